@@ -1,0 +1,28 @@
+# Two commands do all set-up on a fresh machine:
+#   make demo   flatten the built-in Surf1 mesh (writes demo/)
+#   make test   run the test suite
+VENV  := .venv
+STAMP := $(VENV)/.springflat-installed
+
+.PHONY: demo test paper bench clean
+
+$(STAMP): pyproject.toml scripts/setup.sh
+	bash scripts/setup.sh
+	touch $@
+
+demo: $(STAMP)
+	@mkdir -p demo
+	$(VENV)/bin/springflat flatten surf1 --out demo/surf1.obj --history demo/surf1.csv --plot demo/surf1.png
+	@echo "wrote demo/surf1.obj, demo/surf1.csv, demo/surf1.png"
+
+test: $(STAMP)
+	$(VENV)/bin/python -m pytest
+
+paper: $(STAMP)
+	$(VENV)/bin/springflat paper --out paper-report
+
+bench: $(STAMP)
+	$(VENV)/bin/python benchmarks/bench_float.py
+
+clean:
+	rm -rf $(VENV) demo paper-report .pytest_cache build *.egg-info

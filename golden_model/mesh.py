@@ -1,0 +1,324 @@
+"""Triangle meshes: loading, validation, and the topology the models share.
+
+A :class:`Mesh` is the 3D patch to flatten: ``V`` vertices ``Q`` (metres or any
+consistent length unit) and ``F`` triangles.  Vertex *i* in a file is node *i*
+everywhere in the project (float reference, fixed-point golden model, RTL
+streams): nothing is merged or reordered, except for STL, which has no shared
+vertices at all (see :func:`load_mesh`).
+
+Validation follows ``spec.md`` ("Bad input"): a mesh must be a single
+connected manifold disk with exactly one boundary loop, no degenerate or
+duplicate triangles, no out-of-range indices and only finite coordinates.
+Every failure raises :class:`MeshError` with a one-line message naming the
+problem.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+__all__ = ["Mesh", "MeshError", "load_mesh", "triangle_areas_3d", "signed_areas_2d"]
+
+#: Relative area below which a triangle counts as degenerate: area ≤ this
+#: times the squared longest edge of the mesh.
+DEGENERATE_RELATIVE_AREA = 1e-12
+
+MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
+
+
+class MeshError(ValueError):
+    """A mesh that cannot be flattened; the message is one line for the user."""
+
+
+def triangle_areas_3d(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Areas of the triangles ``faces`` of 3D ``vertices`` (length units squared)."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def signed_areas_2d(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Signed areas of 2D triangles (positive when counter-clockwise)."""
+    a, b, c = (positions[faces[:, k]] for k in range(3))
+    u, v = b - a, c - a
+    return 0.5 * (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A validated triangle-mesh disk.
+
+    Attributes:
+        vertices: ``(V, 3)`` float64 3D positions ``Q``.
+        faces: ``(F, 3)`` int64 vertex indices, 0-based.
+        name: a label for reports (file stem or built-in name).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    name: str = "mesh"
+    _validated: bool = field(default=False, repr=False)
+
+    def __post_init__(self) -> None:
+        vertices = np.ascontiguousarray(self.vertices, dtype=np.float64)
+        faces = np.ascontiguousarray(self.faces)
+        object.__setattr__(self, "vertices", vertices)
+        _validate(vertices, faces)
+        object.__setattr__(self, "faces", faces.astype(np.int64))
+        object.__setattr__(self, "_validated", True)
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """``(E, 2)`` unique undirected edges ``(i, j)`` with ``i < j``, sorted."""
+        return _unique_edges(self.faces)[0]
+
+    @property
+    def n_edges(self) -> int:
+        return len(self.edges)
+
+    @cached_property
+    def rest_lengths(self) -> np.ndarray:
+        """``(E,)`` 3D edge lengths ``d_e`` (the springs' rest lengths)."""
+        i, j = self.edges.T
+        return np.linalg.norm(self.vertices[i] - self.vertices[j], axis=1)
+
+    @cached_property
+    def face_areas(self) -> np.ndarray:
+        """``(F,)`` 3D triangle areas ``A_t``."""
+        return triangle_areas_3d(self.vertices, self.faces)
+
+    @cached_property
+    def boundary_loop(self) -> np.ndarray:
+        """Boundary vertex indices in loop order.
+
+        Starts at the smallest boundary vertex index and walks the way its
+        outgoing boundary edge runs in its face, so the face is on the left:
+        placing this loop counter-clockwise gives a consistently wound mesh
+        positive orientation.
+        """
+        directed = _directed_boundary_edges(self.faces)
+        start = int(directed[:, 0].min())
+        adjacent: dict[int, list[int]] = {}
+        for a, b in directed.tolist():
+            adjacent.setdefault(a, []).append(b)
+            adjacent.setdefault(b, []).append(a)
+        first = directed[directed[:, 0] == start][0, 1]
+        loop = [start, int(first)]
+        for _ in range(len(directed) - 2):
+            before, here = loop[-2], loop[-1]
+            a, b = adjacent[here]
+            loop.append(b if a == before else a)
+        return np.asarray(loop, dtype=np.int64)
+
+    @cached_property
+    def neighbours(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """CSR neighbour lists: ``(indptr, indices, edge_ids)``.
+
+        Node ``i``'s neighbours are ``indices[indptr[i]:indptr[i+1]]`` in
+        increasing index order; ``edge_ids`` gives the row of :attr:`edges`
+        of each entry (so rest lengths are ``rest_lengths[edge_ids]``).
+        This fixed order is the order the hardware streams neighbours in.
+        """
+        i, j = self.edges.T
+        e = np.arange(self.n_edges)
+        src = np.concatenate([i, j])
+        dst = np.concatenate([j, i])
+        eid = np.concatenate([e, e])
+        order = np.lexsort((dst, src))
+        indptr = np.zeros(self.n_vertices + 1, dtype=np.int64)
+        np.cumsum(np.bincount(src, minlength=self.n_vertices), out=indptr[1:])
+        return indptr, dst[order], eid[order]
+
+    def masses(self, density: float) -> np.ndarray:
+        """Node masses (eq. 6): ``m_i = (rho/3)·Σ A_t`` over incident triangles."""
+        incident = np.bincount(
+            self.faces.ravel(), weights=np.repeat(self.face_areas, 3), minlength=self.n_vertices
+        )
+        return density / 3.0 * incident
+
+    def auto_density(self) -> float:
+        """The paper's ``rho = 1/min m_i`` with masses computed at ``rho = 1``."""
+        return 1.0 / float(self.masses(1.0).min())
+
+
+# --------------------------------------------------------------------------- topology
+
+
+def _unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique sorted edges, the edge index of each face side, and face counts per edge.
+
+    Face side ``k`` of face ``f`` is the edge ``(faces[f,k], faces[f,(k+1)%3])``.
+    """
+    sides = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    sides = np.sort(sides, axis=1)
+    edges, side_edge, counts = np.unique(sides, axis=0, return_inverse=True, return_counts=True)
+    return edges, side_edge.reshape(-1), counts
+
+
+def _directed_boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """Boundary edges ``(a, b)`` oriented as they appear in their face."""
+    sides = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    _, side_edge, counts = _unique_edges(faces)
+    return sides[counts[side_edge] == 1]
+
+
+def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Raise :class:`MeshError` unless the arrays form a single manifold disk."""
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise MeshError(f"vertices must be a (V, 3) array, got shape {vertices.shape}")
+    if len(vertices) == 0 or faces.size == 0:
+        raise MeshError("mesh is empty (no vertices or no faces)")
+    if faces.ndim != 2 or faces.shape[1] != 3:
+        raise MeshError(f"faces must be triangles, got face array of shape {faces.shape}")
+    if not np.issubdtype(faces.dtype, np.integer):
+        raise MeshError("face indices must be integers")
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise MeshError(f"vertex {int(np.flatnonzero(bad)[0])} has a non-finite coordinate")
+    n = len(vertices)
+    out = (faces < 0) | (faces >= n)
+    if out.any():
+        f = int(np.flatnonzero(out.any(axis=1))[0])
+        raise MeshError(
+            f"face {f} references vertex {int(faces[f][out[f]][0])}, out of range 0..{n - 1}"
+        )
+    faces = faces.astype(np.int64)
+    repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    if repeated.any():
+        raise MeshError(f"face {int(np.flatnonzero(repeated)[0])} repeats a vertex (degenerate triangle)")
+    _, first, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        f = int(first[counts > 1].min())
+        raise MeshError(f"face {f} is duplicated (same three vertices appear in another face)")
+    used = np.zeros(n, dtype=bool)
+    used[faces.ravel()] = True
+    if not used.all():
+        raise MeshError(f"vertex {int(np.flatnonzero(~used)[0])} is not used by any face")
+
+    edges, side_edge, counts = _unique_edges(faces)
+    longest = float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).max())
+    areas = triangle_areas_3d(vertices, faces)
+    degenerate = areas <= DEGENERATE_RELATIVE_AREA * longest**2
+    if degenerate.any():
+        raise MeshError(f"face {int(np.flatnonzero(degenerate)[0])} is degenerate (zero area)")
+    if (counts > 2).any():
+        e = edges[np.flatnonzero(counts > 2)[0]]
+        raise MeshError(f"mesh is non-manifold: edge ({e[0]}, {e[1]}) is shared by more than two faces")
+
+    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    n_parts, _ = connected_components(graph, directed=False)
+    if n_parts != 1:
+        raise MeshError(f"mesh is not a single disk: it has {n_parts} connected components")
+    _check_vertex_manifold(faces, side_edge, counts, n)
+
+    boundary = edges[counts == 1]
+    if len(boundary) == 0:
+        raise MeshError("mesh is not a disk: it is closed (no boundary loop)")
+    bgraph = sp.coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(n, n))
+    on_boundary = np.unique(boundary)
+    n_loops = connected_components(bgraph, directed=False)[0] - (n - len(on_boundary))
+    if n_loops != 1:
+        raise MeshError(f"mesh is not a disk: it has {n_loops} boundary loops (holes), expected one")
+    euler = n - len(edges) + len(faces)
+    if euler != 1:
+        raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")
+
+
+def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.ndarray, n: int) -> None:
+    """Each vertex's incident triangles must form one fan (no pinched vertices).
+
+    Corners (face, vertex) are joined across every interior edge they share;
+    a manifold vertex has all its corners in one connected group.
+    """
+    n_faces = len(faces)
+    corner = np.arange(3 * n_faces).reshape(n_faces, 3)
+    # Side k of face f runs from corner k to corner k+1.
+    side_from = corner.reshape(-1)
+    side_to = np.roll(corner, -1, axis=1).reshape(-1)
+    interior = counts[side_edge] == 2
+    sides = np.flatnonzero(interior)
+    order = np.argsort(side_edge[sides], kind="stable")
+    pairs = sides[order].reshape(-1, 2)  # the two face sides of each interior edge
+    s, t = pairs[:, 0], pairs[:, 1]
+    v_s_from = faces.reshape(-1)[side_from[s]]
+    # Match corners of the same vertex on both sides of the shared edge.
+    same = v_s_from == faces.reshape(-1)[side_from[t]]
+    a = np.concatenate([side_from[s], side_to[s]])
+    b = np.concatenate([np.where(same, side_from[t], side_to[t]), np.where(same, side_to[t], side_from[t])])
+    m = 3 * n_faces
+    graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m))
+    _, label = connected_components(graph, directed=False)
+    corner_vertex = faces.reshape(-1)
+    fans = np.unique(np.stack([corner_vertex, label], axis=1), axis=0)
+    fans_per_vertex = np.bincount(fans[:, 0], minlength=n)
+    if (fans_per_vertex > 1).any():
+        v = int(np.flatnonzero(fans_per_vertex > 1)[0])
+        raise MeshError(f"mesh is non-manifold at vertex {v} (its triangles form more than one fan)")
+
+
+# --------------------------------------------------------------------------- I/O
+
+
+def load_mesh(path: str | Path) -> Mesh:
+    """Load and validate an OBJ, PLY, OFF or STL triangle mesh.
+
+    Vertices keep their file order (``process=False, maintain_order=True``).
+    STL stores each triangle with its own three corners and no shared
+    vertices, so for STL only, exactly equal corner coordinates are merged,
+    numbered in order of first appearance.
+    """
+    import trimesh  # heavy import, only needed for files
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"cannot read mesh '{path}': no such file")
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise MeshError(
+            f"cannot read mesh '{path}': unknown format '{suffix}' (use {', '.join(MESH_SUFFIXES)})"
+        )
+    try:
+        loaded = trimesh.load(path, process=False, maintain_order=True, force="mesh")
+        vertices = np.asarray(loaded.vertices, dtype=np.float64)
+        faces = np.asarray(loaded.faces)
+    except Exception as exc:  # trimesh raises many types on malformed files
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise MeshError(f"cannot parse mesh '{path}': {reason}") from None
+    if suffix == ".stl" and len(vertices):
+        vertices, faces = _merge_exact_duplicates(vertices, faces)
+    try:
+        return Mesh(vertices, faces, name=path.stem)
+    except MeshError as exc:
+        raise MeshError(f"invalid mesh '{path}': {exc}") from None
+
+
+def _merge_exact_duplicates(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge bit-identical vertices, numbering them by first appearance."""
+    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))
+    return vertices[np.sort(first)], rank[inverse.reshape(-1)][faces]
+
+
+def save_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Write an OBJ with ``vertices`` (V×2 padded with z = 0, or V×3) and 1-based faces."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    if vertices.shape[1] == 2:
+        vertices = np.column_stack([vertices, np.zeros(len(vertices))])
+    with open(path, "w", encoding="ascii") as out:
+        out.write("# written by springflat\n")
+        np.savetxt(out, vertices, fmt="v %.17g %.17g %.17g")
+        np.savetxt(out, np.asarray(faces) + 1, fmt="f %d %d %d")

@@ -1,0 +1,206 @@
+"""The ``springflat`` console command.
+
+Subcommands:
+
+* ``flatten [MESH]``: flatten a mesh (a file or a built-in, default ``surf1``);
+* ``paper [--out DIR]``: reproduce the paper's Tables VI–VII and figures.
+
+Bad input never produces a traceback: every user error is one line on
+stderr (``springflat: error: ...``) and exit status 2.  A run that diverges
+exits with status 3 after writing what was asked for.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
+from golden_model.layouts import LAYOUT_METHODS, LayoutError, initial_layout
+from golden_model.mesh import Mesh, MeshError, load_mesh
+from golden_model.reference import FlattenParams, FlattenResult, ParameterError, flatten
+
+from .outputs import LAYOUT_SUFFIXES, OutputError, check_output_path, write_history, write_layout, write_plot
+
+EXIT_USAGE = 2
+EXIT_DIVERGED = 3
+USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
+
+
+class UserError(ValueError):
+    """Anything else the user got wrong; one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's one-line error format."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"springflat: error: {message} (see '{self.prog} --help')\n")
+
+
+def _density(text: str) -> float | str:
+    if text == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or 'auto', got {text!r}") from None
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def add_run_options(parser: argparse.ArgumentParser) -> None:
+    """The options every command that runs the algorithm shares."""
+    builtins = ", ".join(BUILTIN_MESHES)
+    parser.add_argument("mesh", nargs="?", default="surf1",
+                        help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
+    parser.add_argument("--init", default="pca", metavar="tutte|pca|PATH",
+                        help="initial layout: tutte, pca (default) or a file of V rows 'x y' / an OBJ")
+    parser.add_argument("--step", choices=("variable", "fixed"), default="variable",
+                        help="step-size mode (default variable, eqs. 18-20)")
+    parser.add_argument("--dt", type=_number, default=None, help="fixed step size (default 0.01)")
+    parser.add_argument("--update", choices=("jacobi", "sequential"), default="jacobi",
+                        help="update order: jacobi (synchronous, default) or sequential (Algorithm 1)")
+    parser.add_argument("--damping", type=_number, default=None, help="velocity damping gamma in [0, 1) (default 0)")
+    parser.add_argument("--penalty", action="store_true", help="apply the overlap penalty (eqs. 10-11)")
+    parser.add_argument("--penalty-kappa", type=_number, default=None, help="penalty threshold kappa (default 1)")
+    parser.add_argument("--penalty-gain", type=_number, default=None, help="penalty gain lambda (default 1)")
+    parser.add_argument("--spring", type=_number, default=None, help="spring constant C (default 0.5)")
+    parser.add_argument("--density", type=_density, default=None,
+                        help="area density rho or 'auto' = 1/min m_i (default: 2 for built-ins, auto for files)")
+    parser.add_argument("--tol-area", type=_number, default=None, help="area error tolerance phi_S")
+    parser.add_argument("--tol-shape", type=_number, default=None, help="shape error tolerance phi_C")
+    parser.add_argument("--tol-energy", type=_number, default=None, help="relative energy change tolerance epsilon")
+    parser.add_argument("--max-iter", type=_integer, default=None, help="iteration limit N_max")
+
+
+def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
+    """The mesh and its default parameters (paper sets for built-ins)."""
+    if is_builtin(name) and not Path(name).is_file():
+        mesh, paper = builtin_mesh(name)
+        return mesh, FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
+                                   tol_shape=paper.tol_shape, tol_energy=paper.tol_energy,
+                                   max_iter=paper.max_iter)
+    return load_mesh(name), FlattenParams(density="auto")
+
+
+def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> FlattenParams:
+    """Apply the command-line overrides to ``defaults`` (validated)."""
+    changes = {"step": args.step, "update": args.update, "penalty": args.penalty or defaults.penalty}
+    for option in ("dt", "damping", "penalty_kappa", "penalty_gain", "spring", "density",
+                   "tol_area", "tol_shape", "tol_energy", "max_iter"):
+        value = getattr(args, option)
+        if value is not None:
+            changes[option] = value
+    return defaults.with_(**changes)
+
+
+def _progress(total: int, enabled: bool):
+    """A tqdm bar on stderr that appears only for runs longer than ~2 s."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="it", delay=2.0, disable=not enabled, file=sys.stderr, leave=False)
+
+
+def cmd_flatten(args: argparse.Namespace) -> int:
+    mesh, defaults = resolve_mesh(args.mesh)
+    params = params_from_args(args, defaults)
+    for path, what, suffixes in ((args.out, "--out", LAYOUT_SUFFIXES), (args.history, "--history", None),
+                                 (args.plot, "--plot", (".png",))):
+        if path is not None:
+            check_output_path(path, what, suffixes)
+    if args.engine != "float":
+        raise UserError(f"engine '{args.engine}' is not available")
+    positions = initial_layout(mesh, args.init)
+    show_progress = sys.stderr.isatty() or not args.json
+    with _progress(params.max_iter, show_progress) as bar:
+        result = flatten(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
+    _write_outputs(args, mesh, result)
+    if args.json:
+        print(json.dumps({"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces,
+                          **result.summary()}))
+    else:
+        final = result.final
+        print(f"{mesh.name}: {result.status} after {result.iterations} iterations "
+              f"({params.step} step, {params.update}): E_S {result.initial.area_error:.4f} -> "
+              f"{final.area_error:.4f}, E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
+              f"flipped {final.flipped}")
+    if result.status == "diverged":
+        print(f"springflat: the run diverged at iteration {result.iterations + 1} "
+              "(try --damping 0.05 or a smaller --dt); outputs hold the last finite state", file=sys.stderr)
+        return EXIT_DIVERGED
+    return 0
+
+
+def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:
+    if args.out is not None:
+        write_layout(args.out, result.positions, mesh.faces)
+    if args.history is not None:
+        write_history(args.history, result)
+    if args.plot is not None:
+        write_plot(args.plot, result, mesh.faces, title=f"{mesh.name} ({result.engine} engine)")
+
+
+def cmd_paper(args: argparse.Namespace) -> int:
+    from .paper import reproduce_paper
+
+    report = reproduce_paper(Path(args.out), init=args.init, progress=not args.quiet)
+    print(f"wrote {report}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="springflat",
+        description="Flatten triangle-mesh patches with the variable step-size mass-spring method, "
+                    "and verify its fixed-point hardware.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+
+    p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
+    add_run_options(p)
+    p.add_argument("--engine", choices=("float",), default="float", help="arithmetic engine (default float)")
+    p.add_argument("--out", type=Path, help="flattened layout: .obj (z = 0, same faces) or .svg")
+    p.add_argument("--history", type=Path, help="per-iteration CSV")
+    p.add_argument("--plot", type=Path, help="PNG of the layouts and error curves")
+    p.add_argument("--json", action="store_true", help="print one JSON object with the results")
+    p.set_defaults(func=cmd_flatten)
+
+    p = sub.add_parser("paper", help="reproduce the paper's Tables VI-VII and figures",
+                       description="Run Surf1 and Surf2 with fixed and variable steps; write a markdown report.")
+    p.add_argument("--out", default="paper-report", help="output directory (default paper-report)")
+    p.add_argument("--init", choices=LAYOUT_METHODS, default="pca", help="initial layout (default pca)")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=cmd_paper)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except USER_ERRORS + (UserError,) as exc:
+        print(f"springflat: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("springflat: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,42 @@
+"""Small generated meshes for the tests (regular grids bent into shapes)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from golden_model.mesh import Mesh
+
+
+def grid_faces(nx: int, ny: int) -> np.ndarray:
+    """Triangles of an ``nx × ny`` vertex grid (row-major), two per cell."""
+    idx = np.arange(nx * ny).reshape(ny, nx)
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    return np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+
+
+def grid_uv(nx: int, ny: int, width: float = 1.0, height: float = 1.0) -> np.ndarray:
+    u, v = np.meshgrid(np.linspace(0, width, nx), np.linspace(0, height, ny))
+    return np.column_stack([u.ravel(), v.ravel()])
+
+
+def rolled_grid(nx: int = 6, ny: int = 6, arc_degrees: float = 60.0, size: float = 1.0) -> tuple[Mesh, np.ndarray]:
+    """A ``size × size`` plane grid rolled onto a cylinder arc, and its exact unrolled layout.
+
+    The mesh is made of planar rectangles hinged along the cylinder's
+    generators, so it is developable; its isometric layout spaces the
+    columns by the 3D chord, not by the arc length.
+    """
+    uv = grid_uv(nx, ny, size, size)
+    radius = size / np.radians(arc_degrees)
+    theta = uv[:, 0] / radius
+    vertices = np.column_stack([radius * np.sin(theta), uv[:, 1], radius * (1 - np.cos(theta))])
+    chord = 2 * radius * np.sin(size / (nx - 1) / radius / 2)
+    unrolled = np.column_stack([np.tile(np.arange(nx) * chord, ny), uv[:, 1]])
+    return Mesh(vertices, grid_faces(nx, ny), name="rolled"), unrolled
+
+
+def dome_grid(n: int = 8, height: float = 0.3) -> Mesh:
+    uv = grid_uv(n, n) - 0.5
+    z = height * (1 - 2 * (uv**2).sum(axis=1))
+    return Mesh(np.column_stack([uv, z]), grid_faces(n, n), name="dome")
