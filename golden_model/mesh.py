@@ -164,7 +164,10 @@ def _unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     """
     sides = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
     sides = np.sort(sides, axis=1)
-    edges, side_edge, counts = np.unique(sides, axis=0, return_inverse=True, return_counts=True)
+    # one int64 key per edge: np.unique on 1-D keys is much faster than on rows
+    n = int(faces.max()) + 1
+    keys, side_edge, counts = np.unique(sides[:, 0] * n + sides[:, 1], return_inverse=True, return_counts=True)
+    edges = np.column_stack([keys // n, keys % n])
     return edges, side_edge.reshape(-1), counts
 
 
@@ -262,8 +265,8 @@ def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.
     graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m))
     _, label = connected_components(graph, directed=False)
     corner_vertex = faces.reshape(-1)
-    fans = np.unique(np.stack([corner_vertex, label], axis=1), axis=0)
-    fans_per_vertex = np.bincount(fans[:, 0], minlength=n)
+    fans = np.unique(corner_vertex * m + label)  # one key per (vertex, fan)
+    fans_per_vertex = np.bincount(fans // m, minlength=n)
     if (fans_per_vertex > 1).any():
         v = int(np.flatnonzero(fans_per_vertex > 1)[0])
         raise MeshError(f"mesh is non-manifold at vertex {v} (its triangles form more than one fan)")

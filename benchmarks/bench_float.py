@@ -1,0 +1,113 @@
+"""Per-iteration time of the float reference on a generated ~90k-vertex mesh.
+
+Usage: .venv/bin/python benchmarks/bench_float.py [--n 300] [--iterations 20]
+
+Measures, in one run (ratios are what to compare on a shared machine):
+  * Tutte and PCA initial layouts (one sparse LU solve; SVD);
+  * one `jacobi` iteration of the float engine (forces, Euler step and the
+    measurement the stopping rule needs), as edge updates per second;
+  * the same step written as plain vectorised numpy (np.add.at scatter,
+    edge vectors recomputed for the measurement): the baseline the engine
+    must at least match.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from golden_model.layouts import pca_layout, tutte_layout  # noqa: E402
+from golden_model.mesh import Mesh, signed_areas_2d  # noqa: E402
+from golden_model.reference import FlattenParams, SpringModel, _Jacobi, variable_step  # noqa: E402
+from meshgen import grid_faces, grid_uv  # noqa: E402
+
+
+def dome(n: int) -> Mesh:
+    uv = grid_uv(n, n) - 0.5
+    return Mesh(np.column_stack([uv, 0.3 * (1 - 2 * (uv**2).sum(axis=1))]), grid_faces(n, n), name=f"dome{n}")
+
+
+def best_of(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+class PlainNumpyStep:
+    """The same jacobi iteration, written the obvious vectorised way."""
+
+    def __init__(self, mesh: Mesh, model: SpringModel, positions: np.ndarray, spring: float):
+        self.mesh, self.model, self.spring = mesh, model, spring
+        self.positions = positions.copy()
+        self.velocities = np.zeros_like(positions)
+
+    def iteration(self, dt: float) -> None:
+        mesh, p = self.mesh, self.positions
+        i, j = mesh.edges.T
+        delta = p[j] - p[i]
+        length = np.linalg.norm(delta, axis=1)
+        term = (0.5 * self.spring * (1 - mesh.rest_lengths / length))[:, None] * delta
+        forces = np.zeros_like(p)
+        np.add.at(forces, i, term)
+        np.add.at(forces, j, -term)
+        a = forces / self.model.masses[:, None]
+        p += dt * self.velocities + 0.5 * dt * dt * a
+        self.velocities += dt * a
+        # measurement for the stopping rule
+        delta = p[j] - p[i]
+        length = np.linalg.norm(delta, axis=1)
+        area = np.abs(signed_areas_2d(p, mesh.faces))
+        e_s = np.abs(mesh.face_areas - area).sum() / mesh.face_areas.sum()
+        e_c = np.abs(mesh.rest_lengths - length).sum() / mesh.rest_lengths.sum()
+        energy = self.spring * ((length - mesh.rest_lengths) ** 2).sum()
+        return e_s, e_c, energy
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--n", type=int, default=300, help="grid side (n² vertices; default 300 → 90,000)")
+    parser.add_argument("--iterations", type=int, default=20, help="timed iterations (best of)")
+    args = parser.parse_args()
+
+    t = time.perf_counter()
+    mesh = dome(args.n)
+    _ = mesh.edges, mesh.rest_lengths, mesh.face_areas, mesh.neighbours
+    build = time.perf_counter() - t
+    tutte = best_of(lambda: tutte_layout(mesh), 2)
+    pca = best_of(lambda: pca_layout(mesh), 2)
+    p0 = pca_layout(mesh)
+    params = FlattenParams(density="auto")
+    model = SpringModel.build(mesh, p0, params.spring, params.density)
+    engine = _Jacobi(model, params, p0)
+    dt = variable_step(0.5, 0.5)
+
+    def engine_iteration():
+        engine.advance(dt)
+        engine.measure()
+
+    plain = PlainNumpyStep(mesh, model, p0, params.spring)
+    engine_iteration(), plain.iteration(dt)  # warm-up
+    t_engine = best_of(engine_iteration, args.iterations)
+    t_plain = best_of(lambda: plain.iteration(dt), args.iterations)
+    e = mesh.n_edges
+    print(f"mesh: {mesh.n_vertices} vertices, {mesh.n_faces} faces, {e} edges (built and validated in {build:.2f} s)")
+    print(f"| what | time | edge updates/s |")
+    print(f"|---|---|---|")
+    print(f"| tutte layout | {tutte:.2f} s | |")
+    print(f"| pca layout | {pca:.3f} s | |")
+    print(f"| float engine, jacobi iteration | {1e3 * t_engine:.1f} ms | {e / t_engine / 1e6:.1f} M |")
+    print(f"| plain numpy (np.add.at) iteration | {1e3 * t_plain:.1f} ms | {e / t_plain / 1e6:.1f} M |")
+    print(f"engine / plain time ratio: {t_engine / t_plain:.2f} (lower is better)")
+
+
+if __name__ == "__main__":
+    main()
