@@ -1,0 +1,269 @@
+"""The set of fixed-point formats and knobs of the per-node update pipeline.
+
+A :class:`FormatSet` names one :class:`~golden_model.fixed.format.Format` per
+signal class and the non-format knobs (rsqrt seed/Newton parameters, exp-LUT
+size, default rounding).  Presets live as JSON in ``golden_model/data/formats/``
+(the only place their values are written down); the RTL and the golden model
+both take every width from the loaded object.
+
+Validation (``__post_init__``) guarantees that every multiplication the pipeline
+performs has an exact product that fits int64 (sum of operand widths <= 63),
+that signals that are non-negative by construction use unsigned formats, and
+that the exp-LUT indexing fits the error format.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+from .format import MAX_PRODUCT_WIDTH, Format, Rounding
+from .rsqrt import RsqrtConfig
+
+__all__ = ["FormatSet", "FORMAT_FIELDS", "PRESET_DIR"]
+
+PRESET_DIR = Path(__file__).resolve().parent.parent / "data" / "formats"
+"""Directory holding the preset JSON files (``<name>.json``)."""
+
+FORMAT_FIELDS: tuple[str, ...] = (
+    "position",
+    "velocity",
+    "delta",
+    "rest_length",
+    "length_sq",
+    "rsqrt",
+    "spring",
+    "force",
+    "force_acc",
+    "inv_mass",
+    "accel",
+    "dt",
+    "half_dt_sq",
+    "error_acc",
+    "error",
+    "lut_entry",
+)
+"""Names of the Format-valued fields, in pipeline order."""
+
+_SIGNED = ("position", "velocity", "delta", "spring", "force", "force_acc", "accel")
+_UNSIGNED = (
+    "rest_length", "length_sq", "rsqrt", "inv_mass", "dt", "half_dt_sq",
+    "error_acc", "error", "lut_entry",
+)
+
+
+@dataclass(frozen=True)
+class FormatSet:
+    """Formats (one per signal class) and knobs of the fixed-point pipeline.
+
+    Real-value meaning of each format field (mesh scaled so the mean edge is ~1):
+
+    ``position`` P, ``velocity`` V, ``delta`` P_j - P_i after narrowing,
+    ``rest_length`` d, ``length_sq`` |delta|**2 (rsqrt input), ``rsqrt`` r = 1/|delta|,
+    ``spring`` s = C/2*(1 - d*r) (dimensionless), ``force`` per-neighbour s*delta,
+    ``force_acc`` sum of forces, ``inv_mass`` 1/m, ``accel`` a, ``dt`` step,
+    ``half_dt_sq`` dt**2/2, ``error_acc`` sums of |L - d|, ``error`` E_S/E_C in
+    [0, 1] (LUT input), ``lut_entry`` exp-table entries 0.1*exp(-5(1-E)).
+
+    Format fields accept ``"s3.16"``-style strings (converted on construction).
+    """
+
+    position: Format
+    velocity: Format
+    delta: Format
+    rest_length: Format
+    length_sq: Format
+    rsqrt: Format
+    spring: Format
+    force: Format
+    force_acc: Format
+    inv_mass: Format
+    accel: Format
+    dt: Format
+    half_dt_sq: Format
+    error_acc: Format
+    error: Format
+    lut_entry: Format
+    rsqrt_seed_bits: int
+    rsqrt_newton_steps: int
+    lut_index_bits: int
+    lut_interpolate: bool
+    rounding: Rounding = Rounding.HALF_UP
+    name: str = "custom"
+    notes: dict[str, str] = field(default_factory=dict, compare=False, hash=False, repr=False)
+
+    # ------------------------------------------------------------------ validation
+    def __post_init__(self) -> None:
+        for f in FORMAT_FIELDS:
+            v = getattr(self, f)
+            if not isinstance(v, Format):
+                try:
+                    v = Format.parse(v)
+                except ValueError as exc:
+                    raise ValueError(f"FormatSet {self.name!r}: field {f}: {exc}") from None
+                object.__setattr__(self, f, v)
+        try:
+            object.__setattr__(self, "rounding", Rounding(self.rounding))
+        except ValueError:
+            raise ValueError(
+                f"FormatSet {self.name!r}: unknown rounding {self.rounding!r}; "
+                f"expected one of {[m.value for m in Rounding]}"
+            ) from None
+        for knob in ("rsqrt_seed_bits", "rsqrt_newton_steps", "lut_index_bits"):
+            v = getattr(self, knob)
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise ValueError(f"FormatSet {self.name!r}: {knob} must be an int, got {v!r}")
+        if not isinstance(self.lut_interpolate, bool):
+            raise ValueError(f"FormatSet {self.name!r}: lut_interpolate must be a bool")
+        self._check_signedness()
+        self._check_step_path()
+        for pname, wa, wb in self.products():
+            if wa + wb > MAX_PRODUCT_WIDTH:
+                raise ValueError(
+                    f"FormatSet {self.name!r}: product {pname} needs {wa} + {wb} = {wa + wb} "
+                    f"bits > {MAX_PRODUCT_WIDTH}; the exact product would not fit int64"
+                )
+        try:
+            self.rsqrt_config()
+        except ValueError as exc:
+            raise ValueError(f"FormatSet {self.name!r}: {exc}") from None
+
+    def _check_signedness(self) -> None:
+        for f in _SIGNED:
+            if not getattr(self, f).signed:
+                raise ValueError(f"FormatSet {self.name!r}: {f} must be a signed format")
+        for f in _UNSIGNED:
+            if getattr(self, f).signed:
+                raise ValueError(
+                    f"FormatSet {self.name!r}: {f} is non-negative and must be unsigned"
+                )
+
+    def _check_step_path(self) -> None:
+        n = self.name
+        if self.error.int_bits > 1:
+            raise ValueError(
+                f"FormatSet {n!r}: error format {self.error} must be u0.F or u1.F (E in [0, 1])"
+            )
+        if not 1 <= self.lut_index_bits <= self.error.frac_bits:
+            raise ValueError(
+                f"FormatSet {n!r}: lut_index_bits {self.lut_index_bits} must be in "
+                f"1..error.frac_bits ({self.error.frac_bits})"
+            )
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def lut_frac_bits(self) -> int:
+        """Bits of E below the LUT index (interpolation weight width)."""
+        return self.error.frac_bits - self.lut_index_bits
+
+    def products(self) -> list[tuple[str, int, int]]:
+        """Every pipeline multiplication as ``(name, width_a, width_b)``.
+
+        The LUT interpolation multiplies an entry difference (non-negative, at
+        most ``lut_entry.width`` bits) by the ``lut_frac_bits`` low bits of E.
+        The rsqrt unit's internal products are checked by :class:`RsqrtConfig`.
+        """
+        w = {f: getattr(self, f).width for f in FORMAT_FIELDS}
+        prods = [
+            ("delta*delta -> length_sq", w["delta"], w["delta"]),
+            ("rest_length*rsqrt (d*r)", w["rest_length"], w["rsqrt"]),
+            ("length_sq*rsqrt (L)", w["length_sq"], w["rsqrt"]),
+            ("spring*delta -> force", w["spring"], w["delta"]),
+            ("force_acc*inv_mass -> accel", w["force_acc"], w["inv_mass"]),
+            ("dt*velocity", w["dt"], w["velocity"]),
+            ("dt*accel", w["dt"], w["accel"]),
+            ("half_dt_sq*accel", w["half_dt_sq"], w["accel"]),
+            ("dt*dt -> half_dt_sq", w["dt"], w["dt"]),
+        ]
+        if self.lut_interpolate:
+            prods.append(("lut interpolation (entry diff * E low bits)", w["lut_entry"],
+                          self.lut_frac_bits))
+        return prods
+
+    def rsqrt_config(self) -> RsqrtConfig:
+        """The rsqrt unit configuration: ``length_sq`` -> ``rsqrt``."""
+        return RsqrtConfig(self.length_sq, self.rsqrt, self.rsqrt_seed_bits,
+                           self.rsqrt_newton_steps)
+
+    def formats(self) -> dict[str, Format]:
+        """``{field name: Format}`` for all format fields."""
+        return {f: getattr(self, f) for f in FORMAT_FIELDS}
+
+    def replace(self, **changes: Any) -> FormatSet:
+        """Copy with fields changed (formats may be given as strings); re-validated."""
+        return replace(self, **changes)
+
+    # ------------------------------------------------------------------ JSON
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (formats as strings); inverse of :meth:`from_dict`."""
+        d: dict[str, Any] = {"name": self.name, "formats": {f: str(getattr(self, f))
+                                                            for f in FORMAT_FIELDS}}
+        for f in fields(self):
+            if f.name not in FORMAT_FIELDS and f.name not in ("name", "notes"):
+                v = getattr(self, f.name)
+                d[f.name] = v.value if isinstance(v, Rounding) else v
+        if self.notes:
+            d["notes"] = dict(self.notes)
+        return d
+
+    def to_json(self, indent: int = 2) -> str:
+        return json.dumps(self.to_dict(), indent=indent) + "\n"
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.to_json())
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FormatSet:
+        """Build from the JSON schema written by :meth:`to_dict` (unknown keys are errors)."""
+        d = dict(d)
+        name = d.pop("name", "custom")
+        fmts = d.pop("formats", None)
+        if not isinstance(fmts, dict):
+            raise ValueError(f"FormatSet {name!r}: missing 'formats' object")
+        missing = set(FORMAT_FIELDS) - set(fmts)
+        extra = set(fmts) - set(FORMAT_FIELDS)
+        if missing or extra:
+            raise ValueError(
+                f"FormatSet {name!r}: formats missing {sorted(missing)}, unknown {sorted(extra)}"
+            )
+        notes = d.pop("notes", {})
+        known = {f.name for f in fields(cls)} - set(FORMAT_FIELDS) - {"name", "notes"}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"FormatSet {name!r}: unknown keys {sorted(unknown)}")
+        return cls(**fmts, **d, name=name, notes=dict(notes))
+
+    @classmethod
+    def load(cls, path_or_preset: str | Path) -> FormatSet:
+        """Load a JSON file, or a preset by name (``"default"``, ``"narrow"``)."""
+        p = Path(path_or_preset)
+        if isinstance(path_or_preset, str) and p.suffix != ".json" and len(p.parts) == 1:
+            return cls.preset(path_or_preset)
+        return cls.from_dict(json.loads(p.read_text()))
+
+    @classmethod
+    def preset(cls, name: str) -> FormatSet:
+        """Load ``golden_model/data/formats/<name>.json``."""
+        p = PRESET_DIR / f"{name}.json"
+        if not p.is_file():
+            raise ValueError(f"unknown FormatSet preset {name!r}; available: {cls.presets()}")
+        return cls.from_dict(json.loads(p.read_text()))
+
+    @staticmethod
+    def presets() -> list[str]:
+        """Names of the available presets."""
+        return sorted(p.stem for p in PRESET_DIR.glob("*.json"))
+
+    def summary(self) -> str:
+        """One line per format: name, format, width, real range, lsb."""
+        lines = [f"FormatSet {self.name}"]
+        for f, fmt in self.formats().items():
+            lines.append(f"  {f:12s} {str(fmt):7s} {fmt.width:3d} b  "
+                         f"[{fmt.min:.6g}, {fmt.max:.6g}]  lsb {fmt.lsb:.3g}")
+        for k in ("rsqrt_seed_bits", "rsqrt_newton_steps", "lut_index_bits",
+                  "lut_interpolate"):
+            lines.append(f"  {k} = {getattr(self, k)}")
+        lines.append(f"  rounding = {self.rounding.value}")
+        return "\n".join(lines)
