@@ -14,18 +14,14 @@ Measures, in one run (ratios are what to compare on a shared machine):
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-
-from golden_model.layouts import pca_layout, tutte_layout  # noqa: E402
-from golden_model.mesh import Mesh, signed_areas_2d  # noqa: E402
-from golden_model.reference import FlattenParams, SpringModel, _Jacobi, variable_step  # noqa: E402
-from meshgen import grid_faces, grid_uv  # noqa: E402
+from golden_model.layouts import pca_layout, tutte_layout
+from golden_model.mesh import Mesh, signed_areas_2d
+from golden_model.reference import FlattenParams, SpringModel, _Jacobi, variable_step
+from golden_model.generate import grid_faces, grid_uv
 
 
 def dome(n: int) -> Mesh:

@@ -20,6 +20,7 @@ from pathlib import Path
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.layouts import LAYOUT_METHODS, LayoutError, initial_layout
 from golden_model.mesh import Mesh, MeshError, load_mesh
+from golden_model.fixed.engine import flatten_fixed, load_formats
 from golden_model.reference import FlattenParams, FlattenResult, ParameterError, flatten
 
 from .outputs import LAYOUT_SUFFIXES, OutputError, check_output_path, write_history, write_layout, write_plot
@@ -123,12 +124,19 @@ def cmd_flatten(args: argparse.Namespace) -> int:
                                  (args.plot, "--plot", (".png",))):
         if path is not None:
             check_output_path(path, what, suffixes)
-    if args.engine != "float":
-        raise UserError(f"engine '{args.engine}' is not available")
     positions = initial_layout(mesh, args.init)
     show_progress = sys.stderr.isatty() or not args.json
+    if args.engine == "fixed":
+        formats = load_formats(args.formats or "default")
+
+        def engine(*run_args, **kw):
+            return flatten_fixed(*run_args, fs=formats, **kw)
+    elif args.formats is not None:
+        raise UserError("--formats applies to --engine fixed")
+    else:
+        engine = flatten
     with _progress(params.max_iter, show_progress) as bar:
-        result = flatten(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
+        result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     _write_outputs(args, mesh, result)
     if args.json:
         print(json.dumps({"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces,
@@ -138,7 +146,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(f"{mesh.name}: {result.status} after {result.iterations} iterations "
               f"({params.step} step, {params.update}): E_S {result.initial.area_error:.4f} -> "
               f"{final.area_error:.4f}, E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
-              f"flipped {final.flipped}")
+              f"flipped {final.flipped}"
+              + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed" else ""))
     if result.status == "diverged":
         print(f"springflat: the run diverged at iteration {result.iterations + 1} "
               "(try --damping 0.05 or a smaller --dt); outputs hold the last finite state", file=sys.stderr)
@@ -173,7 +182,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
     add_run_options(p)
-    p.add_argument("--engine", choices=("float",), default="float", help="arithmetic engine (default float)")
+    p.add_argument("--engine", choices=("float", "fixed"), default="float",
+                   help="float reference (default) or the bit-exact fixed-point golden model")
+    p.add_argument("--formats", default=None, metavar="PRESET|FILE",
+                   help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
     p.add_argument("--out", type=Path, help="flattened layout: .obj (z = 0, same faces) or .svg")
     p.add_argument("--history", type=Path, help="per-iteration CSV")
     p.add_argument("--plot", type=Path, help="PNG of the layouts and error curves")

@@ -12,7 +12,7 @@ import pytest
 
 from golden_model.builtin import builtin_mesh
 from golden_model.mesh import load_mesh
-from meshgen import dome_grid
+from golden_model.generate import dome_grid
 
 SPRINGFLAT = str(Path(sys.executable).parent / "springflat")
 

@@ -8,7 +8,7 @@ import pytest
 from golden_model.builtin import builtin_mesh
 from golden_model.layouts import LayoutError, initial_layout, load_layout, pca_layout, tutte_layout
 from golden_model.mesh import Mesh, signed_areas_2d
-from meshgen import dome_grid, grid_faces, grid_uv
+from golden_model.generate import dome_grid, grid_faces, grid_uv
 
 
 def test_tutte_boundary_circle_and_barycentric_interior():

@@ -6,7 +6,7 @@ import trimesh
 
 from golden_model.builtin import builtin_mesh
 from golden_model.mesh import Mesh, MeshError, load_mesh, save_obj
-from meshgen import grid_faces, grid_uv, rolled_grid
+from golden_model.generate import grid_faces, grid_uv, rolled_grid
 
 SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
 SQUARE_F = np.array([[0, 1, 2], [0, 2, 3]])

@@ -10,7 +10,7 @@ from golden_model.layouts import initial_layout
 from golden_model.mesh import Mesh
 from golden_model.reference import (FlattenParams, ParameterError, SpringModel, flatten, measure,
                                     penalty_moves, spring_energy, spring_forces, variable_step)
-from meshgen import dome_grid, rolled_grid
+from golden_model.generate import dome_grid, rolled_grid
 
 SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
 SQUARE_F = np.array([[0, 1, 2], [0, 2, 3]])

@@ -44,6 +44,7 @@ from .steplut import (
     exp_table,
     lut_value_float,
     measure_step_size,
+    half_dt_sq,
     step_size,
     step_size_error_bound,
     step_size_float,
@@ -57,5 +58,5 @@ __all__ = [
     "RSQRT_GUARD_BITS", "RsqrtConfig", "bit_length", "measure_rsqrt", "rsqrt", "rsqrt_exact",
     "rsqrt_seed_table", "rsqrt_stages", "rsqrt_with_config",
     "DT_MAX", "DT_MIN", "LUT_RATE", "LUT_SCALE", "dt_constant", "exp_lut", "exp_table",
-    "lut_value_float", "measure_step_size", "step_size", "step_size_error_bound", "step_size_float",
+    "lut_value_float", "measure_step_size", "step_size", "half_dt_sq", "step_size_error_bound", "step_size_float",
 ]

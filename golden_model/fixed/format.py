@@ -297,7 +297,10 @@ def shift_round(raw: np.ndarray | int, shift: np.ndarray | int, rounding: Roundi
         out = r >> np.minimum(sr, 63)
     else:
         t = r >> (sr - 1)  # keeps the half-lsb bit as bit 0
-        out = (t >> 1) + (t & 1)  # = (t + 1) >> 1, without overflow at t = 2**63 - 1
+        if s.ndim == 0 and int(s) >= 2:  # |t| <= 2**62: t + 1 cannot overflow
+            out = (t + 1) >> 1
+        else:
+            out = (t >> 1) + (t & 1)  # = (t + 1) >> 1, without overflow at t = 2**63 - 1
         if mode is Rounding.NEAREST_EVEN:
             # tie: half bit set and nothing below it; then drop the +1 if result is odd
             below = r - (t << (sr - 1))
@@ -324,11 +327,12 @@ def apply_overflow(
     mode = _overflow(overflow)
     _check_counter_name(counter, name)
     r = as_raw(raw)
+    # Fast path (two reductions, no temporaries): everything already in range.
+    if r.size == 0 or (r.max() <= fmt.raw_max and r.min() >= fmt.raw_min):
+        return r
     hi = r > fmt.raw_max
     lo = r < fmt.raw_min
     n_out = int(np.count_nonzero(hi | lo))
-    if n_out == 0:
-        return r
     if mode is Overflow.SATURATE:
         if counter is not None:
             counter.add_saturations(name, n_out)

@@ -44,13 +44,14 @@ FORMAT_FIELDS: tuple[str, ...] = (
     "error_acc",
     "error",
     "lut_entry",
+    "damping",
 )
 """Names of the Format-valued fields, in pipeline order."""
 
 _SIGNED = ("position", "velocity", "delta", "spring", "force", "force_acc", "accel")
 _UNSIGNED = (
     "rest_length", "length_sq", "rsqrt", "inv_mass", "dt", "half_dt_sq",
-    "error_acc", "error", "lut_entry",
+    "error_acc", "error", "lut_entry", "damping",
 )
 
 
@@ -65,7 +66,9 @@ class FormatSet:
     ``spring`` s = C/2*(1 - d*r) (dimensionless), ``force`` per-neighbour s*delta,
     ``force_acc`` sum of forces, ``inv_mass`` 1/m, ``accel`` a, ``dt`` step,
     ``half_dt_sq`` dt**2/2, ``error_acc`` sums of |L - d|, ``error`` E_S/E_C in
-    [0, 1] (LUT input), ``lut_entry`` exp-table entries 0.1*exp(-5(1-E)).
+    [0, 1] (LUT input), ``lut_entry`` exp-table entries 0.1*exp(-5(1-E)),
+    ``damping`` the velocity factor 1 - gamma in (0, 1] (needs an integer bit
+    so that gamma = 0 multiplies by exactly 1).
 
     Format fields accept ``"s3.16"``-style strings (converted on construction).
     """
@@ -86,11 +89,13 @@ class FormatSet:
     error_acc: Format
     error: Format
     lut_entry: Format
+    damping: Format
     rsqrt_seed_bits: int
     rsqrt_newton_steps: int
     lut_index_bits: int
     lut_interpolate: bool
     rounding: Rounding = Rounding.HALF_UP
+    max_degree: int = 32
     name: str = "custom"
     notes: dict[str, str] = field(default_factory=dict, compare=False, hash=False, repr=False)
 
@@ -111,10 +116,15 @@ class FormatSet:
                 f"FormatSet {self.name!r}: unknown rounding {self.rounding!r}; "
                 f"expected one of {[m.value for m in Rounding]}"
             ) from None
-        for knob in ("rsqrt_seed_bits", "rsqrt_newton_steps", "lut_index_bits"):
+        for knob in ("rsqrt_seed_bits", "rsqrt_newton_steps", "lut_index_bits", "max_degree"):
             v = getattr(self, knob)
             if isinstance(v, bool) or not isinstance(v, int):
                 raise ValueError(f"FormatSet {self.name!r}: {knob} must be an int, got {v!r}")
+        if self.max_degree < 1:
+            raise ValueError(f"FormatSet {self.name!r}: max_degree must be >= 1, got {self.max_degree}")
+        if self.error_acc.frac_bits < self.rest_length.frac_bits:
+            raise ValueError(f"FormatSet {self.name!r}: error_acc needs at least rest_length's fraction bits "
+                             f"({self.rest_length.frac_bits}) so that error sums are exact")
         if not isinstance(self.lut_interpolate, bool):
             raise ValueError(f"FormatSet {self.name!r}: lut_interpolate must be a bool")
         self._check_signedness()
@@ -176,6 +186,7 @@ class FormatSet:
             ("dt*accel", w["dt"], w["accel"]),
             ("half_dt_sq*accel", w["half_dt_sq"], w["accel"]),
             ("dt*dt -> half_dt_sq", w["dt"], w["dt"]),
+            ("velocity*damping", w["velocity"], w["damping"]),
         ]
         if self.lut_interpolate:
             prods.append(("lut interpolation (entry diff * E low bits)", w["lut_entry"],
@@ -263,7 +274,7 @@ class FormatSet:
             lines.append(f"  {f:12s} {str(fmt):7s} {fmt.width:3d} b  "
                          f"[{fmt.min:.6g}, {fmt.max:.6g}]  lsb {fmt.lsb:.3g}")
         for k in ("rsqrt_seed_bits", "rsqrt_newton_steps", "lut_index_bits",
-                  "lut_interpolate"):
+                  "lut_interpolate", "max_degree"):
             lines.append(f"  {k} = {getattr(self, k)}")
         lines.append(f"  rounding = {self.rounding.value}")
         return "\n".join(lines)

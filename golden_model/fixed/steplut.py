@@ -62,6 +62,7 @@ __all__ = [
     "exp_lut",
     "dt_constant",
     "step_size",
+    "half_dt_sq",
     "step_size_error_bound",
     "measure_step_size",
 ]
@@ -179,10 +180,20 @@ def step_size(
     v = exp_lut(e_s_raw, *args) + exp_lut(e_c_raw, *args)
     v = requantize(v, fs.lut_entry.frac_bits, fs.dt, fs.rounding, Overflow.SATURATE, counter, "dt")
     dt = apply_overflow(v + dt_constant(fs.dt), fs.dt, Overflow.SATURATE, counter, "dt")
+    return dt, half_dt_sq(dt, fs, counter)
+
+
+def half_dt_sq(
+    dt_raw: np.ndarray | int, fs: FormatSet, counter: SaturationCounter | None = None
+) -> np.ndarray:
+    """``dt**2/2`` raw in ``fs.half_dt_sq`` from raw ``dt`` in ``fs.dt`` (``fs.rounding``, saturating).
+
+    The step generator's last stage; the fixed-step mode uses it too.
+    """
+    dt = fs.dt.check(dt_raw, "dt")
     # dt*dt fits int64 (checked by FormatSet: "dt*dt -> half_dt_sq"); /2 = one more fraction bit
-    half = requantize(dt * dt, 2 * fs.dt.frac_bits + 1, fs.half_dt_sq, fs.rounding,
+    return requantize(dt * dt, 2 * fs.dt.frac_bits + 1, fs.half_dt_sq, fs.rounding,
                       Overflow.SATURATE, counter, "half_dt_sq")
-    return dt, half
 
 
 def step_size_error_bound(fs: FormatSet) -> float:

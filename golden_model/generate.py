@@ -1,4 +1,8 @@
-"""Small generated meshes for the tests (regular grids bent into shapes)."""
+"""Generated test meshes: regular grids bent into shapes, and an irregular Delaunay patch.
+
+Used by the tests, the error studies and the benchmarks; every mesh is a
+valid disk (see :mod:`golden_model.mesh`).
+"""
 
 from __future__ import annotations
 
@@ -40,3 +44,35 @@ def dome_grid(n: int = 8, height: float = 0.3) -> Mesh:
     uv = grid_uv(n, n) - 0.5
     z = height * (1 - 2 * (uv**2).sum(axis=1))
     return Mesh(np.column_stack([uv, z]), grid_faces(n, n), name="dome")
+
+
+def saddle_grid(n: int = 8, height: float = 0.3) -> Mesh:
+    uv = grid_uv(n, n) - 0.5
+    z = height * 4 * (uv[:, 0] ** 2 - uv[:, 1] ** 2)
+    return Mesh(np.column_stack([uv, z]), grid_faces(n, n), name="saddle")
+
+
+def delaunay_patch(n_points: int = 150, seed: int = 0, height: float = 0.25) -> Mesh:
+    """An irregular Delaunay triangulation of random points in a disk, lifted onto a bump."""
+    from scipy.spatial import Delaunay  # scipy is a dependency; only this generator needs it
+
+    rng = np.random.default_rng(seed)
+    ring = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    boundary = np.column_stack([np.cos(ring), np.sin(ring)])
+    radius = np.sqrt(rng.uniform(0, 0.85**2, n_points - len(ring)))
+    angle = rng.uniform(0, 2 * np.pi, n_points - len(ring))
+    inner = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+    uv = np.vstack([boundary, inner])
+    faces = Delaunay(uv).simplices  # the hull is the 24-gon: no slivers
+    z = height * np.exp(-2 * (uv**2).sum(axis=1))
+    return Mesh(np.column_stack([uv, z]), faces, name="delaunay")
+
+
+def generated_meshes() -> dict[str, Mesh]:
+    """The generated meshes of the fixed-point acceptance checks."""
+    return {
+        "developable": rolled_grid(8, 8, arc_degrees=90)[0],
+        "dome": dome_grid(8, height=0.3),
+        "saddle": saddle_grid(8, height=0.3),
+        "delaunay": delaunay_patch(150),
+    }

@@ -1,0 +1,330 @@
+"""Host and controller around the fixed-point pipeline: ``--engine fixed``.
+
+The host maps a mesh into the formats' range and back; the controller runs
+Algorithm 1 around :func:`~golden_model.fixed.pipeline.node_update` the way
+the hardware-side controller will: E_C from the pipeline's per-node partial
+sums, E_S from the triangle areas of the fixed-point layout, both normalised
+by precomputed reciprocals, fed to the exp-LUT step generator and to the
+stopping rule.
+
+**Scale.** Positions and rest lengths are multiplied by ``2**k`` (exact in
+binary), with ``k`` chosen so that the mean rest length lies in
+[1/√2, √2) — the range the presets are designed for.  Forces, accelerations
+and velocities then scale by the same factor while masses, ``Δt`` and the
+dynamics are unchanged, so the fixed-point trajectory approximates the float
+trajectory times ``2**k``.  Areas scale by ``4**k``; both sides of ``E_S``
+are formed at that scale.  Results are mapped back by ``2**-k``.
+
+**Energy.** The stopping rule's relative energy change is evaluated by the
+host in float64 from the pipeline's exact ``|L − d|`` terms (``Σ e²``, an
+exact integer): a deterministic function of the bit-exact state, so a
+controller around the RTL reproduces it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..mesh import Mesh
+from ..reference import FlattenParams, FlattenResult, Measurement, ParameterError, run
+from .format import Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
+from .formats_set import FormatSet
+from .pipeline import NeighbourStream, NodeConstants, NodeTerms, integrate, node_terms
+from .steplut import half_dt_sq, step_size
+
+__all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats"]
+
+SAT = Overflow.SATURATE
+HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
+
+#: Extra fraction bits of the reciprocals' mantissas beyond the error format's.
+RECIPROCAL_GUARD_BITS = 8
+#: The initial layout must fit in this fraction of the position range (the
+#: layout may grow while it relaxes).
+POSITION_HEADROOM = 0.5
+
+
+class FixedPointError(ParameterError):
+    """A mesh or parameter set the formats cannot hold; one line for the user."""
+
+
+def load_formats(spec: str) -> FormatSet:
+    """A preset name or a JSON file, with errors turned into one-line messages."""
+    try:
+        return FormatSet.load(spec)
+    except FileNotFoundError:
+        raise FixedPointError(f"formats file '{spec}' not found (presets: {', '.join(FormatSet.presets())})") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise FixedPointError(f"formats '{spec}': {str(exc).splitlines()[0]}") from None
+
+
+@dataclass(frozen=True)
+class Reciprocal:
+    """``1/total`` as an integer mantissa and a shift: ``x/total ≈ x·mantissa·2^-shift``.
+
+    Used by the controller to normalise an error sum into ``fs.error`` with one
+    multiply and one rounding shift.
+    """
+
+    mantissa: int
+    shift: int
+
+    @classmethod
+    def of(cls, total_raw: int, mantissa_bits: int) -> "Reciprocal":
+        """``round_half_up(2**shift / total_raw)`` with exactly ``mantissa_bits`` bits."""
+        if total_raw <= 0:
+            raise FixedPointError("cannot normalise by a zero total")
+        shift = mantissa_bits + total_raw.bit_length() - 1
+        mantissa = ((1 << (shift + 1)) // total_raw + 1) >> 1
+        if mantissa == 1 << mantissa_bits:  # total a power of two, or rounding carried
+            mantissa, shift = mantissa >> 1, shift - 1
+        return cls(mantissa, shift)
+
+    def normalise(self, sum_raw: int, fmt: Format, rounding: Rounding) -> int:
+        """``sum/total`` raw in ``fmt`` (``sum`` at the fraction bits ``total`` had)."""
+        return int(requantize(np.int64(sum_raw) * np.int64(self.mantissa), self.shift, fmt, rounding, SAT))
+
+
+@dataclass(frozen=True, eq=False)
+class FixedProblem:
+    """Everything the host precomputes for one mesh, layout and format set."""
+
+    fs: FormatSet
+    mesh: Mesh
+    params: FlattenParams
+    scale_exp: int
+    stream: NeighbourStream
+    half_spring: int
+    damping: int
+    face_areas: np.ndarray  # (F,) raw [error_acc], scaled by 4**k
+    area_reciprocal: Reciprocal
+    length_reciprocal: Reciprocal
+    orientation: np.ndarray  # (F,) ±1 of the fixed-point P0
+    initial_positions: np.ndarray  # (V, 2) raw [position]
+    density: float
+
+    @property
+    def scale(self) -> float:
+        return 2.0**self.scale_exp
+
+    def to_float_positions(self, raw: np.ndarray) -> np.ndarray:
+        return np.ldexp(to_float(raw, self.fs.position), -self.scale_exp)
+
+    def to_float_velocities(self, raw: np.ndarray) -> np.ndarray:
+        return np.ldexp(to_float(raw, self.fs.velocity), -self.scale_exp)
+
+    def constants(self, dt: int) -> NodeConstants:
+        """The datapath inputs for a step ``dt`` (raw [dt])."""
+        return NodeConstants(dt, int(half_dt_sq(np.int64(dt), self.fs)), self.half_spring, self.damping)
+
+
+def _quantize_checked(x: np.ndarray | float, fmt: Format, what: str, fs: FormatSet, hint: str) -> np.ndarray:
+    raw = quantize(x, fmt, HOST_ROUNDING, SAT)
+    worst = float(np.max(np.abs(x)))
+    if worst > fmt.max or (np.ndim(x) and np.any(np.abs(x) > fmt.max)):
+        raise FixedPointError(f"{what} {worst:.6g} does not fit format set '{fs.name}' "
+                              f"({fmt}: max {fmt.max:.6g}); {hint}")
+    return raw
+
+
+def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs: FormatSet) -> FixedProblem:
+    """Scale the problem into ``fs`` and precompute the controller's constants.
+
+    Raises :class:`FixedPointError` with one line naming the first quantity
+    that does not fit.
+    """
+    if params.update != "jacobi":
+        raise FixedPointError("the fixed-point engine computes the jacobi order (as the hardware does); "
+                              "use --update jacobi")
+    if params.penalty:
+        raise FixedPointError("the penalty is not part of the fixed-point pipeline; drop --penalty")
+    rest = mesh.rest_lengths
+    k = -int(math.floor(math.log2(float(rest.mean())) + 0.5))
+    scale = 2.0**k
+    wider = "choose a format set with more integer bits"
+
+    degree = int(np.diff(mesh.neighbours[0]).max())
+    if degree > fs.max_degree:
+        raise FixedPointError(f"a node has {degree} neighbours; format set '{fs.name}' accumulates at most "
+                              f"{fs.max_degree} (max_degree)")
+    p0 = np.asarray(initial_positions, dtype=np.float64) * scale
+    extent = float(np.max(np.abs(p0)))
+    if extent > POSITION_HEADROOM * fs.position.max:
+        raise FixedPointError(
+            f"the initial layout spans ±{extent:.4g} mean edge lengths; format set '{fs.name}' holds positions "
+            f"up to ±{fs.position.max:.4g} ({fs.position}) with room to grow up to ±{POSITION_HEADROOM * fs.position.max:.4g}: "
+            f"the mesh has too many edges across for these formats; {wider}")
+    positions = quantize(p0, fs.position, HOST_ROUNDING, SAT)
+    indptr, neighbour, edge_id = mesh.neighbours
+    scaled_rest = rest * scale
+    longest = float(scaled_rest.max())
+    if longest >= fs.delta.max or longest >= fs.rest_length.max:
+        raise FixedPointError(f"the longest edge is {longest:.4g} mean edge lengths; format set '{fs.name}' "
+                              f"holds edges below {min(fs.delta.max, fs.rest_length.max):.4g}: "
+                              "the mesh's edge lengths vary too much for these formats")
+    shortest = float(scaled_rest.min())
+    if shortest <= 1.0 / fs.rsqrt.max:
+        raise FixedPointError(f"the shortest edge is {shortest:.4g} mean edge lengths; the rsqrt format "
+                              f"{fs.rsqrt} of '{fs.name}' needs edges above {1.0 / fs.rsqrt.max:.4g}: "
+                              "the mesh's edge lengths vary too much for these formats")
+    rest_raw = quantize(scaled_rest, fs.rest_length, HOST_ROUNDING, SAT)
+    model_density = mesh.auto_density() if params.density == "auto" else float(params.density)
+    inv_mass = 1.0 / mesh.masses(model_density)
+    inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "1/m", fs,
+                                     "use --density auto (or a larger density), or a wider inv_mass format")
+    if inv_mass_raw.min() < 16:
+        raise FixedPointError(f"1/m down to {inv_mass.min():.3g} keeps fewer than 5 bits in {fs.inv_mass} "
+                              f"of format set '{fs.name}': the node masses vary too much (lower the density)")
+    half_spring = int(_quantize_checked(0.5 * params.spring, fs.spring, "C/2", fs, "use a smaller --spring"))
+    damping = int(quantize(1.0 - params.damping, fs.damping, HOST_ROUNDING, SAT))
+
+    stream = NeighbourStream(indptr, neighbour, rest_raw[edge_id], inv_mass_raw)
+    acc_frac = fs.error_acc.frac_bits
+    face_areas = quantize(mesh.face_areas * scale * scale, Format(False, 62 - acc_frac, acc_frac),
+                          HOST_ROUNDING, SAT)
+    mantissa_bits = fs.error.frac_bits + RECIPROCAL_GUARD_BITS
+    area_total = int(face_areas.sum())
+    length_total = int(requantize(stream.rest.sum(), fs.rest_length.frac_bits,
+                                  Format(False, 62 - acc_frac, acc_frac), HOST_ROUNDING, SAT))
+    orientation = np.where(_doubled_areas(positions, mesh.faces) >= 0, 1, -1)
+    return FixedProblem(fs, mesh, params, k, stream, half_spring, damping, face_areas,
+                        Reciprocal.of(area_total, mantissa_bits), Reciprocal.of(length_total, mantissa_bits),
+                        orientation, positions, model_density)
+
+
+def _doubled_areas(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Twice the signed areas, exact, at twice the position fraction bits."""
+    x, y = positions[:, 0], positions[:, 1]
+    corners = faces.T
+    ax, bx, cx = (np.take(x, c) for c in corners)
+    ay, by, cy = (np.take(y, c) for c in corners)
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+
+
+def area_error(problem: FixedProblem, positions: np.ndarray, counter: SaturationCounter | None = None) -> int:
+    """``E_S`` raw [error]: Σ|A − |A'|| [error_acc] times 1/ΣA."""
+    fs = problem.fs
+    doubled = np.abs(_doubled_areas(positions, problem.mesh.faces))
+    area = requantize(doubled, 2 * fs.position.frac_bits + 1, Format(False, 62 - fs.error_acc.frac_bits,
+                      fs.error_acc.frac_bits), fs.rounding, SAT)
+    total = requantize(np.abs(problem.face_areas - area).sum(), fs.error_acc.frac_bits, fs.error_acc, fs.rounding,
+                       SAT, counter, "area_sum")
+    return problem.area_reciprocal.normalise(int(total), fs.error, fs.rounding)
+
+
+def shape_error(problem: FixedProblem, error_sums: np.ndarray, counter: SaturationCounter | None = None) -> int:
+    """``E_C`` raw [error]: Σ over nodes of the pipeline's Σ|L − d| times 1/(2Σd)."""
+    fs = problem.fs
+    total = requantize(error_sums.sum(), fs.error_acc.frac_bits, fs.error_acc, fs.rounding, SAT, counter,
+                       "length_sum")
+    return problem.length_reciprocal.normalise(int(total), fs.error, fs.rounding)
+
+
+def flipped_count(problem: FixedProblem, positions: np.ndarray) -> int:
+    """Faces whose exact orientation is opposite to the fixed-point ``P0``'s."""
+    return int(np.sum(problem.orientation * _doubled_areas(positions, problem.mesh.faces) < 0))
+
+
+class FixedEngine:
+    """Controller state for :func:`reference.run`: raw state plus the last raw errors.
+
+    Each iteration is a force pass over the current positions (which also
+    yields their ``E_C`` partial sums) and an integrate pass once the step
+    generator has turned ``E_S``, ``E_C`` into ``Δt``.  With the single-pass
+    datapath this is a pass with ``Δt = 0``, ``1 − γ = 1`` (which moves
+    nothing) followed by the real pass: the partial sums do not depend on the
+    step, so both passes produce the same terms.
+
+    ``positions``/``velocities`` are the state mapped back to mesh units
+    (float64); ``raw_positions``/``raw_velocities`` are the bit-exact state.
+    """
+
+    def __init__(self, problem: FixedProblem, counter: SaturationCounter):
+        self.problem = problem
+        self.counter = counter
+        self.raw_positions = problem.initial_positions.copy()
+        self.raw_velocities = np.zeros_like(self.raw_positions)
+        self.terms: NodeTerms | None = None
+        self.errors = (0, 0)
+        self.dt = 0
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.problem.to_float_positions(self.raw_positions)
+
+    @positions.setter
+    def positions(self, value) -> None:  # run() restores a state only after divergence, impossible here
+        raise AssertionError("fixed-point state is never non-finite")
+
+    @property
+    def velocities(self) -> np.ndarray:
+        return self.problem.to_float_velocities(self.raw_velocities)
+
+    def measure(self) -> Measurement:
+        p = self.problem
+        self.terms = node_terms(p.fs, self.raw_positions, p.stream, p.half_spring, self.counter)
+        e_s = area_error(p, self.raw_positions, self.counter)
+        e_c = shape_error(p, self.terms.error_sums, self.counter)
+        self.errors = (e_s, e_c)
+        # E = Σ_e C(L − d)²: each edge appears twice among the entries
+        energy = 0.5 * p.params.spring * math.ldexp(float(self.terms.error_square_sum),
+                                                    -2 * (p.fs.rest_length.frac_bits + p.scale_exp))
+        return Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
+                           flipped_count(p, self.raw_positions))
+
+    def step_size(self, _: Measurement) -> float:
+        """The step generator on the last raw errors (variable) or the fixed ``Δt``."""
+        fs, params = self.problem.fs, self.problem.params
+        if params.step == "fixed":
+            self.dt = int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))
+        else:
+            self.dt = int(step_size(np.int64(self.errors[0]), np.int64(self.errors[1]), fs, self.counter)[0])
+        return float(to_float(self.dt, fs.dt))
+
+    def advance(self, dt: float) -> None:
+        p = self.problem
+        self.raw_positions, self.raw_velocities = integrate(
+            p.fs, self.raw_positions, self.raw_velocities, self.terms.force, p.stream.inv_mass,
+            p.constants(self.dt), self.counter)
+
+
+def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
+    """Refuse parameters the formats cannot represent faithfully."""
+    if params.step == "fixed":
+        raw = float(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))
+        if params.dt > fs.dt.max or raw == 0:
+            raise FixedPointError(f"dt {params.dt} does not fit format set '{fs.name}' ({fs.dt}: "
+                                  f"{fs.dt.lsb:.3g} .. {fs.dt.max:.6g})")
+
+
+def flatten_fixed(
+    mesh: Mesh,
+    initial_positions: np.ndarray,
+    params: FlattenParams,
+    fs: FormatSet | None = None,
+    on_iteration: Callable[[int, Measurement], None] | None = None,
+) -> FlattenResult:
+    """Algorithm 1 on the bit-exact pipeline; results mapped back to mesh units.
+
+    ``result.extra`` carries ``saturations`` (total events), ``saturation_events``
+    (per signal), ``formats`` and ``scale``.
+    """
+    fs = FormatSet.preset("default") if fs is None else fs
+    check_fixed_params(params, fs)
+    problem = prepare(mesh, initial_positions, params, fs)
+    counter = SaturationCounter()
+    engine = FixedEngine(problem, counter)
+    result = run(engine, params, problem.density, problem.to_float_positions(problem.initial_positions),
+                 on_iteration, name="fixed", step_size=engine.step_size)
+    result.extra.update({
+        "formats": fs.name,
+        "scale": problem.scale,
+        "saturations": counter.total,
+        "saturation_events": {k: v for k, v in counter.saturations.items() if v},
+    })
+    result.engine_state = engine  # the raw state, for bit-level comparisons
+    return result

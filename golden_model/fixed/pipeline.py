@@ -1,0 +1,283 @@
+"""The per-node update pipeline, bit for bit as the hardware computes it.
+
+``docs/fixed-point.md`` lists the same operations as a table; the RTL
+(``hdl/``) follows that page stage by stage.  Every value is a numpy int64
+*raw* integer in the :class:`~golden_model.fixed.formats_set.FormatSet`
+format named in brackets; ``rq(x, F → fmt)`` is :func:`requantize` from ``F``
+fraction bits with ``fs.rounding`` and saturation (each clamped element
+counted under the signal's name).  Products are exact before ``rq``.
+
+Per neighbour entry ``(j, d)`` of node ``i`` (``jacobi``: all from the
+positions at the start of the iteration)::
+
+    D   = P_j − P_i                         exact, position fraction bits
+    Δ   = rq(D → delta)                                       [delta]
+    S   = rq(Δx² + Δy² → length_sq)                           [length_sq]
+    r   = rsqrt(S)                          the rsqrt unit    [rsqrt]
+    u   = rq(1 − d·r → spring)              1 exact at d·r's fraction bits
+    s   = rq(½C · u → spring)               ½C a constant in [spring]
+    f   = rq(s·Δ → force)                   per component     [force]
+    L   = rq(S·r → rest_length)             |Δ| = |Δ|²/|Δ|    [length]
+    e   = |L − d|                           exact             [rest_length]
+
+Per node, after its last neighbour::
+
+    F   = rq(Σ f → force_acc)               exact sum in an accumulator with
+                                            ceil(log2(max_degree)) guard bits
+    Σe  = rq(Σ e → error_acc)               likewise
+    a   = rq(F · (1/m) → accel)
+    P'  = sat(P + rq(Δt·V + ½Δt²·a → position))   one rounding for both terms
+    V'  = sat(V + rq(Δt·a → velocity))
+    V'' = rq(V' · (1 − γ) → velocity)       exact when γ = 0
+
+The guard bits make the sums order-independent (the hardware saturates once,
+when the node leaves the accumulator), so the model may sum with numpy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .format import Format, Overflow, SaturationCounter, requantize
+from .formats_set import FormatSet
+from .rsqrt import rsqrt_with_config
+
+__all__ = ["NeighbourStream", "NodeConstants", "NodeTerms", "NodeUpdate", "accumulator_guard_bits", "integrate",
+           "edge_terms", "neighbour_terms", "node_terms", "node_update"]
+
+SAT = Overflow.SATURATE
+
+
+def accumulator_guard_bits(max_degree: int) -> int:
+    """Extra integer bits that let ``max_degree`` terms add up without overflow."""
+    return max(1, math.ceil(math.log2(max_degree)))
+
+
+@dataclass(frozen=True, eq=False)
+class NeighbourStream:
+    """The static part of the input stream: CSR neighbour lists and node constants.
+
+    Attributes:
+        indptr: ``(V+1,)`` node ``i``'s entries are ``indptr[i]:indptr[i+1]``.
+        neighbour: ``(N,)`` neighbour node index of each entry.
+        rest: ``(N,)`` raw rest length ``d`` of each entry [rest_length].
+        inv_mass: ``(V,)`` raw ``1/m`` [inv_mass].
+    """
+
+    indptr: np.ndarray
+    neighbour: np.ndarray
+    rest: np.ndarray
+    inv_mass: np.ndarray
+
+    @property
+    def owner(self) -> np.ndarray:
+        """``(N,)`` the node each entry belongs to."""
+        return np.repeat(np.arange(len(self.indptr) - 1), np.diff(self.indptr))
+
+    @property
+    def max_degree(self) -> int:
+        return int(np.diff(self.indptr).max())
+
+    @cached_property
+    def edge_entries(self) -> tuple[np.ndarray, np.ndarray]:
+        """For each undirected edge ``(a < b)``: the entry ``a → b`` and the entry ``b → a``."""
+        owner = self.owner
+        forward = np.flatnonzero(owner < self.neighbour)
+        # entry b → a: sort entries by (neighbour, owner) to line them up with (owner, neighbour)
+        key_f = owner[forward] * len(self.indptr) + self.neighbour[forward]
+        backward_all = np.flatnonzero(owner > self.neighbour)
+        key_b = self.neighbour[backward_all] * len(self.indptr) + owner[backward_all]
+        order_f, order_b = np.argsort(key_f), np.argsort(key_b)
+        if not np.array_equal(key_f[order_f], key_b[order_b]):
+            raise ValueError("neighbour lists are not symmetric")
+        backward = np.empty_like(forward)
+        backward[order_f] = backward_all[order_b]
+        return forward, backward
+
+
+@dataclass(frozen=True)
+class NodeConstants:
+    """The datapath's per-iteration inputs (raw).
+
+    Attributes:
+        dt: ``Δt`` [dt].
+        half_dt_sq: ``½Δt²`` [half_dt_sq].
+        half_spring: ``½C`` [spring].
+        damping: ``1 − γ`` [damping].
+    """
+
+    dt: int
+    half_dt_sq: int
+    half_spring: int
+    damping: int
+
+
+@dataclass(frozen=True, eq=False)
+class NodeUpdate:
+    """Outputs of one pass over all nodes (raw)."""
+
+    positions: np.ndarray  # (V, 2) [position]
+    velocities: np.ndarray  # (V, 2) [velocity]
+    error_sums: np.ndarray  # (V,) Σ|L − d| per node [error_acc]
+
+
+def neighbour_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream,
+                    half_spring: int, counter: SaturationCounter | None = None,
+                    entries: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-entry force ``f`` ``(N, 2)`` [force] and ``|L − d|`` ``(N,)`` [rest_length].
+
+    The definition: every entry computed on its own, as the datapath does.
+    ``entries`` restricts it to some entries (default all).
+    """
+    owner, neighbour, rest = stream.owner, stream.neighbour, stream.rest
+    if entries is not None:
+        owner, neighbour, rest = owner[entries], neighbour[entries], rest[entries]
+    delta = _narrow(fs, positions[neighbour] - positions[owner], counter)
+    spring, error = _spring_terms(fs, delta, rest, half_spring, counter)
+    return _force(fs, spring, delta, counter), error
+
+
+def _narrow(fs: FormatSet, diff: np.ndarray, counter: SaturationCounter | None) -> np.ndarray:
+    return requantize(diff, fs.position.frac_bits, fs.delta, fs.rounding, SAT, counter, "delta")
+
+
+def _spring_terms(fs: FormatSet, delta: np.ndarray, rest: np.ndarray, half_spring: int,
+                  counter: SaturationCounter | None) -> tuple[np.ndarray, np.ndarray]:
+    """``s`` [spring] and ``|L − d|`` [rest_length] of each entry from its ``Δ``."""
+    rnd = fs.rounding
+    square = delta[:, 0] * delta[:, 0] + delta[:, 1] * delta[:, 1]
+    length_sq = requantize(square, 2 * fs.delta.frac_bits, fs.length_sq, rnd, SAT, counter, "length_sq")
+    r = rsqrt_with_config(length_sq, fs.rsqrt_config(), counter, "rsqrt")
+    dr_frac = fs.rest_length.frac_bits + fs.rsqrt.frac_bits
+    u = requantize((1 << dr_frac) - rest * r, dr_frac, fs.spring, rnd, SAT, counter, "one_minus_dr")
+    spring = requantize(half_spring * u, 2 * fs.spring.frac_bits, fs.spring, rnd, SAT, counter, "spring")
+    length = requantize(length_sq * r, fs.length_sq.frac_bits + fs.rsqrt.frac_bits, fs.rest_length, rnd, SAT,
+                        counter, "length")
+    return spring, np.abs(length - rest)
+
+
+def _force(fs: FormatSet, spring: np.ndarray, delta: np.ndarray, counter: SaturationCounter | None) -> np.ndarray:
+    return requantize(spring[:, None] * delta, fs.spring.frac_bits + fs.delta.frac_bits, fs.force, fs.rounding,
+                      SAT, counter, "force")
+
+
+def edge_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, half_spring: int,
+               counter: SaturationCounter | None = None) -> tuple[np.ndarray, ...]:
+    """:func:`neighbour_terms` arranged by undirected edge: same values, same counts, faster.
+
+    Returns ``(force_forward, force_backward, error_forward, error_backward)``
+    for the entries listed by :attr:`NeighbourStream.edge_entries`.  The two
+    entries of an edge see ``Δ`` and ``−Δ``.  Where narrowing keeps that
+    symmetry (it breaks only at rounding ties and saturation), ``|Δ|²``, ``r``,
+    ``s`` and ``|L − d|`` are equal for both and computed once; the forces are
+    rounded per direction.  The other edges take the per-entry path.
+    """
+    forward, backward = stream.edge_entries
+    a, b = stream.neighbour[backward], stream.neighbour[forward]
+    rest = stream.rest[forward]
+    diff = positions[b] - positions[a]
+    delta_f = _narrow(fs, diff, counter)
+    delta_b = _narrow(fs, -diff, counter)
+    symmetric = np.all(delta_b == -delta_f, axis=1)
+    asym = np.flatnonzero(~symmetric)
+    sym = slice(None) if len(asym) == 0 else np.flatnonzero(symmetric)
+    force_f, force_b = np.empty_like(delta_f), np.empty_like(delta_b)
+    error_f, error_b = np.empty(len(rest), dtype=np.int64), np.empty(len(rest), dtype=np.int64)
+
+    once = SaturationCounter()
+    spring, error = _spring_terms(fs, delta_f[sym], rest[sym], half_spring, once)
+    if counter is not None:
+        counter.merge(once).merge(once)  # the same events happen in both entries
+    force_f[sym] = _force(fs, spring, delta_f[sym], counter)
+    force_b[sym] = _force(fs, spring, delta_b[sym], counter)
+    error_f[sym] = error
+    error_b[sym] = error
+    if len(asym):
+        pair = np.concatenate([delta_f[asym], delta_b[asym]])
+        spring, error = _spring_terms(fs, pair, np.concatenate([rest[asym], rest[asym]]), half_spring, counter)
+        force = _force(fs, spring, pair, counter)
+        n = len(asym)
+        force_f[asym], force_b[asym] = force[:n], force[n:]
+        error_f[asym], error_b[asym] = error[:n], error[n:]
+    return force_f, force_b, error_f, error_b
+
+
+@dataclass(frozen=True, eq=False)
+class NodeTerms:
+    """What the neighbour half of the pipeline produces per node (raw)."""
+
+    force: np.ndarray  # (V, 2) Σ f [force_acc]
+    error_sums: np.ndarray  # (V,) Σ|L − d| [error_acc]
+    #: Σ over all entries of |L − d|² (raw², exact): the host's energy estimate
+    error_square_sum: int
+
+
+def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, half_spring: int,
+               counter: SaturationCounter | None = None) -> NodeTerms:
+    """Every node's accumulated force and error partial sum from the same positions."""
+    rnd = fs.rounding
+    forward, backward = stream.edge_entries
+    a, b = stream.neighbour[backward], stream.neighbour[forward]
+    force_f, force_b, error_f, error_b = edge_terms(fs, positions, stream, half_spring, counter)
+    n = len(stream.indptr) - 1
+
+    def per_node(forward_values: np.ndarray, backward_values: np.ndarray) -> np.ndarray:
+        # float64 sums of these integers are exact (|sum| < 2**53 by the formats)
+        total = np.bincount(a, forward_values, n) + np.bincount(b, backward_values, n)
+        return total.astype(np.int64)
+
+    force = np.column_stack([per_node(force_f[:, 0], force_b[:, 0]), per_node(force_f[:, 1], force_b[:, 1])])
+    force_acc = requantize(force, fs.force.frac_bits, fs.force_acc, rnd, SAT, counter, "force_acc")
+    error_sums = requantize(per_node(error_f, error_b), fs.rest_length.frac_bits, fs.error_acc, rnd, SAT,
+                            counter, "error_acc")
+    square_sum = int(np.dot(error_f, error_f)) + int(np.dot(error_b, error_b))
+    return NodeTerms(force_acc, error_sums, square_sum)
+
+
+def integrate(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, force: np.ndarray,
+              inv_mass: np.ndarray, constants: NodeConstants,
+              counter: SaturationCounter | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The node half of the pipeline: ``a = F/m`` and the Euler step with damping."""
+    rnd = fs.rounding
+    accel = requantize(force * inv_mass[:, None], fs.force_acc.frac_bits + fs.inv_mass.frac_bits,
+                       fs.accel, rnd, SAT, counter, "accel")
+    # Δt·V and ½Δt²·a aligned to the finer of their fraction bits, summed, rounded once.
+    fv = fs.dt.frac_bits + fs.velocity.frac_bits
+    fa = fs.half_dt_sq.frac_bits + fs.accel.frac_bits
+    step_frac = max(fv, fa)
+    step = (constants.dt * velocities << (step_frac - fv)) + (constants.half_dt_sq * accel << (step_frac - fa))
+    moved = positions + requantize(step, step_frac, _wide(fs.position), rnd, SAT, counter, "position_step")
+    new_positions = requantize(moved, fs.position.frac_bits, fs.position, rnd, SAT, counter, "position")
+    kick = requantize(constants.dt * accel, fs.dt.frac_bits + fs.accel.frac_bits, _wide(fs.velocity), rnd, SAT,
+                      counter, "velocity_step")
+    new_velocities = requantize(velocities + kick, fs.velocity.frac_bits, fs.velocity, rnd, SAT, counter, "velocity")
+    new_velocities = requantize(new_velocities * constants.damping, fs.velocity.frac_bits + fs.damping.frac_bits,
+                                fs.velocity, rnd, SAT, counter, "damping")
+    return new_positions, new_velocities
+
+
+def node_update(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, stream: NeighbourStream,
+                constants: NodeConstants, counter: SaturationCounter | None = None) -> NodeUpdate:
+    """One ``jacobi`` pass of the datapath: every node's update from the same positions.
+
+    The error partial sums describe the *input* positions (they are formed
+    from the same neighbour entries as the forces).
+    """
+    terms = node_terms(fs, positions, stream, constants.half_spring, counter)
+    new_positions, new_velocities = integrate(fs, positions, velocities, terms.force, stream.inv_mass, constants,
+                                              counter)
+    return NodeUpdate(new_positions, new_velocities, terms.error_sums)
+
+
+def _wide(fmt: Format) -> Format:
+    """``fmt`` with one more integer bit: the adder input before the final saturation.
+
+    The step term is held in this width and the sum with the old value is
+    formed exactly and saturated once; a step that does not fit the wide
+    format saturates too (counted separately).
+    """
+    return Format(fmt.signed, fmt.int_bits + 1, fmt.frac_bits)
