@@ -22,7 +22,7 @@ paper: $(STAMP)
 	$(VENV)/bin/springflat paper --out paper-report
 
 bench: $(STAMP)
-	$(VENV)/bin/python benchmarks/bench_float.py
+	$(VENV)/bin/python benchmarks/bench_engines.py
 
 clean:
 	rm -rf $(VENV) demo paper-report .pytest_cache build *.egg-info

@@ -417,7 +417,9 @@ def requantize(
     _check_counter_name(counter, name)
     r = as_raw(raw)
     shift = int(from_frac_bits) - fmt.frac_bits
-    if shift >= 0:
+    if shift == 0:  # nothing to round: only the range
+        return apply_overflow(r, fmt, overflow, counter, name)
+    if shift > 0:
         return apply_overflow(shift_round(r, shift, rounding), fmt, overflow, counter, name)
     _rounding(rounding)  # validate even though a left shift never rounds
     ov = _overflow(overflow)

@@ -161,8 +161,13 @@ def _spring_terms(fs: FormatSet, delta: np.ndarray, rest: np.ndarray, half_sprin
 
 
 def _force(fs: FormatSet, spring: np.ndarray, delta: np.ndarray, counter: SaturationCounter | None) -> np.ndarray:
-    return requantize(spring[:, None] * delta, fs.spring.frac_bits + fs.delta.frac_bits, fs.force, fs.rounding,
-                      SAT, counter, "force")
+    return _round_force(fs, spring[:, None] * delta, counter)
+
+
+def _round_force(fs: FormatSet, product: np.ndarray, counter: SaturationCounter | None) -> np.ndarray:
+    """``f = rq(s·Δ → force)`` from the exact product."""
+    return requantize(product, fs.spring.frac_bits + fs.delta.frac_bits, fs.force, fs.rounding, SAT, counter,
+                      "force")
 
 
 def edge_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, half_spring: int,
@@ -181,28 +186,38 @@ def edge_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
     rest = stream.rest[forward]
     diff = positions[b] - positions[a]
     delta_f = _narrow(fs, diff, counter)
-    delta_b = _narrow(fs, -diff, counter)
-    symmetric = np.all(delta_b == -delta_f, axis=1)
-    asym = np.flatnonzero(~symmetric)
-    sym = slice(None) if len(asym) == 0 else np.flatnonzero(symmetric)
-    force_f, force_b = np.empty_like(delta_f), np.empty_like(delta_b)
-    error_f, error_b = np.empty(len(rest), dtype=np.int64), np.empty(len(rest), dtype=np.int64)
+    if fs.position.frac_bits == fs.delta.frac_bits and -fs.delta.raw_max <= delta_f.min() \
+            and delta_f.max() < fs.delta.raw_max:
+        # narrowing only saturates, and nothing came near the range: −Δ is exactly the other entry's Δ
+        delta_b, asym = -delta_f, np.empty(0, dtype=np.int64)
+    else:
+        delta_b = _narrow(fs, -diff, counter)
+        asym = np.flatnonzero(np.any(delta_b != -delta_f, axis=1))
 
     once = SaturationCounter()
-    spring, error = _spring_terms(fs, delta_f[sym], rest[sym], half_spring, once)
-    if counter is not None:
-        counter.merge(once).merge(once)  # the same events happen in both entries
-    force_f[sym] = _force(fs, spring, delta_f[sym], counter)
-    force_b[sym] = _force(fs, spring, delta_b[sym], counter)
-    error_f[sym] = error
-    error_b[sym] = error
-    if len(asym):
+    if len(asym) == 0:
+        spring, error = _spring_terms(fs, delta_f, rest, half_spring, once)
+        product = spring[:, None] * delta_f
+        force_f = _round_force(fs, product, counter)
+        force_b = _round_force(fs, -product, counter)
+        error_f = error_b = error
+    else:
+        sym = np.flatnonzero(np.all(delta_b == -delta_f, axis=1))
+        force_f, force_b = np.empty_like(delta_f), np.empty_like(delta_b)
+        error_f, error_b = np.empty(len(rest), dtype=np.int64), np.empty(len(rest), dtype=np.int64)
+        spring, error = _spring_terms(fs, delta_f[sym], rest[sym], half_spring, once)
+        force_f[sym] = _force(fs, spring, delta_f[sym], counter)
+        force_b[sym] = _force(fs, spring, delta_b[sym], counter)
+        error_f[sym] = error
+        error_b[sym] = error
         pair = np.concatenate([delta_f[asym], delta_b[asym]])
         spring, error = _spring_terms(fs, pair, np.concatenate([rest[asym], rest[asym]]), half_spring, counter)
         force = _force(fs, spring, pair, counter)
         n = len(asym)
         force_f[asym], force_b[asym] = force[:n], force[n:]
         error_f[asym], error_b[asym] = error[:n], error[n:]
+    if counter is not None:
+        counter.merge(once).merge(once)  # the symmetric edges' events happen in both entries
     return force_f, force_b, error_f, error_b
 
 

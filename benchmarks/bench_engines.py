@@ -1,6 +1,6 @@
-"""Per-iteration time of the float reference on a generated ~90k-vertex mesh.
+"""Per-iteration time of the float and fixed-point engines on a generated ~90k-vertex mesh.
 
-Usage: .venv/bin/python benchmarks/bench_float.py [--n 300] [--iterations 20]
+Usage: .venv/bin/python benchmarks/bench_engines.py [--n 300] [--iterations 20] [--formats default]
 
 Measures, in one run (ratios are what to compare on a shared machine):
   * Tutte and PCA initial layouts (one sparse LU solve; SVD);
@@ -8,7 +8,9 @@ Measures, in one run (ratios are what to compare on a shared machine):
     measurement the stopping rule needs), as edge updates per second;
   * the same step written as plain vectorised numpy (np.add.at scatter,
     edge vectors recomputed for the measurement): the baseline the engine
-    must at least match.
+    must at least match;
+  * one iteration of the bit-exact fixed-point golden model (`--engine
+    fixed`: force pass, E_S/E_C, step generator, integrate pass).
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ import time
 
 import numpy as np
 
+from golden_model.fixed import FormatSet, SaturationCounter
+from golden_model.fixed.engine import FixedEngine, prepare
 from golden_model.layouts import pca_layout, tutte_layout
 from golden_model.mesh import Mesh, signed_areas_2d
 from golden_model.reference import FlattenParams, SpringModel, _Jacobi, variable_step
@@ -72,6 +76,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--n", type=int, default=300, help="grid side (n² vertices; default 300 → 90,000)")
     parser.add_argument("--iterations", type=int, default=20, help="timed iterations (best of)")
+    parser.add_argument("--formats", default="default", help="fixed-point format set (default: default)")
     args = parser.parse_args()
 
     t = time.perf_counter()
@@ -91,9 +96,15 @@ def main() -> None:
         engine.measure()
 
     plain = PlainNumpyStep(mesh, model, p0, params.spring)
-    engine_iteration(), plain.iteration(dt)  # warm-up
+    fixed = FixedEngine(prepare(mesh, p0, params, FormatSet.load(args.formats)), SaturationCounter())
+
+    def fixed_iteration():
+        fixed.advance(fixed.step_size(fixed.measure()))
+
+    engine_iteration(), plain.iteration(dt), fixed_iteration()  # warm-up
     t_engine = best_of(engine_iteration, args.iterations)
     t_plain = best_of(lambda: plain.iteration(dt), args.iterations)
+    t_fixed = best_of(fixed_iteration, args.iterations)
     e = mesh.n_edges
     print(f"mesh: {mesh.n_vertices} vertices, {mesh.n_faces} faces, {e} edges (built and validated in {build:.2f} s)")
     print(f"| what | time | edge updates/s |")
@@ -102,7 +113,8 @@ def main() -> None:
     print(f"| pca layout | {pca:.3f} s | |")
     print(f"| float engine, jacobi iteration | {1e3 * t_engine:.1f} ms | {e / t_engine / 1e6:.1f} M |")
     print(f"| plain numpy (np.add.at) iteration | {1e3 * t_plain:.1f} ms | {e / t_plain / 1e6:.1f} M |")
-    print(f"engine / plain time ratio: {t_engine / t_plain:.2f} (lower is better)")
+    print(f"| fixed-point engine ({args.formats}) iteration | {1e3 * t_fixed:.1f} ms | {e / t_fixed / 1e6:.1f} M |")
+    print(f"float engine / plain numpy time: {t_engine / t_plain:.2f}; fixed / float engine time: {t_fixed / t_engine:.2f}")
 
 
 if __name__ == "__main__":
