@@ -361,7 +361,8 @@ def test_narrow_preset_respects_dsp_budget():
 
 def test_formatset_validation_messages():
     fs = FormatSet.preset("default")
-    with pytest.raises(ValueError, match=r"product spring\*delta -> force needs 51 \+ 24 = 75"):
+    w = fs.delta.width
+    with pytest.raises(ValueError, match=rf"product spring\*delta -> force needs 51 \+ {w} = {51 + w}"):
         fs.replace(spring="s30.20")
     with pytest.raises(ValueError, match=r"product delta\*delta -> length_sq needs 40 \+ 40 = 80"):
         fs.replace(delta="s20.19")
