@@ -83,17 +83,23 @@ class NeighbourStream:
         return int(np.diff(self.indptr).max())
 
     @cached_property
-    def edge_entries(self) -> tuple[np.ndarray, np.ndarray]:
-        """For each undirected edge ``(a < b)``: the entry ``a → b`` and the entry ``b → a``."""
+    def edge_entries(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """For each undirected edge ``(a < b)``: the entry ``a → b`` and the entry ``b → a``.
+
+        ``None`` when the lists are not those of an undirected graph (a
+        synthetic stream), which then takes the per-entry path.
+        """
         owner = self.owner
         forward = np.flatnonzero(owner < self.neighbour)
-        # entry b → a: sort entries by (neighbour, owner) to line them up with (owner, neighbour)
-        key_f = owner[forward] * len(self.indptr) + self.neighbour[forward]
         backward_all = np.flatnonzero(owner > self.neighbour)
+        if len(forward) != len(backward_all) or len(forward) * 2 != len(owner):
+            return None
+        key_f = owner[forward] * len(self.indptr) + self.neighbour[forward]
         key_b = self.neighbour[backward_all] * len(self.indptr) + owner[backward_all]
         order_f, order_b = np.argsort(key_f), np.argsort(key_b)
-        if not np.array_equal(key_f[order_f], key_b[order_b]):
-            raise ValueError("neighbour lists are not symmetric")
+        if not np.array_equal(key_f[order_f], key_b[order_b]) or \
+                not np.array_equal(self.rest[forward[order_f]], self.rest[backward_all[order_b]]):
+            return None
         backward = np.empty_like(forward)
         backward[order_f] = backward_all[order_b]
         return forward, backward
@@ -235,21 +241,28 @@ def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
                counter: SaturationCounter | None = None) -> NodeTerms:
     """Every node's accumulated force and error partial sum from the same positions."""
     rnd = fs.rounding
-    forward, backward = stream.edge_entries
-    a, b = stream.neighbour[backward], stream.neighbour[forward]
-    force_f, force_b, error_f, error_b = edge_terms(fs, positions, stream, half_spring, counter)
     n = len(stream.indptr) - 1
+    if stream.edge_entries is None:  # any stream: every entry on its own, summed per node
+        force_entries, error_entries = neighbour_terms(fs, positions, stream, half_spring, counter)
+        starts = stream.indptr[:-1]
+        force = np.add.reduceat(force_entries, starts, axis=0)
+        error = np.add.reduceat(error_entries, starts)
+        square_sum = int(np.dot(error_entries, error_entries))
+    else:  # a mesh: each edge once for both of its entries
+        forward, backward = stream.edge_entries
+        a, b = stream.neighbour[backward], stream.neighbour[forward]
+        force_f, force_b, error_f, error_b = edge_terms(fs, positions, stream, half_spring, counter)
 
-    def per_node(forward_values: np.ndarray, backward_values: np.ndarray) -> np.ndarray:
-        # float64 sums of these integers are exact (|sum| < 2**53 by the formats)
-        total = np.bincount(a, forward_values, n) + np.bincount(b, backward_values, n)
-        return total.astype(np.int64)
+        def per_node(forward_values: np.ndarray, backward_values: np.ndarray) -> np.ndarray:
+            # float64 sums of these integers are exact (|sum| < 2**53 by the formats)
+            total = np.bincount(a, forward_values, n) + np.bincount(b, backward_values, n)
+            return total.astype(np.int64)
 
-    force = np.column_stack([per_node(force_f[:, 0], force_b[:, 0]), per_node(force_f[:, 1], force_b[:, 1])])
+        force = np.column_stack([per_node(force_f[:, 0], force_b[:, 0]), per_node(force_f[:, 1], force_b[:, 1])])
+        error = per_node(error_f, error_b)
+        square_sum = int(np.dot(error_f, error_f)) + int(np.dot(error_b, error_b))
     force_acc = requantize(force, fs.force.frac_bits, fs.force_acc, rnd, SAT, counter, "force_acc")
-    error_sums = requantize(per_node(error_f, error_b), fs.rest_length.frac_bits, fs.error_acc, rnd, SAT,
-                            counter, "error_acc")
-    square_sum = int(np.dot(error_f, error_f)) + int(np.dot(error_b, error_b))
+    error_sums = requantize(error, fs.rest_length.frac_bits, fs.error_acc, rnd, SAT, counter, "error_acc")
     return NodeTerms(force_acc, error_sums, square_sum)
 
 
@@ -283,8 +296,9 @@ def node_update(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, st
     from the same neighbour entries as the forces).
     """
     terms = node_terms(fs, positions, stream, constants.half_spring, counter)
-    new_positions, new_velocities = integrate(fs, positions, velocities, terms.force, stream.inv_mass, constants,
-                                              counter)
+    n = len(stream.indptr) - 1  # positions may hold more rows: neighbours that are not updated
+    new_positions, new_velocities = integrate(fs, positions[:n], velocities[:n], terms.force, stream.inv_mass,
+                                              constants, counter)
     return NodeUpdate(new_positions, new_velocities, terms.error_sums)
 
 

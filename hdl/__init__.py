@@ -1,0 +1,12 @@
+"""Amaranth RTL of the springflat pipeline units.
+
+Every width, constant and table comes from the golden model's objects
+(:class:`golden_model.fixed.FormatSet`, :class:`golden_model.fixed.RsqrtConfig`); each unit is
+bit-exact with its golden-model function. See ``docs/hardware-units.md``.
+"""
+
+from .node_update import NodeUpdate
+from .rsqrt import RsqrtUnit
+from .stepgen import StepGenerator
+
+__all__ = ["NodeUpdate", "RsqrtUnit", "StepGenerator"]

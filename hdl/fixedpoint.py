@@ -1,0 +1,81 @@
+"""Fixed-point helpers for the RTL: rounding and saturation exactly as :mod:`golden_model.fixed.format`.
+
+``requantize(value, from_frac, fmt, rounding)`` is the hardware twin of the
+golden model's ``requantize(raw, from_frac, fmt, rounding, "saturate")``: the
+rounding shift :func:`shift_round`, then a clamp into ``fmt``.
+"""
+
+from amaranth.hdl import Const, Mux, Value, signed, unsigned
+
+from golden_model.fixed import Format, Rounding
+
+__all__ = ["shape_of", "round_half_bit", "shift_round", "saturate", "clamp", "requantize"]
+
+
+def round_half_bit(t, rounding, sticky=Const(0)):
+    """Drop bit 0 of ``t``, which holds the half-lsb, rounding with ``rounding``.
+
+    ``sticky`` is 1 if any bit below the half-lsb was set (only nearest_even needs it). This
+    is the golden model's ``t = raw >> (s-1); out = (t >> 1) + (t & 1)``:
+
+    * floor: ``t >> 1``;
+    * half_up: ``(t + 1) >> 1`` (one carry-in);
+    * nearest_even: as half_up, and on an exact tie (``t[0] & ~sticky``) the lsb is cleared.
+    """
+    rounding = Rounding(rounding)
+    t = Value.cast(t)
+    if rounding is Rounding.FLOOR:
+        return t >> 1
+    rounded = (t + 1) >> 1
+    if rounding is Rounding.HALF_UP:
+        return rounded
+    tie = t[0] & ~sticky
+    result = Cat(rounded[0] & ~tie, rounded[1:])
+    return result.as_signed() if rounded.shape().signed else result
+
+
+def shift_round(value, shift, rounding):
+    """``value * 2**-shift`` rounded as :func:`golden_model.fixed.shift_round` does.
+
+    ``shift`` is a constant; ``shift <= 0`` is an exact left shift. The result is wide enough
+    for the exact value (the caller truncates only where the golden model's ranges allow it).
+    """
+    rounding = Rounding(rounding)
+    value = Value.cast(value)
+    if shift <= 0:
+        return value << -shift
+    if rounding is Rounding.FLOOR:
+        return value >> shift
+    sticky = value[:shift - 1].any() if shift > 1 else Const(0)
+    return round_half_bit(value >> (shift - 1), rounding, sticky)
+
+
+def saturate(value, fmt):
+    """``(clamped, overflow)``: non-negative ``value`` clamped to unsigned ``fmt``'s ``raw_max``."""
+    if fmt.signed:
+        raise ValueError(f"saturate() supports unsigned formats only, not {fmt}")
+    overflow = Value.cast(value) > fmt.raw_max
+    return Mux(overflow, fmt.raw_max, value)[:fmt.width], overflow
+
+
+
+
+def shape_of(fmt: Format):
+    """The Amaranth shape holding raw values of ``fmt``."""
+    return signed(fmt.width) if fmt.signed else unsigned(fmt.width)
+
+
+def clamp(value, fmt: Format):
+    """``(clamped, overflow)``: ``value`` saturated into ``fmt``'s raw range."""
+    value = Value.cast(value)
+    over = value > fmt.raw_max
+    under = (value < fmt.raw_min) if value.shape().signed else False
+    result = Mux(over, fmt.raw_max, Mux(under, fmt.raw_min, value))[:fmt.width]
+    if fmt.signed:
+        result = result.as_signed()
+    return result, over | under
+
+
+def requantize(value, from_frac: int, fmt: Format, rounding: Rounding):
+    """``(result, overflow)``: ``value`` with ``from_frac`` fraction bits, rounded to ``fmt`` and saturated."""
+    return clamp(shift_round(value, from_frac - fmt.frac_bits, rounding), fmt)

@@ -1,0 +1,219 @@
+"""Pipelined variable step-size generator: the RTL twin of :func:`golden_model.fixed.step_size`.
+
+Every width, constant and table is taken from a :class:`~golden_model.fixed.FormatSet`;
+the unit is bit-exact with :func:`~golden_model.fixed.step_size` for every input pair.
+"""
+
+from amaranth.hdl import *
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet, dt_constant, exp_table, shift_round as gm_shift_round
+
+from .fixedpoint import saturate, shift_round
+
+__all__ = ["StepGenerator"]
+
+
+class StepGenerator(wiring.Component):
+    """Step size ``dt = C + f(E_S) + f(E_C)`` and ``dt**2/2``; fully pipelined, one per clock.
+
+    ``f(E) = 0.1*exp(-5(1-E))`` is read from the golden model's table
+    :func:`~golden_model.fixed.exp_table` (``fs.lut_index_bits``, ``fs.lut_entry``), linearly
+    interpolated if ``fs.lut_interpolate``; ``C`` is :func:`~golden_model.fixed.dt_constant`.
+    Every rounding is ``fs.rounding`` and every overflow saturates, exactly as in
+    :func:`golden_model.fixed.step_size` (``area_error`` is its ``E_S``, ``shape_error`` its
+    ``E_C``).
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet`
+        Source of every format, table and knob.
+
+    Attributes
+    ----------
+    latency : :class:`int`
+        Clock cycles from an input transfer to the output transfer of the same item when
+        ``o.ready`` is held high: 7 when interpolating (both presets), 5 otherwise.
+        Throughput: one item per clock (II = 1).
+
+    Members
+    -------
+    i : :py:`In(stream.Signature(input_layout))`
+        :class:`~amaranth.lib.data.StructLayout` payload: ``area_error``, ``shape_error``
+        (raw, ``fs.error``; u0.16 in the default preset).
+    o : :py:`Out(stream.Signature(output_layout))`
+        :class:`~amaranth.lib.data.StructLayout` payload: ``dt`` (raw ``fs.dt``) and
+        ``half_dt_sq`` (raw ``fs.half_dt_sq``).
+
+    Pipeline (all stages advance together when the output register is empty or being read,
+    ``advance = ~o.valid | o.ready``; ``i.ready = advance``). The two lookup lanes are identical
+    and share one ROM through two synchronous read ports:
+
+    ==========  ==================================================================================
+    ``lut``     ROM read. Interpolating: address ``k = E >> r``, row ``(T[k], T[k+1] - T[k])``,
+                ``t = E mod 2**r`` registered. Otherwise: row ``T[round(E / 2**r)]``.
+                (A ``u1.F`` error is first clamped to 1.0.)
+    ``mul``     interpolating only: ``slope * t``
+    ``interp``  interpolating only: ``v = T[k] + round(slope * t / 2**r)``
+    ``sum``     ``v_S + v_C``
+    ``dt``      requantise to ``fs.dt``, saturate, ``+ C``, saturate
+    ``sq``      ``dt * dt``
+    ``o``       ``round(dt*dt / 2)`` to ``fs.half_dt_sq``, saturate; output register
+    ==========  ==================================================================================
+    """
+
+    def __init__(self, fs):
+        if not isinstance(fs, FormatSet):
+            raise TypeError(f"StepGenerator needs a FormatSet, not {fs!r}")
+        self._fs = fs
+        self.latency = 7 if self._interpolating else 5
+        super().__init__({
+            "i": In(stream.Signature(self.input_layout(fs))),
+            "o": Out(stream.Signature(self.output_layout(fs))),
+        })
+
+    @staticmethod
+    def input_layout(fs):
+        """Payload layout of ``i``: ``area_error``, ``shape_error`` (raw ``fs.error``)."""
+        return data.StructLayout({
+            "area_error": unsigned(fs.error.width),
+            "shape_error": unsigned(fs.error.width),
+        })
+
+    @staticmethod
+    def output_layout(fs):
+        """Payload layout of ``o``: ``dt``, ``half_dt_sq`` (raw ``fs.dt``, ``fs.half_dt_sq``)."""
+        return data.StructLayout({
+            "dt": unsigned(fs.dt.width),
+            "half_dt_sq": unsigned(fs.half_dt_sq.width),
+        })
+
+    @property
+    def fs(self):
+        return self._fs
+
+    @property
+    def _interpolating(self):
+        return self._fs.lut_interpolate and self._fs.lut_frac_bits > 0
+
+    @property
+    def _error_max(self):
+        """Largest error after the clamp to 1.0 (``fs.error.raw_max`` for ``u0.F``)."""
+        return min(self._fs.error.raw_max, 1 << self._fs.error.frac_bits)
+
+    def _rom_rows(self):
+        """``(layout, rows)`` of the exp ROM, derived from :func:`~golden_model.fixed.exp_table`.
+
+        Only the reachable addresses are stored (``0 .. k_max``). Interpolating, row ``k`` holds
+        ``base = T[k]`` and ``slope = T[min(k+1, 2**n)] - T[k]`` (>= 0: the table is
+        non-decreasing), the slope field as wide as the largest difference needs.
+        """
+        fs = self._fs
+        table = [int(v) for v in exp_table(fs.lut_index_bits, fs.lut_entry)]
+        r = fs.lut_frac_bits
+        if self._interpolating:
+            k_max = self._error_max >> r
+            last = len(table) - 1
+            slopes = [table[min(k + 1, last)] - table[k] for k in range(k_max + 1)]
+            assert min(slopes) >= 0
+            layout = data.StructLayout({
+                "base": unsigned(fs.lut_entry.width),
+                "slope": unsigned(max(1, max(slopes).bit_length())),
+            })
+            rows = [{"base": table[k], "slope": slopes[k]} for k in range(k_max + 1)]
+        else:
+            k_max = int(gm_shift_round(self._error_max, r, fs.rounding)) if r else self._error_max
+            layout = data.StructLayout({"base": unsigned(fs.lut_entry.width)})
+            rows = [{"base": table[k]} for k in range(k_max + 1)]
+        return layout, rows
+
+    def elaborate(self, platform):
+        m = Module()
+        fs = self._fs
+        r = fs.lut_frac_bits
+
+        advance = Signal()
+        m.d.comb += [
+            advance.eq(~self.o.valid | self.o.ready),
+            self.i.ready.eq(advance),
+        ]
+        n_stages = 0
+        prev_valid = self.i.valid
+
+        def stage(name):
+            nonlocal n_stages, prev_valid
+            valid = Signal(name=f"{name}_valid")
+            with m.If(advance):
+                m.d.sync += valid.eq(prev_valid)
+            n_stages += 1
+            prev_valid = valid
+
+        def reg(value, shape, name):
+            sig = Signal(shape, name=name)
+            with m.If(advance):
+                m.d.sync += sig.eq(value)
+            return sig
+
+        # --- lut: one ROM, one synchronous read port per lane
+        layout, rows = self._rom_rows()
+        m.submodules.exp_rom = exp_rom = Memory(shape=layout, depth=len(rows), init=rows)
+        lanes = ("area_error", "shape_error")
+        error, ports = {}, {}
+        for lane in lanes:
+            error[lane] = e = self.i.payload[lane]
+            if self._error_max < fs.error.raw_max:  # u1.F: values above 1.0 clamp to 1.0
+                error[lane] = e = Mux(e > self._error_max, self._error_max, e)
+            if self._interpolating:
+                addr = e >> r
+            elif r:
+                addr = shift_round(e, r, fs.rounding)
+            else:
+                addr = e
+            ports[lane] = port = exp_rom.read_port()
+            m.d.comb += [port.en.eq(advance), port.addr.eq(addr)]
+        stage("lut")
+        value = {lane: ports[lane].data.base for lane in lanes}
+
+        if self._interpolating:
+            frac = {lane: reg(error[lane][:r], r, f"lut_{lane}_t") for lane in lanes}
+            stage("mul")
+            product = {}
+            for lane in lanes:
+                slope = ports[lane].data.slope
+                product[lane] = reg(slope * frac[lane], len(slope) + r, f"mul_{lane}_p")
+                value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_{lane}_base")
+            stage("interp")
+            for lane in lanes:
+                value[lane] = reg(value[lane] + shift_round(product[lane], r, fs.rounding),
+                                  fs.lut_entry.width, f"interp_{lane}_v")
+
+        # --- sum of the two lookups (entry lsb)
+        stage("sum")
+        v_sum = reg(value["area_error"] + value["shape_error"], fs.lut_entry.width + 1, "v_sum")
+
+        # --- dt = sat(sat(requantize(v_sum)) + C)
+        stage("dt")
+        v_dt, _ = saturate(shift_round(v_sum, fs.lut_entry.frac_bits - fs.dt.frac_bits,
+                                       fs.rounding), fs.dt)
+        dt_value, _ = saturate(v_dt + dt_constant(fs.dt), fs.dt)
+        dt = reg(dt_value, fs.dt.width, "dt")
+
+        # --- dt * dt (registered operand, registered product)
+        stage("sq")
+        dt_sq = reg(dt * dt, 2 * fs.dt.width, "dt_sq")
+        dt = reg(dt, fs.dt.width, "sq_dt")
+
+        # --- o: half_dt_sq = sat(round(dt*dt / 2)) into the output register
+        half, _ = saturate(shift_round(dt_sq, 2 * fs.dt.frac_bits + 1 - fs.half_dt_sq.frac_bits,
+                                       fs.rounding), fs.half_dt_sq)
+        n_stages += 1
+        with m.If(advance):
+            m.d.sync += [
+                self.o.valid.eq(prev_valid),
+                self.o.payload.dt.eq(dt),
+                self.o.payload.half_dt_sq.eq(half),
+            ]
+        assert n_stages == self.latency, (n_stages, self.latency)
+        return m

@@ -1,0 +1,225 @@
+"""RTL node-update datapath (hdl.NodeUpdate) against the golden model, in Amaranth's simulator.
+
+Every node's new position, velocity and Σ|L − d| is compared bit for bit with
+``golden_model.fixed.pipeline.node_update``, in order, under seeded random
+valid/ready stalls on both sides.
+"""
+
+import random
+
+import numpy as np
+import pytest
+from amaranth.hdl import Value
+from amaranth.lib import data
+from amaranth.sim import Simulator
+
+from golden_model.builtin import builtin_mesh
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import FixedEngine, prepare
+from golden_model.fixed.pipeline import NeighbourStream, NodeConstants, node_update
+from golden_model.fixed import SaturationCounter
+from golden_model.layouts import initial_layout
+from golden_model.reference import FlattenParams
+from hdl import NodeUpdate
+
+PRESETS = ["default", "narrow"]
+
+
+def leaves(layout, offset=0, path=()):
+    """``(path, offset, width, signed)`` of every leaf field of a nested layout."""
+    for name, field in layout:
+        shape = field.shape
+        if isinstance(shape, data.Layout):
+            yield from leaves(shape, offset + field.offset, path + (name,))
+        else:
+            shape = shape if not hasattr(shape, "as_shape") else shape.as_shape()
+            yield path + (name,), offset + field.offset, shape.width, shape.signed
+
+
+def pack(layout, fields):
+    """Raw payload ints from ``{path: int array}`` (missing fields are 0)."""
+    n = len(next(iter(fields.values())))
+    out = [0] * n
+    for path, offset, width, _ in leaves(layout):
+        if path in fields:
+            mask = (1 << width) - 1
+            for k, v in enumerate(fields[path]):
+                out[k] |= (int(v) & mask) << offset
+    return out
+
+
+def unpack(layout, raw, path):
+    """One field of raw payload ints, sign-extended where signed."""
+    for p, offset, width, signed in leaves(layout):
+        if p == path:
+            vals = [(int(r) >> offset) & ((1 << width) - 1) for r in raw]
+            if signed:
+                vals = [v - (1 << width) if v >> (width - 1) else v for v in vals]
+            return np.array(vals, dtype=np.int64)
+    raise KeyError(path)
+
+
+def entries(stream: NeighbourStream, positions, velocities):
+    """The input beats of one pass: every node's entries, its header on the first."""
+    owner = stream.owner
+    start = stream.indptr[:-1][owner] == np.arange(len(owner))
+    end = stream.indptr[1:][owner] - 1 == np.arange(len(owner))
+    return {
+        ("first",): start.astype(int), ("last",): end.astype(int),
+        ("node", "position", "x"): positions[owner, 0] * start, ("node", "position", "y"): positions[owner, 1] * start,
+        ("node", "velocity", "x"): velocities[owner, 0] * start, ("node", "velocity", "y"): velocities[owner, 1] * start,
+        ("node", "inv_mass"): stream.inv_mass[owner] * start,
+        ("neighbour", "position", "x"): positions[stream.neighbour, 0],
+        ("neighbour", "position", "y"): positions[stream.neighbour, 1],
+        ("neighbour", "rest"): stream.rest,
+    }
+
+
+class Run:
+    def __init__(self):
+        self.outputs, self.in_cycles, self.out_cycles = [], [], []
+
+
+def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0):
+    """Stream ``beats`` into ``dut.i``, collect ``n_out`` results; check the stream rules on the way."""
+    run = Run()
+    i_payload, o_payload = Value.cast(dut.i.payload), Value.cast(dut.o.payload)
+    n = len(beats)
+    max_cycles = int(4 * (n + dut.latency) / (p_valid * p_ready)) + 200
+
+    async def producer(ctx):
+        for port, value in zip((dut.dt, dut.half_dt_sq, dut.half_spring, dut.damping), constants):
+            ctx.set(port, value)
+        await ctx.tick().repeat(2)  # the constants are registered once
+        rng = random.Random(seed)
+        idx, cycle = 0, 0
+        while idx < n:
+            valid = p_valid >= 1 or rng.random() < p_valid
+            ctx.set(i_payload, beats[idx] if valid else rng.getrandbits(len(i_payload)))
+            ctx.set(dut.i.valid, valid)
+            _, _, ready = await ctx.tick().sample(dut.i.ready)
+            if valid and ready:
+                run.in_cycles.append(cycle)
+                idx += 1
+            cycle += 1
+        ctx.set(dut.i.valid, 0)
+
+    async def consumer(ctx):
+        await ctx.tick().repeat(2)
+        rng = random.Random(seed + 1)
+        held, cycle = None, 0
+        while len(run.outputs) < n_out or cycle < (run.out_cycles[-1] if run.out_cycles else 0) + dut.latency + 3:
+            ready = len(run.outputs) >= n_out or p_ready >= 1 or rng.random() < p_ready
+            ctx.set(dut.o.ready, ready)
+            _, _, valid, payload = await ctx.tick().sample(dut.o.valid, o_payload)
+            if held is not None:
+                assert valid and payload == held, f"cycle {cycle}: offered result withdrawn or changed"
+            if valid and ready:
+                assert len(run.outputs) < n_out, f"cycle {cycle}: more results than nodes"
+                run.outputs.append(payload)
+                run.out_cycles.append(cycle)
+            held = payload if valid and not ready else None
+            cycle += 1
+            assert cycle < max_cycles, f"no progress: {len(run.outputs)} of {n_out} results"
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(producer)
+    sim.add_testbench(consumer)
+    sim.run()
+    assert len(run.outputs) == n_out
+    return run
+
+
+def check_pass(dut, fs, stream, positions, velocities, constants, **kw):
+    """One pass through the RTL against ``node_update``; returns the run."""
+    layout = dut.i.payload.shape()
+    beats = pack(layout, entries(stream, positions, velocities))
+    run = simulate(dut, beats, len(stream.indptr) - 1, (constants.dt, constants.half_dt_sq, constants.half_spring,
+                                                        constants.damping), **kw)
+    want = node_update(fs, positions, velocities, stream, constants)
+    out = dut.o.payload.shape()
+    for name, got, expected in (
+        ("position.x", unpack(out, run.outputs, ("position", "x")), want.positions[:, 0]),
+        ("position.y", unpack(out, run.outputs, ("position", "y")), want.positions[:, 1]),
+        ("velocity.x", unpack(out, run.outputs, ("velocity", "x")), want.velocities[:, 0]),
+        ("velocity.y", unpack(out, run.outputs, ("velocity", "y")), want.velocities[:, 1]),
+        ("error_sum", unpack(out, run.outputs, ("error_sum",)), want.error_sums),
+    ):
+        bad = np.flatnonzero(got != expected)
+        if bad.size:
+            i = int(bad[0])
+            pytest.fail(f"{name}: {bad.size} mismatches; first at node {i}: rtl {int(got[i])} golden {int(expected[i])}")
+    return run
+
+
+def random_stream(fs, n_nodes, seed, max_degree=12):
+    """Nodes of random degree 1..max_degree with random neighbours around them (a synthetic stream)."""
+    rng = np.random.default_rng(seed)
+    degree = rng.integers(1, max_degree + 1, n_nodes)
+    n_total = n_nodes + int(degree.sum())
+    scale = 1 << fs.position.frac_bits
+    positions = rng.integers(-4 * scale, 4 * scale, size=(n_total, 2))
+    indptr = np.r_[0, np.cumsum(degree)]
+    neighbour = n_nodes + np.arange(int(degree.sum()))
+    owner = np.repeat(np.arange(n_nodes), degree)
+    # neighbours at 0.3 .. 2.5 mean edges from their node, rest lengths around that
+    angle = rng.uniform(0, 2 * np.pi, len(neighbour))
+    radius = rng.uniform(0.3, 2.5, len(neighbour))
+    positions[neighbour] = positions[owner] + (np.column_stack([np.cos(angle), np.sin(angle)])
+                                               * radius[:, None] * scale).astype(np.int64)
+    rest = (radius * rng.uniform(0.7, 1.3, len(radius)) * (1 << fs.rest_length.frac_bits)).astype(np.int64)
+    inv_mass = rng.integers(1 << (fs.inv_mass.frac_bits - 2), 2 << fs.inv_mass.frac_bits, n_nodes)
+    velocities = rng.integers(-(1 << fs.velocity.frac_bits), 1 << fs.velocity.frac_bits, size=(n_nodes, 2))
+    stream = NeighbourStream(indptr, neighbour, rest, inv_mass)
+    return stream, positions, velocities
+
+
+def random_constants(fs, seed):
+    rng = np.random.default_rng(seed)
+    dt = int(rng.uniform(0.01, 0.21) * (1 << fs.dt.frac_bits))
+    half = int(round(dt * dt / 2 / (1 << (2 * fs.dt.frac_bits - fs.half_dt_sq.frac_bits))))
+    return NodeConstants(dt, half, int(0.25 * (1 << fs.spring.frac_bits)),
+                         int(rng.uniform(0.9, 1.0) * (1 << fs.damping.frac_bits)))
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_random_nodes_of_degree_1_to_12_with_stalls(preset):
+    fs = FormatSet.preset(preset)
+    stream, positions, velocities = random_stream(fs, 60, seed=1)
+    velocities_all = np.zeros_like(positions)
+    velocities_all[:60] = velocities
+    check_pass(NodeUpdate(fs), fs, stream, positions, velocities_all, random_constants(fs, 2),
+               seed=3, p_valid=0.7, p_ready=0.6)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("mesh_name", ["surf1", "surf2"])
+def test_builtin_meshes_over_several_iterations(preset, mesh_name):
+    """Every node of the mesh, the state of iterations 0..4 of a fixed-point flattening."""
+    fs = FormatSet.preset(preset)
+    mesh, paper = builtin_mesh(mesh_name)
+    params = FlattenParams(density=paper.density, damping=0.02)
+    engine = FixedEngine(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), SaturationCounter())
+    dut = NodeUpdate(fs)
+    for iteration in range(5):
+        engine.step_size(engine.measure())
+        constants = engine.problem.constants(engine.dt)
+        check_pass(dut, fs, engine.problem.stream, engine.raw_positions, engine.raw_velocities, constants,
+                   seed=10 + iteration, p_valid=0.8, p_ready=0.7)
+        engine.advance(0)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_no_bubbles(preset):
+    """Never stalled: N entries go in on N consecutive clocks and the last result leaves latency clocks later."""
+    fs = FormatSet.preset(preset)
+    stream, positions, velocities = random_stream(fs, 40, seed=4)
+    v = np.zeros_like(positions)
+    v[:40] = velocities
+    dut = NodeUpdate(fs)
+    run = check_pass(dut, fs, stream, positions, v, random_constants(fs, 5))
+    n = len(stream.neighbour)
+    assert run.in_cycles == list(range(n))
+    last_entry = np.r_[stream.indptr[1:] - 1]
+    assert run.out_cycles == [int(c) + dut.latency for c in last_entry]

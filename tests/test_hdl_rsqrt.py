@@ -1,0 +1,336 @@
+"""RTL rsqrt unit (hdl.RsqrtUnit) against the golden model, in Amaranth's simulator.
+
+Every output is compared, in order, with ``rsqrt_with_config`` (value and saturation flag)
+under seeded random valid/ready stalls on both sides. The stream driver ``run_stream`` is
+shared with ``test_hdl_stepgen.py``.
+"""
+
+import gc
+import importlib
+import random
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+from amaranth.back import verilog
+from amaranth.hdl import UnusedElaboratable, Value
+from amaranth.sim import Simulator
+
+from golden_model.fixed import (
+    Format,
+    FormatSet,
+    Rounding,
+    RsqrtConfig,
+    SaturationCounter,
+    rsqrt_stages,
+    rsqrt_with_config,
+)
+from hdl import RsqrtUnit
+
+PRESETS = ("default", "narrow")
+
+# Whole-domain simulation up to this many inputs (2**18 take ~25 s); wider inputs are swept.
+EXHAUSTIVE_SIM_LIMIT = 1 << 18
+
+
+# --------------------------------------------------------------------------- stream driver
+
+
+@dataclass
+class StreamRun:
+    outputs: list = field(default_factory=list)  # raw o.payload bits, in order
+    in_cycles: list = field(default_factory=list)  # clock edge of each input transfer
+    out_cycles: list = field(default_factory=list)  # clock edge of each output transfer
+
+
+def run_stream(dut, inputs, *, seed=0, p_valid=1.0, p_ready=1.0, probe_ready=False):
+    """Push raw payloads ``inputs`` into ``dut.i``; collect as many raw payloads from ``dut.o``.
+
+    A producer and a consumer testbench; with ``p_valid``/``p_ready`` < 1 each cycle's
+    ``i.valid``/``o.ready`` is random (seeded), and ``i.payload`` is garbage while ``i.valid``
+    is low. Checked on the fly: the output stream rules (a payload offered and not taken stays
+    offered, unchanged), no output beyond the last input (drain of ``latency + 2`` cycles), no
+    hang. ``probe_ready`` also checks every cycle that ``o.valid``/``o.payload`` do not depend on
+    ``o.ready``. Clock edges are counted from 0 (the first edge of the simulation).
+    """
+    n = len(inputs)
+    run = StreamRun()
+    i_payload, i_valid, i_ready = Value.cast(dut.i.payload), dut.i.valid, dut.i.ready
+    o_payload, o_valid, o_ready = Value.cast(dut.o.payload), dut.o.valid, dut.o.ready
+    drain = dut.latency + 2
+    max_cycles = int(4 * (n + dut.latency) / (p_valid * p_ready)) + 100
+
+    async def producer(ctx):
+        if n == 0:
+            return
+        rng = random.Random(seed)
+        idx, cycle = 0, 0
+        valid = p_valid >= 1 or rng.random() < p_valid
+        ctx.set(i_payload, inputs[0] if valid else rng.getrandbits(len(i_payload)))
+        ctx.set(i_valid, valid)
+        async for _, _, ready in ctx.tick().sample(i_ready):
+            taken = valid and ready
+            if taken:
+                run.in_cycles.append(cycle)
+                idx += 1
+                if idx == n:
+                    ctx.set(i_valid, 0)
+                    return
+            cycle += 1
+            if p_valid >= 1:
+                if taken:
+                    ctx.set(i_payload, inputs[idx])
+            else:
+                valid = rng.random() < p_valid
+                ctx.set(i_payload, inputs[idx] if valid else rng.getrandbits(len(i_payload)))
+                ctx.set(i_valid, valid)
+
+    async def consumer(ctx):
+        rng = random.Random(seed + 1)
+        cycle, done_at = 0, None
+        ready = p_ready >= 1 or rng.random() < p_ready
+        ctx.set(o_ready, ready)
+        held = None  # payload offered but not taken at the previous edge
+        async for _, _, valid, payload in ctx.tick().sample(o_valid, o_payload):
+            if held is not None:
+                assert valid and payload == held, f"edge {cycle}: offered payload withdrawn"
+            if valid and ready:
+                assert done_at is None, f"edge {cycle}: output beyond the {n} inputs"
+                run.outputs.append(payload)
+                run.out_cycles.append(cycle)
+                if len(run.outputs) == n:
+                    done_at = cycle
+            held = payload if valid and not ready else None
+            cycle += 1
+            assert cycle < max_cycles, f"no progress: {len(run.outputs)} of {n} outputs"
+            if n == 0 and done_at is None:
+                done_at = 0
+            if done_at is not None:
+                if cycle > done_at + drain:
+                    return
+                ready = True
+            elif p_ready < 1:
+                ready = rng.random() < p_ready
+            ctx.set(o_ready, ready)
+            if probe_ready:
+                seen = ctx.get(o_valid), ctx.get(o_payload)
+                ctx.set(o_ready, not ready)
+                assert (ctx.get(o_valid), ctx.get(o_payload)) == seen, "o depends on o.ready"
+                ctx.set(o_ready, ready)
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(producer)
+    sim.add_testbench(consumer)
+    sim.run()
+    assert len(run.in_cycles) == n and len(run.outputs) == n
+    return run
+
+
+def unpack(layout, raw, name):
+    """Field ``name`` of ``layout`` from raw payload integers (numpy int64 array)."""
+    f = layout[name]
+    return (np.asarray(raw, dtype=np.int64) >> f.offset) & ((1 << f.shape.width) - 1)
+
+
+def pack(layout, **fields):
+    """Raw payload integers from per-field arrays (inverse of :func:`unpack`)."""
+    out = 0
+    for name, values in fields.items():
+        out = out | (np.asarray(values, dtype=np.int64) << layout[name].offset)
+    return [int(v) for v in np.atleast_1d(out)]
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def boundary_inputs(cfg):
+    """0, 1, raw_max, every power of two and its neighbours, the saturation threshold and its
+    neighbours, and one input per seed-ROM entry (each with random bits below the index)."""
+    top = cfg.fmt_in.raw_max
+    pw = [1 << k for k in range(cfg.fmt_in.width)]
+    vals = {0, 1, 2, 3, top - 1, top} | {p + d for p in pw for d in (-1, 0, 1)}
+    # Largest saturating input (saturation is monotone: bisect on the golden model's flag).
+    lo, hi = 0, top
+    if rsqrt_stages(top, cfg)["saturate"]:
+        lo = hi
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if rsqrt_stages(mid, cfg)["saturate"] else (lo, mid)
+    vals |= set(range(max(lo - 3, 0), min(lo + 4, top + 1)))
+    # Seed index j: X = i << q with i = j + offset and q + seed_bits - 2 - Fin even (so that
+    # the exponent is e = q + seed_bits - 2 and the top seed_bits of M are exactly i).
+    rng = np.random.default_rng(1)
+    for j in range(cfg.seed_table_size):
+        i = j + cfg.seed_index_offset
+        for q in range(cfg.fmt_in.width):
+            if (q + cfg.seed_bits - 2 - cfg.fmt_in.frac_bits) % 2 == 0 and (i << q) <= top:
+                low = int(rng.integers(0, 1 << q)) if q else 0
+                vals.add((i << q) | low)
+                break
+    x = np.array(sorted(v for v in vals if 0 <= v <= top), dtype=np.int64)
+    return x
+
+
+def random_inputs(cfg, n, seed):
+    """``n/2`` uniform and ``n/2`` log-uniform inputs (dense at small x, where few bits drop)."""
+    rng = np.random.default_rng(seed)
+    top = cfg.fmt_in.raw_max
+    uni = rng.integers(0, top + 1, n // 2)
+    logu = np.exp2(rng.uniform(0, np.log2(float(top)), n - n // 2)).astype(np.int64)
+    return np.clip(np.concatenate([uni, logu]), 0, top)
+
+
+def check_rsqrt(dut, x, **kw):
+    """Run ``x`` through ``dut``; compare every output and the saturation count; return run."""
+    cfg = dut.config
+    run = run_stream(dut, [int(v) for v in x], **kw)
+    layout = dut.o.payload.shape()
+    got = unpack(layout, run.outputs, "rsqrt")
+    sat = unpack(layout, run.outputs, "saturated").astype(bool)
+    counter = SaturationCounter()
+    want = rsqrt_with_config(x, cfg, counter)
+    bad = np.flatnonzero(got != want)
+    if bad.size:
+        i = bad[0]
+        st = {k: int(v[0]) for k, v in rsqrt_stages(x[i:i + 1], cfg).items()}
+        pytest.fail(f"{bad.size} mismatches; first: x={int(x[i])} rtl={int(got[i])} "
+                    f"golden={int(want[i])} stages={st}")
+    np.testing.assert_array_equal(sat, rsqrt_stages(x, cfg)["saturate"])
+    assert int(sat.sum()) == counter["rsqrt"]
+    return run
+
+
+# --------------------------------------------------------------------------- tests
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_golden_intermediates_fit_rtl_widths(preset):
+    """The RTL holds every intermediate in its RsqrtConfig format (the golden model computes in
+    int64). Check that the golden values fit, over the whole domain when it has at most 2**24
+    inputs, else over the boundaries and 2**22 random inputs."""
+    cfg = FormatSet.preset(preset).rsqrt_config()
+    n = cfg.fmt_in.raw_max + 1
+    if n <= 1 << 24:
+        chunks = (np.arange(lo, min(n, lo + (1 << 21))) for lo in range(0, n, 1 << 21))
+    else:
+        chunks = [boundary_inputs(cfg), random_inputs(cfg, 1 << 22, seed=7)]
+    fmts = {"m": cfg.mant_fmt, "y0": cfg.y_fmt, "y": cfg.y_fmt}
+    for i in range(cfg.newton_steps):
+        fmts.update({f"t1_{i}": cfg.ysq_fmt, f"t2_{i}": cfg.ysq_fmt, f"h_{i}": cfg.h_fmt,
+                     f"y_{i}": cfg.y_fmt})
+    for x in chunks:
+        st = rsqrt_stages(x, cfg)
+        for name, fmt in fmts.items():
+            fmt.check(st[name], f"{preset} rsqrt intermediate {name}")
+        assert int(st["seed_index"].min()) >= 0
+        assert int(st["seed_index"].max()) < cfg.seed_table_size
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_boundaries_and_random_with_stalls(preset):
+    """Boundary inputs and ~20k random inputs, random stalls on both sides."""
+    cfg = FormatSet.preset(preset).rsqrt_config()
+    rng = np.random.default_rng(3)
+    x = np.concatenate([boundary_inputs(cfg), random_inputs(cfg, 20_000, seed=4)])
+    rng.shuffle(x)
+    check_rsqrt(RsqrtUnit(FormatSet.preset(preset)), x, seed=5, p_valid=0.75, p_ready=0.75)
+
+
+def test_narrow_whole_domain():
+    """Every input of the narrow preset (a stride sweep if its domain outgrows the limit)."""
+    fs = FormatSet.preset("narrow")
+    cfg = fs.rsqrt_config()
+    n = cfg.fmt_in.raw_max + 1
+    if n <= EXHAUSTIVE_SIM_LIMIT:
+        x = np.arange(n, dtype=np.int64)
+    else:
+        x = np.unique(np.concatenate([
+            np.linspace(0, cfg.fmt_in.raw_max, EXHAUSTIVE_SIM_LIMIT, dtype=np.int64),
+            boundary_inputs(cfg)]))
+    check_rsqrt(RsqrtUnit(fs), x, seed=6, p_valid=0.98, p_ready=0.98)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_throughput_and_latency(preset):
+    """No stalls: N inputs on N consecutive edges, N outputs from edge ``latency`` on (N +
+    latency edges in all: no bubbles). With input gaps and o.ready high every output leaves
+    exactly ``latency`` edges after its input."""
+    fs = FormatSet.preset(preset)
+    dut = RsqrtUnit(fs)
+    assert dut.latency == 5 + 6 * fs.rsqrt_newton_steps
+    x = random_inputs(fs.rsqrt_config(), 400, seed=8)
+    run = check_rsqrt(dut, x)
+    assert run.in_cycles == list(range(len(x)))
+    assert run.out_cycles == list(range(dut.latency, dut.latency + len(x)))
+    run = check_rsqrt(dut, x, seed=9, p_valid=0.5)
+    assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * len(x)
+
+
+def test_output_independent_of_ready():
+    """o.valid and o.payload never depend (combinationally) on o.ready."""
+    fs = FormatSet.preset("narrow")
+    x = random_inputs(fs.rsqrt_config(), 300, seed=10)
+    check_rsqrt(RsqrtUnit(fs), x, seed=11, p_valid=0.8, p_ready=0.6, probe_ready=True)
+
+
+GENERIC_CONFIGS = [
+    RsqrtConfig(Format(False, 7, 16), Format(False, 4, 14), 10, 0),  # seed only
+    RsqrtConfig(Format(False, 7, 16), Format(False, 4, 14), 6, 2),  # two Newton steps
+    RsqrtConfig(Format(False, 5, 12), Format(False, 3, 12), 3, 3),  # three steps, tiny ROM
+    RsqrtConfig(Format(False, 7, 16), Format(False, 4, 14), 8, 1, guard_bits=1),
+    RsqrtConfig(Format(False, 20, 20), Format(False, 2, 14), 10, 1),  # M floors input bits
+    RsqrtConfig(Format(False, 12, 1), Format(False, 1, 17), 9, 1),  # odd Fin
+    RsqrtConfig(Format(False, 0, 12), Format(False, 0, 16), 5, 2),  # nothing saturates by s
+]
+
+
+@pytest.mark.parametrize("cfg", GENERIC_CONFIGS, ids=str)
+def test_generic_configs(cfg):
+    """Non-preset configurations: every width really comes from the RsqrtConfig."""
+    x = np.concatenate([boundary_inputs(cfg), random_inputs(cfg, 1000, seed=12)])
+    check_rsqrt(RsqrtUnit(cfg), x, seed=13, p_valid=0.8, p_ready=0.8)
+
+
+def test_parameter_validation():
+    # A component whose __init__ raises is still reported as unused when collected.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        cfg = FormatSet.preset("default").rsqrt_config()
+        with pytest.raises(TypeError, match=r"needs a FormatSet or an RsqrtConfig, not 'default'"):
+            RsqrtUnit("default")
+        with pytest.raises(ValueError, match=r"input format must be unsigned, not s7\.16"):
+            RsqrtUnit(RsqrtConfig(Format(True, 7, 16), cfg.fmt_out, 10, 1))
+        with pytest.raises(ValueError, match=r"output format must be unsigned, not s4\.13"):
+            RsqrtUnit(RsqrtConfig(cfg.fmt_in, Format(True, 4, 13), 10, 1))
+        gc.collect()
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_converts_to_verilog(preset, monkeypatch):
+    monkeypatch.setenv("AMARANTH_USE_YOSYS", "builtin")
+    fs = FormatSet.preset(preset)
+    cfg = fs.rsqrt_config()
+    dut = RsqrtUnit(fs)
+    text = verilog.convert(dut, name="rsqrt_unit")
+    assert "module rsqrt_unit" in text
+    ports = {
+        "i__payload": f"input [{cfg.fmt_in.width - 1}:0]",
+        "i__valid": "input", "i__ready": "output",
+        "o__payload": f"output [{cfg.fmt_out.width}:0]",  # rsqrt + saturated
+        "o__valid": "output", "o__ready": "input",
+    }
+    for name, decl in ports.items():
+        assert any(line.strip().startswith(decl) and line.strip().endswith(f" {name};")
+                   for line in text.splitlines()), f"port {name} ({decl}) missing"
+
+
+@pytest.mark.parametrize("rounding", ["floor", "half_up", "nearest_even"])
+def test_follows_golden_internal_rounding(rounding, monkeypatch):
+    """The unit takes its rounding from the golden model (module constant), in every mode."""
+    golden_rsqrt = importlib.import_module("golden_model.fixed.rsqrt")
+    monkeypatch.setattr(golden_rsqrt, "_INTERNAL_ROUNDING", Rounding(rounding))
+    for cfg in (FormatSet.preset("narrow").rsqrt_config(), GENERIC_CONFIGS[1]):
+        x = np.concatenate([boundary_inputs(cfg), random_inputs(cfg, 1500, seed=14)])
+        check_rsqrt(RsqrtUnit(cfg), x, seed=15, p_valid=0.9, p_ready=0.9)

@@ -1,0 +1,242 @@
+"""RTL step generator (hdl.StepGenerator) against the golden model, in Amaranth's simulator.
+
+Every output (``dt``, ``half_dt_sq``) is compared, in order, with ``step_size`` under seeded
+random valid/ready stalls on both sides (stream driver shared with ``test_hdl_rsqrt.py``).
+
+Why two one-lane sweeps plus a dt sweep verify *every* input pair (separability)
+----------------------------------------------------------------------------------
+By construction of the RTL the two lookup lanes (``area_error`` -> ``v_S``, ``shape_error``
+-> ``v_C``) are independent and meet only in the register ``v_sum = v_S + v_C``; both outputs
+are a function ``H`` of ``v_sum`` alone: ``dt = sat(sat(requant(v_sum)) + C)`` and
+``half_dt_sq`` a function of ``dt``. So the RTL computes ``H(L_S(a) + L_C(b))`` and the golden
+model ``H'(v(a) + v(b))``. When ``lut_entry`` and ``dt`` have the same lsb and ``C + 2 max T``
+fits ``dt`` (both presets; checked below), ``dt = C + v_sum`` exactly, so ``dt`` is injective in
+``v_sum``. Then
+
+1. sweep 1, all ``a`` with ``b = b0``: equal ``dt`` gives ``L_S(a) + L_C(b0) = v(a) + v(b0)``;
+2. sweep 2, all ``b`` with ``a = a0``: ``L_S(a0) + L_C(b) = v(a0) + v(b)``;
+3. adding them and subtracting the pair ``(a0, b0)`` of sweep 1:
+   ``L_S(a) + L_C(b) = v(a) + v(b)`` for every pair, i.e. ``v_sum`` is right everywhere;
+4. sweep 3 feeds one pair for every *reachable* sum ``s`` in ``{v(a) + v(b)}``, so
+   ``H(s) = H'(s)`` (``dt`` and ``half_dt_sq``) for every ``s`` any pair can produce.
+
+Hence RTL == golden model for all ``2**(2F)`` pairs (4.3e9 for u0.16) from
+``2 * 2**F + |reachable sums|`` transfers (~183k for u0.16). Presets with the same step-path
+parameters share one run.
+
+The Python simulator manages ~12k transfers/s, so whole-domain lane sweeps are run up to
+``LANE_SWEEP_LIMIT`` error values (u0.16). A wider error format (the default preset's u0.20:
+2 x 1M transfers, ~2.5 min) gets a dense lane sweep instead: every ROM address with the
+interpolation weights 0, 1, half-1, half, half+1 and max, a stride sweep and random values;
+sweep 3 (every reachable sum) stays exhaustive. Steps 1-3 are then a sample, not a proof.
+Random pairs with heavier stalls check the flow control on top.
+"""
+
+import gc
+import warnings
+
+import numpy as np
+import pytest
+from amaranth.back import verilog
+from amaranth.hdl import UnusedElaboratable
+
+from golden_model.fixed import FormatSet, dt_constant, exp_lut, exp_table, step_size
+from hdl import StepGenerator
+from test_hdl_rsqrt import PRESETS, pack, run_stream, unpack
+
+
+def step_key(fs):
+    """The FormatSet fields the step generator depends on."""
+    return (fs.error, fs.lut_entry, fs.dt, fs.half_dt_sq, fs.lut_index_bits,
+            fs.lut_interpolate, fs.rounding)
+
+
+def distinct_step_presets():
+    """One entry per distinct step-path configuration among the presets: (ids, preset name)."""
+    groups = {}
+    for name in PRESETS:
+        groups.setdefault(step_key(FormatSet.preset(name)), []).append(name)
+    return [pytest.param(names[0], id="+".join(names)) for names in groups.values()]
+
+
+def check_step(dut, area, shape, **kw):
+    """Run the pairs through ``dut`` and compare both outputs with ``step_size``; return run."""
+    fs = dut.fs
+    area = np.asarray(area, dtype=np.int64)
+    shape = np.asarray(shape, dtype=np.int64)
+    run = run_stream(dut, pack(dut.i.payload.shape(), area_error=area, shape_error=shape), **kw)
+    layout = dut.o.payload.shape()
+    want_dt, want_half = step_size(area, shape, fs)
+    for name, got, want in (("dt", unpack(layout, run.outputs, "dt"), want_dt),
+                            ("half_dt_sq", unpack(layout, run.outputs, "half_dt_sq"), want_half)):
+        bad = np.flatnonzero(got != want)
+        if bad.size:
+            i = bad[0]
+            pytest.fail(f"{name}: {bad.size} mismatches; first: area_error={int(area[i])} "
+                        f"shape_error={int(shape[i])} rtl={int(got[i])} golden={int(want[i])}")
+    return run
+
+
+def lookup_values(fs):
+    """``v(E)`` of the golden model for every raw error ``E``."""
+    e = np.arange(fs.error.raw_max + 1, dtype=np.int64)
+    table = exp_table(fs.lut_index_bits, fs.lut_entry)
+    return e, exp_lut(e, fs.error, table, fs.lut_index_bits, fs.lut_interpolate, fs.rounding)
+
+
+def pairs_for_every_sum(fs):
+    """One ``(a, b)`` per reachable ``v(a) + v(b)`` (the sumset is found with an FFT)."""
+    e, v = lookup_values(fs)
+    vals = np.unique(v)
+    first = np.full(int(vals[-1]) + 1, -1, dtype=np.int64)
+    first[v[::-1]] = e[::-1]  # smallest E giving each value
+    ind = np.zeros(int(vals[-1]) + 1)
+    ind[vals] = 1
+    size = 1 << int(2 * len(ind)).bit_length()
+    sumset = np.fft.irfft(np.fft.rfft(ind, size) ** 2, size)[:2 * len(ind) - 1] > 0.5
+    need = sumset.copy()
+    area, shape = [], []
+    for u in vals[::-1]:  # large u first: the sparse top sums need both terms large
+        sums = u + vals
+        new = sums[need[sums]]
+        if new.size:
+            need[new] = False
+            area.append(np.full(new.size, first[u]))
+            shape.append(first[new - u])
+            if not need.any():
+                break
+    assert not need.any()
+    area, shape = np.concatenate(area), np.concatenate(shape)
+    assert np.array_equal(np.sort(v[area] + v[shape]), np.flatnonzero(sumset))
+    return area, shape
+
+
+LANE_SWEEP_LIMIT = 1 << 16  # whole-domain lane sweeps up to this many error values (~5 s each)
+
+
+def lane_inputs(fs):
+    """``(values, exhaustive)``: every raw error if there are at most ``LANE_SWEEP_LIMIT``,
+    else every LUT index with the interpolation weights 0, 1, half-1, half, half+1 and max,
+    a stride sweep of ``LANE_SWEEP_LIMIT / 2`` values and as many random ones."""
+    top = fs.error.raw_max
+    if top + 1 <= LANE_SWEEP_LIMIT:
+        return np.arange(top + 1, dtype=np.int64), True
+    r = fs.lut_frac_bits
+    half = (1 << r) >> 1
+    weights = np.unique(np.clip([0, 1, half - 1, half, half + 1, (1 << r) - 1], 0, (1 << r) - 1))
+    idx = np.arange((top >> r) + 1, dtype=np.int64)
+    grid = ((idx[:, None] << r) | weights[None, :]).ravel()
+    stride = np.linspace(0, top, LANE_SWEEP_LIMIT // 2, dtype=np.int64)
+    rand = np.random.default_rng(10).integers(0, top + 1, LANE_SWEEP_LIMIT // 2)
+    values = np.unique(np.concatenate([grid, stride, rand, [0, top]]))
+    return values[values <= top], False
+
+
+@pytest.mark.parametrize("preset", distinct_step_presets())
+def test_lane_sweeps_and_every_reachable_sum(preset):
+    """Sweeps 1-3 of the module docstring (light stalls): every input pair when the lanes are
+    swept whole and the step path is separable."""
+    fs = FormatSet.preset(preset)
+    table = exp_table(fs.lut_index_bits, fs.lut_entry)
+    # Preconditions of steps 1-3: dt = C + v_S + v_C exactly (no rounding, no saturation).
+    separable = (fs.lut_entry.frac_bits == fs.dt.frac_bits
+                 and dt_constant(fs.dt) + 2 * int(table.max()) <= fs.dt.raw_max)
+    e, exhaustive = lane_inputs(fs)
+    print(f"{preset}: lanes {'whole domain' if exhaustive else 'dense sweep'} ({e.size} values"
+          f"), separable {separable}")
+    a0, b0 = fs.error.raw_max, 0
+    sum_a, sum_b = pairs_for_every_sum(fs)
+    area = np.concatenate([e, np.full_like(e, a0), sum_a])
+    shape = np.concatenate([np.full_like(e, b0), e, sum_b])
+    check_step(StepGenerator(fs), area, shape, seed=1, p_valid=0.97, p_ready=0.97)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_random_pairs_with_stalls(preset):
+    fs = FormatSet.preset(preset)
+    rng = np.random.default_rng(2)
+    top = fs.error.raw_max
+    corners = np.array([0, 1, top - 1, top, (top + 1) // 2])
+    ca, cb = (g.ravel() for g in np.meshgrid(corners, corners))
+    area = np.concatenate([ca, rng.integers(0, top + 1, 5000)])
+    shape = np.concatenate([cb, rng.integers(0, top + 1, 5000)])
+    check_step(StepGenerator(fs), area, shape, seed=3, p_valid=0.7, p_ready=0.7)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_throughput_and_latency(preset):
+    """No stalls: N pairs in N consecutive edges and out from edge ``latency`` on (N + latency
+    edges: no bubbles); with input gaps each output leaves ``latency`` edges after its input."""
+    fs = FormatSet.preset(preset)
+    dut = StepGenerator(fs)
+    assert dut.latency == (7 if fs.lut_interpolate and fs.lut_frac_bits else 5)
+    rng = np.random.default_rng(4)
+    area, shape = rng.integers(0, fs.error.raw_max + 1, (2, 400))
+    run = check_step(dut, area, shape)
+    assert run.in_cycles == list(range(400))
+    assert run.out_cycles == list(range(dut.latency, dut.latency + 400))
+    run = check_step(dut, area, shape, seed=5, p_valid=0.5)
+    assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * 400
+
+
+def test_output_independent_of_ready():
+    fs = FormatSet.preset("default")
+    rng = np.random.default_rng(6)
+    area, shape = rng.integers(0, fs.error.raw_max + 1, (2, 300))
+    check_step(StepGenerator(fs), area, shape, seed=7, p_valid=0.8, p_ready=0.6,
+               probe_ready=True)
+
+
+VARIANTS = {
+    "nearest_even": dict(rounding="nearest_even"),
+    "floor": dict(rounding="floor"),
+    "nearest_entry": dict(lut_interpolate=False),
+    "nearest_entry_floor": dict(lut_interpolate=False, rounding="floor"),
+    "index_is_error": dict(error="u0.10", lut_index_bits=10),  # r = 0: T[E]
+    "u1_error_clamps": dict(error="u1.15", lut_index_bits=6),  # E > 1 clamps to 1
+    "entry_finer_than_dt": dict(lut_entry="u0.21", rounding="nearest_even"),
+    "entry_coarser_than_dt": dict(lut_entry="u0.15", half_dt_sq="u0.22"),
+    "coarse_dt": dict(dt="u1.12", half_dt_sq="u0.10", lut_entry="u0.14"),
+}
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_generic_formatsets(variant):
+    """Non-preset knobs: every rounding mode, no interpolation, r = 0, a u1.F error, and
+    requantisation between entry and dt lsbs. Uniform random pairs plus the corners."""
+    fs = FormatSet.preset("default").replace(**VARIANTS[variant])
+    rng = np.random.default_rng(8)
+    top = fs.error.raw_max
+    corners = np.array([0, 1, top, 1 << fs.error.frac_bits, (1 << fs.error.frac_bits) - 1])
+    ca, cb = (g.ravel() for g in np.meshgrid(corners.clip(0, top), corners.clip(0, top)))
+    area = np.concatenate([ca, rng.integers(0, top + 1, 1500)])
+    shape = np.concatenate([cb, rng.integers(0, top + 1, 1500)])
+    check_step(StepGenerator(fs), area, shape, seed=9, p_valid=0.8, p_ready=0.8)
+
+
+def test_parameter_validation():
+    # A component whose __init__ raises is still reported as unused when collected.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        with pytest.raises(TypeError, match=r"StepGenerator needs a FormatSet, not 'default'"):
+            StepGenerator("default")
+        with pytest.raises(TypeError, match=r"StepGenerator needs a FormatSet, not RsqrtConfig"):
+            StepGenerator(FormatSet.preset("default").rsqrt_config())
+        gc.collect()
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_converts_to_verilog(preset, monkeypatch):
+    monkeypatch.setenv("AMARANTH_USE_YOSYS", "builtin")
+    fs = FormatSet.preset(preset)
+    text = verilog.convert(StepGenerator(fs), name="step_generator")
+    assert "module step_generator" in text
+    ports = {
+        "i__payload": f"input [{2 * fs.error.width - 1}:0]",  # area_error, shape_error
+        "i__valid": "input", "i__ready": "output",
+        "o__payload": f"output [{fs.dt.width + fs.half_dt_sq.width - 1}:0]",  # dt, half_dt_sq
+        "o__valid": "output", "o__ready": "input",
+    }
+    for name, decl in ports.items():
+        assert any(line.strip().startswith(decl) and line.strip().endswith(f" {name};")
+                   for line in text.splitlines()), f"port {name} ({decl}) missing"
