@@ -5,7 +5,7 @@ golden model's ``requantize(raw, from_frac, fmt, rounding, "saturate")``: the
 rounding shift :func:`shift_round`, then a clamp into ``fmt``.
 """
 
-from amaranth.hdl import Const, Mux, Value, signed, unsigned
+from amaranth.hdl import Cat, Const, Mux, Value, signed, unsigned
 
 from golden_model.fixed import Format, Rounding
 
