@@ -5,8 +5,9 @@ Every width, constant and table comes from the golden model's objects
 bit-exact with its golden-model function. See ``docs/hardware-units.md``.
 """
 
+from .core import SpringflatCore
 from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["NodeUpdate", "RsqrtUnit", "StepGenerator"]
+__all__ = ["NodeUpdate", "RsqrtUnit", "SpringflatCore", "StepGenerator"]

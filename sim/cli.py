@@ -172,6 +172,20 @@ def cmd_paper(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_verilog(args: argparse.Namespace) -> int:
+    from .export import export_verilog
+
+    formats = load_formats(args.formats)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out '{out}' exists and is not a directory")
+    interface = export_verilog(formats, out)
+    for name, c in interface["components"].items():
+        print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
+    print(f"{out / 'interface.md'}, {out / 'interface.json'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="springflat",
@@ -198,6 +212,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--init", choices=LAYOUT_METHODS, default="pca", help="initial layout (default pca)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=cmd_paper)
+
+    p = sub.add_parser("verilog", help="export the RTL as Verilog with its interface description",
+                       description="Write Verilog of every component, ROM contents and interface.md/json.")
+    p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.set_defaults(func=cmd_verilog)
     return parser
 
 

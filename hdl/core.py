@@ -1,0 +1,98 @@
+"""The top-level core: the node-update datapath with its step generator and step registers."""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out, connect
+
+from golden_model.fixed import FormatSet
+
+from .fixedpoint import shape_of
+from .node_update import NodeUpdate, entry_layout, result_layout
+from .stepgen import StepGenerator
+
+__all__ = ["SpringflatCore", "step_layout", "errors_layout"]
+
+
+def step_layout(fs: FormatSet) -> data.StructLayout:
+    """``dt`` [dt] and ``half_dt_sq`` [half_dt_sq]."""
+    return data.StructLayout({"dt": shape_of(fs.dt), "half_dt_sq": shape_of(fs.half_dt_sq)})
+
+
+def errors_layout(fs: FormatSet) -> data.StructLayout:
+    """``area_error`` (E_S) and ``shape_error`` (E_C), both [error]."""
+    return data.StructLayout({"area_error": shape_of(fs.error), "shape_error": shape_of(fs.error)})
+
+
+class SpringflatCore(wiring.Component):
+    """Node-update datapath + exp-LUT step generator + the step registers between them.
+
+    Members
+    -------
+    entries : ``In(stream.Signature(entry_layout(fs)))``
+        Neighbour entries (see :class:`~hdl.node_update.NodeUpdate`).
+    results : ``Out(stream.Signature(result_layout(fs)))``
+        One result per node.
+    errors : ``In(stream.Signature(errors_layout(fs)))``
+        E_S and E_C of the current layout; the step generator turns them into
+        ``Δt, ½Δt²``, which load the step registers (variable step).
+    step_load : ``In(stream.Signature(step_layout(fs)))``
+        Loads the step registers directly (fixed step). Always ready.
+    step : ``Out(step_layout(fs))``
+        The step registers.
+    measure : ``In(1)``
+        While high the datapath sees ``Δt = ½Δt² = 0`` and ``1 − γ = 1``: a pass that moves
+        nothing and yields the E_C partial sums of the current positions.
+    half_spring, damping : ``In(...)``
+        ``½C`` [spring] and ``1 − γ`` [damping].
+
+    Contract: ``entries``/``results`` as :class:`~hdl.node_update.NodeUpdate` (II = 1 entry per
+    clock, latency ``latency``); ``errors`` → ``step`` takes ``step_latency`` clocks. Change
+    ``step``/``measure``/``half_spring``/``damping`` only between passes (no entry in flight).
+    """
+
+    def __init__(self, fs: FormatSet | str):
+        if isinstance(fs, str):
+            fs = FormatSet.preset(fs)
+        if not isinstance(fs, FormatSet):
+            raise TypeError(f"SpringflatCore needs a FormatSet or a preset name, not {fs!r}")
+        self.fs = fs
+        self._datapath = NodeUpdate(fs)
+        self._stepgen = StepGenerator(fs)
+        self.latency = self._datapath.latency
+        self.step_latency = self._stepgen.latency + 1
+        super().__init__({
+            "entries": In(stream.Signature(entry_layout(fs))),
+            "results": Out(stream.Signature(result_layout(fs))),
+            "errors": In(stream.Signature(errors_layout(fs))),
+            "step_load": In(stream.Signature(step_layout(fs))),
+            "step": Out(step_layout(fs)),
+            "measure": In(1),
+            "half_spring": In(shape_of(fs.spring)),
+            "damping": In(shape_of(fs.damping)),
+        })
+
+    def elaborate(self, platform):
+        fs = self.fs
+        m = Module()
+        m.submodules.datapath = datapath = self._datapath
+        m.submodules.stepgen = stepgen = self._stepgen
+        connect(m, wiring.flipped(self.entries), datapath.i)
+        connect(m, datapath.o, wiring.flipped(self.results))
+        connect(m, wiring.flipped(self.errors), stepgen.i)
+
+        m.d.comb += [stepgen.o.ready.eq(1), self.step_load.ready.eq(1)]
+        with m.If(self.step_load.valid):
+            m.d.sync += self.step.eq(self.step_load.payload)
+        with m.Elif(stepgen.o.valid):
+            m.d.sync += [self.step.dt.eq(stepgen.o.payload.dt), self.step.half_dt_sq.eq(stepgen.o.payload.half_dt_sq)]
+
+        one = 1 << fs.damping.frac_bits  # 1 − γ = 1 exactly: the damping multiply is then exact
+        m.d.comb += [
+            datapath.dt.eq(Mux(self.measure, 0, self.step.dt)),
+            datapath.half_dt_sq.eq(Mux(self.measure, 0, self.step.half_dt_sq)),
+            datapath.damping.eq(Mux(self.measure, one, self.damping)),
+            datapath.half_spring.eq(self.half_spring),
+        ]
+        return m

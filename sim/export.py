@@ -1,0 +1,167 @@
+"""``springflat verilog``: Verilog of every component plus a machine- and human-readable interface.
+
+Writes into ``--out DIR``:
+
+* ``rsqrt_unit.v``, ``step_generator.v``, ``node_update.v`` and the top
+  ``springflat_core.v`` (Amaranth's builtin Yosys, ``AMARANTH_USE_YOSYS=builtin``
+  for reproducible output);
+* ``rsqrt_seed.hex`` and ``exp_table.hex``: the ROM contents (also inlined in
+  the Verilog), one hex word per line, from the golden model's table functions;
+* ``interface.json`` and ``interface.md``: ports (name, direction, width),
+  the bit layout of every stream payload with each field's format, latency,
+  initiation interval, the stream protocol, and the format set.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from amaranth.hdl import Shape
+from amaranth.lib import data, wiring
+
+from golden_model.fixed import FormatSet, exp_table
+
+__all__ = ["COMPONENTS", "export_verilog", "describe"]
+
+STREAM_PROTOCOL = (
+    "Each stream is `valid`, `ready`, `payload` (amaranth.lib.stream): a beat transfers on a rising clock "
+    "edge where valid and ready are both high; valid never depends on ready; once valid is high, it and "
+    "the payload stay unchanged until the transfer. All ports are synchronous to `clk`; `rst` is an "
+    "active-high synchronous reset that empties every pipeline."
+)
+
+
+@dataclass(frozen=True)
+class ComponentSpec:
+    module: str
+    summary: str
+
+    def build(self, fs: FormatSet):
+        import hdl
+
+        return {"rsqrt_unit": hdl.RsqrtUnit, "step_generator": hdl.StepGenerator, "node_update": hdl.NodeUpdate,
+                "springflat_core": hdl.SpringflatCore}[self.module](fs)
+
+
+COMPONENTS = (
+    ComponentSpec("rsqrt_unit", "reciprocal square root, |Δ|² → r"),
+    ComponentSpec("step_generator", "exp-LUT step generator, (E_S, E_C) → (Δt, ½Δt²)"),
+    ComponentSpec("node_update", "node-update datapath: neighbour entries → updated nodes"),
+    ComponentSpec("springflat_core", "top: node-update datapath + step generator + step registers"),
+)
+
+
+def _fields(layout, fs: FormatSet, offset=0, path=()):
+    """Leaf fields of a payload layout with their bit offsets and formats."""
+    formats = {str(f): name for name, f in fs.formats().items()}
+    for name, field in layout:
+        shape = field.shape
+        if isinstance(shape, data.Layout):
+            yield from _fields(shape, fs, offset + field.offset, path + (name,))
+        else:
+            s = Shape.cast(shape)
+            yield {"field": ".".join(path + (name,)), "lsb": offset + field.offset, "width": s.width,
+                   "signed": s.signed}
+
+
+def _format_of(field_name: str, port: str) -> str | None:
+    """The FormatSet signal class a payload field holds (by name)."""
+    leaf = field_name.split(".")
+    key = {"rsqrt": "rsqrt", "saturated": None, "area_error": "error", "shape_error": "error", "dt": "dt",
+           "half_dt_sq": "half_dt_sq", "inv_mass": "inv_mass", "rest": "rest_length", "error_sum": "error_acc",
+           "first": None, "last": None}
+    for part in reversed(leaf):
+        if part in key:
+            return key[part]
+        if part in ("position", "velocity"):
+            return part
+    if port in ("i",):
+        return "length_sq"
+    return None
+
+
+def describe(component, fs: FormatSet, name: str) -> dict:
+    """Ports, payload layouts, latency and formats of one component."""
+    ports = [{"name": "clk", "direction": "input", "width": 1}, {"name": "rst", "direction": "input", "width": 1}]
+    payloads = {}
+    for path, member in component.signature.members.flatten():
+        if not member.is_port:
+            continue
+        port = "__".join(str(p) for p in path)
+        shape = member.shape
+        width = shape.size if isinstance(shape, data.Layout) else Shape.cast(shape).width
+        ports.append({"name": port, "direction": "input" if member.flow == wiring.In else "output", "width": width})
+        if isinstance(shape, data.Layout):
+            fields = list(_fields(shape, fs))
+            for f in fields:
+                cls = _format_of(f["field"], path[0])
+                if cls:
+                    f["format"] = f"{cls} {getattr(fs, cls)}"
+            payloads[port] = fields
+        else:
+            cls = {"dt": "dt", "half_dt_sq": "half_dt_sq", "half_spring": "spring", "damping": "damping"}.get(port)
+            if cls is None and port == "i__payload":
+                cls = "length_sq"
+            if cls:
+                payloads[port] = [{"field": "(whole port)", "lsb": 0, "width": width, "format": f"{cls} {getattr(fs, cls)}"}]
+    info = {"module": name, "ports": ports, "payload_layouts": payloads, "latency": component.latency,
+            "initiation_interval": 1}
+    if hasattr(component, "step_latency"):
+        info["step_latency"] = component.step_latency
+    return info
+
+
+def export_verilog(fs: FormatSet, out: Path) -> dict:
+    """Write every component's Verilog, the ROM files and the interface; return the interface dict."""
+    from amaranth.back import verilog
+
+    os.environ["AMARANTH_USE_YOSYS"] = "builtin"
+    out.mkdir(parents=True, exist_ok=True)
+    components = {}
+    for spec in COMPONENTS:
+        component = spec.build(fs)
+        text = verilog.convert(component, name=spec.module)
+        (out / f"{spec.module}.v").write_text(text)
+        info = describe(component, fs, spec.module)
+        info["summary"] = spec.summary
+        components[spec.module] = info
+    cfg = fs.rsqrt_config()
+    (out / "rsqrt_seed.hex").write_text("".join(f"{int(v):x}\n" for v in cfg.seed_table()))
+    (out / "exp_table.hex").write_text("".join(f"{int(v):x}\n" for v in exp_table(fs.lut_index_bits, fs.lut_entry)))
+    interface = {"format_set": fs.to_dict(), "stream_protocol": STREAM_PROTOCOL, "components": components,
+                 "notes": [
+                     "A node's header (position, velocity, 1/m) rides on its first neighbour entry (first = 1); "
+                     "last = 1 closes the node. A node with n >= 1 neighbours is n beats; at most max_degree.",
+                     "node_update / springflat_core: one result per node, in input order; error_sum is the node's "
+                     "sum of |L - d| over the positions it was given.",
+                     "Throughput = Fmax x II = Fmax neighbour entries per second.",
+                 ]}
+    (out / "interface.json").write_text(json.dumps(interface, indent=2) + "\n")
+    (out / "interface.md").write_text(interface_markdown(interface))
+    return interface
+
+
+def interface_markdown(interface: dict) -> str:
+    fs = interface["format_set"]
+    lines = [f"# springflat hardware interface (format set `{fs['name']}`)", "", "## Stream protocol", "",
+             interface["stream_protocol"], "", *[f"* {n}" for n in interface["notes"]], ""]
+    for name, c in interface["components"].items():
+        lines += [f"## `{name}` — {c['summary']}", "",
+                  f"Latency {c['latency']} clocks, initiation interval {c['initiation_interval']}"
+                  + (f"; errors → step {c['step_latency']} clocks" if "step_latency" in c else "") + ".", "",
+                  "| port | direction | width |", "|---|---|---|"]
+        lines += [f"| `{p['name']}` | {p['direction']} | {p['width']} |" for p in c["ports"]]
+        for port, fields in c["payload_layouts"].items():
+            lines += ["", f"`{port}` bits:", "", "| field | bits | signed | format |", "|---|---|---|---|"]
+            for f in fields:
+                hi = f["lsb"] + f["width"] - 1
+                lines.append(f"| `{f['field']}` | [{hi}:{f['lsb']}] | {'yes' if f.get('signed') else 'no'} | "
+                             f"{f.get('format', '')} |")
+        lines.append("")
+    lines += ["## Formats", "", "| signal | format |", "|---|---|"]
+    lines += [f"| `{k}` | {v} |" for k, v in fs["formats"].items()]
+    lines += ["", "Knobs: " + ", ".join(f"{k} = {v}" for k, v in fs.items() if k not in ("formats", "notes", "name"))]
+    return "\n".join(lines) + "\n"
