@@ -10,7 +10,6 @@ import random
 import numpy as np
 import pytest
 from amaranth.hdl import Value
-from amaranth.lib import data
 from amaranth.sim import Simulator
 
 from golden_model.builtin import builtin_mesh
@@ -21,58 +20,9 @@ from golden_model.fixed import SaturationCounter
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
 from hdl import NodeUpdate
+from sim.payloads import pack, pass_beats, unpack
 
 PRESETS = ["default", "narrow"]
-
-
-def leaves(layout, offset=0, path=()):
-    """``(path, offset, width, signed)`` of every leaf field of a nested layout."""
-    for name, field in layout:
-        shape = field.shape
-        if isinstance(shape, data.Layout):
-            yield from leaves(shape, offset + field.offset, path + (name,))
-        else:
-            shape = shape if not hasattr(shape, "as_shape") else shape.as_shape()
-            yield path + (name,), offset + field.offset, shape.width, shape.signed
-
-
-def pack(layout, fields):
-    """Raw payload ints from ``{path: int array}`` (missing fields are 0)."""
-    n = len(next(iter(fields.values())))
-    out = [0] * n
-    for path, offset, width, _ in leaves(layout):
-        if path in fields:
-            mask = (1 << width) - 1
-            for k, v in enumerate(fields[path]):
-                out[k] |= (int(v) & mask) << offset
-    return out
-
-
-def unpack(layout, raw, path):
-    """One field of raw payload ints, sign-extended where signed."""
-    for p, offset, width, signed in leaves(layout):
-        if p == path:
-            vals = [(int(r) >> offset) & ((1 << width) - 1) for r in raw]
-            if signed:
-                vals = [v - (1 << width) if v >> (width - 1) else v for v in vals]
-            return np.array(vals, dtype=np.int64)
-    raise KeyError(path)
-
-
-def entries(stream: NeighbourStream, positions, velocities):
-    """The input beats of one pass: every node's entries, its header on the first."""
-    owner = stream.owner
-    start = stream.indptr[:-1][owner] == np.arange(len(owner))
-    end = stream.indptr[1:][owner] - 1 == np.arange(len(owner))
-    return {
-        ("first",): start.astype(int), ("last",): end.astype(int),
-        ("node", "position", "x"): positions[owner, 0] * start, ("node", "position", "y"): positions[owner, 1] * start,
-        ("node", "velocity", "x"): velocities[owner, 0] * start, ("node", "velocity", "y"): velocities[owner, 1] * start,
-        ("node", "inv_mass"): stream.inv_mass[owner] * start,
-        ("neighbour", "position", "x"): positions[stream.neighbour, 0],
-        ("neighbour", "position", "y"): positions[stream.neighbour, 1],
-        ("neighbour", "rest"): stream.rest,
-    }
 
 
 class Run:
@@ -133,8 +83,7 @@ def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0):
 
 def check_pass(dut, fs, stream, positions, velocities, constants, **kw):
     """One pass through the RTL against ``node_update``; returns the run."""
-    layout = dut.i.payload.shape()
-    beats = pack(layout, entries(stream, positions, velocities))
+    beats = pass_beats(dut.i.payload.shape(), stream, positions, velocities)
     run = simulate(dut, beats, len(stream.indptr) - 1, (constants.dt, constants.half_dt_sq, constants.half_spring,
                                                         constants.damping), **kw)
     want = node_update(fs, positions, velocities, stream, constants)

@@ -1,0 +1,102 @@
+"""Clock, reset, configuration and a cycle-accurate stream driver for the benches."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+from dataclasses import dataclass, field
+
+from cocotb.clock import Clock
+from cocotb.triggers import ReadOnly, RisingEdge
+
+from golden_model.fixed import FormatSet
+
+CLOCK_NS = 10
+
+
+def load_config() -> dict:
+    with open(os.environ["SPRINGFLAT_BENCH_CONFIG"]) as f:
+        return json.load(f)
+
+
+def formats(config: dict) -> FormatSet:
+    return FormatSet.from_dict(config["formats"])
+
+
+def write_result(result: dict) -> None:
+    with open(os.environ["SPRINGFLAT_BENCH_RESULT"], "w") as f:
+        json.dump(result, f, indent=1)
+
+
+async def start_clock_and_reset(dut, idle: tuple[str, ...] = (), cycles: int = 3) -> None:
+    """Start the clock and reset; the ``idle`` inputs are driven low from the start.
+
+    An undriven ``valid`` is X in a 4-state simulator and can be taken as a beat.
+    """
+    for name in idle:
+        getattr(dut, name).value = 0
+    Clock(dut.clk, CLOCK_NS, unit="ns").start()
+    dut.rst.value = 1
+    for _ in range(cycles):
+        await RisingEdge(dut.clk)
+    dut.rst.value = 0
+
+
+@dataclass
+class StreamStats:
+    cycles: int = 0
+    in_cycles: list[int] = field(default_factory=list)
+    out_cycles: list[int] = field(default_factory=list)
+
+
+class StreamPort:
+    """The ``<name>__valid/ready/payload`` signals of one stream port."""
+
+    def __init__(self, dut, name: str):
+        self.valid = getattr(dut, f"{name}__valid")
+        self.ready = getattr(dut, f"{name}__ready")
+        self.payload = getattr(dut, f"{name}__payload")
+
+
+async def transfer(dut, source: StreamPort, sink: StreamPort, beats: list[int], n_out: int, *,
+                   rng: random.Random | None = None, p_valid: float = 1.0, p_ready: float = 1.0,
+                   stop_after: int | None = None, stats: StreamStats | None = None) -> list[int]:
+    """Drive ``beats`` into ``source`` and collect ``n_out`` payloads from ``sink``, one clock at a time.
+
+    With ``p_valid``/``p_ready`` < 1 each clock's valid/ready is random; the sink
+    checks that an offered payload is never withdrawn or changed. ``stop_after``
+    returns early after that many clocks (for a reset in the middle of a stream).
+    """
+    rng = rng or random.Random(0)
+    stats = stats if stats is not None else StreamStats()
+    outputs: list[int] = []
+    index, cycle, held = 0, 0, None
+    width = len(source.payload)
+    limit = 20 * (len(beats) + 200) / max(p_valid * p_ready, 0.05)
+    while index < len(beats) or len(outputs) < n_out:
+        valid = index < len(beats) and (p_valid >= 1 or rng.random() < p_valid)
+        source.valid.value = int(valid)
+        source.payload.value = beats[index] if valid else rng.getrandbits(width)
+        ready = p_ready >= 1 or rng.random() < p_ready
+        sink.ready.value = int(ready)
+        await ReadOnly()
+        offered = bool(int(sink.valid.value))
+        if held is not None:
+            assert offered and int(sink.payload.value) == held, f"clock {cycle}: an offered payload was withdrawn"
+        if valid and int(source.ready.value):
+            index += 1
+            stats.in_cycles.append(stats.cycles)
+        if offered and ready:
+            assert len(outputs) < n_out, f"clock {cycle}: more outputs than expected"
+            outputs.append(int(sink.payload.value))
+            stats.out_cycles.append(stats.cycles)
+        held = int(sink.payload.value) if offered and not ready else None
+        await RisingEdge(dut.clk)
+        cycle += 1
+        stats.cycles += 1
+        if stop_after is not None and cycle >= stop_after:
+            break
+        assert cycle < limit, f"no progress after {cycle} clocks: {index}/{len(beats)} in, {len(outputs)}/{n_out} out"
+    source.valid.value = 0
+    return outputs

