@@ -102,11 +102,12 @@ class BenchRun:
 
 
 def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, *, testcase: str | None = None,
-              waves: bool = False, work: Path | None = None) -> BenchRun:
+              waves: bool = False, work: Path | None = None, log_file: Path | None = None) -> BenchRun:
     """Build ``toplevel`` for ``sim`` (cached) and run the cocotb module ``sim.cocotb_benches.<bench>``.
 
     ``config`` is handed to the bench as JSON (``SPRINGFLAT_BENCH_CONFIG``); the bench
-    writes its findings to ``SPRINGFLAT_BENCH_RESULT``, returned as ``result``.
+    writes its findings to ``SPRINGFLAT_BENCH_RESULT``, returned as ``result``. With
+    ``log_file`` the simulator's output goes there instead of stdout.
     """
     from cocotb_tools.check_results import get_results
     from cocotb_tools.runner import get_runner
@@ -128,14 +129,21 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     runner.build(sources=[sources / f"{toplevel}.v"], hdl_toplevel=toplevel, build_dir=build_dir,
                  build_args=build_args, timescale=("1ns", "1ps"), waves=waves, always=False, verbose=False)
     started = time.perf_counter()
-    results_xml = runner.test(
-        test_module=f"{BENCH_PACKAGE}.{bench}", hdl_toplevel=toplevel, testcase=testcase, build_dir=build_dir,
-        test_dir=work, waves=waves, timescale=("1ns", "1ps"),
-        extra_env={"SPRINGFLAT_BENCH_CONFIG": str(config_path), "SPRINGFLAT_BENCH_RESULT": str(result_path),
-                   "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])},
-    )
+    results_xml = work / "results.xml"
+    try:
+        runner.test(
+            test_module=f"{BENCH_PACKAGE}.{bench}", hdl_toplevel=toplevel, testcase=testcase, build_dir=build_dir,
+            test_dir=work, waves=waves, timescale=("1ns", "1ps"), results_xml=str(results_xml), log_file=log_file,
+            extra_env={"SPRINGFLAT_BENCH_CONFIG": str(config_path), "SPRINGFLAT_BENCH_RESULT": str(result_path),
+                       "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])},
+        )
+    except SystemExit:  # the runner exits when a test failed; the results file says which
+        pass
     wall = time.perf_counter() - started
-    tests, failed = get_results(Path(results_xml))
+    try:
+        tests, failed = get_results(results_xml)
+    except RuntimeError:
+        raise SimulatorError(f"the {sim} simulation of {toplevel} ended abnormally (see {log_file or work})") from None
     result = json.loads(result_path.read_text()) if result_path.exists() else {}
     wave_file = None
     if waves:

