@@ -20,7 +20,7 @@ from pathlib import Path
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.layouts import LAYOUT_METHODS, LayoutError, initial_layout
 from golden_model.mesh import Mesh, MeshError, load_mesh
-from golden_model.fixed.engine import flatten_fixed, load_formats
+from golden_model.fixed.engine import FixedPointError, flatten_fixed, load_formats
 from golden_model.reference import FlattenParams, FlattenResult, ParameterError, flatten
 
 from .outputs import LAYOUT_SUFFIXES, OutputError, check_output_path, write_history, write_layout, write_plot
@@ -218,6 +218,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=cmd_verilog)
+
+    from .rtl_check import add_parser as add_rtl_check_parser
+
+    add_rtl_check_parser(sub, add_run_options)
     return parser
 
 

@@ -125,9 +125,13 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     runner = get_runner(sim)
     build_args = ["-Wno-fatal", "-Wno-WIDTHEXPAND", "-Wno-WIDTHTRUNC", "-O2"] if sim == "verilator" else []
     if sim == "verilator" and waves:
-        build_args += ["--trace-fst", "--trace-structs"]
-    runner.build(sources=[sources / f"{toplevel}.v"], hdl_toplevel=toplevel, build_dir=build_dir,
-                 build_args=build_args, timescale=("1ns", "1ps"), waves=waves, always=False, verbose=False)
+        build_args += ["--trace-structs"]  # cocotb adds --trace (VCD; FST would need liblz4 headers)
+    try:
+        runner.build(sources=[sources / f"{toplevel}.v"], hdl_toplevel=toplevel, build_dir=build_dir,
+                     build_args=build_args, timescale=("1ns", "1ps"), waves=waves, always=False, verbose=False,
+                     log_file=log_file)
+    except RuntimeError as exc:
+        raise SimulatorError(f"building {toplevel} for {sim} failed ({exc}); see {log_file or build_dir}") from None
     started = time.perf_counter()
     results_xml = work / "results.xml"
     try:

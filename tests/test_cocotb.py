@@ -83,3 +83,29 @@ def test_a_broken_expectation_fails(simulator, bench, toplevel, config):
     assert run.result["mismatches"] >= 1
     if bench != "units":
         assert "iteration" in run.result["first_mismatches"][0]
+
+
+def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path):
+    """springflat rtl-check on a mesh file it has never seen: a few iterations, zero mismatches."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from golden_model.generate import delaunay_patch
+    from golden_model.mesh import save_obj
+
+    mesh = delaunay_patch(220, seed=11)
+    save_obj(tmp_path / "patch.obj", mesh.vertices, mesh.faces)
+    springflat = str(Path(sys.executable).parent / "springflat")
+    proc = subprocess.run([springflat, "rtl-check", "patch.obj", "--sim", simulator, "--iterations", "3",
+                           "--tol-area", "0", "--damping", "0.05", "--stall", "0.1", "--json"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = json.loads(proc.stdout)
+    for key in ("mismatches", "iterations", "simulator", "area_error", "shape_error", "float_area_error",
+                "float_shape_error", "cycles", "cycles_per_second"):
+        assert key in result
+    assert (result["mismatches"], result["iterations"], result["simulator"]) == (0, 3, simulator)
+    assert result["nodes"] == 220 and result["cycles"] > 2 * 3 * result["entries"]
+    assert abs(result["area_error"] - result["float_area_error"]) <= 1e-3
