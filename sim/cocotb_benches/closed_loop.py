@@ -170,3 +170,4 @@ def config_initial(problem, config):
     from golden_model.layouts import initial_layout
 
     return initial_layout(problem.mesh, config.get("init", "tutte"))
+

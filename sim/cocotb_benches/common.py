@@ -8,7 +8,7 @@ import random
 from dataclasses import dataclass, field
 
 from cocotb.clock import Clock
-from cocotb.triggers import ReadOnly, RisingEdge
+from cocotb.triggers import FallingEdge, ReadOnly, RisingEdge
 
 from golden_model.fixed import FormatSet
 
@@ -70,6 +70,8 @@ async def transfer(dut, source: StreamPort, sink: StreamPort, beats: list[int], 
     """
     rng = rng or random.Random(0)
     stats = stats if stats is not None else StreamStats()
+    if p_valid >= 1 and p_ready >= 1 and stop_after is None:
+        return await _transfer_unstalled(dut, source, sink, beats, n_out, stats)
     outputs: list[int] = []
     index, cycle, held = 0, 0, None
     width = len(source.payload)
@@ -98,5 +100,44 @@ async def transfer(dut, source: StreamPort, sink: StreamPort, beats: list[int], 
         if stop_after is not None and cycle >= stop_after:
             break
         assert cycle < limit, f"no progress after {cycle} clocks: {index}/{len(beats)} in, {len(outputs)}/{n_out} out"
+    source.valid.value = 0
+    return outputs
+
+
+async def _transfer_unstalled(dut, source: StreamPort, sink: StreamPort, beats: list[int], n_out: int,
+                              stats: StreamStats) -> list[int]:
+    """:func:`transfer` without stalls, with one trigger per clock.
+
+    With ``sink.ready`` held high, the source's ``ready`` depends only on the DUT's
+    registers (it depends on nothing driven here), and the sink's valid/payload are registers: all
+    are settled at the falling edge, where both the sample for the next rising
+    edge and the beat to present at it are decided. Payloads are written only when
+    they change.
+    """
+    outputs: list[int] = []
+    sink.ready.value = 1
+    index, presented, ready_at_edge, cycle = 0, False, False, 0
+    limit = 20 * (len(beats) + 200)
+    while index < len(beats) or len(outputs) < n_out:
+        await FallingEdge(dut.clk)
+        if presented and ready_at_edge:  # sampled at the previous falling edge: taken at the rising edge since
+            index += 1
+            stats.in_cycles.append(stats.cycles - 1)
+            presented = False
+        if not presented and index < len(beats):
+            source.payload.value = beats[index]
+            source.valid.value = 1
+            presented = True
+        elif not presented:
+            source.valid.value = 0
+        ready_at_edge = bool(int(source.ready.value))
+        if int(sink.valid.value):  # taken at the next rising edge (ready is high)
+            assert len(outputs) < n_out, f"clock {cycle}: more outputs than expected"
+            outputs.append(int(sink.payload.value))
+            stats.out_cycles.append(stats.cycles)
+        cycle += 1
+        stats.cycles += 1
+        assert cycle < limit, f"no progress after {cycle} clocks: {index}/{len(beats)} in, {len(outputs)}/{n_out} out"
+    await RisingEdge(dut.clk)  # the last beats transfer on this edge
     source.valid.value = 0
     return outputs
