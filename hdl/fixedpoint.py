@@ -79,3 +79,86 @@ def clamp(value, fmt: Format):
 def requantize(value, from_frac: int, fmt: Format, rounding: Rounding):
     """``(result, overflow)``: ``value`` with ``from_frac`` fraction bits, rounded to ``fmt`` and saturated."""
     return clamp(shift_round(value, from_frac - fmt.frac_bits, rounding), fmt)
+
+
+DSP_WIDTH = 18  # ECP5 MULT18X18D: 18x18 signed (iCE40 SB_MAC16 is 16x16: an 18x18 takes several)
+
+
+def _dsp_chunks(value, width, signed_product):
+    """``[(chunk, shift)]`` with ``value == sum(chunk << shift)``; each chunk fits an 18-bit DSP operand.
+
+    In an unsigned product the chunks are 18-bit unsigned slices. In a signed product an unsigned
+    chunk is zero-extended to a signed operand, so the low chunks are 17 bits and only a signed
+    operand's top chunk (its sign) takes 18.
+    """
+    value = Value.cast(value)
+    signed = value.shape().signed
+    step = width if not signed_product else width - 1
+    chunks, lo = [], 0
+    n = len(value)
+    while lo < n:
+        top_signed = signed and n - lo <= width  # the rest fits one signed chunk
+        hi = n if top_signed else min(n, lo + step)
+        part = value[lo:hi]
+        chunks.append((part.as_signed() if top_signed else part, lo))
+        lo = hi
+    return chunks
+
+
+def dsp_partial_products(a, b, width=DSP_WIDTH):
+    """``[(product, shift)]`` with ``a * b == sum(product << shift)``, each product one 18×18 multiplier.
+
+    Splitting a wide multiply by hand lets every partial product sit alone between registers (one
+    DSP, registered operands and product); :func:`dsp_sum` adds them in the next stage.
+    """
+    a, b = Value.cast(a), Value.cast(b)
+    signed_product = a.shape().signed or b.shape().signed
+    return [(pa * pb, sa + sb) for pa, sa in _dsp_chunks(a, width, signed_product)
+            for pb, sb in _dsp_chunks(b, width, signed_product)]
+
+
+def dsp_sum(parts):
+    """``sum(product << shift)`` of registered partial products (see :func:`dsp_partial_products`)."""
+    total = None
+    for p, shift in parts:
+        term = Value.cast(p) << shift if shift else Value.cast(p)
+        total = term if total is None else total + term
+    return total
+
+
+def sum_round(add, shift, rounding, sub=(), const=0):
+    """``round((const + sum(add) - sum(sub)) * 2**-shift)`` as :func:`shift_round` rounds it.
+
+    For floor and half up the rounding is folded into the sum (half up adds ``2**(shift-1)``
+    before the shift), so Yosys sees one multi-operand add (one carry-save tree and one carry
+    chain) instead of a chain of adders. Nearest-even rounds the exact sum with
+    :func:`shift_round`. ``shift >= 1``.
+    """
+    rounding = Rounding(rounding)
+    assert shift >= 1
+    total = Const(const) if const else None
+    if rounding is not Rounding.NEAREST_EVEN and rounding is not Rounding.FLOOR:
+        total = Const(const + (1 << (shift - 1)))
+    for term in add:
+        total = Value.cast(term) if total is None else total + term
+    for term in sub:
+        total = -Value.cast(term) if total is None else total - term
+    if rounding is Rounding.NEAREST_EVEN:
+        return shift_round(total, shift, rounding)
+    return total >> shift
+
+
+def sub_round(minuend, add, shift, rounding):
+    """``minuend - round(sum(add) * 2**-shift)``, rounded as :func:`shift_round`, as one sum.
+
+    ``-floor(X / 2**k) == floor((2**k - 1 - X) / 2**k)`` for integer X, so for floor and half up
+    (X = S + 2**(k-1)) the whole expression is one multi-operand add and a shift.
+    """
+    rounding = Rounding(rounding)
+    if rounding is Rounding.NEAREST_EVEN:
+        total = None
+        for term in add:
+            total = Value.cast(term) if total is None else total + term
+        return minuend - shift_round(total, shift, rounding)
+    c = (1 << (shift - 1)) if rounding is Rounding.HALF_UP else 0
+    return sum_round((), shift, Rounding.FLOOR, sub=add, const=(minuend << shift) + (1 << shift) - 1 - c)

