@@ -109,3 +109,13 @@ def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path):
     assert (result["mismatches"], result["iterations"], result["simulator"]) == (0, 3, simulator)
     assert result["nodes"] == 220 and result["cycles"] > 2 * 3 * result["entries"]
     assert abs(result["area_error"] - result["float_area_error"]) <= 1e-3
+
+
+def test_step_generator_whole_lanes_on_verilator():
+    """Every E_S with E_C fixed and every E_C with E_S fixed (2 x 2^20 for the default preset), on Verilator."""
+    reason = missing_simulator("verilator")
+    if reason:
+        pytest.fail(reason)
+    run = run_bench("verilator", DEFAULT, "step_generator", "units", {}, testcase="step_generator_lanes")
+    assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches")
+    assert run.result["inputs"] == 2 * (DEFAULT.error.raw_max + 1) and run.result["mismatches"] == 0
