@@ -101,7 +101,7 @@ class NodeUpdate(wiring.Component):
     """
 
     FRONT_STAGES = 5
-    BACK_STAGES = 11
+    BACK_STAGES = 12
     TAIL_STAGES = 10
 
     def __init__(self, fs: FormatSet | str):
@@ -247,6 +247,12 @@ class NodeUpdate(wiring.Component):
         c = carry("b1", first=head.first, last=head.last, rest=head.rest, length_sq=head.length_sq,
                   dx=head.delta.x, dy=head.delta.y)
 
+        # B1b: registered again. Yosys merges the B1 registers into the side FIFO's memory as
+        # its read register; this stage keeps that memory's output off the multipliers.
+        stage()
+        r = reg(r, r.shape(), "b1b_r")
+        c = carry("b1b", **c)
+
         # B2: d·r and S·r
         stage()
         d_r = mul(c["rest"], r, "b2_dr")
@@ -305,6 +311,13 @@ class NodeUpdate(wiring.Component):
                 m.d.sync += acc.eq(Mux(c["first"], f, acc + f))
             m.d.sync += acc_e.eq(Mux(c["first"], c["e"], acc_e + c["e"]))
         node_done = Signal(name="b8_valid")
+        # The node's header leaves its FIFO with the node's last entry in B8 (into a register
+        # Yosys merges into the FIFO memory's read port), so that T1 registers it once more and
+        # no memory output reaches a multiplier.
+        m.d.comb += headers.r_en.eq(ba & b7_valid & c["last"])
+        header = Signal(node_layout(fs), name="b8_header")
+        with m.If(ba & b7_valid & c["last"]):
+            m.d.sync += header.eq(headers.r_data)
         with m.If(ba):
             m.d.sync += node_done.eq(b7_valid & c["last"])
         state["stages"] += 1
@@ -312,8 +325,6 @@ class NodeUpdate(wiring.Component):
 
         # ---------------------------------------------------------------- node tail
         stage, reg, state, mul, product = pipeline(ba, node_done)
-        header = data.View(node_layout(fs), headers.r_data)
-        m.d.comb += headers.r_en.eq(node_done & ba)
 
         # T1: F = sat(Σf → force_acc), Σe = sat(Σe → error_acc), the node's header
         stage()

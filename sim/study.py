@@ -126,7 +126,7 @@ def _progress_bars(enabled: bool):
             for bar in bars.values():
                 bar.close()
             bars[phase] = tqdm(total=totals.get(phase), desc=phase, unit="run", file=sys.stderr,
-                               disable=not enabled, leave=False, dynamic_ncols=True)
+                               disable=not enabled, leave=False, dynamic_ncols=True, mininterval=0.5)
         bars[phase].update(n)
 
     def close() -> None:
