@@ -16,12 +16,10 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import math
 import os
 import shlex
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
