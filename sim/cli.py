@@ -50,14 +50,14 @@ def _density(text: str) -> float | str:
         raise argparse.ArgumentTypeError(f"expected a number or 'auto', got {text!r}") from None
 
 
-def _number(text: str) -> float:
+def number_argument(text: str) -> float:
     try:
         return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
 
 
-def _integer(text: str) -> int:
+def integer_argument(text: str) -> int:
     try:
         return int(text)
     except ValueError:
@@ -73,20 +73,20 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="initial layout: tutte, pca (default) or a file of V rows 'x y' / an OBJ")
     parser.add_argument("--step", choices=("variable", "fixed"), default="variable",
                         help="step-size mode (default variable, eqs. 18-20)")
-    parser.add_argument("--dt", type=_number, default=None, help="fixed step size (default 0.01)")
+    parser.add_argument("--dt", type=number_argument, default=None, help="fixed step size (default 0.01)")
     parser.add_argument("--update", choices=("jacobi", "sequential"), default="jacobi",
                         help="update order: jacobi (synchronous, default) or sequential (Algorithm 1)")
-    parser.add_argument("--damping", type=_number, default=None, help="velocity damping gamma in [0, 1) (default 0)")
+    parser.add_argument("--damping", type=number_argument, default=None, help="velocity damping gamma in [0, 1) (default 0)")
     parser.add_argument("--penalty", action="store_true", help="apply the overlap penalty (eqs. 10-11)")
-    parser.add_argument("--penalty-kappa", type=_number, default=None, help="penalty threshold kappa (default 1)")
-    parser.add_argument("--penalty-gain", type=_number, default=None, help="penalty gain lambda (default 1)")
-    parser.add_argument("--spring", type=_number, default=None, help="spring constant C (default 0.5)")
+    parser.add_argument("--penalty-kappa", type=number_argument, default=None, help="penalty threshold kappa (default 1)")
+    parser.add_argument("--penalty-gain", type=number_argument, default=None, help="penalty gain lambda (default 1)")
+    parser.add_argument("--spring", type=number_argument, default=None, help="spring constant C (default 0.5)")
     parser.add_argument("--density", type=_density, default=None,
                         help="area density rho or 'auto' = 1/min m_i (default: 2 for built-ins, auto for files)")
-    parser.add_argument("--tol-area", type=_number, default=None, help="area error tolerance phi_S")
-    parser.add_argument("--tol-shape", type=_number, default=None, help="shape error tolerance phi_C")
-    parser.add_argument("--tol-energy", type=_number, default=None, help="relative energy change tolerance epsilon")
-    parser.add_argument("--max-iter", type=_integer, default=None, help="iteration limit N_max")
+    parser.add_argument("--tol-area", type=number_argument, default=None, help="area error tolerance phi_S")
+    parser.add_argument("--tol-shape", type=number_argument, default=None, help="shape error tolerance phi_C")
+    parser.add_argument("--tol-energy", type=number_argument, default=None, help="relative energy change tolerance epsilon")
+    parser.add_argument("--max-iter", type=integer_argument, default=None, help="iteration limit N_max")
 
 
 def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:

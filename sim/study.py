@@ -46,6 +46,7 @@ from golden_model.study import (
     sweep_configs,
 )
 
+from .cli import integer_argument, number_argument
 from .outputs import atomic_write
 
 __all__ = ["add_parser", "cmd_study", "write_outputs", "PLOT_FILES"]
@@ -53,20 +54,6 @@ __all__ = ["add_parser", "cmd_study", "write_outputs", "PLOT_FILES"]
 PLOT_FILES = {"bits": "study-bits.png", "knobs": "study-knobs.png", "pareto": "study-pareto.png"}
 _BOTH = {"both": ("pca", "tutte"), "pca": ("pca",), "tutte": ("tutte",)}
 _STEPS = {"both": ("fixed", "variable"), "fixed": ("fixed",), "variable": ("variable",)}
-
-
-def _number(text: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-
-
-def _integer(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
 
 
 def _default_workers() -> int:
@@ -98,15 +85,15 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="fraction bits tried for each signal class (default %(default)s)")
     p.add_argument("--base", default="default", metavar="PRESET|FILE",
                    help="format set the sweeps and the optimiser start from (default: default)")
-    p.add_argument("--target", type=_number, default=1e-3,
+    p.add_argument("--target", type=number_argument, default=1e-3,
                    help="accuracy target: max |dE_S|, |dE_C| of the final errors vs float (default 1e-3); "
                         "also required: same status, |d iterations| <= 1, no saturation")
     p.add_argument("--optimise", action=argparse.BooleanOptionalAction, default=True,
                    help="run the greedy word-length optimiser (default on)")
     p.add_argument("--cost", choices=("bits", "dsp"), default="bits",
                    help="what 'cheapest' minimises first: total datapath bits (default) or estimated DSP blocks")
-    p.add_argument("--max-iter", type=_integer, default=None, help="override every case's iteration limit")
-    p.add_argument("--workers", type=_integer, default=None,
+    p.add_argument("--max-iter", type=integer_argument, default=None, help="override every case's iteration limit")
+    p.add_argument("--workers", type=integer_argument, default=None,
                    help="worker processes (default: the CPUs available)")
     p.add_argument("--out", type=Path, default=Path("study-report"), help="output directory (default study-report)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
