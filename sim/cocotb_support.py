@@ -76,7 +76,11 @@ def missing_simulator(sim: str) -> str | None:
 
 
 def _formats_key(fs: FormatSet) -> str:
-    return hashlib.sha256(fs.to_json().encode()).hexdigest()[:12]
+    """Cache key of an export: the format set and the RTL sources (an RTL edit must not reuse old Verilog)."""
+    digest = hashlib.sha256(fs.to_json().encode())
+    for source in sorted((REPO / "hdl").glob("*.py")) + [REPO / "sim" / "export.py"]:
+        digest.update(source.read_bytes())
+    return digest.hexdigest()[:12]
 
 
 def verilog_sources(fs: FormatSet) -> Path:
