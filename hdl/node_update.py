@@ -7,9 +7,7 @@ pipeline stage onto the steps of ``docs/fixed-point.md``.
 
 from __future__ import annotations
 
-import math
-
-from amaranth.hdl import Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
@@ -17,7 +15,8 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import Format, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
 
-from .fixedpoint import clamp, dsp_partial_products, dsp_sum, requantize, shape_of
+from .fixedpoint import clamp, dsp_partial_products, shape_of, shift_round
+from .pipeline import Pipeline, aligned_add, join_parts
 from .rsqrt import RsqrtUnit
 
 __all__ = ["NodeUpdate", "vector_layout", "entry_layout", "node_layout", "result_layout"]
@@ -61,6 +60,15 @@ def result_layout(fs: FormatSet) -> data.StructLayout:
     })
 
 
+def _reduce_levels(*operand_shapes) -> int:
+    """Adder levels that :meth:`~hdl.pipeline.Pipeline.reduce` needs for the widest of these products."""
+    levels = 0
+    for a, b in operand_shapes:
+        n = len(dsp_partial_products(Signal(a), Signal(b)))
+        levels = max(levels, (n - 1).bit_length())
+    return levels
+
+
 class NodeUpdate(wiring.Component):
     """Pipelined per-node update (``jacobi``), bit-exact with the golden model's ``node_update``.
 
@@ -90,19 +98,26 @@ class NodeUpdate(wiring.Component):
     on ``o`` when never stalled (so N entries take N + ``latency`` clocks).
     Back-pressure: ``o.valid`` and ``o.payload`` never depend on ``o.ready``; a result
     stays offered until taken; any stall pattern on either side is allowed.
-    Every multiplier sits alone in a stage, between registers.
+    ``o.payload`` leaves a register.
 
-    Structure: a front pipeline (narrowing, squares, ``|Δ|²``) feeds the
-    :class:`~hdl.rsqrt.RsqrtUnit` stream; the entry's side data waits in a FIFO
-    alongside the rsqrt pipeline; a back pipeline forms ``s``, the forces and ``|L − d|``,
-    accumulates per node, and runs the node tail (``a = F/m``, Euler, damping). Node
-    headers wait in a FIFO from the input to the node tail. Each section moves as a
-    whole when its output register is empty or being read.
+    Structure
+    ---------
+    The datapath never stalls. Every stage register loads on every clock, so no enable
+    fans out across the ~7,000 pipeline flip-flops: a front section (narrowing, squares,
+    ``|Δ|²``) feeds the :class:`~hdl.rsqrt.RsqrtUnit` (its ``o.ready`` tied high), the
+    entry's side data rides along in a delay line of the rsqrt latency, a back section
+    forms ``s``, the forces and ``|L − d|`` and accumulates per node, and a node tail runs
+    ``a = F/m``, Euler and damping. Node headers wait in a FIFO from the input to the
+    accumulators. Results enter a FIFO of ``result_depth`` entries in front of the
+    output register. Back-pressure is a credit count: ``i.ready`` is high while fewer
+    than ``result_depth`` nodes are owed (accepted last entries whose results have not
+    left ``o``), so the result FIFO can never overflow; ``result_depth`` covers the
+    latency, so credits never run out while ``o`` is ready, even for degree-1 nodes.
+
+    Every multiplier sits alone between registers (its 18×18 partial products); partial
+    products are added pairwise, one adder per stage; every rounding and every
+    saturation has a stage of its own.
     """
-
-    FRONT_STAGES = 5
-    BACK_STAGES = 12
-    TAIL_STAGES = 10
 
     def __init__(self, fs: FormatSet | str):
         if isinstance(fs, str):
@@ -113,7 +128,19 @@ class NodeUpdate(wiring.Component):
             raise ValueError(f"delta {fs.delta} cannot have more fraction bits than position {fs.position}")
         self.fs = fs
         self.rsqrt_latency = RsqrtUnit.latency_of(fs.rsqrt_config())
-        self.latency = self.FRONT_STAGES + self.rsqrt_latency + self.BACK_STAGES + self.TAIL_STAGES
+        s = shape_of
+        self.front_stages = 8 + _reduce_levels((s(fs.delta), s(fs.delta)))
+        self.back_stages = 10 + (_reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
+                                 + _reduce_levels((s(fs.spring), s(fs.spring)))
+                                 + _reduce_levels((s(fs.spring), s(fs.delta))))
+        self.tail_stages = 13 + (_reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
+                                 + _reduce_levels((s(fs.dt), s(fs.velocity)), (s(fs.half_dt_sq), s(fs.accel)),
+                                                  (s(fs.dt), s(fs.accel)))
+                                 + _reduce_levels((s(fs.velocity), s(fs.damping))))
+        self.pipeline_stages = self.front_stages + self.rsqrt_latency + self.back_stages + self.tail_stages
+        # The result FIFO's write and its output register.
+        self.latency = self.pipeline_stages + 2
+        self.result_depth = 1 << (self.latency + 1).bit_length()
         super().__init__({
             "i": In(stream.Signature(entry_layout(fs))),
             "o": Out(stream.Signature(result_layout(fs))),
@@ -130,35 +157,6 @@ class NodeUpdate(wiring.Component):
         m.submodules.rsqrt = rsqrt = RsqrtUnit(fs)
         assert rsqrt.latency == self.rsqrt_latency
 
-        def pipeline(advance, first_valid):
-            """``stage()`` and ``reg()`` helpers for a section moving on ``advance``."""
-            state = {"valid": first_valid, "stages": 0}
-
-            def stage():
-                valid = Signal(name=f"s{state['stages']}_valid")
-                with m.If(advance):
-                    m.d.sync += valid.eq(state["valid"])
-                state["valid"] = valid
-                state["stages"] += 1
-                return valid
-
-            def reg(value, shape, name):
-                sig = Signal(shape, name=name)
-                with m.If(advance):
-                    m.d.sync += sig.eq(value)
-                return sig
-
-            def mul(a, b, name):
-                """``a * b`` split into 18x18 partial products, each registered (one DSP each)."""
-                return [(reg(p, p.shape(), f"{name}_pp{i}"), shift)
-                        for i, (p, shift) in enumerate(dsp_partial_products(a, b))]
-
-            def product(parts, shape, name):
-                """The next stage: the partial products' exact sum, registered."""
-                return reg(dsp_sum(parts), shape, name)
-
-            return stage, reg, state, mul, product
-
         # Constants, registered so that they reach the multipliers from registers.
         dt, half_dt_sq, half_spring, damping = (Signal.like(p, name=f"{n}_r") for n, p in (
             ("dt", self.dt), ("half_dt_sq", self.half_dt_sq), ("half_spring", self.half_spring),
@@ -166,247 +164,207 @@ class NodeUpdate(wiring.Component):
         m.d.sync += [dt.eq(self.dt), half_dt_sq.eq(self.half_dt_sq), half_spring.eq(self.half_spring),
                      damping.eq(self.damping)]
 
-        # ---------------------------------------------------------------- front
-        side_layout = data.StructLayout({
-            "first": unsigned(1), "last": unsigned(1), "delta": vector_layout(fs.delta),
-            "rest": shape_of(fs.rest_length), "length_sq": shape_of(fs.length_sq),
-        })
-        in_flight = self.latency + 2  # entries (hence nodes) that can be inside at once
-        m.submodules.side = side = SyncFIFO(width=side_layout.size, depth=self.rsqrt_latency + 2)
-        m.submodules.headers = headers = SyncFIFO(width=node_layout(fs).size, depth=in_flight)
+        def rounded(value, from_frac, fmt):
+            """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""
+            return shift_round(value, from_frac - fmt.frac_bits, rnd)
 
-        front_out_valid = Signal()
-        fa = Signal()
-        m.d.comb += fa.eq(~front_out_valid | rsqrt.i.ready)
-        m.d.comb += self.i.ready.eq(fa & headers.w_rdy)
+        def saturated(value, fmt):
+            return clamp(value, fmt)[0]
+
+        # ------------------------------------------------------------ credits
+        owed = Signal(range(self.result_depth + 1))
+        m.d.comb += self.i.ready.eq(owed < self.result_depth)
         take = self.i.valid & self.i.ready
-        stage, reg, state, mul, product = pipeline(fa, take)
-        beat = self.i.payload
+        m.d.sync += owed.eq(owed + (take & self.i.payload.last) - (self.o.valid & self.o.ready))
 
-        # F1: capture; P_i comes from the header on a node's first entry
-        current = Signal(vector_layout(fs.position))
+        # ------------------------------------------------------------ stage helper
+        live = {}
+
+        def step(p, name, drop=(), **new):
+            """One stage of ``p``: registers ``new`` and every value in ``live`` not dropped.
+
+            A value is a signal/view or a list of partial products ``[(value, shift)]``.
+            """
+            p.stage(name)
+            out = {}
+            carried = [(k, v) for k, v in live.items() if k not in drop and k not in new]
+            for key, value in carried + list(new.items()):
+                if isinstance(value, list):
+                    out[key] = [(p.keep(Value.cast(v), f"{name}_{key}_{i}"), s) for i, (v, s) in enumerate(value)]
+                else:
+                    out[key] = p.keep(value, f"{name}_{key}")
+            live.clear()
+            live.update(out)
+
+        def multiply(p, name, drop=(), **products):
+            """A stage of partial products (one DSP each), then adder levels until each product is whole."""
+            p.stage(name)
+            out = {}
+            for key, value in live.items():
+                if key not in drop:
+                    out[key] = p.keep(value, f"{name}_{key}")
+            for key, (a, b) in products.items():
+                out[key] = p.mul(a, b, f"{name}_{key}")
+            live.clear()
+            live.update(out)
+            level = 0
+            while any(len(live[k]) > 1 for k in products):
+                level += 1
+                p.stage(f"{name}_sum{level}")
+                out = {}
+                for key, value in live.items():
+                    out[key] = (p.reduce(value, f"{name}_sum{level}_{key}") if key in products
+                                else p.keep(value, f"{name}_sum{level}_{key}"))
+                live.clear()
+                live.update(out)
+            for k in products:
+                live[k] = join_parts(live[k])
+
+        # ------------------------------------------------------------ front
+        m.submodules.headers = headers = SyncFIFO(
+            width=node_layout(fs).size,
+            depth=1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length())
+        beat = self.i.payload
+        current = Signal(vector_layout(fs.position), name="current_position")
         with m.If(take & beat.first):
             m.d.sync += current.eq(beat.node.position)
         m.d.comb += [headers.w_en.eq(take & beat.first), headers.w_data.eq(beat.node.as_value())]
-        stage()
-        p_i = reg(Mux(beat.first, beat.node.position.as_value(), current.as_value()), vector_layout(fs.position),
-                  "f1_pi")
-        p_j = reg(beat.neighbour.position, vector_layout(fs.position), "f1_pj")
-        rest = reg(beat.neighbour.rest, shape_of(fs.rest_length), "f1_rest")
-        first = reg(beat.first, 1, "f1_first")
-        last = reg(beat.last, 1, "f1_last")
 
-        # F2: Δ = rq(P_j − P_i → delta)
-        stage()
-        delta = [reg(requantize(p_j[c] - p_i[c], fs.position.frac_bits, fs.delta, rnd)[0], shape_of(fs.delta),
-                     f"f2_delta_{c}") for c in "xy"]
-        rest, first, last = (reg(v, v.shape(), f"f2_{n}") for n, v in (("rest", rest), ("first", first), ("last", last)))
+        front = Pipeline(m, take)
+        position = vector_layout(fs.position)
+        # F1: capture; P_i comes from the header on a node's first entry
+        step(front, "f1", p_i=Mux(beat.first, beat.node.position.as_value(), current.as_value()),
+             p_j=beat.neighbour.position.as_value(), rest=beat.neighbour.rest, first=beat.first, last=beat.last)
+        p_i, p_j = (data.View(position, live[k]) for k in ("p_i", "p_j"))
+        # F2: P_j − P_i, exact;  F3: rounded to delta;  F4: saturated
+        step(front, "f2", drop=("p_i", "p_j"), dx=p_j.x - p_i.x, dy=p_j.y - p_i.y)
+        step(front, "f3", dx=rounded(live["dx"], fs.position.frac_bits, fs.delta),
+             dy=rounded(live["dy"], fs.position.frac_bits, fs.delta))
+        step(front, "f4", dx=saturated(live["dx"], fs.delta), dy=saturated(live["dy"], fs.delta))
+        # F5…: Δx², Δy²;  then S = rq(Δx² + Δy² → length_sq) as sum, rounding, saturation
+        multiply(front, "f5", sq_x=(live["dx"], live["dx"]), sq_y=(live["dy"], live["dy"]))
+        square_frac = 2 * fs.delta.frac_bits
+        step(front, "f6", drop=("sq_x", "sq_y"), s=live["sq_x"] + live["sq_y"])
+        step(front, "f7", s=rounded(live["s"], square_frac, fs.length_sq))
+        step(front, "f8", s=saturated(live["s"], fs.length_sq))
+        assert front.stages == self.front_stages, (front.stages, self.front_stages)
+        m.d.comb += [rsqrt.i.valid.eq(front.valid), rsqrt.i.payload.eq(live["s"]), rsqrt.o.ready.eq(1)]
 
-        # F3: Δx², Δy² (partial products); F3b: their sums
-        stage()
-        square = [mul(d, d, f"f3_sq_{c}") for c, d in zip("xy", delta)]
-        delta = [reg(d, d.shape(), f"f3_delta_{c}") for c, d in zip("xy", delta)]
-        rest, first, last = (reg(v, v.shape(), f"f3_{n}") for n, v in (("rest", rest), ("first", first), ("last", last)))
-        stage()
-        square = [product(p, unsigned(2 * fs.delta.width), f"f3b_sq_{c}") for c, p in zip("xy", square)]
-        delta = [reg(d, d.shape(), f"f3b_delta_{c}") for c, d in zip("xy", delta)]
-        rest, first, last = (reg(v, v.shape(), f"f3b_{n}") for n, v in (("rest", rest), ("first", first), ("last", last)))
+        # The entry's side data waits for r in a delay line as long as the rsqrt unit.
+        side = Pipeline(m, front.valid)
+        for n in range(self.rsqrt_latency):
+            step(side, f"side{n}")
 
-        # F4 (front output register): S = rq(Δx² + Δy² → length_sq)
-        stage()
-        s_value = requantize(square[0] + square[1], 2 * fs.delta.frac_bits, fs.length_sq, rnd)[0]
-        length_sq = reg(s_value, shape_of(fs.length_sq), "f4_length_sq")
-        side_data = Signal(side_layout, name="f4_side")
-        with m.If(fa):
-            m.d.sync += [
-                side_data.first.eq(first), side_data.last.eq(last), side_data.rest.eq(rest),
-                side_data.delta.x.eq(delta[0]), side_data.delta.y.eq(delta[1]), side_data.length_sq.eq(s_value),
-            ]
-        m.d.comb += [
-            front_out_valid.eq(state["valid"]),
-            rsqrt.i.valid.eq(front_out_valid),
-            rsqrt.i.payload.eq(length_sq),
-            side.w_en.eq(rsqrt.i.valid & rsqrt.i.ready),
-            side.w_data.eq(side_data.as_value()),
-        ]
-        assert state["stages"] == self.FRONT_STAGES
-
-        # ---------------------------------------------------------------- back
-        ba = Signal()
-        m.d.comb += ba.eq(~self.o.valid | self.o.ready)
-        m.d.comb += [rsqrt.o.ready.eq(ba), side.r_en.eq(rsqrt.o.valid & ba)]
-        stage, reg, state, mul, product = pipeline(ba, rsqrt.o.valid)
-        head = data.View(side_layout, side.r_data)
-
-        def carry(prefix, **values):
-            return {n: reg(v, v.shape(), f"{prefix}_{n}") for n, v in values.items()}
-
-        # B1: r and the entry's side data
-        stage()
-        r = reg(rsqrt.o.payload.rsqrt, unsigned(fs.rsqrt.width), "b1_r")
-        c = carry("b1", first=head.first, last=head.last, rest=head.rest, length_sq=head.length_sq,
-                  dx=head.delta.x, dy=head.delta.y)
-
-        # B1b: registered again. Yosys merges the B1 registers into the side FIFO's memory as
-        # its read register; this stage keeps that memory's output off the multipliers.
-        stage()
-        r = reg(r, r.shape(), "b1b_r")
-        c = carry("b1b", **c)
-
-        # B2: d·r and S·r
-        stage()
-        d_r = mul(c["rest"], r, "b2_dr")
-        s_r = mul(c["length_sq"], r, "b2_sr")
-        c = carry("b2", first=c["first"], last=c["last"], rest=c["rest"], dx=c["dx"], dy=c["dy"])
-        stage()
-        d_r = product(d_r, unsigned(fs.rest_length.width + fs.rsqrt.width), "b2b_dr")
-        s_r = product(s_r, unsigned(fs.length_sq.width + fs.rsqrt.width), "b2b_sr")
-        c = carry("b2b", **c)
-
-        # B3: u = rq(1 − d·r → spring), L = rq(S·r → rest_length), e = |L − d|
-        stage()
+        # ------------------------------------------------------------ back
+        back = Pipeline(m, rsqrt.o.valid)
+        r = rsqrt.o.payload.rsqrt  # leaves the rsqrt unit's output register
+        # d·r and S·r
+        multiply(back, "b1", drop=("s",), d_r=(live["rest"], r), s_r=(live["s"], r))
+        # u = rq(1 − d·r → spring), L = rq(S·r → rest_length): rounding, then saturation
         dr_frac = fs.rest_length.frac_bits + fs.rsqrt.frac_bits
-        one_minus = Signal(signed(fs.rest_length.width + fs.rsqrt.width + 2))
-        m.d.comb += one_minus.eq((1 << dr_frac) - d_r)
-        u = reg(requantize(one_minus, dr_frac, fs.spring, rnd)[0], shape_of(fs.spring), "b3_u")
-        length = requantize(s_r, fs.length_sq.frac_bits + fs.rsqrt.frac_bits, fs.rest_length, rnd)[0]
-        error = reg(Mux(length > c["rest"], length - c["rest"], c["rest"] - length), unsigned(fs.rest_length.width),
-                    "b3_e")
-        c = carry("b3", first=c["first"], last=c["last"], dx=c["dx"], dy=c["dy"])
+        one_minus = Signal(signed(len(live["d_r"]) + 2), name="one_minus_dr")
+        m.d.comb += one_minus.eq((1 << dr_frac) - live["d_r"])
+        step(back, "b2", drop=("d_r", "s_r"), u=rounded(one_minus, dr_frac, fs.spring),
+             length=rounded(live["s_r"], fs.length_sq.frac_bits + fs.rsqrt.frac_bits, fs.rest_length))
+        step(back, "b3", u=saturated(live["u"], fs.spring), length=saturated(live["length"], fs.rest_length))
+        # e = |L − d| alongside ½C·u
+        length, rest = live["length"], live["rest"]
+        live["e"] = Mux(length > rest, length - rest, rest - length)[:fs.rest_length.width]
+        multiply(back, "b4", drop=("length", "rest", "u"), c_u=(half_spring, live["u"]))
+        # s = rq(½C·u → spring)
+        step(back, "b5", c_u=rounded(live["c_u"], 2 * fs.spring.frac_bits, fs.spring))
+        step(back, "b6", drop=("c_u",), s=saturated(live["c_u"], fs.spring))
+        # s·Δ, then f = rq(s·Δ → force)
+        multiply(back, "b7", drop=("s", "dx", "dy"), f_x=(live["s"], live["dx"]), f_y=(live["s"], live["dy"]))
+        f_frac = fs.spring.frac_bits + fs.delta.frac_bits
+        step(back, "b8", f_x=rounded(live["f_x"], f_frac, fs.force), f_y=rounded(live["f_y"], f_frac, fs.force))
+        step(back, "b9", f_x=saturated(live["f_x"], fs.force), f_y=saturated(live["f_y"], fs.force))
 
-        # B4: ½C·u
-        stage()
-        c_u = mul(half_spring, u, "b4_cu")
-        c = carry("b4", first=c["first"], last=c["last"], dx=c["dx"], dy=c["dy"], e=error)
-        stage()
-        c_u = product(c_u, signed(2 * fs.spring.width), "b4b_cu")
-        c = carry("b4b", **c)
-
-        # B5: s = rq(½C·u → spring)
-        stage()
-        s = reg(requantize(c_u, 2 * fs.spring.frac_bits, fs.spring, rnd)[0], shape_of(fs.spring), "b5_s")
-        c = carry("b5", **c)
-
-        # B6: s·Δ
-        stage()
-        s_d = [mul(s, c[k], f"b6_sd_{k}") for k in ("dx", "dy")]
-        c = carry("b6", first=c["first"], last=c["last"], e=c["e"])
-        stage()
-        s_d = [product(p, signed(fs.spring.width + fs.delta.width), f"b6b_sd_{k}") for k, p in zip("xy", s_d)]
-        c = carry("b6b", **c)
-
-        # B7: f = rq(s·Δ → force)
-        stage()
-        force = [reg(requantize(p, fs.spring.frac_bits + fs.delta.frac_bits, fs.force, rnd)[0], shape_of(fs.force),
-                     f"b7_f_{k}") for k, p in zip("xy", s_d)]
-        c = carry("b7", **c)
-
-        # B8: per-node accumulators with guard bits (exact; saturated once in the tail)
+        # B10: per-node accumulators with guard bits (exact; saturated once in the tail). The
+        # node's header leaves its FIFO with the node's last entry into a register (Yosys merges
+        # it into the FIFO memory's read port); the tail registers it once more.
         guard = accumulator_guard_bits(fs.max_degree)
         acc_f = [Signal(signed(fs.force.width + guard), name=f"acc_f_{k}") for k in "xy"]
         acc_e = Signal(unsigned(fs.rest_length.width + guard), name="acc_e")
-        b7_valid = state["valid"]
-        with m.If(ba & b7_valid):
-            for acc, f in zip(acc_f, force):
-                m.d.sync += acc.eq(Mux(c["first"], f, acc + f))
-            m.d.sync += acc_e.eq(Mux(c["first"], c["e"], acc_e + c["e"]))
-        node_done = Signal(name="b8_valid")
-        # The node's header leaves its FIFO with the node's last entry in B8 (into a register
-        # Yosys merges into the FIFO memory's read port), so that T1 registers it once more and
-        # no memory output reaches a multiplier.
-        m.d.comb += headers.r_en.eq(ba & b7_valid & c["last"])
-        header = Signal(node_layout(fs), name="b8_header")
-        with m.If(ba & b7_valid & c["last"]):
+        first, last = live["first"], live["last"]
+        with m.If(back.valid):
+            for acc, f in zip(acc_f, (live["f_x"], live["f_y"])):
+                m.d.sync += acc.eq(Mux(first, f, acc + f))
+            m.d.sync += acc_e.eq(Mux(first, live["e"], acc_e + live["e"]))
+        node_done = back.valid & last
+        m.d.comb += headers.r_en.eq(node_done)
+        header = Signal(node_layout(fs), name="acc_header")
+        with m.If(node_done):
             m.d.sync += header.eq(headers.r_data)
-        with m.If(ba):
-            m.d.sync += node_done.eq(b7_valid & c["last"])
-        state["stages"] += 1
-        assert state["stages"] == self.BACK_STAGES
+        node_done_r = Signal(name="b10_node_done")
+        m.d.sync += node_done_r.eq(node_done)
+        back.stages += 1
+        live.clear()
+        assert back.stages == self.back_stages, (back.stages, self.back_stages)
 
-        # ---------------------------------------------------------------- node tail
-        stage, reg, state, mul, product = pipeline(ba, node_done)
-
-        # T1: F = sat(Σf → force_acc), Σe = sat(Σe → error_acc), the node's header
-        stage()
-        f_acc = [reg(requantize(acc, fs.force.frac_bits, fs.force_acc, rnd)[0], shape_of(fs.force_acc), f"t1_F_{k}")
-                 for k, acc in zip("xy", acc_f)]
-        e_sum = reg(requantize(acc_e, fs.rest_length.frac_bits, fs.error_acc, rnd)[0], shape_of(fs.error_acc),
-                    "t1_esum")
-        pos = [reg(header.position[k], shape_of(fs.position), f"t1_p_{k}") for k in "xy"]
-        vel = [reg(header.velocity[k], shape_of(fs.velocity), f"t1_v_{k}") for k in "xy"]
-        inv_mass = reg(header.inv_mass, shape_of(fs.inv_mass), "t1_inv_mass")
-
-        def carry_node(prefix, with_vel=True):
-            nonlocal pos, vel, e_sum
-            pos = [reg(p, p.shape(), f"{prefix}_p_{k}") for k, p in zip("xy", pos)]
-            if with_vel:
-                vel = [reg(v, v.shape(), f"{prefix}_v_{k}") for k, v in zip("xy", vel)]
-            e_sum = reg(e_sum, e_sum.shape(), f"{prefix}_esum")
-
-        # T2: F·(1/m)
-        stage()
-        f_m = [mul(f, inv_mass, f"t2_fm_{k}") for k, f in zip("xy", f_acc)]
-        carry_node("t2")
-        stage()
-        f_m = [product(p, signed(fs.force_acc.width + fs.inv_mass.width + 1), f"t2b_fm_{k}")
-               for k, p in zip("xy", f_m)]
-        carry_node("t2b")
-
-        # T3: a = rq(F·(1/m) → accel)
-        stage()
-        accel = [reg(requantize(p, fs.force_acc.frac_bits + fs.inv_mass.frac_bits, fs.accel, rnd)[0],
-                     shape_of(fs.accel), f"t3_a_{k}") for k, p in zip("xy", f_m)]
-        carry_node("t3")
-
-        # T4: Δt·V, ½Δt²·a, Δt·a
-        stage()
-        dt_v = [mul(dt, v, f"t4_dtv_{k}") for k, v in zip("xy", vel)]
-        h_a = [mul(half_dt_sq, a, f"t4_ha_{k}") for k, a in zip("xy", accel)]
-        dt_a = [mul(dt, a, f"t4_dta_{k}") for k, a in zip("xy", accel)]
-        carry_node("t4")
-        stage()
-        dt_v = [product(p, signed(fs.dt.width + fs.velocity.width + 1), f"t4b_dtv_{k}") for k, p in zip("xy", dt_v)]
-        h_a = [product(p, signed(fs.half_dt_sq.width + fs.accel.width + 1), f"t4b_ha_{k}") for k, p in zip("xy", h_a)]
-        dt_a = [product(p, signed(fs.dt.width + fs.accel.width + 1), f"t4b_dta_{k}") for k, p in zip("xy", dt_a)]
-        carry_node("t4b")
-
-        # T5: P' = sat(P + rq(Δt·V + ½Δt²·a)), V' = sat(V + rq(Δt·a))
-        stage()
+        # ------------------------------------------------------------ node tail
+        tail = Pipeline(m, node_done_r)
+        # T1: the node's header; F and Σe rounded;  T2: saturated
+        step(tail, "t1", f_x=rounded(acc_f[0], fs.force.frac_bits, fs.force_acc),
+             f_y=rounded(acc_f[1], fs.force.frac_bits, fs.force_acc),
+             e=rounded(acc_e, fs.rest_length.frac_bits, fs.error_acc),
+             p_x=header.position.x, p_y=header.position.y, v_x=header.velocity.x, v_y=header.velocity.y,
+             inv_mass=header.inv_mass)
+        step(tail, "t2", f_x=saturated(live["f_x"], fs.force_acc), f_y=saturated(live["f_y"], fs.force_acc),
+             e=saturated(live["e"], fs.error_acc))
+        # F·(1/m), then a = rq(F·(1/m) → accel)
+        multiply(tail, "t3", drop=("f_x", "f_y", "inv_mass"),
+                 a_x=(live["f_x"], live["inv_mass"]), a_y=(live["f_y"], live["inv_mass"]))
+        a_frac = fs.force_acc.frac_bits + fs.inv_mass.frac_bits
+        step(tail, "t4", a_x=rounded(live["a_x"], a_frac, fs.accel), a_y=rounded(live["a_y"], a_frac, fs.accel))
+        step(tail, "t5", a_x=saturated(live["a_x"], fs.accel), a_y=saturated(live["a_y"], fs.accel))
+        # Δt·V, ½Δt²·a, Δt·a
+        multiply(tail, "t6", drop=("a_x", "a_y"),
+                 dtv_x=(dt, live["v_x"]), dtv_y=(dt, live["v_y"]),
+                 ha_x=(half_dt_sq, live["a_x"]), ha_y=(half_dt_sq, live["a_y"]),
+                 dta_x=(dt, live["a_x"]), dta_y=(dt, live["a_y"]))
+        # P' = sat(P + rq(Δt·V + ½Δt²·a → wide_p)),  V' = sat(V + rq(Δt·a → wide_v))
         fv = fs.dt.frac_bits + fs.velocity.frac_bits
-        fa_ = fs.half_dt_sq.frac_bits + fs.accel.frac_bits
-        step_frac = max(fv, fa_)
+        fa = fs.half_dt_sq.frac_bits + fs.accel.frac_bits
+        step_frac = max(fv, fa)
         wide_p = Format(fs.position.signed, fs.position.int_bits + 1, fs.position.frac_bits)
         wide_v = Format(fs.velocity.signed, fs.velocity.int_bits + 1, fs.velocity.frac_bits)
-        new_pos, new_vel = [], []
-        for k, p, v, a1, a2, a3 in zip("xy", pos, vel, dt_v, h_a, dt_a):
-            step = (a1 << (step_frac - fv)) + (a2 << (step_frac - fa_))
-            moved = p + requantize(step, step_frac, wide_p, rnd)[0]
-            new_pos.append(reg(clamp(moved, fs.position)[0], shape_of(fs.position), f"t5_p_{k}"))
-            kicked = v + requantize(a3, fs.dt.frac_bits + fs.accel.frac_bits, wide_v, rnd)[0]
-            new_vel.append(reg(clamp(kicked, fs.velocity)[0], shape_of(fs.velocity), f"t5_v_{k}"))
-        pos, vel = new_pos, new_vel
-        e_sum = reg(e_sum, e_sum.shape(), "t5_esum")
+        kick_frac = fs.dt.frac_bits + fs.accel.frac_bits
+        sums = {}
+        for k in "xy":
+            value, shift = aligned_add(live[f"dtv_{k}"], step_frac - fv, live[f"ha_{k}"], step_frac - fa)
+            sums[f"step_{k}"] = Value.cast(value) << shift if shift else value
+            sums[f"kick_{k}"] = rounded(live[f"dta_{k}"], kick_frac, wide_v)
+        step(tail, "t7", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta") for k in "xy"), **sums)
+        step(tail, "t8", **{f"step_{k}": rounded(live[f"step_{k}"], step_frac, wide_p) for k in "xy"},
+             **{f"kick_{k}": saturated(live[f"kick_{k}"], wide_v) for k in "xy"})
+        step(tail, "t9", drop=("kick_x", "kick_y"),
+             **{f"step_{k}": saturated(live[f"step_{k}"], wide_p) for k in "xy"},
+             **{f"v_{k}": live[f"v_{k}"] + live[f"kick_{k}"] for k in "xy"})
+        step(tail, "t10", drop=("step_x", "step_y"),
+             **{f"p_{k}": live[f"p_{k}"] + live[f"step_{k}"] for k in "xy"},
+             **{f"v_{k}": saturated(live[f"v_{k}"], fs.velocity) for k in "xy"})
+        # V'·(1 − γ) alongside the position's saturation, then V'' = rq(V'·(1 − γ) → velocity)
+        live.update({f"p_{k}": saturated(live[f"p_{k}"], fs.position) for k in "xy"})
+        multiply(tail, "t11", drop=("v_x", "v_y"), vk_x=(live["v_x"], damping), vk_y=(live["v_y"], damping))
+        vk_frac = fs.velocity.frac_bits + fs.damping.frac_bits
+        step(tail, "t12", **{f"vk_{k}": rounded(live[f"vk_{k}"], vk_frac, fs.velocity) for k in "xy"})
+        step(tail, "t13", **{f"vk_{k}": saturated(live[f"vk_{k}"], fs.velocity) for k in "xy"})
+        assert tail.stages == self.tail_stages, (tail.stages, self.tail_stages)
 
-        # T6: V'·(1 − γ)
-        stage()
-        v_k = [mul(v, damping, f"t6_vk_{k}") for k, v in zip("xy", vel)]
-        carry_node("t6", with_vel=False)
-        stage()
-        v_k = [product(p, signed(fs.velocity.width + fs.damping.width + 1), f"t6b_vk_{k}") for k, p in zip("xy", v_k)]
-        carry_node("t6b", with_vel=False)
-
-        # T7 (output register): V'' = rq(V'·(1 − γ) → velocity)
-        with m.If(ba):
-            m.d.sync += [
-                self.o.valid.eq(state["valid"]),
-                self.o.payload.position.x.eq(pos[0]),
-                self.o.payload.position.y.eq(pos[1]),
-                self.o.payload.velocity.x.eq(requantize(v_k[0], fs.velocity.frac_bits + fs.damping.frac_bits,
-                                                        fs.velocity, rnd)[0]),
-                self.o.payload.velocity.y.eq(requantize(v_k[1], fs.velocity.frac_bits + fs.damping.frac_bits,
-                                                        fs.velocity, rnd)[0]),
-                self.o.payload.error_sum.eq(e_sum),
-            ]
-        state["stages"] += 1
-        assert state["stages"] == self.TAIL_STAGES
+        # ------------------------------------------------------------ results
+        layout = result_layout(fs)
+        result = Signal(layout, name="result")
+        m.d.comb += [
+            result.position.x.eq(live["p_x"]), result.position.y.eq(live["p_y"]),
+            result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
+            result.error_sum.eq(live["e"]),
+        ]
+        m.submodules.results = results = SyncFIFO(width=layout.size, depth=self.result_depth)
+        m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value())]
+        # The output register: loads whenever it is empty or being read.
+        load = ~self.o.valid | self.o.ready
+        m.d.comb += results.r_en.eq(load)
+        with m.If(load):
+            m.d.sync += [self.o.valid.eq(results.r_rdy), self.o.payload.eq(results.r_data)]
         return m

@@ -13,7 +13,8 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet, Rounding, RsqrtConfig, rsqrt_stages
 
-from .fixedpoint import dsp_partial_products, round_half_bit, saturate, shift_round, sub_round, sum_round
+from .fixedpoint import round_half_bit, saturate, shift_round, sub_round, sum_round
+from .pipeline import Pipeline
 
 # The golden model's rounding of the rsqrt internals is the module constant
 # ``_INTERNAL_ROUNDING`` (not a field of RsqrtConfig). ``golden_model.fixed.rsqrt`` is the
@@ -144,27 +145,8 @@ class RsqrtUnit(wiring.Component):
             advance.eq(~self.o.valid | self.o.ready),
             self.i.ready.eq(advance),
         ]
-        n_stages = 0
-        prev_valid = self.i.valid
-
-        def stage(name):
-            nonlocal n_stages, prev_valid
-            valid = Signal(name=f"{name}_valid")
-            with m.If(advance):
-                m.d.sync += valid.eq(prev_valid)
-            n_stages += 1
-            prev_valid = valid
-
-        def reg(value, shape, name):
-            sig = Signal(shape, name=name)
-            with m.If(advance):
-                m.d.sync += sig.eq(value)
-            return sig
-
-        def dsp_regs(a, b, name):
-            """``a * b`` as registered 18x18 partial products ``[(register, shift)]``."""
-            return [(reg(p, p.shape(), f"{name}_pp{i}"), shift)
-                    for i, (p, shift) in enumerate(dsp_partial_products(a, b))]
+        pipe = Pipeline(m, self.i.valid, advance=advance)
+        stage, reg, dsp_regs = pipe.stage, pipe.reg, pipe.mul
 
         def shifted(parts):
             return [p << shift if shift else p for p, shift in parts]
@@ -269,12 +251,11 @@ class RsqrtUnit(wiring.Component):
         # --- o: final rounding and saturation, into the output register
         result, overflow = saturate(round_half_bit(y_shifted, rnd, sticky), cfg.fmt_out)
         saturated = sat_r | overflow
-        n_stages += 1
         with m.If(advance):
             m.d.sync += [
-                self.o.valid.eq(prev_valid),
+                self.o.valid.eq(pipe.valid),
                 self.o.payload.rsqrt.eq(Mux(saturated, cfg.fmt_out.raw_max, result)),
                 self.o.payload.saturated.eq(saturated),
             ]
-        assert n_stages == self.latency, (n_stages, self.latency)
+        assert pipe.stages + 1 == self.latency, (pipe.stages + 1, self.latency)
         return m

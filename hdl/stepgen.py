@@ -12,6 +12,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet, dt_constant, exp_table, shift_round as gm_shift_round
 
 from .fixedpoint import saturate, shift_round
+from .pipeline import Pipeline
 
 __all__ = ["StepGenerator"]
 
@@ -139,22 +140,8 @@ class StepGenerator(wiring.Component):
             advance.eq(~self.o.valid | self.o.ready),
             self.i.ready.eq(advance),
         ]
-        n_stages = 0
-        prev_valid = self.i.valid
-
-        def stage(name):
-            nonlocal n_stages, prev_valid
-            valid = Signal(name=f"{name}_valid")
-            with m.If(advance):
-                m.d.sync += valid.eq(prev_valid)
-            n_stages += 1
-            prev_valid = valid
-
-        def reg(value, shape, name):
-            sig = Signal(shape, name=name)
-            with m.If(advance):
-                m.d.sync += sig.eq(value)
-            return sig
+        pipe = Pipeline(m, self.i.valid, advance=advance)
+        stage, reg = pipe.stage, pipe.reg
 
         # --- lut: one ROM, one synchronous read port per lane
         layout, rows = self._rom_rows()
@@ -212,12 +199,11 @@ class StepGenerator(wiring.Component):
         # --- o: half_dt_sq = sat(round(dt*dt / 2)) into the output register
         half, _ = saturate(shift_round(dt_sq, 2 * fs.dt.frac_bits + 1 - fs.half_dt_sq.frac_bits,
                                        fs.rounding), fs.half_dt_sq)
-        n_stages += 1
         with m.If(advance):
             m.d.sync += [
-                self.o.valid.eq(prev_valid),
+                self.o.valid.eq(pipe.valid),
                 self.o.payload.dt.eq(dt),
                 self.o.payload.half_dt_sq.eq(half),
             ]
-        assert n_stages == self.latency, (n_stages, self.latency)
+        assert pipe.stages + 1 == self.latency, (pipe.stages + 1, self.latency)
         return m

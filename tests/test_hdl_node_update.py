@@ -30,12 +30,15 @@ class Run:
         self.outputs, self.in_cycles, self.out_cycles = [], [], []
 
 
-def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0):
-    """Stream ``beats`` into ``dut.i``, collect ``n_out`` results; check the stream rules on the way."""
+def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0, ready_after=0):
+    """Stream ``beats`` into ``dut.i``, collect ``n_out`` results; check the stream rules on the way.
+
+    ``o.ready`` stays low for the first ``ready_after`` cycles of the consumer.
+    """
     run = Run()
     i_payload, o_payload = Value.cast(dut.i.payload), Value.cast(dut.o.payload)
     n = len(beats)
-    max_cycles = int(4 * (n + dut.latency) / (p_valid * p_ready)) + 200
+    max_cycles = int(4 * (n + dut.latency) / (p_valid * p_ready)) + 200 + ready_after
 
     async def producer(ctx):
         for port, value in zip((dut.dt, dut.half_dt_sq, dut.half_spring, dut.damping), constants):
@@ -59,7 +62,7 @@ def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0):
         rng = random.Random(seed + 1)
         held, cycle = None, 0
         while len(run.outputs) < n_out or cycle < (run.out_cycles[-1] if run.out_cycles else 0) + dut.latency + 3:
-            ready = len(run.outputs) >= n_out or p_ready >= 1 or rng.random() < p_ready
+            ready = cycle >= ready_after and (len(run.outputs) >= n_out or p_ready >= 1 or rng.random() < p_ready)
             ctx.set(dut.o.ready, ready)
             _, _, valid, payload = await ctx.tick().sample(dut.o.valid, o_payload)
             if held is not None:
@@ -172,3 +175,32 @@ def test_no_bubbles(preset):
     assert run.in_cycles == list(range(n))
     last_entry = np.r_[stream.indptr[1:] - 1]
     assert run.out_cycles == [int(c) + dut.latency for c in last_entry]
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_no_bubbles_with_degree_1_nodes(preset):
+    """One entry per node, never stalled: the credits cover the latency, so the input never waits."""
+    fs = FormatSet.preset(preset)
+    dut = NodeUpdate(fs)
+    stream, positions, velocities = random_stream(fs, 3 * dut.latency, seed=6, max_degree=1)
+    n = len(stream.indptr) - 1
+    v = np.zeros_like(positions)
+    v[:n] = velocities
+    run = check_pass(dut, fs, stream, positions, v, random_constants(fs, 7))
+    assert run.in_cycles == list(range(n))
+    assert run.out_cycles == [c + dut.latency for c in range(n)]
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_a_long_output_stall_fills_the_results_and_stops_the_input(preset):
+    """o.ready low for a long time: exactly ``result_depth`` nodes are accepted, then i.ready falls."""
+    fs = FormatSet.preset(preset)
+    dut = NodeUpdate(fs)
+    stream, positions, velocities = random_stream(fs, 2 * dut.result_depth, seed=8, max_degree=1)
+    n = len(stream.indptr) - 1
+    v = np.zeros_like(positions)
+    v[:n] = velocities
+    stall = 4 * dut.result_depth
+    run = check_pass(dut, fs, stream, positions, v, random_constants(fs, 9), ready_after=stall)
+    accepted_during_stall = sum(c < stall for c in run.in_cycles)
+    assert accepted_during_stall == dut.result_depth

@@ -1,0 +1,117 @@
+"""Stage-by-stage pipeline construction shared by every datapath block.
+
+A :class:`Pipeline` hands out the registers of a pipeline written one stage after the
+other inside one :class:`~amaranth.hdl.Module`: :meth:`Pipeline.stage` starts a stage
+(and registers the valid bit), :meth:`Pipeline.reg` registers a value in it,
+:meth:`Pipeline.mul` registers a product as 18×18 partial products (one DSP block
+each) and :meth:`Pipeline.reduce` adds partial products pairwise, one adder level
+per stage.
+
+Two kinds of pipeline:
+
+* **stalling** (``advance`` given): every register loads only while ``advance`` is high.
+  The blocks that are streams of their own (:class:`~hdl.rsqrt.RsqrtUnit`,
+  :class:`~hdl.stepgen.StepGenerator`) use ``advance = ~o.valid | o.ready``. Inside a
+  larger design whose ``o.ready`` is tied high, ``advance`` is constant and the enables
+  vanish in synthesis.
+* **free-running** (``advance=None``): every register loads on every clock; nothing
+  fans out to the registers but the clock. :class:`~hdl.node_update.NodeUpdate` runs
+  this way and turns back-pressure into credits at its input.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Signal, Value
+
+from .fixedpoint import dsp_partial_products
+
+__all__ = ["Pipeline", "aligned_add", "join_parts"]
+
+
+def aligned_add(a, a_shift: int, b, b_shift: int):
+    """``(a << a_shift) + (b << b_shift)`` as ``(value, shift)`` with ``shift = min(a_shift, b_shift)``.
+
+    The bits of the lower-aligned operand below the other one's lsb pass through unchanged
+    (``x == ((x >> k) << k) + x[:k]`` holds for signed ``x`` too), so the carry chain is
+    only as long as the overlapping part.
+    """
+    a, b = Value.cast(a), Value.cast(b)
+    if a_shift > b_shift:
+        a, a_shift, b, b_shift = b, b_shift, a, a_shift
+    k = b_shift - a_shift
+    if k == 0:
+        return a + b, a_shift
+    high = (a >> k) + b
+    value = Cat(a[:k], high)
+    return (value.as_signed() if high.shape().signed else value), a_shift
+
+
+def join_parts(parts):
+    """The value ``sum(p << shift)`` of a one-element partial-product list, or of several (one add)."""
+    value, shift = parts[0]
+    for p, s in parts[1:]:
+        value, shift = aligned_add(value, shift, p, s)
+    value = Value.cast(value)
+    return value << shift if shift else value
+
+
+class Pipeline:
+    """Registers of one pipeline, stage by stage.
+
+    Parameters
+    ----------
+    m : Module
+        Where the registers go (``m.d.sync``).
+    valid : Value
+        The valid bit entering the first stage.
+    advance : Value or None
+        Clock enable of every register (a stalling pipeline), or ``None`` (free-running).
+    """
+
+    def __init__(self, m: Module, valid, *, advance=None):
+        self._m = m
+        self._advance = advance
+        self.valid = valid
+        self.stages = 0
+
+    def _load(self, signal, value):
+        if self._advance is None:
+            self._m.d.sync += signal.eq(value)
+        else:
+            with self._m.If(self._advance):
+                self._m.d.sync += signal.eq(value)
+
+    def stage(self, name: str):
+        """Start the next stage; returns its (registered) valid bit."""
+        valid = Signal(name=f"{name}_valid")
+        self._load(valid, self.valid)
+        self.valid = valid
+        self.stages += 1
+        return valid
+
+    def reg(self, value, shape, name: str):
+        """``value`` registered in the current stage, as a signal of ``shape``."""
+        sig = Signal(shape, name=name)
+        self._load(sig, value)
+        return sig
+
+    def keep(self, value, name: str):
+        """``value`` registered with its own shape (a carried value)."""
+        return self.reg(value, value.shape(), name)
+
+    def mul(self, a, b, name: str):
+        """``a * b`` as registered 18×18 partial products ``[(register, shift)]``, one DSP block each."""
+        return [(self.reg(p, p.shape(), f"{name}_pp{i}"), shift)
+                for i, (p, shift) in enumerate(dsp_partial_products(a, b))]
+
+    def reduce(self, parts, name: str):
+        """One adder level: neighbouring partial products added pairwise, each sum registered.
+
+        ``[(value, shift)]`` in, about half as many out; the sum of ``value << shift`` is exact.
+        """
+        out = []
+        for i in range(0, len(parts), 2):
+            pair = parts[i:i + 2]
+            value, shift = pair[0] if len(pair) == 1 else aligned_add(*pair[0], *pair[1])
+            out.append((self.keep(Value.cast(value), f"{name}_r{i // 2}"), shift))
+        return out
