@@ -9,7 +9,8 @@ from amaranth.hdl import Cat, Const, Mux, Value, signed, unsigned
 
 from golden_model.fixed import Format, Rounding
 
-__all__ = ["shape_of", "round_half_bit", "shift_round", "saturate", "clamp", "requantize"]
+__all__ = ["shape_of", "round_half_bit", "shift_round", "saturate", "clamp", "requantize", "dsp_operands",
+           "dsp_partial_products", "sum_round", "sub_round"]
 
 
 def round_half_bit(t, rounding, sticky=Const(0)):
@@ -105,25 +106,21 @@ def _dsp_chunks(value, width, signed_product):
     return chunks
 
 
-def dsp_partial_products(a, b, width=DSP_WIDTH):
-    """``[(product, shift)]`` with ``a * b == sum(product << shift)``, each product one 18×18 multiplier.
+def dsp_operands(a, b, width=DSP_WIDTH):
+    """``[(a_chunk, b_chunk, shift)]`` with ``a * b == sum((a_chunk * b_chunk) << shift)``.
 
-    Splitting a wide multiply by hand lets every partial product sit alone between registers (one
-    DSP, registered operands and product); :func:`dsp_sum` adds them in the next stage.
+    Each chunk pair is one 18×18 multiplier (:func:`hdl.dsp.registered_product`). Splitting a
+    wide multiply by hand lets every partial product sit alone between registers.
     """
     a, b = Value.cast(a), Value.cast(b)
     signed_product = a.shape().signed or b.shape().signed
-    return [(pa * pb, sa + sb) for pa, sa in _dsp_chunks(a, width, signed_product)
+    return [(pa, pb, sa + sb) for pa, sa in _dsp_chunks(a, width, signed_product)
             for pb, sb in _dsp_chunks(b, width, signed_product)]
 
 
-def dsp_sum(parts):
-    """``sum(product << shift)`` of registered partial products (see :func:`dsp_partial_products`)."""
-    total = None
-    for p, shift in parts:
-        term = Value.cast(p) << shift if shift else Value.cast(p)
-        total = term if total is None else total + term
-    return total
+def dsp_partial_products(a, b, width=DSP_WIDTH):
+    """``[(product, shift)]`` with ``a * b == sum(product << shift)``, one 18×18 multiplier each."""
+    return [(pa * pb, shift) for pa, pb, shift in dsp_operands(a, b, width)]
 
 
 def sum_round(add, shift, rounding, sub=(), const=0):

@@ -9,12 +9,12 @@ from __future__ import annotations
 
 from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
-from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import Format, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
 
+from .fifo import LutFIFO
 from .fixedpoint import clamp, dsp_partial_products, shape_of, shift_round
 from .pipeline import Pipeline, aligned_add, join_parts
 from .rsqrt import RsqrtUnit
@@ -129,11 +129,11 @@ class NodeUpdate(wiring.Component):
         self.fs = fs
         self.rsqrt_latency = RsqrtUnit.latency_of(fs.rsqrt_config())
         s = shape_of
-        self.front_stages = 8 + _reduce_levels((s(fs.delta), s(fs.delta)))
-        self.back_stages = 10 + (_reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
+        self.front_stages = 9 + _reduce_levels((s(fs.delta), s(fs.delta)))
+        self.back_stages = 13 + (_reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
                                  + _reduce_levels((s(fs.spring), s(fs.spring)))
                                  + _reduce_levels((s(fs.spring), s(fs.delta))))
-        self.tail_stages = 13 + (_reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
+        self.tail_stages = 16 + (_reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
                                  + _reduce_levels((s(fs.dt), s(fs.velocity)), (s(fs.half_dt_sq), s(fs.accel)),
                                                   (s(fs.dt), s(fs.accel)))
                                  + _reduce_levels((s(fs.velocity), s(fs.damping))))
@@ -197,16 +197,12 @@ class NodeUpdate(wiring.Component):
             live.update(out)
 
         def multiply(p, name, drop=(), **products):
-            """A stage of partial products (one DSP each), then adder levels until each product is whole."""
-            p.stage(name)
-            out = {}
-            for key, value in live.items():
-                if key not in drop:
-                    out[key] = p.keep(value, f"{name}_{key}")
-            for key, (a, b) in products.items():
-                out[key] = p.mul(a, b, f"{name}_{key}")
-            live.clear()
-            live.update(out)
+            """Partial products (one DSP each: operands, then products registered), then adder
+            levels until each product is whole."""
+            parts = {key: p.mul(a, b, f"{name}_{key}") for key, (a, b) in products.items()}
+            step(p, f"{name}_in", drop=drop)
+            step(p, name)
+            live.update(parts)
             level = 0
             while any(len(live[k]) > 1 for k in products):
                 level += 1
@@ -221,7 +217,7 @@ class NodeUpdate(wiring.Component):
                 live[k] = join_parts(live[k])
 
         # ------------------------------------------------------------ front
-        m.submodules.headers = headers = SyncFIFO(
+        m.submodules.headers = headers = LutFIFO(
             width=node_layout(fs).size,
             depth=1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length())
         beat = self.i.payload
@@ -230,7 +226,7 @@ class NodeUpdate(wiring.Component):
             m.d.sync += current.eq(beat.node.position)
         m.d.comb += [headers.w_en.eq(take & beat.first), headers.w_data.eq(beat.node.as_value())]
 
-        front = Pipeline(m, take)
+        front = Pipeline(m, take, platform=platform)
         position = vector_layout(fs.position)
         # F1: capture; P_i comes from the header on a node's first entry
         step(front, "f1", p_i=Mux(beat.first, beat.node.position.as_value(), current.as_value()),
@@ -251,12 +247,12 @@ class NodeUpdate(wiring.Component):
         m.d.comb += [rsqrt.i.valid.eq(front.valid), rsqrt.i.payload.eq(live["s"]), rsqrt.o.ready.eq(1)]
 
         # The entry's side data waits for r in a delay line as long as the rsqrt unit.
-        side = Pipeline(m, front.valid)
+        side = Pipeline(m, front.valid, platform=platform)
         for n in range(self.rsqrt_latency):
             step(side, f"side{n}")
 
         # ------------------------------------------------------------ back
-        back = Pipeline(m, rsqrt.o.valid)
+        back = Pipeline(m, rsqrt.o.valid, platform=platform)
         r = rsqrt.o.payload.rsqrt  # leaves the rsqrt unit's output register
         # d·r and S·r
         multiply(back, "b1", drop=("s",), d_r=(live["rest"], r), s_r=(live["s"], r))
@@ -303,7 +299,7 @@ class NodeUpdate(wiring.Component):
         assert back.stages == self.back_stages, (back.stages, self.back_stages)
 
         # ------------------------------------------------------------ node tail
-        tail = Pipeline(m, node_done_r)
+        tail = Pipeline(m, node_done_r, platform=platform)
         # T1: the node's header; F and Σe rounded;  T2: saturated
         step(tail, "t1", f_x=rounded(acc_f[0], fs.force.frac_bits, fs.force_acc),
              f_y=rounded(acc_f[1], fs.force.frac_bits, fs.force_acc),
@@ -360,7 +356,7 @@ class NodeUpdate(wiring.Component):
             result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
             result.error_sum.eq(live["e"]),
         ]
-        m.submodules.results = results = SyncFIFO(width=layout.size, depth=self.result_depth)
+        m.submodules.results = results = LutFIFO(width=layout.size, depth=self.result_depth)
         m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value())]
         # The output register: loads whenever it is empty or being read.
         load = ~self.o.valid | self.o.ready

@@ -3,9 +3,11 @@
 A :class:`Pipeline` hands out the registers of a pipeline written one stage after the
 other inside one :class:`~amaranth.hdl.Module`: :meth:`Pipeline.stage` starts a stage
 (and registers the valid bit), :meth:`Pipeline.reg` registers a value in it,
-:meth:`Pipeline.mul` registers a product as 18×18 partial products (one DSP block
-each) and :meth:`Pipeline.reduce` adds partial products pairwise, one adder level
-per stage.
+:meth:`Pipeline.mul` starts a product as 18×18 partial products (one DSP block each,
+operands and product registered: the product is there two stages later) and
+:meth:`Pipeline.reduce` adds partial products pairwise, one adder level per stage.
+Data registers have no reset (only the valid bits do), so the reset does not fan out
+across the datapath either.
 
 Two kinds of pipeline:
 
@@ -23,7 +25,8 @@ from __future__ import annotations
 
 from amaranth.hdl import Cat, Module, Signal, Value
 
-from .fixedpoint import dsp_partial_products
+from .dsp import registered_product
+from .fixedpoint import dsp_operands
 
 __all__ = ["Pipeline", "aligned_add", "join_parts"]
 
@@ -66,11 +69,15 @@ class Pipeline:
         The valid bit entering the first stage.
     advance : Value or None
         Clock enable of every register (a stalling pipeline), or ``None`` (free-running).
+    platform
+        The elaboration platform; :data:`hdl.dsp.ECP5` makes the multipliers ``MULT18X18D``
+        instances with their own registers (:func:`hdl.dsp.registered_product`).
     """
 
-    def __init__(self, m: Module, valid, *, advance=None):
+    def __init__(self, m: Module, valid, *, advance=None, platform=None):
         self._m = m
         self._advance = advance
+        self._platform = platform
         self.valid = valid
         self.stages = 0
 
@@ -91,7 +98,7 @@ class Pipeline:
 
     def reg(self, value, shape, name: str):
         """``value`` registered in the current stage, as a signal of ``shape``."""
-        sig = Signal(shape, name=name)
+        sig = Signal(shape, name=name, reset_less=True)
         self._load(sig, value)
         return sig
 
@@ -100,9 +107,15 @@ class Pipeline:
         return self.reg(value, value.shape(), name)
 
     def mul(self, a, b, name: str):
-        """``a * b`` as registered 18×18 partial products ``[(register, shift)]``, one DSP block each."""
-        return [(self.reg(p, p.shape(), f"{name}_pp{i}"), shift)
-                for i, (p, shift) in enumerate(dsp_partial_products(a, b))]
+        """``a * b`` as 18×18 partial products ``[(product, shift)]``, one DSP block each.
+
+        Called in stage k with operands valid in stage k − 1: the operands are registered in
+        stage k and the products in stage k + 1, so the products are read after the next
+        :meth:`stage` call.
+        """
+        return [(registered_product(self._m, pa, pb, name=f"{name}_pp{i}", enable=self._advance,
+                                    platform=self._platform), shift)
+                for i, (pa, pb, shift) in enumerate(dsp_operands(a, b))]
 
     def reduce(self, parts, name: str):
         """One adder level: neighbouring partial products added pairwise, each sum registered.

@@ -45,7 +45,7 @@ class RsqrtUnit(wiring.Component):
         The configuration every width and table comes from.
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: ``5 + 6 * config.newton_steps`` (11 for both presets).
+        ``o.ready`` is held high: ``5 + 9 * config.newton_steps`` (14 for both presets).
         Throughput: one item per clock (II = 1).
 
     Members
@@ -95,8 +95,8 @@ class RsqrtUnit(wiring.Component):
 
     @staticmethod
     def latency_of(config):
-        """Pipeline latency in clocks for ``config``: norm, shift, seed, 6 per Newton step, denorm, o."""
-        return 5 + 6 * config.newton_steps
+        """Pipeline latency in clocks for ``config``: norm, shift, seed, 9 per Newton step, denorm, o."""
+        return 5 + 9 * config.newton_steps
 
     @staticmethod
     def output_layout(config):
@@ -145,7 +145,7 @@ class RsqrtUnit(wiring.Component):
             advance.eq(~self.o.valid | self.o.ready),
             self.i.ready.eq(advance),
         ]
-        pipe = Pipeline(m, self.i.valid, advance=advance)
+        pipe = Pipeline(m, self.i.valid, advance=advance, platform=platform)
         stage, reg, dsp_regs = pipe.stage, pipe.reg, pipe.mul
 
         def shifted(parts):
@@ -213,26 +213,32 @@ class RsqrtUnit(wiring.Component):
                 dn_r = reg(dn_r, dn_r.shape(), f"nr{n}_{name}_dn")
                 sat_r = reg(sat_r, 1, f"nr{n}_{name}_sat")
 
-            # Each multiply is split into 18x18 partial products (one DSP each, registered
-            # operands and products); the next stage adds them with its rounding.
-            stage(f"nr{n}_ysq")
+            # Each multiply is split into 18x18 partial products (one DSP each: operands
+            # registered, then products, two stages); the next stage adds them with its rounding.
+            stage(f"nr{n}_ysq_in")
             y_sq = dsp_regs(y, y, f"nr{n}_ysq")
+            carry("ysq_in", with_mant=True)
+            stage(f"nr{n}_ysq")
             carry("ysq", with_mant=True)
 
             stage(f"nr{n}_t1")
             t1 = reg(sum_round(shifted(y_sq), 2 * fy - fw, rnd), cfg.ysq_fmt.width, f"nr{n}_t1")
             carry("t1", with_mant=True)
 
-            stage(f"nr{n}_mt1")
+            stage(f"nr{n}_mt1_in")
             m_t1 = dsp_regs(mant, t1, f"nr{n}_mt1")
+            carry("mt1_in")
+            stage(f"nr{n}_mt1")
             carry("mt1")
 
             stage(f"nr{n}_h")
             h = reg(sub_round(one_w, shifted(m_t1), fm, rnd), signed(cfg.h_fmt.width), f"nr{n}_h")
             carry("h")
 
-            stage(f"nr{n}_yh")
+            stage(f"nr{n}_yh_in")
             y_h = dsp_regs(y, h, f"nr{n}_yh")
+            carry("yh_in")
+            stage(f"nr{n}_yh")
             carry("yh")
 
             stage(f"nr{n}_y")

@@ -12,7 +12,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet, dt_constant, exp_table, shift_round as gm_shift_round
 
 from .fixedpoint import saturate, shift_round
-from .pipeline import Pipeline
+from .pipeline import Pipeline, join_parts
 
 __all__ = ["StepGenerator"]
 
@@ -36,7 +36,7 @@ class StepGenerator(wiring.Component):
     ----------
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: 7 when interpolating (both presets), 5 otherwise.
+        ``o.ready`` is held high: 9 when interpolating (both presets), 6 otherwise.
         Throughput: one item per clock (II = 1).
 
     Members
@@ -56,11 +56,13 @@ class StepGenerator(wiring.Component):
     ``lut``     ROM read (asynchronous, registered). Interpolating: address ``k = E >> r``, row ``(T[k], T[k+1] - T[k])``,
                 ``t = E mod 2**r`` registered. Otherwise: row ``T[round(E / 2**r)]``.
                 (A ``u1.F`` error is first clamped to 1.0.)
-    ``mul``     interpolating only: ``slope * t``
+    ``mul_in``  interpolating only: ``slope``, ``t`` registered in the DSP block
+    ``mul``     interpolating only: ``slope * t`` registered in the DSP block
     ``interp``  interpolating only: ``v = T[k] + round(slope * t / 2**r)``
     ``sum``     ``v_S + v_C``
     ``dt``      requantise to ``fs.dt``, saturate, ``+ C``, saturate
-    ``sq``      ``dt * dt``
+    ``sq_in``   ``dt`` registered in the DSP block
+    ``sq``      ``dt * dt`` registered in the DSP block
     ``o``       ``round(dt*dt / 2)`` to ``fs.half_dt_sq``, saturate; output register
     ==========  ==================================================================================
     """
@@ -69,7 +71,7 @@ class StepGenerator(wiring.Component):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"StepGenerator needs a FormatSet, not {fs!r}")
         self._fs = fs
-        self.latency = 7 if self._interpolating else 5
+        self.latency = 9 if self._interpolating else 6
         super().__init__({
             "i": In(stream.Signature(self.input_layout(fs))),
             "o": Out(stream.Signature(self.output_layout(fs))),
@@ -140,7 +142,7 @@ class StepGenerator(wiring.Component):
             advance.eq(~self.o.valid | self.o.ready),
             self.i.ready.eq(advance),
         ]
-        pipe = Pipeline(m, self.i.valid, advance=advance)
+        pipe = Pipeline(m, self.i.valid, advance=advance, platform=platform)
         stage, reg = pipe.stage, pipe.reg
 
         # --- lut: one ROM, one synchronous read port per lane
@@ -169,11 +171,14 @@ class StepGenerator(wiring.Component):
 
         if self._interpolating:
             frac = {lane: reg(error[lane][:r], r, f"lut_{lane}_t") for lane in lanes}
-            stage("mul")
+            # slope · t in a DSP block: operands registered, then the product (two stages)
+            stage("mul_in")
             product = {}
             for lane in lanes:
-                slope = row[lane].slope
-                product[lane] = reg(slope * frac[lane], len(slope) + r, f"mul_{lane}_p")
+                product[lane] = join_parts(pipe.mul(row[lane].slope, frac[lane], f"mul_{lane}"))
+                value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_in_{lane}_base")
+            stage("mul")
+            for lane in lanes:
                 value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_{lane}_base")
             stage("interp")
             for lane in lanes:
@@ -191,9 +196,11 @@ class StepGenerator(wiring.Component):
         dt_value, _ = saturate(v_dt + dt_constant(fs.dt), fs.dt)
         dt = reg(dt_value, fs.dt.width, "dt")
 
-        # --- dt * dt (registered operand, registered product)
+        # --- dt * dt in a DSP block: operand registered, then the product (two stages)
+        stage("sq_in")
+        dt_sq = join_parts(pipe.mul(dt, dt, "dt_sq"))
+        dt = reg(dt, fs.dt.width, "sq_in_dt")
         stage("sq")
-        dt_sq = reg(dt * dt, 2 * fs.dt.width, "dt_sq")
         dt = reg(dt, fs.dt.width, "sq_dt")
 
         # --- o: half_dt_sq = sat(round(dt*dt / 2)) into the output register

@@ -75,22 +75,34 @@ def missing_simulator(sim: str) -> str | None:
     return None
 
 
-def _formats_key(fs: FormatSet) -> str:
-    """Cache key of an export: the format set and the RTL sources (an RTL edit must not reuse old Verilog)."""
+#: Simulation models of the device primitives the ``dsp`` flavours instantiate.
+PRIMITIVE_MODELS = {"ecp5": [REPO / "sim" / "models" / "MULT18X18D.v"]}
+
+
+def _formats_key(fs: FormatSet, dsp: str | None = None) -> str:
+    """Cache key of an export: the format set, the DSP flavour and the RTL sources (an RTL edit
+    must not reuse old Verilog)."""
     digest = hashlib.sha256(fs.to_json().encode())
-    for source in sorted((REPO / "hdl").glob("*.py")) + [REPO / "sim" / "export.py"]:
+    digest.update(repr(dsp).encode())
+    for source in sorted((REPO / "hdl").glob("*.py")) + [REPO / "sim" / "export.py"] + PRIMITIVE_MODELS.get(dsp, []):
         digest.update(source.read_bytes())
     return digest.hexdigest()[:12]
 
 
-def verilog_sources(fs: FormatSet) -> Path:
-    """Export (once per format set) and return the directory of Verilog files."""
+def verilog_sources(fs: FormatSet, dsp: str | None = None) -> Path:
+    """Export (once per format set and DSP flavour) and return the directory of Verilog files.
+
+    ``dsp="ecp5"`` exports what ``springflat synth --target ecp5`` synthesises (``MULT18X18D``
+    instances, :mod:`hdl.dsp`); the benches then add the primitive's simulation model.
+    """
+    from hdl.dsp import DspPlatform
+
     from .export import export_verilog
 
-    directory = BUILD_ROOT / _formats_key(fs) / "verilog"
+    directory = BUILD_ROOT / _formats_key(fs, dsp) / "verilog"
     stamp = directory / "interface.json"
     if not stamp.exists():
-        export_verilog(fs, directory)
+        export_verilog(fs, directory, platform=DspPlatform(dsp) if dsp else None)
     return directory
 
 
@@ -106,12 +118,14 @@ class BenchRun:
 
 
 def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, *, testcase: str | None = None,
-              waves: bool = False, work: Path | None = None, log_file: Path | None = None) -> BenchRun:
+              waves: bool = False, work: Path | None = None, log_file: Path | None = None,
+              dsp: str | None = None) -> BenchRun:
     """Build ``toplevel`` for ``sim`` (cached) and run the cocotb module ``sim.cocotb_benches.<bench>``.
 
     ``config`` is handed to the bench as JSON (``SPRINGFLAT_BENCH_CONFIG``); the bench
     writes its findings to ``SPRINGFLAT_BENCH_RESULT``, returned as ``result``. With
-    ``log_file`` the simulator's output goes there instead of stdout.
+    ``log_file`` the simulator's output goes there instead of stdout. ``dsp`` selects the
+    Verilog flavour (:func:`verilog_sources`).
     """
     from cocotb_tools.check_results import get_results
     from cocotb_tools.runner import get_runner
@@ -119,8 +133,10 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     reason = missing_simulator(sim)
     if reason:
         raise SimulatorError(reason)
-    sources = verilog_sources(fs)
-    build_dir = BUILD_ROOT / _formats_key(fs) / sim / (toplevel + ("-waves" if waves else ""))
+    if dsp is not None and dsp not in PRIMITIVE_MODELS:
+        raise SimulatorError(f"no simulation model for DSP flavour {dsp!r} (choose from {', '.join(PRIMITIVE_MODELS)})")
+    sources = verilog_sources(fs, dsp)
+    build_dir = BUILD_ROOT / _formats_key(fs, dsp) / sim / (toplevel + ("-waves" if waves else ""))
     work = Path(work) if work is not None else build_dir / "runs" / f"{bench}-{os.getpid()}-{time.time_ns()}"
     work.mkdir(parents=True, exist_ok=True)
     config_path, result_path = work / "config.json", work / "result.json"
@@ -131,7 +147,7 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     if sim == "verilator" and waves:
         build_args += ["--trace-structs"]  # cocotb adds --trace (VCD; FST would need liblz4 headers)
     try:
-        runner.build(sources=[sources / f"{toplevel}.v"], hdl_toplevel=toplevel, build_dir=build_dir,
+        runner.build(sources=[sources / f"{toplevel}.v", *PRIMITIVE_MODELS.get(dsp, [])], hdl_toplevel=toplevel, build_dir=build_dir,
                      build_args=build_args, timescale=("1ns", "1ps"), waves=waves, always=False, verbose=False,
                      log_file=log_file)
     except RuntimeError as exc:

@@ -23,6 +23,7 @@ from amaranth.hdl import Shape
 from amaranth.lib import data, wiring
 
 from golden_model.fixed import FormatSet, exp_table
+from hdl.dsp import dsp_target
 
 __all__ = ["COMPONENTS", "export_verilog", "describe"]
 
@@ -114,8 +115,13 @@ def describe(component, fs: FormatSet, name: str) -> dict:
     return info
 
 
-def export_verilog(fs: FormatSet, out: Path) -> dict:
-    """Write every component's Verilog, the ROM files and the interface; return the interface dict."""
+def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
+    """Write every component's Verilog, the ROM files and the interface; return the interface dict.
+
+    ``platform`` is passed to elaboration: :data:`hdl.dsp.ECP5` gives ``MULT18X18D`` instances
+    with their own registers instead of generic registered multipliers (same function, same
+    latency).
+    """
     from amaranth.back import verilog
 
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
@@ -123,7 +129,7 @@ def export_verilog(fs: FormatSet, out: Path) -> dict:
     components = {}
     for spec in COMPONENTS:
         component = spec.build(fs)
-        text = verilog.convert(component, name=spec.module)
+        text = verilog.convert(component, name=spec.module, platform=platform)
         (out / f"{spec.module}.v").write_text(text)
         info = describe(component, fs, spec.module)
         info["summary"] = spec.summary
@@ -138,6 +144,12 @@ def export_verilog(fs: FormatSet, out: Path) -> dict:
                      "node_update / springflat_core: one result per node, in input order; error_sum is the node's "
                      "sum of |L - d| over the positions it was given.",
                      "Throughput = Fmax x II = Fmax neighbour entries per second.",
+                     ("Multipliers: ECP5 MULT18X18D instances with their input and output registers in use "
+                      "(REG_INPUTA/B_CLK, REG_OUTPUT_CLK = CLK0); the generic Verilog of `springflat verilog` "
+                      "has the same registers in the fabric and the same latency."
+                      if dsp_target(platform) == "ecp5" else
+                      "Multipliers: generic registered multipliers (operands and product registered, "
+                      "two clocks), written as 18x18 partial products."),
                  ]}
     (out / "interface.json").write_text(json.dumps(interface, indent=2) + "\n")
     (out / "interface.md").write_text(interface_markdown(interface))

@@ -65,6 +65,7 @@ class Target:
     lut_cells: dict           # cell type -> LUT4 it counts for
     ff_prefix: str
     lutram_cells: tuple = ()
+    dsp_primitives: str | None = None  # hdl.dsp platform: multipliers as this device's DSP primitive
 
 
 TARGETS = {
@@ -76,7 +77,7 @@ TARGETS = {
         capacity={"luts": 83640, "ffs": 83640, "dsps": 156, "brams": 208, "pins": 205},
         dsp_cell="MULT18X18D", bram_cells=("DP16KD", "PDPW16KD"),
         lut_cells={"LUT4": 1, "CCU2C": 2, "TRELLIS_DPR16X4": 0},  # a CCU2C carry cell is two LUT4s
-        ff_prefix="TRELLIS_FF", lutram_cells=("TRELLIS_DPR16X4",),
+        ff_prefix="TRELLIS_FF", lutram_cells=("TRELLIS_DPR16X4",), dsp_primitives="ecp5",
     ),
     "ice40": Target(
         name="ice40", device="iCE40 UP5K SG48",
@@ -233,6 +234,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     """
     from amaranth.back import verilog
 
+    from hdl.dsp import DspPlatform
     from hdl.io_wrapper import SerialWrapper
 
     from .export import COMPONENTS, export_verilog
@@ -255,8 +257,9 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
         raise SynthError(f"--out '{out}' exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
 
-    say(f"exporting Verilog ({fs.name}) to {out}")
-    interface = export_verilog(fs, out)
+    platform = DspPlatform(tgt.dsp_primitives) if tgt.dsp_primitives else None
+    say(f"exporting Verilog ({fs.name}{', ' + tgt.dsp_primitives + ' DSP primitives' if platform else ''}) to {out}")
+    interface = export_verilog(fs, out, platform=platform)
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     _write_constraints(out, freq)
 
@@ -266,7 +269,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     for name in components:
         info = interface["components"][name]
         wrapper = SerialWrapper(specs[name].build(fs))
-        (out / f"{name}_pnr.v").write_text(verilog.convert(wrapper, name=f"{name}_pnr"))
+        (out / f"{name}_pnr.v").write_text(verilog.convert(wrapper, name=f"{name}_pnr", platform=platform))
         entry = {"latency": info["latency"], "ii": info["initiation_interval"], "port_bits": _port_bits(info),
                  "wrapper": {"in_bits": wrapper.in_width, "out_bits": wrapper.out_width}}
 

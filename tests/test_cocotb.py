@@ -7,7 +7,7 @@ import pytest
 from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet
 from hdl import SpringflatCore
-from sim.cocotb_support import SIMULATORS, missing_simulator, run_bench
+from sim.cocotb_support import SIMULATORS, missing_simulator, run_bench, verilog_sources
 
 DEFAULT = FormatSet.preset("default")
 
@@ -35,6 +35,25 @@ def test_node_update_over_iterations_with_stalls_and_reset(simulator):
     run = run_bench(simulator, DEFAULT, "node_update", "node_update", config)
     assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches")
     assert run.result["mismatches"] == 0
+
+
+@pytest.mark.parametrize("toplevel, bench, testcase", [("rsqrt_unit", "units", "rsqrt_unit"),
+                                                     ("step_generator", "units", "step_generator"),
+                                                     ("node_update", "node_update", None)])
+def test_ecp5_flavour_with_mult18x18d_instances(toplevel, bench, testcase):
+    """The Verilog `springflat synth --target ecp5` synthesises (MULT18X18D instances with their
+    own registers) against the golden model, on Icarus with a model of the primitive."""
+    reason = missing_simulator("icarus")
+    if reason:
+        pytest.fail(reason)
+    config = ({"n": 1200, "seed": 3} if bench == "units" else
+              {"mesh": "surf1", "init": "pca", "params": {"density": 2.0, "damping": 0.02}, "iterations": 2,
+               "p_valid": 0.8, "p_ready": 0.7, "seed": 4})
+    run = run_bench("icarus", DEFAULT, toplevel, bench, config, testcase=testcase, dsp="ecp5")
+    assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches", run.result)
+    assert run.result["mismatches"] == 0
+    source = (verilog_sources(DEFAULT, "ecp5") / f"{toplevel}.v").read_text()
+    assert "MULT18X18D" in source
 
 
 def _paper_params(name, step):

@@ -1,0 +1,90 @@
+"""18×18 multipliers with registered operands and product: generic RTL or the ECP5 ``MULT18X18D``.
+
+Every multiply of the datapath is a set of 18×18 partial products
+(:func:`~hdl.fixedpoint.dsp_partial_products`), each computed by :func:`registered_product`:
+the operands are registered, then the product — two clocks from operands to product. In
+generic RTL (simulation, iCE40, any FPGA tool that infers registered multipliers) that is
+two flip-flop levels around a ``*``. Elaborated with :data:`ECP5` as the platform it is one
+``MULT18X18D`` whose own input and output registers (``REG_INPUTA/B_CLK``,
+``REG_OUTPUT_CLK``) hold them: Yosys's ``synth_ecp5`` maps a ``*`` to a bare
+``MULT18X18D`` and leaves the registers in the fabric, where the routing to and from the
+DSP row costs 2.5–4.5 ns (``docs/synthesis.md``). Both forms compute the same function
+with the same latency; ``tests/test_dsp.py`` checks the primitive form against a model of
+the primitive.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import ClockSignal, Const, Instance, Module, Signal, Value, signed, unsigned
+
+from .fixedpoint import DSP_WIDTH
+
+__all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target"]
+
+
+class DspPlatform:
+    """A minimal Amaranth platform object that only says which multiplier primitive to use."""
+
+    def __init__(self, dsp: str):
+        self.dsp = dsp
+
+    def __repr__(self):
+        return f"DspPlatform({self.dsp!r})"
+
+
+#: Elaborate with ``platform=ECP5`` to get ``MULT18X18D`` instances.
+ECP5 = DspPlatform("ecp5")
+
+
+def dsp_target(platform) -> str | None:
+    """``"ecp5"`` when ``platform`` asks for ECP5 primitives, else ``None`` (generic RTL)."""
+    return getattr(platform, "dsp", None)
+
+
+def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None) -> Value:
+    """``a * b`` two clocks later (operands registered, then the product).
+
+    ``a`` and ``b`` fit 18-bit operands (signed if the product is signed: an unsigned operand
+    of a signed product is at most 17 bits). ``enable`` is the clock enable of all three
+    registers (``None``: always). The returned value has the shape of ``a * b``.
+    """
+    a, b = Value.cast(a), Value.cast(b)
+    shape = (a * b).shape()
+    is_signed = shape.signed
+    for op in (a, b):
+        limit = DSP_WIDTH if (op.shape().signed or not is_signed) else DSP_WIDTH - 1
+        if len(op) > limit:
+            raise ValueError(f"{name}: a {len(op)}-bit {'signed' if op.shape().signed else 'unsigned'} operand "
+                             f"does not fit an {DSP_WIDTH}-bit multiplier operand")
+    product = Signal(shape, name=name, reset_less=True)
+    if dsp_target(platform) == "ecp5":
+        operand = signed(DSP_WIDTH) if is_signed else unsigned(DSP_WIDTH)
+        a_ext, b_ext = (Signal(operand, name=f"{name}_{n}") for n in "ab")
+        p = Signal(2 * DSP_WIDTH, name=f"{name}_p")
+        m.d.comb += [a_ext.eq(a), b_ext.eq(b), product.eq(p[:len(product)])]
+        ports = {f"i_A{i}": a_ext[i] for i in range(DSP_WIDTH)}
+        ports.update({f"i_B{i}": b_ext[i] for i in range(DSP_WIDTH)})
+        ports.update({f"i_C{i}": Const(0, 1) for i in range(DSP_WIDTH)})
+        ports.update({f"o_P{i}": p[i] for i in range(2 * DSP_WIDTH)})
+        m.submodules[name] = Instance(
+            "MULT18X18D",
+            p_REG_INPUTA_CLK="CLK0", p_REG_INPUTA_CE="CE0", p_REG_INPUTA_RST="RST0",
+            p_REG_INPUTB_CLK="CLK0", p_REG_INPUTB_CE="CE0", p_REG_INPUTB_RST="RST0",
+            p_REG_INPUTC_CLK="NONE", p_REG_PIPELINE_CLK="NONE",
+            p_REG_OUTPUT_CLK="CLK0", p_REG_OUTPUT_CE="CE0", p_REG_OUTPUT_RST="RST0",
+            p_GSR="DISABLED", p_RESETMODE="SYNC", p_MULT_BYPASS="DISABLED",
+            p_SOURCEB_MODE="B_INPUT", p_CAS_MATCH_REG="FALSE",
+            i_SIGNEDA=Const(int(is_signed), 1), i_SIGNEDB=Const(int(is_signed), 1),
+            i_SOURCEA=Const(0, 1), i_SOURCEB=Const(0, 1),
+            i_CLK0=ClockSignal(), i_CE0=Const(1, 1) if enable is None else enable, i_RST0=Const(0, 1),
+            **ports)
+        return product
+    a_r = Signal(a.shape(), name=f"{name}_a", reset_less=True)
+    b_r = Signal(b.shape(), name=f"{name}_b", reset_less=True)
+    updates = [a_r.eq(a), b_r.eq(b), product.eq(a_r * b_r)]
+    if enable is None:
+        m.d.sync += updates
+    else:
+        with m.If(enable):
+            m.d.sync += updates
+    return product
