@@ -1,7 +1,7 @@
 """18×18 multipliers with registered operands and product: generic RTL or the ECP5 ``MULT18X18D``.
 
 Every multiply of the datapath is a set of 18×18 partial products
-(:func:`~hdl.fixedpoint.dsp_partial_products`), each computed by :func:`registered_product`:
+(:func:`~hdl.fixedpoint.dsp_operands`), each computed by :func:`registered_product`:
 the operands are registered, then the product — two clocks from operands to product. In
 generic RTL (simulation, iCE40, any FPGA tool that infers registered multipliers) that is
 two flip-flop levels around a ``*``. Elaborated with :data:`ECP5` as the platform it is one

@@ -10,7 +10,7 @@ from amaranth.hdl import Cat, Const, Mux, Value, signed, unsigned
 from golden_model.fixed import Format, Rounding
 
 __all__ = ["shape_of", "round_half_bit", "shift_round", "saturate", "clamp", "requantize", "dsp_operands",
-           "dsp_partial_products", "sum_round", "sub_round"]
+           "sum_round"]
 
 
 def round_half_bit(t, rounding, sticky=Const(0)):
@@ -118,17 +118,12 @@ def dsp_operands(a, b, width=DSP_WIDTH):
             for pb, sb in _dsp_chunks(b, width, signed_product)]
 
 
-def dsp_partial_products(a, b, width=DSP_WIDTH):
-    """``[(product, shift)]`` with ``a * b == sum(product << shift)``, one 18×18 multiplier each."""
-    return [(pa * pb, shift) for pa, pb, shift in dsp_operands(a, b, width)]
-
-
 def sum_round(add, shift, rounding, sub=(), const=0):
     """``round((const + sum(add) - sum(sub)) * 2**-shift)`` as :func:`shift_round` rounds it.
 
     For floor and half up the rounding is folded into the sum (half up adds ``2**(shift-1)``
-    before the shift), so Yosys sees one multi-operand add (one carry-save tree and one carry
-    chain) instead of a chain of adders. Nearest-even rounds the exact sum with
+    before the shift): ``K - x`` rounded is one subtraction from a constant, not two carry
+    chains in series. Nearest-even rounds the exact sum with
     :func:`shift_round`. ``shift >= 1``.
     """
     rounding = Rounding(rounding)
@@ -143,19 +138,3 @@ def sum_round(add, shift, rounding, sub=(), const=0):
     if rounding is Rounding.NEAREST_EVEN:
         return shift_round(total, shift, rounding)
     return total >> shift
-
-
-def sub_round(minuend, add, shift, rounding):
-    """``minuend - round(sum(add) * 2**-shift)``, rounded as :func:`shift_round`, as one sum.
-
-    ``-floor(X / 2**k) == floor((2**k - 1 - X) / 2**k)`` for integer X, so for floor and half up
-    (X = S + 2**(k-1)) the whole expression is one multi-operand add and a shift.
-    """
-    rounding = Rounding(rounding)
-    if rounding is Rounding.NEAREST_EVEN:
-        total = None
-        for term in add:
-            total = Value.cast(term) if total is None else total + term
-        return minuend - shift_round(total, shift, rounding)
-    c = (1 << (shift - 1)) if rounding is Rounding.HALF_UP else 0
-    return sum_round((), shift, Rounding.FLOOR, sub=add, const=(minuend << shift) + (1 << shift) - 1 - c)

@@ -15,8 +15,8 @@ from golden_model.fixed import Format, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
 
 from .fifo import LutFIFO
-from .fixedpoint import clamp, dsp_partial_products, shape_of, shift_round
-from .pipeline import Pipeline, aligned_add, join_parts
+from .fixedpoint import clamp, shape_of, shift_round, sum_round
+from .pipeline import Pipeline, aligned_add, join_parts, reduce_levels
 from .rsqrt import RsqrtUnit
 
 __all__ = ["NodeUpdate", "vector_layout", "entry_layout", "node_layout", "result_layout"]
@@ -58,15 +58,6 @@ def result_layout(fs: FormatSet) -> data.StructLayout:
         "velocity": vector_layout(fs.velocity),
         "error_sum": shape_of(fs.error_acc),
     })
-
-
-def _reduce_levels(*operand_shapes) -> int:
-    """Adder levels that :meth:`~hdl.pipeline.Pipeline.reduce` needs for the widest of these products."""
-    levels = 0
-    for a, b in operand_shapes:
-        n = len(dsp_partial_products(Signal(a), Signal(b)))
-        levels = max(levels, (n - 1).bit_length())
-    return levels
 
 
 class NodeUpdate(wiring.Component):
@@ -129,14 +120,14 @@ class NodeUpdate(wiring.Component):
         self.fs = fs
         self.rsqrt_latency = RsqrtUnit.latency_of(fs.rsqrt_config())
         s = shape_of
-        self.front_stages = 9 + _reduce_levels((s(fs.delta), s(fs.delta)))
-        self.back_stages = 13 + (_reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
-                                 + _reduce_levels((s(fs.spring), s(fs.spring)))
-                                 + _reduce_levels((s(fs.spring), s(fs.delta))))
-        self.tail_stages = 16 + (_reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
-                                 + _reduce_levels((s(fs.dt), s(fs.velocity)), (s(fs.half_dt_sq), s(fs.accel)),
+        self.front_stages = 9 + reduce_levels((s(fs.delta), s(fs.delta)))
+        self.back_stages = 13 + (reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
+                                 + reduce_levels((s(fs.spring), s(fs.spring)))
+                                 + reduce_levels((s(fs.spring), s(fs.delta))))
+        self.tail_stages = 16 + (reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
+                                 + reduce_levels((s(fs.dt), s(fs.velocity)), (s(fs.half_dt_sq), s(fs.accel)),
                                                   (s(fs.dt), s(fs.accel)))
-                                 + _reduce_levels((s(fs.velocity), s(fs.damping))))
+                                 + reduce_levels((s(fs.velocity), s(fs.damping))))
         self.pipeline_stages = self.front_stages + self.rsqrt_latency + self.back_stages + self.tail_stages
         # The result FIFO's write and its output register.
         self.latency = self.pipeline_stages + 2
@@ -258,9 +249,11 @@ class NodeUpdate(wiring.Component):
         multiply(back, "b1", drop=("s",), d_r=(live["rest"], r), s_r=(live["s"], r))
         # u = rq(1 − d·r → spring), L = rq(S·r → rest_length): rounding, then saturation
         dr_frac = fs.rest_length.frac_bits + fs.rsqrt.frac_bits
-        one_minus = Signal(signed(len(live["d_r"]) + 2), name="one_minus_dr")
-        m.d.comb += one_minus.eq((1 << dr_frac) - live["d_r"])
-        step(back, "b2", drop=("d_r", "s_r"), u=rounded(one_minus, dr_frac, fs.spring),
+        if fs.spring.frac_bits < dr_frac:  # the rounding constant folds into 1 − d·r: one subtraction
+            u = sum_round((), dr_frac - fs.spring.frac_bits, rnd, sub=[live["d_r"]], const=1 << dr_frac)
+        else:
+            u = rounded((1 << dr_frac) - live["d_r"], dr_frac, fs.spring)
+        step(back, "b2", drop=("d_r", "s_r"), u=u,
              length=rounded(live["s_r"], fs.length_sq.frac_bits + fs.rsqrt.frac_bits, fs.rest_length))
         step(back, "b3", u=saturated(live["u"], fs.spring), length=saturated(live["length"], fs.rest_length))
         # e = |L − d| alongside ½C·u

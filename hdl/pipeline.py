@@ -28,7 +28,7 @@ from amaranth.hdl import Cat, Module, Signal, Value
 from .dsp import registered_product
 from .fixedpoint import dsp_operands
 
-__all__ = ["Pipeline", "aligned_add", "join_parts"]
+__all__ = ["Pipeline", "aligned_add", "join_parts", "reduce_levels"]
 
 
 def aligned_add(a, a_shift: int, b, b_shift: int):
@@ -47,6 +47,15 @@ def aligned_add(a, a_shift: int, b, b_shift: int):
     high = (a >> k) + b
     value = Cat(a[:k], high)
     return (value.as_signed() if high.shape().signed else value), a_shift
+
+
+def reduce_levels(*operand_shapes) -> int:
+    """Adder levels :meth:`Pipeline.reduce` needs for the widest of these products (shape pairs)."""
+    levels = 0
+    for a, b in operand_shapes:
+        n = len(dsp_operands(Signal(a), Signal(b)))
+        levels = max(levels, (n - 1).bit_length())
+    return levels
 
 
 def join_parts(parts):

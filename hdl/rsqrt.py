@@ -13,8 +13,8 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet, Rounding, RsqrtConfig, rsqrt_stages
 
-from .fixedpoint import round_half_bit, saturate, shift_round, sub_round, sum_round
-from .pipeline import Pipeline
+from .fixedpoint import round_half_bit, saturate, shift_round
+from .pipeline import Pipeline, join_parts, reduce_levels
 
 # The golden model's rounding of the rsqrt internals is the module constant
 # ``_INTERNAL_ROUNDING`` (not a field of RsqrtConfig). ``golden_model.fixed.rsqrt`` is the
@@ -95,8 +95,15 @@ class RsqrtUnit(wiring.Component):
 
     @staticmethod
     def latency_of(config):
-        """Pipeline latency in clocks for ``config``: norm, shift, seed, 9 per Newton step, denorm, o."""
-        return 5 + 9 * config.newton_steps
+        """Pipeline latency in clocks for ``config``.
+
+        norm, shift, seed; per Newton step 11 stages plus the adder levels of its three
+        multiplies (which depend on the widths); denorm, round, o.
+        """
+        y, mant = unsigned(config.y_fmt.width), unsigned(config.mant_fmt.width)
+        t1, h = unsigned(config.ysq_fmt.width), signed(config.h_fmt.width)
+        per_step = 11 + reduce_levels((y, y)) + reduce_levels((mant, t1)) + reduce_levels((y, h))
+        return 6 + per_step * config.newton_steps
 
     @staticmethod
     def output_layout(config):
@@ -146,10 +153,7 @@ class RsqrtUnit(wiring.Component):
             self.i.ready.eq(advance),
         ]
         pipe = Pipeline(m, self.i.valid, advance=advance, platform=platform)
-        stage, reg, dsp_regs = pipe.stage, pipe.reg, pipe.mul
-
-        def shifted(parts):
-            return [p << shift if shift else p for p, shift in parts]
+        stage, reg, mul = pipe.stage, pipe.reg, pipe.mul
 
         # --- norm: priority encoder -> shift amounts (per bit length, from the golden model)
         table, right = self._normalisation_table()
@@ -214,35 +218,41 @@ class RsqrtUnit(wiring.Component):
                 sat_r = reg(sat_r, 1, f"nr{n}_{name}_sat")
 
             # Each multiply is split into 18x18 partial products (one DSP each: operands
-            # registered, then products, two stages); the next stage adds them with its rounding.
-            stage(f"nr{n}_ysq_in")
-            y_sq = dsp_regs(y, y, f"nr{n}_ysq")
-            carry("ysq_in", with_mant=True)
-            stage(f"nr{n}_ysq")
-            carry("ysq", with_mant=True)
+            # registered, then products, two stages); adder levels add them pairwise, one
+            # adder per stage, then the rounding takes a stage of its own.
+            def product(a, b, name, **keep):
+                parts = mul(a, b, f"nr{n}_{name}")
+                stage(f"nr{n}_{name}_in")
+                carry(f"{name}_in", **keep)
+                stage(f"nr{n}_{name}")
+                carry(name, **keep)
+                level = 0
+                while len(parts) > 1:
+                    level += 1
+                    stage(f"nr{n}_{name}_sum{level}")
+                    parts = pipe.reduce(parts, f"nr{n}_{name}_sum{level}")
+                    carry(f"{name}_sum{level}", **keep)
+                return join_parts(parts)
 
+            y_sq = product(y, y, "ysq", with_mant=True)
             stage(f"nr{n}_t1")
-            t1 = reg(sum_round(shifted(y_sq), 2 * fy - fw, rnd), cfg.ysq_fmt.width, f"nr{n}_t1")
+            t1 = reg(shift_round(y_sq, 2 * fy - fw, rnd), cfg.ysq_fmt.width, f"nr{n}_t1")
             carry("t1", with_mant=True)
 
-            stage(f"nr{n}_mt1_in")
-            m_t1 = dsp_regs(mant, t1, f"nr{n}_mt1")
-            carry("mt1_in")
-            stage(f"nr{n}_mt1")
-            carry("mt1")
-
+            m_t1 = product(mant, t1, "mt1")
+            stage(f"nr{n}_t2")
+            t2 = reg(shift_round(m_t1, fm, rnd), cfg.ysq_fmt.width, f"nr{n}_t2")
+            carry("t2")
             stage(f"nr{n}_h")
-            h = reg(sub_round(one_w, shifted(m_t1), fm, rnd), signed(cfg.h_fmt.width), f"nr{n}_h")
+            h = reg(one_w - t2, signed(cfg.h_fmt.width), f"nr{n}_h")
             carry("h")
 
-            stage(f"nr{n}_yh_in")
-            y_h = dsp_regs(y, h, f"nr{n}_yh")
-            carry("yh_in")
-            stage(f"nr{n}_yh")
-            carry("yh")
-
+            y_h = product(y, h, "yh")
+            stage(f"nr{n}_yh_round")
+            y_h = reg(shift_round(y_h, fw + 1, rnd), signed(cfg.y_fmt.width + 1), f"nr{n}_yh_round")
+            carry("yh_round")
             stage(f"nr{n}_y")
-            y = reg(sum_round([y << (fw + 1), *shifted(y_h)], fw + 1, rnd), cfg.y_fmt.width, f"nr{n}_y")
+            y = reg(y + y_h, cfg.y_fmt.width, f"nr{n}_y")
             carry("y", with_y=False)
 
         # --- denorm: t = y >> (s - 1) keeps the half-lsb of R = round(y * 2**-s) as bit 0
@@ -254,8 +264,13 @@ class RsqrtUnit(wiring.Component):
             sticky = reg((t << dn_r) != y, 1, "denorm_sticky")
         sat_r = reg(sat_r, 1, "denorm_sat")
 
-        # --- o: final rounding and saturation, into the output register
-        result, overflow = saturate(round_half_bit(y_shifted, rnd, sticky), cfg.fmt_out)
+        # --- round: drop the half-lsb bit
+        stage("round")
+        rounded = reg(round_half_bit(y_shifted, rnd, sticky), cfg.y_fmt.width, "round_r")
+        sat_r = reg(sat_r, 1, "round_sat")
+
+        # --- o: saturation, into the output register
+        result, overflow = saturate(rounded, cfg.fmt_out)
         saturated = sat_r | overflow
         with m.If(advance):
             m.d.sync += [

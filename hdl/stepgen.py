@@ -36,7 +36,7 @@ class StepGenerator(wiring.Component):
     ----------
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: 9 when interpolating (both presets), 6 otherwise.
+        ``o.ready`` is held high: 14 when interpolating (both presets), 10 otherwise.
         Throughput: one item per clock (II = 1).
 
     Members
@@ -52,26 +52,31 @@ class StepGenerator(wiring.Component):
     ``advance = ~o.valid | o.ready``; ``i.ready = advance``). The two lookup lanes are identical
     and share one LUT ROM through two asynchronous read ports, each row registered:
 
-    ==========  ==================================================================================
-    ``lut``     ROM read (asynchronous, registered). Interpolating: address ``k = E >> r``, row ``(T[k], T[k+1] - T[k])``,
-                ``t = E mod 2**r`` registered. Otherwise: row ``T[round(E / 2**r)]``.
-                (A ``u1.F`` error is first clamped to 1.0.)
-    ``mul_in``  interpolating only: ``slope``, ``t`` registered in the DSP block
-    ``mul``     interpolating only: ``slope * t`` registered in the DSP block
-    ``interp``  interpolating only: ``v = T[k] + round(slope * t / 2**r)``
-    ``sum``     ``v_S + v_C``
-    ``dt``      requantise to ``fs.dt``, saturate, ``+ C``, saturate
-    ``sq_in``   ``dt`` registered in the DSP block
-    ``sq``      ``dt * dt`` registered in the DSP block
-    ``o``       ``round(dt*dt / 2)`` to ``fs.half_dt_sq``, saturate; output register
-    ==========  ==================================================================================
+    ================  ============================================================================
+    ``lut``           ROM read (asynchronous, registered). Interpolating: address ``k = E >> r``, row
+                      ``(T[k], T[k+1] - T[k])``, ``t = E mod 2**r`` registered. Otherwise: row
+                      ``T[round(E / 2**r)]``. (A ``u1.F`` error is first clamped to 1.0.)
+    ``mul_in``        interpolating only: ``slope``, ``t`` registered in the DSP block
+    ``mul``           interpolating only: ``slope * t`` registered in the DSP block
+    ``interp_round``  interpolating only: ``round(slope * t / 2**r)``
+    ``interp``        interpolating only: ``v = T[k] + round(slope * t / 2**r)``
+    ``sum``           ``v_S + v_C``
+    ``dt_round``      requantise to ``fs.dt``
+    ``dt_sat``        saturate
+    ``dt_add``        ``+ C``
+    ``dt``            saturate
+    ``sq_in``         ``dt`` registered in the DSP block
+    ``sq``            ``dt * dt`` registered in the DSP block
+    ``half``          ``round(dt*dt / 2)`` to ``fs.half_dt_sq``'s lsb
+    ``o``             saturate; output register
+    ================  ============================================================================
     """
 
     def __init__(self, fs):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"StepGenerator needs a FormatSet, not {fs!r}")
         self._fs = fs
-        self.latency = 9 if self._interpolating else 6
+        self.latency = 14 if self._interpolating else 10
         super().__init__({
             "i": In(stream.Signature(self.input_layout(fs))),
             "o": Out(stream.Signature(self.output_layout(fs))),
@@ -180,21 +185,29 @@ class StepGenerator(wiring.Component):
             stage("mul")
             for lane in lanes:
                 value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_{lane}_base")
+            stage("interp_round")
+            for lane in lanes:
+                product[lane] = reg(shift_round(product[lane], r, fs.rounding), len(product[lane]) - r + 1,
+                                    f"interp_round_{lane}_p")
+                value[lane] = reg(value[lane], fs.lut_entry.width, f"interp_round_{lane}_base")
             stage("interp")
             for lane in lanes:
-                value[lane] = reg(value[lane] + shift_round(product[lane], r, fs.rounding),
-                                  fs.lut_entry.width, f"interp_{lane}_v")
+                value[lane] = reg(value[lane] + product[lane], fs.lut_entry.width, f"interp_{lane}_v")
 
         # --- sum of the two lookups (entry lsb)
         stage("sum")
         v_sum = reg(value["area_error"] + value["shape_error"], fs.lut_entry.width + 1, "v_sum")
 
-        # --- dt = sat(sat(requantize(v_sum)) + C)
+        # --- dt = sat(sat(requantize(v_sum)) + C): rounding, saturation, + C, saturation
+        stage("dt_round")
+        v_rounded = shift_round(v_sum, fs.lut_entry.frac_bits - fs.dt.frac_bits, fs.rounding)
+        v_dt = reg(v_rounded, len(v_rounded), "dt_round_v")
+        stage("dt_sat")
+        v_dt = reg(saturate(v_dt, fs.dt)[0], fs.dt.width, "dt_sat_v")
+        stage("dt_add")
+        v_dt = reg(v_dt + dt_constant(fs.dt), fs.dt.width + 1, "dt_add_v")
         stage("dt")
-        v_dt, _ = saturate(shift_round(v_sum, fs.lut_entry.frac_bits - fs.dt.frac_bits,
-                                       fs.rounding), fs.dt)
-        dt_value, _ = saturate(v_dt + dt_constant(fs.dt), fs.dt)
-        dt = reg(dt_value, fs.dt.width, "dt")
+        dt = reg(saturate(v_dt, fs.dt)[0], fs.dt.width, "dt")
 
         # --- dt * dt in a DSP block: operand registered, then the product (two stages)
         stage("sq_in")
@@ -203,9 +216,14 @@ class StepGenerator(wiring.Component):
         stage("sq")
         dt = reg(dt, fs.dt.width, "sq_dt")
 
-        # --- o: half_dt_sq = sat(round(dt*dt / 2)) into the output register
-        half, _ = saturate(shift_round(dt_sq, 2 * fs.dt.frac_bits + 1 - fs.half_dt_sq.frac_bits,
-                                       fs.rounding), fs.half_dt_sq)
+        # --- half: round(dt*dt / 2) to half_dt_sq's lsb
+        stage("half")
+        half_rounded = shift_round(dt_sq, 2 * fs.dt.frac_bits + 1 - fs.half_dt_sq.frac_bits, fs.rounding)
+        half_rounded = reg(half_rounded, len(half_rounded), "half_r")
+        dt = reg(dt, fs.dt.width, "half_dt")
+
+        # --- o: half_dt_sq saturated, into the output register
+        half, _ = saturate(half_rounded, fs.half_dt_sq)
         with m.If(advance):
             m.d.sync += [
                 self.o.valid.eq(pipe.valid),
