@@ -20,14 +20,19 @@ class LutFIFO(Elaboratable):
     The interface is :class:`amaranth.lib.fifo.SyncFIFO`'s subset: ``w_data``, ``w_en``,
     ``w_rdy``, ``r_data`` (valid while ``r_rdy``), ``r_en``, ``r_rdy``, ``level``. A write
     is visible on the read side on the next clock; a read and a write may happen together.
+
+    The read and write pointers carry one wrap bit, so empty and full are equality tests of
+    two registers (no counter on the handshake paths). With ``checked=False`` the handshakes
+    are not gated: the user guarantees never to write when full nor read when empty (the node
+    header FIFO, whose reads follow its writes by construction).
     """
 
-    def __init__(self, *, width: int, depth: int):
+    def __init__(self, *, width: int, depth: int, checked: bool = True):
         if width < 1:
             raise ValueError(f"LutFIFO width must be at least 1, not {width}")
         if depth < 2 or depth & (depth - 1):
             raise ValueError(f"LutFIFO depth must be a power of two of at least 2, not {depth}")
-        self.width, self.depth = width, depth
+        self.width, self.depth, self.checked = width, depth, checked
         self.w_data = Signal(width)
         self.w_en = Signal()
         self.w_rdy = Signal()
@@ -42,19 +47,22 @@ class LutFIFO(Elaboratable):
                                                 attrs={"ram_style": "distributed"})
         write = storage.write_port()
         read = storage.read_port(domain="comb")
-        produce = Signal(range(self.depth))
-        consume = Signal(range(self.depth))
-        do_write = self.w_en & self.w_rdy
-        do_read = self.r_en & self.r_rdy
+        bits = (self.depth - 1).bit_length()
+        produce = Signal(bits + 1)  # the top bit counts wraps
+        consume = Signal(bits + 1)
         m.d.comb += [
-            self.w_rdy.eq(self.level != self.depth),
-            self.r_rdy.eq(self.level != 0),
-            write.addr.eq(produce), write.data.eq(self.w_data), write.en.eq(do_write),
-            read.addr.eq(consume), self.r_data.eq(read.data),
+            self.r_rdy.eq(produce != consume),
+            self.w_rdy.eq(produce != (consume ^ (1 << bits))),
+            self.level.eq((produce - consume)[:bits + 1]),
+        ]
+        do_write = self.w_en & self.w_rdy if self.checked else self.w_en
+        do_read = self.r_en & self.r_rdy if self.checked else self.r_en
+        m.d.comb += [
+            write.addr.eq(produce[:bits]), write.data.eq(self.w_data), write.en.eq(do_write),
+            read.addr.eq(consume[:bits]), self.r_data.eq(read.data),
         ]
         with m.If(do_write):
-            m.d.sync += produce.eq(produce + 1)  # wraps: depth is a power of two
+            m.d.sync += produce.eq(produce + 1)
         with m.If(do_read):
             m.d.sync += consume.eq(consume + 1)
-        m.d.sync += self.level.eq(self.level + do_write - do_read)
         return m

@@ -210,12 +210,17 @@ class NodeUpdate(wiring.Component):
         # ------------------------------------------------------------ front
         m.submodules.headers = headers = LutFIFO(
             width=node_layout(fs).size,
-            depth=1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length())
+            depth=1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length(), checked=False)
         beat = self.i.payload
         current = Signal(vector_layout(fs.position), name="current_position")
         with m.If(take & beat.first):
             m.d.sync += current.eq(beat.node.position)
-        m.d.comb += [headers.w_en.eq(take & beat.first), headers.w_data.eq(beat.node.as_value())]
+        # The header is written one clock late, from registers: the write enable fans out to
+        # every LUT RAM cell of the FIFO, and the read comes dozens of clocks later anyway.
+        header_write = Signal(name="header_write")
+        header_data = Signal(node_layout(fs), name="header_data")
+        m.d.sync += [header_write.eq(take & beat.first), header_data.eq(beat.node)]
+        m.d.comb += [headers.w_en.eq(header_write), headers.w_data.eq(header_data.as_value())]
 
         front = Pipeline(m, take, platform=platform)
         position = vector_layout(fs.position)
