@@ -45,7 +45,7 @@ class RsqrtUnit(wiring.Component):
         The configuration every width and table comes from.
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: ``5 + 9 * config.newton_steps`` (14 for both presets).
+        ``o.ready`` is held high: :meth:`latency_of` (24 for both presets).
         Throughput: one item per clock (II = 1).
 
     Members
@@ -65,12 +65,14 @@ class RsqrtUnit(wiring.Component):
     ``norm``         priority encoder on ``X`` (``X = 0`` is treated as ``X = 1``, saturated):
                      left-shift amount, denormalisation shift and its saturation, per bit length
     ``shift``        barrel shifter: mantissa ``M`` (``u2.Fm``), low bits floored
-    ``seed``         seed ROM data registered (its block RAM is addressed with ``M >> shift`` in ``shift``)
-    per Newton step  ``y*y`` | round to ``t1`` | ``M*t1`` | ``h = 1 - round`` | ``y*h`` |
-                     ``y += round(y*h/2)``: every multiply alone between two registers
+    ``rom``          the seed ROM's block RAM addressed with ``M >> shift`` from the ``M`` register
+    ``seed``         seed ROM data registered
+    per Newton step  ``y*y`` | round to ``t1`` | ``M*t1`` | round to ``t2`` | ``h = 1 - t2`` |
+                     ``y*h`` | round | ``y += ...``: each multiply is DSP partial products
+                     (operands and products registered) and pairwise adder levels
     ``denorm``       barrel shifter ``y >> (s - 1)``
-    ``o``            drop the half-lsb bit of ``t`` (``(t + 1) >> 1`` for half up), saturation,
-                     output register
+    ``round``        drop the half-lsb bit of ``t`` (``(t + 1) >> 1`` for half up)
+    ``o``            saturation, output register
     ===============  ==========================================================================
     """
 
@@ -97,13 +99,13 @@ class RsqrtUnit(wiring.Component):
     def latency_of(config):
         """Pipeline latency in clocks for ``config``.
 
-        norm, shift, seed; per Newton step 11 stages plus the adder levels of its three
+        norm, shift, rom, seed; per Newton step 11 stages plus the adder levels of its three
         multiplies (which depend on the widths); denorm, round, o.
         """
         y, mant = unsigned(config.y_fmt.width), unsigned(config.mant_fmt.width)
         t1, h = unsigned(config.ysq_fmt.width), signed(config.h_fmt.width)
         per_step = 11 + reduce_levels((y, y)) + reduce_levels((mant, t1)) + reduce_levels((y, h))
-        return 6 + per_step * config.newton_steps
+        return 7 + per_step * config.newton_steps
 
     @staticmethod
     def output_layout(config):
@@ -177,25 +179,30 @@ class RsqrtUnit(wiring.Component):
         dn_r = reg(dn, dn.shape(), "norm_dn")
         sat_r = reg(zero | sat_shift, 1, "norm_sat")
 
-        # --- shift: mantissa M = floor(X * 2**(Fm - e)) in u2.Fm. The seed ROM (block RAM,
-        # synchronous read port) takes its address M >> shift from the shifter directly: the
-        # port's address register is this stage's, and its data is registered in the next stage
-        # (a block RAM's unregistered output, ~5.6 ns on ECP5, then goes straight to a
-        # flip-flop, and the first multiply starts at a flip-flop). The ROM is indexed by
-        # M >> shift itself (no subtraction on the address path): the rows below
-        # seed_index_offset are never read and hold 0.
+        # --- shift: mantissa M = floor(X * 2**(Fm - e)) in u2.Fm (barrel shifter), registered
         stage("shift")
         mant_value = ((xs << amount_r) >> right)[:cfg.mant_fmt.width]
         mant = reg(mant_value, cfg.mant_fmt.width, "mant")
         dn_r = reg(dn_r, dn_r.shape(), "shift_dn")
         sat_r = reg(sat_r, 1, "shift_sat")
-        index = mant_value[cfg.seed_index_shift:]
+
+        # --- rom: the seed ROM (block RAM, synchronous read port) is addressed with M >> shift
+        # from the mant register, so the port's address register is this stage's; its data is
+        # registered in the next stage (a block RAM's unregistered output, ~5.6 ns on ECP5,
+        # goes straight to a flip-flop, and the first multiply starts at a flip-flop). The ROM
+        # is indexed by M >> shift itself (no subtraction on the address path): the rows below
+        # seed_index_offset are never read and hold 0.
+        stage("rom")
+        index = mant[cfg.seed_index_shift:]
         assert cfg.seed_index_offset + cfg.seed_table_size <= 1 << len(index)
         m.submodules.seed_rom = seed_rom = Memory(
             shape=unsigned(cfg.seed_frac_bits), depth=cfg.seed_index_offset + cfg.seed_table_size,
             init=[0] * cfg.seed_index_offset + cfg.seed_table().tolist())
         seed_port = seed_rom.read_port()
         m.d.comb += [seed_port.en.eq(advance), seed_port.addr.eq(index)]
+        mant = reg(mant, mant.shape(), "rom_mant")
+        dn_r = reg(dn_r, dn_r.shape(), "rom_dn")
+        sat_r = reg(sat_r, 1, "rom_sat")
 
         # --- seed: the ROM's data, registered
         stage("seed")
