@@ -55,10 +55,7 @@ def saturate(value, fmt):
     """``(clamped, overflow)``: non-negative ``value`` clamped to unsigned ``fmt``'s ``raw_max``."""
     if fmt.signed:
         raise ValueError(f"saturate() supports unsigned formats only, not {fmt}")
-    overflow = Value.cast(value) > fmt.raw_max
-    return Mux(overflow, fmt.raw_max, value)[:fmt.width], overflow
-
-
+    return clamp(value, fmt)
 
 
 def shape_of(fmt: Format):
@@ -66,11 +63,33 @@ def shape_of(fmt: Format):
     return signed(fmt.width) if fmt.signed else unsigned(fmt.width)
 
 
+def _out_of_range(value, fmt: Format):
+    """``(over, under)`` of ``value`` against ``fmt``'s raw range, from the high bits alone.
+
+    A format's range is the whole two's-complement (or unsigned) range of its width, so a
+    value fits exactly when its bits above the format's sign position are copies of the sign
+    (all zero if unsigned): OR/AND trees of LUTs, not a comparison carry chain.
+    """
+    value = Value.cast(value)
+    width, w = len(value), fmt.width
+    negative = value[-1] if value.shape().signed else Const(0)
+    # magnitude bits that must be clear (non-negative) or set (negative) to fit
+    lo = w - 1 if fmt.signed else w
+    hi = width - 1 if value.shape().signed else width
+    high = value[lo:hi] if hi > lo else None
+    over = (~negative & high.any()) if high is not None else Const(0)
+    if fmt.signed:
+        under = (negative & ~high.all()) if high is not None else Const(0)
+    else:
+        under = negative
+    return over, under
+
+
 def clamp(value, fmt: Format):
     """``(clamped, overflow)``: ``value`` saturated into ``fmt``'s raw range."""
+    assert fmt.raw_max == (1 << (fmt.width - fmt.signed)) - 1 and fmt.raw_min == (-(1 << (fmt.width - 1)) if fmt.signed else 0)
     value = Value.cast(value)
-    over = value > fmt.raw_max
-    under = (value < fmt.raw_min) if value.shape().signed else False
+    over, under = _out_of_range(value, fmt)
     result = Mux(over, fmt.raw_max, Mux(under, fmt.raw_min, value))[:fmt.width]
     if fmt.signed:
         result = result.as_signed()
