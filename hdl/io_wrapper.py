@@ -8,17 +8,20 @@ pins besides ``clk`` and ``rst``:
 
 ``si``, ``shift``
     On a clock edge with ``shift`` high, the input shift register moves up one bit and takes
-    ``si`` in its bit 0. The core's inputs (payloads, ``valid``, ``ready`` and the constants) are
-    driven straight from that register, so every core input path starts at a flip-flop.
+    ``si`` in its bit 0.
 ``capture``, ``so``
-    On a clock edge with ``capture`` high the output register loads every core output (payloads,
-    ``valid``, ``ready``, ``step``); otherwise, with ``shift`` high, it moves down one bit.
-    ``so`` is its bit 0. Every core output path ends at a flip-flop.
+    On a clock edge with ``capture`` high the input holding register loads the input shift
+    register, and the output register loads every core output (payloads, ``valid``, ``ready``,
+    ``step``); otherwise, with ``shift`` high, the output register moves down one bit. ``so``
+    is its bit 0. The core's inputs (payloads, ``valid``, ``ready`` and the constants) are
+    driven from the holding register, so every core input path starts at a flip-flop that the
+    placer can put next to its users, and the shift chain stays compact; every core output
+    path ends at a flip-flop.
 
 The wrapper is for place and route only (it turns the core's I/O timing into register-to-register
 paths, as in a system where the core sits between registers); it adds ``in_width + out_width``
-flip-flops and about one LUT per output bit, which the synthesis report of the bare core does
-not include.
+flip-flops plus ``in_width`` for the holding register, and about one LUT per output bit, which
+the synthesis report of the bare core does not include.
 """
 
 
@@ -66,7 +69,10 @@ class SerialWrapper(wiring.Component):
         with m.If(self.shift):
             m.d.sync += sr_in.eq(Cat(self.si, sr_in[:-1]) if len(sr_in) > 1 else self.si)
         if self.in_width:
-            m.d.comb += inputs.eq(sr_in)
+            held = Signal(self.in_width, name="held_in")
+            with m.If(self.capture):
+                m.d.sync += held.eq(sr_in)
+            m.d.comb += inputs.eq(held)
         with m.If(self.capture):
             m.d.sync += sr_out.eq(outputs)
         with m.Elif(self.shift):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
+from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import Format, FormatSet
@@ -94,18 +95,19 @@ class NodeUpdate(wiring.Component):
     Structure
     ---------
     The datapath never stalls. Every stage register loads on every clock, so no enable
-    fans out across the ~7,000 pipeline flip-flops: a front section (narrowing, squares,
+    fans out across the ~12,000 pipeline flip-flops: a front section (narrowing, squares,
     ``|Δ|²``) feeds the :class:`~hdl.rsqrt.RsqrtUnit` (its ``o.ready`` tied high), the
     entry's side data rides along in a delay line of the rsqrt latency, a back section
     forms ``s``, the forces and ``|L − d|`` and accumulates per node, and a node tail runs
     ``a = F/m``, Euler and damping. Node headers wait in a FIFO from the input to the
-    accumulators. Results enter a FIFO of ``result_depth`` entries in front of the
-    output register. Back-pressure is a credit count: ``i.ready`` is high while fewer
+    accumulators. Results enter a block-RAM FIFO of ``result_depth`` entries whose read
+    register is the output register. Back-pressure is a credit count: ``i.ready`` is high while fewer
     than ``result_depth`` nodes are owed (accepted last entries whose results have not
     left ``o``), so the result FIFO can never overflow; ``result_depth`` covers the
     latency, so credits never run out while ``o`` is ready, even for degree-1 nodes.
 
-    Every multiplier sits alone between registers (its 18×18 partial products); partial
+    Every multiplier sits alone between registers (its 18×18 partial products, operands and
+    products registered, then the products landed in fabric registers); partial
     products are added pairwise, one adder per stage; every rounding and every
     saturation has a stage of its own.
     """
@@ -120,18 +122,20 @@ class NodeUpdate(wiring.Component):
         self.fs = fs
         self.rsqrt_latency = RsqrtUnit.latency_of(fs.rsqrt_config())
         s = shape_of
-        self.front_stages = 9 + reduce_levels((s(fs.delta), s(fs.delta)))
-        self.back_stages = 13 + (reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
+        self.front_stages = 10 + reduce_levels((s(fs.delta), s(fs.delta)))
+        self.back_stages = 16 + (reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
                                  + reduce_levels((s(fs.spring), s(fs.spring)))
                                  + reduce_levels((s(fs.spring), s(fs.delta))))
-        self.tail_stages = 16 + (reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
+        self.tail_stages = 19 + (reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
                                  + reduce_levels((s(fs.dt), s(fs.velocity)), (s(fs.half_dt_sq), s(fs.accel)),
                                                   (s(fs.dt), s(fs.accel)))
                                  + reduce_levels((s(fs.velocity), s(fs.damping))))
         self.pipeline_stages = self.front_stages + self.rsqrt_latency + self.back_stages + self.tail_stages
         # The result FIFO's write and its output register.
         self.latency = self.pipeline_stages + 2
-        self.result_depth = 1 << (self.latency + 1).bit_length()
+        # The result FIFO: block RAM (its depth is nearly free up to 512) plus the output
+        # register; more entries than the latency, so the credits never run out while o is ready.
+        self.result_depth = max(256, 1 << (self.latency + 1).bit_length()) + 1
         super().__init__({
             "i": In(stream.Signature(entry_layout(fs))),
             "o": Out(stream.Signature(result_layout(fs))),
@@ -194,6 +198,9 @@ class NodeUpdate(wiring.Component):
             step(p, f"{name}_in", drop=drop)
             step(p, name)
             live.update(parts)
+            # The products land in fabric registers first: the route out of the DSP row is
+            # then all that stage does, and the adders start next to their inputs.
+            step(p, f"{name}_out")
             level = 0
             while any(len(live[k]) > 1 for k in products):
                 level += 1
@@ -354,11 +361,12 @@ class NodeUpdate(wiring.Component):
             result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
             result.error_sum.eq(live["e"]),
         ]
-        m.submodules.results = results = LutFIFO(width=layout.size, depth=self.result_depth)
-        m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value())]
-        # The output register: loads whenever it is empty or being read.
-        load = ~self.o.valid | self.o.ready
-        m.d.comb += results.r_en.eq(load)
-        with m.If(load):
-            m.d.sync += [self.o.valid.eq(results.r_rdy), self.o.payload.eq(results.r_data)]
+        # A buffered FIFO: its storage is block RAM (a synchronous read port, so the address
+        # fans out to a handful of DP16KD, not to hundreds of LUT RAM cells) whose read
+        # register is the output register.
+        m.submodules.results = results = SyncFIFOBuffered(width=layout.size, depth=self.result_depth)
+        m.d.comb += [
+            results.w_en.eq(tail.valid), results.w_data.eq(result.as_value()),
+            self.o.valid.eq(results.r_rdy), self.o.payload.eq(results.r_data), results.r_en.eq(self.o.ready),
+        ]
         return m

@@ -45,7 +45,7 @@ class RsqrtUnit(wiring.Component):
         The configuration every width and table comes from.
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: :meth:`latency_of` (24 for both presets).
+        ``o.ready`` is held high: :meth:`latency_of` (27 for both presets).
         Throughput: one item per clock (II = 1).
 
     Members
@@ -69,7 +69,8 @@ class RsqrtUnit(wiring.Component):
     ``seed``         seed ROM data registered
     per Newton step  ``y*y`` | round to ``t1`` | ``M*t1`` | round to ``t2`` | ``h = 1 - t2`` |
                      ``y*h`` | round | ``y += ...``: each multiply is DSP partial products
-                     (operands and products registered) and pairwise adder levels
+                     (operands and products registered, products landed in fabric registers) and
+                     pairwise adder levels
     ``denorm``       barrel shifter ``y >> (s - 1)``
     ``round``        drop the half-lsb bit of ``t`` (``(t + 1) >> 1`` for half up)
     ``o``            saturation, output register
@@ -99,12 +100,12 @@ class RsqrtUnit(wiring.Component):
     def latency_of(config):
         """Pipeline latency in clocks for ``config``.
 
-        norm, shift, rom, seed; per Newton step 11 stages plus the adder levels of its three
+        norm, shift, rom, seed; per Newton step 14 stages plus the adder levels of its three
         multiplies (which depend on the widths); denorm, round, o.
         """
         y, mant = unsigned(config.y_fmt.width), unsigned(config.mant_fmt.width)
         t1, h = unsigned(config.ysq_fmt.width), signed(config.h_fmt.width)
-        per_step = 11 + reduce_levels((y, y)) + reduce_levels((mant, t1)) + reduce_levels((y, h))
+        per_step = 14 + reduce_levels((y, y)) + reduce_levels((mant, t1)) + reduce_levels((y, h))
         return 7 + per_step * config.newton_steps
 
     @staticmethod
@@ -233,6 +234,9 @@ class RsqrtUnit(wiring.Component):
                 carry(f"{name}_in", **keep)
                 stage(f"nr{n}_{name}")
                 carry(name, **keep)
+                stage(f"nr{n}_{name}_out")  # the products land in fabric registers
+                parts = [(reg(v, v.shape(), f"nr{n}_{name}_out{i}"), sh) for i, (v, sh) in enumerate(parts)]
+                carry(f"{name}_out", **keep)
                 level = 0
                 while len(parts) > 1:
                     level += 1

@@ -36,7 +36,7 @@ class StepGenerator(wiring.Component):
     ----------
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: 14 when interpolating (both presets), 10 otherwise.
+        ``o.ready`` is held high: 16 when interpolating (both presets), 11 otherwise.
         Throughput: one item per clock (II = 1).
 
     Members
@@ -58,6 +58,7 @@ class StepGenerator(wiring.Component):
                       ``T[round(E / 2**r)]``. (A ``u1.F`` error is first clamped to 1.0.)
     ``mul_in``        interpolating only: ``slope``, ``t`` registered in the DSP block
     ``mul``           interpolating only: ``slope * t`` registered in the DSP block
+    ``mul_out``       interpolating only: the product landed in fabric registers
     ``interp_round``  interpolating only: ``round(slope * t / 2**r)``
     ``interp``        interpolating only: ``v = T[k] + round(slope * t / 2**r)``
     ``sum``           ``v_S + v_C``
@@ -67,6 +68,7 @@ class StepGenerator(wiring.Component):
     ``dt``            saturate
     ``sq_in``         ``dt`` registered in the DSP block
     ``sq``            ``dt * dt`` registered in the DSP block
+    ``sq_out``        the product landed in fabric registers
     ``half``          ``round(dt*dt / 2)`` to ``fs.half_dt_sq``'s lsb
     ``o``             saturate; output register
     ================  ============================================================================
@@ -76,7 +78,7 @@ class StepGenerator(wiring.Component):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"StepGenerator needs a FormatSet, not {fs!r}")
         self._fs = fs
-        self.latency = 14 if self._interpolating else 10
+        self.latency = 16 if self._interpolating else 11
         super().__init__({
             "i": In(stream.Signature(self.input_layout(fs))),
             "o": Out(stream.Signature(self.output_layout(fs))),
@@ -185,6 +187,10 @@ class StepGenerator(wiring.Component):
             stage("mul")
             for lane in lanes:
                 value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_{lane}_base")
+            stage("mul_out")  # the products land in fabric registers
+            for lane in lanes:
+                product[lane] = reg(product[lane], product[lane].shape(), f"mul_out_{lane}_p")
+                value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_out_{lane}_base")
             stage("interp_round")
             for lane in lanes:
                 product[lane] = reg(shift_round(product[lane], r, fs.rounding), len(product[lane]) - r + 1,
@@ -215,6 +221,9 @@ class StepGenerator(wiring.Component):
         dt = reg(dt, fs.dt.width, "sq_in_dt")
         stage("sq")
         dt = reg(dt, fs.dt.width, "sq_dt")
+        stage("sq_out")  # the product lands in fabric registers
+        dt_sq = reg(dt_sq, dt_sq.shape(), "sq_out_p")
+        dt = reg(dt, fs.dt.width, "sq_out_dt")
 
         # --- half: round(dt*dt / 2) to half_dt_sq's lsb
         stage("half")

@@ -169,7 +169,7 @@ def test_throughput_and_latency(preset):
     edges: no bubbles); with input gaps each output leaves ``latency`` edges after its input."""
     fs = FormatSet.preset(preset)
     dut = StepGenerator(fs)
-    assert dut.latency == (14 if fs.lut_interpolate and fs.lut_frac_bits else 10)
+    assert dut.latency == (16 if fs.lut_interpolate and fs.lut_frac_bits else 11)
     rng = np.random.default_rng(4)
     area, shape = rng.integers(0, fs.error.raw_max + 1, (2, 400))
     run = check_step(dut, area, shape)
