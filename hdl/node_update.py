@@ -167,10 +167,14 @@ class NodeUpdate(wiring.Component):
             return clamp(value, fmt)[0]
 
         # ------------------------------------------------------------ credits
+        # owed: accepted last entries whose results have not left o. i.ready = owed < depth,
+        # computed one clock ahead from the next owed, so that it leaves a flip-flop.
         owed = Signal(range(self.result_depth + 1))
-        m.d.comb += self.i.ready.eq(owed < self.result_depth)
-        take = self.i.valid & self.i.ready
-        m.d.sync += owed.eq(owed + (take & self.i.payload.last) - (self.o.valid & self.o.ready))
+        accepting = Signal(init=1)
+        take = self.i.valid & accepting
+        owed_next = owed + (take & self.i.payload.last) - (self.o.valid & self.o.ready)
+        m.d.sync += [owed.eq(owed_next), accepting.eq(owed_next < self.result_depth)]
+        m.d.comb += self.i.ready.eq(accepting)
 
         # ------------------------------------------------------------ stage helper
         live = {}
