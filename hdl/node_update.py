@@ -153,7 +153,7 @@ class NodeUpdate(wiring.Component):
         assert rsqrt.latency == self.rsqrt_latency
 
         # Constants, registered so that they reach the multipliers from registers.
-        dt, half_dt_sq, half_spring, damping = (Signal.like(p, name=f"{n}_r") for n, p in (
+        dt, half_dt_sq, half_spring, damping = (Signal.like(p, name=f"{n}_r", reset_less=True) for n, p in (
             ("dt", self.dt), ("half_dt_sq", self.half_dt_sq), ("half_spring", self.half_spring),
             ("damping", self.damping)))
         m.d.sync += [dt.eq(self.dt), half_dt_sq.eq(self.half_dt_sq), half_spring.eq(self.half_spring),
@@ -232,13 +232,13 @@ class NodeUpdate(wiring.Component):
             width=node_layout(fs).size,
             depth=1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length(), checked=False)
         beat = self.i.payload
-        current = Signal(vector_layout(fs.position), name="current_position")
+        current = Signal(vector_layout(fs.position), name="current_position", reset_less=True)
         with m.If(take & beat.first):
             m.d.sync += current.eq(beat.node.position)
         # The header is written one clock late, from registers: the write enable fans out to
         # every LUT RAM cell of the FIFO, and the read comes dozens of clocks later anyway.
         header_write = Signal(name="header_write")
-        header_data = Signal(node_layout(fs), name="header_data")
+        header_data = Signal(node_layout(fs), name="header_data", reset_less=True)
         m.d.sync += [header_write.eq(take & beat.first), header_data.eq(beat.node)]
         m.d.comb += [headers.w_en.eq(header_write), headers.w_data.eq(header_data.as_value())]
 
@@ -298,8 +298,8 @@ class NodeUpdate(wiring.Component):
         # node's header leaves its FIFO with the node's last entry into a register (Yosys merges
         # it into the FIFO memory's read port); the tail registers it once more.
         guard = accumulator_guard_bits(fs.max_degree)
-        acc_f = [Signal(signed(fs.force.width + guard), name=f"acc_f_{k}") for k in "xy"]
-        acc_e = Signal(unsigned(fs.rest_length.width + guard), name="acc_e")
+        acc_f = [Signal(signed(fs.force.width + guard), name=f"acc_f_{k}", reset_less=True) for k in "xy"]
+        acc_e = Signal(unsigned(fs.rest_length.width + guard), name="acc_e", reset_less=True)
         first, last = live["first"], live["last"]
         with m.If(back.valid):
             for acc, f in zip(acc_f, (live["f_x"], live["f_y"])):
@@ -307,7 +307,7 @@ class NodeUpdate(wiring.Component):
             m.d.sync += acc_e.eq(Mux(first, live["e"], acc_e + live["e"]))
         node_done = back.valid & last
         m.d.comb += headers.r_en.eq(node_done)
-        header = Signal(node_layout(fs), name="acc_header")
+        header = Signal(node_layout(fs), name="acc_header", reset_less=True)
         with m.If(node_done):
             m.d.sync += header.eq(headers.r_data)
         node_done_r = Signal(name="b10_node_done")
@@ -380,7 +380,8 @@ class NodeUpdate(wiring.Component):
         m.submodules.results = results = SyncFIFOBuffered(width=layout.size, depth=self.result_depth)
         m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value())]
         load = ~self.o.valid | self.o.ready
-        m.d.comb += results.r_en.eq(load)
+        payload = Signal(layout.size, name="o_payload", reset_less=True)  # data: no reset
+        m.d.comb += [results.r_en.eq(load), self.o.payload.eq(payload)]
         with m.If(load):
-            m.d.sync += [self.o.valid.eq(results.r_rdy), self.o.payload.eq(results.r_data)]
+            m.d.sync += [self.o.valid.eq(results.r_rdy), payload.eq(results.r_data)]
         return m
