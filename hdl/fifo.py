@@ -24,15 +24,18 @@ class LutFIFO(Elaboratable):
     The read and write pointers carry one wrap bit, so empty and full are equality tests of
     two registers (no counter on the handshake paths). With ``checked=False`` the handshakes
     are not gated: the user guarantees never to write when full nor read when empty (the node
-    header FIFO, whose reads follow its writes by construction).
+    header FIFO, whose reads follow its writes by construction). ``start`` is the pointers'
+    reset value: FIFOs that split one wide queue into column slices get different starts, so
+    that synthesis cannot merge their pointer registers and each pointer drives only its own
+    slice's RAM cells.
     """
 
-    def __init__(self, *, width: int, depth: int, checked: bool = True):
+    def __init__(self, *, width: int, depth: int, checked: bool = True, start: int = 0):
         if width < 1:
             raise ValueError(f"LutFIFO width must be at least 1, not {width}")
         if depth < 2 or depth & (depth - 1):
             raise ValueError(f"LutFIFO depth must be a power of two of at least 2, not {depth}")
-        self.width, self.depth, self.checked = width, depth, checked
+        self.width, self.depth, self.checked, self.start = width, depth, checked, start % depth
         self.w_data = Signal(width)
         self.w_en = Signal()
         self.w_rdy = Signal()
@@ -48,8 +51,8 @@ class LutFIFO(Elaboratable):
         write = storage.write_port()
         read = storage.read_port(domain="comb")
         bits = (self.depth - 1).bit_length()
-        produce = Signal(bits + 1)  # the top bit counts wraps
-        consume = Signal(bits + 1)
+        produce = Signal(bits + 1, init=self.start)  # the top bit counts wraps
+        consume = Signal(bits + 1, init=self.start)
         m.d.comb += [
             self.r_rdy.eq(produce != consume),
             self.w_rdy.eq(produce != (consume ^ (1 << bits))),

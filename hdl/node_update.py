@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
-from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import Format, FormatSet
@@ -112,6 +111,9 @@ class NodeUpdate(wiring.Component):
     saturation has a stage of its own.
     """
 
+    #: Width of one column slice of the result FIFO (each slice has its own pointers).
+    RESULT_SLICE_BITS = 20
+
     def __init__(self, fs: FormatSet | str):
         if isinstance(fs, str):
             fs = FormatSet.preset(fs)
@@ -131,12 +133,11 @@ class NodeUpdate(wiring.Component):
                                                   (s(fs.dt), s(fs.accel)))
                                  + reduce_levels((s(fs.velocity), s(fs.damping))))
         self.pipeline_stages = self.front_stages + self.rsqrt_latency + self.back_stages + self.tail_stages
-        # The result FIFO's write and read registers, the landing register, the skid FIFO
-        # and the output register.
-        self.latency = self.pipeline_stages + 5
-        # The result FIFO: block RAM (its depth is nearly free up to 512) plus the output
-        # register; more entries than the latency, so the credits never run out while o is ready.
-        self.result_depth = max(256, 1 << (self.latency + 1).bit_length()) + 1
+        # The result FIFO's write and the output register.
+        self.latency = self.pipeline_stages + 2
+        # Credits: the result FIFO (a power of two, more entries than the latency, so the
+        # credits never run out while o is ready) plus the output register.
+        self.result_depth = (1 << (self.latency + 1).bit_length()) + 1
         super().__init__({
             "i": In(stream.Signature(entry_layout(fs))),
             "o": Out(stream.Signature(result_layout(fs))),
@@ -375,27 +376,25 @@ class NodeUpdate(wiring.Component):
             result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
             result.error_sum.eq(live["e"]),
         ]
-        # A buffered FIFO: its storage is block RAM (a synchronous read port, so the address
-        # fans out to a handful of DP16KD, not to hundreds of LUT RAM cells). A DP16KD's data
-        # output takes ~5.8 ns, so it goes only into `landed`, a register that loads every
-        # clock (no enable, no reset: the placer puts it next to the block RAM). Landed
-        # results enter a 4-entry skid FIFO in front of the output register; the block RAM
-        # is read only when the skid FIFO has room for the results on their way to it.
-        m.submodules.results = results = SyncFIFOBuffered(width=layout.size, depth=self.result_depth)
-        m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value())]
-        landed = Signal(layout.size, name="results_landed", reset_less=True)
-        landed_valid = Signal(name="results_landed_valid")
-        m.submodules.skid = skid = LutFIFO(width=layout.size, depth=4)
-        pop = Signal()
-        m.d.comb += [
-            pop.eq(skid.level + landed_valid < skid.depth),
-            results.r_en.eq(pop),
-            skid.w_en.eq(landed_valid), skid.w_data.eq(landed),
-        ]
-        m.d.sync += [landed.eq(results.r_data), landed_valid.eq(pop & results.r_rdy)]
+        # The result FIFO in LUT RAM, in column slices of at most RESULT_SLICE_BITS, each
+        # with its own pointers: a read address then fans out to ~40 RAM cells, not ~300 (and
+        # no block RAM, whose 5.8 ns data output would take most of a clock).
+        fifo_depth = self.result_depth - 1
+        slices = []
+        for k, lo in enumerate(range(0, layout.size, self.RESULT_SLICE_BITS)):
+            width = min(self.RESULT_SLICE_BITS, layout.size - lo)
+            fifo = LutFIFO(width=width, depth=fifo_depth, checked=False, start=k)
+            m.submodules[f"results{k}"] = fifo
+            slices.append((lo, width, fifo))
+        result_ready = slices[0][2].r_rdy
         load = ~self.o.valid | self.o.ready
         payload = Signal(layout.size, name="o_payload", reset_less=True)  # data: no reset
-        m.d.comb += [skid.r_en.eq(load), self.o.payload.eq(payload)]
+        for lo, width, fifo in slices:
+            m.d.comb += [fifo.w_en.eq(tail.valid), fifo.w_data.eq(result.as_value()[lo:lo + width]),
+                         fifo.r_en.eq(load & result_ready)]
+            with m.If(load):
+                m.d.sync += payload[lo:lo + width].eq(fifo.r_data)
+        m.d.comb += self.o.payload.eq(payload)
         with m.If(load):
-            m.d.sync += [self.o.valid.eq(skid.r_rdy), payload.eq(skid.r_data)]
+            m.d.sync += self.o.valid.eq(result_ready)
         return m
