@@ -99,9 +99,9 @@ class NodeUpdate(wiring.Component):
     entry's side data rides along in a delay line of the rsqrt latency, a back section
     forms ``s``, the forces and ``|L − d|`` and accumulates per node, and a node tail runs
     ``a = F/m``, Euler and damping. Node headers wait in a FIFO from the input to the
-    accumulators. Results enter a block-RAM FIFO of ``result_depth`` entries whose read
-    register is the output register. Back-pressure is a credit count: ``i.ready`` is high while fewer
-    than ``result_depth`` nodes are owed (accepted last entries whose results have not
+    accumulators. Results enter a LUT-RAM FIFO (column slices with their own pointers)
+    in front of the output register; ``result_depth`` counts both. Back-pressure is a
+    credit count: ``i.ready`` is high while fewer than ``result_depth`` nodes are owed (accepted last entries whose results have not
     left ``o``), so the result FIFO can never overflow; ``result_depth`` covers the
     latency, so credits never run out while ``o`` is ready, even for degree-1 nodes.
 
