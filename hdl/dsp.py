@@ -46,7 +46,8 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
 
     ``a`` and ``b`` fit 18-bit operands (signed if the product is signed: an unsigned operand
     of a signed product is at most 17 bits). ``enable`` is the clock enable of all three
-    registers (``None``: always). The returned value has the shape of ``a * b``.
+    registers (``None``: always). The returned value has the shape of ``a * b``. With ECP5
+    primitives, a product with a 1-bit operand stays in the fabric.
     """
     a, b = Value.cast(a), Value.cast(b)
     shape = (a * b).shape()
@@ -57,7 +58,9 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
             raise ValueError(f"{name}: a {len(op)}-bit {'signed' if op.shape().signed else 'unsigned'} operand "
                              f"does not fit an {DSP_WIDTH}-bit multiplier operand")
     product = Signal(shape, name=name, reset_less=True)
-    if dsp_target(platform) == "ecp5":
+    # A 1-bit operand (the top bit of an unsigned operand in a signed product) makes the
+    # product a multiplexer: fabric logic, not a DSP block (Yosys maps it so too).
+    if dsp_target(platform) == "ecp5" and min(len(a), len(b)) > 1:
         operand = signed(DSP_WIDTH) if is_signed else unsigned(DSP_WIDTH)
         a_ext, b_ext = (Signal(operand, name=f"{name}_{n}") for n in "ab")
         p = Signal(2 * DSP_WIDTH, name=f"{name}_p")
