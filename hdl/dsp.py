@@ -15,7 +15,7 @@ the primitive.
 
 from __future__ import annotations
 
-from amaranth.hdl import ClockSignal, Const, Instance, Module, Signal, Value, signed, unsigned
+from amaranth.hdl import ClockSignal, Const, Instance, Module, Mux, Signal, Value, signed, unsigned
 
 from .fixedpoint import DSP_WIDTH
 
@@ -59,7 +59,7 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
                              f"does not fit an {DSP_WIDTH}-bit multiplier operand")
     product = Signal(shape, name=name, reset_less=True)
     # A 1-bit operand (the top bit of an unsigned operand in a signed product) makes the
-    # product a multiplexer: fabric logic, not a DSP block (Yosys maps it so too).
+    # product a multiplexer: fabric logic, not a DSP block.
     if dsp_target(platform) == "ecp5" and min(len(a), len(b)) > 1:
         operand = signed(DSP_WIDTH) if is_signed else unsigned(DSP_WIDTH)
         a_ext, b_ext = (Signal(operand, name=f"{name}_{n}") for n in "ab")
@@ -84,7 +84,13 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
         return product
     a_r = Signal(a.shape(), name=f"{name}_a", reset_less=True)
     b_r = Signal(b.shape(), name=f"{name}_b", reset_less=True)
-    updates = [a_r.eq(a), b_r.eq(b), product.eq(a_r * b_r)]
+    if len(b) == 1 and not b.shape().signed:
+        value = Mux(b_r, a_r, 0)  # written as a multiplexer, or Yosys may map it to a DSP block
+    elif len(a) == 1 and not a.shape().signed:
+        value = Mux(a_r, b_r, 0)
+    else:
+        value = a_r * b_r
+    updates = [a_r.eq(a), b_r.eq(b), product.eq(value)]
     if enable is None:
         m.d.sync += updates
     else:

@@ -7,6 +7,8 @@ pipeline stage onto the steps of ``docs/fixed-point.md``.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
@@ -111,7 +113,7 @@ class NodeUpdate(wiring.Component):
     saturation has a stage of its own.
     """
 
-    #: Width of one column slice of the result FIFO (each slice has its own pointers).
+    #: Width of one column slice of the header and result FIFOs (each slice has its own pointers).
     RESULT_SLICE_BITS = 20
 
     def __init__(self, fs: FormatSet | str):
@@ -146,6 +148,25 @@ class NodeUpdate(wiring.Component):
             "half_spring": In(shape_of(fs.spring)),
             "damping": In(shape_of(fs.damping)),
         })
+
+    def _sliced_fifo(self, m, name, width, depth):
+        """A FIFO (unchecked handshakes) of LUT RAM column slices, each with its own pointers.
+
+        The slices' pointers start at different values, so synthesis cannot merge them, and a
+        read address drives only its own slice's ~40 RAM cells instead of every cell of a
+        wide, deep FIFO (measured: 126 MHz with one 128×152-bit LUT RAM, 144 MHz sliced).
+        Returns an object with ``w_en``, ``w_data``, ``r_en``, ``r_data``, ``r_rdy``.
+        """
+        port = SimpleNamespace(w_en=Signal(name=f"{name}_w_en"), w_data=Signal(width, name=f"{name}_w_data"),
+                               r_en=Signal(name=f"{name}_r_en"), r_data=Signal(width, name=f"{name}_r_data"))
+        for k, lo in enumerate(range(0, width, self.RESULT_SLICE_BITS)):
+            bits = min(self.RESULT_SLICE_BITS, width - lo)
+            m.submodules[f"{name}{k}"] = fifo = LutFIFO(width=bits, depth=depth, checked=False, start=k)
+            m.d.comb += [fifo.w_en.eq(port.w_en), fifo.w_data.eq(port.w_data[lo:lo + bits]),
+                         fifo.r_en.eq(port.r_en), port.r_data[lo:lo + bits].eq(fifo.r_data)]
+            if k == 0:
+                port.r_rdy = fifo.r_rdy
+        return port
 
     def elaborate(self, platform):
         fs = self.fs
@@ -230,9 +251,8 @@ class NodeUpdate(wiring.Component):
                 live[k] = join_parts(live[k])
 
         # ------------------------------------------------------------ front
-        m.submodules.headers = headers = LutFIFO(
-            width=node_layout(fs).size,
-            depth=1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length(), checked=False)
+        headers = self._sliced_fifo(m, "headers", node_layout(fs).size,
+                                    1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length())
         beat = self.i.payload
         current = Signal(vector_layout(fs.position), name="current_position", reset_less=True)
         with m.If(take & beat.first):
@@ -376,25 +396,12 @@ class NodeUpdate(wiring.Component):
             result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
             result.error_sum.eq(live["e"]),
         ]
-        # The result FIFO in LUT RAM, in column slices of at most RESULT_SLICE_BITS, each
-        # with its own pointers: a read address then fans out to ~40 RAM cells, not ~300 (and
-        # no block RAM, whose 5.8 ns data output would take most of a clock).
-        fifo_depth = self.result_depth - 1
-        slices = []
-        for k, lo in enumerate(range(0, layout.size, self.RESULT_SLICE_BITS)):
-            width = min(self.RESULT_SLICE_BITS, layout.size - lo)
-            fifo = LutFIFO(width=width, depth=fifo_depth, checked=False, start=k)
-            m.submodules[f"results{k}"] = fifo
-            slices.append((lo, width, fifo))
-        result_ready = slices[0][2].r_rdy
+        # The result FIFO in LUT RAM, in column slices with their own pointers (below).
+        results = self._sliced_fifo(m, "results", layout.size, self.result_depth - 1)
         load = ~self.o.valid | self.o.ready
         payload = Signal(layout.size, name="o_payload", reset_less=True)  # data: no reset
-        for lo, width, fifo in slices:
-            m.d.comb += [fifo.w_en.eq(tail.valid), fifo.w_data.eq(result.as_value()[lo:lo + width]),
-                         fifo.r_en.eq(load & result_ready)]
-            with m.If(load):
-                m.d.sync += payload[lo:lo + width].eq(fifo.r_data)
-        m.d.comb += self.o.payload.eq(payload)
+        m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value()),
+                     results.r_en.eq(load & results.r_rdy), self.o.payload.eq(payload)]
         with m.If(load):
-            m.d.sync += self.o.valid.eq(result_ready)
+            m.d.sync += [self.o.valid.eq(results.r_rdy), payload.eq(results.r_data)]
         return m
