@@ -2,14 +2,17 @@
 
 :class:`amaranth.lib.fifo.SyncFIFO` reads its memory asynchronously; when the register that
 takes ``r_data`` is merged into the read port, Yosys may place the memory in ECP5 block RAM,
-whose ~5.8 ns clock-to-output then eats most of a clock. This FIFO asks for distributed RAM
-(``ram_style = "distributed"``: ``TRELLIS_DPR16X4`` on ECP5), whose read is a LUT delay.
+whose ~5.8 ns clock-to-output then eats most of a clock. Elaborated for ECP5 (:data:`hdl.dsp.ECP5`)
+this FIFO asks for distributed RAM (``ram_style = "distributed"``: ``TRELLIS_DPR16X4``), whose
+read is a LUT delay; elsewhere the synthesis tool chooses.
 """
 
 from __future__ import annotations
 
 from amaranth.hdl import Elaboratable, Module, Signal
 from amaranth.lib.memory import Memory
+
+from .dsp import dsp_target
 
 __all__ = ["LutFIFO"]
 
@@ -46,8 +49,9 @@ class LutFIFO(Elaboratable):
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.storage = storage = Memory(shape=self.width, depth=self.depth, init=[],
-                                                attrs={"ram_style": "distributed"})
+        # Only where the device has distributed RAM (iCE40 has none: Yosys would refuse).
+        attrs = {"ram_style": "distributed"} if dsp_target(platform) == "ecp5" else {}
+        m.submodules.storage = storage = Memory(shape=self.width, depth=self.depth, init=[], attrs=attrs)
         write = storage.write_port()
         read = storage.read_port(domain="comb")
         bits = (self.depth - 1).bit_length()
