@@ -61,6 +61,7 @@ class SpringflatCore(wiring.Component):
         self._datapath = NodeUpdate(fs)
         self._stepgen = StepGenerator(fs)
         self.latency = self._datapath.latency
+        self.result_depth = self._datapath.result_depth
         self.step_latency = self._stepgen.latency + 1
         super().__init__({
             "entries": In(stream.Signature(entry_layout(fs))),

@@ -112,6 +112,8 @@ def describe(component, fs: FormatSet, name: str) -> dict:
             "initiation_interval": 1}
     if hasattr(component, "step_latency"):
         info["step_latency"] = component.step_latency
+    if hasattr(component, "result_depth"):
+        info["credits"] = component.result_depth
     return info
 
 
@@ -145,7 +147,7 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "sum of |L - d| over the positions it was given.",
                      "node_update / springflat_core: the datapath never stalls; back-pressure is a credit count. "
                      "entries.ready (a register) falls only while as many results are owed (accepted, not yet "
-                     "taken from the output) as the result FIFO and output register hold (129 for both presets); "
+                     "taken from the output) as the result FIFO and output register hold (`credits` below); "
                      "with results.ready held high it never falls.",
                      "Throughput = Fmax x II = Fmax neighbour entries per second.",
                      ("Multipliers: ECP5 MULT18X18D instances with their input and output registers in use "
@@ -167,7 +169,8 @@ def interface_markdown(interface: dict) -> str:
     for name, c in interface["components"].items():
         lines += [f"## `{name}` — {c['summary']}", "",
                   f"Latency {c['latency']} clocks, initiation interval {c['initiation_interval']}"
-                  + (f"; errors → step {c['step_latency']} clocks" if "step_latency" in c else "") + ".", "",
+                  + (f"; errors → step {c['step_latency']} clocks" if "step_latency" in c else "")
+                  + (f"; credits {c['credits']} results" if "credits" in c else "") + ".", "",
                   "| port | direction | width |", "|---|---|---|"]
         lines += [f"| `{p['name']}` | {p['direction']} | {p['width']} |" for p in c["ports"]]
         for port, fields in c["payload_layouts"].items():
