@@ -8,9 +8,12 @@ two flip-flop levels around a ``*``. Elaborated with :data:`ECP5` as the platfor
 ``MULT18X18D`` whose own input and output registers (``REG_INPUTA/B_CLK``,
 ``REG_OUTPUT_CLK``) hold them: Yosys's ``synth_ecp5`` maps a ``*`` to a bare
 ``MULT18X18D`` and leaves the registers in the fabric, where the routing to and from the
-DSP row costs 2.5–4.5 ns (``docs/synthesis.md``). Both forms compute the same function
-with the same latency; ``tests/test_dsp.py`` checks the primitive form against a model of
-the primitive.
+DSP row costs 2.5–5.8 ns (``docs/synthesis.md``). Both forms compute the same function
+with the same latency; ``tests/test_cocotb.py::test_ecp5_flavour_with_mult18x18d_instances``
+simulates the primitive form against the golden model with a model of the primitive
+(``sim/models/MULT18X18D.v``).
+
+The platform object also tells :class:`hdl.fifo.LutFIFO` that the device has distributed RAM.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ from golden_model.fixed.pipeline import accumulator_guard_bits
 
 from .fifo import LutFIFO
 from .fixedpoint import clamp, shape_of, shift_round, sum_round
-from .pipeline import Pipeline, aligned_add, join_parts, reduce_levels
+from .pipeline import Pipeline, aligned_add, reduce_levels
 from .rsqrt import RsqrtUnit
 
 __all__ = ["NodeUpdate", "vector_layout", "entry_layout", "node_layout", "result_layout"]
@@ -114,7 +114,7 @@ class NodeUpdate(wiring.Component):
     """
 
     #: Width of one column slice of the header and result FIFOs (each slice has its own pointers).
-    RESULT_SLICE_BITS = 20
+    FIFO_SLICE_BITS = 20
 
     def __init__(self, fs: FormatSet | str):
         if isinstance(fs, str):
@@ -126,11 +126,12 @@ class NodeUpdate(wiring.Component):
         self.fs = fs
         self.rsqrt_latency = RsqrtUnit.latency_of(fs.rsqrt_config())
         s = shape_of
-        self.front_stages = 10 + reduce_levels((s(fs.delta), s(fs.delta)))
-        self.back_stages = 16 + (reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
+        mul = Pipeline.MUL_STAGES
+        self.front_stages = 7 + mul + reduce_levels((s(fs.delta), s(fs.delta)))
+        self.back_stages = 7 + 3 * mul + (reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
                                  + reduce_levels((s(fs.spring), s(fs.spring)))
                                  + reduce_levels((s(fs.spring), s(fs.delta))))
-        self.tail_stages = 19 + (reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
+        self.tail_stages = 10 + 3 * mul + (reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
                                  + reduce_levels((s(fs.dt), s(fs.velocity)), (s(fs.half_dt_sq), s(fs.accel)),
                                                   (s(fs.dt), s(fs.accel)))
                                  + reduce_levels((s(fs.velocity), s(fs.damping))))
@@ -159,8 +160,8 @@ class NodeUpdate(wiring.Component):
         """
         port = SimpleNamespace(w_en=Signal(name=f"{name}_w_en"), w_data=Signal(width, name=f"{name}_w_data"),
                                r_en=Signal(name=f"{name}_r_en"), r_data=Signal(width, name=f"{name}_r_data"))
-        for k, lo in enumerate(range(0, width, self.RESULT_SLICE_BITS)):
-            bits = min(self.RESULT_SLICE_BITS, width - lo)
+        for k, lo in enumerate(range(0, width, self.FIFO_SLICE_BITS)):
+            bits = min(self.FIFO_SLICE_BITS, width - lo)
             m.submodules[f"{name}{k}"] = fifo = LutFIFO(width=bits, depth=depth, checked=False, start=k)
             m.d.comb += [fifo.w_en.eq(port.w_en), fifo.w_data.eq(port.w_data[lo:lo + bits]),
                          fifo.r_en.eq(port.r_en), port.r_data[lo:lo + bits].eq(fifo.r_data)]
@@ -211,44 +212,25 @@ class NodeUpdate(wiring.Component):
         # ------------------------------------------------------------ stage helper
         live = {}
 
-        def step(p, name, drop=(), **new):
-            """One stage of ``p``: registers ``new`` and every value in ``live`` not dropped.
-
-            A value is a signal/view or a list of partial products ``[(value, shift)]``.
-            """
-            p.stage(name)
+        def carry_live(p, name, drop=(), **new):
+            """Register, in ``p``'s current stage, ``new`` and every value in ``live`` not dropped."""
             out = {}
             carried = [(k, v) for k, v in live.items() if k not in drop and k not in new]
             for key, value in carried + list(new.items()):
-                if isinstance(value, list):
-                    out[key] = [(p.keep(Value.cast(v), f"{name}_{key}_{i}"), s) for i, (v, s) in enumerate(value)]
-                else:
-                    out[key] = p.keep(value, f"{name}_{key}")
+                out[key] = p.keep(value, f"{name}_{key}")
             live.clear()
             live.update(out)
 
+        def step(p, name, drop=(), **new):
+            """One stage of ``p`` (see :func:`carry_live`)."""
+            p.stage(name)
+            carry_live(p, name, drop, **new)
+
         def multiply(p, name, drop=(), **products):
-            """Partial products (one DSP each: operands, then products registered), then adder
-            levels until each product is whole."""
-            parts = {key: p.mul(a, b, f"{name}_{key}") for key, (a, b) in products.items()}
-            step(p, f"{name}_in", drop=drop)
-            step(p, name)
-            live.update(parts)
-            # The products land in fabric registers first: the route out of the DSP row is
-            # then all that stage does, and the adders start next to their inputs.
-            step(p, f"{name}_out")
-            level = 0
-            while any(len(live[k]) > 1 for k in products):
-                level += 1
-                p.stage(f"{name}_sum{level}")
-                out = {}
-                for key, value in live.items():
-                    out[key] = (p.reduce(value, f"{name}_sum{level}_{key}") if key in products
-                                else p.keep(value, f"{name}_sum{level}_{key}"))
-                live.clear()
-                live.update(out)
-            for k in products:
-                live[k] = join_parts(live[k])
+            """Whole products (:meth:`~hdl.pipeline.Pipeline.multiply`), carrying ``live`` along."""
+            drops = [drop]
+            live.update(p.multiply(products, name,
+                                   lambda stage_name: carry_live(p, stage_name, drops.pop() if drops else ())))
 
         # ------------------------------------------------------------ front
         headers = self._sliced_fifo(m, "headers", node_layout(fs).size,

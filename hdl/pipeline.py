@@ -70,6 +70,9 @@ def join_parts(parts):
 class Pipeline:
     """Registers of one pipeline, stage by stage.
 
+    A whole multiply (:meth:`multiply`) takes :attr:`MUL_STAGES` stages plus its adder levels
+    (:func:`reduce_levels`); the blocks' latency formulas count with both.
+
     Parameters
     ----------
     m : Module
@@ -82,6 +85,10 @@ class Pipeline:
         The elaboration platform; :data:`hdl.dsp.ECP5` makes the multipliers ``MULT18X18D``
         instances with their own registers (:func:`hdl.dsp.registered_product`).
     """
+
+    #: Stages of a multiply before its adder levels: operands, products (both in the DSP
+    #: block), the products landed in fabric registers.
+    MUL_STAGES = 3
 
     def __init__(self, m: Module, valid, *, advance=None, platform=None):
         self._m = m
@@ -137,3 +144,28 @@ class Pipeline:
             value, shift = pair[0] if len(pair) == 1 else aligned_add(*pair[0], *pair[1])
             out.append((self.keep(Value.cast(value), f"{name}_r{i // 2}"), shift))
         return out
+
+    def multiply(self, products: dict, name: str, carry=lambda stage_name: None) -> dict:
+        """Whole products ``{key: (a, b)}`` → ``{key: a * b}``, valid after the stages this adds.
+
+        :attr:`MUL_STAGES` stages (``{name}_in``, ``{name}``, ``{name}_out``: operands and
+        products registered in the DSP blocks, then the products landed in fabric registers,
+        so the route out of the DSP row is all that stage does), then the pairwise adder levels
+        ``{name}_sum1``…. ``carry(stage_name)`` is called once in every stage, after it starts,
+        to register the caller's other values.
+        """
+        parts = {key: self.mul(a, b, f"{name}_{key}") for key, (a, b) in products.items()}
+        for suffix in ("_in", ""):
+            self.stage(f"{name}{suffix}")
+            carry(f"{name}{suffix}")
+        self.stage(f"{name}_out")
+        parts = {key: [(self.keep(Value.cast(v), f"{name}_out_{key}{i}"), shift) for i, (v, shift) in enumerate(p)]
+                 for key, p in parts.items()}
+        carry(f"{name}_out")
+        level = 0
+        while any(len(p) > 1 for p in parts.values()):
+            level += 1
+            self.stage(f"{name}_sum{level}")
+            parts = {key: self.reduce(p, f"{name}_sum{level}_{key}") for key, p in parts.items()}
+            carry(f"{name}_sum{level}")
+        return {key: join_parts(p) for key, p in parts.items()}

@@ -14,7 +14,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet, Rounding, RsqrtConfig, rsqrt_stages
 
 from .fixedpoint import round_half_bit, saturate, shift_round
-from .pipeline import Pipeline, join_parts, reduce_levels
+from .pipeline import Pipeline, reduce_levels
 
 # The golden model's rounding of the rsqrt internals is the module constant
 # ``_INTERNAL_ROUNDING`` (not a field of RsqrtConfig). ``golden_model.fixed.rsqrt`` is the
@@ -100,12 +100,12 @@ class RsqrtUnit(wiring.Component):
     def latency_of(config):
         """Pipeline latency in clocks for ``config``.
 
-        norm, shift, rom, seed; per Newton step 14 stages plus the adder levels of its three
+        norm, shift, rom, seed; per Newton step 5 stages, 3 multiplies of ``Pipeline.MUL_STAGES`` each plus the adder levels of its three
         multiplies (which depend on the widths); denorm, round, o.
         """
         y, mant = unsigned(config.y_fmt.width), unsigned(config.mant_fmt.width)
         t1, h = unsigned(config.ysq_fmt.width), signed(config.h_fmt.width)
-        per_step = 14 + reduce_levels((y, y)) + reduce_levels((mant, t1)) + reduce_levels((y, h))
+        per_step = 5 + 3 * Pipeline.MUL_STAGES + reduce_levels((y, y)) + reduce_levels((mant, t1)) + reduce_levels((y, h))
         return 7 + per_step * config.newton_steps
 
     @staticmethod
@@ -156,7 +156,7 @@ class RsqrtUnit(wiring.Component):
             self.i.ready.eq(advance),
         ]
         pipe = Pipeline(m, self.i.valid, advance=advance, platform=platform)
-        stage, reg, mul = pipe.stage, pipe.reg, pipe.mul
+        stage, reg = pipe.stage, pipe.reg
 
         # --- norm: priority encoder -> shift amounts (per bit length, from the golden model)
         table, right = self._normalisation_table()
@@ -229,21 +229,8 @@ class RsqrtUnit(wiring.Component):
             # registered, then products, two stages); adder levels add them pairwise, one
             # adder per stage, then the rounding takes a stage of its own.
             def product(a, b, name, **keep):
-                parts = mul(a, b, f"nr{n}_{name}")
-                stage(f"nr{n}_{name}_in")
-                carry(f"{name}_in", **keep)
-                stage(f"nr{n}_{name}")
-                carry(name, **keep)
-                stage(f"nr{n}_{name}_out")  # the products land in fabric registers
-                parts = [(reg(v, v.shape(), f"nr{n}_{name}_out{i}"), sh) for i, (v, sh) in enumerate(parts)]
-                carry(f"{name}_out", **keep)
-                level = 0
-                while len(parts) > 1:
-                    level += 1
-                    stage(f"nr{n}_{name}_sum{level}")
-                    parts = pipe.reduce(parts, f"nr{n}_{name}_sum{level}")
-                    carry(f"{name}_sum{level}", **keep)
-                return join_parts(parts)
+                return pipe.multiply({"p": (a, b)}, f"nr{n}_{name}",
+                                     lambda stage_name: carry(stage_name.removeprefix(f"nr{n}_"), **keep))["p"]
 
             y_sq = product(y, y, "ysq", with_mant=True)
             stage(f"nr{n}_t1")

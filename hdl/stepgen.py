@@ -12,7 +12,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet, dt_constant, exp_table, shift_round as gm_shift_round
 
 from .fixedpoint import saturate, shift_round
-from .pipeline import Pipeline, join_parts
+from .pipeline import Pipeline
 
 __all__ = ["StepGenerator"]
 
@@ -179,18 +179,11 @@ class StepGenerator(wiring.Component):
         if self._interpolating:
             frac = {lane: reg(error[lane][:r], r, f"lut_{lane}_t") for lane in lanes}
             # slope · t in a DSP block: operands registered, then the product (two stages)
-            stage("mul_in")
-            product = {}
-            for lane in lanes:
-                product[lane] = join_parts(pipe.mul(row[lane].slope, frac[lane], f"mul_{lane}"))
-                value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_in_{lane}_base")
-            stage("mul")
-            for lane in lanes:
-                value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_{lane}_base")
-            stage("mul_out")  # the products land in fabric registers
-            for lane in lanes:
-                product[lane] = reg(product[lane], product[lane].shape(), f"mul_out_{lane}_p")
-                value[lane] = reg(value[lane], fs.lut_entry.width, f"mul_out_{lane}_base")
+            def carry_base(stage_name):
+                for lane in lanes:
+                    value[lane] = reg(value[lane], fs.lut_entry.width, f"{stage_name}_{lane}_base")
+
+            product = pipe.multiply({lane: (row[lane].slope, frac[lane]) for lane in lanes}, "mul", carry_base)
             stage("interp_round")
             for lane in lanes:
                 product[lane] = reg(shift_round(product[lane], r, fs.rounding), len(product[lane]) - r + 1,
@@ -216,14 +209,11 @@ class StepGenerator(wiring.Component):
         dt = reg(saturate(v_dt, fs.dt)[0], fs.dt.width, "dt")
 
         # --- dt * dt in a DSP block: operand registered, then the product (two stages)
-        stage("sq_in")
-        dt_sq = join_parts(pipe.mul(dt, dt, "dt_sq"))
-        dt = reg(dt, fs.dt.width, "sq_in_dt")
-        stage("sq")
-        dt = reg(dt, fs.dt.width, "sq_dt")
-        stage("sq_out")  # the product lands in fabric registers
-        dt_sq = reg(dt_sq, dt_sq.shape(), "sq_out_p")
-        dt = reg(dt, fs.dt.width, "sq_out_dt")
+        def carry_dt(stage_name):
+            nonlocal dt
+            dt = reg(dt, fs.dt.width, f"{stage_name}_dt")
+
+        dt_sq = pipe.multiply({"dt_sq": (dt, dt)}, "sq", carry_dt)["dt_sq"]
 
         # --- half: round(dt*dt / 2) to half_dt_sq's lsb
         stage("half")

@@ -177,16 +177,21 @@ def test_no_bubbles(preset):
     assert run.out_cycles == [int(c) + dut.latency for c in last_entry]
 
 
+def check_degree_one_nodes(dut, fs, n_nodes, seed, **kw):
+    """``n_nodes`` nodes of one neighbour each through the RTL against the golden model."""
+    stream, positions, velocities = random_stream(fs, n_nodes, seed=seed, max_degree=1)
+    v = np.zeros_like(positions)
+    v[:n_nodes] = velocities
+    return check_pass(dut, fs, stream, positions, v, random_constants(fs, seed + 1), **kw)
+
+
 @pytest.mark.parametrize("preset", PRESETS)
 def test_no_bubbles_with_degree_1_nodes(preset):
     """One entry per node, never stalled: the credits cover the latency, so the input never waits."""
     fs = FormatSet.preset(preset)
     dut = NodeUpdate(fs)
-    stream, positions, velocities = random_stream(fs, 3 * dut.latency, seed=6, max_degree=1)
-    n = len(stream.indptr) - 1
-    v = np.zeros_like(positions)
-    v[:n] = velocities
-    run = check_pass(dut, fs, stream, positions, v, random_constants(fs, 7))
+    n = 3 * dut.latency
+    run = check_degree_one_nodes(dut, fs, n, seed=6)
     assert run.in_cycles == list(range(n))
     assert run.out_cycles == [c + dut.latency for c in range(n)]
 
@@ -196,11 +201,7 @@ def test_a_long_output_stall_fills_the_results_and_stops_the_input(preset):
     """o.ready low for a long time: exactly ``result_depth`` nodes are accepted, then i.ready falls."""
     fs = FormatSet.preset(preset)
     dut = NodeUpdate(fs)
-    stream, positions, velocities = random_stream(fs, 2 * dut.result_depth, seed=8, max_degree=1)
-    n = len(stream.indptr) - 1
-    v = np.zeros_like(positions)
-    v[:n] = velocities
     stall = 4 * dut.result_depth
-    run = check_pass(dut, fs, stream, positions, v, random_constants(fs, 9), ready_after=stall)
+    run = check_degree_one_nodes(dut, fs, 2 * dut.result_depth, seed=8, ready_after=stall)
     accepted_during_stall = sum(c < stall for c in run.in_cycles)
     assert accepted_during_stall == dut.result_depth
