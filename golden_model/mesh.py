@@ -142,6 +142,11 @@ class Mesh:
         np.cumsum(np.bincount(src, minlength=self.n_vertices), out=indptr[1:])
         return indptr, dst[order], eid[order]
 
+    @cached_property
+    def rings(self) -> "Rings":
+        """Each node's neighbours in cyclic order around it (see :class:`Rings`)."""
+        return _rings(self.faces, self.n_vertices, self.edges)
+
     def masses(self, density: float) -> np.ndarray:
         """Node masses (eq. 6): ``m_i = (rho/3)·Σ A_t`` over incident triangles."""
         incident = np.bincount(
@@ -152,6 +157,98 @@ class Mesh:
     def auto_density(self) -> float:
         """The paper's ``rho = 1/min m_i`` with masses computed at ``rho = 1``."""
         return 1.0 / float(self.masses(1.0).min())
+
+
+# --------------------------------------------------------------------------- orientation and rings
+
+
+def layout_orientation(positions: np.ndarray, faces: np.ndarray) -> float:
+    """``+1`` or ``−1``: the sign of the layout's total signed area.
+
+    A consistently oriented mesh maps onto a fold-free layout with every face
+    of one sign; which sign depends only on whether the layout is mirrored.
+    The sign of the summed signed area is the orientation of the bulk of the
+    pattern, whatever folds it has (``+1`` on a tie).
+    """
+    return 1.0 if float(np.sum(signed_areas_2d(positions, faces))) >= 0 else -1.0
+
+
+def folded_faces(positions: np.ndarray, faces: np.ndarray, orientation: float | None = None) -> np.ndarray:
+    """``(F,)`` bool: faces whose 2D orientation disagrees with the pattern's (or is degenerate).
+
+    ``orientation`` defaults to :func:`layout_orientation` of ``positions``:
+    the mesh is consistently oriented, so in a usable pattern every face has
+    the sign of the whole.  This is the honest fold count; the spec's
+    ``flipped`` compares with each face's own sign in ``P0`` instead.
+    """
+    if orientation is None:
+        orientation = layout_orientation(positions, faces)
+    return orientation * signed_areas_2d(positions, faces) <= 0
+
+
+@dataclass(frozen=True, eq=False)
+class Rings:
+    """Neighbour lists in cyclic order: node ``i``'s are ``neighbour[indptr[i]:indptr[i+1]]``.
+
+    Consecutive entries ``k``, ``k+1`` of a node (cyclically: the last entry
+    pairs with the first) are the node's incident triangle ``(i, j_k, j_k+1)``
+    in the mesh's own winding, when ``face[k] >= 0``; a boundary node's ring
+    starts after its boundary gap, so only its last pair has ``face = −1``.
+    The degree and the set of neighbours are those of :attr:`Mesh.neighbours`.
+
+    Attributes:
+        indptr: ``(V+1,)``.
+        neighbour: ``(N,)`` neighbour node ``j_k``.
+        edge_id: ``(N,)`` row of :attr:`Mesh.edges` of the spring ``(i, j_k)``.
+        next_neighbour: ``(N,)`` ``j_k+1`` (cyclic within the node).
+        face: ``(N,)`` the face ``(i, j_k, j_k+1)``, or −1 where the pair is no face.
+    """
+
+    indptr: np.ndarray
+    neighbour: np.ndarray
+    edge_id: np.ndarray
+    next_neighbour: np.ndarray
+    face: np.ndarray
+
+
+def _rings(faces: np.ndarray, n: int, edges: np.ndarray) -> Rings:
+    """Walk each node's fan: corner ``a`` of face ``(a, b, c)`` links ``b → c``."""
+    f = len(faces)
+    owner = faces.ravel()  # corner k of face t: node faces[t, k]
+    after = np.roll(faces, -1, axis=1).ravel()  # b
+    before = np.roll(faces, -2, axis=1).ravel()  # c
+    face_of = np.repeat(np.arange(f), 3)
+    key = owner * n + after
+    degree = np.bincount(np.concatenate([edges[:, 0], edges[:, 1]]), minlength=n)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(degree, out=indptr[1:])
+    # a fan starts at the corner whose 'after' is no other corner's 'before' (boundary nodes only)
+    has_predecessor = np.isin(key, owner * n + before)
+    neighbour = np.empty(indptr[-1], dtype=np.int64)
+    next_neighbour = np.empty_like(neighbour)
+    face = np.full(indptr[-1], -1, dtype=np.int64)
+    corners_of = np.argsort(owner, kind="stable")
+    corner_ptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(owner, minlength=n), out=corner_ptr[1:])
+    for i in range(n):
+        corners = corners_of[corner_ptr[i]:corner_ptr[i + 1]]
+        succ = {int(after[c]): (int(before[c]), int(face_of[c])) for c in corners}
+        starts = [int(after[c]) for c in corners if not has_predecessor[c]]
+        j = starts[0] if starts else int(after[corners[0]])
+        base = indptr[i]
+        for k in range(degree[i]):
+            neighbour[base + k] = j
+            nxt = succ.get(j)
+            if nxt is None:  # boundary: the fan ends; the ring closes over the gap
+                next_neighbour[base + k] = neighbour[base]
+                break
+            next_neighbour[base + k], face[base + k] = nxt
+            j = nxt[0]
+    edge_index = {(int(a), int(b)): e for e, (a, b) in enumerate(edges.tolist())}
+    owner_entries = np.repeat(np.arange(n), degree)
+    lo, hi = np.minimum(owner_entries, neighbour), np.maximum(owner_entries, neighbour)
+    edge_id = np.fromiter((edge_index[(int(a), int(b))] for a, b in zip(lo, hi)), dtype=np.int64, count=len(lo))
+    return Rings(indptr, neighbour, edge_id, next_neighbour, face)
 
 
 # --------------------------------------------------------------------------- topology

@@ -136,3 +136,39 @@ def test_unparseable_and_unknown_files(tmp_path):
         load_mesh(tmp_path / "x.dae") if (tmp_path / "x.dae").write_text("x") else None
     with pytest.raises(MeshError, match="no such file"):
         load_mesh(tmp_path / "missing.obj")
+
+
+def test_rings_are_cyclic_fans_in_the_mesh_winding():
+    from golden_model.generate import generated_meshes
+    for mesh in list(generated_meshes().values())[:3]:
+        rings = mesh.rings
+        indptr, neighbours, _ = mesh.neighbours
+        assert np.array_equal(rings.indptr, indptr)
+        owner = np.repeat(np.arange(mesh.n_vertices), np.diff(indptr))
+        for i in range(mesh.n_vertices):
+            lo, hi = indptr[i], indptr[i + 1]
+            assert sorted(rings.neighbour[lo:hi]) == sorted(neighbours[lo:hi])
+            assert np.array_equal(rings.next_neighbour[lo:hi], np.roll(rings.neighbour[lo:hi], -1))
+        tri = rings.face >= 0
+        # every face appears once per corner, wound as in the mesh
+        assert np.bincount(rings.face[tri], minlength=mesh.n_faces).tolist() == [3] * mesh.n_faces
+        wound = np.column_stack([owner[tri], rings.neighbour[tri], rings.next_neighbour[tri]])
+        faces = mesh.faces[rings.face[tri]]
+        assert all(tuple(w) in {tuple(np.roll(f, k)) for k in range(3)} for w, f in zip(wound, faces))
+        boundary = np.zeros(mesh.n_vertices, bool)
+        boundary[mesh.boundary_loop] = True
+        assert np.array_equal(np.bincount(owner[~tri], minlength=mesh.n_vertices), boundary.astype(int))
+        assert np.array_equal(mesh.rest_lengths[rings.edge_id],
+                              np.linalg.norm(mesh.vertices[owner] - mesh.vertices[rings.neighbour], axis=1))
+
+
+def test_folded_faces_counts_against_the_whole_pattern():
+    from golden_model.mesh import folded_faces, layout_orientation
+    mesh = Mesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float), np.array([[0, 1, 2], [1, 3, 2]]))
+    flat = mesh.vertices[:, :2]
+    assert layout_orientation(flat, mesh.faces) == 1 and not folded_faces(flat, mesh.faces).any()
+    mirrored = flat * [-1, 1]
+    assert layout_orientation(mirrored, mesh.faces) == -1 and not folded_faces(mirrored, mesh.faces).any()
+    folded = flat.copy()
+    folded[3] = [0.2, 0.2]  # vertex 3 pulled across edge (1, 2)
+    assert folded_faces(folded, mesh.faces).tolist() == [False, True]
