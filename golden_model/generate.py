@@ -76,3 +76,44 @@ def generated_meshes() -> dict[str, Mesh]:
         "saddle": saddle_grid(8, height=0.3),
         "delaunay": delaunay_patch(150),
     }
+
+
+def spherical_cap(rings: int = 10, half_angle_degrees: float = 60.0, radius: float = 1.0) -> Mesh:
+    """A spherical cap meshed in ``rings`` concentric rings around its pole (6k nodes on ring k).
+
+    Ring ``k`` lies at polar angle ``k/rings`` of ``half_angle_degrees``; its
+    nodes are evenly spaced in longitude, and neighbouring rings are zipped
+    into triangles by longitude order, so the mesh is a disk with nearly
+    equilateral triangles and valences around 6.
+    """
+    vertices = [np.array([[0.0, 0.0, radius]])]
+    faces = []
+    start = [0]
+    offset = 1
+    for k in range(1, rings + 1):
+        polar = np.radians(half_angle_degrees) * k / rings
+        count = 6 * k
+        longitude = 2 * np.pi * (np.arange(count) + 0.5 * (k % 2)) / count
+        vertices.append(radius * np.column_stack([np.sin(polar) * np.cos(longitude), np.sin(polar) * np.sin(longitude),
+                                                  np.full(count, np.cos(polar))]))
+        start.append(offset)
+        offset += count
+    for k in range(1, rings + 1):
+        outer = start[k] + np.arange(6 * k)
+        if k == 1:  # the pole's fan
+            faces += [[0, outer[o], outer[(o + 1) % 6]] for o in range(6)]
+            continue
+        inner = start[k - 1] + np.arange(6 * (k - 1))
+        angle_in = 2 * np.pi * (np.arange(len(inner)) + 0.5 * ((k - 1) % 2)) / len(inner)
+        angle_out = 2 * np.pi * (np.arange(len(outer)) + 0.5 * (k % 2)) / len(outer)
+        # zip the two rings by longitude: each step advances one ring and makes one triangle
+        i = o = 0
+        while i < len(inner) or o < len(outer):
+            take_outer = i == len(inner) or (o < len(outer) and angle_out[o] <= angle_in[i])
+            if take_outer:
+                faces.append([inner[i % len(inner)], outer[o], outer[(o + 1) % len(outer)]])
+                o += 1
+            else:
+                faces.append([inner[i], outer[o % len(outer)], inner[(i + 1) % len(inner)]])
+                i += 1
+    return Mesh(np.vstack(vertices), np.array(faces), name="cap")

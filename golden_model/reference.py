@@ -27,11 +27,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields, replace
+from functools import cached_property
 from typing import Callable, Literal
 
 import numpy as np
 
-from .mesh import Mesh, signed_areas_2d
+from .mesh import Mesh, folded_faces, layout_orientation, signed_areas_2d
 
 __all__ = [
     "FlattenParams",
@@ -44,11 +45,16 @@ __all__ = [
     "variable_step",
     "spring_forces",
     "spring_energy",
+    "barrier_forces",
+    "barrier_energy",
+    "momentum_beta",
+    "node_weights",
 ]
 
 Status = Literal["converged", "max-iterations", "diverged"]
 STEP_MODES = ("variable", "fixed")
 UPDATE_ORDERS = ("jacobi", "sequential")
+DYNAMICS = ("paper", "momentum")
 
 
 class ParameterError(ValueError):
@@ -74,6 +80,17 @@ class FlattenParams:
         penalty_gain: ``λ`` ≥ 0, the fraction of the shortfall moved per step.
         tol_area, tol_shape, tol_energy: ``φ_S``, ``φ_C``, ``ε`` (≥ 0).
         max_iter: ``N_max`` (≥ 1).
+        dynamics: ``"paper"`` (eqs. 7–9, the default) or ``"momentum"``:
+            per-node weights ``w_i = 2/(C·deg_i)``, ``V ← β_k·V + w_i·f_i``,
+            ``P ← P + V`` with ``β_k = k/(k+3)`` and a gradient restart
+            (``docs/dynamics.md``).  ``step``, ``dt`` and ``density`` do not
+            apply to it.
+        barrier: the fold barrier (``docs/dynamics.md``); ``None`` means on
+            with ``momentum`` and off with ``paper``.
+        barrier_threshold: ``κ`` in (0, 1]: a triangle whose signed 2D area
+            falls below ``κ`` times its 3D area is pushed back.
+        barrier_gain: ``μ`` > 0: the barrier's stiffness relative to the
+            springs' ``C``.
     """
 
     spring: float = 0.5
@@ -89,6 +106,10 @@ class FlattenParams:
     tol_shape: float = 0.40
     tol_energy: float = 0.05
     max_iter: int = 100
+    dynamics: str = "paper"
+    barrier: bool | None = None
+    barrier_threshold: float = 0.25
+    barrier_gain: float = 1.0
 
     def __post_init__(self) -> None:
         def finite(name: str, value: float) -> float:
@@ -113,6 +134,22 @@ class FlattenParams:
                 raise ParameterError(f"{name.replace('_', '-')} must be >= 0, got {getattr(self, name)}")
         if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
             raise ParameterError(f"max-iter must be an integer >= 1, got {self.max_iter!r}")
+        if self.dynamics not in DYNAMICS:
+            raise ParameterError(f"dynamics must be one of {DYNAMICS}, got {self.dynamics!r}")
+        if self.barrier is None:
+            object.__setattr__(self, "barrier", self.dynamics == "momentum")
+        if not isinstance(self.barrier, bool):
+            raise ParameterError(f"barrier must be true or false, got {self.barrier!r}")
+        if not 0 < finite("barrier threshold", self.barrier_threshold) <= 1:
+            raise ParameterError(f"barrier threshold kappa must be in (0, 1], got {self.barrier_threshold}")
+        if not 0 < finite("barrier gain", self.barrier_gain) <= 16:
+            raise ParameterError(f"barrier gain mu must be in (0, 16], got {self.barrier_gain}")
+        if self.dynamics == "momentum":
+            if self.update != "jacobi":
+                raise ParameterError("the momentum dynamics updates all nodes together: use --update jacobi")
+            if self.damping:
+                raise ParameterError("damping belongs to the paper dynamics; the momentum dynamics damps "
+                                     "by its restart (drop --damping)")
 
     def with_(self, **changes) -> "FlattenParams":
         """A copy with some fields changed (validated again)."""
@@ -138,6 +175,10 @@ class SpringModel:
             degenerate in ``P0`` takes the majority orientation).
         altitudes: ``(F, 3)`` 3D altitude ``h*`` from each corner to its
             opposite side.
+        winding: ``σ`` = ±1, the orientation of the whole ``P0``
+            (:func:`~golden_model.mesh.layout_orientation`): the sign every
+            face has in a fold-free layout continuing ``P0``.
+        barrier: ``(κ, μ)`` of the fold barrier, or ``None`` when it is off.
     """
 
     mesh: Mesh
@@ -146,20 +187,90 @@ class SpringModel:
     masses: np.ndarray
     orientation: np.ndarray
     altitudes: np.ndarray
+    winding: float = 1.0
+    barrier: tuple[float, float] | None = None
 
     @classmethod
-    def build(cls, mesh: Mesh, initial_positions: np.ndarray, spring: float, density: float | str) -> "SpringModel":
+    def build(cls, mesh: Mesh, initial_positions: np.ndarray, spring: float, density: float | str,
+              barrier: tuple[float, float] | None = None) -> "SpringModel":
         rho = mesh.auto_density() if density == "auto" else float(density)
         signed = signed_areas_2d(initial_positions, mesh.faces)
         majority = 1.0 if np.sum(signed > 0) >= np.sum(signed < 0) else -1.0
         orientation = np.where(signed > 0, 1.0, np.where(signed < 0, -1.0, majority))
         opposite = mesh.vertices[np.roll(mesh.faces, -1, axis=1)] - mesh.vertices[np.roll(mesh.faces, -2, axis=1)]
         altitudes = 2.0 * mesh.face_areas[:, None] / np.linalg.norm(opposite, axis=2)
-        return cls(mesh, float(spring), rho, mesh.masses(rho), orientation, altitudes)
+        return cls(mesh, float(spring), rho, mesh.masses(rho), orientation, altitudes,
+                   layout_orientation(initial_positions, mesh.faces), barrier)
 
     @property
     def inverse_masses(self) -> np.ndarray:
         return 1.0 / self.masses
+
+    @cached_property
+    def weights(self) -> np.ndarray:
+        """``(V,)`` the momentum dynamics' ``w_i = 2/(C·deg_i)`` (:func:`node_weights`)."""
+        return node_weights(self.mesh, self.spring)
+
+
+def node_weights(mesh: Mesh, spring: float) -> np.ndarray:
+    """``w_i = Δt/m_i = 2/(C·deg_i)``: masses ``m_i = (C/2)·deg_i`` and ``Δt = 1``.
+
+    ``C·deg_i`` bounds the stiffness of node i's springs, so these masses make
+    every node equally fast (a Jacobi preconditioner); the energy minimum
+    does not depend on them.
+    """
+    degree = np.diff(mesh.neighbours[0])
+    return 2.0 / (spring * degree)
+
+
+def momentum_beta(k: int) -> float:
+    """``β_k = k/(k+3)``: the momentum of the ``k``-th iteration since the last restart."""
+    return k / (k + 3)
+
+
+def _barrier_per_face(positions: np.ndarray, faces: np.ndarray, winding: float, doubled_rest: np.ndarray,
+                      kappa: float) -> tuple[np.ndarray, np.ndarray]:
+    """``X = σ·2A'`` per face and the shortfall ``(κ − X/X*)₊``."""
+    a, b, c = (positions[faces[:, k]] for k in range(3))
+    u, v = b - a, c - a
+    doubled = winding * (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    return doubled, np.maximum(kappa - doubled / doubled_rest, 0.0)
+
+
+def barrier_energy(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, winding: float,
+                   kappa: float, gain: float, spring: float) -> float:
+    """Fold-barrier energy ``Σ_t ½·μ·C·X*_t·(κ − X_t/X*_t)₊²``.
+
+    ``X_t = σ·2A'_t`` is the face's doubled 2D area in the pattern's winding
+    ``σ``, ``X*_t = 2A_t`` its doubled 3D area: zero while every face keeps
+    at least ``κ`` of its area, growing quadratically as a face shrinks
+    towards a fold and beyond.  On the springs' scale (``C``, lengths²).
+    """
+    doubled_rest = 2.0 * face_areas
+    _, short = _barrier_per_face(positions, faces, winding, doubled_rest, kappa)
+    return float(0.5 * gain * spring * np.sum(doubled_rest * short * short))
+
+
+def barrier_forces(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, winding: float,
+                   kappa: float, gain: float, spring: float) -> np.ndarray:
+    """``(V, 2)`` barrier forces ``−¼·∂B/∂P`` (the springs' convention, eq. 2).
+
+    Per face and corner ``i`` with the other corners ``j, k`` in winding order:
+    ``f_i = ¼·μ·C·(κ − X/X*)₊ · σ·(P_j.y − P_k.y, P_k.x − P_j.x)``, the
+    direction that grows the face's area fastest.  ``faces`` may be a subset
+    of the mesh's (with their 3D ``face_areas``).
+    """
+    doubled_rest = 2.0 * face_areas
+    _, short = _barrier_per_face(positions, faces, winding, doubled_rest, kappa)
+    coefficient = 0.25 * gain * spring * winding * short
+    p = positions[faces]  # (F, 3, 2)
+    pj, pk = np.roll(p, -1, axis=1), np.roll(p, -2, axis=1)
+    gradient = np.stack([pj[..., 1] - pk[..., 1], pk[..., 0] - pj[..., 0]], axis=-1)
+    moves = coefficient[:, None, None] * gradient
+    n = len(positions)
+    idx = faces.ravel()
+    return np.column_stack([np.bincount(idx, weights=moves[..., 0].ravel(), minlength=n),
+                            np.bincount(idx, weights=moves[..., 1].ravel(), minlength=n)])
 
 
 def spring_forces(positions: np.ndarray, edges: np.ndarray, rest: np.ndarray, spring: float) -> np.ndarray:
@@ -207,6 +318,8 @@ class Measurement:
     shape_error: float
     energy: float
     flipped: int
+    #: faces whose orientation disagrees with the whole pattern's (the honest fold count)
+    folded: int = 0
 
     def finite(self) -> bool:
         return all(math.isfinite(v) for v in (self.area_error, self.shape_error, self.energy))
@@ -225,7 +338,11 @@ def measure(model: SpringModel, positions: np.ndarray, length: np.ndarray | None
     area_error = float(np.sum(np.abs(mesh.face_areas - np.abs(signed))) / np.sum(mesh.face_areas))
     shape_error = float(np.sum(np.abs(mesh.rest_lengths - length)) / np.sum(mesh.rest_lengths))
     flipped = int(np.sum(model.orientation * signed < 0))
-    return Measurement(area_error, shape_error, spring_energy(length, mesh.rest_lengths, model.spring), flipped)
+    folded = int(np.count_nonzero(folded_faces(positions, mesh.faces)))
+    energy = spring_energy(length, mesh.rest_lengths, model.spring)
+    if model.barrier is not None:
+        energy += barrier_energy(positions, mesh.faces, mesh.face_areas, model.winding, *model.barrier, model.spring)
+    return Measurement(area_error, shape_error, energy, flipped, folded)
 
 
 # --------------------------------------------------------------------------- penalty
@@ -276,6 +393,7 @@ class History:
     shape_error: list[float] = field(default_factory=list)
     energy: list[float] = field(default_factory=list)
     flipped: list[int] = field(default_factory=list)
+    folded: list[int] = field(default_factory=list)
 
     def append(self, dt: float, m: Measurement) -> None:
         self.dt.append(dt)
@@ -283,6 +401,7 @@ class History:
         self.shape_error.append(m.shape_error)
         self.energy.append(m.energy)
         self.flipped.append(m.flipped)
+        self.folded.append(m.folded)
 
     def __len__(self) -> int:
         return len(self.dt)
@@ -318,12 +437,12 @@ class FlattenResult:
     @property
     def final(self) -> Measurement:
         h = self.history
-        return Measurement(h.area_error[-1], h.shape_error[-1], h.energy[-1], h.flipped[-1])
+        return Measurement(h.area_error[-1], h.shape_error[-1], h.energy[-1], h.flipped[-1], h.folded[-1])
 
     @property
     def initial(self) -> Measurement:
         h = self.history
-        return Measurement(h.area_error[0], h.shape_error[0], h.energy[0], h.flipped[0])
+        return Measurement(h.area_error[0], h.shape_error[0], h.energy[0], h.flipped[0], h.folded[0])
 
     def summary(self) -> dict:
         """The JSON summary the CLI prints."""
@@ -335,15 +454,19 @@ class FlattenResult:
             "shape_error": final.shape_error,
             "energy": final.energy,
             "flipped": final.flipped,
+            "folded": final.folded,
             "initial_area_error": initial.area_error,
             "initial_shape_error": initial.shape_error,
             "initial_energy": initial.energy,
             "initial_flipped": initial.flipped,
+            "initial_folded": initial.folded,
             "engine": self.engine,
+            "dynamics": self.params.dynamics,
             "step": self.params.step,
             "update": self.params.update,
             "damping": self.params.damping,
             "penalty": self.params.penalty,
+            "barrier": self.params.barrier,
             "density": self.density,
             **self.extra,
         }
@@ -372,6 +495,8 @@ class _Jacobi:
         self.inv_mass = model.inverse_masses[:, None]
         self.positions = positions.copy()
         self.velocities = np.zeros_like(positions)
+        self.momentum_k = 0  # iterations since the last restart
+        self.restart = False  # S < 0 seen in the last force pass
         self._refresh()
 
     def _refresh(self) -> None:
@@ -383,14 +508,42 @@ class _Jacobi:
     def measure(self) -> Measurement:
         return measure(self.model, self.positions, self.length)
 
-    def advance(self, dt: float) -> None:
-        p = self.params
+    def forces(self) -> np.ndarray:
+        """Spring forces (eq. 2) plus the barrier's, all from the current positions."""
+        p, model = self.params, self.model
         forces = _accumulate(_edge_terms(self.delta, self.length, self.rest, p.spring), self.edges, len(self.positions))
+        if model.barrier is not None:
+            forces += barrier_forces(self.positions, model.mesh.faces, model.mesh.face_areas, model.winding,
+                                     *model.barrier, p.spring)
+        return forces
+
+    def advance(self, dt: float) -> None:
+        if self.params.dynamics == "momentum":
+            self._advance_momentum()
+            return
+        p = self.params
+        forces = self.forces()
         acceleration = forces * self.inv_mass
         self.positions += dt * self.velocities + (0.5 * dt * dt) * acceleration
         self.velocities += dt * acceleration
         if p.damping:
             self.velocities *= 1.0 - p.damping
+        if p.penalty:
+            self.positions += penalty_moves(self.model, self.positions, p.penalty_kappa, p.penalty_gain)
+        self._refresh()
+
+    def _advance_momentum(self) -> None:
+        """``V ← β_k·V + w·f``, ``P ← P + V``; a restart (``V := 0``, ``k := 0``) one iteration after ``S < 0``."""
+        p = self.params
+        forces = self.forces()
+        if self.restart:
+            self.velocities[:] = 0.0
+            self.momentum_k = 0
+        power = float(np.sum(forces * self.velocities))  # S = Σ f·V, acted on next iteration
+        self.velocities = momentum_beta(self.momentum_k) * self.velocities + self.model.weights[:, None] * forces
+        self.positions += self.velocities
+        self.momentum_k += 1
+        self.restart = power < 0
         if p.penalty:
             self.positions += penalty_moves(self.model, self.positions, p.penalty_kappa, p.penalty_gain)
         self._refresh()
@@ -407,6 +560,9 @@ class _Sequential:
         self.inv_mass = model.inverse_masses
         self.positions = positions.copy()
         self.velocities = np.zeros_like(positions)
+        corners = np.argsort(mesh.faces.ravel(), kind="stable")
+        self.barrier_face_of_corner = corners // 3
+        self.barrier_face_ptr = np.r_[0, np.cumsum(np.bincount(mesh.faces.ravel(), minlength=mesh.n_vertices))]
         if params.penalty:
             # incident faces of each node, for its own penalty
             faces = mesh.faces
@@ -421,11 +577,14 @@ class _Sequential:
         p = self.params
         half_dt_sq = 0.5 * dt * dt
         pos, vel = self.positions, self.velocities
+        model = self.model
         for i in range(len(pos)):
             lo, hi = self.indptr[i], self.indptr[i + 1]
             delta = pos[self.neighbour[lo:hi]] - pos[i]
             length = np.hypot(delta[:, 0], delta[:, 1])
             force = _edge_terms(delta, length, self.rest[lo:hi], p.spring).sum(axis=0)
+            if model.barrier is not None:
+                force += self._barrier_force(i)
             acceleration = force * self.inv_mass[i]
             pos[i] += dt * vel[i] + half_dt_sq * acceleration
             vel[i] += dt * acceleration
@@ -433,6 +592,12 @@ class _Sequential:
                 vel[i] *= 1.0 - p.damping
             if p.penalty:
                 self._penalty(i)
+
+    def _barrier_force(self, i: int) -> np.ndarray:
+        model = self.model
+        incident = self.barrier_face_of_corner[self.barrier_face_ptr[i]:self.barrier_face_ptr[i + 1]]
+        return barrier_forces(self.positions, model.mesh.faces[incident], model.mesh.face_areas[incident],
+                              model.winding, *model.barrier, self.params.spring)[i]
 
     def _penalty(self, i: int) -> None:
         model = self.model
@@ -457,7 +622,8 @@ def flatten(
     initial_positions = np.asarray(initial_positions, dtype=np.float64)
     if initial_positions.shape != (mesh.n_vertices, 2):
         raise ParameterError(f"initial layout must have shape ({mesh.n_vertices}, 2), got {initial_positions.shape}")
-    model = SpringModel.build(mesh, initial_positions, params.spring, params.density)
+    barrier = (params.barrier_threshold, params.barrier_gain) if params.barrier else None
+    model = SpringModel.build(mesh, initial_positions, params.spring, params.density, barrier)
     engine = (_Jacobi if params.update == "jacobi" else _Sequential)(model, params, initial_positions)
     return run(engine, params, model.density, initial_positions, on_iteration, name="float")
 
