@@ -637,7 +637,10 @@ def run(engine, params: FlattenParams, density: float, initial_positions: np.nda
     float formula of eqs. 18–20, or ``params.dt`` for the fixed step).
     """
     if step_size is None:
-        if params.step == "fixed":
+        if params.dynamics == "momentum":
+            def step_size(_: Measurement) -> float:
+                return 1.0  # Δt = 1: the weights w_i carry the step
+        elif params.step == "fixed":
             def step_size(_: Measurement) -> float:
                 return params.dt
         else:

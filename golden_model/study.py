@@ -190,6 +190,9 @@ SIGNAL_CLASSES: dict[str, tuple[str, ...]] = {
     "half_dt_sq": ("half_dt_sq",),
     "error": ("error",),
     "damping": ("damping",),
+    "area": ("area",),
+    "barrier": ("barrier_gain", "barrier_coeff"),
+    "power": ("power", "power_acc"),
 }
 """Signal classes whose fraction bits are swept: name -> tied format fields.
 
@@ -198,8 +201,8 @@ in the base set are kept); the class's value is the first field's fraction bits.
 """
 assert sorted(f for fs in SIGNAL_CLASSES.values() for f in fs) == sorted(FORMAT_FIELDS)
 
-DATAPATH_FIELDS: tuple[str, ...] = tuple(f for f in FORMAT_FIELDS if f not in ("error", "lut_entry"))
-"""Formats of the node datapath counted by ``total_bits`` (the step generator's are not)."""
+DATAPATH_FIELDS: tuple[str, ...] = tuple(f for f in FORMAT_FIELDS if f not in ("error", "lut_entry", "power_acc"))
+"""Formats of the node datapath counted by ``total_bits`` (the step generator's and the controller's are not)."""
 
 OTHER_KNOB_VALUES: dict[str, tuple[Any, ...]] = {
     "lut_index_bits": (4, 5, 6, 7, 10, 12),
@@ -362,7 +365,7 @@ DSP_WIDTH = 18
 """Operand width of one DSP multiplier block (ECP5/iCE40-UP/Xilinx-style 18×18)."""
 
 _PER_COMPONENT = {"delta*delta", "spring*delta", "force_acc*inv_mass", "dt*velocity", "dt*accel",
-                  "half_dt_sq*accel", "velocity*damping"}
+                  "half_dt_sq*accel", "velocity*damping", "barrier_coeff*barrier_edge", "force_acc*velocity"}
 
 
 def _blocks(wa: int, wb: int) -> int:

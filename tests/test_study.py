@@ -36,6 +36,7 @@ def tiny_formats(**changes) -> FormatSet:
         position="s4.8", velocity="s2.8", delta="s3.8", rest_length="u3.8", length_sq="u6.10", rsqrt="u4.8",
         spring="s3.8", force="s3.8", force_acc="s4.8", inv_mass="u3.8", accel="s4.8", dt="u0.12",
         half_dt_sq="u0.12", error_acc="u10.8", error="u0.10", lut_entry="u0.12", damping="u1.10",
+        area="s6.8", barrier_gain="u4.8", barrier_coeff="u3.8", power="s6.8", power_acc="s12.8",
         rsqrt_seed_bits=6, rsqrt_newton_steps=1, lut_index_bits=6, lut_interpolate=True, name="tiny")
     return fs.replace(**changes) if changes else fs
 
@@ -46,30 +47,34 @@ def tiny_formats(**changes) -> FormatSet:
 def test_cost_model_by_hand():
     fs = tiny_formats()
     c = cost(fs)
-    # widths of the 15 datapath formats (error u0.10 and lut_entry u0.12 are the step generator's)
-    assert c.total_bits == 13 + 11 + 12 + 11 + 16 + 12 + 12 + 12 + 13 + 11 + 13 + 12 + 12 + 18 + 11 == 189
+    # widths of the 19 datapath formats (error u0.10 and lut_entry u0.12 are the step generator's,
+    # power_acc the controller's)
+    assert c.total_bits == 13 + 11 + 12 + 11 + 16 + 12 + 12 + 12 + 13 + 11 + 13 + 12 + 12 + 18 + 11 \
+        + 15 + 12 + 11 + 15 == 242
     # one block each: delta^2 x2, d*r, L, s*delta x2, F/m x2, dt*V x2, dt*a x2, hdt2*a x2, dt*dt,
-    # V*damping x2, LUT interpolation, 1/2C*u  = 19; rsqrt: out u4.8 -> Fy = 12 + 3 = 15, operands
+    # V*damping x2, LUT interpolation, 1/2C*u  = 19; the barrier's cross product x2, G*h, c*D x2 and
+    # the momentum's F.V x2 = 7; rsqrt: out u4.8 -> Fy = 12 + 3 = 15, operands
     # y u1.15 (16), M u2.15 (17), y^2 u1.15, h s0.15 (16): 3 blocks per Newton step
-    assert c.dsp == 19 + 3 == 22
+    assert c.dsp == 19 + 7 + 3 == 29
     # seed ROM: 3 * 2**(6-2) = 48 entries of min(15, 6 + 3) = 9 bits; LUT: 65 entries of 12 bits
     assert c.rom_bits == 48 * 9 + 65 * 12 == 1212
 
     wide = tiny_formats(rsqrt="u4.14")  # out value bits 18 -> Fy 21: rsqrt operands 22/23 bits -> 2x2 blocks
     # d*r 11 x 18 and L 16 x 18 stay at one block; the 3 rsqrt products go to 4 blocks each
-    assert cost(wide).dsp == 19 + 12
-    assert cost(wide).total_bits == 189 + 6
+    assert cost(wide).dsp == 19 + 7 + 12
+    assert cost(wide).total_bits == 242 + 6
     two_steps = tiny_formats(rsqrt_newton_steps=2)
-    assert cost(two_steps).dsp == 19 + 6
-    wider_delta = tiny_formats(delta="s3.16", position="s4.16")  # delta 20 bits: delta^2 2x2 x2, s*delta 1x2 x2
-    assert cost(wider_delta).dsp == 22 - 2 - 2 + 8 + 4
-    assert cost(wider_delta).total_bits == 189 + 16
+    assert cost(two_steps).dsp == 19 + 7 + 6
+    # delta 20 bits: delta^2 and the barrier's cross product 2x2 x2 each, s*delta and c*D 1x2 x2 each
+    wider_delta = tiny_formats(delta="s3.16", position="s4.16")
+    assert cost(wider_delta).dsp == 29 - 2 - 2 + 8 + 4 - 2 - 2 + 8 + 4
+    assert cost(wider_delta).total_bits == 242 + 16
     no_interp = tiny_formats(lut_interpolate=False)
-    assert cost(no_interp).dsp == 21
+    assert cost(no_interp).dsp == 28
     names = [m[0] for m in multipliers(fs)]
-    assert sum(m[3] for m in multipliers(fs)) == 22  # every product here is one block
+    assert sum(m[3] for m in multipliers(fs)) == 29  # every product here is one block
     assert any(n.startswith("half_spring*u") for n in names)
-    assert cost(fs).key("bits") == (189, 22, 1212) and cost(fs).key("dsp") == (22, 189, 1212)
+    assert cost(fs).key("bits") == (242, 29, 1212) and cost(fs).key("dsp") == (29, 242, 1212)
 
 
 def test_presets_cost_ordering():

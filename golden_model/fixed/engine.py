@@ -30,13 +30,16 @@ from typing import Callable
 import numpy as np
 
 from ..mesh import Mesh
-from ..reference import FlattenParams, FlattenResult, Measurement, ParameterError, run
+from ..mesh import layout_orientation
+from ..reference import FlattenParams, FlattenResult, Measurement, ParameterError, barrier_energy, node_weights, run
 from .format import Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
 from .formats_set import FormatSet
-from .pipeline import NeighbourStream, NodeConstants, NodeTerms, integrate, node_terms
+from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum,
+                       node_power, node_terms)
 from .steplut import half_dt_sq, step_size
 
-__all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats"]
+__all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats",
+           "momentum_beta_raw", "power_sum"]
 
 SAT = Overflow.SATURATE
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
@@ -106,6 +109,11 @@ class FixedProblem:
     orientation: np.ndarray  # (F,) ±1 of the fixed-point P0
     initial_positions: np.ndarray  # (V, 2) raw [position]
     density: float
+    winding: float = 1.0  # σ of the fixed-point P0 (the barrier's orientation)
+
+    @property
+    def momentum(self) -> bool:
+        return self.params.dynamics == "momentum"
 
     @property
     def scale(self) -> float:
@@ -118,8 +126,22 @@ class FixedProblem:
         return np.ldexp(to_float(raw, self.fs.velocity), -self.scale_exp)
 
     def constants(self, dt: int) -> NodeConstants:
-        """The datapath inputs for a step ``dt`` (raw [dt])."""
+        """The datapath inputs for a step ``dt`` (raw [dt]; the momentum dynamics: ``β``, and ``½Δt²`` unused)."""
+        if self.momentum:
+            return NodeConstants(dt, 0, self.half_spring, 1 << self.fs.damping.frac_bits)
         return NodeConstants(dt, int(half_dt_sq(np.int64(dt), self.fs)), self.half_spring, self.damping)
+
+
+def momentum_beta_raw(k: int, fs: FormatSet) -> int:
+    """``β_k = k/(k+3)`` in [dt], rounded half up: the controller's one division per iteration."""
+    return min((((k << fs.dt.frac_bits) << 1) // (k + 3) + 1) >> 1, fs.dt.raw_max)
+
+
+def power_sum(fs: FormatSet, power: np.ndarray, counter: SaturationCounter | None = None) -> int:
+    """``S = Σ F·V`` [power_acc]: the controller's exact sum, saturated once."""
+    total = int(np.sum(power, dtype=np.int64))
+    return int(requantize(np.int64(total), fs.power.frac_bits, fs.power_acc, fs.rounding, SAT, counter,
+                          "power_acc"))
 
 
 def _quantize_checked(x: np.ndarray | float, fmt: Format, what: str, fs: FormatSet, hint: str) -> np.ndarray:
@@ -142,6 +164,9 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               "use --update jacobi")
     if params.penalty:
         raise FixedPointError("the penalty is not part of the fixed-point pipeline; drop --penalty")
+    if params.dynamics == "momentum" and fs.velocity.frac_bits != fs.position.frac_bits:
+        raise FixedPointError(f"the momentum dynamics adds V to P directly: format set '{fs.name}' needs velocity "
+                              f"({fs.velocity}) and position ({fs.position}) with the same fraction bits")
     rest = mesh.rest_lengths
     k = -int(math.floor(math.log2(float(rest.mean())) + 0.5))
     scale = 2.0**k
@@ -173,16 +198,24 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               "the mesh's edge lengths vary too much for these formats")
     rest_raw = quantize(scaled_rest, fs.rest_length, HOST_ROUNDING, SAT)
     model_density = mesh.auto_density() if params.density == "auto" else float(params.density)
-    inv_mass = 1.0 / mesh.masses(model_density)
-    inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "1/m", fs,
-                                     "use --density auto (or a larger density), or a wider inv_mass format")
+    if params.dynamics == "momentum":
+        inv_mass = node_weights(mesh, params.spring)
+        inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "the weight 2/(C deg)", fs,
+                                         "use a larger --spring, or a wider inv_mass format")
+    else:
+        inv_mass = 1.0 / mesh.masses(model_density)
+        inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "1/m", fs,
+                                         "use --density auto (or a larger density), or a wider inv_mass format")
     if inv_mass_raw.min() < 16:
         raise FixedPointError(f"1/m down to {inv_mass.min():.3g} keeps fewer than 5 bits in {fs.inv_mass} "
                               f"of format set '{fs.name}': the node masses vary too much (lower the density)")
     half_spring = int(_quantize_checked(0.5 * params.spring, fs.spring, "C/2", fs, "use a smaller --spring"))
     damping = int(quantize(1.0 - params.damping, fs.damping, HOST_ROUNDING, SAT))
 
-    stream = NeighbourStream(indptr, neighbour, rest_raw[edge_id], inv_mass_raw)
+    rings = mesh.rings  # the stream's order: a node's triangles are consecutive entries
+    winding = layout_orientation(positions.astype(np.float64), mesh.faces)
+    barrier = _barrier_entries(mesh, params, fs, scale, winding) if params.barrier else None
+    stream = NeighbourStream(rings.indptr, rings.neighbour, rest_raw[rings.edge_id], inv_mass_raw, barrier)
     acc_frac = fs.error_acc.frac_bits
     face_areas = quantize(mesh.face_areas * scale * scale, Format(False, 62 - acc_frac, acc_frac),
                           HOST_ROUNDING, SAT)
@@ -193,7 +226,41 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
     orientation = np.where(_doubled_areas(positions, mesh.faces) >= 0, 1, -1)
     return FixedProblem(fs, mesh, params, k, stream, half_spring, damping, face_areas,
                         Reciprocal.of(area_total, mantissa_bits), Reciprocal.of(length_total, mantissa_bits),
-                        orientation, positions, model_density)
+                        orientation, positions, model_density, winding)
+
+
+def _barrier_entries(mesh: Mesh, params: FlattenParams, fs: FormatSet, scale: float,
+                     winding: float) -> BarrierEntries:
+    """Each triangle on one entry of each of its corners, wound so that ``X > 0`` when unfolded.
+
+    Ring entry ``k`` of node ``i`` and its successor span the triangle
+    ``(i, j_k, j_k+1)`` in the mesh's winding.  With ``σ = +1`` entry ``k``
+    carries it (``second = j_k+1``); with ``σ = −1`` entry ``k+1`` does
+    (``second = j_k``), which negates ``X`` and ``D`` as the barrier's ``σ`` does.
+    """
+    rings = mesh.rings
+    n = len(rings.neighbour)
+    owner = np.repeat(np.arange(mesh.n_vertices), np.diff(rings.indptr))
+    face = rings.face.copy()
+    second = rings.next_neighbour.copy()
+    if winding < 0:
+        # entry k+1 (cyclically within the node) takes entry k's triangle
+        successor = np.arange(n) + 1
+        last = rings.indptr[1:] - 1
+        successor[last] = rings.indptr[:-1]
+        face_moved = np.full(n, -1, dtype=np.int64)
+        second_moved = owner.copy()
+        face_moved[successor] = face
+        second_moved[successor] = rings.neighbour
+        face, second = face_moved, second_moved
+    has = face >= 0
+    doubled = 2.0 * mesh.face_areas[np.where(has, face, 0)] * scale * scale
+    threshold = np.where(has, params.barrier_threshold * doubled, 0.0)
+    gain = np.where(has, params.barrier_gain * params.spring / (4.0 * doubled), 0.0)
+    hint = "the mesh's triangles vary too much in size for these formats (or lower --barrier-gain)"
+    threshold_raw = _quantize_checked(threshold, fs.area, "a barrier threshold", fs, hint)
+    gain_raw = _quantize_checked(gain, fs.barrier_gain, "the barrier gain mu C/(4 X*)", fs, hint)
+    return BarrierEntries(np.where(has, second, rings.neighbour), threshold_raw, gain_raw)
 
 
 def _doubled_areas(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -224,6 +291,13 @@ def shape_error(problem: FixedProblem, error_sums: np.ndarray, counter: Saturati
     return problem.length_reciprocal.normalise(int(total), fs.error, fs.rounding)
 
 
+def folded_count(problem: FixedProblem, positions: np.ndarray) -> int:
+    """Faces whose exact orientation disagrees with the whole pattern's (the honest fold count)."""
+    doubled = _doubled_areas(positions, problem.mesh.faces)
+    orientation = 1 if float(np.sum(doubled, dtype=np.float64)) >= 0 else -1
+    return int(np.count_nonzero(orientation * doubled <= 0))
+
+
 def flipped_count(problem: FixedProblem, positions: np.ndarray) -> int:
     """Faces whose exact orientation is opposite to the fixed-point ``P0``'s."""
     return int(np.sum(problem.orientation * _doubled_areas(positions, problem.mesh.faces) < 0))
@@ -251,6 +325,9 @@ class FixedEngine:
         self.terms: NodeTerms | None = None
         self.errors = (0, 0)
         self.dt = 0
+        self.power = 0  # S of the last force pass [power_acc]
+        self.momentum_k = 0
+        self.restart = False
 
     @property
     def positions(self) -> np.ndarray:
@@ -273,12 +350,27 @@ class FixedEngine:
         # E = Σ_e C(L − d)²: each edge appears twice among the entries
         energy = 0.5 * p.params.spring * math.ldexp(float(self.terms.error_square_sum),
                                                     -2 * (p.fs.rest_length.frac_bits + p.scale_exp))
+        positions = self.positions
+        if p.params.barrier:
+            energy += barrier_energy(positions, p.mesh.faces, p.mesh.face_areas, p.winding,
+                                     p.params.barrier_threshold, p.params.barrier_gain, p.params.spring)
+        if p.momentum:
+            self.power = power_sum(p.fs, node_power(p.fs, self.terms.force, self.raw_velocities, self.counter),
+                                   self.counter)
         return Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
-                           flipped_count(p, self.raw_positions))
+                           flipped_count(p, self.raw_positions), folded_count(p, self.raw_positions))
 
     def step_size(self, _: Measurement) -> float:
         """The step generator on the last raw errors (variable) or the fixed ``Δt``."""
         fs, params = self.problem.fs, self.problem.params
+        if params.dynamics == "momentum":  # Δt = 1; the controller's β_k goes into the Δt port
+            if self.restart:
+                self.momentum_k, self.restart = 0, False  # V := 0 (β = 0), and this pass's S is void
+            else:
+                self.restart = self.power < 0
+            self.dt = momentum_beta_raw(self.momentum_k, fs)
+            self.momentum_k += 1
+            return 1.0
         if params.step == "fixed":
             self.dt = int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))
         else:
@@ -287,6 +379,11 @@ class FixedEngine:
 
     def advance(self, dt: float) -> None:
         p = self.problem
+        if p.momentum:
+            self.raw_positions, self.raw_velocities = integrate_momentum(
+                p.fs, self.raw_positions, self.raw_velocities, self.terms.force, p.stream.inv_mass, self.dt,
+                self.counter)
+            return
         self.raw_positions, self.raw_velocities = integrate(
             p.fs, self.raw_positions, self.raw_velocities, self.terms.force, p.stream.inv_mass,
             p.constants(self.dt), self.counter)

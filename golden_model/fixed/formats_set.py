@@ -45,13 +45,18 @@ FORMAT_FIELDS: tuple[str, ...] = (
     "error",
     "lut_entry",
     "damping",
+    "area",
+    "barrier_gain",
+    "barrier_coeff",
+    "power",
+    "power_acc",
 )
 """Names of the Format-valued fields, in pipeline order."""
 
-_SIGNED = ("position", "velocity", "delta", "spring", "force", "force_acc", "accel")
+_SIGNED = ("position", "velocity", "delta", "spring", "force", "force_acc", "accel", "area", "power", "power_acc")
 _UNSIGNED = (
     "rest_length", "length_sq", "rsqrt", "inv_mass", "dt", "half_dt_sq",
-    "error_acc", "error", "lut_entry", "damping",
+    "error_acc", "error", "lut_entry", "damping", "barrier_gain", "barrier_coeff",
 )
 
 
@@ -68,7 +73,12 @@ class FormatSet:
     ``half_dt_sq`` dt**2/2, ``error_acc`` sums of |L - d|, ``error`` E_S/E_C in
     [0, 1] (LUT input), ``lut_entry`` exp-table entries 0.1*exp(-5(1-E)),
     ``damping`` the velocity factor 1 - gamma in (0, 1] (needs an integer bit
-    so that gamma = 0 multiplies by exactly 1).
+    so that gamma = 0 multiplies by exactly 1).  The momentum dynamics and
+    the fold barrier (``docs/dynamics.md``): ``area`` a doubled signed 2D
+    triangle area X and its threshold, ``barrier_gain`` the per-entry
+    G = mu*C/(4*X*), ``barrier_coeff`` c = G*(threshold - X)+, ``power`` a node's
+    F.V, ``power_acc`` their sum S; ``dt`` also carries the momentum beta_k and
+    ``inv_mass`` the weights w_i = 2/(C*deg_i).
 
     Format fields accept ``"s3.16"``-style strings (converted on construction).
     """
@@ -90,6 +100,11 @@ class FormatSet:
     error: Format
     lut_entry: Format
     damping: Format
+    area: Format
+    barrier_gain: Format
+    barrier_coeff: Format
+    power: Format
+    power_acc: Format
     rsqrt_seed_bits: int
     rsqrt_newton_steps: int
     lut_index_bits: int
@@ -187,6 +202,10 @@ class FormatSet:
             ("half_dt_sq*accel", w["half_dt_sq"], w["accel"]),
             ("dt*dt -> half_dt_sq", w["dt"], w["dt"]),
             ("velocity*damping", w["velocity"], w["damping"]),
+            ("delta*delta -> area", w["delta"], w["delta"]),
+            ("barrier_gain*area -> barrier_coeff", w["barrier_gain"], w["area"]),
+            ("barrier_coeff*barrier_edge -> force", w["barrier_coeff"], w["delta"]),
+            ("force_acc*velocity -> power", w["force_acc"], w["velocity"]),
         ]
         if self.lut_interpolate:
             prods.append(("lut interpolation (entry diff * E low bits)", w["lut_entry"],

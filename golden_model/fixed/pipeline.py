@@ -46,7 +46,8 @@ from .format import Format, Overflow, SaturationCounter, requantize
 from .formats_set import FormatSet
 from .rsqrt import rsqrt_with_config
 
-__all__ = ["NeighbourStream", "NodeConstants", "NodeTerms", "NodeUpdate", "accumulator_guard_bits", "integrate",
+__all__ = ["BarrierEntries", "NeighbourStream", "NodeConstants", "NodeTerms", "NodeUpdate",
+           "accumulator_guard_bits", "integrate", "integrate_momentum", "barrier_terms", "node_power",
            "edge_terms", "neighbour_terms", "node_terms", "node_update"]
 
 SAT = Overflow.SATURATE
@@ -58,6 +59,25 @@ def accumulator_guard_bits(max_degree: int) -> int:
 
 
 @dataclass(frozen=True, eq=False)
+class BarrierEntries:
+    """The fold barrier's part of each neighbour entry (raw).
+
+    Entry ``k`` of node ``i`` carries at most one of the node's triangles,
+    ``(i, j_k, second_k)`` wound so that its doubled area ``X`` is positive in
+    a fold-free pattern.
+
+    Attributes:
+        second: ``(N,)`` the triangle's third node (any node where ``gain`` is 0).
+        threshold: ``(N,)`` ``κ·X*`` [area], ``X*`` the doubled 3D area.
+        gain: ``(N,)`` ``G = μ·C/(4·X*)`` [barrier_gain]; 0 for an entry without a triangle.
+    """
+
+    second: np.ndarray
+    threshold: np.ndarray
+    gain: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class NeighbourStream:
     """The static part of the input stream: CSR neighbour lists and node constants.
 
@@ -65,13 +85,15 @@ class NeighbourStream:
         indptr: ``(V+1,)`` node ``i``'s entries are ``indptr[i]:indptr[i+1]``.
         neighbour: ``(N,)`` neighbour node index of each entry.
         rest: ``(N,)`` raw rest length ``d`` of each entry [rest_length].
-        inv_mass: ``(V,)`` raw ``1/m`` [inv_mass].
+        inv_mass: ``(V,)`` raw ``1/m`` [inv_mass] (the momentum dynamics: ``w_i``).
+        barrier: the fold barrier's entry data, or ``None`` (no barrier).
     """
 
     indptr: np.ndarray
     neighbour: np.ndarray
     rest: np.ndarray
     inv_mass: np.ndarray
+    barrier: BarrierEntries | None = None
 
     @property
     def owner(self) -> np.ndarray:
@@ -237,9 +259,42 @@ class NodeTerms:
     error_square_sum: int
 
 
+def barrier_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream,
+                  counter: SaturationCounter | None = None) -> np.ndarray:
+    """Per-entry barrier force ``(N, 2)`` [force] (zero rows where the gain is 0)::
+
+        Δa  = rq(P_j − P_i → delta),  Δb = rq(P_second − P_i → delta)
+        X   = rq(Δa.x·Δb.y − Δa.y·Δb.x → area)         doubled signed area
+        h   = sat(max(T − X, 0) → area)                 shortfall below the threshold T
+        c   = rq(G·h → barrier_coeff)
+        D   = sat(Δa − Δb → delta)                      the opposite edge, P_j − P_second
+        f_b = rq(c·(D.y, −D.x) → force)
+    """
+    barrier = stream.barrier
+    rnd = fs.rounding
+    owner = stream.owner
+    here = positions[owner]
+    delta_a = _narrow(fs, positions[stream.neighbour] - here, None)  # the spring's Δ: counted there
+    delta_b = _narrow(fs, positions[barrier.second] - here, counter)
+    cross = delta_a[:, 0] * delta_b[:, 1] - delta_a[:, 1] * delta_b[:, 0]
+    area = requantize(cross, 2 * fs.delta.frac_bits, fs.area, rnd, SAT, counter, "area")
+    short = requantize(np.maximum(barrier.threshold - area, 0), fs.area.frac_bits, fs.area, rnd, SAT, counter,
+                       "area_short")
+    coeff = requantize(barrier.gain * short, fs.barrier_gain.frac_bits + fs.area.frac_bits, fs.barrier_coeff, rnd,
+                       SAT, counter, "barrier_coeff")
+    diff = requantize(delta_a - delta_b, fs.delta.frac_bits, fs.delta, rnd, SAT, counter, "barrier_edge")
+    product = coeff[:, None] * np.column_stack([diff[:, 1], -diff[:, 0]])
+    return requantize(product, fs.barrier_coeff.frac_bits + fs.delta.frac_bits, fs.force, rnd, SAT, counter,
+                      "barrier_force")
+
+
 def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, half_spring: int,
                counter: SaturationCounter | None = None) -> NodeTerms:
-    """Every node's accumulated force and error partial sum from the same positions."""
+    """Every node's accumulated force and error partial sum from the same positions.
+
+    With a barrier, each entry's force is its spring term plus its barrier
+    term, summed exactly (the accumulators have guard bits for both).
+    """
     rnd = fs.rounding
     n = len(stream.indptr) - 1
     if stream.edge_entries is None:  # any stream: every entry on its own, summed per node
@@ -261,6 +316,11 @@ def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
         force = np.column_stack([per_node(force_f[:, 0], force_b[:, 0]), per_node(force_f[:, 1], force_b[:, 1])])
         error = per_node(error_f, error_b)
         square_sum = int(np.dot(error_f, error_f)) + int(np.dot(error_b, error_b))
+    if stream.barrier is not None:
+        barrier = barrier_terms(fs, positions, stream, counter)
+        owner = stream.owner
+        force = force + np.column_stack([np.bincount(owner, barrier[:, 0], n), np.bincount(owner, barrier[:, 1], n)
+                                         ]).astype(np.int64)
     force_acc = requantize(force, fs.force.frac_bits, fs.force_acc, rnd, SAT, counter, "force_acc")
     error_sums = requantize(error, fs.rest_length.frac_bits, fs.error_acc, rnd, SAT, counter, "error_acc")
     return NodeTerms(force_acc, error_sums, square_sum)
@@ -285,6 +345,39 @@ def integrate(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, forc
     new_velocities = requantize(velocities + kick, fs.velocity.frac_bits, fs.velocity, rnd, SAT, counter, "velocity")
     new_velocities = requantize(new_velocities * constants.damping, fs.velocity.frac_bits + fs.damping.frac_bits,
                                 fs.velocity, rnd, SAT, counter, "damping")
+    return new_positions, new_velocities
+
+
+def node_power(fs: FormatSet, force: np.ndarray, velocities: np.ndarray,
+               counter: SaturationCounter | None = None) -> np.ndarray:
+    """``(V,)`` each node's ``F·V`` [power] (the momentum restart's terms of ``S``)."""
+    dot = force[:, 0] * velocities[:, 0] + force[:, 1] * velocities[:, 1]
+    return requantize(dot, fs.force_acc.frac_bits + fs.velocity.frac_bits, fs.power, fs.rounding, SAT, counter,
+                      "power")
+
+
+def integrate_momentum(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, force: np.ndarray,
+                       weights: np.ndarray, beta: int, counter: SaturationCounter | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The momentum dynamics' node half::
+
+        a  = rq(F·w → accel)                       w = 2/(C·deg) [inv_mass]
+        V' = rq(β·V + a → velocity)                β [dt]; one rounding for both terms
+        P' = sat(P + V' → position)                velocity has position's fraction bits
+
+    The datapath reuses the paper's products: ``Δt·V`` with ``β`` in the
+    ``Δt`` port, and ``a`` in place of ``½Δt²·a``.
+    """
+    rnd = fs.rounding
+    accel = requantize(force * weights[:, None], fs.force_acc.frac_bits + fs.inv_mass.frac_bits,
+                       fs.accel, rnd, SAT, counter, "accel")
+    fv = fs.dt.frac_bits + fs.velocity.frac_bits
+    fa = fs.accel.frac_bits
+    step_frac = max(fv, fa)
+    step = (beta * velocities << (step_frac - fv)) + (accel << (step_frac - fa))
+    new_velocities = requantize(step, step_frac, fs.velocity, rnd, SAT, counter, "velocity")
+    new_positions = requantize(positions + new_velocities, fs.position.frac_bits, fs.position, rnd, SAT, counter,
+                               "position")
     return new_positions, new_velocities
 
 
