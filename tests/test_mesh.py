@@ -172,3 +172,161 @@ def test_folded_faces_counts_against_the_whole_pattern():
     folded = flat.copy()
     folded[3] = [0.2, 0.2]  # vertex 3 pulled across edge (1, 2)
     assert folded_faces(folded, mesh.faces).tolist() == [False, True]
+
+
+# --------------------------------------------------------------------------- OBJ reader
+
+from golden_model.mesh import load_mesh_with_notes  # noqa: E402
+
+UNIT_SQUARE_OBJ = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+
+
+def _obj(tmp_path, text, name="m.obj"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_obj_negative_indices_with_texture_and_normals(tmp_path):
+    # negative indices count back from the vertices (texture coordinates, normals) read so far
+    text = (UNIT_SQUARE_OBJ + "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
+            "f -4/-4/-1 -3/-3/-1 -2/-2/-1\n"
+            "f -4/-4/-1 -2/-2/-1 -1/-1/-1\n"
+            "v 2 0 0\nv 2 1 0\nvt 1 0\nvt 1 1\n"
+            "f -5/-2/-1 -2/-2/-1 -1/-1/-1\n"
+            "f -5/-6/-1 -1/-1/-1 -4/-4/-1\n")
+    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]]
+    assert mesh.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0]]
+    assert notes == []
+
+
+def test_obj_the_issue_face_with_negative_triples(tmp_path):
+    # the issue's "f -18/-9/-6 -17/-8/-5 -16/-7/-4": 18 vertices, 9 texture coordinates, 6 normals before it
+    text = ("v 0 0 0\nv 1 0 0\nv 0 1 0\n" + "".join(f"v {i} {i * i % 7} {i % 3}\n" for i in range(15))
+            + "vt 0 0\n" * 9 + "vn 0 0 1\n" * 6 + "f -18/-9/-6 -17/-8/-5 -16/-7/-4\n")
+    with pytest.raises(MeshError, match=r"vertex 3 is not used by any face \(file line 4\)"):
+        load_mesh(_obj(tmp_path, text))  # the face is read; the 15 unused vertices are the validation's business
+    from golden_model.mesh import read_obj
+    assert read_obj(_obj(tmp_path, text)).faces.tolist() == [[0, 1, 2]]
+
+
+def test_obj_vertex_and_normal_form(tmp_path):
+    text = UNIT_SQUARE_OBJ + "vn 0 0 1\nf 1//1 2//1 3//1\nf 1//1 3//1 -1//-1\n"
+    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and notes == []
+
+
+def test_obj_vertex_and_texture_form(tmp_path):
+    text = UNIT_SQUARE_OBJ + "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"
+    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and notes == []
+
+
+def test_obj_mixed_corner_forms_in_one_file(tmp_path):
+    text = UNIT_SQUARE_OBJ + "vt 0 0\nvn 0 0 1\nf 1 2/1 3//1\nf 1/1/1 3 4\n"
+    assert load_mesh(_obj(tmp_path, text)).faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+
+
+def test_obj_quads_and_pentagons_are_fan_triangulated(tmp_path):
+    text = ("v 0 0 0\nv 2 0 0\nv 3 1.5 0\nv 1 2.5 0\nv -1 1.5 0\nv 4 0 0\nv 4.5 1.5 0\nv 3.5 3 0\n"
+            "f 1 2 3 4 5\n"     # pentagon
+            "f 2 6 7 3\n"       # quad
+            "f 3 7 8\n")        # a triangle stays as it is
+    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [1, 5, 6], [1, 6, 2], [2, 6, 7]]
+    assert notes == ["2 polygons (4 to 5 corners) fan-triangulated into 5 triangles"]
+    quad, quad_notes = load_mesh_with_notes(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3 4\n", "q.obj"))
+    assert quad.faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+    assert quad_notes == ["1 polygon (4 corners) fan-triangulated into 2 triangles"]
+
+
+def test_obj_polygon_that_cannot_be_fanned_is_refused(tmp_path):
+    # reflex at corner 4: the fan from corner 1 would fold triangle (1, 3, 4)
+    text = "v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 0.2 0\nv 0 1 0\nf 1 2 3 4 5\n"
+    with pytest.raises(MeshError, match=r"line 6: polygon with 5 corners cannot be fan-triangulated") as info:
+        load_mesh(_obj(tmp_path, text))
+    assert "\n" not in str(info.value)
+
+
+def test_obj_groups_and_objects_make_one_mesh(tmp_path):
+    text = ("mtllib scene.mtl\no left\ng part1\nusemtl red\ns 1\n" + UNIT_SQUARE_OBJ + "f 1 2 3\n"
+            "g part2\ns off\nf 1 3 4\n"
+            "o right\ng part3\nusemtl blue\nv 2 0 0\nv 2 1 0\nf 2 5 6\nf 2 6 3\n")
+    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
+    assert mesh.n_vertices == 6
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]]
+    assert notes == ["2 'o' objects and 3 'g' groups read as one mesh (OBJ numbers vertices across the whole file)"]
+
+
+def test_obj_vertex_i_of_the_file_is_node_i(tmp_path):
+    mesh, _ = rolled_grid(5, 4)
+    perm = np.random.default_rng(7).permutation(mesh.n_vertices)
+    inverse = np.argsort(perm)
+    vertices, faces = mesh.vertices[perm], inverse[mesh.faces]
+    # faces listed in scrambled order, each with its own texture coordinates (trimesh would split vertices)
+    order = np.random.default_rng(8).permutation(len(faces))
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
+    lines += [f"vt {k / 100} 0" for k in range(3 * len(faces))]
+    lines += [f"f {a + 1}/{3 * k + 1} {b + 1}/{3 * k + 2} {c + 1}/{3 * k + 3}"
+              for k, (a, b, c) in enumerate(faces[order].tolist())]
+    loaded = load_mesh(_obj(tmp_path, "\n".join(lines) + "\n"))
+    assert loaded.vertices.tolist() == vertices.tolist()
+    assert loaded.faces.tolist() == faces[order].tolist()
+
+
+def test_obj_ignored_statements_are_noted(tmp_path):
+    text = ("# a comment\n" + UNIT_SQUARE_OBJ.replace("v 1 1 0", "v 1 1 0 0.2 0.3 0.4")
+            + "vp 0.5\nl 1 2 3\nl 3 4\np 1\nfoo bar\nbaz\nfoo\n"
+            + "f 1 2 \\\n  3  # continued\nf 1 3 4\n")
+    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+    assert mesh.vertices[2].tolist() == [1, 1, 0]
+    assert notes == [
+        "ignored 1 'vp' parameter-space vertex",
+        "ignored 2 'l' line elements",
+        "ignored 1 'p' point element",
+        "ignored 3 unknown statements: 'foo' (2, first at line 10), 'baz' (1, first at line 11)",
+        "ignored the extra values (weight w or colour r g b) of 1 'v' line",
+    ]
+
+
+OBJ_REFUSALS = {
+    "index 0": (UNIT_SQUARE_OBJ + "f 1 2 3\nf 0 3 4\n",
+                r"line 6: face vertex index 0 \(OBJ indices start at 1\)"),
+    "negative too far back": (UNIT_SQUARE_OBJ + "f -1 -2 -5\n",
+                              r"line 5: face refers to vertex -5 but only 4 vertices precede it"),
+    "positive beyond the file": (UNIT_SQUARE_OBJ + "f 1 2 9\n",
+                                 r"line 5: face refers to vertex 9 but the file has only 4 vertices"),
+    "texture index 0": (UNIT_SQUARE_OBJ + "vt 0 0\nf 1/1 2/0 3/1\n",
+                        r"line 6: face texture coordinate index 0 \(OBJ indices start at 1\)"),
+    "normal out of range": (UNIT_SQUARE_OBJ + "vn 0 0 1\nf 1//1 2//2 3//1\n",
+                            r"line 6: face refers to normal 2 but the file has only 1 normal"),
+    "free-form type": ("v 0 0 0\nv 1 0 0\ncstype bspline\n",
+                       r"line 3: free-form geometry \('cstype'\) is not supported"),
+    "curv": ("v 0 0 0\nv 1 0 0\ncurv 0 1 1 2\n", r"line 3: free-form geometry \('curv'\) is not supported"),
+    "two-corner face": (UNIT_SQUARE_OBJ + "f 1 2\n", r"line 5: face 'f' with 2 corners \(a face needs at least 3\)"),
+    "bad number": ("v 0 0 0\nv 1 0.5.1 0\n", r"line 2: vertex coordinate '0.5.1' is not a number"),
+    "two coordinates": ("v 0 0 0\nv 1 0\n", r"line 2: vertex 'v' with 2 coordinates \(needs x y z\)"),
+    "bad corner": (UNIT_SQUARE_OBJ + "f 1 2 3/x\n", r"line 5: face corner '3/x' is not i, i/t, i//n or i/t/n"),
+    "only lines": (UNIT_SQUARE_OBJ + "l 1 2 3 4 1\n",
+                   r"no faces \('f'\), only line \('l'\) or point \('p'\) elements"),
+}
+
+
+@pytest.mark.parametrize("case", OBJ_REFUSALS)
+def test_obj_refusals_name_the_construct(tmp_path, case):
+    text, message = OBJ_REFUSALS[case]
+    path = _obj(tmp_path, text, "x.obj")
+    with pytest.raises(MeshError, match=r"^cannot parse mesh '.*x\.obj': " + message) as info:
+        load_mesh(path)
+    assert "\n" not in str(info.value)
+
+
+def test_obj_validation_message_points_at_the_file_line(tmp_path):
+    # the validation's own message, then the OBJ line it is about
+    with pytest.raises(MeshError, match=r"invalid mesh .*: vertex 4 is not used by any face \(file line 5\)$"):
+        load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "v 9 9 9\nf 1 2 3 4\n"))
+    repeated = r"invalid mesh .*: face 1 repeats a vertex \(degenerate triangle\) \(file line 6\)$"
+    with pytest.raises(MeshError, match=repeated):
+        load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3\nf 1 3 3\n"))
