@@ -7,12 +7,26 @@
   with one sparse LU factorisation for both coordinates.
 * ``pca``: orthographic projection onto the least-squares plane through the
   centroid, centred at the origin.
+* ``harmonic`` (libigl): Tutte's boundary circle, interior by the cotangent
+  Laplacian (``igl.harmonic`` with ``k = 1``); differs from ``tutte`` only in
+  the interior weights.
+* ``lscm`` (libigl): least-squares conformal map with the two boundary
+  vertices farthest apart in 3D pinned at their 3D distance, then scaled
+  uniformly so that the summed 2D triangle area ``Σ|A'_t|`` equals the 3D
+  area, and centred.
+* ``arap`` (libigl): as-rigid-as-possible parameterisation
+  (``igl.arap_precomputation`` / ``igl.arap_solve`` in 2D) started from the
+  ``harmonic`` layout, one boundary vertex pinned at its start position (no
+  dynamics), at most :data:`ARAP_MAX_ITERATIONS` local/global iterations,
+  then centred.  ARAP keeps the 3D scale.
 * a file: ``V`` rows ``x y`` (whitespace or comma separated; ``#`` comments),
   or an OBJ whose vertex *i* gives ``(x, y)`` of node *i*.
 
-Both computed layouts are oriented so that most faces are counter-clockwise
+Every computed layout is oriented so that most faces are counter-clockwise
 (mirrored otherwise), which makes pictures comparable; the flattening itself
-does not depend on it.
+does not depend on it.  libigl is imported on first use of a libigl method;
+any libigl failure (an exception or a non-finite result) is a
+:class:`LayoutError` naming the method.
 """
 
 from __future__ import annotations
@@ -25,9 +39,15 @@ import scipy.sparse.linalg as spla
 
 from .mesh import Mesh, signed_areas_2d
 
-__all__ = ["LayoutError", "initial_layout", "tutte_layout", "pca_layout", "load_layout", "LAYOUT_METHODS"]
+__all__ = ["LayoutError", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
+           "arap_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS"]
 
-LAYOUT_METHODS = ("tutte", "pca")
+LAYOUT_METHODS = ("tutte", "pca", "harmonic", "lscm", "arap")
+
+ARAP_MAX_ITERATIONS = 100
+"""Upper bound on ARAP local/global iterations (run in chunks of 10)."""
+ARAP_TOLERANCE = 1e-9
+"""ARAP stops early when a chunk moves no node more than this × the boundary length."""
 
 
 class LayoutError(ValueError):
@@ -41,15 +61,25 @@ def _counter_clockwise(positions: np.ndarray, mesh: Mesh) -> np.ndarray:
     return positions
 
 
-def tutte_layout(mesh: Mesh) -> np.ndarray:
-    """Tutte embedding with the boundary on a circle of the 3D boundary length."""
+def _boundary_circle(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Tutte's boundary: ``(loop, positions)`` on a circle of the 3D boundary length.
+
+    The loop is :attr:`Mesh.boundary_loop`; its nodes sit at arc-length
+    positions given by the chord lengths of the 3D boundary edges.
+    """
     loop = mesh.boundary_loop
     chords = np.linalg.norm(mesh.vertices[np.roll(loop, -1)] - mesh.vertices[loop], axis=1)
     perimeter = chords.sum()
     radius = perimeter / (2 * np.pi)
     angles = 2 * np.pi * np.concatenate([[0.0], np.cumsum(chords[:-1])]) / perimeter
+    return loop, radius * np.column_stack([np.cos(angles), np.sin(angles)])
+
+
+def tutte_layout(mesh: Mesh) -> np.ndarray:
+    """Tutte embedding with the boundary on a circle of the 3D boundary length."""
+    loop, circle = _boundary_circle(mesh)
     positions = np.zeros((mesh.n_vertices, 2))
-    positions[loop] = radius * np.column_stack([np.cos(angles), np.sin(angles)])
+    positions[loop] = circle
 
     interior = np.ones(mesh.n_vertices, dtype=bool)
     interior[loop] = False
@@ -78,6 +108,138 @@ def pca_layout(mesh: Mesh) -> np.ndarray:
     axes = vt[:2]
     signs = np.sign(axes[np.arange(2), np.argmax(np.abs(axes), axis=1)])
     positions = centred @ (axes * signs[:, None]).T
+    return _counter_clockwise(positions, mesh)
+
+
+# --------------------------------------------------------------------------- libigl layouts
+
+
+def _igl(method: str):
+    """The ``igl`` module, imported on first use (it takes ~0.3 s to import)."""
+    try:
+        import igl
+    except ImportError as exc:
+        raise LayoutError(f"{method} layout needs libigl (pip install libigl): {exc}") from None
+    return igl
+
+
+def _igl_arrays(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Contiguous float64 vertices and int64 faces, as libigl's bindings take them."""
+    return (np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+            np.ascontiguousarray(mesh.faces, dtype=np.int64))
+
+
+def _checked(method: str, function: str, positions, n_vertices: int) -> np.ndarray:
+    """``positions`` (from ``igl.<function>``) as a finite (V, 2) float64 array, or a :class:`LayoutError`."""
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.shape != (n_vertices, 2):
+        raise LayoutError(f"{method} layout failed: igl.{function} returned shape {positions.shape}, "
+                          f"expected ({n_vertices}, 2)")
+    if not np.isfinite(positions).all():
+        bad = int(np.sum(~np.isfinite(positions).all(axis=1)))
+        raise LayoutError(f"{method} layout failed: igl.{function} returned non-finite coordinates for {bad} of "
+                          f"{n_vertices} vertices")
+    return np.array(positions, dtype=np.float64, order="C")
+
+
+def _libigl_failure(method: str, function: str, exc: Exception) -> LayoutError:
+    """One line: the method, the libigl function and the first line of its exception."""
+    text = str(exc).strip().splitlines()
+    reason = f": {text[0]}" if text else ""
+    return LayoutError(f"{method} layout failed: igl.{function} raised {type(exc).__name__}{reason}")
+
+
+def _harmonic_positions(mesh: Mesh, method: str = "harmonic") -> np.ndarray:
+    """Cotangent-harmonic interior for Tutte's boundary circle (not yet oriented)."""
+    igl = _igl(method)
+    vertices, faces = _igl_arrays(mesh)
+    loop, circle = _boundary_circle(mesh)
+    try:
+        positions = igl.harmonic(vertices, faces, np.ascontiguousarray(loop, dtype=np.int64),
+                                 np.ascontiguousarray(circle), 1)
+    except Exception as exc:  # libigl raises RuntimeError/ValueError/TypeError
+        raise _libigl_failure(method, "harmonic", exc) from None
+    return _checked(method, "harmonic", positions, mesh.n_vertices)
+
+
+def harmonic_layout(mesh: Mesh) -> np.ndarray:
+    """Harmonic map with cotangent weights; the boundary exactly as :func:`tutte_layout`'s."""
+    return _counter_clockwise(_harmonic_positions(mesh), mesh)
+
+
+def _farthest_pair(points: np.ndarray) -> tuple[int, int]:
+    """Indices ``(a, b)``, ``a < b``, of the two points farthest apart (first such pair)."""
+    best, pair = -1.0, (0, 1)
+    block = max(1, 2_000_000 // (3 * len(points)))  # rows per block: about 16 MB of differences
+    for start in range(0, len(points), block):
+        d2 = ((points[start:start + block, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+        k = int(np.argmax(d2))
+        r, c = divmod(k, len(points))
+        if d2[r, c] > best:
+            best, pair = float(d2[r, c]), (start + r, c)
+    a, b = pair
+    return (a, b) if a < b else (b, a)
+
+
+def lscm_layout(mesh: Mesh) -> np.ndarray:
+    """LSCM with two pinned boundary vertices, scaled to the 3D area and centred."""
+    igl = _igl("lscm")
+    vertices, faces = _igl_arrays(mesh)
+    loop = mesh.boundary_loop
+    a, b = _farthest_pair(vertices[loop])
+    pinned = np.array([loop[a], loop[b]], dtype=np.int64)
+    distance = float(np.linalg.norm(vertices[pinned[1]] - vertices[pinned[0]]))
+    targets = np.array([[0.0, 0.0], [distance, 0.0]])
+    try:
+        result = igl.lscm(vertices, faces, pinned, targets)
+    except Exception as exc:
+        raise _libigl_failure("lscm", "lscm", exc) from None
+    positions = _checked("lscm", "lscm", result[0] if isinstance(result, tuple) else result, mesh.n_vertices)
+    area_2d = float(np.abs(signed_areas_2d(positions, mesh.faces)).sum())
+    if not (np.isfinite(area_2d) and area_2d > 0):
+        raise LayoutError("lscm layout failed: the map has zero 2D area")
+    positions = positions * np.sqrt(float(mesh.face_areas.sum()) / area_2d)
+    positions -= positions.mean(axis=0)
+    return _counter_clockwise(positions, mesh)
+
+
+def arap_layout(mesh: Mesh) -> np.ndarray:
+    """2D ARAP from the harmonic layout, one boundary vertex pinned, centred.
+
+    libigl's tutorial 503 regularises the unconstrained solve with
+    ``with_dynamics``; that changes the minimiser (a developable mesh keeps
+    about 1 % edge-length error), so instead the first boundary vertex is held
+    at its harmonic position, which removes the translation null space and
+    leaves the ARAP energy itself.  Iterations run in chunks of 10 up to
+    :data:`ARAP_MAX_ITERATIONS`, stopping after a chunk that moved no node
+    more than :data:`ARAP_TOLERANCE` × the boundary length.
+    """
+    igl = _igl("arap")
+    vertices, faces = _igl_arrays(mesh)
+    positions = _harmonic_positions(mesh, "arap")
+    loop = mesh.boundary_loop
+    pinned = np.array([loop[0]], dtype=np.int32)
+    targets = np.ascontiguousarray(positions[pinned.astype(np.int64)])
+    perimeter = float(np.linalg.norm(vertices[np.roll(loop, -1)] - vertices[loop], axis=1).sum())
+    chunk = 10
+    data = igl.ARAPData()
+    data.with_dynamics = False
+    data.max_iter = chunk
+    try:
+        igl.arap_precomputation(vertices, faces, 2, pinned, data)
+    except Exception as exc:
+        raise _libigl_failure("arap", "arap_precomputation", exc) from None
+    for _ in range(0, ARAP_MAX_ITERATIONS, chunk):
+        try:
+            moved = igl.arap_solve(targets, data, positions)
+        except Exception as exc:
+            raise _libigl_failure("arap", "arap_solve", exc) from None
+        moved = _checked("arap", "arap_solve", moved, mesh.n_vertices)
+        change = float(np.abs(moved - positions).max())
+        positions = moved
+        if change <= ARAP_TOLERANCE * perimeter:
+            break
+    positions -= positions.mean(axis=0)
     return _counter_clockwise(positions, mesh)
 
 
@@ -120,10 +282,13 @@ def _obj_vertex_xy(path: Path) -> np.ndarray:
         raise LayoutError(f"cannot parse layout '{path}': {str(exc).splitlines()[0]}") from None
 
 
+_METHODS = {"tutte": tutte_layout, "pca": pca_layout, "harmonic": harmonic_layout, "lscm": lscm_layout,
+            "arap": arap_layout}
+
+
 def initial_layout(mesh: Mesh, init: str | Path) -> np.ndarray:
-    """``P0`` for ``init`` = ``'tutte'``, ``'pca'`` or a layout file path."""
-    if str(init) == "tutte":
-        return tutte_layout(mesh)
-    if str(init) == "pca":
-        return pca_layout(mesh)
+    """``P0`` for ``init`` = one of :data:`LAYOUT_METHODS` or a layout file path."""
+    method = _METHODS.get(str(init))
+    if method is not None:
+        return method(mesh)
     return load_layout(init, mesh.n_vertices)

@@ -1,4 +1,4 @@
-"""Initial layouts: tutte, pca and user files."""
+"""Initial layouts: tutte, pca, the libigl maps (harmonic, lscm, arap) and user files."""
 
 import math
 
@@ -6,9 +6,20 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.layouts import LayoutError, initial_layout, load_layout, pca_layout, tutte_layout
-from golden_model.mesh import Mesh, signed_areas_2d
-from golden_model.generate import dome_grid, grid_faces, grid_uv
+import igl
+from golden_model.layouts import (
+    LAYOUT_METHODS,
+    LayoutError,
+    arap_layout,
+    harmonic_layout,
+    initial_layout,
+    load_layout,
+    lscm_layout,
+    pca_layout,
+    tutte_layout,
+)
+from golden_model.mesh import Mesh, folded_faces, signed_areas_2d
+from golden_model.generate import delaunay_patch, dome_grid, grid_faces, grid_uv, rolled_grid, saddle_grid
 
 
 def test_tutte_boundary_circle_and_barycentric_interior():
@@ -73,3 +84,126 @@ def test_bad_layout_files(tmp_path, text, message):
 def test_missing_layout_file(tmp_path):
     with pytest.raises(LayoutError, match="no such file"):
         load_layout(tmp_path / "nope.txt", 7)
+
+
+# --------------------------------------------------------------------------- libigl layouts
+
+
+def _shape_error(mesh, p):
+    """E_C = Σ|d_e − L_e| / Σ d_e."""
+    i, j = mesh.edges.T
+    return np.abs(mesh.rest_lengths - np.linalg.norm(p[i] - p[j], axis=1)).sum() / mesh.rest_lengths.sum()
+
+
+def _reversed(mesh):
+    """The same surface with every face's winding reversed (the mirror image's layouts)."""
+    return Mesh(mesh.vertices, mesh.faces[:, ::-1].copy())
+
+
+def test_layout_methods_are_the_init_choices():
+    assert LAYOUT_METHODS == ("tutte", "pca", "harmonic", "lscm", "arap")
+    mesh = dome_grid(6)
+    expected = {"tutte": tutte_layout, "pca": pca_layout, "harmonic": harmonic_layout, "lscm": lscm_layout,
+                "arap": arap_layout}
+    for name, function in expected.items():
+        assert np.array_equal(initial_layout(mesh, name), function(mesh))
+
+
+@pytest.mark.parametrize("method", LAYOUT_METHODS)
+@pytest.mark.parametrize("make", [lambda: dome_grid(12, height=0.3), lambda: saddle_grid(12, height=0.3),
+                                  lambda: _reversed(saddle_grid(12, height=0.3))],
+                         ids=["dome", "saddle", "saddle-reversed-winding"])
+def test_every_method_gives_a_fold_free_counter_clockwise_layout(method, make):
+    mesh = make()
+    p = initial_layout(mesh, method)
+    assert p.shape == (mesh.n_vertices, 2) and p.dtype == np.float64
+    assert np.isfinite(p).all()
+    assert np.sum(signed_areas_2d(p, mesh.faces) > 0) > mesh.n_faces / 2
+    assert not folded_faces(p, mesh.faces).any()
+    # deterministic, also from fresh copies of the arrays
+    assert np.array_equal(p, initial_layout(Mesh(mesh.vertices.copy(), mesh.faces.copy()), method))
+
+
+def test_harmonic_keeps_tuttes_boundary_and_differs_inside():
+    mesh = delaunay_patch(150)  # irregular: cotangent and uniform weights differ
+    h, t = harmonic_layout(mesh), tutte_layout(mesh)
+    loop = mesh.boundary_loop
+    assert h[loop] == pytest.approx(t[loop], abs=1e-12)
+    interior = np.setdiff1d(np.arange(mesh.n_vertices), loop)
+    radius = np.linalg.norm(t[loop], axis=1).max()
+    assert np.abs(h[interior] - t[interior]).max() > 1e-2 * radius
+
+
+def test_harmonic_reproduces_a_flat_disk_up_to_scale():
+    """Linear precision of the cotangent Laplacian, which the uniform (Tutte) weights lack.
+
+    The flat Delaunay patch's boundary is a regular 24-gon starting at vertex
+    0 on the x axis, so Tutte's circle is that polygon scaled by
+    perimeter / (2π); the cotangent-harmonic interior is then the same
+    scaling of the flat mesh, mirrored or not.
+    """
+    mesh = delaunay_patch(150, height=0.0)
+    uv = mesh.vertices[:, :2]
+    loop = mesh.boundary_loop
+    perimeter = np.linalg.norm(uv[np.roll(loop, -1)] - uv[loop], axis=1).sum()
+    scaled = uv * perimeter / (2 * math.pi)
+    candidates = (scaled, scaled * [1.0, -1.0], scaled * [-1.0, 1.0])
+    h = harmonic_layout(mesh)
+    assert min(np.abs(h - c).max() for c in candidates) < 1e-10
+    t = tutte_layout(mesh)
+    assert min(np.abs(t - c).max() for c in candidates) > 1e-3
+
+
+def test_lscm_area_equals_3d_area_and_is_centred():
+    for mesh in (dome_grid(12, height=0.3), saddle_grid(12, height=0.3), delaunay_patch(150)):
+        p = lscm_layout(mesh)
+        assert np.abs(signed_areas_2d(p, mesh.faces)).sum() == pytest.approx(mesh.face_areas.sum(), rel=1e-9)
+        assert p.mean(axis=0) == pytest.approx([0, 0], abs=1e-12)
+
+
+@pytest.mark.parametrize("method", ["lscm", "arap"])
+def test_lscm_and_arap_unroll_a_developable_grid(method):
+    mesh, unrolled = rolled_grid(8, 8, arc_degrees=90)
+    p = initial_layout(mesh, method)
+    assert _shape_error(mesh, p) < 1e-6
+    # the exact unrolled layout up to a rigid motion (orthogonal Procrustes, mirror allowed)
+    a, b = p - p.mean(axis=0), unrolled - unrolled.mean(axis=0)
+    u, _, vt = np.linalg.svd(b.T @ a)
+    assert np.abs(b @ (u @ vt) - a).max() < 1e-6
+
+
+def test_arap_keeps_the_3d_scale():
+    mesh = dome_grid(12, height=0.3)
+    p = arap_layout(mesh)
+    assert _shape_error(mesh, p) < 0.05
+    big = arap_layout(Mesh(mesh.vertices * 10.0, mesh.faces))
+    assert big == pytest.approx(10.0 * p, abs=1e-9 * 10.0)
+
+
+def _nan_like(result):
+    if isinstance(result, tuple):
+        return (np.full_like(result[0], np.nan),) + tuple(result[1:])
+    return np.full_like(result, np.nan)
+
+
+@pytest.mark.parametrize("method, function", [("harmonic", "harmonic"), ("lscm", "lscm"), ("arap", "arap_solve"),
+                                              ("arap", "harmonic")])
+def test_non_finite_libigl_output_is_a_layout_error(monkeypatch, method, function):
+    original = getattr(igl, function)
+    monkeypatch.setattr(igl, function, lambda *args: _nan_like(original(*args)))
+    with pytest.raises(LayoutError, match=rf"^{method} layout failed: igl.{function} returned non-finite "
+                                          r"coordinates for 36 of 36 vertices$") as info:
+        initial_layout(dome_grid(6), method)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("method, function", [("harmonic", "harmonic"), ("lscm", "lscm"), ("arap", "arap_solve"),
+                                              ("arap", "arap_precomputation")])
+def test_libigl_exception_is_a_layout_error(monkeypatch, method, function):
+    def fail(*args):
+        raise RuntimeError("solver exploded\nsecond line")
+
+    monkeypatch.setattr(igl, function, fail)
+    with pytest.raises(LayoutError, match=rf"^{method} layout failed: igl.{function} raised RuntimeError: "
+                                          r"solver exploded$"):
+        initial_layout(dome_grid(6), method)
