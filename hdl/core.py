@@ -46,6 +46,10 @@ class SpringflatCore(wiring.Component):
         nothing and yields the E_C partial sums of the current positions.
     half_spring, damping : ``In(...)``
         ``½C`` [spring] and ``1 − γ`` [damping].
+    momentum : ``In(1)``
+        The momentum dynamics (the step registers then hold ``β`` in ``dt``, loaded through
+        ``step_load``); a measure pass runs the paper's step with ``Δt = 0`` in either mode,
+        so it moves nothing and yields E_C partial sums and the power ``F·V``.
 
     Contract: ``entries``/``results`` as :class:`~hdl.node_update.NodeUpdate` (II = 1 entry per
     clock, latency ``latency``); ``errors`` → ``step`` takes ``step_latency`` clocks. Change
@@ -72,6 +76,7 @@ class SpringflatCore(wiring.Component):
             "measure": In(1),
             "half_spring": In(shape_of(fs.spring)),
             "damping": In(shape_of(fs.damping)),
+            "momentum": In(1),
         })
 
     def elaborate(self, platform):
@@ -95,5 +100,6 @@ class SpringflatCore(wiring.Component):
             datapath.half_dt_sq.eq(Mux(self.measure, 0, self.step.half_dt_sq)),
             datapath.damping.eq(Mux(self.measure, one, self.damping)),
             datapath.half_spring.eq(self.half_spring),
+            datapath.momentum.eq(self.momentum & ~self.measure),
         ]
         return m

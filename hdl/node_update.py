@@ -21,7 +21,7 @@ from .fixedpoint import clamp, shape_of, shift_round, sum_round
 from .pipeline import Pipeline, aligned_add, reduce_levels
 from .rsqrt import RsqrtUnit
 
-__all__ = ["NodeUpdate", "vector_layout", "entry_layout", "node_layout", "result_layout"]
+__all__ = ["NodeUpdate", "vector_layout", "barrier_layout", "entry_layout", "node_layout", "result_layout"]
 
 
 def vector_layout(fmt: Format) -> data.StructLayout:
@@ -38,27 +38,40 @@ def node_layout(fs: FormatSet) -> data.StructLayout:
     })
 
 
+def barrier_layout(fs: FormatSet) -> data.StructLayout:
+    """An entry's fold-barrier triangle: the third corner's ``position``, ``threshold`` κX* [area], ``gain`` G [barrier_gain]."""
+    return data.StructLayout({
+        "second": vector_layout(fs.position),
+        "threshold": shape_of(fs.area),
+        "gain": shape_of(fs.barrier_gain),
+    })
+
+
 def entry_layout(fs: FormatSet) -> data.StructLayout:
     """One input beat: a neighbour entry, with its node's header on the node's first entry.
 
     ``first``/``last`` mark a node's first and last neighbour entries; ``node``
     is read only when ``first`` is set; ``neighbour`` holds the neighbour's
-    ``position`` and the edge's ``rest`` length [rest_length].
+    ``position`` and the edge's ``rest`` length [rest_length]; ``barrier`` the
+    entry's fold-barrier triangle (``gain`` 0: none).
     """
     return data.StructLayout({
         "first": unsigned(1),
         "last": unsigned(1),
         "node": node_layout(fs),
         "neighbour": data.StructLayout({"position": vector_layout(fs.position), "rest": shape_of(fs.rest_length)}),
+        "barrier": barrier_layout(fs),
     })
 
 
 def result_layout(fs: FormatSet) -> data.StructLayout:
-    """One output beat: the node's new ``position``, ``velocity`` and ``error_sum`` Σ|L − d| [error_acc]."""
+    """One output beat: the node's new ``position``, ``velocity``, ``error_sum`` Σ|L − d| [error_acc]
+    and ``power`` F·V [power] (force and velocity of the *input* state)."""
     return data.StructLayout({
         "position": vector_layout(fs.position),
         "velocity": vector_layout(fs.velocity),
         "error_sum": shape_of(fs.error_acc),
+        "power": shape_of(fs.power),
     })
 
 
@@ -82,6 +95,10 @@ class NodeUpdate(wiring.Component):
     dt, half_dt_sq, half_spring, damping : ``In(...)``
         ``Δt`` [dt], ``½Δt²`` [half_dt_sq], ``½C`` [spring], ``1 − γ`` [damping]. Hold them
         stable while a pass is in flight (they are registered once per clock).
+    momentum : ``In(1)``
+        The momentum dynamics (``docs/dynamics.md``): ``dt`` carries ``β``, the Euler step
+        becomes ``V' = rq(β·V + a → velocity)``, ``P' = sat(P + V')``; ``half_dt_sq`` and
+        ``damping`` are not used. Change it only between passes.
 
     Contract
     --------
@@ -123,15 +140,25 @@ class NodeUpdate(wiring.Component):
             raise TypeError(f"NodeUpdate needs a FormatSet or a preset name, not {fs!r}")
         if fs.delta.frac_bits > fs.position.frac_bits:
             raise ValueError(f"delta {fs.delta} cannot have more fraction bits than position {fs.position}")
+        if fs.velocity.frac_bits != fs.position.frac_bits:
+            raise ValueError(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
+                             f"{fs.position.frac_bits} fraction bits")
         self.fs = fs
         self.rsqrt_latency = RsqrtUnit.latency_of(fs.rsqrt_config())
         s = shape_of
         mul = Pipeline.MUL_STAGES
         self.front_stages = 7 + mul + reduce_levels((s(fs.delta), s(fs.delta)))
-        self.back_stages = 7 + 3 * mul + (reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
+        # the fold barrier runs beside the rsqrt unit, in its delay line
+        self.barrier_stages = 6 + 2 * mul + (reduce_levels((s(fs.barrier_gain), unsigned(fs.area.width - 1)))
+                                             + reduce_levels((s(fs.barrier_coeff), s(fs.delta))))
+        if self.barrier_stages > self.rsqrt_latency:
+            raise ValueError(f"the fold barrier needs {self.barrier_stages} stages, more than the rsqrt unit's "
+                             f"{self.rsqrt_latency} it runs beside")
+        self.back_stages = 8 + 3 * mul + (reduce_levels((s(fs.rest_length), s(fs.rsqrt)), (s(fs.length_sq), s(fs.rsqrt)))
                                  + reduce_levels((s(fs.spring), s(fs.spring)))
                                  + reduce_levels((s(fs.spring), s(fs.delta))))
-        self.tail_stages = 10 + 3 * mul + (reduce_levels((s(fs.force_acc), s(fs.inv_mass)))
+        self.tail_stages = 10 + 3 * mul + (reduce_levels((s(fs.force_acc), s(fs.inv_mass)),
+                                                         (s(fs.force_acc), s(fs.velocity)))
                                  + reduce_levels((s(fs.dt), s(fs.velocity)), (s(fs.half_dt_sq), s(fs.accel)),
                                                   (s(fs.dt), s(fs.accel)))
                                  + reduce_levels((s(fs.velocity), s(fs.damping))))
@@ -148,6 +175,7 @@ class NodeUpdate(wiring.Component):
             "half_dt_sq": In(shape_of(fs.half_dt_sq)),
             "half_spring": In(shape_of(fs.spring)),
             "damping": In(shape_of(fs.damping)),
+            "momentum": In(1),
         })
 
     def _sliced_fifo(self, m, name, width, depth):
@@ -180,8 +208,10 @@ class NodeUpdate(wiring.Component):
         dt, half_dt_sq, half_spring, damping = (Signal.like(p, name=f"{n}_r", reset_less=True) for n, p in (
             ("dt", self.dt), ("half_dt_sq", self.half_dt_sq), ("half_spring", self.half_spring),
             ("damping", self.damping)))
+        momentum = Signal(name="momentum_r", reset_less=True)
+        one = 1 << fs.damping.frac_bits  # the momentum step is not damped: × 1 exactly
         m.d.sync += [dt.eq(self.dt), half_dt_sq.eq(self.half_dt_sq), half_spring.eq(self.half_spring),
-                     damping.eq(self.damping)]
+                     damping.eq(Mux(self.momentum, one, self.damping)), momentum.eq(self.momentum)]
 
         def rounded(value, from_frac, fmt):
             """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""
@@ -250,25 +280,48 @@ class NodeUpdate(wiring.Component):
         position = vector_layout(fs.position)
         # F1: capture; P_i comes from the header on a node's first entry
         step(front, "f1", p_i=Mux(beat.first, beat.node.position.as_value(), current.as_value()),
-             p_j=beat.neighbour.position.as_value(), rest=beat.neighbour.rest, first=beat.first, last=beat.last)
-        p_i, p_j = (data.View(position, live[k]) for k in ("p_i", "p_j"))
-        # F2: P_j − P_i, exact;  F3: rounded to delta;  F4: saturated
-        step(front, "f2", drop=("p_i", "p_j"), dx=p_j.x - p_i.x, dy=p_j.y - p_i.y)
-        step(front, "f3", dx=rounded(live["dx"], fs.position.frac_bits, fs.delta),
-             dy=rounded(live["dy"], fs.position.frac_bits, fs.delta))
-        step(front, "f4", dx=saturated(live["dx"], fs.delta), dy=saturated(live["dy"], fs.delta))
-        # F5…: Δx², Δy²;  then S = rq(Δx² + Δy² → length_sq) as sum, rounding, saturation
-        multiply(front, "f5", sq_x=(live["dx"], live["dx"]), sq_y=(live["dy"], live["dy"]))
+             p_j=beat.neighbour.position.as_value(), p_b=beat.barrier.second.as_value(), rest=beat.neighbour.rest,
+             threshold=beat.barrier.threshold, gain=beat.barrier.gain, first=beat.first, last=beat.last)
+        p_i, p_j, p_b = (data.View(position, live[k]) for k in ("p_i", "p_j", "p_b"))
+        # F2: P_j − P_i and the barrier's P_second − P_i, exact;  F3: rounded to delta;  F4: saturated
+        step(front, "f2", drop=("p_i", "p_j", "p_b"), dx=p_j.x - p_i.x, dy=p_j.y - p_i.y,
+             bx=p_b.x - p_i.x, by=p_b.y - p_i.y)
+        step(front, "f3", **{k: rounded(live[k], fs.position.frac_bits, fs.delta) for k in ("dx", "dy", "bx", "by")})
+        step(front, "f4", **{k: saturated(live[k], fs.delta) for k in ("dx", "dy", "bx", "by")})
+        # F5…: Δx², Δy² and the barrier's Δa.x·Δb.y, Δa.y·Δb.x;  then S = rq(Δx² + Δy² → length_sq)
+        # and X = rq(Δa × Δb → area) as sum, rounding, saturation
+        multiply(front, "f5", sq_x=(live["dx"], live["dx"]), sq_y=(live["dy"], live["dy"]),
+                 cross_a=(live["dx"], live["by"]), cross_b=(live["dy"], live["bx"]))
         square_frac = 2 * fs.delta.frac_bits
-        step(front, "f6", drop=("sq_x", "sq_y"), s=live["sq_x"] + live["sq_y"])
-        step(front, "f7", s=rounded(live["s"], square_frac, fs.length_sq))
-        step(front, "f8", s=saturated(live["s"], fs.length_sq))
+        step(front, "f6", drop=("sq_x", "sq_y", "cross_a", "cross_b"), s=live["sq_x"] + live["sq_y"],
+             cross=live["cross_a"] - live["cross_b"])
+        step(front, "f7", s=rounded(live["s"], square_frac, fs.length_sq), cross=rounded(live["cross"], square_frac, fs.area))
+        step(front, "f8", s=saturated(live["s"], fs.length_sq), cross=saturated(live["cross"], fs.area))
         assert front.stages == self.front_stages, (front.stages, self.front_stages)
         m.d.comb += [rsqrt.i.valid.eq(front.valid), rsqrt.i.payload.eq(live["s"]), rsqrt.o.ready.eq(1)]
 
-        # The entry's side data waits for r in a delay line as long as the rsqrt unit.
+        # The entry's side data waits for r in a delay line as long as the rsqrt unit; the fold
+        # barrier's force is computed there.
         side = Pipeline(m, front.valid, platform=platform)
-        for n in range(self.rsqrt_latency):
+        # S1: the shortfall T − X and the opposite edge D = Δa − Δb, exact
+        step(side, "s1", drop=("cross", "threshold", "bx", "by"), short=live["threshold"] - live["cross"],
+             ex=live["dx"] - live["bx"], ey=live["dy"] - live["by"])
+        # S2: h = sat(max(T − X, 0) → area), non-negative;  D saturated to delta
+        short = live["short"]
+        step(side, "s2", short=Mux(short < 0, 0, saturated(short, fs.area))[:fs.area.width - 1],
+             ex=saturated(live["ex"], fs.delta), ey=saturated(live["ey"], fs.delta))
+        # c = rq(G·h → barrier_coeff)
+        multiply(side, "s3", drop=("short", "gain"), c=(live["gain"], live["short"]))
+        step(side, "s4", c=rounded(live["c"], fs.barrier_gain.frac_bits + fs.area.frac_bits, fs.barrier_coeff))
+        step(side, "s5", c=saturated(live["c"], fs.barrier_coeff))
+        # f_b = rq(c·(D.y, −D.x) → force): the minus folds into the rounding's subtraction
+        multiply(side, "s6", drop=("c", "ex", "ey"), fb_x=(live["c"], live["ey"]), fb_y=(live["c"], live["ex"]))
+        fb_frac = fs.barrier_coeff.frac_bits + fs.delta.frac_bits
+        step(side, "s7", fb_x=rounded(live["fb_x"], fb_frac, fs.force),
+             fb_y=sum_round((), fb_frac - fs.force.frac_bits, rnd, sub=[live["fb_y"]]))
+        step(side, "s8", fb_x=saturated(live["fb_x"], fs.force), fb_y=saturated(live["fb_y"], fs.force))
+        assert side.stages == self.barrier_stages, (side.stages, self.barrier_stages)
+        for n in range(self.barrier_stages, self.rsqrt_latency):
             step(side, f"side{n}")
 
         # ------------------------------------------------------------ back
@@ -297,12 +350,14 @@ class NodeUpdate(wiring.Component):
         f_frac = fs.spring.frac_bits + fs.delta.frac_bits
         step(back, "b8", f_x=rounded(live["f_x"], f_frac, fs.force), f_y=rounded(live["f_y"], f_frac, fs.force))
         step(back, "b9", f_x=saturated(live["f_x"], fs.force), f_y=saturated(live["f_y"], fs.force))
+        # B10: the entry's force, spring plus barrier, exact
+        step(back, "b10", drop=("fb_x", "fb_y"), f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"])
 
-        # B10: per-node accumulators with guard bits (exact; saturated once in the tail). The
+        # B11: per-node accumulators with guard bits (exact; saturated once in the tail). The
         # node's header leaves its FIFO with the node's last entry into a register (Yosys merges
         # it into the FIFO memory's read port); the tail registers it once more.
         guard = accumulator_guard_bits(fs.max_degree)
-        acc_f = [Signal(signed(fs.force.width + guard), name=f"acc_f_{k}", reset_less=True) for k in "xy"]
+        acc_f = [Signal(signed(fs.force.width + 1 + guard), name=f"acc_f_{k}", reset_less=True) for k in "xy"]
         acc_e = Signal(unsigned(fs.rest_length.width + guard), name="acc_e", reset_less=True)
         first, last = live["first"], live["last"]
         with m.If(back.valid):
@@ -331,13 +386,18 @@ class NodeUpdate(wiring.Component):
         step(tail, "t2", f_x=saturated(live["f_x"], fs.force_acc), f_y=saturated(live["f_y"], fs.force_acc),
              e=saturated(live["e"], fs.error_acc))
         # F·(1/m), then a = rq(F·(1/m) → accel)
+        # and the power F·V of the input state (the momentum restart's S, summed by the controller)
         multiply(tail, "t3", drop=("f_x", "f_y", "inv_mass"),
-                 a_x=(live["f_x"], live["inv_mass"]), a_y=(live["f_y"], live["inv_mass"]))
+                 a_x=(live["f_x"], live["inv_mass"]), a_y=(live["f_y"], live["inv_mass"]),
+                 pw_x=(live["f_x"], live["v_x"]), pw_y=(live["f_y"], live["v_y"]))
         a_frac = fs.force_acc.frac_bits + fs.inv_mass.frac_bits
-        step(tail, "t4", a_x=rounded(live["a_x"], a_frac, fs.accel), a_y=rounded(live["a_y"], a_frac, fs.accel))
-        step(tail, "t5", a_x=saturated(live["a_x"], fs.accel), a_y=saturated(live["a_y"], fs.accel))
+        step(tail, "t4", drop=("pw_x", "pw_y"), a_x=rounded(live["a_x"], a_frac, fs.accel),
+             a_y=rounded(live["a_y"], a_frac, fs.accel), pw=live["pw_x"] + live["pw_y"])
+        step(tail, "t5", a_x=saturated(live["a_x"], fs.accel), a_y=saturated(live["a_y"], fs.accel),
+             pw=rounded(live["pw"], fs.force_acc.frac_bits + fs.velocity.frac_bits, fs.power))
+        live["pw"] = saturated(live["pw"], fs.power)
         # Δt·V, ½Δt²·a, Δt·a
-        multiply(tail, "t6", drop=("a_x", "a_y"),
+        multiply(tail, "t6",
                  dtv_x=(dt, live["v_x"]), dtv_y=(dt, live["v_y"]),
                  ha_x=(half_dt_sq, live["a_x"]), ha_y=(half_dt_sq, live["a_y"]),
                  dta_x=(dt, live["a_x"]), dta_y=(dt, live["a_y"]))
@@ -348,20 +408,25 @@ class NodeUpdate(wiring.Component):
         wide_p = Format(fs.position.signed, fs.position.int_bits + 1, fs.position.frac_bits)
         wide_v = Format(fs.velocity.signed, fs.velocity.int_bits + 1, fs.velocity.frac_bits)
         kick_frac = fs.dt.frac_bits + fs.accel.frac_bits
+        # momentum: step = β·V + a, the a term aligned as ½Δt²·a would be (fraction bits fa)
         sums = {}
         for k in "xy":
-            value, shift = aligned_add(live[f"dtv_{k}"], step_frac - fv, live[f"ha_{k}"], step_frac - fa)
+            second = Mux(momentum, live[f"a_{k}"] << fs.half_dt_sq.frac_bits, live[f"ha_{k}"])
+            value, shift = aligned_add(live[f"dtv_{k}"], step_frac - fv, second, step_frac - fa)
             sums[f"step_{k}"] = Value.cast(value) << shift if shift else value
             sums[f"kick_{k}"] = rounded(live[f"dta_{k}"], kick_frac, wide_v)
-        step(tail, "t7", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta") for k in "xy"), **sums)
+        step(tail, "t7", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta", "a") for k in "xy"), **sums)
         step(tail, "t8", **{f"step_{k}": rounded(live[f"step_{k}"], step_frac, wide_p) for k in "xy"},
              **{f"kick_{k}": saturated(live[f"kick_{k}"], wide_v) for k in "xy"})
+        # paper: the position step saturated to wide_p; momentum: V' = step saturated to velocity
         step(tail, "t9", drop=("kick_x", "kick_y"),
-             **{f"step_{k}": saturated(live[f"step_{k}"], wide_p) for k in "xy"},
+             **{f"step_{k}": Mux(momentum, saturated(live[f"step_{k}"], fs.velocity),
+                                 saturated(live[f"step_{k}"], wide_p)) for k in "xy"},
              **{f"v_{k}": live[f"v_{k}"] + live[f"kick_{k}"] for k in "xy"})
         step(tail, "t10", drop=("step_x", "step_y"),
              **{f"p_{k}": live[f"p_{k}"] + live[f"step_{k}"] for k in "xy"},
-             **{f"v_{k}": saturated(live[f"v_{k}"], fs.velocity) for k in "xy"})
+             **{f"v_{k}": Mux(momentum, live[f"step_{k}"], saturated(live[f"v_{k}"], fs.velocity)
+                              )[:fs.velocity.width].as_signed() for k in "xy"})
         # V'·(1 − γ) alongside the position's saturation, then V'' = rq(V'·(1 − γ) → velocity)
         live.update({f"p_{k}": saturated(live[f"p_{k}"], fs.position) for k in "xy"})
         multiply(tail, "t11", drop=("v_x", "v_y"), vk_x=(live["v_x"], damping), vk_y=(live["v_y"], damping))
@@ -376,7 +441,7 @@ class NodeUpdate(wiring.Component):
         m.d.comb += [
             result.position.x.eq(live["p_x"]), result.position.y.eq(live["p_y"]),
             result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
-            result.error_sum.eq(live["e"]),
+            result.error_sum.eq(live["e"]), result.power.eq(live["pw"]),
         ]
         # The result FIFO in LUT RAM, in column slices with their own pointers (below).
         results = self._sliced_fifo(m, "results", layout.size, self.result_depth - 1)

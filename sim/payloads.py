@@ -51,12 +51,24 @@ def unpack(layout: data.Layout, raw: list[int], path: tuple) -> np.ndarray:
 
 def pass_beats(layout: data.Layout, stream: NeighbourStream, positions: np.ndarray,
                velocities: np.ndarray) -> list[int]:
-    """The input beats of one pass: every node's entries in CSR order, its header on the first."""
+    """The input beats of one pass: every node's entries in CSR order, its header on the first.
+
+    With a fold barrier, each entry also carries its triangle's third corner, threshold and gain.
+    """
     owner = stream.owner
     index = np.arange(len(owner))
     first = stream.indptr[:-1][owner] == index
     last = stream.indptr[1:][owner] - 1 == index
+    barrier = {}
+    if stream.barrier is not None:
+        barrier = {
+            ("barrier", "second", "x"): positions[stream.barrier.second, 0],
+            ("barrier", "second", "y"): positions[stream.barrier.second, 1],
+            ("barrier", "threshold"): stream.barrier.threshold,
+            ("barrier", "gain"): stream.barrier.gain,
+        }
     return pack(layout, {
+        **barrier,
         ("first",): first.astype(np.int64), ("last",): last.astype(np.int64),
         ("node", "position", "x"): positions[owner, 0] * first, ("node", "position", "y"): positions[owner, 1] * first,
         ("node", "velocity", "x"): velocities[owner, 0] * first, ("node", "velocity", "y"): velocities[owner, 1] * first,

@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 from golden_model.fixed.engine import check_fixed_params, load_formats, prepare
-from golden_model.layouts import initial_layout
+from golden_model.layouts import LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, SimulatorError, run_bench
 
@@ -56,7 +56,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     check_fixed_params(params, formats)
     prepare(mesh, initial_layout(mesh, args.init), params, formats)  # refuses what the formats cannot hold
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())
-    init_spec = args.init if args.init in ("tutte", "pca") else str(Path(args.init).resolve())
+    init_spec = args.init if args.init in LAYOUT_METHODS else str(Path(args.init).resolve())
     config = {"mesh": mesh_spec, "init": init_spec, "params": params.as_dict(), "iterations": args.iterations,
               "step_latency": SpringflatCore(formats).step_latency, "p_valid": 1 - args.stall,
               "p_ready": 1 - args.stall}

@@ -78,6 +78,29 @@ def test_closed_loop_on_paper_meshes(simulator, mesh):
     assert abs(r["shape_error"] - r["float_shape_error"]) <= 1e-3
 
 
+@pytest.mark.parametrize("barrier", [True, False])
+def test_closed_loop_momentum_dynamics(simulator, barrier, tmp_path):
+    """The momentum dynamics through the RTL: β_k from the controller, restarts from the RTL's F·V,
+    the barrier's forces in the stream; every iteration bit for bit, the end against the float model."""
+    from golden_model.generate import spherical_cap
+    from golden_model.mesh import save_obj
+
+    cap = spherical_cap(4)
+    path = tmp_path / "cap.obj"
+    save_obj(path, cap.vertices, cap.faces)
+    config = {"mesh": str(path), "init": "tutte",
+              "params": {"dynamics": "momentum", "barrier": barrier, "tol_area": 1.0, "tol_shape": 1.0,
+                         "tol_energy": 0.0, "max_iter": 25},
+              "p_valid": 0.9, "p_ready": 0.8, "seed": 5, "step_latency": SpringflatCore(DEFAULT).step_latency}
+    run = run_bench(simulator, DEFAULT, "springflat_core", "closed_loop", config)
+    r = run.result
+    assert (run.tests, run.failed) == (1, 0), r.get("first_mismatches")
+    assert r["mismatches"] == 0 and r["iterations"] == 25 and r["dynamics"] == "momentum"
+    assert r["status"] == r["float_status"] and r["iterations"] == r["float_iterations"]
+    assert abs(r["area_error"] - r["float_area_error"]) <= 1e-3
+    assert abs(r["shape_error"] - r["float_shape_error"]) <= 1e-3
+
+
 def test_closed_loop_fixed_step_with_stalls(simulator):
     config = {"mesh": "surf1", "init": "tutte", "params": {**_paper_params("surf1", "fixed"), "damping": 0.05},
               "iterations": 12, "p_valid": 0.7, "p_ready": 0.6, "seed": 3,

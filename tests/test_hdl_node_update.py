@@ -15,7 +15,7 @@ from amaranth.sim import Simulator
 from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedEngine, prepare
-from golden_model.fixed.pipeline import NeighbourStream, NodeConstants, node_update
+from golden_model.fixed.pipeline import BarrierEntries, NeighbourStream, NodeConstants, node_update
 from golden_model.fixed import SaturationCounter
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
@@ -30,7 +30,7 @@ class Run:
         self.outputs, self.in_cycles, self.out_cycles = [], [], []
 
 
-def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0, ready_after=0):
+def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0, ready_after=0, momentum=False):
     """Stream ``beats`` into ``dut.i``, collect ``n_out`` results; check the stream rules on the way.
 
     ``o.ready`` stays low for the first ``ready_after`` cycles of the consumer.
@@ -43,6 +43,7 @@ def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0, 
     async def producer(ctx):
         for port, value in zip((dut.dt, dut.half_dt_sq, dut.half_spring, dut.damping), constants):
             ctx.set(port, value)
+        ctx.set(dut.momentum, momentum)
         await ctx.tick().repeat(2)  # the constants are registered once
         rng = random.Random(seed)
         idx, cycle = 0, 0
@@ -84,12 +85,12 @@ def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0, 
     return run
 
 
-def check_pass(dut, fs, stream, positions, velocities, constants, **kw):
+def check_pass(dut, fs, stream, positions, velocities, constants, momentum=False, **kw):
     """One pass through the RTL against ``node_update``; returns the run."""
     beats = pass_beats(dut.i.payload.shape(), stream, positions, velocities)
     run = simulate(dut, beats, len(stream.indptr) - 1, (constants.dt, constants.half_dt_sq, constants.half_spring,
-                                                        constants.damping), **kw)
-    want = node_update(fs, positions, velocities, stream, constants)
+                                                        constants.damping), momentum=momentum, **kw)
+    want = node_update(fs, positions, velocities, stream, constants, momentum=momentum)
     out = dut.o.payload.shape()
     for name, got, expected in (
         ("position.x", unpack(out, run.outputs, ("position", "x")), want.positions[:, 0]),
@@ -97,6 +98,7 @@ def check_pass(dut, fs, stream, positions, velocities, constants, **kw):
         ("velocity.x", unpack(out, run.outputs, ("velocity", "x")), want.velocities[:, 0]),
         ("velocity.y", unpack(out, run.outputs, ("velocity", "y")), want.velocities[:, 1]),
         ("error_sum", unpack(out, run.outputs, ("error_sum",)), want.error_sums),
+        ("power", unpack(out, run.outputs, ("power",)), want.power),
     ):
         bad = np.flatnonzero(got != expected)
         if bad.size:
@@ -105,8 +107,13 @@ def check_pass(dut, fs, stream, positions, velocities, constants, **kw):
     return run
 
 
-def random_stream(fs, n_nodes, seed, max_degree=12):
-    """Nodes of random degree 1..max_degree with random neighbours around them (a synthetic stream)."""
+def random_stream(fs, n_nodes, seed, max_degree=12, barrier=False):
+    """Nodes of random degree 1..max_degree with random neighbours around them (a synthetic stream).
+
+    With ``barrier``, each entry's triangle has a random third corner (one of the node's
+    neighbours), threshold and gain (0 on about a fifth of the entries), so that some
+    triangles are folded, some short of the threshold and some clear of it.
+    """
     rng = np.random.default_rng(seed)
     degree = rng.integers(1, max_degree + 1, n_nodes)
     n_total = n_nodes + int(degree.sum())
@@ -123,7 +130,13 @@ def random_stream(fs, n_nodes, seed, max_degree=12):
     rest = (radius * rng.uniform(0.7, 1.3, len(radius)) * (1 << fs.rest_length.frac_bits)).astype(np.int64)
     inv_mass = rng.integers(1 << (fs.inv_mass.frac_bits - 2), 2 << fs.inv_mass.frac_bits, n_nodes)
     velocities = rng.integers(-(1 << fs.velocity.frac_bits), 1 << fs.velocity.frac_bits, size=(n_nodes, 2))
-    stream = NeighbourStream(indptr, neighbour, rest, inv_mass)
+    entries = None
+    if barrier:
+        second = neighbour[indptr[owner] + rng.integers(0, degree[owner])]
+        threshold = rng.uniform(0, 1.5, len(neighbour)) * (1 << fs.area.frac_bits)
+        gain = rng.uniform(0, 4, len(neighbour)) * (rng.random(len(neighbour)) > 0.2) * (1 << fs.barrier_gain.frac_bits)
+        entries = BarrierEntries(second, threshold.astype(np.int64), gain.astype(np.int64))
+    stream = NeighbourStream(indptr, neighbour, rest, inv_mass, entries)
     return stream, positions, velocities
 
 
@@ -205,3 +218,34 @@ def test_a_long_output_stall_fills_the_results_and_stops_the_input(preset):
     run = check_degree_one_nodes(dut, fs, 2 * dut.result_depth, seed=8, ready_after=stall)
     accepted_during_stall = sum(c < stall for c in run.in_cycles)
     assert accepted_during_stall == dut.result_depth
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("momentum", [False, True])
+def test_random_nodes_with_barrier_triangles(preset, momentum):
+    """Barrier terms on random triangles (folded, short of the threshold, clear) in both dynamics."""
+    fs = FormatSet.preset(preset)
+    stream, positions, velocities = random_stream(fs, 60, seed=11, barrier=True)
+    v = np.zeros_like(positions)
+    v[:60] = velocities
+    constants = random_constants(fs, 12)
+    if momentum:
+        constants = NodeConstants(int(0.7 * (1 << fs.dt.frac_bits)), 0, constants.half_spring, 1 << fs.damping.frac_bits)
+    check_pass(NodeUpdate(fs), fs, stream, positions, v, constants, momentum=momentum, seed=13, p_valid=0.8,
+               p_ready=0.7)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_momentum_flattening_over_several_iterations(preset):
+    """A 4-ring spherical cap with the barrier: iterations 0..5 of the momentum dynamics, restarts included."""
+    from golden_model.generate import spherical_cap
+    fs = FormatSet.preset(preset)
+    mesh = spherical_cap(4)
+    params = FlattenParams(dynamics="momentum")
+    engine = FixedEngine(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), SaturationCounter())
+    dut = NodeUpdate(fs)
+    for iteration in range(6):
+        engine.step_size(engine.measure())
+        check_pass(dut, fs, engine.problem.stream, engine.raw_positions, engine.raw_velocities,
+                   engine.problem.constants(engine.dt), momentum=True, seed=20 + iteration, p_valid=0.9, p_ready=0.8)
+        engine.advance(0)

@@ -39,7 +39,7 @@ from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms
 from .steplut import half_dt_sq, step_size
 
 __all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats",
-           "momentum_beta_raw", "power_sum"]
+           "momentum_beta_raw", "power_sum", "MomentumState", "host_energy"]
 
 SAT = Overflow.SATURATE
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
@@ -135,6 +135,39 @@ class FixedProblem:
 def momentum_beta_raw(k: int, fs: FormatSet) -> int:
     """``β_k = k/(k+3)`` in [dt], rounded half up: the controller's one division per iteration."""
     return min((((k << fs.dt.frac_bits) << 1) // (k + 3) + 1) >> 1, fs.dt.raw_max)
+
+
+@dataclass(frozen=True)
+class MomentumState:
+    """The controller's momentum registers: iterations since the last restart, and a pending restart."""
+
+    k: int = 0
+    restart: bool = False
+
+    def next(self, power: int, fs: FormatSet) -> tuple[int, "MomentumState"]:
+        """``(β [dt], next state)`` for the coming update pass, given ``S`` of its force pass.
+
+        A pending restart zeroes the momentum (``β = 0``, i.e. ``V := 0``) and voids this
+        pass's ``S``; otherwise ``S < 0`` schedules a restart for the next iteration.
+        """
+        if self.restart:
+            return momentum_beta_raw(0, fs), MomentumState(1, False)
+        return momentum_beta_raw(self.k, fs), MomentumState(self.k + 1, power < 0)
+
+
+def host_energy(problem: "FixedProblem", raw_positions: np.ndarray, error_square_sum: int) -> float:
+    """The stopping rule's energy from the bit-exact state, in float64 (mesh units).
+
+    ``½C·Σe²`` over the entries' exact ``|L − d|`` (each edge twice), plus the
+    barrier energy of the layout when the barrier is on.
+    """
+    p = problem
+    energy = 0.5 * p.params.spring * math.ldexp(float(error_square_sum),
+                                                -2 * (p.fs.rest_length.frac_bits + p.scale_exp))
+    if p.params.barrier:
+        energy += barrier_energy(p.to_float_positions(raw_positions), p.mesh.faces, p.mesh.face_areas, p.winding,
+                                 p.params.barrier_threshold, p.params.barrier_gain, p.params.spring)
+    return energy
 
 
 def power_sum(fs: FormatSet, power: np.ndarray, counter: SaturationCounter | None = None) -> int:
@@ -326,8 +359,8 @@ class FixedEngine:
         self.errors = (0, 0)
         self.dt = 0
         self.power = 0  # S of the last force pass [power_acc]
-        self.momentum_k = 0
-        self.restart = False
+        self.node_power: np.ndarray | None = None  # its per-node terms [power]
+        self.momentum = MomentumState()
 
     @property
     def positions(self) -> np.ndarray:
@@ -348,15 +381,10 @@ class FixedEngine:
         e_c = shape_error(p, self.terms.error_sums, self.counter)
         self.errors = (e_s, e_c)
         # E = Σ_e C(L − d)²: each edge appears twice among the entries
-        energy = 0.5 * p.params.spring * math.ldexp(float(self.terms.error_square_sum),
-                                                    -2 * (p.fs.rest_length.frac_bits + p.scale_exp))
-        positions = self.positions
-        if p.params.barrier:
-            energy += barrier_energy(positions, p.mesh.faces, p.mesh.face_areas, p.winding,
-                                     p.params.barrier_threshold, p.params.barrier_gain, p.params.spring)
+        energy = host_energy(p, self.raw_positions, self.terms.error_square_sum)
         if p.momentum:
-            self.power = power_sum(p.fs, node_power(p.fs, self.terms.force, self.raw_velocities, self.counter),
-                                   self.counter)
+            self.node_power = node_power(p.fs, self.terms.force, self.raw_velocities, self.counter)
+            self.power = power_sum(p.fs, self.node_power, self.counter)
         return Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
                            flipped_count(p, self.raw_positions), folded_count(p, self.raw_positions))
 
@@ -364,12 +392,7 @@ class FixedEngine:
         """The step generator on the last raw errors (variable) or the fixed ``Δt``."""
         fs, params = self.problem.fs, self.problem.params
         if params.dynamics == "momentum":  # Δt = 1; the controller's β_k goes into the Δt port
-            if self.restart:
-                self.momentum_k, self.restart = 0, False  # V := 0 (β = 0), and this pass's S is void
-            else:
-                self.restart = self.power < 0
-            self.dt = momentum_beta_raw(self.momentum_k, fs)
-            self.momentum_k += 1
+            self.dt, self.momentum = self.momentum.next(self.power, fs)
             return 1.0
         if params.step == "fixed":
             self.dt = int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))

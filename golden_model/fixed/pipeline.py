@@ -151,6 +151,7 @@ class NodeUpdate:
     positions: np.ndarray  # (V, 2) [position]
     velocities: np.ndarray  # (V, 2) [velocity]
     error_sums: np.ndarray  # (V,) Σ|L − d| per node [error_acc]
+    power: np.ndarray  # (V,) F·V of the input state [power]
 
 
 def neighbour_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream,
@@ -382,17 +383,24 @@ def integrate_momentum(fs: FormatSet, positions: np.ndarray, velocities: np.ndar
 
 
 def node_update(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, stream: NeighbourStream,
-                constants: NodeConstants, counter: SaturationCounter | None = None) -> NodeUpdate:
+                constants: NodeConstants, counter: SaturationCounter | None = None,
+                momentum: bool = False) -> NodeUpdate:
     """One ``jacobi`` pass of the datapath: every node's update from the same positions.
 
-    The error partial sums describe the *input* positions (they are formed
-    from the same neighbour entries as the forces).
+    The error partial sums and the power describe the *input* state (they are
+    formed from the same neighbour entries as the forces).  ``momentum``
+    selects :func:`integrate_momentum` with ``β = constants.dt``.
     """
     terms = node_terms(fs, positions, stream, constants.half_spring, counter)
     n = len(stream.indptr) - 1  # positions may hold more rows: neighbours that are not updated
-    new_positions, new_velocities = integrate(fs, positions[:n], velocities[:n], terms.force, stream.inv_mass,
-                                              constants, counter)
-    return NodeUpdate(new_positions, new_velocities, terms.error_sums)
+    if momentum:
+        new_positions, new_velocities = integrate_momentum(fs, positions[:n], velocities[:n], terms.force,
+                                                           stream.inv_mass, constants.dt, counter)
+    else:
+        new_positions, new_velocities = integrate(fs, positions[:n], velocities[:n], terms.force, stream.inv_mass,
+                                                  constants, counter)
+    power = node_power(fs, terms.force, velocities[:n], counter)
+    return NodeUpdate(new_positions, new_velocities, terms.error_sums, power)
 
 
 def _wide(fmt: Format) -> Format:

@@ -11,7 +11,6 @@ errors are compared bit for bit with the golden model running alongside.
 
 from __future__ import annotations
 
-import math
 import random
 import time
 
@@ -20,7 +19,8 @@ import numpy as np
 from cocotb.triggers import RisingEdge
 
 from golden_model.fixed import SaturationCounter, half_dt_sq, quantize, to_float
-from golden_model.fixed.engine import HOST_ROUNDING, FixedEngine, area_error, flipped_count, shape_error
+from golden_model.fixed.engine import (HOST_ROUNDING, FixedEngine, MomentumState, area_error, flipped_count,
+                                       folded_count, host_energy, power_sum, shape_error)
 from golden_model.fixed.format import Overflow
 from golden_model.fixed.pipeline import node_terms
 from golden_model.reference import Measurement, _converged
@@ -44,9 +44,11 @@ class Controller:
         self.positions = problem.initial_positions.copy()
         self.velocities = np.zeros_like(self.positions)
         self.stats = StreamStats()
+        self.momentum = MomentumState()
+        self.power = 0
 
     async def run_pass(self, measure: bool):
-        """One pass over every node; returns (positions, velocities, error_sums) from the RTL."""
+        """One pass over every node; returns (positions, velocities, error_sums, power) from the RTL."""
         self.dut.measure.value = int(measure)
         await RisingEdge(self.dut.clk)
         beats = pass_beats(self.in_layout, self.problem.stream, self.positions, self.velocities)
@@ -55,28 +57,37 @@ class Controller:
         field = lambda *path: unpack(self.out_layout, out, path)  # noqa: E731
         positions = np.column_stack([field("position", "x"), field("position", "y")])
         velocities = np.column_stack([field("velocity", "x"), field("velocity", "y")])
-        return positions, velocities, field("error_sum")
+        return positions, velocities, field("error_sum"), field("power")
 
     async def measure(self):
-        """E_S, E_C (raw), energy and flipped count of the current layout, formed from RTL results."""
-        positions, velocities, error_sums = await self.run_pass(measure=True)
+        """E_S, E_C (raw), energy and fold counts of the current layout, formed from RTL results."""
+        positions, velocities, error_sums, power = await self.run_pass(measure=True)
         moved = not (np.array_equal(positions, self.positions) and np.array_equal(velocities, self.velocities))
         p = self.problem
         e_s = area_error(p, self.positions)
         e_c = shape_error(p, error_sums)
         # the host's energy: (C/2)·Σ e² over the entries of the current (bit-exact) layout
         square_sum = node_terms(p.fs, self.positions, p.stream, p.half_spring).error_square_sum
-        energy = 0.5 * p.params.spring * math.ldexp(float(square_sum), -2 * (p.fs.rest_length.frac_bits + p.scale_exp))
+        energy = host_energy(p, self.positions, square_sum)
         m = Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
-                        flipped_count(p, self.positions))
+                        flipped_count(p, self.positions), folded_count(p, self.positions))
+        self.node_power = power
+        self.power = power_sum(p.fs, power)
         return (e_s, e_c), m, error_sums, moved
 
     async def set_step(self, errors):
-        """Variable step: the RTL step generator; fixed step: load Δt and ½Δt² directly."""
+        """Variable step: the RTL step generator; fixed step: load Δt and ½Δt² directly;
+        momentum: load β_k (the controller's counter and restart) into the Δt register."""
         dut, fs = self.dut, self.fs
-        if self.problem.params.step == "fixed":
-            dt = int(quantize(self.problem.params.dt, fs.dt, HOST_ROUNDING, Overflow.SATURATE))
-            dut.step_load__payload.value = pack(step_layout(fs), {("dt",): [dt], ("half_dt_sq",): [int(half_dt_sq(dt, fs))]})[0]
+        momentum = self.problem.params.dynamics == "momentum"
+        if momentum or self.problem.params.step == "fixed":
+            if momentum:
+                dt, self.momentum = self.momentum.next(self.power, fs)
+                half = 0
+            else:
+                dt = int(quantize(self.problem.params.dt, fs.dt, HOST_ROUNDING, Overflow.SATURATE))
+                half = int(half_dt_sq(dt, fs))
+            dut.step_load__payload.value = pack(step_layout(fs), {("dt",): [dt], ("half_dt_sq",): [half]})[0]
             dut.step_load__valid.value = 1
             await RisingEdge(dut.clk)
             dut.step_load__valid.value = 0
@@ -105,9 +116,11 @@ async def closed_loop(dut):
     ctl = Controller(dut, problem, config)
     ctl.dut_step_latency = int(config["step_latency"])
     await start_clock_and_reset(dut, idle=("entries__valid", "results__ready", "errors__valid", "step_load__valid",
-                                           "measure"))
+                                           "measure", "momentum"))
     dut.half_spring.value = problem.half_spring
     dut.damping.value = problem.damping
+    momentum = params.dynamics == "momentum"
+    dut.momentum.value = int(momentum)
     started = time.perf_counter()
 
     mismatches: list[str] = []
@@ -124,6 +137,8 @@ async def closed_loop(dut):
     gold_current = golden.measure()
     check(0, "error_sums", error_sums, golden.terms.error_sums)
     check(0, "E_S/E_C", errors, golden.errors)
+    if momentum:
+        check(0, "power", ctl.node_power, golden.node_power)
     history = [current]
     status, k = "max-iterations", 0
     max_iter = min(params.max_iter, config.get("iterations") or params.max_iter)
@@ -131,16 +146,19 @@ async def closed_loop(dut):
         dt, half = await ctl.set_step(errors)
         golden.step_size(gold_current)
         check(k + 1, "dt", dt, golden.dt)
-        check(k + 1, "half_dt_sq", half, problem.constants(golden.dt).half_dt_sq)
+        if not momentum:
+            check(k + 1, "half_dt_sq", half, problem.constants(golden.dt).half_dt_sq)
         if config.get("broken_expectation") and k == 1:  # the bench must be able to fail
             golden.raw_velocities[0, 0] += 1
-        ctl.positions, ctl.velocities, _ = await ctl.run_pass(measure=False)
+        ctl.positions, ctl.velocities, _, _ = await ctl.run_pass(measure=False)
         golden.advance(0)
         check(k + 1, "positions", ctl.positions, golden.raw_positions)
         check(k + 1, "velocities", ctl.velocities, golden.raw_velocities)
         errors, after, error_sums, moved = await ctl.measure()
         gold_after = golden.measure()
         check(k + 1, "error_sums", error_sums, golden.terms.error_sums)
+        if momentum:
+            check(k + 1, "power", ctl.node_power, golden.node_power)
         if moved:
             mismatches.append(f"iteration {k + 1}: the measuring pass moved a node")
         k += 1
@@ -161,6 +179,7 @@ async def closed_loop(dut):
         "float_area_error": reference.final.area_error, "float_shape_error": reference.final.shape_error,
         "cycles": ctl.stats.cycles, "bench_seconds": wall, "cycles_per_second": ctl.stats.cycles / wall,
         "nodes": problem.mesh.n_vertices, "entries": int(len(problem.stream.neighbour)),
+        "dynamics": params.dynamics, "barrier": params.barrier, "folded": history[-1].folded,
     })
     assert not mismatches, f"{len(mismatches)} mismatches; first: {mismatches[0]}"
 

@@ -56,7 +56,7 @@ async def node_update_passes(dut):
     rng = random.Random(config.get("seed", 0))
     p_valid, p_ready = config.get("p_valid", 0.8), config.get("p_ready", 0.8)
     source, sink = StreamPort(dut, "i"), StreamPort(dut, "o")
-    await start_clock_and_reset(dut, idle=("i__valid", "o__ready"))
+    await start_clock_and_reset(dut, idle=("i__valid", "o__ready", "momentum"))
     dut.half_spring.value = problem.half_spring
     dut.damping.value = problem.damping
     stats, problems = StreamStats(), []

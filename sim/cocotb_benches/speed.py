@@ -21,7 +21,7 @@ async def raw_speed(dut):
     fs = formats(config)
     problem = load_problem(config, fs)
     await start_clock_and_reset(dut, idle=("entries__valid", "results__ready", "errors__valid", "step_load__valid",
-                                           "measure"))
+                                           "measure", "momentum"))
     dut.half_spring.value = problem.half_spring
     dut.damping.value = problem.damping
     layout = entry_layout(fs)
