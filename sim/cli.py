@@ -17,11 +17,13 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.layouts import LAYOUT_METHODS, LayoutError, initial_layout
-from golden_model.mesh import Mesh, MeshError, load_mesh
+from golden_model.mesh import Mesh, MeshError, load_mesh_with_notes
 from golden_model.fixed.engine import FixedPointError, flatten_fixed, load_formats
-from golden_model.reference import FlattenParams, FlattenResult, ParameterError, flatten
+from golden_model.reference import DYNAMICS, FlattenParams, FlattenResult, ParameterError, flatten
 
 from .outputs import LAYOUT_SUFFIXES, OutputError, check_output_path, write_history, write_layout, write_plot
 
@@ -69,8 +71,19 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     builtins = ", ".join(BUILTIN_MESHES)
     parser.add_argument("mesh", nargs="?", default="surf1",
                         help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
-    parser.add_argument("--init", default="pca", metavar="tutte|pca|PATH",
-                        help="initial layout: tutte, pca (default) or a file of V rows 'x y' / an OBJ")
+    parser.add_argument("--init", default=None, metavar="|".join(LAYOUT_METHODS) + "|PATH",
+                        help="initial layout: tutte, pca, harmonic, lscm, arap (libigl) or a file of V rows "
+                             "'x y' / an OBJ (default: pca for built-ins, arap for files)")
+    parser.add_argument("--dynamics", choices=DYNAMICS, default=None,
+                        help="paper (eqs. 7-9) or momentum (docs/dynamics.md); default: paper for built-ins, "
+                             "momentum for files")
+    parser.add_argument("--barrier", action=argparse.BooleanOptionalAction, default=None,
+                        help="the fold barrier (default: on with momentum, off with paper)")
+    parser.add_argument("--barrier-threshold", type=number_argument, default=None,
+                        help="barrier threshold kappa in (0, 1]: the fraction of its 3D area below which a "
+                             "triangle is pushed back (default 0.25)")
+    parser.add_argument("--barrier-gain", type=number_argument, default=None,
+                        help="barrier stiffness mu in (0, 16], relative to the springs' C (default 1)")
     parser.add_argument("--step", choices=("variable", "fixed"), default="variable",
                         help="step-size mode (default variable, eqs. 18-20)")
     parser.add_argument("--dt", type=number_argument, default=None, help="fixed step size (default 0.01)")
@@ -89,21 +102,66 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-iter", type=integer_argument, default=None, help="iteration limit N_max")
 
 
+#: The stop rule for mesh files: the energy minimum, not the paper's Surf1 tolerances.
+FILE_TOL_ENERGY = 1e-7
+#: N_max for files: this many iterations per edge from the boundary to the deepest node (the
+#: momentum dynamics needs about 6), and never fewer than FILE_MIN_ITER.
+FILE_ITER_PER_EDGE = 40
+FILE_MIN_ITER = 1000
+
+
+def edge_radius(mesh: Mesh) -> int:
+    """Edges from the boundary to the node farthest from it (breadth-first, all boundary nodes at 0)."""
+    import scipy.sparse as sp
+
+    i, j = mesh.edges.T
+    adjacency = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])),
+                              shape=(mesh.n_vertices, mesh.n_vertices)).tocsr()
+    reached = np.zeros(mesh.n_vertices, dtype=bool)
+    reached[mesh.boundary_loop] = True
+    frontier, depth = reached.copy(), 0
+    while not reached.all():
+        frontier = (adjacency @ frontier.astype(float) > 0) & ~reached
+        reached |= frontier
+        depth += 1
+    return depth
+
+
 def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
-    """The mesh and its default parameters (paper sets for built-ins)."""
+    """The mesh and its default parameters.
+
+    Built-ins: the paper's sets (paper dynamics, Table II/IV tolerances).  Files: the momentum
+    dynamics with the fold barrier, stopped at the energy minimum (relative energy change
+    ``FILE_TOL_ENERGY``, no E_S/E_C thresholds) with ``N_max`` sized to the mesh's radius in edges.
+    """
     if is_builtin(name) and not Path(name).is_file():
         mesh, paper = builtin_mesh(name)
         return mesh, FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
                                    tol_shape=paper.tol_shape, tol_energy=paper.tol_energy,
                                    max_iter=paper.max_iter)
-    return load_mesh(name), FlattenParams(density="auto")
+    mesh, notes = load_mesh_with_notes(name)
+    for note in notes:
+        print(f"springflat: note: {mesh.name}: {note}", file=sys.stderr)
+    return mesh, FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0,
+                               tol_energy=FILE_TOL_ENERGY,
+                               max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
+
+
+def default_init(mesh_name: str) -> str:
+    """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), arap for files
+    (measured best: the lowest E_C of the five methods and no folds on every shipped scan, docs/dynamics.md)."""
+    return "pca" if is_builtin(mesh_name) and not Path(mesh_name).is_file() else "arap"
 
 
 def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> FlattenParams:
     """Apply the command-line overrides to ``defaults`` (validated)."""
     changes = {"step": args.step, "update": args.update, "penalty": args.penalty or defaults.penalty}
+    if args.dynamics is not None and args.dynamics != defaults.dynamics:
+        changes["dynamics"] = args.dynamics
+        changes["barrier"] = None  # follows the dynamics unless given
     for option in ("dt", "damping", "penalty_kappa", "penalty_gain", "spring", "density",
-                   "tol_area", "tol_shape", "tol_energy", "max_iter"):
+                   "tol_area", "tol_shape", "tol_energy", "max_iter", "barrier", "barrier_threshold",
+                   "barrier_gain"):
         value = getattr(args, option)
         if value is not None:
             changes[option] = value
@@ -124,6 +182,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
                                  (args.plot, "--plot", (".png",))):
         if path is not None:
             check_output_path(path, what, suffixes)
+    args.init = args.init or default_init(args.mesh)
     positions = initial_layout(mesh, args.init)
     show_progress = sys.stderr.isatty() or not args.json
     if args.engine == "fixed":
@@ -139,20 +198,38 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     _write_outputs(args, mesh, result)
     if args.json:
-        print(json.dumps({"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces,
-                          **result.summary()}))
+        print(json.dumps({"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
+                          **result.summary(), "used": _what_was_used(params, args.init, result)[len("springflat: "):]}))
     else:
         final = result.final
-        print(f"{mesh.name}: {result.status} after {result.iterations} iterations "
-              f"({params.step} step, {params.update}): E_S {result.initial.area_error:.4f} -> "
-              f"{final.area_error:.4f}, E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
-              f"flipped {final.flipped}"
+        print(f"{mesh.name}: {result.status} after {result.iterations} iterations: "
+              f"E_S {result.initial.area_error:.4f} -> {final.area_error:.4f}, "
+              f"E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
+              f"folded {final.folded} (flipped against P0: {final.flipped})"
               + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed" else ""))
+        print(_what_was_used(params, args.init, result), file=sys.stderr)
     if result.status == "diverged":
         print(f"springflat: the run diverged at iteration {result.iterations + 1} "
               "(try --damping 0.05 or a smaller --dt); outputs hold the last finite state", file=sys.stderr)
         return EXIT_DIVERGED
     return 0
+
+
+def _what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> str:
+    """One line: dynamics, initial layout, stop rule, and why the run stopped."""
+    if params.dynamics == "momentum":
+        dynamics = "momentum dynamics" + (f", fold barrier (kappa {params.barrier_threshold:g}, mu "
+                                          f"{params.barrier_gain:g})" if params.barrier else ", no barrier")
+    else:
+        dynamics = (f"paper dynamics, {params.step} step" + (f", damping {params.damping:g}" if params.damping else "")
+                    + (f", fold barrier (kappa {params.barrier_threshold:g}, mu {params.barrier_gain:g})"
+                       if params.barrier else ""))
+    rule = f"relative energy change <= {params.tol_energy:g}"
+    if params.tol_area < 1 or params.tol_shape < 1:
+        rule = f"E_S <= {params.tol_area:g}, E_C <= {params.tol_shape:g} and {rule}"
+    why = {"converged": "the stop rule held", "max-iterations": f"N_max = {params.max_iter} reached",
+           "diverged": "a value stopped being finite"}[result.status]
+    return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 
 def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:

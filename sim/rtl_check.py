@@ -42,10 +42,11 @@ def add_parser(sub, add_run_options) -> None:
 def cmd_rtl_check(args: argparse.Namespace) -> int:
     from hdl import SpringflatCore
 
-    from .cli import UserError, params_from_args, resolve_mesh
+    from .cli import UserError, default_init, params_from_args, resolve_mesh
 
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
+    args.init = args.init or default_init(args.mesh)
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     if not 0 <= args.stall < 1:

@@ -64,7 +64,8 @@ def test_flatten_file_mesh_to_svg_with_options(tmp_path):
         np.savetxt(f, mesh.vertices)
         np.savetxt(f, np.column_stack([np.full(mesh.n_faces, 3), mesh.faces]), fmt="%d")
     svg = tmp_path / "dome.svg"
-    proc = run("flatten", path, "--init", "tutte", "--step", "fixed", "--dt", "0.02", "--update", "sequential",
+    proc = run("flatten", path, "--dynamics", "paper", "--init", "tutte", "--step", "fixed", "--dt", "0.02",
+               "--update", "sequential",
                "--damping", "0.1", "--density", "auto", "--max-iter", "5", "--tol-area", "0", "--out", svg, "--json")
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
@@ -169,3 +170,57 @@ def test_variable_step_beats_fixed_on_surf1():
     variable = json.loads(run("flatten", "surf1", "--step", "variable", "--json").stdout)
     assert fixed["status"] == variable["status"] == "converged"
     assert variable["iterations"] < fixed["iterations"]
+
+
+SCANS = Path(__file__).parent / "data" / "scans"
+
+
+def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap():
+    """Defaults for files: momentum, fold barrier, ARAP start, stop at the energy minimum."""
+    from golden_model.layouts import initial_layout
+    from golden_model.reference import FlattenParams, SpringModel, measure
+
+    path = SCANS / "bunny_face.obj"
+    done = run("flatten", str(path), "--json")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    mesh = load_mesh(path)
+    arap = initial_layout(mesh, "arap")
+    arap_error = measure(SpringModel.build(mesh, arap, 0.5, "auto"), arap).shape_error
+    assert summary["dynamics"] == "momentum" and summary["barrier"] is True
+    assert summary["status"] == "converged"
+    assert summary["folded"] == 0
+    assert summary["shape_error"] <= arap_error
+    assert summary["init"] == "arap" and "stopped: the stop rule held" in summary["used"]
+    human = run("flatten", str(path), "--max-iter", "5")
+    assert "used momentum dynamics, fold barrier" in human.stderr and "N_max = 5 reached" in human.stderr
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--barrier-threshold", "0"], "barrier threshold kappa must be in (0, 1]"),
+    (["--barrier-gain", "100"], "barrier gain mu must be in (0, 16]"),
+    (["--dynamics", "momentum", "--update", "sequential"], "use --update jacobi"),
+    (["--dynamics", "momentum", "--engine", "fixed", "--formats", "FORMATS"], "same fraction bits"),
+])
+def test_bad_dynamics_parameters_are_one_line(tmp_path, args, message):
+    from golden_model.fixed import FormatSet
+
+    odd = tmp_path / "odd.json"
+    FormatSet.preset("default").replace(velocity="s3.20", name="odd").save(odd)
+    args = [str(odd) if a == "FORMATS" else a for a in args]
+    out = tmp_path / "x.obj"
+    done = run("flatten", "surf2", "--out", str(out), *args)
+    assert done.returncode == 2
+    assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_momentum_on_the_fixed_engine_matches_the_float_engine():
+    common = ("flatten", "surf2", "--dynamics", "momentum", "--init", "tutte", "--max-iter", "60",
+              "--tol-energy", "0", "--json")
+    fixed = json.loads(run(*common, "--engine", "fixed").stdout)
+    floating = json.loads(run(*common).stdout)
+    assert fixed["iterations"] == floating["iterations"] == 60
+    assert fixed["saturations"] == 0 and fixed["barrier"] is True
+    assert abs(fixed["shape_error"] - floating["shape_error"]) <= 1e-3
+    assert abs(fixed["area_error"] - floating["area_error"]) <= 1e-3
