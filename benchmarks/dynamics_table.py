@@ -19,17 +19,10 @@ from golden_model.generate import rolled_grid, saddle_grid, spherical_cap  # noq
 from golden_model.layouts import initial_layout  # noqa: E402
 from golden_model.mesh import load_mesh  # noqa: E402
 from golden_model.reference import FlattenParams, SpringModel, flatten, measure  # noqa: E402
+from golden_model.reference import iterations_to_within as within  # noqa: E402
 
 SCANS = Path(__file__).resolve().parents[1] / "tests" / "data" / "scans"
 RUN = dict(tol_area=1.0, tol_shape=1.0, tol_energy=0.0)
-
-
-def within(shape_errors, target, rel=0.01, floor=1e-4):
-    errors = np.asarray(shape_errors)
-    outside = np.flatnonzero(np.abs(errors - target) > max(rel * target, floor))
-    if len(outside) == 0:
-        return 0
-    return None if outside[-1] + 1 >= len(errors) else int(outside[-1] + 1)
 
 
 def main() -> None:

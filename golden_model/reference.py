@@ -49,6 +49,8 @@ __all__ = [
     "barrier_energy",
     "momentum_beta",
     "node_weights",
+    "barrier_stiffness",
+    "iterations_to_within",
 ]
 
 Status = Literal["converged", "max-iterations", "diverged"]
@@ -108,8 +110,8 @@ class FlattenParams:
     max_iter: int = 100
     dynamics: str = "paper"
     barrier: bool | None = None
-    barrier_threshold: float = 0.25
-    barrier_gain: float = 1.0
+    barrier_threshold: float = 0.5
+    barrier_gain: float = 4.0
 
     def __post_init__(self) -> None:
         def finite(name: str, value: float) -> float:
@@ -208,19 +210,46 @@ class SpringModel:
 
     @cached_property
     def weights(self) -> np.ndarray:
-        """``(V,)`` the momentum dynamics' ``w_i = 2/(C·deg_i)`` (:func:`node_weights`)."""
-        return node_weights(self.mesh, self.spring)
+        """``(V,)`` the momentum dynamics' weights ``w_i`` (:func:`node_weights`)."""
+        return node_weights(self.mesh, self.spring, self.barrier[1] if self.barrier else None)
 
 
-def node_weights(mesh: Mesh, spring: float) -> np.ndarray:
+#: The momentum step stays stable while ``w_i`` times node i's stiffness is below about
+#: ``2(1 + β)``; the springs alone use 2 of it (``w_i = 2/(C·deg_i)``), and the barrier's
+#: stiffness may take the rest before the weight has to shrink.
+MOMENTUM_STIFFNESS_BUDGET = 4.0
+
+
+def barrier_stiffness(mesh: Mesh, spring: float, gain: float) -> np.ndarray:
+    """``(V,)`` ``b_i = Σ_t ¼·μ·C·|e_t|²/X*_t``: the barrier's stiffness at node i once active.
+
+    ``e_t`` is the 3D edge of triangle t opposite node i, ``X*_t`` twice its 3D area (the
+    Hessian of the barrier force with respect to the node's own position).
+    """
+    faces, vertices = mesh.faces, mesh.vertices
+    stiffness = np.zeros(mesh.n_vertices)
+    for k in range(3):
+        opposite = vertices[faces[:, (k + 1) % 3]] - vertices[faces[:, (k + 2) % 3]]
+        terms = 0.25 * gain * spring * np.sum(opposite * opposite, axis=1) / (2.0 * mesh.face_areas)
+        stiffness += np.bincount(faces[:, k], weights=terms, minlength=mesh.n_vertices)
+    return stiffness
+
+
+def node_weights(mesh: Mesh, spring: float, barrier_gain: float | None = None) -> np.ndarray:
     """``w_i = Δt/m_i = 2/(C·deg_i)``: masses ``m_i = (C/2)·deg_i`` and ``Δt = 1``.
 
     ``C·deg_i`` bounds the stiffness of node i's springs, so these masses make
     every node equally fast (a Jacobi preconditioner); the energy minimum
-    does not depend on them.
+    does not depend on them.  With the fold barrier (gain ``μ``), a node whose
+    barrier stiffness ``b_i`` (:func:`barrier_stiffness`) would push it past the
+    stability budget gets the smaller ``w_i = budget/(C·deg_i + 2·b_i)``.
     """
     degree = np.diff(mesh.neighbours[0])
-    return 2.0 / (spring * degree)
+    weights = 2.0 / (spring * degree)
+    if barrier_gain is not None:
+        stiff = barrier_stiffness(mesh, spring, barrier_gain)
+        weights = np.minimum(weights, MOMENTUM_STIFFNESS_BUDGET / (spring * degree + 2.0 * stiff))
+    return weights
 
 
 def momentum_beta(k: int) -> float:
@@ -298,6 +327,19 @@ def _accumulate(terms: np.ndarray, edges: np.ndarray, n: int) -> np.ndarray:
 def spring_energy(length: np.ndarray, rest: np.ndarray, spring: float) -> float:
     """Energy (eqs. 1, 3): ``Σ_e C·(L_e − d_e)²`` (each edge from both ends)."""
     return float(spring * np.sum((length - rest) ** 2))
+
+
+def iterations_to_within(shape_errors, target: float, rel: float = 0.01, floor: float = 1e-4) -> int | None:
+    """First iteration from which E_C stays within ``rel`` of ``target`` (or ``floor`` absolute).
+
+    The measure of docs/dynamics.md: ``floor`` serves meshes whose converged E_C is 0
+    (developable ones).  ``None`` when the last value is still outside.
+    """
+    errors = np.asarray(shape_errors)
+    outside = np.flatnonzero(np.abs(errors - target) > max(rel * target, floor))
+    if len(outside) == 0:
+        return 0
+    return None if outside[-1] + 1 >= len(errors) else int(outside[-1] + 1)
 
 
 def variable_step(area_error: float, shape_error: float) -> float:

@@ -81,9 +81,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="the fold barrier (default: on with momentum, off with paper)")
     parser.add_argument("--barrier-threshold", type=number_argument, default=None,
                         help="barrier threshold kappa in (0, 1]: the fraction of its 3D area below which a "
-                             "triangle is pushed back (default 0.25)")
+                             "triangle is pushed back (default 0.5)")
     parser.add_argument("--barrier-gain", type=number_argument, default=None,
-                        help="barrier stiffness mu in (0, 16], relative to the springs' C (default 1)")
+                        help="barrier stiffness mu in (0, 16], relative to the springs' C (default 4)")
     parser.add_argument("--step", choices=("variable", "fixed"), default="variable",
                         help="step-size mode (default variable, eqs. 18-20)")
     parser.add_argument("--dt", type=number_argument, default=None, help="fixed step size (default 0.01)")

@@ -11,12 +11,13 @@ import math
 import os
 import tempfile
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
-from golden_model.mesh import save_obj
+from golden_model.mesh import folded_faces, save_obj, signed_areas_2d, triangle_areas_3d
 from golden_model.reference import FlattenResult
 
 HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped")
@@ -52,32 +53,279 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
             os.unlink(tmp)
 
 
-def write_layout(path: Path, positions: np.ndarray, faces: np.ndarray) -> None:
-    """The layout as OBJ (z = 0, same faces) or, for ``.svg``, as an SVG drawing."""
+# --------------------------------------------------------------------------- per-face distortion colouring
+
+#: Colour of folded faces (pattern orientation disagrees, or zero area): not in :data:`DISTORTION_CMAP`.
+FOLD_COLOUR = "#000000"
+#: Colour of every unfolded face when no 3D areas are known (no distortion to show).
+PLAIN_COLOUR = "#c8c8c8"
+#: The diverging map of ``|A'|/A`` on a log scale: blue = shrunk, white = 1, red = stretched.
+#: RdBu reversed, its near-black ends cut off so that black stays free for folds.
+DISTORTION_CMAP = "RdBu_r"
+_CMAP_RANGE = (0.1, 0.9)
+#: The colour scale spans ``[1/r, r]`` with ``r`` the 98th percentile of ``max(ρ, 1/ρ)``,
+#: clipped to ``[MIN_SCALE, MAX_SCALE]`` (beyond it colours saturate).
+MIN_SCALE, MAX_SCALE = 1.1, 2.0
+#: Draw triangle edges when the median edge is longer than this many pixels (plot) ...
+EDGE_MIN_PIXELS = 8.0
+#: ... or, in an SVG, longer than this fraction of the pattern's size (≈ 3 mm on a 20 cm print).
+SVG_EDGE_MIN_FRACTION = 1 / 60
+
+
+@dataclass(frozen=True)
+class FaceColours:
+    """Per-face colours of a layout by its area distortion.
+
+    Attributes:
+        ratio: ``(F,)`` ``|A'_t| / A_t`` (NaN when no 3D areas were given).
+        folded: ``(F,)`` bool, :func:`golden_model.mesh.folded_faces`.
+        rgba: ``(F, 4)`` floats in [0, 1]; folded faces are :data:`FOLD_COLOUR`.
+        scale: the map spans ``[1/scale, scale]`` (log-symmetric around 1).
+    """
+
+    ratio: np.ndarray
+    folded: np.ndarray
+    rgba: np.ndarray
+    scale: float
+
+    @property
+    def n_folded(self) -> int:
+        return int(self.folded.sum())
+
+    @property
+    def has_ratio(self) -> bool:
+        return bool(np.isfinite(self.ratio).any())
+
+    @property
+    def limits(self) -> tuple[float, float]:
+        return 1.0 / self.scale, self.scale
+
+    def ticks(self) -> np.ndarray:
+        """Five colour-bar ticks, log-evenly spaced from ``1/scale`` through 1 to ``scale``."""
+        return np.exp(np.linspace(-1.0, 1.0, 5) * math.log(self.scale))
+
+
+def distortion_cmap():
+    """The :data:`DISTORTION_CMAP` without its darkest ends (a matplotlib colormap)."""
+    from matplotlib import colormaps
+    from matplotlib.colors import ListedColormap
+
+    base = colormaps[DISTORTION_CMAP]
+    cmap = ListedColormap(base(np.linspace(*_CMAP_RANGE, 256)), name="springflat_distortion")
+    return cmap.with_extremes(over=cmap(1.0), under=cmap(0.0))
+
+
+def area_ratio(positions: np.ndarray, faces: np.ndarray, areas_3d: np.ndarray) -> np.ndarray:
+    """``(F,)`` area distortion ``|A'_t| / A_t`` of a 2D layout against the 3D areas."""
+    return np.abs(signed_areas_2d(positions, faces)) / np.asarray(areas_3d, dtype=np.float64)
+
+
+def ratio_rgba(ratio: np.ndarray, scale: float) -> np.ndarray:
+    """``(N, 4)`` colours of area ratios on the log map ``[1/scale, scale]`` (1 → its white centre)."""
+    from matplotlib.colors import LogNorm
+
+    ratio = np.maximum(np.asarray(ratio, dtype=np.float64), 1e-300)
+    return np.asarray(distortion_cmap()(LogNorm(1.0 / scale, scale)(ratio)), dtype=np.float64)
+
+
+def distortion_scale(ratio: np.ndarray, folded: np.ndarray | None = None) -> float:
+    """``r`` ≥ 1 so that ``[1/r, r]`` holds 98 % of the unfolded faces, within ``[MIN_SCALE, MAX_SCALE]``."""
+    ratio = np.asarray(ratio, dtype=np.float64)
+    keep = np.isfinite(ratio) & (ratio > 0)
+    if folded is not None:
+        keep &= ~np.asarray(folded, dtype=bool)
+    if not keep.any():
+        return MAX_SCALE
+    spread = float(np.percentile(np.abs(np.log(ratio[keep])), 98))
+    return float(np.clip(math.exp(spread), MIN_SCALE, MAX_SCALE))
+
+
+def face_colours(positions: np.ndarray, faces: np.ndarray, areas_3d: np.ndarray | None = None,
+                 scale: float | None = None) -> FaceColours:
+    """Colour each face of the layout ``positions`` by ``|A'|/A`` (folded faces: :data:`FOLD_COLOUR`).
+
+    ``areas_3d`` are the mesh's ``A_t`` (:attr:`Mesh.face_areas`); without
+    them every unfolded face is :data:`PLAIN_COLOUR`.  ``scale`` fixes the
+    map's range ``[1/scale, scale]`` (default :func:`distortion_scale`), e.g.
+    to colour two layouts alike.
+    """
+    from matplotlib.colors import to_rgba
+
+    positions = np.asarray(positions, dtype=np.float64)
+    faces = np.asarray(faces)
+    folded = folded_faces(positions, faces)
+    if areas_3d is None:
+        ratio = np.full(len(faces), np.nan)
+        rgba = np.tile(to_rgba(PLAIN_COLOUR), (len(faces), 1))
+        scale = MAX_SCALE if scale is None else float(scale)
+    else:
+        ratio = area_ratio(positions, faces, areas_3d)
+        scale = distortion_scale(ratio, folded) if scale is None else float(scale)
+        rgba = ratio_rgba(ratio, scale)
+    rgba = np.array(rgba, dtype=np.float64)
+    rgba[folded] = to_rgba(FOLD_COLOUR)
+    return FaceColours(ratio, folded, rgba, scale)
+
+
+def _hex(rgba: np.ndarray) -> list[str]:
+    """``#rrggbb`` of each row of ``rgba`` (alpha dropped)."""
+    rgb = np.clip(np.rint(np.asarray(rgba)[:, :3] * 255), 0, 255).astype(int)
+    return [f"#{r:02x}{g:02x}{b:02x}" for r, g, b in rgb]
+
+
+def _typical_edge(positions: np.ndarray, faces: np.ndarray) -> float:
+    """The median edge length of the layout (robust to a few long boundary edges)."""
+    p = positions[faces]
+    return float(np.median(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2)))
+
+
+def write_layout(path: Path, positions: np.ndarray, faces: np.ndarray, *, vertices: np.ndarray | None = None,
+                 units: str | None = None) -> None:
+    """The layout as OBJ (z = 0, same faces) or, for ``.svg``, as an SVG drawing.
+
+    For SVG only: ``vertices`` (the 3D mesh's ``(V, 3)`` positions) colour the
+    faces by their area distortion (:func:`face_colours`); ``units`` (one of
+    :data:`SVG_UNITS`, the mesh's length unit) sets the SVG's ``width`` and
+    ``height`` so that it prints at real size.
+    """
     with atomic_write(path) as tmp:
         if Path(path).suffix.lower() == ".svg":
-            _write_svg(tmp, positions, faces)
+            _write_svg(tmp, positions, faces, vertices=vertices, units=units)
         else:
             save_obj(tmp, positions, faces)
 
 
-def _write_svg(path: str, positions: np.ndarray, faces: np.ndarray) -> None:
-    """Triangles as SVG polygons in mesh units (y up, as in the plots)."""
+#: Length units an SVG can be printed in (value: the SVG unit and its factor).
+SVG_UNITS = {"mm": ("mm", 1.0), "cm": ("cm", 1.0), "m": ("mm", 1000.0), "in": ("in", 1.0)}
+
+
+def _nice_length(target: float) -> float:
+    """The largest 1, 2 or 5 × 10^k not above ``target``."""
+    power = 10.0 ** math.floor(math.log10(target))
+    return max(step * power for step in (1.0, 2.0, 5.0) if step * power <= target * (1 + 1e-9))
+
+
+def _svg_number(value: float, decimals: int) -> str:
+    text = f"{value:.{decimals}f}"
+    if "." in text:
+        text = text.rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def _write_svg(path: str, positions: np.ndarray, faces: np.ndarray, *, vertices: np.ndarray | None = None,
+               units: str | None = None) -> None:
+    """Triangles as filled SVG polygons in mesh units (y up, as in the plots), a legend strip below.
+
+    One ``<polygon>`` per face: the unfolded ones in face order in group
+    ``pattern``, then the folded ones in group ``folded`` (drawn on top, so
+    that a fold is never hidden).  Group ``legend`` holds the colour bar, the
+    fold swatch and a scale bar.  No strokes once edges would merge in print.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    faces = np.asarray(faces)
+    areas = None if vertices is None else triangle_areas_3d(np.asarray(vertices, dtype=np.float64), faces)
+    colours = face_colours(positions, faces, areas)
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     size = float(max(hi - lo)) or 1.0
-    margin = 0.02 * size
-    stroke = 0.002 * size
-    flipped = positions * np.array([1.0, -1.0])  # SVG's y axis points down
+    decimals = max(0, 5 - math.floor(math.log10(size)))
+    margin = 0.03 * size
+    font = 0.025 * size
+
+    def num(value: float) -> str:
+        return _svg_number(float(value), decimals)
+
+    # the pattern, y flipped (SVG's y axis points down), then a legend strip under it
+    corners = positions[faces] * np.array([1.0, -1.0])
     x0, y0 = lo[0] - margin, -hi[1] - margin
-    width, height = hi[0] - lo[0] + 2 * margin, hi[1] - lo[1] + 2 * margin
+    legend_top = -lo[1] + margin
+    legend_height = 5.2 * font
+    width = max(hi[0] - lo[0] + 2 * margin, 0.95 * size)
+    height = (legend_top - y0) + legend_height
+    size_attributes = ""
+    if units is not None:
+        if units not in SVG_UNITS:
+            raise OutputError(f"SVG units must be one of {', '.join(SVG_UNITS)}, got {units!r}")
+        unit, factor = SVG_UNITS[units]
+        size_attributes = f' width="{width * factor:.6g}{unit}" height="{height * factor:.6g}{unit}"'
+    stroke = _typical_edge(positions, faces) > SVG_EDGE_MIN_FRACTION * size
+    fills = np.array(_hex(colours.rgba))
+    fmt = " ".join([f"%.{decimals}f,%.{decimals}f"] * 3)
+    coordinates = np.round(corners.reshape(len(faces), 6), decimals) + 0.0  # no "-0.000"
+
+    def polygons(which: np.ndarray) -> Iterator[str]:
+        for row, fill in zip(coordinates[which], fills[which]):
+            yield f'<polygon points="{fmt % tuple(row)}" fill="{fill}"/>\n'
+
     with open(path, "w", encoding="utf-8") as out:
         out.write('<?xml version="1.0" encoding="UTF-8"?>\n')
-        out.write(f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="{x0:.9g} {y0:.9g} {width:.9g} {height:.9g}">\n')
-        out.write(f'<g fill="#dfe8f5" stroke="#1f3b73" stroke-width="{stroke:.6g}" stroke-linejoin="round">\n')
-        for face in faces:
-            points = " ".join(f"{x:.9g},{y:.9g}" for x, y in flipped[face])
-            out.write(f'<polygon points="{points}"/>\n')
-        out.write("</g>\n</svg>\n")
+        out.write(f'<svg xmlns="http://www.w3.org/2000/svg"{size_attributes} '
+                  f'viewBox="{num(x0)} {num(y0)} {num(width)} {num(height)}">\n')
+        scale_note = (f"1 user unit = 1 {units}, printed at real size" if units is not None
+                      else "1 user unit = 1 length unit of the mesh; scale the print so that the scale bar measures true")
+        colour_note = ("faces filled by area ratio |A'|/A (log scale, blue shrunk, white 1, red stretched)"
+                       if colours.has_ratio else "faces not coloured (no 3D areas given)")
+        out.write(f"<!-- springflat pattern: {scale_note}; {colour_note}; "
+                  f"{colours.n_folded} folded faces filled {FOLD_COLOUR} -->\n")
+        if stroke:
+            out.write(f'<g id="pattern" stroke="#3a3a3a" stroke-width="{num(0.0015 * size)}" '
+                      'stroke-linejoin="round">\n')
+        else:
+            out.write('<g id="pattern" stroke="none" shape-rendering="crispEdges">\n')  # no seams
+        out.writelines(polygons(~colours.folded))
+        out.write("</g>\n")
+        out.write(f'<g id="folded" stroke="{FOLD_COLOUR}" stroke-width="{num(0.002 * size)}" '
+                  'stroke-linejoin="round">\n')
+        out.writelines(polygons(colours.folded))
+        out.write("</g>\n")
+        _write_svg_legend(out, colours, x0 + margin, legend_top, size, num, units)
+        out.write("</svg>\n")
+
+
+def _write_svg_legend(out, colours: FaceColours, left: float, top: float, size: float, num,
+                      units: str | None) -> None:
+    """Colour bar (log scale) with ticks, the fold swatch and a scale bar, in group ``legend``.
+
+    The group draws in its own frame, 1000 units to the pattern's size, so that
+    text is never sized in tiny user units (renderers mishandle fonts below 1).
+    """
+    k = size / 1000.0
+
+    def n(value: float) -> str:
+        return _svg_number(float(value), 2)
+
+    font, bar_width, bar_height = 25.0, 450.0, 22.0
+    bar_top = 1.5 * font
+    out.write(f'<g id="legend" transform="translate({num(left)} {num(top)}) scale({k:.6g})" '
+              f'font-family="sans-serif" font-size="{n(font)}" fill="#000000">\n')
+    x = 0.0
+    if colours.has_ratio:
+        out.write(f'<text x="0" y="{n(font)}">area ratio |A\'|/A (log scale): blue shrunk, red stretched</text>\n')
+        out.write('<g id="colourbar" stroke="none">\n')
+        steps = 48
+        log_scale = math.log(colours.scale)
+        rgba = ratio_rgba(np.exp(np.linspace(-log_scale, log_scale, steps)), colours.scale)  # the faces' map
+        step = bar_width / steps
+        for j, fill in enumerate(_hex(rgba)):
+            out.write(f'<rect x="{n(j * step)}" y="{n(bar_top)}" width="{n(step + 0.5)}" height="{n(bar_height)}" '
+                      f'fill="{fill}"/>\n')
+        out.write("</g>\n")
+        out.write(f'<rect x="0" y="{n(bar_top)}" width="{n(bar_width)}" height="{n(bar_height)}" fill="none" '
+                  'stroke="#000000" stroke-width="1"/>\n')
+        for j, tick in enumerate(colours.ticks()):
+            out.write(f'<text x="{n(bar_width * j / 4)}" y="{n(bar_top + bar_height + 1.05 * font)}" '
+                      f'text-anchor="middle">{tick:.3g}</text>\n')
+        x = bar_width + 1.5 * font
+    out.write(f'<rect x="{n(x)}" y="{n(bar_top)}" width="{n(bar_height)}" height="{n(bar_height)}" '
+              f'fill="{FOLD_COLOUR}"/>\n')
+    out.write(f'<text x="{n(x + bar_height + 0.4 * font)}" y="{n(bar_top + 0.85 * bar_height)}">'
+              f"folded: {colours.n_folded}</text>\n")
+    # scale bar: a round length in the mesh's unit
+    length = _nice_length(0.2 * size)
+    sy = bar_top + bar_height + 1.9 * font
+    unit = f" {units}" if units is not None else " (mesh units)"
+    out.write(f'<path d="M{n(x)} {n(sy)}h{n(length / k)}" stroke="#000000" stroke-width="4"/>\n')
+    out.write(f'<text x="{n(x + length / k + 0.4 * font)}" y="{n(sy + 0.35 * font)}">{length:g}{unit}</text>\n')
+    out.write("</g>\n")
 
 
 def write_history(path: Path, result: FlattenResult) -> None:
@@ -89,36 +337,134 @@ def write_history(path: Path, result: FlattenResult) -> None:
             writer.writerow([k, "" if math.isnan(dt) else repr(dt), repr(area), repr(shape), repr(energy), flipped])
 
 
-def write_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str = "") -> None:
-    """PNG: initial and final layouts overlaid (paper Figs. 8/10), error curves (Figs. 11/12)."""
+def _draw_faces(ax, positions: np.ndarray, faces: np.ndarray, colours: FaceColours):
+    """Two PolyCollections on ``ax``: the unfolded faces, then the folded ones on top (outlined so they show)."""
+    from matplotlib.collections import PolyCollection
+
+    corners = positions[faces]
+    body = PolyCollection(corners[~colours.folded], facecolors=colours.rgba[~colours.folded], linewidths=0,
+                          edgecolors="none", antialiaseds=False, rasterized=False)
+    folds = PolyCollection(corners[colours.folded], facecolors=FOLD_COLOUR, edgecolors=FOLD_COLOUR,
+                           linewidths=0.6, zorder=3)
+    ax.add_collection(body)
+    ax.add_collection(folds)
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    pad = 0.03 * float(max(hi - lo) or 1.0)
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    return body
+
+
+def show_edges(positions: np.ndarray, faces: np.ndarray, pixels_per_unit: float) -> bool:
+    """Whether triangle edges stay apart when drawn: the median edge spans > :data:`EDGE_MIN_PIXELS`."""
+    return _typical_edge(positions, faces) * pixels_per_unit > EDGE_MIN_PIXELS
+
+
+def _set_edges(ax, body, positions: np.ndarray, faces: np.ndarray) -> bool:
+    """Thin edges on ``body`` when the median edge spans more than :data:`EDGE_MIN_PIXELS` (call after layout)."""
+    ax.apply_aspect()
+    pixels_per_unit = ax.get_window_extent().width / abs(np.diff(ax.get_xlim())[0])
+    visible = show_edges(positions, faces, pixels_per_unit)
+    if visible:
+        body.set_edgecolor((0.15, 0.15, 0.15, 0.45))
+        body.set_linewidth(0.35)
+        body.set_antialiased(True)
+    return visible
+
+
+def write_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str = "", *,
+               vertices: np.ndarray | None = None) -> None:
+    """PNG a person reads at a glance: the final pattern coloured by area distortion, the initial layout, errors.
+
+    The main panel fills each face by ``|A'|/A`` (:func:`face_colours`, a
+    diverging log-scale map centred on 1, with a colour bar) and marks folded
+    faces in :data:`FOLD_COLOUR`; a small panel shows the initial layout on
+    the same scale; the third panel has ``E_S``, ``E_C`` (and the energy) per
+    iteration.  ``vertices`` (the mesh's 3D positions) are needed for the
+    colours; without them the faces are plain grey.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LogNorm
+    from matplotlib.patches import Patch
+    from matplotlib.ticker import NullLocator
 
-    fig, (ax_layout, ax_errors) = plt.subplots(1, 2, figsize=(11, 4.8))
-    for positions, colour, label in (
-        (result.initial_positions, "tab:blue", "initial layout"),
-        (result.positions, "tab:red", f"after {result.iterations} iterations"),
-    ):
-        ax_layout.triplot(positions[:, 0], positions[:, 1], faces, color=colour, lw=0.8, label=label)
-    ax_layout.set_aspect("equal")
-    ax_layout.legend(loc="upper right", fontsize=8)
-    ax_layout.set_title("layouts")
-    k = np.arange(len(result.history))
-    ax_errors.plot(k, result.history.area_error, "-", color="tab:green", label="area error $E_S$")
-    ax_errors.plot(k, result.history.shape_error, "-", color="tab:purple", label="shape error $E_C$")
+    faces = np.asarray(faces)
+    areas = None if vertices is None else triangle_areas_3d(np.asarray(vertices, dtype=np.float64), faces)
+    final = face_colours(result.positions, faces, areas)
+    initial = face_colours(result.initial_positions, faces, areas, scale=final.scale)
+
+    dpi = 110
+    fig = plt.figure(figsize=(12.5, 6.6), dpi=dpi)
+    grid = fig.add_gridspec(2, 4, width_ratios=(1.75, 0.045, 0.3, 1), height_ratios=(1, 1), wspace=0.05,
+                            hspace=0.38)
+    ax_main = fig.add_subplot(grid[:, 0])
+    ax_bar = fig.add_subplot(grid[:, 1])
+    ax_initial = fig.add_subplot(grid[0, 3])
+    ax_errors = fig.add_subplot(grid[1, 3])
+
+    body = _draw_faces(ax_main, result.positions, faces, final)
+    body_initial = _draw_faces(ax_initial, result.initial_positions, faces, initial)
+    what = ("coloured by area ratio |A'|/A: red stretched, blue shrunk" if final.has_ratio
+            else "not coloured: no 3D areas given")
+    ax_main.set_title(f"final pattern, {what}", fontsize=10)
+    ax_main.set_anchor("E")  # against the colour bar
+    ax_initial.set_title(f"initial layout (same colours), {initial.n_folded} folded", fontsize=9)
+    for ax in (ax_main, ax_initial):
+        ax.tick_params(labelsize=7, colors="0.4")
+        for spine in ax.spines.values():
+            spine.set_color("0.75")
+    ax_initial.tick_params(labelsize=6)
+    ax_main.legend(handles=[Patch(facecolor=FOLD_COLOUR, label=f"folded faces: {final.n_folded}")],
+                   loc="upper right", fontsize=8, framealpha=0.85)
+    if final.has_ratio:
+        mappable = ScalarMappable(LogNorm(*final.limits), distortion_cmap())
+        bar = fig.colorbar(mappable, cax=ax_bar, extend="both")
+        bar.set_label("area ratio |A'|/A  (log scale)", fontsize=9)
+        bar.set_ticks(final.ticks(), labels=[f"{t:.3g}" for t in final.ticks()])
+        bar.ax.yaxis.set_minor_locator(NullLocator())
+        bar.ax.tick_params(labelsize=8)
+    else:
+        ax_bar.set_axis_off()
+
+    history = result.history
+    k = np.arange(len(history))
+    curves = [(np.asarray(history.area_error, dtype=float), "tab:green", "area error $E_S$"),
+              (np.asarray(history.shape_error, dtype=float), "tab:purple", "shape error $E_C$")]
     params = result.params
-    ax_errors.axhline(params.tol_area, color="tab:green", ls=":", lw=0.8)
-    ax_errors.axhline(params.tol_shape, color="tab:purple", ls=":", lw=0.8)
-    ax_errors.set_xlabel("iteration")
-    ax_errors.set_ylabel("relative error")
-    ax_errors.set_title(f"{params.step} step, {result.status}")
-    ax_errors.legend(fontsize=8)
+    for values, colour, label in curves:
+        ax_errors.plot(k, values, "-", color=colour, lw=1.3, label=label)
+    for tolerance, colour in ((params.tol_area, "tab:green"), (params.tol_shape, "tab:purple")):
+        if tolerance > 0:  # a zero tolerance (rule off) has no place on a log axis
+            ax_errors.axhline(tolerance, color=colour, ls=":", lw=0.8)
+    if all(np.all(np.isfinite(v) & (v > 0)) for v, _, _ in curves):
+        ax_errors.set_yscale("log")
+    energy = np.asarray(history.energy, dtype=float)
+    handles, labels = ax_errors.get_legend_handles_labels()
+    if len(energy) and np.all(np.isfinite(energy)):
+        ax_energy = ax_errors.twinx()
+        (line,) = ax_energy.plot(k, energy, "--", color="0.45", lw=1.0, label="energy (right axis)")
+        if np.all(energy > 0):
+            ax_energy.set_yscale("log")
+        ax_energy.tick_params(which="both", labelsize=7, colors="0.4")
+        handles, labels = handles + [line], labels + [line.get_label()]
+    ax_errors.legend(handles, labels, fontsize=7, loc="upper right")
+    ax_errors.set_xlabel("iteration", fontsize=8)
+    ax_errors.set_ylabel("relative error (dotted: tolerance)", fontsize=8)
+    ax_errors.tick_params(which="both", labelsize=7)
+    ax_errors.set_title(f"errors ({params.dynamics} dynamics, {params.step} step)", fontsize=9)
     ax_errors.grid(alpha=0.3)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
+
+    summary = (f"{result.status} after {result.iterations} iterations:  $E_S$ = {history.area_error[-1]:.3g},  "
+               f"$E_C$ = {history.shape_error[-1]:.3g},  {final.n_folded} of {len(faces)} faces folded")
+    fig.suptitle(f"{title} — {summary}" if title else summary, fontsize=12)
+    fig.subplots_adjust(left=0.04, right=0.95, top=0.9, bottom=0.08)
+    _set_edges(ax_main, body, result.positions, faces)
+    _set_edges(ax_initial, body_initial, result.initial_positions, faces)
     with atomic_write(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+        fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
