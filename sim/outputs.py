@@ -261,7 +261,7 @@ def _write_svg(path: str, positions: np.ndarray, faces: np.ndarray, *, vertices:
         out.write(f'<svg xmlns="http://www.w3.org/2000/svg"{size_attributes} '
                   f'viewBox="{num(x0)} {num(y0)} {num(width)} {num(height)}">\n')
         scale_note = (f"1 user unit = 1 {units}, printed at real size" if units is not None
-                      else "1 user unit = 1 length unit of the mesh; scale the print so that the scale bar measures true")
+                      else "1 user unit = 1 length unit of the mesh; print so that the scale bar measures true")
         colour_note = ("faces filled by area ratio |A'|/A (log scale, blue shrunk, white 1, red stretched)"
                        if colours.has_ratio else "faces not coloured (no 3D areas given)")
         out.write(f"<!-- springflat pattern: {scale_note}; {colour_note}; "
@@ -400,7 +400,7 @@ def write_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str 
 
     dpi = 110
     fig = plt.figure(figsize=(12.5, 6.6), dpi=dpi)
-    grid = fig.add_gridspec(2, 4, width_ratios=(1.75, 0.045, 0.3, 1), height_ratios=(1, 1), wspace=0.05,
+    grid = fig.add_gridspec(2, 4, width_ratios=(1.75, 0.045, 0.36, 1), height_ratios=(1, 1), wspace=0.05,
                             hspace=0.38)
     ax_main = fig.add_subplot(grid[:, 0])
     ax_bar = fig.add_subplot(grid[:, 1])
@@ -462,7 +462,7 @@ def write_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str 
     summary = (f"{result.status} after {result.iterations} iterations:  $E_S$ = {history.area_error[-1]:.3g},  "
                f"$E_C$ = {history.shape_error[-1]:.3g},  {final.n_folded} of {len(faces)} faces folded")
     fig.suptitle(f"{title} — {summary}" if title else summary, fontsize=12)
-    fig.subplots_adjust(left=0.04, right=0.95, top=0.9, bottom=0.08)
+    fig.subplots_adjust(left=0.04, right=0.95, top=0.88, bottom=0.08)
     _set_edges(ax_main, body, result.positions, faces)
     _set_edges(ax_initial, body_initial, result.initial_positions, faces)
     with atomic_write(path) as tmp:
