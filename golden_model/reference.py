@@ -211,7 +211,7 @@ class SpringModel:
     @cached_property
     def weights(self) -> np.ndarray:
         """``(V,)`` the momentum dynamics' weights ``w_i`` (:func:`node_weights`)."""
-        return node_weights(self.mesh, self.spring, self.barrier[1] if self.barrier else None)
+        return node_weights(self.mesh, self.spring, self.barrier)
 
 
 #: The momentum step stays stable while ``w_i`` times node i's stiffness is below about
@@ -220,34 +220,37 @@ class SpringModel:
 MOMENTUM_STIFFNESS_BUDGET = 4.0
 
 
-def barrier_stiffness(mesh: Mesh, spring: float, gain: float) -> np.ndarray:
-    """``(V,)`` ``b_i = Σ_t ¼·μ·C·|e_t|²/X*_t``: the barrier's stiffness at node i once active.
+def barrier_stiffness(mesh: Mesh, spring: float, gain: float, threshold: float) -> np.ndarray:
+    """``(V,)`` ``b_i = Σ_t ¼·μ·C·(|e_t|²/X*_t + 2κ)``: a bound on the barrier's stiffness at node i.
 
-    ``e_t`` is the 3D edge of triangle t opposite node i, ``X*_t`` twice its 3D area (the
-    Hessian of the barrier force with respect to the node's own position).
+    ``e_t`` is the 3D edge of triangle t opposite node i, ``X*_t`` twice its 3D area: the
+    first term is the Hessian of the barrier force with respect to the node's own position,
+    the second the rotation with which an active triangle couples the node to its two
+    neighbours (``c·∂(D.y, −D.x)/∂P_j``, ``c ≤ ¼μCκ`` on an unfolded triangle).
     """
     faces, vertices = mesh.faces, mesh.vertices
     stiffness = np.zeros(mesh.n_vertices)
     for k in range(3):
         opposite = vertices[faces[:, (k + 1) % 3]] - vertices[faces[:, (k + 2) % 3]]
-        terms = 0.25 * gain * spring * np.sum(opposite * opposite, axis=1) / (2.0 * mesh.face_areas)
+        terms = 0.25 * gain * spring * (np.sum(opposite * opposite, axis=1) / (2.0 * mesh.face_areas)
+                                         + 2.0 * threshold)
         stiffness += np.bincount(faces[:, k], weights=terms, minlength=mesh.n_vertices)
     return stiffness
 
 
-def node_weights(mesh: Mesh, spring: float, barrier_gain: float | None = None) -> np.ndarray:
+def node_weights(mesh: Mesh, spring: float, barrier: tuple[float, float] | None = None) -> np.ndarray:
     """``w_i = Δt/m_i = 2/(C·deg_i)``: masses ``m_i = (C/2)·deg_i`` and ``Δt = 1``.
 
     ``C·deg_i`` bounds the stiffness of node i's springs, so these masses make
     every node equally fast (a Jacobi preconditioner); the energy minimum
-    does not depend on them.  With the fold barrier (gain ``μ``), a node whose
+    does not depend on them.  With the fold barrier (``(κ, μ)``), a node whose
     barrier stiffness ``b_i`` (:func:`barrier_stiffness`) would push it past the
     stability budget gets the smaller ``w_i = budget/(C·deg_i + 2·b_i)``.
     """
     degree = np.diff(mesh.neighbours[0])
     weights = 2.0 / (spring * degree)
-    if barrier_gain is not None:
-        stiff = barrier_stiffness(mesh, spring, barrier_gain)
+    if barrier is not None:
+        stiff = barrier_stiffness(mesh, spring, barrier[1], barrier[0])
         weights = np.minimum(weights, MOMENTUM_STIFFNESS_BUDGET / (spring * degree + 2.0 * stiff))
     return weights
 
@@ -449,9 +452,9 @@ class History:
         return len(self.dt)
 
     def rows(self) -> list[tuple]:
-        """``(iteration, dt, area_error, shape_error, energy, flipped)`` rows."""
+        """``(iteration, dt, area_error, shape_error, energy, flipped, folded)`` rows."""
         return [
-            (k, self.dt[k], self.area_error[k], self.shape_error[k], self.energy[k], self.flipped[k])
+            (k, self.dt[k], self.area_error[k], self.shape_error[k], self.energy[k], self.flipped[k], self.folded[k])
             for k in range(len(self))
         ]
 

@@ -445,10 +445,24 @@ class NodeUpdate(wiring.Component):
         ]
         # The result FIFO in LUT RAM, in column slices with their own pointers (below).
         results = self._sliced_fifo(m, "results", layout.size, self.result_depth - 1)
-        load = ~self.o.valid | self.o.ready
+        # A two-register skid buffer after the FIFO: the output register and a spare. The FIFO
+        # is read whenever the spare is free, a registered condition, so o.ready reaches only
+        # the two registers' enables and never the FIFO slices' pointers (through them it was
+        # the critical path: 137.7 MHz once the payload grew to ten slices).
         payload = Signal(layout.size, name="o_payload", reset_less=True)  # data: no reset
+        spare = Signal(layout.size, name="o_spare", reset_less=True)
+        spare_full = Signal()
+        read = Signal()
         m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value()),
-                     results.r_en.eq(load & results.r_rdy), self.o.payload.eq(payload)]
-        with m.If(load):
-            m.d.sync += [self.o.valid.eq(results.r_rdy), payload.eq(results.r_data)]
+                     read.eq(results.r_rdy & ~spare_full), results.r_en.eq(read), self.o.payload.eq(payload)]
+        take = self.o.valid & self.o.ready
+        with m.If(~self.o.valid | take):  # the output register is free (or being freed)
+            with m.If(spare_full):
+                m.d.sync += [payload.eq(spare), self.o.valid.eq(1), spare_full.eq(read)]
+                with m.If(read):
+                    m.d.sync += spare.eq(results.r_data)
+            with m.Else():
+                m.d.sync += [payload.eq(results.r_data), self.o.valid.eq(read)]
+        with m.Elif(read):  # the output register holds: the read goes to the spare
+            m.d.sync += [spare.eq(results.r_data), spare_full.eq(1)]
         return m

@@ -234,11 +234,12 @@ def _what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> s
 
 def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:
     if args.out is not None:
-        write_layout(args.out, result.positions, mesh.faces)
+        write_layout(args.out, result.positions, mesh.faces, vertices=mesh.vertices)
     if args.history is not None:
         write_history(args.history, result)
     if args.plot is not None:
-        write_plot(args.plot, result, mesh.faces, title=f"{mesh.name} ({result.engine} engine)")
+        write_plot(args.plot, result, mesh.faces, title=f"{mesh.name} ({result.engine} engine)",
+                   vertices=mesh.vertices)
 
 
 def cmd_paper(args: argparse.Namespace) -> int:

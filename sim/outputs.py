@@ -20,7 +20,7 @@ import numpy as np
 from golden_model.mesh import folded_faces, save_obj, signed_areas_2d, triangle_areas_3d
 from golden_model.reference import FlattenResult
 
-HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped")
+HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded")
 LAYOUT_SUFFIXES = (".obj", ".svg")
 
 
@@ -333,8 +333,9 @@ def write_history(path: Path, result: FlattenResult) -> None:
     with atomic_write(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as out:
         writer = csv.writer(out)
         writer.writerow(HISTORY_HEADER)
-        for k, dt, area, shape, energy, flipped in result.history.rows():
-            writer.writerow([k, "" if math.isnan(dt) else repr(dt), repr(area), repr(shape), repr(energy), flipped])
+        for k, dt, area, shape, energy, flipped, folded in result.history.rows():
+            writer.writerow([k, "" if math.isnan(dt) else repr(dt), repr(area), repr(shape), repr(energy), flipped,
+                             folded])
 
 
 def _draw_faces(ax, positions: np.ndarray, faces: np.ndarray, colours: FaceColours):

@@ -39,14 +39,14 @@ def test_flatten_round_trip(tmp_path):
 
     with open(hist, newline="") as f:
         rows = list(csv.reader(f))
-    assert rows[0] == ["iteration", "dt", "area_error", "shape_error", "energy", "flipped"]
+    assert rows[0] == ["iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded"]
     assert len(rows) == summary["iterations"] + 2
     assert rows[1][0] == "0" and rows[1][1] == ""
     assert float(rows[1][2]) == summary["initial_area_error"]
     last = rows[-1]
     assert int(last[0]) == summary["iterations"]
     assert float(last[2]) == summary["area_error"] and float(last[3]) == summary["shape_error"]
-    assert int(last[5]) == summary["flipped"]
+    assert int(last[5]) == summary["flipped"] and int(last[6]) == summary["folded"]
     assert 0.01 < float(rows[2][1]) <= 0.21
     # the layout written is the one whose errors were reported
     edges = surf1.edges

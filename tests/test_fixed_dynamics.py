@@ -18,14 +18,14 @@ DEFAULT = FormatSet.preset("default")
 
 
 @pytest.mark.parametrize("barrier", [True, False])
-def test_fixed_momentum_reaches_the_minimum_within_120_iterations_150_with_the_barrier(generated, barrier):
+def test_fixed_momentum_reaches_the_minimum_within_120_iterations_180_with_the_barrier(generated, barrier):
     name, mesh, p0, target = generated
     params = FlattenParams(dynamics="momentum", barrier=barrier, max_iter=200, **RUN)
     fixed = flatten_fixed(mesh, p0, params, DEFAULT)
     count = iterations_to_within(fixed.history.shape_error, target)
     # the bound for the dynamics; the default barrier (κ 0.5, μ 4) trades speed for
-    # fold-free scans (its weights shrink where it is stiff): measured 73 / 110 / 149, docs/dynamics.md
-    bound = 150 if barrier else 120
+    # fold-free scans (its weights shrink where it is stiff): measured 91 / 135 / 176, docs/dynamics.md
+    bound = 180 if barrier else 120
     assert count is not None and count <= bound, (name, count)
     assert fixed.extra["saturations"] == 0 and fixed.final.folded == 0
     float_run = flatten(mesh, p0, params)

@@ -232,7 +232,8 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
     rest_raw = quantize(scaled_rest, fs.rest_length, HOST_ROUNDING, SAT)
     model_density = mesh.auto_density() if params.density == "auto" else float(params.density)
     if params.dynamics == "momentum":
-        inv_mass = node_weights(mesh, params.spring, params.barrier_gain if params.barrier else None)
+        inv_mass = node_weights(mesh, params.spring,
+                                (params.barrier_threshold, params.barrier_gain) if params.barrier else None)
         inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "the weight 2/(C deg)", fs,
                                          "use a larger --spring, or a wider inv_mass format")
     else:
