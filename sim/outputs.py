@@ -47,6 +47,9 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
     os.close(fd)
     try:
         yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an output file gets the usual mode
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -457,7 +460,8 @@ def write_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str 
     ax_errors.set_xlabel("iteration", fontsize=8)
     ax_errors.set_ylabel("relative error (dotted: tolerance)", fontsize=8)
     ax_errors.tick_params(which="both", labelsize=7)
-    ax_errors.set_title(f"errors ({params.dynamics} dynamics, {params.step} step)", fontsize=9)
+    how = "momentum dynamics" if params.dynamics == "momentum" else f"paper dynamics, {params.step} step"
+    ax_errors.set_title(f"errors ({how})", fontsize=9)
     ax_errors.grid(alpha=0.3)
 
     summary = (f"{result.status} after {result.iterations} iterations:  $E_S$ = {history.area_error[-1]:.3g},  "
