@@ -150,8 +150,8 @@ class FlattenParams:
             if self.update != "jacobi":
                 raise ParameterError("the momentum dynamics updates all nodes together: use --update jacobi")
             if self.damping:
-                raise ParameterError("damping belongs to the paper dynamics; the momentum dynamics damps "
-                                     "by its restart (drop --damping)")
+                raise ParameterError("damping belongs to the paper dynamics (--dynamics paper); the momentum "
+                                     "dynamics damps by its restart (drop --damping)")
 
     def with_(self, **changes) -> "FlattenParams":
         """A copy with some fields changed (validated again)."""

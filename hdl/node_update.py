@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Cat, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -443,26 +443,37 @@ class NodeUpdate(wiring.Component):
             result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
             result.error_sum.eq(live["e"]), result.power.eq(live["pw"]),
         ]
-        # The result FIFO in LUT RAM, in column slices with their own pointers (below).
-        results = self._sliced_fifo(m, "results", layout.size, self.result_depth - 1)
-        # A two-register skid buffer after the FIFO: the output register and a spare. The FIFO
-        # is read whenever the spare is free, a registered condition, so o.ready reaches only
-        # the two registers' enables and never the FIFO slices' pointers (through them it was
-        # the critical path: 137.7 MHz once the payload grew to ten slices).
-        payload = Signal(layout.size, name="o_payload", reset_less=True)  # data: no reset
-        spare = Signal(layout.size, name="o_spare", reset_less=True)
-        spare_full = Signal()
-        read = Signal()
-        m.d.comb += [results.w_en.eq(tail.valid), results.w_data.eq(result.as_value()),
-                     read.eq(results.r_rdy & ~spare_full), results.r_en.eq(read), self.o.payload.eq(payload)]
+        # The result FIFO in LUT RAM column slices, each with its own pointers and its own
+        # two-register skid buffer (output register and a spare): a slice reads its FIFO whenever
+        # its spare is free, so a read enable reaches only its own ~20-bit slice, and o.ready only
+        # the skid registers' enables. The slices decide alike (same writes, same o.ready, equal
+        # levels), so they stay in step; o.valid is slice 0's. One shared read enable over ten
+        # slices was the critical path (123–138 MHz).
+        payload_parts = []
         take = self.o.valid & self.o.ready
-        with m.If(~self.o.valid | take):  # the output register is free (or being freed)
-            with m.If(spare_full):
-                m.d.sync += [payload.eq(spare), self.o.valid.eq(1), spare_full.eq(read)]
-                with m.If(read):
-                    m.d.sync += spare.eq(results.r_data)
-            with m.Else():
-                m.d.sync += [payload.eq(results.r_data), self.o.valid.eq(read)]
-        with m.Elif(read):  # the output register holds: the read goes to the spare
-            m.d.sync += [spare.eq(results.r_data), spare_full.eq(1)]
+        data_in = result.as_value()
+        for k, lo in enumerate(range(0, layout.size, self.FIFO_SLICE_BITS)):
+            bits = min(self.FIFO_SLICE_BITS, layout.size - lo)
+            m.submodules[f"results{k}"] = fifo = LutFIFO(width=bits, depth=self.result_depth - 1, checked=False,
+                                                         start=k)
+            out = Signal(bits, name=f"o_payload{k}", reset_less=True)  # data: no reset
+            spare = Signal(bits, name=f"o_spare{k}", reset_less=True)
+            out_valid = Signal(name=f"o_valid{k}")
+            spare_full = Signal(name=f"o_spare_full{k}")
+            read = Signal(name=f"results{k}_read")
+            m.d.comb += [fifo.w_en.eq(tail.valid), fifo.w_data.eq(data_in[lo:lo + bits]),
+                         read.eq(fifo.r_rdy & ~spare_full), fifo.r_en.eq(read)]
+            with m.If(~out_valid | take):  # the output register is free (or being freed)
+                with m.If(spare_full):
+                    m.d.sync += [out.eq(spare), out_valid.eq(1), spare_full.eq(read)]
+                    with m.If(read):
+                        m.d.sync += spare.eq(fifo.r_data)
+                with m.Else():
+                    m.d.sync += [out.eq(fifo.r_data), out_valid.eq(read)]
+            with m.Elif(read):  # the output register holds: the read goes to the spare
+                m.d.sync += [spare.eq(fifo.r_data), spare_full.eq(1)]
+            payload_parts.append(out)
+            if k == 0:
+                m.d.comb += self.o.valid.eq(out_valid)
+        m.d.comb += self.o.payload.eq(Cat(*payload_parts))
         return m

@@ -127,8 +127,10 @@ def test_a_broken_expectation_fails(simulator, bench, toplevel, config):
         assert "iteration" in run.result["first_mismatches"][0]
 
 
-def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path):
-    """springflat rtl-check on a mesh file it has never seen: a few iterations, zero mismatches."""
+@pytest.mark.parametrize("dynamics", [("--dynamics", "paper", "--init", "pca", "--damping", "0.05"), ()])
+def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path, dynamics):
+    """springflat rtl-check on a mesh file it has never seen, with the paper's dynamics and with the
+    file defaults (momentum, fold barrier, ARAP start): a few iterations, zero mismatches."""
     import json
     import subprocess
     import sys
@@ -141,7 +143,7 @@ def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path):
     save_obj(tmp_path / "patch.obj", mesh.vertices, mesh.faces)
     springflat = str(Path(sys.executable).parent / "springflat")
     proc = subprocess.run([springflat, "rtl-check", "patch.obj", "--sim", simulator, "--iterations", "3",
-                           "--tol-area", "0", "--damping", "0.05", "--stall", "0.1", "--json"],
+                           "--tol-area", "0", *dynamics, "--stall", "0.1", "--json"],
                           capture_output=True, text=True, cwd=tmp_path, timeout=900)
     assert proc.returncode == 0, proc.stderr[-2000:]
     result = json.loads(proc.stdout)
@@ -150,6 +152,7 @@ def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path):
         assert key in result
     assert (result["mismatches"], result["iterations"], result["simulator"]) == (0, 3, simulator)
     assert result["nodes"] == 220 and result["cycles"] > 2 * 3 * result["entries"]
+    assert result["dynamics"] == ("paper" if dynamics else "momentum")
     assert abs(result["area_error"] - result["float_area_error"]) <= 1e-3
 
 
