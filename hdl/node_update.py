@@ -147,7 +147,7 @@ class NodeUpdate(wiring.Component):
         self.rsqrt_latency = RsqrtUnit.latency_of(fs.rsqrt_config())
         s = shape_of
         mul = Pipeline.MUL_STAGES
-        self.front_stages = 7 + mul + reduce_levels((s(fs.delta), s(fs.delta)))
+        self.front_stages = 8 + mul + reduce_levels((s(fs.delta), s(fs.delta)))
         # the fold barrier runs beside the rsqrt unit, in its delay line
         self.barrier_stages = 6 + 2 * mul + (reduce_levels((s(fs.barrier_gain), unsigned(fs.area.width - 1)))
                                              + reduce_levels((s(fs.barrier_coeff), s(fs.delta))))
@@ -267,8 +267,6 @@ class NodeUpdate(wiring.Component):
                                     1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length())
         beat = self.i.payload
         current = Signal(vector_layout(fs.position), name="current_position", reset_less=True)
-        with m.If(take & beat.first):
-            m.d.sync += current.eq(beat.node.position)
         # The header is written one clock late, from registers: the write enable fans out to
         # every LUT RAM cell of the FIFO, and the read comes dozens of clocks later anyway.
         header_write = Signal(name="header_write")
@@ -278,8 +276,14 @@ class NodeUpdate(wiring.Component):
 
         front = Pipeline(m, take, platform=platform)
         position = vector_layout(fs.position)
-        # F1: capture; P_i comes from the header on a node's first entry
-        step(front, "f1", p_i=Mux(beat.first, beat.node.position.as_value(), current.as_value()),
+        # F0: the beat as it arrived, so that i.valid drives no wide enable (the held P_i's was
+        # the critical path once the barrier widened the entry)
+        step(front, "f0", beat=beat.as_value())
+        beat = data.View(entry_layout(fs), live["beat"])
+        with m.If(front.valid & beat.first):
+            m.d.sync += current.eq(beat.node.position)
+        # F1: P_i comes from the header on a node's first entry
+        step(front, "f1", drop=("beat",), p_i=Mux(beat.first, beat.node.position.as_value(), current.as_value()),
              p_j=beat.neighbour.position.as_value(), p_b=beat.barrier.second.as_value(), rest=beat.neighbour.rest,
              threshold=beat.barrier.threshold, gain=beat.barrier.gain, first=beat.first, last=beat.last)
         p_i, p_j, p_b = (data.View(position, live[k]) for k in ("p_i", "p_j", "p_b"))
