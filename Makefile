@@ -4,7 +4,7 @@
 VENV  := .venv
 STAMP := $(VENV)/.springflat-installed
 
-.PHONY: demo test paper bench clean
+.PHONY: demo test test-fast paper bench clean
 
 $(STAMP): pyproject.toml scripts/setup.sh
 	bash scripts/setup.sh
@@ -17,6 +17,11 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest
+
+# The edit-test loop: everything but the tests marked slow (simulators, synthesis, sweeps).
+# CI runs `make test`, all of them.
+test-fast: $(STAMP)
+	$(VENV)/bin/python -m pytest -m "not slow"
 
 paper: $(STAMP)
 	$(VENV)/bin/springflat paper --out paper-report

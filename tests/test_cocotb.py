@@ -9,6 +9,8 @@ from golden_model.fixed import FormatSet
 from hdl import SpringflatCore
 from sim.cocotb_support import SIMULATORS, missing_simulator, run_bench, verilog_sources
 
+pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
+
 DEFAULT = FormatSet.preset("default")
 
 

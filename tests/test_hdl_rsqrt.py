@@ -238,6 +238,7 @@ def test_boundaries_and_random_with_stalls(preset):
     check_rsqrt(RsqrtUnit(FormatSet.preset(preset)), x, seed=5, p_valid=0.75, p_ready=0.75)
 
 
+@pytest.mark.slow
 def test_narrow_whole_domain():
     """Every input of the narrow preset (a stride sweep if its domain outgrows the limit)."""
     fs = FormatSet.preset("narrow")

@@ -132,6 +132,7 @@ def lane_inputs(fs):
     return values[values <= top], False
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", distinct_step_presets())
 def test_lane_sweeps_and_every_reachable_sum(preset):
     """Sweeps 1-3 of the module docstring (light stalls): every input pair when the lanes are

@@ -176,6 +176,7 @@ def test_too_narrow_configuration_misses_the_target(surf1_cases):
     assert not inv.meets and inv.refused == len(surf1_cases) and inv.cost is None
 
 
+@pytest.mark.slow
 def test_optimiser_result_meets_the_target_on_its_cases(surf1_cases):
     target = AccuracyTarget(1e-3)
     base = FormatSet.preset("default")
@@ -232,6 +233,7 @@ def test_bad_input_is_a_parameter_error(tmp_path, argv, message):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_cmd_study_writes_outputs(tmp_path, capsys):
     out = tmp_path / "study"
     args = _parse(["surf1", "--init", "pca", "--step", "variable", "--sweep", "position,lut_interpolate",

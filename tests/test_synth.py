@@ -19,6 +19,8 @@ import pytest
 from sim import cli
 from sim.synth import TARGETS, add_parser, parse_nextpnr_log, parse_yosys_stat
 
+pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
+
 
 @pytest.fixture(autouse=True)
 def synth_registered(monkeypatch):
