@@ -42,7 +42,7 @@ def add_parser(sub, add_run_options) -> None:
 def cmd_rtl_check(args: argparse.Namespace) -> int:
     from hdl import SpringflatCore
 
-    from .cli import UserError, default_init, params_from_args, resolve_mesh
+    from .run_options import UserError, default_init, params_from_args, resolve_mesh
 
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)

@@ -46,7 +46,7 @@ from golden_model.study import (
     sweep_configs,
 )
 
-from .cli import integer_argument, number_argument
+from .run_options import integer_argument, number_argument
 from .outputs import atomic_write
 
 __all__ = ["add_parser", "cmd_study", "write_outputs", "PLOT_FILES"]

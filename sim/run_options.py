@@ -1,0 +1,153 @@
+"""What every ``springflat`` command that runs the algorithm shares: the run options, the
+mesh's default parameters and initial layout, argument types and the one-line user errors.
+
+``sim/cli.py``, ``sim/rtl_check.py`` and ``sim/study.py`` import from here, not from each other.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
+from golden_model.layouts import LAYOUT_METHODS, LayoutError
+from golden_model.mesh import Mesh, MeshError, load_mesh_with_notes
+from golden_model.reference import DYNAMICS, FlattenParams, ParameterError
+
+from .outputs import OutputError
+
+EXIT_USAGE = 2
+EXIT_DIVERGED = 3
+USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
+
+
+class UserError(ValueError):
+    """Anything else the user got wrong; one line."""
+
+
+def _density(text: str) -> float | str:
+    if text == "auto":
+        return "auto"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or 'auto', got {text!r}") from None
+
+
+def number_argument(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
+def integer_argument(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def add_run_options(parser: argparse.ArgumentParser) -> None:
+    """The options every command that runs the algorithm shares."""
+    builtins = ", ".join(BUILTIN_MESHES)
+    parser.add_argument("mesh", nargs="?", default="surf1",
+                        help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
+    parser.add_argument("--init", default=None, metavar="|".join(LAYOUT_METHODS) + "|PATH",
+                        help="initial layout: tutte, pca, harmonic, lscm, arap (libigl) or a file of V rows "
+                             "'x y' / an OBJ (default: pca for built-ins, arap for files)")
+    parser.add_argument("--dynamics", choices=DYNAMICS, default=None,
+                        help="paper (eqs. 7-9) or momentum (docs/dynamics.md); default: paper for built-ins, "
+                             "momentum for files")
+    parser.add_argument("--barrier", action=argparse.BooleanOptionalAction, default=None,
+                        help="the fold barrier (default: on with momentum, off with paper)")
+    parser.add_argument("--barrier-threshold", type=number_argument, default=None,
+                        help="barrier threshold kappa in (0, 1]: the fraction of its 3D area below which a "
+                             "triangle is pushed back (default 0.5)")
+    parser.add_argument("--barrier-gain", type=number_argument, default=None,
+                        help="barrier stiffness mu in (0, 16], relative to the springs' C (default 4)")
+    parser.add_argument("--step", choices=("variable", "fixed"), default="variable",
+                        help="step-size mode (default variable, eqs. 18-20)")
+    parser.add_argument("--dt", type=number_argument, default=None, help="fixed step size (default 0.01)")
+    parser.add_argument("--update", choices=("jacobi", "sequential"), default="jacobi",
+                        help="update order: jacobi (synchronous, default) or sequential (Algorithm 1)")
+    parser.add_argument("--damping", type=number_argument, default=None, help="velocity damping gamma in [0, 1) (default 0)")
+    parser.add_argument("--penalty", action="store_true", help="apply the overlap penalty (eqs. 10-11)")
+    parser.add_argument("--penalty-kappa", type=number_argument, default=None, help="penalty threshold kappa (default 1)")
+    parser.add_argument("--penalty-gain", type=number_argument, default=None, help="penalty gain lambda (default 1)")
+    parser.add_argument("--spring", type=number_argument, default=None, help="spring constant C (default 0.5)")
+    parser.add_argument("--density", type=_density, default=None,
+                        help="area density rho or 'auto' = 1/min m_i (default: 2 for built-ins, auto for files)")
+    parser.add_argument("--tol-area", type=number_argument, default=None, help="area error tolerance phi_S")
+    parser.add_argument("--tol-shape", type=number_argument, default=None, help="shape error tolerance phi_C")
+    parser.add_argument("--tol-energy", type=number_argument, default=None, help="relative energy change tolerance epsilon")
+    parser.add_argument("--max-iter", type=integer_argument, default=None, help="iteration limit N_max")
+
+
+#: The stop rule for mesh files: the energy minimum, not the paper's Surf1 tolerances.
+FILE_TOL_ENERGY = 1e-7
+#: N_max for files: this many iterations per edge from the boundary to the deepest node (the
+#: momentum dynamics needs about 6), and never fewer than FILE_MIN_ITER.
+FILE_ITER_PER_EDGE = 40
+FILE_MIN_ITER = 1000
+
+
+def edge_radius(mesh: Mesh) -> int:
+    """Edges from the boundary to the node farthest from it (breadth-first, all boundary nodes at 0)."""
+    import scipy.sparse as sp
+
+    i, j = mesh.edges.T
+    adjacency = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])),
+                              shape=(mesh.n_vertices, mesh.n_vertices)).tocsr()
+    reached = np.zeros(mesh.n_vertices, dtype=bool)
+    reached[mesh.boundary_loop] = True
+    frontier, depth = reached.copy(), 0
+    while not reached.all():
+        frontier = (adjacency @ frontier.astype(float) > 0) & ~reached
+        reached |= frontier
+        depth += 1
+    return depth
+
+
+def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
+    """The mesh and its default parameters.
+
+    Built-ins: the paper's sets (paper dynamics, Table II/IV tolerances).  Files: the momentum
+    dynamics with the fold barrier, stopped at the energy minimum (relative energy change
+    ``FILE_TOL_ENERGY``, no E_S/E_C thresholds) with ``N_max`` sized to the mesh's radius in edges.
+    """
+    if is_builtin(name) and not Path(name).is_file():
+        mesh, paper = builtin_mesh(name)
+        return mesh, FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
+                                   tol_shape=paper.tol_shape, tol_energy=paper.tol_energy,
+                                   max_iter=paper.max_iter)
+    mesh, notes = load_mesh_with_notes(name)
+    for note in notes:
+        print(f"springflat: note: {mesh.name}: {note}", file=sys.stderr)
+    return mesh, FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0,
+                               tol_energy=FILE_TOL_ENERGY,
+                               max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
+
+
+def default_init(mesh_name: str) -> str:
+    """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), arap for files
+    (measured best: the lowest E_C of the five methods and no folds on every shipped scan, docs/dynamics.md)."""
+    return "pca" if is_builtin(mesh_name) and not Path(mesh_name).is_file() else "arap"
+
+
+def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> FlattenParams:
+    """Apply the command-line overrides to ``defaults`` (validated)."""
+    changes = {"step": args.step, "update": args.update, "penalty": args.penalty or defaults.penalty}
+    if args.dynamics is not None and args.dynamics != defaults.dynamics:
+        changes["dynamics"] = args.dynamics
+        changes["barrier"] = None  # follows the dynamics unless given
+    for option in ("dt", "damping", "penalty_kappa", "penalty_gain", "spring", "density",
+                   "tol_area", "tol_shape", "tol_energy", "max_iter", "barrier", "barrier_threshold",
+                   "barrier_gain"):
+        value = getattr(args, option)
+        if value is not None:
+            changes[option] = value
+    return defaults.with_(**changes)
