@@ -170,7 +170,7 @@ def layout_orientation(positions: np.ndarray, faces: np.ndarray) -> float:
     The sign of the summed signed area is the orientation of the bulk of the
     pattern, whatever folds it has (``+1`` on a tie).
     """
-    return 1.0 if float(np.sum(signed_areas_2d(positions, faces))) >= 0 else -1.0
+    return 1.0 if float(np.sum(signed_areas_2d(positions, faces), dtype=np.float64)) >= 0 else -1.0
 
 
 def folded_faces(positions: np.ndarray, faces: np.ndarray, orientation: float | None = None) -> np.ndarray:
@@ -181,9 +181,14 @@ def folded_faces(positions: np.ndarray, faces: np.ndarray, orientation: float | 
     the sign of the whole.  This is the honest fold count; the spec's
     ``flipped`` compares with each face's own sign in ``P0`` instead.
     """
+    return folded_by_area(signed_areas_2d(positions, faces), orientation)
+
+
+def folded_by_area(signed: np.ndarray, orientation: float | None = None) -> np.ndarray:
+    """:func:`folded_faces` from the faces' signed areas (float, or exact integers at any scale)."""
     if orientation is None:
-        orientation = layout_orientation(positions, faces)
-    return orientation * signed_areas_2d(positions, faces) <= 0
+        orientation = 1.0 if float(np.sum(signed, dtype=np.float64)) >= 0 else -1.0
+    return orientation * signed <= 0
 
 
 @dataclass(frozen=True, eq=False)

@@ -260,13 +260,16 @@ def momentum_beta(k: int) -> float:
     return k / (k + 3)
 
 
-def _barrier_per_face(positions: np.ndarray, faces: np.ndarray, winding: float, doubled_rest: np.ndarray,
-                      kappa: float) -> tuple[np.ndarray, np.ndarray]:
-    """``X = σ·2A'`` per face and the shortfall ``(κ − X/X*)₊``."""
-    a, b, c = (positions[faces[:, k]] for k in range(3))
-    u, v = b - a, c - a
-    doubled = winding * (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
-    return doubled, np.maximum(kappa - doubled / doubled_rest, 0.0)
+def _barrier_shortfall(positions: np.ndarray, faces: np.ndarray, winding: float, doubled_rest: np.ndarray,
+                       kappa: float) -> np.ndarray:
+    """Per face ``(κ − X/X*)₊`` with ``X = σ·2A'``."""
+    return np.maximum(kappa - winding * 2.0 * signed_areas_2d(positions, faces) / doubled_rest, 0.0)
+
+
+def _scatter(nodes: np.ndarray, moves: np.ndarray, n: int) -> np.ndarray:
+    """``(n, 2)``: the 2D ``moves`` summed onto their ``nodes``."""
+    return np.column_stack([np.bincount(nodes, weights=moves[..., 0].ravel(), minlength=n),
+                            np.bincount(nodes, weights=moves[..., 1].ravel(), minlength=n)])
 
 
 def barrier_energy(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, winding: float,
@@ -279,7 +282,7 @@ def barrier_energy(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndar
     towards a fold and beyond.  On the springs' scale (``C``, lengths²).
     """
     doubled_rest = 2.0 * face_areas
-    _, short = _barrier_per_face(positions, faces, winding, doubled_rest, kappa)
+    short = _barrier_shortfall(positions, faces, winding, doubled_rest, kappa)
     return float(0.5 * gain * spring * np.sum(doubled_rest * short * short))
 
 
@@ -292,17 +295,13 @@ def barrier_forces(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndar
     direction that grows the face's area fastest.  ``faces`` may be a subset
     of the mesh's (with their 3D ``face_areas``).
     """
-    doubled_rest = 2.0 * face_areas
-    _, short = _barrier_per_face(positions, faces, winding, doubled_rest, kappa)
+    short = _barrier_shortfall(positions, faces, winding, 2.0 * face_areas, kappa)
     coefficient = 0.25 * gain * spring * winding * short
     p = positions[faces]  # (F, 3, 2)
     pj, pk = np.roll(p, -1, axis=1), np.roll(p, -2, axis=1)
     gradient = np.stack([pj[..., 1] - pk[..., 1], pk[..., 0] - pj[..., 0]], axis=-1)
-    moves = coefficient[:, None, None] * gradient
-    n = len(positions)
-    idx = faces.ravel()
-    return np.column_stack([np.bincount(idx, weights=moves[..., 0].ravel(), minlength=n),
-                            np.bincount(idx, weights=moves[..., 1].ravel(), minlength=n)])
+    return _scatter(faces.ravel(), coefficient[:, None, None] * gradient, len(positions))
+
 
 
 def spring_forces(positions: np.ndarray, edges: np.ndarray, rest: np.ndarray, spring: float) -> np.ndarray:
@@ -417,13 +416,7 @@ def penalty_moves(model: SpringModel, positions: np.ndarray, kappa: float, gain:
     h = np.sum((p - a) * normal, axis=-1)
     target = kappa * altitudes
     amount = np.where(h <= target, gain * (target - h), 0.0)
-    moves = amount[..., None] * normal
-    n = len(positions)
-    idx = faces.ravel()
-    return np.column_stack([
-        np.bincount(idx, weights=moves[..., 0].ravel(), minlength=n),
-        np.bincount(idx, weights=moves[..., 1].ravel(), minlength=n),
-    ])
+    return _scatter(faces.ravel(), amount[..., None] * normal, len(positions))
 
 
 # --------------------------------------------------------------------------- results
@@ -605,15 +598,10 @@ class _Sequential:
         self.inv_mass = model.inverse_masses
         self.positions = positions.copy()
         self.velocities = np.zeros_like(positions)
-        corners = np.argsort(mesh.faces.ravel(), kind="stable")
-        self.barrier_face_of_corner = corners // 3
-        self.barrier_face_ptr = np.r_[0, np.cumsum(np.bincount(mesh.faces.ravel(), minlength=mesh.n_vertices))]
-        if params.penalty:
-            # incident faces of each node, for its own penalty
-            faces = mesh.faces
-            order = np.argsort(faces.ravel(), kind="stable")
-            self.face_of_corner = order // 3
-            self.face_ptr = np.r_[0, np.cumsum(np.bincount(faces.ravel(), minlength=mesh.n_vertices))]
+        # incident faces of each node, for its own penalty and barrier
+        corners = mesh.faces.ravel()
+        self.face_of_corner = np.argsort(corners, kind="stable") // 3
+        self.face_ptr = np.r_[0, np.cumsum(np.bincount(corners, minlength=mesh.n_vertices))]
 
     def measure(self) -> Measurement:
         return measure(self.model, self.positions)
@@ -640,7 +628,7 @@ class _Sequential:
 
     def _barrier_force(self, i: int) -> np.ndarray:
         model = self.model
-        incident = self.barrier_face_of_corner[self.barrier_face_ptr[i]:self.barrier_face_ptr[i + 1]]
+        incident = self.face_of_corner[self.face_ptr[i]:self.face_ptr[i + 1]]
         return barrier_forces(self.positions, model.mesh.faces[incident], model.mesh.face_areas[incident],
                               model.winding, *model.barrier, self.params.spring)[i]
 

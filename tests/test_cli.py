@@ -178,7 +178,7 @@ SCANS = Path(__file__).parent / "data" / "scans"
 def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap():
     """Defaults for files: momentum, fold barrier, ARAP start, stop at the energy minimum."""
     from golden_model.layouts import initial_layout
-    from golden_model.reference import FlattenParams, SpringModel, measure
+    from golden_model.reference import SpringModel, measure
 
     path = SCANS / "bunny_face.obj"
     done = run("flatten", str(path), "--json")

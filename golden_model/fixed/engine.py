@@ -29,8 +29,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..mesh import Mesh
-from ..mesh import layout_orientation
+from ..mesh import Mesh, folded_by_area, layout_orientation
 from ..reference import FlattenParams, FlattenResult, Measurement, ParameterError, barrier_energy, node_weights, run
 from .format import Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
 from .formats_set import FormatSet
@@ -217,7 +216,6 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
             f"up to ±{fs.position.max:.4g} ({fs.position}) with room to grow up to ±{POSITION_HEADROOM * fs.position.max:.4g}: "
             f"the mesh has too many edges across for these formats; {wider}")
     positions = quantize(p0, fs.position, HOST_ROUNDING, SAT)
-    indptr, neighbour, edge_id = mesh.neighbours
     scaled_rest = rest * scale
     longest = float(scaled_rest.max())
     if longest >= fs.delta.max or longest >= fs.rest_length.max:
@@ -327,9 +325,7 @@ def shape_error(problem: FixedProblem, error_sums: np.ndarray, counter: Saturati
 
 def folded_count(problem: FixedProblem, positions: np.ndarray) -> int:
     """Faces whose exact orientation disagrees with the whole pattern's (the honest fold count)."""
-    doubled = _doubled_areas(positions, problem.mesh.faces)
-    orientation = 1 if float(np.sum(doubled, dtype=np.float64)) >= 0 else -1
-    return int(np.count_nonzero(orientation * doubled <= 0))
+    return int(np.count_nonzero(folded_by_area(_doubled_areas(positions, problem.mesh.faces))))
 
 
 def flipped_count(problem: FixedProblem, positions: np.ndarray) -> int:
