@@ -358,8 +358,10 @@ class NodeUpdate(wiring.Component):
         step(back, "b10", drop=("fb_x", "fb_y"), f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"])
 
         # B11: per-node accumulators with guard bits (exact; saturated once in the tail). The
-        # node's header leaves its FIFO with the node's last entry into a register (Yosys merges
-        # it into the FIFO memory's read port); the tail registers it once more.
+        # node's header is read one clock after its last entry, when T1 registers it straight
+        # from the FIFO: the read enable is then a flip-flop (b10_node_done) that drives only
+        # the slices' read pointers (reading with the last entry itself, through an AND gate
+        # into the pointers and a header register, was the critical path: 137 MHz).
         guard = accumulator_guard_bits(fs.max_degree)
         acc_f = [Signal(signed(fs.force.width + 1 + guard), name=f"acc_f_{k}", reset_less=True) for k in "xy"]
         acc_e = Signal(unsigned(fs.rest_length.width + guard), name="acc_e", reset_less=True)
@@ -368,13 +370,10 @@ class NodeUpdate(wiring.Component):
             for acc, f in zip(acc_f, (live["f_x"], live["f_y"])):
                 m.d.sync += acc.eq(Mux(first, f, acc + f))
             m.d.sync += acc_e.eq(Mux(first, live["e"], acc_e + live["e"]))
-        node_done = back.valid & last
-        m.d.comb += headers.r_en.eq(node_done)
-        header = Signal(node_layout(fs), name="acc_header", reset_less=True)
-        with m.If(node_done):
-            m.d.sync += header.eq(headers.r_data)
         node_done_r = Signal(name="b10_node_done")
-        m.d.sync += node_done_r.eq(node_done)
+        m.d.sync += node_done_r.eq(back.valid & last)
+        m.d.comb += headers.r_en.eq(node_done_r)
+        header = data.View(node_layout(fs), headers.r_data)
         back.stages += 1
         live.clear()
         assert back.stages == self.back_stages, (back.stages, self.back_stages)
@@ -412,20 +411,24 @@ class NodeUpdate(wiring.Component):
         wide_p = Format(fs.position.signed, fs.position.int_bits + 1, fs.position.frac_bits)
         wide_v = Format(fs.velocity.signed, fs.velocity.int_bits + 1, fs.velocity.frac_bits)
         kick_frac = fs.dt.frac_bits + fs.accel.frac_bits
-        # momentum: step = β·V + a, the a term aligned as ½Δt²·a would be (fraction bits fa)
+        # momentum: step = β·V + a, the a term aligned as ½Δt²·a would be (fraction bits fa).
+        # Both dynamics' sums are formed and rounded side by side; the mode picks one only at
+        # the saturation (T9), which muxes anyway: a mux in front of the 50-bit adder was the
+        # critical path (139 MHz).
         sums = {}
         for k in "xy":
-            second = Mux(momentum, live[f"a_{k}"] << fs.half_dt_sq.frac_bits, live[f"ha_{k}"])
-            value, shift = aligned_add(live[f"dtv_{k}"], step_frac - fv, second, step_frac - fa)
-            sums[f"step_{k}"] = Value.cast(value) << shift if shift else value
+            for mode, second in (("paper", live[f"ha_{k}"]), ("mom", live[f"a_{k}"] << fs.half_dt_sq.frac_bits)):
+                value, shift = aligned_add(live[f"dtv_{k}"], step_frac - fv, second, step_frac - fa)
+                sums[f"step_{mode}_{k}"] = Value.cast(value) << shift if shift else value
             sums[f"kick_{k}"] = rounded(live[f"dta_{k}"], kick_frac, wide_v)
         step(tail, "t7", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta", "a") for k in "xy"), **sums)
-        step(tail, "t8", **{f"step_{k}": rounded(live[f"step_{k}"], step_frac, wide_p) for k in "xy"},
+        step(tail, "t8", **{f"step_{mode}_{k}": rounded(live[f"step_{mode}_{k}"], step_frac, wide_p)
+                            for mode in ("paper", "mom") for k in "xy"},
              **{f"kick_{k}": saturated(live[f"kick_{k}"], wide_v) for k in "xy"})
         # paper: the position step saturated to wide_p; momentum: V' = step saturated to velocity
-        step(tail, "t9", drop=("kick_x", "kick_y"),
-             **{f"step_{k}": Mux(momentum, saturated(live[f"step_{k}"], fs.velocity),
-                                 saturated(live[f"step_{k}"], wide_p)) for k in "xy"},
+        step(tail, "t9", drop=tuple(f"{n}_{k}" for n in ("kick", "step_paper", "step_mom") for k in "xy"),
+             **{f"step_{k}": Mux(momentum, saturated(live[f"step_mom_{k}"], fs.velocity),
+                                 saturated(live[f"step_paper_{k}"], wide_p)) for k in "xy"},
              **{f"v_{k}": live[f"v_{k}"] + live[f"kick_{k}"] for k in "xy"})
         step(tail, "t10", drop=("step_x", "step_y"),
              **{f"p_{k}": live[f"p_{k}"] + live[f"step_{k}"] for k in "xy"},
