@@ -8,13 +8,13 @@ import importlib
 
 from amaranth.hdl import *
 from amaranth.lib import data, stream, wiring
-from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet, Rounding, RsqrtConfig, rsqrt_stages
 
 from .fixedpoint import round_half_bit, saturate, shift_round
 from .pipeline import Pipeline, reduce_levels
+from .rom import registered_rom
 
 # The golden model's rounding of the rsqrt internals is the module constant
 # ``_INTERNAL_ROUNDING`` (not a field of RsqrtConfig). ``golden_model.fixed.rsqrt`` is the
@@ -66,7 +66,7 @@ class RsqrtUnit(wiring.Component):
                      left-shift amount, denormalisation shift and its saturation, per bit length
     ``shift``        barrel shifter: mantissa ``M`` (``u2.Fm``), low bits floored
     ``rom``          the seed ROM's block RAM addressed with ``M >> shift`` from the ``M`` register
-    ``seed``         seed ROM data registered
+    ``seed``         seed ROM data registered (on ECP5 in the block RAM's output register)
     per Newton step  ``y*y`` | round to ``t1`` | ``M*t1`` | round to ``t2`` | ``h = 1 - t2`` |
                      ``y*h`` | round | ``y += ...``: each multiply is DSP partial products
                      (operands and products registered, products landed in fabric registers) and
@@ -187,27 +187,21 @@ class RsqrtUnit(wiring.Component):
         dn_r = reg(dn_r, dn_r.shape(), "shift_dn")
         sat_r = reg(sat_r, 1, "shift_sat")
 
-        # --- rom: the seed ROM (block RAM, synchronous read port) is addressed with M >> shift
-        # from the mant register, so the port's address register is this stage's; its data is
-        # registered in the next stage (a block RAM's unregistered output, ~5.6 ns on ECP5,
-        # goes straight to a flip-flop, and the first multiply starts at a flip-flop). The ROM
-        # is indexed by M >> shift itself (no subtraction on the address path): the rows below
+        # --- rom: the seed ROM's address register, addressed with M >> shift from the mant
+        # register;  seed: its data register, in the block RAM itself on ECP5 (hdl/rom.py:
+        # the unregistered output, ~5.6 ns, went to a fabric flip-flop). The ROM is indexed by
+        # M >> shift itself (no subtraction on the address path): the rows below
         # seed_index_offset are never read and hold 0.
         stage("rom")
         index = mant[cfg.seed_index_shift:]
         assert cfg.seed_index_offset + cfg.seed_table_size <= 1 << len(index)
-        m.submodules.seed_rom = seed_rom = Memory(
-            shape=unsigned(cfg.seed_frac_bits), depth=cfg.seed_index_offset + cfg.seed_table_size,
-            init=[0] * cfg.seed_index_offset + cfg.seed_table().tolist())
-        seed_port = seed_rom.read_port()
-        m.d.comb += [seed_port.en.eq(advance), seed_port.addr.eq(index)]
+        seed = registered_rom(m, [0] * cfg.seed_index_offset + cfg.seed_table().tolist(), cfg.seed_frac_bits,
+                              index, name="seed_rom", enable=advance, platform=platform)
         mant = reg(mant, mant.shape(), "rom_mant")
         dn_r = reg(dn_r, dn_r.shape(), "rom_dn")
         sat_r = reg(sat_r, 1, "rom_sat")
 
-        # --- seed: the ROM's data, registered
         stage("seed")
-        seed = reg(seed_port.data, cfg.seed_frac_bits, "seed_y")
         y = seed << (fy - cfg.seed_frac_bits)  # u0.Fs -> u1.Fy, exact (wiring)
         mant = reg(mant, mant.shape(), "seed_mant")
         dn_r = reg(dn_r, dn_r.shape(), "seed_dn")

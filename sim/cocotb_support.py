@@ -76,7 +76,7 @@ def missing_simulator(sim: str) -> str | None:
 
 
 #: Simulation models of the device primitives the ``dsp`` flavours instantiate.
-PRIMITIVE_MODELS = {"ecp5": [REPO / "sim" / "models" / "MULT18X18D.v"]}
+PRIMITIVE_MODELS = {"ecp5": [REPO / "sim" / "models" / "MULT18X18D.v", REPO / "sim" / "models" / "DP16KD.v"]}
 
 
 def _formats_key(fs: FormatSet, dsp: str | None = None) -> str:

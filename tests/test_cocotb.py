@@ -44,7 +44,8 @@ def test_node_update_over_iterations_with_stalls_and_reset(simulator):
                                                      ("node_update", "node_update", None)])
 def test_ecp5_flavour_with_mult18x18d_instances(toplevel, bench, testcase):
     """The Verilog `springflat synth --target ecp5` synthesises (MULT18X18D instances with their
-    own registers) against the golden model, on Icarus with a model of the primitive."""
+    own registers, the seed ROM a DP16KD with its output register) against the golden model, on
+    Icarus with models of the primitives."""
     reason = missing_simulator("icarus")
     if reason:
         pytest.fail(reason)
@@ -56,6 +57,8 @@ def test_ecp5_flavour_with_mult18x18d_instances(toplevel, bench, testcase):
     assert run.result["mismatches"] == 0
     source = (verilog_sources(DEFAULT, "ecp5") / f"{toplevel}.v").read_text()
     assert "MULT18X18D" in source
+    if toplevel != "step_generator":  # the rsqrt unit's seed ROM, with its output register
+        assert "DP16KD" in source and '"OUTREG"' in source
 
 
 def _paper_params(name, step):

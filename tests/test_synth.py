@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import re
 
+import numpy as np
 import pytest
 
 from sim import cli
@@ -146,3 +147,42 @@ Info: Max frequency for clock '$glbnet$clk$TRELLIS_IO_IN': 134.37 MHz (FAIL at 1
                                              "DP16KD": 1}}}
     res = parse_yosys_stat(stat, TARGETS["ecp5"])
     assert (res["luts"], res["ffs"], res["dsps"], res["brams"]) == (18, 7, 2, 1)
+
+
+@pytest.mark.parametrize("width, depth", [(18, 1024), (9, 2048), (4, 4096), (2, 8192)])
+def test_dp16kd_model_reads_what_yosys_maps(tmp_path, width, depth):
+    """``sim/models/DP16KD.v`` (the ECP5-flavour benches' block RAM) reads back the words Yosys's
+    ``synth_ecp5`` packs into a DP16KD's INITVALs for an inferred ROM: an independent check of
+    the packing that :func:`hdl.rom.dp16kd_initvals` writes and the model reads."""
+    import shutil
+    import subprocess
+
+    from sim.cocotb_support import REPO
+    from sim.synth import TOOL, _run_tool
+
+    if shutil.which("iverilog") is None:
+        pytest.fail("Icarus Verilog (iverilog) is not on PATH")
+    rng = np.random.default_rng(width)
+    words = rng.integers(0, 1 << width, depth)
+    abits = (depth - 1).bit_length()
+    (tmp_path / "rom.v").write_text(
+        f"module rom(input clk, input [{abits - 1}:0] addr, output reg [{width - 1}:0] q);\n"
+        f"  reg [{width - 1}:0] mem [0:{depth - 1}];\n"
+        f"  initial $readmemh(\"rom.hex\", mem);\n"
+        f"  always @(posedge clk) q <= mem[addr];\nendmodule\n")
+    (tmp_path / "rom.hex").write_text("".join(f"{w:x}\n" for w in words))
+    code, log = _run_tool(TOOL["yosys"], ["-q", "-p", "read_verilog rom.v; synth_ecp5 -top rom; write_verilog -noattr net.v"],
+                          tmp_path, "yosys.log")
+    assert code == 0, log[-2000:]
+    netlist = (tmp_path / "net.v").read_text()
+    assert netlist.count("DP16KD #(") == 1 and "LUT4" not in netlist  # one block RAM, nothing else
+    (tmp_path / "tb.v").write_text(
+        "`timescale 1ns/1ps\nmodule tb; reg clk = 0; reg [%d:0] addr = 0; wire [%d:0] q; integer i;\n"
+        "rom dut(.clk(clk), .addr(addr), .q(q));\n"
+        "initial begin for (i = 0; i < %d; i = i + 1) begin addr = i; #1 clk = 1; #1 clk = 0; $display(\"%%0d\", q); end "
+        "$finish; end\nendmodule\n" % (abits - 1, width - 1, depth))
+    subprocess.run(["iverilog", "-g2005", "-o", "tb.vvp", "tb.v", "net.v", str(REPO / "sim" / "models" / "DP16KD.v")],
+                   cwd=tmp_path, check=True, capture_output=True)
+    out = subprocess.run(["vvp", "-n", "tb.vvp"], cwd=tmp_path, check=True, capture_output=True, text=True).stdout
+    read = [int(line) for line in out.split() if line.isdigit()]
+    assert read == words.tolist()

@@ -1,0 +1,92 @@
+"""A ROM read in two registered clocks: generic RTL or ECP5 ``DP16KD`` block RAM with its output register.
+
+:func:`registered_rom` returns ``table[addr]`` two clocks after ``addr`` (the address is
+registered, then the data). In generic RTL that is an :class:`amaranth.lib.memory.Memory` read
+port (its address register) and a flip-flop on its data. Yosys's ``synth_ecp5`` maps that
+to a ``DP16KD`` with ``REGMODE_A = "NOREG"`` and leaves the data register in the fabric: the
+block RAM's unregistered clock-to-output (~5.6 ns) plus the route to that flip-flop then
+limits the clock (137–139 MHz, ``docs/synthesis.md``), and Yosys does not infer the output
+register. Elaborated with :data:`hdl.dsp.ECP5` as the platform, the ROM is therefore a row of
+``DP16KD`` instances with ``REGMODE_A = "OUTREG"``, one per column slice of the word, in the
+deepest configuration that holds the table. Both forms have the same function and latency;
+the ECP5 flavour is simulated against the golden model with a model of the primitive
+(``sim/models/DP16KD.v``) whose memory packing is checked against Yosys's own mapping.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import ClockSignal, Const, Instance, Module, Signal, Value, unsigned
+from amaranth.lib.memory import Memory
+
+from .dsp import dsp_target
+
+__all__ = ["DP16KD_CONFIGS", "dp16kd_config", "dp16kd_initvals", "registered_rom"]
+
+#: ``DP16KD`` port widths and their depths (16 Kib, 18 Kib with the ninth bits).
+DP16KD_CONFIGS = ((18, 1024), (9, 2048), (4, 4096), (2, 8192), (1, 16384))
+
+
+def dp16kd_config(depth: int) -> tuple[int, int]:
+    """The widest ``(data width, address bits)`` configuration with at least ``depth`` words."""
+    for width, words in DP16KD_CONFIGS:
+        if words >= depth:
+            return width, (words - 1).bit_length()
+    raise ValueError(f"a ROM of {depth} words does not fit one DP16KD column (at most 16384)")
+
+
+def dp16kd_initvals(words, width: int) -> dict[str, str]:
+    """``INITVAL_00`` … ``INITVAL_3F`` for ``words`` (ints of ``width`` bits) in a ``width``-wide DP16KD.
+
+    Each INITVAL holds 16 rows of 18 bits (in 20-bit groups). A row holds one 18-bit word,
+    two 9-bit words, or narrow words packed into the low 8 bits of each 9-bit byte, the lower
+    address in the lower bits: the packing Yosys's ``memory_libmap`` produces.
+    """
+    per_byte = 1 if width >= 9 else 8 // width
+    positions = [0] if width == 18 else [byte * 9 + j * width for byte in (0, 1) for j in range(per_byte)]
+    rows = [0] * 1024
+    for address, word in enumerate(words):
+        row, k = divmod(address, len(positions))
+        rows[row] |= (int(word) & ((1 << width) - 1)) << positions[k]
+    return {f"p_INITVAL_{n:02X}": Const(sum(rows[n * 16 + i] << (20 * i) for i in range(16)), 320)
+            for n in range(64)}
+
+
+def registered_rom(m: Module, table, width: int, addr, *, name: str, enable=None, platform=None) -> Value:
+    """``table[addr]`` (``width`` bits) two clocks later; ``enable`` is every register's clock enable."""
+    addr = Value.cast(addr)
+    data = Signal(unsigned(width), name=f"{name}_data", reset_less=True)
+    enable = Const(1, 1) if enable is None else enable
+    if dsp_target(platform) != "ecp5":
+        m.submodules[name] = rom = Memory(shape=unsigned(width), depth=len(table), init=list(table))
+        port = rom.read_port()
+        m.d.comb += [port.en.eq(enable), port.addr.eq(addr)]
+        with m.If(enable):
+            m.d.sync += data.eq(port.data)
+        return data
+    slice_width, address_bits = dp16kd_config(len(table))
+    if len(addr) > address_bits:
+        raise ValueError(f"{name}: a {len(addr)}-bit address for a {len(table)}-word ROM")
+    ada = Signal(14, name=f"{name}_ada")
+    m.d.comb += ada.eq(addr << (14 - address_bits))
+    for k, lo in enumerate(range(0, width, slice_width)):
+        bits = min(slice_width, width - lo)
+        doa = Signal(18, name=f"{name}{k}_doa")
+        zero = Const(0, 1)
+        ports = {f"i_ADA{i}": ada[i] for i in range(14)}
+        ports.update({f"i_DIA{i}": zero for i in range(18)})
+        ports.update({f"i_DIB{i}": zero for i in range(18)})
+        ports.update({f"i_ADB{i}": zero for i in range(14)})
+        ports.update({f"o_DOA{i}": doa[i] for i in range(18)})
+        ports.update({f"i_{p}": zero for p in ("WEA", "RSTA", "CSA0", "CSA1", "CSA2", "CLKB", "CEB", "OCEB",
+                                                "WEB", "RSTB", "CSB0", "CSB1", "CSB2")})
+        m.submodules[f"{name}{k}"] = Instance(
+            "DP16KD",
+            p_DATA_WIDTH_A=slice_width, p_DATA_WIDTH_B=slice_width,
+            p_REGMODE_A="OUTREG", p_REGMODE_B="NOREG", p_RESETMODE="SYNC", p_ASYNC_RESET_RELEASE="SYNC",
+            p_CSDECODE_A="0b000", p_CSDECODE_B="0b000", p_WRITEMODE_A="NORMAL", p_WRITEMODE_B="NORMAL",
+            p_GSR="DISABLED",
+            **dp16kd_initvals([(int(w) >> lo) for w in table], slice_width),
+            i_CLKA=ClockSignal(), i_CEA=enable, i_OCEA=enable,
+            **ports)
+        m.d.comb += data[lo:lo + bits].eq(doa[:bits])
+    return data
