@@ -49,6 +49,7 @@ __all__ = [
     "barrier_energy",
     "momentum_beta",
     "node_weights",
+    "barrier_active_nodes",
     "barrier_stiffness",
     "iterations_to_within",
 ]
@@ -210,8 +211,24 @@ class SpringModel:
 
     @cached_property
     def weights(self) -> np.ndarray:
-        """``(V,)`` the momentum dynamics' weights ``w_i`` (:func:`node_weights`)."""
+        """``(V,)`` the momentum dynamics' weights ``w_i`` while node i's barrier is active
+        (:func:`node_weights` with the barrier's stiffness)."""
         return node_weights(self.mesh, self.spring, self.barrier)
+
+    @cached_property
+    def spring_weights(self) -> np.ndarray:
+        """``(V,)`` the momentum dynamics' weights ``w_i = 2/(C·deg_i)`` of a node whose triangles
+        are all outside the barrier (the springs' stiffness alone)."""
+        return node_weights(self.mesh, self.spring, None)
+
+    def step_weights(self, positions: np.ndarray) -> np.ndarray:
+        """``(V,)`` this iteration's ``w_i``: :attr:`weights` at nodes with a triangle inside the
+        barrier (``X < κ·X*``, :func:`barrier_active_nodes`), :attr:`spring_weights` elsewhere."""
+        if self.barrier is None:
+            return self.spring_weights
+        active = barrier_active_nodes(positions, self.mesh.faces, self.mesh.face_areas, self.winding,
+                                      self.barrier[0])
+        return np.where(active, self.weights, self.spring_weights)
 
 
 #: The momentum step stays stable while ``w_i`` times node i's stiffness is below about
@@ -264,6 +281,20 @@ def _barrier_shortfall(positions: np.ndarray, faces: np.ndarray, winding: float,
                        kappa: float) -> np.ndarray:
     """Per face ``(κ − X/X*)₊`` with ``X = σ·2A'``."""
     return np.maximum(kappa - winding * 2.0 * signed_areas_2d(positions, faces) / doubled_rest, 0.0)
+
+
+def barrier_active_nodes(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, winding: float,
+                         kappa: float) -> np.ndarray:
+    """``(V,)`` bool: the nodes with a triangle inside the barrier, ``X_t < κ·X*_t``.
+
+    Only there does the barrier add stiffness, so only there must the momentum step's weight
+    shrink (:meth:`SpringModel.step_weights`); everywhere else the springs' weight keeps the
+    dynamics as fast as without the barrier.
+    """
+    active = np.zeros(len(positions), dtype=bool)
+    inside = _barrier_shortfall(positions, faces, winding, 2.0 * face_areas, kappa) > 0
+    active[faces[inside].ravel()] = True
+    return active
 
 
 def _scatter(nodes: np.ndarray, moves: np.ndarray, n: int) -> np.ndarray:
@@ -578,7 +609,8 @@ class _Jacobi:
             self.velocities[:] = 0.0
             self.momentum_k = 0
         power = float(np.sum(forces * self.velocities))  # S = Σ f·V, acted on next iteration
-        self.velocities = momentum_beta(self.momentum_k) * self.velocities + self.model.weights[:, None] * forces
+        weights = self.model.step_weights(self.positions)
+        self.velocities = momentum_beta(self.momentum_k) * self.velocities + weights[:, None] * forces
         self.positions += self.velocities
         self.momentum_k += 1
         self.restart = power < 0

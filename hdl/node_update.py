@@ -30,11 +30,14 @@ def vector_layout(fmt: Format) -> data.StructLayout:
 
 
 def node_layout(fs: FormatSet) -> data.StructLayout:
-    """A node's state: ``position`` [position], ``velocity`` [velocity], ``inv_mass`` [inv_mass]."""
+    """A node's state: ``position`` [position], ``velocity`` [velocity], ``inv_mass`` [inv_mass]
+    and ``inv_mass_barrier`` [inv_mass], the weight used instead while one of the node's
+    triangles is inside the fold barrier (equal to ``inv_mass`` where that does not apply)."""
     return data.StructLayout({
         "position": vector_layout(fs.position),
         "velocity": vector_layout(fs.velocity),
         "inv_mass": shape_of(fs.inv_mass),
+        "inv_mass_barrier": shape_of(fs.inv_mass),
     })
 
 
@@ -87,7 +90,7 @@ class NodeUpdate(wiring.Component):
     -------
     i : ``In(stream.Signature(entry_layout(fs)))``
         Neighbour entries, node after node; the node's header (position, velocity,
-        1/m) rides on its first entry (``first``), ``last`` closes the node. A node
+        1/m and the barrier's weight) rides on its first entry (``first``), ``last`` closes the node. A node
         with n ≥ 1 neighbours is n beats.
     o : ``Out(stream.Signature(result_layout(fs)))``
         One beat per node, in input order: new position, new velocity (damped), and
@@ -117,7 +120,8 @@ class NodeUpdate(wiring.Component):
     ``|Δ|²``) feeds the :class:`~hdl.rsqrt.RsqrtUnit` (its ``o.ready`` tied high), the
     entry's side data rides along in a delay line of the rsqrt latency, a back section
     forms ``s``, the forces and ``|L − d|`` and accumulates per node, and a node tail runs
-    ``a = F/m``, Euler and damping. Node headers wait in a FIFO from the input to the
+    ``a = F/m`` (``inv_mass_barrier`` for ``1/m`` if any of the node's triangles is inside
+    the fold barrier, ``h > 0``), Euler and damping. Node headers wait in a FIFO from the input to the
     accumulators. Results enter a LUT-RAM FIFO (column slices with their own pointers)
     in front of the output register; ``result_depth`` counts both. Back-pressure is a
     credit count: ``i.ready`` is high while fewer than ``result_depth`` nodes are owed (accepted last entries whose results have not
@@ -310,10 +314,11 @@ class NodeUpdate(wiring.Component):
         # S1: the shortfall T − X and the opposite edge D = Δa − Δb, exact
         step(side, "s1", drop=("cross", "threshold", "bx", "by"), short=live["threshold"] - live["cross"],
              ex=live["dx"] - live["bx"], ey=live["dy"] - live["by"])
-        # S2: h = sat(max(T − X, 0) → area), non-negative;  D saturated to delta
+        # S2: h = sat(max(T − X, 0) → area), non-negative;  D saturated to delta;  inside: h > 0
         short = live["short"]
         step(side, "s2", short=Mux(short < 0, 0, saturated(short, fs.area))[:fs.area.width - 1],
-             ex=saturated(live["ex"], fs.delta), ey=saturated(live["ey"], fs.delta))
+             ex=saturated(live["ex"], fs.delta), ey=saturated(live["ey"], fs.delta),
+             inside=(short >= 0) & short.any())
         # c = rq(G·h → barrier_coeff)
         multiply(side, "s3", drop=("short", "gain"), c=(live["gain"], live["short"]))
         step(side, "s4", c=rounded(live["c"], fs.barrier_gain.frac_bits + fs.area.frac_bits, fs.barrier_coeff))
@@ -365,11 +370,13 @@ class NodeUpdate(wiring.Component):
         guard = accumulator_guard_bits(fs.max_degree)
         acc_f = [Signal(signed(fs.force.width + 1 + guard), name=f"acc_f_{k}", reset_less=True) for k in "xy"]
         acc_e = Signal(unsigned(fs.rest_length.width + guard), name="acc_e", reset_less=True)
+        acc_inside = Signal(name="acc_inside", reset_less=True)  # a triangle of the node is inside the barrier
         first, last = live["first"], live["last"]
         with m.If(back.valid):
             for acc, f in zip(acc_f, (live["f_x"], live["f_y"])):
                 m.d.sync += acc.eq(Mux(first, f, acc + f))
-            m.d.sync += acc_e.eq(Mux(first, live["e"], acc_e + live["e"]))
+            m.d.sync += [acc_e.eq(Mux(first, live["e"], acc_e + live["e"])),
+                         acc_inside.eq(Mux(first, live["inside"], acc_inside | live["inside"]))]
         node_done_r = Signal(name="b10_node_done")
         m.d.sync += node_done_r.eq(back.valid & last)
         m.d.comb += headers.r_en.eq(node_done_r)
@@ -385,9 +392,12 @@ class NodeUpdate(wiring.Component):
              f_y=rounded(acc_f[1], fs.force.frac_bits, fs.force_acc),
              e=rounded(acc_e, fs.rest_length.frac_bits, fs.error_acc),
              p_x=header.position.x, p_y=header.position.y, v_x=header.velocity.x, v_y=header.velocity.y,
-             inv_mass=header.inv_mass)
-        step(tail, "t2", f_x=saturated(live["f_x"], fs.force_acc), f_y=saturated(live["f_y"], fs.force_acc),
-             e=saturated(live["e"], fs.error_acc))
+             inv_mass=header.inv_mass, inv_mass_barrier=header.inv_mass_barrier, inside=acc_inside)
+        # T2: the weight, the barrier's where a triangle of the node is inside it
+        step(tail, "t2", drop=("inv_mass_barrier", "inside"),
+             f_x=saturated(live["f_x"], fs.force_acc), f_y=saturated(live["f_y"], fs.force_acc),
+             e=saturated(live["e"], fs.error_acc),
+             inv_mass=Mux(live["inside"], live["inv_mass_barrier"], live["inv_mass"]))
         # F·(1/m), then a = rq(F·(1/m) → accel)
         # and the power F·V of the input state (the momentum restart's S, summed by the controller)
         multiply(tail, "t3", drop=("f_x", "f_y", "inv_mass"),

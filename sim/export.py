@@ -72,7 +72,7 @@ def _format_of(field_name: str, port: str) -> str | None:
     """The FormatSet signal class a payload field holds (by name)."""
     leaf = field_name.split(".")
     key = {"rsqrt": "rsqrt", "saturated": None, "area_error": "error", "shape_error": "error", "dt": "dt",
-           "half_dt_sq": "half_dt_sq", "inv_mass": "inv_mass", "rest": "rest_length", "error_sum": "error_acc",
+           "half_dt_sq": "half_dt_sq", "inv_mass": "inv_mass", "inv_mass_barrier": "inv_mass", "rest": "rest_length", "error_sum": "error_acc",
            "first": None, "last": None}
     for part in reversed(leaf):
         if part in key:

@@ -73,6 +73,7 @@ def pass_beats(layout: data.Layout, stream: NeighbourStream, positions: np.ndarr
         ("node", "position", "x"): positions[owner, 0] * first, ("node", "position", "y"): positions[owner, 1] * first,
         ("node", "velocity", "x"): velocities[owner, 0] * first, ("node", "velocity", "y"): velocities[owner, 1] * first,
         ("node", "inv_mass"): stream.inv_mass[owner] * first,
+        ("node", "inv_mass_barrier"): stream.header_inv_mass_barrier[owner] * first,
         ("neighbour", "position", "x"): positions[stream.neighbour, 0],
         ("neighbour", "position", "y"): positions[stream.neighbour, 1],
         ("neighbour", "rest"): stream.rest,

@@ -26,14 +26,13 @@ def generated(request):
 
 
 @pytest.mark.parametrize("barrier", [True, False])
-def test_momentum_reaches_the_minimum_within_120_iterations_180_with_the_barrier(generated, barrier):
+def test_momentum_reaches_the_minimum_within_120_iterations_with_and_without_the_barrier(generated, barrier):
     name, mesh, p0, target = generated
     result = flatten(mesh, p0, FlattenParams(dynamics="momentum", barrier=barrier, max_iter=200, **RUN))
     count = iterations_to_within(result.history.shape_error, target)
-    # the bound for the dynamics; the default barrier (κ 0.5, μ 4) trades speed for
-    # fold-free scans (its weights shrink where it is stiff): measured 91 / 135 / 176, docs/dynamics.md
-    bound = 180 if barrier else 120
-    assert count is not None and count <= bound, (name, count)
+    # the bound; the barrier's smaller weights apply only at nodes with a triangle inside
+    # it, so it costs the generated meshes next to nothing (docs/dynamics.md)
+    assert count is not None and count <= 120, (name, count)
     assert result.final.folded == 0
 
 

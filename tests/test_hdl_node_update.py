@@ -136,7 +136,10 @@ def random_stream(fs, n_nodes, seed, max_degree=12, barrier=False):
         threshold = rng.uniform(0, 1.5, len(neighbour)) * (1 << fs.area.frac_bits)
         gain = rng.uniform(0, 4, len(neighbour)) * (rng.random(len(neighbour)) > 0.2) * (1 << fs.barrier_gain.frac_bits)
         entries = BarrierEntries(second, threshold.astype(np.int64), gain.astype(np.int64))
-    stream = NeighbourStream(indptr, neighbour, rest, inv_mass, entries)
+        # a second weight, taken where a triangle of the node is inside the barrier
+        inv_mass_barrier = rng.integers(1 << (fs.inv_mass.frac_bits - 2), 2 << fs.inv_mass.frac_bits, n_nodes)
+    stream = NeighbourStream(indptr, neighbour, rest, inv_mass, entries,
+                             inv_mass_barrier if barrier else None)
     return stream, positions, velocities
 
 

@@ -229,16 +229,20 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               "the mesh's edge lengths vary too much for these formats")
     rest_raw = quantize(scaled_rest, fs.rest_length, HOST_ROUNDING, SAT)
     model_density = mesh.auto_density() if params.density == "auto" else float(params.density)
+    inv_mass_barrier_raw = None
     if params.dynamics == "momentum":
-        inv_mass = node_weights(mesh, params.spring,
-                                (params.barrier_threshold, params.barrier_gain) if params.barrier else None)
+        inv_mass = node_weights(mesh, params.spring)
         inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "the weight 2/(C deg)", fs,
                                          "use a larger --spring, or a wider inv_mass format")
+        if params.barrier:  # the smaller weight of a node while its barrier is active
+            inv_mass = node_weights(mesh, params.spring, (params.barrier_threshold, params.barrier_gain))
+            inv_mass_barrier_raw = _quantize_checked(inv_mass, fs.inv_mass, "the barrier weight w_i", fs,
+                                                     "use a larger --spring, or a wider inv_mass format")
     else:
         inv_mass = 1.0 / mesh.masses(model_density)
         inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "1/m", fs,
                                          "use --density auto (or a larger density), or a wider inv_mass format")
-    if inv_mass_raw.min() < 16:
+    if min(w.min() for w in (inv_mass_raw, inv_mass_barrier_raw) if w is not None) < 16:
         raise FixedPointError(f"1/m down to {inv_mass.min():.3g} keeps fewer than 5 bits in {fs.inv_mass} "
                               f"of format set '{fs.name}': the node masses vary too much (lower the density)")
     half_spring = int(_quantize_checked(0.5 * params.spring, fs.spring, "C/2", fs, "use a smaller --spring"))
@@ -247,7 +251,8 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
     rings = mesh.rings  # the stream's order: a node's triangles are consecutive entries
     winding = layout_orientation(positions.astype(np.float64), mesh.faces)
     barrier = _barrier_entries(mesh, params, fs, scale, winding) if params.barrier else None
-    stream = NeighbourStream(rings.indptr, rings.neighbour, rest_raw[rings.edge_id], inv_mass_raw, barrier)
+    stream = NeighbourStream(rings.indptr, rings.neighbour, rest_raw[rings.edge_id], inv_mass_raw, barrier,
+                             inv_mass_barrier_raw)
     acc_frac = fs.error_acc.frac_bits
     face_areas = quantize(mesh.face_areas * scale * scale, Format(False, 62 - acc_frac, acc_frac),
                           HOST_ROUNDING, SAT)
@@ -399,14 +404,14 @@ class FixedEngine:
 
     def advance(self, dt: float) -> None:
         p = self.problem
+        weights = p.stream.node_weights(self.terms.barrier_active)
         if p.momentum:
             self.raw_positions, self.raw_velocities = integrate_momentum(
-                p.fs, self.raw_positions, self.raw_velocities, self.terms.force, p.stream.inv_mass, self.dt,
-                self.counter)
+                p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, self.dt, self.counter)
             return
         self.raw_positions, self.raw_velocities = integrate(
-            p.fs, self.raw_positions, self.raw_velocities, self.terms.force, p.stream.inv_mass,
-            p.constants(self.dt), self.counter)
+            p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, p.constants(self.dt),
+            self.counter)
 
 
 def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:

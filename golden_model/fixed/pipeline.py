@@ -87,6 +87,9 @@ class NeighbourStream:
         rest: ``(N,)`` raw rest length ``d`` of each entry [rest_length].
         inv_mass: ``(V,)`` raw ``1/m`` [inv_mass] (the momentum dynamics: ``w_i``).
         barrier: the fold barrier's entry data, or ``None`` (no barrier).
+        inv_mass_barrier: ``(V,)`` raw weight [inv_mass] of a node while one of its triangles is
+            inside the barrier (the momentum dynamics' smaller, barrier-stable ``w_i``);
+            ``None``: ``inv_mass`` throughout.
     """
 
     indptr: np.ndarray
@@ -94,6 +97,18 @@ class NeighbourStream:
     rest: np.ndarray
     inv_mass: np.ndarray
     barrier: BarrierEntries | None = None
+    inv_mass_barrier: np.ndarray | None = None
+
+    @property
+    def header_inv_mass_barrier(self) -> np.ndarray:
+        """``(V,)`` the header's second weight: :attr:`inv_mass_barrier`, or :attr:`inv_mass`."""
+        return self.inv_mass if self.inv_mass_barrier is None else self.inv_mass_barrier
+
+    def node_weights(self, barrier_active: np.ndarray | None) -> np.ndarray:
+        """``(V,)`` the weights the tail multiplies by: the barrier weight where ``barrier_active``."""
+        if barrier_active is None:
+            return self.inv_mass
+        return np.where(barrier_active, self.header_inv_mass_barrier, self.inv_mass)
 
     @property
     def owner(self) -> np.ndarray:
@@ -258,11 +273,14 @@ class NodeTerms:
     error_sums: np.ndarray  # (V,) Σ|L − d| [error_acc]
     #: Σ over all entries of |L − d|² (raw², exact): the host's energy estimate
     error_square_sum: int
+    #: (V,) bool: a triangle of the node is inside the barrier (``h > 0``); ``None`` without one
+    barrier_active: np.ndarray | None = None
 
 
 def barrier_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream,
-                  counter: SaturationCounter | None = None) -> np.ndarray:
-    """Per-entry barrier force ``(N, 2)`` [force] (zero rows where the gain is 0)::
+                  counter: SaturationCounter | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-entry barrier force ``(N, 2)`` [force] (zero rows where the gain is 0), and ``(N,)``
+    whether the entry's triangle is inside the barrier (``h > 0``; never on an entry without one)::
 
         Δa  = rq(P_j − P_i → delta),  Δb = rq(P_second − P_i → delta)
         X   = rq(Δa.x·Δb.y − Δa.y·Δb.x → area)         doubled signed area
@@ -286,7 +304,7 @@ def barrier_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream,
     diff = requantize(delta_a - delta_b, fs.delta.frac_bits, fs.delta, rnd, SAT, counter, "barrier_edge")
     product = coeff[:, None] * np.column_stack([diff[:, 1], -diff[:, 0]])
     return requantize(product, fs.barrier_coeff.frac_bits + fs.delta.frac_bits, fs.force, rnd, SAT, counter,
-                      "barrier_force")
+                      "barrier_force"), short > 0
 
 
 def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, half_spring: int,
@@ -317,14 +335,16 @@ def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
         force = np.column_stack([per_node(force_f[:, 0], force_b[:, 0]), per_node(force_f[:, 1], force_b[:, 1])])
         error = per_node(error_f, error_b)
         square_sum = int(np.dot(error_f, error_f)) + int(np.dot(error_b, error_b))
+    active = None
     if stream.barrier is not None:
-        barrier = barrier_terms(fs, positions, stream, counter)
+        barrier, inside = barrier_terms(fs, positions, stream, counter)
         owner = stream.owner
         force = force + np.column_stack([np.bincount(owner, barrier[:, 0], n), np.bincount(owner, barrier[:, 1], n)
                                          ]).astype(np.int64)
+        active = np.bincount(owner, inside, n) > 0
     force_acc = requantize(force, fs.force.frac_bits, fs.force_acc, rnd, SAT, counter, "force_acc")
     error_sums = requantize(error, fs.rest_length.frac_bits, fs.error_acc, rnd, SAT, counter, "error_acc")
-    return NodeTerms(force_acc, error_sums, square_sum)
+    return NodeTerms(force_acc, error_sums, square_sum, active)
 
 
 def integrate(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, force: np.ndarray,
@@ -393,11 +413,12 @@ def node_update(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, st
     """
     terms = node_terms(fs, positions, stream, constants.half_spring, counter)
     n = len(stream.indptr) - 1  # positions may hold more rows: neighbours that are not updated
+    weights = stream.node_weights(terms.barrier_active)
     if momentum:
         new_positions, new_velocities = integrate_momentum(fs, positions[:n], velocities[:n], terms.force,
-                                                           stream.inv_mass, constants.dt, counter)
+                                                           weights, constants.dt, counter)
     else:
-        new_positions, new_velocities = integrate(fs, positions[:n], velocities[:n], terms.force, stream.inv_mass,
+        new_positions, new_velocities = integrate(fs, positions[:n], velocities[:n], terms.force, weights,
                                                   constants, counter)
     power = node_power(fs, terms.force, velocities[:n], counter)
     return NodeUpdate(new_positions, new_velocities, terms.error_sums, power)
