@@ -467,7 +467,6 @@ class NodeUpdate(wiring.Component):
         # levels), so they stay in step; o.valid is slice 0's. One shared read enable over ten
         # slices was the critical path (123–138 MHz).
         payload_parts = []
-        take = self.o.valid & self.o.ready
         data_in = result.as_value()
         for k, lo in enumerate(range(0, layout.size, self.FIFO_SLICE_BITS)):
             bits = min(self.FIFO_SLICE_BITS, layout.size - lo)
@@ -480,7 +479,9 @@ class NodeUpdate(wiring.Component):
             read = Signal(name=f"results{k}_read")
             m.d.comb += [fifo.w_en.eq(tail.valid), fifo.w_data.eq(data_in[lo:lo + bits]),
                          read.eq(fifo.r_rdy & ~spare_full), fifo.r_en.eq(read)]
-            with m.If(~out_valid | take):  # the output register is free (or being freed)
+            # The output register is free or being freed: its own valid bit and o.ready, not
+            # slice 0's o.valid (that route across every slice was the critical path, 148 MHz).
+            with m.If(~out_valid | self.o.ready):
                 with m.If(spare_full):
                     m.d.sync += [out.eq(spare), out_valid.eq(1), spare_full.eq(read)]
                     with m.If(read):
