@@ -8,13 +8,16 @@ vertices at all (see :func:`load_mesh`).
 
 Validation follows ``spec.md`` ("Bad input"): a mesh must be a single
 connected manifold disk with exactly one boundary loop, no degenerate or
-duplicate triangles, no out-of-range indices and only finite coordinates.
+duplicate triangles, no out-of-range indices and only finite coordinates
+within the supported range (:data:`COORDINATE_LIMIT`, :data:`MIN_MESH_SIZE`).
 Every failure raises :class:`MeshError` with a one-line message naming the
-problem.
+problem; so does a file that cannot be read (the OS error in words).
 """
 
 from __future__ import annotations
 
+import errno
+import io
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -23,17 +26,45 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["Mesh", "MeshError", "load_mesh", "triangle_areas_3d", "signed_areas_2d"]
+__all__ = ["Mesh", "MeshError", "load_mesh", "triangle_areas_3d", "signed_areas_2d", "COORDINATE_LIMIT",
+           "MIN_MESH_SIZE", "describe_os_error"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
 #: times the squared longest edge of the mesh.
 DEGENERATE_RELATIVE_AREA = 1e-12
+
+#: Largest coordinate magnitude accepted in a mesh or a layout file.  The highest power of a
+#: length any float64 computation takes is the fourth (a triangle's area is the norm of a cross
+#: product, whose components are products of two lengths, squared inside the norm): with
+#: |x| <= 1e50 that stays below ~1e203, a factor 1e105 under float64's overflow at 1.8e308,
+#: which leaves room for the parameters (spring constant, density, gains) to scale energies.
+COORDINATE_LIMIT = 1e50
+#: Smallest accepted mesh size, as its longest edge (largest coordinate difference along an
+#: edge).  Mirror of :data:`COORDINATE_LIMIT`: fourth powers stay above ~1e-200, a factor 1e108
+#: over float64's smallest normal number (2.2e-308), so areas do not underflow to zero.
+MIN_MESH_SIZE = 1e-50
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
 
 class MeshError(ValueError):
     """A mesh that cannot be flattened; the message is one line for the user."""
+
+
+def describe_os_error(exc: OSError) -> str:
+    """The OS error in the words of a one-line message: ``permission denied``, ``is a directory``, ..."""
+    if exc.errno == errno.ENOENT:
+        return "no such file"
+    text = exc.strerror or str(exc) or type(exc).__name__
+    return text[:1].lower() + text[1:]
+
+
+def read_file_bytes(path: Path, what: str, error: type[ValueError]) -> bytes:
+    """The bytes of ``path``; any OS error becomes ``error("cannot read <what> '<path>': <reason>")``."""
+    try:
+        return Path(path).read_bytes()
+    except OSError as exc:
+        raise error(f"cannot read {what} '{path}': {describe_os_error(exc)}") from None
 
 
 def triangle_areas_3d(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -293,6 +324,12 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
     bad = ~np.isfinite(vertices).all(axis=1)
     if bad.any():
         raise MeshError(f"vertex {int(np.flatnonzero(bad)[0])} has a non-finite coordinate")
+    magnitude = np.abs(vertices).max(axis=1)
+    far = magnitude > COORDINATE_LIMIT
+    if far.any():
+        v = int(np.flatnonzero(far)[0])
+        raise MeshError(f"vertex {v} has a coordinate of magnitude {magnitude[v]:.3g}, outside the supported range "
+                        f"|x| <= {COORDINATE_LIMIT:g}")
     n = len(vertices)
     out = (faces < 0) | (faces >= n)
     if out.any():
@@ -314,6 +351,10 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
         raise MeshError(f"vertex {int(np.flatnonzero(~used)[0])} is not used by any face")
 
     edges, side_edge, counts = _unique_edges(faces)
+    size = float(np.abs(vertices[edges[:, 0]] - vertices[edges[:, 1]]).max())  # no squares: cannot underflow
+    if 0 < size < MIN_MESH_SIZE:  # size 0: every face is degenerate, said below
+        raise MeshError(f"mesh is too small: its longest edge is about {size:.3g}, below the supported "
+                        f"{MIN_MESH_SIZE:g} (squared lengths and areas would underflow); scale it up")
     longest = float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).max())
     areas = triangle_areas_3d(vertices, faces)
     degenerate = areas <= DEGENERATE_RELATIVE_AREA * longest**2
@@ -388,50 +429,371 @@ def load_mesh(path: str | Path) -> Mesh:
 def load_mesh_with_notes(path: str | Path) -> tuple[Mesh, list[str]]:
     """Load and validate a mesh file; also return one-line notes on what was changed or ignored.
 
-    OBJ is read by :func:`read_obj` (vertex *i* of the file is node *i*;
-    polygons are fan-triangulated; see there).  PLY, OFF and STL go through
-    trimesh; vertices keep their file order (``process=False,
-    maintain_order=True``).  STL stores each triangle with its own three
-    corners and no shared vertices, so for STL only, exactly equal corner
-    coordinates are merged, numbered in order of first appearance.
+    Vertex *i* of the file is node *i* in every format but STL.  OBJ is read
+    by :func:`read_obj`, PLY (ASCII and binary) and OFF by the project's own
+    readers; polygons are fan-triangulated in file order, with a note (see
+    :func:`read_obj`).  STL goes through trimesh; it stores each triangle
+    with its own three corners and no shared vertices, so for STL only,
+    exactly equal corner coordinates are merged, numbered in order of first
+    appearance.
 
-    A file that cannot be read raises :class:`MeshError` "cannot parse mesh
-    …"; one that is read but is no valid disk raises "invalid mesh …" with
-    the validation's message (for OBJ followed by the file line it points at).
+    A file that cannot be read raises :class:`MeshError` "cannot read mesh
+    '<path>': <reason>" (no such file, permission denied, ...); one that is
+    no valid file of its format "cannot parse mesh …"; one that is read but
+    is no valid disk "invalid mesh …" with the validation's message (for OBJ
+    followed by the file line it points at).
     """
     path = Path(path)
-    if not path.is_file():
-        raise MeshError(f"cannot read mesh '{path}': no such file")
+    data = read_file_bytes(path, "mesh", MeshError)
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise MeshError(
             f"cannot read mesh '{path}': unknown format '{suffix}' (use {', '.join(MESH_SUFFIXES)})"
         )
+    hint = ""
     if suffix == ".obj":
-        obj = read_obj(path)
-        try:
-            return Mesh(obj.vertices, obj.faces, name=path.stem), obj.notes
-        except MeshError as exc:
-            raise MeshError(f"invalid mesh '{path}': {exc}{_obj_line_hint(str(exc), obj)}") from None
-
-    import trimesh  # heavy import, only needed for PLY, OFF and STL
-
-    notes: list[str] = []
+        obj = read_obj(path, data)
+        vertices, faces, notes = obj.vertices, obj.faces, obj.notes
+    elif suffix in (".ply", ".off"):
+        where = f"cannot parse mesh '{path}'"
+        vertices, polygons = (_read_ply if suffix == ".ply" else _read_off)(data, where)
+        faces, _, notes = _triangulate_polygons(vertices, polygons, where)
+    else:
+        vertices, faces, notes = _read_stl(data, path)
     try:
-        loaded = trimesh.load(path, process=False, maintain_order=True, force="mesh")
+        return Mesh(vertices, faces, name=path.stem), notes
+    except MeshError as exc:
+        if suffix == ".obj":
+            hint = _obj_line_hint(str(exc), obj)
+        raise MeshError(f"invalid mesh '{path}': {exc}{hint}") from None
+
+
+def _read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """STL (ASCII or binary) through trimesh, equal corners merged."""
+    import trimesh  # heavy import, only needed for STL
+
+    try:
+        loaded = trimesh.load(io.BytesIO(data), file_type="stl", process=False, maintain_order=True, force="mesh")
         vertices = np.asarray(loaded.vertices, dtype=np.float64)
         faces = np.asarray(loaded.faces)
     except Exception as exc:  # trimesh raises many types on malformed files
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise MeshError(f"cannot parse mesh '{path}': {reason}") from None
-    if suffix == ".stl" and len(vertices):
+    notes = []
+    if len(vertices):
         corners = len(vertices)
         vertices, faces = _merge_exact_duplicates(vertices, faces)
         notes.append(f"merged {corners} STL triangle corners into {len(vertices)} shared vertices")
+    return vertices, faces, notes
+
+
+@dataclass(frozen=True)
+class _Polygons:
+    """Faces as read: the corners of all faces in a row, each face's corner count, and how to name face f."""
+
+    index: np.ndarray
+    sizes: np.ndarray
+    label: object  # callable: face number -> "line 12" / "face 3"
+
+
+def _triangulate_polygons(
+    vertices: np.ndarray, polygons: _Polygons, where: str
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Triangles of the faces (fans for polygons), the face of each triangle, and the note on polygons."""
+    sizes = polygons.sizes
+    if (sizes == 3).all():
+        return polygons.index.reshape(-1, 3), np.arange(len(sizes)), []
+    faces, triangle_face = _fan_triangulate(polygons.index, sizes)
+    if np.isfinite(vertices).all() and np.abs(vertices).max(initial=0.0) <= COORDINATE_LIMIT:
+        _check_fans(vertices, faces, triangle_face, sizes, polygons.label, where)
+    # else the validation refuses the coordinates, with the right message, before anything uses the fans
+    many = sizes > 3
+    low, high = int(sizes[many].min()), int(sizes[many].max())
+    polygon_count = _plural(int(many.sum()), "polygon")
+    triangle_count = _plural(int((sizes[many] - 2).sum()), "triangle")
+    span = f"{low}" if low == high else f"{low} to {high}"
+    return faces, triangle_face, [f"{polygon_count} ({span} corners) fan-triangulated into {triangle_count}"]
+
+
+def _checked_polygons(index: np.ndarray, sizes: np.ndarray, n_vertices: int, label, where: str) -> _Polygons:
+    """Refuse faces with fewer than 3 corners or a corner outside the vertices (PLY, OFF: 0-based)."""
+    short = sizes < 3
+    if short.any():
+        f = int(np.flatnonzero(short)[0])
+        raise MeshError(f"{where}: {label(f)}: face with {_plural(int(sizes[f]), 'corner')} (a face needs at least 3)")
+    out = (index < 0) | (index >= n_vertices)
+    if out.any():
+        c = int(np.flatnonzero(out)[0])
+        f = int(np.searchsorted(np.cumsum(sizes), c, side="right"))
+        raise MeshError(f"{where}: {label(f)}: face refers to vertex {int(index[c])}, outside 0..{n_vertices - 1}")
+    return _Polygons(index.astype(np.int64), sizes.astype(np.int64), label)
+
+
+# ..................................................................... PLY
+
+#: PLY scalar types and their numpy codes (byte order added for binary files).
+_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+              "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+
+
+def _read_ply(data: bytes, where: str) -> tuple[np.ndarray, _Polygons]:
+    """Vertices (the ``vertex`` element's x, y, z, in file order) and faces of an ASCII or binary PLY file.
+
+    Every element the header declares is read (so elements before or between
+    ``vertex`` and ``face`` are skipped correctly); the faces are the
+    ``face`` element's ``vertex_indices`` (or ``vertex_index``) lists, of any
+    length.  Refusals name the problem: not PLY, an unknown type, a value
+    that is no number, a file shorter than its header says.
+    """
+    if not data.startswith(b"ply"):
+        raise MeshError(f"{where}: not a PLY file (it must start with 'ply')")
+    marker = data.find(b"end_header")
+    if marker < 0:
+        raise MeshError(f"{where}: the PLY header has no 'end_header' line")
+    newline = data.find(b"\n", marker)
+    body = data[newline + 1:] if newline >= 0 else b""
+    fmt, elements = None, []  # elements: (name, count, [(property, type, count type or None)])
+    for number, line in enumerate(data[:marker].decode("ascii", errors="replace").splitlines(), 1):
+        tokens = line.split()
+        if not tokens or tokens[0] in ("ply", "comment", "obj_info"):
+            continue
+        if tokens[0] == "format" and len(tokens) == 3:
+            fmt = tokens[1]
+        elif tokens[0] == "element" and len(tokens) == 3 and tokens[2].isdigit():
+            elements.append((tokens[1], int(tokens[2]), []))
+        elif tokens[0] == "property" and elements and len(tokens) == 3 and tokens[1] in _PLY_TYPES:
+            elements[-1][2].append((tokens[2], tokens[1], None))
+        elif (tokens[0] == "property" and elements and len(tokens) == 5 and tokens[1] == "list"
+              and tokens[2] in _PLY_TYPES and tokens[3] in _PLY_TYPES):
+            elements[-1][2].append((tokens[4], tokens[3], tokens[2]))
+        else:
+            raise MeshError(f"{where}: header line {number} {line.strip()[:60]!r} is not PLY")
+    if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+        raise MeshError(f"{where}: the PLY header has no 'format ascii|binary_little_endian|binary_big_endian 1.0'")
     try:
-        return Mesh(vertices, faces, name=path.stem), notes
-    except MeshError as exc:
-        raise MeshError(f"invalid mesh '{path}': {exc}") from None
+        if fmt == "ascii":
+            values = _ply_ascii(body, elements)
+        else:
+            values = _ply_binary(body, elements, "<" if fmt == "binary_little_endian" else ">")
+    except (ValueError, TypeError) as exc:
+        raise MeshError(f"{where}: {str(exc).splitlines()[0]}") from None
+    vertex = values.get("vertex")
+    if vertex is None or not {"x", "y", "z"} <= vertex.keys():
+        raise MeshError(f"{where}: no 'vertex' element with x, y and z")
+    vertices = np.column_stack([np.asarray(vertex[k], dtype=np.float64) for k in "xyz"]).reshape(-1, 3)
+    face_properties = next((props for element, _, props in elements if element == "face"), [])
+    lists = [prop for prop, _, count_type in face_properties if count_type]
+    name = next((n for n in ("vertex_indices", "vertex_index") if n in lists), lists[0] if lists else None)
+    if name is None:
+        index, sizes = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    else:
+        index, sizes = values["face"][name]
+    return vertices, _checked_polygons(index, sizes, len(vertices), lambda f: f"face {f}", where)
+
+
+def _ply_ascii(body: bytes, elements) -> dict:
+    """Each element's properties: a scalar as an array, a list as ``(flat values, lengths)``."""
+    tokens = body.split()
+    pos, values = 0, {}
+    for name, count, props in elements:
+        columns: dict = {}
+        if all(count_type is None for _, _, count_type in props):
+            width = len(props)
+            block = _ascii_numbers(tokens[pos:pos + count * width], name, count * width).reshape(count, width)
+            columns = {prop: block[:, k] for k, (prop, _, _) in enumerate(props)}
+            pos += count * width
+        elif len(props) == 1 and count and _uniform_ascii_list(tokens, pos, count):
+            length = int(tokens[pos])
+            block = _ascii_numbers(tokens[pos:pos + count * (length + 1)], name, count * (length + 1))
+            columns = {props[0][0]: (block.reshape(count, length + 1)[:, 1:].ravel().astype(np.int64),
+                                     np.full(count, length, dtype=np.int64))}
+            pos += count * (length + 1)
+        else:
+            raw = {prop: [] for prop, _, _ in props}
+            lengths = {prop: [] for prop, _, count_type in props if count_type}
+            for _ in range(count):
+                for prop, _, count_type in props:
+                    if count_type is None:
+                        raw[prop].append(tokens[pos] if pos < len(tokens) else b"")
+                        pos += 1
+                    else:
+                        length = int(_ascii_numbers(tokens[pos:pos + 1], name, 1)[0])
+                        raw[prop].extend(tokens[pos + 1:pos + 1 + length])
+                        lengths[prop].append(length)
+                        pos += 1 + length
+            if pos > len(tokens):
+                raise ValueError(f"the file ends inside element '{name}' (fewer values than the header declares)")
+            for prop, items in raw.items():
+                numbers = _ascii_numbers(items, name, len(items) if prop in lengths else count)
+                columns[prop] = ((numbers.astype(np.int64), np.asarray(lengths[prop], dtype=np.int64))
+                                 if prop in lengths else numbers)
+        values[name] = columns
+    if pos < len(tokens):
+        raise ValueError(f"{len(tokens) - pos} values after the last element the header declares")
+    return values
+
+
+def _uniform_ascii_list(tokens: list, pos: int, count: int) -> bool:
+    """Whether ``count`` rows of one list property all have the length of the first."""
+    first = tokens[pos] if pos < len(tokens) else b""
+    if not first.isdigit():
+        return False
+    stride = int(first) + 1
+    lengths = tokens[pos:pos + count * stride:stride]
+    return len(lengths) == count and len(tokens) >= pos + count * stride and all(t == first for t in lengths)
+
+
+def _ascii_numbers(items: list, element: str, expected: int) -> np.ndarray:
+    if len(items) < expected:
+        raise ValueError(f"the file ends inside element '{element}' (fewer values than the header declares)")
+    try:
+        return np.array(items, dtype=np.bytes_).astype(np.float64)
+    except ValueError:
+        bad = next(t for t in items if not _is_float(t.decode("ascii", errors="replace")))
+        raise ValueError(f"element '{element}' has a value {bad.decode('ascii', errors='replace')[:20]!r} that is "
+                         "not a number") from None
+
+
+def _ply_binary(body: bytes, elements, order: str) -> dict:
+    """As :func:`_ply_ascii` for a binary body in byte order ``order``."""
+    pos, values = 0, {}
+
+    def take(dtype: np.dtype, count: int, element: str) -> np.ndarray:
+        nonlocal pos
+        if pos + dtype.itemsize * count > len(body):
+            raise ValueError(f"the file ends inside element '{element}' (shorter than the header declares)")
+        array = np.frombuffer(body, dtype=dtype, count=count, offset=pos)
+        pos += dtype.itemsize * count
+        return array
+
+    for name, count, props in elements:
+        if len({prop for prop, _, _ in props}) != len(props):
+            raise ValueError(f"element '{name}' declares a property twice")
+        if all(count_type is None for _, _, count_type in props):
+            block = take(np.dtype([(prop, order + _PLY_TYPES[t]) for prop, t, _ in props]), count, name)
+            values[name] = {prop: block[prop] for prop, _, _ in props}
+            continue
+        uniform = _uniform_binary(body, pos, count, props, order)
+        if uniform is not None:
+            block = take(uniform, count, name)
+            values[name] = {prop: (block[prop].ravel().astype(np.int64), block[prop + "#"].astype(np.int64))
+                            if count_type else block[prop]
+                            for prop, _, count_type in props}
+            continue
+        columns = {prop: [] for prop, _, _ in props}
+        lengths = {prop: [] for prop, _, count_type in props if count_type}
+        scalar = {prop: np.dtype(order + _PLY_TYPES[t]) for prop, t, _ in props}
+        counter = {prop: np.dtype(order + _PLY_TYPES[c]) for prop, _, c in props if c}
+        for _ in range(count):
+            for prop, _, count_type in props:
+                if count_type is None:
+                    columns[prop].append(take(scalar[prop], 1, name)[0])
+                else:
+                    length = int(take(counter[prop], 1, name)[0])
+                    columns[prop].append(take(scalar[prop], length, name))
+                    lengths[prop].append(length)
+        values[name] = {prop: ((np.concatenate(items).astype(np.int64) if items else np.zeros(0, dtype=np.int64)),
+                               np.asarray(lengths[prop], dtype=np.int64)) if prop in lengths else np.asarray(items)
+                        for prop, items in columns.items()}
+    return values
+
+
+def _uniform_binary(body: bytes, pos: int, count: int, props, order: str) -> np.dtype | None:
+    """A record dtype for the element when every list in it has the length its first row has, else None."""
+    if count == 0:
+        return None
+    fields, offset = [], pos
+    for prop, t, count_type in props:
+        if count_type is None:
+            fields.append((prop, order + _PLY_TYPES[t]))
+            offset += np.dtype(_PLY_TYPES[t]).itemsize
+            continue
+        counter = np.dtype(order + _PLY_TYPES[count_type])
+        if offset + counter.itemsize > len(body):
+            return None
+        length = int(np.frombuffer(body, dtype=counter, count=1, offset=offset)[0])
+        fields += [(prop + "#", counter), (prop, order + _PLY_TYPES[t], (length,))]
+        offset += counter.itemsize + length * np.dtype(_PLY_TYPES[t]).itemsize
+    dtype = np.dtype(fields)
+    if pos + dtype.itemsize * count > len(body):
+        return None
+    block = np.frombuffer(body, dtype=dtype, count=count, offset=pos)
+    for prop, _, count_type in props:
+        if count_type and not (block[prop + "#"] == block[prop].shape[1]).all():
+            return None
+    return dtype
+
+
+# ..................................................................... OFF
+
+#: OFF keywords: vertex colours (C), normals (N) and texture coordinates (ST) follow x y z and are ignored.
+_OFF_KEYWORDS = frozenset(f"{st}{c}{n}OFF" for st in ("", "ST") for c in ("", "C") for n in ("", "N"))
+
+
+def _read_off(data: bytes, where: str) -> tuple[np.ndarray, _Polygons]:
+    """Vertices (in file order) and faces of an ASCII OFF file.
+
+    ``OFF`` (or ``COFF``, ``NOFF``, ``STOFF`` …), the counts ``V F [E]`` on
+    the same line or the next, ``V`` lines whose first three numbers are
+    x y z, then ``F`` lines ``n i1 … in [colour]``; ``#`` comments and blank
+    lines anywhere.  Refusals name the line.
+    """
+    text = data.decode("utf-8-sig", errors="replace")
+    lines = text.splitlines()
+    if "#" in text:
+        lines = [line.split("#", 1)[0] for line in lines]
+    rows = [(number, tokens) for number, tokens in enumerate(map(str.split, lines), 1) if tokens]
+    if not rows or rows[0][1][0] not in _OFF_KEYWORDS:
+        first = rows[0][1][0][:20] if rows else "nothing"
+        raise MeshError(f"{where}: not an OFF file (it starts with {first!r}; binary and 4D/nD OFF are not supported)")
+    count_line, header = rows[0][0], rows[0][1][1:]
+    if header[:1] == ["BINARY"]:
+        raise MeshError(f"{where}: binary OFF is not supported (write it as text OFF, PLY or OBJ)")
+    rows = rows[1:]
+    if not header:  # the counts are on the next line
+        if not rows:
+            raise MeshError(f"{where}: the OFF file has no vertex and face counts")
+        (count_line, header), rows = rows[0], rows[1:]
+    if len(header) < 2 or not all(_is_int(t) for t in header[:3]) or min(int(t) for t in header[:2]) < 0:
+        raise MeshError(f"{where}: line {count_line}: expected the counts 'vertices faces [edges]', "
+                        f"got {' '.join(header)[:40]!r}")
+    n_vertices, n_faces = int(header[0]), int(header[1])
+    if len(rows) < n_vertices + n_faces:
+        raise MeshError(f"{where}: the file ends early: the header declares {_plural(n_vertices, 'vertex', 'vertices')} "
+                        f"and {_plural(n_faces, 'face')}, the file has {len(rows)} lines of them")
+    vertex_rows, face_rows = rows[:n_vertices], rows[n_vertices:n_vertices + n_faces]
+    short = next(((number, tokens) for number, tokens in vertex_rows if len(tokens) < 3), None)
+    if short is not None:
+        raise MeshError(f"{where}: line {short[0]}: vertex with {len(short[1])} values (needs x y z)")
+    coords = [value for _, tokens in vertex_rows for value in tokens[:3]]
+    vertices = _obj_coordinates(coords, np.array([number for number, _ in vertex_rows]), where)
+    lines = [number for number, _ in face_rows]
+    uniform = _uniform_off_faces([tokens for _, tokens in face_rows])
+    if uniform is not None:
+        return vertices, _checked_polygons(uniform[:, 1:].ravel(),
+                                           uniform[:, 0], n_vertices, lambda f: f"line {lines[f]}", where)
+    sizes, index = [], []
+    for number, tokens in face_rows:
+        if not _is_int(tokens[0]) or len(tokens) < int(tokens[0]) + 1 or not all(
+                _is_int(t) for t in tokens[1:int(tokens[0]) + 1]):
+            raise MeshError(f"{where}: line {number}: expected a face 'n i1 ... in', got {' '.join(tokens)[:40]!r}")
+        size = int(tokens[0])
+        sizes.append(size)
+        index.extend(int(t) for t in tokens[1:size + 1])
+    return vertices, _checked_polygons(np.asarray(index, dtype=np.int64), np.asarray(sizes, dtype=np.int64),
+                                       n_vertices, lambda f: f"line {lines[f]}", where)
+
+
+def _uniform_off_faces(rows: list[list[str]]) -> np.ndarray | None:
+    """``(F, n+1)`` integers when every face row is ``n i1 … in`` with one n and nothing after; else None."""
+    if not rows or len({len(tokens) for tokens in rows}) != 1:
+        return None
+    try:
+        block = np.array(rows, dtype=np.bytes_).astype(np.int64)
+    except (ValueError, UnicodeEncodeError):
+        return None
+    return block if (block[:, 0] == block.shape[1] - 1).all() else None
 
 
 # ..................................................................... OBJ
@@ -507,7 +869,7 @@ def _plural(n: int, word: str, words: str | None = None) -> str:
     return f"{n} {word}" if n == 1 else f"{n} {words or word + 's'}"
 
 
-def read_obj(path: str | Path) -> ObjContents:
+def read_obj(path: str | Path, data: bytes | None = None) -> ObjContents:
     """Read the polygonal part of a Wavefront OBJ file, keeping vertex numbering.
 
     Accepted: ``v x y z [w]`` and ``v x y z r g b`` (weight and colours
@@ -529,11 +891,16 @@ def read_obj(path: str | Path) -> ObjContents:
     Vertex *i* of the file (0-based) is row *i* of ``vertices``: nothing is
     merged, reordered or dropped; unused vertices are left to the mesh
     validation.  Refusals raise :class:`MeshError` "cannot parse mesh
-    '<path>': line <n>: <construct>".
+    '<path>': line <n>: <construct>"; a file that cannot be read "cannot
+    read mesh '<path>': <reason>".  ``data``: the file's bytes, if already read.
+    Text is UTF-8 (a byte-order mark is skipped); lines end in LF, CRLF or CR;
+    tokens are separated by any whitespace, tabs included.
     """
     path = Path(path)
     where = f"cannot parse mesh '{path}'"
-    text = path.read_bytes().decode("utf-8", errors="replace")
+    if data is None:
+        data = read_file_bytes(path, "mesh", MeshError)
+    text = data.decode("utf-8-sig", errors="replace")
 
     statements, numbers = _obj_lines(text)
 
@@ -608,20 +975,9 @@ def read_obj(path: str | Path) -> ObjContents:
     ]
     index = resolved[0]
 
-    notes: list[str] = []
-    if (sizes == 3).all():
-        faces = index.reshape(-1, 3)
-        triangle_line = lines
-    else:
-        faces, triangle_face = _fan_triangulate(index, sizes)
-        triangle_line = lines[triangle_face]
-        _check_fans(vertices, faces, triangle_face, sizes, lines, where)
-        polygons = sizes > 3
-        low, high = int(sizes[polygons].min()), int(sizes[polygons].max())
-        polygon_count = _plural(int(polygons.sum()), "polygon")
-        triangle_count = _plural(int((sizes[polygons] - 2).sum()), "triangle")
-        span = f"{low}" if low == high else f"{low} to {high}"
-        notes.append(f"{polygon_count} ({span} corners) fan-triangulated into {triangle_count}")
+    polygons = _Polygons(index, sizes, lambda f: f"line {lines[f]}")
+    faces, triangle_face, notes = _triangulate_polygons(vertices, polygons, where)
+    triangle_line = lines[triangle_face]
     if len(sizes) == 0 and ignored.keys() & {"l", "p"}:
         raise MeshError(f"{where}: no faces ('f'), only line ('l') or point ('p') elements")
     for key, count in ignored.items():
@@ -638,6 +994,30 @@ def read_obj(path: str | Path) -> ObjContents:
         parts = [part for part, key in zip(parts, "og") if groups[key]]
         notes.append(f"{' and '.join(parts)} read as one mesh (OBJ numbers vertices across the whole file)")
     return ObjContents(vertices, faces, triangle_line, vertex_line, notes)
+
+
+def read_obj_vertices(data: bytes, where: str) -> np.ndarray:
+    """``(V, 3)`` coordinates of the ``v`` statements of an OBJ file's bytes, in file order.
+
+    The text is read as by :func:`read_obj` (BOM, line ends, tabs, ``#``
+    comments, ``\\`` continuations); nothing but ``v`` is looked at.  Used for
+    layouts given as OBJ.  Refusals: :class:`MeshError` "<where>: line <n>: ...".
+    """
+    statements, numbers = _obj_lines(data.decode("utf-8-sig", errors="replace"))
+    coords: list[str] = []
+    at: list[int] = []
+    for i, line in enumerate(statements):
+        tokens = line.split("#", 1)[0].split()
+        if tokens and tokens[0] == "v":
+            if len(tokens) < 4:
+                line_number = i + 1 if numbers is None else numbers[i]
+                raise MeshError(f"{where}: line {line_number}: vertex 'v' with {len(tokens) - 1} "
+                                f"coordinate{'' if len(tokens) == 2 else 's'} (needs x y z)")
+            coords.extend(tokens[1:4])
+            at.append(i)
+    index = np.asarray(at, dtype=np.int64)
+    lines = index + 1 if numbers is None else np.asarray(numbers, dtype=np.int64)[index]
+    return _obj_coordinates(coords, lines, where)
 
 
 def _obj_coordinates(coords: list[str], vertex_line: np.ndarray, where: str) -> np.ndarray:
@@ -759,8 +1139,7 @@ def _fan_triangulate(index: np.ndarray, sizes: np.ndarray) -> tuple[np.ndarray, 
 
 
 def _check_fans(
-    vertices: np.ndarray, faces: np.ndarray, triangle_face: np.ndarray, sizes: np.ndarray,
-    lines: np.ndarray, where: str,
+    vertices: np.ndarray, faces: np.ndarray, triangle_face: np.ndarray, sizes: np.ndarray, label, where: str,
 ) -> None:
     """Refuse a polygon whose fan has a triangle facing against the polygon (not convex at corner 0)."""
     polygon = sizes[triangle_face] > 3
@@ -777,7 +1156,7 @@ def _check_fans(
         t = int(np.flatnonzero(against)[0])
         f = int(owner[t])
         raise MeshError(
-            f"{where}: line {lines[f]}: polygon with {sizes[f]} corners cannot be fan-triangulated from its "
+            f"{where}: {label(f)}: polygon with {sizes[f]} corners cannot be fan-triangulated from its "
             "first corner (a fan triangle would be folded or of zero area)"
         )
 

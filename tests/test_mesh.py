@@ -330,3 +330,101 @@ def test_obj_validation_message_points_at_the_file_line(tmp_path):
     repeated = r"invalid mesh .*: face 1 repeats a vertex \(degenerate triangle\) \(file line 6\)$"
     with pytest.raises(MeshError, match=repeated):
         load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3\nf 1 3 3\n"))
+
+
+# --------------------------------------------------------------------------- PLY and OFF, ranges (issue 14)
+
+PLY_V = np.array([[0, 0, 0], [2, 0, 0], [3, 1.5, 0], [1, 2.5, 0], [-1, 1.5, 0], [4, 0, 0], [4.5, 1.5, 0], [3.5, 3, 0]])
+
+
+def _ply_binary_mixed(order: str) -> bytes:
+    """Big- or little-endian PLY: an extra element before the faces, properties out of x y z order,
+    a pentagon, a quad and a triangle with a per-face flag after each list."""
+    import struct
+
+    endian = {"<": "binary_little_endian", ">": "binary_big_endian"}[order]
+    head = (f"ply\nformat {endian} 1.0\ncomment mixed\nelement vertex {len(PLY_V)}\n"
+            "property float z\nproperty double x\nproperty uchar red\nproperty double y\n"
+            "element edge 1\nproperty int vertex1\nproperty int vertex2\n"
+            "element face 3\nproperty list uchar uint vertex_index\nproperty uchar flags\nend_header\n").encode()
+    body = b"".join(struct.pack(order + "fdBd", z, x, 7, y) for x, y, z in PLY_V.tolist())
+    body += struct.pack(order + "ii", 0, 1)
+    for face in ([0, 1, 2, 3, 4], [1, 5, 6, 2], [2, 6, 7]):
+        body += struct.pack(f"{order}B{len(face)}IB", len(face), *face, 1)
+    return head + body
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+def test_ply_binary_polygons_are_fanned_in_file_order(tmp_path, order):
+    path = tmp_path / "m.ply"
+    path.write_bytes(_ply_binary_mixed(order))
+    mesh, notes = load_mesh_with_notes(path)
+    assert mesh.vertices.tolist() == PLY_V.tolist()
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [1, 5, 6], [1, 6, 2], [2, 6, 7]]
+    assert notes == ["2 polygons (4 to 5 corners) fan-triangulated into 5 triangles"]
+
+
+def test_ply_ascii_with_tabs_crlf_and_mixed_faces(tmp_path):
+    rows = ["ply", "format ascii 1.0", f"element vertex {len(PLY_V)}", "property double x", "property double y",
+            "property double z", "element face 3", "property list uchar int vertex_indices", "end_header"]
+    rows += ["\t".join(map(repr, v)) for v in PLY_V.tolist()] + ["5\t0 1 2 3 4", "4 1\t5 6 2", "3 2 6 7"]
+    path = tmp_path / "m.ply"
+    path.write_bytes("\r\n".join(rows).encode() + b"\r\n")
+    mesh, notes = load_mesh_with_notes(path)
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [1, 5, 6], [1, 6, 2], [2, 6, 7]]
+    assert notes == ["2 polygons (4 to 5 corners) fan-triangulated into 5 triangles"]
+
+
+@pytest.mark.parametrize("text, message", [
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+     "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n",
+     r"the file ends inside element 'face'"),
+    ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+     "end_header\n0 zero 0\n", r"element 'vertex' has a value 'zero' that is not a number"),
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+     "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n",
+     r"face 0: face refers to vertex 3, outside 0..2"),
+    ("ply\nformat binary_middle_endian 1.0\nend_header\n", r"no 'format ascii\|binary"),
+    ("ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n", r"header line 4 'property quad x'"),
+    ("OFF\n3 1\n0 0 0\n1 0 0\n", r"the file ends early"),
+    ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", r"line 6: face with 2 corners"),
+    ("OFF BINARY\n", r"binary OFF is not supported"),
+    ("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", r"line 4: vertex coordinate 'x' is not a number"),
+])
+def test_ply_and_off_refusals_are_one_line(tmp_path, text, message):
+    path = tmp_path / ("m.ply" if text.startswith("ply") else "m.off")
+    path.write_text(text)
+    with pytest.raises(MeshError, match=r"^cannot parse mesh '.*': .*" + message) as info:
+        load_mesh(path)
+    assert "\n" not in str(info.value)
+
+
+def test_off_variants(tmp_path):
+    path = tmp_path / "m.off"
+    path.write_text("COFF 4 2 0  # counts on the keyword's line\n0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n"
+                    "1 1 0 0 0 255 255\n0 1 0 9 9 9 255\n3 0 1 2 200 10 10\n3\t0 2 3\n")
+    mesh, notes = load_mesh_with_notes(path)
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and notes == []
+
+
+def test_coordinates_outside_the_range_are_refused_naming_it():
+    with pytest.raises(MeshError, match=r"^vertex 2 has a coordinate of magnitude 1e\+51, outside the supported "
+                                        r"range \|x\| <= 1e\+50$"):
+        Mesh(np.where(np.arange(4)[:, None] == 2, -1e51, SQUARE_V), SQUARE_F)
+    Mesh(SQUARE_V * 1e50, SQUARE_F)  # the limit itself is in range
+    with pytest.raises(MeshError, match=r"^mesh is too small: its longest edge is about 1e-150, below the supported "
+                                        r"1e-50 .*underflow"):
+        Mesh(SQUARE_V * 1e-150, SQUARE_F)
+    Mesh(SQUARE_V * 1e-50, SQUARE_F)
+    with pytest.raises(MeshError, match="degenerate"):  # all at one point: no size at all
+        Mesh(SQUARE_V * 0, SQUARE_F)
+
+
+def test_an_unreadable_mesh_is_one_line(tmp_path):
+    (tmp_path / "d.obj").mkdir()
+    with pytest.raises(MeshError, match=r"^cannot read mesh '.*d\.obj': is a directory$"):
+        load_mesh(tmp_path / "d.obj")
+    with pytest.raises(MeshError, match=r"^cannot read mesh '.*': file name too long$"):
+        load_mesh(tmp_path / ("n" * 300 + ".obj"))
+    with pytest.raises(MeshError, match=r"^cannot read mesh '.*nope\.ply': no such file$"):
+        load_mesh(tmp_path / "nope.ply")
