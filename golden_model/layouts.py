@@ -20,7 +20,9 @@
   dynamics), at most :data:`ARAP_MAX_ITERATIONS` local/global iterations,
   then centred.  ARAP keeps the 3D scale.
 * a file: ``V`` rows ``x y`` (whitespace or comma separated; ``#`` comments),
-  or an OBJ whose vertex *i* gives ``(x, y)`` of node *i*.
+  or an OBJ whose vertex *i* gives ``(x, y)`` of node *i* (read as the mesh
+  reader reads OBJ: tabs, CRLF, continuations).  Coordinates must be finite
+  and within ``|x| <= COORDINATE_LIMIT`` (1e50, as for meshes).
 
 Every computed layout is oriented so that most faces are counter-clockwise
 (mirrored otherwise), which makes pictures comparable; the flattening itself
@@ -37,7 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .mesh import Mesh, signed_areas_2d
+from .mesh import COORDINATE_LIMIT, Mesh, MeshError, read_file_bytes, read_obj_vertices, signed_areas_2d
 
 __all__ = ["LayoutError", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
            "arap_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS"]
@@ -244,15 +246,21 @@ def arap_layout(mesh: Mesh) -> np.ndarray:
 
 
 def load_layout(path: str | Path, n_vertices: int) -> np.ndarray:
-    """Read a user layout: a text file of ``x y`` rows, or an OBJ's vertex (x, y)."""
+    """Read a user layout: a text file of ``x y`` rows, or an OBJ's vertex (x, y).
+
+    A file that cannot be read is a :class:`LayoutError` "cannot read layout
+    '<path>': <reason>" (no such file, is a directory, permission denied, ...).
+    """
     path = Path(path)
-    if not path.is_file():
-        raise LayoutError(f"cannot read layout '{path}': no such file")
+    data = read_file_bytes(path, "layout", LayoutError)
     if path.suffix.lower() == ".obj":
-        positions = _obj_vertex_xy(path)
+        try:
+            positions = read_obj_vertices(data, f"cannot parse layout '{path}'")[:, :2]
+        except MeshError as exc:
+            raise LayoutError(str(exc)) from None
     else:
         try:
-            text = path.read_text(encoding="utf-8").replace(",", " ")
+            text = data.decode("utf-8-sig").replace(",", " ")
             rows = [line.split("#")[0].split() for line in text.splitlines()]
             rows = [r for r in rows if r]
             if any(len(r) != 2 for r in rows):
@@ -269,17 +277,12 @@ def load_layout(path: str | Path, n_vertices: int) -> np.ndarray:
         raise LayoutError(f"layout '{path}' has {len(positions)} rows but the mesh has {n_vertices} vertices")
     if not np.isfinite(positions).all():
         raise LayoutError(f"layout '{path}' has a non-finite coordinate")
+    magnitude = np.abs(positions).max(axis=1, initial=0.0)
+    if (magnitude > COORDINATE_LIMIT).any():
+        row = int(np.flatnonzero(magnitude > COORDINATE_LIMIT)[0])
+        raise LayoutError(f"layout '{path}': row {row + 1} has a coordinate of magnitude {magnitude[row]:.3g}, "
+                          f"outside the supported range |x| <= {COORDINATE_LIMIT:g}")
     return positions
-
-
-def _obj_vertex_xy(path: Path) -> np.ndarray:
-    """(x, y) of the ``v`` records of an OBJ file, in file order."""
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-        rows = [line.split()[1:3] for line in lines if line.startswith("v ")]
-        return np.array(rows, dtype=np.float64).reshape(-1, 2)
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise LayoutError(f"cannot parse layout '{path}': {str(exc).splitlines()[0]}") from None
 
 
 _METHODS = {"tutte": tutte_layout, "pca": pca_layout, "harmonic": harmonic_layout, "lscm": lscm_layout,
