@@ -5,26 +5,33 @@ Subcommands:
 * ``flatten [MESH]``: flatten a mesh (a file or a built-in, default ``surf1``);
 * ``paper [--out DIR]``: reproduce the paper's Tables VI–VII and figures.
 
-Bad input never produces a traceback: every user error is one line on
-stderr (``springflat: error: ...``) and exit status 2.  A run that diverges
-exits with status 3 after writing what was asked for.
+Bad input never produces a traceback: every user error, an unreadable or
+unwritable file included, is one line on stderr (``springflat: error: ...``)
+and exit status 2, and leaves no file behind.  A run that diverges exits with
+status 3 after writing what was asked for.  ``--json`` prints standard JSON:
+a number that is not finite is ``null`` and its key is listed in
+``non_finite`` (the status, ``diverged``, says why).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from golden_model.layouts import LAYOUT_METHODS, initial_layout
-from golden_model.mesh import Mesh
-from golden_model.fixed.engine import flatten_fixed, load_formats
+from golden_model.mesh import Mesh, describe_os_error
+from golden_model.fixed.engine import flatten_fixed
 from golden_model.reference import FlattenParams, FlattenResult, flatten
 
-from .outputs import LAYOUT_SUFFIXES, check_output_path, write_history, write_layout, write_plot
+from .outputs import (LAYOUT_SUFFIXES, OutputWriteError, all_or_nothing, check_output_path, write_history,
+                      write_layout, write_plot)
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
-                          params_from_args, resolve_mesh)
+                          load_format_set, params_from_args, resolve_mesh)
 
 class _Parser(argparse.ArgumentParser):
     """argparse with the project's one-line error format."""
@@ -47,11 +54,12 @@ def cmd_flatten(args: argparse.Namespace) -> int:
                                  (args.plot, "--plot", (".png",))):
         if path is not None:
             check_output_path(path, what, suffixes)
+    _check_distinct_files(args)
     args.init = args.init or default_init(args.mesh)
     positions = initial_layout(mesh, args.init)
     show_progress = sys.stderr.isatty() or not args.json
     if args.engine == "fixed":
-        formats = load_formats(args.formats or "default")
+        formats = load_format_set(args.formats or "default")
 
         def engine(*run_args, **kw):
             return flatten_fixed(*run_args, fs=formats, **kw)
@@ -59,12 +67,14 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         raise UserError("--formats applies to --engine fixed")
     else:
         engine = flatten
-    with _progress(params.max_iter, show_progress) as bar:
+    # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
+    with _progress(params.max_iter, show_progress) as bar, np.errstate(over="ignore", invalid="ignore",
+                                                                        divide="ignore"):
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     _write_outputs(args, mesh, result)
     if args.json:
-        print(json.dumps({"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
-                          **result.summary(), "used": _what_was_used(params, args.init, result)[len("springflat: "):]}))
+        print(strict_json({"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
+                           **result.summary(), "used": _what_was_used(params, args.init, result)[len("springflat: "):]}))
     else:
         final = result.final
         print(f"{mesh.name}: {result.status} after {result.iterations} iterations: "
@@ -97,14 +107,59 @@ def _what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> s
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 
+def strict_json(summary: dict) -> str:
+    """One line of standard JSON: each number that is not finite becomes ``null`` and its key (dotted
+    for nested objects) is listed under ``non_finite``."""
+    non_finite: list[str] = []
+
+    def finite(value, key):
+        if isinstance(value, float) and not math.isfinite(value):
+            non_finite.append(key)
+            return None
+        if isinstance(value, dict):
+            return {k: finite(v, f"{key}.{k}" if key else str(k)) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [finite(v, f"{key}[{i}]") for i, v in enumerate(value)]
+        return value
+
+    cleaned = finite(summary, "")
+    if non_finite:
+        cleaned["non_finite"] = non_finite
+    return json.dumps(cleaned, allow_nan=False)
+
+
+def _check_distinct_files(args: argparse.Namespace) -> None:
+    """No two outputs may be one file, and no output may overwrite the mesh."""
+    seen: dict[Path, str] = {}
+    mesh_path = Path(args.mesh)
+    if mesh_path.is_file():
+        seen[mesh_path.resolve()] = f"the mesh '{args.mesh}'"
+    for what, path in (("--out", args.out), ("--history", args.history), ("--plot", args.plot)):
+        if path is None:
+            continue
+        key = Path(path).resolve()
+        if key in seen:
+            raise UserError(f"{what} '{path}' is the same file as {seen[key]}")
+        seen[key] = f"{what} '{path}'"
+
+
 def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:
-    if args.out is not None:
-        write_layout(args.out, result.positions, mesh.faces, vertices=mesh.vertices)
-    if args.history is not None:
-        write_history(args.history, result)
-    if args.plot is not None:
-        write_plot(args.plot, result, mesh.faces, title=f"{mesh.name} ({result.engine} engine)",
-                   vertices=mesh.vertices)
+    """Write the outputs asked for: all of them, or (on an error) none."""
+    title = f"{mesh.name} ({result.engine} engine)"
+    jobs = ((args.out, "--out", lambda path: write_layout(path, result.positions, mesh.faces, vertices=mesh.vertices)),
+            (args.history, "--history", lambda path: write_history(path, result)),
+            (args.plot, "--plot", lambda path: write_plot(path, result, mesh.faces, title=title,
+                                                          vertices=mesh.vertices)))
+    with all_or_nothing():
+        for path, what, write in jobs:
+            if path is None:
+                continue
+            try:
+                write(path)
+            except OutputWriteError as exc:
+                raise OutputWriteError(exc.path, exc.error, what) from None
+            except OSError as exc:
+                raise OutputWriteError(path, exc, what) from None
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
@@ -118,7 +173,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 def cmd_verilog(args: argparse.Namespace) -> int:
     from .export import export_verilog
 
-    formats = load_formats(args.formats)
+    formats = load_format_set(args.formats)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out '{out}' exists and is not a directory")
@@ -179,6 +234,10 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except USER_ERRORS + (UserError,) as exc:
         print(f"springflat: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as exc:  # a file operation the commands do not name themselves
+        name = f" '{exc.filename}'" if exc.filename else ""
+        print(f"springflat: error: cannot access{name}: {describe_os_error(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("springflat: interrupted", file=sys.stderr)

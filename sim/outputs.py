@@ -1,7 +1,9 @@
 """Files a flattening run writes: layout (OBJ/SVG), history CSV, plot PNG.
 
 Every writer goes through :func:`atomic_write`, so an interrupted or failed
-run never leaves a partial file behind.
+run never leaves a partial file behind; inside :func:`all_or_nothing` several
+outputs appear together or not at all.  An OS error while writing is an
+:class:`OutputWriteError`, one line: ``cannot write '<path>': <reason>``.
 """
 
 from __future__ import annotations
@@ -11,13 +13,14 @@ import math
 import os
 import tempfile
 from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
-from golden_model.mesh import folded_faces, save_obj, signed_areas_2d, triangle_areas_3d
+from golden_model.mesh import describe_os_error, folded_faces, save_obj, signed_areas_2d, triangle_areas_3d
 from golden_model.reference import FlattenResult
 
 HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded")
@@ -28,32 +31,92 @@ class OutputError(ValueError):
     """An output path that cannot be written; one line for the user."""
 
 
+class OutputWriteError(OutputError):
+    """An OS error on an output: ``cannot write [<what> ]'<path>': <reason>``."""
+
+    def __init__(self, path: Path, error: OSError, what: str = ""):
+        self.path, self.error = path, error
+        super().__init__(f"cannot write {what + ' ' if what else ''}'{path}': {describe_os_error(error)}")
+
+
 def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = None) -> None:
-    """Fail early (before a long run) on an output path that cannot work."""
+    """Fail early (before a long run) on an output path that cannot work.
+
+    Besides the suffix and the directory, this creates and removes a
+    temporary file where :func:`atomic_write` will, so that a directory
+    without write permission or a name too long is refused up front.
+    """
     if suffixes and path.suffix.lower() not in suffixes:
         raise OutputError(f"{what} '{path}' must end in {' or '.join(suffixes)}")
     parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise OutputError(f"{what} '{path}': directory '{parent}' does not exist")
-    if path.is_dir():
-        raise OutputError(f"{what} '{path}' is a directory")
+    try:
+        if not parent.exists():
+            raise OutputError(f"{what} '{path}': directory '{parent}' does not exist")
+        if not parent.is_dir():
+            raise OutputError(f"{what} '{path}': '{parent}' is not a directory")
+        if path.is_dir():
+            raise OutputError(f"{what} '{path}' is a directory")
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise OutputWriteError(path, exc, what) from None
+
+
+#: The renames :func:`all_or_nothing` holds back: (temporary file, final path).
+_PENDING: ContextVar[list[tuple[str, Path]] | None] = ContextVar("springflat_pending_outputs", default=None)
 
 
 @contextmanager
 def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
-    """Yield a temporary path next to ``path``; rename it over ``path`` on success."""
+    """Yield a temporary path next to ``path``; rename it over ``path`` on success.
+
+    Inside :func:`all_or_nothing` the rename waits for the end of that block.
+    An OS error (here or in the caller's block) removes the temporary file
+    and is raised as :class:`OutputWriteError` naming ``path``.
+    """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
-    os.close(fd)
+    tmp = None
     try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
+        os.close(fd)
         yield tmp
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an output file gets the usual mode
-        os.replace(tmp, path)
+        pending = _PENDING.get()
+        if pending is None:
+            os.replace(tmp, path)
+        else:
+            pending.append((tmp, path))
+            tmp = None
+    except OSError as exc:
+        raise OutputWriteError(path, exc) from None
     finally:
-        if os.path.exists(tmp):
+        if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
+
+
+@contextmanager
+def all_or_nothing() -> Iterator[None]:
+    """The files :func:`atomic_write` writes inside the block appear at its end, all of them or none."""
+    pending: list[tuple[str, Path]] = []
+    token = _PENDING.set(pending)
+    try:
+        yield
+        _PENDING.reset(token)
+        token = None
+        for tmp, path in pending:
+            try:
+                os.replace(tmp, path)
+            except OSError as exc:
+                raise OutputWriteError(path, exc) from None
+    finally:
+        if token is not None:
+            _PENDING.reset(token)
+        for tmp, _ in pending:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
 
 
 # --------------------------------------------------------------------------- per-face distortion colouring

@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from golden_model.fixed.engine import check_fixed_params, load_formats, prepare
+from golden_model.fixed.engine import check_fixed_params, prepare
 from golden_model.layouts import LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, SimulatorError, run_bench
@@ -42,7 +42,7 @@ def add_parser(sub, add_run_options) -> None:
 def cmd_rtl_check(args: argparse.Namespace) -> int:
     from hdl import SpringflatCore
 
-    from .run_options import UserError, default_init, params_from_args, resolve_mesh
+    from .run_options import UserError, default_init, load_format_set, params_from_args, resolve_mesh
 
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
@@ -53,7 +53,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         raise UserError(f"--stall must be in [0, 1), got {args.stall}")
     if args.waves is not None and not (args.waves.parent if str(args.waves.parent) else Path(".")).is_dir():
         raise UserError(f"--waves '{args.waves}': directory '{args.waves.parent}' does not exist")
-    formats = load_formats(args.formats)
+    formats = load_format_set(args.formats)
     check_fixed_params(params, formats)
     prepare(mesh, initial_layout(mesh, args.init), params, formats)  # refuses what the formats cannot hold
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())

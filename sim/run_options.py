@@ -14,7 +14,7 @@ import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.layouts import LAYOUT_METHODS, LayoutError
-from golden_model.mesh import Mesh, MeshError, load_mesh_with_notes
+from golden_model.mesh import Mesh, MeshError, describe_os_error, load_mesh_with_notes
 from golden_model.reference import DYNAMICS, FlattenParams, ParameterError
 
 from .outputs import OutputError
@@ -26,6 +26,19 @@ USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
 
 class UserError(ValueError):
     """Anything else the user got wrong; one line."""
+
+
+def load_format_set(spec: str):
+    """:func:`golden_model.fixed.engine.load_formats` (a preset name or a JSON file), with the file errors it
+    leaves to the caller made one line: an OS error reading the file, and JSON nested beyond Python's limit."""
+    from golden_model.fixed.engine import load_formats
+
+    try:
+        return load_formats(spec)
+    except OSError as exc:
+        raise UserError(f"cannot read formats file '{spec}': {describe_os_error(exc)}") from None
+    except RecursionError:
+        raise UserError(f"formats '{spec}': the JSON is nested too deeply") from None
 
 
 def _density(text: str) -> float | str:

@@ -23,7 +23,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from golden_model.fixed.engine import load_formats
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.reference import ParameterError
 from golden_model.study import (
@@ -46,7 +45,7 @@ from golden_model.study import (
     sweep_configs,
 )
 
-from .run_options import integer_argument, number_argument
+from .run_options import integer_argument, load_format_set, number_argument
 from .outputs import atomic_write
 
 __all__ = ["add_parser", "cmd_study", "write_outputs", "PLOT_FILES"]
@@ -132,7 +131,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     workers = _default_workers() if args.workers is None else args.workers
     if workers < 1:
         raise ParameterError(f"--workers must be >= 1, got {workers}")
-    base = load_formats(args.base)
+    base = load_format_set(args.base)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ParameterError(f"--out '{out}' exists and is not a directory")
