@@ -1,0 +1,692 @@
+"""Fuzz cases for ``springflat flatten`` (issue 14): malformed and legal-but-unusual meshes, layouts,
+parameters, output paths and format sets.
+
+Every case runs the command's ``main()`` in-process, in an empty directory of its own, and checks what a
+user would see:
+
+* the exit status;
+* a refusal is exactly one ``springflat: error: ...`` line on stderr (other lines may only be
+  ``springflat: note: ...``), with nothing on stdout; no exception escapes (no traceback);
+* no numpy floating-point warning (``RuntimeWarning``) is raised;
+* no file is left behind but the outputs a successful run was asked for (not even a ``.part`` file);
+* ``--json`` output parses with a strict parser (no ``NaN``/``Infinity``);
+* a legal mesh is read with exactly the file's faces (polygons fan-triangulated in file order), and
+  the ``--out`` layout carries those faces.
+
+OS errors (permission denied, I/O error) are injected by patching ``open``/``os.open`` for one path, so
+the cases run as root too; a few subprocess cases at the end check the same on a real exit, with real
+file permissions where the machine allows it.
+"""
+
+from __future__ import annotations
+
+import builtins
+import errno
+import io
+import json
+import os
+import re
+import shutil
+import struct
+import subprocess
+import sys
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from golden_model.generate import grid_faces, grid_uv
+from golden_model.mesh import load_mesh_with_notes, read_obj
+from sim.cli import main
+
+SPRINGFLAT = str(Path(sys.executable).parent / "springflat")
+
+# --------------------------------------------------------------------------- the base mesh
+
+#: A gently curved 4 x 4 grid: 16 vertices, 18 triangles, one boundary loop.
+UV = grid_uv(4, 4)
+V = np.column_stack([UV, 0.1 * UV[:, 0] ** 2])
+F = grid_faces(4, 4)
+#: The same grid as 9 quads (the fan of each quad from its first corner is two of F's triangles).
+QUADS = np.array([[4 * r + c, 4 * r + c + 1, 4 * r + c + 5, 4 * r + c + 4] for r in range(3) for c in range(3)])
+QUAD_FAN = np.array([t for q in QUADS.tolist() for t in ([q[0], q[1], q[2]], [q[0], q[2], q[3]])])
+
+
+def num(x: float) -> str:
+    return repr(float(x))
+
+
+def obj(vertices=V, faces=F, sep=" ", nl="\n", corner=lambda i: str(i + 1)) -> str:
+    lines = [sep.join(["v", *map(num, v)]) for v in vertices]
+    lines += [sep.join(["f", *(corner(i) for i in f)]) for f in np.asarray(faces).tolist()]
+    return nl.join(lines) + nl
+
+
+def obj_interleaved(vertices=V, faces=F, mixed=False) -> str:
+    """``v`` lines written only when a face first needs them; faces use negative (relative) indices
+    (with ``mixed``, every other corner positive)."""
+    lines, count = [], 0
+    for f in np.asarray(faces).tolist():
+        while count <= max(f):
+            lines.append("v " + " ".join(map(num, vertices[count])))
+            count += 1
+        corners = [str(i - count) if not (mixed and k % 2) else str(i + 1) for k, i in enumerate(f)]
+        lines.append("f " + " ".join(corners))
+    return "\n".join(lines) + "\n"
+
+
+def obj_texture_normals() -> str:
+    """Every face with its own ``vt``/``vn`` written just before it, referred to relatively."""
+    lines = ["v " + " ".join(map(num, v)) for v in V]
+    for k, f in enumerate(F.tolist()):
+        lines += [f"vt {k / 40} {k / 50}", "vt 0.5 0.5", "vt 1 0", "vn 0 0 1"]
+        forms = [f"{f[0] + 1}/-3/-1", f"{f[1] - 16}/-2/-1", f"{f[2] + 1}/-1/-1"] if k % 2 else \
+            [f"{f[0] + 1}//-1", f"{f[1] + 1}/{3 * k + 2}", f"{f[2] - 16}"]
+        lines.append("f " + " ".join(forms))
+    return "\n".join(lines) + "\n"
+
+
+def obj_groups() -> str:
+    """Faces spread over objects, groups, smoothing groups and materials, sharing the vertices."""
+    head = "mtllib scene.mtl\no sheet\n" + "".join("v " + " ".join(map(num, v)) + "\n" for v in V)
+    body = []
+    for k, f in enumerate(F.tolist()):
+        if k % 5 == 0:
+            body += [f"g part{k}", f"usemtl m{k % 2}", f"s {'off' if k % 2 else 1}"]
+        if k == 9:
+            body.append("o second")
+        body.append("f " + " ".join(str(i + 1) for i in f))
+    return head + "\n".join(body) + "\n"
+
+
+def obj_continued() -> str:
+    lines = ["v " + " ".join(map(num, v)) for v in V]
+    lines += [f"f {a + 1} \\\n {b + 1}\\\n {c + 1}" for a, b, c in F.tolist()]
+    lines[0] = "v 0.0 \\\n0.0 \\\n 0.0"
+    return "\n".join(lines) + "\n"
+
+
+def ply_ascii(faces=F, sep=" ", nl="\n") -> str:
+    head = ["ply", "format ascii 1.0", "comment written by the fuzz suite", f"element vertex {len(V)}",
+            "property double x", "property double y", "property double z", f"element face {len(faces)}",
+            "property list uchar int vertex_indices", "end_header"]
+    rows = [sep.join(map(num, v)) for v in V] + [sep.join(map(str, [len(f), *f])) for f in np.asarray(faces).tolist()]
+    return nl.join(head + rows) + nl
+
+
+def ply_binary(faces=F) -> bytes:
+    head = ("ply\nformat binary_little_endian 1.0\n" f"element vertex {len(V)}\n"
+            "property double x\nproperty double y\nproperty double z\n" f"element face {len(faces)}\n"
+            "property list uchar int vertex_indices\nend_header\n").encode()
+    body = b"".join(struct.pack("<3d", *v) for v in V)
+    body += b"".join(struct.pack(f"<B{len(f)}i", len(f), *f) for f in np.asarray(faces).tolist())
+    return head + body
+
+
+def off(faces=F, sep=" ", nl="\n", counts_on_header=False, comments=False) -> str:
+    rows = ([f"OFF{sep}{len(V)}{sep}{len(faces)}{sep}0"] if counts_on_header
+            else ["OFF"] + (["# a comment"] if comments else []) + [f"{len(V)}{sep}{len(faces)}{sep}0"])
+    rows += [sep.join(map(num, v)) + ("  # vertex" if comments else "") for v in V]
+    rows += [sep.join(map(str, [len(f), *f])) for f in np.asarray(faces).tolist()]
+    return nl.join(rows) + nl
+
+
+def stl_ascii(sep=" ", nl="\n") -> str:
+    rows = ["solid fuzz"]
+    for f in F.tolist():
+        rows += [f"{sep}facet normal 0 0 1", f"{sep}{sep}outer loop"]
+        rows += [f"{sep * 3}vertex{sep}" + sep.join(map(num, V[i])) for i in f]
+        rows += [f"{sep}{sep}endloop", f"{sep}endfacet"]
+    return nl.join(rows + ["endsolid fuzz"]) + nl
+
+
+def stl_binary() -> bytes:
+    body = b"".join(struct.pack("<12fH", 0, 0, 1, *V[f[0]], *V[f[1]], *V[f[2]], 0) for f in F.tolist())
+    return b"\0" * 80 + struct.pack("<I", len(F)) + body
+
+
+#: STL has no shared vertices: they are numbered by first appearance.
+_FIRST = list(dict.fromkeys(F.ravel().tolist()))
+STL_FACES = np.argsort(_FIRST)[F]
+
+
+# --------------------------------------------------------------------------- running a case
+
+
+@dataclass
+class Case:
+    """One command line: ``files`` written first; ``deny`` = (file, errno) made unreadable/unwritable."""
+
+    args: list[str]
+    code: int = 0
+    error: str | None = None  # regex the one error line must match (failures)
+    files: dict[str, str | bytes] = field(default_factory=dict)
+    faces: np.ndarray | None = None  # expected faces of the mesh (legal meshes)
+    note: str | None = None  # regex one note must match
+    deny: tuple[str, int] | None = None
+
+
+@dataclass
+class Outcome:
+    code: int
+    out: str
+    err: str
+    runtime_warnings: list
+
+
+def _deny(monkeypatch, target: Path, err: int) -> None:
+    """Make every open of ``target`` (or of a path inside it) fail with ``err``, as the OS would."""
+    target_text = os.path.abspath(target)
+
+    def check(name):
+        if isinstance(name, int):
+            return
+        p = os.path.abspath(os.fspath(name))
+        if p == target_text or p.startswith(target_text + os.sep):
+            raise OSError(err, os.strerror(err), os.fspath(name))
+
+    real_open, real_os_open = builtins.open, os.open
+
+    def fake_open(file, *args, **kwargs):
+        check(file)
+        return real_open(file, *args, **kwargs)
+
+    def fake_os_open(path, *args, **kwargs):
+        check(path)
+        return real_os_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", fake_open)
+    monkeypatch.setattr(io, "open", fake_open)
+    monkeypatch.setattr(os, "open", fake_os_open)
+
+
+def _tree(root: Path) -> list[str]:
+    return sorted(str(p.relative_to(root)) for p in root.rglob("*"))
+
+
+def _strict_json(text: str):
+    def refuse(constant):
+        raise ValueError(f"non-standard JSON constant {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def run_case(case: Case, tmp_path: Path, monkeypatch, capsys) -> Outcome:
+    monkeypatch.chdir(tmp_path)
+    for name, content in case.files.items():
+        path = tmp_path / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            with open(path, "w", newline="", encoding="utf-8") as handle:
+                handle.write(content)
+    before = _tree(tmp_path)
+    if case.deny is not None:
+        _deny(monkeypatch, tmp_path / case.deny[0], case.deny[1])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            code = main(["flatten", *case.args])
+        except SystemExit as exc:  # argparse's own exit
+            code = exc.code
+    monkeypatch.undo()
+    out, err = capsys.readouterr()
+    outcome = Outcome(code, out, err, [w for w in caught if issubclass(w.category, RuntimeWarning)])
+
+    assert outcome.code == case.code, f"exit {outcome.code}, expected {case.code}; stderr:\n{err}"
+    assert not outcome.runtime_warnings, [str(w.message) for w in outcome.runtime_warnings]
+    assert "Traceback" not in err and "Warning" not in err, err
+    lines = err.splitlines()
+    errors = [line for line in lines if line.startswith("springflat: error:")]
+    if case.code == 2:
+        assert len(errors) == 1, err
+        assert all(line.startswith("springflat: note:") for line in lines if line not in errors), err
+        assert case.error is None or re.search(case.error, errors[0]), errors[0]
+        assert out == ""
+        assert _tree(tmp_path) == before, "a refused run left files behind"
+    else:
+        assert errors == [], err
+        produced = set(_tree(tmp_path)) - set(before)
+        assert not [p for p in produced if p.endswith(".part") or "/." in p or p.startswith(".")], produced
+    if "--json" in case.args and outcome.out:
+        _strict_json(outcome.out)
+    if case.note is not None:
+        assert re.search(case.note, err), err
+    return outcome
+
+
+RUN = ["--json", "--max-iter", "40", "--out", "flat.obj"]
+
+
+# --------------------------------------------------------------------------- legal but unusual meshes
+
+LEGAL_MESHES: dict[str, tuple[str, str | bytes, np.ndarray, str | None]] = {
+    # name: (file name, content, expected faces, note regex)
+    "obj plain": ("m.obj", obj(), F, None),
+    "obj tabs": ("m.obj", obj(sep="\t"), F, None),
+    "obj tabs and CRLF": ("m.obj", obj(sep="\t", nl="\r\n"), F, None),
+    "obj CR only": ("m.obj", obj(nl="\r"), F, None),
+    "obj mixed whitespace": ("m.obj", obj(sep=" \t  ").replace("\nv", "\n  \tv"), F, None),
+    "obj UTF-8 BOM": ("m.obj", "\ufeff" + obj(), F, None),
+    "obj no final newline": ("m.obj", obj().rstrip("\n"), F, None),
+    "obj number forms": ("m.obj", obj().replace("v 0.0 0.0 0.0", "v +0e0 -0. .0E+0"), F, None),
+    "obj interleaved negative": ("m.obj", obj_interleaved(), F, None),
+    "obj interleaved mixed signs": ("m.obj", obj_interleaved(mixed=True), F, None),
+    "obj all negative at the end": ("m.obj", obj(corner=lambda i: str(i - 16)), F, None),
+    "obj v/vt/vn forms": ("m.obj", obj_texture_normals(), F, None),
+    "obj line continuations": ("m.obj", obj_continued(), F, None),
+    "obj groups and materials": ("m.obj", obj_groups(), F, r"note: .*read as one mesh"),
+    "obj quads": ("m.obj", obj(faces=QUADS), QUAD_FAN, r"9 polygons \(4 corners\) fan-triangulated into 18"),
+    "obj quads with tabs CRLF": ("m.obj", obj(faces=QUADS, sep="\t", nl="\r\n"), QUAD_FAN, r"fan-triangulated"),
+    "obj upper-case suffix": ("M.OBJ", obj(), F, None),
+    "obj name with spaces": ("a dir/my mesh é.obj", obj(), F, None),
+    "obj large in range": ("m.obj", obj(vertices=V * 1e45), F, None),
+    "obj small in range": ("m.obj", obj(vertices=V * 1e-45), F, None),
+    "ply ascii": ("m.ply", ply_ascii(), F, None),
+    "ply ascii tabs CRLF": ("m.ply", ply_ascii(sep="\t", nl="\r\n"), F, None),
+    "ply binary": ("m.ply", ply_binary(), F, None),
+    "ply quads": ("m.ply", ply_ascii(faces=QUADS), QUAD_FAN, r"9 polygons \(4 corners\) fan-triangulated"),
+    "ply binary quads": ("m.ply", ply_binary(faces=QUADS), QUAD_FAN, r"fan-triangulated"),
+    "off": ("m.off", off(), F, None),
+    "off tabs CRLF comments": ("m.off", off(sep="\t", nl="\r\n", comments=True), F, None),
+    "off counts on the header line": ("m.off", off(counts_on_header=True), F, None),
+    "off quads": ("m.off", off(faces=QUADS), QUAD_FAN, r"9 polygons \(4 corners\) fan-triangulated"),
+    "stl ascii": ("m.stl", stl_ascii(), STL_FACES, r"merged"),
+    "stl ascii tabs CRLF": ("m.stl", stl_ascii(sep="\t", nl="\r\n"), STL_FACES, r"merged"),
+    "stl binary": ("m.stl", stl_binary(), STL_FACES, r"merged"),
+}
+
+
+@pytest.mark.parametrize("name", LEGAL_MESHES)
+def test_legal_mesh(name, tmp_path, monkeypatch, capsys):
+    file_name, content, faces, note = LEGAL_MESHES[name]
+    case = Case([file_name, *RUN], files={file_name: content}, faces=faces, note=note)
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    mesh, _ = load_mesh_with_notes(tmp_path / file_name)
+    assert mesh.faces.tolist() == faces.tolist()  # exactly the file's faces, in the file's order
+    assert mesh.n_vertices == len(V)
+    if not file_name.endswith(".stl"):
+        assert np.array_equal(mesh.vertices, V * (1e45 if "large" in name else 1e-45 if "small" in name else 1))
+    assert read_obj(tmp_path / "flat.obj").faces.tolist() == faces.tolist()
+    summary = _strict_json(outcome.out)
+    assert summary["faces"] == len(faces) and summary["status"] in ("converged", "max-iterations")
+
+
+# --------------------------------------------------------------------------- malformed meshes
+
+def _long_name() -> str:
+    return "x" * 300 + ".obj"
+
+
+MALFORMED_MESHES: dict[str, Case] = {
+    "missing file": Case(["nope.obj"], 2, r"cannot read mesh 'nope.obj': no such file"),
+    "directory": Case(["d.obj"], 2, r"cannot read mesh 'd.obj': is a directory", files={"d.obj/x": ""}),
+    "file name too long": Case([_long_name()], 2, r"cannot read mesh 'x+\.obj': file name too long"),
+    "permission denied": Case(["m.obj"], 2, r"^springflat: error: cannot read mesh 'm.obj': permission denied$",
+                              files={"m.obj": obj()}, deny=("m.obj", errno.EACCES)),
+    "I/O error": Case(["m.obj"], 2, r"cannot read mesh 'm.obj': input/output error",
+                      files={"m.obj": obj()}, deny=("m.obj", errno.EIO)),
+    "ply permission denied": Case(["m.ply"], 2, r"cannot read mesh 'm.ply': permission denied",
+                                  files={"m.ply": ply_ascii()}, deny=("m.ply", errno.EACCES)),
+    "unknown suffix": Case(["m.xyz"], 2, r"unknown format '.xyz'", files={"m.xyz": obj()}),
+    "empty file": Case(["m.obj"], 2, r"empty", files={"m.obj": ""}),
+    "only comments": Case(["m.obj"], 2, r"empty", files={"m.obj": "# nothing\n# at all\n"}),
+    "binary garbage obj": Case(["m.obj"], 2, r"cannot parse mesh|empty",
+                               files={"m.obj": bytes(range(256)) * 4}),
+    "index 0": Case(["m.obj"], 2, r"line 17: face vertex index 0",
+                    files={"m.obj": obj().replace("f 1 2 6", "f 0 2 6")}),
+    "index past the end": Case(["m.obj"], 2, r"face refers to vertex 17 but the file has only 16",
+                               files={"m.obj": obj().replace("f 1 2 6", "f 17 2 6")}),
+    "interleaved negative too far back": Case(
+        ["m.obj"], 2, r"line 7: face refers to vertex -9 but only 6 vertices precede it",
+        files={"m.obj": obj_interleaved().replace("f -6 -5 -1", "f -9 -5 -1", 1)}),
+    "non-number coordinate": Case(["m.obj"], 2, r"line 2: vertex coordinate '0.3x' is not a number",
+                                  files={"m.obj": obj().replace("v 0.3333333333333333 0.0", "v 0.3x 0.0", 1)}),
+    "nan coordinate": Case(["m.obj"], 2, r"non-finite", files={"m.obj": obj().replace("v 0.0 0.0 0.0", "v nan 0 0")}),
+    "inf coordinate": Case(["m.obj"], 2, r"non-finite", files={"m.obj": obj().replace("v 0.0 0.0 0.0", "v 1e999 0 0")}),
+    "coordinates near 1e200": Case(["m.obj"], 2, r"outside the supported range .*1e\+?50",
+                                   files={"m.obj": obj(vertices=V * 1e200)}),
+    "coordinates near 1e150": Case(["m.obj"], 2, r"outside the supported range .*1e\+?50",
+                                   files={"m.obj": obj(vertices=V * 1e150)}),
+    "one far vertex": Case(["m.obj"], 2, r"vertex 5 .*outside the supported range",
+                           files={"m.obj": obj(vertices=np.where(np.arange(16)[:, None] == 5, 1e60, V))}),
+    "mesh scaled to 1e-150": Case(["m.obj"], 2, r"too small.*1e-50", files={"m.obj": obj(vertices=V * 1e-150)}),
+    "mesh scaled to 1e-300": Case(["m.obj"], 2, r"too small.*1e-50", files={"m.obj": obj(vertices=V * 1e-300)}),
+    "two-corner face": Case(["m.obj"], 2, r"face 'f' with 2 corners", files={"m.obj": obj() + "f 1 2\n"}),
+    "free-form": Case(["m.obj"], 2, r"free-form", files={"m.obj": obj() + "cstype bspline\n"}),
+    "closed mesh": Case(["m.obj"], 2, r"closed",
+                        files={"m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"}),
+    "duplicate face": Case(["m.obj"], 2, r"duplicated", files={"m.obj": obj() + "f 6 2 1\n"}),
+    "unused vertex": Case(["m.obj"], 2, r"vertex 16 is not used by any face \(file line 17\)",
+                          files={"m.obj": obj().replace("f 1 2 6", "v 5 5 5\nf 1 2 6", 1)}),
+    "ply truncated": Case(["m.ply"], 2, r"cannot parse mesh 'm.ply'", files={"m.ply": ply_binary()[:-30]}),
+    "ply garbage": Case(["m.ply"], 2, r"cannot parse mesh 'm.ply'", files={"m.ply": "ply\nnonsense\n"}),
+    "ply face index out of range": Case(["m.ply"], 2, r"out of range|cannot parse",
+                                        files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 99")}),
+    "off bad counts": Case(["m.off"], 2, r"cannot parse mesh 'm.off'",
+                           files={"m.off": off().replace("16 18 0", "16 x 0")}),
+    "off too few vertices": Case(["m.off"], 2, r"cannot parse mesh 'm.off'",
+                                 files={"m.off": off().replace("16 18 0", "40 18 0")}),
+    "off negative index": Case(["m.off"], 2, r"out of range|cannot parse",
+                               files={"m.off": off().replace("\n3 0 1 5", "\n3 0 -1 5")}),
+    "off huge coordinates": Case(["m.off"], 2, r"outside the supported range",
+                                 files={"m.off": off().replace("\n0.0 0.0 0.0", "\n1e300 0.0 0.0")}),
+    "stl empty": Case(["m.stl"], 2, r"cannot parse|empty", files={"m.stl": ""}),
+    "stl garbage": Case(["m.stl"], 2, r"cannot parse|empty", files={"m.stl": "solid x\nfacet normal 1\n"}),
+}
+
+
+@pytest.mark.parametrize("name", MALFORMED_MESHES)
+def test_malformed_mesh(name, tmp_path, monkeypatch, capsys):
+    case = MALFORMED_MESHES[name]
+    case.args = [*case.args, "--out", "o.obj", "--history", "h.csv", "--json"]
+    run_case(case, tmp_path, monkeypatch, capsys)
+
+
+# --------------------------------------------------------------------------- layouts
+
+LAYOUT_ROWS = UV * 1.1 + 0.05
+
+
+def layout_text(rows=LAYOUT_ROWS, sep=" ", nl="\n") -> str:
+    return nl.join(sep.join(map(num, r)) for r in rows) + nl
+
+
+LAYOUTS: dict[str, Case] = {
+    "text": Case(["--init", "l.txt"], files={"l.txt": layout_text()}),
+    "text tabs CRLF": Case(["--init", "l.txt"], files={"l.txt": layout_text(sep="\t", nl="\r\n")}),
+    "text commas and comments": Case(["--init", "l.csv"],
+                                     files={"l.csv": "# x, y\n" + layout_text(sep=", ").replace("\n", "  # row\n")}),
+    "obj": Case(["--init", "l.obj"], files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]))}),
+    "obj tabs": Case(["--init", "l.obj"],
+                     files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]), sep="\t")}),
+    "obj tabs CRLF interleaved": Case(["--init", "l.obj"], files={"l.obj": obj_interleaved(
+        np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]])).replace(" ", "\t").replace("\n", "\r\n")}),
+    "missing": Case(["--init", "nope.txt"], 2, r"cannot read layout 'nope.txt': no such file"),
+    "directory": Case(["--init", "d"], 2, r"cannot read layout 'd': is a directory", files={"d/x": ""}),
+    "file name too long": Case(["--init", "y" * 300 + ".txt"], 2, r"cannot read layout 'y+\.txt': file name too long"),
+    "permission denied": Case(["--init", "l.txt"], 2,
+                              r"^springflat: error: cannot read layout 'l.txt': permission denied$",
+                              files={"l.txt": layout_text()}, deny=("l.txt", errno.EACCES)),
+    "obj permission denied": Case(["--init", "l.obj"], 2, r"cannot read layout 'l.obj': permission denied",
+                                  files={"l.obj": obj()}, deny=("l.obj", errno.EACCES)),
+    "I/O error": Case(["--init", "l.txt"], 2, r"cannot read layout 'l.txt': input/output error",
+                      files={"l.txt": layout_text()}, deny=("l.txt", errno.EIO)),
+    "too few rows": Case(["--init", "l.txt"], 2, r"has 15 rows but the mesh has 16",
+                         files={"l.txt": layout_text(LAYOUT_ROWS[:-1])}),
+    "three columns": Case(["--init", "l.txt"], 2, r"row 1 has 3 values",
+                          files={"l.txt": layout_text(np.column_stack([LAYOUT_ROWS, UV[:, 0]]))}),
+    "not a number": Case(["--init", "l.txt"], 2, r"cannot parse layout",
+                         files={"l.txt": layout_text().replace("0.05", "abc", 1)}),
+    "nan": Case(["--init", "l.txt"], 2, r"non-finite", files={"l.txt": layout_text().replace("0.05", "nan", 1)}),
+    "empty": Case(["--init", "l.txt"], 2, r"has 0 rows", files={"l.txt": ""}),
+    "binary garbage": Case(["--init", "l.txt"], 2, r"cannot parse layout", files={"l.txt": bytes(range(256))}),
+    "huge coordinates 1e200": Case(["--init", "l.txt"], 2, r"outside the supported range .*1e\+?50",
+                                   files={"l.txt": layout_text(LAYOUT_ROWS * 1e200)}),
+    "huge coordinates 1e300": Case(["--init", "l.txt"], 2, r"outside the supported range",
+                                   files={"l.txt": layout_text(LAYOUT_ROWS * 1e300)}),
+    "obj huge coordinates": Case(["--init", "l.obj"], 2, r"outside the supported range",
+                                 files={"l.obj": obj(np.column_stack([LAYOUT_ROWS * 1e200, 0 * UV[:, 0]]))}),
+    "obj bad vertex": Case(["--init", "l.obj"], 2, r"cannot parse layout 'l.obj': line 2",
+                           files={"l.obj": obj().replace("v 0.3333333333333333", "v zz", 1)}),
+}
+
+
+@pytest.mark.parametrize("name", LAYOUTS)
+def test_layout(name, tmp_path, monkeypatch, capsys):
+    case = LAYOUTS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", *case.args, "--json", "--max-iter", "40", "--out", "flat.obj", "--history", "h.csv"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0:
+        assert read_obj(tmp_path / "flat.obj").faces.tolist() == F.tolist()
+        assert _strict_json(outcome.out)["init"] == case.args[2]
+
+
+# --------------------------------------------------------------------------- parameters
+
+PARAMETERS: dict[str, Case] = {
+    "dt zero": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "0"], 2, r"dt must be > 0"),
+    "dt nan": Case(["--dt", "nan"], 2, r"dt must be a finite number"),
+    "dt inf": Case(["--dt", "inf"], 2, r"dt must be a finite number"),
+    "dt text": Case(["--dt", "fast"], 2, r"expected a number"),
+    "damping 1": Case(["--dynamics", "paper", "--damping", "1"], 2, r"damping"),
+    "max-iter 0": Case(["--max-iter", "0"], 2, r"max-iter"),
+    "max-iter float": Case(["--max-iter", "2.5"], 2, r"expected an integer"),
+    "density 0": Case(["--density", "0"], 2, r"density"),
+    "density -inf": Case(["--density", "-inf"], 2, r"density"),
+    "spring nan": Case(["--spring", "nan"], 2, r"finite"),
+    "barrier threshold 0": Case(["--barrier-threshold", "0"], 2, r"kappa"),
+    "barrier gain 100": Case(["--barrier-gain", "100"], 2, r"mu"),
+    "tol-area negative": Case(["--tol-area", "-1"], 2, r"tol-area"),
+    "unknown option": Case(["--warp", "9"], 2, r"unrecognized arguments"),
+    "bad choice": Case(["--step", "wobbly"], 2, r"invalid choice"),
+    "init unknown name": Case(["--init", "spiral"], 2, r"cannot read layout 'spiral': no such file"),
+    "formats with float engine": Case(["--formats", "narrow"], 2, r"--formats applies to --engine fixed"),
+    # legal extremes: the run ends (possibly diverged), with strict JSON and no warnings
+    "spring 1e300": Case(["--spring", "1e300"]),
+    "spring 1e-300": Case(["--spring", "1e-300"]),
+    "density 1e300": Case(["--density", "1e300"]),
+    "density 1e-300": Case(["--density", "1e-300"]),
+    "dt 1e300 paper": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1e300"], 3),
+    "dt 1e-320 paper": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1e-320"]),
+    "dt 1000 paper diverges": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1000"], 3),
+    "penalty gain 1e300": Case(["--penalty", "--penalty-gain", "1e300"], 3),
+    "paper spring 1e300": Case(["--dynamics", "paper", "--spring", "1e300"], 3),
+    "tol-energy 1e300": Case(["--tol-energy", "1e300"]),
+    "fixed engine": Case(["--engine", "fixed"]),
+    # in-range meshes at the ends of the range, with extreme parameters: the energy overflows to inf
+    "spring 1e300 on a 1e45 mesh": Case(["--spring", "1e300"], 3, files={"m.obj": obj(vertices=V * 1e45)}),
+    "paper spring 1e300 on a 1e45 mesh": Case(["--dynamics", "paper", "--spring", "1e300"], 3,
+                                              files={"m.obj": obj(vertices=V * 1e45)}),
+    "paper density 1e300 on a 1e45 mesh": Case(["--dynamics", "paper", "--density", "1e300"],
+                                               files={"m.obj": obj(vertices=V * 1e45)}),
+    "penalty gain 1e300 on a 1e45 mesh": Case(["--penalty", "--penalty-gain", "1e300"], 3,
+                                              files={"m.obj": obj(vertices=V * 1e45)}),
+    "paper density and spring 1e-300 on a 1e-45 mesh": Case(
+        ["--dynamics", "paper", "--density", "1e-300", "--spring", "1e-300"], 3,
+        files={"m.obj": obj(vertices=V * 1e-45)}),
+    "fixed engine on a 1e45 mesh": Case(["--engine", "fixed"], files={"m.obj": obj(vertices=V * 1e45)}),
+    "fixed engine on a 1e-45 mesh": Case(["--engine", "fixed"], files={"m.obj": obj(vertices=V * 1e-45)}),
+}
+
+
+@pytest.mark.parametrize("name", PARAMETERS)
+def test_parameters(name, tmp_path, monkeypatch, capsys):
+    case = PARAMETERS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", *case.args, "--json", "--max-iter", "60", "--out", "flat.obj", "--history", "h.csv"] \
+        if "--max-iter" not in case.args else ["m.obj", *case.args, "--json", "--out", "flat.obj"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code in (0, 3):
+        summary = _strict_json(outcome.out)
+        assert (summary["status"] == "diverged") == (case.code == 3)
+        for key, value in summary.items():  # a non-finite number is null, and the summary says which
+            if value is None:
+                assert key in summary.get("non_finite", []), key
+        if "1e300 on a 1e45" in name and "density" not in name and "penalty" not in name:
+            assert summary["energy"] is None and "energy" in summary["non_finite"]  # was Infinity
+        assert np.isfinite(np.array([line.split()[1:] for line in (tmp_path / "flat.obj").read_text().splitlines()
+                                     if line.startswith("v ")], dtype=float)).all()
+
+
+# --------------------------------------------------------------------------- output paths
+
+OUTPUTS: dict[str, Case] = {
+    "out in a missing directory": Case(["--out", "no/where.obj"], 2, r"directory 'no' does not exist"),
+    "out is a directory": Case(["--out", "d.obj"], 2, r"is a directory", files={"d.obj/x": ""}),
+    "out wrong suffix": Case(["--out", "o.png"], 2, r"must end in .obj or .svg"),
+    "out parent is a file": Case(["--out", "f/o.obj"], 2, r"--out 'f/o.obj'", files={"f": "x"}),
+    "out name too long": Case(["--out", "z" * 300 + ".obj"], 2, r"cannot write --out 'z+\.obj': file name too long"),
+    "out directory not writable": Case(["--out", "ro/o.obj"], 2,
+                                       r"^springflat: error: cannot write --out 'ro/o.obj': permission denied$",
+                                       files={"ro/keep": ""}, deny=("ro", errno.EACCES)),
+    "history on a read-only file system": Case(["--history", "ro/h.csv"], 2,
+                                               r"cannot write --history 'ro/h.csv': read-only file system",
+                                               files={"ro/keep": ""}, deny=("ro", errno.EROFS)),
+    "plot directory not writable": Case(["--plot", "ro/p.png"], 2, r"cannot write --plot 'ro/p.png': permission denied",
+                                        files={"ro/keep": ""}, deny=("ro", errno.EACCES)),
+    "plot wrong suffix": Case(["--plot", "p.jpg"], 2, r"must end in .png"),
+    "out and history the same file": Case(["--out", "o.obj", "--history", "./o.obj"], 2, r"same file"),
+    "out overwrites the mesh": Case(["--out", "m.obj"], 2, r"same file"),
+    "svg upper-case suffix": Case(["--out", "o.SVG"]),
+    "existing outputs replaced": Case(["--out", "o.obj", "--history", "h.csv"], files={"o.obj": "old", "h.csv": "old"}),
+    "all outputs": Case(["--out", "o.svg", "--history", "h.csv", "--plot", "p.png"]),
+}
+
+
+@pytest.mark.parametrize("name", OUTPUTS)
+def test_output_path(name, tmp_path, monkeypatch, capsys):
+    case = OUTPUTS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", "--json", "--max-iter", "30", *case.args]
+    run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0:
+        for option, path in zip(case.args[4::2], case.args[5::2]):
+            assert (tmp_path / path).stat().st_size > 10, option
+
+
+def test_an_unwritable_output_is_refused_before_the_run(tmp_path, monkeypatch, capsys):
+    def no_run(*args, **kwargs):
+        raise AssertionError("the run started although --history cannot be written")
+
+    monkeypatch.setattr("sim.cli.flatten", no_run)
+    case = Case(["m.obj", "--out", "o.obj", "--history", "ro/h.csv"], 2,
+                r"cannot write --history 'ro/h.csv': permission denied", files={"m.obj": obj(), "ro/keep": ""},
+                deny=("ro", errno.EACCES))
+    run_case(case, tmp_path, monkeypatch, capsys)
+
+
+def test_a_failed_late_write_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
+    """The layout is written, then the history fails (disk full): neither file stays."""
+    import sim.outputs
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "h.csv")
+
+    monkeypatch.setattr(sim.outputs, "write_history", full)
+    monkeypatch.setattr("sim.cli.write_history", full)
+    case = Case(["m.obj", "--max-iter", "20", "--out", "o.obj", "--history", "h.csv"], 2,
+                r"cannot write --history 'h.csv': no space left on device", files={"m.obj": obj()})
+    run_case(case, tmp_path, monkeypatch, capsys)
+
+
+# --------------------------------------------------------------------------- format sets
+
+
+def _formats_json() -> str:
+    from golden_model.fixed.formats_set import FormatSet
+
+    return FormatSet.preset("default").to_json()
+
+
+FORMAT_SETS: dict[str, Case] = {
+    "preset narrow": Case(["--formats", "narrow"]),
+    "json file": Case(["--formats", "f.json"], files={"f.json": _formats_json()}),
+    "json file CRLF": Case(["--formats", "f.json"], files={"f.json": _formats_json().replace("\n", "\r\n")}),
+    "unknown preset": Case(["--formats", "wide"], 2, r"unknown FormatSet preset 'wide'"),
+    "missing file": Case(["--formats", "nope.json"], 2, r"formats file 'nope.json' not found"),
+    "directory": Case(["--formats", "d.json"], 2, r"cannot read formats file 'd.json': is a directory",
+                      files={"d.json/x": ""}),
+    "file name too long": Case(["--formats", "q" * 300 + ".json"], 2,
+                               r"cannot read formats file 'q+\.json': file name too long"),
+    "permission denied": Case(["--formats", "f.json"], 2,
+                              r"^springflat: error: cannot read formats file 'f.json': permission denied$",
+                              files={"f.json": "{}"}, deny=("f.json", errno.EACCES)),
+    "I/O error": Case(["--formats", "f.json"], 2, r"cannot read formats file 'f.json': input/output error",
+                      files={"f.json": "{}"}, deny=("f.json", errno.EIO)),
+    "not json": Case(["--formats", "f.json"], 2, r"formats 'f.json'", files={"f.json": "{formats: }"}),
+    "json list": Case(["--formats", "f.json"], 2, r"formats 'f.json'", files={"f.json": "[1, 2]"}),
+    "json empty object": Case(["--formats", "f.json"], 2, r"formats 'f.json'", files={"f.json": "{}"}),
+    "json deeply nested": Case(["--formats", "f.json"], 2, r"formats 'f.json'",
+                               files={"f.json": "[" * 100000 + "]" * 100000}),
+    "binary garbage": Case(["--formats", "f.json"], 2, r"formats 'f.json'", files={"f.json": bytes(range(256))}),
+    "json with NaN": Case(["--formats", "f.json"], 2, r"formats 'f.json'",
+                          files={"f.json": _formats_json().replace('"rsqrt_seed_bits": 12', '"rsqrt_seed_bits": NaN')}),
+}
+
+
+@pytest.mark.parametrize("name", FORMAT_SETS)
+def test_format_set(name, tmp_path, monkeypatch, capsys):
+    case = FORMAT_SETS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", "--engine", "fixed", *case.args, "--json", "--max-iter", "30", "--out", "flat.obj"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0:
+        assert _strict_json(outcome.out)["engine"] == "fixed"
+
+
+# --------------------------------------------------------------------------- a real exit, real permissions
+
+
+def _real(tmp_path, *args):
+    return subprocess.run([SPRINGFLAT, "flatten", *map(str, args)], capture_output=True, text=True, cwd=tmp_path,
+                          timeout=300)
+
+
+def _one_error_line(proc, pattern: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stdout == ""
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and re.search(pattern, lines[0]), proc.stderr
+
+
+@pytest.mark.parametrize("scale, pattern", [(1e200, r"outside the supported range"),
+                                            (1e150, r"outside the supported range"),
+                                            (1e-150, r"too small")])
+def test_real_exit_extreme_coordinates_print_one_line(tmp_path, scale, pattern):
+    (tmp_path / "m.obj").write_text(obj(vertices=V * scale))
+    proc = _real(tmp_path, "m.obj", "--json", "--out", "o.obj")
+    _one_error_line(proc, pattern)  # no RuntimeWarning lines before it
+    assert _tree(tmp_path) == ["m.obj"]
+
+
+def test_real_exit_file_name_too_long(tmp_path):
+    _one_error_line(_real(tmp_path, "x" * 300 + ".obj"), r"file name too long")
+
+
+def _unreadable_command(tmp_path) -> list[str] | None:
+    """A prefix that runs the command without the right to read a mode-000 file, or None."""
+    if os.geteuid() != 0:
+        return []
+    capsh = shutil.which("capsh")
+    if capsh is None:
+        return None
+    probe = tmp_path / "probe"
+    probe.write_text("x")
+    probe.chmod(0)
+    prefix = [capsh, "--drop=cap_dac_override,cap_dac_read_search", "--"]
+    blocked = subprocess.run([*prefix, "-c", f"cat {probe}"], capture_output=True).returncode != 0
+    probe.unlink()
+    return prefix if blocked else None
+
+
+@pytest.mark.parametrize("what", ["mesh", "layout", "formats", "out"])
+def test_real_permission_denied(tmp_path, what):
+    prefix = _unreadable_command(tmp_path)
+    if prefix is None:
+        pytest.skip("cannot drop the right to read unreadable files here")
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "l.txt").write_text(layout_text())
+    (tmp_path / "f.json").write_text(_formats_json())
+    (tmp_path / "ro").mkdir()
+    args = {"mesh": ["m.obj"], "layout": ["m.obj", "--init", "l.txt"],
+            "formats": ["m.obj", "--engine", "fixed", "--formats", "f.json"],
+            "out": ["m.obj", "--out", "ro/o.obj"]}[what]
+    target = {"mesh": "m.obj", "layout": "l.txt", "formats": "f.json", "out": "ro"}[what]
+    (tmp_path / target).chmod(0o500 if what == "out" else 0)
+    before = _tree(tmp_path)
+    try:
+        command = [SPRINGFLAT, "flatten", *args, "--json"]
+        if prefix:
+            command = [*prefix, "-c", " ".join(f"'{c}'" for c in command)]
+        proc = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    finally:
+        (tmp_path / target).chmod(0o700)
+    kind = {"mesh": "read mesh", "layout": "read layout", "formats": "read formats file", "out": "write --out"}[what]
+    _one_error_line(proc, rf"^springflat: error: cannot {kind} '{'ro/o.obj' if what == 'out' else target}': "
+                          "permission denied$")
+    assert _tree(tmp_path) == before
