@@ -2,27 +2,18 @@
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Signal
-from amaranth.lib import data, stream, wiring
+from amaranth.hdl import Module, Mux
+from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out, connect
 
 from golden_model.fixed import FormatSet
 
 from .fixedpoint import shape_of
-from .node_update import NodeUpdate, entry_layout, result_layout
+from .layouts import entry_layout, errors_layout, result_layout, step_layout
+from .node_update import NodeUpdate
 from .stepgen import StepGenerator
 
-__all__ = ["SpringflatCore", "step_layout", "errors_layout"]
-
-
-def step_layout(fs: FormatSet) -> data.StructLayout:
-    """``dt`` [dt] and ``half_dt_sq`` [half_dt_sq]."""
-    return data.StructLayout({"dt": shape_of(fs.dt), "half_dt_sq": shape_of(fs.half_dt_sq)})
-
-
-def errors_layout(fs: FormatSet) -> data.StructLayout:
-    """``area_error`` (E_S) and ``shape_error`` (E_C), both [error]."""
-    return data.StructLayout({"area_error": shape_of(fs.error), "shape_error": shape_of(fs.error)})
+__all__ = ["SpringflatCore"]
 
 
 class SpringflatCore(wiring.Component):

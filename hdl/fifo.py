@@ -9,12 +9,14 @@ read is a LUT delay; elsewhere the synthesis tool chooses.
 
 from __future__ import annotations
 
-from amaranth.hdl import Elaboratable, Module, Signal
+from amaranth.hdl import Cat, Elaboratable, Module, Signal
+from amaranth.lib import stream, wiring
 from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
 
 from .dsp import dsp_target
 
-__all__ = ["LutFIFO"]
+__all__ = ["LutFIFO", "SlicedFIFO"]
 
 
 class LutFIFO(Elaboratable):
@@ -72,4 +74,80 @@ class LutFIFO(Elaboratable):
             m.d.sync += produce.eq(produce + 1)
         with m.If(do_read):
             m.d.sync += consume.eq(consume + 1)
+        return m
+
+
+class SlicedFIFO(wiring.Component):
+    """A wide FIFO (unchecked handshakes) of :class:`LutFIFO` column slices, each with its own pointers.
+
+    Parameters
+    ----------
+    width : :class:`int`
+        Payload bits.
+    depth : :class:`int`
+        Entries, a power of two.
+    slice_bits : :class:`int`
+        Bits per column slice (the last one takes the rest).
+    registered : :class:`bool`
+        ``False``: ``r_stream.payload`` is the memories' asynchronous read of the oldest entry
+        (valid while ``r_stream.valid``), and ``r_stream.ready`` pops it. ``True``: each slice
+        ends in a two-register skid buffer (output register and a spare), so ``r_stream`` is a
+        registered stream obeying the ``lib.stream`` rules, and ``r_stream.ready`` reaches only
+        the skid registers; it holds ``depth + 2`` entries.
+
+    Attributes
+    ----------
+    w_stream : ``In(stream.Signature(width))``
+        Writes; unchecked: the user never writes a full FIFO (``w_stream.ready`` tells).
+    r_stream : ``Out(stream.Signature(width))``
+        Reads (see ``registered``); unchecked: the unregistered form is never popped empty.
+
+    Why slices: a read address that drives every cell of a wide, deep LUT RAM was the critical
+    path (126 MHz with one 128×152-bit memory, 144 MHz sliced). The slices' pointers start at
+    different values, so synthesis cannot merge them; they decide alike (same writes and reads,
+    equal levels), so they stay in step, and slice 0's flags stand for all.
+    """
+
+    def __init__(self, *, width: int, depth: int, slice_bits: int, registered: bool = False):
+        if width < 1 or slice_bits < 1:
+            raise ValueError(f"SlicedFIFO needs positive width and slice_bits, not {width}, {slice_bits}")
+        self.width, self.depth, self.slice_bits, self.registered = width, depth, slice_bits, registered
+        super().__init__({"w_stream": In(stream.Signature(width)), "r_stream": Out(stream.Signature(width))})
+
+    def elaborate(self, platform):
+        m = Module()
+        parts = []
+        for k, lo in enumerate(range(0, self.width, self.slice_bits)):
+            bits = min(self.slice_bits, self.width - lo)
+            m.submodules[f"slice{k}"] = fifo = LutFIFO(width=bits, depth=self.depth, checked=False, start=k)
+            m.d.comb += [fifo.w_en.eq(self.w_stream.valid), fifo.w_data.eq(self.w_stream.payload[lo:lo + bits])]
+            if k == 0:
+                m.d.comb += self.w_stream.ready.eq(fifo.w_rdy)
+            if not self.registered:
+                m.d.comb += fifo.r_en.eq(self.r_stream.ready)
+                parts.append(fifo.r_data)
+                if k == 0:
+                    m.d.comb += self.r_stream.valid.eq(fifo.r_rdy)
+                continue
+            out = Signal(bits, name=f"out{k}", reset_less=True)  # data: no reset
+            spare = Signal(bits, name=f"spare{k}", reset_less=True)
+            out_valid = Signal(name=f"out_valid{k}")
+            spare_full = Signal(name=f"spare_full{k}")
+            read = Signal(name=f"read{k}")
+            m.d.comb += [read.eq(fifo.r_rdy & ~spare_full), fifo.r_en.eq(read)]
+            # The output register is free or being freed: its own valid bit and r_stream.ready,
+            # not slice 0's valid (that route across every slice was a critical path, 148 MHz).
+            with m.If(~out_valid | self.r_stream.ready):
+                with m.If(spare_full):
+                    m.d.sync += [out.eq(spare), out_valid.eq(1), spare_full.eq(read)]
+                    with m.If(read):
+                        m.d.sync += spare.eq(fifo.r_data)
+                with m.Else():
+                    m.d.sync += [out.eq(fifo.r_data), out_valid.eq(read)]
+            with m.Elif(read):  # the output register holds: the read goes to the spare
+                m.d.sync += [spare.eq(fifo.r_data), spare_full.eq(1)]
+            parts.append(out)
+            if k == 0:
+                m.d.comb += self.r_stream.valid.eq(out_valid)
+        m.d.comb += self.r_stream.payload.eq(Cat(*parts))
         return m

@@ -7,75 +7,20 @@ pipeline stage onto the steps of ``docs/fixed-point.md``.
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
-from amaranth.hdl import Cat, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import Format, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
 
-from .fifo import LutFIFO
+from .fifo import SlicedFIFO
 from .fixedpoint import clamp, shape_of, shift_round, sum_round
+from .layouts import entry_layout, node_layout, result_layout, vector_layout
 from .pipeline import Pipeline, aligned_add, reduce_levels
 from .rsqrt import RsqrtUnit
 
-__all__ = ["NodeUpdate", "vector_layout", "barrier_layout", "entry_layout", "node_layout", "result_layout"]
-
-
-def vector_layout(fmt: Format) -> data.StructLayout:
-    """A 2D vector of raw ``fmt`` values: fields ``x``, ``y``."""
-    return data.StructLayout({"x": shape_of(fmt), "y": shape_of(fmt)})
-
-
-def node_layout(fs: FormatSet) -> data.StructLayout:
-    """A node's state: ``position`` [position], ``velocity`` [velocity], ``inv_mass`` [inv_mass]
-    and ``inv_mass_barrier`` [inv_mass], the weight used instead while one of the node's
-    triangles is inside the fold barrier (equal to ``inv_mass`` where that does not apply)."""
-    return data.StructLayout({
-        "position": vector_layout(fs.position),
-        "velocity": vector_layout(fs.velocity),
-        "inv_mass": shape_of(fs.inv_mass),
-        "inv_mass_barrier": shape_of(fs.inv_mass),
-    })
-
-
-def barrier_layout(fs: FormatSet) -> data.StructLayout:
-    """An entry's fold-barrier triangle: the third corner's ``position``, ``threshold`` κX* [area], ``gain`` G [barrier_gain]."""
-    return data.StructLayout({
-        "second": vector_layout(fs.position),
-        "threshold": shape_of(fs.area),
-        "gain": shape_of(fs.barrier_gain),
-    })
-
-
-def entry_layout(fs: FormatSet) -> data.StructLayout:
-    """One input beat: a neighbour entry, with its node's header on the node's first entry.
-
-    ``first``/``last`` mark a node's first and last neighbour entries; ``node``
-    is read only when ``first`` is set; ``neighbour`` holds the neighbour's
-    ``position`` and the edge's ``rest`` length [rest_length]; ``barrier`` the
-    entry's fold-barrier triangle (``gain`` 0: none).
-    """
-    return data.StructLayout({
-        "first": unsigned(1),
-        "last": unsigned(1),
-        "node": node_layout(fs),
-        "neighbour": data.StructLayout({"position": vector_layout(fs.position), "rest": shape_of(fs.rest_length)}),
-        "barrier": barrier_layout(fs),
-    })
-
-
-def result_layout(fs: FormatSet) -> data.StructLayout:
-    """One output beat: the node's new ``position``, ``velocity``, ``error_sum`` Σ|L − d| [error_acc]
-    and ``power`` F·V [power] (force and velocity of the *input* state)."""
-    return data.StructLayout({
-        "position": vector_layout(fs.position),
-        "velocity": vector_layout(fs.velocity),
-        "error_sum": shape_of(fs.error_acc),
-        "power": shape_of(fs.power),
-    })
+__all__ = ["NodeUpdate"]
 
 
 class NodeUpdate(wiring.Component):
@@ -182,25 +127,6 @@ class NodeUpdate(wiring.Component):
             "momentum": In(1),
         })
 
-    def _sliced_fifo(self, m, name, width, depth):
-        """A FIFO (unchecked handshakes) of LUT RAM column slices, each with its own pointers.
-
-        The slices' pointers start at different values, so synthesis cannot merge them, and a
-        read address drives only its own slice's ~40 RAM cells instead of every cell of a
-        wide, deep FIFO (measured: 126 MHz with one 128×152-bit LUT RAM, 144 MHz sliced).
-        Returns an object with ``w_en``, ``w_data``, ``r_en``, ``r_data``, ``r_rdy``.
-        """
-        port = SimpleNamespace(w_en=Signal(name=f"{name}_w_en"), w_data=Signal(width, name=f"{name}_w_data"),
-                               r_en=Signal(name=f"{name}_r_en"), r_data=Signal(width, name=f"{name}_r_data"))
-        for k, lo in enumerate(range(0, width, self.FIFO_SLICE_BITS)):
-            bits = min(self.FIFO_SLICE_BITS, width - lo)
-            m.submodules[f"{name}{k}"] = fifo = LutFIFO(width=bits, depth=depth, checked=False, start=k)
-            m.d.comb += [fifo.w_en.eq(port.w_en), fifo.w_data.eq(port.w_data[lo:lo + bits]),
-                         fifo.r_en.eq(port.r_en), port.r_data[lo:lo + bits].eq(fifo.r_data)]
-            if k == 0:
-                port.r_rdy = fifo.r_rdy
-        return port
-
     def elaborate(self, platform):
         fs = self.fs
         rnd = fs.rounding
@@ -267,8 +193,9 @@ class NodeUpdate(wiring.Component):
                                    lambda stage_name: carry_live(p, stage_name, drops.pop() if drops else ())))
 
         # ------------------------------------------------------------ front
-        headers = self._sliced_fifo(m, "headers", node_layout(fs).size,
-                                    1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length())
+        m.submodules.headers = headers = SlicedFIFO(
+            width=node_layout(fs).size, slice_bits=self.FIFO_SLICE_BITS,
+            depth=1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length())
         beat = self.i.payload
         current = Signal(vector_layout(fs.position), name="current_position", reset_less=True)
         # The header is written one clock late, from registers: the write enable fans out to
@@ -276,7 +203,7 @@ class NodeUpdate(wiring.Component):
         header_write = Signal(name="header_write")
         header_data = Signal(node_layout(fs), name="header_data", reset_less=True)
         m.d.sync += [header_write.eq(take & beat.first), header_data.eq(beat.node)]
-        m.d.comb += [headers.w_en.eq(header_write), headers.w_data.eq(header_data.as_value())]
+        m.d.comb += [headers.w_stream.valid.eq(header_write), headers.w_stream.payload.eq(header_data.as_value())]
 
         front = Pipeline(m, take, platform=platform)
         position = vector_layout(fs.position)
@@ -379,8 +306,8 @@ class NodeUpdate(wiring.Component):
                          acc_inside.eq(Mux(first, live["inside"], acc_inside | live["inside"]))]
         node_done_r = Signal(name="b10_node_done")
         m.d.sync += node_done_r.eq(back.valid & last)
-        m.d.comb += headers.r_en.eq(node_done_r)
-        header = data.View(node_layout(fs), headers.r_data)
+        m.d.comb += headers.r_stream.ready.eq(node_done_r)
+        header = data.View(node_layout(fs), headers.r_stream.payload)
         back.stages += 1
         live.clear()
         assert back.stages == self.back_stages, (back.stages, self.back_stages)
@@ -460,38 +387,14 @@ class NodeUpdate(wiring.Component):
             result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
             result.error_sum.eq(live["e"]), result.power.eq(live["pw"]),
         ]
-        # The result FIFO in LUT RAM column slices, each with its own pointers and its own
-        # two-register skid buffer (output register and a spare): a slice reads its FIFO whenever
-        # its spare is free, so a read enable reaches only its own ~20-bit slice, and o.ready only
-        # the skid registers' enables. The slices decide alike (same writes, same o.ready, equal
-        # levels), so they stay in step; o.valid is slice 0's. One shared read enable over ten
-        # slices was the critical path (123–138 MHz).
-        payload_parts = []
-        data_in = result.as_value()
-        for k, lo in enumerate(range(0, layout.size, self.FIFO_SLICE_BITS)):
-            bits = min(self.FIFO_SLICE_BITS, layout.size - lo)
-            m.submodules[f"results{k}"] = fifo = LutFIFO(width=bits, depth=self.result_depth - 1, checked=False,
-                                                         start=k)
-            out = Signal(bits, name=f"o_payload{k}", reset_less=True)  # data: no reset
-            spare = Signal(bits, name=f"o_spare{k}", reset_less=True)
-            out_valid = Signal(name=f"o_valid{k}")
-            spare_full = Signal(name=f"o_spare_full{k}")
-            read = Signal(name=f"results{k}_read")
-            m.d.comb += [fifo.w_en.eq(tail.valid), fifo.w_data.eq(data_in[lo:lo + bits]),
-                         read.eq(fifo.r_rdy & ~spare_full), fifo.r_en.eq(read)]
-            # The output register is free or being freed: its own valid bit and o.ready, not
-            # slice 0's o.valid (that route across every slice was the critical path, 148 MHz).
-            with m.If(~out_valid | self.o.ready):
-                with m.If(spare_full):
-                    m.d.sync += [out.eq(spare), out_valid.eq(1), spare_full.eq(read)]
-                    with m.If(read):
-                        m.d.sync += spare.eq(fifo.r_data)
-                with m.Else():
-                    m.d.sync += [out.eq(fifo.r_data), out_valid.eq(read)]
-            with m.Elif(read):  # the output register holds: the read goes to the spare
-                m.d.sync += [spare.eq(fifo.r_data), spare_full.eq(1)]
-            payload_parts.append(out)
-            if k == 0:
-                m.d.comb += self.o.valid.eq(out_valid)
-        m.d.comb += self.o.payload.eq(Cat(*payload_parts))
+        # The result FIFO: LUT RAM column slices, each with its own pointers and its own
+        # two-register skid buffer, so a read enable reaches only its own ~20-bit slice and
+        # o.ready only the skid registers' enables (one shared read enable over ten slices was
+        # the critical path, 123–138 MHz). Never written full: the credits count its depth and
+        # the two skid registers.
+        m.submodules.results = results = SlicedFIFO(width=result_layout(fs).size, depth=self.result_depth - 1,
+                                                    slice_bits=self.FIFO_SLICE_BITS, registered=True)
+        m.d.comb += [results.w_stream.valid.eq(tail.valid), results.w_stream.payload.eq(result.as_value()),
+                     self.o.valid.eq(results.r_stream.valid), self.o.payload.eq(results.r_stream.payload),
+                     results.r_stream.ready.eq(self.o.ready)]
         return m

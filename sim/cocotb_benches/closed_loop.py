@@ -24,8 +24,7 @@ from golden_model.fixed.engine import (HOST_ROUNDING, FixedEngine, MomentumState
 from golden_model.fixed.format import Overflow
 from golden_model.fixed.pipeline import node_terms
 from golden_model.reference import Measurement, _converged
-from hdl.core import errors_layout, step_layout
-from hdl.node_update import entry_layout, result_layout
+from hdl.layouts import entry_layout, errors_layout, result_layout, step_layout
 from sim.payloads import pack, pass_beats, unpack
 
 from .common import StreamPort, StreamStats, formats, load_config, start_clock_and_reset, transfer, write_result

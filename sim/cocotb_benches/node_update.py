@@ -12,7 +12,7 @@ from golden_model.fixed import SaturationCounter
 from golden_model.fixed.engine import FixedEngine, prepare
 from golden_model.fixed.pipeline import node_update
 from golden_model.reference import FlattenParams
-from hdl.node_update import entry_layout, result_layout
+from hdl.layouts import entry_layout, result_layout
 from sim.payloads import pass_beats, unpack
 
 from .common import StreamPort, StreamStats, formats, load_config, start_clock_and_reset, transfer, write_result

@@ -7,7 +7,7 @@ import time
 import cocotb
 from cocotb.triggers import ClockCycles
 
-from hdl.node_update import entry_layout
+from hdl.layouts import entry_layout
 from sim.payloads import pack
 
 from .common import formats, load_config, start_clock_and_reset, write_result
