@@ -16,8 +16,6 @@ a number that is not finite is ``null`` and its key is listed in
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from pathlib import Path
 
@@ -31,7 +29,8 @@ from golden_model.reference import FlattenParams, FlattenResult, flatten
 from .outputs import (LAYOUT_SUFFIXES, OutputWriteError, all_or_nothing, check_output_path, write_history,
                       write_layout, write_plot)
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
-                          load_format_set, params_from_args, resolve_mesh)
+                          load_format_set, params_from_args, resolve_mesh, strict_json)
+
 
 class _Parser(argparse.ArgumentParser):
     """argparse with the project's one-line error format."""
@@ -105,27 +104,6 @@ def _what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> s
     why = {"converged": "the stop rule held", "max-iterations": f"N_max = {params.max_iter} reached",
            "diverged": "a value stopped being finite"}[result.status]
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
-
-
-def strict_json(summary: dict) -> str:
-    """One line of standard JSON: each number that is not finite becomes ``null`` and its key (dotted
-    for nested objects) is listed under ``non_finite``."""
-    non_finite: list[str] = []
-
-    def finite(value, key):
-        if isinstance(value, float) and not math.isfinite(value):
-            non_finite.append(key)
-            return None
-        if isinstance(value, dict):
-            return {k: finite(v, f"{key}.{k}" if key else str(k)) for k, v in value.items()}
-        if isinstance(value, (list, tuple)):
-            return [finite(v, f"{key}[{i}]") for i, v in enumerate(value)]
-        return value
-
-    cleaned = finite(summary, "")
-    if non_finite:
-        cleaned["non_finite"] = non_finite
-    return json.dumps(cleaned, allow_nan=False)
 
 
 def _check_distinct_files(args: argparse.Namespace) -> None:

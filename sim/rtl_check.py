@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import shutil
 import sys
 import tempfile
@@ -42,7 +41,7 @@ def add_parser(sub, add_run_options) -> None:
 def cmd_rtl_check(args: argparse.Namespace) -> int:
     from hdl import SpringflatCore
 
-    from .run_options import UserError, default_init, load_format_set, params_from_args, resolve_mesh
+    from .run_options import UserError, default_init, load_format_set, params_from_args, resolve_mesh, strict_json
 
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
@@ -82,7 +81,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     if args.waves is not None:
         summary["waves"] = str(args.waves) if run.waves is not None else None
     if args.json:
-        print(json.dumps(summary))
+        print(strict_json(summary))
     else:
         print(f"{mesh.name} on {args.sim}: {result['mismatches']} mismatches over {result['iterations']} iterations "
               f"({result['status']}); E_S {result['area_error']:.5f} (float {result['float_area_error']:.5f}), "

@@ -7,6 +7,8 @@ mesh's default parameters and initial layout, argument types and the one-line us
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
 from pathlib import Path
 
@@ -164,3 +166,24 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> Flatt
         if value is not None:
             changes[option] = value
     return defaults.with_(**changes)
+
+
+def strict_json(summary: dict) -> str:
+    """One line of standard JSON: each number that is not finite becomes ``null`` and its key (dotted
+    for nested objects) is listed under ``non_finite``."""
+    non_finite: list[str] = []
+
+    def finite(value, key):
+        if isinstance(value, float) and not math.isfinite(value):
+            non_finite.append(key)
+            return None
+        if isinstance(value, dict):
+            return {k: finite(v, f"{key}.{k}" if key else str(k)) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [finite(v, f"{key}[{i}]") for i, v in enumerate(value)]
+        return value
+
+    cleaned = finite(summary, "")
+    if non_finite:
+        cleaned["non_finite"] = non_finite
+    return json.dumps(cleaned, allow_nan=False)

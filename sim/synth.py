@@ -473,9 +473,9 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    from golden_model.fixed.engine import load_formats
+    from .run_options import load_format_set, strict_json
 
-    fs = load_formats(args.formats)
+    fs = load_format_set(args.formats)
     out = Path(args.out) if args.out else Path(f"synth-{args.target}-{fs.name}")
     start = time.monotonic()
 
@@ -486,7 +486,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     report = run_synthesis(fs, args.target, args.freq, out, components=args.components, progress=progress,
                            router=args.router, seed=args.seed, command=_command_line(args, out))
     if args.json:
-        print(json.dumps(report))
+        print(strict_json(report))
     else:
         print(report_markdown(report), end="")
         print(f"bundle: {out}/ (synth_report.md, synth_report.json, interface.md, reproduce.sh)")

@@ -619,6 +619,16 @@ def test_format_set(name, tmp_path, monkeypatch, capsys):
         assert _strict_json(outcome.out)["engine"] == "fixed"
 
 
+@pytest.mark.parametrize("command", [["synth", "--target", "ecp5"], ["rtl-check", "surf1"]])
+def test_other_commands_read_format_sets_the_same_way(command, tmp_path, capsys):
+    """``synth`` and ``rtl-check`` take --formats through the same reader: a directory is one line, exit 2."""
+    (tmp_path / "d.json").mkdir()
+    code = main([*command, "--formats", str(tmp_path / "d.json")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert re.fullmatch(r"springflat: error: cannot read formats file '.*d\.json': is a directory", err[0])
+
+
 # --------------------------------------------------------------------------- a real exit, real permissions
 
 
