@@ -25,11 +25,10 @@ the meshes, not on accuracy; saturation events show when they are short).
 
 **Cost model** (:func:`cost`): ``total_bits`` = sum of the widths of the node
 datapath formats (:data:`DATAPATH_FIELDS`: every format but the step
-generator's ``error`` and ``lut_entry``); ``dsp`` = estimated 18×18 DSP blocks
-(:func:`multipliers`): ``ceil(wa/18)·ceil(wb/18)`` per multiplication of
-``fs.products()`` (x/y products counted twice), plus ``½C·u`` (a
-``spring × spring`` product that ``fs.products()`` does not list), plus the
-rsqrt unit's three products per Newton step (``fs.rsqrt_config().products``);
+generator's ``error`` and ``lut_entry`` and the controller's); ``dsp`` = the 18×18 DSP
+blocks of the RTL (:func:`multipliers`): every multiplication of ``fs.products()`` in the
+node datapath, its rsqrt unit and the step generator, times its instances, split into
+partial products by the rule the RTL uses (:mod:`golden_model.fixed.dsp`);
 ``rom_bits`` = rsqrt seed ROM + exp-LUT bits.  Costs compare
 lexicographically: ``(total_bits, dsp, rom_bits)`` for the ``bits`` metric,
 ``(dsp, total_bits, rom_bits)`` for ``dsp``.
@@ -65,6 +64,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from .builtin import builtin_mesh, is_builtin
+from .fixed.dsp import dsp_blocks as _dsp_blocks
 from .fixed.engine import flatten_fixed
 from .fixed.format import Rounding
 from .fixed.formats_set import FORMAT_FIELDS, FormatSet
@@ -74,7 +74,7 @@ from .reference import FlattenParams, FlattenResult, ParameterError, flatten
 
 __all__ = [
     "GENERATED_PARAMS", "STUDY_MESHES", "GENERATED_MESH_NAMES", "SIGNAL_CLASSES", "DATAPATH_FIELDS", "KNOBS",
-    "OTHER_KNOB_VALUES", "DEFAULT_BITS", "DEFAULT_STRIDES", "DSP_WIDTH",
+    "OTHER_KNOB_VALUES", "DEFAULT_BITS", "DEFAULT_STRIDES", "RTL_UNITS",
     "StudyCase", "Config", "RunRecord", "AccuracyTarget", "Cost", "ConfigSummary", "OptimiseStep",
     "OptimiseResult", "StudyResult", "Study",
     "resolve_study_mesh", "build_cases", "parse_bits", "parse_knobs", "make_config", "class_frac_bits",
@@ -361,41 +361,23 @@ def preset_configs(base: FormatSet | None = None) -> list[Config]:
 
 # ----------------------------------------------------------------------------- cost model
 
-DSP_WIDTH = 18
-"""Operand width of one DSP multiplier block (ECP5/iCE40-UP/Xilinx-style 18×18)."""
-
-_PER_COMPONENT = {"delta*delta", "spring*delta", "force_acc*inv_mass", "dt*velocity", "dt*accel",
-                  "half_dt_sq*accel", "velocity*damping", "barrier_coeff*barrier_edge", "force_acc*velocity"}
-
-
-def _blocks(wa: int, wb: int) -> int:
-    return math.ceil(wa / DSP_WIDTH) * math.ceil(wb / DSP_WIDTH)
+#: The units whose multipliers the RTL instantiates (the controller's are not in the RTL).
+RTL_UNITS = ("node_update", "rsqrt", "step_generator")
 
 
 def multipliers(fs: FormatSet) -> list[tuple[str, int, int, int, int]]:
-    """``(name, width_a, width_b, count, dsp_blocks_each)`` for every multiplication of the design.
+    """``(name, width_a, width_b, count, dsp_blocks_each)`` for every multiplication of the RTL.
 
-    ``fs.products()`` with the x/y products counted twice, the ``½C·u`` product
-    (``spring × spring``, not listed by ``fs.products()``), and the rsqrt unit's
-    ``y·y``, ``M·y²``, ``y·h`` per Newton step.  The step generator's
-    ``dt·dt`` and LUT interpolation run once per iteration and count once.
+    ``fs.products()`` of the node datapath, the rsqrt unit and the step generator, each split
+    into 18×18 partial products by the RTL's own rule (:func:`golden_model.fixed.dsp.dsp_blocks`:
+    a partial product with a 1-bit slice is a multiplexer, not a DSP block).
     """
-    rows = []
-    for name, wa, wb in fs.products():
-        count = 2 if name.split(" ")[0] in _PER_COMPONENT else 1
-        rows.append((name, wa, wb, count, _blocks(wa, wb)))
-    if not any(r[0].split(" ")[0] in ("half_spring*u", "spring*spring") for r in rows):
-        w = fs.spring.width
-        rows.append(("half_spring*u (1/2 C * u)", w, w, 1, _blocks(w, w)))
-    cfg = fs.rsqrt_config()
-    for name, fa, fb in cfg.products:
-        if fs.rsqrt_newton_steps:
-            rows.append((f"rsqrt {name}", fa.width, fb.width, fs.rsqrt_newton_steps, _blocks(fa.width, fb.width)))
-    return rows
+    return [(p.name, p.a.width, p.b.width, p.count, _dsp_blocks(p.a, p.b))
+            for p in fs.products() if p.unit in RTL_UNITS]
 
 
 def dsp_blocks(fs: FormatSet) -> int:
-    """Estimated 18×18 DSP blocks of the datapath and the step generator."""
+    """18×18 DSP blocks of the node datapath (with its rsqrt unit) and the step generator."""
     return sum(count * each for _, _, _, count, each in multipliers(fs))
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from amaranth.hdl import ClockSignal, Const, Instance, Module, Mux, Signal, Value, signed, unsigned
 
-from .fixedpoint import DSP_WIDTH
+from golden_model.fixed.dsp import DSP_WIDTH, is_dsp_block
 
 __all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target"]
 
@@ -62,8 +62,8 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
                              f"does not fit an {DSP_WIDTH}-bit multiplier operand")
     product = Signal(shape, name=name, reset_less=True)
     # A 1-bit operand (the top bit of an unsigned operand in a signed product) makes the
-    # product a multiplexer: fabric logic, not a DSP block.
-    if dsp_target(platform) == "ecp5" and min(len(a), len(b)) > 1:
+    # product a multiplexer: fabric logic, not a DSP block (the rule the study's cost counts with).
+    if dsp_target(platform) == "ecp5" and is_dsp_block(len(a), len(b)):
         operand = signed(DSP_WIDTH) if is_signed else unsigned(DSP_WIDTH)
         a_ext, b_ext = (Signal(operand, name=f"{name}_{n}") for n in "ab")
         p = Signal(2 * DSP_WIDTH, name=f"{name}_p")

@@ -8,6 +8,7 @@ rounding shift :func:`shift_round`, then a clamp into ``fmt``.
 from amaranth.hdl import Cat, Const, Mux, Value, signed, unsigned
 
 from golden_model.fixed import Format, Rounding
+from golden_model.fixed.dsp import DSP_WIDTH, Operand, dsp_partial_products
 
 __all__ = ["shape_of", "round_half_bit", "shift_round", "saturate", "clamp", "requantize", "dsp_operands",
            "sum_round"]
@@ -101,40 +102,23 @@ def requantize(value, from_frac: int, fmt: Format, rounding: Rounding):
     return clamp(shift_round(value, from_frac - fmt.frac_bits, rounding), fmt)
 
 
-DSP_WIDTH = 18  # ECP5 MULT18X18D: 18x18 signed (iCE40 SB_MAC16 is 16x16: an 18x18 takes several)
-
-
-def _dsp_chunks(value, width, signed_product):
-    """``[(chunk, shift)]`` with ``value == sum(chunk << shift)``; each chunk fits an 18-bit DSP operand.
-
-    In an unsigned product the chunks are 18-bit unsigned slices. In a signed product an unsigned
-    chunk is zero-extended to a signed operand, so the low chunks are 17 bits and only a signed
-    operand's top chunk (its sign) takes 18.
-    """
-    value = Value.cast(value)
-    signed = value.shape().signed
-    step = width if not signed_product else width - 1
-    chunks, lo = [], 0
-    n = len(value)
-    while lo < n:
-        top_signed = signed and n - lo <= width  # the rest fits one signed chunk
-        hi = n if top_signed else min(n, lo + step)
-        part = value[lo:hi]
-        chunks.append((part.as_signed() if top_signed else part, lo))
-        lo = hi
-    return chunks
-
-
 def dsp_operands(a, b, width=DSP_WIDTH):
     """``[(a_chunk, b_chunk, shift)]`` with ``a * b == sum((a_chunk * b_chunk) << shift)``.
 
-    Each chunk pair is one 18×18 multiplier (:func:`hdl.dsp.registered_product`). Splitting a
-    wide multiply by hand lets every partial product sit alone between registers.
+    Each chunk pair is one 18×18 multiplier (:func:`hdl.dsp.registered_product`), sliced by the
+    golden model's rule (:func:`golden_model.fixed.dsp.dsp_partial_products`, which the study's
+    DSP cost counts with). Splitting a wide multiply by hand lets every partial product sit alone
+    between registers.
     """
     a, b = Value.cast(a), Value.cast(b)
-    signed_product = a.shape().signed or b.shape().signed
-    return [(pa, pb, sa + sb) for pa, sa in _dsp_chunks(a, width, signed_product)
-            for pb, sb in _dsp_chunks(b, width, signed_product)]
+
+    def part(value, chunk):
+        bits = value[chunk.lo:chunk.hi]
+        return bits.as_signed() if chunk.signed else bits
+
+    return [(part(a, ca), part(b, cb), ca.lo + cb.lo)
+            for ca, cb in dsp_partial_products(Operand(len(a), a.shape().signed),
+                                               Operand(len(b), b.shape().signed), width)]
 
 
 def sum_round(add, shift, rounding, sub=(), const=0):

@@ -9,10 +9,10 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from golden_model.fixed import FormatSet, dt_constant, exp_table, shift_round as gm_shift_round
+from golden_model.fixed import FormatSet, dt_constant, exp_table, lut_slope_bits, shift_round as gm_shift_round
 
 from .fixedpoint import saturate, shift_round
-from .pipeline import Pipeline
+from .pipeline import Pipeline, reduce_levels
 
 __all__ = ["StepGenerator"]
 
@@ -36,14 +36,14 @@ class StepGenerator(wiring.Component):
     ----------
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: 16 when interpolating (both presets), 11 otherwise.
-        Throughput: one item per clock (II = 1).
+        ``o.ready`` is held high: :meth:`latency_of` (16 for both presets, which interpolate;
+        11 without interpolation). Throughput: one item per clock (II = 1).
 
     Members
     -------
     i : :py:`In(stream.Signature(input_layout))`
         :class:`~amaranth.lib.data.StructLayout` payload: ``area_error``, ``shape_error``
-        (raw, ``fs.error``; u0.16 in the default preset).
+        (raw, ``fs.error``: u0.20 in the default preset).
     o : :py:`Out(stream.Signature(output_layout))`
         :class:`~amaranth.lib.data.StructLayout` payload: ``dt`` (raw ``fs.dt``) and
         ``half_dt_sq`` (raw ``fs.half_dt_sq``).
@@ -59,6 +59,7 @@ class StepGenerator(wiring.Component):
     ``mul_in``        interpolating only: ``slope``, ``t`` registered in the DSP block
     ``mul``           interpolating only: ``slope * t`` registered in the DSP block
     ``mul_out``       interpolating only: the product landed in fabric registers
+    ``mul_sum1``…     interpolating only: adder levels of the partial products (none in the presets)
     ``interp_round``  interpolating only: ``round(slope * t / 2**r)``
     ``interp``        interpolating only: ``v = T[k] + round(slope * t / 2**r)``
     ``sum``           ``v_S + v_C``
@@ -69,6 +70,7 @@ class StepGenerator(wiring.Component):
     ``sq_in``         ``dt`` registered in the DSP block
     ``sq``            ``dt * dt`` registered in the DSP block
     ``sq_out``        the product landed in fabric registers
+    ``sq_sum1``…      adder levels of the partial products (none in the presets)
     ``half``          ``round(dt*dt / 2)`` to ``fs.half_dt_sq``'s lsb
     ``o``             saturate; output register
     ================  ============================================================================
@@ -78,7 +80,7 @@ class StepGenerator(wiring.Component):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"StepGenerator needs a FormatSet, not {fs!r}")
         self._fs = fs
-        self.latency = 16 if self._interpolating else 11
+        self.latency = self.latency_of(fs)
         super().__init__({
             "i": In(stream.Signature(self.input_layout(fs))),
             "o": Out(stream.Signature(self.output_layout(fs))),
@@ -100,13 +102,28 @@ class StepGenerator(wiring.Component):
             "half_dt_sq": unsigned(fs.half_dt_sq.width),
         })
 
+    @staticmethod
+    def latency_of(fs):
+        """Pipeline latency in clocks for ``fs``.
+
+        lut, sum, dt_round, dt_sat, dt_add, dt, half, o; the ``dt*dt`` multiply
+        (``Pipeline.MUL_STAGES`` plus its adder levels); interpolating, the ``slope*t`` multiply
+        and interp_round, interp.
+        """
+        mul = Pipeline.MUL_STAGES
+        latency = 8 + mul + reduce_levels((unsigned(fs.dt.width), unsigned(fs.dt.width)))
+        if fs.interpolates:
+            slope, t = unsigned(lut_slope_bits(fs.lut_index_bits, fs.lut_entry)), unsigned(fs.lut_frac_bits)
+            latency += 2 + mul + reduce_levels((slope, t))
+        return latency
+
     @property
     def fs(self):
         return self._fs
 
     @property
     def _interpolating(self):
-        return self._fs.lut_interpolate and self._fs.lut_frac_bits > 0
+        return self._fs.interpolates
 
     @property
     def _error_max(self):
@@ -127,10 +144,11 @@ class StepGenerator(wiring.Component):
             k_max = self._error_max >> r
             last = len(table) - 1
             slopes = [table[min(k + 1, last)] - table[k] for k in range(k_max + 1)]
-            assert min(slopes) >= 0
+            slope_bits = lut_slope_bits(fs.lut_index_bits, fs.lut_entry)  # as FormatSet.products() has it
+            assert min(slopes) >= 0 and max(slopes) < 1 << slope_bits
             layout = data.StructLayout({
                 "base": unsigned(fs.lut_entry.width),
-                "slope": unsigned(max(1, max(slopes).bit_length())),
+                "slope": unsigned(slope_bits),
             })
             rows = [{"base": table[k], "slope": slopes[k]} for k in range(k_max + 1)]
         else:

@@ -17,3 +17,15 @@ def test_fixed_point_format_table_matches_presets():
                                  "max_degree"):
         assert rows[name] == (str(getattr(default, name)), str(getattr(narrow, name))), name
     assert rows["rounding"] == (default.rounding.value, narrow.rounding.value)
+
+
+def test_study_doc_states_the_presets_costs():
+    from golden_model.study import cost
+
+    text = " ".join((DOCS / "study.md").read_text().split())
+    m = re.search(r"presets: `default` (\d+) bits, (\d+) DSP, ([\d ]+) ROM bits; `narrow` (\d+) bits, (\d+) DSP, "
+                  r"([\d ]+) ROM bits", text)
+    assert m, "docs/study.md no longer states the presets' costs"
+    stated = [int(g.replace(" ", "")) for g in m.groups()]
+    actual = [v for name in ("default", "narrow") for v in cost(FormatSet.preset(name)).key("bits")]
+    assert stated == actual

@@ -52,29 +52,32 @@ def test_cost_model_by_hand():
     assert c.total_bits == 13 + 11 + 12 + 11 + 16 + 12 + 12 + 12 + 13 + 11 + 13 + 12 + 12 + 18 + 11 \
         + 15 + 12 + 11 + 15 == 242
     # one block each: delta^2 x2, d*r, L, s*delta x2, F/m x2, dt*V x2, dt*a x2, hdt2*a x2, dt*dt,
-    # V*damping x2, LUT interpolation, 1/2C*u  = 19; the barrier's cross product x2, G*h, c*D x2 and
-    # the momentum's F.V x2 = 7; rsqrt: out u4.8 -> Fy = 12 + 3 = 15, operands
-    # y u1.15 (16), M u2.15 (17), y^2 u1.15, h s0.15 (16): 3 blocks per Newton step
-    assert c.dsp == 19 + 7 + 3 == 29
+    # V*damping x2, LUT interpolation x2 (one per lookup lane), 1/2C*u  = 20; the barrier's cross
+    # product x2, G*h, c*D x2 and the momentum's F.V x2 = 7; rsqrt: out u4.8 -> Fy = 12 + 3 = 15,
+    # operands y u1.15 (16), M u2.15 (17), y^2 u1.15, h s0.15 (16): 3 blocks per Newton step
+    assert c.dsp == 20 + 7 + 3 == 30
     # seed ROM: 3 * 2**(6-2) = 48 entries of min(15, 6 + 3) = 9 bits; LUT: 65 entries of 12 bits
     assert c.rom_bits == 48 * 9 + 65 * 12 == 1212
 
     wide = tiny_formats(rsqrt="u4.14")  # out value bits 18 -> Fy 21: rsqrt operands 22/23 bits -> 2x2 blocks
     # d*r 11 x 18 and L 16 x 18 stay at one block; the 3 rsqrt products go to 4 blocks each
-    assert cost(wide).dsp == 19 + 7 + 12
+    assert cost(wide).dsp == 20 + 7 + 12
     assert cost(wide).total_bits == 242 + 6
     two_steps = tiny_formats(rsqrt_newton_steps=2)
-    assert cost(two_steps).dsp == 19 + 7 + 6
-    # delta 20 bits: delta^2 and the barrier's cross product 2x2 x2 each, s*delta and c*D 1x2 x2 each
+    assert cost(two_steps).dsp == 20 + 7 + 6
+    # delta 20 bits (a signed product's slices: 17 + 3): delta^2 and the barrier's cross product
+    # 2x2 x2 each, s*delta and c*D 1x2 x2 each
     wider_delta = tiny_formats(delta="s3.16", position="s4.16")
-    assert cost(wider_delta).dsp == 29 - 2 - 2 + 8 + 4 - 2 - 2 + 8 + 4
+    assert cost(wider_delta).dsp == 30 - 2 - 2 + 8 + 4 - 2 - 2 + 8 + 4
     assert cost(wider_delta).total_bits == 242 + 16
     no_interp = tiny_formats(lut_interpolate=False)
     assert cost(no_interp).dsp == 28
     names = [m[0] for m in multipliers(fs)]
-    assert sum(m[3] for m in multipliers(fs)) == 29  # every product here is one block
-    assert any(n.startswith("half_spring*u") for n in names)
-    assert cost(fs).key("bits") == (242, 29, 1212) and cost(fs).key("dsp") == (29, 242, 1212)
+    assert sum(m[3] for m in multipliers(fs)) == 30  # every product here is one block
+    assert any(n.startswith("spring*spring (1/2 C * u)") for n in names)
+    assert cost(fs).key("bits") == (242, 30, 1212) and cost(fs).key("dsp") == (30, 242, 1212)
+    # an unsigned 18-bit operand of a signed product: slices 17 + 1, the 1-bit slice a multiplexer
+    assert cost(tiny_formats(inv_mass="u3.15")).dsp == 30
 
 
 def test_presets_cost_ordering():

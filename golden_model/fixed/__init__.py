@@ -22,7 +22,7 @@ from .format import (
     sub,
     to_float,
 )
-from .formats_set import FORMAT_FIELDS, PRESET_DIR, FormatSet
+from .formats_set import FORMAT_FIELDS, PRESET_DIR, UNITS, FormatSet, Product
 from .rsqrt import (
     RSQRT_GUARD_BITS,
     RsqrtConfig,
@@ -42,6 +42,7 @@ from .steplut import (
     dt_constant,
     exp_lut,
     exp_table,
+    lut_slope_bits,
     lut_value_float,
     measure_step_size,
     half_dt_sq,
@@ -54,9 +55,9 @@ __all__ = [
     "MAX_PRODUCT_WIDTH", "MAX_WIDTH", "Format", "Overflow", "Rounding", "SaturationCounter",
     "add", "apply_overflow", "as_raw", "mul", "quantize", "requantize", "shift_round", "sub",
     "to_float",
-    "FORMAT_FIELDS", "PRESET_DIR", "FormatSet",
+    "FORMAT_FIELDS", "PRESET_DIR", "UNITS", "FormatSet", "Product",
     "RSQRT_GUARD_BITS", "RsqrtConfig", "bit_length", "measure_rsqrt", "rsqrt", "rsqrt_exact",
     "rsqrt_seed_table", "rsqrt_stages", "rsqrt_with_config",
     "DT_MAX", "DT_MIN", "LUT_RATE", "LUT_SCALE", "dt_constant", "exp_lut", "exp_table",
-    "lut_value_float", "measure_step_size", "step_size", "half_dt_sq", "step_size_error_bound", "step_size_float",
+    "lut_slope_bits", "lut_value_float", "measure_step_size", "step_size", "half_dt_sq", "step_size_error_bound", "step_size_float",
 ]

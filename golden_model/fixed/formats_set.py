@@ -17,12 +17,14 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
+from .dsp import Operand
 from .format import MAX_PRODUCT_WIDTH, Format, Rounding
 from .rsqrt import RsqrtConfig
+from .steplut import lut_slope_bits
 
-__all__ = ["FormatSet", "FORMAT_FIELDS", "PRESET_DIR"]
+__all__ = ["FormatSet", "FORMAT_FIELDS", "PRESET_DIR", "Product", "UNITS"]
 
 PRESET_DIR = Path(__file__).resolve().parent.parent / "data" / "formats"
 """Directory holding the preset JSON files (``<name>.json``)."""
@@ -58,6 +60,26 @@ _UNSIGNED = (
     "rest_length", "length_sq", "rsqrt", "inv_mass", "dt", "half_dt_sq",
     "error_acc", "error", "lut_entry", "damping", "barrier_gain", "barrier_coeff",
 )
+
+
+UNITS = ("node_update", "rsqrt", "step_generator", "controller")
+"""Where a product is computed: the RTL's node-update datapath, its rsqrt unit, the step
+generator, or the controller around them (``golden_model.fixed.engine``; not in the RTL)."""
+
+
+class Product(NamedTuple):
+    """One kind of multiplication: operands as the hardware holds them, instances, unit.
+
+    ``int64``: the golden model forms the exact product in numpy int64, so the operand widths
+    must sum to at most ``MAX_PRODUCT_WIDTH`` (checked when a :class:`FormatSet` is built).
+    """
+
+    name: str
+    a: Operand
+    b: Operand
+    count: int = 1
+    unit: str = "node_update"
+    int64: bool = True
 
 
 @dataclass(frozen=True)
@@ -144,16 +166,17 @@ class FormatSet:
             raise ValueError(f"FormatSet {self.name!r}: lut_interpolate must be a bool")
         self._check_signedness()
         self._check_step_path()
-        for pname, wa, wb in self.products():
-            if wa + wb > MAX_PRODUCT_WIDTH:
-                raise ValueError(
-                    f"FormatSet {self.name!r}: product {pname} needs {wa} + {wb} = {wa + wb} "
-                    f"bits > {MAX_PRODUCT_WIDTH}; the exact product would not fit int64"
-                )
         try:
             self.rsqrt_config()
         except ValueError as exc:
             raise ValueError(f"FormatSet {self.name!r}: {exc}") from None
+        for p in self.products():
+            wa, wb = p.a.width, p.b.width
+            if p.int64 and wa + wb > MAX_PRODUCT_WIDTH:
+                raise ValueError(
+                    f"FormatSet {self.name!r}: product {p.name} needs {wa} + {wb} = {wa + wb} "
+                    f"bits > {MAX_PRODUCT_WIDTH}; the exact product would not fit int64"
+                )
 
     def _check_signedness(self) -> None:
         for f in _SIGNED:
@@ -183,33 +206,49 @@ class FormatSet:
         """Bits of E below the LUT index (interpolation weight width)."""
         return self.error.frac_bits - self.lut_index_bits
 
-    def products(self) -> list[tuple[str, int, int]]:
-        """Every pipeline multiplication as ``(name, width_a, width_b)``.
+    @property
+    def interpolates(self) -> bool:
+        """Whether the step generator interpolates (``lut_interpolate`` and E has bits below the index)."""
+        return self.lut_interpolate and self.lut_frac_bits > 0
 
-        The LUT interpolation multiplies an entry difference (non-negative, at
-        most ``lut_entry.width`` bits) by the ``lut_frac_bits`` low bits of E.
-        The rsqrt unit's internal products are checked by :class:`RsqrtConfig`.
+    def products(self) -> list[Product]:
+        """Every multiplication of the design, one :class:`Product` per kind.
+
+        Operands are as the hardware holds them (``hdl/`` builds each with
+        :func:`~golden_model.fixed.dsp.dsp_partial_products`): the barrier's shortfall
+        ``h >= 0`` drops the sign bit of ``area``; the LUT interpolation multiplies an entry
+        difference (``lut_slope_bits`` wide) by the ``lut_frac_bits`` low bits of E; the
+        rsqrt unit's first Newton step squares the seed (:meth:`RsqrtConfig.step_products`).
+        ``count`` is the number of instances (x and y: 2; the step generator's two lookups: 2).
         """
-        w = {f: getattr(self, f).width for f in FORMAT_FIELDS}
+        op = Operand.of
+        delta = op(self.delta)
+        shortfall = Format(False, self.area.int_bits, self.area.frac_bits)
         prods = [
-            ("delta*delta -> length_sq", w["delta"], w["delta"]),
-            ("rest_length*rsqrt (d*r)", w["rest_length"], w["rsqrt"]),
-            ("length_sq*rsqrt (L)", w["length_sq"], w["rsqrt"]),
-            ("spring*delta -> force", w["spring"], w["delta"]),
-            ("force_acc*inv_mass -> accel", w["force_acc"], w["inv_mass"]),
-            ("dt*velocity", w["dt"], w["velocity"]),
-            ("dt*accel", w["dt"], w["accel"]),
-            ("half_dt_sq*accel", w["half_dt_sq"], w["accel"]),
-            ("dt*dt -> half_dt_sq", w["dt"], w["dt"]),
-            ("velocity*damping", w["velocity"], w["damping"]),
-            ("delta*delta -> area", w["delta"], w["delta"]),
-            ("barrier_gain*area -> barrier_coeff", w["barrier_gain"], w["area"]),
-            ("barrier_coeff*barrier_edge -> force", w["barrier_coeff"], w["delta"]),
-            ("force_acc*velocity -> power", w["force_acc"], w["velocity"]),
+            Product("delta*delta -> length_sq", delta, delta, 2),
+            Product("delta*delta -> area (cross product)", delta, delta, 2),
+            Product("barrier_gain*shortfall -> barrier_coeff", op(self.barrier_gain), op(shortfall)),
+            Product("barrier_coeff*barrier_edge -> force", op(self.barrier_coeff), delta, 2),
+            Product("rest_length*rsqrt (d*r)", op(self.rest_length), op(self.rsqrt)),
+            Product("length_sq*rsqrt (L)", op(self.length_sq), op(self.rsqrt)),
+            Product("spring*spring (1/2 C * u)", op(self.spring), op(self.spring)),
+            Product("spring*delta -> force", op(self.spring), delta, 2),
+            Product("force_acc*inv_mass -> accel", op(self.force_acc), op(self.inv_mass), 2),
+            Product("force_acc*velocity -> power", op(self.force_acc), op(self.velocity), 2),
+            Product("dt*velocity", op(self.dt), op(self.velocity), 2),
+            Product("half_dt_sq*accel", op(self.half_dt_sq), op(self.accel), 2),
+            Product("dt*accel", op(self.dt), op(self.accel), 2),
+            Product("velocity*damping", op(self.velocity), op(self.damping), 2),
         ]
-        if self.lut_interpolate:
-            prods.append(("lut interpolation (entry diff * E low bits)", w["lut_entry"],
-                          self.lut_frac_bits))
+        cfg = self.rsqrt_config()
+        for step in range(cfg.newton_steps):
+            prods += [Product(f"rsqrt {name} (Newton step {step + 1})", op(fa), op(fb), 1, "rsqrt")
+                      for name, fa, fb in cfg.step_products(step)]
+        if self.interpolates:
+            prods.append(Product("lut interpolation (entry diff * E low bits)",
+                                 Operand(lut_slope_bits(self.lut_index_bits, self.lut_entry), False),
+                                 Operand(self.lut_frac_bits, False), 2, "step_generator"))
+        prods.append(Product("dt*dt -> half_dt_sq", op(self.dt), op(self.dt), 1, "step_generator"))
         return prods
 
     def rsqrt_config(self) -> RsqrtConfig:

@@ -178,6 +178,17 @@ class RsqrtConfig:
             ("y*h", self.y_fmt, self.h_fmt),
         )
 
+    def step_products(self, step: int) -> tuple[tuple[str, Format, Format], ...]:
+        """:attr:`products` of Newton step ``step`` with the operand formats the unit holds.
+
+        Step 0 squares the seed, which is below 1: ``u0.Fy`` (the ROM entry widened by
+        wiring), one bit narrower than ``y_fmt``; everything else is as :attr:`products`.
+        """
+        if step == 0:
+            seed_y = Format(False, 0, self.y_frac_bits)
+            return (("y*y", seed_y, seed_y),) + self.products[1:]
+        return self.products
+
     def denorm_shift(self, e: np.ndarray | int) -> np.ndarray:
         """Right shift ``s = Fy - Fout + (e - Fin)/2`` applied to ``y`` (``e - Fin`` even)."""
         e = np.asarray(e, dtype=np.int64)

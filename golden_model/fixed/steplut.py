@@ -60,6 +60,7 @@ __all__ = [
     "lut_value_float",
     "exp_table",
     "exp_lut",
+    "lut_slope_bits",
     "dt_constant",
     "step_size",
     "half_dt_sq",
@@ -161,6 +162,16 @@ def exp_lut(
     t0 = table[k]
     t1 = table[np.minimum(k + 1, n1)]
     return t0 + shift_round((t1 - t0) * t, r, rounding)
+
+
+def lut_slope_bits(index_bits: int, entry_fmt: Format) -> int:
+    """Bits of the largest entry difference ``T[k+1] - T[k]`` (>= 0: the table is non-decreasing).
+
+    The interpolation multiplies a difference by the low bits of E; the step generator's ROM
+    stores the differences in this many bits.
+    """
+    table = exp_table(index_bits, entry_fmt)
+    return max(1, int(np.diff(table).max()).bit_length())
 
 
 def dt_constant(dt_fmt: Format) -> int:
