@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux
+from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out, connect
 
@@ -32,6 +32,13 @@ class SpringflatCore(wiring.Component):
         Loads the step registers directly (fixed step). Always ready.
     step : ``Out(step_layout(fs))``
         The step registers.
+    step_valid : ``Out(1)``
+        The step registers hold the answer to the last ``errors`` accepted: low from that
+        transfer until the step generator's result loads them (``step_latency`` clocks), high
+        after reset and after a ``step_load``. A controller waits for it instead of counting.
+    idle : ``Out(1)``
+        No entry is in flight (:attr:`hdl.node_update.NodeUpdate.idle`): every node accepted has
+        left ``results``, so a pass is done and ``step``/``measure`` and the constants may change.
     measure : ``In(1)``
         While high the datapath sees ``Δt = ½Δt² = 0`` and ``1 − γ = 1``: a pass that moves
         nothing and yields the E_C partial sums of the current positions.
@@ -43,8 +50,8 @@ class SpringflatCore(wiring.Component):
         so it moves nothing and yields E_C partial sums and the power ``F·V``.
 
     Contract: ``entries``/``results`` as :class:`~hdl.node_update.NodeUpdate` (II = 1 entry per
-    clock, latency ``latency``); ``errors`` → ``step`` takes ``step_latency`` clocks. Change
-    ``step``/``measure``/``half_spring``/``damping`` only between passes (no entry in flight).
+    clock, latency ``latency``); ``errors`` → ``step`` takes ``step_latency`` clocks (``step_valid``
+    says when). Change ``step``/``measure``/``half_spring``/``damping`` only while ``idle``.
     """
 
     def __init__(self, fs: FormatSet | str):
@@ -64,6 +71,8 @@ class SpringflatCore(wiring.Component):
             "errors": In(stream.Signature(errors_layout(fs))),
             "step_load": In(stream.Signature(step_layout(fs))),
             "step": Out(step_layout(fs)),
+            "step_valid": Out(1),
+            "idle": Out(1),
             "measure": In(1),
             "half_spring": In(shape_of(fs.spring)),
             "damping": In(shape_of(fs.damping)),
@@ -79,11 +88,16 @@ class SpringflatCore(wiring.Component):
         connect(m, datapath.o, wiring.flipped(self.results))
         connect(m, wiring.flipped(self.errors), stepgen.i)
 
-        m.d.comb += [stepgen.o.ready.eq(1), self.step_load.ready.eq(1)]
+        m.d.comb += [stepgen.o.ready.eq(1), self.step_load.ready.eq(1), self.idle.eq(datapath.idle)]
         with m.If(self.step_load.valid):
             m.d.sync += self.step.eq(self.step_load.payload)
         with m.Elif(stepgen.o.valid):
             m.d.sync += [self.step.dt.eq(stepgen.o.payload.dt), self.step.half_dt_sq.eq(stepgen.o.payload.half_dt_sq)]
+        # Requests in the step generator: the registers are valid when none is pending.
+        pending = Signal(range(self._stepgen.latency + 2))
+        accepted = self.errors.valid & self.errors.ready
+        m.d.sync += pending.eq(pending + accepted - stepgen.o.valid)
+        m.d.comb += self.step_valid.eq(pending == 0)
 
         one = 1 << fs.damping.frac_bits  # 1 − γ = 1 exactly: the damping multiply is then exact
         m.d.comb += [

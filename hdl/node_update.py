@@ -43,6 +43,9 @@ class NodeUpdate(wiring.Component):
     dt, half_dt_sq, half_spring, damping : ``In(...)``
         ``Δt`` [dt], ``½Δt²`` [half_dt_sq], ``½C`` [spring], ``1 − γ`` [damping]. Hold them
         stable while a pass is in flight (they are registered once per clock).
+    idle : ``Out(1)``
+        No entry in flight: every node whose entries were accepted has left ``o``, and no node
+        is half accepted. A pass is done when ``idle`` rises after its last entry.
     momentum : ``In(1)``
         The momentum dynamics (``docs/dynamics.md``): ``dt`` carries ``β``, the Euler step
         becomes ``V' = rq(β·V + a → velocity)``, ``P' = sat(P + V')``; ``half_dt_sq`` and
@@ -125,6 +128,7 @@ class NodeUpdate(wiring.Component):
             "half_spring": In(shape_of(fs.spring)),
             "damping": In(shape_of(fs.damping)),
             "momentum": In(1),
+            "idle": Out(1),
         })
 
     def elaborate(self, platform):
@@ -168,6 +172,11 @@ class NodeUpdate(wiring.Component):
             accepting.eq(~owed[top] | (at_depth_minus_1 & ~grow) | (at_depth & shrink)),
         ]
         m.d.comb += self.i.ready.eq(accepting)
+        # idle: no node owed and none half accepted (between its first and last entry)
+        open_node = Signal()
+        with m.If(take):
+            m.d.sync += open_node.eq(~self.i.payload.last)
+        m.d.comb += self.idle.eq((owed == 0) & ~open_node)
 
         # ------------------------------------------------------------ stage helper
         live = {}

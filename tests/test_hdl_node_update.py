@@ -27,7 +27,7 @@ PRESETS = ["default", "narrow"]
 
 class Run:
     def __init__(self):
-        self.outputs, self.in_cycles, self.out_cycles = [], [], []
+        self.outputs, self.in_cycles, self.out_cycles, self.idle = [], [], [], []
 
 
 def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0, ready_after=0, momentum=False):
@@ -65,7 +65,8 @@ def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0, 
         while len(run.outputs) < n_out or cycle < (run.out_cycles[-1] if run.out_cycles else 0) + dut.latency + 3:
             ready = cycle >= ready_after and (len(run.outputs) >= n_out or p_ready >= 1 or rng.random() < p_ready)
             ctx.set(dut.o.ready, ready)
-            _, _, valid, payload = await ctx.tick().sample(dut.o.valid, o_payload)
+            _, _, valid, payload, idle = await ctx.tick().sample(dut.o.valid, o_payload, dut.idle)
+            run.idle.append(idle)
             if held is not None:
                 assert valid and payload == held, f"cycle {cycle}: offered result withdrawn or changed"
             if valid and ready:
@@ -91,6 +92,7 @@ def check_pass(dut, fs, stream, positions, velocities, constants, momentum=False
     run = simulate(dut, beats, len(stream.indptr) - 1, (constants.dt, constants.half_dt_sq, constants.half_spring,
                                                         constants.damping), momentum=momentum, **kw)
     want = node_update(fs, positions, velocities, stream, constants, momentum=momentum)
+    check_idle(run, stream)
     out = dut.o.payload.shape()
     for name, got, expected in (
         ("position.x", unpack(out, run.outputs, ("position", "x")), want.positions[:, 0]),
@@ -105,6 +107,17 @@ def check_pass(dut, fs, stream, positions, velocities, constants, momentum=False
             i = int(bad[0])
             pytest.fail(f"{name}: {bad.size} mismatches; first at node {i}: rtl {int(got[i])} golden {int(expected[i])}")
     return run
+
+
+def check_idle(run, stream):
+    """``idle`` in every cycle: high exactly when the entries accepted so far end on a node
+    boundary and every one of those nodes' results has been taken."""
+    entries_in = np.searchsorted(run.in_cycles, np.arange(len(run.idle)))  # accepted before cycle c
+    results_out = np.searchsorted(run.out_cycles, np.arange(len(run.idle)))
+    nodes_in = np.searchsorted(stream.indptr, entries_in, side="right") - 1  # complete nodes among them
+    expected = (stream.indptr[nodes_in] == entries_in) & (results_out == nodes_in)
+    bad = np.flatnonzero(np.asarray(run.idle, dtype=bool) != expected)
+    assert bad.size == 0, f"idle wrong in {bad.size} cycles, first {int(bad[0])}: rtl {run.idle[int(bad[0])]}"
 
 
 def random_stream(fs, n_nodes, seed, max_degree=12, barrier=False):

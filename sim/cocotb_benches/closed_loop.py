@@ -16,7 +16,7 @@ import time
 
 import cocotb
 import numpy as np
-from cocotb.triggers import RisingEdge
+from cocotb.triggers import ReadOnly, RisingEdge
 
 from golden_model.fixed import SaturationCounter, half_dt_sq, quantize, to_float
 from golden_model.fixed.engine import (HOST_ROUNDING, FixedEngine, MomentumState, area_error, flipped_count,
@@ -53,6 +53,10 @@ class Controller:
         beats = pass_beats(self.in_layout, self.problem.stream, self.positions, self.velocities)
         out = await transfer(self.dut, self.entries, self.results, beats, self.problem.mesh.n_vertices,
                              rng=self.rng, p_valid=self.p_valid, p_ready=self.p_ready, stats=self.stats)
+        # every result taken: the pass is done, and the core says so
+        await ReadOnly()
+        assert int(self.dut.idle.value) == 1, "all results taken but the core is not idle"
+        await RisingEdge(self.dut.clk)
         field = lambda *path: unpack(self.out_layout, out, path)  # noqa: E731
         positions = np.column_stack([field("position", "x"), field("position", "y")])
         velocities = np.column_stack([field("velocity", "x"), field("velocity", "y")])
@@ -97,8 +101,14 @@ class Controller:
             while not int(dut.errors__ready.value):
                 await RisingEdge(dut.clk)
             dut.errors__valid.value = 0
-            for _ in range(self.dut_step_latency):
+            waited = 0  # the step registers say when they hold the answer
+            while True:
+                await ReadOnly()
+                if int(dut.step_valid.value):
+                    break
                 await RisingEdge(dut.clk)
+                waited += 1
+            assert waited == self.dut_step_latency - 1, f"step_valid after {waited} clocks"
         await RisingEdge(dut.clk)
         raw = int(dut.step.value)
         layout = step_layout(fs)
