@@ -13,10 +13,11 @@ or the mesh was refused.
 
 **Knobs** (:data:`KNOBS`): the fraction bits of each *signal class*
 (:data:`SIGNAL_CLASSES`; tied formats move together so that the design
-invariants of the presets hold: ``position``/``delta`` share fraction bits so
+invariants of the presets hold: ``position``/``delta``/``face_edge`` share fraction bits so
 narrowing only saturates, ``force``/``force_acc`` so accumulation is exact,
-``rest_length``/``error_acc`` so error sums are exact, ``dt``/``lut_entry`` so
-``dt = C + T(E_S) + T(E_C)`` is an exact sum), ``lut_index_bits``,
+``rest_length``/``error_acc``/``face_area`` so error sums are exact, ``dt``/``lut_entry`` so
+``dt = C + T(E_S) + T(E_C)`` is an exact sum, ``error``/``reciprocal`` so the reciprocals
+keep their guard bits), ``lut_index_bits``,
 ``lut_interpolate``, ``rsqrt_seed_bits``, ``rsqrt_newton_steps`` and
 ``rounding``.  :func:`sweep_configs` makes one-knob-at-a-time sweeps around a
 base set; combinations that :class:`FormatSet` refuses are kept with the
@@ -67,7 +68,7 @@ from .builtin import builtin_mesh, is_builtin
 from .fixed.dsp import dsp_blocks as _dsp_blocks
 from .fixed.engine import flatten_fixed
 from .fixed.format import Rounding
-from .fixed.formats_set import FORMAT_FIELDS, FormatSet
+from .fixed.formats_set import CONTROLLER_FIELDS, FORMAT_FIELDS, FormatSet
 from .layouts import initial_layout
 from .mesh import Mesh, load_mesh
 from .reference import FlattenParams, FlattenResult, ParameterError, flatten
@@ -177,18 +178,18 @@ def build_cases(meshes: Sequence[str] = STUDY_MESHES, inits: Sequence[str] = ("p
 # ----------------------------------------------------------------------------- knobs
 
 SIGNAL_CLASSES: dict[str, tuple[str, ...]] = {
-    "position": ("position", "delta"),
+    "position": ("position", "delta", "face_edge"),
     "velocity": ("velocity",),
     "length_sq": ("length_sq",),
     "rsqrt": ("rsqrt",),
-    "rest_length": ("rest_length", "error_acc"),
+    "rest_length": ("rest_length", "error_acc", "face_area"),
     "spring": ("spring",),
     "force": ("force", "force_acc"),
     "inv_mass": ("inv_mass",),
     "accel": ("accel",),
     "dt": ("dt", "lut_entry"),
     "half_dt_sq": ("half_dt_sq",),
-    "error": ("error",),
+    "error": ("error", "reciprocal"),
     "damping": ("damping",),
     "area": ("area",),
     "barrier": ("barrier_gain", "barrier_coeff"),
@@ -201,7 +202,8 @@ in the base set are kept); the class's value is the first field's fraction bits.
 """
 assert sorted(f for fs in SIGNAL_CLASSES.values() for f in fs) == sorted(FORMAT_FIELDS)
 
-DATAPATH_FIELDS: tuple[str, ...] = tuple(f for f in FORMAT_FIELDS if f not in ("error", "lut_entry", "power_acc"))
+DATAPATH_FIELDS: tuple[str, ...] = tuple(f for f in FORMAT_FIELDS
+                                         if f not in ("error", "lut_entry") + CONTROLLER_FIELDS)
 """Formats of the node datapath counted by ``total_bits`` (the step generator's and the controller's are not)."""
 
 OTHER_KNOB_VALUES: dict[str, tuple[Any, ...]] = {

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
+from golden_model.fixed.formats_set import CONTROLLER_FIELDS, FORMAT_FIELDS, FormatSet
 from golden_model.reference import ParameterError
 from golden_model.study import (
     DATAPATH_FIELDS,
@@ -432,11 +432,11 @@ def report_markdown(result: StudyResult, chosen_fs: FormatSet | None, command: s
                   f"| field | {base.fs.name} | chosen | Δ width |", "|---|---|---|---:|"]
         for f in FORMAT_FIELDS:
             a, b = getattr(base.fs, f), getattr(chosen_fs, f)
-            mark = "" if f in DATAPATH_FIELDS else " (step generator)"
+            mark = "" if f in DATAPATH_FIELDS else " (controller)" if f in CONTROLLER_FIELDS else " (step generator)"
             lines.append(f"| {f}{mark} | {a} | {'**' + str(b) + '**' if a != b else str(b)} | "
                          f"{b.width - a.width:+d} |")
         lines += ["", f"Knobs: {base.fs.name}: {_knob_line(base.fs)}; chosen: {_knob_line(chosen_fs)}.", "",
-                  "Multipliers of the chosen configuration (18×18 DSP estimate):", "",
+                  "Multipliers of the chosen configuration (18×18 DSP blocks by the RTL's split rule):", "",
                   "| product | width a | width b | count | DSP each |", "|---|---:|---:|---:|---:|"]
         lines += [f"| {n} | {a} | {b} | {c} | {d} |" for n, a, b, c, d in multipliers(chosen_fs)]
         lines += ["", "The chosen configuration as a format-set file (`chosen.json`; "

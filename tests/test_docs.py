@@ -29,3 +29,12 @@ def test_study_doc_states_the_presets_costs():
     stated = [int(g.replace(" ", "")) for g in m.groups()]
     actual = [v for name in ("default", "narrow") for v in cost(FormatSet.preset(name)).key("bits")]
     assert stated == actual
+
+
+def test_study_doc_lists_the_signal_classes():
+    from golden_model.study import SIGNAL_CLASSES
+
+    text = (DOCS / "study.md").read_text()
+    rows = {m.group(1): tuple(f.strip() for f in m.group(2).split(","))
+            for m in re.finditer(r"^\| `(\w+)` \| ([\w, ]+) \|", text, re.M)}
+    assert {k: rows.get(k) for k in SIGNAL_CLASSES} == SIGNAL_CLASSES

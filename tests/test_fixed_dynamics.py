@@ -94,7 +94,7 @@ def test_fixed_and_float_stop_together_within_one_percent_of_the_minimum(generat
         # Developable: E_C* = 0, so the band is 1e-4, three lsbs of the spring's strain u (s6.15,
         # 3e-5). There the default preset's restarts follow quantisation noise (it stops at 110,
         # float at 118; docs/dynamics.md); 20 fraction bits for u and L resolve it.
-        formats = DEFAULT.replace(spring="s6.20", rest_length="u3.20", error_acc="u20.20")
+        formats = DEFAULT.replace(spring="s6.20", rest_length="u3.20", error_acc="u20.20", face_area="u16.20")
     fixed = flatten_fixed(mesh, p0, params, formats)
     float_run = flatten(mesh, p0, params)
     assert fixed.status == float_run.status == "converged", name

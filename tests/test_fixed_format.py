@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from golden_model.fixed import (
+    CONTROLLER_FIELDS,
     FORMAT_FIELDS,
     Format,
     FormatSet,
@@ -355,8 +356,8 @@ def test_narrow_preset_respects_dsp_budget():
     for p in fs.products():
         if p.unit == "node_update" and p.name != "length_sq*rsqrt (L)":
             assert max(p.a.width, p.b.width) <= 18, p
-    d = FormatSet.preset("default")
-    assert all(getattr(fs, f).width <= getattr(d, f).width for f in FORMAT_FIELDS)
+    d = FormatSet.preset("default")  # the controller's formats are not the datapath's cost
+    assert all(getattr(fs, f).width <= getattr(d, f).width for f in FORMAT_FIELDS if f not in CONTROLLER_FIELDS)
 
 
 def test_formatset_validation_messages():

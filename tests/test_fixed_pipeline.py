@@ -12,12 +12,12 @@ import pytest
 
 from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet, SaturationCounter, rsqrt_with_config
-from golden_model.fixed.engine import FixedPointError, Reciprocal, flatten_fixed, prepare
+from golden_model.fixed.engine import FixedEngine, FixedPointError, Reciprocal, flatten_fixed, prepare
 from golden_model.fixed.pipeline import (NeighbourStream, NodeConstants, edge_terms, neighbour_terms,
                                          node_update)
 from golden_model.generate import dome_grid, generated_meshes, grid_faces, grid_uv, rolled_grid
 from golden_model.layouts import initial_layout, tutte_layout
-from golden_model.mesh import Mesh
+from golden_model.mesh import Mesh, signed_areas_2d
 from golden_model.reference import FlattenParams, flatten
 
 DEFAULT = FormatSet.preset("default")
@@ -129,6 +129,96 @@ def test_reciprocals_are_correctly_rounded():
         assert abs(Fraction(2**r.shift, total) - r.mantissa) <= Fraction(1, 2)
 
 
+@pytest.mark.parametrize("rounding", ["half_up", "floor", "nearest_even"])
+def test_normalisation_is_the_exact_quotient_rounded_once(rounding):
+    """``sum·mantissa`` is 64 bits wide in the default set (error_acc u20.16 times reciprocal u1.27): formed
+    in int64 it wrapped for error sums of 2^19 mean edges and up, and a huge error normalised to E = 0."""
+    fs = DEFAULT.replace(rounding=rounding)
+    rng = np.random.default_rng(5)
+    mantissa_bits = fs.reciprocal.width
+    cases = [(fs.error_acc.raw_max, 3 << 16), (fs.error_acc.raw_max, 2**40 - 3), (2**35 + 7, 2**36 - 5), (0, 5)]
+    cases += [(int(t * f), int(t)) for t, f in zip(rng.integers(1, 2**40, 300), rng.uniform(0, 1.2, 300))]
+    cases += [(int(rng.integers(0, 2**36)), int(rng.integers(1, 2**24))) for _ in range(100)]
+    for sum_raw, total in cases:
+        r = Reciprocal.of(total, mantissa_bits)
+        exact = Fraction(sum_raw * r.mantissa, 2 ** (r.shift - fs.error.frac_bits))  # E in error lsbs
+        low = math.floor(exact)
+        if rounding == "floor":
+            want = low
+        elif rounding == "half_up":
+            want = low + (exact - low >= Fraction(1, 2))
+        else:
+            want = low + (exact - low > Fraction(1, 2) or (exact - low == Fraction(1, 2) and low % 2 == 1))
+        assert r.normalise(sum_raw, fs.error, fs.rounding) == min(want, fs.error.raw_max), (sum_raw, total)
+    assert Reciprocal.of(3 << 16, mantissa_bits).normalise(fs.error_acc.raw_max, fs.error, fs.rounding) \
+        == fs.error.raw_max
+
+
+def _grid(n: int) -> Mesh:
+    uv = grid_uv(n, n, n - 1.0, n - 1.0)
+    return Mesh(np.column_stack([uv, np.zeros(len(uv))]), grid_faces(n, n), name=f"grid{n}")
+
+
+@pytest.mark.parametrize("fs", [DEFAULT, NARROW], ids=["default", "narrow"])
+def test_a_layout_with_one_huge_triangle(fs):
+    """A 100 x 100 grid grown to a layout with one triangle of doubled area 2^20 - 1 mean edges^2.
+
+    Positions grow up to +-1024 while the layout relaxes (the initial layout must fit +-512).
+    Here one corner triangle of the grid spans about [-512, 512]^2; its far corners' other
+    triangles lie along the grid's diagonal (little area). At the default set's 44 product
+    fraction bits its doubled area is (2^20 - 1) * 2^44 > 2^63: numpy's int64 wrapped it to
+    -2^44, so E_S came out 0.05 (and the step size with it) with no saturation counted, where
+    it is 53. Now the edges saturate into face_edge (counted) and E_S is 1; the narrow set's
+    face_edge holds every edge of its positions, so its areas, E_S and fold count are exact.
+    """
+    n = 100
+    mesh = _grid(n)
+    at = lambda i, j: j * n + i  # noqa: E731 (grid vertex i, j)
+    c1, a1, far, d1 = at(n - 2, 1), at(n - 2, 0), at(n - 1, 0), at(n - 1, 1)
+    p0 = mesh.vertices[:, :2] - mesh.vertices[c1, :2]  # c1 at the origin
+    params = FlattenParams(density="auto", max_iter=1)
+    problem = prepare(mesh, p0, params, fs)
+    assert problem.scale_exp == 0
+    layout = p0.copy()
+    layout[[a1, far, d1]] = [[-512, -513], [512, -512], [513, 512]]  # a1, d1 by the diagonal through c1
+    assert [tuple(f) for f in mesh.faces if far in f] == [(a1, far, d1)]
+    raw = np.round(layout * 2**fs.position.frac_bits).astype(np.int64)
+
+    counter = SaturationCounter()
+    engine = FixedEngine(problem, counter)
+    engine.raw_positions = raw
+    fixed = engine.measure()
+    exact = flatten(mesh, layout, params).initial
+    assert exact.area_error > 50 and engine.errors[0] == fs.error.raw_max  # E_S >= 1 clamps
+    if fs is DEFAULT:  # edges of 1024 mean edges do not fit s8.22: counted (and fold counts approximate)
+        assert counter.saturations["face_edge"] > 0
+    else:
+        assert "face_edge" not in counter.saturations and "face_area" not in counter.saturations
+        assert (fixed.folded, fixed.flipped) == (exact.folded, exact.flipped) == (0, 0)
+        e_s = np.abs(mesh.face_areas - np.abs(signed_areas_2d(layout, mesh.faces))).sum() / mesh.face_areas.sum()
+        assert e_s == pytest.approx(exact.area_error, rel=1e-12)
+
+
+def test_controller_products_are_checked():
+    with pytest.raises(ValueError, match=r"product face_edge\*face_edge -> face_area \(E_S cross product\) needs "
+                                         r"32 \+ 32 = 64"):
+        DEFAULT.replace(face_edge="s9.22", face_area="u18.16")
+    with pytest.raises(ValueError, match="face_area u16.16 needs at least 18 integer bits"):
+        DEFAULT.replace(face_edge="s9.22")
+    with pytest.raises(ValueError, match=r"face_edge s8.21 needs position's fraction bits \(22\)"):
+        DEFAULT.replace(face_edge="s8.21")
+    with pytest.raises(ValueError, match=r"face_area u16.15 needs error_acc's fraction bits \(16\)"):
+        DEFAULT.replace(face_area="u16.15")
+    with pytest.raises(ValueError, match=r"reciprocal u1.20 must be u1.F \(a mantissa in \[1, 2\)\) with more "
+                                         "fraction bits than error u0.20"):
+        DEFAULT.replace(reciprocal="u1.20")
+    controller = {p.name: p for p in DEFAULT.products() if p.unit == "controller"}
+    assert set(controller) == {"face_edge*face_edge -> face_area (E_S cross product)",
+                               "error_acc*reciprocal -> error (E_S, E_C normalisation)"}
+    # the normalisation is a scalar formed as a Python int (64 bits here), the cross products int64
+    assert not controller["error_acc*reciprocal -> error (E_S, E_C normalisation)"].int64
+
+
 def _strip(n: int) -> Mesh:
     uv = grid_uv(n, 2, float(n - 1), 1.0)
     return Mesh(np.column_stack([uv, np.zeros(len(uv))]), grid_faces(n, 2), name="strip")
@@ -231,7 +321,7 @@ def test_cli_fixed_engine(tmp_path):
 
 @pytest.mark.parametrize("formats, message", [
     ("nosuchpreset", "unknown FormatSet preset"),
-    ("bad.json", "product spring*delta"),
+    ("bad.json", "product spring*spring (1/2 C * u)"),
 ])
 def test_cli_bad_formats(tmp_path, formats, message):
     spec = DEFAULT.to_dict()

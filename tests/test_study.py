@@ -37,6 +37,7 @@ def tiny_formats(**changes) -> FormatSet:
         spring="s3.8", force="s3.8", force_acc="s4.8", inv_mass="u3.8", accel="s4.8", dt="u0.12",
         half_dt_sq="u0.12", error_acc="u10.8", error="u0.10", lut_entry="u0.12", damping="u1.10",
         area="s6.8", barrier_gain="u4.8", barrier_coeff="u3.8", power="s6.8", power_acc="s12.8",
+        face_edge="s5.8", face_area="u10.8", reciprocal="u1.18",
         rsqrt_seed_bits=6, rsqrt_newton_steps=1, lut_index_bits=6, lut_interpolate=True, name="tiny")
     return fs.replace(**changes) if changes else fs
 
@@ -67,7 +68,7 @@ def test_cost_model_by_hand():
     assert cost(two_steps).dsp == 20 + 7 + 6
     # delta 20 bits (a signed product's slices: 17 + 3): delta^2 and the barrier's cross product
     # 2x2 x2 each, s*delta and c*D 1x2 x2 each
-    wider_delta = tiny_formats(delta="s3.16", position="s4.16")
+    wider_delta = tiny_formats(delta="s3.16", position="s4.16", face_edge="s5.16")
     assert cost(wider_delta).dsp == 30 - 2 - 2 + 8 + 4 - 2 - 2 + 8 + 4
     assert cost(wider_delta).total_bits == 242 + 16
     no_interp = tiny_formats(lut_interpolate=False)
@@ -91,7 +92,7 @@ def test_presets_cost_ordering():
 def test_class_changes_keep_tied_offsets():
     d = FormatSet.preset("default")
     ch = class_changes(d, "rest_length", d.rest_length.frac_bits - 3)
-    assert set(ch) == {"rest_length", "error_acc"}
+    assert set(ch) == {"rest_length", "error_acc", "face_area"}
     fs = d.replace(**ch)
     assert fs.error_acc.frac_bits - fs.rest_length.frac_bits == d.error_acc.frac_bits - d.rest_length.frac_bits
     ch = class_changes(d, "position", 12)

@@ -22,7 +22,7 @@ from .format import (
     sub,
     to_float,
 )
-from .formats_set import FORMAT_FIELDS, PRESET_DIR, UNITS, FormatSet, Product
+from .formats_set import CONTROLLER_FIELDS, FORMAT_FIELDS, PRESET_DIR, UNITS, FormatSet, Product
 from .rsqrt import (
     RSQRT_GUARD_BITS,
     RsqrtConfig,
@@ -55,7 +55,7 @@ __all__ = [
     "MAX_PRODUCT_WIDTH", "MAX_WIDTH", "Format", "Overflow", "Rounding", "SaturationCounter",
     "add", "apply_overflow", "as_raw", "mul", "quantize", "requantize", "shift_round", "sub",
     "to_float",
-    "FORMAT_FIELDS", "PRESET_DIR", "UNITS", "FormatSet", "Product",
+    "CONTROLLER_FIELDS", "FORMAT_FIELDS", "PRESET_DIR", "UNITS", "FormatSet", "Product",
     "RSQRT_GUARD_BITS", "RsqrtConfig", "bit_length", "measure_rsqrt", "rsqrt", "rsqrt_exact",
     "rsqrt_seed_table", "rsqrt_stages", "rsqrt_with_config",
     "DT_MAX", "DT_MIN", "LUT_RATE", "LUT_SCALE", "dt_constant", "exp_lut", "exp_table",

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..mesh import Mesh, folded_by_area, layout_orientation
 from ..reference import FlattenParams, FlattenResult, Measurement, ParameterError, barrier_energy, node_weights, run
-from .format import Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
+from .format import MAX_PRODUCT_WIDTH, Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
 from .formats_set import FormatSet
 from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum,
                        node_power, node_terms)
@@ -43,8 +43,6 @@ __all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_
 SAT = Overflow.SATURATE
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
 
-#: Extra fraction bits of the reciprocals' mantissas beyond the error format's.
-RECIPROCAL_GUARD_BITS = 8
 #: The initial layout must fit in this fraction of the position range (the
 #: layout may grow while it relaxes).
 POSITION_HEADROOM = 0.5
@@ -69,7 +67,8 @@ class Reciprocal:
     """``1/total`` as an integer mantissa and a shift: ``x/total ≈ x·mantissa·2^-shift``.
 
     Used by the controller to normalise an error sum into ``fs.error`` with one
-    multiply and one rounding shift.
+    multiply and one rounding shift; the mantissa has ``fs.reciprocal``'s width
+    (``u1.F``: in [1, 2)).
     """
 
     mantissa: int
@@ -87,8 +86,19 @@ class Reciprocal:
         return cls(mantissa, shift)
 
     def normalise(self, sum_raw: int, fmt: Format, rounding: Rounding) -> int:
-        """``sum/total`` raw in ``fmt`` (``sum`` at the fraction bits ``total`` had)."""
-        return int(requantize(np.int64(sum_raw) * np.int64(self.mantissa), self.shift, fmt, rounding, SAT))
+        """``sum/total`` raw in ``fmt`` (``sum >= 0`` at the fraction bits ``total`` had).
+
+        The product ``sum·mantissa`` is exact (a Python int: ``error_acc`` times ``reciprocal``
+        is 64 bits in the default set, too wide for int64). The rounding reads only the
+        bits from the result's half-lsb up and whether any bit below is set, so those are
+        kept (the lowest as a sticky bit) and rounded by :func:`requantize` as everywhere
+        else; a value past ``fmt``'s range saturates the same at any size.
+        """
+        drop = self.shift - fmt.frac_bits  # >= 2: reciprocal has more fraction bits than fmt
+        product = int(sum_raw) * self.mantissa
+        kept = (product >> (drop - 2)) | int(product & ((1 << (drop - 2)) - 1) != 0)
+        kept = min(kept, (fmt.raw_max + 1) << 2)
+        return int(requantize(np.int64(kept), fmt.frac_bits + 2, fmt, rounding, SAT))
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,7 +112,7 @@ class FixedProblem:
     stream: NeighbourStream
     half_spring: int
     damping: int
-    face_areas: np.ndarray  # (F,) raw [error_acc], scaled by 4**k
+    face_areas: np.ndarray  # (F,) raw [face_area], scaled by 4**k
     area_reciprocal: Reciprocal
     length_reciprocal: Reciprocal
     orientation: np.ndarray  # (F,) ±1 of the fixed-point P0
@@ -253,14 +263,15 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
     barrier = _barrier_entries(mesh, params, fs, scale, winding) if params.barrier else None
     stream = NeighbourStream(rings.indptr, rings.neighbour, rest_raw[rings.edge_id], inv_mass_raw, barrier,
                              inv_mass_barrier_raw)
-    acc_frac = fs.error_acc.frac_bits
-    face_areas = quantize(mesh.face_areas * scale * scale, Format(False, 62 - acc_frac, acc_frac),
-                          HOST_ROUNDING, SAT)
-    mantissa_bits = fs.error.frac_bits + RECIPROCAL_GUARD_BITS
-    area_total = int(face_areas.sum())
-    length_total = int(requantize(stream.rest.sum(), fs.rest_length.frac_bits,
-                                  Format(False, 62 - acc_frac, acc_frac), HOST_ROUNDING, SAT))
-    orientation = np.where(_doubled_areas(positions, mesh.faces) >= 0, 1, -1)
+    if mesh.n_faces >= 1 << (MAX_PRODUCT_WIDTH - fs.face_area.width):  # Σ|A − |A'|| must fit int64
+        raise FixedPointError(f"the mesh has {mesh.n_faces} triangles; the area sum of format set '{fs.name}' "
+                              f"takes fewer than 2^{MAX_PRODUCT_WIDTH - fs.face_area.width} ({fs.face_area})")
+    face_areas = _quantize_checked(mesh.face_areas * scale * scale, fs.face_area, "a triangle's area", fs,
+                                   "the mesh's triangles vary too much in size for these formats")
+    mantissa_bits = fs.reciprocal.width
+    area_total = int(face_areas.sum())  # [face_area], exact
+    length_total = int(stream.rest.sum()) << (fs.error_acc.frac_bits - fs.rest_length.frac_bits)  # [error_acc]
+    orientation = np.where(_doubled_areas(fs, positions, mesh.faces) >= 0, 1, -1)
     return FixedProblem(fs, mesh, params, k, stream, half_spring, damping, face_areas,
                         Reciprocal.of(area_total, mantissa_bits), Reciprocal.of(length_total, mantissa_bits),
                         orientation, positions, model_density, winding)
@@ -300,22 +311,29 @@ def _barrier_entries(mesh: Mesh, params: FlattenParams, fs: FormatSet, scale: fl
     return BarrierEntries(np.where(has, second, rings.neighbour), threshold_raw, gain_raw)
 
 
-def _doubled_areas(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Twice the signed areas, exact, at twice the position fraction bits."""
-    x, y = positions[:, 0], positions[:, 1]
-    corners = faces.T
-    ax, bx, cx = (np.take(x, c) for c in corners)
-    ay, by, cy = (np.take(y, c) for c in corners)
-    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+def _doubled_areas(fs: FormatSet, positions: np.ndarray, faces: np.ndarray,
+                   counter: SaturationCounter | None = None) -> np.ndarray:
+    """Twice the signed areas at twice ``face_edge``'s fraction bits.
+
+    The edges ``P_b − P_a``, ``P_c − P_a`` are narrowed to ``face_edge`` (saturating, counted
+    as ``face_edge``), so the cross product fits int64 (checked by :class:`FormatSet`); with
+    position's fraction bits it is exact for every triangle whose edges are in range.
+    """
+    def edges(coord: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        a, b, c = (np.take(coord, k) for k in faces.T)
+        return tuple(requantize(d, fs.position.frac_bits, fs.face_edge, fs.rounding, SAT, counter, "face_edge")
+                     for d in (b - a, c - a))
+
+    (ux, vx), (uy, vy) = edges(positions[:, 0]), edges(positions[:, 1])
+    return ux * vy - uy * vx
 
 
 def area_error(problem: FixedProblem, positions: np.ndarray, counter: SaturationCounter | None = None) -> int:
-    """``E_S`` raw [error]: Σ|A − |A'|| [error_acc] times 1/ΣA."""
+    """``E_S`` raw [error]: Σ|A − |A'|| [error_acc] times 1/ΣA; the areas |A'| in [face_area]."""
     fs = problem.fs
-    doubled = np.abs(_doubled_areas(positions, problem.mesh.faces))
-    area = requantize(doubled, 2 * fs.position.frac_bits + 1, Format(False, 62 - fs.error_acc.frac_bits,
-                      fs.error_acc.frac_bits), fs.rounding, SAT)
-    total = requantize(np.abs(problem.face_areas - area).sum(), fs.error_acc.frac_bits, fs.error_acc, fs.rounding,
+    doubled = np.abs(_doubled_areas(fs, positions, problem.mesh.faces, counter))
+    area = requantize(doubled, 2 * fs.face_edge.frac_bits + 1, fs.face_area, fs.rounding, SAT, counter, "face_area")
+    total = requantize(np.abs(problem.face_areas - area).sum(), fs.face_area.frac_bits, fs.error_acc, fs.rounding,
                        SAT, counter, "area_sum")
     return problem.area_reciprocal.normalise(int(total), fs.error, fs.rounding)
 
@@ -329,13 +347,17 @@ def shape_error(problem: FixedProblem, error_sums: np.ndarray, counter: Saturati
 
 
 def folded_count(problem: FixedProblem, positions: np.ndarray) -> int:
-    """Faces whose exact orientation disagrees with the whole pattern's (the honest fold count)."""
-    return int(np.count_nonzero(folded_by_area(_doubled_areas(positions, problem.mesh.faces))))
+    """Faces whose exact orientation disagrees with the whole pattern's (the honest fold count).
+
+    Exact for every triangle whose edges fit ``face_edge``; a longer edge saturates (counted
+    by :func:`area_error` on the same positions), and that triangle's sign may then be wrong.
+    """
+    return int(np.count_nonzero(folded_by_area(_doubled_areas(problem.fs, positions, problem.mesh.faces))))
 
 
 def flipped_count(problem: FixedProblem, positions: np.ndarray) -> int:
-    """Faces whose exact orientation is opposite to the fixed-point ``P0``'s."""
-    return int(np.sum(problem.orientation * _doubled_areas(positions, problem.mesh.faces) < 0))
+    """Faces whose exact orientation is opposite to the fixed-point ``P0``'s (as :func:`folded_count`)."""
+    return int(np.sum(problem.orientation * _doubled_areas(problem.fs, positions, problem.mesh.faces) < 0))
 
 
 class FixedEngine:

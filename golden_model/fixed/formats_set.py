@@ -6,10 +6,13 @@ size, default rounding).  Presets live as JSON in ``golden_model/data/formats/``
 (the only place their values are written down); the RTL and the golden model
 both take every width from the loaded object.
 
-Validation (``__post_init__``) guarantees that every multiplication the pipeline
-performs has an exact product that fits int64 (sum of operand widths <= 63),
-that signals that are non-negative by construction use unsigned formats, and
-that the exp-LUT indexing fits the error format.
+Validation (``__post_init__``) guarantees that every multiplication the golden
+model forms in numpy int64 — the datapath's, the rsqrt unit's, the step
+generator's and the controller's E_S cross products, all listed by
+:meth:`FormatSet.products` — has an exact product that fits int64 (sum of operand
+widths <= 63), that signals that are non-negative by construction use unsigned
+formats, that the exp-LUT indexing fits the error format, and that the
+controller's ``face_area`` holds every area its ``face_edge`` edges can span.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from .format import MAX_PRODUCT_WIDTH, Format, Rounding
 from .rsqrt import RsqrtConfig
 from .steplut import lut_slope_bits
 
-__all__ = ["FormatSet", "FORMAT_FIELDS", "PRESET_DIR", "Product", "UNITS"]
+__all__ = ["FormatSet", "FORMAT_FIELDS", "CONTROLLER_FIELDS", "PRESET_DIR", "Product", "UNITS"]
 
 PRESET_DIR = Path(__file__).resolve().parent.parent / "data" / "formats"
 """Directory holding the preset JSON files (``<name>.json``)."""
@@ -52,13 +55,20 @@ FORMAT_FIELDS: tuple[str, ...] = (
     "barrier_coeff",
     "power",
     "power_acc",
+    "face_edge",
+    "face_area",
+    "reciprocal",
 )
-"""Names of the Format-valued fields, in pipeline order."""
+"""Names of the Format-valued fields, in pipeline order (the controller's last)."""
 
-_SIGNED = ("position", "velocity", "delta", "spring", "force", "force_acc", "accel", "area", "power", "power_acc")
+CONTROLLER_FIELDS: tuple[str, ...] = ("power_acc", "face_edge", "face_area", "reciprocal")
+"""Formats of the controller around the RTL (``golden_model.fixed.engine``), not of the datapath."""
+
+_SIGNED = ("position", "velocity", "delta", "spring", "force", "force_acc", "accel", "area", "power", "power_acc",
+           "face_edge")
 _UNSIGNED = (
     "rest_length", "length_sq", "rsqrt", "inv_mass", "dt", "half_dt_sq",
-    "error_acc", "error", "lut_entry", "damping", "barrier_gain", "barrier_coeff",
+    "error_acc", "error", "lut_entry", "damping", "barrier_gain", "barrier_coeff", "face_area", "reciprocal",
 )
 
 
@@ -100,7 +110,12 @@ class FormatSet:
     triangle area X and its threshold, ``barrier_gain`` the per-entry
     G = mu*C/(4*X*), ``barrier_coeff`` c = G*(threshold - X)+, ``power`` a node's
     F.V, ``power_acc`` their sum S; ``dt`` also carries the momentum beta_k and
-    ``inv_mass`` the weights w_i = 2/(C*deg_i).
+    ``inv_mass`` the weights w_i = 2/(C*deg_i).  The controller's E_S and E_C
+    (``golden_model.fixed.engine``): ``face_edge`` a triangle's edge P_b - P_a of the
+    layout (narrowing only saturates when it has position's fraction bits, so the
+    cross product is exact), ``face_area`` a triangle's area |A'| and the host's A
+    (wide enough for every area of edges that fit ``face_edge``), ``reciprocal`` the
+    mantissa of 1/total in [1, 2) (E = sum * mantissa * 2^-shift).
 
     Format fields accept ``"s3.16"``-style strings (converted on construction).
     """
@@ -127,6 +142,9 @@ class FormatSet:
     barrier_coeff: Format
     power: Format
     power_acc: Format
+    face_edge: Format
+    face_area: Format
+    reciprocal: Format
     rsqrt_seed_bits: int
     rsqrt_newton_steps: int
     lut_index_bits: int
@@ -166,6 +184,7 @@ class FormatSet:
             raise ValueError(f"FormatSet {self.name!r}: lut_interpolate must be a bool")
         self._check_signedness()
         self._check_step_path()
+        self._check_controller()
         try:
             self.rsqrt_config()
         except ValueError as exc:
@@ -198,6 +217,23 @@ class FormatSet:
             raise ValueError(
                 f"FormatSet {n!r}: lut_index_bits {self.lut_index_bits} must be in "
                 f"1..error.frac_bits ({self.error.frac_bits})"
+            )
+
+    def _check_controller(self) -> None:
+        n = self.name
+        for fmt, of in (("face_edge", "position"), ("face_area", "error_acc")):
+            if getattr(self, fmt).frac_bits != getattr(self, of).frac_bits:
+                raise ValueError(f"FormatSet {n!r}: {fmt} {getattr(self, fmt)} needs {of}'s fraction bits "
+                                 f"({getattr(self, of).frac_bits}) so that E_S's areas and sums are exact")
+        if self.face_area.int_bits < 2 * self.face_edge.int_bits:
+            raise ValueError(
+                f"FormatSet {n!r}: face_area {self.face_area} needs at least {2 * self.face_edge.int_bits} integer "
+                f"bits to hold the area of every triangle whose edges fit face_edge {self.face_edge}"
+            )
+        if self.reciprocal.int_bits != 1 or self.reciprocal.frac_bits <= self.error.frac_bits:
+            raise ValueError(
+                f"FormatSet {n!r}: reciprocal {self.reciprocal} must be u1.F (a mantissa in [1, 2)) with more "
+                f"fraction bits than error {self.error}"
             )
 
     # ------------------------------------------------------------------ derived
@@ -249,6 +285,15 @@ class FormatSet:
                                  Operand(lut_slope_bits(self.lut_index_bits, self.lut_entry), False),
                                  Operand(self.lut_frac_bits, False), 2, "step_generator"))
         prods.append(Product("dt*dt -> half_dt_sq", op(self.dt), op(self.dt), 1, "step_generator"))
+        # The controller: E_S's cross products of the layout's triangle edges (numpy int64, over
+        # all triangles) and the normalisations of the E_S and E_C sums (one scalar each per
+        # iteration, formed exactly as a Python int: 64 bits in the default set).
+        prods += [
+            Product("face_edge*face_edge -> face_area (E_S cross product)", op(self.face_edge), op(self.face_edge),
+                    2, "controller"),
+            Product("error_acc*reciprocal -> error (E_S, E_C normalisation)", op(self.error_acc),
+                    op(self.reciprocal), 2, "controller", int64=False),
+        ]
         return prods
 
     def rsqrt_config(self) -> RsqrtConfig:
