@@ -43,6 +43,10 @@ __all__ = [
     "FlattenResult",
     "flatten",
     "variable_step",
+    "step_decay",
+    "STEP_MIN",
+    "STEP_SCALE",
+    "STEP_RATE",
     "spring_forces",
     "spring_energy",
     "barrier_forces",
@@ -375,11 +379,23 @@ def iterations_to_within(shape_errors, target: float, rel: float = 0.01, floor: 
     return None if outside[-1] + 1 >= len(errors) else int(outside[-1] + 1)
 
 
-def variable_step(area_error: float, shape_error: float) -> float:
-    """Eqs. 18–20 with each error clamped to [0, 1] first."""
-    e_s = min(max(area_error, 0.0), 1.0)
-    e_c = min(max(shape_error, 0.0), 1.0)
-    return 0.01 + 0.1 * (math.exp(-5.0 * (1.0 - e_s)) + math.exp(-5.0 * (1.0 - e_c)))
+#: The variable step (eqs. 18–20): ``Δt = STEP_MIN + STEP_SCALE·(step_decay(E_S) + step_decay(E_C))``.
+#: The only place the formula is written; the fixed-point step generator's table
+#: (``golden_model.fixed.steplut``) is built from these constants and checked against it.
+STEP_MIN = 0.01
+STEP_SCALE = 0.1
+STEP_RATE = 5
+
+
+def step_decay(error):
+    """``exp(−STEP_RATE·(1 − E))`` with ``E`` clamped to [0, 1]; a float or an array."""
+    return np.exp(-STEP_RATE * (1.0 - np.clip(error, 0.0, 1.0)))
+
+
+def variable_step(area_error, shape_error):
+    """Eqs. 18–20 with each error clamped to [0, 1] first; floats or arrays (then elementwise)."""
+    dt = STEP_MIN + STEP_SCALE * (step_decay(area_error) + step_decay(shape_error))
+    return float(dt) if np.ndim(dt) == 0 else dt
 
 
 # --------------------------------------------------------------------------- measurement

@@ -8,6 +8,7 @@ an operand of the wrong width or a rule that differs from the RTL's shows as a c
 """
 
 import re
+from pathlib import Path
 
 import pytest
 from amaranth.back import rtlil
@@ -71,3 +72,11 @@ def test_split_rule():
     assert len(dsp_partial_products(Operand(18, False), Operand(18, True))) == 2
     assert dsp_blocks(Operand(18, False), Operand(18, True)) == 1
     assert dsp_blocks(Operand(26, True), Operand(26, True)) == 4
+
+
+def test_dsp_width_is_defined_once():
+    """The study and the RTL read the one ``DSP_WIDTH`` (``golden_model/fixed/dsp.py``)."""
+    root = Path(__file__).resolve().parents[1]
+    defining = [str(p.relative_to(root)) for d in ("golden_model", "hdl", "sim") for p in (root / d).rglob("*.py")
+                if re.search(r"^DSP_WIDTH\s*=", p.read_text(), re.M)]
+    assert defining == ["golden_model/fixed/dsp.py"]

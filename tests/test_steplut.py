@@ -56,6 +56,19 @@ def test_step_size_float_formula():
                                + 0.1 * math.exp(-3.5), rtol=1e-15)
 
 
+def test_the_step_formula_is_written_once():
+    """The step generator's float model is the float reference's ``variable_step``, constants and all."""
+    from golden_model import reference
+    from golden_model.fixed import steplut
+
+    assert steplut.step_size_float is reference.variable_step
+    assert (steplut.DT_MIN, steplut.LUT_SCALE, steplut.LUT_RATE) == (reference.STEP_MIN, reference.STEP_SCALE,
+                                                                     reference.STEP_RATE)
+    e = np.linspace(-0.5, 1.5, 21)
+    assert np.array_equal(lut_value_float(e), reference.STEP_SCALE * reference.step_decay(e))
+    assert reference.variable_step(0.3, 0.8) == float(step_size_float(np.array([0.3]), np.array([0.8]))[0])
+
+
 # ----------------------------------------------------------------- table
 @pytest.mark.parametrize("n, fmt_s", [(8, "u0.18"), (7, "u0.16"), (4, "u0.10"), (10, "u0.30")])
 def test_exp_table_correctly_rounded(n, fmt_s):

@@ -1,7 +1,9 @@
 """Bit-accurate model of the variable step-size generator (exp lookup table).
 
 Algorithm (float): ``dt = 0.01 + 0.1*exp(-5(1 - E_S)) + 0.1*exp(-5(1 - E_C))`` with
-the error measures ``E_S, E_C`` clamped to [0, 1].  See :func:`step_size_float`.
+the error measures ``E_S, E_C`` clamped to [0, 1]: the float reference's
+:func:`~golden_model.reference.variable_step` (the one place the formula and its
+constants are written; :func:`step_size_float` is that function).
 
 Fixed point (all formats from a FormatSet ``fs``):
 
@@ -36,6 +38,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..reference import STEP_MIN as DT_MIN, STEP_RATE as LUT_RATE, STEP_SCALE as LUT_SCALE, step_decay, variable_step
 from .format import (
     Format,
     Overflow,
@@ -68,28 +71,20 @@ __all__ = [
     "measure_step_size",
 ]
 
-DT_MIN = 0.01
-"""Constant term of dt (quantised in the dt format)."""
-LUT_SCALE = 0.1
-"""Factor of each exp term, folded into the table entries."""
-LUT_RATE = 5
-"""Rate of the exponential: exp(-LUT_RATE * (1 - E))."""
+# DT_MIN: the constant term of dt (quantised in the dt format); LUT_SCALE: the factor of each
+# exp term, folded into the table entries; LUT_RATE: the rate of exp(-LUT_RATE * (1 - E)).
 DT_MAX = DT_MIN + 2 * LUT_SCALE
 """Largest step (E_S = E_C = 1)."""
+step_size_float = variable_step
+"""Float reference ``dt = 0.01 + 0.1*exp(-5(1-E_S)) + 0.1*exp(-5(1-E_C))``: :func:`~golden_model.reference.variable_step`."""
 
 _DEC_PREC = 60  # decimal digits used to evaluate the exact table entries
 _TIE_MARGIN = Decimal(10) ** -40  # relative distance from a rounding tie that is decided safely
 
 
 def lut_value_float(e: np.ndarray | float) -> np.ndarray:
-    """``0.1*exp(-5(1 - E))`` in float64 (E clamped to [0, 1])."""
-    e = np.clip(np.asarray(e, dtype=np.float64), 0.0, 1.0)
-    return LUT_SCALE * np.exp(-LUT_RATE * (1.0 - e))
-
-
-def step_size_float(e_s: np.ndarray | float, e_c: np.ndarray | float) -> np.ndarray:
-    """Float reference ``dt = 0.01 + 0.1*exp(-5(1-E_S)) + 0.1*exp(-5(1-E_C))``."""
-    return DT_MIN + lut_value_float(e_s) + lut_value_float(e_c)
+    """``0.1*exp(-5(1 - E))`` in float64 (E clamped to [0, 1]): one term of :func:`step_size_float`."""
+    return LUT_SCALE * step_decay(np.asarray(e, dtype=np.float64))
 
 
 @lru_cache(maxsize=64)
