@@ -10,8 +10,8 @@ By construction of the RTL the two lookup lanes (``area_error`` -> ``v_S``, ``sh
 are a function ``H`` of ``v_sum`` alone: ``dt = sat(sat(requant(v_sum)) + C)`` and
 ``half_dt_sq`` a function of ``dt``. So the RTL computes ``H(L_S(a) + L_C(b))`` and the golden
 model ``H'(v(a) + v(b))``. When ``lut_entry`` and ``dt`` have the same lsb and ``C + 2 max T``
-fits ``dt`` (both presets; checked below), ``dt = C + v_sum`` exactly, so ``dt`` is injective in
-``v_sum``. Then
+fits ``dt`` (:func:`separable`; both presets, asserted by ``test_presets_are_separable`` and by the
+sweep itself), ``dt = C + v_sum`` exactly, so ``dt`` is injective in ``v_sum``. Then
 
 1. sweep 1, all ``a`` with ``b = b0``: equal ``dt`` gives ``L_S(a) + L_C(b0) = v(a) + v(b0)``;
 2. sweep 2, all ``b`` with ``a = a0``: ``L_S(a0) + L_C(b) = v(a0) + v(b)``;
@@ -43,6 +43,25 @@ from amaranth.hdl import UnusedElaboratable
 from golden_model.fixed import FormatSet, dt_constant, exp_lut, exp_table, step_size
 from hdl import StepGenerator
 from test_hdl_rsqrt import PRESETS, pack, run_stream, unpack
+
+
+def separable(fs):
+    """The precondition of steps 1-3 of the module docstring: ``dt = C + v_S + v_C`` exactly, that is
+    ``lut_entry`` and ``dt`` have the same lsb (no rounding) and ``C + 2 max T`` fits ``dt`` (no saturation)."""
+    table = exp_table(fs.lut_index_bits, fs.lut_entry)
+    return (fs.lut_entry.frac_bits == fs.dt.frac_bits
+            and dt_constant(fs.dt) + 2 * int(table.max()) <= fs.dt.raw_max)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_presets_are_separable(preset):
+    """The whole-domain argument holds for every preset (the slow sweep asserts it again)."""
+    assert separable(FormatSet.preset(preset))
+
+
+def test_separable_refuses_a_rounded_sum():
+    # entries finer than dt: v_S + v_C is rounded into dt, so dt no longer tells v_sum apart
+    assert not separable(FormatSet.preset("default").replace(lut_entry="u0.21"))
 
 
 def step_key(fs):
@@ -138,13 +157,9 @@ def test_lane_sweeps_and_every_reachable_sum(preset):
     """Sweeps 1-3 of the module docstring (light stalls): every input pair when the lanes are
     swept whole and the step path is separable."""
     fs = FormatSet.preset(preset)
-    table = exp_table(fs.lut_index_bits, fs.lut_entry)
-    # Preconditions of steps 1-3: dt = C + v_S + v_C exactly (no rounding, no saturation).
-    separable = (fs.lut_entry.frac_bits == fs.dt.frac_bits
-                 and dt_constant(fs.dt) + 2 * int(table.max()) <= fs.dt.raw_max)
+    assert separable(fs), "steps 1-3 need dt = C + v_S + v_C exactly (no rounding, no saturation)"
     e, exhaustive = lane_inputs(fs)
-    print(f"{preset}: lanes {'whole domain' if exhaustive else 'dense sweep'} ({e.size} values"
-          f"), separable {separable}")
+    print(f"{preset}: lanes {'whole domain' if exhaustive else 'dense sweep'} ({e.size} values)")
     a0, b0 = fs.error.raw_max, 0
     sum_a, sum_b = pairs_for_every_sum(fs)
     area = np.concatenate([e, np.full_like(e, a0), sum_a])
@@ -164,13 +179,25 @@ def test_random_pairs_with_stalls(preset):
     check_step(StepGenerator(fs), area, shape, seed=3, p_valid=0.7, p_ready=0.7)
 
 
-@pytest.mark.parametrize("preset", PRESETS)
-def test_throughput_and_latency(preset):
+#: The documented latencies (``docs/hardware.md``, the StepGenerator docstring; ``tests/test_docs.py``
+#: checks that they say these numbers): the presets; without interpolation; a 20-bit ``dt``, whose
+#: square takes 2 x 2 partial products and so two adder levels.
+LATENCY = {"default": 16, "narrow": 16, "no_interpolation": 11, "wide_dt": 18}
+LATENCY_FORMATS = {"no_interpolation": dict(lut_interpolate=False),
+                   "wide_dt": dict(dt="u0.20", half_dt_sq="u0.20", lut_entry="u0.20")}
+
+
+def latency_case(name):
+    return FormatSet.preset(name) if name in PRESETS else FormatSet.preset("default").replace(**LATENCY_FORMATS[name])
+
+
+@pytest.mark.parametrize("case", LATENCY)
+def test_throughput_and_latency(case):
     """No stalls: N pairs in N consecutive edges and out from edge ``latency`` on (N + latency
     edges: no bubbles); with input gaps each output leaves ``latency`` edges after its input."""
-    fs = FormatSet.preset(preset)
+    fs = latency_case(case)
     dut = StepGenerator(fs)
-    assert dut.latency == (16 if fs.lut_interpolate and fs.lut_frac_bits else 11)
+    assert dut.latency == LATENCY[case]
     rng = np.random.default_rng(4)
     area, shape = rng.integers(0, fs.error.raw_max + 1, (2, 400))
     run = check_step(dut, area, shape)
