@@ -1,7 +1,7 @@
 """A thin serialising I/O wrapper, so that a bare core with hundreds of ports can be placed and routed.
 
 A core such as :class:`~hdl.node_update.NodeUpdate` has more port bits than an FPGA package has
-pins (458 for the default preset against 205 user I/O on an ECP5-85F CABGA381 and 39 on an
+pins (631 port bits for the default preset against 205 user I/O on an ECP5-85F CABGA381 and 39 on an
 iCE40 UP5K SG48). :class:`SerialWrapper` puts every input port of the core behind one shift
 register and every output port in front of another, so the wrapped design needs four signal
 pins besides ``clk`` and ``rst``:

@@ -51,7 +51,7 @@ class RsqrtUnit(wiring.Component):
     Members
     -------
     i : :py:`In(stream.Signature(unsigned(config.fmt_in.width)))`
-        Raw ``X`` in ``config.fmt_in`` (``length_sq``: u7.16 in the default preset).
+        Raw ``X`` in ``config.fmt_in`` (``length_sq``: u7.34 in the default preset).
     o : :py:`Out(stream.Signature(output_layout))`
         :class:`~amaranth.lib.data.StructLayout` payload with fields ``rsqrt`` (raw ``R`` in
         ``config.fmt_out``) and ``saturated`` (1 if the result was clamped to ``raw_max``:

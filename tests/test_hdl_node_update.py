@@ -191,14 +191,27 @@ def test_builtin_meshes_over_several_iterations(preset, mesh_name):
         engine.advance(0)
 
 
+#: The documented latency (``docs/hardware.md``'s contract table; ``tests/test_docs.py`` checks that it says
+#: these numbers): front + rsqrt unit + back + tail, plus the result FIFO's write and the output register.
+LATENCY = {"default": (91, (13, 27, 24, 25)), "narrow": (80, (11, 27, 18, 22))}
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_documented_latency(preset):
+    dut = NodeUpdate(FormatSet.preset(preset))
+    assert (dut.latency, (dut.front_stages, dut.rsqrt_latency, dut.back_stages, dut.tail_stages)) == LATENCY[preset]
+
+
 @pytest.mark.parametrize("preset", PRESETS)
 def test_no_bubbles(preset):
-    """Never stalled: N entries go in on N consecutive clocks and the last result leaves latency clocks later."""
+    """Never stalled: N entries go in on N consecutive clocks and the last result leaves latency clocks later
+    (the documented latency, measured)."""
     fs = FormatSet.preset(preset)
     stream, positions, velocities = random_stream(fs, 40, seed=4)
     v = np.zeros_like(positions)
     v[:40] = velocities
     dut = NodeUpdate(fs)
+    assert dut.latency == LATENCY[preset][0]
     run = check_pass(dut, fs, stream, positions, v, random_constants(fs, 5))
     n = len(stream.neighbour)
     assert run.in_cycles == list(range(n))
