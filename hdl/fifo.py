@@ -9,7 +9,7 @@ read is a LUT delay; elsewhere the synthesis tool chooses.
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Elaboratable, Module, Signal
+from amaranth.hdl import Cat, Elaboratable, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -91,9 +91,10 @@ class SlicedFIFO(wiring.Component):
     registered : :class:`bool`
         ``False``: ``r_stream.payload`` is the memories' asynchronous read of the oldest entry
         (valid while ``r_stream.valid``), and ``r_stream.ready`` pops it. ``True``: each slice
-        ends in a two-register skid buffer (output register and a spare), so ``r_stream`` is a
-        registered stream obeying the ``lib.stream`` rules, and ``r_stream.ready`` reaches only
-        the skid registers; it holds ``depth + 2`` entries.
+        ends in two registers used in turn (one offered, the other refilling from the memory),
+        so ``r_stream`` obeys the ``lib.stream`` rules at one transfer per clock, its payload a
+        2:1 multiplexer of registers, and ``r_stream.ready`` reaches only a few flags per slice;
+        it holds ``depth + 2`` entries.
 
     Attributes
     ----------
@@ -129,25 +130,29 @@ class SlicedFIFO(wiring.Component):
                 if k == 0:
                     m.d.comb += self.r_stream.valid.eq(fifo.r_rdy)
                 continue
-            out = Signal(bits, name=f"out{k}", reset_less=True)  # data: no reset
-            spare = Signal(bits, name=f"spare{k}", reset_less=True)
-            out_valid = Signal(name=f"out_valid{k}")
-            spare_full = Signal(name=f"spare_full{k}")
+            # Two registers per slice, used in turn: the head is offered, the other one refills.
+            # A register's load enable is its own (registered) empty flag, never r_stream.ready,
+            # which reaches only the flags and the head pointer (as the enable of every skid
+            # register in 19 slices it was the critical path, 136 MHz).
+            regs = [Signal(bits, name=f"buf{k}_{n}", reset_less=True) for n in range(2)]  # data: no reset
+            full = [Signal(name=f"full{k}_{n}") for n in range(2)]
+            head = Signal(name=f"head{k}")  # the register offered
+            fill = Signal(name=f"fill{k}")  # the register refilled next
             read = Signal(name=f"read{k}")
-            m.d.comb += [read.eq(fifo.r_rdy & ~spare_full), fifo.r_en.eq(read)]
-            # The output register is free or being freed: its own valid bit and r_stream.ready,
-            # not slice 0's valid (that route across every slice was a critical path, 148 MHz).
-            with m.If(~out_valid | self.r_stream.ready):
-                with m.If(spare_full):
-                    m.d.sync += [out.eq(spare), out_valid.eq(1), spare_full.eq(read)]
-                    with m.If(read):
-                        m.d.sync += spare.eq(fifo.r_data)
-                with m.Else():
-                    m.d.sync += [out.eq(fifo.r_data), out_valid.eq(read)]
-            with m.Elif(read):  # the output register holds: the read goes to the spare
-                m.d.sync += [spare.eq(fifo.r_data), spare_full.eq(1)]
-            parts.append(out)
+            take = Signal(name=f"take{k}")
+            m.d.comb += [read.eq(fifo.r_rdy & ~Mux(fill, full[1], full[0])), fifo.r_en.eq(read),
+                         take.eq(Mux(head, full[1], full[0]) & self.r_stream.ready)]
+            for n in range(2):
+                with m.If(read & (fill == n)):
+                    m.d.sync += [regs[n].eq(fifo.r_data), full[n].eq(1)]
+                with m.Elif(take & (head == n)):
+                    m.d.sync += full[n].eq(0)
+            with m.If(read):
+                m.d.sync += fill.eq(~fill)
+            with m.If(take):
+                m.d.sync += head.eq(~head)
+            parts.append(Mux(head, regs[1], regs[0]))
             if k == 0:
-                m.d.comb += self.r_stream.valid.eq(out_valid)
+                m.d.comb += self.r_stream.valid.eq(Mux(head, full[1], full[0]))
         m.d.comb += self.r_stream.payload.eq(Cat(*parts))
         return m

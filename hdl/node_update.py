@@ -59,7 +59,7 @@ class NodeUpdate(wiring.Component):
     on ``o`` when never stalled (so N entries take N + ``latency`` clocks).
     Back-pressure: ``o.valid`` and ``o.payload`` never depend on ``o.ready``; a result
     stays offered until taken; any stall pattern on either side is allowed.
-    ``o.payload`` leaves a register.
+    ``o.payload`` is one of two registers per FIFO column slice (a 2:1 multiplexer, no other logic).
 
     Structure
     ---------
