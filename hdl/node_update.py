@@ -64,7 +64,7 @@ class NodeUpdate(wiring.Component):
     Structure
     ---------
     The datapath never stalls. Every stage register loads on every clock, so no enable
-    fans out across the ~12,000 pipeline flip-flops: a front section (narrowing, squares,
+    fans out across the ~26,600 flip-flops: a front section (narrowing, squares,
     ``|Δ|²``) feeds the :class:`~hdl.rsqrt.RsqrtUnit` (its ``o.ready`` tied high), the
     entry's side data rides along in a delay line of the rsqrt latency, a back section
     forms ``s``, the forces and ``|L − d|`` and accumulates per node, and a node tail runs

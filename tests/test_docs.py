@@ -168,8 +168,6 @@ def test_flip_flop_counts_in_the_hardware_doc():
         assert abs(int(stated.replace(",", "")) - count) <= 0.02 * count, (name, stated, count)
 
 
-@pytest.mark.xfail(strict=True, reason="hdl/node_update.py's NodeUpdate docstring still says '~12,000 pipeline "
-                   "flip-flops' (another engineer's file): change it to '~26,600 flip-flops' and drop this mark")
 def test_flip_flop_count_in_the_node_update_docstring():
     from hdl import NodeUpdate
 
