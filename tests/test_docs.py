@@ -9,6 +9,7 @@ import pytest
 from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import FORMAT_FIELDS, FormatSet
+from golden_model.fixed.pipeline import accumulator_guard_bits
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 
@@ -174,3 +175,78 @@ def test_flip_flop_count_in_the_node_update_docstring():
     m = re.search(r"~([\d,]+) (?:pipeline )?flip-flops", flat(NodeUpdate.__doc__))
     count = elaborated_flip_flops(NodeUpdate("default"))
     assert m and abs(int(m.group(1).replace(",", "")) - count) <= 0.02 * count, (m and m.group(1), count)
+
+
+# ----------------------------------------------------------------------------- the presets' notes
+
+
+def _rsqrt_blocks(fs):
+    from golden_model.fixed.dsp import dsp_blocks
+
+    return sum(p.count * dsp_blocks(p.a, p.b) for p in fs.products() if p.unit == "rsqrt")
+
+
+def _measured(fs, seed_bits=None, steps=None):
+    from golden_model.fixed.rsqrt import measure_rsqrt
+
+    if seed_bits is not None:
+        fs = fs.replace(rsqrt_seed_bits=seed_bits, rsqrt_newton_steps=steps)
+    return measure_rsqrt(fs.rsqrt_config())
+
+
+#: Claims a note may make about the formats, in the forms a note writes them: (pattern, the
+#: ``(stated, actual)`` pairs of a match ``m`` in the note of key ``k`` of preset ``fs``, or None
+#: when the match is no claim). Tried in this order; text a claim matched is not read again.
+NOTE_CLAIMS = [
+    (r"(\d+)-bit seed ROM \((\d+) entries\) \+ (\d+) Newton step",
+     lambda fs, k, m: zip(m.groups(), (fs.rsqrt_seed_bits, fs.rsqrt_config().seed_table_size,
+                                       fs.rsqrt_newton_steps))),
+    (r"over the (\d+)-bit input", lambda fs, k, m: [(m[1], fs.length_sq.width)]),
+    (r"max ([\d.]+) ulp on a ([\d.]+)M-point sweep",
+     lambda fs, k, m: zip(m.groups(), (round(_measured(fs)["max_ulp_error"], 2),
+                                       round(_measured(fs)["n_points"] / 1e6, 1)))),
+    (r"(\d+) bits \+ (\d+) steps is also faithful \(([\d.]+) ulp\) but doubles the multipliers \((\d+) DSP "
+     r"blocks instead of (\d+)\)",
+     lambda fs, k, m: [(m[3], round(_measured(fs, int(m[1]), int(m[2]))["max_ulp_error"], 2)),
+                       (m[4], _rsqrt_blocks(fs.replace(rsqrt_seed_bits=int(m[1]), rsqrt_newton_steps=int(m[2])))),
+                       (m[5], _rsqrt_blocks(fs)), (m[4], 2 * int(m[5]))]),
+    (r"(\d+)-entry table", lambda fs, k, m: [(m[1], (1 << fs.lut_index_bits) + 1)]),
+    (r"(\d+) guard bits", lambda fs, k, m: [(m[1], accumulator_guard_bits(fs.max_degree))]),
+    (r"(\d+) bits, (\d+) more than (\w+)'s (\d+) fraction bits",
+     lambda fs, k, m: [(m[1], getattr(fs, k).width), (m[4], getattr(fs, m[3]).frac_bits),
+                       (m[2], getattr(fs, k).width - getattr(fs, m[3]).frac_bits)]),
+    (r"\b(\w+) \((\d+) bits", lambda fs, k, m: [(m[2], getattr(fs, m[1]).width)] if m[1] in FORMAT_FIELDS else None),
+    (r"\b([su]\d+\.\d+)\b", lambda fs, k, m: [(m[1], str(getattr(fs, k)))]),
+    (r"(\d+) fraction bits", lambda fs, k, m: [(m[1], getattr(fs, k).frac_bits)]),
+    (r"\b(\d+|one) integer bits?", lambda fs, k, m: [("1" if m[1] == "one" else m[1], getattr(fs, k).int_bits)]),
+    (r"2\^-(\d+)", lambda fs, k, m: [(m[1], getattr(fs, k).frac_bits)]),
+    (r"lsb ([\d.]+e-\d+)", lambda fs, k, m: [(m[1], float(f"{getattr(fs, k).lsb:.2g}"))]),
+    (r"\((\d+) bits", lambda fs, k, m: [(m[1], getattr(fs, k).width)]),
+]
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_preset_notes_state_the_formats_numbers(preset):
+    """The numbers a preset's notes derive from its formats (fraction/integer bits, widths, formats,
+    the rsqrt measurement, table sizes) are the formats' own: a note that drifts fails here."""
+    import json
+
+    from golden_model.fixed import PRESET_DIR
+
+    fs = FormatSet.preset(preset)
+    notes = json.loads((PRESET_DIR / f"{preset}.json").read_text())["notes"]
+    checked = 0
+    for key, text in notes.items():
+        for pattern, claims in NOTE_CLAIMS:
+            read = []
+            for m in re.finditer(pattern, text):
+                pairs = claims(fs, key, m)
+                if pairs is None:
+                    continue
+                for stated, actual in pairs:
+                    assert type(actual)(stated) == actual, (preset, key, m.group(0), actual)
+                    checked += 1
+                read.append(m.span())
+            for lo, hi in read:
+                text = text[:lo] + " " * (hi - lo) + text[hi:]
+    assert checked >= (25 if preset == "default" else 3), checked
