@@ -78,7 +78,7 @@ def elaborated_flip_flops(component) -> int:
 
 def test_hardware_doc_contract_table(unelaborated):
     """Latencies (front + rsqrt + back + tail + 2) and DSP blocks as the code computes them."""
-    from golden_model.study import multipliers
+    from golden_model.fixed.dsp import dsp_blocks
     from hdl import NodeUpdate, RsqrtUnit, StepGenerator
 
     text = (DOCS / "hardware.md").read_text()
@@ -92,11 +92,9 @@ def test_hardware_doc_contract_table(unelaborated):
         assert [int(g) for g in m.groups()] == [n.latency, n.front_stages, n.rsqrt_latency, n.back_stages,
                                                 n.tail_stages, n.latency - n.pipeline_stages,
                                                 RsqrtUnit.latency_of(fs.rsqrt_config()), StepGenerator.latency_of(fs)]
-        units = {}
+        dsp[name] = units = dict.fromkeys(("node_update", "rsqrt", "step_generator", "controller"), 0)
         for p in fs.products():
-            units[p.unit] = units.get(p.unit, 0) + p.count * next(r[4] for r in multipliers(fs) if r[0] == p.name) \
-                if p.unit != "controller" else 0
-        dsp[name] = units
+            units[p.unit] += p.count * dsp_blocks(p.a, p.b)
     row = flat(re.search(r"^\| multipliers \(18×18 DSP blocks, ECP5\) \|(.*)$", text, re.M).group(1))
     m = re.search(r"default (\d+), narrow (\d+), each incl\. the rsqrt unit's (\d+) \(the core adds the step "
                   r"generator's (\d+): (\d+), (\d+);.*\| (\d+) \| (\d+) \(", row)
