@@ -256,6 +256,8 @@ class FormatSet:
         difference (``lut_slope_bits`` wide) by the ``lut_frac_bits`` low bits of E; the
         rsqrt unit's first Newton step squares the seed (:meth:`RsqrtConfig.step_products`).
         ``count`` is the number of instances (x and y: 2; the step generator's two lookups: 2).
+        The controller's (unit ``controller``, not in the RTL) come last; ``int64`` marks the
+        products the golden model forms in numpy int64, whose widths ``__post_init__`` checks.
         """
         op = Operand.of
         delta = op(self.delta)
