@@ -51,7 +51,7 @@ def test_barrier_forces_match_the_float_model(winding):
     assert problem.winding == winding
     squeezed = p0 + rng.normal(0, 0.03, p0.shape)  # Tutte compresses: some triangles inside the barrier
     raw = np.round(squeezed * problem.scale * 2**DEFAULT.position.frac_bits).astype(np.int64)
-    per_entry, inside = barrier_terms(DEFAULT, raw, problem.stream)
+    per_entry, inside, _ = barrier_terms(DEFAULT, raw, problem.stream)
     owner = problem.stream.owner
     fixed = np.column_stack([np.bincount(owner, per_entry[:, k], mesh.n_vertices) for k in range(2)]).astype(np.int64)
     fixed = to_float(fixed, DEFAULT.force) / problem.scale

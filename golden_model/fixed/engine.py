@@ -15,10 +15,13 @@ dynamics are unchanged, so the fixed-point trajectory approximates the float
 trajectory times ``2**k``.  Areas scale by ``4**k``; both sides of ``E_S``
 are formed at that scale.  Results are mapped back by ``2**-k``.
 
-**Energy.** The stopping rule's relative energy change is evaluated by the
-host in float64 from the pipeline's exact ``|L − d|`` terms (``Σ e²``, an
-exact integer): a deterministic function of the bit-exact state, so a
-controller around the RTL reproduces it.
+**Controller.** :func:`run_fixed` is Algorithm 1's loop on integers alone: the
+stopping rule compares raw E_S and E_C with the tolerances quantised by the host
+(:class:`StopRule`), and the relative energy change in integers
+(:func:`energy_raw`: ``3·(½C)·Σe² + 2·Σc·h`` over the entries, exact), with
+``ε`` quantised to :data:`ENERGY_TOL_FRAC_BITS` fraction bits. Nothing on the
+decision path is a float, so a controller in hardware reproduces it bit for bit;
+floats only report (``Measurement``).
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from typing import Callable
 import numpy as np
 
 from ..mesh import Mesh, folded_by_area, layout_orientation
-from ..reference import FlattenParams, FlattenResult, Measurement, ParameterError, barrier_energy, node_weights, run
+from ..reference import FlattenParams, FlattenResult, History, Measurement, ParameterError, Status, node_weights
 from .format import MAX_PRODUCT_WIDTH, Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
 from .formats_set import FormatSet
 from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum,
@@ -38,7 +41,8 @@ from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms
 from .steplut import half_dt_sq, step_size
 
 __all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats",
-           "momentum_beta_raw", "power_sum", "MomentumState", "host_energy"]
+           "momentum_beta_raw", "power_sum", "MomentumState", "energy_raw", "energy_to_float", "StopRule",
+           "ENERGY_TOL_FRAC_BITS", "run_fixed"]
 
 SAT = Overflow.SATURATE
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
@@ -164,19 +168,58 @@ class MomentumState:
         return momentum_beta_raw(self.k, fs), MomentumState(self.k + 1, power < 0)
 
 
-def host_energy(problem: "FixedProblem", raw_positions: np.ndarray, error_square_sum: int) -> float:
-    """The stopping rule's energy from the bit-exact state, in float64 (mesh units).
+#: Fraction bits of the host-quantised relative-energy tolerance ε (u0.40: ε down to ~1e-12).
+ENERGY_TOL_FRAC_BITS = 40
 
-    ``½C·Σe²`` over the entries' exact ``|L − d|`` (each edge twice), plus the
-    barrier energy of the layout when the barrier is on.
+
+def _energy_frac(fs: FormatSet) -> int:
+    return max(fs.spring.frac_bits + 2 * fs.rest_length.frac_bits, fs.barrier_coeff.frac_bits + fs.area.frac_bits)
+
+
+def energy_raw(problem: "FixedProblem", terms: NodeTerms) -> int:
+    """Three times the energy of the layout, exact, at :func:`_energy_frac` fraction bits (scaled units).
+
+    Springs: ``½C·Σe²`` over the entries (each edge twice, as the float reference's
+    ``Σ_edges C·(L − d)²``). Barrier: each triangle's ``½μC·X*·(κ − X/X*)²₊`` is ``2·c·h`` of
+    each of its three entries. Three times the sum keeps both parts integers; the stopping rule
+    only compares ratios.
     """
-    p = problem
-    energy = 0.5 * p.params.spring * math.ldexp(float(error_square_sum),
-                                                -2 * (p.fs.rest_length.frac_bits + p.scale_exp))
-    if p.params.barrier:
-        energy += barrier_energy(p.to_float_positions(raw_positions), p.mesh.faces, p.mesh.face_areas, p.winding,
-                                 p.params.barrier_threshold, p.params.barrier_gain, p.params.spring)
-    return energy
+    fs = problem.fs
+    frac = _energy_frac(fs)
+    springs = (3 * problem.half_spring * terms.error_square_sum) << (
+        frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits)
+    barrier = (2 * terms.barrier_energy_sum) << (frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits)
+    return springs + barrier
+
+
+def energy_to_float(problem: "FixedProblem", raw: int) -> float:
+    """:func:`energy_raw` in mesh units (float64, for reporting)."""
+    return math.ldexp(raw / 3, -_energy_frac(problem.fs) - 2 * problem.scale_exp)
+
+
+@dataclass(frozen=True)
+class StopRule:
+    """Algorithm 1's stopping rule in integers: ``E_S ≤ φ_S``, ``E_C ≤ φ_C`` (raw [error]) and
+    ``|E_k − E_k−1| ≤ ε·E_k−1`` with ``ε`` raw at :data:`ENERGY_TOL_FRAC_BITS` fraction bits."""
+
+    area: int
+    shape: int
+    energy: int
+
+    @classmethod
+    def of(cls, params: FlattenParams, fs: FormatSet) -> "StopRule":
+        """The host's quantisation: ``φ`` floored to the error lsb (a raw error passes exactly when
+        its value does), ``ε`` rounded half up."""
+        lsb = fs.error.frac_bits
+        return cls(math.floor(math.ldexp(params.tol_area, lsb)), math.floor(math.ldexp(params.tol_shape, lsb)),
+                   math.floor(math.ldexp(params.tol_energy, ENERGY_TOL_FRAC_BITS) + 0.5))
+
+    def converged(self, energy_before: int, energy_after: int, errors: tuple[int, int]) -> bool:
+        if energy_before == 0:
+            change_ok = energy_after == 0
+        else:
+            change_ok = abs(energy_after - energy_before) << ENERGY_TOL_FRAC_BITS <= self.energy * energy_before
+        return errors[0] <= self.area and errors[1] <= self.shape and change_ok
 
 
 def power_sum(fs: FormatSet, power: np.ndarray, counter: SaturationCounter | None = None) -> int:
@@ -361,7 +404,7 @@ def flipped_count(problem: FixedProblem, positions: np.ndarray) -> int:
 
 
 class FixedEngine:
-    """Controller state for :func:`reference.run`: raw state plus the last raw errors.
+    """The controller's state for :func:`run_fixed`: raw state plus the last raw errors and energy.
 
     Each iteration is a force pass over the current positions (which also
     yields their ``E_C`` partial sums) and an integrate pass once the step
@@ -385,14 +428,11 @@ class FixedEngine:
         self.power = 0  # S of the last force pass [power_acc]
         self.node_power: np.ndarray | None = None  # its per-node terms [power]
         self.momentum = MomentumState()
+        self.energy_raw = 0  # of the last measurement (energy_raw)
 
     @property
     def positions(self) -> np.ndarray:
         return self.problem.to_float_positions(self.raw_positions)
-
-    @positions.setter
-    def positions(self, value) -> None:  # run() restores a state only after divergence, impossible here
-        raise AssertionError("fixed-point state is never non-finite")
 
     @property
     def velocities(self) -> np.ndarray:
@@ -404,8 +444,8 @@ class FixedEngine:
         e_s = area_error(p, self.raw_positions, self.counter)
         e_c = shape_error(p, self.terms.error_sums, self.counter)
         self.errors = (e_s, e_c)
-        # E = Σ_e C(L − d)²: each edge appears twice among the entries
-        energy = host_energy(p, self.raw_positions, self.terms.error_square_sum)
+        self.energy_raw = energy_raw(p, self.terms)
+        energy = energy_to_float(p, self.energy_raw)
         if p.momentum:
             self.node_power = node_power(p.fs, self.terms.force, self.raw_velocities, self.counter)
             self.power = power_sum(p.fs, self.node_power, self.counter)
@@ -438,6 +478,9 @@ class FixedEngine:
 
 def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
     """Refuse parameters the formats cannot represent faithfully."""
+    if 0 < params.tol_energy < math.ldexp(1, -ENERGY_TOL_FRAC_BITS - 1):
+        raise FixedPointError(f"tol_energy {params.tol_energy:g} is below the controller's resolution "
+                              f"2^-{ENERGY_TOL_FRAC_BITS} ({math.ldexp(1, -ENERGY_TOL_FRAC_BITS):.3g}); use 0 or a larger value")
     if params.step == "fixed":
         raw = float(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))
         if params.dt > fs.dt.max or raw == 0:
@@ -462,8 +505,7 @@ def flatten_fixed(
     problem = prepare(mesh, initial_positions, params, fs)
     counter = SaturationCounter()
     engine = FixedEngine(problem, counter)
-    result = run(engine, params, problem.density, problem.to_float_positions(problem.initial_positions),
-                 on_iteration, name="fixed", step_size=engine.step_size)
+    result = run_fixed(engine, on_iteration)
     result.extra.update({
         "formats": fs.name,
         "scale": problem.scale,
@@ -472,3 +514,31 @@ def flatten_fixed(
     })
     result.engine_state = engine  # the raw state, for bit-level comparisons
     return result
+
+
+def run_fixed(engine: FixedEngine, on_iteration: Callable[[int, Measurement], None] | None = None) -> FlattenResult:
+    """Algorithm 1's loop, every decision on raw integers (:class:`StopRule`); never diverges (the
+    formats saturate, and ``result.extra`` counts it)."""
+    problem = engine.problem
+    params = problem.params
+    rule = StopRule.of(params, problem.fs)
+    history = History()
+    current = engine.measure()
+    history.append(math.nan, current)
+    before = engine.energy_raw
+    status: Status = "max-iterations"
+    k = 0
+    while k < params.max_iter:
+        dt = engine.step_size(current)
+        engine.advance(dt)
+        after = engine.measure()
+        k += 1
+        history.append(dt, after)
+        if on_iteration is not None:
+            on_iteration(k, after)
+        if rule.converged(before, engine.energy_raw, engine.errors):
+            status = "converged"
+            break
+        current, before = after, engine.energy_raw
+    return FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
+                         history, status, k, params, problem.density, engine="fixed")

@@ -275,12 +275,23 @@ class NodeTerms:
     error_square_sum: int
     #: (V,) bool: a triangle of the node is inside the barrier (``h > 0``); ``None`` without one
     barrier_active: np.ndarray | None = None
+    #: Σ over all entries of the barrier's ``c·h`` (raw [barrier_coeff]·[area], exact; 0 without
+    #: one): each triangle's barrier energy is ``2·c·h``, and each triangle is on three entries
+    barrier_energy_sum: int = 0
+
+
+def exact_sum(values: np.ndarray) -> int:
+    """The exact integer sum of int64 ``values`` of up to 62 bits (in two 31-bit halves, so the
+    int64 partial sums cannot wrap for fewer than 2**31 values)."""
+    values = np.asarray(values, dtype=np.int64)
+    return (int(np.sum(values >> 31)) << 31) + int(np.sum(values & ((1 << 31) - 1)))
 
 
 def barrier_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream,
-                  counter: SaturationCounter | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Per-entry barrier force ``(N, 2)`` [force] (zero rows where the gain is 0), and ``(N,)``
-    whether the entry's triangle is inside the barrier (``h > 0``; never on an entry without one)::
+                  counter: SaturationCounter | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-entry barrier force ``(N, 2)`` [force] (zero rows where the gain is 0), ``(N,)``
+    whether the entry's triangle is inside the barrier (``h > 0``; never on an entry without one),
+    and ``(N,)`` ``c·h`` (raw, exact: half the triangle's barrier energy ``½μC·X*·(κ − X/X*)²₊``)::
 
         Δa  = rq(P_j − P_i → delta),  Δb = rq(P_second − P_i → delta)
         X   = rq(Δa.x·Δb.y − Δa.y·Δb.x → area)         doubled signed area
@@ -304,7 +315,7 @@ def barrier_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream,
     diff = requantize(delta_a - delta_b, fs.delta.frac_bits, fs.delta, rnd, SAT, counter, "barrier_edge")
     product = coeff[:, None] * np.column_stack([diff[:, 1], -diff[:, 0]])
     return requantize(product, fs.barrier_coeff.frac_bits + fs.delta.frac_bits, fs.force, rnd, SAT, counter,
-                      "barrier_force"), short > 0
+                      "barrier_force"), short > 0, coeff * short
 
 
 def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, half_spring: int,
@@ -335,16 +346,17 @@ def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
         force = np.column_stack([per_node(force_f[:, 0], force_b[:, 0]), per_node(force_f[:, 1], force_b[:, 1])])
         error = per_node(error_f, error_b)
         square_sum = int(np.dot(error_f, error_f)) + int(np.dot(error_b, error_b))
-    active = None
+    active, barrier_energy = None, 0
     if stream.barrier is not None:
-        barrier, inside = barrier_terms(fs, positions, stream, counter)
+        barrier, inside, energy = barrier_terms(fs, positions, stream, counter)
+        barrier_energy = exact_sum(energy)
         owner = stream.owner
         force = force + np.column_stack([np.bincount(owner, barrier[:, 0], n), np.bincount(owner, barrier[:, 1], n)
                                          ]).astype(np.int64)
         active = np.bincount(owner, inside, n) > 0
     force_acc = requantize(force, fs.force.frac_bits, fs.force_acc, rnd, SAT, counter, "force_acc")
     error_sums = requantize(error, fs.rest_length.frac_bits, fs.error_acc, rnd, SAT, counter, "error_acc")
-    return NodeTerms(force_acc, error_sums, square_sum, active)
+    return NodeTerms(force_acc, error_sums, square_sum, active, barrier_energy)
 
 
 def integrate(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, force: np.ndarray,

@@ -19,11 +19,12 @@ import numpy as np
 from cocotb.triggers import ReadOnly, RisingEdge
 
 from golden_model.fixed import SaturationCounter, half_dt_sq, quantize, to_float
-from golden_model.fixed.engine import (HOST_ROUNDING, FixedEngine, MomentumState, area_error, flipped_count,
-                                       folded_count, host_energy, power_sum, shape_error)
+from golden_model.fixed.engine import (HOST_ROUNDING, FixedEngine, MomentumState, StopRule, area_error,
+                                       energy_raw, energy_to_float, flipped_count, folded_count, power_sum,
+                                       shape_error)
 from golden_model.fixed.format import Overflow
 from golden_model.fixed.pipeline import node_terms
-from golden_model.reference import Measurement, _converged
+from golden_model.reference import Measurement
 from hdl.layouts import entry_layout, errors_layout, result_layout, step_layout
 from sim.payloads import pack, pass_beats, unpack
 
@@ -69,9 +70,9 @@ class Controller:
         p = self.problem
         e_s = area_error(p, self.positions)
         e_c = shape_error(p, error_sums)
-        # the host's energy: (C/2)·Σ e² over the entries of the current (bit-exact) layout
-        square_sum = node_terms(p.fs, self.positions, p.stream, p.half_spring).error_square_sum
-        energy = host_energy(p, self.positions, square_sum)
+        # the stopping rule's energy (springs and barrier, exact) of the current (bit-exact) layout
+        self.energy_raw = energy_raw(p, node_terms(p.fs, self.positions, p.stream, p.half_spring))
+        energy = energy_to_float(p, self.energy_raw)
         m = Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
                         flipped_count(p, self.positions), folded_count(p, self.positions))
         self.node_power = power
@@ -149,6 +150,9 @@ async def closed_loop(dut):
     if momentum:
         check(0, "power", ctl.node_power, golden.node_power)
     history = [current]
+    rule = StopRule.of(params, problem.fs)  # the golden model's integer stopping rule
+    energy_before = ctl.energy_raw
+    check(0, "energy", ctl.energy_raw, golden.energy_raw)
     status, k = "max-iterations", 0
     max_iter = min(params.max_iter, config.get("iterations") or params.max_iter)
     while k < max_iter:
@@ -170,12 +174,13 @@ async def closed_loop(dut):
             check(k + 1, "power", ctl.node_power, golden.node_power)
         if moved:
             mismatches.append(f"iteration {k + 1}: the measuring pass moved a node")
+        check(k + 1, "energy", ctl.energy_raw, golden.energy_raw)
         k += 1
         history.append(after)
-        if _converged(current, after, params):
+        if rule.converged(energy_before, ctl.energy_raw, errors):
             status = "converged"
             break
-        current, gold_current = after, gold_after
+        current, gold_current, energy_before = after, gold_after, ctl.energy_raw
     wall = time.perf_counter() - started
 
     from golden_model.reference import flatten
