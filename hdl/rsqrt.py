@@ -45,7 +45,7 @@ class RsqrtUnit(wiring.Component):
         The configuration every width and table comes from.
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: :meth:`latency_of` (27 for both presets).
+        ``o.ready`` is held high: :meth:`latency_of` (28 for both presets).
         Throughput: one item per clock (II = 1).
 
     Members
@@ -67,6 +67,7 @@ class RsqrtUnit(wiring.Component):
     ``shift``        barrel shifter: mantissa ``M`` (``u2.Fm``), low bits floored
     ``rom``          the seed ROM's block RAM addressed with ``M >> shift`` from the ``M`` register
     ``seed``         seed ROM data registered (on ECP5 in the block RAM's output register)
+    ``land``         the seed registered in the fabric, next to the multipliers
     per Newton step  ``y*y`` | round to ``t1`` | ``M*t1`` | round to ``t2`` | ``h = 1 - t2`` |
                      ``y*h`` | round | ``y += ...``: each multiply is DSP partial products
                      (operands and products registered, products landed in fabric registers) and
@@ -100,13 +101,13 @@ class RsqrtUnit(wiring.Component):
     def latency_of(config):
         """Pipeline latency in clocks for ``config``.
 
-        norm, shift, rom, seed; per Newton step 5 stages, 3 multiplies of ``Pipeline.MUL_STAGES`` each plus the adder levels of its three
+        norm, shift, rom, seed, land; per Newton step 5 stages, 3 multiplies of ``Pipeline.MUL_STAGES`` each plus the adder levels of its three
         multiplies (which depend on the widths); denorm, round, o.
         """
         y, mant = unsigned(config.y_fmt.width), unsigned(config.mant_fmt.width)
         t1, h = unsigned(config.ysq_fmt.width), signed(config.h_fmt.width)
         per_step = 5 + 3 * Pipeline.MUL_STAGES + reduce_levels((y, y)) + reduce_levels((mant, t1)) + reduce_levels((y, h))
-        return 7 + per_step * config.newton_steps
+        return 8 + per_step * config.newton_steps
 
     @staticmethod
     def output_layout(config):
@@ -202,10 +203,18 @@ class RsqrtUnit(wiring.Component):
         sat_r = reg(sat_r, 1, "rom_sat")
 
         stage("seed")
-        y = seed << (fy - cfg.seed_frac_bits)  # u0.Fs -> u1.Fy, exact (wiring)
         mant = reg(mant, mant.shape(), "seed_mant")
         dn_r = reg(dn_r, dn_r.shape(), "seed_dn")
         sat_r = reg(sat_r, 1, "seed_sat")
+
+        # --- land: the seed in a fabric register, so that the block RAM's output and the DSP
+        # row's inputs are two short routes (one route from the block RAM straight into the
+        # multiplier's input register took 6 ns on one placement: 142 MHz)
+        stage("land")
+        y = reg(seed, cfg.seed_frac_bits, "land_y") << (fy - cfg.seed_frac_bits)  # u0.Fs -> u1.Fy (wiring)
+        mant = reg(mant, mant.shape(), "land_mant")
+        dn_r = reg(dn_r, dn_r.shape(), "land_dn")
+        sat_r = reg(sat_r, 1, "land_sat")
 
         # --- Newton-Raphson, y <- y + round(y * (1 - round(M * round(y*y))) / 2)
         one_w = 1 << fw
