@@ -399,11 +399,10 @@ class NodeUpdate(wiring.Component):
             result.velocity.x.eq(live["vk_x"]), result.velocity.y.eq(live["vk_y"]),
             result.error_sum.eq(live["e"]), result.power.eq(live["pw"]),
         ]
-        # The result FIFO: LUT RAM column slices, each with its own pointers and its own
-        # two-register skid buffer, so a read enable reaches only its own ~20-bit slice and
-        # o.ready only the skid registers' enables (one shared read enable over ten slices was
-        # the critical path, 123–138 MHz). Never written full: the credits count its depth and
-        # the two skid registers.
+        # The result FIFO: LUT RAM column slices, each with its own pointers and its own two
+        # output registers, so a read enable reaches only its own 12-bit slice and o.ready only
+        # a few flags per slice (one shared read enable over ten slices was the critical path,
+        # 123–138 MHz). Never written full: the credits count its depth and the output register.
         m.submodules.results = results = SlicedFIFO(width=result_layout(fs).size, depth=self.result_depth - 1,
                                                     slice_bits=self.FIFO_SLICE_BITS, registered=True)
         m.d.comb += [results.w_stream.valid.eq(tail.valid), results.w_stream.payload.eq(result.as_value()),
