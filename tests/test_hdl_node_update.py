@@ -22,7 +22,7 @@ from golden_model.fixed import SaturationCounter
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
 from hdl import NodeUpdate
-from sim.payloads import pack, pass_beats, unpack
+from sim.payloads import pass_beats, unpack_beats
 
 PRESETS = ["default", "narrow"]
 
@@ -95,14 +95,14 @@ def check_pass(dut, fs, stream, positions, velocities, constants, momentum=False
                                                         constants.damping), momentum=momentum, **kw)
     want = node_update(fs, positions, velocities, stream, constants, momentum=momentum)
     check_idle(run, stream)
-    out = dut.o.payload.shape()
+    out = unpack_beats(dut.o.payload.shape(), run.outputs)
     for name, got, expected in (
-        ("position.x", unpack(out, run.outputs, ("position", "x")), want.positions[:, 0]),
-        ("position.y", unpack(out, run.outputs, ("position", "y")), want.positions[:, 1]),
-        ("velocity.x", unpack(out, run.outputs, ("velocity", "x")), want.velocities[:, 0]),
-        ("velocity.y", unpack(out, run.outputs, ("velocity", "y")), want.velocities[:, 1]),
-        ("error_sum", unpack(out, run.outputs, ("error_sum",)), want.error_sums),
-        ("power", unpack(out, run.outputs, ("power",)), want.power),
+        ("position.x", out["position"]["x"], want.positions[:, 0]),
+        ("position.y", out["position"]["y"], want.positions[:, 1]),
+        ("velocity.x", out["velocity"]["x"], want.velocities[:, 0]),
+        ("velocity.y", out["velocity"]["y"], want.velocities[:, 1]),
+        ("error_sum", out["error_sum"], want.error_sums),
+        ("power", out["power"], want.power),
     ):
         bad = np.flatnonzero(got != expected)
         if bad.size:

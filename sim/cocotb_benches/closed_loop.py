@@ -26,7 +26,7 @@ from golden_model.fixed.format import Overflow
 from golden_model.fixed.pipeline import node_terms
 from golden_model.reference import Measurement
 from hdl.layouts import entry_layout, errors_layout, result_layout, step_layout
-from sim.payloads import pack, pass_beats, unpack
+from sim.payloads import pack, pass_beats, unpack, unpack_beats
 
 from .common import StreamPort, StreamStats, formats, load_config, start_clock_and_reset, transfer, write_result
 from .node_update import load_problem
@@ -58,10 +58,10 @@ class Controller:
         await ReadOnly()
         assert int(self.dut.idle.value) == 1, "all results taken but the core is not idle"
         await RisingEdge(self.dut.clk)
-        field = lambda *path: unpack(self.out_layout, out, path)  # noqa: E731
-        positions = np.column_stack([field("position", "x"), field("position", "y")])
-        velocities = np.column_stack([field("velocity", "x"), field("velocity", "y")])
-        return positions, velocities, field("error_sum"), field("power")
+        got = unpack_beats(self.out_layout, out)
+        positions = np.column_stack([got["position"]["x"], got["position"]["y"]])
+        velocities = np.column_stack([got["velocity"]["x"], got["velocity"]["y"]])
+        return positions, velocities, got["error_sum"], got["power"]
 
     async def measure(self):
         """E_S, E_C (raw), energy and fold counts of the current layout, formed from RTL results."""
@@ -91,12 +91,12 @@ class Controller:
             else:
                 dt = int(quantize(self.problem.params.dt, fs.dt, HOST_ROUNDING, Overflow.SATURATE))
                 half = int(half_dt_sq(dt, fs))
-            dut.step_load__payload.value = pack(step_layout(fs), {("dt",): [dt], ("half_dt_sq",): [half]})[0]
+            dut.step_load__payload.value = pack(step_layout(fs), {"dt": dt, "half_dt_sq": half})
             dut.step_load__valid.value = 1
             await RisingEdge(dut.clk)
             dut.step_load__valid.value = 0
         else:
-            dut.errors__payload.value = pack(errors_layout(fs), {("area_error",): [errors[0]], ("shape_error",): [errors[1]]})[0]
+            dut.errors__payload.value = pack(errors_layout(fs), {"area_error": errors[0], "shape_error": errors[1]})
             dut.errors__valid.value = 1
             await RisingEdge(dut.clk)
             while not int(dut.errors__ready.value):
@@ -111,9 +111,8 @@ class Controller:
                 waited += 1
             assert waited == self.dut_step_latency - 1, f"step_valid after {waited} clocks"
         await RisingEdge(dut.clk)
-        raw = int(dut.step.value)
-        layout = step_layout(fs)
-        return int(unpack(layout, [raw], ("dt",))[0]), int(unpack(layout, [raw], ("half_dt_sq",))[0])
+        step = unpack(step_layout(fs), int(dut.step.value))
+        return step["dt"], step["half_dt_sq"]
 
 
 @cocotb.test()

@@ -13,24 +13,24 @@ from golden_model.fixed.engine import FixedEngine, prepare
 from golden_model.fixed.pipeline import node_update
 from golden_model.reference import FlattenParams
 from hdl.layouts import entry_layout, result_layout
-from sim.payloads import pass_beats, unpack
+from sim.payloads import pass_beats, unpack_beats
 
 from .common import StreamPort, StreamStats, formats, load_config, start_clock_and_reset, transfer, write_result
-
-FIELDS = (("position", "x"), ("position", "y"), ("velocity", "x"), ("velocity", "y"), ("error_sum",))
 
 
 def compare(outputs: list[int], want, layout, iteration: int) -> list[str]:
     """Every differing (node, field), as readable lines."""
-    expected = {("position", "x"): want.positions[:, 0], ("position", "y"): want.positions[:, 1],
-                ("velocity", "x"): want.velocities[:, 0], ("velocity", "y"): want.velocities[:, 1],
-                ("error_sum",): want.error_sums}
+    got = unpack_beats(layout, outputs)
+    fields = (("position.x", got["position"]["x"], want.positions[:, 0]),
+              ("position.y", got["position"]["y"], want.positions[:, 1]),
+              ("velocity.x", got["velocity"]["x"], want.velocities[:, 0]),
+              ("velocity.y", got["velocity"]["y"], want.velocities[:, 1]),
+              ("error_sum", got["error_sum"], want.error_sums))
     problems = []
-    for path in FIELDS:
-        got = unpack(layout, outputs, path)
-        for node in np.flatnonzero(got != expected[path]):
-            problems.append(f"iteration {iteration}, node {int(node)}, field {'.'.join(path)}: "
-                            f"rtl {int(got[node])} golden {int(expected[path][node])}")
+    for name, rtl, golden in fields:
+        for node in np.flatnonzero(rtl != golden):
+            problems.append(f"iteration {iteration}, node {int(node)}, field {name}: "
+                            f"rtl {int(rtl[node])} golden {int(golden[node])}")
     return problems
 
 

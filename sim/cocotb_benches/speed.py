@@ -25,10 +25,10 @@ async def raw_speed(dut):
     dut.half_spring.value = problem.half_spring
     dut.damping.value = problem.damping
     layout = entry_layout(fs)
-    one_node = pack(layout, {("first",): [1], ("last",): [1], ("neighbour", "rest"): [int(problem.stream.rest[0])],
-                             ("neighbour", "position", "x"): [int(problem.initial_positions[1, 0])],
-                             ("neighbour", "position", "y"): [int(problem.initial_positions[1, 1])],
-                             ("node", "inv_mass"): [int(problem.stream.inv_mass[0])]})[0]
+    one_node = pack(layout, {"first": 1, "last": 1, "node": {"inv_mass": int(problem.stream.inv_mass[0])},
+                             "neighbour": {"rest": int(problem.stream.rest[0]),
+                                           "position": {"x": int(problem.initial_positions[1, 0]),
+                                                        "y": int(problem.initial_positions[1, 1])}}})
     dut.entries__payload.value = one_node  # a node of degree 1, over and over: the pipeline stays full
     dut.entries__valid.value = 1
     dut.results__ready.value = 1

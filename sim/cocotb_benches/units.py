@@ -10,7 +10,7 @@ from cocotb.triggers import RisingEdge
 
 from golden_model.fixed import rsqrt_with_config, step_size
 from hdl import RsqrtUnit, StepGenerator
-from sim.payloads import pack, unpack
+from sim.payloads import pack_beats, unpack_beats
 
 from .common import StreamPort, formats, load_config, start_clock_and_reset, transfer, write_result
 
@@ -39,8 +39,9 @@ async def _check(dut, beats, expected: dict, layout, config, what: str):
     dut.rst.value = 0
     outputs = await transfer(dut, source, sink, beats, len(beats), rng=rng, p_valid=p_valid, p_ready=p_ready)
     problems = []
+    fields = unpack_beats(layout, outputs)
     for name, want in expected.items():
-        got = unpack(layout, outputs, (name,))
+        got = fields[name]
         problems += [f"{what}: field '{name}', input #{int(i)}: rtl {int(got[i])} golden {int(want[i])}"
                      for i in np.flatnonzero(got != want)]
     return problems
@@ -77,7 +78,7 @@ async def step_generator(dut):
     area = np.concatenate([lane, rng.integers(0, top + 1, n // 2), np.full(len(lane), top // 3)])
     shape = np.concatenate([np.full(len(lane), top // 2), rng.integers(0, top + 1, n // 2), lane])
     layout_in, layout_out = StepGenerator.input_layout(fs), StepGenerator.output_layout(fs)
-    beats = pack(layout_in, {("area_error",): area, ("shape_error",): shape})
+    beats = pack_beats(layout_in, {"area_error": area, "shape_error": shape})
     dt, half = step_size(area, shape, fs)
     if config.get("broken_expectation"):
         dt = dt.copy()
@@ -103,14 +104,10 @@ async def step_generator_lanes(dut):
     area = np.concatenate([lane, np.full(len(lane), a0)])
     shape = np.concatenate([np.full(len(lane), b0), lane])
     layout_in, layout_out = StepGenerator.input_layout(fs), StepGenerator.output_layout(fs)
-    offset_shape = dict((f[0], f[1]) for f in [(name, field.offset) for name, field in layout_in])["shape_error"]
-    beats = (area | (shape << offset_shape)).tolist()  # both fields unsigned: plain bit packing
+    beats = pack_beats(layout_in, {"area_error": area, "shape_error": shape})
     outputs = await transfer(dut, StreamPort(dut, "i"), StreamPort(dut, "o"), beats, len(beats))
-    raw = np.array(outputs, dtype=object)
-    dt_field, half_field = layout_out["dt"], layout_out["half_dt_sq"]
-    got_dt = np.array([(int(v) >> dt_field.offset) & ((1 << fs.dt.width) - 1) for v in raw], dtype=np.int64)
-    got_half = np.array([(int(v) >> half_field.offset) & ((1 << fs.half_dt_sq.width) - 1) for v in raw],
-                        dtype=np.int64)
+    got = unpack_beats(layout_out, outputs)
+    got_dt, got_half = got["dt"], got["half_dt_sq"]
     want_dt, want_half = step_size(area, shape, fs)
     bad = np.flatnonzero((got_dt != want_dt) | (got_half != want_half))
     problems = [f"area_error {int(area[i])}, shape_error {int(shape[i])}: rtl ({int(got_dt[i])}, {int(got_half[i])}) "
