@@ -1,21 +1,18 @@
 """RTL rsqrt unit (hdl.RsqrtUnit) against the golden model, in Amaranth's simulator.
 
 Every output is compared, in order, with ``rsqrt_with_config`` (value and saturation flag)
-under seeded random valid/ready stalls on both sides. The stream driver ``run_stream`` is
-shared with ``test_hdl_stepgen.py``.
+under seeded random valid/ready stalls on both sides, driven by the stream helpers of
+:mod:`sim.stream_helpers` (shared with ``test_hdl_stepgen.py`` and ``test_hdl_node_update.py``).
 """
 
 import gc
 import importlib
-import random
 import warnings
-from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
 from amaranth.back import verilog
-from amaranth.hdl import UnusedElaboratable, Value
-from amaranth.sim import Simulator
+from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import (
     Format,
@@ -27,119 +24,13 @@ from golden_model.fixed import (
     rsqrt_with_config,
 )
 from hdl import RsqrtUnit
+from sim.payloads import unpack_beats
+from sim.stream_helpers import run_streams, run_testbenches, stream_get, stream_put
 
 PRESETS = ("default", "narrow")
 
 # Whole-domain simulation up to this many inputs (2**18 take ~25 s); wider inputs are swept.
 EXHAUSTIVE_SIM_LIMIT = 1 << 18
-
-
-# --------------------------------------------------------------------------- stream driver
-
-
-@dataclass
-class StreamRun:
-    outputs: list = field(default_factory=list)  # raw o.payload bits, in order
-    in_cycles: list = field(default_factory=list)  # clock edge of each input transfer
-    out_cycles: list = field(default_factory=list)  # clock edge of each output transfer
-
-
-def run_stream(dut, inputs, *, seed=0, p_valid=1.0, p_ready=1.0, probe_ready=False):
-    """Push raw payloads ``inputs`` into ``dut.i``; collect as many raw payloads from ``dut.o``.
-
-    A producer and a consumer testbench; with ``p_valid``/``p_ready`` < 1 each cycle's
-    ``i.valid``/``o.ready`` is random (seeded), and ``i.payload`` is garbage while ``i.valid``
-    is low. Checked on the fly: the output stream rules (a payload offered and not taken stays
-    offered, unchanged), no output beyond the last input (drain of ``latency + 2`` cycles), no
-    hang. ``probe_ready`` also checks every cycle that ``o.valid``/``o.payload`` do not depend on
-    ``o.ready``. Clock edges are counted from 0 (the first edge of the simulation).
-    """
-    n = len(inputs)
-    run = StreamRun()
-    i_payload, i_valid, i_ready = Value.cast(dut.i.payload), dut.i.valid, dut.i.ready
-    o_payload, o_valid, o_ready = Value.cast(dut.o.payload), dut.o.valid, dut.o.ready
-    drain = dut.latency + 2
-    max_cycles = int(4 * (n + dut.latency) / (p_valid * p_ready)) + 100
-
-    async def producer(ctx):
-        if n == 0:
-            return
-        rng = random.Random(seed)
-        idx, cycle = 0, 0
-        valid = p_valid >= 1 or rng.random() < p_valid
-        ctx.set(i_payload, inputs[0] if valid else rng.getrandbits(len(i_payload)))
-        ctx.set(i_valid, valid)
-        async for _, _, ready in ctx.tick().sample(i_ready):
-            taken = valid and ready
-            if taken:
-                run.in_cycles.append(cycle)
-                idx += 1
-                if idx == n:
-                    ctx.set(i_valid, 0)
-                    return
-            cycle += 1
-            if p_valid >= 1:
-                if taken:
-                    ctx.set(i_payload, inputs[idx])
-            else:
-                valid = rng.random() < p_valid
-                ctx.set(i_payload, inputs[idx] if valid else rng.getrandbits(len(i_payload)))
-                ctx.set(i_valid, valid)
-
-    async def consumer(ctx):
-        rng = random.Random(seed + 1)
-        cycle, done_at = 0, None
-        ready = p_ready >= 1 or rng.random() < p_ready
-        ctx.set(o_ready, ready)
-        held = None  # payload offered but not taken at the previous edge
-        async for _, _, valid, payload in ctx.tick().sample(o_valid, o_payload):
-            if held is not None:
-                assert valid and payload == held, f"edge {cycle}: offered payload withdrawn"
-            if valid and ready:
-                assert done_at is None, f"edge {cycle}: output beyond the {n} inputs"
-                run.outputs.append(payload)
-                run.out_cycles.append(cycle)
-                if len(run.outputs) == n:
-                    done_at = cycle
-            held = payload if valid and not ready else None
-            cycle += 1
-            assert cycle < max_cycles, f"no progress: {len(run.outputs)} of {n} outputs"
-            if n == 0 and done_at is None:
-                done_at = 0
-            if done_at is not None:
-                if cycle > done_at + drain:
-                    return
-                ready = True
-            elif p_ready < 1:
-                ready = rng.random() < p_ready
-            ctx.set(o_ready, ready)
-            if probe_ready:
-                seen = ctx.get(o_valid), ctx.get(o_payload)
-                ctx.set(o_ready, not ready)
-                assert (ctx.get(o_valid), ctx.get(o_payload)) == seen, "o depends on o.ready"
-                ctx.set(o_ready, ready)
-
-    sim = Simulator(dut)
-    sim.add_clock(1e-8)
-    sim.add_testbench(producer)
-    sim.add_testbench(consumer)
-    sim.run()
-    assert len(run.in_cycles) == n and len(run.outputs) == n
-    return run
-
-
-def unpack(layout, raw, name):
-    """Field ``name`` of ``layout`` from raw payload integers (numpy int64 array)."""
-    f = layout[name]
-    return (np.asarray(raw, dtype=np.int64) >> f.offset) & ((1 << f.shape.width) - 1)
-
-
-def pack(layout, **fields):
-    """Raw payload integers from per-field arrays (inverse of :func:`unpack`)."""
-    out = 0
-    for name, values in fields.items():
-        out = out | (np.asarray(values, dtype=np.int64) << layout[name].offset)
-    return [int(v) for v in np.atleast_1d(out)]
 
 
 # --------------------------------------------------------------------------- inputs
@@ -185,10 +76,10 @@ def random_inputs(cfg, n, seed):
 def check_rsqrt(dut, x, **kw):
     """Run ``x`` through ``dut``; compare every output and the saturation count; return run."""
     cfg = dut.config
-    run = run_stream(dut, [int(v) for v in x], **kw)
-    layout = dut.o.payload.shape()
-    got = unpack(layout, run.outputs, "rsqrt")
-    sat = unpack(layout, run.outputs, "saturated").astype(bool)
+    run = run_streams(dut, [int(v) for v in x], **kw)
+    out = unpack_beats(dut.o.payload.shape(), run.outputs)
+    got = out["rsqrt"]
+    sat = out["saturated"].astype(bool)
     counter = SaturationCounter()
     want = rsqrt_with_config(x, cfg, counter)
     bad = np.flatnonzero(got != want)
@@ -274,6 +165,25 @@ def test_output_independent_of_ready():
     fs = FormatSet.preset("narrow")
     x = random_inputs(fs.rsqrt_config(), 300, seed=10)
     check_rsqrt(RsqrtUnit(fs), x, seed=11, p_valid=0.8, p_ready=0.6, probe_ready=True)
+
+
+def test_one_transfer_at_a_time():
+    """stream_put/stream_get, one input in flight at a time: each result, as a dict, is the golden one."""
+    fs = FormatSet.preset("narrow")
+    cfg = fs.rsqrt_config()
+    x = [0, 1, cfg.fmt_in.raw_max, *random_inputs(cfg, 6, seed=16).tolist()]
+    want = rsqrt_with_config(np.array(x), cfg)
+    saturated = rsqrt_stages(np.array(x), cfg)["saturate"]
+    dut = RsqrtUnit(fs)
+    results = []
+
+    async def bench(ctx):
+        for value in x:
+            assert await stream_put(ctx, dut.i, value) == 1  # the unit is empty: taken at once
+            results.append(await stream_get(ctx, dut.o))
+
+    run_testbenches(dut, bench)
+    assert results == [{"rsqrt": int(w), "saturated": int(s)} for w, s in zip(want, saturated)]
 
 
 GENERIC_CONFIGS = [

@@ -1,7 +1,7 @@
 """RTL step generator (hdl.StepGenerator) against the golden model, in Amaranth's simulator.
 
 Every output (``dt``, ``half_dt_sq``) is compared, in order, with ``step_size`` under seeded
-random valid/ready stalls on both sides (stream driver shared with ``test_hdl_rsqrt.py``).
+random valid/ready stalls on both sides (the stream helpers of :mod:`sim.stream_helpers`).
 
 Why two one-lane sweeps plus a dt sweep verify *every* input pair (separability)
 ----------------------------------------------------------------------------------
@@ -42,7 +42,9 @@ from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import FormatSet, dt_constant, exp_lut, exp_table, step_size
 from hdl import StepGenerator
-from test_hdl_rsqrt import PRESETS, pack, run_stream, unpack
+from sim.payloads import pack_beats, unpack_beats
+from sim.stream_helpers import run_streams, run_testbenches, stream_get, stream_put
+from test_hdl_rsqrt import PRESETS
 
 
 def separable(fs):
@@ -83,11 +85,10 @@ def check_step(dut, area, shape, **kw):
     fs = dut.fs
     area = np.asarray(area, dtype=np.int64)
     shape = np.asarray(shape, dtype=np.int64)
-    run = run_stream(dut, pack(dut.i.payload.shape(), area_error=area, shape_error=shape), **kw)
-    layout = dut.o.payload.shape()
+    run = run_streams(dut, pack_beats(dut.i.payload.shape(), {"area_error": area, "shape_error": shape}), **kw)
+    out = unpack_beats(dut.o.payload.shape(), run.outputs)
     want_dt, want_half = step_size(area, shape, fs)
-    for name, got, want in (("dt", unpack(layout, run.outputs, "dt"), want_dt),
-                            ("half_dt_sq", unpack(layout, run.outputs, "half_dt_sq"), want_half)):
+    for name, got, want in (("dt", out["dt"], want_dt), ("half_dt_sq", out["half_dt_sq"], want_half)):
         bad = np.flatnonzero(got != want)
         if bad.size:
             i = bad[0]
@@ -213,6 +214,24 @@ def test_output_independent_of_ready():
     area, shape = rng.integers(0, fs.error.raw_max + 1, (2, 300))
     check_step(StepGenerator(fs), area, shape, seed=7, p_valid=0.8, p_ready=0.6,
                probe_ready=True)
+
+
+def test_one_transfer_at_a_time():
+    """stream_put/stream_get with dict payloads, one pair in flight at a time, against step_size."""
+    fs = FormatSet.preset("default")
+    top = fs.error.raw_max
+    pairs = [(0, 0), (top, top), (top, 0), (0, top), (top // 3, top // 2), (1, top - 1)]
+    want_dt, want_half = step_size(*np.array(pairs).T, fs)
+    dut = StepGenerator(fs)
+    results = []
+
+    async def bench(ctx):
+        for area, shape in pairs:
+            assert await stream_put(ctx, dut.i, {"area_error": area, "shape_error": shape}) == 1
+            results.append(await stream_get(ctx, dut.o))
+
+    run_testbenches(dut, bench)
+    assert results == [{"dt": int(d), "half_dt_sq": int(h)} for d, h in zip(want_dt, want_half)]
 
 
 VARIANTS = {
