@@ -2,17 +2,15 @@
 
 Every node's new position, velocity and Σ|L − d| is compared bit for bit with
 ``golden_model.fixed.pipeline.node_update``, in order, under seeded random
-valid/ready stalls on both sides.
+valid/ready stalls on both sides (the stream helpers of :mod:`sim.stream_helpers`).
 """
 
 import gc
-import random
 import warnings
 
 import numpy as np
 import pytest
-from amaranth.hdl import UnusedElaboratable, Value
-from amaranth.sim import Simulator
+from amaranth.hdl import UnusedElaboratable
 
 from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet
@@ -23,69 +21,21 @@ from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
 from hdl import NodeUpdate
 from sim.payloads import pass_beats, unpack_beats
+from sim.stream_helpers import run_streams
 
 PRESETS = ["default", "narrow"]
 
 
-class Run:
-    def __init__(self):
-        self.outputs, self.in_cycles, self.out_cycles, self.idle = [], [], [], []
-
-
-def simulate(dut, beats, n_out, constants, *, seed=0, p_valid=1.0, p_ready=1.0, ready_after=0, momentum=False):
-    """Stream ``beats`` into ``dut.i``, collect ``n_out`` results; check the stream rules on the way.
-
-    ``o.ready`` stays low for the first ``ready_after`` cycles of the consumer.
-    """
-    run = Run()
-    i_payload, o_payload = Value.cast(dut.i.payload), Value.cast(dut.o.payload)
-    n = len(beats)
-    max_cycles = int(4 * (n + dut.latency) / (p_valid * p_ready)) + 200 + ready_after
-
-    async def producer(ctx):
+def simulate(dut, beats, n_out, constants, *, momentum=False, **kw):
+    """Stream ``beats`` into ``dut.i`` and collect ``n_out`` results (:func:`sim.stream_helpers.run_streams`,
+    which checks the stream rules), the constant inputs set first; ``idle`` recorded at every edge."""
+    def setup(ctx):
         for port, value in zip((dut.dt, dut.half_dt_sq, dut.half_spring, dut.damping), constants):
             ctx.set(port, value)
         ctx.set(dut.momentum, momentum)
-        await ctx.tick().repeat(2)  # the constants are registered once
-        rng = random.Random(seed)
-        idx, cycle = 0, 0
-        while idx < n:
-            valid = p_valid >= 1 or rng.random() < p_valid
-            ctx.set(i_payload, beats[idx] if valid else rng.getrandbits(len(i_payload)))
-            ctx.set(dut.i.valid, valid)
-            _, _, ready = await ctx.tick().sample(dut.i.ready)
-            if valid and ready:
-                run.in_cycles.append(cycle)
-                idx += 1
-            cycle += 1
-        ctx.set(dut.i.valid, 0)
 
-    async def consumer(ctx):
-        await ctx.tick().repeat(2)
-        rng = random.Random(seed + 1)
-        held, cycle = None, 0
-        while len(run.outputs) < n_out or cycle < (run.out_cycles[-1] if run.out_cycles else 0) + dut.latency + 3:
-            ready = cycle >= ready_after and (len(run.outputs) >= n_out or p_ready >= 1 or rng.random() < p_ready)
-            ctx.set(dut.o.ready, ready)
-            _, _, valid, payload, idle = await ctx.tick().sample(dut.o.valid, o_payload, dut.idle)
-            run.idle.append(idle)
-            if held is not None:
-                assert valid and payload == held, f"cycle {cycle}: offered result withdrawn or changed"
-            if valid and ready:
-                assert len(run.outputs) < n_out, f"cycle {cycle}: more results than nodes"
-                run.outputs.append(payload)
-                run.out_cycles.append(cycle)
-            held = payload if valid and not ready else None
-            cycle += 1
-            assert cycle < max_cycles, f"no progress: {len(run.outputs)} of {n_out} results"
-
-    sim = Simulator(dut)
-    sim.add_clock(1e-8)
-    sim.add_testbench(producer)
-    sim.add_testbench(consumer)
-    sim.run()
-    assert len(run.outputs) == n_out
-    return run
+    # the constants are registered once: the streams start two edges later
+    return run_streams(dut, beats, n_out, setup=setup, start=2, watch={"idle": dut.idle}, **kw)
 
 
 def check_pass(dut, fs, stream, positions, velocities, constants, momentum=False, **kw):
@@ -114,12 +64,13 @@ def check_pass(dut, fs, stream, positions, velocities, constants, momentum=False
 def check_idle(run, stream):
     """``idle`` in every cycle: high exactly when the entries accepted so far end on a node
     boundary and every one of those nodes' results has been taken."""
-    entries_in = np.searchsorted(run.in_cycles, np.arange(len(run.idle)))  # accepted before cycle c
-    results_out = np.searchsorted(run.out_cycles, np.arange(len(run.idle)))
+    idle = run.watched["idle"]
+    entries_in = np.searchsorted(run.in_cycles, np.arange(len(idle)))  # accepted before cycle c
+    results_out = np.searchsorted(run.out_cycles, np.arange(len(idle)))
     nodes_in = np.searchsorted(stream.indptr, entries_in, side="right") - 1  # complete nodes among them
     expected = (stream.indptr[nodes_in] == entries_in) & (results_out == nodes_in)
-    bad = np.flatnonzero(np.asarray(run.idle, dtype=bool) != expected)
-    assert bad.size == 0, f"idle wrong in {bad.size} cycles, first {int(bad[0])}: rtl {run.idle[int(bad[0])]}"
+    bad = np.flatnonzero(np.asarray(idle, dtype=bool) != expected)
+    assert bad.size == 0, f"idle wrong in {bad.size} cycles, first {int(bad[0])}: rtl {idle[int(bad[0])]}"
 
 
 def random_stream(fs, n_nodes, seed, max_degree=12, barrier=False):
