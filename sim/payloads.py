@@ -8,7 +8,8 @@ integer for a payload that is not a layout. Two forms of the same thing:
 * :func:`pack_beats` / :func:`unpack_beats`: many beats at once (a pass has thousands), the
   same nested dicts with an array of values in every leaf, field by field with numpy.
 
-Both walk the layout with :func:`leaves`; ``tests/test_payloads.py`` checks that they agree.
+The many-beat form walks the layout with :func:`leaves`; ``tests/test_payloads.py`` checks that
+the two forms agree.
 Shared by the Amaranth-simulator tests (:mod:`sim.stream_helpers`) and the cocotb benches, so
 both drive the hardware with exactly the same bits.
 """
