@@ -88,6 +88,12 @@ class SlicedFIFO(wiring.Component):
         Entries, a power of two.
     slice_bits : :class:`int`
         Bits per column slice (the last one takes the rest).
+    write_register : :class:`bool`
+        Each slice registers its write (enable and data) before its memory, one clock later:
+        the enable register of slice k takes ``w_stream.valid`` and slice k's own ``w_rdy``, so
+        the slices' enable registers are distinct logic that synthesis cannot merge, and
+        ``w_stream.valid`` reaches one LUT per slice instead of every slice's row decoders (one
+        register for all 14 slices of the node-header FIFO was a critical path, 141 MHz).
     registered : :class:`bool`
         ``False``: ``r_stream.payload`` is the memories' asynchronous read of the oldest entry
         (valid while ``r_stream.valid``), and ``r_stream.ready`` pops it. ``True``: each slice
@@ -109,10 +115,12 @@ class SlicedFIFO(wiring.Component):
     equal levels), so they stay in step, and slice 0's flags stand for all.
     """
 
-    def __init__(self, *, width: int, depth: int, slice_bits: int, registered: bool = False):
+    def __init__(self, *, width: int, depth: int, slice_bits: int, registered: bool = False,
+                 write_register: bool = False):
         if width < 1 or slice_bits < 1:
             raise ValueError(f"SlicedFIFO needs positive width and slice_bits, not {width}, {slice_bits}")
         self.width, self.depth, self.slice_bits, self.registered = width, depth, slice_bits, registered
+        self.write_register = write_register
         super().__init__({"w_stream": In(stream.Signature(width)), "r_stream": Out(stream.Signature(width))})
 
     def elaborate(self, platform):
@@ -121,7 +129,13 @@ class SlicedFIFO(wiring.Component):
         for k, lo in enumerate(range(0, self.width, self.slice_bits)):
             bits = min(self.slice_bits, self.width - lo)
             m.submodules[f"slice{k}"] = fifo = LutFIFO(width=bits, depth=self.depth, checked=False, start=k)
-            m.d.comb += [fifo.w_en.eq(self.w_stream.valid), fifo.w_data.eq(self.w_stream.payload[lo:lo + bits])]
+            w_en, w_data = self.w_stream.valid, self.w_stream.payload[lo:lo + bits]
+            if self.write_register:
+                w_en_r = Signal(name=f"w_en{k}")
+                w_data_r = Signal(bits, name=f"w_data{k}", reset_less=True)
+                m.d.sync += [w_en_r.eq(w_en & fifo.w_rdy), w_data_r.eq(w_data)]
+                w_en, w_data = w_en_r, w_data_r
+            m.d.comb += [fifo.w_en.eq(w_en), fifo.w_data.eq(w_data)]
             if k == 0:
                 m.d.comb += self.w_stream.ready.eq(fifo.w_rdy)
             if not self.registered:

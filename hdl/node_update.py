@@ -206,12 +206,13 @@ class NodeUpdate(wiring.Component):
 
         # ------------------------------------------------------------ front
         m.submodules.headers = headers = SlicedFIFO(
-            width=node_layout(fs).size, slice_bits=self.FIFO_SLICE_BITS,
+            width=node_layout(fs).size, slice_bits=self.FIFO_SLICE_BITS, write_register=True,
             depth=1 << (self.front_stages + self.rsqrt_latency + self.back_stages + 1).bit_length())
         beat = self.i.payload
         current = Signal(vector_layout(fs.position), name="current_position", reset_less=True)
-        # The header is written one clock late, from registers: the write enable fans out to
-        # every LUT RAM cell of the FIFO, and the read comes dozens of clocks later anyway.
+        # The header is written two clocks late, from registers here and again in each FIFO slice
+        # (write_register): the write enable would otherwise fan out to every LUT RAM row of
+        # the FIFO, and the read comes dozens of clocks later anyway.
         header_write = Signal(name="header_write")
         header_data = Signal(node_layout(fs), name="header_data", reset_less=True)
         m.d.sync += [header_write.eq(take & beat.first), header_data.eq(beat.node)]
