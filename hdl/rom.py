@@ -24,6 +24,8 @@ __all__ = ["DP16KD_CONFIGS", "dp16kd_config", "dp16kd_initvals", "registered_rom
 
 #: ``DP16KD`` port widths and their depths (16 Kib, 18 Kib with the ninth bits).
 DP16KD_CONFIGS = ((18, 1024), (9, 2048), (4, 4096), (2, 8192), (1, 16384))
+#: The primitive's data and address pins per port (the device's, not a format's).
+DP16KD_DATA_PINS, DP16KD_ADDRESS_PINS = 18, 14
 
 
 def dp16kd_config(depth: int) -> tuple[int, int]:
@@ -66,17 +68,16 @@ def registered_rom(m: Module, table, width: int, addr, *, name: str, enable=None
     slice_width, address_bits = dp16kd_config(len(table))
     if len(addr) > address_bits:
         raise ValueError(f"{name}: a {len(addr)}-bit address for a {len(table)}-word ROM")
-    ada = Signal(14, name=f"{name}_ada")
-    m.d.comb += ada.eq(addr << (14 - address_bits))
+    ada = Signal(DP16KD_ADDRESS_PINS, name=f"{name}_ada")
+    m.d.comb += ada.eq(addr << (DP16KD_ADDRESS_PINS - address_bits))
     for k, lo in enumerate(range(0, width, slice_width)):
         bits = min(slice_width, width - lo)
-        doa = Signal(18, name=f"{name}{k}_doa")
+        doa = Signal(DP16KD_DATA_PINS, name=f"{name}{k}_doa")
         zero = Const(0, 1)
-        ports = {f"i_ADA{i}": ada[i] for i in range(14)}
-        ports.update({f"i_DIA{i}": zero for i in range(18)})
-        ports.update({f"i_DIB{i}": zero for i in range(18)})
-        ports.update({f"i_ADB{i}": zero for i in range(14)})
-        ports.update({f"o_DOA{i}": doa[i] for i in range(18)})
+        ports = {f"i_ADA{i}": ada[i] for i in range(DP16KD_ADDRESS_PINS)}
+        ports.update({f"i_ADB{i}": zero for i in range(DP16KD_ADDRESS_PINS)})
+        ports.update({f"i_DI{p}{i}": zero for p in "AB" for i in range(DP16KD_DATA_PINS)})
+        ports.update({f"o_DOA{i}": doa[i] for i in range(DP16KD_DATA_PINS)})
         ports.update({f"i_{p}": zero for p in ("WEA", "RSTA", "CSA0", "CSA1", "CSA2", "CLKB", "CEB", "OCEB",
                                                 "WEB", "RSTB", "CSB0", "CSB1", "CSB2")})
         m.submodules[f"{name}{k}"] = Instance(
