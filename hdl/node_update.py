@@ -64,7 +64,7 @@ class NodeUpdate(wiring.Component):
     Structure
     ---------
     The datapath never stalls. Every stage register loads on every clock, so no enable
-    fans out across the ~26,600 flip-flops: a front section (narrowing, squares,
+    fans out across the ~28,750 flip-flops: a front section (narrowing, squares,
     ``|Δ|²``) feeds the :class:`~hdl.rsqrt.RsqrtUnit` (its ``o.ready`` tied high), the
     entry's side data rides along in a delay line of the rsqrt latency, a back section
     forms ``s``, the forces and ``|L − d|`` and accumulates per node, and a node tail runs
@@ -101,7 +101,7 @@ class NodeUpdate(wiring.Component):
         self.fs = fs
         self.rsqrt_latency = RsqrtUnit.latency_of(fs.rsqrt_config())
         s = shape_of
-        mul = Pipeline.MUL_STAGES
+        mul = Pipeline.mul_stages(land_operands=True)
         self.front_stages = 8 + mul + reduce_levels((s(fs.delta), s(fs.delta)))
         # the fold barrier runs beside the rsqrt unit, in its delay line
         self.barrier_stages = 6 + 2 * mul + (reduce_levels((s(fs.barrier_gain), unsigned(fs.area.width - 1)))
@@ -218,7 +218,7 @@ class NodeUpdate(wiring.Component):
         m.d.sync += [header_write.eq(take & beat.first), header_data.eq(beat.node)]
         m.d.comb += [headers.w_stream.valid.eq(header_write), headers.w_stream.payload.eq(header_data.as_value())]
 
-        front = Pipeline(m, take, platform=platform)
+        front = Pipeline(m, take, land_operands=True, platform=platform)
         position = vector_layout(fs.position)
         # F0: the beat as it arrived, so that i.valid drives no wide enable (the held P_i's was
         # the critical path once the barrier widened the entry)
@@ -250,7 +250,7 @@ class NodeUpdate(wiring.Component):
 
         # The entry's side data waits for r in a delay line as long as the rsqrt unit; the fold
         # barrier's force is computed there.
-        side = Pipeline(m, front.valid, platform=platform)
+        side = Pipeline(m, front.valid, land_operands=True, platform=platform)
         # S1: the shortfall T − X and the opposite edge D = Δa − Δb, exact
         step(side, "s1", drop=("cross", "threshold", "bx", "by"), short=live["threshold"] - live["cross"],
              ex=live["dx"] - live["bx"], ey=live["dy"] - live["by"])
@@ -274,7 +274,7 @@ class NodeUpdate(wiring.Component):
             step(side, f"side{n}")
 
         # ------------------------------------------------------------ back
-        back = Pipeline(m, rsqrt.o.valid, platform=platform)
+        back = Pipeline(m, rsqrt.o.valid, land_operands=True, platform=platform)
         r = rsqrt.o.payload.rsqrt  # leaves the rsqrt unit's output register
         # d·r and S·r
         multiply(back, "b1", drop=("s",), d_r=(live["rest"], r), s_r=(live["s"], r))
@@ -326,7 +326,7 @@ class NodeUpdate(wiring.Component):
         assert back.stages == self.back_stages, (back.stages, self.back_stages)
 
         # ------------------------------------------------------------ node tail
-        tail = Pipeline(m, node_done_r, platform=platform)
+        tail = Pipeline(m, node_done_r, land_operands=True, platform=platform)
         # T1: the node's header; F and Σe rounded;  T2: saturated
         step(tail, "t1", f_x=rounded(acc_f[0], fs.force.frac_bits, fs.force_acc),
              f_y=rounded(acc_f[1], fs.force.frac_bits, fs.force_acc),

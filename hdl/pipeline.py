@@ -81,18 +81,28 @@ class Pipeline:
         The valid bit entering the first stage.
     advance : Value or None
         Clock enable of every register (a stalling pipeline), or ``None`` (free-running).
+    land_operands : bool
+        Give every multiply a stage more (:meth:`multiply`): its operands are copied into fabric
+        registers before the DSP blocks' input registers, so the route from where an operand is
+        computed (a rounding or a saturation) to the DSP blocks it fans out to is a stage's only work.
     platform
         The elaboration platform; :data:`hdl.dsp.ECP5` makes the multipliers ``MULT18X18D``
         instances with their own registers (:func:`hdl.dsp.registered_product`).
     """
 
     #: Stages of a multiply before its adder levels: operands, products (both in the DSP
-    #: block), the products landed in fabric registers.
+    #: block), the products landed in fabric registers (one more with ``land_operands``).
     MUL_STAGES = 3
 
-    def __init__(self, m: Module, valid, *, advance=None, platform=None):
+    @classmethod
+    def mul_stages(cls, land_operands: bool = False) -> int:
+        """Stages of a multiply before its adder levels."""
+        return cls.MUL_STAGES + int(land_operands)
+
+    def __init__(self, m: Module, valid, *, advance=None, land_operands: bool = False, platform=None):
         self._m = m
         self._advance = advance
+        self.land_operands = land_operands
         self._platform = platform
         self.valid = valid
         self.stages = 0
@@ -151,9 +161,20 @@ class Pipeline:
         :attr:`MUL_STAGES` stages (``{name}_in``, ``{name}``, ``{name}_out``: operands and
         products registered in the DSP blocks, then the products landed in fabric registers,
         so the route out of the DSP row is all that stage does), then the pairwise adder levels
-        ``{name}_sum1``…. ``carry(stage_name)`` is called once in every stage, after it starts,
+        ``{name}_sum1``…. With ``land_operands`` a stage ``{name}_land`` comes first: each
+        distinct operand copied into a fabric register, so the route into the DSP row is all
+        that stage does. ``carry(stage_name)`` is called once in every stage, after it starts,
         to register the caller's other values.
         """
+        if self.land_operands:
+            self.stage(f"{name}_land")
+            landed = {}  # one register per distinct operand (Yosys would merge copies anyway)
+            for key, (a, b) in products.items():
+                for n, operand in (("a", a), ("b", b)):
+                    if id(operand) not in landed:
+                        landed[id(operand)] = self.keep(Value.cast(operand), f"{name}_land_{key}_{n}")
+            products = {key: (landed[id(a)], landed[id(b)]) for key, (a, b) in products.items()}
+            carry(f"{name}_land")
         parts = {key: self.mul(a, b, f"{name}_{key}") for key, (a, b) in products.items()}
         for suffix in ("_in", ""):
             self.stage(f"{name}{suffix}")
