@@ -47,7 +47,7 @@ from .formats_set import FormatSet
 from .rsqrt import rsqrt_with_config
 
 __all__ = ["BarrierEntries", "NeighbourStream", "NodeConstants", "NodeTerms", "NodeUpdate",
-           "accumulator_guard_bits", "integrate", "integrate_momentum", "barrier_terms", "node_power",
+           "accumulator_guard_bits", "per_node_sums", "integrate", "integrate_momentum", "barrier_terms", "node_power",
            "edge_terms", "neighbour_terms", "node_terms", "node_update"]
 
 SAT = Overflow.SATURATE
@@ -267,17 +267,28 @@ def edge_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
 
 @dataclass(frozen=True, eq=False)
 class NodeTerms:
-    """What the neighbour half of the pipeline produces per node (raw)."""
+    """What the neighbour half of the pipeline (the force pass) produces per node (raw)."""
 
     force: np.ndarray  # (V, 2) Σ f [force_acc]
     error_sums: np.ndarray  # (V,) Σ|L − d| [error_acc]
-    #: Σ over all entries of |L − d|² (raw², exact): the host's energy estimate
-    error_square_sum: int
+    #: (V,) Σ over the node's entries of |L − d|² (raw [rest_length]², exact)
+    error_squares: np.ndarray
+    #: (V,) Σ over the node's entries of the barrier's ``c·h`` (raw [barrier_coeff]·[area], exact;
+    #: zeros without a barrier): each triangle's barrier energy is ``2·c·h``, and each triangle is
+    #: on three entries
+    barrier_energies: np.ndarray
     #: (V,) bool: a triangle of the node is inside the barrier (``h > 0``); ``None`` without one
     barrier_active: np.ndarray | None = None
-    #: Σ over all entries of the barrier's ``c·h`` (raw [barrier_coeff]·[area], exact; 0 without
-    #: one): each triangle's barrier energy is ``2·c·h``, and each triangle is on three entries
-    barrier_energy_sum: int = 0
+
+    @property
+    def error_square_sum(self) -> int:
+        """Σ over all entries of |L − d|² (raw², exact): the host's energy estimate."""
+        return exact_sum(self.error_squares)
+
+    @property
+    def barrier_energy_sum(self) -> int:
+        """Σ over all entries of ``c·h`` (raw, exact; 0 without a barrier)."""
+        return exact_sum(self.barrier_energies)
 
 
 def exact_sum(values: np.ndarray) -> int:
@@ -285,6 +296,17 @@ def exact_sum(values: np.ndarray) -> int:
     int64 partial sums cannot wrap for fewer than 2**31 values)."""
     values = np.asarray(values, dtype=np.int64)
     return (int(np.sum(values >> 31)) << 31) + int(np.sum(values & ((1 << 31) - 1)))
+
+
+def per_node_sums(values: np.ndarray, indptr: np.ndarray) -> np.ndarray:
+    """``(V,)`` the exact int64 sum of each node's entries ``indptr[i]:indptr[i+1]`` of ``values`` (N,).
+
+    Prefix sums in int64 wrap modulo 2**64 and the differences of two of them are taken modulo
+    2**64 as well, so each node's sum is exact whenever it fits int64 (the prefix sums need not).
+    Nodes without entries sum to 0.
+    """
+    prefix = np.concatenate([[0], np.cumsum(np.asarray(values, dtype=np.int64))])
+    return prefix[indptr[1:]] - prefix[indptr[:-1]]
 
 
 def barrier_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream,
@@ -332,7 +354,7 @@ def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
         starts = stream.indptr[:-1]
         force = np.add.reduceat(force_entries, starts, axis=0)
         error = np.add.reduceat(error_entries, starts)
-        square_sum = int(np.dot(error_entries, error_entries))
+        squares = per_node_sums(error_entries * error_entries, stream.indptr)
     else:  # a mesh: each edge once for both of its entries
         forward, backward = stream.edge_entries
         a, b = stream.neighbour[backward], stream.neighbour[forward]
@@ -345,18 +367,18 @@ def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
 
         force = np.column_stack([per_node(force_f[:, 0], force_b[:, 0]), per_node(force_f[:, 1], force_b[:, 1])])
         error = per_node(error_f, error_b)
-        square_sum = int(np.dot(error_f, error_f)) + int(np.dot(error_b, error_b))
-    active, barrier_energy = None, 0
+        squares = per_node(error_f * error_f, error_b * error_b)  # < 2**53: exact in float64 too
+    active, barrier_energies = None, np.zeros(n, dtype=np.int64)
     if stream.barrier is not None:
         barrier, inside, energy = barrier_terms(fs, positions, stream, counter)
-        barrier_energy = exact_sum(energy)
+        barrier_energies = per_node_sums(energy, stream.indptr)
         owner = stream.owner
         force = force + np.column_stack([np.bincount(owner, barrier[:, 0], n), np.bincount(owner, barrier[:, 1], n)
                                          ]).astype(np.int64)
         active = np.bincount(owner, inside, n) > 0
     force_acc = requantize(force, fs.force.frac_bits, fs.force_acc, rnd, SAT, counter, "force_acc")
     error_sums = requantize(error, fs.rest_length.frac_bits, fs.error_acc, rnd, SAT, counter, "error_acc")
-    return NodeTerms(force_acc, error_sums, square_sum, active, barrier_energy)
+    return NodeTerms(force_acc, error_sums, squares, barrier_energies, active)
 
 
 def integrate(fs: FormatSet, positions: np.ndarray, velocities: np.ndarray, force: np.ndarray,
