@@ -7,15 +7,17 @@ and unpack with the same layouts (:mod:`sim.payloads`), and the Verilog export d
 
 from __future__ import annotations
 
-from amaranth.hdl import unsigned
+from amaranth.hdl import ShapeCastable, unsigned
 from amaranth.lib import data
 
 from golden_model.fixed import Format, FormatSet
+from golden_model.fixed.pipeline import accumulator_guard_bits
 
 from .fixedpoint import shape_of
 
-__all__ = ["vector_layout", "node_layout", "barrier_layout", "entry_layout", "result_layout", "step_layout",
-           "errors_layout"]
+__all__ = ["vector_layout", "node_layout", "barrier_layout", "neighbour_layout", "entry_layout", "result_layout",
+           "force_entry_layout", "node_force_layout", "integrator_input_layout", "integrator_output_layout",
+           "step_layout", "errors_layout"]
 
 
 def vector_layout(fmt: Format) -> data.StructLayout:
@@ -44,6 +46,11 @@ def barrier_layout(fs: FormatSet) -> data.StructLayout:
     })
 
 
+def neighbour_layout(fs: FormatSet) -> data.StructLayout:
+    """A neighbour entry's ``position`` [position] and the edge's ``rest`` length [rest_length]."""
+    return data.StructLayout({"position": vector_layout(fs.position), "rest": shape_of(fs.rest_length)})
+
+
 def entry_layout(fs: FormatSet) -> data.StructLayout:
     """One input beat: a neighbour entry, with its node's header on the node's first entry.
 
@@ -56,7 +63,7 @@ def entry_layout(fs: FormatSet) -> data.StructLayout:
         "first": unsigned(1),
         "last": unsigned(1),
         "node": node_layout(fs),
-        "neighbour": data.StructLayout({"position": vector_layout(fs.position), "rest": shape_of(fs.rest_length)}),
+        "neighbour": neighbour_layout(fs),
         "barrier": barrier_layout(fs),
     })
 
@@ -72,6 +79,62 @@ def result_layout(fs: FormatSet) -> data.StructLayout:
     })
 
 
+def force_entry_layout(fs: FormatSet) -> data.StructLayout:
+    """One beat of the force pass (:class:`~hdl.force_pass.ForcePass`): a neighbour entry of a node.
+
+    ``first``/``last`` mark the node's first and last entries; ``position`` is the node's own
+    ``P_i`` [position], read only on ``first``; ``neighbour`` and ``barrier`` as in
+    :func:`entry_layout`. No velocity or weight: the force pass does not need them.
+    """
+    return data.StructLayout({
+        "first": unsigned(1),
+        "last": unsigned(1),
+        "position": vector_layout(fs.position),
+        "neighbour": neighbour_layout(fs),
+        "barrier": barrier_layout(fs),
+    })
+
+
+def node_force_layout(fs: FormatSet, energy: bool = False) -> data.StructLayout:
+    """One node's result of the force pass.
+
+    ``force`` ΣF [force_acc] and ``error_sum`` Σ|L − d| [error_acc], both saturated; ``inside``:
+    one of the node's triangles is inside the fold barrier (``h > 0``). With ``energy``, the
+    node's exact energy partials too: ``error_squares`` Σe² (``e = |L − d|`` raw [rest_length],
+    squared: raw at twice its fraction bits) and ``barrier_energy`` Σc·h (raw [barrier_coeff]·[area],
+    ``h ≥ 0``), each wide enough for ``max_degree`` terms
+    (:attr:`golden_model.fixed.pipeline.NodeTerms.error_squares` / ``barrier_energies``).
+    """
+    fields = {"force": vector_layout(fs.force_acc), "error_sum": shape_of(fs.error_acc), "inside": unsigned(1)}
+    if energy:
+        guard = accumulator_guard_bits(fs.max_degree)
+        coeff_bits = fs.barrier_coeff.width - int(fs.barrier_coeff.signed)  # c ≥ 0
+        fields["error_squares"] = unsigned(2 * fs.rest_length.width + guard)
+        fields["barrier_energy"] = unsigned(coeff_bits + fs.area.width - 1 + guard)  # h < 2**(area.width − 1)
+    return data.StructLayout(fields)
+
+
+def integrator_input_layout(fs: FormatSet, side: ShapeCastable | None = None) -> data.StructLayout:
+    """One node into the integrate stage (:class:`~hdl.integrator.Integrator`): its state ``node``
+    (:func:`node_layout`), ``force`` ΣF [force_acc] and ``inside`` (the barrier's weight applies);
+    with ``side``, an opaque field of that shape carried to the output unchanged."""
+    fields = {"node": node_layout(fs), "force": vector_layout(fs.force_acc), "inside": unsigned(1)}
+    if side is not None:
+        fields["side"] = side
+    return data.StructLayout(fields)
+
+
+def integrator_output_layout(fs: FormatSet, side: ShapeCastable | None = None) -> data.StructLayout:
+    """One node out of the integrate stage: new ``position`` [position], new ``velocity``
+    [velocity] (damped), ``power`` F·V [power] of the input state; with ``side``, the input's
+    ``side`` field."""
+    fields = {"position": vector_layout(fs.position), "velocity": vector_layout(fs.velocity),
+              "power": shape_of(fs.power)}
+    if side is not None:
+        fields["side"] = side
+    return data.StructLayout(fields)
+
+
 def step_layout(fs: FormatSet) -> data.StructLayout:
     """``dt`` [dt] and ``half_dt_sq`` [half_dt_sq]."""
     return data.StructLayout({"dt": shape_of(fs.dt), "half_dt_sq": shape_of(fs.half_dt_sq)})
@@ -80,3 +143,71 @@ def step_layout(fs: FormatSet) -> data.StructLayout:
 def errors_layout(fs: FormatSet) -> data.StructLayout:
     """``area_error`` (E_S) and ``shape_error`` (E_C), both [error]."""
     return data.StructLayout({"area_error": shape_of(fs.error), "shape_error": shape_of(fs.error)})
+
+
+# ---------------------------------------------------------------- the controller's units
+# (hdl/area_error.py, hdl/controller_units.py)
+
+from golden_model.fixed import MAX_PRODUCT_WIDTH  # noqa: E402  (this block is appended as one piece)
+
+__all__ += ["triangle_layout", "area_saturations_layout", "normalise_layout", "energy_sums_layout",
+            "energy_result_layout"]
+
+
+def triangle_layout(fs: FormatSet) -> data.StructLayout:
+    """One triangle of the area pass: its corners ``a``, ``b``, ``c`` [position] in the layout
+    and the host's area ``area`` A [face_area] (the same triangle in the mesh)."""
+    return data.StructLayout({
+        "a": vector_layout(fs.position),
+        "b": vector_layout(fs.position),
+        "c": vector_layout(fs.position),
+        "area": shape_of(fs.face_area),
+    })
+
+
+def area_saturations_layout(fs: FormatSet) -> data.StructLayout:
+    """Saturation events of one area pass, named as the golden model's ``SaturationCounter``
+    counts them: ``face_edge`` (edge components, up to 4 per triangle), ``face_area`` (triangles)
+    and ``area_sum`` (1 if the pass's sum saturated).
+
+    Wide enough for every pass the host accepts: fewer than ``2**(63 − face_area.width)``
+    triangles (``golden_model.fixed.engine.prepare``: the exact sum fits int64).
+    """
+    triangle_bits = MAX_PRODUCT_WIDTH - fs.face_area.width
+    return data.StructLayout({
+        "face_edge": unsigned(triangle_bits + 2),
+        "face_area": unsigned(triangle_bits),
+        "area_sum": unsigned(1),
+    })
+
+
+def normalise_layout(fs: FormatSet) -> data.StructLayout:
+    """A sum to normalise: ``sum`` [error_acc] and the host's reciprocal of the total,
+    ``mantissa`` [reciprocal] and ``shift`` (``sum/total ≈ sum·mantissa·2^-shift``,
+    :class:`~golden_model.fixed.engine.Reciprocal`). ``shift`` holds the shift of every total
+    below ``2**MAX_PRODUCT_WIDTH`` (``reciprocal.width + 62`` at most)."""
+    return data.StructLayout({
+        "sum": shape_of(fs.error_acc),
+        "mantissa": shape_of(fs.reciprocal),
+        "shift": unsigned((fs.reciprocal.width + MAX_PRODUCT_WIDTH).bit_length()),
+    })
+
+
+def energy_sums_layout(fs: FormatSet, entries_capacity: int) -> data.StructLayout:
+    """The exact sums of one force pass over at most ``entries_capacity`` entries:
+    ``square_sum`` Σe² (``e = |L − d|`` [rest_length], squared: raw at twice its fraction bits),
+    ``barrier_sum`` Σc·h ([barrier_coeff]·[area], ``h ≥ 0``), and ``first``: the run's first
+    pass (its energy has no predecessor)."""
+    square_max = entries_capacity * fs.rest_length.raw_max ** 2
+    barrier_max = entries_capacity * fs.barrier_coeff.raw_max * fs.area.raw_max
+    return data.StructLayout({
+        "square_sum": unsigned(square_max.bit_length()),
+        "barrier_sum": unsigned(barrier_max.bit_length()),
+        "first": unsigned(1),
+    })
+
+
+def energy_result_layout(energy_bits: int) -> data.StructLayout:
+    """``energy`` (``energy_raw``: three times the energy, exact, ``energy_bits`` wide) and
+    ``settled``: the stopping rule's relative energy change is within ε."""
+    return data.StructLayout({"energy": unsigned(energy_bits), "settled": unsigned(1)})
