@@ -1,0 +1,103 @@
+"""Wishbone B4 classic: the engine's host bus (signature and the target-side handshake).
+
+Names follow ``amaranth_soc.wishbone`` (``cyc``, ``stb``, ``we``, ``adr``, ``dat_w``, ``dat_r``,
+``sel``, ``ack``, ``err``), so the engine plugs into an amaranth-soc or LiteX interconnect by
+name. The signature is the *initiator's* view (``Out`` = driven by the host); a target takes
+``In(wishbone.Signature(...))``.
+
+Classic cycles (Wishbone B4 §3.2): the initiator holds ``cyc``, ``stb``, ``we``, ``adr``,
+``dat_w`` and ``sel`` until the target answers with ``ack`` or ``err`` for one clock; a read's
+``dat_r`` is valid with that ``ack``. ``adr`` addresses 32-bit words (byte address >> 2) and
+``sel`` has one bit per byte; the engine accepts only whole words (``sel`` all ones).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+__all__ = ["Signature", "TargetHandshake", "DATA_WIDTH", "GRANULARITY"]
+
+#: Bus data width (bits) and ``sel`` granularity (bits per ``sel`` bit).
+DATA_WIDTH = 32
+GRANULARITY = 8
+
+
+class Signature(wiring.Signature):
+    """Wishbone B4 classic with ``err``, ``DATA_WIDTH``-bit data and ``addr_width``-bit word addresses."""
+
+    def __init__(self, *, addr_width: int):
+        if not isinstance(addr_width, int) or addr_width < 1:
+            raise ValueError(f"addr_width must be a positive integer, not {addr_width!r}")
+        self.addr_width = addr_width
+        super().__init__({
+            "cyc": Out(1),
+            "stb": Out(1),
+            "we": Out(1),
+            "adr": Out(addr_width),
+            "dat_w": Out(DATA_WIDTH),
+            "sel": Out(DATA_WIDTH // GRANULARITY),
+            "dat_r": In(DATA_WIDTH),
+            "ack": In(1),
+            "err": In(1),
+        })
+
+    def __eq__(self, other):
+        return isinstance(other, Signature) and other.addr_width == self.addr_width
+
+    def __repr__(self):
+        return f"wishbone.Signature(addr_width={self.addr_width})"
+
+
+class TargetHandshake(wiring.Component):
+    """The target side of one classic cycle at a time.
+
+    ``request`` is high for exactly one clock per bus cycle, the clock after the cycle starts (so a
+    decoder has registered ``adr``/``we``/``dat_w`` to look at); the target then answers by
+    raising ``done`` (with ``error`` for an ``err`` answer, and for reads ``data``) exactly
+    any number of clocks after ``request`` (in the same clock at the earliest). ``ack``/``err``
+    are registered and high for one clock; back-to-back cycles (``stb`` held high with the next
+    request right after an answer) are taken. A cycle the initiator abandons (``cyc`` low) before
+    its answer is forgotten.
+
+    Members
+    -------
+    bus : ``In(Signature(addr_width))``
+    request : ``Out(1)``; ``address``, ``write``, ``write_data``, ``whole_word`` (``sel`` all ones): ``Out``
+        The registered request.
+    done, error : ``In(1)``; data : ``In(DATA_WIDTH)``
+        The target's answer.
+    """
+
+    def __init__(self, *, addr_width: int):
+        super().__init__({
+            "bus": In(Signature(addr_width=addr_width)),
+            "request": Out(1),
+            "address": Out(addr_width),
+            "write": Out(1),
+            "write_data": Out(DATA_WIDTH),
+            "whole_word": Out(1),
+            "done": In(1),
+            "error": In(1),
+            "data": In(DATA_WIDTH),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        bus = self.bus
+        busy = Signal()  # a cycle has been taken and not yet answered
+        # While ack/err is out, the initiator still shows the answered cycle's request: it takes
+        # the answer at this clock edge and only then presents its next cycle (or drops stb).
+        start = bus.cyc & bus.stb & ~busy & ~bus.ack & ~bus.err
+        m.d.sync += self.request.eq(start)
+        with m.If(start):
+            m.d.sync += [busy.eq(1), self.address.eq(bus.adr), self.write.eq(bus.we),
+                         self.write_data.eq(bus.dat_w), self.whole_word.eq(bus.sel.all())]
+        m.d.sync += [bus.ack.eq(0), bus.err.eq(0)]
+        with m.If(busy & self.done):
+            m.d.sync += [busy.eq(0), bus.ack.eq(bus.cyc & ~self.error),
+                         bus.err.eq(bus.cyc & self.error), bus.dat_r.eq(self.data)]
+        with m.If(~bus.cyc):
+            m.d.sync += busy.eq(0)
+        return m
