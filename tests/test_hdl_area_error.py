@@ -151,9 +151,12 @@ def test_sum_at_and_just_past_error_acc_max(preset):
     remainder = top - base
     assert 0 <= remainder <= fs.face_area.raw_max
     passes = [(np.concatenate([corners, degenerate]), np.r_[areas, remainder]),
-              (np.concatenate([corners, degenerate]), np.r_[areas, remainder + 1])]
+              (np.concatenate([corners, degenerate]), np.r_[areas, remainder + 1]),
+              # saturated, then terms of 0: the event stays counted
+              (np.concatenate([corners, degenerate, np.zeros((3, 3, 2), dtype=np.int64)]),
+               np.r_[areas, remainder + 1, 0, 0, 0])]
     _, results = check_passes(fs, passes, seed=4, p_valid=0.9)
-    assert [(t, c["area_sum"]) for t, c, _ in results] == [(top, 0), (top, 1)]
+    assert [(t, c["area_sum"]) for t, c, _ in results] == [(top, 0), (top, 1), (top, 1)]
 
 
 @pytest.mark.parametrize("preset", PRESETS)
