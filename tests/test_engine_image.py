@@ -2,12 +2,14 @@
 
 import dataclasses
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine import FixedPointError, flatten_fixed, prepare
+from golden_model.fixed.engine import FixedPointError, energy_raw, flatten_fixed, prepare
+from golden_model.fixed.pipeline import NodeTerms
 from golden_model.fixed.engine_image import (EngineCapacity, MemoryLayout, WordField, build_image, constant_fault,
                                              decode_entries, decode_nodes, decode_triangles, energy_width,
                                              memory_layouts, run_image)
@@ -26,6 +28,9 @@ RUNS = {  # both dynamics, with and without the barrier, fixed and variable step
     "paper-fixed-damped": FlattenParams(density="auto", step="fixed", dt=0.3, damping=0.1, max_iter=25),
     "momentum-barrier": FlattenParams(dynamics="momentum", max_iter=60),
     "momentum-no-barrier": FlattenParams(dynamics="momentum", barrier=False, max_iter=60),
+    # the energy always passes: the iteration whose E_S first passes stops the run
+    "momentum-area-gate": FlattenParams(dynamics="momentum", tol_area=0.02, tol_shape=1.0, tol_energy=1.0,
+                                        max_iter=60),
 }
 
 
@@ -82,15 +87,14 @@ def test_word_layouts_take_their_widths_from_the_formats_and_the_capacity():
 
 
 def test_energy_width_holds_the_largest_energy():
-    """Every entry at the largest |L − d| and the largest barrier c·h: the bound is reached, not exceeded."""
+    """energy_raw of every entry at the largest |L − d| and the largest barrier c·h reaches the width."""
     cap = EngineCapacity(4, 6, 4)
-    frac = max(DEFAULT.spring.frac_bits + 2 * DEFAULT.rest_length.frac_bits,
-               DEFAULT.barrier_coeff.frac_bits + DEFAULT.area.frac_bits)
-    springs = 3 * DEFAULT.spring.raw_max * 6 * DEFAULT.rest_length.raw_max ** 2 << (
-        frac - DEFAULT.spring.frac_bits - 2 * DEFAULT.rest_length.frac_bits)
-    barrier = 2 * 6 * DEFAULT.barrier_coeff.raw_max * DEFAULT.area.raw_max << (
-        frac - DEFAULT.barrier_coeff.frac_bits - DEFAULT.area.frac_bits)
-    assert energy_width(DEFAULT, cap) == (springs + barrier).bit_length()
+    per_node = np.array([2, 1, 2, 1])  # entries of each node
+    worst = NodeTerms(np.zeros((4, 2), np.int64), np.zeros(4, np.int64),
+                      error_squares=per_node * DEFAULT.rest_length.raw_max ** 2,
+                      barrier_energies=per_node * (DEFAULT.barrier_coeff.raw_max * DEFAULT.area.raw_max))
+    problem = SimpleNamespace(fs=DEFAULT, half_spring=DEFAULT.spring.raw_max)
+    assert energy_width(DEFAULT, cap) == energy_raw(problem, worst).bit_length()
 
 
 @pytest.mark.parametrize("what, capacity", [
