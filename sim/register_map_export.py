@@ -1,0 +1,148 @@
+"""The engine's register map as markdown, JSON and a C header, all from one :class:`RegisterMap`.
+
+``write_exports(register_map, out_dir)`` writes ``register_map.md``, ``register_map.json`` and
+``springflat_regs.h`` (next to the Verilog).  Addresses in all three are 32-bit-word addresses
+(Wishbone ``adr``); the C header also gives ``SPRINGFLAT_ADDR_UNIT_BYTES`` for byte addressing.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from golden_model.fixed.register_map import ACCESS, MAGIC, REGISTER_BLOCKS, RESULTS, STATES, VERSION, BitField, \
+    MemoryWindow, Register, RegisterMap
+
+__all__ = ["markdown", "to_json", "c_header", "write_exports", "EXPORT_FILES"]
+
+EXPORT_FILES = ("register_map.md", "register_map.json", "springflat_regs.h")
+PREFIX = "SPRINGFLAT"
+
+
+def _bits(f: BitField | tuple[int, int]) -> str:
+    lsb, width = (f.lsb, f.width) if isinstance(f, BitField) else f
+    return f"{lsb}" if width == 1 else f"{lsb + width - 1}:{lsb}"
+
+
+def _field_text(f: BitField) -> str:
+    text = f.description
+    if f.fmt:
+        text += f" — [{f.fmt}]" if f"[{f.fmt}]" not in text else ""
+    if f.signed:
+        text += " (signed)"
+    if f.codes:
+        text += "; codes: " + ", ".join(f"{i} {c}" for i, c in enumerate(f.codes))
+    return text
+
+
+def _register_rows(r: Register) -> list[str]:
+    rows = []
+    for f in r.fields:
+        reset = (r.reset & f.mask) >> f.lsb
+        rows.append(f"| `0x{r.offset:04X}` | `{r.name}` | {_bits(f)} | `{f.name}` | {f.access} | `0x{reset:X}` | "
+                    f"{_field_text(f)} |")
+    return rows
+
+
+def _window_section(w: MemoryWindow) -> list[str]:
+    lines = [f"### `{w.name}` — {w.description}", "",
+             f"Base `0x{w.base:05X}`, depth {w.depth}, {w.words} words per entry at a stride of {w.stride} "
+             f"(entry `i`, word `k` at `0x{w.base:05X} + i·{w.stride} + k`; word 0 = bits 31:0).", "",
+             "| Bits | Field | Width | Signed | Format |", "|---|---|---|---|---|"]
+    lsb = 0
+    for f in w.fields:
+        lines.append(f"| {_bits((lsb, f.width))} | `{f.name}` | {f.width} | {'yes' if f.signed else 'no'} | "
+                     f"{f.fmt or '—'} |")
+        lsb += f.width
+    return lines + [""]
+
+
+def markdown(m: RegisterMap) -> str:
+    """The map as markdown: the bus, a table per register block, the memory windows with their layouts."""
+    bus = m.to_dict()["bus"]
+    lines = [
+        f"# SpringflatEngine register map (v{VERSION[0]}.{VERSION[1]})", "",
+        f"Generated from `golden_model.fixed.register_map.RegisterMap` for format set `{m.formats}` "
+        f"(FORMAT_HASH `0x{m.format_hash:08X}`) and capacity {m.capacity.vertices} vertices, "
+        f"{m.capacity.entries} entries, {m.capacity.triangles} triangles. Do not edit.", "",
+        f"Bus: {bus['protocol']}, {bus['data_bits']}-bit data, `adr` a {bus['address']} address (byte address >> 2), "
+        f"`sel` {bus['sel']}. `err` answers: {bus['err']}.", "",
+        "Access: " + "; ".join(f"`{k}` {v}" for k, v in ACCESS.items()) + ".", "",
+        "Values wider than 32 bits span consecutive registers, least significant word first; signed values are "
+        "two's complement over the value's width.", "",
+    ]
+    for block in REGISTER_BLOCKS:
+        lines += [f"## {block.capitalize()}", "", "| Address | Register | Bits | Field | Access | Reset | Description |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in m.registers:
+            if r.block == block:
+                lines += _register_rows(r)
+        lines.append("")
+    lines += ["## Memory windows", "", "| Window | Base | Depth | Words/entry | Stride | Size |",
+              "|---|---|---|---|---|---|"]
+    lines += [f"| `{w.name}` | `0x{w.base:05X}` | {w.depth} | {w.words} | {w.stride} | `0x{w.size:X}` |"
+              for w in m.windows]
+    lines.append("")
+    for w in m.windows:
+        lines += _window_section(w)
+    return "\n".join(lines)
+
+
+def to_json(m: RegisterMap) -> str:
+    """The map as JSON (:meth:`RegisterMap.to_dict`; :meth:`RegisterMap.from_dict` reads it back)."""
+    return json.dumps(m.to_dict(), indent=2, ensure_ascii=False) + "\n"
+
+
+def _c_name(*parts: str) -> str:
+    return "_".join([PREFIX] + [re.sub(r"[^A-Za-z0-9]", "_", p).upper() for p in parts])
+
+
+def _define(name: str, value: int) -> str:
+    return f"#define {name:<48} 0x{value:X}u"
+
+
+def c_header(m: RegisterMap) -> str:
+    """The map as a C header: register word addresses, field shifts/masks/widths, reset values, window
+    bases/depths/strides and entry field positions, state and result codes."""
+    guard = f"{PREFIX}_REGS_H"
+    lines = [f"/* SpringflatEngine register map v{VERSION[0]}.{VERSION[1]}: format set '{m.formats}', capacity "
+             f"{m.capacity.vertices} vertices / {m.capacity.entries} entries / {m.capacity.triangles} triangles. */",
+             "/* Generated from golden_model.fixed.register_map.RegisterMap; do not edit. */",
+             "/* Addresses are 32-bit-word addresses (Wishbone adr): byte address = ADDR * ADDR_UNIT_BYTES. */",
+             f"#ifndef {guard}", f"#define {guard}", "",
+             _define(_c_name("ADDR_UNIT_BYTES"), 4), _define(_c_name("MAGIC"), MAGIC),
+             _define(_c_name("VERSION_MAJOR"), VERSION[0]), _define(_c_name("VERSION_MINOR"), VERSION[1]),
+             _define(_c_name("FORMAT_HASH"), m.format_hash), ""]
+    for r in m.registers:
+        lines += [f"/* {r.name} ({r.access}): {r.description} */", _define(_c_name(r.name, "ADDR"), r.offset),
+                  _define(_c_name(r.name, "RESET"), r.reset)]
+        for f in r.fields:
+            lines += [_define(_c_name(r.name, f.name, "SHIFT"), f.lsb), _define(_c_name(r.name, f.name, "MASK"), f.mask),
+                      _define(_c_name(r.name, f.name, "WIDTH"), f.width)]
+        lines.append("")
+    lines += ["/* STATUS.state and STATUS.result codes */"]
+    lines += [_define(_c_name("STATE", s), i) for i, s in enumerate(STATES)]
+    lines += [_define(_c_name("RESULT", s), i) for i, s in enumerate(RESULTS)]
+    lines.append("")
+    for w in m.windows:
+        lines += [f"/* memory window {w.name}: {w.description} */", _define(_c_name(w.name, "BASE"), w.base),
+                  _define(_c_name(w.name, "DEPTH"), w.depth), _define(_c_name(w.name, "WORDS"), w.words),
+                  _define(_c_name(w.name, "STRIDE"), w.stride), _define(_c_name(w.name, "SIZE"), w.size)]
+        lsb = 0
+        for f in w.fields:
+            lines += [_define(_c_name(w.name, f.name, "LSB"), lsb), _define(_c_name(w.name, f.name, "WIDTH"), f.width)]
+            lsb += f.width
+        lines.append("")
+    lines += [f"#endif /* {guard} */", ""]
+    return "\n".join(lines)
+
+
+def write_exports(m: RegisterMap, out_dir: str | Path) -> list[Path]:
+    """Write :data:`EXPORT_FILES` into ``out_dir``; returns their paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / name for name in EXPORT_FILES]
+    for path, text in zip(paths, (markdown(m), to_json(m), c_header(m))):
+        path.write_text(text)
+    return paths
