@@ -1,0 +1,347 @@
+"""The engine controller's once-per-iteration arithmetic as small sequential units.
+
+Each unit is bit-exact with the golden-model function it mirrors
+(:mod:`golden_model.fixed.engine`):
+
+* :class:`Normaliser`: an error sum times a host reciprocal, rounded into ``[error]``
+  (:meth:`Reciprocal.normalise <golden_model.fixed.engine.Reciprocal.normalise>`);
+* :class:`EnergyCheck`: the exact energy of a pass (:func:`~golden_model.fixed.engine.energy_raw`)
+  and the stopping rule's relative-change test (the energy part of
+  :meth:`StopRule.converged <golden_model.fixed.engine.StopRule.converged>`);
+* :class:`BetaDivider`: the momentum ``β_k = k/(k+3)`` (:func:`~golden_model.fixed.engine.momentum_beta_raw`).
+
+They run once per iteration, so they trade cycles for area: products are LSB-first shift-add
+multiplies (one multiplicand addition per clock, :func:`shift_add_step`), the divider restores
+one quotient bit per clock. Each takes one item at a time: ``i.ready`` is high only while the
+unit is idle, ``o`` holds its result (a register, independent of ``o.ready``) until taken.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Mux, Signal, Value, unsigned
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, _energy_frac
+
+from .fixedpoint import clamp, shape_of, shift_round
+from .layouts import energy_result_layout, energy_sums_layout, normalise_layout
+
+__all__ = ["shift_add_step", "Normaliser", "EnergyCheck", "BetaDivider"]
+
+
+def shift_add_step(product, multiplicand, multiplier_bits: int) -> Value:
+    """One clock of an LSB-first shift-add multiply of unsigned values.
+
+    ``product`` is a register of ``len(multiplicand) + multiplier_bits + 1`` bits, loaded with
+    the multiplier in its low ``multiplier_bits`` bits and zeros above; after ``multiplier_bits``
+    steps it holds ``multiplicand · multiplier``. Each step adds the multiplicand to the high
+    part if the multiplier's current bit (bit 0) is set and shifts the whole register right by
+    one: the adder is only as wide as the multiplicand, and the product's low bits move into the
+    places the multiplier's used bits leave.
+    """
+    product, multiplicand = Value.cast(product), Value.cast(multiplicand)
+    assert len(product) == len(multiplicand) + multiplier_bits + 1
+    high = product[multiplier_bits:] + Mux(product[0], multiplicand, 0)
+    return Cat(product[1:multiplier_bits], high)[:len(product)]
+
+
+def _check_fs(unit: str, fs) -> FormatSet:
+    if isinstance(fs, str):
+        fs = FormatSet.preset(fs)
+    if not isinstance(fs, FormatSet):
+        raise TypeError(f"{unit} needs a FormatSet or a preset name, not {fs!r}")
+    return fs
+
+
+class Normaliser(wiring.Component):
+    """``sum/total`` raw [error] from a sum [error_acc] and the host's reciprocal of ``total``.
+
+    Bit-exact with :meth:`Reciprocal.normalise <golden_model.fixed.engine.Reciprocal.normalise>`
+    (``fmt = fs.error``, ``fs.rounding``)::
+
+        product = sum · mantissa                                   (exact)
+        kept    = (product >> (shift − F − 2)) | sticky            (F = error.frac_bits: the
+                                                                     half-lsb and one sticky bit kept)
+        error   = sat(rq(kept, F + 2 → error))
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+
+    Members
+    -------
+    i : ``In(stream.Signature(normalise_layout(fs)))``
+        ``sum`` [error_acc], ``mantissa`` [reciprocal] and ``shift`` of
+        :class:`~golden_model.fixed.engine.Reciprocal` (the host's registers). ``shift`` must be
+        at least ``F + 2``: every ``Reciprocal.of(total)`` with ``total ≥ 2`` is.
+    o : ``Out(stream.Signature(shape_of(fs.error)))``
+        The normalised error.
+
+    Contract
+    --------
+    One item at a time: ``i.ready`` is high while idle (nothing accepted or the result taken).
+    :meth:`cycles` clock edges from the input transfer to the output transfer when ``o.ready``
+    is high: ``reciprocal.width`` multiply steps, ``min(shift − F − 2, product bits)`` shift
+    steps (a longer shift leaves only the sticky bit, as this many does), one rounding and
+    saturation, and the output transfer. ``o.valid`` and ``o.payload`` are registers.
+    """
+
+    def __init__(self, fs: FormatSet | str):
+        fs = _check_fs("Normaliser", fs)
+        self.fs = fs
+        self.product_bits = fs.error_acc.width + fs.reciprocal.width + 1
+        super().__init__({
+            "i": In(stream.Signature(normalise_layout(fs))),
+            "o": Out(stream.Signature(shape_of(fs.error))),
+        })
+
+    def shift_steps(self, shift: int) -> int:
+        """Clocks the unit spends shifting the product right for a reciprocal's ``shift``."""
+        return min(max(shift - self.fs.error.frac_bits - 2, 0), self.product_bits)
+
+    def cycles(self, shift: int) -> int:
+        """Clock edges from the input transfer to the output transfer, ``o.ready`` high."""
+        return self.fs.reciprocal.width + self.shift_steps(shift) + 2
+
+    def elaborate(self, platform):
+        fs = self.fs
+        m = Module()
+        mantissa_bits = fs.reciprocal.width
+        multiplicand = Signal(shape_of(fs.error_acc), reset_less=True)
+        product = Signal(self.product_bits, reset_less=True)
+        sticky = Signal(reset_less=True)
+        steps = Signal(range(max(mantissa_bits, self.product_bits) + 1), reset_less=True)
+        # the shift steps, from the host's shift: min(max(shift − F − 2, 0), product bits)
+        drop = self.i.payload.shift - (fs.error.frac_bits + 2)
+        shift_steps = Mux(drop < 0, 0, Mux(drop > self.product_bits, self.product_bits, drop))
+        remaining_shift = Signal.like(steps, name="remaining_shift")
+        # kept: the product with its sticky bit ORed into bit 0, then the two kept bits dropped
+        kept = Cat(product[0] | sticky, product[1:])
+        error, _ = clamp(shift_round(kept, 2, fs.rounding), fs.error)
+
+        with m.FSM():
+            with m.State("idle"):
+                m.d.comb += self.i.ready.eq(1)
+                with m.If(self.i.valid):
+                    m.d.sync += [multiplicand.eq(self.i.payload.sum), product.eq(self.i.payload.mantissa),
+                                 sticky.eq(0), steps.eq(mantissa_bits), remaining_shift.eq(shift_steps)]
+                    m.next = "multiply"
+            with m.State("multiply"):
+                m.d.sync += [product.eq(shift_add_step(product, multiplicand, mantissa_bits)), steps.eq(steps - 1)]
+                with m.If((steps == 1) & (remaining_shift == 0)):
+                    m.next = "round"
+                with m.Elif(steps == 1):
+                    m.next = "shift"
+            with m.State("shift"):
+                m.d.sync += [product.eq(product >> 1), sticky.eq(sticky | product[0]),
+                             remaining_shift.eq(remaining_shift - 1)]
+                with m.If(remaining_shift == 1):
+                    m.next = "round"
+            with m.State("round"):
+                m.d.sync += [self.o.payload.eq(error), self.o.valid.eq(1)]
+                m.next = "done"
+            with m.State("done"):
+                with m.If(self.o.ready):
+                    m.d.sync += self.o.valid.eq(0)
+                    m.next = "idle"
+        return m
+
+
+class EnergyCheck(wiring.Component):
+    """The exact energy of a pass and the stopping rule's relative-change test against the last one.
+
+    Bit-exact with :func:`~golden_model.fixed.engine.energy_raw` and the energy part of
+    :meth:`StopRule.converged <golden_model.fixed.engine.StopRule.converged>`::
+
+        E       = (3·½C·Σe²) << s_springs + (2·Σc·h) << s_barrier     (``_energy_frac`` fraction bits)
+        settled = E == 0                                  if E_prev == 0
+                  |E − E_prev| << 40 ≤ ε·E_prev           otherwise (ε at 40 fraction bits)
+
+    ``E_prev`` is the energy of the previous item (a register). The last test is evaluated as
+    ``|E − E_prev| ≤ (ε·E_prev) >> 40``, the same for integers, so the comparison is only as
+    wide as ``E``.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+    entries_capacity : int
+        The most neighbour entries of a pass: the sums' widths (:func:`~hdl.layouts.energy_sums_layout`)
+        hold ``capacity·max(e)²`` and ``capacity·max(c)·max(h)``, and ``energy_bits`` holds
+        the largest ``E`` of sums of those widths with the largest ``½C``.
+
+    Members
+    -------
+    i : ``In(stream.Signature(energy_sums_layout(fs, entries_capacity)))``
+        A pass's exact ``square_sum`` Σe² and ``barrier_sum`` Σc·h; ``first`` marks the run's
+        first pass (its ``settled`` is 0: nothing to compare with).
+    o : ``Out(stream.Signature(energy_result_layout(energy_bits)))``
+        ``energy`` (``E``, ``energy_raw``) and ``settled``.
+    half_spring : ``In(unsigned(fs.spring.width − 1))``
+        ``½C`` raw [spring], non-negative (``C > 0``). Hold it stable while an item is in flight.
+    tolerance : ``In(unsigned(ENERGY_TOL_FRAC_BITS + 1))``
+        ``ε`` raw at ``ENERGY_TOL_FRAC_BITS`` (40) fraction bits, ε < 2 (``StopRule.energy``).
+
+    Contract
+    --------
+    One item at a time: ``i.ready`` is high while idle. ``latency`` clock edges from the input
+    transfer to the output transfer when ``o.ready`` is high: ``len(square_sum)`` steps of
+    ``Σe²·(3·½C)``, one for ``E``, ``energy_bits`` steps of ``ε·E_prev`` (with ``|E − E_prev|``
+    alongside), one for the comparison and the output transfer. ``o.valid`` and ``o.payload``
+    are registers. The adders are as wide as ``3·½C``, ``ε``, and (one clock each) ``E``.
+    """
+
+    def __init__(self, fs: FormatSet | str, entries_capacity: int):
+        fs = _check_fs("EnergyCheck", fs)
+        if isinstance(entries_capacity, bool) or not isinstance(entries_capacity, int) or entries_capacity < 1:
+            raise ValueError(f"entries_capacity must be a positive int, not {entries_capacity!r}")
+        self.fs = fs
+        self.entries_capacity = entries_capacity
+        sums = energy_sums_layout(fs, entries_capacity)
+        self.square_bits = sums["square_sum"].shape.width
+        self.barrier_bits = sums["barrier_sum"].shape.width
+        frac = _energy_frac(fs)
+        self.springs_shift = frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits
+        self.barrier_shift = frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits
+        self.half_spring_bits = fs.spring.width - 1
+        self.spring_factor_bits = self.half_spring_bits + 2  # 3·½C
+        largest = (((3 * ((1 << self.half_spring_bits) - 1) * ((1 << self.square_bits) - 1)) << self.springs_shift)
+                   + ((2 * ((1 << self.barrier_bits) - 1)) << self.barrier_shift))
+        self.energy_bits = largest.bit_length()
+        self.tolerance_bits = ENERGY_TOL_FRAC_BITS + 1
+        self.latency = self.square_bits + self.energy_bits + 3
+        super().__init__({
+            "i": In(stream.Signature(sums)),
+            "o": Out(stream.Signature(energy_result_layout(self.energy_bits))),
+            "half_spring": In(unsigned(self.half_spring_bits)),
+            "tolerance": In(unsigned(self.tolerance_bits)),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        beat = self.i.payload
+        factor = Signal(self.spring_factor_bits, reset_less=True)  # 3·½C
+        barrier = Signal(self.barrier_bits, reset_less=True)
+        first = Signal(reset_less=True)
+        springs = Signal(self.spring_factor_bits + self.square_bits + 1, reset_less=True)
+        energy = Signal(self.energy_bits, reset_less=True)
+        previous = Signal(self.energy_bits, reset_less=True)
+        tolerance = Signal(self.tolerance_bits, reset_less=True)
+        allowed = Signal(self.tolerance_bits + self.energy_bits + 1, reset_less=True)  # ε·E_prev
+        change = Signal(self.energy_bits, reset_less=True)  # |E − E_prev|
+        steps = Signal(range(max(self.square_bits, self.energy_bits) + 1), reset_less=True)
+
+        total = (springs[:self.spring_factor_bits + self.square_bits] << self.springs_shift) + \
+                ((barrier << 1) << self.barrier_shift)
+        settled = Mux(first, 0, Mux(previous == 0, energy == 0,
+                                    change <= allowed[ENERGY_TOL_FRAC_BITS:]))
+
+        with m.FSM():
+            with m.State("idle"):
+                m.d.comb += self.i.ready.eq(1)
+                with m.If(self.i.valid):
+                    m.d.sync += [factor.eq(self.half_spring * 3), springs.eq(beat.square_sum),
+                                 barrier.eq(beat.barrier_sum), first.eq(beat.first),
+                                 tolerance.eq(self.tolerance), steps.eq(self.square_bits)]
+                    m.next = "springs"
+            with m.State("springs"):
+                m.d.sync += [springs.eq(shift_add_step(springs, factor, self.square_bits)), steps.eq(steps - 1)]
+                with m.If(steps == 1):
+                    m.next = "energy"
+            with m.State("energy"):
+                m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits)]
+                m.next = "tolerance"
+            with m.State("tolerance"):
+                m.d.sync += [allowed.eq(shift_add_step(allowed, tolerance, self.energy_bits)),
+                             change.eq(Mux(energy > previous, energy - previous, previous - energy)),
+                             steps.eq(steps - 1)]
+                with m.If(steps == 1):
+                    m.next = "compare"
+            with m.State("compare"):
+                m.d.sync += [self.o.payload.energy.eq(energy), self.o.payload.settled.eq(settled),
+                             self.o.valid.eq(1), previous.eq(energy)]
+                m.next = "done"
+            with m.State("done"):
+                with m.If(self.o.ready):
+                    m.d.sync += self.o.valid.eq(0)
+                    m.next = "idle"
+        return m
+
+
+class BetaDivider(wiring.Component):
+    """The momentum factor ``β_k = k/(k+3)`` raw [dt], rounded half up and capped at ``dt.raw_max``.
+
+    Bit-exact with :func:`~golden_model.fixed.engine.momentum_beta_raw`::
+
+        q = (k · 2^(F+1)) // (k + 3)          (F = dt.frac_bits; q < 2^(F+1) since k < k + 3)
+        β = min((q + 1) >> 1, dt.raw_max)
+
+    A restoring divider: the remainder starts at ``k`` (the integer part of ``k/(k+3)`` is 0)
+    and each clock doubles it, subtracts ``k + 3`` where it fits and shifts the quotient bit in.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+    k_bits : int
+        Width of ``k`` (default 21: ``k`` up to ``2**21 − 1``).
+
+    Members
+    -------
+    i : ``In(stream.Signature(unsigned(k_bits)))``
+        The iteration count ``k`` since the last restart.
+    o : ``Out(stream.Signature(shape_of(fs.dt)))``
+        ``β_k``.
+
+    Contract
+    --------
+    One item at a time: ``i.ready`` is high while idle. ``latency`` = ``dt.frac_bits + 3`` clock
+    edges from the input transfer to the output transfer when ``o.ready`` is high (``F + 1``
+    quotient bits, the rounding, the output transfer): 21 for both presets. ``o.valid`` and
+    ``o.payload`` are registers.
+    """
+
+    def __init__(self, fs: FormatSet | str, k_bits: int = 21):
+        fs = _check_fs("BetaDivider", fs)
+        if isinstance(k_bits, bool) or not isinstance(k_bits, int) or k_bits < 1:
+            raise ValueError(f"k_bits must be a positive int, not {k_bits!r}")
+        self.fs = fs
+        self.k_bits = k_bits
+        self.quotient_bits = fs.dt.frac_bits + 1
+        self.latency = self.quotient_bits + 2
+        super().__init__({
+            "i": In(stream.Signature(unsigned(k_bits))),
+            "o": Out(stream.Signature(shape_of(fs.dt))),
+        })
+
+    def elaborate(self, platform):
+        fs = self.fs
+        m = Module()
+        divisor = Signal(self.k_bits + 1, reset_less=True)  # k + 3
+        remainder = Signal(self.k_bits + 1, reset_less=True)  # < divisor
+        quotient = Signal(self.quotient_bits, reset_less=True)
+        steps = Signal(range(self.quotient_bits + 1), reset_less=True)
+        doubled = remainder << 1
+        fits = doubled >= divisor
+        beta, _ = clamp((quotient + 1) >> 1, fs.dt)
+
+        with m.FSM():
+            with m.State("idle"):
+                m.d.comb += self.i.ready.eq(1)
+                with m.If(self.i.valid):
+                    m.d.sync += [divisor.eq(self.i.payload + 3), remainder.eq(self.i.payload), quotient.eq(0),
+                                 steps.eq(self.quotient_bits)]
+                    m.next = "divide"
+            with m.State("divide"):
+                m.d.sync += [remainder.eq(Mux(fits, doubled - divisor, doubled)), quotient.eq(Cat(fits, quotient)),
+                             steps.eq(steps - 1)]
+                with m.If(steps == 1):
+                    m.next = "round"
+            with m.State("round"):
+                m.d.sync += [self.o.payload.eq(beta), self.o.valid.eq(1)]
+                m.next = "done"
+            with m.State("done"):
+                with m.If(self.o.ready):
+                    m.d.sync += self.o.valid.eq(0)
+                    m.next = "idle"
+        return m
