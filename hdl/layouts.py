@@ -7,15 +7,17 @@ and unpack with the same layouts (:mod:`sim.payloads`), and the Verilog export d
 
 from __future__ import annotations
 
-from amaranth.hdl import unsigned
+from amaranth.hdl import ShapeCastable, unsigned
 from amaranth.lib import data
 
 from golden_model.fixed import Format, FormatSet
+from golden_model.fixed.pipeline import accumulator_guard_bits
 
 from .fixedpoint import shape_of
 
-__all__ = ["vector_layout", "node_layout", "barrier_layout", "entry_layout", "result_layout", "step_layout",
-           "errors_layout"]
+__all__ = ["vector_layout", "node_layout", "barrier_layout", "neighbour_layout", "entry_layout", "result_layout",
+           "force_entry_layout", "node_force_layout", "integrator_input_layout", "integrator_output_layout",
+           "step_layout", "errors_layout"]
 
 
 def vector_layout(fmt: Format) -> data.StructLayout:
@@ -44,6 +46,11 @@ def barrier_layout(fs: FormatSet) -> data.StructLayout:
     })
 
 
+def neighbour_layout(fs: FormatSet) -> data.StructLayout:
+    """A neighbour entry's ``position`` [position] and the edge's ``rest`` length [rest_length]."""
+    return data.StructLayout({"position": vector_layout(fs.position), "rest": shape_of(fs.rest_length)})
+
+
 def entry_layout(fs: FormatSet) -> data.StructLayout:
     """One input beat: a neighbour entry, with its node's header on the node's first entry.
 
@@ -56,7 +63,7 @@ def entry_layout(fs: FormatSet) -> data.StructLayout:
         "first": unsigned(1),
         "last": unsigned(1),
         "node": node_layout(fs),
-        "neighbour": data.StructLayout({"position": vector_layout(fs.position), "rest": shape_of(fs.rest_length)}),
+        "neighbour": neighbour_layout(fs),
         "barrier": barrier_layout(fs),
     })
 
@@ -70,6 +77,62 @@ def result_layout(fs: FormatSet) -> data.StructLayout:
         "error_sum": shape_of(fs.error_acc),
         "power": shape_of(fs.power),
     })
+
+
+def force_entry_layout(fs: FormatSet) -> data.StructLayout:
+    """One beat of the force pass (:class:`~hdl.force_pass.ForcePass`): a neighbour entry of a node.
+
+    ``first``/``last`` mark the node's first and last entries; ``position`` is the node's own
+    ``P_i`` [position], read only on ``first``; ``neighbour`` and ``barrier`` as in
+    :func:`entry_layout`. No velocity or weight: the force pass does not need them.
+    """
+    return data.StructLayout({
+        "first": unsigned(1),
+        "last": unsigned(1),
+        "position": vector_layout(fs.position),
+        "neighbour": neighbour_layout(fs),
+        "barrier": barrier_layout(fs),
+    })
+
+
+def node_force_layout(fs: FormatSet, energy: bool = False) -> data.StructLayout:
+    """One node's result of the force pass.
+
+    ``force`` ΣF [force_acc] and ``error_sum`` Σ|L − d| [error_acc], both saturated; ``inside``:
+    one of the node's triangles is inside the fold barrier (``h > 0``). With ``energy``, the
+    node's exact energy partials too: ``error_squares`` Σe² (``e = |L − d|`` raw [rest_length],
+    squared: raw at twice its fraction bits) and ``barrier_energy`` Σc·h (raw [barrier_coeff]·[area],
+    ``h ≥ 0``), each wide enough for ``max_degree`` terms
+    (:attr:`golden_model.fixed.pipeline.NodeTerms.error_squares` / ``barrier_energies``).
+    """
+    fields = {"force": vector_layout(fs.force_acc), "error_sum": shape_of(fs.error_acc), "inside": unsigned(1)}
+    if energy:
+        guard = accumulator_guard_bits(fs.max_degree)
+        coeff_bits = fs.barrier_coeff.width - int(fs.barrier_coeff.signed)  # c ≥ 0
+        fields["error_squares"] = unsigned(2 * fs.rest_length.width + guard)
+        fields["barrier_energy"] = unsigned(coeff_bits + fs.area.width - 1 + guard)  # h < 2**(area.width − 1)
+    return data.StructLayout(fields)
+
+
+def integrator_input_layout(fs: FormatSet, side: ShapeCastable | None = None) -> data.StructLayout:
+    """One node into the integrate stage (:class:`~hdl.integrator.Integrator`): its state ``node``
+    (:func:`node_layout`), ``force`` ΣF [force_acc] and ``inside`` (the barrier's weight applies);
+    with ``side``, an opaque field of that shape carried to the output unchanged."""
+    fields = {"node": node_layout(fs), "force": vector_layout(fs.force_acc), "inside": unsigned(1)}
+    if side is not None:
+        fields["side"] = side
+    return data.StructLayout(fields)
+
+
+def integrator_output_layout(fs: FormatSet, side: ShapeCastable | None = None) -> data.StructLayout:
+    """One node out of the integrate stage: new ``position`` [position], new ``velocity``
+    [velocity] (damped), ``power`` F·V [power] of the input state; with ``side``, the input's
+    ``side`` field."""
+    fields = {"position": vector_layout(fs.position), "velocity": vector_layout(fs.velocity),
+              "power": shape_of(fs.power)}
+    if side is not None:
+        fields["side"] = side
+    return data.StructLayout(fields)
 
 
 def step_layout(fs: FormatSet) -> data.StructLayout:

@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """Stage-by-stage pipeline construction shared by every datapath block.
 
 A :class:`Pipeline` hands out the registers of a pipeline written one stage after the
@@ -19,16 +20,28 @@ Two kinds of pipeline:
 * **free-running** (``advance=None``): every register loads on every clock; nothing
   fans out to the registers but the clock. :class:`~hdl.node_update.NodeUpdate` runs
   this way and turns back-pressure into credits at its input.
+
+A block's latency is counted, not computed: it builds its datapath once into a throwaway
+module (:func:`count_stages`) and reads :attr:`Pipeline.stages` of the pipelines it built.
+:class:`LiveValues` carries a datapath's values from stage to stage.
+
+(The first line of this file silences Amaranth's unused-elaboratable warning for the modules
+created here: :func:`count_stages`'s module is never elaborated, by design.)
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TypeVar
 
 from amaranth.hdl import Cat, Module, Signal, Value
 
 from .dsp import registered_product
 from .fixedpoint import dsp_operands
 
-__all__ = ["Pipeline", "aligned_add", "join_parts", "reduce_levels"]
+__all__ = ["LiveValues", "Pipeline", "aligned_add", "count_stages", "join_parts", "reduce_levels"]
+
+T = TypeVar("T")
 
 
 def aligned_add(a, a_shift: int, b, b_shift: int):
@@ -114,10 +127,15 @@ class Pipeline:
             with self._m.If(self._advance):
                 self._m.d.sync += signal.eq(value)
 
-    def stage(self, name: str):
-        """Start the next stage; returns its (registered) valid bit."""
-        valid = Signal(name=f"{name}_valid")
-        self._load(valid, self.valid)
+    def stage(self, name: str, valid=None):
+        """Start the next stage; returns its (registered) valid bit.
+
+        ``valid`` (default: the previous stage's valid bit) is what the new valid bit registers:
+        a stage that closes a group of beats (a node's accumulators) passes on only the last one.
+        """
+        registered = Signal(name=f"{name}_valid")
+        self._load(registered, self.valid if valid is None else valid)
+        valid = registered
         self.valid = valid
         self.stages += 1
         return valid
@@ -190,3 +208,43 @@ class Pipeline:
             parts = {key: self.reduce(p, f"{name}_sum{level}_{key}") for key, p in parts.items()}
             carry(f"{name}_sum{level}")
         return {key: join_parts(p) for key, p in parts.items()}
+
+
+class LiveValues(dict):
+    """The values a datapath carries from stage to stage, by name (``{name: value}``).
+
+    :meth:`step` starts a stage of a :class:`Pipeline` and registers in it the new values and
+    every carried value not dropped, so a value written once rides along until it is dropped;
+    :meth:`multiply` does the same through every stage of :meth:`Pipeline.multiply`. A value
+    assigned directly (``live[key] = expression``) is registered by the next stage.
+    """
+
+    def carry(self, pipe: Pipeline, name: str, drop=(), **new):
+        """Register, in ``pipe``'s current stage, ``new`` and every carried value not in ``drop``."""
+        carried = [(k, v) for k, v in self.items() if k not in drop and k not in new]
+        registered = {key: pipe.keep(Value.cast(value), f"{name}_{key}") for key, value in carried + list(new.items())}
+        self.clear()
+        self.update(registered)
+
+    def step(self, pipe: Pipeline, name: str, drop=(), **new):
+        """One stage of ``pipe`` named ``name`` (see :meth:`carry`)."""
+        pipe.stage(name)
+        self.carry(pipe, name, drop, **new)
+
+    def multiply(self, pipe: Pipeline, name: str, drop=(), **products):
+        """Whole products ``key=(a, b)`` (:meth:`Pipeline.multiply`), each then a carried value;
+        the carried values not in ``drop`` ride along (dropped in the multiply's first stage)."""
+        drops = [drop]
+        self.update(pipe.multiply(products, name,
+                                  lambda stage_name: self.carry(pipe, stage_name, drops.pop() if drops else ())))
+
+
+def count_stages(build: Callable[[Module], T]) -> T:
+    """``build(m)`` run on a throwaway module, never elaborated; returns what ``build`` returns.
+
+    A block describes its datapath once, in a function of the module it builds into; this runs
+    that function for its :attr:`Pipeline.stages` counts, so a latency is the number of stages
+    the block really builds, not a formula kept in step with it. ``build`` must create no
+    elaboratable of its own (give it stand-in interfaces for its submodules' ports).
+    """
+    return build(Module())
