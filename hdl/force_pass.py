@@ -1,0 +1,295 @@
+"""The force pass: per neighbour entry the spring and barrier forces, per node their sums.
+
+The RTL twin of :func:`golden_model.fixed.pipeline.node_terms`; every width comes from a
+:class:`~golden_model.fixed.FormatSet`. ``docs/hardware.md`` maps each stage onto the steps of
+``docs/fixed-point.md``.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+from amaranth.hdl import Module, Mux, Signal, signed, unsigned
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.pipeline import accumulator_guard_bits
+
+from .fixedpoint import clamp, shape_of, shift_round, sum_round
+from .layouts import force_entry_layout, node_force_layout, vector_layout
+from .pipeline import LiveValues, Pipeline, count_stages
+from .rsqrt import RsqrtUnit
+
+__all__ = ["ForcePass", "ForcePassStages", "format_set"]
+
+
+def format_set(fs: FormatSet | str, component: str) -> FormatSet:
+    """``fs``, or the preset it names; a clear error for anything else."""
+    if isinstance(fs, str):
+        fs = FormatSet.preset(fs)
+    if not isinstance(fs, FormatSet):
+        raise TypeError(f"{component} needs a FormatSet or a preset name, not {fs!r}")
+    return fs
+
+
+@dataclass(frozen=True)
+class ForcePassStages:
+    """Stages of a :class:`ForcePass` as its pipelines build them.
+
+    Attributes:
+        front: F0…F8, the entry to the rsqrt unit's input.
+        barrier: S1…S8, the fold barrier's force, computed in the delay line beside the rsqrt unit.
+        rsqrt: the rsqrt unit's latency, which the delay line matches.
+        back: B1…B11 (B11: the node's accumulators) and the node's N1, N2 (rounding, saturation).
+    """
+
+    front: int
+    barrier: int
+    rsqrt: int
+    back: int
+
+    @property
+    def latency(self) -> int:
+        return self.front + self.rsqrt + self.back
+
+
+class ForcePass(wiring.Component):
+    """Pipelined force pass over neighbour entries, bit-exact with the golden model's ``node_terms``.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+        Every width, the rounding mode and ``max_degree`` come from it.
+    energy : :class:`bool`
+        Also sum each node's exact energy partials (``error_squares``, ``barrier_energy`` of
+        :func:`~hdl.layouts.node_force_layout`): two more multiplies (``e²`` beside ``½C·u``,
+        ``c·h`` beside ``c·D``), which a datapath without them does not pay for.
+
+    Members
+    -------
+    i : ``In(stream.Signature(force_entry_layout(fs), always_ready=True))``
+        Neighbour entries, node after node (``first``, ``last``); the node's own position rides on
+        its first entry. A node with n ≥ 1 neighbours is n beats. Always ready.
+    o : ``Out(stream.Signature(node_force_layout(fs, energy), always_ready=True))``
+        One beat per node, in input order: ``Σf`` [force_acc] and ``Σ|L − d|`` [error_acc]
+        (saturated), ``inside``, and with ``energy`` the exact ``Σe²`` and ``Σc·h``. ``o.valid`` is
+        a register: its consumer takes every beat on the clock it is offered.
+    half_spring : ``In(shape_of(fs.spring))``
+        ``½C`` [spring]; registered once per clock, hold it stable while a pass is in flight.
+    idle : ``Out(1)``
+        No node in flight: every node whose first entry was accepted has left ``o``.
+
+    Contract
+    --------
+    Throughput: one entry per clock (II = 1), no gap between nodes, any degree 1…``fs.max_degree``.
+    Latency: ``latency`` clocks from a node's last entry to its result on ``o``
+    (``stages.front + stages.rsqrt + stages.back``, counted from the pipelines the pass builds).
+    No back-pressure: neither stream stalls.
+
+    Structure
+    ---------
+    A free-running pipeline: every stage register loads on every clock (no enable fans out), a
+    valid bit travels with the data. A front section (``P_i`` held from the first entry, the
+    differences, ``|Δ|²`` and the barrier triangle's doubled area) feeds the
+    :class:`~hdl.rsqrt.RsqrtUnit` (``o.ready`` tied high); the entry's other data waits for
+    ``r`` in a delay line as long as the unit, whose first stages compute the barrier's force;
+    a back section forms ``s``, the spring force and ``|L − d|`` and accumulates per node with
+    guard bits (exact), and two node stages round and saturate the sums. Every multiply's
+    operands land in fabric registers first, its partial products sit alone between
+    registers and are added pairwise, one adder per stage; every rounding and every saturation
+    has a stage of its own.
+    """
+
+    def __init__(self, fs: FormatSet | str, *, energy: bool = False):
+        fs = format_set(fs, "ForcePass")
+        if fs.delta.frac_bits > fs.position.frac_bits:
+            raise ValueError(f"delta {fs.delta} cannot have more fraction bits than position {fs.position}")
+        self.fs, self.energy = fs, bool(energy)
+        super().__init__(self.signature_of(fs, self.energy))
+        self.stages = _stage_counts(fs, self.energy)
+        if self.stages.barrier > self.stages.rsqrt:
+            raise ValueError(f"the fold barrier needs {self.stages.barrier} stages, more than the rsqrt unit's "
+                             f"{self.stages.rsqrt} it runs beside")
+        self.latency = self.stages.latency
+
+    @staticmethod
+    def signature_of(fs: FormatSet, energy: bool = False) -> wiring.Signature:
+        """The component's signature (also the throwaway build's stand-in ports)."""
+        return wiring.Signature({
+            "i": In(stream.Signature(force_entry_layout(fs), always_ready=True)),
+            "o": Out(stream.Signature(node_force_layout(fs, energy), always_ready=True)),
+            "half_spring": In(shape_of(fs.spring)),
+            "idle": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.rsqrt = rsqrt = RsqrtUnit(self.fs)
+        _build(m, self.fs, self.energy, self, rsqrt, platform)
+        return m
+
+
+@functools.cache
+def _stage_counts(fs: FormatSet, energy: bool) -> ForcePassStages:
+    """The stages :func:`_build` builds (a throwaway build with stand-in ports)."""
+    config = fs.rsqrt_config()
+    rsqrt = SimpleNamespace(  # the rsqrt unit's ports, as RsqrtUnit declares them
+        i=stream.Signature(unsigned(config.fmt_in.width)).create(),
+        o=stream.Signature(RsqrtUnit.output_layout(config)).create(),
+        latency=RsqrtUnit.latency_of(config))
+    ports = ForcePass.signature_of(fs, energy).create()
+    return count_stages(lambda m: _build(m, fs, energy, ports, rsqrt, None))
+
+
+def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> ForcePassStages:
+    """The force pass's datapath into ``m``: ``ports`` (``i``, ``o``, ``half_spring``, ``idle``) and
+    the rsqrt unit's ``i``, ``o`` and ``latency``; returns the stages it built."""
+    rnd = fs.rounding
+    half_spring = Signal.like(ports.half_spring, name="half_spring_r", reset_less=True)
+    m.d.sync += half_spring.eq(ports.half_spring)
+
+    def rounded(value, from_frac, fmt):
+        """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""
+        return shift_round(value, from_frac - fmt.frac_bits, rnd)
+
+    def saturated(value, fmt):
+        return clamp(value, fmt)[0]
+
+    live = LiveValues()
+
+    # ------------------------------------------------------------ front
+    current = Signal(vector_layout(fs.position), name="current_position", reset_less=True)
+    front = Pipeline(m, ports.i.valid, land_operands=True, platform=platform)
+    position = vector_layout(fs.position)
+    # F0: the beat as it arrived, so that i.valid drives no wide enable (the held P_i's was
+    # the critical path once the barrier widened the entry)
+    live.step(front, "f0", beat=ports.i.payload.as_value())
+    beat = data.View(force_entry_layout(fs), live["beat"])
+    with m.If(front.valid & beat.first):
+        m.d.sync += current.eq(beat.position)
+    # F1: P_i comes from the node's first entry
+    live.step(front, "f1", drop=("beat",), p_i=Mux(beat.first, beat.position.as_value(), current.as_value()),
+              p_j=beat.neighbour.position.as_value(), p_b=beat.barrier.second.as_value(), rest=beat.neighbour.rest,
+              threshold=beat.barrier.threshold, gain=beat.barrier.gain, first=beat.first, last=beat.last)
+    p_i, p_j, p_b = (data.View(position, live[k]) for k in ("p_i", "p_j", "p_b"))
+    # F2: P_j − P_i and the barrier's P_second − P_i, exact;  F3: rounded to delta;  F4: saturated
+    live.step(front, "f2", drop=("p_i", "p_j", "p_b"), dx=p_j.x - p_i.x, dy=p_j.y - p_i.y,
+              bx=p_b.x - p_i.x, by=p_b.y - p_i.y)
+    live.step(front, "f3", **{k: rounded(live[k], fs.position.frac_bits, fs.delta) for k in ("dx", "dy", "bx", "by")})
+    live.step(front, "f4", **{k: saturated(live[k], fs.delta) for k in ("dx", "dy", "bx", "by")})
+    # F5…: Δx², Δy² and the barrier's Δa.x·Δb.y, Δa.y·Δb.x;  then S = rq(Δx² + Δy² → length_sq)
+    # and X = rq(Δa × Δb → area) as sum, rounding, saturation
+    live.multiply(front, "f5", sq_x=(live["dx"], live["dx"]), sq_y=(live["dy"], live["dy"]),
+                  cross_a=(live["dx"], live["by"]), cross_b=(live["dy"], live["bx"]))
+    square_frac = 2 * fs.delta.frac_bits
+    live.step(front, "f6", drop=("sq_x", "sq_y", "cross_a", "cross_b"), s=live["sq_x"] + live["sq_y"],
+              cross=live["cross_a"] - live["cross_b"])
+    live.step(front, "f7", s=rounded(live["s"], square_frac, fs.length_sq),
+              cross=rounded(live["cross"], square_frac, fs.area))
+    live.step(front, "f8", s=saturated(live["s"], fs.length_sq), cross=saturated(live["cross"], fs.area))
+    m.d.comb += [rsqrt.i.valid.eq(front.valid), rsqrt.i.payload.eq(live["s"]), rsqrt.o.ready.eq(1)]
+
+    # The entry's side data waits for r in a delay line as long as the rsqrt unit; the fold
+    # barrier's force is computed there.
+    side = Pipeline(m, front.valid, land_operands=True, platform=platform)
+    # S1: the shortfall T − X and the opposite edge D = Δa − Δb, exact
+    live.step(side, "s1", drop=("cross", "threshold", "bx", "by"), short=live["threshold"] - live["cross"],
+              ex=live["dx"] - live["bx"], ey=live["dy"] - live["by"])
+    # S2: h = sat(max(T − X, 0) → area), non-negative;  D saturated to delta;  inside: h > 0
+    short = live["short"]
+    live.step(side, "s2", short=Mux(short < 0, 0, saturated(short, fs.area))[:fs.area.width - 1],
+              ex=saturated(live["ex"], fs.delta), ey=saturated(live["ey"], fs.delta),
+              inside=(short >= 0) & short.any())
+    # c = rq(G·h → barrier_coeff);  h stays for c·h when the energy is summed
+    live.multiply(side, "s3", drop=("gain",) if energy else ("short", "gain"), c=(live["gain"], live["short"]))
+    live.step(side, "s4", c=rounded(live["c"], fs.barrier_gain.frac_bits + fs.area.frac_bits, fs.barrier_coeff))
+    live.step(side, "s5", c=saturated(live["c"], fs.barrier_coeff))
+    # f_b = rq(c·(D.y, −D.x) → force): the minus folds into the rounding's subtraction;
+    # beside it the entry's barrier energy c·h (exact)
+    energy_product = {"ch": (live["c"], live["short"])} if energy else {}
+    live.multiply(side, "s6", drop=("c", "ex", "ey", "short"), fb_x=(live["c"], live["ey"]),
+                  fb_y=(live["c"], live["ex"]), **energy_product)
+    fb_frac = fs.barrier_coeff.frac_bits + fs.delta.frac_bits
+    live.step(side, "s7", fb_x=rounded(live["fb_x"], fb_frac, fs.force),
+              fb_y=sum_round((), fb_frac - fs.force.frac_bits, rnd, sub=[live["fb_y"]]))
+    live.step(side, "s8", fb_x=saturated(live["fb_x"], fs.force), fb_y=saturated(live["fb_y"], fs.force))
+    barrier_stages = side.stages
+    for n in range(side.stages, rsqrt.latency):
+        live.step(side, f"side{n}")
+
+    # ------------------------------------------------------------ back
+    back = Pipeline(m, rsqrt.o.valid, land_operands=True, platform=platform)
+    r = rsqrt.o.payload.rsqrt  # leaves the rsqrt unit's output register
+    # d·r and S·r
+    live.multiply(back, "b1", drop=("s",), d_r=(live["rest"], r), s_r=(live["s"], r))
+    # u = rq(1 − d·r → spring), L = rq(S·r → rest_length): rounding, then saturation
+    dr_frac = fs.rest_length.frac_bits + fs.rsqrt.frac_bits
+    if fs.spring.frac_bits < dr_frac:  # the rounding constant folds into 1 − d·r: one subtraction
+        u = sum_round((), dr_frac - fs.spring.frac_bits, rnd, sub=[live["d_r"]], const=1 << dr_frac)
+    else:
+        u = rounded((1 << dr_frac) - live["d_r"], dr_frac, fs.spring)
+    live.step(back, "b2", drop=("d_r", "s_r"), u=u,
+              length=rounded(live["s_r"], fs.length_sq.frac_bits + fs.rsqrt.frac_bits, fs.rest_length))
+    live.step(back, "b3", u=saturated(live["u"], fs.spring), length=saturated(live["length"], fs.rest_length))
+    # e = |L − d| alongside ½C·u (and e², exact, when the energy is summed)
+    length, rest = live["length"], live["rest"]
+    live["e"] = e = Mux(length > rest, length - rest, rest - length)[:fs.rest_length.width]
+    live.multiply(back, "b4", drop=("length", "rest", "u"), c_u=(half_spring, live["u"]),
+                  **({"e_sq": (e, e)} if energy else {}))
+    # s = rq(½C·u → spring)
+    live.step(back, "b5", c_u=rounded(live["c_u"], 2 * fs.spring.frac_bits, fs.spring))
+    live.step(back, "b6", drop=("c_u",), s=saturated(live["c_u"], fs.spring))
+    # s·Δ, then f = rq(s·Δ → force)
+    live.multiply(back, "b7", drop=("s", "dx", "dy"), f_x=(live["s"], live["dx"]), f_y=(live["s"], live["dy"]))
+    f_frac = fs.spring.frac_bits + fs.delta.frac_bits
+    live.step(back, "b8", f_x=rounded(live["f_x"], f_frac, fs.force), f_y=rounded(live["f_y"], f_frac, fs.force))
+    live.step(back, "b9", f_x=saturated(live["f_x"], fs.force), f_y=saturated(live["f_y"], fs.force))
+    # B10: the entry's force, spring plus barrier, exact
+    live.step(back, "b10", drop=("fb_x", "fb_y"), f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"])
+
+    # B11: per-node accumulators with guard bits (exact; rounded and saturated once, in N1, N2),
+    # restarted on a node's first entry. The stage's valid bit is the node's last entry: from
+    # here on one beat is one node.
+    guard = accumulator_guard_bits(fs.max_degree)
+    out = ports.o.payload
+    sums = {  # name: (accumulator shape, this entry's term, combine)
+        "f_x": (signed(fs.force.width + 1 + guard), live["f_x"], "add"),  # + 1: two terms per entry
+        "f_y": (signed(fs.force.width + 1 + guard), live["f_y"], "add"),
+        "e": (unsigned(fs.rest_length.width + guard), live["e"], "add"),
+        "inside": (unsigned(1), live["inside"], "or"),  # a triangle of the node is inside the barrier
+    }
+    if energy:
+        sums["e_sq"] = (out.error_squares.shape(), live["e_sq"], "add")
+        sums["ch"] = (out.barrier_energy.shape(), live["ch"], "add")
+    first, last, entry_valid = live["first"], live["last"], back.valid
+    back.stage("b11", valid=entry_valid & last)
+    live.clear()
+    for name, (shape, term, combine) in sums.items():
+        acc = live[name] = Signal(shape, name=f"acc_{name}", reset_less=True)
+        with m.If(entry_valid):
+            m.d.sync += acc.eq(Mux(first, term, (acc | term) if combine == "or" else acc + term))
+    # N1: the sums rounded;  N2: saturated (the exact energy partials ride along)
+    live.step(back, "n1", f_x=rounded(live["f_x"], fs.force.frac_bits, fs.force_acc),
+              f_y=rounded(live["f_y"], fs.force.frac_bits, fs.force_acc),
+              e=rounded(live["e"], fs.rest_length.frac_bits, fs.error_acc))
+    live.step(back, "n2", f_x=saturated(live["f_x"], fs.force_acc), f_y=saturated(live["f_y"], fs.force_acc),
+              e=saturated(live["e"], fs.error_acc))
+    m.d.comb += [ports.o.valid.eq(back.valid), out.force.x.eq(live["f_x"]), out.force.y.eq(live["f_y"]),
+                 out.error_sum.eq(live["e"]), out.inside.eq(live["inside"])]
+    if energy:
+        m.d.comb += [out.error_squares.eq(live["e_sq"]), out.barrier_energy.eq(live["ch"])]
+    stages = ForcePassStages(front=front.stages, barrier=barrier_stages, rsqrt=rsqrt.latency, back=back.stages)
+
+    # ------------------------------------------------------------ idle
+    # nodes in flight: last entries accepted whose results have not left o (at most one per stage)
+    in_flight = Signal(range(stages.latency + 2), name="nodes_in_flight")
+    open_node = Signal(name="open_node")  # between a node's first and last entry
+    node_in = ports.i.valid & ports.i.payload.last
+    m.d.sync += in_flight.eq(in_flight + node_in - ports.o.valid)
+    with m.If(ports.i.valid):
+        m.d.sync += open_node.eq(~ports.i.payload.last)
+    m.d.comb += ports.idle.eq((in_flight == 0) & ~open_node)
+    return stages
