@@ -1,0 +1,200 @@
+"""The integrate stage: a node's acceleration, its Euler or momentum step, damping and power.
+
+The RTL twin of :func:`golden_model.fixed.pipeline.integrate` / ``integrate_momentum`` and
+``node_power``; every width comes from a :class:`~golden_model.fixed.FormatSet`.
+``docs/hardware.md`` maps each stage onto the steps of ``docs/fixed-point.md``.
+"""
+
+from __future__ import annotations
+
+import functools
+
+from amaranth.hdl import Module, Mux, Shape, ShapeCastable, Signal, Value
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import Format, FormatSet
+
+from .fixedpoint import clamp, shape_of, shift_round
+from .force_pass import format_set
+from .layouts import integrator_input_layout, integrator_output_layout
+from .pipeline import LiveValues, Pipeline, aligned_add, count_stages
+
+__all__ = ["Integrator"]
+
+
+class Integrator(wiring.Component):
+    """Pipelined per-node integration, bit-exact with the golden model's ``integrate`` (the paper's
+    Euler step), ``integrate_momentum`` and ``node_power``.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+        Every width and the rounding mode come from it.
+    side : shape or ``None``
+        An opaque field of this shape carried from ``i`` to ``o`` with the node (``None``: none);
+        :class:`~hdl.node_update.NodeUpdate` carries the node's error sum this way instead of in
+        a delay line of its own.
+
+    Members
+    -------
+    i : ``In(stream.Signature(integrator_input_layout(fs, side), always_ready=True))``
+        One node per beat: its state (position, velocity, ``1/m`` and the barrier's weight ``w_b``),
+        ``F`` [force_acc] and ``inside`` (use ``w_b``). Always ready.
+    o : ``Out(stream.Signature(integrator_output_layout(fs, side), always_ready=True))``
+        One beat per node, in input order: new position, new (damped) velocity, the power ``F·V``
+        [power] of the input state. ``o.valid`` is a register; its consumer takes every beat.
+    dt, half_dt_sq, damping : ``In(...)``
+        ``Δt`` [dt], ``½Δt²`` [half_dt_sq], ``1 − γ`` [damping]; registered once per clock, hold
+        them stable while a pass is in flight.
+    momentum : ``In(1)``
+        The momentum dynamics (``docs/dynamics.md``): ``dt`` carries ``β``, the step becomes
+        ``V' = rq(β·V + a → velocity)``, ``P' = sat(P + V')``; ``half_dt_sq`` and ``damping`` are
+        not used. Change it only between passes.
+    idle : ``Out(1)``
+        No node in flight.
+
+    Contract
+    --------
+    Throughput: one node per clock (II = 1). Latency: ``latency`` clocks from a node's transfer on
+    ``i`` to its result on ``o`` (the stages the pipeline builds, counted). No back-pressure.
+
+    Structure
+    ---------
+    A free-running pipeline (no enable fans out). T1 registers the input as it arrives (in
+    :class:`~hdl.node_update.NodeUpdate` straight from the node-header FIFO's LUT RAM); the
+    weight is chosen as it lands for the first multiply. Both dynamics' step sums are formed and
+    rounded side by side and the mode picks one only at the saturation (a multiplexer in front of
+    the 50-bit adder was a critical path). Every multiply's operands land in fabric registers
+    first; one adder, rounding or saturation per stage.
+    """
+
+    def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None):
+        fs = format_set(fs, "Integrator")
+        if fs.velocity.frac_bits != fs.position.frac_bits:
+            raise ValueError(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
+                             f"{fs.position.frac_bits} fraction bits")
+        if side is not None:
+            Shape.cast(side)  # a clear error now rather than at elaboration
+        self.fs, self.side = fs, side
+        super().__init__(self.signature_of(fs, side))
+        self.latency = _stage_count(fs, side)
+
+    @staticmethod
+    def signature_of(fs: FormatSet, side: ShapeCastable | None = None) -> wiring.Signature:
+        """The component's signature (also the throwaway build's stand-in ports)."""
+        return wiring.Signature({
+            "i": In(stream.Signature(integrator_input_layout(fs, side), always_ready=True)),
+            "o": Out(stream.Signature(integrator_output_layout(fs, side), always_ready=True)),
+            "dt": In(shape_of(fs.dt)),
+            "half_dt_sq": In(shape_of(fs.half_dt_sq)),
+            "damping": In(shape_of(fs.damping)),
+            "momentum": In(1),
+            "idle": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        _build(m, self.fs, self.side, self, platform)
+        return m
+
+
+@functools.cache
+def _stage_count(fs: FormatSet, side) -> int:
+    """The stages :func:`_build` builds (a throwaway build with stand-in ports)."""
+    ports = Integrator.signature_of(fs, side).create()
+    return count_stages(lambda m: _build(m, fs, side, ports, None))
+
+
+def _build(m: Module, fs: FormatSet, side, ports, platform) -> int:
+    """The integrator's datapath into ``m`` (``ports``: the component's members); returns its stages."""
+    rnd = fs.rounding
+    # Constants, registered so that they reach the multipliers from registers.
+    dt, half_dt_sq, damping = (Signal.like(p, name=f"{n}_r", reset_less=True) for n, p in (
+        ("dt", ports.dt), ("half_dt_sq", ports.half_dt_sq), ("damping", ports.damping)))
+    momentum = Signal(name="momentum_r", reset_less=True)
+    one = 1 << fs.damping.frac_bits  # the momentum step is not damped: × 1 exactly
+    m.d.sync += [dt.eq(ports.dt), half_dt_sq.eq(ports.half_dt_sq),
+                 damping.eq(Mux(ports.momentum, one, ports.damping)), momentum.eq(ports.momentum)]
+
+    def rounded(value, from_frac, fmt):
+        """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""
+        return shift_round(value, from_frac - fmt.frac_bits, rnd)
+
+    def saturated(value, fmt):
+        return clamp(value, fmt)[0]
+
+    live = LiveValues()
+    tail = Pipeline(m, ports.i.valid, land_operands=True, platform=platform)
+    node = ports.i.payload
+    # T1: the node as it arrives
+    live.step(tail, "t1", f_x=node.force.x, f_y=node.force.y, p_x=node.node.position.x, p_y=node.node.position.y,
+              v_x=node.node.velocity.x, v_y=node.node.velocity.y, inv_mass=node.node.inv_mass,
+              inv_mass_barrier=node.node.inv_mass_barrier, inside=node.inside,
+              **({"side": Value.cast(node.side)} if side is not None else {}))
+    # F·w, w the barrier's weight where a triangle of the node is inside it (chosen as it lands),
+    # then a = rq(F·w → accel); and the power F·V of the input state (the momentum restart's S)
+    weight = Mux(live["inside"], live["inv_mass_barrier"], live["inv_mass"])
+    live.multiply(tail, "t2", drop=("f_x", "f_y", "inv_mass", "inv_mass_barrier", "inside"),
+                  a_x=(live["f_x"], weight), a_y=(live["f_y"], weight),
+                  pw_x=(live["f_x"], live["v_x"]), pw_y=(live["f_y"], live["v_y"]))
+    a_frac = fs.force_acc.frac_bits + fs.inv_mass.frac_bits
+    live.step(tail, "t3", drop=("pw_x", "pw_y"), a_x=rounded(live["a_x"], a_frac, fs.accel),
+              a_y=rounded(live["a_y"], a_frac, fs.accel), pw=live["pw_x"] + live["pw_y"])
+    live.step(tail, "t4", a_x=saturated(live["a_x"], fs.accel), a_y=saturated(live["a_y"], fs.accel),
+              pw=rounded(live["pw"], fs.force_acc.frac_bits + fs.velocity.frac_bits, fs.power))
+    live["pw"] = saturated(live["pw"], fs.power)
+    # Δt·V, ½Δt²·a, Δt·a
+    live.multiply(tail, "t5",
+                  dtv_x=(dt, live["v_x"]), dtv_y=(dt, live["v_y"]),
+                  ha_x=(half_dt_sq, live["a_x"]), ha_y=(half_dt_sq, live["a_y"]),
+                  dta_x=(dt, live["a_x"]), dta_y=(dt, live["a_y"]))
+    # P' = sat(P + rq(Δt·V + ½Δt²·a → wide_p)),  V' = sat(V + rq(Δt·a → wide_v))
+    fv = fs.dt.frac_bits + fs.velocity.frac_bits
+    fa = fs.half_dt_sq.frac_bits + fs.accel.frac_bits
+    step_frac = max(fv, fa)
+    wide_p = Format(fs.position.signed, fs.position.int_bits + 1, fs.position.frac_bits)
+    wide_v = Format(fs.velocity.signed, fs.velocity.int_bits + 1, fs.velocity.frac_bits)
+    kick_frac = fs.dt.frac_bits + fs.accel.frac_bits
+    # momentum: step = β·V + a, the a term aligned as ½Δt²·a would be (fraction bits fa).
+    # Both dynamics' sums are formed and rounded side by side; the mode picks one only at
+    # the saturation (T8), which muxes anyway: a mux in front of the 50-bit adder was the
+    # critical path (139 MHz).
+    sums = {}
+    for k in "xy":
+        for mode, second in (("paper", live[f"ha_{k}"]), ("mom", live[f"a_{k}"] << fs.half_dt_sq.frac_bits)):
+            value, shift = aligned_add(live[f"dtv_{k}"], step_frac - fv, second, step_frac - fa)
+            sums[f"step_{mode}_{k}"] = Value.cast(value) << shift if shift else value
+        sums[f"kick_{k}"] = rounded(live[f"dta_{k}"], kick_frac, wide_v)
+    live.step(tail, "t6", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta", "a") for k in "xy"), **sums)
+    live.step(tail, "t7", **{f"step_{mode}_{k}": rounded(live[f"step_{mode}_{k}"], step_frac, wide_p)
+                             for mode in ("paper", "mom") for k in "xy"},
+              **{f"kick_{k}": saturated(live[f"kick_{k}"], wide_v) for k in "xy"})
+    # paper: the position step saturated to wide_p; momentum: V' = step saturated to velocity
+    live.step(tail, "t8", drop=tuple(f"{n}_{k}" for n in ("kick", "step_paper", "step_mom") for k in "xy"),
+              **{f"step_{k}": Mux(momentum, saturated(live[f"step_mom_{k}"], fs.velocity),
+                                  saturated(live[f"step_paper_{k}"], wide_p)) for k in "xy"},
+              **{f"v_{k}": live[f"v_{k}"] + live[f"kick_{k}"] for k in "xy"})
+    live.step(tail, "t9", drop=("step_x", "step_y"),
+              **{f"p_{k}": live[f"p_{k}"] + live[f"step_{k}"] for k in "xy"},
+              **{f"v_{k}": Mux(momentum, live[f"step_{k}"], saturated(live[f"v_{k}"], fs.velocity)
+                               )[:fs.velocity.width].as_signed() for k in "xy"})
+    # V'·(1 − γ) alongside the position's saturation, then V'' = rq(V'·(1 − γ) → velocity)
+    live.update({f"p_{k}": saturated(live[f"p_{k}"], fs.position) for k in "xy"})
+    live.multiply(tail, "t10", drop=("v_x", "v_y"), vk_x=(live["v_x"], damping), vk_y=(live["v_y"], damping))
+    vk_frac = fs.velocity.frac_bits + fs.damping.frac_bits
+    live.step(tail, "t11", **{f"vk_{k}": rounded(live[f"vk_{k}"], vk_frac, fs.velocity) for k in "xy"})
+    live.step(tail, "t12", **{f"vk_{k}": saturated(live[f"vk_{k}"], fs.velocity) for k in "xy"})
+
+    out = ports.o.payload
+    m.d.comb += [ports.o.valid.eq(tail.valid),
+                 out.position.x.eq(live["p_x"]), out.position.y.eq(live["p_y"]),
+                 out.velocity.x.eq(live["vk_x"]), out.velocity.y.eq(live["vk_y"]), out.power.eq(live["pw"])]
+    if side is not None:
+        m.d.comb += Value.cast(out.side).eq(live["side"])
+
+    # nodes in flight (at most one per stage)
+    in_flight = Signal(range(tail.stages + 2), name="nodes_in_flight")
+    m.d.sync += in_flight.eq(in_flight + ports.i.valid - ports.o.valid)
+    m.d.comb += ports.idle.eq(in_flight == 0)
+    return tail.stages

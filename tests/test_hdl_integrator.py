@@ -1,0 +1,125 @@
+"""RTL integrate stage (hdl.Integrator) against the golden model's ``integrate`` /
+``integrate_momentum`` and ``node_power``, in Amaranth's simulator.
+
+Random nodes (state, force, both weights, ``inside``) in both dynamics, compared bit for bit and in
+order, with random gaps in the input (the stream helpers of :mod:`sim.stream_helpers`).
+"""
+
+import gc
+import warnings
+
+import numpy as np
+import pytest
+from amaranth.hdl import UnusedElaboratable, unsigned
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.pipeline import NodeConstants, integrate, integrate_momentum, node_power
+from hdl import Integrator, NodeUpdate
+from sim.payloads import pack_beats, unpack_beats
+from sim.stream_helpers import run_streams
+from test_hdl_force_pass import Harness
+from test_hdl_node_update import PRESETS, random_constants
+
+SIDE = unsigned(20)
+
+
+def random_nodes(fs, n, seed):
+    """``n`` nodes: positions, velocities, forces over their formats' whole ranges (saturations
+    included), weights around 1, ``inside`` on about a third, a random side value."""
+    rng = np.random.default_rng(seed)
+
+    def raw(fmt, size, scale=1.0):
+        return rng.integers(int(fmt.raw_min * scale), int(fmt.raw_max * scale) + 1, size=size)
+
+    return {
+        "position": raw(fs.position, (n, 2), 1 / 64), "velocity": raw(fs.velocity, (n, 2), 1 / 4),
+        "force": raw(fs.force_acc, (n, 2)),
+        "inv_mass": rng.integers(1 << (fs.inv_mass.frac_bits - 2), 2 << fs.inv_mass.frac_bits, n),
+        "inv_mass_barrier": rng.integers(1 << (fs.inv_mass.frac_bits - 3), 1 << fs.inv_mass.frac_bits, n),
+        "inside": rng.random(n) < 0.3,
+        "side": rng.integers(0, 1 << SIDE.width, n),
+    }
+
+
+def check_integrator(dut, fs, nodes, constants, momentum=False, **kw):
+    """The nodes through the RTL against the golden model; returns the run."""
+    vec = lambda a: {"x": a[:, 0], "y": a[:, 1]}  # noqa: E731
+    beats = pack_beats(dut.i.payload.shape(), {
+        "node": {"position": vec(nodes["position"]), "velocity": vec(nodes["velocity"]),
+                 "inv_mass": nodes["inv_mass"], "inv_mass_barrier": nodes["inv_mass_barrier"]},
+        "force": vec(nodes["force"]), "inside": nodes["inside"].astype(np.int64), "side": nodes["side"]})
+
+    def setup(ctx):
+        for port, value in ((dut.dt, constants.dt), (dut.half_dt_sq, constants.half_dt_sq),
+                            (dut.damping, constants.damping), (dut.momentum, momentum)):
+            ctx.set(port, value)
+
+    # the constants are registered once: the stream starts one edge later
+    run = run_streams(Harness(dut), beats, setup=setup, start=1, watch={"idle": dut.idle}, **kw)
+    weights = np.where(nodes["inside"], nodes["inv_mass_barrier"], nodes["inv_mass"])
+    p, v, f = nodes["position"], nodes["velocity"], nodes["force"]
+    if momentum:
+        want_p, want_v = integrate_momentum(fs, p, v, f, weights, constants.dt)
+    else:
+        want_p, want_v = integrate(fs, p, v, f, weights, constants)
+    out = unpack_beats(dut.o.payload.shape(), run.outputs)
+    for name, got, expected in (
+        ("position.x", out["position"]["x"], want_p[:, 0]), ("position.y", out["position"]["y"], want_p[:, 1]),
+        ("velocity.x", out["velocity"]["x"], want_v[:, 0]), ("velocity.y", out["velocity"]["y"], want_v[:, 1]),
+        ("power", out["power"], node_power(fs, f, v)), ("side", out["side"], nodes["side"]),
+    ):
+        bad = np.flatnonzero(got != expected)
+        if bad.size:
+            i = int(bad[0])
+            pytest.fail(f"{name}: {bad.size} mismatches; first at node {i}: rtl {int(got[i])} golden {int(expected[i])}")
+    # idle: high exactly when every node taken in has come out
+    idle = np.asarray(run.watched["idle"], dtype=bool)
+    edges = np.arange(len(idle))
+    expected_idle = np.searchsorted(run.in_cycles, edges) == np.searchsorted(run.out_cycles, edges)
+    assert np.array_equal(idle, expected_idle), f"idle wrong at edge {int(np.flatnonzero(idle != expected_idle)[0])}"
+    return run
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("momentum", [False, True])
+def test_random_nodes_with_input_gaps(preset, momentum):
+    fs = FormatSet.preset(preset)
+    constants = random_constants(fs, 7)
+    if momentum:
+        constants = NodeConstants(int(0.7 * (1 << fs.dt.frac_bits)), 0, constants.half_spring, 1 << fs.damping.frac_bits)
+    check_integrator(Integrator(fs, side=SIDE), fs, random_nodes(fs, 300, seed=8 + momentum), constants,
+                     momentum=momentum, seed=9, p_valid=0.6)
+
+
+#: Independent pins of the stages the integrator builds (NodeUpdate's tail_stages).
+LATENCY = {"default": 27, "narrow": 24}
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_latency_pin(preset):
+    with warnings.catch_warnings():  # built for their attributes only, never elaborated
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        latencies = Integrator(preset).latency, Integrator(preset, side=SIDE).latency, NodeUpdate(preset).tail_stages
+        gc.collect()
+    assert latencies == (LATENCY[preset],) * 3
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_one_node_per_clock_and_the_measured_latency(preset):
+    fs = FormatSet.preset(preset)
+    dut = Integrator(fs, side=SIDE)
+    assert dut.latency == LATENCY[preset]
+    n = 100
+    run = check_integrator(dut, fs, random_nodes(fs, n, seed=10), random_constants(fs, 11))
+    assert run.in_cycles == list(range(n))
+    assert run.out_cycles == [c + dut.latency for c in range(n)]
+
+
+def test_refuses_what_it_cannot_build():
+    with warnings.catch_warnings():  # the refused objects are never elaborated
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        with pytest.raises(TypeError, match="Integrator needs a FormatSet"):
+            Integrator(None)
+        with pytest.raises(ValueError, match="fraction bits"):
+            Integrator(FormatSet.preset("narrow").replace(velocity="s3.16"))
+        gc.collect()
