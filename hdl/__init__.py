@@ -6,8 +6,10 @@ bit-exact with its golden-model function. See ``docs/hardware-units.md``.
 """
 
 from .core import SpringflatCore
+from .force_pass import ForcePass
+from .integrator import Integrator
 from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["NodeUpdate", "RsqrtUnit", "SpringflatCore", "StepGenerator"]
+__all__ = ["ForcePass", "Integrator", "NodeUpdate", "RsqrtUnit", "SpringflatCore", "StepGenerator"]
