@@ -75,7 +75,9 @@ class Normaliser(wiring.Component):
     i : ``In(stream.Signature(normalise_layout(fs)))``
         ``sum`` [error_acc], ``mantissa`` [reciprocal] and ``shift`` of
         :class:`~golden_model.fixed.engine.Reciprocal` (the host's registers). ``shift`` must be
-        at least ``F + 2``: every ``Reciprocal.of(total)`` with ``total ≥ 2`` is.
+        at least ``F + 2``, as ``normalise`` needs: every ``Reciprocal.of(total)`` is if
+        ``reciprocal`` has at least two more fraction bits than ``error`` (7 more in both presets),
+        else every one with ``total ≥ 2``.
     o : ``Out(stream.Signature(shape_of(fs.error)))``
         The normalised error.
 
@@ -179,9 +181,10 @@ class EnergyCheck(wiring.Component):
     o : ``Out(stream.Signature(energy_result_layout(energy_bits)))``
         ``energy`` (``E``, ``energy_raw``) and ``settled``.
     half_spring : ``In(unsigned(fs.spring.width − 1))``
-        ``½C`` raw [spring], non-negative (``C > 0``). Hold it stable while an item is in flight.
+        ``½C`` raw [spring], non-negative (``C > 0``). Sampled when an item is accepted.
     tolerance : ``In(unsigned(ENERGY_TOL_FRAC_BITS + 1))``
-        ``ε`` raw at ``ENERGY_TOL_FRAC_BITS`` (40) fraction bits, ε < 2 (``StopRule.energy``).
+        ``ε`` raw at ``ENERGY_TOL_FRAC_BITS`` (40) fraction bits (``StopRule.energy``), ε < 2: a
+        larger ε does not fit (the host would have to refuse it). Sampled when an item is accepted.
 
     Contract
     --------

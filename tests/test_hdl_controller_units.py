@@ -68,7 +68,7 @@ def normalise_cases(fs, rng, n):
             sums.append(min(total + int(rng.integers(-2, 3)), top))  # around E = 1
         else:
             sums.append(min(int(total * rng.uniform(0, 1.2)), top))
-    corners = [(0, 2), (top, 2), (top, top), (top - 1, top), (0, 1 << 62), (top, 1 << 62), (1, 3), (2, 3)]
+    corners = [(0, 1), (1, 1), (top, 1), (0, 2), (top, 2), (top, top), (top - 1, top), (0, 1 << 62), (top, 1 << 62), (1, 3), (2, 3)]
     return [s for s, _ in corners] + sums, [t for _, t in corners] + totals
 
 
@@ -253,10 +253,14 @@ def test_beta_every_k_to_5000():
 
 @pytest.mark.parametrize("preset", PRESETS)
 def test_beta_small_and_large_k_with_stalls(preset):
-    """k = 0…300 and random large k up to the port's width, where β rounds up to 1 and is capped."""
+    """k = 0…300, random large k up to the port's width (β rounds up to 1 and is capped), and every
+    k whose quotient is exact (``k + 3`` a power of two or three times one: a remainder reaches
+    exactly the divisor; with ``k + 3 = 2^(F+1)`` or ``3·2^(F+1)`` the quotient is odd, so a
+    divider one low there rounds differently)."""
     fs = FormatSet.preset(preset)
     rng = np.random.default_rng(9)
-    ks = np.r_[np.arange(301), rng.integers(301, 1 << 21, 300), (1 << 21) - 1, (1 << 20)]
+    exact = [m * (1 << j) - 3 for j in range(22) for m in (1, 3) if 0 <= m * (1 << j) - 3 < 1 << 21]
+    ks = np.r_[np.arange(301), rng.integers(301, 1 << 21, 300), (1 << 21) - 1, (1 << 20), exact]
     _, _, want = check_beta(fs, ks, seed=10, p_valid=0.6, p_ready=0.6)
     assert fs.dt.raw_max in want  # the cap was reached
 
