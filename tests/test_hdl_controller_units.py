@@ -68,7 +68,8 @@ def normalise_cases(fs, rng, n):
             sums.append(min(total + int(rng.integers(-2, 3)), top))  # around E = 1
         else:
             sums.append(min(int(total * rng.uniform(0, 1.2)), top))
-    corners = [(0, 1), (1, 1), (top, 1), (0, 2), (top, 2), (top, top), (top - 1, top), (0, 1 << 62), (top, 1 << 62), (1, 3), (2, 3)]
+    corners = [(0, 1), (1, 1), (top, 1), (0, 2), (top, 2), (top, top), (top - 1, top), (0, 1 << 62),
+               (top, 1 << 62), (1, 3), (2, 3)]
     return [s for s, _ in corners] + sums, [t for _, t in corners] + totals
 
 
