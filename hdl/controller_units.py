@@ -24,6 +24,7 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, _energy_frac
+from golden_model.fixed.engine_image import ENERGY_TOL_INT_BITS
 
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import energy_result_layout, energy_sums_layout, normalise_layout
@@ -182,9 +183,9 @@ class EnergyCheck(wiring.Component):
         ``energy`` (``E``, ``energy_raw``) and ``settled``.
     half_spring : ``In(unsigned(fs.spring.width − 1))``
         ``½C`` raw [spring], non-negative (``C > 0``). Sampled when an item is accepted.
-    tolerance : ``In(unsigned(ENERGY_TOL_FRAC_BITS + 1))``
-        ``ε`` raw at ``ENERGY_TOL_FRAC_BITS`` (40) fraction bits (``StopRule.energy``), ε < 2: a
-        larger ε does not fit (the host would have to refuse it). Sampled when an item is accepted.
+    tolerance : ``In(unsigned(ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS))``
+        ``ε`` raw (``StopRule.energy``) in the engine's run-constant format, u8.40
+        (:mod:`golden_model.fixed.engine_image`). Sampled when an item is accepted.
 
     Contract
     --------
@@ -212,7 +213,7 @@ class EnergyCheck(wiring.Component):
         largest = (((3 * ((1 << self.half_spring_bits) - 1) * ((1 << self.square_bits) - 1)) << self.springs_shift)
                    + ((2 * ((1 << self.barrier_bits) - 1)) << self.barrier_shift))
         self.energy_bits = largest.bit_length()
-        self.tolerance_bits = ENERGY_TOL_FRAC_BITS + 1
+        self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
         self.latency = self.square_bits + self.energy_bits + 3
         super().__init__({
             "i": In(stream.Signature(sums)),
