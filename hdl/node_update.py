@@ -126,18 +126,21 @@ class NodeUpdate(wiring.Component):
         # leaves a flip-flop, set from the current count and this clock's handshakes alone
         # (no adder on that path): depth - 1 is a power of two.
         owed = Signal(range(self.result_depth + 1))
+        # The same decision in two flip-flops: `accepting` drives i.ready out of the block,
+        # `refusing` (its complement, so that synthesis does not merge the two) everything inside,
+        # so the counter's loop stays local (one flip-flop driving both was 5.6 ns of routing
+        # away from the counter).
         accepting = Signal(init=1)
-        take = self.i.valid & accepting
+        refusing = Signal(init=0)
+        take = self.i.valid & ~refusing
         grow = take & self.i.payload.last & ~(self.o.valid & self.o.ready)
         shrink = self.o.valid & self.o.ready & ~(take & self.i.payload.last)
         top = (self.result_depth - 1).bit_length() - 1
         assert self.result_depth - 1 == 1 << top
         at_depth_minus_1 = owed[top] & ~owed[:top].any()
         at_depth = owed[top] & owed[0]
-        m.d.sync += [
-            owed.eq(owed + grow - shrink),
-            accepting.eq(~owed[top] | (at_depth_minus_1 & ~grow) | (at_depth & shrink)),
-        ]
+        accept_next = ~owed[top] | (at_depth_minus_1 & ~grow) | (at_depth & shrink)
+        m.d.sync += [owed.eq(owed + grow - shrink), accepting.eq(accept_next), refusing.eq(~accept_next)]
         m.d.comb += self.i.ready.eq(accepting)
         # idle: no node owed and none half accepted (between its first and last entry)
         open_node = Signal()
