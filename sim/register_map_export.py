@@ -45,8 +45,8 @@ def _register_rows(r: Register) -> list[str]:
     return rows
 
 
-def _window_section(w: MemoryWindow) -> list[str]:
-    lines = [f"### `{w.name}` — {w.description}", "",
+def _window_section(w: MemoryWindow, level: int) -> list[str]:
+    lines = [f"{'#' * (level + 2)} `{w.name}` — {w.description}", "",
              f"Base `0x{w.base:05X}`, depth {w.depth}, {w.words} words per entry at a stride of {w.stride} "
              f"(entry `i`, word `k` at `0x{w.base:05X} + i·{w.stride} + k`; word 0 = bits 31:0).", "",
              "| Bits | Field | Width | Signed | Format |", "|---|---|---|---|---|"]
@@ -58,11 +58,13 @@ def _window_section(w: MemoryWindow) -> list[str]:
     return lines + [""]
 
 
-def markdown(m: RegisterMap) -> str:
-    """The map as markdown: the bus, a table per register block, the memory windows with their layouts."""
+def markdown(m: RegisterMap, level: int = 1) -> str:
+    """The map as markdown: the bus, a table per register block, the memory windows with their layouts
+    (``level``: the title's heading level)."""
     bus = m.to_dict()["bus"]
+    h = "#" * level
     lines = [
-        f"# SpringflatEngine register map (v{VERSION[0]}.{VERSION[1]})", "",
+        f"{h} SpringflatEngine register map (v{VERSION[0]}.{VERSION[1]})", "",
         f"Generated from `golden_model.fixed.register_map.RegisterMap` for format set `{m.formats}` "
         f"(FORMAT_HASH `0x{m.format_hash:08X}`) and capacity {m.capacity.vertices} vertices, "
         f"{m.capacity.entries} entries, {m.capacity.triangles} triangles. Do not edit.", "",
@@ -73,19 +75,19 @@ def markdown(m: RegisterMap) -> str:
         "two's complement over the value's width.", "",
     ]
     for block in REGISTER_BLOCKS:
-        lines += [f"## {block.capitalize()}", "", "| Address | Register | Bits | Field | Access | Reset | Description |",
+        lines += [f"{h}# {block.capitalize()}", "", "| Address | Register | Bits | Field | Access | Reset | Description |",
                   "|---|---|---|---|---|---|---|"]
         for r in m.registers:
             if r.block == block:
                 lines += _register_rows(r)
         lines.append("")
-    lines += ["## Memory windows", "", "| Window | Base | Depth | Words/entry | Stride | Size |",
+    lines += [f"{h}# Memory windows", "", "| Window | Base | Depth | Words/entry | Stride | Size |",
               "|---|---|---|---|---|---|"]
     lines += [f"| `{w.name}` | `0x{w.base:05X}` | {w.depth} | {w.words} | {w.stride} | `0x{w.size:X}` |"
               for w in m.windows]
     lines.append("")
     for w in m.windows:
-        lines += _window_section(w)
+        lines += _window_section(w, level)
     return "\n".join(lines)
 
 
@@ -146,3 +148,30 @@ def write_exports(m: RegisterMap, out_dir: str | Path) -> list[Path]:
     for path, text in zip(paths, (markdown(m), to_json(m), c_header(m))):
         path.write_text(text)
     return paths
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sim.register_map_export --formats PRESET|FILE --capacity V E T --out DIR``."""
+    import argparse
+
+    from golden_model.fixed.engine import FixedPointError, load_formats
+    from golden_model.fixed.engine_image import EngineCapacity
+
+    parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
+    parser.add_argument("--formats", default="default")
+    parser.add_argument("--capacity", nargs=3, type=int, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
+                        default=(16384, 131072, 32768))
+    parser.add_argument("--out", required=True)
+    args = parser.parse_args(argv)
+    try:
+        m = RegisterMap.build(load_formats(args.formats), EngineCapacity(*args.capacity))
+    except (FixedPointError, ValueError) as exc:
+        print(f"error: {exc}")
+        return 2
+    for path in write_exports(m, args.out):
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

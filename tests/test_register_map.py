@@ -5,6 +5,7 @@ import json
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 import pytest
 
@@ -220,3 +221,13 @@ def test_write_exports_writes_all_three(regmap, tmp_path):
     assert [p.name for p in paths] == list(EXPORT_FILES)
     assert RegisterMap.from_dict(json.loads(paths[1].read_text())) == regmap
     assert paths[2].read_text() == c_header(regmap) and paths[0].read_text() == markdown(regmap)
+
+
+def test_the_engine_doc_holds_the_generated_map():
+    """docs/engine.md embeds the exported map of the capacity its marker names: it cannot drift."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "engine.md").read_text()
+    m = re.search(r"<!-- generated: python -m sim.register_map_export --formats (\w+) --capacity (\d+) (\d+) (\d+) -->"
+                  r"\n(.*)\n<!-- end of generated -->", text, re.S)
+    assert m, "docs/engine.md lost its generated register map"
+    regmap = RegisterMap.build(FormatSet.preset(m.group(1)), EngineCapacity(*map(int, m.group(2, 3, 4))))
+    assert m.group(5) == markdown(regmap, level=3)

@@ -151,10 +151,9 @@ class _Allocator:
             suffix = "" if words == 1 else ("_LO", "_HI")[part] if words == 2 else f"_{part}"
             bits = min(BUS_WORD_BITS, width - part * BUS_WORD_BITS)
             lsb = part * BUS_WORD_BITS
-            f = BitField("value", 0, bits, access, description, name, lsb, signed, fmt)
-            self.add(name.upper() + suffix, access, description + (f" (bits {lsb + bits - 1}:{lsb})" if words > 1
-                                                                   else ""), (f,), block,
-                     (reset >> lsb) & ((1 << bits) - 1))
+            text = description + (f" (bits {lsb + bits - 1}:{lsb})" if words > 1 else "")
+            f = BitField("value", 0, bits, access, text, name, lsb, signed, fmt)
+            self.add(name.upper() + suffix, access, text, (f,), block, (reset >> lsb) & ((1 << bits) - 1))
 
 
 def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
