@@ -23,7 +23,7 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, _energy_frac
+from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, energy_frac_bits
 from golden_model.fixed.engine_image import ENERGY_TOL_INT_BITS
 
 from .fixedpoint import clamp, shape_of, shift_round
@@ -158,7 +158,7 @@ class EnergyCheck(wiring.Component):
     Bit-exact with :func:`~golden_model.fixed.engine.energy_raw` and the energy part of
     :meth:`StopRule.converged <golden_model.fixed.engine.StopRule.converged>`::
 
-        E       = (3·½C·Σe²) << s_springs + (2·Σc·h) << s_barrier     (``_energy_frac`` fraction bits)
+        E       = (3·½C·Σe²) << s_springs + (2·Σc·h) << s_barrier     (``energy_frac_bits`` fraction bits)
         settled = E == 0                                  if E_prev == 0
                   |E − E_prev| << 40 ≤ ε·E_prev           otherwise (ε at 40 fraction bits)
 
@@ -205,7 +205,7 @@ class EnergyCheck(wiring.Component):
         sums = energy_sums_layout(fs, entries_capacity)
         self.square_bits = sums["square_sum"].shape.width
         self.barrier_bits = sums["barrier_sum"].shape.width
-        frac = _energy_frac(fs)
+        frac = energy_frac_bits(fs)
         self.springs_shift = frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits
         self.barrier_shift = frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits
         self.half_spring_bits = fs.spring.width - 1

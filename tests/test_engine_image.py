@@ -2,7 +2,6 @@
 
 import dataclasses
 import time
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -93,8 +92,8 @@ def test_energy_width_holds_the_largest_energy():
     worst = NodeTerms(np.zeros((4, 2), np.int64), np.zeros(4, np.int64),
                       error_squares=per_node * DEFAULT.rest_length.raw_max ** 2,
                       barrier_energies=per_node * (DEFAULT.barrier_coeff.raw_max * DEFAULT.area.raw_max))
-    problem = SimpleNamespace(fs=DEFAULT, half_spring=DEFAULT.spring.raw_max)
-    assert energy_width(DEFAULT, cap) == energy_raw(problem, worst).bit_length()
+    energy = energy_raw(DEFAULT, DEFAULT.spring.raw_max, worst.error_square_sum, worst.barrier_energy_sum)
+    assert energy_width(DEFAULT, cap) == energy.bit_length()
 
 
 @pytest.mark.parametrize("what, capacity", [

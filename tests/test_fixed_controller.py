@@ -67,7 +67,8 @@ def test_integer_energy_is_the_float_energy_of_the_same_layout(barrier):
                               params.barrier_gain, params.spring)
         assert part > 0.05 * expected  # the barrier's share is there to be checked
         expected += part
-    got = energy_to_float(problem, energy_raw(problem, engine.terms))
+    got = energy_to_float(problem, energy_raw(problem.fs, problem.half_spring, engine.terms.error_square_sum,
+                                              engine.terms.barrier_energy_sum))
     assert math.isclose(got, expected, rel_tol=1e-4), (got, expected)
 
 

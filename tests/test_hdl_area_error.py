@@ -1,15 +1,13 @@
-"""RTL area pass (hdl.AreaError) against the golden model's ``area_error``, in Amaranth's simulator.
+"""RTL area pass (hdl.AreaError) against the golden model's ``area_sum``, in Amaranth's simulator.
 
 The sum ``Σ|A − |A'||`` [error_acc] and the saturation events (``face_edge``, ``face_area``,
-``area_sum``) of each pass are compared with what ``golden_model.fixed.engine.area_error``
-computes and counts before it normalises: the golden function itself runs on a stand-in
-problem whose reciprocal returns the sum unnormalised (:class:`SumTap`), so no step of it is
-re-implemented here. Triangles arrive with seeded random gaps (the input is always ready).
+``area_sum``) of each pass are compared with what ``golden_model.fixed.engine.area_sum``
+computes and counts (the sum ``area_error`` normalises). Triangles arrive with seeded random
+gaps (the input is always ready).
 """
 
 import gc
 import warnings
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,7 +15,7 @@ from amaranth.back import verilog
 from amaranth.hdl import Const, UnusedElaboratable, Value
 
 from golden_model.fixed import FormatSet, SaturationCounter
-from golden_model.fixed.engine import area_error
+from golden_model.fixed.engine import area_sum
 from hdl.area_error import AreaError
 from sim.payloads import pack_beats
 from sim.stream_helpers import StreamRun, run_testbenches, stream_producer
@@ -26,24 +24,14 @@ PRESETS = ["default", "narrow"]
 SATURATION_NAMES = ("face_edge", "face_area", "area_sum")
 
 
-class SumTap:
-    """Stands in for the problem's :class:`~golden_model.fixed.engine.Reciprocal`: ``area_error``
-    hands it the sum [error_acc] it would normalise, and gets the sum back."""
-
-    @staticmethod
-    def normalise(sum_raw, fmt, rounding):
-        return sum_raw
-
-
 def golden_pass(fs, corners, areas):
-    """``(Σ|A − |A'|| [error_acc], {name: saturation events})`` of ``area_error`` on triangles
+    """``(Σ|A − |A'|| [error_acc], {name: saturation events})`` of ``area_sum`` on triangles
     ``corners`` (F, 3, 2) raw [position] with host areas ``areas`` (F,) raw [face_area]."""
     n = len(corners)
-    problem = SimpleNamespace(fs=fs, mesh=SimpleNamespace(faces=np.arange(3 * n).reshape(n, 3)),
-                              face_areas=np.asarray(areas, dtype=np.int64), area_reciprocal=SumTap())
     counter = SaturationCounter()
-    total = area_error(problem, np.asarray(corners, dtype=np.int64).reshape(-1, 2), counter)
-    return int(total), {name: counter[name] for name in SATURATION_NAMES}
+    total = area_sum(fs, np.arange(3 * n).reshape(n, 3), np.asarray(areas, dtype=np.int64),
+                     np.asarray(corners, dtype=np.int64).reshape(-1, 2), counter)
+    return total, {name: counter[name] for name in SATURATION_NAMES}
 
 
 def triangle_beats(dut, corners, areas):

@@ -123,12 +123,6 @@ def test_normaliser_cycles(preset):
 
 # ---------------------------------------------------------------- EnergyCheck
 
-def golden_energy(fs, half_spring, square_sum, barrier_sum):
-    """``energy_raw`` on a stand-in problem and pass terms (the only attributes it reads)."""
-    return energy_raw(SimpleNamespace(fs=fs, half_spring=half_spring),
-                      SimpleNamespace(error_square_sum=square_sum, barrier_energy_sum=barrier_sum))
-
-
 def check_energy(fs, capacity, half_spring, tolerance, items, **kw):
     """``items`` ``(square_sum, barrier_sum, first)`` through an ``EnergyCheck``; each output against
     ``energy_raw`` and ``StopRule.converged``'s energy part with the previous item's energy."""
@@ -142,7 +136,7 @@ def check_energy(fs, capacity, half_spring, tolerance, items, **kw):
 
     run = run_items(dut, beats, dut.latency, setup=setup, **kw)
     out = unpack_beats(dut.o.payload.shape(), run.outputs)
-    energies = [golden_energy(fs, half_spring, q, b) for q, b, _ in items]
+    energies = [energy_raw(fs, half_spring, q, b) for q, b, _ in items]
     rule = StopRule(area=0, shape=0, energy=tolerance)  # errors (0, 0) pass: only the energy part decides
     settled = [0 if f else int(rule.converged(energies[i - 1], energies[i], (0, 0)))
                for i, (_, _, f) in enumerate(items)]

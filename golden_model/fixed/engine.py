@@ -41,8 +41,8 @@ from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms
 from .steplut import half_dt_sq, step_size
 
 __all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats",
-           "momentum_beta_raw", "power_sum", "MomentumState", "energy_raw", "energy_to_float", "StopRule",
-           "ENERGY_TOL_FRAC_BITS", "run_fixed"]
+           "momentum_beta_raw", "power_sum", "MomentumState", "area_sum", "area_error", "length_sum", "shape_error",
+           "energy_frac_bits", "energy_raw", "energy_to_float", "StopRule", "ENERGY_TOL_FRAC_BITS", "run_fixed"]
 
 SAT = Overflow.SATURATE
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
@@ -172,29 +172,30 @@ class MomentumState:
 ENERGY_TOL_FRAC_BITS = 40
 
 
-def _energy_frac(fs: FormatSet) -> int:
+def energy_frac_bits(fs: FormatSet) -> int:
+    """Fraction bits of :func:`energy_raw`: the finer of its spring part's (``½C·e²``) and barrier part's."""
     return max(fs.spring.frac_bits + 2 * fs.rest_length.frac_bits, fs.barrier_coeff.frac_bits + fs.area.frac_bits)
 
 
-def energy_raw(problem: "FixedProblem", terms: NodeTerms) -> int:
-    """Three times the energy of the layout, exact, at :func:`_energy_frac` fraction bits (scaled units).
+def energy_raw(fs: FormatSet, half_spring: int, square_sum: int, barrier_sum: int) -> int:
+    """Three times the energy of a layout, exact, at :func:`energy_frac_bits` fraction bits (scaled units).
 
-    Springs: ``½C·Σe²`` over the entries (each edge twice, as the float reference's
-    ``Σ_edges C·(L − d)²``). Barrier: each triangle's ``½μC·X*·(κ − X/X*)²₊`` is ``2·c·h`` of
-    each of its three entries. Three times the sum keeps both parts integers; the stopping rule
-    only compares ratios.
+    ``half_spring`` is ``½C`` raw [spring]; ``square_sum`` is ``Σe²`` over the entries at twice
+    rest_length's fraction bits and ``barrier_sum`` is ``Σc·h`` at barrier_coeff's plus area's
+    (a pass's ``NodeTerms.error_square_sum`` and ``barrier_energy_sum``). Springs: ``½C·Σe²`` over
+    the entries (each edge twice, as the float reference's ``Σ_edges C·(L − d)²``). Barrier: each
+    triangle's ``½μC·X*·(κ − X/X*)²₊`` is ``2·c·h`` of each of its three entries. Three times the
+    sum keeps both parts integers; the stopping rule only compares ratios.
     """
-    fs = problem.fs
-    frac = _energy_frac(fs)
-    springs = (3 * problem.half_spring * terms.error_square_sum) << (
-        frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits)
-    barrier = (2 * terms.barrier_energy_sum) << (frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits)
+    frac = energy_frac_bits(fs)
+    springs = (3 * half_spring * int(square_sum)) << (frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits)
+    barrier = (2 * int(barrier_sum)) << (frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits)
     return springs + barrier
 
 
 def energy_to_float(problem: "FixedProblem", raw: int) -> float:
     """:func:`energy_raw` in mesh units (float64, for reporting)."""
-    return math.ldexp(raw / 3, -_energy_frac(problem.fs) - 2 * problem.scale_exp)
+    return math.ldexp(raw / 3, -energy_frac_bits(problem.fs) - 2 * problem.scale_exp)
 
 
 @dataclass(frozen=True)
@@ -371,29 +372,45 @@ def _doubled_areas(fs: FormatSet, positions: np.ndarray, faces: np.ndarray,
     return ux * vy - uy * vx
 
 
-def area_error(problem: FixedProblem, positions: np.ndarray, counter: SaturationCounter | None = None) -> int:
-    """``E_S`` raw [error]: Σ|A − |A'|| [error_acc] times 1/ΣA; the areas |A'| in [face_area]."""
-    fs = problem.fs
-    doubled = np.abs(_doubled_areas(fs, positions, problem.mesh.faces, counter))
+def area_sum(fs: FormatSet, faces: np.ndarray, face_areas: np.ndarray, positions: np.ndarray,
+             counter: SaturationCounter | None = None) -> int:
+    """``Σ|A − |A'||`` raw [error_acc], before normalising: the area pass's sum.
+
+    ``faces`` (F, 3) corner indices into ``positions`` (V, 2) raw [position]; ``face_areas``
+    (F,) the host's areas ``A`` raw [face_area]. The layout's ``|A'|`` are rounded to
+    [face_area]; saturations count as ``face_edge``, ``face_area`` and ``area_sum``.
+    """
+    doubled = np.abs(_doubled_areas(fs, positions, faces, counter))
     area = requantize(doubled, 2 * fs.face_edge.frac_bits + 1, fs.face_area, fs.rounding, SAT, counter, "face_area")
-    total = requantize(np.abs(problem.face_areas - area).sum(), fs.face_area.frac_bits, fs.error_acc, fs.rounding,
-                       SAT, counter, "area_sum")
-    return problem.area_reciprocal.normalise(int(total), fs.error, fs.rounding)
+    total = requantize(np.abs(face_areas - area).sum(), fs.face_area.frac_bits, fs.error_acc, fs.rounding, SAT,
+                       counter, "area_sum")
+    return int(total)
 
 
-def shape_error(problem: FixedProblem, error_sums: np.ndarray, counter: SaturationCounter | None = None) -> int:
-    """``E_C`` raw [error]: Σ over nodes of the pipeline's Σ|L − d| times 1/(2Σd)."""
-    fs = problem.fs
-    total = requantize(error_sums.sum(), fs.error_acc.frac_bits, fs.error_acc, fs.rounding, SAT, counter,
-                       "length_sum")
-    return problem.length_reciprocal.normalise(int(total), fs.error, fs.rounding)
+def area_error(fs: FormatSet, reciprocal: Reciprocal, faces: np.ndarray, face_areas: np.ndarray,
+               positions: np.ndarray, counter: SaturationCounter | None = None) -> int:
+    """``E_S`` raw [error]: :func:`area_sum` times ``reciprocal`` (1/ΣA)."""
+    return reciprocal.normalise(area_sum(fs, faces, face_areas, positions, counter), fs.error, fs.rounding)
+
+
+def length_sum(fs: FormatSet, error_sums: np.ndarray, counter: SaturationCounter | None = None) -> int:
+    """``Σ|L − d|`` raw [error_acc] over the nodes' partial sums ``error_sums`` (V,) [error_acc],
+    saturated once (counted as ``length_sum``)."""
+    return int(requantize(error_sums.sum(), fs.error_acc.frac_bits, fs.error_acc, fs.rounding, SAT, counter,
+                          "length_sum"))
+
+
+def shape_error(fs: FormatSet, reciprocal: Reciprocal, error_sums: np.ndarray,
+                counter: SaturationCounter | None = None) -> int:
+    """``E_C`` raw [error]: :func:`length_sum` times ``reciprocal`` (1/(2Σd))."""
+    return reciprocal.normalise(length_sum(fs, error_sums, counter), fs.error, fs.rounding)
 
 
 def folded_count(problem: FixedProblem, positions: np.ndarray) -> int:
     """Faces whose exact orientation disagrees with the whole pattern's (the honest fold count).
 
     Exact for every triangle whose edges fit ``face_edge``; a longer edge saturates (counted
-    by :func:`area_error` on the same positions), and that triangle's sign may then be wrong.
+    by :func:`area_sum` on the same positions), and that triangle's sign may then be wrong.
     """
     return int(np.count_nonzero(folded_by_area(_doubled_areas(problem.fs, positions, problem.mesh.faces))))
 
@@ -441,10 +458,10 @@ class FixedEngine:
     def measure(self) -> Measurement:
         p = self.problem
         self.terms = node_terms(p.fs, self.raw_positions, p.stream, p.half_spring, self.counter)
-        e_s = area_error(p, self.raw_positions, self.counter)
-        e_c = shape_error(p, self.terms.error_sums, self.counter)
+        e_s = area_error(p.fs, p.area_reciprocal, p.mesh.faces, p.face_areas, self.raw_positions, self.counter)
+        e_c = shape_error(p.fs, p.length_reciprocal, self.terms.error_sums, self.counter)
         self.errors = (e_s, e_c)
-        self.energy_raw = energy_raw(p, self.terms)
+        self.energy_raw = energy_raw(p.fs, p.half_spring, self.terms.error_square_sum, self.terms.barrier_energy_sum)
         energy = energy_to_float(p, self.energy_raw)
         if p.momentum:
             self.node_power = node_power(p.fs, self.terms.force, self.raw_velocities, self.counter)

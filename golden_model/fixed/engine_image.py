@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, SAT, FixedPointError, FixedProblem, MomentumState,
-                     Reciprocal, StopRule, _energy_frac, area_error, check_fixed_params, energy_raw, power_sum,
+                     Reciprocal, StopRule, area_error, check_fixed_params, energy_frac_bits, energy_raw, power_sum,
                      shape_error)
 from .format import Format, SaturationCounter, quantize
 from .formats_set import FormatSet
@@ -229,7 +229,7 @@ def _reciprocal_shift_bits(fs: FormatSet, capacity: EngineCapacity) -> int:
 def energy_width(fs: FormatSet, capacity: EngineCapacity) -> int:
     """Bits of :func:`~golden_model.fixed.engine.energy_raw` for any layout of a mesh within ``capacity``:
     every entry's ``e = |L − d|`` at most rest_length's and ``c·h`` at most barrier_coeff's times area's maximum."""
-    frac = _energy_frac(fs)
+    frac = energy_frac_bits(fs)
     springs = 3 * fs.spring.raw_max * capacity.entries * fs.rest_length.raw_max ** 2 << (
         frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits)
     barrier = 2 * capacity.entries * fs.barrier_coeff.raw_max * fs.area.raw_max << (
@@ -377,18 +377,15 @@ def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCap
 
 
 @dataclass(frozen=True, eq=False)
-class _ImageFaces:
-    faces: np.ndarray
-
-
-@dataclass(frozen=True, eq=False)
-class _ImageProblem:
-    """The decoded images in the attributes ``area_error``, ``shape_error`` and ``energy_raw`` read."""
+class _Loaded:
+    """What the controller reads besides the node state: the decoded entry and triangle memories
+    and the run constants the measurements need."""
 
     fs: FormatSet
-    mesh: _ImageFaces
-    face_areas: np.ndarray
-    half_spring: int
+    stream: NeighbourStream
+    faces: np.ndarray  # (F, 3) corner indices
+    face_areas: np.ndarray  # (F,) raw [face_area]
+    half_spring: int  # raw [spring]
     area_reciprocal: Reciprocal
     length_reciprocal: Reciprocal
 
@@ -418,14 +415,16 @@ class _Pass:
     power: int
 
 
-def _measure(problem: _ImageProblem, stream: NeighbourStream, positions: np.ndarray, velocities: np.ndarray,
-             momentum: bool, counter: SaturationCounter) -> _Pass:
+def _measure(loaded: _Loaded, positions: np.ndarray, velocities: np.ndarray, momentum: bool,
+             counter: SaturationCounter) -> _Pass:
     """Force pass (F, Σe, inside, Σe², Σc·h and, with momentum, S = ΣF·V) then area pass (E_S)."""
-    fs = problem.fs
-    terms = node_terms(fs, positions, stream, problem.half_spring, counter)
-    errors = (area_error(problem, positions, counter), shape_error(problem, terms.error_sums, counter))
+    fs = loaded.fs
+    terms = node_terms(fs, positions, loaded.stream, loaded.half_spring, counter)
+    errors = (area_error(fs, loaded.area_reciprocal, loaded.faces, loaded.face_areas, positions, counter),
+              shape_error(fs, loaded.length_reciprocal, terms.error_sums, counter))
     power = power_sum(fs, node_power(fs, terms.force, velocities, counter), counter) if momentum else 0
-    return _Pass(terms, errors, energy_raw(problem, terms), power)
+    energy = energy_raw(fs, loaded.half_spring, terms.error_square_sum, terms.barrier_energy_sum)
+    return _Pass(terms, errors, energy, power)
 
 
 def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
@@ -446,13 +445,12 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity, bool(c["barrier"]))
     stream = NeighbourStream(indptr, neighbour, rest, inv_mass[:n], barrier, inv_mass_barrier[:n])
     faces, areas = decode_triangles(image.triangles[:c["triangles"]], fs, capacity)
-    problem = _ImageProblem(fs, _ImageFaces(faces), areas, c["half_spring"],
-                            Reciprocal(c["area_reciprocal"], c["area_shift"]),
-                            Reciprocal(c["length_reciprocal"], c["length_shift"]))
+    loaded = _Loaded(fs, stream, faces, areas, c["half_spring"], Reciprocal(c["area_reciprocal"], c["area_shift"]),
+                     Reciprocal(c["length_reciprocal"], c["length_shift"]))
     rule = StopRule(c["tol_area"], c["tol_shape"], c["tol_energy"])
     momentum = bool(c["momentum"])
     counter = SaturationCounter()
-    current = _measure(problem, stream, positions, velocities, momentum, counter)
+    current = _measure(loaded, positions, velocities, momentum, counter)
     state = MomentumState()
     status, k = "max-iterations", 0
     while k < c["max_iter"]:
@@ -467,7 +465,7 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
             constants = NodeConstants(dt, int(half_dt_sq(np.int64(dt), fs)), c["half_spring"], c["damping"])
             positions, velocities = integrate(fs, positions, velocities, current.terms.force, weights, constants,
                                               counter)
-        after = _measure(problem, stream, positions, velocities, momentum, counter)
+        after = _measure(loaded, positions, velocities, momentum, counter)
         k += 1
         if c["saturation_limit"] and counter.total >= c["saturation_limit"]:
             status, current = "diverged", after

@@ -71,8 +71,8 @@ class Controller:
         positions, velocities, error_sums, power = await self.run_pass(measure=True)
         moved = not (np.array_equal(positions, self.positions) and np.array_equal(velocities, self.velocities))
         p = self.problem
-        e_s = area_error(p, self.positions)
-        e_c = shape_error(p, error_sums)
+        e_s = area_error(p.fs, p.area_reciprocal, p.mesh.faces, p.face_areas, self.positions)
+        e_c = shape_error(p.fs, p.length_reciprocal, error_sums)
         self.energy_raw = energy
         m = Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy_to_float(p, energy),
                         flipped_count(p, self.positions), folded_count(p, self.positions))
