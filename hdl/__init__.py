@@ -5,6 +5,8 @@ Every width, constant and table comes from the golden model's objects
 bit-exact with its golden-model function. See ``docs/hardware-units.md``.
 """
 
+from .area_error import AreaError
+from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .core import SpringflatCore
 from .force_pass import ForcePass
 from .integrator import Integrator
@@ -12,4 +14,5 @@ from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["ForcePass", "Integrator", "NodeUpdate", "RsqrtUnit", "SpringflatCore", "StepGenerator"]
+__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "Integrator", "Normaliser", "NodeUpdate",
+           "RsqrtUnit", "SpringflatCore", "StepGenerator"]
