@@ -99,8 +99,8 @@ class NodeUpdate(wiring.Component):
         self.front_stages, self.rsqrt_latency, self.back_stages = stages.front, stages.rsqrt, stages.back
         self.tail_stages = self._integrator.latency
         self.pipeline_stages = self._force_pass.latency + self._integrator.latency
-        # The result FIFO's write and the output register.
-        self.latency = self.pipeline_stages + 2
+        # The result FIFO's write register (per slice, see below), its write and the output register.
+        self.latency = self.pipeline_stages + 3
         # Credits: the result FIFO (a power of two, more entries than the latency, so the
         # credits never run out while o is ready) plus the output register.
         self.result_depth = (1 << (self.latency + 1).bit_length()) + 1
@@ -194,8 +194,11 @@ class NodeUpdate(wiring.Component):
         result = Signal(result_layout(fs), name="result")
         m.d.comb += [result.position.eq(new.position), result.velocity.eq(new.velocity),
                      result.error_sum.eq(new.side), result.power.eq(new.power)]
+        # Each slice registers its own write (write_register): the integrator's valid bit as the
+        # write enable of all 14 slices' LUT RAM was 6.6 ns of routing (129 MHz).
         m.submodules.results = results = SlicedFIFO(width=result_layout(fs).size, depth=self.result_depth - 1,
-                                                    slice_bits=self.FIFO_SLICE_BITS, registered=True)
+                                                    slice_bits=self.FIFO_SLICE_BITS, registered=True,
+                                                    write_register=True)
         m.d.comb += [results.w_stream.valid.eq(integrator.o.valid), results.w_stream.payload.eq(result.as_value()),
                      self.o.valid.eq(results.r_stream.valid), self.o.payload.eq(results.r_stream.payload),
                      results.r_stream.ready.eq(self.o.ready)]
