@@ -12,6 +12,11 @@ The rules (``amaranth.lib.stream``): a transfer happens at a clock edge where ``
 ``ready`` are both high; once ``valid`` is asserted, neither it nor ``payload`` may change until
 a transfer; ``valid`` must not wait for ``ready``. Clock edges are counted from 0, the first
 edge after the streams start.
+
+An ``always_ready=True`` stream's ``ready`` is the constant 1: every edge with ``valid`` high is a
+transfer. The helpers read it as such and never drive it, so a device with such a stream (a
+pipeline that never stalls) is tested as it is; asking its consumer to stall (``p_ready`` < 1,
+``ready_after``) is refused with a :class:`ValueError`.
 """
 
 from __future__ import annotations
@@ -27,6 +32,10 @@ from .payloads import pack, unpack
 
 __all__ = ["stream_put", "stream_get", "StreamRun", "stream_producer", "stream_consumer", "run_testbenches",
            "run_streams"]
+
+
+def _always_ready(stream) -> bool:
+    return stream.signature.always_ready
 
 
 def _bits(stream, payload) -> int:
@@ -48,10 +57,17 @@ async def stream_put(ctx, stream, payload) -> int:
 
 async def stream_get(ctx, stream):
     """Take one payload from ``stream`` (``ready`` high until a transfer, low again on return);
-    the payload as a nested dict (:func:`sim.payloads.unpack`), an integer for a plain shape."""
-    ctx.set(stream.ready, 1)
+    the payload as a nested dict (:func:`sim.payloads.unpack`), an integer for a plain shape.
+
+    On an always-ready stream ``ready`` is left alone: this is the next edge with ``valid`` high,
+    and a beat offered before the call was already taken (by nobody), as in hardware.
+    """
+    always_ready = _always_ready(stream)
+    if not always_ready:
+        ctx.set(stream.ready, 1)
     raw, = await ctx.tick().sample(Value.cast(stream.payload)).until(stream.valid)
-    ctx.set(stream.ready, 0)
+    if not always_ready:
+        ctx.set(stream.ready, 0)
     return unpack(stream.payload.shape(), raw)
 
 
@@ -121,7 +137,16 @@ def stream_consumer(stream, n_out, run: StreamRun, *, seed=1, p_ready=1.0, ready
     ``probe_ready``, also that ``valid`` and ``payload`` do not depend on ``ready`` (flipped and
     restored before every edge). ``watch`` (name -> signal) records signals at every edge in
     ``run.watched``.
+
+    On an always-ready stream ``ready`` is not driven and every edge with ``valid`` high is a
+    transfer; ``p_ready`` < 1 or ``ready_after`` > 0 raise :class:`ValueError`, and ``probe_ready``
+    holds trivially.
     """
+    always_ready = _always_ready(stream)
+    if always_ready and (p_ready < 1 or ready_after > 0):
+        raise ValueError(f"stream_consumer: the stream is always ready (ready is the constant 1): every valid beat "
+                         f"is taken, it cannot stall (p_ready={p_ready}, ready_after={ready_after}); "
+                         f"use p_ready=1, ready_after=0")
     watch = dict(watch or {})
     payload, valid_signal, ready_signal = Value.cast(stream.payload), stream.valid, stream.ready
     run.watched.update({name: [] for name in watch})
@@ -133,6 +158,8 @@ def stream_consumer(stream, n_out, run: StreamRun, *, seed=1, p_ready=1.0, ready
         held, cycle, ready = None, 0, None
 
         def offer_ready():
+            if always_ready:
+                return True
             new = cycle >= ready_after and (len(run.outputs) >= n_out or p_ready >= 1 or rng.random() < p_ready)
             if new != ready:
                 ctx.set(ready_signal, new)
@@ -177,7 +204,8 @@ def run_streams(dut, beats, n_out=None, *, seed=0, p_valid=1.0, p_ready=1.0, rea
     """Simulate ``dut``: :func:`stream_producer` on ``dut.i``, :func:`stream_consumer` on ``dut.o``.
 
     ``n_out`` (default: one output per beat) outputs are collected, then ``dut.latency + 2`` more
-    edges watched; the consumer's seed is ``seed + 1``. ``setup(ctx)``, if given, runs at time 0
+    edges watched; the consumer's seed is ``seed + 1``. Either stream may be always ready
+    (:func:`stream_consumer` refuses stalls on an always-ready ``o``). ``setup(ctx)``, if given, runs at time 0
     (constant inputs; the streams wait ``start`` edges). Returns the run once every beat went in
     and every output came out.
     """

@@ -17,7 +17,6 @@ from golden_model.fixed.pipeline import NodeConstants, integrate, integrate_mome
 from hdl import Integrator, NodeUpdate
 from sim.payloads import pack_beats, unpack_beats
 from sim.stream_helpers import run_streams
-from test_hdl_force_pass import Harness
 from test_hdl_node_update import PRESETS, random_constants
 
 SIDE = unsigned(20)
@@ -55,7 +54,7 @@ def check_integrator(dut, fs, nodes, constants, momentum=False, **kw):
             ctx.set(port, value)
 
     # the constants are registered once: the stream starts one edge later
-    run = run_streams(Harness(dut), beats, setup=setup, start=1, watch={"idle": dut.idle}, **kw)
+    run = run_streams(dut, beats, setup=setup, start=1, watch={"idle": dut.idle}, **kw)
     weights = np.where(nodes["inside"], nodes["inv_mass_barrier"], nodes["inv_mass"])
     p, v, f = nodes["position"], nodes["velocity"], nodes["force"]
     if momentum:

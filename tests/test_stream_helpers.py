@@ -1,8 +1,11 @@
 """sim/stream_helpers.py on toy devices: a one-register stage that keeps the stream rules, and
 faulty copies of it that each break one; the helpers must pass the first and catch the others."""
 
+import gc
+import warnings
+
 import pytest
-from amaranth.hdl import Module, Signal, Value, signed, unsigned
+from amaranth.hdl import Module, Signal, UnusedElaboratable, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -122,3 +125,80 @@ def test_put_and_get_dict_payloads():
 
     run_testbenches(dut, source, sink)
     assert got == payloads
+
+
+class AlwaysReadyStage(wiring.Component):
+    """``o`` is ``i`` one clock later, both streams ``always_ready`` (a pipeline that never stalls).
+
+    ``fault="hold"`` keeps ``o.valid`` one clock longer after each beat: with ``ready`` the constant
+    1 that is a second transfer of the same payload.
+    """
+
+    latency = 1
+
+    def __init__(self, shape=unsigned(8), fault=None):
+        self.fault = fault
+        super().__init__({"i": In(stream.Signature(shape, always_ready=True)),
+                          "o": Out(stream.Signature(shape, always_ready=True))})
+
+    def elaborate(self, platform):
+        m = Module()
+        valid = Signal()
+        m.d.sync += valid.eq(self.i.valid)
+        with m.If(self.i.valid):
+            m.d.sync += self.o.payload.eq(self.i.payload)
+        if self.fault == "hold":
+            earlier = Signal()
+            m.d.sync += earlier.eq(valid)
+            m.d.comb += self.o.valid.eq(valid | earlier)
+        else:
+            m.d.comb += self.o.valid.eq(valid)
+        return m
+
+
+@pytest.mark.parametrize("p_valid", [1.0, 0.4])
+def test_always_ready_streams_take_every_valid_beat(p_valid):
+    """Neither ``ready`` is driven (each is the constant 1): every beat goes in on the edge it is
+    offered and comes out one edge later, taken on that edge."""
+    run = run_streams(AlwaysReadyStage(), BEATS, seed=6, p_valid=p_valid, probe_ready=True)
+    assert run.outputs == BEATS
+    assert run.out_cycles == [c + 1 for c in run.in_cycles]
+    if p_valid < 1:
+        assert run.in_cycles[-1] > 1.5 * len(BEATS)  # the producer did leave gaps
+    else:
+        assert run.in_cycles == list(range(len(BEATS)))
+
+
+def test_a_held_beat_on_an_always_ready_stream_is_a_second_transfer():
+    with pytest.raises(AssertionError, match="more than the 199 outputs expected"):
+        run_streams(AlwaysReadyStage(fault="hold"), BEATS, seed=7, p_valid=0.5)
+
+
+@pytest.mark.parametrize("kw", [dict(p_ready=0.5), dict(ready_after=3)])
+def test_stalling_an_always_ready_stream_is_refused(kw):
+    with warnings.catch_warnings():  # refused before the simulator elaborates the stage
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        with pytest.raises(ValueError, match=r"^stream_consumer: the stream is always ready \(ready is the constant 1\): "
+                                             r"every valid beat is taken, it cannot stall"):
+            run_streams(AlwaysReadyStage(), BEATS, **kw)
+        gc.collect()
+
+
+def test_put_and_get_on_always_ready_streams():
+    """stream_put's beats are taken on their first edge; stream_get takes the next valid beat
+    without driving ``ready`` (a constant)."""
+    dut = AlwaysReadyStage(PAYLOAD)
+    payloads = [{"a": -5, "b": {"c": 7}}, {"a": 31, "b": {"c": 0}}, {"a": -32, "b": {"c": 3}}]
+    edges, got = [], []
+
+    async def source(ctx):
+        for payload in payloads:
+            edges.append(await stream_put(ctx, dut.i, payload))
+            await ctx.tick().repeat(2)  # gaps: o.valid low between the beats
+
+    async def sink(ctx):
+        for _ in payloads:
+            got.append(await stream_get(ctx, dut.o))
+
+    run_testbenches(dut, source, sink)
+    assert got == payloads and edges == [1, 1, 1]
