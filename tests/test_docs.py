@@ -248,3 +248,57 @@ def test_preset_notes_state_the_formats_numbers(preset):
             for lo, hi in read:
                 text = text[:lo] + " " * (hi - lo) + text[hi:]
     assert checked >= (25 if preset == "default" else 3), checked
+
+
+# ---------------------------------------------------------------- docs/hardware-units.md: the engine's units
+
+
+def _units_doc() -> str:
+    return " ".join((DOCS / "hardware-units.md").read_text().split())
+
+
+def _dsp_blocks(component) -> int:
+    """MULT18X18D cells in ``component`` elaborated for ECP5."""
+    from amaranth.back import rtlil
+    from amaranth.hdl import Const, Value
+
+    from hdl.dsp import ECP5
+
+    ports = [Value.cast(v) for _, _, v in component.signature.flatten(component) if not isinstance(v, Const)]
+    return len(re.findall(r"^\s*cell \\MULT18X18D ", rtlil.convert(component, platform=ECP5, ports=ports), re.M))
+
+
+def test_engine_unit_pipelines_in_the_units_doc(unelaborated):
+    from hdl import AreaError, ForcePass, Integrator
+
+    doc, dsp = _units_doc(), _dsp_blocks
+    D, N = FormatSet.preset("default"), FormatSet.preset("narrow")
+    fd, fn = ForcePass(D), ForcePass(N)
+    sd, sn = fd.stages, fn.stages
+    assert (f"default {sd.front} + {sd.rsqrt} + {sd.back} = {fd.latency}, narrow "
+            f"{sn.front} + {sn.rsqrt} + {sn.back} = {fn.latency}") in doc
+    assert f"default {dsp(fd)}, narrow {dsp(fn)}, each including the rsqrt unit's 12" in doc
+    assert f"(default {dsp(ForcePass(D, energy=True))}, narrow {dsp(ForcePass(N, energy=True))})" in doc
+    assert f"{Integrator(D).latency} (default), {Integrator(N).latency} (narrow)" in doc
+    assert f"default {dsp(Integrator(D))}, narrow {dsp(Integrator(N))}" in doc
+    assert {AreaError.latency_of(D), AreaError.latency_of(N)} == {int(re.search(r"adder levels: (\d+) in both", doc)[1])}
+    assert {dsp(AreaError(D)), dsp(AreaError(N))} == {int(re.search(r"(\d+) `MULT18X18D` each: (\d+) in both", doc)[2])}
+
+
+def test_controller_unit_numbers_in_the_units_doc(unelaborated):
+    from golden_model.fixed.engine_image import EngineCapacity, energy_width
+    from hdl import BetaDivider, EnergyCheck, Normaliser
+
+    doc = _units_doc()
+    D, N = FormatSet.preset("default"), FormatSet.preset("narrow")
+    nd, nn = Normaliser(D), Normaliser(N)
+    lo = lambda n: n.cycles(n.fs.error.frac_bits + 2)  # noqa: E731
+    hi = lambda n: n.cycles(10**6)  # noqa: E731
+    assert f"{lo(nd)} to {hi(nd)} edges, narrow" in doc and f"{lo(nn)} to {hi(nn)};" in doc
+    ed, en = EnergyCheck(D, 8192), EnergyCheck(N, 8192)
+    cap = EngineCapacity(1024, 8192, 2048)
+    assert ed.energy_bits == energy_width(D, cap) and en.energy_bits == energy_width(N, cap)
+    assert (f"default {ed.square_bits} + {ed.energy_bits} + 3 = {ed.latency}, narrow "
+            f"{en.square_bits} + {en.energy_bits} + 3 = {en.latency}") in doc
+    assert {BetaDivider(D).latency, BetaDivider(N).latency} == {
+        int(re.search(r"output transfer\): (\d+) in both presets", doc)[1])}
