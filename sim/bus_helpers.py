@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["BusAnswer", "wishbone_cycle", "wishbone_write", "wishbone_read"]
+__all__ = ["BusAnswer", "wishbone_cycle", "wishbone_write", "wishbone_read", "ThreadedBus"]
 
 
 @dataclass(frozen=True)
@@ -52,3 +52,77 @@ async def wishbone_write(ctx, bus, adr: int, data: int, **kwargs) -> BusAnswer:
 
 async def wishbone_read(ctx, bus, adr: int, **kwargs) -> BusAnswer:
     return await wishbone_cycle(ctx, bus, adr, write=False, **kwargs)
+
+
+class ThreadedBus:
+    """A blocking ``read``/``write`` bus (the :class:`sim.engine_driver.Bus` protocol) for a host
+    driver running in a thread, served by an Amaranth testbench (:meth:`serve`).
+
+    The driver is synchronous (it is also used with cocotb and with a pure-Python model); the
+    simulator's testbenches are coroutines. :meth:`serve` takes the driver's requests from a queue
+    and runs each as a Wishbone cycle; ``idle(n)`` lets the driver wait ``n`` clocks (a poll).
+    """
+
+    def __init__(self, error: type[Exception] = RuntimeError, wait_states=None):
+        import queue
+
+        self._requests: "queue.Queue" = queue.Queue()
+        self._answers: "queue.Queue" = queue.Queue()
+        self._error = error
+        self._wait_states = wait_states or (lambda: 0)
+        self.cycles = 0
+
+    def _call(self, request):
+        self._requests.put(request)
+        answer = self._answers.get()
+        if isinstance(answer, BaseException):
+            raise answer
+        return answer
+
+    def read(self, address: int) -> int:
+        return self._call(("read", address, 0))
+
+    def write(self, address: int, value: int) -> None:
+        self._call(("write", address, value))
+
+    def idle(self, clocks: int) -> None:
+        self._call(("idle", clocks, 0))
+
+    def run(self, host) -> None:
+        """Run ``host()`` (the driver's calls) in a thread; :meth:`serve` ends when it returns."""
+        import threading
+
+        def body():
+            try:
+                host()
+                self._requests.put(("done", None, None))
+            except BaseException as exc:  # handed to the testbench, which re-raises it
+                self._requests.put(("failed", exc, None))
+
+        self._thread = threading.Thread(target=body, daemon=True)
+        self._thread.start()
+
+    async def serve(self, ctx, bus) -> None:
+        """Serve requests until the host is done (re-raising its exception)."""
+        import queue
+
+        while True:
+            try:
+                kind, a, b = self._requests.get_nowait()
+            except queue.Empty:
+                await ctx.tick()
+                continue
+            if kind == "done":
+                return
+            if kind == "failed":
+                raise a
+            if kind == "idle":
+                await ctx.tick().repeat(a)
+                self._answers.put(None)
+                continue
+            answer = await wishbone_cycle(ctx, bus, a, write=kind == "write", data=b, idle=self._wait_states())
+            self.cycles += answer.clocks
+            if answer.error:
+                self._answers.put(self._error(f"bus error: {kind} at word address {a:#x} answered err"))
+            else:
+                self._answers.put(answer.data if kind == "read" else None)

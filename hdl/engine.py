@@ -1,0 +1,534 @@
+"""``SpringflatEngine``: the whole flattening on chip, behind a Wishbone bus.
+
+Algorithm 1 from START to done with no host in the loop, the twin of the golden model's
+:func:`~golden_model.fixed.engine_image.run_image` (itself bit-identical to ``run_fixed``).
+The host interface is the :class:`~golden_model.fixed.register_map.RegisterMap` of the format
+set and capacity: this module decodes that map, it defines no address of its own.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.lib import data, wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine_image import BUS_WORD_BITS, EngineCapacity, MemoryLayout, memory_layouts
+from golden_model.fixed.register_map import RESULTS, STATES, RegisterMap
+
+from . import wishbone
+from .area_error import AreaError
+from .controller_units import BetaDivider, EnergyCheck, Normaliser
+from .fixedpoint import clamp, shape_of, shift_round
+from .force_pass import ForcePass
+from .integrator import Integrator
+from .layouts import vector_layout
+from .stepgen import StepGenerator
+
+__all__ = ["SpringflatEngine", "word_layout"]
+
+
+def word_layout(layout: MemoryLayout) -> data.StructLayout:
+    """A memory word of the map as a ``lib.data`` layout: the same fields in the same order (LSB first)."""
+    return data.StructLayout({f.name: (signed if f.signed else unsigned)(f.width) for f in layout.fields})
+
+
+def _code(codes: tuple[str, ...], name: str) -> int:
+    return codes.index(name)
+
+
+class SpringflatEngine(wiring.Component):
+    """Algorithm 1 in hardware: memories, the passes, the controller and a Wishbone B4 target.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+    capacity : :class:`~golden_model.fixed.engine_image.EngineCapacity`
+        Depths of the node, entry and triangle memories.
+
+    Members
+    -------
+    bus : ``In(wishbone.Signature(addr_width=...))``
+        The register map of :attr:`register_map` (Wishbone B4 classic, 32-bit words).
+    irq : ``Out(1)``
+        STATUS.irq_pending and CONTROL.irq_enable.
+
+    Iteration
+    ---------
+    Each measurement is a **force pass** over the entries (one per clock: the entry memory, then
+    the three position reads ``P_i``, ``P_j``, ``P_second``, into :class:`~hdl.force_pass.ForcePass`,
+    whose per-node ``F``/``inside`` go to a force memory and whose error and energy partials are
+    summed exactly), then an **area pass** over the triangles (the same three position ports
+    read ``a``, ``b``, ``c`` into :class:`~hdl.area_error.AreaError`). The normalisers and the
+    energy check run beside the area pass. Between measurements the **step** (the step
+    generator, the fixed ``Δt``, or ``β_k`` from the divider) and the **integrate pass** over
+    the nodes (positions, velocities, weights and forces into :class:`~hdl.integrator.Integrator`,
+    new positions and velocities written back in place: every force of the iteration is in the
+    force memory before any node moves, so the update stays synchronous without ping-pong
+    memories).
+    """
+
+    def __init__(self, fs: FormatSet | str, capacity: EngineCapacity):
+        if isinstance(fs, str):
+            fs = FormatSet.preset(fs)
+        if not isinstance(fs, FormatSet):
+            raise TypeError(f"SpringflatEngine needs a FormatSet or a preset name, not {fs!r}")
+        if not isinstance(capacity, EngineCapacity):
+            raise TypeError(f"SpringflatEngine needs an EngineCapacity, not {capacity!r}")
+        self.fs, self.capacity = fs, capacity
+        self.register_map = RegisterMap.build(fs, capacity)
+        self.layouts = memory_layouts(fs, capacity)
+        end = max(w.base + w.size for w in self.register_map.windows)
+        self.addr_width = (end - 1).bit_length()
+        super().__init__({
+            "bus": In(wishbone.Signature(addr_width=self.addr_width)),
+            "irq": Out(1),
+        })
+
+    # ------------------------------------------------------------------ helpers
+    def _value_signals(self):
+        """One signal per register value (run constants, results, identification)."""
+        values = {}
+        for r in self.register_map.registers:
+            for f in r.fields:
+                if f.value is not None and f.value not in values:
+                    values[f.value] = Signal(self.register_map.value_width(f.value), name=f"reg_{f.value}")
+        return values
+
+    def elaborate(self, platform):
+        fs, cap, rmap = self.fs, self.capacity, self.register_map
+        m = Module()
+        values = self._value_signals()
+        const = {r.name: r for r in rmap.registers}
+
+        # ------------------------------------------------------------ units
+        m.submodules.force = force = ForcePass(fs, energy=True)
+        m.submodules.integrator = integ = Integrator(fs)
+        m.submodules.area = area = AreaError(fs)
+        m.submodules.norm_length = norm_length = Normaliser(fs)
+        m.submodules.norm_area = norm_area = Normaliser(fs)
+        m.submodules.energy = energy = EnergyCheck(fs, cap.entries)
+        m.submodules.beta = beta = BetaDivider(fs)
+        m.submodules.stepgen = stepgen = StepGenerator(fs)
+        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width)
+        wiring.connect(m, wiring.flipped(self.bus), hs.bus)
+
+        # ------------------------------------------------------------ memories
+        pos_shape = vector_layout(fs.position)
+        vel_shape = vector_layout(fs.velocity)
+        weight_shape = data.StructLayout({"inv_mass": shape_of(fs.inv_mass), "inv_mass_barrier": shape_of(fs.inv_mass)})
+        force_shape = data.StructLayout({"force": vector_layout(fs.force_acc), "inside": unsigned(1)})
+        entry_shape = word_layout(self.layouts["entries"])
+        tri_shape = word_layout(self.layouts["triangles"])
+        m.submodules.positions = positions = Memory(shape=pos_shape, depth=cap.vertices, init=[])
+        m.submodules.velocities = velocities = Memory(shape=vel_shape, depth=cap.vertices, init=[])
+        m.submodules.weights = weights = Memory(shape=weight_shape, depth=cap.vertices, init=[])
+        m.submodules.forces = forces = Memory(shape=force_shape, depth=cap.vertices, init=[])
+        m.submodules.entries = entries = Memory(shape=entry_shape, depth=cap.entries, init=[])
+        m.submodules.triangles = triangles = Memory(shape=tri_shape, depth=cap.triangles, init=[])
+        pos_a, pos_b, pos_c = positions.read_port(), positions.read_port(), positions.read_port()
+        pos_w = positions.write_port()
+        vel_r, vel_w = velocities.read_port(), velocities.write_port()
+        wgt_r, wgt_w = weights.read_port(), weights.write_port()
+        frc_r, frc_w = forces.read_port(), forces.write_port()
+        ent_r, ent_w = entries.read_port(), entries.write_port()
+        tri_r, tri_w = triangles.read_port(), triangles.write_port()
+
+        # ------------------------------------------------------------ controller state
+        state = Signal(range(len(STATES)), init=_code(STATES, "idle"))
+        result = Signal(range(len(RESULTS)), init=_code(RESULTS, "none"))
+        irq_pending = Signal()
+        irq_enable = Signal()
+        running = state == _code(STATES, "running")
+        m.d.comb += self.irq.eq(irq_pending & irq_enable)
+
+        n_vertices, n_entries, n_triangles = values["vertices"], values["entries"], values["triangles"]
+        mode_momentum, mode_fixed = values["momentum"], values["fixed_step"]
+
+        # phases of a run
+        phase = Signal(range(16))
+        PH = {name: i for i, name in enumerate((
+            "start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain", "finish"))}
+
+        # ------------------------------------------------------------ force pass fetch
+        # One entry per clock. Valid bits are named for the clock whose data they mark:
+        # E1 the entry memory's read data; E2 the entry landed in fabric registers, its three
+        # position reads issued; E3 the position memory's read data; E4 everything landed, into
+        # ForcePass.i. Block RAM outputs land in registers before any logic (clock-to-out is most
+        # of a period on ECP5).
+        entry_index = Signal(range(cap.entries + 1))
+        fetch_force = Signal()
+        e1_valid, e2_valid, e3_valid, e4_valid = (Signal(name=f"e{k}_valid") for k in range(1, 5))
+        e2_entry, e3_entry, e4_entry = (Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(2, 5))
+        e3_first, e4_first = Signal(), Signal()
+        e4_pi, e4_pj, e4_pb = (Signal(pos_shape, reset_less=True, name=f"e4_{n}") for n in ("pi", "pj", "pb"))
+        node_of_entry = Signal(range(cap.vertices + 1))
+        next_first = Signal()
+        issue_entry = fetch_force & (entry_index < n_entries)
+        m.d.sync += [e1_valid.eq(issue_entry), e2_valid.eq(e1_valid), e3_valid.eq(e2_valid), e4_valid.eq(e3_valid),
+                     e2_entry.eq(ent_r.data), e3_entry.eq(e2_entry), e4_entry.eq(e3_entry),
+                     e3_first.eq(next_first), e4_first.eq(e3_first),
+                     e4_pi.eq(pos_a.data), e4_pj.eq(pos_b.data), e4_pb.eq(pos_c.data)]
+        with m.If(issue_entry):
+            m.d.sync += entry_index.eq(entry_index + 1)
+        with m.If(e2_valid):  # the owner of the entry after this one
+            m.d.sync += [next_first.eq(e2_entry.last), node_of_entry.eq(node_of_entry + e2_entry.last)]
+        m.d.comb += [
+            force.i.valid.eq(e4_valid),
+            force.i.payload.first.eq(e4_first), force.i.payload.last.eq(e4_entry.last),
+            force.i.payload.position.eq(e4_pi), force.i.payload.neighbour.position.eq(e4_pj),
+            force.i.payload.neighbour.rest.eq(e4_entry.rest),
+            force.i.payload.barrier.second.eq(e4_pb),
+            force.i.payload.barrier.threshold.eq(Mux(values["barrier"], e4_entry.threshold, 0)),
+            force.i.payload.barrier.gain.eq(Mux(values["barrier"], e4_entry.gain, 0)),
+            force.half_spring.eq(values["half_spring"]),
+        ]
+        # per-node results: the force memory and the exact sums
+        force_out_index = Signal(range(cap.vertices + 1))
+        length_sum = Signal(fs.error_acc.width + cap.vertices.bit_length())
+        square_sum = Signal(len(energy.i.payload.square_sum))
+        barrier_sum = Signal(len(energy.i.payload.barrier_sum))
+        m.d.comb += [frc_w.addr.eq(force_out_index), frc_w.data.force.eq(force.o.payload.force),
+                     frc_w.data.inside.eq(force.o.payload.inside), frc_w.en.eq(force.o.valid)]
+        with m.If(force.o.valid):
+            m.d.sync += [force_out_index.eq(force_out_index + 1),
+                         length_sum.eq(length_sum + force.o.payload.error_sum),
+                         square_sum.eq(square_sum + force.o.payload.error_squares),
+                         barrier_sum.eq(barrier_sum + force.o.payload.barrier_energy)]
+
+        # ------------------------------------------------------------ area pass fetch
+        # As the force pass: T1 the triangle memory's data, T2 landed (corner reads issued),
+        # T3 the corners' data, T4 landed, into AreaError.i.
+        tri_index = Signal(range(cap.triangles + 1))
+        fetch_area = Signal()
+        t1_valid, t2_valid, t3_valid, t4_valid = (Signal(name=f"t{k}_valid") for k in range(1, 5))
+        t2_tri = Signal(tri_shape, reset_less=True)
+        t3_area, t4_area = (Signal(shape_of(fs.face_area), reset_less=True, name=f"t{k}_area") for k in (3, 4))
+        t4_p = [Signal(pos_shape, reset_less=True, name=f"t4_p{k}") for k in "abc"]
+        issue_tri = fetch_area & (tri_index < n_triangles)
+        m.d.sync += [t1_valid.eq(issue_tri), t2_valid.eq(t1_valid), t3_valid.eq(t2_valid), t4_valid.eq(t3_valid),
+                     t2_tri.eq(tri_r.data), t3_area.eq(t2_tri.area), t4_area.eq(t3_area),
+                     t4_p[0].eq(pos_a.data), t4_p[1].eq(pos_b.data), t4_p[2].eq(pos_c.data)]
+        with m.If(issue_tri):
+            m.d.sync += tri_index.eq(tri_index + 1)
+        m.d.comb += [area.i.valid.eq(t4_valid), area.i.payload.a.eq(t4_p[0]), area.i.payload.b.eq(t4_p[1]),
+                     area.i.payload.c.eq(t4_p[2]), area.i.payload.area.eq(t4_area)]
+
+        # ------------------------------------------------------------ integrate pass fetch
+        node_index = Signal(range(cap.vertices + 1))
+        fetch_nodes = Signal()
+        n1_valid, n2_valid = Signal(), Signal()
+        n2_pos = Signal(pos_shape, reset_less=True)
+        n2_vel = Signal(vel_shape, reset_less=True)
+        n2_wgt = Signal(weight_shape, reset_less=True)
+        n2_frc = Signal(force_shape, reset_less=True)
+        issue_node = fetch_nodes & (node_index < n_vertices)
+        m.d.sync += [n1_valid.eq(issue_node), n2_valid.eq(n1_valid), n2_pos.eq(pos_a.data), n2_vel.eq(vel_r.data),
+                     n2_wgt.eq(wgt_r.data), n2_frc.eq(frc_r.data)]
+        with m.If(issue_node):
+            m.d.sync += node_index.eq(node_index + 1)
+        step_dt = Signal(shape_of(fs.dt))
+        step_half = Signal(shape_of(fs.half_dt_sq))
+        # The fixed step's ½Δt² (steplut.half_dt_sq), three stages from the DT register: product,
+        # rounding, saturation; DT is loaded long before a step uses it.
+        fixed_sq = Signal(2 * fs.dt.width, reset_less=True)
+        fixed_rounded = Signal(2 * fs.dt.width, reset_less=True)
+        fixed_half = Signal(shape_of(fs.half_dt_sq), reset_less=True)
+        m.d.sync += [fixed_sq.eq(values["dt"] * values["dt"]),
+                     fixed_rounded.eq(shift_round(fixed_sq, 2 * fs.dt.frac_bits + 1 - fs.half_dt_sq.frac_bits,
+                                                  fs.rounding)),
+                     fixed_half.eq(clamp(fixed_rounded, fs.half_dt_sq)[0])]
+        m.d.comb += [
+            integ.i.valid.eq(n2_valid),
+            integ.i.payload.node.position.eq(n2_pos), integ.i.payload.node.velocity.eq(n2_vel),
+            integ.i.payload.node.inv_mass.eq(n2_wgt.inv_mass),
+            integ.i.payload.node.inv_mass_barrier.eq(n2_wgt.inv_mass_barrier),
+            integ.i.payload.force.eq(n2_frc.force), integ.i.payload.inside.eq(n2_frc.inside),
+            integ.dt.eq(step_dt), integ.half_dt_sq.eq(step_half), integ.damping.eq(values["damping"]),
+            integ.momentum.eq(mode_momentum),
+        ]
+        node_out_index = Signal(range(cap.vertices + 1))
+        power_sum = Signal(fs.power.width + cap.vertices.bit_length())
+        with m.If(integ.o.valid):
+            m.d.sync += [node_out_index.eq(node_out_index + 1), power_sum.eq(power_sum + integ.o.payload.power)]
+
+        # ------------------------------------------------------------ bus: decode
+        bus_window = Signal(range(len(rmap.windows) + 1))  # len(): none
+        bus_index = Signal(max(cap.vertices, cap.entries, cap.triangles).bit_length())
+        bus_word = Signal(range(max(w.words for w in rmap.windows) + 1))
+        bus_reg_hit = Signal()
+        window_ok = Signal()
+        for k, w in enumerate(rmap.windows):
+            size_bits = (w.size - 1).bit_length()
+            stride_bits = (w.stride - 1).bit_length()
+            with m.If(hs.address[size_bits:] == (w.base >> size_bits)):
+                index = hs.address[stride_bits:size_bits]
+                word = hs.address[:stride_bits] if stride_bits else Const(0, 1)
+                m.d.comb += [bus_window.eq(k), bus_index.eq(index), bus_word.eq(word),
+                             window_ok.eq((index < w.depth) & (word < w.words))]
+        with m.If(~window_ok):
+            m.d.comb += bus_window.eq(len(rmap.windows))
+
+        # register reads and writes, answered in the request's clock
+        read_word = Signal(BUS_WORD_BITS)
+        reg_error = Signal()
+        start_pulse, abort_pulse = Signal(), Signal()
+        status_code = {"state": state, "result": result, "irq_pending": irq_pending}
+        for r in rmap.registers:
+            with m.If(hs.address == r.offset):
+                m.d.comb += bus_reg_hit.eq(1)
+                word = Signal(BUS_WORD_BITS, name=f"rd_{r.name.lower()}")
+                for f in r.fields:
+                    if r.name == "CONTROL":
+                        source = {"start": Const(0, 1), "abort": Const(0, 1), "irq_enable": irq_enable}[f.name]
+                    elif r.name == "STATUS":
+                        source = status_code.get(f.name)
+                        if f.name == "saturated":
+                            source = values["saturations"] != 0
+                    elif r.access == "ro" and r.reset and r.block == "identification":
+                        source = Const((r.reset >> f.lsb) & ((1 << f.width) - 1), f.width)
+                    else:
+                        source = values[f.value][f.value_lsb:f.value_lsb + f.width]
+                    m.d.comb += word[f.lsb:f.lsb + f.width].eq(source)
+                m.d.comb += read_word.eq(word)
+                with m.If(hs.request & hs.write & hs.whole_word):
+                    if r.name == "CONTROL":
+                        m.d.comb += [start_pulse.eq(hs.write_data[0]), abort_pulse.eq(hs.write_data[1])]
+                        m.d.sync += irq_enable.eq(hs.write_data[2])
+                    elif r.name == "STATUS":
+                        with m.If(hs.write_data[8]):
+                            m.d.sync += irq_pending.eq(0)
+                    elif r.access == "rw":
+                        for f in r.fields:
+                            m.d.sync += values[f.value][f.value_lsb:f.value_lsb + f.width].eq(
+                                hs.write_data[f.lsb:f.lsb + f.width])
+                if r.access == "ro":
+                    m.d.comb += reg_error.eq(hs.write)
+        # identification values are constants
+        for name in ("cap_vertices", "cap_entries", "cap_triangles"):
+            m.d.comb += values[name].eq(getattr(cap, name[4:]))
+
+        # memory windows: read (and modify, write) the whole word, one clock after the request
+        mem_phase = Signal()  # the read of a window access is under way
+        bus_mem = ~running & (bus_window != len(rmap.windows))
+        mem_data = Signal(BUS_WORD_BITS)
+        with m.If(hs.request & bus_mem):
+            m.d.sync += mem_phase.eq(1)
+        with m.If(mem_phase):
+            m.d.sync += mem_phase.eq(0)
+        window_words = {}
+        for k, w in enumerate(rmap.windows):
+            if w.name == "nodes":
+                word_value = Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
+                                 wgt_r.data.inv_mass_barrier)
+            elif w.name == "entries":
+                word_value = ent_r.data.as_value()
+            else:
+                word_value = tri_r.data.as_value()
+            padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word")
+            m.d.comb += padded.eq(word_value)
+            window_words[w.name] = (k, padded, len(word_value))
+            with m.If(bus_window == k):
+                m.d.comb += mem_data.eq(padded.word_select(bus_word, BUS_WORD_BITS))
+        new_words = {}
+        for name, (k, padded, bits) in window_words.items():
+            modified = Signal(len(padded), name=f"bus_{name}_new")
+            m.d.comb += modified.eq(padded)
+            with m.Switch(bus_word):
+                for j in range(len(padded) // BUS_WORD_BITS):
+                    with m.Case(j):
+                        m.d.comb += modified[j * BUS_WORD_BITS:(j + 1) * BUS_WORD_BITS].eq(hs.write_data)
+            new_words[name] = (k, modified[:bits])
+        bus_writing = mem_phase & hs.write & hs.whole_word
+
+        # ------------------------------------------------------------ port multiplexing
+        # Addresses: the bus while idle, else the pass in progress.
+        with m.If(~running):
+            m.d.comb += [pos_a.addr.eq(bus_index), vel_r.addr.eq(bus_index), wgt_r.addr.eq(bus_index),
+                         ent_r.addr.eq(bus_index), tri_r.addr.eq(bus_index)]
+        with m.Elif(fetch_nodes | (phase == PH["integrate"])):
+            m.d.comb += [pos_a.addr.eq(node_index), vel_r.addr.eq(node_index), wgt_r.addr.eq(node_index),
+                         frc_r.addr.eq(node_index)]
+        with m.Elif(phase == PH["area"]):
+            m.d.comb += [tri_r.addr.eq(tri_index), pos_a.addr.eq(t2_tri.a), pos_b.addr.eq(t2_tri.b),
+                         pos_c.addr.eq(t2_tri.c)]
+        with m.Else():
+            m.d.comb += [ent_r.addr.eq(entry_index), pos_a.addr.eq(node_of_entry),
+                         pos_b.addr.eq(e2_entry.neighbour), pos_c.addr.eq(e2_entry.second)]
+        # Writes: the bus's read-modify-write while idle, the integrator's results while running.
+        node_k, node_new = new_words["nodes"]
+        ent_k, ent_new = new_words["entries"]
+        tri_k, tri_new = new_words["triangles"]
+        with m.If(running):
+            m.d.comb += [pos_w.addr.eq(node_out_index), pos_w.data.eq(integ.o.payload.position),
+                         pos_w.en.eq(integ.o.valid),
+                         vel_w.addr.eq(node_out_index), vel_w.data.eq(integ.o.payload.velocity),
+                         vel_w.en.eq(integ.o.valid)]
+        with m.Else():
+            m.d.comb += [
+                pos_w.addr.eq(bus_index), vel_w.addr.eq(bus_index), wgt_w.addr.eq(bus_index),
+                ent_w.addr.eq(bus_index), tri_w.addr.eq(bus_index),
+                Cat(pos_w.data.as_value(), vel_w.data.as_value(), wgt_w.data.as_value()).eq(node_new),
+                ent_w.data.eq(ent_new), tri_w.data.eq(tri_new),
+                pos_w.en.eq(bus_writing & (bus_window == node_k)),
+                vel_w.en.eq(bus_writing & (bus_window == node_k)),
+                wgt_w.en.eq(bus_writing & (bus_window == node_k)),
+                ent_w.en.eq(bus_writing & (bus_window == ent_k)),
+                tri_w.en.eq(bus_writing & (bus_window == tri_k)),
+            ]
+
+        # bus answers
+        with m.If(hs.request & bus_reg_hit):
+            m.d.comb += [hs.done.eq(1), hs.error.eq(reg_error | ~hs.whole_word), hs.data.eq(read_word)]
+        with m.Elif(hs.request & ~bus_mem):  # unmapped, or a memory while running
+            m.d.comb += [hs.done.eq(1), hs.error.eq(1)]
+        with m.Elif(mem_phase):
+            m.d.comb += [hs.done.eq(1), hs.error.eq(~hs.whole_word), hs.data.eq(mem_data)]
+
+        # ------------------------------------------------------------ controller
+        iterations = values["iterations"]
+        area_error_raw, shape_error_raw = values["area_error"], values["shape_error"]
+        saturations = values["saturations"]
+        cycles = values["cycles"]
+        with m.If(running):
+            m.d.sync += cycles.eq(cycles + 1)
+
+        momentum_k = Signal(len(beta.i.payload))
+        restart_pending = Signal()
+        step_was_restart = Signal()
+        first_measure = Signal()
+        math_pending = Signal(3)  # length, area, energy results still to come
+        settled = Signal()
+        tol_energy = values["tol_energy"]
+        bad_tolerance = tol_energy[len(energy.tolerance):].any()
+
+        m.d.comb += [
+            energy.half_spring.eq(values["half_spring"]),
+            energy.tolerance.eq(tol_energy[:len(energy.tolerance)]),
+            norm_length.o.ready.eq(1), norm_area.o.ready.eq(1), energy.o.ready.eq(1), beta.o.ready.eq(1),
+            stepgen.o.ready.eq(1),
+            area.clear.eq(0),
+        ]
+        # unit requests: valid held until taken
+        for unit in (norm_length, norm_area, energy, beta, stepgen):
+            with m.If(unit.i.valid & unit.i.ready):
+                m.d.sync += unit.i.valid.eq(0)
+        with m.If(norm_length.o.valid):
+            m.d.sync += [shape_error_raw.eq(norm_length.o.payload), math_pending[0].eq(0)]
+        with m.If(norm_area.o.valid):
+            m.d.sync += [area_error_raw.eq(norm_area.o.payload), math_pending[1].eq(0)]
+        with m.If(energy.o.valid):
+            m.d.sync += [values["energy"].eq(energy.o.payload.energy), settled.eq(energy.o.payload.settled),
+                         math_pending[2].eq(0)]
+        with m.If(beta.o.valid):
+            m.d.sync += step_dt.eq(beta.o.payload)
+        with m.If(stepgen.o.valid):
+            m.d.sync += [step_dt.eq(stepgen.o.payload.dt), step_half.eq(stepgen.o.payload.half_dt_sq)]
+
+        def finish(code):
+            m.d.sync += [state.eq(_code(STATES, "done")), result.eq(_code(RESULTS, code)), irq_pending.eq(1),
+                         fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
+
+        length_total = Mux(length_sum > fs.error_acc.raw_max, fs.error_acc.raw_max, length_sum)
+        fetching = e1_valid | e2_valid | e3_valid | e4_valid | t1_valid | t2_valid | t3_valid | t4_valid \
+            | n1_valid | n2_valid
+        units_idle = force.idle & area.idle & integ.idle & ~fetching
+
+        with m.If(abort_pulse):
+            m.d.sync += [state.eq(_code(STATES, "idle")), result.eq(_code(RESULTS, "none")), phase.eq(PH["drain"]),
+                         fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
+        with m.Elif(start_pulse & ~running):
+            m.d.sync += [cycles.eq(0), iterations.eq(0), saturations.eq(0), irq_pending.eq(0),
+                         result.eq(_code(RESULTS, "none"))]
+            with m.If(n_vertices == 0):
+                finish("no-mesh")
+            with m.Elif((n_vertices > cap.vertices) | (n_entries > cap.entries) | (n_triangles > cap.triangles)
+                        | (n_entries == 0) | (n_triangles == 0) | bad_tolerance):
+                finish("bad-constants")
+            with m.Else():
+                m.d.sync += [state.eq(_code(STATES, "running")), phase.eq(PH["start"]), first_measure.eq(1),
+                             momentum_k.eq(0), restart_pending.eq(0)]
+        with m.Elif(running):
+            with m.Switch(phase):
+                with m.Case(PH["start"]):  # a measurement: the force pass
+                    m.d.sync += [entry_index.eq(0), node_of_entry.eq(0), next_first.eq(1), force_out_index.eq(0),
+                                 length_sum.eq(0), square_sum.eq(0), barrier_sum.eq(0), fetch_force.eq(1),
+                                 phase.eq(PH["force"])]
+                with m.Case(PH["force"]):
+                    with m.If(force_out_index == n_vertices):
+                        m.d.sync += [fetch_force.eq(0), tri_index.eq(0), fetch_area.eq(1), phase.eq(PH["area"]),
+                                     math_pending.eq(0b111),
+                                     norm_length.i.valid.eq(1), norm_length.i.payload.sum.eq(length_total),
+                                     norm_length.i.payload.mantissa.eq(values["length_reciprocal"]),
+                                     norm_length.i.payload.shift.eq(values["length_shift"]),
+                                     energy.i.valid.eq(1), energy.i.payload.square_sum.eq(square_sum),
+                                     energy.i.payload.barrier_sum.eq(barrier_sum),
+                                     energy.i.payload.first.eq(first_measure)]
+                        m.d.comb += area.clear.eq(1)
+                with m.Case(PH["area"]):
+                    with m.If((tri_index == n_triangles) & ~t1_valid & ~t2_valid & ~t3_valid & ~t4_valid
+                              & area.idle & ~area.clear):
+                        sat = area.saturations
+                        m.d.sync += [fetch_area.eq(0), phase.eq(PH["math"]),
+                                     saturations.eq(saturations + sat.face_edge + sat.face_area + sat.area_sum),
+                                     norm_area.i.valid.eq(1), norm_area.i.payload.sum.eq(area.total),
+                                     norm_area.i.payload.mantissa.eq(values["area_reciprocal"]),
+                                     norm_area.i.payload.shift.eq(values["area_shift"])]
+                with m.Case(PH["math"]):
+                    with m.If(math_pending == 0):
+                        m.d.sync += phase.eq(PH["check"])
+                with m.Case(PH["check"]):
+                    converged = (area_error_raw <= values["tol_area"]) & (shape_error_raw <= values["tol_shape"]) \
+                        & settled & ~first_measure
+                    limit = values["saturation_limit"]
+                    with m.If(converged):
+                        finish("converged")
+                    with m.Elif((limit != 0) & (saturations >= limit)):
+                        finish("diverged")
+                    with m.Elif(iterations == values["max_iter"]):
+                        finish("max-iterations")
+                    with m.Else():
+                        m.d.sync += [first_measure.eq(0), phase.eq(PH["step"])]
+                with m.Case(PH["step"]):
+                    with m.If(mode_momentum):
+                        with m.If(restart_pending):
+                            m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(0), momentum_k.eq(1),
+                                         restart_pending.eq(0), step_was_restart.eq(1)]
+                        with m.Else():
+                            m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(momentum_k),
+                                         momentum_k.eq(momentum_k + 1), step_was_restart.eq(0)]
+                    with m.Elif(mode_fixed):
+                        m.d.sync += [step_dt.eq(values["dt"]), step_half.eq(fixed_half)]
+                    with m.Else():
+                        m.d.sync += [stepgen.i.valid.eq(1), stepgen.i.payload.area_error.eq(area_error_raw),
+                                     stepgen.i.payload.shape_error.eq(shape_error_raw)]
+                    m.d.sync += phase.eq(PH["step_wait"])
+                with m.Case(PH["step_wait"]):
+                    waiting = (beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready) | \
+                        Mux(mode_momentum, 0, 0)
+                    with m.If(~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle_signal(m, stepgen)):
+                        m.d.sync += [node_index.eq(0), node_out_index.eq(0), power_sum.eq(0), fetch_nodes.eq(1),
+                                     phase.eq(PH["integrate"])]
+                with m.Case(PH["integrate"]):
+                    with m.If(node_out_index == n_vertices):
+                        power_negative = power_sum[-1]
+                        m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), phase.eq(PH["start"])]
+                        with m.If(mode_momentum & ~step_was_restart):
+                            m.d.sync += restart_pending.eq(power_negative)
+        # Internal signals a testbench may watch (``debug_signals``).
+        self.debug_signals = {"state": state, "phase": phase, "entry_index": entry_index,
+                              "force_out_index": force_out_index, "tri_index": tri_index,
+                              "node_out_index": node_out_index, "math_pending": math_pending,
+                              "iterations": iterations}
+        with m.Elif(phase == PH["drain"]):
+            with m.If(units_idle):
+                m.d.sync += phase.eq(PH["finish"])
+        return m
+
+
+def stepgen_idle_signal(m: Module, stepgen: StepGenerator):
+    """High when the step generator holds no request: it counts requests in and results out."""
+    pending = Signal(range(stepgen.latency + 2), name="stepgen_pending")
+    m.d.sync += pending.eq(pending + (stepgen.i.valid & stepgen.i.ready) - stepgen.o.valid)
+    return pending == 0
