@@ -25,7 +25,7 @@ from amaranth.lib import data, wiring
 from golden_model.fixed import FormatSet, exp_table
 from hdl.dsp import dsp_target
 
-__all__ = ["COMPONENTS", "export_verilog", "describe"]
+__all__ = ["COMPONENTS", "export_verilog", "export_engine", "describe"]
 
 STREAM_PROTOCOL = (
     "Each stream is `valid`, `ready`, `payload` (amaranth.lib.stream): a beat transfers on a rising clock "
@@ -184,3 +184,25 @@ def interface_markdown(interface: dict) -> str:
     lines += [f"| `{k}` | {v} |" for k, v in fs["formats"].items()]
     lines += ["", "Knobs: " + ", ".join(f"{k} = {v}" for k, v in fs.items() if k not in ("formats", "notes", "name"))]
     return "\n".join(lines) + "\n"
+
+
+def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
+    """Write the engine's Verilog (``springflat_engine.v``, top ``springflat_engine``) and its register
+    map (``register_map.md``, ``register_map.json``, ``springflat_regs.h``: :mod:`sim.register_map_export`);
+    return a short description (module, capacity, bus, files)."""
+    from amaranth.back import verilog
+
+    from golden_model.fixed.register_map import RegisterMap
+    from hdl.engine import SpringflatEngine
+
+    from .register_map_export import write_exports
+
+    os.environ["AMARANTH_USE_YOSYS"] = "builtin"
+    out.mkdir(parents=True, exist_ok=True)
+    engine = SpringflatEngine(fs, capacity)
+    (out / "springflat_engine.v").write_text(verilog.convert(engine, name="springflat_engine", platform=platform))
+    files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)]
+    return {"module": "springflat_engine", "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
+                                                          "triangles": capacity.triangles},
+            "bus": "Wishbone B4 classic, 32-bit data, word addresses", "addr_width": engine.addr_width,
+            "files": ["springflat_engine.v", *files]}

@@ -39,7 +39,7 @@ from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms
                        node_power, node_terms)
 from .steplut import half_dt_sq, step_size
 
-__all__ = ["EngineCapacity", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
+__all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
            "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "EngineImage",
            "build_image", "decode_nodes", "decode_entries", "decode_triangles", "constant_fault", "ImageRunResult",
            "run_image", "BUS_WORD_BITS", "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS"]
@@ -95,6 +95,11 @@ class EngineCapacity:
                     f"the mesh has {count} {'neighbour entries' if name == 'entries' else name}; the engine holds "
                     f"at most {getattr(self, name)} (capacity vertices={self.vertices}, entries={self.entries}, "
                     f"triangles={self.triangles})")
+
+
+#: The engine's capacity unless a flow says otherwise: a 2,000-vertex patch (about 6 entries and 2
+#: triangles per vertex) with room to spare, and what the ECP5-85F holds (docs/synthesis.md).
+DEFAULT_CAPACITY = EngineCapacity(vertices=2048, entries=12288, triangles=4096)
 
 
 @dataclass(frozen=True)
