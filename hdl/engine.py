@@ -516,7 +516,8 @@ class SpringflatEngine(wiring.Component):
                         m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), phase.eq(PH["start"])]
                         with m.If(mode_momentum & ~step_was_restart):
                             m.d.sync += restart_pending.eq(power_negative)
-        # Internal signals a testbench may watch (``debug_signals``).
+        # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
+        self.debug_memories = {"positions": positions, "velocities": velocities}
         self.debug_signals = {"state": state, "phase": phase, "entry_index": entry_index,
                               "force_out_index": force_out_index, "tri_index": tri_index,
                               "node_out_index": node_out_index, "math_pending": math_pending,

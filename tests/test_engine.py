@@ -1,0 +1,186 @@
+"""SpringflatEngine on Amaranth's simulator: whole flattenings through the Wishbone bus and the host driver,
+bit for bit against the golden model's image-driven controller (``run_image``), and the engine's answers to
+bad requests. (The exported Verilog on Icarus and Verilator: ``tests/test_engine_rtl.py``.)"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from amaranth.sim import Simulator
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import prepare
+from golden_model.fixed.engine_image import EngineCapacity, build_image, run_image
+from golden_model.generate import dome_grid
+from golden_model.layouts import initial_layout
+from golden_model.reference import FlattenParams
+from hdl.engine import SpringflatEngine
+from sim.bus_helpers import ThreadedBus, wishbone_read, wishbone_write
+from sim.engine_driver import BusError, EngineDriver
+
+pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
+
+FS = FormatSet.preset("default")
+CAPACITY = EngineCapacity(32, 256, 64)
+MESH = dome_grid(4)  # 16 vertices, 66 entries, 18 triangles
+
+RUNS = {
+    "paper-variable": FlattenParams(density="auto", max_iter=4),
+    "paper-fixed-barrier-damped": FlattenParams(density="auto", step="fixed", dt=0.2, damping=0.1, barrier=True,
+                                                max_iter=4),
+    # from the PCA layout the momentum restarts (S < 0) at the third and eighth steps
+    "momentum-barrier": FlattenParams(dynamics="momentum", max_iter=9),
+}
+INIT = {"momentum-barrier": "pca"}
+
+
+def image_of(params: FlattenParams, capacity: EngineCapacity = CAPACITY, init: str = "tutte"):
+    problem = prepare(MESH, initial_layout(MESH, init), params, FS)
+    return build_image(problem, capacity)
+
+
+def simulate(dut, host, watch=None):
+    """Run ``host(driver, bus)`` (the synchronous driver, in a thread) against ``dut`` on the simulator."""
+    bus = ThreadedBus(BusError, wait_states=watch.get("wait_states") if watch else None)
+    bus.run(lambda: host(EngineDriver(bus, dut.register_map), bus))
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+
+    async def bench(ctx):
+        await bus.serve(ctx, dut.bus)
+
+    sim.add_testbench(bench)
+    if watch and "watcher" in watch:
+        sim.add_testbench(watch["watcher"], background=True)
+    sim.run()
+    return bus
+
+
+def run_on_engine(dut, image, wait_states=None):
+    out = {}
+
+    def host(driver, bus):
+        driver.load(image)
+        driver.start()
+        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+        out["read_back"] = driver.read_back()
+
+    simulate(dut, host, {"wait_states": wait_states} if wait_states else None)
+    return out["result"], out["read_back"]
+
+
+def assert_same_run(read_back, expected):
+    assert read_back.result == expected.status
+    assert read_back.iterations == expected.iterations
+    assert (read_back.area_error, read_back.shape_error, read_back.energy) == (
+        expected.area_error, expected.shape_error, expected.energy)
+    np.testing.assert_array_equal(read_back.positions, expected.positions)
+    np.testing.assert_array_equal(read_back.velocities, expected.velocities)
+
+
+@pytest.mark.parametrize("run", RUNS)
+def test_whole_run_matches_the_golden_model(run):
+    image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
+    expected = run_image(image, FS)
+    dut = SpringflatEngine(FS, CAPACITY)
+    result, read_back = run_on_engine(dut, image)
+    assert result == expected.status
+    assert_same_run(read_back, expected)
+    assert read_back.cycles > 0
+
+
+def test_every_iteration_state_matches_with_bus_wait_states():
+    """The node memory after each integrate pass equals the golden model's state after that many iterations;
+    the host's bus cycles come with random idle clocks between them."""
+    import random
+
+    params = RUNS["momentum-barrier"]
+    image = image_of(params, init="pca")
+    states = {k: run_image(image_of(dataclasses.replace(params, max_iter=k), init="pca"), FS)
+              for k in range(1, params.max_iter + 1)}
+    dut = SpringflatEngine(FS, CAPACITY)
+    seen = {}
+
+    async def watch(ctx):
+        iterations = dut.debug_signals["iterations"]
+        positions = dut.debug_memories["positions"]
+        last = 0
+        while True:
+            await ctx.tick()
+            k = ctx.get(iterations)
+            if k != last and k > 0:
+                seen[k] = np.array([[ctx.get(positions.data[i]).x, ctx.get(positions.data[i]).y]
+                                    for i in range(MESH.n_vertices)])
+            last = k
+
+    rng = random.Random(5)
+    out = {}
+
+    def host(driver, bus):
+        driver.load(image)
+        driver.start()
+        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+        out["read_back"] = driver.read_back()
+
+    simulate(dut, host, {"watcher": watch, "wait_states": lambda: rng.choice([0, 0, 1, 4])})
+    expected = states[params.max_iter]
+    assert_same_run(out["read_back"], expected)
+    assert sorted(seen) == list(range(1, expected.iterations + 1))
+    for k, positions in seen.items():
+        np.testing.assert_array_equal(positions, states[k].positions, err_msg=f"iteration {k}")
+
+
+def test_start_without_a_mesh_answers_no_mesh_and_running_memory_access_is_a_bus_error():
+    dut = SpringflatEngine(FS, CAPACITY)
+    rmap = dut.register_map
+    control, status = rmap.register("CONTROL"), rmap.register("STATUS")
+    nodes = rmap.window("nodes")
+    answers = {}
+
+    async def bench(ctx):
+        # START with nothing loaded (VERTICES reads 0 after reset)
+        await wishbone_write(ctx, dut.bus, control.offset, 1)
+        await ctx.tick().repeat(3)
+        answers["status"] = (await wishbone_read(ctx, dut.bus, status.offset)).data
+        # unmapped word, partial write, write to a read-only register
+        answers["unmapped"] = (await wishbone_read(ctx, dut.bus, rmap.windows[0].base - 1)).error
+        answers["partial"] = (await wishbone_write(ctx, dut.bus, rmap.register("MAX_ITER").offset, 5,
+                                                   sel=0b0011)).error
+        answers["read_only"] = (await wishbone_write(ctx, dut.bus, rmap.register("ITERATIONS").offset, 5)).error
+        answers["memory_idle"] = (await wishbone_read(ctx, dut.bus, nodes.address(0, 0))).error
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(bench)
+    sim.run()
+    result_field = next(f for f in status.fields if f.name == "result")
+    state_field = next(f for f in status.fields if f.name == "state")
+    word = answers["status"]
+    assert state_field.codes[(word >> state_field.lsb) & ((1 << state_field.width) - 1)] == "done"
+    assert result_field.codes[(word >> result_field.lsb) & ((1 << result_field.width) - 1)] == "no-mesh"
+    assert answers["unmapped"] and answers["partial"] and answers["read_only"]
+    assert not answers["memory_idle"]
+
+
+def test_memory_access_while_running_is_a_bus_error_and_abort_stops_the_run():
+    image = image_of(dataclasses.replace(RUNS["paper-variable"], max_iter=50))
+    dut = SpringflatEngine(FS, CAPACITY)
+    out = {}
+
+    def host(driver, bus):
+        driver.load(image)
+        driver.start()
+        window = driver.map.window("nodes")
+        try:
+            bus.read(window.address(0, 0))
+            out["error"] = None
+        except BusError as exc:
+            out["error"] = str(exc)
+        driver.abort()
+        bus.idle(300)
+        out["status"] = driver._status_fields()
+        out["memory_after_abort"] = bus.read(window.address(0, 0))
+
+    simulate(dut, host)
+    assert out["error"] is not None and "err" in out["error"]
+    assert out["status"] == ("idle", "none")
