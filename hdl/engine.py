@@ -149,7 +149,7 @@ class SpringflatEngine(wiring.Component):
         # phases of a run
         phase = Signal(range(16))
         PH = {name: i for i, name in enumerate((
-            "start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain", "finish"))}
+            "start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain"))}
 
         # ------------------------------------------------------------ force pass fetch
         # One entry per clock. Valid bits are named for the clock whose data they mark:
@@ -435,9 +435,18 @@ class SpringflatEngine(wiring.Component):
             | n1_valid | n2_valid
         units_idle = force.idle & area.idle & integ.idle & ~fetching
 
-        with m.If(abort_pulse):
-            m.d.sync += [state.eq(_code(STATES, "idle")), result.eq(_code(RESULTS, "none")), phase.eq(PH["drain"]),
-                         fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
+        stepgen_idle = stepgen_idle_signal(m, stepgen)
+        sequential_idle = ~Cat(*(u.i.valid for u in (norm_length, norm_area, energy, beta, stepgen))).any() \
+            & norm_length.i.ready & norm_area.i.ready & energy.i.ready & beta.i.ready & stepgen_idle
+        # ABORT while running drains what is in flight (still "running": START is ignored and the memories
+        # answer err until nothing can write them any more), then goes idle with no result. The pass under
+        # way fetches to its end (a node half fed to the force pass would never leave it).
+        with m.If(abort_pulse & running):
+            m.d.sync += phase.eq(PH["drain"])
+            for unit in (norm_length, norm_area, energy, beta, stepgen):
+                m.d.sync += unit.i.valid.eq(0)
+        with m.Elif(abort_pulse):
+            m.d.sync += [state.eq(_code(STATES, "idle")), result.eq(_code(RESULTS, "none"))]
         with m.Elif(start_pulse & ~running):
             m.d.sync += [cycles.eq(0), iterations.eq(0), saturations.eq(0), irq_pending.eq(0),
                          result.eq(_code(RESULTS, "none"))]
@@ -507,9 +516,15 @@ class SpringflatEngine(wiring.Component):
                 with m.Case(PH["step_wait"]):
                     waiting = (beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready) | \
                         Mux(mode_momentum, 0, 0)
-                    with m.If(~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle_signal(m, stepgen)):
+                    with m.If(~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
                         m.d.sync += [node_index.eq(0), node_out_index.eq(0), power_sum.eq(0), fetch_nodes.eq(1),
                                      phase.eq(PH["integrate"])]
+                with m.Case(PH["drain"]):
+                    done_fetching = ((entry_index == n_entries) | ~fetch_force) & ((tri_index == n_triangles) | ~fetch_area) \
+                        & ((node_index == n_vertices) | ~fetch_nodes)
+                    with m.If(units_idle & sequential_idle & done_fetching):
+                        m.d.sync += [state.eq(_code(STATES, "idle")), result.eq(_code(RESULTS, "none")),
+                                     fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
                 with m.Case(PH["integrate"]):
                     with m.If(node_out_index == n_vertices):
                         power_negative = power_sum[-1]
@@ -522,9 +537,6 @@ class SpringflatEngine(wiring.Component):
                               "force_out_index": force_out_index, "tri_index": tri_index,
                               "node_out_index": node_out_index, "math_pending": math_pending,
                               "iterations": iterations}
-        with m.Elif(phase == PH["drain"]):
-            with m.If(units_idle):
-                m.d.sync += phase.eq(PH["finish"])
         return m
 
 

@@ -162,7 +162,7 @@ def test_start_without_a_mesh_answers_no_mesh_and_running_memory_access_is_a_bus
     assert not answers["memory_idle"]
 
 
-def test_memory_access_while_running_is_a_bus_error_and_abort_stops_the_run():
+def test_memory_access_while_running_is_a_bus_error_and_abort_then_a_clean_rerun():
     image = image_of(dataclasses.replace(RUNS["paper-variable"], max_iter=50))
     dut = SpringflatEngine(FS, CAPACITY)
     out = {}
@@ -180,7 +180,14 @@ def test_memory_access_while_running_is_a_bus_error_and_abort_stops_the_run():
         bus.idle(300)
         out["status"] = driver._status_fields()
         out["memory_after_abort"] = bus.read(window.address(0, 0))
+        # a clean rerun: the aborted run moved the nodes, so the host loads the image again
+        driver.load(rerun)
+        driver.start()
+        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+        out["read_back"] = driver.read_back()
 
+    rerun = image_of(RUNS["paper-variable"])
     simulate(dut, host)
     assert out["error"] is not None and "err" in out["error"]
     assert out["status"] == ("idle", "none")
+    assert_same_run(out["read_back"], run_image(rerun, FS))
