@@ -149,9 +149,10 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 
 def cmd_verilog(args: argparse.Namespace) -> int:
-    from .export import export_verilog
+    from .export import engine_capacity, export_engine_bundle, export_verilog
 
     formats = load_format_set(args.formats)
+    capacity = engine_capacity(args.capacity, formats)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out '{out}' exists and is not a directory")
@@ -159,6 +160,10 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
     print(f"{out / 'interface.md'}, {out / 'interface.json'}")
+    engine = export_engine_bundle(formats, capacity, out)
+    print(f"{out / engine['files'][0]}: capacity {capacity.vertices} vertices, {capacity.entries} entries, "
+          f"{capacity.triangles} triangles; {engine['bus']}")
+    print(", ".join(str(out / f) for f in engine["files"][1:]))
     return 0
 
 
@@ -190,8 +195,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_paper)
 
     p = sub.add_parser("verilog", help="export the RTL as Verilog with its interface description",
-                       description="Write Verilog of every component, ROM contents and interface.md/json.")
+                       description="Write Verilog of every component, ROM contents and interface.md/json, and the "
+                                   "engine (springflat_engine.v) with its register map (register_map.md, "
+                                   "register_map.json, springflat_regs.h) and memory_image.md.")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
+    p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
+                   help="the engine's vertices, neighbour entries and triangles (default: "
+                        "golden_model.fixed.engine_image.DEFAULT_CAPACITY)")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=cmd_verilog)
 

@@ -25,7 +25,11 @@ from amaranth.lib import data, wiring
 from golden_model.fixed import FormatSet, exp_table
 from hdl.dsp import dsp_target
 
-__all__ = ["COMPONENTS", "export_verilog", "export_engine", "describe"]
+__all__ = ["COMPONENTS", "ENGINE_MODULE", "export_verilog", "export_engine", "export_engine_bundle",
+           "engine_capacity", "memory_image_markdown", "describe"]
+
+ENGINE_MODULE = "springflat_engine"
+"""Top module name of :class:`hdl.engine.SpringflatEngine` in the exports."""
 
 STREAM_PROTOCOL = (
     "Each stream is `valid`, `ready`, `payload` (amaranth.lib.stream): a beat transfers on a rising clock "
@@ -206,3 +210,66 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
                                                           "triangles": capacity.triangles},
             "bus": "Wishbone B4 classic, 32-bit data, word addresses", "addr_width": engine.addr_width,
             "files": ["springflat_engine.v", *files]}
+
+
+def engine_capacity(values, fs: FormatSet) -> "EngineCapacity":
+    """``--capacity V E T`` as an :class:`~golden_model.fixed.engine_image.EngineCapacity` (``None``: the
+    default); a capacity the engine's register map cannot hold is a one-line :class:`ParameterError`."""
+    from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
+    from golden_model.fixed.register_map import RegisterMap
+    from golden_model.reference import ParameterError
+
+    if values is None:
+        return DEFAULT_CAPACITY
+    try:
+        capacity = EngineCapacity(*(int(v) for v in values))
+        RegisterMap.build(fs, capacity)  # the address map must hold it
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"--capacity V E T: {exc}") from None
+    return capacity
+
+
+def memory_image_markdown(fs: FormatSet, capacity) -> str:
+    """A short description of the engine's memory images for the handoff bundle (``memory_image.md``):
+    the three memories' word layouts and bus packing for this format set and capacity."""
+    from golden_model.fixed.register_map import RegisterMap
+
+    rmap = RegisterMap.build(fs, capacity)
+    lines = [f"# springflat engine memory images (format set `{fs.name}`, capacity {capacity.vertices} vertices, "
+             f"{capacity.entries} entries, {capacity.triangles} triangles)", "",
+             "The host loads three memories over the Wishbone bus while the engine is idle, writes the run "
+             "constants (registers, `register_map.md`) and writes CONTROL.start; the engine writes positions and "
+             "velocities back in place in the `nodes` memory. Each memory word is the fields below, first field "
+             "at bit 0, no padding between fields; over the bus a word is `ceil(bits/32)` 32-bit words (word 0 = "
+             "bits 31:0) at a stride of the next power of two: entry `i`, word `k` at `base + i*stride + k` "
+             "(word addresses; byte address = 4 x word address). Signed fields are two's complement of their "
+             "width; a field's format is the format set's (`interface.json`'s `format_set`, or the golden "
+             "model's `FormatSet`).", "",
+             "* `nodes`: vertices in mesh order; the initial layout scaled by the host (`prepare`), zero "
+             "velocities, `inv_mass_barrier = inv_mass` where no second weight applies.",
+             "* `entries`: nodes in order, each node's neighbour entries in ring order; `last` marks a node's "
+             "last entry (every node has at least one); without the fold barrier `second = neighbour`, "
+             "`threshold = gain = 0`.",
+             "* `triangles`: corner indices and the host-scaled 3D area (for E_S).", "",
+             "| memory | base | depth | bits | words | stride | fields (LSB first: name width[format]) |",
+             "|---|---|---|---|---|---|---|"]
+    for w in rmap.windows:
+        fields = ", ".join(f"`{f.name}` {'s' if f.signed else 'u'}{f.width}" + (f" [{f.fmt}]" if f.fmt else "")
+                           for f in w.fields)
+        lines.append(f"| `{w.name}` | `0x{w.base:X}` | {w.depth} | {sum(f.width for f in w.fields)} | {w.words} | "
+                     f"{w.stride} | {fields} |")
+    lines += ["", "Reference packer: `golden_model.fixed.engine_image.build_image(problem, capacity)` (and "
+              "`decode_nodes`/`decode_entries`/`decode_triangles`); reference host driver: "
+              "`sim/engine_driver.py`. The full contract (run constants, controller passes, error answers) is "
+              "docs/engine.md in the springflat repository; the field tables with bit ranges are in "
+              "`register_map.md`.", ""]
+    return "\n".join(lines)
+
+
+def export_engine_bundle(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
+    """:func:`export_engine` plus ``memory_image.md`` (:func:`memory_image_markdown`): what a handoff of
+    the engine holds. Returns :func:`export_engine`'s description with the file added."""
+    info = export_engine(fs, capacity, out, platform=platform)
+    (out / "memory_image.md").write_text(memory_image_markdown(fs, capacity))
+    info["files"].append("memory_image.md")
+    return info
