@@ -435,6 +435,14 @@ class SpringflatEngine(wiring.Component):
             | n1_valid | n2_valid
         units_idle = force.idle & area.idle & integ.idle & ~fetching
 
+        # START's checks of the run constants, as golden_model's constant_fault states them
+        top = 1 << (fs.reciprocal.width - 1)
+        reciprocal_bad = [(values[f"{k}_reciprocal"] < top) | (values[f"{k}_reciprocal"] >= 2 * top)
+                          | (values[f"{k}_shift"] < fs.error.frac_bits + 2) for k in ("area", "length")]
+        bad_constants = ((n_vertices > cap.vertices) | (n_entries > cap.entries) | (n_triangles > cap.triangles)
+                         | (n_entries == 0) | (n_triangles == 0) | reciprocal_bad[0] | reciprocal_bad[1]
+                         | (mode_fixed & ~mode_momentum & (values["dt"] == 0)) | (values["max_iter"] == 0)
+                         | bad_tolerance)
         stepgen_idle = stepgen_idle_signal(m, stepgen)
         sequential_idle = ~Cat(*(u.i.valid for u in (norm_length, norm_area, energy, beta, stepgen))).any() \
             & norm_length.i.ready & norm_area.i.ready & energy.i.ready & beta.i.ready & stepgen_idle
@@ -452,8 +460,7 @@ class SpringflatEngine(wiring.Component):
                          result.eq(_code(RESULTS, "none"))]
             with m.If(n_vertices == 0):
                 finish("no-mesh")
-            with m.Elif((n_vertices > cap.vertices) | (n_entries > cap.entries) | (n_triangles > cap.triangles)
-                        | (n_entries == 0) | (n_triangles == 0) | bad_tolerance):
+            with m.Elif(bad_constants):
                 finish("bad-constants")
             with m.Else():
                 m.d.sync += [state.eq(_code(STATES, "running")), phase.eq(PH["start"]), first_measure.eq(1),

@@ -191,3 +191,39 @@ def test_memory_access_while_running_is_a_bus_error_and_abort_then_a_clean_rerun
     assert out["error"] is not None and "err" in out["error"]
     assert out["status"] == ("idle", "none")
     assert_same_run(out["read_back"], run_image(rerun, FS))
+
+
+def test_bad_run_constants_answer_as_constant_fault_says():
+    from golden_model.fixed.engine_image import constant_fault
+
+    image = image_of(RUNS["paper-variable"])
+    top = 1 << (FS.reciprocal.width - 1)
+    cases = {
+        "no iterations": {"max_iter": 0},
+        "entries over capacity": {"entries": CAPACITY.entries + 1},
+        "no triangles": {"triangles": 0},
+        "reciprocal not u1.F": {"area_reciprocal": top - 1},
+        "shift too small": {"length_shift": FS.error.frac_bits + 1},
+        "fixed step of zero": {"fixed_step": 1, "dt": 0},
+        "good": {},
+    }
+    dut = SpringflatEngine(FS, CAPACITY)
+    answers = {}
+
+    def host(driver, bus):
+        driver.load(image)
+        for name, change in cases.items():
+            constants = {**image.constants, **change}
+            for offset, word in sorted(driver.map.encode(constants).items()):
+                bus.write(offset, word)
+            driver.start()
+            bus.idle(20)
+            answers[name] = driver._status_fields()
+            if answers[name][0] == "running":
+                driver.abort()
+                bus.idle(400)
+
+    simulate(dut, host)
+    for name, change in cases.items():
+        expected = constant_fault({**image.constants, **change}, FS, CAPACITY)
+        assert answers[name] == (("done", expected) if expected else ("running", "none")), name
