@@ -56,7 +56,8 @@ def simulate(dut, host, watch=None):
     return bus
 
 
-def run_on_engine(dut, image, wait_states=None):
+def run_on_engine(dut, image, watch=None):
+    """Load ``image``, start, wait, read back: ``(result, read_back)``."""
     out = {}
 
     def host(driver, bus):
@@ -65,7 +66,7 @@ def run_on_engine(dut, image, wait_states=None):
         out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
         out["read_back"] = driver.read_back()
 
-    simulate(dut, host, {"wait_states": wait_states} if wait_states else None)
+    simulate(dut, host, watch)
     return out["result"], out["read_back"]
 
 
@@ -114,17 +115,9 @@ def test_every_iteration_state_matches_with_bus_wait_states():
             last = k
 
     rng = random.Random(5)
-    out = {}
-
-    def host(driver, bus):
-        driver.load(image)
-        driver.start()
-        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
-        out["read_back"] = driver.read_back()
-
-    simulate(dut, host, {"watcher": watch, "wait_states": lambda: rng.choice([0, 0, 1, 4])})
+    _, read_back = run_on_engine(dut, image, {"watcher": watch, "wait_states": lambda: rng.choice([0, 0, 1, 4])})
     expected = states[params.max_iter]
-    assert_same_run(out["read_back"], expected)
+    assert_same_run(read_back, expected)
     assert sorted(seen) == list(range(1, expected.iterations + 1))
     for k, positions in seen.items():
         np.testing.assert_array_equal(positions, states[k].positions, err_msg=f"iteration {k}")
