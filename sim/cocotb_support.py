@@ -119,13 +119,16 @@ class BenchRun:
 
 def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, *, testcase: str | None = None,
               waves: bool = False, work: Path | None = None, log_file: Path | None = None,
-              dsp: str | None = None) -> BenchRun:
+              dsp: str | None = None, sources: Path | None = None,
+              extra_build_args: tuple[str, ...] = ()) -> BenchRun:
     """Build ``toplevel`` for ``sim`` (cached) and run the cocotb module ``sim.cocotb_benches.<bench>``.
 
     ``config`` is handed to the bench as JSON (``SPRINGFLAT_BENCH_CONFIG``); the bench
     writes its findings to ``SPRINGFLAT_BENCH_RESULT``, returned as ``result``. With
     ``log_file`` the simulator's output goes there instead of stdout. ``dsp`` selects the
-    Verilog flavour (:func:`verilog_sources`).
+    Verilog flavour (:func:`verilog_sources`). ``sources`` is a directory holding ``<toplevel>.v``
+    exported elsewhere (the engine: :func:`sim.engine_run.engine_sources`), cached by the caller; its
+    builds go beside it. ``extra_build_args`` are added to the simulator's build flags.
     """
     from cocotb_tools.check_results import get_results
     from cocotb_tools.runner import get_runner
@@ -135,8 +138,11 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
         raise SimulatorError(reason)
     if dsp is not None and dsp not in PRIMITIVE_MODELS:
         raise SimulatorError(f"no simulation model for DSP flavour {dsp!r} (choose from {', '.join(PRIMITIVE_MODELS)})")
-    sources = verilog_sources(fs, dsp)
-    build_dir = BUILD_ROOT / _formats_key(fs, dsp) / sim / (toplevel + ("-waves" if waves else ""))
+    if sources is None:
+        sources = verilog_sources(fs, dsp)
+        build_dir = BUILD_ROOT / _formats_key(fs, dsp) / sim / (toplevel + ("-waves" if waves else ""))
+    else:
+        build_dir = Path(sources) / sim / (toplevel + ("-waves" if waves else ""))
     work = Path(work) if work is not None else build_dir / "runs" / f"{bench}-{os.getpid()}-{time.time_ns()}"
     work.mkdir(parents=True, exist_ok=True)
     config_path, result_path = work / "config.json", work / "result.json"
@@ -144,6 +150,7 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
 
     runner = get_runner(sim)
     build_args = ["-Wno-fatal", "-Wno-WIDTHEXPAND", "-Wno-WIDTHTRUNC", "-O2"] if sim == "verilator" else []
+    build_args += list(extra_build_args)
     if sim == "verilator" and waves:
         build_args += ["--trace-structs"]  # cocotb adds --trace (VCD; FST would need liblz4 headers)
     try:

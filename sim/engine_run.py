@@ -1,0 +1,173 @@
+"""A mesh through ``SpringflatEngine`` on a Verilog simulator: the flow of ``rtl-check --engine-top``
+and ``flatten --engine rtl``.
+
+:func:`engine_sources` exports the engine for a format set and capacity (cached like
+:func:`sim.cocotb_support.verilog_sources`: keyed by the format set, the capacity and the RTL
+sources); :func:`run_engine` packs a :class:`~golden_model.fixed.engine.FixedProblem` into an
+image (:func:`~golden_model.fixed.engine_image.build_image`, which refuses a mesh over capacity
+with a one-line :class:`~golden_model.fixed.engine.FixedPointError`), runs the cocotb bench
+``sim/cocotb_benches/engine.py`` on it and returns what the engine read back, compared bit for
+bit with :func:`~golden_model.fixed.engine_image.run_image` inside the bench.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import FixedProblem
+from golden_model.fixed.engine_image import EngineCapacity, EngineImage, build_image
+
+from .cocotb_support import BUILD_ROOT, _formats_key, run_bench
+
+__all__ = ["ENGINE_TOP", "VERILATOR_SPEED_FLAGS", "EngineRun", "engine_sources", "run_engine", "run_image_on_rtl", "summary_line",
+           "flatten_on_rtl", "EngineRunError"]
+
+ENGINE_TOP = "springflat_engine"
+
+#: Verilator flags for a whole run: no X randomisation code, and the C++ at -O3 (the default
+#: flags already have -O2 for Verilator's own optimisation).
+VERILATOR_SPEED_FLAGS = ("--x-assign", "fast", "--x-initial", "fast", "-CFLAGS", "-O3")
+
+#: Icarus in Verilog-2005 mode (after the runner's -g2012: the last generation flag wins). Yosys's
+#: Verilog starts each `always @*` block with a dummy read of a `reg ... = 0` so that the block runs
+#: at time 0 (YosysHQ/yosys#2273); in SystemVerilog mode Icarus sets declaration initialisers
+#: without an event, so blocks whose inputs never change (the bus read mux of word 0, whose
+#: registered address starts and resets at 0) never run and read X.
+ICARUS_FLAGS = ("-g2005",)
+
+#: A Yosys ``always @*`` block that only assigns a constant (the unused bits of a register's read
+#: word): it has no input, so an event-driven simulator never runs it and the bits stay X.
+_CONSTANT_BLOCK = re.compile(r"always @\*\n(\s+)([^\n;]*?) = (\d+'[hbd][0-9a-fA-F_]+);\n")
+
+
+def icarus_verilog(text: str) -> str:
+    """The engine's Verilog for Icarus: each constant-only ``always @*`` block an ``initial`` one
+    (same value, set once at time 0); nothing else changes."""
+    return _CONSTANT_BLOCK.sub(lambda m: f"initial\n{m[1]}{m[2]} = {m[3]};\n", text)
+
+
+def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator") -> Path:
+    """Export ``springflat_engine.v`` for ``fs`` and ``capacity`` once; return its directory (for
+    Icarus a subdirectory with :func:`icarus_verilog`'s copy)."""
+    from .export import export_engine
+
+    directory = (BUILD_ROOT / _formats_key(fs) / "engine"
+                 / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}")
+    exported = directory / f"{ENGINE_TOP}.v"
+    if not exported.exists():
+        export_engine(fs, capacity, directory)
+    if simulator != "icarus":
+        return directory
+    icarus = directory / "icarus-source"
+    if not (icarus / exported.name).exists():
+        icarus.mkdir(exist_ok=True)
+        (icarus / exported.name).write_text(icarus_verilog(exported.read_text()))
+    return icarus
+
+
+@dataclass(frozen=True, eq=False)
+class EngineRun:
+    """One bench run: the bench's findings (``result``), the read-back layout (raw), timings."""
+
+    result: dict
+    positions: np.ndarray | None  # (V, 2) raw [position], as read back over the bus
+    velocities: np.ndarray | None  # (V, 2) raw [velocity]
+    passed: bool  # the bench ran to its end with no mismatch
+    wall_seconds: float  # the simulation, start to end (load, run, read-back, golden model)
+    waves: Path | None
+
+    @property
+    def mismatches(self) -> int:
+        return int(self.result.get("mismatches", -1))
+
+
+def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_states: int = 0, seed: int = 0,
+                     checks: dict | None = None, work: Path | None = None, log_file: Path | None = None,
+                     waves: bool = False) -> EngineRun:
+    """Run the engine bench on ``image``. ``checks`` adds the bench's extra scenarios
+    (``iteration_checks``, ``reset_after``, ``busy_check``, ``no_mesh_check``, ``unmapped_check``,
+    ``broken_expectation``)."""
+    capacity = image.capacity
+    sources = engine_sources(fs, capacity, simulator)
+    if work is None:
+        import os
+        import time
+
+        work = sources / "runs" / f"{simulator}-{os.getpid()}-{time.time_ns()}"
+    work = Path(work)
+    work.mkdir(parents=True, exist_ok=True)
+    np.savez(work / "image.npz", nodes=image.nodes, entries=image.entries, triangles=image.triangles)
+    config = {"capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
+                           "triangles": capacity.triangles},
+              "constants": {k: int(v) for k, v in image.constants.items()},
+              "wait_states": wait_states, "seed": seed, **(checks or {})}
+    flags = VERILATOR_SPEED_FLAGS if simulator == "verilator" else ICARUS_FLAGS
+    run = run_bench(simulator, fs, ENGINE_TOP, "engine", config, work=work, log_file=log_file, waves=waves,
+                    sources=sources, extra_build_args=flags)
+    readback = work / "readback.npz"
+    positions = velocities = None
+    if readback.exists():
+        arrays = np.load(readback)
+        positions, velocities = arrays["positions"], arrays["velocities"]
+    passed = run.tests == 1 and run.failed == 0 and run.result.get("mismatches") == 0
+    return EngineRun(run.result, positions, velocities, passed, run.wall_seconds, run.waves)
+
+
+def run_engine(problem: FixedProblem, capacity: EngineCapacity, simulator: str, **kwargs) -> EngineRun:
+    """``problem`` (the golden model's host scaling) packed for an engine of ``capacity`` and run through it.
+
+    Raises :class:`~golden_model.fixed.engine.FixedPointError` (one line) when the mesh is over
+    capacity, and :class:`~sim.cocotb_support.SimulatorError` when the simulation cannot run.
+    """
+    image = build_image(problem, capacity)
+    return run_image_on_rtl(image, problem.fs, simulator, **kwargs)
+
+
+def flatten_on_rtl(problem: FixedProblem, capacity: EngineCapacity, simulator: str = "verilator", **kwargs):
+    """``springflat flatten --engine rtl``: ``problem`` through the engine, as a
+    :class:`~golden_model.reference.FlattenResult` in mesh units (the FixedProblem maps the raw
+    read-back back). The engine keeps no per-iteration record, so the history holds two rows: the
+    initial layout and the engine's final one, both measured by the golden model. Raises
+    :class:`EngineRunError` when the run does not match the golden model bit for bit."""
+    import math
+
+    from golden_model.fixed import SaturationCounter
+    from golden_model.fixed.engine import FixedEngine
+    from golden_model.reference import FlattenResult, History
+
+    run = run_engine(problem, capacity, simulator, **kwargs)
+    if not run.passed or run.positions is None:
+        first = (run.result.get("first_mismatches") or ["the simulation ended without a result"])[0]
+        raise EngineRunError(f"the {simulator} run of the engine does not match the golden model: {first}")
+    engine = FixedEngine(problem, SaturationCounter())
+    history = History()
+    history.append(math.nan, engine.measure())
+    engine.raw_positions, engine.raw_velocities = run.positions.copy(), run.velocities.copy()
+    history.append(math.nan, engine.measure())
+    r = run.result
+    result = FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
+                           history, r["status"], r["iterations"], problem.params, problem.density, engine="fixed")
+    result.extra.update({"formats": problem.fs.name, "scale": problem.scale, "saturations": r["saturations"],
+                         "simulator": simulator, "cycles": r["cycles"],
+                         "cycles_per_iteration": r["cycles_per_iteration"],
+                         "cycles_per_second": r["cycles_per_second"]})
+    return result
+
+
+class EngineRunError(RuntimeError):
+    """The engine's run differs from the golden model (one line)."""
+
+
+def summary_line(name: str, simulator: str, run: EngineRun) -> str:
+    """The numbers of a run on one line."""
+    r = run.result
+    return (f"{name} on {simulator} (engine): {run.mismatches} mismatches; {r['status']} after {r['iterations']} "
+            f"iterations; {r['cycles']} cycles ({r['cycles_per_iteration']:.0f}/iteration); run "
+            f"{r['run_seconds']:.2f} s = {r['cycles_per_second']:.0f} simulated cycles/s, Python "
+            f"{100 * r['python_share']:.1f} % of it")
+
