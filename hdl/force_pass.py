@@ -11,7 +11,7 @@ import functools
 from dataclasses import dataclass
 from types import SimpleNamespace
 
-from amaranth.hdl import Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -19,7 +19,8 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
 
 from .fixedpoint import clamp, shape_of, shift_round, sum_round
-from .layouts import force_entry_layout, node_force_layout, vector_layout
+from .layouts import (FORCE_ENTRY_EVENTS, FORCE_NODE_EVENTS, force_entry_layout, force_saturations_max,
+                      node_force_layout, vector_layout)
 from .pipeline import LiveValues, Pipeline, count_stages
 from .rsqrt import RsqrtUnit
 
@@ -67,6 +68,13 @@ class ForcePass(wiring.Component):
         Also sum each node's exact energy partials (``error_squares``, ``barrier_energy`` of
         :func:`~hdl.layouts.node_force_layout`): two more multiplies (``e²`` beside ``½C·u``,
         ``c·h`` beside ``c·D``), which a datapath without them does not pay for.
+    saturations : :class:`bool`
+        Also count each node's saturation events as the golden model's ``SaturationCounter``
+        counts them in ``node_terms`` (``saturations`` of :func:`~hdl.layouts.node_force_layout`;
+        per entry the events of :data:`~hdl.layouts.FORCE_ENTRY_EVENTS`, per node those of
+        :data:`~hdl.layouts.FORCE_NODE_EVENTS`), and take the ``barrier`` input. Every saturation
+        stage's overflow bits are added into a small running count that rides with the entry and
+        is summed per node like the forces; no stage, no multiply more.
 
     Members
     -------
@@ -75,10 +83,17 @@ class ForcePass(wiring.Component):
         its first entry. A node with n ≥ 1 neighbours is n beats. Always ready.
     o : ``Out(stream.Signature(node_force_layout(fs, energy), always_ready=True))``
         One beat per node, in input order: ``Σf`` [force_acc] and ``Σ|L − d|`` [error_acc]
-        (saturated), ``inside``, and with ``energy`` the exact ``Σe²`` and ``Σc·h``. ``o.valid`` is
-        a register: its consumer takes every beat on the clock it is offered.
+        (saturated), ``inside``, with ``energy`` the exact ``Σe²`` and ``Σc·h``, with
+        ``saturations`` the node's event count ``saturations`` (up to
+        :func:`~hdl.layouts.force_saturations_max`: ``max_degree`` · 18 + 3). ``o.valid`` is a
+        register: its consumer takes every beat on the clock it is offered.
     half_spring : ``In(shape_of(fs.spring))``
         ``½C`` [spring]; registered once per clock, hold it stable while a pass is in flight.
+    barrier : ``In(1)``, with ``saturations`` only
+        The fold barrier is on: its events (the Δb narrowing, ``area``, ``area_short``,
+        ``barrier_coeff``, ``barrier_edge``, ``barrier_force``) count. Off, the golden model computes
+        no barrier terms and the entries' triangles are filler, whose events must not count.
+        Registered once per clock, like ``half_spring``.
     idle : ``Out(1)``
         No node in flight: every node whose first entry was accepted has left ``o``.
 
@@ -103,62 +118,81 @@ class ForcePass(wiring.Component):
     has a stage of its own.
     """
 
-    def __init__(self, fs: FormatSet | str, *, energy: bool = False):
+    def __init__(self, fs: FormatSet | str, *, energy: bool = False, saturations: bool = False):
         fs = format_set(fs, "ForcePass")
         if fs.delta.frac_bits > fs.position.frac_bits:
             raise ValueError(f"delta {fs.delta} cannot have more fraction bits than position {fs.position}")
-        self.fs, self.energy = fs, bool(energy)
-        super().__init__(self.signature_of(fs, self.energy))
-        self.stages = _stage_counts(fs, self.energy)
+        self.fs, self.energy, self.saturations = fs, bool(energy), bool(saturations)
+        super().__init__(self.signature_of(fs, self.energy, self.saturations))
+        self.stages = _stage_counts(fs, self.energy, self.saturations)
         if self.stages.barrier > self.stages.rsqrt:
             raise ValueError(f"the fold barrier needs {self.stages.barrier} stages, more than the rsqrt unit's "
                              f"{self.stages.rsqrt} it runs beside")
         self.latency = self.stages.latency
 
     @staticmethod
-    def signature_of(fs: FormatSet, energy: bool = False) -> wiring.Signature:
+    def signature_of(fs: FormatSet, energy: bool = False, saturations: bool = False) -> wiring.Signature:
         """The component's signature (also the throwaway build's stand-in ports)."""
-        return wiring.Signature({
+        members = {
             "i": In(stream.Signature(force_entry_layout(fs), always_ready=True)),
-            "o": Out(stream.Signature(node_force_layout(fs, energy), always_ready=True)),
+            "o": Out(stream.Signature(node_force_layout(fs, energy, saturations), always_ready=True)),
             "half_spring": In(shape_of(fs.spring)),
             "idle": Out(1),
-        })
+        }
+        if saturations:
+            members["barrier"] = In(1)
+        return wiring.Signature(members)
 
     def elaborate(self, platform):
         m = Module()
         m.submodules.rsqrt = rsqrt = RsqrtUnit(self.fs)
-        _build(m, self.fs, self.energy, self, rsqrt, platform)
+        _build(m, self.fs, self.energy, self.saturations, self, rsqrt, platform)
         return m
 
 
 @functools.cache
-def _stage_counts(fs: FormatSet, energy: bool) -> ForcePassStages:
+def _stage_counts(fs: FormatSet, energy: bool, saturations: bool) -> ForcePassStages:
     """The stages :func:`_build` builds (a throwaway build with stand-in ports)."""
     config = fs.rsqrt_config()
     rsqrt = SimpleNamespace(  # the rsqrt unit's ports, as RsqrtUnit declares them
         i=stream.Signature(unsigned(config.fmt_in.width)).create(),
         o=stream.Signature(RsqrtUnit.output_layout(config)).create(),
         latency=RsqrtUnit.latency_of(config))
-    ports = ForcePass.signature_of(fs, energy).create()
-    return count_stages(lambda m: _build(m, fs, energy, ports, rsqrt, None))
+    ports = ForcePass.signature_of(fs, energy, saturations).create()
+    return count_stages(lambda m: _build(m, fs, energy, saturations, ports, rsqrt, None))
 
 
-def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> ForcePassStages:
-    """The force pass's datapath into ``m``: ``ports`` (``i``, ``o``, ``half_spring``, ``idle``) and
-    the rsqrt unit's ``i``, ``o`` and ``latency``; returns the stages it built."""
+def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsqrt, platform) -> ForcePassStages:
+    """The force pass's datapath into ``m``: ``ports`` (``i``, ``o``, ``half_spring``, ``idle``, with
+    ``saturations`` ``barrier``) and the rsqrt unit's ``i``, ``o`` and ``latency``; returns the
+    stages it built."""
     rnd = fs.rounding
     half_spring = Signal.like(ports.half_spring, name="half_spring_r", reset_less=True)
     m.d.sync += half_spring.eq(ports.half_spring)
+    live = LiveValues()
+
+    # Saturation events: each saturation stage adds its overflow bits to the running count "ev"
+    # the entry carries (so the count costs a few small adders, not a bit per event per stage).
+    entry_events = sum(FORCE_ENTRY_EVENTS.values())
+    counted = []  # how many bits were counted, checked against FORCE_*_EVENTS below
+    if saturations:
+        barrier_on = Signal(name="barrier_r", reset_less=True)
+        m.d.sync += barrier_on.eq(ports.barrier)
+
+    def events(*flags, barrier=()):
+        """``{"ev": the entry's count + flags}`` for a stage (``{}`` without ``saturations``);
+        the ``barrier`` flags are the fold barrier's, counted only while it is on."""
+        if not saturations:
+            return {}
+        counted.append(len(flags) + len(barrier))
+        total = sum(Value.cast(flag) for flag in flags) + sum(Value.cast(flag) & barrier_on for flag in barrier)
+        if "ev" in live:
+            total = live["ev"] + total
+        return {"ev": Value.cast(total)[:entry_events.bit_length()]}
 
     def rounded(value, from_frac, fmt):
         """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""
         return shift_round(value, from_frac - fmt.frac_bits, rnd)
-
-    def saturated(value, fmt):
-        return clamp(value, fmt)[0]
-
-    live = LiveValues()
 
     # ------------------------------------------------------------ front
     current = Signal(vector_layout(fs.position), name="current_position", reset_less=True)
@@ -183,7 +217,10 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
     live.step(front, "f2", drop=("p_i", "p_j", "p_b"), dx=p_j.x - p_i.x, dy=p_j.y - p_i.y,
               bx=p_b.x - p_i.x, by=p_b.y - p_i.y)
     live.step(front, "f3", **{k: rounded(live[k], fs.position.frac_bits, fs.delta) for k in ("dx", "dy", "bx", "by")})
-    live.step(front, "f4", **{k: saturated(live[k], fs.delta) for k in ("dx", "dy", "bx", "by")})
+    narrowed = {k: clamp(live[k], fs.delta) for k in ("dx", "dy", "bx", "by")}
+    live.step(front, "f4", **{k: value for k, (value, _) in narrowed.items()},
+              **events(narrowed["dx"][1], narrowed["dy"][1], barrier=(narrowed["bx"][1], narrowed["by"][1])))
+
     # F5…: Δx², Δy² and the barrier's Δa.x·Δb.y, Δa.y·Δb.x;  then S = rq(Δx² + Δy² → length_sq)
     # and X = rq(Δa × Δb → area) as sum, rounding, saturation
     live.multiply(front, "f5", sq_x=(live["dx"], live["dx"]), sq_y=(live["dy"], live["dy"]),
@@ -193,7 +230,8 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
               cross=live["cross_a"] - live["cross_b"])
     live.step(front, "f7", s=rounded(live["s"], square_frac, fs.length_sq),
               cross=rounded(live["cross"], square_frac, fs.area))
-    live.step(front, "f8", s=saturated(live["s"], fs.length_sq), cross=saturated(live["cross"], fs.area))
+    length_sq, area = clamp(live["s"], fs.length_sq), clamp(live["cross"], fs.area)
+    live.step(front, "f8", s=length_sq[0], cross=area[0], **events(length_sq[1], barrier=(area[1],)))
     m.d.comb += [rsqrt.i.valid.eq(front.valid), rsqrt.i.payload.eq(live["s"]), rsqrt.o.ready.eq(1)]
 
     # The entry's side data waits for r in a delay line as long as the rsqrt unit; the fold
@@ -204,13 +242,15 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
               ex=live["dx"] - live["bx"], ey=live["dy"] - live["by"])
     # S2: h = sat(max(T − X, 0) → area), non-negative;  D saturated to delta;  inside: h > 0
     short = live["short"]
-    live.step(side, "s2", short=Mux(short < 0, 0, saturated(short, fs.area))[:fs.area.width - 1],
-              ex=saturated(live["ex"], fs.delta), ey=saturated(live["ey"], fs.delta),
-              inside=(short >= 0) & short.any())
+    short_sat, edge_x, edge_y = clamp(short, fs.area), clamp(live["ex"], fs.delta), clamp(live["ey"], fs.delta)
+    live.step(side, "s2", short=Mux(short < 0, 0, short_sat[0])[:fs.area.width - 1],
+              ex=edge_x[0], ey=edge_y[0], inside=(short >= 0) & short.any(),
+              **events(barrier=(short_sat[1] & (short >= 0), edge_x[1], edge_y[1])))
     # c = rq(G·h → barrier_coeff);  h stays for c·h when the energy is summed
     live.multiply(side, "s3", drop=("gain",) if energy else ("short", "gain"), c=(live["gain"], live["short"]))
     live.step(side, "s4", c=rounded(live["c"], fs.barrier_gain.frac_bits + fs.area.frac_bits, fs.barrier_coeff))
-    live.step(side, "s5", c=saturated(live["c"], fs.barrier_coeff))
+    coeff = clamp(live["c"], fs.barrier_coeff)
+    live.step(side, "s5", c=coeff[0], **events(barrier=(coeff[1],)))
     # f_b = rq(c·(D.y, −D.x) → force): the minus folds into the rounding's subtraction;
     # beside it the entry's barrier energy c·h (exact)
     energy_product = {"ch": (live["c"], live["short"])} if energy else {}
@@ -219,7 +259,8 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
     fb_frac = fs.barrier_coeff.frac_bits + fs.delta.frac_bits
     live.step(side, "s7", fb_x=rounded(live["fb_x"], fb_frac, fs.force),
               fb_y=sum_round((), fb_frac - fs.force.frac_bits, rnd, sub=[live["fb_y"]]))
-    live.step(side, "s8", fb_x=saturated(live["fb_x"], fs.force), fb_y=saturated(live["fb_y"], fs.force))
+    fb_x, fb_y = clamp(live["fb_x"], fs.force), clamp(live["fb_y"], fs.force)
+    live.step(side, "s8", fb_x=fb_x[0], fb_y=fb_y[0], **events(barrier=(fb_x[1], fb_y[1])))
     barrier_stages = side.stages
     for n in range(side.stages, rsqrt.latency):
         live.step(side, f"side{n}")
@@ -227,6 +268,7 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
     # ------------------------------------------------------------ back
     back = Pipeline(m, rsqrt.o.valid, land_operands=True, platform=platform)
     r = rsqrt.o.payload.rsqrt  # leaves the rsqrt unit's output register
+    live.update(events(rsqrt.o.payload.saturated))  # registered by b1's first stage, beside r's use
     # d·r and S·r
     live.multiply(back, "b1", drop=("s",), d_r=(live["rest"], r), s_r=(live["s"], r))
     # u = rq(1 − d·r → spring), L = rq(S·r → rest_length): rounding, then saturation
@@ -237,7 +279,8 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
         u = rounded((1 << dr_frac) - live["d_r"], dr_frac, fs.spring)
     live.step(back, "b2", drop=("d_r", "s_r"), u=u,
               length=rounded(live["s_r"], fs.length_sq.frac_bits + fs.rsqrt.frac_bits, fs.rest_length))
-    live.step(back, "b3", u=saturated(live["u"], fs.spring), length=saturated(live["length"], fs.rest_length))
+    u, length = clamp(live["u"], fs.spring), clamp(live["length"], fs.rest_length)
+    live.step(back, "b3", u=u[0], length=length[0], **events(u[1], length[1]))
     # e = |L − d| alongside ½C·u (and e², exact, when the energy is summed)
     length, rest = live["length"], live["rest"]
     live["e"] = e = Mux(length > rest, length - rest, rest - length)[:fs.rest_length.width]
@@ -245,12 +288,14 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
                   **({"e_sq": (e, e)} if energy else {}))
     # s = rq(½C·u → spring)
     live.step(back, "b5", c_u=rounded(live["c_u"], 2 * fs.spring.frac_bits, fs.spring))
-    live.step(back, "b6", drop=("c_u",), s=saturated(live["c_u"], fs.spring))
+    spring = clamp(live["c_u"], fs.spring)
+    live.step(back, "b6", drop=("c_u",), s=spring[0], **events(spring[1]))
     # s·Δ, then f = rq(s·Δ → force)
     live.multiply(back, "b7", drop=("s", "dx", "dy"), f_x=(live["s"], live["dx"]), f_y=(live["s"], live["dy"]))
     f_frac = fs.spring.frac_bits + fs.delta.frac_bits
     live.step(back, "b8", f_x=rounded(live["f_x"], f_frac, fs.force), f_y=rounded(live["f_y"], f_frac, fs.force))
-    live.step(back, "b9", f_x=saturated(live["f_x"], fs.force), f_y=saturated(live["f_y"], fs.force))
+    f_x, f_y = clamp(live["f_x"], fs.force), clamp(live["f_y"], fs.force)
+    live.step(back, "b9", f_x=f_x[0], f_y=f_y[0], **events(f_x[1], f_y[1]))
     # B10: the entry's force, spring plus barrier, exact
     live.step(back, "b10", drop=("fb_x", "fb_y"), f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"])
 
@@ -268,6 +313,9 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
     if energy:
         sums["e_sq"] = (out.error_squares.shape(), live["e_sq"], "add")
         sums["ch"] = (out.barrier_energy.shape(), live["ch"], "add")
+    if saturations:
+        assert sum(counted) == entry_events, (counted, FORCE_ENTRY_EVENTS)
+        sums["ev"] = (unsigned((fs.max_degree * entry_events).bit_length()), live["ev"], "add")
     first, last, entry_valid = live["first"], live["last"], back.valid
     back.stage("b11", valid=entry_valid & last)
     live.clear()
@@ -279,12 +327,19 @@ def _build(m: Module, fs: FormatSet, energy: bool, ports, rsqrt, platform) -> Fo
     live.step(back, "n1", f_x=rounded(live["f_x"], fs.force.frac_bits, fs.force_acc),
               f_y=rounded(live["f_y"], fs.force.frac_bits, fs.force_acc),
               e=rounded(live["e"], fs.rest_length.frac_bits, fs.error_acc))
-    live.step(back, "n2", f_x=saturated(live["f_x"], fs.force_acc), f_y=saturated(live["f_y"], fs.force_acc),
-              e=saturated(live["e"], fs.error_acc))
+    force_x, force_y, error = (clamp(live["f_x"], fs.force_acc), clamp(live["f_y"], fs.force_acc),
+                               clamp(live["e"], fs.error_acc))
+    if saturations:  # the node's own events join its entries' sum
+        node_flags = (force_x[1], force_y[1], error[1])
+        assert len(node_flags) == sum(FORCE_NODE_EVENTS.values()), FORCE_NODE_EVENTS
+        live["ev"] = (live["ev"] + sum(node_flags))[:force_saturations_max(fs).bit_length()]
+    live.step(back, "n2", f_x=force_x[0], f_y=force_y[0], e=error[0])
     m.d.comb += [ports.o.valid.eq(back.valid), out.force.x.eq(live["f_x"]), out.force.y.eq(live["f_y"]),
                  out.error_sum.eq(live["e"]), out.inside.eq(live["inside"])]
     if energy:
         m.d.comb += [out.error_squares.eq(live["e_sq"]), out.barrier_energy.eq(live["ch"])]
+    if saturations:
+        m.d.comb += out.saturations.eq(live["ev"])
     stages = ForcePassStages(front=front.stages, barrier=barrier_stages, rsqrt=rsqrt.latency, back=back.stages)
 
     # ------------------------------------------------------------ idle

@@ -17,7 +17,36 @@ from .fixedpoint import shape_of
 
 __all__ = ["vector_layout", "node_layout", "barrier_layout", "neighbour_layout", "entry_layout", "result_layout",
            "force_entry_layout", "node_force_layout", "integrator_input_layout", "integrator_output_layout",
-           "step_layout", "errors_layout"]
+           "step_layout", "errors_layout", "FORCE_ENTRY_EVENTS", "FORCE_NODE_EVENTS", "INTEGRATOR_EVENTS",
+           "STEP_EVENTS", "force_saturations_max", "saturations_shape"]
+
+#: Saturation events one neighbour entry of the force pass can raise, by the golden model's
+#: ``SaturationCounter`` name (``node_terms``: ``neighbour_terms`` and ``barrier_terms``): elements
+#: per entry. ``delta`` is the spring's Δ (x, y) and the barrier's Δb (x, y); the barrier's events
+#: (its Δb, ``area`` … ``barrier_force``) count only while the barrier is on.
+FORCE_ENTRY_EVENTS = {"delta": 4, "length_sq": 1, "rsqrt": 1, "one_minus_dr": 1, "length": 1, "spring": 1,
+                      "force": 2, "area": 1, "area_short": 1, "barrier_coeff": 1, "barrier_edge": 2,
+                      "barrier_force": 2}
+#: … and one node of the force pass, once its sums leave the accumulators.
+FORCE_NODE_EVENTS = {"force_acc": 2, "error_acc": 1}
+#: Saturation events of one node in the integrate stage (``integrate`` or ``integrate_momentum``,
+#: and ``node_power``); the momentum step raises only ``accel``, ``velocity``, ``position`` and ``power``.
+INTEGRATOR_EVENTS = {"accel": 2, "position_step": 2, "position": 2, "velocity_step": 2, "velocity": 2,
+                     "damping": 2, "power": 1}
+#: Saturation events of one step (``step_size``): ``lut_input`` per lane (a u1.F error above 1),
+#: ``dt`` twice (the requantised sum, then with the constant added), ``half_dt_sq``.
+STEP_EVENTS = {"lut_input": 2, "dt": 2, "half_dt_sq": 1}
+
+
+def force_saturations_max(fs: FormatSet) -> int:
+    """The most saturation events one node of the force pass can raise: ``max_degree`` entries
+    of :data:`FORCE_ENTRY_EVENTS` and the node's own :data:`FORCE_NODE_EVENTS`."""
+    return fs.max_degree * sum(FORCE_ENTRY_EVENTS.values()) + sum(FORCE_NODE_EVENTS.values())
+
+
+def saturations_shape(most: int):
+    """The ``saturations`` field of a beat that can carry up to ``most`` events."""
+    return unsigned(most.bit_length())
 
 
 def vector_layout(fmt: Format) -> data.StructLayout:
@@ -95,7 +124,7 @@ def force_entry_layout(fs: FormatSet) -> data.StructLayout:
     })
 
 
-def node_force_layout(fs: FormatSet, energy: bool = False) -> data.StructLayout:
+def node_force_layout(fs: FormatSet, energy: bool = False, saturations: bool = False) -> data.StructLayout:
     """One node's result of the force pass.
 
     ``force`` ΣF [force_acc] and ``error_sum`` Σ|L − d| [error_acc], both saturated; ``inside``:
@@ -104,6 +133,8 @@ def node_force_layout(fs: FormatSet, energy: bool = False) -> data.StructLayout:
     squared: raw at twice its fraction bits) and ``barrier_energy`` Σc·h (raw [barrier_coeff]·[area],
     ``h ≥ 0``), each wide enough for ``max_degree`` terms
     (:attr:`golden_model.fixed.pipeline.NodeTerms.error_squares` / ``barrier_energies``).
+    With ``saturations``, ``saturations``: the node's saturation events (its entries' and its
+    sums'), up to :func:`force_saturations_max`.
     """
     fields = {"force": vector_layout(fs.force_acc), "error_sum": shape_of(fs.error_acc), "inside": unsigned(1)}
     if energy:
@@ -111,6 +142,8 @@ def node_force_layout(fs: FormatSet, energy: bool = False) -> data.StructLayout:
         coeff_bits = fs.barrier_coeff.width - int(fs.barrier_coeff.signed)  # c ≥ 0
         fields["error_squares"] = unsigned(2 * fs.rest_length.width + guard)
         fields["barrier_energy"] = unsigned(coeff_bits + fs.area.width - 1 + guard)  # h < 2**(area.width − 1)
+    if saturations:
+        fields["saturations"] = saturations_shape(force_saturations_max(fs))
     return data.StructLayout(fields)
 
 
@@ -124,14 +157,18 @@ def integrator_input_layout(fs: FormatSet, side: ShapeCastable | None = None) ->
     return data.StructLayout(fields)
 
 
-def integrator_output_layout(fs: FormatSet, side: ShapeCastable | None = None) -> data.StructLayout:
+def integrator_output_layout(fs: FormatSet, side: ShapeCastable | None = None,
+                             saturations: bool = False) -> data.StructLayout:
     """One node out of the integrate stage: new ``position`` [position], new ``velocity``
     [velocity] (damped), ``power`` F·V [power] of the input state; with ``side``, the input's
-    ``side`` field."""
+    ``side`` field; with ``saturations``, ``saturations``: the node's saturation events (up to
+    :data:`INTEGRATOR_EVENTS`)."""
     fields = {"position": vector_layout(fs.position), "velocity": vector_layout(fs.velocity),
               "power": shape_of(fs.power)}
     if side is not None:
         fields["side"] = side
+    if saturations:
+        fields["saturations"] = saturations_shape(sum(INTEGRATOR_EVENTS.values()))
     return data.StructLayout(fields)
 
 
