@@ -17,7 +17,7 @@ from golden_model.fixed import Format, FormatSet
 
 from .fixedpoint import clamp, shape_of, shift_round
 from .force_pass import format_set
-from .layouts import integrator_input_layout, integrator_output_layout
+from .layouts import INTEGRATOR_EVENTS, integrator_input_layout, integrator_output_layout
 from .pipeline import LiveValues, Pipeline, aligned_add, count_stages
 
 __all__ = ["Integrator"]
@@ -35,6 +35,12 @@ class Integrator(wiring.Component):
         An opaque field of this shape carried from ``i`` to ``o`` with the node (``None``: none);
         :class:`~hdl.node_update.NodeUpdate` carries the node's error sum this way instead of in
         a delay line of its own.
+    saturations : :class:`bool`
+        Also count each node's saturation events as the golden model's ``SaturationCounter``
+        counts them (``saturations`` of :func:`~hdl.layouts.integrator_output_layout`, up to
+        :data:`~hdl.layouts.INTEGRATOR_EVENTS`: 13). Every saturation stage's overflow bits
+        (those of the dynamics in use) are added into a running count that rides with the node;
+        no stage, no multiply more.
 
     Members
     -------
@@ -43,7 +49,8 @@ class Integrator(wiring.Component):
         ``F`` [force_acc] and ``inside`` (use ``w_b``). Always ready.
     o : ``Out(stream.Signature(integrator_output_layout(fs, side), always_ready=True))``
         One beat per node, in input order: new position, new (damped) velocity, the power ``F·V``
-        [power] of the input state. ``o.valid`` is a register; its consumer takes every beat.
+        [power] of the input state, with ``saturations`` the node's event count ``saturations``.
+        ``o.valid`` is a register; its consumer takes every beat.
     dt, half_dt_sq, damping : ``In(...)``
         ``Δt`` [dt], ``½Δt²`` [half_dt_sq], ``1 − γ`` [damping]; registered once per clock, hold
         them stable while a pass is in flight.
@@ -69,23 +76,24 @@ class Integrator(wiring.Component):
     first; one adder, rounding or saturation per stage.
     """
 
-    def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None):
+    def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None, saturations: bool = False):
         fs = format_set(fs, "Integrator")
         if fs.velocity.frac_bits != fs.position.frac_bits:
             raise ValueError(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
                              f"{fs.position.frac_bits} fraction bits")
         if side is not None:
             Shape.cast(side)  # a clear error now rather than at elaboration
-        self.fs, self.side = fs, side
-        super().__init__(self.signature_of(fs, side))
-        self.latency = _stage_count(fs, side)
+        self.fs, self.side, self.saturations = fs, side, bool(saturations)
+        super().__init__(self.signature_of(fs, side, self.saturations))
+        self.latency = _stage_count(fs, side, self.saturations)
 
     @staticmethod
-    def signature_of(fs: FormatSet, side: ShapeCastable | None = None) -> wiring.Signature:
+    def signature_of(fs: FormatSet, side: ShapeCastable | None = None, saturations: bool = False
+                     ) -> wiring.Signature:
         """The component's signature (also the throwaway build's stand-in ports)."""
         return wiring.Signature({
             "i": In(stream.Signature(integrator_input_layout(fs, side), always_ready=True)),
-            "o": Out(stream.Signature(integrator_output_layout(fs, side), always_ready=True)),
+            "o": Out(stream.Signature(integrator_output_layout(fs, side, saturations), always_ready=True)),
             "dt": In(shape_of(fs.dt)),
             "half_dt_sq": In(shape_of(fs.half_dt_sq)),
             "damping": In(shape_of(fs.damping)),
@@ -95,18 +103,18 @@ class Integrator(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        _build(m, self.fs, self.side, self, platform)
+        _build(m, self.fs, self.side, self.saturations, self, platform)
         return m
 
 
 @functools.cache
-def _stage_count(fs: FormatSet, side) -> int:
+def _stage_count(fs: FormatSet, side, saturations: bool) -> int:
     """The stages :func:`_build` builds (a throwaway build with stand-in ports)."""
-    ports = Integrator.signature_of(fs, side).create()
-    return count_stages(lambda m: _build(m, fs, side, ports, None))
+    ports = Integrator.signature_of(fs, side, saturations).create()
+    return count_stages(lambda m: _build(m, fs, side, saturations, ports, None))
 
 
-def _build(m: Module, fs: FormatSet, side, ports, platform) -> int:
+def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -> int:
     """The integrator's datapath into ``m`` (``ports``: the component's members); returns its stages."""
     rnd = fs.rounding
     # Constants, registered so that they reach the multipliers from registers.
@@ -121,10 +129,23 @@ def _build(m: Module, fs: FormatSet, side, ports, platform) -> int:
         """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""
         return shift_round(value, from_frac - fmt.frac_bits, rnd)
 
-    def saturated(value, fmt):
-        return clamp(value, fmt)[0]
-
     live = LiveValues()
+    # Saturation events: each saturation stage adds its overflow bits to the running count "ev"
+    # the node carries; a dynamics' bits count only while it is the one in use.
+    node_events = sum(INTEGRATOR_EVENTS.values())
+    counted = []  # how many bits were counted, checked against INTEGRATOR_EVENTS below
+
+    def events(*flags, paper=(), mom=()):
+        """``{"ev": the node's count + flags}`` for a stage (``{}`` without ``saturations``); the
+        ``paper`` flags count only in the paper's dynamics, the ``mom`` flags only in the momentum one."""
+        if not saturations:
+            return {}
+        counted.append(len(flags) + max(len(paper), len(mom)))
+        total = (sum(Value.cast(f) for f in flags) + sum(Value.cast(f) & ~momentum for f in paper)
+                 + sum(Value.cast(f) & momentum for f in mom))
+        if "ev" in live:
+            total = live["ev"] + total
+        return {"ev": Value.cast(total)[:node_events.bit_length()]}
     tail = Pipeline(m, ports.i.valid, land_operands=True, platform=platform)
     node = ports.i.payload
     # T1: the node as it arrives
@@ -141,9 +162,13 @@ def _build(m: Module, fs: FormatSet, side, ports, platform) -> int:
     a_frac = fs.force_acc.frac_bits + fs.inv_mass.frac_bits
     live.step(tail, "t3", drop=("pw_x", "pw_y"), a_x=rounded(live["a_x"], a_frac, fs.accel),
               a_y=rounded(live["a_y"], a_frac, fs.accel), pw=live["pw_x"] + live["pw_y"])
-    live.step(tail, "t4", a_x=saturated(live["a_x"], fs.accel), a_y=saturated(live["a_y"], fs.accel),
-              pw=rounded(live["pw"], fs.force_acc.frac_bits + fs.velocity.frac_bits, fs.power))
-    live["pw"] = saturated(live["pw"], fs.power)
+    a_x, a_y = clamp(live["a_x"], fs.accel), clamp(live["a_y"], fs.accel)
+    live.step(tail, "t4", a_x=a_x[0], a_y=a_y[0],
+              pw=rounded(live["pw"], fs.force_acc.frac_bits + fs.velocity.frac_bits, fs.power),
+              **events(a_x[1], a_y[1]))
+    power = clamp(live["pw"], fs.power)
+    live["pw"] = power[0]
+    live.update(events(power[1]))  # registered by t5's first stage, beside the power's saturation
     # Δt·V, ½Δt²·a, Δt·a
     live.multiply(tail, "t5",
                   dtv_x=(dt, live["v_x"]), dtv_y=(dt, live["v_y"]),
@@ -167,24 +192,33 @@ def _build(m: Module, fs: FormatSet, side, ports, platform) -> int:
             sums[f"step_{mode}_{k}"] = Value.cast(value) << shift if shift else value
         sums[f"kick_{k}"] = rounded(live[f"dta_{k}"], kick_frac, wide_v)
     live.step(tail, "t6", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta", "a") for k in "xy"), **sums)
+    kick = {k: clamp(live[f"kick_{k}"], wide_v) for k in "xy"}
     live.step(tail, "t7", **{f"step_{mode}_{k}": rounded(live[f"step_{mode}_{k}"], step_frac, wide_p)
                              for mode in ("paper", "mom") for k in "xy"},
-              **{f"kick_{k}": saturated(live[f"kick_{k}"], wide_v) for k in "xy"})
+              **{f"kick_{k}": kick[k][0] for k in "xy"}, **events(paper=(kick["x"][1], kick["y"][1])))
     # paper: the position step saturated to wide_p; momentum: V' = step saturated to velocity
+    # (the momentum step's V' = rq(β·V + a → velocity) is its velocity event, the paper's its position_step)
+    step_mom = {k: clamp(live[f"step_mom_{k}"], fs.velocity) for k in "xy"}
+    step_paper = {k: clamp(live[f"step_paper_{k}"], wide_p) for k in "xy"}
     live.step(tail, "t8", drop=tuple(f"{n}_{k}" for n in ("kick", "step_paper", "step_mom") for k in "xy"),
-              **{f"step_{k}": Mux(momentum, saturated(live[f"step_mom_{k}"], fs.velocity),
-                                  saturated(live[f"step_paper_{k}"], wide_p)) for k in "xy"},
-              **{f"v_{k}": live[f"v_{k}"] + live[f"kick_{k}"] for k in "xy"})
+              **{f"step_{k}": Mux(momentum, step_mom[k][0], step_paper[k][0]) for k in "xy"},
+              **{f"v_{k}": live[f"v_{k}"] + live[f"kick_{k}"] for k in "xy"},
+              **events(paper=(step_paper["x"][1], step_paper["y"][1]), mom=(step_mom["x"][1], step_mom["y"][1])))
+    velocity = {k: clamp(live[f"v_{k}"], fs.velocity) for k in "xy"}
     live.step(tail, "t9", drop=("step_x", "step_y"),
               **{f"p_{k}": live[f"p_{k}"] + live[f"step_{k}"] for k in "xy"},
-              **{f"v_{k}": Mux(momentum, live[f"step_{k}"], saturated(live[f"v_{k}"], fs.velocity)
-                               )[:fs.velocity.width].as_signed() for k in "xy"})
+              **{f"v_{k}": Mux(momentum, live[f"step_{k}"], velocity[k][0]
+                               )[:fs.velocity.width].as_signed() for k in "xy"},
+              **events(paper=(velocity["x"][1], velocity["y"][1])))
     # V'·(1 − γ) alongside the position's saturation, then V'' = rq(V'·(1 − γ) → velocity)
-    live.update({f"p_{k}": saturated(live[f"p_{k}"], fs.position) for k in "xy"})
+    position = {k: clamp(live[f"p_{k}"], fs.position) for k in "xy"}
+    live.update({f"p_{k}": position[k][0] for k in "xy"})
+    live.update(events(position["x"][1], position["y"][1]))
     live.multiply(tail, "t10", drop=("v_x", "v_y"), vk_x=(live["v_x"], damping), vk_y=(live["v_y"], damping))
     vk_frac = fs.velocity.frac_bits + fs.damping.frac_bits
     live.step(tail, "t11", **{f"vk_{k}": rounded(live[f"vk_{k}"], vk_frac, fs.velocity) for k in "xy"})
-    live.step(tail, "t12", **{f"vk_{k}": saturated(live[f"vk_{k}"], fs.velocity) for k in "xy"})
+    damped = {k: clamp(live[f"vk_{k}"], fs.velocity) for k in "xy"}
+    live.step(tail, "t12", **{f"vk_{k}": damped[k][0] for k in "xy"}, **events(damped["x"][1], damped["y"][1]))
 
     out = ports.o.payload
     m.d.comb += [ports.o.valid.eq(tail.valid),
@@ -192,6 +226,9 @@ def _build(m: Module, fs: FormatSet, side, ports, platform) -> int:
                  out.velocity.x.eq(live["vk_x"]), out.velocity.y.eq(live["vk_y"]), out.power.eq(live["pw"])]
     if side is not None:
         m.d.comb += Value.cast(out.side).eq(live["side"])
+    if saturations:
+        assert sum(counted) == node_events, (counted, INTEGRATOR_EVENTS)
+        m.d.comb += out.saturations.eq(live["ev"])
 
     # nodes in flight (at most one per stage)
     in_flight = Signal(range(tail.stages + 2), name="nodes_in_flight")

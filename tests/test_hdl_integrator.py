@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from amaranth.hdl import UnusedElaboratable, unsigned
 
-from golden_model.fixed import FormatSet
+from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.pipeline import NodeConstants, integrate, integrate_momentum, node_power
 from hdl import Integrator, NodeUpdate
 from sim.payloads import pack_beats, unpack_beats
@@ -121,4 +121,108 @@ def test_refuses_what_it_cannot_build():
             Integrator(None)
         with pytest.raises(ValueError, match="fraction bits"):
             Integrator(FormatSet.preset("narrow").replace(velocity="s3.16"))
+        gc.collect()
+
+
+# ---------------------------------------------------------------- saturation events
+
+def saturating_nodes(fs, n, seed):
+    """Nodes that saturate every signal the formats let saturate: positions, velocities and forces
+    over their formats' whole ranges, weights over the whole [inv_mass] range."""
+    rng = np.random.default_rng(seed)
+
+    def raw(fmt, size):
+        return rng.integers(fmt.raw_min, fmt.raw_max + 1, size=size)
+
+    nodes = {"position": raw(fs.position, (n, 2)), "velocity": raw(fs.velocity, (n, 2)),
+             "force": raw(fs.force_acc, (n, 2)), "inv_mass": raw(fs.inv_mass, n),
+             "inv_mass_barrier": raw(fs.inv_mass, n), "inside": rng.random(n) < 0.5}
+    nodes["position"][: n // 4] //= 1 << 8  # some nodes far from the position range's ends
+    return nodes
+
+
+def golden_events(fs, nodes, constants, momentum):
+    """``(SaturationCounter, per-node totals)`` of the golden model on ``nodes``."""
+    weights = np.where(nodes["inside"], nodes["inv_mass_barrier"], nodes["inv_mass"])
+
+    def count(rows):
+        counter = SaturationCounter()
+        p, v, f, w = (a[rows] for a in (nodes["position"], nodes["velocity"], nodes["force"], weights))
+        if momentum:
+            integrate_momentum(fs, p, v, f, w, constants.dt, counter)
+        else:
+            integrate(fs, p, v, f, w, constants, counter)
+        node_power(fs, f, v, counter)
+        return counter
+
+    n = len(weights)
+    return count(slice(None)), np.array([count(slice(i, i + 1)).total for i in range(n)])
+
+
+def integrator_saturations(fs, nodes, constants, momentum):
+    """The RTL's per-node ``saturations`` (a unit with ``saturations=True``, checked bit-exact first)."""
+    dut = Integrator(fs, side=SIDE, saturations=True)
+    n = len(nodes["inside"])
+    run = check_integrator(dut, fs, dict(nodes, side=np.arange(n)), constants, momentum=momentum,
+                           seed=12, p_valid=0.8)
+    return unpack_beats(dut.o.payload.shape(), run.outputs)["saturations"]
+
+
+#: Formats whose steps and power can leave their ranges (the presets' cannot: |Δt·V + ½Δt²·a| < 16,
+#: |Δt·a| < 16, |F·V| < 256), with an accel too wide to saturate instead.
+TIGHT = dict(position="s3.22", velocity="s5.22", accel="s8.22", power="s3.24")
+#: The events each case's saturating nodes raise (paper, momentum): every name somewhere.
+REACHABLE = {
+    "default": ({"accel", "position", "velocity", "damping"}, {"accel", "position", "velocity"}),
+    "narrow": ({"accel", "position", "velocity", "damping"}, {"accel", "position", "velocity"}),
+    "tight": ({"position_step", "position", "velocity_step", "velocity", "damping", "power"},
+              {"position", "velocity", "power"}),
+}
+
+
+@pytest.mark.parametrize("case", REACHABLE)
+@pytest.mark.parametrize("momentum", [False, True])
+def test_saturations_count_every_golden_event(case, momentum):
+    """Each node's ``saturations`` is the number of events the golden model counts for it
+    (``integrate`` or ``integrate_momentum``, and ``node_power``); over the pass they sum to
+    ``SaturationCounter().total``."""
+    fs = FormatSet.preset("default").replace(**TIGHT) if case == "tight" else FormatSet.preset(case)
+    nodes = saturating_nodes(fs, 400, seed=20 + momentum)
+    if momentum:  # β up to 1
+        constants = NodeConstants(fs.dt.raw_max, 0, 0, 1 << fs.damping.frac_bits)
+    else:  # the largest step, and 1 − γ above 1 so that the damping saturates too
+        constants = NodeConstants(fs.dt.raw_max, fs.half_dt_sq.raw_max, 0, fs.damping.raw_max)
+    counter, per_node = golden_events(fs, nodes, constants, momentum)
+    assert per_node.sum() == counter.total
+    got = integrator_saturations(fs, nodes, constants, momentum)
+    bad = np.flatnonzero(got != per_node)
+    assert bad.size == 0, f"{bad.size} nodes miscounted; first {int(bad[0])}: rtl {int(got[bad[0]])} golden " \
+                          f"{int(per_node[bad[0]])}"
+    assert int(got.sum()) == counter.total
+    reachable = REACHABLE[case][momentum]
+    assert reachable <= set(counter.saturations), reachable - set(counter.saturations)
+
+
+@pytest.mark.parametrize("momentum", [False, True])
+def test_saturations_zero_without_events(momentum):
+    fs = FormatSet.preset("default")
+    nodes = random_nodes(fs, 150, seed=22)
+    nodes["force"] //= 4
+    constants = random_constants(fs, 23)
+    if momentum:
+        constants = NodeConstants(int(0.5 * (1 << fs.dt.frac_bits)), 0, 0, 1 << fs.damping.frac_bits)
+    counter, _ = golden_events(fs, nodes, constants, momentum)
+    assert counter.total == 0
+    assert not integrator_saturations(fs, nodes, constants, momentum).any()
+
+
+def test_saturations_leave_the_default_build_alone():
+    """``saturations=False`` (the default) has the layout and stages it had; the count is 4 bits (13 events)."""
+    with warnings.catch_warnings():  # built for their attributes only, never elaborated
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        plain, counting = Integrator("default", side=SIDE), Integrator("default", side=SIDE, saturations=True)
+        assert "saturations" not in dict(plain.o.payload.shape())
+        assert counting.o.payload.saturations.shape() == unsigned(4)
+        assert counting.latency == plain.latency == LATENCY["default"]
+        del plain, counting
         gc.collect()
