@@ -62,8 +62,10 @@ def cmd_flatten(args: argparse.Namespace) -> int:
 
         def engine(*run_args, **kw):
             return flatten_fixed(*run_args, fs=formats, **kw)
+    elif args.engine == "rtl":
+        engine = _rtl_engine(load_format_set(args.formats or "default"))
     elif args.formats is not None:
-        raise UserError("--formats applies to --engine fixed")
+        raise UserError("--formats applies to --engine fixed and --engine rtl")
     else:
         engine = flatten
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
@@ -80,13 +82,53 @@ def cmd_flatten(args: argparse.Namespace) -> int:
               f"E_S {result.initial.area_error:.4f} -> {final.area_error:.4f}, "
               f"E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
               f"folded {final.folded} (flipped against P0: {final.flipped})"
-              + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed" else ""))
+              + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed" else "")
+              + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
+                 if "simulator" in result.extra else ""))
         print(_what_was_used(params, args.init, result), file=sys.stderr)
     if result.status == "diverged":
         print(f"springflat: the run diverged at iteration {result.iterations + 1} "
               "(try --damping 0.05 or a smaller --dt); outputs hold the last finite state", file=sys.stderr)
         return EXIT_DIVERGED
     return 0
+
+
+def _rtl_engine(formats):
+    """``--engine rtl``: the whole flattening through SpringflatEngine on Verilator (``sim.engine_run``),
+    with the engine's default capacity (``SPRINGFLAT_ENGINE_CAPACITY=V,E,T`` overrides it: the tests use a
+    small engine); a mesh over capacity is a one-line error."""
+    import contextlib
+    import os
+
+    from golden_model.fixed.engine import check_fixed_params, prepare
+    from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
+
+    capacity = DEFAULT_CAPACITY
+    if os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
+        try:
+            capacity = EngineCapacity(*(int(v) for v in os.environ["SPRINGFLAT_ENGINE_CAPACITY"].split(",")))
+        except (TypeError, ValueError) as exc:
+            raise UserError(f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
+
+    from .cocotb_support import SimulatorError
+    from .engine_run import EngineRunError, flatten_on_rtl
+
+    def engine(mesh, positions, params, on_iteration=None):
+        import tempfile
+
+        check_fixed_params(params, formats)
+        problem = prepare(mesh, positions, params, formats)
+        print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
+              f"{capacity.entries}/{capacity.triangles} (cached) and running the flattening ...", file=sys.stderr)
+        with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
+            try:  # the simulator's own output goes to a log: stdout is for the result
+                with contextlib.redirect_stdout(sys.stderr):
+                    return flatten_on_rtl(problem, capacity, "verilator", work=Path(tmp) / "run",
+                                          log_file=Path(tmp) / "simulation.log")
+            except (SimulatorError, EngineRunError) as exc:
+                raise UserError(str(exc)) from None
+
+    return engine
 
 
 def _what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> str:
@@ -177,8 +219,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
     add_run_options(p)
-    p.add_argument("--engine", choices=("float", "fixed"), default="float",
-                   help="float reference (default) or the bit-exact fixed-point golden model")
+    p.add_argument("--engine", choices=("float", "fixed", "rtl"), default="float",
+                   help="float reference (default), the bit-exact fixed-point golden model, or rtl: the whole "
+                        "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)")
     p.add_argument("--formats", default=None, metavar="PRESET|FILE",
                    help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
     p.add_argument("--out", type=Path, help="flattened layout: .obj (z = 0, same faces) or .svg")

@@ -29,9 +29,11 @@ __all__ = ["ENGINE_TOP", "VERILATOR_SPEED_FLAGS", "EngineRun", "engine_sources",
 
 ENGINE_TOP = "springflat_engine"
 
-#: Verilator flags for a whole run: no X randomisation code, and the C++ at -O3 (the default
-#: flags already have -O2 for Verilator's own optimisation).
-VERILATOR_SPEED_FLAGS = ("--x-assign", "fast", "--x-initial", "fast", "-CFLAGS", "-O3")
+#: Verilator flags for a whole run. cocotb's runner makes every internal signal public
+#: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and
+#: no optimisation across them; the bench touches only the top's ports, so only those are public.
+#: No X randomisation code either.
+VERILATOR_SPEED_FLAGS = ("--no-public-flat-rw", "--public-depth", "1", "--x-assign", "fast", "--x-initial", "fast")
 
 #: Icarus in Verilog-2005 mode (after the runner's -g2012: the last generation flag wins). Yosys's
 #: Verilog starts each `always @*` block with a dummy read of a `reg ... = 0` so that the block runs

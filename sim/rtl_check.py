@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import shutil
 import sys
 import tempfile
@@ -29,7 +30,16 @@ def add_parser(sub, add_run_options) -> None:
                                    "against the golden model and compared with the float reference.")
     add_run_options(p)
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
-    p.add_argument("--sim", choices=SIMULATORS, default="verilator", help="simulator (default verilator)")
+    p.add_argument("--sim", "--simulator", dest="sim", choices=SIMULATORS, default="verilator",
+                   help="simulator (default verilator)")
+    p.add_argument("--engine-top", action="store_true",
+                   help="run the whole flattening through SpringflatEngine (springflat_engine.v, driven over "
+                        "its Wishbone bus) and compare it bit for bit with the golden model's run_image")
+    p.add_argument("--capacity", type=int, nargs=3, default=None, metavar=("V", "E", "T"),
+                   help="with --engine-top: the engine's vertices, neighbour entries and triangles "
+                        "(default: DEFAULT_CAPACITY)")
+    p.add_argument("--wait-states", type=int, default=0, metavar="N",
+                   help="with --engine-top: up to N random idle clocks before each bus cycle (default 0)")
     p.add_argument("--iterations", type=int, default=None, metavar="N", help="stop after at most N iterations")
     p.add_argument("--waves", type=Path, default=None, metavar="PATH", help="write the waveform (FST/VCD) here")
     p.add_argument("--stall", type=float, default=0.0, metavar="P",
@@ -46,6 +56,10 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
     args.init = args.init or default_init(args.mesh)
+    if args.engine_top:
+        return cmd_rtl_check_engine(args, mesh, params)
+    if args.capacity is not None or args.wait_states:
+        raise UserError("--capacity and --wait-states apply to --engine-top")
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     if not 0 <= args.stall < 1:
@@ -90,3 +104,66 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     for line in result.get("first_mismatches", []):
         print(f"springflat: mismatch: {line}", file=sys.stderr)
     return 0 if result["mismatches"] == 0 and run.failed == 0 else 1
+
+
+def engine_capacity(args: argparse.Namespace):
+    """``--capacity V E T`` as an :class:`EngineCapacity` (one-line error), else the default."""
+    from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
+
+    from .run_options import UserError
+
+    if args.capacity is None:
+        return DEFAULT_CAPACITY
+    try:
+        return EngineCapacity(*args.capacity)
+    except ValueError as exc:
+        raise UserError(f"--capacity: {exc}") from None
+
+
+def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
+    """The whole flattening through ``springflat_engine``: exit 0 when bit-exact, 1 (one line) if not."""
+    from golden_model.fixed.engine_image import build_image
+
+    from .engine_run import run_image_on_rtl, summary_line
+    from .run_options import UserError, load_format_set, strict_json
+
+    if args.stall:
+        raise UserError("--stall applies to the datapath bench; with --engine-top use --wait-states")
+    if args.wait_states < 0:
+        raise UserError(f"--wait-states must be >= 0, got {args.wait_states}")
+    if args.iterations is not None:
+        if args.iterations < 1:
+            raise UserError(f"--iterations must be >= 1, got {args.iterations}")
+        params = dataclasses.replace(params, max_iter=min(params.max_iter, args.iterations))
+    formats = load_format_set(args.formats)
+    capacity = engine_capacity(args)
+    check_fixed_params(params, formats)
+    problem = prepare(mesh, initial_layout(mesh, args.init), params, formats)
+    image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity
+    print(f"springflat: {args.sim}: exporting and building springflat_engine for capacity {capacity.vertices}/"
+          f"{capacity.entries}/{capacity.triangles} (cached) and running the whole flattening ...", file=sys.stderr)
+    with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
+        log = Path(tmp) / "simulation.log"
+        try:
+            with contextlib.redirect_stdout(sys.stderr):
+                run = run_image_on_rtl(image, formats, args.sim, wait_states=args.wait_states,
+                                       work=Path(tmp) / "run", log_file=log, waves=args.waves is not None)
+        except SimulatorError as exc:
+            raise UserError(str(exc)) from None
+        if not run.result or "status" not in run.result:
+            tail = log.read_text(errors="replace").splitlines()[-5:] if log.exists() else []
+            raise UserError(f"the {args.sim} simulation of the engine produced no result: {' / '.join(tail)}")
+        if args.waves is not None and run.waves is not None:
+            shutil.copyfile(run.waves, args.waves)
+    summary = {"mesh": mesh.name, "simulator": args.sim, "formats": formats.name, "top": "springflat_engine",
+               "capacity": list(args.capacity or (capacity.vertices, capacity.entries, capacity.triangles)),
+               "vertices": mesh.n_vertices, **run.result, "wall_seconds": run.wall_seconds}
+    if args.json:
+        print(strict_json(summary))
+    else:
+        print(summary_line(mesh.name, args.sim, run))
+    if not run.passed:
+        first = run.result.get("first_mismatches") or ["the bench failed (see the simulator log)"]
+        print(f"springflat: mismatch: {first[0]} ({run.mismatches} in all)", file=sys.stderr)
+        return 1
+    return 0

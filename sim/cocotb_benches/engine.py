@@ -251,8 +251,13 @@ async def engine_run(dut):
         np.savez(work / "readback.npz", positions=readback.positions, velocities=readback.velocities)
 
     started = time.perf_counter()
-    await bridge(host)()
-    result.update({"mismatches": len(problems), "first_mismatches": problems[:10],
-                   "bench_seconds": time.perf_counter() - started})
-    write_result(result)
+    try:
+        await bridge(host)()
+    except Exception as exc:  # a refusal or bus error where none was expected: reported, then raised
+        problems.append(f"the host stopped: {type(exc).__name__}: {exc}")
+        raise
+    finally:
+        result.update({"mismatches": len(problems), "first_mismatches": problems[:10],
+                       "bench_seconds": time.perf_counter() - started})
+        write_result(result)
     assert not problems, f"{len(problems)} mismatches; first: {problems[0]}"
