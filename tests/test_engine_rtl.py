@@ -1,0 +1,153 @@
+"""Whole flattenings through the exported ``springflat_engine`` on Icarus and Verilator (cocotb), driven by
+the host driver over Wishbone, bit-exact with ``run_image``; the refusals; ``rtl-check --engine-top`` and
+``flatten --engine rtl``.
+
+Icarus simulates this design at a few hundred clocks per second, so its cases are a 16-vertex dome and
+a few iterations; Verilator takes the three dynamics modes. Every case shares one capacity (one build
+per simulator).
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import prepare
+from golden_model.fixed.engine_image import EngineCapacity, build_image, run_image
+from golden_model.generate import dome_grid
+from golden_model.layouts import initial_layout
+from golden_model.reference import FlattenParams
+from sim.cocotb_support import missing_simulator
+from sim.engine_run import icarus_verilog, run_image_on_rtl
+
+pytestmark = pytest.mark.slow  # simulator builds (Verilator: minutes, cached)
+
+DEFAULT = FormatSet.preset("default")
+CAPACITY = EngineCapacity(64, 512, 128)
+SPRINGFLAT = str(Path(sys.executable).parent / "springflat")
+
+MODES = {
+    "paper-variable": dict(density="auto", tol_area=0.0, tol_shape=0.0),
+    "paper-fixed-barrier": dict(density="auto", step="fixed", dt=0.02, damping=0.05, barrier=True,
+                                tol_area=0.0, tol_shape=0.0),
+    "momentum": dict(density="auto", dynamics="momentum", barrier=True, tol_area=0.0, tol_shape=0.0),
+}
+
+
+def need(simulator):
+    reason = missing_simulator(simulator)
+    if reason:
+        if os.environ.get("SPRINGFLAT_ALLOW_MISSING_SIMULATOR"):
+            pytest.skip(reason)
+        pytest.fail(reason)
+
+
+def dome_image(mode: str, max_iter: int):
+    mesh = dome_grid(4)
+    params = FlattenParams(**MODES[mode], max_iter=max_iter)
+    return build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, DEFAULT), CAPACITY)
+
+
+@pytest.mark.parametrize("simulator, mode", [("verilator", m) for m in MODES] + [("icarus", "paper-variable")])
+def test_whole_run_bit_exact(simulator, mode):
+    """Every iteration's state (runs with N_max = 1, 2, read back) and a whole run: positions, velocities,
+    status, iterations, E_S, E_C, energy and saturations equal run_image's; random bus wait states."""
+    need(simulator)
+    max_iter = 3 if simulator == "icarus" else 6
+    image = dome_image(mode, max_iter)
+    run = run_image_on_rtl(image, DEFAULT, simulator, wait_states=3, seed=7, checks={"iteration_checks": 2})
+    r = run.result
+    assert run.passed, r.get("first_mismatches", r)
+    want = run_image(image, DEFAULT)
+    # the bench's own comparison aside: the read-back itself, against the golden model here
+    assert np.array_equal(run.positions, want.positions) and np.array_equal(run.velocities, want.velocities)
+    assert (r["status"], r["iterations"], r["area_error"], r["shape_error"], r["energy"]) == (
+        want.status, want.iterations, want.area_error, want.shape_error, want.energy)
+    assert r["iterations"] == max_iter  # tolerances 0: the run goes to N_max
+    assert r["cycles"] > max_iter * (image.constants["entries"] + image.constants["triangles"])
+    assert 0 <= r["python_share"] < 1 and r["cycles_per_second"] > 0
+
+
+@pytest.mark.parametrize("simulator", ["verilator", "icarus"])
+def test_reset_mid_run_and_refusals(simulator):
+    """START with nothing loaded (the driver refuses; the hardware answers no-mesh), an unmapped read and a
+    memory read while running (bus error), rst in the middle of a run (the engine idles, the run
+    constants cleared), then a clean rerun that matches run_image bit for bit."""
+    need(simulator)
+    image = dome_image("paper-variable", 2)
+    checks = {"no_mesh_check": True, "unmapped_check": True, "busy_check": True, "reset_after": 150}
+    run = run_image_on_rtl(image, DEFAULT, simulator, wait_states=1, seed=3, checks=checks)
+    r = run.result
+    assert run.passed, r.get("first_mismatches", r)
+    c = r["checks"]
+    assert c["driver_start_without_mesh"] == "no mesh loaded: call load(image) before start()"
+    assert c["hardware_start_without_mesh"] == "no-mesh"
+    assert c["unmapped_read"].startswith("bus error: read at word") and c["unmapped_read"].endswith("answered err")
+    assert c["memory_read_while_running"].startswith("bus error: read at word 0x")
+    assert (c["running_before_reset"], c["state_after_reset"], c["vertices_after_reset"]) == ("running", "idle", 0)
+    assert r["iterations"] == 2 and r["status"] == "max-iterations"
+
+
+def test_a_broken_expectation_fails():
+    """The bench can fail: one wrong golden bit is reported as a mismatch naming the node and field."""
+    need("verilator")
+    run = run_image_on_rtl(dome_image("paper-variable", 2), DEFAULT, "verilator",
+                           checks={"broken_expectation": True})
+    assert not run.passed and run.mismatches == 1
+    assert run.result["first_mismatches"][0].startswith("whole run: node 8 position.y: rtl ")
+
+
+def test_icarus_source_rewrites_only_constant_blocks():
+    """The Icarus copy turns each input-less constant `always @*` block into `initial`, nothing else."""
+    text = ("  always @*\n    rd_status[7] = 1'h0;\n"
+            "  always @* begin\n    if (\\$auto$x ) begin end\n    y = 2'h1;\n  end\n"
+            "  always @*\n    z = a;\n")
+    out = icarus_verilog(text)
+    assert out == text.replace("always @*\n    rd_status[7]", "initial\n    rd_status[7]")
+
+
+def test_rtl_check_engine_top_cli(tmp_path):
+    """rtl-check --engine-top: one JSON object, bit-exact, with the speed numbers; exit 0."""
+    need("verilator")
+    proc = subprocess.run([SPRINGFLAT, "rtl-check", "surf1", "--engine-top", "--capacity", "64", "512", "128",
+                           "--iterations", "4", "--wait-states", "2", "--json"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    r = json.loads(proc.stdout)
+    assert (r["mismatches"], r["top"], r["simulator"], r["iterations"]) == (0, "springflat_engine", "verilator", 4)
+    for key in ("cycles", "cycles_per_iteration", "cycles_per_second", "python_share", "status", "area_error"):
+        assert key in r
+
+
+@pytest.mark.parametrize("command", [["rtl-check", "surf2", "--engine-top"], ["flatten", "surf2", "--engine", "rtl"]])
+def test_a_mesh_over_capacity_is_refused_in_one_line(command, tmp_path):
+    """Refused before anything is built: exit 2 and one line naming the count and the capacity."""
+    extra = ["--capacity", "8", "64", "32"] if command[0] == "rtl-check" else []
+    env = {**os.environ, "SPRINGFLAT_ENGINE_CAPACITY": "8,64,32"}
+    proc = subprocess.run([SPRINGFLAT, *command, *extra], capture_output=True, text=True, cwd=tmp_path, env=env,
+                          timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0] == ("springflat: error: the mesh has 15 vertices; the engine holds at most 8 "
+                                            "(capacity vertices=8, entries=64, triangles=32)")
+
+
+def test_flatten_engine_rtl_writes_the_fixed_engines_layout(tmp_path):
+    """flatten --engine rtl writes the layout flatten --engine fixed writes, bit for bit."""
+    need("verilator")
+    env = {**os.environ, "SPRINGFLAT_ENGINE_CAPACITY": "64,512,128"}
+    outs = {}
+    for engine in ("rtl", "fixed"):
+        proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", engine, "--max-iter", "5",
+                               "--out", f"{engine}.obj", "--json"], capture_output=True, text=True, cwd=tmp_path,
+                              env=env, timeout=1200)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        outs[engine] = json.loads(proc.stdout)
+    assert (tmp_path / "rtl.obj").read_text() == (tmp_path / "fixed.obj").read_text()
+    assert outs["rtl"]["iterations"] == outs["fixed"]["iterations"] == 5
+    assert outs["rtl"]["status"] == outs["fixed"]["status"]
