@@ -12,6 +12,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet, dt_constant, exp_table, lut_slope_bits, shift_round as gm_shift_round
 
 from .fixedpoint import saturate, shift_round
+from .layouts import STEP_EVENTS, saturations_shape
 from .pipeline import Pipeline, reduce_levels
 
 __all__ = ["StepGenerator"]
@@ -31,6 +32,11 @@ class StepGenerator(wiring.Component):
     ----------
     fs : :class:`~golden_model.fixed.FormatSet`
         Source of every format, table and knob.
+    saturations : :class:`bool`
+        Also count each step's saturation events as the golden model's ``SaturationCounter``
+        counts them in ``step_size`` (the output field ``saturations``, up to
+        :data:`~hdl.layouts.STEP_EVENTS`: ``lut_input`` per lane, ``dt`` twice, ``half_dt_sq``).
+        The overflow bits are added into a running count that rides with the step; no stage more.
 
     Attributes
     ----------
@@ -46,7 +52,7 @@ class StepGenerator(wiring.Component):
         (raw, ``fs.error``: u0.20 in the default preset).
     o : :py:`Out(stream.Signature(output_layout))`
         :class:`~amaranth.lib.data.StructLayout` payload: ``dt`` (raw ``fs.dt``) and
-        ``half_dt_sq`` (raw ``fs.half_dt_sq``).
+        ``half_dt_sq`` (raw ``fs.half_dt_sq``); with ``saturations``, ``saturations`` (3 bits).
 
     Pipeline (all stages advance together when the output register is empty or being read,
     ``advance = ~o.valid | o.ready``; ``i.ready = advance``). The two lookup lanes are identical
@@ -76,14 +82,15 @@ class StepGenerator(wiring.Component):
     ================  ============================================================================
     """
 
-    def __init__(self, fs):
+    def __init__(self, fs, *, saturations: bool = False):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"StepGenerator needs a FormatSet, not {fs!r}")
         self._fs = fs
+        self.saturations = bool(saturations)
         self.latency = self.latency_of(fs)
         super().__init__({
             "i": In(stream.Signature(self.input_layout(fs))),
-            "o": Out(stream.Signature(self.output_layout(fs))),
+            "o": Out(stream.Signature(self.output_layout(fs, self.saturations))),
         })
 
     @staticmethod
@@ -95,12 +102,16 @@ class StepGenerator(wiring.Component):
         })
 
     @staticmethod
-    def output_layout(fs):
-        """Payload layout of ``o``: ``dt``, ``half_dt_sq`` (raw ``fs.dt``, ``fs.half_dt_sq``)."""
-        return data.StructLayout({
+    def output_layout(fs, saturations: bool = False):
+        """Payload layout of ``o``: ``dt``, ``half_dt_sq`` (raw ``fs.dt``, ``fs.half_dt_sq``); with
+        ``saturations``, the step's event count ``saturations`` (up to :data:`~hdl.layouts.STEP_EVENTS`)."""
+        fields = {
             "dt": unsigned(fs.dt.width),
             "half_dt_sq": unsigned(fs.half_dt_sq.width),
-        })
+        }
+        if saturations:
+            fields["saturations"] = saturations_shape(sum(STEP_EVENTS.values()))
+        return data.StructLayout(fields)
 
     @staticmethod
     def latency_of(fs):
@@ -168,7 +179,24 @@ class StepGenerator(wiring.Component):
             self.i.ready.eq(advance),
         ]
         pipe = Pipeline(m, self.i.valid, advance=advance, platform=platform)
-        stage, reg = pipe.stage, pipe.reg
+        reg = pipe.reg
+
+        # Saturation events: a running count that rides with the step, registered in every stage;
+        # each saturation adds its overflow bit.
+        event_bits = sum(STEP_EVENTS.values()).bit_length()
+        events = {"count": None, "counted": 0}
+
+        def stage(name):
+            pipe.stage(name)
+            if events["count"] is not None:
+                events["count"] = reg(events["count"], event_bits, f"{name}_saturations")
+
+        def count(*flags):
+            """Add ``flags`` to the count as the current stage registers it (nothing without ``saturations``)."""
+            if self.saturations:
+                events["counted"] += len(flags)
+                total = sum(Value.cast(flag) for flag in flags)
+                events["count"] = total if events["count"] is None else events["count"] + total
 
         # --- lut: one ROM, one synchronous read port per lane
         layout, rows = self._rom_rows()
@@ -177,8 +205,10 @@ class StepGenerator(wiring.Component):
         error, ports = {}, {}
         for lane in lanes:
             error[lane] = e = self.i.payload[lane]
+            above_one = e > self._error_max
             if self._error_max < fs.error.raw_max:  # u1.F: values above 1.0 clamp to 1.0
-                error[lane] = e = Mux(e > self._error_max, self._error_max, e)
+                error[lane] = e = Mux(above_one, self._error_max, e)
+            count(above_one)  # a constant 0 for u0.F (there is no more than 1.0)
             if self._interpolating:
                 addr = e >> r
             elif r:
@@ -200,6 +230,8 @@ class StepGenerator(wiring.Component):
             def carry_base(stage_name):
                 for lane in lanes:
                     value[lane] = reg(value[lane], fs.lut_entry.width, f"{stage_name}_{lane}_base")
+                if events["count"] is not None:
+                    events["count"] = reg(events["count"], event_bits, f"{stage_name}_saturations")
 
             product = pipe.multiply({lane: (row[lane].slope, frac[lane]) for lane in lanes}, "mul", carry_base)
             stage("interp_round")
@@ -219,17 +251,23 @@ class StepGenerator(wiring.Component):
         stage("dt_round")
         v_rounded = shift_round(v_sum, fs.lut_entry.frac_bits - fs.dt.frac_bits, fs.rounding)
         v_dt = reg(v_rounded, len(v_rounded), "dt_round_v")
+        v_dt, dt_over = saturate(v_dt, fs.dt)
+        count(dt_over)
         stage("dt_sat")
-        v_dt = reg(saturate(v_dt, fs.dt)[0], fs.dt.width, "dt_sat_v")
+        v_dt = reg(v_dt, fs.dt.width, "dt_sat_v")
         stage("dt_add")
         v_dt = reg(v_dt + dt_constant(fs.dt), fs.dt.width + 1, "dt_add_v")
+        dt, dt_over = saturate(v_dt, fs.dt)
+        count(dt_over)
         stage("dt")
-        dt = reg(saturate(v_dt, fs.dt)[0], fs.dt.width, "dt")
+        dt = reg(dt, fs.dt.width, "dt")
 
         # --- dt * dt in a DSP block: operand registered, then the product (two stages)
         def carry_dt(stage_name):
             nonlocal dt
             dt = reg(dt, fs.dt.width, f"{stage_name}_dt")
+            if events["count"] is not None:
+                events["count"] = reg(events["count"], event_bits, f"{stage_name}_saturations")
 
         dt_sq = pipe.multiply({"dt_sq": (dt, dt)}, "sq", carry_dt)["dt_sq"]
 
@@ -240,12 +278,16 @@ class StepGenerator(wiring.Component):
         dt = reg(dt, fs.dt.width, "half_dt")
 
         # --- o: half_dt_sq saturated, into the output register
-        half, _ = saturate(half_rounded, fs.half_dt_sq)
+        half, half_over = saturate(half_rounded, fs.half_dt_sq)
+        count(half_over)
         with m.If(advance):
             m.d.sync += [
                 self.o.valid.eq(pipe.valid),
                 self.o.payload.dt.eq(dt),
                 self.o.payload.half_dt_sq.eq(half),
             ]
+            if self.saturations:
+                assert events["counted"] == sum(STEP_EVENTS.values()), (events["counted"], STEP_EVENTS)
+                m.d.sync += self.o.payload.saturations.eq(events["count"])
         assert pipe.stages + 1 == self.latency, (pipe.stages + 1, self.latency)
         return m

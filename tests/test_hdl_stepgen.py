@@ -38,9 +38,9 @@ import warnings
 import numpy as np
 import pytest
 from amaranth.back import verilog
-from amaranth.hdl import UnusedElaboratable
+from amaranth.hdl import UnusedElaboratable, unsigned
 
-from golden_model.fixed import FormatSet, dt_constant, exp_lut, exp_table, step_size
+from golden_model.fixed import FormatSet, SaturationCounter, dt_constant, exp_lut, exp_table, step_size
 from hdl import StepGenerator
 from sim.payloads import pack_beats, unpack_beats
 from sim.stream_helpers import run_streams, run_testbenches, stream_get, stream_put
@@ -287,3 +287,66 @@ def test_converts_to_verilog(preset, monkeypatch):
     for name, decl in ports.items():
         assert any(line.strip().startswith(decl) and line.strip().endswith(f" {name};")
                    for line in text.splitlines()), f"port {name} ({decl}) missing"
+
+
+# ---------------------------------------------------------------- saturation events
+
+def step_saturations(fs, area, shape):
+    """The RTL's per-step ``saturations`` (a unit with ``saturations=True``, checked bit-exact first)."""
+    dut = StepGenerator(fs, saturations=True)
+    run = check_step(dut, area, shape, seed=13, p_valid=0.8, p_ready=0.7)
+    return unpack_beats(dut.o.payload.shape(), run.outputs)["saturations"]
+
+
+def golden_step_events(fs, area, shape):
+    """``(SaturationCounter, per-step totals)`` of ``step_size``."""
+    counter = SaturationCounter()
+    step_size(area, shape, fs, counter)
+    per_step = []
+    for a, b in zip(area, shape):
+        one = SaturationCounter()
+        step_size(np.array([a]), np.array([b]), fs, one)
+        per_step.append(one.total)
+    return counter, np.array(per_step)
+
+
+@pytest.mark.parametrize("variant", ["u1_error_clamps", "u1_error_nearest_entry"])
+def test_saturations_count_every_golden_event(variant):
+    """A ``u1.F`` error above 1.0 is clamped (``lut_input``, per lane): each step's ``saturations``
+    is the number of events ``step_size`` counts for it, and they sum to its counter's total. (The
+    other events, ``dt`` and ``half_dt_sq``, no format set can raise: ``dt ≤ C + 0.2 < 0.5``.)"""
+    knobs = dict(VARIANTS["u1_error_clamps"], **({"lut_interpolate": False} if "nearest" in variant else {}))
+    fs = FormatSet.preset("default").replace(**knobs)
+    rng = np.random.default_rng(14)
+    top, one = fs.error.raw_max, 1 << fs.error.frac_bits
+    corners = np.array([0, one - 1, one, one + 1, top])
+    ca, cb = (g.ravel() for g in np.meshgrid(corners, corners))
+    area = np.concatenate([ca, rng.integers(0, top + 1, 600)])
+    shape = np.concatenate([cb, rng.integers(0, top + 1, 600)])
+    counter, per_step = golden_step_events(fs, area, shape)
+    assert set(counter.saturations) == {"lut_input"} and per_step.max() == 2
+    got = step_saturations(fs, area, shape)
+    bad = np.flatnonzero(got != per_step)
+    assert bad.size == 0, f"{bad.size} steps miscounted; first {int(bad[0])}: rtl {int(got[bad[0]])} golden " \
+                          f"{int(per_step[bad[0]])}"
+    assert int(got.sum()) == counter.total
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_saturations_zero_in_the_presets(preset):
+    """The presets' u0.F errors cannot exceed 1.0 and their steps fit: every count is 0."""
+    fs = FormatSet.preset(preset)
+    top = fs.error.raw_max
+    area = np.concatenate([[0, top, top, 0], np.random.default_rng(15).integers(0, top + 1, 300)])
+    shape = np.concatenate([[0, top, 0, top], np.random.default_rng(16).integers(0, top + 1, 300)])
+    counter, _ = golden_step_events(fs, area, shape)
+    assert counter.total == 0
+    assert not step_saturations(fs, area, shape).any()
+
+
+def test_saturations_leave_the_default_build_alone():
+    """``saturations=False`` (the default) has the layout it had; the count is 3 bits (5 events)."""
+    fs = FormatSet.preset("default")
+    assert StepGenerator.output_layout(fs) == StepGenerator.output_layout(fs, saturations=False)
+    assert "saturations" not in dict(StepGenerator.output_layout(fs))
+    assert StepGenerator.output_layout(fs, saturations=True)["saturations"].shape == unsigned(3)
