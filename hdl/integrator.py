@@ -168,7 +168,9 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
               **events(a_x[1], a_y[1]))
     power = clamp(live["pw"], fs.power)
     live["pw"] = power[0]
-    live.update(events(power[1]))  # registered by t5's first stage, beside the power's saturation
+    # the power counts only in the momentum dynamics: the controller forms S (and the golden model
+    # node_power) only there
+    live.update(events(mom=(power[1],)))  # registered by t5's first stage, beside the power's saturation
     # Δt·V, ½Δt²·a, Δt·a
     live.multiply(tail, "t5",
                   dtv_x=(dt, live["v_x"]), dtv_y=(dt, live["v_y"]),

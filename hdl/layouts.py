@@ -30,7 +30,8 @@ FORCE_ENTRY_EVENTS = {"delta": 4, "length_sq": 1, "rsqrt": 1, "one_minus_dr": 1,
 #: … and one node of the force pass, once its sums leave the accumulators.
 FORCE_NODE_EVENTS = {"force_acc": 2, "error_acc": 1}
 #: Saturation events of one node in the integrate stage (``integrate`` or ``integrate_momentum``,
-#: and ``node_power``); the momentum step raises only ``accel``, ``velocity``, ``position`` and ``power``.
+#: and, in the momentum dynamics, ``node_power``); the paper's step raises all but ``power``, the
+#: momentum step only ``accel``, ``velocity``, ``position`` and ``power``.
 INTEGRATOR_EVENTS = {"accel": 2, "position_step": 2, "position": 2, "velocity_step": 2, "velocity": 2,
                      "damping": 2, "power": 1}
 #: Saturation events of one step (``step_size``): ``lut_input`` per lane (a u1.F error above 1),
