@@ -103,14 +103,14 @@ class SpringflatEngine(wiring.Component):
         const = {r.name: r for r in rmap.registers}
 
         # ------------------------------------------------------------ units
-        m.submodules.force = force = ForcePass(fs, energy=True)
-        m.submodules.integrator = integ = Integrator(fs)
+        m.submodules.force = force = ForcePass(fs, energy=True, saturations=True)
+        m.submodules.integrator = integ = Integrator(fs, saturations=True)
         m.submodules.area = area = AreaError(fs)
         m.submodules.norm_length = norm_length = Normaliser(fs)
         m.submodules.norm_area = norm_area = Normaliser(fs)
         m.submodules.energy = energy = EnergyCheck(fs, cap.entries)
         m.submodules.beta = beta = BetaDivider(fs)
-        m.submodules.stepgen = stepgen = StepGenerator(fs)
+        m.submodules.stepgen = stepgen = StepGenerator(fs, saturations=True)
         m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width)
         wiring.connect(m, wiring.flipped(self.bus), hs.bus)
 
@@ -182,7 +182,7 @@ class SpringflatEngine(wiring.Component):
             force.i.payload.barrier.second.eq(e4_pb),
             force.i.payload.barrier.threshold.eq(Mux(values["barrier"], e4_entry.threshold, 0)),
             force.i.payload.barrier.gain.eq(Mux(values["barrier"], e4_entry.gain, 0)),
-            force.half_spring.eq(values["half_spring"]),
+            force.half_spring.eq(values["half_spring"]), force.barrier.eq(values["barrier"]),
         ]
         # per-node results: the force memory and the exact sums
         force_out_index = Signal(range(cap.vertices + 1))
@@ -249,7 +249,7 @@ class SpringflatEngine(wiring.Component):
             integ.momentum.eq(mode_momentum),
         ]
         node_out_index = Signal(range(cap.vertices + 1))
-        power_sum = Signal(fs.power.width + cap.vertices.bit_length())
+        power_sum = Signal(signed(fs.power.width + cap.vertices.bit_length()))
         with m.If(integ.o.valid):
             m.d.sync += [node_out_index.eq(node_out_index + 1), power_sum.eq(power_sum + integ.o.payload.power)]
 
@@ -444,6 +444,27 @@ class SpringflatEngine(wiring.Component):
                          | (mode_fixed & ~mode_momentum & (values["dt"] == 0)) | (values["max_iter"] == 0)
                          | bad_tolerance)
         stepgen_idle = stepgen_idle_signal(m, stepgen)
+
+        # SATURATIONS: every event the golden model counts, added as the units report them, stopping at
+        # its maximum. The force pass's, integrate stage's and step generator's per beat; the area pass's
+        # at its end; the E_C sum's (length_sum) when the force pass ends; S's (power_acc) when an
+        # integrate pass ends (momentum).
+        force_pass_done = running & (phase == PH["force"]) & (force_out_index == n_vertices)
+        area_pass_done = running & (phase == PH["area"]) & (tri_index == n_triangles) & ~t1_valid & ~t2_valid \
+            & ~t3_valid & ~t4_valid & area.idle & ~area.clear
+        integrate_done = running & (phase == PH["integrate"]) & (node_out_index == n_vertices)
+        increments = [
+            Mux(force.o.valid, force.o.payload.saturations, 0),
+            Mux(integ.o.valid & running, integ.o.payload.saturations, 0),
+            Mux(stepgen.o.valid, stepgen.o.payload.saturations, 0),
+            Mux(area_pass_done, area.saturations.face_edge + area.saturations.face_area
+                + area.saturations.area_sum, 0),
+            force_pass_done & (length_sum > fs.error_acc.raw_max),
+            integrate_done & mode_momentum & ((power_sum > fs.power_acc.raw_max) | (power_sum < fs.power_acc.raw_min)),
+        ]
+        total = saturations + sum(increments)
+        saturation_max = (1 << len(saturations)) - 1
+        m.d.sync += saturations.eq(Mux(total > saturation_max, saturation_max, total))
         sequential_idle = ~Cat(*(u.i.valid for u in (norm_length, norm_area, energy, beta, stepgen))).any() \
             & norm_length.i.ready & norm_area.i.ready & energy.i.ready & beta.i.ready & stepgen_idle
         # ABORT while running drains what is in flight (still "running": START is ignored and the memories
@@ -472,7 +493,7 @@ class SpringflatEngine(wiring.Component):
                                  length_sum.eq(0), square_sum.eq(0), barrier_sum.eq(0), fetch_force.eq(1),
                                  phase.eq(PH["force"])]
                 with m.Case(PH["force"]):
-                    with m.If(force_out_index == n_vertices):
+                    with m.If(force_pass_done):
                         m.d.sync += [fetch_force.eq(0), tri_index.eq(0), fetch_area.eq(1), phase.eq(PH["area"]),
                                      math_pending.eq(0b111),
                                      norm_length.i.valid.eq(1), norm_length.i.payload.sum.eq(length_total),
@@ -483,11 +504,8 @@ class SpringflatEngine(wiring.Component):
                                      energy.i.payload.first.eq(first_measure)]
                         m.d.comb += area.clear.eq(1)
                 with m.Case(PH["area"]):
-                    with m.If((tri_index == n_triangles) & ~t1_valid & ~t2_valid & ~t3_valid & ~t4_valid
-                              & area.idle & ~area.clear):
-                        sat = area.saturations
+                    with m.If(area_pass_done):
                         m.d.sync += [fetch_area.eq(0), phase.eq(PH["math"]),
-                                     saturations.eq(saturations + sat.face_edge + sat.face_area + sat.area_sum),
                                      norm_area.i.valid.eq(1), norm_area.i.payload.sum.eq(area.total),
                                      norm_area.i.payload.mantissa.eq(values["area_reciprocal"]),
                                      norm_area.i.payload.shift.eq(values["area_shift"])]
@@ -498,10 +516,12 @@ class SpringflatEngine(wiring.Component):
                     converged = (area_error_raw <= values["tol_area"]) & (shape_error_raw <= values["tol_shape"]) \
                         & settled & ~first_measure
                     limit = values["saturation_limit"]
-                    with m.If(converged):
-                        finish("converged")
-                    with m.Elif((limit != 0) & (saturations >= limit)):
+                    # as run_image: the saturation limit first, then the stop rule (neither after the first
+                    # measurement), then the iteration limit
+                    with m.If((limit != 0) & (saturations >= limit) & ~first_measure):
                         finish("diverged")
+                    with m.Elif(converged):
+                        finish("converged")
                     with m.Elif(iterations == values["max_iter"]):
                         finish("max-iterations")
                     with m.Else():
@@ -533,8 +553,8 @@ class SpringflatEngine(wiring.Component):
                         m.d.sync += [state.eq(_code(STATES, "idle")), result.eq(_code(RESULTS, "none")),
                                      fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
                 with m.Case(PH["integrate"]):
-                    with m.If(node_out_index == n_vertices):
-                        power_negative = power_sum[-1]
+                    with m.If(integrate_done):
+                        power_negative = power_sum < 0
                         m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), phase.eq(PH["start"])]
                         with m.If(mode_momentum & ~step_was_restart):
                             m.d.sync += restart_pending.eq(power_negative)

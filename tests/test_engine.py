@@ -73,6 +73,7 @@ def run_on_engine(dut, image, watch=None):
 def assert_same_run(read_back, expected):
     assert read_back.result == expected.status
     assert read_back.iterations == expected.iterations
+    assert read_back.saturations == expected.saturations
     assert (read_back.area_error, read_back.shape_error, read_back.energy) == (
         expected.area_error, expected.shape_error, expected.energy)
     np.testing.assert_array_equal(read_back.positions, expected.positions)
@@ -220,3 +221,18 @@ def test_bad_run_constants_answer_as_constant_fault_says():
     for name, change in cases.items():
         expected = constant_fault({**image.constants, **change}, FS, CAPACITY)
         assert answers[name] == (("done", expected) if expected else ("running", "none")), name
+
+
+def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged():
+    """A run that saturates (a large spring constant and step): SATURATIONS equals the golden model's
+    count, and with a saturation limit the run stops as diverged at the same iteration."""
+    params = FlattenParams(step="fixed", dt=0.9, spring=7.0, density="auto", max_iter=6)
+    image = image_of(params)
+    expected = run_image(image, FS)
+    assert expected.saturations > 10  # the case saturates
+    limited = dataclasses.replace(image, constants={**image.constants, "saturation_limit": 4})
+    expected_limited = run_image(limited, FS)
+    assert expected_limited.status == "diverged"
+    for img, exp in ((image, expected), (limited, expected_limited)):
+        _, read_back = run_on_engine(SpringflatEngine(FS, CAPACITY), img)
+        assert_same_run(read_back, exp)
