@@ -82,7 +82,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
               f"E_S {result.initial.area_error:.4f} -> {final.area_error:.4f}, "
               f"E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
               f"folded {final.folded} (flipped against P0: {final.flipped})"
-              + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed" else "")
+              + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed"
+                 else "")
               + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
                  if "simulator" in result.extra else ""))
         print(_what_was_used(params, args.init, result), file=sys.stderr)
@@ -118,6 +119,7 @@ def _rtl_engine(formats):
 
         check_fixed_params(params, formats)
         problem = prepare(mesh, positions, params, formats)
+        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
               f"{capacity.entries}/{capacity.triangles} (cached) and running the flattening ...", file=sys.stderr)
         with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:

@@ -12,7 +12,11 @@ bit with :func:`~golden_model.fixed.engine_image.run_image` inside the bench.
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
+import os
 import re
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,8 +28,9 @@ from golden_model.fixed.engine_image import EngineCapacity, EngineImage, build_i
 
 from .cocotb_support import BUILD_ROOT, _formats_key, run_bench
 
-__all__ = ["ENGINE_TOP", "VERILATOR_SPEED_FLAGS", "EngineRun", "engine_sources", "run_engine", "run_image_on_rtl", "summary_line",
-           "flatten_on_rtl", "EngineRunError"]
+__all__ = ["ENGINE_TOP", "VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
+           "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "summary_line",
+           "icarus_verilog"]
 
 ENGINE_TOP = "springflat_engine"
 
@@ -34,6 +39,11 @@ ENGINE_TOP = "springflat_engine"
 #: no optimisation across them; the bench touches only the top's ports, so only those are public.
 #: No X randomisation code either.
 VERILATOR_SPEED_FLAGS = ("--no-public-flat-rw", "--public-depth", "1", "--x-assign", "fast", "--x-initial", "fast")
+
+#: The model's per-clock C++ at -O2 instead of Verilator's default -Os (``OPT_FAST`` of its
+#: makefile; the run-once ``Slow`` files keep -Os), through ``MAKEFLAGS`` as
+#: :func:`sim.cocotb_support.prepare_environment` passes its own make variable.
+VERILATOR_MAKE_FLAGS = "OPT_FAST=-O2"
 
 #: Icarus in Verilog-2005 mode (after the runner's -g2012: the last generation flag wins). Yosys's
 #: Verilog starts each `always @*` block with a dummy read of a `reg ... = 0` so that the block runs
@@ -63,13 +73,16 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
     exported = directory / f"{ENGINE_TOP}.v"
     if not exported.exists():
         export_engine(fs, capacity, directory)
-    if simulator != "icarus":
-        return directory
-    icarus = directory / "icarus-source"
-    if not (icarus / exported.name).exists():
-        icarus.mkdir(exist_ok=True)
-        (icarus / exported.name).write_text(icarus_verilog(exported.read_text()))
-    return icarus
+    # one source directory per simulator (and build flags): the runner rebuilds on a source change only
+    if simulator == "icarus":
+        copy, text = directory / "icarus-source", lambda: icarus_verilog(exported.read_text())
+    else:
+        key = hashlib.sha256(repr((VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS)).encode()).hexdigest()[:8]
+        copy, text = directory / f"verilator-source-{key}", exported.read_text
+    if not (copy / exported.name).exists():
+        copy.mkdir(exist_ok=True)
+        (copy / exported.name).write_text(text())
+    return copy
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,6 +101,20 @@ class EngineRun:
         return int(self.result.get("mismatches", -1))
 
 
+@contextlib.contextmanager
+def _make_flags(extra: str):
+    """``MAKEFLAGS`` with ``extra`` added, for the duration of a build."""
+    from .cocotb_support import prepare_environment
+
+    prepare_environment()
+    before = os.environ.get("MAKEFLAGS", "")
+    os.environ["MAKEFLAGS"] = f"{before} {extra}".strip()
+    try:
+        yield
+    finally:
+        os.environ["MAKEFLAGS"] = before
+
+
 def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_states: int = 0, seed: int = 0,
                      checks: dict | None = None, work: Path | None = None, log_file: Path | None = None,
                      waves: bool = False) -> EngineRun:
@@ -97,9 +124,6 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
     capacity = image.capacity
     sources = engine_sources(fs, capacity, simulator)
     if work is None:
-        import os
-        import time
-
         work = sources / "runs" / f"{simulator}-{os.getpid()}-{time.time_ns()}"
     work = Path(work)
     work.mkdir(parents=True, exist_ok=True)
@@ -109,8 +133,9 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
               "constants": {k: int(v) for k, v in image.constants.items()},
               "wait_states": wait_states, "seed": seed, **(checks or {})}
     flags = VERILATOR_SPEED_FLAGS if simulator == "verilator" else ICARUS_FLAGS
-    run = run_bench(simulator, fs, ENGINE_TOP, "engine", config, work=work, log_file=log_file, waves=waves,
-                    sources=sources, extra_build_args=flags)
+    with _make_flags(VERILATOR_MAKE_FLAGS if simulator == "verilator" else ""):
+        run = run_bench(simulator, fs, ENGINE_TOP, "engine", config, work=work, log_file=log_file, waves=waves,
+                        sources=sources, extra_build_args=flags)
     readback = work / "readback.npz"
     positions = velocities = None
     if readback.exists():
