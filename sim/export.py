@@ -23,6 +23,7 @@ from amaranth.hdl import Shape
 from amaranth.lib import data, wiring
 
 from golden_model.fixed import FormatSet, exp_table
+from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
 from hdl.dsp import dsp_target
 
 __all__ = ["COMPONENTS", "ENGINE_MODULE", "export_verilog", "export_engine", "export_engine_bundle",
@@ -212,10 +213,9 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
             "files": ["springflat_engine.v", *files]}
 
 
-def engine_capacity(values, fs: FormatSet) -> "EngineCapacity":
+def engine_capacity(values, fs: FormatSet) -> EngineCapacity:
     """``--capacity V E T`` as an :class:`~golden_model.fixed.engine_image.EngineCapacity` (``None``: the
     default); a capacity the engine's register map cannot hold is a one-line :class:`ParameterError`."""
-    from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
     from golden_model.fixed.register_map import RegisterMap
     from golden_model.reference import ParameterError
 
