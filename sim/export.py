@@ -205,12 +205,12 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     out.mkdir(parents=True, exist_ok=True)
     engine = SpringflatEngine(fs, capacity)
-    (out / "springflat_engine.v").write_text(verilog.convert(engine, name="springflat_engine", platform=platform))
+    (out / f"{ENGINE_MODULE}.v").write_text(verilog.convert(engine, name=ENGINE_MODULE, platform=platform))
     files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)]
-    return {"module": "springflat_engine", "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
+    return {"module": ENGINE_MODULE, "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                                                           "triangles": capacity.triangles},
             "bus": "Wishbone B4 classic, 32-bit data, word addresses", "addr_width": engine.addr_width,
-            "files": ["springflat_engine.v", *files]}
+            "files": [f"{ENGINE_MODULE}.v", *files]}
 
 
 def engine_capacity(values, fs: FormatSet) -> EngineCapacity:

