@@ -8,7 +8,7 @@ set and capacity: this module decodes that map, it defines no address of its own
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -279,6 +279,7 @@ class SpringflatEngine(wiring.Component):
             with m.If(hs.address == r.offset):
                 m.d.comb += bus_reg_hit.eq(1)
                 word = Signal(BUS_WORD_BITS, name=f"rd_{r.name.lower()}")
+                pieces = []  # (lsb, value) of each field
                 for f in r.fields:
                     if r.name == "CONTROL":
                         source = {"start": Const(0, 1), "abort": Const(0, 1), "irq_enable": irq_enable}[f.name]
@@ -290,7 +291,17 @@ class SpringflatEngine(wiring.Component):
                         source = Const((r.reset >> f.lsb) & ((1 << f.width) - 1), f.width)
                     else:
                         source = values[f.value][f.value_lsb:f.value_lsb + f.width]
-                    m.d.comb += word[f.lsb:f.lsb + f.width].eq(source)
+                    pieces.append((f.lsb, Value.cast(source).as_unsigned()[:f.width], f.width))
+                # the whole word in one assignment, unused bits as constant zeros beside the fields: a
+                # separate constant-only assignment becomes an input-less `always @*` block in the
+                # Verilog, which an event-driven simulator (Icarus) never runs
+                parts, at = [], 0
+                for lsb, value, width in sorted(pieces, key=lambda p: p[0]):
+                    parts += [Const(0, lsb - at)] if lsb > at else []
+                    parts.append(value)
+                    parts += [Const(0, width - len(value))] if len(value) < width else []
+                    at = lsb + width
+                m.d.comb += word.eq(Cat(*parts))
                 m.d.comb += read_word.eq(word)
                 with m.If(hs.request & hs.write & hs.whole_word):
                     if r.name == "CONTROL":
