@@ -119,37 +119,6 @@ def test_bad_requests(argv, message, capsys, tmp_path):
     assert len(lines) == 1 and lines[0].startswith("springflat: error:") and message in lines[0]
 
 
-def test_engine_on_ice40_does_not_fit_and_the_bundle_holds_its_register_map(tmp_path, capsys):
-    """The engine goes through the same flow (Yosys only here: it needs more SB_MAC16 than a UP5K has);
-    the bundle gets its Verilog, the register map of the requested capacity and the memory-image format."""
-    from golden_model.fixed import FormatSet
-    from golden_model.fixed.engine_image import EngineCapacity
-    from golden_model.fixed.register_map import RegisterMap
-
-    out_dir = tmp_path / "engine"
-    status, out, err = run(["synth", "--target", "ice40", "--formats", "narrow", "--components", "springflat_engine",
-                            "--capacity", "32", "160", "64", "--out", str(out_dir), "--quiet", "--json"], capsys)
-    assert status == 2
-    report = json.loads(out)
-    comp = report["components"]["springflat_engine"]
-    assert report["top"] == "springflat_engine" and not comp["fits"] and comp["fmax_mhz"] is None
-    assert comp["latency"] is None and comp["ii"] is None and "throughput_per_s" not in comp
-    assert comp["capacity"] == {"vertices": 32, "entries": 160, "triangles": 64}
-    cells = json.loads((out_dir / "springflat_engine.ice40.stat.json").read_text())["design"]["num_cells_by_type"]
-    assert comp["dsps"] == cells["SB_MAC16"] > TARGETS["ice40"].capacity["dsps"]
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("springflat: error: does not fit iCE40 UP5K SG48: springflat_engine:")
-    rmap = RegisterMap.from_dict(json.loads((out_dir / "register_map.json").read_text()))
-    assert rmap == RegisterMap.build(FormatSet.preset("narrow"), EngineCapacity(32, 160, 64))
-    for name in ("springflat_engine.v", "springflat_engine_pnr.v", "register_map.md", "springflat_regs.h",
-                 "memory_image.md", "synth_report.md"):
-        assert (out_dir / name).is_file(), name
-    assert set(report["engine"]["files"]) >= {"register_map.md", "register_map.json", "springflat_regs.h",
-                                              "memory_image.md"}
-    assert "| `springflat_engine` |" in (out_dir / "synth_report.md").read_text()
-    assert "--capacity 32 160 64" in (out_dir / "reproduce.sh").read_text()
-
-
 def test_parsers():
     log = """Info: Device utilisation:
 Info: \t          TRELLIS_IO:       6/    365     1%
