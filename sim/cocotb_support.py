@@ -126,9 +126,9 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     ``config`` is handed to the bench as JSON (``SPRINGFLAT_BENCH_CONFIG``); the bench
     writes its findings to ``SPRINGFLAT_BENCH_RESULT``, returned as ``result``. With
     ``log_file`` the simulator's output goes there instead of stdout. ``dsp`` selects the
-    Verilog flavour (:func:`verilog_sources`). ``sources`` is a directory holding ``<toplevel>.v``
-    exported elsewhere (the engine: :func:`sim.engine_run.engine_sources`), cached by the caller; its
-    builds go beside it. ``extra_build_args`` are added to the simulator's build flags.
+    Verilog flavour (:func:`verilog_sources`). ``sources`` is a directory whose ``*.v`` files (``<toplevel>``
+    among them) were exported elsewhere (the engine: :func:`sim.engine_run.engine_sources`), cached by
+    the caller; its builds go beside it. ``extra_build_args`` are added to the simulator's build flags.
     """
     from cocotb_tools.check_results import get_results
     from cocotb_tools.runner import get_runner
@@ -141,8 +141,11 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     if sources is None:
         sources = verilog_sources(fs, dsp)
         build_dir = BUILD_ROOT / _formats_key(fs, dsp) / sim / (toplevel + ("-waves" if waves else ""))
+        files = [sources / f"{toplevel}.v"]
     else:
-        build_dir = Path(sources) / sim / (toplevel + ("-waves" if waves else ""))
+        sources = Path(sources)
+        build_dir = sources / sim / (toplevel + ("-waves" if waves else ""))
+        files = sorted(sources.glob("*.v"))
     work = Path(work) if work is not None else build_dir / "runs" / f"{bench}-{os.getpid()}-{time.time_ns()}"
     work.mkdir(parents=True, exist_ok=True)
     config_path, result_path = work / "config.json", work / "result.json"
@@ -154,7 +157,7 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     if sim == "verilator" and waves:
         build_args += ["--trace-structs"]  # cocotb adds --trace (VCD; FST would need liblz4 headers)
     try:
-        runner.build(sources=[sources / f"{toplevel}.v", *PRIMITIVE_MODELS.get(dsp, [])], hdl_toplevel=toplevel, build_dir=build_dir,
+        runner.build(sources=[*files, *PRIMITIVE_MODELS.get(dsp, [])], hdl_toplevel=toplevel, build_dir=build_dir,
                      build_args=build_args, timescale=("1ns", "1ps"), waves=waves, always=False, verbose=False,
                      log_file=log_file)
     except RuntimeError as exc:

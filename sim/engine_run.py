@@ -28,11 +28,16 @@ from golden_model.fixed.engine_image import EngineCapacity, EngineImage, build_i
 
 from .cocotb_support import BUILD_ROOT, _formats_key, run_bench
 
-__all__ = ["ENGINE_TOP", "VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
+__all__ = ["ENGINE_TOP", "SIM_TOP", "VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
            "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "summary_line",
-           "icarus_verilog"]
+           "simulation_harness", "top_ports"]
 
 ENGINE_TOP = "springflat_engine"
+
+#: The simulation top: the exported ``springflat_engine.v`` untouched, inside a harness
+#: (:func:`simulation_harness`) that passes every port through and takes ``rst`` through one
+#: flip-flop.
+SIM_TOP = "springflat_engine_sim"
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
 #: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and
@@ -40,10 +45,11 @@ ENGINE_TOP = "springflat_engine"
 #: No X randomisation code either.
 VERILATOR_SPEED_FLAGS = ("--no-public-flat-rw", "--public-depth", "1", "--x-assign", "fast", "--x-initial", "fast")
 
-#: The model's per-clock C++ at -O2 instead of Verilator's default -Os (``OPT_FAST`` of its
-#: makefile; the run-once ``Slow`` files keep -Os), through ``MAKEFLAGS`` as
-#: :func:`sim.cocotb_support.prepare_environment` passes its own make variable.
-VERILATOR_MAKE_FLAGS = "OPT_FAST=-O2"
+#: The model's per-clock C++ at -O3 for this machine's CPU instead of Verilator's default -Os
+#: (``OPT_FAST`` of its makefile; the run-once ``Slow`` files keep -Os), through ``MAKEFLAGS`` as
+#: :func:`sim.cocotb_support.prepare_environment` passes its own make variable (the space escaped
+#: for make). The build stays on this machine (``build/``), so ``-march=native`` is safe.
+VERILATOR_MAKE_FLAGS = r"OPT_FAST=-O3\ -march=native"
 
 #: Icarus in Verilog-2005 mode (after the runner's -g2012: the last generation flag wins). Yosys's
 #: Verilog starts each `always @*` block with a dummy read of a `reg ... = 0` so that the block runs
@@ -52,20 +58,42 @@ VERILATOR_MAKE_FLAGS = "OPT_FAST=-O2"
 #: registered address starts and resets at 0) never run and read X.
 ICARUS_FLAGS = ("-g2005",)
 
-#: A Yosys ``always @*`` block that only assigns a constant (the unused bits of a register's read
-#: word): it has no input, so an event-driven simulator never runs it and the bits stay X.
-_CONSTANT_BLOCK = re.compile(r"always @\*\n(\s+)([^\n;]*?) = (\d+'[hbd][0-9a-fA-F_]+);\n")
+_PORT = re.compile(r"^\s*(input|output)\s+(\[\d+:\d+\]\s+)?([A-Za-z_][A-Za-z0-9_$]*);$", re.MULTILINE)
 
 
-def icarus_verilog(text: str) -> str:
-    """The engine's Verilog for Icarus: each constant-only ``always @*`` block an ``initial`` one
-    (same value, set once at time 0); nothing else changes."""
-    return _CONSTANT_BLOCK.sub(lambda m: f"initial\n{m[1]}{m[2]} = {m[3]};\n", text)
+def top_ports(verilog: str, module: str = ENGINE_TOP) -> list[tuple[str, str, str]]:
+    """``module``'s ports in Yosys's Verilog, as (direction, range or "", name)."""
+    start = verilog.index(f"module {module}(")
+    body = verilog[start:verilog.index("endmodule", start)]
+    return [(m[1], (m[2] or "").strip(), m[3]) for m in _PORT.finditer(body)]
+
+
+def simulation_harness(verilog: str) -> str:
+    """Verilog of :data:`SIM_TOP`: ``springflat_engine`` with the same ports, ``rst`` registered once.
+
+    Why: Verilator evaluates the logic that reads a top-level input at every ``eval`` (its "ico"
+    region, twice per clock), and Yosys's next-state logic reads ``rst`` in nearly every register's
+    ``always @*`` block; behind a flip-flop it is evaluated once per clock with the rest. A reset
+    takes effect one clock later; nothing else changes (the bus inputs stay direct, as Wishbone's
+    handshake needs).
+    """
+    ports = top_ports(verilog)
+    names = {name for _, _, name in ports}
+    if not {"clk", "rst"} <= names:
+        raise ValueError(f"{ENGINE_TOP} has no clk/rst ports (has {sorted(names)})")
+    declarations = ",\n".join(f"  {direction} {f'{width} ' if width else ''}{name}" for direction, width, name in ports)
+    connections = ",\n".join(f"    .{name}({'rst_q' if name == 'rst' else name})" for _, _, name in ports)
+    return (f"// Simulation top (sim/engine_run.py): {ENGINE_TOP} with rst through one flip-flop.\n"
+            f"module {SIM_TOP}(\n{declarations}\n);\n"
+            f"  reg rst_q = 1'b1;\n"
+            f"  always @(posedge clk) rst_q <= rst;\n"
+            f"  {ENGINE_TOP} engine(\n{connections}\n  );\n"
+            f"endmodule\n")
 
 
 def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator") -> Path:
-    """Export ``springflat_engine.v`` for ``fs`` and ``capacity`` once; return its directory (for
-    Icarus a subdirectory with :func:`icarus_verilog`'s copy)."""
+    """Export ``springflat_engine.v`` for ``fs`` and ``capacity`` once; return a directory per
+    simulator (and build flags) holding it and :func:`simulation_harness`'s ``springflat_engine_sim.v``."""
     from .export import export_engine
 
     directory = (BUILD_ROOT / _formats_key(fs) / "engine"
@@ -74,14 +102,14 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
     if not exported.exists():
         export_engine(fs, capacity, directory)
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
-    if simulator == "icarus":
-        copy, text = directory / "icarus-source", lambda: icarus_verilog(exported.read_text())
-    else:
-        key = hashlib.sha256(repr((VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS)).encode()).hexdigest()[:8]
-        copy, text = directory / f"verilator-source-{key}", exported.read_text
-    if not (copy / exported.name).exists():
-        copy.mkdir(exist_ok=True)
-        (copy / exported.name).write_text(text())
+    flags = (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS) if simulator == "verilator" else ICARUS_FLAGS
+    key = hashlib.sha256(repr(flags).encode()).hexdigest()[:8]
+    copy = directory / f"{simulator}-source-{key}"
+    copy.mkdir(exist_ok=True)
+    text = exported.read_text()
+    for name, content in ((exported.name, text), (f"{SIM_TOP}.v", simulation_harness(text))):
+        if not (copy / name).exists() or (copy / name).read_text() != content:
+            (copy / name).write_text(content)
     return copy
 
 
@@ -134,7 +162,7 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
               "wait_states": wait_states, "seed": seed, **(checks or {})}
     flags = VERILATOR_SPEED_FLAGS if simulator == "verilator" else ICARUS_FLAGS
     with _make_flags(VERILATOR_MAKE_FLAGS if simulator == "verilator" else ""):
-        run = run_bench(simulator, fs, ENGINE_TOP, "engine", config, work=work, log_file=log_file, waves=waves,
+        run = run_bench(simulator, fs, SIM_TOP, "engine", config, work=work, log_file=log_file, waves=waves,
                         sources=sources, extra_build_args=flags)
     readback = work / "readback.npz"
     positions = velocities = None
