@@ -27,17 +27,18 @@ from golden_model.fixed.engine import FixedProblem
 from golden_model.fixed.engine_image import EngineCapacity, EngineImage, build_image
 
 from .cocotb_support import BUILD_ROOT, _formats_key, run_bench
+from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["ENGINE_TOP", "SIM_TOP", "VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
            "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "summary_line",
            "simulation_harness", "top_ports"]
 
-ENGINE_TOP = "springflat_engine"
+ENGINE_TOP = ENGINE_MODULE
 
 #: The simulation top: the exported ``springflat_engine.v`` untouched, inside a harness
 #: (:func:`simulation_harness`) that passes every port through and takes ``rst`` through one
 #: flip-flop.
-SIM_TOP = "springflat_engine_sim"
+SIM_TOP = ENGINE_SIM_MODULE
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
 #: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and

@@ -26,10 +26,11 @@ from golden_model.fixed import FormatSet, exp_table
 from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
 from hdl.dsp import dsp_target
 
+from .top_names import CORE_MODULE, ENGINE_MODULE
+
 __all__ = ["COMPONENTS", "ENGINE_MODULE", "export_verilog", "export_engine", "export_engine_bundle",
            "engine_capacity", "memory_image_markdown", "describe"]
 
-ENGINE_MODULE = "springflat_engine"
 """Top module name of :class:`hdl.engine.SpringflatEngine` in the exports."""
 
 STREAM_PROTOCOL = (
@@ -49,14 +50,14 @@ class ComponentSpec:
         import hdl
 
         return {"rsqrt_unit": hdl.RsqrtUnit, "step_generator": hdl.StepGenerator, "node_update": hdl.NodeUpdate,
-                "springflat_core": hdl.SpringflatCore}[self.module](fs)
+                CORE_MODULE: hdl.SpringflatCore}[self.module](fs)
 
 
 COMPONENTS = (
     ComponentSpec("rsqrt_unit", "reciprocal square root, |Δ|² → r"),
     ComponentSpec("step_generator", "exp-LUT step generator, (E_S, E_C) → (Δt, ½Δt²)"),
     ComponentSpec("node_update", "node-update datapath: neighbour entries → updated nodes"),
-    ComponentSpec("springflat_core", "top: node-update datapath + step generator + step registers"),
+    ComponentSpec(CORE_MODULE, "top: node-update datapath + step generator + step registers"),
 )
 
 

@@ -20,6 +20,7 @@ from golden_model.fixed.engine import check_fixed_params, prepare
 from golden_model.layouts import LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, SimulatorError, run_bench
+from .top_names import CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["add_parser", "cmd_rtl_check"]
 
@@ -80,7 +81,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         log = Path(tmp) / "simulation.log"
         try:
             with contextlib.redirect_stdout(sys.stderr):  # keep stdout for the result (--json)
-                run = run_bench(args.sim, formats, "springflat_core", "closed_loop", config,
+                run = run_bench(args.sim, formats, CORE_MODULE, "closed_loop", config,
                                 waves=args.waves is not None, work=Path(tmp) / "run", log_file=log)
         except SimulatorError as exc:
             raise UserError(str(exc)) from None
@@ -155,7 +156,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
             raise UserError(f"the {args.sim} simulation of the engine produced no result: {' / '.join(tail)}")
         if args.waves is not None and run.waves is not None:
             shutil.copyfile(run.waves, args.waves)
-    summary = {"mesh": mesh.name, "simulator": args.sim, "formats": formats.name, "top": "springflat_engine",
+    summary = {"mesh": mesh.name, "simulator": args.sim, "formats": formats.name, "top": ENGINE_MODULE,
                "capacity": list(args.capacity or (capacity.vertices, capacity.entries, capacity.triangles)),
                "vertices": mesh.n_vertices, **run.result, "wall_seconds": run.wall_seconds}
     if args.json:

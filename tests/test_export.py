@@ -117,10 +117,3 @@ def test_bad_capacity_is_one_line_and_writes_nothing(tmp_path, capacity, message
     assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("springflat: error:"), proc.stderr
     assert message in lines[0]
     assert not out.exists()
-
-
-def test_synth_names_the_engine_as_the_export_does():
-    from sim.export import ENGINE_MODULE
-    from sim.synth import ENGINE
-
-    assert ENGINE == ENGINE_MODULE
