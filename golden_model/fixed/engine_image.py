@@ -33,7 +33,7 @@ import numpy as np
 from .engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, SAT, FixedPointError, FixedProblem, MomentumState,
                      Reciprocal, StopRule, area_error, check_fixed_params, energy_frac_bits, energy_raw, power_sum,
                      shape_error)
-from .format import Format, SaturationCounter, quantize
+from .format import Format, SaturationCounter, quantize, raw_range
 from .formats_set import FormatSet
 from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum,
                        node_power, node_terms)
@@ -119,11 +119,11 @@ class WordField:
 
     @property
     def raw_min(self) -> int:
-        return -(1 << (self.width - 1)) if self.signed else 0
+        return raw_range(self.width, self.signed)[0]
 
     @property
     def raw_max(self) -> int:
-        return (1 << (self.width - int(self.signed))) - 1
+        return raw_range(self.width, self.signed)[1]
 
 
 @dataclass(frozen=True)

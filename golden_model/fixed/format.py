@@ -30,6 +30,7 @@ __all__ = [
     "Rounding",
     "Overflow",
     "Format",
+    "raw_range",
     "SaturationCounter",
     "as_raw",
     "shift_round",
@@ -76,6 +77,12 @@ class Overflow(str, Enum):
 
 
 _FORMAT_RE = re.compile(r"^\s*([su])(\d+)\.(\d+)\s*$")
+
+
+def raw_range(width: int, signed: bool) -> tuple[int, int]:
+    """The smallest and largest raw integer of a ``width``-bit two's-complement (``signed``) or
+    unsigned field."""
+    return (-(1 << (width - 1)) if signed else 0), (1 << (width - int(signed))) - 1
 
 
 @dataclass(frozen=True)
@@ -129,12 +136,12 @@ class Format:
     @property
     def raw_min(self) -> int:
         """Smallest raw integer (``-2**(width-1)`` or 0)."""
-        return -(1 << (self.width - 1)) if self.signed else 0
+        return raw_range(self.width, self.signed)[0]
 
     @property
     def raw_max(self) -> int:
         """Largest raw integer (``2**(width-1) - 1`` or ``2**width - 1``)."""
-        return (1 << (self.width - int(self.signed))) - 1
+        return raw_range(self.width, self.signed)[1]
 
     @property
     def lsb(self) -> float:
