@@ -71,9 +71,9 @@ class Integrator(wiring.Component):
     A free-running pipeline (no enable fans out). T1 registers the input as it arrives (in
     :class:`~hdl.node_update.NodeUpdate` straight from the node-header FIFO's LUT RAM); the
     weight is chosen as it lands for the first multiply. Both dynamics' step sums are formed and
-    rounded side by side and the mode picks one only at the saturation (a multiplexer in front of
-    the 50-bit adder was a critical path). Every multiply's operands land in fabric registers
-    first; one adder, rounding or saturation per stage.
+    rounded and saturated side by side and the mode picks one in a stage of its own (neither in
+    front of the 50-bit adder nor behind the saturation: both were critical paths). Every
+    multiply's operands land in fabric registers first; one adder, rounding or saturation per stage.
     """
 
     def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None, saturations: bool = False):
@@ -184,9 +184,9 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     wide_v = Format(fs.velocity.signed, fs.velocity.int_bits + 1, fs.velocity.frac_bits)
     kick_frac = fs.dt.frac_bits + fs.accel.frac_bits
     # momentum: step = β·V + a, the a term aligned as ½Δt²·a would be (fraction bits fa).
-    # Both dynamics' sums are formed and rounded side by side; the mode picks one only at
-    # the saturation (T8), which muxes anyway: a mux in front of the 50-bit adder was the
-    # critical path (139 MHz).
+    # Both dynamics' sums are formed, rounded and saturated side by side; the mode picks one in
+    # a stage of its own (T8m), not in front of the 50-bit adder (that was the critical path at
+    # 139 MHz).
     sums = {}
     for k in "xy":
         for mode, second in (("paper", live[f"ha_{k}"]), ("mom", live[f"a_{k}"] << fs.half_dt_sq.frac_bits)):
@@ -202,10 +202,15 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     # (the momentum step's V' = rq(β·V + a → velocity) is its velocity event, the paper's its position_step)
     step_mom = {k: clamp(live[f"step_mom_{k}"], fs.velocity) for k in "xy"}
     step_paper = {k: clamp(live[f"step_paper_{k}"], wide_p) for k in "xy"}
-    live.step(tail, "t8", drop=tuple(f"{n}_{k}" for n in ("kick", "step_paper", "step_mom") for k in "xy"),
-              **{f"step_{k}": Mux(momentum, step_mom[k][0], step_paper[k][0]) for k in "xy"},
+    live.step(tail, "t8", drop=("kick_x", "kick_y"),
+              **{f"step_{mode}_{k}": step[k][0] for mode, step in (("paper", step_paper), ("mom", step_mom))
+                 for k in "xy"},
               **{f"v_{k}": live[f"v_{k}"] + live[f"kick_{k}"] for k in "xy"},
               **events(paper=(step_paper["x"][1], step_paper["y"][1]), mom=(step_mom["x"][1], step_mom["y"][1])))
+    # the mode's step in a stage of its own: saturation and the mode's multiplexer in one stage
+    # (six LUT levels) were the core's critical path (docs/synthesis.md)
+    live.step(tail, "t8m", drop=tuple(f"step_{mode}_{k}" for mode in ("paper", "mom") for k in "xy"),
+              **{f"step_{k}": Mux(momentum, live[f"step_mom_{k}"], live[f"step_paper_{k}"]) for k in "xy"})
     velocity = {k: clamp(live[f"v_{k}"], fs.velocity) for k in "xy"}
     live.step(tail, "t9", drop=("step_x", "step_y"),
               **{f"p_{k}": live[f"p_{k}"] + live[f"step_{k}"] for k in "xy"},
