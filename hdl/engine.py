@@ -270,64 +270,66 @@ class SpringflatEngine(wiring.Component):
         with m.If(~window_ok):
             m.d.comb += bus_window.eq(len(rmap.windows))
 
-        # register reads and writes, answered in the request's clock
+        # register reads and writes: the write acts in the request's clock; the answer comes the
+        # clock after, from the read word landed in a register (one parallel case over the
+        # address, then a register: the read mux and the bus's data register are far apart)
         read_word = Signal(BUS_WORD_BITS)
         reg_error = Signal()
         start_pulse, abort_pulse = Signal(), Signal()
         status_code = {"state": state, "result": result, "irq_pending": irq_pending}
-        for r in rmap.registers:
-            with m.If(hs.address == r.offset):
-                m.d.comb += bus_reg_hit.eq(1)
-                word = Signal(BUS_WORD_BITS, name=f"rd_{r.name.lower()}")
-                pieces = []  # (lsb, value) of each field
-                for f in r.fields:
-                    if r.name == "CONTROL":
-                        source = {"start": Const(0, 1), "abort": Const(0, 1), "irq_enable": irq_enable}[f.name]
-                    elif r.name == "STATUS":
-                        source = status_code.get(f.name)
-                        if f.name == "saturated":
-                            source = values["saturations"] != 0
-                    elif r.access == "ro" and r.reset and r.block == "identification":
-                        source = Const((r.reset >> f.lsb) & ((1 << f.width) - 1), f.width)
-                    else:
-                        source = values[f.value][f.value_lsb:f.value_lsb + f.width]
-                    pieces.append((f.lsb, Value.cast(source).as_unsigned()[:f.width], f.width))
-                # the whole word in one assignment, unused bits as constant zeros beside the fields: a
-                # separate constant-only assignment becomes an input-less `always @*` block in the
-                # Verilog, which an event-driven simulator (Icarus) never runs
-                parts, at = [], 0
-                for lsb, value, width in sorted(pieces, key=lambda p: p[0]):
-                    parts += [Const(0, lsb - at)] if lsb > at else []
-                    parts.append(value)
-                    parts += [Const(0, width - len(value))] if len(value) < width else []
-                    at = lsb + width
-                m.d.comb += word.eq(Cat(*parts))
-                m.d.comb += read_word.eq(word)
-                with m.If(hs.request & hs.write & hs.whole_word):
-                    if r.name == "CONTROL":
-                        m.d.comb += [start_pulse.eq(hs.write_data[0]), abort_pulse.eq(hs.write_data[1])]
-                        m.d.sync += irq_enable.eq(hs.write_data[2])
-                    elif r.name == "STATUS":
-                        with m.If(hs.write_data[8]):
-                            m.d.sync += irq_pending.eq(0)
-                    elif r.access == "rw":
-                        for f in r.fields:
-                            m.d.sync += values[f.value][f.value_lsb:f.value_lsb + f.width].eq(
-                                hs.write_data[f.lsb:f.lsb + f.width])
-                if r.access == "ro":
-                    m.d.comb += reg_error.eq(hs.write)
+        with m.Switch(hs.address):
+            for r in rmap.registers:
+                with m.Case(r.offset):
+                    m.d.comb += bus_reg_hit.eq(1)
+                    word = Signal(BUS_WORD_BITS, name=f"rd_{r.name.lower()}")
+                    pieces = []  # (lsb, value) of each field
+                    for f in r.fields:
+                        if r.name == "CONTROL":
+                            source = {"start": Const(0, 1), "abort": Const(0, 1), "irq_enable": irq_enable}[f.name]
+                        elif r.name == "STATUS":
+                            source = status_code.get(f.name)
+                            if f.name == "saturated":
+                                source = values["saturations"] != 0
+                        elif r.access == "ro" and r.reset and r.block == "identification":
+                            source = Const((r.reset >> f.lsb) & ((1 << f.width) - 1), f.width)
+                        else:
+                            source = values[f.value][f.value_lsb:f.value_lsb + f.width]
+                        pieces.append((f.lsb, Value.cast(source).as_unsigned()[:f.width], f.width))
+                    # the whole word in one assignment, unused bits as constant zeros beside the fields: a
+                    # separate constant-only assignment becomes an input-less `always @*` block in the
+                    # Verilog, which an event-driven simulator (Icarus) never runs
+                    parts, at = [], 0
+                    for lsb, value, width in sorted(pieces, key=lambda p: p[0]):
+                        parts += [Const(0, lsb - at)] if lsb > at else []
+                        parts.append(value)
+                        parts += [Const(0, width - len(value))] if len(value) < width else []
+                        at = lsb + width
+                    m.d.comb += word.eq(Cat(*parts))
+                    m.d.comb += read_word.eq(word)
+                    with m.If(hs.request & hs.write & hs.whole_word):
+                        if r.name == "CONTROL":
+                            m.d.comb += [start_pulse.eq(hs.write_data[0]), abort_pulse.eq(hs.write_data[1])]
+                            m.d.sync += irq_enable.eq(hs.write_data[2])
+                        elif r.name == "STATUS":
+                            with m.If(hs.write_data[8]):
+                                m.d.sync += irq_pending.eq(0)
+                        elif r.access == "rw":
+                            for f in r.fields:
+                                m.d.sync += values[f.value][f.value_lsb:f.value_lsb + f.width].eq(
+                                    hs.write_data[f.lsb:f.lsb + f.width])
+                    if r.access == "ro":
+                        m.d.comb += reg_error.eq(hs.write)
         # identification values are constants
         for name in ("cap_vertices", "cap_entries", "cap_triangles"):
             m.d.comb += values[name].eq(getattr(cap, name[4:]))
 
-        # memory windows: read (and modify, write) the whole word, one clock after the request
-        mem_phase = Signal()  # the read of a window access is under way
+        # memory windows: the block RAM read (clock 1 after the request), the whole word landed in a
+        # register (clock 2: the memories' outputs come from all over the device), then the answer
+        # and, for a write, the modified word written back (clock 3)
+        mem_read, mem_landed = Signal(), Signal()
         bus_mem = ~running & (bus_window != len(rmap.windows))
         mem_data = Signal(BUS_WORD_BITS)
-        with m.If(hs.request & bus_mem):
-            m.d.sync += mem_phase.eq(1)
-        with m.If(mem_phase):
-            m.d.sync += mem_phase.eq(0)
+        m.d.sync += [mem_read.eq(hs.request & bus_mem), mem_landed.eq(mem_read)]
         window_words = {}
         for k, w in enumerate(rmap.windows):
             if w.name == "nodes":
@@ -337,8 +339,8 @@ class SpringflatEngine(wiring.Component):
                 word_value = ent_r.data.as_value()
             else:
                 word_value = tri_r.data.as_value()
-            padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word")
-            m.d.comb += padded.eq(word_value)
+            padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word", reset_less=True)
+            m.d.sync += padded.eq(word_value)
             window_words[w.name] = (k, padded, len(word_value))
             with m.If(bus_window == k):
                 m.d.comb += mem_data.eq(padded.word_select(bus_word, BUS_WORD_BITS))
@@ -351,7 +353,7 @@ class SpringflatEngine(wiring.Component):
                     with m.Case(j):
                         m.d.comb += modified[j * BUS_WORD_BITS:(j + 1) * BUS_WORD_BITS].eq(hs.write_data)
             new_words[name] = (k, modified[:bits])
-        bus_writing = mem_phase & hs.write & hs.whole_word
+        bus_writing = mem_landed & hs.write & hs.whole_word
 
         # ------------------------------------------------------------ port multiplexing
         # Addresses: the bus while idle, else the pass in progress.
@@ -389,12 +391,18 @@ class SpringflatEngine(wiring.Component):
                 tri_w.en.eq(bus_writing & (bus_window == tri_k)),
             ]
 
-        # bus answers
-        with m.If(hs.request & bus_reg_hit):
-            m.d.comb += [hs.done.eq(1), hs.error.eq(reg_error | ~hs.whole_word), hs.data.eq(read_word)]
-        with m.Elif(hs.request & ~bus_mem):  # unmapped, or a memory while running
+        # bus answers: a register the clock after the request (its read word and error landed), a
+        # memory window two clocks after that, an unmapped word (or a memory while running) at once
+        reg_answer = Signal()
+        landed_word = Signal(BUS_WORD_BITS, reset_less=True)
+        landed_error = Signal(reset_less=True)
+        m.d.sync += [reg_answer.eq(hs.request & bus_reg_hit), landed_word.eq(read_word),
+                     landed_error.eq(reg_error | ~hs.whole_word)]
+        with m.If(reg_answer):
+            m.d.comb += [hs.done.eq(1), hs.error.eq(landed_error), hs.data.eq(landed_word)]
+        with m.Elif(hs.request & ~bus_reg_hit & ~bus_mem):
             m.d.comb += [hs.done.eq(1), hs.error.eq(1)]
-        with m.Elif(mem_phase):
+        with m.Elif(mem_landed):
             m.d.comb += [hs.done.eq(1), hs.error.eq(~hs.whole_word), hs.data.eq(mem_data)]
 
         # ------------------------------------------------------------ controller

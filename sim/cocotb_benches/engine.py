@@ -32,7 +32,7 @@ from sim.engine_driver import BusError, DriverError, EngineDriver
 
 from .common import CLOCK_NS, formats, load_config, write_result
 
-#: Clocks a bus cycle may take before the initiator gives up (the engine answers in one or two).
+#: Clocks a bus cycle may take before the initiator gives up (the engine answers in three or four).
 BUS_TIMEOUT = 64
 
 
