@@ -1,10 +1,10 @@
 """Time per iteration: SpringflatEngine at its ECP5 Fmax against the float and fixed engines on this machine.
 
 Usage: .venv/bin/python benchmarks/bench_engine_iteration.py --fmax MHZ [--iterations 20] [--repeats 3]
-       [--formats default] [--capacity V E T] [--rtl verilator|icarus]
+       [--formats default] [--capacity V E T] [--side 45] [--rtl verilator|icarus]
 
 For each mesh (``dome45``: ``dome_grid(45)``, a generated 2,025-vertex patch that fits the default
-capacity; ``surf1``: the paper's Surf1)
+capacity, or ``dome_grid(--side)`` for a smaller one; ``surf1``: the paper's Surf1)
 all three engines run the same problem with the stop rule switched off (tolerances 0), so every run
 is exactly its ``max_iter`` iterations:
 
@@ -56,11 +56,11 @@ class Case:
         return self.mesh.n_vertices, 2 * len(self.mesh.edges), len(self.mesh.faces)
 
 
-def cases() -> list[Case]:
+def cases(side: int = 45) -> list[Case]:
     off = {"tol_area": 0.0, "tol_shape": 0.0, "tol_energy": 0.0}
     surf1, paper = builtin_mesh("surf1")
     return [
-        Case("dome45", dome_grid(45), FlattenParams(density="auto", damping=0.05, **off)),
+        Case(f"dome{side}", dome_grid(side), FlattenParams(density="auto", damping=0.05, **off)),
         Case("surf1", surf1, FlattenParams(spring=paper.spring, density=paper.density, **off)),
     ]
 
@@ -135,6 +135,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--fmax", type=float, required=True, help="the engine's Fmax after routing (MHz)")
     parser.add_argument("--iterations", type=int, default=20)
+    parser.add_argument("--side", type=int, default=45,
+                        help="the generated patch: dome_grid(SIDE), SIDE² vertices (default 45; it must fit --capacity)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--formats", default="default")
     parser.add_argument("--capacity", nargs=3, type=int, metavar=("V", "E", "T"), default=None,
@@ -153,7 +155,7 @@ def main() -> None:
     print("| mesh | vertices | entries | triangles | engine cycles/iteration | engine (µs/iteration) | "
           "float (µs/iteration) | fixed (µs/iteration) | engine vs float | engine vs fixed |")
     print("|---|---|---|---|---|---|---|---|---|---|")
-    for case in cases():
+    for case in cases(args.side):
         vertices, entries, triangles = case.counts
         p0 = initial_layout(case.mesh, "pca")
         float_s = seconds_per_iteration(lambda n: flatten(case.mesh, p0, case.params.with_(max_iter=n)),
