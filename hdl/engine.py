@@ -463,6 +463,20 @@ class SpringflatEngine(wiring.Component):
                          | (mode_fixed & ~mode_momentum & (values["dt"] == 0)) | (values["max_iter"] == 0)
                          | bad_tolerance)
         stepgen_idle = stepgen_idle_signal(m, stepgen)
+        # START's and the check phase's decisions from flip-flops: each comparison registered the clock
+        # before it is used. What they read is stable by then (START follows the last constant's write by
+        # a whole bus cycle; the check phase follows the math phase, after every pass and unit has
+        # reported), and the controller's next-state logic starts from one flag instead of a 32-bit
+        # compare (MAX_ITER against the iteration count into the phase machine was the engine's
+        # critical path, 84 MHz on ECP5-85F).
+        limit = values["saturation_limit"]
+        no_mesh_q, bad_constants_q, converged_q, diverged_q, at_max_iter_q = (
+            Signal(name=n) for n in ("no_mesh_q", "bad_constants_q", "converged_q", "diverged_q", "at_max_iter_q"))
+        m.d.sync += [no_mesh_q.eq(n_vertices == 0), bad_constants_q.eq(bad_constants),
+                     converged_q.eq((area_error_raw <= values["tol_area"]) & (shape_error_raw <= values["tol_shape"])
+                                    & settled),
+                     diverged_q.eq((limit != 0) & (saturations >= limit)),
+                     at_max_iter_q.eq(iterations == values["max_iter"])]
 
         # SATURATIONS: every event the golden model counts, added as the units report them, stopping at
         # its maximum. The force pass's, integrate stage's and step generator's per beat; the area pass's
@@ -498,9 +512,9 @@ class SpringflatEngine(wiring.Component):
         with m.Elif(start_pulse & ~running):
             m.d.sync += [cycles.eq(0), iterations.eq(0), saturations.eq(0), irq_pending.eq(0),
                          result.eq(_code(RESULTS, "none"))]
-            with m.If(n_vertices == 0):
+            with m.If(no_mesh_q):
                 finish("no-mesh")
-            with m.Elif(bad_constants):
+            with m.Elif(bad_constants_q):
                 finish("bad-constants")
             with m.Else():
                 m.d.sync += [state.eq(_code(STATES, "running")), phase.eq(PH["start"]), first_measure.eq(1),
@@ -532,16 +546,13 @@ class SpringflatEngine(wiring.Component):
                     with m.If(math_pending == 0):
                         m.d.sync += phase.eq(PH["check"])
                 with m.Case(PH["check"]):
-                    converged = (area_error_raw <= values["tol_area"]) & (shape_error_raw <= values["tol_shape"]) \
-                        & settled & ~first_measure
-                    limit = values["saturation_limit"]
                     # as run_image: the saturation limit first, then the stop rule (neither after the first
                     # measurement), then the iteration limit
-                    with m.If((limit != 0) & (saturations >= limit) & ~first_measure):
+                    with m.If(diverged_q & ~first_measure):
                         finish("diverged")
-                    with m.Elif(converged):
+                    with m.Elif(converged_q & ~first_measure):
                         finish("converged")
-                    with m.Elif(iterations == values["max_iter"]):
+                    with m.Elif(at_max_iter_q):
                         finish("max-iterations")
                     with m.Else():
                         m.d.sync += [first_measure.eq(0), phase.eq(PH["step"])]
