@@ -2,7 +2,7 @@
 the host driver over Wishbone, bit-exact with ``run_image``; the refusals; ``rtl-check --engine-top`` and
 ``flatten --engine rtl``.
 
-Icarus simulates this design at a few hundred clocks per second, so its cases are a 16-vertex dome and
+Icarus simulates this design at about a thousand clocks per second, so its cases are a 16-vertex dome and
 a few iterations; Verilator takes the three dynamics modes. Every case shares one capacity (one build
 per simulator).
 """
