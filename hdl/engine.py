@@ -275,7 +275,10 @@ class SpringflatEngine(wiring.Component):
         # address, then a register: the read mux and the bus's data register are far apart)
         read_word = Signal(BUS_WORD_BITS)
         reg_error = Signal()
+        # CONTROL's START and ABORT act from flip-flops the clock after the write (the bus decode into
+        # the phase machine and on into the units' controls was the engine's critical path, 69 MHz)
         start_pulse, abort_pulse = Signal(), Signal()
+        m.d.sync += [start_pulse.eq(0), abort_pulse.eq(0)]
         status_code = {"state": state, "result": result, "irq_pending": irq_pending}
         with m.Switch(hs.address):
             for r in rmap.registers:
@@ -308,7 +311,7 @@ class SpringflatEngine(wiring.Component):
                     m.d.comb += read_word.eq(word)
                     with m.If(hs.request & hs.write & hs.whole_word):
                         if r.name == "CONTROL":
-                            m.d.comb += [start_pulse.eq(hs.write_data[0]), abort_pulse.eq(hs.write_data[1])]
+                            m.d.sync += [start_pulse.eq(hs.write_data[0]), abort_pulse.eq(hs.write_data[1])]
                             m.d.sync += irq_enable.eq(hs.write_data[2])
                         elif r.name == "STATUS":
                             with m.If(hs.write_data[8]):
