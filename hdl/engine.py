@@ -309,12 +309,13 @@ class SpringflatEngine(wiring.Component):
                         at = lsb + width
                     m.d.comb += word.eq(Cat(*parts))
                     m.d.comb += read_word.eq(word)
+                    written = {f.name: hs.write_data[f.lsb:f.lsb + f.width] for f in r.fields}
                     with m.If(hs.request & hs.write & hs.whole_word):
                         if r.name == "CONTROL":
-                            m.d.sync += [start_pulse.eq(hs.write_data[0]), abort_pulse.eq(hs.write_data[1])]
-                            m.d.sync += irq_enable.eq(hs.write_data[2])
+                            m.d.sync += [start_pulse.eq(written["start"]), abort_pulse.eq(written["abort"]),
+                                         irq_enable.eq(written["irq_enable"])]
                         elif r.name == "STATUS":
-                            with m.If(hs.write_data[8]):
+                            with m.If(written["irq_pending"]):
                                 m.d.sync += irq_pending.eq(0)
                         elif r.access == "rw":
                             for f in r.fields:
