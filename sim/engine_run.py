@@ -29,16 +29,9 @@ from golden_model.fixed.engine_image import EngineCapacity, EngineImage, build_i
 from .cocotb_support import BUILD_ROOT, _formats_key, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
-__all__ = ["ENGINE_TOP", "SIM_TOP", "VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
+__all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
            "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "summary_line",
-           "simulation_harness", "top_ports"]
-
-ENGINE_TOP = ENGINE_MODULE
-
-#: The simulation top: the exported ``springflat_engine.v`` untouched, inside a harness
-#: (:func:`simulation_harness`) that passes every port through and takes ``rst`` through one
-#: flip-flop.
-SIM_TOP = ENGINE_SIM_MODULE
+           "simulation_harness", "top_ports", "build_flags"]
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
 #: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and
@@ -59,10 +52,15 @@ VERILATOR_MAKE_FLAGS = r"OPT_FAST=-O3\ -march=native"
 #: registered address starts and resets at 0) never run and read X.
 ICARUS_FLAGS = ("-g2005",)
 
+
+def build_flags(simulator: str) -> tuple[tuple[str, ...], str]:
+    """The simulator's extra build arguments and make variables for the engine."""
+    return (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS) if simulator == "verilator" else (ICARUS_FLAGS, "")
+
 _PORT = re.compile(r"^\s*(input|output)\s+(\[\d+:\d+\]\s+)?([A-Za-z_][A-Za-z0-9_$]*);$", re.MULTILINE)
 
 
-def top_ports(verilog: str, module: str = ENGINE_TOP) -> list[tuple[str, str, str]]:
+def top_ports(verilog: str, module: str = ENGINE_MODULE) -> list[tuple[str, str, str]]:
     """``module``'s ports in Yosys's Verilog, as (direction, range or "", name)."""
     start = verilog.index(f"module {module}(")
     body = verilog[start:verilog.index("endmodule", start)]
@@ -70,7 +68,7 @@ def top_ports(verilog: str, module: str = ENGINE_TOP) -> list[tuple[str, str, st
 
 
 def simulation_harness(verilog: str) -> str:
-    """Verilog of :data:`SIM_TOP`: ``springflat_engine`` with the same ports, ``rst`` registered once.
+    """Verilog of ``springflat_engine_sim``: ``springflat_engine`` with the same ports, ``rst`` registered once.
 
     Why: Verilator evaluates the logic that reads a top-level input at every ``eval`` (its "ico"
     region, twice per clock), and Yosys's next-state logic reads ``rst`` in nearly every register's
@@ -81,14 +79,14 @@ def simulation_harness(verilog: str) -> str:
     ports = top_ports(verilog)
     names = {name for _, _, name in ports}
     if not {"clk", "rst"} <= names:
-        raise ValueError(f"{ENGINE_TOP} has no clk/rst ports (has {sorted(names)})")
+        raise ValueError(f"{ENGINE_MODULE} has no clk/rst ports (has {sorted(names)})")
     declarations = ",\n".join(f"  {direction} {f'{width} ' if width else ''}{name}" for direction, width, name in ports)
     connections = ",\n".join(f"    .{name}({'rst_q' if name == 'rst' else name})" for _, _, name in ports)
-    return (f"// Simulation top (sim/engine_run.py): {ENGINE_TOP} with rst through one flip-flop.\n"
-            f"module {SIM_TOP}(\n{declarations}\n);\n"
+    return (f"// Simulation top (sim/engine_run.py): {ENGINE_MODULE} with rst through one flip-flop.\n"
+            f"module {ENGINE_SIM_MODULE}(\n{declarations}\n);\n"
             f"  reg rst_q = 1'b1;\n"
             f"  always @(posedge clk) rst_q <= rst;\n"
-            f"  {ENGINE_TOP} engine(\n{connections}\n  );\n"
+            f"  {ENGINE_MODULE} engine(\n{connections}\n  );\n"
             f"endmodule\n")
 
 
@@ -99,16 +97,15 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
 
     directory = (BUILD_ROOT / _formats_key(fs) / "engine"
                  / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}")
-    exported = directory / f"{ENGINE_TOP}.v"
+    exported = directory / f"{ENGINE_MODULE}.v"
     if not exported.exists():
         export_engine(fs, capacity, directory)
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
-    flags = (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS) if simulator == "verilator" else ICARUS_FLAGS
-    key = hashlib.sha256(repr(flags).encode()).hexdigest()[:8]
+    key = hashlib.sha256(repr(build_flags(simulator)).encode()).hexdigest()[:8]
     copy = directory / f"{simulator}-source-{key}"
     copy.mkdir(exist_ok=True)
     text = exported.read_text()
-    for name, content in ((exported.name, text), (f"{SIM_TOP}.v", simulation_harness(text))):
+    for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", simulation_harness(text))):
         if not (copy / name).exists() or (copy / name).read_text() != content:
             (copy / name).write_text(content)
     return copy
@@ -161,9 +158,9 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
                            "triangles": capacity.triangles},
               "constants": {k: int(v) for k, v in image.constants.items()},
               "wait_states": wait_states, "seed": seed, **(checks or {})}
-    flags = VERILATOR_SPEED_FLAGS if simulator == "verilator" else ICARUS_FLAGS
-    with _make_flags(VERILATOR_MAKE_FLAGS if simulator == "verilator" else ""):
-        run = run_bench(simulator, fs, SIM_TOP, "engine", config, work=work, log_file=log_file, waves=waves,
+    flags, make_flags = build_flags(simulator)
+    with _make_flags(make_flags):
+        run = run_bench(simulator, fs, ENGINE_SIM_MODULE, "engine", config, work=work, log_file=log_file, waves=waves,
                         sources=sources, extra_build_args=flags)
     readback = work / "readback.npz"
     positions = velocities = None

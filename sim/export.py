@@ -31,8 +31,6 @@ from .top_names import CORE_MODULE, ENGINE_MODULE
 __all__ = ["COMPONENTS", "ENGINE_MODULE", "export_verilog", "export_engine", "export_engine_bundle",
            "engine_capacity", "memory_image_markdown", "describe"]
 
-"""Top module name of :class:`hdl.engine.SpringflatEngine` in the exports."""
-
 STREAM_PROTOCOL = (
     "Each stream is `valid`, `ready`, `payload` (amaranth.lib.stream): a beat transfers on a rising clock "
     "edge where valid and ready are both high; valid never depends on ready; once valid is high, it and "

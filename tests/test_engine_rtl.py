@@ -24,7 +24,8 @@ from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
 from sim.cocotb_support import missing_simulator
-from sim.engine_run import ENGINE_TOP, engine_sources, run_image_on_rtl, simulation_harness, top_ports
+from sim.engine_run import engine_sources, run_image_on_rtl, simulation_harness, top_ports
+from sim.top_names import ENGINE_MODULE
 
 pytestmark = pytest.mark.slow  # simulator builds (Verilator: minutes, cached)
 
@@ -113,13 +114,13 @@ def test_the_export_has_no_input_less_always_block():
     """Icarus runs the export as it is: no ``always @*`` block assigns only a constant (the register
     read words are single assignments with constant zeros beside the fields)."""
     assert CONSTANT_BLOCK.search("  always @*\n    rd_status[7] = 1'h0;\n")  # the pattern finds one
-    text = (engine_sources(DEFAULT, CAPACITY, "icarus") / f"{ENGINE_TOP}.v").read_text()
+    text = (engine_sources(DEFAULT, CAPACITY, "icarus") / f"{ENGINE_MODULE}.v").read_text()
     assert CONSTANT_BLOCK.findall(text) == []
 
 
 def test_the_simulation_harness_keeps_every_port_and_registers_rst():
     """springflat_engine_sim: the engine's ports, each connected by name, except rst through one flip-flop."""
-    text = (engine_sources(DEFAULT, CAPACITY, "verilator") / f"{ENGINE_TOP}.v").read_text()
+    text = (engine_sources(DEFAULT, CAPACITY, "verilator") / f"{ENGINE_MODULE}.v").read_text()
     ports = top_ports(text)
     assert {"clk", "rst", "irq", "bus__cyc", "bus__stb", "bus__ack", "bus__dat_r"} <= {name for *_, name in ports}
     harness = simulation_harness(text)
