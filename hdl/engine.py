@@ -140,8 +140,14 @@ class SpringflatEngine(wiring.Component):
         result = Signal(range(len(RESULTS)), init=_code(RESULTS, "none"))
         irq_pending = Signal()
         irq_enable = Signal()
-        running = state == _code(STATES, "running")
+        # ``state == running`` as a flip-flop of its own, set and cleared with ``state`` (set_state):
+        # it gates every pass, port multiplexer and bus answer, so it starts their logic from a
+        # register rather than a compare
+        running = Signal()
         m.d.comb += self.irq.eq(irq_pending & irq_enable)
+
+        def set_state(name):
+            m.d.sync += [state.eq(_code(STATES, name)), running.eq(name == "running")]
 
         n_vertices, n_entries, n_triangles = values["vertices"], values["entries"], values["triangles"]
         mode_momentum, mode_fixed = values["momentum"], values["fixed_step"]
@@ -152,36 +158,39 @@ class SpringflatEngine(wiring.Component):
         phase = Signal(range(len(PH)))
 
         # ------------------------------------------------------------ force pass fetch
-        # One entry per clock. Valid bits are named for the clock whose data they mark:
-        # E1 the entry memory's read data; E2 the entry landed in fabric registers, its three
-        # position reads issued; E3 the position memory's read data; E4 everything landed, into
-        # ForcePass.i. Block RAM outputs land in registers before any logic (clock-to-out is most
-        # of a period on ECP5).
+        # One entry per clock. Valid bits are named for the clock whose data they mark: E0 the
+        # entry's address in the entry memory's address register; E1 the entry memory's read data;
+        # E2 the entry landed in fabric registers, its three position addresses formed; E3 those
+        # in the position memory's address registers; E4 the position memory's read data; E5
+        # everything landed, into ForcePass.i. Every block RAM address comes from a flip-flop after
+        # the pass multiplexer, and every block RAM output lands in a register before any logic
+        # (clock-to-out is most of a period on ECP5).
         entry_index = Signal(range(cap.entries + 1))
         fetch_force = Signal()
-        e1_valid, e2_valid, e3_valid, e4_valid = (Signal(name=f"e{k}_valid") for k in range(1, 5))
-        e2_entry, e3_entry, e4_entry = (Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(2, 5))
-        e3_first, e4_first = Signal(), Signal()
-        e4_pi, e4_pj, e4_pb = (Signal(pos_shape, reset_less=True, name=f"e4_{n}") for n in ("pi", "pj", "pb"))
+        e_valid = [Signal(name=f"e{k}_valid") for k in range(6)]
+        e2_entry, e3_entry, e4_entry, e5_entry = (
+            Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(2, 6))
+        e3_first, e4_first, e5_first = Signal(), Signal(), Signal()
+        e5_pi, e5_pj, e5_pb = (Signal(pos_shape, reset_less=True, name=f"e5_{n}") for n in ("pi", "pj", "pb"))
         node_of_entry = Signal(range(cap.vertices + 1))
         next_first = Signal()
         issue_entry = fetch_force & (entry_index < n_entries)
-        m.d.sync += [e1_valid.eq(issue_entry), e2_valid.eq(e1_valid), e3_valid.eq(e2_valid), e4_valid.eq(e3_valid),
-                     e2_entry.eq(ent_r.data), e3_entry.eq(e2_entry), e4_entry.eq(e3_entry),
-                     e3_first.eq(next_first), e4_first.eq(e3_first),
-                     e4_pi.eq(pos_a.data), e4_pj.eq(pos_b.data), e4_pb.eq(pos_c.data)]
+        m.d.sync += [e_valid[0].eq(issue_entry), *(e_valid[k].eq(e_valid[k - 1]) for k in range(1, 6)),
+                     e2_entry.eq(ent_r.data), e3_entry.eq(e2_entry), e4_entry.eq(e3_entry), e5_entry.eq(e4_entry),
+                     e3_first.eq(next_first), e4_first.eq(e3_first), e5_first.eq(e4_first),
+                     e5_pi.eq(pos_a.data), e5_pj.eq(pos_b.data), e5_pb.eq(pos_c.data)]
         with m.If(issue_entry):
             m.d.sync += entry_index.eq(entry_index + 1)
-        with m.If(e2_valid):  # the owner of the entry after this one
+        with m.If(e_valid[2]):  # the owner of the entry after this one
             m.d.sync += [next_first.eq(e2_entry.last), node_of_entry.eq(node_of_entry + e2_entry.last)]
         m.d.comb += [
-            force.i.valid.eq(e4_valid),
-            force.i.payload.first.eq(e4_first), force.i.payload.last.eq(e4_entry.last),
-            force.i.payload.position.eq(e4_pi), force.i.payload.neighbour.position.eq(e4_pj),
-            force.i.payload.neighbour.rest.eq(e4_entry.rest),
-            force.i.payload.barrier.second.eq(e4_pb),
-            force.i.payload.barrier.threshold.eq(Mux(values["barrier"], e4_entry.threshold, 0)),
-            force.i.payload.barrier.gain.eq(Mux(values["barrier"], e4_entry.gain, 0)),
+            force.i.valid.eq(e_valid[5]),
+            force.i.payload.first.eq(e5_first), force.i.payload.last.eq(e5_entry.last),
+            force.i.payload.position.eq(e5_pi), force.i.payload.neighbour.position.eq(e5_pj),
+            force.i.payload.neighbour.rest.eq(e5_entry.rest),
+            force.i.payload.barrier.second.eq(e5_pb),
+            force.i.payload.barrier.threshold.eq(Mux(values["barrier"], e5_entry.threshold, 0)),
+            force.i.payload.barrier.gain.eq(Mux(values["barrier"], e5_entry.gain, 0)),
             force.half_spring.eq(values["half_spring"]), force.barrier.eq(values["barrier"]),
         ]
         # per-node results: the force memory and the exact sums
@@ -198,34 +207,37 @@ class SpringflatEngine(wiring.Component):
                          barrier_sum.eq(barrier_sum + force.o.payload.barrier_energy)]
 
         # ------------------------------------------------------------ area pass fetch
-        # As the force pass: T1 the triangle memory's data, T2 landed (corner reads issued),
-        # T3 the corners' data, T4 landed, into AreaError.i.
+        # As the force pass: T0 the triangle's address registered, T1 the triangle memory's data,
+        # T2 landed (corner addresses formed), T3 registered, T4 the corners' data, T5 landed, into
+        # AreaError.i.
         tri_index = Signal(range(cap.triangles + 1))
         fetch_area = Signal()
-        t1_valid, t2_valid, t3_valid, t4_valid = (Signal(name=f"t{k}_valid") for k in range(1, 5))
+        t_valid = [Signal(name=f"t{k}_valid") for k in range(6)]
         t2_tri = Signal(tri_shape, reset_less=True)
-        t3_area, t4_area = (Signal(shape_of(fs.face_area), reset_less=True, name=f"t{k}_area") for k in (3, 4))
-        t4_p = [Signal(pos_shape, reset_less=True, name=f"t4_p{k}") for k in "abc"]
+        t3_area, t4_area, t5_area = (Signal(shape_of(fs.face_area), reset_less=True, name=f"t{k}_area")
+                                     for k in (3, 4, 5))
+        t5_p = [Signal(pos_shape, reset_less=True, name=f"t5_p{k}") for k in "abc"]
         issue_tri = fetch_area & (tri_index < n_triangles)
-        m.d.sync += [t1_valid.eq(issue_tri), t2_valid.eq(t1_valid), t3_valid.eq(t2_valid), t4_valid.eq(t3_valid),
-                     t2_tri.eq(tri_r.data), t3_area.eq(t2_tri.area), t4_area.eq(t3_area),
-                     t4_p[0].eq(pos_a.data), t4_p[1].eq(pos_b.data), t4_p[2].eq(pos_c.data)]
+        m.d.sync += [t_valid[0].eq(issue_tri), *(t_valid[k].eq(t_valid[k - 1]) for k in range(1, 6)),
+                     t2_tri.eq(tri_r.data), t3_area.eq(t2_tri.area), t4_area.eq(t3_area), t5_area.eq(t4_area),
+                     t5_p[0].eq(pos_a.data), t5_p[1].eq(pos_b.data), t5_p[2].eq(pos_c.data)]
         with m.If(issue_tri):
             m.d.sync += tri_index.eq(tri_index + 1)
-        m.d.comb += [area.i.valid.eq(t4_valid), area.i.payload.a.eq(t4_p[0]), area.i.payload.b.eq(t4_p[1]),
-                     area.i.payload.c.eq(t4_p[2]), area.i.payload.area.eq(t4_area)]
+        m.d.comb += [area.i.valid.eq(t_valid[5]), area.i.payload.a.eq(t5_p[0]), area.i.payload.b.eq(t5_p[1]),
+                     area.i.payload.c.eq(t5_p[2]), area.i.payload.area.eq(t5_area)]
 
         # ------------------------------------------------------------ integrate pass fetch
+        # N0 the node's address registered, N1 the memories' data, N2 landed, into Integrator.i.
         node_index = Signal(range(cap.vertices + 1))
         fetch_nodes = Signal()
-        n1_valid, n2_valid = Signal(), Signal()
+        n_valid = [Signal(name=f"n{k}_valid") for k in range(3)]
         n2_pos = Signal(pos_shape, reset_less=True)
         n2_vel = Signal(vel_shape, reset_less=True)
         n2_wgt = Signal(weight_shape, reset_less=True)
         n2_frc = Signal(force_shape, reset_less=True)
         issue_node = fetch_nodes & (node_index < n_vertices)
-        m.d.sync += [n1_valid.eq(issue_node), n2_valid.eq(n1_valid), n2_pos.eq(pos_a.data), n2_vel.eq(vel_r.data),
-                     n2_wgt.eq(wgt_r.data), n2_frc.eq(frc_r.data)]
+        m.d.sync += [n_valid[0].eq(issue_node), n_valid[1].eq(n_valid[0]), n_valid[2].eq(n_valid[1]),
+                     n2_pos.eq(pos_a.data), n2_vel.eq(vel_r.data), n2_wgt.eq(wgt_r.data), n2_frc.eq(frc_r.data)]
         with m.If(issue_node):
             m.d.sync += node_index.eq(node_index + 1)
         step_dt = Signal(shape_of(fs.dt))
@@ -240,7 +252,7 @@ class SpringflatEngine(wiring.Component):
                                                   fs.rounding)),
                      fixed_half.eq(clamp(fixed_rounded, fs.half_dt_sq)[0])]
         m.d.comb += [
-            integ.i.valid.eq(n2_valid),
+            integ.i.valid.eq(n_valid[2]),
             integ.i.payload.node.position.eq(n2_pos), integ.i.payload.node.velocity.eq(n2_vel),
             integ.i.payload.node.inv_mass.eq(n2_wgt.inv_mass),
             integ.i.payload.node.inv_mass_barrier.eq(n2_wgt.inv_mass_barrier),
@@ -254,10 +266,14 @@ class SpringflatEngine(wiring.Component):
             m.d.sync += [node_out_index.eq(node_out_index + 1), power_sum.eq(power_sum + integ.o.payload.power)]
 
         # ------------------------------------------------------------ bus: decode
-        bus_window = Signal(range(len(rmap.windows) + 1))  # len(): none
+        # The request's address is decoded into flip-flops (REQ: the handshake's request; DEC: the
+        # decode registered, ``bus_request``), and every action starts from them: the decode of a
+        # 14-bit address into every register's write enable and the answer was the next critical
+        # path once the memories' outputs had landed.
+        n_windows = len(rmap.windows)
+        bus_window = Signal(range(n_windows + 1))  # n_windows: none
         bus_index = Signal(max(cap.vertices, cap.entries, cap.triangles).bit_length())
         bus_word = Signal(range(max(w.words for w in rmap.windows) + 1))
-        bus_reg_hit = Signal()
         window_ok = Signal()
         for k, w in enumerate(rmap.windows):
             size_bits = (w.size - 1).bit_length()
@@ -268,72 +284,84 @@ class SpringflatEngine(wiring.Component):
                 m.d.comb += [bus_window.eq(k), bus_index.eq(index), bus_word.eq(word),
                              window_ok.eq((index < w.depth) & (word < w.words))]
         with m.If(~window_ok):
-            m.d.comb += bus_window.eq(len(rmap.windows))
+            m.d.comb += bus_window.eq(n_windows)
+        registers = rmap.registers
+        bus_request = Signal()
+        reg_select = Signal(len(registers))  # one-hot: the register addressed, if any
+        window_q = Signal.like(bus_window)
+        index_q = Signal.like(bus_index)
+        word_q = Signal.like(bus_word)
+        m.d.sync += [bus_request.eq(hs.request), window_q.eq(bus_window), index_q.eq(bus_index), word_q.eq(bus_word),
+                     reg_select.eq(Cat(hs.address == r.offset for r in registers))]
+        bus_reg_hit = reg_select.any()
+        bus_write = bus_request & hs.write & hs.whole_word
 
-        # register reads and writes: the write acts in the request's clock; the answer comes the
-        # clock after, from the read word landed in a register (one parallel case over the
-        # address, then a register: the read mux and the bus's data register are far apart)
+        # register reads and writes: the write acts in DEC's clock; the answer comes the clock after,
+        # from the read word landed in a register (an AND-OR over the one-hot select)
         read_word = Signal(BUS_WORD_BITS)
-        reg_error = Signal()
+        read_only = Signal()
         # CONTROL's START and ABORT act from flip-flops the clock after the write (the bus decode into
         # the phase machine and on into the units' controls was the engine's critical path, 69 MHz)
         start_pulse, abort_pulse = Signal(), Signal()
         m.d.sync += [start_pulse.eq(0), abort_pulse.eq(0)]
         status_code = {"state": state, "result": result, "irq_pending": irq_pending}
-        with m.Switch(hs.address):
-            for r in rmap.registers:
-                with m.Case(r.offset):
-                    m.d.comb += bus_reg_hit.eq(1)
-                    word = Signal(BUS_WORD_BITS, name=f"rd_{r.name.lower()}")
-                    pieces = []  # (lsb, value) of each field
+        read_terms, read_only_terms = [], []
+        for k, r in enumerate(registers):
+            selected = reg_select[k]
+            word = Signal(BUS_WORD_BITS, name=f"rd_{r.name.lower()}")
+            pieces = []  # (lsb, value) of each field
+            for f in r.fields:
+                if r.name == "CONTROL":
+                    source = {"start": Const(0, 1), "abort": Const(0, 1), "irq_enable": irq_enable}[f.name]
+                elif r.name == "STATUS":
+                    source = status_code.get(f.name)
+                    if f.name == "saturated":
+                        source = values["saturations"] != 0
+                elif r.access == "ro" and r.reset and r.block == "identification":
+                    source = Const((r.reset >> f.lsb) & ((1 << f.width) - 1), f.width)
+                else:
+                    source = values[f.value][f.value_lsb:f.value_lsb + f.width]
+                pieces.append((f.lsb, Value.cast(source).as_unsigned()[:f.width], f.width))
+            # the whole word in one assignment, unused bits as constant zeros beside the fields: a
+            # separate constant-only assignment becomes an input-less `always @*` block in the
+            # Verilog, which an event-driven simulator (Icarus) never runs
+            parts, at = [], 0
+            for lsb, value, width in sorted(pieces, key=lambda p: p[0]):
+                parts += [Const(0, lsb - at)] if lsb > at else []
+                parts.append(value)
+                parts += [Const(0, width - len(value))] if len(value) < width else []
+                at = lsb + width
+            m.d.comb += word.eq(Cat(*parts))
+            read_terms.append(Mux(selected, word, 0))
+            if r.access == "ro":
+                read_only_terms.append(selected)
+            written = {f.name: hs.write_data[f.lsb:f.lsb + f.width] for f in r.fields}
+            with m.If(bus_write & selected):
+                if r.name == "CONTROL":
+                    m.d.sync += [start_pulse.eq(written["start"]), abort_pulse.eq(written["abort"]),
+                                 irq_enable.eq(written["irq_enable"])]
+                elif r.name == "STATUS":
+                    with m.If(written["irq_pending"]):
+                        m.d.sync += irq_pending.eq(0)
+                elif r.access == "rw":
                     for f in r.fields:
-                        if r.name == "CONTROL":
-                            source = {"start": Const(0, 1), "abort": Const(0, 1), "irq_enable": irq_enable}[f.name]
-                        elif r.name == "STATUS":
-                            source = status_code.get(f.name)
-                            if f.name == "saturated":
-                                source = values["saturations"] != 0
-                        elif r.access == "ro" and r.reset and r.block == "identification":
-                            source = Const((r.reset >> f.lsb) & ((1 << f.width) - 1), f.width)
-                        else:
-                            source = values[f.value][f.value_lsb:f.value_lsb + f.width]
-                        pieces.append((f.lsb, Value.cast(source).as_unsigned()[:f.width], f.width))
-                    # the whole word in one assignment, unused bits as constant zeros beside the fields: a
-                    # separate constant-only assignment becomes an input-less `always @*` block in the
-                    # Verilog, which an event-driven simulator (Icarus) never runs
-                    parts, at = [], 0
-                    for lsb, value, width in sorted(pieces, key=lambda p: p[0]):
-                        parts += [Const(0, lsb - at)] if lsb > at else []
-                        parts.append(value)
-                        parts += [Const(0, width - len(value))] if len(value) < width else []
-                        at = lsb + width
-                    m.d.comb += word.eq(Cat(*parts))
-                    m.d.comb += read_word.eq(word)
-                    written = {f.name: hs.write_data[f.lsb:f.lsb + f.width] for f in r.fields}
-                    with m.If(hs.request & hs.write & hs.whole_word):
-                        if r.name == "CONTROL":
-                            m.d.sync += [start_pulse.eq(written["start"]), abort_pulse.eq(written["abort"]),
-                                         irq_enable.eq(written["irq_enable"])]
-                        elif r.name == "STATUS":
-                            with m.If(written["irq_pending"]):
-                                m.d.sync += irq_pending.eq(0)
-                        elif r.access == "rw":
-                            for f in r.fields:
-                                m.d.sync += values[f.value][f.value_lsb:f.value_lsb + f.width].eq(
-                                    hs.write_data[f.lsb:f.lsb + f.width])
-                    if r.access == "ro":
-                        m.d.comb += reg_error.eq(hs.write)
+                        m.d.sync += values[f.value][f.value_lsb:f.value_lsb + f.width].eq(
+                            hs.write_data[f.lsb:f.lsb + f.width])
+        m.d.comb += [read_word.eq(_or_all(read_terms)), read_only.eq(_or_all(read_only_terms))]
         # identification values are constants
         for name in ("cap_vertices", "cap_entries", "cap_triangles"):
             m.d.comb += values[name].eq(getattr(cap, name[4:]))
 
-        # memory windows: the block RAM read (clock 1 after the request), the whole word landed in a
-        # register (clock 2: the memories' outputs come from all over the device), then the answer
-        # and, for a write, the modified word written back (clock 3)
-        mem_read, mem_landed = Signal(), Signal()
-        bus_mem = ~running & (bus_window != len(rmap.windows))
+        # memory windows: DEC forms the port addresses (in the memories' address registers the clock
+        # after), then the block RAM read, the whole word landed in a register (the memories'
+        # outputs come from all over the device), then the answer and, for a write, the modified
+        # word written back
+        bus_mem = ~running & (window_q != n_windows)
+        mem_steps = [Signal(name=f"mem_step{k}") for k in range(3)]  # address registered, data, landed
+        m.d.sync += [mem_steps[0].eq(bus_request & bus_mem), mem_steps[1].eq(mem_steps[0]),
+                     mem_steps[2].eq(mem_steps[1])]
+        mem_landed = mem_steps[2]
         mem_data = Signal(BUS_WORD_BITS)
-        m.d.sync += [mem_read.eq(hs.request & bus_mem), mem_landed.eq(mem_read)]
         window_words = {}
         for k, w in enumerate(rmap.windows):
             if w.name == "nodes":
@@ -346,13 +374,13 @@ class SpringflatEngine(wiring.Component):
             padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word", reset_less=True)
             m.d.sync += padded.eq(word_value)
             window_words[w.name] = (k, padded, len(word_value))
-            with m.If(bus_window == k):
-                m.d.comb += mem_data.eq(padded.word_select(bus_word, BUS_WORD_BITS))
+            with m.If(window_q == k):
+                m.d.comb += mem_data.eq(padded.word_select(word_q, BUS_WORD_BITS))
         new_words = {}
         for name, (k, padded, bits) in window_words.items():
             modified = Signal(len(padded), name=f"bus_{name}_new")
             m.d.comb += modified.eq(padded)
-            with m.Switch(bus_word):
+            with m.Switch(word_q):
                 for j in range(len(padded) // BUS_WORD_BITS):
                     with m.Case(j):
                         m.d.comb += modified[j * BUS_WORD_BITS:(j + 1) * BUS_WORD_BITS].eq(hs.write_data)
@@ -360,51 +388,61 @@ class SpringflatEngine(wiring.Component):
         bus_writing = mem_landed & hs.write & hs.whole_word
 
         # ------------------------------------------------------------ port multiplexing
-        # Addresses: the bus while idle, else the pass in progress.
+        # Read addresses: the bus while idle, else the pass in progress, into a register per port
+        # (the block RAMs' address inputs come from flip-flops).
+        read_ports = {"pos_a": pos_a, "pos_b": pos_b, "pos_c": pos_c, "vel": vel_r, "wgt": wgt_r, "frc": frc_r,
+                      "ent": ent_r, "tri": tri_r}
+        read_addr = {name: Signal.like(port.addr, name=f"{name}_addr") for name, port in read_ports.items()}
+        m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
         with m.If(~running):
-            m.d.comb += [pos_a.addr.eq(bus_index), vel_r.addr.eq(bus_index), wgt_r.addr.eq(bus_index),
-                         ent_r.addr.eq(bus_index), tri_r.addr.eq(bus_index)]
+            m.d.sync += [read_addr[n].eq(index_q) for n in ("pos_a", "vel", "wgt", "ent", "tri")]
         with m.Elif(fetch_nodes | (phase == PH["integrate"])):
-            m.d.comb += [pos_a.addr.eq(node_index), vel_r.addr.eq(node_index), wgt_r.addr.eq(node_index),
-                         frc_r.addr.eq(node_index)]
+            m.d.sync += [read_addr[n].eq(node_index) for n in ("pos_a", "vel", "wgt", "frc")]
         with m.Elif(phase == PH["area"]):
-            m.d.comb += [tri_r.addr.eq(tri_index), pos_a.addr.eq(t2_tri.a), pos_b.addr.eq(t2_tri.b),
-                         pos_c.addr.eq(t2_tri.c)]
+            m.d.sync += [read_addr["tri"].eq(tri_index), read_addr["pos_a"].eq(t2_tri.a),
+                         read_addr["pos_b"].eq(t2_tri.b), read_addr["pos_c"].eq(t2_tri.c)]
         with m.Else():
-            m.d.comb += [ent_r.addr.eq(entry_index), pos_a.addr.eq(node_of_entry),
-                         pos_b.addr.eq(e2_entry.neighbour), pos_c.addr.eq(e2_entry.second)]
-        # Writes: the bus's read-modify-write while idle, the integrator's results while running.
+            m.d.sync += [read_addr["ent"].eq(entry_index), read_addr["pos_a"].eq(node_of_entry),
+                         read_addr["pos_b"].eq(e2_entry.neighbour), read_addr["pos_c"].eq(e2_entry.second)]
+        # Writes: the bus's read-modify-write while idle, the integrator's results while running, each
+        # port's address, data and enable landed in registers before the block RAM.
         node_k, node_new = new_words["nodes"]
         ent_k, ent_new = new_words["entries"]
         tri_k, tri_new = new_words["triangles"]
+        write_ports = {"pos": pos_w, "vel": vel_w, "wgt": wgt_w, "ent": ent_w, "tri": tri_w}
+        write_regs = {}
+        for name, port in write_ports.items():
+            regs = (Signal.like(port.addr, name=f"{name}_waddr"), Signal.like(port.data, name=f"{name}_wdata"),
+                    Signal(name=f"{name}_wen"))
+            write_regs[name] = regs
+            m.d.comb += [port.addr.eq(regs[0]), port.data.eq(regs[1]), port.en.eq(regs[2])]
         with m.If(running):
-            m.d.comb += [pos_w.addr.eq(node_out_index), pos_w.data.eq(integ.o.payload.position),
-                         pos_w.en.eq(integ.o.valid),
-                         vel_w.addr.eq(node_out_index), vel_w.data.eq(integ.o.payload.velocity),
-                         vel_w.en.eq(integ.o.valid)]
+            m.d.sync += [write_regs["pos"][0].eq(node_out_index), write_regs["pos"][1].eq(integ.o.payload.position),
+                         write_regs["pos"][2].eq(integ.o.valid),
+                         write_regs["vel"][0].eq(node_out_index), write_regs["vel"][1].eq(integ.o.payload.velocity),
+                         write_regs["vel"][2].eq(integ.o.valid),
+                         write_regs["wgt"][2].eq(0), write_regs["ent"][2].eq(0), write_regs["tri"][2].eq(0)]
         with m.Else():
-            m.d.comb += [
-                pos_w.addr.eq(bus_index), vel_w.addr.eq(bus_index), wgt_w.addr.eq(bus_index),
-                ent_w.addr.eq(bus_index), tri_w.addr.eq(bus_index),
-                Cat(pos_w.data.as_value(), vel_w.data.as_value(), wgt_w.data.as_value()).eq(node_new),
-                ent_w.data.eq(ent_new), tri_w.data.eq(tri_new),
-                pos_w.en.eq(bus_writing & (bus_window == node_k)),
-                vel_w.en.eq(bus_writing & (bus_window == node_k)),
-                wgt_w.en.eq(bus_writing & (bus_window == node_k)),
-                ent_w.en.eq(bus_writing & (bus_window == ent_k)),
-                tri_w.en.eq(bus_writing & (bus_window == tri_k)),
+            m.d.sync += [
+                *(write_regs[n][0].eq(index_q) for n in write_ports),
+                Cat(write_regs["pos"][1].as_value(), write_regs["vel"][1].as_value(),
+                    write_regs["wgt"][1].as_value()).eq(node_new),
+                write_regs["ent"][1].eq(ent_new), write_regs["tri"][1].eq(tri_new),
+                *(write_regs[n][2].eq(bus_writing & (window_q == node_k)) for n in ("pos", "vel", "wgt")),
+                write_regs["ent"][2].eq(bus_writing & (window_q == ent_k)),
+                write_regs["tri"][2].eq(bus_writing & (window_q == tri_k)),
             ]
 
-        # bus answers: a register the clock after the request (its read word and error landed), a
-        # memory window two clocks after that, an unmapped word (or a memory while running) at once
+        # bus answers: a register the clock after DEC (its read word and error landed), a memory window
+        # three clocks after that, an unmapped word (or a memory while running) in DEC's clock
         reg_answer = Signal()
         landed_word = Signal(BUS_WORD_BITS, reset_less=True)
         landed_error = Signal(reset_less=True)
-        m.d.sync += [reg_answer.eq(hs.request & bus_reg_hit), landed_word.eq(read_word),
-                     landed_error.eq(reg_error | ~hs.whole_word)]
+        m.d.sync += [reg_answer.eq(bus_request & bus_reg_hit), landed_word.eq(read_word),
+                     landed_error.eq((read_only & hs.write) | ~hs.whole_word)]
         with m.If(reg_answer):
             m.d.comb += [hs.done.eq(1), hs.error.eq(landed_error), hs.data.eq(landed_word)]
-        with m.Elif(hs.request & ~bus_reg_hit & ~bus_mem):
+        with m.Elif(bus_request & ~bus_reg_hit & ~bus_mem):
             m.d.comb += [hs.done.eq(1), hs.error.eq(1)]
         with m.Elif(mem_landed):
             m.d.comb += [hs.done.eq(1), hs.error.eq(~hs.whole_word), hs.data.eq(mem_data)]
@@ -423,19 +461,32 @@ class SpringflatEngine(wiring.Component):
         first_measure = Signal()
         math_pending = Signal(3)  # length, area, energy results still to come
         settled = Signal()
+        area_clear = Signal()
         tol_energy = values["tol_energy"]
         # the register is as wide as the energy check's tolerance (both from the golden model's
         # ENERGY_TOL_* bits), so every value START sees is valid
         assert len(tol_energy) == len(energy.tolerance), (len(tol_energy), len(energy.tolerance))
 
+        length_total = Mux(length_sum > fs.error_acc.raw_max, fs.error_acc.raw_max, length_sum)
+        # The units' requests: valid set by the phase machine and held until taken; the payloads
+        # are the sums and registers themselves, which hold still from the end of their pass until
+        # the unit's result is in (the next pass starts after the math phase).
         m.d.comb += [
             energy.half_spring.eq(values["half_spring"]),
             energy.tolerance.eq(tol_energy),
             norm_length.o.ready.eq(1), norm_area.o.ready.eq(1), energy.o.ready.eq(1), beta.o.ready.eq(1),
             stepgen.o.ready.eq(1),
-            area.clear.eq(0),
+            area.clear.eq(area_clear),
+            norm_length.i.payload.sum.eq(length_total),
+            norm_length.i.payload.mantissa.eq(values["length_reciprocal"]),
+            norm_length.i.payload.shift.eq(values["length_shift"]),
+            energy.i.payload.square_sum.eq(square_sum), energy.i.payload.barrier_sum.eq(barrier_sum),
+            energy.i.payload.first.eq(first_measure),
+            norm_area.i.payload.sum.eq(area.total),
+            norm_area.i.payload.mantissa.eq(values["area_reciprocal"]),
+            norm_area.i.payload.shift.eq(values["area_shift"]),
+            stepgen.i.payload.area_error.eq(area_error_raw), stepgen.i.payload.shape_error.eq(shape_error_raw),
         ]
-        # unit requests: valid held until taken
         for unit in (norm_length, norm_area, energy, beta, stepgen):
             with m.If(unit.i.valid & unit.i.ready):
                 m.d.sync += unit.i.valid.eq(0)
@@ -452,12 +503,11 @@ class SpringflatEngine(wiring.Component):
             m.d.sync += [step_dt.eq(stepgen.o.payload.dt), step_half.eq(stepgen.o.payload.half_dt_sq)]
 
         def finish(code):
-            m.d.sync += [state.eq(_code(STATES, "done")), result.eq(_code(RESULTS, code)), irq_pending.eq(1),
+            set_state("done")
+            m.d.sync += [result.eq(_code(RESULTS, code)), irq_pending.eq(1),
                          fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
 
-        length_total = Mux(length_sum > fs.error_acc.raw_max, fs.error_acc.raw_max, length_sum)
-        fetching = e1_valid | e2_valid | e3_valid | e4_valid | t1_valid | t2_valid | t3_valid | t4_valid \
-            | n1_valid | n2_valid
+        fetching = Cat(*e_valid, *t_valid, *n_valid).any()
         units_idle = force.idle & area.idle & integ.idle & ~fetching
 
         # START's checks of the run constants, as golden_model's constant_fault states them
@@ -482,29 +532,41 @@ class SpringflatEngine(wiring.Component):
                                     & settled),
                      diverged_q.eq((limit != 0) & (saturations >= limit)),
                      at_max_iter_q.eq(iterations == values["max_iter"])]
+        # The passes' ends, registered the same way: a pulse the clock after the pass's last result
+        # (its counter's compare and the units' idle flags stay off the phase machine's logic).
+        force_done, area_done, integrate_done = Signal(), Signal(), Signal()
+        area_fetching = Cat(*t_valid).any()
+        m.d.sync += [
+            force_done.eq(running & (phase == PH["force"]) & (force_out_index == n_vertices) & ~force_done),
+            area_done.eq(running & (phase == PH["area"]) & (tri_index == n_triangles) & ~area_fetching & area.idle
+                         & ~area_clear & ~area_done),
+            integrate_done.eq(running & (phase == PH["integrate"]) & (node_out_index == n_vertices)
+                              & ~integrate_done),
+        ]
 
         # SATURATIONS: every event the golden model counts, added as the units report them, stopping at
         # its maximum. The force pass's, integrate stage's and step generator's per beat; the area pass's
         # at its end; the E_C sum's (length_sum) when the force pass ends; S's (power_acc) when an
-        # integrate pass ends (momentum).
-        force_pass_done = running & (phase == PH["force"]) & (force_out_index == n_vertices)
-        area_pass_done = running & (phase == PH["area"]) & (tri_index == n_triangles) & ~t1_valid & ~t2_valid \
-            & ~t3_valid & ~t4_valid & area.idle & ~area.clear
-        integrate_done = running & (phase == PH["integrate"]) & (node_out_index == n_vertices)
-        increments = [
+        # integrate pass ends (momentum). Each event lands in a register, their sum in another, then the
+        # count: two clocks late, long before the check phase reads it.
+        events = [
             Mux(force.o.valid, force.o.payload.saturations, 0),
             Mux(integ.o.valid & running, integ.o.payload.saturations, 0),
             Mux(stepgen.o.valid, stepgen.o.payload.saturations, 0),
-            Mux(area_pass_done, area.saturations.face_edge + area.saturations.face_area
-                + area.saturations.area_sum, 0),
-            force_pass_done & (length_sum > fs.error_acc.raw_max),
+            Mux(area_done, area.saturations.face_edge + area.saturations.face_area + area.saturations.area_sum, 0),
+            force_done & (length_sum > fs.error_acc.raw_max),
             integrate_done & mode_momentum & ((power_sum > fs.power_acc.raw_max) | (power_sum < fs.power_acc.raw_min)),
         ]
-        total = saturations + sum(increments)
+        event_regs = [Signal(len(Value.cast(e)), name=f"saturation_event{k}") for k, e in enumerate(events)]
+        m.d.sync += [r.eq(e) for r, e in zip(event_regs, events)]
+        new_events = Signal(max(len(r) for r in event_regs) + 3)
+        m.d.sync += new_events.eq(sum(event_regs))
+        total = saturations + new_events
         saturation_max = (1 << len(saturations)) - 1
         m.d.sync += saturations.eq(Mux(total > saturation_max, saturation_max, total))
         sequential_idle = ~Cat(*(u.i.valid for u in (norm_length, norm_area, energy, beta, stepgen))).any() \
             & norm_length.i.ready & norm_area.i.ready & energy.i.ready & beta.i.ready & stepgen_idle
+        m.d.sync += area_clear.eq(0)
         # ABORT while running drains what is in flight (still "running": START is ignored and the memories
         # answer err until nothing can write them any more), then goes idle with no result. The pass under
         # way fetches to its end (a node half fed to the force pass would never leave it).
@@ -513,7 +575,8 @@ class SpringflatEngine(wiring.Component):
             for unit in (norm_length, norm_area, energy, beta, stepgen):
                 m.d.sync += unit.i.valid.eq(0)
         with m.Elif(abort_pulse):
-            m.d.sync += [state.eq(_code(STATES, "idle")), result.eq(_code(RESULTS, "none"))]
+            set_state("idle")
+            m.d.sync += result.eq(_code(RESULTS, "none"))
         with m.Elif(start_pulse & ~running):
             m.d.sync += [cycles.eq(0), iterations.eq(0), saturations.eq(0), irq_pending.eq(0),
                          result.eq(_code(RESULTS, "none"))]
@@ -522,8 +585,8 @@ class SpringflatEngine(wiring.Component):
             with m.Elif(bad_constants_q):
                 finish("bad-constants")
             with m.Else():
-                m.d.sync += [state.eq(_code(STATES, "running")), phase.eq(PH["start"]), first_measure.eq(1),
-                             momentum_k.eq(0), restart_pending.eq(0)]
+                set_state("running")
+                m.d.sync += [phase.eq(PH["start"]), first_measure.eq(1), momentum_k.eq(0), restart_pending.eq(0)]
         with m.Elif(running):
             with m.Switch(phase):
                 with m.Case(PH["start"]):  # a measurement: the force pass
@@ -531,22 +594,13 @@ class SpringflatEngine(wiring.Component):
                                  length_sum.eq(0), square_sum.eq(0), barrier_sum.eq(0), fetch_force.eq(1),
                                  phase.eq(PH["force"])]
                 with m.Case(PH["force"]):
-                    with m.If(force_pass_done):
+                    with m.If(force_done):
                         m.d.sync += [fetch_force.eq(0), tri_index.eq(0), fetch_area.eq(1), phase.eq(PH["area"]),
-                                     math_pending.eq(0b111),
-                                     norm_length.i.valid.eq(1), norm_length.i.payload.sum.eq(length_total),
-                                     norm_length.i.payload.mantissa.eq(values["length_reciprocal"]),
-                                     norm_length.i.payload.shift.eq(values["length_shift"]),
-                                     energy.i.valid.eq(1), energy.i.payload.square_sum.eq(square_sum),
-                                     energy.i.payload.barrier_sum.eq(barrier_sum),
-                                     energy.i.payload.first.eq(first_measure)]
-                        m.d.comb += area.clear.eq(1)
+                                     math_pending.eq(0b111), norm_length.i.valid.eq(1), energy.i.valid.eq(1),
+                                     area_clear.eq(1)]
                 with m.Case(PH["area"]):
-                    with m.If(area_pass_done):
-                        m.d.sync += [fetch_area.eq(0), phase.eq(PH["math"]),
-                                     norm_area.i.valid.eq(1), norm_area.i.payload.sum.eq(area.total),
-                                     norm_area.i.payload.mantissa.eq(values["area_reciprocal"]),
-                                     norm_area.i.payload.shift.eq(values["area_shift"])]
+                    with m.If(area_done):
+                        m.d.sync += [fetch_area.eq(0), phase.eq(PH["math"]), norm_area.i.valid.eq(1)]
                 with m.Case(PH["math"]):
                     with m.If(math_pending == 0):
                         m.d.sync += phase.eq(PH["check"])
@@ -572,8 +626,7 @@ class SpringflatEngine(wiring.Component):
                     with m.Elif(mode_fixed):
                         m.d.sync += [step_dt.eq(values["dt"]), step_half.eq(fixed_half)]
                     with m.Else():
-                        m.d.sync += [stepgen.i.valid.eq(1), stepgen.i.payload.area_error.eq(area_error_raw),
-                                     stepgen.i.payload.shape_error.eq(shape_error_raw)]
+                        m.d.sync += stepgen.i.valid.eq(1)
                     m.d.sync += phase.eq(PH["step_wait"])
                 with m.Case(PH["step_wait"]):
                     waiting = beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready
@@ -584,7 +637,8 @@ class SpringflatEngine(wiring.Component):
                     done_fetching = ((entry_index == n_entries) | ~fetch_force) & ((tri_index == n_triangles) | ~fetch_area) \
                         & ((node_index == n_vertices) | ~fetch_nodes)
                     with m.If(units_idle & sequential_idle & done_fetching):
-                        m.d.sync += [state.eq(_code(STATES, "idle")), result.eq(_code(RESULTS, "none")),
+                        set_state("idle")
+                        m.d.sync += [result.eq(_code(RESULTS, "none")),
                                      fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
                 with m.Case(PH["integrate"]):
                     with m.If(integrate_done):
@@ -599,6 +653,14 @@ class SpringflatEngine(wiring.Component):
                               "node_out_index": node_out_index, "math_pending": math_pending,
                               "iterations": iterations}
         return m
+
+
+def _or_all(values) -> Value:
+    """The OR of ``values`` as a balanced tree (an AND-OR multiplexer's second half)."""
+    values = [Value.cast(v) for v in values]
+    while len(values) > 1:
+        values = [values[k] | values[k + 1] if k + 1 < len(values) else values[k] for k in range(0, len(values), 2)]
+    return values[0]
 
 
 def stepgen_idle_signal(m: Module, stepgen: StepGenerator):
