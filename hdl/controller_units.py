@@ -18,7 +18,7 @@ unit is idle, ``o`` holds its result (a register, independent of ``o.ready``) un
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Mux, Signal, Value, unsigned
+from amaranth.hdl import Cat, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -87,8 +87,9 @@ class Normaliser(wiring.Component):
     One item at a time: ``i.ready`` is high while idle (nothing accepted or the result taken).
     :meth:`cycles` clock edges from the input transfer to the output transfer when ``o.ready``
     is high: ``reciprocal.width`` multiply steps, ``min(shift − F − 2, product bits)`` shift
-    steps (a longer shift leaves only the sticky bit, as this many does), one rounding and
-    saturation, and the output transfer. ``o.valid`` and ``o.payload`` are registers.
+    steps (a longer shift leaves only the sticky bit, as this many does), one rounding, one
+    saturation (two clocks: each is a carry chain as wide as the product), and the output
+    transfer. ``o.valid`` and ``o.payload`` are registers.
     """
 
     def __init__(self, fs: FormatSet | str):
@@ -106,7 +107,7 @@ class Normaliser(wiring.Component):
 
     def cycles(self, shift: int) -> int:
         """Clock edges from the input transfer to the output transfer, ``o.ready`` high."""
-        return self.fs.reciprocal.width + self.shift_steps(shift) + 2
+        return self.fs.reciprocal.width + self.shift_steps(shift) + 3
 
     def elaborate(self, platform):
         fs = self.fs
@@ -122,7 +123,9 @@ class Normaliser(wiring.Component):
         remaining_shift = Signal.like(steps, name="remaining_shift")
         # kept: the product with its sticky bit ORed into bit 0, then the two kept bits dropped
         kept = Cat(product[0] | sticky, product[1:])
-        error, _ = clamp(shift_round(kept, 2, fs.rounding), fs.error)
+        rounded_value = shift_round(kept, 2, fs.rounding)
+        rounded = Signal.like(rounded_value, name="rounded", reset_less=True)
+        error, _ = clamp(rounded, fs.error)
 
         with m.FSM():
             with m.State("idle"):
@@ -143,6 +146,9 @@ class Normaliser(wiring.Component):
                 with m.If(remaining_shift == 1):
                     m.next = "round"
             with m.State("round"):
+                m.d.sync += rounded.eq(rounded_value)
+                m.next = "saturate"
+            with m.State("saturate"):
                 m.d.sync += [self.o.payload.eq(error), self.o.valid.eq(1)]
                 m.next = "done"
             with m.State("done"):
@@ -233,13 +239,15 @@ class EnergyCheck(wiring.Component):
         previous = Signal(self.energy_bits, reset_less=True)
         tolerance = Signal(self.tolerance_bits, reset_less=True)
         allowed = Signal(self.tolerance_bits + self.energy_bits + 1, reset_less=True)  # ε·E_prev
-        change = Signal(self.energy_bits, reset_less=True)  # |E − E_prev|
+        difference = Signal(signed(self.energy_bits + 1), reset_less=True)  # E − E_prev
+        change = Signal(self.energy_bits, reset_less=True)  # |E − E_prev|, from difference a clock later
+        previous_zero = Signal(reset_less=True)
+        energy_zero = Signal(reset_less=True)
         steps = Signal(range(max(self.square_bits, self.energy_bits) + 1), reset_less=True)
 
         total = (springs[:self.spring_factor_bits + self.square_bits] << self.springs_shift) + \
                 ((barrier << 1) << self.barrier_shift)
-        settled = Mux(first, 0, Mux(previous == 0, energy == 0,
-                                    change <= allowed[ENERGY_TOL_FRAC_BITS:]))
+        settled = Mux(first, 0, Mux(previous_zero, energy_zero, change <= allowed[ENERGY_TOL_FRAC_BITS:]))
 
         with m.FSM():
             with m.State("idle"):
@@ -257,8 +265,12 @@ class EnergyCheck(wiring.Component):
                 m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits)]
                 m.next = "tolerance"
             with m.State("tolerance"):
+                # the step count (energy_bits ≥ 2 clocks) leaves time for the difference, then its
+                # magnitude: each a carry chain as wide as E, one per clock
                 m.d.sync += [allowed.eq(shift_add_step(allowed, tolerance, self.energy_bits)),
-                             change.eq(Mux(energy > previous, energy - previous, previous - energy)),
+                             difference.eq(energy - previous),
+                             change.eq(Mux(difference < 0, -difference, difference)),
+                             previous_zero.eq(previous == 0), energy_zero.eq(energy == 0),
                              steps.eq(steps - 1)]
                 with m.If(steps == 1):
                     m.next = "compare"
