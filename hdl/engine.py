@@ -156,6 +156,12 @@ class SpringflatEngine(wiring.Component):
         PH = {name: i for i, name in enumerate((
             "start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain"))}
         phase = Signal(range(len(PH)))
+        # one flip-flop per phase beside the code (phase_to sets both): the port multiplexers and the
+        # passes' end tests read a flag, not a decode of the code
+        in_phase = {name: Signal(name=f"in_{name}", init=(code == 0)) for name, code in PH.items()}
+
+        def phase_to(name):
+            return [phase.eq(PH[name]), *(flag.eq(n == name) for n, flag in in_phase.items())]
 
         # ------------------------------------------------------------ force pass fetch
         # One entry per clock. Valid bits are named for the clock whose data they mark: E0 the
@@ -357,11 +363,13 @@ class SpringflatEngine(wiring.Component):
         # outputs come from all over the device), then the answer and, for a write, the modified
         # word written back
         bus_mem = ~running & (window_q != n_windows)
-        mem_steps = [Signal(name=f"mem_step{k}") for k in range(3)]  # address registered, data, landed
-        m.d.sync += [mem_steps[0].eq(bus_request & bus_mem), mem_steps[1].eq(mem_steps[0]),
-                     mem_steps[2].eq(mem_steps[1])]
-        mem_landed = mem_steps[2]
+        # address registered, data, entry landed (the write-back formed), word landed (the answer)
+        mem_steps = [Signal(name=f"mem_step{k}") for k in range(4)]
+        m.d.sync += [mem_steps[0].eq(bus_request & bus_mem), *(mem_steps[k].eq(mem_steps[k - 1]) for k in (1, 2, 3))]
+        mem_landed, mem_answer = mem_steps[2], mem_steps[3]
         mem_data = Signal(BUS_WORD_BITS)
+        mem_word = Signal(BUS_WORD_BITS, reset_less=True)
+        m.d.sync += mem_word.eq(mem_data)
         window_words = {}
         for k, w in enumerate(rmap.windows):
             if w.name == "nodes":
@@ -394,16 +402,20 @@ class SpringflatEngine(wiring.Component):
                       "ent": ent_r, "tri": tri_r}
         read_addr = {name: Signal.like(port.addr, name=f"{name}_addr") for name, port in read_ports.items()}
         m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
-        with m.If(~running):
-            m.d.sync += [read_addr[n].eq(index_q) for n in ("pos_a", "vel", "wgt", "ent", "tri")]
-        with m.Elif(fetch_nodes | (phase == PH["integrate"])):
-            m.d.sync += [read_addr[n].eq(node_index) for n in ("pos_a", "vel", "wgt", "frc")]
-        with m.Elif(phase == PH["area"]):
-            m.d.sync += [read_addr["tri"].eq(tri_index), read_addr["pos_a"].eq(t2_tri.a),
-                         read_addr["pos_b"].eq(t2_tri.b), read_addr["pos_c"].eq(t2_tri.c)]
-        with m.Else():
-            m.d.sync += [read_addr["ent"].eq(entry_index), read_addr["pos_a"].eq(node_of_entry),
-                         read_addr["pos_b"].eq(e2_entry.neighbour), read_addr["pos_c"].eq(e2_entry.second)]
+        # Each register loads every clock (a read has no side effect), from as few sources as it
+        # needs, selected by flip-flops (running, the phase flags): the entries and triangles
+        # memories by the bus or their pass's counter, the node memories by the bus or the integrate
+        # pass's, the second and third position ports by the area or the force pass.
+        in_nodes = fetch_nodes | in_phase["integrate"]
+        m.d.sync += [
+            read_addr["ent"].eq(Mux(running, entry_index, index_q)),
+            read_addr["tri"].eq(Mux(running, tri_index, index_q)),
+            *(read_addr[n].eq(Mux(running, node_index, index_q)) for n in ("vel", "wgt", "frc")),
+            read_addr["pos_b"].eq(Mux(in_phase["area"], t2_tri.b, e2_entry.neighbour)),
+            read_addr["pos_c"].eq(Mux(in_phase["area"], t2_tri.c, e2_entry.second)),
+            read_addr["pos_a"].eq(Mux(~running | in_nodes, Mux(running, node_index, index_q),
+                                      Mux(in_phase["area"], t2_tri.a, node_of_entry))),
+        ]
         # Writes: the bus's read-modify-write while idle, the integrator's results while running, each
         # port's address, data and enable landed in registers before the block RAM.
         node_k, node_new = new_words["nodes"]
@@ -434,7 +446,7 @@ class SpringflatEngine(wiring.Component):
             ]
 
         # bus answers: a register the clock after DEC (its read word and error landed), a memory window
-        # three clocks after that, an unmapped word (or a memory while running) in DEC's clock
+        # four clocks after that, an unmapped word (or a memory while running) in DEC's clock
         reg_answer = Signal()
         landed_word = Signal(BUS_WORD_BITS, reset_less=True)
         landed_error = Signal(reset_less=True)
@@ -444,8 +456,8 @@ class SpringflatEngine(wiring.Component):
             m.d.comb += [hs.done.eq(1), hs.error.eq(landed_error), hs.data.eq(landed_word)]
         with m.Elif(bus_request & ~bus_reg_hit & ~bus_mem):
             m.d.comb += [hs.done.eq(1), hs.error.eq(1)]
-        with m.Elif(mem_landed):
-            m.d.comb += [hs.done.eq(1), hs.error.eq(~hs.whole_word), hs.data.eq(mem_data)]
+        with m.Elif(mem_answer):
+            m.d.comb += [hs.done.eq(1), hs.error.eq(~hs.whole_word), hs.data.eq(mem_word)]
 
         # ------------------------------------------------------------ controller
         iterations = values["iterations"]
@@ -501,6 +513,12 @@ class SpringflatEngine(wiring.Component):
             m.d.sync += step_dt.eq(beta.o.payload)
         with m.If(stepgen.o.valid):
             m.d.sync += [step_dt.eq(stepgen.o.payload.dt), step_half.eq(stepgen.o.payload.half_dt_sq)]
+        # the fixed step is loaded the clock after the step phase (from a flip-flop, as the units'
+        # results are), long before the integrate pass's first node reaches the integrator
+        fixed_load = Signal()
+        m.d.sync += fixed_load.eq(0)
+        with m.If(fixed_load):
+            m.d.sync += [step_dt.eq(values["dt"]), step_half.eq(fixed_half)]
 
         def finish(code):
             set_state("done")
@@ -537,10 +555,10 @@ class SpringflatEngine(wiring.Component):
         force_done, area_done, integrate_done = Signal(), Signal(), Signal()
         area_fetching = Cat(*t_valid).any()
         m.d.sync += [
-            force_done.eq(running & (phase == PH["force"]) & (force_out_index == n_vertices) & ~force_done),
-            area_done.eq(running & (phase == PH["area"]) & (tri_index == n_triangles) & ~area_fetching & area.idle
+            force_done.eq(running & in_phase["force"] & (force_out_index == n_vertices) & ~force_done),
+            area_done.eq(running & in_phase["area"] & (tri_index == n_triangles) & ~area_fetching & area.idle
                          & ~area_clear & ~area_done),
-            integrate_done.eq(running & (phase == PH["integrate"]) & (node_out_index == n_vertices)
+            integrate_done.eq(running & in_phase["integrate"] & (node_out_index == n_vertices)
                               & ~integrate_done),
         ]
 
@@ -571,7 +589,7 @@ class SpringflatEngine(wiring.Component):
         # answer err until nothing can write them any more), then goes idle with no result. The pass under
         # way fetches to its end (a node half fed to the force pass would never leave it).
         with m.If(abort_pulse & running):
-            m.d.sync += phase.eq(PH["drain"])
+            m.d.sync += phase_to("drain")
             for unit in (norm_length, norm_area, energy, beta, stepgen):
                 m.d.sync += unit.i.valid.eq(0)
         with m.Elif(abort_pulse):
@@ -586,24 +604,24 @@ class SpringflatEngine(wiring.Component):
                 finish("bad-constants")
             with m.Else():
                 set_state("running")
-                m.d.sync += [phase.eq(PH["start"]), first_measure.eq(1), momentum_k.eq(0), restart_pending.eq(0)]
+                m.d.sync += [*phase_to("start"), first_measure.eq(1), momentum_k.eq(0), restart_pending.eq(0)]
         with m.Elif(running):
             with m.Switch(phase):
                 with m.Case(PH["start"]):  # a measurement: the force pass
                     m.d.sync += [entry_index.eq(0), node_of_entry.eq(0), next_first.eq(1), force_out_index.eq(0),
                                  length_sum.eq(0), square_sum.eq(0), barrier_sum.eq(0), fetch_force.eq(1),
-                                 phase.eq(PH["force"])]
+                                 *phase_to("force")]
                 with m.Case(PH["force"]):
                     with m.If(force_done):
-                        m.d.sync += [fetch_force.eq(0), tri_index.eq(0), fetch_area.eq(1), phase.eq(PH["area"]),
+                        m.d.sync += [fetch_force.eq(0), tri_index.eq(0), fetch_area.eq(1), *phase_to("area"),
                                      math_pending.eq(0b111), norm_length.i.valid.eq(1), energy.i.valid.eq(1),
                                      area_clear.eq(1)]
                 with m.Case(PH["area"]):
                     with m.If(area_done):
-                        m.d.sync += [fetch_area.eq(0), phase.eq(PH["math"]), norm_area.i.valid.eq(1)]
+                        m.d.sync += [fetch_area.eq(0), *phase_to("math"), norm_area.i.valid.eq(1)]
                 with m.Case(PH["math"]):
                     with m.If(math_pending == 0):
-                        m.d.sync += phase.eq(PH["check"])
+                        m.d.sync += phase_to("check")
                 with m.Case(PH["check"]):
                     # as run_image: the saturation limit first, then the stop rule (neither after the first
                     # measurement), then the iteration limit
@@ -614,7 +632,7 @@ class SpringflatEngine(wiring.Component):
                     with m.Elif(at_max_iter_q):
                         finish("max-iterations")
                     with m.Else():
-                        m.d.sync += [first_measure.eq(0), phase.eq(PH["step"])]
+                        m.d.sync += [first_measure.eq(0), *phase_to("step")]
                 with m.Case(PH["step"]):
                     with m.If(mode_momentum):
                         with m.If(restart_pending):
@@ -624,15 +642,15 @@ class SpringflatEngine(wiring.Component):
                             m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(momentum_k),
                                          momentum_k.eq(momentum_k + 1), step_was_restart.eq(0)]
                     with m.Elif(mode_fixed):
-                        m.d.sync += [step_dt.eq(values["dt"]), step_half.eq(fixed_half)]
+                        m.d.sync += fixed_load.eq(1)
                     with m.Else():
                         m.d.sync += stepgen.i.valid.eq(1)
-                    m.d.sync += phase.eq(PH["step_wait"])
+                    m.d.sync += phase_to("step_wait")
                 with m.Case(PH["step_wait"]):
                     waiting = beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready
                     with m.If(~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
                         m.d.sync += [node_index.eq(0), node_out_index.eq(0), power_sum.eq(0), fetch_nodes.eq(1),
-                                     phase.eq(PH["integrate"])]
+                                     *phase_to("integrate")]
                 with m.Case(PH["drain"]):
                     done_fetching = ((entry_index == n_entries) | ~fetch_force) & ((tri_index == n_triangles) | ~fetch_area) \
                         & ((node_index == n_vertices) | ~fetch_nodes)
@@ -643,7 +661,7 @@ class SpringflatEngine(wiring.Component):
                 with m.Case(PH["integrate"]):
                     with m.If(integrate_done):
                         power_negative = power_sum < 0
-                        m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), phase.eq(PH["start"])]
+                        m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), *phase_to("start")]
                         with m.If(mode_momentum & ~step_was_restart):
                             m.d.sync += restart_pending.eq(power_negative)
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
