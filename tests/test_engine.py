@@ -239,3 +239,35 @@ def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged()
     for img, exp in ((image, expected), (limited, expected_limited)):
         _, read_back = run_on_engine(SpringflatEngine(FS, CAPACITY), img)
         assert_same_run(read_back, exp)
+
+
+def test_bus_answers_take_the_documented_clocks():
+    """docs/engine.md: a register answers 4 clocks after ``stb`` rises, a memory word 7 (read or write),
+    an unmapped word's ``err`` 3; what is written reads back."""
+    dut = SpringflatEngine(FS, CAPACITY)
+    rmap = dut.register_map
+    max_iter = rmap.register("MAX_ITER").offset
+    entries = rmap.window("entries")
+    answers = {}
+
+    async def bench(ctx):
+        answers["register_write"] = await wishbone_write(ctx, dut.bus, max_iter, 1234)
+        # each cycle after an idle clock: a cycle presented back to back, while the last answer's
+        # ack is still out, starts a clock later (hdl/wishbone.py)
+        answers["register_read"] = await wishbone_read(ctx, dut.bus, max_iter, idle=1)
+        answers["memory_write"] = await wishbone_write(ctx, dut.bus, entries.address(5, 0), 0x5A5A5, idle=1)
+        answers["memory_read"] = await wishbone_read(ctx, dut.bus, entries.address(5, 0), idle=1)
+        answers["unmapped"] = await wishbone_read(ctx, dut.bus, rmap.windows[0].base - 1, idle=1)
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(bench)
+    sim.run()
+    # BusAnswer.clocks counts edges up to the one at which the initiator samples ack/err: one more
+    # than the edges after which the target raises it
+    raised_after = {name: a.clocks - 1 for name, a in answers.items()}
+    assert raised_after == {"register_write": 4, "register_read": 4, "memory_write": 7, "memory_read": 7,
+                            "unmapped": 3}
+    assert answers["register_read"].data == 1234 and not answers["register_read"].error
+    assert answers["memory_read"].data == 0x5A5A5 and not answers["memory_read"].error
+    assert answers["unmapped"].error
