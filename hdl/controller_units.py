@@ -253,7 +253,8 @@ class EnergyCheck(wiring.Component):
             with m.State("idle"):
                 m.d.comb += self.i.ready.eq(1)
                 with m.If(self.i.valid):
-                    m.d.sync += [factor.eq(self.half_spring * 3), springs.eq(beat.square_sum),
+                    # 3·½C as an adder: ``* 3`` became a combinational DSP block
+                    m.d.sync += [factor.eq((self.half_spring << 1) + self.half_spring), springs.eq(beat.square_sum),
                                  barrier.eq(beat.barrier_sum), first.eq(beat.first),
                                  tolerance.eq(self.tolerance), steps.eq(self.square_bits)]
                     m.next = "springs"

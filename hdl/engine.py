@@ -18,6 +18,7 @@ from golden_model.fixed.engine_image import BUS_WORD_BITS, EngineCapacity, Memor
 from golden_model.fixed.register_map import RESULTS, STATES, RegisterMap
 
 from . import wishbone
+from .dsp import registered_product
 from .area_error import AreaError
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .fixedpoint import clamp, shape_of, shift_round
@@ -248,12 +249,16 @@ class SpringflatEngine(wiring.Component):
             m.d.sync += node_index.eq(node_index + 1)
         step_dt = Signal(shape_of(fs.dt))
         step_half = Signal(shape_of(fs.half_dt_sq))
-        # The fixed step's ½Δt² (steplut.half_dt_sq), three stages from the DT register: product,
-        # rounding, saturation; DT is loaded long before a step uses it.
+        # The fixed step's ½Δt² (steplut.half_dt_sq), five stages from the DT register: the
+        # product's operands, the product, its copy, rounding, saturation; DT is loaded long
+        # before a step uses it.
         fixed_sq = Signal(2 * fs.dt.width, reset_less=True)
         fixed_rounded = Signal(2 * fs.dt.width, reset_less=True)
         fixed_half = Signal(shape_of(fs.half_dt_sq), reset_less=True)
-        m.d.sync += [fixed_sq.eq(values["dt"] * values["dt"]),
+        # the product in a DSP block with its own operand and product registers (hdl.dsp: a bare `*`
+        # became a combinational MULT18X18D)
+        m.d.sync += [fixed_sq.eq(registered_product(m, values["dt"], values["dt"], name="fixed_dt_sq",
+                                                    platform=platform)),
                      fixed_rounded.eq(shift_round(fixed_sq, 2 * fs.dt.frac_bits + 1 - fs.half_dt_sq.frac_bits,
                                                   fs.rounding)),
                      fixed_half.eq(clamp(fixed_rounded, fs.half_dt_sq)[0])]
