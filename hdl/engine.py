@@ -316,6 +316,8 @@ class SpringflatEngine(wiring.Component):
         start_pulse, abort_pulse = Signal(), Signal()
         m.d.sync += [start_pulse.eq(0), abort_pulse.eq(0)]
         status_code = {"state": state, "result": result, "irq_pending": irq_pending}
+        saturated = Signal()  # STATUS.saturated: SATURATIONS != 0, registered (a 32-bit OR off the read path)
+        m.d.sync += saturated.eq(values["saturations"] != 0)
         read_terms, read_only_terms = [], []
         for k, r in enumerate(registers):
             selected = reg_select[k]
@@ -327,7 +329,7 @@ class SpringflatEngine(wiring.Component):
                 elif r.name == "STATUS":
                     source = status_code.get(f.name)
                     if f.name == "saturated":
-                        source = values["saturations"] != 0
+                        source = saturated
                 elif r.access == "ro" and r.reset and r.block == "identification":
                     source = Const((r.reset >> f.lsb) & ((1 << f.width) - 1), f.width)
                 else:
@@ -450,16 +452,17 @@ class SpringflatEngine(wiring.Component):
                 write_regs["tri"][2].eq(bus_writing & (window_q == tri_k)),
             ]
 
-        # bus answers: a register the clock after DEC (its read word and error landed), a memory window
-        # four clocks after that, an unmapped word (or a memory while running) in DEC's clock
-        reg_answer = Signal()
+        # bus answers, every one from flip-flops: a register the clock after DEC (its read word and error
+        # landed), an unmapped word (or a memory while running) the same clock, a memory window three
+        # clocks after that
+        reg_answer, refused = Signal(), Signal()
         landed_word = Signal(BUS_WORD_BITS, reset_less=True)
         landed_error = Signal(reset_less=True)
-        m.d.sync += [reg_answer.eq(bus_request & bus_reg_hit), landed_word.eq(read_word),
-                     landed_error.eq((read_only & hs.write) | ~hs.whole_word)]
+        m.d.sync += [reg_answer.eq(bus_request & bus_reg_hit), refused.eq(bus_request & ~bus_reg_hit & ~bus_mem),
+                     landed_word.eq(read_word), landed_error.eq((read_only & hs.write) | ~hs.whole_word)]
         with m.If(reg_answer):
             m.d.comb += [hs.done.eq(1), hs.error.eq(landed_error), hs.data.eq(landed_word)]
-        with m.Elif(bus_request & ~bus_reg_hit & ~bus_mem):
+        with m.Elif(refused):
             m.d.comb += [hs.done.eq(1), hs.error.eq(1)]
         with m.Elif(mem_answer):
             m.d.comb += [hs.done.eq(1), hs.error.eq(~hs.whole_word), hs.data.eq(mem_word)]
@@ -469,8 +472,15 @@ class SpringflatEngine(wiring.Component):
         area_error_raw, shape_error_raw = values["area_error"], values["shape_error"]
         saturations = values["saturations"]
         cycles = values["cycles"]
+        # CYCLES counts in two 32-bit halves, the high half a clock behind the low half's wrap (a 64-bit
+        # carry chain in one clock was among the longest paths); it is exact a clock after the run
+        half = len(cycles) // 2
+        cycles_wrapped = Signal()
+        m.d.sync += cycles_wrapped.eq(running & (cycles[:half] == (1 << half) - 1))
         with m.If(running):
-            m.d.sync += cycles.eq(cycles + 1)
+            m.d.sync += cycles[:half].eq(cycles[:half] + 1)
+        with m.If(cycles_wrapped):
+            m.d.sync += cycles[half:].eq(cycles[half:] + 1)
 
         momentum_k = Signal(len(beta.i.payload))
         restart_pending = Signal()
@@ -601,7 +611,7 @@ class SpringflatEngine(wiring.Component):
             set_state("idle")
             m.d.sync += result.eq(_code(RESULTS, "none"))
         with m.Elif(start_pulse & ~running):
-            m.d.sync += [cycles.eq(0), iterations.eq(0), saturations.eq(0), irq_pending.eq(0),
+            m.d.sync += [cycles.eq(0), cycles_wrapped.eq(0), iterations.eq(0), saturations.eq(0), irq_pending.eq(0),
                          result.eq(_code(RESULTS, "none"))]
             with m.If(no_mesh_q):
                 finish("no-mesh")

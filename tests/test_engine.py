@@ -243,7 +243,7 @@ def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged()
 
 def test_bus_answers_take_the_documented_clocks():
     """docs/engine.md: a register answers 4 clocks after ``stb`` rises, a memory word 7 (read or write),
-    an unmapped word's ``err`` 3; what is written reads back."""
+    an unmapped word's ``err`` 4; what is written reads back."""
     dut = SpringflatEngine(FS, CAPACITY)
     rmap = dut.register_map
     max_iter = rmap.register("MAX_ITER").offset
@@ -267,7 +267,7 @@ def test_bus_answers_take_the_documented_clocks():
     # than the edges after which the target raises it
     raised_after = {name: a.clocks - 1 for name, a in answers.items()}
     assert raised_after == {"register_write": 4, "register_read": 4, "memory_write": 7, "memory_read": 7,
-                            "unmapped": 3}
+                            "unmapped": 4}
     assert answers["register_read"].data == 1234 and not answers["register_read"].error
     assert answers["memory_read"].data == 0x5A5A5 and not answers["memory_read"].error
     assert answers["unmapped"].error
