@@ -377,7 +377,12 @@ class SpringflatEngine(wiring.Component):
         mem_data = Signal(BUS_WORD_BITS)
         mem_word = Signal(BUS_WORD_BITS, reset_less=True)
         m.d.sync += mem_word.eq(mem_data)
-        window_words = {}
+        # the word's select, one flip-flop per (window, word), set the clock after DEC from the decode
+        # (long before the entry lands): the answer and the write-back are AND-OR selects from flip-flops
+        word_hot = {(k, j): Signal(name=f"word_hot_{w.name}_{j}")
+                    for k, w in enumerate(rmap.windows) for j in range(w.words)}
+        m.d.sync += [hot.eq((window_q == k) & (word_q == j)) for (k, j), hot in word_hot.items()]
+        answer_terms, new_words = [], {}
         for k, w in enumerate(rmap.windows):
             if w.name == "nodes":
                 word_value = Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
@@ -388,18 +393,11 @@ class SpringflatEngine(wiring.Component):
                 word_value = tri_r.data.as_value()
             padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word", reset_less=True)
             m.d.sync += padded.eq(word_value)
-            window_words[w.name] = (k, padded, len(word_value))
-            with m.If(window_q == k):
-                m.d.comb += mem_data.eq(padded.word_select(word_q, BUS_WORD_BITS))
-        new_words = {}
-        for name, (k, padded, bits) in window_words.items():
-            modified = Signal(len(padded), name=f"bus_{name}_new")
-            m.d.comb += modified.eq(padded)
-            with m.Switch(word_q):
-                for j in range(len(padded) // BUS_WORD_BITS):
-                    with m.Case(j):
-                        m.d.comb += modified[j * BUS_WORD_BITS:(j + 1) * BUS_WORD_BITS].eq(hs.write_data)
-            new_words[name] = (k, modified[:bits])
+            words = [padded.word_select(j, BUS_WORD_BITS) for j in range(w.words)]
+            answer_terms += [Mux(word_hot[k, j], words[j], 0) for j in range(w.words)]
+            modified = Cat(*(Mux(word_hot[k, j], hs.write_data, words[j]) for j in range(w.words)))
+            new_words[w.name] = (k, modified[:len(word_value)])
+        m.d.comb += mem_data.eq(_or_all(answer_terms))
         bus_writing = mem_landed & hs.write & hs.whole_word
 
         # ------------------------------------------------------------ port multiplexing
@@ -537,8 +535,7 @@ class SpringflatEngine(wiring.Component):
 
         def finish(code):
             set_state("done")
-            m.d.sync += [result.eq(_code(RESULTS, code)), irq_pending.eq(1),
-                         fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
+            m.d.sync += [result.eq(_code(RESULTS, code)), irq_pending.eq(1)]  # (no pass is fetching then)
 
         fetching = Cat(*e_valid, *t_valid, *n_valid).any()
         units_idle = force.idle & area.idle & integ.idle & ~fetching
@@ -603,14 +600,21 @@ class SpringflatEngine(wiring.Component):
         # ABORT while running drains what is in flight (still "running": START is ignored and the memories
         # answer err until nothing can write them any more), then goes idle with no result. The pass under
         # way fetches to its end (a node half fed to the force pass would never leave it).
+        # The passes' counters and sums restart from a phase flag, outside the phase machine's priority
+        # logic: the force and area passes' in the start phase, the integrate pass's in the step phase.
+        with m.If(in_phase["start"]):
+            m.d.sync += [entry_index.eq(0), node_of_entry.eq(0), next_first.eq(1), force_out_index.eq(0),
+                         length_sum.eq(0), square_sum.eq(0), barrier_sum.eq(0), tri_index.eq(0)]
+        with m.If(in_phase["step"]):
+            m.d.sync += [node_index.eq(0), node_out_index.eq(0), power_sum.eq(0)]
         with m.If(abort_pulse & running):
             m.d.sync += phase_to("drain")
             for unit in (norm_length, norm_area, energy, beta, stepgen):
                 m.d.sync += unit.i.valid.eq(0)
-        with m.Elif(abort_pulse):
+        with m.If(abort_pulse & ~running):
             set_state("idle")
             m.d.sync += result.eq(_code(RESULTS, "none"))
-        with m.Elif(start_pulse & ~running):
+        with m.If(start_pulse & ~abort_pulse & ~running):
             m.d.sync += [cycles.eq(0), cycles_wrapped.eq(0), iterations.eq(0), saturations.eq(0), irq_pending.eq(0),
                          result.eq(_code(RESULTS, "none"))]
             with m.If(no_mesh_q):
@@ -620,15 +624,13 @@ class SpringflatEngine(wiring.Component):
             with m.Else():
                 set_state("running")
                 m.d.sync += [*phase_to("start"), first_measure.eq(1), momentum_k.eq(0), restart_pending.eq(0)]
-        with m.Elif(running):
+        with m.If(running & ~abort_pulse):
             with m.Switch(phase):
                 with m.Case(PH["start"]):  # a measurement: the force pass
-                    m.d.sync += [entry_index.eq(0), node_of_entry.eq(0), next_first.eq(1), force_out_index.eq(0),
-                                 length_sum.eq(0), square_sum.eq(0), barrier_sum.eq(0), fetch_force.eq(1),
-                                 *phase_to("force")]
+                    m.d.sync += [fetch_force.eq(1), *phase_to("force")]
                 with m.Case(PH["force"]):
                     with m.If(force_done):
-                        m.d.sync += [fetch_force.eq(0), tri_index.eq(0), fetch_area.eq(1), *phase_to("area"),
+                        m.d.sync += [fetch_force.eq(0), fetch_area.eq(1), *phase_to("area"),
                                      math_pending.eq(0b111), norm_length.i.valid.eq(1), energy.i.valid.eq(1),
                                      area_clear.eq(1)]
                 with m.Case(PH["area"]):
@@ -664,8 +666,7 @@ class SpringflatEngine(wiring.Component):
                 with m.Case(PH["step_wait"]):
                     waiting = beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready
                     with m.If(~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
-                        m.d.sync += [node_index.eq(0), node_out_index.eq(0), power_sum.eq(0), fetch_nodes.eq(1),
-                                     *phase_to("integrate")]
+                        m.d.sync += [fetch_nodes.eq(1), *phase_to("integrate")]
                 with m.Case(PH["drain"]):
                     done_fetching = ((entry_index == n_entries) | ~fetch_force) & ((tri_index == n_triangles) | ~fetch_area) \
                         & ((node_index == n_vertices) | ~fetch_nodes)
