@@ -27,7 +27,10 @@ from .integrator import Integrator
 from .layouts import vector_layout
 from .stepgen import StepGenerator
 
-__all__ = ["SpringflatEngine", "word_layout"]
+__all__ = ["SpringflatEngine", "word_layout", "ENTRY_BANK_DEPTH"]
+
+#: Words per bank of the entry memory (DP16KD's 2K×9 mode: the deepest without a cascade multiplexer).
+ENTRY_BANK_DEPTH = 2048
 
 
 def word_layout(layout: MemoryLayout) -> data.StructLayout:
@@ -47,6 +50,9 @@ class SpringflatEngine(wiring.Component):
     fs : :class:`~golden_model.fixed.FormatSet` or preset name
     capacity : :class:`~golden_model.fixed.engine_image.EngineCapacity`
         Depths of the node, entry and triangle memories.
+    entry_bank_depth : int
+        Words per bank of the entry memory (a power of two; :data:`ENTRY_BANK_DEPTH`, the deepest
+        DP16KD mode of a wide word; a test passes less to have several banks at a small capacity).
 
     Members
     -------
@@ -70,14 +76,18 @@ class SpringflatEngine(wiring.Component):
     memories).
     """
 
-    def __init__(self, fs: FormatSet | str, capacity: EngineCapacity):
+    def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH):
         if isinstance(fs, str):
             fs = FormatSet.preset(fs)
         if not isinstance(fs, FormatSet):
             raise TypeError(f"SpringflatEngine needs a FormatSet or a preset name, not {fs!r}")
         if not isinstance(capacity, EngineCapacity):
             raise TypeError(f"SpringflatEngine needs an EngineCapacity, not {capacity!r}")
+        if isinstance(entry_bank_depth, bool) or not isinstance(entry_bank_depth, int) or entry_bank_depth < 2 \
+                or entry_bank_depth & (entry_bank_depth - 1):
+            raise ValueError(f"entry_bank_depth must be a power of two >= 2, not {entry_bank_depth!r}")
         self.fs, self.capacity = fs, capacity
+        self.entry_bank_depth = entry_bank_depth
         self.register_map = RegisterMap.build(fs, capacity)
         self.layouts = memory_layouts(fs, capacity)
         end = max(w.base + w.size for w in self.register_map.windows)
@@ -101,7 +111,6 @@ class SpringflatEngine(wiring.Component):
         fs, cap, rmap = self.fs, self.capacity, self.register_map
         m = Module()
         values = self._value_signals()
-        const = {r.name: r for r in rmap.registers}
 
         # ------------------------------------------------------------ units
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True)
@@ -122,19 +131,48 @@ class SpringflatEngine(wiring.Component):
         force_shape = data.StructLayout({"force": vector_layout(fs.force_acc), "inside": unsigned(1)})
         entry_shape = word_layout(self.layouts["entries"])
         tri_shape = word_layout(self.layouts["triangles"])
-        m.submodules.positions = positions = Memory(shape=pos_shape, depth=cap.vertices, init=[])
-        m.submodules.velocities = velocities = Memory(shape=vel_shape, depth=cap.vertices, init=[])
-        m.submodules.weights = weights = Memory(shape=weight_shape, depth=cap.vertices, init=[])
-        m.submodules.forces = forces = Memory(shape=force_shape, depth=cap.vertices, init=[])
-        m.submodules.entries = entries = Memory(shape=entry_shape, depth=cap.entries, init=[])
-        m.submodules.triangles = triangles = Memory(shape=tri_shape, depth=cap.triangles, init=[])
+        # Every memory carries Yosys's ``no_rw_check``: no read whose data is used meets a write to its
+        # address in the same clock (passes read ahead of the integrate pass's writes; the bus reads
+        # and writes while idle, a word's write-back after its read), so Yosys need not add the
+        # collision bypass (a comparator and a multiplexer after each block RAM's output).
+        def memory(shape, depth):
+            return Memory(shape=shape, depth=depth, init=[], attrs={"no_rw_check": 1})
+
+        m.submodules.positions = positions = memory(pos_shape, cap.vertices)
+        m.submodules.velocities = velocities = memory(vel_shape, cap.vertices)
+        m.submodules.weights = weights = memory(weight_shape, cap.vertices)
+        m.submodules.forces = forces = memory(force_shape, cap.vertices)
+        m.submodules.triangles = triangles = memory(tri_shape, cap.triangles)
+        # The entries, the deepest memory, in banks of ``entry_bank_depth`` words (ENTRY_BANK_DEPTH): Yosys maps a bank of
+        # wide words to DP16KDs in their 2K×9 mode with no cascade, where a deeper memory gets a
+        # multiplexer after the block RAMs' outputs (the engine's critical path at 6144 entries).
+        # Every bank's read data lands in a register; the addressed bank's word is selected into
+        # another the clock after.
+        bank_depth = self.entry_bank_depth
+        entry_banks = [memory(entry_shape, min(bank_depth, cap.entries - b * bank_depth))
+                       for b in range(-(-cap.entries // bank_depth))]
+        for b, bank in enumerate(entry_banks):
+            m.submodules[f"entries{b}"] = bank
         pos_a, pos_b, pos_c = positions.read_port(), positions.read_port(), positions.read_port()
         pos_w = positions.write_port()
         vel_r, vel_w = velocities.read_port(), velocities.write_port()
         wgt_r, wgt_w = weights.read_port(), weights.write_port()
         frc_r, frc_w = forces.read_port(), forces.write_port()
-        ent_r, ent_w = entries.read_port(), entries.write_port()
+        ent_rs = [bank.read_port() for bank in entry_banks]
+        ent_ws = [bank.write_port() for bank in entry_banks]
         tri_r, tri_w = triangles.read_port(), triangles.write_port()
+        bank_bits = (bank_depth - 1).bit_length() if len(entry_banks) > 1 else len(ent_rs[0].addr)
+        ent_addr = Signal(range(cap.entries), name="ent_addr")  # the entry memory's address register
+        ent_bank = [Signal(range(len(entry_banks)), name=f"ent_bank{k}") for k in (1, 2)]  # at E1, E2
+        ent_landed = [Signal(entry_shape, reset_less=True, name=f"ent_landed{b}") for b in range(len(entry_banks))]
+        ent_data = Signal(entry_shape, reset_less=True)  # the addressed entry, the clock after landing
+        m.d.comb += [port.addr.eq(ent_addr[:bank_bits]) for port in ent_rs]
+        m.d.sync += [ent_bank[0].eq(ent_addr[bank_bits:] if len(entry_banks) > 1 else 0), ent_bank[1].eq(ent_bank[0]),
+                     *(landed.eq(port.data) for landed, port in zip(ent_landed, ent_rs))]
+        with m.Switch(ent_bank[1]):
+            for b, landed in enumerate(ent_landed):
+                with m.Case(b):
+                    m.d.sync += ent_data.eq(landed)
 
         # ------------------------------------------------------------ controller state
         state = Signal(range(len(STATES)), init=_code(STATES, "idle"))
@@ -166,38 +204,37 @@ class SpringflatEngine(wiring.Component):
 
         # ------------------------------------------------------------ force pass fetch
         # One entry per clock. Valid bits are named for the clock whose data they mark: E0 the
-        # entry's address in the entry memory's address register; E1 the entry memory's read data;
-        # E2 the entry landed in fabric registers, its three position addresses formed; E3 those
-        # in the position memory's address registers; E4 the position memory's read data; E5
-        # everything landed, into ForcePass.i. Every block RAM address comes from a flip-flop after
-        # the pass multiplexer, and every block RAM output lands in a register before any logic
-        # (clock-to-out is most of a period on ECP5).
+        # entry's address in the entry memory's address register; E1 the entry banks' read data;
+        # E2 landed in fabric registers; E3 the addressed bank's entry (``ent_data``), its three
+        # position addresses formed; E4 those in the position memory's address registers; E5 the
+        # position memory's read data; E6 everything landed, into ForcePass.i. Every block RAM
+        # address comes from a flip-flop after the pass multiplexer, and every block RAM output
+        # lands in a register before any logic (clock-to-out is most of a period on ECP5).
         entry_index = Signal(range(cap.entries + 1))
         fetch_force = Signal()
-        e_valid = [Signal(name=f"e{k}_valid") for k in range(6)]
-        e2_entry, e3_entry, e4_entry, e5_entry = (
-            Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(2, 6))
-        e3_first, e4_first, e5_first = Signal(), Signal(), Signal()
-        e5_pi, e5_pj, e5_pb = (Signal(pos_shape, reset_less=True, name=f"e5_{n}") for n in ("pi", "pj", "pb"))
+        e_valid = [Signal(name=f"e{k}_valid") for k in range(7)]
+        e4_entry, e5_entry, e6_entry = (Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(4, 7))
+        e4_first, e5_first, e6_first = Signal(), Signal(), Signal()
+        e6_pi, e6_pj, e6_pb = (Signal(pos_shape, reset_less=True, name=f"e6_{n}") for n in ("pi", "pj", "pb"))
         node_of_entry = Signal(range(cap.vertices + 1))
         next_first = Signal()
         issue_entry = fetch_force & (entry_index < n_entries)
-        m.d.sync += [e_valid[0].eq(issue_entry), *(e_valid[k].eq(e_valid[k - 1]) for k in range(1, 6)),
-                     e2_entry.eq(ent_r.data), e3_entry.eq(e2_entry), e4_entry.eq(e3_entry), e5_entry.eq(e4_entry),
-                     e3_first.eq(next_first), e4_first.eq(e3_first), e5_first.eq(e4_first),
-                     e5_pi.eq(pos_a.data), e5_pj.eq(pos_b.data), e5_pb.eq(pos_c.data)]
+        m.d.sync += [e_valid[0].eq(issue_entry), *(e_valid[k].eq(e_valid[k - 1]) for k in range(1, 7)),
+                     e4_entry.eq(ent_data), e5_entry.eq(e4_entry), e6_entry.eq(e5_entry),
+                     e4_first.eq(next_first), e5_first.eq(e4_first), e6_first.eq(e5_first),
+                     e6_pi.eq(pos_a.data), e6_pj.eq(pos_b.data), e6_pb.eq(pos_c.data)]
         with m.If(issue_entry):
             m.d.sync += entry_index.eq(entry_index + 1)
-        with m.If(e_valid[2]):  # the owner of the entry after this one
-            m.d.sync += [next_first.eq(e2_entry.last), node_of_entry.eq(node_of_entry + e2_entry.last)]
+        with m.If(e_valid[3]):  # the owner of the entry after this one
+            m.d.sync += [next_first.eq(ent_data.last), node_of_entry.eq(node_of_entry + ent_data.last)]
         m.d.comb += [
-            force.i.valid.eq(e_valid[5]),
-            force.i.payload.first.eq(e5_first), force.i.payload.last.eq(e5_entry.last),
-            force.i.payload.position.eq(e5_pi), force.i.payload.neighbour.position.eq(e5_pj),
-            force.i.payload.neighbour.rest.eq(e5_entry.rest),
-            force.i.payload.barrier.second.eq(e5_pb),
-            force.i.payload.barrier.threshold.eq(Mux(values["barrier"], e5_entry.threshold, 0)),
-            force.i.payload.barrier.gain.eq(Mux(values["barrier"], e5_entry.gain, 0)),
+            force.i.valid.eq(e_valid[6]),
+            force.i.payload.first.eq(e6_first), force.i.payload.last.eq(e6_entry.last),
+            force.i.payload.position.eq(e6_pi), force.i.payload.neighbour.position.eq(e6_pj),
+            force.i.payload.neighbour.rest.eq(e6_entry.rest),
+            force.i.payload.barrier.second.eq(e6_pb),
+            force.i.payload.barrier.threshold.eq(Mux(values["barrier"], e6_entry.threshold, 0)),
+            force.i.payload.barrier.gain.eq(Mux(values["barrier"], e6_entry.gain, 0)),
             force.half_spring.eq(values["half_spring"]), force.barrier.eq(values["barrier"]),
         ]
         # per-node results: the force memory and the exact sums
@@ -370,10 +407,12 @@ class SpringflatEngine(wiring.Component):
         # outputs come from all over the device), then the answer and, for a write, the modified
         # word written back
         bus_mem = ~running & (window_q != n_windows)
-        # address registered, data, entry landed (the write-back formed), word landed (the answer)
-        mem_steps = [Signal(name=f"mem_step{k}") for k in range(4)]
-        m.d.sync += [mem_steps[0].eq(bus_request & bus_mem), *(mem_steps[k].eq(mem_steps[k - 1]) for k in (1, 2, 3))]
-        mem_landed, mem_answer = mem_steps[2], mem_steps[3]
+        # address registered, data, landed, the entry bank's word selected (the other windows' data
+        # delayed alike), the whole word in the window's register (the write-back formed), the bus
+        # word landed (the answer)
+        mem_steps = [Signal(name=f"mem_step{k}") for k in range(6)]
+        m.d.sync += [mem_steps[0].eq(bus_request & bus_mem), *(mem_steps[k].eq(mem_steps[k - 1]) for k in range(1, 6))]
+        mem_landed, mem_answer = mem_steps[4], mem_steps[5]
         mem_data = Signal(BUS_WORD_BITS)
         mem_word = Signal(BUS_WORD_BITS, reset_less=True)
         m.d.sync += mem_word.eq(mem_data)
@@ -384,13 +423,19 @@ class SpringflatEngine(wiring.Component):
         m.d.sync += [hot.eq((window_q == k) & (word_q == j)) for (k, j), hot in word_hot.items()]
         answer_terms, new_words = [], {}
         for k, w in enumerate(rmap.windows):
-            if w.name == "nodes":
-                word_value = Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
-                                 wgt_r.data.inv_mass_barrier)
-            elif w.name == "entries":
-                word_value = ent_r.data.as_value()
+            if w.name == "entries":
+                word_value = ent_data.as_value()  # selected at the third clock after the address
             else:
-                word_value = tri_r.data.as_value()
+                if w.name == "nodes":
+                    read_data = Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
+                                    wgt_r.data.inv_mass_barrier)
+                else:
+                    read_data = tri_r.data.as_value()
+                word_value = read_data
+                for step in ("landed", "aligned"):
+                    delayed = Signal(len(read_data), name=f"bus_{w.name}_{step}", reset_less=True)
+                    m.d.sync += delayed.eq(word_value)
+                    word_value = delayed
             padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word", reset_less=True)
             m.d.sync += padded.eq(word_value)
             words = [padded.word_select(j, BUS_WORD_BITS) for j in range(w.words)]
@@ -404,7 +449,7 @@ class SpringflatEngine(wiring.Component):
         # Read addresses: the bus while idle, else the pass in progress, into a register per port
         # (the block RAMs' address inputs come from flip-flops).
         read_ports = {"pos_a": pos_a, "pos_b": pos_b, "pos_c": pos_c, "vel": vel_r, "wgt": wgt_r, "frc": frc_r,
-                      "ent": ent_r, "tri": tri_r}
+                      "tri": tri_r}
         read_addr = {name: Signal.like(port.addr, name=f"{name}_addr") for name, port in read_ports.items()}
         m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
         # Each register loads every clock (a read has no side effect), from as few sources as it
@@ -413,11 +458,11 @@ class SpringflatEngine(wiring.Component):
         # pass's, the second and third position ports by the area or the force pass.
         in_nodes = fetch_nodes | in_phase["integrate"]
         m.d.sync += [
-            read_addr["ent"].eq(Mux(running, entry_index, index_q)),
+            ent_addr.eq(Mux(running, entry_index, index_q)),
             read_addr["tri"].eq(Mux(running, tri_index, index_q)),
             *(read_addr[n].eq(Mux(running, node_index, index_q)) for n in ("vel", "wgt", "frc")),
-            read_addr["pos_b"].eq(Mux(in_phase["area"], t2_tri.b, e2_entry.neighbour)),
-            read_addr["pos_c"].eq(Mux(in_phase["area"], t2_tri.c, e2_entry.second)),
+            read_addr["pos_b"].eq(Mux(in_phase["area"], t2_tri.b, ent_data.neighbour)),
+            read_addr["pos_c"].eq(Mux(in_phase["area"], t2_tri.c, ent_data.second)),
             read_addr["pos_a"].eq(Mux(~running | in_nodes, Mux(running, node_index, index_q),
                                       Mux(in_phase["area"], t2_tri.a, node_of_entry))),
         ]
@@ -426,13 +471,21 @@ class SpringflatEngine(wiring.Component):
         node_k, node_new = new_words["nodes"]
         ent_k, ent_new = new_words["entries"]
         tri_k, tri_new = new_words["triangles"]
-        write_ports = {"pos": pos_w, "vel": vel_w, "wgt": wgt_w, "ent": ent_w, "tri": tri_w}
+        write_ports = {"pos": pos_w, "vel": vel_w, "wgt": wgt_w, "ent": None, "tri": tri_w}
         write_regs = {}
         for name, port in write_ports.items():
-            regs = (Signal.like(port.addr, name=f"{name}_waddr"), Signal.like(port.data, name=f"{name}_wdata"),
-                    Signal(name=f"{name}_wen"))
+            if port is None:  # the entry banks: the bank's port enabled by the address's high bits
+                regs = (Signal.like(ent_addr, name="ent_waddr"), Signal(entry_shape, name="ent_wdata"),
+                        Signal(name="ent_wen"))
+                for b, bank_port in enumerate(ent_ws):
+                    hit = regs[0][bank_bits:] == b if len(ent_ws) > 1 else 1
+                    m.d.comb += [bank_port.addr.eq(regs[0][:bank_bits]), bank_port.data.eq(regs[1]),
+                                 bank_port.en.eq(regs[2] & hit)]
+            else:
+                regs = (Signal.like(port.addr, name=f"{name}_waddr"), Signal.like(port.data, name=f"{name}_wdata"),
+                        Signal(name=f"{name}_wen"))
+                m.d.comb += [port.addr.eq(regs[0]), port.data.eq(regs[1]), port.en.eq(regs[2])]
             write_regs[name] = regs
-            m.d.comb += [port.addr.eq(regs[0]), port.data.eq(regs[1]), port.en.eq(regs[2])]
         with m.If(running):
             m.d.sync += [write_regs["pos"][0].eq(node_out_index), write_regs["pos"][1].eq(integ.o.payload.position),
                          write_regs["pos"][2].eq(integ.o.valid),
@@ -451,7 +504,7 @@ class SpringflatEngine(wiring.Component):
             ]
 
         # bus answers, every one from flip-flops: a register the clock after DEC (its read word and error
-        # landed), an unmapped word (or a memory while running) the same clock, a memory window three
+        # landed), an unmapped word (or a memory while running) the same clock, a memory window five
         # clocks after that
         reg_answer, refused = Signal(), Signal()
         landed_word = Signal(BUS_WORD_BITS, reset_less=True)
@@ -597,6 +650,13 @@ class SpringflatEngine(wiring.Component):
         sequential_idle = ~Cat(*(u.i.valid for u in (norm_length, norm_area, energy, beta, stepgen))).any() \
             & norm_length.i.ready & norm_area.i.ready & energy.i.ready & beta.i.ready & stepgen_idle
         m.d.sync += area_clear.eq(0)
+        # the drain's end, registered (the OR of every fetch stage's valid bit and the units' idle flags
+        # into the fetch flags' enables was the critical path): once true it stays true, as nothing
+        # starts while draining
+        done_fetching = ((entry_index == n_entries) | ~fetch_force) & ((tri_index == n_triangles) | ~fetch_area) \
+            & ((node_index == n_vertices) | ~fetch_nodes)
+        drained = Signal()
+        m.d.sync += drained.eq(in_phase["drain"] & units_idle & sequential_idle & done_fetching)
         # ABORT while running drains what is in flight (still "running": START is ignored and the memories
         # answer err until nothing can write them any more), then goes idle with no result. The pass under
         # way fetches to its end (a node half fed to the force pass would never leave it).
@@ -668,9 +728,7 @@ class SpringflatEngine(wiring.Component):
                     with m.If(~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
                         m.d.sync += [fetch_nodes.eq(1), *phase_to("integrate")]
                 with m.Case(PH["drain"]):
-                    done_fetching = ((entry_index == n_entries) | ~fetch_force) & ((tri_index == n_triangles) | ~fetch_area) \
-                        & ((node_index == n_vertices) | ~fetch_nodes)
-                    with m.If(units_idle & sequential_idle & done_fetching):
+                    with m.If(drained):
                         set_state("idle")
                         m.d.sync += [result.eq(_code(RESULTS, "none")),
                                      fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]

@@ -83,11 +83,12 @@ def assert_same_run(read_back, expected):
 # The paper dynamics with variable step and the fixed step with barrier run here in one case each (the
 # momentum dynamics in the every-iteration test below); tests/test_engine_rtl.py runs all three on the
 # exported Verilog.
-@pytest.mark.parametrize("run", ["paper-variable", "paper-fixed-barrier-damped"])
-def test_whole_run_matches_the_golden_model(run):
+# The second run stores its 66 entries in banks of 32 words (three banks used of eight), the first in one.
+@pytest.mark.parametrize("run, bank_depth", [("paper-variable", 256), ("paper-fixed-barrier-damped", 32)])
+def test_whole_run_matches_the_golden_model(run, bank_depth):
     image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
     expected = run_image(image, FS)
-    dut = SpringflatEngine(FS, CAPACITY)
+    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=bank_depth)
     result, read_back = run_on_engine(dut, image)
     assert result == expected.status
     assert_same_run(read_back, expected)
@@ -103,7 +104,7 @@ def test_every_iteration_state_matches_with_bus_wait_states():
     image = image_of(params, init="pca")
     states = {k: run_image(image_of(dataclasses.replace(params, max_iter=k), init="pca"), FS)
               for k in range(1, params.max_iter + 1)}
-    dut = SpringflatEngine(FS, CAPACITY)
+    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=64)  # the entries in two banks
     seen = {}
 
     async def watch(ctx):
@@ -242,9 +243,9 @@ def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged()
 
 
 def test_bus_answers_take_the_documented_clocks():
-    """docs/engine.md: a register answers 4 clocks after ``stb`` rises, a memory word 7 (read or write),
+    """docs/engine.md: a register answers 4 clocks after ``stb`` rises, a memory word 9 (read or write),
     an unmapped word's ``err`` 4; what is written reads back."""
-    dut = SpringflatEngine(FS, CAPACITY)
+    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=4)
     rmap = dut.register_map
     max_iter = rmap.register("MAX_ITER").offset
     entries = rmap.window("entries")
@@ -266,7 +267,7 @@ def test_bus_answers_take_the_documented_clocks():
     # BusAnswer.clocks counts edges up to the one at which the initiator samples ack/err: one more
     # than the edges after which the target raises it
     raised_after = {name: a.clocks - 1 for name, a in answers.items()}
-    assert raised_after == {"register_write": 4, "register_read": 4, "memory_write": 7, "memory_read": 7,
+    assert raised_after == {"register_write": 4, "register_read": 4, "memory_write": 9, "memory_read": 9,
                             "unmapped": 4}
     assert answers["register_read"].data == 1234 and not answers["register_read"].error
     assert answers["memory_read"].data == 0x5A5A5 and not answers["memory_read"].error
