@@ -127,34 +127,36 @@ class Normaliser(wiring.Component):
         rounded = Signal.like(rounded_value, name="rounded", reset_less=True)
         error, _ = clamp(rounded, fs.error)
 
-        with m.FSM():
-            with m.State("idle"):
-                m.d.comb += self.i.ready.eq(1)
-                with m.If(self.i.valid):
-                    m.d.sync += [multiplicand.eq(self.i.payload.sum), product.eq(self.i.payload.mantissa),
-                                 sticky.eq(0), steps.eq(mantissa_bits), remaining_shift.eq(shift_steps)]
-                    m.next = "multiply"
-            with m.State("multiply"):
-                m.d.sync += [product.eq(shift_add_step(product, multiplicand, mantissa_bits)), steps.eq(steps - 1)]
-                with m.If((steps == 1) & (remaining_shift == 0)):
-                    m.next = "round"
-                with m.Elif(steps == 1):
-                    m.next = "shift"
-            with m.State("shift"):
-                m.d.sync += [product.eq(product >> 1), sticky.eq(sticky | product[0]),
-                             remaining_shift.eq(remaining_shift - 1)]
-                with m.If(remaining_shift == 1):
-                    m.next = "round"
-            with m.State("round"):
-                m.d.sync += rounded.eq(rounded_value)
-                m.next = "saturate"
-            with m.State("saturate"):
-                m.d.sync += [self.o.payload.eq(error), self.o.valid.eq(1)]
-                m.next = "done"
-            with m.State("done"):
-                with m.If(self.o.ready):
-                    m.d.sync += self.o.valid.eq(0)
-                    m.next = "idle"
+        # The states as one flip-flop each (one-hot): the product register's next value is chosen by
+        # a flag, not a decode of a state code (the decode into the 65-bit multiplexer's select was
+        # among the engine's longest paths)
+        names = ("idle", "multiply", "shift", "round", "saturate", "done")
+        state = {name: Signal(name=f"in_{name}", init=(name == "idle")) for name in names}
+
+        def goto(name):
+            return [flag.eq(n == name) for n, flag in state.items()]
+
+        m.d.comb += self.i.ready.eq(state["idle"])
+        with m.If(state["idle"] & self.i.valid):
+            m.d.sync += [multiplicand.eq(self.i.payload.sum), product.eq(self.i.payload.mantissa),
+                         sticky.eq(0), steps.eq(mantissa_bits), remaining_shift.eq(shift_steps), *goto("multiply")]
+        with m.If(state["multiply"]):
+            m.d.sync += [product.eq(shift_add_step(product, multiplicand, mantissa_bits)), steps.eq(steps - 1)]
+            with m.If((steps == 1) & (remaining_shift == 0)):
+                m.d.sync += goto("round")
+            with m.Elif(steps == 1):
+                m.d.sync += goto("shift")
+        with m.If(state["shift"]):
+            m.d.sync += [product.eq(product >> 1), sticky.eq(sticky | product[0]),
+                         remaining_shift.eq(remaining_shift - 1)]
+            with m.If(remaining_shift == 1):
+                m.d.sync += goto("round")
+        with m.If(state["round"]):
+            m.d.sync += [rounded.eq(rounded_value), *goto("saturate")]
+        with m.If(state["saturate"]):
+            m.d.sync += [self.o.payload.eq(error), self.o.valid.eq(1), *goto("done")]
+        with m.If(state["done"] & self.o.ready):
+            m.d.sync += [self.o.valid.eq(0), *goto("idle")]
         return m
 
 
