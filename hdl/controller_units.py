@@ -94,6 +94,9 @@ class Normaliser(wiring.Component):
 
     def __init__(self, fs: FormatSet | str):
         fs = _check_fs("Normaliser", fs)
+        if fs.reciprocal.width < 2:
+            raise ValueError(f"Normaliser needs a reciprocal of at least 2 bits (the shift steps are "
+                             f"worked out during the multiply steps), not {fs.reciprocal.width}")
         self.fs = fs
         self.product_bits = fs.error_acc.width + fs.reciprocal.width + 1
         super().__init__({
@@ -117,8 +120,11 @@ class Normaliser(wiring.Component):
         product = Signal(self.product_bits, reset_less=True)
         sticky = Signal(reset_less=True)
         steps = Signal(range(max(mantissa_bits, self.product_bits) + 1), reset_less=True)
-        # the shift steps, from the host's shift: min(max(shift − F − 2, 0), product bits)
-        drop = self.i.payload.shift - (fs.error.frac_bits + 2)
+        # The shift steps, min(max(shift − F − 2, 0), product bits), are worked out from a copy of
+        # the host's shift during the multiply steps, not when the item is accepted: the subtract
+        # and clamp after the engine's run-constant multiplexer did not fit one clock
+        shift_held = Signal.like(self.i.payload.shift, name="shift_held", reset_less=True)
+        drop = shift_held - (fs.error.frac_bits + 2)
         shift_steps = Mux(drop < 0, 0, Mux(drop > self.product_bits, self.product_bits, drop))
         remaining_shift = Signal.like(steps, name="remaining_shift")
         # kept: the product with its sticky bit ORed into bit 0, then the two kept bits dropped
@@ -139,9 +145,13 @@ class Normaliser(wiring.Component):
         m.d.comb += self.i.ready.eq(state["idle"])
         with m.If(state["idle"] & self.i.valid):
             m.d.sync += [multiplicand.eq(self.i.payload.sum), product.eq(self.i.payload.mantissa),
-                         sticky.eq(0), steps.eq(mantissa_bits), remaining_shift.eq(shift_steps), *goto("multiply")]
+                         sticky.eq(0), steps.eq(mantissa_bits), shift_held.eq(self.i.payload.shift),
+                         *goto("multiply")]
         with m.If(state["multiply"]):
-            m.d.sync += [product.eq(shift_add_step(product, multiplicand, mantissa_bits)), steps.eq(steps - 1)]
+            # loaded on every multiply step (the held shift does not change); the first load is
+            # read at the last step, which __init__'s two-step minimum makes a later clock
+            m.d.sync += [product.eq(shift_add_step(product, multiplicand, mantissa_bits)), steps.eq(steps - 1),
+                         remaining_shift.eq(shift_steps)]
             with m.If((steps == 1) & (remaining_shift == 0)):
                 m.d.sync += goto("round")
             with m.Elif(steps == 1):

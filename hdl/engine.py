@@ -684,60 +684,58 @@ class SpringflatEngine(wiring.Component):
             with m.Else():
                 set_state("running")
                 m.d.sync += [*phase_to("start"), first_measure.eq(1), momentum_k.eq(0), restart_pending.eq(0)]
-        with m.If(running & ~abort_pulse):
-            with m.Switch(phase):
-                with m.Case(PH["start"]):  # a measurement: the force pass
-                    m.d.sync += [fetch_force.eq(1), *phase_to("force")]
-                with m.Case(PH["force"]):
-                    with m.If(force_done):
-                        m.d.sync += [fetch_force.eq(0), fetch_area.eq(1), *phase_to("area"),
-                                     math_pending.eq(0b111), norm_length.i.valid.eq(1), energy.i.valid.eq(1),
-                                     area_clear.eq(1)]
-                with m.Case(PH["area"]):
-                    with m.If(area_done):
-                        m.d.sync += [fetch_area.eq(0), *phase_to("math"), norm_area.i.valid.eq(1)]
-                with m.Case(PH["math"]):
-                    with m.If(math_pending == 0):
-                        m.d.sync += phase_to("check")
-                with m.Case(PH["check"]):
-                    # as run_image: the saturation limit first, then the stop rule (neither after the first
-                    # measurement), then the iteration limit
-                    with m.If(diverged_q & ~first_measure):
-                        finish("diverged")
-                    with m.Elif(converged_q & ~first_measure):
-                        finish("converged")
-                    with m.Elif(at_max_iter_q):
-                        finish("max-iterations")
-                    with m.Else():
-                        m.d.sync += [first_measure.eq(0), *phase_to("step")]
-                with m.Case(PH["step"]):
-                    with m.If(mode_momentum):
-                        with m.If(restart_pending):
-                            m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(0), momentum_k.eq(1),
-                                         restart_pending.eq(0), step_was_restart.eq(1)]
-                        with m.Else():
-                            m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(momentum_k),
-                                         momentum_k.eq(momentum_k + 1), step_was_restart.eq(0)]
-                    with m.Elif(mode_fixed):
-                        m.d.sync += fixed_load.eq(1)
-                    with m.Else():
-                        m.d.sync += stepgen.i.valid.eq(1)
-                    m.d.sync += phase_to("step_wait")
-                with m.Case(PH["step_wait"]):
-                    waiting = beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready
-                    with m.If(~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
-                        m.d.sync += [fetch_nodes.eq(1), *phase_to("integrate")]
-                with m.Case(PH["drain"]):
-                    with m.If(drained):
-                        set_state("idle")
-                        m.d.sync += [result.eq(_code(RESULTS, "none")),
-                                     fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
-                with m.Case(PH["integrate"]):
-                    with m.If(integrate_done):
-                        power_negative = power_sum < 0
-                        m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), *phase_to("start")]
-                        with m.If(mode_momentum & ~step_was_restart):
-                            m.d.sync += restart_pending.eq(power_negative)
+        # The phase machine: one block per phase, each enabled by its one-hot flag (and the pass-end
+        # pulse it waits for), not by a decode of ``phase`` under ``running``: ``running`` fans out to
+        # every port multiplexer, and the counters behind it (ITERATIONS, momentum_k) were the engine's
+        # longest paths. Every phase but start, check and drain is entered and left only while
+        # running (an abort moves to drain), so its flag implies ``running``.
+        go = ~abort_pulse
+        with m.If(go & running & in_phase["start"]):  # a measurement: the force pass
+            m.d.sync += [fetch_force.eq(1), *phase_to("force")]
+        with m.If(go & in_phase["force"] & force_done):
+            m.d.sync += [fetch_force.eq(0), fetch_area.eq(1), *phase_to("area"),
+                         math_pending.eq(0b111), norm_length.i.valid.eq(1), energy.i.valid.eq(1),
+                         area_clear.eq(1)]
+        with m.If(go & in_phase["area"] & area_done):
+            m.d.sync += [fetch_area.eq(0), *phase_to("math"), norm_area.i.valid.eq(1)]
+        with m.If(go & in_phase["math"] & (math_pending == 0)):
+            m.d.sync += phase_to("check")
+        with m.If(go & running & in_phase["check"]):
+            # as run_image: the saturation limit first, then the stop rule (neither after the first
+            # measurement), then the iteration limit
+            with m.If(diverged_q & ~first_measure):
+                finish("diverged")
+            with m.Elif(converged_q & ~first_measure):
+                finish("converged")
+            with m.Elif(at_max_iter_q):
+                finish("max-iterations")
+            with m.Else():
+                m.d.sync += [first_measure.eq(0), *phase_to("step")]
+        with m.If(go & in_phase["step"]):
+            with m.If(mode_momentum):
+                with m.If(restart_pending):
+                    m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(0), momentum_k.eq(1),
+                                 restart_pending.eq(0), step_was_restart.eq(1)]
+                with m.Else():
+                    m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(momentum_k),
+                                 momentum_k.eq(momentum_k + 1), step_was_restart.eq(0)]
+            with m.Elif(mode_fixed):
+                m.d.sync += fixed_load.eq(1)
+            with m.Else():
+                m.d.sync += stepgen.i.valid.eq(1)
+            m.d.sync += phase_to("step_wait")
+        waiting = beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready
+        with m.If(go & in_phase["step_wait"] & ~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
+            m.d.sync += [fetch_nodes.eq(1), *phase_to("integrate")]
+        with m.If(go & running & in_phase["drain"] & drained):
+            set_state("idle")
+            m.d.sync += [result.eq(_code(RESULTS, "none")),
+                         fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
+        with m.If(go & in_phase["integrate"] & integrate_done):
+            power_negative = power_sum < 0
+            m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), *phase_to("start")]
+            with m.If(mode_momentum & ~step_was_restart):
+                m.d.sync += restart_pending.eq(power_negative)
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
         self.debug_memories = {"positions": positions, "velocities": velocities}
         self.debug_signals = {"state": state, "phase": phase, "entry_index": entry_index,
