@@ -42,8 +42,8 @@ class StepGenerator(wiring.Component):
     ----------
     latency : :class:`int`
         Clock cycles from an input transfer to the output transfer of the same item when
-        ``o.ready`` is held high: :meth:`latency_of` (16 for both presets, which interpolate;
-        11 without interpolation). Throughput: one item per clock (II = 1).
+        ``o.ready`` is held high: :meth:`latency_of` (17 for both presets, which interpolate;
+        12 without interpolation). Throughput: one item per clock (II = 1).
 
     Members
     -------
@@ -59,6 +59,7 @@ class StepGenerator(wiring.Component):
     and share one LUT ROM through two asynchronous read ports, each row registered:
 
     ================  ============================================================================
+    ``lut_addr``      the error clamped (``u1.F`` only) and the ROM address registered
     ``lut``           ROM read (asynchronous, registered). Interpolating: address ``k = E >> r``, row
                       ``(T[k], T[k+1] - T[k])``, ``t = E mod 2**r`` registered. Otherwise: row
                       ``T[round(E / 2**r)]``. (A ``u1.F`` error is first clamped to 1.0.)
@@ -117,12 +118,12 @@ class StepGenerator(wiring.Component):
     def latency_of(fs):
         """Pipeline latency in clocks for ``fs``.
 
-        lut, sum, dt_round, dt_sat, dt_add, dt, half, o; the ``dt*dt`` multiply
+        lut_addr, lut, sum, dt_round, dt_sat, dt_add, dt, half, o; the ``dt*dt`` multiply
         (``Pipeline.MUL_STAGES`` plus its adder levels); interpolating, the ``slope*t`` multiply
         and interp_round, interp.
         """
         mul = Pipeline.MUL_STAGES
-        latency = 8 + mul + reduce_levels((unsigned(fs.dt.width), unsigned(fs.dt.width)))
+        latency = 9 + mul + reduce_levels((unsigned(fs.dt.width), unsigned(fs.dt.width)))
         if fs.interpolates:
             slope, t = unsigned(lut_slope_bits(fs.lut_index_bits, fs.lut_entry)), unsigned(fs.lut_frac_bits)
             latency += 2 + mul + reduce_levels((slope, t))
@@ -202,7 +203,7 @@ class StepGenerator(wiring.Component):
         layout, rows = self._rom_rows()
         m.submodules.exp_rom = exp_rom = Memory(shape=layout, depth=len(rows), init=rows, attrs={"rom_style": "logic"})
         lanes = ("area_error", "shape_error")
-        error, ports = {}, {}
+        error, addrs, ports = {}, {}, {}
         for lane in lanes:
             error[lane] = e = self.i.payload[lane]
             above_one = e > self._error_max
@@ -218,14 +219,21 @@ class StepGenerator(wiring.Component):
             # An asynchronous read port (LUT ROM) whose data is registered here: the row comes
             # from a fabric register, so the multiply below starts at a flip-flop (an ECP5
             # block RAM's unregistered output alone costs ~5.8 ns).
-            ports[lane] = port = exp_rom.read_port(domain="comb")
-            m.d.comb += port.addr.eq(addr)
+            ports[lane] = exp_rom.read_port(domain="comb")
+            addrs[lane] = addr
+        # The address is registered before the ROM: the clamp's compare and the ROM's multiplexer
+        # tree in one clock were among the engine's longest paths
+        stage("lut_addr")
+        for lane in lanes:
+            m.d.comb += ports[lane].addr.eq(reg(addrs[lane], len(ports[lane].addr), f"lut_{lane}_addr"))
+            if self._interpolating:
+                error[lane] = reg(error[lane][:r], r, f"lut_addr_{lane}_t")
         stage("lut")
         row = {lane: reg(ports[lane].data, layout, f"lut_{lane}_row") for lane in lanes}
         value = {lane: row[lane].base for lane in lanes}
 
         if self._interpolating:
-            frac = {lane: reg(error[lane][:r], r, f"lut_{lane}_t") for lane in lanes}
+            frac = {lane: reg(error[lane], r, f"lut_{lane}_t") for lane in lanes}
             # slope · t in a DSP block: operands registered, then the product (two stages)
             def carry_base(stage_name):
                 for lane in lanes:

@@ -183,7 +183,7 @@ def test_random_pairs_with_stalls(preset):
 #: The documented latencies (``docs/hardware.md``, the StepGenerator docstring; ``tests/test_docs.py``
 #: checks that they say these numbers): the presets; without interpolation; a 20-bit ``dt``, whose
 #: square takes 2 x 2 partial products and so two adder levels.
-LATENCY = {"default": 16, "narrow": 16, "no_interpolation": 11, "wide_dt": 18}
+LATENCY = {"default": 17, "narrow": 17, "no_interpolation": 12, "wide_dt": 19}
 LATENCY_FORMATS = {"no_interpolation": dict(lut_interpolate=False),
                    "wide_dt": dict(dt="u0.20", half_dt_sq="u0.20", lut_entry="u0.20")}
 
