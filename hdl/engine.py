@@ -14,7 +14,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import BUS_WORD_BITS, EngineCapacity, MemoryLayout, memory_layouts
+from golden_model.fixed.engine_image import BUS_WORD_BITS, ITERATION_BITS, EngineCapacity, MemoryLayout, memory_layouts
 from golden_model.fixed.register_map import RESULTS, STATES, RegisterMap
 
 from . import wishbone
@@ -119,7 +119,8 @@ class SpringflatEngine(wiring.Component):
         m.submodules.norm_length = norm_length = Normaliser(fs)
         m.submodules.norm_area = norm_area = Normaliser(fs)
         m.submodules.energy = energy = EnergyCheck(fs, cap.entries)
-        m.submodules.beta = beta = BetaDivider(fs)
+        # k counts iterations since the last restart, so it never exceeds ITERATIONS: as wide, it never wraps
+        m.submodules.beta = beta = BetaDivider(fs, k_bits=ITERATION_BITS)
         m.submodules.stepgen = stepgen = StepGenerator(fs, saturations=True)
         m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width)
         wiring.connect(m, wiring.flipped(self.bus), hs.bus)

@@ -18,6 +18,7 @@ from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, Reciprocal, StopRule, energy_raw, momentum_beta_raw
+from golden_model.fixed.engine_image import ITERATION_BITS
 from hdl.controller_units import BetaDivider, EnergyCheck, Normaliser
 from sim.payloads import pack, unpack_beats
 from sim.stream_helpers import StreamRun, run_testbenches, stream_consumer, stream_producer
@@ -231,8 +232,8 @@ def test_energy_latency(preset):
 
 # ---------------------------------------------------------------- BetaDivider
 
-def check_beta(fs, ks, **kw):
-    dut = BetaDivider(fs)
+def check_beta(fs, ks, k_bits=21, **kw):
+    dut = BetaDivider(fs, k_bits=k_bits)
     run = run_items(dut, [int(k) for k in ks], dut.latency, **kw)
     want = [momentum_beta_raw(int(k), fs) for k in ks]
     first_mismatch("beta", run.outputs, want, lambda i: f"k={ks[i]}")
@@ -267,6 +268,16 @@ def test_beta_other_dt_formats(dt):
     fs = FormatSet.preset("default").replace(dt=dt, half_dt_sq="u0.10")
     rng = np.random.default_rng(11)
     check_beta(fs, np.r_[np.arange(100), rng.integers(100, 1 << 21, 100)], seed=12, p_valid=0.8, p_ready=0.8)
+
+
+def test_beta_as_wide_as_the_iteration_counter():
+    """The engine's divider takes ``k`` as wide as ITERATIONS (``k`` counts iterations since the
+    last restart, so it never wraps): k up to 2^32 − 1, where ``k + 3`` needs a 33rd bit."""
+    fs = FormatSet.preset("default")
+    top = (1 << ITERATION_BITS) - 1
+    ks = [(1 << 21) - 1, 1 << 21, 3 << 20, (1 << 31) - 3, top - 2, top - 1, top]
+    _, _, want = check_beta(fs, ks, k_bits=ITERATION_BITS)
+    assert set(want) == {fs.dt.raw_max}
 
 
 def test_beta_latency():
