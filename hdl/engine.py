@@ -14,7 +14,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import BUS_WORD_BITS, ITERATION_BITS, EngineCapacity, MemoryLayout, memory_layouts
+from golden_model.fixed.engine_image import BUS_WORD_BITS, ITERATION_BITS, EngineCapacity, memory_layouts
 from golden_model.fixed.register_map import RESULTS, STATES, RegisterMap
 
 from . import wishbone
@@ -24,18 +24,11 @@ from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .fixedpoint import clamp, shape_of, shift_round
 from .force_pass import ForcePass
 from .integrator import Integrator
-from .layouts import vector_layout
+from .layouts import vector_layout, word_layout
+from .rom import ENTRY_BANK_DEPTH
 from .stepgen import StepGenerator
 
-__all__ = ["SpringflatEngine", "word_layout", "ENTRY_BANK_DEPTH"]
-
-#: Words per bank of the entry memory (DP16KD's 2K×9 mode: the deepest without a cascade multiplexer).
-ENTRY_BANK_DEPTH = 2048
-
-
-def word_layout(layout: MemoryLayout) -> data.StructLayout:
-    """A memory word of the map as a ``lib.data`` layout: the same fields in the same order (LSB first)."""
-    return data.StructLayout({f.name: (signed if f.signed else unsigned)(f.width) for f in layout.fields})
+__all__ = ["SpringflatEngine"]
 
 
 def _code(codes: tuple[str, ...], name: str) -> int:

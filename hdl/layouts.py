@@ -7,10 +7,11 @@ and unpack with the same layouts (:mod:`sim.payloads`), and the Verilog export d
 
 from __future__ import annotations
 
-from amaranth.hdl import ShapeCastable, unsigned
+from amaranth.hdl import ShapeCastable, signed, unsigned
 from amaranth.lib import data
 
-from golden_model.fixed import Format, FormatSet
+from golden_model.fixed import MAX_PRODUCT_WIDTH, Format, FormatSet
+from golden_model.fixed.engine_image import MemoryLayout
 from golden_model.fixed.pipeline import accumulator_guard_bits
 
 from .fixedpoint import shape_of
@@ -186,10 +187,8 @@ def errors_layout(fs: FormatSet) -> data.StructLayout:
 # ---------------------------------------------------------------- the controller's units
 # (hdl/area_error.py, hdl/controller_units.py)
 
-from golden_model.fixed import MAX_PRODUCT_WIDTH  # noqa: E402  (this block is appended as one piece)
-
 __all__ += ["triangle_layout", "area_saturations_layout", "normalise_layout", "energy_sums_layout",
-            "energy_result_layout"]
+            "energy_result_layout", "word_layout"]
 
 
 def triangle_layout(fs: FormatSet) -> data.StructLayout:
@@ -249,3 +248,10 @@ def energy_result_layout(energy_bits: int) -> data.StructLayout:
     """``energy`` (``energy_raw``: three times the energy, exact, ``energy_bits`` wide) and
     ``settled``: the stopping rule's relative energy change is within ε."""
     return data.StructLayout({"energy": unsigned(energy_bits), "settled": unsigned(1)})
+
+
+# ---------------------------------------------------------------- the engine's memory words (hdl/engine.py)
+
+def word_layout(layout: MemoryLayout) -> data.StructLayout:
+    """A memory word of the map as a ``lib.data`` layout: the same fields in the same order (LSB first)."""
+    return data.StructLayout({f.name: (signed if f.signed else unsigned)(f.width) for f in layout.fields})

@@ -20,10 +20,13 @@ from amaranth.lib.memory import Memory
 
 from .dsp import dsp_target
 
-__all__ = ["DP16KD_CONFIGS", "dp16kd_config", "dp16kd_initvals", "registered_rom"]
+__all__ = ["DP16KD_CONFIGS", "ENTRY_BANK_DEPTH", "dp16kd_config", "dp16kd_initvals", "registered_rom"]
 
 #: ``DP16KD`` port widths and their depths (16 Kib, 18 Kib with the ninth bits).
 DP16KD_CONFIGS = ((18, 1024), (9, 2048), (4, 4096), (2, 8192), (1, 16384))
+#: Words per bank of the engine's entry memory: DP16KD's 2K×9 mode, the deepest in which Yosys maps a
+#: wide word as a row of block RAMs side by side, without a cascade multiplexer behind them.
+ENTRY_BANK_DEPTH = dict(DP16KD_CONFIGS)[9]
 #: The primitive's data and address pins per port (the device's, not a format's).
 DP16KD_DATA_PINS, DP16KD_ADDRESS_PINS = 18, 14
 
