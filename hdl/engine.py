@@ -188,13 +188,19 @@ class SpringflatEngine(wiring.Component):
         # phases of a run
         PH = {name: i for i, name in enumerate((
             "start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain"))}
-        phase = Signal(range(len(PH)))
-        # one flip-flop per phase beside the code (phase_to sets both): the port multiplexers and the
-        # passes' end tests read a flag, not a decode of the code
-        in_phase = {name: Signal(name=f"in_{name}", init=(code == 0)) for name, code in PH.items()}
+        # One flip-flop per phase, all low while no run is under way (so each implies ``running``). A
+        # transition clears the phase it leaves and sets the one it enters, so a flag's next value
+        # depends only on the blocks that enter or leave it (and ABORT): with a phase code, or with
+        # every transition writing every flag, each flag's logic took in the whole phase machine and
+        # ``running``'s fan-out (the critical paths after 2e879ec)
+        in_phase = {name: Signal(name=f"in_{name}") for name in PH}
 
-        def phase_to(name):
-            return [phase.eq(PH[name]), *(flag.eq(n == name) for n, flag in in_phase.items())]
+        def move(leaving, entering=None):
+            return [in_phase[leaving].eq(0), *([in_phase[entering].eq(1)] if entering else [])]
+
+        # the phase's code, for a testbench only (``debug_signals``; nothing in the design reads it)
+        phase = Signal(range(len(PH)))
+        m.d.comb += phase.eq(_or_all([Mux(flag, PH[name], 0) for name, flag in in_phase.items()]))
 
         # ------------------------------------------------------------ force pass fetch
         # One entry per clock. Valid bits are named for the clock whose data they mark: E0 the
@@ -614,10 +620,10 @@ class SpringflatEngine(wiring.Component):
         force_done, area_done, integrate_done = Signal(), Signal(), Signal()
         area_fetching = Cat(*t_valid).any()
         m.d.sync += [
-            force_done.eq(running & in_phase["force"] & (force_out_index == n_vertices) & ~force_done),
-            area_done.eq(running & in_phase["area"] & (tri_index == n_triangles) & ~area_fetching & area.idle
+            force_done.eq(in_phase["force"] & (force_out_index == n_vertices) & ~force_done),
+            area_done.eq(in_phase["area"] & (tri_index == n_triangles) & ~area_fetching & area.idle
                          & ~area_clear & ~area_done),
-            integrate_done.eq(running & in_phase["integrate"] & (node_out_index == n_vertices)
+            integrate_done.eq(in_phase["integrate"] & (node_out_index == n_vertices)
                               & ~integrate_done),
         ]
 
@@ -662,7 +668,7 @@ class SpringflatEngine(wiring.Component):
         with m.If(in_phase["step"]):
             m.d.sync += [node_index.eq(0), node_out_index.eq(0), power_sum.eq(0)]
         with m.If(abort_pulse & running):
-            m.d.sync += phase_to("drain")
+            m.d.sync += [flag.eq(name == "drain") for name, flag in in_phase.items()]
             for unit in (norm_length, norm_area, energy, beta, stepgen):
                 m.d.sync += unit.i.valid.eq(0)
         with m.If(abort_pulse & ~running):
@@ -677,26 +683,26 @@ class SpringflatEngine(wiring.Component):
                 finish("bad-constants")
             with m.Else():
                 set_state("running")
-                m.d.sync += [*phase_to("start"), first_measure.eq(1), momentum_k.eq(0), restart_pending.eq(0)]
+                m.d.sync += [in_phase["start"].eq(1), first_measure.eq(1), momentum_k.eq(0), restart_pending.eq(0)]
         # The phase machine: one block per phase, each enabled by its one-hot flag (and the pass-end
-        # pulse it waits for), not by a decode of ``phase`` under ``running``: ``running`` fans out to
-        # every port multiplexer, and the counters behind it (ITERATIONS, momentum_k) were the engine's
-        # longest paths. Every phase but start, check and drain is entered and left only while
-        # running (an abort moves to drain), so its flag implies ``running``.
+        # pulse it waits for), not by a decode of a phase code under ``running``: ``running`` fans out
+        # to every port multiplexer, and the counters behind it (ITERATIONS, momentum_k) were the
+        # engine's longest paths. The flags are low while idle, so none of these needs ``running``.
         go = ~abort_pulse
-        with m.If(go & running & in_phase["start"]):  # a measurement: the force pass
-            m.d.sync += [fetch_force.eq(1), *phase_to("force")]
+        with m.If(go & in_phase["start"]):  # a measurement: the force pass
+            m.d.sync += [fetch_force.eq(1), *move("start", "force")]
         with m.If(go & in_phase["force"] & force_done):
-            m.d.sync += [fetch_force.eq(0), fetch_area.eq(1), *phase_to("area"),
+            m.d.sync += [fetch_force.eq(0), fetch_area.eq(1), *move("force", "area"),
                          math_pending.eq(0b111), norm_length.i.valid.eq(1), energy.i.valid.eq(1),
                          area_clear.eq(1)]
         with m.If(go & in_phase["area"] & area_done):
-            m.d.sync += [fetch_area.eq(0), *phase_to("math"), norm_area.i.valid.eq(1)]
+            m.d.sync += [fetch_area.eq(0), *move("area", "math"), norm_area.i.valid.eq(1)]
         with m.If(go & in_phase["math"] & (math_pending == 0)):
-            m.d.sync += phase_to("check")
-        with m.If(go & running & in_phase["check"]):
+            m.d.sync += move("math", "check")
+        with m.If(go & in_phase["check"]):
             # as run_image: the saturation limit first, then the stop rule (neither after the first
             # measurement), then the iteration limit
+            m.d.sync += move("check")  # to the step phase, or the run is over
             with m.If(diverged_q & ~first_measure):
                 finish("diverged")
             with m.Elif(converged_q & ~first_measure):
@@ -704,7 +710,7 @@ class SpringflatEngine(wiring.Component):
             with m.Elif(at_max_iter_q):
                 finish("max-iterations")
             with m.Else():
-                m.d.sync += [first_measure.eq(0), *phase_to("step")]
+                m.d.sync += [first_measure.eq(0), *move("check", "step")]
         with m.If(go & in_phase["step"]):
             with m.If(mode_momentum):
                 with m.If(restart_pending):
@@ -717,17 +723,18 @@ class SpringflatEngine(wiring.Component):
                 m.d.sync += fixed_load.eq(1)
             with m.Else():
                 m.d.sync += stepgen.i.valid.eq(1)
-            m.d.sync += phase_to("step_wait")
+            m.d.sync += move("step", "step_wait")
         waiting = beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready
         with m.If(go & in_phase["step_wait"] & ~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
-            m.d.sync += [fetch_nodes.eq(1), *phase_to("integrate")]
-        with m.If(go & running & in_phase["drain"] & drained):
+            m.d.sync += [fetch_nodes.eq(1), *move("step_wait", "integrate")]
+        with m.If(go & in_phase["drain"] & drained):
             set_state("idle")
+            m.d.sync += move("drain")
             m.d.sync += [result.eq(_code(RESULTS, "none")),
                          fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
         with m.If(go & in_phase["integrate"] & integrate_done):
             power_negative = power_sum < 0
-            m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), *phase_to("start")]
+            m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), *move("integrate", "start")]
             with m.If(mode_momentum & ~step_was_restart):
                 m.d.sync += restart_pending.eq(power_negative)
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
