@@ -11,9 +11,11 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet, dt_constant, exp_table, lut_slope_bits, shift_round as gm_shift_round
 
+from .dsp import dsp_target
 from .fixedpoint import saturate, shift_round
 from .layouts import STEP_EVENTS, saturations_shape
 from .pipeline import Pipeline, reduce_levels
+from .rom import registered_rom
 
 __all__ = ["StepGenerator"]
 
@@ -199,11 +201,18 @@ class StepGenerator(wiring.Component):
                 total = sum(Value.cast(flag) for flag in flags)
                 events["count"] = total if events["count"] is None else events["count"] + total
 
-        # --- lut: one ROM, one synchronous read port per lane
+        # --- lut: the exp table. Generic RTL: one LUT ROM with an asynchronous read port per lane
+        # (its address and its row registered). ECP5: a block-RAM ROM per lane (hdl/rom.py: the
+        # address registered in the DP16KD, its output register on), because the LUT ROM's
+        # multiplexer tree, six LUT levels, was among the engine's longest paths. Same rows, same
+        # two stages, so the same function and latency.
         layout, rows = self._rom_rows()
-        m.submodules.exp_rom = exp_rom = Memory(shape=layout, depth=len(rows), init=rows, attrs={"rom_style": "logic"})
+        block_ram = dsp_target(platform) == "ecp5"
+        if not block_ram:
+            m.submodules.exp_rom = exp_rom = Memory(shape=layout, depth=len(rows), init=rows,
+                                                    attrs={"rom_style": "logic"})
         lanes = ("area_error", "shape_error")
-        error, addrs, ports = {}, {}, {}
+        error, addrs, read_data = {}, {}, {}
         for lane in lanes:
             error[lane] = e = self.i.payload[lane]
             above_one = e > self._error_max
@@ -216,20 +225,27 @@ class StepGenerator(wiring.Component):
                 addr = shift_round(e, r, fs.rounding)
             else:
                 addr = e
-            # An asynchronous read port (LUT ROM) whose data is registered here: the row comes
-            # from a fabric register, so the multiply below starts at a flip-flop (an ECP5
-            # block RAM's unregistered output alone costs ~5.8 ns).
-            ports[lane] = exp_rom.read_port(domain="comb")
             addrs[lane] = addr
         # The address is registered before the ROM: the clamp's compare and the ROM's multiplexer
         # tree in one clock were among the engine's longest paths
         stage("lut_addr")
         for lane in lanes:
-            m.d.comb += ports[lane].addr.eq(reg(addrs[lane], len(ports[lane].addr), f"lut_{lane}_addr"))
+            if block_ram:
+                words = [layout.const(row).as_value().value for row in rows]
+                # every reachable address is below len(rows) (as the LUT ROM's port, which truncates)
+                read_data[lane] = registered_rom(m, words, layout.size, addrs[lane][:(len(rows) - 1).bit_length()],
+                                                 name=f"exp_rom_{lane}", enable=advance, platform=platform)
+            else:
+                # an asynchronous read port whose data is registered below: the multiply after it
+                # starts at a flip-flop
+                port = exp_rom.read_port(domain="comb")
+                m.d.comb += port.addr.eq(reg(addrs[lane], len(port.addr), f"lut_{lane}_addr"))
+                read_data[lane] = port.data
             if self._interpolating:
                 error[lane] = reg(error[lane][:r], r, f"lut_addr_{lane}_t")
         stage("lut")
-        row = {lane: reg(ports[lane].data, layout, f"lut_{lane}_row") for lane in lanes}
+        row = {lane: layout(read_data[lane]) if block_ram else reg(read_data[lane], layout, f"lut_{lane}_row")
+               for lane in lanes}
         value = {lane: row[lane].base for lane in lanes}
 
         if self._interpolating:

@@ -44,7 +44,7 @@ def test_node_update_over_iterations_with_stalls_and_reset(simulator):
                                                      ("node_update", "node_update", None)])
 def test_ecp5_flavour_with_mult18x18d_instances(toplevel, bench, testcase):
     """The Verilog `springflat synth --target ecp5` synthesises (MULT18X18D instances with their
-    own registers, the seed ROM a DP16KD with its output register) against the golden model, on
+    own registers, the seed and exp ROMs DP16KDs with their output registers) against the golden model, on
     Icarus with models of the primitives."""
     reason = missing_simulator("icarus")
     if reason:
@@ -57,8 +57,8 @@ def test_ecp5_flavour_with_mult18x18d_instances(toplevel, bench, testcase):
     assert run.result["mismatches"] == 0
     source = (verilog_sources(DEFAULT, "ecp5") / f"{toplevel}.v").read_text()
     assert "MULT18X18D" in source
-    if toplevel != "step_generator":  # the rsqrt unit's seed ROM, with its output register
-        assert "DP16KD" in source and '"OUTREG"' in source
+    # the rsqrt unit's seed ROM and the step generator's exp ROMs, with their output registers
+    assert "DP16KD" in source and '"OUTREG"' in source
 
 
 def _paper_params(name, step):
