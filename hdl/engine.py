@@ -711,14 +711,23 @@ class SpringflatEngine(wiring.Component):
                 finish("max-iterations")
             with m.Else():
                 m.d.sync += [first_measure.eq(0), *move("check", "step")]
+        # The 32-bit registers stay off the phase machine's enables (a control LUT that also drove
+        # momentum_k's 32 flip-flops was placed beside them: 6780c63's critical paths). The divider's
+        # k is loaded on every clock: momentum_k and restart_pending stand still from the step phase
+        # until the divider takes the request, the clock after; they and ITERATIONS move on a
+        # registered pulse the clock after their phase's block.
+        m.d.sync += beta.i.payload.eq(Mux(restart_pending, 0, momentum_k))
+        step_pulse, iterate_pulse = Signal(), Signal()
+        m.d.sync += [step_pulse.eq(go & in_phase["step"] & mode_momentum),
+                     iterate_pulse.eq(go & in_phase["integrate"] & integrate_done)]
+        with m.If(step_pulse):
+            m.d.sync += [momentum_k.eq(Mux(restart_pending, 1, momentum_k + 1)), restart_pending.eq(0),
+                         step_was_restart.eq(restart_pending)]
+        with m.If(iterate_pulse):
+            m.d.sync += iterations.eq(iterations + 1)
         with m.If(go & in_phase["step"]):
             with m.If(mode_momentum):
-                with m.If(restart_pending):
-                    m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(0), momentum_k.eq(1),
-                                 restart_pending.eq(0), step_was_restart.eq(1)]
-                with m.Else():
-                    m.d.sync += [beta.i.valid.eq(1), beta.i.payload.eq(momentum_k),
-                                 momentum_k.eq(momentum_k + 1), step_was_restart.eq(0)]
+                m.d.sync += beta.i.valid.eq(1)
             with m.Elif(mode_fixed):
                 m.d.sync += fixed_load.eq(1)
             with m.Else():
@@ -734,7 +743,7 @@ class SpringflatEngine(wiring.Component):
                          fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
         with m.If(go & in_phase["integrate"] & integrate_done):
             power_negative = power_sum < 0
-            m.d.sync += [fetch_nodes.eq(0), iterations.eq(iterations + 1), *move("integrate", "start")]
+            m.d.sync += [fetch_nodes.eq(0), *move("integrate", "start")]
             with m.If(mode_momentum & ~step_was_restart):
                 m.d.sync += restart_pending.eq(power_negative)
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
