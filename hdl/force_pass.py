@@ -11,7 +11,7 @@ import functools
 from dataclasses import dataclass
 from types import SimpleNamespace
 
-from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -21,7 +21,7 @@ from golden_model.fixed.pipeline import accumulator_guard_bits
 from .fixedpoint import clamp, shape_of, shift_round, sum_round
 from .layouts import (FORCE_ENTRY_EVENTS, FORCE_NODE_EVENTS, force_entry_layout, force_saturations_max,
                       node_force_layout, vector_layout)
-from .pipeline import LiveValues, Pipeline, count_stages
+from .pipeline import EventCount, LiveValues, Pipeline, count_stages
 from .rsqrt import RsqrtUnit
 
 __all__ = ["ForcePass", "ForcePassStages", "format_set"]
@@ -171,24 +171,17 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
     m.d.sync += half_spring.eq(ports.half_spring)
     live = LiveValues()
 
-    # Saturation events: each saturation stage adds its overflow bits to the running count "ev"
-    # the entry carries (so the count costs a few small adders, not a bit per event per stage).
+    # Saturation events: counted by a few small adders along the entry, not a bit per event per
+    # stage (EventCount); the fold barrier's flags count only while it is on.
     entry_events = sum(FORCE_ENTRY_EVENTS.values())
-    counted = []  # how many bits were counted, checked against FORCE_*_EVENTS below
+    barrier_on = Signal(name="barrier_r", reset_less=True)
     if saturations:
-        barrier_on = Signal(name="barrier_r", reset_less=True)
         m.d.sync += barrier_on.eq(ports.barrier)
+    count = EventCount(live, entry_events.bit_length(), barrier=barrier_on)
 
     def events(*flags, barrier=()):
-        """``{"ev": the entry's count + flags}`` for a stage (``{}`` without ``saturations``);
-        the ``barrier`` flags are the fold barrier's, counted only while it is on."""
-        if not saturations:
-            return {}
-        counted.append(len(flags) + len(barrier))
-        total = sum(Value.cast(flag) for flag in flags) + sum(Value.cast(flag) & barrier_on for flag in barrier)
-        if "ev" in live:
-            total = live["ev"] + total
-        return {"ev": Value.cast(total)[:entry_events.bit_length()]}
+        """The stage's event values (:class:`~hdl.pipeline.EventCount`; ``{}`` without ``saturations``)."""
+        return count(*flags, barrier=barrier) if saturations else {}
 
     def rounded(value, from_frac, fmt):
         """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""
@@ -296,8 +289,9 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
     live.step(back, "b8", f_x=rounded(live["f_x"], f_frac, fs.force), f_y=rounded(live["f_y"], f_frac, fs.force))
     f_x, f_y = clamp(live["f_x"], fs.force), clamp(live["f_y"], fs.force)
     live.step(back, "b9", f_x=f_x[0], f_y=f_y[0], **events(f_x[1], f_y[1]))
-    # B10: the entry's force, spring plus barrier, exact
-    live.step(back, "b10", drop=("fb_x", "fb_y"), f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"])
+    # B10: the entry's force, spring plus barrier, exact; the last saturation flags join the count
+    live.step(back, "b10", drop=("fb_x", "fb_y"), f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"],
+              **(count.flush() if saturations else {}))
 
     # B11: per-node accumulators with guard bits (exact; rounded and saturated once, in N1, N2),
     # restarted on a node's first entry. The stage's valid bit is the node's last entry: from
@@ -314,7 +308,7 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
         sums["e_sq"] = (out.error_squares.shape(), live["e_sq"], "add")
         sums["ch"] = (out.barrier_energy.shape(), live["ch"], "add")
     if saturations:
-        assert sum(counted) == entry_events, (counted, FORCE_ENTRY_EVENTS)
+        assert sum(count.counted) == entry_events, (count.counted, FORCE_ENTRY_EVENTS)
         sums["ev"] = (unsigned((fs.max_degree * entry_events).bit_length()), live["ev"], "add")
     first, last, entry_valid = live["first"], live["last"], back.valid
     back.stage("b11", valid=entry_valid & last)

@@ -18,7 +18,7 @@ from golden_model.fixed import Format, FormatSet
 from .fixedpoint import clamp, shape_of, shift_round
 from .force_pass import format_set
 from .layouts import INTEGRATOR_EVENTS, integrator_input_layout, integrator_output_layout
-from .pipeline import LiveValues, Pipeline, aligned_add, count_stages
+from .pipeline import EventCount, LiveValues, Pipeline, aligned_add, count_stages
 
 __all__ = ["Integrator"]
 
@@ -130,22 +130,14 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
         return shift_round(value, from_frac - fmt.frac_bits, rnd)
 
     live = LiveValues()
-    # Saturation events: each saturation stage adds its overflow bits to the running count "ev"
-    # the node carries; a dynamics' bits count only while it is the one in use.
+    # Saturation events: counted by a few small adders along the node (EventCount); a dynamics'
+    # flags count only while it is the one in use.
     node_events = sum(INTEGRATOR_EVENTS.values())
-    counted = []  # how many bits were counted, checked against INTEGRATOR_EVENTS below
+    count = EventCount(live, node_events.bit_length(), paper=~momentum, mom=momentum)
 
-    def events(*flags, paper=(), mom=()):
-        """``{"ev": the node's count + flags}`` for a stage (``{}`` without ``saturations``); the
-        ``paper`` flags count only in the paper's dynamics, the ``mom`` flags only in the momentum one."""
-        if not saturations:
-            return {}
-        counted.append(len(flags) + max(len(paper), len(mom)))
-        total = (sum(Value.cast(f) for f in flags) + sum(Value.cast(f) & ~momentum for f in paper)
-                 + sum(Value.cast(f) & momentum for f in mom))
-        if "ev" in live:
-            total = live["ev"] + total
-        return {"ev": Value.cast(total)[:node_events.bit_length()]}
+    def events(*flags, **gated):
+        """The stage's event values (:class:`~hdl.pipeline.EventCount`; ``{}`` without ``saturations``)."""
+        return count(*flags, **gated) if saturations else {}
     tail = Pipeline(m, ports.i.valid, land_operands=True, platform=platform)
     node = ports.i.payload
     # T1: the node as it arrives
@@ -225,7 +217,9 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     vk_frac = fs.velocity.frac_bits + fs.damping.frac_bits
     live.step(tail, "t11", **{f"vk_{k}": rounded(live[f"vk_{k}"], vk_frac, fs.velocity) for k in "xy"})
     damped = {k: clamp(live[f"vk_{k}"], fs.velocity) for k in "xy"}
-    live.step(tail, "t12", **{f"vk_{k}": damped[k][0] for k in "xy"}, **events(damped["x"][1], damped["y"][1]))
+    # (the last flags join the count in their own stage: one more would lengthen the node pass)
+    live.step(tail, "t12", **{f"vk_{k}": damped[k][0] for k in "xy"},
+              **(count.flush(damped["x"][1], damped["y"][1]) if saturations else {}))
 
     out = ports.o.payload
     m.d.comb += [ports.o.valid.eq(tail.valid),
@@ -234,7 +228,7 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     if side is not None:
         m.d.comb += Value.cast(out.side).eq(live["side"])
     if saturations:
-        assert sum(counted) == node_events, (counted, INTEGRATOR_EVENTS)
+        assert sum(count.counted) == node_events, (count.counted, INTEGRATOR_EVENTS)
         m.d.comb += out.saturations.eq(live["ev"])
 
     # nodes in flight (at most one per stage)

@@ -34,7 +34,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TypeVar
 
-from amaranth.hdl import Cat, Module, Signal, Value
+from amaranth.hdl import Cat, Const, Module, Signal, Value
 
 from .dsp import registered_product
 from .fixedpoint import dsp_operands
@@ -237,6 +237,60 @@ class LiveValues(dict):
         drops = [drop]
         self.update(pipe.multiply(products, name,
                                   lambda stage_name: self.carry(pipe, stage_name, drops.pop() if drops else ())))
+
+
+class EventCount:
+    """A saturation-event count carried along a datapath in :class:`LiveValues` (as ``"ev"``).
+
+    Each saturation stage registers its overflow flags as ``"ev_pending"`` (:meth:`__call__`),
+    and the next saturation stage adds them to the count: a clamp's flag reaches a register
+    straight from its comparison, never through the count's adder in the same clock (that
+    compare-then-add was the engine's critical path). :meth:`flush` adds the pending flags
+    for good. Flags given under a ``gates`` name count only while that gate is high; the gated
+    groups of a block are exclusive (at most one gate high), so a stage counts at most its
+    plain flags plus its widest group (:attr:`counted`, checked against the golden model's
+    event tables).
+    """
+
+    def __init__(self, live: LiveValues, width: int, **gates):
+        self.live, self.width, self.gates = live, width, {k: Value.cast(v) for k, v in gates.items()}
+        self.counted: list[int] = []  # per saturation stage: how many events it can count
+        self._pending_gates: list = []  # per bit of live["ev_pending"]: its gate, or None
+
+    def _count(self, flags=(), gated=None):
+        """The carried count plus the pending flags plus ``flags``/``gated`` (an expression)."""
+        terms = []
+        if self._pending_gates:
+            bits = self.live["ev_pending"]
+            terms += [bits[i] if gate is None else bits[i] & gate for i, gate in enumerate(self._pending_gates)]
+        terms += [Value.cast(f) for f in flags]
+        terms += [Value.cast(f) & self.gates[name] for name, group in (gated or {}).items() for f in group]
+        total = sum(terms, self.live["ev"] if "ev" in self.live else Const(0, 1))
+        return Value.cast(total)[:self.width]
+
+    def _note(self, flags, gated):
+        unknown = set(gated) - set(self.gates)
+        assert not unknown, f"no gate for {sorted(unknown)}"
+        self.counted.append(len(flags) + max((len(group) for group in gated.values()), default=0))
+
+    def __call__(self, *flags, **gated) -> dict:
+        """The values a stage registers for its saturation ``flags`` (and ``gated`` ones, by gate
+        name): the count with the previous stage's flags added, and these flags, pending."""
+        self._note(flags, gated)
+        new = {"ev": self._count()} if self._pending_gates or "ev" in self.live else {}
+        bits = list(flags) + [f for group in gated.values() for f in group]
+        self._pending_gates = [None] * len(flags) + [self.gates[n] for n, group in gated.items() for _ in group]
+        new["ev_pending"] = Cat(*bits)
+        return new
+
+    def flush(self, *flags, **gated) -> dict:
+        """The values the count's last stage registers: every pending flag and ``flags`` added
+        (where a stage of its own would lengthen the block, the last flags are added in theirs)."""
+        self._note(flags, gated)
+        total = self._count(flags, gated)
+        self.live.pop("ev_pending", None)
+        self._pending_gates = []
+        return {"ev": total}
 
 
 def count_stages(build: Callable[[Module], T]) -> T:
