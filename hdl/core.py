@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Module, Mux
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out, connect
 
@@ -11,7 +11,7 @@ from golden_model.fixed import FormatSet
 from .fixedpoint import shape_of
 from .layouts import entry_layout, errors_layout, result_layout, step_layout
 from .node_update import NodeUpdate
-from .stepgen import StepGenerator
+from .stepgen import StepGenerator, stepgen_idle_signal
 
 __all__ = ["SpringflatCore"]
 
@@ -93,11 +93,8 @@ class SpringflatCore(wiring.Component):
             m.d.sync += self.step.eq(self.step_load.payload)
         with m.Elif(stepgen.o.valid):
             m.d.sync += [self.step.dt.eq(stepgen.o.payload.dt), self.step.half_dt_sq.eq(stepgen.o.payload.half_dt_sq)]
-        # Requests in the step generator: the registers are valid when none is pending.
-        pending = Signal(range(self._stepgen.latency + 2))
-        accepted = self.errors.valid & self.errors.ready
-        m.d.sync += pending.eq(pending + accepted - stepgen.o.valid)
-        m.d.comb += self.step_valid.eq(pending == 0)
+        # the registers are valid when no request is pending in the step generator
+        m.d.comb += self.step_valid.eq(stepgen_idle_signal(m, stepgen))
 
         one = 1 << fs.damping.frac_bits  # 1 − γ = 1 exactly: the damping multiply is then exact
         m.d.comb += [

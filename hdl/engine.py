@@ -26,7 +26,7 @@ from .force_pass import ForcePass
 from .integrator import Integrator
 from .layouts import vector_layout, word_layout
 from .rom import ENTRY_BANK_DEPTH
-from .stepgen import StepGenerator
+from .stepgen import StepGenerator, stepgen_idle_signal
 
 __all__ = ["SpringflatEngine"]
 
@@ -210,21 +210,16 @@ class SpringflatEngine(wiring.Component):
         # position memory's read data; E6 everything landed, into ForcePass.i. Every block RAM
         # address comes from a flip-flop after the pass multiplexer, and every block RAM output
         # lands in a register before any logic (clock-to-out is most of a period on ECP5).
-        entry_index = Signal(range(cap.entries + 1))
-        fetch_force = Signal()
-        e_valid = [Signal(name=f"e{k}_valid") for k in range(7)]
+        entry_index, fetch_force, e_valid = _fetch_sequencer(m, "entry_index", "fetch_force", "e", 7,
+                                                             cap.entries, n_entries)
         e4_entry, e5_entry, e6_entry = (Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(4, 7))
         e4_first, e5_first, e6_first = Signal(), Signal(), Signal()
         e6_pi, e6_pj, e6_pb = (Signal(pos_shape, reset_less=True, name=f"e6_{n}") for n in ("pi", "pj", "pb"))
         node_of_entry = Signal(range(cap.vertices + 1))
         next_first = Signal()
-        issue_entry = fetch_force & (entry_index < n_entries)
-        m.d.sync += [e_valid[0].eq(issue_entry), *(e_valid[k].eq(e_valid[k - 1]) for k in range(1, 7)),
-                     e4_entry.eq(ent_data), e5_entry.eq(e4_entry), e6_entry.eq(e5_entry),
+        m.d.sync += [e4_entry.eq(ent_data), e5_entry.eq(e4_entry), e6_entry.eq(e5_entry),
                      e4_first.eq(next_first), e5_first.eq(e4_first), e6_first.eq(e5_first),
                      e6_pi.eq(pos_a.data), e6_pj.eq(pos_b.data), e6_pb.eq(pos_c.data)]
-        with m.If(issue_entry):
-            m.d.sync += entry_index.eq(entry_index + 1)
         with m.If(e_valid[3]):  # the owner of the entry after this one
             m.d.sync += [next_first.eq(ent_data.last), node_of_entry.eq(node_of_entry + ent_data.last)]
         m.d.comb += [
@@ -254,36 +249,26 @@ class SpringflatEngine(wiring.Component):
         # As the force pass: T0 the triangle's address registered, T1 the triangle memory's data,
         # T2 landed (corner addresses formed), T3 registered, T4 the corners' data, T5 landed, into
         # AreaError.i.
-        tri_index = Signal(range(cap.triangles + 1))
-        fetch_area = Signal()
-        t_valid = [Signal(name=f"t{k}_valid") for k in range(6)]
+        tri_index, fetch_area, t_valid = _fetch_sequencer(m, "tri_index", "fetch_area", "t", 6,
+                                                          cap.triangles, n_triangles)
         t2_tri = Signal(tri_shape, reset_less=True)
         t3_area, t4_area, t5_area = (Signal(shape_of(fs.face_area), reset_less=True, name=f"t{k}_area")
                                      for k in (3, 4, 5))
         t5_p = [Signal(pos_shape, reset_less=True, name=f"t5_p{k}") for k in "abc"]
-        issue_tri = fetch_area & (tri_index < n_triangles)
-        m.d.sync += [t_valid[0].eq(issue_tri), *(t_valid[k].eq(t_valid[k - 1]) for k in range(1, 6)),
-                     t2_tri.eq(tri_r.data), t3_area.eq(t2_tri.area), t4_area.eq(t3_area), t5_area.eq(t4_area),
+        m.d.sync += [t2_tri.eq(tri_r.data), t3_area.eq(t2_tri.area), t4_area.eq(t3_area), t5_area.eq(t4_area),
                      t5_p[0].eq(pos_a.data), t5_p[1].eq(pos_b.data), t5_p[2].eq(pos_c.data)]
-        with m.If(issue_tri):
-            m.d.sync += tri_index.eq(tri_index + 1)
         m.d.comb += [area.i.valid.eq(t_valid[5]), area.i.payload.a.eq(t5_p[0]), area.i.payload.b.eq(t5_p[1]),
                      area.i.payload.c.eq(t5_p[2]), area.i.payload.area.eq(t5_area)]
 
         # ------------------------------------------------------------ integrate pass fetch
         # N0 the node's address registered, N1 the memories' data, N2 landed, into Integrator.i.
-        node_index = Signal(range(cap.vertices + 1))
-        fetch_nodes = Signal()
-        n_valid = [Signal(name=f"n{k}_valid") for k in range(3)]
+        node_index, fetch_nodes, n_valid = _fetch_sequencer(m, "node_index", "fetch_nodes", "n", 3,
+                                                            cap.vertices, n_vertices)
         n2_pos = Signal(pos_shape, reset_less=True)
         n2_vel = Signal(vel_shape, reset_less=True)
         n2_wgt = Signal(weight_shape, reset_less=True)
         n2_frc = Signal(force_shape, reset_less=True)
-        issue_node = fetch_nodes & (node_index < n_vertices)
-        m.d.sync += [n_valid[0].eq(issue_node), n_valid[1].eq(n_valid[0]), n_valid[2].eq(n_valid[1]),
-                     n2_pos.eq(pos_a.data), n2_vel.eq(vel_r.data), n2_wgt.eq(wgt_r.data), n2_frc.eq(frc_r.data)]
-        with m.If(issue_node):
-            m.d.sync += node_index.eq(node_index + 1)
+        m.d.sync += [n2_pos.eq(pos_a.data), n2_vel.eq(vel_r.data), n2_wgt.eq(wgt_r.data), n2_frc.eq(frc_r.data)]
         step_dt = Signal(shape_of(fs.dt))
         step_half = Signal(shape_of(fs.half_dt_sq))
         # The fixed step's ½Δt² (steplut.half_dt_sq), five stages from the DT register: the
@@ -755,16 +740,25 @@ class SpringflatEngine(wiring.Component):
         return m
 
 
+def _fetch_sequencer(m: Module, index_name: str, fetch_name: str, valid_prefix: str, stages: int,
+                     capacity: int, count: Value) -> tuple[Signal, Signal, list[Signal]]:
+    """A pass's fetch: while the ``fetch`` flag (set by the controller) is high, the ``index``
+    counts 0, 1, … up to ``count`` (at most ``capacity``), one issued per clock, and ``valid[k]``
+    marks the clock whose data belongs to an index issued ``k`` clocks ago (``valid[0]``: the
+    index in the memories' address registers). Returns ``(index, fetch, valid)``."""
+    index = Signal(range(capacity + 1), name=index_name)
+    fetch = Signal(name=fetch_name)
+    valid = [Signal(name=f"{valid_prefix}{k}_valid") for k in range(stages)]
+    issue = fetch & (index < count)
+    m.d.sync += [valid[0].eq(issue), *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
+    with m.If(issue):
+        m.d.sync += index.eq(index + 1)
+    return index, fetch, valid
+
+
 def _or_all(values) -> Value:
     """The OR of ``values`` as a balanced tree (an AND-OR multiplexer's second half)."""
     values = [Value.cast(v) for v in values]
     while len(values) > 1:
         values = [values[k] | values[k + 1] if k + 1 < len(values) else values[k] for k in range(0, len(values), 2)]
     return values[0]
-
-
-def stepgen_idle_signal(m: Module, stepgen: StepGenerator):
-    """High when the step generator holds no request: it counts requests in and results out."""
-    pending = Signal(range(stepgen.latency + 2), name="stepgen_pending")
-    m.d.sync += pending.eq(pending + (stepgen.i.valid & stepgen.i.ready) - stepgen.o.valid)
-    return pending == 0

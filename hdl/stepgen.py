@@ -17,7 +17,7 @@ from .layouts import STEP_EVENTS, saturations_shape
 from .pipeline import Pipeline, reduce_levels
 from .rom import registered_rom
 
-__all__ = ["StepGenerator"]
+__all__ = ["StepGenerator", "stepgen_idle_signal"]
 
 
 class StepGenerator(wiring.Component):
@@ -315,3 +315,10 @@ class StepGenerator(wiring.Component):
                 m.d.sync += self.o.payload.saturations.eq(events["count"])
         assert pipe.stages + 1 == self.latency, (pipe.stages + 1, self.latency)
         return m
+
+
+def stepgen_idle_signal(m: Module, stepgen: StepGenerator):
+    """High when the step generator holds no request: it counts requests in and results out."""
+    pending = Signal(range(stepgen.latency + 2), name="stepgen_pending")
+    m.d.sync += pending.eq(pending + (stepgen.i.valid & stepgen.i.ready) - stepgen.o.valid)
+    return pending == 0
