@@ -668,7 +668,7 @@ class SpringflatEngine(wiring.Component):
                 finish("bad-constants")
             with m.Else():
                 set_state("running")
-                m.d.sync += [in_phase["start"].eq(1), first_measure.eq(1), momentum_k.eq(0), restart_pending.eq(0)]
+                m.d.sync += [in_phase["start"].eq(1), first_measure.eq(1)]
         # The phase machine: one block per phase, each enabled by its one-hot flag (and the pass-end
         # pulse it waits for), not by a decode of a phase code under ``running``: ``running`` fans out
         # to every port multiplexer, and the counters behind it (ITERATIONS, momentum_k) were the
@@ -701,13 +701,23 @@ class SpringflatEngine(wiring.Component):
         # k is loaded on every clock: momentum_k and restart_pending stand still from the step phase
         # until the divider takes the request, the clock after; they and ITERATIONS move on a
         # registered pulse the clock after their phase's block.
+        # restart_pending's decision too (control → restart_pending through two far LUTs was d40a96c's
+        # critical path): every pulse, and S's sign, is a flip-flop of its own.
         m.d.sync += beta.i.payload.eq(Mux(restart_pending, 0, momentum_k))
-        step_pulse, iterate_pulse = Signal(), Signal()
-        m.d.sync += [step_pulse.eq(go & in_phase["step"] & mode_momentum),
-                     iterate_pulse.eq(go & in_phase["integrate"] & integrate_done)]
+        launch_pulse, step_pulse, iterate_pulse, restart_pulse = Signal(), Signal(), Signal(), Signal()
+        power_negative = Signal()
+        m.d.sync += [launch_pulse.eq(in_phase["start"] & first_measure),
+                     step_pulse.eq(go & in_phase["step"] & mode_momentum),
+                     iterate_pulse.eq(go & in_phase["integrate"] & integrate_done),
+                     restart_pulse.eq(go & in_phase["integrate"] & integrate_done & mode_momentum & ~step_was_restart),
+                     power_negative.eq(power_sum < 0)]
+        with m.If(launch_pulse):  # a run's start: no momentum yet
+            m.d.sync += [momentum_k.eq(0), restart_pending.eq(0)]
         with m.If(step_pulse):
             m.d.sync += [momentum_k.eq(Mux(restart_pending, 1, momentum_k + 1)), restart_pending.eq(0),
                          step_was_restart.eq(restart_pending)]
+        with m.If(restart_pulse):
+            m.d.sync += restart_pending.eq(power_negative)
         with m.If(iterate_pulse):
             m.d.sync += iterations.eq(iterations + 1)
         with m.If(go & in_phase["step"]):
@@ -727,10 +737,7 @@ class SpringflatEngine(wiring.Component):
             m.d.sync += [result.eq(_code(RESULTS, "none")),
                          fetch_force.eq(0), fetch_area.eq(0), fetch_nodes.eq(0)]
         with m.If(go & in_phase["integrate"] & integrate_done):
-            power_negative = power_sum < 0
             m.d.sync += [fetch_nodes.eq(0), *move("integrate", "start")]
-            with m.If(mode_momentum & ~step_was_restart):
-                m.d.sync += restart_pending.eq(power_negative)
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
         self.debug_memories = {"positions": positions, "velocities": velocities}
         self.debug_signals = {"state": state, "phase": phase, "entry_index": entry_index,
