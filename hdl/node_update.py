@@ -71,11 +71,14 @@ class NodeUpdate(wiring.Component):
     on a flip-flop: the force pass's ``o.valid``); the integrator runs ``a = F·w`` (the barrier's
     weight if a triangle of the node is inside it), the Euler or momentum step and damping, and
     carries the error sum along. Results enter a LUT-RAM FIFO (column slices with their own
-    pointers) in front of the output register; ``result_depth`` counts both. Back-pressure is a
-    credit count: ``i.ready`` is high while fewer than ``result_depth`` nodes are owed (accepted
-    last entries whose results have not left ``o``), so the result FIFO can never overflow;
-    ``result_depth`` covers the latency, so credits never run out while ``o`` is ready, even for
-    degree-1 nodes. ``front_stages``, ``rsqrt_latency``, ``back_stages`` (the force pass) and
+    pointers), each slice ending in two output registers; it holds ``result_depth`` =
+    ``credits`` + 2 results. Back-pressure is a credit count: ``i.ready`` is high while fewer
+    than ``credits`` nodes are owed (accepted last entries whose results have not left ``o``) as
+    counted, and the count sees a node two clocks after its last entry, so at most
+    ``result_depth`` nodes are ever owed (exactly that many are accepted with ``o`` stalled and
+    a node arriving every clock) and the result FIFO can never overflow; ``credits`` covers the
+    latency and that delay, so credits never run out while ``o`` is ready, even for degree-1
+    nodes. ``front_stages``, ``rsqrt_latency``, ``back_stages`` (the force pass) and
     ``tail_stages`` (the integrator) are counted from the pipelines the components build.
 
     Every multiplier sits alone between registers (its 18×18 partial products, operands and
@@ -101,9 +104,11 @@ class NodeUpdate(wiring.Component):
         self.pipeline_stages = self._force_pass.latency + self._integrator.latency
         # The result FIFO's write register (per slice, see below), its write and the output register.
         self.latency = self.pipeline_stages + 3
-        # Credits: the result FIFO (a power of two, more entries than the latency, so the
-        # credits never run out while o is ready) plus the output register.
-        self.result_depth = (1 << (self.latency + 1).bit_length()) + 1
+        # Credits: a power of two, more than the latency plus the count's two clocks of delay, so
+        # the credits never run out while o is ready; the result FIFO (as deep, plus its two
+        # output registers per slice) holds every node owed, up to result_depth.
+        self.credits = 1 << (self.latency + 3).bit_length()
+        self.result_depth = self.credits + 2
         super().__init__({
             "i": In(stream.Signature(entry_layout(fs))),
             "o": Out(stream.Signature(result_layout(fs))),
@@ -122,10 +127,15 @@ class NodeUpdate(wiring.Component):
         m.submodules.integrator = integrator = self._integrator
 
         # ------------------------------------------------------------ credits
-        # owed: accepted last entries whose results have not left o. i.ready = owed < depth
-        # leaves a flip-flop, set from the current count and this clock's handshakes alone
-        # (no adder on that path): depth - 1 is a power of two.
-        owed = Signal(range(self.result_depth + 1))
+        # owed: accepted last entries whose results have not left o, as counted. A node's last
+        # entry reaches the count two clocks late, through two flip-flops that the placer can put
+        # at the input and at the counter (the input's last bit into the counter's carry chain
+        # across the die was the core's critical path, 135 MHz). i.ready = counted owed < credits
+        # leaves a flip-flop, set from the current count and this clock's handshakes alone (no
+        # adder on that path): credits is a power of two. Up to two nodes are accepted but not yet
+        # counted, so up to credits + 2 are owed: the result FIFO holds exactly that many.
+        credits = self.credits
+        owed = Signal(range(credits + 3))
         # The same decision in two flip-flops: `accepting` drives i.ready out of the block,
         # `refusing` (its complement, so that synthesis does not merge the two) everything inside,
         # so the counter's loop stays local (one flip-flop driving both was 5.6 ns of routing
@@ -133,20 +143,25 @@ class NodeUpdate(wiring.Component):
         accepting = Signal(init=1)
         refusing = Signal(init=0)
         take = self.i.valid & ~refusing
-        grow = take & self.i.payload.last & ~(self.o.valid & self.o.ready)
-        shrink = self.o.valid & self.o.ready & ~(take & self.i.payload.last)
-        top = (self.result_depth - 1).bit_length() - 1
-        assert self.result_depth - 1 == 1 << top
-        at_depth_minus_1 = owed[top] & ~owed[:top].any()
-        at_depth = owed[top] & owed[0]
-        accept_next = ~owed[top] | (at_depth_minus_1 & ~grow) | (at_depth & shrink)
+        node_taken, node_counted = Signal(), Signal()
+        m.d.sync += [node_taken.eq(take & self.i.payload.last), node_counted.eq(node_taken)]
+        leave = self.o.valid & self.o.ready
+        grow = node_counted & ~leave
+        shrink = leave & ~node_counted
+        top = credits.bit_length() - 1
+        assert credits == 1 << top
+        below = ~owed[top]  # owed < credits (owed < 2·credits always)
+        at_credits_minus_1 = below & owed[:top].all()
+        at_credits = owed[top] & ~owed[:top].any()
+        accept_next = (below & ~(at_credits_minus_1 & grow)) | (at_credits & shrink)
         m.d.sync += [owed.eq(owed + grow - shrink), accepting.eq(accept_next), refusing.eq(~accept_next)]
         m.d.comb += self.i.ready.eq(accepting)
-        # idle: no node owed and none half accepted (between its first and last entry)
+        # idle: no node owed, none on its way to the count, none half accepted (between its first
+        # and last entry)
         open_node = Signal()
         with m.If(take):
             m.d.sync += open_node.eq(~self.i.payload.last)
-        m.d.comb += self.idle.eq((owed == 0) & ~open_node)
+        m.d.comb += self.idle.eq((owed == 0) & ~node_taken & ~node_counted & ~open_node)
 
         # ------------------------------------------------------------ force pass
         beat = self.i.payload
@@ -196,7 +211,7 @@ class NodeUpdate(wiring.Component):
                      result.error_sum.eq(new.side), result.power.eq(new.power)]
         # Each slice registers its own write (write_register): the integrator's valid bit as the
         # write enable of all 14 slices' LUT RAM was 6.6 ns of routing (129 MHz).
-        m.submodules.results = results = SlicedFIFO(width=result_layout(fs).size, depth=self.result_depth - 1,
+        m.submodules.results = results = SlicedFIFO(width=result_layout(fs).size, depth=self.credits,
                                                     slice_bits=self.FIFO_SLICE_BITS, registered=True,
                                                     write_register=True)
         m.d.comb += [results.w_stream.valid.eq(integrator.o.valid), results.w_stream.payload.eq(result.as_value()),

@@ -150,9 +150,9 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "node_update / springflat_core: one result per node, in input order; error_sum is the node's "
                      "sum of |L - d| over the positions it was given.",
                      "node_update / springflat_core: the datapath never stalls; back-pressure is a credit count. "
-                     "entries.ready (a register) falls only while as many results are owed (accepted, not yet "
-                     "taken from the output) as the result FIFO and output register hold (`credits` below); "
-                     "with results.ready held high it never falls.",
+                     "entries.ready (a register) falls before more results are owed (accepted, not yet "
+                     "taken from the output) than the result FIFO holds (`credits` below: at most that many are "
+                     "ever owed); with results.ready held high it never falls.",
                      "Throughput = Fmax x II = Fmax neighbour entries per second.",
                      ("Multipliers: ECP5 MULT18X18D instances with their input and output registers in use "
                       "(REG_INPUTA/B_CLK, REG_OUTPUT_CLK = CLK0); the generic Verilog of `springflat verilog` "
