@@ -10,6 +10,7 @@ from amaranth.sim import Simulator
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
+from golden_model.fixed.format import Format
 from golden_model.fixed.engine_image import EngineCapacity, build_image, run_image
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
@@ -240,6 +241,20 @@ def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged()
     for img, exp in ((image, expected), (limited, expected_limited)):
         _, read_back = run_on_engine(SpringflatEngine(FS, CAPACITY), img)
         assert_same_run(read_back, exp)
+
+
+@pytest.mark.parametrize("dynamics", ["momentum", "paper"])
+def test_area_and_shape_sum_saturations_are_counted(dynamics):
+    """Narrow face_edge and error_acc formats: the area pass's and the E_C sum's saturation events reach
+    SATURATIONS as the golden model counts them (the test above saturates only the force pass and the
+    integrator)."""
+    fs = dataclasses.replace(FS, face_edge=Format(True, 0, 22), error_acc=Format(False, 2, 16))
+    params = FlattenParams(dynamics=dynamics, density="auto", max_iter=6)
+    image = build_image(prepare(MESH, initial_layout(MESH, "tutte"), params, fs), CAPACITY)
+    expected = run_image(image, fs)
+    assert expected.saturations > 10  # the case saturates
+    _, read_back = run_on_engine(SpringflatEngine(fs, CAPACITY), image)
+    assert_same_run(read_back, expected)
 
 
 def test_bus_answers_take_the_documented_clocks():
