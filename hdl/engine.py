@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, wiring
-from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
@@ -18,6 +17,7 @@ from golden_model.fixed.engine_image import BUS_WORD_BITS, ITERATION_BITS, Engin
 from golden_model.fixed.register_map import RESULTS, STATES, RegisterMap
 
 from . import wishbone
+from .block_ram import BlockRam
 from .dsp import registered_product
 from .area_error import AreaError
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
@@ -125,44 +125,43 @@ class SpringflatEngine(wiring.Component):
         force_shape = data.StructLayout({"force": vector_layout(fs.force_acc), "inside": unsigned(1)})
         entry_shape = word_layout(self.layouts["entries"])
         tri_shape = word_layout(self.layouts["triangles"])
-        # Every memory carries Yosys's ``no_rw_check``: no read whose data is used meets a write to its
+        # Every memory is a BlockRam: its read data lands in a register two clocks after the address (on
+        # ECP5 the DP16KD's own output register: its unregistered clock-to-out and the route to a fabric
+        # register were the critical path at 119.7 MHz). No read whose data is used meets a write to its
         # address in the same clock (passes read ahead of the integrate pass's writes; the bus reads
-        # and writes while idle, a word's write-back after its read), so Yosys need not add the
-        # collision bypass (a comparator and a multiplexer after each block RAM's output).
-        def memory(shape, depth):
-            return Memory(shape=shape, depth=depth, init=[], attrs={"no_rw_check": 1})
+        # and writes while idle, a word's write-back after its read): BlockRam's timing contract.
+        def memory(name, shape, depth, read_ports=1):
+            m.submodules[name] = ram = BlockRam(shape, depth, read_ports=read_ports, name=name)
+            return ram
 
-        m.submodules.positions = positions = memory(pos_shape, cap.vertices)
-        m.submodules.velocities = velocities = memory(vel_shape, cap.vertices)
-        m.submodules.weights = weights = memory(weight_shape, cap.vertices)
-        m.submodules.forces = forces = memory(force_shape, cap.vertices)
-        m.submodules.triangles = triangles = memory(tri_shape, cap.triangles)
+        positions = memory("positions", pos_shape, cap.vertices, read_ports=3)
+        velocities = memory("velocities", vel_shape, cap.vertices)
+        weights = memory("weights", weight_shape, cap.vertices)
+        forces = memory("forces", force_shape, cap.vertices)
+        triangles = memory("triangles", tri_shape, cap.triangles)
         # The entries, the deepest memory, in banks of ``entry_bank_depth`` words (ENTRY_BANK_DEPTH): Yosys maps a bank of
         # wide words to DP16KDs in their 2K×9 mode with no cascade, where a deeper memory gets a
         # multiplexer after the block RAMs' outputs (the engine's critical path at 6144 entries).
-        # Every bank's read data lands in a register; the addressed bank's word is selected into
+        # Every bank's read data lands in its register; the addressed bank's word is selected into
         # another the clock after.
         bank_depth = self.entry_bank_depth
-        entry_banks = [memory(entry_shape, min(bank_depth, cap.entries - b * bank_depth))
+        entry_banks = [memory(f"entries{b}", entry_shape, min(bank_depth, cap.entries - b * bank_depth))
                        for b in range(-(-cap.entries // bank_depth))]
-        for b, bank in enumerate(entry_banks):
-            m.submodules[f"entries{b}"] = bank
-        pos_a, pos_b, pos_c = positions.read_port(), positions.read_port(), positions.read_port()
-        pos_w = positions.write_port()
-        vel_r, vel_w = velocities.read_port(), velocities.write_port()
-        wgt_r, wgt_w = weights.read_port(), weights.write_port()
-        frc_r, frc_w = forces.read_port(), forces.write_port()
-        ent_rs = [bank.read_port() for bank in entry_banks]
-        ent_ws = [bank.write_port() for bank in entry_banks]
-        tri_r, tri_w = triangles.read_port(), triangles.write_port()
+        pos_a, pos_b, pos_c = positions.read
+        pos_w = positions.write
+        (vel_r,), vel_w = velocities.read, velocities.write
+        (wgt_r,), wgt_w = weights.read, weights.write
+        (frc_r,), frc_w = forces.read, forces.write
+        ent_rs = [bank.read[0] for bank in entry_banks]
+        ent_ws = [bank.write for bank in entry_banks]
+        (tri_r,), tri_w = triangles.read, triangles.write
         bank_bits = (bank_depth - 1).bit_length() if len(entry_banks) > 1 else len(ent_rs[0].addr)
         ent_addr = Signal(range(cap.entries), name="ent_addr")  # the entry memory's address register
         ent_bank = [Signal(range(len(entry_banks)), name=f"ent_bank{k}") for k in (1, 2)]  # at E1, E2
-        ent_landed = [Signal(entry_shape, reset_less=True, name=f"ent_landed{b}") for b in range(len(entry_banks))]
+        ent_landed = [port.data for port in ent_rs]  # at E2
         ent_data = Signal(entry_shape, reset_less=True)  # the addressed entry, the clock after landing
         m.d.comb += [port.addr.eq(ent_addr[:bank_bits]) for port in ent_rs]
-        m.d.sync += [ent_bank[0].eq(ent_addr[bank_bits:] if len(entry_banks) > 1 else 0), ent_bank[1].eq(ent_bank[0]),
-                     *(landed.eq(port.data) for landed, port in zip(ent_landed, ent_rs))]
+        m.d.sync += [ent_bank[0].eq(ent_addr[bank_bits:] if len(entry_banks) > 1 else 0), ent_bank[1].eq(ent_bank[0])]
         with m.Switch(ent_bank[1]):
             for b, landed in enumerate(ent_landed):
                 with m.Case(b):
@@ -214,12 +213,11 @@ class SpringflatEngine(wiring.Component):
                                                              cap.entries, n_entries)
         e4_entry, e5_entry, e6_entry = (Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(4, 7))
         e4_first, e5_first, e6_first = Signal(), Signal(), Signal()
-        e6_pi, e6_pj, e6_pb = (Signal(pos_shape, reset_less=True, name=f"e6_{n}") for n in ("pi", "pj", "pb"))
+        e6_pi, e6_pj, e6_pb = pos_a.data, pos_b.data, pos_c.data  # landed at E6
         node_of_entry = Signal(range(cap.vertices + 1))
         next_first = Signal()
         m.d.sync += [e4_entry.eq(ent_data), e5_entry.eq(e4_entry), e6_entry.eq(e5_entry),
-                     e4_first.eq(next_first), e5_first.eq(e4_first), e6_first.eq(e5_first),
-                     e6_pi.eq(pos_a.data), e6_pj.eq(pos_b.data), e6_pb.eq(pos_c.data)]
+                     e4_first.eq(next_first), e5_first.eq(e4_first), e6_first.eq(e5_first)]
         with m.If(e_valid[3]):  # the owner of the entry after this one
             m.d.sync += [next_first.eq(ent_data.last), node_of_entry.eq(node_of_entry + ent_data.last)]
         m.d.comb += [
@@ -251,12 +249,11 @@ class SpringflatEngine(wiring.Component):
         # AreaError.i.
         tri_index, fetch_area, t_valid = _fetch_sequencer(m, "tri_index", "fetch_area", "t", 6,
                                                           cap.triangles, n_triangles)
-        t2_tri = Signal(tri_shape, reset_less=True)
+        t2_tri = tri_r.data  # landed at T2
         t3_area, t4_area, t5_area = (Signal(shape_of(fs.face_area), reset_less=True, name=f"t{k}_area")
                                      for k in (3, 4, 5))
-        t5_p = [Signal(pos_shape, reset_less=True, name=f"t5_p{k}") for k in "abc"]
-        m.d.sync += [t2_tri.eq(tri_r.data), t3_area.eq(t2_tri.area), t4_area.eq(t3_area), t5_area.eq(t4_area),
-                     t5_p[0].eq(pos_a.data), t5_p[1].eq(pos_b.data), t5_p[2].eq(pos_c.data)]
+        t5_p = [pos_a.data, pos_b.data, pos_c.data]  # landed at T5
+        m.d.sync += [t3_area.eq(t2_tri.area), t4_area.eq(t3_area), t5_area.eq(t4_area)]
         m.d.comb += [area.i.valid.eq(t_valid[5]), area.i.payload.a.eq(t5_p[0]), area.i.payload.b.eq(t5_p[1]),
                      area.i.payload.c.eq(t5_p[2]), area.i.payload.area.eq(t5_area)]
 
@@ -264,11 +261,7 @@ class SpringflatEngine(wiring.Component):
         # N0 the node's address registered, N1 the memories' data, N2 landed, into Integrator.i.
         node_index, fetch_nodes, n_valid = _fetch_sequencer(m, "node_index", "fetch_nodes", "n", 3,
                                                             cap.vertices, n_vertices)
-        n2_pos = Signal(pos_shape, reset_less=True)
-        n2_vel = Signal(vel_shape, reset_less=True)
-        n2_wgt = Signal(weight_shape, reset_less=True)
-        n2_frc = Signal(force_shape, reset_less=True)
-        m.d.sync += [n2_pos.eq(pos_a.data), n2_vel.eq(vel_r.data), n2_wgt.eq(wgt_r.data), n2_frc.eq(frc_r.data)]
+        n2_pos, n2_vel, n2_wgt, n2_frc = pos_a.data, vel_r.data, wgt_r.data, frc_r.data  # landed at N2
         step_dt = Signal(shape_of(fs.dt))
         step_half = Signal(shape_of(fs.half_dt_sq))
         # The fixed step's ½Δt² (steplut.half_dt_sq), five stages from the DT register: the
@@ -416,11 +409,9 @@ class SpringflatEngine(wiring.Component):
                                     wgt_r.data.inv_mass_barrier)
                 else:
                     read_data = tri_r.data.as_value()
-                word_value = read_data
-                for step in ("landed", "aligned"):
-                    delayed = Signal(len(read_data), name=f"bus_{w.name}_{step}", reset_less=True)
-                    m.d.sync += delayed.eq(word_value)
-                    word_value = delayed
+                # the memories' data has landed (BlockRam); one more clock aligns it with the entry bank's select
+                word_value = Signal(len(read_data), name=f"bus_{w.name}_aligned", reset_less=True)
+                m.d.sync += word_value.eq(read_data)
             padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word", reset_less=True)
             m.d.sync += padded.eq(word_value)
             words = [padded.word_select(j, BUS_WORD_BITS) for j in range(w.words)]
@@ -744,7 +735,7 @@ class SpringflatEngine(wiring.Component):
         with m.If(go & in_phase["integrate"] & integrate_done):
             m.d.sync += [fetch_nodes.eq(0), *move("integrate", "start")]
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
-        self.debug_memories = {"positions": positions, "velocities": velocities}
+        self.debug_memories = {"positions": positions.contents, "velocities": velocities.contents}
         self.debug_signals = {"state": state, "phase": phase, "entry_index": entry_index,
                               "force_out_index": force_out_index, "tri_index": tri_index,
                               "node_out_index": node_out_index, "math_pending": math_pending,

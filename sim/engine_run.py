@@ -90,16 +90,27 @@ def simulation_harness(verilog: str) -> str:
             f"endmodule\n")
 
 
-def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator") -> Path:
+def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator",
+                   dsp: str | None = None) -> Path:
     """Export ``springflat_engine.v`` for ``fs`` and ``capacity`` once; return a directory per
-    simulator (and build flags) holding it and :func:`simulation_harness`'s ``springflat_engine_sim.v``."""
+    simulator (and build flags) holding it and :func:`simulation_harness`'s ``springflat_engine_sim.v``.
+
+    ``dsp="ecp5"`` exports what ``springflat synth --target ecp5`` synthesises (``MULT18X18D`` and
+    ``DP16KD`` instances) and adds the primitives' simulation models to the directory."""
+    import shutil
+
+    from hdl.dsp import DspPlatform
+
+    from .cocotb_support import PRIMITIVE_MODELS, SimulatorError
     from .export import export_engine
 
-    directory = (BUILD_ROOT / _formats_key(fs) / "engine"
+    if dsp is not None and dsp not in PRIMITIVE_MODELS:
+        raise SimulatorError(f"no simulation model for DSP flavour {dsp!r} (choose from {', '.join(PRIMITIVE_MODELS)})")
+    directory = (BUILD_ROOT / _formats_key(fs, dsp) / "engine"
                  / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}")
     exported = directory / f"{ENGINE_MODULE}.v"
     if not exported.exists():
-        export_engine(fs, capacity, directory)
+        export_engine(fs, capacity, directory, platform=DspPlatform(dsp) if dsp else None)
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
     key = hashlib.sha256(repr(build_flags(simulator)).encode()).hexdigest()[:8]
     copy = directory / f"{simulator}-source-{key}"
@@ -108,6 +119,9 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
     for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", simulation_harness(text))):
         if not (copy / name).exists() or (copy / name).read_text() != content:
             (copy / name).write_text(content)
+    for model in PRIMITIVE_MODELS.get(dsp, []):
+        if not (copy / model.name).exists() or (copy / model.name).read_bytes() != model.read_bytes():
+            shutil.copyfile(model, copy / model.name)
     return copy
 
 
@@ -143,12 +157,12 @@ def _make_flags(extra: str):
 
 def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_states: int = 0, seed: int = 0,
                      checks: dict | None = None, work: Path | None = None, log_file: Path | None = None,
-                     waves: bool = False) -> EngineRun:
+                     waves: bool = False, dsp: str | None = None) -> EngineRun:
     """Run the engine bench on ``image``. ``checks`` adds the bench's extra scenarios
     (``iteration_checks``, ``reset_after``, ``busy_check``, ``no_mesh_check``, ``unmapped_check``,
-    ``broken_expectation``)."""
+    ``broken_expectation``); ``dsp`` the Verilog flavour (:func:`engine_sources`)."""
     capacity = image.capacity
-    sources = engine_sources(fs, capacity, simulator)
+    sources = engine_sources(fs, capacity, simulator, dsp)
     if work is None:
         work = sources / "runs" / f"{simulator}-{os.getpid()}-{time.time_ns()}"
     work = Path(work)

@@ -116,7 +116,7 @@ def test_every_iteration_state_matches_with_bus_wait_states():
             await ctx.tick()
             k = ctx.get(iterations)
             if k != last and k > 0:
-                seen[k] = np.array([[ctx.get(positions.data[i]).x, ctx.get(positions.data[i]).y]
+                seen[k] = np.array([[ctx.get(positions[i]).x, ctx.get(positions[i]).y]
                                     for i in range(MESH.n_vertices)])
             last = k
 

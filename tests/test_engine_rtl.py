@@ -76,6 +76,25 @@ def test_whole_run_bit_exact(simulator, mode):
     assert 0 <= r["python_share"] < 1 and r["cycles_per_second"] > 0
 
 
+def test_ecp5_flavour_whole_run_bit_exact():
+    """What ``springflat synth --target ecp5`` synthesises (every memory a row of DP16KDs read through their
+    output registers, the multipliers MULT18X18Ds, the step generator's tables DP16KD ROMs), on Icarus with
+    the primitives' models: every iteration's state and the whole run equal run_image's. The DP16KD model
+    reads X where a port reads bits the other writes at the same clock, so this also checks that no read
+    whose data is used meets a write (BlockRam's timing contract)."""
+    need("icarus")
+    image = dome_image("momentum", 2)
+    run = run_image_on_rtl(image, DEFAULT, "icarus", wait_states=2, seed=11, checks={"iteration_checks": 1},
+                           dsp="ecp5")
+    r = run.result
+    assert run.passed, r.get("first_mismatches", r)
+    want = run_image(image, DEFAULT)
+    assert np.array_equal(run.positions, want.positions) and np.array_equal(run.velocities, want.velocities)
+    assert (r["status"], r["iterations"], r["energy"]) == (want.status, want.iterations, want.energy)
+    source = (engine_sources(DEFAULT, CAPACITY, "icarus", "ecp5") / f"{ENGINE_MODULE}.v").read_text()
+    assert '.REGMODE_B("OUTREG")' in source and "MULT18X18D" in source and "no_rw_check" not in source
+
+
 @pytest.mark.parametrize("simulator", ["verilator", "icarus"])
 def test_reset_mid_run_and_refusals(simulator):
     """START with nothing loaded (the driver refuses; the hardware answers no-mesh), an unmapped read and a

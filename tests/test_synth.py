@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from sim import cli
+from ram_traffic import icarus_run, ram_reads, random_ram_traffic
 from sim.synth import TARGETS, add_parser, parse_nextpnr_log, parse_yosys_stat
 
 pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
@@ -191,3 +192,37 @@ def test_dp16kd_model_reads_what_yosys_maps(tmp_path, width, depth):
     out = subprocess.run(["vvp", "-n", "tb.vvp"], cwd=tmp_path, check=True, capture_output=True, text=True).stdout
     read = [int(line) for line in out.split() if line.isdigit()]
     assert read == words.tolist()
+
+
+@pytest.mark.parametrize("width, depth", [(18, 1024), (9, 2048), (4, 4096), (30, 1024)])
+def test_dp16kd_model_is_the_ram_yosys_maps(tmp_path, width, depth):
+    """``sim/models/DP16KD.v`` as a RAM: Yosys's ``synth_ecp5`` maps an inferred simple dual-port RAM
+    (one write port, one registered read) to DP16KDs, and that netlist on the model reads what a RAM
+    reads, so the model's write pins (WE, CE, the 18-bit configuration's byte enables on AD1/AD0) and
+    read pins are the device's as Yosys uses them: the ones :class:`hdl.block_ram.BlockRam` drives. A
+    read of the row being written at the same clock reads X."""
+    from sim.synth import TOOL, _run_tool
+
+    abits = (depth - 1).bit_length()
+    (tmp_path / "ram.v").write_text(
+        f"module ram(input clk, input we, input [{abits - 1}:0] waddr, input [{width - 1}:0] wdata,\n"
+        f"           input [{abits - 1}:0] raddr, output reg [{width - 1}:0] q);\n"
+        f"  (* no_rw_check *) reg [{width - 1}:0] mem [0:{depth - 1}];\n"
+        f"  integer i; initial for (i = 0; i < {depth}; i = i + 1) mem[i] = 0;\n"
+        f"  always @(posedge clk) begin if (we) mem[waddr] <= wdata; q <= mem[raddr]; end\nendmodule\n")
+    code, log = _run_tool(TOOL["yosys"], ["-q", "-p", "read_verilog ram.v; synth_ecp5 -top ram; write_verilog -noattr net.v"],
+                          tmp_path, "yosys.log")
+    assert code == 0, log[-2000:]
+    netlist = (tmp_path / "net.v").read_text()
+    assert netlist.count("DP16KD #(") == -(-width // {1024: 18, 2048: 9, 4096: 4}[depth])
+    rng = np.random.default_rng(width + depth)
+    we, waddr, wdata, raddr = random_ram_traffic(rng, depth, width, 3000)
+    ports = ("ram dut(.clk(clk), .we(we), .waddr(waddr[%d:0]), .wdata(wdata[%d:0]), .raddr(raddr[%d:0]), .q(q[%d:0]));"
+             % (abits - 1, width - 1, abits - 1, width - 1))
+    lines = icarus_run(tmp_path, ["net.v"], "ram", ports, we, waddr, wdata, raddr)
+    assert [int(line[-width:], 2) for line in lines] == ram_reads(we, waddr, wdata, raddr, depth, 0)
+    # a collision: the row being written is read at the same clock
+    we[:] = 1
+    raddr[:] = waddr
+    lines = icarus_run(tmp_path, ["net.v"], "ram", ports, we, waddr, wdata, raddr)
+    assert all("x" in line[-width:] for line in lines[1:])

@@ -1,0 +1,117 @@
+"""A block RAM whose read data lands in a register: generic RTL or ECP5 ``DP16KD`` with its output register.
+
+:class:`BlockRam` is the engine's node, entry and triangle storage: one write port and
+``read_ports`` read ports, each read answering ``mem[addr]`` two clocks after ``addr`` (the
+address registered in the block RAM, then its data registered). In generic RTL that is an
+:class:`amaranth.lib.memory.Memory` read port and a flip-flop on its data. Yosys's ``synth_ecp5``
+maps the read port to a ``DP16KD`` with ``REGMODE = "NOREG"`` and leaves the flip-flop in the
+fabric, so every read costs the block RAM's unregistered clock-to-output (5.83 ns in nextpnr's
+ECP5 model) plus a route to that flip-flop: the engine's critical path at 119.7 MHz
+(``docs/synthesis.md``). Elaborated with :data:`hdl.dsp.ECP5` as the platform, each read port is
+therefore a row of ``DP16KD`` instances, port A written and port B read with
+``REGMODE_B = "OUTREG"``, one instance per column slice of the word, in the deepest configuration
+that holds ``depth`` words (:func:`hdl.rom.dp16kd_config`); every read port has its own copy of the
+memory, as Yosys makes for a memory with several read ports. Both forms have the same function and
+latency. The ECP5 form is simulated with ``sim/models/DP16KD.v``, whose write and read pins are
+checked against Yosys's own mapping of an inferred RAM (``tests/test_synth.py``).
+
+Timing contract: a write (``write.en`` high at a clock edge) is visible to a read whose address
+is registered at a later edge. A read and a write of the same address at the same edge are a
+collision: the generic form returns the old word, a ``DP16KD`` an undefined one (the simulation
+model returns X), so a user must never use such a read's data (Yosys's ``no_rw_check``, which the
+generic form carries, says the same to the synthesis tool).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import ClockSignal, Const, Instance, Module, Shape, Signal, Value
+from amaranth.lib import wiring
+from amaranth.lib.memory import Memory, MemoryData, WritePort
+from amaranth.lib.wiring import In, Out
+
+from .dsp import dsp_target
+from .rom import DP16KD_ADDRESS_PINS, DP16KD_DATA_PINS, dp16kd_config
+
+__all__ = ["BlockRam"]
+
+
+class BlockRam(wiring.Component):
+    """``depth`` words of ``shape`` in block RAM, one write port, ``read_ports`` registered read ports.
+
+    Members: ``write`` (:class:`amaranth.lib.memory.WritePort.Signature`: ``addr``, ``data``,
+    ``en``; the word is written at the clock edge where ``en`` is high) and ``read[k]`` (``addr`` in,
+    ``data`` out: ``data`` is the word at the ``addr`` of two clocks before; there is no read
+    enable, every port reads every clock). Initial contents: all zeros.
+
+    ``name`` prefixes the ``DP16KD`` instances of the ECP5 form (``{name}_r{k}_{slice}``).
+    ``contents`` is the generic form's :class:`amaranth.lib.memory.MemoryData`, for a testbench
+    that reads the memory directly (``ctx.get(ram.contents[i])``).
+    """
+
+    def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram"):
+        if not isinstance(depth, int) or depth < 1:
+            raise ValueError(f"BlockRam depth must be a positive integer, not {depth!r}")
+        if not isinstance(read_ports, int) or read_ports < 1:
+            raise ValueError(f"BlockRam needs at least one read port, not {read_ports!r}")
+        width = Shape.cast(shape).width
+        if width < 1:
+            raise ValueError(f"BlockRam word width must be at least 1, not {width}")
+        self.shape, self.depth, self.name = shape, depth, name
+        self.contents = MemoryData(shape=shape, depth=depth, init=[])
+        addr_width = max(1, (depth - 1).bit_length())
+        read = wiring.Signature({"addr": In(addr_width), "data": Out(shape)})
+        super().__init__({"write": Out(WritePort.Signature(addr_width=addr_width, shape=shape)),
+                          "read": Out(read).array(read_ports)})
+
+    def elaborate(self, platform):
+        m = Module()
+        if dsp_target(platform) == "ecp5":
+            self._dp16kd(m)
+            return m
+        # no_rw_check: see the module's timing contract (no collision bypass after the block RAM)
+        m.submodules.memory = memory = Memory(data=self.contents, attrs={"no_rw_check": 1})
+        write = memory.write_port()
+        m.d.comb += [write.addr.eq(self.write.addr), write.data.eq(self.write.data), write.en.eq(self.write.en)]
+        for k, port in enumerate(self.read):
+            read = memory.read_port()
+            landed = Signal(self.shape, reset_less=True, name=f"landed{k}")
+            m.d.comb += [read.addr.eq(port.addr), port.data.eq(landed)]
+            m.d.sync += landed.eq(read.data)
+        return m
+
+    def _dp16kd(self, m: Module) -> None:
+        slice_width, address_bits = dp16kd_config(self.depth)
+        shift = DP16KD_ADDRESS_PINS - address_bits
+        width = Shape.cast(self.shape).width
+        zero, one = Const(0, 1), Const(1, 1)
+        # In the 18-bit configuration the two lowest address pins of a writing port are its byte
+        # enables (Yosys's brams_map_16kd.v): both high, every write is a whole word.
+        ada = Signal(DP16KD_ADDRESS_PINS, name="w_ada")
+        low = 0b11 if slice_width == DP16KD_DATA_PINS else 0
+        m.d.comb += ada.eq((self.write.addr << shift) | low)
+        write_data = Value.cast(self.write.data)
+        for k, port in enumerate(self.read):
+            adb = Signal(DP16KD_ADDRESS_PINS, name=f"r{k}_adb")
+            m.d.comb += adb.eq(port.addr << shift)
+            read_data = Value.cast(port.data)
+            for s, lo in enumerate(range(0, width, slice_width)):
+                bits = min(slice_width, width - lo)
+                dia = Signal(DP16KD_DATA_PINS, name=f"r{k}_{s}_dia")
+                dob = Signal(DP16KD_DATA_PINS, name=f"r{k}_{s}_dob")
+                m.d.comb += [dia.eq(write_data[lo:lo + bits]), read_data[lo:lo + bits].eq(dob[:bits])]
+                pins = {f"i_ADA{i}": ada[i] for i in range(DP16KD_ADDRESS_PINS)}
+                pins.update({f"i_ADB{i}": adb[i] for i in range(DP16KD_ADDRESS_PINS)})
+                pins.update({f"i_DIA{i}": dia[i] for i in range(DP16KD_DATA_PINS)})
+                pins.update({f"i_DIB{i}": zero for i in range(DP16KD_DATA_PINS)})
+                pins.update({f"o_DOB{i}": dob[i] for i in range(DP16KD_DATA_PINS)})
+                pins.update({f"i_{p}": zero for p in ("RSTA", "CSA0", "CSA1", "CSA2", "WEB", "RSTB",
+                                                      "CSB0", "CSB1", "CSB2")})
+                pins.update({f"i_{p}": one for p in ("CEA", "OCEA", "CEB", "OCEB")})
+                m.submodules[f"{self.name}_r{k}_{s}"] = Instance(
+                    "DP16KD",
+                    p_DATA_WIDTH_A=slice_width, p_DATA_WIDTH_B=slice_width,
+                    p_REGMODE_A="NOREG", p_REGMODE_B="OUTREG", p_RESETMODE="SYNC", p_ASYNC_RESET_RELEASE="SYNC",
+                    p_CSDECODE_A="0b000", p_CSDECODE_B="0b000", p_WRITEMODE_A="NORMAL", p_WRITEMODE_B="NORMAL",
+                    p_GSR="DISABLED",
+                    i_CLKA=ClockSignal(), i_CLKB=ClockSignal(), i_WEA=self.write.en,
+                    **pins)
