@@ -24,13 +24,13 @@ generic form carries, says the same to the synthesis tool).
 
 from __future__ import annotations
 
-from amaranth.hdl import ClockSignal, Const, Instance, Module, Shape, Signal, Value
+from amaranth.hdl import ClockSignal, Module, Shape, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory, MemoryData, WritePort
 from amaranth.lib.wiring import In, Out
 
 from .dsp import dsp_target
-from .rom import DP16KD_ADDRESS_PINS, DP16KD_DATA_PINS, dp16kd_config
+from .rom import DP16KD_ADDRESS_PINS, DP16KD_DATA_PINS, dp16kd, dp16kd_config, dp16kd_port
 
 __all__ = ["BlockRam"]
 
@@ -83,7 +83,6 @@ class BlockRam(wiring.Component):
         slice_width, address_bits = dp16kd_config(self.depth)
         shift = DP16KD_ADDRESS_PINS - address_bits
         width = Shape.cast(self.shape).width
-        zero, one = Const(0, 1), Const(1, 1)
         # In the 18-bit configuration the two lowest address pins of a writing port are its byte
         # enables (Yosys's brams_map_16kd.v): both high, every write is a whole word.
         ada = Signal(DP16KD_ADDRESS_PINS, name="w_ada")
@@ -99,19 +98,7 @@ class BlockRam(wiring.Component):
                 dia = Signal(DP16KD_DATA_PINS, name=f"r{k}_{s}_dia")
                 dob = Signal(DP16KD_DATA_PINS, name=f"r{k}_{s}_dob")
                 m.d.comb += [dia.eq(write_data[lo:lo + bits]), read_data[lo:lo + bits].eq(dob[:bits])]
-                pins = {f"i_ADA{i}": ada[i] for i in range(DP16KD_ADDRESS_PINS)}
-                pins.update({f"i_ADB{i}": adb[i] for i in range(DP16KD_ADDRESS_PINS)})
-                pins.update({f"i_DIA{i}": dia[i] for i in range(DP16KD_DATA_PINS)})
-                pins.update({f"i_DIB{i}": zero for i in range(DP16KD_DATA_PINS)})
-                pins.update({f"o_DOB{i}": dob[i] for i in range(DP16KD_DATA_PINS)})
-                pins.update({f"i_{p}": zero for p in ("RSTA", "CSA0", "CSA1", "CSA2", "WEB", "RSTB",
-                                                      "CSB0", "CSB1", "CSB2")})
-                pins.update({f"i_{p}": one for p in ("CEA", "OCEA", "CEB", "OCEB")})
-                m.submodules[f"{self.name}_r{k}_{s}"] = Instance(
-                    "DP16KD",
-                    p_DATA_WIDTH_A=slice_width, p_DATA_WIDTH_B=slice_width,
-                    p_REGMODE_A="NOREG", p_REGMODE_B="OUTREG", p_RESETMODE="SYNC", p_ASYNC_RESET_RELEASE="SYNC",
-                    p_CSDECODE_A="0b000", p_CSDECODE_B="0b000", p_WRITEMODE_A="NORMAL", p_WRITEMODE_B="NORMAL",
-                    p_GSR="DISABLED",
-                    i_CLKA=ClockSignal(), i_CLKB=ClockSignal(), i_WEA=self.write.en,
-                    **pins)
+                m.submodules[f"{self.name}_r{k}_{s}"] = dp16kd(
+                    slice_width, regmode_b="OUTREG",
+                    **dp16kd_port("A", clock=ClockSignal(), address=ada, write_data=dia, write_enable=self.write.en),
+                    **dp16kd_port("B", clock=ClockSignal(), address=adb, read_data=dob))

@@ -20,7 +20,8 @@ from amaranth.lib.memory import Memory
 
 from .dsp import dsp_target
 
-__all__ = ["DP16KD_CONFIGS", "ENTRY_BANK_DEPTH", "dp16kd_config", "dp16kd_initvals", "registered_rom"]
+__all__ = ["DP16KD_CONFIGS", "ENTRY_BANK_DEPTH", "dp16kd", "dp16kd_config", "dp16kd_initvals", "dp16kd_port",
+           "registered_rom"]
 
 #: ``DP16KD`` port widths and their depths (16 Kib, 18 Kib with the ninth bits).
 DP16KD_CONFIGS = ((18, 1024), (9, 2048), (4, 4096), (2, 8192), (1, 16384))
@@ -56,6 +57,35 @@ def dp16kd_initvals(words, width: int) -> dict[str, str]:
             for n in range(64)}
 
 
+def dp16kd_port(port: str, *, clock, address, write_data=None, read_data=None, write_enable=None,
+                clock_enable=None, output_enable=None) -> dict:
+    """The ``Instance`` pins of one ``DP16KD`` port (``"A"`` or ``"B"``): its clock, 14-bit
+    ``address``, ``write_data`` (18 bits; ``None``: zeros) and ``read_data`` (an 18-bit signal for
+    ``DO``; ``None``: unconnected), the write, clock and output-register enables (``None``: 0, 1, 1);
+    its reset and chip selects low."""
+    zero, one = Const(0, 1), Const(1, 1)
+    pins = {f"i_CLK{port}": clock, f"i_WE{port}": zero if write_enable is None else write_enable,
+            f"i_CE{port}": one if clock_enable is None else clock_enable,
+            f"i_OCE{port}": one if output_enable is None else output_enable,
+            f"i_RST{port}": zero, **{f"i_CS{port}{i}": zero for i in range(3)}}
+    pins.update({f"i_AD{port}{i}": address[i] for i in range(DP16KD_ADDRESS_PINS)})
+    pins.update({f"i_DI{port}{i}": zero if write_data is None else write_data[i] for i in range(DP16KD_DATA_PINS)})
+    if read_data is not None:
+        pins.update({f"o_DO{port}{i}": read_data[i] for i in range(DP16KD_DATA_PINS)})
+    return pins
+
+
+def dp16kd(width: int, *, regmode_a: str = "NOREG", regmode_b: str = "NOREG", initvals: dict | None = None,
+           **pins) -> Instance:
+    """A ``DP16KD`` with both ports ``width`` bits wide, the given output-register modes, write mode
+    NORMAL, no chip-select decode and no global reset; ``pins`` from :func:`dp16kd_port`."""
+    return Instance(
+        "DP16KD",
+        p_DATA_WIDTH_A=width, p_DATA_WIDTH_B=width, p_REGMODE_A=regmode_a, p_REGMODE_B=regmode_b,
+        p_RESETMODE="SYNC", p_ASYNC_RESET_RELEASE="SYNC", p_CSDECODE_A="0b000", p_CSDECODE_B="0b000",
+        p_WRITEMODE_A="NORMAL", p_WRITEMODE_B="NORMAL", p_GSR="DISABLED", **(initvals or {}), **pins)
+
+
 def registered_rom(m: Module, table, width: int, addr, *, name: str, enable=None, platform=None) -> Value:
     """``table[addr]`` (``width`` bits) two clocks later; ``enable`` is every register's clock enable."""
     addr = Value.cast(addr)
@@ -76,21 +106,12 @@ def registered_rom(m: Module, table, width: int, addr, *, name: str, enable=None
     for k, lo in enumerate(range(0, width, slice_width)):
         bits = min(slice_width, width - lo)
         doa = Signal(DP16KD_DATA_PINS, name=f"{name}{k}_doa")
-        zero = Const(0, 1)
-        ports = {f"i_ADA{i}": ada[i] for i in range(DP16KD_ADDRESS_PINS)}
-        ports.update({f"i_ADB{i}": zero for i in range(DP16KD_ADDRESS_PINS)})
-        ports.update({f"i_DI{p}{i}": zero for p in "AB" for i in range(DP16KD_DATA_PINS)})
-        ports.update({f"o_DOA{i}": doa[i] for i in range(DP16KD_DATA_PINS)})
-        ports.update({f"i_{p}": zero for p in ("WEA", "RSTA", "CSA0", "CSA1", "CSA2", "CLKB", "CEB", "OCEB",
-                                                "WEB", "RSTB", "CSB0", "CSB1", "CSB2")})
-        m.submodules[f"{name}{k}"] = Instance(
-            "DP16KD",
-            p_DATA_WIDTH_A=slice_width, p_DATA_WIDTH_B=slice_width,
-            p_REGMODE_A="OUTREG", p_REGMODE_B="NOREG", p_RESETMODE="SYNC", p_ASYNC_RESET_RELEASE="SYNC",
-            p_CSDECODE_A="0b000", p_CSDECODE_B="0b000", p_WRITEMODE_A="NORMAL", p_WRITEMODE_B="NORMAL",
-            p_GSR="DISABLED",
-            **dp16kd_initvals([(int(w) >> lo) for w in table], slice_width),
-            i_CLKA=ClockSignal(), i_CEA=enable, i_OCEA=enable,
-            **ports)
+        m.submodules[f"{name}{k}"] = dp16kd(
+            slice_width, regmode_a="OUTREG",
+            initvals=dp16kd_initvals([(int(w) >> lo) for w in table], slice_width),
+            **dp16kd_port("A", clock=ClockSignal(), address=ada, read_data=doa, clock_enable=enable,
+                          output_enable=enable),
+            **dp16kd_port("B", clock=Const(0, 1), address=Const(0, DP16KD_ADDRESS_PINS), clock_enable=Const(0, 1),
+                          output_enable=Const(0, 1)))
         m.d.comb += data[lo:lo + bits].eq(doa[:bits])
     return data
