@@ -257,8 +257,8 @@ class EnergyCheck(wiring.Component):
         energy_zero = Signal(reset_less=True)
         steps = Signal(range(max(self.square_bits, self.energy_bits) + 1), reset_less=True)
 
-        total = (springs[:self.spring_factor_bits + self.square_bits] << self.springs_shift) + \
-                ((barrier << 1) << self.barrier_shift)
+        total = springs[:self.spring_factor_bits + self.square_bits].shift_left(self.springs_shift) + \
+                barrier.shift_left(1 + self.barrier_shift)
         settled = Mux(first, 0, Mux(previous_zero, energy_zero, change <= allowed[ENERGY_TOL_FRAC_BITS:]))
 
         with m.FSM():
@@ -266,7 +266,7 @@ class EnergyCheck(wiring.Component):
                 m.d.comb += self.i.ready.eq(1)
                 with m.If(self.i.valid):
                     # 3·½C as an adder: ``* 3`` became a combinational DSP block
-                    m.d.sync += [factor.eq((self.half_spring << 1) + self.half_spring), springs.eq(beat.square_sum),
+                    m.d.sync += [factor.eq(self.half_spring.shift_left(1) + self.half_spring), springs.eq(beat.square_sum),
                                  barrier.eq(beat.barrier_sum), first.eq(beat.first),
                                  tolerance.eq(self.tolerance), steps.eq(self.square_bits)]
                     m.next = "springs"
@@ -350,9 +350,9 @@ class BetaDivider(wiring.Component):
         remainder = Signal(self.k_bits + 1, reset_less=True)  # < divisor
         quotient = Signal(self.quotient_bits, reset_less=True)
         steps = Signal(range(self.quotient_bits + 1), reset_less=True)
-        doubled = remainder << 1
+        doubled = remainder.shift_left(1)
         fits = doubled >= divisor
-        beta, _ = clamp((quotient + 1) >> 1, fs.dt)
+        beta, _ = clamp((quotient + 1).shift_right(1), fs.dt)
 
         with m.FSM():
             with m.State("idle"):

@@ -27,8 +27,8 @@ def round_half_bit(t, rounding, sticky=Const(0)):
     rounding = Rounding(rounding)
     t = Value.cast(t)
     if rounding is Rounding.FLOOR:
-        return t >> 1
-    rounded = (t + 1) >> 1
+        return t.shift_right(1)
+    rounded = (t + 1).shift_right(1)
     if rounding is Rounding.HALF_UP:
         return rounded
     tie = t[0] & ~sticky
@@ -40,16 +40,18 @@ def shift_round(value, shift, rounding):
     """``value * 2**-shift`` rounded as :func:`golden_model.fixed.shift_round` does.
 
     ``shift`` is a constant; ``shift <= 0`` is an exact left shift. The result is wide enough
-    for the exact value (the caller truncates only where the golden model's ranges allow it).
+    for the exact value (the caller truncates only where the golden model's ranges allow it) and no
+    wider: the shifts are ``shift_right`` (Amaranth's ``>>`` keeps the operand's width, so the
+    rounding's carry chain and a saturation's range test behind it spanned copies of the sign).
     """
     rounding = Rounding(rounding)
     value = Value.cast(value)
     if shift <= 0:
-        return value << -shift
+        return value.shift_left(-shift)
     if rounding is Rounding.FLOOR:
-        return value >> shift
+        return value.shift_right(shift)
     sticky = value[:shift - 1].any() if shift > 1 else Const(0)
-    return round_half_bit(value >> (shift - 1), rounding, sticky)
+    return round_half_bit(value.shift_right(shift - 1), rounding, sticky)
 
 
 def saturate(value, fmt):
@@ -140,4 +142,4 @@ def sum_round(add, shift, rounding, sub=(), const=0):
         total = -Value.cast(term) if total is None else total - term
     if rounding is Rounding.NEAREST_EVEN:
         return shift_round(total, shift, rounding)
-    return total >> shift
+    return total.shift_right(shift)

@@ -181,9 +181,9 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     # 139 MHz).
     sums = {}
     for k in "xy":
-        for mode, second in (("paper", live[f"ha_{k}"]), ("mom", live[f"a_{k}"] << fs.half_dt_sq.frac_bits)):
+        for mode, second in (("paper", live[f"ha_{k}"]), ("mom", live[f"a_{k}"].shift_left(fs.half_dt_sq.frac_bits))):
             value, shift = aligned_add(live[f"dtv_{k}"], step_frac - fv, second, step_frac - fa)
-            sums[f"step_{mode}_{k}"] = Value.cast(value) << shift if shift else value
+            sums[f"step_{mode}_{k}"] = Value.cast(value).shift_left(shift)
         sums[f"kick_{k}"] = rounded(live[f"dta_{k}"], kick_frac, wide_v)
     live.step(tail, "t6", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta", "a") for k in "xy"), **sums)
     kick = {k: clamp(live[f"kick_{k}"], wide_v) for k in "xy"}

@@ -57,7 +57,7 @@ def aligned_add(a, a_shift: int, b, b_shift: int):
     k = b_shift - a_shift
     if k == 0:
         return a + b, a_shift
-    high = (a >> k) + b
+    high = a.shift_right(k) + b
     value = Cat(a[:k], high)
     return (value.as_signed() if high.shape().signed else value), a_shift
 
@@ -77,7 +77,7 @@ def join_parts(parts):
     for p, s in parts[1:]:
         value, shift = aligned_add(value, shift, p, s)
     value = Value.cast(value)
-    return value << shift if shift else value
+    return value.shift_left(shift)
 
 
 class Pipeline:
@@ -207,7 +207,21 @@ class Pipeline:
             self.stage(f"{name}_sum{level}")
             parts = {key: self.reduce(p, f"{name}_sum{level}_{key}") for key, p in parts.items()}
             carry(f"{name}_sum{level}")
-        return {key: join_parts(p) for key, p in parts.items()}
+        # Each product as wide as ``a * b`` itself: the partial products' sums grow a bit per adder and
+        # per alignment shift (72 bits for a 44-bit product), and whatever reads a product (a rounding's
+        # carry chain, a saturation's range test) would otherwise span those copies of its sign.
+        return {key: _exact_width(join_parts(p), Value.cast(a) * Value.cast(b))
+                for (key, p), (a, b) in zip(parts.items(), products.values())}
+
+
+def _exact_width(value, exact) -> Value:
+    """``value`` (equal to ``exact`` for every input) cut to ``exact``'s shape, which holds it."""
+    shape = exact.shape()
+    value = Value.cast(value)
+    if len(value) <= shape.width:
+        return value
+    cut = value[:shape.width]
+    return cut.as_signed() if shape.signed else cut
 
 
 class LiveValues(dict):

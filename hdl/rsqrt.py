@@ -211,7 +211,9 @@ class RsqrtUnit(wiring.Component):
         # row's inputs are two short routes (one route from the block RAM straight into the
         # multiplier's input register took 6 ns on one placement: 142 MHz)
         stage("land")
-        y = reg(seed, cfg.seed_frac_bits, "land_y") << (fy - cfg.seed_frac_bits)  # u0.Fs -> u1.Fy (wiring)
+        # u0.Fs -> u1.Fy (wiring), as wide as every later y (the multiplies' partial products, latency_of)
+        y = reg(seed, cfg.seed_frac_bits, "land_y").shift_left(fy - cfg.seed_frac_bits).as_unsigned()
+        y = Cat(y, Const(0, cfg.y_fmt.width - len(y)))
         mant = reg(mant, mant.shape(), "land_mant")
         dn_r = reg(dn_r, dn_r.shape(), "land_dn")
         sat_r = reg(sat_r, 1, "land_sat")
