@@ -9,9 +9,13 @@ fabric, so every read costs the block RAM's unregistered clock-to-output (5.83 n
 ECP5 model) plus a route to that flip-flop: the engine's critical path at 119.7 MHz
 (``docs/synthesis.md``). Elaborated with :data:`hdl.dsp.ECP5` as the platform, each read port is
 therefore a row of ``DP16KD`` instances, port A written and port B read with
-``REGMODE_B = "OUTREG"``, one instance per column slice of the word, in the deepest configuration
-that holds ``depth`` words (:func:`hdl.rom.dp16kd_config`); every read port has its own copy of the
-memory, as Yosys makes for a memory with several read ports. Both forms have the same function and
+``REGMODE_B = "OUTREG"``, one instance per column slice of the word, in the configuration that
+holds ``depth`` words in the fewest block RAMs (:func:`dp16kd_banks`); every read port has its own
+copy of the memory, as Yosys makes for a memory with several read ports. Where that takes several
+banks (a depth above 2,048, or just above a power of two: 3,072 words of 66 bits are 3 banks of
+1K×18, 12 block RAMs, where one 4K×4 bank takes 17), the addressed bank's word is selected after
+the output registers, by the address's high bits registered alongside: a multiplexer between the
+output registers and the user's logic. Both forms have the same function and
 latency. The ECP5 form is simulated with ``sim/models/DP16KD.v``, whose write and read pins are
 checked against Yosys's own mapping of an inferred RAM (``tests/test_synth.py``).
 
@@ -30,9 +34,9 @@ from amaranth.lib.memory import Memory, MemoryData, WritePort
 from amaranth.lib.wiring import In, Out
 
 from .dsp import dsp_target
-from .rom import DP16KD_ADDRESS_PINS, DP16KD_DATA_PINS, dp16kd, dp16kd_config, dp16kd_port
+from .rom import DP16KD_ADDRESS_PINS, DP16KD_CONFIGS, DP16KD_DATA_PINS, dp16kd, dp16kd_port
 
-__all__ = ["BlockRam"]
+__all__ = ["BlockRam", "dp16kd_banks"]
 
 
 class BlockRam(wiring.Component):
@@ -80,25 +84,49 @@ class BlockRam(wiring.Component):
         return m
 
     def _dp16kd(self, m: Module) -> None:
-        slice_width, address_bits = dp16kd_config(self.depth)
-        shift = DP16KD_ADDRESS_PINS - address_bits
         width = Shape.cast(self.shape).width
+        slice_width, words, banks = dp16kd_banks(self.depth, width)
+        address_bits = (words - 1).bit_length()
+        shift = DP16KD_ADDRESS_PINS - address_bits
         # In the 18-bit configuration the two lowest address pins of a writing port are its byte
         # enables (Yosys's brams_map_16kd.v): both high, every write is a whole word.
         ada = Signal(DP16KD_ADDRESS_PINS, name="w_ada")
         low = 0b11 if slice_width == DP16KD_DATA_PINS else 0
-        m.d.comb += ada.eq((self.write.addr << shift) | low)
+        m.d.comb += ada.eq((self.write.addr[:address_bits] << shift) | low)
+        write_bank = self.write.addr[address_bits:]
         write_data = Value.cast(self.write.data)
         for k, port in enumerate(self.read):
             adb = Signal(DP16KD_ADDRESS_PINS, name=f"r{k}_adb")
-            m.d.comb += adb.eq(port.addr << shift)
+            m.d.comb += adb.eq(port.addr[:address_bits] << shift)
+            bank_data = [Signal(width, name=f"r{k}_bank{b}_data") for b in range(banks)]
+            for b in range(banks):
+                write_enable = self.write.en & (write_bank == b) if banks > 1 else self.write.en
+                for s, lo in enumerate(range(0, width, slice_width)):
+                    bits = min(slice_width, width - lo)
+                    dia = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_dia")
+                    dob = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_dob")
+                    m.d.comb += [dia.eq(write_data[lo:lo + bits]), bank_data[b][lo:lo + bits].eq(dob[:bits])]
+                    m.submodules[f"{self.name}_r{k}_{b}_{s}"] = dp16kd(
+                        slice_width, regmode_b="OUTREG",
+                        **dp16kd_port("A", clock=ClockSignal(), address=ada, write_data=dia, write_enable=write_enable),
+                        **dp16kd_port("B", clock=ClockSignal(), address=adb, read_data=dob))
             read_data = Value.cast(port.data)
-            for s, lo in enumerate(range(0, width, slice_width)):
-                bits = min(slice_width, width - lo)
-                dia = Signal(DP16KD_DATA_PINS, name=f"r{k}_{s}_dia")
-                dob = Signal(DP16KD_DATA_PINS, name=f"r{k}_{s}_dob")
-                m.d.comb += [dia.eq(write_data[lo:lo + bits]), read_data[lo:lo + bits].eq(dob[:bits])]
-                m.submodules[f"{self.name}_r{k}_{s}"] = dp16kd(
-                    slice_width, regmode_b="OUTREG",
-                    **dp16kd_port("A", clock=ClockSignal(), address=ada, write_data=dia, write_enable=self.write.en),
-                    **dp16kd_port("B", clock=ClockSignal(), address=adb, read_data=dob))
+            if banks == 1:
+                m.d.comb += read_data.eq(bank_data[0])
+                continue
+            # the bank of the word in the output registers: the address's high bits, two clocks on
+            bank = [Signal(range(banks), name=f"r{k}_bank_q{n}") for n in (1, 2)]
+            m.d.sync += [bank[0].eq(port.addr[address_bits:]), bank[1].eq(bank[0])]
+            with m.Switch(bank[1]):
+                for b in range(banks):
+                    with m.Case(b):
+                        m.d.comb += read_data.eq(bank_data[b])
+
+
+def dp16kd_banks(depth: int, width: int) -> tuple[int, int, int]:
+    """``(slice width, words per bank, banks)``: the DP16KD configuration that holds ``depth`` words of
+    ``width`` bits in the fewest block RAMs (``banks`` × ``ceil(width / slice width)``), fewer banks
+    breaking a tie (one bank needs no multiplexer after the output registers)."""
+    options = [(-(-depth // words) * -(-width // w), -(-depth // words), w, words) for w, words in DP16KD_CONFIGS]
+    count, banks, w, words = min(options)
+    return w, words, banks

@@ -25,7 +25,8 @@ pytestmark = pytest.mark.slow  # Icarus
 
 @pytest.mark.parametrize("platform", [None, ECP5], ids=["generic", "ecp5"])
 @pytest.mark.parametrize("shape, depth", [(unsigned(18), 1024), (unsigned(9), 1500), (unsigned(40), 600),
-                                          (data.StructLayout({"x": 17, "y": 13}), 1024), (unsigned(4), 4096)])
+                                          (data.StructLayout({"x": 17, "y": 13}), 1024), (unsigned(4), 4096),
+                                          (unsigned(40), 3000), (unsigned(30), 2100)])  # the last two in banks
 def test_block_ram_reads_two_clocks_after_the_address(tmp_path, platform, shape, depth):
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     ram = BlockRam(shape, depth, read_ports=2, name="mem")
@@ -55,3 +56,12 @@ def test_block_ram_refuses_bad_parameters():
         BlockRam(unsigned(8), 16, read_ports=0)
     with pytest.raises(ValueError, match="width"):
         BlockRam(unsigned(0), 16)
+
+
+def test_dp16kd_banks_takes_the_fewest_block_rams():
+    from hdl.block_ram import dp16kd_banks
+
+    assert dp16kd_banks(1024, 66) == (18, 1024, 1)  # 4 block RAMs
+    assert dp16kd_banks(3072, 66) == (18, 1024, 3)  # 12, where one 4K x 4 bank takes 17
+    assert dp16kd_banks(6144, 65) == (9, 2048, 3)  # 24, tied with 6 banks of 1K x 18: fewer banks
+    assert dp16kd_banks(4096, 4) == (4, 4096, 1)
