@@ -146,14 +146,17 @@ class AreaError(wiring.Component):
         s = stage("area_sat", area_new=area_new, area=s["area"], edge_events=s["edge_events"],
                   area_events=area_over)
         host, new = s["area"], s["area_new"]
-        s = stage("diff", diff=Mux(host > new, host - new, new - host)[:fs.face_area.width],
+        # |A − |A'||, 0 for a stage without a triangle: the accumulator then adds a register straight
+        # (the valid bit gating the term in front of the adder reached its 37-bit carry chain across the
+        # die: the engine's critical path at 120.5 MHz)
+        s = stage("diff", diff=Mux(pipe.valid, Mux(host > new, host - new, new - host)[:fs.face_area.width], 0),
                   edge_events=s["edge_events"], area_events=s["area_events"])
 
         # The accumulator: all terms are non-negative, so saturating each partial sum gives the
         # golden model's saturation of the exact sum (once past raw_max, it stays past).
         counts, valid = self.saturations, pipe.valid
         kept = ~self.clear
-        total, sum_over = clamp(Mux(kept, self.total, 0) + Mux(valid, s["diff"], 0), fs.error_acc)
+        total, sum_over = clamp(Mux(kept, self.total, 0) + s["diff"], fs.error_acc)
         m.d.sync += [
             self.total.eq(total),
             counts.face_edge.eq(Mux(kept, counts.face_edge, 0) + Mux(valid, s["edge_events"], 0)),

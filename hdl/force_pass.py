@@ -11,7 +11,7 @@ import functools
 from dataclasses import dataclass
 from types import SimpleNamespace
 
-from amaranth.hdl import Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -85,7 +85,8 @@ class ForcePass(wiring.Component):
         One beat per node, in input order: ``Σf`` [force_acc] and ``Σ|L − d|`` [error_acc]
         (saturated), ``inside``, with ``energy`` the exact ``Σe²`` and ``Σc·h``, with
         ``saturations`` the node's event count ``saturations`` (up to
-        :func:`~hdl.layouts.force_saturations_max`: ``max_degree`` · 18 + 3). ``o.valid`` is a
+        :func:`~hdl.layouts.force_saturations_max`: ``max_degree`` · 18 + 3; the entries' count plus the
+        node's three flags, one small adder after the registers). ``o.valid`` is a
         register: its consumer takes every beat on the clock it is offered.
     half_spring : ``In(shape_of(fs.spring))``
         ``½C`` [spring]; registered once per clock, hold it stable while a pass is in flight.
@@ -323,17 +324,21 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
               e=rounded(live["e"], fs.rest_length.frac_bits, fs.error_acc))
     force_x, force_y, error = (clamp(live["f_x"], fs.force_acc), clamp(live["f_y"], fs.force_acc),
                                clamp(live["e"], fs.error_acc))
-    if saturations:  # the node's own events join its entries' sum
+    if saturations:  # the node's own events, registered beside their clamps (N2), join its entries' sum at o
         node_flags = (force_x[1], force_y[1], error[1])
         assert len(node_flags) == sum(FORCE_NODE_EVENTS.values()), FORCE_NODE_EVENTS
-        live["ev"] = (live["ev"] + sum(node_flags))[:force_saturations_max(fs).bit_length()]
+        live["ev_node"] = Cat(*node_flags)
     live.step(back, "n2", f_x=force_x[0], f_y=force_y[0], e=error[0])
     m.d.comb += [ports.o.valid.eq(back.valid), out.force.x.eq(live["f_x"]), out.force.y.eq(live["f_y"]),
                  out.error_sum.eq(live["e"]), out.inside.eq(live["inside"])]
     if energy:
         m.d.comb += [out.error_squares.eq(live["e_sq"]), out.barrier_energy.eq(live["ch"])]
     if saturations:
-        m.d.comb += out.saturations.eq(live["ev"])
+        # the clamps' flags added after N2, from registers (added in N1 -> N2 with the clamps, the flags'
+        # route to the count was the engine's critical path at 112 MHz)
+        flags = live["ev_node"]
+        total = live["ev"] + sum(flags[i] for i in range(len(flags)))
+        m.d.comb += out.saturations.eq(total[:force_saturations_max(fs).bit_length()])
     stages = ForcePassStages(front=front.stages, barrier=barrier_stages, rsqrt=rsqrt.latency, back=back.stages)
 
     # ------------------------------------------------------------ idle
