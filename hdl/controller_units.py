@@ -356,21 +356,27 @@ class BetaDivider(wiring.Component):
 
         # Its phases as flip-flops of their own, no state code: an FSM's state register drove both the
         # 50 bits of remainder and quotient and, through ``i.ready``, the engine's phase machine, and
-        # ABC shared a LUT between the two (the engine's critical path, 8.5 ns of routing).
+        # ABC shared a LUT between the two (the engine's critical path, 8.5 ns of routing). The
+        # datapath registers load on every clock, chosen by ``dividing`` alone: while it is low they
+        # follow the input (the values a start needs), so ``i.ready``, placed by the engine's control,
+        # reaches only ``dividing`` and ``idle`` (as the load enable of the remainder it was 8.5 ns of
+        # routing again, 101 MHz).
         idle = Signal(init=1)
         dividing = Signal()
         last = Signal()  # the quotient bit being formed is the last one
         rounding = Signal()
-        start = self.i.valid & idle
         m.d.comb += self.i.ready.eq(idle)
-        with m.If(start):
-            m.d.sync += [divisor.eq(self.i.payload + 3), remainder.eq(self.i.payload), quotient.eq(0),
-                         steps.eq(self.quotient_bits), idle.eq(0), dividing.eq(1), last.eq(self.quotient_bits == 1)]
-        with m.If(dividing):
-            m.d.sync += [remainder.eq(Mux(fits, doubled - divisor, doubled)), quotient.eq(Cat(fits, quotient)),
-                         steps.eq(steps - 1), last.eq(steps == 2)]
-            with m.If(last):
-                m.d.sync += [dividing.eq(0), rounding.eq(1)]
+        with m.If(self.i.valid & idle):
+            m.d.sync += [idle.eq(0), dividing.eq(1)]
+        m.d.sync += [
+            divisor.eq(Mux(dividing, divisor, self.i.payload + 3)),
+            remainder.eq(Mux(dividing, Mux(fits, doubled - divisor, doubled), self.i.payload)),
+            quotient.eq(Mux(dividing, Cat(fits, quotient), 0)),
+            steps.eq(Mux(dividing, steps - 1, self.quotient_bits)),
+            last.eq(Mux(dividing, steps == 2, self.quotient_bits == 1)),
+        ]
+        with m.If(dividing & last):
+            m.d.sync += [dividing.eq(0), rounding.eq(1)]
         with m.If(rounding):
             m.d.sync += [self.o.payload.eq(beta), self.o.valid.eq(1), rounding.eq(0)]
         with m.If(self.o.valid & self.o.ready):
