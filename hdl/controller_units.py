@@ -261,40 +261,50 @@ class EnergyCheck(wiring.Component):
                 barrier.shift_left(1 + self.barrier_shift)
         settled = Mux(first, 0, Mux(previous_zero, energy_zero, change <= allowed[ENERGY_TOL_FRAC_BITS:]))
 
-        with m.FSM():
-            with m.State("idle"):
-                m.d.comb += self.i.ready.eq(1)
-                with m.If(self.i.valid):
-                    # 3·½C as an adder: ``* 3`` became a combinational DSP block
-                    m.d.sync += [factor.eq(self.half_spring.shift_left(1) + self.half_spring), springs.eq(beat.square_sum),
-                                 barrier.eq(beat.barrier_sum), first.eq(beat.first),
-                                 tolerance.eq(self.tolerance), steps.eq(self.square_bits)]
-                    m.next = "springs"
-            with m.State("springs"):
-                m.d.sync += [springs.eq(shift_add_step(springs, factor, self.square_bits)), steps.eq(steps - 1)]
-                with m.If(steps == 1):
-                    m.next = "energy"
-            with m.State("energy"):
-                m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits)]
-                m.next = "tolerance"
-            with m.State("tolerance"):
-                # the step count (energy_bits ≥ 2 clocks) leaves time for the difference, then its
-                # magnitude: each a carry chain as wide as E, one per clock
-                m.d.sync += [allowed.eq(shift_add_step(allowed, tolerance, self.energy_bits)),
-                             difference.eq(energy - previous),
-                             change.eq(Mux(difference < 0, -difference, difference)),
-                             previous_zero.eq(previous == 0), energy_zero.eq(energy == 0),
-                             steps.eq(steps - 1)]
-                with m.If(steps == 1):
-                    m.next = "compare"
-            with m.State("compare"):
-                m.d.sync += [self.o.payload.energy.eq(energy), self.o.payload.settled.eq(settled),
-                             self.o.valid.eq(1), previous.eq(energy)]
-                m.next = "done"
-            with m.State("done"):
-                with m.If(self.o.ready):
-                    m.d.sync += self.o.valid.eq(0)
-                    m.next = "idle"
+        # Its phases as flip-flops of their own, no state code (as BetaDivider: an FSM's state, which
+        # also reaches the engine's phase machine through ``i.ready``, fanned out to every wide register
+        # here). ``busy`` chooses every register's input: while it is low they follow the input (the
+        # values a start needs), so ``i.ready`` reaches only the phase flip-flops.
+        idle = Signal(init=1)
+        busy = Signal()
+        in_springs, in_energy, in_tolerance, in_compare = (Signal(name=f"in_{n}") for n in
+                                                           ("springs", "energy", "tolerance", "compare"))
+        last = Signal()  # the springs or tolerance phase's last step
+        m.d.comb += self.i.ready.eq(idle)
+        with m.If(self.i.valid & idle):
+            m.d.sync += [idle.eq(0), busy.eq(1), in_springs.eq(1)]
+        m.d.sync += [
+            # 3·½C as an adder: ``* 3`` became a combinational DSP block
+            factor.eq(Mux(busy, factor, self.half_spring.shift_left(1) + self.half_spring)),
+            barrier.eq(Mux(busy, barrier, beat.barrier_sum)),
+            first.eq(Mux(busy, first, beat.first)),
+            tolerance.eq(Mux(busy, tolerance, self.tolerance)),
+            springs.eq(Mux(busy, Mux(in_springs, shift_add_step(springs, factor, self.square_bits), springs),
+                           beat.square_sum)),
+        ]
+        with m.If(~busy):
+            m.d.sync += [steps.eq(self.square_bits), last.eq(self.square_bits == 1)]
+        with m.If(in_springs | in_tolerance):
+            m.d.sync += [steps.eq(steps - 1), last.eq(steps == 2)]
+        with m.If(in_springs & last):
+            m.d.sync += [in_springs.eq(0), in_energy.eq(1)]
+        with m.If(in_energy):
+            m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits),
+                         last.eq(self.energy_bits == 1), in_energy.eq(0), in_tolerance.eq(1)]
+        with m.If(in_tolerance):
+            # the step count (energy_bits ≥ 2 clocks) leaves time for the difference, then its
+            # magnitude: each a carry chain as wide as E, one per clock
+            m.d.sync += [allowed.eq(shift_add_step(allowed, tolerance, self.energy_bits)),
+                         difference.eq(energy - previous),
+                         change.eq(Mux(difference < 0, -difference, difference)),
+                         previous_zero.eq(previous == 0), energy_zero.eq(energy == 0)]
+            with m.If(last):
+                m.d.sync += [in_tolerance.eq(0), in_compare.eq(1)]
+        with m.If(in_compare):
+            m.d.sync += [self.o.payload.energy.eq(energy), self.o.payload.settled.eq(settled),
+                         self.o.valid.eq(1), previous.eq(energy), in_compare.eq(0)]
+        with m.If(self.o.valid & self.o.ready):
+            m.d.sync += [self.o.valid.eq(0), idle.eq(1), busy.eq(0)]
         return m
 
 
