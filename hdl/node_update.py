@@ -64,7 +64,7 @@ class NodeUpdate(wiring.Component):
     ---------
     :class:`~hdl.force_pass.ForcePass` → node-header FIFO → :class:`~hdl.integrator.Integrator`
     → result FIFO. The datapath never stalls. Every stage register loads on every clock, so no
-    enable fans out across the ~28,750 flip-flops. The force pass sums each node's forces,
+    enable fans out across the ~26,900 flip-flops. The force pass sums each node's forces,
     ``|L − d|`` and ``inside`` over its entries; the node's header (position, velocity and the two
     weights) waits in a FIFO from the input until the force pass's result leaves, and the
     integrator's first stage registers both (the header straight from the FIFO's LUT RAM, read
