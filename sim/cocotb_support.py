@@ -15,12 +15,16 @@ import os
 import shutil
 import sys
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from filelock import FileLock
+
 from golden_model.fixed import FormatSet
 
-__all__ = ["SIMULATORS", "SimulatorError", "missing_simulator", "prepare_environment", "BenchRun", "run_bench"]
+__all__ = ["SIMULATORS", "SimulatorError", "missing_simulator", "prepare_environment", "BenchRun", "run_bench",
+           "build_lock"]
 
 SIMULATORS = ("icarus", "verilator")
 BENCH_PACKAGE = "sim.cocotb_benches"
@@ -79,6 +83,20 @@ def missing_simulator(sim: str) -> str | None:
 PRIMITIVE_MODELS = {"ecp5": [REPO / "sim" / "models" / "MULT18X18D.v", REPO / "sim" / "models" / "DP16KD.v"]}
 
 
+@contextmanager
+def build_lock(directory: Path):
+    """Hold an inter-process lock on the cached build ``directory`` (created if missing).
+
+    Exports and simulator builds are cached on disk and shared by every process that asks for
+    the same format set: parallel test workers, two ``springflat rtl-check`` runs. Whoever
+    holds the lock checks the cache and fills it; the others wait, then find it filled.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    with FileLock(directory.parent / f".{directory.name}.lock"):
+        yield directory
+
+
 def _formats_key(fs: FormatSet, dsp: str | None = None) -> str:
     """Cache key of an export: the format set, the DSP flavour and the RTL sources (an RTL edit
     must not reuse old Verilog)."""
@@ -100,9 +118,9 @@ def verilog_sources(fs: FormatSet, dsp: str | None = None) -> Path:
     from .export import export_verilog
 
     directory = BUILD_ROOT / _formats_key(fs, dsp) / "verilog"
-    stamp = directory / "interface.json"
-    if not stamp.exists():
-        export_verilog(fs, directory, platform=DspPlatform(dsp) if dsp else None)
+    with build_lock(directory):
+        if not (directory / "interface.json").exists():  # written last: the export is complete
+            export_verilog(fs, directory, platform=DspPlatform(dsp) if dsp else None)
     return directory
 
 
@@ -157,9 +175,10 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     if sim == "verilator" and waves:
         build_args += ["--trace-structs"]  # cocotb adds --trace (VCD; FST would need liblz4 headers)
     try:
-        runner.build(sources=[*files, *PRIMITIVE_MODELS.get(dsp, [])], hdl_toplevel=toplevel, build_dir=build_dir,
-                     build_args=build_args, timescale=("1ns", "1ps"), waves=waves, always=False, verbose=False,
-                     log_file=log_file)
+        with build_lock(build_dir):
+            runner.build(sources=[*files, *PRIMITIVE_MODELS.get(dsp, [])], hdl_toplevel=toplevel,
+                         build_dir=build_dir, build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
+                         always=False, verbose=False, log_file=log_file)
     except RuntimeError as exc:
         raise SimulatorError(f"building {toplevel} for {sim} failed ({exc}); see {log_file or build_dir}") from None
     started = time.perf_counter()

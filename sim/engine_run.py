@@ -26,7 +26,7 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
 from golden_model.fixed.engine_image import EngineCapacity, EngineImage, build_image
 
-from .cocotb_support import BUILD_ROOT, _formats_key, run_bench
+from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
@@ -109,19 +109,20 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
     directory = (BUILD_ROOT / _formats_key(fs, dsp) / "engine"
                  / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}")
     exported = directory / f"{ENGINE_MODULE}.v"
-    if not exported.exists():
-        export_engine(fs, capacity, directory, platform=DspPlatform(dsp) if dsp else None)
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
     key = hashlib.sha256(repr(build_flags(simulator)).encode()).hexdigest()[:8]
     copy = directory / f"{simulator}-source-{key}"
-    copy.mkdir(exist_ok=True)
-    text = exported.read_text()
-    for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", simulation_harness(text))):
-        if not (copy / name).exists() or (copy / name).read_text() != content:
-            (copy / name).write_text(content)
-    for model in PRIMITIVE_MODELS.get(dsp, []):
-        if not (copy / model.name).exists() or (copy / model.name).read_bytes() != model.read_bytes():
-            shutil.copyfile(model, copy / model.name)
+    with build_lock(directory):
+        if not exported.exists():
+            export_engine(fs, capacity, directory, platform=DspPlatform(dsp) if dsp else None)
+        copy.mkdir(exist_ok=True)
+        text = exported.read_text()
+        for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", simulation_harness(text))):
+            if not (copy / name).exists() or (copy / name).read_text() != content:
+                (copy / name).write_text(content)
+        for model in PRIMITIVE_MODELS.get(dsp, []):
+            if not (copy / model.name).exists() or (copy / model.name).read_bytes() != model.read_bytes():
+                shutil.copyfile(model, copy / model.name)
     return copy
 
 
