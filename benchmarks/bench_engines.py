@@ -10,7 +10,9 @@ Measures, in one run (ratios are what to compare on a shared machine):
     edge vectors recomputed for the measurement): the baseline the engine
     must at least match;
   * one iteration of the bit-exact fixed-point golden model (`--engine
-    fixed`: force pass, E_S/E_C, step generator, integrate pass).
+    fixed`: force pass, E_S/E_C, step generator, integrate pass);
+  * the SpringflatEngine's memory images of that problem (`build_image`:
+    what the host driver loads over the bus).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 
 from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.engine import FixedEngine, prepare
+from golden_model.fixed.engine_image import EngineCapacity, build_image
 from golden_model.layouts import pca_layout, tutte_layout
 from golden_model.mesh import Mesh, signed_areas_2d
 from golden_model.reference import FlattenParams, SpringModel, _Jacobi, variable_step
@@ -96,7 +99,10 @@ def main() -> None:
         engine.measure()
 
     plain = PlainNumpyStep(mesh, model, p0, params.spring)
-    fixed = FixedEngine(prepare(mesh, p0, params, FormatSet.load(args.formats)), SaturationCounter())
+    problem = prepare(mesh, p0, params, FormatSet.load(args.formats))
+    fixed = FixedEngine(problem, SaturationCounter())
+    capacity = EngineCapacity(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)
+    t_image = best_of(lambda: build_image(problem, capacity), 3)
 
     def fixed_iteration():
         fixed.advance(fixed.step_size(fixed.measure()))
@@ -114,6 +120,7 @@ def main() -> None:
     print(f"| float engine, jacobi iteration | {1e3 * t_engine:.1f} ms | {e / t_engine / 1e6:.1f} M |")
     print(f"| plain numpy (np.add.at) iteration | {1e3 * t_plain:.1f} ms | {e / t_plain / 1e6:.1f} M |")
     print(f"| fixed-point engine ({args.formats}) iteration | {1e3 * t_fixed:.1f} ms | {e / t_fixed / 1e6:.1f} M |")
+    print(f"| SpringflatEngine memory images (build_image) | {1e3 * t_image:.1f} ms | |")
     print(f"float engine / plain numpy time: {t_engine / t_plain:.2f}; fixed / float engine time: {t_fixed / t_engine:.2f}")
 
 

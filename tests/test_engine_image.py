@@ -1,7 +1,6 @@
 """The engine's memory images and image-driven controller (golden_model.fixed.engine_image)."""
 
 import dataclasses
-import time
 
 import numpy as np
 import pytest
@@ -224,13 +223,21 @@ def test_start_answers_bad_run_constants_with_a_result_code(change, answer):
         np.testing.assert_array_equal(result.nodes, image.nodes)
 
 
-def test_a_90000_vertex_mesh_images_in_well_under_a_second():
+def test_a_90000_vertex_mesh_images_at_a_large_capacity():
+    """17-bit vertex indices and 20-bit entry indices: the vectorised packer round-trips a 90,000-vertex
+    mesh (how fast it does so is in ``benchmarks/bench_engines.py``, not here)."""
     uv = grid_uv(300, 300, 299.0, 299.0)
     mesh = Mesh(np.column_stack([uv, 0.1 * np.sin(uv[:, 0] / 20)]), grid_faces(300, 300))
     problem = prepare(mesh, uv - 149.5, FlattenParams(dynamics="momentum"), DEFAULT)
     capacity = EngineCapacity(1 << 17, 1 << 20, 1 << 18)
-    start = time.perf_counter()
     image = build_image(problem, capacity)
-    elapsed = time.perf_counter() - start
     assert image.nodes.shape == (90_000, 5) and image.entries.shape[0] == len(problem.stream.neighbour)
-    assert elapsed < 0.5, elapsed
+    positions, _, inv_mass, _ = decode_nodes(image.nodes, DEFAULT, capacity)
+    np.testing.assert_array_equal(positions, problem.initial_positions)
+    np.testing.assert_array_equal(inv_mass, problem.stream.inv_mass)
+    indptr, neighbour, rest, _ = decode_entries(image.entries, DEFAULT, capacity, barrier=True)
+    for got, want in ((indptr, problem.stream.indptr), (neighbour, problem.stream.neighbour),
+                      (rest, problem.stream.rest)):
+        np.testing.assert_array_equal(got, want)
+    faces, _ = decode_triangles(image.triangles, DEFAULT, capacity)
+    np.testing.assert_array_equal(faces, mesh.faces)
