@@ -15,13 +15,18 @@ demo: $(STAMP)
 	$(VENV)/bin/springflat flatten surf1 --out demo/surf1.obj --history demo/surf1.csv --plot demo/surf1.png
 	@echo "wrote demo/surf1.obj, demo/surf1.csv, demo/surf1.png"
 
+# One pytest worker per core (pytest-xdist); a test file stays on one worker, so its module
+# fixtures run once. Exports and simulator builds shared across files are cached under build/
+# behind file locks (sim.cocotb_support.build_lock).
+PYTEST := $(VENV)/bin/python -m pytest -n auto --dist loadfile
+
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest
+	$(PYTEST)
 
 # The edit-test loop: everything but the tests marked slow (simulators, synthesis, sweeps).
 # CI runs `make test`, all of them.
 test-fast: $(STAMP)
-	$(VENV)/bin/python -m pytest -m "not slow"
+	$(PYTEST) -m "not slow"
 
 paper: $(STAMP)
 	$(VENV)/bin/springflat paper --out paper-report
