@@ -267,7 +267,11 @@ def _acceptance(mesh, p0, params):
     assert abs(fixed.iterations - reference.iterations) <= 1
     assert abs(fixed.final.area_error - reference.final.area_error) <= 1e-3
     assert abs(fixed.final.shape_error - reference.final.shape_error) <= 1e-3
-    assert fixed.extra["saturations"] == 0, fixed.extra["saturation_events"]
+    # the one saturation allowed is the error measures' own: an E_S or E_C of 1 or more (error is u0.F),
+    # once for every measurement at which the float reference's is
+    at_one = {name: int((np.asarray(values) >= 1).sum()) for name, values in
+              (("area_error", reference.history.area_error), ("shape_error", reference.history.shape_error))}
+    assert fixed.extra["saturation_events"] == {name: n for name, n in at_one.items() if n}
     return reference, fixed
 
 

@@ -89,20 +89,23 @@ class Reciprocal:
             mantissa, shift = mantissa >> 1, shift - 1
         return cls(mantissa, shift)
 
-    def normalise(self, sum_raw: int, fmt: Format, rounding: Rounding) -> int:
+    def normalise(self, sum_raw: int, fmt: Format, rounding: Rounding, counter: SaturationCounter | None = None,
+                  name: str | None = None) -> int:
         """``sum/total`` raw in ``fmt`` (``sum >= 0`` at the fraction bits ``total`` had).
 
         The product ``sum·mantissa`` is exact (a Python int: ``error_acc`` times ``reciprocal``
         is 64 bits in the default set, too wide for int64). The rounding reads only the
         bits from the result's half-lsb up and whether any bit below is set, so those are
         kept (the lowest as a sticky bit) and rounded by :func:`requantize` as everywhere
-        else; a value past ``fmt``'s range saturates the same at any size.
+        else; a value past ``fmt``'s range saturates the same at any size, counted under
+        ``name`` (an error measure of 1 or more in ``error`` = u0.F: E_S of a layout whose
+        area is off by its whole area).
         """
         drop = self.shift - fmt.frac_bits  # >= 2: reciprocal has more fraction bits than fmt
         product = int(sum_raw) * self.mantissa
         kept = (product >> (drop - 2)) | int(product & ((1 << (drop - 2)) - 1) != 0)
         kept = min(kept, (fmt.raw_max + 1) << 2)
-        return int(requantize(np.int64(kept), fmt.frac_bits + 2, fmt, rounding, SAT))
+        return int(requantize(np.int64(kept), fmt.frac_bits + 2, fmt, rounding, SAT, counter, name))
 
 
 @dataclass(frozen=True, eq=False)
@@ -389,8 +392,10 @@ def area_sum(fs: FormatSet, faces: np.ndarray, face_areas: np.ndarray, positions
 
 def area_error(fs: FormatSet, reciprocal: Reciprocal, faces: np.ndarray, face_areas: np.ndarray,
                positions: np.ndarray, counter: SaturationCounter | None = None) -> int:
-    """``E_S`` raw [error]: :func:`area_sum` times ``reciprocal`` (1/ΣA)."""
-    return reciprocal.normalise(area_sum(fs, faces, face_areas, positions, counter), fs.error, fs.rounding)
+    """``E_S`` raw [error]: :func:`area_sum` times ``reciprocal`` (1/ΣA); saturating at ``error``'s
+    maximum counts as ``area_error``."""
+    return reciprocal.normalise(area_sum(fs, faces, face_areas, positions, counter), fs.error, fs.rounding,
+                                counter, "area_error")
 
 
 def length_sum(fs: FormatSet, error_sums: np.ndarray, counter: SaturationCounter | None = None) -> int:
@@ -402,8 +407,10 @@ def length_sum(fs: FormatSet, error_sums: np.ndarray, counter: SaturationCounter
 
 def shape_error(fs: FormatSet, reciprocal: Reciprocal, error_sums: np.ndarray,
                 counter: SaturationCounter | None = None) -> int:
-    """``E_C`` raw [error]: :func:`length_sum` times ``reciprocal`` (1/(2Σd))."""
-    return reciprocal.normalise(length_sum(fs, error_sums, counter), fs.error, fs.rounding)
+    """``E_C`` raw [error]: :func:`length_sum` times ``reciprocal`` (1/(2Σd)); saturating at ``error``'s
+    maximum counts as ``shape_error``."""
+    return reciprocal.normalise(length_sum(fs, error_sums, counter), fs.error, fs.rounding, counter,
+                                "shape_error")
 
 
 def folded_count(problem: FixedProblem, positions: np.ndarray) -> int:
