@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import math
 
@@ -163,6 +164,21 @@ def test_records_match_an_independent_run(surf1_cases):
         assert rec.max_position_error == pytest.approx(err.max())
         assert rec.rms_position_error == pytest.approx(math.sqrt(np.mean(err**2)))
     assert summary.meets  # the default preset is designed for 1e-3
+
+
+def test_error_measure_clamps_shared_with_the_float_run_do_not_fail_the_target():
+    """Surf1 from Tutte, variable step: the float run's E_S passes 1 at 11 measurements, and the default
+    formats hold those E_S just below 1 (11 ``area_error`` events). They are the clamp the step applies
+    anyway, so the record meets the target; an event the float run does not share would not."""
+    (case,) = build_cases(["surf1"], ["tutte"], ["variable"])
+    d = FormatSet.preset("default")
+    st = Study([case], AccuracyTarget(1e-3))
+    (summary,) = st.evaluate([Config("base", d, "base")])
+    (rec,) = st.records(Config("base", d, "base"))
+    assert (rec.saturations, rec.measure_clamps, rec.saturated_signals) == (11, 11, "area_error:11")
+    assert summary.meets and summary.saturations == 0
+    assert AccuracyTarget(1e-3).failures(dataclasses.replace(rec, measure_clamps=10)) == [
+        "1 saturations (area_error:11)"]
 
 
 def test_too_narrow_configuration_misses_the_target(surf1_cases):
