@@ -19,7 +19,7 @@ unit is idle, ``o`` holds its result (a register, independent of ``o.ready``) un
 from __future__ import annotations
 
 from amaranth.hdl import Cat, Module, Mux, Signal, Value, signed, unsigned
-from amaranth.lib import stream, wiring
+from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
@@ -27,7 +27,7 @@ from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, energy_frac_bits
 from golden_model.fixed.engine_image import ENERGY_TOL_INT_BITS
 
 from .fixedpoint import clamp, shape_of, shift_round
-from .layouts import energy_result_layout, energy_sums_layout, normalise_layout
+from .layouts import energy_result_layout, energy_sums_layout, normalise_layout, saturations_shape
 
 __all__ = ["shift_add_step", "Normaliser", "EnergyCheck", "BetaDivider"]
 
@@ -70,6 +70,9 @@ class Normaliser(wiring.Component):
     Parameters
     ----------
     fs : :class:`~golden_model.fixed.FormatSet` or preset name
+    saturations : :class:`bool`
+        Also report whether the result saturated (an error of 1 or more: the golden model counts
+        it, as ``area_error`` or ``shape_error``).
 
     Members
     -------
@@ -79,8 +82,9 @@ class Normaliser(wiring.Component):
         at least ``F + 2``, as ``normalise`` needs: every ``Reciprocal.of(total)`` is if
         ``reciprocal`` has at least two more fraction bits than ``error`` (7 more in both presets),
         else every one with ``total ≥ 2``.
-    o : ``Out(stream.Signature(shape_of(fs.error)))``
-        The normalised error.
+    o : ``Out(stream.Signature(Normaliser.output_layout(fs, saturations)))``
+        The normalised error: ``shape_of(fs.error)``; with ``saturations``, a struct of ``error``
+        and ``saturations`` (1 bit: the result saturated).
 
     Contract
     --------
@@ -92,17 +96,25 @@ class Normaliser(wiring.Component):
     transfer. ``o.valid`` and ``o.payload`` are registers.
     """
 
-    def __init__(self, fs: FormatSet | str):
+    def __init__(self, fs: FormatSet | str, *, saturations: bool = False):
         fs = _check_fs("Normaliser", fs)
         if fs.reciprocal.width < 2:
             raise ValueError(f"Normaliser needs a reciprocal of at least 2 bits (the shift steps are "
                              f"worked out during the multiply steps), not {fs.reciprocal.width}")
         self.fs = fs
+        self.saturations = bool(saturations)
         self.product_bits = fs.error_acc.width + fs.reciprocal.width + 1
         super().__init__({
             "i": In(stream.Signature(normalise_layout(fs))),
-            "o": Out(stream.Signature(shape_of(fs.error))),
+            "o": Out(stream.Signature(self.output_layout(fs, self.saturations))),
         })
+
+    @staticmethod
+    def output_layout(fs: FormatSet, saturations: bool = False):
+        """Payload of ``o``: the error raw [error]; with ``saturations``, ``error`` and ``saturations``."""
+        if not saturations:
+            return shape_of(fs.error)
+        return data.StructLayout({"error": shape_of(fs.error), "saturations": saturations_shape(1)})
 
     def shift_steps(self, shift: int) -> int:
         """Clocks the unit spends shifting the product right for a reciprocal's ``shift``."""
@@ -131,7 +143,7 @@ class Normaliser(wiring.Component):
         kept = Cat(product[0] | sticky, product[1:])
         rounded_value = shift_round(kept, 2, fs.rounding)
         rounded = Signal.like(rounded_value, name="rounded", reset_less=True)
-        error, _ = clamp(rounded, fs.error)
+        error, saturated = clamp(rounded, fs.error)
 
         # The states as one flip-flop each (one-hot): the product register's next value is chosen by
         # a flag, not a decode of a state code (the decode into the 65-bit multiplexer's select was
@@ -164,7 +176,11 @@ class Normaliser(wiring.Component):
         with m.If(state["round"]):
             m.d.sync += [rounded.eq(rounded_value), *goto("saturate")]
         with m.If(state["saturate"]):
-            m.d.sync += [self.o.payload.eq(error), self.o.valid.eq(1), *goto("done")]
+            if self.saturations:
+                m.d.sync += [self.o.payload.error.eq(error), self.o.payload.saturations.eq(saturated)]
+            else:
+                m.d.sync += self.o.payload.eq(error)
+            m.d.sync += [self.o.valid.eq(1), *goto("done")]
         with m.If(state["done"] & self.o.ready):
             m.d.sync += [self.o.valid.eq(0), *goto("idle")]
         return m

@@ -69,6 +69,11 @@ class SpringflatEngine(wiring.Component):
     memories).
     """
 
+    #: Clocks the check phase waits after the math phase's last result: the saturation count's
+    #: pipeline (event, pair sums, their sum, the count) and the registered limit compare, so a
+    #: normaliser's saturation is counted before the limit is tested, as in ``run_image``.
+    CHECK_SETTLE_CLOCKS = 3
+
     def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH):
         if isinstance(fs, str):
             fs = FormatSet.preset(fs)
@@ -109,8 +114,8 @@ class SpringflatEngine(wiring.Component):
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True)
         m.submodules.integrator = integ = Integrator(fs, saturations=True)
         m.submodules.area = area = AreaError(fs)
-        m.submodules.norm_length = norm_length = Normaliser(fs)
-        m.submodules.norm_area = norm_area = Normaliser(fs)
+        m.submodules.norm_length = norm_length = Normaliser(fs, saturations=True)
+        m.submodules.norm_area = norm_area = Normaliser(fs, saturations=True)
         m.submodules.energy = energy = EnergyCheck(fs, cap.entries)
         # k counts iterations since the last restart, so it never exceeds ITERATIONS: as wide, it never wraps
         m.submodules.beta = beta = BetaDivider(fs, k_bits=ITERATION_BITS)
@@ -545,9 +550,9 @@ class SpringflatEngine(wiring.Component):
             with m.If(unit.i.valid & unit.i.ready):
                 m.d.sync += unit.i.valid.eq(0)
         with m.If(norm_length.o.valid):
-            m.d.sync += [shape_error_raw.eq(norm_length.o.payload), math_pending[0].eq(0)]
+            m.d.sync += [shape_error_raw.eq(norm_length.o.payload.error), math_pending[0].eq(0)]
         with m.If(norm_area.o.valid):
-            m.d.sync += [area_error_raw.eq(norm_area.o.payload), math_pending[1].eq(0)]
+            m.d.sync += [area_error_raw.eq(norm_area.o.payload.error), math_pending[1].eq(0)]
         with m.If(energy.o.valid):
             m.d.sync += [values["energy"].eq(energy.o.payload.energy), settled.eq(energy.o.payload.settled),
                          math_pending[2].eq(0)]
@@ -606,10 +611,12 @@ class SpringflatEngine(wiring.Component):
         # SATURATIONS: every event the golden model counts, added as the units report them, stopping at
         # its maximum. The force pass's, integrate stage's and step generator's per beat; the area pass's
         # at its end; the E_C sum's (length_sum) when the force pass ends; S's (power_acc) when an
-        # integrate pass ends (momentum). Each event lands in a register, the pairs' sums in three, their
-        # sum in another (six counts summed in one clock were d06964b's critical path, 118.4 MHz), then
-        # the count: three clocks late, long before the check phase reads it (the math phase alone
-        # takes more than the reciprocal's width in clocks).
+        # integrate pass ends (momentum); E_S's and E_C's (an error of 1 or more) as the normalisers
+        # answer. Each event lands in a register, the pairs' sums in four, their sum in another (six
+        # counts summed in one clock were d06964b's critical path, 118.4 MHz), then the count: a unit's
+        # event is in SATURATIONS four clocks after the unit reports it, and in diverged_q one later, so
+        # the math phase holds the check phase back until the normalisers' events are in
+        # (CHECK_SETTLE_CLOCKS).
         events = [
             Mux(force.o.valid, force.o.payload.saturations, 0),
             Mux(integ.o.valid & running, integ.o.payload.saturations, 0),
@@ -617,6 +624,8 @@ class SpringflatEngine(wiring.Component):
             Mux(area_done, area.saturations.face_edge + area.saturations.face_area + area.saturations.area_sum, 0),
             force_done & (length_sum > fs.error_acc.raw_max),
             integrate_done & mode_momentum & ((power_sum > fs.power_acc.raw_max) | (power_sum < fs.power_acc.raw_min)),
+            norm_length.o.valid & norm_length.o.payload.saturations,
+            norm_area.o.valid & norm_area.o.payload.saturations,
         ]
         event_regs = [Signal(len(Value.cast(e)), name=f"saturation_event{k}") for k, e in enumerate(events)]
         m.d.sync += [r.eq(e) for r, e in zip(event_regs, events)]
@@ -678,7 +687,12 @@ class SpringflatEngine(wiring.Component):
                          area_clear.eq(1)]
         with m.If(go & in_phase["area"] & area_done):
             m.d.sync += [fetch_area.eq(0), *move("area", "math"), norm_area.i.valid.eq(1)]
-        with m.If(go & in_phase["math"] & (math_pending == 0)):
+        # the last result's clock t clears its math_pending bit (seen at t+1); its event reaches diverged_q
+        # at t+5: the check phase starts then, CHECK_SETTLE_CLOCKS after math_pending reads 0
+        math_settle = [Signal(name=f"math_settle{k}") for k in range(self.CHECK_SETTLE_CLOCKS)]
+        m.d.sync += [math_settle[0].eq(in_phase["math"] & (math_pending == 0)),
+                     *(math_settle[k].eq(math_settle[k - 1]) for k in range(1, len(math_settle)))]
+        with m.If(go & in_phase["math"] & math_settle[-1]):
             m.d.sync += move("math", "check")
         with m.If(go & in_phase["check"]):
             # as run_image: the saturation limit first, then the stop rule (neither after the first

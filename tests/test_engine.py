@@ -257,6 +257,25 @@ def test_area_and_shape_sum_saturations_are_counted(dynamics):
     assert_same_run(read_back, expected)
 
 
+def test_error_measure_saturations_are_counted_before_the_limit_is_tested():
+    """A layout twice the mesh's size: E_S and E_C are 1 or more at every measurement, the only events
+    (the normalisers saturate; two per measurement). Counted as the golden model counts them, and with
+    a limit of 4 the run stops as diverged after its one iteration, not at N_max: the check phase waits until the
+    normalisers' events are in the count (without that wait it saw 3 and went on). 72 triangles: the area
+    normaliser answers after the energy check, so its event is the math phase's last."""
+    params = FlattenParams(density="auto", max_iter=1)
+    mesh, capacity = dome_grid(7), EngineCapacity(64, 512, 128)
+    image = build_image(prepare(mesh, 2.0 * initial_layout(mesh, "tutte"), params, FS), capacity)
+    expected = run_image(image, FS)
+    assert (expected.saturations, expected.status) == (4, "max-iterations")
+    limited = dataclasses.replace(image, constants={**image.constants, "saturation_limit": 4})
+    expected_limited = run_image(limited, FS)
+    assert (expected_limited.status, expected_limited.iterations) == ("diverged", 1)
+    for img, exp in ((image, expected), (limited, expected_limited)):
+        _, read_back = run_on_engine(SpringflatEngine(FS, capacity), img)
+        assert_same_run(read_back, exp)
+
+
 def test_bus_answers_take_the_documented_clocks():
     """docs/engine.md: a register answers 4 clocks after ``stb`` rises, a memory word 9 (read or write),
     an unmapped word's ``err`` 4; what is written reads back."""

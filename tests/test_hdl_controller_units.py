@@ -16,7 +16,7 @@ import pytest
 from amaranth.back import verilog
 from amaranth.hdl import UnusedElaboratable
 
-from golden_model.fixed import FormatSet
+from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, Reciprocal, StopRule, energy_raw, momentum_beta_raw
 from golden_model.fixed.engine_image import ITERATION_BITS
 from hdl.controller_units import BetaDivider, EnergyCheck, Normaliser
@@ -74,23 +74,36 @@ def normalise_cases(fs, rng, n):
     return [s for s, _ in corners] + sums, [t for _, t in corners] + totals
 
 
-def check_normaliser(fs, sums, totals, **kw):
-    dut = Normaliser(fs)
+def check_normaliser(fs, sums, totals, saturations=False, **kw):
+    """The unit's errors (and with ``saturations`` its saturation flags) against ``Reciprocal.normalise``
+    and the events it counts; returns the unit, the run, the reciprocals, the golden errors and flags."""
+    dut = Normaliser(fs, saturations=saturations)
     recips = [Reciprocal.of(t, fs.reciprocal.width) for t in totals]
     shape = dut.i.payload.shape()
     beats = [pack(shape, {"sum": s, "mantissa": r.mantissa, "shift": r.shift}) for s, r in zip(sums, recips)]
     run = run_items(dut, beats, dut.cycles(max(r.shift for r in recips)), **kw)
-    want = [r.normalise(s, fs.error, fs.rounding) for s, r in zip(sums, recips)]
-    first_mismatch("error", run.outputs, want, lambda i: f"sum={sums[i]} total={totals[i]} {recips[i]}")
-    return dut, run, recips, want
+    counters = [SaturationCounter() for _ in sums]
+    want = [r.normalise(s, fs.error, fs.rounding, c, "error") for s, r, c in zip(sums, recips, counters)]
+    flags = [c.total for c in counters]
+    inputs = lambda i: f"sum={sums[i]} total={totals[i]} {recips[i]}"
+    if saturations:
+        out = unpack_beats(dut.o.payload.shape(), run.outputs)
+        first_mismatch("error", list(out["error"]), want, inputs)
+        first_mismatch("saturations", list(out["saturations"]), flags, inputs)
+    else:
+        first_mismatch("error", run.outputs, want, inputs)
+    return dut, run, recips, want, flags
 
 
 @pytest.mark.parametrize("preset", PRESETS)
-def test_normaliser_random_totals_with_stalls(preset):
+@pytest.mark.parametrize("saturations", [False, True])
+def test_normaliser_random_totals_with_stalls(preset, saturations):
     fs = FormatSet.preset(preset)
     sums, totals = normalise_cases(fs, np.random.default_rng(1), 400)
-    _, _, _, want = check_normaliser(fs, sums, totals, seed=2, p_valid=0.7, p_ready=0.6)
+    _, _, _, want, flags = check_normaliser(fs, sums, totals, saturations, seed=2, p_valid=0.7, p_ready=0.6)
     assert fs.error.raw_max in want and 0 in want  # saturated and zero results were among them
+    # E ≥ 1 saturates; a result that is error's maximum without saturating (E just below 1) is not an event
+    assert 0 < sum(flags) < sum(w == fs.error.raw_max for w in want)
 
 
 @pytest.mark.parametrize("rounding", ["nearest_even", "floor"])
@@ -115,7 +128,7 @@ def test_normaliser_cycles(preset):
     fs = FormatSet.preset(preset)
     totals = [2, 1000, 1 << 30, (1 << 62) + 5]
     sums = [1, 500, 1 << 29, 1 << 33]
-    dut, run, recips, _ = check_normaliser(fs, sums, totals)
+    dut, run, recips, _, _ = check_normaliser(fs, sums, totals)
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.cycles(r.shift) for r in recips]
     assert [dut.shift_steps(r.shift) for r in recips][-1] == dut.product_bits  # the capped shift
     assert run.in_cycles[1:] == [o + 1 for o in run.out_cycles[:-1]]
