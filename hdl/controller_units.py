@@ -226,7 +226,7 @@ class EnergyCheck(wiring.Component):
     One item at a time: ``i.ready`` is high while idle. ``latency`` clock edges from the input
     transfer to the output transfer when ``o.ready`` is high: ``len(square_sum)`` steps of
     ``Σe²·(3·½C)``, one for ``E``, ``energy_bits`` steps of ``ε·E_prev`` (with ``|E − E_prev|``
-    alongside), one for the comparison and the output transfer. ``o.valid`` and ``o.payload``
+    alongside), one for the comparison, one for the output register and the output transfer. ``o.valid`` and ``o.payload``
     are registers. The adders are as wide as ``3·½C``, ``ε``, and (one clock each) ``E``.
     """
 
@@ -248,7 +248,7 @@ class EnergyCheck(wiring.Component):
                    + ((2 * ((1 << self.barrier_bits) - 1)) << self.barrier_shift))
         self.energy_bits = largest.bit_length()
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
-        self.latency = self.square_bits + self.energy_bits + 3
+        self.latency = self.square_bits + self.energy_bits + 4
         super().__init__({
             "i": In(stream.Signature(sums)),
             "o": Out(stream.Signature(energy_result_layout(self.energy_bits))),
@@ -275,7 +275,8 @@ class EnergyCheck(wiring.Component):
 
         total = springs[:self.spring_factor_bits + self.square_bits].shift_left(self.springs_shift) + \
                 barrier.shift_left(1 + self.barrier_shift)
-        settled = Mux(first, 0, Mux(previous_zero, energy_zero, change <= allowed[ENERGY_TOL_FRAC_BITS:]))
+        within = Signal(reset_less=True)  # |E − E_prev| ≤ (ε·E_prev) >> 40, registered: read a clock after the last step
+        settled = Mux(first, 0, Mux(previous_zero, energy_zero, within))
 
         # Its phases as flip-flops of their own, no state code (as BetaDivider: an FSM's state, which
         # also reaches the engine's phase machine through ``i.ready``, fanned out to every wide register
@@ -283,8 +284,8 @@ class EnergyCheck(wiring.Component):
         # values a start needs), so ``i.ready`` reaches only the phase flip-flops.
         idle = Signal(init=1)
         busy = Signal()
-        in_springs, in_energy, in_tolerance, in_compare = (Signal(name=f"in_{n}") for n in
-                                                           ("springs", "energy", "tolerance", "compare"))
+        in_springs, in_energy, in_tolerance, in_within, in_compare = (
+            Signal(name=f"in_{n}") for n in ("springs", "energy", "tolerance", "within", "compare"))
         last = Signal()  # the springs or tolerance phase's last step
         m.d.comb += self.i.ready.eq(idle)
         with m.If(self.i.valid & idle):
@@ -312,10 +313,22 @@ class EnergyCheck(wiring.Component):
             # magnitude: each a carry chain as wide as E, one per clock
             m.d.sync += [allowed.eq(shift_add_step(allowed, tolerance, self.energy_bits)),
                          difference.eq(energy - previous),
-                         change.eq(Mux(difference < 0, -difference, difference)),
-                         previous_zero.eq(previous == 0), energy_zero.eq(energy == 0)]
+                         change.eq(Mux(difference < 0, -difference, difference))]
             with m.If(last):
-                m.d.sync += [in_tolerance.eq(0), in_compare.eq(1)]
+                m.d.sync += [in_tolerance.eq(0), in_within.eq(1)]
+        # the E-wide comparison in a clock of its own, free-running (from ε·E_prev through the compare
+        # into settled's output register was the energy check's longest path at 9740e43)
+        m.d.sync += within.eq(change <= allowed[ENERGY_TOL_FRAC_BITS:])
+        with m.If(in_within):
+            m.d.sync += [in_within.eq(0), in_compare.eq(1)]
+        # E == 0 and E_prev == 0 in two clocks, free-running: 16-bit pieces, then their AND (the whole
+        # E-wide zero test in one clock, under in_tolerance's enable, was the engine's critical path
+        # at 4338217, 119.3 MHz). E holds still from the energy phase to the compare, E_prev from one
+        # compare to the next, and the tolerance phase takes energy_bits ≥ 2 clocks.
+        for value, zero in ((energy, energy_zero), (previous, previous_zero)):
+            pieces = [Signal(name=f"{zero.name}_{k}", reset_less=True) for k in range(0, len(value), 16)]
+            m.d.sync += [piece.eq(value[16 * k:16 * (k + 1)] == 0) for k, piece in enumerate(pieces)]
+            m.d.sync += zero.eq(Cat(*pieces).all())
         with m.If(in_compare):
             m.d.sync += [self.o.payload.energy.eq(energy), self.o.payload.settled.eq(settled),
                          self.o.valid.eq(1), previous.eq(energy), in_compare.eq(0)]
