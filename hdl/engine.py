@@ -716,20 +716,27 @@ class SpringflatEngine(wiring.Component):
         # until the divider takes the request, the clock after; they and ITERATIONS move on a
         # registered pulse the clock after their phase's block.
         # restart_pending's decision too (control → restart_pending through two far LUTs was d40a96c's
-        # critical path): every pulse, and S's sign, is a flip-flop of its own.
+        # critical path): every pulse, and S's sign, is a flip-flop of its own, and restart_pending is
+        # cleared by a pulse of its own (restart_clear: the launch's or the step's), not by the pulses
+        # that move momentum_k: a LUT that ABC shared between momentum_k's 32-bit update and
+        # restart_pending's enable, placed beside momentum_k, was 1db0307's critical path (127.2 and
+        # 126.7 MHz, seeds 1 and 2).
         m.d.sync += beta.i.payload.eq(Mux(restart_pending, 0, momentum_k))
-        launch_pulse, step_pulse, iterate_pulse, restart_pulse = Signal(), Signal(), Signal(), Signal()
-        power_negative = Signal()
-        m.d.sync += [launch_pulse.eq(in_phase["start"] & first_measure),
-                     step_pulse.eq(go & in_phase["step"] & mode_momentum),
+        launch_pulse, step_pulse, iterate_pulse, restart_pulse, restart_clear, power_negative = (
+            Signal(name=n) for n in ("launch_pulse", "step_pulse", "iterate_pulse", "restart_pulse",
+                                     "restart_clear", "power_negative"))
+        launching = in_phase["start"] & first_measure
+        stepping = go & in_phase["step"] & mode_momentum
+        m.d.sync += [launch_pulse.eq(launching), step_pulse.eq(stepping), restart_clear.eq(launching | stepping),
                      iterate_pulse.eq(go & in_phase["integrate"] & integrate_done),
                      restart_pulse.eq(go & in_phase["integrate"] & integrate_done & mode_momentum & ~step_was_restart),
                      power_negative.eq(power_sum < 0)]
         with m.If(launch_pulse):  # a run's start: no momentum yet
-            m.d.sync += [momentum_k.eq(0), restart_pending.eq(0)]
+            m.d.sync += momentum_k.eq(0)
         with m.If(step_pulse):
-            m.d.sync += [momentum_k.eq(Mux(restart_pending, 1, momentum_k + 1)), restart_pending.eq(0),
-                         step_was_restart.eq(restart_pending)]
+            m.d.sync += [momentum_k.eq(Mux(restart_pending, 1, momentum_k + 1)), step_was_restart.eq(restart_pending)]
+        with m.If(restart_clear):
+            m.d.sync += restart_pending.eq(0)
         with m.If(restart_pulse):
             m.d.sync += restart_pending.eq(power_negative)
         with m.If(iterate_pulse):
