@@ -189,6 +189,20 @@ class SpringflatEngine(wiring.Component):
         n_vertices, n_entries, n_triangles = values["vertices"], values["entries"], values["triangles"]
         mode_momentum, mode_fixed = values["momentum"], values["fixed_step"]
 
+        # The run constants the datapath units read, each through a copy register of its own: the
+        # register file sits by the bus decode, the units across the die, and a constant's route into a
+        # unit's first stage was a critical path (MODE.barrier into the force pass's entry register,
+        # 7.4 ns of routing at 4a4a5ea). The copy follows its register a clock later; the host writes
+        # the constants a bus cycle or more before START, so every pass sees the values it wrote.
+        def held(name):
+            copy = Signal.like(values[name], name=f"{name}_held")
+            m.d.sync += copy.eq(values[name])
+            return copy
+
+        unit_constants = {name: held(name) for name in (
+            "barrier", "momentum", "half_spring", "damping", "area_reciprocal", "area_shift",
+            "length_reciprocal", "length_shift", "tol_energy")}
+
         # phases of a run
         PH = {name: i for i, name in enumerate((
             "start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain"))}
@@ -231,9 +245,9 @@ class SpringflatEngine(wiring.Component):
             force.i.payload.position.eq(e6_pi), force.i.payload.neighbour.position.eq(e6_pj),
             force.i.payload.neighbour.rest.eq(e6_entry.rest),
             force.i.payload.barrier.second.eq(e6_pb),
-            force.i.payload.barrier.threshold.eq(Mux(values["barrier"], e6_entry.threshold, 0)),
-            force.i.payload.barrier.gain.eq(Mux(values["barrier"], e6_entry.gain, 0)),
-            force.half_spring.eq(values["half_spring"]), force.barrier.eq(values["barrier"]),
+            force.i.payload.barrier.threshold.eq(Mux(unit_constants["barrier"], e6_entry.threshold, 0)),
+            force.i.payload.barrier.gain.eq(Mux(unit_constants["barrier"], e6_entry.gain, 0)),
+            force.half_spring.eq(unit_constants["half_spring"]), force.barrier.eq(unit_constants["barrier"]),
         ]
         # per-node results: the force memory and the exact sums
         force_out_index = Signal(range(cap.vertices + 1))
@@ -288,8 +302,8 @@ class SpringflatEngine(wiring.Component):
             integ.i.payload.node.inv_mass.eq(n2_wgt.inv_mass),
             integ.i.payload.node.inv_mass_barrier.eq(n2_wgt.inv_mass_barrier),
             integ.i.payload.force.eq(n2_frc.force), integ.i.payload.inside.eq(n2_frc.inside),
-            integ.dt.eq(step_dt), integ.half_dt_sq.eq(step_half), integ.damping.eq(values["damping"]),
-            integ.momentum.eq(mode_momentum),
+            integ.dt.eq(step_dt), integ.half_dt_sq.eq(step_half), integ.damping.eq(unit_constants["damping"]),
+            integ.momentum.eq(unit_constants["momentum"]),
         ]
         node_out_index = Signal(range(cap.vertices + 1))
         power_sum = Signal(signed(fs.power.width + cap.vertices.bit_length()))
@@ -380,7 +394,14 @@ class SpringflatEngine(wiring.Component):
                     for f in r.fields:
                         m.d.sync += values[f.value][f.value_lsb:f.value_lsb + f.width].eq(
                             hs.write_data[f.lsb:f.lsb + f.width])
-        m.d.comb += [read_word.eq(_or_all(read_terms)), read_only.eq(_or_all(read_only_terms))]
+        # The AND-OR over the one-hot select in two clocks: groups of eight registers, each OR landed in
+        # a register of its own, then their OR (one clock from reg_select through the whole tree into
+        # the landed word, 6.4 ns of it routing, was 4a4a5ea's critical path with seed 1)
+        read_groups = [Signal(BUS_WORD_BITS, name=f"read_group{k}", reset_less=True)
+                       for k in range(0, len(read_terms), 8)]
+        m.d.sync += [group.eq(_or_all(read_terms[8 * k:8 * k + 8])) for k, group in enumerate(read_groups)]
+        m.d.comb += read_word.eq(_or_all(read_groups))
+        m.d.sync += read_only.eq(_or_all(read_only_terms))
         # identification values are constants
         for name in ("cap_vertices", "cap_entries", "cap_triangles"):
             m.d.comb += values[name].eq(getattr(cap, name[4:]))
@@ -484,13 +505,14 @@ class SpringflatEngine(wiring.Component):
                 write_regs["tri"][2].eq(bus_writing & (window_q == tri_k)),
             ]
 
-        # bus answers, every one from flip-flops: a register the clock after DEC (its read word and error
-        # landed), an unmapped word (or a memory while running) the same clock, a memory window five
-        # clocks after that
-        reg_answer, refused = Signal(), Signal()
+        # bus answers, every one from flip-flops: a register two clocks after DEC (its read word and error
+        # landed, the word through two clocks of AND-OR), an unmapped word (or a memory while running)
+        # the clock after DEC, a memory window five clocks after that
+        reg_pending, reg_answer, refused = Signal(), Signal(), Signal()
         landed_word = Signal(BUS_WORD_BITS, reset_less=True)
         landed_error = Signal(reset_less=True)
-        m.d.sync += [reg_answer.eq(bus_request & bus_reg_hit), refused.eq(bus_request & ~bus_reg_hit & ~bus_mem),
+        m.d.sync += [reg_pending.eq(bus_request & bus_reg_hit), reg_answer.eq(reg_pending),
+                     refused.eq(bus_request & ~bus_reg_hit & ~bus_mem),
                      landed_word.eq(read_word), landed_error.eq((read_only & hs.write) | ~hs.whole_word)]
         with m.If(reg_answer):
             m.d.comb += [hs.done.eq(1), hs.error.eq(landed_error), hs.data.eq(landed_word)]
@@ -531,19 +553,19 @@ class SpringflatEngine(wiring.Component):
         # are the sums and registers themselves, which hold still from the end of their pass until
         # the unit's result is in (the next pass starts after the math phase).
         m.d.comb += [
-            energy.half_spring.eq(values["half_spring"]),
-            energy.tolerance.eq(tol_energy),
+            energy.half_spring.eq(unit_constants["half_spring"]),
+            energy.tolerance.eq(unit_constants["tol_energy"]),
             norm_length.o.ready.eq(1), norm_area.o.ready.eq(1), energy.o.ready.eq(1), beta.o.ready.eq(1),
             stepgen.o.ready.eq(1),
             area.clear.eq(area_clear),
             norm_length.i.payload.sum.eq(length_total),
-            norm_length.i.payload.mantissa.eq(values["length_reciprocal"]),
-            norm_length.i.payload.shift.eq(values["length_shift"]),
+            norm_length.i.payload.mantissa.eq(unit_constants["length_reciprocal"]),
+            norm_length.i.payload.shift.eq(unit_constants["length_shift"]),
             energy.i.payload.square_sum.eq(square_sum), energy.i.payload.barrier_sum.eq(barrier_sum),
             energy.i.payload.first.eq(first_measure),
             norm_area.i.payload.sum.eq(area.total),
-            norm_area.i.payload.mantissa.eq(values["area_reciprocal"]),
-            norm_area.i.payload.shift.eq(values["area_shift"]),
+            norm_area.i.payload.mantissa.eq(unit_constants["area_reciprocal"]),
+            norm_area.i.payload.shift.eq(unit_constants["area_shift"]),
             stepgen.i.payload.area_error.eq(area_error_raw), stepgen.i.payload.shape_error.eq(shape_error_raw),
         ]
         for unit in (norm_length, norm_area, energy, beta, stepgen):

@@ -277,7 +277,7 @@ def test_error_measure_saturations_are_counted_before_the_limit_is_tested():
 
 
 def test_bus_answers_take_the_documented_clocks():
-    """docs/engine.md: a register answers 4 clocks after ``stb`` rises, a memory word 9 (read or write),
+    """docs/engine.md: a register answers 5 clocks after ``stb`` rises, a memory word 9 (read or write),
     an unmapped word's ``err`` 4; what is written reads back."""
     dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=4)
     rmap = dut.register_map
@@ -301,7 +301,7 @@ def test_bus_answers_take_the_documented_clocks():
     # BusAnswer.clocks counts edges up to the one at which the initiator samples ack/err: one more
     # than the edges after which the target raises it
     raised_after = {name: a.clocks - 1 for name, a in answers.items()}
-    assert raised_after == {"register_write": 4, "register_read": 4, "memory_write": 9, "memory_read": 9,
+    assert raised_after == {"register_write": 5, "register_read": 5, "memory_write": 9, "memory_read": 9,
                             "unmapped": 4}
     assert answers["register_read"].data == 1234 and not answers["register_read"].error
     assert answers["memory_read"].data == 0x5A5A5 and not answers["memory_read"].error
