@@ -226,7 +226,7 @@ class EnergyCheck(wiring.Component):
     One item at a time: ``i.ready`` is high while idle. ``latency`` clock edges from the input
     transfer to the output transfer when ``o.ready`` is high: ``len(square_sum)`` steps of
     ``Σe²·(3·½C)``, one for ``E``, ``energy_bits`` steps of ``ε·E_prev`` (with ``|E − E_prev|``
-    alongside), one for the comparison, one for the output register and the output transfer. ``o.valid`` and ``o.payload``
+    alongside), two for the comparison, one for the output register and the output transfer. ``o.valid`` and ``o.payload``
     are registers. The adders are as wide as ``3·½C``, ``ε``, and (one clock each) ``E``.
     """
 
@@ -248,7 +248,7 @@ class EnergyCheck(wiring.Component):
                    + ((2 * ((1 << self.barrier_bits) - 1)) << self.barrier_shift))
         self.energy_bits = largest.bit_length()
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
-        self.latency = self.square_bits + self.energy_bits + 4
+        self.latency = self.square_bits + self.energy_bits + 5
         super().__init__({
             "i": In(stream.Signature(sums)),
             "o": Out(stream.Signature(energy_result_layout(self.energy_bits))),
@@ -275,7 +275,7 @@ class EnergyCheck(wiring.Component):
 
         total = springs[:self.spring_factor_bits + self.square_bits].shift_left(self.springs_shift) + \
                 barrier.shift_left(1 + self.barrier_shift)
-        within = Signal(reset_less=True)  # |E − E_prev| ≤ (ε·E_prev) >> 40, registered: read a clock after the last step
+        within = Signal(reset_less=True)  # |E − E_prev| ≤ (ε·E_prev) >> 40, registered: read two clocks after the last step
         settled = Mux(first, 0, Mux(previous_zero, energy_zero, within))
 
         # Its phases as flip-flops of their own, no state code (as BetaDivider: an FSM's state, which
@@ -284,8 +284,8 @@ class EnergyCheck(wiring.Component):
         # values a start needs), so ``i.ready`` reaches only the phase flip-flops.
         idle = Signal(init=1)
         busy = Signal()
-        in_springs, in_energy, in_tolerance, in_within, in_compare = (
-            Signal(name=f"in_{n}") for n in ("springs", "energy", "tolerance", "within", "compare"))
+        in_springs, in_energy, in_tolerance, in_halves, in_within, in_compare = (
+            Signal(name=f"in_{n}") for n in ("springs", "energy", "tolerance", "halves", "within", "compare"))
         last = Signal()  # the springs or tolerance phase's last step
         m.d.comb += self.i.ready.eq(idle)
         with m.If(self.i.valid & idle):
@@ -315,10 +315,20 @@ class EnergyCheck(wiring.Component):
                          difference.eq(energy - previous),
                          change.eq(Mux(difference < 0, -difference, difference))]
             with m.If(last):
-                m.d.sync += [in_tolerance.eq(0), in_within.eq(1)]
-        # the E-wide comparison in a clock of its own, free-running (from ε·E_prev through the compare
-        # into settled's output register was the energy check's longest path at 9740e43)
-        m.d.sync += within.eq(change <= allowed[ENERGY_TOL_FRAC_BITS:])
+                m.d.sync += [in_tolerance.eq(0), in_halves.eq(1)]
+        # The E-wide comparison in two clocks of its own, free-running: the halves compared, then
+        # combined (from ε·E_prev through the compare into settled's output register was the energy
+        # check's longest path at 9740e43; the whole compare in one clock, 83 carry cells, was
+        # eae9e83's critical path with seed 1, 130.3 MHz)
+        limit = allowed[ENERGY_TOL_FRAC_BITS:]
+        half = len(change) // 2
+        low_within, high_below, high_equal = (Signal(name=n, reset_less=True)
+                                              for n in ("low_within", "high_below", "high_equal"))
+        m.d.sync += [low_within.eq(change[:half] <= limit[:half]),
+                     high_below.eq(change[half:] < limit[half:]), high_equal.eq(change[half:] == limit[half:]),
+                     within.eq(high_below | (high_equal & low_within))]
+        with m.If(in_halves):
+            m.d.sync += [in_halves.eq(0), in_within.eq(1)]
         with m.If(in_within):
             m.d.sync += [in_within.eq(0), in_compare.eq(1)]
         # E == 0 and E_prev == 0 in two clocks, free-running: 16-bit pieces, then their AND (the whole

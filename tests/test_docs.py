@@ -298,7 +298,7 @@ def test_controller_unit_numbers_in_the_units_doc(unelaborated):
     ed, en = EnergyCheck(D, 8192), EnergyCheck(N, 8192)
     cap = EngineCapacity(1024, 8192, 2048)
     assert ed.energy_bits == energy_width(D, cap) and en.energy_bits == energy_width(N, cap)
-    assert (f"default {ed.square_bits} + {ed.energy_bits} + 4 = {ed.latency}, narrow "
-            f"{en.square_bits} + {en.energy_bits} + 4 = {en.latency}") in doc
+    assert (f"default {ed.square_bits} + {ed.energy_bits} + 5 = {ed.latency}, narrow "
+            f"{en.square_bits} + {en.energy_bits} + 5 = {en.latency}") in doc
     assert {BetaDivider(D).latency, BetaDivider(N).latency} == {
         int(re.search(r"output transfer\): (\d+) in both presets", doc)[1])}
