@@ -10,6 +10,12 @@ variable step from a Tutte layout, tolerances 0 so the run goes to ``N_max``; th
 The run is bit-exact with ``run_image`` or the script fails. It prints the engine's CYCLES register,
 cycles per iteration, simulated cycles per second of wall time from START to done, and the share of
 that wall time spent in Python (the rest is inside the simulator, waiting for ``irq``).
+
+With ``--baseline`` (the default) it then runs, on the same simulator and in the same process, the
+closed loop that issue 11 measured against: ``springflat_core`` on Surf2 with the Python controller
+(``sim/cocotb_benches/closed_loop.py``, as ``bench_rtl_sim.py``), and prints the engine's speed as a
+multiple of it. The machine is shared and its speed varies by 2x between hours; the ratio of two runs
+a minute apart is what to compare against the issue's 10x.
 """
 
 from __future__ import annotations
@@ -24,8 +30,10 @@ from golden_model.fixed.engine_image import DEFAULT_CAPACITY, build_image
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
-from sim.cocotb_support import SIMULATORS
+from sim.cocotb_support import SIMULATORS, run_bench
 from sim.engine_run import run_image_on_rtl
+
+from bench_rtl_sim import closed_loop_config  # this folder's script, on sys.path when run as a script
 
 
 def main() -> int:
@@ -34,6 +42,8 @@ def main() -> int:
     parser.add_argument("--iterations", type=int, default=20)
     parser.add_argument("--simulator", choices=SIMULATORS, default="verilator")
     parser.add_argument("--formats", default="default")
+    parser.add_argument("--baseline", action=argparse.BooleanOptionalAction, default=True,
+                        help="also run the Python-controlled closed loop on Surf2 and print the ratio (default: on)")
     args = parser.parse_args()
     fs = FormatSet.preset(args.formats)
     mesh = dome_grid(args.side)
@@ -53,7 +63,17 @@ def main() -> int:
     print("|---|---|---|---|---|---|---|")
     print(f"| {args.simulator} | {r['cycles']} | {r['cycles_per_iteration']:.0f} | {r['run_seconds']:.2f} | "
           f"{r['cycles_per_second']:.0f} | {100 * r['python_share']:.1f} % | {total:.0f} |")
+    if args.baseline:
+        loop = closed_loop_speed(fs, args.simulator)
+        print(f"closed loop (springflat_core, Python controller, surf2): {loop['cycles']} cycles, "
+              f"{loop['cycles_per_second']:.0f} cycles/s; the engine: "
+              f"{r['cycles_per_second'] / loop['cycles_per_second']:.1f}x")
     return 0
+
+
+def closed_loop_speed(fs: FormatSet, simulator: str) -> dict:
+    """The issue's baseline: Surf2 with the paper parameters through ``springflat_core``, the loop in Python."""
+    return run_bench(simulator, fs, "springflat_core", "closed_loop", closed_loop_config("surf2", fs)).result
 
 
 if __name__ == "__main__":

@@ -18,16 +18,21 @@ from hdl import SpringflatCore
 from sim.cocotb_support import SIMULATORS, run_bench
 
 
+def closed_loop_config(mesh: str, fs: FormatSet) -> dict:
+    """The closed-loop bench's configuration for a built-in mesh with its paper parameters, PCA start."""
+    _, p = builtin_mesh(mesh)
+    params = dict(spring=p.spring, density=p.density, tol_area=p.tol_area, tol_shape=p.tol_shape,
+                  tol_energy=p.tol_energy, max_iter=p.max_iter)
+    return {"mesh": mesh, "init": "pca", "params": params, "step_latency": SpringflatCore(fs).step_latency}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--mesh", default="surf2")
     parser.add_argument("--formats", default="default")
     args = parser.parse_args()
     fs = FormatSet.load(args.formats)
-    _, p = builtin_mesh(args.mesh)
-    params = dict(spring=p.spring, density=p.density, tol_area=p.tol_area, tol_shape=p.tol_shape,
-                  tol_energy=p.tol_energy, max_iter=p.max_iter)
-    config = {"mesh": args.mesh, "init": "pca", "params": params, "step_latency": SpringflatCore(fs).step_latency}
+    config = closed_loop_config(args.mesh, fs)
     rows = {}
     for sim in SIMULATORS:
         loop = run_bench(sim, fs, "springflat_core", "closed_loop", config).result
