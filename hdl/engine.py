@@ -543,10 +543,9 @@ class SpringflatEngine(wiring.Component):
         math_pending = Signal(3)  # length, area, energy results still to come
         settled = Signal()
         area_clear = Signal()
-        tol_energy = values["tol_energy"]
         # the register is as wide as the energy check's tolerance (both from the golden model's
         # ENERGY_TOL_* bits), so every value START sees is valid
-        assert len(tol_energy) == len(energy.tolerance), (len(tol_energy), len(energy.tolerance))
+        assert len(values["tol_energy"]) == len(energy.tolerance), (len(values["tol_energy"]), len(energy.tolerance))
 
         length_total = Mux(length_sum > fs.error_acc.raw_max, fs.error_acc.raw_max, length_sum)
         # The units' requests: valid set by the phase machine and held until taken; the payloads
