@@ -32,6 +32,7 @@ from typing import Callable, Literal
 
 import numpy as np
 
+from .guard import ENERGY_FLOOR, ENERGY_WINDOW, GUARD_LEVELS, EnergyWindow, StepScale, guarded_moves
 from .mesh import Mesh, folded_faces, layout_orientation, signed_areas_2d
 
 __all__ = [
@@ -58,7 +59,7 @@ __all__ = [
     "iterations_to_within",
 ]
 
-Status = Literal["converged", "max-iterations", "diverged"]
+Status = Literal["converged", "max-iterations", "diverged", "stalled"]
 STEP_MODES = ("variable", "fixed")
 UPDATE_ORDERS = ("jacobi", "sequential")
 DYNAMICS = ("paper", "momentum")
@@ -98,6 +99,13 @@ class FlattenParams:
             falls below ``κ`` times its 3D area is pushed back.
         barrier_gain: ``μ`` > 0: the barrier's stiffness relative to the
             springs' ``C``.
+        guard: the step guard of the momentum dynamics (:mod:`golden_model.guard`): no
+            accepted step raises the energy or inverts a triangle; ``None`` means on with
+            ``momentum``; the paper dynamics has none.
+        energy_window: ``W``, the iterations over which the stop rule measures the relative
+            energy change, ``|E_k − E_k−W| ≤ ε·E_k−W`` (counting accepted steps only);
+            ``None`` means 1 with ``paper`` (Algorithm 1's rule) and
+            :data:`~golden_model.guard.ENERGY_WINDOW` with ``momentum``.
     """
 
     spring: float = 0.5
@@ -117,6 +125,8 @@ class FlattenParams:
     barrier: bool | None = None
     barrier_threshold: float = 0.5
     barrier_gain: float = 4.0
+    guard: bool | None = None
+    energy_window: int | None = None
 
     def __post_init__(self) -> None:
         def finite(name: str, value: float) -> float:
@@ -151,6 +161,21 @@ class FlattenParams:
             raise ParameterError(f"barrier threshold kappa must be in (0, 1], got {self.barrier_threshold}")
         if not 0 < finite("barrier gain", self.barrier_gain) <= 16:
             raise ParameterError(f"barrier gain mu must be in (0, 16], got {self.barrier_gain}")
+        if self.guard is None:
+            object.__setattr__(self, "guard", self.dynamics == "momentum")
+        if not isinstance(self.guard, bool):
+            raise ParameterError(f"guard must be true or false, got {self.guard!r}")
+        if self.energy_window is None:
+            object.__setattr__(self, "energy_window", ENERGY_WINDOW if self.dynamics == "momentum" else 1)
+        if (isinstance(self.energy_window, bool) or not isinstance(self.energy_window, int)
+                or not 1 <= self.energy_window <= 1000):
+            raise ParameterError(f"energy-window must be an integer in [1, 1000], got {self.energy_window!r}")
+        if self.guard and self.dynamics != "momentum":
+            raise ParameterError("the step guard belongs to the momentum dynamics (--dynamics momentum); "
+                                 "the paper dynamics has none (drop --guard)")
+        if self.guard and self.penalty:
+            raise ParameterError("the penalty moves nodes after the guarded step and would void its "
+                                 "guarantees: drop --penalty, or use --no-guard")
         if self.dynamics == "momentum":
             if self.update != "jacobi":
                 raise ParameterError("the momentum dynamics updates all nodes together: use --update jacobi")
@@ -479,8 +504,11 @@ class History:
     energy: list[float] = field(default_factory=list)
     flipped: list[int] = field(default_factory=list)
     folded: list[int] = field(default_factory=list)
+    #: whether the iteration's step was taken (the guard rolls back a step that raises the energy)
+    accepted: list[bool] = field(default_factory=list)
 
-    def append(self, dt: float, m: Measurement) -> None:
+    def append(self, dt: float, m: Measurement, accepted: bool = True) -> None:
+        self.accepted.append(accepted)
         self.dt.append(dt)
         self.area_error.append(m.area_error)
         self.shape_error.append(m.shape_error)
@@ -560,14 +588,43 @@ class FlattenResult:
 # --------------------------------------------------------------------------- iteration
 
 
-def _converged(before: Measurement, after: Measurement, params: FlattenParams) -> bool:
-    """Algorithm 1's convergence test on two consecutive measurements."""
-    if before.energy == 0:
+def energy_floor(mesh: Mesh, params: FlattenParams) -> float:
+    """The energy below which the stop rule's energy part holds whatever its change:
+    ``ENERGY_FLOOR·C·Σd²`` with the momentum dynamics, 0 with the paper's (Algorithm 1)."""
+    if params.dynamics != "momentum":
+        return 0.0
+    return ENERGY_FLOOR * params.spring * float(np.sum(mesh.rest_lengths**2))
+
+
+def _converged(energy_before: float, after: Measurement, params: FlattenParams, floor: float = 0.0) -> bool:
+    """Algorithm 1's convergence test: ``after``'s errors, and its energy against ``energy_before``, the
+    energy :attr:`FlattenParams.energy_window` iterations earlier: ``|ΔE| ≤ ε·E_before``, or
+    ``E ≤ floor`` (:func:`energy_floor`)."""
+    if energy_before == 0:
         change = 0.0 if after.energy == 0 else math.inf
     else:
-        change = abs(after.energy - before.energy) / before.energy
+        change = abs(after.energy - energy_before) / energy_before
     return (after.area_error <= params.tol_area and after.shape_error <= params.tol_shape
-            and change <= params.tol_energy)
+            and (change <= params.tol_energy or after.energy < floor))
+
+
+@dataclass
+class GuardRecord:
+    """What the step guard did in a run: its scale, and counts of rolled-back steps and of node
+    steps shortened (``clipped``: moved by less than the proposal) or stopped (``frozen``)."""
+
+    scale: StepScale = field(default_factory=StepScale)
+    rejected: int = 0
+    clipped: int = 0
+    frozen: int = 0
+
+    def count_levels(self, levels: np.ndarray) -> None:
+        self.clipped += int(np.count_nonzero(levels))
+        self.frozen += int(np.count_nonzero(levels > GUARD_LEVELS))
+
+    def summary(self) -> dict:
+        return {"rejected_steps": self.rejected, "clipped_node_steps": self.clipped,
+                "frozen_node_steps": self.frozen, "step_scale": self.scale.value}
 
 
 class _Jacobi:
@@ -583,6 +640,11 @@ class _Jacobi:
         self.momentum_k = 0  # iterations since the last restart
         self.restart = False  # S < 0 seen in the last force pass
         self._refresh()
+        self.guard = GuardRecord() if params.guard else None
+        self.accepted = True  # the last advance's step was taken
+        self.stalled = False
+        if self.guard is not None:
+            self.energy = self.measure().energy  # of the last accepted layout
 
     def _refresh(self) -> None:
         # Edge vectors of the current layout serve both its measurement and
@@ -618,21 +680,62 @@ class _Jacobi:
         self._refresh()
 
     def _advance_momentum(self) -> None:
-        """``V ← β_k·V + w·f``, ``P ← P + V``; a restart (``V := 0``, ``k := 0``) one iteration after ``S < 0``."""
-        p = self.params
+        """``V ← β_k·V + w·f``, ``P ← P + V``; a restart (``V := 0``, ``k := 0``) one iteration after ``S < 0``.
+
+        With the guard (:mod:`golden_model.guard`) the weights carry the step scale, each node moves by
+        its guarded fraction of ``V`` (``V`` becomes the move taken), and a step that raises the energy
+        is rolled back: the layout stays, ``V := 0``, ``k := 0`` and the scale halves.
+        """
+        p, guard = self.params, self.guard
         forces = self.forces()
         if self.restart:
             self.velocities[:] = 0.0
             self.momentum_k = 0
         power = float(np.sum(forces * self.velocities))  # S = Σ f·V, acted on next iteration
         weights = self.model.step_weights(self.positions)
-        self.velocities = momentum_beta(self.momentum_k) * self.velocities + weights[:, None] * forces
-        self.positions += self.velocities
-        self.momentum_k += 1
-        self.restart = power < 0
-        if p.penalty:
-            self.positions += penalty_moves(self.model, self.positions, p.penalty_kappa, p.penalty_gain)
+        if guard is not None:
+            weights = guard.scale.value * weights
+        proposal = momentum_beta(self.momentum_k) * self.velocities + weights[:, None] * forces
+        if guard is None:
+            self.velocities = proposal
+            self.positions += proposal
+            self.momentum_k += 1
+            self.restart = power < 0
+            if p.penalty:
+                self.positions += penalty_moves(self.model, self.positions, p.penalty_kappa, p.penalty_gain)
+            self._refresh()
+            return
+        mesh = self.model.mesh
+        moves, levels = guarded_moves(self.positions, proposal, mesh.faces, self.model.winding, 2.0 * mesh.face_areas)
+        guard.count_levels(levels)
+        before = (self.positions, self.delta, self.length)
+        self.positions = self.positions + moves
         self._refresh()
+        energy = self.energy_of_layout()
+        self.accepted = energy <= self.energy
+        if self.accepted:
+            self.energy = energy
+            self.velocities = moves
+            self.momentum_k += 1
+            self.restart = power < 0
+            guard.scale = guard.scale.accepted_step()
+        else:
+            self.positions, self.delta, self.length = before
+            self.velocities = np.zeros_like(self.velocities)
+            self.momentum_k = 0
+            self.restart = False
+            guard.rejected += 1
+            guard.scale = guard.scale.rejected()
+            self.stalled = guard.scale.stalled
+
+    def energy_of_layout(self) -> float:
+        """The energy the stop rule and the guard watch (springs + barrier) of the current layout."""
+        model = self.model
+        energy = spring_energy(self.length, self.rest, model.spring)
+        if model.barrier is not None:
+            energy += barrier_energy(self.positions, model.mesh.faces, model.mesh.face_areas, model.winding,
+                                     *model.barrier, model.spring)
+        return energy
 
 
 class _Sequential:
@@ -731,6 +834,9 @@ def run(engine, params: FlattenParams, density: float, initial_positions: np.nda
     history = History()
     current = engine.measure()
     history.append(math.nan, current)
+    window = EnergyWindow(params.energy_window)
+    window.push(current.energy)
+    floor = energy_floor(engine.model.mesh, params)
     saved = (engine.positions.copy(), engine.velocities.copy())
     status: Status = "max-iterations"
     k = 0
@@ -744,13 +850,20 @@ def run(engine, params: FlattenParams, density: float, initial_positions: np.nda
             engine.positions, engine.velocities = saved
             break
         k += 1
-        history.append(dt, after)
+        accepted = getattr(engine, "accepted", True)
+        history.append(dt, after, accepted)
         if on_iteration is not None:
             on_iteration(k, after)
         saved = (engine.positions.copy(), engine.velocities.copy())
-        if _converged(current, after, params):
+        if getattr(engine, "stalled", False):
+            status = "stalled"
+            break
+        window.push(after.energy, accepted)
+        if window.ready and _converged(window.oldest, after, params, floor):
             status = "converged"
             break
         current = after
+    guard = getattr(engine, "guard", None)
+    extra = guard.summary() if guard is not None else {}
     return FlattenResult(engine.positions, engine.velocities, initial_positions.copy(), history,
-                         status, k, params, density, engine=name)
+                         status, k, params, density, engine=name, extra=extra)

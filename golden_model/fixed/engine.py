@@ -32,10 +32,13 @@ from typing import Callable
 
 import numpy as np
 
+from ..guard import ENERGY_FLOOR, EnergyWindow
 from ..mesh import Mesh, folded_by_area, layout_orientation
-from ..reference import FlattenParams, FlattenResult, History, Measurement, ParameterError, Status, node_weights
+from ..reference import (FlattenParams, FlattenResult, GuardRecord, History, Measurement, ParameterError, Status,
+                         node_weights)
 from .format import MAX_PRODUCT_WIDTH, Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
 from .formats_set import FormatSet
+from .guard import commit, floor_min_raw, guarded_moves_raw, proposal
 from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum,
                        node_power, node_terms)
 from .steplut import half_dt_sq, step_size
@@ -204,26 +207,40 @@ def energy_to_float(problem: "FixedProblem", raw: int) -> float:
 @dataclass(frozen=True)
 class StopRule:
     """Algorithm 1's stopping rule in integers: ``E_S ≤ φ_S``, ``E_C ≤ φ_C`` (raw [error]) and
-    ``|E_k − E_k−1| ≤ ε·E_k−1`` with ``ε`` raw at :data:`ENERGY_TOL_FRAC_BITS` fraction bits."""
+    ``|E_k − E_k−W| ≤ ε·E_k−W`` with ``ε`` raw at :data:`ENERGY_TOL_FRAC_BITS` fraction bits, or
+    ``E_k < floor`` in :func:`energy_raw` units (0 for the paper dynamics; see
+    :func:`golden_model.reference.energy_floor`)."""
 
     area: int
     shape: int
     energy: int
+    floor: int = 0
 
     @classmethod
-    def of(cls, params: FlattenParams, fs: FormatSet) -> "StopRule":
+    def of(cls, params: FlattenParams, fs: FormatSet, floor: int = 0) -> "StopRule":
         """The host's quantisation: ``φ`` floored to the error lsb (a raw error passes exactly when
         its value does), ``ε`` rounded half up."""
         lsb = fs.error.frac_bits
         return cls(math.floor(math.ldexp(params.tol_area, lsb)), math.floor(math.ldexp(params.tol_shape, lsb)),
-                   math.floor(math.ldexp(params.tol_energy, ENERGY_TOL_FRAC_BITS) + 0.5))
+                   math.floor(math.ldexp(params.tol_energy, ENERGY_TOL_FRAC_BITS) + 0.5), floor)
 
     def converged(self, energy_before: int, energy_after: int, errors: tuple[int, int]) -> bool:
         if energy_before == 0:
             change_ok = energy_after == 0
         else:
             change_ok = abs(energy_after - energy_before) << ENERGY_TOL_FRAC_BITS <= self.energy * energy_before
-        return errors[0] <= self.area and errors[1] <= self.shape and change_ok
+        return errors[0] <= self.area and errors[1] <= self.shape and (change_ok or energy_after < self.floor)
+
+
+def energy_floor_raw(problem: "FixedProblem") -> int:
+    """:func:`golden_model.reference.energy_floor` in :func:`energy_raw` units: ``ENERGY_FLOOR`` times the
+    exact energy of every edge at twice its rest length (``½C·Σd²`` over the entries), floored; 0 for the
+    paper dynamics."""
+    if not problem.momentum:
+        return 0
+    rest = problem.stream.rest
+    reference = energy_raw(problem.fs, problem.half_spring, int(np.sum(rest * rest, dtype=object)), 0)
+    return math.floor(ENERGY_FLOOR * reference)
 
 
 def power_sum(fs: FormatSet, power: np.ndarray, counter: SaturationCounter | None = None) -> int:
@@ -248,14 +265,7 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
     Raises :class:`FixedPointError` with one line naming the first quantity
     that does not fit.
     """
-    if params.update != "jacobi":
-        raise FixedPointError("the fixed-point engine computes the jacobi order (as the hardware does); "
-                              "use --update jacobi")
-    if params.penalty:
-        raise FixedPointError("the penalty is not part of the fixed-point pipeline; drop --penalty")
-    if params.dynamics == "momentum" and fs.velocity.frac_bits != fs.position.frac_bits:
-        raise FixedPointError(f"the momentum dynamics adds V to P directly: format set '{fs.name}' needs velocity "
-                              f"({fs.velocity}) and position ({fs.position}) with the same fraction bits")
+    check_fixed_params(params, fs)
     rest = mesh.rest_lengths
     k = -int(math.floor(math.log2(float(rest.mean())) + 0.5))
     scale = 2.0**k
@@ -437,6 +447,11 @@ class FixedEngine:
     nothing) followed by the real pass: the partial sums do not depend on the
     step, so both passes produce the same terms.
 
+    With the step guard (momentum dynamics, :mod:`golden_model.fixed.guard`) an iteration proposes
+    ``V'``, takes each node's guarded fraction of it, measures the moved layout and keeps it only
+    if its exact energy is not above the last accepted one; otherwise the layout and its
+    measurement return (``P − V``), the momentum restarts and the step scale halves.
+
     ``positions``/``velocities`` are the state mapped back to mesh units
     (float64); ``raw_positions``/``raw_velocities`` are the bit-exact state.
     """
@@ -453,6 +468,13 @@ class FixedEngine:
         self.node_power: np.ndarray | None = None  # its per-node terms [power]
         self.momentum = MomentumState()
         self.energy_raw = 0  # of the last measurement (energy_raw)
+        self.measurement: Measurement | None = None  # of the layout ``_measured`` (the same array object)
+        self._measured: np.ndarray | None = None
+        self.guard = GuardRecord() if problem.params.guard else None
+        self.accepted = True
+        self.stalled = False
+        if self.guard is not None:
+            self.floor_min = floor_min_raw(problem.fs, problem.face_areas)
 
     @property
     def positions(self) -> np.ndarray:
@@ -463,6 +485,8 @@ class FixedEngine:
         return self.problem.to_float_velocities(self.raw_velocities)
 
     def measure(self) -> Measurement:
+        if self._measured is self.raw_positions:
+            return self.measurement
         p = self.problem
         self.terms = node_terms(p.fs, self.raw_positions, p.stream, p.half_spring, self.counter)
         e_s = area_error(p.fs, p.area_reciprocal, p.mesh.faces, p.face_areas, self.raw_positions, self.counter)
@@ -473,8 +497,10 @@ class FixedEngine:
         if p.momentum:
             self.node_power = node_power(p.fs, self.terms.force, self.raw_velocities, self.counter)
             self.power = power_sum(p.fs, self.node_power, self.counter)
-        return Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
-                           flipped_count(p, self.raw_positions), folded_count(p, self.raw_positions))
+        self.measurement = Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
+                                       flipped_count(p, self.raw_positions), folded_count(p, self.raw_positions))
+        self._measured = self.raw_positions
+        return self.measurement
 
     def step_size(self, _: Measurement) -> float:
         """The step generator on the last raw errors (variable) or the fixed ``Δt``."""
@@ -491,17 +517,59 @@ class FixedEngine:
     def advance(self, dt: float) -> None:
         p = self.problem
         weights = p.stream.node_weights(self.terms.barrier_active)
+        if self.guard is not None:
+            self._advance_guarded(weights)
+            return
         if p.momentum:
             self.raw_positions, self.raw_velocities = integrate_momentum(
                 p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, self.dt, self.counter)
+        else:
+            self.raw_positions, self.raw_velocities = integrate(
+                p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, p.constants(self.dt),
+                self.counter)
+
+    def _advance_guarded(self, weights: np.ndarray) -> None:
+        """Propose, guard, commit and measure; keep the step only if the energy did not rise."""
+        p, guard = self.problem, self.guard
+        accepted_state = (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power,
+                          self.measure())
+        wanted = proposal(p.fs, self.raw_velocities, self.terms.force, weights, self.dt, guard.scale.shift,
+                          self.counter)
+        moves, levels = guarded_moves_raw(p.fs, self.raw_positions, wanted, p.mesh.faces, p.winding, self.floor_min)
+        guard.count_levels(levels)
+        self.raw_positions, taken = commit(self.raw_positions, moves)
+        before = self.energy_raw
+        self.measure()
+        self.accepted = self.energy_raw <= before
+        if self.accepted:
+            self.raw_velocities = taken
+            guard.scale = guard.scale.accepted_step()
             return
-        self.raw_positions, self.raw_velocities = integrate(
-            p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, p.constants(self.dt),
-            self.counter)
+        (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power,
+         self.measurement) = accepted_state
+        self._measured = self.raw_positions
+        self.raw_velocities = np.zeros_like(self.raw_velocities)
+        self.power = 0  # S of a stopped momentum
+        self.momentum = MomentumState()
+        guard.rejected += 1
+        guard.scale = guard.scale.rejected()
+        self.stalled = guard.scale.stalled
 
 
 def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
-    """Refuse parameters the formats cannot represent faithfully."""
+    """Refuse parameters the formats cannot represent faithfully, and modes the fixed-point model does not
+    have (before any mesh work: :func:`prepare` checks the mesh against the formats)."""
+    if params.update != "jacobi":
+        raise FixedPointError("the fixed-point engine computes the jacobi order (as the hardware does); "
+                              "use --update jacobi")
+    if params.penalty:
+        raise FixedPointError("the penalty is not part of the fixed-point pipeline; drop --penalty")
+    if params.dynamics == "momentum" and fs.velocity.frac_bits != fs.position.frac_bits:
+        raise FixedPointError(f"the momentum dynamics adds V to P directly: format set '{fs.name}' needs velocity "
+                              f"({fs.velocity}) and position ({fs.position}) with the same fraction bits")
+    if params.guard and fs.face_edge.frac_bits != fs.position.frac_bits:
+        raise FixedPointError(f"the step guard's certificate is exact only with face_edge ({fs.face_edge}) at "
+                              f"position's ({fs.position}) fraction bits: format set '{fs.name}'")
     if 0 < params.tol_energy < math.ldexp(1, -ENERGY_TOL_FRAC_BITS - 1):
         raise FixedPointError(f"tol_energy {params.tol_energy:g} is below the controller's resolution "
                               f"2^-{ENERGY_TOL_FRAC_BITS} ({math.ldexp(1, -ENERGY_TOL_FRAC_BITS):.3g}); use 0 or a larger value")
@@ -542,14 +610,16 @@ def flatten_fixed(
 
 def run_fixed(engine: FixedEngine, on_iteration: Callable[[int, Measurement], None] | None = None) -> FlattenResult:
     """Algorithm 1's loop, every decision on raw integers (:class:`StopRule`); never diverges (the
-    formats saturate, and ``result.extra`` counts it)."""
+    formats saturate, and ``result.extra`` counts it). The energy change is measured over the last
+    :attr:`FlattenParams.energy_window` accepted iterations, as in the float reference."""
     problem = engine.problem
     params = problem.params
-    rule = StopRule.of(params, problem.fs)
+    rule = StopRule.of(params, problem.fs, energy_floor_raw(problem))
     history = History()
     current = engine.measure()
     history.append(math.nan, current)
-    before = engine.energy_raw
+    window = EnergyWindow(params.energy_window)
+    window.push(engine.energy_raw)
     status: Status = "max-iterations"
     k = 0
     while k < params.max_iter:
@@ -557,12 +627,17 @@ def run_fixed(engine: FixedEngine, on_iteration: Callable[[int, Measurement], No
         engine.advance(dt)
         after = engine.measure()
         k += 1
-        history.append(dt, after)
+        history.append(dt, after, engine.accepted)
         if on_iteration is not None:
             on_iteration(k, after)
-        if rule.converged(before, engine.energy_raw, engine.errors):
+        if engine.stalled:
+            status = "stalled"
+            break
+        window.push(engine.energy_raw, engine.accepted)
+        if window.ready and rule.converged(window.oldest, engine.energy_raw, engine.errors):
             status = "converged"
             break
-        current, before = after, engine.energy_raw
+        current = after
+    extra = engine.guard.summary() if engine.guard is not None else {}
     return FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
-                         history, status, k, params, problem.density, engine="fixed")
+                         history, status, k, params, problem.density, engine="fixed", extra=extra)

@@ -1,0 +1,174 @@
+"""The step guard of the momentum dynamics: the energy never rises and no step inverts a triangle.
+
+Both guarantees hold by construction, whatever the mesh, the start or the barrier's settings
+(``docs/guard.md``):
+
+* **No inversion.** The momentum step proposes a move ``D_i`` for every node. A triangle's doubled
+  signed area (in the pattern's winding σ) after moving its corners by fractions ``t_a, t_b, t_c``
+  of their proposals,
+
+      X(t) = X0 + Σ_i t_i·L_i + Σ_{i<j} t_i·t_j·Q_ij,
+      L_a = σ·D_a × (P_b − P_c) (and cyclically),   Q_ab = σ·D_a × D_b (and cyclically),
+
+  is multi-affine: affine in each ``t_i`` alone (a corner's move never multiplies itself). On
+  the box ``[0, τ]³`` it therefore takes its minimum at one of the box's eight corners, so if
+  ``X ≥ floor`` at the seven corner subsets that move (``t_i ∈ {0, τ}``, the eighth is ``X0``),
+  every combination of fractions up to ``τ`` keeps ``X ≥ floor``. Each triangle gets the
+  largest ``τ = 2^-r`` (``r`` = 0 … :data:`GUARD_LEVELS`) that passes, or 0 when none does;
+  each node moves by the smallest ``τ`` of its triangles. Every triangle then keeps its area
+  above its floor ``min(X0, max(X0/2^FLOOR_SHIFT, X*/2^FLOOR_MIN_SHIFT))`` (``X*`` its doubled 3D
+  area): a step may shrink a triangle to an eighth of its area, never below ``2^-20`` of its 3D
+  area, and never past zero. A fold-free layout stays fold-free.
+* **Monotone energy.** A step whose layout has a higher total energy (springs + barrier) than
+  the last accepted layout is rolled back: the positions return, the momentum restarts and the
+  step scale ``s`` halves (``s = 2^-shift``); after :data:`SCALE_GROW_AFTER` accepted steps in a
+  row it doubles again, up to 1. The scale multiplies the weights ``w_i``; a proposal of a
+  stopped momentum is ``s·w_i·f_i``, a descent direction, so a small enough scale always
+  lowers the energy unless the layout is stationary. A run whose scale falls below
+  ``2^-SCALE_MAX_SHIFT`` has no step left that lowers its energy: it ends as ``stalled``.
+
+The move fractions are powers of two so that the fixed-point model and the hardware take them
+with shifts, exactly (``golden_model.fixed``); the float model here is their reference.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["GUARD_LEVELS", "FLOOR_SHIFT", "FLOOR_MIN_SHIFT", "SCALE_GROW_AFTER", "SCALE_MAX_SHIFT",
+           "ENERGY_WINDOW", "ENERGY_FLOOR", "area_floor", "triangle_levels", "node_levels", "guarded_moves",
+           "StepScale", "EnergyWindow"]
+
+#: Move fractions 1, 1/2, …, 2^-GUARD_LEVELS; a node none of them keeps safe does not move.
+GUARD_LEVELS = 6
+#: A step may shrink a triangle's area to 2^-FLOOR_SHIFT of what it was …
+FLOOR_SHIFT = 3
+#: … but never below 2^-FLOOR_MIN_SHIFT of its 3D area (nor a triangle already below that at all).
+FLOOR_MIN_SHIFT = 20
+#: Accepted steps in a row after which the step scale doubles (up to 1).
+SCALE_GROW_AFTER = 20
+#: A run whose step scale falls below 2^-SCALE_MAX_SHIFT is ``stalled``.
+SCALE_MAX_SHIFT = 20
+#: Iterations over which the momentum dynamics' stop rule measures the energy change.
+ENERGY_WINDOW = 10
+#: The momentum dynamics' stop rule also holds once the energy is below this fraction of ``C·Σ d²``
+#: (the energy of a layout with every edge at twice its length), an rms strain of 1e-4: ``E → 0``
+#: on a developable patch, where its relative change stays large however exact the layout is.
+ENERGY_FLOOR = 1e-8
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def area_floor(doubled: np.ndarray, doubled_rest: np.ndarray) -> np.ndarray:
+    """Per triangle the least doubled signed area a step may leave: ``min(X0, max(X0/8, X*·2^-20))``.
+
+    ``doubled`` is ``X0`` (in the pattern's winding: positive when unfolded), ``doubled_rest``
+    ``X* = 2A`` (3D). A folded triangle (``X0 ≤ 0``) may not fold further.
+    """
+    return np.minimum(doubled, np.maximum(doubled * 2.0**-FLOOR_SHIFT, doubled_rest * 2.0**-FLOOR_MIN_SHIFT))
+
+
+def triangle_levels(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarray, winding: float,
+                    doubled_rest: np.ndarray, levels: int = GUARD_LEVELS) -> np.ndarray:
+    """``(F,)`` the smallest ``r`` in 0 … ``levels`` with every corner subset moving by ``2^-r`` of its
+    proposal at or above the triangle's :func:`area_floor`; ``levels + 1`` where none is.
+
+    ``positions`` and ``proposal`` are ``(V, 2)``; ``faces`` ``(F, 3)`` in the mesh's winding;
+    ``winding`` σ = ±1 the pattern's orientation; ``doubled_rest`` ``(F,)`` = ``2A``.
+    """
+    corner = [positions[faces[:, k]] for k in range(3)]
+    move = [proposal[faces[:, k]] for k in range(3)]
+    x0 = winding * _cross(corner[1] - corner[0], corner[2] - corner[0])
+    linear = [winding * _cross(move[k], corner[(k + 1) % 3] - corner[(k + 2) % 3]) for k in range(3)]
+    pair = [winding * _cross(move[k], move[(k + 1) % 3]) for k in range(3)]  # ab, bc, ca
+    floor = area_floor(x0, doubled_rest)
+    # the seven moving subsets: a, b, c, ab, bc, ca, abc
+    subset_linear = np.stack([linear[0], linear[1], linear[2], linear[0] + linear[1], linear[1] + linear[2],
+                              linear[2] + linear[0], linear[0] + linear[1] + linear[2]])
+    zero = np.zeros_like(x0)
+    subset_pair = np.stack([zero, zero, zero, pair[0], pair[1], pair[2], pair[0] + pair[1] + pair[2]])
+    level = np.full(len(faces), levels + 1, dtype=np.int64)
+    for r in range(levels, -1, -1):  # passing at 2^-r implies passing at every smaller fraction
+        tau = 2.0**-r
+        safe = np.all(x0 + tau * subset_linear + (tau * tau) * subset_pair >= floor, axis=0)
+        level[safe] = r
+    return level
+
+
+def node_levels(face_levels: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """``(V,)`` each node's level: the largest of its triangles' (its smallest move fraction)."""
+    level = np.zeros(n_vertices, dtype=np.int64)
+    np.maximum.at(level, faces.ravel(), np.repeat(face_levels, 3))
+    return level
+
+
+def guarded_moves(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarray, winding: float,
+                  doubled_rest: np.ndarray, levels: int = GUARD_LEVELS) -> tuple[np.ndarray, np.ndarray]:
+    """``(moves (V, 2), node levels (V,))``: each node's proposal times ``2^-level`` (0 past ``levels``)."""
+    level = node_levels(triangle_levels(positions, proposal, faces, winding, doubled_rest, levels), faces,
+                        len(positions))
+    moves = np.ldexp(proposal, -np.minimum(level, levels)[:, None])
+    moves[level > levels] = 0.0  # also where a proposal is not finite
+    return moves, level
+
+
+@dataclass(frozen=True)
+class StepScale:
+    """The guard's step scale ``s = 2^-shift`` and the accepted steps since it last changed."""
+
+    shift: int = 0
+    accepted: int = 0
+
+    @property
+    def value(self) -> float:
+        return 2.0**-self.shift
+
+    @property
+    def stalled(self) -> bool:
+        return self.shift > SCALE_MAX_SHIFT
+
+    def rejected(self) -> "StepScale":
+        return StepScale(self.shift + 1, 0)
+
+    def accepted_step(self) -> "StepScale":
+        if self.accepted + 1 >= SCALE_GROW_AFTER:
+            return StepScale(self.shift - 1, 0) if self.shift > 0 else StepScale(0, SCALE_GROW_AFTER)
+        return StepScale(self.shift, self.accepted + 1)
+
+
+@dataclass
+class EnergyWindow:
+    """The stop rule's memory: the energy at the end of each of the last ``size`` iterations (and the one
+    before them), and whether each iteration's step was taken.
+
+    The rule compares the newest energy with the oldest, ``size`` iterations apart (a rolled-back
+    iteration repeats its energy), and only once the window holds at least one taken step: a run
+    whose every step is rolled back is not converged but ends ``stalled`` (:class:`StepScale`).
+    Floats or exact integers alike.
+    """
+
+    size: int
+    energies: deque = field(init=False)
+    taken: deque = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.energies = deque(maxlen=self.size + 1)
+        self.taken = deque(maxlen=self.size)
+
+    def push(self, energy, taken: bool = True) -> None:
+        if self.energies:
+            self.taken.append(taken)
+        self.energies.append(energy)
+
+    @property
+    def ready(self) -> bool:
+        return len(self.energies) == self.size + 1 and any(self.taken)
+
+    @property
+    def oldest(self):
+        return self.energies[0]
