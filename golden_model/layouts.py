@@ -19,6 +19,9 @@
   ``harmonic`` layout, one boundary vertex pinned at its start position (no
   dynamics), at most :data:`ARAP_MAX_ITERATIONS` local/global iterations,
   then centred.  ARAP keeps the 3D scale.
+* ``slim`` (libigl): the ``tutte`` layout relaxed by SLIM (symmetric Dirichlet energy,
+  ``igl.slim_solve``) for at most :data:`SLIM_MAX_ITERATIONS` iterations; SLIM's line search never
+  inverts a triangle, so the result is fold-free like the Tutte start.
 * a file: ``V`` rows ``x y`` (whitespace or comma separated; ``#`` comments),
   or an OBJ whose vertex *i* gives ``(x, y)`` of node *i* (read as the mesh
   reader reads OBJ: tabs, CRLF, continuations).  Coordinates must be finite
@@ -33,6 +36,7 @@ any libigl failure (an exception or a non-finite result) is a
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -41,15 +45,23 @@ import scipy.sparse.linalg as spla
 
 from .mesh import COORDINATE_LIMIT, Mesh, MeshError, read_file_bytes, read_obj_vertices, signed_areas_2d
 
-__all__ = ["LayoutError", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
-           "arap_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS"]
+__all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
+           "arap_layout", "slim_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS",
+           "SLIM_MAX_ITERATIONS"]
 
-LAYOUT_METHODS = ("tutte", "pca", "harmonic", "lscm", "arap")
+LAYOUT_METHODS = ("tutte", "pca", "harmonic", "lscm", "arap", "slim")
+#: The start of mesh files: ARAP, and SLIM from Tutte where ARAP folds (docs/guard.md measures the choice).
+AUTO_START = "auto"
 
 ARAP_MAX_ITERATIONS = 100
 """Upper bound on ARAP local/global iterations (run in chunks of 10)."""
 ARAP_TOLERANCE = 1e-9
 """ARAP stops early when a chunk moves no node more than this × the boundary length."""
+SLIM_MAX_ITERATIONS = 50
+"""Upper bound on SLIM iterations (run in chunks of 5)."""
+SLIM_TOLERANCE = 1e-5
+"""SLIM stops after a chunk that moved no node more than this × the boundary length (its E_C has
+settled to three digits by then on the corpus's meshes: docs/guard.md)."""
 
 
 class LayoutError(ValueError):
@@ -245,6 +257,41 @@ def arap_layout(mesh: Mesh) -> np.ndarray:
     return _counter_clockwise(positions, mesh)
 
 
+def slim_layout(mesh: Mesh) -> np.ndarray:
+    """libigl's SLIM (symmetric Dirichlet) from :func:`tutte_layout`, free boundary, centred.
+
+    Tutte's layout is fold-free and SLIM only takes steps that keep every triangle's orientation,
+    so the result is fold-free too; it stops after a chunk of 5 iterations that moved no node more
+    than :data:`SLIM_TOLERANCE` × the boundary length, or after :data:`SLIM_MAX_ITERATIONS`.
+    """
+    igl = _igl("slim")
+    vertices, faces = _igl_arrays(mesh)
+    positions = tutte_layout(mesh)
+    if np.sum(signed_areas_2d(positions, mesh.faces)) < 0:  # SLIM needs the mesh's own winding
+        positions = positions * np.array([-1.0, 1.0])
+    loop = mesh.boundary_loop
+    perimeter = float(np.linalg.norm(vertices[np.roll(loop, -1)] - vertices[loop], axis=1).sum())
+    try:
+        data = igl.slim_precompute(np.asfortranarray(vertices), np.asfortranarray(faces.astype(np.int32)),
+                                   np.asfortranarray(positions), igl.MappingEnergyType.SYMMETRIC_DIRICHLET,
+                                   np.zeros(0, dtype=np.int32), np.zeros((0, 2)), 0.0)
+    except Exception as exc:
+        raise _libigl_failure("slim", "slim_precompute", exc) from None
+    chunk = 5
+    for _ in range(0, SLIM_MAX_ITERATIONS, chunk):
+        try:
+            moved = igl.slim_solve(data, chunk)
+        except Exception as exc:
+            raise _libigl_failure("slim", "slim_solve", exc) from None
+        moved = _checked("slim", "slim_solve", moved, mesh.n_vertices)
+        change = float(np.abs(moved - positions).max())
+        positions = moved
+        if change <= SLIM_TOLERANCE * perimeter:
+            break
+    positions -= positions.mean(axis=0)
+    return _counter_clockwise(positions, mesh)
+
+
 def load_layout(path: str | Path, n_vertices: int) -> np.ndarray:
     """Read a user layout: a text file of ``x y`` rows, or an OBJ's vertex (x, y).
 
@@ -286,12 +333,78 @@ def load_layout(path: str | Path, n_vertices: int) -> np.ndarray:
 
 
 _METHODS = {"tutte": tutte_layout, "pca": pca_layout, "harmonic": harmonic_layout, "lscm": lscm_layout,
-            "arap": arap_layout}
+            "arap": arap_layout, "slim": slim_layout}
 
 
 def initial_layout(mesh: Mesh, init: str | Path) -> np.ndarray:
-    """``P0`` for ``init`` = one of :data:`LAYOUT_METHODS` or a layout file path."""
-    method = _METHODS.get(str(init))
+    """``P0`` for ``init`` = one of :data:`LAYOUT_METHODS`, :data:`AUTO_START` (here: ARAP as it is;
+    :func:`start_layout` untangles) or a layout file path."""
+    method = _METHODS.get("arap" if str(init) == AUTO_START else str(init))
     if method is not None:
         return method(mesh)
     return load_layout(init, mesh.n_vertices)
+
+
+@dataclass(frozen=True)
+class StartLayout:
+    """A start for the dynamics: ``positions`` (V, 2), ``method`` (what produced them, for the user),
+    ``folded`` triangles left (0 unless untangling failed) and ``notes`` (one line each) on what was done."""
+
+    positions: np.ndarray
+    method: str
+    folded: int
+    notes: list[str] = field(default_factory=list)
+
+
+def _folds(mesh: Mesh, positions: np.ndarray) -> int:
+    from .mesh import folded_faces
+
+    return int(np.count_nonzero(folded_faces(positions, mesh.faces)))
+
+
+def start_layout(mesh: Mesh, init: str | Path, progress=None, untangle_seconds: float = 20.0) -> StartLayout:
+    """The initial layout for ``init`` (:data:`AUTO_START`, a method or a file), fold-free where possible.
+
+    The guarded dynamics keeps a fold-free start fold-free but cannot clear a fold. ``auto`` is ARAP,
+    or SLIM from Tutte (fold-free by construction) where ARAP folds: measured on the corpus, that
+    beats untangling ARAP's layout on E_C and on time. Any other start with folds is untangled
+    (:func:`golden_model.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
+    folded is returned with its count, and the notes say why. ``progress(text)`` is called before
+    each long step.
+    """
+    from .untangle import untangle_layout
+
+    say = progress or (lambda text: None)
+    name = str(init)
+    method = "arap" if name == AUTO_START else name
+    described = f"the {method} layout" if method in _METHODS else f"the layout '{name}'"
+    say(f"computing {described}" if method in _METHODS else f"reading {described}")
+    positions = initial_layout(mesh, method)
+    folded = _folds(mesh, positions)
+    if folded == 0:
+        return StartLayout(positions, method, 0)
+    plural = "s" if folded != 1 else ""
+    if name == AUTO_START:
+        notes = [f"{described} folds {folded} triangle{plural}: starting from SLIM on Tutte's layout instead "
+                 "(fold-free by construction)"]
+        say(notes[-1])
+        return StartLayout(slim_layout(mesh), "slim", 0, notes)
+    notes = [f"{described} folds {folded} triangle{plural}: untangling it"]
+    say(notes[-1])
+    untangled = untangle_layout(mesh, positions, time_limit=untangle_seconds)
+    if untangled.folded == 0:
+        return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, untangled", 0, notes)
+    notes.append(f"untangling left {untangled.folded} of {folded} folded triangles after {untangled.seconds:.0f} s; "
+                 "the guarded dynamics cannot clear them (the default --init auto starts fold-free)")
+    if untangled.folded < folded:
+        return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, partly untangled",
+                           untangled.folded, notes)
+    return StartLayout(positions, method, folded, notes)
+
+
+def _scaled_to_area(mesh: Mesh, positions: np.ndarray) -> np.ndarray:
+    """``positions`` centred and scaled uniformly so that ``Σ|A'_t|`` is the 3D area (folds unchanged): the
+    untangler's free boundary lets the layout grow."""
+    area = float(np.abs(signed_areas_2d(positions, mesh.faces)).sum())
+    centred = positions - positions.mean(axis=0)
+    return centred * np.sqrt(float(mesh.face_areas.sum()) / area) if area > 0 else centred

@@ -21,15 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-from golden_model.layouts import LAYOUT_METHODS, initial_layout
+from golden_model.layouts import LAYOUT_METHODS
 from golden_model.mesh import Mesh, describe_os_error
-from golden_model.fixed.engine import flatten_fixed
+from golden_model.fixed.engine import check_fixed_params, flatten_fixed
 from golden_model.reference import FlattenParams, FlattenResult, flatten
 
 from .outputs import (LAYOUT_SUFFIXES, OutputWriteError, all_or_nothing, check_output_path, write_history,
                       write_layout, write_plot)
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
-                          load_format_set, params_from_args, resolve_mesh, strict_json)
+                          load_format_set, params_from_args, resolve_mesh, start_positions, strict_json)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -55,8 +55,14 @@ def cmd_flatten(args: argparse.Namespace) -> int:
             check_output_path(path, what, suffixes)
     _check_distinct_files(args)
     args.init = args.init or default_init(args.mesh)
-    positions = initial_layout(mesh, args.init)
     show_progress = sys.stderr.isatty() or not args.json
+    if args.engine in ("fixed", "rtl"):  # refuse what the formats or the engine cannot run before any layout work
+        check_fixed_params(params, load_format_set(args.formats or "default"))
+        if args.engine == "rtl":
+            from golden_model.fixed.engine_image import check_engine_params
+
+            check_engine_params(params)
+    positions, args.init = start_positions(mesh, args.init, params, sys.stderr.isatty())
     if args.engine == "fixed":
         formats = load_format_set(args.formats or "default")
 
@@ -102,7 +108,7 @@ def _rtl_engine(formats):
     import os
 
     from golden_model.fixed.engine import check_fixed_params, prepare
-    from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
+    from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity, check_engine_params
 
     capacity = DEFAULT_CAPACITY
     if os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
@@ -118,6 +124,7 @@ def _rtl_engine(formats):
         import tempfile
 
         check_fixed_params(params, formats)
+        check_engine_params(params)
         problem = prepare(mesh, positions, params, formats)
         capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
-from golden_model.layouts import LAYOUT_METHODS, LayoutError
+from golden_model.layouts import AUTO_START, LAYOUT_METHODS, LayoutError, initial_layout, start_layout
 from golden_model.mesh import Mesh, MeshError, describe_os_error, load_mesh_with_notes
 from golden_model.reference import DYNAMICS, FlattenParams, ParameterError
 
@@ -71,9 +71,11 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     builtins = ", ".join(BUILTIN_MESHES)
     parser.add_argument("mesh", nargs="?", default="surf1",
                         help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
-    parser.add_argument("--init", default=None, metavar="|".join(LAYOUT_METHODS) + "|PATH",
-                        help="initial layout: tutte, pca, harmonic, lscm, arap (libigl) or a file of V rows "
-                             "'x y' / an OBJ (default: pca for built-ins, arap for files)")
+    parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
+                        help="initial layout: auto (arap, untangled where it folds, else slim), tutte, pca, "
+                             "harmonic, lscm, arap, slim (libigl) or a file of V rows 'x y' / an OBJ (default: "
+                             "pca for built-ins, auto for files); a folded start is untangled for the guarded "
+                             "dynamics")
     parser.add_argument("--dynamics", choices=DYNAMICS, default=None,
                         help="paper (eqs. 7-9) or momentum (docs/dynamics.md); default: paper for built-ins, "
                              "momentum for files")
@@ -84,6 +86,12 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                              "triangle is pushed back (default 0.5)")
     parser.add_argument("--barrier-gain", type=number_argument, default=None,
                         help="barrier stiffness mu in (0, 16], relative to the springs' C (default 4)")
+    parser.add_argument("--guard", action=argparse.BooleanOptionalAction, default=None,
+                        help="the momentum dynamics' step guard: no accepted step raises the energy or inverts a "
+                             "triangle (default: on with momentum; docs/guard.md)")
+    parser.add_argument("--energy-window", type=integer_argument, default=None, metavar="W",
+                        help="iterations over which the stop rule measures the relative energy change "
+                             "(default: 1 with paper, as Algorithm 1; 10 with momentum)")
     parser.add_argument("--step", choices=("variable", "fixed"), default="variable",
                         help="step-size mode (default variable, eqs. 18-20)")
     parser.add_argument("--dt", type=number_argument, default=None, help="fixed step size (default 0.01)")
@@ -102,8 +110,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-iter", type=integer_argument, default=None, help="iteration limit N_max")
 
 
-#: The stop rule for mesh files: the energy minimum, not the paper's Surf1 tolerances.
-FILE_TOL_ENERGY = 1e-7
+#: The stop rule for mesh files: the energy minimum, not the paper's Surf1 tolerances; the energy
+#: change over the momentum dynamics' window of 10 iterations (docs/guard.md has the measurements).
+FILE_TOL_ENERGY = 1e-4
 #: N_max for files: this many iterations per edge from the boundary to the deepest node (the
 #: momentum dynamics needs about 6), and never fewer than FILE_MIN_ITER.
 FILE_ITER_PER_EDGE = 40
@@ -148,9 +157,22 @@ def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
 
 
 def default_init(mesh_name: str) -> str:
-    """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), arap for files
-    (measured best: the lowest E_C of the five methods and no folds on every shipped scan, docs/dynamics.md)."""
-    return "pca" if is_builtin(mesh_name) and not Path(mesh_name).is_file() else "arap"
+    """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), ``auto`` for files
+    (ARAP, untangled where it folds, SLIM from Tutte where that fails: golden_model.layouts.start_layout)."""
+    return "pca" if is_builtin(mesh_name) and not Path(mesh_name).is_file() else AUTO_START
+
+
+def start_positions(mesh: Mesh, init: str, params: FlattenParams, progress: bool) -> tuple[np.ndarray, str]:
+    """``(P0, what it is)``. A guarded run starts fold-free where that can be had (``start_layout``: folds are
+    untangled, and what was done is one note each on stderr); the paper dynamics takes the layout as it is."""
+    if not params.guard:
+        return initial_layout(mesh, init), init
+    say = (lambda text: print(f"springflat: {text} ...", file=sys.stderr)) if progress else None
+    start = start_layout(mesh, init, progress=say)
+    if not progress:
+        for note in start.notes:
+            print(f"springflat: note: {note}", file=sys.stderr)
+    return start.positions, start.method
 
 
 def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> FlattenParams:
@@ -158,10 +180,11 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> Flatt
     changes = {"step": args.step, "update": args.update, "penalty": args.penalty or defaults.penalty}
     if args.dynamics is not None and args.dynamics != defaults.dynamics:
         changes["dynamics"] = args.dynamics
-        changes["barrier"] = None  # follows the dynamics unless given
+        for follower in ("barrier", "guard", "energy_window"):
+            changes[follower] = None  # follows the dynamics unless given
     for option in ("dt", "damping", "penalty_kappa", "penalty_gain", "spring", "density",
                    "tol_area", "tol_shape", "tol_energy", "max_iter", "barrier", "barrier_threshold",
-                   "barrier_gain"):
+                   "barrier_gain", "guard", "energy_window"):
         value = getattr(args, option)
         if value is not None:
             changes[option] = value

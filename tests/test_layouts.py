@@ -101,7 +101,7 @@ def _reversed(mesh):
 
 
 def test_layout_methods_are_the_init_choices():
-    assert LAYOUT_METHODS == ("tutte", "pca", "harmonic", "lscm", "arap")
+    assert LAYOUT_METHODS == ("tutte", "pca", "harmonic", "lscm", "arap", "slim")
     mesh = dome_grid(6)
     expected = {"tutte": tutte_layout, "pca": pca_layout, "harmonic": harmonic_layout, "lscm": lscm_layout,
                 "arap": arap_layout}

@@ -1,0 +1,138 @@
+"""Untangling a folded layout: Garanzha et al. 2021, "Foldover-free maps in 50 lines of code".
+
+The guarded dynamics (:mod:`golden_model.guard`) keeps a fold-free layout fold-free but cannot
+clear a fold it starts with. This module removes folds first. Each triangle's Jacobian ``J``
+maps its 3D shape (laid flat in its own plane) onto the layout; the energy
+
+    F_ε = Σ_t A_t·((1 − θ)·|J|²_F + θ·(1 + det² J)) / χ(det J, ε),   χ(D, ε) = (D + √(ε² + D²))/2,
+
+is finite for every layout (also folded ones, ``det J ≤ 0``) while ``ε > 0``, and as ``ε`` shrinks
+it approaches an energy that is infinite on folded triangles. Minimising ``F_ε`` with L-BFGS and
+shrinking ``ε`` by the paper's rule after each minimisation drives every ``det J`` positive.
+The boundary is free (the paper's 2D code holds it fixed): a pattern has no prescribed outline.
+
+The result is a start for the dynamics, not a final pattern: the shape energy makes triangles
+conformal and the area term keeps them at their 3D size, so it is near an isometry wherever one
+exists, and the dynamics then lowers the springs' energy from there without creating a fold.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+from threadpoolctl import threadpool_limits
+
+from .mesh import Mesh, layout_orientation
+
+__all__ = ["UntangleResult", "untangle_layout", "UNTANGLE_THETA"]
+
+#: The weight of the area term against the shape term (the paper's 1/128).
+UNTANGLE_THETA = 1.0 / 128.0
+
+
+@dataclass(frozen=True)
+class UntangleResult:
+    """``positions`` (V, 2); ``folded`` triangles left (0 on success); ``rounds`` of ε; ``seconds``."""
+
+    positions: np.ndarray
+    folded: int
+    rounds: int
+    seconds: float
+
+
+def _reference_gradients(mesh: Mesh) -> np.ndarray:
+    """``(F, 3, 2)``: the gradient of each corner's barycentric coordinate on the triangle laid flat.
+
+    ``J = Σ_i P_i ⊗ G_i`` is then the Jacobian of the affine map from the 3D triangle (in its own
+    plane, the mesh's winding counter-clockwise) onto the layout.
+    """
+    a, b, c = (mesh.vertices[mesh.faces[:, k]] for k in range(3))
+    ab, ac = b - a, c - a
+    length = np.linalg.norm(ab, axis=1)
+    x_c = np.sum(ab * ac, axis=1) / length
+    y_c = np.linalg.norm(np.cross(ab, ac), axis=1) / length
+    # flat corners (0, 0), (length, 0), (x_c, y_c); inverse of the edge matrix [[length, x_c], [0, y_c]]
+    inv = np.zeros((len(length), 2, 2))
+    inv[:, 0, 0] = 1.0 / length
+    inv[:, 0, 1] = -x_c / (length * y_c)
+    inv[:, 1, 1] = 1.0 / y_c
+    corners = np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
+    return np.einsum("kj,fja->fka", corners, inv)  # G_k = corners[k] · E^-1
+
+
+def _chi(det: np.ndarray, eps: float) -> np.ndarray:
+    root = np.sqrt(eps * eps + det * det)
+    positive = det > 0
+    # for det <= 0 the algebraically equal form avoids the cancellation of det + root
+    return np.where(positive, 0.5 * (det + root), 0.5 * eps * eps / np.where(positive, 1.0, root - det))
+
+
+def _energy_and_gradient(flat: np.ndarray, faces: np.ndarray, grads: np.ndarray, areas: np.ndarray,
+                         eps: float, theta: float) -> tuple[float, np.ndarray, np.ndarray]:
+    positions = flat.reshape(-1, 2)
+    corner = positions[faces]  # (F, 3, 2)
+    jac = np.einsum("fkd,fka->fda", corner, grads)  # J[d, axis]
+    det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
+    cof = np.stack([np.stack([jac[:, 1, 1], -jac[:, 1, 0]], axis=1),
+                    np.stack([-jac[:, 0, 1], jac[:, 0, 0]], axis=1)], axis=1)  # ∂det/∂J
+    c1 = _chi(det, eps)
+    c2 = 0.5 + det / (2.0 * np.sqrt(eps * eps + det * det))  # ∂χ/∂det
+    shape = np.sum(jac * jac, axis=(1, 2)) / c1
+    area_term = (1.0 + det * det) / c1
+    energy = float(np.sum(areas * ((1.0 - theta) * shape + theta * area_term)))
+    d_shape = (2.0 * jac - (shape * c2)[:, None, None] * cof) / c1[:, None, None]
+    d_area = cof * ((2.0 * det - area_term * c2) / c1)[:, None, None]
+    d_jac = areas[:, None, None] * ((1.0 - theta) * d_shape + theta * d_area)
+    d_corner = np.einsum("fda,fka->fkd", d_jac, grads)
+    gradient = np.zeros_like(positions)
+    np.add.at(gradient, faces.ravel(), d_corner.reshape(-1, 2))
+    return energy, gradient.ravel(), det
+
+
+def untangle_layout(mesh: Mesh, positions: np.ndarray, *, max_rounds: int = 200, time_limit: float = 20.0,
+                    theta: float = UNTANGLE_THETA, progress=None) -> UntangleResult:
+    """Remove the folds of ``positions`` (V, 2), or as many as ``max_rounds`` and ``time_limit`` seconds allow.
+
+    The layout is mirrored into the mesh's winding first when its bulk is clockwise, and back at
+    the end, so the pattern keeps its orientation. ``progress(rounds, folded)`` is called after
+    each round.
+    """
+    start = time.monotonic()
+    sigma = 1.0 if _winding_agrees(mesh, positions) else -1.0
+    flip = np.array([sigma, 1.0])
+    x = (np.asarray(positions, dtype=np.float64) * flip).ravel()
+    grads, areas, faces = _reference_gradients(mesh), mesh.face_areas, mesh.faces
+    eps = 1.0
+    rounds = 0
+    _, _, det = _energy_and_gradient(x, faces, grads, areas, eps, theta)
+    while rounds < max_rounds and time.monotonic() - start < time_limit:
+        rounds += 1
+        before, _, _ = _energy_and_gradient(x, faces, grads, areas, eps, theta)
+        with threadpool_limits(1):  # L-BFGS-B's small BLAS calls only lose time to threads
+            result = minimize(_energy_and_gradient_only, x, args=(faces, grads, areas, eps, theta), jac=True,
+                              method="L-BFGS-B", options={"maxiter": 2000, "gtol": 1e-6})
+        x = result.x
+        after, _, det = _energy_and_gradient(x, faces, grads, areas, eps, theta)
+        detmin = float(det.min())
+        if progress is not None:
+            progress(rounds, int(np.count_nonzero(det <= 0)))
+        if detmin > 0 and abs(before - after) <= 1e-5 * after:
+            break
+        sigma_k = max(1.0 - after / before, 0.1) if before > 0 else 0.1
+        mu = (1.0 - sigma_k) * float(_chi(np.array([detmin]), eps)[0])
+        eps = max(1e-9, 2.0 * np.sqrt(mu * (mu - detmin))) if detmin < mu else 1e-9
+    layout = x.reshape(-1, 2) * flip
+    return UntangleResult(layout, int(np.count_nonzero(det <= 0)), rounds, time.monotonic() - start)
+
+
+def _energy_and_gradient_only(flat, faces, grads, areas, eps, theta):
+    energy, gradient, _ = _energy_and_gradient(flat, faces, grads, areas, eps, theta)
+    return energy, gradient
+
+
+def _winding_agrees(mesh: Mesh, positions: np.ndarray) -> bool:
+    """Whether the layout's bulk has the mesh's own winding (counter-clockwise faces)."""
+    return layout_orientation(positions, mesh.faces) > 0
