@@ -17,7 +17,8 @@ import tempfile
 from pathlib import Path
 
 from golden_model.fixed.engine import check_fixed_params, prepare
-from golden_model.layouts import LAYOUT_METHODS, initial_layout
+from golden_model.fixed.engine_image import check_engine_params
+from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, SimulatorError, run_bench
 from .top_names import CORE_MODULE, ENGINE_MODULE
@@ -56,6 +57,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
 
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
+    check_engine_params(params)
     args.init = args.init or default_init(args.mesh)
     if args.engine_top:
         return cmd_rtl_check_engine(args, mesh, params)
@@ -71,7 +73,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     check_fixed_params(params, formats)
     prepare(mesh, initial_layout(mesh, args.init), params, formats)  # refuses what the formats cannot hold
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())
-    init_spec = args.init if args.init in LAYOUT_METHODS else str(Path(args.init).resolve())
+    init_spec = args.init if args.init in LAYOUT_METHODS + (AUTO_START,) else str(Path(args.init).resolve())
     config = {"mesh": mesh_spec, "init": init_spec, "params": params.as_dict(), "iterations": args.iterations,
               "step_latency": SpringflatCore(formats).step_latency, "p_valid": 1 - args.stall,
               "p_ready": 1 - args.stall}

@@ -8,6 +8,7 @@ from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet
 from hdl import SpringflatCore
 from sim.cocotb_support import SIMULATORS, missing_simulator, run_bench, verilog_sources
+from golden_model.fixed.engine_image import UNGUARDED
 
 pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
 
@@ -94,7 +95,7 @@ def test_closed_loop_momentum_dynamics(simulator, barrier, tmp_path):
     path = tmp_path / "cap.obj"
     save_obj(path, cap.vertices, cap.faces)
     config = {"mesh": str(path), "init": "tutte",
-              "params": {"dynamics": "momentum", "barrier": barrier, "tol_area": 1.0, "tol_shape": 1.0,
+              "params": {"dynamics": "momentum", **UNGUARDED, "barrier": barrier, "tol_area": 1.0, "tol_shape": 1.0,
                          "tol_energy": 0.0, "max_iter": 25},
               "p_valid": 0.9, "p_ready": 0.8, "seed": 5, "step_latency": SpringflatCore(DEFAULT).step_latency}
     run = run_bench(simulator, DEFAULT, "springflat_core", "closed_loop", config)

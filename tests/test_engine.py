@@ -18,6 +18,7 @@ from golden_model.reference import FlattenParams
 from hdl.engine import SpringflatEngine
 from sim.bus_helpers import ThreadedBus, wishbone_read, wishbone_write
 from sim.engine_driver import BusError, EngineDriver
+from golden_model.fixed.engine_image import UNGUARDED
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
 
@@ -30,7 +31,7 @@ RUNS = {
     "paper-fixed-barrier-damped": FlattenParams(density="auto", step="fixed", dt=0.2, damping=0.1, barrier=True,
                                                 max_iter=4),
     # from the PCA layout the momentum restarts (S < 0) at the third and eighth steps
-    "momentum-barrier": FlattenParams(dynamics="momentum", max_iter=9),
+    "momentum-barrier": FlattenParams(dynamics="momentum", **UNGUARDED, max_iter=9),
 }
 INIT = {"momentum-barrier": "pca"}
 
@@ -249,7 +250,8 @@ def test_area_and_shape_sum_saturations_are_counted(dynamics):
     SATURATIONS as the golden model counts them (the test above saturates only the force pass and the
     integrator)."""
     fs = dataclasses.replace(FS, face_edge=Format(True, 0, 22), error_acc=Format(False, 2, 16))
-    params = FlattenParams(dynamics=dynamics, density="auto", max_iter=6)
+    params = FlattenParams(dynamics=dynamics, density="auto", max_iter=6,
+                           **(UNGUARDED if dynamics == "momentum" else {}))
     image = build_image(prepare(MESH, initial_layout(MESH, "tutte"), params, fs), CAPACITY)
     expected = run_image(image, fs)
     assert expected.saturations > 10  # the case saturates

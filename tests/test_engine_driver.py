@@ -13,13 +13,14 @@ from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
 from sim.engine_driver import BusError, DriverError, EngineDriver, ModelBus
+from golden_model.fixed.engine_image import UNGUARDED
 
 DEFAULT = FormatSet.preset("default")
 CAPACITY = EngineCapacity(vertices=64, entries=400, triangles=128)
 MAP = RegisterMap.build(DEFAULT, CAPACITY)
 MESH = dome_grid(6)
 P0 = initial_layout(MESH, "tutte")
-PARAMS = FlattenParams(dynamics="momentum", max_iter=40)
+PARAMS = FlattenParams(dynamics="momentum", **UNGUARDED, max_iter=40)
 
 
 def _image(params=PARAMS, capacity=CAPACITY):

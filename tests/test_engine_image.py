@@ -15,6 +15,7 @@ from golden_model.generate import dome_grid, generated_meshes, grid_faces, grid_
 from golden_model.layouts import initial_layout
 from golden_model.mesh import Mesh
 from golden_model.reference import FlattenParams
+from golden_model.fixed.engine_image import UNGUARDED
 
 DEFAULT = FormatSet.preset("default")
 CAPACITY = EngineCapacity(vertices=1024, entries=8192, triangles=2048)
@@ -24,10 +25,10 @@ RUNS = {  # both dynamics, with and without the barrier, fixed and variable step
     "paper-variable": FlattenParams(density="auto", max_iter=25),
     "paper-fixed-barrier": FlattenParams(density="auto", step="fixed", dt=0.2, barrier=True, max_iter=25),
     "paper-fixed-damped": FlattenParams(density="auto", step="fixed", dt=0.3, damping=0.1, max_iter=25),
-    "momentum-barrier": FlattenParams(dynamics="momentum", max_iter=60),
-    "momentum-no-barrier": FlattenParams(dynamics="momentum", barrier=False, max_iter=60),
+    "momentum-barrier": FlattenParams(dynamics="momentum", **UNGUARDED, max_iter=60),
+    "momentum-no-barrier": FlattenParams(dynamics="momentum", **UNGUARDED, barrier=False, max_iter=60),
     # the energy always passes: the iteration whose E_S first passes stops the run
-    "momentum-area-gate": FlattenParams(dynamics="momentum", tol_area=0.02, tol_shape=1.0, tol_energy=1.0,
+    "momentum-area-gate": FlattenParams(dynamics="momentum", **UNGUARDED, tol_area=0.02, tol_shape=1.0, tol_energy=1.0,
                                         max_iter=60),
 }
 
@@ -228,7 +229,7 @@ def test_a_90000_vertex_mesh_images_at_a_large_capacity():
     mesh (how fast it does so is in ``benchmarks/bench_engines.py``, not here)."""
     uv = grid_uv(300, 300, 299.0, 299.0)
     mesh = Mesh(np.column_stack([uv, 0.1 * np.sin(uv[:, 0] / 20)]), grid_faces(300, 300))
-    problem = prepare(mesh, uv - 149.5, FlattenParams(dynamics="momentum"), DEFAULT)
+    problem = prepare(mesh, uv - 149.5, FlattenParams(dynamics="momentum", **UNGUARDED), DEFAULT)
     capacity = EngineCapacity(1 << 17, 1 << 20, 1 << 18)
     image = build_image(problem, capacity)
     assert image.nodes.shape == (90_000, 5) and image.entries.shape[0] == len(problem.stream.neighbour)

@@ -26,6 +26,7 @@ from golden_model.reference import FlattenParams
 from sim.cocotb_support import missing_simulator
 from sim.engine_run import engine_sources, run_image_on_rtl, simulation_harness, top_ports
 from sim.top_names import ENGINE_MODULE
+from golden_model.fixed.engine_image import UNGUARDED
 
 pytestmark = pytest.mark.slow  # simulator builds (Verilator: minutes, cached)
 
@@ -37,7 +38,7 @@ MODES = {
     "paper-variable": dict(density="auto", tol_area=0.0, tol_shape=0.0),
     "paper-fixed-barrier": dict(density="auto", step="fixed", dt=0.02, damping=0.05, barrier=True,
                                 tol_area=0.0, tol_shape=0.0),
-    "momentum": dict(density="auto", dynamics="momentum", barrier=True, tol_area=0.0, tol_shape=0.0),
+    "momentum": dict(density="auto", dynamics="momentum", **UNGUARDED, barrier=True, tol_area=0.0, tol_shape=0.0),
 }
 
 

@@ -22,6 +22,7 @@ from golden_model.reference import FlattenParams
 from hdl import NodeUpdate
 from sim.payloads import pass_beats, unpack_beats
 from sim.stream_helpers import run_streams
+from golden_model.fixed.engine_image import UNGUARDED
 
 PRESETS = ["default", "narrow"]
 
@@ -228,7 +229,7 @@ def test_momentum_flattening_over_several_iterations(preset):
     from golden_model.generate import spherical_cap
     fs = FormatSet.preset(preset)
     mesh = spherical_cap(4)
-    params = FlattenParams(dynamics="momentum")
+    params = FlattenParams(dynamics="momentum", **UNGUARDED)
     engine = FixedEngine(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), SaturationCounter())
     dut = NodeUpdate(fs)
     for iteration in range(6):

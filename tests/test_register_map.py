@@ -16,6 +16,7 @@ from golden_model.fixed.engine_image import (RESULTS, EngineCapacity, build_imag
 from golden_model.fixed.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
+from golden_model.fixed.engine_image import UNGUARDED
 from golden_model.reference import FlattenParams
 from sim.register_map_export import EXPORT_FILES, c_header, markdown, to_json, write_exports
 
@@ -102,7 +103,7 @@ def test_decode_selects_exactly_the_mapped_words(regmap):
 
 def test_encode_and_decode_values_round_trip(regmap, fs):
     mesh = dome_grid(6)
-    params = FlattenParams(dynamics="momentum", tol_energy=3.5)
+    params = FlattenParams(dynamics="momentum", **UNGUARDED, tol_energy=3.5)
     constants = build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), SMALL).constants
     words = regmap.encode(constants)
     assert set(words) <= {r.offset for r in regmap.registers if r.access == "rw"}

@@ -308,6 +308,18 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str,
     return constants
 
 
+#: The momentum dynamics as the engine runs it: without the step guard, stopped by Algorithm 1's
+#: one-iteration energy rule (``FlattenParams(dynamics="momentum", **UNGUARDED)``).
+UNGUARDED = {"guard": False, "energy_window": 1}
+
+
+def check_engine_params(params) -> None:
+    """Refuse, in one line, the run modes the engine does not have (the step guard, a windowed stop rule)."""
+    if params.guard or params.energy_window != 1:
+        raise FixedPointError("SpringflatEngine runs the momentum dynamics without the step guard and with "
+                              "Algorithm 1's one-iteration energy rule: add --no-guard --energy-window 1")
+
+
 def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
     """The memory images and run constants of ``problem`` for an engine of ``capacity``.
 
@@ -318,6 +330,7 @@ def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
     n_vertices, n_entries = len(stream.indptr) - 1, len(stream.neighbour)
     capacity.check(n_vertices, n_entries, len(problem.face_areas))
     check_fixed_params(problem.params, fs)
+    check_engine_params(problem.params)
     constants = _run_constants(problem, capacity)
     layouts = memory_layouts(fs, capacity)
     positions = problem.initial_positions
