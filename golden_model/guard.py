@@ -73,6 +73,12 @@ def area_floor(doubled: np.ndarray, doubled_rest: np.ndarray) -> np.ndarray:
     return np.minimum(doubled, np.maximum(doubled * 2.0**-FLOOR_SHIFT, doubled_rest * 2.0**-FLOOR_MIN_SHIFT))
 
 
+def _corners(values: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
+    """``[(F, 2)] * 3``: each corner's rows of ``values`` (gathered one coordinate at a time: faster)."""
+    x, y = np.ascontiguousarray(values[:, 0]), np.ascontiguousarray(values[:, 1])
+    return [np.column_stack([x.take(faces[:, k]), y.take(faces[:, k])]) for k in range(3)]
+
+
 def triangle_levels(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarray, winding: float,
                     doubled_rest: np.ndarray, levels: int = GUARD_LEVELS) -> np.ndarray:
     """``(F,)`` the smallest ``r`` in 0 … ``levels`` with every corner subset moving by ``2^-r`` of its
@@ -81,29 +87,45 @@ def triangle_levels(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarr
     ``positions`` and ``proposal`` are ``(V, 2)``; ``faces`` ``(F, 3)`` in the mesh's winding;
     ``winding`` σ = ±1 the pattern's orientation; ``doubled_rest`` ``(F,)`` = ``2A``.
     """
-    corner = [positions[faces[:, k]] for k in range(3)]
-    move = [proposal[faces[:, k]] for k in range(3)]
+    corner, move = _corners(positions, faces), _corners(proposal, faces)
     x0 = winding * _cross(corner[1] - corner[0], corner[2] - corner[0])
     linear = [winding * _cross(move[k], corner[(k + 1) % 3] - corner[(k + 2) % 3]) for k in range(3)]
     pair = [winding * _cross(move[k], move[(k + 1) % 3]) for k in range(3)]  # ab, bc, ca
     floor = area_floor(x0, doubled_rest)
-    # the seven moving subsets: a, b, c, ab, bc, ca, abc
-    subset_linear = np.stack([linear[0], linear[1], linear[2], linear[0] + linear[1], linear[1] + linear[2],
-                              linear[2] + linear[0], linear[0] + linear[1] + linear[2]])
-    zero = np.zeros_like(x0)
-    subset_pair = np.stack([zero, zero, zero, pair[0], pair[1], pair[2], pair[0] + pair[1] + pair[2]])
     level = np.full(len(faces), levels + 1, dtype=np.int64)
-    for r in range(levels, -1, -1):  # passing at 2^-r implies passing at every smaller fraction
+    # Every subset's area at the full step is at least X0 + Σ min(L_i, 0) − Σ |Q_ij|: where that bound
+    # clears the floor (most triangles, most steps) level 0 holds without the seven subsets.
+    bound = x0 + np.minimum(linear[0], 0) + np.minimum(linear[1], 0) + np.minimum(linear[2], 0) \
+        - np.abs(pair[0]) - np.abs(pair[1]) - np.abs(pair[2])
+    level[bound >= floor] = 0
+    pending = np.flatnonzero(~(bound >= floor))
+    if not len(pending):
+        return level
+    lin = [v[pending] for v in linear]
+    quad = [v[pending] for v in pair]
+    x0, floor = x0[pending], floor[pending]
+    # the seven moving subsets: a, b, c, ab, bc, ca, abc
+    zero = np.zeros_like(x0)
+    subset_linear = np.stack([lin[0], lin[1], lin[2], lin[0] + lin[1], lin[1] + lin[2], lin[2] + lin[0],
+                              lin[0] + lin[1] + lin[2]])
+    subset_pair = np.stack([zero, zero, zero, quad[0], quad[1], quad[2], quad[0] + quad[1] + quad[2]])
+    for r in range(levels + 1):  # the first level that passes; passing at 2^-r implies every smaller fraction
         tau = 2.0**-r
         safe = np.all(x0 + tau * subset_linear + (tau * tau) * subset_pair >= floor, axis=0)
-        level[safe] = r
+        level[pending[safe]] = r
+        keep = ~safe
+        pending, x0, floor = pending[keep], x0[keep], floor[keep]
+        subset_linear, subset_pair = subset_linear[:, keep], subset_pair[:, keep]
+        if not len(pending):
+            break
     return level
 
 
 def node_levels(face_levels: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """``(V,)`` each node's level: the largest of its triangles' (its smallest move fraction)."""
     level = np.zeros(n_vertices, dtype=np.int64)
-    np.maximum.at(level, faces.ravel(), np.repeat(face_levels, 3))
+    for r in np.unique(face_levels[face_levels > 0]):  # ascending: a later (larger) level overwrites
+        level[faces[face_levels == r].ravel()] = r
     return level
 
 
@@ -132,8 +154,10 @@ class StepScale:
     def stalled(self) -> bool:
         return self.shift > SCALE_MAX_SHIFT
 
-    def rejected(self) -> "StepScale":
-        return StepScale(self.shift + 1, 0)
+    def rejected(self, with_momentum: bool = False) -> "StepScale":
+        """After a rolled-back step: a step that carried momentum overshot, and the restart is its cure
+        (the scale stays); a plain gradient step was too long, and the scale halves."""
+        return StepScale(self.shift, 0) if with_momentum else StepScale(self.shift + 1, 0)
 
     def accepted_step(self) -> "StepScale":
         if self.accepted + 1 >= SCALE_GROW_AFTER:

@@ -75,9 +75,11 @@ def triangle_areas_3d(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def signed_areas_2d(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Signed areas of 2D triangles (positive when counter-clockwise)."""
-    a, b, c = (positions[faces[:, k]] for k in range(3))
-    u, v = b - a, c - a
-    return 0.5 * (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    # one coordinate at a time: gathering 1-D arrays is several times faster than gathering rows
+    x, y = np.ascontiguousarray(positions[:, 0]), np.ascontiguousarray(positions[:, 1])
+    xa, xb, xc = (x.take(faces[:, k]) for k in range(3))
+    ya, yb, yc = (y.take(faces[:, k]) for k in range(3))
+    return 0.5 * ((xb - xa) * (yc - ya) - (yb - ya) * (xc - xa))
 
 
 @dataclass(frozen=True, eq=False)

@@ -356,7 +356,9 @@ def barrier_forces(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndar
     of the mesh's (with their 3D ``face_areas``).
     """
     short = _barrier_shortfall(positions, faces, winding, 2.0 * face_areas, kappa)
-    coefficient = 0.25 * gain * spring * winding * short
+    active = np.flatnonzero(short)  # the barrier acts on few faces: only theirs are gathered
+    faces = faces[active]
+    coefficient = 0.25 * gain * spring * winding * short[active]
     p = positions[faces]  # (F, 3, 2)
     pj, pk = np.roll(p, -1, axis=1), np.roll(p, -2, axis=1)
     gradient = np.stack([pj[..., 1] - pk[..., 1], pk[..., 0] - pj[..., 0]], axis=-1)
@@ -649,7 +651,9 @@ class _Jacobi:
     def _refresh(self) -> None:
         # Edge vectors of the current layout serve both its measurement and
         # the next iteration's forces: computed once.
-        self.delta = self.positions[self.edges[:, 1]] - self.positions[self.edges[:, 0]]
+        x, y = np.ascontiguousarray(self.positions[:, 0]), np.ascontiguousarray(self.positions[:, 1])
+        self.delta = np.column_stack([x.take(self.edges[:, 1]) - x.take(self.edges[:, 0]),
+                                      y.take(self.edges[:, 1]) - y.take(self.edges[:, 0])])
         self.length = np.hypot(self.delta[:, 0], self.delta[:, 1])
 
     def measure(self) -> Measurement:
@@ -696,6 +700,7 @@ class _Jacobi:
         if guard is not None:
             weights = guard.scale.value * weights
         proposal = momentum_beta(self.momentum_k) * self.velocities + weights[:, None] * forces
+        with_momentum = self.momentum_k > 0
         if guard is None:
             self.velocities = proposal
             self.positions += proposal
@@ -725,7 +730,7 @@ class _Jacobi:
             self.momentum_k = 0
             self.restart = False
             guard.rejected += 1
-            guard.scale = guard.scale.rejected()
+            guard.scale = guard.scale.rejected(with_momentum)
             self.stalled = guard.scale.stalled
 
     def energy_of_layout(self) -> float:

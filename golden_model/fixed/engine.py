@@ -552,7 +552,7 @@ class FixedEngine:
         self.power = 0  # S of a stopped momentum
         self.momentum = MomentumState()
         guard.rejected += 1
-        guard.scale = guard.scale.rejected()
+        guard.scale = guard.scale.rejected(with_momentum=self.dt > 0)  # β = 0: a plain gradient step
         self.stalled = guard.scale.stalled
 
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..guard import FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS
+from ..guard import FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, node_levels
 from .format import Overflow, SaturationCounter, requantize, shift_round
 from .formats_set import FormatSet
 
@@ -112,8 +112,7 @@ def guarded_moves_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, f
     """``(moves (V, 2) [velocity], node levels (V,))``: each node's proposal ``>> level``; 0 past
     GUARD_LEVELS, and 0 (level ``GUARD_LEVELS + 1``) where the move would leave the position range."""
     face_level = triangle_levels_raw(fs, positions, moves, faces, winding, floor_min)
-    level = np.zeros(len(positions), dtype=np.int64)
-    np.maximum.at(level, faces.ravel(), np.repeat(face_level, 3))
+    level = node_levels(face_level, faces, len(positions))
     taken = moves >> np.minimum(level, GUARD_LEVELS)[:, None]
     target = positions + taken
     outside = ((target < fs.position.raw_min) | (target > fs.position.raw_max)).any(axis=1)
