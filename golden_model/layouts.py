@@ -57,7 +57,7 @@ ARAP_MAX_ITERATIONS = 100
 """Upper bound on ARAP local/global iterations (run in chunks of 10)."""
 ARAP_TOLERANCE = 1e-9
 """ARAP stops early when a chunk moves no node more than this × the boundary length."""
-SLIM_MAX_ITERATIONS = 50
+SLIM_MAX_ITERATIONS = 10
 """Upper bound on SLIM iterations (run in chunks of 5)."""
 SLIM_TOLERANCE = 1e-5
 """SLIM stops after a chunk that moved no node more than this × the boundary length (its E_C has
