@@ -320,10 +320,10 @@ def scale_note(drawing: PatternDrawing) -> str | None:
 
 def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None:
     """Refuse a print of more than :data:`MAX_SHEETS` sheets (a wrong ``--units``, most likely)."""
-    plan = plan_sheets(size, paper)
-    if len(plan.sheets) > MAX_SHEETS:
+    _, _, _, rows, cols = _grid(size, paper, OVERLAP_MM)
+    if rows * cols > MAX_SHEETS:
         raise PatternError(f"the pattern is {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m at 1:1 with --units "
-                           f"{units}: {len(plan.sheets)} {paper} sheets (at most {MAX_SHEETS}); check --units, "
+                           f"{units}: {rows * cols} {paper} sheets (at most {MAX_SHEETS}); check --units, "
                            "or write .dxf")
 
 
@@ -333,33 +333,39 @@ def _tiles(length: float, window: float, overlap: float) -> int:
     return 1 + math.ceil((length - window) / (window - overlap) - 1e-9)
 
 
+def _grid(size: tuple[float, float], paper: str, overlap: float):
+    """``(page, landscape, window, rows, cols)`` of the fewest sheets (see :func:`plan_sheets`)."""
+    width, height = size
+    if paper == "fit":
+        window = (max(width + 2 * FIT_PAD_MM, FIT_MIN_WIDTH_MM - 2 * MARGIN_MM), height + 2 * FIT_PAD_MM)
+        choices = [((window[0] + 2 * MARGIN_MM, window[1] + 2 * MARGIN_MM + TITLE_MM), False)]
+    elif paper in PAPER_MM:
+        w, h = PAPER_MM[paper]
+        choices = [((w, h), False), ((h, w), True)]
+    else:
+        raise PatternError(f"paper must be one of {', '.join(PAPERS)}, got {paper!r}")
+    best = None
+    for page, landscape in choices:
+        window = (MARGIN_MM, MARGIN_MM + TITLE_MM, page[0] - 2 * MARGIN_MM, page[1] - 2 * MARGIN_MM - TITLE_MM)
+        cols, rows = _tiles(width, window[2], overlap), _tiles(height, window[3], overlap)
+        if best is None or rows * cols < best[3] * best[4]:
+            best = (page, landscape, window, rows, cols)
+    return best
+
+
 def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = OVERLAP_MM) -> SheetPlan:
     """Lay a pattern of ``size`` = ``(width, height)`` mm onto sheets of ``paper`` (:data:`PAPERS`).
 
     A4 and Letter: portrait or landscape, whichever needs fewer sheets (portrait on a tie); the grid of
     windows is centred on the pattern.  ``fit``: one page, the pattern plus :data:`FIT_PAD_MM` around it.
     """
-    width, height = size
-    if paper == "fit":
-        window = (max(width + 2 * FIT_PAD_MM, FIT_MIN_WIDTH_MM - 2 * MARGIN_MM), height + 2 * FIT_PAD_MM)
-        page = (window[0] + 2 * MARGIN_MM, window[1] + 2 * MARGIN_MM + TITLE_MM)
-        choices = [(page, False)]
-    elif paper in PAPER_MM:
-        w, h = PAPER_MM[paper]
-        choices = [((w, h), False), ((h, w), True)]
-    else:
-        raise PatternError(f"paper must be one of {', '.join(PAPERS)}, got {paper!r}")
-
-    best = None
-    for page, landscape in choices:
-        window = (MARGIN_MM, MARGIN_MM + TITLE_MM, page[0] - 2 * MARGIN_MM, page[1] - 2 * MARGIN_MM - TITLE_MM)
-        cols, rows = _tiles(width, window[2], overlap), _tiles(height, window[3], overlap)
-        if best is None or rows * cols < best[0]:
-            best = (rows * cols, page, landscape, window, rows, cols)
-    _, page, landscape, window, rows, cols = best
-    covered = (window[2] + (cols - 1) * (window[2] - overlap), window[3] + (rows - 1) * (window[3] - overlap))
-    shift = ((covered[0] - width) / 2, (covered[1] - height) / 2)
+    page, landscape, window, rows, cols = _grid(size, paper, overlap)
+    if rows * cols > MAX_SHEETS:
+        raise PatternError(f"a pattern of {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m needs {rows * cols} "
+                           f"{paper} sheets, more than {MAX_SHEETS}")
     sx, sy = window[2] - overlap, window[3] - overlap
+    covered = (window[2] + (cols - 1) * sx, window[3] + (rows - 1) * sy)
+    shift = ((covered[0] - size[0]) / 2, (covered[1] - size[1]) / 2)
     sheets = tuple(Sheet(f"{_row_name(rows - 1 - r)}{c + 1}", r, c, (c * sx, r * sy))
                    for r in reversed(range(rows)) for c in range(cols))
     return SheetPlan(paper, landscape, page, window, rows, cols, shift, overlap, sheets)
