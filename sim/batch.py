@@ -293,6 +293,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
             outcomes[name] = job
         else:
             pending.append(job)
+    pending.sort(key=lambda job: -len(job.data or b""))  # the largest first: the last task to start is short
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, "local")
              else f"{min(workers, max(1, len(pending)))} {'Dask ' if args.scheduler else ''}worker processes")
     if not args.json:
