@@ -58,8 +58,9 @@ def main() -> None:
         load_before = os.getloadavg()
         separate_dir = tmp / "separate"
         separate_dir.mkdir()
-        separate = sum(timed([SPRINGFLAT, "flatten", str(m), "--units", "m", "--out", str(separate_dir / f"{m.stem}.dxf"),
-                              "--out", str(separate_dir / f"{m.stem}.pdf")]) for m in meshes)
+        separate = sum(timed([SPRINGFLAT, "flatten", str(m), "--units", "m", "--out",
+                              str(separate_dir / f"{m.stem}.dxf"), "--out", str(separate_dir / f"{m.stem}.pdf")])
+                       for m in meshes)
         batch = timed([SPRINGFLAT, "flatten", *map(str, meshes), "--units", "m", "--out-dir", str(tmp / "batch"),
                        "--out", ".dxf", "--out", ".pdf", "--jobs", str(args.jobs)])
         dask = None

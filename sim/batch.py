@@ -45,7 +45,8 @@ OUTPUT_OPTIONS = (("out", "--out", PATTERN_SUFFIXES), ("history", "--history", N
 def add_batch_options(parser: argparse.ArgumentParser) -> None:
     """The batch options of ``flatten``: more meshes, ``--out-dir``, ``--jobs``, ``--scheduler``."""
     parser.add_argument("more_meshes", nargs="*", metavar="MESH",
-                        help="more meshes (given together, before the options): a batch, one result line each")
+                        help="more meshes, right after the first (no option between them): a batch, one result "
+                             "line each")
     parser.add_argument("--out-dir", type=Path, default=None, metavar="DIR",
                         help="batch: write DIR/<mesh name><ending> for each ending given to --out, --history, "
                              "--plot and --distortion (e.g. --out .dxf --out .pdf --distortion .csv)")
@@ -237,6 +238,10 @@ def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:
         outcome.status, outcome.line = "failed", str(exc)
 
 
+def _died(job: BatchJob, exc: BaseException) -> MeshOutcome:
+    return MeshOutcome(job.source, job.name, "failed", line=f"the worker failed: {type(exc).__name__}: {exc}")
+
+
 def _pool_outcomes(jobs: list[BatchJob], workers: int):
     """Each job's outcome as it finishes, on a local process pool."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -248,7 +253,7 @@ def _pool_outcomes(jobs: list[BatchJob], workers: int):
             try:
                 yield future.result()
             except Exception as exc:  # noqa: BLE001 - a worker that died fails its mesh only
-                yield MeshOutcome(job.source, job.name, "failed", line=f"the worker failed: {type(exc).__name__}: {exc}")
+                yield _died(job, exc)
 
 
 def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
@@ -275,7 +280,7 @@ def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
                 yield future.result()
             except Exception as exc:  # noqa: BLE001 - a worker that died fails its mesh only
                 job = by_key[future.key]
-                yield MeshOutcome(job.source, job.name, "failed", line=f"the worker failed: {type(exc).__name__}: {exc}")
+                yield _died(job, exc)
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
