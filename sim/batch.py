@@ -256,13 +256,14 @@ def _pool_outcomes(jobs: list[BatchJob], workers: int):
                 yield _died(job, exc)
 
 
-def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
-    """Each job's outcome as it finishes, on a Dask cluster (``local``: a ``LocalCluster`` of ``workers``)."""
+@contextlib.contextmanager
+def dask_client(scheduler: str, workers: int):
+    """A ``distributed.Client``: of a new ``LocalCluster`` of ``workers`` single-threaded processes for
+    ``local``, else connected to the scheduler at ``scheduler`` (a one-line error when it cannot be reached)."""
     try:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, LocalCluster
     except ImportError:  # pragma: no cover - a dependency of springflat
         raise UserError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
-
     with contextlib.ExitStack() as stack:
         if scheduler == "local":
             cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
@@ -273,14 +274,21 @@ def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
                 client = stack.enter_context(Client(scheduler, timeout="10s"))
             except (OSError, TimeoutError, ValueError) as exc:
                 raise UserError(f"cannot reach the Dask scheduler at '{scheduler}': {exc}") from None
+        yield client
+
+
+def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
+    """Each job's outcome as it finishes, on a Dask cluster (``local``: a ``LocalCluster`` of ``workers``)."""
+    from distributed import as_completed
+
+    with dask_client(scheduler, workers) as client:
         futures = client.map(flatten_one, jobs, pure=False)
         by_key = {future.key: job for future, job in zip(futures, jobs)}
         for future in as_completed(futures):
             try:
                 yield future.result()
             except Exception as exc:  # noqa: BLE001 - a worker that died fails its mesh only
-                job = by_key[future.key]
-                yield _died(job, exc)
+                yield _died(by_key[future.key], exc)
 
 
 def cmd_batch(args: argparse.Namespace) -> int:

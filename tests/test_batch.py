@@ -125,3 +125,21 @@ def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
     write_meshes(tmp_path / "b", 1, 0)
     assert main(["flatten", "a/dome00.obj", "b/dome00.obj", "--out-dir", "o", "--out", ".dxf"]) == 2
     assert "are both named 'dome00'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_study_on_a_dask_local_cluster_gives_the_pools_results(tmp_path):
+    import csv
+
+    args = ["study", "surf2", "--init", "pca", "--step", "variable", "--sweep", "lut_index_bits", "--no-optimise",
+            "--quiet", "--workers", "2"]
+    pool = run(*args, "--out", tmp_path / "pool")
+    dask = run(*args, "--out", tmp_path / "dask", "--scheduler", "local")
+    assert pool.returncode == dask.returncode == 0, dask.stderr
+    for name in ("summary.csv", "chosen.json"):
+        assert (tmp_path / "pool" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes(), name
+
+    def runs(folder):  # every column but the wall time of each run
+        with open(tmp_path / folder / "results.csv", newline="") as f:
+            return [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
+    assert runs("pool") == runs("dask") and len(runs("pool")) == 8
