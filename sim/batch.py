@@ -113,7 +113,7 @@ class MeshOutcome:
 
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
-    from .cli import _write_outputs, human_line, json_summary, run_flatten
+    from .cli import _write_outputs, check_print_size, human_line, json_summary, run_flatten
 
     start = time.perf_counter()
     stderr = io.StringIO()
@@ -139,6 +139,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
             with contextlib.redirect_stderr(stderr):
                 mesh, defaults = resolve_mesh(mesh_path)
                 params = params_from_args(args, defaults)
+                check_print_size(args, mesh)
                 result = run_flatten(args, mesh, params)
                 _write_outputs(args, mesh, result)
                 summary = json_summary(args, mesh, params, result)

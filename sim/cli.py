@@ -29,8 +29,8 @@ from golden_model.reference import FlattenParams, FlattenResult, flatten
 
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .outputs import OutputWriteError, all_or_nothing, check_output_path, write_history, write_plot
-from .patterns import PATTERN_SUFFIXES, PatternDrawing, add_pattern_options, run_caption, scale_note, \
-    write_pattern_file
+from .patterns import PATTERN_SUFFIXES, PatternDrawing, add_pattern_options, check_mesh_fits, run_caption, \
+    scale_note, write_pattern_file
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
                           load_format_set, params_from_args, resolve_mesh, strict_json)
 
@@ -57,6 +57,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
     check_outputs(args)
+    check_print_size(args, mesh)
     result = run_flatten(args, mesh, params, progress=sys.stderr.isatty() or not args.json)
     _write_outputs(args, mesh, result)
     if args.json:
@@ -83,6 +84,13 @@ def check_outputs(args: argparse.Namespace) -> None:
         if path is not None:
             check_output_path(path, what, suffixes)
     _check_distinct_files(args)
+
+
+def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
+    """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units)."""
+    if any(str(path).lower().endswith((".pdf", ".svg")) and not str(path).lower().endswith(".flat.svg")
+           for path in args.out or ()):
+        check_mesh_fits(mesh, args.units, args.paper)
 
 
 def choose_engine(args: argparse.Namespace):

@@ -327,6 +327,23 @@ def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None
                            "or write .dxf")
 
 
+def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
+    """Refuse, before a run, a print that will need more than :data:`MAX_SHEETS` sheets whatever the layout.
+
+    A pattern covers about the mesh's area (its area error E_S aside): half of it over one window's area is
+    a lower bound of the sheets needed.
+    """
+    if paper == "fit":
+        return
+    page, _, window, _, _ = _grid((0.0, 0.0), paper, OVERLAP_MM)
+    area_mm2 = float(mesh.face_areas.sum()) * check_units(units) ** 2
+    least = 0.5 * area_mm2 / (window[2] * window[3])
+    if least > MAX_SHEETS:
+        side = math.sqrt(area_mm2) / 1000
+        raise PatternError(f"the mesh's area is about {side:.3g} x {side:.3g} m at 1:1 with --units {units}: more "
+                           f"than {MAX_SHEETS} {paper} sheets; check --units, or write .dxf")
+
+
 def _tiles(length: float, window: float, overlap: float) -> int:
     if length <= window:
         return 1

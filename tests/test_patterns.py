@@ -415,3 +415,14 @@ def test_a_pattern_too_small_for_its_units_gets_a_note(tmp_path):
                            "--out", str(tmp_path / "b.pdf")], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert re.search(r"note: the pattern is [\d.]+ x [\d.]+ mm at 1:1 with --units mm", proc.stderr)
+
+
+def test_a_print_of_too_many_sheets_is_refused_before_the_run(tmp_path):
+    """nefertiti_face is in millimetres: read as metres it would be about 190 m across."""
+    proc = subprocess.run([SPRINGFLAT, "flatten", str(SCANS / "nefertiti_face.obj"), "--units", "m",
+                           "--out", str(tmp_path / "n.dxf"), "--out", str(tmp_path / "n.pdf")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.splitlines() == [f"springflat: error: the mesh's area is about 189 x 189 m at 1:1 with "
+                                        f"--units m: more than {MAX_SHEETS} a4 sheets; check --units, or write .dxf"]
+    assert list(tmp_path.iterdir()) == []
