@@ -57,7 +57,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
@@ -577,6 +577,11 @@ def _worker_task(fs: FormatSet, index: int) -> _FixedOutcome:
     return _run_fixed(_WORKER_CASES[index], fs)
 
 
+def _case_task(case: StudyCase, fs: FormatSet) -> _FixedOutcome:
+    """A run for an executor given to :class:`Study` (it has no initializer: the case travels with the task)."""
+    return _run_fixed(case, fs)
+
+
 # ----------------------------------------------------------------------------- summaries
 
 
@@ -683,11 +688,14 @@ class OptimiseResult:
 class Study:
     """Cases, their cached float references and a cache of fixed-point runs.
 
-    Use as a context manager when ``workers > 1`` (the worker pool is closed on exit).
+    Use as a context manager when ``workers > 1`` (the worker pool is closed on exit).  ``executor``, a
+    ``concurrent.futures.Executor`` of the caller's (a Dask cluster's, say), runs the fixed-point runs instead
+    of a pool of ``workers`` processes; ``workers`` then only bounds the runs in flight when a stop rule
+    may end a phase early.  The caller shuts it down.
     """
 
     def __init__(self, cases: Sequence[StudyCase], target: AccuracyTarget = AccuracyTarget(), workers: int = 1,
-                 progress: Progress | None = None):
+                 progress: Progress | None = None, executor: Executor | None = None):
         if not cases:
             raise ParameterError("a study needs at least one case")
         names = [c.name for c in cases]
@@ -701,6 +709,7 @@ class Study:
         self._runs: dict[tuple[str, str], RunRecord] = {}  # (fs_key, case) -> record (config label "")
         self._configs: dict[str, Config] = {}  # label -> fully evaluated config
         self._pool: ProcessPoolExecutor | None = None
+        self._external = executor
         self._fail_counts = {c.name: 0 for c in self.cases}
         self._knob_failure: dict[str, str] = {}  # knob -> the case that last failed a change of it
         self.runs = 0
@@ -717,7 +726,9 @@ class Study:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
-    def _executor(self) -> ProcessPoolExecutor | None:
+    def _executor(self) -> Executor | None:
+        if self._external is not None:
+            return self._external
         if self.workers <= 1:
             return None
         if self._pool is None:
@@ -759,7 +770,9 @@ class Study:
         while queue or pending:
             while queue and len(pending) < limit and not stopped:
                 fs, i = queue.pop(0)
-                pending[pool.submit(_worker_task, fs, i)] = (fs, i)
+                future = (pool.submit(_worker_task, fs, i) if self._external is None
+                          else pool.submit(_case_task, self.cases[i], fs))
+                pending[future] = (fs, i)
             if not pending:
                 break
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -1040,13 +1053,17 @@ class StudyResult:
 def run_study(cases: Sequence[StudyCase], base: FormatSet, knobs: Sequence[str] | None = None,
               bits: tuple[int, int, int] = DEFAULT_BITS, target: AccuracyTarget = AccuracyTarget(),
               metric: str = "bits", optimise: bool = True, workers: int = 1, presets: bool = True,
-              strides: Sequence[int] = DEFAULT_STRIDES, progress: Progress | None = None) -> StudyResult:
-    """Base + presets + one-knob sweeps, then (optionally) the greedy optimiser; pick the cheapest."""
+              strides: Sequence[int] = DEFAULT_STRIDES, progress: Progress | None = None,
+              executor: Executor | None = None) -> StudyResult:
+    """Base + presets + one-knob sweeps, then (optionally) the greedy optimiser; pick the cheapest.
+
+    ``executor`` runs the fixed-point runs instead of a pool of ``workers`` processes (see :class:`Study`).
+    """
     t0 = time.perf_counter()
     knobs = list(KNOBS) if knobs is None else list(knobs)
     base_cfg = Config(f"base:{base.name}", base, "base")
     configs = [base_cfg] + (preset_configs(base) if presets else []) + sweep_configs(base, knobs, bits)
-    with Study(cases, target, workers, progress) as study:
+    with Study(cases, target, workers, progress, executor) as study:
         study.evaluate(configs, phase="sweep")
         opt = study.optimise(base_cfg, metric, strides) if optimise else None
         chosen = study.cheapest(metric)

@@ -2,7 +2,8 @@
 
 Subcommands:
 
-* ``flatten [MESH]``: flatten a mesh (a file or a built-in, default ``surf1``);
+* ``flatten [MESH]``: flatten a mesh (a file or a built-in, default ``surf1``); with several meshes or
+  ``--out-dir``, a batch on all cores or a Dask cluster (:mod:`sim.batch`);
 * ``paper [--out DIR]``: reproduce the paper's Tables VI–VII and figures.
 
 Bad input never produces a traceback: every user error, an unreadable or
@@ -26,8 +27,10 @@ from golden_model.mesh import Mesh, describe_os_error
 from golden_model.fixed.engine import check_fixed_params, flatten_fixed
 from golden_model.reference import FlattenParams, FlattenResult, flatten
 
-from .outputs import (LAYOUT_SUFFIXES, OutputWriteError, all_or_nothing, check_output_path, write_history,
-                      write_layout, write_plot)
+from .distortion import distortion, worst_summary, write_distortion_csv
+from .outputs import OutputWriteError, all_or_nothing, check_output_path, write_history, write_plot
+from .patterns import PATTERN_SUFFIXES, PatternDrawing, add_pattern_options, check_mesh_fits, run_caption, \
+    scale_note, write_pattern_file
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
                           load_format_set, params_from_args, resolve_mesh, start_positions, strict_json)
 
@@ -47,57 +50,110 @@ def _progress(total: int, enabled: bool):
 
 
 def cmd_flatten(args: argparse.Namespace) -> int:
+    if args.more_meshes or args.out_dir is not None or args.scheduler is not None:
+        from .batch import cmd_batch
+
+        return cmd_batch(args)
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
-    for path, what, suffixes in ((args.out, "--out", LAYOUT_SUFFIXES), (args.history, "--history", None),
-                                 (args.plot, "--plot", (".png",))):
+    check_outputs(args)
+    check_print_size(args, mesh)
+    result = run_flatten(args, mesh, params, progress=sys.stderr.isatty() or not args.json)
+    _write_outputs(args, mesh, result)
+    if args.json:
+        print(strict_json(json_summary(args, mesh, params, result)))
+    else:
+        print(human_line(mesh, result))
+        print(_what_was_used(params, args.init, result), file=sys.stderr)
+    note = scale_note(PatternDrawing.of(mesh, result.positions, args.units)) if any(
+        not str(path).lower().endswith((".flat.obj", ".flat.svg")) for path in args.out or ()) else None
+    if note:
+        print(f"springflat: note: {note}", file=sys.stderr)
+    if result.status == "diverged":
+        print(f"springflat: the run diverged at iteration {result.iterations + 1} ({divergence_hint(params)}); "
+              "outputs hold the last finite state", file=sys.stderr)
+        return EXIT_DIVERGED
+    return 0
+
+
+def divergence_hint(params: FlattenParams) -> str:
+    """What to try after a diverged run, naming only options its mode takes (only an unguarded run diverges)."""
+    if params.dynamics == "momentum":
+        return "the momentum dynamics without its guard: drop --no-guard"
+    step = "a smaller --dt" if params.step == "fixed" else "--step fixed with a small --dt"
+    return f"the paper dynamics has no guard: try --damping 0.05, {step}, or --dynamics momentum"
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse, before the run, an output path that cannot work, and two outputs that are one file."""
+    for path, what, suffixes in ([(path, "--out", PATTERN_SUFFIXES) for path in args.out or ()]
+                                 + [(args.history, "--history", None), (args.plot, "--plot", (".png",)),
+                                    (args.distortion, "--distortion", (".csv",))]):
         if path is not None:
             check_output_path(path, what, suffixes)
     _check_distinct_files(args)
-    args.init = args.init or default_init(args.mesh)
-    show_progress = sys.stderr.isatty() or not args.json
-    if args.engine in ("fixed", "rtl"):  # refuse what the formats or the engine cannot run before any layout work
-        check_fixed_params(params, load_format_set(args.formats or "default"))
-        if args.engine == "rtl":
-            from golden_model.fixed.engine_image import check_engine_params
 
-            check_engine_params(params)
-    positions, args.init = start_positions(mesh, args.init, params, sys.stderr.isatty())
+
+def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
+    """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units)."""
+    if any(str(path).lower().endswith((".pdf", ".svg")) and not str(path).lower().endswith(".flat.svg")
+           for path in args.out or ()):
+        check_mesh_fits(mesh, args.units, args.paper)
+
+
+def choose_engine(args: argparse.Namespace):
+    """The engine ``--engine`` and ``--formats`` name: ``engine(mesh, P0, params, on_iteration=None)``."""
     if args.engine == "fixed":
         formats = load_format_set(args.formats or "default")
 
         def engine(*run_args, **kw):
             return flatten_fixed(*run_args, fs=formats, **kw)
-    elif args.engine == "rtl":
-        engine = _rtl_engine(load_format_set(args.formats or "default"))
-    elif args.formats is not None:
+        return engine
+    if args.engine == "rtl":
+        return _rtl_engine(load_format_set(args.formats or "default"))
+    if args.formats is not None:
         raise UserError("--formats applies to --engine fixed and --engine rtl")
-    else:
-        engine = flatten
+    return flatten
+
+
+def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, progress: bool = False) -> FlattenResult:
+    """One flattening as ``args`` asks (initial layout, engine); sets ``args.init`` to the layout used.
+
+    What the formats or the engine cannot run is refused before any layout work; a guarded run starts
+    fold-free where that can be had (:func:`~sim.run_options.start_positions`)."""
+    args.init = args.init or default_init(args.mesh)
+    if args.engine in ("fixed", "rtl"):
+        check_fixed_params(params, load_format_set(args.formats or "default"))
+        if args.engine == "rtl":
+            from golden_model.fixed.engine_image import check_engine_params
+
+            check_engine_params(params)
+    engine = choose_engine(args)
+    positions, args.init = start_positions(mesh, args.init, params, sys.stderr.isatty())
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
-    with _progress(params.max_iter, show_progress) as bar, np.errstate(over="ignore", invalid="ignore",
-                                                                        divide="ignore"):
-        result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
-    _write_outputs(args, mesh, result)
-    if args.json:
-        print(strict_json({"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
-                           **result.summary(), "used": _what_was_used(params, args.init, result)[len("springflat: "):]}))
-    else:
-        final = result.final
-        print(f"{mesh.name}: {result.status} after {result.iterations} iterations: "
-              f"E_S {result.initial.area_error:.4f} -> {final.area_error:.4f}, "
-              f"E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
-              f"folded {final.folded} (flipped against P0: {final.flipped})"
-              + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed"
-                 else "")
-              + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
-                 if "simulator" in result.extra else ""))
-        print(_what_was_used(params, args.init, result), file=sys.stderr)
-    if result.status == "diverged":
-        print(f"springflat: the run diverged at iteration {result.iterations + 1} "
-              "(try --damping 0.05 or a smaller --dt); outputs hold the last finite state", file=sys.stderr)
-        return EXIT_DIVERGED
-    return 0
+    with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
+
+
+def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:
+    """What ``--json`` prints: the mesh, the run's summary, the distortion's worst 1 %, what was used."""
+    return {"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
+            **result.summary(), "units": args.units,
+            "distortion": worst_summary(distortion(mesh, result.positions)),
+            "used": _what_was_used(params, args.init, result)[len("springflat: "):]}
+
+
+def human_line(mesh: Mesh, result: FlattenResult) -> str:
+    """The one-line result a person reads."""
+    final = result.final
+    return (f"{mesh.name}: {result.status} after {result.iterations} iterations: "
+            f"E_S {result.initial.area_error:.4f} -> {final.area_error:.4f}, "
+            f"E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
+            f"folded {final.folded} (flipped against P0: {final.flipped})"
+            + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed"
+               else "")
+            + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
+               if "simulator" in result.extra else ""))
 
 
 def _rtl_engine(formats):
@@ -163,7 +219,8 @@ def _check_distinct_files(args: argparse.Namespace) -> None:
     mesh_path = Path(args.mesh)
     if mesh_path.is_file():
         seen[mesh_path.resolve()] = f"the mesh '{args.mesh}'"
-    for what, path in (("--out", args.out), ("--history", args.history), ("--plot", args.plot)):
+    for what, path in ([("--out", path) for path in args.out or ()]
+                       + [("--history", args.history), ("--plot", args.plot), ("--distortion", args.distortion)]):
         if path is None:
             continue
         key = Path(path).resolve()
@@ -175,10 +232,16 @@ def _check_distinct_files(args: argparse.Namespace) -> None:
 def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:
     """Write the outputs asked for: all of them, or (on an error) none."""
     title = f"{mesh.name} ({result.engine} engine)"
-    jobs = ((args.out, "--out", lambda path: write_layout(path, result.positions, mesh.faces, vertices=mesh.vertices)),
-            (args.history, "--history", lambda path: write_history(path, result)),
-            (args.plot, "--plot", lambda path: write_plot(path, result, mesh.faces, title=title,
-                                                          vertices=mesh.vertices)))
+    final = result.final
+    drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
+        result.status, result.iterations, final.area_error, final.shape_error, final.folded))
+    jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=args.paper, dxf_edges=args.dxf_edges))
+            for path in args.out or ()]
+    jobs += [(args.history, "--history", lambda path: write_history(path, result)),
+             (args.plot, "--plot", lambda path: write_plot(path, result, mesh.faces, title=title,
+                                                           vertices=mesh.vertices)),
+             (args.distortion, "--distortion",
+              lambda path: write_distortion_csv(path, distortion(mesh, result.positions), args.units))]
     with all_or_nothing():
         for path, what, write in jobs:
             if path is None:
@@ -218,6 +281,15 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_engine_options(parser: argparse.ArgumentParser) -> None:
+    """``--engine`` and ``--formats`` of ``flatten`` (also the keywords of ``springflat.flatten``)."""
+    parser.add_argument("--engine", choices=("float", "fixed", "rtl"), default="float",
+                        help="float reference (default), the bit-exact fixed-point golden model, or rtl: the whole "
+                             "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)")
+    parser.add_argument("--formats", default=None, metavar="PRESET|FILE",
+                        help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="springflat",
@@ -228,15 +300,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
     add_run_options(p)
-    p.add_argument("--engine", choices=("float", "fixed", "rtl"), default="float",
-                   help="float reference (default), the bit-exact fixed-point golden model, or rtl: the whole "
-                        "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)")
-    p.add_argument("--formats", default=None, metavar="PRESET|FILE",
-                   help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
-    p.add_argument("--out", type=Path, help="flattened layout: .obj (z = 0, same faces) or .svg")
+    add_engine_options(p)
+    p.add_argument("--out", type=Path, action="append", metavar="FILE",
+                   help="the pattern, by its ending (repeat for several): .dxf (cut line on layer CUT), .pdf or "
+                        ".svg (true scale on --paper sheets), .obj (the 3D mesh with the pattern as vt), "
+                        ".flat.obj (the layout, z = 0), .flat.svg (the layout coloured by distortion)")
     p.add_argument("--history", type=Path, help="per-iteration CSV")
     p.add_argument("--plot", type=Path, help="PNG of the layouts and error curves")
     p.add_argument("--json", action="store_true", help="print one JSON object with the results")
+    add_pattern_options(p)
+    from .batch import add_batch_options
+
+    add_batch_options(p)
     p.set_defaults(func=cmd_flatten)
 
     p = sub.add_parser("paper", help="reproduce the paper's Tables VI-VII and figures",

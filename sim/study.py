@@ -15,6 +15,7 @@ Wiring (in ``sim/cli.py``)::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import math
 import os
@@ -94,6 +95,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--max-iter", type=integer_argument, default=None, help="override every case's iteration limit")
     p.add_argument("--workers", type=integer_argument, default=None,
                    help="worker processes (default: the CPUs available)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
+                   help="run the fixed-point runs on a Dask cluster: a scheduler address (tcp://host:8786), or "
+                        "local for Dask's LocalCluster with --workers processes")
     p.add_argument("--out", type=Path, default=Path("study-report"), help="output directory (default study-report)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_study)
@@ -142,7 +146,14 @@ def cmd_study(args: argparse.Namespace) -> int:
     n_configs = len({c.key for c in [*preset_configs(base), *sweep_configs(base, knobs, bits)] if c.fs is not None})
     totals["sweep"] = (n_configs + 1) * len(cases)
     try:
-        result = run_study(cases, base, knobs, bits, target, args.cost, args.optimise, workers, progress=update)
+        with contextlib.ExitStack() as stack:
+            executor = None
+            if args.scheduler is not None:
+                from .batch import dask_client
+
+                executor = stack.enter_context(dask_client(args.scheduler, workers)).get_executor(pure=False)
+            result = run_study(cases, base, knobs, bits, target, args.cost, args.optimise, workers, progress=update,
+                               executor=executor)
     finally:
         close()
     command = " ".join(["springflat study", *map(shlex.quote, args.meshes or STUDY_MESHES),

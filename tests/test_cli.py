@@ -22,7 +22,7 @@ def run(*args, cwd=None):
 
 
 def test_flatten_round_trip(tmp_path):
-    out, hist, plot = tmp_path / "flat.obj", tmp_path / "h.csv", tmp_path / "p.png"
+    out, hist, plot = tmp_path / "flat.flat.obj", tmp_path / "h.csv", tmp_path / "p.png"  # .flat.obj: z = 0
     proc = run("flatten", "surf1", "--out", out, "--history", hist, "--plot", plot, "--json")
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
@@ -63,7 +63,7 @@ def test_flatten_file_mesh_to_svg_with_options(tmp_path):
         f.write(f"OFF\n{mesh.n_vertices} {mesh.n_faces} 0\n")
         np.savetxt(f, mesh.vertices)
         np.savetxt(f, np.column_stack([np.full(mesh.n_faces, 3), mesh.faces]), fmt="%d")
-    svg = tmp_path / "dome.svg"
+    svg = tmp_path / "dome.flat.svg"  # the layout in mesh units, a polygon per face (.svg is the print pattern)
     proc = run("flatten", path, "--dynamics", "paper", "--init", "tutte", "--step", "fixed", "--dt", "0.02",
                "--update", "sequential",
                "--damping", "0.1", "--density", "auto", "--max-iter", "5", "--tol-area", "0", "--out", svg, "--json")
@@ -147,10 +147,11 @@ def test_bad_mesh_files(tmp_path, name, message):
 
 def test_diverged_run_exits_nonzero_but_writes_finite_layout(tmp_path):
     proc = run("flatten", "surf1", "--step", "fixed", "--dt", "1000", "--max-iter", "1000",
-               "--out", tmp_path / "o.obj", "--json")
+               "--out", tmp_path / "o.flat.obj", "--json")
     assert proc.returncode == 3
     assert json.loads(proc.stdout)["status"] == "diverged"
-    vertices = [line.split()[1:] for line in (tmp_path / "o.obj").read_text().splitlines() if line.startswith("v ")]
+    vertices = [line.split()[1:] for line in (tmp_path / "o.flat.obj").read_text().splitlines()
+                if line.startswith("v ")]
     assert len(vertices) == 7 and np.isfinite(np.array(vertices, dtype=float)).all()
 
 

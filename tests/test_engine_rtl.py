@@ -185,10 +185,10 @@ def test_flatten_engine_rtl_writes_the_fixed_engines_layout(tmp_path):
     outs = {}
     for engine in ("rtl", "fixed"):
         proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", engine, "--max-iter", "5",
-                               "--out", f"{engine}.obj", "--json"], capture_output=True, text=True, cwd=tmp_path,
+                               "--out", f"{engine}.flat.obj", "--json"], capture_output=True, text=True, cwd=tmp_path,
                               env=env, timeout=1200)
         assert proc.returncode == 0, proc.stderr[-2000:]
         outs[engine] = json.loads(proc.stdout)
-    assert (tmp_path / "rtl.obj").read_text() == (tmp_path / "fixed.obj").read_text()
+    assert (tmp_path / "rtl.flat.obj").read_text() == (tmp_path / "fixed.flat.obj").read_text()  # the layouts
     assert outs["rtl"]["iterations"] == outs["fixed"]["iterations"] == 5
     assert outs["rtl"]["status"] == outs["fixed"]["status"]

@@ -518,7 +518,7 @@ def test_parameters(name, tmp_path, monkeypatch, capsys):
 OUTPUTS: dict[str, Case] = {
     "out in a missing directory": Case(["--out", "no/where.obj"], 2, r"directory 'no' does not exist"),
     "out is a directory": Case(["--out", "d.obj"], 2, r"is a directory", files={"d.obj/x": ""}),
-    "out wrong suffix": Case(["--out", "o.png"], 2, r"must end in .obj or .svg"),
+    "out wrong suffix": Case(["--out", "o.png"], 2, r"must end in .dxf or .pdf or .svg or .obj"),
     "out parent is a file": Case(["--out", "f/o.obj"], 2, r"--out 'f/o.obj'", files={"f": "x"}),
     "out name too long": Case(["--out", "z" * 300 + ".obj"], 2, r"cannot write --out 'z+\.obj': file name too long"),
     "out directory not writable": Case(["--out", "ro/o.obj"], 2,

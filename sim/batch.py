@@ -1,0 +1,377 @@
+"""``springflat flatten A.obj B.obj ... --out-dir DIR``: many meshes on all cores, or on a Dask cluster.
+
+Each mesh is one task, :func:`flatten_one`: the same steps as a single ``springflat flatten`` (the
+mesh's defaults, ``--init``, the engine, the outputs), run in a worker.  The task takes the mesh file's
+bytes and gives back the output files' bytes, so a worker needs no shared file system; the command
+writes them into ``DIR`` as ``<mesh name><ending>``, where the endings are the values of ``--out``,
+``--history``, ``--plot`` and ``--distortion`` (``--out .dxf --out .pdf``), each mesh's files all or
+none (:func:`sim.outputs.all_or_nothing`).
+
+Workers: a :class:`concurrent.futures.ProcessPoolExecutor` with ``--jobs`` processes (default: the
+cores this process may use), or with ``--scheduler ADDRESS`` a Dask cluster (``distributed.Client``);
+``--scheduler local`` starts Dask's own ``LocalCluster`` of ``--jobs`` single-threaded worker
+processes.  Either way the outputs are the same bytes.
+
+A mesh that fails (unreadable, invalid, a worker that died) is reported on its line and in the table,
+and the others go on; the exit status is 2 when any mesh failed, else 3 when any run diverged, else 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import os
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from golden_model.builtin import is_builtin
+from golden_model.layouts import LAYOUT_METHODS
+from golden_model.mesh import MeshError, describe_os_error, read_file_bytes
+
+from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_output_path
+from .patterns import PATTERN_SUFFIXES, pattern_kind
+from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, integer_argument, params_from_args,
+                          resolve_mesh, strict_json)
+
+#: The output options a batch takes endings for, with the file kinds each accepts.
+OUTPUT_OPTIONS = (("out", "--out", PATTERN_SUFFIXES), ("history", "--history", None), ("plot", "--plot", (".png",)),
+                  ("distortion", "--distortion", (".csv",)))
+
+
+def add_batch_options(parser: argparse.ArgumentParser) -> None:
+    """The batch options of ``flatten``: more meshes, ``--out-dir``, ``--jobs``, ``--scheduler``."""
+    parser.add_argument("more_meshes", nargs="*", metavar="MESH",
+                        help="more meshes, right after the first (no option between them): a batch, one result "
+                             "line each")
+    parser.add_argument("--out-dir", type=Path, default=None, metavar="DIR",
+                        help="batch: write DIR/<mesh name><ending> for each ending given to --out, --history, "
+                             "--plot and --distortion (e.g. --out .dxf --out .pdf --distortion .csv)")
+    parser.add_argument("--jobs", type=integer_argument, default=None, metavar="N",
+                        help="batch: worker processes (default: every core)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
+                        help="batch on a Dask cluster: a scheduler address (tcp://host:8786), or local for Dask's "
+                             "LocalCluster with --jobs worker processes")
+
+
+def default_jobs() -> int:
+    """The cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+@dataclass(frozen=True)
+class BatchJob:
+    """One mesh of a batch, as shipped to a worker.
+
+    Attributes:
+        source: the mesh as given on the command line (a file or a built-in name).
+        name: the mesh's name: the file's stem, or the built-in's name; names the output files.
+        data: the file's bytes (``None`` for a built-in).
+        options: the run's options (``argparse`` namespace entries of ``flatten``).
+        endings: ``{option: ending}`` of the outputs to write (``out`` may have several).
+    """
+
+    source: str
+    name: str
+    data: bytes | None
+    options: dict
+    endings: tuple[tuple[str, str], ...]
+
+
+@dataclass
+class MeshOutcome:
+    """What one mesh gave: its result or why it failed, and its output files.
+
+    Attributes:
+        status: the run's status (``converged``, ``max-iterations``, ``diverged``) or ``failed``.
+        summary: the ``--json`` summary of a single run (``None`` when failed).
+        line: the one-line result, or the error.
+        notes: what the run said on stderr (mesh notes).
+        files: ``{ending: bytes}`` of the outputs.
+        seconds: the worker's wall time.
+    """
+
+    source: str
+    name: str
+    status: str
+    summary: dict | None = None
+    line: str = ""
+    notes: str = ""
+    files: list[tuple[str, bytes]] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def failed(self) -> bool:
+        return self.status == "failed"
+
+
+def flatten_one(job: BatchJob) -> MeshOutcome:
+    """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
+    from .cli import _write_outputs, check_print_size, human_line, json_summary, run_flatten
+
+    start = time.perf_counter()
+    stderr = io.StringIO()
+    with tempfile.TemporaryDirectory(prefix="springflat-batch-") as tmp:
+        mesh_path = job.source
+        if job.data is not None:
+            (Path(tmp) / "in").mkdir()
+            mesh_path = str(Path(tmp) / "in" / Path(job.source).name)
+            Path(mesh_path).write_bytes(job.data)
+        out = Path(tmp) / "out"
+        out.mkdir()
+        names = [(option, ending, out / f"{job.name}{ending}") for option, ending in job.endings]
+        args = argparse.Namespace(**job.options)
+        args.mesh = mesh_path
+        for option, _, _ in OUTPUT_OPTIONS:
+            setattr(args, option, [] if option == "out" else None)
+        for option, _, path in names:
+            if option == "out":
+                args.out.append(path)
+            else:
+                setattr(args, option, path)
+        try:
+            with contextlib.redirect_stderr(stderr):
+                mesh, defaults = resolve_mesh(mesh_path)
+                params = params_from_args(args, defaults)
+                check_print_size(args, mesh)
+                result = run_flatten(args, mesh, params)
+                _write_outputs(args, mesh, result)
+                summary = json_summary(args, mesh, params, result)
+                line = human_line(mesh, result)
+            files = [(ending, path.read_bytes()) for _, ending, path in names]
+            return MeshOutcome(job.source, job.name, result.status, summary, line, stderr.getvalue(), files,
+                               time.perf_counter() - start)
+        except USER_ERRORS + (UserError,) as exc:
+            message = str(exc)
+        except OSError as exc:
+            message = f"cannot access '{exc.filename}': {describe_os_error(exc)}" if exc.filename else str(exc)
+        except Exception as exc:  # noqa: BLE001 - one mesh's bug must not end the batch
+            message = f"unexpected {type(exc).__name__}: {exc}"
+        message = message.replace(mesh_path, job.source)
+        return MeshOutcome(job.source, job.name, "failed", None, message, stderr.getvalue(), [],
+                           time.perf_counter() - start)
+
+
+def _endings(args: argparse.Namespace) -> tuple[tuple[str, str], ...]:
+    """``(option, ending)`` of every output asked for; an ending is a file-name tail such as ``.pdf``."""
+    endings = []
+    for option, what, _ in OUTPUT_OPTIONS:
+        values = getattr(args, option)
+        for value in (values or []) if option == "out" else ([] if values is None else [values]):
+            text = str(value)
+            if not text or "/" in text or os.sep in text:
+                raise UserError(f"in a batch, {what} takes a file-name ending such as .pdf, not '{text}': each mesh "
+                                f"writes --out-dir/<mesh name><ending>")
+            endings.append((option, text))
+    tails = [e for _, e in endings]
+    for tail in tails:
+        if tails.count(tail) > 1:
+            raise UserError(f"the ending '{tail}' is given twice: two outputs would be one file")
+    return tuple(endings)
+
+
+def _names(meshes: list[str]) -> list[str]:
+    """Each mesh's name (file stem or built-in name); two meshes of one name would share files."""
+    names = [m if is_builtin(m) and not Path(m).is_file() else Path(m).stem for m in meshes]
+    seen: dict[str, str] = {}
+    for mesh, name in zip(meshes, names):
+        if name in seen:
+            raise UserError(f"'{seen[name]}' and '{mesh}' are both named '{name}': their outputs would collide")
+        seen[name] = mesh
+    return names
+
+
+def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tuple[str, str], ...], int]:
+    """Refuse what a batch cannot do, before any run; returns the endings and the worker count."""
+    if args.engine == "rtl":
+        raise UserError("--engine rtl runs one mesh at a time (the simulator build is shared): drop it for a batch")
+    if args.init is not None and args.init not in LAYOUT_METHODS:
+        raise UserError(f"in a batch, --init takes a method ({', '.join(LAYOUT_METHODS)}), not a layout file")
+    jobs = default_jobs() if args.jobs is None else args.jobs
+    if jobs < 1:
+        raise UserError(f"--jobs must be >= 1, got {jobs}")
+    endings = _endings(args)
+    if endings and args.out_dir is None:
+        raise UserError("several meshes write their outputs to --out-dir DIR (the endings name the files)")
+    if args.out_dir is not None:
+        out_dir = Path(args.out_dir)
+        if out_dir.exists() and not out_dir.is_dir():
+            raise UserError(f"--out-dir '{out_dir}' exists and is not a directory")
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputWriteError(out_dir, exc, "--out-dir") from None
+        names = _names(meshes)
+        for option, ending in endings:
+            what, suffixes = next((w, s) for o, w, s in OUTPUT_OPTIONS if o == option)
+            check_output_path(out_dir / f"{names[0]}{ending}", what, suffixes)
+            if option == "out":
+                pattern_kind(Path(ending))
+    else:
+        _names(meshes)
+    return endings, jobs
+
+
+def _job(source: str, name: str, options: dict, endings) -> BatchJob | MeshOutcome:
+    """The job of one mesh, or its failure when its file cannot be read here."""
+    if is_builtin(source) and not Path(source).is_file():
+        return BatchJob(source, name, None, options, endings)
+    try:
+        return BatchJob(source, name, read_file_bytes(Path(source), "mesh", MeshError), options, endings)
+    except MeshError as exc:
+        return MeshOutcome(source, name, "failed", line=str(exc))
+
+
+def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:
+    """The mesh's output files in ``out_dir``, all or none; a write error fails the mesh."""
+    try:
+        with all_or_nothing():
+            for ending, data in outcome.files:
+                with atomic_write(out_dir / f"{outcome.name}{ending}") as tmp:
+                    Path(tmp).write_bytes(data)
+    except OutputWriteError as exc:
+        outcome.status, outcome.line = "failed", str(exc)
+
+
+def _died(job: BatchJob, exc: BaseException) -> MeshOutcome:
+    return MeshOutcome(job.source, job.name, "failed", line=f"the worker failed: {type(exc).__name__}: {exc}")
+
+
+def _pool_outcomes(jobs: list[BatchJob], workers: int):
+    """Each job's outcome as it finishes, on a local process pool."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as pool:
+        futures = {pool.submit(flatten_one, job): job for job in jobs}
+        for future in as_completed(futures):
+            job = futures[future]
+            try:
+                yield future.result()
+            except Exception as exc:  # noqa: BLE001 - a worker that died fails its mesh only
+                yield _died(job, exc)
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str, workers: int):
+    """A ``distributed.Client``: of a new ``LocalCluster`` of ``workers`` single-threaded processes for
+    ``local``, else connected to the scheduler at ``scheduler`` (a one-line error when it cannot be reached)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:  # pragma: no cover - a dependency of springflat
+        raise UserError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
+    with contextlib.ExitStack() as stack:
+        if scheduler == "local":
+            cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                       dashboard_address=None))
+            client = stack.enter_context(Client(cluster))
+        else:
+            try:
+                client = stack.enter_context(Client(scheduler, timeout="10s"))
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise UserError(f"cannot reach the Dask scheduler at '{scheduler}': {exc}") from None
+        yield client
+
+
+def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
+    """Each job's outcome as it finishes, on a Dask cluster (``local``: a ``LocalCluster`` of ``workers``)."""
+    from distributed import as_completed
+
+    with dask_client(scheduler, workers) as client:
+        futures = client.map(flatten_one, jobs, pure=False)
+        by_key = {future.key: job for future, job in zip(futures, jobs)}
+        for future in as_completed(futures):
+            try:
+                yield future.result()
+            except Exception as exc:  # noqa: BLE001 - a worker that died fails its mesh only
+                yield _died(by_key[future.key], exc)
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    """Flatten every mesh given; print a line per mesh as it finishes, then a table; the exit status."""
+    meshes = [args.mesh, *args.more_meshes]
+    endings, workers = _check_batch(args, meshes)
+    names = _names(meshes)
+    options = {k: v for k, v in vars(args).items() if k not in ("func", "mesh", "more_meshes")}
+    start = time.perf_counter()
+    outcomes: dict[str, MeshOutcome] = {}
+    pending: list[BatchJob] = []
+    for source, name in zip(meshes, names):
+        job = _job(source, name, options, endings)
+        if isinstance(job, MeshOutcome):
+            outcomes[name] = job
+        else:
+            pending.append(job)
+    pending.sort(key=lambda job: -len(job.data or b""))  # the largest first: the last task to start is short
+    where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, "local")
+             else f"{min(workers, max(1, len(pending)))} {'Dask ' if args.scheduler else ''}worker processes")
+    if not args.json:
+        print(f"springflat: {len(meshes)} meshes on {where}", file=sys.stderr)
+    done = 0
+
+    def report(outcome: MeshOutcome) -> None:
+        nonlocal done
+        done += 1
+        if outcome.notes:
+            sys.stderr.write(outcome.notes)
+        if args.json:
+            record = {"source": outcome.source, "mesh": outcome.name, "seconds": round(outcome.seconds, 3)}
+            record.update(outcome.summary if outcome.summary else {"status": "failed", "error": outcome.line})
+            record["files"] = [str(Path(args.out_dir) / f"{outcome.name}{e}") for e, _ in outcome.files] \
+                if args.out_dir is not None and not outcome.failed else []
+            print(strict_json(record), flush=True)
+        elif outcome.failed:
+            print(f"[{done}/{len(meshes)}] {outcome.source}: failed: {outcome.line}", flush=True)
+        else:
+            print(f"[{done}/{len(meshes)}] {outcome.line} ({outcome.seconds:.1f} s)", flush=True)
+
+    for outcome in outcomes.values():
+        report(outcome)
+    if pending:
+        stream = (_pool_outcomes(pending, workers) if args.scheduler is None
+                  else _dask_outcomes(pending, args.scheduler, workers))
+        for outcome in stream:
+            if args.out_dir is not None and not outcome.failed:
+                _write_files(Path(args.out_dir), outcome)
+            outcomes[outcome.name] = outcome
+            report(outcome)
+    ordered = [outcomes[name] for name in names]
+    elapsed = time.perf_counter() - start
+    failed = [o for o in ordered if o.failed]
+    diverged = [o for o in ordered if o.status == "diverged"]
+    if args.json:
+        print(strict_json({"batch": {"meshes": len(ordered), "failed": len(failed), "diverged": len(diverged),
+                                     "seconds": round(elapsed, 3), "workers": where}}))
+    else:
+        print(summary_table(ordered))
+        statuses = {}
+        for o in ordered:
+            statuses[o.status] = statuses.get(o.status, 0) + 1
+        counts = ", ".join(f"{n} {s}" for s, n in statuses.items())
+        print(f"{len(ordered)} meshes: {counts}; {elapsed:.1f} s on {where}")
+    if failed:
+        print(f"springflat: error: {len(failed)} of {len(ordered)} meshes failed: "
+              f"{', '.join(o.source for o in failed)}", file=sys.stderr)
+        return EXIT_USAGE
+    return EXIT_DIVERGED if diverged else 0
+
+
+def summary_table(outcomes: list[MeshOutcome]) -> str:
+    """A plain-text table: one row per mesh, in the order given."""
+    rows = [("mesh", "status", "iterations", "E_S", "E_C", "folded", "seconds")]
+    for o in outcomes:
+        if o.summary is None:
+            rows.append((o.name, "failed", "", "", "", "", f"{o.seconds:.1f}"))
+        else:
+            s = o.summary
+            rows.append((o.name, s["status"], str(s["iterations"]), f"{s['area_error']:.4f}",
+                         f"{s['shape_error']:.4f}", str(s["folded"]), f"{o.seconds:.1f}"))
+    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
+    lines = ["  ".join(cell.ljust(w) if k < 2 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths)))
+             for row in rows]
+    return "\n".join(line.rstrip() for line in lines)

@@ -1,0 +1,685 @@
+"""Cutting patterns from a flattened mesh: DXF, true-scale PDF and SVG tiled onto paper, OBJ with ``vt``.
+
+The writer is chosen by the file name's ending (:func:`pattern_kind`):
+
+=============  ==========================================================================================
+``.dxf``       the boundary as one closed ``LWPOLYLINE`` on layer ``CUT``; with ``dxf_edges`` every mesh
+               edge as a ``LINE`` on layer ``MESH``; coordinates in the mesh's units, 1:1, ``$INSUNITS`` and
+               ``$MEASUREMENT`` set from ``units`` (ezdxf).
+``.pdf``       true scale (1 mm of pattern = 1 mm of paper for ``units="mm"``), on ``paper`` sheets
+               (A4, Letter, or ``fit``: one page the pattern's size), tiled with overlap marks when the
+               pattern is larger than one sheet; every sheet carries the mesh's name, the units, its
+               label and a scale bar to check the print (reportlab).
+``.svg``       the same sheets as the PDF in one SVG document, user unit = 1 mm; tiled sheets lie side
+               by side in their grid, each declared as an Inkscape page.
+``.obj``       the 3D mesh (``v``, full precision) with the pattern as texture coordinates ``vt`` (scaled
+               into [0, 1], the factor in a comment) and ``f v/vt`` corners.
+``.flat.obj``  the flat layout as OBJ with z = 0 and the same faces (:func:`sim.outputs.write_layout`).
+``.flat.svg``  the flat layout in mesh units, faces coloured by area distortion (:func:`sim.outputs.write_layout`).
+=============  ==========================================================================================
+
+Every file is written through :func:`sim.outputs.atomic_write` (no partial file on an error) and is
+byte-for-byte reproducible: no dates, GUIDs or random IDs (ezdxf's fixed metadata, reportlab's
+``invariant`` mode).  Units are stated in every file (DXF header, PDF/SVG title block, OBJ comment).
+
+Sheet geometry (page coordinates in millimetres, origin at the lower left, y up): a margin of
+:data:`MARGIN_MM` on every side, a title block of :data:`TITLE_MM` at the bottom, and the pattern's
+window above it.  Adjacent windows share a strip of :data:`OVERLAP_MM`: a dashed line on each sheet
+shows where its neighbour's window begins, with crosses where that line meets the window's frame, so
+that sheets are trimmed along one frame edge and laid onto the neighbour's dashed line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+from xml.sax.saxutils import escape
+
+import numpy as np
+
+from golden_model.mesh import Mesh, folded_faces, save_obj
+
+from .outputs import OutputError, atomic_write, write_layout
+
+#: Length units a mesh may be in, and millimetres per unit.
+UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+UNITS = tuple(UNIT_MM)
+#: DXF ``$INSUNITS`` codes of :data:`UNITS` (AutoCAD: 1 inches, 4 millimetres, 5 centimetres, 6 metres).
+DXF_INSUNITS = {"mm": 4, "cm": 5, "m": 6, "in": 1}
+#: Paper sizes in millimetres (portrait); ``fit`` is one page the size of the pattern.
+PAPER_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}
+PAPERS = (*PAPER_MM, "fit")
+#: What ``--out`` accepts (:func:`pattern_kind` tells the kind of each).
+PATTERN_SUFFIXES = (".dxf", ".pdf", ".svg", ".obj")
+
+MARGIN_MM = 10.0          # unprinted border on every side
+TITLE_MM = 22.0           # the title block under the window
+OVERLAP_MM = 10.0         # strip shared by adjacent windows
+FIT_PAD_MM = 5.0          # room around the pattern in a ``fit`` window
+FIT_MIN_WIDTH_MM = 160.0  # a ``fit`` page is at least this wide (room for the title block)
+SVG_GAP_MM = 10.0         # space between tiled sheets in an SVG
+CUT_WIDTH_MM = 0.3        # the cut line
+EDGE_WIDTH_MM = 0.06      # mesh edges, drawn only when ...
+EDGE_MIN_MM = 2.0         # ... the median edge is at least this long on paper
+SCALE_BAR_MAX_MM = 80.0   # the scale bar is the longest 1, 2 or 5 x 10^k units not longer than this
+FONT_MM = 3.2             # text height of the title block
+MAX_SHEETS = 400          # more sheets than this is a wrong --units, not a pattern to print
+SMALL_PATTERN_MM = 10.0   # a pattern smaller than this at 1:1 gets a note about --units
+PT_PER_MM = 72.0 / 25.4
+
+
+class PatternError(OutputError):
+    """A pattern that cannot be written as asked (a bad unit, paper or file ending); one line."""
+
+
+def pattern_kind(path: Path) -> str:
+    """``dxf``, ``pdf``, ``svg``, ``obj``, ``flat.obj`` or ``flat.svg`` from the file name's ending."""
+    name = Path(path).name.lower()
+    for kind in ("flat.obj", "flat.svg", "dxf", "pdf", "svg", "obj"):
+        if name.endswith("." + kind):
+            return kind
+    raise PatternError(f"'{path}' must end in {', '.join(PATTERN_SUFFIXES)} (or .flat.obj, .flat.svg)")
+
+
+def check_units(units: str) -> float:
+    """Millimetres per unit of ``units`` (one of :data:`UNITS`)."""
+    if units not in UNIT_MM:
+        raise PatternError(f"units must be one of {', '.join(UNITS)}, got {units!r}")
+    return UNIT_MM[units]
+
+
+def add_pattern_options(parser: argparse.ArgumentParser) -> None:
+    """The ``flatten`` options of the pattern outputs (``--units``, ``--paper``, ``--dxf-edges``, ``--distortion``)."""
+    parser.add_argument("--units", choices=UNITS, default="mm",
+                        help="the mesh's length unit, stated in every output and used for true-scale "
+                             "PDF/SVG and DXF $INSUNITS (default mm)")
+    parser.add_argument("--paper", choices=PAPERS, default="a4",
+                        help="PDF/SVG sheet: a4 or letter (tiled with overlap marks when the pattern is larger), "
+                             "or fit: one page the pattern's size (default a4)")
+    parser.add_argument("--dxf-edges", action="store_true",
+                        help="also write every mesh edge to the DXF, on layer MESH (the boundary is on CUT)")
+    parser.add_argument("--distortion", type=Path, default=None, metavar="FILE.csv",
+                        help="per-triangle area ratio and per-edge strain as CSV")
+
+
+# --------------------------------------------------------------------------- what is drawn
+
+
+@dataclass(frozen=True)
+class PatternDrawing:
+    """A flattened mesh as the writers need it.
+
+    Attributes:
+        name: the mesh's name, printed on every sheet.
+        vertices: ``(V, 3)`` the 3D mesh, in ``units``.
+        faces: ``(F, 3)`` vertex indices.
+        layout: ``(V, 2)`` the pattern, in ``units``.
+        boundary: ``(B,)`` the boundary loop's vertex indices in order (:attr:`Mesh.boundary_loop`).
+        edges: ``(E, 2)`` the unique edges (:attr:`Mesh.edges`).
+        units: one of :data:`UNITS`.
+        caption: one line about the run (status, errors), printed under the name.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    layout: np.ndarray
+    boundary: np.ndarray
+    edges: np.ndarray
+    units: str = "mm"
+    caption: str = ""
+
+    @classmethod
+    def of(cls, mesh: Mesh, layout: np.ndarray, units: str = "mm", caption: str = "") -> "PatternDrawing":
+        layout = np.asarray(layout, dtype=np.float64)
+        if layout.shape != (mesh.n_vertices, 2):
+            raise PatternError(f"the layout must have shape ({mesh.n_vertices}, 2), got {layout.shape}")
+        if not np.isfinite(layout).all():
+            raise PatternError("the layout has a non-finite coordinate")
+        check_units(units)
+        return cls(mesh.name, mesh.vertices, mesh.faces, layout, mesh.boundary_loop, mesh.edges, units, caption)
+
+    @property
+    def boundary_points(self) -> np.ndarray:
+        """``(B, 2)`` the cut line's corners, in ``units`` (closed: the last joins the first)."""
+        return self.layout[self.boundary]
+
+    def boundary_length(self) -> float:
+        """Length of the closed cut line, in ``units``."""
+        p = self.boundary_points
+        return float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
+
+
+def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int) -> str:
+    """The line under the name on each sheet."""
+    return (f"{status} after {iterations} iterations: E_S {area_error:.4f}, E_C {shape_error:.4f}, "
+            f"{folded} folded")
+
+
+def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = "a4", dxf_edges: bool = False) -> None:
+    """Write ``drawing`` to ``path`` in the format its ending names (:func:`pattern_kind`)."""
+    kind = pattern_kind(path)
+    if paper not in PAPERS:
+        raise PatternError(f"paper must be one of {', '.join(PAPERS)}, got {paper!r}")
+    if kind == "flat.obj":
+        with atomic_write(path) as tmp:
+            save_obj(tmp, drawing.layout, drawing.faces)
+    elif kind == "flat.svg":
+        write_layout(path, drawing.layout, drawing.faces, vertices=drawing.vertices, units=drawing.units)
+    elif kind == "obj":
+        with atomic_write(path) as tmp:
+            _write_uv_obj(tmp, drawing)
+    elif kind == "dxf":
+        with atomic_write(path) as tmp:
+            _write_dxf(tmp, drawing, dxf_edges)
+    else:
+        size = pattern_size_mm(drawing)
+        check_sheet_count(size, paper, drawing.units)
+        plan = plan_sheets(size, paper)
+        with atomic_write(path) as tmp:
+            (_write_pdf if kind == "pdf" else _write_svg)(tmp, drawing, plan)
+
+
+# --------------------------------------------------------------------------- OBJ with vt
+
+
+def uv_coordinates(layout: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(uv, origin, size)``: ``uv = (layout - origin) / size`` in [0, 1]², aspect kept.
+
+    ``origin`` is the layout's lower-left corner and ``size`` its larger side (in the layout's units), so
+    ``uv * size + origin`` gives the pattern back.
+    """
+    layout = np.asarray(layout, dtype=np.float64)
+    origin = layout.min(axis=0)
+    size = float(np.max(layout.max(axis=0) - origin)) or 1.0
+    return (layout - origin) / size, origin, size
+
+
+def _write_uv_obj(path: str, drawing: PatternDrawing) -> None:
+    uv, origin, size = uv_coordinates(drawing.layout)
+    faces = np.asarray(drawing.faces, dtype=np.int64) + 1
+    with open(path, "w", encoding="utf-8") as out:
+        out.write(f"# springflat pattern of '{drawing.name}': v = the 3D mesh in {drawing.units}, "
+                  "vt = the flattened pattern\n")
+        out.write(f"# vt = (x - {origin[0]!r}, y - {origin[1]!r}) / {size!r}: the pattern scaled into [0, 1]; "
+                  f"multiply by {size!r} {drawing.units} for its true size\n")
+        if drawing.caption:
+            out.write(f"# {drawing.caption}\n")
+        np.savetxt(out, drawing.vertices, fmt="v %.17g %.17g %.17g")
+        np.savetxt(out, uv, fmt="vt %.17g %.17g")
+        np.savetxt(out, np.repeat(faces, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+
+
+# --------------------------------------------------------------------------- DXF
+
+
+def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
+    import ezdxf
+
+    previous = ezdxf.options.write_fixed_meta_data_for_testing
+    ezdxf.options.write_fixed_meta_data_for_testing = True  # no dates or GUIDs: the same input, the same bytes
+    try:
+        doc = ezdxf.new("R2010", units=DXF_INSUNITS[drawing.units])
+        doc.layers.add("CUT", color=7)
+        msp = doc.modelspace()
+        msp.add_lwpolyline(drawing.boundary_points.tolist(), format="xy", close=True, dxfattribs={"layer": "CUT"})
+        if edges:
+            doc.layers.add("MESH", color=8)
+            for a, b in drawing.layout[drawing.edges].tolist():
+                msp.add_line(a, b, dxfattribs={"layer": "MESH"})
+        meta = doc.ezdxf_metadata()
+        meta["springflat_mesh"] = drawing.name
+        meta["springflat_units"] = drawing.units
+        if drawing.caption:
+            meta["springflat_run"] = drawing.caption
+        # ezdxf adds a CLASS per object type in use while saving, in the order of a set (the hash seed's):
+        # register them first, sorted, so that the file does not depend on the process
+        for dxftype in sorted(doc.entitydb.dxf_types_in_use()):
+            doc.classes.add_class(dxftype)
+        doc.saveas(path)
+    finally:
+        ezdxf.options.write_fixed_meta_data_for_testing = previous
+
+
+# --------------------------------------------------------------------------- sheets
+
+
+@dataclass(frozen=True)
+class Sheet:
+    """One sheet of a tiled pattern.
+
+    Attributes:
+        label: row letter (A at the top) and column number (1 at the left), e.g. ``B2``.
+        row: 0 at the bottom (math orientation); ``col``: 0 at the left.
+        offset: ``(x, y)`` mm: the pattern point (in :func:`pattern_size_mm`'s frame, after
+            :attr:`SheetPlan.shift`) at the window's lower-left corner.
+    """
+
+    label: str
+    row: int
+    col: int
+    offset: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class SheetPlan:
+    """How a pattern of ``size`` mm goes onto sheets of ``page`` mm.
+
+    Attributes:
+        paper: ``a4``, ``letter`` or ``fit``; ``landscape`` when turned.
+        page: ``(width, height)`` of a sheet, mm.
+        window: ``(x, y, width, height)`` mm of the pattern's window on each sheet.
+        rows, cols: the grid.
+        shift: ``(x, y)`` mm added to the pattern so that it sits centred on the grid of windows.
+        overlap: mm shared by adjacent windows.
+        sheets: row by row from the top, each left to right.
+    """
+
+    paper: str
+    landscape: bool
+    page: tuple[float, float]
+    window: tuple[float, float, float, float]
+    rows: int
+    cols: int
+    shift: tuple[float, float]
+    overlap: float
+    sheets: tuple[Sheet, ...]
+
+    @property
+    def stride(self) -> tuple[float, float]:
+        """Distance between the lower-left corners of adjacent windows, mm."""
+        return self.window[2] - self.overlap, self.window[3] - self.overlap
+
+    def describe(self) -> str:
+        if self.paper == "fit":
+            return f"one {self.page[0]:.0f} x {self.page[1]:.0f} mm page"
+        paper = {"a4": "A4", "letter": "Letter"}[self.paper] + (" landscape" if self.landscape else " portrait")
+        if len(self.sheets) == 1:
+            return f"one {paper} sheet"
+        return (f"{len(self.sheets)} {paper} sheets ({self.cols} columns x {self.rows} rows, "
+                f"overlap {self.overlap:g} mm)")
+
+
+def pattern_size_mm(drawing: PatternDrawing) -> tuple[float, float]:
+    """Width and height of the pattern on paper at 1:1, mm."""
+    extent = (drawing.layout.max(axis=0) - drawing.layout.min(axis=0)) * check_units(drawing.units)
+    return float(extent[0]), float(extent[1])
+
+
+def scale_note(drawing: PatternDrawing) -> str | None:
+    """A note when the pattern is so small at 1:1 that ``units`` is likely wrong, else ``None``."""
+    width, height = pattern_size_mm(drawing)
+    if max(width, height) >= SMALL_PATTERN_MM:
+        return None
+    return (f"the pattern is {width:.3g} x {height:.3g} mm at 1:1 with --units {drawing.units}: "
+            "if the mesh is in metres, centimetres or inches, say so with --units m, cm or in")
+
+
+def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None:
+    """Refuse a print of more than :data:`MAX_SHEETS` sheets (a wrong ``--units``, most likely)."""
+    _, _, _, rows, cols = _grid(size, paper, OVERLAP_MM)
+    if rows * cols > MAX_SHEETS:
+        raise PatternError(f"the pattern is {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m at 1:1 with --units "
+                           f"{units}: {rows * cols} {paper} sheets (at most {MAX_SHEETS}); check --units, "
+                           "or write .dxf")
+
+
+def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
+    """Refuse, before a run, a print that will need more than :data:`MAX_SHEETS` sheets whatever the layout.
+
+    A pattern covers about the mesh's area (its area error E_S aside): half of it over one window's area is
+    a lower bound of the sheets needed.
+    """
+    if paper == "fit":
+        return
+    page, _, window, _, _ = _grid((0.0, 0.0), paper, OVERLAP_MM)
+    area_mm2 = float(mesh.face_areas.sum()) * check_units(units) ** 2
+    least = 0.5 * area_mm2 / (window[2] * window[3])
+    if least > MAX_SHEETS:
+        side = math.sqrt(area_mm2) / 1000
+        raise PatternError(f"the mesh's area is about {side:.3g} x {side:.3g} m at 1:1 with --units {units}: more "
+                           f"than {MAX_SHEETS} {paper} sheets; check --units, or write .dxf")
+
+
+def _tiles(length: float, window: float, overlap: float) -> int:
+    if length <= window:
+        return 1
+    return 1 + math.ceil((length - window) / (window - overlap) - 1e-9)
+
+
+def _grid(size: tuple[float, float], paper: str, overlap: float):
+    """``(page, landscape, window, rows, cols)`` of the fewest sheets (see :func:`plan_sheets`)."""
+    width, height = size
+    if paper == "fit":
+        window = (max(width + 2 * FIT_PAD_MM, FIT_MIN_WIDTH_MM - 2 * MARGIN_MM), height + 2 * FIT_PAD_MM)
+        choices = [((window[0] + 2 * MARGIN_MM, window[1] + 2 * MARGIN_MM + TITLE_MM), False)]
+    elif paper in PAPER_MM:
+        w, h = PAPER_MM[paper]
+        choices = [((w, h), False), ((h, w), True)]
+    else:
+        raise PatternError(f"paper must be one of {', '.join(PAPERS)}, got {paper!r}")
+    best = None
+    for page, landscape in choices:
+        window = (MARGIN_MM, MARGIN_MM + TITLE_MM, page[0] - 2 * MARGIN_MM, page[1] - 2 * MARGIN_MM - TITLE_MM)
+        cols, rows = _tiles(width, window[2], overlap), _tiles(height, window[3], overlap)
+        if best is None or rows * cols < best[3] * best[4]:
+            best = (page, landscape, window, rows, cols)
+    return best
+
+
+def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = OVERLAP_MM) -> SheetPlan:
+    """Lay a pattern of ``size`` = ``(width, height)`` mm onto sheets of ``paper`` (:data:`PAPERS`).
+
+    A4 and Letter: portrait or landscape, whichever needs fewer sheets (portrait on a tie); the grid of
+    windows is centred on the pattern.  ``fit``: one page, the pattern plus :data:`FIT_PAD_MM` around it.
+    """
+    page, landscape, window, rows, cols = _grid(size, paper, overlap)
+    if rows * cols > MAX_SHEETS:
+        raise PatternError(f"a pattern of {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m needs {rows * cols} "
+                           f"{paper} sheets, more than {MAX_SHEETS}")
+    sx, sy = window[2] - overlap, window[3] - overlap
+    covered = (window[2] + (cols - 1) * sx, window[3] + (rows - 1) * sy)
+    shift = ((covered[0] - size[0]) / 2, (covered[1] - size[1]) / 2)
+    sheets = tuple(Sheet(f"{_row_name(rows - 1 - r)}{c + 1}", r, c, (c * sx, r * sy))
+                   for r in reversed(range(rows)) for c in range(cols))
+    return SheetPlan(paper, landscape, page, window, rows, cols, shift, overlap, sheets)
+
+
+def _row_name(index: int) -> str:
+    """A, B, ..., Z, AA, AB, ... for row 0, 1, ..."""
+    name = ""
+    index += 1
+    while index:
+        index, rest = divmod(index - 1, 26)
+        name = chr(ord("A") + rest) + name
+    return name
+
+
+def nice_length(limit: float) -> float:
+    """The largest 1, 2 or 5 x 10^k not above ``limit`` (> 0)."""
+    power = 10.0 ** math.floor(math.log10(limit))
+    return max(step * power for step in (1.0, 2.0, 5.0) if step * power <= limit * (1 + 1e-12))
+
+
+def scale_bar(units: str) -> tuple[float, float]:
+    """``(length in units, length in mm)`` of the scale bar: the longest round length up to
+    :data:`SCALE_BAR_MAX_MM` on paper."""
+    per_unit = check_units(units)
+    length = nice_length(SCALE_BAR_MAX_MM / per_unit)
+    return length, length * per_unit
+
+
+# --------------------------------------------------------------------------- drawing primitives (page mm)
+
+
+@dataclass(frozen=True)
+class Stroke:
+    """A polyline on a sheet, mm; ``grey`` 0 = black; ``dash`` mm on/off or ``None``; ``name`` its SVG class."""
+
+    points: tuple[tuple[float, float], ...]
+    width: float
+    grey: float = 0.0
+    dash: tuple[float, float] | None = None
+    name: str | None = None
+
+
+@dataclass(frozen=True)
+class Label:
+    """Text on a sheet: ``(x, y)`` mm of its baseline; ``anchor`` start, middle or end."""
+
+    x: float
+    y: float
+    text: str
+    size: float = FONT_MM
+    anchor: str = "start"
+    bold: bool = False
+    name: str | None = None
+
+
+def _unit_label(length: float, units: str) -> str:
+    """``50 mm``, ``2 in``, ``5 cm (50 mm)``: metric lengths also in mm, for a ruler."""
+    mm = length * UNIT_MM[units]
+    return f"{length:g} {units}" + (f" ({mm:g} mm)" if units in ("cm", "m") else "")
+
+
+def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple[list[Stroke], list[Label]]:
+    """The frame, overlap marks, title block and scale bar of one sheet, in page mm."""
+    x0, y0, w, h = plan.window
+    sx, sy = plan.stride
+    strokes = [Stroke(((x0, y0), (x0 + w, y0), (x0 + w, y0 + h), (x0, y0 + h), (x0, y0)), 0.15, 0.55, name="frame")]
+    labels: list[Label] = []
+    by_place = {(s.row, s.col): s for s in plan.sheets}
+    cross = 3.0
+
+    def mark(a: tuple[float, float], b: tuple[float, float], neighbour: Sheet, at: tuple[float, float], anchor: str):
+        strokes.append(Stroke((a, b), 0.2, 0.3, dash=(2.0, 1.5), name=f"overlap-{neighbour.label}"))
+        for px, py in (a, b):
+            strokes.append(Stroke(((px - cross, py), (px + cross, py)), 0.2, 0.0))
+            strokes.append(Stroke(((px, py - cross), (px, py + cross)), 0.2, 0.0))
+        labels.append(Label(at[0], at[1], f"{neighbour.label} overlaps here", 2.4, anchor))
+
+    r, c = sheet.row, sheet.col
+    if (r, c + 1) in by_place:  # the right neighbour's window starts at x0 + sx
+        mark((x0 + sx, y0), (x0 + sx, y0 + h), by_place[(r, c + 1)], (x0 + sx - 1.0, y0 + h / 2), "end")
+    if (r, c - 1) in by_place:
+        mark((x0 + plan.overlap, y0), (x0 + plan.overlap, y0 + h), by_place[(r, c - 1)],
+             (x0 + plan.overlap + 1.0, y0 + h / 2), "start")
+    if (r + 1, c) in by_place:
+        mark((x0, y0 + sy), (x0 + w, y0 + sy), by_place[(r + 1, c)], (x0 + w / 2, y0 + sy - 3.5), "middle")
+    if (r - 1, c) in by_place:
+        mark((x0, y0 + plan.overlap), (x0 + w, y0 + plan.overlap), by_place[(r - 1, c)],
+             (x0 + w / 2, y0 + plan.overlap + 1.5), "middle")
+
+    # title block: name and units, the run, the sheet; the scale bar at the right
+    top = y0 - 5.0
+    labels.append(Label(x0, top, f"{drawing.name}: springflat cutting pattern, scale 1:1, units {drawing.units}",
+                        FONT_MM, bold=True, name="title"))
+    if drawing.caption:
+        labels.append(Label(x0, top - 1.5 * FONT_MM, drawing.caption, 0.8 * FONT_MM))
+    where = f"sheet {sheet.label} of {len(plan.sheets)}: " if len(plan.sheets) > 1 else ""
+    labels.append(Label(x0, top - 3.0 * FONT_MM, f"{where}{plan.describe()}; print at 100 % (no fit to page)",
+                        0.8 * FONT_MM, name="sheet"))
+    length, length_mm = scale_bar(drawing.units)
+    bar_y = MARGIN_MM + 3.0
+    right = x0 + w
+    strokes.append(Stroke(((right - length_mm, bar_y), (right, bar_y)), 0.5, name="scale-bar"))
+    for x in (right - length_mm, right):
+        strokes.append(Stroke(((x, bar_y - 1.5), (x, bar_y + 1.5)), 0.3))
+    labels.append(Label(right - length_mm / 2, bar_y + 2.5, _unit_label(length, drawing.units), 0.9 * FONT_MM,
+                        "middle", name="scale-label"))
+    labels.append(Label(right - length_mm - 2.0, bar_y - 1.0, "scale check:", 0.8 * FONT_MM, "end"))
+    return strokes, labels
+
+
+def _median_edge_mm(drawing: PatternDrawing) -> float:
+    p = drawing.layout[drawing.edges]
+    return float(np.median(np.linalg.norm(p[:, 1] - p[:, 0], axis=1))) * check_units(drawing.units)
+
+
+def _pattern_mm(drawing: PatternDrawing, plan: SheetPlan) -> np.ndarray:
+    """``(V, 2)`` the layout in mm, shifted onto the grid of windows."""
+    return (drawing.layout - drawing.layout.min(axis=0)) * check_units(drawing.units) + np.array(plan.shift)
+
+
+def _pattern_parts(drawing: PatternDrawing, plan: SheetPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(edges (E', 2, 2), folded faces (K, 3, 2), cut line (B, 2))`` in the grid's mm; no edges when they
+    would merge on paper (median under :data:`EDGE_MIN_MM`)."""
+    q = _pattern_mm(drawing, plan)
+    edges = q[drawing.edges] if _median_edge_mm(drawing) >= EDGE_MIN_MM else np.empty((0, 2, 2))
+    folded = q[drawing.faces[folded_faces(drawing.layout, drawing.faces)]]
+    return edges, folded, q[drawing.boundary]
+
+
+# --------------------------------------------------------------------------- PDF (reportlab)
+
+
+def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
+    """One page per sheet; the pattern is one form XObject, placed and clipped on each page.
+
+    The page's user space is scaled to millimetres, so every coordinate below is in mm.
+    """
+    from reportlab.pdfgen.canvas import Canvas
+
+    canvas = Canvas(path, pagesize=(plan.page[0] * PT_PER_MM, plan.page[1] * PT_PER_MM), invariant=1,
+                    pageCompression=1)
+    canvas.setTitle(f"{drawing.name}: cutting pattern, scale 1:1, units {drawing.units}")
+    canvas.setAuthor("springflat")
+    canvas.setCreator("springflat")
+    canvas.setSubject(f"{plan.describe()}; {drawing.caption}" if drawing.caption else plan.describe())
+
+    edges, folded, cut = _pattern_parts(drawing, plan)
+    sx, sy = plan.stride
+    grid = (plan.window[2] + (plan.cols - 1) * sx, plan.window[3] + (plan.rows - 1) * sy)
+    canvas.beginForm("pattern", -PT_PER_MM, -PT_PER_MM, (grid[0] + 1) * PT_PER_MM, (grid[1] + 1) * PT_PER_MM)
+    canvas.scale(PT_PER_MM, PT_PER_MM)
+    canvas.setLineCap(1)
+    canvas.setLineJoin(1)
+    if len(edges):
+        path_ = canvas.beginPath()
+        for (ax, ay), (bx, by) in edges.tolist():
+            path_.moveTo(ax, ay)
+            path_.lineTo(bx, by)
+        canvas.setLineWidth(EDGE_WIDTH_MM)
+        canvas.setStrokeGray(0.6)
+        canvas.drawPath(path_, stroke=1, fill=0)
+    if len(folded):
+        path_ = canvas.beginPath()
+        for triangle in folded.tolist():
+            path_.moveTo(*triangle[0])
+            path_.lineTo(*triangle[1])
+            path_.lineTo(*triangle[2])
+            path_.close()
+        canvas.setFillGray(0.0)
+        canvas.drawPath(path_, stroke=0, fill=1)
+    path_ = canvas.beginPath()
+    path_.moveTo(*cut[0])
+    for point in cut[1:].tolist():
+        path_.lineTo(*point)
+    path_.close()
+    canvas.setLineWidth(CUT_WIDTH_MM)
+    canvas.setStrokeGray(0.0)
+    canvas.drawPath(path_, stroke=1, fill=0)
+    canvas.endForm()
+
+    x0, y0, w, h = plan.window
+    for sheet in plan.sheets:
+        canvas.scale(PT_PER_MM, PT_PER_MM)
+        canvas.saveState()
+        clip = canvas.beginPath()
+        clip.rect(x0, y0, w, h)
+        canvas.clipPath(clip, stroke=0, fill=0)
+        canvas.translate(x0 - sheet.offset[0], y0 - sheet.offset[1])
+        canvas.scale(1 / PT_PER_MM, 1 / PT_PER_MM)  # the form scales itself to mm
+        canvas.doForm("pattern")
+        canvas.restoreState()
+        strokes, labels = sheet_marks(plan, sheet, drawing)
+        for stroke in strokes:
+            canvas.setLineWidth(stroke.width)
+            canvas.setStrokeGray(stroke.grey)
+            canvas.setDash(list(stroke.dash) if stroke.dash else [])
+            line = canvas.beginPath()
+            line.moveTo(*stroke.points[0])
+            for point in stroke.points[1:]:
+                line.lineTo(*point)
+            canvas.drawPath(line, stroke=1, fill=0)
+        canvas.setFillGray(0.0)
+        for label in labels:
+            canvas.setFont("Helvetica-Bold" if label.bold else "Helvetica", label.size / 0.72)  # cap height ~0.72 em
+            draw = {"start": canvas.drawString, "middle": canvas.drawCentredString,
+                    "end": canvas.drawRightString}[label.anchor]
+            draw(label.x, label.y, label.text)
+        canvas.showPage()
+    canvas.save()
+
+
+# --------------------------------------------------------------------------- SVG
+
+
+def _svg_num(value: float) -> str:
+    text = f"{value:.4f}".rstrip("0").rstrip(".")
+    return "0" if text in ("", "-0") else text
+
+
+def _svg_points(points: Sequence[Sequence[float]], height: float, dx: float = 0.0, dy: float = 0.0) -> str:
+    """``x,y`` pairs in SVG's frame (y down) of page-mm points."""
+    return " ".join(f"{_svg_num(x + dx)},{_svg_num(height - (y + dy))}" for x, y in points)
+
+
+def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
+    """All sheets in one SVG, user unit = 1 mm; each sheet a ``<g id="sheet-LABEL">`` at its place in the grid.
+
+    The pattern is drawn once in ``<defs>`` (y flipped) and placed on each sheet by ``<use>`` inside the
+    window's clip path.  ``sodipodi:namedview`` declares each sheet as an Inkscape page, so that Inkscape
+    prints or exports them one per page.
+    """
+    page_w, page_h = plan.page
+    total_w = plan.cols * page_w + (plan.cols - 1) * SVG_GAP_MM
+    total_h = plan.rows * page_h + (plan.rows - 1) * SVG_GAP_MM
+    edges, folded, cut = _pattern_parts(drawing, plan)
+    x0, y0, w, h = plan.window
+    title = f"{drawing.name}: springflat cutting pattern, scale 1:1, units {drawing.units}"
+
+    def place(sheet: Sheet) -> tuple[float, float]:
+        return sheet.col * (page_w + SVG_GAP_MM), (plan.rows - 1 - sheet.row) * (page_h + SVG_GAP_MM)
+
+    with open(path, "w", encoding="utf-8") as out:
+        write = out.write
+        write('<?xml version="1.0" encoding="UTF-8"?>\n')
+        write('<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" '
+              'xmlns:inkscape="http://www.inkscape.org/namespaces/inkscape" '
+              'xmlns:sodipodi="http://sodipodi.sourceforge.net/DTD/sodipodi-0.dtd" '
+              f'width="{_svg_num(total_w)}mm" height="{_svg_num(total_h)}mm" '
+              f'viewBox="0 0 {_svg_num(total_w)} {_svg_num(total_h)}">\n')
+        write(f"<title>{escape(title)}</title>\n")
+        write(f"<desc>{escape(plan.describe())}; 1 user unit = 1 mm on paper"
+              f"{'; ' + escape(drawing.caption) if drawing.caption else ''}</desc>\n")
+        write('<sodipodi:namedview id="pages">\n')
+        for sheet in plan.sheets:
+            px, py = place(sheet)
+            write(f'<inkscape:page id="page-{sheet.label}" inkscape:label="{sheet.label}" x="{_svg_num(px)}" '
+                  f'y="{_svg_num(py)}" width="{_svg_num(page_w)}" height="{_svg_num(page_h)}"/>\n')
+        write("</sodipodi:namedview>\n<defs>\n")
+        write(f'<clipPath id="window" clipPathUnits="userSpaceOnUse"><rect x="{_svg_num(x0)}" '
+              f'y="{_svg_num(page_h - y0 - h)}" width="{_svg_num(w)}" height="{_svg_num(h)}"/></clipPath>\n')
+        # the pattern in the grid's mm, y flipped about 0: <use> translates it by (dx, page_h - dy)
+        write('<g id="pattern" fill="none" stroke-linecap="round" stroke-linejoin="round">\n')
+        if len(edges):
+            d = "".join(f"M{_svg_num(ax)} {_svg_num(-ay)}L{_svg_num(bx)} {_svg_num(-by)}"
+                        for (ax, ay), (bx, by) in edges.tolist())
+            write(f'<path id="mesh-edges" d="{d}" stroke="#999999" stroke-width="{_svg_num(EDGE_WIDTH_MM)}"/>\n')
+        if len(folded):
+            write('<g id="folded" fill="#000000" stroke="none">\n')
+            for triangle in folded.tolist():
+                write(f'<polygon points="{_svg_points(triangle, 0.0)}"/>\n')
+            write("</g>\n")
+        write(f'<polygon id="cut" points="{_svg_points(cut.tolist(), 0.0)}" stroke="#000000" '
+              f'stroke-width="{_svg_num(CUT_WIDTH_MM)}"/>\n')
+        write("</g>\n</defs>\n")
+        for sheet in plan.sheets:
+            px, py = place(sheet)
+            write(f'<g id="sheet-{sheet.label}" transform="translate({_svg_num(px)} {_svg_num(py)})">\n')
+            write(f'<rect width="{_svg_num(page_w)}" height="{_svg_num(page_h)}" fill="#ffffff" '
+                  f'stroke="{"#cccccc" if len(plan.sheets) > 1 else "none"}" stroke-width="0.2"/>\n')
+            dx, dy = x0 - sheet.offset[0], y0 - sheet.offset[1]
+            write(f'<g clip-path="url(#window)"><use xlink:href="#pattern" '
+                  f'transform="translate({_svg_num(dx)} {_svg_num(page_h - dy)})"/></g>\n')
+            strokes, labels = sheet_marks(plan, sheet, drawing)
+            for stroke in strokes:
+                grey = round(255 * stroke.grey)
+                attributes = (f' class="{stroke.name}"' if stroke.name else "") + (
+                    f' stroke-dasharray="{_svg_num(stroke.dash[0])} {_svg_num(stroke.dash[1])}"' if stroke.dash else "")
+                write(f'<polyline points="{_svg_points(stroke.points, page_h)}" fill="none" '
+                      f'stroke="#{grey:02x}{grey:02x}{grey:02x}" stroke-width="{_svg_num(stroke.width)}"'
+                      f'{attributes}/>\n')
+            for label in labels:
+                anchor = "" if label.anchor == "start" else f' text-anchor="{label.anchor}"'
+                weight = ' font-weight="bold"' if label.bold else ""
+                ident = f' class="{label.name}"' if label.name else ""
+                write(f'<text x="{_svg_num(label.x)}" y="{_svg_num(page_h - label.y)}" '
+                      f'font-family="Helvetica, Arial, sans-serif" font-size="{_svg_num(label.size / 0.72)}"'
+                      f'{anchor}{weight}{ident}>{escape(label.text)}</text>\n')
+            write("</g>\n")
+        write("</svg>\n")

@@ -1,0 +1,276 @@
+"""The library face of springflat: :func:`read_mesh`, :func:`flatten`, :func:`write_pattern`.
+
+One definition of the options.  ``springflat flatten``'s run options are defined once, by
+:func:`sim.run_options.add_run_options` and :func:`sim.cli.add_engine_options`.  This module calls
+those two functions on a recorder (:class:`_Recorder`) instead of a parser, which yields
+:data:`OPTIONS`: every keyword :func:`flatten` takes, with the flag, type, choices and help text of the
+command line.  A keyword's value goes through the option's own argparse ``type`` (given as text, so
+``max_iter=2.5`` is refused as the command line refuses ``--max-iter 2.5``) and ``choices``; the
+namespace then goes through :func:`sim.run_options.params_from_args` like the command line's, which
+checks each value's domain (:class:`golden_model.reference.ParameterError`).  A new option of the
+command line is a new keyword here with no edit.
+
+One set of defaults.  Arrays get the defaults of a mesh *file* (:func:`sim.run_options.resolve_mesh`:
+the momentum dynamics with the fold barrier, stopped at the energy minimum, an ARAP start), obtained by
+handing ``resolve_mesh`` the arrays as a temporary OBJ: ``flatten(V, F)`` gives the layout that
+``springflat flatten mesh.obj`` gives for the same ``V``, ``F``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import warnings
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from golden_model.mesh import Mesh, load_mesh_with_notes, save_obj
+from golden_model.reference import FlattenParams, FlattenResult, ParameterError
+from sim.cli import add_engine_options, choose_engine, run_flatten
+from sim.distortion import Distortion, distortion
+from sim.outputs import area_ratio
+from sim.patterns import PatternDrawing, run_caption, write_pattern_file
+from sim.run_options import add_run_options, params_from_args, resolve_mesh
+
+__all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
+
+
+class MeshNote(UserWarning):
+    """What :func:`read_mesh` changed or ignored in a file (polygons triangulated, STL corners merged, ...)."""
+
+
+@dataclass(frozen=True)
+class OptionSpec:
+    """One option of ``springflat flatten`` as :func:`flatten` takes it.
+
+    Attributes:
+        keyword: the keyword (``damping``); ``flag``: the command line's (``--damping``).
+        action: argparse's action: ``None`` (takes a value), ``"store_true"`` or
+            ``argparse.BooleanOptionalAction``.
+        type: the argparse ``type`` that parses the value's text, or ``None``.
+        choices: the allowed values, or ``None``.
+        default: the command line's default (``None``: the mesh's default applies).
+        help: the command line's help text.
+    """
+
+    keyword: str
+    flag: str
+    action: Any
+    type: Callable[[str], Any] | None
+    choices: tuple | None
+    default: Any
+    help: str
+
+
+class _Recorder:
+    """Stands in for an ``argparse`` parser and records each option added to it."""
+
+    def __init__(self) -> None:
+        self.specs: dict[str, OptionSpec] = {}
+
+    def add_argument(self, *names: str, **kwargs: Any) -> None:
+        flags = [n for n in names if n.startswith("--")]
+        if not flags:  # the positional MESH: flatten's V, F
+            return
+        keyword = kwargs.get("dest") or flags[0][2:].replace("-", "_")
+        choices = kwargs.get("choices")
+        self.specs[keyword] = OptionSpec(keyword, flags[0], kwargs.get("action"), kwargs.get("type"),
+                                         None if choices is None else tuple(choices), kwargs.get("default"),
+                                         " ".join(str(kwargs.get("help", "")).split()))
+
+    def add_argument_group(self, *args: Any, **kwargs: Any) -> "_Recorder":
+        return self
+
+    add_mutually_exclusive_group = add_argument_group
+
+
+def _record_options() -> Mapping[str, OptionSpec]:
+    recorder = _Recorder()
+    add_run_options(recorder)  # type: ignore[arg-type]
+    add_engine_options(recorder)  # type: ignore[arg-type]
+    return recorder.specs
+
+
+#: Every keyword option of :func:`flatten`: the run and engine options of ``springflat flatten``.
+OPTIONS: Mapping[str, OptionSpec] = _record_options()
+
+
+def _option_value(spec: OptionSpec, value: Any) -> Any:
+    """``value`` checked and converted as the command line would the same text."""
+    if spec.action == "store_true" or spec.action is argparse.BooleanOptionalAction:
+        if isinstance(value, (bool, np.bool_)) or (value is None and spec.action != "store_true"):
+            return None if value is None else bool(value)
+        raise ParameterError(f"{spec.keyword} must be True or False, got {value!r}")
+    if value is None:
+        return None
+    if isinstance(value, (bool, np.bool_)):
+        raise ParameterError(f"{spec.keyword} takes a value ({spec.flag}), not {value!r}")
+    text = value if isinstance(value, str) else str(value)
+    if spec.type is not None:
+        try:
+            value = spec.type(text)
+        except (argparse.ArgumentTypeError, TypeError, ValueError) as exc:
+            raise ParameterError(f"{spec.keyword}: {exc}") from None
+    else:
+        value = text
+    if spec.choices is not None and value not in spec.choices:
+        raise ParameterError(f"{spec.keyword} must be one of {', '.join(map(str, spec.choices))}, got {value!r}")
+    return value
+
+
+def _namespace(options: Mapping[str, Any]) -> argparse.Namespace:
+    """The ``flatten`` namespace the command line would build from these keywords."""
+    unknown = sorted(set(options) - set(OPTIONS))
+    if unknown:
+        raise TypeError(f"flatten() got unexpected keyword(s) {', '.join(unknown)}; the options are "
+                        f"{', '.join(OPTIONS)}")
+    values = {keyword: spec.default for keyword, spec in OPTIONS.items()}
+    for keyword, value in options.items():
+        values[keyword] = _option_value(OPTIONS[keyword], value)
+    return argparse.Namespace(**values)
+
+
+@dataclass(frozen=True, eq=False)
+class Pattern:
+    """The result of :func:`flatten`.
+
+    Attributes:
+        layout: ``(V, 2)`` float64, the flat pattern, in the mesh's units; row ``i`` is vertex ``i``.
+        status: ``converged``, ``max-iterations`` or ``diverged`` (then ``layout`` is the last finite state).
+        iterations: iterations run.
+        area_error: ``E_S`` of ``layout`` (relative area error, eq. 16).
+        shape_error: ``E_C`` of ``layout`` (relative edge-length error, eq. 17).
+        folded: triangles whose orientation disagrees with the pattern's.
+        area_ratio: ``(F,)`` ``|A'_t| / A_t`` per triangle (1 = area kept).
+        name: the mesh's name (printed on PDF/SVG sheets).
+        vertices, faces: the mesh, ``(V, 3)`` float64 and ``(F, 3)`` int64.
+        init: the initial layout used (a method name, a file, or ``"array"``).
+        params: the :class:`~golden_model.reference.FlattenParams` of the run.
+        result: the engine's full :class:`~golden_model.reference.FlattenResult` (history, velocities, ...).
+    """
+
+    layout: np.ndarray
+    status: str
+    iterations: int
+    area_error: float
+    shape_error: float
+    folded: int
+    area_ratio: np.ndarray
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    init: str
+    params: FlattenParams
+    result: FlattenResult
+
+    @cached_property
+    def mesh(self) -> Mesh:
+        """The 3D mesh as :class:`golden_model.mesh.Mesh`."""
+        return Mesh(self.vertices, self.faces, name=self.name)
+
+    def distortion(self) -> Distortion:
+        """Per-triangle area ratio and per-edge strain (:class:`sim.distortion.Distortion`)."""
+        return distortion(self.mesh, self.layout)
+
+    @property
+    def edge_strain(self) -> np.ndarray:
+        """``(E,)`` ``l_e / d_e - 1`` per edge of ``mesh.edges``."""
+        return self.distortion().strain
+
+
+def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """``(V, F)`` of an OBJ, PLY, OFF or STL disk patch: ``(V, 3)`` float64 positions, ``(F, 3)`` int64
+    vertex indices (0-based), in the file's vertex order.
+
+    The file must be one manifold disk (:func:`golden_model.mesh.load_mesh_with_notes`); anything else
+    raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
+    reader changed (polygons fan-triangulated, STL corners merged) is a :class:`MeshNote` warning.
+    """
+    mesh, notes = load_mesh_with_notes(path)
+    for note in notes:
+        warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
+    return mesh.vertices, mesh.faces
+
+
+def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
+    if F is None:
+        if not (hasattr(V, "vertices") and hasattr(V, "faces")):
+            raise TypeError("flatten(V, F) takes two arrays, or one trimesh.Trimesh")
+        V, F = V.vertices, V.faces
+    return np.asarray(V), np.asarray(F)
+
+
+def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.ndarray | None = None,
+            **options: Any) -> Pattern:
+    """Flatten a triangle-mesh disk patch into a plane.
+
+    Args:
+        V: ``(V, 3)`` vertex positions (any length unit), or a ``trimesh.Trimesh`` (then no ``F``).
+        F: ``(F, 3)`` 0-based vertex indices of the triangles.
+        name: the mesh's name, for the pattern files.
+        init: the initial layout: ``tutte``, ``pca``, ``harmonic``, ``lscm``, ``arap`` (default), a
+            layout file, or a ``(V, 2)`` array.
+        **options: the options of ``springflat flatten`` (listed below and in :data:`OPTIONS`), the flag
+            without its dashes and with ``_`` for ``-``: ``max_iter=500`` is ``--max-iter 500``.  Each value
+            is checked as the command line checks the same text.  Left out, an option has the default of a
+            mesh *file* on the command line (``springflat flatten mesh.obj``).
+
+    Returns:
+        a :class:`Pattern` (``.layout`` is the ``(V, 2)`` numpy array).
+
+    Raises:
+        golden_model.mesh.MeshError: ``V``, ``F`` are not one manifold disk (a ``ValueError``).
+        golden_model.reference.ParameterError: an option out of its domain (a ``ValueError``).
+        TypeError: an unknown keyword.
+    """
+    vertices, faces = _arrays(V, F)
+    args = _namespace(options)
+    mesh = Mesh(vertices, faces, name=name)  # validated here: errors name no temporary file
+    with tempfile.TemporaryDirectory(prefix="springflat-api-") as tmp:
+        path = Path(tmp) / "mesh.obj"
+        save_obj(path, mesh.vertices, mesh.faces)
+        _, defaults = resolve_mesh(str(path))
+        params = params_from_args(args, defaults)
+        args.mesh = str(path)
+        if init is not None and not isinstance(init, (str, Path)):
+            positions = np.asarray(init, dtype=np.float64)
+            args.init = "array"
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                result = choose_engine(args)(mesh, positions, params)
+        else:
+            args.init = None if init is None else str(init)
+            result = run_flatten(args, mesh, params)
+    final = result.final
+    return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
+                   final.folded, area_ratio(result.positions, mesh.faces, mesh.face_areas), name, mesh.vertices,
+                   mesh.faces, args.init, params, result)
+
+
+def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str = "a4",
+                  dxf_edges: bool = False) -> None:
+    """Write ``pattern`` to ``path``, the format named by its ending (as ``springflat flatten --out``).
+
+    ``.dxf`` (cut line on layer ``CUT``; ``dxf_edges``: mesh edges on ``MESH``), ``.pdf`` / ``.svg`` (true
+    scale on ``paper`` = ``a4``, ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the 3D mesh with
+    the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured by
+    distortion).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
+    :mod:`sim.patterns`.  The file appears whole or not at all.
+    """
+    caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
+                          pattern.folded)
+    write_pattern_file(Path(path), PatternDrawing.of(pattern.mesh, pattern.layout, units, caption), paper=paper,
+                       dxf_edges=dxf_edges)
+
+
+def _options_doc() -> str:
+    lines = ["", "    Options (from ``springflat flatten``):", ""]
+    for spec in OPTIONS.values():
+        lines.append(f"    * ``{spec.keyword}`` (``{spec.flag}``): {spec.help}")
+    return "\n".join(lines) + "\n"
+
+
+flatten.__doc__ = (flatten.__doc__ or "") + _options_doc()
