@@ -113,6 +113,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
 #: The stop rule for mesh files: the energy minimum, not the paper's Surf1 tolerances; the energy
 #: change over the momentum dynamics' window of 10 iterations (docs/guard.md has the measurements).
 FILE_TOL_ENERGY = 1e-3
+#: ... and per iteration (Algorithm 1's rule) for a mesh file run with ``--dynamics paper``, whose
+#: oscillating energy changes by more than this until it has settled.
+FILE_TOL_ENERGY_PAPER = 1e-7
 #: N_max for files: this many iterations per edge from the boundary to the deepest node (the
 #: momentum dynamics needs about 6), and never fewer than FILE_MIN_ITER.
 FILE_ITER_PER_EDGE = 40
@@ -182,6 +185,8 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> Flatt
         changes["dynamics"] = args.dynamics
         for follower in ("barrier", "guard", "energy_window"):
             changes[follower] = None  # follows the dynamics unless given
+        if defaults.tol_energy == FILE_TOL_ENERGY and args.dynamics == "paper":  # a mesh file's defaults
+            changes["tol_energy"] = FILE_TOL_ENERGY_PAPER
     for option in ("dt", "damping", "penalty_kappa", "penalty_gain", "spring", "density",
                    "tol_area", "tol_shape", "tol_energy", "max_iter", "barrier", "barrier_threshold",
                    "barrier_gain", "guard", "energy_window"):
