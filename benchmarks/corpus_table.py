@@ -305,6 +305,10 @@ def patches(corpus: Path, only: list[str] | None, kinds: list[str] | None) -> li
             raise SystemExit(f"corpus_table: error: no patch named {', '.join(sorted(unknown))} in the manifest")
         entries = [e for e in entries if e["name"] in only]
     if kinds:
+        unknown = set(kinds) - set(manifest["kinds"])
+        if unknown:
+            raise SystemExit(f"corpus_table: error: unknown kind {', '.join(sorted(unknown))} "
+                             f"(kinds: {', '.join(manifest['kinds'])})")
         entries = [e for e in entries if e["kind"] in kinds]
     missing = [e["name"] for e in entries if not (corpus / f"{e['name']}.ply").is_file()]
     if missing:

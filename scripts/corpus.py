@@ -485,13 +485,17 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="corpus.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("--manifest", type=Path, default=MANIFEST, help="the manifest (default %(default)s)")
     sub = parser.add_subparsers(dest="command", required=True)
-    b = sub.add_parser("build", help="cut the patches from a directory of originals (checks both sha256s)")
+    about = "cut the patches from a directory of originals (checks both sha256s)"
+    b = sub.add_parser("build", help=about, description=about)
     b.add_argument("--originals", type=Path, required=True, help="directory holding the originals, named as the manifest's 'original'")
-    m = sub.add_parser("from-mirror", help="read the originals from fetched bare git repositories, then build")
+    about = "read the originals from fetched bare git repositories (git show COMMIT:PATH), then build"
+    m = sub.add_parser("from-mirror", help=about, description=about)
     m.add_argument("--mirror-root", type=Path, default=Path("/work/.mirror"),
                    help="directory of fetched repositories OWNER+NAME/repo (default %(default)s)")
-    d = sub.add_parser("download", help="fetch the originals from raw.githubusercontent.com at the pinned commits, "
-                                        "then build; needs internet (machines without it: use from-mirror or build)")
+    about = ("fetch the originals from raw.githubusercontent.com at the pinned commits (sha256-checked), then "
+             "build; needs internet: the project's development machines have none, and there this fails with "
+             "one line (use from-mirror or build there)")
+    d = sub.add_parser("download", help=about, description=about)
     d.add_argument("--timeout", type=float, default=60.0, help="seconds per file (default %(default)s)")
     for p in (b, m, d):
         p.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output directory (default %(default)s)")
