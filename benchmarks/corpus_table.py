@@ -100,6 +100,8 @@ class Run:
     shape_error: float | None = None
     folded: int | None = None
     message: str = ""
+    #: folded triangles of the run's start layout (from its JSON)
+    initial_folded: int | None = None
 
 
 @dataclass
@@ -229,7 +231,7 @@ def springflat(patch: Path, extra: list[str], timeout: float) -> Run:
         lines = done.stderr.strip().splitlines()
         return Run(args, seconds, "error", message=lines[-1] if lines else f"exit status {done.returncode}")
     return Run(args, seconds, str(result["status"]), int(result["iterations"]), float(result["area_error"]),
-               float(result["shape_error"]), int(result["folded"]))
+               float(result["shape_error"]), int(result["folded"]), initial_folded=int(result["initial_folded"]))
 
 
 def bar_failures(run: Run, arap: Layout, slim: Layout) -> list[str]:
@@ -255,7 +257,9 @@ def bar_failures(run: Run, arap: Layout, slim: Layout) -> list[str]:
 
 
 def _f(x: float | None, digits: int = 4) -> str:
-    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    return f"{x:.{digits}f}" if abs(x) < 1e3 else f"{x:.1e}"
 
 
 def peer_cell(layout: Layout) -> str:
@@ -268,13 +272,14 @@ def markdown(rows: list[Row], command: str) -> str:
     lines = [f"Command: `{command}`", "",
              f"Bar: not diverged, 0 folded, E_C <= SLIM's and <= ARAP's where ARAP is fold-free "
              f"(relative tolerance {EC_TOLERANCE:.1%}), wall time < {TIME_LIMIT:g} s.", "",
-             "| mesh | kind | V | status | it | time s | E_S | E_C | folded | ARAP s | E_S | E_C | folded | it "
-             "| SLIM s | E_S | E_C | folded | it | bar |",
-             "|---|---|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|"]
+             "| mesh | kind | V | start folded | status | it | time s | E_S | E_C | folded | ARAP s | E_S | E_C "
+             "| folded | it | SLIM s | E_S | E_C | folded | it | bar |",
+             "|---|---|--:|--:|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|"]
     for r in rows:
         s = r.springflat
         verdict = "PASS" if not r.failures else "FAIL: " + ", ".join(r.failures)
-        lines.append(f"| {r.name} | {r.kind} | {r.vertices} | {s.status} | {s.iterations if s.iterations is not None else '-'} "
+        start = "-" if s.initial_folded is None else str(s.initial_folded)
+        lines.append(f"| {r.name} | {r.kind} | {r.vertices} | {start} | {s.status} | {s.iterations if s.iterations is not None else '-'} "
                      f"| {s.seconds:.1f} | {_f(s.area_error)} | {_f(s.shape_error)} | "
                      f"{s.folded if s.folded is not None else '-'} | {peer_cell(r.arap)} | {peer_cell(r.slim)} | {verdict} |")
     lines += ["", summary(rows)]
@@ -352,7 +357,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--jobs", type=int, default=1, help="meshes at once (default 1; see below)")
     parser.add_argument("--barrier-sweep", action="store_true", help="run every legal barrier setting from a fold-free start")
     parser.add_argument("--peers", type=Path, help="peer cache (default CORPUS/peers.json)")
+    parser.add_argument("--render", type=Path, metavar="JSON", help="run nothing: print (and --markdown) the table "
+                                                                      "of a --json file written before")
     args = parser.parse_args(argv)
+    if args.render:
+        saved = json.loads(args.render.read_text())
+        rows = [Row(**{**r, "springflat": Run(**r["springflat"]), "arap": Layout(**r["arap"]),
+                       "slim": Layout(**r["slim"])}) for r in saved["rows"]]
+        text = markdown(rows, saved["command"])
+        print(text)
+        if args.markdown:
+            args.markdown.write_text(text)
+        return 0
     entries = patches(args.corpus, args.only, args.kinds)
     extra = shlex.split(args.springflat_args)
     command = "benchmarks/corpus_table.py " + " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
