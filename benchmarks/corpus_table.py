@@ -33,6 +33,7 @@ import os
 import shlex
 import subprocess
 import sys
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
@@ -66,6 +67,7 @@ BARRIER_SETTINGS = [("no barrier", ["--no-barrier"])] + [
     for k in (0.05, 0.5, 1) for m in (0.01, 4, 16)]
 #: Version of the peer computation; a change invalidates the cache.
 PEER_VERSION = 1
+_CACHE_LOCK = threading.Lock()
 
 
 @dataclass
@@ -206,10 +208,11 @@ def peers_for(mesh: Mesh, sha: str, cache_path: Path, cache: dict) -> tuple[Layo
         return Layout(**hit["arap"]), Layout(**hit["slim"])
     arap = timed(arap_converged, mesh, "arap")
     slim = timed(slim_converged, mesh, "slim")
-    cache[sha] = {"version": PEER_VERSION, "name": mesh.name, "arap": asdict(arap), "slim": asdict(slim)}
-    partial = cache_path.with_suffix(".json.part")
-    partial.write_text(json.dumps(cache, indent=1, allow_nan=True))
-    partial.replace(cache_path)
+    with _CACHE_LOCK:  # --jobs N: one writer at a time
+        cache[sha] = {"version": PEER_VERSION, "name": mesh.name, "arap": asdict(arap), "slim": asdict(slim)}
+        partial = cache_path.with_suffix(".json.part")
+        partial.write_text(json.dumps(cache, indent=1, allow_nan=True))
+        partial.replace(cache_path)
     return arap, slim
 
 
