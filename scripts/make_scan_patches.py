@@ -39,12 +39,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components, dijkstra
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "scripts"))
 
+from corpus import clean, cut_patch, read_original  # noqa: E402  (the cutting method, generalised there)
 from golden_model.mesh import Mesh, save_obj  # noqa: E402
 
 #: name -> (source file, kind, seed point(s), target vertex count in the ball)
@@ -63,130 +63,9 @@ SOURCES = {
 
 
 def read_clean(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
-
-    loaded = trimesh.load(path, process=False, maintain_order=True, force="mesh")
-    vertices = np.asarray(loaded.vertices, dtype=np.float64)
-    faces = np.asarray(loaded.faces, dtype=np.int64)
-    ok = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    ok &= np.linalg.norm(np.cross(b - a, c - a), axis=1) > 0
-    faces = faces[ok]
-    _, first = np.unique(np.sort(faces, axis=1), axis=0, return_index=True)
-    faces = faces[np.sort(first)]
-    used = np.unique(faces)
-    remap = np.full(len(vertices), -1, dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    return vertices[used], remap[faces]
-
-
-def edge_graph(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    w = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
-    n = len(vertices)
-    return sp.coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
-
-
-def face_adjacency(faces: np.ndarray) -> sp.csr_matrix:
-    """Triangles sharing an (undirected) edge."""
-    f = len(faces)
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    e = np.sort(e, axis=1)
-    owner = np.tile(np.arange(f), 3)
-    order = np.lexsort((e[:, 1], e[:, 0]))
-    e, owner = e[order], owner[order]
-    same = np.all(e[1:] == e[:-1], axis=1)
-    i, j = owner[:-1][same], owner[1:][same]
-    return sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(f, f)).tocsr()
-
-
-def boundary_edge_counts(faces: np.ndarray) -> np.ndarray:
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    _, inverse, counts = np.unique(np.sort(e, axis=1), axis=0, return_inverse=True, return_counts=True)
-    on_boundary = (counts[inverse.reshape(-1)] == 1).reshape(3, -1)
-    return on_boundary.sum(axis=0)
-
-
-def pinched_vertices(faces: np.ndarray, n: int) -> np.ndarray:
-    """Vertices whose incident triangles form more than one edge-connected fan."""
-    bad = []
-    incident = sp.coo_matrix((np.ones(faces.size), (faces.ravel(), np.repeat(np.arange(len(faces)), 3))),
-                             shape=(n, len(faces))).tocsr()
-    for v in np.unique(faces):
-        ring = incident.indices[incident.indptr[v]:incident.indptr[v + 1]]
-        if len(ring) < 2:
-            continue
-        sub = faces[ring]
-        # two triangles around v are adjacent when they share v and one more vertex
-        others = [set(t) - {v} for t in sub.tolist()]
-        rows, cols = [], []
-        for a in range(len(ring)):
-            for b in range(a + 1, len(ring)):
-                if others[a] & others[b]:
-                    rows.append(a)
-                    cols.append(b)
-        g = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(ring),) * 2)
-        if connected_components(g, directed=False)[0] > 1:
-            bad.append(v)
-    return np.asarray(bad, dtype=np.int64)
-
-
-def nearest(vertices: np.ndarray, point) -> int:
-    return int(np.argmin(np.linalg.norm(vertices - np.asarray(point, dtype=np.float64), axis=1)))
-
-
-def distances(vertices: np.ndarray, faces: np.ndarray, kind: str, points) -> np.ndarray:
-    graph = edge_graph(vertices, faces)
-    seeds = [nearest(vertices, p) for p in points]
-    if kind == "ball":
-        return dijkstra(graph, directed=False, indices=seeds[0])
-    if kind == "strip":
-        d, pred = dijkstra(graph, directed=False, indices=seeds[0], return_predecessors=True)
-        path, v = [seeds[1]], seeds[1]
-        while v != seeds[0]:
-            v = int(pred[v])
-            path.append(v)
-        return dijkstra(graph, directed=False, indices=path, min_only=True)
-    raise ValueError(kind)
-
-
-def cut_patch(vertices: np.ndarray, faces: np.ndarray, kind: str, points, target: int) -> tuple[np.ndarray, np.ndarray]:
-    d = distances(vertices, faces, kind, points)
-    radius = np.sort(d)[target - 1]
-    keep = np.all(d[faces] <= radius, axis=1)
-    adjacency = face_adjacency(faces)
-    far = int(np.argmax(d[faces].min(axis=1)))
-    for _ in range(100):
-        before = keep.copy()
-        # largest kept component
-        sub = adjacency[keep][:, keep]
-        _, label = connected_components(sub, directed=False)
-        idx = np.flatnonzero(keep)
-        keep[:] = False
-        keep[idx[label == np.bincount(label).argmax()]] = True
-        # fill enclosed islands of unkept triangles
-        out = np.flatnonzero(~keep)
-        _, label = connected_components(adjacency[~keep][:, ~keep], directed=False)
-        outer = label[np.searchsorted(out, far)]
-        keep[out[label != outer]] = True
-        # pinched boundary vertices: take their whole source one-ring
-        pinched = pinched_vertices(faces[keep], len(vertices))
-        if len(pinched):
-            keep |= np.isin(faces, pinched).any(axis=1)
-        # ears
-        idx = np.flatnonzero(keep)
-        ears = boundary_edge_counts(faces[keep]) >= 2
-        keep[idx[ears]] = False
-        if np.array_equal(before, keep):
-            break
-    else:
-        raise RuntimeError("patch clean-up did not settle")
-    kept = faces[keep]
-    used = np.unique(kept)
-    remap = np.full(len(vertices), -1, dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    return vertices[used], remap[kept]
+    """The original after step 1 (the code is ``scripts/corpus.py``'s, which also drops triangles on edges
+    shared by more than two triangles: none in these originals)."""
+    return clean(*read_original(path))
 
 
 def main(argv: list[str]) -> int:
