@@ -188,7 +188,7 @@ def errors_layout(fs: FormatSet) -> data.StructLayout:
 # (hdl/area_error.py, hdl/controller_units.py)
 
 __all__ += ["triangle_layout", "area_saturations_layout", "normalise_layout", "energy_sums_layout",
-            "energy_result_layout", "word_layout"]
+            "energy_result_layout", "word_layout", "weight_word_layout", "force_word_layout"]
 
 
 def triangle_layout(fs: FormatSet) -> data.StructLayout:
@@ -255,3 +255,13 @@ def energy_result_layout(energy_bits: int) -> data.StructLayout:
 def word_layout(layout: MemoryLayout) -> data.StructLayout:
     """A memory word of the map as a ``lib.data`` layout: the same fields in the same order (LSB first)."""
     return data.StructLayout({f.name: (signed if f.signed else unsigned)(f.width) for f in layout.fields})
+
+
+def weight_word_layout(fs: FormatSet) -> data.StructLayout:
+    """A word of the engine's weight memory: the node's ``1/m`` and its barrier weight [inv_mass]."""
+    return data.StructLayout({"inv_mass": shape_of(fs.inv_mass), "inv_mass_barrier": shape_of(fs.inv_mass)})
+
+
+def force_word_layout(fs: FormatSet) -> data.StructLayout:
+    """A word of the engine's force memory: a node's force [force_acc] and ``inside`` (the barrier's flag)."""
+    return data.StructLayout({"force": vector_layout(fs.force_acc), "inside": unsigned(1)})

@@ -17,7 +17,7 @@ from .layouts import STEP_EVENTS, saturations_shape
 from .pipeline import Pipeline, reduce_levels
 from .rom import registered_rom
 
-__all__ = ["StepGenerator", "stepgen_idle_signal"]
+__all__ = ["StepGenerator", "stepgen_idle_signal", "pending_is_zero"]
 
 
 class StepGenerator(wiring.Component):
@@ -319,6 +319,12 @@ class StepGenerator(wiring.Component):
 
 def stepgen_idle_signal(m: Module, stepgen: StepGenerator):
     """High when the step generator holds no request: it counts requests in and results out."""
-    pending = Signal(range(stepgen.latency + 2), name="stepgen_pending")
-    m.d.sync += pending.eq(pending + (stepgen.i.valid & stepgen.i.ready) - stepgen.o.valid)
+    return pending_is_zero(m, stepgen.latency, stepgen.i, stepgen.o, name="stepgen_pending")
+
+
+def pending_is_zero(m: Module, latency: int, i, o, *, name: str):
+    """High when a unit of ``latency`` clocks with streams ``i`` and ``o`` holds no request: a counter
+    ``name`` of requests taken on ``i`` less results given on ``o`` (``o.ready`` held high)."""
+    pending = Signal(range(latency + 2), name=name)
+    m.d.sync += pending.eq(pending + (i.valid & i.ready) - o.valid)
     return pending == 0

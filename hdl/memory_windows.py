@@ -1,0 +1,289 @@
+"""The engine's memories and their bus windows: every block RAM, the entry memory's banks, the bus's
+read-modify-write of a window word, and each port's multiplexer between the bus and the passes."""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.lib import data, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine_image import BUS_WORD_BITS, EngineCapacity, memory_layouts
+from golden_model.fixed.register_map import RegisterMap
+
+from .block_ram import BlockRam
+from .layouts import force_word_layout, vector_layout, weight_word_layout, word_layout
+from .logic import or_tree
+from .rom import ENTRY_BANK_DEPTH
+
+__all__ = ["MemoryWindows", "write_signature", "node_write_layout"]
+
+#: Clocks from DEC to a window's answer: the address registered, the block RAM's data, landed, the
+#: entry bank's word selected (the other windows' data delayed alike), the whole word in the
+#: window's register (the write-back formed), the bus word landed.
+WINDOW_STEPS = 6
+
+
+def write_signature(addr_shape, data_shape) -> wiring.Signature:
+    """A write into a memory, the writer's view: ``data`` is written at ``addr`` at the clock edge where
+    ``en`` is high."""
+    return wiring.Signature({"addr": Out(addr_shape), "data": Out(data_shape), "en": Out(1)})
+
+
+def node_write_layout(fs: FormatSet) -> data.StructLayout:
+    """What the integrate pass writes back to a node: its position and velocity."""
+    return data.StructLayout({"position": vector_layout(fs.position), "velocity": vector_layout(fs.velocity)})
+
+
+class MemoryWindows(wiring.Component):
+    """The node, entry and triangle memories (and the force memory) with their bus windows.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet`
+    capacity : :class:`~golden_model.fixed.engine_image.EngineCapacity`
+    register_map : :class:`~golden_model.fixed.register_map.RegisterMap`
+        Its windows (``nodes``, ``entries``, ``triangles``: base, stride, words).
+    addr_width : int
+        Width of the bus's word address.
+    entry_bank_depth : int
+        Words per bank of the entry memory (a power of two).
+
+    Members
+    -------
+    address, bus_request, write, write_data, whole_word : ``In``
+        The bus's registered request (:class:`~hdl.wishbone.TargetHandshake`) and DEC
+        (:attr:`RegisterBank.bus_request <hdl.register_bank.RegisterBank>`).
+    hit, answer, answer_data : ``Out``
+        At DEC: the request is a window word's and the engine is idle (``hit``, combinational from
+        flip-flops); ``answer`` with ``answer_data`` (the word read, a register) five clocks later.
+    running, in_area, in_integrate, fetch_nodes : ``In(1)``
+        The controller's flip-flops that choose each port's source.
+    entry_index, tri_index, node_index, node_of_entry : ``In``
+        The passes' addresses (:class:`~hdl.pass_sequencer.PassSequencer`).
+    entry, triangle, position[3], velocity, weight_word, force_word : ``Out``
+        The passes' read data: ``entry`` (the addressed bank's word) three clocks after the
+        entry address, every other port two clocks after its address.
+    force_write : ``In(write_signature(...))``
+        The force pass's per-node results: written to the force memory (not on the bus).
+    node_write : ``In(write_signature(...))``
+        The integrator's results: written back to the position and velocity memories while running.
+
+    Port sources
+    ------------
+    Every block RAM address comes from a register after its multiplexer (each register loads every
+    clock, from as few sources as it needs, chosen by flip-flops): while idle the bus's index, while
+    running the entry and triangle memories their pass's counter, the node memories the integrate
+    pass's, the position memory's second and third ports the entry's neighbour and second node or
+    the triangle's corners, its first port the node of the entry, a corner or the integrate pass's
+    node. Writes: the bus's read-modify-write while idle, the integrator's results while running,
+    each port's address, data and enable landed in registers before the block RAM. Every memory is
+    a :class:`~hdl.block_ram.BlockRam` (its data in a register two clocks after the address); no read
+    whose data is used meets a write to its address in the same clock (the passes read ahead of
+    the integrate pass's writes; the bus reads and writes while idle, a word's write-back after its
+    read): BlockRam's timing contract.
+    """
+
+    def __init__(self, fs: FormatSet, capacity: EngineCapacity, register_map: RegisterMap, *, addr_width: int,
+                 entry_bank_depth: int = ENTRY_BANK_DEPTH):
+        if not isinstance(fs, FormatSet) or not isinstance(capacity, EngineCapacity):
+            raise TypeError(f"MemoryWindows needs a FormatSet and an EngineCapacity, not {fs!r}, {capacity!r}")
+        if not isinstance(register_map, RegisterMap) or register_map.capacity != capacity:
+            raise ValueError(f"MemoryWindows needs the RegisterMap of capacity {capacity}, not {register_map!r}")
+        if sorted(w.name for w in register_map.windows) != sorted(memory_layouts(fs, capacity)):
+            raise ValueError(f"MemoryWindows decodes the windows {sorted(memory_layouts(fs, capacity))}")
+        if isinstance(entry_bank_depth, bool) or not isinstance(entry_bank_depth, int) or entry_bank_depth < 2 \
+                or entry_bank_depth & (entry_bank_depth - 1):
+            raise ValueError(f"entry_bank_depth must be a power of two >= 2, not {entry_bank_depth!r}")
+        self.fs, self.capacity, self.register_map = fs, capacity, register_map
+        self.entry_bank_depth = entry_bank_depth
+        layouts = memory_layouts(fs, capacity)
+        self.entry_shape, self.triangle_shape = word_layout(layouts["entries"]), word_layout(layouts["triangles"])
+        pos_shape, vel_shape = vector_layout(fs.position), vector_layout(fs.velocity)
+        weight_shape, force_shape = weight_word_layout(fs), force_word_layout(fs)
+        cap, banks = capacity, -(-capacity.entries // entry_bank_depth)
+        #: The block RAMs by name (``contents`` for a testbench); the entries in banks of
+        #: ``entry_bank_depth`` words: Yosys maps a bank of wide words to DP16KDs with no cascade,
+        #: where a deeper memory gets a multiplexer after the block RAMs' outputs.
+        self.rams = {
+            "positions": BlockRam(pos_shape, cap.vertices, read_ports=3, name="positions"),
+            "velocities": BlockRam(vel_shape, cap.vertices, name="velocities"),
+            "weights": BlockRam(weight_shape, cap.vertices, name="weights"),
+            "forces": BlockRam(force_shape, cap.vertices, name="forces"),
+            "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles"),
+            **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
+                                       name=f"entries{b}") for b in range(banks)},
+        }
+        super().__init__({
+            "address": In(addr_width), "bus_request": In(1), "write": In(1), "write_data": In(BUS_WORD_BITS),
+            "whole_word": In(1), "hit": Out(1), "answer": Out(1), "answer_data": Out(BUS_WORD_BITS),
+            "running": In(1), "in_area": In(1), "in_integrate": In(1), "fetch_nodes": In(1),
+            "entry_index": In(range(cap.entries + 1)), "tri_index": In(range(cap.triangles + 1)),
+            "node_index": In(range(cap.vertices + 1)), "node_of_entry": In(range(cap.vertices + 1)),
+            "entry": Out(self.entry_shape), "triangle": Out(self.triangle_shape), "position": Out(pos_shape).array(3),
+            "velocity": Out(vel_shape), "weight_word": Out(weight_shape), "force_word": Out(force_shape),
+            "force_write": In(write_signature(range(cap.vertices + 1), force_shape)),
+            "node_write": In(write_signature(range(cap.vertices + 1), node_write_layout(fs))),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        for name, ram in self.rams.items():
+            m.submodules[name] = ram
+        entry_banks = [ram for name, ram in self.rams.items() if name.startswith("entries")]
+        bank_bits = (self.entry_bank_depth - 1).bit_length() if len(entry_banks) > 1 \
+            else len(entry_banks[0].read[0].addr)
+        # Every bank's read data lands in its register; the addressed bank's word is selected into
+        # another the clock after.
+        ent_addr = Signal(range(self.capacity.entries), name="ent_addr")  # the entry memory's address register
+        ent_bank = [Signal(range(len(entry_banks)), name=f"ent_bank{k}") for k in (1, 2)]  # at E1, E2
+        ent_data = Signal(self.entry_shape, reset_less=True, name="ent_data")  # the addressed entry
+        m.d.comb += [bank.read[0].addr.eq(ent_addr[:bank_bits]) for bank in entry_banks]
+        m.d.sync += [ent_bank[0].eq(ent_addr[bank_bits:] if len(entry_banks) > 1 else 0), ent_bank[1].eq(ent_bank[0])]
+        with m.Switch(ent_bank[1]):
+            for b, bank in enumerate(entry_banks):
+                with m.Case(b):
+                    m.d.sync += ent_data.eq(bank.read[0].data)
+
+        positions, triangles, forces = self.rams["positions"], self.rams["triangles"], self.rams["forces"]
+        m.d.comb += [self.entry.eq(ent_data), self.triangle.eq(triangles.read[0].data),
+                     *(self.position[k].eq(port.data) for k, port in enumerate(positions.read)),
+                     self.velocity.eq(self.rams["velocities"].read[0].data),
+                     self.weight_word.eq(self.rams["weights"].read[0].data), self.force_word.eq(forces.read[0].data)]
+        # the force pass's per-node results, straight into the force memory (not on the bus)
+        m.d.comb += [forces.write.addr.eq(self.force_write.addr), forces.write.data.eq(self.force_write.data),
+                     forces.write.en.eq(self.force_write.en)]
+
+        window_q, index_q, word_q = self._decode(m)
+        bus_writing, new_words = self._bus_words(m, window_q, word_q, ent_data)
+        self._read_addresses(m, index_q, ent_addr, ent_data)
+        self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks)
+        return m
+
+    def _decode(self, m: Module):
+        """The request's window, index and word, registered at DEC (``n_windows``: none)."""
+        windows, cap = self.register_map.windows, self.capacity
+        n_windows = len(windows)
+        bus_window = Signal(range(n_windows + 1))  # n_windows: none
+        bus_index = Signal(max(cap.vertices, cap.entries, cap.triangles).bit_length())
+        bus_word = Signal(range(max(w.words for w in windows) + 1))
+        window_ok = Signal()
+        for k, w in enumerate(windows):
+            size_bits = (w.size - 1).bit_length()
+            stride_bits = (w.stride - 1).bit_length()
+            with m.If(self.address[size_bits:] == (w.base >> size_bits)):
+                index = self.address[stride_bits:size_bits]
+                word = self.address[:stride_bits] if stride_bits else Const(0, 1)
+                m.d.comb += [bus_window.eq(k), bus_index.eq(index), bus_word.eq(word),
+                             window_ok.eq((index < w.depth) & (word < w.words))]
+        with m.If(~window_ok):
+            m.d.comb += bus_window.eq(n_windows)
+        window_q = Signal.like(bus_window, name="window_q")
+        index_q = Signal.like(bus_index, name="index_q")
+        word_q = Signal.like(bus_word, name="word_q")
+        m.d.sync += [window_q.eq(bus_window), index_q.eq(bus_index), word_q.eq(bus_word)]
+        m.d.comb += self.hit.eq(~self.running & (window_q != n_windows))
+        return window_q, index_q, word_q
+
+    def _bus_words(self, m: Module, window_q, word_q, ent_data):
+        """A window word's read and write-back: DEC forms the port addresses (in the memories' address
+        registers the clock after), then the block RAM read, the whole word landed in a register (the
+        memories' outputs come from all over the device), then the answer and, for a write, the
+        modified word written back. Returns ``(bus_writing, {window: (k, new word)})``."""
+        windows = self.register_map.windows
+        mem_steps = [Signal(name=f"mem_step{k}") for k in range(WINDOW_STEPS)]
+        m.d.sync += [mem_steps[0].eq(self.bus_request & self.hit),
+                     *(mem_steps[k].eq(mem_steps[k - 1]) for k in range(1, WINDOW_STEPS))]
+        mem_landed, mem_answer = mem_steps[4], mem_steps[5]
+        mem_data = Signal(BUS_WORD_BITS)
+        mem_word = Signal(BUS_WORD_BITS, reset_less=True, name="mem_word")
+        m.d.sync += mem_word.eq(mem_data)
+        m.d.comb += [self.answer.eq(mem_answer), self.answer_data.eq(mem_word)]
+        # the word's select, one flip-flop per (window, word), set the clock after DEC from the decode
+        # (long before the entry lands): the answer and the write-back are AND-OR selects from flip-flops
+        word_hot = {(k, j): Signal(name=f"word_hot_{w.name}_{j}") for k, w in enumerate(windows) for j in range(w.words)}
+        m.d.sync += [hot.eq((window_q == k) & (word_q == j)) for (k, j), hot in word_hot.items()]
+        pos_a, vel_r, wgt_r = self.rams["positions"].read[0], self.rams["velocities"].read[0], self.rams["weights"].read[0]
+        answer_terms, new_words = [], {}
+        for k, w in enumerate(windows):
+            if w.name == "entries":
+                word_value = ent_data.as_value()  # selected at the third clock after the address
+            else:
+                if w.name == "nodes":
+                    read_data = Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
+                                    wgt_r.data.inv_mass_barrier)
+                else:
+                    read_data = self.rams["triangles"].read[0].data.as_value()
+                # the memories' data has landed (BlockRam); one more clock aligns it with the entry bank's select
+                word_value = Signal(len(read_data), name=f"bus_{w.name}_aligned", reset_less=True)
+                m.d.sync += word_value.eq(read_data)
+            padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word", reset_less=True)
+            m.d.sync += padded.eq(word_value)
+            words = [padded.word_select(j, BUS_WORD_BITS) for j in range(w.words)]
+            answer_terms += [Mux(word_hot[k, j], words[j], 0) for j in range(w.words)]
+            modified = Cat(*(Mux(word_hot[k, j], self.write_data, words[j]) for j in range(w.words)))
+            new_words[w.name] = (k, modified[:len(word_value)])
+        m.d.comb += mem_data.eq(or_tree(answer_terms))
+        return mem_landed & self.write & self.whole_word, new_words
+
+    def _read_addresses(self, m: Module, index_q, ent_addr, ent_data) -> None:
+        """Each read address register: the bus's index while idle, the pass's address while running."""
+        positions = self.rams["positions"].read
+        read_ports = {"pos_a": positions[0], "pos_b": positions[1], "pos_c": positions[2],
+                      "vel": self.rams["velocities"].read[0], "wgt": self.rams["weights"].read[0],
+                      "frc": self.rams["forces"].read[0], "tri": self.rams["triangles"].read[0]}
+        read_addr = {name: Signal.like(port.addr, name=f"{name}_addr") for name, port in read_ports.items()}
+        m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
+        t2_tri = self.rams["triangles"].read[0].data
+        running, in_area = self.running, self.in_area
+        in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight
+        m.d.sync += [
+            ent_addr.eq(Mux(running, self.entry_index, index_q)),
+            read_addr["tri"].eq(Mux(running, self.tri_index, index_q)),
+            *(read_addr[n].eq(Mux(running, self.node_index, index_q)) for n in ("vel", "wgt", "frc")),
+            read_addr["pos_b"].eq(Mux(in_area, t2_tri.b, ent_data.neighbour)),
+            read_addr["pos_c"].eq(Mux(in_area, t2_tri.c, ent_data.second)),
+            read_addr["pos_a"].eq(Mux(~running | in_nodes, Mux(running, self.node_index, index_q),
+                                      Mux(in_area, t2_tri.a, self.node_of_entry))),
+        ]
+
+    def _writes(self, m: Module, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks) -> None:
+        """Each write port's address, data and enable registers: the bus's write-back while idle, the
+        integrator's results while running (the entry banks: the bank's port enabled by the high bits)."""
+        write_ports = {"pos": self.rams["positions"].write, "vel": self.rams["velocities"].write,
+                       "wgt": self.rams["weights"].write, "ent": None, "tri": self.rams["triangles"].write}
+        write_regs = {}
+        for name, port in write_ports.items():
+            if port is None:
+                regs = (Signal.like(ent_addr, name="ent_waddr"), Signal(self.entry_shape, name="ent_wdata"),
+                        Signal(name="ent_wen"))
+                for b, bank in enumerate(entry_banks):
+                    hit = regs[0][bank_bits:] == b if len(entry_banks) > 1 else 1
+                    m.d.comb += [bank.write.addr.eq(regs[0][:bank_bits]), bank.write.data.eq(regs[1]),
+                                 bank.write.en.eq(regs[2] & hit)]
+            else:
+                regs = (Signal.like(port.addr, name=f"{name}_waddr"), Signal.like(port.data, name=f"{name}_wdata"),
+                        Signal(name=f"{name}_wen"))
+                m.d.comb += [port.addr.eq(regs[0]), port.data.eq(regs[1]), port.en.eq(regs[2])]
+            write_regs[name] = regs
+        node_k, node_new = new_words["nodes"]
+        ent_k, ent_new = new_words["entries"]
+        tri_k, tri_new = new_words["triangles"]
+        with m.If(self.running):
+            node = self.node_write
+            m.d.sync += [
+                write_regs["pos"][0].eq(node.addr), write_regs["pos"][1].eq(node.data.position),
+                write_regs["pos"][2].eq(node.en),
+                write_regs["vel"][0].eq(node.addr), write_regs["vel"][1].eq(node.data.velocity),
+                write_regs["vel"][2].eq(node.en),
+                write_regs["wgt"][2].eq(0), write_regs["ent"][2].eq(0), write_regs["tri"][2].eq(0)]
+        with m.Else():
+            m.d.sync += [
+                *(write_regs[n][0].eq(index_q) for n in write_ports),
+                Cat(write_regs["pos"][1].as_value(), write_regs["vel"][1].as_value(),
+                    write_regs["wgt"][1].as_value()).eq(node_new),
+                write_regs["ent"][1].eq(ent_new), write_regs["tri"][1].eq(tri_new),
+                *(write_regs[n][2].eq(bus_writing & (window_q == node_k)) for n in ("pos", "vel", "wgt")),
+                write_regs["ent"][2].eq(bus_writing & (window_q == ent_k)),
+                write_regs["tri"][2].eq(bus_writing & (window_q == tri_k)),
+            ]

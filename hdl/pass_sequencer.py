@@ -1,0 +1,250 @@
+"""The engine's pass sequencer: each pass's fetch from the memories into its unit, one item per clock,
+and the collection of the unit's per-node results (counts, exact sums, saturation events)."""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Mux, Signal, signed
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine_image import EngineCapacity, memory_layouts
+from golden_model.fixed.register_map import RegisterMap
+
+from .fixedpoint import shape_of
+from .force_pass import ForcePass
+from .integrator import Integrator
+from .memory_windows import node_write_layout, write_signature
+from .layouts import (area_saturations_layout, energy_sums_layout, force_entry_layout, force_word_layout,
+                      integrator_input_layout, integrator_output_layout, node_force_layout, triangle_layout, vector_layout, weight_word_layout, word_layout)
+
+__all__ = ["PassSequencer", "fetch_counter"]
+
+#: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
+PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
+
+
+def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, stages: int) -> list[Signal]:
+    """A pass's fetch: while ``fetch`` is high, ``index`` counts 0, 1, … up to ``count``, one issued
+    per clock. Returns ``valid``: ``valid[k]`` marks the clock whose data belongs to an index issued
+    ``k`` clocks ago (``valid[0]``: the index in the memories' address registers)."""
+    valid = [Signal(name=f"{valid_prefix}{k}_valid") for k in range(stages)]
+    issue = fetch & (index < count)
+    m.d.sync += [valid[0].eq(issue), *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
+    with m.If(issue):
+        m.d.sync += index.eq(index + 1)
+    return valid
+
+
+class PassSequencer(wiring.Component):
+    """The force, area and integrate passes' fetch and collection.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet`
+    register_map : :class:`~golden_model.fixed.register_map.RegisterMap`
+        Its capacity sizes the counters, its values the mesh-size inputs.
+
+    Members
+    -------
+    fetch_force, fetch_area, fetch_nodes : ``In(1)``
+        The controller's pass enables: while high, the pass issues one item per clock until its
+        counter reaches the mesh size (``entries``, ``triangles``, ``vertices``).
+    in_start, in_force, in_area, in_step, in_integrate, running, area_clear : ``In(1)``
+        The controller's flags: the start phase restarts the force and area passes' counters and
+        sums, the step phase the integrate pass's; the pass phases time the passes' ends.
+    vertices, entries, triangles, momentum, barrier_held : ``In``
+        Run constants (MODE.momentum gates S's saturation event; MODE.barrier's copy the barrier terms).
+    entry, triangle, position[3], velocity, weight_word, force_word : ``In``
+        The memories' read data (:class:`~hdl.memory_windows.MemoryWindows`).
+    entry_index, tri_index, node_index, node_of_entry : ``Out``
+        The addresses the passes read (the entry's node: the owner of the entry fetched).
+    force_entry, triangle_out, node_out : ``Out`` streams
+        Into ``ForcePass.i``, ``AreaError.i``, ``Integrator.i``.
+    forces, integrated : ``In`` streams; area_saturations, force_idle, area_idle, integrator_idle : ``In``
+        The units' results and state.
+    force_out_index, node_out_index : ``Out``
+        The node of the unit's next result.
+    force_write, node_write : ``Out(write_signature(...))``
+        The force pass's results into the force memory, the integrator's into the node memories.
+    force_done, area_done, integrate_done : ``Out(1)``
+        A pass's end: one clock, registered, the clock after its last result.
+    done_fetching, passes_idle : ``Out(1)``
+        No pass has an item left to issue (registered); no item in a fetch or a unit.
+    length_sum, square_sum, barrier_sum, power_sum : ``Out``
+        The passes' exact sums (Σ|L − d|, Σe², Σc·h of the force pass; S of the integrate pass),
+        still from a pass's end until the next pass restarts them.
+    force_events, integrate_events, area_events, length_events, power_events : ``Out``
+        Saturation events as the golden model counts them: per node (the force pass, the integrator
+        while running), per area pass (at its end), the E_C sum's (at the force pass's end) and S's
+        (at the integrate pass's end, momentum only); 0 when there is none.
+
+    Latency
+    -------
+    Valid bits are named for the clock whose data they mark. The force pass: E0 the entry's address
+    in the entry memory's address register; E1 the entry banks' read data; E2 landed in fabric
+    registers; E3 the addressed bank's entry, its three position addresses formed; E4 those in the
+    position memory's address registers; E5 its read data; E6 everything landed, into ``ForcePass.i``.
+    The area pass: T0 the triangle's address, T1 the data, T2 landed (corner addresses formed), T3
+    registered, T4 the corners' data, T5 landed, into ``AreaError.i``. The integrate pass: N0 the
+    node's address, N1 the data, N2 landed, into ``Integrator.i``. Every block RAM address comes from
+    a flip-flop after the port multiplexer, every block RAM output lands in a register before any
+    logic (clock-to-out is most of a period on ECP5). One item per clock; a pass fetched to its end
+    drains on its own.
+    """
+
+    def __init__(self, fs: FormatSet, register_map: RegisterMap):
+        if not isinstance(fs, FormatSet) or not isinstance(register_map, RegisterMap):
+            raise TypeError(f"PassSequencer needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
+        cap: EngineCapacity = register_map.capacity
+        self.fs, self.capacity = fs, cap
+        layouts = memory_layouts(fs, cap)
+        sums = energy_sums_layout(fs, cap.entries)
+        force_sig, integrator_sig = ForcePass.signature_of(fs, True, True), Integrator.signature_of(fs, None, True)
+        width = register_map.value_width
+        nodes = range(cap.vertices + 1)
+        area_saturations = Signal(area_saturations_layout(fs))
+        #: Width of each saturation-event output (a unit's count, 0 when it reports none).
+        self.event_widths = {
+            "force": node_force_layout(fs, True, True)["saturations"].shape.width,
+            "integrate": integrator_output_layout(fs, None, True)["saturations"].shape.width,
+            "area": len(area_saturations.face_edge + area_saturations.face_area + area_saturations.area_sum),
+            "length": 1, "power": 1,
+        }
+        super().__init__({
+            "fetch_force": In(1), "fetch_area": In(1), "fetch_nodes": In(1),
+            **{name: In(1) for name in PHASE_INPUTS}, "running": In(1), "area_clear": In(1),
+            "vertices": In(width("vertices")), "entries": In(width("entries")), "triangles": In(width("triangles")),
+            "momentum": In(1), "barrier_held": In(1),
+            "entry": In(word_layout(layouts["entries"])), "triangle": In(word_layout(layouts["triangles"])),
+            "position": In(vector_layout(fs.position)).array(3), "velocity": In(vector_layout(fs.velocity)),
+            "weight_word": In(weight_word_layout(fs)), "force_word": In(force_word_layout(fs)),
+            "entry_index": Out(range(cap.entries + 1)), "tri_index": Out(range(cap.triangles + 1)),
+            "node_index": Out(nodes), "node_of_entry": Out(nodes),
+            "force_entry": Out(stream.Signature(force_entry_layout(fs), always_ready=True)),
+            "triangle_out": Out(stream.Signature(triangle_layout(fs), always_ready=True)),
+            "node_out": Out(stream.Signature(integrator_input_layout(fs), always_ready=True)),
+            "forces": In(force_sig.members["o"].signature), "integrated": In(integrator_sig.members["o"].signature),
+            "area_saturations": In(area_saturations_layout(fs)),
+            "force_idle": In(1), "area_idle": In(1), "integrator_idle": In(1),
+            "force_out_index": Out(nodes), "node_out_index": Out(nodes),
+            "force_write": Out(write_signature(nodes, force_word_layout(fs))),
+            "node_write": Out(write_signature(nodes, node_write_layout(fs))),
+            "force_done": Out(1), "area_done": Out(1), "integrate_done": Out(1),
+            "done_fetching": Out(1), "passes_idle": Out(1),
+            "length_sum": Out(fs.error_acc.width + cap.vertices.bit_length()),
+            "square_sum": Out(sums["square_sum"].shape), "barrier_sum": Out(sums["barrier_sum"].shape),
+            "power_sum": Out(signed(fs.power.width + cap.vertices.bit_length())),
+            **{f"{name}_events": Out(w) for name, w in self.event_widths.items()},
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        e_valid, next_first = self._force_pass(m)
+        t_valid = self._area_pass(m)
+        n_valid = self._integrate_pass(m)
+        self._ends(m, e_valid, t_valid, n_valid)
+        # The counters and sums restart from a phase flag, outside the phase machine's priority logic:
+        # the force and area passes' in the start phase, the integrate pass's in the step phase.
+        with m.If(self.in_start):
+            m.d.sync += [self.entry_index.eq(0), self.node_of_entry.eq(0), next_first.eq(1),
+                         self.force_out_index.eq(0), self.length_sum.eq(0), self.square_sum.eq(0),
+                         self.barrier_sum.eq(0), self.tri_index.eq(0)]
+        with m.If(self.in_step):
+            m.d.sync += [self.node_index.eq(0), self.node_out_index.eq(0), self.power_sum.eq(0)]
+        return m
+
+    def _force_pass(self, m: Module):
+        """E0 … E6 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
+        e_valid = fetch_counter(m, self.entry_index, self.fetch_force, self.entries, "e", 7)
+        entry_shape = self.entry.shape()
+        e4_entry, e5_entry, e6_entry = (Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(4, 7))
+        e4_first, e5_first, e6_first = (Signal(name=f"e{k}_first") for k in range(4, 7))
+        next_first = Signal(name="next_first")
+        ent_data = self.entry  # the addressed entry, at E3
+        m.d.sync += [e4_entry.eq(ent_data), e5_entry.eq(e4_entry), e6_entry.eq(e5_entry),
+                     e4_first.eq(next_first), e5_first.eq(e4_first), e6_first.eq(e5_first)]
+        with m.If(e_valid[3]):  # the owner of the entry after this one
+            m.d.sync += [next_first.eq(ent_data.last), self.node_of_entry.eq(self.node_of_entry + ent_data.last)]
+        beat, barrier = self.force_entry.payload, self.barrier_held
+        m.d.comb += [
+            self.force_entry.valid.eq(e_valid[6]),
+            beat.first.eq(e6_first), beat.last.eq(e6_entry.last),
+            beat.position.eq(self.position[0]), beat.neighbour.position.eq(self.position[1]),  # landed at E6
+            beat.neighbour.rest.eq(e6_entry.rest),
+            beat.barrier.second.eq(self.position[2]),
+            beat.barrier.threshold.eq(Mux(barrier, e6_entry.threshold, 0)),
+            beat.barrier.gain.eq(Mux(barrier, e6_entry.gain, 0)),
+        ]
+        # per-node results: into the force memory, and the exact sums
+        m.d.comb += [self.force_write.addr.eq(self.force_out_index),
+                     self.force_write.data.force.eq(self.forces.payload.force),
+                     self.force_write.data.inside.eq(self.forces.payload.inside),
+                     self.force_write.en.eq(self.forces.valid)]
+        with m.If(self.forces.valid):
+            m.d.sync += [self.force_out_index.eq(self.force_out_index + 1),
+                         self.length_sum.eq(self.length_sum + self.forces.payload.error_sum),
+                         self.square_sum.eq(self.square_sum + self.forces.payload.error_squares),
+                         self.barrier_sum.eq(self.barrier_sum + self.forces.payload.barrier_energy)]
+        return e_valid, next_first
+
+    def _area_pass(self, m: Module):
+        """T0 … T5 into ``AreaError.i``, one triangle per clock."""
+        t_valid = fetch_counter(m, self.tri_index, self.fetch_area, self.triangles, "t", 6)
+        t3_area, t4_area, t5_area = (Signal(shape_of(self.fs.face_area), reset_less=True, name=f"t{k}_area")
+                                     for k in (3, 4, 5))
+        m.d.sync += [t3_area.eq(self.triangle.area), t4_area.eq(t3_area), t5_area.eq(t4_area)]  # landed at T2
+        out = self.triangle_out
+        m.d.comb += [out.valid.eq(t_valid[5]), out.payload.a.eq(self.position[0]), out.payload.b.eq(self.position[1]),
+                     out.payload.c.eq(self.position[2]), out.payload.area.eq(t5_area)]  # landed at T5
+        return t_valid
+
+    def _integrate_pass(self, m: Module):
+        """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
+        n_valid = fetch_counter(m, self.node_index, self.fetch_nodes, self.vertices, "n", 3)
+        node = self.node_out.payload
+        m.d.comb += [  # landed at N2
+            self.node_out.valid.eq(n_valid[2]),
+            node.node.position.eq(self.position[0]), node.node.velocity.eq(self.velocity),
+            node.node.inv_mass.eq(self.weight_word.inv_mass), node.node.inv_mass_barrier.eq(self.weight_word.inv_mass_barrier),
+            node.force.eq(self.force_word.force), node.inside.eq(self.force_word.inside),
+        ]
+        # its results: back into the node memories, and S summed
+        m.d.comb += [self.node_write.addr.eq(self.node_out_index),
+                     self.node_write.data.position.eq(self.integrated.payload.position),
+                     self.node_write.data.velocity.eq(self.integrated.payload.velocity),
+                     self.node_write.en.eq(self.integrated.valid)]
+        with m.If(self.integrated.valid):
+            m.d.sync += [self.node_out_index.eq(self.node_out_index + 1),
+                         self.power_sum.eq(self.power_sum + self.integrated.payload.power)]
+        return n_valid
+
+    def _ends(self, m: Module, e_valid, t_valid, n_valid) -> None:
+        """The passes' ends and their saturation events; the fetch's and the units' idle state."""
+        fs = self.fs
+        # a pulse the clock after the pass's last result, registered (its counter's compare and the
+        # units' idle flags stay off the phase machine's logic)
+        area_fetching = Cat(*t_valid).any()
+        m.d.sync += [
+            self.force_done.eq(self.in_force & (self.force_out_index == self.vertices) & ~self.force_done),
+            self.area_done.eq(self.in_area & (self.tri_index == self.triangles) & ~area_fetching & self.area_idle
+                              & ~self.area_clear & ~self.area_done),
+            self.integrate_done.eq(self.in_integrate & (self.node_out_index == self.vertices) & ~self.integrate_done),
+        ]
+        sat, power = self.area_saturations, self.power_sum
+        m.d.comb += [
+            self.force_events.eq(Mux(self.forces.valid, self.forces.payload.saturations, 0)),
+            self.integrate_events.eq(Mux(self.integrated.valid & self.running, self.integrated.payload.saturations, 0)),
+            self.area_events.eq(Mux(self.area_done, sat.face_edge + sat.face_area + sat.area_sum, 0)),
+            self.length_events.eq(self.force_done & (self.length_sum > fs.error_acc.raw_max)),
+            self.power_events.eq(self.integrate_done & self.momentum
+                                 & ((power > fs.power_acc.raw_max) | (power < fs.power_acc.raw_min))),
+        ]
+        # The fetch counters' compares registered (a counter's compare into the drain's end, itself
+        # registered, is a path of its own): no pass starts in the drain phase or on the abort clock
+        # before it, so that clock's lag is never stale.
+        m.d.sync += self.done_fetching.eq(((self.entry_index == self.entries) | ~self.fetch_force)
+                                          & ((self.tri_index == self.triangles) | ~self.fetch_area)
+                                          & ((self.node_index == self.vertices) | ~self.fetch_nodes))
+        fetching = Cat(*e_valid, *t_valid, *n_valid).any()
+        m.d.comb += self.passes_idle.eq(self.force_idle & self.area_idle & self.integrator_idle & ~fetching)

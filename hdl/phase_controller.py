@@ -1,0 +1,402 @@
+"""The engine's phase controller: a run from START to its result, one phase flip-flop at a time, and the
+once-per-iteration arithmetic it runs between the passes (normalisers, energy check, the step)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from amaranth.hdl import Cat, Module, Mux, Signal, signed
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine_image import ITERATION_BITS
+from golden_model.fixed.register_map import RESULTS, STATES, RegisterMap
+
+from .controller_units import BetaDivider, EnergyCheck, Normaliser
+from .dsp import registered_product
+from .fixedpoint import clamp, shape_of, shift_round
+from .layouts import energy_sums_layout
+from .logic import or_tree
+from .stepgen import StepGenerator, pending_is_zero
+
+__all__ = ["PhaseController", "PHASES"]
+
+#: The phases of a run, in code order (the ``phase`` debug code).
+PHASES = ("start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain")
+
+#: Run constants the controller reads from the register bank, and those it reads from their copies.
+CONSTANTS = ("vertices", "entries", "triangles", "momentum", "fixed_step", "dt", "max_iter", "saturation_limit",
+             "tol_area", "tol_shape", "area_reciprocal", "area_shift", "length_reciprocal", "length_shift")
+HELD = ("area_reciprocal", "area_shift", "length_reciprocal", "length_shift", "half_spring", "tol_energy")
+
+#: Results the controller holds (the register map's values).
+RESULT_VALUES = ("iterations", "area_error", "shape_error", "cycles", "energy")
+
+
+def _code(codes: tuple[str, ...], name: str) -> int:
+    return codes.index(name)
+
+
+@dataclass
+class _Run:
+    """The controller's internal registers, shared by its parts."""
+
+    first_measure: Signal
+    math_pending: Signal
+    settled: Signal
+    fixed_load: Signal
+    fixed_half: Signal
+    momentum_k: Signal
+
+
+class PhaseController(wiring.Component):
+    """Algorithm 1's control: the run's state and phases, its stop decisions and its arithmetic units.
+
+    A run goes start → force → area → math → check, then step → step_wait → integrate → start again
+    until the check phase stops it (diverged, converged, at N_max); ABORT while running drains what is
+    in flight and goes idle. Its units (:class:`~hdl.controller_units.Normaliser` ×2,
+    :class:`~hdl.controller_units.EnergyCheck`, :class:`~hdl.controller_units.BetaDivider`,
+    :class:`~hdl.stepgen.StepGenerator`) are submodules of its own: it alone feeds and reads them.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet`
+    register_map : :class:`~golden_model.fixed.register_map.RegisterMap`
+        Sizes the constants' and results' ports (its values) and the energy check (its capacity).
+
+    Members
+    -------
+    start, abort : ``In(1)``
+        CONTROL's pulses (registered in the register bank).
+    the run constants of :data:`CONSTANTS` : ``In``; ``<name>_held`` of :data:`HELD` : ``In``
+        As the register bank holds them; the held copies are read by the units.
+    saturations : ``In``
+        SATURATIONS (:class:`~hdl.saturation_tally.SaturationTally`).
+    force_done, area_done, integrate_done, done_fetching, passes_idle : ``In(1)``
+        From the :class:`~hdl.pass_sequencer.PassSequencer`.
+    length_sum, square_sum, barrier_sum, power_sum, area_total : ``In``
+        The passes' sums (``area_total`` from :class:`~hdl.area_error.AreaError`).
+    state, result, running : ``Out``
+        STATUS.state and STATUS.result codes; ``running`` is ``state == running`` as a flip-flop of
+        its own (it gates every pass, port multiplexer and bus answer: their logic starts from a
+        register rather than a compare).
+    starting, irq_set : ``Out(1)``
+        Combinational: START accepted this clock (the results and STATUS.irq_pending restart); a
+        run ends this clock (STATUS.irq_pending set).
+    ``in_<phase>`` for each of :data:`PHASES` : ``Out(1)``
+        One flip-flop per phase, all low while no run is under way (each implies ``running``).
+    fetch_force, fetch_area, fetch_nodes, area_clear : ``Out(1)``
+        The passes' enables (:class:`~hdl.pass_sequencer.PassSequencer`) and the area unit's clear.
+    step_dt, step_half : ``Out``
+        The step's ``Δt`` and ``½Δt²`` for the integrator, loaded in the step phases.
+    iterations, area_error, shape_error, cycles, energy : ``Out``
+        The results (the register map's values).
+    step_events, shape_error_events, area_error_events : ``Out``
+        The units' saturation events (0 when there is none).
+    phase, math_pending : ``Out``
+        For a testbench: the phase's code (nothing reads it) and the math results still to come.
+
+    Timing
+    ------
+    Every decision is taken from flip-flops: START's checks of the constants and the check phase's
+    stop rule, iteration limit and saturation limit are compares registered the clock before they
+    are read (what they read is stable by then: START follows the last constant's write by a whole
+    bus cycle, the check phase follows every pass and unit); the passes' ends come registered from
+    the sequencer. A transition clears the phase flag it leaves and sets the one it enters, so a
+    flag's next value depends only on the blocks that enter or leave it and on ABORT (registered
+    because a phase code, or every transition writing every flag, takes the whole phase machine and
+    ``running``'s fan-out into each flag's logic). The wide registers (ITERATIONS, ``momentum_k``)
+    move on registered pulses the clock after their phase's block, and ``restart_pending`` on pulses
+    of its own: no control LUT drives both a wide register and a control flag.
+    """
+
+    #: Clocks the check phase waits after the math phase's last result: the saturation tally's
+    #: pipeline (event, pair sums, their sum, the count) and the registered limit compare, so a
+    #: normaliser's saturation is counted before the limit is tested, as in ``run_image``.
+    CHECK_SETTLE_CLOCKS = 3
+
+    def __init__(self, fs: FormatSet, register_map: RegisterMap):
+        if not isinstance(fs, FormatSet) or not isinstance(register_map, RegisterMap):
+            raise TypeError(f"PhaseController needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
+        self.fs, self.capacity = fs, register_map.capacity
+        width = register_map.value_width
+        sums = energy_sums_layout(fs, self.capacity.entries)
+        #: Width of each saturation-event output.
+        self.event_widths = {"step": StepGenerator.output_layout(fs, True)["saturations"].shape.width,
+                             "shape_error": 1, "area_error": 1}
+        super().__init__({
+            "start": In(1), "abort": In(1),
+            **{name: In(width(name)) for name in CONSTANTS},
+            **{f"{name}_held": In(width(name)) for name in HELD},
+            "saturations": In(width("saturations")),
+            "force_done": In(1), "area_done": In(1), "integrate_done": In(1), "done_fetching": In(1),
+            "passes_idle": In(1),
+            "length_sum": In(fs.error_acc.width + self.capacity.vertices.bit_length()),
+            "square_sum": In(sums["square_sum"].shape), "barrier_sum": In(sums["barrier_sum"].shape),
+            "power_sum": In(signed(fs.power.width + self.capacity.vertices.bit_length())),
+            "area_total": In(shape_of(fs.error_acc)),
+            "state": Out(range(len(STATES)), init=_code(STATES, "idle")),
+            "result": Out(range(len(RESULTS)), init=_code(RESULTS, "none")),
+            "running": Out(1), "starting": Out(1), "irq_set": Out(1),
+            **{f"in_{name}": Out(1) for name in PHASES},
+            "fetch_force": Out(1), "fetch_area": Out(1), "fetch_nodes": Out(1), "area_clear": Out(1),
+            "step_dt": Out(shape_of(fs.dt)), "step_half": Out(shape_of(fs.half_dt_sq)),
+            **{name: Out(width(name)) for name in RESULT_VALUES},
+            **{f"{name}_events": Out(w) for name, w in self.event_widths.items()},
+            "phase": Out(range(len(PHASES))), "math_pending": Out(3),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        fs, cap = self.fs, self.capacity
+        units = {
+            "norm_length": Normaliser(fs, saturations=True),
+            "norm_area": Normaliser(fs, saturations=True),
+            "energy_check": EnergyCheck(fs, cap.entries),
+            # k counts iterations since the last restart, so it never exceeds ITERATIONS: as wide, it never wraps
+            "beta": BetaDivider(fs, k_bits=ITERATION_BITS),
+            "stepgen": StepGenerator(fs, saturations=True),
+        }
+        for name, unit in units.items():
+            m.submodules[name] = unit
+        # the register is as wide as the energy check's tolerance (both from the golden model's
+        # ENERGY_TOL_* bits), so every value START sees is valid
+        assert len(self.tol_energy_held) == len(units["energy_check"].tolerance)
+        phase_codes = [Mux(getattr(self, f"in_{name}"), k, 0) for k, name in enumerate(PHASES)]
+        m.d.comb += self.phase.eq(or_tree(phase_codes))
+
+        run = _Run(first_measure=Signal(name="first_measure"), math_pending=self.math_pending,
+                   settled=Signal(name="settled"), fixed_load=Signal(name="fixed_load"),
+                   fixed_half=self._fixed_half_dt_sq(m, platform), momentum_k=Signal(ITERATION_BITS, name="momentum_k"))
+        self._cycles(m)
+        self._units(m, units, run)
+        decisions, stepgen_idle = self._decisions(m, units, run)
+        sequential_idle = ~Cat(*(u.i.valid for u in units.values())).any() \
+            & units["norm_length"].i.ready & units["norm_area"].i.ready & units["energy_check"].i.ready \
+            & units["beta"].i.ready & stepgen_idle
+        m.d.sync += self.area_clear.eq(0)
+        # the drain's end, registered (the OR of every fetch stage's valid bit and the units' idle
+        # flags into the fetch flags' enables is a path of its own): once true it stays true, as
+        # nothing starts while draining
+        drained = Signal(name="drained")
+        m.d.sync += drained.eq(self.in_drain & self.passes_idle & sequential_idle & self.done_fetching)
+        self._phases(m, units, run, decisions, drained, stepgen_idle)
+        self._momentum(m, units, run)
+        return m
+
+    def _fixed_half_dt_sq(self, m: Module, platform) -> Signal:
+        """The fixed step's ½Δt² (steplut.half_dt_sq), five stages from the DT register: the product's
+        operands, the product, its copy, rounding, saturation; DT is loaded long before a step uses it.
+        The product is in a DSP block with its own operand and product registers (``hdl.dsp``)."""
+        fs = self.fs
+        fixed_sq = Signal(2 * fs.dt.width, reset_less=True, name="fixed_sq")
+        fixed_rounded = Signal(2 * fs.dt.width, reset_less=True, name="fixed_rounded")
+        fixed_half = Signal(shape_of(fs.half_dt_sq), reset_less=True, name="fixed_half")
+        m.d.sync += [fixed_sq.eq(registered_product(m, self.dt, self.dt, name="fixed_dt_sq", platform=platform)),
+                     fixed_rounded.eq(shift_round(fixed_sq, 2 * fs.dt.frac_bits + 1 - fs.half_dt_sq.frac_bits,
+                                                  fs.rounding)),
+                     fixed_half.eq(clamp(fixed_rounded, fs.half_dt_sq)[0])]
+        return fixed_half
+
+    def _cycles(self, m: Module) -> None:
+        """CYCLES in two halves, the high half a clock behind the low half's wrap (registered because a
+        64-bit carry chain in one clock is among the longest paths); exact a clock after the run."""
+        cycles = self.cycles
+        half = len(cycles) // 2
+        cycles_wrapped = Signal(name="cycles_wrapped")
+        m.d.sync += cycles_wrapped.eq(self.running & (cycles[:half] == (1 << half) - 1))
+        with m.If(self.running):
+            m.d.sync += cycles[:half].eq(cycles[:half] + 1)
+        with m.If(cycles_wrapped):
+            m.d.sync += cycles[half:].eq(cycles[half:] + 1)
+        with m.If(self.starting):
+            m.d.sync += [cycles.eq(0), cycles_wrapped.eq(0)]
+
+    def _units(self, m: Module, units, run: _Run) -> None:
+        """The units' requests and results. A request's valid is set by the phase machine and held until
+        taken; the payloads are the sums and registers themselves, which hold still from the end of
+        their pass until the unit's result is in (the next pass starts after the math phase)."""
+        fs = self.fs
+        norm_length, norm_area, energy = units["norm_length"], units["norm_area"], units["energy_check"]
+        beta, stepgen = units["beta"], units["stepgen"]
+        length_total = Mux(self.length_sum > fs.error_acc.raw_max, fs.error_acc.raw_max, self.length_sum)
+        m.d.comb += [
+            energy.half_spring.eq(self.half_spring_held), energy.tolerance.eq(self.tol_energy_held),
+            *(u.o.ready.eq(1) for u in units.values()),
+            norm_length.i.payload.sum.eq(length_total),
+            norm_length.i.payload.mantissa.eq(self.length_reciprocal_held),
+            norm_length.i.payload.shift.eq(self.length_shift_held),
+            energy.i.payload.square_sum.eq(self.square_sum), energy.i.payload.barrier_sum.eq(self.barrier_sum),
+            energy.i.payload.first.eq(run.first_measure),
+            norm_area.i.payload.sum.eq(self.area_total),
+            norm_area.i.payload.mantissa.eq(self.area_reciprocal_held),
+            norm_area.i.payload.shift.eq(self.area_shift_held),
+            stepgen.i.payload.area_error.eq(self.area_error), stepgen.i.payload.shape_error.eq(self.shape_error),
+            self.step_events.eq(Mux(stepgen.o.valid, stepgen.o.payload.saturations, 0)),
+            self.shape_error_events.eq(norm_length.o.valid & norm_length.o.payload.saturations),
+            self.area_error_events.eq(norm_area.o.valid & norm_area.o.payload.saturations),
+        ]
+        for unit in units.values():
+            with m.If(unit.i.valid & unit.i.ready):
+                m.d.sync += unit.i.valid.eq(0)
+        with m.If(norm_length.o.valid):
+            m.d.sync += [self.shape_error.eq(norm_length.o.payload.error), run.math_pending[0].eq(0)]
+        with m.If(norm_area.o.valid):
+            m.d.sync += [self.area_error.eq(norm_area.o.payload.error), run.math_pending[1].eq(0)]
+        with m.If(energy.o.valid):
+            m.d.sync += [self.energy.eq(energy.o.payload.energy), run.settled.eq(energy.o.payload.settled),
+                         run.math_pending[2].eq(0)]
+        with m.If(beta.o.valid):
+            m.d.sync += self.step_dt.eq(beta.o.payload)
+        with m.If(stepgen.o.valid):
+            m.d.sync += [self.step_dt.eq(stepgen.o.payload.dt), self.step_half.eq(stepgen.o.payload.half_dt_sq)]
+        # the fixed step is loaded the clock after the step phase (from a flip-flop, as the units'
+        # results are), long before the integrate pass's first node reaches the integrator
+        m.d.sync += run.fixed_load.eq(0)
+        with m.If(run.fixed_load):
+            m.d.sync += [self.step_dt.eq(self.dt), self.step_half.eq(run.fixed_half)]
+
+    def _decisions(self, m: Module, units, run: _Run):
+        """START's checks and the check phase's decisions, each compare registered the clock before it is
+        read (registered because a 32-bit compare into the phase machine's next-state logic is a long
+        path). Returns ``({name: flag}, stepgen_idle)``."""
+        fs, cap = self.fs, self.capacity
+        # START's checks of the run constants, as golden_model's constant_fault states them
+        top = 1 << (fs.reciprocal.width - 1)
+        reciprocal_bad = [(getattr(self, f"{k}_reciprocal") < top) | (getattr(self, f"{k}_reciprocal") >= 2 * top)
+                          | (getattr(self, f"{k}_shift") < fs.error.frac_bits + 2) for k in ("area", "length")]
+        bad_constants = ((self.vertices > cap.vertices) | (self.entries > cap.entries)
+                         | (self.triangles > cap.triangles) | (self.entries == 0) | (self.triangles == 0)
+                         | reciprocal_bad[0] | reciprocal_bad[1]
+                         | (self.fixed_step & ~self.momentum & (self.dt == 0)) | (self.max_iter == 0))
+        stepgen = units["stepgen"]
+        stepgen_idle = pending_is_zero(m, StepGenerator.latency_of(self.fs), stepgen.i, stepgen.o, name="stepgen_pending")
+        names = ("no_mesh_q", "bad_constants_q", "converged_q", "diverged_q", "at_max_iter_q")
+        q = {name: Signal(name=name) for name in names}
+        limit = self.saturation_limit
+        m.d.sync += [q["no_mesh_q"].eq(self.vertices == 0), q["bad_constants_q"].eq(bad_constants),
+                     q["converged_q"].eq((self.area_error <= self.tol_area) & (self.shape_error <= self.tol_shape)
+                                         & run.settled),
+                     q["diverged_q"].eq((limit != 0) & (self.saturations >= limit)),
+                     q["at_max_iter_q"].eq(self.iterations == self.max_iter)]
+        return q, stepgen_idle
+
+    def _phases(self, m: Module, units, run: _Run, q, drained, stepgen_idle) -> None:
+        """START, ABORT and the phase machine: one block per phase, each enabled by its one-hot flag
+        (and the pass-end pulse it waits for), not by a decode of a phase code under ``running``."""
+        flags = {name: getattr(self, f"in_{name}") for name in PHASES}
+
+        def move(leaving, entering=None):
+            return [flags[leaving].eq(0), *([flags[entering].eq(1)] if entering else [])]
+
+        def set_state(name):
+            m.d.sync += [self.state.eq(_code(STATES, name)), self.running.eq(name == "running")]
+
+        def finish(code):  # (no pass is fetching then)
+            set_state("done")
+            m.d.sync += self.result.eq(_code(RESULTS, code))
+            m.d.comb += self.irq_set.eq(1)
+
+        norm_length, norm_area, energy = units["norm_length"], units["norm_area"], units["energy_check"]
+        beta, stepgen = units["beta"], units["stepgen"]
+        abort, running = self.abort, self.running
+        # ABORT while running drains what is in flight (still "running": START is ignored and the memories
+        # answer err until nothing can write them any more), then goes idle with no result. The pass under
+        # way fetches to its end (a node half fed to the force pass would never leave it).
+        with m.If(abort & running):
+            m.d.sync += [flag.eq(name == "drain") for name, flag in flags.items()]
+            m.d.sync += [unit.i.valid.eq(0) for unit in units.values()]
+        with m.If(abort & ~running):
+            set_state("idle")
+            m.d.sync += self.result.eq(_code(RESULTS, "none"))
+        m.d.comb += self.starting.eq(self.start & ~abort & ~running)
+        with m.If(self.starting):
+            m.d.sync += [self.iterations.eq(0), self.result.eq(_code(RESULTS, "none"))]
+            with m.If(q["no_mesh_q"]):
+                finish("no-mesh")
+            with m.Elif(q["bad_constants_q"]):
+                finish("bad-constants")
+            with m.Else():
+                set_state("running")
+                m.d.sync += [flags["start"].eq(1), run.first_measure.eq(1)]
+        go = ~abort
+        with m.If(go & flags["start"]):  # a measurement: the force pass
+            m.d.sync += [self.fetch_force.eq(1), *move("start", "force")]
+        with m.If(go & flags["force"] & self.force_done):
+            m.d.sync += [self.fetch_force.eq(0), self.fetch_area.eq(1), *move("force", "area"),
+                         run.math_pending.eq(0b111), norm_length.i.valid.eq(1), energy.i.valid.eq(1),
+                         self.area_clear.eq(1)]
+        with m.If(go & flags["area"] & self.area_done):
+            m.d.sync += [self.fetch_area.eq(0), *move("area", "math"), norm_area.i.valid.eq(1)]
+        # the last result's clock t clears its math_pending bit (seen at t+1); its event reaches diverged_q
+        # at t+5: the check phase starts then, CHECK_SETTLE_CLOCKS after math_pending reads 0
+        math_settle = [Signal(name=f"math_settle{k}") for k in range(self.CHECK_SETTLE_CLOCKS)]
+        m.d.sync += [math_settle[0].eq(flags["math"] & (run.math_pending == 0)),
+                     *(math_settle[k].eq(math_settle[k - 1]) for k in range(1, len(math_settle)))]
+        with m.If(go & flags["math"] & math_settle[-1]):
+            m.d.sync += move("math", "check")
+        with m.If(go & flags["check"]):
+            # as run_image: the saturation limit first, then the stop rule (neither after the first
+            # measurement), then the iteration limit
+            m.d.sync += move("check")  # to the step phase, or the run is over
+            with m.If(q["diverged_q"] & ~run.first_measure):
+                finish("diverged")
+            with m.Elif(q["converged_q"] & ~run.first_measure):
+                finish("converged")
+            with m.Elif(q["at_max_iter_q"]):
+                finish("max-iterations")
+            with m.Else():
+                m.d.sync += [run.first_measure.eq(0), *move("check", "step")]
+        with m.If(go & flags["step"]):
+            with m.If(self.momentum):
+                m.d.sync += beta.i.valid.eq(1)
+            with m.Elif(self.fixed_step):
+                m.d.sync += run.fixed_load.eq(1)
+            with m.Else():
+                m.d.sync += stepgen.i.valid.eq(1)
+            m.d.sync += move("step", "step_wait")
+        waiting = beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready
+        with m.If(go & flags["step_wait"] & ~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
+            m.d.sync += [self.fetch_nodes.eq(1), *move("step_wait", "integrate")]
+        with m.If(go & flags["drain"] & drained):
+            set_state("idle")
+            m.d.sync += move("drain")
+            m.d.sync += [self.result.eq(_code(RESULTS, "none")),
+                         self.fetch_force.eq(0), self.fetch_area.eq(0), self.fetch_nodes.eq(0)]
+        with m.If(go & flags["integrate"] & self.integrate_done):
+            m.d.sync += [self.fetch_nodes.eq(0), *move("integrate", "start")]
+
+    def _momentum(self, m: Module, units, run: _Run) -> None:
+        """``k`` and the restart for β_k, and ITERATIONS, each moved by a registered pulse of its own.
+
+        The divider's ``k`` is loaded on every clock: ``momentum_k`` and ``restart_pending`` stand still
+        from the step phase until the divider takes the request, the clock after. ``restart_pending``
+        is set from S's sign (a flip-flop) at the integrate pass's end and cleared by a pulse of its
+        own (the launch's or the step's), not by the pulses that move ``momentum_k``: registered so
+        that no LUT is shared between the 32-bit update and the flag's enable."""
+        beta = units["beta"]
+        go = ~self.abort
+        momentum_k = run.momentum_k
+        restart_pending, step_was_restart = Signal(name="restart_pending"), Signal(name="step_was_restart")
+        m.d.sync += beta.i.payload.eq(Mux(restart_pending, 0, momentum_k))
+        launch_pulse, step_pulse, iterate_pulse, restart_pulse, restart_clear, power_negative = (
+            Signal(name=n) for n in ("launch_pulse", "step_pulse", "iterate_pulse", "restart_pulse",
+                                     "restart_clear", "power_negative"))
+        launching = self.in_start & run.first_measure
+        stepping = go & self.in_step & self.momentum
+        ending = go & self.in_integrate & self.integrate_done
+        m.d.sync += [launch_pulse.eq(launching), step_pulse.eq(stepping), restart_clear.eq(launching | stepping),
+                     iterate_pulse.eq(ending),
+                     restart_pulse.eq(ending & self.momentum & ~step_was_restart),
+                     power_negative.eq(self.power_sum < 0)]
+        with m.If(launch_pulse):  # a run's start: no momentum yet
+            m.d.sync += momentum_k.eq(0)
+        with m.If(step_pulse):
+            m.d.sync += [momentum_k.eq(Mux(restart_pending, 1, momentum_k + 1)), step_was_restart.eq(restart_pending)]
+        with m.If(restart_clear):
+            m.d.sync += restart_pending.eq(0)
+        with m.If(restart_pulse):
+            m.d.sync += restart_pending.eq(power_negative)
+        with m.If(iterate_pulse):
+            m.d.sync += self.iterations.eq(self.iterations + 1)

@@ -1,0 +1,71 @@
+"""SATURATIONS: the run's saturation events, summed in registered stages, stopping at the maximum."""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+__all__ = ["SaturationTally"]
+
+
+class SaturationTally(wiring.Component):
+    """Adds the units' saturation events to a count that stops at its maximum (never wraps).
+
+    Parameters
+    ----------
+    sources : dict of str to int
+        The event inputs, in order, and their widths; an even number (they are summed in pairs).
+    count_bits : int
+        Width of the count.
+
+    Members
+    -------
+    ``<source>_events`` : ``In(width)``, one per source
+        Events reported this clock (0 when there is none).
+    clear : ``In(1)``
+        Restart the count from 0 (a new run); it takes precedence over the clock's events.
+    saturations : ``Out(count_bits)``
+        The count.
+    saturated : ``Out(1)``
+        ``saturations != 0``, a clock later (registered: a wide OR off the register read path).
+
+    Latency
+    -------
+    Each event lands in a register, the pairs' sums in registers of their own, their sum in another,
+    then the count: an event reported at clock t is in ``saturations`` after the edge at t + 4 (and in
+    ``saturated`` one later). The stages are registered because summing every source into the wide
+    saturating add in one clock is a long carry chain behind a wide adder tree.
+    """
+
+    def __init__(self, sources: dict[str, int], *, count_bits: int):
+        sources = dict(sources)
+        if not sources or len(sources) % 2:
+            raise ValueError(f"SaturationTally sums its sources in pairs: it needs an even number, not {len(sources)}")
+        for name, width in sources.items():
+            if not name.isidentifier() or isinstance(width, bool) or not isinstance(width, int) or width < 1:
+                raise ValueError(f"event source {name!r}: needs an identifier and a positive width, not {width!r}")
+        if isinstance(count_bits, bool) or not isinstance(count_bits, int) or count_bits < 1:
+            raise ValueError(f"count_bits must be a positive int, not {count_bits!r}")
+        self.sources, self.count_bits = sources, count_bits
+        super().__init__({
+            **{f"{name}_events": In(width) for name, width in sources.items()},
+            "clear": In(1), "saturations": Out(count_bits), "saturated": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        event_regs = [Signal(width, name=f"saturation_event{k}") for k, width in enumerate(self.sources.values())]
+        m.d.sync += [r.eq(getattr(self, f"{name}_events")) for r, name in zip(event_regs, self.sources)]
+        new_events = Signal(max(len(r) for r in event_regs) + (len(event_regs) - 1).bit_length(), name="new_events")
+        pair_sums = [Signal(len(new_events) - 1, name=f"saturation_pair{k}") for k in range(len(event_regs) // 2)]
+        m.d.sync += [p.eq(event_regs[2 * k] + event_regs[2 * k + 1]) for k, p in enumerate(pair_sums)]
+        m.d.sync += new_events.eq(sum(pair_sums))
+        count = self.saturations
+        total = count + new_events
+        saturation_max = (1 << len(count)) - 1
+        m.d.sync += count.eq(Mux(total > saturation_max, saturation_max, total))
+        with m.If(self.clear):
+            m.d.sync += count.eq(0)
+        m.d.sync += self.saturated.eq(count != 0)
+        return m
