@@ -34,6 +34,7 @@ import numpy as np
 
 from .guard import ENERGY_FLOOR, ENERGY_WINDOW, GUARD_LEVELS, EnergyWindow, StepScale, guarded_moves
 from .mesh import Mesh, folded_faces, layout_orientation, signed_areas_2d
+from .modes import DYNAMICS, STEP_MODES, RunMode, Step, run_mode
 
 __all__ = [
     "FlattenParams",
@@ -60,9 +61,7 @@ __all__ = [
 ]
 
 Status = Literal["converged", "max-iterations", "diverged", "stalled"]
-STEP_MODES = ("variable", "fixed")
 UPDATE_ORDERS = ("jacobi", "sequential")
-DYNAMICS = ("paper", "momentum")
 
 
 class ParameterError(ValueError):
@@ -182,6 +181,11 @@ class FlattenParams:
             if self.damping:
                 raise ParameterError("damping belongs to the paper dynamics (--dynamics paper); the momentum "
                                      "dynamics damps by its restart (drop --damping)")
+
+    @property
+    def mode(self) -> RunMode:
+        """The run mode (:mod:`golden_model.modes`) these parameters select."""
+        return run_mode(self.dynamics, self.step, self.guard)
 
     def with_(self, **changes) -> "FlattenParams":
         """A copy with some fields changed (validated again)."""
@@ -669,7 +673,7 @@ class _Jacobi:
         return forces
 
     def advance(self, dt: float) -> None:
-        if self.params.dynamics == "momentum":
+        if self.params.mode.step is Step.MOMENTUM:
             self._advance_momentum()
             return
         p = self.params
@@ -826,10 +830,11 @@ def run(engine, params: FlattenParams, density: float, initial_positions: np.nda
     float formula of eqs. 18–20, or ``params.dt`` for the fixed step).
     """
     if step_size is None:
-        if params.dynamics == "momentum":
+        step = params.mode.step
+        if step is Step.MOMENTUM:
             def step_size(_: Measurement) -> float:
                 return 1.0  # Δt = 1: the weights w_i carry the step
-        elif params.step == "fixed":
+        elif step is Step.FIXED:
             def step_size(_: Measurement) -> float:
                 return params.dt
         else:
