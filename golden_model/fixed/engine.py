@@ -32,16 +32,15 @@ from typing import Callable
 
 import numpy as np
 
-from ..guard import ENERGY_FLOOR, EnergyWindow
+from ..guard import ENERGY_FLOOR
 from ..mesh import Mesh, folded_by_area, layout_orientation
-from ..reference import (FlattenParams, FlattenResult, GuardRecord, History, Measurement, ParameterError, Status,
-                         node_weights)
+from ..modes import Step
+from ..reference import FlattenParams, FlattenResult, History, Measurement, ParameterError, node_weights
+from .controller import Controller, Setup
 from .format import MAX_PRODUCT_WIDTH, Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
 from .formats_set import FormatSet
-from .guard import commit, floor_min_raw, guarded_moves_raw, proposal
-from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum,
-                       node_power, node_terms)
-from .steplut import half_dt_sq, step_size
+from .pipeline import BarrierEntries, NeighbourStream, NodeConstants
+from .steplut import half_dt_sq
 
 __all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats",
            "momentum_beta_raw", "power_sum", "MomentumState", "area_sum", "area_error", "length_sum", "shape_error",
@@ -437,44 +436,20 @@ def flipped_count(problem: FixedProblem, positions: np.ndarray) -> int:
     return int(np.sum(problem.orientation * _doubled_areas(problem.fs, positions, problem.mesh.faces) < 0))
 
 
-class FixedEngine:
-    """The controller's state for :func:`run_fixed`: raw state plus the last raw errors and energy.
+class FixedEngine(Controller):
+    """``--engine fixed``: the engine's :class:`~golden_model.fixed.controller.Controller` on the host's
+    :class:`FixedProblem`, with the measurements a run reports (``positions``/``velocities`` mapped back
+    to mesh units, float64; ``raw_positions``/``raw_velocities`` are the bit-exact state).
 
-    Each iteration is a force pass over the current positions (which also
-    yields their ``E_C`` partial sums) and an integrate pass once the step
-    generator has turned ``E_S``, ``E_C`` into ``Δt``.  With the single-pass
-    datapath this is a pass with ``Δt = 0``, ``1 − γ = 1`` (which moves
-    nothing) followed by the real pass: the partial sums do not depend on the
-    step, so both passes produce the same terms.
-
-    With the step guard (momentum dynamics, :mod:`golden_model.fixed.guard`) an iteration proposes
-    ``V'``, takes each node's guarded fraction of it, measures the moved layout and keeps it only
-    if its exact energy is not above the last accepted one; otherwise the layout and its
-    measurement return (``P − V``), the momentum restarts and the step scale halves.
-
-    ``positions``/``velocities`` are the state mapped back to mesh units
-    (float64); ``raw_positions``/``raw_velocities`` are the bit-exact state.
+    The single-pass datapath measures a layout with a pass at ``Δt = 0``, ``1 − γ = 1`` (which moves
+    nothing) before the real pass: the partial sums do not depend on the step, so both passes
+    produce the same terms.
     """
 
     def __init__(self, problem: FixedProblem, counter: SaturationCounter):
+        super().__init__(controller_setup(problem), problem.initial_positions.copy(),
+                         np.zeros_like(problem.initial_positions), counter)
         self.problem = problem
-        self.counter = counter
-        self.raw_positions = problem.initial_positions.copy()
-        self.raw_velocities = np.zeros_like(self.raw_positions)
-        self.terms: NodeTerms | None = None
-        self.errors = (0, 0)
-        self.dt = 0
-        self.power = 0  # S of the last force pass [power_acc]
-        self.node_power: np.ndarray | None = None  # its per-node terms [power]
-        self.momentum = MomentumState()
-        self.energy_raw = 0  # of the last measurement (energy_raw)
-        self.measurement: Measurement | None = None  # of the layout ``_measured`` (the same array object)
-        self._measured: np.ndarray | None = None
-        self.guard = GuardRecord() if problem.params.guard else None
-        self.accepted = True
-        self.stalled = False
-        if self.guard is not None:
-            self.floor_min = floor_min_raw(problem.fs, problem.face_areas)
 
     @property
     def positions(self) -> np.ndarray:
@@ -485,75 +460,31 @@ class FixedEngine:
         return self.problem.to_float_velocities(self.raw_velocities)
 
     def measure(self) -> Measurement:
-        if self._measured is self.raw_positions:
-            return self.measurement
-        p = self.problem
-        self.terms = node_terms(p.fs, self.raw_positions, p.stream, p.half_spring, self.counter)
-        e_s = area_error(p.fs, p.area_reciprocal, p.mesh.faces, p.face_areas, self.raw_positions, self.counter)
-        e_c = shape_error(p.fs, p.length_reciprocal, self.terms.error_sums, self.counter)
-        self.errors = (e_s, e_c)
-        self.energy_raw = energy_raw(p.fs, p.half_spring, self.terms.error_square_sum, self.terms.barrier_energy_sum)
-        energy = energy_to_float(p, self.energy_raw)
-        if p.momentum:
-            self.node_power = node_power(p.fs, self.terms.force, self.raw_velocities, self.counter)
-            self.power = power_sum(p.fs, self.node_power, self.counter)
-        self.measurement = Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
-                                       flipped_count(p, self.raw_positions), folded_count(p, self.raw_positions))
-        self._measured = self.raw_positions
-        return self.measurement
+        """The passes of the current layout (once per layout) and what they report, in mesh units."""
+        super().measure()
+        p, fs = self.problem, self.problem.fs
+        return Measurement(float(to_float(self.errors[0], fs.error)), float(to_float(self.errors[1], fs.error)),
+                           energy_to_float(p, self.energy_raw), flipped_count(p, self.raw_positions),
+                           folded_count(p, self.raw_positions))
 
     def step_size(self, _: Measurement) -> float:
-        """The step generator on the last raw errors (variable) or the fixed ``Δt``."""
-        fs, params = self.problem.fs, self.problem.params
-        if params.dynamics == "momentum":  # Δt = 1; the controller's β_k goes into the Δt port
-            self.dt, self.momentum = self.momentum.next(self.power, fs)
-            return 1.0
-        if params.step == "fixed":
-            self.dt = int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))
-        else:
-            self.dt = int(step_size(np.int64(self.errors[0]), np.int64(self.errors[1]), fs, self.counter)[0])
-        return float(to_float(self.dt, fs.dt))
+        """:meth:`choose_step`, as the float step (1 with momentum: β goes into the Δt port)."""
+        dt = self.choose_step()
+        return 1.0 if self.setup.mode.step is Step.MOMENTUM else float(to_float(dt, self.problem.fs.dt))
 
-    def advance(self, dt: float) -> None:
-        p = self.problem
-        weights = p.stream.node_weights(self.terms.barrier_active)
-        if self.guard is not None:
-            self._advance_guarded(weights)
-            return
-        if p.momentum:
-            self.raw_positions, self.raw_velocities = integrate_momentum(
-                p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, self.dt, self.counter)
-        else:
-            self.raw_positions, self.raw_velocities = integrate(
-                p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, p.constants(self.dt),
-                self.counter)
+    def advance(self, dt: float = 0.0) -> None:
+        super().advance()
 
-    def _advance_guarded(self, weights: np.ndarray) -> None:
-        """Propose, guard, commit and measure; keep the step only if the energy did not rise."""
-        p, guard = self.problem, self.guard
-        accepted_state = (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power,
-                          self.measure())
-        wanted = proposal(p.fs, self.raw_velocities, self.terms.force, weights, self.dt, guard.scale.shift,
-                          self.counter)
-        moves, levels = guarded_moves_raw(p.fs, self.raw_positions, wanted, p.mesh.faces, p.winding, self.floor_min)
-        guard.count_levels(levels)
-        self.raw_positions, taken = commit(self.raw_positions, moves)
-        before = self.energy_raw
-        self.measure()
-        self.accepted = self.energy_raw <= before
-        if self.accepted:
-            self.raw_velocities = taken
-            guard.scale = guard.scale.accepted_step()
-            return
-        (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power,
-         self.measurement) = accepted_state
-        self._measured = self.raw_positions
-        self.raw_velocities = np.zeros_like(self.raw_velocities)
-        self.power = 0  # S of a stopped momentum
-        self.momentum = MomentumState()
-        guard.rejected += 1
-        guard.scale = guard.scale.rejected(with_momentum=self.dt > 0)  # β = 0: a plain gradient step
-        self.stalled = guard.scale.stalled
+
+def controller_setup(problem: FixedProblem) -> Setup:
+    """The controller's view of the host's problem."""
+    fs, params = problem.fs, problem.params
+    mode = params.mode
+    dt = int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) if mode.step is Step.FIXED else 0
+    return Setup(fs, mode, problem.stream, problem.mesh.faces, problem.face_areas, problem.half_spring,
+                 problem.damping, dt, problem.area_reciprocal, problem.length_reciprocal,
+                 StopRule.of(params, fs, energy_floor_raw(problem)), params.max_iter, params.energy_window,
+                 winding=int(problem.winding))
 
 
 def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
@@ -609,35 +540,20 @@ def flatten_fixed(
 
 
 def run_fixed(engine: FixedEngine, on_iteration: Callable[[int, Measurement], None] | None = None) -> FlattenResult:
-    """Algorithm 1's loop, every decision on raw integers (:class:`StopRule`); never diverges (the
-    formats saturate, and ``result.extra`` counts it). The energy change is measured over the last
-    :attr:`FlattenParams.energy_window` accepted iterations, as in the float reference."""
+    """Algorithm 1's loop (:meth:`Controller.run`), every decision on raw integers; never diverges (the
+    formats saturate, and ``result.extra`` counts it). Each iteration is recorded in the history."""
     problem = engine.problem
-    params = problem.params
-    rule = StopRule.of(params, problem.fs, energy_floor_raw(problem))
     history = History()
-    current = engine.measure()
-    history.append(math.nan, current)
-    window = EnergyWindow(params.energy_window)
-    window.push(engine.energy_raw)
-    status: Status = "max-iterations"
-    k = 0
-    while k < params.max_iter:
-        dt = engine.step_size(current)
-        engine.advance(dt)
-        after = engine.measure()
-        k += 1
-        history.append(dt, after, engine.accepted)
+    history.append(math.nan, engine.measure())
+
+    def record(k: int) -> None:
+        measurement = engine.measure()
+        dt = 1.0 if engine.setup.mode.step is Step.MOMENTUM else float(to_float(engine.dt, problem.fs.dt))
+        history.append(dt, measurement, engine.accepted)
         if on_iteration is not None:
-            on_iteration(k, after)
-        if engine.stalled:
-            status = "stalled"
-            break
-        window.push(engine.energy_raw, engine.accepted)
-        if window.ready and rule.converged(window.oldest, engine.energy_raw, engine.errors):
-            status = "converged"
-            break
-        current = after
+            on_iteration(k, measurement)
+
+    status, k = engine.run(record)
     extra = engine.guard.summary() if engine.guard is not None else {}
     return FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
-                         history, status, k, params, problem.density, engine="fixed", extra=extra)
+                         history, status, k, problem.params, problem.density, engine="fixed", extra=extra)
