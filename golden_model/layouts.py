@@ -245,19 +245,29 @@ def arap_layout(mesh: Mesh) -> np.ndarray:
     return _counter_clockwise(positions, mesh)
 
 
-def load_layout(path: str | Path, n_vertices: int) -> np.ndarray:
+def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None = None,
+                notes: list[str] | None = None) -> np.ndarray:
     """Read a user layout: a text file of ``x y`` rows, or an OBJ's vertex (x, y).
 
     A file that cannot be read is a :class:`LayoutError` "cannot read layout
-    '<path>': <reason>" (no such file, is a directory, permission denied, ...).
+    '<path>': <reason>" (no such file, is a directory, a FIFO or a device,
+    permission denied, ...); an empty path is refused.  For an OBJ, given the
+    mesh's ``faces``, a layout whose faces are not the mesh's (as sets of
+    corners), or whose z is not 0, gets a line in ``notes``: only the
+    vertices' x, y are used.
     """
+    if str(path) == "":
+        raise LayoutError(f"the layout '' is empty: name a method ({', '.join(LAYOUT_METHODS)}) or a file")
     path = Path(path)
     data = read_file_bytes(path, "layout", LayoutError)
     if path.suffix.lower() == ".obj":
         try:
-            positions = read_obj_vertices(data, f"cannot parse layout '{path}'")[:, :2]
+            vertices = read_obj_vertices(data, f"cannot parse layout '{path}'")
         except MeshError as exc:
             raise LayoutError(str(exc)) from None
+        positions = vertices[:, :2]
+        if notes is not None and faces is not None and len(positions) == n_vertices:
+            notes.extend(_obj_layout_notes(path, data, vertices, faces))
     else:
         try:
             text = data.decode("utf-8-sig").replace(",", " ")
@@ -285,13 +295,34 @@ def load_layout(path: str | Path, n_vertices: int) -> np.ndarray:
     return positions
 
 
+def _obj_layout_notes(path: Path, data: bytes, vertices: np.ndarray, faces: np.ndarray) -> list[str]:
+    """What an OBJ layout has that is not used: faces other than the mesh's, a z that is not 0."""
+    from .mesh import read_obj
+
+    notes = []
+    try:
+        own = read_obj(path, data).faces
+        differ = len(own) != len(faces) or not np.array_equal(np.unique(np.sort(own, axis=1), axis=0),
+                                                              np.unique(np.sort(faces, axis=1), axis=0))
+        what = "no faces" if len(own) == 0 else f"{len(own)} faces that are not the mesh's {len(faces)}"
+    except MeshError as exc:
+        differ, what = True, f"faces that cannot be read ({str(exc).split(': ', 1)[-1]})"
+    if differ:
+        notes.append(f"layout '{path}' has {what}: only its vertices' x, y are used, in the mesh's vertex order")
+    z = float(np.abs(vertices[:, 2]).max(initial=0.0))
+    if z > 0:
+        notes.append(f"layout '{path}' has z up to {z:.3g}, not a flat layout: only x, y are used (z dropped)")
+    return notes
+
+
 _METHODS = {"tutte": tutte_layout, "pca": pca_layout, "harmonic": harmonic_layout, "lscm": lscm_layout,
             "arap": arap_layout}
 
 
-def initial_layout(mesh: Mesh, init: str | Path) -> np.ndarray:
-    """``P0`` for ``init`` = one of :data:`LAYOUT_METHODS` or a layout file path."""
+def initial_layout(mesh: Mesh, init: str | Path, notes: list[str] | None = None) -> np.ndarray:
+    """``P0`` for ``init`` = one of :data:`LAYOUT_METHODS` or a layout file path (what an OBJ layout has
+    that is not used goes to ``notes``, see :func:`load_layout`)."""
     method = _METHODS.get(str(init))
     if method is not None:
         return method(mesh)
-    return load_layout(init, mesh.n_vertices)
+    return load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes)
