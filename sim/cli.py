@@ -16,7 +16,10 @@ a number that is not finite is ``null`` and its key is listed in
 from __future__ import annotations
 
 import argparse
+import math
+import signal
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -24,12 +27,14 @@ import numpy as np
 from golden_model.layouts import LAYOUT_METHODS, initial_layout
 from golden_model.mesh import Mesh, describe_os_error
 from golden_model.fixed.engine import flatten_fixed
+from golden_model.fixed.formats_set import FormatSet
 from golden_model.reference import FlattenParams, FlattenResult, flatten
 
-from .outputs import (LAYOUT_SUFFIXES, OutputWriteError, all_or_nothing, check_output_path, write_history,
+from .outputs import (LAYOUT_SUFFIXES, OutputWriteError, all_or_nothing, atomic_directory, check_distinct,
+                      check_not_interrupted, check_output_path, on_interrupt, reset_interrupted, write_history,
                       write_layout, write_plot)
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
-                          load_format_set, params_from_args, resolve_mesh, strict_json)
+                          input_files, load_format_set, params_from_args, resolve_mesh, strict_json)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -53,17 +58,23 @@ def cmd_flatten(args: argparse.Namespace) -> int:
                                  (args.plot, "--plot", (".png",))):
         if path is not None:
             check_output_path(path, what, suffixes)
+    if args.init is None:
+        args.init = default_init(args.mesh)
     _check_distinct_files(args)
-    args.init = args.init or default_init(args.mesh)
-    positions = initial_layout(mesh, args.init)
-    show_progress = sys.stderr.isatty() or not args.json
+    notes: list[str] = []
+    positions = initial_layout(mesh, args.init, notes)
+    for note in notes:
+        print(f"springflat: note: {note}", file=sys.stderr)
+    show_progress = sys.stderr.isatty()  # progress goes to a terminal only, never into a log
+    formats = None
     if args.engine == "fixed":
         formats = load_format_set(args.formats or "default")
 
         def engine(*run_args, **kw):
             return flatten_fixed(*run_args, fs=formats, **kw)
     elif args.engine == "rtl":
-        engine = _rtl_engine(load_format_set(args.formats or "default"))
+        formats = load_format_set(args.formats or "default")
+        engine = _rtl_engine(formats)
     elif args.formats is not None:
         raise UserError("--formats applies to --engine fixed and --engine rtl")
     else:
@@ -87,6 +98,9 @@ def cmd_flatten(args: argparse.Namespace) -> int:
               + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
                  if "simulator" in result.extra else ""))
         print(_what_was_used(params, args.init, result), file=sys.stderr)
+    for note in (_energy_rule_note(params, result), _error_resolution_note(formats)):
+        if note:
+            print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":
         print(f"springflat: the run diverged at iteration {result.iterations + 1} "
               "(try --damping 0.05 or a smaller --dt); outputs hold the last finite state", file=sys.stderr)
@@ -150,19 +164,51 @@ def _what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> s
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 
+#: Iterations :func:`_energy_rule_note` looks back over.
+ENERGY_NOTE_WINDOW = 50
+
+
+def _energy_rule_note(params: FlattenParams, result: FlattenResult) -> str | None:
+    """Why a fixed-point run ended at N_max under the energy rule, when its energy never settled below ε.
+
+    The fixed-point energy changes by its own rounding from one iteration to the next; near the
+    minimum that floor can be above ``--tol-energy`` (docs/dynamics.md), so the rule cannot hold.
+    """
+    energy = np.asarray(result.history.energy[-ENERGY_NOTE_WINDOW - 1:], dtype=float)
+    if (result.engine == "float" or result.status != "max-iterations" or not params.tol_energy > 0
+            or len(energy) <= ENERGY_NOTE_WINDOW or not np.isfinite(energy).all()):
+        return None
+    steps = np.diff(energy)
+    if np.count_nonzero(steps > 0) < ENERGY_NOTE_WINDOW // 4:  # still descending, not at the floor
+        return None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        change = np.abs(steps) / energy[:-1]
+    smallest = float(np.nanmin(change)) if np.isfinite(change).any() else math.inf
+    if not smallest > params.tol_energy:
+        return None
+    return (f"over the last {len(change)} iterations the relative energy change never fell below {smallest:.2g}, "
+            f"above --tol-energy {params.tol_energy:g}: the fixed-point energy moves by its rounding at that level "
+            "near the minimum, so the rule could not hold (a larger --tol-energy stops there; docs/dynamics.md)")
+
+
+#: The resolution of E_S and E_C as printed (four decimals): a coarser error format gets a note.
+PRINTED_ERROR_RESOLUTION = 5e-5
+
+
+def _error_resolution_note(formats: FormatSet | None) -> str | None:
+    """E_S and E_C of the fixed-point engine are values of the ``error`` format: say so when it is coarser
+    than the printed digits (an error of 0.0053 reads 0.0000 in u0.1)."""
+    if formats is None or formats.error.lsb <= PRINTED_ERROR_RESOLUTION:
+        return None
+    return (f"format set '{formats.name}' holds E_S and E_C in error {formats.error}: they are multiples of "
+            f"{formats.error.lsb:.3g}, the values above are rounded to that")
+
+
 def _check_distinct_files(args: argparse.Namespace) -> None:
-    """No two outputs may be one file, and no output may overwrite the mesh."""
-    seen: dict[Path, str] = {}
-    mesh_path = Path(args.mesh)
-    if mesh_path.is_file():
-        seen[mesh_path.resolve()] = f"the mesh '{args.mesh}'"
-    for what, path in (("--out", args.out), ("--history", args.history), ("--plot", args.plot)):
-        if path is None:
-            continue
-        key = Path(path).resolve()
-        if key in seen:
-            raise UserError(f"{what} '{path}' is the same file as {seen[key]}")
-        seen[key] = f"{what} '{path}'"
+    """No two outputs may be one file, and no output may be an input (the mesh, the --init or --formats
+    file), compared by device and inode."""
+    check_distinct([("--out", args.out), ("--history", args.history), ("--plot", args.plot)],
+                   input_files(args))
 
 
 def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:
@@ -187,8 +233,10 @@ def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) 
 def cmd_paper(args: argparse.Namespace) -> int:
     from .paper import reproduce_paper
 
-    report = reproduce_paper(Path(args.out), init=args.init, progress=not args.quiet)
-    print(f"wrote {report}")
+    out = Path(args.out)
+    with atomic_directory(out) as build:  # all of the report or nothing, also on Ctrl-C
+        report = reproduce_paper(build, init=args.init, progress=not args.quiet)
+    print(f"wrote {out / report.name}")
     return 0
 
 
@@ -198,13 +246,13 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats)
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"--out '{out}' exists and is not a directory")
-    interface = export_verilog(formats, out)
+    inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
+    with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
+        interface = export_verilog(formats, build)
+        engine = export_engine_bundle(formats, capacity, build)
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
     print(f"{out / 'interface.md'}, {out / 'interface.json'}")
-    engine = export_engine_bundle(formats, capacity, out)
     print(f"{out / engine['files'][0]}: capacity {capacity.vertices} vertices, {capacity.entries} entries, "
           f"{capacity.triangles} triangles; {engine['bus']}")
     print(", ".join(str(out / f) for f in engine["files"][1:]))
@@ -260,11 +308,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _quiet_after_interrupt() -> None:
+    """After Ctrl-C, the objects a half-done step leaves are collected: their finalisers' warnings (such as
+    amaranth's UnusedElaboratable for a half-elaborated design) and errors are noise, not for the user."""
+    import warnings
+
+    warnings.simplefilter("ignore")
+    sys.unraisablehook = lambda unraisable: None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    reset_interrupted()
+    handler = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, on_interrupt) if handler else None  # Ctrl-C: one line, status 130
     try:
-        return args.func(args)
+        status = args.func(args)
+        check_not_interrupted()  # a Ctrl-C a finaliser swallowed still ends the command as interrupted
+        return status
     except USER_ERRORS + (UserError,) as exc:
         print(f"springflat: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -273,8 +335,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"springflat: error: cannot access{name}: {describe_os_error(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
+        if argv is None:  # the program itself, which ends now (not a caller running it in-process)
+            _quiet_after_interrupt()
         print("springflat: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if handler:
+            signal.signal(signal.SIGINT, previous)
 
 
 if __name__ == "__main__":

@@ -187,3 +187,15 @@ def strict_json(summary: dict) -> str:
     if non_finite:
         cleaned["non_finite"] = non_finite
     return json.dumps(cleaned, allow_nan=False)
+
+
+def input_files(args: argparse.Namespace) -> list[tuple[str, Path | None]]:
+    """The files a run reads, as ``(what, path)`` for :func:`sim.outputs.check_distinct`: the mesh, and the
+    ``--init`` and ``--formats`` arguments when they name files (not a built-in, a method or a preset)."""
+    from golden_model.fixed.formats_set import FormatSet
+
+    init = getattr(args, "init", None)
+    formats = getattr(args, "formats", None)
+    return [("the mesh", Path(args.mesh)),
+            ("--init", Path(init) if init and init not in LAYOUT_METHODS else None),
+            ("--formats", Path(formats) if formats and not FormatSet.names_preset(formats) else None)]
