@@ -30,7 +30,7 @@ from .rsqrt import RsqrtConfig
 from .steplut import lut_slope_bits
 
 __all__ = ["FormatSet", "FORMAT_FIELDS", "CONTROLLER_FIELDS", "PRESET_DIR", "Product", "UNITS", "KNOB_DOMAINS",
-           "WIDENED_FIELDS", "accumulator_guard_bits"]
+           "WIDENED_FIELDS", "accumulator_guard_bits", "RESOLUTION_SCALES", "ACCURACY_FACTOR"]
 
 PRESET_DIR = Path(__file__).resolve().parent.parent / "data" / "formats"
 """Directory holding the preset JSON files (``<name>.json``)."""
@@ -88,6 +88,23 @@ KNOB_DOMAINS: dict[str, tuple[int, int]] = {
 #: Formats the datapath widens by one integer bit (the adder input of the position and
 #: velocity updates, ``pipeline._wide``): they take at most ``MAX_WIDTH - 1`` bits.
 WIDENED_FIELDS = ("position", "velocity")
+
+
+#: The scale (in the host's units: mean edge lengths, unit time) at which each signal's rounding shows in
+#: a run's result, for :meth:`FormatSet.resolution`: lengths, ``r = 1/|Δ|``, the strain ``1 − d·r``
+#: and the error measures near 1; forces about ``C/2`` (a quarter); the weights about 1/2; the
+#: accelerations a tenth; velocities, ``Δt`` and the exp table's entries near the smallest step 0.01;
+#: ``Δt²/2`` near 1e-3. Calibrated, with :data:`ACCURACY_FACTOR`, on random format sets
+#: (``tests/test_formats_property.py``; ``docs/fixed-point.md`` has the runs).
+RESOLUTION_SCALES: dict[str, float] = {
+    "rest_length": 1.0, "delta": 1.0, "length_sq": 1.0, "rsqrt": 1.0, "spring": 1.0, "error": 1.0,
+    "force": 0.25, "force_acc": 0.25, "inv_mass": 0.5, "accel": 0.1,
+    "velocity": 0.01, "dt": 0.01, "lut_entry": 0.01, "half_dt_sq": 1e-3,
+}
+
+#: A format set's documented accuracy: a run without saturation events ends with its E_S and E_C
+#: within ``ACCURACY_FACTOR · resolution()`` of the float engine's (:meth:`FormatSet.accuracy_bound`).
+ACCURACY_FACTOR = 4.0
 
 
 def accumulator_guard_bits(max_degree: int) -> int:
@@ -369,6 +386,18 @@ class FormatSet:
         momentum = (self.accel.frac_bits, self.accel.width)
         return {name: (True, max(wv + max(fv, fa) - fv, wa + max(fv, fa) - fa) + 1)
                 for name, (fa, wa) in (("position step", paper), ("momentum step", momentum))}
+
+    def resolution(self) -> float:
+        """``ρ = Σ 2^-F / m`` over :data:`RESOLUTION_SCALES` (each signal's lsb at the scale ``m`` where it
+        shows), plus the rsqrt method's relative error (:meth:`RsqrtConfig.method_error`: few seed bits
+        and Newton steps make ``r`` coarser than its lsb)."""
+        return (sum(math.ldexp(1.0, -getattr(self, f).frac_bits) / m for f, m in RESOLUTION_SCALES.items())
+                + self.rsqrt_config().method_error())
+
+    def accuracy_bound(self) -> float:
+        """The documented bound on ``|ΔE_S|``, ``|ΔE_C|`` against the float engine of a run without saturation
+        events: ``ACCURACY_FACTOR · resolution()`` (``docs/fixed-point.md``, "Every legal format set")."""
+        return ACCURACY_FACTOR * self.resolution()
 
     def rsqrt_config(self) -> RsqrtConfig:
         """The rsqrt unit configuration: ``length_sq`` -> ``rsqrt``."""
