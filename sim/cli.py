@@ -33,6 +33,7 @@ from golden_model.reference import FlattenParams, FlattenResult, flatten
 from .outputs import (LAYOUT_SUFFIXES, OutputWriteError, all_or_nothing, atomic_directory, check_distinct,
                       check_not_interrupted, check_output_path, on_interrupt, reset_interrupted, write_history,
                       write_layout, write_plot)
+from .entry import EXIT_INTERRUPTED
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
                           input_files, load_format_set, params_from_args, resolve_mesh, strict_json)
 
@@ -324,9 +325,15 @@ def main(argv: list[str] | None = None) -> int:
     handler = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGINT, on_interrupt) if handler else None  # Ctrl-C: one line, status 130
     try:
-        status = args.func(args)
-        check_not_interrupted()  # a Ctrl-C a finaliser swallowed still ends the command as interrupted
-        return status
+        try:
+            status = args.func(args)
+            check_not_interrupted()  # a Ctrl-C a finaliser swallowed still ends the command as interrupted
+            return status
+        except Exception:
+            # A Ctrl-C can come back as another exception: an import it cut short is an ImportError (numpy's,
+            # libigl's), which a command may turn into a one-line error of its own. It is still Ctrl-C.
+            check_not_interrupted()
+            raise
     except USER_ERRORS + (UserError,) as exc:
         print(f"springflat: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -338,7 +345,7 @@ def main(argv: list[str] | None = None) -> int:
         if argv is None:  # the program itself, which ends now (not a caller running it in-process)
             _quiet_after_interrupt()
         print("springflat: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     finally:
         if handler:
             signal.signal(signal.SIGINT, previous)

@@ -80,7 +80,7 @@ _UNSIGNED = (
 #: ``error``'s fraction bits.
 KNOB_DOMAINS: dict[str, tuple[int, int]] = {
     "rsqrt_seed_bits": (2, 16),  # a seed ROM of 3·2^(b−2) entries: 49,152 at 16
-    "rsqrt_newton_steps": (0, 4),  # 4 steps take a 2-bit seed past 32 correct bits
+    "rsqrt_newton_steps": (0, 4),  # one multiplier stage each; 4 take even a 2-bit seed to ~23 bits
     "lut_index_bits": (1, 12),  # an exp table of 2^b + 1 entries: 4,097 at 12
     "max_degree": (1, 1024),  # ceil(log2) guard bits in every accumulator: 10 at 1024
 }
