@@ -21,8 +21,11 @@
   then centred.  ARAP keeps the 3D scale.
 * a file: ``V`` rows ``x y`` (whitespace or comma separated; ``#`` comments),
   or an OBJ whose vertex *i* gives ``(x, y)`` of node *i* (read as the mesh
-  reader reads OBJ: tabs, CRLF, continuations).  Coordinates must be finite
-  and within ``|x| <= COORDINATE_LIMIT`` (1e50, as for meshes).
+  reader reads OBJ: tabs, CRLF, continuations; faces other than the mesh's,
+  or a z that is not 0, get a note: only x, y are used).  Coordinates must be
+  finite and within ``|x| <= COORDINATE_LIMIT`` (1e50, as for meshes).  The
+  file must be a regular file (a FIFO or a device is refused, never opened);
+  an empty path is refused.
 
 Every computed layout is oriented so that most faces are counter-clockwise
 (mirrored otherwise), which makes pictures comparable; the flattening itself

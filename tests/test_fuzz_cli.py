@@ -962,6 +962,7 @@ ROUND_TWO_OUTPUTS: dict[str, Case] = {
         ["--history", "h.png", "--plot", "d/../h.png"], 2, r"--plot 'd/../h.png' is the same file as --history 'h.png'",
         files={"d/k": ""}),
     "a 255-byte name": Case(["--history", _long_name("h", 255, ".csv")]),
+    "a 255-byte --out name": Case(["--out", _long_name("o", 255, ".obj"), "--history", "h.csv"]),
     "a 255-byte name of two-byte characters": Case(["--history", _long_name("\u00e9", 255, ".csv")]),
     "a 256-byte name": Case(["--history", _long_name("h", 256, ".csv")], 2, r"file name too long"),
 }
@@ -1032,8 +1033,8 @@ def test_as_root_a_device_survives_history_out_and_plot(tmp_path, monkeypatch, c
     import stat
 
     devices = {"dev.csv": "--history", "dev.obj": "--out", "dev.png": "--plot"}
-    for name in devices:
-        os.mknod(tmp_path / name, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+    for name, minor in zip(devices, (7, 3, 3)):  # what /dev/full (1, 7) and /dev/null (1, 3) are
+        os.mknod(tmp_path / name, 0o666 | stat.S_IFCHR, os.makedev(1, minor))
     os.symlink("dev.csv", tmp_path / "link.csv")
     before = {name: os.lstat(tmp_path / name) for name in devices}
     for name, option in [*devices.items(), ("link.csv", "--history")]:
@@ -1097,6 +1098,23 @@ def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
     assert "it/s" not in capsys.readouterr().err
 
 
+def test_study_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
+    import sim.study
+
+    seen = []
+    real = sim.study._progress_bars
+
+    def spy(enabled):
+        seen.append(enabled)
+        return real(enabled)
+
+    monkeypatch.setattr(sim.study, "_progress_bars", spy)
+    monkeypatch.chdir(tmp_path)
+    assert main(["study", "dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--max-iter", "5",
+                 "--out", "s"]) == 0
+    assert seen == [False] and "run/s" not in capsys.readouterr().err
+
+
 def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, timeout: float = 600):
     """Run ``springflat argv`` in a session of its own; once ``ready()`` holds (or at once), wait ``after`` s
     and send SIGINT to the whole group (as Ctrl-C in a terminal does). Returns the finished process."""
@@ -1152,7 +1170,7 @@ def test_real_exit_ctrl_c_during_flatten_leaves_no_output(tmp_path, after):
 @pytest.mark.slow
 @pytest.mark.parametrize("command, name", [
     (["verilog", "--out", "v"], "v"),
-    (["study", "dome", "--sweep", "frac", "--bits", "8:24:8", "--no-optimise", "--workers", "2", "--out", "s"], "s"),
+    (["study", "dome", "saddle", "--workers", "2", "--out", "s"], "s"),  # minutes: every sweep and the optimiser
     (["synth", "--target", "ecp5", "--components", "step_generator", "--out", "y"], "y"),
 ])
 @pytest.mark.parametrize("after", [0.5, 3.0])

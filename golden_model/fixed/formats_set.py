@@ -390,9 +390,11 @@ class FormatSet:
     def resolution(self) -> float:
         """``ρ = Σ 2^-F / m`` over :data:`RESOLUTION_SCALES` (each signal's lsb at the scale ``m`` where it
         shows), plus the rsqrt method's relative error (:meth:`RsqrtConfig.method_error`: few seed bits
-        and Newton steps make ``r`` coarser than its lsb)."""
-        return (sum(math.ldexp(1.0, -getattr(self, f).frac_bits) / m for f, m in RESOLUTION_SCALES.items())
-                + self.rsqrt_config().method_error())
+        and Newton steps make ``r`` coarser than its lsb); twice that with ``floor`` rounding, whose
+        error is up to a whole lsb and always of one sign (it drifts), against half an lsb either way."""
+        rho = (sum(math.ldexp(1.0, -getattr(self, f).frac_bits) / m for f, m in RESOLUTION_SCALES.items())
+               + self.rsqrt_config().method_error())
+        return 2.0 * rho if self.rounding is Rounding.FLOOR else rho
 
     def accuracy_bound(self) -> float:
         """The documented bound on ``|ΔE_S|``, ``|ΔE_C|`` against the float engine of a run without saturation
