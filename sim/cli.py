@@ -7,7 +7,9 @@ Subcommands:
 
 Bad input never produces a traceback: every user error, an unreadable or
 unwritable file included, is one line on stderr (``springflat: error: ...``)
-and exit status 2, and leaves no file behind.  A run that diverges exits with
+and exit status 2, and leaves no file behind; Ctrl-C is the one line
+``springflat: interrupted`` and exit status 130, with no output left behind
+(the policy for output paths: :mod:`sim.outputs`).  A run that diverges exits with
 status 3 after writing what was asked for.  ``--json`` prints standard JSON:
 a number that is not finite is ``null`` and its key is listed in
 ``non_finite`` (the status, ``diverged``, says why).
@@ -30,10 +32,10 @@ from golden_model.fixed.engine import flatten_fixed
 from golden_model.fixed.formats_set import FormatSet
 from golden_model.reference import FlattenParams, FlattenResult, flatten
 
+from .entry import EXIT_INTERRUPTED
 from .outputs import (LAYOUT_SUFFIXES, OutputWriteError, all_or_nothing, atomic_directory, check_distinct,
                       check_not_interrupted, check_output_path, on_interrupt, reset_interrupted, write_history,
                       write_layout, write_plot)
-from .entry import EXIT_INTERRUPTED
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
                           input_files, load_format_set, params_from_args, resolve_mesh, strict_json)
 

@@ -1,9 +1,17 @@
-"""Files a flattening run writes: layout (OBJ/SVG), history CSV, plot PNG.
+"""Files a flattening run writes: layout (OBJ/SVG), history CSV, plot PNG; and how every output is written.
 
 Every writer goes through :func:`atomic_write`, so an interrupted or failed
 run never leaves a partial file behind; inside :func:`all_or_nothing` several
-outputs appear together or not at all.  An OS error while writing is an
-:class:`OutputWriteError`, one line: ``cannot write '<path>': <reason>``.
+outputs appear together or not at all; :func:`atomic_directory` does the same
+for a directory.  An OS error while writing is an :class:`OutputWriteError`,
+one line: ``cannot write '<path>': <reason>``.
+
+The policy: outputs are regular files.  A symbolic link is written through (its
+final target is replaced, the link stays); a path that is not a regular file (a
+device, a FIFO, a socket, a directory), or a link to one, is refused and never
+replaced; no output may be the same file as an input or another output
+(:func:`check_distinct`, by device and inode).  SIGINT (:func:`on_interrupt`)
+never lets anything be put in place afterwards.
 """
 
 from __future__ import annotations
