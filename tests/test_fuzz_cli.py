@@ -1235,3 +1235,19 @@ def test_a_fixed_point_run_at_its_energy_floor_says_so(engine, iterations, noted
                      r"above --tol-energy 1e-07" if noted else None)
     outcome = run_case(case, tmp_path, monkeypatch, capsys)
     assert ("relative energy change never fell" in outcome.err) == noted
+
+
+def test_a_255_byte_output_directory_name(tmp_path, monkeypatch, capsys):
+    """The temporary sibling an output directory is built in fits wherever the directory's name fits."""
+    import sim.paper
+
+    def tiny_report(out, init="pca", progress=True):
+        (out / "report.md").write_text("report\n")
+        return out / "report.md"
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    monkeypatch.chdir(tmp_path)
+    name = _long_name("r", 255, "")
+    assert main(["paper", "--out", name]) == 0
+    assert os.listdir(tmp_path) == [name] and os.listdir(tmp_path / name) == ["report.md"]
+    capsys.readouterr()
