@@ -517,6 +517,9 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
+    from golden_model.fixed.formats_set import FormatSet
+
+    from .outputs import atomic_directory
     from .run_options import load_format_set, strict_json
 
     from .export import engine_capacity
@@ -532,8 +535,22 @@ def cmd_synth(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"springflat synth [{time.monotonic() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
-    report = run_synthesis(fs, args.target, args.freq, out, components=args.components, progress=progress,
-                           router=args.router, seed=args.seed, command=_command_line(args, out), capacity=capacity)
+    inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
+    failure = None
+    with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
+        def shown(text: str) -> str:  # the bundle is built beside --out: name --out
+            return text.replace(str(build), str(out))
+
+        try:
+            report = run_synthesis(fs, args.target, args.freq, build, components=args.components,
+                                   progress=lambda msg: progress(shown(msg)), router=args.router, seed=args.seed,
+                                   command=_command_line(args, out), capacity=capacity)
+        except SynthError as exc:  # a tool failed: its logs are kept in --out, when there are any
+            failure = SynthError(shown(str(exc)))
+            if not any(build.iterdir()):
+                raise failure from None
+    if failure is not None:
+        raise failure
     if args.json:
         print(strict_json(report))
     else:

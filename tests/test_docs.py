@@ -302,3 +302,24 @@ def test_controller_unit_numbers_in_the_units_doc(unelaborated):
             f"{en.square_bits} + {en.energy_bits} + 5 = {en.latency}") in doc
     assert {BetaDivider(D).latency, BetaDivider(N).latency} == {
         int(re.search(r"output transfer\): (\d+) in both presets", doc)[1])}
+
+
+def test_fixed_point_doc_states_the_domains_and_the_resolution_scales():
+    from golden_model.fixed.formats_set import ACCURACY_FACTOR, KNOB_DOMAINS, RESOLUTION_SCALES
+
+    text = (DOCS / "fixed-point.md").read_text()
+    domains = {m.group(3): (int(m.group(1)), int(m.group(2)))
+               for m in re.finditer(r"^\| (\d+)\.\.(\d+) \| `(\w+)` \|", text, re.M)}
+    assert domains == KNOB_DOMAINS
+    scales = {}
+    for m in re.finditer(r"^\| ([\d.]+) \| ((?:`\w+`(?:, )?)+) \|$", text, re.M):
+        scales.update({name: float(m.group(1)) for name in re.findall(r"`(\w+)`", m.group(2))})
+    assert scales == RESOLUTION_SCALES
+    assert f"≤ {ACCURACY_FACTOR:g}·ρ(fs)" in text
+    def short(x: float) -> str:  # 4.8e-3
+        mantissa, exponent = f"{x:.1e}".split("e")
+        return f"{mantissa}e{int(exponent)}"
+
+    for name in ("default", "narrow"):  # the stated resolutions and bounds
+        fs = FormatSet.preset(name)
+        assert f"`{name}` ρ = {short(fs.resolution())} (bound {short(fs.accuracy_bound())})" in flat(text), name

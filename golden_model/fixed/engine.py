@@ -37,10 +37,11 @@ from ..mesh import Mesh, folded_by_area, layout_orientation
 from ..modes import Step
 from ..reference import FlattenParams, FlattenResult, History, Measurement, ParameterError, node_weights
 from .controller import Controller, Setup
-from .format import MAX_PRODUCT_WIDTH, Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
+from .format import (MAX_PRODUCT_WIDTH, MAX_WIDTH, Format, Overflow, Rounding, SaturationCounter, quantize, requantize,
+                     to_float)
 from .formats_set import FormatSet
-from .pipeline import BarrierEntries, NeighbourStream, NodeConstants
-from .steplut import half_dt_sq
+from .pipeline import BarrierEntries, NeighbourStream, NodeConstants, exact_sum
+from .steplut import DT_MAX, DT_MIN, dt_constant, half_dt_sq, lut_value_float
 
 __all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats",
            "momentum_beta_raw", "power_sum", "MomentumState", "area_sum", "area_error", "length_sum", "shape_error",
@@ -244,9 +245,15 @@ def energy_floor_raw(problem: "FixedProblem") -> int:
 
 def power_sum(fs: FormatSet, power: np.ndarray, counter: SaturationCounter | None = None) -> int:
     """``S = Σ F·V`` [power_acc]: the controller's exact sum, saturated once."""
-    total = int(np.sum(power, dtype=np.int64))
-    return int(requantize(np.int64(total), fs.power.frac_bits, fs.power_acc, fs.rounding, SAT, counter,
-                          "power_acc"))
+    return int(requantize(_int64_clamped(exact_sum(power)), fs.power.frac_bits, fs.power_acc, fs.rounding, SAT,
+                          counter, "power_acc"))
+
+
+def _int64_clamped(total: int) -> np.int64:
+    """An exact sum as int64 for :func:`requantize`: one past the widest format's range at most (a sum
+    beyond it saturates the same, counted once); every format is at most ``MAX_WIDTH`` bits."""
+    limit = 1 << MAX_WIDTH
+    return np.int64(max(-limit, min(limit, total)))
 
 
 def _quantize_checked(x: np.ndarray | float, fmt: Format, what: str, fs: FormatSet, hint: str) -> np.ndarray:
@@ -256,6 +263,16 @@ def _quantize_checked(x: np.ndarray | float, fmt: Format, what: str, fs: FormatS
         raise FixedPointError(f"{what} {worst:.6g} does not fit format set '{fs.name}' "
                               f"({fmt}: max {fmt.max:.6g}); {hint}")
     return raw
+
+
+def _refuse_zeros(raw: np.ndarray, value: np.ndarray, what: str, field: str, fs: FormatSet) -> None:
+    """Refuse, naming the field, when a positive quantity the host rounded (``value``, scaled units) became 0."""
+    zero = (np.asarray(raw) == 0) & (np.asarray(value) > 0)
+    if zero.any():
+        fmt = getattr(fs, field)
+        smallest = float(np.min(np.asarray(value)[zero]))
+        raise FixedPointError(f"{what} of {smallest:.3g} (scaled units) rounds to 0 in {field} {fmt} of format set "
+                              f"'{fs.name}' (lsb {fmt.lsb:.3g}); choose a format set with more fraction bits for it")
 
 
 def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs: FormatSet) -> FixedProblem:
@@ -294,6 +311,7 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               f"{fs.rsqrt} of '{fs.name}' needs edges above {1.0 / fs.rsqrt.max:.4g}: "
                               "the mesh's edge lengths vary too much for these formats")
     rest_raw = quantize(scaled_rest, fs.rest_length, HOST_ROUNDING, SAT)
+    _refuse_zeros(rest_raw, scaled_rest, "an edge's rest length", "rest_length", fs)
     model_density = mesh.auto_density() if params.density == "auto" else float(params.density)
     inv_mass_barrier_raw = None
     if params.dynamics == "momentum":
@@ -324,6 +342,7 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               f"takes fewer than 2^{MAX_PRODUCT_WIDTH - fs.face_area.width} ({fs.face_area})")
     face_areas = _quantize_checked(mesh.face_areas * scale * scale, fs.face_area, "a triangle's area", fs,
                                    "the mesh's triangles vary too much in size for these formats")
+    _refuse_zeros(face_areas, mesh.face_areas * scale * scale, "a triangle's area", "face_area", fs)
     mantissa_bits = fs.reciprocal.width
     area_total = int(face_areas.sum())  # [face_area], exact
     length_total = int(stream.rest.sum()) << (fs.error_acc.frac_bits - fs.rest_length.frac_bits)  # [error_acc]
@@ -364,6 +383,8 @@ def _barrier_entries(mesh: Mesh, params: FlattenParams, fs: FormatSet, scale: fl
     hint = "the mesh's triangles vary too much in size for these formats (or lower --barrier-gain)"
     threshold_raw = _quantize_checked(threshold, fs.area, "a barrier threshold", fs, hint)
     gain_raw = _quantize_checked(gain, fs.barrier_gain, "the barrier gain mu C/(4 X*)", fs, hint)
+    _refuse_zeros(threshold_raw[has], threshold[has], "a barrier threshold kappa X*", "area", fs)
+    _refuse_zeros(gain_raw[has], gain[has], "the barrier gain mu C/(4 X*)", "barrier_gain", fs)
     return BarrierEntries(np.where(has, second, rings.neighbour), threshold_raw, gain_raw)
 
 
@@ -410,8 +431,8 @@ def area_error(fs: FormatSet, reciprocal: Reciprocal, faces: np.ndarray, face_ar
 def length_sum(fs: FormatSet, error_sums: np.ndarray, counter: SaturationCounter | None = None) -> int:
     """``Σ|L − d|`` raw [error_acc] over the nodes' partial sums ``error_sums`` (V,) [error_acc],
     saturated once (counted as ``length_sum``)."""
-    return int(requantize(error_sums.sum(), fs.error_acc.frac_bits, fs.error_acc, fs.rounding, SAT, counter,
-                          "length_sum"))
+    return int(requantize(_int64_clamped(exact_sum(error_sums)), fs.error_acc.frac_bits, fs.error_acc, fs.rounding,
+                          SAT, counter, "length_sum"))
 
 
 def shape_error(fs: FormatSet, reciprocal: Reciprocal, error_sums: np.ndarray,
@@ -487,9 +508,23 @@ def controller_setup(problem: FixedProblem) -> Setup:
                  winding=int(problem.winding))
 
 
+def _fits(what: str, value: float, field: str, fs: FormatSet, hint: str = "") -> int:
+    """``value`` > 0 rounded into ``fs.<field>`` by the host; refused, naming the field, when it rounds to 0
+    or does not fit (would saturate)."""
+    fmt = getattr(fs, field)
+    raw = int(quantize(value, fmt, HOST_ROUNDING, SAT))
+    if value > fmt.max or raw == 0:
+        problem = f"rounds to 0 (lsb {fmt.lsb:.3g})" if raw == 0 else f"does not fit (max {fmt.max:.6g})"
+        raise FixedPointError(f"{what} {value:.6g} {problem} in {field} {fmt} of format set '{fs.name}'"
+                              + (f"; {hint}" if hint else ""))
+    return raw
+
+
 def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
     """Refuse parameters the formats cannot represent faithfully, and modes the fixed-point model does not
-    have (before any mesh work: :func:`prepare` checks the mesh against the formats)."""
+    have, before any mesh work (:func:`prepare` checks the mesh against the formats): every constant the
+    host rounds into a format (``Δt`` or the step generator's range, ``β``, ``C/2``, ``1 − γ``, the
+    tolerances) must neither round to 0 nor saturate; each refusal is one line naming the field."""
     if params.update != "jacobi":
         raise FixedPointError("the fixed-point engine computes the jacobi order (as the hardware does); "
                               "use --update jacobi")
@@ -504,11 +539,32 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
     if 0 < params.tol_energy < math.ldexp(1, -ENERGY_TOL_FRAC_BITS - 1):
         raise FixedPointError(f"tol_energy {params.tol_energy:g} is below the controller's resolution "
                               f"2^-{ENERGY_TOL_FRAC_BITS} ({math.ldexp(1, -ENERGY_TOL_FRAC_BITS):.3g}); use 0 or a larger value")
-    if params.step == "fixed":
-        raw = float(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))
-        if params.dt > fs.dt.max or raw == 0:
+    finer = "choose a format set with more fraction bits for it"
+    if params.dynamics == "momentum":  # β_k = k/(k+3) goes into the Δt port: its first non-zero value
+        _fits("the momentum factor beta_1", 0.25, "dt", fs, finer)
+    elif params.step == "fixed":
+        if params.dt > fs.dt.max or float(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) == 0:
             raise FixedPointError(f"dt {params.dt} does not fit format set '{fs.name}' ({fs.dt}: "
                                   f"{fs.dt.lsb:.3g} .. {fs.dt.max:.6g})")
+        if int(half_dt_sq(np.int64(_fits("dt", params.dt, "dt", fs)), fs)) == 0:
+            raise FixedPointError(f"dt^2/2 for dt {params.dt:g} rounds to 0 in half_dt_sq {fs.half_dt_sq} of format "
+                                  f"set '{fs.name}' (lsb {fs.half_dt_sq.lsb:.3g}); {finer}")
+    else:  # the step generator: Δt from DT_MIN (E = 0) to DT_MAX (E = 1)
+        _fits("the step generator's smallest dt", DT_MIN, "dt", fs, finer)
+        _fits("the step generator's largest dt", DT_MAX, "dt", fs, "choose a dt format with a larger range")
+        _fits("the exp table's smallest entry", float(lut_value_float(0.0)), "lut_entry", fs, finer)
+        if int(half_dt_sq(np.int64(dt_constant(fs.dt)), fs)) == 0:
+            raise FixedPointError(f"dt^2/2 for the step generator's smallest dt {DT_MIN:g} rounds to 0 in half_dt_sq "
+                                  f"{fs.half_dt_sq} of format set '{fs.name}' (lsb {fs.half_dt_sq.lsb:.3g}); {finer}")
+    if params.spring > 0:
+        _fits("C/2", 0.5 * params.spring, "spring", fs, "use another --spring, or a spring format that holds it")
+    if params.damping < 1:
+        _fits("the velocity factor 1 - damping", 1.0 - params.damping, "damping", fs, finer)
+    for option, tolerance in (("--tol-area", params.tol_area), ("--tol-shape", params.tol_shape)):
+        if 0 < tolerance < 1 and math.floor(math.ldexp(tolerance, fs.error.frac_bits)) == 0:
+            raise FixedPointError(f"{option} {tolerance:g} rounds to 0 in error {fs.error} of format set '{fs.name}' "
+                                  f"(lsb {fs.error.lsb:.3g}): the rule could never hold; use a larger tolerance, "
+                                  "or an error format with more fraction bits")
 
 
 def flatten_fixed(
