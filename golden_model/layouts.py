@@ -307,7 +307,7 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
     vertices' x, y are used.
     """
     if str(path) == "":
-        raise LayoutError(f"the layout '' is empty: name a method ({', '.join(LAYOUT_METHODS)}) or a file")
+        raise LayoutError(f"the layout '' is empty: name a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}) or a file")
     path = Path(path)
     data = read_file_bytes(path, "layout", LayoutError)
     if path.suffix.lower() == ".obj":

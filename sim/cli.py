@@ -75,7 +75,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(_what_was_used(params, args.init, result), file=sys.stderr)
     formats = load_format_set(args.formats or "default") if args.engine in ("fixed", "rtl") else None
     scale = scale_note(PatternDrawing.of(mesh, result.positions, args.units)) if any(
-        not str(path).lower().endswith((".flat.obj", ".flat.svg")) for path in args.out or ()) else None
+        str(path).lower().endswith((".pdf", ".svg", ".dxf")) and not str(path).lower().endswith(".flat.svg")
+        for path in args.out or ()) else None  # a print or cut at the wrong scale; vt and layouts have none
     for note in (scale, _energy_rule_note(params, result), _error_resolution_note(formats)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
@@ -133,7 +134,8 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
 
     What the formats or the engine cannot run is refused before any layout work; a guarded run starts
     fold-free where that can be had (:func:`~sim.run_options.start_positions`)."""
-    args.init = args.init or default_init(args.mesh)
+    if args.init is None:
+        args.init = default_init(args.mesh)
     if args.engine in ("fixed", "rtl"):
         check_fixed_params(params, load_format_set(args.formats or "default"))
         if args.engine == "rtl":

@@ -59,12 +59,13 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
 
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
-    check_engine_params(params)
     if args.init is None:
         args.init = default_init(args.mesh)
     if args.waves is not None:  # before any build or run: a path that cannot take the waveform is one line
         check_output_path(args.waves, "--waves")
         check_distinct([("--waves", args.waves)], input_files(args))
+    load_format_set(args.formats)  # a formats file that cannot work is refused before the run mode
+    check_engine_params(params)
     if args.engine_top:
         return cmd_rtl_check_engine(args, mesh, params)
     if args.capacity is not None or args.wait_states:

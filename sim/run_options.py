@@ -173,7 +173,7 @@ def start_positions(mesh: Mesh, init: str, params: FlattenParams, progress: bool
         positions = initial_layout(mesh, init, notes)
         for note in notes:
             print(f"springflat: note: {note}", file=sys.stderr)
-        return positions, init
+        return positions, "arap" if init == AUTO_START else init
     say = (lambda text: print(f"springflat: {text} ...", file=sys.stderr)) if progress else None
     start = start_layout(mesh, init, progress=say)
     if not progress:
