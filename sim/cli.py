@@ -64,6 +64,10 @@ def cmd_flatten(args: argparse.Namespace) -> int:
             return flatten_fixed(*run_args, fs=formats, **kw)
     elif args.engine == "rtl":
         engine = _rtl_engine(load_format_set(args.formats or "default"))
+    elif args.engine == "board":  # the engine on a board, over its UART (sim/board_run.py)
+        from .board_run import board_engine
+
+        engine = board_engine(load_format_set(args.formats or "default"), args.port, args.baud)
     elif args.formats is not None:
         raise UserError("--formats applies to --engine fixed and --engine rtl")
     else:
@@ -221,9 +225,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
     add_run_options(p)
-    p.add_argument("--engine", choices=("float", "fixed", "rtl"), default="float",
-                   help="float reference (default), the bit-exact fixed-point golden model, or rtl: the whole "
-                        "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)")
+    p.add_argument("--engine", choices=("float", "fixed", "rtl", "board"), default="float",
+                   help="float reference (default), the bit-exact fixed-point golden model, rtl: the whole "
+                        "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed), or "
+                        "board: the engine on a ULX3S over its USB-UART (--port; docs/board.md)")
+    from .board_run import add_board_options
+
+    add_board_options(p)
     p.add_argument("--formats", default=None, metavar="PRESET|FILE",
                    help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
     p.add_argument("--out", type=Path, help="flattened layout: .obj (z = 0, same faces) or .svg")

@@ -30,7 +30,8 @@ from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
-           "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "summary_line",
+           "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "engine_flatten_result",
+           "summary_line",
            "simulation_harness", "top_ports", "build_flags"]
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
@@ -202,28 +203,36 @@ def flatten_on_rtl(problem: FixedProblem, capacity: EngineCapacity, simulator: s
     read-back back). The engine keeps no per-iteration record, so the history holds two rows: the
     initial layout and the engine's final one, both measured by the golden model. Raises
     :class:`EngineRunError` when the run does not match the golden model bit for bit."""
+    run = run_engine(problem, capacity, simulator, **kwargs)
+    if not run.passed or run.positions is None:
+        first = (run.result.get("first_mismatches") or ["the simulation ended without a result"])[0]
+        raise EngineRunError(f"the {simulator} run of the engine does not match the golden model: {first}")
+    r = run.result
+    return engine_flatten_result(problem, run.positions, run.velocities, r["status"], r["iterations"], {
+        "saturations": r["saturations"], "simulator": simulator, "cycles": r["cycles"],
+        "cycles_per_iteration": r["cycles_per_iteration"], "cycles_per_second": r["cycles_per_second"]})
+
+
+def engine_flatten_result(problem: FixedProblem, positions: np.ndarray, velocities: np.ndarray, status: str,
+                          iterations: int, extra: dict):
+    """An engine's read-back (raw positions and velocities, as ``EngineDriver.read_back`` gives them) as the
+    :class:`~golden_model.reference.FlattenResult` that ``flatten`` writes, in mesh units. The engine keeps no
+    per-iteration record, so the history holds two rows: the initial layout and the engine's final one, both
+    measured by the golden model. ``extra`` goes into ``result.extra`` (``saturations`` among it)."""
     import math
 
     from golden_model.fixed import SaturationCounter
     from golden_model.fixed.engine import FixedEngine
     from golden_model.reference import FlattenResult, History
 
-    run = run_engine(problem, capacity, simulator, **kwargs)
-    if not run.passed or run.positions is None:
-        first = (run.result.get("first_mismatches") or ["the simulation ended without a result"])[0]
-        raise EngineRunError(f"the {simulator} run of the engine does not match the golden model: {first}")
     engine = FixedEngine(problem, SaturationCounter())
     history = History()
     history.append(math.nan, engine.measure())
-    engine.raw_positions, engine.raw_velocities = run.positions.copy(), run.velocities.copy()
+    engine.raw_positions, engine.raw_velocities = positions.copy(), velocities.copy()
     history.append(math.nan, engine.measure())
-    r = run.result
     result = FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
-                           history, r["status"], r["iterations"], problem.params, problem.density, engine="fixed")
-    result.extra.update({"formats": problem.fs.name, "scale": problem.scale, "saturations": r["saturations"],
-                         "simulator": simulator, "cycles": r["cycles"],
-                         "cycles_per_iteration": r["cycles_per_iteration"],
-                         "cycles_per_second": r["cycles_per_second"]})
+                           history, status, iterations, problem.params, problem.density, engine="fixed")
+    result.extra.update({"formats": problem.fs.name, "scale": problem.scale, **extra})
     return result
 
 
