@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from amaranth.hdl import ClockDomain, Const, Elaboratable, Instance, Module, Signal
-from amaranth.lib import wiring
+from amaranth.lib import io, wiring
 from amaranth.lib.cdc import ResetSynchronizer
 from amaranth.lib.wiring import In, Out
 
@@ -287,12 +287,14 @@ class Ulx3sTop(Elaboratable):
         m.submodules.pll = pll = self.pll
         m.submodules.core = core = self.core
         m.submodules.reset_sync = ResetSynchronizer(~pll.locked, domain="sync")
-        m.d.comb += [pll.clk_in.eq(platform.request("clk25", 0).i), sync.clk.eq(pll.clk_out)]
+        m.submodules.clk25 = clk25 = io.Buffer("i", platform.request("clk25", 0, dir="-"))
+        m.d.comb += [pll.clk_in.eq(clk25.i), sync.clk.eq(pll.clk_out)]
         platform.add_clock_constraint(sync.clk, self.clock_hz)
-        uart = platform.request("uart", 0)
-        m.d.comb += [core.rx.eq(uart.rx.i), uart.tx.o.eq(core.tx)]
-        leds = [platform.request("led", i) for i in range(len(LEDS))]
-        for i in range(len(LEDS) - 1):
-            m.d.comb += leds[i].o.eq(core.leds[i])
-        m.d.comb += leds[-1].o.eq(pll.locked)
+        uart = platform.request("uart", 0, dir="-")
+        m.submodules.uart_rx = uart_rx = io.Buffer("i", uart.rx)
+        m.submodules.uart_tx = uart_tx = io.Buffer("o", uart.tx)
+        m.d.comb += [core.rx.eq(uart_rx.i), uart_tx.o.eq(core.tx)]
+        for i in range(len(LEDS)):
+            m.submodules[f"led_{i}"] = led = io.Buffer("o", platform.request("led", i, dir="-"))
+            m.d.comb += led.o.eq(core.leds[i] if i < len(LEDS) - 1 else pll.locked)
         return m

@@ -32,7 +32,7 @@ from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
            "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "engine_flatten_result",
            "summary_line",
-           "simulation_harness", "top_ports", "build_flags"]
+           "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo"]
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
 #: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and
@@ -54,9 +54,30 @@ VERILATOR_MAKE_FLAGS = r"OPT_FAST=-O3\ -march=native"
 ICARUS_FLAGS = ("-g2005",)
 
 
-def build_flags(simulator: str) -> tuple[tuple[str, ...], str]:
-    """The simulator's extra build arguments and make variables for the engine."""
-    return (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS) if simulator == "verilator" else (ICARUS_FLAGS, "")
+#: Verilator builds of the engine that ``benchmarks/bench_sim_speed.py`` compares (``build=`` of
+#: :func:`run_image_on_rtl`): (extra Verilator arguments, make variables). ``default`` is what every run
+#: uses; the others each change one thing. ``pgo`` is ``default`` compiled a second time with g++'s
+#: profile of a training run (:func:`prepare_pgo`).
+VERILATOR_BUILDS = {
+    "default": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS),
+    "x-randomised": (VERILATOR_SPEED_FLAGS[:3], VERILATOR_MAKE_FLAGS),  # Verilator's default X handling
+    "cxx-O2": (VERILATOR_SPEED_FLAGS, r"OPT_FAST=-O2"),
+    "verilator-O3": (VERILATOR_SPEED_FLAGS + ("-O3",), VERILATOR_MAKE_FLAGS),
+    "threads-2": (VERILATOR_SPEED_FLAGS + ("--threads", "2"), VERILATOR_MAKE_FLAGS),
+    "pgo-generate": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS + r"\ -fprofile-generate LDLIBS=-lgcov"),
+    "pgo": (VERILATOR_SPEED_FLAGS,
+            VERILATOR_MAKE_FLAGS + r"\ -fprofile-use\ -fprofile-partial-training\ -Wno-missing-profile"),
+}
+
+
+def build_flags(simulator: str, build: str = "default") -> tuple[tuple[str, ...], str]:
+    """The simulator's extra build arguments and make variables for the engine (``build``: a key of
+    :data:`VERILATOR_BUILDS`; Icarus has one)."""
+    if simulator != "verilator":
+        return ICARUS_FLAGS, ""
+    if build not in VERILATOR_BUILDS:
+        raise ValueError(f"unknown Verilator build {build!r} (choose from {', '.join(VERILATOR_BUILDS)})")
+    return VERILATOR_BUILDS[build]
 
 _PORT = re.compile(r"^\s*(input|output)\s+(\[\d+:\d+\]\s+)?([A-Za-z_][A-Za-z0-9_$]*);$", re.MULTILINE)
 
@@ -92,7 +113,7 @@ def simulation_harness(verilog: str) -> str:
 
 
 def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator",
-                   dsp: str | None = None) -> Path:
+                   dsp: str | None = None, build: str = "default") -> Path:
     """Export ``springflat_engine.v`` for ``fs`` and ``capacity`` once; return a directory per
     simulator (and build flags) holding it and :func:`simulation_harness`'s ``springflat_engine_sim.v``.
 
@@ -111,7 +132,10 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
                  / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}")
     exported = directory / f"{ENGINE_MODULE}.v"
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
-    key = hashlib.sha256(repr(build_flags(simulator)).encode()).hexdigest()[:8]
+    flags = build_flags(simulator, build)
+    # (pgo-generate and pgo share a directory: the second compiles with the first's profile)
+    keyed = build_flags(simulator, "pgo") if build == "pgo-generate" else flags
+    key = hashlib.sha256(repr(keyed).encode()).hexdigest()[:8]
     copy = directory / f"{simulator}-source-{key}"
     with build_lock(directory):
         if not exported.exists():
@@ -159,12 +183,12 @@ def _make_flags(extra: str):
 
 def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_states: int = 0, seed: int = 0,
                      checks: dict | None = None, work: Path | None = None, log_file: Path | None = None,
-                     waves: bool = False, dsp: str | None = None) -> EngineRun:
+                     waves: bool = False, dsp: str | None = None, build: str = "default") -> EngineRun:
     """Run the engine bench on ``image``. ``checks`` adds the bench's extra scenarios
     (``iteration_checks``, ``reset_after``, ``busy_check``, ``no_mesh_check``, ``unmapped_check``,
     ``broken_expectation``); ``dsp`` the Verilog flavour (:func:`engine_sources`)."""
     capacity = image.capacity
-    sources = engine_sources(fs, capacity, simulator, dsp)
+    sources = engine_sources(fs, capacity, simulator, dsp, build)
     if work is None:
         work = sources / "runs" / f"{simulator}-{os.getpid()}-{time.time_ns()}"
     work = Path(work)
@@ -174,7 +198,7 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
                            "triangles": capacity.triangles},
               "constants": {k: int(v) for k, v in image.constants.items()},
               "wait_states": wait_states, "seed": seed, **(checks or {})}
-    flags, make_flags = build_flags(simulator)
+    flags, make_flags = build_flags(simulator, build)
     with _make_flags(make_flags):
         run = run_bench(simulator, fs, ENGINE_SIM_MODULE, "engine", config, work=work, log_file=log_file, waves=waves,
                         sources=sources, extra_build_args=flags)
@@ -185,6 +209,20 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
         positions, velocities = arrays["positions"], arrays["velocities"]
     passed = run.tests == 1 and run.failed == 0 and run.result.get("mismatches") == 0
     return EngineRun(run.result, positions, velocities, passed, run.wall_seconds, run.waves)
+
+
+def prepare_pgo(training: EngineImage, fs: FormatSet) -> EngineRun:
+    """The first half of the ``pgo`` build: compile the engine with ``-fprofile-generate``, run ``training``
+    (its profile lands beside the objects), then delete the objects so that the next ``build="pgo"`` run
+    compiles them again with ``-fprofile-use``. Returns the training run."""
+    sources = engine_sources(fs, training.capacity, "verilator", None, "pgo")
+    run = run_image_on_rtl(training, fs, "verilator", build="pgo-generate")
+    build_dir = sources / "verilator" / ENGINE_SIM_MODULE
+    if not list(build_dir.glob("*.gcda")):
+        raise RuntimeError(f"the training run left no profile in {build_dir}")
+    for stale in [*build_dir.glob("*.o"), *build_dir.glob("*.a"), build_dir / ENGINE_SIM_MODULE]:
+        stale.unlink(missing_ok=True)
+    return run
 
 
 def run_engine(problem: FixedProblem, capacity: EngineCapacity, simulator: str, **kwargs) -> EngineRun:
