@@ -88,12 +88,12 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise SynthError(f"--out '{out}' exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     try:
         top = Ulx3sTop(fs, capacity, clock_hz=clock_hz, baud=baud)
     except ValueError as exc:
         raise SynthError(str(exc)) from None
+    out.mkdir(parents=True, exist_ok=True)
     platform = _ulx3s_85f()()
     say(f"elaborating the ULX3S-85F top (capacity {capacity.vertices}/{capacity.entries}/{capacity.triangles}, "
         f"{clock_hz / 1e6:g} MHz, {baud} baud)")

@@ -131,3 +131,27 @@ def test_the_top_for_the_ulx3s_85f(tmp_path):
     assert "EHXPLLL" in rtlil and "MULT18X18D" in rtlil and "DP16KD" in rtlil
     for name, value in (("CLKI_DIV", 1), ("CLKFB_DIV", 5), ("CLKOP_DIV", 5), ("CLKOP_CPHASE", 4)):
         assert re.search(rf"parameter \\{name} {value}\b", rtlil), name
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["synth"], "give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)"),
+    (["synth", "--board", "ulx3s-85f", "--target", "ecp5"], "--board takes --formats, --capacity, --seed, --baud and "
+                                                            "--out only"),
+    (["synth", "--board", "ulx3s-85f", "--baud", "0"], "--baud must be a positive number of bits per second, not 0"),
+])
+def test_synth_board_refusals_are_one_line(argv, message, capsys, tmp_path):
+    from sim.cli import main
+
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == f"springflat: error: {message}\n"
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unreachable_baud_is_one_line(capsys, tmp_path):
+    """12 Mbaud at 125 MHz is 10.4 clocks per bit: 10 is 4.2 % fast, refused before anything is built."""
+    from sim.cli import main
+
+    assert main(["synth", "--board", "ulx3s-85f", "--baud", "12000000", "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == ("springflat: error: 1.2e+07 baud at 125 MHz: 10 clocks per bit is 4.2 % off "
+                                       "(at most 2 %)\n")
+    assert not (tmp_path / "out").exists()

@@ -187,14 +187,15 @@ async def engine_run(dut):
     def run_once(img: EngineImage, driver: EngineDriver) -> dict:
         driver.load(img)
         waited_before = bus.irq_wait_seconds
-        started = time.perf_counter()
+        started, window = time.perf_counter(), [time.monotonic()]
         driver.start(irq=True)
         status = driver.wait(poll=bus.wait_irq)
         run_seconds = time.perf_counter() - started
+        window.append(time.monotonic())
         readback = driver.read_back()
         irq_seconds = bus.irq_wait_seconds - waited_before
         return {"readback": readback, "status": status, "run_seconds": run_seconds,
-                "python_seconds": run_seconds - irq_seconds}
+                "python_seconds": run_seconds - irq_seconds, "window": window}
 
     def host() -> None:
         driver = EngineDriver(bus, rmap)
@@ -247,6 +248,7 @@ async def engine_run(dut):
             "shape_error": readback.shape_error, "energy": readback.energy, "saturations": readback.saturations,
             "run_seconds": final["run_seconds"], "cycles_per_second": readback.cycles / final["run_seconds"],
             "python_share": final["python_seconds"] / final["run_seconds"],
+            "run_window_monotonic": final["window"],  # START .. done, CLOCK_MONOTONIC s (for perf --time)
             "bus_cycles": bus.cycles})
         np.savez(work / "readback.npz", positions=readback.positions, velocities=readback.velocities)
 
