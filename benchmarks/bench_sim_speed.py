@@ -1,7 +1,7 @@
 """Where a whole engine run's Verilator time goes: one workload on several builds of the engine, in one run.
 
 Usage: .venv/bin/python benchmarks/bench_sim_speed.py [--side 45] [--iterations 40] [--repeats 3]
-       [--builds default,x-randomised,cxx-O2,verilator-O3,threads-2,pgo]
+       [--builds default,internal-clock,x-randomised,cxx-O2,verilator-O3,threads-2,pgo] [--no-harness]
 
 The workload is ``bench_engine_sim.py``'s: ``dome_grid(45)`` (2,025 vertices, 11,792 entries, 3,872
 triangles), the paper's dynamics with the variable step from a Tutte layout, tolerances 0 so the run goes to

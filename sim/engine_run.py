@@ -32,7 +32,8 @@ from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
            "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "engine_flatten_result",
            "summary_line",
-           "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo"]
+           "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo",
+           "harness_ceiling", "INTERNAL_CLOCK_BUILDS"]
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
 #: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and
@@ -54,6 +55,12 @@ VERILATOR_MAKE_FLAGS = r"OPT_FAST=-O3\ -march=native"
 ICARUS_FLAGS = ("-g2005",)
 
 
+#: Verilator's ``--timing`` (the harness's own clock) needs C++20 coroutines; the wheel's ``verilated.mk``
+#: leaves both of its variables for them empty.
+TIMING_MAKE_FLAGS = " CFG_CXXFLAGS_COROUTINES=-fcoroutines CFG_CXXFLAGS_STD=-std=gnu++20"
+#: The bench's clock period is 10 ns (``sim.cocotb_benches.common.CLOCK_NS``).
+CLOCK_HALF_PERIOD_NS = 5
+
 #: Verilator builds of the engine that ``benchmarks/bench_sim_speed.py`` compares (``build=`` of
 #: :func:`run_image_on_rtl`): (extra Verilator arguments, make variables). ``default`` is what every run
 #: uses; the others each change one thing. ``pgo`` is ``default`` compiled a second time with g++'s
@@ -64,10 +71,15 @@ VERILATOR_BUILDS = {
     "cxx-O2": (VERILATOR_SPEED_FLAGS, r"OPT_FAST=-O2"),
     "verilator-O3": (VERILATOR_SPEED_FLAGS + ("-O3",), VERILATOR_MAKE_FLAGS),
     "threads-2": (VERILATOR_SPEED_FLAGS + ("--threads", "2"), VERILATOR_MAKE_FLAGS),
+    "internal-clock": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
     "pgo-generate": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS + r"\ -fprofile-generate LDLIBS=-lgcov"),
     "pgo": (VERILATOR_SPEED_FLAGS,
             VERILATOR_MAKE_FLAGS + r"\ -fprofile-use\ -fprofile-partial-training\ -Wno-missing-profile"),
 }
+
+
+#: Builds whose harness makes its own clock (:func:`simulation_harness`); the bench then starts none.
+INTERNAL_CLOCK_BUILDS = frozenset({"internal-clock"})
 
 
 def build_flags(simulator: str, build: str = "default") -> tuple[tuple[str, ...], str]:
@@ -89,7 +101,7 @@ def top_ports(verilog: str, module: str = ENGINE_MODULE) -> list[tuple[str, str,
     return [(m[1], (m[2] or "").strip(), m[3]) for m in _PORT.finditer(body)]
 
 
-def simulation_harness(verilog: str) -> str:
+def simulation_harness(verilog: str, internal_clock: bool = False) -> str:
     """Verilog of ``springflat_engine_sim``: ``springflat_engine`` with the same ports, ``rst`` registered once.
 
     Why: Verilator evaluates the logic that reads a top-level input at every ``eval`` (its "ico"
@@ -97,15 +109,28 @@ def simulation_harness(verilog: str) -> str:
     ``always @*`` block; behind a flip-flop it is evaluated once per clock with the rest. A reset
     takes effect one clock later; nothing else changes (the bus inputs stay direct, as Wishbone's
     handshake needs).
+
+    With ``internal_clock`` the harness makes the clock itself (``always #5 clk = ~clk``, the bench's
+    10 ns period; Verilator's ``--timing``) and ``clk`` becomes an output the bench watches: no cocotb
+    callback toggles it twice per cycle (:data:`INTERNAL_CLOCK_BUILDS`).
     """
     ports = top_ports(verilog)
     names = {name for _, _, name in ports}
     if not {"clk", "rst"} <= names:
         raise ValueError(f"{ENGINE_MODULE} has no clk/rst ports (has {sorted(names)})")
-    declarations = ",\n".join(f"  {direction} {f'{width} ' if width else ''}{name}" for direction, width, name in ports)
+
+    def declaration(direction, width, name):
+        if internal_clock and name == "clk":
+            return "  output reg clk"
+        return f"  {direction} {f'{width} ' if width else ''}{name}"
+
+    declarations = ",\n".join(declaration(*port) for port in ports)
     connections = ",\n".join(f"    .{name}({'rst_q' if name == 'rst' else name})" for _, _, name in ports)
-    return (f"// Simulation top (sim/engine_run.py): {ENGINE_MODULE} with rst through one flip-flop.\n"
+    clock = (f"  initial clk = 1'b0;\n  always #{CLOCK_HALF_PERIOD_NS} clk = ~clk;\n" if internal_clock else "")
+    return (f"// Simulation top (sim/engine_run.py): {ENGINE_MODULE} with rst through one flip-flop"
+            f"{' and its own clock' if internal_clock else ''}.\n"
             f"module {ENGINE_SIM_MODULE}(\n{declarations}\n);\n"
+            f"{clock}"
             f"  reg rst_q = 1'b1;\n"
             f"  always @(posedge clk) rst_q <= rst;\n"
             f"  {ENGINE_MODULE} engine(\n{connections}\n  );\n"
@@ -142,7 +167,8 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
             export_engine(fs, capacity, directory, platform=DspPlatform(dsp) if dsp else None)
         copy.mkdir(exist_ok=True)
         text = exported.read_text()
-        for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", simulation_harness(text))):
+        harness = simulation_harness(text, internal_clock=build in INTERNAL_CLOCK_BUILDS)
+        for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", harness)):
             if not (copy / name).exists() or (copy / name).read_text() != content:
                 (copy / name).write_text(content)
         for model in PRIMITIVE_MODELS.get(dsp, []):
@@ -197,7 +223,8 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
     config = {"capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                            "triangles": capacity.triangles},
               "constants": {k: int(v) for k, v in image.constants.items()},
-              "wait_states": wait_states, "seed": seed, **(checks or {})}
+              "wait_states": wait_states, "seed": seed, "internal_clock": build in INTERNAL_CLOCK_BUILDS,
+              **(checks or {})}
     flags, make_flags = build_flags(simulator, build)
     with _make_flags(make_flags):
         run = run_bench(simulator, fs, ENGINE_SIM_MODULE, "engine", config, work=work, log_file=log_file, waves=waves,
@@ -223,6 +250,34 @@ def prepare_pgo(training: EngineImage, fs: FormatSet) -> EngineRun:
     for stale in [*build_dir.glob("*.o"), *build_dir.glob("*.a"), build_dir / ENGINE_SIM_MODULE]:
         stale.unlink(missing_ok=True)
     return run
+
+
+HARNESS_PROBE = """// The harness alone (sim/engine_run.py, harness_ceiling): irq rises after CYCLES clocks.
+module harness_probe({clock_port}, input rst, output reg irq);
+{clock}  reg [31:0] n;
+  always @(posedge clk) begin
+    if (rst) begin n <= 0; irq <= 0; end
+    else begin n <= n + 1; irq <= n == {cycles}; end
+  end
+endmodule
+"""
+
+
+def harness_ceiling(fs: FormatSet, cycles: int = 5_000_000, build: str = "default") -> float:
+    """Simulated cycles per second of ``harness_probe`` (a counter, nothing else) under the engine bench's
+    clock and wait, built like the engine: the speed the harness alone allows."""
+    flags, make_flags = build_flags("verilator", build)
+    key = hashlib.sha256(repr((flags, make_flags, cycles)).encode()).hexdigest()[:8]
+    directory = BUILD_ROOT / "harness-probe" / key
+    internal = build in INTERNAL_CLOCK_BUILDS
+    with build_lock(directory):
+        (directory / "harness_probe.v").write_text(HARNESS_PROBE.format(
+            cycles=cycles, clock_port="output reg clk" if internal else "input clk",
+            clock=f"  initial clk = 1'b0;\n  always #{CLOCK_HALF_PERIOD_NS} clk = ~clk;\n" if internal else ""))
+    with _make_flags(make_flags):
+        run = run_bench("verilator", fs, "harness_probe", "harness", {"cycles": cycles, "internal_clock": internal},
+                        sources=directory, extra_build_args=flags)
+    return run.result["cycles_per_second"]
 
 
 def run_engine(problem: FixedProblem, capacity: EngineCapacity, simulator: str, **kwargs) -> EngineRun:

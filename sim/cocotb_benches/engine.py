@@ -169,7 +169,8 @@ async def engine_run(dut):
     image = load_image(config, work)
     rmap = RegisterMap.build(fs, image.capacity)
     rng = random.Random(config.get("seed", 0))
-    Clock(dut.clk, CLOCK_NS, unit="ns", impl="gpi").start()
+    if not config.get("internal_clock"):  # else the harness makes its own (sim.engine_run.simulation_harness)
+        Clock(dut.clk, CLOCK_NS, unit="ns", impl="gpi").start()
     dut.rst.value = 1
     bus = CocotbWishbone(dut, rng, config.get("wait_states", 0))
     await Timer(3 * CLOCK_NS, unit="ns")
@@ -263,3 +264,4 @@ async def engine_run(dut):
                        "bench_seconds": time.perf_counter() - started})
         write_result(result)
     assert not problems, f"{len(problems)} mismatches; first: {problems[0]}"
+
