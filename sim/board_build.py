@@ -78,7 +78,8 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     import os
 
     from golden_model.fixed import uart_protocol as protocol
-    from hdl.board import ENGINE_CLOCK_HZ, LEDS, Ulx3sTop, _ulx3s_85f
+    from hdl.board import ENGINE_CLOCK_HZ, LEDS, OSCILLATOR_HZ, Ulx3sTop, _ulx3s_85f, pll_config
+    from hdl.uart_bridge import uart_divisor
 
     if board not in BOARDS:
         raise SynthError(f"unknown board {board!r} (choose from {', '.join(BOARDS)})")
@@ -89,10 +90,12 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     if out.exists() and not out.is_dir():
         raise SynthError(f"--out '{out}' exists and is not a directory")
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
-    try:
-        top = Ulx3sTop(fs, capacity, clock_hz=clock_hz, baud=baud)
+    try:  # the parameters first: a top that raises half-built would warn that it was never elaborated
+        pll_config(OSCILLATOR_HZ, clock_hz)
+        uart_divisor(clock_hz, baud)
     except ValueError as exc:
         raise SynthError(str(exc)) from None
+    top = Ulx3sTop(fs, capacity, clock_hz=clock_hz, baud=baud)
     out.mkdir(parents=True, exist_ok=True)
     platform = _ulx3s_85f()()
     say(f"elaborating the ULX3S-85F top (capacity {capacity.vertices}/{capacity.entries}/{capacity.triangles}, "
