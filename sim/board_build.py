@@ -27,7 +27,7 @@ from pathlib import Path
 
 from .synth import _FMAX, SynthError, _critical_path, _error_line, _run_tool, _tool_versions
 
-__all__ = ["BOARDS", "NAME", "run_board_build", "parse_lpf_pins", "parse_clocks", "board_markdown"]
+__all__ = ["BOARDS", "NAME", "run_board_build", "collect_report", "parse_lpf_pins", "parse_clocks", "board_markdown"]
 
 BOARDS = ("ulx3s-85f",)
 NAME = "springflat_ulx3s"
@@ -68,8 +68,11 @@ def _utilisation(log: str) -> dict:
 
 
 #: What each port of the top is, for pins.md.
-PORT_ROLES = {"clk25": "25 MHz oscillator (PLL input)", "uart_0__rx": "UART rx: from the FTDI FT231X (host to board)",
-              "uart_0__tx": "UART tx: to the FTDI FT231X (board to host)"}
+PORT_ROLES = {"clk25_0__io": "25 MHz oscillator (PLL input)",
+              "uart_0__rx__io": "UART rx: from the FTDI FT231X (host to board)",
+              "uart_0__tx__io": "UART tx: to the FTDI FT231X (board to host)",
+              "uart_0__rts__io": "FTDI RTS (requested with the UART resource; unused input)",
+              "uart_0__dtr__io": "FTDI DTR (requested with the UART resource; unused input)"}
 
 
 def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: int = 1, baud: int | None = None,
@@ -78,7 +81,7 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     import os
 
     from golden_model.fixed import uart_protocol as protocol
-    from hdl.board import ENGINE_CLOCK_HZ, LEDS, OSCILLATOR_HZ, Ulx3sTop, _ulx3s_85f, pll_config
+    from hdl.board import ENGINE_CLOCK_HZ, OSCILLATOR_HZ, Ulx3sTop, _ulx3s_85f, pll_config
     from hdl.uart_bridge import uart_divisor
 
     if board not in BOARDS:
@@ -127,11 +130,28 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
         started = time.monotonic()
         status, text = _run_tool(tool, argv, out, f"{NAME}.{name}.stdout")
         report["seconds"][name] = round(time.monotonic() - started, 1)
+        if status == 0 and name == "nextpnr":  # the timing report and pins, whatever ecppack does next
+            collect_report(out, report, clock_hz)
+            _write(out, report)
         if status != 0:
             log = out / (f"{NAME}.tim" if name == "nextpnr" else f"{NAME}.rpt")
             reason = _error_line(log.read_text() if log.exists() and name != "ecppack" else text)
             _write(out, report)
-            raise SynthError(f"{name} failed: {reason} (logs in {out})")
+            raise SynthError(f"{name} failed: {reason} (logs in {out}"
+                             + (f"; the placed and routed design is {NAME}.config" if name == "ecppack" else "") + ")")
+
+    bit = out / f"{NAME}.bit"
+    report["bitstream"] = {"file": bit.name, "bytes": bit.stat().st_size}
+    _write(out, report)
+    say(f"{bit} ({bit.stat().st_size} bytes); engine clock Fmax {report['fmax_mhz']} MHz "
+        f"({'meets' if report['timing_met'] else 'misses'} {clock_hz / 1e6:g} MHz)")
+    return report
+
+
+def collect_report(out: Path, report: dict, clock_hz: float) -> dict:
+    """Yosys's cell counts, nextpnr's utilisation, clocks and critical paths, and the pins, from the files a
+    build left in ``out`` (into ``report``)."""
+    from hdl.board import LEDS
 
     stat = json.loads((out / f"{NAME}.stat.json").read_text())
     design = stat.get("design") or next(iter(stat["modules"].values()))
@@ -144,15 +164,10 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     e = report["clocks"].get(report["engine_clock"], {})
     report.update(fmax_mhz=e.get("fmax_mhz"), timing_met=e.get("timing_met"),
                   critical_path=(e.get("critical_path") or {}).get("summary"))
-    bit = out / f"{NAME}.bit"
-    report["bitstream"] = {"file": bit.name, "bytes": bit.stat().st_size}
     lpf = (out / f"{NAME}.lpf").read_text()
-    led_roles = {f"led_{i}__o": f"LED {i}: {role}" for i, role in enumerate(LEDS)}
-    report["pins"] = [{**p, "role": PORT_ROLES.get(p["port"].split("$")[0], led_roles.get(p["port"], ""))}
+    led_roles = {f"led_{i}__io": f"LED {i}: {role}" for i, role in enumerate(LEDS)}
+    report["pins"] = [{**p, "role": PORT_ROLES.get(p["port"], led_roles.get(p["port"], ""))}
                       for p in parse_lpf_pins(lpf)]
-    _write(out, report)
-    say(f"{bit} ({bit.stat().st_size} bytes); engine clock Fmax {report['fmax_mhz']} MHz "
-        f"({'meets' if report['timing_met'] else 'misses'} {clock_hz / 1e6:g} MHz)")
     return report
 
 
