@@ -72,7 +72,7 @@ VERILATOR_BUILDS = {
     "verilator-O3": (VERILATOR_SPEED_FLAGS + ("-O3",), VERILATOR_MAKE_FLAGS),
     "threads-2": (VERILATOR_SPEED_FLAGS + ("--threads", "2"), VERILATOR_MAKE_FLAGS),
     "internal-clock": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
-    "pgo-generate": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS + r"\ -fprofile-generate LDLIBS=-lgcov"),
+    "pgo-generate": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS + r"\ -fprofile-generate LOADLIBES=-lgcov"),
     "pgo": (VERILATOR_SPEED_FLAGS,
             VERILATOR_MAKE_FLAGS + r"\ -fprofile-use\ -fprofile-partial-training\ -Wno-missing-profile"),
 }
