@@ -139,7 +139,8 @@ class StateLeds(wiring.Component):
     ended as diverged, no-mesh or bad-constants. ``heartbeat`` toggles every ``2**heartbeat_bits``
     clocks (the clock runs); ``uart_rx``/``uart_tx`` light for ``2**blink_bits`` clocks after a byte.
 
-    **Latency**: one clock from the bus answer (or irq) to the LEDs. The state shown is what the host
+    **Latency**: three clocks from the bus answer (or irq) to the LEDs (every input is registered first,
+    as it comes from across the device; the state; the LED register). The state shown is what the host
     last saw, plus ``done`` from the interrupt.
 
     Members
@@ -165,26 +166,34 @@ class StateLeds(wiring.Component):
         state_f, result_f = field[("STATUS", "state")], field[("STATUS", "result")]
         start_f, abort_f = field[("CONTROL", "start")], field[("CONTROL", "abort")]
 
+        # every input through a flip-flop first: the bus and the pulses come from across the device
+        names = ("cyc", "stb", "we", "ack", "adr", "dat_w", "dat_r", "irq", "bridge_error", "rx_byte", "tx_byte")
+        seen = {}
+        for name in names:
+            port = getattr(self, name)
+            seen[name] = Signal.like(port, name=f"{name}_q")
+            m.d.sync += seen[name].eq(port)
         state = Signal(range(len(STATES)))  # reset: idle
         failed = Signal()
-        answered = self.cyc & self.stb & self.ack
-        with m.If(answered & self.we & (self.adr == control.offset)):
-            with m.If(self.dat_w[abort_f.lsb]):
+        answered = seen["cyc"] & seen["stb"] & seen["ack"]
+        with m.If(answered & seen["we"] & (seen["adr"] == control.offset)):
+            with m.If(seen["dat_w"][abort_f.lsb]):
                 m.d.sync += state.eq(STATES.index("idle"))
-            with m.Elif(self.dat_w[start_f.lsb]):
+            with m.Elif(seen["dat_w"][start_f.lsb]):
                 m.d.sync += [state.eq(STATES.index("running")), failed.eq(0)]
-        with m.Elif(answered & ~self.we & (self.adr == status.offset)):
-            result = self.dat_r[result_f.lsb:result_f.lsb + result_f.width]
-            m.d.sync += [state.eq(self.dat_r[state_f.lsb:state_f.lsb + state_f.width]),
+        with m.Elif(answered & ~seen["we"] & (seen["adr"] == status.offset)):
+            dat_r = seen["dat_r"]
+            result = dat_r[result_f.lsb:result_f.lsb + result_f.width]
+            m.d.sync += [state.eq(dat_r[state_f.lsb:state_f.lsb + state_f.width]),
                          failed.eq((result == RESULTS.index("diverged")) | (result == RESULTS.index("no-mesh"))
                                    | (result == RESULTS.index("bad-constants")))]
-        with m.Elif(self.irq):
+        with m.Elif(seen["irq"]):
             m.d.sync += state.eq(STATES.index("done"))
 
         heartbeat = Signal(self.heartbeat_bits + 1)
         m.d.sync += heartbeat.eq(heartbeat + 1)
         blinks = []
-        for pulse in (self.rx_byte, self.tx_byte):
+        for pulse in (seen["rx_byte"], seen["tx_byte"]):
             timer = Signal(self.blink_bits)
             with m.If(pulse):
                 m.d.sync += timer.eq(~0)
@@ -193,7 +202,7 @@ class StateLeds(wiring.Component):
             blinks.append(timer != 0)
         lit = {"heartbeat": heartbeat[-1], "idle": state == STATES.index("idle"),
                "running": state == STATES.index("running"), "done": state == STATES.index("done"),
-               "error": self.bridge_error | failed, "uart_rx": blinks[0], "uart_tx": blinks[1]}
+               "error": seen["bridge_error"] | failed, "uart_rx": blinks[0], "uart_tx": blinks[1]}
         for i, name in enumerate(LEDS[:-1]):
             m.d.sync += self.leds[i].eq(lit[name])
         return m

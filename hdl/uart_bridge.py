@@ -181,9 +181,10 @@ class FrameBridge(wiring.Component):
     have been checked runs the bus cycles, one word at a time, the address incrementing; a read's
     words go into the same buffer. Then it sends the answer on ``tx``.
 
-    **Latency**: the first bus cycle starts 2 clocks after the CRC byte is taken; each word takes the
-    target's answer time plus 1 clock; the answer's first byte is offered the clock after the last
-    access (after the CRC byte, for an answer without access). A bad command or length is answered
+    **Latency**: the first bus cycle starts 3 clocks after the CRC byte is taken; each word takes the
+    target's answer time plus 2 clocks (the cycle's outputs are flip-flops, loaded in an idle clock before
+    each cycle, so the route to a distant target starts at a register); the answer's first byte is offered
+    the clock after the last access (after the CRC byte, for an answer without access). A bad command or length is answered
     ``timeout`` clocks after the last byte of the frame (the bridge drains the line first); a truncated
     frame ``timeout`` clocks after its last byte. **Throughput**: one frame at a time; the line's byte
     rate bounds it.
@@ -247,7 +248,7 @@ class FrameBridge(wiring.Component):
         # the inter-byte timer: restarts at every byte; `idle` once `timeout` clocks passed without one
         timer = Signal(range(self.timeout + 1))
         idle = Signal()
-        m.d.comb += [rx.ready.eq(1), idle.eq(timer == self.timeout)]
+        m.d.comb += [rx.ready.eq(1), idle.eq(timer == self.timeout), bus.sel.eq(~0)]
         took = rx.valid
         with m.If(took):
             m.d.sync += timer.eq(0)
@@ -319,15 +320,19 @@ class FrameBridge(wiring.Component):
                     answer(protocol.BAD_ADDRESS)
                 with m.Else():
                     m.d.sync += [index.eq(0), bus_address.eq(address[:self.addr_width])]
-                    m.next = "BUS"
+                    m.next = "GAP"
             with m.State("DRAIN"):  # a frame whose end cannot be known: drop bytes until the line idles
                 with m.If(idle & ~took):
                     m.d.sync += count.eq(0)
                     m.next = "STATUS"
-            with m.State("BUS"):  # one classic cycle per word; the next starts the clock after an answer
-                m.d.comb += [bus.cyc.eq(1), bus.stb.eq(1), bus.we.eq(is_write), bus.adr.eq(bus_address),
-                             bus.dat_w.eq(rd.data), bus.sel.eq(~0),
-                             wr.data.eq(bus.dat_r), wr.en.eq(bus.ack & ~is_write)]
+            with m.State("GAP"):  # stb low for a clock before each cycle; the cycle's outputs are registered here
+                m.d.sync += [bus.cyc.eq(1), bus.stb.eq(1), bus.we.eq(is_write), bus.adr.eq(bus_address),
+                             bus.dat_w.eq(rd.data)]
+                m.next = "BUS"
+            with m.State("BUS"):  # one classic cycle per word, its outputs from flip-flops
+                m.d.comb += [wr.data.eq(bus.dat_r), wr.en.eq(bus.ack & ~is_write)]
+                with m.If(bus.ack | bus.err):
+                    m.d.sync += [bus.cyc.eq(0), bus.stb.eq(0)]
                 with m.If(bus.err):
                     m.d.sync += [status.eq(protocol.BUS_ERROR), count.eq(index)]
                     m.next = "STATUS"
@@ -338,8 +343,6 @@ class FrameBridge(wiring.Component):
                         m.next = "STATUS"
                     with m.Else():
                         m.next = "GAP"
-            with m.State("GAP"):  # stb low for a clock between cycles: the target has dropped its answer
-                m.next = "BUS"
             with m.State("STATUS"):
                 m.d.comb += [tx.valid.eq(1), tx.payload.eq(status), crc_tx.start.eq(1)]
                 with m.If(tx.ready):
@@ -386,7 +389,8 @@ class UartBridge(wiring.Component):
     -------
     rx : ``In(1)``; tx : ``Out(1)``, the line.
     bus : ``Out(wishbone.Signature(addr_width))``
-    error : ``Out(1)``, :class:`FrameBridge`'s; rx_byte, tx_byte : ``Out(1)``, a pulse per byte received or sent.
+    error : ``Out(1)``, :class:`FrameBridge`'s; rx_byte, tx_byte : ``Out(1)``, a pulse per byte received or sent
+        (registered: a clock after the byte).
     """
 
     def __init__(self, *, divisor: int, addr_width: int, timeout: int, max_words: int = protocol.MAX_WORDS):
@@ -405,7 +409,8 @@ class UartBridge(wiring.Component):
         wiring.connect(m, rx.source, frames.rx)
         wiring.connect(m, frames.tx, tx.sink)
         wiring.connect(m, wiring.flipped(self.bus), frames.bus)
-        m.d.comb += [rx.rx.eq(self.rx), self.tx.eq(tx.tx), self.error.eq(frames.error),
-                     self.rx_byte.eq(rx.source.valid & rx.source.ready),
+        m.d.comb += [rx.rx.eq(self.rx), self.tx.eq(tx.tx), self.error.eq(frames.error)]
+        # registered: they go to the LEDs, across the device
+        m.d.sync += [self.rx_byte.eq(rx.source.valid & rx.source.ready),
                      self.tx_byte.eq(tx.sink.valid & tx.sink.ready)]
         return m

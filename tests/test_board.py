@@ -67,7 +67,7 @@ def test_state_leds_follow_the_bus():
         await ctx.tick()
         for sig in (dut.cyc, dut.stb, dut.ack):
             ctx.set(sig, 0)
-        await ctx.tick()
+        await ctx.tick().repeat(3)  # inputs registered, the state, the LEDs
 
     async def bench(ctx):
         await ctx.tick()
@@ -75,7 +75,7 @@ def test_state_leds_follow_the_bus():
         await answer(ctx, control.offset, 1, dat_w=field["start"].mask)
         seen["start"] = lit(ctx.get(dut.leds))
         ctx.set(dut.irq, 1)
-        await ctx.tick().repeat(2)
+        await ctx.tick().repeat(3)
         ctx.set(dut.irq, 0)
         seen["irq"] = lit(ctx.get(dut.leds))
         bad = (STATES.index("done") << field["state"].lsb) | (RESULTS.index("bad-constants") << field["result"].lsb)
@@ -88,7 +88,7 @@ def test_state_leds_follow_the_bus():
         ctx.set(dut.rx_byte, 1)
         await ctx.tick()
         ctx.set(dut.rx_byte, 0)
-        await ctx.tick()
+        await ctx.tick().repeat(2)
         seen["rx"] = lit(ctx.get(dut.leds))
         await ctx.tick().repeat(6)
         seen["rx later"] = lit(ctx.get(dut.leds))
