@@ -117,7 +117,7 @@ def run_board_sim(problem: FixedProblem, capacity: EngineCapacity, *, work: Path
     (work / "problem.pkl").write_bytes(pickle.dumps(problem))
     config = {"capacity": [capacity.vertices, capacity.entries, capacity.triangles], "divisor": SIM_DIVISOR,
               "timeout": SIM_TIMEOUT, "bad_frames": bad_frames}
-    flags, make_flags = build_flags("verilator")
+    flags, make_flags = build_flags("verilator", "gpi-clock")  # the bench starts cocotb's clock
     with _make_flags(make_flags):
         run = run_bench("verilator", fs, BOARD_SIM_MODULE, "board", config, work=work, log_file=log_file,
                         sources=sources, extra_build_args=flags)

@@ -63,15 +63,18 @@ CLOCK_HALF_PERIOD_NS = 5
 
 #: Verilator builds of the engine that ``benchmarks/bench_sim_speed.py`` compares (``build=`` of
 #: :func:`run_image_on_rtl`): (extra Verilator arguments, make variables). ``default`` is what every run
-#: uses; the others each change one thing. ``pgo`` is ``default`` compiled a second time with g++'s
-#: profile of a training run (:func:`prepare_pgo`).
+#: uses: the harness makes its own clock (``internal-clock``, the same build), 1.48x ``gpi-clock``'s speed
+#: measured in one run (``docs/verification.md``). ``gpi-clock`` is cocotb's GPI clock, a callback at
+#: every clock edge; the others each change one thing against it. ``pgo`` is ``gpi-clock`` compiled a
+#: second time with g++'s profile of a training run (:func:`prepare_pgo`).
 VERILATOR_BUILDS = {
-    "default": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS),
+    "default": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
+    "internal-clock": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
+    "gpi-clock": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS),
     "x-randomised": (VERILATOR_SPEED_FLAGS[:3], VERILATOR_MAKE_FLAGS),  # Verilator's default X handling
     "cxx-O2": (VERILATOR_SPEED_FLAGS, r"OPT_FAST=-O2"),
     "verilator-O3": (VERILATOR_SPEED_FLAGS + ("-O3",), VERILATOR_MAKE_FLAGS),
     "threads-2": (VERILATOR_SPEED_FLAGS + ("--threads", "2"), VERILATOR_MAKE_FLAGS),
-    "internal-clock": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
     "pgo-generate": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS + r"\ -fprofile-generate LOADLIBES=-lgcov"),
     "pgo": (VERILATOR_SPEED_FLAGS,
             VERILATOR_MAKE_FLAGS + r"\ -fprofile-use\ -fprofile-partial-training\ -Wno-missing-profile"),
@@ -79,7 +82,7 @@ VERILATOR_BUILDS = {
 
 
 #: Builds whose harness makes its own clock (:func:`simulation_harness`); the bench then starts none.
-INTERNAL_CLOCK_BUILDS = frozenset({"internal-clock"})
+INTERNAL_CLOCK_BUILDS = frozenset({"default", "internal-clock"})
 
 
 def build_flags(simulator: str, build: str = "default") -> tuple[tuple[str, ...], str]:
@@ -167,7 +170,7 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
             export_engine(fs, capacity, directory, platform=DspPlatform(dsp) if dsp else None)
         copy.mkdir(exist_ok=True)
         text = exported.read_text()
-        harness = simulation_harness(text, internal_clock=build in INTERNAL_CLOCK_BUILDS)
+        harness = simulation_harness(text, internal_clock=simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS)
         for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", harness)):
             if not (copy / name).exists() or (copy / name).read_text() != content:
                 (copy / name).write_text(content)
@@ -223,7 +226,7 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
     config = {"capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                            "triangles": capacity.triangles},
               "constants": {k: int(v) for k, v in image.constants.items()},
-              "wait_states": wait_states, "seed": seed, "internal_clock": build in INTERNAL_CLOCK_BUILDS,
+              "wait_states": wait_states, "seed": seed, "internal_clock": simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS,
               **(checks or {})}
     flags, make_flags = build_flags(simulator, build)
     with _make_flags(make_flags):
@@ -239,7 +242,7 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
 
 
 def prepare_pgo(training: EngineImage, fs: FormatSet) -> EngineRun:
-    """The first half of the ``pgo`` build: compile the engine with ``-fprofile-generate``, run ``training``
+    """The first half of the ``pgo`` build: compile the engine (``gpi-clock``) with ``-fprofile-generate``, run ``training``
     (its profile lands beside the objects), then delete the objects so that the next ``build="pgo"`` run
     compiles them again with ``-fprofile-use``. Returns the training run."""
     sources = engine_sources(fs, training.capacity, "verilator", None, "pgo")
