@@ -184,7 +184,8 @@ class FrameBridge(wiring.Component):
     **Latency**: the first bus cycle starts 3 clocks after the CRC byte is taken; each word takes the
     target's answer time plus 2 clocks (the cycle's outputs are flip-flops, loaded in an idle clock before
     each cycle, so the route to a distant target starts at a register); the answer's first byte is offered
-    the clock after the last access (after the CRC byte, for an answer without access). A bad command or length is answered
+    the clock after the last access (after the CRC byte, for an answer without access). A bad command or length
+    is answered
     ``timeout`` clocks after the last byte of the frame (the bridge drains the line first); a truncated
     frame ``timeout`` clocks after its last byte. **Throughput**: one frame at a time; the line's byte
     rate bounds it.

@@ -30,7 +30,8 @@ from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
-           "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "engine_flatten_result",
+           "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl",
+           "engine_flatten_result",
            "summary_line",
            "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo",
            "harness_ceiling", "INTERNAL_CLOCK_BUILDS"]
@@ -226,7 +227,8 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
     config = {"capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                            "triangles": capacity.triangles},
               "constants": {k: int(v) for k, v in image.constants.items()},
-              "wait_states": wait_states, "seed": seed, "internal_clock": simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS,
+              "wait_states": wait_states, "seed": seed,
+              "internal_clock": simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS,
               **(checks or {})}
     flags, make_flags = build_flags(simulator, build)
     with _make_flags(make_flags):
@@ -242,7 +244,8 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
 
 
 def prepare_pgo(training: EngineImage, fs: FormatSet) -> EngineRun:
-    """The first half of the ``pgo`` build: compile the engine (``gpi-clock``) with ``-fprofile-generate``, run ``training``
+    """The first half of the ``pgo`` build: compile the engine (``gpi-clock``) with ``-fprofile-generate``, run
+    ``training``
     (its profile lands beside the objects), then delete the objects so that the next ``build="pgo"`` run
     compiles them again with ``-fprofile-use``. Returns the training run."""
     sources = engine_sources(fs, training.capacity, "verilator", None, "pgo")

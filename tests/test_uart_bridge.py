@@ -117,7 +117,8 @@ def scenarios(rng: random.Random) -> list[tuple[str, bytes]]:
 
 
 def _raw(command, address, length, data):
-    body = bytes([command]) + address.to_bytes(4, "big") + bytes([length]) + b"".join(w.to_bytes(4, "big") for w in data)
+    body = (bytes([command]) + address.to_bytes(4, "big") + bytes([length])
+            + b"".join(w.to_bytes(4, "big") for w in data))
     return body + bytes([protocol.crc8(body)])
 
 

@@ -131,7 +131,8 @@ def test_a_missing_port_is_one_line(tmp_path):
     proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "board", "--port", str(tmp_path / "ttyUSB9"),
                            "--out", "out.obj"], capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert proc.returncode == 2 and proc.stdout == ""
-    assert proc.stderr.splitlines()[-1].startswith(f"springflat: error: cannot open the serial port '{tmp_path}/ttyUSB9'")
+    last = proc.stderr.splitlines()[-1]
+    assert last.startswith(f"springflat: error: cannot open the serial port '{tmp_path}/ttyUSB9'")
     assert len([l for l in proc.stderr.splitlines() if l.startswith("springflat: error")]) == 1
     assert not (tmp_path / "out.obj").exists()
     proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "board"], capture_output=True, text=True,
