@@ -73,7 +73,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
     else:
         print(human_line(mesh, result))
         print(_what_was_used(params, args.init, result), file=sys.stderr)
-    formats = load_format_set(args.formats or "default") if args.engine in ("fixed", "rtl") else None
+    formats = load_format_set(args.formats or "default") if args.engine in ("fixed", "rtl", "board") else None
     scale = scale_note(PatternDrawing.of(mesh, result.positions, args.units)) if any(
         str(path).lower().endswith((".pdf", ".svg", ".dxf")) and not str(path).lower().endswith(".flat.svg")
         for path in args.out or ()) else None  # a print or cut at the wrong scale; vt and layouts have none
@@ -124,6 +124,10 @@ def choose_engine(args: argparse.Namespace):
         return engine
     if args.engine == "rtl":
         return _rtl_engine(load_format_set(args.formats or "default"))
+    if args.engine == "board":  # the engine on a board, over its UART (sim/board_run.py)
+        from .board_run import board_engine
+
+        return board_engine(load_format_set(args.formats or "default"), args.port, args.baud)
     if args.formats is not None:
         raise UserError("--formats applies to --engine fixed and --engine rtl")
     return flatten
@@ -136,9 +140,9 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     fold-free where that can be had (:func:`~sim.run_options.start_positions`)."""
     if args.init is None:
         args.init = default_init(args.mesh)
-    if args.engine in ("fixed", "rtl"):
+    if args.engine in ("fixed", "rtl", "board"):
         check_fixed_params(params, load_format_set(args.formats or "default"))
-        if args.engine == "rtl":
+        if args.engine in ("rtl", "board"):
             from golden_model.fixed.engine_image import check_engine_params
 
             check_engine_params(params)
@@ -331,9 +335,10 @@ def cmd_verilog(args: argparse.Namespace) -> int:
 
 def add_engine_options(parser: argparse.ArgumentParser) -> None:
     """``--engine`` and ``--formats`` of ``flatten`` (also the keywords of ``springflat.flatten``)."""
-    parser.add_argument("--engine", choices=("float", "fixed", "rtl"), default="float",
-                        help="float reference (default), the bit-exact fixed-point golden model, or rtl: the whole "
-                             "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)")
+    parser.add_argument("--engine", choices=("float", "fixed", "rtl", "board"), default="float",
+                        help="float reference (default), the bit-exact fixed-point golden model, rtl: the whole "
+                             "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed), or "
+                             "board: the engine on a ULX3S over its USB-UART (--port; docs/board.md)")
     parser.add_argument("--formats", default=None, metavar="PRESET|FILE",
                         help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
 
@@ -349,6 +354,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
     add_run_options(p)
     add_engine_options(p)
+    from .board_run import add_board_options
+
+    add_board_options(p)
     p.add_argument("--out", type=Path, action="append", metavar="FILE",
                    help="the pattern, by its ending (repeat for several): .dxf (cut line on layer CUT), .pdf or "
                         ".svg (true scale on --paper sheets), .obj (the 3D mesh with the pattern as vt), "

@@ -480,7 +480,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     "and report LUT4, flip-flops, DSPs, block RAM, Fmax after routing and the critical path per "
                     "component and for the top (springflat_core). springflat_engine (the whole engine behind "
                     "its Wishbone bus, --capacity) is opt-in. Writes the handoff bundle to --out.")
-    p.add_argument("--target", required=True, choices=tuple(TARGETS), help="ecp5 (LFE5U-85F) or ice40 (UP5K)")
+    p.add_argument("--target", choices=tuple(TARGETS), help="ecp5 (LFE5U-85F) or ice40 (UP5K)")
+    p.add_argument("--board", choices=("ulx3s-85f",), default=None,
+                   help="instead of --target: the board top (PLL, UART bridge, LEDs, the engine at --capacity) "
+                        "to a bitstream with its timing report and pin list (docs/board.md)")
+    p.add_argument("--baud", type=int, default=None, help="--board: the UART's rate (default 1000000)")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
                    help="clock constraint for nextpnr (default 150 for ecp5, 48 for ice40)")
@@ -526,6 +530,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     fs = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, fs)
+    if args.board is not None or args.target is None:
+        from .board_build import cmd_board
+
+        return cmd_board(args, fs, capacity)
     if args.capacity and ENGINE not in (args.components or ()):
         raise SynthError(f"--capacity sizes {ENGINE}: add it to --components")
     out = Path(args.out) if args.out else Path(f"synth-{args.target}-{fs.name}")
