@@ -1017,7 +1017,8 @@ def test_real_exit_a_write_error_past_the_file_size_limit(tmp_path):
 
     (tmp_path / "m.obj").write_text(obj())
     (tmp_path / "h.csv").write_text("old")
-    proc = subprocess.run([SPRINGFLAT, "flatten", "m.obj", "--max-iter", "200", "--tol-energy", "0", "--history",
+    proc = subprocess.run([SPRINGFLAT, "flatten", "m.obj", "--max-iter", "200", "--tol-energy", "0", "--no-guard",
+                           "--energy-window", "1000", "--history",
                            "h.csv"],
                           capture_output=True, text=True, cwd=tmp_path, timeout=300, preexec_fn=limit)
     assert proc.returncode == 2, proc.stderr

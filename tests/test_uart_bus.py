@@ -15,6 +15,7 @@ import pytest
 from golden_model.fixed import FormatSet
 from golden_model.fixed import uart_protocol as protocol
 from golden_model.fixed.engine import flatten_fixed, prepare
+from golden_model.fixed.engine_image import UNGUARDED
 from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity, build_image
 from golden_model.fixed.register_map import RegisterMap
 from golden_model.generate import dome_grid
@@ -64,7 +65,7 @@ def addr_width(rmap: RegisterMap) -> int:
 CAPACITY = EngineCapacity(64, 512, 128)
 MAP = RegisterMap.build(DEFAULT, CAPACITY)
 MESH = dome_grid(6)
-PARAMS = FlattenParams(dynamics="momentum", barrier=True, max_iter=12)
+PARAMS = FlattenParams(dynamics="momentum", **UNGUARDED, barrier=True, max_iter=12)
 
 
 def test_a_run_over_frames_is_the_golden_models():
