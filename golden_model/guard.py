@@ -55,9 +55,9 @@ SCALE_MAX_SHIFT = 20
 #: Iterations over which the momentum dynamics' stop rule measures the energy change.
 ENERGY_WINDOW = 10
 #: The momentum dynamics' stop rule also holds once the energy is below this fraction of ``C·Σ d²``
-#: (the energy of a layout with every edge at twice its length), an rms strain of 1e-4: ``E → 0``
+#: (the energy of a layout with every edge at twice its length), an rms strain of 1e-3: ``E → 0``
 #: on a developable patch, where its relative change stays large however exact the layout is.
-ENERGY_FLOOR = 1e-8
+ENERGY_FLOOR = 1e-6
 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
