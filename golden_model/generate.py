@@ -190,3 +190,10 @@ def sliver_patch(n_points: int = 400, seed: int = 1, squash: float = 0.02) -> Me
     faces = Delaunay(uv * [1.0, squash]).simplices
     z = 0.4 * np.exp(-3.0 * (uv**2).sum(axis=1))
     return Mesh(np.column_stack([uv, z]), faces, name="slivers")
+
+
+def bumpy_grid(n: int = 31, height: float = 0.08, bumps: int = 3) -> Mesh:
+    """An ``n × n`` grid over the unit square lifted by ``bumps × bumps`` sine bumps of ``height``."""
+    uv = grid_uv(n, n) - 0.5
+    z = height * np.sin(2 * np.pi * bumps * uv[:, 0]) * np.sin(2 * np.pi * bumps * uv[:, 1])
+    return Mesh(np.column_stack([uv, z]), grid_faces(n, n), name="bumpy")
