@@ -1,8 +1,9 @@
-"""What the docs and docstrings state that a generated block cannot hold.
+"""What the docs and docstrings state that a generated block cannot hold, and no history in docs/.
 
 The tables of docs/ that are functions of the code are generated blocks (``sim.docgen``; ``tests/test_docgen.py``
 keeps them current). What is left here: numbers stated in the prose of ``hdl/`` docstrings and of the presets'
-``notes`` (code and data, not generated) and one fact about the code the units' table relied on.
+``notes`` (code and data, not generated), one fact about the code the units' table relied on, and that the
+design docs carry no commit hashes or session diary.
 """
 
 import gc
@@ -177,3 +178,38 @@ def test_the_energy_checks_width_is_the_engines(unelaborated):
     for name in PRESETS:
         fs = FormatSet.preset(name)
         assert EnergyCheck(fs, 8192).energy_bits == energy_width(fs, EngineCapacity(1024, 8192, 2048)), name
+
+
+# ----------------------------------------------------------------------------- no history in the design docs
+
+#: Tokens of 7–40 hex digits in docs/ that are not commit hashes, each with the reason.
+NOT_HASHES = {
+    "123456789": "the ASCII string a CRC's check value is computed over (docs/board.md)",
+    "1175269": "a raw fixed-point value in an example mismatch message (docs/verification.md)",
+    "1175268": "a raw fixed-point value in an example mismatch message (docs/verification.md)",
+    "0099983": "the fraction digits of 0.0099983 (docs/study.md)",
+}
+HASH_LIKE = re.compile(r"\b[0-9a-fA-F]{7,40}\b")
+DIARY = re.compile(r"\b(?:this|previous|last|next|earlier|later|same|first|second|third|fourth|fifth|sixth|seventh|"
+                   r"eighth|ninth|tenth|eleventh|twelfth|\d+(?:st|nd|rd|th)) session\b|\bat the time of writing\b",
+                   re.IGNORECASE)
+
+
+def history_in(text: str) -> list[str]:
+    """Commit-hash-like tokens (but the ones ``NOT_HASHES`` explains) and diary phrases in ``text``."""
+    return [m.group(0) for m in HASH_LIKE.finditer(text) if m.group(0) not in NOT_HASHES] + \
+        [m.group(0) for m in DIARY.finditer(flat(text))]
+
+
+def test_history_is_found():
+    assert history_in("measured at 02ffc8f (the eleventh session), ac1ece3's netlist; this\nsession too") == [
+        "02ffc8f", "ac1ece3", "eleventh session", "this session"]
+    assert history_in("0x1F, 150 MHz, 2048 words, 0.0099983, dome_grid(45), a cafe, 0.0012345") == ["0012345"]
+    assert history_in("CRC over 123456789; at the time of writing") == ["at the time of writing"]
+
+
+@pytest.mark.parametrize("path", sorted(DOCS.rglob("*.md")), ids=lambda p: str(p.relative_to(DOCS)))
+def test_design_docs_keep_no_history(path):
+    """The docs state the design and the current figures; the history is git's (and docs/results/ keeps
+    the measured rows, each with its date and command)."""
+    assert history_in(path.read_text(encoding="utf-8")) == []
