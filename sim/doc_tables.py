@@ -96,23 +96,35 @@ def accuracy_bounds() -> str:
     return _table(["preset", "ρ(fs)", f"bound: `ACCURACY_FACTOR`·ρ = {ACCURACY_FACTOR:g}·ρ"], rows)
 
 
-def unit_accuracy() -> str:
-    """``measure_rsqrt`` and ``measure_step_size`` of both presets (a few seconds: 13M rsqrt evaluations)."""
+def rsqrt_accuracy() -> str:
+    """``measure_rsqrt`` of both presets' rsqrt units (a few seconds: 13M evaluations)."""
     from golden_model.fixed.rsqrt import measure_rsqrt
+
+    rows = []
+    for p in PRESETS:
+        cfg = _preset(p).rsqrt_config()
+        r = measure_rsqrt(cfg)
+        inputs = (f"all {r['n_points']:,}" if r["exhaustive"] else
+                  f"{r['n_points']:,}-point sweep + every boundary ({cfg.fmt_in.width}-bit input)")
+        rows.append([p, f"{cfg.fmt_in} → {cfg.fmt_out}", f"{cfg.seed_bits} / {cfg.newton_steps}",
+                     f"{cfg.seed_table_size} entries", f"**{r['max_ulp_error']:.3f} ulp**", inputs])
+    return _table(["preset", "in → out", "seed / steps", "ROM", "max error", "inputs"], rows)
+
+
+def step_accuracy() -> str:
+    """``measure_step_size`` of both presets' step generators (exhaustive over each error's domain)."""
     from golden_model.fixed.steplut import measure_step_size
 
-    rsqrt, step = [], []
+    rows = []
     for p in PRESETS:
         fs = _preset(p)
-        r = measure_rsqrt(fs.rsqrt_config())
-        domain = (f"exhaustive over all {r['n_points']:,} inputs" if r["exhaustive"] else
-                  f"over a {r['n_points'] / 1e6:.1f}M-point sweep with every boundary "
-                  f"({fs.length_sq.width}-bit input: not exhaustive)")
-        rsqrt.append(f"{r['max_ulp_error']:.3f} ulp, {domain}")
         s = measure_step_size(fs)
-        how = "exhaustive over each error's domain (the sum is separable)" if s["separable"] else "an upper bound"
-        step.append(f"{s['max_dt_ulp_error']:.2f} dt ulps (bound {s['bound']:.2f}), {how}")
-    return _table(["unit", *PRESETS], [["rsqrt, max error", *rsqrt], ["Δt from the LUT, max error", *step]])
+        table = f"{(1 << fs.lut_index_bits) + 1} entries, {'interpolated' if fs.lut_interpolate else 'nearest'}"
+        error = f"**{s['max_dt_ulp_error']:.2f} ulp** ({s['max_dt_ulp_error'] * fs.dt.lsb:.1e} in dt)"
+        if not s["separable"]:
+            error += ", an upper bound (not separable)"
+        rows.append([f"{p} ({fs.error} → {fs.dt})", table, error, f"{s['bound']:.2f}"])
+    return _table(["preset", "table", "max dt error (all pairs)", "bound (ulp)"], rows)
 
 
 # ----------------------------------------------------------------------------- docs/study.md
