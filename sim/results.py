@@ -7,7 +7,7 @@ command that produced it. ``docs/synthesis.md`` renders its tables from this fil
 
 Add a run with::
 
-    springflat synth --target ecp5 --components springflat_core --seed 2 --out DIR --json > DIR/run.json
+    springflat synth --target ecp5 --components springflat_core --seed 2 --out DIR
     python -m sim.results record DIR/synth_report.json [--date YYYY-MM-DD]
 
 A row for the same configuration is replaced (git keeps the history); ``python -m sim.docgen`` then
@@ -20,6 +20,7 @@ import argparse
 import csv
 import datetime
 import io
+import json
 import shlex
 import sys
 from pathlib import Path
@@ -107,15 +108,13 @@ def main(argv: list[str] | None = None) -> int:
     rec.add_argument("report", type=Path)
     rec.add_argument("--date", default=datetime.date.today().isoformat(), help="measurement date (default: today)")
     args = parser.parse_args(argv)
-    import json
-
     try:
         report = json.loads(args.report.read_text(encoding="utf-8"))
         new = rows_from_report(report, args.date)
     except (OSError, ValueError, KeyError, TypeError) as e:
         print(f"sim.results: error: {args.report}: not a springflat synth report ({e})", file=sys.stderr)
         return 2
-    write_rows(record(read_rows(), new))
+    write_rows(record(read_rows(RESULTS), new), RESULTS)
     for r in new:
         print(f"recorded {r['target']} {r['preset']} {r['component']} {r['capacity'] or '-'} seed {r['seed'] or '-'}: "
               f"{r['fmax_mhz'] or 'not placed'}")

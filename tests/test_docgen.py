@@ -1,6 +1,7 @@
 """Generated blocks in docs/ (sim.docgen) are in step with the code, and the results file they read (sim.results)."""
 
 import csv
+import json
 import re
 
 import pytest
@@ -114,10 +115,8 @@ def test_record_writes_the_file_and_refuses_a_non_report(tmp_path, monkeypatch, 
     path = tmp_path / "synthesis.csv"
     results.write_rows([], path)
     monkeypatch.setattr(results, "RESULTS", path)
-    monkeypatch.setattr(results.read_rows, "__defaults__", (path,))
-    monkeypatch.setattr(results.write_rows, "__defaults__", (path,))
     report = tmp_path / "synth_report.json"
-    report.write_text(__import__("json").dumps(REPORT))
+    report.write_text(json.dumps(REPORT))
     assert results.main(["record", str(report), "--date", "2026-11-26"]) == 0
     assert [r["component"] for r in results.read_rows(path)] == ["springflat_core", "springflat_engine"]
     assert "recorded ecp5 default springflat_core - seed 3: 151.26" in capsys.readouterr().out
