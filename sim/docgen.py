@@ -51,9 +51,35 @@ def _constant_doc(module, name: str) -> str:
     return " ".join(comment)
 
 
+def _tables() -> dict[str, Callable[[], str]]:
+    from functools import partial
+
+    from sim import doc_tables as t
+
+    return {
+        "format-presets": t.format_presets,
+        "knob-domains": t.knob_domains,
+        "resolution-scales": t.resolution_scales,
+        "accuracy-bounds": t.accuracy_bounds,
+        "rsqrt-accuracy": t.rsqrt_accuracy,
+        "step-accuracy": t.step_accuracy,
+        "preset-costs": t.preset_costs,
+        "signal-classes": t.signal_classes,
+        "node-update-contract": t.node_update_contract,
+        "node-update-flip-flops": t.node_update_flip_flops,
+        "unit-figures": t.unit_figures,
+        "synth-components": t.synth_components,
+        "datapath-throughput": t.datapath_throughput,
+        "synthesis-ecp5-components": partial(t.synthesis_components, "ecp5"),
+        "synthesis-ecp5-engine": partial(t.synthesis_engine, "ecp5"),
+        "synthesis-ice40-components": partial(t.synthesis_components, "ice40"),
+    }
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
     "run-modes": _run_modes,
     "guard-constants": _guard_constants,
+    **_tables(),
 }
 
 
