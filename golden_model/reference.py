@@ -601,8 +601,9 @@ class FlattenResult:
 
 def energy_floor(mesh: Mesh, params: FlattenParams) -> float:
     """The energy below which the stop rule's energy part holds whatever its change:
-    ``ENERGY_FLOOR·C·Σd²`` with the momentum dynamics, 0 with the paper's (Algorithm 1)."""
-    if params.dynamics != "momentum":
+    ``ENERGY_FLOOR·C·Σd²`` in the guarded momentum mode; 0 (no floor) in the other modes, whose stop
+    rule is the one the engine has, and with ``tol_energy = 0``, which asks for no energy stop."""
+    if not (params.guard and params.tol_energy > 0):
         return 0.0
     return ENERGY_FLOOR * params.spring * float(np.sum(mesh.rest_lengths**2))
 

@@ -18,7 +18,7 @@ from sim.board_sim import run_board_sim
 from sim.cli import build_parser
 from sim.cocotb_support import missing_simulator
 from sim.engine_run import engine_flatten_result
-from sim.outputs import write_layout
+from sim.patterns import PatternDrawing, run_caption, write_pattern_file
 from sim.run_options import default_init, load_format_set, params_from_args, resolve_mesh
 
 pytestmark = pytest.mark.slow  # a Verilator build of the engine (cached)
@@ -51,7 +51,9 @@ def test_surf1_over_the_simulated_uart_is_byte_identical_to_engine_fixed(tmp_pat
         name: (status, 0) for name, status in want.items()}
     result = engine_flatten_result(problem, run.positions, run.velocities, r["status"], r["iterations"],
                                    {"saturations": r["saturations"]})
-    write_layout(tmp_path / "board.obj", result.positions, mesh.faces, vertices=mesh.vertices)
+    final = result.final  # the file as --out writes it: the layout as vt, the run's line in its header
+    caption = run_caption(result.status, result.iterations, final.area_error, final.shape_error, final.folded)
+    write_pattern_file(tmp_path / "board.obj", PatternDrawing.of(mesh, result.positions, caption=caption))
     proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "fixed", "--out", "fixed.obj", "--json"],
                           capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 0, proc.stderr

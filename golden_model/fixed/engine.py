@@ -234,9 +234,9 @@ class StopRule:
 
 def energy_floor_raw(problem: "FixedProblem") -> int:
     """:func:`golden_model.reference.energy_floor` in :func:`energy_raw` units: ``ENERGY_FLOOR`` times the
-    exact energy of every edge at twice its rest length (``½C·Σd²`` over the entries), floored; 0 for the
-    paper dynamics."""
-    if not problem.momentum:
+    exact energy of every edge at twice its rest length (``½C·Σd²`` over the entries), floored; 0 where
+    the float model has no floor."""
+    if not (problem.params.guard and problem.params.tol_energy > 0):
         return 0
     rest = problem.stream.rest
     reference = energy_raw(problem.fs, problem.half_spring, int(np.sum(rest * rest, dtype=object)), 0)
