@@ -117,3 +117,83 @@ def spherical_cap(rings: int = 10, half_angle_degrees: float = 60.0, radius: flo
                 faces.append([inner[i], outer[o % len(outer)], inner[(i + 1) % len(inner)]])
                 i += 1
     return Mesh(np.vstack(vertices), np.array(faces), name="cap")
+
+
+def capped_tube(cap_rings: int = 8, rows: int = 24, length: float = 5.0, radius: float = 0.4) -> Mesh:
+    """A finger: a hemispherical cap (:func:`spherical_cap` of ``cap_rings`` rings to 90°) continued by
+    ``rows`` rings of a cylinder wall of ``length``; a disk whose boundary is the open end."""
+    cap = spherical_cap(cap_rings, 90.0, radius)
+    n = 6 * cap_rings
+    rim = np.arange(cap.n_vertices - n, cap.n_vertices)
+    angle = np.arctan2(cap.vertices[rim, 1], cap.vertices[rim, 0])
+    order = np.argsort(angle)
+    rim, angle = rim[order], angle[order]
+    vertices, faces, previous = [cap.vertices], [cap.faces], rim
+    for row in range(1, rows + 1):
+        ring = cap.n_vertices + (row - 1) * n + np.arange(n)
+        vertices.append(np.column_stack([radius * np.cos(angle), radius * np.sin(angle),
+                                         np.full(n, cap.vertices[rim[0], 2] - row * length / rows)]))
+        nxt = np.roll(np.arange(n), -1)
+        faces += [np.column_stack([previous, ring, ring[nxt]]), np.column_stack([previous, ring[nxt], previous[nxt]])]
+        previous = ring
+    return Mesh(np.vstack(vertices), np.vstack(faces), name="tube")
+
+
+def cone_tip(rings: int = 20, half_angle_degrees: float = 10.0, height: float = 3.0) -> Mesh:
+    """A horn: :func:`spherical_cap`'s rings laid on a cone of ``half_angle_degrees`` around its apex."""
+    cap = spherical_cap(rings, 60.0, 1.0)
+    x, y = cap.vertices[:, 0], cap.vertices[:, 1]
+    slant = np.arcsin(np.clip(np.hypot(x, y), 0.0, 1.0)) / np.radians(60.0) * height / np.cos(
+        np.radians(half_angle_degrees))
+    theta = np.arctan2(y, x)
+    r = slant * np.sin(np.radians(half_angle_degrees))
+    return Mesh(np.column_stack([r * np.cos(theta), r * np.sin(theta), -slant * np.cos(np.radians(half_angle_degrees))]),
+                cap.faces, name="cone")
+
+
+def bent(mesh: Mesh, angle: float) -> Mesh:
+    """``mesh`` bent about the y axis by ``angle`` radians over its z extent (a bent finger)."""
+    x, y, z = mesh.vertices.T
+    phi = angle * (z.max() - z) / (np.ptp(z) or 1.0)
+    return Mesh(np.column_stack([x * np.cos(phi) - z * np.sin(phi), y, x * np.sin(phi) + z * np.cos(phi)]),
+                mesh.faces, name=f"bent {mesh.name}")
+
+
+def jittered(mesh: Mesh, amount: float, seed: int = 0) -> Mesh:
+    """``mesh`` with each vertex moved by a normal deviate of ``amount`` × the median edge length (a scan's noise)."""
+    rng = np.random.default_rng(seed)
+    step = amount * float(np.median(mesh.rest_lengths))
+    return Mesh(mesh.vertices + rng.normal(0.0, step, mesh.vertices.shape), mesh.faces, name=f"noisy {mesh.name}")
+
+
+def hard_patches() -> dict[str, Mesh]:
+    """Generated patches of the kinds that broke the unguarded dynamics on public scans (docs/corpus.md):
+    fingers and horn tips whose ARAP layout folds, and a sliver-strewn Delaunay patch."""
+    return {
+        "bent finger": bent(capped_tube(), 2.5),
+        "noisy finger": jittered(capped_tube(), 0.25),
+        "noisy horn": jittered(cone_tip(), 0.3),
+        "slivers": sliver_patch(),
+    }
+
+
+def sliver_patch(n_points: int = 400, seed: int = 1, squash: float = 0.02) -> Mesh:
+    """A bump triangulated by Delaunay in a squashed parameter domain, then unsquashed: thin slivers."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    ring = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    boundary = np.column_stack([np.cos(ring), np.sin(ring)])
+    radius = np.sqrt(rng.uniform(0, 0.85**2, n_points))
+    angle = rng.uniform(0, 2 * np.pi, n_points)
+    uv = np.vstack([boundary, np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])])
+    faces = Delaunay(uv * [1.0, squash]).simplices
+    z = 0.4 * np.exp(-3.0 * (uv**2).sum(axis=1))
+    return Mesh(np.column_stack([uv, z]), faces, name="slivers")
+
+
+def bumpy_grid(n: int = 31, height: float = 0.08, bumps: int = 3) -> Mesh:
+    """An ``n × n`` grid over the unit square lifted by ``bumps × bumps`` sine bumps of ``height``."""
+    uv = grid_uv(n, n) - 0.5
+    z = height * np.sin(2 * np.pi * bumps * uv[:, 0]) * np.sin(2 * np.pi * bumps * uv[:, 1])
+    return Mesh(np.column_stack([uv, z]), grid_faces(n, n), name="bumpy")

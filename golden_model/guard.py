@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["GUARD_LEVELS", "FLOOR_SHIFT", "FLOOR_MIN_SHIFT", "SCALE_GROW_AFTER", "SCALE_MAX_SHIFT",
-           "ENERGY_WINDOW", "ENERGY_FLOOR", "area_floor", "triangle_levels", "node_levels", "guarded_moves",
+           "ENERGY_WINDOW", "ENERGY_FLOOR", "area_floor", "triangle_levels", "node_levels", "stuck_nodes", "guarded_moves",
            "StepScale", "EnergyWindow"]
 
 #: Move fractions 1, 1/2, …, 2^-GUARD_LEVELS; a node none of them keeps safe does not move.
@@ -55,9 +55,9 @@ SCALE_MAX_SHIFT = 20
 #: Iterations over which the momentum dynamics' stop rule measures the energy change.
 ENERGY_WINDOW = 10
 #: The momentum dynamics' stop rule also holds once the energy is below this fraction of ``C·Σ d²``
-#: (the energy of a layout with every edge at twice its length), an rms strain of 1e-4: ``E → 0``
+#: (the energy of a layout with every edge at twice its length), an rms strain of 1e-3: ``E → 0``
 #: on a developable patch, where its relative change stays large however exact the layout is.
-ENERGY_FLOOR = 1e-8
+ENERGY_FLOOR = 1e-6
 
 
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -79,20 +79,20 @@ def _corners(values: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
     return [np.column_stack([x.take(faces[:, k]), y.take(faces[:, k])]) for k in range(3)]
 
 
-def triangle_levels(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarray, winding: float,
-                    doubled_rest: np.ndarray, levels: int = GUARD_LEVELS) -> np.ndarray:
-    """``(F,)`` the smallest ``r`` in 0 … ``levels`` with every corner subset moving by ``2^-r`` of its
-    proposal at or above the triangle's :func:`area_floor`; ``levels + 1`` where none is.
-
-    ``positions`` and ``proposal`` are ``(V, 2)``; ``faces`` ``(F, 3)`` in the mesh's winding;
-    ``winding`` σ = ±1 the pattern's orientation; ``doubled_rest`` ``(F,)`` = ``2A``.
-    """
+def _terms(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarray, winding: float,
+           doubled_rest: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]:
+    """Per triangle ``X0``, the linear terms ``L_a, L_b, L_c``, the pair terms ``Q_ab, Q_bc, Q_ca`` and the floor."""
     corner, move = _corners(positions, faces), _corners(proposal, faces)
     x0 = winding * _cross(corner[1] - corner[0], corner[2] - corner[0])
     linear = [winding * _cross(move[k], corner[(k + 1) % 3] - corner[(k + 2) % 3]) for k in range(3)]
     pair = [winding * _cross(move[k], move[(k + 1) % 3]) for k in range(3)]  # ab, bc, ca
-    floor = area_floor(x0, doubled_rest)
-    level = np.full(len(faces), levels + 1, dtype=np.int64)
+    return x0, linear, pair, area_floor(x0, doubled_rest)
+
+
+def _levels(x0: np.ndarray, linear: list[np.ndarray], pair: list[np.ndarray], floor: np.ndarray,
+            levels: int) -> np.ndarray:
+    """The certificate on the terms: the first level whose seven moving subsets clear the floor."""
+    level = np.full(len(x0), levels + 1, dtype=np.int64)
     # Every subset's area at the full step is at least X0 + Σ min(L_i, 0) − Σ |Q_ij|: where that bound
     # clears the floor (most triangles, most steps) level 0 holds without the seven subsets.
     bound = x0 + np.minimum(linear[0], 0) + np.minimum(linear[1], 0) + np.minimum(linear[2], 0) \
@@ -121,6 +121,17 @@ def triangle_levels(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarr
     return level
 
 
+def triangle_levels(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarray, winding: float,
+                    doubled_rest: np.ndarray, levels: int = GUARD_LEVELS) -> np.ndarray:
+    """``(F,)`` the smallest ``r`` in 0 … ``levels`` with every corner subset moving by ``2^-r`` of its
+    proposal at or above the triangle's :func:`area_floor`; ``levels + 1`` where none is.
+
+    ``positions`` and ``proposal`` are ``(V, 2)``; ``faces`` ``(F, 3)`` in the mesh's winding;
+    ``winding`` σ = ±1 the pattern's orientation; ``doubled_rest`` ``(F,)`` = ``2A``.
+    """
+    return _levels(*_terms(positions, proposal, faces, winding, doubled_rest), levels)
+
+
 def node_levels(face_levels: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """``(V,)`` each node's level: the largest of its triangles' (its smallest move fraction)."""
     level = np.zeros(n_vertices, dtype=np.int64)
@@ -129,13 +140,43 @@ def node_levels(face_levels: np.ndarray, faces: np.ndarray, n_vertices: int) -> 
     return level
 
 
+def _stuck(x0: np.ndarray, linear: list[np.ndarray], floor: np.ndarray, faces: np.ndarray, n_vertices: int,
+           levels: int) -> np.ndarray:
+    """See :func:`stuck_nodes`; from the certificate's terms."""
+    stuck = np.zeros(n_vertices, dtype=bool)
+    tau = 2.0**-levels
+    for k in range(3):  # X(t) = X0 + t·L_k is affine: failing at the smallest fraction, it fails at every one
+        stuck[faces[~(x0 + tau * linear[k] >= floor), k]] = True
+    return stuck
+
+
+def stuck_nodes(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarray, winding: float,
+                doubled_rest: np.ndarray, levels: int = GUARD_LEVELS) -> np.ndarray:
+    """``(V,)`` bool: the nodes whose own move, alone, takes one of their triangles below its floor even at the
+    smallest fraction ``2^-levels`` (or whose proposal is not finite). Such a node cannot move; holding it
+    still first keeps it from freezing its neighbours, whose moves the certificate would otherwise judge
+    together with its own."""
+    x0, linear, _, floor = _terms(positions, proposal, faces, winding, doubled_rest)
+    return _stuck(x0, linear, floor, faces, len(positions), levels) | ~np.isfinite(proposal).all(axis=1)
+
+
 def guarded_moves(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarray, winding: float,
                   doubled_rest: np.ndarray, levels: int = GUARD_LEVELS) -> tuple[np.ndarray, np.ndarray]:
-    """``(moves (V, 2), node levels (V,))``: each node's proposal times ``2^-level`` (0 past ``levels``)."""
-    level = node_levels(triangle_levels(positions, proposal, faces, winding, doubled_rest, levels), faces,
-                        len(positions))
-    moves = np.ldexp(proposal, -np.minimum(level, levels)[:, None])
-    moves[level > levels] = 0.0  # also where a proposal is not finite
+    """``(moves (V, 2), node levels (V,))``: each node's proposal times ``2^-level`` (0 past ``levels``).
+
+    Two rounds: the :func:`stuck_nodes` are held still, then every triangle's certificate is taken with
+    their proposals at 0 (which only removes terms, so it stays sound for the still nodes)."""
+    stuck = ~np.isfinite(proposal).all(axis=1)
+    free = np.where(stuck[:, None], 0.0, proposal)
+    x0, linear, pair, floor = _terms(positions, free, faces, winding, doubled_rest)
+    stuck |= _stuck(x0, linear, floor, faces, len(positions), levels)
+    held = [stuck[faces[:, k]] for k in range(3)]  # the certificate with the stuck nodes' terms at 0
+    linear = [np.where(held[k], 0.0, linear[k]) for k in range(3)]
+    pair = [np.where(held[k] | held[(k + 1) % 3], 0.0, pair[k]) for k in range(3)]
+    level = node_levels(_levels(x0, linear, pair, floor, levels), faces, len(positions))
+    level[stuck] = levels + 1
+    moves = np.ldexp(free, -np.minimum(level, levels)[:, None])
+    moves[level > levels] = 0.0
     return moves, level
 
 

@@ -24,8 +24,11 @@
   inverts a triangle, so the result is fold-free like the Tutte start.
 * a file: ``V`` rows ``x y`` (whitespace or comma separated; ``#`` comments),
   or an OBJ whose vertex *i* gives ``(x, y)`` of node *i* (read as the mesh
-  reader reads OBJ: tabs, CRLF, continuations).  Coordinates must be finite
-  and within ``|x| <= COORDINATE_LIMIT`` (1e50, as for meshes).
+  reader reads OBJ: tabs, CRLF, continuations; faces other than the mesh's,
+  or a z that is not 0, get a note: only x, y are used).  Coordinates must be
+  finite and within ``|x| <= COORDINATE_LIMIT`` (1e50, as for meshes).  The
+  file must be a regular file (a FIFO or a device is refused, never opened);
+  an empty path is refused.
 
 Every computed layout is oriented so that most faces are counter-clockwise
 (mirrored otherwise), which makes pictures comparable; the flattening itself
@@ -57,11 +60,11 @@ ARAP_MAX_ITERATIONS = 100
 """Upper bound on ARAP local/global iterations (run in chunks of 10)."""
 ARAP_TOLERANCE = 1e-9
 """ARAP stops early when a chunk moves no node more than this × the boundary length."""
-SLIM_MAX_ITERATIONS = 10
+SLIM_MAX_ITERATIONS = 20
 """Upper bound on SLIM iterations (run in chunks of 5)."""
-SLIM_TOLERANCE = 1e-5
-"""SLIM stops after a chunk that moved no node more than this × the boundary length (its E_C has
-settled to three digits by then on the corpus's meshes: docs/guard.md)."""
+SLIM_TOLERANCE = 0.05
+"""SLIM stops after a chunk that lowered its symmetric Dirichlet energy by less than this fraction: the
+dynamics takes it from there (docs/guard.md)."""
 
 
 class LayoutError(ValueError):
@@ -261,16 +264,16 @@ def slim_layout(mesh: Mesh) -> np.ndarray:
     """libigl's SLIM (symmetric Dirichlet) from :func:`tutte_layout`, free boundary, centred.
 
     Tutte's layout is fold-free and SLIM only takes steps that keep every triangle's orientation,
-    so the result is fold-free too; it stops after a chunk of 5 iterations that moved no node more
-    than :data:`SLIM_TOLERANCE` × the boundary length, or after :data:`SLIM_MAX_ITERATIONS`.
+    so the result is fold-free too; it stops after a chunk of 5 iterations that lowered the symmetric
+    Dirichlet energy by less than :data:`SLIM_TOLERANCE` (relative), or after :data:`SLIM_MAX_ITERATIONS`.
     """
+    from .untangle import symmetric_dirichlet
+
     igl = _igl("slim")
     vertices, faces = _igl_arrays(mesh)
     positions = tutte_layout(mesh)
     if np.sum(signed_areas_2d(positions, mesh.faces)) < 0:  # SLIM needs the mesh's own winding
         positions = positions * np.array([-1.0, 1.0])
-    loop = mesh.boundary_loop
-    perimeter = float(np.linalg.norm(vertices[np.roll(loop, -1)] - vertices[loop], axis=1).sum())
     try:
         data = igl.slim_precompute(np.asfortranarray(vertices), np.asfortranarray(faces.astype(np.int32)),
                                    np.asfortranarray(positions), igl.MappingEnergyType.SYMMETRIC_DIRICHLET,
@@ -278,33 +281,43 @@ def slim_layout(mesh: Mesh) -> np.ndarray:
     except Exception as exc:
         raise _libigl_failure("slim", "slim_precompute", exc) from None
     chunk = 5
+    energy = symmetric_dirichlet(mesh, positions)
     for _ in range(0, SLIM_MAX_ITERATIONS, chunk):
         try:
             moved = igl.slim_solve(data, chunk)
         except Exception as exc:
             raise _libigl_failure("slim", "slim_solve", exc) from None
-        moved = _checked("slim", "slim_solve", moved, mesh.n_vertices)
-        change = float(np.abs(moved - positions).max())
-        positions = moved
-        if change <= SLIM_TOLERANCE * perimeter:
+        positions = _checked("slim", "slim_solve", moved, mesh.n_vertices)
+        before, energy = energy, symmetric_dirichlet(mesh, positions)
+        if not energy < (1.0 - SLIM_TOLERANCE) * before:
             break
     positions -= positions.mean(axis=0)
     return _counter_clockwise(positions, mesh)
 
 
-def load_layout(path: str | Path, n_vertices: int) -> np.ndarray:
+def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None = None,
+                notes: list[str] | None = None) -> np.ndarray:
     """Read a user layout: a text file of ``x y`` rows, or an OBJ's vertex (x, y).
 
     A file that cannot be read is a :class:`LayoutError` "cannot read layout
-    '<path>': <reason>" (no such file, is a directory, permission denied, ...).
+    '<path>': <reason>" (no such file, is a directory, a FIFO or a device,
+    permission denied, ...); an empty path is refused.  For an OBJ, given the
+    mesh's ``faces``, a layout whose faces are not the mesh's (as sets of
+    corners), or whose z is not 0, gets a line in ``notes``: only the
+    vertices' x, y are used.
     """
+    if str(path) == "":
+        raise LayoutError(f"the layout '' is empty: name a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}) or a file")
     path = Path(path)
     data = read_file_bytes(path, "layout", LayoutError)
     if path.suffix.lower() == ".obj":
         try:
-            positions = read_obj_vertices(data, f"cannot parse layout '{path}'")[:, :2]
+            vertices = read_obj_vertices(data, f"cannot parse layout '{path}'")
         except MeshError as exc:
             raise LayoutError(str(exc)) from None
+        positions = vertices[:, :2]
+        if notes is not None and faces is not None and len(positions) == n_vertices:
+            notes.extend(_obj_layout_notes(path, data, vertices, faces))
     else:
         try:
             text = data.decode("utf-8-sig").replace(",", " ")
@@ -332,17 +345,38 @@ def load_layout(path: str | Path, n_vertices: int) -> np.ndarray:
     return positions
 
 
+def _obj_layout_notes(path: Path, data: bytes, vertices: np.ndarray, faces: np.ndarray) -> list[str]:
+    """What an OBJ layout has that is not used: faces other than the mesh's, a z that is not 0."""
+    from .mesh import read_obj
+
+    notes = []
+    try:
+        own = read_obj(path, data).faces
+        differ = len(own) != len(faces) or not np.array_equal(np.unique(np.sort(own, axis=1), axis=0),
+                                                              np.unique(np.sort(faces, axis=1), axis=0))
+        what = "no faces" if len(own) == 0 else f"{len(own)} faces that are not the mesh's {len(faces)}"
+    except MeshError as exc:
+        differ, what = True, f"faces that cannot be read ({str(exc).split(': ', 1)[-1]})"
+    if differ:
+        notes.append(f"layout '{path}' has {what}: only its vertices' x, y are used, in the mesh's vertex order")
+    z = float(np.abs(vertices[:, 2]).max(initial=0.0))
+    if z > 0:
+        notes.append(f"layout '{path}' has z up to {z:.3g}, not a flat layout: only x, y are used (z dropped)")
+    return notes
+
+
 _METHODS = {"tutte": tutte_layout, "pca": pca_layout, "harmonic": harmonic_layout, "lscm": lscm_layout,
             "arap": arap_layout, "slim": slim_layout}
 
 
-def initial_layout(mesh: Mesh, init: str | Path) -> np.ndarray:
+def initial_layout(mesh: Mesh, init: str | Path, notes: list[str] | None = None) -> np.ndarray:
     """``P0`` for ``init`` = one of :data:`LAYOUT_METHODS`, :data:`AUTO_START` (here: ARAP as it is;
-    :func:`start_layout` untangles) or a layout file path."""
+    :func:`start_layout` untangles) or a layout file path (what an OBJ layout has that is not used goes
+    to ``notes``, see :func:`load_layout`)."""
     method = _METHODS.get("arap" if str(init) == AUTO_START else str(init))
     if method is not None:
         return method(mesh)
-    return load_layout(init, mesh.n_vertices)
+    return load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes)
 
 
 @dataclass(frozen=True)
@@ -379,17 +413,18 @@ def start_layout(mesh: Mesh, init: str | Path, progress=None, untangle_seconds: 
     method = "arap" if name == AUTO_START else name
     described = f"the {method} layout" if method in _METHODS else f"the layout '{name}'"
     say(f"computing {described}" if method in _METHODS else f"reading {described}")
-    positions = initial_layout(mesh, method)
+    read_notes: list[str] = []
+    positions = initial_layout(mesh, method, read_notes)
     folded = _folds(mesh, positions)
     if folded == 0:
-        return StartLayout(positions, method, 0)
+        return StartLayout(positions, method, 0, read_notes)
     plural = "s" if folded != 1 else ""
     if name == AUTO_START:
         notes = [f"{described} folds {folded} triangle{plural}: starting from SLIM on Tutte's layout instead "
                  "(fold-free by construction)"]
         say(notes[-1])
         return StartLayout(slim_layout(mesh), "slim", 0, notes)
-    notes = [f"{described} folds {folded} triangle{plural}: untangling it"]
+    notes = read_notes + [f"{described} folds {folded} triangle{plural}: untangling it"]
     say(notes[-1])
     untangled = untangle_layout(mesh, positions, time_limit=untangle_seconds)
     if untangled.folded == 0:

@@ -26,6 +26,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from .files import read_regular_file
+
 __all__ = ["Mesh", "MeshError", "load_mesh", "triangle_areas_3d", "signed_areas_2d", "COORDINATE_LIMIT",
            "MIN_MESH_SIZE", "describe_os_error"]
 
@@ -60,9 +62,10 @@ def describe_os_error(exc: OSError) -> str:
 
 
 def read_file_bytes(path: Path, what: str, error: type[ValueError]) -> bytes:
-    """The bytes of ``path``; any OS error becomes ``error("cannot read <what> '<path>': <reason>")``."""
+    """The bytes of the regular file ``path``; any OS error, and a path that is no regular file (a FIFO, a
+    device: :func:`golden_model.files.read_regular_file`), becomes ``error("cannot read <what> '<path>': <reason>")``."""
     try:
-        return Path(path).read_bytes()
+        return read_regular_file(path)  # a FIFO or a device is refused, never opened
     except OSError as exc:
         raise error(f"cannot read {what} '{path}': {describe_os_error(exc)}") from None
 
@@ -474,6 +477,13 @@ def _read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str
     """STL (ASCII or binary) through trimesh, equal corners merged."""
     import trimesh  # heavy import, only needed for STL
 
+    binary = len(data) >= 84 and len(data) == 84 + 50 * int.from_bytes(data[80:84], "little")
+    if binary and len(data) == 84:
+        raise MeshError(f"invalid mesh '{path}': the binary STL holds 0 triangles")
+    if not binary:
+        # text: trimesh would guess a non-UTF-8 encoding with charset_normalizer (an optional
+        # dependency); STL keywords and numbers are ASCII, so undecodable bytes are replaced
+        data = data.decode("utf-8", errors="replace").encode("utf-8")
     try:
         loaded = trimesh.load(io.BytesIO(data), file_type="stl", process=False, maintain_order=True, force="mesh")
         vertices = np.asarray(loaded.vertices, dtype=np.float64)
@@ -608,7 +618,7 @@ def _ply_ascii(body: bytes, elements) -> dict:
         elif len(props) == 1 and count and _uniform_ascii_list(tokens, pos, count):
             length = int(tokens[pos])
             block = _ascii_numbers(tokens[pos:pos + count * (length + 1)], name, count * (length + 1))
-            columns = {props[0][0]: (block.reshape(count, length + 1)[:, 1:].ravel().astype(np.int64),
+            columns = {props[0][0]: (_ascii_indices(block.reshape(count, length + 1)[:, 1:].ravel(), name),
                                      np.full(count, length, dtype=np.int64))}
             pos += count * (length + 1)
         else:
@@ -628,7 +638,7 @@ def _ply_ascii(body: bytes, elements) -> dict:
                 raise ValueError(f"the file ends inside element '{name}' (fewer values than the header declares)")
             for prop, items in raw.items():
                 numbers = _ascii_numbers(items, name, len(items) if prop in lengths else count)
-                columns[prop] = ((numbers.astype(np.int64), np.asarray(lengths[prop], dtype=np.int64))
+                columns[prop] = ((_ascii_indices(numbers, name), np.asarray(lengths[prop], dtype=np.int64))
                                  if prop in lengths else numbers)
         values[name] = columns
     if pos < len(tokens):
@@ -644,6 +654,23 @@ def _uniform_ascii_list(tokens: list, pos: int, count: int) -> bool:
     stride = int(first) + 1
     lengths = tokens[pos:pos + count * stride:stride]
     return len(lengths) == count and len(tokens) >= pos + count * stride and all(t == first for t in lengths)
+
+
+#: Largest magnitude a face index read from a text file may have; far beyond any vertex count, and
+#: exactly representable in float64 (PLY ASCII numbers are read as floats), so a larger index is
+#: refused as out of range instead of wrapping in the conversion to int64.
+_INDEX_LIMIT = 1 << 53
+
+
+def _ascii_indices(numbers: np.ndarray, element: str) -> np.ndarray:
+    """The int64 indices of ASCII PLY list values read as floats; a fraction or a value past
+    :data:`_INDEX_LIMIT` is refused (no silent truncation or wrap-around)."""
+    bad = ~(np.abs(numbers) < _INDEX_LIMIT) | (numbers != np.floor(numbers))
+    if bad.any():
+        value = float(numbers[np.flatnonzero(bad)[0]])
+        what = "out of range" if not abs(value) < _INDEX_LIMIT else "not an integer"
+        raise ValueError(f"element '{element}' has an index {value:.17g} that is {what}")
+    return numbers.astype(np.int64)
 
 
 def _ascii_numbers(items: list, element: str, expected: int) -> np.ndarray:
@@ -781,8 +808,12 @@ def _read_off(data: bytes, where: str) -> tuple[np.ndarray, _Polygons]:
                 _is_int(t) for t in tokens[1:int(tokens[0]) + 1]):
             raise MeshError(f"{where}: line {number}: expected a face 'n i1 ... in', got {' '.join(tokens)[:40]!r}")
         size = int(tokens[0])
+        corners = [int(t) for t in tokens[1:size + 1]]
+        if any(not -_INDEX_LIMIT <= i < _INDEX_LIMIT for i in corners):  # beyond int64: no file has that many
+            bad = next(i for i in corners if not -_INDEX_LIMIT <= i < _INDEX_LIMIT)
+            raise MeshError(f"{where}: line {number}: face index {bad} is out of range")
         sizes.append(size)
-        index.extend(int(t) for t in tokens[1:size + 1])
+        index.extend(corners)
     return vertices, _checked_polygons(np.asarray(index, dtype=np.int64), np.asarray(sizes, dtype=np.int64),
                                        n_vertices, lambda f: f"line {lines[f]}", where)
 
@@ -793,7 +824,7 @@ def _uniform_off_faces(rows: list[list[str]]) -> np.ndarray | None:
         return None
     try:
         block = np.array(rows, dtype=np.bytes_).astype(np.int64)
-    except (ValueError, UnicodeEncodeError):
+    except (ValueError, UnicodeEncodeError, OverflowError):  # the slow path names the line
         return None
     return block if (block[:, 0] == block.shape[1] - 1).all() else None
 
@@ -1057,6 +1088,10 @@ def _obj_corner_slots(
                 f"{where}: line {corner_line[c]}: face corner {corners[c]!r} is not i, i/t, i//n or i/t/n "
                 "with integer indices"
             ) from None
+        except OverflowError:  # beyond int64: far past any file's vertex count
+            c = next(c for c, text in enumerate(strings) if not -(1 << 63) <= int(text) < 1 << 63)
+            raise MeshError(f"{where}: line {corner_line[c]}: face corner {corners[c]!r}: index {strings[c]} is "
+                            "out of range") from None
         written.append(np.array(present, dtype=bool))
     return slots, written
 
@@ -1079,7 +1114,7 @@ def _obj_uniform_corners(corners: list[str]) -> tuple[list[np.ndarray], list[np.
         return None
     try:
         values = np.fromiter(map(int, tokens), dtype=np.int64, count=len(tokens)).reshape(-1, width)
-    except ValueError:
+    except (ValueError, OverflowError):  # the slow path names the corner
         return None
     columns = iter(values.T)
     slots = [next(columns) if on else np.zeros(len(corners), dtype=np.int64) for on in form]

@@ -34,6 +34,7 @@ import numpy as np
 
 from .guard import ENERGY_FLOOR, ENERGY_WINDOW, GUARD_LEVELS, EnergyWindow, StepScale, guarded_moves
 from .mesh import Mesh, folded_faces, layout_orientation, signed_areas_2d
+from .modes import DYNAMICS, STEP_MODES, RunMode, Step, run_mode
 
 __all__ = [
     "FlattenParams",
@@ -60,9 +61,7 @@ __all__ = [
 ]
 
 Status = Literal["converged", "max-iterations", "diverged", "stalled"]
-STEP_MODES = ("variable", "fixed")
 UPDATE_ORDERS = ("jacobi", "sequential")
-DYNAMICS = ("paper", "momentum")
 
 
 class ParameterError(ValueError):
@@ -183,6 +182,11 @@ class FlattenParams:
                 raise ParameterError("damping belongs to the paper dynamics (--dynamics paper); the momentum "
                                      "dynamics damps by its restart (drop --damping)")
 
+    @property
+    def mode(self) -> RunMode:
+        """The run mode (:mod:`golden_model.modes`) these parameters select."""
+        return run_mode(self.dynamics, self.step, self.guard)
+
     def with_(self, **changes) -> "FlattenParams":
         """A copy with some fields changed (validated again)."""
         return replace(self, **changes)
@@ -250,13 +254,13 @@ class SpringModel:
         are all outside the barrier (the springs' stiffness alone)."""
         return node_weights(self.mesh, self.spring, None)
 
-    def step_weights(self, positions: np.ndarray) -> np.ndarray:
+    def step_weights(self, positions: np.ndarray, signed: np.ndarray | None = None) -> np.ndarray:
         """``(V,)`` this iteration's ``w_i``: :attr:`weights` at nodes with a triangle inside the
         barrier (``X < κ·X*``, :func:`barrier_active_nodes`), :attr:`spring_weights` elsewhere."""
         if self.barrier is None:
             return self.spring_weights
         active = barrier_active_nodes(positions, self.mesh.faces, self.mesh.face_areas, self.winding,
-                                      self.barrier[0])
+                                      self.barrier[0], signed)
         return np.where(active, self.weights, self.spring_weights)
 
 
@@ -307,13 +311,15 @@ def momentum_beta(k: int) -> float:
 
 
 def _barrier_shortfall(positions: np.ndarray, faces: np.ndarray, winding: float, doubled_rest: np.ndarray,
-                       kappa: float) -> np.ndarray:
+                       kappa: float, signed: np.ndarray | None = None) -> np.ndarray:
     """Per face ``(κ − X/X*)₊`` with ``X = σ·2A'``."""
-    return np.maximum(kappa - winding * 2.0 * signed_areas_2d(positions, faces) / doubled_rest, 0.0)
+    if signed is None:
+        signed = signed_areas_2d(positions, faces)
+    return np.maximum(kappa - winding * 2.0 * signed / doubled_rest, 0.0)
 
 
 def barrier_active_nodes(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, winding: float,
-                         kappa: float) -> np.ndarray:
+                         kappa: float, signed: np.ndarray | None = None) -> np.ndarray:
     """``(V,)`` bool: the nodes with a triangle inside the barrier, ``X_t < κ·X*_t``.
 
     Only there does the barrier add stiffness, so only there must the momentum step's weight
@@ -321,7 +327,7 @@ def barrier_active_nodes(positions: np.ndarray, faces: np.ndarray, face_areas: n
     dynamics as fast as without the barrier.
     """
     active = np.zeros(len(positions), dtype=bool)
-    inside = _barrier_shortfall(positions, faces, winding, 2.0 * face_areas, kappa) > 0
+    inside = _barrier_shortfall(positions, faces, winding, 2.0 * face_areas, kappa, signed) > 0
     active[faces[inside].ravel()] = True
     return active
 
@@ -333,7 +339,7 @@ def _scatter(nodes: np.ndarray, moves: np.ndarray, n: int) -> np.ndarray:
 
 
 def barrier_energy(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, winding: float,
-                   kappa: float, gain: float, spring: float) -> float:
+                   kappa: float, gain: float, spring: float, signed: np.ndarray | None = None) -> float:
     """Fold-barrier energy ``Σ_t ½·μ·C·X*_t·(κ − X_t/X*_t)₊²``.
 
     ``X_t = σ·2A'_t`` is the face's doubled 2D area in the pattern's winding
@@ -342,12 +348,12 @@ def barrier_energy(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndar
     towards a fold and beyond.  On the springs' scale (``C``, lengths²).
     """
     doubled_rest = 2.0 * face_areas
-    short = _barrier_shortfall(positions, faces, winding, doubled_rest, kappa)
+    short = _barrier_shortfall(positions, faces, winding, doubled_rest, kappa, signed)
     return float(0.5 * gain * spring * np.sum(doubled_rest * short * short))
 
 
 def barrier_forces(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndarray, winding: float,
-                   kappa: float, gain: float, spring: float) -> np.ndarray:
+                   kappa: float, gain: float, spring: float, signed: np.ndarray | None = None) -> np.ndarray:
     """``(V, 2)`` barrier forces ``−¼·∂B/∂P`` (the springs' convention, eq. 2).
 
     Per face and corner ``i`` with the other corners ``j, k`` in winding order:
@@ -355,7 +361,7 @@ def barrier_forces(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndar
     direction that grows the face's area fastest.  ``faces`` may be a subset
     of the mesh's (with their 3D ``face_areas``).
     """
-    short = _barrier_shortfall(positions, faces, winding, 2.0 * face_areas, kappa)
+    short = _barrier_shortfall(positions, faces, winding, 2.0 * face_areas, kappa, signed)
     active = np.flatnonzero(short)  # the barrier acts on few faces: only theirs are gathered
     faces = faces[active]
     coefficient = 0.25 * gain * spring * winding * short[active]
@@ -443,7 +449,8 @@ class Measurement:
         return all(math.isfinite(v) for v in (self.area_error, self.shape_error, self.energy))
 
 
-def measure(model: SpringModel, positions: np.ndarray, length: np.ndarray | None = None) -> Measurement:
+def measure(model: SpringModel, positions: np.ndarray, length: np.ndarray | None = None,
+            signed: np.ndarray | None = None) -> Measurement:
     """``E_S``, ``E_C``, energy and flipped count of ``positions``.
 
     ``length`` (the 2D edge lengths) may be passed when already computed.
@@ -452,14 +459,16 @@ def measure(model: SpringModel, positions: np.ndarray, length: np.ndarray | None
     if length is None:
         delta = positions[mesh.edges[:, 1]] - positions[mesh.edges[:, 0]]
         length = np.hypot(delta[:, 0], delta[:, 1])
-    signed = signed_areas_2d(positions, mesh.faces)
+    if signed is None:
+        signed = signed_areas_2d(positions, mesh.faces)
     area_error = float(np.sum(np.abs(mesh.face_areas - np.abs(signed))) / np.sum(mesh.face_areas))
     shape_error = float(np.sum(np.abs(mesh.rest_lengths - length)) / np.sum(mesh.rest_lengths))
     flipped = int(np.sum(model.orientation * signed < 0))
     folded = int(np.count_nonzero(folded_faces(positions, mesh.faces)))
     energy = spring_energy(length, mesh.rest_lengths, model.spring)
     if model.barrier is not None:
-        energy += barrier_energy(positions, mesh.faces, mesh.face_areas, model.winding, *model.barrier, model.spring)
+        energy += barrier_energy(positions, mesh.faces, mesh.face_areas, model.winding, *model.barrier, model.spring,
+                                 signed)
     return Measurement(area_error, shape_error, energy, flipped, folded)
 
 
@@ -592,8 +601,9 @@ class FlattenResult:
 
 def energy_floor(mesh: Mesh, params: FlattenParams) -> float:
     """The energy below which the stop rule's energy part holds whatever its change:
-    ``ENERGY_FLOOR·C·Σd²`` with the momentum dynamics, 0 with the paper's (Algorithm 1)."""
-    if params.dynamics != "momentum":
+    ``ENERGY_FLOOR·C·Σd²`` in the guarded momentum mode; 0 (no floor) in the other modes, whose stop
+    rule is the one the engine has, and with ``tol_energy = 0``, which asks for no energy stop."""
+    if not (params.guard and params.tol_energy > 0):
         return 0.0
     return ENERGY_FLOOR * params.spring * float(np.sum(mesh.rest_lengths**2))
 
@@ -655,9 +665,10 @@ class _Jacobi:
         self.delta = np.column_stack([x.take(self.edges[:, 1]) - x.take(self.edges[:, 0]),
                                       y.take(self.edges[:, 1]) - y.take(self.edges[:, 0])])
         self.length = np.hypot(self.delta[:, 0], self.delta[:, 1])
+        self.signed = signed_areas_2d(self.positions, self.model.mesh.faces)
 
     def measure(self) -> Measurement:
-        return measure(self.model, self.positions, self.length)
+        return measure(self.model, self.positions, self.length, self.signed)
 
     def forces(self) -> np.ndarray:
         """Spring forces (eq. 2) plus the barrier's, all from the current positions."""
@@ -665,11 +676,11 @@ class _Jacobi:
         forces = _accumulate(_edge_terms(self.delta, self.length, self.rest, p.spring), self.edges, len(self.positions))
         if model.barrier is not None:
             forces += barrier_forces(self.positions, model.mesh.faces, model.mesh.face_areas, model.winding,
-                                     *model.barrier, p.spring)
+                                     *model.barrier, p.spring, self.signed)
         return forces
 
     def advance(self, dt: float) -> None:
-        if self.params.dynamics == "momentum":
+        if self.params.mode.step is Step.MOMENTUM:
             self._advance_momentum()
             return
         p = self.params
@@ -696,7 +707,7 @@ class _Jacobi:
             self.velocities[:] = 0.0
             self.momentum_k = 0
         power = float(np.sum(forces * self.velocities))  # S = Σ f·V, acted on next iteration
-        weights = self.model.step_weights(self.positions)
+        weights = self.model.step_weights(self.positions, self.signed)
         if guard is not None:
             weights = guard.scale.value * weights
         proposal = momentum_beta(self.momentum_k) * self.velocities + weights[:, None] * forces
@@ -713,7 +724,7 @@ class _Jacobi:
         mesh = self.model.mesh
         moves, levels = guarded_moves(self.positions, proposal, mesh.faces, self.model.winding, 2.0 * mesh.face_areas)
         guard.count_levels(levels)
-        before = (self.positions, self.delta, self.length)
+        before = (self.positions, self.delta, self.length, self.signed)
         self.positions = self.positions + moves
         self._refresh()
         energy = self.energy_of_layout()
@@ -725,7 +736,7 @@ class _Jacobi:
             self.restart = power < 0
             guard.scale = guard.scale.accepted_step()
         else:
-            self.positions, self.delta, self.length = before
+            self.positions, self.delta, self.length, self.signed = before
             self.velocities = np.zeros_like(self.velocities)
             self.momentum_k = 0
             self.restart = False
@@ -739,7 +750,7 @@ class _Jacobi:
         energy = spring_energy(self.length, self.rest, model.spring)
         if model.barrier is not None:
             energy += barrier_energy(self.positions, model.mesh.faces, model.mesh.face_areas, model.winding,
-                                     *model.barrier, model.spring)
+                                     *model.barrier, model.spring, self.signed)
         return energy
 
 
@@ -826,10 +837,11 @@ def run(engine, params: FlattenParams, density: float, initial_positions: np.nda
     float formula of eqs. 18–20, or ``params.dt`` for the fixed step).
     """
     if step_size is None:
-        if params.dynamics == "momentum":
+        step = params.mode.step
+        if step is Step.MOMENTUM:
             def step_size(_: Measurement) -> float:
                 return 1.0  # Δt = 1: the weights w_i carry the step
-        elif params.step == "fixed":
+        elif step is Step.FIXED:
             def step_size(_: Measurement) -> float:
                 return params.dt
         else:

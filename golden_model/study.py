@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import time
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
@@ -571,6 +572,9 @@ _WORKER_CASES: list[StudyCase] | None = None
 def _init_worker(cases: list[StudyCase]) -> None:
     global _WORKER_CASES
     _WORKER_CASES = cases
+    # Ctrl-C reaches the whole process group: the parent stops the study (and says so in one line);
+    # a worker finishes its run quietly instead of printing a traceback of its own
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _worker_task(fs: FormatSet, index: int) -> _FixedOutcome:

@@ -27,7 +27,7 @@ from threadpoolctl import threadpool_limits
 
 from .mesh import Mesh, layout_orientation
 
-__all__ = ["UntangleResult", "untangle_layout", "UNTANGLE_THETA"]
+__all__ = ["UntangleResult", "untangle_layout", "symmetric_dirichlet", "UNTANGLE_THETA"]
 
 #: The weight of the area term against the shape term (the paper's 1/128).
 UNTANGLE_THETA = 1.0 / 128.0
@@ -61,6 +61,17 @@ def _reference_gradients(mesh: Mesh) -> np.ndarray:
     inv[:, 1, 1] = 1.0 / y_c
     corners = np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
     return np.einsum("kj,fja->fka", corners, inv)  # G_k = corners[k] · E^-1
+
+
+def symmetric_dirichlet(mesh: Mesh, positions: np.ndarray) -> float:
+    """``Σ_t A_t·(|J|²_F + |J⁻¹|²_F)`` (SLIM's energy; infinite where a triangle is flat or folded)."""
+    corner = np.asarray(positions, dtype=np.float64)[mesh.faces]
+    jac = np.einsum("fkd,fka->fda", corner, _reference_gradients(mesh))
+    det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
+    norm = np.sum(jac * jac, axis=(1, 2))
+    with np.errstate(divide="ignore"):
+        per_face = np.where(det > 0, norm * (1.0 + 1.0 / (det * det)), np.inf)
+    return float(np.sum(mesh.face_areas * per_face))
 
 
 def _chi(det: np.ndarray, eps: float) -> np.ndarray:

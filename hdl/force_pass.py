@@ -11,12 +11,11 @@ import functools
 from dataclasses import dataclass
 from types import SimpleNamespace
 
-from amaranth.hdl import Cat, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, Module, Mux, Shape, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.pipeline import accumulator_guard_bits
 
 from .fixedpoint import clamp, shape_of, shift_round, sum_round
 from .layouts import (FORCE_ENTRY_EVENTS, FORCE_NODE_EVENTS, force_entry_layout, force_saturations_max,
@@ -297,12 +296,12 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
     # B11: per-node accumulators with guard bits (exact; rounded and saturated once, in N1, N2),
     # restarted on a node's first entry. The stage's valid bit is the node's last entry: from
     # here on one beat is one node.
-    guard = accumulator_guard_bits(fs.max_degree)
+    acc = {name: Shape(width, is_signed) for name, (is_signed, width) in fs.accumulators().items()}
     out = ports.o.payload
     sums = {  # name: (accumulator shape, this entry's term, combine)
-        "f_x": (signed(fs.force.width + 1 + guard), live["f_x"], "add"),  # + 1: two terms per entry
-        "f_y": (signed(fs.force.width + 1 + guard), live["f_y"], "add"),
-        "e": (unsigned(fs.rest_length.width + guard), live["e"], "add"),
+        "f_x": (acc["force"], live["f_x"], "add"),  # two terms per entry with the barrier
+        "f_y": (acc["force"], live["f_y"], "add"),
+        "e": (acc["error"], live["e"], "add"),
         "inside": (unsigned(1), live["inside"], "or"),  # a triangle of the node is inside the barrier
     }
     if energy:

@@ -12,7 +12,6 @@ from amaranth.lib import data
 
 from golden_model.fixed import MAX_PRODUCT_WIDTH, Format, FormatSet
 from golden_model.fixed.engine_image import MemoryLayout
-from golden_model.fixed.pipeline import accumulator_guard_bits
 
 from .fixedpoint import shape_of
 
@@ -140,10 +139,9 @@ def node_force_layout(fs: FormatSet, energy: bool = False, saturations: bool = F
     """
     fields = {"force": vector_layout(fs.force_acc), "error_sum": shape_of(fs.error_acc), "inside": unsigned(1)}
     if energy:
-        guard = accumulator_guard_bits(fs.max_degree)
-        coeff_bits = fs.barrier_coeff.width - int(fs.barrier_coeff.signed)  # c ≥ 0
-        fields["error_squares"] = unsigned(2 * fs.rest_length.width + guard)
-        fields["barrier_energy"] = unsigned(coeff_bits + fs.area.width - 1 + guard)  # h < 2**(area.width − 1)
+        acc = fs.accumulators()  # c ≥ 0 and h < 2**(area.width − 1): both unsigned
+        fields["error_squares"] = unsigned(acc["error_squares"][1])
+        fields["barrier_energy"] = unsigned(acc["barrier_energy"][1])
     if saturations:
         fields["saturations"] = saturations_shape(force_saturations_max(fs))
     return data.StructLayout(fields)

@@ -8,7 +8,9 @@ Subcommands:
 
 Bad input never produces a traceback: every user error, an unreadable or
 unwritable file included, is one line on stderr (``springflat: error: ...``)
-and exit status 2, and leaves no file behind.  A run that diverges exits with
+and exit status 2, and leaves no file behind; Ctrl-C is the one line
+``springflat: interrupted`` and exit status 130, with no output left behind
+(the policy for output paths: :mod:`sim.outputs`).  A run that diverges exits with
 status 3 after writing what was asked for.  ``--json`` prints standard JSON:
 a number that is not finite is ``null`` and its key is listed in
 ``non_finite`` (the status, ``diverged``, says why).
@@ -17,7 +19,10 @@ a number that is not finite is ``null`` and its key is listed in
 from __future__ import annotations
 
 import argparse
+import math
+import signal
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -25,14 +30,17 @@ import numpy as np
 from golden_model.layouts import LAYOUT_METHODS
 from golden_model.mesh import Mesh, describe_os_error
 from golden_model.fixed.engine import check_fixed_params, flatten_fixed
+from golden_model.fixed.formats_set import FormatSet
 from golden_model.reference import FlattenParams, FlattenResult, flatten
 
 from .distortion import distortion, worst_summary, write_distortion_csv
-from .outputs import OutputWriteError, all_or_nothing, check_output_path, write_history, write_plot
+from .entry import EXIT_INTERRUPTED
+from .outputs import (OutputWriteError, all_or_nothing, atomic_directory, check_distinct, check_not_interrupted,
+                      check_output_path, on_interrupt, reset_interrupted, write_history, write_plot)
 from .patterns import PATTERN_SUFFIXES, PatternDrawing, add_pattern_options, check_mesh_fits, run_caption, \
     scale_note, write_pattern_file
 from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, add_run_options, default_init,
-                          load_format_set, params_from_args, resolve_mesh, start_positions, strict_json)
+                          input_files, load_format_set, params_from_args, resolve_mesh, start_positions, strict_json)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -58,17 +66,20 @@ def cmd_flatten(args: argparse.Namespace) -> int:
     params = params_from_args(args, defaults)
     check_outputs(args)
     check_print_size(args, mesh)
-    result = run_flatten(args, mesh, params, progress=sys.stderr.isatty() or not args.json)
+    result = run_flatten(args, mesh, params, progress=sys.stderr.isatty())  # progress to a terminal only
     _write_outputs(args, mesh, result)
     if args.json:
         print(strict_json(json_summary(args, mesh, params, result)))
     else:
         print(human_line(mesh, result))
         print(_what_was_used(params, args.init, result), file=sys.stderr)
-    note = scale_note(PatternDrawing.of(mesh, result.positions, args.units)) if any(
-        not str(path).lower().endswith((".flat.obj", ".flat.svg")) for path in args.out or ()) else None
-    if note:
-        print(f"springflat: note: {note}", file=sys.stderr)
+    formats = load_format_set(args.formats or "default") if args.engine in ("fixed", "rtl", "board") else None
+    scale = scale_note(PatternDrawing.of(mesh, result.positions, args.units)) if any(
+        str(path).lower().endswith((".pdf", ".svg", ".dxf")) and not str(path).lower().endswith(".flat.svg")
+        for path in args.out or ()) else None  # a print or cut at the wrong scale; vt and layouts have none
+    for note in (scale, _energy_rule_note(params, result), _error_resolution_note(formats)):
+        if note:
+            print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":
         print(f"springflat: the run diverged at iteration {result.iterations + 1} ({divergence_hint(params)}); "
               "outputs hold the last finite state", file=sys.stderr)
@@ -91,6 +102,8 @@ def check_outputs(args: argparse.Namespace) -> None:
                                     (args.distortion, "--distortion", (".csv",))]):
         if path is not None:
             check_output_path(path, what, suffixes)
+    if args.init is None:
+        args.init = default_init(args.mesh)
     _check_distinct_files(args)
 
 
@@ -111,6 +124,10 @@ def choose_engine(args: argparse.Namespace):
         return engine
     if args.engine == "rtl":
         return _rtl_engine(load_format_set(args.formats or "default"))
+    if args.engine == "board":  # the engine on a board, over its UART (sim/board_run.py)
+        from .board_run import board_engine
+
+        return board_engine(load_format_set(args.formats or "default"), args.port, args.baud)
     if args.formats is not None:
         raise UserError("--formats applies to --engine fixed and --engine rtl")
     return flatten
@@ -121,10 +138,11 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
 
     What the formats or the engine cannot run is refused before any layout work; a guarded run starts
     fold-free where that can be had (:func:`~sim.run_options.start_positions`)."""
-    args.init = args.init or default_init(args.mesh)
-    if args.engine in ("fixed", "rtl"):
+    if args.init is None:
+        args.init = default_init(args.mesh)
+    if args.engine in ("fixed", "rtl", "board"):
         check_fixed_params(params, load_format_set(args.formats or "default"))
-        if args.engine == "rtl":
+        if args.engine in ("rtl", "board"):
             from golden_model.fixed.engine_image import check_engine_params
 
             check_engine_params(params)
@@ -213,20 +231,52 @@ def _what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> s
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 
+#: Iterations :func:`_energy_rule_note` looks back over.
+ENERGY_NOTE_WINDOW = 50
+
+
+def _energy_rule_note(params: FlattenParams, result: FlattenResult) -> str | None:
+    """Why a fixed-point run ended at N_max under the energy rule, when its energy never settled below ε.
+
+    The fixed-point energy changes by its own rounding from one iteration to the next; near the
+    minimum that floor can be above ``--tol-energy`` (docs/dynamics.md), so the rule cannot hold.
+    """
+    energy = np.asarray(result.history.energy[-ENERGY_NOTE_WINDOW - 1:], dtype=float)
+    if (result.engine == "float" or result.status != "max-iterations" or not params.tol_energy > 0
+            or len(energy) <= ENERGY_NOTE_WINDOW or not np.isfinite(energy).all()):
+        return None
+    steps = np.diff(energy)
+    if np.count_nonzero(steps > 0) < ENERGY_NOTE_WINDOW // 4:  # still descending, not at the floor
+        return None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        change = np.abs(steps) / energy[:-1]
+    smallest = float(np.nanmin(change)) if np.isfinite(change).any() else math.inf
+    if not smallest > params.tol_energy:
+        return None
+    return (f"over the last {len(change)} iterations the relative energy change never fell below {smallest:.2g}, "
+            f"above --tol-energy {params.tol_energy:g}: the fixed-point energy moves by its rounding at that level "
+            "near the minimum, so the rule could not hold (a larger --tol-energy stops there; docs/dynamics.md)")
+
+
+#: The resolution of E_S and E_C as printed (four decimals): a coarser error format gets a note.
+PRINTED_ERROR_RESOLUTION = 5e-5
+
+
+def _error_resolution_note(formats: FormatSet | None) -> str | None:
+    """E_S and E_C of the fixed-point engine are values of the ``error`` format: say so when it is coarser
+    than the printed digits (an error of 0.0053 reads 0.0000 in u0.1)."""
+    if formats is None or formats.error.lsb <= PRINTED_ERROR_RESOLUTION:
+        return None
+    return (f"format set '{formats.name}' holds E_S and E_C in error {formats.error}: they are multiples of "
+            f"{formats.error.lsb:.3g}, the values above are rounded to that")
+
+
 def _check_distinct_files(args: argparse.Namespace) -> None:
-    """No two outputs may be one file, and no output may overwrite the mesh."""
-    seen: dict[Path, str] = {}
-    mesh_path = Path(args.mesh)
-    if mesh_path.is_file():
-        seen[mesh_path.resolve()] = f"the mesh '{args.mesh}'"
-    for what, path in ([("--out", path) for path in args.out or ()]
-                       + [("--history", args.history), ("--plot", args.plot), ("--distortion", args.distortion)]):
-        if path is None:
-            continue
-        key = Path(path).resolve()
-        if key in seen:
-            raise UserError(f"{what} '{path}' is the same file as {seen[key]}")
-        seen[key] = f"{what} '{path}'"
+    """No two outputs may be one file, and no output may be an input (the mesh, the --init or --formats
+    file), compared by device and inode."""
+    check_distinct([("--out", path) for path in args.out or ()]
+                   + [("--history", args.history), ("--plot", args.plot), ("--distortion", args.distortion)],
+                   input_files(args))
 
 
 def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:
@@ -257,8 +307,10 @@ def _write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) 
 def cmd_paper(args: argparse.Namespace) -> int:
     from .paper import reproduce_paper
 
-    report = reproduce_paper(Path(args.out), init=args.init, progress=not args.quiet)
-    print(f"wrote {report}")
+    out = Path(args.out)
+    with atomic_directory(out) as build:  # all of the report or nothing, also on Ctrl-C
+        report = reproduce_paper(build, init=args.init, progress=not args.quiet)
+    print(f"wrote {out / report.name}")
     return 0
 
 
@@ -268,13 +320,13 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats)
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"--out '{out}' exists and is not a directory")
-    interface = export_verilog(formats, out)
+    inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
+    with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
+        interface = export_verilog(formats, build)
+        engine = export_engine_bundle(formats, capacity, build)
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
     print(f"{out / 'interface.md'}, {out / 'interface.json'}")
-    engine = export_engine_bundle(formats, capacity, out)
     print(f"{out / engine['files'][0]}: capacity {capacity.vertices} vertices, {capacity.entries} entries, "
           f"{capacity.triangles} triangles; {engine['bus']}")
     print(", ".join(str(out / f) for f in engine["files"][1:]))
@@ -283,9 +335,10 @@ def cmd_verilog(args: argparse.Namespace) -> int:
 
 def add_engine_options(parser: argparse.ArgumentParser) -> None:
     """``--engine`` and ``--formats`` of ``flatten`` (also the keywords of ``springflat.flatten``)."""
-    parser.add_argument("--engine", choices=("float", "fixed", "rtl"), default="float",
-                        help="float reference (default), the bit-exact fixed-point golden model, or rtl: the whole "
-                             "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)")
+    parser.add_argument("--engine", choices=("float", "fixed", "rtl", "board"), default="float",
+                        help="float reference (default), the bit-exact fixed-point golden model, rtl: the whole "
+                             "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed), or "
+                             "board: the engine on a ULX3S over its USB-UART (--port; docs/board.md)")
     parser.add_argument("--formats", default=None, metavar="PRESET|FILE",
                         help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
 
@@ -301,6 +354,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
     add_run_options(p)
     add_engine_options(p)
+    from .board_run import add_board_options
+
+    add_board_options(p)
     p.add_argument("--out", type=Path, action="append", metavar="FILE",
                    help="the pattern, by its ending (repeat for several): .dxf (cut line on layer CUT), .pdf or "
                         ".svg (true scale on --paper sheets), .obj (the 3D mesh with the pattern as vt), "
@@ -342,11 +398,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _quiet_after_interrupt() -> None:
+    """After Ctrl-C, the objects a half-done step leaves are collected: their finalisers' warnings (such as
+    amaranth's UnusedElaboratable for a half-elaborated design) and errors are noise, not for the user."""
+    import warnings
+
+    warnings.simplefilter("ignore")
+    sys.unraisablehook = lambda unraisable: None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    reset_interrupted()
+    handler = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, on_interrupt) if handler else None  # Ctrl-C: one line, status 130
     try:
-        return args.func(args)
+        try:
+            status = args.func(args)
+            check_not_interrupted()  # a Ctrl-C a finaliser swallowed still ends the command as interrupted
+            return status
+        except Exception:
+            # A Ctrl-C can come back as another exception: an import it cut short is an ImportError (numpy's,
+            # libigl's), which a command may turn into a one-line error of its own. It is still Ctrl-C.
+            check_not_interrupted()
+            raise
     except USER_ERRORS + (UserError,) as exc:
         print(f"springflat: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -355,8 +431,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"springflat: error: cannot access{name}: {describe_os_error(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
+        if argv is None:  # the program itself, which ends now (not a caller running it in-process)
+            _quiet_after_interrupt()
         print("springflat: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    finally:
+        if handler:
+            signal.signal(signal.SIGINT, previous)
 
 
 if __name__ == "__main__":

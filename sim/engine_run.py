@@ -30,8 +30,11 @@ from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
-           "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl", "summary_line",
-           "simulation_harness", "top_ports", "build_flags"]
+           "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl",
+           "engine_flatten_result",
+           "summary_line",
+           "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo",
+           "harness_ceiling", "INTERNAL_CLOCK_BUILDS"]
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
 #: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and
@@ -53,9 +56,44 @@ VERILATOR_MAKE_FLAGS = r"OPT_FAST=-O3\ -march=native"
 ICARUS_FLAGS = ("-g2005",)
 
 
-def build_flags(simulator: str) -> tuple[tuple[str, ...], str]:
-    """The simulator's extra build arguments and make variables for the engine."""
-    return (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS) if simulator == "verilator" else (ICARUS_FLAGS, "")
+#: Verilator's ``--timing`` (the harness's own clock) needs C++20 coroutines; the wheel's ``verilated.mk``
+#: leaves both of its variables for them empty.
+TIMING_MAKE_FLAGS = " CFG_CXXFLAGS_COROUTINES=-fcoroutines CFG_CXXFLAGS_STD=-std=gnu++20"
+#: The bench's clock period is 10 ns (``sim.cocotb_benches.common.CLOCK_NS``).
+CLOCK_HALF_PERIOD_NS = 5
+
+#: Verilator builds of the engine that ``benchmarks/bench_sim_speed.py`` compares (``build=`` of
+#: :func:`run_image_on_rtl`): (extra Verilator arguments, make variables). ``default`` is what every run
+#: uses: the harness makes its own clock (``internal-clock``, the same build), 1.48x ``gpi-clock``'s speed
+#: measured in one run (``docs/verification.md``). ``gpi-clock`` is cocotb's GPI clock, a callback at
+#: every clock edge; the others each change one thing against it. ``pgo`` is ``gpi-clock`` compiled a
+#: second time with g++'s profile of a training run (:func:`prepare_pgo`).
+VERILATOR_BUILDS = {
+    "default": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
+    "internal-clock": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
+    "gpi-clock": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS),
+    "x-randomised": (VERILATOR_SPEED_FLAGS[:3], VERILATOR_MAKE_FLAGS),  # Verilator's default X handling
+    "cxx-O2": (VERILATOR_SPEED_FLAGS, r"OPT_FAST=-O2"),
+    "verilator-O3": (VERILATOR_SPEED_FLAGS + ("-O3",), VERILATOR_MAKE_FLAGS),
+    "threads-2": (VERILATOR_SPEED_FLAGS + ("--threads", "2"), VERILATOR_MAKE_FLAGS),
+    "pgo-generate": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS + r"\ -fprofile-generate LOADLIBES=-lgcov"),
+    "pgo": (VERILATOR_SPEED_FLAGS,
+            VERILATOR_MAKE_FLAGS + r"\ -fprofile-use\ -fprofile-partial-training\ -Wno-missing-profile"),
+}
+
+
+#: Builds whose harness makes its own clock (:func:`simulation_harness`); the bench then starts none.
+INTERNAL_CLOCK_BUILDS = frozenset({"default", "internal-clock"})
+
+
+def build_flags(simulator: str, build: str = "default") -> tuple[tuple[str, ...], str]:
+    """The simulator's extra build arguments and make variables for the engine (``build``: a key of
+    :data:`VERILATOR_BUILDS`; Icarus has one)."""
+    if simulator != "verilator":
+        return ICARUS_FLAGS, ""
+    if build not in VERILATOR_BUILDS:
+        raise ValueError(f"unknown Verilator build {build!r} (choose from {', '.join(VERILATOR_BUILDS)})")
+    return VERILATOR_BUILDS[build]
 
 _PORT = re.compile(r"^\s*(input|output)\s+(\[\d+:\d+\]\s+)?([A-Za-z_][A-Za-z0-9_$]*);$", re.MULTILINE)
 
@@ -67,7 +105,7 @@ def top_ports(verilog: str, module: str = ENGINE_MODULE) -> list[tuple[str, str,
     return [(m[1], (m[2] or "").strip(), m[3]) for m in _PORT.finditer(body)]
 
 
-def simulation_harness(verilog: str) -> str:
+def simulation_harness(verilog: str, internal_clock: bool = False) -> str:
     """Verilog of ``springflat_engine_sim``: ``springflat_engine`` with the same ports, ``rst`` registered once.
 
     Why: Verilator evaluates the logic that reads a top-level input at every ``eval`` (its "ico"
@@ -75,15 +113,28 @@ def simulation_harness(verilog: str) -> str:
     ``always @*`` block; behind a flip-flop it is evaluated once per clock with the rest. A reset
     takes effect one clock later; nothing else changes (the bus inputs stay direct, as Wishbone's
     handshake needs).
+
+    With ``internal_clock`` the harness makes the clock itself (``always #5 clk = ~clk``, the bench's
+    10 ns period; Verilator's ``--timing``) and ``clk`` becomes an output the bench watches: no cocotb
+    callback toggles it twice per cycle (:data:`INTERNAL_CLOCK_BUILDS`).
     """
     ports = top_ports(verilog)
     names = {name for _, _, name in ports}
     if not {"clk", "rst"} <= names:
         raise ValueError(f"{ENGINE_MODULE} has no clk/rst ports (has {sorted(names)})")
-    declarations = ",\n".join(f"  {direction} {f'{width} ' if width else ''}{name}" for direction, width, name in ports)
+
+    def declaration(direction, width, name):
+        if internal_clock and name == "clk":
+            return "  output reg clk"
+        return f"  {direction} {f'{width} ' if width else ''}{name}"
+
+    declarations = ",\n".join(declaration(*port) for port in ports)
     connections = ",\n".join(f"    .{name}({'rst_q' if name == 'rst' else name})" for _, _, name in ports)
-    return (f"// Simulation top (sim/engine_run.py): {ENGINE_MODULE} with rst through one flip-flop.\n"
+    clock = (f"  initial clk = 1'b0;\n  always #{CLOCK_HALF_PERIOD_NS} clk = ~clk;\n" if internal_clock else "")
+    return (f"// Simulation top (sim/engine_run.py): {ENGINE_MODULE} with rst through one flip-flop"
+            f"{' and its own clock' if internal_clock else ''}.\n"
             f"module {ENGINE_SIM_MODULE}(\n{declarations}\n);\n"
+            f"{clock}"
             f"  reg rst_q = 1'b1;\n"
             f"  always @(posedge clk) rst_q <= rst;\n"
             f"  {ENGINE_MODULE} engine(\n{connections}\n  );\n"
@@ -91,7 +142,7 @@ def simulation_harness(verilog: str) -> str:
 
 
 def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator",
-                   dsp: str | None = None) -> Path:
+                   dsp: str | None = None, build: str = "default") -> Path:
     """Export ``springflat_engine.v`` for ``fs`` and ``capacity`` once; return a directory per
     simulator (and build flags) holding it and :func:`simulation_harness`'s ``springflat_engine_sim.v``.
 
@@ -110,14 +161,18 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
                  / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}")
     exported = directory / f"{ENGINE_MODULE}.v"
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
-    key = hashlib.sha256(repr(build_flags(simulator)).encode()).hexdigest()[:8]
+    flags = build_flags(simulator, build)
+    # (pgo-generate and pgo share a directory: the second compiles with the first's profile)
+    keyed = build_flags(simulator, "pgo") if build == "pgo-generate" else flags
+    key = hashlib.sha256(repr(keyed).encode()).hexdigest()[:8]
     copy = directory / f"{simulator}-source-{key}"
     with build_lock(directory):
         if not exported.exists():
             export_engine(fs, capacity, directory, platform=DspPlatform(dsp) if dsp else None)
         copy.mkdir(exist_ok=True)
         text = exported.read_text()
-        for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", simulation_harness(text))):
+        harness = simulation_harness(text, internal_clock=simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS)
+        for name, content in ((exported.name, text), (f"{ENGINE_SIM_MODULE}.v", harness)):
             if not (copy / name).exists() or (copy / name).read_text() != content:
                 (copy / name).write_text(content)
         for model in PRIMITIVE_MODELS.get(dsp, []):
@@ -158,12 +213,12 @@ def _make_flags(extra: str):
 
 def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_states: int = 0, seed: int = 0,
                      checks: dict | None = None, work: Path | None = None, log_file: Path | None = None,
-                     waves: bool = False, dsp: str | None = None) -> EngineRun:
+                     waves: bool = False, dsp: str | None = None, build: str = "default") -> EngineRun:
     """Run the engine bench on ``image``. ``checks`` adds the bench's extra scenarios
     (``iteration_checks``, ``reset_after``, ``busy_check``, ``no_mesh_check``, ``unmapped_check``,
     ``broken_expectation``); ``dsp`` the Verilog flavour (:func:`engine_sources`)."""
     capacity = image.capacity
-    sources = engine_sources(fs, capacity, simulator, dsp)
+    sources = engine_sources(fs, capacity, simulator, dsp, build)
     if work is None:
         work = sources / "runs" / f"{simulator}-{os.getpid()}-{time.time_ns()}"
     work = Path(work)
@@ -172,8 +227,10 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
     config = {"capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                            "triangles": capacity.triangles},
               "constants": {k: int(v) for k, v in image.constants.items()},
-              "wait_states": wait_states, "seed": seed, **(checks or {})}
-    flags, make_flags = build_flags(simulator)
+              "wait_states": wait_states, "seed": seed,
+              "internal_clock": simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS,
+              **(checks or {})}
+    flags, make_flags = build_flags(simulator, build)
     with _make_flags(make_flags):
         run = run_bench(simulator, fs, ENGINE_SIM_MODULE, "engine", config, work=work, log_file=log_file, waves=waves,
                         sources=sources, extra_build_args=flags)
@@ -184,6 +241,49 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
         positions, velocities = arrays["positions"], arrays["velocities"]
     passed = run.tests == 1 and run.failed == 0 and run.result.get("mismatches") == 0
     return EngineRun(run.result, positions, velocities, passed, run.wall_seconds, run.waves)
+
+
+def prepare_pgo(training: EngineImage, fs: FormatSet) -> EngineRun:
+    """The first half of the ``pgo`` build: compile the engine (``gpi-clock``) with ``-fprofile-generate``, run
+    ``training``
+    (its profile lands beside the objects), then delete the objects so that the next ``build="pgo"`` run
+    compiles them again with ``-fprofile-use``. Returns the training run."""
+    sources = engine_sources(fs, training.capacity, "verilator", None, "pgo")
+    run = run_image_on_rtl(training, fs, "verilator", build="pgo-generate")
+    build_dir = sources / "verilator" / ENGINE_SIM_MODULE
+    if not list(build_dir.glob("*.gcda")):
+        raise RuntimeError(f"the training run left no profile in {build_dir}")
+    for stale in [*build_dir.glob("*.o"), *build_dir.glob("*.a"), build_dir / ENGINE_SIM_MODULE]:
+        stale.unlink(missing_ok=True)
+    return run
+
+
+HARNESS_PROBE = """// The harness alone (sim/engine_run.py, harness_ceiling): irq rises after CYCLES clocks.
+module harness_probe({clock_port}, input rst, output reg irq);
+{clock}  reg [31:0] n;
+  always @(posedge clk) begin
+    if (rst) begin n <= 0; irq <= 0; end
+    else begin n <= n + 1; irq <= n == {cycles}; end
+  end
+endmodule
+"""
+
+
+def harness_ceiling(fs: FormatSet, cycles: int = 5_000_000, build: str = "default") -> float:
+    """Simulated cycles per second of ``harness_probe`` (a counter, nothing else) under the engine bench's
+    clock and wait, built like the engine: the speed the harness alone allows."""
+    flags, make_flags = build_flags("verilator", build)
+    key = hashlib.sha256(repr((flags, make_flags, cycles)).encode()).hexdigest()[:8]
+    directory = BUILD_ROOT / "harness-probe" / key
+    internal = build in INTERNAL_CLOCK_BUILDS
+    with build_lock(directory):
+        (directory / "harness_probe.v").write_text(HARNESS_PROBE.format(
+            cycles=cycles, clock_port="output reg clk" if internal else "input clk",
+            clock=f"  initial clk = 1'b0;\n  always #{CLOCK_HALF_PERIOD_NS} clk = ~clk;\n" if internal else ""))
+    with _make_flags(make_flags):
+        run = run_bench("verilator", fs, "harness_probe", "harness", {"cycles": cycles, "internal_clock": internal},
+                        sources=directory, extra_build_args=flags)
+    return run.result["cycles_per_second"]
 
 
 def run_engine(problem: FixedProblem, capacity: EngineCapacity, simulator: str, **kwargs) -> EngineRun:
@@ -202,28 +302,36 @@ def flatten_on_rtl(problem: FixedProblem, capacity: EngineCapacity, simulator: s
     read-back back). The engine keeps no per-iteration record, so the history holds two rows: the
     initial layout and the engine's final one, both measured by the golden model. Raises
     :class:`EngineRunError` when the run does not match the golden model bit for bit."""
+    run = run_engine(problem, capacity, simulator, **kwargs)
+    if not run.passed or run.positions is None:
+        first = (run.result.get("first_mismatches") or ["the simulation ended without a result"])[0]
+        raise EngineRunError(f"the {simulator} run of the engine does not match the golden model: {first}")
+    r = run.result
+    return engine_flatten_result(problem, run.positions, run.velocities, r["status"], r["iterations"], {
+        "saturations": r["saturations"], "simulator": simulator, "cycles": r["cycles"],
+        "cycles_per_iteration": r["cycles_per_iteration"], "cycles_per_second": r["cycles_per_second"]})
+
+
+def engine_flatten_result(problem: FixedProblem, positions: np.ndarray, velocities: np.ndarray, status: str,
+                          iterations: int, extra: dict):
+    """An engine's read-back (raw positions and velocities, as ``EngineDriver.read_back`` gives them) as the
+    :class:`~golden_model.reference.FlattenResult` that ``flatten`` writes, in mesh units. The engine keeps no
+    per-iteration record, so the history holds two rows: the initial layout and the engine's final one, both
+    measured by the golden model. ``extra`` goes into ``result.extra`` (``saturations`` among it)."""
     import math
 
     from golden_model.fixed import SaturationCounter
     from golden_model.fixed.engine import FixedEngine
     from golden_model.reference import FlattenResult, History
 
-    run = run_engine(problem, capacity, simulator, **kwargs)
-    if not run.passed or run.positions is None:
-        first = (run.result.get("first_mismatches") or ["the simulation ended without a result"])[0]
-        raise EngineRunError(f"the {simulator} run of the engine does not match the golden model: {first}")
     engine = FixedEngine(problem, SaturationCounter())
     history = History()
     history.append(math.nan, engine.measure())
-    engine.raw_positions, engine.raw_velocities = run.positions.copy(), run.velocities.copy()
+    engine.raw_positions, engine.raw_velocities = positions.copy(), velocities.copy()
     history.append(math.nan, engine.measure())
-    r = run.result
     result = FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
-                           history, r["status"], r["iterations"], problem.params, problem.density, engine="fixed")
-    result.extra.update({"formats": problem.fs.name, "scale": problem.scale, "saturations": r["saturations"],
-                         "simulator": simulator, "cycles": r["cycles"],
-                         "cycles_per_iteration": r["cycles_per_iteration"],
-                         "cycles_per_second": r["cycles_per_second"]})
+                           history, status, iterations, problem.params, problem.density, engine="fixed")
+    result.extra.update({"formats": problem.fs.name, "scale": problem.scale, **extra})
     return result
 
 

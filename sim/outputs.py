@@ -1,17 +1,30 @@
-"""Files a flattening run writes: layout (OBJ/SVG), history CSV, plot PNG.
+"""Files a flattening run writes: layout (OBJ/SVG), history CSV, plot PNG; and how every output is written.
 
 Every writer goes through :func:`atomic_write`, so an interrupted or failed
 run never leaves a partial file behind; inside :func:`all_or_nothing` several
-outputs appear together or not at all.  An OS error while writing is an
-:class:`OutputWriteError`, one line: ``cannot write '<path>': <reason>``.
+outputs appear together or not at all; :func:`atomic_directory` does the same
+for a directory.  An OS error while writing is an :class:`OutputWriteError`,
+one line: ``cannot write '<path>': <reason>``.
+
+The policy: outputs are regular files.  A symbolic link is written through (its
+final target is replaced, the link stays); a path that is not a regular file (a
+device, a FIFO, a socket, a directory), or a link to one, is refused and never
+replaced; no output may be the same file as an input or another output
+(:func:`check_distinct`, by device and inode).  SIGINT (:func:`on_interrupt`)
+never lets anything be put in place afterwards.
 """
 
 from __future__ import annotations
 
 import csv
+import errno
 import math
 import os
-import tempfile
+import secrets
+import shutil
+import signal
+import stat
+import threading
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -20,6 +33,7 @@ from typing import Iterator
 
 import numpy as np
 
+from golden_model.files import file_kind, resolved_parent_key, same_file_key
 from golden_model.mesh import describe_os_error, folded_faces, save_obj, signed_areas_2d, triangle_areas_3d
 from golden_model.reference import FlattenResult
 
@@ -39,38 +53,153 @@ class OutputWriteError(OutputError):
         super().__init__(f"cannot write {what + ' ' if what else ''}'{path}': {describe_os_error(error)}")
 
 
+def output_target(path: Path) -> Path:
+    """The file an output path writes: ``path`` itself or, for a symbolic link, the file the link finally
+    points to (written through: the link stays, its target is replaced; see :func:`atomic_write`)."""
+    path = Path(path)
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
+
+
+def _refuse_special(target: Path, path: Path, what: str) -> None:
+    """An existing ``target`` that is not a regular file (a directory, a device, a FIFO, a socket) is refused:
+    springflat never replaces one."""
+    try:
+        st = os.stat(target)
+    except FileNotFoundError:
+        return
+    if stat.S_ISDIR(st.st_mode):
+        raise OutputError(f"{what} '{path}' is a directory")
+    if not stat.S_ISREG(st.st_mode):
+        via = f" (the link's target '{target}')" if target != Path(path) else ""
+        raise OutputError(f"{what} '{path}'{via} is a {file_kind(st.st_mode)}, not a regular file: "
+                          "springflat writes regular files only")
+
+
+#: Bytes a temporary name may always take, whatever the target's name: every file system in use
+#: allows names of 255 bytes, the oldest 30 or so; the name of a longer target is shortened.
+TEMPORARY_NAME_MIN = 32
+_TEMPORARY_SUFFIX = ".part"
+
+
+def temporary_name(name: str, token: str) -> str:
+    """``.<name>.<token>.part``, the name shortened so that the whole takes no more bytes than
+    ``max(len(name), TEMPORARY_NAME_MIN)`` (in the file-system encoding): it fits wherever ``name`` does."""
+    budget = max(len(os.fsencode(name)), TEMPORARY_NAME_MIN)
+    room = budget - len(os.fsencode(f"..{token}{_TEMPORARY_SUFFIX}"))
+    while len(os.fsencode(name)) > room:  # characters, not bytes: a multi-byte character is never split
+        name = name[:-1]
+    return f".{name}.{token}{_TEMPORARY_SUFFIX}"
+
+
+def _make_temporary(directory: Path, name: str, *, is_dir: bool = False) -> Path:
+    """Create a new file (mode 0600) or directory (0700) named by :func:`temporary_name` in ``directory``."""
+    for _ in range(100):
+        candidate = Path(directory) / temporary_name(name, secrets.token_hex(4))
+        try:
+            if is_dir:
+                os.mkdir(candidate, 0o700)
+            else:
+                os.close(os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0),
+                                 0o600))
+            return candidate
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, "no free temporary name", str(directory))
+
+
 def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = None) -> None:
     """Fail early (before a long run) on an output path that cannot work.
 
-    Besides the suffix and the directory, this creates and removes a
-    temporary file where :func:`atomic_write` will, so that a directory
-    without write permission or a name too long is refused up front.
+    Besides the suffix and the directory, this refuses a path that exists and is
+    not a regular file (a symbolic link counts as its target), and creates and
+    removes a temporary file where :func:`atomic_write` will, so that a
+    directory without write permission or a name too long is refused up front.
     """
+    path = Path(path)
     if suffixes and path.suffix.lower() not in suffixes:
         raise OutputError(f"{what} '{path}' must end in {' or '.join(suffixes)}")
-    parent = path.parent if str(path.parent) else Path(".")
     try:
+        target = output_target(path)
+        parent = target.parent if str(target.parent) else Path(".")
         if not parent.exists():
             raise OutputError(f"{what} '{path}': directory '{parent}' does not exist")
         if not parent.is_dir():
             raise OutputError(f"{what} '{path}': '{parent}' is not a directory")
-        if path.is_dir():
-            raise OutputError(f"{what} '{path}' is a directory")
-        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
-        os.close(fd)
-        os.unlink(probe)
+        _refuse_special(target, path, what)
+        os.unlink(_make_temporary(parent, target.name))
     except OSError as exc:
         raise OutputWriteError(path, exc, what) from None
 
 
-#: The renames :func:`all_or_nothing` holds back: (temporary file, final path).
-_PENDING: ContextVar[list[tuple[str, Path]] | None] = ContextVar("springflat_pending_outputs", default=None)
+def _identity(path: Path) -> tuple:
+    """What decides whether two paths are one file: ``(st_dev, st_ino)`` of an existing file (links
+    followed), else the directory's ``(st_dev, st_ino)`` and the name the file will get."""
+    key = same_file_key(path)
+    if key is not None:
+        return key
+    target = output_target(path)
+    return resolved_parent_key(target) or (os.path.abspath(target),)
+
+
+def check_distinct(outputs: list[tuple[str, Path | None]], inputs: list[tuple[str, Path | None]]) -> None:
+    """Refuse an output that is the same file as an input or as another output.
+
+    ``outputs``, ``inputs``: ``(what, path)`` pairs (``path`` None: not given; an input that is no
+    existing file, such as a built-in mesh's name, is skipped).  Files are compared by device and
+    inode (:func:`golden_model.files.same_file_key`), never by spelling: a symbolic or hard link to
+    the mesh is the mesh.
+    """
+    seen: dict[tuple, str] = {}
+    for what, path in inputs:
+        key = same_file_key(path) if path is not None and str(path) else None
+        if key is not None:
+            seen.setdefault(key, f"{what} '{path}'")
+    for what, path in outputs:
+        if path is None:
+            continue
+        key = _identity(Path(path))
+        if key in seen:
+            raise OutputError(f"{what} '{path}' is the same file as {seen[key]}")
+        seen[key] = f"{what} '{path}'"
+
+
+#: The renames :func:`all_or_nothing` holds back: (temporary file, final path, the path as given).
+_PENDING: ContextVar[list[tuple[Path, Path, Path]] | None] = ContextVar("springflat_pending_outputs", default=None)
+
+
+def _file_mode(target: Path) -> int:
+    """The mode a replaced file keeps; a new file gets 0666 less the umask."""
+    try:
+        return stat.S_IMODE(os.stat(target).st_mode)
+    except FileNotFoundError:
+        return 0o666 & ~_umask()
+
+
+def _flush_to_disk(tmp: Path) -> None:
+    """fsync the temporary file: a full disk or an I/O error shows now, before the rename, not later."""
+    fd = os.open(tmp, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _replace(tmp: Path, target: Path, path: Path) -> None:
+    """Rename ``tmp`` over ``target``, unless ``target`` became something other than a regular file."""
+    _refuse_special(target, path, "output")
+    os.replace(tmp, target)
 
 
 @contextmanager
 def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
-    """Yield a temporary path next to ``path``; rename it over ``path`` on success.
+    """Yield a temporary path next to ``path``'s file; rename it over that file on success.
 
+    A symbolic link is written through: the file it finally points to is
+    replaced and the link stays (:func:`output_target`).  A path that is not a
+    regular file is never replaced (:class:`OutputError`).  The temporary name
+    fits wherever the target's does (:func:`temporary_name`).  The data is
+    flushed to disk before the rename, so a full disk or an I/O error is
+    reported and leaves the old file as it was; a replaced file keeps its mode.
     Inside :func:`all_or_nothing` the rename waits for the end of that block.
     An OS error (here or in the caller's block) removes the temporary file
     and is raised as :class:`OutputWriteError` naming ``path``.
@@ -78,45 +207,171 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
     path = Path(path)
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
-        os.close(fd)
-        yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an output file gets the usual mode
+        target = output_target(path)
+        _refuse_special(target, path, "output")
+        tmp = _make_temporary(target.parent if str(target.parent) else Path("."), target.name)
+        yield str(tmp)
+        _flush_to_disk(tmp)
+        os.chmod(tmp, _file_mode(target))  # the temporary file is 0600
         pending = _PENDING.get()
         if pending is None:
-            os.replace(tmp, path)
+            with deferred_interrupts():
+                _replace(tmp, target, path)
         else:
-            pending.append((tmp, path))
-            tmp = None
+            pending.append((tmp, target, path))
+        tmp = None
     except OSError as exc:
         raise OutputWriteError(path, exc) from None
     finally:
-        if tmp is not None and os.path.exists(tmp):
+        if tmp is not None and os.path.lexists(tmp):
             os.unlink(tmp)
+
+
+#: Set by :func:`on_interrupt` (SIGINT); the commits of :func:`atomic_write`, :func:`all_or_nothing` and
+#: :func:`atomic_directory` refuse to put anything in place once it is set.
+_INTERRUPTED = threading.Event()
+
+
+def on_interrupt(signum, frame) -> None:
+    """The commands' SIGINT handler: :class:`KeyboardInterrupt`, as Python's own.
+
+    Inside a finaliser (``__del__``, run by the garbage collector anywhere) Python would print
+    the exception and drop it; there the signal is only recorded and sent again a moment later.
+    Either way no output is put in place afterwards (:func:`check_not_interrupted`).
+    """
+    _INTERRUPTED.set()
+    while frame is not None:
+        if frame.f_code.co_name == "__del__":
+            threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+            return
+        frame = frame.f_back
+    raise KeyboardInterrupt
+
+
+def reset_interrupted() -> None:
+    """Forget an earlier SIGINT (a command run in-process after another)."""
+    _INTERRUPTED.clear()
+
+
+def check_not_interrupted() -> None:
+    """:class:`KeyboardInterrupt` if SIGINT arrived (even one a finaliser swallowed): nothing is committed."""
+    if _INTERRUPTED.is_set():
+        raise KeyboardInterrupt
+
+
+@contextmanager
+def deferred_interrupts() -> Iterator[None]:
+    """Hold SIGINT back for the duration of the block (a few renames), then raise it: an interrupt
+    never leaves half of a set of outputs in place.  Outside the main thread: no effect."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        check_not_interrupted()
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if received:
+        _INTERRUPTED.set()
+        raise KeyboardInterrupt
 
 
 @contextmanager
 def all_or_nothing() -> Iterator[None]:
     """The files :func:`atomic_write` writes inside the block appear at its end, all of them or none."""
-    pending: list[tuple[str, Path]] = []
+    pending: list[tuple[Path, Path, Path]] = []
     token = _PENDING.set(pending)
     try:
         yield
         _PENDING.reset(token)
         token = None
-        for tmp, path in pending:
-            try:
-                os.replace(tmp, path)
-            except OSError as exc:
-                raise OutputWriteError(path, exc) from None
+        with deferred_interrupts():
+            for _, target, path in pending:  # checked again just before: nothing is renamed if one fails
+                _refuse_special(target, path, "output")
+            for tmp, target, path in pending:
+                try:
+                    os.replace(tmp, target)
+                except OSError as exc:
+                    raise OutputWriteError(path, exc) from None
     finally:
         if token is not None:
             _PENDING.reset(token)
-        for tmp, _ in pending:
-            if os.path.exists(tmp):
+        for tmp, _, _ in pending:
+            if os.path.lexists(tmp):
                 os.unlink(tmp)
+
+
+def check_output_directory(out: Path, what: str = "--out") -> None:
+    """Fail early on an output directory that cannot work: it must be a directory if it exists (a link to
+    one counts), and its parent must exist and take a new directory."""
+    out = Path(out)
+    try:
+        target = output_target(out)
+        if target.exists() and not target.is_dir():
+            st = os.stat(target)
+            raise OutputError(f"{what} '{out}' exists and is a {file_kind(st.st_mode)}, not a directory")
+        parent = target.parent if str(target.parent) else Path(".")
+        if not parent.is_dir():
+            raise OutputError(f"{what} '{out}': directory '{parent}' does not exist")
+        os.rmdir(_make_temporary(parent, target.name, is_dir=True))
+    except OSError as exc:
+        raise OutputWriteError(out, exc, what) from None
+
+
+@contextmanager
+def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = (),
+                     inputs: list[tuple[str, Path | None]] = ()) -> Iterator[Path]:
+    """Yield a new empty directory beside ``out`` to build an output directory in; at the end of the block
+    its contents become ``out``: all of them, or (on an exception, an interrupt included) none.
+
+    A new ``out`` is the built directory, renamed.  An existing ``out`` (or the directory a link
+    points to) keeps the files the build did not write; those it did write replace their namesakes,
+    one rename each with SIGINT held back, after checking that none of them is anything but a
+    regular file, nor one of ``inputs`` (``(what, path)`` as for :func:`check_distinct`).
+    ``stale``: names removed from an existing ``out`` unless the build wrote them (a result an
+    earlier run left that would now mislead).
+    """
+    out = Path(out)
+    check_output_directory(out, what)
+    target = output_target(out)
+    build = _make_temporary(target.parent if str(target.parent) else Path("."), target.name, is_dir=True)
+    try:
+        yield build
+        with deferred_interrupts():
+            os.chmod(build, 0o777 & ~_umask())
+            if not target.exists():
+                os.rename(build, target)
+                return
+            _merge_directory(build, target, out, stale, inputs)
+    except OSError as exc:
+        raise OutputWriteError(out, exc, what) from None
+    finally:
+        if build.exists():
+            shutil.rmtree(build, ignore_errors=True)
+
+
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
+def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...],
+                     inputs: list[tuple[str, Path | None]]) -> None:
+    """Move every file of ``build`` into ``target`` (same relative paths), replacing regular files only."""
+    files = sorted(p for p in build.rglob("*") if not p.is_dir())
+    check_distinct([("output", out / p.relative_to(build)) for p in files], list(inputs))
+    for p in files:
+        _refuse_special(target / p.relative_to(build), out / p.relative_to(build), "output")
+    for p in files:
+        destination = target / p.relative_to(build)
+        destination.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(p, destination)
+    for name in stale:
+        if not (build / name).exists() and (target / name).is_file():
+            (target / name).unlink()
 
 
 # --------------------------------------------------------------------------- per-face distortion colouring

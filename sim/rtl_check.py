@@ -53,12 +53,19 @@ def add_parser(sub, add_run_options) -> None:
 def cmd_rtl_check(args: argparse.Namespace) -> int:
     from hdl import SpringflatCore
 
-    from .run_options import UserError, default_init, load_format_set, params_from_args, resolve_mesh, strict_json
+    from .outputs import check_distinct, check_output_path
+    from .run_options import (UserError, default_init, input_files, load_format_set, params_from_args, resolve_mesh,
+                              strict_json)
 
     mesh, defaults = resolve_mesh(args.mesh)
     params = params_from_args(args, defaults)
+    if args.init is None:
+        args.init = default_init(args.mesh)
+    if args.waves is not None:  # before any build or run: a path that cannot take the waveform is one line
+        check_output_path(args.waves, "--waves")
+        check_distinct([("--waves", args.waves)], input_files(args))
+    load_format_set(args.formats)  # a formats file that cannot work is refused before the run mode
     check_engine_params(params)
-    args.init = args.init or default_init(args.mesh)
     if args.engine_top:
         return cmd_rtl_check_engine(args, mesh, params)
     if args.capacity is not None or args.wait_states:
@@ -67,11 +74,9 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     if not 0 <= args.stall < 1:
         raise UserError(f"--stall must be in [0, 1), got {args.stall}")
-    if args.waves is not None and not (args.waves.parent if str(args.waves.parent) else Path(".")).is_dir():
-        raise UserError(f"--waves '{args.waves}': directory '{args.waves.parent}' does not exist")
     formats = load_format_set(args.formats)
     check_fixed_params(params, formats)
-    prepare(mesh, initial_layout(mesh, args.init), params, formats)  # refuses what the formats cannot hold
+    prepare(mesh, _initial_layout(mesh, args.init), params, formats)  # refuses what the formats cannot hold
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())
     init_spec = args.init if args.init in LAYOUT_METHODS + (AUTO_START,) else str(Path(args.init).resolve())
     config = {"mesh": mesh_spec, "init": init_spec, "params": params.as_dict(), "iterations": args.iterations,
@@ -92,7 +97,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
             tail = log.read_text(errors="replace").splitlines()[-5:] if log.exists() else []
             raise UserError(f"the {args.sim} simulation produced no result: {' / '.join(tail)}")
         if args.waves is not None and run.waves is not None:
-            shutil.copyfile(run.waves, args.waves)
+            _save_waves(run.waves, args.waves)
     summary = {"mesh": mesh.name, "simulator": args.sim, "formats": formats.name, **result}
     summary["wall_seconds"] = run.wall_seconds
     if args.waves is not None:
@@ -107,6 +112,26 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     for line in result.get("first_mismatches", []):
         print(f"springflat: mismatch: {line}", file=sys.stderr)
     return 0 if result["mismatches"] == 0 and run.failed == 0 else 1
+
+
+def _initial_layout(mesh, init: str):
+    """:func:`initial_layout`, its notes (an OBJ layout's unused faces or z) printed as ``springflat: note:``."""
+    notes: list[str] = []
+    positions = initial_layout(mesh, init, notes)
+    for note in notes:
+        print(f"springflat: note: {note}", file=sys.stderr)
+    return positions
+
+
+def _save_waves(source: Path, waves: Path) -> None:
+    """Copy the simulator's waveform to ``--waves`` as every output is written (:func:`sim.outputs.atomic_write`)."""
+    from .outputs import OutputWriteError, atomic_write
+
+    try:
+        with atomic_write(waves) as tmp:
+            shutil.copyfile(source, tmp)
+    except OutputWriteError as exc:
+        raise OutputWriteError(exc.path, exc.error, "--waves") from None
 
 
 def engine_capacity(args: argparse.Namespace):
@@ -141,7 +166,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args)
     check_fixed_params(params, formats)
-    problem = prepare(mesh, initial_layout(mesh, args.init), params, formats)
+    problem = prepare(mesh, _initial_layout(mesh, args.init), params, formats)
     image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity
     print(f"springflat: {args.sim}: exporting and building springflat_engine for capacity {capacity.vertices}/"
           f"{capacity.entries}/{capacity.triangles} (cached) and running the whole flattening ...", file=sys.stderr)
@@ -157,7 +182,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
             tail = log.read_text(errors="replace").splitlines()[-5:] if log.exists() else []
             raise UserError(f"the {args.sim} simulation of the engine produced no result: {' / '.join(tail)}")
         if args.waves is not None and run.waves is not None:
-            shutil.copyfile(run.waves, args.waves)
+            _save_waves(run.waves, args.waves)
     summary = {"mesh": mesh.name, "simulator": args.sim, "formats": formats.name, "top": ENGINE_MODULE,
                "capacity": list(args.capacity or (capacity.vertices, capacity.entries, capacity.triangles)),
                "vertices": mesh.n_vertices, **run.result, "wall_seconds": run.wall_seconds}

@@ -169,7 +169,11 @@ def start_positions(mesh: Mesh, init: str, params: FlattenParams, progress: bool
     """``(P0, what it is)``. A guarded run starts fold-free where that can be had (``start_layout``: folds are
     untangled, and what was done is one note each on stderr); the paper dynamics takes the layout as it is."""
     if not params.guard:
-        return initial_layout(mesh, init), init
+        notes: list[str] = []
+        positions = initial_layout(mesh, init, notes)
+        for note in notes:
+            print(f"springflat: note: {note}", file=sys.stderr)
+        return positions, "arap" if init == AUTO_START else init
     say = (lambda text: print(f"springflat: {text} ...", file=sys.stderr)) if progress else None
     start = start_layout(mesh, init, progress=say)
     if not progress:
@@ -215,3 +219,15 @@ def strict_json(summary: dict) -> str:
     if non_finite:
         cleaned["non_finite"] = non_finite
     return json.dumps(cleaned, allow_nan=False)
+
+
+def input_files(args: argparse.Namespace) -> list[tuple[str, Path | None]]:
+    """The files a run reads, as ``(what, path)`` for :func:`sim.outputs.check_distinct`: the mesh, and the
+    ``--init`` and ``--formats`` arguments when they name files (not a built-in, a method or a preset)."""
+    from golden_model.fixed.formats_set import FormatSet
+
+    init = getattr(args, "init", None)
+    formats = getattr(args, "formats", None)
+    return [("the mesh", Path(args.mesh)),
+            ("--init", Path(init) if init and init not in LAYOUT_METHODS + (AUTO_START,) else None),
+            ("--formats", Path(formats) if formats and not FormatSet.names_preset(formats) else None)]

@@ -47,7 +47,7 @@ from golden_model.study import (
 )
 
 from .run_options import integer_argument, load_format_set, number_argument
-from .outputs import atomic_write
+from .outputs import atomic_directory, atomic_write, check_output_directory
 
 __all__ = ["add_parser", "cmd_study", "write_outputs", "PLOT_FILES"]
 
@@ -137,12 +137,10 @@ def cmd_study(args: argparse.Namespace) -> int:
         raise ParameterError(f"--workers must be >= 1, got {workers}")
     base = load_format_set(args.base)
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ParameterError(f"--out '{out}' exists and is not a directory")
+    check_output_directory(out)  # before the study: the report is written at its end
     cases = build_cases(args.meshes or list(STUDY_MESHES), _BOTH[args.init], _STEPS[args.step], args.max_iter)
-    out.mkdir(parents=True, exist_ok=True)
 
-    update, close, totals = _progress_bars(not args.quiet)
+    update, close, totals = _progress_bars(not args.quiet and sys.stderr.isatty())  # bars on a terminal only
     n_configs = len({c.key for c in [*preset_configs(base), *sweep_configs(base, knobs, bits)] if c.fs is not None})
     totals["sweep"] = (n_configs + 1) * len(cases)
     try:
@@ -162,7 +160,10 @@ def cmd_study(args: argparse.Namespace) -> int:
                         "--optimise" if args.optimise else "--no-optimise",
                         *([f"--max-iter {args.max_iter}"] if args.max_iter is not None else []),
                         f"--out {shlex.quote(str(out))}"])
-    write_outputs(result, out, command=command)
+    inputs = [("--base", None if FormatSet.names_preset(args.base) else Path(args.base)),
+              *(("a mesh", Path(m)) for m in args.meshes or ())]
+    with atomic_directory(out, stale=("chosen.json",), inputs=inputs) as build:  # all of it or nothing
+        write_outputs(result, build, command=command)
     chosen = result.chosen
     if chosen is None:
         print(f"no configuration meets the target {target.error:g} on the {len(cases)} cases; "

@@ -480,7 +480,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     "and report LUT4, flip-flops, DSPs, block RAM, Fmax after routing and the critical path per "
                     "component and for the top (springflat_core). springflat_engine (the whole engine behind "
                     "its Wishbone bus, --capacity) is opt-in. Writes the handoff bundle to --out.")
-    p.add_argument("--target", required=True, choices=tuple(TARGETS), help="ecp5 (LFE5U-85F) or ice40 (UP5K)")
+    p.add_argument("--target", choices=tuple(TARGETS), help="ecp5 (LFE5U-85F) or ice40 (UP5K)")
+    p.add_argument("--board", choices=("ulx3s-85f",), default=None,
+                   help="instead of --target: the board top (PLL, UART bridge, LEDs, the engine at --capacity) "
+                        "to a bitstream with its timing report and pin list (docs/board.md)")
+    p.add_argument("--baud", type=int, default=None, help="--board: the UART's rate (default 1000000)")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
                    help="clock constraint for nextpnr (default 150 for ecp5, 48 for ice40)")
@@ -517,12 +521,19 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
+    from golden_model.fixed.formats_set import FormatSet
+
+    from .outputs import atomic_directory
     from .run_options import load_format_set, strict_json
 
     from .export import engine_capacity
 
     fs = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, fs)
+    if args.board is not None or args.target is None:
+        from .board_build import cmd_board
+
+        return cmd_board(args, fs, capacity)
     if args.capacity and ENGINE not in (args.components or ()):
         raise SynthError(f"--capacity sizes {ENGINE}: add it to --components")
     out = Path(args.out) if args.out else Path(f"synth-{args.target}-{fs.name}")
@@ -532,8 +543,22 @@ def cmd_synth(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"springflat synth [{time.monotonic() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
-    report = run_synthesis(fs, args.target, args.freq, out, components=args.components, progress=progress,
-                           router=args.router, seed=args.seed, command=_command_line(args, out), capacity=capacity)
+    inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
+    failure = None
+    with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
+        def shown(text: str) -> str:  # the bundle is built beside --out: name --out
+            return text.replace(str(build), str(out))
+
+        try:
+            report = run_synthesis(fs, args.target, args.freq, build, components=args.components,
+                                   progress=lambda msg: progress(shown(msg)), router=args.router, seed=args.seed,
+                                   command=_command_line(args, out), capacity=capacity)
+        except SynthError as exc:  # a tool failed: its logs are kept in --out, when there are any
+            failure = SynthError(shown(str(exc)))
+            if not any(build.iterdir()):
+                raise failure from None
+    if failure is not None:
+        raise failure
     if args.json:
         print(strict_json(report))
     else:

@@ -1,4 +1,10 @@
-"""The docs state numbers and tables that must match the code."""
+"""What the docs and docstrings state that a generated block cannot hold, and no history in docs/.
+
+The tables of docs/ that are functions of the code are generated blocks (``sim.docgen``; ``tests/test_docgen.py``
+keeps them current). What is left here: numbers stated in the prose of ``hdl/`` docstrings and of the presets'
+``notes`` (code and data, not generated), one fact about the code the units' table relied on, and that the
+design docs carry no commit hashes or session diary.
+"""
 
 import gc
 import re
@@ -12,42 +18,6 @@ from golden_model.fixed import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-
-
-def test_fixed_point_format_table_matches_presets():
-    text = (DOCS / "fixed-point.md").read_text()
-    rows = {m.group(1): (m.group(2).strip(), m.group(3).strip())
-            for m in re.finditer(r"^\| `(\w+)` \| ([^|]+) \|[^|]*\| ([^|]+) \|", text, re.M)}
-    default, narrow = FormatSet.preset("default"), FormatSet.preset("narrow")
-    for name in FORMAT_FIELDS + ("rsqrt_seed_bits", "rsqrt_newton_steps", "lut_index_bits", "lut_interpolate",
-                                 "max_degree"):
-        assert rows[name] == (str(getattr(default, name)), str(getattr(narrow, name))), name
-    assert rows["rounding"] == (default.rounding.value, narrow.rounding.value)
-
-
-def test_study_doc_states_the_presets_costs():
-    from golden_model.study import cost
-
-    text = " ".join((DOCS / "study.md").read_text().split())
-    m = re.search(r"presets: `default` (\d+) bits, (\d+) DSP, ([\d ]+) ROM bits; `narrow` (\d+) bits, (\d+) DSP, "
-                  r"([\d ]+) ROM bits", text)
-    assert m, "docs/study.md no longer states the presets' costs"
-    stated = [int(g.replace(" ", "")) for g in m.groups()]
-    actual = [v for name in ("default", "narrow") for v in cost(FormatSet.preset(name)).key("bits")]
-    assert stated == actual
-
-
-def test_study_doc_lists_the_signal_classes():
-    from golden_model.study import SIGNAL_CLASSES
-
-    text = (DOCS / "study.md").read_text()
-    rows = {m.group(1): tuple(f.strip() for f in m.group(2).split(","))
-            for m in re.finditer(r"^\| `(\w+)` \| ([\w, ]+) \|", text, re.M)}
-    assert {k: rows.get(k) for k in SIGNAL_CLASSES} == SIGNAL_CLASSES
-
-
-# ----------------------------------------------------------------------------- hardware numbers
-
 ROOT = DOCS.parent
 PRESETS = ("default", "narrow")
 
@@ -76,56 +46,15 @@ def elaborated_flip_flops(component) -> int:
     return sum(int(w) for w in re.findall(r"cell \$\w*dff\w* .*?\n.*?parameter \\WIDTH (\d+)", text, re.S))
 
 
-def test_hardware_doc_contract_table(unelaborated):
-    """Latencies (front + rsqrt + back + tail + 2) and DSP blocks as the code computes them."""
-    from golden_model.fixed.dsp import dsp_blocks
-    from hdl import NodeUpdate, RsqrtUnit, StepGenerator
-
-    text = (DOCS / "hardware.md").read_text()
-    dsp = {}
-    for name in PRESETS:
-        fs = FormatSet.preset(name)
-        n = NodeUpdate(fs)
-        m = re.search(rf"^\| latency, {name} preset \| (\d+) clocks \((\d+) \+ (\d+) \+ (\d+) \+ (\d+) \+ (\d+)\) "
-                      r"\| (\d+) \| (\d+) \|", text, re.M)
-        assert m, f"docs/hardware.md: no latency row for {name}"
-        assert [int(g) for g in m.groups()] == [n.latency, n.front_stages, n.rsqrt_latency, n.back_stages,
-                                                n.tail_stages, n.latency - n.pipeline_stages,
-                                                RsqrtUnit.latency_of(fs.rsqrt_config()), StepGenerator.latency_of(fs)]
-        dsp[name] = units = dict.fromkeys(("node_update", "rsqrt", "step_generator", "controller"), 0)
-        for p in fs.products():
-            units[p.unit] += p.count * dsp_blocks(p.a, p.b)
-    row = flat(re.search(r"^\| multipliers \(18×18 DSP blocks, ECP5\) \|(.*)$", text, re.M).group(1))
-    m = re.search(r"default (\d+), narrow (\d+), each incl\. the rsqrt unit's (\d+) \(the core adds the step "
-                  r"generator's (\d+): (\d+), (\d+);.*\| (\d+) \| (\d+) \(", row)
-    d, n = dsp["default"], dsp["narrow"]
-    assert d["rsqrt"] == n["rsqrt"] and d["step_generator"] == n["step_generator"]
-    assert [int(g) for g in m.groups()] == [
-        d["node_update"] + d["rsqrt"], n["node_update"] + n["rsqrt"], d["rsqrt"], d["step_generator"],
-        d["node_update"] + d["rsqrt"] + d["step_generator"], n["node_update"] + n["rsqrt"] + n["step_generator"],
-        d["rsqrt"], d["step_generator"]]
-
-
-def test_synthesis_doc_gives_the_current_latencies(unelaborated):
-    from hdl import NodeUpdate
-
-    text = flat((DOCS / "synthesis.md").read_text())
-    m = re.search(r"\((?:before|after)[^)]*; (\d+) and (\d+) since\)", text)
-    assert m, "docs/synthesis.md no longer says the current latencies"
-    assert [int(g) for g in m.groups()] == [NodeUpdate(name).latency for name in PRESETS]
-
-
-def test_unit_latencies_in_docstrings_and_docs():
-    """``RsqrtUnit``'s and ``StepGenerator``'s stated latencies (docstrings, hardware-units.md) are the code's."""
+def test_unit_latencies_in_docstrings():
+    """``RsqrtUnit``'s and ``StepGenerator``'s docstrings state their latencies (the docs' tables are
+    generated, ``sim.docgen``; a docstring in ``hdl/`` cannot be)."""
     from hdl import RsqrtUnit, StepGenerator
 
     rsqrt = {RsqrtUnit.latency_of(FormatSet.preset(p).rsqrt_config()) for p in PRESETS}
     step = {StepGenerator.latency_of(FormatSet.preset(p)) for p in PRESETS}
     plain = StepGenerator.latency_of(FormatSet.preset("default").replace(lut_interpolate=False))
     assert len(rsqrt) == len(step) == 1  # "for both presets"
-    units = flat((DOCS / "hardware-units.md").read_text())
-    assert [int(v) for v in re.findall(r"\*\*(\d+)\*\* for both presets", units)] == [*rsqrt, *step]
-    assert int(re.search(r"\*\*\d+\*\* for both presets, (\d+) without interpolation", units).group(1)) == plain
     assert int(re.search(r"latency_of` \((\d+) for both presets\)", flat(RsqrtUnit.__doc__)).group(1)) in rsqrt
     m = re.search(r"latency_of` \((\d+) for both presets, which interpolate; (\d+) without interpolation\)",
                   flat(StepGenerator.__doc__))
@@ -143,6 +72,7 @@ def test_preset_formats_named_in_hdl_docstrings():
 
 
 def test_io_wrapper_states_the_cores_port_bits(unelaborated):
+    """``hdl/io_wrapper.py``'s docstring states the core's port bits (a docstring cannot be generated)."""
     from amaranth.hdl import Shape
 
     from hdl import NodeUpdate
@@ -154,20 +84,9 @@ def test_io_wrapper_states_the_cores_port_bits(unelaborated):
         == ports
 
 
-def test_flip_flop_counts_in_the_hardware_doc():
-    """``~N`` flip-flops in docs/hardware.md within 2 % of the elaborated ``NodeUpdate``'s."""
-    from hdl import NodeUpdate
-
-    text = flat((DOCS / "hardware.md").read_text())
-    m = re.search(r"elaborates to ~([\d,]+) flip-flops for ECP5 in the default preset and ~([\d,]+) in `narrow`",
-                  text)
-    assert m, "docs/hardware.md no longer states NodeUpdate's flip-flops"
-    for stated, name in zip(m.groups(), PRESETS):
-        count = elaborated_flip_flops(NodeUpdate(name))
-        assert abs(int(stated.replace(",", "")) - count) <= 0.02 * count, (name, stated, count)
-
-
 def test_flip_flop_count_in_the_node_update_docstring():
+    """``NodeUpdate``'s docstring states its flip-flops within 2 % (docs/hardware.md's count is generated;
+    a docstring cannot be)."""
     from hdl import NodeUpdate
 
     m = re.search(r"~([\d,]+) (?:pipeline )?flip-flops", flat(NodeUpdate.__doc__))
@@ -250,55 +169,47 @@ def test_preset_notes_state_the_formats_numbers(preset):
     assert checked >= (25 if preset == "default" else 3), checked
 
 
-# ---------------------------------------------------------------- docs/hardware-units.md: the engine's units
-
-
-def _units_doc() -> str:
-    return " ".join((DOCS / "hardware-units.md").read_text().split())
-
-
-def _dsp_blocks(component) -> int:
-    """MULT18X18D cells in ``component`` elaborated for ECP5."""
-    from amaranth.back import rtlil
-    from amaranth.hdl import Const, Value
-
-    from hdl.dsp import ECP5
-
-    ports = [Value.cast(v) for _, _, v in component.signature.flatten(component) if not isinstance(v, Const)]
-    return len(re.findall(r"^\s*cell \\MULT18X18D ", rtlil.convert(component, platform=ECP5, ports=ports), re.M))
-
-
-def test_engine_unit_pipelines_in_the_units_doc(unelaborated):
-    from hdl import AreaError, ForcePass, Integrator
-
-    doc, dsp = _units_doc(), _dsp_blocks
-    D, N = FormatSet.preset("default"), FormatSet.preset("narrow")
-    fd, fn = ForcePass(D), ForcePass(N)
-    sd, sn = fd.stages, fn.stages
-    assert (f"default {sd.front} + {sd.rsqrt} + {sd.back} = {fd.latency}, narrow "
-            f"{sn.front} + {sn.rsqrt} + {sn.back} = {fn.latency}") in doc
-    assert f"default {dsp(fd)}, narrow {dsp(fn)}, each including the rsqrt unit's 12" in doc
-    assert f"(default {dsp(ForcePass(D, energy=True))}, narrow {dsp(ForcePass(N, energy=True))})" in doc
-    assert f"{Integrator(D).latency} (default), {Integrator(N).latency} (narrow)" in doc
-    assert f"default {dsp(Integrator(D))}, narrow {dsp(Integrator(N))}" in doc
-    assert {AreaError.latency_of(D), AreaError.latency_of(N)} == {int(re.search(r"adder levels: (\d+) in both", doc)[1])}
-    assert {dsp(AreaError(D)), dsp(AreaError(N))} == {int(re.search(r"(\d+) `MULT18X18D` each: (\d+) in both", doc)[2])}
-
-
-def test_controller_unit_numbers_in_the_units_doc(unelaborated):
+def test_the_energy_checks_width_is_the_engines(unelaborated):
+    """``EnergyCheck``'s energy width is the engine's ``energy_width`` (a fact about the code, not a table:
+    docs/hardware-units.md's latencies are generated from ``EnergyCheck`` itself)."""
     from golden_model.fixed.engine_image import EngineCapacity, energy_width
-    from hdl import BetaDivider, EnergyCheck, Normaliser
+    from hdl import EnergyCheck
 
-    doc = _units_doc()
-    D, N = FormatSet.preset("default"), FormatSet.preset("narrow")
-    nd, nn = Normaliser(D), Normaliser(N)
-    lo = lambda n: n.cycles(n.fs.error.frac_bits + 2)  # noqa: E731
-    hi = lambda n: n.cycles(10**6)  # noqa: E731
-    assert f"{lo(nd)} to {hi(nd)} edges, narrow" in doc and f"{lo(nn)} to {hi(nn)};" in doc
-    ed, en = EnergyCheck(D, 8192), EnergyCheck(N, 8192)
-    cap = EngineCapacity(1024, 8192, 2048)
-    assert ed.energy_bits == energy_width(D, cap) and en.energy_bits == energy_width(N, cap)
-    assert (f"default {ed.square_bits} + {ed.energy_bits} + 5 = {ed.latency}, narrow "
-            f"{en.square_bits} + {en.energy_bits} + 5 = {en.latency}") in doc
-    assert {BetaDivider(D).latency, BetaDivider(N).latency} == {
-        int(re.search(r"output transfer\): (\d+) in both presets", doc)[1])}
+    for name in PRESETS:
+        fs = FormatSet.preset(name)
+        assert EnergyCheck(fs, 8192).energy_bits == energy_width(fs, EngineCapacity(1024, 8192, 2048)), name
+
+
+# ----------------------------------------------------------------------------- no history in the design docs
+
+#: Tokens of 7–40 hex digits in docs/ that are not commit hashes, each with the reason.
+NOT_HASHES = {
+    "123456789": "the ASCII string a CRC's check value is computed over (docs/board.md)",
+    "1175269": "a raw fixed-point value in an example mismatch message (docs/verification.md)",
+    "1175268": "a raw fixed-point value in an example mismatch message (docs/verification.md)",
+    "0099983": "the fraction digits of 0.0099983 (docs/study.md)",
+}
+HASH_LIKE = re.compile(r"\b[0-9a-fA-F]{7,40}\b")
+DIARY = re.compile(r"\b(?:this|previous|last|next|earlier|later|same|first|second|third|fourth|fifth|sixth|seventh|"
+                   r"eighth|ninth|tenth|eleventh|twelfth|\d+(?:st|nd|rd|th)) session\b|\bat the time of writing\b",
+                   re.IGNORECASE)
+
+
+def history_in(text: str) -> list[str]:
+    """Commit-hash-like tokens (but the ones ``NOT_HASHES`` explains) and diary phrases in ``text``."""
+    return [m.group(0) for m in HASH_LIKE.finditer(text) if m.group(0) not in NOT_HASHES] + \
+        [m.group(0) for m in DIARY.finditer(flat(text))]
+
+
+def test_history_is_found():
+    assert history_in("measured at 02ffc8f (the eleventh session), ac1ece3's netlist; this\nsession too") == [
+        "02ffc8f", "ac1ece3", "eleventh session", "this session"]
+    assert history_in("0x1F, 150 MHz, 2048 words, 0.0099983, dome_grid(45), a cafe, 0.0012345") == ["0012345"]
+    assert history_in("CRC over 123456789; at the time of writing") == ["at the time of writing"]
+
+
+@pytest.mark.parametrize("path", sorted(DOCS.rglob("*.md")), ids=lambda p: str(p.relative_to(DOCS)))
+def test_design_docs_keep_no_history(path):
+    """The docs state the design and the current figures; the history is git's (and docs/results/ keeps
+    the measured rows, each with its date and command)."""
+    assert history_in(path.read_text(encoding="utf-8")) == []

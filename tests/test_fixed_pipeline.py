@@ -346,3 +346,36 @@ def test_cli_refuses_a_mesh_out_of_range(tmp_path):
                           capture_output=True, text=True, cwd=tmp_path)
     assert proc.returncode == 2 and "too many edges across" in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "o.obj").exists()
+
+
+def test_per_node_sums_are_exact_where_float64_is_not():
+    """``rest_length`` of 29 bits (the widest whose Σe² accumulator, 2·29 + 5 guard bits, fits 63): the
+    squares of |L − d| reach 2^58 and their per-node sums must still be exact (float64 keeps 53 bits)."""
+    from golden_model.fixed.pipeline import node_terms
+
+    fs = DEFAULT.replace(rest_length="u3.26", error_acc="u20.26", face_area="u16.26", name="wide")
+    mesh = dome_grid(6)
+    problem = prepare(mesh, tutte_layout(mesh), FlattenParams(density="auto"), fs)
+    stream = problem.stream
+    # rest lengths of 1 lsb against edges of several mean edges: e = |L - d| near 2^28 raw
+    stream = NeighbourStream(stream.indptr, stream.neighbour, np.ones_like(stream.rest), stream.inv_mass)
+    positions = problem.initial_positions * 6 + np.arange(problem.initial_positions.size).reshape(-1, 2) * 7919
+    terms = node_terms(fs, positions, stream, problem.half_spring)
+    _, error = neighbour_terms(fs, positions, stream, problem.half_spring)  # the per-entry definition
+    assert int(error.max()) ** 2 > 2**53  # float64 could not hold these squares exactly
+    spans = zip(stream.indptr[:-1], stream.indptr[1:])
+    assert terms.error_squares.tolist() == [sum(int(v) ** 2 for v in error[a:b]) for a, b in spans]
+    assert terms.error_sums.tolist() == [min(int(error[a:b].sum()), fs.error_acc.raw_max)
+                                         for a, b in zip(stream.indptr[:-1], stream.indptr[1:])]
+
+
+def test_accumulators_that_would_not_fit_int64_are_refused():
+    with pytest.raises(ValueError, match=r"the error_squares accumulator takes 67 bits > 63"):
+        DEFAULT.replace(rest_length="u3.28", error_acc="u20.28", face_area="u16.28")
+    with pytest.raises(ValueError, match=r"the error_squares accumulator takes 65 bits > 63"):
+        DEFAULT.replace(rest_length="u3.26", error_acc="u20.26", face_area="u16.26", max_degree=128)
+    with pytest.raises(ValueError, match=r"the position step takes 64 bits > 63"):  # Δt·V shifted 48 bits up
+        DEFAULT.replace(dt="u0.10", half_dt_sq="u0.24", accel="s4.34", velocity="s3.10", position="s10.10",
+                        delta="s3.10", face_edge="s8.10")
+    assert DEFAULT.accumulators() == {"force": (True, 30), "error": (False, 23), "error_squares": (False, 41),
+                                      "barrier_energy": (False, 57)}

@@ -166,6 +166,8 @@ class Case:
     faces: np.ndarray | None = None  # expected faces of the mesh (legal meshes)
     note: str | None = None  # regex one note must match
     deny: tuple[str, int] | None = None
+    links: dict[str, str] = field(default_factory=dict)  # name -> symbolic link target ("hard:x": a hard link to x)
+    fifos: tuple[str, ...] = ()  # named pipes made first
 
 
 @dataclass
@@ -223,6 +225,13 @@ def run_case(case: Case, tmp_path: Path, monkeypatch, capsys) -> Outcome:
         else:
             with open(path, "w", newline="", encoding="utf-8") as handle:
                 handle.write(content)
+    for name in case.fifos:
+        os.mkfifo(tmp_path / name)
+    for name, target in case.links.items():
+        if target.startswith("hard:"):
+            os.link(tmp_path / target[len("hard:"):], tmp_path / name)
+        else:
+            os.symlink(target, tmp_path / name)
     before = _tree(tmp_path)
     if case.deny is not None:
         _deny(monkeypatch, tmp_path / case.deny[0], case.deny[1])
@@ -700,3 +709,552 @@ def test_real_permission_denied(tmp_path, what):
     _one_error_line(proc, rf"^springflat: error: cannot {kind} '{'ro/o.obj' if what == 'out' else target}': "
                           "permission denied$")
     assert _tree(tmp_path) == before
+
+
+# --------------------------------------------------------------------------- issue 26: outputs, inputs, format sets
+#
+# Policy (README "Outputs", docs/hardware.md "Outputs"): an output is written as a new file renamed over
+# the old one; a symbolic link is written through (its target is replaced, the link stays); a path
+# that is not a regular file (a device, a named pipe, a socket, a directory), or a link to one, is
+# refused in one line and never replaced; no output may be the same file (device and inode) as an
+# input or another output.
+
+
+def _long_name(stem_char: str, total_bytes: int, suffix: str) -> str:
+    """A file name of exactly ``total_bytes`` bytes in UTF-8 (``stem_char`` may take two)."""
+    width = len(stem_char.encode())
+    stem = stem_char * ((total_bytes - len(suffix)) // width)
+    return stem + "x" * (total_bytes - len(suffix) - len(stem.encode())) + suffix
+
+
+def _stl_no_triangles(header: bytes = b"\0" * 80, tail: bytes = b"") -> bytes:
+    return header + struct.pack("<I", 0) + tail
+
+
+class _Hung(Exception):
+    """A read blocked (the alarm below fired): not an OSError, so no handler can mistake it for one."""
+
+
+@pytest.fixture
+def no_hang():
+    """Fail, instead of hanging forever, if a case blocks for 60 s (a FIFO opened for reading would)."""
+    import signal
+
+    def fire(signum, frame):
+        raise _Hung("the command blocked")
+
+    previous = signal.signal(signal.SIGALRM, fire)
+    signal.alarm(60)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, previous)
+
+
+def _flip_diagonals(faces: np.ndarray) -> np.ndarray:
+    """The grid's quads split along the other diagonal: the same vertices, other triangles."""
+    return np.array([t for q in QUADS.tolist() for t in ([q[0], q[1], q[3]], [q[1], q[2], q[3]])])
+
+
+ROUND_TWO_MESHES: dict[str, Case] = {
+    "obj index beyond int64": Case(
+        ["m.obj"], 2, r"^springflat: error: cannot parse mesh 'm.obj': line 17: face corner '99999999999999999999': "
+                      r"index 99999999999999999999 is out of range$",
+        files={"m.obj": obj().replace("f 1 2 6", "f 99999999999999999999 2 6")}),
+    "obj negative index beyond int64": Case(["m.obj"], 2, r"index -99999999999999999999 is out of range",
+                                            files={"m.obj": obj().replace("f 1 2 6", "f -99999999999999999999 2 6")}),
+    "obj index beyond int64 with a normal": Case(
+        ["m.obj"], 2, r"face corner '2//99999999999999999999': index 99999999999999999999 is out of range",
+        files={"m.obj": obj().replace("f 1 2 6", "vn 0 0 1\nf 1//1 2//99999999999999999999 6//1")}),
+    "obj the largest int64 index": Case(["m.obj"], 2, r"face refers to vertex 9223372036854775807 but the file has only 16",
+                                        files={"m.obj": obj().replace("f 1 2 6", "f 9223372036854775807 2 6")}),
+    "off index beyond int64": Case(["m.off"], 2, r"line 19: face index 99999999999999999999 is out of range",
+                                   files={"m.off": off().replace("\n3 0 1 5", "\n3 0 1 99999999999999999999")}),
+    "ply index beyond int64": Case(["m.ply"], 2, r"element 'face' has an index 1e\+20 that is out of range",
+                                   files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 99999999999999999999")}),
+    "ply fractional index": Case(["m.ply"], 2, r"element 'face' has an index 5.5 that is not an integer",
+                                 files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 5.5")}),
+    "stl with 0 triangles": Case(["m.stl"], 2, r"invalid mesh 'm.stl': the binary STL holds 0 triangles",
+                                 files={"m.stl": _stl_no_triangles()}),
+    "stl with 0 triangles and a header that is not UTF-8": Case(
+        ["m.stl"], 2, r"the binary STL holds 0 triangles", files={"m.stl": _stl_no_triangles(b"\xff" * 80)}),
+    "stl with 0 triangles, a header that is not UTF-8 and a stray byte": Case(
+        ["m.stl"], 2, r"invalid mesh 'm.stl': mesh is empty", files={"m.stl": _stl_no_triangles(b"\xff" * 80, b"\n")}),
+    "stl text that is not UTF-8": Case(["m.stl"], 2, r"invalid mesh 'm.stl': mesh is empty",
+                                       files={"m.stl": b"solid \xe9\xff\nendsolid\n"}),
+    "stl text that is not UTF-8, with triangles": Case(
+        ["m.stl"], 0, files={"m.stl": stl_ascii().replace("solid fuzz", "solid caf\u00e9").encode("latin-1")}),
+    "mesh is a named pipe": Case(["p.obj"], 2, r"^springflat: error: cannot read mesh 'p.obj': is a named pipe "
+                                               r"\(FIFO\), not a regular file$", fifos=("p.obj",)),
+    "mesh is a link to a named pipe": Case(["l.obj"], 2, r"cannot read mesh 'l.obj': is a named pipe \(FIFO\)",
+                                           fifos=("p",), links={"l.obj": "p"}),
+}
+
+
+@pytest.mark.parametrize("name", ROUND_TWO_MESHES)
+def test_round_two_mesh(name, tmp_path, monkeypatch, capsys, no_hang):
+    case = ROUND_TWO_MESHES[name]
+    case.args = [*case.args, "--out", "o.obj", "--history", "h.csv", "--json", "--max-iter", "10"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    assert "charset" not in outcome.err and "module" not in outcome.err
+
+
+ROUND_TWO_LAYOUTS: dict[str, Case] = {
+    "empty --init": Case(["--init", ""], 2, r"^springflat: error: the layout '' is empty: name a method \(auto, tutte, pca, "
+                                            r"harmonic, lscm, arap, slim\) or a file$"),
+    "--init is a named pipe": Case(["--init", "l.txt"], 2, r"cannot read layout 'l.txt': is a named pipe \(FIFO\), "
+                                                           "not a regular file", fifos=("l.txt",)),
+    "obj layout without faces": Case(
+        ["--init", "l.obj"], note=r"note: layout 'l.obj' has no faces: only its vertices' x, y are used",
+        files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]), faces=np.zeros((0, 3), dtype=int))}),
+    "obj layout with other faces": Case(
+        ["--init", "l.obj"], note=r"note: layout 'l.obj' has 18 faces that are not the mesh's 18: only its vertices'",
+        files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]), faces=_flip_diagonals(F))}),
+    "obj layout with z": Case(
+        ["--init", "l.obj"], note=r"note: layout 'l.obj' has z up to 0\.2, not a flat layout: only x, y are used",
+        files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0.2 * UV[:, 0]]))}),
+    "obj layout, the mesh's faces in another order and rotation": Case(
+        ["--init", "l.obj"], files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]),
+                                                 faces=np.roll(F[::-1], 1, axis=1))}),
+}
+
+
+@pytest.mark.parametrize("name", ROUND_TWO_LAYOUTS)
+def test_round_two_layout(name, tmp_path, monkeypatch, capsys, no_hang):
+    case = ROUND_TWO_LAYOUTS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", *case.args, "--json", "--max-iter", "20", "--out", "flat.obj"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0 and case.note is None:
+        assert "note:" not in outcome.err  # the mesh's faces and z = 0: nothing to say
+
+
+def _formats(**changes) -> str:
+    """The default preset as JSON with ``changes`` (format fields or knobs), unvalidated."""
+    from golden_model.fixed.formats_set import FormatSet
+
+    data = FormatSet.preset("default").to_dict()
+    data["name"] = "fuzzed"
+    for key, value in changes.items():
+        (data["formats"] if key in data["formats"] else data)[key] = value
+    return json.dumps(data)
+
+
+#: A grid whose second column is 1/20 of the others' width: its short edges are 1/16 of the mean edge.
+SQUEEZED = np.column_stack([np.array([0.0, 0.05, 1.0, 2.0])[np.arange(16) % 4], np.repeat(np.arange(4.0), 4),
+                            0.1 * np.repeat(np.arange(4.0), 4) ** 2 / 9])
+
+ROUND_TWO_FORMATS: dict[str, Case] = {
+    "json null": Case(["--formats", "f.json"], 2, r"^springflat: error: formats 'f.json': a format set is a JSON object "
+                                                  r"with 'formats' and the knobs, not null$", files={"f.json": "null"}),
+    "json string": Case(["--formats", "f.json"], 2, r"not the string \"default\"$", files={"f.json": '"default"'}),
+    "json number": Case(["--formats", "f.json"], 2, r"not the number 42$", files={"f.json": "42"}),
+    "json boolean": Case(["--formats", "f.json"], 2, r"not the boolean true$", files={"f.json": "true"}),
+    "name not a string": Case(["--formats", "f.json"], 2, r"the format set's 'name' must be a string, not a list",
+                              files={"f.json": _formats(name=[1])}),
+    "a billion Newton steps": Case(["--formats", "f.json"], 2,
+                                   r"rsqrt_newton_steps 1000000000 is outside its domain 0..4$",
+                                   files={"f.json": _formats(rsqrt_newton_steps=10**9)}),
+    "64 seed bits": Case(["--formats", "f.json"], 2, r"rsqrt_seed_bits 64 is outside its domain 2..16",
+                         files={"f.json": _formats(rsqrt_seed_bits=64)}),
+    "40 LUT index bits": Case(["--formats", "f.json"], 2, r"lut_index_bits 40 is outside its domain 1..12",
+                              files={"f.json": _formats(lut_index_bits=40, error="u0.40", reciprocal="u1.44")}),
+    "max_degree 10^12": Case(["--formats", "f.json"], 2, r"max_degree 1000000000000 is outside its domain 1..1024",
+                             files={"f.json": _formats(max_degree=10**12)}),
+    "rest_length u3.28": Case(["--formats", "f.json"], 2,
+                              r"the error_squares accumulator takes 67 bits > 63; its exact value would not fit int64",
+                              files={"f.json": _formats(rest_length="u3.28", error_acc="u20.28", face_area="u16.28")}),
+    "position 62 bits": Case(["--formats", "f.json"], 2, r"position s39.22 is 62 bits; its update adds in one more bit",
+                             files={"f.json": _formats(position="s39.22")}),
+    "damping without an integer bit": Case(["--formats", "f.json"], 2, r"damping u0.17 needs an integer bit",
+                                           files={"f.json": _formats(damping="u0.17")}),
+    "formats file is a named pipe": Case(["--formats", "f.json"], 2, r"cannot read formats file 'f.json': is a named "
+                                                                     r"pipe \(FIFO\), not a regular file",
+                                         fifos=("f.json",)),
+    "dt u0.4, variable step": Case(["--dynamics", "paper", "--formats", "f.json"], 2,
+                                   r"the step generator's smallest dt 0.01 rounds to 0 \(lsb 0.0625\) in dt u0.4 of "
+                                   r"format set 'fuzzed'", files={"f.json": _formats(dt="u0.4")}),
+    "dt u0.4, fixed step": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "0.01", "--formats", "f.json"], 2,
+                                r"dt 0.01 does not fit format set 'fuzzed' \(u0.4", files={"f.json": _formats(dt="u0.4")}),
+    "dt^2/2 rounds to 0": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "0.01", "--formats", "f.json"], 2,
+                               r"dt\^2/2 for dt 0.01 rounds to 0 in half_dt_sq u0.12",
+                               files={"f.json": _formats(half_dt_sq="u0.12")}),
+    "exp table entries round to 0": Case(["--dynamics", "paper", "--formats", "f.json"], 2,
+                                         r"the exp table's smallest entry 0.000673795 rounds to 0 .* in lut_entry u0.8",
+                                         files={"f.json": _formats(lut_entry="u0.8")}),
+    "beta_1 rounds to 0": Case(["--formats", "f.json"], 2, r"the momentum factor beta_1 0.25 rounds to 0 \(lsb 1\) in dt u1.0",
+                               files={"f.json": _formats(dt="u1.0")}),
+    "error u0.1 with the paper's tolerances": Case(
+        ["--dynamics", "paper", "--tol-area", "0.16", "--tol-shape", "0.4", "--formats", "f.json"], 2,
+        r"--tol-area 0.16 rounds to 0 in error u0.1 of format set 'fuzzed' \(lsb 0.5\): the rule could never hold",
+        files={"f.json": _formats(error="u0.1", lut_index_bits=1, reciprocal="u1.3")}),
+    "error u0.1 without E tolerances": Case(
+        ["--formats", "f.json"], 0, note=r"format set 'fuzzed' holds E_S and E_C in error u0.1: they are multiples "
+                                          r"of 0.5, the values above are rounded to that",
+        files={"f.json": _formats(error="u0.1", lut_index_bits=1, reciprocal="u1.3")}),
+    "C/2 rounds to 0": Case(["--spring", "1e-9"], 2, r"C/2 5e-10 rounds to 0 \(lsb 3.05e-05\) in spring s6.15"),
+    "1 - damping rounds to 0": Case(["--dynamics", "paper", "--damping", "0.99999999"], 2,
+                                    r"the velocity factor 1 - damping 1e-08 rounds to 0 .* in damping u1.17"),
+    "barrier gain rounds to 0": Case(["--barrier-gain", "0.01", "--formats", "f.json"], 2,
+                                     r"the barrier gain mu C/\(4 X\*\) of .* rounds to 0 in barrier_gain u8.2",
+                                     files={"f.json": _formats(barrier_gain="u8.2")}),
+    "a rest length rounds to 0": Case(["--formats", "f.json"], 2,
+                                      r"an edge's rest length of 0.0\d+ \(scaled units\) rounds to 0 in rest_length u3.2",
+                                      files={"m.obj": obj(vertices=SQUEEZED),
+                                             "f.json": _formats(rest_length="u3.2")}),
+}
+
+
+@pytest.mark.parametrize("name", ROUND_TWO_FORMATS)
+def test_round_two_format_set(name, tmp_path, monkeypatch, capsys, no_hang):
+    case = ROUND_TWO_FORMATS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", "--engine", "fixed", *case.args, "--json", "--max-iter", "30", "--out", "flat.obj"]
+    run_case(case, tmp_path, monkeypatch, capsys)
+
+
+@pytest.mark.parametrize("command", [["verilog", "--out", "v"], ["study", "dome", "--out", "s"],
+                                     ["synth", "--target", "ecp5", "--out", "y"],
+                                     ["rtl-check", "m.obj", "--json"]])
+def test_every_command_refuses_a_billion_newton_steps_at_once(command, tmp_path, monkeypatch, capsys):
+    """No command hangs on a format set with a huge knob: one line, at once, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "f.json").write_text(_formats(rsqrt_newton_steps=10**9))
+    option = "--base" if command[0] == "study" else "--formats"
+    code = main([*command, option, "f.json"])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert re.fullmatch(r"springflat: error: formats 'f.json': FormatSet 'fuzzed': rsqrt_newton_steps 1000000000 is "
+                        r"outside its domain 0..4", err[0])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.json", "m.obj"]
+
+
+ROUND_TWO_OUTPUTS: dict[str, Case] = {
+    "history is a named pipe": Case(["--history", "h.csv"], 2,
+                                    r"^springflat: error: --history 'h.csv' is a named pipe \(FIFO\), not a regular "
+                                    r"file: springflat writes regular files only$", fifos=("h.csv",)),
+    "out is a link to a named pipe": Case(["--out", "o.obj"], 2,
+                                          r"--out 'o.obj' \(the link's target '.*/p'\) is a named pipe \(FIFO\)",
+                                          fifos=("p",), links={"o.obj": "p"}),
+    "plot is a link to a directory": Case(["--plot", "p.png"], 2, r"--plot 'p.png' is a directory",
+                                          files={"d/x": ""}, links={"p.png": "d"}),
+    "history is a link to a file": Case(["--history", "h.csv"], files={"t.csv": "old"}, links={"h.csv": "t.csv"}),
+    "history is a dangling link": Case(["--history", "h.csv"], links={"h.csv": "new.csv"}),
+    "history is a link into a missing directory": Case(["--history", "h.csv"], 2, r"directory '.*gone' does not exist",
+                                                       links={"h.csv": "gone/h.csv"}),
+    "history overwrites the --init file": Case(["--init", "l.txt", "--history", "l.txt"], 2,
+                                               r"^springflat: error: --history 'l.txt' is the same file as --init "
+                                               r"'l.txt'$", files={"l.txt": layout_text()}),
+    "history overwrites the --init file, spelled another way": Case(
+        ["--init", "l.txt", "--history", "d/../l.txt"], 2, r"--history 'd/../l.txt' is the same file as --init 'l.txt'",
+        files={"l.txt": layout_text(), "d/k": ""}),
+    "history overwrites the --init file through a link": Case(
+        ["--init", "l.txt", "--history", "h.csv"], 2, r"--history 'h.csv' is the same file as --init 'l.txt'",
+        files={"l.txt": layout_text()}, links={"h.csv": "l.txt"}),
+    "history overwrites the formats file": Case(
+        ["--engine", "fixed", "--formats", "f.json", "--history", "./f.json"], 2,
+        r"--history '(\./)?f.json' is the same file as --formats 'f.json'", files={"f.json": _formats_json()}),
+    "out is a hard link to the mesh": Case(["--out", "h.obj"], 2, r"--out 'h.obj' is the same file as the mesh 'm.obj'",
+                                           links={"h.obj": "hard:m.obj"}),
+    "out is a symbolic link to the mesh": Case(["--out", "s.obj"], 2, r"--out 's.obj' is the same file as the mesh",
+                                               links={"s.obj": "m.obj"}),
+    "history and plot the same new file, spelled two ways": Case(
+        ["--history", "h.png", "--plot", "d/../h.png"], 2, r"--plot 'd/../h.png' is the same file as --history 'h.png'",
+        files={"d/k": ""}),
+    "a 255-byte name": Case(["--history", _long_name("h", 255, ".csv")]),
+    "a 255-byte --out name": Case(["--out", _long_name("o", 255, ".obj"), "--history", "h.csv"]),
+    "a 255-byte name of two-byte characters": Case(["--history", _long_name("\u00e9", 255, ".csv")]),
+    "a 256-byte name": Case(["--history", _long_name("h", 256, ".csv")], 2, r"file name too long"),
+}
+
+
+@pytest.mark.parametrize("name", ROUND_TWO_OUTPUTS)
+def test_round_two_output_path(name, tmp_path, monkeypatch, capsys, no_hang):
+    case = ROUND_TWO_OUTPUTS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", "--json", "--max-iter", "30", *case.args]
+    run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0:
+        written = tmp_path / case.args[case.args.index("--history") + 1]
+        assert written.read_text().startswith("iteration,dt,")
+        if case.links:  # written through: the link is still a link, its target holds the CSV
+            assert written.is_symlink() and (tmp_path / os.readlink(written)).read_text().startswith("iteration,")
+
+
+def test_a_replaced_output_keeps_its_mode(tmp_path, monkeypatch, capsys):
+    (tmp_path / "h.csv").write_text("old")
+    (tmp_path / "h.csv").chmod(0o640)
+    run_case(Case(["m.obj", "--max-iter", "5", "--history", "h.csv"], files={"m.obj": obj()}), tmp_path, monkeypatch,
+             capsys)
+    assert (tmp_path / "h.csv").stat().st_mode & 0o777 == 0o640
+
+
+@pytest.mark.parametrize("err", [errno.ENOSPC, errno.EIO])
+def test_a_write_error_is_one_line_and_leaves_the_old_file(err, tmp_path, monkeypatch, capsys):
+    """Data that cannot reach the disk (a full disk, an I/O error: reported by fsync before the rename)."""
+    import sim.outputs
+
+    def failing_fsync(fd):
+        raise OSError(err, os.strerror(err))
+
+    (tmp_path / "h.csv").write_text("old")
+    monkeypatch.setattr(sim.outputs.os, "fsync", failing_fsync)
+    words = {errno.ENOSPC: "no space left on device", errno.EIO: "input/output error"}[err]
+    case = Case(["m.obj", "--max-iter", "5", "--out", "o.obj", "--history", "h.csv"], 2,
+                rf"^springflat: error: cannot write --out 'o.obj': {words}$", files={"m.obj": obj()})
+    run_case(case, tmp_path, monkeypatch, capsys)
+    assert (tmp_path / "h.csv").read_text() == "old"
+
+
+def test_real_exit_a_write_error_past_the_file_size_limit(tmp_path):
+    """A real write error, without root or a full disk: RLIMIT_FSIZE makes writes past 2 kB fail (EFBIG)."""
+    import resource
+    import signal
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG instead of the signal
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))
+
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "h.csv").write_text("old")
+    proc = subprocess.run([SPRINGFLAT, "flatten", "m.obj", "--max-iter", "200", "--tol-energy", "0", "--no-guard",
+                           "--energy-window", "1000", "--history",
+                           "h.csv"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300, preexec_fn=limit)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert lines[-1] == "springflat: error: cannot write --history 'h.csv': file too large", proc.stderr
+    assert all(line.startswith("springflat: ") for line in lines)
+    assert (tmp_path / "h.csv").read_text() == "old" and sorted(os.listdir(tmp_path)) == ["h.csv", "m.obj"]
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
+def test_as_root_a_device_survives_history_out_and_plot(tmp_path, monkeypatch, capsys):
+    """Stand-in character devices (major 1, minor 3: what /dev/null is) made in tmp_path; the machine's own
+    devices are never touched. Each output option, and a link to a device, is refused and the device stays."""
+    import stat
+
+    devices = {"dev.csv": "--history", "dev.obj": "--out", "dev.png": "--plot"}
+    for name, minor in zip(devices, (7, 3, 3)):  # what /dev/full (1, 7) and /dev/null (1, 3) are
+        os.mknod(tmp_path / name, 0o666 | stat.S_IFCHR, os.makedev(1, minor))
+    os.symlink("dev.csv", tmp_path / "link.csv")
+    before = {name: os.lstat(tmp_path / name) for name in devices}
+    for name, option in [*devices.items(), ("link.csv", "--history")]:
+        case = Case(["m.obj", "--max-iter", "5", option, name], 2,
+                    rf"^springflat: error: {option} '{name}'( \(the link's target '.*dev.csv'\))? is a character device, "
+                    "not a regular file: springflat writes regular files only$", files={"m.obj": obj()})
+        run_case(case, tmp_path, monkeypatch, capsys)
+    for name, st in before.items():
+        now = os.lstat(tmp_path / name)
+        assert stat.S_ISCHR(now.st_mode) and (now.st_ino, now.st_rdev) == (st.st_ino, st.st_rdev), name
+
+
+@pytest.mark.parametrize("command", [["verilog"], ["paper"], ["study", "dome"], ["synth", "--target", "ecp5"]])
+@pytest.mark.parametrize("kind", ["file", "fifo"])
+def test_an_output_directory_that_is_not_one_is_refused_at_once(command, kind, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    if kind == "file":
+        (tmp_path / "f.txt").write_text("keep")
+    else:
+        os.mkfifo(tmp_path / "f.txt")
+    code = main([*command, "--out", "f.txt"])
+    err = capsys.readouterr().err.splitlines()
+    what = "a regular file" if kind == "file" else r"a named pipe \(FIFO\)"
+    assert code == 2 and len(err) == 1 and re.fullmatch(
+        rf"springflat: error: --out 'f.txt' exists and is {what}, not a directory", err[0]), err
+    assert os.listdir(tmp_path) == ["f.txt"]
+
+
+def test_rtl_check_waves_onto_a_directory_is_one_line_before_anything(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "w").mkdir()
+    for extra in ([], ["--engine-top"]):
+        code = main(["rtl-check", "m.obj", "--waves", "w", *extra])
+        err = capsys.readouterr().err.splitlines()
+        assert code == 2 and err == ["springflat: error: --waves 'w' is a directory"], err  # no "building" line
+    code = main(["rtl-check", "m.obj", "--waves", "m.obj"])
+    assert code == 2 and capsys.readouterr().err.splitlines() == [
+        "springflat: error: --waves 'm.obj' is the same file as the mesh 'm.obj'"]
+
+
+def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
+    """Under pytest stderr is not a terminal: no bar; made to look like one, the bar is enabled."""
+    import sim.cli
+
+    seen = []
+    real = sim.cli._progress
+
+    def spy(total, enabled):
+        seen.append(enabled)
+        return real(total, enabled)
+
+    monkeypatch.setattr(sim.cli, "_progress", spy)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.obj").write_text(obj())
+    for argv in (["m.obj", "--max-iter", "3"], ["m.obj", "--max-iter", "3", "--json"]):
+        assert main(["flatten", *argv]) == 0
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    assert main(["flatten", "m.obj", "--max-iter", "3"]) == 0
+    assert seen == [False, False, True]
+    assert "it/s" not in capsys.readouterr().err
+
+
+def test_study_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
+    import sim.study
+
+    seen = []
+    real = sim.study._progress_bars
+
+    def spy(enabled):
+        seen.append(enabled)
+        return real(enabled)
+
+    monkeypatch.setattr(sim.study, "_progress_bars", spy)
+    monkeypatch.chdir(tmp_path)
+    assert main(["study", "dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--max-iter", "5",
+                 "--out", "s"]) == 0
+    assert seen == [False] and "run/s" not in capsys.readouterr().err
+
+
+def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, timeout: float = 600):
+    """Run ``springflat argv`` in a session of its own; once ``ready()`` holds (or at once), wait ``after`` s
+    and send SIGINT to the whole group (as Ctrl-C in a terminal does). Returns the finished process."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([SPRINGFLAT, *argv], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    start = time.monotonic()
+    ready = ready or _past_python_start_up(proc.pid)
+    while not ready() and proc.poll() is None and time.monotonic() - start < timeout:
+        time.sleep(0.02)
+    time.sleep(after)
+    assert proc.poll() is None, "the command ended before it could be interrupted"
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=timeout)
+    return proc.returncode, out, err
+
+
+def _past_python_start_up(pid: int):
+    """Whether process ``pid`` has begun importing springflat's modules (numpy is mapped): past CPython's own
+    start-up, where a SIGINT is the interpreter's fatal error, not springflat's to answer (on a loaded
+    machine start-up alone can take seconds)."""
+    def ready() -> bool:
+        try:
+            return "numpy" in Path(f"/proc/{pid}/maps").read_text()
+        except OSError:
+            return False
+    return ready
+
+
+def _building(cwd: Path, name: str):
+    """Whether the temporary sibling of output directory ``name`` exists (the build has begun)."""
+    return lambda: any(p.name.startswith(f".{name}.") for p in cwd.iterdir())
+
+
+@pytest.mark.parametrize("after", [0.0, 0.8, 2.5])
+def test_real_exit_ctrl_c_during_flatten_leaves_no_output(tmp_path, after):
+    """Ctrl-C while importing, early, or during the run: one line, status 130, no file. (Counted from the
+    start of the imports: within Python's own start-up, before any of springflat's code runs, CPython
+    answers for itself.)"""
+    from golden_model.generate import dome_grid
+    from golden_model.mesh import save_obj
+
+    mesh = dome_grid(64)  # long enough to be running at 2.5 s
+    save_obj(tmp_path / "m.obj", mesh.vertices, mesh.faces)
+    # --tol-area 0: E_S never reaches 0, so the run cannot stop before it is interrupted
+    code, out, err = _interrupt(["flatten", "m.obj", "--max-iter", "100000", "--tol-area", "0", "--tol-energy", "0",
+                                 "--no-guard",
+                                 "--energy-window", "1", "--out", "o.obj",
+                                 "--history", "h.csv", "--plot", "p.png"], tmp_path, after=after)
+    assert (code, out, err) == (130, "", "springflat: interrupted\n")
+    assert os.listdir(tmp_path) == ["m.obj"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command, name", [
+    (["verilog", "--out", "v"], "v"),
+    (["study", "dome", "saddle", "--workers", "2", "--out", "s"], "s"),  # minutes: every sweep and the optimiser
+    (["synth", "--target", "ecp5", "--components", "step_generator", "--out", "y"], "y"),
+])
+@pytest.mark.parametrize("after", [0.5, 3.0])
+def test_real_exit_ctrl_c_during_a_directory_output_leaves_nothing(command, name, after, tmp_path):
+    """verilog, study and synth build their directory beside --out: Ctrl-C leaves neither, prints one line
+    (no worker's traceback, no progress bar) and exits 130."""
+    ready = None if command[0] == "study" else _building(tmp_path, name)  # study: from the imports on
+    code, out, err = _interrupt(command, tmp_path, after=after + (2.0 if command[0] == "study" else 0.0), ready=ready)
+    assert (code, out) == (130, ""), err
+    assert err.splitlines()[-1] == "springflat: interrupted"
+    assert all(line.startswith("springflat") for line in err.splitlines()), err  # synth's step lines at most
+    assert os.listdir(tmp_path) == []
+
+
+def test_an_existing_output_directory_keeps_its_other_files(tmp_path, monkeypatch, capsys):
+    """paper into an existing directory: its files replace their namesakes, other files stay; the report's
+    figures are referred to by name, so they work from --out."""
+    import sim.paper
+
+    def tiny_report(out, init="pca", progress=True):
+        (out / "figure.png").write_bytes(b"png")
+        report = out / "report.md"
+        report.write_text("![figure](figure.png)\n")
+        return report
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "mine.txt").write_text("keep")
+    (tmp_path / "r" / "report.md").write_text("old")
+    assert main(["paper", "--out", "r"]) == 0
+    assert sorted(os.listdir(tmp_path / "r")) == ["figure.png", "mine.txt", "report.md"]
+    assert (tmp_path / "r" / "report.md").read_text() == "![figure](figure.png)\n"
+    assert (tmp_path / "r" / "mine.txt").read_text() == "keep"
+    assert os.listdir(tmp_path) == ["r"]
+    assert capsys.readouterr().out == "wrote r/report.md\n"
+
+
+@pytest.mark.parametrize("what", ["mesh", "init", "formats"])
+def test_real_exit_a_named_pipe_as_input_does_not_block(tmp_path, what):
+    name = "p.json" if what == "formats" else "p.obj"
+    os.mkfifo(tmp_path / name)
+    (tmp_path / "m.obj").write_text(obj())
+    args = {"mesh": [name], "init": ["m.obj", "--init", name], "formats": ["m.obj", "--engine", "fixed", "--formats", name]}
+    proc = _real(tmp_path, *args[what])  # a blocking read would end in subprocess's 300 s timeout
+    kind = {"mesh": "mesh", "init": "layout", "formats": "formats file"}[what]
+    _one_error_line(proc, rf"cannot read {kind} '{name}': is a named pipe \(FIFO\), not a regular file$")
+
+
+@pytest.mark.parametrize("engine, iterations, noted", [("fixed", 130, True), ("fixed", 20, False),
+                                                       ("float", 130, False)])
+def test_a_fixed_point_run_at_its_energy_floor_says_so(engine, iterations, noted, tmp_path, monkeypatch, capsys):
+    """The cap from ARAP, the unguarded dynamics under Algorithm 1's per-iteration rule: the fixed-point
+    energy reaches its rounding floor (~1e-5 relative) well before N_max = 130 and never meets ε = 1e-7
+    (docs/dynamics.md); 20 iterations are still descending."""
+    from golden_model.generate import spherical_cap
+    from golden_model.mesh import save_obj
+
+    cap = spherical_cap()
+    save_obj(tmp_path / "cap.obj", cap.vertices, cap.faces)
+    case = Case(["cap.obj", "--engine", engine, "--max-iter", str(iterations), "--no-guard", "--energy-window", "1",
+                 "--tol-energy", "1e-7"],
+                note=r"note: over the last 50 iterations the relative energy change never fell below [0-9.e-]+, "
+                     r"above --tol-energy 1e-07" if noted else None)
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    assert ("relative energy change never fell" in outcome.err) == noted
+
+
+def test_a_255_byte_output_directory_name(tmp_path, monkeypatch, capsys):
+    """The temporary sibling an output directory is built in fits wherever the directory's name fits."""
+    import sim.paper
+
+    def tiny_report(out, init="pca", progress=True):
+        (out / "report.md").write_text("report\n")
+        return out / "report.md"
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    monkeypatch.chdir(tmp_path)
+    name = _long_name("r", 255, "")
+    assert main(["paper", "--out", name]) == 0
+    assert os.listdir(tmp_path) == [name] and os.listdir(tmp_path / name) == ["report.md"]
+    capsys.readouterr()

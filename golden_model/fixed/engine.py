@@ -32,16 +32,16 @@ from typing import Callable
 
 import numpy as np
 
-from ..guard import ENERGY_FLOOR, EnergyWindow
+from ..guard import ENERGY_FLOOR
 from ..mesh import Mesh, folded_by_area, layout_orientation
-from ..reference import (FlattenParams, FlattenResult, GuardRecord, History, Measurement, ParameterError, Status,
-                         node_weights)
-from .format import MAX_PRODUCT_WIDTH, Format, Overflow, Rounding, SaturationCounter, quantize, requantize, to_float
+from ..modes import Step
+from ..reference import FlattenParams, FlattenResult, History, Measurement, ParameterError, node_weights
+from .controller import Controller, Setup
+from .format import (MAX_PRODUCT_WIDTH, MAX_WIDTH, Format, Overflow, Rounding, SaturationCounter, quantize, requantize,
+                     to_float)
 from .formats_set import FormatSet
-from .guard import commit, floor_min_raw, guarded_moves_raw, proposal
-from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum,
-                       node_power, node_terms)
-from .steplut import half_dt_sq, step_size
+from .pipeline import BarrierEntries, NeighbourStream, NodeConstants, exact_sum
+from .steplut import DT_MAX, DT_MIN, dt_constant, half_dt_sq, lut_value_float
 
 __all__ = ["FixedPointError", "Reciprocal", "FixedProblem", "prepare", "flatten_fixed", "load_formats",
            "momentum_beta_raw", "power_sum", "MomentumState", "area_sum", "area_error", "length_sum", "shape_error",
@@ -234,9 +234,9 @@ class StopRule:
 
 def energy_floor_raw(problem: "FixedProblem") -> int:
     """:func:`golden_model.reference.energy_floor` in :func:`energy_raw` units: ``ENERGY_FLOOR`` times the
-    exact energy of every edge at twice its rest length (``½C·Σd²`` over the entries), floored; 0 for the
-    paper dynamics."""
-    if not problem.momentum:
+    exact energy of every edge at twice its rest length (``½C·Σd²`` over the entries), floored; 0 where
+    the float model has no floor."""
+    if not (problem.params.guard and problem.params.tol_energy > 0):
         return 0
     rest = problem.stream.rest
     reference = energy_raw(problem.fs, problem.half_spring, int(np.sum(rest * rest, dtype=object)), 0)
@@ -245,9 +245,15 @@ def energy_floor_raw(problem: "FixedProblem") -> int:
 
 def power_sum(fs: FormatSet, power: np.ndarray, counter: SaturationCounter | None = None) -> int:
     """``S = Σ F·V`` [power_acc]: the controller's exact sum, saturated once."""
-    total = int(np.sum(power, dtype=np.int64))
-    return int(requantize(np.int64(total), fs.power.frac_bits, fs.power_acc, fs.rounding, SAT, counter,
-                          "power_acc"))
+    return int(requantize(_int64_clamped(exact_sum(power)), fs.power.frac_bits, fs.power_acc, fs.rounding, SAT,
+                          counter, "power_acc"))
+
+
+def _int64_clamped(total: int) -> np.int64:
+    """An exact sum as int64 for :func:`requantize`: one past the widest format's range at most (a sum
+    beyond it saturates the same, counted once); every format is at most ``MAX_WIDTH`` bits."""
+    limit = 1 << MAX_WIDTH
+    return np.int64(max(-limit, min(limit, total)))
 
 
 def _quantize_checked(x: np.ndarray | float, fmt: Format, what: str, fs: FormatSet, hint: str) -> np.ndarray:
@@ -257,6 +263,16 @@ def _quantize_checked(x: np.ndarray | float, fmt: Format, what: str, fs: FormatS
         raise FixedPointError(f"{what} {worst:.6g} does not fit format set '{fs.name}' "
                               f"({fmt}: max {fmt.max:.6g}); {hint}")
     return raw
+
+
+def _refuse_zeros(raw: np.ndarray, value: np.ndarray, what: str, field: str, fs: FormatSet) -> None:
+    """Refuse, naming the field, when a positive quantity the host rounded (``value``, scaled units) became 0."""
+    zero = (np.asarray(raw) == 0) & (np.asarray(value) > 0)
+    if zero.any():
+        fmt = getattr(fs, field)
+        smallest = float(np.min(np.asarray(value)[zero]))
+        raise FixedPointError(f"{what} of {smallest:.3g} (scaled units) rounds to 0 in {field} {fmt} of format set "
+                              f"'{fs.name}' (lsb {fmt.lsb:.3g}); choose a format set with more fraction bits for it")
 
 
 def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs: FormatSet) -> FixedProblem:
@@ -295,6 +311,7 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               f"{fs.rsqrt} of '{fs.name}' needs edges above {1.0 / fs.rsqrt.max:.4g}: "
                               "the mesh's edge lengths vary too much for these formats")
     rest_raw = quantize(scaled_rest, fs.rest_length, HOST_ROUNDING, SAT)
+    _refuse_zeros(rest_raw, scaled_rest, "an edge's rest length", "rest_length", fs)
     model_density = mesh.auto_density() if params.density == "auto" else float(params.density)
     inv_mass_barrier_raw = None
     if params.dynamics == "momentum":
@@ -325,6 +342,7 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               f"takes fewer than 2^{MAX_PRODUCT_WIDTH - fs.face_area.width} ({fs.face_area})")
     face_areas = _quantize_checked(mesh.face_areas * scale * scale, fs.face_area, "a triangle's area", fs,
                                    "the mesh's triangles vary too much in size for these formats")
+    _refuse_zeros(face_areas, mesh.face_areas * scale * scale, "a triangle's area", "face_area", fs)
     mantissa_bits = fs.reciprocal.width
     area_total = int(face_areas.sum())  # [face_area], exact
     length_total = int(stream.rest.sum()) << (fs.error_acc.frac_bits - fs.rest_length.frac_bits)  # [error_acc]
@@ -365,6 +383,8 @@ def _barrier_entries(mesh: Mesh, params: FlattenParams, fs: FormatSet, scale: fl
     hint = "the mesh's triangles vary too much in size for these formats (or lower --barrier-gain)"
     threshold_raw = _quantize_checked(threshold, fs.area, "a barrier threshold", fs, hint)
     gain_raw = _quantize_checked(gain, fs.barrier_gain, "the barrier gain mu C/(4 X*)", fs, hint)
+    _refuse_zeros(threshold_raw[has], threshold[has], "a barrier threshold kappa X*", "area", fs)
+    _refuse_zeros(gain_raw[has], gain[has], "the barrier gain mu C/(4 X*)", "barrier_gain", fs)
     return BarrierEntries(np.where(has, second, rings.neighbour), threshold_raw, gain_raw)
 
 
@@ -411,8 +431,8 @@ def area_error(fs: FormatSet, reciprocal: Reciprocal, faces: np.ndarray, face_ar
 def length_sum(fs: FormatSet, error_sums: np.ndarray, counter: SaturationCounter | None = None) -> int:
     """``Σ|L − d|`` raw [error_acc] over the nodes' partial sums ``error_sums`` (V,) [error_acc],
     saturated once (counted as ``length_sum``)."""
-    return int(requantize(error_sums.sum(), fs.error_acc.frac_bits, fs.error_acc, fs.rounding, SAT, counter,
-                          "length_sum"))
+    return int(requantize(_int64_clamped(exact_sum(error_sums)), fs.error_acc.frac_bits, fs.error_acc, fs.rounding,
+                          SAT, counter, "length_sum"))
 
 
 def shape_error(fs: FormatSet, reciprocal: Reciprocal, error_sums: np.ndarray,
@@ -437,44 +457,20 @@ def flipped_count(problem: FixedProblem, positions: np.ndarray) -> int:
     return int(np.sum(problem.orientation * _doubled_areas(problem.fs, positions, problem.mesh.faces) < 0))
 
 
-class FixedEngine:
-    """The controller's state for :func:`run_fixed`: raw state plus the last raw errors and energy.
+class FixedEngine(Controller):
+    """``--engine fixed``: the engine's :class:`~golden_model.fixed.controller.Controller` on the host's
+    :class:`FixedProblem`, with the measurements a run reports (``positions``/``velocities`` mapped back
+    to mesh units, float64; ``raw_positions``/``raw_velocities`` are the bit-exact state).
 
-    Each iteration is a force pass over the current positions (which also
-    yields their ``E_C`` partial sums) and an integrate pass once the step
-    generator has turned ``E_S``, ``E_C`` into ``Δt``.  With the single-pass
-    datapath this is a pass with ``Δt = 0``, ``1 − γ = 1`` (which moves
-    nothing) followed by the real pass: the partial sums do not depend on the
-    step, so both passes produce the same terms.
-
-    With the step guard (momentum dynamics, :mod:`golden_model.fixed.guard`) an iteration proposes
-    ``V'``, takes each node's guarded fraction of it, measures the moved layout and keeps it only
-    if its exact energy is not above the last accepted one; otherwise the layout and its
-    measurement return (``P − V``), the momentum restarts and the step scale halves.
-
-    ``positions``/``velocities`` are the state mapped back to mesh units
-    (float64); ``raw_positions``/``raw_velocities`` are the bit-exact state.
+    The single-pass datapath measures a layout with a pass at ``Δt = 0``, ``1 − γ = 1`` (which moves
+    nothing) before the real pass: the partial sums do not depend on the step, so both passes
+    produce the same terms.
     """
 
     def __init__(self, problem: FixedProblem, counter: SaturationCounter):
+        super().__init__(controller_setup(problem), problem.initial_positions.copy(),
+                         np.zeros_like(problem.initial_positions), counter)
         self.problem = problem
-        self.counter = counter
-        self.raw_positions = problem.initial_positions.copy()
-        self.raw_velocities = np.zeros_like(self.raw_positions)
-        self.terms: NodeTerms | None = None
-        self.errors = (0, 0)
-        self.dt = 0
-        self.power = 0  # S of the last force pass [power_acc]
-        self.node_power: np.ndarray | None = None  # its per-node terms [power]
-        self.momentum = MomentumState()
-        self.energy_raw = 0  # of the last measurement (energy_raw)
-        self.measurement: Measurement | None = None  # of the layout ``_measured`` (the same array object)
-        self._measured: np.ndarray | None = None
-        self.guard = GuardRecord() if problem.params.guard else None
-        self.accepted = True
-        self.stalled = False
-        if self.guard is not None:
-            self.floor_min = floor_min_raw(problem.fs, problem.face_areas)
 
     @property
     def positions(self) -> np.ndarray:
@@ -485,80 +481,50 @@ class FixedEngine:
         return self.problem.to_float_velocities(self.raw_velocities)
 
     def measure(self) -> Measurement:
-        if self._measured is self.raw_positions:
-            return self.measurement
-        p = self.problem
-        self.terms = node_terms(p.fs, self.raw_positions, p.stream, p.half_spring, self.counter)
-        e_s = area_error(p.fs, p.area_reciprocal, p.mesh.faces, p.face_areas, self.raw_positions, self.counter)
-        e_c = shape_error(p.fs, p.length_reciprocal, self.terms.error_sums, self.counter)
-        self.errors = (e_s, e_c)
-        self.energy_raw = energy_raw(p.fs, p.half_spring, self.terms.error_square_sum, self.terms.barrier_energy_sum)
-        energy = energy_to_float(p, self.energy_raw)
-        if p.momentum:
-            self.node_power = node_power(p.fs, self.terms.force, self.raw_velocities, self.counter)
-            self.power = power_sum(p.fs, self.node_power, self.counter)
-        self.measurement = Measurement(float(to_float(e_s, p.fs.error)), float(to_float(e_c, p.fs.error)), energy,
-                                       flipped_count(p, self.raw_positions), folded_count(p, self.raw_positions))
-        self._measured = self.raw_positions
-        return self.measurement
+        """The passes of the current layout (once per layout) and what they report, in mesh units."""
+        super().measure()
+        p, fs = self.problem, self.problem.fs
+        return Measurement(float(to_float(self.errors[0], fs.error)), float(to_float(self.errors[1], fs.error)),
+                           energy_to_float(p, self.energy_raw), flipped_count(p, self.raw_positions),
+                           folded_count(p, self.raw_positions))
 
     def step_size(self, _: Measurement) -> float:
-        """The step generator on the last raw errors (variable) or the fixed ``Δt``."""
-        fs, params = self.problem.fs, self.problem.params
-        if params.dynamics == "momentum":  # Δt = 1; the controller's β_k goes into the Δt port
-            self.dt, self.momentum = self.momentum.next(self.power, fs)
-            return 1.0
-        if params.step == "fixed":
-            self.dt = int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))
-        else:
-            self.dt = int(step_size(np.int64(self.errors[0]), np.int64(self.errors[1]), fs, self.counter)[0])
-        return float(to_float(self.dt, fs.dt))
+        """:meth:`choose_step`, as the float step (1 with momentum: β goes into the Δt port)."""
+        dt = self.choose_step()
+        return 1.0 if self.setup.mode.step is Step.MOMENTUM else float(to_float(dt, self.problem.fs.dt))
 
-    def advance(self, dt: float) -> None:
-        p = self.problem
-        weights = p.stream.node_weights(self.terms.barrier_active)
-        if self.guard is not None:
-            self._advance_guarded(weights)
-            return
-        if p.momentum:
-            self.raw_positions, self.raw_velocities = integrate_momentum(
-                p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, self.dt, self.counter)
-        else:
-            self.raw_positions, self.raw_velocities = integrate(
-                p.fs, self.raw_positions, self.raw_velocities, self.terms.force, weights, p.constants(self.dt),
-                self.counter)
+    def advance(self, dt: float = 0.0) -> None:
+        super().advance()
 
-    def _advance_guarded(self, weights: np.ndarray) -> None:
-        """Propose, guard, commit and measure; keep the step only if the energy did not rise."""
-        p, guard = self.problem, self.guard
-        accepted_state = (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power,
-                          self.measure())
-        wanted = proposal(p.fs, self.raw_velocities, self.terms.force, weights, self.dt, guard.scale.shift,
-                          self.counter)
-        moves, levels = guarded_moves_raw(p.fs, self.raw_positions, wanted, p.mesh.faces, p.winding, self.floor_min)
-        guard.count_levels(levels)
-        self.raw_positions, taken = commit(self.raw_positions, moves)
-        before = self.energy_raw
-        self.measure()
-        self.accepted = self.energy_raw <= before
-        if self.accepted:
-            self.raw_velocities = taken
-            guard.scale = guard.scale.accepted_step()
-            return
-        (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power,
-         self.measurement) = accepted_state
-        self._measured = self.raw_positions
-        self.raw_velocities = np.zeros_like(self.raw_velocities)
-        self.power = 0  # S of a stopped momentum
-        self.momentum = MomentumState()
-        guard.rejected += 1
-        guard.scale = guard.scale.rejected(with_momentum=self.dt > 0)  # β = 0: a plain gradient step
-        self.stalled = guard.scale.stalled
+
+def controller_setup(problem: FixedProblem) -> Setup:
+    """The controller's view of the host's problem."""
+    fs, params = problem.fs, problem.params
+    mode = params.mode
+    dt = int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) if mode.step is Step.FIXED else 0
+    return Setup(fs, mode, problem.stream, problem.mesh.faces, problem.face_areas, problem.half_spring,
+                 problem.damping, dt, problem.area_reciprocal, problem.length_reciprocal,
+                 StopRule.of(params, fs, energy_floor_raw(problem)), params.max_iter, params.energy_window,
+                 winding=int(problem.winding))
+
+
+def _fits(what: str, value: float, field: str, fs: FormatSet, hint: str = "") -> int:
+    """``value`` > 0 rounded into ``fs.<field>`` by the host; refused, naming the field, when it rounds to 0
+    or does not fit (would saturate)."""
+    fmt = getattr(fs, field)
+    raw = int(quantize(value, fmt, HOST_ROUNDING, SAT))
+    if value > fmt.max or raw == 0:
+        problem = f"rounds to 0 (lsb {fmt.lsb:.3g})" if raw == 0 else f"does not fit (max {fmt.max:.6g})"
+        raise FixedPointError(f"{what} {value:.6g} {problem} in {field} {fmt} of format set '{fs.name}'"
+                              + (f"; {hint}" if hint else ""))
+    return raw
 
 
 def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
     """Refuse parameters the formats cannot represent faithfully, and modes the fixed-point model does not
-    have (before any mesh work: :func:`prepare` checks the mesh against the formats)."""
+    have, before any mesh work (:func:`prepare` checks the mesh against the formats): every constant the
+    host rounds into a format (``Δt`` or the step generator's range, ``β``, ``C/2``, ``1 − γ``, the
+    tolerances) must neither round to 0 nor saturate; each refusal is one line naming the field."""
     if params.update != "jacobi":
         raise FixedPointError("the fixed-point engine computes the jacobi order (as the hardware does); "
                               "use --update jacobi")
@@ -573,11 +539,32 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
     if 0 < params.tol_energy < math.ldexp(1, -ENERGY_TOL_FRAC_BITS - 1):
         raise FixedPointError(f"tol_energy {params.tol_energy:g} is below the controller's resolution "
                               f"2^-{ENERGY_TOL_FRAC_BITS} ({math.ldexp(1, -ENERGY_TOL_FRAC_BITS):.3g}); use 0 or a larger value")
-    if params.step == "fixed":
-        raw = float(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT))
-        if params.dt > fs.dt.max or raw == 0:
+    finer = "choose a format set with more fraction bits for it"
+    if params.dynamics == "momentum":  # β_k = k/(k+3) goes into the Δt port: its first non-zero value
+        _fits("the momentum factor beta_1", 0.25, "dt", fs, finer)
+    elif params.step == "fixed":
+        if params.dt > fs.dt.max or float(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) == 0:
             raise FixedPointError(f"dt {params.dt} does not fit format set '{fs.name}' ({fs.dt}: "
                                   f"{fs.dt.lsb:.3g} .. {fs.dt.max:.6g})")
+        if int(half_dt_sq(np.int64(_fits("dt", params.dt, "dt", fs)), fs)) == 0:
+            raise FixedPointError(f"dt^2/2 for dt {params.dt:g} rounds to 0 in half_dt_sq {fs.half_dt_sq} of format "
+                                  f"set '{fs.name}' (lsb {fs.half_dt_sq.lsb:.3g}); {finer}")
+    else:  # the step generator: Δt from DT_MIN (E = 0) to DT_MAX (E = 1)
+        _fits("the step generator's smallest dt", DT_MIN, "dt", fs, finer)
+        _fits("the step generator's largest dt", DT_MAX, "dt", fs, "choose a dt format with a larger range")
+        _fits("the exp table's smallest entry", float(lut_value_float(0.0)), "lut_entry", fs, finer)
+        if int(half_dt_sq(np.int64(dt_constant(fs.dt)), fs)) == 0:
+            raise FixedPointError(f"dt^2/2 for the step generator's smallest dt {DT_MIN:g} rounds to 0 in half_dt_sq "
+                                  f"{fs.half_dt_sq} of format set '{fs.name}' (lsb {fs.half_dt_sq.lsb:.3g}); {finer}")
+    if params.spring > 0:
+        _fits("C/2", 0.5 * params.spring, "spring", fs, "use another --spring, or a spring format that holds it")
+    if params.damping < 1:
+        _fits("the velocity factor 1 - damping", 1.0 - params.damping, "damping", fs, finer)
+    for option, tolerance in (("--tol-area", params.tol_area), ("--tol-shape", params.tol_shape)):
+        if 0 < tolerance < 1 and math.floor(math.ldexp(tolerance, fs.error.frac_bits)) == 0:
+            raise FixedPointError(f"{option} {tolerance:g} rounds to 0 in error {fs.error} of format set '{fs.name}' "
+                                  f"(lsb {fs.error.lsb:.3g}): the rule could never hold; use a larger tolerance, "
+                                  "or an error format with more fraction bits")
 
 
 def flatten_fixed(
@@ -609,35 +596,20 @@ def flatten_fixed(
 
 
 def run_fixed(engine: FixedEngine, on_iteration: Callable[[int, Measurement], None] | None = None) -> FlattenResult:
-    """Algorithm 1's loop, every decision on raw integers (:class:`StopRule`); never diverges (the
-    formats saturate, and ``result.extra`` counts it). The energy change is measured over the last
-    :attr:`FlattenParams.energy_window` accepted iterations, as in the float reference."""
+    """Algorithm 1's loop (:meth:`Controller.run`), every decision on raw integers; never diverges (the
+    formats saturate, and ``result.extra`` counts it). Each iteration is recorded in the history."""
     problem = engine.problem
-    params = problem.params
-    rule = StopRule.of(params, problem.fs, energy_floor_raw(problem))
     history = History()
-    current = engine.measure()
-    history.append(math.nan, current)
-    window = EnergyWindow(params.energy_window)
-    window.push(engine.energy_raw)
-    status: Status = "max-iterations"
-    k = 0
-    while k < params.max_iter:
-        dt = engine.step_size(current)
-        engine.advance(dt)
-        after = engine.measure()
-        k += 1
-        history.append(dt, after, engine.accepted)
+    history.append(math.nan, engine.measure())
+
+    def record(k: int) -> None:
+        measurement = engine.measure()
+        dt = 1.0 if engine.setup.mode.step is Step.MOMENTUM else float(to_float(engine.dt, problem.fs.dt))
+        history.append(dt, measurement, engine.accepted)
         if on_iteration is not None:
-            on_iteration(k, after)
-        if engine.stalled:
-            status = "stalled"
-            break
-        window.push(engine.energy_raw, engine.accepted)
-        if window.ready and rule.converged(window.oldest, engine.energy_raw, engine.errors):
-            status = "converged"
-            break
-        current = after
+            on_iteration(k, measurement)
+
+    status, k = engine.run(record)
     extra = engine.guard.summary() if engine.guard is not None else {}
     return FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
-                         history, status, k, params, problem.density, engine="fixed", extra=extra)
+                         history, status, k, problem.params, problem.density, engine="fixed", extra=extra)

@@ -30,14 +30,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, SAT, FixedPointError, FixedProblem, MomentumState,
-                     Reciprocal, StopRule, area_error, check_fixed_params, energy_frac_bits, energy_raw, power_sum,
-                     shape_error)
+from ..modes import RunMode, mode_named
+from .controller import Controller, Setup
+from .engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, SAT, FixedPointError, FixedProblem, Reciprocal, StopRule,
+                     check_fixed_params, energy_frac_bits)
 from .format import Format, SaturationCounter, quantize, raw_range
 from .formats_set import FormatSet
-from .pipeline import (BarrierEntries, NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum,
-                       node_power, node_terms)
-from .steplut import half_dt_sq, step_size
+from .pipeline import BarrierEntries, NeighbourStream
 
 __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
            "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "EngineImage",
@@ -395,20 +394,6 @@ def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCap
 
 
 @dataclass(frozen=True, eq=False)
-class _Loaded:
-    """What the controller reads besides the node state: the decoded entry and triangle memories
-    and the run constants the measurements need."""
-
-    fs: FormatSet
-    stream: NeighbourStream
-    faces: np.ndarray  # (F, 3) corner indices
-    face_areas: np.ndarray  # (F,) raw [face_area]
-    half_spring: int  # raw [spring]
-    area_reciprocal: Reciprocal
-    length_reciprocal: Reciprocal
-
-
-@dataclass(frozen=True, eq=False)
 class ImageRunResult:
     """What the engine holds after a run: the node memory, STATUS.result, and the result registers."""
 
@@ -423,80 +408,38 @@ class ImageRunResult:
     velocities: np.ndarray  # (V, 2) raw [velocity]
 
 
-@dataclass
-class _Pass:
-    """The force and area passes' results for one layout."""
-
-    terms: NodeTerms
-    errors: tuple[int, int]
-    energy: int
-    power: int
-
-
-def _measure(loaded: _Loaded, positions: np.ndarray, velocities: np.ndarray, momentum: bool,
-             counter: SaturationCounter) -> _Pass:
-    """Force pass (F, Σe, inside, Σe², Σc·h and, with momentum, S = ΣF·V) then area pass (E_S)."""
-    fs = loaded.fs
-    terms = node_terms(fs, positions, loaded.stream, loaded.half_spring, counter)
-    errors = (area_error(fs, loaded.area_reciprocal, loaded.faces, loaded.face_areas, positions, counter),
-              shape_error(fs, loaded.length_reciprocal, terms.error_sums, counter))
-    power = power_sum(fs, node_power(fs, terms.force, velocities, counter), counter) if momentum else 0
-    energy = energy_raw(fs, loaded.half_spring, terms.error_square_sum, terms.barrier_energy_sum)
-    return _Pass(terms, errors, energy, power)
+def image_mode(constants: dict[str, int]) -> RunMode:
+    """The run mode the ``MODE`` bits select."""
+    if constants["momentum"]:
+        return mode_named("momentum")
+    return mode_named("paper-fixed" if constants["fixed_step"] else "paper-variable")
 
 
 def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
-    """Algorithm 1 from START to done on the decoded images, as the engine runs it.
-
-    A force pass and an area pass measure the loaded layout; then each iteration is: the
-    step generator (or momentum β), an integrate pass writing P and V in place, a force
-    pass and an area pass on the new layout, and the stop rule on their results
-    (``diverged`` when ``saturation_limit`` events were counted, checked first).
-    """
+    """Algorithm 1 from START to done on the decoded images, as the engine runs it: the one controller
+    model (:class:`~golden_model.fixed.controller.Controller`) on what the memories and run constants
+    hold, ``diverged`` when ``saturation_limit`` events were counted."""
     c, capacity = image.constants, image.capacity
     positions, velocities, inv_mass, inv_mass_barrier = decode_nodes(image.nodes, fs, capacity)
     fault = constant_fault(c, fs, capacity)
     if fault is not None:
         return ImageRunResult(image.nodes.copy(), fault, 0, 0, 0, 0, 0, positions, velocities)
     n = c["vertices"]
-    positions, velocities = positions[:n], velocities[:n]
     indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity, bool(c["barrier"]))
     stream = NeighbourStream(indptr, neighbour, rest, inv_mass[:n], barrier, inv_mass_barrier[:n])
     faces, areas = decode_triangles(image.triangles[:c["triangles"]], fs, capacity)
-    loaded = _Loaded(fs, stream, faces, areas, c["half_spring"], Reciprocal(c["area_reciprocal"], c["area_shift"]),
-                     Reciprocal(c["length_reciprocal"], c["length_shift"]))
-    rule = StopRule(c["tol_area"], c["tol_shape"], c["tol_energy"])
-    momentum = bool(c["momentum"])
+    setup = Setup(fs, image_mode(c), stream, faces, areas, c["half_spring"], c["damping"], c["dt"],
+                  Reciprocal(c["area_reciprocal"], c["area_shift"]), Reciprocal(c["length_reciprocal"], c["length_shift"]),
+                  StopRule(c["tol_area"], c["tol_shape"], c["tol_energy"]), c["max_iter"], 1, c["saturation_limit"])
     counter = SaturationCounter()
-    current = _measure(loaded, positions, velocities, momentum, counter)
-    state = MomentumState()
-    status, k = "max-iterations", 0
-    while k < c["max_iter"]:
-        weights = stream.node_weights(current.terms.barrier_active)
-        if momentum:
-            beta, state = state.next(current.power, fs)
-            positions, velocities = integrate_momentum(fs, positions, velocities, current.terms.force, weights,
-                                                       beta, counter)
-        else:
-            dt = c["dt"] if c["fixed_step"] else int(step_size(np.int64(current.errors[0]),
-                                                              np.int64(current.errors[1]), fs, counter)[0])
-            constants = NodeConstants(dt, int(half_dt_sq(np.int64(dt), fs)), c["half_spring"], c["damping"])
-            positions, velocities = integrate(fs, positions, velocities, current.terms.force, weights, constants,
-                                              counter)
-        after = _measure(loaded, positions, velocities, momentum, counter)
-        k += 1
-        if c["saturation_limit"] and counter.total >= c["saturation_limit"]:
-            status, current = "diverged", after
-            break
-        if rule.converged(current.energy, after.energy, after.errors):
-            status, current = "converged", after
-            break
-        current = after
+    controller = Controller(setup, positions[:n], velocities[:n], counter)
+    status, k = controller.run()
+    positions, velocities = controller.raw_positions, controller.raw_velocities
     layout = node_word_layout(fs, capacity)
     nodes = image.nodes.copy()
     nodes[:n] = layout.pack({"position_x": positions[:, 0], "position_y": positions[:, 1],
                              "velocity_x": velocities[:, 0], "velocity_y": velocities[:, 1],
                              "inv_mass": inv_mass[:n], "inv_mass_barrier": inv_mass_barrier[:n]})
     saturations = min(counter.total, (1 << SATURATION_BITS) - 1)
-    return ImageRunResult(nodes, status, k, current.errors[0], current.errors[1], current.energy, saturations,
-                          positions, velocities)
+    return ImageRunResult(nodes, status, k, controller.errors[0], controller.errors[1], controller.energy_raw,
+                          saturations, positions, velocities)

@@ -18,16 +18,19 @@ controller's ``face_area`` holds every area its ``face_edge`` edges can span.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from ..files import read_regular_file
 from .dsp import Operand
-from .format import MAX_PRODUCT_WIDTH, Format, Rounding
+from .format import MAX_PRODUCT_WIDTH, MAX_WIDTH, Format, Rounding
 from .rsqrt import RsqrtConfig
 from .steplut import lut_slope_bits
 
-__all__ = ["FormatSet", "FORMAT_FIELDS", "CONTROLLER_FIELDS", "PRESET_DIR", "Product", "UNITS"]
+__all__ = ["FormatSet", "FORMAT_FIELDS", "CONTROLLER_FIELDS", "PRESET_DIR", "Product", "UNITS", "KNOB_DOMAINS",
+           "WIDENED_FIELDS", "accumulator_guard_bits", "RESOLUTION_SCALES", "ACCURACY_FACTOR"]
 
 PRESET_DIR = Path(__file__).resolve().parent.parent / "data" / "formats"
 """Directory holding the preset JSON files (``<name>.json``)."""
@@ -72,9 +75,59 @@ _UNSIGNED = (
 )
 
 
+#: Each knob's domain, inclusive: what the RTL builds and the golden model tabulates in bounded
+#: time and memory (``docs/fixed-point.md`` states it). ``lut_index_bits`` is also at most
+#: ``error``'s fraction bits.
+KNOB_DOMAINS: dict[str, tuple[int, int]] = {
+    "rsqrt_seed_bits": (2, 16),  # a seed ROM of 3·2^(b−2) entries: 49,152 at 16
+    "rsqrt_newton_steps": (0, 4),  # one multiplier stage each; 4 take even a 2-bit seed to ~23 bits
+    "lut_index_bits": (1, 12),  # an exp table of 2^b + 1 entries: 4,097 at 12
+    "max_degree": (1, 1024),  # ceil(log2) guard bits in every accumulator: 10 at 1024
+}
+
+#: Formats the datapath widens by one integer bit (the adder input of the position and
+#: velocity updates, ``pipeline._wide``): they take at most ``MAX_WIDTH - 1`` bits.
+WIDENED_FIELDS = ("position", "velocity")
+
+
+#: The scale (in the host's units: mean edge lengths, unit time) at which each signal's rounding shows in
+#: a run's result, for :meth:`FormatSet.resolution`: lengths, ``r = 1/|Δ|``, the strain ``1 − d·r``
+#: and the error measures near 1; forces about ``C/2`` (a quarter); the weights about 1/2; the
+#: accelerations a tenth; velocities, ``Δt`` and the exp table's entries near the smallest step 0.01;
+#: ``Δt²/2`` near 1e-3. Calibrated, with :data:`ACCURACY_FACTOR`, on random format sets
+#: (``tests/test_formats_property.py``; ``docs/fixed-point.md`` has the runs).
+RESOLUTION_SCALES: dict[str, float] = {
+    "rest_length": 1.0, "delta": 1.0, "length_sq": 1.0, "rsqrt": 1.0, "spring": 1.0, "error": 1.0,
+    "force": 0.25, "force_acc": 0.25, "inv_mass": 0.5, "accel": 0.1,
+    "velocity": 0.01, "dt": 0.01, "lut_entry": 0.01, "half_dt_sq": 1e-3,
+}
+
+#: A format set's documented accuracy: a run without saturation events ends with its E_S and E_C
+#: within ``ACCURACY_FACTOR · resolution()`` of the float engine's (:meth:`FormatSet.accuracy_bound`).
+ACCURACY_FACTOR = 4.0
+
+
+def accumulator_guard_bits(max_degree: int) -> int:
+    """Extra integer bits that let ``max_degree`` terms add up without overflow."""
+    return max(1, math.ceil(math.log2(max_degree)))
+
+
 UNITS = ("node_update", "rsqrt", "step_generator", "controller")
 """Where a product is computed: the RTL's node-update datapath, its rsqrt unit, the step
 generator, or the controller around them (``golden_model.fixed.engine``; not in the RTL)."""
+
+
+def _json_kind(value: Any) -> str:
+    """How a JSON value reads in a message: ``null``, ``the string "default"``, ``the number 42``, ..."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    if isinstance(value, (int, float)):
+        return f"the number {value!r}"
+    if isinstance(value, str):
+        return f"the string {json.dumps(value[:40])}"
+    return "a list" if isinstance(value, list) else f"a {type(value).__name__}"
 
 
 class Product(NamedTuple):
@@ -171,12 +224,19 @@ class FormatSet:
                 f"FormatSet {self.name!r}: unknown rounding {self.rounding!r}; "
                 f"expected one of {[m.value for m in Rounding]}"
             ) from None
-        for knob in ("rsqrt_seed_bits", "rsqrt_newton_steps", "lut_index_bits", "max_degree"):
+        for knob, (low, high) in KNOB_DOMAINS.items():
             v = getattr(self, knob)
             if isinstance(v, bool) or not isinstance(v, int):
                 raise ValueError(f"FormatSet {self.name!r}: {knob} must be an int, got {v!r}")
-        if self.max_degree < 1:
-            raise ValueError(f"FormatSet {self.name!r}: max_degree must be >= 1, got {self.max_degree}")
+            if not low <= v <= high:
+                raise ValueError(f"FormatSet {self.name!r}: {knob} {v} is outside its domain {low}..{high}")
+        for f in WIDENED_FIELDS:
+            if getattr(self, f).width > MAX_WIDTH - 1:
+                raise ValueError(f"FormatSet {self.name!r}: {f} {getattr(self, f)} is {getattr(self, f).width} bits; "
+                                 f"its update adds in one more bit, so at most {MAX_WIDTH - 1}")
+        if self.damping.int_bits < 1:
+            raise ValueError(f"FormatSet {self.name!r}: damping {self.damping} needs an integer bit: 1 - gamma = 1 "
+                             "(no damping, and the momentum dynamics) must be exact")
         if self.error_acc.frac_bits < self.rest_length.frac_bits:
             raise ValueError(f"FormatSet {self.name!r}: error_acc needs at least rest_length's fraction bits "
                              f"({self.rest_length.frac_bits}) so that error sums are exact")
@@ -196,6 +256,11 @@ class FormatSet:
                     f"FormatSet {self.name!r}: product {p.name} needs {wa} + {wb} = {wa + wb} "
                     f"bits > {MAX_PRODUCT_WIDTH}; the exact product would not fit int64"
                 )
+        sums = {**{f"{k} accumulator": v for k, v in self.accumulators().items()}, **self.aligned_sums()}
+        for name, (_, width) in sums.items():
+            if width > MAX_PRODUCT_WIDTH:
+                raise ValueError(f"FormatSet {self.name!r}: the {name} takes {width} bits > {MAX_PRODUCT_WIDTH}; "
+                                 "its exact value would not fit int64")
 
     def _check_signedness(self) -> None:
         for f in _SIGNED:
@@ -298,6 +363,44 @@ class FormatSet:
         ]
         return prods
 
+    def accumulators(self) -> dict[str, tuple[bool, int]]:
+        """``{name: (signed, width)}`` of the force pass's per-node sums, exact with
+        :func:`accumulator_guard_bits` guard bits for ``max_degree`` entries (the RTL's
+        accumulator widths; the golden model forms them in int64, so ``__post_init__`` checks
+        each against ``MAX_PRODUCT_WIDTH``): ``force`` Σf (two terms per entry with the barrier),
+        ``error`` Σ|L − d|, ``error_squares`` Σ|L − d|² and ``barrier_energy`` Σc·h (``c``, ``h`` ≥ 0)."""
+        guard = accumulator_guard_bits(self.max_degree)
+        coeff_bits = self.barrier_coeff.width - int(self.barrier_coeff.signed)
+        return {"force": (True, self.force.width + 1 + guard),
+                "error": (False, self.rest_length.width + guard),
+                "error_squares": (False, 2 * self.rest_length.width + guard),
+                "barrier_energy": (False, coeff_bits + self.area.width - 1 + guard)}
+
+    def aligned_sums(self) -> dict[str, tuple[bool, int]]:
+        """``{name: (signed, width)}`` of the sums of two products aligned to the finer fraction (the position
+        step ``Δt·V + ½Δt²·a`` and the momentum step ``β·V + a``, ``pipeline.integrate*``): the
+        wider aligned term plus a carry."""
+        fv = self.dt.frac_bits + self.velocity.frac_bits
+        wv = self.dt.width + self.velocity.width
+        paper = (self.half_dt_sq.frac_bits + self.accel.frac_bits, self.half_dt_sq.width + self.accel.width)
+        momentum = (self.accel.frac_bits, self.accel.width)
+        return {name: (True, max(wv + max(fv, fa) - fv, wa + max(fv, fa) - fa) + 1)
+                for name, (fa, wa) in (("position step", paper), ("momentum step", momentum))}
+
+    def resolution(self) -> float:
+        """``ρ = Σ 2^-F / m`` over :data:`RESOLUTION_SCALES` (each signal's lsb at the scale ``m`` where it
+        shows), plus the rsqrt method's relative error (:meth:`RsqrtConfig.method_error`: few seed bits
+        and Newton steps make ``r`` coarser than its lsb); twice that with ``floor`` rounding, whose
+        error is up to a whole lsb and always of one sign (it drifts), against half an lsb either way."""
+        rho = (sum(math.ldexp(1.0, -getattr(self, f).frac_bits) / m for f, m in RESOLUTION_SCALES.items())
+               + self.rsqrt_config().method_error())
+        return 2.0 * rho if self.rounding is Rounding.FLOOR else rho
+
+    def accuracy_bound(self) -> float:
+        """The documented bound on ``|ΔE_S|``, ``|ΔE_C|`` against the float engine of a run without saturation
+        events: ``ACCURACY_FACTOR · resolution()`` (``docs/fixed-point.md``, "Every legal format set")."""
+        return ACCURACY_FACTOR * self.resolution()
+
     def rsqrt_config(self) -> RsqrtConfig:
         """The rsqrt unit configuration: ``length_sq`` -> ``rsqrt``."""
         return RsqrtConfig(self.length_sq, self.rsqrt, self.rsqrt_seed_bits,
@@ -333,8 +436,12 @@ class FormatSet:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FormatSet:
         """Build from the JSON schema written by :meth:`to_dict` (unknown keys are errors)."""
+        if not isinstance(d, dict):
+            raise ValueError(f"a format set is a JSON object with 'formats' and the knobs, not {_json_kind(d)}")
         d = dict(d)
         name = d.pop("name", "custom")
+        if not isinstance(name, str):
+            raise ValueError(f"the format set's 'name' must be a string, not {_json_kind(name)}")
         fmts = d.pop("formats", None)
         if not isinstance(fmts, dict):
             raise ValueError(f"FormatSet {name!r}: missing 'formats' object")
@@ -345,19 +452,28 @@ class FormatSet:
                 f"FormatSet {name!r}: formats missing {sorted(missing)}, unknown {sorted(extra)}"
             )
         notes = d.pop("notes", {})
+        if not isinstance(notes, dict):
+            raise ValueError(f"FormatSet {name!r}: 'notes' must be an object, not {_json_kind(notes)}")
         known = {f.name for f in fields(cls)} - set(FORMAT_FIELDS) - {"name", "notes"}
         unknown = set(d) - known
         if unknown:
             raise ValueError(f"FormatSet {name!r}: unknown keys {sorted(unknown)}")
         return cls(**fmts, **d, name=name, notes=dict(notes))
 
+    @staticmethod
+    def names_preset(path_or_preset: str | Path) -> bool:
+        """Whether :meth:`load` reads ``path_or_preset`` as a preset name (a string without a directory
+        part and without the suffix ``.json``), not as a file."""
+        p = Path(path_or_preset)
+        return isinstance(path_or_preset, str) and p.suffix != ".json" and len(p.parts) == 1
+
     @classmethod
     def load(cls, path_or_preset: str | Path) -> FormatSet:
-        """Load a JSON file, or a preset by name (``"default"``, ``"narrow"``)."""
-        p = Path(path_or_preset)
-        if isinstance(path_or_preset, str) and p.suffix != ".json" and len(p.parts) == 1:
-            return cls.preset(path_or_preset)
-        return cls.from_dict(json.loads(p.read_text()))
+        """Load a JSON file (a regular file: a FIFO or a device is refused with an :class:`OSError`, never
+        opened), or a preset by name (``"default"``, ``"narrow"``)."""
+        if cls.names_preset(path_or_preset):
+            return cls.preset(str(path_or_preset))
+        return cls.from_dict(json.loads(read_regular_file(path_or_preset)))
 
     @classmethod
     def preset(cls, name: str) -> FormatSet:

@@ -36,14 +36,13 @@ when the node leaves the accumulator), so the model may sum with numpy.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 
 from .format import Format, Overflow, SaturationCounter, requantize
-from .formats_set import FormatSet
+from .formats_set import FormatSet, accumulator_guard_bits
 from .rsqrt import rsqrt_with_config
 
 __all__ = ["BarrierEntries", "NeighbourStream", "NodeConstants", "NodeTerms", "NodeUpdate",
@@ -51,11 +50,6 @@ __all__ = ["BarrierEntries", "NeighbourStream", "NodeConstants", "NodeTerms", "N
            "edge_terms", "neighbour_terms", "node_terms", "node_update"]
 
 SAT = Overflow.SATURATE
-
-
-def accumulator_guard_bits(max_degree: int) -> int:
-    """Extra integer bits that let ``max_degree`` terms add up without overflow."""
-    return max(1, math.ceil(math.log2(max_degree)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -361,21 +355,23 @@ def node_terms(fs: FormatSet, positions: np.ndarray, stream: NeighbourStream, ha
         force_f, force_b, error_f, error_b = edge_terms(fs, positions, stream, half_spring, counter)
 
         def per_node(forward_values: np.ndarray, backward_values: np.ndarray) -> np.ndarray:
-            # float64 sums of these integers are exact (|sum| < 2**53 by the formats)
-            total = np.bincount(a, forward_values, n) + np.bincount(b, backward_values, n)
-            return total.astype(np.int64)
+            # each value back in its entry's place (entry forward[k] belongs to node a[k], backward[k] to b[k]),
+            # then every node's entries summed in int64: exact, as the accumulators are
+            # (FormatSet.accumulators() fit 63 bits), whatever the widths
+            values = np.empty(len(stream.neighbour), dtype=np.int64)
+            values[forward], values[backward] = forward_values, backward_values
+            return per_node_sums(values, stream.indptr)
 
         force = np.column_stack([per_node(force_f[:, 0], force_b[:, 0]), per_node(force_f[:, 1], force_b[:, 1])])
         error = per_node(error_f, error_b)
-        squares = per_node(error_f * error_f, error_b * error_b)  # < 2**53: exact in float64 too
+        squares = per_node(error_f * error_f, error_b * error_b)
     active, barrier_energies = None, np.zeros(n, dtype=np.int64)
     if stream.barrier is not None:
         barrier, inside, energy = barrier_terms(fs, positions, stream, counter)
         barrier_energies = per_node_sums(energy, stream.indptr)
-        owner = stream.owner
-        force = force + np.column_stack([np.bincount(owner, barrier[:, 0], n), np.bincount(owner, barrier[:, 1], n)
-                                         ]).astype(np.int64)
-        active = np.bincount(owner, inside, n) > 0
+        force = force + np.column_stack([per_node_sums(barrier[:, 0], stream.indptr),
+                                         per_node_sums(barrier[:, 1], stream.indptr)])
+        active = np.bincount(stream.owner, inside, n) > 0
     force_acc = requantize(force, fs.force.frac_bits, fs.force_acc, rnd, SAT, counter, "force_acc")
     error_sums = requantize(error, fs.rest_length.frac_bits, fs.error_acc, rnd, SAT, counter, "error_acc")
     return NodeTerms(force_acc, error_sums, squares, barrier_energies, active)

@@ -99,6 +99,9 @@ class RsqrtConfig:
                 f"rsqrt seed_bits {self.seed_bits} exceeds the mantissa width "
                 f"{self.mant_fmt.width}"
             )
+        if self.seed_frac_bits < self.seed_bits:  # a seed entry could round up to 1.0, outside u0.Fs
+            raise ValueError(f"rsqrt seed_bits {self.seed_bits} needs seed entries of at least as many fraction bits; "
+                             f"{self.fmt_out} (+ {self.guard_bits} guard bits) gives {self.seed_frac_bits}")
         for pname, fa, fb in self.products:
             if fa.width + fb.width > MAX_PRODUCT_WIDTH:
                 raise ValueError(
@@ -193,6 +196,16 @@ class RsqrtConfig:
         """Right shift ``s = Fy - Fout + (e - Fin)/2`` applied to ``y`` (``e - Fin`` even)."""
         e = np.asarray(e, dtype=np.int64)
         return self.y_frac_bits - self.fmt_out.frac_bits + (e - self.fmt_in.frac_bits) // 2
+
+    def method_error(self) -> float:
+        """The method's relative error before the output's rounding (a priori): the seed, the reciprocal
+        square root of its interval's midpoint, is off by at most ``2^-seed_bits`` (the interval at
+        ``M = 1``), and each Newton step ``y(3 − M·y²)/2`` takes an error ``e`` to ``1.5·e²``
+        (measured below it: 0.18 for 2 seed bits and no step, 0.0037 with two)."""
+        error = math.ldexp(1.0, -self.seed_bits)
+        for _ in range(self.newton_steps):
+            error = 1.5 * error * error
+        return error
 
     def seed_table(self) -> np.ndarray:
         """The seed ROM contents for this configuration (raw ``u0.Fs``)."""

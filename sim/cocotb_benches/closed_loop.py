@@ -23,6 +23,7 @@ from golden_model.fixed.engine import (HOST_ROUNDING, FixedEngine, MomentumState
                                        energy_to_float, flipped_count, folded_count, power_sum,
                                        shape_error)
 from golden_model.fixed.format import Overflow
+from golden_model.modes import Step
 from golden_model.reference import Measurement
 from hdl.layouts import entry_layout, errors_layout, result_layout, step_layout
 from sim.payloads import pack, pass_beats, unpack, unpack_beats
@@ -84,9 +85,9 @@ class Controller:
         """Variable step: the RTL step generator; fixed step: load Δt and ½Δt² directly;
         momentum: load β_k (the controller's counter and restart) into the Δt register."""
         dut, fs = self.dut, self.fs
-        momentum = self.problem.params.dynamics == "momentum"
-        if momentum or self.problem.params.step == "fixed":
-            if momentum:
+        step = self.problem.params.mode.step
+        if step is not Step.VARIABLE:
+            if step is Step.MOMENTUM:
                 dt, self.momentum = self.momentum.next(self.power, fs)
                 half = 0
             else:
@@ -129,7 +130,7 @@ async def closed_loop(dut):
                                            "measure", "momentum"))
     dut.half_spring.value = problem.half_spring
     dut.damping.value = problem.damping
-    momentum = params.dynamics == "momentum"
+    momentum = params.mode.step is Step.MOMENTUM
     dut.momentum.value = int(momentum)
     started = time.perf_counter()
 

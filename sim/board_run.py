@@ -1,0 +1,138 @@
+"""A flattening through the engine on a board (or anything behind :class:`~sim.uart_bus.UartBus`): the flow of
+``springflat flatten --engine board``.
+
+The same pieces as ``--engine rtl`` (``sim/engine_run.py``): the golden model's host scaling
+(``prepare``), the image (``build_image``), the register map and :class:`~sim.engine_driver.EngineDriver`;
+only the transport differs. The capacity is the board's own: read from its CAP_* registers (whose
+addresses do not depend on the capacity) before the map is built. The read-back is compared bit for bit
+with :func:`~golden_model.fixed.engine_image.run_image` (a mismatch is an :class:`EngineRunError`), and
+becomes the :class:`~golden_model.reference.FlattenResult` that ``flatten`` writes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import FixedProblem
+from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity, build_image, run_image
+from golden_model.fixed.register_map import RegisterMap
+
+from .engine_driver import EngineDriver, EngineReadBack
+from .engine_run import EngineRunError, engine_flatten_result
+
+__all__ = ["board_capacity", "BoardRun", "run_on_board", "flatten_on_board", "add_board_options", "board_engine"]
+
+
+def board_capacity(bus, fs: FormatSet) -> EngineCapacity:
+    """The capacity the engine behind ``bus`` was built with (its CAP_* registers)."""
+    probe = EngineDriver(bus, RegisterMap.build(fs, DEFAULT_CAPACITY))
+    values = [probe.read_value(f"cap_{what}") for what in ("vertices", "entries", "triangles")]
+    return EngineCapacity(*values)
+
+
+@dataclass(frozen=True, eq=False)
+class BoardRun:
+    readback: EngineReadBack
+    capacity: EngineCapacity
+    mismatches: list[str]
+    load_seconds: float
+    run_seconds: float
+    readback_seconds: float
+
+
+def run_on_board(problem: FixedProblem, bus, *, poll=None, max_polls: int = 10_000_000) -> BoardRun:
+    """Load ``problem``'s image, run it, read it back and compare it with ``run_image``. ``poll`` runs between
+    STATUS reads (default: none; the link's round trip paces the polls)."""
+    fs = problem.fs
+    capacity = board_capacity(bus, fs)
+    driver = EngineDriver(bus, RegisterMap.build(fs, capacity))
+    image = build_image(problem, capacity)  # refuses a mesh over the board's capacity in one line
+    started = time.perf_counter()
+    batched = getattr(bus, "batched", None)
+    if batched is not None:
+        with batched():
+            driver.load(image)
+    else:
+        driver.load(image)
+    loaded = time.perf_counter()
+    driver.start(irq=True)
+    driver.wait(poll=poll, max_polls=max_polls)
+    ran = time.perf_counter()
+    readback = driver.read_back()
+    done = time.perf_counter()
+    want = run_image(image, fs)
+    mismatches = [f"{name}: engine {getattr(readback, attr)} golden model {getattr(want, name)}"
+                  for name, attr in (("status", "result"), ("iterations", "iterations"),
+                                     ("area_error", "area_error"), ("shape_error", "shape_error"),
+                                     ("energy", "energy"), ("saturations", "saturations"))
+                  if getattr(readback, attr) != getattr(want, name)]
+    for name in ("positions", "velocities"):
+        got, golden = getattr(readback, name), getattr(want, name)
+        if got.shape != golden.shape or not np.array_equal(got, golden):
+            bad = np.argwhere(got != golden) if got.shape == golden.shape else [[0, 0]]
+            node, axis = (int(v) for v in bad[0])
+            mismatches.append(f"{name}: {len(bad)} values differ, the first node {node} {'xy'[axis]}")
+    return BoardRun(readback, capacity, mismatches, loaded - started, ran - loaded, done - ran)
+
+
+def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = "board"):
+    """``springflat flatten --engine board``: ``problem`` through the engine behind ``bus``, as a
+    :class:`~golden_model.reference.FlattenResult`; :class:`EngineRunError` when the read-back differs
+    from the golden model's."""
+    run = run_on_board(problem, bus, poll=poll)
+    if run.mismatches:
+        raise EngineRunError(f"the engine on {transport} does not match the golden model: {run.mismatches[0]}")
+    r = run.readback
+    return engine_flatten_result(problem, r.positions, r.velocities, r.result, r.iterations, {
+        "saturations": r.saturations, "simulator": transport, "cycles": r.cycles,
+        "cycles_per_iteration": r.cycles / max(r.iterations, 1), "load_seconds": round(run.load_seconds, 3),
+        "run_seconds": round(run.run_seconds, 3), "readback_seconds": round(run.readback_seconds, 3)})
+
+
+def add_board_options(parser) -> None:
+    """``--port`` and ``--baud`` of ``flatten --engine board``."""
+    from golden_model.fixed.uart_protocol import DEFAULT_BAUD
+
+    parser.add_argument("--port", default=None, metavar="DEVICE|URL",
+                        help="--engine board: the board's serial port (/dev/ttyUSB0, COM3, or a pyserial URL "
+                             "such as socket://host:port)")
+    parser.add_argument("--baud", type=int, default=DEFAULT_BAUD,
+                        help=f"--engine board: the UART's rate, as the bitstream was built (default {DEFAULT_BAUD})")
+
+
+def board_engine(formats: FormatSet, port: str | None, baud: int):
+    """``--engine board``: the engine function ``cmd_flatten`` calls; every failure is one line (``UserError``)."""
+    import sys
+
+    from golden_model.fixed.engine import check_fixed_params, prepare
+
+    from .engine_driver import EngineError
+    from .run_options import UserError
+    from .uart_bus import UartBus, open_port
+
+    if not port:
+        raise UserError("--engine board needs --port DEVICE (the board's serial port, e.g. /dev/ttyUSB0)")
+    if baud <= 0:
+        raise UserError(f"--baud must be a positive number of bits per second, not {baud}")
+
+    def engine(mesh, positions, params, on_iteration=None):
+        check_fixed_params(params, formats)
+        problem = prepare(mesh, positions, params, formats)
+        try:
+            link = open_port(port, baud)
+        except EngineError as exc:
+            raise UserError(str(exc)) from None
+        print(f"springflat: board: loading the mesh over {port} at {baud} baud and running the flattening ...",
+              file=sys.stderr)
+        try:
+            with link:
+                return flatten_on_board(problem, UartBus(link, name=f"the board on {port}"),
+                                        transport=f"the board on {port}")
+        except (EngineError, EngineRunError) as exc:
+            raise UserError(str(exc)) from None
+
+    return engine

@@ -1,0 +1,40 @@
+"""The engine's named Verilator builds (sim/engine_run.py, benchmarks/bench_sim_speed.py): the flags each
+changes, and the harness that makes its own clock."""
+
+import pytest
+
+from sim.engine_run import (INTERNAL_CLOCK_BUILDS, VERILATOR_BUILDS, VERILATOR_MAKE_FLAGS, VERILATOR_SPEED_FLAGS,
+                            build_flags, simulation_harness)
+from sim.top_names import ENGINE_MODULE
+
+VERILOG = f"""module {ENGINE_MODULE}(clk, rst, bus__cyc, bus__ack);
+  input clk;
+  input rst;
+  input bus__cyc;
+  output bus__ack;
+endmodule
+"""
+
+
+def test_each_build_changes_one_thing_against_gpi_clock():
+    flags, make = build_flags("verilator", "gpi-clock")
+    assert (flags, make) == (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS)
+    assert build_flags("verilator") == build_flags("verilator", "internal-clock") == VERILATOR_BUILDS["default"]
+    assert build_flags("verilator")[0] == flags + ("--timing",)  # the harness's own clock
+    assert build_flags("verilator", "threads-2")[0] == flags + ("--threads", "2")
+    assert "--x-assign" not in build_flags("verilator", "x-randomised")[0]
+    assert "-fprofile-use" in build_flags("verilator", "pgo")[1]
+    assert build_flags("icarus", "threads-2") == build_flags("icarus")  # one Icarus build
+    with pytest.raises(ValueError, match="unknown Verilator build 'fast'"):
+        build_flags("verilator", "fast")
+
+
+def test_the_internal_clock_harness():
+    """With its own clock the harness drives clk (10 ns period) and no longer takes it; otherwise the same."""
+    plain, own = simulation_harness(VERILOG), simulation_harness(VERILOG, internal_clock=True)
+    assert "  input clk," in plain and "always #" not in plain
+    assert "  output reg clk," in own and "  input clk" not in own
+    assert "  initial clk = 1'b0;\n  always #5 clk = ~clk;\n" in own
+    for text in (plain, own):
+        assert ".clk(clk)" in text and ".rst(rst_q)" in text and "always @(posedge clk) rst_q <= rst;" in text
+    assert INTERNAL_CLOCK_BUILDS == {"default", "internal-clock"}
