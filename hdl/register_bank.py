@@ -15,8 +15,9 @@ access    behaviour and port
 ``rw``    storage (reset 0), written by a whole-word bus write, read back; ``Out`` port.
 ``w1p``   writing 1 raises the ``Out`` port for one clock, the clock after the write; reads 0.
 ``w1c``   a flag with storage (reset 0), the ``Out`` port; reads the flag; writing 1 clears it.
-          ``<value>_set`` (``In``) sets it, ``<value>_clear`` (``In``) clears it: set first,
-          then the clear input, then the bus write (amaranth-soc's ``RW1C`` with a hardware clear).
+          ``<value>_set`` (``In``) sets it, ``<value>_clear`` (``In``) clears it. In one clock the
+          clear input wins over the set input, which wins over the bus write (a new run's clear
+          over a run's end, both over the host's acknowledgement).
 ========  ==================================================================================
 """
 
@@ -149,13 +150,13 @@ class RegisterBank(wiring.Component):
                         for i in range(f.width):
                             with m.If(bits[i]):
                                 m.d.sync += flags[f.value][f.value_lsb + i].eq(0)
-        for v, flag in flags.items():  # the hardware's clear, then its set: both before any bus write
+        for v, flag in flags.items():  # after the bus write, so the hardware wins: its set, then its clear
             clear, set_ = getattr(self, f"{v}_clear"), getattr(self, f"{v}_set")
             for i in range(len(flag)):
-                with m.If(clear[i]):
-                    m.d.sync += flag[i].eq(0)
                 with m.If(set_[i]):
                     m.d.sync += flag[i].eq(1)
+                with m.If(clear[i]):
+                    m.d.sync += flag[i].eq(0)
 
         # The AND-OR over the one-hot select in two clocks: groups of eight registers, each OR landed in
         # a register of its own, then their OR (registered because one clock from reg_select through the
@@ -186,7 +187,8 @@ class RegisterBank(wiring.Component):
         """Every answer from flip-flops: a register's two clocks after DEC (its word and error landed),
         a refusal (an unmapped word, or a window while running) the clock after DEC, a window's as it
         comes."""
-        reg_pending, reg_answer, refused = Signal(), Signal(), Signal()
+        reg_pending, reg_answer = Signal(name="reg_pending"), Signal(name="reg_answer")
+        refused = Signal()
         landed_word = Signal(BUS_WORD_BITS, reset_less=True)
         landed_error = Signal(reset_less=True)
         m.d.sync += [reg_pending.eq(self.bus_request & bus_reg_hit), reg_answer.eq(reg_pending),
