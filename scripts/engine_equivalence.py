@@ -178,9 +178,14 @@ def gate_renames(gold: dict, gate: dict, blocks: dict[str, dict[str, str]]) -> t
     block is renamed to its name inside the block (the blocks keep the before design's flip-flop names) or
     to :data:`RENAMES`'s, except a block's input port (another block's signal, matched there), the register
     bank's value ports (copies of its ``reg_<value>`` storage and ``<value>_pulse`` flip-flops, matched by
-    those names) and a tool-generated name (:data:`GENERATED`). Every other wire (the units' insides, the
-    engine's ports) keeps its name."""
+    those names), a tool-generated name (:data:`GENERATED`), and a name Amaranth made unique with a ``$N``
+    suffix in the before design's top or in a block (:func:`numbered_twins`). Every other wire (the units'
+    insides, the engine's ports) keeps its name."""
     gold_names = set(gold["netnames"])
+    twins_gold = numbered_twins(n for n in gold_names if "." not in n)
+    own = {head: [w.partition(".")[2] for w in gate["netnames"]
+                  if w.partition(".")[0] == head and "." not in w.partition(".")[2]] for head in blocks}
+    twins_gate = {head: {f"{head}.{n}" for n in numbered_twins(names)} for head, names in own.items()}
     ports = set(gate["ports"])
     explicit = {**RENAMES, **{k: v for k, v in UNNAMED_BEFORE.items() if v in gold_names}}
     reserved = set(explicit.values())
@@ -195,6 +200,7 @@ def gate_renames(gold: dict, gate: dict, blocks: dict[str, dict[str, str]]) -> t
             target = explicit[w]
         elif head in blocks and rest not in reserved and not re.fullmatch(GENERATED, rest.rpartition(".")[2]) \
                 and blocks[head].get(rest) != "input" \
+                and w not in twins_gate[head] and rest not in twins_gold \
                 and not (head == "registers" and {f"{head}.reg_{rest}", f"{head}.{rest}_pulse"} & names):
             target = rest
             for old, new in PATH_RENAMES.items():
@@ -206,6 +212,16 @@ def gate_renames(gold: dict, gate: dict, blocks: dict[str, dict[str, str]]) -> t
         elif not rest or head in blocks or re.fullmatch(GENERATED, w.rpartition(".")[2]):
             hidden.append(w)
     return renames, hidden
+
+
+def numbered_twins(names) -> set[str]:
+    """The names among ``names`` (one module's own wires) that share a base name with another, told apart by
+    a ``$N`` suffix (``i__valid``, ``i__valid$315``): which signal gets which number follows the order of
+    elaboration, so such a name means nothing across two designs and is never matched."""
+    groups: dict[str, list[str]] = {}
+    for name in names:
+        groups.setdefault(re.sub(r"\$\d+$", "", name), []).append(name)
+    return {name for group in groups.values() if len(group) > 1 for name in group}
 
 
 def flip_flop_coverage(gold: dict, gate: dict, renames) -> tuple[int, int]:
