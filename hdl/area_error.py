@@ -147,8 +147,8 @@ class AreaError(wiring.Component):
                   area_events=area_over)
         host, new = s["area"], s["area_new"]
         # |A − |A'||, 0 for a stage without a triangle: the accumulator then adds a register straight
-        # (the valid bit gating the term in front of the adder reached its 37-bit carry chain across the
-        # die: the engine's critical path at 120.5 MHz)
+        # (registered because a valid bit gating the term in front of the adder would reach the
+        # 37-bit carry chain from across the die)
         s = stage("diff", diff=Mux(pipe.valid, Mux(host > new, host - new, new - host)[:fs.face_area.width], 0),
                   edge_events=s["edge_events"], area_events=s["area_events"])
 
@@ -156,7 +156,7 @@ class AreaError(wiring.Component):
         # golden model's saturation of the exact sum (once past raw_max, it stays past).
         counts, valid = self.saturations, pipe.valid
         # ``clear`` chooses between the sums and the term alone after the adders, not in front of them
-        # (clear -> the 37-bit carry chain was the engine's critical path at 114.3 MHz)
+        # (in front, clear would feed the 37-bit carry chain: a long path from the controller)
         clear = self.clear
         summed, sum_over = clamp(self.total + s["diff"], fs.error_acc)
         alone, alone_over = clamp(s["diff"], fs.error_acc)

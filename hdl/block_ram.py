@@ -6,8 +6,8 @@ address registered in the block RAM, then its data registered). In generic RTL t
 :class:`amaranth.lib.memory.Memory` read port and a flip-flop on its data. Yosys's ``synth_ecp5``
 maps the read port to a ``DP16KD`` with ``REGMODE = "NOREG"`` and leaves the flip-flop in the
 fabric, so every read costs the block RAM's unregistered clock-to-output (5.83 ns in nextpnr's
-ECP5 model) plus a route to that flip-flop: the engine's critical path at 119.7 MHz
-(``docs/synthesis.md``). Elaborated with :data:`hdl.dsp.ECP5` as the platform, each read port is
+ECP5 model) plus a route to that flip-flop, most of a clock period at the engine's clock.
+Elaborated with :data:`hdl.dsp.ECP5` as the platform, each read port is
 therefore a row of ``DP16KD`` instances, port A written and port B read with
 ``REGMODE_B = "OUTREG"``, one instance per column slice of the word, in the configuration that
 holds ``depth`` words in the fewest block RAMs (:func:`dp16kd_banks`); every read port has its own

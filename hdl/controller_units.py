@@ -317,9 +317,7 @@ class EnergyCheck(wiring.Component):
             with m.If(last):
                 m.d.sync += [in_tolerance.eq(0), in_halves.eq(1)]
         # The E-wide comparison in two clocks of its own, free-running: the halves compared, then
-        # combined (from ε·E_prev through the compare into settled's output register was the energy
-        # check's longest path at 9740e43; the whole compare in one clock, 83 carry cells, was
-        # eae9e83's critical path with seed 1, 130.3 MHz)
+        # combined (the whole compare in one clock is a carry chain of over 80 cells behind ε·E_prev)
         limit = allowed[ENERGY_TOL_FRAC_BITS:]
         half = len(change) // 2
         low_within, high_below, high_equal = (Signal(name=n, reset_less=True)
@@ -332,8 +330,7 @@ class EnergyCheck(wiring.Component):
         with m.If(in_within):
             m.d.sync += [in_within.eq(0), in_compare.eq(1)]
         # E == 0 and E_prev == 0 in two clocks, free-running: 16-bit pieces, then their AND (the whole
-        # E-wide zero test in one clock, under in_tolerance's enable, was the engine's critical path
-        # at 4338217, 119.3 MHz). E holds still from the energy phase to the compare, E_prev from one
+        # E-wide zero test in one clock, under in_tolerance's enable, is a deep path). E holds still from the energy phase to the compare, E_prev from one
         # compare to the next, and the tolerance phase takes energy_bits ≥ 2 clocks.
         for value, zero in ((energy, energy_zero), (previous, previous_zero)):
             pieces = [Signal(name=f"{zero.name}_{k}", reset_less=True) for k in range(0, len(value), 16)]
@@ -405,11 +402,10 @@ class BetaDivider(wiring.Component):
 
         # Its phases as flip-flops of their own, no state code: an FSM's state register drove both the
         # 50 bits of remainder and quotient and, through ``i.ready``, the engine's phase machine, and
-        # ABC shared a LUT between the two (the engine's critical path, 8.5 ns of routing). The
-        # datapath registers load on every clock, chosen by ``dividing`` alone: while it is low they
-        # follow the input (the values a start needs), so ``i.ready``, placed by the engine's control,
-        # reaches only ``dividing`` and ``idle`` (as the load enable of the remainder it was 8.5 ns of
-        # routing again, 101 MHz).
+        # ABC shared a LUT between the two, a long route either way. The datapath registers load on
+        # every clock, chosen by ``dividing`` alone: while it is low they follow the input (the values
+        # a start needs), so ``i.ready``, placed by the engine's control, reaches only ``dividing``
+        # and ``idle`` (as the load enable of the remainder's 50 bits it would fan out across the die).
         idle = Signal(init=1)
         dividing = Signal()
         last = Signal()  # the quotient bit being formed is the last one

@@ -93,7 +93,7 @@ class SlicedFIFO(wiring.Component):
         the enable register of slice k takes ``w_stream.valid`` and slice k's own ``w_rdy``, so
         the slices' enable registers are distinct logic that synthesis cannot merge, and
         ``w_stream.valid`` reaches one LUT per slice instead of every slice's row decoders (one
-        register for all 14 slices of the node-header FIFO was a critical path, 141 MHz).
+        register for all the slices of a wide FIFO fans out across the die).
     registered : :class:`bool`
         ``False``: ``r_stream.payload`` is the memories' asynchronous read of the oldest entry
         (valid while ``r_stream.valid``), and ``r_stream.ready`` pops it. ``True``: each slice
@@ -109,8 +109,8 @@ class SlicedFIFO(wiring.Component):
     r_stream : ``Out(stream.Signature(width))``
         Reads (see ``registered``); unchecked: the unregistered form is never popped empty.
 
-    Why slices: a read address that drives every cell of a wide, deep LUT RAM was the critical
-    path (126 MHz with one 128×152-bit memory, 144 MHz sliced). The slices' pointers start at
+    Why slices: a read address that drives every cell of a wide, deep LUT RAM fans out to all of
+    them; a slice's own pointers reach only its cells. The slices' pointers start at
     different values, so synthesis cannot merge them; they decide alike (same writes and reads,
     equal levels), so they stay in step, and slice 0's flags stand for all.
     """
@@ -147,7 +147,7 @@ class SlicedFIFO(wiring.Component):
             # Two registers per slice, used in turn: the head is offered, the other one refills.
             # A register's load enable is its own (registered) empty flag, never r_stream.ready,
             # which reaches only the flags and the head pointer (as the enable of every skid
-            # register in 19 slices it was the critical path, 136 MHz).
+            # register in every slice it would fan out across the die).
             regs = [Signal(bits, name=f"buf{k}_{n}", reset_less=True) for n in range(2)]  # data: no reset
             full = [Signal(name=f"full{k}_{n}") for n in range(2)]
             head = Signal(name=f"head{k}")  # the register offered

@@ -333,8 +333,8 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
     if energy:
         m.d.comb += [out.error_squares.eq(live["e_sq"]), out.barrier_energy.eq(live["ch"])]
     if saturations:
-        # the clamps' flags added after N2, from registers (added in N1 -> N2 with the clamps, the flags'
-        # route to the count was the engine's critical path at 112 MHz)
+        # the clamps' flags added after N2, from registers (added in N1 -> N2 with the clamps, the flags
+        # would route from the clamps' carry chains into the count in one clock)
         flags = live["ev_node"]
         total = live["ev"] + sum(flags[i] for i in range(len(flags)))
         m.d.comb += out.saturations.eq(total[:force_saturations_max(fs).bit_length()])

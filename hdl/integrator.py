@@ -177,8 +177,8 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     kick_frac = fs.dt.frac_bits + fs.accel.frac_bits
     # momentum: step = β·V + a, the a term aligned as ½Δt²·a would be (fraction bits fa).
     # Both dynamics' sums are formed, rounded and saturated side by side; the mode picks one in
-    # a stage of its own (T8m), not in front of the 50-bit adder (that was the critical path at
-    # 139 MHz).
+    # a stage of its own (T8m), not in front of the 50-bit adder (a multiplexer before a carry chain
+    # that long adds its delay to the chain's).
     sums = {}
     for k in "xy":
         for mode, second in (("paper", live[f"ha_{k}"]), ("mom", live[f"a_{k}"].shift_left(fs.half_dt_sq.frac_bits))):

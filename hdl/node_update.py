@@ -89,8 +89,8 @@ class NodeUpdate(wiring.Component):
 
     #: Width of one column slice of the header and result FIFOs (each slice has its own pointers).
     #: 12 bits: a slice of the 128-deep result FIFO is 24 LUT RAM cells, which its read pointer
-    #: reaches within a clock wherever they are placed (20-bit slices, 40 cells: 137–158 MHz
-    #: depending on placement).
+    #: reaches within a clock wherever they are placed (wider slices' pointers reach more cells, and
+    #: their timing then depends on placement).
     FIFO_SLICE_BITS = 12
 
     def __init__(self, fs: FormatSet | str):
@@ -130,7 +130,7 @@ class NodeUpdate(wiring.Component):
         # owed: accepted last entries whose results have not left o, as counted. A node's last
         # entry reaches the count two clocks late, through two flip-flops that the placer can put
         # at the input and at the counter (the input's last bit into the counter's carry chain
-        # across the die was the core's critical path, 135 MHz). i.ready = counted owed < credits
+        # across the die is a long path). i.ready = counted owed < credits
         # leaves a flip-flop, set from the current count and this clock's handshakes alone (no
         # adder on that path): credits is a power of two. Up to two nodes are accepted but not yet
         # counted, so up to credits + 2 are owed: the result FIFO holds exactly that many.
@@ -179,8 +179,8 @@ class NodeUpdate(wiring.Component):
         # when its forces leave the force pass: the read enable is then a flip-flop (the pass's
         # o.valid) that drives only the slices' read pointers, and the integrator's first stage
         # registers the header straight from the LUT RAM (reading with the last entry itself,
-        # through an AND gate into the pointers and a header register, was the critical path:
-        # 137 MHz). At most one node per force-pass stage is in flight, so the FIFO never fills.
+        # through an AND gate into the pointers and a header register, adds logic to a long
+        # route). At most one node per force-pass stage is in flight, so the FIFO never fills.
         m.submodules.headers = headers = SlicedFIFO(
             width=node_layout(fs).size, slice_bits=self.FIFO_SLICE_BITS, write_register=True,
             depth=1 << (force_pass.latency + 1).bit_length())
@@ -203,14 +203,14 @@ class NodeUpdate(wiring.Component):
         # ------------------------------------------------------------ results
         # The result FIFO: LUT RAM column slices, each with its own pointers and its own two
         # output registers, so a read enable reaches only its own 12-bit slice and o.ready only
-        # a few flags per slice (one shared read enable over ten slices was the critical path,
-        # 123–138 MHz). Never written full: the credits count its depth and the output register.
+        # a few flags per slice (one shared read enable over every slice fans out across the die).
+        # Never written full: the credits count its depth and the output register.
         new = integrator.o.payload
         result = Signal(result_layout(fs), name="result")
         m.d.comb += [result.position.eq(new.position), result.velocity.eq(new.velocity),
                      result.error_sum.eq(new.side), result.power.eq(new.power)]
         # Each slice registers its own write (write_register): the integrator's valid bit as the
-        # write enable of all 14 slices' LUT RAM was 6.6 ns of routing (129 MHz).
+        # write enable of every slice's LUT RAM would be one signal routed to all of them.
         m.submodules.results = results = SlicedFIFO(width=result_layout(fs).size, depth=self.credits,
                                                     slice_bits=self.FIFO_SLICE_BITS, registered=True,
                                                     write_register=True)

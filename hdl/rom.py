@@ -5,7 +5,7 @@ registered, then the data). In generic RTL that is an :class:`amaranth.lib.memor
 port (its address register) and a flip-flop on its data. Yosys's ``synth_ecp5`` maps that
 to a ``DP16KD`` with ``REGMODE_A = "NOREG"`` and leaves the data register in the fabric: the
 block RAM's unregistered clock-to-output (~5.6 ns) plus the route to that flip-flop then
-limits the clock (137–139 MHz, ``docs/synthesis.md``), and Yosys does not infer the output
+limits the clock, and Yosys does not infer the output
 register. Elaborated with :data:`hdl.dsp.ECP5` as the platform, the ROM is therefore a row of
 ``DP16KD`` instances with ``REGMODE_A = "OUTREG"``, one per column slice of the word, in the
 deepest configuration that holds the table. Both forms have the same function and latency;

@@ -209,7 +209,7 @@ class RsqrtUnit(wiring.Component):
 
         # --- land: the seed in a fabric register, so that the block RAM's output and the DSP
         # row's inputs are two short routes (one route from the block RAM straight into the
-        # multiplier's input register took 6 ns on one placement: 142 MHz)
+        # multiplier's input register can take most of a clock period)
         stage("land")
         # u0.Fs -> u1.Fy (wiring), as wide as every later y (the multiplies' partial products, latency_of)
         y = reg(seed, cfg.seed_frac_bits, "land_y").shift_left(fy - cfg.seed_frac_bits).as_unsigned()
