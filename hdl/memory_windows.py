@@ -56,7 +56,8 @@ class MemoryWindows(wiring.Component):
         (:attr:`RegisterBank.bus_request <hdl.register_bank.RegisterBank>`).
     hit, answer, answer_data : ``Out``
         At DEC: the request is a window word's and the engine is idle (``hit``, combinational from
-        flip-flops); ``answer`` with ``answer_data`` (the word read, a register) five clocks later.
+        flip-flops); ``answer`` with ``answer_data`` (the word read, a register) :data:`WINDOW_STEPS`
+        (six) clocks after DEC, for a write as for a read.
     running, in_area, in_integrate, fetch_nodes : ``In(1)``
         The controller's flip-flops that choose each port's source.
     entry_index, tri_index, node_index, node_of_entry : ``In``

@@ -14,9 +14,10 @@ from golden_model.fixed.register_map import RegisterMap
 from .fixedpoint import shape_of
 from .force_pass import ForcePass
 from .integrator import Integrator
-from .memory_windows import node_write_layout, write_signature
 from .layouts import (area_saturations_layout, energy_sums_layout, force_entry_layout, force_word_layout,
-                      integrator_input_layout, integrator_output_layout, node_force_layout, triangle_layout, vector_layout, weight_word_layout, word_layout)
+                      integrator_input_layout, integrator_output_layout, node_force_layout, triangle_layout,
+                      vector_layout, weight_word_layout, word_layout)
+from .memory_windows import node_write_layout, write_signature
 
 __all__ = ["PassSequencer", "fetch_counter"]
 
