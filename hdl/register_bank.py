@@ -16,8 +16,8 @@ access    behaviour and port
 ``w1p``   writing 1 raises the ``Out`` port for one clock, the clock after the write; reads 0.
 ``w1c``   a flag with storage (reset 0), the ``Out`` port; reads the flag; writing 1 clears it.
           ``<value>_set`` (``In``) sets it, ``<value>_clear`` (``In``) clears it. In one clock the
-          clear input wins over the set input, which wins over the bus write (a new run's clear
-          over a run's end, both over the host's acknowledgement).
+          set input wins over the clear input, which wins over the bus write (a run that START
+          ends at once, with no mesh or bad constants, leaves its interrupt pending).
 ========  ==================================================================================
 """
 
@@ -150,13 +150,13 @@ class RegisterBank(wiring.Component):
                         for i in range(f.width):
                             with m.If(bits[i]):
                                 m.d.sync += flags[f.value][f.value_lsb + i].eq(0)
-        for v, flag in flags.items():  # after the bus write, so the hardware wins: its set, then its clear
+        for v, flag in flags.items():  # after the bus write, so the hardware wins: its clear, then its set
             clear, set_ = getattr(self, f"{v}_clear"), getattr(self, f"{v}_set")
             for i in range(len(flag)):
-                with m.If(set_[i]):
-                    m.d.sync += flag[i].eq(1)
                 with m.If(clear[i]):
                     m.d.sync += flag[i].eq(0)
+                with m.If(set_[i]):
+                    m.d.sync += flag[i].eq(1)
 
         # The AND-OR over the one-hot select in two clocks: groups of eight registers, each OR landed in
         # a register of its own, then their OR (registered because one clock from reg_select through the

@@ -137,13 +137,13 @@ def test_each_field_acts_as_its_access_type_says():
         await ctx.tick()
         ctx.set(bank.flags_clear, 0)
         assert ctx.get(bank.flags) == 0
-        # in one clock the clear input wins over the set input
-        ctx.set(bank.flags_set, 0b11)
-        ctx.set(bank.flags_clear, 0b01)
+        # in one clock the set input wins over the clear input
+        ctx.set(bank.flags_set, 0b01)
+        ctx.set(bank.flags_clear, 0b11)
         await ctx.tick()
         ctx.set(bank.flags_set, 0)
         ctx.set(bank.flags_clear, 0)
-        assert ctx.get(bank.flags) == 0b10
+        assert ctx.get(bank.flags) == 0b01
 
     sim = Simulator(dut)
     sim.add_clock(1e-8)
