@@ -158,6 +158,8 @@ def test_start_without_a_mesh_answers_no_mesh_and_running_memory_access_is_a_bus
     word = answers["status"]
     assert state_field.codes[(word >> state_field.lsb) & ((1 << state_field.width) - 1)] == "done"
     assert result_field.codes[(word >> result_field.lsb) & ((1 << result_field.width) - 1)] == "no-mesh"
+    pending_field = next(f for f in status.fields if f.name == "irq_pending")
+    assert (word >> pending_field.lsb) & 1, "a run START ends at once leaves its interrupt pending"
     assert answers["unmapped"] and answers["partial"] and answers["read_only"]
     assert not answers["memory_idle"]
 
