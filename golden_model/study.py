@@ -71,7 +71,8 @@ from .fixed.engine import flatten_fixed
 from .fixed.format import Rounding
 from .fixed.formats_set import CONTROLLER_FIELDS, FORMAT_FIELDS, FormatSet
 from .layouts import initial_layout
-from .mesh import Mesh, load_mesh
+from .mesh import Mesh
+from .mesh_io import load_mesh
 from .reference import FlattenParams, FlattenResult, ParameterError, flatten
 
 __all__ = [

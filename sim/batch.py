@@ -30,7 +30,8 @@ from pathlib import Path
 
 from golden_model.builtin import is_builtin
 from golden_model.layouts import LAYOUT_METHODS
-from golden_model.mesh import MeshError, describe_os_error, read_file_bytes
+from golden_model.files import describe_os_error, read_file_bytes
+from golden_model.mesh import MeshError
 
 from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_output_path
 from .patterns import PATTERN_SUFFIXES, pattern_kind

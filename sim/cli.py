@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.layouts import LAYOUT_METHODS
-from golden_model.mesh import Mesh, describe_os_error
+from golden_model.files import describe_os_error
+from golden_model.mesh import Mesh
 from golden_model.fixed.engine import check_fixed_params, flatten_fixed
 from golden_model.fixed.formats_set import FormatSet
 from golden_model.reference import FlattenParams, FlattenResult, flatten

@@ -16,7 +16,9 @@ import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, LayoutError, initial_layout, start_layout
-from golden_model.mesh import Mesh, MeshError, describe_os_error, load_mesh_with_notes
+from golden_model.files import describe_os_error
+from golden_model.mesh import Mesh, MeshError
+from golden_model.mesh_io import load_mesh_with_notes
 from golden_model.reference import DYNAMICS, FlattenParams, ParameterError
 
 from .outputs import OutputError

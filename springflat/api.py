@@ -28,7 +28,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from golden_model.mesh import Mesh, load_mesh_with_notes, save_obj
+from golden_model.mesh import Mesh
+from golden_model.mesh_io import load_mesh_with_notes, save_obj
 from golden_model.reference import FlattenParams, FlattenResult, ParameterError
 from sim.cli import add_engine_options, choose_engine, run_flatten
 from sim.distortion import Distortion, distortion
@@ -186,7 +187,7 @@ def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """``(V, F)`` of an OBJ, PLY, OFF or STL disk patch: ``(V, 3)`` float64 positions, ``(F, 3)`` int64
     vertex indices (0-based), in the file's vertex order.
 
-    The file must be one manifold disk (:func:`golden_model.mesh.load_mesh_with_notes`); anything else
+    The file must be one manifold disk (:func:`golden_model.mesh_io.load_mesh_with_notes`); anything else
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
     reader changed (polygons fan-triangulated, STL corners merged) is a :class:`MeshNote` warning.
     """

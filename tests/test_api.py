@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import springflat
-from golden_model.mesh import MeshError, load_mesh
+from golden_model.mesh import MeshError
+from golden_model.mesh_io import load_mesh
 from golden_model.reference import ParameterError
 from sim.cli import main
 

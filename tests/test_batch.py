@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from golden_model.generate import dome_grid
-from golden_model.mesh import save_obj
+from golden_model.mesh_io import save_obj
 from sim.cli import main
 
 SPRINGFLAT = str(Path(sys.executable).parent / "springflat")

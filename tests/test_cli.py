@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import load_mesh
+from golden_model.mesh_io import load_mesh
 from golden_model.generate import dome_grid
 
 SPRINGFLAT = str(Path(sys.executable).parent / "springflat")

@@ -89,7 +89,7 @@ def test_closed_loop_momentum_dynamics(simulator, barrier, tmp_path):
     """The momentum dynamics through the RTL: β_k from the controller, restarts from the RTL's F·V,
     the barrier's forces in the stream; every iteration bit for bit, the end against the float model."""
     from golden_model.generate import spherical_cap
-    from golden_model.mesh import save_obj
+    from golden_model.mesh_io import save_obj
 
     cap = spherical_cap(4)
     path = tmp_path / "cap.obj"
@@ -145,7 +145,7 @@ def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path, dynamics):
     from pathlib import Path
 
     from golden_model.generate import delaunay_patch
-    from golden_model.mesh import save_obj
+    from golden_model.mesh_io import save_obj
 
     mesh = delaunay_patch(220, seed=11)
     save_obj(tmp_path / "patch.obj", mesh.vertices, mesh.faces)

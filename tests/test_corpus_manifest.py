@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from golden_model.mesh import load_mesh, save_obj
+from golden_model.mesh_io import load_mesh, save_obj
 
 REPO = Path(__file__).resolve().parents[1]
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"

@@ -139,7 +139,7 @@ def test_strongly_curved_scans_end_fold_free_and_below_arap(scan):
     """From a flip-free ARAP layout, momentum + the default barrier: no folds, E_C below ARAP's."""
     from pathlib import Path
 
-    from golden_model.mesh import load_mesh
+    from golden_model.mesh_io import load_mesh
     from golden_model.reference import SpringModel, measure
 
     mesh = load_mesh(Path(__file__).parent / "data" / "scans" / f"{scan}.obj")

@@ -340,7 +340,7 @@ def test_cli_bad_formats(tmp_path, formats, message):
 
 def test_cli_refuses_a_mesh_out_of_range(tmp_path):
     mesh = _strip(1200)
-    from golden_model.mesh import save_obj
+    from golden_model.mesh_io import save_obj
     save_obj(tmp_path / "strip.obj", mesh.vertices, mesh.faces)
     proc = subprocess.run([SPRINGFLAT, "flatten", "strip.obj", "--engine", "fixed", "--out", "o.obj"],
                           capture_output=True, text=True, cwd=tmp_path)

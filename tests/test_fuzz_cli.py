@@ -38,7 +38,7 @@ import numpy as np
 import pytest
 
 from golden_model.generate import grid_faces, grid_uv
-from golden_model.mesh import load_mesh_with_notes, read_obj
+from golden_model.mesh_io import load_mesh_with_notes, read_obj
 from sim.cli import main
 
 SPRINGFLAT = str(Path(sys.executable).parent / "springflat")
@@ -1159,7 +1159,7 @@ def test_real_exit_ctrl_c_during_flatten_leaves_no_output(tmp_path, after):
     start of the imports: within Python's own start-up, before any of springflat's code runs, CPython
     answers for itself.)"""
     from golden_model.generate import dome_grid
-    from golden_model.mesh import save_obj
+    from golden_model.mesh_io import save_obj
 
     mesh = dome_grid(64)  # long enough to be running at 2.5 s
     save_obj(tmp_path / "m.obj", mesh.vertices, mesh.faces)
@@ -1232,7 +1232,7 @@ def test_a_fixed_point_run_at_its_energy_floor_says_so(engine, iterations, noted
     energy reaches its rounding floor (~1e-5 relative) well before N_max = 130 and never meets ε = 1e-7
     (docs/dynamics.md); 20 iterations are still descending."""
     from golden_model.generate import spherical_cap
-    from golden_model.mesh import save_obj
+    from golden_model.mesh_io import save_obj
 
     cap = spherical_cap()
     save_obj(tmp_path / "cap.obj", cap.vertices, cap.faces)

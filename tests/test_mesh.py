@@ -5,7 +5,8 @@ import pytest
 import trimesh
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import Mesh, MeshError, load_mesh, save_obj
+from golden_model.mesh import Mesh, MeshError
+from golden_model.mesh_io import load_mesh, save_obj
 from golden_model.generate import grid_faces, grid_uv, rolled_grid
 
 SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
@@ -176,7 +177,7 @@ def test_folded_faces_counts_against_the_whole_pattern():
 
 # --------------------------------------------------------------------------- OBJ reader
 
-from golden_model.mesh import load_mesh_with_notes  # noqa: E402
+from golden_model.mesh_io import load_mesh_with_notes  # noqa: E402
 
 UNIT_SQUARE_OBJ = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
 
@@ -207,7 +208,7 @@ def test_obj_the_issue_face_with_negative_triples(tmp_path):
             + "vt 0 0\n" * 9 + "vn 0 0 1\n" * 6 + "f -18/-9/-6 -17/-8/-5 -16/-7/-4\n")
     with pytest.raises(MeshError, match=r"vertex 3 is not used by any face \(file line 4\)"):
         load_mesh(_obj(tmp_path, text))  # the face is read; the 15 unused vertices are the validation's business
-    from golden_model.mesh import read_obj
+    from golden_model.mesh_io import read_obj
     assert read_obj(_obj(tmp_path, text)).faces.tolist() == [[0, 1, 2]]
 
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from golden_model.generate import dome_grid
-from golden_model.mesh import Mesh, load_mesh, read_obj
+from golden_model.mesh import Mesh
+from golden_model.mesh_io import load_mesh, read_obj
 from sim.distortion import DISTORTION_HEADER, distortion, worst_summary, write_distortion_csv
 from sim.patterns import (MAX_SHEETS, OVERLAP_MM, PatternDrawing, PatternError, plan_sheets, write_pattern_file)
 
