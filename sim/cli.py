@@ -390,7 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_verilog)
 
     from .rtl_check import add_parser as add_rtl_check_parser
-    from .study import add_parser as add_study_parser
+    from .study.cli import add_parser as add_study_parser
     from .synth import add_parser as add_synth_parser
 
     add_rtl_check_parser(sub, add_run_options)

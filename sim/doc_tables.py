@@ -131,8 +131,8 @@ def step_accuracy() -> str:
 
 
 def preset_costs() -> str:
-    """``golden_model.study.cost`` of both presets."""
-    from golden_model.study import cost
+    """``sim.study.cost.cost`` of both presets."""
+    from .study.cost import cost
 
     return _table(["preset", "total bits", "DSP (18×18)", "ROM bits"],
                   [[f"`{p}`", c.total_bits, c.dsp, f"{c.rom_bits:,}"] for p in PRESETS for c in [cost(_preset(p))]])

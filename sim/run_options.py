@@ -1,7 +1,7 @@
 """What every ``springflat`` command that runs the algorithm shares: the run options, the
 mesh's default parameters and initial layout, argument types and the one-line user errors.
 
-``sim/cli.py``, ``sim/rtl_check.py`` and ``sim/study.py`` import from here, not from each other.
+``sim/cli.py``, ``sim/rtl_check.py`` and ``sim/study/cli.py`` import from here, not from each other.
 """
 
 from __future__ import annotations

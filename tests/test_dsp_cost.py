@@ -15,7 +15,7 @@ from amaranth.back import rtlil
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.dsp import Operand, dsp_blocks, dsp_chunks, dsp_partial_products
-from golden_model.study import cost
+from sim.study.cost import cost
 from hdl import NodeUpdate, RsqrtUnit, StepGenerator
 from hdl.dsp import ECP5
 

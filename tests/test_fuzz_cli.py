@@ -1101,16 +1101,16 @@ def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
 
 
 def test_study_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
-    import sim.study
+    import sim.study.cli
 
     seen = []
-    real = sim.study._progress_bars
+    real = sim.study.cli._progress_bars
 
     def spy(enabled):
         seen.append(enabled)
         return real(enabled)
 
-    monkeypatch.setattr(sim.study, "_progress_bars", spy)
+    monkeypatch.setattr(sim.study.cli, "_progress_bars", spy)
     monkeypatch.chdir(tmp_path)
     assert main(["study", "dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--max-iter", "5",
                  "--out", "s"]) == 0

@@ -11,24 +11,23 @@ import math
 import numpy as np
 import pytest
 
-import golden_model.study as study
+import sim.study.flow as study_flow
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed
 from golden_model.reference import ParameterError, flatten
 from golden_model.study import (
     AccuracyTarget,
     Config,
-    Study,
     build_cases,
     class_changes,
-    cost,
     make_config,
-    multipliers,
     parse_bits,
     parse_knobs,
     sweep_configs,
 )
-from sim.study import add_parser, cmd_study
+from sim.study.cli import add_parser, cmd_study
+from sim.study.cost import cost, multipliers
+from sim.study.flow import Study
 
 
 def tiny_formats(**changes) -> FormatSet:
@@ -142,7 +141,7 @@ def test_float_reference_computed_once(monkeypatch, surf1_cases):
         calls.append(1)
         return flatten(*a, **kw)
 
-    monkeypatch.setattr(study, "flatten", counting)
+    monkeypatch.setattr(study_flow, "flatten", counting)
     d = FormatSet.preset("default")
     st = Study(surf1_cases)
     st.evaluate([Config("a", d, "base"), make_config(d, "b", velocity="s3.18")])

@@ -4,11 +4,11 @@ Sweeps the knobs of a format set one at a time around a base (preset or JSON
 file) over a set of cases (meshes × initial layouts × step modes), compares
 every run with the float reference, runs the greedy word-length optimiser and
 writes ``results.csv``, ``summary.csv``, ``report.md``, ``chosen.json`` and
-PNG plots to ``--out``.  The computation lives in :mod:`golden_model.study`.
+PNG plots to ``--out``.  The runs are :mod:`.flow`'s, the model :mod:`golden_model.study`.
 
 Wiring (in ``sim/cli.py``)::
 
-    from .study import add_parser as add_study_parser
+    from .study.cli import add_parser as add_study_parser
     add_study_parser(sub)
 """
 
@@ -34,20 +34,18 @@ from golden_model.study import (
     SIGNAL_CLASSES,
     STUDY_MESHES,
     AccuracyTarget,
-    ConfigSummary,
-    StudyResult,
     build_cases,
     class_frac_bits,
-    multipliers,
     parse_bits,
     parse_knobs,
     preset_configs,
-    run_study,
     sweep_configs,
 )
 
-from .run_options import integer_argument, load_format_set, number_argument
-from .outputs import atomic_directory, atomic_write, check_output_directory
+from ..outputs import atomic_directory, atomic_write, check_output_directory
+from ..run_options import integer_argument, load_format_set, number_argument
+from .cost import multipliers
+from .flow import ConfigSummary, StudyResult, run_study
 
 __all__ = ["add_parser", "cmd_study", "write_outputs", "PLOT_FILES"]
 
@@ -147,7 +145,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         with contextlib.ExitStack() as stack:
             executor = None
             if args.scheduler is not None:
-                from .batch import dask_client
+                from ..batch import dask_client
 
                 executor = stack.enter_context(dask_client(args.scheduler, workers)).get_executor(pure=False)
             result = run_study(cases, base, knobs, bits, target, args.cost, args.optimise, workers, progress=update,
