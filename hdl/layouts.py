@@ -11,7 +11,7 @@ from amaranth.hdl import ShapeCastable, signed, unsigned
 from amaranth.lib import data
 
 from golden_model.fixed import MAX_PRODUCT_WIDTH, Format, FormatSet
-from golden_model.fixed.engine_image import MemoryLayout
+from golden_model.engine_spec.image import MemoryLayout
 
 from .fixedpoint import shape_of
 

@@ -21,7 +21,7 @@ from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from golden_model.fixed import uart_protocol as protocol
+from golden_model.engine_spec import uart_protocol as protocol
 
 from . import wishbone
 

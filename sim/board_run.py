@@ -5,7 +5,7 @@ The same pieces as ``--engine rtl`` (``sim/engine_run.py``): the golden model's 
 (``prepare``), the image (``build_image``), the register map and :class:`~sim.engine_driver.EngineDriver`;
 only the transport differs. The capacity is the board's own: read from its CAP_* registers (whose
 addresses do not depend on the capacity) before the map is built. The read-back is compared bit for bit
-with :func:`~golden_model.fixed.engine_image.run_image` (a mismatch is an :class:`EngineRunError`), and
+with :func:`~golden_model.engine_spec.image.run_image` (a mismatch is an :class:`EngineRunError`), and
 becomes the :class:`~golden_model.reference.FlattenResult` that ``flatten`` writes.
 """
 
@@ -18,8 +18,8 @@ import numpy as np
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
-from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity, build_image, run_image
-from golden_model.fixed.register_map import RegisterMap
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, build_image, run_image
+from golden_model.engine_spec.register_map import RegisterMap
 
 from .engine_driver import EngineDriver, EngineReadBack
 from .engine_run import EngineRunError, engine_flatten_result
@@ -95,7 +95,7 @@ def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = 
 
 def add_board_options(parser) -> None:
     """``--port`` and ``--baud`` of ``flatten --engine board``."""
-    from golden_model.fixed.uart_protocol import DEFAULT_BAUD
+    from golden_model.engine_spec.uart_protocol import DEFAULT_BAUD
 
     parser.add_argument("--port", default=None, metavar="DEVICE|URL",
                         help="--engine board: the board's serial port (/dev/ttyUSB0, COM3, or a pyserial URL "

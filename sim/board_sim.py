@@ -24,7 +24,7 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
-from golden_model.fixed.engine_image import EngineCapacity
+from golden_model.engine_spec.image import EngineCapacity
 
 from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
 

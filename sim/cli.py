@@ -144,7 +144,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     if args.engine in ("fixed", "rtl", "board"):
         check_fixed_params(params, load_format_set(args.formats or "default"))
         if args.engine in ("rtl", "board"):
-            from golden_model.fixed.engine_image import check_engine_params
+            from golden_model.engine_spec.image import check_engine_params
 
             check_engine_params(params)
     engine = choose_engine(args)
@@ -183,7 +183,7 @@ def _rtl_engine(formats):
     import os
 
     from golden_model.fixed.engine import check_fixed_params, prepare
-    from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity, check_engine_params
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, check_engine_params
 
     capacity = DEFAULT_CAPACITY
     if os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
@@ -385,7 +385,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="the engine's vertices, neighbour entries and triangles (default: "
-                        "golden_model.fixed.engine_image.DEFAULT_CAPACITY)")
+                        "golden_model.engine_spec.image.DEFAULT_CAPACITY)")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=cmd_verilog)
 

@@ -4,10 +4,10 @@ and ``flatten --engine rtl``.
 :func:`engine_sources` exports the engine for a format set and capacity (cached like
 :func:`sim.cocotb_support.verilog_sources`: keyed by the format set, the capacity and the RTL
 sources); :func:`run_engine` packs a :class:`~golden_model.fixed.engine.FixedProblem` into an
-image (:func:`~golden_model.fixed.engine_image.build_image`, which refuses a mesh over capacity
+image (:func:`~golden_model.engine_spec.image.build_image`, which refuses a mesh over capacity
 with a one-line :class:`~golden_model.fixed.engine.FixedPointError`), runs the cocotb bench
 ``sim/cocotb_benches/engine.py`` on it and returns what the engine read back, compared bit for
-bit with :func:`~golden_model.fixed.engine_image.run_image` inside the bench.
+bit with :func:`~golden_model.engine_spec.image.run_image` inside the bench.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
-from golden_model.fixed.engine_image import EngineCapacity, EngineImage, build_image
+from golden_model.engine_spec.image import EngineCapacity, EngineImage, build_image
 
 from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE

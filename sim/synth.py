@@ -2,7 +2,7 @@
 
 For every component (``rsqrt_unit``, ``step_generator``, ``node_update`` and the top
 ``springflat_core``; on request also ``springflat_engine``, the whole engine behind its Wishbone
-bus at a given :class:`~golden_model.fixed.engine_image.EngineCapacity`) the flow
+bus at a given :class:`~golden_model.engine_spec.image.EngineCapacity`) the flow
 
 1. exports the Verilog (:func:`sim.export.export_verilog`: the bare modules, ROM files and
    ``interface.md``/``interface.json``) and, for place and route, the component inside
@@ -233,7 +233,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     the wrapped design, ``latency``, ``ii``, ``throughput_per_s``, ``ports``, ``does_not_fit``).
     The top is ``springflat_core`` when it is among ``components``, else the last component.
     ``springflat_engine`` (:data:`ENGINE`) is built at ``capacity`` (default
-    :data:`~golden_model.fixed.engine_image.DEFAULT_CAPACITY`); its entry has ``capacity`` and no
+    :data:`~golden_model.engine_spec.image.DEFAULT_CAPACITY`); its entry has ``capacity`` and no
     latency or II (it runs whole iterations), and the report's ``engine`` lists its bundle files.
     ``router`` is nextpnr's router: ``auto`` (default) is the timing-driven ``router1``, which
     routes the core in about five minutes; ``router2`` is faster on congested designs but not
@@ -246,7 +246,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     from hdl.dsp import DspPlatform
     from hdl.io_wrapper import SerialWrapper
 
-    from golden_model.fixed.engine_image import DEFAULT_CAPACITY
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
     from hdl.engine import SpringflatEngine
 
     from .export import COMPONENTS, export_engine_bundle, export_verilog
@@ -494,7 +494,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "springflat_engine (default: all but springflat_engine)")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="springflat_engine's vertices, neighbour entries and triangles (default: "
-                        "golden_model.fixed.engine_image.DEFAULT_CAPACITY)")
+                        "golden_model.engine_spec.image.DEFAULT_CAPACITY)")
     p.add_argument("--router", choices=("auto", "router1", "router2"), default="auto",
                    help="nextpnr router (default auto: the timing-driven router1; router2 is not timing-driven)")
     p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")

@@ -12,8 +12,8 @@ from amaranth.hdl import UnusedElaboratable
 from amaranth.sim import Simulator
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import RESULTS, EngineCapacity
-from golden_model.fixed.register_map import STATES, RegisterMap
+from golden_model.engine_spec.image import RESULTS, EngineCapacity
+from golden_model.engine_spec.register_map import STATES, RegisterMap
 from hdl.board import LEDS, BoardCore, EcpPll, StateLeds, Ulx3sTop, pll_config
 
 DEFAULT = FormatSet.preset("default")

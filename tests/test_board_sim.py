@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from golden_model.fixed import uart_protocol as protocol
+from golden_model.engine_spec import uart_protocol as protocol
 from golden_model.fixed.engine import prepare
-from golden_model.fixed.engine_image import EngineCapacity
-from golden_model.fixed.register_map import MAGIC
+from golden_model.engine_spec.image import EngineCapacity
+from golden_model.engine_spec.register_map import MAGIC
 from golden_model.layouts import initial_layout
 from sim.board_sim import run_board_sim
 from sim.cli import build_parser

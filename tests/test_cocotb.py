@@ -8,7 +8,7 @@ from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet
 from hdl import SpringflatCore
 from sim.cocotb_support import SIMULATORS, missing_simulator, run_bench, verilog_sources
-from golden_model.fixed.engine_image import UNGUARDED
+from golden_model.engine_spec.image import UNGUARDED
 
 pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
 

@@ -172,7 +172,7 @@ def test_preset_notes_state_the_formats_numbers(preset):
 def test_the_energy_checks_width_is_the_engines(unelaborated):
     """``EnergyCheck``'s energy width is the engine's ``energy_width`` (a fact about the code, not a table:
     docs/hardware-units.md's latencies are generated from ``EnergyCheck`` itself)."""
-    from golden_model.fixed.engine_image import EngineCapacity, energy_width
+    from golden_model.engine_spec.image import EngineCapacity, energy_width
     from hdl import EnergyCheck
 
     for name in PRESETS:

@@ -11,14 +11,14 @@ from amaranth.sim import Simulator
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.fixed.format import Format
-from golden_model.fixed.engine_image import EngineCapacity, build_image, run_image
+from golden_model.engine_spec.image import EngineCapacity, build_image, run_image
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
 from hdl.engine import SpringflatEngine
 from sim.bus_helpers import ThreadedBus, wishbone_read, wishbone_write
 from sim.engine_driver import BusError, EngineDriver
-from golden_model.fixed.engine_image import UNGUARDED
+from golden_model.engine_spec.image import UNGUARDED
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
 
@@ -194,7 +194,7 @@ def test_memory_access_while_running_is_a_bus_error_and_abort_then_a_clean_rerun
 
 
 def test_bad_run_constants_answer_as_constant_fault_says():
-    from golden_model.fixed.engine_image import constant_fault
+    from golden_model.engine_spec.image import constant_fault
 
     image = image_of(RUNS["paper-variable"])
     top = 1 << (FS.reciprocal.width - 1)

@@ -7,13 +7,13 @@ import pytest
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed, prepare
-from golden_model.fixed.engine_image import EngineCapacity, build_image
-from golden_model.fixed.register_map import RegisterMap
+from golden_model.engine_spec.image import EngineCapacity, build_image
+from golden_model.engine_spec.register_map import RegisterMap
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
 from sim.engine_driver import BusError, DriverError, EngineDriver, ModelBus
-from golden_model.fixed.engine_image import UNGUARDED
+from golden_model.engine_spec.image import UNGUARDED
 
 DEFAULT = FormatSet.preset("default")
 CAPACITY = EngineCapacity(vertices=64, entries=400, triangles=128)

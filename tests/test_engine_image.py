@@ -1,4 +1,4 @@
-"""The engine's memory images and image-driven controller (golden_model.fixed.engine_image)."""
+"""The engine's memory images and image-driven controller (golden_model.engine_spec.image)."""
 
 import dataclasses
 
@@ -8,14 +8,14 @@ import pytest
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedPointError, energy_raw, flatten_fixed, prepare
 from golden_model.fixed.pipeline import NodeTerms
-from golden_model.fixed.engine_image import (EngineCapacity, MemoryLayout, WordField, build_image, constant_fault,
+from golden_model.engine_spec.image import (EngineCapacity, MemoryLayout, WordField, build_image, constant_fault,
                                              decode_entries, decode_nodes, decode_triangles, energy_width,
                                              memory_layouts, run_image)
 from golden_model.generate import dome_grid, generated_meshes, grid_faces, grid_uv
 from golden_model.layouts import initial_layout
 from golden_model.mesh import Mesh
 from golden_model.reference import FlattenParams
-from golden_model.fixed.engine_image import UNGUARDED
+from golden_model.engine_spec.image import UNGUARDED
 
 DEFAULT = FormatSet.preset("default")
 CAPACITY = EngineCapacity(vertices=1024, entries=8192, triangles=2048)

@@ -19,14 +19,14 @@ import pytest
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
-from golden_model.fixed.engine_image import EngineCapacity, build_image, run_image
+from golden_model.engine_spec.image import EngineCapacity, build_image, run_image
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams
 from sim.cocotb_support import missing_simulator
 from sim.engine_run import engine_sources, run_image_on_rtl, simulation_harness, top_ports
 from sim.top_names import ENGINE_MODULE
-from golden_model.fixed.engine_image import UNGUARDED
+from golden_model.engine_spec.image import UNGUARDED
 
 pytestmark = pytest.mark.slow  # simulator builds (Verilator: minutes, cached)
 

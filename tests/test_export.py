@@ -65,8 +65,8 @@ def test_bad_formats_and_out(tmp_path):
 # ------------------------------------------------------------------ the engine and its register map
 def test_the_engine_ships_with_its_register_map_at_the_default_capacity(exported):
     """Without --capacity the engine is DEFAULT_CAPACITY's; the JSON map is the one the golden model builds."""
-    from golden_model.fixed.engine_image import DEFAULT_CAPACITY
-    from golden_model.fixed.register_map import RegisterMap
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
+    from golden_model.engine_spec.register_map import RegisterMap
 
     for name in ("springflat_engine.v", "register_map.md", "register_map.json", "springflat_regs.h",
                  "memory_image.md"):
@@ -78,8 +78,8 @@ def test_the_engine_ships_with_its_register_map_at_the_default_capacity(exported
 
 @pytest.mark.slow  # two elaborations of every component: ~20 s
 def test_capacity_option_sizes_the_engine_and_its_map(tmp_path):
-    from golden_model.fixed.engine_image import EngineCapacity
-    from golden_model.fixed.register_map import RegisterMap
+    from golden_model.engine_spec.image import EngineCapacity
+    from golden_model.engine_spec.register_map import RegisterMap
 
     out = tmp_path / "v"
     proc = subprocess.run([SPRINGFLAT, "verilog", "--formats", "narrow", "--capacity", "64", "300", "128",

@@ -22,7 +22,7 @@ from golden_model.reference import FlattenParams
 from hdl import NodeUpdate
 from sim.payloads import pass_beats, unpack_beats
 from sim.stream_helpers import run_streams
-from golden_model.fixed.engine_image import UNGUARDED
+from golden_model.engine_spec.image import UNGUARDED
 
 PRESETS = ["default", "narrow"]
 

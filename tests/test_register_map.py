@@ -1,4 +1,4 @@
-"""The engine's register map (golden_model.fixed.register_map) and its exports (sim/register_map_export.py)."""
+"""The engine's register map (golden_model.engine_spec.register_map) and its exports (sim/register_map_export.py)."""
 
 import dataclasses
 import json
@@ -11,12 +11,12 @@ import pytest
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
-from golden_model.fixed.engine_image import (RESULTS, EngineCapacity, build_image, energy_width, memory_layouts,
+from golden_model.engine_spec.image import (RESULTS, EngineCapacity, build_image, energy_width, memory_layouts,
                                              run_constant_fields)
-from golden_model.fixed.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
+from golden_model.engine_spec.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
-from golden_model.fixed.engine_image import UNGUARDED
+from golden_model.engine_spec.image import UNGUARDED
 from golden_model.reference import FlattenParams
 from sim.register_map_export import EXPORT_FILES, c_header, markdown, to_json, write_exports
 

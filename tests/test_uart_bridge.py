@@ -1,5 +1,5 @@
 """The UART-to-Wishbone bridge (hdl.uart_bridge) in Amaranth's simulator, against the frame format's Python
-reference (golden_model.fixed.uart_protocol.ReferenceTarget): answers byte for byte and the bus accesses
+reference (golden_model.engine_spec.uart_protocol.ReferenceTarget): answers byte for byte and the bus accesses
 access for access, with gaps on the byte stream in, back-pressure on the answer stream, and bus wait
 states; and the serial line, bit by bit."""
 
@@ -12,7 +12,7 @@ from amaranth.lib import crc
 from amaranth.hdl import UnusedElaboratable
 from amaranth.sim import Simulator
 
-from golden_model.fixed import uart_protocol as protocol
+from golden_model.engine_spec import uart_protocol as protocol
 from hdl.uart_bridge import FrameBridge, UartBridge, UartRx, UartTx, timeout_clocks, uart_divisor
 
 ADDR_WIDTH = 12

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed import uart_protocol as protocol
+from golden_model.engine_spec import uart_protocol as protocol
 from golden_model.fixed.engine import flatten_fixed, prepare
-from golden_model.fixed.engine_image import UNGUARDED
-from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity, build_image
-from golden_model.fixed.register_map import RegisterMap
+from golden_model.engine_spec.image import UNGUARDED
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, build_image
+from golden_model.engine_spec.register_map import RegisterMap
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.reference import FlattenParams

@@ -4,7 +4,7 @@
 mesh: the stream of neighbour entries, the triangles, the run constants) and a raw layout. Both
 ``--engine fixed`` (:class:`~golden_model.fixed.engine.FixedEngine`, from the host's
 :class:`~golden_model.fixed.engine.FixedProblem`) and the image model of ``SpringflatEngine``
-(:func:`~golden_model.fixed.engine_image.run_image`, from decoded memories) run this class, so the
+(:func:`~golden_model.engine_spec.image.run_image`, from decoded memories) run this class, so the
 two cannot drift apart.
 
 An iteration (``docs/engine.md`` has it pass by pass): the step for the run mode

@@ -31,12 +31,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..modes import RunMode, mode_named
-from .controller import Controller, Setup
-from .engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, SAT, FixedPointError, FixedProblem, Reciprocal, StopRule,
+from ..fixed.controller import Controller, Setup
+from ..fixed.engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, SAT, FixedPointError, FixedProblem, Reciprocal, StopRule,
                      check_fixed_params, energy_frac_bits)
-from .format import Format, SaturationCounter, quantize, raw_range
-from .formats_set import FormatSet
-from .pipeline import BarrierEntries, NeighbourStream
+from ..fixed.format import Format, SaturationCounter, quantize, raw_range
+from ..fixed.formats_set import FormatSet
+from ..fixed.pipeline import BarrierEntries, NeighbourStream
 
 __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
            "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "EngineImage",

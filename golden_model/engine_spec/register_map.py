@@ -1,7 +1,7 @@
 """The engine's register map on its Wishbone B4 bus, as data: registers, bit fields, memory windows.
 
 One :class:`RegisterMap` built from a :class:`~golden_model.fixed.FormatSet` and an
-:class:`~golden_model.fixed.engine_image.EngineCapacity` is the only description of the host
+:class:`~golden_model.engine_spec.image.EngineCapacity` is the only description of the host
 interface: the RTL decodes it, the driver (``sim/engine_driver.py``) and the exports
 (markdown, JSON, C header: ``sim/register_map_export.py``) read it.
 
@@ -22,9 +22,9 @@ import json
 import zlib
 from dataclasses import asdict, dataclass, field
 
-from .engine_image import (BUS_WORD_BITS, ITERATION_BITS, RESULTS, SATURATION_BITS, EngineCapacity, WordField,
+from .image import (BUS_WORD_BITS, ITERATION_BITS, RESULTS, SATURATION_BITS, EngineCapacity, WordField,
                            energy_width, memory_layouts, run_constant_fields)
-from .formats_set import FormatSet
+from ..fixed.formats_set import FormatSet
 
 __all__ = ["MAGIC", "VERSION", "ACCESS", "STATES", "RESULTS", "REGISTER_BLOCKS", "BitField", "Register", "MemoryWindow",
            "RegisterMap", "format_hash"]
