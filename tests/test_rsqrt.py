@@ -18,12 +18,11 @@ from golden_model.fixed import (
     RsqrtConfig,
     SaturationCounter,
     bit_length,
-    rsqrt,
     rsqrt_seed_table,
     rsqrt_stages,
     rsqrt_with_config,
 )
-from golden_model.fixed.rsqrt import _sweep_points, measure_rsqrt
+from golden_model.fixed.rsqrt import _sweep_points, measure_rsqrt, rsqrt
 
 FAITHFUL = 1.0  # stated bound: strictly less than one output ulp
 

@@ -25,9 +25,9 @@ from typing import Any, NamedTuple
 
 from ..files import read_regular_file
 from .dsp import Operand
+from .exp_table import lut_slope_bits
 from .format import MAX_PRODUCT_WIDTH, MAX_WIDTH, Format, Rounding
 from .rsqrt import RsqrtConfig
-from .steplut import lut_slope_bits
 
 __all__ = ["FormatSet", "FORMAT_FIELDS", "CONTROLLER_FIELDS", "PRESET_DIR", "Product", "UNITS", "KNOB_DOMAINS",
            "WIDENED_FIELDS", "accumulator_guard_bits", "RESOLUTION_SCALES", "ACCURACY_FACTOR"]
