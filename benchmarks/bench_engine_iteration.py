@@ -38,7 +38,8 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.mesh import Mesh
-from golden_model.reference import FlattenParams, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
 
 WARMUP_ITERATIONS = 5
 """Iterations of the short run whose time (or cycle count) is subtracted: set-up and the first measurement."""

@@ -6,7 +6,7 @@ The same pieces as ``--engine rtl`` (``sim/engine_run.py``): the golden model's 
 only the transport differs. The capacity is the board's own: read from its CAP_* registers (whose
 addresses do not depend on the capacity) before the map is built. The read-back is compared bit for bit
 with :func:`~golden_model.engine_spec.image.run_image` (a mismatch is an :class:`EngineRunError`), and
-becomes the :class:`~golden_model.reference.FlattenResult` that ``flatten`` writes.
+becomes the :class:`~golden_model.results.FlattenResult` that ``flatten`` writes.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ def run_on_board(problem: FixedProblem, bus, *, poll=None, max_polls: int = 10_0
 
 def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = "board"):
     """``springflat flatten --engine board``: ``problem`` through the engine behind ``bus``, as a
-    :class:`~golden_model.reference.FlattenResult`; :class:`EngineRunError` when the read-back differs
+    :class:`~golden_model.results.FlattenResult`; :class:`EngineRunError` when the read-back differs
     from the golden model's."""
     run = run_on_board(problem, bus, poll=poll)
     if run.mismatches:

@@ -32,7 +32,9 @@ from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh
 from golden_model.fixed.engine import check_fixed_params, flatten_fixed
 from golden_model.fixed.formats_set import FormatSet
-from golden_model.reference import FlattenParams, FlattenResult, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
+from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .entry import EXIT_INTERRUPTED

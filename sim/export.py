@@ -216,7 +216,7 @@ def engine_capacity(values, fs: FormatSet) -> EngineCapacity:
     """``--capacity V E T`` as an :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the
     default); a capacity the engine's register map cannot hold is a one-line :class:`ParameterError`."""
     from golden_model.engine_spec.register_map import RegisterMap
-    from golden_model.reference import ParameterError
+    from golden_model.params import ParameterError
 
     if values is None:
         return DEFAULT_CAPACITY

@@ -154,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m sim.register_map_export --formats PRESET|FILE --capacity V E T --out DIR``."""
     import argparse
 
-    from golden_model.fixed.engine import FixedPointError, load_formats
+    from golden_model.fixed.engine import load_formats
+    from golden_model.fixed.measures import FixedPointError
     from golden_model.engine_spec.image import EngineCapacity
 
     parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)

@@ -19,7 +19,8 @@ from golden_model.layouts import AUTO_START, LAYOUT_METHODS, LayoutError, initia
 from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes
-from golden_model.reference import DYNAMICS, FlattenParams, ParameterError
+from golden_model.modes import DYNAMICS
+from golden_model.params import FlattenParams, ParameterError
 
 from .outputs import OutputError
 

@@ -41,7 +41,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from golden_model.reference import ParameterError
+from golden_model.params import ParameterError
 
 from .top_names import CORE_MODULE, ENGINE_MODULE
 

@@ -12,7 +12,7 @@ import pytest
 import springflat
 from golden_model.mesh import MeshError
 from golden_model.mesh_io import load_mesh
-from golden_model.reference import ParameterError
+from golden_model.params import ParameterError
 from sim.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,8 +5,15 @@ import pytest
 
 from golden_model.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap
 from golden_model.layouts import initial_layout
-from golden_model.reference import (FlattenParams, ParameterError, barrier_energy, barrier_forces, flatten,
-                                    iterations_to_within, momentum_beta, node_weights)
+from golden_model.params import FlattenParams, ParameterError
+from golden_model.reference import (
+    barrier_energy,
+    barrier_forces,
+    flatten,
+    iterations_to_within,
+    momentum_beta,
+    node_weights,
+)
 
 #: The issue's generated meshes: a 10-ring spherical cap, a 15×15 saddle, a 12×12 cylinder strip.
 GENERATED = {

@@ -14,7 +14,7 @@ from golden_model.fixed.format import Format
 from golden_model.engine_spec.image import EngineCapacity, build_image, run_image
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from hdl.engine import SpringflatEngine
 from sim.bus_helpers import ThreadedBus, wishbone_read, wishbone_write
 from sim.engine_driver import BusError, EngineDriver

@@ -11,7 +11,7 @@ from golden_model.engine_spec.image import EngineCapacity, build_image
 from golden_model.engine_spec.register_map import RegisterMap
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from sim.engine_driver import BusError, DriverError, EngineDriver, ModelBus
 from golden_model.engine_spec.image import UNGUARDED
 

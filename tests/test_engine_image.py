@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine import FixedPointError, energy_raw, flatten_fixed, prepare
+from golden_model.fixed.engine import flatten_fixed, prepare
+from golden_model.fixed.measures import FixedPointError, energy_raw
 from golden_model.fixed.pipeline import NodeTerms
 from golden_model.engine_spec.image import (EngineCapacity, MemoryLayout, WordField, build_image, constant_fault,
                                              decode_entries, decode_nodes, decode_triangles, energy_width,
@@ -14,7 +15,7 @@ from golden_model.engine_spec.image import (EngineCapacity, MemoryLayout, WordFi
 from golden_model.generate import dome_grid, generated_meshes, grid_faces, grid_uv
 from golden_model.layouts import initial_layout
 from golden_model.mesh import Mesh
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from golden_model.engine_spec.image import UNGUARDED
 
 DEFAULT = FormatSet.preset("default")

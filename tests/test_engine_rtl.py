@@ -22,7 +22,7 @@ from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import EngineCapacity, build_image, run_image
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from sim.cocotb_support import missing_simulator
 from sim.engine_run import engine_sources, run_image_on_rtl, simulation_harness, top_ports
 from sim.top_names import ENGINE_MODULE

@@ -6,12 +6,20 @@ import numpy as np
 import pytest
 
 from golden_model.fixed import FormatSet, SaturationCounter
-from golden_model.fixed.engine import (ENERGY_TOL_FRAC_BITS, FixedEngine, FixedPointError, StopRule, energy_raw,
-                                       energy_to_float, flatten_fixed, prepare)
+from golden_model.fixed.engine import (
+    ENERGY_TOL_FRAC_BITS,
+    FixedEngine,
+    StopRule,
+    energy_to_float,
+    flatten_fixed,
+    prepare,
+)
+from golden_model.fixed.measures import FixedPointError, energy_raw
 from golden_model.fixed.pipeline import exact_sum, node_terms
 from golden_model.generate import spherical_cap
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams, SpringModel, barrier_energy, measure
+from golden_model.params import FlattenParams
+from golden_model.reference import SpringModel, barrier_energy, measure
 
 DEFAULT = FormatSet.preset("default")
 

@@ -4,12 +4,14 @@ import numpy as np
 import pytest
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine import FixedPointError, flatten_fixed, momentum_beta_raw, prepare
+from golden_model.fixed.engine import flatten_fixed, prepare
+from golden_model.fixed.measures import FixedPointError, momentum_beta_raw
 from golden_model.fixed.format import to_float
 from golden_model.fixed.pipeline import barrier_terms
 from golden_model.generate import rolled_grid, saddle_grid, spherical_cap
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams, barrier_active_nodes, barrier_forces, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import barrier_active_nodes, barrier_forces, flatten
 
 from golden_model.reference import iterations_to_within
 from test_dynamics import RUN, generated  # noqa: F401 (a shared module-scoped fixture)

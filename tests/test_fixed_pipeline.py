@@ -12,13 +12,15 @@ import pytest
 
 from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet, SaturationCounter, rsqrt_with_config
-from golden_model.fixed.engine import FixedEngine, FixedPointError, Reciprocal, flatten_fixed, prepare
+from golden_model.fixed.engine import FixedEngine, flatten_fixed, prepare
+from golden_model.fixed.measures import FixedPointError, Reciprocal
 from golden_model.fixed.pipeline import (NeighbourStream, NodeConstants, edge_terms, neighbour_terms,
                                          node_update)
 from golden_model.generate import dome_grid, generated_meshes, grid_faces, grid_uv, rolled_grid
 from golden_model.layouts import initial_layout, tutte_layout
 from golden_model.mesh import Mesh, signed_areas_2d
-from golden_model.reference import FlattenParams, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
 
 DEFAULT = FormatSet.preset("default")
 NARROW = FormatSet.preset("narrow")

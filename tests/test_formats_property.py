@@ -30,12 +30,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from golden_model.fixed.engine import FixedPointError, flatten_fixed
+from golden_model.fixed.engine import flatten_fixed
+from golden_model.fixed.measures import FixedPointError
 from golden_model.fixed.format import Format
 from golden_model.fixed.formats_set import FORMAT_FIELDS, KNOB_DOMAINS, FormatSet
 from golden_model.generate import dome_grid, rolled_grid, saddle_grid, spherical_cap
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
 
 EXAMPLES = int(os.environ.get("SPRINGFLAT_PROPERTY_EXAMPLES", "200"))
 LOG = os.environ.get("SPRINGFLAT_PROPERTY_LOG")

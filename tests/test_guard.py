@@ -12,7 +12,8 @@ from golden_model.guard import (FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, SCAL
                                 StepScale, area_floor, guarded_moves)
 from golden_model.layouts import initial_layout
 from golden_model.mesh import folded_faces, signed_areas_2d
-from golden_model.reference import FlattenParams, ParameterError, flatten
+from golden_model.params import FlattenParams, ParameterError
+from golden_model.reference import flatten
 
 DEFAULT = FormatSet.preset("default")
 

@@ -7,7 +7,8 @@ import pytest
 from golden_model.generate import hard_patches
 from golden_model.layouts import initial_layout, slim_layout, start_layout
 from golden_model.mesh import folded_faces
-from golden_model.reference import FlattenParams, SpringModel, flatten, measure
+from golden_model.params import FlattenParams
+from golden_model.reference import SpringModel, flatten, measure
 from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius
 
 PATCHES = hard_patches()

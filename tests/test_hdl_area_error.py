@@ -1,7 +1,7 @@
 """RTL area pass (hdl.AreaError) against the golden model's ``area_sum``, in Amaranth's simulator.
 
 The sum ``Σ|A − |A'||`` [error_acc] and the saturation events (``face_edge``, ``face_area``,
-``area_sum``) of each pass are compared with what ``golden_model.fixed.engine.area_sum``
+``area_sum``) of each pass are compared with what ``golden_model.fixed.measures.area_sum``
 computes and counts (the sum ``area_error`` normalises). Triangles arrive with seeded random
 gaps (the input is always ready).
 """
@@ -15,7 +15,7 @@ from amaranth.back import verilog
 from amaranth.hdl import Const, UnusedElaboratable, Value
 
 from golden_model.fixed import FormatSet, SaturationCounter
-from golden_model.fixed.engine import area_sum
+from golden_model.fixed.measures import area_sum
 from hdl.area_error import AreaError
 from sim.payloads import pack_beats
 from sim.stream_helpers import StreamRun, run_testbenches, stream_producer

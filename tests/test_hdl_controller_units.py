@@ -17,7 +17,8 @@ from amaranth.back import verilog
 from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import FormatSet, SaturationCounter
-from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, Reciprocal, StopRule, energy_raw, momentum_beta_raw
+from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, StopRule
+from golden_model.fixed.measures import Reciprocal, energy_raw, momentum_beta_raw
 from golden_model.engine_spec.image import ITERATION_BITS
 from hdl.controller_units import BetaDivider, EnergyCheck, Normaliser
 from sim.payloads import pack, unpack_beats

@@ -18,7 +18,7 @@ from golden_model.fixed.engine import FixedEngine, prepare
 from golden_model.fixed.pipeline import BarrierEntries, NeighbourStream, NodeConstants, node_update
 from golden_model.fixed import SaturationCounter
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from hdl import NodeUpdate
 from sim.payloads import pass_beats, unpack_beats
 from sim.stream_helpers import run_streams

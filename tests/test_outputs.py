@@ -9,7 +9,8 @@ from matplotlib.colors import to_rgba
 from golden_model.generate import dome_grid
 from golden_model.layouts import tutte_layout
 from golden_model.mesh import folded_faces, triangle_areas_3d
-from golden_model.reference import FlattenParams, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
 from sim.outputs import (
     FOLD_COLOUR,
     MAX_SCALE,

@@ -8,8 +8,16 @@ import pytest
 from golden_model.builtin import builtin_mesh
 from golden_model.layouts import initial_layout
 from golden_model.mesh import Mesh
-from golden_model.reference import (FlattenParams, ParameterError, SpringModel, flatten, measure,
-                                    penalty_moves, spring_energy, spring_forces, variable_step)
+from golden_model.params import FlattenParams, ParameterError
+from golden_model.reference import (
+    SpringModel,
+    flatten,
+    measure,
+    penalty_moves,
+    spring_energy,
+    spring_forces,
+    variable_step,
+)
 from golden_model.generate import dome_grid, rolled_grid
 
 SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)

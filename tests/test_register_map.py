@@ -17,7 +17,7 @@ from golden_model.engine_spec.register_map import MAGIC, STATES, VERSION, BitFie
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.engine_spec.image import UNGUARDED
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from sim.register_map_export import EXPORT_FILES, c_header, markdown, to_json, write_exports
 
 PRESETS = FormatSet.presets()

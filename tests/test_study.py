@@ -14,7 +14,8 @@ import pytest
 import sim.study.flow as study_flow
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed
-from golden_model.reference import ParameterError, flatten
+from golden_model.params import ParameterError
+from golden_model.reference import flatten
 from golden_model.study import (
     AccuracyTarget,
     Config,

@@ -20,7 +20,7 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, bui
 from golden_model.engine_spec.register_map import RegisterMap
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from sim.board_run import board_capacity, run_on_board
 from sim.engine_driver import BusError, EngineDriver, ModelBus
 from sim.uart_bus import LinkError, UartBus, open_port

@@ -32,8 +32,8 @@ import numpy as np
 
 from ..modes import RunMode, mode_named
 from ..fixed.controller import Controller, Setup
-from ..fixed.engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, SAT, FixedPointError, FixedProblem, Reciprocal, StopRule,
-                     check_fixed_params, energy_frac_bits)
+from ..fixed.engine import ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, FixedProblem, StopRule, check_fixed_params
+from ..fixed.measures import SAT, FixedPointError, Reciprocal, energy_frac_bits
 from ..fixed.format import Format, SaturationCounter, quantize, raw_range
 from ..fixed.formats_set import FormatSet
 from ..fixed.pipeline import BarrierEntries, NeighbourStream
@@ -231,7 +231,7 @@ def _reciprocal_shift_bits(fs: FormatSet, capacity: EngineCapacity) -> int:
 
 
 def energy_width(fs: FormatSet, capacity: EngineCapacity) -> int:
-    """Bits of :func:`~golden_model.fixed.engine.energy_raw` for any layout of a mesh within ``capacity``:
+    """Bits of :func:`~golden_model.fixed.measures.energy_raw` for any layout of a mesh within ``capacity``:
     every entry's ``e = |L − d|`` at most rest_length's and ``c·h`` at most barrier_coeff's times area's maximum."""
     frac = energy_frac_bits(fs)
     springs = 3 * fs.spring.raw_max * capacity.entries * fs.rest_length.raw_max ** 2 << (

@@ -12,7 +12,7 @@ from ..builtin import builtin_mesh, is_builtin
 from ..layouts import initial_layout
 from ..mesh import Mesh
 from ..mesh_io import load_mesh
-from ..reference import FlattenParams, ParameterError
+from ..params import FlattenParams, ParameterError
 
 GENERATED_PARAMS = FlattenParams(density="auto", damping=0.05, tol_area=0.01, tol_shape=0.01, tol_energy=0.05,
                                  max_iter=300)

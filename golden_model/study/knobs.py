@@ -8,7 +8,7 @@ from typing import Any, Iterable, Sequence
 
 from ..fixed.format import Rounding
 from ..fixed.formats_set import CONTROLLER_FIELDS, FORMAT_FIELDS, FormatSet
-from ..reference import ParameterError
+from ..params import ParameterError
 
 SIGNAL_CLASSES: dict[str, tuple[str, ...]] = {
     "position": ("position", "delta", "face_edge"),

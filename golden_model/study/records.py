@@ -11,7 +11,8 @@ import numpy as np
 
 from ..fixed.engine import flatten_fixed
 from ..fixed.formats_set import FormatSet
-from ..reference import FlattenResult, ParameterError
+from ..params import ParameterError
+from ..results import FlattenResult
 from .cases import StudyCase
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from cocotb.triggers import RisingEdge
 from golden_model.fixed import SaturationCounter
 from golden_model.fixed.engine import FixedEngine, prepare
 from golden_model.fixed.pipeline import node_update
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from hdl.layouts import entry_layout, result_layout
 from sim.payloads import pass_beats, unpack_beats
 

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from golden_model.fixed.formats_set import CONTROLLER_FIELDS, FORMAT_FIELDS, FormatSet
-from golden_model.reference import ParameterError
+from golden_model.params import ParameterError
 from golden_model.study import (
     DATAPATH_FIELDS,
     DEFAULT_BITS,

@@ -11,7 +11,9 @@ from typing import Any, Callable, Iterable, Sequence
 
 from golden_model.fixed.format import Rounding
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
-from golden_model.reference import FlattenResult, ParameterError, flatten
+from golden_model.params import ParameterError
+from golden_model.reference import flatten
+from golden_model.results import FlattenResult
 from golden_model.study.cases import StudyCase
 from golden_model.study.knobs import (
     DEFAULT_BITS, DEFAULT_STRIDES, KNOBS, SIGNAL_CLASSES, Config, class_frac_bits,
