@@ -24,8 +24,6 @@ from golden_model.params import FlattenParams, ParameterError
 
 from .outputs import OutputError
 
-EXIT_USAGE = 2
-EXIT_DIVERGED = 3
 USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
 
 

@@ -32,7 +32,8 @@ from golden_model.mesh import Mesh
 from golden_model.mesh_io import load_mesh_with_notes, save_obj
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
-from sim.cli import add_engine_options, choose_engine, run_flatten
+from sim.cli import add_engine_options
+from sim.flatten_run import choose_engine, run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import area_ratio
 from sim.patterns import PatternDrawing, run_caption, write_pattern_file

@@ -562,7 +562,7 @@ def test_an_unwritable_output_is_refused_before_the_run(tmp_path, monkeypatch, c
     def no_run(*args, **kwargs):
         raise AssertionError("the run started although --history cannot be written")
 
-    monkeypatch.setattr("sim.cli.flatten", no_run)
+    monkeypatch.setattr("sim.flatten_run.flatten", no_run)
     case = Case(["m.obj", "--out", "o.obj", "--history", "ro/h.csv"], 2,
                 r"cannot write --history 'ro/h.csv': permission denied", files={"m.obj": obj(), "ro/keep": ""},
                 deny=("ro", errno.EACCES))
@@ -577,7 +577,7 @@ def test_a_failed_late_write_leaves_nothing_behind(tmp_path, monkeypatch, capsys
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "h.csv")
 
     monkeypatch.setattr(sim.outputs, "write_history", full)
-    monkeypatch.setattr("sim.cli.write_history", full)
+    monkeypatch.setattr("sim.flatten_run.write_history", full)
     case = Case(["m.obj", "--max-iter", "20", "--out", "o.obj", "--history", "h.csv"], 2,
                 r"cannot write --history 'h.csv': no space left on device", files={"m.obj": obj()})
     run_case(case, tmp_path, monkeypatch, capsys)
@@ -1080,16 +1080,16 @@ def test_rtl_check_waves_onto_a_directory_is_one_line_before_anything(tmp_path, 
 
 def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
     """Under pytest stderr is not a terminal: no bar; made to look like one, the bar is enabled."""
-    import sim.cli
+    import sim.flatten_run
 
     seen = []
-    real = sim.cli._progress
+    real = sim.flatten_run._progress
 
     def spy(total, enabled):
         seen.append(enabled)
         return real(total, enabled)
 
-    monkeypatch.setattr(sim.cli, "_progress", spy)
+    monkeypatch.setattr(sim.flatten_run, "_progress", spy)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "m.obj").write_text(obj())
     for argv in (["m.obj", "--max-iter", "3"], ["m.obj", "--max-iter", "3", "--json"]):

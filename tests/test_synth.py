@@ -19,7 +19,8 @@ import pytest
 
 from sim import cli
 from ram_traffic import icarus_run, ram_reads, random_ram_traffic
-from sim.synth import TARGETS, add_parser, parse_nextpnr_log, parse_yosys_stat
+from sim.synth import TARGETS, parse_nextpnr_log, parse_yosys_stat
+from sim.synth_cli import add_parser
 
 pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
 
