@@ -5,7 +5,7 @@ frames (``sim/cocotb_benches/board.py``).
 :class:`BoardSimTop` puts a host-side :class:`~hdl.uart_bridge.UartTx` and :class:`~hdl.uart_bridge.UartRx`
 (the same divisor) on BoardCore's ``rx``/``tx`` pins, so the bench hands over whole bytes (a few triggers
 per byte instead of one per bit) while the line between them is serial, bit by bit; the UARTs themselves are
-tested bit by bit against Python in ``tests/test_uart_bridge.py``. It also counts the engine bus's answers
+tested bit by bit against Python in ``tests/hdl/test_uart_bridge.py``. It also counts the engine bus's answers
 (``accesses``), so the bench sees that a bad frame makes no bus access.
 """
 

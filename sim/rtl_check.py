@@ -80,7 +80,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())
     init_spec = args.init if args.init in LAYOUT_METHODS + (AUTO_START,) else str(Path(args.init).resolve())
     config = {"mesh": mesh_spec, "init": init_spec, "params": params.as_dict(), "iterations": args.iterations,
-              "step_latency": SpringflatCore(formats).step_latency, "p_valid": 1 - args.stall,
+              "step_latency": SpringflatCore.step_latency_of(formats), "p_valid": 1 - args.stall,
               "p_ready": 1 - args.stall}
     print(f"springflat: {args.sim}: building the model (cached; the first Verilator build takes ~1 min) "
           "and running the closed loop ...", file=sys.stderr)

@@ -1,6 +1,6 @@
 """What the docs and docstrings state that a generated block cannot hold, and no history in docs/.
 
-The tables of docs/ that are functions of the code are generated blocks (``sim.docgen``; ``tests/test_docgen.py``
+The tables of docs/ that are functions of the code are generated blocks (``sim.docgen``; ``tests/sim/test_docgen.py``
 keeps them current). What is left here: numbers stated in the prose of ``hdl/`` docstrings and of the presets'
 ``notes`` (code and data, not generated), one fact about the code the units' table relied on, and that the
 design docs carry no commit hashes or session diary.
@@ -9,15 +9,15 @@ design docs carry no commit hashes or session diary.
 import gc
 import re
 import warnings
-from pathlib import Path
 
 import pytest
 from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
+from support import DOCS
 
-DOCS = Path(__file__).resolve().parents[1] / "docs"
+DOCS = DOCS
 ROOT = DOCS.parent
 PRESETS = ("default", "narrow")
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from support import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 PACKAGES = ("golden_model", "hdl", "sim")
 MAX_LINES = 800
 SIZE_CHECKED = ("golden_model", "hdl")
