@@ -6,18 +6,14 @@ keeps them current). What is left here: numbers stated in the prose of ``hdl/`` 
 design docs carry no commit hashes or session diary.
 """
 
-import gc
 import re
-import warnings
 
 import pytest
-from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
 from support import DOCS
 
-DOCS = DOCS
 ROOT = DOCS.parent
 PRESETS = ("default", "narrow")
 
@@ -25,15 +21,6 @@ PRESETS = ("default", "narrow")
 def flat(text: str) -> str:
     """``text`` with every run of white space one blank (prose wraps anywhere)."""
     return " ".join(text.split())
-
-
-@pytest.fixture
-def unelaborated():
-    """Components built only for their attributes (latencies) are not reported as unused."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UnusedElaboratable)
-        yield
-        gc.collect()
 
 
 def elaborated_flip_flops(component) -> int:
@@ -84,6 +71,7 @@ def test_io_wrapper_states_the_cores_port_bits(unelaborated):
         == ports
 
 
+@pytest.mark.slow
 def test_flip_flop_count_in_the_node_update_docstring():
     """``NodeUpdate``'s docstring states its flip-flops within 2 % (docs/hardware.md's count is generated;
     a docstring cannot be)."""
@@ -142,6 +130,7 @@ NOTE_CLAIMS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_preset_notes_state_the_formats_numbers(preset):
     """The numbers a preset's notes derive from its formats (fraction/integer bits, widths, formats,

@@ -21,7 +21,6 @@ import pytest
 from golden_model.mesh_io import load_mesh, save_obj
 from support import REPO
 
-REPO = REPO
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"
 SHA256 = re.compile(r"^[0-9a-f]{64}$")
 

@@ -142,6 +142,7 @@ def test_barrier_defaults_follow_the_dynamics():
     assert FlattenParams(dynamics="paper", barrier=True).barrier is True
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scan", ["nefertiti_face", "bunny_ear"])
 def test_strongly_curved_scans_end_fold_free_and_below_arap(scan):
     """From a flip-free ARAP layout, momentum + the default barrier: no folds, E_C below ARAP's."""
@@ -161,7 +162,8 @@ def test_strongly_curved_scans_end_fold_free_and_below_arap(scan):
     assert unprotected.final.folded > 100  # what the barrier and the guard each prevent
 
 
-@pytest.mark.parametrize("name, mesh", [("cap, 15 rings", spherical_cap(15)), ("bumpy 31×31", bumpy_grid(31))])
+@pytest.mark.parametrize("name, mesh", [("cap, 15 rings", spherical_cap(15)),
+                                        pytest.param("bumpy 31×31", bumpy_grid(31), marks=pytest.mark.slow)])
 def test_guarded_defaults_reach_the_minimum_within_120_iterations_at_radius_15(name, mesh):
     """Issue 25's bound at about 15 edges of radius, from Tutte, with the defaults (guard and barrier): met
     on the cap and the bumpy patch. The 31×31 saddle and cylinder strip need 175 and 217 (docs/guard.md)."""

@@ -225,6 +225,7 @@ def test_start_answers_bad_run_constants_with_a_result_code(change, answer):
         np.testing.assert_array_equal(result.nodes, image.nodes)
 
 
+@pytest.mark.slow
 def test_a_90000_vertex_mesh_images_at_a_large_capacity():
     """17-bit vertex indices and 20-bit entry indices: the vectorised packer round-trips a 90,000-vertex
     mesh (how fast it does so is in ``benchmarks/bench_engines.py``, not here)."""

@@ -309,6 +309,7 @@ def test_default_preset_follows_float_on_generated_meshes(name, init, step):
     assert reference.status == ("converged" if len(falling) else "max-iterations")
 
 
+@pytest.mark.slow
 def test_cli_fixed_engine(tmp_path):
     proc = subprocess.run([SPRINGFLAT, "flatten", "surf2", "--init", "tutte", "--engine", "fixed", "--json",
                            "--history", tmp_path / "h.csv"], capture_output=True, text=True)

@@ -21,6 +21,7 @@ def file_defaults(mesh, **changes) -> FlattenParams:
                          max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh))).with_(**changes)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(PATCHES))
 def test_the_no_option_run_is_fold_free_and_beats_slim(name):
     mesh = PATCHES[name]

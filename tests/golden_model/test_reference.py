@@ -134,6 +134,7 @@ def test_orders_agree_where_updates_cannot_interact():
     assert np.array_equal(results[0].positions, results[1].positions)
 
 
+@pytest.mark.slow
 def test_orders_agree_on_the_converged_result():
     mesh, _ = rolled_grid(6, 6)
     p0 = initial_layout(mesh, "pca")

@@ -118,6 +118,7 @@ def _exhaustive(cfg: RsqrtConfig, chunk: int = 1 << 21) -> tuple[int, int]:
     return len(bad), nsat.total
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["default", "narrow"])
 def test_rsqrt_faithful_presets(preset):
     """Exhaustive where the input is at most 24 bits wide, else a dense sweep plus all boundaries."""
@@ -154,6 +155,7 @@ def test_checker_detects_unfaithful_config():
     ("u9.20", "u5.16", 8, 2),   # 29-bit input: dense sweep, mantissa truncation active
     ("u30.0", "u0.24", 7, 2),   # integer input, pure-fraction output
 ])
+@pytest.mark.slow
 def test_rsqrt_faithful_dense_sweep_wide_input(fin, fout, sb, steps):
     cfg = RsqrtConfig(Format.parse(fin), Format.parse(fout), sb, steps)
     assert cfg.fmt_in.width > 24

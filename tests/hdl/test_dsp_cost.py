@@ -45,6 +45,7 @@ def blocks_per_unit(fs: FormatSet) -> dict[str, int]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", FORMAT_SETS)
 def test_dsp_cost_counts_the_rtls_dsp_blocks(name):
     fs = FORMAT_SETS[name]

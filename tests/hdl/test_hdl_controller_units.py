@@ -96,6 +96,7 @@ def check_normaliser(fs, sums, totals, saturations=False, **kw):
     return dut, run, recips, want, flags
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 @pytest.mark.parametrize("saturations", [False, True])
 def test_normaliser_random_totals_with_stalls(preset, saturations):
@@ -254,6 +255,7 @@ def check_beta(fs, ks, k_bits=21, **kw):
     return dut, run, want
 
 
+@pytest.mark.slow
 def test_beta_every_k_to_5000():
     """β depends on ``dt`` alone, which both presets share (u0.18): one run covers them (~10 s)."""
     fs = FormatSet.preset("default")

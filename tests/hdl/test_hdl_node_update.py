@@ -118,6 +118,7 @@ def random_constants(fs, seed):
                          int(rng.uniform(0.9, 1.0) * (1 << fs.damping.frac_bits)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_random_nodes_of_degree_1_to_12_with_stalls(preset):
     fs = FormatSet.preset(preset)
@@ -128,6 +129,7 @@ def test_random_nodes_of_degree_1_to_12_with_stalls(preset):
                seed=3, p_valid=0.7, p_ready=0.6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 @pytest.mark.parametrize("mesh_name", ["surf1", "surf2"])
 def test_builtin_meshes_over_several_iterations(preset, mesh_name):
@@ -161,6 +163,7 @@ def test_documented_latency(preset):
     assert stages == LATENCY[preset]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_no_bubbles(preset):
     """Never stalled: N entries go in on N consecutive clocks and the last result leaves latency clocks later
@@ -186,6 +189,7 @@ def check_degree_one_nodes(dut, fs, n_nodes, seed, **kw):
     return check_pass(dut, fs, stream, positions, v, random_constants(fs, seed + 1), **kw)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_no_bubbles_with_degree_1_nodes(preset):
     """One entry per node, never stalled: the credits cover the latency, so the input never waits."""
@@ -197,6 +201,7 @@ def test_no_bubbles_with_degree_1_nodes(preset):
     assert run.out_cycles == [c + dut.latency for c in range(n)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_a_long_output_stall_fills_the_results_and_stops_the_input(preset):
     """o.ready low for a long time: exactly ``result_depth`` nodes are accepted, then i.ready falls."""
@@ -208,6 +213,7 @@ def test_a_long_output_stall_fills_the_results_and_stops_the_input(preset):
     assert accepted_during_stall == dut.result_depth
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 @pytest.mark.parametrize("momentum", [False, True])
 def test_random_nodes_with_barrier_triangles(preset, momentum):
@@ -223,6 +229,7 @@ def test_random_nodes_with_barrier_triangles(preset, momentum):
                p_ready=0.7)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_momentum_flattening_over_several_iterations(preset):
     """A 4-ring spherical cap with the barrier: iterations 0..5 of the momentum dynamics, restarts included."""

@@ -96,6 +96,7 @@ def check_rsqrt(dut, x, **kw):
 # --------------------------------------------------------------------------- tests
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_golden_intermediates_fit_rtl_widths(preset):
     """The RTL holds every intermediate in its RsqrtConfig format (the golden model computes in
@@ -119,6 +120,7 @@ def test_golden_intermediates_fit_rtl_widths(preset):
         assert int(st["seed_index"].max()) < cfg.seed_table_size
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_boundaries_and_random_with_stalls(preset):
     """Boundary inputs and ~20k random inputs, random stalls on both sides."""

@@ -37,6 +37,7 @@ def write_meshes(folder: Path, good: int, corrupt_at: int) -> list[Path]:
     return paths
 
 
+@pytest.mark.slow
 def test_a_corrupt_mesh_is_reported_and_the_other_19_finish(tmp_path):
     meshes = write_meshes(tmp_path / "in", 19, 7)
     out = tmp_path / "out"

@@ -147,6 +147,7 @@ def test_diverged_run_exits_nonzero_but_writes_finite_layout(tmp_path):
     assert len(vertices) == 7 and np.isfinite(np.array(vertices, dtype=float)).all()
 
 
+@pytest.mark.slow
 def test_paper_report(tmp_path):
     proc = run("paper", "--out", tmp_path / "rep", "--quiet")
     assert proc.returncode == 0, proc.stderr
@@ -157,6 +158,7 @@ def test_paper_report(tmp_path):
         assert (tmp_path / "rep" / name).stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_variable_step_beats_fixed_on_surf1():
     # the paper's claim, measured on the same initial layout
     fixed = json.loads(run("flatten", "surf1", "--step", "fixed", "--json").stdout)
@@ -165,9 +167,7 @@ def test_variable_step_beats_fixed_on_surf1():
     assert variable["iterations"] < fixed["iterations"]
 
 
-SCANS = SCANS
-
-
+@pytest.mark.slow
 def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap():
     """Defaults for files: momentum, fold barrier, ARAP start, stop at the energy minimum."""
     from golden_model.layouts import initial_layout
@@ -208,6 +208,7 @@ def test_bad_dynamics_parameters_are_one_line(tmp_path, args, message):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_momentum_on_the_fixed_engine_matches_the_float_engine():
     common = ("flatten", "surf2", "--dynamics", "momentum", "--init", "tutte", "--max-iter", "60",
               "--tol-energy", "0", "--json")

@@ -10,9 +10,13 @@ from sim import results
 from sim.docgen import BLOCK, DOCS, GENERATORS, render, stale_blocks
 
 
-def _blocks() -> list[tuple[str, str]]:
-    return [(path.name, m.group("name")) for path in sorted(DOCS.glob("*.md"))
-            for m in BLOCK.finditer(path.read_text(encoding="utf-8"))]
+#: Blocks whose generator elaborates the RTL or sweeps a unit's whole domain: seconds each.
+SLOW_BLOCKS = {"node-update-flip-flops", "rsqrt-accuracy", "unit-figures"}
+
+
+def _blocks() -> list:
+    return [pytest.param(path.name, m.group("name"), marks=[pytest.mark.slow] if m.group("name") in SLOW_BLOCKS else [])
+            for path in sorted(DOCS.glob("*.md")) for m in BLOCK.finditer(path.read_text(encoding="utf-8"))]
 
 
 @pytest.mark.parametrize("doc, name", _blocks(), ids=lambda v: v)

@@ -28,6 +28,7 @@ def _verilog_ports(text: str, module: str) -> dict[str, tuple[str, int]]:
     return ports
 
 
+@pytest.mark.slow
 def test_files_and_interface_match_the_verilog(exported):
     interface = json.loads((exported / "interface.json").read_text())
     assert interface["format_set"]["name"] == "narrow"
@@ -50,6 +51,7 @@ def test_files_and_interface_match_the_verilog(exported):
     assert "| `entries__payload` | input |" in (exported / "interface.md").read_text()
 
 
+@pytest.mark.slow
 def test_bad_formats_and_out(tmp_path):
     (tmp_path / "file").write_text("x")
     proc = subprocess.run([SPRINGFLAT, "verilog", "--out", tmp_path / "file"], capture_output=True, text=True)
@@ -60,6 +62,7 @@ def test_bad_formats_and_out(tmp_path):
 
 
 # ------------------------------------------------------------------ the engine and its register map
+@pytest.mark.slow
 def test_the_engine_ships_with_its_register_map_at_the_default_capacity(exported):
     """Without --capacity the engine is DEFAULT_CAPACITY's; the JSON map is the one the golden model builds."""
     from golden_model.engine_spec.image import DEFAULT_CAPACITY

@@ -163,6 +163,7 @@ def test_edges_only_when_they_stay_apart():
     assert not show_edges(big.vertices[:, :2], big.faces, pixels_per_unit)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [8, 101])  # 98 and 20 000 triangles
 def test_plot_is_a_coloured_png(tmp_path, n):
     import matplotlib.image

@@ -16,7 +16,6 @@ from sim.distortion import DISTORTION_HEADER, distortion, worst_summary, write_d
 from sim.patterns import (MAX_SHEETS, OVERLAP_MM, PatternDrawing, PatternError, plan_sheets, write_pattern_file)
 from support import SCANS, SPRINGFLAT
 
-SCANS = SCANS
 SVG = "{http://www.w3.org/2000/svg}"
 INKSCAPE = "{http://www.inkscape.org/namespaces/inkscape}"
 #: millimetres per unit: physical facts, not the code's table
@@ -47,6 +46,7 @@ def boundary_length(mesh: Mesh, layout: np.ndarray) -> float:
 # --------------------------------------------------------------------------- DXF
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("units, insunits", [("m", 6), ("mm", 4), ("cm", 5), ("in", 1)])
 def test_dxf_has_a_closed_cut_line_of_the_patterns_length_and_declares_its_units(bunny, tmp_path, units, insunits):
     import ezdxf
