@@ -28,7 +28,7 @@ def test_every_generated_block_in_the_docs_is_current(doc, name):
 
 
 def test_every_generator_has_a_block():
-    assert sorted(GENERATORS) == sorted({name for _, name in _blocks()})
+    assert sorted(GENERATORS) == sorted({p.values[1] for p in _blocks()})
 
 
 def test_a_stale_block_is_found_and_rewritten(tmp_path):
