@@ -45,7 +45,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from golden_model.layouts import harmonic_layout, tutte_layout  # noqa: E402
-from golden_model.mesh import Mesh, load_mesh  # noqa: E402
+from golden_model.mesh import Mesh  # noqa: E402
+from golden_model.mesh_io import load_mesh  # noqa: E402
 from golden_model.reference import SpringModel, measure  # noqa: E402
 
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"

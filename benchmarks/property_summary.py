@@ -1,7 +1,7 @@
 """The row of docs/fixed-point.md's property-test table, from a run's ``SPRINGFLAT_PROPERTY_LOG``.
 
     SPRINGFLAT_PROPERTY_EXAMPLES=5000 SPRINGFLAT_PROPERTY_LOG=runs.jsonl \\
-        .venv/bin/python -m pytest tests/test_formats_property.py
+        .venv/bin/python -m pytest tests/golden_model/test_formats_property.py
     .venv/bin/python benchmarks/property_summary.py runs.jsonl --name "longer (5,000)"
 
 Counts every outcome the test logs (``invalid``: refused by ``FormatSet``; ``refused``: by the host;

@@ -23,8 +23,9 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, energy_frac_bits
-from golden_model.fixed.engine_image import ENERGY_TOL_INT_BITS
+from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
+from golden_model.fixed.measures import energy_frac_bits
+from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS
 
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import energy_result_layout, energy_sums_layout, normalise_layout, saturations_shape

@@ -13,8 +13,8 @@ from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import BUS_WORD_BITS, ITERATION_BITS, EngineCapacity, memory_layouts
-from golden_model.fixed.register_map import RESULTS, STATES, RegisterMap
+from golden_model.engine_spec.image import BUS_WORD_BITS, ITERATION_BITS, EngineCapacity, memory_layouts
+from golden_model.engine_spec.register_map import RESULTS, STATES, RegisterMap
 
 from . import wishbone
 from .block_ram import BlockRam
