@@ -34,11 +34,12 @@ import numpy as np
 from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed, prepare
-from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.mesh import Mesh
-from golden_model.reference import FlattenParams, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
 
 WARMUP_ITERATIONS = 5
 """Iterations of the short run whose time (or cycle count) is subtracted: set-up and the first measurement."""
@@ -100,7 +101,7 @@ def estimated_cycles(case: Case, fs: FormatSet, capacity: EngineCapacity, p0: np
       runs beside it: the longer of the two;
     * the step generator's latency, and :data:`PHASE_CHANGES`.
     """
-    from golden_model.fixed.engine_image import build_image
+    from golden_model.engine_spec.image import build_image
     from hdl.area_error import AreaError
     from hdl.controller_units import EnergyCheck, Normaliser
     from hdl.force_pass import ForcePass

@@ -26,10 +26,10 @@ import time
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
-from golden_model.fixed.engine_image import DEFAULT_CAPACITY, build_image
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, build_image
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from sim.cocotb_support import SIMULATORS, run_bench
 from sim.engine_run import run_image_on_rtl
 

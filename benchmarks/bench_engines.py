@@ -24,10 +24,11 @@ import numpy as np
 
 from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.engine import FixedEngine, prepare
-from golden_model.fixed.engine_image import EngineCapacity, build_image
+from golden_model.engine_spec.image import EngineCapacity, build_image
 from golden_model.layouts import pca_layout, tutte_layout
 from golden_model.mesh import Mesh, signed_areas_2d
-from golden_model.reference import FlattenParams, SpringModel, _Jacobi, variable_step
+from golden_model.params import FlattenParams
+from golden_model.reference import SpringModel, _Jacobi, variable_step
 from golden_model.generate import grid_faces, grid_uv
 
 

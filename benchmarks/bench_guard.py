@@ -21,7 +21,8 @@ from golden_model.fixed.engine import flatten_fixed
 from golden_model.generate import grid_faces, grid_uv
 from golden_model.layouts import tutte_layout
 from golden_model.mesh import Mesh
-from golden_model.reference import FlattenParams, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
 
 
 def dome(n: int) -> Mesh:

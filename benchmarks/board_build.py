@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import DEFAULT_CAPACITY
+from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from sim.board_build import board_markdown, run_board_build
 
 

@@ -45,7 +45,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from golden_model.layouts import harmonic_layout, tutte_layout  # noqa: E402
-from golden_model.mesh import Mesh, load_mesh  # noqa: E402
+from golden_model.mesh import Mesh  # noqa: E402
+from golden_model.mesh_io import load_mesh  # noqa: E402
 from golden_model.reference import SpringModel, measure  # noqa: E402
 
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"
@@ -285,8 +286,25 @@ def markdown(rows: list[Row], command: str) -> str:
         lines.append(f"| {r.name} | {r.kind} | {r.vertices} | {start} | {s.status} | {s.iterations if s.iterations is not None else '-'} "
                      f"| {s.seconds:.1f} | {_f(s.area_error)} | {_f(s.shape_error)} | "
                      f"{s.folded if s.folded is not None else '-'} | {peer_cell(r.arap)} | {peer_cell(r.slim)} | {verdict} |")
-    lines += ["", summary(rows)]
+    lines += ["", summary(rows), "", *kind_table(rows)]
     return "\n".join(lines) + "\n"
+
+
+def kind_table(rows: list[Row]) -> list[str]:
+    """The bar's outcome per kind of patch (markdown lines)."""
+    lines = ["| kind | meshes | pass | diverged | folded | slow or timeout | E_C miss | capped | start had folds |",
+             "|---|--:|--:|--:|--:|--:|--:|--:|--:|"]
+    for kind in dict.fromkeys(r.kind for r in rows):
+        group = [r for r in rows if r.kind == kind]
+
+        def count(*tags: str) -> int:
+            return sum(any(f.startswith(tags) for f in r.failures) for r in group)
+
+        lines.append(f"| `{kind}` | {len(group)} | {sum(not r.failures for r in group)} | {count('diverged')} | "
+                     f"{count('folded')} | {count('slow', 'timeout')} | {count('E_C')} | "
+                     f"{sum(r.springflat.status == 'max-iterations' for r in group)} | "
+                     f"{sum(bool(r.springflat.initial_folded) for r in group)} |")
+    return lines
 
 
 def summary(rows: list[Row]) -> str:
@@ -344,6 +362,29 @@ def sweep_rows(entry: dict, corpus: Path, extra: list[str], timeout: float) -> l
     return out
 
 
+def sweep_markdown(results: list[dict], command: str) -> str:
+    """The sweep's table: every run, the totals, and the totals per barrier setting."""
+    lines = [f"Command: `{command}`", "", "| mesh | kind | setting | status | it | folded | E_C |",
+             "|---|---|---|---|--:|--:|--:|"]
+    for r in results:
+        lines.append(f"| {r['name']} | {r['kind']} | {r['setting']} | {r['status']} | {r['iterations'] or '-'} | "
+                     f"{r['folded'] if r['folded'] is not None else '-'} | {_f(r['shape_error'])} |")
+
+    def totals(runs: list[dict]) -> tuple[int, int, int, int, int]:
+        return (len(runs), sum(r["status"] == "diverged" for r in runs), sum(bool(r["folded"]) for r in runs),
+                sum(r["status"] == "timeout" for r in runs), sum(r["status"] == "error" for r in runs))
+
+    runs, diverged, folded, timeouts, errors = totals(results)
+    meshes = len(dict.fromkeys(r["name"] for r in results))
+    lines += ["", f"{runs} runs on {meshes} meshes; folded {folded}, diverged {diverged}, timeouts {timeouts}, "
+                  f"errors {errors}" + ("" if diverged or folded or timeouts or errors else "; no folds and no divergence"),
+              "", "| setting | runs | diverged | ended with folds | timeouts | errors |", "|---|--:|--:|--:|--:|--:|"]
+    for setting in dict.fromkeys(r["setting"] for r in results):
+        n, d, f, t, e = totals([r for r in results if r["setting"] == setting])
+        lines.append(f"| {setting} | {n} | {d} | {f} | {t} | {e} |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0],
@@ -365,6 +406,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.render:
         saved = json.loads(args.render.read_text())
+        if "runs" in saved:  # a --barrier-sweep's
+            text = sweep_markdown(saved["runs"], saved["command"])
+            print(text)
+            if args.markdown:
+                args.markdown.write_text(text)
+            return 0
         rows = [Row(**{**r, "springflat": Run(**r["springflat"]), "arap": Layout(**r["arap"]),
                        "slim": Layout(**r["slim"])}) for r in saved["rows"]]
         text = markdown(rows, saved["command"])
@@ -382,22 +429,12 @@ def main(argv: list[str] | None = None) -> int:
         with ThreadPoolExecutor(jobs) as pool:
             results = [r for rows in pool.map(lambda e: sweep_rows(e, args.corpus, extra, args.timeout), entries)
                        for r in rows]
-        lines = [f"Command: `{command}`", "", "| mesh | kind | setting | status | it | folded | E_C |",
-                 "|---|---|---|---|--:|--:|--:|"]
-        for r in results:
-            lines.append(f"| {r['name']} | {r['kind']} | {r['setting']} | {r['status']} | {r['iterations'] or '-'} | "
-                         f"{r['folded'] if r['folded'] is not None else '-'} | {_f(r['shape_error'])} |")
-        bad = [r for r in results if r["status"] in ("diverged", "timeout", "error") or r["folded"]]
-        lines += ["", f"{len(results)} runs on {len(entries)} meshes; folded {sum(bool(r['folded']) for r in results)}, "
-                      f"diverged {sum(r['status'] == 'diverged' for r in results)}, timeouts "
-                      f"{sum(r['status'] == 'timeout' for r in results)}, errors {sum(r['status'] == 'error' for r in results)}"
-                      + ("" if bad else "; no folds and no divergence")]
-        text = "\n".join(lines) + "\n"
+        text = sweep_markdown(results, command)
         print(text)
         if args.markdown:
             args.markdown.write_text(text)
         if args.json:
-            args.json.write_text(json.dumps(results, indent=1))
+            args.json.write_text(json.dumps({"command": command, "runs": results}, indent=1))
         return 0
 
     if args.init:

@@ -12,7 +12,8 @@ from __future__ import annotations
 from golden_model.fixed.engine import flatten_fixed
 from golden_model.generate import delaunay_patch, dome_grid, rolled_grid, saddle_grid, spherical_cap
 from golden_model.layouts import tutte_layout
-from golden_model.reference import FlattenParams, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
 from sim.run_options import FILE_TOL_ENERGY
 
 MESHES = {

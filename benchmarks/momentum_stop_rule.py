@@ -17,7 +17,8 @@ from golden_model.fixed import FormatSet  # noqa: E402
 from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.generate import rolled_grid, saddle_grid, spherical_cap  # noqa: E402
 from golden_model.layouts import initial_layout  # noqa: E402
-from golden_model.reference import FlattenParams, flatten  # noqa: E402
+from golden_model.params import FlattenParams  # noqa: E402
+from golden_model.reference import flatten  # noqa: E402
 
 
 def main() -> None:

@@ -6,7 +6,7 @@ to it, a device could be endless or have side effects on open, so neither is ope
 path is looked at with ``stat`` first, and the file opened (without blocking) is checked again
 with ``fstat`` to be the same regular file.  A refusal is an :class:`OSError` whose ``strerror``
 reads as the end of a one-line message (``is a named pipe (FIFO), not a regular file``), so that
-callers word it like any other OS error (:func:`golden_model.mesh.describe_os_error`).
+callers word it like any other OS error (:func:`describe_os_error`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import os
 import stat
 from pathlib import Path
 
-__all__ = ["NotRegularFileError", "file_kind", "read_regular_file", "same_file_key", "resolved_parent_key"]
+__all__ = ["NotRegularFileError", "describe_os_error", "read_file_bytes", "file_kind", "read_regular_file", "same_file_key", "resolved_parent_key"]
 
 _KINDS = ((stat.S_ISDIR, "directory"), (stat.S_ISCHR, "character device"), (stat.S_ISBLK, "block device"),
           (stat.S_ISFIFO, "named pipe (FIFO)"), (stat.S_ISSOCK, "socket"), (stat.S_ISLNK, "symbolic link"),
@@ -79,3 +79,20 @@ def resolved_parent_key(path: str | os.PathLike) -> tuple[int, int, str] | None:
     p = Path(path)
     key = same_file_key(p.parent if str(p.parent) else Path("."))
     return None if key is None else (*key, p.name)
+
+
+def describe_os_error(exc: OSError) -> str:
+    """The OS error in the words of a one-line message: ``permission denied``, ``is a directory``, ..."""
+    if exc.errno == errno.ENOENT:
+        return "no such file"
+    text = exc.strerror or str(exc) or type(exc).__name__
+    return text[:1].lower() + text[1:]
+
+
+def read_file_bytes(path: Path, what: str, error: type[ValueError]) -> bytes:
+    """The bytes of the regular file ``path``; any OS error, and a path that is no regular file (a FIFO, a
+    device: :func:`read_regular_file`), becomes ``error("cannot read <what> '<path>': <reason>")``."""
+    try:
+        return read_regular_file(path)  # a FIFO or a device is refused, never opened
+    except OSError as exc:
+        raise error(f"cannot read {what} '{path}': {describe_os_error(exc)}") from None

@@ -46,7 +46,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .mesh import COORDINATE_LIMIT, Mesh, MeshError, read_file_bytes, read_obj_vertices, signed_areas_2d
+from .files import read_file_bytes
+from .mesh import COORDINATE_LIMIT, Mesh, MeshError, signed_areas_2d
+from .mesh_io import read_obj_vertices
 
 __all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
            "arap_layout", "slim_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS",
@@ -347,7 +349,7 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
 
 def _obj_layout_notes(path: Path, data: bytes, vertices: np.ndarray, faces: np.ndarray) -> list[str]:
     """What an OBJ layout has that is not used: faces other than the mesh's, a z that is not 0."""
-    from .mesh import read_obj
+    from .mesh_io import read_obj
 
     notes = []
     try:

@@ -26,23 +26,20 @@ Algorithm 1 literally, node by node in index order.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Callable, Literal
+from typing import Callable
 
 import numpy as np
 
-from .guard import ENERGY_FLOOR, ENERGY_WINDOW, GUARD_LEVELS, EnergyWindow, StepScale, guarded_moves
+from .guard import ENERGY_FLOOR, GUARD_LEVELS, EnergyWindow, StepScale, guarded_moves
 from .mesh import Mesh, folded_faces, layout_orientation, signed_areas_2d
-from .modes import DYNAMICS, STEP_MODES, RunMode, Step, run_mode
+from .modes import Step
+from .params import FlattenParams, ParameterError
+from .results import FlattenResult, History, Measurement, Status
 
 __all__ = [
-    "FlattenParams",
-    "ParameterError",
     "SpringModel",
-    "Measurement",
-    "History",
-    "FlattenResult",
     "flatten",
     "variable_step",
     "step_decay",
@@ -59,141 +56,6 @@ __all__ = [
     "barrier_stiffness",
     "iterations_to_within",
 ]
-
-Status = Literal["converged", "max-iterations", "diverged", "stalled"]
-UPDATE_ORDERS = ("jacobi", "sequential")
-
-
-class ParameterError(ValueError):
-    """A parameter outside its domain; the message is one line for the user."""
-
-
-@dataclass(frozen=True)
-class FlattenParams:
-    """Parameters of one flattening run (defaults: the paper's Table II).
-
-    Attributes:
-        spring: spring constant ``C`` (> 0).
-        density: area density ``rho`` (> 0), or ``"auto"`` for ``1/min m_i``
-            with masses computed at ``rho = 1``.
-        step: ``"variable"`` (eqs. 18–20) or ``"fixed"``.
-        dt: the fixed step ``Δt`` (> 0), used when ``step == "fixed"``.
-        update: ``"jacobi"`` (synchronous, what the hardware computes) or
-            ``"sequential"`` (Algorithm 1, index order).
-        damping: velocity damping ``γ`` in [0, 1); 0 is the paper.
-        penalty: apply the overlap penalty (eqs. 10–11).
-        penalty_kappa: ``κ`` ≥ 0, the fraction of the 3D altitude below which
-            the penalty fires.
-        penalty_gain: ``λ`` ≥ 0, the fraction of the shortfall moved per step.
-        tol_area, tol_shape, tol_energy: ``φ_S``, ``φ_C``, ``ε`` (≥ 0).
-        max_iter: ``N_max`` (≥ 1).
-        dynamics: ``"paper"`` (eqs. 7–9, the default) or ``"momentum"``:
-            per-node weights ``w_i = 2/(C·deg_i)``, ``V ← β_k·V + w_i·f_i``,
-            ``P ← P + V`` with ``β_k = k/(k+3)`` and a gradient restart
-            (``docs/dynamics.md``).  ``step``, ``dt`` and ``density`` do not
-            apply to it.
-        barrier: the fold barrier (``docs/dynamics.md``); ``None`` means on
-            with ``momentum`` and off with ``paper``.
-        barrier_threshold: ``κ`` in (0, 1]: a triangle whose signed 2D area
-            falls below ``κ`` times its 3D area is pushed back.
-        barrier_gain: ``μ`` > 0: the barrier's stiffness relative to the
-            springs' ``C``.
-        guard: the step guard of the momentum dynamics (:mod:`golden_model.guard`): no
-            accepted step raises the energy or inverts a triangle; ``None`` means on with
-            ``momentum``; the paper dynamics has none.
-        energy_window: ``W``, the iterations over which the stop rule measures the relative
-            energy change, ``|E_k − E_k−W| ≤ ε·E_k−W`` (counting accepted steps only);
-            ``None`` means 1 with ``paper`` (Algorithm 1's rule) and
-            :data:`~golden_model.guard.ENERGY_WINDOW` with ``momentum``.
-    """
-
-    spring: float = 0.5
-    density: float | str = 2.0
-    step: str = "variable"
-    dt: float = 0.01
-    update: str = "jacobi"
-    damping: float = 0.0
-    penalty: bool = False
-    penalty_kappa: float = 1.0
-    penalty_gain: float = 1.0
-    tol_area: float = 0.16
-    tol_shape: float = 0.40
-    tol_energy: float = 0.05
-    max_iter: int = 100
-    dynamics: str = "paper"
-    barrier: bool | None = None
-    barrier_threshold: float = 0.5
-    barrier_gain: float = 4.0
-    guard: bool | None = None
-    energy_window: int | None = None
-
-    def __post_init__(self) -> None:
-        def finite(name: str, value: float) -> float:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ParameterError(f"{name} must be a finite number, got {value!r}")
-            return float(value)
-
-        if finite("spring constant C", self.spring) <= 0:
-            raise ParameterError(f"spring constant C must be > 0, got {self.spring}")
-        if self.density != "auto" and finite("density", self.density) <= 0:
-            raise ParameterError(f"density must be > 0 or 'auto', got {self.density}")
-        if self.step not in STEP_MODES:
-            raise ParameterError(f"step must be one of {STEP_MODES}, got {self.step!r}")
-        if finite("dt", self.dt) <= 0:
-            raise ParameterError(f"dt must be > 0, got {self.dt}")
-        if self.update not in UPDATE_ORDERS:
-            raise ParameterError(f"update must be one of {UPDATE_ORDERS}, got {self.update!r}")
-        if not 0 <= finite("damping", self.damping) < 1:
-            raise ParameterError(f"damping must be in [0, 1), got {self.damping}")
-        for name in ("penalty_kappa", "penalty_gain", "tol_area", "tol_shape", "tol_energy"):
-            if finite(name, getattr(self, name)) < 0:
-                raise ParameterError(f"{name.replace('_', '-')} must be >= 0, got {getattr(self, name)}")
-        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
-            raise ParameterError(f"max-iter must be an integer >= 1, got {self.max_iter!r}")
-        if self.dynamics not in DYNAMICS:
-            raise ParameterError(f"dynamics must be one of {DYNAMICS}, got {self.dynamics!r}")
-        if self.barrier is None:
-            object.__setattr__(self, "barrier", self.dynamics == "momentum")
-        if not isinstance(self.barrier, bool):
-            raise ParameterError(f"barrier must be true or false, got {self.barrier!r}")
-        if not 0 < finite("barrier threshold", self.barrier_threshold) <= 1:
-            raise ParameterError(f"barrier threshold kappa must be in (0, 1], got {self.barrier_threshold}")
-        if not 0 < finite("barrier gain", self.barrier_gain) <= 16:
-            raise ParameterError(f"barrier gain mu must be in (0, 16], got {self.barrier_gain}")
-        if self.guard is None:
-            object.__setattr__(self, "guard", self.dynamics == "momentum")
-        if not isinstance(self.guard, bool):
-            raise ParameterError(f"guard must be true or false, got {self.guard!r}")
-        if self.energy_window is None:
-            object.__setattr__(self, "energy_window", ENERGY_WINDOW if self.dynamics == "momentum" else 1)
-        if (isinstance(self.energy_window, bool) or not isinstance(self.energy_window, int)
-                or not 1 <= self.energy_window <= 1000):
-            raise ParameterError(f"energy-window must be an integer in [1, 1000], got {self.energy_window!r}")
-        if self.guard and self.dynamics != "momentum":
-            raise ParameterError("the step guard belongs to the momentum dynamics (--dynamics momentum); "
-                                 "the paper dynamics has none (drop --guard)")
-        if self.guard and self.penalty:
-            raise ParameterError("the penalty moves nodes after the guarded step and would void its "
-                                 "guarantees: drop --penalty, or use --no-guard")
-        if self.dynamics == "momentum":
-            if self.update != "jacobi":
-                raise ParameterError("the momentum dynamics updates all nodes together: use --update jacobi")
-            if self.damping:
-                raise ParameterError("damping belongs to the paper dynamics (--dynamics paper); the momentum "
-                                     "dynamics damps by its restart (drop --damping)")
-
-    @property
-    def mode(self) -> RunMode:
-        """The run mode (:mod:`golden_model.modes`) these parameters select."""
-        return run_mode(self.dynamics, self.step, self.guard)
-
-    def with_(self, **changes) -> "FlattenParams":
-        """A copy with some fields changed (validated again)."""
-        return replace(self, **changes)
-
-    def as_dict(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
 
 # --------------------------------------------------------------------------- model
 
@@ -434,21 +296,6 @@ def variable_step(area_error, shape_error):
 # --------------------------------------------------------------------------- measurement
 
 
-@dataclass(frozen=True)
-class Measurement:
-    """The errors of one layout."""
-
-    area_error: float
-    shape_error: float
-    energy: float
-    flipped: int
-    #: faces whose orientation disagrees with the whole pattern's (the honest fold count)
-    folded: int = 0
-
-    def finite(self) -> bool:
-        return all(math.isfinite(v) for v in (self.area_error, self.shape_error, self.energy))
-
-
 def measure(model: SpringModel, positions: np.ndarray, length: np.ndarray | None = None,
             signed: np.ndarray | None = None) -> Measurement:
     """``E_S``, ``E_C``, energy and flipped count of ``positions``.
@@ -500,100 +347,6 @@ def penalty_moves(model: SpringModel, positions: np.ndarray, kappa: float, gain:
     target = kappa * altitudes
     amount = np.where(h <= target, gain * (target - h), 0.0)
     return _scatter(faces.ravel(), amount[..., None] * normal, len(positions))
-
-
-# --------------------------------------------------------------------------- results
-
-
-@dataclass
-class History:
-    """Per-iteration record; row 0 is the initial layout (``dt`` NaN there)."""
-
-    dt: list[float] = field(default_factory=list)
-    area_error: list[float] = field(default_factory=list)
-    shape_error: list[float] = field(default_factory=list)
-    energy: list[float] = field(default_factory=list)
-    flipped: list[int] = field(default_factory=list)
-    folded: list[int] = field(default_factory=list)
-    #: whether the iteration's step was taken (the guard rolls back a step that raises the energy)
-    accepted: list[bool] = field(default_factory=list)
-
-    def append(self, dt: float, m: Measurement, accepted: bool = True) -> None:
-        self.accepted.append(accepted)
-        self.dt.append(dt)
-        self.area_error.append(m.area_error)
-        self.shape_error.append(m.shape_error)
-        self.energy.append(m.energy)
-        self.flipped.append(m.flipped)
-        self.folded.append(m.folded)
-
-    def __len__(self) -> int:
-        return len(self.dt)
-
-    def rows(self) -> list[tuple]:
-        """``(iteration, dt, area_error, shape_error, energy, flipped, folded)`` rows."""
-        return [
-            (k, self.dt[k], self.area_error[k], self.shape_error[k], self.energy[k], self.flipped[k], self.folded[k])
-            for k in range(len(self))
-        ]
-
-
-@dataclass
-class FlattenResult:
-    """Outcome of a flattening run.
-
-    ``positions``/``velocities`` are the last finite state; ``iterations``
-    counts the iterations that produced it.  ``status == "diverged"`` means
-    iteration ``iterations + 1`` produced a non-finite value.
-    """
-
-    positions: np.ndarray
-    velocities: np.ndarray
-    initial_positions: np.ndarray
-    history: History
-    status: Status
-    iterations: int
-    params: FlattenParams
-    density: float
-    engine: str = "float"
-    extra: dict = field(default_factory=dict)
-
-    @property
-    def final(self) -> Measurement:
-        h = self.history
-        return Measurement(h.area_error[-1], h.shape_error[-1], h.energy[-1], h.flipped[-1], h.folded[-1])
-
-    @property
-    def initial(self) -> Measurement:
-        h = self.history
-        return Measurement(h.area_error[0], h.shape_error[0], h.energy[0], h.flipped[0], h.folded[0])
-
-    def summary(self) -> dict:
-        """The JSON summary the CLI prints."""
-        final, initial = self.final, self.initial
-        return {
-            "status": self.status,
-            "iterations": self.iterations,
-            "area_error": final.area_error,
-            "shape_error": final.shape_error,
-            "energy": final.energy,
-            "flipped": final.flipped,
-            "folded": final.folded,
-            "initial_area_error": initial.area_error,
-            "initial_shape_error": initial.shape_error,
-            "initial_energy": initial.energy,
-            "initial_flipped": initial.flipped,
-            "initial_folded": initial.folded,
-            "engine": self.engine,
-            "dynamics": self.params.dynamics,
-            "step": self.params.step,
-            "update": self.params.update,
-            "damping": self.params.damping,
-            "penalty": self.params.penalty,
-            "barrier": self.params.barrier,
-            "density": self.density,
-            **self.extra,
-        }
 
 
 # --------------------------------------------------------------------------- iteration

@@ -1,6 +1,6 @@
 """The area pass of the engine's controller: Σ|A − |A'|| over the triangles, one per clock.
 
-The RTL twin of the sum that :func:`golden_model.fixed.engine.area_error` forms before it
+The RTL twin of the sum that :func:`golden_model.fixed.measures.area_error` forms before it
 normalises it (:class:`hdl.controller_units.Normaliser` does that); every width comes from a
 :class:`~golden_model.fixed.FormatSet`.
 """

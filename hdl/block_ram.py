@@ -17,7 +17,7 @@ banks (a depth above 2,048, or just above a power of two: 3,072 words of 66 bits
 the output registers, by the address's high bits registered alongside: a multiplexer between the
 output registers and the user's logic. Both forms have the same function and
 latency. The ECP5 form is simulated with ``sim/models/DP16KD.v``, whose write and read pins are
-checked against Yosys's own mapping of an inferred RAM (``tests/test_synth.py``).
+checked against Yosys's own mapping of an inferred RAM (``tests/sim/test_synth.py``).
 
 Timing contract: a write (``write.en`` high at a clock edge) is visible to a read whose address
 is registered at a later edge. A read and a write of the same address at the same edge are a

@@ -20,9 +20,9 @@ from amaranth.lib.cdc import ResetSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed import uart_protocol as protocol
-from golden_model.fixed.engine_image import RESULTS, EngineCapacity
-from golden_model.fixed.register_map import STATES, RegisterMap
+from golden_model.engine_spec import uart_protocol as protocol
+from golden_model.engine_spec.image import RESULTS, EngineCapacity
+from golden_model.engine_spec.register_map import STATES, RegisterMap
 
 from .engine import SpringflatEngine
 from .uart_bridge import UartBridge, timeout_clocks, uart_divisor

@@ -64,7 +64,7 @@ class SpringflatCore(wiring.Component):
         self._stepgen = StepGenerator(fs)
         self.latency = self._datapath.latency
         self.result_depth = self._datapath.result_depth
-        self.step_latency = self._stepgen.latency + 1
+        self.step_latency = self.step_latency_of(fs)
         super().__init__({
             "entries": In(stream.Signature(entry_layout(fs))),
             "results": Out(stream.Signature(result_layout(fs))),
@@ -78,6 +78,12 @@ class SpringflatCore(wiring.Component):
             "damping": In(shape_of(fs.damping)),
             "momentum": In(1),
         })
+
+    @staticmethod
+    def step_latency_of(fs: FormatSet) -> int:
+        """Clocks from an ``errors`` transfer to ``step_valid``: the step generator's latency and the
+        register that loads ``step`` (no component is built)."""
+        return StepGenerator.latency_of(fs) + 1
 
     def elaborate(self, platform):
         fs = self.fs

@@ -9,7 +9,7 @@ two flip-flop levels around a ``*``. Elaborated with :data:`ECP5` as the platfor
 ``REG_OUTPUT_CLK``) hold them: Yosys's ``synth_ecp5`` maps a ``*`` to a bare
 ``MULT18X18D`` and leaves the registers in the fabric, where the routing to and from the
 DSP row costs 2.5–5.8 ns (``docs/synthesis.md``). Both forms compute the same function
-with the same latency; ``tests/test_cocotb.py::test_ecp5_flavour_with_mult18x18d_instances``
+with the same latency; ``tests/sim/test_cocotb.py::test_ecp5_flavour_with_mult18x18d_instances``
 simulates the primitive form against the golden model with a model of the primitive
 (``sim/models/MULT18X18D.v``).
 

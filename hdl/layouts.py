@@ -11,7 +11,7 @@ from amaranth.hdl import ShapeCastable, signed, unsigned
 from amaranth.lib import data
 
 from golden_model.fixed import MAX_PRODUCT_WIDTH, Format, FormatSet
-from golden_model.fixed.engine_image import MemoryLayout
+from golden_model.engine_spec.image import MemoryLayout
 
 from .fixedpoint import shape_of
 
@@ -219,7 +219,7 @@ def area_saturations_layout(fs: FormatSet) -> data.StructLayout:
 def normalise_layout(fs: FormatSet) -> data.StructLayout:
     """A sum to normalise: ``sum`` [error_acc] and the host's reciprocal of the total,
     ``mantissa`` [reciprocal] and ``shift`` (``sum/total ≈ sum·mantissa·2^-shift``,
-    :class:`~golden_model.fixed.engine.Reciprocal`). ``shift`` holds the shift of every total
+    :class:`~golden_model.fixed.measures.Reciprocal`). ``shift`` holds the shift of every total
     below ``2**MAX_PRODUCT_WIDTH`` (``reciprocal.width + 62`` at most)."""
     return data.StructLayout({
         "sum": shape_of(fs.error_acc),

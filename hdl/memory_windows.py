@@ -8,8 +8,8 @@ from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import BUS_WORD_BITS, EngineCapacity, memory_layouts
-from golden_model.fixed.register_map import RegisterMap
+from golden_model.engine_spec.image import BUS_WORD_BITS, EngineCapacity, memory_layouts
+from golden_model.engine_spec.register_map import RegisterMap
 
 from .block_ram import BlockRam
 from .layouts import force_word_layout, vector_layout, weight_word_layout, word_layout
@@ -41,8 +41,8 @@ class MemoryWindows(wiring.Component):
     Parameters
     ----------
     fs : :class:`~golden_model.fixed.FormatSet`
-    capacity : :class:`~golden_model.fixed.engine_image.EngineCapacity`
-    register_map : :class:`~golden_model.fixed.register_map.RegisterMap`
+    capacity : :class:`~golden_model.engine_spec.image.EngineCapacity`
+    register_map : :class:`~golden_model.engine_spec.register_map.RegisterMap`
         Its windows (``nodes``, ``entries``, ``triangles``: base, stride, words).
     addr_width : int
         Width of the bus's word address.

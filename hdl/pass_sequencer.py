@@ -8,8 +8,8 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import EngineCapacity, memory_layouts
-from golden_model.fixed.register_map import RegisterMap
+from golden_model.engine_spec.image import EngineCapacity, memory_layouts
+from golden_model.engine_spec.register_map import RegisterMap
 
 from .fixedpoint import shape_of
 from .force_pass import ForcePass
@@ -43,7 +43,7 @@ class PassSequencer(wiring.Component):
     Parameters
     ----------
     fs : :class:`~golden_model.fixed.FormatSet`
-    register_map : :class:`~golden_model.fixed.register_map.RegisterMap`
+    register_map : :class:`~golden_model.engine_spec.register_map.RegisterMap`
         Its capacity sizes the counters, its values the mesh-size inputs.
 
     Members

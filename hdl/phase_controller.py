@@ -10,8 +10,8 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import ITERATION_BITS
-from golden_model.fixed.register_map import RESULTS, STATES, RegisterMap
+from golden_model.engine_spec.image import ITERATION_BITS
+from golden_model.engine_spec.register_map import RESULTS, STATES, RegisterMap
 
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .dsp import registered_product
@@ -62,7 +62,7 @@ class PhaseController(wiring.Component):
     Parameters
     ----------
     fs : :class:`~golden_model.fixed.FormatSet`
-    register_map : :class:`~golden_model.fixed.register_map.RegisterMap`
+    register_map : :class:`~golden_model.engine_spec.register_map.RegisterMap`
         Sizes the constants' and results' ports (its values) and the energy check (its capacity).
 
     Members

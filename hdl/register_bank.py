@@ -1,8 +1,8 @@
-"""The engine's register bank: every register of a :class:`~golden_model.fixed.register_map.RegisterMap`,
+"""The engine's register bank: every register of a :class:`~golden_model.engine_spec.register_map.RegisterMap`,
 each field acting as its declared access type says, and the bus target's answers.
 
 As ``amaranth_soc.csr`` takes a field's behaviour from its action (``csr.action.R``, ``RW``, ``RW1C``,
-...), the bank takes it from the map's access type (:data:`~golden_model.fixed.register_map.ACCESS`);
+...), the bank takes it from the map's access type (:data:`~golden_model.engine_spec.register_map.ACCESS`);
 it knows no register by name. A field's port is named for the value it carries (``BitField.value``;
 a value wider than a word is one port over all its registers):
 
@@ -27,8 +27,8 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from golden_model.fixed.engine_image import BUS_WORD_BITS
-from golden_model.fixed.register_map import RegisterMap
+from golden_model.engine_spec.image import BUS_WORD_BITS
+from golden_model.engine_spec.register_map import RegisterMap
 
 from .logic import or_tree
 
@@ -47,7 +47,7 @@ class RegisterBank(wiring.Component):
 
     Parameters
     ----------
-    register_map : :class:`~golden_model.fixed.register_map.RegisterMap`
+    register_map : :class:`~golden_model.engine_spec.register_map.RegisterMap`
     addr_width : int
         Width of the bus's word address (the map's registers and windows fit it).
     copies : tuple of str

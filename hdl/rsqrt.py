@@ -4,22 +4,16 @@ Every width, constant and table is taken from a :class:`~golden_model.fixed.Rsqr
 the unit is bit-exact with :func:`~golden_model.fixed.rsqrt_with_config` for every input.
 """
 
-import importlib
-
 from amaranth.hdl import *
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+import golden_model.fixed.rsqrt as golden_rsqrt
 from golden_model.fixed import FormatSet, Rounding, RsqrtConfig, rsqrt_stages
 
 from .fixedpoint import round_half_bit, saturate, shift_round
 from .pipeline import Pipeline, reduce_levels
 from .rom import registered_rom
-
-# The golden model's rounding of the rsqrt internals is the module constant
-# ``_INTERNAL_ROUNDING`` (not a field of RsqrtConfig). ``golden_model.fixed.rsqrt`` is the
-# *function* ``rsqrt`` (it shadows the submodule), hence importlib.
-_golden_rsqrt = importlib.import_module("golden_model.fixed.rsqrt")
 
 __all__ = ["RsqrtUnit"]
 
@@ -90,7 +84,7 @@ class RsqrtUnit(wiring.Component):
         if config.fmt_out.signed:
             raise ValueError(f"RsqrtUnit output format must be unsigned, not {config.fmt_out}")
         self._config = config
-        self._rounding = Rounding(_golden_rsqrt._INTERNAL_ROUNDING)
+        self._rounding = Rounding(golden_rsqrt.INTERNAL_ROUNDING)
         self.latency = self.latency_of(config)
         super().__init__({
             "i": In(stream.Signature(unsigned(config.fmt_in.width))),

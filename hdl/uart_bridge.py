@@ -1,4 +1,4 @@
-"""A UART-to-Wishbone bridge: the host link of the board top (frame format: :mod:`golden_model.fixed.uart_protocol`).
+"""A UART-to-Wishbone bridge: the host link of the board top (frame format: :mod:`golden_model.engine_spec.uart_protocol`).
 
 Three blocks joined by ``lib.stream`` byte streams, and :class:`UartBridge` that composes them:
 
@@ -21,7 +21,7 @@ from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from golden_model.fixed import uart_protocol as protocol
+from golden_model.engine_spec import uart_protocol as protocol
 
 from . import wishbone
 
@@ -172,7 +172,7 @@ class UartTx(wiring.Component):
 
 
 class FrameBridge(wiring.Component):
-    """The frames' parser and Wishbone initiator (frame format: :mod:`golden_model.fixed.uart_protocol`).
+    """The frames' parser and Wishbone initiator (frame format: :mod:`golden_model.engine_spec.uart_protocol`).
 
     Takes a frame byte by byte from ``rx`` (always ready: bytes arriving while the bridge executes or
     answers are dropped), feeds every byte to a CRC-8 (:class:`amaranth.lib.crc.Processor`; the frame
@@ -198,7 +198,7 @@ class FrameBridge(wiring.Component):
     timeout : int
         The inter-byte timeout in clocks (:func:`timeout_clocks`).
     max_words : int
-        The buffer's depth, :data:`~golden_model.fixed.uart_protocol.MAX_WORDS` (a smaller bridge
+        The buffer's depth, :data:`~golden_model.engine_spec.uart_protocol.MAX_WORDS` (a smaller bridge
         answers longer frames ``BAD_LENGTH``).
 
     Members

@@ -65,7 +65,7 @@ os.environ["AMARANTH_USE_YOSYS"] = "builtin"
 sys.path.insert(0, sys.argv[1])
 from amaranth.back import verilog
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 import hdl.engine
 assert hdl.engine.__file__.startswith(sys.argv[1]), hdl.engine.__file__
 capacity = EngineCapacity(*map(int, sys.argv[4:7])) if len(sys.argv) > 4 else DEFAULT_CAPACITY

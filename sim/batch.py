@@ -30,12 +30,13 @@ from pathlib import Path
 
 from golden_model.builtin import is_builtin
 from golden_model.layouts import LAYOUT_METHODS
-from golden_model.mesh import MeshError, describe_os_error, read_file_bytes
+from golden_model.files import describe_os_error, read_file_bytes
+from golden_model.mesh import MeshError
 
+from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_output_path
 from .patterns import PATTERN_SUFFIXES, pattern_kind
-from .run_options import (EXIT_DIVERGED, EXIT_USAGE, USER_ERRORS, UserError, integer_argument, params_from_args,
-                          resolve_mesh, strict_json)
+from .run_options import USER_ERRORS, UserError, integer_argument, params_from_args, resolve_mesh, strict_json
 
 #: The output options a batch takes endings for, with the file kinds each accepts.
 OUTPUT_OPTIONS = (("out", "--out", PATTERN_SUFFIXES), ("history", "--history", None), ("plot", "--plot", (".png",)),
@@ -113,7 +114,7 @@ class MeshOutcome:
 
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
-    from .cli import _write_outputs, check_print_size, human_line, json_summary, run_flatten
+    from .flatten_run import check_print_size, human_line, json_summary, run_flatten, write_outputs
 
     start = time.perf_counter()
     stderr = io.StringIO()
@@ -141,7 +142,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 params = params_from_args(args, defaults)
                 check_print_size(args, mesh)
                 result = run_flatten(args, mesh, params)
-                _write_outputs(args, mesh, result)
+                write_outputs(args, mesh, result)
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)
             files = [(ending, path.read_bytes()) for _, ending, path in names]

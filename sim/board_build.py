@@ -80,7 +80,7 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     """Build the bitstream; return the report (also written as ``board_report.json``)."""
     import os
 
-    from golden_model.fixed import uart_protocol as protocol
+    from golden_model.engine_spec import uart_protocol as protocol
     from hdl.board import ENGINE_CLOCK_HZ, OSCILLATOR_HZ, Ulx3sTop, _ulx3s_85f, pll_config
     from hdl.uart_bridge import uart_divisor
 

@@ -5,8 +5,8 @@ The same pieces as ``--engine rtl`` (``sim/engine_run.py``): the golden model's 
 (``prepare``), the image (``build_image``), the register map and :class:`~sim.engine_driver.EngineDriver`;
 only the transport differs. The capacity is the board's own: read from its CAP_* registers (whose
 addresses do not depend on the capacity) before the map is built. The read-back is compared bit for bit
-with :func:`~golden_model.fixed.engine_image.run_image` (a mismatch is an :class:`EngineRunError`), and
-becomes the :class:`~golden_model.reference.FlattenResult` that ``flatten`` writes.
+with :func:`~golden_model.engine_spec.image.run_image` (a mismatch is an :class:`EngineRunError`), and
+becomes the :class:`~golden_model.results.FlattenResult` that ``flatten`` writes.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import numpy as np
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
-from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity, build_image, run_image
-from golden_model.fixed.register_map import RegisterMap
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, build_image, run_image
+from golden_model.engine_spec.register_map import RegisterMap
 
 from .engine_driver import EngineDriver, EngineReadBack
 from .engine_run import EngineRunError, engine_flatten_result
@@ -81,7 +81,7 @@ def run_on_board(problem: FixedProblem, bus, *, poll=None, max_polls: int = 10_0
 
 def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = "board"):
     """``springflat flatten --engine board``: ``problem`` through the engine behind ``bus``, as a
-    :class:`~golden_model.reference.FlattenResult`; :class:`EngineRunError` when the read-back differs
+    :class:`~golden_model.results.FlattenResult`; :class:`EngineRunError` when the read-back differs
     from the golden model's."""
     run = run_on_board(problem, bus, poll=poll)
     if run.mismatches:
@@ -95,7 +95,7 @@ def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = 
 
 def add_board_options(parser) -> None:
     """``--port`` and ``--baud`` of ``flatten --engine board``."""
-    from golden_model.fixed.uart_protocol import DEFAULT_BAUD
+    from golden_model.engine_spec.uart_protocol import DEFAULT_BAUD
 
     parser.add_argument("--port", default=None, metavar="DEVICE|URL",
                         help="--engine board: the board's serial port (/dev/ttyUSB0, COM3, or a pyserial URL "

@@ -5,7 +5,7 @@ frames (``sim/cocotb_benches/board.py``).
 :class:`BoardSimTop` puts a host-side :class:`~hdl.uart_bridge.UartTx` and :class:`~hdl.uart_bridge.UartRx`
 (the same divisor) on BoardCore's ``rx``/``tx`` pins, so the bench hands over whole bytes (a few triggers
 per byte instead of one per bit) while the line between them is serial, bit by bit; the UARTs themselves are
-tested bit by bit against Python in ``tests/test_uart_bridge.py``. It also counts the engine bus's answers
+tested bit by bit against Python in ``tests/hdl/test_uart_bridge.py``. It also counts the engine bus's answers
 (``accesses``), so the bench sees that a bad frame makes no bus access.
 """
 
@@ -24,7 +24,7 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
-from golden_model.fixed.engine_image import EngineCapacity
+from golden_model.engine_spec.image import EngineCapacity
 
 from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
 

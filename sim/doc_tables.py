@@ -4,7 +4,7 @@ Each function returns the body of one generated block; none types a number the c
 format tables read the presets (``golden_model/data/formats``); latencies and stage counts come
 from the components (``hdl``), counted from the pipelines they build; DSP blocks are the
 ``MULT18X18D`` instances of a component elaborated for ECP5 (or the golden model's split rule,
-which ``tests/test_dsp_cost.py`` holds equal to them); flip-flops are the register bits of the
+which ``tests/hdl/test_dsp_cost.py`` holds equal to them); flip-flops are the register bits of the
 elaborated RTLIL; the measured synthesis tables are rows of ``docs/results/synthesis.csv``
 (:mod:`sim.results`).
 """
@@ -131,8 +131,8 @@ def step_accuracy() -> str:
 
 
 def preset_costs() -> str:
-    """``golden_model.study.cost`` of both presets."""
-    from golden_model.study import cost
+    """``sim.study.cost.cost`` of both presets."""
+    from .study.cost import cost
 
     return _table(["preset", "total bits", "DSP (18×18)", "ROM bits"],
                   [[f"`{p}`", c.total_bits, c.dsp, f"{c.rom_bits:,}"] for p in PRESETS for c in [cost(_preset(p))]])
@@ -149,7 +149,7 @@ def signal_classes() -> str:
 
 
 def _fs_dsp(fs: FormatSet) -> dict[str, int]:
-    """DSP blocks per RTL unit by the golden model's split rule (``tests/test_dsp_cost.py`` holds it to the RTL)."""
+    """DSP blocks per RTL unit by the golden model's split rule (``tests/hdl/test_dsp_cost.py`` holds it to the RTL)."""
     from golden_model.fixed.dsp import dsp_blocks
 
     units = dict.fromkeys(("node_update", "rsqrt", "step_generator"), 0)

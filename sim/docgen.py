@@ -7,7 +7,7 @@ A block is delimited in the markdown by::
     <!-- end generated -->
 
 and its text is ``GENERATORS[NAME]()``. ``python -m sim.docgen`` rewrites every block in ``docs/``;
-``python -m sim.docgen --check`` (and ``tests/test_docgen.py``) fails, naming the file and block, when
+``python -m sim.docgen --check`` (and ``tests/sim/test_docgen.py``) fails, naming the file and block, when
 one is out of step with the code.
 """
 

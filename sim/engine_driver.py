@@ -1,11 +1,11 @@
 """Host driver of ``SpringflatEngine``, bus-agnostic, and a pure-Python model of the engine on its bus.
 
-:class:`EngineDriver` turns a :class:`~golden_model.fixed.engine_image.EngineImage` (the golden
-model's host scaling, packed by :func:`~golden_model.fixed.engine_image.build_image`) into bus
+:class:`EngineDriver` turns a :class:`~golden_model.engine_spec.image.EngineImage` (the golden
+model's host scaling, packed by :func:`~golden_model.engine_spec.image.build_image`) into bus
 writes, starts the engine, waits for it and reads the layout and the result registers back.  The
 bus is anything with ``read(word_address) -> int`` and ``write(word_address, value)`` that raises
 :class:`BusError` when the engine answers ``err``: :class:`ModelBus` here (the register map, the
-memories and :func:`~golden_model.fixed.engine_image.run_image` behind it), a cocotb Wishbone
+memories and :func:`~golden_model.engine_spec.image.run_image` behind it), a cocotb Wishbone
 master later.
 
 Every refusal is one line: :class:`DriverError` (a bad call: no engine at the bus, an image for
@@ -21,9 +21,9 @@ from typing import Callable, Protocol
 import numpy as np
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.engine_image import (EngineImage, ImageRunResult, MemoryLayout, constant_fault,
+from golden_model.engine_spec.image import (EngineImage, ImageRunResult, MemoryLayout, constant_fault,
                                              run_constant_fields, run_image)
-from golden_model.fixed.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
+from golden_model.engine_spec.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
 
 __all__ = ["EngineError", "BusError", "DriverError", "Bus", "EngineReadBack", "EngineDriver", "ModelBus"]
 

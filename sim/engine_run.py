@@ -4,10 +4,10 @@ and ``flatten --engine rtl``.
 :func:`engine_sources` exports the engine for a format set and capacity (cached like
 :func:`sim.cocotb_support.verilog_sources`: keyed by the format set, the capacity and the RTL
 sources); :func:`run_engine` packs a :class:`~golden_model.fixed.engine.FixedProblem` into an
-image (:func:`~golden_model.fixed.engine_image.build_image`, which refuses a mesh over capacity
-with a one-line :class:`~golden_model.fixed.engine.FixedPointError`), runs the cocotb bench
+image (:func:`~golden_model.engine_spec.image.build_image`, which refuses a mesh over capacity
+with a one-line :class:`~golden_model.fixed.measures.FixedPointError`), runs the cocotb bench
 ``sim/cocotb_benches/engine.py`` on it and returns what the engine read back, compared bit for
-bit with :func:`~golden_model.fixed.engine_image.run_image` inside the bench.
+bit with :func:`~golden_model.engine_spec.image.run_image` inside the bench.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ import numpy as np
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
-from golden_model.fixed.engine_image import EngineCapacity, EngineImage, build_image
+from golden_model.engine_spec.image import EngineCapacity, EngineImage, build_image
 
 from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
@@ -289,7 +289,7 @@ def harness_ceiling(fs: FormatSet, cycles: int = 5_000_000, build: str = "defaul
 def run_engine(problem: FixedProblem, capacity: EngineCapacity, simulator: str, **kwargs) -> EngineRun:
     """``problem`` (the golden model's host scaling) packed for an engine of ``capacity`` and run through it.
 
-    Raises :class:`~golden_model.fixed.engine.FixedPointError` (one line) when the mesh is over
+    Raises :class:`~golden_model.fixed.measures.FixedPointError` (one line) when the mesh is over
     capacity, and :class:`~sim.cocotb_support.SimulatorError` when the simulation cannot run.
     """
     image = build_image(problem, capacity)
@@ -298,7 +298,7 @@ def run_engine(problem: FixedProblem, capacity: EngineCapacity, simulator: str, 
 
 def flatten_on_rtl(problem: FixedProblem, capacity: EngineCapacity, simulator: str = "verilator", **kwargs):
     """``springflat flatten --engine rtl``: ``problem`` through the engine, as a
-    :class:`~golden_model.reference.FlattenResult` in mesh units (the FixedProblem maps the raw
+    :class:`~golden_model.results.FlattenResult` in mesh units (the FixedProblem maps the raw
     read-back back). The engine keeps no per-iteration record, so the history holds two rows: the
     initial layout and the engine's final one, both measured by the golden model. Raises
     :class:`EngineRunError` when the run does not match the golden model bit for bit."""
@@ -315,14 +315,14 @@ def flatten_on_rtl(problem: FixedProblem, capacity: EngineCapacity, simulator: s
 def engine_flatten_result(problem: FixedProblem, positions: np.ndarray, velocities: np.ndarray, status: str,
                           iterations: int, extra: dict):
     """An engine's read-back (raw positions and velocities, as ``EngineDriver.read_back`` gives them) as the
-    :class:`~golden_model.reference.FlattenResult` that ``flatten`` writes, in mesh units. The engine keeps no
+    :class:`~golden_model.results.FlattenResult` that ``flatten`` writes, in mesh units. The engine keeps no
     per-iteration record, so the history holds two rows: the initial layout and the engine's final one, both
     measured by the golden model. ``extra`` goes into ``result.extra`` (``saturations`` among it)."""
     import math
 
     from golden_model.fixed import SaturationCounter
     from golden_model.fixed.engine import FixedEngine
-    from golden_model.reference import FlattenResult, History
+    from golden_model.results import FlattenResult, History
 
     engine = FixedEngine(problem, SaturationCounter())
     history = History()

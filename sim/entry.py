@@ -12,7 +12,7 @@ from __future__ import annotations
 import signal
 import sys
 
-EXIT_INTERRUPTED = 130
+from .exit_codes import EXIT_INTERRUPTED
 
 
 def _interrupted() -> int:

@@ -23,7 +23,7 @@ from amaranth.hdl import Shape
 from amaranth.lib import data, wiring
 
 from golden_model.fixed import FormatSet, exp_table
-from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from hdl.dsp import dsp_target
 
 from .top_names import CORE_MODULE, ENGINE_MODULE
@@ -196,7 +196,7 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
     return a short description (module, capacity, bus, files)."""
     from amaranth.back import verilog
 
-    from golden_model.fixed.register_map import RegisterMap
+    from golden_model.engine_spec.register_map import RegisterMap
     from hdl.engine import SpringflatEngine
 
     from .register_map_export import write_exports
@@ -213,10 +213,10 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
 
 
 def engine_capacity(values, fs: FormatSet) -> EngineCapacity:
-    """``--capacity V E T`` as an :class:`~golden_model.fixed.engine_image.EngineCapacity` (``None``: the
+    """``--capacity V E T`` as an :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the
     default); a capacity the engine's register map cannot hold is a one-line :class:`ParameterError`."""
-    from golden_model.fixed.register_map import RegisterMap
-    from golden_model.reference import ParameterError
+    from golden_model.engine_spec.register_map import RegisterMap
+    from golden_model.params import ParameterError
 
     if values is None:
         return DEFAULT_CAPACITY
@@ -231,7 +231,7 @@ def engine_capacity(values, fs: FormatSet) -> EngineCapacity:
 def memory_image_markdown(fs: FormatSet, capacity) -> str:
     """A short description of the engine's memory images for the handoff bundle (``memory_image.md``):
     the three memories' word layouts and bus packing for this format set and capacity."""
-    from golden_model.fixed.register_map import RegisterMap
+    from golden_model.engine_spec.register_map import RegisterMap
 
     rmap = RegisterMap.build(fs, capacity)
     lines = [f"# springflat engine memory images (format set `{fs.name}`, capacity {capacity.vertices} vertices, "
@@ -257,7 +257,7 @@ def memory_image_markdown(fs: FormatSet, capacity) -> str:
                            for f in w.fields)
         lines.append(f"| `{w.name}` | `0x{w.base:X}` | {w.depth} | {sum(f.width for f in w.fields)} | {w.words} | "
                      f"{w.stride} | {fields} |")
-    lines += ["", "Reference packer: `golden_model.fixed.engine_image.build_image(problem, capacity)` (and "
+    lines += ["", "Reference packer: `golden_model.engine_spec.image.build_image(problem, capacity)` (and "
               "`decode_nodes`/`decode_entries`/`decode_triangles`); reference host driver: "
               "`sim/engine_driver.py`. The full contract (run constants, controller passes, error answers) is "
               "docs/engine.md in the springflat repository; the field tables with bit ranges are in "

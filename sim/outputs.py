@@ -34,8 +34,10 @@ from typing import Iterator
 import numpy as np
 
 from golden_model.files import file_kind, resolved_parent_key, same_file_key
-from golden_model.mesh import describe_os_error, folded_faces, save_obj, signed_areas_2d, triangle_areas_3d
-from golden_model.reference import FlattenResult
+from golden_model.files import describe_os_error
+from golden_model.mesh import folded_faces, signed_areas_2d, triangle_areas_3d
+from golden_model.mesh_io import save_obj
+from golden_model.results import FlattenResult
 
 HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded")
 LAYOUT_SUFFIXES = (".obj", ".svg")

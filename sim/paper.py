@@ -16,7 +16,9 @@ import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh
 from golden_model.layouts import LAYOUT_METHODS, initial_layout
-from golden_model.reference import FlattenParams, FlattenResult, flatten
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
+from golden_model.results import FlattenResult
 
 from .outputs import atomic_write, write_history
 

@@ -40,7 +40,8 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from golden_model.mesh import Mesh, folded_faces, save_obj
+from golden_model.mesh import Mesh, folded_faces
+from golden_model.mesh_io import save_obj
 
 from .outputs import OutputError, atomic_write, write_layout
 

@@ -8,9 +8,9 @@ integer for a payload that is not a layout. Two forms of the same thing:
 * :func:`pack_beats` / :func:`unpack_beats`: many beats at once (a pass has thousands), the
   same nested dicts with an array of values in every leaf, field by field with numpy.
 
-The many-beat form walks the layout with :func:`leaves`; ``tests/test_payloads.py`` checks that
+The many-beat form walks the layout with :func:`leaves`; ``tests/sim/test_payloads.py`` checks that
 the two forms agree.
-Shared by the Amaranth-simulator tests (:mod:`sim.stream_helpers`) and the cocotb benches, so
+Shared by the Amaranth-simulator tests (:mod:`support.streams`) and the cocotb benches, so
 both drive the hardware with exactly the same bits.
 """
 

@@ -11,7 +11,7 @@ import json
 import re
 from pathlib import Path
 
-from golden_model.fixed.register_map import ACCESS, MAGIC, REGISTER_BLOCKS, RESULTS, STATES, VERSION, BitField, \
+from golden_model.engine_spec.register_map import ACCESS, MAGIC, REGISTER_BLOCKS, RESULTS, STATES, VERSION, BitField, \
     MemoryWindow, Register, RegisterMap
 
 __all__ = ["markdown", "to_json", "c_header", "write_exports", "EXPORT_FILES"]
@@ -65,7 +65,7 @@ def markdown(m: RegisterMap, level: int = 1) -> str:
     h = "#" * level
     lines = [
         f"{h} SpringflatEngine register map (v{VERSION[0]}.{VERSION[1]})", "",
-        f"Generated from `golden_model.fixed.register_map.RegisterMap` for format set `{m.formats}` "
+        f"Generated from `golden_model.engine_spec.register_map.RegisterMap` for format set `{m.formats}` "
         f"(FORMAT_HASH `0x{m.format_hash:08X}`) and capacity {m.capacity.vertices} vertices, "
         f"{m.capacity.entries} entries, {m.capacity.triangles} triangles. Do not edit.", "",
         f"Bus: {bus['protocol']}, {bus['data_bits']}-bit data, `adr` a {bus['address']} address (byte address >> 2), "
@@ -110,7 +110,7 @@ def c_header(m: RegisterMap) -> str:
     guard = f"{PREFIX}_REGS_H"
     lines = [f"/* SpringflatEngine register map v{VERSION[0]}.{VERSION[1]}: format set '{m.formats}', capacity "
              f"{m.capacity.vertices} vertices / {m.capacity.entries} entries / {m.capacity.triangles} triangles. */",
-             "/* Generated from golden_model.fixed.register_map.RegisterMap; do not edit. */",
+             "/* Generated from golden_model.engine_spec.register_map.RegisterMap; do not edit. */",
              "/* Addresses are 32-bit-word addresses (Wishbone adr): byte address = ADDR * ADDR_UNIT_BYTES. */",
              f"#ifndef {guard}", f"#define {guard}", "",
              _define(_c_name("ADDR_UNIT_BYTES"), 4), _define(_c_name("MAGIC"), MAGIC),
@@ -154,8 +154,9 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m sim.register_map_export --formats PRESET|FILE --capacity V E T --out DIR``."""
     import argparse
 
-    from golden_model.fixed.engine import FixedPointError, load_formats
-    from golden_model.fixed.engine_image import EngineCapacity
+    from golden_model.fixed.engine import load_formats
+    from golden_model.fixed.measures import FixedPointError
+    from golden_model.engine_spec.image import EngineCapacity
 
     parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
     parser.add_argument("--formats", default="default")

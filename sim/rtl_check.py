@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 from golden_model.fixed.engine import check_fixed_params, prepare
-from golden_model.fixed.engine_image import check_engine_params
+from golden_model.engine_spec.image import check_engine_params
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, SimulatorError, run_bench
@@ -80,7 +80,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())
     init_spec = args.init if args.init in LAYOUT_METHODS + (AUTO_START,) else str(Path(args.init).resolve())
     config = {"mesh": mesh_spec, "init": init_spec, "params": params.as_dict(), "iterations": args.iterations,
-              "step_latency": SpringflatCore(formats).step_latency, "p_valid": 1 - args.stall,
+              "step_latency": SpringflatCore.step_latency_of(formats), "p_valid": 1 - args.stall,
               "p_ready": 1 - args.stall}
     print(f"springflat: {args.sim}: building the model (cached; the first Verilator build takes ~1 min) "
           "and running the closed loop ...", file=sys.stderr)
@@ -136,7 +136,7 @@ def _save_waves(source: Path, waves: Path) -> None:
 
 def engine_capacity(args: argparse.Namespace):
     """``--capacity V E T`` as an :class:`EngineCapacity` (one-line error), else the default."""
-    from golden_model.fixed.engine_image import DEFAULT_CAPACITY, EngineCapacity
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 
     from .run_options import UserError
 
@@ -150,7 +150,7 @@ def engine_capacity(args: argparse.Namespace):
 
 def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     """The whole flattening through ``springflat_engine``: exit 0 when bit-exact, 1 (one line) if not."""
-    from golden_model.fixed.engine_image import build_image
+    from golden_model.engine_spec.image import build_image
 
     from .engine_run import run_image_on_rtl, summary_line
     from .run_options import UserError, load_format_set, strict_json

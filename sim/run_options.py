@@ -1,7 +1,7 @@
 """What every ``springflat`` command that runs the algorithm shares: the run options, the
 mesh's default parameters and initial layout, argument types and the one-line user errors.
 
-``sim/cli.py``, ``sim/rtl_check.py`` and ``sim/study.py`` import from here, not from each other.
+``sim/cli.py``, ``sim/rtl_check.py`` and ``sim/study/cli.py`` import from here, not from each other.
 """
 
 from __future__ import annotations
@@ -16,13 +16,14 @@ import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, LayoutError, initial_layout, start_layout
-from golden_model.mesh import Mesh, MeshError, describe_os_error, load_mesh_with_notes
-from golden_model.reference import DYNAMICS, FlattenParams, ParameterError
+from golden_model.files import describe_os_error
+from golden_model.mesh import Mesh, MeshError
+from golden_model.mesh_io import load_mesh_with_notes
+from golden_model.modes import DYNAMICS
+from golden_model.params import FlattenParams, ParameterError
 
 from .outputs import OutputError
 
-EXIT_USAGE = 2
-EXIT_DIVERGED = 3
 USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
 
 

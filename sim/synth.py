@@ -2,7 +2,7 @@
 
 For every component (``rsqrt_unit``, ``step_generator``, ``node_update`` and the top
 ``springflat_core``; on request also ``springflat_engine``, the whole engine behind its Wishbone
-bus at a given :class:`~golden_model.fixed.engine_image.EngineCapacity`) the flow
+bus at a given :class:`~golden_model.engine_spec.image.EngineCapacity`) the flow
 
 1. exports the Verilog (:func:`sim.export.export_verilog`: the bare modules, ROM files and
    ``interface.md``/``interface.json``) and, for place and route, the component inside
@@ -30,7 +30,6 @@ The YoWASP tools run as subprocesses with ``cwd`` = the build directory and rela
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -41,12 +40,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from golden_model.reference import ParameterError
+from golden_model.params import ParameterError
 
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["TARGETS", "SynthError", "DoesNotFit", "run_synthesis", "add_parser", "cmd_synth",
-           "parse_yosys_stat", "parse_nextpnr_log"]
+__all__ = ["TARGETS", "SynthError", "DoesNotFit", "run_synthesis", "parse_yosys_stat", "parse_nextpnr_log"]
 
 
 class SynthError(ParameterError):
@@ -233,7 +231,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     the wrapped design, ``latency``, ``ii``, ``throughput_per_s``, ``ports``, ``does_not_fit``).
     The top is ``springflat_core`` when it is among ``components``, else the last component.
     ``springflat_engine`` (:data:`ENGINE`) is built at ``capacity`` (default
-    :data:`~golden_model.fixed.engine_image.DEFAULT_CAPACITY`); its entry has ``capacity`` and no
+    :data:`~golden_model.engine_spec.image.DEFAULT_CAPACITY`); its entry has ``capacity`` and no
     latency or II (it runs whole iterations), and the report's ``engine`` lists its bundle files.
     ``router`` is nextpnr's router: ``auto`` (default) is the timing-driven ``router1``, which
     routes the core in about five minutes; ``router2`` is faster on congested designs but not
@@ -246,7 +244,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     from hdl.dsp import DspPlatform
     from hdl.io_wrapper import SerialWrapper
 
-    from golden_model.fixed.engine_image import DEFAULT_CAPACITY
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
     from hdl.engine import SpringflatEngine
 
     from .export import COMPONENTS, export_engine_bundle, export_verilog
@@ -446,125 +444,3 @@ def report_markdown(report: dict) -> str:
     if report.get("command"):
         lines += ["", "Reproduce:", "", "    " + report["command"]]
     return "\n".join(lines) + "\n"
-
-
-# ------------------------------------------------------------------------------------ CLI
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of MHz, got {text!r}") from None
-    if not (0 < value <= 1000):
-        raise argparse.ArgumentTypeError(f"expected a frequency in (0, 1000] MHz, got {text!r}")
-    return value
-
-
-def _component_list(text: str) -> list[str]:
-    from .export import COMPONENTS
-
-    names = [c.module for c in COMPONENTS] + [ENGINE]
-    chosen = [c.strip() for c in text.split(",") if c.strip()]
-    for c in chosen:
-        if c not in names:
-            raise argparse.ArgumentTypeError(f"unknown component {c!r} (choose from {', '.join(names)})")
-    if not chosen:
-        raise argparse.ArgumentTypeError("expected at least one component")
-    return chosen
-
-
-def add_parser(subparsers) -> argparse.ArgumentParser:
-    """Register ``springflat synth`` on an ``add_subparsers()`` object."""
-    p = subparsers.add_parser(
-        "synth", help="synthesise, place and route the RTL for ECP5 or iCE40 and write a handoff bundle",
-        description="Export the Verilog, run Yosys and nextpnr (YoWASP) for ECP5-85F CABGA381 or iCE40 UP5K SG48, "
-                    "and report LUT4, flip-flops, DSPs, block RAM, Fmax after routing and the critical path per "
-                    "component and for the top (springflat_core). springflat_engine (the whole engine behind "
-                    "its Wishbone bus, --capacity) is opt-in. Writes the handoff bundle to --out.")
-    p.add_argument("--target", choices=tuple(TARGETS), help="ecp5 (LFE5U-85F) or ice40 (UP5K)")
-    p.add_argument("--board", choices=("ulx3s-85f",), default=None,
-                   help="instead of --target: the board top (PLL, UART bridge, LEDs, the engine at --capacity) "
-                        "to a bitstream with its timing report and pin list (docs/board.md)")
-    p.add_argument("--baud", type=int, default=None, help="--board: the UART's rate (default 1000000)")
-    p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
-    p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
-                   help="clock constraint for nextpnr (default 150 for ecp5, 48 for ice40)")
-    p.add_argument("--out", default=None, help="bundle directory (default synth-TARGET-PRESET)")
-    p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
-                   help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core,"
-                        "springflat_engine (default: all but springflat_engine)")
-    p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
-                   help="springflat_engine's vertices, neighbour entries and triangles (default: "
-                        "golden_model.fixed.engine_image.DEFAULT_CAPACITY)")
-    p.add_argument("--router", choices=("auto", "router1", "router2"), default="auto",
-                   help="nextpnr router (default auto: the timing-driven router1; router2 is not timing-driven)")
-    p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
-    p.add_argument("--json", action="store_true", help="print the report as one JSON object")
-    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    p.set_defaults(func=cmd_synth)
-    return p
-
-
-def _command_line(args: argparse.Namespace, out: Path) -> str:
-    parts = ["springflat", "synth", "--target", args.target, "--formats", args.formats]
-    if args.freq is not None:
-        parts += ["--freq", f"{args.freq:g}"]
-    if args.components:
-        parts += ["--components", ",".join(args.components)]
-    if args.capacity:
-        parts += ["--capacity", *(str(n) for n in args.capacity)]
-    if args.router != "auto":
-        parts += ["--router", args.router]
-    if args.seed != 1:
-        parts += ["--seed", str(args.seed)]
-    parts += ["--out", str(out)]
-    return shlex.join(parts)
-
-
-def cmd_synth(args: argparse.Namespace) -> int:
-    from golden_model.fixed.formats_set import FormatSet
-
-    from .outputs import atomic_directory
-    from .run_options import load_format_set, strict_json
-
-    from .export import engine_capacity
-
-    fs = load_format_set(args.formats)
-    capacity = engine_capacity(args.capacity, fs)
-    if args.board is not None or args.target is None:
-        from .board_build import cmd_board
-
-        return cmd_board(args, fs, capacity)
-    if args.capacity and ENGINE not in (args.components or ()):
-        raise SynthError(f"--capacity sizes {ENGINE}: add it to --components")
-    out = Path(args.out) if args.out else Path(f"synth-{args.target}-{fs.name}")
-    start = time.monotonic()
-
-    def progress(msg: str) -> None:
-        if not args.quiet:
-            print(f"springflat synth [{time.monotonic() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
-
-    inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
-    failure = None
-    with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
-        def shown(text: str) -> str:  # the bundle is built beside --out: name --out
-            return text.replace(str(build), str(out))
-
-        try:
-            report = run_synthesis(fs, args.target, args.freq, build, components=args.components,
-                                   progress=lambda msg: progress(shown(msg)), router=args.router, seed=args.seed,
-                                   command=_command_line(args, out), capacity=capacity)
-        except SynthError as exc:  # a tool failed: its logs are kept in --out, when there are any
-            failure = SynthError(shown(str(exc)))
-            if not any(build.iterdir()):
-                raise failure from None
-    if failure is not None:
-        raise failure
-    if args.json:
-        print(strict_json(report))
-    else:
-        print(report_markdown(report), end="")
-        print(f"bundle: {out}/ (synth_report.md, synth_report.json, interface.md, reproduce.sh)")
-    if report["does_not_fit"]:
-        what = "; ".join(f"{n}: {', '.join(p)}" for n, p in report["does_not_fit"].items())
-        raise DoesNotFit(f"does not fit {report['device']}: {what} (synthesis numbers are in {out}/synth_report.md)")
-    return 0

@@ -1,5 +1,5 @@
 """The host side of the UART link: :class:`UartBus`, the engine driver's bus over frames
-(:mod:`golden_model.fixed.uart_protocol`) on any byte stream.
+(:mod:`golden_model.engine_spec.uart_protocol`) on any byte stream.
 
 The stream is anything with ``write(data: bytes)`` and ``read(n) -> bytes`` that returns fewer than ``n``
 bytes when its own timeout passes: pyserial's ``serial.Serial`` (a board's USB-UART, :func:`open_port`),
@@ -10,7 +10,7 @@ that caused it: the driver's :class:`~sim.engine_driver.BusError` for every erro
 ``err``, and the link's own: a bad checksum, length, command, address or a truncated frame), and
 :class:`LinkError` when no whole answer comes back in time or the answer itself is corrupt. Inside
 :meth:`UartBus.batched` consecutive writes are sent as one frame of up to
-:data:`~golden_model.fixed.uart_protocol.MAX_WORDS` words (loading an image is 97 % payload instead of
+:data:`~golden_model.engine_spec.uart_protocol.MAX_WORDS` words (loading an image is 97 % payload instead of
 28 %): a write's error is then raised by the call that sends its frame (a read, a write that does not
 continue the run of addresses, or the end of the block).
 """
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import contextlib
 
-from golden_model.fixed import uart_protocol as protocol
+from golden_model.engine_spec import uart_protocol as protocol
 
 from .engine_driver import BusError, EngineError
 

@@ -7,7 +7,7 @@ those two functions on a recorder (:class:`_Recorder`) instead of a parser, whic
 command line.  A keyword's value goes through the option's own argparse ``type`` (given as text, so
 ``max_iter=2.5`` is refused as the command line refuses ``--max-iter 2.5``) and ``choices``; the
 namespace then goes through :func:`sim.run_options.params_from_args` like the command line's, which
-checks each value's domain (:class:`golden_model.reference.ParameterError`).  A new option of the
+checks each value's domain (:class:`golden_model.params.ParameterError`).  A new option of the
 command line is a new keyword here with no edit.
 
 One set of defaults.  Arrays get the defaults of a mesh *file* (:func:`sim.run_options.resolve_mesh`:
@@ -28,9 +28,12 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from golden_model.mesh import Mesh, load_mesh_with_notes, save_obj
-from golden_model.reference import FlattenParams, FlattenResult, ParameterError
-from sim.cli import add_engine_options, choose_engine, run_flatten
+from golden_model.mesh import Mesh
+from golden_model.mesh_io import load_mesh_with_notes, save_obj
+from golden_model.params import FlattenParams, ParameterError
+from golden_model.results import FlattenResult
+from sim.cli import add_engine_options
+from sim.flatten_run import choose_engine, run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import area_ratio
 from sim.patterns import PatternDrawing, run_caption, write_pattern_file
@@ -149,8 +152,8 @@ class Pattern:
         name: the mesh's name (printed on PDF/SVG sheets).
         vertices, faces: the mesh, ``(V, 3)`` float64 and ``(F, 3)`` int64.
         init: the initial layout used (a method name, a file, or ``"array"``).
-        params: the :class:`~golden_model.reference.FlattenParams` of the run.
-        result: the engine's full :class:`~golden_model.reference.FlattenResult` (history, velocities, ...).
+        params: the :class:`~golden_model.params.FlattenParams` of the run.
+        result: the engine's full :class:`~golden_model.results.FlattenResult` (history, velocities, ...).
     """
 
     layout: np.ndarray
@@ -186,7 +189,7 @@ def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """``(V, F)`` of an OBJ, PLY, OFF or STL disk patch: ``(V, 3)`` float64 positions, ``(F, 3)`` int64
     vertex indices (0-based), in the file's vertex order.
 
-    The file must be one manifold disk (:func:`golden_model.mesh.load_mesh_with_notes`); anything else
+    The file must be one manifold disk (:func:`golden_model.mesh_io.load_mesh_with_notes`); anything else
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
     reader changed (polygons fan-triangulated, STL corners merged) is a :class:`MeshNote` warning.
     """
@@ -224,7 +227,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
 
     Raises:
         golden_model.mesh.MeshError: ``V``, ``F`` are not one manifold disk (a ``ValueError``).
-        golden_model.reference.ParameterError: an option out of its domain (a ``ValueError``).
+        golden_model.params.ParameterError: an option out of its domain (a ``ValueError``).
         TypeError: an unknown keyword.
     """
     vertices, faces = _arrays(V, F)

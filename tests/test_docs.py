@@ -1,23 +1,19 @@
 """What the docs and docstrings state that a generated block cannot hold, and no history in docs/.
 
-The tables of docs/ that are functions of the code are generated blocks (``sim.docgen``; ``tests/test_docgen.py``
+The tables of docs/ that are functions of the code are generated blocks (``sim.docgen``; ``tests/sim/test_docgen.py``
 keeps them current). What is left here: numbers stated in the prose of ``hdl/`` docstrings and of the presets'
 ``notes`` (code and data, not generated), one fact about the code the units' table relied on, and that the
 design docs carry no commit hashes or session diary.
 """
 
-import gc
 import re
-import warnings
-from pathlib import Path
 
 import pytest
-from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
+from support import DOCS
 
-DOCS = Path(__file__).resolve().parents[1] / "docs"
 ROOT = DOCS.parent
 PRESETS = ("default", "narrow")
 
@@ -25,15 +21,6 @@ PRESETS = ("default", "narrow")
 def flat(text: str) -> str:
     """``text`` with every run of white space one blank (prose wraps anywhere)."""
     return " ".join(text.split())
-
-
-@pytest.fixture
-def unelaborated():
-    """Components built only for their attributes (latencies) are not reported as unused."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UnusedElaboratable)
-        yield
-        gc.collect()
 
 
 def elaborated_flip_flops(component) -> int:
@@ -84,6 +71,7 @@ def test_io_wrapper_states_the_cores_port_bits(unelaborated):
         == ports
 
 
+@pytest.mark.slow
 def test_flip_flop_count_in_the_node_update_docstring():
     """``NodeUpdate``'s docstring states its flip-flops within 2 % (docs/hardware.md's count is generated;
     a docstring cannot be)."""
@@ -142,6 +130,7 @@ NOTE_CLAIMS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", PRESETS)
 def test_preset_notes_state_the_formats_numbers(preset):
     """The numbers a preset's notes derive from its formats (fraction/integer bits, widths, formats,
@@ -172,7 +161,7 @@ def test_preset_notes_state_the_formats_numbers(preset):
 def test_the_energy_checks_width_is_the_engines(unelaborated):
     """``EnergyCheck``'s energy width is the engine's ``energy_width`` (a fact about the code, not a table:
     docs/hardware-units.md's latencies are generated from ``EnergyCheck`` itself)."""
-    from golden_model.fixed.engine_image import EngineCapacity, energy_width
+    from golden_model.engine_spec.image import EngineCapacity, energy_width
     from hdl import EnergyCheck
 
     for name in PRESETS:

@@ -4,7 +4,7 @@
 mesh: the stream of neighbour entries, the triangles, the run constants) and a raw layout. Both
 ``--engine fixed`` (:class:`~golden_model.fixed.engine.FixedEngine`, from the host's
 :class:`~golden_model.fixed.engine.FixedProblem`) and the image model of ``SpringflatEngine``
-(:func:`~golden_model.fixed.engine_image.run_image`, from decoded memories) run this class, so the
+(:func:`~golden_model.engine_spec.image.run_image`, from decoded memories) run this class, so the
 two cannot drift apart.
 
 An iteration (``docs/engine.md`` has it pass by pass): the step for the run mode
@@ -27,6 +27,7 @@ from ..modes import RunMode, Step
 from .format import SaturationCounter
 from .formats_set import FormatSet
 from .guard import commit, floor_min_raw, guarded_moves_raw, proposal
+from .measures import MomentumState, area_error, energy_raw, power_sum, shape_error
 from .pipeline import NeighbourStream, NodeConstants, NodeTerms, integrate, integrate_momentum, node_power, node_terms
 from .steplut import half_dt_sq, step_size
 
@@ -80,8 +81,6 @@ class Controller:
         self.power = 0
         self.node_power: np.ndarray | None = None
         self.dt = 0  # the step chosen for the coming integrate pass (β with momentum) [dt]
-        from .engine import MomentumState
-
         self.momentum = MomentumState()
         self.guard = GuardRecord() if setup.mode.guarded else None
         self.floor_min = floor_min_raw(setup.fs, setup.face_areas) if self.guard is not None else None
@@ -93,8 +92,6 @@ class Controller:
         """The force pass (F, Σe, Σe², Σc·h, S) and the area pass (E_S) of the current layout, once per layout."""
         if self._measured is self.raw_positions:
             return
-        from .engine import area_error, energy_raw, power_sum, shape_error
-
         s, fs = self.setup, self.setup.fs
         self.terms = node_terms(fs, self.raw_positions, s.stream, s.half_spring, self.counter)
         self.errors = (area_error(fs, s.area_reciprocal, s.faces, s.face_areas, self.raw_positions, self.counter),
@@ -133,8 +130,6 @@ class Controller:
 
     def _advance_guarded(self, weights: np.ndarray) -> None:
         """Propose, guard, commit and measure; keep the step only if the energy did not rise."""
-        from .engine import MomentumState
-
         s, guard = self.setup, self.guard
         accepted = (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power)
         wanted = proposal(s.fs, self.raw_velocities, self.terms.force, weights, self.dt, guard.scale.shift,

@@ -2,9 +2,9 @@
 
 ``hdl.fixedpoint.dsp_operands`` slices a multiply's operands with :func:`dsp_chunks`, and
 ``hdl.dsp.registered_product`` maps a partial product onto a DSP block only when
-:func:`is_dsp_block` says so; ``golden_model.study`` counts DSP blocks of a format set with
+:func:`is_dsp_block` says so; ``sim.study.cost`` counts DSP blocks of a format set with
 :func:`dsp_blocks` over :meth:`~golden_model.fixed.FormatSet.products`.  One rule, so the
-study's cost is the RTL's (``tests/test_hdl_node_update.py`` counts the ``MULT18X18D``
+study's cost is the RTL's (``tests/hdl/test_hdl_node_update.py`` counts the ``MULT18X18D``
 instances of the elaborated RTL against it).
 
 The rule: an unsigned product (both operands unsigned) is cut into 18-bit unsigned slices.

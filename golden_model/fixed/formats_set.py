@@ -25,9 +25,9 @@ from typing import Any, NamedTuple
 
 from ..files import read_regular_file
 from .dsp import Operand
+from .exp_table import lut_slope_bits
 from .format import MAX_PRODUCT_WIDTH, MAX_WIDTH, Format, Rounding
 from .rsqrt import RsqrtConfig
-from .steplut import lut_slope_bits
 
 __all__ = ["FormatSet", "FORMAT_FIELDS", "CONTROLLER_FIELDS", "PRESET_DIR", "Product", "UNITS", "KNOB_DOMAINS",
            "WIDENED_FIELDS", "accumulator_guard_bits", "RESOLUTION_SCALES", "ACCURACY_FACTOR"]
@@ -95,7 +95,7 @@ WIDENED_FIELDS = ("position", "velocity")
 #: and the error measures near 1; forces about ``C/2`` (a quarter); the weights about 1/2; the
 #: accelerations a tenth; velocities, ``Δt`` and the exp table's entries near the smallest step 0.01;
 #: ``Δt²/2`` near 1e-3. Calibrated, with :data:`ACCURACY_FACTOR`, on random format sets
-#: (``tests/test_formats_property.py``; ``docs/fixed-point.md`` has the runs).
+#: (``tests/golden_model/test_formats_property.py``; ``docs/fixed-point.md`` has the runs).
 RESOLUTION_SCALES: dict[str, float] = {
     "rest_length": 1.0, "delta": 1.0, "length_sq": 1.0, "rsqrt": 1.0, "spring": 1.0, "error": 1.0,
     "force": 0.25, "force_acc": 0.25, "inv_mass": 0.5, "accel": 0.1,

@@ -17,7 +17,7 @@ multi-affine argument as in float, with one integer margin for the rounding of t
   leave the position range does not move: holding a node still is always safe;
 * the committed move is ``V = P'' − P``, so a rollback ``P − V`` restores ``P`` exactly.
 
-The energy comparison uses the exact :func:`~golden_model.fixed.engine.energy_raw`.
+The energy comparison uses the exact :func:`~golden_model.fixed.measures.energy_raw`.
 """
 
 from __future__ import annotations

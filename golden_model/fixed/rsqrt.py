@@ -74,7 +74,8 @@ __all__ = [
 RSQRT_GUARD_BITS = 3
 """Default extra fraction bits carried beyond the output's value bits (see module doc)."""
 
-_INTERNAL_ROUNDING = Rounding.HALF_UP
+INTERNAL_ROUNDING = Rounding.HALF_UP
+"""Rounding of the unit's internal steps (not a field of :class:`RsqrtConfig`); the RTL reads it here."""
 
 
 @dataclass(frozen=True)
@@ -289,7 +290,7 @@ def rsqrt_stages(x_raw: np.ndarray | int, cfg: RsqrtConfig) -> dict[str, np.ndar
     x = cfg.fmt_in.check(x_raw, "rsqrt input")
     if x.size and int(x.min()) < 0:
         raise ValueError("rsqrt input must be non-negative")
-    rnd = _INTERNAL_ROUNDING
+    rnd = INTERNAL_ROUNDING
     fy, fm, fw = cfg.y_frac_bits, cfg.mant_frac_bits, cfg.work_frac_bits
     st: dict[str, np.ndarray] = {"x": x}
     zero = x == 0

@@ -32,13 +32,10 @@ Fixed point (all formats from a FormatSet ``fs``):
 
 from __future__ import annotations
 
-from decimal import Decimal, localcontext
-from functools import lru_cache
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from ..reference import STEP_MIN as DT_MIN, STEP_RATE as LUT_RATE, STEP_SCALE as LUT_SCALE, step_decay, variable_step
+from .exp_table import exp_table, lut_slope_bits
 from .format import (
     Format,
     Overflow,
@@ -50,9 +47,7 @@ from .format import (
     shift_round,
     to_float,
 )
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .formats_set import FormatSet
+from .formats_set import FormatSet
 
 __all__ = [
     "DT_MIN",
@@ -78,47 +73,9 @@ DT_MAX = DT_MIN + 2 * LUT_SCALE
 step_size_float = variable_step
 """Float reference ``dt = 0.01 + 0.1*exp(-5(1-E_S)) + 0.1*exp(-5(1-E_C))``: :func:`~golden_model.reference.variable_step`."""
 
-_DEC_PREC = 60  # decimal digits used to evaluate the exact table entries
-_TIE_MARGIN = Decimal(10) ** -40  # relative distance from a rounding tie that is decided safely
-
-
 def lut_value_float(e: np.ndarray | float) -> np.ndarray:
     """``0.1*exp(-5(1 - E))`` in float64 (E clamped to [0, 1]): one term of :func:`step_size_float`."""
     return LUT_SCALE * step_decay(np.asarray(e, dtype=np.float64))
-
-
-@lru_cache(maxsize=64)
-def _exp_table_cached(index_bits: int, frac_bits: int) -> tuple[int, ...]:
-    # Exact value x_k = 0.1 * exp(-5 (2**n - k) / 2**n) * 2**F.  The exponent is an exact
-    # decimal; Decimal.exp is correctly rounded to 60 digits, so x_k is known to a
-    # relative 1e-58.  Rounding half up is decided exactly unless x_k lies within a relative
-    # 1e-40 of a tie, which is refused (it cannot happen: for k < 2**n x_k is transcendental
-    # (Lindemann), for k = 2**n it is 2**F / 10, never an odd multiple of 1/2).
-    n1 = 1 << index_bits
-    out = []
-    with localcontext() as ctx:
-        ctx.prec = _DEC_PREC
-        scale = Decimal(repr(LUT_SCALE))  # the decimal 0.1, exactly
-        two_f = Decimal(1 << frac_bits)
-        for k in range(n1 + 1):
-            x = (Decimal(-LUT_RATE * (n1 - k)) / Decimal(n1)).exp() * scale * two_f
-            fl = int(x.to_integral_value(rounding="ROUND_FLOOR"))
-            frac = x - fl
-            if abs(frac - Decimal("0.5")) <= _TIE_MARGIN * x:
-                raise ArithmeticError(f"exp table entry {k} too close to a rounding tie")
-            out.append(fl + (frac > Decimal("0.5")))
-    return tuple(out)
-
-
-def exp_table(index_bits: int, entry_fmt: Format) -> np.ndarray:
-    """Raw table ``T[k] = round_half_up(0.1*exp(-5(1 - k/2**n)) * 2**F)``, ``k = 0..2**n``.
-
-    ``2**index_bits + 1`` entries in ``entry_fmt`` (correctly rounded; see module doc).
-    """
-    if not 1 <= index_bits <= 20:
-        raise ValueError(f"index_bits must be in 1..20, got {index_bits}")
-    # Entries are <= 0.1 < 0.5 <= entry_fmt.max for any format: they always fit.
-    return np.array(_exp_table_cached(int(index_bits), entry_fmt.frac_bits), dtype=np.int64)
 
 
 def exp_lut(
@@ -157,16 +114,6 @@ def exp_lut(
     t0 = table[k]
     t1 = table[np.minimum(k + 1, n1)]
     return t0 + shift_round((t1 - t0) * t, r, rounding)
-
-
-def lut_slope_bits(index_bits: int, entry_fmt: Format) -> int:
-    """Bits of the largest entry difference ``T[k+1] - T[k]`` (>= 0: the table is non-decreasing).
-
-    The interpolation multiplies a difference by the low bits of E; the step generator's ROM
-    stores the differences in this many bits.
-    """
-    table = exp_table(index_bits, entry_fmt)
-    return max(1, int(np.diff(table).max()).bit_length())
 
 
 def dt_constant(dt_fmt: Format) -> int:

@@ -28,9 +28,9 @@ from cocotb.clock import Clock
 from cocotb.task import bridge, resume
 from cocotb.triggers import Event, FallingEdge, First, RisingEdge, Timer
 
-from golden_model.fixed import uart_protocol as protocol
-from golden_model.fixed.register_map import MAGIC, VERSION, RegisterMap
-from golden_model.fixed.engine_image import EngineCapacity
+from golden_model.engine_spec import uart_protocol as protocol
+from golden_model.engine_spec.register_map import MAGIC, VERSION, RegisterMap
+from golden_model.engine_spec.image import EngineCapacity
 from sim.board_run import run_on_board
 from sim.uart_bus import UartBus
 

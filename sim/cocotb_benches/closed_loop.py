@@ -19,12 +19,11 @@ import numpy as np
 from cocotb.triggers import ReadOnly, RisingEdge
 
 from golden_model.fixed import SaturationCounter, half_dt_sq, quantize, to_float
-from golden_model.fixed.engine import (HOST_ROUNDING, FixedEngine, MomentumState, StopRule, area_error,
-                                       energy_to_float, flipped_count, folded_count, power_sum,
-                                       shape_error)
+from golden_model.fixed.engine import HOST_ROUNDING, FixedEngine, StopRule, energy_to_float, flipped_count, folded_count
+from golden_model.fixed.measures import MomentumState, area_error, power_sum, shape_error
 from golden_model.fixed.format import Overflow
 from golden_model.modes import Step
-from golden_model.reference import Measurement
+from golden_model.results import Measurement
 from hdl.layouts import entry_layout, errors_layout, result_layout, step_layout
 from sim.payloads import pack, pass_beats, unpack, unpack_beats
 

@@ -7,8 +7,8 @@ runs, Python waits on the ``irq`` line (one trigger for the whole run, no per-cl
 simulator runs at its own speed.
 
 The image (``image.npz``: the three memories; the constants in the config) comes from
-:func:`golden_model.fixed.engine_image.build_image`; the expected results from
-:func:`~golden_model.fixed.engine_image.run_image` on the same image, compared bit for bit:
+:func:`golden_model.engine_spec.image.build_image`; the expected results from
+:func:`~golden_model.engine_spec.image.run_image` on the same image, compared bit for bit:
 positions, velocities, status, iterations, E_S, E_C, energy. The read-back is written to
 ``readback.npz`` beside the result.
 """
@@ -26,8 +26,8 @@ from cocotb.clock import Clock
 from cocotb.task import bridge, resume
 from cocotb.triggers import FallingEdge, First, RisingEdge, Timer
 
-from golden_model.fixed.engine_image import EngineCapacity, EngineImage, run_image
-from golden_model.fixed.register_map import RegisterMap
+from golden_model.engine_spec.image import EngineCapacity, EngineImage, run_image
+from golden_model.engine_spec.register_map import RegisterMap
 from sim.engine_driver import BusError, DriverError, EngineDriver
 
 from .common import CLOCK_NS, formats, load_config, write_result

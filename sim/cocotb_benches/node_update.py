@@ -11,7 +11,7 @@ from cocotb.triggers import RisingEdge
 from golden_model.fixed import SaturationCounter
 from golden_model.fixed.engine import FixedEngine, prepare
 from golden_model.fixed.pipeline import node_update
-from golden_model.reference import FlattenParams
+from golden_model.params import FlattenParams
 from hdl.layouts import entry_layout, result_layout
 from sim.payloads import pass_beats, unpack_beats
 
@@ -37,7 +37,7 @@ def compare(outputs: list[int], want, layout, iteration: int) -> list[str]:
 def load_problem(config, fs):
     from golden_model.builtin import builtin_mesh, is_builtin
     from golden_model.layouts import initial_layout
-    from golden_model.mesh import load_mesh
+    from golden_model.mesh_io import load_mesh
 
     name = config.get("mesh", "surf2")
     mesh = builtin_mesh(name)[0] if is_builtin(name) else load_mesh(name)

@@ -92,7 +92,7 @@ async def step_generator(dut):
 async def step_generator_lanes(dut):
     """Every value of each error with the other fixed, no stalls: the whole input domain of each lane.
 
-    The two lanes meet only in the sum ``v_S + v_C`` (see tests/test_hdl_stepgen.py for the argument
+    The two lanes meet only in the sum ``v_S + v_C`` (see tests/hdl/test_hdl_stepgen.py for the argument
     that these two sweeps plus one pair per reachable sum cover every pair).
     """
     config = load_config()

@@ -1,0 +1,445 @@
+"""The engine's memory images and an image-driven model of its controller.
+
+``SpringflatEngine`` (issue 11) runs Algorithm 1 from memories the host loads
+over the bus.  This module is the contract of those memories, in one place:
+
+* **Word layouts** (:class:`MemoryLayout`): per memory an ordered field list
+  (name, width, signedness, format name) built from a
+  :class:`~golden_model.fixed.FormatSet` and an :class:`EngineCapacity`; the
+  RTL turns it into a ``lib.data.StructLayout`` in the same order (first field
+  at bit 0), and the images are packed with it.  Over the bus a memory word is
+  ``ceil(bits/32)`` 32-bit words (word 0 = bits 31:0) at a stride of the next
+  power of two, so an address decodes by bit slicing.
+* **Run constants** (:func:`run_constant_fields`): the raw integers the
+  controller needs besides the memories (counts, ½C, 1 − γ, modes, the fixed
+  ``Δt``, both reciprocals, the stop rule's tolerances, ``N_max``).
+* **Images** (:func:`build_image`): a :class:`~golden_model.fixed.engine.FixedProblem`
+  (the host scaling of :func:`~golden_model.fixed.engine.prepare`) packed into
+  the three memories and the constants; vectorised (no loop per vertex).
+* **The controller** (:func:`run_image`): Algorithm 1 pass by pass from the
+  decoded images, as the engine runs it, on the golden model's own arithmetic
+  (``node_terms``, ``area_error``, ``shape_error``, ``energy_raw``, ``StopRule``,
+  ``integrate``/``integrate_momentum``, ``node_power``/``power_sum``,
+  ``MomentumState``, ``step_size``): bit-identical to
+  :func:`~golden_model.fixed.engine.run_fixed`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..modes import RunMode, mode_named
+from ..fixed.controller import Controller, Setup
+from ..fixed.engine import ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, FixedProblem, StopRule, check_fixed_params
+from ..fixed.measures import SAT, FixedPointError, Reciprocal, energy_frac_bits
+from ..fixed.format import Format, SaturationCounter, quantize, raw_range
+from ..fixed.formats_set import FormatSet
+from ..fixed.pipeline import BarrierEntries, NeighbourStream
+
+__all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
+           "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "EngineImage",
+           "build_image", "decode_nodes", "decode_entries", "decode_triangles", "constant_fault", "ImageRunResult",
+           "run_image", "BUS_WORD_BITS", "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS"]
+
+BUS_WORD_BITS = 32
+"""Width of one bus word (Wishbone ``dat``)."""
+
+ITERATION_BITS = 32
+"""Width of ``max_iter`` and of the iteration counter."""
+
+SATURATION_BITS = 32
+"""Width of the saturation-event counter (it stops at its maximum, never wraps) and of its limit."""
+
+ENERGY_TOL_INT_BITS = 8
+"""Integer bits of the relative-energy tolerance ε (u8.40 with :data:`ENERGY_TOL_FRAC_BITS`)."""
+
+RESULTS = ("none", "converged", "max-iterations", "diverged", "no-mesh", "bad-constants")
+"""The run's result codes, in code order (STATUS.result)."""
+
+
+def _next_power_of_two(n: int) -> int:
+    return 1 << max(0, (n - 1).bit_length())
+
+
+@dataclass(frozen=True)
+class EngineCapacity:
+    """The engine's memory depths, an elaboration parameter: vertices, neighbour entries, triangles."""
+
+    vertices: int
+    entries: int
+    triangles: int
+
+    def __post_init__(self) -> None:
+        for name in ("vertices", "entries", "triangles"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 2:
+                raise ValueError(f"EngineCapacity: {name} must be an int >= 2, got {value!r}")
+
+    @property
+    def vertex_index_bits(self) -> int:
+        """Bits of a vertex index (``0 .. vertices − 1``)."""
+        return (self.vertices - 1).bit_length()
+
+    def count_bits(self, what: str) -> int:
+        """Bits of a count ``0 .. capacity`` of ``what`` (``"vertices"``, ``"entries"``, ``"triangles"``)."""
+        return getattr(self, what).bit_length()
+
+    def check(self, vertices: int, entries: int, triangles: int) -> None:
+        """Refuse counts over capacity: a one-line :class:`FixedPointError` naming the first."""
+        for name, count in (("vertices", vertices), ("entries", entries), ("triangles", triangles)):
+            if count > getattr(self, name):
+                raise FixedPointError(
+                    f"the mesh has {count} {'neighbour entries' if name == 'entries' else name}; the engine holds "
+                    f"at most {getattr(self, name)} (capacity vertices={self.vertices}, entries={self.entries}, "
+                    f"triangles={self.triangles})")
+
+
+#: The engine's capacity unless a flow says otherwise: a 2,000-vertex patch (about 6 entries and 2
+#: triangles per vertex) with room to spare, and what the ECP5-85F holds (docs/synthesis.md).
+DEFAULT_CAPACITY = EngineCapacity(vertices=2048, entries=12288, triangles=4096)
+
+
+@dataclass(frozen=True)
+class WordField:
+    """One field of a memory word or run constant: raw integer of ``width`` bits (``fmt``: its format's name)."""
+
+    name: str
+    width: int
+    signed: bool = False
+    fmt: str | None = None
+
+    @classmethod
+    def of(cls, name: str, fs: FormatSet, fmt: str) -> "WordField":
+        """A field holding a raw value of ``fs``'s format ``fmt``."""
+        f: Format = getattr(fs, fmt)
+        return cls(name, f.width, f.signed, fmt)
+
+    @property
+    def raw_min(self) -> int:
+        return raw_range(self.width, self.signed)[0]
+
+    @property
+    def raw_max(self) -> int:
+        return raw_range(self.width, self.signed)[1]
+
+
+@dataclass(frozen=True)
+class MemoryLayout:
+    """A memory word: fields from bit 0 up, in order; over the bus :attr:`words` words at :attr:`stride`."""
+
+    name: str
+    fields: tuple[WordField, ...]
+    depth: int
+
+    @property
+    def bits(self) -> int:
+        return sum(f.width for f in self.fields)
+
+    @property
+    def words(self) -> int:
+        """Bus words per entry: ``ceil(bits/32)``; word 0 holds bits 31:0."""
+        return -(-self.bits // BUS_WORD_BITS)
+
+    @property
+    def stride(self) -> int:
+        """Bus words between entries: :attr:`words` rounded up to a power of two."""
+        return _next_power_of_two(self.words)
+
+    def offsets(self) -> dict[str, int]:
+        """``{field: lsb}``."""
+        lsb = np.concatenate([[0], np.cumsum([f.width for f in self.fields])[:-1]])
+        return {f.name: int(b) for f, b in zip(self.fields, lsb)}
+
+    def pack(self, values: dict[str, np.ndarray]) -> np.ndarray:
+        """``(n, words)`` uint32 from one ``(n,)`` array of raw ints per field (range-checked)."""
+        n = len(next(iter(values.values())))
+        out = np.zeros((n, self.words), dtype=np.uint64)
+        for f, lsb in zip(self.fields, self.offsets().values()):
+            raw = np.asarray(values[f.name], dtype=np.int64)
+            if raw.shape != (n,):
+                raise ValueError(f"{self.name}.{f.name}: expected shape ({n},), got {raw.shape}")
+            if n and (raw.min() < f.raw_min or raw.max() > f.raw_max):
+                raise ValueError(f"{self.name}.{f.name}: raw values [{raw.min()}, {raw.max()}] outside "
+                                 f"[{f.raw_min}, {f.raw_max}] ({f.width} bits)")
+            bits = raw.astype(np.uint64) & np.uint64((1 << f.width) - 1)  # two's complement in f.width bits
+            for word in range(lsb // BUS_WORD_BITS, (lsb + f.width - 1) // BUS_WORD_BITS + 1):
+                shift = lsb - word * BUS_WORD_BITS
+                part = bits << np.uint64(shift) if shift >= 0 else bits >> np.uint64(-shift)
+                out[:, word] |= part & np.uint64(0xFFFF_FFFF)
+        return out.astype(np.uint32)
+
+    def unpack(self, words: np.ndarray) -> dict[str, np.ndarray]:
+        """Inverse of :meth:`pack`: ``{field: (n,) int64}`` (signed fields sign-extended)."""
+        words = np.asarray(words, dtype=np.uint64).reshape(-1, self.words)
+        out = {}
+        for f, lsb in zip(self.fields, self.offsets().values()):
+            bits = np.zeros(len(words), dtype=np.uint64)
+            for word in range(lsb // BUS_WORD_BITS, (lsb + f.width - 1) // BUS_WORD_BITS + 1):
+                shift = lsb - word * BUS_WORD_BITS
+                bits |= words[:, word] >> np.uint64(shift) if shift >= 0 else words[:, word] << np.uint64(-shift)
+            raw = (bits & np.uint64((1 << f.width) - 1)).astype(np.int64)
+            if f.signed:
+                raw = np.where(raw >= 1 << (f.width - 1), raw - (1 << f.width), raw)
+            out[f.name] = raw
+        return out
+
+
+def node_word_layout(fs: FormatSet, capacity: EngineCapacity) -> MemoryLayout:
+    """Per vertex: position x/y [position], velocity x/y [velocity], inv_mass and inv_mass_barrier [inv_mass]."""
+    return MemoryLayout("nodes", (
+        WordField.of("position_x", fs, "position"), WordField.of("position_y", fs, "position"),
+        WordField.of("velocity_x", fs, "velocity"), WordField.of("velocity_y", fs, "velocity"),
+        WordField.of("inv_mass", fs, "inv_mass"), WordField.of("inv_mass_barrier", fs, "inv_mass"),
+    ), capacity.vertices)
+
+
+def entry_word_layout(fs: FormatSet, capacity: EngineCapacity) -> MemoryLayout:
+    """Per neighbour entry, nodes in order and each node's entries in ring order (as ``NeighbourStream``):
+    neighbour index, ``last`` (the node's last entry), rest [rest_length], the barrier triangle's second
+    index, threshold κX* [area] and gain G [barrier_gain] (0: no triangle on this entry)."""
+    index = capacity.vertex_index_bits
+    return MemoryLayout("entries", (
+        WordField("neighbour", index), WordField("last", 1), WordField.of("rest", fs, "rest_length"),
+        WordField("second", index), WordField.of("threshold", fs, "area"),
+        WordField.of("gain", fs, "barrier_gain"),
+    ), capacity.entries)
+
+
+def triangle_word_layout(fs: FormatSet, capacity: EngineCapacity) -> MemoryLayout:
+    """Per triangle: corner indices a, b, c and the host-scaled 3D area [face_area] (``FixedProblem.face_areas``)."""
+    index = capacity.vertex_index_bits
+    return MemoryLayout("triangles", (
+        WordField("a", index), WordField("b", index), WordField("c", index),
+        WordField.of("area", fs, "face_area"),
+    ), capacity.triangles)
+
+
+def memory_layouts(fs: FormatSet, capacity: EngineCapacity) -> dict[str, MemoryLayout]:
+    """The three memories, by name, in bus-window order."""
+    return {m.name: m for m in (node_word_layout(fs, capacity), entry_word_layout(fs, capacity),
+                                triangle_word_layout(fs, capacity))}
+
+
+def _reciprocal_shift_bits(fs: FormatSet, capacity: EngineCapacity) -> int:
+    """Bits of a :class:`Reciprocal` shift (``mantissa_bits + bit_length(total) − 1``) for the largest total
+    the capacity allows: Σ of the triangles' [face_area], or Σ of the entries' rest lengths at [error_acc]."""
+    area_total = capacity.triangles * fs.face_area.raw_max
+    length_total = capacity.entries * fs.rest_length.raw_max << (fs.error_acc.frac_bits - fs.rest_length.frac_bits)
+    return (fs.reciprocal.width + max(area_total, length_total).bit_length() - 1).bit_length()
+
+
+def energy_width(fs: FormatSet, capacity: EngineCapacity) -> int:
+    """Bits of :func:`~golden_model.fixed.measures.energy_raw` for any layout of a mesh within ``capacity``:
+    every entry's ``e = |L − d|`` at most rest_length's and ``c·h`` at most barrier_coeff's times area's maximum."""
+    frac = energy_frac_bits(fs)
+    springs = 3 * fs.spring.raw_max * capacity.entries * fs.rest_length.raw_max ** 2 << (
+        frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits)
+    barrier = 2 * capacity.entries * fs.barrier_coeff.raw_max * fs.area.raw_max << (
+        frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits)
+    return (springs + barrier).bit_length()
+
+
+def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordField, ...]:
+    """The run constants (raw ints), in register order; the 1-bit ones are the mode flags.
+
+    ``saturation_limit`` (0: never) stops a run as ``diverged`` once that many saturation
+    events were counted; the golden model's own loop never stops on saturation (limit 0).
+    """
+    shift = _reciprocal_shift_bits(fs, capacity)
+    return (
+        WordField("vertices", capacity.count_bits("vertices")),
+        WordField("entries", capacity.count_bits("entries")),
+        WordField("triangles", capacity.count_bits("triangles")),
+        WordField("momentum", 1),
+        WordField("fixed_step", 1),
+        WordField("barrier", 1),
+        WordField.of("half_spring", fs, "spring"),
+        WordField.of("damping", fs, "damping"),
+        WordField.of("dt", fs, "dt"),
+        WordField.of("area_reciprocal", fs, "reciprocal"),
+        WordField("area_shift", shift),
+        WordField.of("length_reciprocal", fs, "reciprocal"),
+        WordField("length_shift", shift),
+        WordField.of("tol_area", fs, "error"),
+        WordField.of("tol_shape", fs, "error"),
+        WordField("tol_energy", ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS),
+        WordField("max_iter", ITERATION_BITS),
+        WordField("saturation_limit", SATURATION_BITS),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class EngineImage:
+    """What the host loads: three memories as ``(n, words)`` uint32 (``n`` the mesh's counts), and the
+    run constants as raw ints (keys: :func:`run_constant_fields`)."""
+
+    capacity: EngineCapacity
+    nodes: np.ndarray
+    entries: np.ndarray
+    triangles: np.ndarray
+    constants: dict[str, int] = field(default_factory=dict)
+
+    def memories(self) -> dict[str, np.ndarray]:
+        return {"nodes": self.nodes, "entries": self.entries, "triangles": self.triangles}
+
+
+def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str, int]:
+    fs, params, stream = problem.fs, problem.params, problem.stream
+    fixed_step = params.step == "fixed" and not problem.momentum
+    rule = StopRule.of(params, fs)
+    constants = {
+        "vertices": len(stream.indptr) - 1, "entries": len(stream.neighbour), "triangles": len(problem.face_areas),
+        "momentum": int(problem.momentum), "fixed_step": int(fixed_step), "barrier": int(stream.barrier is not None),
+        "half_spring": problem.half_spring, "damping": problem.damping,
+        "dt": int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) if fixed_step else 0,
+        "area_reciprocal": problem.area_reciprocal.mantissa, "area_shift": problem.area_reciprocal.shift,
+        "length_reciprocal": problem.length_reciprocal.mantissa, "length_shift": problem.length_reciprocal.shift,
+        # an error never exceeds error's maximum, so a larger tolerance passes the same errors
+        "tol_area": min(rule.area, fs.error.raw_max), "tol_shape": min(rule.shape, fs.error.raw_max),
+        "tol_energy": rule.energy, "max_iter": params.max_iter, "saturation_limit": 0,
+    }
+    for f in run_constant_fields(fs, capacity):
+        if not f.raw_min <= constants[f.name] <= f.raw_max:
+            raise FixedPointError(f"run constant {f.name} = {constants[f.name]} does not fit the engine's "
+                                  f"{f.width}-bit register (max {f.raw_max})")
+    return constants
+
+
+#: The momentum dynamics as the engine runs it: without the step guard, stopped by Algorithm 1's
+#: one-iteration energy rule (``FlattenParams(dynamics="momentum", **UNGUARDED)``).
+UNGUARDED = {"guard": False, "energy_window": 1}
+
+
+def check_engine_params(params) -> None:
+    """Refuse, in one line, the run modes the engine does not have (the step guard, a windowed stop rule)."""
+    if params.guard or params.energy_window != 1:
+        raise FixedPointError("SpringflatEngine runs the momentum dynamics without the step guard and with "
+                              "Algorithm 1's one-iteration energy rule: add --no-guard --energy-window 1")
+
+
+def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
+    """The memory images and run constants of ``problem`` for an engine of ``capacity``.
+
+    Raises :class:`FixedPointError` (one line) for a mesh over capacity, or a parameter
+    the engine's registers cannot hold.
+    """
+    fs, stream = problem.fs, problem.stream
+    n_vertices, n_entries = len(stream.indptr) - 1, len(stream.neighbour)
+    capacity.check(n_vertices, n_entries, len(problem.face_areas))
+    check_fixed_params(problem.params, fs)
+    check_engine_params(problem.params)
+    constants = _run_constants(problem, capacity)
+    layouts = memory_layouts(fs, capacity)
+    positions = problem.initial_positions
+    nodes = layouts["nodes"].pack({
+        "position_x": positions[:, 0], "position_y": positions[:, 1],
+        "velocity_x": np.zeros(n_vertices, np.int64), "velocity_y": np.zeros(n_vertices, np.int64),
+        "inv_mass": stream.inv_mass, "inv_mass_barrier": stream.header_inv_mass_barrier})
+    last = np.zeros(n_entries, np.int64)
+    last[stream.indptr[1:] - 1] = 1
+    barrier = stream.barrier
+    zeros = np.zeros(n_entries, np.int64)
+    entries = layouts["entries"].pack({
+        "neighbour": stream.neighbour, "last": last, "rest": stream.rest,
+        "second": stream.neighbour if barrier is None else barrier.second,
+        "threshold": zeros if barrier is None else barrier.threshold,
+        "gain": zeros if barrier is None else barrier.gain})
+    faces = problem.mesh.faces
+    triangles = layouts["triangles"].pack({"a": faces[:, 0], "b": faces[:, 1], "c": faces[:, 2],
+                                           "area": problem.face_areas})
+    return EngineImage(capacity, nodes, entries, triangles, constants)
+
+
+def decode_nodes(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity) -> tuple[np.ndarray, np.ndarray,
+                                                                                       np.ndarray, np.ndarray]:
+    """Node memory words → ``(positions (V, 2) [position], velocities (V, 2) [velocity], inv_mass (V,),
+    inv_mass_barrier (V,) [inv_mass])``."""
+    f = node_word_layout(fs, capacity).unpack(words)
+    return (np.column_stack([f["position_x"], f["position_y"]]), np.column_stack([f["velocity_x"], f["velocity_y"]]),
+            f["inv_mass"], f["inv_mass_barrier"])
+
+
+def decode_entries(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity,
+                   barrier: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, BarrierEntries | None]:
+    """Entry memory words → ``(indptr (V+1,) from the last flags, neighbour, rest, barrier entries or None)``."""
+    f = entry_word_layout(fs, capacity).unpack(words)
+    indptr = np.concatenate([[0], np.flatnonzero(f["last"]) + 1])
+    entries = BarrierEntries(f["second"], f["threshold"], f["gain"]) if barrier else None
+    return indptr, f["neighbour"], f["rest"], entries
+
+
+def decode_triangles(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity) -> tuple[np.ndarray, np.ndarray]:
+    """Triangle memory words → ``(faces (F, 3), areas (F,) [face_area])``."""
+    f = triangle_word_layout(fs, capacity).unpack(words)
+    return np.column_stack([f["a"], f["b"], f["c"]]), f["area"]
+
+
+def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCapacity) -> str | None:
+    """What the engine answers to START with these run constants: ``"no-mesh"`` (no vertices: nothing
+    loaded since reset), ``"bad-constants"`` (a count over capacity or zero, a reciprocal that is not a
+    u1.F mantissa or whose shift is too small for :meth:`Reciprocal.normalise`, a zero fixed step, no
+    iterations), or ``None`` (the run starts)."""
+    if constants["vertices"] == 0:
+        return "no-mesh"
+    counts_ok = all(0 < constants[n] <= getattr(capacity, n) for n in ("vertices", "entries", "triangles"))
+    top = 1 << (fs.reciprocal.width - 1)
+    reciprocals_ok = all(top <= constants[f"{k}_reciprocal"] < 2 * top
+                         and constants[f"{k}_shift"] >= fs.error.frac_bits + 2 for k in ("area", "length"))
+    step_ok = not constants["fixed_step"] or constants["momentum"] or constants["dt"] > 0
+    if not (counts_ok and reciprocals_ok and step_ok and constants["max_iter"] > 0):
+        return "bad-constants"
+    return None
+
+
+@dataclass(frozen=True, eq=False)
+class ImageRunResult:
+    """What the engine holds after a run: the node memory, STATUS.result, and the result registers."""
+
+    nodes: np.ndarray  # (V, words) uint32: the node memory written back in place
+    status: str  # one of RESULTS
+    iterations: int
+    area_error: int  # E_S raw [error] of the final layout
+    shape_error: int  # E_C raw [error]
+    energy: int  # energy_raw of the final layout
+    saturations: int  # saturation events, stopped at 2**SATURATION_BITS - 1
+    positions: np.ndarray  # (V, 2) raw [position]
+    velocities: np.ndarray  # (V, 2) raw [velocity]
+
+
+def image_mode(constants: dict[str, int]) -> RunMode:
+    """The run mode the ``MODE`` bits select."""
+    if constants["momentum"]:
+        return mode_named("momentum")
+    return mode_named("paper-fixed" if constants["fixed_step"] else "paper-variable")
+
+
+def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
+    """Algorithm 1 from START to done on the decoded images, as the engine runs it: the one controller
+    model (:class:`~golden_model.fixed.controller.Controller`) on what the memories and run constants
+    hold, ``diverged`` when ``saturation_limit`` events were counted."""
+    c, capacity = image.constants, image.capacity
+    positions, velocities, inv_mass, inv_mass_barrier = decode_nodes(image.nodes, fs, capacity)
+    fault = constant_fault(c, fs, capacity)
+    if fault is not None:
+        return ImageRunResult(image.nodes.copy(), fault, 0, 0, 0, 0, 0, positions, velocities)
+    n = c["vertices"]
+    indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity, bool(c["barrier"]))
+    stream = NeighbourStream(indptr, neighbour, rest, inv_mass[:n], barrier, inv_mass_barrier[:n])
+    faces, areas = decode_triangles(image.triangles[:c["triangles"]], fs, capacity)
+    setup = Setup(fs, image_mode(c), stream, faces, areas, c["half_spring"], c["damping"], c["dt"],
+                  Reciprocal(c["area_reciprocal"], c["area_shift"]), Reciprocal(c["length_reciprocal"], c["length_shift"]),
+                  StopRule(c["tol_area"], c["tol_shape"], c["tol_energy"]), c["max_iter"], 1, c["saturation_limit"])
+    counter = SaturationCounter()
+    controller = Controller(setup, positions[:n], velocities[:n], counter)
+    status, k = controller.run()
+    positions, velocities = controller.raw_positions, controller.raw_velocities
+    layout = node_word_layout(fs, capacity)
+    nodes = image.nodes.copy()
+    nodes[:n] = layout.pack({"position_x": positions[:, 0], "position_y": positions[:, 1],
+                             "velocity_x": velocities[:, 0], "velocity_y": velocities[:, 1],
+                             "inv_mass": inv_mass[:n], "inv_mass_barrier": inv_mass_barrier[:n]})
+    saturations = min(counter.total, (1 << SATURATION_BITS) - 1)
+    return ImageRunResult(nodes, status, k, controller.errors[0], controller.errors[1], controller.energy_raw,
+                          saturations, positions, velocities)

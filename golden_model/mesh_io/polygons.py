@@ -1,0 +1,124 @@
+"""Faces as the PLY, OFF and OBJ readers find them, and their fan triangulation; shared text helpers."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..mesh import COORDINATE_LIMIT, MeshError
+
+#: Largest magnitude a face index read from a text file may have; far beyond any vertex count, and
+#: exactly representable in float64 (PLY ASCII numbers are read as floats), so a larger index is
+#: refused as out of range instead of wrapping in the conversion to int64.
+INDEX_LIMIT = 1 << 53
+
+
+@dataclass(frozen=True)
+class Polygons:
+    """Faces as read: the corners of all faces in a row, each face's corner count, and how to name face f."""
+
+    index: np.ndarray
+    sizes: np.ndarray
+    label: object  # callable: face number -> "line 12" / "face 3"
+
+
+def triangulate_polygons(
+    vertices: np.ndarray, polygons: Polygons, where: str
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Triangles of the faces (fans for polygons), the face of each triangle, and the note on polygons."""
+    sizes = polygons.sizes
+    if (sizes == 3).all():
+        return polygons.index.reshape(-1, 3), np.arange(len(sizes)), []
+    faces, triangle_face = fan_triangulate(polygons.index, sizes)
+    if np.isfinite(vertices).all() and np.abs(vertices).max(initial=0.0) <= COORDINATE_LIMIT:
+        check_fans(vertices, faces, triangle_face, sizes, polygons.label, where)
+    # else the validation refuses the coordinates, with the right message, before anything uses the fans
+    many = sizes > 3
+    low, high = int(sizes[many].min()), int(sizes[many].max())
+    polygon_count = plural(int(many.sum()), "polygon")
+    triangle_count = plural(int((sizes[many] - 2).sum()), "triangle")
+    span = f"{low}" if low == high else f"{low} to {high}"
+    return faces, triangle_face, [f"{polygon_count} ({span} corners) fan-triangulated into {triangle_count}"]
+
+
+def checked_polygons(index: np.ndarray, sizes: np.ndarray, n_vertices: int, label, where: str) -> Polygons:
+    """Refuse faces with fewer than 3 corners or a corner outside the vertices (PLY, OFF: 0-based)."""
+    short = sizes < 3
+    if short.any():
+        f = int(np.flatnonzero(short)[0])
+        raise MeshError(f"{where}: {label(f)}: face with {plural(int(sizes[f]), 'corner')} (a face needs at least 3)")
+    out = (index < 0) | (index >= n_vertices)
+    if out.any():
+        c = int(np.flatnonzero(out)[0])
+        f = int(np.searchsorted(np.cumsum(sizes), c, side="right"))
+        raise MeshError(f"{where}: {label(f)}: face refers to vertex {int(index[c])}, outside 0..{n_vertices - 1}")
+    return Polygons(index.astype(np.int64), sizes.astype(np.int64), label)
+
+
+def fan_triangulate(index: np.ndarray, sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fan ``(c0, ck, ck+1)`` of each polygon; also the polygon of each triangle."""
+    first = np.zeros(len(sizes), dtype=np.int64)
+    np.cumsum(sizes[:-1], out=first[1:])
+    triangle_face = np.repeat(np.arange(len(sizes)), sizes - 2)
+    triangle_start = np.zeros(len(sizes), dtype=np.int64)
+    np.cumsum(sizes[:-1] - 2, out=triangle_start[1:])
+    k = np.arange(len(triangle_face)) - triangle_start[triangle_face] + 1
+    c0 = first[triangle_face]
+    faces = np.column_stack([index[c0], index[c0 + k], index[c0 + k + 1]])
+    return faces, triangle_face
+
+
+def check_fans(
+    vertices: np.ndarray, faces: np.ndarray, triangle_face: np.ndarray, sizes: np.ndarray, label, where: str,
+) -> None:
+    """Refuse a polygon whose fan has a triangle facing against the polygon (not convex at corner 0)."""
+    polygon = sizes[triangle_face] > 3
+    if not polygon.any():
+        return
+    a, b, c = (vertices[faces[polygon, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    # Newell normal of each polygon = the sum of its fan triangles' normals (exact for any fan)
+    owner = triangle_face[polygon]
+    newell = np.column_stack([np.bincount(owner, weights=normal[:, d], minlength=len(sizes)) for d in range(3)])
+    facing = np.einsum("ij,ij->i", normal, newell[owner])
+    against = ~(facing > 0)
+    if against.any():
+        t = int(np.flatnonzero(against)[0])
+        f = int(owner[t])
+        raise MeshError(
+            f"{where}: {label(f)}: polygon with {sizes[f]} corners cannot be fan-triangulated from its "
+            "first corner (a fan triangle would be folded or of zero area)"
+        )
+
+
+def plural(n: int, word: str, words: str | None = None) -> str:
+    """``1 polygon``, ``2 polygons``; ``words`` for an irregular plural."""
+    return f"{n} {word}" if n == 1 else f"{n} {words or word + 's'}"
+
+
+def is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def is_int(text: str) -> bool:
+    try:
+        int(text)
+    except ValueError:
+        return False
+    return True
+
+
+def text_coordinates(coords: list[str], vertex_line: np.ndarray, where: str) -> np.ndarray:
+    """``(V, 3)`` floats from the flat x, y, z strings; a token that is no number is refused with its line."""
+    try:
+        return np.fromiter(map(float, coords), dtype=np.float64, count=len(coords)).reshape(-1, 3)
+    except ValueError:
+        k = next(k for k, value in enumerate(coords) if not is_float(value))
+        raise MeshError(
+            f"{where}: line {vertex_line[k // 3]}: vertex coordinate {coords[k]!r} is not a number"
+        ) from None

@@ -1,0 +1,104 @@
+"""The cases of a study: mesh × initial layout ``P0`` × step mode, with their parameters."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..builtin import builtin_mesh, is_builtin
+from ..layouts import initial_layout
+from ..mesh import Mesh
+from ..mesh_io import load_mesh
+from ..params import FlattenParams, ParameterError
+
+GENERATED_PARAMS = FlattenParams(density="auto", damping=0.05, tol_area=0.01, tol_shape=0.01, tol_energy=0.05,
+                                 max_iter=300)
+"""Parameters of generated and file meshes in a study (built-ins use their paper sets)."""
+
+GENERATED_MESH_NAMES = ("developable", "dome", "saddle", "delaunay")
+STUDY_MESHES = ("surf1", "surf2") + GENERATED_MESH_NAMES
+"""The default meshes of a study."""
+
+
+@dataclass(frozen=True, eq=False)
+class StudyCase:
+    """One flattening problem: a mesh, an initial layout ``P0`` and parameters."""
+
+    name: str  # "<mesh>/<init>/<step>"
+    mesh_name: str
+    mesh: Mesh
+    init: str
+    positions: np.ndarray  # P0, (V, 2)
+    params: FlattenParams
+
+    @property
+    def step(self) -> str:
+        return self.params.step
+
+    @property
+    def mean_edge(self) -> float:
+        return float(self.mesh.rest_lengths.mean())
+
+    @property
+    def work(self) -> int:
+        """A run-time estimate (entries × iteration budget), for scheduling."""
+        return (2 * self.mesh.n_edges + self.mesh.n_vertices) * self.params.max_iter
+
+
+_GENERATED: dict[str, Mesh] | None = None
+
+
+def resolve_study_mesh(name: str) -> tuple[str, Mesh, FlattenParams]:
+    """``(display name, mesh, default parameters)`` for a built-in, generated or file mesh.
+
+    Built-ins take their paper parameter sets (jacobi, no damping); generated
+    and file meshes take :data:`GENERATED_PARAMS`.
+    """
+    global _GENERATED
+    path = Path(name)
+    if is_builtin(name) and not path.is_file():
+        mesh, paper = builtin_mesh(name)
+        return name.lower(), mesh, FlattenParams(spring=paper.spring, density=paper.density,
+                                                 tol_area=paper.tol_area, tol_shape=paper.tol_shape,
+                                                 tol_energy=paper.tol_energy, max_iter=paper.max_iter)
+    if name.lower() in GENERATED_MESH_NAMES and not path.is_file():
+        if _GENERATED is None:
+            from ..generate import generated_meshes
+
+            _GENERATED = generated_meshes()
+        return name.lower(), _GENERATED[name.lower()], GENERATED_PARAMS
+    if path.is_file():
+        return path.stem, load_mesh(path), GENERATED_PARAMS
+    raise ParameterError(f"unknown mesh '{name}': expected one of {', '.join(STUDY_MESHES)} or a mesh file")
+
+
+def build_cases(meshes: Sequence[str] = STUDY_MESHES, inits: Sequence[str] = ("pca", "tutte"),
+                steps: Sequence[str] = ("fixed", "variable"), max_iter: int | None = None) -> list[StudyCase]:
+    """Every combination mesh × init × step (meshes in the given order, duplicates dropped)."""
+    if not meshes:
+        raise ParameterError("no meshes to study")
+    for init in inits:
+        if init not in ("pca", "tutte"):
+            raise ParameterError(f"unknown initial layout '{init}': expected pca or tutte")
+    cases: list[StudyCase] = []
+    seen: set[str] = set()
+    for spec in meshes:
+        label, mesh, params = resolve_study_mesh(spec)
+        if label in seen:
+            if spec.lower() in seen:
+                continue  # the same mesh twice
+            k = 2
+            while f"{label}-{k}" in seen:
+                k += 1
+            label = f"{label}-{k}"
+        seen.add(label)
+        if max_iter is not None:
+            params = params.with_(max_iter=max_iter)
+        for init in inits:
+            p0 = initial_layout(mesh, init)
+            for step in steps:
+                cases.append(StudyCase(f"{label}/{init}/{step}", label, mesh, init, p0, params.with_(step=step)))
+    return cases

@@ -1,0 +1,12 @@
+"""The exit statuses of ``springflat`` (besides 0 and 1), in one place.
+
+A module of its own with no imports, so that the console script's door (:mod:`sim.entry`) can use
+them before the commands are imported.
+"""
+
+EXIT_USAGE = 2
+"""Bad arguments or input: one line ``springflat: error: ...``."""
+EXIT_DIVERGED = 3
+"""A run diverged (its last finite layout is still written)."""
+EXIT_INTERRUPTED = 130
+"""Ctrl-C (SIGINT), as a shell reports it: 128 + 2."""

@@ -1,0 +1,180 @@
+"""One flattening as ``springflat flatten`` runs it: the engine chosen, the run, the one-line result, the JSON
+summary and the output files.
+
+``sim/cli.py`` (the command) and ``sim/batch.py`` (many meshes, each in a worker) both run a mesh
+through here."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from golden_model.fixed.engine import check_fixed_params, flatten_fixed
+from golden_model.mesh import Mesh
+from golden_model.params import FlattenParams
+from golden_model.reference import flatten
+from golden_model.results import FlattenResult
+
+from .distortion import distortion, worst_summary, write_distortion_csv
+from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
+from .patterns import PatternDrawing, check_mesh_fits, run_caption, write_pattern_file
+from .run_options import UserError, default_init, load_format_set, start_positions
+
+
+def _progress(total: int, enabled: bool):
+    """A tqdm bar on stderr that appears only for runs longer than ~2 s."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="it", delay=2.0, disable=not enabled, file=sys.stderr, leave=False)
+
+
+def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
+    """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units)."""
+    if any(str(path).lower().endswith((".pdf", ".svg")) and not str(path).lower().endswith(".flat.svg")
+           for path in args.out or ()):
+        check_mesh_fits(mesh, args.units, args.paper)
+
+
+def choose_engine(args: argparse.Namespace):
+    """The engine ``--engine`` and ``--formats`` name: ``engine(mesh, P0, params, on_iteration=None)``."""
+    if args.engine == "fixed":
+        formats = load_format_set(args.formats or "default")
+
+        def engine(*run_args, **kw):
+            return flatten_fixed(*run_args, fs=formats, **kw)
+        return engine
+    if args.engine == "rtl":
+        return _rtl_engine(load_format_set(args.formats or "default"))
+    if args.engine == "board":  # the engine on a board, over its UART (sim/board_run.py)
+        from .board_run import board_engine
+
+        return board_engine(load_format_set(args.formats or "default"), args.port, args.baud)
+    if args.formats is not None:
+        raise UserError("--formats applies to --engine fixed and --engine rtl")
+    return flatten
+
+
+def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, progress: bool = False) -> FlattenResult:
+    """One flattening as ``args`` asks (initial layout, engine); sets ``args.init`` to the layout used.
+
+    What the formats or the engine cannot run is refused before any layout work; a guarded run starts
+    fold-free where that can be had (:func:`~sim.run_options.start_positions`)."""
+    if args.init is None:
+        args.init = default_init(args.mesh)
+    if args.engine in ("fixed", "rtl", "board"):
+        check_fixed_params(params, load_format_set(args.formats or "default"))
+        if args.engine in ("rtl", "board"):
+            from golden_model.engine_spec.image import check_engine_params
+
+            check_engine_params(params)
+    engine = choose_engine(args)
+    positions, args.init = start_positions(mesh, args.init, params, sys.stderr.isatty())
+    # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
+    with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
+
+
+def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:
+    """What ``--json`` prints: the mesh, the run's summary, the distortion's worst 1 %, what was used."""
+    return {"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
+            **result.summary(), "units": args.units,
+            "distortion": worst_summary(distortion(mesh, result.positions)),
+            "used": what_was_used(params, args.init, result)[len("springflat: "):]}
+
+
+def human_line(mesh: Mesh, result: FlattenResult) -> str:
+    """The one-line result a person reads."""
+    final = result.final
+    return (f"{mesh.name}: {result.status} after {result.iterations} iterations: "
+            f"E_S {result.initial.area_error:.4f} -> {final.area_error:.4f}, "
+            f"E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
+            f"folded {final.folded} (flipped against P0: {final.flipped})"
+            + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed"
+               else "")
+            + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
+               if "simulator" in result.extra else ""))
+
+
+def _rtl_engine(formats):
+    """``--engine rtl``: the whole flattening through SpringflatEngine on Verilator (``sim.engine_run``),
+    with the engine's default capacity (``SPRINGFLAT_ENGINE_CAPACITY=V,E,T`` overrides it: the tests use a
+    small engine); a mesh over capacity is a one-line error."""
+    import contextlib
+    import os
+
+    from golden_model.fixed.engine import check_fixed_params, prepare
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, check_engine_params
+
+    capacity = DEFAULT_CAPACITY
+    if os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
+        try:
+            capacity = EngineCapacity(*(int(v) for v in os.environ["SPRINGFLAT_ENGINE_CAPACITY"].split(",")))
+        except (TypeError, ValueError) as exc:
+            raise UserError(f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
+
+    from .cocotb_support import SimulatorError
+    from .engine_run import EngineRunError, flatten_on_rtl
+
+    def engine(mesh, positions, params, on_iteration=None):
+        import tempfile
+
+        check_fixed_params(params, formats)
+        check_engine_params(params)
+        problem = prepare(mesh, positions, params, formats)
+        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build
+        print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
+              f"{capacity.entries}/{capacity.triangles} (cached) and running the flattening ...", file=sys.stderr)
+        with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
+            try:  # the simulator's own output goes to a log: stdout is for the result
+                with contextlib.redirect_stdout(sys.stderr):
+                    return flatten_on_rtl(problem, capacity, "verilator", work=Path(tmp) / "run",
+                                          log_file=Path(tmp) / "simulation.log")
+            except (SimulatorError, EngineRunError) as exc:
+                raise UserError(str(exc)) from None
+
+    return engine
+
+
+def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> str:
+    """One line: dynamics, initial layout, stop rule, and why the run stopped."""
+    if params.dynamics == "momentum":
+        dynamics = "momentum dynamics" + (f", fold barrier (kappa {params.barrier_threshold:g}, mu "
+                                          f"{params.barrier_gain:g})" if params.barrier else ", no barrier")
+    else:
+        dynamics = (f"paper dynamics, {params.step} step" + (f", damping {params.damping:g}" if params.damping else "")
+                    + (f", fold barrier (kappa {params.barrier_threshold:g}, mu {params.barrier_gain:g})"
+                       if params.barrier else ""))
+    rule = f"relative energy change <= {params.tol_energy:g}"
+    if params.tol_area < 1 or params.tol_shape < 1:
+        rule = f"E_S <= {params.tol_area:g}, E_C <= {params.tol_shape:g} and {rule}"
+    why = {"converged": "the stop rule held", "max-iterations": f"N_max = {params.max_iter} reached",
+           "diverged": "a value stopped being finite"}[result.status]
+    return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
+
+
+def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:
+    """Write the outputs asked for: all of them, or (on an error) none."""
+    title = f"{mesh.name} ({result.engine} engine)"
+    final = result.final
+    drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
+        result.status, result.iterations, final.area_error, final.shape_error, final.folded))
+    jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=args.paper, dxf_edges=args.dxf_edges))
+            for path in args.out or ()]
+    jobs += [(args.history, "--history", lambda path: write_history(path, result)),
+             (args.plot, "--plot", lambda path: write_plot(path, result, mesh.faces, title=title,
+                                                           vertices=mesh.vertices)),
+             (args.distortion, "--distortion",
+              lambda path: write_distortion_csv(path, distortion(mesh, result.positions), args.units))]
+    with all_or_nothing():
+        for path, what, write in jobs:
+            if path is None:
+                continue
+            try:
+                write(path)
+            except OutputWriteError as exc:
+                raise OutputWriteError(exc.path, exc.error, what) from None
+            except OSError as exc:
+                raise OutputWriteError(path, exc, what) from None

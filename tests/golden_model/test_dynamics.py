@@ -1,0 +1,175 @@
+"""The momentum dynamics and the fold barrier of the float reference (docs/dynamics.md)."""
+
+import numpy as np
+import pytest
+
+from golden_model.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap
+from golden_model.layouts import initial_layout
+from golden_model.params import FlattenParams, ParameterError
+from golden_model.reference import (
+    barrier_energy,
+    barrier_forces,
+    flatten,
+    iterations_to_within,
+    momentum_beta,
+    node_weights,
+)
+from support import SCANS
+
+#: The issue's generated meshes: a 10-ring spherical cap, a 15×15 saddle, a 12×12 cylinder strip.
+GENERATED = {
+    "cap": lambda: spherical_cap(10),
+    "saddle": lambda: saddle_grid(15),
+    "cylinder": lambda: rolled_grid(12, 12, arc_degrees=180)[0],
+}
+RUN = dict(tol_area=1.0, tol_shape=1.0, tol_energy=0.0, energy_window=1000)  # never converged: run exactly max_iter
+
+
+@pytest.fixture(scope="module", params=list(GENERATED))
+def generated(request):
+    mesh = GENERATED[request.param]()
+    p0 = initial_layout(mesh, "tutte")
+    minimum = flatten(mesh, p0, FlattenParams(dynamics="momentum", barrier=False, max_iter=3000, **RUN))
+    return request.param, mesh, p0, minimum.final.shape_error
+
+
+@pytest.mark.parametrize("barrier", [True, False])
+def test_momentum_reaches_the_minimum_within_120_iterations_with_and_without_the_barrier(generated, barrier):
+    name, mesh, p0, target = generated
+    result = flatten(mesh, p0, FlattenParams(dynamics="momentum", barrier=barrier, max_iter=200, **RUN))
+    count = iterations_to_within(result.history.shape_error, target)
+    # the issue's bound; the barrier's smaller weights apply only at nodes with a triangle inside
+    # it, so it costs the generated meshes next to nothing (docs/dynamics.md)
+    assert count is not None and count <= 120, (name, count)
+    assert result.final.folded == 0
+
+
+def test_paper_dynamics_needs_thousands(generated):
+    name, mesh, p0, target = generated
+    if name != "saddle":
+        pytest.skip("one mesh is enough to show the gap")
+    result = flatten(mesh, p0, FlattenParams(dynamics="paper", density="auto", damping=0.001, max_iter=2000, **RUN))
+    assert iterations_to_within(result.history.shape_error, target) is None
+
+
+def test_weights_are_two_over_c_times_degree():
+    mesh = saddle_grid(4)
+    degree = np.diff(mesh.neighbours[0])
+    assert np.allclose(node_weights(mesh, 0.5) * 0.5 * degree, 2.0)
+    assert [momentum_beta(k) for k in (0, 1, 3)] == [0.0, 0.25, 0.5]
+
+
+def test_barrier_forces_are_minus_a_quarter_of_its_gradient():
+    mesh = spherical_cap(3)
+    rng = np.random.default_rng(1)
+    positions = initial_layout(mesh, "tutte") * 0.6 + rng.normal(0, 0.05, (mesh.n_vertices, 2))
+    args = (mesh.faces, mesh.face_areas, 1.0, 0.5, 2.0, 0.5)
+    assert barrier_energy(positions, *args) > 0
+    forces = barrier_forces(positions, *args)
+    h = 1e-6
+    numeric = np.zeros_like(positions)
+    for i in range(mesh.n_vertices):
+        for d in range(2):
+            up, down = positions.copy(), positions.copy()
+            up[i, d] += h
+            down[i, d] -= h
+            numeric[i, d] = -(barrier_energy(up, *args) - barrier_energy(down, *args)) / (2 * h) / 4
+    assert np.allclose(forces, numeric, atol=1e-7)
+
+
+def test_barrier_is_zero_on_the_3d_shape_and_mirrors_with_the_winding():
+    mesh = rolled_grid(5, 5, arc_degrees=60)[0]
+    flat = rolled_grid(5, 5, arc_degrees=60)[1]
+    args = (mesh.faces, mesh.face_areas)
+    assert barrier_energy(flat, *args, 1.0, 0.5, 1.0, 0.5) == 0
+    mirrored = flat * [-1, 1]
+    assert barrier_energy(mirrored, *args, -1.0, 0.5, 1.0, 0.5) == 0
+    assert barrier_energy(mirrored, *args, 1.0, 0.5, 1.0, 0.5) > 0  # the wrong winding: every face folded
+
+
+def test_barrier_unfolds_a_folded_start():
+    mesh = spherical_cap(4)
+    p0 = initial_layout(mesh, "tutte")
+    p0[0] = p0[mesh.boundary_loop[0]] * 0.9  # the pole dragged out to the rim: its fan folds
+    start = flatten(mesh, p0, FlattenParams(dynamics="momentum", max_iter=1, **RUN))
+    assert start.initial.folded > 0
+    # without the guard: the barrier alone pushes a fold open (the guard keeps a fold from deepening,
+    # and a folded start is untangled before a guarded run: test_guard.py)
+    without = flatten(mesh, p0, FlattenParams(dynamics="momentum", guard=False, barrier=False, max_iter=300, **RUN))
+    with_barrier = flatten(mesh, p0, FlattenParams(dynamics="momentum", guard=False, barrier=True, max_iter=300,
+                                                   **RUN))
+    assert with_barrier.final.folded == 0
+    assert with_barrier.final.folded <= without.final.folded
+
+
+def test_restart_zeroes_the_velocity_one_iteration_after_s_turns_negative():
+    mesh = saddle_grid(6)
+    p0 = initial_layout(mesh, "tutte")
+    from golden_model.reference import SpringModel, _Jacobi
+    params = FlattenParams(dynamics="momentum", barrier=False, guard=False)
+    engine = _Jacobi(SpringModel.build(mesh, p0, params.spring, params.density), params, p0)
+    restarts = 0
+    for _ in range(100):
+        forces, velocities = engine.forces(), engine.velocities.copy()
+        pending = engine.restart
+        engine.advance(1.0)
+        if pending:
+            restarts += 1
+            assert engine.momentum_k == 1
+            assert np.allclose(engine.velocities, engine.model.weights[:, None] * forces)
+        assert engine.restart == (not pending and float(np.sum(forces * velocities)) < 0)
+    assert restarts > 0
+
+
+@pytest.mark.parametrize("changes, message", [
+    (dict(barrier_threshold=0.0), "barrier threshold kappa must be in (0, 1]"),
+    (dict(barrier_threshold=1.5), "barrier threshold kappa must be in (0, 1]"),
+    (dict(barrier_gain=-1.0), "barrier gain mu must be in (0, 16]"),
+    (dict(barrier_gain=float("nan")), "barrier gain must be a finite number"),
+    (dict(dynamics="verlet"), "dynamics must be one of"),
+    (dict(dynamics="momentum", update="sequential"), "use --update jacobi"),
+    (dict(dynamics="momentum", damping=0.1), "drop --damping"),
+])
+def test_bad_parameters_are_one_line(changes, message):
+    with pytest.raises(ParameterError, match=None) as info:
+        FlattenParams(**changes)
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_barrier_defaults_follow_the_dynamics():
+    assert FlattenParams().barrier is False
+    assert FlattenParams(dynamics="momentum").barrier is True
+    assert FlattenParams(dynamics="paper", barrier=True).barrier is True
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scan", ["nefertiti_face", "bunny_ear"])
+def test_strongly_curved_scans_end_fold_free_and_below_arap(scan):
+    """From a flip-free ARAP layout, momentum + the default barrier: no folds, E_C below ARAP's."""
+
+    from golden_model.mesh_io import load_mesh
+    from golden_model.reference import SpringModel, measure
+
+    mesh = load_mesh(SCANS / f"{scan}.obj")
+    p0 = initial_layout(mesh, "arap")
+    start = measure(SpringModel.build(mesh, p0, 0.5, "auto"), p0)
+    assert start.folded == 0
+    result = flatten(mesh, p0, FlattenParams(dynamics="momentum", max_iter=1000, **RUN))
+    assert result.final.folded == 0
+    assert result.final.shape_error < start.shape_error
+    unprotected = flatten(mesh, p0, FlattenParams(dynamics="momentum", barrier=False, guard=False, max_iter=1000,
+                                                  **RUN))
+    assert unprotected.final.folded > 100  # what the barrier and the guard each prevent
+
+
+@pytest.mark.parametrize("name, mesh", [("cap, 15 rings", spherical_cap(15)),
+                                        pytest.param("bumpy 31×31", bumpy_grid(31), marks=pytest.mark.slow)])
+def test_guarded_defaults_reach_the_minimum_within_120_iterations_at_radius_15(name, mesh):
+    """Issue 25's bound at about 15 edges of radius, from Tutte, with the defaults (guard and barrier): met
+    on the cap and the bumpy patch. The 31×31 saddle and cylinder strip need 175 and 217 (docs/guard.md)."""
+    p0 = initial_layout(mesh, "tutte")
+    minimum = flatten(mesh, p0, FlattenParams(dynamics="momentum", max_iter=3000, **RUN))
+    result = flatten(mesh, p0, FlattenParams(dynamics="momentum", max_iter=200, **RUN))
+    count = iterations_to_within(result.history.shape_error, minimum.final.shape_error)
+    assert count is not None and count <= 120, (name, count)
+    assert max(result.history.folded) == 0

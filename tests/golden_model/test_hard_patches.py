@@ -1,0 +1,54 @@
+"""The guarantees on generated patches of the kinds that broke the unguarded dynamics on public scans
+(docs/corpus.md): fingers and a horn tip whose ARAP layout folds, and a sliver-strewn patch."""
+
+import numpy as np
+import pytest
+
+from golden_model.generate import hard_patches
+from golden_model.layouts import initial_layout, slim_layout, start_layout
+from golden_model.mesh import folded_faces
+from golden_model.params import FlattenParams
+from golden_model.reference import SpringModel, flatten, measure
+from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius
+
+PATCHES = hard_patches()
+
+
+def file_defaults(mesh, **changes) -> FlattenParams:
+    """What a mesh file gets with no options (sim.run_options.resolve_mesh)."""
+    return FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0,
+                         tol_energy=FILE_TOL_ENERGY,
+                         max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh))).with_(**changes)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(PATCHES))
+def test_the_no_option_run_is_fold_free_and_beats_slim(name):
+    mesh = PATCHES[name]
+    arap = initial_layout(mesh, "arap")
+    assert folded_faces(arap, mesh.faces).sum() > 0  # the kind that broke: a folded default start
+    start = start_layout(mesh, "auto")
+    assert start.method == "slim" and start.folded == 0
+    result = flatten(mesh, start.positions, file_defaults(mesh))
+    assert result.status in ("converged", "max-iterations", "stalled")
+    assert max(result.history.folded) == 0
+    slim = slim_layout(mesh)
+    assert result.final.shape_error <= measure(SpringModel.build(mesh, slim, 0.5, "auto"), slim).shape_error
+    # what the guard prevents: the unguarded dynamics from the same start folds, or raises its energy
+    unguarded = flatten(mesh, start.positions, file_defaults(mesh, guard=False, energy_window=1, tol_energy=1e-7,
+                                                             max_iter=300))
+    assert unguarded.status == "diverged" or max(unguarded.history.folded) > 0 \
+        or np.any(np.diff(unguarded.history.energy) > 0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(PATCHES))
+@pytest.mark.parametrize("barrier", [None, (0.05, 0.01), (0.05, 16.0), (0.5, 4.0), (1.0, 0.01), (1.0, 16.0)])
+def test_from_a_fold_free_start_no_barrier_setting_folds_or_diverges(name, barrier):
+    mesh = PATCHES[name]
+    tutte = initial_layout(mesh, "tutte")  # fold-free by construction
+    assert folded_faces(tutte, mesh.faces).sum() == 0
+    options = dict(barrier=False) if barrier is None else dict(barrier_threshold=barrier[0], barrier_gain=barrier[1])
+    result = flatten(mesh, tutte, file_defaults(mesh, max_iter=400, **options))
+    assert result.status != "diverged"
+    assert max(result.history.folded) == 0

@@ -1,0 +1,234 @@
+"""The engine's register map (golden_model.engine_spec.register_map) and its exports (sim/register_map_export.py)."""
+
+import dataclasses
+import json
+import re
+import shutil
+import subprocess
+
+import pytest
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import prepare
+from golden_model.engine_spec.image import (RESULTS, EngineCapacity, build_image, energy_width, memory_layouts,
+                                             run_constant_fields)
+from golden_model.engine_spec.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
+from golden_model.generate import dome_grid
+from golden_model.layouts import initial_layout
+from golden_model.engine_spec.image import UNGUARDED
+from golden_model.params import FlattenParams
+from sim.register_map_export import EXPORT_FILES, c_header, markdown, to_json, write_exports
+from support import DOCS
+
+PRESETS = FormatSet.presets()
+SMALL = EngineCapacity(vertices=100, entries=600, triangles=200)
+
+
+@pytest.fixture(scope="module", params=PRESETS)
+def fs(request):
+    return FormatSet.preset(request.param)
+
+
+@pytest.fixture(scope="module")
+def regmap(fs):
+    return RegisterMap.build(fs, SMALL)
+
+
+def test_identification_and_capacity_read_back_as_reset_values(regmap, fs):
+    assert regmap.register("ID").reset == MAGIC == int.from_bytes(b"SPFL", "big")
+    assert regmap.register("FORMAT_HASH").reset == format_hash(fs)
+    for what in ("vertices", "entries", "triangles"):
+        r = regmap.register(f"CAP_{what.upper()}")
+        assert (r.access, r.reset) == ("ro", getattr(SMALL, what))
+
+
+def test_the_format_hash_tells_format_sets_apart_but_not_their_names():
+    default = FormatSet.preset("default")
+    assert format_hash(default) == format_hash(default.replace(name="renamed"))
+    assert format_hash(default) != format_hash(default.replace(position="s11.22"))
+
+
+def test_control_and_status_fields(regmap):
+    control = {f.name: f for f in regmap.register("CONTROL").fields}
+    assert {n: (f.access, f.width) for n, f in control.items()} == {
+        "start": ("w1p", 1), "abort": ("w1p", 1), "irq_enable": ("rw", 1)}
+    status = {f.name: f for f in regmap.register("STATUS").fields}
+    assert status["state"].codes == ("idle", "running", "done") and status["state"].width == 2
+    assert status["result"].codes == ("none", "converged", "max-iterations", "diverged", "no-mesh", "bad-constants")
+    assert 2 ** status["result"].width >= len(RESULTS)
+    assert status["irq_pending"].access == "w1c"
+
+
+def test_every_run_constant_and_result_has_its_width(regmap, fs):
+    for c in run_constant_fields(fs, SMALL):
+        assert regmap.value_width(c.name) == c.width, c.name
+        assert all(r.access == "rw" for r, _ in regmap.value_fields(c.name))
+    assert regmap.value_width("area_error") == regmap.value_width("shape_error") == fs.error.width
+    assert regmap.value_width("cycles") == 64
+    assert [r.name for r, _ in regmap.value_fields("cycles")] == ["CYCLES_LO", "CYCLES_HI"]
+    width = energy_width(fs, SMALL)
+    names = [r.name for r, _ in regmap.value_fields("energy")]
+    assert names == [f"ENERGY_{k}" for k in range(-(-width // 32))] and regmap.value_width("energy") == width
+    assert len(names) >= 3  # a wide value spans as many registers as it needs
+
+
+def test_multi_word_values_are_aligned(regmap):
+    for value in ("cycles", "energy", "tol_energy"):
+        regs = [r for r, _ in regmap.value_fields(value)]
+        span = 1 << (len(regs) - 1).bit_length()
+        assert regs[0].offset % span == 0, value
+        assert [r.offset for r in regs] == list(range(regs[0].offset, regs[0].offset + len(regs)))
+
+
+def test_windows_follow_the_memory_layouts(regmap, fs):
+    layouts = memory_layouts(fs, SMALL)
+    last_register = max(r.offset for r in regmap.registers)
+    for w in regmap.windows:
+        layout = layouts[w.name]
+        assert (w.depth, w.words, w.stride, w.fields) == (layout.depth, layout.words, layout.stride, layout.fields)
+        assert w.base > last_register and w.base % w.size == 0 and w.size >= w.depth * w.stride
+
+
+def test_decode_selects_exactly_the_mapped_words(regmap):
+    """Every address up to past the last window: a register, a memory word, or None (bus error)."""
+    expected = {r.offset: r for r in regmap.registers}
+    for w in regmap.windows:
+        for i in range(w.depth):
+            for k in range(w.words):
+                expected[w.base + i * w.stride + k] = (w, i, k)
+    end = max(w.base + w.size for w in regmap.windows)
+    for address in range(end + 64):
+        assert regmap.decode(address) == expected.get(address), hex(address)
+
+
+def test_encode_and_decode_values_round_trip(regmap, fs):
+    mesh = dome_grid(6)
+    params = FlattenParams(dynamics="momentum", **UNGUARDED, tol_energy=3.5)
+    constants = build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), SMALL).constants
+    words = regmap.encode(constants)
+    assert set(words) <= {r.offset for r in regmap.registers if r.access == "rw"}
+    assert {n: regmap.decode_value(n, words) for n in constants} == constants
+    mode = {f.name: f.lsb for f in regmap.register("MODE").fields}
+    assert words[regmap.register("MODE").offset] == (1 << mode["momentum"]) | (1 << mode["barrier"])
+    # tol_energy = 3.5 · 2^40 is wider than a word: the high word holds its bits 63:32
+    assert words[regmap.register("TOL_ENERGY_HI").offset] == (7 << 39) >> 32
+
+
+def test_signed_values_are_twos_complement_over_their_width(regmap, fs):
+    width = fs.spring.width
+    words = regmap.encode({"half_spring": -3})
+    assert words[regmap.register("HALF_SPRING").offset] == (1 << width) - 3
+    assert regmap.decode_value("half_spring", words) == -3
+    with pytest.raises(ValueError, match=f"half_spring = {1 << (width - 1)} does not fit its {width}-bit register"):
+        regmap.encode({"half_spring": 1 << (width - 1)})
+
+
+def _rebuilt(regmap, **changes):
+    return dataclasses.replace(regmap, **changes)
+
+
+def test_the_checks_refuse_a_broken_map(regmap):
+    regs = list(regmap.registers)
+    with pytest.raises(ValueError, match=r"register map: X and ID overlap at word 0"):
+        _rebuilt(regmap, registers=tuple(regs + [dataclasses.replace(regmap.register("ITERATIONS"), name="X",
+                                                                     offset=0)]))
+    with pytest.raises(ValueError, match="duplicate register names"):
+        _rebuilt(regmap, registers=tuple(regs + [dataclasses.replace(regs[1], offset=0x7)]))
+    clash = Register("X", 0x7, "rw", "", (BitField("a", 0, 4, "rw", ""), BitField("b", 3, 2, "rw", "")), "control")
+    with pytest.raises(ValueError, match=r"register map: X\.b overlaps another field"):
+        _rebuilt(regmap, registers=tuple(regs + [clash]))
+    wide = Register("X", 0x7, "rw", "", (BitField("a", 20, 13, "rw", ""),), "control")
+    with pytest.raises(ValueError, match=r"X\.a .* does not fit a 32-bit register"):
+        _rebuilt(regmap, registers=tuple(regs + [wide]))
+    stray = Register("X", 0x7, "rw", "", (BitField("a", 0, 4, "rw", ""),), "control", reset=0x10)
+    with pytest.raises(ValueError, match="reset 0x10 sets bits outside its fields"):
+        _rebuilt(regmap, registers=tuple(regs + [stray]))
+    first = regmap.windows[0]
+    with pytest.raises(ValueError, match=f"window {first.name} at 0x0 overlaps"):
+        _rebuilt(regmap, windows=(dataclasses.replace(first, base=0),) + regmap.windows[1:])
+    with pytest.raises(ValueError, match=f"window {first.name} at .* is not aligned to its size"):
+        _rebuilt(regmap, windows=(dataclasses.replace(first, base=first.base + first.size // 2),)
+                 + regmap.windows[1:])
+
+
+# ---------------------------------------------------------------------------------------- exports
+
+def test_json_round_trips_the_map(regmap):
+    text = to_json(regmap)
+    assert RegisterMap.from_dict(json.loads(text)) == regmap
+    changed = json.loads(text)
+    changed["registers"][0]["reset"] ^= 1
+    assert RegisterMap.from_dict(changed) != regmap  # the comparison sees a change
+
+
+def test_markdown_lists_every_register_field_and_window(regmap):
+    text = markdown(regmap)
+    for r in regmap.registers:
+        for f in r.fields:
+            assert re.search(rf"\| `0x{r.offset:04X}` \| `{r.name}` \| [0-9:]+ \| `{f.name}` \| {f.access} \|", text), \
+                (r.name, f.name)
+    for w in regmap.windows:
+        assert f"| `{w.name}` | `0x{w.base:05X}` | {w.depth} | {w.words} | {w.stride} |" in text
+        for f in w.fields:
+            assert f"| `{f.name}` | {f.width} |" in text
+    assert "0 idle, 1 running, 2 done" in text
+    version = regmap.register("VERSION").offset
+    assert f"| `0x{version:04X}` | `VERSION` | 31:16 | `major` | ro | `0x{VERSION[0]:X}` |" in text
+    assert f"| `0x{version:04X}` | `VERSION` | 15:0 | `minor` | ro | `0x{VERSION[1]:X}` |" in text
+    assert f"| `CAP_ENTRIES` | 31:0 | `value` | ro | `0x{SMALL.entries:X}` |" in text
+
+
+def _expected_defines(regmap):
+    """Every number the header must define, from the map."""
+    want = {"SPRINGFLAT_MAGIC": MAGIC, "SPRINGFLAT_FORMAT_HASH": regmap.format_hash}
+    for r in regmap.registers:
+        want[f"SPRINGFLAT_{r.name}_ADDR"] = r.offset
+        want[f"SPRINGFLAT_{r.name}_RESET"] = r.reset
+        for f in r.fields:
+            key = f"SPRINGFLAT_{r.name}_{f.name.upper()}"
+            want[key + "_SHIFT"], want[key + "_MASK"], want[key + "_WIDTH"] = f.lsb, f.mask, f.width
+    for i, s in enumerate(STATES):
+        want[f"SPRINGFLAT_STATE_{s.upper()}"] = i
+    for i, s in enumerate(RESULTS):
+        want[f"SPRINGFLAT_RESULT_{s.upper().replace('-', '_')}"] = i
+    for w in regmap.windows:
+        for what in ("base", "depth", "words", "stride", "size"):
+            want[f"SPRINGFLAT_{w.name.upper()}_{what.upper()}"] = getattr(w, what)
+        lsb = 0
+        for f in w.fields:
+            want[f"SPRINGFLAT_{w.name.upper()}_{f.name.upper()}_LSB"] = lsb
+            lsb += f.width
+    return want
+
+
+def test_the_c_header_compiles_and_holds_the_map(regmap, tmp_path):
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        pytest.skip("no C compiler on this machine")
+    (tmp_path / "springflat_regs.h").write_text(c_header(regmap))
+    want = _expected_defines(regmap)
+    prints = "\n".join(f'    printf("{k} %llu\\n", (unsigned long long)({k}));' for k in want)
+    (tmp_path / "check.c").write_text(f'#include <stdio.h>\n#include "springflat_regs.h"\n'
+                                      f'#include "springflat_regs.h"\nint main(void) {{\n{prints}\n    return 0;\n}}\n')
+    subprocess.run([compiler, "-std=c99", "-Wall", "-Werror", "-o", str(tmp_path / "check"), str(tmp_path / "check.c")],
+                   check=True, capture_output=True)
+    output = subprocess.run([str(tmp_path / "check")], check=True, capture_output=True, text=True).stdout
+    got = {name: int(value) for name, value in (line.split() for line in output.splitlines())}
+    assert got == want
+
+
+def test_write_exports_writes_all_three(regmap, tmp_path):
+    paths = write_exports(regmap, tmp_path / "out")
+    assert [p.name for p in paths] == list(EXPORT_FILES)
+    assert RegisterMap.from_dict(json.loads(paths[1].read_text())) == regmap
+    assert paths[2].read_text() == c_header(regmap) and paths[0].read_text() == markdown(regmap)
+
+
+def test_the_engine_doc_holds_the_generated_map():
+    """docs/engine.md embeds the exported map of the capacity its marker names: it cannot drift."""
+    text = (DOCS / "engine.md").read_text()
+    m = re.search(r"<!-- generated: python -m sim.register_map_export --formats (\w+) --capacity (\d+) (\d+) (\d+) -->"
+                  r"\n(.*)\n<!-- end of generated -->", text, re.S)
+    assert m, "docs/engine.md lost its generated register map"
+    regmap = RegisterMap.build(FormatSet.preset(m.group(1)), EngineCapacity(*map(int, m.group(2, 3, 4))))
+    assert m.group(5) == markdown(regmap, level=3)

@@ -1,0 +1,312 @@
+"""SpringflatEngine on Amaranth's simulator: whole flattenings through the Wishbone bus and the host driver,
+bit for bit against the golden model's image-driven controller (``run_image``), and the engine's answers to
+bad requests. (The exported Verilog on Icarus and Verilator: ``tests/sim/test_engine_rtl.py``.)"""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from amaranth.sim import Simulator
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import prepare
+from golden_model.fixed.format import Format
+from golden_model.engine_spec.image import EngineCapacity, build_image, run_image
+from golden_model.generate import dome_grid
+from golden_model.layouts import initial_layout
+from golden_model.params import FlattenParams
+from hdl.engine import SpringflatEngine
+from support.wishbone import ThreadedBus, wishbone_read, wishbone_write
+from sim.engine_driver import BusError, EngineDriver
+from golden_model.engine_spec.image import UNGUARDED
+
+pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
+
+FS = FormatSet.preset("default")
+CAPACITY = EngineCapacity(32, 256, 64)
+MESH = dome_grid(4)  # 16 vertices, 66 entries, 18 triangles
+
+RUNS = {
+    "paper-variable": FlattenParams(density="auto", max_iter=4),
+    "paper-fixed-barrier-damped": FlattenParams(density="auto", step="fixed", dt=0.2, damping=0.1, barrier=True,
+                                                max_iter=4),
+    # from the PCA layout the momentum restarts (S < 0) at the third and eighth steps
+    "momentum-barrier": FlattenParams(dynamics="momentum", **UNGUARDED, max_iter=9),
+}
+INIT = {"momentum-barrier": "pca"}
+
+
+def image_of(params: FlattenParams, capacity: EngineCapacity = CAPACITY, init: str = "tutte"):
+    problem = prepare(MESH, initial_layout(MESH, init), params, FS)
+    return build_image(problem, capacity)
+
+
+def simulate(dut, host, watch=None):
+    """Run ``host(driver, bus)`` (the synchronous driver, in a thread) against ``dut`` on the simulator."""
+    bus = ThreadedBus(BusError, wait_states=watch.get("wait_states") if watch else None)
+    bus.run(lambda: host(EngineDriver(bus, dut.register_map), bus))
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+
+    async def bench(ctx):
+        await bus.serve(ctx, dut.bus)
+
+    sim.add_testbench(bench)
+    if watch and "watcher" in watch:
+        sim.add_testbench(watch["watcher"], background=True)
+    sim.run()
+    return bus
+
+
+def run_on_engine(dut, image, watch=None):
+    """Load ``image``, start, wait, read back: ``(result, read_back)``."""
+    out = {}
+
+    def host(driver, bus):
+        driver.load(image)
+        driver.start()
+        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+        out["read_back"] = driver.read_back()
+
+    simulate(dut, host, watch)
+    return out["result"], out["read_back"]
+
+
+def assert_same_run(read_back, expected):
+    assert read_back.result == expected.status
+    assert read_back.iterations == expected.iterations
+    assert read_back.saturations == expected.saturations
+    assert (read_back.area_error, read_back.shape_error, read_back.energy) == (
+        expected.area_error, expected.shape_error, expected.energy)
+    np.testing.assert_array_equal(read_back.positions, expected.positions)
+    np.testing.assert_array_equal(read_back.velocities, expected.velocities)
+
+
+# The paper dynamics with variable step and the fixed step with barrier run here in one case each (the
+# momentum dynamics in the every-iteration test below); tests/sim/test_engine_rtl.py runs all three on the
+# exported Verilog.
+# The second run stores its 66 entries in banks of 32 words (three banks used of eight), the first in one.
+@pytest.mark.parametrize("run, bank_depth", [("paper-variable", 256), ("paper-fixed-barrier-damped", 32)])
+def test_whole_run_matches_the_golden_model(run, bank_depth):
+    image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
+    expected = run_image(image, FS)
+    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=bank_depth)
+    result, read_back = run_on_engine(dut, image)
+    assert result == expected.status
+    assert_same_run(read_back, expected)
+    assert read_back.cycles > 0
+
+
+def test_every_iteration_state_matches_with_bus_wait_states():
+    """The node memory after each integrate pass equals the golden model's state after that many iterations;
+    the host's bus cycles come with random idle clocks between them."""
+    import random
+
+    params = RUNS["momentum-barrier"]
+    image = image_of(params, init="pca")
+    states = {k: run_image(image_of(dataclasses.replace(params, max_iter=k), init="pca"), FS)
+              for k in range(1, params.max_iter + 1)}
+    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=64)  # the entries in two banks
+    seen = {}
+
+    async def watch(ctx):
+        iterations = dut.debug_signals["iterations"]
+        positions = dut.debug_memories["positions"]
+        last = 0
+        while True:
+            await ctx.tick()
+            k = ctx.get(iterations)
+            if k != last and k > 0:
+                seen[k] = np.array([[ctx.get(positions[i]).x, ctx.get(positions[i]).y]
+                                    for i in range(MESH.n_vertices)])
+            last = k
+
+    rng = random.Random(5)
+    _, read_back = run_on_engine(dut, image, {"watcher": watch, "wait_states": lambda: rng.choice([0, 0, 1, 4])})
+    expected = states[params.max_iter]
+    assert_same_run(read_back, expected)
+    assert sorted(seen) == list(range(1, expected.iterations + 1))
+    for k, positions in seen.items():
+        np.testing.assert_array_equal(positions, states[k].positions, err_msg=f"iteration {k}")
+
+
+def test_start_without_a_mesh_answers_no_mesh_and_running_memory_access_is_a_bus_error():
+    dut = SpringflatEngine(FS, CAPACITY)
+    rmap = dut.register_map
+    control, status = rmap.register("CONTROL"), rmap.register("STATUS")
+    nodes = rmap.window("nodes")
+    answers = {}
+
+    async def bench(ctx):
+        # START with nothing loaded (VERTICES reads 0 after reset)
+        await wishbone_write(ctx, dut.bus, control.offset, 1)
+        await ctx.tick().repeat(3)
+        answers["status"] = (await wishbone_read(ctx, dut.bus, status.offset)).data
+        # unmapped word, partial write, write to a read-only register
+        answers["unmapped"] = (await wishbone_read(ctx, dut.bus, rmap.windows[0].base - 1)).error
+        answers["partial"] = (await wishbone_write(ctx, dut.bus, rmap.register("MAX_ITER").offset, 5,
+                                                   sel=0b0011)).error
+        answers["read_only"] = (await wishbone_write(ctx, dut.bus, rmap.register("ITERATIONS").offset, 5)).error
+        answers["memory_idle"] = (await wishbone_read(ctx, dut.bus, nodes.address(0, 0))).error
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(bench)
+    sim.run()
+    result_field = next(f for f in status.fields if f.name == "result")
+    state_field = next(f for f in status.fields if f.name == "state")
+    word = answers["status"]
+    assert state_field.codes[(word >> state_field.lsb) & ((1 << state_field.width) - 1)] == "done"
+    assert result_field.codes[(word >> result_field.lsb) & ((1 << result_field.width) - 1)] == "no-mesh"
+    pending_field = next(f for f in status.fields if f.name == "irq_pending")
+    assert (word >> pending_field.lsb) & 1, "a run START ends at once leaves its interrupt pending"
+    assert answers["unmapped"] and answers["partial"] and answers["read_only"]
+    assert not answers["memory_idle"]
+
+
+def test_memory_access_while_running_is_a_bus_error_and_abort_then_a_clean_rerun():
+    image = image_of(dataclasses.replace(RUNS["paper-variable"], max_iter=50))
+    dut = SpringflatEngine(FS, CAPACITY)
+    out = {}
+
+    def host(driver, bus):
+        driver.load(image)
+        driver.start()
+        window = driver.map.window("nodes")
+        try:
+            bus.read(window.address(0, 0))
+            out["error"] = None
+        except BusError as exc:
+            out["error"] = str(exc)
+        driver.abort()
+        bus.idle(300)
+        out["status"] = driver._status_fields()
+        out["memory_after_abort"] = bus.read(window.address(0, 0))
+        # a clean rerun: the aborted run moved the nodes, so the host loads the image again
+        driver.load(rerun)
+        driver.start()
+        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+        out["read_back"] = driver.read_back()
+
+    rerun = image_of(RUNS["paper-variable"])
+    simulate(dut, host)
+    assert out["error"] is not None and "err" in out["error"]
+    assert out["status"] == ("idle", "none")
+    assert_same_run(out["read_back"], run_image(rerun, FS))
+
+
+def test_bad_run_constants_answer_as_constant_fault_says():
+    from golden_model.engine_spec.image import constant_fault
+
+    image = image_of(RUNS["paper-variable"])
+    top = 1 << (FS.reciprocal.width - 1)
+    cases = {
+        "no iterations": {"max_iter": 0},
+        "entries over capacity": {"entries": CAPACITY.entries + 1},
+        "no triangles": {"triangles": 0},
+        "reciprocal not u1.F": {"area_reciprocal": top - 1},
+        "shift too small": {"length_shift": FS.error.frac_bits + 1},
+        "fixed step of zero": {"fixed_step": 1, "dt": 0},
+        "good": {},
+    }
+    dut = SpringflatEngine(FS, CAPACITY)
+    answers = {}
+
+    def host(driver, bus):
+        driver.load(image)
+        for name, change in cases.items():
+            constants = {**image.constants, **change}
+            for offset, word in sorted(driver.map.encode(constants).items()):
+                bus.write(offset, word)
+            driver.start()
+            bus.idle(20)
+            answers[name] = driver._status_fields()
+            if answers[name][0] == "running":
+                driver.abort()
+                bus.idle(400)
+
+    simulate(dut, host)
+    for name, change in cases.items():
+        expected = constant_fault({**image.constants, **change}, FS, CAPACITY)
+        assert answers[name] == (("done", expected) if expected else ("running", "none")), name
+
+
+def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged():
+    """A run that saturates (a large spring constant and step): SATURATIONS equals the golden model's
+    count, and with a saturation limit the run stops as diverged at the same iteration."""
+    params = FlattenParams(step="fixed", dt=0.9, spring=7.0, density="auto", max_iter=6)
+    image = image_of(params)
+    expected = run_image(image, FS)
+    assert expected.saturations > 10  # the case saturates
+    limited = dataclasses.replace(image, constants={**image.constants, "saturation_limit": 4})
+    expected_limited = run_image(limited, FS)
+    assert expected_limited.status == "diverged"
+    for img, exp in ((image, expected), (limited, expected_limited)):
+        _, read_back = run_on_engine(SpringflatEngine(FS, CAPACITY), img)
+        assert_same_run(read_back, exp)
+
+
+@pytest.mark.parametrize("dynamics", ["momentum", "paper"])
+def test_area_and_shape_sum_saturations_are_counted(dynamics):
+    """Narrow face_edge and error_acc formats: the area pass's and the E_C sum's saturation events reach
+    SATURATIONS as the golden model counts them (the test above saturates only the force pass and the
+    integrator)."""
+    fs = dataclasses.replace(FS, face_edge=Format(True, 0, 22), error_acc=Format(False, 2, 16))
+    params = FlattenParams(dynamics=dynamics, density="auto", max_iter=6,
+                           **(UNGUARDED if dynamics == "momentum" else {}))
+    image = build_image(prepare(MESH, initial_layout(MESH, "tutte"), params, fs), CAPACITY)
+    expected = run_image(image, fs)
+    assert expected.saturations > 10  # the case saturates
+    _, read_back = run_on_engine(SpringflatEngine(fs, CAPACITY), image)
+    assert_same_run(read_back, expected)
+
+
+def test_error_measure_saturations_are_counted_before_the_limit_is_tested():
+    """A layout twice the mesh's size: E_S and E_C are 1 or more at every measurement, the only events
+    (the normalisers saturate; two per measurement). Counted as the golden model counts them, and with
+    a limit of 4 the run stops as diverged after its one iteration, not at N_max: the check phase waits until the
+    normalisers' events are in the count (without that wait it saw 3 and went on). 72 triangles: the area
+    normaliser answers after the energy check, so its event is the math phase's last."""
+    params = FlattenParams(density="auto", max_iter=1)
+    mesh, capacity = dome_grid(7), EngineCapacity(64, 512, 128)
+    image = build_image(prepare(mesh, 2.0 * initial_layout(mesh, "tutte"), params, FS), capacity)
+    expected = run_image(image, FS)
+    assert (expected.saturations, expected.status) == (4, "max-iterations")
+    limited = dataclasses.replace(image, constants={**image.constants, "saturation_limit": 4})
+    expected_limited = run_image(limited, FS)
+    assert (expected_limited.status, expected_limited.iterations) == ("diverged", 1)
+    for img, exp in ((image, expected), (limited, expected_limited)):
+        _, read_back = run_on_engine(SpringflatEngine(FS, capacity), img)
+        assert_same_run(read_back, exp)
+
+
+def test_bus_answers_take_the_documented_clocks():
+    """docs/engine.md: a register answers 5 clocks after ``stb`` rises, a memory word 9 (read or write),
+    an unmapped word's ``err`` 4; what is written reads back."""
+    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=4)
+    rmap = dut.register_map
+    max_iter = rmap.register("MAX_ITER").offset
+    entries = rmap.window("entries")
+    answers = {}
+
+    async def bench(ctx):
+        answers["register_write"] = await wishbone_write(ctx, dut.bus, max_iter, 1234)
+        # each cycle after an idle clock: a cycle presented back to back, while the last answer's
+        # ack is still out, starts a clock later (hdl/wishbone.py)
+        answers["register_read"] = await wishbone_read(ctx, dut.bus, max_iter, idle=1)
+        answers["memory_write"] = await wishbone_write(ctx, dut.bus, entries.address(5, 0), 0x5A5A5, idle=1)
+        answers["memory_read"] = await wishbone_read(ctx, dut.bus, entries.address(5, 0), idle=1)
+        answers["unmapped"] = await wishbone_read(ctx, dut.bus, rmap.windows[0].base - 1, idle=1)
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(bench)
+    sim.run()
+    # BusAnswer.clocks counts edges up to the one at which the initiator samples ack/err: one more
+    # than the edges after which the target raises it
+    raised_after = {name: a.clocks - 1 for name, a in answers.items()}
+    assert raised_after == {"register_write": 5, "register_read": 5, "memory_write": 9, "memory_read": 9,
+                            "unmapped": 4}
+    assert answers["register_read"].data == 1234 and not answers["register_read"].error
+    assert answers["memory_read"].data == 0x5A5A5 and not answers["memory_read"].error
+    assert answers["unmapped"].error

@@ -1,0 +1,68 @@
+"""``hdl.block_ram.BlockRam``: both forms read what a RAM reads, two clocks after the address.
+
+The generic form (an Amaranth ``Memory`` read port and a data register) and the ECP5 form (``DP16KD``
+instances with their output registers, on ``sim/models/DP16KD.v``, whose pins
+``tests/sim/test_synth.py::test_dp16kd_model_is_the_ram_yosys_maps`` checks against Yosys's mapping) are
+exported to Verilog and driven on Icarus with the same random writes and reads; every read port of
+each is compared with a Python RAM, clock by clock.
+"""
+
+import os
+
+import numpy as np
+import pytest
+from amaranth.back import verilog
+from amaranth.hdl import Shape, unsigned
+from amaranth.lib import data
+
+from hdl.block_ram import BlockRam
+from hdl.dsp import ECP5
+
+from support import refused_components
+from support.ram_traffic import icarus_run, ram_reads, random_ram_traffic
+
+pytestmark = pytest.mark.slow  # Icarus
+
+
+@pytest.mark.parametrize("platform", [None, ECP5], ids=["generic", "ecp5"])
+@pytest.mark.parametrize("shape, depth", [(unsigned(18), 1024), (unsigned(9), 1500), (unsigned(40), 600),
+                                          (data.StructLayout({"x": 17, "y": 13}), 1024), (unsigned(4), 4096),
+                                          (unsigned(40), 3000), (unsigned(30), 2100)])  # the last two in banks
+def test_block_ram_reads_two_clocks_after_the_address(tmp_path, platform, shape, depth):
+    os.environ["AMARANTH_USE_YOSYS"] = "builtin"
+    ram = BlockRam(shape, depth, read_ports=2, name="mem")
+    width = Shape.cast(shape).width
+    abits = len(ram.write.addr)
+    (tmp_path / "ram.v").write_text(verilog.convert(ram, name="ram", platform=platform))
+    source = (tmp_path / "ram.v").read_text()
+    assert ("DP16KD" in source and '"OUTREG"' in source) == (platform is ECP5)
+    rng = np.random.default_rng(depth + width)
+    we, waddr, wdata, raddr = random_ram_traffic(rng, depth, width, 2500)
+    want = ram_reads(we, waddr, wdata, raddr, depth, 1)
+    for k in range(2):  # each read port, the other one reading elsewhere
+        other = 1 - k
+        ports = (f"ram dut(.clk(clk), .rst(1'b0), .write__en(we), .write__addr(waddr[{abits - 1}:0]), "
+                 f".write__data(wdata[{width - 1}:0]), .read__{k}__addr(raddr[{abits - 1}:0]), "
+                 f".read__{k}__data(q[{width - 1}:0]), .read__{other}__addr({abits}'d0), .read__{other}__data());")
+        lines = icarus_run(tmp_path, ["ram.v"], "ram", ports, we, waddr, wdata, raddr)
+        # from the second clock on (the generic form's first data register starts undefined)
+        assert [int(line[-width:], 2) for line in lines[1:]] == want[1:], f"read port {k}"
+
+
+def test_block_ram_refuses_bad_parameters():
+    with refused_components():  # collected here, not in whichever test runs when the collector next does
+        with pytest.raises(ValueError, match="depth"):
+            BlockRam(unsigned(8), 0)
+        with pytest.raises(ValueError, match="read port"):
+            BlockRam(unsigned(8), 16, read_ports=0)
+        with pytest.raises(ValueError, match="width"):
+            BlockRam(unsigned(0), 16)
+
+
+def test_dp16kd_banks_takes_the_fewest_block_rams():
+    from hdl.block_ram import dp16kd_banks
+
+    assert dp16kd_banks(1024, 66) == (18, 1024, 1)  # 4 block RAMs
+    assert dp16kd_banks(3072, 66) == (18, 1024, 3)  # 12, where one 4K x 4 bank takes 17
+    assert dp16kd_banks(6144, 65) == (9, 2048, 3)  # 24, tied with 6 banks of 1K x 18: fewer banks
+    assert dp16kd_banks(4096, 4) == (4, 4096, 1)

@@ -1,0 +1,147 @@
+"""The Wishbone target handshake (hdl.wishbone) against a register file with a variable answer latency."""
+
+import random
+
+import pytest
+from amaranth.hdl import Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In
+from amaranth.sim import Simulator
+
+from hdl import wishbone
+from support.wishbone import wishbone_cycle, wishbone_read, wishbone_write
+
+REGISTERS = 4
+
+
+class RegisterFile(wiring.Component):
+    """``REGISTERS`` read/write words behind a :class:`~hdl.wishbone.TargetHandshake`; answers after
+    ``latency`` clocks; ``err`` for an unmapped word or a partial ``sel``."""
+
+    bus: In(wishbone.Signature(addr_width=4))
+
+    def __init__(self, latency: int):
+        self.latency = latency
+        super().__init__()
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=4)
+        wiring.connect(m, wiring.flipped(self.bus), hs.bus)
+        words = [Signal(32, name=f"word{i}") for i in range(REGISTERS)]
+        wait = Signal(range(self.latency + 1))
+        pending = Signal()
+        with m.If(hs.request):  # answer `latency` clocks after the request's clock
+            m.d.sync += [pending.eq(self.latency > 0), wait.eq(max(self.latency - 1, 0))]
+        with m.Elif(wait != 0):
+            m.d.sync += wait.eq(wait - 1)
+        answer = (hs.request & (self.latency == 0)) | (pending & (wait == 0) & ~hs.request)
+        m.d.comb += [hs.done.eq(answer), hs.error.eq((hs.address >= REGISTERS) | ~hs.whole_word)]
+        with m.If(answer):
+            m.d.sync += pending.eq(0)
+            for i, word in enumerate(words):
+                with m.If((hs.address == i) & hs.write & hs.whole_word):
+                    m.d.sync += word.eq(hs.write_data)
+                with m.If(hs.address == i):
+                    m.d.comb += hs.data.eq(word)
+        return m
+
+
+def run(dut, bench):
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(bench)
+    sim.run()
+
+
+@pytest.mark.parametrize("latency", [0, 1, 3])
+def test_writes_read_back_with_wait_states(latency):
+    dut = RegisterFile(latency)
+    rng = random.Random(latency)
+    model = [0] * REGISTERS
+    seen = []
+
+    async def bench(ctx):
+        for _ in range(60):
+            adr = rng.randrange(REGISTERS)
+            idle = rng.choice([0, 0, 1, 3])
+            if rng.random() < 0.5:
+                value = rng.getrandbits(32)
+                answer = await wishbone_write(ctx, dut.bus, adr, value, idle=idle)
+                model[adr] = value
+            else:
+                answer = await wishbone_read(ctx, dut.bus, adr, idle=idle)
+                assert answer.data == model[adr], (adr, answer)
+            assert not answer.error
+            seen.append(answer.clocks)
+
+    run(dut, bench)
+    # the request registered at the first edge, the answer latency clocks later, taken at the edge after
+    assert set(seen) == {latency + 3}
+
+
+def test_unmapped_and_partial_accesses_get_err_and_change_nothing():
+    dut = RegisterFile(1)
+
+    async def bench(ctx):
+        assert not (await wishbone_write(ctx, dut.bus, 1, 0x1234_5678)).error
+        assert (await wishbone_write(ctx, dut.bus, REGISTERS, 5)).error
+        assert (await wishbone_read(ctx, dut.bus, REGISTERS + 3)).error
+        assert (await wishbone_write(ctx, dut.bus, 1, 0xFFFF_FFFF, sel=0b0111)).error
+        answer = await wishbone_read(ctx, dut.bus, 1)
+        assert (answer.error, answer.data) == (False, 0x1234_5678)
+
+    run(dut, bench)
+
+
+def test_back_to_back_cycles_are_each_answered_once():
+    """stb held high from one cycle to the next: every request is taken exactly once."""
+    dut = RegisterFile(0)
+    acks = []
+
+    async def watch(ctx):
+        async for _, _, ack in ctx.tick().sample(dut.bus.ack):
+            acks.append(ack)
+
+    async def bench(ctx):
+        for i in range(REGISTERS):
+            await wishbone_write(ctx, dut.bus, i, 100 + i, keep_stb=True)
+        for i in range(REGISTERS):
+            answer = await wishbone_read(ctx, dut.bus, i, keep_stb=i < REGISTERS - 1)
+            assert answer.data == 100 + i
+        await ctx.tick().repeat(5)
+        assert sum(acks) == 2 * REGISTERS
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_process(watch)
+    sim.add_testbench(bench)
+    sim.run_until(1e-8 * 200)
+
+
+def test_abandoned_cycle_is_not_answered():
+    dut = RegisterFile(3)
+
+    async def bench(ctx):
+        ctx.set(dut.bus.cyc, 1)
+        ctx.set(dut.bus.stb, 1)
+        ctx.set(dut.bus.we, 1)
+        ctx.set(dut.bus.adr, 2)
+        ctx.set(dut.bus.dat_w, 77)
+        ctx.set(dut.bus.sel, 0xF)
+        await ctx.tick().repeat(2)
+        ctx.set(dut.bus.cyc, 0)
+        ctx.set(dut.bus.stb, 0)
+        for _ in range(6):
+            ack, err = (await ctx.tick().sample(dut.bus.ack, dut.bus.err))[2:]
+            assert not ack and not err
+        assert not (await wishbone_read(ctx, dut.bus, 0)).error
+
+    run(dut, bench)
+
+
+def test_signature_checks_its_parameter():
+    with pytest.raises(ValueError, match="addr_width"):
+        wishbone.Signature(addr_width=0)
+    assert wishbone.Signature(addr_width=8) == wishbone.Signature(addr_width=8)
+    assert wishbone.Signature(addr_width=8) != wishbone.Signature(addr_width=9)

@@ -1,0 +1,149 @@
+"""The springflat package: the README's example as written, the command line's options and defaults."""
+
+import json
+import re
+import subprocess
+
+import numpy as np
+import pytest
+
+import springflat
+from golden_model.mesh import MeshError
+from golden_model.mesh_io import load_mesh
+from golden_model.params import ParameterError
+from sim.cli import main
+from support import REPO, SPRINGFLAT
+
+ROOT = REPO
+SCANS = ROOT / "tests" / "data" / "scans"
+
+
+def readme_first_code_block() -> tuple[str, str]:
+    blocks = re.findall(r"^```(\w*)\n(.*?)^```", (ROOT / "README.md").read_text(), re.S | re.M)
+    return blocks[0]
+
+
+@pytest.mark.slow
+def test_the_readme_opens_with_the_api_in_three_lines_and_it_runs_as_written(monkeypatch):
+    language, code = readme_first_code_block()
+    assert language == "python"
+    lines = [line for line in code.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    assert len(lines) == 3
+    monkeypatch.chdir(ROOT)
+    namespace: dict = {}
+    exec(compile(code, "README.md", "exec"), namespace)
+    layout = namespace["layout"]
+    mesh = load_mesh(SCANS / "bunny_face.obj")
+    assert isinstance(layout, np.ndarray) and layout.shape == (mesh.n_vertices, 2) == (2993, 2)
+    assert layout.dtype == np.float64 and np.isfinite(layout).all()
+    # the layout the command gives the same file with no options
+    done = subprocess.run([SPRINGFLAT, "flatten", str(SCANS / "bunny_face.obj"), "--json"], capture_output=True,
+                          text=True, timeout=300)
+    summary = json.loads(done.stdout)
+    lengths = np.linalg.norm(layout[mesh.edges[:, 0]] - layout[mesh.edges[:, 1]], axis=1)
+    shape_error = np.abs(lengths - mesh.rest_lengths).sum() / mesh.rest_lengths.sum()
+    assert shape_error == pytest.approx(summary["shape_error"], rel=1e-12)
+
+
+@pytest.fixture(scope="module")
+def ear():
+    return springflat.read_mesh(SCANS / "bunny_ear.obj")
+
+
+def test_the_options_are_the_command_lines_run_and_engine_options():
+    from sim.cli import build_parser
+
+    flatten_parser = build_parser()._subparsers._group_actions[0].choices["flatten"]
+    flags = {flag for action in flatten_parser._actions for flag in action.option_strings if flag.startswith("--")}
+    not_run_options = {"--help", "--out", "--history", "--plot", "--json", "--units", "--paper", "--dxf-edges",
+                       "--distortion", "--out-dir", "--jobs", "--scheduler", "--port", "--baud"}
+    negations = {flag for flag in flags if flag.startswith("--no-") and "--" + flag[5:] in flags}  # --[no-]barrier
+    assert {spec.flag for spec in springflat.OPTIONS.values()} == flags - not_run_options - negations
+    for spec in springflat.OPTIONS.values():
+        assert spec.keyword == spec.flag[2:].replace("-", "_") and spec.help
+        assert f"``{spec.keyword}`` (``{spec.flag}``)" in springflat.flatten.__doc__
+
+
+def test_keywords_change_the_run_as_the_flags_do(ear, capsys):
+    V, F = ear
+    # numpy scalars are taken as their text would be on the command line
+    pattern = springflat.flatten(V, F, dynamics="paper", step="fixed", dt=np.float32(0.02), max_iter=np.int64(7),
+                                 init="tutte", name="ear")
+    assert (pattern.status, pattern.iterations, pattern.init) == ("max-iterations", 7, "tutte")
+    assert (pattern.params.dynamics, pattern.params.step, pattern.params.dt) == ("paper", "fixed", 0.02)
+    assert main(["flatten", str(SCANS / "bunny_ear.obj"), "--dynamics", "paper", "--step", "fixed", "--dt", "0.02",
+                 "--max-iter", "7", "--init", "tutte", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["area_error"] == pattern.area_error and summary["shape_error"] == pattern.shape_error
+    np.testing.assert_array_equal(pattern.area_ratio, pattern.distortion().area_ratio)
+    assert pattern.layout.shape == (len(V), 2) and pattern.area_ratio.shape == (len(F),)
+    assert pattern.edge_strain.shape == (pattern.mesh.n_edges,)
+
+
+@pytest.mark.parametrize("options, flags", [
+    ({"max_iter": 2.5}, ["--max-iter", "2.5"]),
+    ({"damping": "lots"}, ["--damping", "lots"]),
+    ({"dynamics": "brownian"}, ["--dynamics", "brownian"]),
+    ({"damping": 0.2}, ["--damping", "0.2"]),            # a domain rule: damping is the paper dynamics'
+    ({"barrier_threshold": 0}, ["--barrier-threshold", "0"]),
+    ({"engine": "quantum"}, ["--engine", "quantum"]),
+])
+def test_a_value_the_command_refuses_the_api_refuses(ear, capsys, options, flags):
+    V, F = ear
+    with pytest.raises(ParameterError) as refused:
+        springflat.flatten(V, F, **options)
+    try:
+        code = main(["flatten", str(SCANS / "bunny_ear.obj"), *flags])
+    except SystemExit as exc:  # argparse's own refusals
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err
+    if "argument --" in err:  # argparse refused the text: both name the value
+        assert flags[1] in str(refused.value) and flags[1] in err
+    else:  # a domain rule: the very same message
+        assert f"springflat: error: {refused.value}" in err
+
+
+def test_unknown_keywords_and_wrong_types_are_type_errors(ear):
+    V, F = ear
+    with pytest.raises(TypeError, match="unexpected keyword.*max_iters"):
+        springflat.flatten(V, F, max_iters=3)
+    with pytest.raises(ParameterError, match="barrier must be True or False"):
+        springflat.flatten(V, F, barrier="yes")
+    with pytest.raises(TypeError, match="trimesh"):
+        springflat.flatten(V)
+
+
+def test_trimesh_and_an_initial_array(ear):
+    import trimesh
+
+    V, F = ear
+    from_arrays = springflat.flatten(V, F, max_iter=20)
+    from_trimesh = springflat.flatten(trimesh.Trimesh(V, F, process=False), max_iter=20)
+    np.testing.assert_array_equal(from_arrays.layout, from_trimesh.layout)
+    again = springflat.flatten(V, F, init=from_arrays.result.initial_positions, max_iter=20)
+    assert again.init == "array"
+    np.testing.assert_array_equal(again.layout, from_arrays.layout)
+
+
+def test_bad_arrays_are_one_line_mesh_errors_without_a_temporary_path():
+    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], float)
+    with pytest.raises(MeshError) as refused:
+        springflat.flatten(V, np.array([[0, 1, 2], [0, 2, 3]]))
+    assert "degenerate" in str(refused.value) and "tmp" not in str(refused.value)
+    with pytest.raises(MeshError, match="no such file"):
+        springflat.read_mesh("nope.obj")
+
+
+def test_write_pattern_and_read_mesh(ear, tmp_path):
+    from ezdxf import recover
+
+    V, F = ear
+    mesh = load_mesh(SCANS / "bunny_ear.obj")
+    np.testing.assert_array_equal(V, mesh.vertices)
+    np.testing.assert_array_equal(F, mesh.faces)
+    pattern = springflat.flatten(V, F, max_iter=10, name="ear")
+    springflat.write_pattern(tmp_path / "ear.dxf", pattern, units="m")
+    doc, auditor = recover.readfile(tmp_path / "ear.dxf")
+    assert not auditor.has_errors and doc.header["$INSUNITS"] == 6
+    assert doc.ezdxf_metadata()["springflat_mesh"] == "ear"

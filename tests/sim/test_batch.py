@@ -1,0 +1,140 @@
+"""Batches: every mesh gets its line and files, a corrupt one is reported, Dask writes the same bytes."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from golden_model.generate import dome_grid
+from golden_model.mesh_io import save_obj
+from sim.cli import main
+from support import run_springflat as run
+
+ENDINGS = ["--out", ".dxf", "--out", ".pdf", "--out", ".svg", "--out", ".obj", "--distortion", ".csv"]
+
+
+def write_meshes(folder: Path, good: int, corrupt_at: int) -> list[Path]:
+    """``good`` small domes of different sizes and shapes (OBJ and OFF), a corrupt OBJ at ``corrupt_at``."""
+    folder.mkdir()
+    paths = []
+    for k in range(good):
+        mesh = dome_grid(5 + k % 4)
+        vertices = mesh.vertices * [100.0 + 10 * k, 80.0 + 5 * k, 30.0]  # millimetres
+        if k % 2:
+            path = folder / f"dome{k:02d}.off"
+            with open(path, "w") as out:
+                out.write(f"OFF\n{mesh.n_vertices} {mesh.n_faces} 0\n")
+                np.savetxt(out, vertices)
+                np.savetxt(out, np.column_stack([np.full(mesh.n_faces, 3), mesh.faces]), fmt="%d")
+        else:
+            path = folder / f"dome{k:02d}.obj"
+            save_obj(path, vertices, mesh.faces)
+        paths.append(path)
+    corrupt = folder / "corrupt.obj"
+    corrupt.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n")
+    paths.insert(corrupt_at, corrupt)
+    return paths
+
+
+@pytest.mark.slow
+def test_a_corrupt_mesh_is_reported_and_the_other_19_finish(tmp_path):
+    meshes = write_meshes(tmp_path / "in", 19, 7)
+    out = tmp_path / "out"
+    proc = run("flatten", *meshes, "--out-dir", out, *ENDINGS, "--jobs", "2")
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stdout.splitlines()
+    results = [line for line in lines if line.startswith("[")]
+    assert len(results) == 20 and sorted(int(r[1:r.index("/")]) for r in results) == list(range(1, 21))
+    failed = [r for r in results if "failed" in r]
+    assert len(failed) == 1 and "corrupt.obj" in failed[0] and "vertex 7" in failed[0]
+    table = lines[lines.index(next(line for line in lines if line.startswith("mesh "))):]
+    assert len(table) == 1 + 20 + 1 and table[-1].startswith("20 meshes: ") and "1 failed" in table[-1]
+    rows = {row.split()[0]: row.split()[1] for row in table[1:-1]}
+    assert rows.pop("corrupt") == "failed"
+    assert len(rows) == 19 and set(rows.values()) <= {"converged", "max-iterations"}
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        f"{m.stem}{e}" for m in meshes if m.stem != "corrupt" for e in (".dxf", ".pdf", ".svg", ".obj", ".csv"))
+    assert proc.stderr.splitlines()[-1] == "springflat: error: 1 of 20 meshes failed: " + str(meshes[7])
+
+
+def test_batch_json_lines(tmp_path):
+    meshes = write_meshes(tmp_path / "in", 3, 1)
+    proc = run("flatten", *meshes, "surf1", "--out-dir", tmp_path / "out", "--history", ".history.csv", "--json")
+    assert proc.returncode == 2
+    records = [json.loads(line) for line in proc.stdout.splitlines()]
+    by_mesh = {r["mesh"]: r for r in records[:-1]}
+    assert set(by_mesh) == {"dome00", "dome01", "dome02", "corrupt", "surf1"}
+    assert by_mesh["corrupt"]["status"] == "failed" and "vertex 7" in by_mesh["corrupt"]["error"]
+    assert by_mesh["surf1"]["dynamics"] == "paper" and by_mesh["dome00"]["dynamics"] == "momentum"
+    assert by_mesh["dome01"]["files"] == [str(tmp_path / "out" / "dome01.history.csv")]
+    assert records[-1]["batch"]["meshes"] == 5 and records[-1]["batch"]["failed"] == 1
+
+
+@pytest.mark.slow
+def test_a_dask_local_cluster_writes_the_same_bytes_as_the_process_pool(tmp_path):
+    meshes = write_meshes(tmp_path / "in", 5, 2)
+    pool = run("flatten", *meshes, "--out-dir", tmp_path / "pool", *ENDINGS, "--jobs", "2")
+    dask = run("flatten", *meshes, "--out-dir", tmp_path / "dask", *ENDINGS, "--scheduler", "local", "--jobs", "2")
+    assert pool.returncode == dask.returncode == 2, dask.stderr
+    assert "on 2 Dask worker processes" in dask.stdout
+    names = sorted(p.name for p in (tmp_path / "pool").iterdir())
+    assert len(names) == 5 * 5 and names == sorted(p.name for p in (tmp_path / "dask").iterdir())
+    for name in names:
+        assert (tmp_path / "pool" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes(), name
+
+
+@pytest.mark.slow
+def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
+    from distributed import LocalCluster
+
+    meshes = write_meshes(tmp_path / "in", 3, 0)
+    with LocalCluster(n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None) as cluster:
+        proc = run("flatten", *meshes, "--out-dir", tmp_path / "out", "--out", ".dxf", "--scheduler",
+                   cluster.scheduler_address)
+    assert proc.returncode == 2 and f"on Dask scheduler {cluster.scheduler_address}" in proc.stdout
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["dome00.dxf", "dome01.dxf", "dome02.dxf"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--out-dir", "o", "--out", "sub/.pdf"], "takes a file-name ending such as .pdf"),
+    (["--out", ".pdf"], "write their outputs to --out-dir"),
+    (["--out-dir", "o", "--out", ".csv", "--distortion", ".csv"], "given twice"),
+    (["--out-dir", "o", "--out", ".png"], "must end in .dxf"),
+    (["--engine", "rtl"], "--engine rtl runs one mesh at a time"),
+    (["--init", "layout.txt"], "--init takes a method"),
+    (["--jobs", "0"], "--jobs must be >= 1"),
+])
+def test_batch_refusals_are_one_line_before_any_run(tmp_path, monkeypatch, capsys, args, message):
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 2, 0)
+    assert main(["flatten", "in/dome00.obj", "in/dome01.off", *args]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("springflat: error: ") and message in err[0], err
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "a", 1, 0)
+    write_meshes(tmp_path / "b", 1, 0)
+    assert main(["flatten", "a/dome00.obj", "b/dome00.obj", "--out-dir", "o", "--out", ".dxf"]) == 2
+    assert "are both named 'dome00'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_study_on_a_dask_local_cluster_gives_the_pools_results(tmp_path):
+    import csv
+
+    args = ["study", "surf2", "--init", "pca", "--step", "variable", "--sweep", "lut_index_bits", "--no-optimise",
+            "--quiet", "--workers", "2"]
+    pool = run(*args, "--out", tmp_path / "pool")
+    dask = run(*args, "--out", tmp_path / "dask", "--scheduler", "local")
+    assert pool.returncode == dask.returncode == 0, dask.stderr
+    for name in ("summary.csv", "chosen.json"):
+        assert (tmp_path / "pool" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes(), name
+
+    def runs(folder):  # every column but the wall time of each run
+        with open(tmp_path / folder / "results.csv", newline="") as f:
+            return [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
+    assert runs("pool") == runs("dask") and len(runs("pool")) == 8

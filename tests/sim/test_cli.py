@@ -1,0 +1,220 @@
+"""The springflat command: round trips and bad input, as a user runs it."""
+
+import csv
+import json
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from golden_model.builtin import builtin_mesh
+from golden_model.mesh_io import load_mesh
+from golden_model.generate import dome_grid
+from support import SCANS, run_springflat as run
+
+
+def test_flatten_round_trip(tmp_path):
+    out, hist, plot = tmp_path / "flat.flat.obj", tmp_path / "h.csv", tmp_path / "p.png"  # .flat.obj: z = 0
+    proc = run("flatten", "surf1", "--out", out, "--history", hist, "--plot", plot, "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    for key in ("status", "iterations", "area_error", "shape_error", "energy", "flipped",
+                "initial_area_error", "initial_shape_error", "engine", "step", "update"):
+        assert key in summary
+    assert (summary["engine"], summary["step"], summary["update"]) == ("float", "variable", "jacobi")
+    assert summary["status"] == "converged"
+
+    flat = load_mesh(out)
+    surf1, _ = builtin_mesh("surf1")
+    assert flat.faces.tolist() == surf1.faces.tolist()
+    assert (flat.vertices[:, 2] == 0).all()
+
+    with open(hist, newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == ["iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded"]
+    assert len(rows) == summary["iterations"] + 2
+    assert rows[1][0] == "0" and rows[1][1] == ""
+    assert float(rows[1][2]) == summary["initial_area_error"]
+    last = rows[-1]
+    assert int(last[0]) == summary["iterations"]
+    assert float(last[2]) == summary["area_error"] and float(last[3]) == summary["shape_error"]
+    assert int(last[5]) == summary["flipped"] and int(last[6]) == summary["folded"]
+    assert 0.01 < float(rows[2][1]) <= 0.21
+    # the layout written is the one whose errors were reported
+    edges = surf1.edges
+    lengths = np.linalg.norm(flat.vertices[edges[:, 0]] - flat.vertices[edges[:, 1]], axis=1)
+    shape_error = np.abs(lengths - surf1.rest_lengths).sum() / surf1.rest_lengths.sum()
+    assert shape_error == pytest.approx(summary["shape_error"], rel=1e-12)
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_flatten_file_mesh_to_svg_with_options(tmp_path):
+    mesh = dome_grid(6)
+    path = tmp_path / "dome.off"
+    with open(path, "w") as f:
+        f.write(f"OFF\n{mesh.n_vertices} {mesh.n_faces} 0\n")
+        np.savetxt(f, mesh.vertices)
+        np.savetxt(f, np.column_stack([np.full(mesh.n_faces, 3), mesh.faces]), fmt="%d")
+    svg = tmp_path / "dome.flat.svg"  # the layout in mesh units, a polygon per face (.svg is the print pattern)
+    proc = run("flatten", path, "--dynamics", "paper", "--init", "tutte", "--step", "fixed", "--dt", "0.02",
+               "--update", "sequential",
+               "--damping", "0.1", "--density", "auto", "--max-iter", "5", "--tol-area", "0", "--out", svg, "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert (summary["status"], summary["iterations"], summary["update"], summary["step"]) == \
+        ("max-iterations", 5, "sequential", "fixed")
+    polygons = ET.parse(svg).getroot().findall(".//{http://www.w3.org/2000/svg}polygon")
+    assert len(polygons) == mesh.n_faces
+
+
+def test_human_summary_line():
+    proc = run("flatten", "surf2", "--max-iter", "3")
+    assert proc.returncode == 0
+    assert proc.stdout.startswith("surf2: max-iterations after 3 iterations")
+
+
+def _bad_files(tmp):
+    files = {}
+    files["garbage.obj"] = "this is not a mesh\nv 1 2\nf 1 2 3\n"
+    files["empty.obj"] = "# nothing\n"
+    files["nan.obj"] = "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n"
+    files["range.off"] = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n"
+    files["degenerate.obj"] = "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n"
+    files["duplicate.obj"] = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\nf 2 3 1\n"
+    files["nonmanifold.obj"] = ("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 1\n"
+                                "f 1 2 3\nf 1 3 4\nf 1 3 5\n")
+    files["closed.obj"] = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"
+    files["twoparts.obj"] = ("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 0\nv 6 5 0\nv 5 6 0\nf 1 2 3\nf 4 5 6\n")
+    for name, text in files.items():
+        (tmp / name).write_text(text)
+    return list(files)
+
+
+BAD_ARGS = [
+    (["nope.obj"], "no such file"),
+    (["--tol-area", "-1"], "tol-area"),
+    (["--tol-shape", "-0.5"], "tol-shape"),
+    (["--max-iter", "0"], "max-iter"),
+    (["--dt", "0", "--step", "fixed"], "dt"),
+    (["--damping", "1.5"], "damping"),
+    (["--spring", "-2"], "spring"),
+    (["--density", "heavy"], "density"),
+    (["--init", "missing-layout.txt"], "no such file"),
+    (["--init", "short.txt"], "rows but the mesh has 7"),
+    (["--step", "wobbly"], "invalid choice"),
+    (["--plot", "p.jpg"], "must end in .png"),
+    (["--out", "nodir/x.obj"], "does not exist"),
+]
+
+
+def _assert_clean_failure(proc, message, tmp_path, before):
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.startswith("springflat: error")]
+    assert len(lines) == 1 and message in lines[0], proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # no output file, not even a partial one
+
+
+@pytest.mark.parametrize("args, message", BAD_ARGS)
+def test_bad_arguments(tmp_path, args, message):
+    (tmp_path / "short.txt").write_text("0 0\n1 1\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    proc = run("flatten", *args, "--out", "o.obj", "--history", "h.csv", cwd=tmp_path) \
+        if "--out" not in args else run("flatten", *args, cwd=tmp_path)
+    _assert_clean_failure(proc, message, tmp_path, before)
+
+
+@pytest.mark.parametrize("name, message", [
+    ("garbage.obj", "cannot parse"), ("empty.obj", "empty"), ("nan.obj", "non-finite"),
+    ("range.off", "range"), ("degenerate.obj", "degenerate"), ("duplicate.obj", "duplicated"),
+    ("nonmanifold.obj", "non-manifold"), ("closed.obj", "closed"), ("twoparts.obj", "connected components"),
+])
+def test_bad_mesh_files(tmp_path, name, message):
+    _bad_files(tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    proc = run("flatten", name, "--out", "o.obj", "--history", "h.csv", "--plot", "p.png", "--json", cwd=tmp_path)
+    _assert_clean_failure(proc, message, tmp_path, before)
+    assert proc.stdout == ""
+
+
+def test_diverged_run_exits_nonzero_but_writes_finite_layout(tmp_path):
+    proc = run("flatten", "surf1", "--step", "fixed", "--dt", "1000", "--max-iter", "1000",
+               "--out", tmp_path / "o.flat.obj", "--json")
+    assert proc.returncode == 3
+    assert json.loads(proc.stdout)["status"] == "diverged"
+    vertices = [line.split()[1:] for line in (tmp_path / "o.flat.obj").read_text().splitlines()
+                if line.startswith("v ")]
+    assert len(vertices) == 7 and np.isfinite(np.array(vertices, dtype=float)).all()
+
+
+@pytest.mark.slow
+def test_paper_report(tmp_path):
+    proc = run("paper", "--out", tmp_path / "rep", "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    report = (tmp_path / "rep" / "report.md").read_text()
+    assert "36/70" in report and "70/112" in report
+    assert "Table VI" in report and "Table VII" in report
+    for name in ("surf1.png", "surf2.png", "surf1-fixed.csv", "surf2-variable.csv"):
+        assert (tmp_path / "rep" / name).stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_variable_step_beats_fixed_on_surf1():
+    # the paper's claim, measured on the same initial layout
+    fixed = json.loads(run("flatten", "surf1", "--step", "fixed", "--json").stdout)
+    variable = json.loads(run("flatten", "surf1", "--step", "variable", "--json").stdout)
+    assert fixed["status"] == variable["status"] == "converged"
+    assert variable["iterations"] < fixed["iterations"]
+
+
+@pytest.mark.slow
+def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap():
+    """Defaults for files: momentum, fold barrier, ARAP start, stop at the energy minimum."""
+    from golden_model.layouts import initial_layout
+    from golden_model.reference import SpringModel, measure
+
+    path = SCANS / "bunny_face.obj"
+    done = run("flatten", str(path), "--json")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    mesh = load_mesh(path)
+    arap = initial_layout(mesh, "arap")
+    arap_error = measure(SpringModel.build(mesh, arap, 0.5, "auto"), arap).shape_error
+    assert summary["dynamics"] == "momentum" and summary["barrier"] is True
+    assert summary["status"] == "converged"
+    assert summary["folded"] == 0
+    assert summary["shape_error"] <= arap_error
+    assert summary["init"] == "arap" and "stopped: the stop rule held" in summary["used"]
+    human = run("flatten", str(path), "--max-iter", "5")
+    assert "used momentum dynamics, fold barrier" in human.stderr and "N_max = 5 reached" in human.stderr
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--barrier-threshold", "0"], "barrier threshold kappa must be in (0, 1]"),
+    (["--barrier-gain", "100"], "barrier gain mu must be in (0, 16]"),
+    (["--dynamics", "momentum", "--update", "sequential"], "use --update jacobi"),
+    (["--dynamics", "momentum", "--engine", "fixed", "--formats", "FORMATS"], "same fraction bits"),
+])
+def test_bad_dynamics_parameters_are_one_line(tmp_path, args, message):
+    from golden_model.fixed import FormatSet
+
+    odd = tmp_path / "odd.json"
+    FormatSet.preset("default").replace(velocity="s3.20", name="odd").save(odd)
+    args = [str(odd) if a == "FORMATS" else a for a in args]
+    out = tmp_path / "x.obj"
+    done = run("flatten", "surf2", "--out", str(out), *args)
+    assert done.returncode == 2
+    assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_momentum_on_the_fixed_engine_matches_the_float_engine():
+    common = ("flatten", "surf2", "--dynamics", "momentum", "--init", "tutte", "--max-iter", "60",
+              "--tol-energy", "0", "--json")
+    fixed = json.loads(run(*common, "--engine", "fixed").stdout)
+    floating = json.loads(run(*common).stdout)
+    assert fixed["iterations"] == floating["iterations"] == 60
+    assert fixed["saturations"] == 0 and fixed["barrier"] is True
+    assert abs(fixed["shape_error"] - floating["shape_error"]) <= 1e-3
+    assert abs(fixed["area_error"] - floating["area_error"]) <= 1e-3

@@ -1,0 +1,160 @@
+"""cocotb on the exported Verilog, on Icarus and Verilator (cocotb_tools.runner driven from pytest)."""
+
+
+import pytest
+
+from golden_model.builtin import builtin_mesh
+from golden_model.fixed import FormatSet
+from hdl import SpringflatCore
+from sim.cocotb_support import run_bench, verilog_sources
+from golden_model.engine_spec.image import UNGUARDED
+from support import need_simulator
+
+pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
+
+DEFAULT = FormatSet.preset("default")
+
+
+@pytest.mark.parametrize("unit", ["rsqrt_unit", "step_generator"])
+def test_units(simulator, unit):
+    run = run_bench(simulator, DEFAULT, unit, "units", {"n": 1200, "seed": 1}, testcase=unit)
+    assert (run.tests, run.failed) == (1, 0), run.result
+    assert run.result["mismatches"] == 0 and run.result["inputs"] > 1000
+
+
+def test_node_update_over_iterations_with_stalls_and_reset(simulator):
+    config = {"mesh": "surf2", "init": "tutte", "params": {"density": 2.0, "damping": 0.02}, "iterations": 4,
+              "p_valid": 0.75, "p_ready": 0.7, "seed": 2}
+    run = run_bench(simulator, DEFAULT, "node_update", "node_update", config)
+    assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches")
+    assert run.result["mismatches"] == 0
+
+
+@pytest.mark.parametrize("toplevel, bench, testcase", [("rsqrt_unit", "units", "rsqrt_unit"),
+                                                     ("step_generator", "units", "step_generator"),
+                                                     ("node_update", "node_update", None)])
+def test_ecp5_flavour_with_mult18x18d_instances(toplevel, bench, testcase):
+    """The Verilog `springflat synth --target ecp5` synthesises (MULT18X18D instances with their
+    own registers, the seed and exp ROMs DP16KDs with their output registers) against the golden model, on
+    Icarus with models of the primitives."""
+    need_simulator("icarus")
+    config = ({"n": 1200, "seed": 3} if bench == "units" else
+              {"mesh": "surf1", "init": "pca", "params": {"density": 2.0, "damping": 0.02}, "iterations": 2,
+               "p_valid": 0.8, "p_ready": 0.7, "seed": 4})
+    run = run_bench("icarus", DEFAULT, toplevel, bench, config, testcase=testcase, dsp="ecp5")
+    assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches", run.result)
+    assert run.result["mismatches"] == 0
+    source = (verilog_sources(DEFAULT, "ecp5") / f"{toplevel}.v").read_text()
+    assert "MULT18X18D" in source
+    # the rsqrt unit's seed ROM and the step generator's exp ROMs, with their output registers
+    assert "DP16KD" in source and '"OUTREG"' in source
+
+
+def _paper_params(name, step):
+    _, p = builtin_mesh(name)
+    return dict(spring=p.spring, density=p.density, tol_area=p.tol_area, tol_shape=p.tol_shape,
+                tol_energy=p.tol_energy, max_iter=p.max_iter, step=step)
+
+
+@pytest.mark.parametrize("mesh", ["surf1", "surf2"])
+def test_closed_loop_on_paper_meshes(simulator, mesh):
+    """A whole flattening through the RTL, to the end, with the paper's parameters."""
+    config = {"mesh": mesh, "init": "pca", "params": _paper_params(mesh, "variable"),
+              "step_latency": SpringflatCore.step_latency_of(DEFAULT)}
+    run = run_bench(simulator, DEFAULT, "springflat_core", "closed_loop", config)
+    r = run.result
+    assert (run.tests, run.failed) == (1, 0), r.get("first_mismatches")
+    assert r["mismatches"] == 0
+    # against the float reference, within the fixed-point engine's tolerances
+    assert r["status"] == r["float_status"]
+    assert abs(r["iterations"] - r["float_iterations"]) <= 1
+    assert abs(r["area_error"] - r["float_area_error"]) <= 1e-3
+    assert abs(r["shape_error"] - r["float_shape_error"]) <= 1e-3
+
+
+@pytest.mark.parametrize("barrier", [True, False])
+def test_closed_loop_momentum_dynamics(simulator, barrier, tmp_path):
+    """The momentum dynamics through the RTL: β_k from the controller, restarts from the RTL's F·V,
+    the barrier's forces in the stream; every iteration bit for bit, the end against the float model."""
+    from golden_model.generate import spherical_cap
+    from golden_model.mesh_io import save_obj
+
+    cap = spherical_cap(4)
+    path = tmp_path / "cap.obj"
+    save_obj(path, cap.vertices, cap.faces)
+    config = {"mesh": str(path), "init": "tutte",
+              "params": {"dynamics": "momentum", **UNGUARDED, "barrier": barrier, "tol_area": 1.0, "tol_shape": 1.0,
+                         "tol_energy": 0.0, "max_iter": 25},
+              "p_valid": 0.9, "p_ready": 0.8, "seed": 5, "step_latency": SpringflatCore.step_latency_of(DEFAULT)}
+    run = run_bench(simulator, DEFAULT, "springflat_core", "closed_loop", config)
+    r = run.result
+    assert (run.tests, run.failed) == (1, 0), r.get("first_mismatches")
+    assert r["mismatches"] == 0 and r["iterations"] == 25 and r["dynamics"] == "momentum"
+    assert r["status"] == r["float_status"] and r["iterations"] == r["float_iterations"]
+    assert abs(r["area_error"] - r["float_area_error"]) <= 1e-3
+    assert abs(r["shape_error"] - r["float_shape_error"]) <= 1e-3
+
+
+def test_closed_loop_fixed_step_with_stalls(simulator):
+    config = {"mesh": "surf1", "init": "tutte", "params": {**_paper_params("surf1", "fixed"), "damping": 0.05},
+              "iterations": 12, "p_valid": 0.7, "p_ready": 0.6, "seed": 3,
+              "step_latency": SpringflatCore.step_latency_of(DEFAULT)}
+    run = run_bench(simulator, DEFAULT, "springflat_core", "closed_loop", config)
+    assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches")
+    assert run.result["mismatches"] == 0 and run.result["iterations"] == 12
+
+
+@pytest.mark.parametrize("bench, toplevel, config", [
+    ("units", "rsqrt_unit", {"n": 200}),
+    ("node_update", "node_update", {"mesh": "surf1", "init": "pca", "params": {"density": 2.0}, "iterations": 3}),
+    ("closed_loop", "springflat_core", {"mesh": "surf1", "init": "pca", "iterations": 3}),
+])
+def test_a_broken_expectation_fails(simulator, bench, toplevel, config):
+    """The benches can fail: one deliberately wrong golden value is reported, naming where."""
+    config = {**config, "broken_expectation": True, "step_latency": SpringflatCore.step_latency_of(DEFAULT)}
+    if bench == "closed_loop":
+        config["params"] = _paper_params("surf1", "variable")
+    run = run_bench(simulator, DEFAULT, toplevel, bench, config, testcase=toplevel if bench == "units" else None)
+    assert run.failed == 1
+    assert run.result["mismatches"] >= 1
+    if bench != "units":
+        assert "iteration" in run.result["first_mismatches"][0]
+
+
+@pytest.mark.parametrize("dynamics", [("--dynamics", "paper", "--init", "pca", "--damping", "0.05"),
+                                      ("--no-guard", "--energy-window", "1")])
+def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path, dynamics):
+    """springflat rtl-check on a mesh file it has never seen, with the paper's dynamics and with the
+    file defaults' unguarded momentum mode (the engine's: fold barrier, start from --init auto): a few
+    iterations, zero mismatches."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from golden_model.generate import delaunay_patch
+    from golden_model.mesh_io import save_obj
+
+    mesh = delaunay_patch(220, seed=11)
+    save_obj(tmp_path / "patch.obj", mesh.vertices, mesh.faces)
+    springflat = str(Path(sys.executable).parent / "springflat")
+    proc = subprocess.run([springflat, "rtl-check", "patch.obj", "--sim", simulator, "--iterations", "3",
+                           "--tol-area", "0", *dynamics, "--stall", "0.1", "--json"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    result = json.loads(proc.stdout)
+    for key in ("mismatches", "iterations", "simulator", "area_error", "shape_error", "float_area_error",
+                "float_shape_error", "cycles", "cycles_per_second"):
+        assert key in result
+    assert (result["mismatches"], result["iterations"], result["simulator"]) == (0, 3, simulator)
+    assert result["nodes"] == 220 and result["cycles"] > 2 * 3 * result["entries"]
+    assert result["dynamics"] == ("paper" if "paper" in dynamics else "momentum")
+    assert abs(result["area_error"] - result["float_area_error"]) <= 1e-3
+
+
+def test_step_generator_whole_lanes_on_verilator():
+    """Every E_S with E_C fixed and every E_C with E_S fixed (2 x 2^20 for the default preset), on Verilator."""
+    need_simulator("verilator")
+    run = run_bench("verilator", DEFAULT, "step_generator", "units", {}, testcase="step_generator_lanes")
+    assert (run.tests, run.failed) == (1, 0), run.result.get("first_mismatches")
+    assert run.result["inputs"] == 2 * (DEFAULT.error.raw_max + 1) and run.result["mismatches"] == 0

@@ -1,0 +1,119 @@
+"""springflat verilog: files, stable port names, and an interface description that matches the Verilog."""
+
+import json
+import re
+import subprocess
+
+import pytest
+
+from golden_model.fixed import FormatSet
+from support import SPRINGFLAT
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    out = tmp_path_factory.mktemp("verilog")
+    proc = subprocess.run([SPRINGFLAT, "verilog", "--formats", "narrow", "--out", out], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def _verilog_ports(text: str, module: str) -> dict[str, tuple[str, int]]:
+    body = text[text.index(f"module {module}("):]
+    body = body[:body.index("endmodule")]
+    ports = {}
+    for direction, msb, name in re.findall(r"^\s*(input|output)\s+(?:wire\s+|reg\s+)?(?:\[(\d+):0\]\s+)?\\?([\w$]+)\s*;",
+                                           body, re.M):
+        ports[name] = (direction, int(msb) + 1 if msb else 1)
+    return ports
+
+
+@pytest.mark.slow
+def test_files_and_interface_match_the_verilog(exported):
+    interface = json.loads((exported / "interface.json").read_text())
+    assert interface["format_set"]["name"] == "narrow"
+    assert FormatSet.from_dict(interface["format_set"]) == FormatSet.preset("narrow")
+    for module, info in interface["components"].items():
+        text = (exported / f"{module}.v").read_text()
+        ports = _verilog_ports(text, module)
+        assert ports == {p["name"]: (p["direction"], p["width"]) for p in info["ports"]}, module
+        assert info["initiation_interval"] == 1 and info["latency"] > 0
+    core = interface["components"]["springflat_core"]
+    names = {p["name"] for p in core["ports"]}
+    assert {"entries__payload", "entries__valid", "entries__ready", "results__payload", "results__valid",
+            "results__ready", "errors__payload", "step_load__payload", "step", "measure", "half_spring",
+            "damping"} <= names
+    fields = {f["field"]: f for f in core["payload_layouts"]["entries__payload"]}
+    width = {p["name"]: p["width"] for p in core["ports"]}["entries__payload"]
+    assert sum(f["width"] for f in fields.values()) == width  # the fields tile the port
+    assert fields["first"]["lsb"] == 0 and fields["node.position.x"]["format"] == "position s10.14"
+    assert (exported / "rsqrt_seed.hex").read_text().count("\n") == FormatSet.preset("narrow").rsqrt_config().seed_table_size
+    assert "| `entries__payload` | input |" in (exported / "interface.md").read_text()
+
+
+@pytest.mark.slow
+def test_bad_formats_and_out(tmp_path):
+    (tmp_path / "file").write_text("x")
+    proc = subprocess.run([SPRINGFLAT, "verilog", "--out", tmp_path / "file"], capture_output=True, text=True)
+    assert proc.returncode == 2 and "not a directory" in proc.stderr and "Traceback" not in proc.stderr
+    proc = subprocess.run([SPRINGFLAT, "verilog", "--formats", "nope", "--out", tmp_path / "v"], capture_output=True,
+                          text=True)
+    assert proc.returncode == 2 and "unknown FormatSet preset" in proc.stderr
+
+
+# ------------------------------------------------------------------ the engine and its register map
+@pytest.mark.slow
+def test_the_engine_ships_with_its_register_map_at_the_default_capacity(exported):
+    """Without --capacity the engine is DEFAULT_CAPACITY's; the JSON map is the one the golden model builds."""
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
+    from golden_model.engine_spec.register_map import RegisterMap
+
+    for name in ("springflat_engine.v", "register_map.md", "register_map.json", "springflat_regs.h",
+                 "memory_image.md"):
+        assert (exported / name).is_file(), name
+    rmap = RegisterMap.from_dict(json.loads((exported / "register_map.json").read_text()))
+    assert rmap == RegisterMap.build(FormatSet.preset("narrow"), DEFAULT_CAPACITY)
+    assert rmap.capacity == DEFAULT_CAPACITY
+
+
+@pytest.mark.slow  # two elaborations of every component: ~20 s
+def test_capacity_option_sizes_the_engine_and_its_map(tmp_path):
+    from golden_model.engine_spec.image import EngineCapacity
+    from golden_model.engine_spec.register_map import RegisterMap
+
+    out = tmp_path / "v"
+    proc = subprocess.run([SPRINGFLAT, "verilog", "--formats", "narrow", "--capacity", "64", "300", "128",
+                           "--out", out], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    capacity = EngineCapacity(64, 300, 128)
+    rmap = RegisterMap.from_dict(json.loads((out / "register_map.json").read_text()))
+    assert rmap == RegisterMap.build(FormatSet.preset("narrow"), capacity)
+    # The Verilog's word address reaches the last window's end and no further than twice it.
+    end = max(w.base + w.size for w in rmap.windows)
+    ports = _verilog_ports((out / "springflat_engine.v").read_text(), "springflat_engine")
+    direction, adr_bits = ports["bus__adr"]
+    assert direction == "input" and 2 ** (adr_bits - 1) < end <= 2 ** adr_bits
+    assert {"bus__dat_w", "bus__dat_r", "bus__ack", "bus__err", "irq"} <= set(ports)
+    header = (out / "springflat_regs.h").read_text()
+    assert "capacity 64 vertices / 300 entries / 128 triangles" in header
+    assert re.search(r"#define SPRINGFLAT_CAP_ENTRIES_RESET\s+0x12Cu", header)  # 300
+    image = (out / "memory_image.md").read_text()
+    entries = rmap.window("entries")
+    assert f"| `entries` | `0x{entries.base:X}` | 300 | {sum(f.width for f in entries.fields)} |" in image
+    assert "docs/engine.md" in image and "register_map.md" in image
+
+
+@pytest.mark.parametrize("capacity, message", [
+    (["1", "300", "128"], "vertices must be an int >= 2, got 1"),
+    (["64", "300"], "expected 3 arguments"),
+    (["64", "x", "128"], "invalid int value: 'x'"),
+    (["268435456", "1073741824", "1073741824"], "do not fit a 32-bit byte address"),
+])
+def test_bad_capacity_is_one_line_and_writes_nothing(tmp_path, capacity, message):
+    out = tmp_path / "v"
+    proc = subprocess.run([SPRINGFLAT, "verilog", "--capacity", *capacity, "--out", out], capture_output=True,
+                          text=True)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("springflat: error:"), proc.stderr
+    assert message in lines[0]
+    assert not out.exists()

@@ -1,0 +1,1260 @@
+"""Fuzz cases for ``springflat flatten`` (issue 14): malformed and legal-but-unusual meshes, layouts,
+parameters, output paths and format sets.
+
+Every case runs the command's ``main()`` in-process, in an empty directory of its own, and checks what a
+user would see:
+
+* the exit status;
+* a refusal is exactly one ``springflat: error: ...`` line on stderr (other lines may only be
+  ``springflat: note: ...``), with nothing on stdout; no exception escapes (no traceback);
+* no numpy floating-point warning (``RuntimeWarning``) is raised;
+* no file is left behind but the outputs a successful run was asked for (not even a ``.part`` file);
+* ``--json`` output parses with a strict parser (no ``NaN``/``Infinity``);
+* a legal mesh is read with exactly the file's faces (polygons fan-triangulated in file order), and
+  the ``--out`` layout carries those faces.
+
+OS errors (permission denied, I/O error) are injected by patching ``open``/``os.open`` for one path, so
+the cases run as root too; a few subprocess cases at the end check the same on a real exit, with real
+file permissions where the machine allows it.
+"""
+
+from __future__ import annotations
+
+import builtins
+import errno
+import io
+import json
+import os
+import re
+import shutil
+import struct
+import subprocess
+import sys
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from golden_model.generate import grid_faces, grid_uv
+from golden_model.mesh_io import load_mesh_with_notes, read_obj
+from sim.cli import main
+from support import SPRINGFLAT
+
+
+# --------------------------------------------------------------------------- the base mesh
+
+#: A gently curved 4 x 4 grid: 16 vertices, 18 triangles, one boundary loop.
+UV = grid_uv(4, 4)
+V = np.column_stack([UV, 0.1 * UV[:, 0] ** 2])
+F = grid_faces(4, 4)
+#: The same grid as 9 quads (the fan of each quad from its first corner is two of F's triangles).
+QUADS = np.array([[4 * r + c, 4 * r + c + 1, 4 * r + c + 5, 4 * r + c + 4] for r in range(3) for c in range(3)])
+QUAD_FAN = np.array([t for q in QUADS.tolist() for t in ([q[0], q[1], q[2]], [q[0], q[2], q[3]])])
+
+
+def num(x: float) -> str:
+    return repr(float(x))
+
+
+def obj(vertices=V, faces=F, sep=" ", nl="\n", corner=lambda i: str(i + 1)) -> str:
+    lines = [sep.join(["v", *map(num, v)]) for v in vertices]
+    lines += [sep.join(["f", *(corner(i) for i in f)]) for f in np.asarray(faces).tolist()]
+    return nl.join(lines) + nl
+
+
+def obj_interleaved(vertices=V, faces=F, mixed=False) -> str:
+    """``v`` lines written only when a face first needs them; faces use negative (relative) indices
+    (with ``mixed``, every other corner positive)."""
+    lines, count = [], 0
+    for f in np.asarray(faces).tolist():
+        while count <= max(f):
+            lines.append("v " + " ".join(map(num, vertices[count])))
+            count += 1
+        corners = [str(i - count) if not (mixed and k % 2) else str(i + 1) for k, i in enumerate(f)]
+        lines.append("f " + " ".join(corners))
+    return "\n".join(lines) + "\n"
+
+
+def obj_texture_normals() -> str:
+    """Every face with its own ``vt``/``vn`` written just before it, referred to relatively."""
+    lines = ["v " + " ".join(map(num, v)) for v in V]
+    for k, f in enumerate(F.tolist()):
+        lines += [f"vt {k / 40} {k / 50}", "vt 0.5 0.5", "vt 1 0", "vn 0 0 1"]
+        forms = [f"{f[0] + 1}/-3/-1", f"{f[1] - 16}/-2/-1", f"{f[2] + 1}/-1/-1"] if k % 2 else \
+            [f"{f[0] + 1}//-1", f"{f[1] + 1}/{3 * k + 2}", f"{f[2] - 16}"]
+        lines.append("f " + " ".join(forms))
+    return "\n".join(lines) + "\n"
+
+
+def obj_groups() -> str:
+    """Faces spread over objects, groups, smoothing groups and materials, sharing the vertices."""
+    head = "mtllib scene.mtl\no sheet\n" + "".join("v " + " ".join(map(num, v)) + "\n" for v in V)
+    body = []
+    for k, f in enumerate(F.tolist()):
+        if k % 5 == 0:
+            body += [f"g part{k}", f"usemtl m{k % 2}", f"s {'off' if k % 2 else 1}"]
+        if k == 9:
+            body.append("o second")
+        body.append("f " + " ".join(str(i + 1) for i in f))
+    return head + "\n".join(body) + "\n"
+
+
+def obj_continued() -> str:
+    lines = ["v " + " ".join(map(num, v)) for v in V]
+    lines += [f"f {a + 1} \\\n {b + 1}\\\n {c + 1}" for a, b, c in F.tolist()]
+    lines[0] = "v 0.0 \\\n0.0 \\\n 0.0"
+    return "\n".join(lines) + "\n"
+
+
+def ply_ascii(faces=F, sep=" ", nl="\n") -> str:
+    head = ["ply", "format ascii 1.0", "comment written by the fuzz suite", f"element vertex {len(V)}",
+            "property double x", "property double y", "property double z", f"element face {len(faces)}",
+            "property list uchar int vertex_indices", "end_header"]
+    rows = [sep.join(map(num, v)) for v in V] + [sep.join(map(str, [len(f), *f])) for f in np.asarray(faces).tolist()]
+    return nl.join(head + rows) + nl
+
+
+def ply_binary(faces=F) -> bytes:
+    head = ("ply\nformat binary_little_endian 1.0\n" f"element vertex {len(V)}\n"
+            "property double x\nproperty double y\nproperty double z\n" f"element face {len(faces)}\n"
+            "property list uchar int vertex_indices\nend_header\n").encode()
+    body = b"".join(struct.pack("<3d", *v) for v in V)
+    body += b"".join(struct.pack(f"<B{len(f)}i", len(f), *f) for f in np.asarray(faces).tolist())
+    return head + body
+
+
+def off(faces=F, sep=" ", nl="\n", counts_on_header=False, comments=False) -> str:
+    rows = ([f"OFF{sep}{len(V)}{sep}{len(faces)}{sep}0"] if counts_on_header
+            else ["OFF"] + (["# a comment"] if comments else []) + [f"{len(V)}{sep}{len(faces)}{sep}0"])
+    rows += [sep.join(map(num, v)) + ("  # vertex" if comments else "") for v in V]
+    rows += [sep.join(map(str, [len(f), *f])) for f in np.asarray(faces).tolist()]
+    return nl.join(rows) + nl
+
+
+def stl_ascii(sep=" ", nl="\n") -> str:
+    rows = ["solid fuzz"]
+    for f in F.tolist():
+        rows += [f"{sep}facet normal 0 0 1", f"{sep}{sep}outer loop"]
+        rows += [f"{sep * 3}vertex{sep}" + sep.join(map(num, V[i])) for i in f]
+        rows += [f"{sep}{sep}endloop", f"{sep}endfacet"]
+    return nl.join(rows + ["endsolid fuzz"]) + nl
+
+
+def stl_binary() -> bytes:
+    body = b"".join(struct.pack("<12fH", 0, 0, 1, *V[f[0]], *V[f[1]], *V[f[2]], 0) for f in F.tolist())
+    return b"\0" * 80 + struct.pack("<I", len(F)) + body
+
+
+#: STL has no shared vertices: they are numbered by first appearance.
+_FIRST = list(dict.fromkeys(F.ravel().tolist()))
+STL_FACES = np.argsort(_FIRST)[F]
+
+
+# --------------------------------------------------------------------------- running a case
+
+
+@dataclass
+class Case:
+    """One command line: ``files`` written first; ``deny`` = (file, errno) made unreadable/unwritable."""
+
+    args: list[str]
+    code: int = 0
+    error: str | None = None  # regex the one error line must match (failures)
+    files: dict[str, str | bytes] = field(default_factory=dict)
+    faces: np.ndarray | None = None  # expected faces of the mesh (legal meshes)
+    note: str | None = None  # regex one note must match
+    deny: tuple[str, int] | None = None
+    links: dict[str, str] = field(default_factory=dict)  # name -> symbolic link target ("hard:x": a hard link to x)
+    fifos: tuple[str, ...] = ()  # named pipes made first
+
+
+@dataclass
+class Outcome:
+    code: int
+    out: str
+    err: str
+    runtime_warnings: list
+
+
+def _deny(monkeypatch, target: Path, err: int) -> None:
+    """Make every open of ``target`` (or of a path inside it) fail with ``err``, as the OS would."""
+    target_text = os.path.abspath(target)
+
+    def check(name):
+        if isinstance(name, int):
+            return
+        p = os.path.abspath(os.fspath(name))
+        if p == target_text or p.startswith(target_text + os.sep):
+            raise OSError(err, os.strerror(err), os.fspath(name))
+
+    real_open, real_os_open = builtins.open, os.open
+
+    def fake_open(file, *args, **kwargs):
+        check(file)
+        return real_open(file, *args, **kwargs)
+
+    def fake_os_open(path, *args, **kwargs):
+        check(path)
+        return real_os_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", fake_open)
+    monkeypatch.setattr(io, "open", fake_open)
+    monkeypatch.setattr(os, "open", fake_os_open)
+
+
+def _tree(root: Path) -> list[str]:
+    return sorted(str(p.relative_to(root)) for p in root.rglob("*"))
+
+
+def _strict_json(text: str):
+    def refuse(constant):
+        raise ValueError(f"non-standard JSON constant {constant}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def run_case(case: Case, tmp_path: Path, monkeypatch, capsys) -> Outcome:
+    monkeypatch.chdir(tmp_path)
+    for name, content in case.files.items():
+        path = tmp_path / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            with open(path, "w", newline="", encoding="utf-8") as handle:
+                handle.write(content)
+    for name in case.fifos:
+        os.mkfifo(tmp_path / name)
+    for name, target in case.links.items():
+        if target.startswith("hard:"):
+            os.link(tmp_path / target[len("hard:"):], tmp_path / name)
+        else:
+            os.symlink(target, tmp_path / name)
+    before = _tree(tmp_path)
+    if case.deny is not None:
+        _deny(monkeypatch, tmp_path / case.deny[0], case.deny[1])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            code = main(["flatten", *case.args])
+        except SystemExit as exc:  # argparse's own exit
+            code = exc.code
+    monkeypatch.undo()
+    out, err = capsys.readouterr()
+    outcome = Outcome(code, out, err, [w for w in caught if issubclass(w.category, RuntimeWarning)])
+
+    assert outcome.code == case.code, f"exit {outcome.code}, expected {case.code}; stderr:\n{err}"
+    assert not outcome.runtime_warnings, [str(w.message) for w in outcome.runtime_warnings]
+    assert "Traceback" not in err and "Warning" not in err, err
+    lines = err.splitlines()
+    errors = [line for line in lines if line.startswith("springflat: error:")]
+    if case.code == 2:
+        assert len(errors) == 1, err
+        assert all(line.startswith("springflat: note:") for line in lines if line not in errors), err
+        assert case.error is None or re.search(case.error, errors[0]), errors[0]
+        assert out == ""
+        assert _tree(tmp_path) == before, "a refused run left files behind"
+    else:
+        assert errors == [], err
+        produced = set(_tree(tmp_path)) - set(before)
+        assert not [p for p in produced if p.endswith(".part") or "/." in p or p.startswith(".")], produced
+    if "--json" in case.args and outcome.out:
+        _strict_json(outcome.out)
+    if case.note is not None:
+        assert re.search(case.note, err), err
+    return outcome
+
+
+RUN = ["--json", "--max-iter", "40", "--out", "flat.obj"]
+
+
+# --------------------------------------------------------------------------- legal but unusual meshes
+
+LEGAL_MESHES: dict[str, tuple[str, str | bytes, np.ndarray, str | None]] = {
+    # name: (file name, content, expected faces, note regex)
+    "obj plain": ("m.obj", obj(), F, None),
+    "obj tabs": ("m.obj", obj(sep="\t"), F, None),
+    "obj tabs and CRLF": ("m.obj", obj(sep="\t", nl="\r\n"), F, None),
+    "obj CR only": ("m.obj", obj(nl="\r"), F, None),
+    "obj mixed whitespace": ("m.obj", obj(sep=" \t  ").replace("\nv", "\n  \tv"), F, None),
+    "obj UTF-8 BOM": ("m.obj", "\ufeff" + obj(), F, None),
+    "obj no final newline": ("m.obj", obj().rstrip("\n"), F, None),
+    "obj number forms": ("m.obj", obj().replace("v 0.0 0.0 0.0", "v +0e0 -0. .0E+0"), F, None),
+    "obj interleaved negative": ("m.obj", obj_interleaved(), F, None),
+    "obj interleaved mixed signs": ("m.obj", obj_interleaved(mixed=True), F, None),
+    "obj all negative at the end": ("m.obj", obj(corner=lambda i: str(i - 16)), F, None),
+    "obj v/vt/vn forms": ("m.obj", obj_texture_normals(), F, None),
+    "obj line continuations": ("m.obj", obj_continued(), F, None),
+    "obj groups and materials": ("m.obj", obj_groups(), F, r"note: .*read as one mesh"),
+    "obj quads": ("m.obj", obj(faces=QUADS), QUAD_FAN, r"9 polygons \(4 corners\) fan-triangulated into 18"),
+    "obj quads with tabs CRLF": ("m.obj", obj(faces=QUADS, sep="\t", nl="\r\n"), QUAD_FAN, r"fan-triangulated"),
+    "obj upper-case suffix": ("M.OBJ", obj(), F, None),
+    "obj name with spaces": ("a dir/my mesh é.obj", obj(), F, None),
+    "obj large in range": ("m.obj", obj(vertices=V * 1e45), F, None),
+    "obj small in range": ("m.obj", obj(vertices=V * 1e-45), F, None),
+    "ply ascii": ("m.ply", ply_ascii(), F, None),
+    "ply ascii tabs CRLF": ("m.ply", ply_ascii(sep="\t", nl="\r\n"), F, None),
+    "ply binary": ("m.ply", ply_binary(), F, None),
+    "ply quads": ("m.ply", ply_ascii(faces=QUADS), QUAD_FAN, r"9 polygons \(4 corners\) fan-triangulated"),
+    "ply binary quads": ("m.ply", ply_binary(faces=QUADS), QUAD_FAN, r"fan-triangulated"),
+    "off": ("m.off", off(), F, None),
+    "off tabs CRLF comments": ("m.off", off(sep="\t", nl="\r\n", comments=True), F, None),
+    "off counts on the header line": ("m.off", off(counts_on_header=True), F, None),
+    "off quads": ("m.off", off(faces=QUADS), QUAD_FAN, r"9 polygons \(4 corners\) fan-triangulated"),
+    "stl ascii": ("m.stl", stl_ascii(), STL_FACES, r"merged"),
+    "stl ascii tabs CRLF": ("m.stl", stl_ascii(sep="\t", nl="\r\n"), STL_FACES, r"merged"),
+    "stl binary": ("m.stl", stl_binary(), STL_FACES, r"merged"),
+}
+
+
+@pytest.mark.parametrize("name", LEGAL_MESHES)
+def test_legal_mesh(name, tmp_path, monkeypatch, capsys):
+    file_name, content, faces, note = LEGAL_MESHES[name]
+    case = Case([file_name, *RUN], files={file_name: content}, faces=faces, note=note)
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    mesh, _ = load_mesh_with_notes(tmp_path / file_name)
+    assert mesh.faces.tolist() == faces.tolist()  # exactly the file's faces, in the file's order
+    assert mesh.n_vertices == len(V)
+    if not file_name.endswith(".stl"):
+        assert np.array_equal(mesh.vertices, V * (1e45 if "large" in name else 1e-45 if "small" in name else 1))
+    assert read_obj(tmp_path / "flat.obj").faces.tolist() == faces.tolist()
+    summary = _strict_json(outcome.out)
+    assert summary["faces"] == len(faces) and summary["status"] in ("converged", "max-iterations")
+
+
+# --------------------------------------------------------------------------- malformed meshes
+
+def _long_name() -> str:
+    return "x" * 300 + ".obj"
+
+
+MALFORMED_MESHES: dict[str, Case] = {
+    "missing file": Case(["nope.obj"], 2, r"cannot read mesh 'nope.obj': no such file"),
+    "directory": Case(["d.obj"], 2, r"cannot read mesh 'd.obj': is a directory", files={"d.obj/x": ""}),
+    "file name too long": Case([_long_name()], 2, r"cannot read mesh 'x+\.obj': file name too long"),
+    "permission denied": Case(["m.obj"], 2, r"^springflat: error: cannot read mesh 'm.obj': permission denied$",
+                              files={"m.obj": obj()}, deny=("m.obj", errno.EACCES)),
+    "I/O error": Case(["m.obj"], 2, r"cannot read mesh 'm.obj': input/output error",
+                      files={"m.obj": obj()}, deny=("m.obj", errno.EIO)),
+    "ply permission denied": Case(["m.ply"], 2, r"cannot read mesh 'm.ply': permission denied",
+                                  files={"m.ply": ply_ascii()}, deny=("m.ply", errno.EACCES)),
+    "unknown suffix": Case(["m.xyz"], 2, r"unknown format '.xyz'", files={"m.xyz": obj()}),
+    "empty file": Case(["m.obj"], 2, r"empty", files={"m.obj": ""}),
+    "only comments": Case(["m.obj"], 2, r"empty", files={"m.obj": "# nothing\n# at all\n"}),
+    "binary garbage obj": Case(["m.obj"], 2, r"cannot parse mesh|empty",
+                               files={"m.obj": bytes(range(256)) * 4}),
+    "index 0": Case(["m.obj"], 2, r"line 17: face vertex index 0",
+                    files={"m.obj": obj().replace("f 1 2 6", "f 0 2 6")}),
+    "index past the end": Case(["m.obj"], 2, r"face refers to vertex 17 but the file has only 16",
+                               files={"m.obj": obj().replace("f 1 2 6", "f 17 2 6")}),
+    "interleaved negative too far back": Case(
+        ["m.obj"], 2, r"line 7: face refers to vertex -9 but only 6 vertices precede it",
+        files={"m.obj": obj_interleaved().replace("f -6 -5 -1", "f -9 -5 -1", 1)}),
+    "non-number coordinate": Case(["m.obj"], 2, r"line 2: vertex coordinate '0.3x' is not a number",
+                                  files={"m.obj": obj().replace("v 0.3333333333333333 0.0", "v 0.3x 0.0", 1)}),
+    "nan coordinate": Case(["m.obj"], 2, r"non-finite", files={"m.obj": obj().replace("v 0.0 0.0 0.0", "v nan 0 0")}),
+    "inf coordinate": Case(["m.obj"], 2, r"non-finite", files={"m.obj": obj().replace("v 0.0 0.0 0.0", "v 1e999 0 0")}),
+    "coordinates near 1e200": Case(["m.obj"], 2, r"outside the supported range .*1e\+?50",
+                                   files={"m.obj": obj(vertices=V * 1e200)}),
+    "coordinates near 1e150": Case(["m.obj"], 2, r"outside the supported range .*1e\+?50",
+                                   files={"m.obj": obj(vertices=V * 1e150)}),
+    "one far vertex": Case(["m.obj"], 2, r"vertex 5 .*outside the supported range",
+                           files={"m.obj": obj(vertices=np.where(np.arange(16)[:, None] == 5, 1e60, V))}),
+    "mesh scaled to 1e-150": Case(["m.obj"], 2, r"too small.*1e-50", files={"m.obj": obj(vertices=V * 1e-150)}),
+    "mesh scaled to 1e-300": Case(["m.obj"], 2, r"too small.*1e-50", files={"m.obj": obj(vertices=V * 1e-300)}),
+    "two-corner face": Case(["m.obj"], 2, r"face 'f' with 2 corners", files={"m.obj": obj() + "f 1 2\n"}),
+    "free-form": Case(["m.obj"], 2, r"free-form", files={"m.obj": obj() + "cstype bspline\n"}),
+    "closed mesh": Case(["m.obj"], 2, r"closed",
+                        files={"m.obj": "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n"}),
+    "duplicate face": Case(["m.obj"], 2, r"duplicated", files={"m.obj": obj() + "f 6 2 1\n"}),
+    "unused vertex": Case(["m.obj"], 2, r"vertex 16 is not used by any face \(file line 17\)",
+                          files={"m.obj": obj().replace("f 1 2 6", "v 5 5 5\nf 1 2 6", 1)}),
+    "ply truncated": Case(["m.ply"], 2, r"cannot parse mesh 'm.ply'", files={"m.ply": ply_binary()[:-30]}),
+    "ply garbage": Case(["m.ply"], 2, r"cannot parse mesh 'm.ply'", files={"m.ply": "ply\nnonsense\n"}),
+    "ply face index out of range": Case(["m.ply"], 2, r"out of range|cannot parse",
+                                        files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 99")}),
+    "off bad counts": Case(["m.off"], 2, r"cannot parse mesh 'm.off'",
+                           files={"m.off": off().replace("16 18 0", "16 x 0")}),
+    "off too few vertices": Case(["m.off"], 2, r"cannot parse mesh 'm.off'",
+                                 files={"m.off": off().replace("16 18 0", "40 18 0")}),
+    "off negative index": Case(["m.off"], 2, r"out of range|cannot parse",
+                               files={"m.off": off().replace("\n3 0 1 5", "\n3 0 -1 5")}),
+    "off huge coordinates": Case(["m.off"], 2, r"outside the supported range",
+                                 files={"m.off": off().replace("\n0.0 0.0 0.0", "\n1e300 0.0 0.0")}),
+    "stl empty": Case(["m.stl"], 2, r"cannot parse|empty", files={"m.stl": ""}),
+    "stl garbage": Case(["m.stl"], 2, r"cannot parse|empty", files={"m.stl": "solid x\nfacet normal 1\n"}),
+}
+
+
+@pytest.mark.parametrize("name", MALFORMED_MESHES)
+def test_malformed_mesh(name, tmp_path, monkeypatch, capsys):
+    case = MALFORMED_MESHES[name]
+    case.args = [*case.args, "--out", "o.obj", "--history", "h.csv", "--json"]
+    run_case(case, tmp_path, monkeypatch, capsys)
+
+
+# --------------------------------------------------------------------------- layouts
+
+LAYOUT_ROWS = UV * 1.1 + 0.05
+
+
+def layout_text(rows=LAYOUT_ROWS, sep=" ", nl="\n") -> str:
+    return nl.join(sep.join(map(num, r)) for r in rows) + nl
+
+
+LAYOUTS: dict[str, Case] = {
+    "text": Case(["--init", "l.txt"], files={"l.txt": layout_text()}),
+    "text tabs CRLF": Case(["--init", "l.txt"], files={"l.txt": layout_text(sep="\t", nl="\r\n")}),
+    "text commas and comments": Case(["--init", "l.csv"],
+                                     files={"l.csv": "# x, y\n" + layout_text(sep=", ").replace("\n", "  # row\n")}),
+    "obj": Case(["--init", "l.obj"], files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]))}),
+    "obj tabs": Case(["--init", "l.obj"],
+                     files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]), sep="\t")}),
+    "obj tabs CRLF interleaved": Case(["--init", "l.obj"], files={"l.obj": obj_interleaved(
+        np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]])).replace(" ", "\t").replace("\n", "\r\n")}),
+    "missing": Case(["--init", "nope.txt"], 2, r"cannot read layout 'nope.txt': no such file"),
+    "directory": Case(["--init", "d"], 2, r"cannot read layout 'd': is a directory", files={"d/x": ""}),
+    "file name too long": Case(["--init", "y" * 300 + ".txt"], 2, r"cannot read layout 'y+\.txt': file name too long"),
+    "permission denied": Case(["--init", "l.txt"], 2,
+                              r"^springflat: error: cannot read layout 'l.txt': permission denied$",
+                              files={"l.txt": layout_text()}, deny=("l.txt", errno.EACCES)),
+    "obj permission denied": Case(["--init", "l.obj"], 2, r"cannot read layout 'l.obj': permission denied",
+                                  files={"l.obj": obj()}, deny=("l.obj", errno.EACCES)),
+    "I/O error": Case(["--init", "l.txt"], 2, r"cannot read layout 'l.txt': input/output error",
+                      files={"l.txt": layout_text()}, deny=("l.txt", errno.EIO)),
+    "too few rows": Case(["--init", "l.txt"], 2, r"has 15 rows but the mesh has 16",
+                         files={"l.txt": layout_text(LAYOUT_ROWS[:-1])}),
+    "three columns": Case(["--init", "l.txt"], 2, r"row 1 has 3 values",
+                          files={"l.txt": layout_text(np.column_stack([LAYOUT_ROWS, UV[:, 0]]))}),
+    "not a number": Case(["--init", "l.txt"], 2, r"cannot parse layout",
+                         files={"l.txt": layout_text().replace("0.05", "abc", 1)}),
+    "nan": Case(["--init", "l.txt"], 2, r"non-finite", files={"l.txt": layout_text().replace("0.05", "nan", 1)}),
+    "empty": Case(["--init", "l.txt"], 2, r"has 0 rows", files={"l.txt": ""}),
+    "binary garbage": Case(["--init", "l.txt"], 2, r"cannot parse layout", files={"l.txt": bytes(range(256))}),
+    "huge coordinates 1e200": Case(["--init", "l.txt"], 2, r"outside the supported range .*1e\+?50",
+                                   files={"l.txt": layout_text(LAYOUT_ROWS * 1e200)}),
+    "huge coordinates 1e300": Case(["--init", "l.txt"], 2, r"outside the supported range",
+                                   files={"l.txt": layout_text(LAYOUT_ROWS * 1e300)}),
+    "obj huge coordinates": Case(["--init", "l.obj"], 2, r"outside the supported range",
+                                 files={"l.obj": obj(np.column_stack([LAYOUT_ROWS * 1e200, 0 * UV[:, 0]]))}),
+    "obj bad vertex": Case(["--init", "l.obj"], 2, r"cannot parse layout 'l.obj': line 2",
+                           files={"l.obj": obj().replace("v 0.3333333333333333", "v zz", 1)}),
+}
+
+
+@pytest.mark.parametrize("name", LAYOUTS)
+def test_layout(name, tmp_path, monkeypatch, capsys):
+    case = LAYOUTS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", *case.args, "--json", "--max-iter", "40", "--out", "flat.obj", "--history", "h.csv"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0:
+        assert read_obj(tmp_path / "flat.obj").faces.tolist() == F.tolist()
+        assert _strict_json(outcome.out)["init"] == case.args[2]
+
+
+# --------------------------------------------------------------------------- parameters
+
+PARAMETERS: dict[str, Case] = {
+    "dt zero": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "0"], 2, r"dt must be > 0"),
+    "dt nan": Case(["--dt", "nan"], 2, r"dt must be a finite number"),
+    "dt inf": Case(["--dt", "inf"], 2, r"dt must be a finite number"),
+    "dt text": Case(["--dt", "fast"], 2, r"expected a number"),
+    "damping 1": Case(["--dynamics", "paper", "--damping", "1"], 2, r"damping"),
+    "max-iter 0": Case(["--max-iter", "0"], 2, r"max-iter"),
+    "max-iter float": Case(["--max-iter", "2.5"], 2, r"expected an integer"),
+    "density 0": Case(["--density", "0"], 2, r"density"),
+    "density -inf": Case(["--density", "-inf"], 2, r"density"),
+    "spring nan": Case(["--spring", "nan"], 2, r"finite"),
+    "barrier threshold 0": Case(["--barrier-threshold", "0"], 2, r"kappa"),
+    "barrier gain 100": Case(["--barrier-gain", "100"], 2, r"mu"),
+    "tol-area negative": Case(["--tol-area", "-1"], 2, r"tol-area"),
+    "unknown option": Case(["--warp", "9"], 2, r"unrecognized arguments"),
+    "bad choice": Case(["--step", "wobbly"], 2, r"invalid choice"),
+    "init unknown name": Case(["--init", "spiral"], 2, r"cannot read layout 'spiral': no such file"),
+    "formats with float engine": Case(["--formats", "narrow"], 2, r"--formats applies to --engine fixed"),
+    # legal extremes: the run ends (possibly diverged), with strict JSON and no warnings
+    "spring 1e300": Case(["--spring", "1e300"]),
+    "spring 1e-300": Case(["--spring", "1e-300"]),
+    "density 1e300": Case(["--density", "1e300"]),
+    "density 1e-300": Case(["--density", "1e-300"]),
+    "dt 1e300 paper": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1e300"], 3),
+    "dt 1e-320 paper": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1e-320"]),
+    "dt 1000 paper diverges": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1000"], 3),
+    "penalty gain 1e300": Case(["--no-guard", "--penalty", "--penalty-gain", "1e300"], 3),
+    "paper spring 1e300": Case(["--dynamics", "paper", "--spring", "1e300"], 3),
+    "tol-energy 1e300": Case(["--tol-energy", "1e300"]),
+    "fixed engine": Case(["--engine", "fixed"]),
+    # in-range meshes at the ends of the range, with extreme parameters: the energy overflows to inf
+    "spring 1e300 on a 1e45 mesh": Case(["--spring", "1e300"], 3, files={"m.obj": obj(vertices=V * 1e45)}),
+    "paper spring 1e300 on a 1e45 mesh": Case(["--dynamics", "paper", "--spring", "1e300"], 3,
+                                              files={"m.obj": obj(vertices=V * 1e45)}),
+    "paper density 1e300 on a 1e45 mesh": Case(["--dynamics", "paper", "--density", "1e300"],
+                                               files={"m.obj": obj(vertices=V * 1e45)}),
+    "penalty gain 1e300 on a 1e45 mesh": Case(["--no-guard", "--penalty", "--penalty-gain", "1e300"], 3,
+                                              files={"m.obj": obj(vertices=V * 1e45)}),
+    "paper density and spring 1e-300 on a 1e-45 mesh": Case(
+        ["--dynamics", "paper", "--density", "1e-300", "--spring", "1e-300"], 3,
+        files={"m.obj": obj(vertices=V * 1e-45)}),
+    "fixed engine on a 1e45 mesh": Case(["--engine", "fixed"], files={"m.obj": obj(vertices=V * 1e45)}),
+    "fixed engine on a 1e-45 mesh": Case(["--engine", "fixed"], files={"m.obj": obj(vertices=V * 1e-45)}),
+}
+
+
+@pytest.mark.parametrize("name", PARAMETERS)
+def test_parameters(name, tmp_path, monkeypatch, capsys):
+    case = PARAMETERS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", *case.args, "--json", "--max-iter", "60", "--out", "flat.obj", "--history", "h.csv"] \
+        if "--max-iter" not in case.args else ["m.obj", *case.args, "--json", "--out", "flat.obj"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code in (0, 3):
+        summary = _strict_json(outcome.out)
+        assert (summary["status"] == "diverged") == (case.code == 3)
+        for key, value in summary.items():  # a non-finite number is null, and the summary says which
+            if value is None:
+                assert key in summary.get("non_finite", []), key
+        if "1e300 on a 1e45" in name and "density" not in name and "penalty" not in name:
+            assert summary["energy"] is None and "energy" in summary["non_finite"]  # was Infinity
+        assert np.isfinite(np.array([line.split()[1:] for line in (tmp_path / "flat.obj").read_text().splitlines()
+                                     if line.startswith("v ")], dtype=float)).all()
+
+
+# --------------------------------------------------------------------------- output paths
+
+OUTPUTS: dict[str, Case] = {
+    "out in a missing directory": Case(["--out", "no/where.obj"], 2, r"directory 'no' does not exist"),
+    "out is a directory": Case(["--out", "d.obj"], 2, r"is a directory", files={"d.obj/x": ""}),
+    "out wrong suffix": Case(["--out", "o.png"], 2, r"must end in .dxf or .pdf or .svg or .obj"),
+    "out parent is a file": Case(["--out", "f/o.obj"], 2, r"--out 'f/o.obj'", files={"f": "x"}),
+    "out name too long": Case(["--out", "z" * 300 + ".obj"], 2, r"cannot write --out 'z+\.obj': file name too long"),
+    "out directory not writable": Case(["--out", "ro/o.obj"], 2,
+                                       r"^springflat: error: cannot write --out 'ro/o.obj': permission denied$",
+                                       files={"ro/keep": ""}, deny=("ro", errno.EACCES)),
+    "history on a read-only file system": Case(["--history", "ro/h.csv"], 2,
+                                               r"cannot write --history 'ro/h.csv': read-only file system",
+                                               files={"ro/keep": ""}, deny=("ro", errno.EROFS)),
+    "plot directory not writable": Case(["--plot", "ro/p.png"], 2, r"cannot write --plot 'ro/p.png': permission denied",
+                                        files={"ro/keep": ""}, deny=("ro", errno.EACCES)),
+    "plot wrong suffix": Case(["--plot", "p.jpg"], 2, r"must end in .png"),
+    "out and history the same file": Case(["--out", "o.obj", "--history", "./o.obj"], 2, r"same file"),
+    "out overwrites the mesh": Case(["--out", "m.obj"], 2, r"same file"),
+    "svg upper-case suffix": Case(["--out", "o.SVG"]),
+    "existing outputs replaced": Case(["--out", "o.obj", "--history", "h.csv"], files={"o.obj": "old", "h.csv": "old"}),
+    "all outputs": Case(["--out", "o.svg", "--history", "h.csv", "--plot", "p.png"]),
+}
+
+
+@pytest.mark.parametrize("name", OUTPUTS)
+def test_output_path(name, tmp_path, monkeypatch, capsys):
+    case = OUTPUTS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", "--json", "--max-iter", "30", *case.args]
+    run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0:
+        for option, path in zip(case.args[4::2], case.args[5::2]):
+            assert (tmp_path / path).stat().st_size > 10, option
+
+
+def test_an_unwritable_output_is_refused_before_the_run(tmp_path, monkeypatch, capsys):
+    def no_run(*args, **kwargs):
+        raise AssertionError("the run started although --history cannot be written")
+
+    monkeypatch.setattr("sim.flatten_run.flatten", no_run)
+    case = Case(["m.obj", "--out", "o.obj", "--history", "ro/h.csv"], 2,
+                r"cannot write --history 'ro/h.csv': permission denied", files={"m.obj": obj(), "ro/keep": ""},
+                deny=("ro", errno.EACCES))
+    run_case(case, tmp_path, monkeypatch, capsys)
+
+
+def test_a_failed_late_write_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
+    """The layout is written, then the history fails (disk full): neither file stays."""
+    import sim.outputs
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "h.csv")
+
+    monkeypatch.setattr(sim.outputs, "write_history", full)
+    monkeypatch.setattr("sim.flatten_run.write_history", full)
+    case = Case(["m.obj", "--max-iter", "20", "--out", "o.obj", "--history", "h.csv"], 2,
+                r"cannot write --history 'h.csv': no space left on device", files={"m.obj": obj()})
+    run_case(case, tmp_path, monkeypatch, capsys)
+
+
+# --------------------------------------------------------------------------- format sets
+
+
+def _formats_json() -> str:
+    from golden_model.fixed.formats_set import FormatSet
+
+    return FormatSet.preset("default").to_json()
+
+
+FORMAT_SETS: dict[str, Case] = {
+    "preset narrow": Case(["--formats", "narrow"]),
+    "json file": Case(["--formats", "f.json"], files={"f.json": _formats_json()}),
+    "json file CRLF": Case(["--formats", "f.json"], files={"f.json": _formats_json().replace("\n", "\r\n")}),
+    "unknown preset": Case(["--formats", "wide"], 2, r"unknown FormatSet preset 'wide'"),
+    "missing file": Case(["--formats", "nope.json"], 2, r"formats file 'nope.json' not found"),
+    "directory": Case(["--formats", "d.json"], 2, r"cannot read formats file 'd.json': is a directory",
+                      files={"d.json/x": ""}),
+    "file name too long": Case(["--formats", "q" * 300 + ".json"], 2,
+                               r"cannot read formats file 'q+\.json': file name too long"),
+    "permission denied": Case(["--formats", "f.json"], 2,
+                              r"^springflat: error: cannot read formats file 'f.json': permission denied$",
+                              files={"f.json": "{}"}, deny=("f.json", errno.EACCES)),
+    "I/O error": Case(["--formats", "f.json"], 2, r"cannot read formats file 'f.json': input/output error",
+                      files={"f.json": "{}"}, deny=("f.json", errno.EIO)),
+    "not json": Case(["--formats", "f.json"], 2, r"formats 'f.json'", files={"f.json": "{formats: }"}),
+    "json list": Case(["--formats", "f.json"], 2, r"formats 'f.json'", files={"f.json": "[1, 2]"}),
+    "json empty object": Case(["--formats", "f.json"], 2, r"formats 'f.json'", files={"f.json": "{}"}),
+    "json deeply nested": Case(["--formats", "f.json"], 2, r"formats 'f.json'",
+                               files={"f.json": "[" * 100000 + "]" * 100000}),
+    "binary garbage": Case(["--formats", "f.json"], 2, r"formats 'f.json'", files={"f.json": bytes(range(256))}),
+    "json with NaN": Case(["--formats", "f.json"], 2, r"formats 'f.json'",
+                          files={"f.json": _formats_json().replace('"rsqrt_seed_bits": 12', '"rsqrt_seed_bits": NaN')}),
+}
+
+
+@pytest.mark.parametrize("name", FORMAT_SETS)
+def test_format_set(name, tmp_path, monkeypatch, capsys):
+    case = FORMAT_SETS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", "--engine", "fixed", *case.args, "--json", "--max-iter", "30", "--out", "flat.obj"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0:
+        assert _strict_json(outcome.out)["engine"] == "fixed"
+
+
+@pytest.mark.parametrize("command", [["synth", "--target", "ecp5"], ["rtl-check", "surf1"]])
+def test_other_commands_read_format_sets_the_same_way(command, tmp_path, capsys):
+    """``synth`` and ``rtl-check`` take --formats through the same reader: a directory is one line, exit 2."""
+    (tmp_path / "d.json").mkdir()
+    code = main([*command, "--formats", str(tmp_path / "d.json")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert re.fullmatch(r"springflat: error: cannot read formats file '.*d\.json': is a directory", err[0])
+
+
+# --------------------------------------------------------------------------- a real exit, real permissions
+
+
+def _real(tmp_path, *args):
+    return subprocess.run([SPRINGFLAT, "flatten", *map(str, args)], capture_output=True, text=True, cwd=tmp_path,
+                          timeout=300)
+
+
+def _one_error_line(proc, pattern: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stdout == ""
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and re.search(pattern, lines[0]), proc.stderr
+
+
+@pytest.mark.parametrize("scale, pattern", [(1e200, r"outside the supported range"),
+                                            (1e150, r"outside the supported range"),
+                                            (1e-150, r"too small")])
+def test_real_exit_extreme_coordinates_print_one_line(tmp_path, scale, pattern):
+    (tmp_path / "m.obj").write_text(obj(vertices=V * scale))
+    proc = _real(tmp_path, "m.obj", "--json", "--out", "o.obj")
+    _one_error_line(proc, pattern)  # no RuntimeWarning lines before it
+    assert _tree(tmp_path) == ["m.obj"]
+
+
+def test_real_exit_file_name_too_long(tmp_path):
+    _one_error_line(_real(tmp_path, "x" * 300 + ".obj"), r"file name too long")
+
+
+def _unreadable_command(tmp_path) -> list[str] | None:
+    """A prefix that runs the command without the right to read a mode-000 file, or None."""
+    if os.geteuid() != 0:
+        return []
+    capsh = shutil.which("capsh")
+    if capsh is None:
+        return None
+    probe = tmp_path / "probe"
+    probe.write_text("x")
+    probe.chmod(0)
+    prefix = [capsh, "--drop=cap_dac_override,cap_dac_read_search", "--"]
+    blocked = subprocess.run([*prefix, "-c", f"cat {probe}"], capture_output=True).returncode != 0
+    probe.unlink()
+    return prefix if blocked else None
+
+
+@pytest.mark.parametrize("what", ["mesh", "layout", "formats", "out"])
+def test_real_permission_denied(tmp_path, what):
+    prefix = _unreadable_command(tmp_path)
+    if prefix is None:
+        pytest.skip("cannot drop the right to read unreadable files here")
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "l.txt").write_text(layout_text())
+    (tmp_path / "f.json").write_text(_formats_json())
+    (tmp_path / "ro").mkdir()
+    args = {"mesh": ["m.obj"], "layout": ["m.obj", "--init", "l.txt"],
+            "formats": ["m.obj", "--engine", "fixed", "--formats", "f.json"],
+            "out": ["m.obj", "--out", "ro/o.obj"]}[what]
+    target = {"mesh": "m.obj", "layout": "l.txt", "formats": "f.json", "out": "ro"}[what]
+    (tmp_path / target).chmod(0o500 if what == "out" else 0)
+    before = _tree(tmp_path)
+    try:
+        command = [SPRINGFLAT, "flatten", *args, "--json"]
+        if prefix:
+            command = [*prefix, "-c", " ".join(f"'{c}'" for c in command)]
+        proc = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    finally:
+        (tmp_path / target).chmod(0o700)
+    kind = {"mesh": "read mesh", "layout": "read layout", "formats": "read formats file", "out": "write --out"}[what]
+    _one_error_line(proc, rf"^springflat: error: cannot {kind} '{'ro/o.obj' if what == 'out' else target}': "
+                          "permission denied$")
+    assert _tree(tmp_path) == before
+
+
+# --------------------------------------------------------------------------- issue 26: outputs, inputs, format sets
+#
+# Policy (README "Outputs", docs/hardware.md "Outputs"): an output is written as a new file renamed over
+# the old one; a symbolic link is written through (its target is replaced, the link stays); a path
+# that is not a regular file (a device, a named pipe, a socket, a directory), or a link to one, is
+# refused in one line and never replaced; no output may be the same file (device and inode) as an
+# input or another output.
+
+
+def _long_name(stem_char: str, total_bytes: int, suffix: str) -> str:
+    """A file name of exactly ``total_bytes`` bytes in UTF-8 (``stem_char`` may take two)."""
+    width = len(stem_char.encode())
+    stem = stem_char * ((total_bytes - len(suffix)) // width)
+    return stem + "x" * (total_bytes - len(suffix) - len(stem.encode())) + suffix
+
+
+def _stl_no_triangles(header: bytes = b"\0" * 80, tail: bytes = b"") -> bytes:
+    return header + struct.pack("<I", 0) + tail
+
+
+class _Hung(Exception):
+    """A read blocked (the alarm below fired): not an OSError, so no handler can mistake it for one."""
+
+
+@pytest.fixture
+def no_hang():
+    """Fail, instead of hanging forever, if a case blocks for 60 s (a FIFO opened for reading would)."""
+    import signal
+
+    def fire(signum, frame):
+        raise _Hung("the command blocked")
+
+    previous = signal.signal(signal.SIGALRM, fire)
+    signal.alarm(60)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, previous)
+
+
+def _flip_diagonals(faces: np.ndarray) -> np.ndarray:
+    """The grid's quads split along the other diagonal: the same vertices, other triangles."""
+    return np.array([t for q in QUADS.tolist() for t in ([q[0], q[1], q[3]], [q[1], q[2], q[3]])])
+
+
+ROUND_TWO_MESHES: dict[str, Case] = {
+    "obj index beyond int64": Case(
+        ["m.obj"], 2, r"^springflat: error: cannot parse mesh 'm.obj': line 17: face corner '99999999999999999999': "
+                      r"index 99999999999999999999 is out of range$",
+        files={"m.obj": obj().replace("f 1 2 6", "f 99999999999999999999 2 6")}),
+    "obj negative index beyond int64": Case(["m.obj"], 2, r"index -99999999999999999999 is out of range",
+                                            files={"m.obj": obj().replace("f 1 2 6", "f -99999999999999999999 2 6")}),
+    "obj index beyond int64 with a normal": Case(
+        ["m.obj"], 2, r"face corner '2//99999999999999999999': index 99999999999999999999 is out of range",
+        files={"m.obj": obj().replace("f 1 2 6", "vn 0 0 1\nf 1//1 2//99999999999999999999 6//1")}),
+    "obj the largest int64 index": Case(["m.obj"], 2, r"face refers to vertex 9223372036854775807 but the file has only 16",
+                                        files={"m.obj": obj().replace("f 1 2 6", "f 9223372036854775807 2 6")}),
+    "off index beyond int64": Case(["m.off"], 2, r"line 19: face index 99999999999999999999 is out of range",
+                                   files={"m.off": off().replace("\n3 0 1 5", "\n3 0 1 99999999999999999999")}),
+    "ply index beyond int64": Case(["m.ply"], 2, r"element 'face' has an index 1e\+20 that is out of range",
+                                   files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 99999999999999999999")}),
+    "ply fractional index": Case(["m.ply"], 2, r"element 'face' has an index 5.5 that is not an integer",
+                                 files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 5.5")}),
+    "stl with 0 triangles": Case(["m.stl"], 2, r"invalid mesh 'm.stl': the binary STL holds 0 triangles",
+                                 files={"m.stl": _stl_no_triangles()}),
+    "stl with 0 triangles and a header that is not UTF-8": Case(
+        ["m.stl"], 2, r"the binary STL holds 0 triangles", files={"m.stl": _stl_no_triangles(b"\xff" * 80)}),
+    "stl with 0 triangles, a header that is not UTF-8 and a stray byte": Case(
+        ["m.stl"], 2, r"invalid mesh 'm.stl': mesh is empty", files={"m.stl": _stl_no_triangles(b"\xff" * 80, b"\n")}),
+    "stl text that is not UTF-8": Case(["m.stl"], 2, r"invalid mesh 'm.stl': mesh is empty",
+                                       files={"m.stl": b"solid \xe9\xff\nendsolid\n"}),
+    "stl text that is not UTF-8, with triangles": Case(
+        ["m.stl"], 0, files={"m.stl": stl_ascii().replace("solid fuzz", "solid caf\u00e9").encode("latin-1")}),
+    "mesh is a named pipe": Case(["p.obj"], 2, r"^springflat: error: cannot read mesh 'p.obj': is a named pipe "
+                                               r"\(FIFO\), not a regular file$", fifos=("p.obj",)),
+    "mesh is a link to a named pipe": Case(["l.obj"], 2, r"cannot read mesh 'l.obj': is a named pipe \(FIFO\)",
+                                           fifos=("p",), links={"l.obj": "p"}),
+}
+
+
+@pytest.mark.parametrize("name", ROUND_TWO_MESHES)
+def test_round_two_mesh(name, tmp_path, monkeypatch, capsys, no_hang):
+    case = ROUND_TWO_MESHES[name]
+    case.args = [*case.args, "--out", "o.obj", "--history", "h.csv", "--json", "--max-iter", "10"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    assert "charset" not in outcome.err and "module" not in outcome.err
+
+
+ROUND_TWO_LAYOUTS: dict[str, Case] = {
+    "empty --init": Case(["--init", ""], 2, r"^springflat: error: the layout '' is empty: name a method \(auto, tutte, pca, "
+                                            r"harmonic, lscm, arap, slim\) or a file$"),
+    "--init is a named pipe": Case(["--init", "l.txt"], 2, r"cannot read layout 'l.txt': is a named pipe \(FIFO\), "
+                                                           "not a regular file", fifos=("l.txt",)),
+    "obj layout without faces": Case(
+        ["--init", "l.obj"], note=r"note: layout 'l.obj' has no faces: only its vertices' x, y are used",
+        files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]), faces=np.zeros((0, 3), dtype=int))}),
+    "obj layout with other faces": Case(
+        ["--init", "l.obj"], note=r"note: layout 'l.obj' has 18 faces that are not the mesh's 18: only its vertices'",
+        files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]), faces=_flip_diagonals(F))}),
+    "obj layout with z": Case(
+        ["--init", "l.obj"], note=r"note: layout 'l.obj' has z up to 0\.2, not a flat layout: only x, y are used",
+        files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0.2 * UV[:, 0]]))}),
+    "obj layout, the mesh's faces in another order and rotation": Case(
+        ["--init", "l.obj"], files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]),
+                                                 faces=np.roll(F[::-1], 1, axis=1))}),
+}
+
+
+@pytest.mark.parametrize("name", ROUND_TWO_LAYOUTS)
+def test_round_two_layout(name, tmp_path, monkeypatch, capsys, no_hang):
+    case = ROUND_TWO_LAYOUTS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", *case.args, "--json", "--max-iter", "20", "--out", "flat.obj"]
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0 and case.note is None:
+        assert "note:" not in outcome.err  # the mesh's faces and z = 0: nothing to say
+
+
+def _formats(**changes) -> str:
+    """The default preset as JSON with ``changes`` (format fields or knobs), unvalidated."""
+    from golden_model.fixed.formats_set import FormatSet
+
+    data = FormatSet.preset("default").to_dict()
+    data["name"] = "fuzzed"
+    for key, value in changes.items():
+        (data["formats"] if key in data["formats"] else data)[key] = value
+    return json.dumps(data)
+
+
+#: A grid whose second column is 1/20 of the others' width: its short edges are 1/16 of the mean edge.
+SQUEEZED = np.column_stack([np.array([0.0, 0.05, 1.0, 2.0])[np.arange(16) % 4], np.repeat(np.arange(4.0), 4),
+                            0.1 * np.repeat(np.arange(4.0), 4) ** 2 / 9])
+
+ROUND_TWO_FORMATS: dict[str, Case] = {
+    "json null": Case(["--formats", "f.json"], 2, r"^springflat: error: formats 'f.json': a format set is a JSON object "
+                                                  r"with 'formats' and the knobs, not null$", files={"f.json": "null"}),
+    "json string": Case(["--formats", "f.json"], 2, r"not the string \"default\"$", files={"f.json": '"default"'}),
+    "json number": Case(["--formats", "f.json"], 2, r"not the number 42$", files={"f.json": "42"}),
+    "json boolean": Case(["--formats", "f.json"], 2, r"not the boolean true$", files={"f.json": "true"}),
+    "name not a string": Case(["--formats", "f.json"], 2, r"the format set's 'name' must be a string, not a list",
+                              files={"f.json": _formats(name=[1])}),
+    "a billion Newton steps": Case(["--formats", "f.json"], 2,
+                                   r"rsqrt_newton_steps 1000000000 is outside its domain 0..4$",
+                                   files={"f.json": _formats(rsqrt_newton_steps=10**9)}),
+    "64 seed bits": Case(["--formats", "f.json"], 2, r"rsqrt_seed_bits 64 is outside its domain 2..16",
+                         files={"f.json": _formats(rsqrt_seed_bits=64)}),
+    "40 LUT index bits": Case(["--formats", "f.json"], 2, r"lut_index_bits 40 is outside its domain 1..12",
+                              files={"f.json": _formats(lut_index_bits=40, error="u0.40", reciprocal="u1.44")}),
+    "max_degree 10^12": Case(["--formats", "f.json"], 2, r"max_degree 1000000000000 is outside its domain 1..1024",
+                             files={"f.json": _formats(max_degree=10**12)}),
+    "rest_length u3.28": Case(["--formats", "f.json"], 2,
+                              r"the error_squares accumulator takes 67 bits > 63; its exact value would not fit int64",
+                              files={"f.json": _formats(rest_length="u3.28", error_acc="u20.28", face_area="u16.28")}),
+    "position 62 bits": Case(["--formats", "f.json"], 2, r"position s39.22 is 62 bits; its update adds in one more bit",
+                             files={"f.json": _formats(position="s39.22")}),
+    "damping without an integer bit": Case(["--formats", "f.json"], 2, r"damping u0.17 needs an integer bit",
+                                           files={"f.json": _formats(damping="u0.17")}),
+    "formats file is a named pipe": Case(["--formats", "f.json"], 2, r"cannot read formats file 'f.json': is a named "
+                                                                     r"pipe \(FIFO\), not a regular file",
+                                         fifos=("f.json",)),
+    "dt u0.4, variable step": Case(["--dynamics", "paper", "--formats", "f.json"], 2,
+                                   r"the step generator's smallest dt 0.01 rounds to 0 \(lsb 0.0625\) in dt u0.4 of "
+                                   r"format set 'fuzzed'", files={"f.json": _formats(dt="u0.4")}),
+    "dt u0.4, fixed step": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "0.01", "--formats", "f.json"], 2,
+                                r"dt 0.01 does not fit format set 'fuzzed' \(u0.4", files={"f.json": _formats(dt="u0.4")}),
+    "dt^2/2 rounds to 0": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "0.01", "--formats", "f.json"], 2,
+                               r"dt\^2/2 for dt 0.01 rounds to 0 in half_dt_sq u0.12",
+                               files={"f.json": _formats(half_dt_sq="u0.12")}),
+    "exp table entries round to 0": Case(["--dynamics", "paper", "--formats", "f.json"], 2,
+                                         r"the exp table's smallest entry 0.000673795 rounds to 0 .* in lut_entry u0.8",
+                                         files={"f.json": _formats(lut_entry="u0.8")}),
+    "beta_1 rounds to 0": Case(["--formats", "f.json"], 2, r"the momentum factor beta_1 0.25 rounds to 0 \(lsb 1\) in dt u1.0",
+                               files={"f.json": _formats(dt="u1.0")}),
+    "error u0.1 with the paper's tolerances": Case(
+        ["--dynamics", "paper", "--tol-area", "0.16", "--tol-shape", "0.4", "--formats", "f.json"], 2,
+        r"--tol-area 0.16 rounds to 0 in error u0.1 of format set 'fuzzed' \(lsb 0.5\): the rule could never hold",
+        files={"f.json": _formats(error="u0.1", lut_index_bits=1, reciprocal="u1.3")}),
+    "error u0.1 without E tolerances": Case(
+        ["--formats", "f.json"], 0, note=r"format set 'fuzzed' holds E_S and E_C in error u0.1: they are multiples "
+                                          r"of 0.5, the values above are rounded to that",
+        files={"f.json": _formats(error="u0.1", lut_index_bits=1, reciprocal="u1.3")}),
+    "C/2 rounds to 0": Case(["--spring", "1e-9"], 2, r"C/2 5e-10 rounds to 0 \(lsb 3.05e-05\) in spring s6.15"),
+    "1 - damping rounds to 0": Case(["--dynamics", "paper", "--damping", "0.99999999"], 2,
+                                    r"the velocity factor 1 - damping 1e-08 rounds to 0 .* in damping u1.17"),
+    "barrier gain rounds to 0": Case(["--barrier-gain", "0.01", "--formats", "f.json"], 2,
+                                     r"the barrier gain mu C/\(4 X\*\) of .* rounds to 0 in barrier_gain u8.2",
+                                     files={"f.json": _formats(barrier_gain="u8.2")}),
+    "a rest length rounds to 0": Case(["--formats", "f.json"], 2,
+                                      r"an edge's rest length of 0.0\d+ \(scaled units\) rounds to 0 in rest_length u3.2",
+                                      files={"m.obj": obj(vertices=SQUEEZED),
+                                             "f.json": _formats(rest_length="u3.2")}),
+}
+
+
+@pytest.mark.parametrize("name", ROUND_TWO_FORMATS)
+def test_round_two_format_set(name, tmp_path, monkeypatch, capsys, no_hang):
+    case = ROUND_TWO_FORMATS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", "--engine", "fixed", *case.args, "--json", "--max-iter", "30", "--out", "flat.obj"]
+    run_case(case, tmp_path, monkeypatch, capsys)
+
+
+@pytest.mark.parametrize("command", [["verilog", "--out", "v"], ["study", "dome", "--out", "s"],
+                                     ["synth", "--target", "ecp5", "--out", "y"],
+                                     ["rtl-check", "m.obj", "--json"]])
+def test_every_command_refuses_a_billion_newton_steps_at_once(command, tmp_path, monkeypatch, capsys):
+    """No command hangs on a format set with a huge knob: one line, at once, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "f.json").write_text(_formats(rsqrt_newton_steps=10**9))
+    option = "--base" if command[0] == "study" else "--formats"
+    code = main([*command, option, "f.json"])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert re.fullmatch(r"springflat: error: formats 'f.json': FormatSet 'fuzzed': rsqrt_newton_steps 1000000000 is "
+                        r"outside its domain 0..4", err[0])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.json", "m.obj"]
+
+
+ROUND_TWO_OUTPUTS: dict[str, Case] = {
+    "history is a named pipe": Case(["--history", "h.csv"], 2,
+                                    r"^springflat: error: --history 'h.csv' is a named pipe \(FIFO\), not a regular "
+                                    r"file: springflat writes regular files only$", fifos=("h.csv",)),
+    "out is a link to a named pipe": Case(["--out", "o.obj"], 2,
+                                          r"--out 'o.obj' \(the link's target '.*/p'\) is a named pipe \(FIFO\)",
+                                          fifos=("p",), links={"o.obj": "p"}),
+    "plot is a link to a directory": Case(["--plot", "p.png"], 2, r"--plot 'p.png' is a directory",
+                                          files={"d/x": ""}, links={"p.png": "d"}),
+    "history is a link to a file": Case(["--history", "h.csv"], files={"t.csv": "old"}, links={"h.csv": "t.csv"}),
+    "history is a dangling link": Case(["--history", "h.csv"], links={"h.csv": "new.csv"}),
+    "history is a link into a missing directory": Case(["--history", "h.csv"], 2, r"directory '.*gone' does not exist",
+                                                       links={"h.csv": "gone/h.csv"}),
+    "history overwrites the --init file": Case(["--init", "l.txt", "--history", "l.txt"], 2,
+                                               r"^springflat: error: --history 'l.txt' is the same file as --init "
+                                               r"'l.txt'$", files={"l.txt": layout_text()}),
+    "history overwrites the --init file, spelled another way": Case(
+        ["--init", "l.txt", "--history", "d/../l.txt"], 2, r"--history 'd/../l.txt' is the same file as --init 'l.txt'",
+        files={"l.txt": layout_text(), "d/k": ""}),
+    "history overwrites the --init file through a link": Case(
+        ["--init", "l.txt", "--history", "h.csv"], 2, r"--history 'h.csv' is the same file as --init 'l.txt'",
+        files={"l.txt": layout_text()}, links={"h.csv": "l.txt"}),
+    "history overwrites the formats file": Case(
+        ["--engine", "fixed", "--formats", "f.json", "--history", "./f.json"], 2,
+        r"--history '(\./)?f.json' is the same file as --formats 'f.json'", files={"f.json": _formats_json()}),
+    "out is a hard link to the mesh": Case(["--out", "h.obj"], 2, r"--out 'h.obj' is the same file as the mesh 'm.obj'",
+                                           links={"h.obj": "hard:m.obj"}),
+    "out is a symbolic link to the mesh": Case(["--out", "s.obj"], 2, r"--out 's.obj' is the same file as the mesh",
+                                               links={"s.obj": "m.obj"}),
+    "history and plot the same new file, spelled two ways": Case(
+        ["--history", "h.png", "--plot", "d/../h.png"], 2, r"--plot 'd/../h.png' is the same file as --history 'h.png'",
+        files={"d/k": ""}),
+    "a 255-byte name": Case(["--history", _long_name("h", 255, ".csv")]),
+    "a 255-byte --out name": Case(["--out", _long_name("o", 255, ".obj"), "--history", "h.csv"]),
+    "a 255-byte name of two-byte characters": Case(["--history", _long_name("\u00e9", 255, ".csv")]),
+    "a 256-byte name": Case(["--history", _long_name("h", 256, ".csv")], 2, r"file name too long"),
+}
+
+
+@pytest.mark.parametrize("name", ROUND_TWO_OUTPUTS)
+def test_round_two_output_path(name, tmp_path, monkeypatch, capsys, no_hang):
+    case = ROUND_TWO_OUTPUTS[name]
+    case.files = {"m.obj": obj(), **case.files}
+    case.args = ["m.obj", "--json", "--max-iter", "30", *case.args]
+    run_case(case, tmp_path, monkeypatch, capsys)
+    if case.code == 0:
+        written = tmp_path / case.args[case.args.index("--history") + 1]
+        assert written.read_text().startswith("iteration,dt,")
+        if case.links:  # written through: the link is still a link, its target holds the CSV
+            assert written.is_symlink() and (tmp_path / os.readlink(written)).read_text().startswith("iteration,")
+
+
+def test_a_replaced_output_keeps_its_mode(tmp_path, monkeypatch, capsys):
+    (tmp_path / "h.csv").write_text("old")
+    (tmp_path / "h.csv").chmod(0o640)
+    run_case(Case(["m.obj", "--max-iter", "5", "--history", "h.csv"], files={"m.obj": obj()}), tmp_path, monkeypatch,
+             capsys)
+    assert (tmp_path / "h.csv").stat().st_mode & 0o777 == 0o640
+
+
+@pytest.mark.parametrize("err", [errno.ENOSPC, errno.EIO])
+def test_a_write_error_is_one_line_and_leaves_the_old_file(err, tmp_path, monkeypatch, capsys):
+    """Data that cannot reach the disk (a full disk, an I/O error: reported by fsync before the rename)."""
+    import sim.outputs
+
+    def failing_fsync(fd):
+        raise OSError(err, os.strerror(err))
+
+    (tmp_path / "h.csv").write_text("old")
+    monkeypatch.setattr(sim.outputs.os, "fsync", failing_fsync)
+    words = {errno.ENOSPC: "no space left on device", errno.EIO: "input/output error"}[err]
+    case = Case(["m.obj", "--max-iter", "5", "--out", "o.obj", "--history", "h.csv"], 2,
+                rf"^springflat: error: cannot write --out 'o.obj': {words}$", files={"m.obj": obj()})
+    run_case(case, tmp_path, monkeypatch, capsys)
+    assert (tmp_path / "h.csv").read_text() == "old"
+
+
+def test_real_exit_a_write_error_past_the_file_size_limit(tmp_path):
+    """A real write error, without root or a full disk: RLIMIT_FSIZE makes writes past 2 kB fail (EFBIG)."""
+    import resource
+    import signal
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG instead of the signal
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, 2048))
+
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "h.csv").write_text("old")
+    proc = subprocess.run([SPRINGFLAT, "flatten", "m.obj", "--max-iter", "200", "--tol-energy", "0", "--no-guard",
+                           "--energy-window", "1000", "--history",
+                           "h.csv"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300, preexec_fn=limit)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.splitlines()
+    assert lines[-1] == "springflat: error: cannot write --history 'h.csv': file too large", proc.stderr
+    assert all(line.startswith("springflat: ") for line in lines)
+    assert (tmp_path / "h.csv").read_text() == "old" and sorted(os.listdir(tmp_path)) == ["h.csv", "m.obj"]
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
+def test_as_root_a_device_survives_history_out_and_plot(tmp_path, monkeypatch, capsys):
+    """Stand-in character devices (major 1, minor 3: what /dev/null is) made in tmp_path; the machine's own
+    devices are never touched. Each output option, and a link to a device, is refused and the device stays."""
+    import stat
+
+    devices = {"dev.csv": "--history", "dev.obj": "--out", "dev.png": "--plot"}
+    for name, minor in zip(devices, (7, 3, 3)):  # what /dev/full (1, 7) and /dev/null (1, 3) are
+        os.mknod(tmp_path / name, 0o666 | stat.S_IFCHR, os.makedev(1, minor))
+    os.symlink("dev.csv", tmp_path / "link.csv")
+    before = {name: os.lstat(tmp_path / name) for name in devices}
+    for name, option in [*devices.items(), ("link.csv", "--history")]:
+        case = Case(["m.obj", "--max-iter", "5", option, name], 2,
+                    rf"^springflat: error: {option} '{name}'( \(the link's target '.*dev.csv'\))? is a character device, "
+                    "not a regular file: springflat writes regular files only$", files={"m.obj": obj()})
+        run_case(case, tmp_path, monkeypatch, capsys)
+    for name, st in before.items():
+        now = os.lstat(tmp_path / name)
+        assert stat.S_ISCHR(now.st_mode) and (now.st_ino, now.st_rdev) == (st.st_ino, st.st_rdev), name
+
+
+@pytest.mark.parametrize("command", [["verilog"], ["paper"], ["study", "dome"], ["synth", "--target", "ecp5"]])
+@pytest.mark.parametrize("kind", ["file", "fifo"])
+def test_an_output_directory_that_is_not_one_is_refused_at_once(command, kind, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    if kind == "file":
+        (tmp_path / "f.txt").write_text("keep")
+    else:
+        os.mkfifo(tmp_path / "f.txt")
+    code = main([*command, "--out", "f.txt"])
+    err = capsys.readouterr().err.splitlines()
+    what = "a regular file" if kind == "file" else r"a named pipe \(FIFO\)"
+    assert code == 2 and len(err) == 1 and re.fullmatch(
+        rf"springflat: error: --out 'f.txt' exists and is {what}, not a directory", err[0]), err
+    assert os.listdir(tmp_path) == ["f.txt"]
+
+
+def test_rtl_check_waves_onto_a_directory_is_one_line_before_anything(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "w").mkdir()
+    for extra in ([], ["--engine-top"]):
+        code = main(["rtl-check", "m.obj", "--waves", "w", *extra])
+        err = capsys.readouterr().err.splitlines()
+        assert code == 2 and err == ["springflat: error: --waves 'w' is a directory"], err  # no "building" line
+    code = main(["rtl-check", "m.obj", "--waves", "m.obj"])
+    assert code == 2 and capsys.readouterr().err.splitlines() == [
+        "springflat: error: --waves 'm.obj' is the same file as the mesh 'm.obj'"]
+
+
+def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
+    """Under pytest stderr is not a terminal: no bar; made to look like one, the bar is enabled."""
+    import sim.flatten_run
+
+    seen = []
+    real = sim.flatten_run._progress
+
+    def spy(total, enabled):
+        seen.append(enabled)
+        return real(total, enabled)
+
+    monkeypatch.setattr(sim.flatten_run, "_progress", spy)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.obj").write_text(obj())
+    for argv in (["m.obj", "--max-iter", "3"], ["m.obj", "--max-iter", "3", "--json"]):
+        assert main(["flatten", *argv]) == 0
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    assert main(["flatten", "m.obj", "--max-iter", "3"]) == 0
+    assert seen == [False, False, True]
+    assert "it/s" not in capsys.readouterr().err
+
+
+def test_study_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
+    import sim.study.cli
+
+    seen = []
+    real = sim.study.cli._progress_bars
+
+    def spy(enabled):
+        seen.append(enabled)
+        return real(enabled)
+
+    monkeypatch.setattr(sim.study.cli, "_progress_bars", spy)
+    monkeypatch.chdir(tmp_path)
+    assert main(["study", "dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--max-iter", "5",
+                 "--out", "s"]) == 0
+    assert seen == [False] and "run/s" not in capsys.readouterr().err
+
+
+def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, timeout: float = 600):
+    """Run ``springflat argv`` in a session of its own; once ``ready()`` holds (or at once), wait ``after`` s
+    and send SIGINT to the whole group (as Ctrl-C in a terminal does). Returns the finished process."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([SPRINGFLAT, *argv], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    start = time.monotonic()
+    ready = ready or _past_python_start_up(proc.pid)
+    while not ready() and proc.poll() is None and time.monotonic() - start < timeout:
+        time.sleep(0.02)
+    time.sleep(after)
+    assert proc.poll() is None, "the command ended before it could be interrupted"
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=timeout)
+    return proc.returncode, out, err
+
+
+def _past_python_start_up(pid: int):
+    """Whether process ``pid`` has begun importing springflat's modules (numpy is mapped): past CPython's own
+    start-up, where a SIGINT is the interpreter's fatal error, not springflat's to answer (on a loaded
+    machine start-up alone can take seconds)."""
+    def ready() -> bool:
+        try:
+            return "numpy" in Path(f"/proc/{pid}/maps").read_text()
+        except OSError:
+            return False
+    return ready
+
+
+def _building(cwd: Path, name: str):
+    """Whether the temporary sibling of output directory ``name`` exists (the build has begun)."""
+    return lambda: any(p.name.startswith(f".{name}.") for p in cwd.iterdir())
+
+
+@pytest.mark.parametrize("after", [0.0, 0.8, 2.5])
+def test_real_exit_ctrl_c_during_flatten_leaves_no_output(tmp_path, after):
+    """Ctrl-C while importing, early, or during the run: one line, status 130, no file. (Counted from the
+    start of the imports: within Python's own start-up, before any of springflat's code runs, CPython
+    answers for itself.)"""
+    from golden_model.generate import dome_grid
+    from golden_model.mesh_io import save_obj
+
+    mesh = dome_grid(64)  # long enough to be running at 2.5 s
+    save_obj(tmp_path / "m.obj", mesh.vertices, mesh.faces)
+    # --tol-area 0: E_S never reaches 0, so the run cannot stop before it is interrupted
+    code, out, err = _interrupt(["flatten", "m.obj", "--max-iter", "100000", "--tol-area", "0", "--tol-energy", "0",
+                                 "--no-guard",
+                                 "--energy-window", "1", "--out", "o.obj",
+                                 "--history", "h.csv", "--plot", "p.png"], tmp_path, after=after)
+    assert (code, out, err) == (130, "", "springflat: interrupted\n")
+    assert os.listdir(tmp_path) == ["m.obj"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command, name", [
+    (["verilog", "--out", "v"], "v"),
+    (["study", "dome", "saddle", "--workers", "2", "--out", "s"], "s"),  # minutes: every sweep and the optimiser
+    (["synth", "--target", "ecp5", "--components", "step_generator", "--out", "y"], "y"),
+])
+@pytest.mark.parametrize("after", [0.5, 3.0])
+def test_real_exit_ctrl_c_during_a_directory_output_leaves_nothing(command, name, after, tmp_path):
+    """verilog, study and synth build their directory beside --out: Ctrl-C leaves neither, prints one line
+    (no worker's traceback, no progress bar) and exits 130."""
+    ready = None if command[0] == "study" else _building(tmp_path, name)  # study: from the imports on
+    code, out, err = _interrupt(command, tmp_path, after=after + (2.0 if command[0] == "study" else 0.0), ready=ready)
+    assert (code, out) == (130, ""), err
+    assert err.splitlines()[-1] == "springflat: interrupted"
+    assert all(line.startswith("springflat") for line in err.splitlines()), err  # synth's step lines at most
+    assert os.listdir(tmp_path) == []
+
+
+def test_an_existing_output_directory_keeps_its_other_files(tmp_path, monkeypatch, capsys):
+    """paper into an existing directory: its files replace their namesakes, other files stay; the report's
+    figures are referred to by name, so they work from --out."""
+    import sim.paper
+
+    def tiny_report(out, init="pca", progress=True):
+        (out / "figure.png").write_bytes(b"png")
+        report = out / "report.md"
+        report.write_text("![figure](figure.png)\n")
+        return report
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "mine.txt").write_text("keep")
+    (tmp_path / "r" / "report.md").write_text("old")
+    assert main(["paper", "--out", "r"]) == 0
+    assert sorted(os.listdir(tmp_path / "r")) == ["figure.png", "mine.txt", "report.md"]
+    assert (tmp_path / "r" / "report.md").read_text() == "![figure](figure.png)\n"
+    assert (tmp_path / "r" / "mine.txt").read_text() == "keep"
+    assert os.listdir(tmp_path) == ["r"]
+    assert capsys.readouterr().out == "wrote r/report.md\n"
+
+
+@pytest.mark.parametrize("what", ["mesh", "init", "formats"])
+def test_real_exit_a_named_pipe_as_input_does_not_block(tmp_path, what):
+    name = "p.json" if what == "formats" else "p.obj"
+    os.mkfifo(tmp_path / name)
+    (tmp_path / "m.obj").write_text(obj())
+    args = {"mesh": [name], "init": ["m.obj", "--init", name], "formats": ["m.obj", "--engine", "fixed", "--formats", name]}
+    proc = _real(tmp_path, *args[what])  # a blocking read would end in subprocess's 300 s timeout
+    kind = {"mesh": "mesh", "init": "layout", "formats": "formats file"}[what]
+    _one_error_line(proc, rf"cannot read {kind} '{name}': is a named pipe \(FIFO\), not a regular file$")
+
+
+@pytest.mark.parametrize("engine, iterations, noted", [("fixed", 130, True), ("fixed", 20, False),
+                                                       ("float", 130, False)])
+def test_a_fixed_point_run_at_its_energy_floor_says_so(engine, iterations, noted, tmp_path, monkeypatch, capsys):
+    """The cap from ARAP, the unguarded dynamics under Algorithm 1's per-iteration rule: the fixed-point
+    energy reaches its rounding floor (~1e-5 relative) well before N_max = 130 and never meets ε = 1e-7
+    (docs/dynamics.md); 20 iterations are still descending."""
+    from golden_model.generate import spherical_cap
+    from golden_model.mesh_io import save_obj
+
+    cap = spherical_cap()
+    save_obj(tmp_path / "cap.obj", cap.vertices, cap.faces)
+    case = Case(["cap.obj", "--engine", engine, "--max-iter", str(iterations), "--no-guard", "--energy-window", "1",
+                 "--tol-energy", "1e-7"],
+                note=r"note: over the last 50 iterations the relative energy change never fell below [0-9.e-]+, "
+                     r"above --tol-energy 1e-07" if noted else None)
+    outcome = run_case(case, tmp_path, monkeypatch, capsys)
+    assert ("relative energy change never fell" in outcome.err) == noted
+
+
+def test_a_255_byte_output_directory_name(tmp_path, monkeypatch, capsys):
+    """The temporary sibling an output directory is built in fits wherever the directory's name fits."""
+    import sim.paper
+
+    def tiny_report(out, init="pca", progress=True):
+        (out / "report.md").write_text("report\n")
+        return out / "report.md"
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    monkeypatch.chdir(tmp_path)
+    name = _long_name("r", 255, "")
+    assert main(["paper", "--out", name]) == 0
+    assert os.listdir(tmp_path) == [name] and os.listdir(tmp_path / name) == ["report.md"]
+    capsys.readouterr()

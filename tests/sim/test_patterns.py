@@ -1,0 +1,427 @@
+"""Pattern files read back by independent readers: ezdxf's recover and audit, pypdf, ElementTree, trimesh."""
+
+import json
+import math
+import re
+import subprocess
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from golden_model.generate import dome_grid
+from golden_model.mesh import Mesh
+from golden_model.mesh_io import load_mesh, read_obj
+from sim.distortion import DISTORTION_HEADER, distortion, worst_summary, write_distortion_csv
+from sim.patterns import (MAX_SHEETS, OVERLAP_MM, PatternDrawing, PatternError, plan_sheets, write_pattern_file)
+from support import SCANS, SPRINGFLAT
+
+SVG = "{http://www.w3.org/2000/svg}"
+INKSCAPE = "{http://www.inkscape.org/namespaces/inkscape}"
+#: millimetres per unit: physical facts, not the code's table
+MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+PT = 25.4 / 72.0  # mm per PDF point
+
+
+@pytest.fixture(scope="module")
+def bunny():
+    """bunny_face.obj (metres) flattened with the file defaults of the command line."""
+    import springflat
+
+    V, F = springflat.read_mesh(SCANS / "bunny_face.obj")
+    pattern = springflat.flatten(V, F, name="bunny_face")
+    assert pattern.status == "converged" and pattern.folded == 0
+    return pattern.mesh, pattern.layout
+
+
+def boundary_length(mesh: Mesh, layout: np.ndarray) -> float:
+    """The closed boundary's length, from the mesh's boundary edges (each in exactly one face)."""
+    directed = np.concatenate([mesh.faces[:, [0, 1]], mesh.faces[:, [1, 2]], mesh.faces[:, [2, 0]]])
+    key = np.sort(directed, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    boundary = key[counts[inverse.ravel()] == 1]
+    return float(np.linalg.norm(layout[boundary[:, 0]] - layout[boundary[:, 1]], axis=1).sum())
+
+
+# --------------------------------------------------------------------------- DXF
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("units, insunits", [("m", 6), ("mm", 4), ("cm", 5), ("in", 1)])
+def test_dxf_has_a_closed_cut_line_of_the_patterns_length_and_declares_its_units(bunny, tmp_path, units, insunits):
+    import ezdxf
+    from ezdxf import recover
+
+    mesh, layout = bunny
+    path = tmp_path / "bunny.dxf"
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, units), dxf_edges=units == "m")
+    doc, auditor = recover.readfile(path)
+    assert not auditor.has_errors, [str(e) for e in auditor.errors]
+    assert not doc.audit().has_errors
+    assert doc.header["$INSUNITS"] == insunits
+    assert doc.header["$MEASUREMENT"] == (0 if units == "in" else 1)
+    assert doc.units == insunits and ezdxf.units.unit_name(doc.units).lower().startswith(
+        {"m": "meter", "mm": "milli", "cm": "centi", "in": "inch"}[units])
+    cut = doc.modelspace().query('*[layer=="CUT"]')
+    assert [e.dxftype() for e in cut] == ["LWPOLYLINE"]
+    polyline = cut[0]
+    assert polyline.closed
+    points = np.array([p[:2] for p in polyline.get_points("xy")])
+    length = float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
+    assert length == pytest.approx(boundary_length(mesh, layout), rel=1e-9)
+    assert len(points) == len(mesh.boundary_loop)
+    lines = doc.modelspace().query('LINE[layer=="MESH"]')
+    assert len(lines) == (mesh.n_edges if units == "m" else 0)
+
+
+def test_dxf_without_edges_has_only_the_cut_line(bunny, tmp_path):
+    from ezdxf import recover
+
+    mesh, layout = bunny
+    path = tmp_path / "cut.dxf"
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, "m"))
+    doc, auditor = recover.readfile(path)
+    assert not auditor.has_errors
+    assert [e.dxftype() for e in doc.modelspace()] == ["LWPOLYLINE"]
+    assert doc.ezdxf_metadata()["springflat_units"] == "m"
+
+
+# --------------------------------------------------------------------------- PDF
+
+
+def _matrix(a, b, c, d, e, f) -> np.ndarray:
+    return np.array([[a, b, 0.0], [c, d, 0.0], [e, f, 1.0]], dtype=float)
+
+
+def pdf_page_contents(reader, page):
+    """A small PDF interpreter: the page's painted paths and shown text, in mm on the page.
+
+    Returns ``(paths, texts)``: ``paths`` is a list of ``(subpaths, operator)``, each subpath a list of
+    ``(x, y)`` mm; ``texts`` a list of ``(text, (x, y) mm of its origin)``.  Handles q/Q/cm, path
+    construction (m l h re), painting operators, form XObjects (Do with their /Matrix) and BT/Tm/Td/Tj.
+    """
+    from pypdf.generic import ContentStream
+
+    paths, texts = [], []
+
+    def point(ctm, x, y):
+        p = np.array([float(x), float(y), 1.0]) @ ctm
+        return p[0] * PT, p[1] * PT
+
+    def run(content, ctm, resources):
+        stack, subpaths, tm = [], [], np.eye(3)
+        for operands, op in ContentStream(content, reader).operations:
+            op = op.decode() if isinstance(op, bytes) else op
+            if op == "q":
+                stack.append(ctm)
+            elif op == "Q":
+                ctm = stack.pop()
+            elif op == "cm":
+                ctm = _matrix(*map(float, operands)) @ ctm
+            elif op == "m":
+                subpaths.append([point(ctm, *operands)])
+            elif op == "l":
+                subpaths[-1].append(point(ctm, *operands))
+            elif op == "re":
+                x, y, w, h = map(float, operands)
+                subpaths.append([point(ctm, x, y), point(ctm, x + w, y), point(ctm, x + w, y + h),
+                                 point(ctm, x, y + h)])
+            elif op in ("S", "s", "f", "F", "f*", "B", "B*", "b", "b*", "n"):
+                if op != "n":
+                    paths.append((subpaths, op))
+                subpaths = []
+            elif op == "BT":
+                tm = np.eye(3)
+            elif op == "Tm":
+                tm = _matrix(*map(float, operands))
+            elif op == "Td":
+                tm = _matrix(1, 0, 0, 1, *map(float, operands)) @ tm
+            elif op == "Tj":
+                texts.append((str(operands[0]), point(tm @ ctm, 0, 0)))
+            elif op == "Do":
+                xobject = resources["/XObject"][operands[0]].get_object()
+                matrix = _matrix(*map(float, xobject.get("/Matrix", [1, 0, 0, 1, 0, 0])))
+                run(xobject, matrix @ ctm, xobject.get("/Resources", resources))
+
+    run(page.get_contents(), np.eye(3), page["/Resources"])
+    return paths, texts
+
+
+def scale_bar_check(paths, texts) -> tuple[float, float]:
+    """``(printed length mm, stated length mm)`` of the scale bar: the label ``<n> <unit>`` and the
+    horizontal two-point stroke just under it, spanning the label's origin."""
+    stated = [(t, xy) for t, xy in texts if re.fullmatch(r"[\d.]+ (mm|cm|m|in)( \(.*\))?", t)]
+    assert len(stated) == 1, texts
+    text, (tx, ty) = stated[0]
+    number, unit = re.match(r"([\d.]+) (mm|cm|m|in)", text).groups()
+    bars = []
+    for subpaths, op in paths:
+        for sub in subpaths:
+            if op == "S" and len(sub) == 2 and abs(sub[0][1] - sub[1][1]) < 1e-6:
+                (x1, y), (x2, _) = sub
+                if min(x1, x2) <= tx <= max(x1, x2) and 0 < ty - y < 6:
+                    bars.append(abs(x2 - x1))
+    assert len(bars) == 1, bars
+    return bars[0], float(number) * MM[unit]
+
+
+def test_pdf_page_size_and_scale_bar_are_true_to_a_tenth_of_a_millimetre(bunny, tmp_path):
+    from pypdf import PdfReader
+
+    mesh, layout = bunny
+    path = tmp_path / "bunny.pdf"
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, "m", "converged"), paper="a4")
+    reader = PdfReader(path)
+    assert len(reader.pages) == 1
+    page = reader.pages[0]
+    width, height = float(page.mediabox.width) * PT, float(page.mediabox.height) * PT
+    assert abs(width - 210.0) < 0.1 and abs(height - 297.0) < 0.1
+    paths, texts = pdf_page_contents(reader, page)
+    printed, stated = scale_bar_check(paths, texts)
+    assert abs(printed - stated) < 0.1
+    words = " ".join(t for t, _ in texts)
+    assert "bunny_face" in words and "units m" in words and "scale 1:1" in words
+    # the cut line: the closed path with one corner per boundary vertex, at 1:1 (metres on paper)
+    cut = [np.array(sub) for subpaths, op in paths for sub in subpaths if len(sub) == len(mesh.boundary_loop)]
+    assert len(cut) == 1
+    extent_mm = cut[0].max(axis=0) - cut[0].min(axis=0)
+    expected = (layout[mesh.boundary_loop].max(axis=0) - layout[mesh.boundary_loop].min(axis=0)) * 1000.0
+    np.testing.assert_allclose(extent_mm, expected, atol=0.01)
+    printed_length = float(np.linalg.norm(np.roll(cut[0], -1, axis=0) - cut[0], axis=1).sum())
+    assert printed_length == pytest.approx(boundary_length(mesh, layout) * 1000.0, abs=0.1)
+    assert reader.metadata.title.startswith("bunny_face")
+
+
+@pytest.mark.slow
+def test_pdf_of_a_large_pattern_is_tiled_with_overlap_marks_on_letter(tmp_path):
+    from pypdf import PdfReader
+
+    mesh = load_mesh(SCANS / "armadillo_strip.obj")  # about 0.27 x 0.62 of a unit flat: metres here
+    layout = mesh.vertices[:, [0, 1]]  # the projection: a stand-in layout, no run needed
+    drawing = PatternDrawing.of(mesh, layout, "m")
+    path = tmp_path / "armadillo.pdf"
+    write_pattern_file(path, drawing, paper="letter")
+    reader = PdfReader(path)
+    size = (np.ptp(layout, axis=0) * 1000.0).tolist()
+    plan = plan_sheets(tuple(size), "letter")
+    assert len(reader.pages) == len(plan.sheets) > 1
+    page_mm = sorted((215.9, 279.4), reverse=plan.landscape)
+    labels = []
+    for page in reader.pages:
+        assert abs(float(page.mediabox.width) * PT - page_mm[0]) < 0.1
+        assert abs(float(page.mediabox.height) * PT - page_mm[1]) < 0.1
+        paths, texts = pdf_page_contents(reader, page)
+        printed, stated = scale_bar_check(paths, texts)
+        assert abs(printed - stated) < 0.1
+        words = " ".join(t for t, _ in texts)
+        labels.append(re.search(r"sheet (\w+) of (\d+)", words).groups())
+        assert "overlaps here" in words
+        dashed = [sub for subpaths, op in paths for sub in subpaths if op == "S"]
+        assert dashed
+    assert [int(n) for _, n in labels] == [len(plan.sheets)] * len(plan.sheets)
+    assert len({label for label, _ in labels}) == len(plan.sheets)
+
+
+# --------------------------------------------------------------------------- SVG
+
+
+def test_svg_sheet_scale_bar_and_cut_line_at_true_scale(bunny, tmp_path):
+    mesh, layout = bunny
+    path = tmp_path / "bunny.svg"
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, "m"), paper="a4")
+    root = ET.parse(path).getroot()
+    assert (root.get("width"), root.get("height"), root.get("viewBox")) == ("210mm", "297mm", "0 0 210 297")
+    bar = root.find(f".//{SVG}polyline[@class='scale-bar']")
+    (x1, y1), (x2, y2) = [tuple(map(float, p.split(","))) for p in bar.get("points").split()]
+    label = root.find(f".//{SVG}text[@class='scale-label']").text
+    number, unit = re.match(r"([\d.]+) (mm|cm|m|in)", label).groups()
+    assert y1 == y2 and abs(abs(x2 - x1) - float(number) * MM[unit]) < 0.1
+    cut = np.array([p.split(",") for p in root.find(f".//{SVG}polygon[@id='cut']").get("points").split()], float)
+    np.testing.assert_allclose(np.ptp(cut, axis=0), np.ptp(layout[mesh.boundary_loop], axis=0) * 1000, atol=1e-3)
+    title = root.find(f"{SVG}title").text
+    assert "bunny_face" in title and "units m" in title
+
+
+def test_svg_tiles_each_sheet_as_a_page(tmp_path):
+    mesh = load_mesh(SCANS / "armadillo_strip.obj")
+    layout = mesh.vertices[:, [0, 1]]
+    path = tmp_path / "armadillo.svg"
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, "m"), paper="a4")
+    root = ET.parse(path).getroot()
+    pages = root.findall(f".//{INKSCAPE}page")
+    plan = plan_sheets(tuple((np.ptp(layout, axis=0) * 1000.0).tolist()), "a4")
+    assert len(pages) == len(plan.sheets) == len(root.findall(f"{SVG}g")) > 1
+    assert {(float(p.get("width")), float(p.get("height"))) for p in pages} == {plan.page}
+    assert len(root.findall(f".//{SVG}polyline[@class='scale-bar']")) == len(plan.sheets)
+
+
+# --------------------------------------------------------------------------- OBJ
+
+
+def _similarity_residual(source: np.ndarray, target: np.ndarray) -> float:
+    """Largest distance after the best similarity (scale, rotation, shift; no mirror) of source onto target."""
+    a, b = source - source.mean(axis=0), target - target.mean(axis=0)
+    u, s, vt = np.linalg.svd(a.T @ b)
+    sign = np.diag([1.0, np.sign(np.linalg.det(u @ vt))])  # Kabsch: a proper rotation only
+    rotation = u @ sign @ vt
+    scale = (s * np.diag(sign)).sum() / (a ** 2).sum()
+    return float(np.abs(scale * a @ rotation - b).max())
+
+
+def test_obj_is_the_3d_mesh_with_the_pattern_as_vt(bunny, tmp_path):
+    import trimesh
+
+    mesh, layout = bunny
+    path = tmp_path / "bunny.obj"
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, "m"))
+    loaded = trimesh.load(path, process=False, maintain_order=True)
+    np.testing.assert_array_equal(loaded.vertices, mesh.vertices)
+    np.testing.assert_array_equal(loaded.faces, mesh.faces)
+    uv = np.asarray(loaded.visual.uv)
+    assert uv.shape == (mesh.n_vertices, 2) and uv.min() >= 0 and uv.max() <= 1
+    size = float(np.ptp(layout, axis=0).max())
+    assert _similarity_residual(uv, layout) < 1e-9 * size
+    assert "in m" in path.read_text().splitlines()[0]
+
+
+def test_flat_obj_keeps_the_layout_with_z_0(bunny, tmp_path):
+    mesh, layout = bunny
+    path = tmp_path / "bunny.flat.obj"
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, "m"))
+    obj = read_obj(path)
+    np.testing.assert_array_equal(obj.vertices[:, :2], layout)
+    assert (obj.vertices[:, 2] == 0).all() and obj.faces.tolist() == mesh.faces.tolist()
+
+
+# --------------------------------------------------------------------------- sheets and refusals
+
+
+@pytest.mark.parametrize("size", [(50.0, 60.0), (189.9, 244.9), (400.0, 100.0), (1000.0, 700.0), (190.0, 1200.0)])
+def test_sheet_windows_cover_the_pattern_and_overlap_by_the_stated_strip(size):
+    plan = plan_sheets(size, "a4")
+    x, y, w, h = plan.window
+    assert x >= 10 and y >= 10 and x + w <= plan.page[0] - 10 + 1e-9 and y + h <= plan.page[1] - 10 + 1e-9
+    assert sorted(plan.page) == [210.0, 297.0]
+    # every point of the pattern (shifted onto the grid) falls in some sheet's window
+    grid = np.stack(np.meshgrid(np.linspace(0, size[0], 41), np.linspace(0, size[1], 41)), -1).reshape(-1, 2)
+    grid += plan.shift
+    inside = np.zeros(len(grid), bool)
+    for sheet in plan.sheets:
+        ox, oy = sheet.offset
+        inside |= (grid[:, 0] >= ox - 1e-9) & (grid[:, 0] <= ox + w + 1e-9) & \
+                  (grid[:, 1] >= oy - 1e-9) & (grid[:, 1] <= oy + h + 1e-9)
+    assert inside.all()
+    if plan.cols > 1:
+        a = next(s for s in plan.sheets if (s.row, s.col) == (0, 0))
+        b = next(s for s in plan.sheets if (s.row, s.col) == (0, 1))
+        assert (a.offset[0] + w) - b.offset[0] == pytest.approx(OVERLAP_MM)
+    # one sheet fewer in either direction would not cover it
+    assert plan.cols == 1 or w + (plan.cols - 2) * (w - OVERLAP_MM) < size[0]
+    assert plan.rows == 1 or h + (plan.rows - 2) * (h - OVERLAP_MM) < size[1]
+    assert len({s.label for s in plan.sheets}) == len(plan.sheets) == plan.rows * plan.cols
+
+
+def test_landscape_when_it_needs_fewer_sheets_and_fit_is_one_page():
+    assert not plan_sheets((100.0, 200.0), "a4").landscape
+    assert plan_sheets((260.0, 150.0), "a4").landscape and len(plan_sheets((260.0, 150.0), "a4").sheets) == 1
+    fit = plan_sheets((1500.0, 900.0), "fit")
+    assert len(fit.sheets) == 1 and fit.window[2] >= 1500.0 and fit.window[3] >= 900.0
+    assert plan_sheets((1.0, 1.0), "letter").page == (215.9, 279.4)
+
+
+def test_refusals_leave_no_file(tmp_path):
+    mesh = dome_grid(5)
+    drawing = PatternDrawing.of(mesh, mesh.vertices[:, :2] * 1e4, "m")  # tens of kilometres at 1:1
+    with pytest.raises(PatternError, match=f"at most {MAX_SHEETS}"):
+        write_pattern_file(tmp_path / "huge.pdf", drawing)
+    with pytest.raises(PatternError, match="must end in"):
+        write_pattern_file(tmp_path / "x.txt", drawing)
+    with pytest.raises(PatternError, match="units must be one of"):
+        PatternDrawing.of(mesh, mesh.vertices[:, :2], "ft")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_every_format_is_reproducible_byte_for_byte(tmp_path):
+    mesh = dome_grid(7)
+    drawing = PatternDrawing.of(mesh, mesh.vertices[:, :2] * 100, "mm", "a caption")
+    for ending in ("dxf", "pdf", "svg", "obj", "flat.obj"):
+        write_pattern_file(tmp_path / f"a.{ending}", drawing, dxf_edges=True)
+        write_pattern_file(tmp_path / f"b.{ending}", drawing, dxf_edges=True)
+        assert (tmp_path / f"a.{ending}").read_bytes() == (tmp_path / f"b.{ending}").read_bytes(), ending
+
+
+# --------------------------------------------------------------------------- distortion
+
+
+def test_distortion_of_a_uniformly_scaled_flat_mesh():
+    """A flat mesh laid out at twice its size: every area ratio 4, every strain 1 (by geometry)."""
+    mesh = dome_grid(6)
+    flat = Mesh(np.column_stack([mesh.vertices[:, :2], np.zeros(mesh.n_vertices)]), mesh.faces)
+    d = distortion(flat, 2.0 * mesh.vertices[:, :2])
+    np.testing.assert_allclose(d.area_ratio, 4.0, rtol=1e-12)
+    np.testing.assert_allclose(d.strain, 1.0, rtol=1e-12)
+    assert not d.folded.any()
+
+
+def test_worst_one_percent_finds_the_moved_vertex(tmp_path):
+    mesh = dome_grid(21)  # 800 faces: the worst 1 % is 8 faces
+    flat = Mesh(np.column_stack([mesh.vertices[:, :2], np.zeros(mesh.n_vertices)]), mesh.faces)
+    layout = mesh.vertices[:, :2].copy()
+    centre = 10 * 21 + 10
+    layout[centre] += [0.3 / 20, 0.0]
+    d = distortion(flat, layout)
+    summary = worst_summary(d)
+    around = set(np.flatnonzero((mesh.faces == centre).any(axis=1)).tolist())
+    assert summary["area_ratio"]["worst_count"] == math.ceil(0.01 * mesh.n_faces) == 8
+    assert summary["area_ratio"]["worst_face"] in around
+    assert set(summary["edge_strain"]["worst_edge"]) & {centre}
+    low, high = summary["area_ratio"]["worst_band"]
+    outside = (d.area_ratio < low - 1e-12) | (d.area_ratio > high + 1e-12)
+    assert outside.sum() < 8 and set(np.flatnonzero(outside).tolist()) <= around
+    path = tmp_path / "d.csv"
+    write_distortion_csv(path, d, "cm")
+    rows = path.read_text().splitlines()
+    assert rows[0].split(",") == list(DISTORTION_HEADER)
+    assert len(rows) == 1 + mesh.n_faces + mesh.n_edges
+    face = rows[1].split(",")
+    assert face[0] == "face" and face[5] == "cm^2" and float(face[8]) == d.area_ratio[0]
+    edge = rows[1 + mesh.n_faces].split(",")
+    assert edge[0] == "edge" and edge[5] == "cm" and float(edge[9]) == d.strain[0]
+
+
+# --------------------------------------------------------------------------- the command
+
+
+@pytest.mark.slow
+def test_flatten_writes_every_format_at_once_with_distortion_and_units(tmp_path):
+    outs = [tmp_path / f"b.{e}" for e in ("dxf", "pdf", "svg", "obj", "flat.obj")]
+    args = [a for out in outs for a in ("--out", out)]
+    proc = subprocess.run([SPRINGFLAT, "flatten", str(SCANS / "bunny_ear.obj"), "--units", "m", *map(str, args),
+                           "--distortion", str(tmp_path / "d.csv"), "--json"], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["units"] == "m"
+    worst = summary["distortion"]
+    assert worst["faces"] == summary["faces"]
+    assert worst["area_ratio"]["worst_count"] == math.ceil(0.01 * summary["faces"])
+    assert all(out.stat().st_size > 0 for out in outs)
+    assert "note" not in proc.stderr
+
+
+def test_a_pattern_too_small_for_its_units_gets_a_note(tmp_path):
+    proc = subprocess.run([SPRINGFLAT, "flatten", str(SCANS / "bunny_ear.obj"), "--max-iter", "3",
+                           "--out", str(tmp_path / "b.pdf")], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert re.search(r"note: the pattern is [\d.]+ x [\d.]+ mm at 1:1 with --units mm", proc.stderr)
+
+
+def test_a_print_of_too_many_sheets_is_refused_before_the_run(tmp_path):
+    """nefertiti_face is in millimetres: read as metres it would be about 190 m across."""
+    proc = subprocess.run([SPRINGFLAT, "flatten", str(SCANS / "nefertiti_face.obj"), "--units", "m",
+                           "--out", str(tmp_path / "n.dxf"), "--out", str(tmp_path / "n.pdf")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.splitlines() == [f"springflat: error: the mesh's area is about 189 x 189 m at 1:1 with "
+                                        f"--units m: more than {MAX_SHEETS} a4 sheets; check --units, or write .dxf"]
+    assert list(tmp_path.iterdir()) == []

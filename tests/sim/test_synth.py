@@ -1,0 +1,229 @@
+"""The synthesis flow (``springflat synth``) end to end on small components, so that it cannot rot.
+
+* ECP5: Yosys ``synth_ecp5`` + nextpnr-ecp5 of the narrow-preset step generator (the smallest
+  component: ~10 s once the YoWASP WASM is compiled; the first call of each tool on a fresh
+  machine adds ~30 s, cached in ``~/.cache/YoWASP``). Every number in the JSON must be the one in
+  the tools' own reports in the bundle.
+* iCE40: the default-preset rsqrt unit needs more SB_MAC16 than a UP5K has: the plain
+  "does not fit" message, exit status 2, and the synthesis numbers are still written.
+* Bad requests (unknown target, bad frequency) exit with status 2 and a one-line message.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from sim import cli
+from support.ram_traffic import icarus_run, ram_reads, random_ram_traffic
+from sim.synth import TARGETS, parse_nextpnr_log, parse_yosys_stat
+from sim.synth_cli import add_parser
+
+pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
+
+
+@pytest.fixture(autouse=True)
+def synth_registered(monkeypatch):
+    """Make sure ``springflat synth`` exists (``sim/cli.py`` registers it with ``add_parser``)."""
+    build = cli.build_parser
+
+    def build_with_synth():
+        parser = build()
+        sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+        if "synth" not in sub.choices:
+            add_parser(sub)
+        return parser
+
+    monkeypatch.setattr(cli, "build_parser", build_with_synth)
+
+
+def run(argv, capsys):
+    try:
+        status = cli.main(argv)
+    except SystemExit as exc:  # argparse errors
+        status = exc.code
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_ecp5_step_generator_narrow(tmp_path, capsys):
+    out_dir = tmp_path / "bundle"
+    status, out, err = run(["synth", "--target", "ecp5", "--formats", "narrow", "--components", "step_generator",
+                            "--freq", "100", "--out", str(out_dir), "--json"], capsys)
+    assert status == 0, err
+    report = json.loads(out)
+    assert report["target"] == "ecp5" and report["preset"] == "narrow" and report["top"] == "step_generator"
+    for key in ("fmax_mhz", "luts", "ffs", "dsps", "brams"):
+        assert isinstance(report[key], (int, float)) and not isinstance(report[key], bool), key
+    comp = report["components"]["step_generator"]
+    for key in ("fmax_mhz", "luts", "ffs", "dsps", "brams"):
+        assert comp[key] == report[key]
+    assert comp["latency"] > 0 and comp["ii"] == 1
+    assert comp["throughput_per_s"] == pytest.approx(comp["fmax_mhz"] * 1e6)
+
+    # The numbers are the tools' own: Yosys stat of the bare module, nextpnr's log after routing.
+    stat = json.loads((out_dir / "step_generator.ecp5.stat.json").read_text())
+    cells = stat["design"]["num_cells_by_type"]
+    assert comp["dsps"] == cells.get("MULT18X18D", 0) >= 1
+    assert comp["ffs"] == cells["TRELLIS_FF"] > 0
+    assert comp["luts"] == cells.get("LUT4", 0) + 2 * cells.get("CCU2C", 0) > 0
+    log = (out_dir / "step_generator_pnr.ecp5.nextpnr.log").read_text()
+    lines = re.findall(r"Max frequency for clock '[^']+': ([0-9.]+) MHz", log)
+    assert lines and comp["fmax_mhz"] == pytest.approx(float(lines[-1]), abs=0.01)
+    assert comp["fmax_mhz"] > 20
+    assert comp["critical_path"]["delay_ns"] == pytest.approx(1000 / comp["fmax_mhz"], rel=0.02)
+    assert comp["pnr"]["utilisation"]["MULT18X18D"]["used"] == comp["dsps"]
+    assert comp["fits"] and not report["does_not_fit"]
+
+    # The handoff bundle.
+    for name in ("step_generator.v", "step_generator_pnr.v", "exp_table.hex", "clock.lpf", "clock.sdc",
+                 "interface.md", "interface.json", "synth_report.md", "synth_report.json", "reproduce.sh"):
+        assert (out_dir / name).is_file(), name
+    assert 'FREQUENCY PORT "clk" 100 MHZ;' in (out_dir / "clock.lpf").read_text()
+    assert "springflat synth --target ecp5 --formats narrow" in (out_dir / "reproduce.sh").read_text()
+    assert "Fmax" in (out_dir / "interface.md").read_text()
+    assert "[ecp5 step_generator] nextpnr" in err  # progress names each tool step
+
+
+def test_ice40_does_not_fit(tmp_path, capsys):
+    out_dir = tmp_path / "ice"
+    status, out, err = run(["synth", "--target", "ice40", "--components", "rsqrt_unit", "--out", str(out_dir),
+                            "--quiet", "--json"], capsys)
+    assert status == 2
+    report = json.loads(out)  # the synthesis numbers are still reported
+    comp = report["components"]["rsqrt_unit"]
+    assert comp["dsps"] > TARGETS["ice40"].capacity["dsps"] and comp["fmax_mhz"] is None and not comp["fits"]
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("springflat: error: does not fit iCE40 UP5K SG48: rsqrt_unit:")
+    assert "SB_MAC16" in lines[0] and "> 8" in lines[0]
+    assert (out_dir / "synth_report.md").is_file()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["synth", "--target", "xc7"], "invalid choice: 'xc7'"),
+    (["synth", "--target", "ecp5", "--freq", "-5"], "frequency"),
+    (["synth", "--target", "ecp5", "--components", "fpu"], "unknown component 'fpu'"),
+    (["synth", "--target", "ecp5", "--formats", "no-such-preset"], ""),
+    (["synth", "--target", "ecp5", "--components", "springflat_engine", "--capacity", "64", "1", "128"],
+     "entries must be an int >= 2, got 1"),
+    (["synth", "--target", "ecp5", "--components", "springflat_engine", "--capacity", "64", "300"],
+     "expected 3 arguments"),
+    (["synth", "--target", "ecp5", "--capacity", "64", "300", "128"], "add it to --components"),
+])
+def test_bad_requests(argv, message, capsys, tmp_path):
+    status, out, err = run(argv + ["--out", str(tmp_path / "x")], capsys)
+    assert status == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("springflat: error:") and message in lines[0]
+
+
+def test_parsers():
+    log = """Info: Device utilisation:
+Info: \t          TRELLIS_IO:       6/    365     1%
+Info: \t          MULT18X18D:       3/    156     1%
+Info: \t              ALU54B:       0/     78     0%
+
+Info: Max frequency for clock '$glbnet$clk$TRELLIS_IO_IN': 80.03 MHz (FAIL at 150.00 MHz)
+Info: Critical path report for clock '$glbnet$clk$TRELLIS_IO_IN' (posedge -> posedge):
+Info:       type curr  total name
+Info:   clk-to-q  0.52  0.52 Source core.dt_TRELLIS_FF_Q_4.Q
+Info:    routing  1.65  2.17 Net core.dt[4] (118,51) -> (119,58)
+Info:                          Sink core.$4_MULT18X18D.B4
+Info:                          Defined in:
+Info:                               /work/main/hdl/stepgen.py:205
+Info:      logic  3.93  6.10 Source core.$4_MULT18X18D.P12
+Info:    routing  1.34  7.44 Net core.$4[12] (14,10) -> (14,9)
+Info:                          Sink core.dt_sq_TRELLIS_FF_Q_7.M
+Info:      setup  0.00  7.44 Source core.dt_sq_TRELLIS_FF_Q_7.M
+Info: 4.45 ns logic, 2.99 ns routing
+
+Info: Max frequency for clock '$glbnet$clk$TRELLIS_IO_IN': 134.37 MHz (FAIL at 150.00 MHz)
+"""
+    r = parse_nextpnr_log(log)
+    assert r["fmax_mhz"] == 134.37 and r["timing_met"] is False and r["constraint_mhz"] == 150.0
+    assert r["utilisation"] == {"TRELLIS_IO": {"used": 6, "available": 365},
+                                "MULT18X18D": {"used": 3, "available": 156}}
+    cp = r["critical_path"]
+    assert cp["from"] == "core.dt" and cp["to"] == "core.dt_sq" and cp["delay_ns"] == 7.44
+    assert cp["through"] == {"MULT18X18D": 1} and cp["rtl"] == ["hdl/stepgen.py:205"]
+    stat = {"design": {"num_cells_by_type": {"LUT4": 10, "CCU2C": 4, "TRELLIS_FF": 7, "MULT18X18D": 2,
+                                             "DP16KD": 1}}}
+    res = parse_yosys_stat(stat, TARGETS["ecp5"])
+    assert (res["luts"], res["ffs"], res["dsps"], res["brams"]) == (18, 7, 2, 1)
+
+
+@pytest.mark.parametrize("width, depth", [(18, 1024), (9, 2048), (4, 4096), (2, 8192)])
+def test_dp16kd_model_reads_what_yosys_maps(tmp_path, width, depth):
+    """``sim/models/DP16KD.v`` (the ECP5-flavour benches' block RAM) reads back the words Yosys's
+    ``synth_ecp5`` packs into a DP16KD's INITVALs for an inferred ROM: an independent check of
+    the packing that :func:`hdl.rom.dp16kd_initvals` writes and the model reads."""
+    import shutil
+    import subprocess
+
+    from sim.cocotb_support import REPO
+    from sim.synth import TOOL, _run_tool
+
+    if shutil.which("iverilog") is None:
+        pytest.fail("Icarus Verilog (iverilog) is not on PATH")
+    rng = np.random.default_rng(width)
+    words = rng.integers(0, 1 << width, depth)
+    abits = (depth - 1).bit_length()
+    (tmp_path / "rom.v").write_text(
+        f"module rom(input clk, input [{abits - 1}:0] addr, output reg [{width - 1}:0] q);\n"
+        f"  reg [{width - 1}:0] mem [0:{depth - 1}];\n"
+        f"  initial $readmemh(\"rom.hex\", mem);\n"
+        f"  always @(posedge clk) q <= mem[addr];\nendmodule\n")
+    (tmp_path / "rom.hex").write_text("".join(f"{w:x}\n" for w in words))
+    code, log = _run_tool(TOOL["yosys"], ["-q", "-p", "read_verilog rom.v; synth_ecp5 -top rom; write_verilog -noattr net.v"],
+                          tmp_path, "yosys.log")
+    assert code == 0, log[-2000:]
+    netlist = (tmp_path / "net.v").read_text()
+    assert netlist.count("DP16KD #(") == 1 and "LUT4" not in netlist  # one block RAM, nothing else
+    (tmp_path / "tb.v").write_text(
+        "`timescale 1ns/1ps\nmodule tb; reg clk = 0; reg [%d:0] addr = 0; wire [%d:0] q; integer i;\n"
+        "rom dut(.clk(clk), .addr(addr), .q(q));\n"
+        "initial begin for (i = 0; i < %d; i = i + 1) begin addr = i; #1 clk = 1; #1 clk = 0; $display(\"%%0d\", q); end "
+        "$finish; end\nendmodule\n" % (abits - 1, width - 1, depth))
+    subprocess.run(["iverilog", "-g2005", "-o", "tb.vvp", "tb.v", "net.v", str(REPO / "sim" / "models" / "DP16KD.v")],
+                   cwd=tmp_path, check=True, capture_output=True)
+    out = subprocess.run(["vvp", "-n", "tb.vvp"], cwd=tmp_path, check=True, capture_output=True, text=True).stdout
+    read = [int(line) for line in out.split() if line.isdigit()]
+    assert read == words.tolist()
+
+
+@pytest.mark.parametrize("width, depth", [(18, 1024), (9, 2048), (4, 4096), (30, 1024)])
+def test_dp16kd_model_is_the_ram_yosys_maps(tmp_path, width, depth):
+    """``sim/models/DP16KD.v`` as a RAM: Yosys's ``synth_ecp5`` maps an inferred simple dual-port RAM
+    (one write port, one registered read) to DP16KDs, and that netlist on the model reads what a RAM
+    reads, so the model's write pins (WE, CE, the 18-bit configuration's byte enables on AD1/AD0) and
+    read pins are the device's as Yosys uses them: the ones :class:`hdl.block_ram.BlockRam` drives. A
+    read of the row being written at the same clock reads X."""
+    from sim.synth import TOOL, _run_tool
+
+    abits = (depth - 1).bit_length()
+    (tmp_path / "ram.v").write_text(
+        f"module ram(input clk, input we, input [{abits - 1}:0] waddr, input [{width - 1}:0] wdata,\n"
+        f"           input [{abits - 1}:0] raddr, output reg [{width - 1}:0] q);\n"
+        f"  (* no_rw_check *) reg [{width - 1}:0] mem [0:{depth - 1}];\n"
+        f"  integer i; initial for (i = 0; i < {depth}; i = i + 1) mem[i] = 0;\n"
+        f"  always @(posedge clk) begin if (we) mem[waddr] <= wdata; q <= mem[raddr]; end\nendmodule\n")
+    code, log = _run_tool(TOOL["yosys"], ["-q", "-p", "read_verilog ram.v; synth_ecp5 -top ram; write_verilog -noattr net.v"],
+                          tmp_path, "yosys.log")
+    assert code == 0, log[-2000:]
+    netlist = (tmp_path / "net.v").read_text()
+    assert netlist.count("DP16KD #(") == -(-width // {1024: 18, 2048: 9, 4096: 4}[depth])
+    rng = np.random.default_rng(width + depth)
+    we, waddr, wdata, raddr = random_ram_traffic(rng, depth, width, 3000)
+    ports = ("ram dut(.clk(clk), .we(we), .waddr(waddr[%d:0]), .wdata(wdata[%d:0]), .raddr(raddr[%d:0]), .q(q[%d:0]));"
+             % (abits - 1, width - 1, abits - 1, width - 1))
+    lines = icarus_run(tmp_path, ["net.v"], "ram", ports, we, waddr, wdata, raddr)
+    assert [int(line[-width:], 2) for line in lines] == ram_reads(we, waddr, wdata, raddr, depth, 0)
+    # a collision: the row being written is read at the same clock
+    we[:] = 1
+    raddr[:] = waddr
+    lines = icarus_run(tmp_path, ["net.v"], "ram", ports, we, waddr, wdata, raddr)
+    assert all("x" in line[-width:] for line in lines[1:])

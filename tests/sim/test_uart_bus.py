@@ -1,0 +1,191 @@
+"""The host transport (sim/uart_bus.py) and ``flatten --engine board`` against the bridge's Python reference
+(``uart_protocol.ReferenceTarget``) with the engine's Python model (``ModelBus``) behind it; the CLI through
+pyserial to a socket server that serves frames."""
+
+import socket
+import subprocess
+import threading
+
+import numpy as np
+import pytest
+
+from golden_model.fixed import FormatSet
+from golden_model.engine_spec import uart_protocol as protocol
+from golden_model.fixed.engine import flatten_fixed, prepare
+from golden_model.engine_spec.image import UNGUARDED
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, build_image
+from golden_model.engine_spec.register_map import RegisterMap
+from golden_model.generate import dome_grid
+from golden_model.layouts import initial_layout
+from golden_model.params import FlattenParams
+from sim.board_run import board_capacity, run_on_board
+from sim.engine_driver import BusError, EngineDriver, ModelBus
+from sim.uart_bus import LinkError, UartBus, open_port
+from support import SPRINGFLAT
+
+DEFAULT = FormatSet.preset("default")
+
+
+class ModelPort:
+    """A byte stream whose other end is the bridge's reference with ``ModelBus`` behind it; ``mangle`` may
+    change each answer (a corrupt link), ``mute`` answers nothing (a link that times out)."""
+
+    def __init__(self, bus, addr_width: int, mangle=None, mute: bool = False):
+        self.log: list = []
+        self.bus = bus
+
+        def read(a):
+            self.log.append(("r", a))
+            return bus.read(a)
+
+        def write(a, v):
+            self.log.append(("w", a, v))
+            bus.write(a, v)
+
+        self.target = protocol.ReferenceTarget(read, write, addr_width)
+        self.mangle, self.mute, self.out, self.requests = mangle, mute, b"", []
+
+    def write(self, data: bytes) -> None:
+        self.requests.append(bytes(data))
+        answer = self.target.serve(bytes(data))
+        self.out += b"" if self.mute else (self.mangle(answer) if self.mangle else answer)
+
+    def read(self, n: int) -> bytes:
+        data, self.out = self.out[:n], self.out[n:]
+        return data
+
+
+def addr_width(rmap: RegisterMap) -> int:
+    return (max(w.base + w.size for w in rmap.windows) - 1).bit_length()
+
+
+CAPACITY = EngineCapacity(64, 512, 128)
+MAP = RegisterMap.build(DEFAULT, CAPACITY)
+MESH = dome_grid(6)
+PARAMS = FlattenParams(dynamics="momentum", **UNGUARDED, barrier=True, max_iter=12)
+
+
+def test_a_run_over_frames_is_the_golden_models():
+    """run_on_board through UartBus frames (batched while loading) equals flatten_fixed bit for bit; the
+    board's capacity is read from its CAP_* registers."""
+    port = ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP))
+    bus = UartBus(port)
+    problem = prepare(MESH, initial_layout(MESH, "tutte"), PARAMS, DEFAULT)
+    run = run_on_board(problem, bus)
+    assert run.mismatches == [] and run.capacity == CAPACITY
+    reference = flatten_fixed(MESH, initial_layout(MESH, "tutte"), PARAMS, DEFAULT)
+    np.testing.assert_array_equal(run.readback.positions, reference.engine_state.raw_positions)
+    assert (run.readback.result, run.readback.iterations) == (reference.status, reference.iterations)
+    image = build_image(problem, CAPACITY)
+    words = sum(a.size for a in (image.nodes, image.entries, image.triangles))
+    writes = [r for r in port.requests if r[0] == protocol.WRITE]
+    assert sum(r[5] for r in writes) >= words
+    # batched: a node's 5 words are one frame (its stride of 8 leaves holes), the entries and triangles 64 a frame
+    assert len(writes) < words / 3
+
+
+def test_the_capacity_registers_do_not_move_with_the_capacity():
+    """board_capacity reads CAP_* at the addresses of DEFAULT_CAPACITY's map: they must be the same for every
+    capacity."""
+    for capacity in (CAPACITY, DEFAULT_CAPACITY, EngineCapacity(16384, 131072, 32768)):
+        rmap = RegisterMap.build(DEFAULT, capacity)
+        assert [rmap.register(f"CAP_{w}").offset for w in ("VERTICES", "ENTRIES", "TRIANGLES")] == [
+            RegisterMap.build(DEFAULT, DEFAULT_CAPACITY).register(f"CAP_{w}").offset
+            for w in ("VERTICES", "ENTRIES", "TRIANGLES")]
+    bus = UartBus(ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP)))
+    assert board_capacity(bus, DEFAULT) == CAPACITY
+
+
+def test_error_answers_and_timeouts_are_one_line():
+    port = ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP))
+    bus = UartBus(port)
+    unmapped = next(a for a in range(1 << 12) if MAP.decode(a) is None)
+    with pytest.raises(BusError, match=rf"^bus error: read at word address {unmapped:#x} answered err$"):
+        bus.read(unmapped)
+    with pytest.raises(BusError, match=r"^bus error: write at word address 0x0 answered err$"):
+        bus.write(0, 1)  # ID is read-only
+    with pytest.raises(BusError, match="refused a read of 2 word.* bad address$"):
+        bus.read_words((1 << addr_width(MAP)) - 1, 2)
+    with bus.batched():  # a write's error inside a batch is raised by the call that sends it
+        bus.write(MAP.register("MAX_ITER").offset, 5)
+        bus.write(0x7, 1)  # not consecutive: flushes MAX_ITER's; 0x7 is unmapped
+        with pytest.raises(BusError, match="write at word address 0x7 answered err"):
+            bus.read(0)
+    assert bus.read(MAP.register("MAX_ITER").offset) == 5
+    corrupt = UartBus(ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP), mangle=lambda a: a[:-1] + bytes([a[-1] ^ 1])))
+    with pytest.raises(LinkError, match="^corrupt answer from the link to a read at 0x0: the answer's checksum"):
+        corrupt.read(0)
+    mute = UartBus(ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP), mute=True), name="the board on COM9")
+    with pytest.raises(LinkError) as info:
+        mute.read(0)
+    assert str(info.value).startswith("no answer from the board on COM9 to a read at 0x0 (nothing before the timeout)")
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.slow  # two CLI runs
+def test_a_missing_port_is_one_line(tmp_path):
+    with pytest.raises(LinkError, match=f"^cannot open the serial port '{tmp_path}/ttyUSB9': "):
+        open_port(str(tmp_path / "ttyUSB9"))
+    proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "board", "--port", str(tmp_path / "ttyUSB9"),
+                           "--out", "out.obj"], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 2 and proc.stdout == ""
+    last = proc.stderr.splitlines()[-1]
+    assert last.startswith(f"springflat: error: cannot open the serial port '{tmp_path}/ttyUSB9'")
+    assert len([l for l in proc.stderr.splitlines() if l.startswith("springflat: error")]) == 1
+    assert not (tmp_path / "out.obj").exists()
+    proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "board"], capture_output=True, text=True,
+                          cwd=tmp_path, timeout=120)
+    assert proc.returncode == 2 and proc.stderr.strip() == ("springflat: error: --engine board needs --port DEVICE "
+                                                            "(the board's serial port, e.g. /dev/ttyUSB0)")
+
+
+class FrameServer:
+    """A TCP server (pyserial's ``socket://`` URL) that answers frames as the bridge would, ModelBus behind."""
+
+    def __init__(self, capacity: EngineCapacity):
+        rmap = RegisterMap.build(DEFAULT, capacity)
+        self.bus = ModelBus(rmap, DEFAULT)
+        self.target = protocol.ReferenceTarget(self.bus.read, self.bus.write, addr_width(rmap))
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.port = self.server.getsockname()[1]
+        self.frames = 0
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _recv(self, conn, n: int) -> bytes:
+        data = b""
+        while len(data) < n:
+            chunk = conn.recv(n - len(data))
+            if not chunk:
+                raise EOFError
+            data += chunk
+        return data
+
+    def _serve(self):
+        conn, _ = self.server.accept()
+        with conn:
+            try:
+                while True:
+                    head = self._recv(conn, protocol.HEADER_BYTES)
+                    rest = self._recv(conn, protocol.request_length(head[0], head[-1]) - len(head))
+                    conn.sendall(self.target.serve(head + rest))
+                    self.frames += 1
+            except (EOFError, ConnectionError):
+                pass
+
+
+@pytest.mark.slow  # two CLI runs
+def test_flatten_engine_board_writes_the_fixed_engines_layout(tmp_path):
+    """flatten surf1 --engine board through pyserial (socket://) to the reference bridge and the engine model:
+    the layout file is byte for byte the one --engine fixed writes."""
+    server = FrameServer(DEFAULT_CAPACITY)
+    outs = {}
+    for engine, extra in (("board", ["--port", f"socket://127.0.0.1:{server.port}"]), ("fixed", [])):
+        proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", engine, *extra, "--out", f"{engine}.obj"],
+                              capture_output=True, text=True, cwd=tmp_path, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        outs[engine] = proc.stdout
+    assert (tmp_path / "board.obj").read_bytes() == (tmp_path / "fixed.obj").read_bytes()
+    assert "engine cycles on the board on socket://" in outs["board"]
+    assert outs["board"].split(":")[1] == outs["fixed"].split(":")[1]  # status and iterations
+    assert server.frames > 10

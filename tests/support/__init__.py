@@ -1,0 +1,61 @@
+"""What many test files share: the repository's paths, the console script, one-line errors, simulators.
+
+Importable from every test (``pythonpath = ["tests"]`` in ``pyproject.toml``); the fixtures built on
+these are in ``tests/conftest.py``.  ``support.streams`` and ``support.wishbone`` drive Amaranth-simulator
+streams and Wishbone cycles, ``support.ram_traffic`` random block-RAM traffic.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+DOCS = REPO / "docs"
+DATA = REPO / "tests" / "data"
+SCANS = DATA / "scans"
+SPRINGFLAT = str(Path(sys.executable).parent / "springflat")
+"""The console script of this environment."""
+
+
+def run_springflat(*args, cwd=None, timeout: float = 600) -> subprocess.CompletedProcess:
+    """``springflat args...`` in a subprocess, text output captured."""
+    return subprocess.run([SPRINGFLAT, *map(str, args)], capture_output=True, text=True, cwd=cwd, timeout=timeout)
+
+
+def one_line(error) -> str:
+    """The message of an exception (or a ``pytest.raises`` info), checked to be one non-empty line."""
+    text = str(getattr(error, "value", error))
+    assert text and "\n" not in text, repr(text)
+    return text
+
+
+def need_simulator(simulator: str) -> None:
+    """Fail when ``simulator`` cannot run here (the set-up installs both); skip instead under
+    ``SPRINGFLAT_ALLOW_MISSING_SIMULATOR``."""
+    from sim.cocotb_support import missing_simulator
+
+    reason = missing_simulator(simulator)
+    if reason:
+        if os.environ.get("SPRINGFLAT_ALLOW_MISSING_SIMULATOR"):
+            pytest.skip(reason)
+        pytest.fail(reason)
+
+
+@contextlib.contextmanager
+def refused_components():
+    """For components whose ``__init__`` raises: Amaranth still reports each as unused when it is
+    collected, so the warning is ignored and the objects collected before leaving."""
+    from amaranth.hdl import UnusedElaboratable
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        yield
+        gc.collect()
