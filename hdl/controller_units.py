@@ -4,11 +4,11 @@ Each unit is bit-exact with the golden-model function it mirrors
 (:mod:`golden_model.fixed.engine`):
 
 * :class:`Normaliser`: an error sum times a host reciprocal, rounded into ``[error]``
-  (:meth:`Reciprocal.normalise <golden_model.fixed.engine.Reciprocal.normalise>`);
-* :class:`EnergyCheck`: the exact energy of a pass (:func:`~golden_model.fixed.engine.energy_raw`)
+  (:meth:`Reciprocal.normalise <golden_model.fixed.measures.Reciprocal.normalise>`);
+* :class:`EnergyCheck`: the exact energy of a pass (:func:`~golden_model.fixed.measures.energy_raw`)
   and the stopping rule's relative-change test (the energy part of
   :meth:`StopRule.converged <golden_model.fixed.engine.StopRule.converged>`);
-* :class:`BetaDivider`: the momentum ``β_k = k/(k+3)`` (:func:`~golden_model.fixed.engine.momentum_beta_raw`).
+* :class:`BetaDivider`: the momentum ``β_k = k/(k+3)`` (:func:`~golden_model.fixed.measures.momentum_beta_raw`).
 
 They run once per iteration, so they trade cycles for area: products are LSB-first shift-add
 multiplies (one multiplicand addition per clock, :func:`shift_add_step`), the divider restores
@@ -60,7 +60,7 @@ def _check_fs(unit: str, fs) -> FormatSet:
 class Normaliser(wiring.Component):
     """``sum/total`` raw [error] from a sum [error_acc] and the host's reciprocal of ``total``.
 
-    Bit-exact with :meth:`Reciprocal.normalise <golden_model.fixed.engine.Reciprocal.normalise>`
+    Bit-exact with :meth:`Reciprocal.normalise <golden_model.fixed.measures.Reciprocal.normalise>`
     (``fmt = fs.error``, ``fs.rounding``)::
 
         product = sum · mantissa                                   (exact)
@@ -79,7 +79,7 @@ class Normaliser(wiring.Component):
     -------
     i : ``In(stream.Signature(normalise_layout(fs)))``
         ``sum`` [error_acc], ``mantissa`` [reciprocal] and ``shift`` of
-        :class:`~golden_model.fixed.engine.Reciprocal` (the host's registers). ``shift`` must be
+        :class:`~golden_model.fixed.measures.Reciprocal` (the host's registers). ``shift`` must be
         at least ``F + 2``, as ``normalise`` needs: every ``Reciprocal.of(total)`` is if
         ``reciprocal`` has at least two more fraction bits than ``error`` (7 more in both presets),
         else every one with ``total ≥ 2``.
@@ -190,7 +190,7 @@ class Normaliser(wiring.Component):
 class EnergyCheck(wiring.Component):
     """The exact energy of a pass and the stopping rule's relative-change test against the last one.
 
-    Bit-exact with :func:`~golden_model.fixed.engine.energy_raw` and the energy part of
+    Bit-exact with :func:`~golden_model.fixed.measures.energy_raw` and the energy part of
     :meth:`StopRule.converged <golden_model.fixed.engine.StopRule.converged>`::
 
         E       = (3·½C·Σe²) << s_springs + (2·Σc·h) << s_barrier     (``energy_frac_bits`` fraction bits)
@@ -220,7 +220,7 @@ class EnergyCheck(wiring.Component):
         ``½C`` raw [spring], non-negative (``C > 0``). Sampled when an item is accepted.
     tolerance : ``In(unsigned(ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS))``
         ``ε`` raw (``StopRule.energy``) in the engine's run-constant format, u8.40
-        (:mod:`golden_model.fixed.engine_image`). Sampled when an item is accepted.
+        (:mod:`golden_model.engine_spec.image`). Sampled when an item is accepted.
 
     Contract
     --------
@@ -351,7 +351,7 @@ class EnergyCheck(wiring.Component):
 class BetaDivider(wiring.Component):
     """The momentum factor ``β_k = k/(k+3)`` raw [dt], rounded half up and capped at ``dt.raw_max``.
 
-    Bit-exact with :func:`~golden_model.fixed.engine.momentum_beta_raw`::
+    Bit-exact with :func:`~golden_model.fixed.measures.momentum_beta_raw`::
 
         q = (k · 2^(F+1)) // (k + 3)          (F = dt.frac_bits; q < 2^(F+1) since k < k + 3)
         β = min((q + 1) >> 1, dt.raw_max)

@@ -1,8 +1,8 @@
 """``SpringflatEngine``: the whole flattening on chip, behind a Wishbone bus.
 
 Algorithm 1 from START to done with no host in the loop, the twin of the golden model's
-:func:`~golden_model.fixed.engine_image.run_image` (itself bit-identical to ``run_fixed``).
-The host interface is the :class:`~golden_model.fixed.register_map.RegisterMap` of the format
+:func:`~golden_model.engine_spec.image.run_image` (itself bit-identical to ``run_fixed``).
+The host interface is the :class:`~golden_model.engine_spec.register_map.RegisterMap` of the format
 set and capacity: this module decodes that map, it defines no address of its own.
 """
 
@@ -41,7 +41,7 @@ class SpringflatEngine(wiring.Component):
     Parameters
     ----------
     fs : :class:`~golden_model.fixed.FormatSet` or preset name
-    capacity : :class:`~golden_model.fixed.engine_image.EngineCapacity`
+    capacity : :class:`~golden_model.engine_spec.image.EngineCapacity`
         Depths of the node, entry and triangle memories.
     entry_bank_depth : int
         Words per bank of the entry memory (a power of two; :data:`ENTRY_BANK_DEPTH`, the deepest
