@@ -108,7 +108,7 @@ def run_board_sim(problem: FixedProblem, capacity: EngineCapacity, *, work: Path
                   log_file: Path | None = None, bad_frames: bool = True) -> BoardSimRun:
     """Build (cached) and run the board bench on Verilator: the self-test read, the bad frames (with
     ``bad_frames``), then ``problem`` through :func:`sim.board_run.run_on_board` over the simulated UART."""
-    from .engine_run import _make_flags, build_flags
+    from .engine_run import _make_flags, build_flags, read_back
 
     fs = problem.fs
     sources = board_sources(fs, capacity)
@@ -121,10 +121,6 @@ def run_board_sim(problem: FixedProblem, capacity: EngineCapacity, *, work: Path
     with _make_flags(make_flags):
         run = run_bench("verilator", fs, BOARD_SIM_MODULE, "board", config, work=work, log_file=log_file,
                         sources=sources, extra_build_args=flags)
-    readback = work / "readback.npz"
-    positions = velocities = None
-    if readback.exists():
-        arrays = np.load(readback)
-        positions, velocities = arrays["positions"], arrays["velocities"]
+    positions, velocities = read_back(work)
     passed = run.tests == 1 and run.failed == 0 and run.result.get("mismatches") == []
     return BoardSimRun(run.result, positions, velocities, passed, run.wall_seconds)

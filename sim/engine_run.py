@@ -197,6 +197,16 @@ class EngineRun:
         return int(self.result.get("mismatches", -1))
 
 
+def read_back(work: Path) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The positions and velocities a bench read back from the engine (``work/readback.npz``, raw
+    integers), or ``(None, None)`` when the run ended before it read them."""
+    readback = work / "readback.npz"
+    if not readback.exists():
+        return None, None
+    arrays = np.load(readback)
+    return arrays["positions"], arrays["velocities"]
+
+
 @contextlib.contextmanager
 def _make_flags(extra: str):
     """``MAKEFLAGS`` with ``extra`` added, for the duration of a build."""
@@ -234,11 +244,7 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
     with _make_flags(make_flags):
         run = run_bench(simulator, fs, ENGINE_SIM_MODULE, "engine", config, work=work, log_file=log_file, waves=waves,
                         sources=sources, extra_build_args=flags)
-    readback = work / "readback.npz"
-    positions = velocities = None
-    if readback.exists():
-        arrays = np.load(readback)
-        positions, velocities = arrays["positions"], arrays["velocities"]
+    positions, velocities = read_back(work)
     passed = run.tests == 1 and run.failed == 0 and run.result.get("mismatches") == 0
     return EngineRun(run.result, positions, velocities, passed, run.wall_seconds, run.waves)
 
