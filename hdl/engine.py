@@ -15,11 +15,13 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import EngineCapacity, memory_layouts
 from golden_model.engine_spec.register_map import RegisterMap
+from golden_model.modes import Step
 
 from . import wishbone
 from .area_error import AreaError
 from .force_pass import ForcePass
 from .integrator import Integrator
+from .logic import mode_steps
 from .memory_windows import MemoryWindows
 from .pass_sequencer import PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
@@ -31,7 +33,7 @@ __all__ = ["SpringflatEngine"]
 
 #: The run constants the datapath units read, each through a copy register of its own in the register
 #: bank (:class:`~hdl.register_bank.RegisterBank`'s ``copies``).
-UNIT_CONSTANTS = ("barrier", "momentum", "half_spring", "damping", "area_reciprocal", "area_shift",
+UNIT_CONSTANTS = ("barrier", "mode", "half_spring", "damping", "area_reciprocal", "area_shift",
                   "length_reciprocal", "length_shift", "tol_energy")
 
 
@@ -154,7 +156,7 @@ class SpringflatEngine(wiring.Component):
         _wire(m, controller, sequencer, "fetch_force", "fetch_area", "fetch_nodes", "in_start", "in_force",
               "in_area", "in_step", "in_integrate", "running", "area_clear")
         _wire(m, controller, memories, "running", "in_area", "in_integrate", "fetch_nodes")
-        _wire(m, registers, sequencer, "vertices", "entries", "triangles", "momentum", "barrier_held")
+        _wire(m, registers, sequencer, "vertices", "entries", "triangles", "barrier_held")
         _wire(m, memories, sequencer, "entry", "triangle", "position", "velocity", "weight_word", "force_word")
         _wire(m, sequencer, memories, "entry_index", "tri_index", "node_index", "node_of_entry")
         _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done", "done_fetching",
@@ -170,7 +172,8 @@ class SpringflatEngine(wiring.Component):
                      sequencer.area_idle.eq(area.idle), sequencer.integrator_idle.eq(integrator.idle),
                      controller.area_total.eq(area.total), area.clear.eq(controller.area_clear),
                      force.half_spring.eq(registers.half_spring_held), force.barrier.eq(registers.barrier_held),
-                     integrator.damping.eq(registers.damping_held), integrator.momentum.eq(registers.momentum_held),
+                     integrator.damping.eq(registers.damping_held), integrator.momentum.eq(mode_steps(registers.mode_held, Step.MOMENTUM)),
+                     sequencer.momentum.eq(mode_steps(registers.mode, Step.MOMENTUM)),
                      integrator.dt.eq(controller.step_dt), integrator.half_dt_sq.eq(controller.step_half)]
 
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-from amaranth.hdl import Value
+from amaranth.hdl import Const, Value
 
-__all__ = ["or_tree"]
+from golden_model.engine_spec.image import ENGINE_RUN_MODES
+from golden_model.modes import Step
+
+__all__ = ["or_tree", "mode_runs", "mode_steps"]
 
 
 def or_tree(values) -> Value:
@@ -15,3 +18,14 @@ def or_tree(values) -> Value:
     while len(values) > 1:
         values = [values[k] | values[k + 1] if k + 1 < len(values) else values[k] for k in range(0, len(values), 2)]
     return values[0]
+
+
+def mode_runs(code: Value) -> Value:
+    """1 where ``MODE.mode``'s ``code`` is a run mode the engine runs (``ENGINE_RUN_MODES``)."""
+    return or_tree(code == m.code for m in ENGINE_RUN_MODES)
+
+
+def mode_steps(code: Value, step: Step) -> Value:
+    """1 where ``MODE.mode``'s ``code`` is a run mode the engine runs whose iteration takes ``step``:
+    the units' one decode of the mode, from the golden model's table of modes."""
+    return or_tree([Const(0), *(code == m.code for m in ENGINE_RUN_MODES if m.step is step)])

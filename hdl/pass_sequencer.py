@@ -55,7 +55,7 @@ class PassSequencer(wiring.Component):
         The controller's flags: the start phase restarts the force and area passes' counters and
         sums, the step phase the integrate pass's; the pass phases time the passes' ends.
     vertices, entries, triangles, momentum, barrier_held : ``In``
-        Run constants (MODE.momentum gates S's saturation event; MODE.barrier's copy the barrier terms).
+        Run constants (a momentum mode in MODE.mode gates S's saturation event; MODE.barrier's copy the barrier terms).
     entry, triangle, position[3], velocity, weight_word, force_word : ``In``
         The memories' read data (:class:`~hdl.memory_windows.MemoryWindows`).
     entry_index, tri_index, node_index, node_of_entry : ``Out``

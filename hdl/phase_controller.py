@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Module, Mux, Signal, Value, signed
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
+from golden_model.modes import Step
 from golden_model.engine_spec.image import ITERATION_BITS
 from golden_model.engine_spec.register_map import RESULTS, STATES, RegisterMap
 
@@ -17,7 +18,7 @@ from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .dsp import registered_product
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import energy_sums_layout
-from .logic import or_tree
+from .logic import mode_runs, mode_steps, or_tree
 from .stepgen import StepGenerator, pending_is_zero
 
 __all__ = ["PhaseController", "PHASES"]
@@ -26,7 +27,7 @@ __all__ = ["PhaseController", "PHASES"]
 PHASES = ("start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain")
 
 #: Run constants the controller reads from the register bank, and those it reads from their copies.
-CONSTANTS = ("vertices", "entries", "triangles", "momentum", "fixed_step", "dt", "max_iter", "saturation_limit",
+CONSTANTS = ("vertices", "entries", "triangles", "mode", "dt", "max_iter", "saturation_limit",
              "tol_area", "tol_shape", "area_reciprocal", "area_shift", "length_reciprocal", "length_shift")
 HELD = ("area_reciprocal", "area_shift", "length_reciprocal", "length_shift", "half_spring", "tol_energy")
 
@@ -48,6 +49,8 @@ class _Run:
     fixed_load: Signal
     fixed_half: Signal
     momentum_k: Signal
+    momentum: Value  # MODE.mode selects the momentum step
+    fixed_step: Value  # MODE.mode selects the fixed step
 
 
 class PhaseController(wiring.Component):
@@ -168,7 +171,8 @@ class PhaseController(wiring.Component):
 
         run = _Run(first_measure=Signal(name="first_measure"), math_pending=self.math_pending,
                    settled=Signal(name="settled"), fixed_load=Signal(name="fixed_load"),
-                   fixed_half=self._fixed_half_dt_sq(m, platform), momentum_k=Signal(ITERATION_BITS, name="momentum_k"))
+                   fixed_half=self._fixed_half_dt_sq(m, platform), momentum_k=Signal(ITERATION_BITS, name="momentum_k"),
+                   momentum=mode_steps(self.mode, Step.MOMENTUM), fixed_step=mode_steps(self.mode, Step.FIXED))
         self._cycles(m)
         self._units(m, units, run)
         decisions, stepgen_idle = self._decisions(m, units, run)
@@ -269,7 +273,7 @@ class PhaseController(wiring.Component):
         bad_constants = ((self.vertices > cap.vertices) | (self.entries > cap.entries)
                          | (self.triangles > cap.triangles) | (self.entries == 0) | (self.triangles == 0)
                          | reciprocal_bad[0] | reciprocal_bad[1]
-                         | (self.fixed_step & ~self.momentum & (self.dt == 0)) | (self.max_iter == 0))
+                         | ~mode_runs(self.mode) | (run.fixed_step & (self.dt == 0)) | (self.max_iter == 0))
         stepgen = units["stepgen"]
         stepgen_idle = pending_is_zero(m, StepGenerator.latency_of(self.fs), stepgen.i, stepgen.o, name="stepgen_pending")
         names = ("no_mesh_q", "bad_constants_q", "converged_q", "diverged_q", "at_max_iter_q")
@@ -349,9 +353,9 @@ class PhaseController(wiring.Component):
             with m.Else():
                 m.d.sync += [run.first_measure.eq(0), *move("check", "step")]
         with m.If(go & flags["step"]):
-            with m.If(self.momentum):
+            with m.If(run.momentum):
                 m.d.sync += beta.i.valid.eq(1)
-            with m.Elif(self.fixed_step):
+            with m.Elif(run.fixed_step):
                 m.d.sync += run.fixed_load.eq(1)
             with m.Else():
                 m.d.sync += stepgen.i.valid.eq(1)
@@ -384,11 +388,11 @@ class PhaseController(wiring.Component):
             Signal(name=n) for n in ("launch_pulse", "step_pulse", "iterate_pulse", "restart_pulse",
                                      "restart_clear", "power_negative"))
         launching = self.in_start & run.first_measure
-        stepping = go & self.in_step & self.momentum
+        stepping = go & self.in_step & run.momentum
         ending = go & self.in_integrate & self.integrate_done
         m.d.sync += [launch_pulse.eq(launching), step_pulse.eq(stepping), restart_clear.eq(launching | stepping),
                      iterate_pulse.eq(ending),
-                     restart_pulse.eq(ending & self.momentum & ~step_was_restart),
+                     restart_pulse.eq(ending & run.momentum & ~step_was_restart),
                      power_negative.eq(self.power_sum < 0)]
         with m.If(launch_pulse):  # a run's start: no momentum yet
             m.d.sync += momentum_k.eq(0)

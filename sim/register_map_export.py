@@ -11,7 +11,7 @@ import json
 import re
 from pathlib import Path
 
-from golden_model.engine_spec.register_map import ACCESS, MAGIC, REGISTER_BLOCKS, RESULTS, STATES, VERSION, BitField, \
+from golden_model.engine_spec.register_map import ACCESS, MAGIC, REGISTER_BLOCKS, VERSION, BitField, \
     MemoryWindow, Register, RegisterMap
 
 __all__ = ["markdown", "to_json", "c_header", "write_exports", "EXPORT_FILES"]
@@ -106,7 +106,8 @@ def _define(name: str, value: int) -> str:
 
 def c_header(m: RegisterMap) -> str:
     """The map as a C header: register word addresses, field shifts/masks/widths, reset values, window
-    bases/depths/strides and entry field positions, state and result codes."""
+    bases/depths/strides and entry field positions, and every enumeration field's codes (STATUS.state,
+    STATUS.result, MODE.mode)."""
     guard = f"{PREFIX}_REGS_H"
     lines = [f"/* SpringflatEngine register map v{VERSION[0]}.{VERSION[1]}: format set '{m.formats}', capacity "
              f"{m.capacity.vertices} vertices / {m.capacity.entries} entries / {m.capacity.triangles} triangles. */",
@@ -123,10 +124,11 @@ def c_header(m: RegisterMap) -> str:
             lines += [_define(_c_name(r.name, f.name, "SHIFT"), f.lsb), _define(_c_name(r.name, f.name, "MASK"), f.mask),
                       _define(_c_name(r.name, f.name, "WIDTH"), f.width)]
         lines.append("")
-    lines += ["/* STATUS.state and STATUS.result codes */"]
-    lines += [_define(_c_name("STATE", s), i) for i, s in enumerate(STATES)]
-    lines += [_define(_c_name("RESULT", s), i) for i, s in enumerate(RESULTS)]
-    lines.append("")
+    for r in m.registers:
+        for f in r.fields:
+            if f.codes:
+                lines += [f"/* {r.name}.{f.name} codes */", *(_define(_c_name(f.name, c), i) for i, c in enumerate(f.codes)),
+                          ""]
     for w in m.windows:
         lines += [f"/* memory window {w.name}: {w.description} */", _define(_c_name(w.name, "BASE"), w.base),
                   _define(_c_name(w.name, "DEPTH"), w.depth), _define(_c_name(w.name, "WORDS"), w.words),

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..modes import RunMode, mode_named
+from ..modes import MODE_CODE_BITS, RUN_MODES, RunMode, Step
 from ..fixed.controller import Controller, Setup
 from ..fixed.engine import ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, FixedProblem, StopRule, check_fixed_params
 from ..fixed.measures import SAT, FixedPointError, Reciprocal, energy_frac_bits
@@ -41,7 +41,8 @@ from ..fixed.pipeline import BarrierEntries, NeighbourStream
 __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
            "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "EngineImage",
            "build_image", "decode_nodes", "decode_entries", "decode_triangles", "constant_fault", "ImageRunResult",
-           "run_image", "BUS_WORD_BITS", "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS"]
+           "run_image", "BUS_WORD_BITS", "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS",
+           "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode"]
 
 BUS_WORD_BITS = 32
 """Width of one bus word (Wishbone ``dat``)."""
@@ -57,6 +58,13 @@ ENERGY_TOL_INT_BITS = 8
 
 RESULTS = ("none", "converged", "max-iterations", "diverged", "no-mesh", "bad-constants")
 """The run's result codes, in code order (STATUS.result)."""
+
+ENGINE_RUN_MODES: tuple[RunMode, ...] = tuple(m for m in RUN_MODES if not m.guarded)
+"""The run modes ``SpringflatEngine`` runs: ``MODE.mode`` holds one of their codes; START answers any
+other code (the guarded mode's) with ``bad-constants``."""
+
+MODE_FIELDS = ("mode", "barrier")
+"""The run constants that share the ``MODE`` register, from bit 0 up."""
 
 
 def _next_power_of_two(n: int) -> int:
@@ -242,7 +250,8 @@ def energy_width(fs: FormatSet, capacity: EngineCapacity) -> int:
 
 
 def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordField, ...]:
-    """The run constants (raw ints), in register order; the 1-bit ones are the mode flags.
+    """The run constants (raw ints), in register order; those of :data:`MODE_FIELDS` share the ``MODE``
+    register: ``mode``, the run mode's code (:data:`~golden_model.modes.RUN_MODES`), and ``barrier``.
 
     ``saturation_limit`` (0: never) stops a run as ``diverged`` once that many saturation
     events were counted; the golden model's own loop never stops on saturation (limit 0).
@@ -252,8 +261,7 @@ def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordFi
         WordField("vertices", capacity.count_bits("vertices")),
         WordField("entries", capacity.count_bits("entries")),
         WordField("triangles", capacity.count_bits("triangles")),
-        WordField("momentum", 1),
-        WordField("fixed_step", 1),
+        WordField("mode", MODE_CODE_BITS),
         WordField("barrier", 1),
         WordField.of("half_spring", fs, "spring"),
         WordField.of("damping", fs, "damping"),
@@ -287,11 +295,12 @@ class EngineImage:
 
 def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str, int]:
     fs, params, stream = problem.fs, problem.params, problem.stream
-    fixed_step = params.step == "fixed" and not problem.momentum
+    mode = params.mode
+    fixed_step = mode.step is Step.FIXED
     rule = StopRule.of(params, fs)
     constants = {
         "vertices": len(stream.indptr) - 1, "entries": len(stream.neighbour), "triangles": len(problem.face_areas),
-        "momentum": int(problem.momentum), "fixed_step": int(fixed_step), "barrier": int(stream.barrier is not None),
+        "mode": mode.code, "barrier": int(stream.barrier is not None),
         "half_spring": problem.half_spring, "damping": problem.damping,
         "dt": int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) if fixed_step else 0,
         "area_reciprocal": problem.area_reciprocal.mantissa, "area_shift": problem.area_reciprocal.shift,
@@ -379,15 +388,16 @@ def decode_triangles(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity)
 def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCapacity) -> str | None:
     """What the engine answers to START with these run constants: ``"no-mesh"`` (no vertices: nothing
     loaded since reset), ``"bad-constants"`` (a count over capacity or zero, a reciprocal that is not a
-    u1.F mantissa or whose shift is too small for :meth:`Reciprocal.normalise`, a zero fixed step, no
-    iterations), or ``None`` (the run starts)."""
+    u1.F mantissa or whose shift is too small for :meth:`Reciprocal.normalise`, a mode code the engine
+    does not run, a zero fixed step, no iterations), or ``None`` (the run starts)."""
     if constants["vertices"] == 0:
         return "no-mesh"
     counts_ok = all(0 < constants[n] <= getattr(capacity, n) for n in ("vertices", "entries", "triangles"))
     top = 1 << (fs.reciprocal.width - 1)
     reciprocals_ok = all(top <= constants[f"{k}_reciprocal"] < 2 * top
                          and constants[f"{k}_shift"] >= fs.error.frac_bits + 2 for k in ("area", "length"))
-    step_ok = not constants["fixed_step"] or constants["momentum"] or constants["dt"] > 0
+    mode = image_mode(constants)
+    step_ok = mode is not None and (mode.step is not Step.FIXED or constants["dt"] > 0)
     if not (counts_ok and reciprocals_ok and step_ok and constants["max_iter"] > 0):
         return "bad-constants"
     return None
@@ -408,11 +418,10 @@ class ImageRunResult:
     velocities: np.ndarray  # (V, 2) raw [velocity]
 
 
-def image_mode(constants: dict[str, int]) -> RunMode:
-    """The run mode the ``MODE`` bits select."""
-    if constants["momentum"]:
-        return mode_named("momentum")
-    return mode_named("paper-fixed" if constants["fixed_step"] else "paper-variable")
+def image_mode(constants: dict[str, int]) -> RunMode | None:
+    """The run mode ``MODE.mode`` selects, or ``None`` for a code of no mode the engine runs (START answers
+    ``bad-constants``)."""
+    return next((m for m in ENGINE_RUN_MODES if m.code == constants["mode"]), None)
 
 
 def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:

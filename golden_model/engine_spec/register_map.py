@@ -12,8 +12,8 @@ included), a write to a read-only register, and any memory-window access while t
 
 **Values wider than a word** are split over consecutive registers, least significant first:
 ``NAME_LO``/``NAME_HI`` for two words, ``NAME_0 .. NAME_k`` for more; signed values are two's
-complement over the value's width (upper bits of the top word read 0).  The 1-bit run constants
-share the ``MODE`` register.
+complement over the value's width (upper bits of the top word read 0).  The run mode's code and
+the barrier bit share the ``MODE`` register (``MODE_FIELDS``).
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ import json
 import zlib
 from dataclasses import asdict, dataclass, field
 
-from .image import (BUS_WORD_BITS, ITERATION_BITS, RESULTS, SATURATION_BITS, EngineCapacity, WordField,
-                           energy_width, memory_layouts, run_constant_fields)
+from .image import (BUS_WORD_BITS, ITERATION_BITS, MODE_FIELDS, RESULTS, SATURATION_BITS, EngineCapacity, WordField,
+                    energy_width, memory_layouts, run_constant_fields)
+from ..modes import RUN_MODES
 from ..fixed.formats_set import FormatSet
 
 __all__ = ["MAGIC", "VERSION", "ACCESS", "STATES", "RESULTS", "REGISTER_BLOCKS", "BitField", "Register", "MemoryWindow",
@@ -32,7 +33,7 @@ __all__ = ["MAGIC", "VERSION", "ACCESS", "STATES", "RESULTS", "REGISTER_BLOCKS",
 MAGIC = 0x5350_464C
 """ID register: ASCII ``SPFL``."""
 
-VERSION = (1, 0)
+VERSION = (2, 0)
 """(major, minor) of this register map; the major changes when an address or field moves."""
 
 ACCESS = {
@@ -196,26 +197,37 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
 
     a.block()
     constants = run_constant_fields(fs, capacity)
-    flags = tuple(c for c in constants if c.width == 1)
-    a.add("MODE", "rw", "the run's modes", tuple(
-        BitField(c.name, bit, 1, "rw", _CONSTANT_TEXT[c.name], c.name) for bit, c in enumerate(flags)),
-        "run constants")
+    a.add("MODE", "rw", "the run's mode and the fold barrier", _mode_fields(constants), "run constants")
     for c in constants:
-        if c.width > 1:
+        if c.name not in MODE_FIELDS:
             a.value(c.name, c.width, "rw", _CONSTANT_TEXT[c.name], "run constants", c.signed, c.fmt)
     return a.registers
+
+
+def _mode_fields(constants: tuple[WordField, ...]) -> tuple[BitField, ...]:
+    """MODE's fields, :data:`MODE_FIELDS` from bit 0 up; ``mode`` names each code's run mode."""
+    width = {c.name: c.width for c in constants}
+    codes = tuple(m.name for m in sorted(RUN_MODES, key=lambda m: m.code))
+    if [m.code for m in sorted(RUN_MODES, key=lambda m: m.code)] != list(range(len(RUN_MODES))):
+        raise ValueError("the run modes' codes must be 0, 1, ... (MODE.mode's codes name them in order)")
+    fields, lsb = [], 0
+    for name in MODE_FIELDS:
+        fields.append(BitField(name, lsb, width[name], "rw", _CONSTANT_TEXT[name], name,
+                               codes=codes if name == "mode" else ()))
+        lsb += width[name]
+    return tuple(fields)
 
 
 _CONSTANT_TEXT = {
     "vertices": "vertices of the loaded mesh (0: no mesh)",
     "entries": "neighbour entries of the loaded mesh",
     "triangles": "triangles of the loaded mesh",
-    "momentum": "1: momentum dynamics (β_k, restart); 0: the paper's",
-    "fixed_step": "1: the fixed step DT; 0: the step generator (paper dynamics)",
+    "mode": "the run mode (docs/guard.md's table); the engine runs the unguarded ones, START answers "
+            "any other code with bad-constants",
     "barrier": "1: the fold barrier's entry terms are on",
     "half_spring": "½C raw [spring]",
     "damping": "1 − γ raw [damping]",
-    "dt": "the fixed step Δt raw [dt] (fixed_step)",
+    "dt": "the fixed step Δt raw [dt] (mode paper-fixed)",
     "area_reciprocal": "mantissa of 1/ΣA raw [reciprocal] (E_S)",
     "area_shift": "shift of 1/ΣA: E_S = Σ·mantissa·2^-shift",
     "length_reciprocal": "mantissa of 1/Σd raw [reciprocal] (E_C)",

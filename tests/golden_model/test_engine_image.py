@@ -5,6 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from golden_model.modes import mode_named
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed, prepare
 from golden_model.fixed.measures import FixedPointError, energy_raw
@@ -140,7 +141,8 @@ def test_the_images_decode_to_the_problem(run):
     c = image.constants
     assert (c["vertices"], c["entries"], c["triangles"]) == (mesh.n_vertices, len(stream.neighbour), mesh.n_faces)
     assert (c["area_reciprocal"], c["area_shift"]) == (problem.area_reciprocal.mantissa, problem.area_reciprocal.shift)
-    assert c["barrier"] == 1 and c["momentum"] == (run == "momentum-barrier")
+    assert c["barrier"] == 1
+    assert c["mode"] == mode_named("momentum" if run == "momentum-barrier" else "paper-fixed").code
 
 
 def test_tolerances_above_one_are_clamped_to_the_error_range():
@@ -210,7 +212,9 @@ def test_the_saturation_limit_stops_a_run_as_diverged():
     ({"triangles": 0}, "bad-constants"),
     ({"area_reciprocal": 1 << 26}, "bad-constants"),  # not a u1.27 mantissa in [1, 2)
     ({"length_shift": 21}, "bad-constants"),  # normalise needs shift >= error.frac_bits + 2
-    ({"fixed_step": 1, "dt": 0}, "bad-constants"),
+    ({"mode": mode_named("paper-fixed").code, "dt": 0}, "bad-constants"),
+    ({"mode": mode_named("momentum-guarded").code}, "bad-constants"),  # a mode the engine does not run
+    ({"mode": mode_named("paper-fixed").code, "dt": 1}, None),
     ({"max_iter": 0}, "bad-constants"),
     ({}, None),
 ])

@@ -8,6 +8,7 @@ import subprocess
 
 import pytest
 
+from golden_model.modes import RUN_MODES, mode_named
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import (RESULTS, EngineCapacity, build_image, energy_width, memory_layouts,
@@ -109,7 +110,7 @@ def test_encode_and_decode_values_round_trip(regmap, fs):
     assert set(words) <= {r.offset for r in regmap.registers if r.access == "rw"}
     assert {n: regmap.decode_value(n, words) for n in constants} == constants
     mode = {f.name: f.lsb for f in regmap.register("MODE").fields}
-    assert words[regmap.register("MODE").offset] == (1 << mode["momentum"]) | (1 << mode["barrier"])
+    assert words[regmap.register("MODE").offset] == (mode_named("momentum").code << mode["mode"]) | (1 << mode["barrier"])
     # tol_energy = 3.5 · 2^40 is wider than a word: the high word holds its bits 63:32
     assert words[regmap.register("TOL_ENERGY_HI").offset] == (7 << 39) >> 32
 
@@ -191,6 +192,8 @@ def _expected_defines(regmap):
         want[f"SPRINGFLAT_STATE_{s.upper()}"] = i
     for i, s in enumerate(RESULTS):
         want[f"SPRINGFLAT_RESULT_{s.upper().replace('-', '_')}"] = i
+    for mode in RUN_MODES:
+        want[f"SPRINGFLAT_MODE_{mode.name.upper().replace('-', '_')}"] = mode.code
     for w in regmap.windows:
         for what in ("base", "depth", "words", "stride", "size"):
             want[f"SPRINGFLAT_{w.name.upper()}_{what.upper()}"] = getattr(w, what)

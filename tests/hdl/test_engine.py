@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
+from golden_model.modes import mode_named
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.fixed.format import Format
@@ -206,7 +207,9 @@ def test_bad_run_constants_answer_as_constant_fault_says():
         "no triangles": {"triangles": 0},
         "reciprocal not u1.F": {"area_reciprocal": top - 1},
         "shift too small": {"length_shift": FS.error.frac_bits + 1},
-        "fixed step of zero": {"fixed_step": 1, "dt": 0},
+        "fixed step of zero": {"mode": mode_named("paper-fixed").code, "dt": 0},
+        "a mode the engine does not run": {"mode": mode_named("momentum-guarded").code},
+        "a fixed step": {"mode": mode_named("paper-fixed").code, "dt": 1},
         "good": {},
     }
     dut = SpringflatEngine(FS, CAPACITY)

@@ -10,7 +10,7 @@ import pytest
 from golden_model.engine_spec import uart_protocol as protocol
 from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import EngineCapacity
-from golden_model.engine_spec.register_map import MAGIC
+from golden_model.engine_spec.register_map import MAGIC, VERSION
 from golden_model.layouts import initial_layout
 from sim.board_sim import run_board_sim
 from sim.cli import build_parser
@@ -39,7 +39,7 @@ def test_surf1_over_the_simulated_uart_is_byte_identical_to_engine_fixed(tmp_pat
     run = run_board_sim(problem, CAPACITY, work=tmp_path / "sim", log_file=tmp_path / "sim.log")
     r = run.result
     assert run.passed, r.get("mismatches", r)
-    assert r["self_test"] == {"id": MAGIC, "version_major": 1}
+    assert r["self_test"] == {"id": MAGIC, "version_major": VERSION[0]}
     want = {"wrong checksum": protocol.BAD_CHECKSUM, "overlong length": protocol.BAD_LENGTH,
             "truncated frame": protocol.TIMEOUT, "bad command": protocol.BAD_COMMAND}
     assert {name: (f["status"], f["bus_accesses"]) for name, f in r["bad_frames"].items()} == {
