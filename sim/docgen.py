@@ -51,6 +51,20 @@ def _constant_doc(module, name: str) -> str:
     return " ".join(comment)
 
 
+#: The format set and capacity (vertices, entries, triangles) of docs/engine.md's register map.
+DOC_MAP = ("default", (16384, 131072, 32768))
+
+
+def _register_map() -> str:
+    from golden_model.engine_spec.image import EngineCapacity
+    from golden_model.engine_spec.register_map import RegisterMap
+    from golden_model.fixed import FormatSet
+    from sim.register_map_export import markdown
+
+    formats, capacity = DOC_MAP
+    return markdown(RegisterMap.build(FormatSet.preset(formats), EngineCapacity(*capacity)), level=3)
+
+
 def _tables() -> dict[str, Callable[[], str]]:
     from functools import partial
 
@@ -79,6 +93,7 @@ def _tables() -> dict[str, Callable[[], str]]:
 GENERATORS: dict[str, Callable[[], str]] = {
     "run-modes": _run_modes,
     "guard-constants": _guard_constants,
+    "register-map": _register_map,
     **_tables(),
 }
 
