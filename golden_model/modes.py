@@ -12,9 +12,15 @@ mode                      code    the iteration
 ``momentum-guarded``      3       the momentum step through the step guard (``docs/guard.md``)
 ========================  ======  =========================================================
 
-The fold barrier is a force term any mode may add (``FlattenParams.barrier``), not a mode. Adding a
-mode means a row in :data:`RUN_MODES` and the units that compute its step (``Step``'s users:
-``golden_model.reference``, ``golden_model.fixed.controller``, the engine's step choice).
+The fold barrier is a force term any mode may add (``FlattenParams.barrier``), not a mode.
+
+Adding a mode is a row in :data:`RUN_MODES`; the command line's choices, the engine's ``MODE.mode``
+codes (its register map, C header and decode, ``hdl.logic.mode_steps``), the modes the engine runs
+(``ENGINE_RUN_MODES``) and the docs' tables (``python -m sim.docgen``) follow from it. A mode with a
+step of its own (a new :class:`Step`) also needs the units that compute that step: the float
+reference (``golden_model.reference``), the fixed controller (``golden_model.fixed.controller``,
+which the engine's image model shares), the closed-loop bench (``sim/cocotb_benches/closed_loop.py``)
+and the engine's phase control (``hdl/phase_controller.py``).
 """
 
 from __future__ import annotations
