@@ -9,10 +9,11 @@ from .area_error import AreaError
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .core import SpringflatCore
 from .force_pass import ForcePass
+from .guard_certificate import GuardCertificate
 from .integrator import Integrator
 from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "Integrator", "Normaliser", "NodeUpdate",
+__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "GuardCertificate", "Integrator", "Normaliser", "NodeUpdate",
            "RsqrtUnit", "SpringflatCore", "StepGenerator"]
