@@ -11,9 +11,10 @@ from .core import SpringflatCore
 from .force_pass import ForcePass
 from .guard_certificate import GuardCertificate
 from .integrator import Integrator
+from .level_scatter import LevelScatter
 from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "GuardCertificate", "Integrator", "Normaliser", "NodeUpdate",
+__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "GuardCertificate", "Integrator", "LevelScatter", "Normaliser", "NodeUpdate",
            "RsqrtUnit", "SpringflatCore", "StepGenerator"]
