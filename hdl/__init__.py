@@ -16,5 +16,5 @@ from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "GuardCertificate", "Integrator", "LevelScatter", "Normaliser", "NodeUpdate",
-           "RsqrtUnit", "SpringflatCore", "StepGenerator"]
+__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "GuardCertificate", "Integrator", "LevelScatter",
+           "Normaliser", "NodeUpdate", "RsqrtUnit", "SpringflatCore", "StepGenerator"]
