@@ -66,10 +66,11 @@ class GuardCertificate(wiring.Component):
     ---------
     A stalling pipeline (one clock enable, ``i.ready``): the beat registered; the exact edges; narrowed to
     face_edge (the wide flag, the norms' first sums); the 14 products (operands landed, DSP
-    stages, adder levels); the cross products with ``σ`` and the margin; the floor and the subset
-    sums; ``X0 − floor``; per subset and level ``X0 − floor + (Σ L >> r)``, then its sign with
-    ``Σ Q >> 2r`` added; the level, the smallest safe one. Each stage does one add (a carry chain)
-    of every value it forms.
+    stages, adder levels, the margin's sums alongside); the products whole; the cross products with
+    ``σ`` (from a register of its own); the floor's cases (compares no wider than floor_min) and
+    the subsets' pair sums; the floor picked and the triple sums; the margin added; ``X0 − floor``;
+    per subset and level ``X0 − floor + (Σ L >> r)``, then its sign with ``Σ Q >> 2r`` added; the
+    level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
     """
 
     def __init__(self, fs: FormatSet | str):
@@ -91,10 +92,10 @@ class GuardCertificate(wiring.Component):
     @staticmethod
     def latency_of(fs: FormatSet) -> int:
         """Clock edges from a triangle's transfer to its level on ``o``: beat, edges, narrowing, the
-        multiply (:meth:`Pipeline.mul_stages` with landed operands and its adder levels), then the cross
-        products, three floor stages, ``X0 − floor``, the two compare stages and the level."""
+        multiply (:meth:`Pipeline.mul_stages` with landed operands and its adder levels), then the products
+        whole, the cross products, three floor stages, ``X0 − floor``, the two compare stages and the level."""
         edge, move = shape_of(fs.face_edge), shape_of(fs.velocity)
-        return 11 + Pipeline.mul_stages(land_operands=True) + reduce_levels((edge, edge), (move, edge), (move, move))
+        return 12 + Pipeline.mul_stages(land_operands=True) + reduce_levels((edge, edge), (move, edge), (move, move))
 
     def elaborate(self, platform):
         fs = self.fs
@@ -154,23 +155,36 @@ class GuardCertificate(wiring.Component):
             products.update(cross_operands(f"m{j}", f"m{(j + 1) % 3}", f"q{j}"))
         products = pipe.multiply(products, "products", carry)
         assert not margin_steps, "the multiply has fewer stages than the margin's adds"
-        negative = self.winding_negative
+        # the products whole (their partial products' last add) before the cross products' subtract
+        s = stage("joined", **products, **carried)
+        # σ from a register of its own: a run constant, read by seven subtracts across the block
+        negative = Signal(name="winding_negative_q")
+        m.d.sync += negative.eq(self.winding_negative)
 
         def cross(name):
-            p, q = products[f"{name}_p"], products[f"{name}_q"]
+            p, q = s[f"{name}_p"], s[f"{name}_q"]
             return Mux(negative, q, p) - Mux(negative, p, q)
 
         terms = ("x0", "l0", "l1", "l2", "q0", "q1", "q2")
-        s = stage("cross", **{n: cross(n) for n in terms}, **carried)
-        shrunk = s["x0"].shift_right(FLOOR_SHIFT)
-        s = stage("floor_max", raised=Mux(shrunk > s["floor_min"], shrunk, s["floor_min"]),
-                  **{k: s[k] for k in terms}, margin=s["margin"], wide=s["wide"],
+        s = stage("cross", **{n: cross(n) for n in terms}, **{k: s[k] for k in carried})
+        # floor = min(X0, max(X0 >> FLOOR_SHIFT, floor_min)) with floor_min ≥ 0, by cases:
+        # X0 < 0: X0;  X0 >> FLOOR_SHIFT ≥ floor_min: X0 >> FLOOR_SHIFT;  else min(X0, floor_min).
+        # Each compare is against floor_min's width only (the wider bits of a non-negative X0 only
+        # need to be zero), so no carry chain is longer than floor_min.
+        x0, floor_min = s["x0"], s["floor_min"]
+        bits = len(floor_min)
+        shrunk = x0.shift_right(FLOOR_SHIFT)
+        s = stage("floor_cases", **{k: s[k] for k in terms}, margin=s["margin"], wide=s["wide"], floor_min=floor_min,
+                  shrunk=shrunk, shrunk_wins=(shrunk[bits:] != 0) | (shrunk[:bits] >= floor_min),
+                  x0_below=(x0[bits:] == 0) & (x0[:bits] < floor_min),
                   l01=s["l0"] + s["l1"], l12=s["l1"] + s["l2"], l20=s["l2"] + s["l0"], q01=s["q0"] + s["q1"])
+        x0 = s["x0"]
+        floor = Mux(x0 < 0, x0, Mux(s["shrunk_wins"], s["shrunk"], Mux(s["x0_below"], x0, s["floor_min"])))
         lin = {0: s["l0"], 1: s["l1"], 2: s["l2"], 3: s["l01"], 4: s["l12"], 5: s["l20"], 6: s["l01"] + s["l2"]}
         quad = {3: s["q0"], 4: s["q1"], 5: s["q2"], 6: s["q01"] + s["q2"]}
-        s = stage("floor_min", floor=Mux(s["x0"] < s["raised"], s["x0"], s["raised"]), x0=s["x0"],
-                  margin=s["margin"], wide=s["wide"], **{f"lin{i}": v for i, v in lin.items()},
-                  **{f"quad{i}": v for i, v in quad.items()})
+        s = stage("floor_pick", floor=floor, x0=x0, margin=s["margin"], wide=s["wide"],
+                  **{f"lin{i}": v for i, v in lin.items()}, **{f"quad{i}": v for i, v in quad.items()})
+
         def sums(s):
             return {k: s[k] for k in s if k.startswith(("lin", "quad"))}
 
