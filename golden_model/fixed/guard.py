@@ -31,7 +31,8 @@ from ..guard import FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, node_levels
 from .format import Overflow, SaturationCounter, requantize, shift_round
 from .formats_set import FormatSet
 
-__all__ = ["proposal", "floor_min_raw", "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw", "commit"]
+__all__ = ["proposal", "floor_min_shift", "floor_min_raw", "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw",
+           "commit"]
 
 SAT = Overflow.SATURATE
 
@@ -56,11 +57,16 @@ def proposal(fs: FormatSet, velocities: np.ndarray, force: np.ndarray, weights: 
     return requantize(step, step_frac, fs.velocity, rnd, SAT, counter, "velocity")
 
 
+def floor_min_shift(fs: FormatSet) -> int:
+    """The left shift (negative: a right shift, rounded half up) from a host area [face_area] to
+    ``X*·2^-FLOOR_MIN_SHIFT`` at the certificate's fraction bits (``X* = 2A``; twice face_edge's)."""
+    return 2 * fs.face_edge.frac_bits + 1 - FLOOR_MIN_SHIFT - fs.face_area.frac_bits
+
+
 def floor_min_raw(fs: FormatSet, face_areas: np.ndarray) -> np.ndarray:
     """``(F,)`` ``X*·2^-FLOOR_MIN_SHIFT`` at the certificate's fraction bits (twice face_edge's), from the
     host's areas ``A`` [face_area] (``X* = 2A``), rounded half up."""
-    shift = 2 * fs.face_edge.frac_bits + 1 - FLOOR_MIN_SHIFT - fs.face_area.frac_bits
-    return shift_round(np.asarray(face_areas, dtype=np.int64), -shift, "half_up")
+    return shift_round(np.asarray(face_areas, dtype=np.int64), -floor_min_shift(fs), "half_up")
 
 
 def _narrow(fs: FormatSet, diff: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
