@@ -1,20 +1,45 @@
 """Fixed point against float under the mesh files' default stop rule, with the step guard.
 
-Usage: .venv/bin/python benchmarks/guard_fixed_vs_float.py
+Usage::
 
-From Tutte's layout on generated patches (the momentum dynamics, the barrier, the guard, the energy
-change over 10 iterations <= FILE_TOL_ENERGY): per mesh the status, iterations, rolled-back steps
-and saturation events of each engine and |ΔE_S|, |ΔE_C|. docs/guard.md quotes the table.
+    .venv/bin/python benchmarks/guard_fixed_vs_float.py             # generated patches from Tutte
+    .venv/bin/python benchmarks/guard_fixed_vs_float.py --fast-subset [--corpus build/corpus]
+
+Default: from Tutte's layout on generated patches (the momentum dynamics, the barrier, the guard, the
+energy change over 10 iterations <= FILE_TOL_ENERGY). ``--fast-subset``: the kinds that broke the
+unguarded dynamics (issue 25), as a no-option ``springflat flatten`` runs them (the ``auto`` start,
+the mesh file's defaults): ``golden_model.generate.hard_patches()`` and the corpus's ``taco``,
+``cone_tip`` and ``cad_sliver`` patches (docs/corpus.md; a missing corpus is skipped with a note).
+Per mesh the status, iterations, rolled-back steps and saturation events of each engine and
+|ΔE_S|, |ΔE_C|, and whether the row meets issue 25's bar (same status, iterations within ±1,
+|ΔE_S|, |ΔE_C| <= 1e-3); a mesh the default formats cannot hold is "refused" with the reason.
+``--perturbed`` adds the float run from ``P0·(1 + 1e-9)`` beside it: how far the float model's own
+stopping point moves under a perturbation far below fixed point's rounding. docs/guard.md quotes the tables.
 """
 
 from __future__ import annotations
 
-from golden_model.fixed.engine import flatten_fixed
-from golden_model.generate import delaunay_patch, dome_grid, rolled_grid, saddle_grid, spherical_cap
-from golden_model.layouts import tutte_layout
-from golden_model.params import FlattenParams
-from golden_model.reference import flatten
-from sim.run_options import FILE_TOL_ENERGY
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from golden_model.fixed.engine import flatten_fixed  # noqa: E402
+from golden_model.fixed.measures import FixedPointError  # noqa: E402
+from golden_model.generate import (delaunay_patch, dome_grid, hard_patches, rolled_grid, saddle_grid,  # noqa: E402
+                                   spherical_cap)
+from golden_model.layouts import start_layout, tutte_layout  # noqa: E402
+from golden_model.mesh import Mesh  # noqa: E402
+from golden_model.mesh_io import load_mesh  # noqa: E402
+from golden_model.params import FlattenParams  # noqa: E402
+from golden_model.reference import flatten  # noqa: E402
+from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius  # noqa: E402
 
 MESHES = {
     "cap, 10 rings": lambda: spherical_cap(10),
@@ -26,21 +51,97 @@ MESHES = {
     "dome 31×31": lambda: dome_grid(31),
     "cylinder strip 31×31": lambda: rolled_grid(31, 31, arc_degrees=180)[0],
 }
+#: The corpus kinds of the fast subset (docs/corpus.md).
+FAST_KINDS = ("taco", "cone_tip", "cad_sliver")
+MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"
+#: Issue 25's bar for fixed against float.
+MAX_ITERATION_GAP = 1
+MAX_ERROR_GAP = 1e-3
+
+
+def file_defaults(mesh: Mesh) -> FlattenParams:
+    """What a mesh file gets with no options (sim.run_options.resolve_mesh)."""
+    return FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=FILE_TOL_ENERGY,
+                         max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
+
+
+def wanted(name: str, only: list[str] | None) -> bool:
+    return not only or any(name.startswith(prefix) for prefix in only)
+
+
+def generated_from_tutte(only: list[str] | None) -> Iterator[tuple[str, Mesh, np.ndarray, FlattenParams]]:
+    params = FlattenParams(dynamics="momentum", density="auto", tol_area=1.0, tol_shape=1.0,
+                           tol_energy=FILE_TOL_ENERGY, max_iter=3000)
+    for name, make in MESHES.items():
+        if not wanted(name, only):
+            continue
+        mesh = make()
+        yield name, mesh, tutte_layout(mesh), params
+
+
+def fast_subset(corpus: Path, only: list[str] | None) -> Iterator[tuple[str, Mesh, np.ndarray, FlattenParams]]:
+    """The no-option run's start and parameters on the hard patches and the corpus's fast kinds."""
+    meshes: list[tuple[str, Callable[[], Mesh]]] = [(name, (lambda m=m: m)) for name, m in hard_patches().items()]
+    entries = [e for e in json.loads(MANIFEST.read_text())["patches"] if e["kind"] in FAST_KINDS]
+    missing = [e["name"] for e in entries if not (corpus / f"{e['name']}.ply").is_file()]
+    if missing:
+        print(f"note: {len(missing)} corpus patches missing from '{corpus}' (docs/corpus.md builds them): "
+              "only the generated ones", file=sys.stderr)
+    else:
+        meshes += [(f"{e['name']} ({e['kind']})", (lambda p=corpus / f"{e['name']}.ply": load_mesh(p)))
+                   for e in entries]
+    for name, make in meshes:
+        if not wanted(name, only):
+            continue
+        mesh = make()
+        yield name, mesh, start_layout(mesh, "auto").positions, file_defaults(mesh)
+
+
+#: ``--perturbed``: the float run again from ``P0·(1 + PERTURBATION)``, far below the fixed point's rounding.
+PERTURBATION = 1e-9
+
+
+def row(name: str, mesh: Mesh, p0: np.ndarray, params: FlattenParams, perturbed: bool) -> tuple[str, bool]:
+    a = flatten(mesh, p0, params)
+    extra = ""
+    if perturbed:
+        c = flatten(mesh, p0 * (1.0 + PERTURBATION), params)
+        extra = (f" {c.status}, {c.iterations} | {abs(a.final.area_error - c.final.area_error):.1e} | "
+                 f"{abs(a.final.shape_error - c.final.shape_error):.1e} |")
+    try:
+        b = flatten_fixed(mesh, p0, params)
+    except FixedPointError as exc:
+        return f"| {name} | {a.status} / refused: {exc} | {a.iterations} / – | | | | | no |{extra}", False
+    ds, dc = abs(a.final.area_error - b.final.area_error), abs(a.final.shape_error - b.final.shape_error)
+    ok = a.status == b.status and abs(a.iterations - b.iterations) <= MAX_ITERATION_GAP and max(ds, dc) <= MAX_ERROR_GAP
+    return (f"| {name} | {a.status} / {b.status} | {a.iterations} / {b.iterations} | "
+            f"{a.extra['rejected_steps']} / {b.extra['rejected_steps']} | {b.extra['saturations']} | "
+            f"{ds:.1e} | {dc:.1e} | {'yes' if ok else 'no'} |{extra}"), ok
 
 
 def main() -> None:
-    params = FlattenParams(dynamics="momentum", density="auto", tol_area=1.0, tol_shape=1.0,
-                           tol_energy=FILE_TOL_ENERGY, max_iter=3000)
-    print("| mesh | status (float / fixed) | iterations | rolled back | saturations | |ΔE_S| | |ΔE_C| |")
-    print("|---|---|---|---|---|---|---|")
-    for name, make in MESHES.items():
-        mesh = make()
-        p0 = tutte_layout(mesh)
-        a, b = flatten(mesh, p0, params), flatten_fixed(mesh, p0, params)
-        print(f"| {name} | {a.status} / {b.status} | {a.iterations} / {b.iterations} | "
-              f"{a.extra['rejected_steps']} / {b.extra['rejected_steps']} | {b.extra['saturations']} | "
-              f"{abs(a.final.area_error - b.final.area_error):.1e} | "
-              f"{abs(a.final.shape_error - b.final.shape_error):.1e} |", flush=True)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--fast-subset", action="store_true",
+                        help="the hard patches and the corpus's taco, cone_tip and cad_sliver patches, no-option runs")
+    parser.add_argument("--corpus", type=Path, default=REPO / "build" / "corpus", help="corpus directory (default %(default)s)")
+    parser.add_argument("--perturbed", action="store_true",
+                        help=f"also run float from P0·(1 + {PERTURBATION:g}): how far float moves from itself")
+    parser.add_argument("--only", nargs="+", metavar="NAME", help="only rows whose name starts with one of these")
+    args = parser.parse_args()
+    rows = fast_subset(args.corpus, args.only) if args.fast_subset else generated_from_tutte(args.only)
+    head = "| mesh | status (float / fixed) | iterations | rolled back | saturations | |ΔE_S| | |ΔE_C| | within the bar |"
+    if args.perturbed:
+        head += f" float from P0·(1 + {PERTURBATION:g}): status, iterations | its |ΔE_S| | its |ΔE_C| |"
+    print(head)
+    print("|---" * head.count(" | ") + "|---|")
+    met = total = 0
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for name, mesh, p0, params in rows:
+            line, ok = row(name, mesh, p0, params, args.perturbed)
+            met, total = met + ok, total + 1
+            print(line, flush=True)
+    print(f"\n{met} of {total} within the bar (same status, iterations ±{MAX_ITERATION_GAP}, "
+          f"|ΔE_S|, |ΔE_C| <= {MAX_ERROR_GAP:g})")
 
 
 if __name__ == "__main__":

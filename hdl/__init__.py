@@ -9,10 +9,12 @@ from .area_error import AreaError
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .core import SpringflatCore
 from .force_pass import ForcePass
+from .guard_certificate import GuardCertificate
 from .integrator import Integrator
+from .level_scatter import LevelScatter
 from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "Integrator", "Normaliser", "NodeUpdate",
-           "RsqrtUnit", "SpringflatCore", "StepGenerator"]
+__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "GuardCertificate", "Integrator", "LevelScatter",
+           "Normaliser", "NodeUpdate", "RsqrtUnit", "SpringflatCore", "StepGenerator"]

@@ -11,6 +11,7 @@ from amaranth.hdl import ShapeCastable, signed, unsigned
 from amaranth.lib import data
 
 from golden_model.fixed import MAX_PRODUCT_WIDTH, Format, FormatSet
+from golden_model.guard import GUARD_LEVELS
 from golden_model.engine_spec.image import MemoryLayout
 
 from .fixedpoint import shape_of
@@ -185,8 +186,9 @@ def errors_layout(fs: FormatSet) -> data.StructLayout:
 # ---------------------------------------------------------------- the controller's units
 # (hdl/area_error.py, hdl/controller_units.py)
 
-__all__ += ["triangle_layout", "area_saturations_layout", "normalise_layout", "energy_sums_layout",
-            "energy_result_layout", "word_layout", "weight_word_layout", "force_word_layout"]
+__all__ += ["triangle_layout", "certificate_layout", "certificate_level_shape", "area_saturations_layout",
+            "normalise_layout", "energy_sums_layout", "energy_result_layout", "word_layout", "weight_word_layout",
+            "force_word_layout"]
 
 
 def triangle_layout(fs: FormatSet) -> data.StructLayout:
@@ -198,6 +200,23 @@ def triangle_layout(fs: FormatSet) -> data.StructLayout:
         "c": vector_layout(fs.position),
         "area": shape_of(fs.face_area),
     })
+
+
+def certificate_layout(fs: FormatSet) -> data.StructLayout:
+    """One triangle of the guard's certificate: its corners ``a``, ``b``, ``c`` [position], their
+    proposed moves ``move_a``, ``move_b``, ``move_c`` [velocity] and the host's area ``area`` [face_area]."""
+    return data.StructLayout({
+        "a": vector_layout(fs.position), "b": vector_layout(fs.position), "c": vector_layout(fs.position),
+        "move_a": vector_layout(fs.velocity), "move_b": vector_layout(fs.velocity),
+        "move_c": vector_layout(fs.velocity),
+        "area": shape_of(fs.face_area),
+    })
+
+
+def certificate_level_shape():
+    """A triangle's guard level: 0 … GUARD_LEVELS (its corners move by 2^-level of their proposals), or
+    GUARD_LEVELS + 1 (they do not move)."""
+    return unsigned((GUARD_LEVELS + 1).bit_length())
 
 
 def area_saturations_layout(fs: FormatSet) -> data.StructLayout:

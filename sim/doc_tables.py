@@ -280,7 +280,7 @@ def synth_components() -> str:
 
 def _current_latency(row: dict[str, str]) -> int | None:
     """The latency the component has in today's RTL, for the row's preset (None for the engine)."""
-    from hdl import NodeUpdate, RsqrtUnit, StepGenerator
+    from hdl import GuardCertificate, NodeUpdate, RsqrtUnit, StepGenerator
 
     if not row["latency"] or row["preset"] not in PRESETS:
         return None
@@ -288,7 +288,8 @@ def _current_latency(row: dict[str, str]) -> int | None:
     return _quietly({"rsqrt_unit": lambda: RsqrtUnit.latency_of(fs.rsqrt_config()),
                      "step_generator": lambda: StepGenerator.latency_of(fs),
                      "node_update": lambda: NodeUpdate(fs).latency,
-                     "springflat_core": lambda: NodeUpdate(fs).latency}[row["component"]])
+                     "springflat_core": lambda: NodeUpdate(fs).latency,
+                     "guard_certificate": lambda: GuardCertificate.latency_of(fs)}[row["component"]])
 
 
 class _Runs:

@@ -48,7 +48,7 @@ class ComponentSpec:
         import hdl
 
         return {"rsqrt_unit": hdl.RsqrtUnit, "step_generator": hdl.StepGenerator, "node_update": hdl.NodeUpdate,
-                CORE_MODULE: hdl.SpringflatCore}[self.module](fs)
+                CORE_MODULE: hdl.SpringflatCore, "guard_certificate": hdl.GuardCertificate}[self.module](fs)
 
 
 COMPONENTS = (
@@ -56,6 +56,8 @@ COMPONENTS = (
     ComponentSpec("step_generator", "exp-LUT step generator, (E_S, E_C) → (Δt, ½Δt²)"),
     ComponentSpec("node_update", "node-update datapath: neighbour entries → updated nodes"),
     ComponentSpec(CORE_MODULE, "top: node-update datapath + step generator + step registers"),
+    ComponentSpec("guard_certificate", "the step guard's inversion test: a triangle's corners and proposed moves "
+                                       "→ its level (docs/engine-guard.md; not yet in the engine)"),
 )
 
 
@@ -77,7 +79,10 @@ def _format_of(field_name: str, port: str) -> str | None:
     leaf = field_name.split(".")
     key = {"rsqrt": "rsqrt", "saturated": None, "area_error": "error", "shape_error": "error", "dt": "dt",
            "half_dt_sq": "half_dt_sq", "inv_mass": "inv_mass", "inv_mass_barrier": "inv_mass", "rest": "rest_length", "error_sum": "error_acc",
-           "first": None, "last": None}
+           "first": None, "last": None,
+           # guard_certificate's triangle: corners, their proposed moves, the host's area
+           "a": "position", "b": "position", "c": "position", "move_a": "velocity", "move_b": "velocity",
+           "move_c": "velocity", "area": "face_area"}
     for part in reversed(leaf):
         if part in key:
             return key[part]

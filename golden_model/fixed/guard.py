@@ -15,6 +15,9 @@ multi-affine argument as in float, with one integer margin for the rounding of t
   host's triangle area [face_area] by a shift;
 * a triangle whose edges do not fit ``face_edge`` is never trusted, and a node whose move would
   leave the position range does not move: holding a node still is always safe;
+* as in float, a node whose own move fails its triangle's certificate even at ``2^-GUARD_LEVELS``
+  (:func:`stuck_nodes_raw`) is held still before the certificate is taken on the others' moves, so
+  that it does not freeze its neighbours;
 * the committed move is ``V = P'' − P``, so a rollback ``P − V`` restores ``P`` exactly.
 
 The energy comparison uses the exact :func:`~golden_model.fixed.measures.energy_raw`.
@@ -28,7 +31,8 @@ from ..guard import FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, node_levels
 from .format import Overflow, SaturationCounter, requantize, shift_round
 from .formats_set import FormatSet
 
-__all__ = ["proposal", "floor_min_raw", "triangle_levels_raw", "guarded_moves_raw", "commit"]
+__all__ = ["proposal", "floor_min_shift", "floor_min_raw", "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw",
+           "commit"]
 
 SAT = Overflow.SATURATE
 
@@ -53,11 +57,16 @@ def proposal(fs: FormatSet, velocities: np.ndarray, force: np.ndarray, weights: 
     return requantize(step, step_frac, fs.velocity, rnd, SAT, counter, "velocity")
 
 
+def floor_min_shift(fs: FormatSet) -> int:
+    """The left shift (negative: a right shift, rounded half up) from a host area [face_area] to
+    ``X*·2^-FLOOR_MIN_SHIFT`` at the certificate's fraction bits (``X* = 2A``; twice face_edge's)."""
+    return 2 * fs.face_edge.frac_bits + 1 - FLOOR_MIN_SHIFT - fs.face_area.frac_bits
+
+
 def floor_min_raw(fs: FormatSet, face_areas: np.ndarray) -> np.ndarray:
     """``(F,)`` ``X*·2^-FLOOR_MIN_SHIFT`` at the certificate's fraction bits (twice face_edge's), from the
     host's areas ``A`` [face_area] (``X* = 2A``), rounded half up."""
-    shift = 2 * fs.face_edge.frac_bits + 1 - FLOOR_MIN_SHIFT - fs.face_area.frac_bits
-    return shift_round(np.asarray(face_areas, dtype=np.int64), -shift, "half_up")
+    return shift_round(np.asarray(face_areas, dtype=np.int64), -floor_min_shift(fs), "half_up")
 
 
 def _narrow(fs: FormatSet, diff: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -67,10 +76,11 @@ def _narrow(fs: FormatSet, diff: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.clip(diff, fmt.raw_min, fmt.raw_max), (diff < fmt.raw_min) | (diff > fmt.raw_max)
 
 
-def triangle_levels_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: np.ndarray, winding: float,
-                        floor_min: np.ndarray) -> np.ndarray:
-    """``(F,)`` the smallest ``r`` in 0 … GUARD_LEVELS whose certificate holds with the rounding margin,
-    else ``GUARD_LEVELS + 1`` (as :func:`golden_model.guard.triangle_levels`)."""
+def _terms_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: np.ndarray, winding: float,
+               floor_min: np.ndarray) -> tuple:
+    """Per triangle ``X0``, ``L_a, L_b, L_c``, ``Q_ab, Q_bc, Q_ca`` [lsb²], the floor without the margin, the
+    margin's part from the edges (``2·(|P_b − P_a|₁ + |P_c − P_a|₁) + 8``), each corner's ``|V'|₁`` and whether
+    an edge does not fit face_edge (never trusted)."""
     sigma = int(winding)
     corner = [positions[faces[:, k]] for k in range(3)]
     move = [moves[faces[:, k]] for k in range(3)]
@@ -92,8 +102,21 @@ def triangle_levels_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray,
     x0 = cross(ab, ac)
     linear = [cross(move[k], opposite[k]) for k in range(3)]
     pair = [cross(move[k], move[(k + 1) % 3]) for k in range(3)]
-    margin = 2 * (norm1(ab) + norm1(ac) + 2 * norm1(move[0]) + norm1(move[1]) + norm1(move[2])) + 8
-    floor = np.minimum(x0, np.maximum(x0 >> FLOOR_SHIFT, floor_min)) + margin
+    edge_margin = 2 * (norm1(ab) + norm1(ac)) + 8
+    floor = np.minimum(x0, np.maximum(x0 >> FLOOR_SHIFT, floor_min))
+    return x0, linear, pair, floor, edge_margin, [norm1(m) for m in move], wide
+
+
+#: The margin's weight on each corner's ``|V'|₁`` (corner a's move also moves both edges the margin measures).
+_MOVE_WEIGHT = (4, 2, 2)
+
+
+def triangle_levels_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: np.ndarray, winding: float,
+                        floor_min: np.ndarray) -> np.ndarray:
+    """``(F,)`` the smallest ``r`` in 0 … GUARD_LEVELS whose certificate holds with the rounding margin,
+    else ``GUARD_LEVELS + 1`` (as :func:`golden_model.guard.triangle_levels`)."""
+    x0, linear, pair, floor, edge_margin, move_norm, wide = _terms_raw(fs, positions, moves, faces, winding, floor_min)
+    floor = floor + edge_margin + sum(w * n for w, n in zip(_MOVE_WEIGHT, move_norm))
     subset_linear = [linear[0], linear[1], linear[2], linear[0] + linear[1], linear[1] + linear[2],
                      linear[2] + linear[0], linear[0] + linear[1] + linear[2]]
     zero = np.zeros_like(x0)
@@ -107,13 +130,32 @@ def triangle_levels_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray,
     return level
 
 
+def stuck_nodes_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: np.ndarray, winding: float,
+                    floor_min: np.ndarray) -> np.ndarray:
+    """``(V,)`` bool: the nodes whose own move, alone, fails the certificate of one of their triangles at the
+    smallest fraction ``2^-GUARD_LEVELS`` (as :func:`golden_model.guard.stuck_nodes`, with the margin of that
+    corner's move alone). Such a node cannot move; holding it still first keeps it from freezing its
+    neighbours. Only a choice of which proposals to zero: the certificate that follows keeps the guarantee."""
+    x0, linear, _, floor, edge_margin, move_norm, _ = _terms_raw(fs, positions, moves, faces, winding, floor_min)
+    stuck = np.zeros(len(positions), dtype=bool)
+    for k in range(3):
+        fails = x0 + (linear[k] >> GUARD_LEVELS) < floor + edge_margin + _MOVE_WEIGHT[k] * move_norm[k]
+        stuck[faces[fails, k]] = True
+    return stuck
+
+
 def guarded_moves_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: np.ndarray, winding: float,
                       floor_min: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(moves (V, 2) [velocity], node levels (V,))``: each node's proposal ``>> level``; 0 past
-    GUARD_LEVELS, and 0 (level ``GUARD_LEVELS + 1``) where the move would leave the position range."""
-    face_level = triangle_levels_raw(fs, positions, moves, faces, winding, floor_min)
+    GUARD_LEVELS, and 0 (level ``GUARD_LEVELS + 1``) for the :func:`stuck_nodes_raw` and where the move
+    would leave the position range. Two rounds, as in float: the stuck nodes' proposals are set to 0, then
+    every triangle's certificate is taken on the rest."""
+    stuck = stuck_nodes_raw(fs, positions, moves, faces, winding, floor_min)
+    free = np.where(stuck[:, None], 0, moves)
+    face_level = triangle_levels_raw(fs, positions, free, faces, winding, floor_min)
     level = node_levels(face_level, faces, len(positions))
-    taken = moves >> np.minimum(level, GUARD_LEVELS)[:, None]
+    level[stuck] = GUARD_LEVELS + 1
+    taken = free >> np.minimum(level, GUARD_LEVELS)[:, None]
     target = positions + taken
     outside = ((target < fs.position.raw_min) | (target > fs.position.raw_max)).any(axis=1)
     level[outside] = GUARD_LEVELS + 1

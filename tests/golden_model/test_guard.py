@@ -165,3 +165,16 @@ def test_fixed_point_margin_covers_the_rounding_of_a_shortened_move():
     u, v = moved[1] - moved[0], moved[2] - moved[0]
     assert u[0] * v[1] - u[1] * v[0] > 0
     assert levels[2] > GUARD_LEVELS and not moves.any()
+
+
+def test_a_stuck_node_does_not_freeze_its_neighbours_in_fixed_point_as_in_float():
+    """Node 2's own move folds triangle (0, 1, 2) even at 2^-GUARD_LEVELS of it: it is held still, and node 1,
+    whose small move is safe, moves in full in both models (rather than frozen by node 2's triangle)."""
+    positions = np.array([[0, 0], [1000, 0], [0, 1000], [1000, 1000]], dtype=np.int64)
+    proposal = np.array([[0, 0], [10, 0], [0, -200_000], [0, 0]], dtype=np.int64)
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    moves, levels = guarded_moves_raw(DEFAULT, positions, proposal, faces, 1.0, np.zeros(2, dtype=np.int64))
+    float_moves, float_levels = guarded_moves(positions.astype(float), proposal.astype(float), faces, 1.0,
+                                              np.full(2, 2e-6))
+    assert np.array_equal(levels, float_levels) and np.array_equal(moves, float_moves)
+    assert levels[2] > GUARD_LEVELS and np.array_equal(moves[1], [10, 0])

@@ -52,3 +52,46 @@ def test_from_a_fold_free_start_no_barrier_setting_folds_or_diverges(name, barri
     result = flatten(mesh, tutte, file_defaults(mesh, max_iter=400, **options))
     assert result.status != "diverged"
     assert max(result.history.folded) == 0
+
+
+def _float_and_fixed(name):
+    """The no-option run's start and defaults through the float model and the fixed-point model."""
+    from golden_model.fixed.engine import flatten_fixed
+
+    mesh = PATCHES[name]
+    start = start_layout(mesh, "auto")
+    params = file_defaults(mesh)
+    return flatten(mesh, start.positions, params), flatten_fixed(mesh, start.positions, params)
+
+
+#: Where fixed point misses issue 25's fixed-against-float bar on these patches, and why (docs/guard.md,
+#: "Fixed point against float", measured with benchmarks/guard_fixed_vs_float.py --fast-subset --perturbed).
+FIXED_MISSES = {
+    "bent finger": "the fixed run saturates (rsqrt, one_minus_dr) on crushed edges and converges at ~190 iterations "
+                   "where float reaches its cap of 1,280",
+    "noisy finger": "within 1e-3 on E_S and E_C but ~17 iterations apart: the fixed forces' ~1e-3 relative error "
+                    "(rsqrt's 14 fraction bits) and the guard's discrete choices move the stopping point; float "
+                    "from a start perturbed by 1e-9 stops 10 iterations apart too",
+    "noisy horn": "~70 iterations apart (float perturbed by 1e-9: 28 apart)",
+    "slivers": "refused: the barrier gain μC/(4X*) of its slivers (868) does not fit the default barrier_gain format",
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=FIXED_MISSES[name]))
+                                  if name in FIXED_MISSES else name for name in PATCHES])
+def test_fixed_against_float_same_status_iterations_within_one_and_errors_within_1e_3(name):
+    a, b = _float_and_fixed(name)
+    assert b.status == a.status
+    assert abs(b.iterations - a.iterations) <= 1, (a.iterations, b.iterations)
+    assert abs(b.final.area_error - a.final.area_error) <= 1e-3
+    assert abs(b.final.shape_error - a.final.shape_error) <= 1e-3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [name for name in PATCHES if name != "slivers"])
+def test_fixed_point_keeps_the_guarantees_on_the_hard_patches(name):
+    """Whatever the distance to float: the exact energy never rises, no triangle folds, no divergence."""
+    _, b = _float_and_fixed(name)
+    assert b.status in ("converged", "max-iterations", "stalled")
+    assert np.all(np.diff(b.history.energy) <= 0) and max(b.history.folded) == 0

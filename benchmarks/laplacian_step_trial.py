@@ -1,0 +1,238 @@
+"""A trial, not a default: the guarded momentum step with a graph-Laplacian preconditioner (float only).
+
+Usage::
+
+    .venv/bin/python benchmarks/laplacian_step_trial.py                      # issue 25's four patches
+    .venv/bin/python benchmarks/laplacian_step_trial.py --corpus [--only NAME ...] [--kinds KIND ...]
+
+The default step proposes ``V' = β_k·V + s·w_i·f_i`` with the Jacobi weights ``w_i = 2/(C·deg_i)``
+(``docs/guard.md``). The trial replaces ``w_i·f_i`` by ``K⁻¹f`` with ``K = C·((1 + δ)·D − A)``, the
+graph Laplacian of the springs (each spring's stiffness along its edge is C; ``D`` the degrees, ``A``
+the adjacency, ``δ = 0.01`` keeps ``K`` regular on a free boundary), factored once per run
+(``scipy.sparse.linalg.splu``). Everything else, the guard included, is the default's: each proposal
+passes the same flip certificate and energy comparison, so the guarantees hold by construction.
+
+Variants beside the default (``jacobi``):
+
+* ``laplacian``: ``K⁻¹f`` on every step;
+* ``hybrid``: ``K⁻¹f``; a rolled-back plain gradient step (no momentum) switches to the Jacobi step for
+  ``HYBRID_JACOBI_STEPS`` accepted steps instead of halving the scale (the global direction, clipped
+  node by node by the guard, stops being a descent direction near the floor; the local one does not);
+* ``sweeps`` (the four patches only): ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from ``w·f``, each one
+  more pass over the neighbours, the kind of preconditioner the engine's passes could run.
+
+Default mode: from Tutte's layout on the cap, bumpy patch, saddle and cylinder strip at ~15 edges of
+radius, the iterations until E_C stays within 1 % of the minimum's (the minimum: 3,000 iterations of the
+default dynamics; ``tests/golden_model/test_dynamics.py``'s measure) and, under the mesh files' stop
+rule, status, iterations and E_C.
+
+``--corpus``: each patch's no-option start (``start_layout(mesh, "auto")``) and file defaults, run
+in-process with each variant: status, iterations, seconds of the run alone (not the start, not the
+command's start-up: compare the columns, not with ``corpus_table.py``'s wall times), E_C and folds,
+and E_C against the cached peers (``CORPUS/peers.json`` from ``corpus_table.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+import golden_model.reference as reference  # noqa: E402
+from golden_model.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap  # noqa: E402
+from golden_model.guard import guarded_moves  # noqa: E402
+from golden_model.layouts import initial_layout, start_layout  # noqa: E402
+from golden_model.mesh_io import load_mesh  # noqa: E402
+from golden_model.params import FlattenParams  # noqa: E402
+from golden_model.reference import flatten, iterations_to_within, momentum_beta  # noqa: E402
+from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius  # noqa: E402
+
+#: ``K = C·((1 + δ)·D − A)``.
+DELTA = 0.01
+#: ``hybrid``: accepted Jacobi steps after a rolled-back gradient step, before the Laplacian step again.
+HYBRID_JACOBI_STEPS = 20
+VARIANTS = ("jacobi", "laplacian", "hybrid")
+#: Four patches only: ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from the default's ``w·f`` (one more
+#: pass over the neighbours each, as the engine could run them).
+SWEEPS = 8
+MESHES = {
+    "spherical cap, 15 rings": lambda: spherical_cap(15),
+    "bumpy 31×31": lambda: bumpy_grid(31),
+    "saddle 31×31": lambda: saddle_grid(31),
+    "cylinder strip 31×31, 180°": lambda: rolled_grid(31, 31, arc_degrees=180)[0],
+}
+RUN = dict(tol_area=1.0, tol_shape=1.0, tol_energy=0.0, energy_window=1000)  # exactly max_iter iterations
+
+
+class _Trial(reference._Jacobi):
+    """``reference._Jacobi`` with the trial's direction in the guarded momentum step (``_advance_momentum``
+    as the default's, with ``w·f`` replaced)."""
+
+    variant = "jacobi"
+
+    def _laplacian_solve(self, forces: np.ndarray) -> np.ndarray:
+        if not hasattr(self, "_lu"):
+            mesh = self.model.mesh
+            i, j = mesh.edges.T
+            n = mesh.n_vertices
+            adjacency = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
+            degree = np.asarray(adjacency.sum(axis=1)).ravel()
+            stiffness = self.params.spring * (sp.diags((1.0 + DELTA) * degree) - adjacency)
+            self._lu = spla.splu(stiffness.tocsc())
+        return self._lu.solve(np.ascontiguousarray(forces))
+
+    def _sweeps(self, forces: np.ndarray) -> np.ndarray:
+        mesh = self.model.mesh
+        i, j = mesh.edges.T
+        n = mesh.n_vertices
+        adjacency = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
+        degree = np.asarray(adjacency.sum(axis=1)).ravel()[:, None]
+        inverse = 1.0 / (self.params.spring * degree)
+        x = 2.0 * inverse * forces
+        for _ in range(SWEEPS):
+            x = x + 0.5 * inverse * (forces - self.params.spring * (degree * x - adjacency @ x))
+        return x
+
+    def _advance_momentum(self) -> None:
+        guard = self.guard
+        if guard is None:
+            raise ValueError("the trial is the guarded step's")
+        forces = self.forces()
+        if self.restart:
+            self.velocities[:] = 0.0
+            self.momentum_k = 0
+        power = float(np.sum(forces * self.velocities))
+        jacobi_left = getattr(self, "_jacobi_left", 0)
+        if self.variant == "jacobi" or (self.variant == "hybrid" and jacobi_left > 0):
+            step = guard.scale.value * self.model.step_weights(self.positions, self.signed)[:, None] * forces
+        elif self.variant == "sweeps":
+            step = guard.scale.value * self._sweeps(forces)
+        else:
+            step = guard.scale.value * self._laplacian_solve(forces)
+        proposal = momentum_beta(self.momentum_k) * self.velocities + step
+        with_momentum = self.momentum_k > 0
+        mesh = self.model.mesh
+        moves, levels = guarded_moves(self.positions, proposal, mesh.faces, self.model.winding, 2.0 * mesh.face_areas)
+        guard.count_levels(levels)
+        before = (self.positions, self.delta, self.length, self.signed)
+        self.positions = self.positions + moves
+        self._refresh()
+        energy = self.energy_of_layout()
+        self.accepted = energy <= self.energy
+        if self.accepted:
+            self.energy = energy
+            self._jacobi_left = jacobi_left - 1
+            self.velocities = moves
+            self.momentum_k += 1
+            self.restart = power < 0
+            guard.scale = guard.scale.accepted_step()
+            return
+        self.positions, self.delta, self.length, self.signed = before
+        self.velocities = np.zeros_like(self.velocities)
+        self.momentum_k = 0
+        self.restart = False
+        guard.rejected += 1
+        if self.variant == "hybrid" and not with_momentum and jacobi_left <= 0:
+            self._jacobi_left = HYBRID_JACOBI_STEPS  # the Jacobi step next, the scale kept
+            return
+        guard.scale = guard.scale.rejected(with_momentum)
+        self.stalled = guard.scale.stalled
+
+
+def run(variant: str, mesh, p0: np.ndarray, params: FlattenParams):
+    """:func:`golden_model.reference.flatten` with the trial's step ``variant``."""
+    trial = type(f"_Trial_{variant}", (_Trial,), {"variant": variant})
+    default = reference._Jacobi
+    reference._Jacobi = trial
+    try:
+        return flatten(mesh, p0, params)
+    finally:
+        reference._Jacobi = default
+
+
+def file_defaults(mesh) -> FlattenParams:
+    """What a mesh file gets with no options (sim.run_options.resolve_mesh)."""
+    return FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=FILE_TOL_ENERGY,
+                         max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
+
+
+def generated() -> None:
+    variants = VARIANTS + ("sweeps",)
+    print("| patch | minimum's E_C | " + " | ".join(f"{v}: to within 1 %" for v in variants) + " | "
+          + " | ".join(f"{v}: default stop (status, it, E_C)" for v in variants) + " |")
+    print("|---" * (2 + 2 * len(variants)) + "|")
+    for name, make in MESHES.items():
+        mesh = make()
+        p0 = initial_layout(mesh, "tutte")
+        target = flatten(mesh, p0, FlattenParams(dynamics="momentum", max_iter=3000, **RUN)).final.shape_error
+        within, stopped = [], []
+        for variant in variants:
+            history = run(variant, mesh, p0, FlattenParams(dynamics="momentum", max_iter=400, **RUN)).history
+            within.append(str(iterations_to_within(history.shape_error, target)))
+            r = run(variant, mesh, p0, FlattenParams(dynamics="momentum", density="auto", tol_area=1.0, tol_shape=1.0,
+                                                     tol_energy=FILE_TOL_ENERGY, max_iter=3000))
+            stopped.append(f"{r.status}, {r.iterations}, {r.final.shape_error:.4f}")
+        print(f"| {name} | {target:.4f} | " + " | ".join(within) + " | " + " | ".join(stopped) + " |", flush=True)
+
+
+def corpus(directory: Path, only: list[str] | None, kinds: list[str] | None) -> None:
+    from corpus_table import EC_TOLERANCE, patches
+
+    cache_path = directory / "peers.json"
+    cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
+    print("| mesh | V | " + " | ".join(f"{v}: status, it, s, E_C, folded" for v in VARIANTS) + " | SLIM E_C | ARAP E_C (folded) |")
+    print("|---" * (4 + len(VARIANTS)) + "|")
+    totals = {v: [0, 0.0, 0, 0] for v in VARIANTS}  # iterations, seconds, E_C misses, folded runs
+    for entry in patches(directory, only, kinds):
+        mesh = load_mesh(directory / f"{entry['name']}.ply")
+        p0 = start_layout(mesh, "auto").positions
+        peers = cache.get(entry["patch"]["sha256"], {})
+        slim, arap = peers.get("slim", {}), peers.get("arap", {})
+        cells = []
+        for variant in VARIANTS:
+            start = time.perf_counter()
+            r = run(variant, mesh, p0, file_defaults(mesh))
+            seconds = time.perf_counter() - start
+            ec = r.final.shape_error
+            miss = (slim and ec > slim["shape_error"] * (1 + EC_TOLERANCE)) or \
+                (arap and arap["folded"] == 0 and ec > arap["shape_error"] * (1 + EC_TOLERANCE))
+            t = totals[variant]
+            t[0] += r.iterations
+            t[1] += seconds
+            t[2] += bool(miss)
+            t[3] += r.final.folded > 0
+            cells.append(f"{r.status}, {r.iterations}, {seconds:.1f}, {ec:.4f}{' (E_C miss)' if miss else ''}, {r.final.folded}")
+        arap_cell = f"{arap['shape_error']:.4f} ({arap['folded']})" if arap else "–"
+        slim_cell = f"{slim['shape_error']:.4f}" if slim else "–"
+        print(f"| {entry['name']} | {mesh.n_vertices} | " + " | ".join(cells) + f" | {slim_cell} | {arap_cell} |",
+              flush=True)
+    print()
+    for variant, (iterations, seconds, misses, folded) in totals.items():
+        print(f"{variant}: {iterations} iterations, {seconds:.0f} s of runs, {misses} E_C misses, {folded} folded runs")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--corpus", nargs="?", type=Path, const=REPO / "build" / "corpus", default=None,
+                        metavar="DIR", help="the corpus's no-option runs (default DIR: build/corpus)")
+    parser.add_argument("--only", nargs="+", metavar="NAME", help="with --corpus: only these patches")
+    parser.add_argument("--kinds", nargs="+", metavar="KIND", help="with --corpus: only these kinds")
+    args = parser.parse_args()
+    if args.corpus is None:
+        generated()
+    else:
+        corpus(args.corpus, args.only, args.kinds)
+
+
+if __name__ == "__main__":
+    main()

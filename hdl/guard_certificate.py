@@ -1,0 +1,207 @@
+"""The step guard's certificate of one triangle: the smallest fraction ``2^-r`` of the proposed moves
+that keeps its signed area above the floor, one triangle per clock.
+
+The RTL twin of :func:`golden_model.fixed.guard.triangle_levels_raw`, the inversion test the engine's
+guarded mode is to run in a pass over the triangles (``docs/engine-guard.md``); every width comes from
+a :class:`~golden_model.fixed.FormatSet` and the guard's constants from :mod:`golden_model.guard`.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Mux, Signal, Value
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.guard import floor_min_shift
+from golden_model.guard import FLOOR_SHIFT, GUARD_LEVELS
+
+from .fixedpoint import clamp, shape_of, shift_round
+from .layouts import certificate_layout, certificate_level_shape
+from .pipeline import Pipeline, reduce_levels
+
+__all__ = ["GuardCertificate", "SUBSETS"]
+
+#: The corner subsets whose moves the certificate tries together (a triangle's doubled area is
+#: multi-affine in its corners' move fractions): each as the corners it moves.
+SUBSETS = ((0,), (1,), (2,), (0, 1), (1, 2), (2, 0), (0, 1, 2))
+
+
+class GuardCertificate(wiring.Component):
+    """A triangle's level ``r`` (its corners may move by ``2^-r`` of their proposals), bit-exact with
+    ``triangle_levels_raw``.
+
+    Per triangle (corners ``a``, ``b``, ``c`` [position], proposals ``V'`` [velocity], the host's
+    area ``A`` [face_area], the layout's winding ``σ = ±1``; position, velocity and face_edge share
+    their fraction bits, so every product is at twice them, "lsb²")::
+
+        ab, ac, o_k = sat(edge → face_edge)            o_k the edge opposite corner k; wide if any saturates
+        X0 = σ·(ab × ac),  L_k = σ·(V'_k × o_k),  Q_k = σ·(V'_k × V'_(k+1))
+        M = 2·(|ab|₁ + |ac|₁) + 8 + 4|V'_a|₁ + 2|V'_b|₁ + 2|V'_c|₁         the moves' rounding margin
+        floor = min(X0, max(X0 >> FLOOR_SHIFT, rnd(A·2^floor_min_shift))) + M     (half up)
+        safe_r = ∀ S: X0 + (Σ_S L >> r) + (Σ_pairs⊂S Q >> 2r) ≥ floor
+        level = min{r ≤ GUARD_LEVELS : safe_r}, else GUARD_LEVELS + 1 (also for a wide triangle)
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+
+    Members
+    -------
+    i : ``In(stream.Signature(certificate_layout(fs)))``
+        One triangle per beat.
+    winding_negative : ``In(1)``
+        ``σ = −1`` (the layout winds clockwise): a run constant, steady while triangles flow.
+    o : ``Out(stream.Signature(certificate_level_shape()))``
+        The triangle's level, in input order.
+
+    Contract
+    --------
+    Throughput: one triangle per clock (II = 1) while ``o.ready`` is high. Latency: with
+    ``o.ready`` high, a triangle transferred at clock edge ``k`` is on ``o`` after edge
+    ``k + latency`` (:meth:`latency_of`). Back-pressure stalls the whole pipeline:
+    ``i.ready = ~o.valid | o.ready``, the clock enable of every register.
+
+    Structure
+    ---------
+    A stalling pipeline (one clock enable, ``i.ready``): the beat registered; the exact edges; narrowed to
+    face_edge (the wide flag, the norms' first sums); the 14 products (operands landed, DSP
+    stages, adder levels, the margin's sums alongside); the products whole; the cross products with
+    ``σ`` (from a register of its own); the floor's cases (compares no wider than floor_min) and
+    the subsets' pair sums; the floor picked and the triple sums; the margin added; ``X0 − floor``;
+    per subset and level ``X0 − floor + (Σ L >> r)``, then its sign with ``Σ Q >> 2r`` added; the
+    level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
+    """
+
+    def __init__(self, fs: FormatSet | str):
+        if isinstance(fs, str):
+            fs = FormatSet.preset(fs)
+        if not isinstance(fs, FormatSet):
+            raise TypeError(f"GuardCertificate needs a FormatSet or a preset name, not {fs!r}")
+        if not fs.position.frac_bits == fs.velocity.frac_bits == fs.face_edge.frac_bits:
+            raise ValueError(f"the certificate needs position {fs.position}, velocity {fs.velocity} and face_edge "
+                             f"{fs.face_edge} to share their fraction bits")
+        self.fs = fs
+        self.latency = self.latency_of(fs)
+        super().__init__({
+            "i": In(stream.Signature(certificate_layout(fs))),
+            "winding_negative": In(1),
+            "o": Out(stream.Signature(certificate_level_shape())),
+        })
+
+    @staticmethod
+    def latency_of(fs: FormatSet) -> int:
+        """Clock edges from a triangle's transfer to its level on ``o``: beat, edges, narrowing, the
+        multiply (:meth:`Pipeline.mul_stages` with landed operands and its adder levels), then the products
+        whole, the cross products, three floor stages, ``X0 − floor``, the two compare stages and the level."""
+        edge, move = shape_of(fs.face_edge), shape_of(fs.velocity)
+        return 12 + Pipeline.mul_stages(land_operands=True) + reduce_levels((edge, edge), (move, edge), (move, move))
+
+    def elaborate(self, platform):
+        fs = self.fs
+        m = Module()
+        # the whole pipeline moves when its output is empty or being taken; valid never waits for
+        # ready, and a stalled output holds its level
+        advance = Signal()
+        pipe = Pipeline(m, self.i.valid, advance=advance, land_operands=True, platform=platform)
+
+        def stage(name, **values):
+            pipe.stage(name)
+            return {key: pipe.keep(Value.cast(value), f"{name}_{key}") for key, value in values.items()}
+
+        beat = data.View(certificate_layout(fs), stage("beat", beat=self.i.payload.as_value())["beat"])
+        corner, move = [beat.a, beat.b, beat.c], [beat.move_a, beat.move_b, beat.move_c]
+        # exact edges: ab, ac and each corner's opposite edge (corner k+1 − corner k+2)
+        edges = {"ab": (corner[1], corner[0]), "ac": (corner[2], corner[0])}
+        edges.update({f"o{k}": (corner[(k + 1) % 3], corner[(k + 2) % 3]) for k in range(3)})
+        edge_keys = [f"{n}_{axis}" for n in edges for axis in "xy"]
+        s = stage("edge", **{f"{n}_{axis}": getattr(p, axis) - getattr(q, axis) for n, (p, q) in edges.items()
+                             for axis in "xy"},
+                  **{f"m{k}_{axis}": getattr(move[k], axis) for k in range(3) for axis in "xy"},
+                  **{f"abs_m{k}_{axis}": abs(getattr(move[k], axis)) for k in range(3) for axis in "xy"},
+                  floor_min=shift_round(beat.area, -floor_min_shift(fs), "half_up"))
+        narrowed = {key: clamp(s[key], fs.face_edge) for key in edge_keys}
+        # the margin's norms from the exact edges: where they differ from the narrowed ones, the
+        # triangle is wide and its level is GUARD_LEVELS + 1 whatever the margin
+        s = stage("narrow", **{key: value for key, (value, _) in narrowed.items()},
+                  **{f"m{k}_{axis}": s[f"m{k}_{axis}"] for k in range(3) for axis in "xy"},
+                  floor_min=s["floor_min"], wide=Cat(*(over for _, over in narrowed.values())).any(),
+                  **{f"abs_{e}_{axis}": abs(s[f"{e}_{axis}"]) for e in ("ab", "ac") for axis in "xy"},
+                  **{f"norm_m{k}": s[f"abs_m{k}_x"] + s[f"abs_m{k}_y"] for k in range(3)})
+
+        # the margin M, one add per stage while the products are formed
+        carried = {"floor_min": s["floor_min"], "wide": s["wide"],
+                   "edges_ab": s["abs_ab_x"] + s["abs_ab_y"], "edges_ac": s["abs_ac_x"] + s["abs_ac_y"],
+                   "moves_ab": 4 * s["norm_m0"] + 2 * s["norm_m1"], "moves_c": 2 * s["norm_m2"] + 8}
+        margin_steps = [
+            lambda c: {"floor_min": c["floor_min"], "wide": c["wide"], "edges": c["edges_ab"] + c["edges_ac"],
+                       "moves": c["moves_ab"] + c["moves_c"]},
+            lambda c: {"floor_min": c["floor_min"], "wide": c["wide"], "margin": 2 * c["edges"] + c["moves"]},
+        ]
+
+        def carry(stage_name):
+            nonlocal carried
+            for key, value in carried.items():
+                carried[key] = pipe.keep(Value.cast(value), f"{stage_name}_{key}")
+            if margin_steps:
+                carried = margin_steps.pop(0)(carried)
+
+        def cross_operands(u, v, name):
+            return {f"{name}_p": (s[f"{u}_x"], s[f"{v}_y"]), f"{name}_q": (s[f"{u}_y"], s[f"{v}_x"])}
+
+        products = {**cross_operands("ab", "ac", "x0")}
+        for j in range(3):
+            products.update(cross_operands(f"m{j}", f"o{j}", f"l{j}"))
+            products.update(cross_operands(f"m{j}", f"m{(j + 1) % 3}", f"q{j}"))
+        products = pipe.multiply(products, "products", carry)
+        assert not margin_steps, "the multiply has fewer stages than the margin's adds"
+        # the products whole (their partial products' last add) before the cross products' subtract
+        s = stage("joined", **products, **carried)
+        # σ from a register of its own: a run constant, read by seven subtracts across the block
+        negative = Signal(name="winding_negative_q")
+        m.d.sync += negative.eq(self.winding_negative)
+
+        def cross(name):
+            p, q = s[f"{name}_p"], s[f"{name}_q"]
+            return Mux(negative, q, p) - Mux(negative, p, q)
+
+        terms = ("x0", "l0", "l1", "l2", "q0", "q1", "q2")
+        s = stage("cross", **{n: cross(n) for n in terms}, **{k: s[k] for k in carried})
+        # floor = min(X0, max(X0 >> FLOOR_SHIFT, floor_min)) with floor_min ≥ 0, by cases:
+        # X0 < 0: X0;  X0 >> FLOOR_SHIFT ≥ floor_min: X0 >> FLOOR_SHIFT;  else min(X0, floor_min).
+        # Each compare is against floor_min's width only (the wider bits of a non-negative X0 only
+        # need to be zero), so no carry chain is longer than floor_min.
+        x0, floor_min = s["x0"], s["floor_min"]
+        bits = len(floor_min)
+        shrunk = x0.shift_right(FLOOR_SHIFT)
+        s = stage("floor_cases", **{k: s[k] for k in terms}, margin=s["margin"], wide=s["wide"], floor_min=floor_min,
+                  shrunk=shrunk, shrunk_wins=(shrunk[bits:] != 0) | (shrunk[:bits] >= floor_min),
+                  x0_below=(x0[bits:] == 0) & (x0[:bits] < floor_min),
+                  l01=s["l0"] + s["l1"], l12=s["l1"] + s["l2"], l20=s["l2"] + s["l0"], q01=s["q0"] + s["q1"])
+        x0 = s["x0"]
+        floor = Mux(x0 < 0, x0, Mux(s["shrunk_wins"], s["shrunk"], Mux(s["x0_below"], x0, s["floor_min"])))
+        lin = {0: s["l0"], 1: s["l1"], 2: s["l2"], 3: s["l01"], 4: s["l12"], 5: s["l20"], 6: s["l01"] + s["l2"]}
+        quad = {3: s["q0"], 4: s["q1"], 5: s["q2"], 6: s["q01"] + s["q2"]}
+        s = stage("floor_pick", floor=floor, x0=x0, margin=s["margin"], wide=s["wide"],
+                  **{f"lin{i}": v for i, v in lin.items()}, **{f"quad{i}": v for i, v in quad.items()})
+
+        def sums(s):
+            return {k: s[k] for k in s if k.startswith(("lin", "quad"))}
+
+        s = stage("floor", floor=s["floor"] + s["margin"], x0=s["x0"], wide=s["wide"], **sums(s))
+        s = stage("slack", slack=s["x0"] - s["floor"], wide=s["wide"], **sums(s))
+        levels = range(GUARD_LEVELS + 1)
+        s = stage("linear", wide=s["wide"], **{k: s[k] for k in s if k.startswith("quad")},
+                  **{f"p{i}_{r}": s["slack"] + s[f"lin{i}"].shift_right(r) for i in range(len(SUBSETS)) for r in levels})
+        s = stage("compare", wide=s["wide"],
+                  **{f"ok{i}_{r}": (s[f"p{i}_{r}"] + s[f"quad{i}"].shift_right(2 * r) if f"quad{i}" in s else s[f"p{i}_{r}"])
+                     >= 0 for i in range(len(SUBSETS)) for r in levels})
+        safe = [Cat(*(s[f"ok{i}_{r}"] for i in range(len(SUBSETS)))).all() & ~s["wide"] for r in levels]
+        level = GUARD_LEVELS + 1
+        for r in reversed(levels):  # the smallest safe level wins
+            level = Mux(safe[r], r, level)
+        s = stage("level", level=level)
+        m.d.comb += [advance.eq(~pipe.valid | self.o.ready), self.i.ready.eq(advance),
+                     self.o.valid.eq(pipe.valid), self.o.payload.eq(s["level"])]
+        assert pipe.stages == self.latency, (pipe.stages, self.latency)
+        return m

@@ -1,0 +1,120 @@
+"""RTL guard certificate (hdl.GuardCertificate) against the golden model's ``triangle_levels_raw``, in
+Amaranth's simulator: every triangle's level, bit for bit, in order, at the stated latency."""
+
+import dataclasses
+import gc
+import warnings
+
+import numpy as np
+import pytest
+from amaranth.back import verilog
+from amaranth.hdl import UnusedElaboratable
+
+from golden_model.fixed import FormatSet
+from golden_model.fixed.guard import floor_min_raw, triangle_levels_raw
+from golden_model.guard import GUARD_LEVELS
+from hdl.guard_certificate import GuardCertificate
+from sim.payloads import pack_beats
+from support.streams import run_streams
+
+PRESETS = ["default", "narrow"]
+
+
+def golden_levels(fs, corners, moves, areas, winding):
+    """``(F,)`` levels of ``triangle_levels_raw`` for triangles ``corners``/``moves`` (F, 3, 2) raw."""
+    n = len(corners)
+    faces = np.arange(3 * n).reshape(n, 3)
+    return triangle_levels_raw(fs, corners.reshape(-1, 2), moves.reshape(-1, 2), faces, winding,
+                               floor_min_raw(fs, areas))
+
+
+def certificate_beats(dut, corners, moves, areas):
+    fields = {name: {"x": corners[:, k, 0], "y": corners[:, k, 1]} for k, name in enumerate("abc")}
+    fields.update({f"move_{name}": {"x": moves[:, k, 0], "y": moves[:, k, 1]} for k, name in enumerate("abc")})
+    fields["area"] = areas
+    return pack_beats(dut.i.payload.shape(), fields)
+
+
+def triangles(fs, n, rng):
+    """``n`` triangles of every kind the certificate meets: sizes from 2^-12 to 8 real units, proposals
+    from 1/100 to 30 times the size (every level from 0 to GUARD_LEVELS + 1 turns up), near-degenerate
+    ones, ones whose edges do not fit face_edge, host areas from 0 to face_area's max."""
+    pos, vel = fs.position, fs.velocity
+    size = 2.0 ** rng.uniform(-12, 3, n)
+    centre = rng.uniform(-0.5, 0.5, (n, 1, 2)) * 2.0 ** (pos.width - pos.frac_bits - 2)
+    shape = rng.normal(size=(n, 3, 2))
+    flat = rng.random(n) < 0.1  # near-degenerate: the third corner close to the first edge
+    shape[flat, 2] = 0.5 * (shape[flat, 0] + shape[flat, 1]) + 1e-4 * rng.normal(size=(flat.sum(), 2))
+    real = centre + shape * size[:, None, None]
+    wide = rng.random(n) < 0.05  # edges over face_edge's range
+    real[wide, 1] = -np.sign(real[wide, 0]) * 2.0 ** (pos.width - pos.frac_bits - 1) * 0.9
+    corners = np.clip(np.round(real * 2.0**pos.frac_bits), pos.raw_min, pos.raw_max).astype(np.int64)
+    reach = size * 10.0 ** rng.uniform(-2, 1.5, n)
+    moves = rng.normal(size=(n, 3, 2)) * reach[:, None, None]
+    still = rng.random((n, 3)) < 0.15  # corners that do not move
+    moves[still] = 0
+    moves = np.clip(np.round(moves * 2.0**vel.frac_bits), vel.raw_min, vel.raw_max).astype(np.int64)
+    area = fs.face_area
+    areas = np.where(rng.random(n) < 0.1, rng.choice([0, area.raw_max], n),
+                     np.round(0.5 * size**2 * rng.uniform(0.1, 2, n) * 2.0**area.frac_bits)).astype(np.int64)
+    return corners, moves, np.clip(areas, 0, area.raw_max)
+
+
+def run_certificate(fs, corners, moves, areas, winding, *, seed=0, p_valid=1.0, p_ready=1.0):
+    dut = GuardCertificate(fs)
+
+    def setup(ctx):
+        ctx.set(dut.winding_negative, int(winding < 0))
+
+    run = run_streams(dut, certificate_beats(dut, corners, moves, areas), seed=seed, p_valid=p_valid,
+                      p_ready=p_ready, setup=setup)
+    return dut, run
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("winding", [1.0, -1.0])
+def test_levels_are_the_golden_models_with_gaps_and_back_pressure(preset, winding):
+    fs = FormatSet.preset(preset)
+    rng = np.random.default_rng([7, int(winding > 0), PRESETS.index(preset)])
+    corners, moves, areas = triangles(fs, 600, rng)
+    if winding < 0:  # the same triangles wound the other way
+        corners = corners[:, ::-1].copy()
+        moves = moves[:, ::-1].copy()
+    want = golden_levels(fs, corners, moves, areas, winding)
+    assert set(np.unique(want)) == set(range(GUARD_LEVELS + 2)), "the triangles must reach every level"
+    _, run = run_certificate(fs, corners, moves, areas, winding, seed=3, p_valid=0.7, p_ready=0.6)
+    got = np.array([int(level) for level in run.outputs])
+    mismatch = np.flatnonzero(got != want)
+    assert mismatch.size == 0, f"{mismatch.size} of {len(want)} levels differ, first at {mismatch[:5]}: " \
+                               f"RTL {got[mismatch[:5]]}, golden {want[mismatch[:5]]}"
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_latency_and_order(preset):
+    fs = FormatSet.preset(preset)
+    corners, moves, areas = triangles(fs, 24, np.random.default_rng(11))
+    dut, run = run_certificate(fs, corners, moves, areas, 1.0)
+    assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * len(corners)
+    assert [int(level) for level in run.outputs] == list(golden_levels(fs, corners, moves, areas, 1.0))
+
+
+def test_parameter_validation():
+    # A component whose __init__ raises is still reported as unused when collected.
+    fs = FormatSet.preset("default")
+    other = dataclasses.replace(fs, velocity=dataclasses.replace(fs.velocity, frac_bits=fs.velocity.frac_bits - 2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        with pytest.raises(TypeError, match="GuardCertificate needs a FormatSet or a preset name, not 3"):
+            GuardCertificate(3)
+        with pytest.raises(ValueError, match="share their fraction bits"):
+            GuardCertificate(other)
+        gc.collect()
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_converts_to_verilog(preset, monkeypatch):
+    monkeypatch.setenv("AMARANTH_USE_YOSYS", "builtin")
+    text = verilog.convert(GuardCertificate(preset), name="guard_certificate")
+    assert "module guard_certificate" in text
+    assert f"output [{(GUARD_LEVELS + 1).bit_length() - 1}:0] o__payload;" in text
