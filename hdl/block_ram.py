@@ -52,6 +52,10 @@ class BlockRam(wiring.Component):
     that reads the memory directly (``ctx.get(ram.contents[i])``).
     """
 
+    #: Clocks from a read port's ``addr`` to its ``data``: the address registered in the block RAM,
+    #: then its data in the output register.
+    LATENCY = 2
+
     def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram"):
         if not isinstance(depth, int) or depth < 1:
             raise ValueError(f"BlockRam depth must be a positive integer, not {depth!r}")
