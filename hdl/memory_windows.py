@@ -16,7 +16,7 @@ from .layouts import force_word_layout, vector_layout, weight_word_layout, word_
 from .logic import or_tree
 from .rom import ENTRY_BANK_DEPTH
 
-__all__ = ["ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
+__all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
            "write_signature"]
 
 #: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`).
@@ -27,9 +27,11 @@ READ_LATENCY = BlockRam.LATENCY
 ENTRY_SELECT_STAGES = 3
 #: Banks per group in the select's second stage (one LUT4 per bit).
 ENTRY_GROUP = 4
+#: Clocks from an entry bank's read address to its data: a :class:`BlockRam` with ``pin_registers``.
+ENTRY_BANK_LATENCY = BlockRam.LATENCY + 1
 #: Clocks from the entry memory's address register (``ent_addr``) to the addressed entry in ``entry``:
-#: the bank's copy of the address, the block RAM's read, the bank select.
-ENTRY_LATENCY = 1 + READ_LATENCY + ENTRY_SELECT_STAGES
+#: the banks' read, the bank select.
+ENTRY_LATENCY = ENTRY_BANK_LATENCY + ENTRY_SELECT_STAGES
 #: Clocks from DEC to a window's answer: the address registered, the entry read (the other windows'
 #: data delayed alike), the whole word in the window's register (the write-back formed), the bus word
 #: landed.
@@ -99,21 +101,21 @@ class MemoryWindows(wiring.Component):
 
     The entry memory
     ----------------
-    Its banks (``entries0``, ``entries1``, …) spread over the device. Every register that feeds all
-    of them is followed by a copy per bank, and the addressed bank's word is selected in registered
-    stages, so that no path crosses the device through logic:
+    Its banks (``entries0``, ``entries1``, …) spread over the device, and so do one bank's block
+    RAMs. Every block RAM input has a register of its own beside it (the banks are
+    :class:`BlockRam` instances with ``pin_registers``: registered because one register fanning out to every
+    block RAM crosses the device), and the addressed bank's word is selected in registered stages,
+    so that no path crosses the device through logic:
 
-    * read: E0 ``ent_addr`` and its one-hot bank flags ``ent_hot``; E1 the bank's copy of the
-      address ``ent_addr<b>``, loaded only when the bank is addressed (registered because one address
-      register fanning out to every bank's block RAMs crosses the device; the load flag keeps the
-      copies distinct, which synthesis would otherwise merge), and the bank's own select flag; E3
-      the bank's data (:attr:`BlockRam.LATENCY`); E4 ``ent_kept<b>``: the data, or 0 when the bank is
-      not the one addressed (a register beside the bank, reset by the bank's flag: no logic between
-      the output register and it); E5 ``ent_group<g>``: the OR of a group of banks; E6 ``entry``: the
-      OR of the groups (:data:`ENTRY_LATENCY`);
-    * write (the bus's write-back only): the central address, data and one-hot bank-enable registers,
-      then a copy of the address and data per bank, loaded when the write is the bank's, and the
-      bank's enable: a clock more, which the bus cycle absorbs (its next read comes after its answer).
+    * read: E0 ``ent_addr`` and its one-hot bank flags ``ent_hot``; E1 the address in every block
+      RAM's pin registers, and each bank's own select flag; E3 the banks' data
+      (:data:`ENTRY_BANK_LATENCY`); E4 ``ent_kept<b>``: a bank's data, or 0 when the bank is not the
+      one addressed (a register beside the bank, reset by the bank's flag: no logic between the
+      output register and it); E5 ``ent_group<g>``: the OR of a group of banks; E6 ``entry``: the OR
+      of the groups (:data:`ENTRY_LATENCY`);
+    * write (the bus's write-back only): the address, data and one-hot bank-enable registers, then
+      the block RAMs' pin registers: a clock more, which the bus cycle absorbs (its next read comes
+      after its answer).
     """
 
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, register_map: RegisterMap, *, addr_width: int,
@@ -144,7 +146,7 @@ class MemoryWindows(wiring.Component):
             "forces": BlockRam(force_shape, cap.vertices, name="forces"),
             "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles"),
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
-                                       name=f"entries{b}") for b in range(banks)},
+                                       name=f"entries{b}", pin_registers=True) for b in range(banks)},
         }
         super().__init__({
             "address": In(addr_width), "bus_request": In(1), "write": In(1), "write_data": In(BUS_WORD_BITS),
@@ -190,13 +192,11 @@ class MemoryWindows(wiring.Component):
         shape = self.entry_shape
         kept = []
         for b, bank in enumerate(entry_banks):
+            assert bank.latency == ENTRY_BANK_LATENCY
             port = bank.read[0]
-            copy = Signal(len(port.addr), name=f"ent_addr{b}")
-            select = [Signal(name=f"ent_select{b}_{k}") for k in range(1, 2 + READ_LATENCY)]  # E1 … E3
-            with m.If(ent_hot[b]):
-                m.d.sync += copy.eq(ent_addr[:len(port.addr)])
+            select = [Signal(name=f"ent_select{b}_{k}") for k in range(1, ENTRY_BANK_LATENCY + 1)]  # E1 … E3
             m.d.sync += [select[0].eq(ent_hot[b]), *(select[k].eq(select[k - 1]) for k in range(1, len(select)))]
-            m.d.comb += port.addr.eq(copy)
+            m.d.comb += port.addr.eq(ent_addr[:len(port.addr)])
             kept.append(Signal(shape, reset_less=True, name=f"ent_kept{b}"))
             with m.If(select[-1]):
                 m.d.sync += kept[b].eq(port.data)
@@ -305,22 +305,17 @@ class MemoryWindows(wiring.Component):
 
     def _writes(self, m: Module, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks) -> None:
         """Each write port's address, data and enable registers: the bus's write-back while idle, the
-        integrator's results while running (the entry banks: a copy per bank, enabled by its flag)."""
+        integrator's results while running (the entry banks: one enable flag per bank)."""
         write_ports = {"pos": self.rams["positions"].write, "vel": self.rams["velocities"].write,
                        "wgt": self.rams["weights"].write, "ent": None, "tri": self.rams["triangles"].write}
         write_regs = {}
         for name, port in write_ports.items():
-            if port is None:  # the entry banks: a copy per bank (the class's docstring)
+            if port is None:  # the entry banks, each enabled by its flag (then their pin registers)
                 regs = (Signal.like(ent_addr, name="ent_waddr"), Signal(self.entry_shape, name="ent_wdata"),
                         Signal(len(entry_banks), name="ent_whot"))
                 for b, bank in enumerate(entry_banks):
-                    addr = Signal.like(bank.write.addr, name=f"ent_waddr{b}")
-                    wdata = Signal(self.entry_shape, name=f"ent_wdata{b}", reset_less=True)
-                    wen = Signal(name=f"ent_wen{b}")
-                    with m.If(regs[2][b]):
-                        m.d.sync += [addr.eq(regs[0][:len(addr)]), wdata.eq(regs[1])]
-                    m.d.sync += wen.eq(regs[2][b])
-                    m.d.comb += [bank.write.addr.eq(addr), bank.write.data.eq(wdata), bank.write.en.eq(wen)]
+                    m.d.comb += [bank.write.addr.eq(regs[0][:len(bank.write.addr)]), bank.write.data.eq(regs[1]),
+                                 bank.write.en.eq(regs[2][b])]
             else:
                 regs = (Signal.like(port.addr, name=f"{name}_waddr"), Signal.like(port.data, name=f"{name}_wdata"),
                         Signal(name=f"{name}_wen"))

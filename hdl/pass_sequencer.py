@@ -93,8 +93,8 @@ class PassSequencer(wiring.Component):
     -------
     Valid bits are named for the clock whose data they mark. The force pass
     (:data:`FORCE_FETCH_LATENCY`, nine clocks): E0 the entry's address in the entry memory's address
-    register; E6 the addressed entry (:data:`~hdl.memory_windows.ENTRY_LATENCY`: the bank's address
-    copy, the block RAM's read, the bank select in registered stages), its three position addresses
+    register; E6 the addressed entry (:data:`~hdl.memory_windows.ENTRY_LATENCY`: the block RAMs' pin
+    registers, their read, the bank select in registered stages), its three position addresses
     formed; E7 those in the position memory's address registers; E8 its read data; E9 everything
     landed, into ``ForcePass.i``. The area pass (:data:`AREA_FETCH_LATENCY`): T0 the triangle's
     address, T1 the data, T2 landed (corner addresses formed), T3 registered, T4 the corners' data,
