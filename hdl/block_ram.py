@@ -113,7 +113,7 @@ class BlockRam(wiring.Component):
         for i in range(len(value)):
             m.submodules[f"{name}_ff{i}"] = Instance(
                 "TRELLIS_FF", p_GSR="AUTO", p_CEMUX="1", p_CLKMUX="CLK", p_LSRMUX="LSR", p_REGSET="RESET",
-                i_CLK=ClockSignal(), i_LSR=0, i_CE=1, i_DI=value[i], i_M=0, o_Q=q[i], a_keep=1)
+                i_CLK=ClockSignal(), i_LSR=0, i_DI=value[i], o_Q=q[i], a_keep=1)
         return q
 
     def _dp16kd(self, m: Module) -> None:
