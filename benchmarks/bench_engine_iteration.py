@@ -94,9 +94,9 @@ force, area, math): one each, as ``hdl/engine.py``'s phase machine is written.""
 def estimated_cycles(case: Case, fs: FormatSet, capacity: EngineCapacity, p0: np.ndarray) -> int:
     """Clocks per iteration from the pass structure of ``hdl/engine.py`` (an estimate, not a measurement):
 
-    * integrate pass: one node per clock, 2 fetch stages, the integrator's latency;
-    * force pass: one entry per clock, 4 fetch stages, the force pass's latency;
-    * area pass: one triangle per clock, 4 fetch stages, the area unit's latency, then the area
+    * integrate pass: one node per clock, its fetch's latency, the integrator's latency;
+    * force pass: one entry per clock, its fetch's latency, the force pass's latency;
+    * area pass: one triangle per clock, its fetch's latency, the area unit's latency, then the area
       normaliser (its cycles for this mesh's shift); the energy check, started at the force pass's end,
       runs beside it: the longer of the two;
     * the step generator's latency, and :data:`PHASE_CHANGES`.
@@ -106,12 +106,13 @@ def estimated_cycles(case: Case, fs: FormatSet, capacity: EngineCapacity, p0: np
     from hdl.controller_units import EnergyCheck, Normaliser
     from hdl.force_pass import ForcePass
     from hdl.integrator import Integrator
+    from hdl.pass_sequencer import AREA_FETCH_LATENCY, FORCE_FETCH_LATENCY, NODE_FETCH_LATENCY
     from hdl.stepgen import StepGenerator
 
     c = build_image(prepare(case.mesh, p0, case.params.with_(max_iter=1), fs), capacity).constants
-    integrate = c["vertices"] + 2 + Integrator(fs).latency
-    force = c["entries"] + 4 + ForcePass(fs, energy=True).latency
-    area = c["triangles"] + 4 + AreaError(fs).latency + Normaliser(fs).cycles(c["area_shift"])
+    integrate = c["vertices"] + NODE_FETCH_LATENCY + Integrator(fs).latency
+    force = c["entries"] + FORCE_FETCH_LATENCY + ForcePass(fs, energy=True).latency
+    area = c["triangles"] + AREA_FETCH_LATENCY + AreaError(fs).latency + Normaliser(fs).cycles(c["area_shift"])
     energy = EnergyCheck(fs, capacity.entries).latency
     return integrate + force + max(area, energy) + StepGenerator(fs).latency + PHASE_CHANGES
 

@@ -28,7 +28,7 @@ generic form carries, says the same to the synthesis tool).
 
 from __future__ import annotations
 
-from amaranth.hdl import ClockSignal, Module, Shape, Signal, Value
+from amaranth.hdl import ClockSignal, Instance, Module, Shape, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory, MemoryData, WritePort
 from amaranth.lib.wiring import In, Out
@@ -47,12 +47,24 @@ class BlockRam(wiring.Component):
     ``data`` out: ``data`` is the word at the ``addr`` of two clocks before; there is no read
     enable, every port reads every clock). Initial contents: all zeros.
 
+    ``pin_registers``: every block RAM input (read and write address, write data and enable) goes
+    through a register of its own, so a read answers :attr:`latency` = three clocks after ``addr``
+    and a write lands a clock after ``en`` (visible to a read whose address is registered two edges
+    later). In the ECP5 form these are ``TRELLIS_FF`` instances per ``DP16KD``, marked ``keep``
+    (Yosys merges identical registers): registered because one register fanning out to block RAMs
+    spread over the device crosses it, where a copy per block RAM can sit between the source and
+    its block RAM. In generic RTL one register per port.
+
     ``name`` prefixes the ``DP16KD`` instances of the ECP5 form (``{name}_r{k}_{slice}``).
     ``contents`` is the generic form's :class:`amaranth.lib.memory.MemoryData`, for a testbench
     that reads the memory directly (``ctx.get(ram.contents[i])``).
     """
 
-    def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram"):
+    #: Clocks from a read port's ``addr`` to its ``data``: the address registered in the block RAM,
+    #: then its data in the output register.
+    LATENCY = 2
+
+    def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram", pin_registers: bool = False):
         if not isinstance(depth, int) or depth < 1:
             raise ValueError(f"BlockRam depth must be a positive integer, not {depth!r}")
         if not isinstance(read_ports, int) or read_ports < 1:
@@ -60,7 +72,11 @@ class BlockRam(wiring.Component):
         width = Shape.cast(shape).width
         if width < 1:
             raise ValueError(f"BlockRam word width must be at least 1, not {width}")
-        self.shape, self.depth, self.name = shape, depth, name
+        if not isinstance(pin_registers, bool):
+            raise TypeError(f"BlockRam pin_registers must be a bool, not {pin_registers!r}")
+        self.shape, self.depth, self.name, self.pin_registers = shape, depth, name, pin_registers
+        #: Clocks from a read port's ``addr`` to its ``data``.
+        self.latency = self.LATENCY + pin_registers
         self.contents = MemoryData(shape=shape, depth=depth, init=[])
         addr_width = max(1, (depth - 1).bit_length())
         read = wiring.Signature({"addr": In(addr_width), "data": Out(shape)})
@@ -75,13 +91,30 @@ class BlockRam(wiring.Component):
         # no_rw_check: see the module's timing contract (no collision bypass after the block RAM)
         m.submodules.memory = memory = Memory(data=self.contents, attrs={"no_rw_check": 1})
         write = memory.write_port()
-        m.d.comb += [write.addr.eq(self.write.addr), write.data.eq(self.write.data), write.en.eq(self.write.en)]
+        m.d.comb += [write.addr.eq(self._pin(m, self.write.addr, "w_addr")),
+                     write.data.eq(self._pin(m, Value.cast(self.write.data), "w_data")),
+                     write.en.eq(self._pin(m, self.write.en, "w_en"))]
         for k, port in enumerate(self.read):
             read = memory.read_port()
             landed = Signal(self.shape, reset_less=True, name=f"landed{k}")
-            m.d.comb += [read.addr.eq(port.addr), port.data.eq(landed)]
+            m.d.comb += [read.addr.eq(self._pin(m, port.addr, f"r{k}_addr")), port.data.eq(landed)]
             m.d.sync += landed.eq(read.data)
         return m
+
+    def _pin(self, m: Module, value: Value, name: str, *, kept: bool = False) -> Value:
+        """``value``, or (``pin_registers``) ``value`` registered: a plain register, or with ``kept`` one
+        ``TRELLIS_FF`` per bit marked ``keep``."""
+        if not self.pin_registers:
+            return value
+        q = Signal(len(value), name=name)
+        if not kept:
+            m.d.sync += q.eq(value)
+            return q
+        for i in range(len(value)):
+            m.submodules[f"{name}_ff{i}"] = Instance(
+                "TRELLIS_FF", p_GSR="AUTO", p_CEMUX="1", p_CLKMUX="CLK", p_LSRMUX="LSR", p_REGSET="RESET",
+                i_CLK=ClockSignal(), i_LSR=0, i_DI=value[i], o_Q=q[i], a_keep=1)
+        return q
 
     def _dp16kd(self, m: Module) -> None:
         width = Shape.cast(self.shape).width
@@ -105,19 +138,32 @@ class BlockRam(wiring.Component):
                     bits = min(slice_width, width - lo)
                     dia = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_dia")
                     dob = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_dob")
-                    m.d.comb += [dia.eq(write_data[lo:lo + bits]), bank_data[b][lo:lo + bits].eq(dob[:bits])]
-                    m.submodules[f"{self.name}_r{k}_{b}_{s}"] = dp16kd(
+                    inst = f"{self.name}_r{k}_{b}_{s}"
+                    if self.pin_registers:  # this block RAM's own copy of every input that varies
+                        ada_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_ada")
+                        adb_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_adb")
+                        m.d.comb += [
+                            ada_pins.eq((self._pin(m, self.write.addr[:address_bits], f"{inst}_wa", kept=True)
+                                         << shift) | low),
+                            adb_pins.eq(self._pin(m, port.addr[:address_bits], f"{inst}_ra", kept=True) << shift),
+                            dia.eq(self._pin(m, write_data[lo:lo + bits], f"{inst}_wd", kept=True))]
+                        wea = self._pin(m, write_enable, f"{inst}_we", kept=True)
+                    else:
+                        ada_pins, adb_pins, wea = ada, adb, write_enable
+                        m.d.comb += dia.eq(write_data[lo:lo + bits])
+                    m.d.comb += bank_data[b][lo:lo + bits].eq(dob[:bits])
+                    m.submodules[inst] = dp16kd(
                         slice_width, regmode_b="OUTREG",
-                        **dp16kd_port("A", clock=ClockSignal(), address=ada, write_data=dia, write_enable=write_enable),
-                        **dp16kd_port("B", clock=ClockSignal(), address=adb, read_data=dob))
+                        **dp16kd_port("A", clock=ClockSignal(), address=ada_pins, write_data=dia, write_enable=wea),
+                        **dp16kd_port("B", clock=ClockSignal(), address=adb_pins, read_data=dob))
             read_data = Value.cast(port.data)
             if banks == 1:
                 m.d.comb += read_data.eq(bank_data[0])
                 continue
-            # the bank of the word in the output registers: the address's high bits, two clocks on
-            bank = [Signal(range(banks), name=f"r{k}_bank_q{n}") for n in (1, 2)]
-            m.d.sync += [bank[0].eq(port.addr[address_bits:]), bank[1].eq(bank[0])]
-            with m.Switch(bank[1]):
+            # the bank of the word in the output registers: the address's high bits, latency clocks on
+            bank = [Signal(range(banks), name=f"r{k}_bank_q{n}") for n in range(1, self.latency + 1)]
+            m.d.sync += [bank[0].eq(port.addr[address_bits:]), *(bank[n].eq(bank[n - 1]) for n in range(1, len(bank)))]
+            with m.Switch(bank[-1]):
                 for b in range(banks):
                     with m.Case(b):
                         m.d.comb += read_data.eq(bank_data[b])

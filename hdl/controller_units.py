@@ -288,9 +288,14 @@ class EnergyCheck(wiring.Component):
         in_springs, in_energy, in_tolerance, in_halves, in_within, in_compare = (
             Signal(name=f"in_{n}") for n in ("springs", "energy", "tolerance", "halves", "within", "compare"))
         last = Signal()  # the springs or tolerance phase's last step
+        # ``in_springs | in_tolerance``, a flip-flop of its own: the step count's only control besides the
+        # start and the energy phase (the phase flags also choose wide registers' inputs, and a LUT
+        # shared between the two gets placed far from both)
+        counting = Signal()
+        start = self.i.valid & idle
         m.d.comb += self.i.ready.eq(idle)
-        with m.If(self.i.valid & idle):
-            m.d.sync += [idle.eq(0), busy.eq(1), in_springs.eq(1)]
+        with m.If(start):
+            m.d.sync += [idle.eq(0), busy.eq(1), in_springs.eq(1), counting.eq(1)]
         m.d.sync += [
             # 3·½C as an adder: ``* 3`` became a combinational DSP block
             factor.eq(Mux(busy, factor, self.half_spring.shift_left(1) + self.half_spring)),
@@ -300,15 +305,15 @@ class EnergyCheck(wiring.Component):
             springs.eq(Mux(busy, Mux(in_springs, shift_add_step(springs, factor, self.square_bits), springs),
                            beat.square_sum)),
         ]
-        with m.If(~busy):
+        with m.If(start):
             m.d.sync += [steps.eq(self.square_bits), last.eq(self.square_bits == 1)]
-        with m.If(in_springs | in_tolerance):
+        with m.If(counting):
             m.d.sync += [steps.eq(steps - 1), last.eq(steps == 2)]
         with m.If(in_springs & last):
-            m.d.sync += [in_springs.eq(0), in_energy.eq(1)]
+            m.d.sync += [in_springs.eq(0), in_energy.eq(1), counting.eq(0)]
         with m.If(in_energy):
             m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits),
-                         last.eq(self.energy_bits == 1), in_energy.eq(0), in_tolerance.eq(1)]
+                         last.eq(self.energy_bits == 1), in_energy.eq(0), in_tolerance.eq(1), counting.eq(1)]
         with m.If(in_tolerance):
             # the step count (energy_bits ≥ 2 clocks) leaves time for the difference, then its
             # magnitude: each a carry chain as wide as E, one per clock
@@ -316,7 +321,7 @@ class EnergyCheck(wiring.Component):
                          difference.eq(energy - previous),
                          change.eq(Mux(difference < 0, -difference, difference))]
             with m.If(last):
-                m.d.sync += [in_tolerance.eq(0), in_halves.eq(1)]
+                m.d.sync += [in_tolerance.eq(0), in_halves.eq(1), counting.eq(0)]
         # The E-wide comparison in two clocks of its own, free-running: the halves compared, then
         # combined (the whole compare in one clock is a carry chain of over 80 cells behind ε·E_prev)
         limit = allowed[ENERGY_TOL_FRAC_BITS:]

@@ -16,12 +16,26 @@ from .layouts import force_word_layout, vector_layout, weight_word_layout, word_
 from .logic import or_tree
 from .rom import ENTRY_BANK_DEPTH
 
-__all__ = ["MemoryWindows", "write_signature", "node_write_layout"]
+__all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
+           "write_signature"]
 
-#: Clocks from DEC to a window's answer: the address registered, the block RAM's data, landed, the
-#: entry bank's word selected (the other windows' data delayed alike), the whole word in the
-#: window's register (the write-back formed), the bus word landed.
-WINDOW_STEPS = 6
+#: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`).
+READ_LATENCY = BlockRam.LATENCY
+#: The entry memory's bank select after the banks' output registers, one registered stage each: every
+#: bank's word kept or zeroed by that bank's own select flag in a register beside the bank, groups of
+#: up to :data:`ENTRY_GROUP` banks ORed, the groups ORed.
+ENTRY_SELECT_STAGES = 3
+#: Banks per group in the select's second stage (one LUT4 per bit).
+ENTRY_GROUP = 4
+#: Clocks from an entry bank's read address to its data: a :class:`BlockRam` with ``pin_registers``.
+ENTRY_BANK_LATENCY = BlockRam.LATENCY + 1
+#: Clocks from the entry memory's address register (``ent_addr``) to the addressed entry in ``entry``:
+#: the banks' read, the bank select.
+ENTRY_LATENCY = ENTRY_BANK_LATENCY + ENTRY_SELECT_STAGES
+#: Clocks from DEC to a window's answer: the address registered, the entry read (the other windows'
+#: data delayed alike), the whole word in the window's register (the write-back formed), the bus word
+#: landed.
+WINDOW_STEPS = 1 + ENTRY_LATENCY + 2
 
 
 def write_signature(addr_shape, data_shape) -> wiring.Signature:
@@ -57,14 +71,15 @@ class MemoryWindows(wiring.Component):
     hit, answer, answer_data : ``Out``
         At DEC: the request is a window word's and the engine is idle (``hit``, combinational from
         flip-flops); ``answer`` with ``answer_data`` (the word read, a register) :data:`WINDOW_STEPS`
-        (six) clocks after DEC, for a write as for a read.
+        (nine) clocks after DEC, for a write as for a read.
     running, in_area, in_integrate, fetch_nodes : ``In(1)``
         The controller's flip-flops that choose each port's source.
     entry_index, tri_index, node_index, node_of_entry : ``In``
         The passes' addresses (:class:`~hdl.pass_sequencer.PassSequencer`).
     entry, triangle, position[3], velocity, weight_word, force_word : ``Out``
-        The passes' read data: ``entry`` (the addressed bank's word) three clocks after the
-        entry address, every other port two clocks after its address.
+        The passes' read data: ``entry`` (the addressed bank's word, a register)
+        :data:`ENTRY_LATENCY` (six) clocks after the entry address is in ``ent_addr``, every other
+        port :data:`READ_LATENCY` (two) clocks after its address register.
     force_write : ``In(write_signature(...))``
         The force pass's per-node results: written to the force memory (not on the bus).
     node_write : ``In(write_signature(...))``
@@ -83,6 +98,24 @@ class MemoryWindows(wiring.Component):
     whose data is used meets a write to its address in the same clock (the passes read ahead of
     the integrate pass's writes; the bus reads and writes while idle, a word's write-back after its
     read): BlockRam's timing contract.
+
+    The entry memory
+    ----------------
+    Its banks (``entries0``, ``entries1``, …) spread over the device, and so do one bank's block
+    RAMs. Every block RAM input has a register of its own beside it (the banks are
+    :class:`BlockRam` instances with ``pin_registers``: registered because one register fanning out to every
+    block RAM crosses the device), and the addressed bank's word is selected in registered stages,
+    so that no path crosses the device through logic:
+
+    * read: E0 ``ent_addr`` and its one-hot bank flags ``ent_hot``; E1 the address in every block
+      RAM's pin registers, and each bank's own select flag; E3 the banks' data
+      (:data:`ENTRY_BANK_LATENCY`); E4 ``ent_kept<b>``: a bank's data, or 0 when the bank is not the
+      one addressed (a register beside the bank, reset by the bank's flag: no logic between the
+      output register and it); E5 ``ent_group<g>``: the OR of a group of banks; E6 ``entry``: the OR
+      of the groups (:data:`ENTRY_LATENCY`);
+    * write (the bus's write-back only): the address, data and one-hot bank-enable registers, then
+      the block RAMs' pin registers: a clock more, which the bus cycle absorbs (its next read comes
+      after its answer).
     """
 
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, register_map: RegisterMap, *, addr_width: int,
@@ -113,7 +146,7 @@ class MemoryWindows(wiring.Component):
             "forces": BlockRam(force_shape, cap.vertices, name="forces"),
             "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles"),
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
-                                       name=f"entries{b}") for b in range(banks)},
+                                       name=f"entries{b}", pin_registers=True) for b in range(banks)},
         }
         super().__init__({
             "address": In(addr_width), "bus_request": In(1), "write": In(1), "write_data": In(BUS_WORD_BITS),
@@ -134,17 +167,9 @@ class MemoryWindows(wiring.Component):
         entry_banks = [ram for name, ram in self.rams.items() if name.startswith("entries")]
         bank_bits = (self.entry_bank_depth - 1).bit_length() if len(entry_banks) > 1 \
             else len(entry_banks[0].read[0].addr)
-        # Every bank's read data lands in its register; the addressed bank's word is selected into
-        # another the clock after.
         ent_addr = Signal(range(self.capacity.entries), name="ent_addr")  # the entry memory's address register
-        ent_bank = [Signal(range(len(entry_banks)), name=f"ent_bank{k}") for k in (1, 2)]  # at E1, E2
-        ent_data = Signal(self.entry_shape, reset_less=True, name="ent_data")  # the addressed entry
-        m.d.comb += [bank.read[0].addr.eq(ent_addr[:bank_bits]) for bank in entry_banks]
-        m.d.sync += [ent_bank[0].eq(ent_addr[bank_bits:] if len(entry_banks) > 1 else 0), ent_bank[1].eq(ent_bank[0])]
-        with m.Switch(ent_bank[1]):
-            for b, bank in enumerate(entry_banks):
-                with m.Case(b):
-                    m.d.sync += ent_data.eq(bank.read[0].data)
+        ent_hot = Signal(len(entry_banks), name="ent_hot")  # ent_addr's bank, one flag per bank
+        ent_data = self._entry_read(m, entry_banks, ent_addr, ent_hot)
 
         positions, triangles, forces = self.rams["positions"], self.rams["triangles"], self.rams["forces"]
         m.d.comb += [self.entry.eq(ent_data), self.triangle.eq(triangles.read[0].data),
@@ -157,9 +182,33 @@ class MemoryWindows(wiring.Component):
 
         window_q, index_q, word_q = self._decode(m)
         bus_writing, new_words = self._bus_words(m, window_q, word_q, ent_data)
-        self._read_addresses(m, index_q, ent_addr, ent_data)
+        self._read_addresses(m, index_q, ent_addr, ent_hot, bank_bits, ent_data)
         self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks)
         return m
+
+    def _entry_read(self, m: Module, entry_banks, ent_addr, ent_hot):
+        """The entry memory's read, E0 (``ent_addr``, ``ent_hot``) to E6 (the returned register): see the
+        class's docstring."""
+        shape = self.entry_shape
+        kept = []
+        for b, bank in enumerate(entry_banks):
+            assert bank.latency == ENTRY_BANK_LATENCY
+            port = bank.read[0]
+            select = [Signal(name=f"ent_select{b}_{k}") for k in range(1, ENTRY_BANK_LATENCY + 1)]  # E1 … E3
+            m.d.sync += [select[0].eq(ent_hot[b]), *(select[k].eq(select[k - 1]) for k in range(1, len(select)))]
+            m.d.comb += port.addr.eq(ent_addr[:len(port.addr)])
+            kept.append(Signal(shape, reset_less=True, name=f"ent_kept{b}"))
+            with m.If(select[-1]):
+                m.d.sync += kept[b].eq(port.data)
+            with m.Else():
+                m.d.sync += kept[b].eq(0)
+        n_groups = -(-len(kept) // ENTRY_GROUP)
+        size = -(-len(kept) // n_groups)
+        groups = [Signal(shape, reset_less=True, name=f"ent_group{g}") for g in range(n_groups)]
+        m.d.sync += [group.eq(or_tree(kept[g * size:(g + 1) * size])) for g, group in enumerate(groups)]
+        ent_data = Signal(shape, reset_less=True, name="ent_data")  # the addressed entry
+        m.d.sync += ent_data.eq(or_tree(groups))
+        return ent_data
 
     def _decode(self, m: Module):
         """The request's window, index and word, registered at DEC (``n_windows``: none)."""
@@ -195,7 +244,7 @@ class MemoryWindows(wiring.Component):
         mem_steps = [Signal(name=f"mem_step{k}") for k in range(WINDOW_STEPS)]
         m.d.sync += [mem_steps[0].eq(self.bus_request & self.hit),
                      *(mem_steps[k].eq(mem_steps[k - 1]) for k in range(1, WINDOW_STEPS))]
-        mem_landed, mem_answer = mem_steps[4], mem_steps[5]
+        mem_landed, mem_answer = mem_steps[WINDOW_STEPS - 2], mem_steps[WINDOW_STEPS - 1]
         mem_data = Signal(BUS_WORD_BITS)
         mem_word = Signal(BUS_WORD_BITS, reset_less=True, name="mem_word")
         m.d.sync += mem_word.eq(mem_data)
@@ -208,16 +257,19 @@ class MemoryWindows(wiring.Component):
         answer_terms, new_words = [], {}
         for k, w in enumerate(windows):
             if w.name == "entries":
-                word_value = ent_data.as_value()  # selected at the third clock after the address
+                word_value = ent_data.as_value()  # ENTRY_LATENCY clocks after the address register
             else:
                 if w.name == "nodes":
                     read_data = Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
                                     wgt_r.data.inv_mass_barrier)
                 else:
                     read_data = self.rams["triangles"].read[0].data.as_value()
-                # the memories' data has landed (BlockRam); one more clock aligns it with the entry bank's select
-                word_value = Signal(len(read_data), name=f"bus_{w.name}_aligned", reset_less=True)
-                m.d.sync += word_value.eq(read_data)
+                # the memories' data has landed (BlockRam); delayed to the entry's clock
+                word_value = read_data
+                for d in range(ENTRY_LATENCY - READ_LATENCY):
+                    aligned = Signal(len(read_data), name=f"bus_{w.name}_aligned{d}", reset_less=True)
+                    m.d.sync += aligned.eq(word_value)
+                    word_value = aligned
             padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word", reset_less=True)
             m.d.sync += padded.eq(word_value)
             words = [padded.word_select(j, BUS_WORD_BITS) for j in range(w.words)]
@@ -227,7 +279,7 @@ class MemoryWindows(wiring.Component):
         m.d.comb += mem_data.eq(or_tree(answer_terms))
         return mem_landed & self.write & self.whole_word, new_words
 
-    def _read_addresses(self, m: Module, index_q, ent_addr, ent_data) -> None:
+    def _read_addresses(self, m: Module, index_q, ent_addr, ent_hot, bank_bits, ent_data) -> None:
         """Each read address register: the bus's index while idle, the pass's address while running."""
         positions = self.rams["positions"].read
         read_ports = {"pos_a": positions[0], "pos_b": positions[1], "pos_c": positions[2],
@@ -238,8 +290,11 @@ class MemoryWindows(wiring.Component):
         t2_tri = self.rams["triangles"].read[0].data
         running, in_area = self.running, self.in_area
         in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight
+        ent_next = Signal.like(ent_addr, name="ent_next")
+        m.d.comb += ent_next.eq(Mux(running, self.entry_index, index_q))
         m.d.sync += [
-            ent_addr.eq(Mux(running, self.entry_index, index_q)),
+            ent_addr.eq(ent_next),
+            ent_hot.eq(Cat(ent_next[bank_bits:] == b for b in range(len(ent_hot))) if len(ent_hot) > 1 else 1),
             read_addr["tri"].eq(Mux(running, self.tri_index, index_q)),
             *(read_addr[n].eq(Mux(running, self.node_index, index_q)) for n in ("vel", "wgt", "frc")),
             read_addr["pos_b"].eq(Mux(in_area, t2_tri.b, ent_data.neighbour)),
@@ -250,18 +305,17 @@ class MemoryWindows(wiring.Component):
 
     def _writes(self, m: Module, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks) -> None:
         """Each write port's address, data and enable registers: the bus's write-back while idle, the
-        integrator's results while running (the entry banks: the bank's port enabled by the high bits)."""
+        integrator's results while running (the entry banks: one enable flag per bank)."""
         write_ports = {"pos": self.rams["positions"].write, "vel": self.rams["velocities"].write,
                        "wgt": self.rams["weights"].write, "ent": None, "tri": self.rams["triangles"].write}
         write_regs = {}
         for name, port in write_ports.items():
-            if port is None:
+            if port is None:  # the entry banks, each enabled by its flag (then their pin registers)
                 regs = (Signal.like(ent_addr, name="ent_waddr"), Signal(self.entry_shape, name="ent_wdata"),
-                        Signal(name="ent_wen"))
+                        Signal(len(entry_banks), name="ent_whot"))
                 for b, bank in enumerate(entry_banks):
-                    hit = regs[0][bank_bits:] == b if len(entry_banks) > 1 else 1
-                    m.d.comb += [bank.write.addr.eq(regs[0][:bank_bits]), bank.write.data.eq(regs[1]),
-                                 bank.write.en.eq(regs[2] & hit)]
+                    m.d.comb += [bank.write.addr.eq(regs[0][:len(bank.write.addr)]), bank.write.data.eq(regs[1]),
+                                 bank.write.en.eq(regs[2][b])]
             else:
                 regs = (Signal.like(port.addr, name=f"{name}_waddr"), Signal.like(port.data, name=f"{name}_wdata"),
                         Signal(name=f"{name}_wen"))
@@ -285,6 +339,8 @@ class MemoryWindows(wiring.Component):
                     write_regs["wgt"][1].as_value()).eq(node_new),
                 write_regs["ent"][1].eq(ent_new), write_regs["tri"][1].eq(tri_new),
                 *(write_regs[n][2].eq(bus_writing & (window_q == node_k)) for n in ("pos", "vel", "wgt")),
-                write_regs["ent"][2].eq(bus_writing & (window_q == ent_k)),
+                write_regs["ent"][2].eq(Cat(bus_writing & (window_q == ent_k)
+                                            & (index_q[bank_bits:] == b if len(entry_banks) > 1 else 1)
+                                            for b in range(len(entry_banks)))),
                 write_regs["tri"][2].eq(bus_writing & (window_q == tri_k)),
             ]

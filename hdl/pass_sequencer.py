@@ -17,9 +17,18 @@ from .integrator import Integrator
 from .layouts import (area_saturations_layout, energy_sums_layout, force_entry_layout, force_word_layout,
                       integrator_input_layout, integrator_output_layout, node_force_layout, triangle_layout,
                       vector_layout, weight_word_layout, word_layout)
-from .memory_windows import node_write_layout, write_signature
+from .memory_windows import ENTRY_LATENCY, READ_LATENCY, node_write_layout, write_signature
 
 __all__ = ["PassSequencer", "fetch_counter"]
+
+#: The force pass's clocks from the entry's address (E0) to ``ForcePass.i``: the entry read, its
+#: position addresses registered, their read.
+FORCE_FETCH_LATENCY = ENTRY_LATENCY + 1 + READ_LATENCY
+#: The area pass's clocks from the triangle's address (T0) to ``AreaError.i``: the triangle's read, its
+#: corners' addresses registered, their read.
+AREA_FETCH_LATENCY = READ_LATENCY + 1 + READ_LATENCY
+#: The integrate pass's clocks from the node's address (N0) to ``Integrator.i``: the node's read.
+NODE_FETCH_LATENCY = READ_LATENCY
 
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
@@ -82,13 +91,15 @@ class PassSequencer(wiring.Component):
 
     Latency
     -------
-    Valid bits are named for the clock whose data they mark. The force pass: E0 the entry's address
-    in the entry memory's address register; E1 the entry banks' read data; E2 landed in fabric
-    registers; E3 the addressed bank's entry, its three position addresses formed; E4 those in the
-    position memory's address registers; E5 its read data; E6 everything landed, into ``ForcePass.i``.
-    The area pass: T0 the triangle's address, T1 the data, T2 landed (corner addresses formed), T3
-    registered, T4 the corners' data, T5 landed, into ``AreaError.i``. The integrate pass: N0 the
-    node's address, N1 the data, N2 landed, into ``Integrator.i``. Every block RAM address comes from
+    Valid bits are named for the clock whose data they mark. The force pass
+    (:data:`FORCE_FETCH_LATENCY`, nine clocks): E0 the entry's address in the entry memory's address
+    register; E6 the addressed entry (:data:`~hdl.memory_windows.ENTRY_LATENCY`: the block RAMs' pin
+    registers, their read, the bank select in registered stages), its three position addresses
+    formed; E7 those in the position memory's address registers; E8 its read data; E9 everything
+    landed, into ``ForcePass.i``. The area pass (:data:`AREA_FETCH_LATENCY`): T0 the triangle's
+    address, T1 the data, T2 landed (corner addresses formed), T3 registered, T4 the corners' data,
+    T5 landed, into ``AreaError.i``. The integrate pass (:data:`NODE_FETCH_LATENCY`): N0 the node's
+    address, N1 the data, N2 landed, into ``Integrator.i``. Every block RAM address comes from
     a flip-flop after the port multiplexer, every block RAM output lands in a register before any
     logic (clock-to-out is most of a period on ECP5). One item per clock; a pass fetched to its end
     drains on its own.
@@ -156,26 +167,29 @@ class PassSequencer(wiring.Component):
         return m
 
     def _force_pass(self, m: Module):
-        """E0 … E6 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
-        e_valid = fetch_counter(m, self.entry_index, self.fetch_force, self.entries, "e", 7)
+        """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
+        e_valid = fetch_counter(m, self.entry_index, self.fetch_force, self.entries, "e", FORCE_FETCH_LATENCY + 1)
         entry_shape = self.entry.shape()
-        e4_entry, e5_entry, e6_entry = (Signal(entry_shape, reset_less=True, name=f"e{k}_entry") for k in range(4, 7))
-        e4_first, e5_first, e6_first = (Signal(name=f"e{k}_first") for k in range(4, 7))
+        ent_data = self.entry  # the addressed entry, at E6 (ENTRY_LATENCY)
         next_first = Signal(name="next_first")
-        ent_data = self.entry  # the addressed entry, at E3
-        m.d.sync += [e4_entry.eq(ent_data), e5_entry.eq(e4_entry), e6_entry.eq(e5_entry),
-                     e4_first.eq(next_first), e5_first.eq(e4_first), e6_first.eq(e5_first)]
-        with m.If(e_valid[3]):  # the owner of the entry after this one
+        # the entry and its first flag carried from ENTRY_LATENCY to FORCE_FETCH_LATENCY, beside its
+        # positions' read
+        e_entry, e_first = ent_data, next_first
+        for k in range(ENTRY_LATENCY + 1, FORCE_FETCH_LATENCY + 1):
+            entry_k, first_k = Signal(entry_shape, reset_less=True, name=f"e{k}_entry"), Signal(name=f"e{k}_first")
+            m.d.sync += [entry_k.eq(e_entry), first_k.eq(e_first)]
+            e_entry, e_first = entry_k, first_k
+        with m.If(e_valid[ENTRY_LATENCY]):  # the owner of the entry after this one
             m.d.sync += [next_first.eq(ent_data.last), self.node_of_entry.eq(self.node_of_entry + ent_data.last)]
         beat, barrier = self.force_entry.payload, self.barrier_held
         m.d.comb += [
-            self.force_entry.valid.eq(e_valid[6]),
-            beat.first.eq(e6_first), beat.last.eq(e6_entry.last),
-            beat.position.eq(self.position[0]), beat.neighbour.position.eq(self.position[1]),  # landed at E6
-            beat.neighbour.rest.eq(e6_entry.rest),
+            self.force_entry.valid.eq(e_valid[FORCE_FETCH_LATENCY]),
+            beat.first.eq(e_first), beat.last.eq(e_entry.last),
+            beat.position.eq(self.position[0]), beat.neighbour.position.eq(self.position[1]),  # landed at E9
+            beat.neighbour.rest.eq(e_entry.rest),
             beat.barrier.second.eq(self.position[2]),
-            beat.barrier.threshold.eq(Mux(barrier, e6_entry.threshold, 0)),
-            beat.barrier.gain.eq(Mux(barrier, e6_entry.gain, 0)),
+            beat.barrier.threshold.eq(Mux(barrier, e_entry.threshold, 0)),
+            beat.barrier.gain.eq(Mux(barrier, e_entry.gain, 0)),
         ]
         # per-node results: into the force memory, and the exact sums
         m.d.comb += [self.force_write.addr.eq(self.force_out_index),
@@ -191,21 +205,22 @@ class PassSequencer(wiring.Component):
 
     def _area_pass(self, m: Module):
         """T0 … T5 into ``AreaError.i``, one triangle per clock."""
-        t_valid = fetch_counter(m, self.tri_index, self.fetch_area, self.triangles, "t", 6)
+        t_valid = fetch_counter(m, self.tri_index, self.fetch_area, self.triangles, "t", AREA_FETCH_LATENCY + 1)
         t3_area, t4_area, t5_area = (Signal(shape_of(self.fs.face_area), reset_less=True, name=f"t{k}_area")
                                      for k in (3, 4, 5))
         m.d.sync += [t3_area.eq(self.triangle.area), t4_area.eq(t3_area), t5_area.eq(t4_area)]  # landed at T2
         out = self.triangle_out
-        m.d.comb += [out.valid.eq(t_valid[5]), out.payload.a.eq(self.position[0]), out.payload.b.eq(self.position[1]),
-                     out.payload.c.eq(self.position[2]), out.payload.area.eq(t5_area)]  # landed at T5
+        m.d.comb += [out.valid.eq(t_valid[AREA_FETCH_LATENCY]), out.payload.a.eq(self.position[0]),
+                     out.payload.b.eq(self.position[1]), out.payload.c.eq(self.position[2]),
+                     out.payload.area.eq(t5_area)]  # landed at T5
         return t_valid
 
     def _integrate_pass(self, m: Module):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
-        n_valid = fetch_counter(m, self.node_index, self.fetch_nodes, self.vertices, "n", 3)
+        n_valid = fetch_counter(m, self.node_index, self.fetch_nodes, self.vertices, "n", NODE_FETCH_LATENCY + 1)
         node = self.node_out.payload
         m.d.comb += [  # landed at N2
-            self.node_out.valid.eq(n_valid[2]),
+            self.node_out.valid.eq(n_valid[NODE_FETCH_LATENCY]),
             node.node.position.eq(self.position[0]), node.node.velocity.eq(self.velocity),
             node.node.inv_mass.eq(self.weight_word.inv_mass), node.node.inv_mass_barrier.eq(self.weight_word.inv_mass_barrier),
             node.force.eq(self.force_word.force), node.inside.eq(self.force_word.inside),

@@ -1,6 +1,6 @@
 """Whole runs on the engine before and after a change meant to keep its behaviour: same clocks, same results.
 
-Runs ``tests/test_engine.py``'s three runs (paper dynamics with the variable step, the fixed step with barrier
+Runs ``tests/hdl/test_engine.py``'s three runs (paper dynamics with the variable step, the fixed step with barrier
 and damping, the momentum dynamics with restarts), each with the entry memory in one bank and in banks of 32
 words, on Amaranth's simulator: once on ``hdl/`` and ``golden_model/`` of a git ref (``git archive``), once on
 the working tree. Compares per run STATUS.result, ITERATIONS, CYCLES (the clocks from START to done: the
@@ -30,6 +30,7 @@ import json, sys
 sys.path.insert(0, sys.argv[1])
 sys.path.insert(1, sys.argv[2])
 sys.path.insert(1, sys.argv[2] + "/tests")
+sys.path.insert(1, sys.argv[2] + "/tests/hdl")
 import hdl.engine
 assert hdl.engine.__file__.startswith(sys.argv[1]), hdl.engine.__file__
 import test_engine as T

@@ -80,7 +80,7 @@ def missing_simulator(sim: str) -> str | None:
 
 
 #: Simulation models of the device primitives the ``dsp`` flavours instantiate.
-PRIMITIVE_MODELS = {"ecp5": [REPO / "sim" / "models" / "MULT18X18D.v", REPO / "sim" / "models" / "DP16KD.v"]}
+PRIMITIVE_MODELS = {"ecp5": [REPO / "sim" / "models" / name for name in ("MULT18X18D.v", "DP16KD.v", "TRELLIS_FF.v")]}
 
 
 @contextmanager

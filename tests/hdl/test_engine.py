@@ -86,8 +86,9 @@ def assert_same_run(read_back, expected):
 # The paper dynamics with variable step and the fixed step with barrier run here in one case each (the
 # momentum dynamics in the every-iteration test below); tests/sim/test_engine_rtl.py runs all three on the
 # exported Verilog.
-# The second run stores its 66 entries in banks of 32 words (three banks used of eight), the first in one.
-@pytest.mark.parametrize("run, bank_depth", [("paper-variable", 256), ("paper-fixed-barrier-damped", 32)])
+# The second run stores its 66 entries in banks of 8 words (nine banks used of 32, in three of the bank
+# select's groups of four), the first in one.
+@pytest.mark.parametrize("run, bank_depth", [("paper-variable", 256), ("paper-fixed-barrier-damped", 8)])
 def test_whole_run_matches_the_golden_model(run, bank_depth):
     image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
     expected = run_image(image, FS)
@@ -284,7 +285,7 @@ def test_error_measure_saturations_are_counted_before_the_limit_is_tested():
 
 
 def test_bus_answers_take_the_documented_clocks():
-    """docs/engine.md: a register answers 5 clocks after ``stb`` rises, a memory word 9 (read or write),
+    """docs/engine.md: a register answers 5 clocks after ``stb`` rises, a memory word 12 (read or write),
     an unmapped word's ``err`` 4; what is written reads back."""
     dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=4)
     rmap = dut.register_map
@@ -300,6 +301,9 @@ def test_bus_answers_take_the_documented_clocks():
         answers["memory_write"] = await wishbone_write(ctx, dut.bus, entries.address(5, 0), 0x5A5A5, idle=1)
         answers["memory_read"] = await wishbone_read(ctx, dut.bus, entries.address(5, 0), idle=1)
         answers["unmapped"] = await wishbone_read(ctx, dut.bus, rmap.windows[0].base - 1, idle=1)
+        # entry 37: bank 9, in the third of the bank select's groups of four
+        answers["far_write"] = await wishbone_write(ctx, dut.bus, entries.address(37, 0), 0x3C3C3, idle=1)
+        answers["far_read"] = await wishbone_read(ctx, dut.bus, entries.address(37, 0), idle=1)
 
     sim = Simulator(dut)
     sim.add_clock(1e-8)
@@ -308,8 +312,9 @@ def test_bus_answers_take_the_documented_clocks():
     # BusAnswer.clocks counts edges up to the one at which the initiator samples ack/err: one more
     # than the edges after which the target raises it
     raised_after = {name: a.clocks - 1 for name, a in answers.items()}
-    assert raised_after == {"register_write": 5, "register_read": 5, "memory_write": 9, "memory_read": 9,
-                            "unmapped": 4}
+    assert raised_after == {"register_write": 5, "register_read": 5, "memory_write": 12, "memory_read": 12,
+                            "unmapped": 4, "far_write": 12, "far_read": 12}
     assert answers["register_read"].data == 1234 and not answers["register_read"].error
     assert answers["memory_read"].data == 0x5A5A5 and not answers["memory_read"].error
     assert answers["unmapped"].error
+    assert answers["far_read"].data == 0x3C3C3 and not answers["far_read"].error

@@ -29,24 +29,38 @@ pytestmark = pytest.mark.slow  # Icarus
                                           (data.StructLayout({"x": 17, "y": 13}), 1024), (unsigned(4), 4096),
                                           (unsigned(40), 3000), (unsigned(30), 2100)])  # the last two in banks
 def test_block_ram_reads_two_clocks_after_the_address(tmp_path, platform, shape, depth):
+    check_block_ram(tmp_path, platform, shape, depth, pin_registers=False)
+
+
+@pytest.mark.parametrize("platform", [None, ECP5], ids=["generic", "ecp5"])
+@pytest.mark.parametrize("shape, depth", [(unsigned(40), 600), (unsigned(40), 3000)])  # the last in banks
+def test_block_ram_with_pin_registers_reads_three_clocks_after_the_address(tmp_path, platform, shape, depth):
+    """Every input a clock later: the read answers a clock later, a write lands a clock later."""
+    check_block_ram(tmp_path, platform, shape, depth, pin_registers=True)
+
+
+def check_block_ram(tmp_path, platform, shape, depth, *, pin_registers):
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
-    ram = BlockRam(shape, depth, read_ports=2, name="mem")
+    ram = BlockRam(shape, depth, read_ports=2, name="mem", pin_registers=pin_registers)
+    assert ram.latency == BlockRam.LATENCY + pin_registers
     width = Shape.cast(shape).width
     abits = len(ram.write.addr)
     (tmp_path / "ram.v").write_text(verilog.convert(ram, name="ram", platform=platform))
     source = (tmp_path / "ram.v").read_text()
     assert ("DP16KD" in source and '"OUTREG"' in source) == (platform is ECP5)
+    assert ("TRELLIS_FF" in source) == (platform is ECP5 and pin_registers)
     rng = np.random.default_rng(depth + width)
     we, waddr, wdata, raddr = random_ram_traffic(rng, depth, width, 2500)
-    want = ram_reads(we, waddr, wdata, raddr, depth, 1)
+    want = ram_reads(we, waddr, wdata, raddr, depth, ram.latency - 1)
     for k in range(2):  # each read port, the other one reading elsewhere
         other = 1 - k
         ports = (f"ram dut(.clk(clk), .rst(1'b0), .write__en(we), .write__addr(waddr[{abits - 1}:0]), "
                  f".write__data(wdata[{width - 1}:0]), .read__{k}__addr(raddr[{abits - 1}:0]), "
                  f".read__{k}__data(q[{width - 1}:0]), .read__{other}__addr({abits}'d0), .read__{other}__data());")
         lines = icarus_run(tmp_path, ["ram.v"], "ram", ports, we, waddr, wdata, raddr)
-        # from the second clock on (the generic form's first data register starts undefined)
-        assert [int(line[-width:], 2) for line in lines[1:]] == want[1:], f"read port {k}"
+        # from the latency's clock on (the generic form's registers start undefined)
+        skip = ram.latency - 1
+        assert [int(line[-width:], 2) for line in lines[skip:]] == want[skip:], f"read port {k}"
 
 
 def test_block_ram_refuses_bad_parameters():

@@ -28,7 +28,7 @@ def ram_reads(we, waddr, wdata, raddr, depth: int, data_registers: int) -> list[
 
 def icarus_run(tmp_path, module_files, top: str, ports: str, we, waddr, wdata, raddr) -> list[str]:
     """Drive ``top`` (ports ``clk, we, waddr, wdata, raddr, q`` named in ``ports``) with the traffic on
-    Icarus with ``sim/models/DP16KD.v``; the value of ``q`` after each clock, as printed (may hold x)."""
+    Icarus with ``sim/models/DP16KD.v`` and ``TRELLIS_FF.v``; the value of ``q`` after each clock, as printed (may hold x)."""
     import shutil
     import subprocess
 
@@ -48,7 +48,8 @@ def icarus_run(tmp_path, module_files, top: str, ports: str, we, waddr, wdata, r
         "#1 clk = 1; #1 clk = 0; $display(\"%%b\", q); end $finish; end\nendmodule\n"
         % (n - 1, n - 1, n - 1, n - 1, ports, n))
     subprocess.run(["iverilog", "-g2005", "-o", "tb.vvp", "tb.v", *module_files,
-                    str(REPO / "sim" / "models" / "DP16KD.v")], cwd=tmp_path, check=True, capture_output=True)
+                    str(REPO / "sim" / "models" / "DP16KD.v"), str(REPO / "sim" / "models" / "TRELLIS_FF.v")],
+                   cwd=tmp_path, check=True, capture_output=True)
     out = subprocess.run(["vvp", "-n", "tb.vvp"], cwd=tmp_path, check=True, capture_output=True, text=True).stdout
     return [line for line in out.split() if set(line) <= set("01xz")]
 
