@@ -68,9 +68,10 @@ class GuardCertificate(wiring.Component):
     face_edge (the wide flag, the norms' first sums); the 14 products (operands landed, DSP
     stages, adder levels, the margin's sums alongside); the products whole; the cross products with
     ``σ`` (from a register of its own); the floor's cases (compares no wider than floor_min) and
-    the subsets' pair sums; the floor picked and the triple sums; the margin added; ``X0 − floor``;
-    per subset and level ``X0 − floor + (Σ L >> r)``, then its sign with ``Σ Q >> 2r`` added; the
-    level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
+    the subsets' pair sums; the floor picked and the triple sums; the margin added, per subset ``S``
+    less its index ``i``; ``X0 − floor + i`` per subset (a copy each, so that no value drives more
+    than 7 adders); per subset and level ``X0 − floor + i + (Σ L >> r)``, then whether it is at
+    least ``i`` with ``Σ Q >> 2r`` added; the level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
     """
 
     def __init__(self, fs: FormatSet | str):
@@ -182,20 +183,24 @@ class GuardCertificate(wiring.Component):
         floor = Mux(x0 < 0, x0, Mux(s["shrunk_wins"], s["shrunk"], Mux(s["x0_below"], x0, s["floor_min"])))
         lin = {0: s["l0"], 1: s["l1"], 2: s["l2"], 3: s["l01"], 4: s["l12"], 5: s["l20"], 6: s["l01"] + s["l2"]}
         quad = {3: s["q0"], 4: s["q1"], 5: s["q2"], 6: s["q01"] + s["q2"]}
-        s = stage("floor_pick", floor=floor, x0=x0, margin=s["margin"], wide=s["wide"],
+        # X0 − floor fans out to the 7 × 7 level adders: one copy per subset i, kept distinct by an
+        # offset of i (the margin less i, the compare against i), so each drives 7 adders
+        subsets = range(len(SUBSETS))
+        s = stage("floor_pick", floor=floor, x0=x0, wide=s["wide"], **{f"margin{i}": s["margin"] - i for i in subsets},
                   **{f"lin{i}": v for i, v in lin.items()}, **{f"quad{i}": v for i, v in quad.items()})
 
         def sums(s):
             return {k: s[k] for k in s if k.startswith(("lin", "quad"))}
 
-        s = stage("floor", floor=s["floor"] + s["margin"], x0=s["x0"], wide=s["wide"], **sums(s))
-        s = stage("slack", slack=s["x0"] - s["floor"], wide=s["wide"], **sums(s))
+        s = stage("floor", x0=s["x0"], wide=s["wide"], **{f"floor{i}": s["floor"] + s[f"margin{i}"] for i in subsets},
+                  **sums(s))
+        s = stage("slack", wide=s["wide"], **{f"slack{i}": s["x0"] - s[f"floor{i}"] for i in subsets}, **sums(s))
         levels = range(GUARD_LEVELS + 1)
         s = stage("linear", wide=s["wide"], **{k: s[k] for k in s if k.startswith("quad")},
-                  **{f"p{i}_{r}": s["slack"] + s[f"lin{i}"].shift_right(r) for i in range(len(SUBSETS)) for r in levels})
+                  **{f"p{i}_{r}": s[f"slack{i}"] + s[f"lin{i}"].shift_right(r) for i in subsets for r in levels})
         s = stage("compare", wide=s["wide"],
                   **{f"ok{i}_{r}": (s[f"p{i}_{r}"] + s[f"quad{i}"].shift_right(2 * r) if f"quad{i}" in s else s[f"p{i}_{r}"])
-                     >= 0 for i in range(len(SUBSETS)) for r in levels})
+                     >= i for i in subsets for r in levels})
         safe = [Cat(*(s[f"ok{i}_{r}"] for i in range(len(SUBSETS)))).all() & ~s["wide"] for r in levels]
         level = GUARD_LEVELS + 1
         for r in reversed(levels):  # the smallest safe level wins
