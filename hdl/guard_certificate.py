@@ -70,8 +70,8 @@ class GuardCertificate(wiring.Component):
     ``σ`` (from a register of its own); the floor's cases (compares no wider than floor_min) and
     the subsets' pair sums; the floor picked and the triple sums; the margin added, per subset ``S``
     less its index ``i``; ``X0 − floor + i`` per subset (a copy each, so that no value drives more
-    than 7 adders); per subset and level ``X0 − floor + i + (Σ L >> r)``, then whether it is at
-    least ``i`` with ``Σ Q >> 2r`` added; the level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
+    than 7 adders); per subset and level ``X0 − floor + i + (Σ L >> r)`` and ``(Σ Q >> 2r) − i``, then
+    the sign of their sum; the level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
     """
 
     def __init__(self, fs: FormatSet | str):
@@ -196,11 +196,14 @@ class GuardCertificate(wiring.Component):
                   **sums(s))
         s = stage("slack", wide=s["wide"], **{f"slack{i}": s["x0"] - s[f"floor{i}"] for i in subsets}, **sums(s))
         levels = range(GUARD_LEVELS + 1)
-        s = stage("linear", wide=s["wide"], **{k: s[k] for k in s if k.startswith("quad")},
-                  **{f"p{i}_{r}": s[f"slack{i}"] + s[f"lin{i}"].shift_right(r) for i in subsets for r in levels})
+        # the quadratic terms less the copy's offset beside them, so that the compare is a sign
+        s = stage("linear", wide=s["wide"],
+                  **{f"p{i}_{r}": s[f"slack{i}"] + s[f"lin{i}"].shift_right(r) for i in subsets for r in levels},
+                  **{f"q{i}_{r}": s[f"quad{i}"].shift_right(2 * r) - i for i in subsets for r in levels
+                     if f"quad{i}" in s})
         s = stage("compare", wide=s["wide"],
-                  **{f"ok{i}_{r}": (s[f"p{i}_{r}"] + s[f"quad{i}"].shift_right(2 * r) if f"quad{i}" in s else s[f"p{i}_{r}"])
-                     >= i for i in subsets for r in levels})
+                  **{f"ok{i}_{r}": (s[f"p{i}_{r}"] + s[f"q{i}_{r}"] >= 0) if f"q{i}_{r}" in s else (s[f"p{i}_{r}"] >= i)
+                     for i in subsets for r in levels})
         safe = [Cat(*(s[f"ok{i}_{r}"] for i in range(len(SUBSETS)))).all() & ~s["wide"] for r in levels]
         level = GUARD_LEVELS + 1
         for r in reversed(levels):  # the smallest safe level wins
