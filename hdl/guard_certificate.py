@@ -16,6 +16,7 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.guard import floor_min_shift
 from golden_model.guard import FLOOR_SHIFT, GUARD_LEVELS
 
+from .fifo import LutFIFO
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import certificate_layout, certificate_level_shape
 from .pipeline import Pipeline, reduce_levels
@@ -59,12 +60,15 @@ class GuardCertificate(wiring.Component):
     --------
     Throughput: one triangle per clock (II = 1) while ``o.ready`` is high. Latency: with
     ``o.ready`` high, a triangle transferred at clock edge ``k`` is on ``o`` after edge
-    ``k + latency`` (:meth:`latency_of`). Back-pressure stalls the whole pipeline:
-    ``i.ready = ~o.valid | o.ready``, the clock enable of every register.
+    ``k + latency`` (:meth:`latency_of`). Back-pressure is a credit count: the pipeline runs
+    free (no clock enable fans out to its registers) into a result FIFO of :attr:`credits`
+    levels, and ``i.ready`` (a register's compare) is high while fewer triangles than that are
+    owed (accepted, their level not yet taken from ``o``), so the FIFO never overflows and the
+    credits never run out while ``o`` is ready.
 
     Structure
     ---------
-    A stalling pipeline (one clock enable, ``i.ready``): the beat registered; the exact edges; narrowed to
+    A free-running pipeline: the beat registered; the exact edges; narrowed to
     face_edge (the wide flag, the norms' first sums); the 14 products (operands landed, DSP
     stages, adder levels, the margin's sums alongside); the products whole; the cross products with
     ``σ`` (from a register of its own); the floor's cases (compares no wider than floor_min) and
@@ -84,6 +88,8 @@ class GuardCertificate(wiring.Component):
                              f"{fs.face_edge} to share their fraction bits")
         self.fs = fs
         self.latency = self.latency_of(fs)
+        #: Triangles that may be owed at once: the result FIFO's depth (a power of two above the latency).
+        self.credits = 1 << (self.latency + 1).bit_length()
         super().__init__({
             "i": In(stream.Signature(certificate_layout(fs))),
             "winding_negative": In(1),
@@ -91,20 +97,23 @@ class GuardCertificate(wiring.Component):
         })
 
     @staticmethod
-    def latency_of(fs: FormatSet) -> int:
-        """Clock edges from a triangle's transfer to its level on ``o``: beat, edges, narrowing, the
-        multiply (:meth:`Pipeline.mul_stages` with landed operands and its adder levels), then the products
-        whole, the cross products, three floor stages, ``X0 − floor``, the two compare stages and the level."""
+    def stages_of(fs: FormatSet) -> int:
+        """The pipeline's stages: beat, edges, narrowing, the multiply (:meth:`Pipeline.mul_stages` with
+        landed operands and its adder levels), then the products whole, the cross products, three floor
+        stages, ``X0 − floor``, the two compare stages and the level."""
         edge, move = shape_of(fs.face_edge), shape_of(fs.velocity)
         return 12 + Pipeline.mul_stages(land_operands=True) + reduce_levels((edge, edge), (move, edge), (move, move))
+
+    @classmethod
+    def latency_of(cls, fs: FormatSet) -> int:
+        """Clock edges from a triangle's transfer to its level on ``o``: the pipeline, then the FIFO."""
+        return cls.stages_of(fs) + 1
 
     def elaborate(self, platform):
         fs = self.fs
         m = Module()
-        # the whole pipeline moves when its output is empty or being taken; valid never waits for
-        # ready, and a stalled output holds its level
-        advance = Signal()
-        pipe = Pipeline(m, self.i.valid, advance=advance, land_operands=True, platform=platform)
+        accept = self.i.valid & self.i.ready
+        pipe = Pipeline(m, accept, land_operands=True, platform=platform)
 
         def stage(name, **values):
             pipe.stage(name)
@@ -209,7 +218,14 @@ class GuardCertificate(wiring.Component):
         for r in reversed(levels):  # the smallest safe level wins
             level = Mux(safe[r], r, level)
         s = stage("level", level=level)
-        m.d.comb += [advance.eq(~pipe.valid | self.o.ready), self.i.ready.eq(advance),
-                     self.o.valid.eq(pipe.valid), self.o.payload.eq(s["level"])]
-        assert pipe.stages == self.latency, (pipe.stages, self.latency)
+        m.submodules.results = results = LutFIFO(width=len(s["level"]), depth=self.credits)
+        m.d.comb += [results.w_data.eq(s["level"]), results.w_en.eq(pipe.valid),
+                     self.o.payload.eq(results.r_data), self.o.valid.eq(results.r_rdy),
+                     results.r_en.eq(self.o.ready)]
+        # credits: owed = accepted, not yet taken; i.ready from a register's compare
+        owed = Signal(range(self.credits + 1), name="owed")
+        take = self.o.valid & self.o.ready
+        m.d.sync += owed.eq(owed + accept - take)
+        m.d.comb += self.i.ready.eq(owed < self.credits)
+        assert pipe.stages == self.stages_of(fs), (pipe.stages, self.stages_of(fs))
         return m
