@@ -70,8 +70,8 @@ class GuardCertificate(wiring.Component):
     ---------
     A free-running pipeline: the beat registered; the exact edges; narrowed to
     face_edge (the wide flag, the norms' first sums); the 14 products (operands landed, DSP
-    stages, adder levels, the margin's sums alongside); the products whole; the cross products with
-    ``σ`` (from a register of its own); the floor's cases (compares no wider than floor_min) and
+    stages, adder levels, the margin's sums alongside); the products whole, in the order ``σ`` (from a
+    register of its own) gives them; the cross products; the floor's cases (compares no wider than floor_min) and
     the subsets' pair sums; the floor picked and the triple sums; the margin added, per subset ``S``
     less its index ``i``; ``X0 − floor + i`` per subset (a copy each, so that no value drives more
     than 7 adders); per subset and level ``X0 − floor + i + (Σ L >> r)`` and ``(Σ Q >> 2r) − i``, then
@@ -166,17 +166,19 @@ class GuardCertificate(wiring.Component):
         products = pipe.multiply(products, "products", carry)
         assert not margin_steps, "the multiply has fewer stages than the margin's adds"
         # the products whole (their partial products' last add) before the cross products' subtract
-        s = stage("joined", **products, **carried)
-        # σ from a register of its own: a run constant, read by seven subtracts across the block
+        # σ from a register of its own (a run constant): the products whole, each cross product's two
+        # in the order σ gives them (σ·(p − q) = q − p for σ = −1), so that the next stage is one
+        # subtract (a multiplexer between the subtract's operands and the subtract in one stage is
+        # rewritten by synthesis into a subtract and a negation, two carry chains)
         negative = Signal(name="winding_negative_q")
         m.d.sync += negative.eq(self.winding_negative)
-
-        def cross(name):
-            p, q = s[f"{name}_p"], s[f"{name}_q"]
-            return Mux(negative, q, p) - Mux(negative, p, q)
-
         terms = ("x0", "l0", "l1", "l2", "q0", "q1", "q2")
-        s = stage("cross", **{n: cross(n) for n in terms}, **{k: s[k] for k in carried})
+        ordered = {}
+        for n in terms:
+            p, q = products[f"{n}_p"], products[f"{n}_q"]
+            ordered.update({f"{n}_p": Mux(negative, q, p), f"{n}_q": Mux(negative, p, q)})
+        s = stage("joined", **ordered, **carried)
+        s = stage("cross", **{n: s[f"{n}_p"] - s[f"{n}_q"] for n in terms}, **{k: s[k] for k in carried})
         # floor = min(X0, max(X0 >> FLOOR_SHIFT, floor_min)) with floor_min ≥ 0, by cases:
         # X0 < 0: X0;  X0 >> FLOOR_SHIFT ≥ floor_min: X0 >> FLOOR_SHIFT;  else min(X0, floor_min).
         # Each compare is against floor_min's width only (the wider bits of a non-negative X0 only
