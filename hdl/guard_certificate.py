@@ -16,6 +16,7 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.guard import floor_min_shift
 from golden_model.guard import FLOOR_SHIFT, GUARD_LEVELS
 
+from .fifo import LutFIFO
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import certificate_layout, certificate_level_shape
 from .pipeline import Pipeline, reduce_levels
@@ -59,18 +60,22 @@ class GuardCertificate(wiring.Component):
     --------
     Throughput: one triangle per clock (II = 1) while ``o.ready`` is high. Latency: with
     ``o.ready`` high, a triangle transferred at clock edge ``k`` is on ``o`` after edge
-    ``k + latency`` (:meth:`latency_of`). Back-pressure stalls the whole pipeline:
-    ``i.ready = ~o.valid | o.ready``, the clock enable of every register.
+    ``k + latency`` (:meth:`latency_of`). Back-pressure is a credit count: the pipeline runs
+    free (no clock enable fans out to its registers) into a result FIFO of :attr:`credits`
+    levels, and ``i.ready`` (a register's compare) is high while fewer triangles than that are
+    owed (accepted, their level not yet taken from ``o``), so the FIFO never overflows and the
+    credits never run out while ``o`` is ready.
 
     Structure
     ---------
-    A stalling pipeline (one clock enable, ``i.ready``): the beat registered; the exact edges; narrowed to
+    A free-running pipeline: the beat registered; the exact edges; narrowed to
     face_edge (the wide flag, the norms' first sums); the 14 products (operands landed, DSP
-    stages, adder levels, the margin's sums alongside); the products whole; the cross products with
-    ``σ`` (from a register of its own); the floor's cases (compares no wider than floor_min) and
-    the subsets' pair sums; the floor picked and the triple sums; the margin added; ``X0 − floor``;
-    per subset and level ``X0 − floor + (Σ L >> r)``, then its sign with ``Σ Q >> 2r`` added; the
-    level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
+    stages, adder levels, the margin's sums alongside); the products whole, in the order ``σ`` (from a
+    register of its own) gives them; the cross products; the floor's cases (compares no wider than floor_min) and
+    the subsets' pair sums; the floor picked and the triple sums; the margin added, per subset ``S``
+    less its index ``i``; ``X0 − floor + i`` per subset (a copy each, so that no value drives more
+    than 7 adders); per subset and level ``X0 − floor + i + (Σ L >> r)`` and ``(Σ Q >> 2r) − i``, then
+    the sign of their sum; the level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
     """
 
     def __init__(self, fs: FormatSet | str):
@@ -83,6 +88,8 @@ class GuardCertificate(wiring.Component):
                              f"{fs.face_edge} to share their fraction bits")
         self.fs = fs
         self.latency = self.latency_of(fs)
+        #: Triangles that may be owed at once: the result FIFO's depth (a power of two above the latency).
+        self.credits = 1 << (self.latency + 1).bit_length()
         super().__init__({
             "i": In(stream.Signature(certificate_layout(fs))),
             "winding_negative": In(1),
@@ -90,20 +97,23 @@ class GuardCertificate(wiring.Component):
         })
 
     @staticmethod
-    def latency_of(fs: FormatSet) -> int:
-        """Clock edges from a triangle's transfer to its level on ``o``: beat, edges, narrowing, the
-        multiply (:meth:`Pipeline.mul_stages` with landed operands and its adder levels), then the products
-        whole, the cross products, three floor stages, ``X0 − floor``, the two compare stages and the level."""
+    def stages_of(fs: FormatSet) -> int:
+        """The pipeline's stages: beat, edges, narrowing, the multiply (:meth:`Pipeline.mul_stages` with
+        landed operands and its adder levels), then the products whole, the cross products, three floor
+        stages, ``X0 − floor``, the two compare stages and the level."""
         edge, move = shape_of(fs.face_edge), shape_of(fs.velocity)
         return 12 + Pipeline.mul_stages(land_operands=True) + reduce_levels((edge, edge), (move, edge), (move, move))
+
+    @classmethod
+    def latency_of(cls, fs: FormatSet) -> int:
+        """Clock edges from a triangle's transfer to its level on ``o``: the pipeline, then the FIFO."""
+        return cls.stages_of(fs) + 1
 
     def elaborate(self, platform):
         fs = self.fs
         m = Module()
-        # the whole pipeline moves when its output is empty or being taken; valid never waits for
-        # ready, and a stalled output holds its level
-        advance = Signal()
-        pipe = Pipeline(m, self.i.valid, advance=advance, land_operands=True, platform=platform)
+        accept = self.i.valid & self.i.ready
+        pipe = Pipeline(m, accept, land_operands=True, platform=platform)
 
         def stage(name, **values):
             pipe.stage(name)
@@ -156,17 +166,19 @@ class GuardCertificate(wiring.Component):
         products = pipe.multiply(products, "products", carry)
         assert not margin_steps, "the multiply has fewer stages than the margin's adds"
         # the products whole (their partial products' last add) before the cross products' subtract
-        s = stage("joined", **products, **carried)
-        # σ from a register of its own: a run constant, read by seven subtracts across the block
+        # σ from a register of its own (a run constant): the products whole, each cross product's two
+        # in the order σ gives them (σ·(p − q) = q − p for σ = −1), so that the next stage is one
+        # subtract (a multiplexer between the subtract's operands and the subtract in one stage is
+        # rewritten by synthesis into a subtract and a negation, two carry chains)
         negative = Signal(name="winding_negative_q")
         m.d.sync += negative.eq(self.winding_negative)
-
-        def cross(name):
-            p, q = s[f"{name}_p"], s[f"{name}_q"]
-            return Mux(negative, q, p) - Mux(negative, p, q)
-
         terms = ("x0", "l0", "l1", "l2", "q0", "q1", "q2")
-        s = stage("cross", **{n: cross(n) for n in terms}, **{k: s[k] for k in carried})
+        ordered = {}
+        for n in terms:
+            p, q = products[f"{n}_p"], products[f"{n}_q"]
+            ordered.update({f"{n}_p": Mux(negative, q, p), f"{n}_q": Mux(negative, p, q)})
+        s = stage("joined", **ordered, **carried)
+        s = stage("cross", **{n: s[f"{n}_p"] - s[f"{n}_q"] for n in terms}, **{k: s[k] for k in carried})
         # floor = min(X0, max(X0 >> FLOOR_SHIFT, floor_min)) with floor_min ≥ 0, by cases:
         # X0 < 0: X0;  X0 >> FLOOR_SHIFT ≥ floor_min: X0 >> FLOOR_SHIFT;  else min(X0, floor_min).
         # Each compare is against floor_min's width only (the wider bits of a non-negative X0 only
@@ -182,26 +194,40 @@ class GuardCertificate(wiring.Component):
         floor = Mux(x0 < 0, x0, Mux(s["shrunk_wins"], s["shrunk"], Mux(s["x0_below"], x0, s["floor_min"])))
         lin = {0: s["l0"], 1: s["l1"], 2: s["l2"], 3: s["l01"], 4: s["l12"], 5: s["l20"], 6: s["l01"] + s["l2"]}
         quad = {3: s["q0"], 4: s["q1"], 5: s["q2"], 6: s["q01"] + s["q2"]}
-        s = stage("floor_pick", floor=floor, x0=x0, margin=s["margin"], wide=s["wide"],
+        # X0 − floor fans out to the 7 × 7 level adders: one copy per subset i, kept distinct by an
+        # offset of i (the margin less i, the compare against i), so each drives 7 adders
+        subsets = range(len(SUBSETS))
+        s = stage("floor_pick", floor=floor, x0=x0, wide=s["wide"], **{f"margin{i}": s["margin"] - i for i in subsets},
                   **{f"lin{i}": v for i, v in lin.items()}, **{f"quad{i}": v for i, v in quad.items()})
 
         def sums(s):
             return {k: s[k] for k in s if k.startswith(("lin", "quad"))}
 
-        s = stage("floor", floor=s["floor"] + s["margin"], x0=s["x0"], wide=s["wide"], **sums(s))
-        s = stage("slack", slack=s["x0"] - s["floor"], wide=s["wide"], **sums(s))
+        s = stage("floor", x0=s["x0"], wide=s["wide"], **{f"floor{i}": s["floor"] + s[f"margin{i}"] for i in subsets},
+                  **sums(s))
+        s = stage("slack", wide=s["wide"], **{f"slack{i}": s["x0"] - s[f"floor{i}"] for i in subsets}, **sums(s))
         levels = range(GUARD_LEVELS + 1)
-        s = stage("linear", wide=s["wide"], **{k: s[k] for k in s if k.startswith("quad")},
-                  **{f"p{i}_{r}": s["slack"] + s[f"lin{i}"].shift_right(r) for i in range(len(SUBSETS)) for r in levels})
+        # the quadratic terms less the copy's offset beside them, so that the compare is a sign
+        s = stage("linear", wide=s["wide"],
+                  **{f"p{i}_{r}": s[f"slack{i}"] + s[f"lin{i}"].shift_right(r) for i in subsets for r in levels},
+                  **{f"q{i}_{r}": s[f"quad{i}"].shift_right(2 * r) - i for i in subsets for r in levels
+                     if f"quad{i}" in s})
         s = stage("compare", wide=s["wide"],
-                  **{f"ok{i}_{r}": (s[f"p{i}_{r}"] + s[f"quad{i}"].shift_right(2 * r) if f"quad{i}" in s else s[f"p{i}_{r}"])
-                     >= 0 for i in range(len(SUBSETS)) for r in levels})
+                  **{f"ok{i}_{r}": (s[f"p{i}_{r}"] + s[f"q{i}_{r}"] >= 0) if f"q{i}_{r}" in s else (s[f"p{i}_{r}"] >= i)
+                     for i in subsets for r in levels})
         safe = [Cat(*(s[f"ok{i}_{r}"] for i in range(len(SUBSETS)))).all() & ~s["wide"] for r in levels]
         level = GUARD_LEVELS + 1
         for r in reversed(levels):  # the smallest safe level wins
             level = Mux(safe[r], r, level)
         s = stage("level", level=level)
-        m.d.comb += [advance.eq(~pipe.valid | self.o.ready), self.i.ready.eq(advance),
-                     self.o.valid.eq(pipe.valid), self.o.payload.eq(s["level"])]
-        assert pipe.stages == self.latency, (pipe.stages, self.latency)
+        m.submodules.results = results = LutFIFO(width=len(s["level"]), depth=self.credits)
+        m.d.comb += [results.w_data.eq(s["level"]), results.w_en.eq(pipe.valid),
+                     self.o.payload.eq(results.r_data), self.o.valid.eq(results.r_rdy),
+                     results.r_en.eq(self.o.ready)]
+        # credits: owed = accepted, not yet taken; i.ready from a register's compare
+        owed = Signal(range(self.credits + 1), name="owed")
+        take = self.o.valid & self.o.ready
+        m.d.sync += owed.eq(owed + accept - take)
+        m.d.comb += self.i.ready.eq(owed < self.credits)
+        assert pipe.stages == self.stages_of(fs), (pipe.stages, self.stages_of(fs))
         return m

@@ -60,14 +60,14 @@ def triangles(fs, n, rng):
     return corners, moves, np.clip(areas, 0, area.raw_max)
 
 
-def run_certificate(fs, corners, moves, areas, winding, *, seed=0, p_valid=1.0, p_ready=1.0):
+def run_certificate(fs, corners, moves, areas, winding, *, seed=0, p_valid=1.0, p_ready=1.0, ready_after=0):
     dut = GuardCertificate(fs)
 
     def setup(ctx):
         ctx.set(dut.winding_negative, int(winding < 0))
 
     run = run_streams(dut, certificate_beats(dut, corners, moves, areas), seed=seed, p_valid=p_valid,
-                      p_ready=p_ready, setup=setup)
+                      p_ready=p_ready, ready_after=ready_after, setup=setup)
     return dut, run
 
 
@@ -96,6 +96,15 @@ def test_latency_and_order(preset):
     corners, moves, areas = triangles(fs, 24, np.random.default_rng(11))
     dut, run = run_certificate(fs, corners, moves, areas, 1.0)
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * len(corners)
+    assert [int(level) for level in run.outputs] == list(golden_levels(fs, corners, moves, areas, 1.0))
+
+
+def test_a_stopped_consumer_takes_every_level_once_the_credits_ran_out():
+    """Nothing is taken for 120 clocks: exactly ``credits`` triangles go in meanwhile, none is lost."""
+    fs = FormatSet.preset("default")
+    corners, moves, areas = triangles(fs, 80, np.random.default_rng(5))
+    dut, run = run_certificate(fs, corners, moves, areas, 1.0, ready_after=120)
+    assert sum(cycle < 120 for cycle in run.in_cycles) == dut.credits
     assert [int(level) for level in run.outputs] == list(golden_levels(fs, corners, moves, areas, 1.0))
 
 

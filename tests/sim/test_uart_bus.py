@@ -162,7 +162,8 @@ class FrameServer:
         return data
 
     def _serve(self):
-        conn, _ = self.server.accept()
+        with self.server:  # one connection: the listening socket closes once it is accepted
+            conn, _ = self.server.accept()
         with conn:
             try:
                 while True:
