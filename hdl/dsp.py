@@ -79,7 +79,7 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
             p_REG_INPUTC_CLK="NONE", p_REG_PIPELINE_CLK="NONE",
             p_REG_OUTPUT_CLK="CLK0", p_REG_OUTPUT_CE="CE0", p_REG_OUTPUT_RST="RST0",
             p_GSR="DISABLED", p_RESETMODE="SYNC", p_MULT_BYPASS="DISABLED",
-            p_SOURCEB_MODE="B_INPUT", p_CAS_MATCH_REG="FALSE",
+            p_SOURCEB_MODE="B_SHIFT", p_CAS_MATCH_REG="FALSE",
             i_SIGNEDA=Const(int(is_signed), 1), i_SIGNEDB=Const(int(is_signed), 1),
             i_SOURCEA=Const(0, 1), i_SOURCEB=Const(0, 1),
             i_CLK0=ClockSignal(), i_CE0=Const(1, 1) if enable is None else enable, i_RST0=Const(0, 1),
