@@ -46,6 +46,10 @@ class GuardCertificate(wiring.Component):
     Parameters
     ----------
     fs : :class:`~golden_model.fixed.FormatSet` or preset name
+    interval : int
+        The initiation interval, 1 or 2: clocks per triangle at most. At 2 each multiplier forms one
+        product of a cross product in the triangle's clock and the other in the clock after, so the
+        unit takes half the DSP blocks (28 instead of 56 in ``default``), for two more stages.
 
     Members
     -------
@@ -58,7 +62,8 @@ class GuardCertificate(wiring.Component):
 
     Contract
     --------
-    Throughput: one triangle per clock (II = 1) while ``o.ready`` is high. Latency: with
+    Throughput: one triangle per ``interval`` clocks (``i.ready`` is low in the clock after a
+    transfer at II 2) while ``o.ready`` is high. Latency: with
     ``o.ready`` high, a triangle transferred at clock edge ``k`` is on ``o`` after edge
     ``k + latency`` (:meth:`latency_of`). Back-pressure is a credit count: the pipeline runs
     free (no clock enable fans out to its registers) into a result FIFO of :attr:`credits`
@@ -78,7 +83,9 @@ class GuardCertificate(wiring.Component):
     the sign of their sum; the level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
     """
 
-    def __init__(self, fs: FormatSet | str):
+    def __init__(self, fs: FormatSet | str, *, interval: int = 1):
+        if interval not in (1, 2) or isinstance(interval, bool):
+            raise ValueError(f"interval must be 1 or 2, not {interval!r}")
         if isinstance(fs, str):
             fs = FormatSet.preset(fs)
         if not isinstance(fs, FormatSet):
@@ -86,8 +93,8 @@ class GuardCertificate(wiring.Component):
         if not fs.position.frac_bits == fs.velocity.frac_bits == fs.face_edge.frac_bits:
             raise ValueError(f"the certificate needs position {fs.position}, velocity {fs.velocity} and face_edge "
                              f"{fs.face_edge} to share their fraction bits")
-        self.fs = fs
-        self.latency = self.latency_of(fs)
+        self.fs, self.interval = fs, interval
+        self.latency = self.latency_of(fs, interval)
         #: Triangles that may be owed at once: the result FIFO's depth (a power of two above the latency).
         self.credits = 1 << (self.latency + 1).bit_length()
         super().__init__({
@@ -97,17 +104,19 @@ class GuardCertificate(wiring.Component):
         })
 
     @staticmethod
-    def stages_of(fs: FormatSet) -> int:
+    def stages_of(fs: FormatSet, interval: int = 1) -> int:
         """The pipeline's stages: beat, edges, narrowing, the multiply (:meth:`Pipeline.mul_stages` with
         landed operands and its adder levels), then the products whole, the cross products, three floor
-        stages, ``X0 − floor``, the two compare stages and the level."""
+        stages, ``X0 − floor``, the two compare stages and the level; at II 2 also the operands' select
+        before the multiply and the first products' register after it."""
         edge, move = shape_of(fs.face_edge), shape_of(fs.velocity)
-        return 12 + Pipeline.mul_stages(land_operands=True) + reduce_levels((edge, edge), (move, edge), (move, move))
+        return 12 + 2 * (interval - 1) + Pipeline.mul_stages(land_operands=True) \
+            + reduce_levels((edge, edge), (move, edge), (move, move))
 
     @classmethod
-    def latency_of(cls, fs: FormatSet) -> int:
+    def latency_of(cls, fs: FormatSet, interval: int = 1) -> int:
         """Clock edges from a triangle's transfer to its level on ``o``: the pipeline, then the FIFO."""
-        return cls.stages_of(fs) + 1
+        return cls.stages_of(fs, interval) + 1
 
     def elaborate(self, platform):
         fs = self.fs
@@ -163,7 +172,10 @@ class GuardCertificate(wiring.Component):
         for j in range(3):
             products.update(cross_operands(f"m{j}", f"o{j}", f"l{j}"))
             products.update(cross_operands(f"m{j}", f"m{(j + 1) % 3}", f"q{j}"))
-        products = pipe.multiply(products, "products", carry)
+        if self.interval == 2:
+            products = self._products_in_two_clocks(m, pipe, products, carry)
+        else:
+            products = pipe.multiply(products, "products", carry)
         assert not margin_steps, "the multiply has fewer stages than the margin's adds"
         # the products whole (their partial products' last add) before the cross products' subtract
         # σ from a register of its own (a run constant): the products whole, each cross product's two
@@ -228,6 +240,35 @@ class GuardCertificate(wiring.Component):
         owed = Signal(range(self.credits + 1), name="owed")
         take = self.o.valid & self.o.ready
         m.d.sync += owed.eq(owed + accept - take)
-        m.d.comb += self.i.ready.eq(owed < self.credits)
-        assert pipe.stages == self.stages_of(fs), (pipe.stages, self.stages_of(fs))
+        if self.interval == 2:  # no transfer in the clock after one: the multipliers' second products
+            accepted = Signal(name="accepted")
+            m.d.sync += accepted.eq(accept)
+            m.d.comb += self.i.ready.eq((owed < self.credits) & ~accepted)
+        else:
+            m.d.comb += self.i.ready.eq(owed < self.credits)
+        assert pipe.stages == self.stages_of(fs, self.interval), (pipe.stages, self.stages_of(fs, self.interval))
         return m
+
+    @staticmethod
+    def _products_in_two_clocks(m: Module, pipe: Pipeline, products: dict, carry) -> dict:
+        """The products ``{n_p: (a, b), n_q: (c, d)}`` with one multiplier per pair: ``n_p``'s operands
+        go in the clock of the triangle, ``n_q``'s in the clock after (no triangle follows in that
+        clock: ``i.ready``), so ``n_q`` comes out of the multiply one clock after ``n_p``, which waits
+        for it in a register of its own."""
+        beat = pipe.valid  # the triangle is in the current (narrowing) stage's registers
+        names = [key.removesuffix("_p") for key in products if key.endswith("_p")]
+        assert sorted(products) == sorted(f"{n}_{half}" for n in names for half in "pq")
+        later = {}  # the _q operands, held into the clock after the triangle's
+        for n in names:
+            for k, operand in enumerate(products[f"{n}_q"]):
+                later[n, k] = Signal(Value.cast(operand).shape(), name=f"products_later_{n}_{k}", reset_less=True)
+                m.d.sync += later[n, k].eq(operand)
+        pipe.stage("products_select")
+        shared = {n: tuple(pipe.keep(Mux(beat, products[f"{n}_p"][k], later[n, k]), f"products_select_{n}_{k}")
+                           for k in range(2)) for n in names}
+        carry("products_select")
+        out = pipe.multiply(shared, "products", carry)
+        pipe.stage("products_first")
+        first = {n: pipe.keep(out[n], f"products_first_{n}") for n in names}
+        carry("products_first")
+        return {**{f"{n}_p": first[n] for n in names}, **{f"{n}_q": out[n] for n in names}}

@@ -289,7 +289,8 @@ def _current_latency(row: dict[str, str]) -> int | None:
                      "step_generator": lambda: StepGenerator.latency_of(fs),
                      "node_update": lambda: NodeUpdate(fs).latency,
                      "springflat_core": lambda: NodeUpdate(fs).latency,
-                     "guard_certificate": lambda: GuardCertificate.latency_of(fs)}[row["component"]])
+                     "guard_certificate": lambda: GuardCertificate.latency_of(fs),
+                     "guard_certificate_ii2": lambda: GuardCertificate.latency_of(fs, 2)}[row["component"]])
 
 
 class _Runs:

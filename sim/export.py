@@ -48,7 +48,8 @@ class ComponentSpec:
         import hdl
 
         return {"rsqrt_unit": hdl.RsqrtUnit, "step_generator": hdl.StepGenerator, "node_update": hdl.NodeUpdate,
-                CORE_MODULE: hdl.SpringflatCore, "guard_certificate": hdl.GuardCertificate}[self.module](fs)
+                CORE_MODULE: hdl.SpringflatCore, "guard_certificate": hdl.GuardCertificate,
+                "guard_certificate_ii2": lambda fs: hdl.GuardCertificate(fs, interval=2)}[self.module](fs)
 
 
 COMPONENTS = (
@@ -58,6 +59,7 @@ COMPONENTS = (
     ComponentSpec(CORE_MODULE, "top: node-update datapath + step generator + step registers"),
     ComponentSpec("guard_certificate", "the step guard's inversion test: a triangle's corners and proposed moves "
                                        "→ its level (docs/engine-guard.md; not yet in the engine)"),
+    ComponentSpec("guard_certificate_ii2", "the same at an initiation interval of 2: half the multipliers"),
 )
 
 
@@ -118,7 +120,7 @@ def describe(component, fs: FormatSet, name: str) -> dict:
             if cls:
                 payloads[port] = [{"field": "(whole port)", "lsb": 0, "width": width, "format": f"{cls} {getattr(fs, cls)}"}]
     info = {"module": name, "ports": ports, "payload_layouts": payloads, "latency": component.latency,
-            "initiation_interval": 1}
+            "initiation_interval": getattr(component, "interval", 1)}
     if hasattr(component, "step_latency"):
         info["step_latency"] = component.step_latency
     if hasattr(component, "result_depth"):

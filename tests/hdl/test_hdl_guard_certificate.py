@@ -8,11 +8,13 @@ import warnings
 import numpy as np
 import pytest
 from amaranth.back import verilog
-from amaranth.hdl import UnusedElaboratable
+from amaranth.hdl import Fragment, Instance, UnusedElaboratable
 
 from golden_model.fixed import FormatSet
+from golden_model.fixed.dsp import Operand, dsp_blocks
 from golden_model.fixed.guard import floor_min_raw, triangle_levels_raw
 from golden_model.guard import GUARD_LEVELS
+from hdl.dsp import ECP5
 from hdl.guard_certificate import GuardCertificate
 from sim.payloads import pack_beats
 from support.streams import run_streams
@@ -60,8 +62,9 @@ def triangles(fs, n, rng):
     return corners, moves, np.clip(areas, 0, area.raw_max)
 
 
-def run_certificate(fs, corners, moves, areas, winding, *, seed=0, p_valid=1.0, p_ready=1.0, ready_after=0):
-    dut = GuardCertificate(fs)
+def run_certificate(fs, corners, moves, areas, winding, *, interval=1, seed=0, p_valid=1.0, p_ready=1.0,
+                    ready_after=0):
+    dut = GuardCertificate(fs, interval=interval)
 
     def setup(ctx):
         ctx.set(dut.winding_negative, int(winding < 0))
@@ -72,9 +75,10 @@ def run_certificate(fs, corners, moves, areas, winding, *, seed=0, p_valid=1.0, 
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("interval", [1, 2])
 @pytest.mark.parametrize("preset", PRESETS)
 @pytest.mark.parametrize("winding", [1.0, -1.0])
-def test_levels_are_the_golden_models_with_gaps_and_back_pressure(preset, winding):
+def test_levels_are_the_golden_models_with_gaps_and_back_pressure(preset, winding, interval):
     fs = FormatSet.preset(preset)
     rng = np.random.default_rng([7, int(winding > 0), PRESETS.index(preset)])
     corners, moves, areas = triangles(fs, 600, rng)
@@ -83,27 +87,31 @@ def test_levels_are_the_golden_models_with_gaps_and_back_pressure(preset, windin
         moves = moves[:, ::-1].copy()
     want = golden_levels(fs, corners, moves, areas, winding)
     assert set(np.unique(want)) == set(range(GUARD_LEVELS + 2)), "the triangles must reach every level"
-    _, run = run_certificate(fs, corners, moves, areas, winding, seed=3, p_valid=0.7, p_ready=0.6)
+    _, run = run_certificate(fs, corners, moves, areas, winding, interval=interval, seed=3, p_valid=0.7, p_ready=0.6)
     got = np.array([int(level) for level in run.outputs])
     mismatch = np.flatnonzero(got != want)
     assert mismatch.size == 0, f"{mismatch.size} of {len(want)} levels differ, first at {mismatch[:5]}: " \
                                f"RTL {got[mismatch[:5]]}, golden {want[mismatch[:5]]}"
 
 
+@pytest.mark.parametrize("interval", [1, 2])
 @pytest.mark.parametrize("preset", PRESETS)
-def test_latency_and_order(preset):
+def test_latency_and_order(preset, interval):
     fs = FormatSet.preset(preset)
     corners, moves, areas = triangles(fs, 24, np.random.default_rng(11))
-    dut, run = run_certificate(fs, corners, moves, areas, 1.0)
+    dut, run = run_certificate(fs, corners, moves, areas, 1.0, interval=interval)
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * len(corners)
+    # a triangle offered every clock goes in every ``interval`` clocks
+    assert set(np.diff(run.in_cycles)) == {interval}
     assert [int(level) for level in run.outputs] == list(golden_levels(fs, corners, moves, areas, 1.0))
 
 
-def test_a_stopped_consumer_takes_every_level_once_the_credits_ran_out():
+@pytest.mark.parametrize("interval", [1, 2])
+def test_a_stopped_consumer_takes_every_level_once_the_credits_ran_out(interval):
     """Nothing is taken for 120 clocks: exactly ``credits`` triangles go in meanwhile, none is lost."""
     fs = FormatSet.preset("default")
     corners, moves, areas = triangles(fs, 80, np.random.default_rng(5))
-    dut, run = run_certificate(fs, corners, moves, areas, 1.0, ready_after=120)
+    dut, run = run_certificate(fs, corners, moves, areas, 1.0, interval=interval, ready_after=120)
     assert sum(cycle < 120 for cycle in run.in_cycles) == dut.credits
     assert [int(level) for level in run.outputs] == list(golden_levels(fs, corners, moves, areas, 1.0))
 
@@ -118,6 +126,8 @@ def test_parameter_validation():
             GuardCertificate(3)
         with pytest.raises(ValueError, match="share their fraction bits"):
             GuardCertificate(other)
+        with pytest.raises(ValueError, match="interval must be 1 or 2, not 3"):
+            GuardCertificate(fs, interval=3)
         gc.collect()
 
 
@@ -127,3 +137,25 @@ def test_converts_to_verilog(preset, monkeypatch):
     text = verilog.convert(GuardCertificate(preset), name="guard_certificate")
     assert "module guard_certificate" in text
     assert f"output [{(GUARD_LEVELS + 1).bit_length() - 1}:0] o__payload;" in text
+
+
+def mult18x18d_instances(component) -> int:
+    count, fragments = 0, [Fragment.get(component, ECP5)]
+    while fragments:
+        for sub, _, _ in fragments.pop().subfragments:
+            if isinstance(sub, Instance):
+                count += sub.type == "MULT18X18D"
+            else:
+                fragments.append(sub)
+    return count
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+def test_interval_two_shares_each_multiplier_between_a_cross_products_two_products(preset):
+    """7 cross products (X0: face_edge², L_k: velocity × face_edge, Q_k: velocity²) of two multiplies each,
+    at the golden model's split rule: all 14 in DSP blocks at II 1, one block per pair at II 2."""
+    fs = FormatSet.preset(preset)
+    edge, move = Operand.of(fs.face_edge), Operand.of(fs.velocity)
+    per_pair = dsp_blocks(edge, edge) + 3 * dsp_blocks(move, edge) + 3 * dsp_blocks(move, move)
+    assert mult18x18d_instances(GuardCertificate(fs)) == 2 * per_pair
+    assert mult18x18d_instances(GuardCertificate(fs, interval=2)) == per_pair
