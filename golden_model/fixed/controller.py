@@ -136,12 +136,13 @@ class Controller:
                           self.counter)
         moves, levels = guarded_moves_raw(s.fs, self.raw_positions, wanted, s.faces, s.winding, self.floor_min)
         guard.count_levels(levels)
-        self.raw_positions, taken = commit(self.raw_positions, moves)
+        # V is the move taken before the moved layout is measured, so that its S = Σ F·V pairs the new
+        # forces with the move that led there, as the float guard's (a rejection zeroes both)
+        self.raw_positions, self.raw_velocities = commit(self.raw_positions, moves)
         before = self.energy_raw
         self.measure()
         self.accepted = self.energy_raw <= before
         if self.accepted:
-            self.raw_velocities = taken
             guard.scale = guard.scale.accepted_step()
             return
         self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power = accepted
