@@ -67,12 +67,13 @@ def _float_and_fixed(name):
 #: Where fixed point misses issue 25's fixed-against-float bar on these patches, and why (docs/guard.md,
 #: "Fixed point against float", measured with benchmarks/guard_fixed_vs_float.py --fast-subset --perturbed).
 FIXED_MISSES = {
-    "bent finger": "the fixed run saturates (rsqrt, one_minus_dr) on crushed edges and converges at ~190 iterations "
+    "bent finger": "the fixed run saturates (rsqrt, one_minus_dr) on crushed edges and converges at ~175 iterations "
                    "where float reaches its cap of 1,280",
-    "noisy finger": "within 1e-3 on E_S and E_C but ~17 iterations apart: the fixed forces' ~1e-3 relative error "
-                    "(rsqrt's 14 fraction bits) and the guard's discrete choices move the stopping point; float "
-                    "from a start perturbed by 1e-9 stops 10 iterations apart too",
-    "noisy horn": "~70 iterations apart (float perturbed by 1e-9: 28 apart)",
+    "noisy finger": "the fixed run saturates (684 events) and stops ~70 iterations before float, 3.8e-3 apart on "
+                    "E_S; float from a start perturbed by 1e-9 stops 10 iterations apart too",
+    "noisy horn": "within 1e-3 on E_S and E_C but ~27 iterations apart: the fixed forces' ~1e-3 relative error "
+                  "(rsqrt's 14 fraction bits) and the guard's discrete choices move the stopping point; float "
+                  "from a start perturbed by 1e-9 stops 28 apart",
     "slivers": "refused: the barrier gain μC/(4X*) of its slivers (868) does not fit the default barrier_gain format",
 }
 
