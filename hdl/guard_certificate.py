@@ -1,9 +1,11 @@
 """The step guard's certificate of one triangle: the smallest fraction ``2^-r`` of the proposed moves
-that keeps its signed area above the floor, one triangle per clock.
+that keeps its signed area above the floor, and which corners cannot move at all, one triangle per
+clock (or per two).
 
-The RTL twin of :func:`golden_model.fixed.guard.triangle_levels_raw`, the inversion test the engine's
-guarded mode is to run in a pass over the triangles (``docs/engine-guard.md``); every width comes from
-a :class:`~golden_model.fixed.FormatSet` and the guard's constants from :mod:`golden_model.guard`.
+The RTL twin of :func:`golden_model.fixed.guard.triangle_levels_raw` and of a triangle's part of
+:func:`~golden_model.fixed.guard.stuck_nodes_raw`, the tests the engine's guarded mode is to run in two
+passes over the triangles (``docs/engine-guard.md``); every width comes from a
+:class:`~golden_model.fixed.FormatSet` and the guard's constants from :mod:`golden_model.guard`.
 """
 
 from __future__ import annotations
@@ -13,12 +15,12 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.guard import floor_min_shift
+from golden_model.fixed.guard import MOVE_WEIGHTS, floor_min_shift
 from golden_model.guard import FLOOR_SHIFT, GUARD_LEVELS
 
 from .fifo import LutFIFO
 from .fixedpoint import clamp, shape_of, shift_round
-from .layouts import certificate_layout, certificate_level_shape
+from .layouts import certificate_layout, certificate_result_layout
 from .pipeline import Pipeline, reduce_levels
 
 __all__ = ["GuardCertificate", "SUBSETS"]
@@ -42,6 +44,8 @@ class GuardCertificate(wiring.Component):
         floor = min(X0, max(X0 >> FLOOR_SHIFT, rnd(A·2^floor_min_shift))) + M     (half up)
         safe_r = ∀ S: X0 + (Σ_S L >> r) + (Σ_pairs⊂S Q >> 2r) ≥ floor
         level = min{r ≤ GUARD_LEVELS : safe_r}, else GUARD_LEVELS + 1 (also for a wide triangle)
+        stuck_k = X0 + (L_k >> GUARD_LEVELS) < floor − M + M_k   (M_k: the margin with corner k's move alone)
+                  or the triangle is wide
 
     Parameters
     ----------
@@ -57,8 +61,10 @@ class GuardCertificate(wiring.Component):
         One triangle per beat.
     winding_negative : ``In(1)``
         ``σ = −1`` (the layout winds clockwise): a run constant, steady while triangles flow.
-    o : ``Out(stream.Signature(certificate_level_shape()))``
-        The triangle's level, in input order.
+    o : ``Out(stream.Signature(certificate_result_layout()))``
+        The triangle's ``level`` and ``stuck`` corners (bit k: corner k), in input order. The stuck
+        pass reads ``stuck`` (with the proposals as they are), the certificate pass ``level`` (with
+        the stuck nodes' proposals zeroed).
 
     Contract
     --------
@@ -100,7 +106,7 @@ class GuardCertificate(wiring.Component):
         super().__init__({
             "i": In(stream.Signature(certificate_layout(fs))),
             "winding_negative": In(1),
-            "o": Out(stream.Signature(certificate_level_shape())),
+            "o": Out(stream.Signature(certificate_result_layout())),
         })
 
     @staticmethod
@@ -149,13 +155,18 @@ class GuardCertificate(wiring.Component):
                   **{f"norm_m{k}": s[f"abs_m{k}_x"] + s[f"abs_m{k}_y"] for k in range(3)})
 
         # the margin M, one add per stage while the products are formed
+        # and each corner's margin alone (its move's weight, the edges' part) for the stuck test
         carried = {"floor_min": s["floor_min"], "wide": s["wide"],
                    "edges_ab": s["abs_ab_x"] + s["abs_ab_y"], "edges_ac": s["abs_ac_x"] + s["abs_ac_y"],
-                   "moves_ab": 4 * s["norm_m0"] + 2 * s["norm_m1"], "moves_c": 2 * s["norm_m2"] + 8}
+                   "moves_ab": MOVE_WEIGHTS[0] * s["norm_m0"] + MOVE_WEIGHTS[1] * s["norm_m1"],
+                   "moves_c": MOVE_WEIGHTS[2] * s["norm_m2"] + 8,
+                   **{f"alone{k}": weight * s[f"norm_m{k}"] + 8 for k, weight in enumerate(MOVE_WEIGHTS)}}
+        alone = [f"alone{k}" for k in range(3)]
         margin_steps = [
             lambda c: {"floor_min": c["floor_min"], "wide": c["wide"], "edges": c["edges_ab"] + c["edges_ac"],
-                       "moves": c["moves_ab"] + c["moves_c"]},
-            lambda c: {"floor_min": c["floor_min"], "wide": c["wide"], "margin": 2 * c["edges"] + c["moves"]},
+                       "moves": c["moves_ab"] + c["moves_c"], **{key: c[key] for key in alone}},
+            lambda c: {"floor_min": c["floor_min"], "wide": c["wide"], "margin": 2 * c["edges"] + c["moves"],
+                       **{f"stuck_margin{k}": 2 * c["edges"] + c[key] for k, key in enumerate(alone)}},
         ]
 
         def carry(stage_name):
@@ -198,7 +209,9 @@ class GuardCertificate(wiring.Component):
         x0, floor_min = s["x0"], s["floor_min"]
         bits = len(floor_min)
         shrunk = x0.shift_right(FLOOR_SHIFT)
-        s = stage("floor_cases", **{k: s[k] for k in terms}, margin=s["margin"], wide=s["wide"], floor_min=floor_min,
+        stuck_margins = {f"stuck_margin{k}": s[f"stuck_margin{k}"] for k in range(3)}
+        s = stage("floor_cases", **{k: s[k] for k in terms}, margin=s["margin"], **stuck_margins, wide=s["wide"],
+                  floor_min=floor_min,
                   shrunk=shrunk, shrunk_wins=(shrunk[bits:] != 0) | (shrunk[:bits] >= floor_min),
                   x0_below=(x0[bits:] == 0) & (x0[:bits] < floor_min),
                   l01=s["l0"] + s["l1"], l12=s["l1"] + s["l2"], l20=s["l2"] + s["l0"], q01=s["q0"] + s["q1"])
@@ -210,30 +223,36 @@ class GuardCertificate(wiring.Component):
         # offset of i (the margin less i, the compare against i), so each drives 7 adders
         subsets = range(len(SUBSETS))
         s = stage("floor_pick", floor=floor, x0=x0, wide=s["wide"], **{f"margin{i}": s["margin"] - i for i in subsets},
+                  **{key: s[key] for key in stuck_margins},
                   **{f"lin{i}": v for i, v in lin.items()}, **{f"quad{i}": v for i, v in quad.items()})
 
         def sums(s):
             return {k: s[k] for k in s if k.startswith(("lin", "quad"))}
 
         s = stage("floor", x0=s["x0"], wide=s["wide"], **{f"floor{i}": s["floor"] + s[f"margin{i}"] for i in subsets},
-                  **sums(s))
-        s = stage("slack", wide=s["wide"], **{f"slack{i}": s["x0"] - s[f"floor{i}"] for i in subsets}, **sums(s))
+                  **{f"stuck_floor{k}": s["floor"] + s[f"stuck_margin{k}"] for k in range(3)}, **sums(s))
+        s = stage("slack", wide=s["wide"], **{f"slack{i}": s["x0"] - s[f"floor{i}"] for i in subsets},
+                  **{f"stuck_slack{k}": s["x0"] - s[f"stuck_floor{k}"] for k in range(3)}, **sums(s))
         levels = range(GUARD_LEVELS + 1)
         # the quadratic terms less the copy's offset beside them, so that the compare is a sign
+        # the stuck test: a corner's own move (subset i = k) at the smallest fraction, its margin alone
         s = stage("linear", wide=s["wide"],
+                  **{f"stuck_p{k}": s[f"stuck_slack{k}"] + s[f"lin{k}"].shift_right(GUARD_LEVELS) for k in range(3)},
                   **{f"p{i}_{r}": s[f"slack{i}"] + s[f"lin{i}"].shift_right(r) for i in subsets for r in levels},
                   **{f"q{i}_{r}": s[f"quad{i}"].shift_right(2 * r) - i for i in subsets for r in levels
                      if f"quad{i}" in s})
-        s = stage("compare", wide=s["wide"],
+        s = stage("compare", wide=s["wide"], stuck=Cat(*((s[f"stuck_p{k}"] < 0) | s["wide"] for k in range(3))),
                   **{f"ok{i}_{r}": (s[f"p{i}_{r}"] + s[f"q{i}_{r}"] >= 0) if f"q{i}_{r}" in s else (s[f"p{i}_{r}"] >= i)
                      for i in subsets for r in levels})
         safe = [Cat(*(s[f"ok{i}_{r}"] for i in range(len(SUBSETS)))).all() & ~s["wide"] for r in levels]
         level = GUARD_LEVELS + 1
         for r in reversed(levels):  # the smallest safe level wins
             level = Mux(safe[r], r, level)
-        s = stage("level", level=level)
-        m.submodules.results = results = LutFIFO(width=len(s["level"]), depth=self.credits)
-        m.d.comb += [results.w_data.eq(s["level"]), results.w_en.eq(pipe.valid),
+        s = stage("level", level=level, stuck=s["stuck"])
+        result = Signal(certificate_result_layout())
+        m.d.comb += [result.level.eq(s["level"]), result.stuck.eq(s["stuck"])]
+        m.submodules.results = results = LutFIFO(width=len(result.as_value()), depth=self.credits)
+        m.d.comb += [results.w_data.eq(result), results.w_en.eq(pipe.valid),
                      self.o.payload.eq(results.r_data), self.o.valid.eq(results.r_rdy),
                      results.r_en.eq(self.o.ready)]
         # credits: owed = accepted, not yet taken; i.ready from a register's compare

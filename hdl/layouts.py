@@ -186,7 +186,7 @@ def errors_layout(fs: FormatSet) -> data.StructLayout:
 # ---------------------------------------------------------------- the controller's units
 # (hdl/area_error.py, hdl/controller_units.py)
 
-__all__ += ["triangle_layout", "certificate_layout", "certificate_level_shape", "area_saturations_layout",
+__all__ += ["triangle_layout", "certificate_layout", "certificate_level_shape", "certificate_result_layout", "area_saturations_layout",
             "normalise_layout", "energy_sums_layout", "energy_result_layout", "word_layout", "weight_word_layout",
             "force_word_layout"]
 
@@ -217,6 +217,13 @@ def certificate_level_shape():
     """A triangle's guard level: 0 … GUARD_LEVELS (its corners move by 2^-level of their proposals), or
     GUARD_LEVELS + 1 (they do not move)."""
     return unsigned((GUARD_LEVELS + 1).bit_length())
+
+
+def certificate_result_layout() -> data.StructLayout:
+    """A triangle's certificate: its ``level`` (:func:`certificate_level_shape`) and ``stuck``, bit ``k``
+    set when corner ``k``'s own move alone fails the triangle's certificate at ``2^-GUARD_LEVELS`` (the
+    triangle's part of ``stuck_nodes_raw``)."""
+    return data.StructLayout({"level": certificate_level_shape(), "stuck": 3})
 
 
 def area_saturations_layout(fs: FormatSet) -> data.StructLayout:

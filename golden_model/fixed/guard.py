@@ -31,7 +31,7 @@ from ..guard import FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, node_levels
 from .format import Overflow, SaturationCounter, requantize, shift_round
 from .formats_set import FormatSet
 
-__all__ = ["proposal", "floor_min_shift", "floor_min_raw", "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw",
+__all__ = ["MOVE_WEIGHTS", "proposal", "floor_min_shift", "floor_min_raw", "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw",
            "commit"]
 
 SAT = Overflow.SATURATE
@@ -108,7 +108,7 @@ def _terms_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: n
 
 
 #: The margin's weight on each corner's ``|V'|₁`` (corner a's move also moves both edges the margin measures).
-_MOVE_WEIGHT = (4, 2, 2)
+MOVE_WEIGHTS = (4, 2, 2)
 
 
 def triangle_levels_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: np.ndarray, winding: float,
@@ -116,7 +116,7 @@ def triangle_levels_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray,
     """``(F,)`` the smallest ``r`` in 0 … GUARD_LEVELS whose certificate holds with the rounding margin,
     else ``GUARD_LEVELS + 1`` (as :func:`golden_model.guard.triangle_levels`)."""
     x0, linear, pair, floor, edge_margin, move_norm, wide = _terms_raw(fs, positions, moves, faces, winding, floor_min)
-    floor = floor + edge_margin + sum(w * n for w, n in zip(_MOVE_WEIGHT, move_norm))
+    floor = floor + edge_margin + sum(w * n for w, n in zip(MOVE_WEIGHTS, move_norm))
     subset_linear = [linear[0], linear[1], linear[2], linear[0] + linear[1], linear[1] + linear[2],
                      linear[2] + linear[0], linear[0] + linear[1] + linear[2]]
     zero = np.zeros_like(x0)
@@ -135,11 +135,12 @@ def stuck_nodes_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, fac
     """``(V,)`` bool: the nodes whose own move, alone, fails the certificate of one of their triangles at the
     smallest fraction ``2^-GUARD_LEVELS`` (as :func:`golden_model.guard.stuck_nodes`, with the margin of that
     corner's move alone). Such a node cannot move; holding it still first keeps it from freezing its
-    neighbours. Only a choice of which proposals to zero: the certificate that follows keeps the guarantee."""
-    x0, linear, _, floor, edge_margin, move_norm, _ = _terms_raw(fs, positions, moves, faces, winding, floor_min)
+    neighbours. A triangle whose edges do not fit face_edge is never trusted: its corners are stuck. Only a
+    choice of which proposals to zero: the certificate that follows keeps the guarantee."""
+    x0, linear, _, floor, edge_margin, move_norm, wide = _terms_raw(fs, positions, moves, faces, winding, floor_min)
     stuck = np.zeros(len(positions), dtype=bool)
     for k in range(3):
-        fails = x0 + (linear[k] >> GUARD_LEVELS) < floor + edge_margin + _MOVE_WEIGHT[k] * move_norm[k]
+        fails = wide | (x0 + (linear[k] >> GUARD_LEVELS) < floor + edge_margin + MOVE_WEIGHTS[k] * move_norm[k])
         stuck[faces[fails, k]] = True
     return stuck
 

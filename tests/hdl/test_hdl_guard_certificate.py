@@ -1,5 +1,6 @@
-"""RTL guard certificate (hdl.GuardCertificate) against the golden model's ``triangle_levels_raw``, in
-Amaranth's simulator: every triangle's level, bit for bit, in order, at the stated latency."""
+"""RTL guard certificate (hdl.GuardCertificate) against the golden model's ``triangle_levels_raw`` and
+``stuck_nodes_raw``, in Amaranth's simulator: every triangle's level and stuck corners, bit for bit, in
+order, at the stated latency."""
 
 import dataclasses
 import gc
@@ -12,22 +13,34 @@ from amaranth.hdl import Fragment, Instance, UnusedElaboratable
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.dsp import Operand, dsp_blocks
-from golden_model.fixed.guard import floor_min_raw, triangle_levels_raw
+from golden_model.fixed.guard import floor_min_raw, stuck_nodes_raw, triangle_levels_raw
 from golden_model.guard import GUARD_LEVELS
 from hdl.dsp import ECP5
 from hdl.guard_certificate import GuardCertificate
+from hdl.layouts import certificate_result_layout
 from sim.payloads import pack_beats
 from support.streams import run_streams
 
 PRESETS = ["default", "narrow"]
 
 
-def golden_levels(fs, corners, moves, areas, winding):
-    """``(F,)`` levels of ``triangle_levels_raw`` for triangles ``corners``/``moves`` (F, 3, 2) raw."""
+def golden(fs, corners, moves, areas, winding):
+    """``((F,) levels, (F,) stuck corners)`` for triangles ``corners``/``moves`` (F, 3, 2) raw:
+    ``triangle_levels_raw``, and ``stuck_nodes_raw`` of each triangle's corners as bits (corner k: bit k),
+    each triangle on nodes of its own."""
     n = len(corners)
     faces = np.arange(3 * n).reshape(n, 3)
-    return triangle_levels_raw(fs, corners.reshape(-1, 2), moves.reshape(-1, 2), faces, winding,
-                               floor_min_raw(fs, areas))
+    args = (fs, corners.reshape(-1, 2), moves.reshape(-1, 2), faces, winding, floor_min_raw(fs, areas))
+    stuck = stuck_nodes_raw(*args)[faces].astype(np.int64)
+    return triangle_levels_raw(*args), stuck[:, 0] | stuck[:, 1] << 1 | stuck[:, 2] << 2
+
+
+def results(run):
+    """``(levels, stuck corners)`` of the RTL's outputs (``certificate_result_layout``'s fields)."""
+    layout = certificate_result_layout()
+    fields = [layout["level"], layout["stuck"]]
+    return tuple(np.array([(out >> f.offset) & ((1 << f.width) - 1) for out in run.outputs], dtype=np.int64)
+                 for f in fields)
 
 
 def certificate_beats(dut, corners, moves, areas):
@@ -85,13 +98,17 @@ def test_levels_are_the_golden_models_with_gaps_and_back_pressure(preset, windin
     if winding < 0:  # the same triangles wound the other way
         corners = corners[:, ::-1].copy()
         moves = moves[:, ::-1].copy()
-    want = golden_levels(fs, corners, moves, areas, winding)
+    want, want_stuck = golden(fs, corners, moves, areas, winding)
     assert set(np.unique(want)) == set(range(GUARD_LEVELS + 2)), "the triangles must reach every level"
+    assert set(np.unique(want_stuck)) == set(range(8)), "every combination of stuck corners must turn up"
     _, run = run_certificate(fs, corners, moves, areas, winding, interval=interval, seed=3, p_valid=0.7, p_ready=0.6)
-    got = np.array([int(level) for level in run.outputs])
+    got, got_stuck = results(run)
     mismatch = np.flatnonzero(got != want)
     assert mismatch.size == 0, f"{mismatch.size} of {len(want)} levels differ, first at {mismatch[:5]}: " \
                                f"RTL {got[mismatch[:5]]}, golden {want[mismatch[:5]]}"
+    mismatch = np.flatnonzero(got_stuck != want_stuck)
+    assert mismatch.size == 0, f"{mismatch.size} of {len(want)} stuck corners differ, first at {mismatch[:5]}: " \
+                               f"RTL {got_stuck[mismatch[:5]]}, golden {want_stuck[mismatch[:5]]}"
 
 
 @pytest.mark.parametrize("interval", [1, 2])
@@ -103,7 +120,7 @@ def test_latency_and_order(preset, interval):
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * len(corners)
     # a triangle offered every clock goes in every ``interval`` clocks
     assert set(np.diff(run.in_cycles)) == {interval}
-    assert [int(level) for level in run.outputs] == list(golden_levels(fs, corners, moves, areas, 1.0))
+    assert [list(r) for r in results(run)] == [list(g) for g in golden(fs, corners, moves, areas, 1.0)]
 
 
 @pytest.mark.parametrize("interval", [1, 2])
@@ -113,7 +130,7 @@ def test_a_stopped_consumer_takes_every_level_once_the_credits_ran_out(interval)
     corners, moves, areas = triangles(fs, 80, np.random.default_rng(5))
     dut, run = run_certificate(fs, corners, moves, areas, 1.0, interval=interval, ready_after=120)
     assert sum(cycle < 120 for cycle in run.in_cycles) == dut.credits
-    assert [int(level) for level in run.outputs] == list(golden_levels(fs, corners, moves, areas, 1.0))
+    assert [list(r) for r in results(run)] == [list(g) for g in golden(fs, corners, moves, areas, 1.0)]
 
 
 def test_parameter_validation():
@@ -136,7 +153,7 @@ def test_converts_to_verilog(preset, monkeypatch):
     monkeypatch.setenv("AMARANTH_USE_YOSYS", "builtin")
     text = verilog.convert(GuardCertificate(preset), name="guard_certificate")
     assert "module guard_certificate" in text
-    assert f"output [{(GUARD_LEVELS + 1).bit_length() - 1}:0] o__payload;" in text
+    assert f"output [{(GUARD_LEVELS + 1).bit_length() + 3 - 1}:0] o__payload;" in text  # the level, 3 stuck bits
 
 
 def mult18x18d_instances(component) -> int:
