@@ -200,18 +200,20 @@ def run_testbenches(dut, *testbenches) -> None:
 
 
 def run_streams(dut, beats, n_out=None, *, seed=0, p_valid=1.0, p_ready=1.0, ready_after=0, start=0,
-                setup=None, watch=None, probe_ready=False) -> StreamRun:
+                setup=None, watch=None, probe_ready=False, one_at_a_time=False) -> StreamRun:
     """Simulate ``dut``: :func:`stream_producer` on ``dut.i``, :func:`stream_consumer` on ``dut.o``.
 
     ``n_out`` (default: one output per beat) outputs are collected, then ``dut.latency + 2`` more
     edges watched; the consumer's seed is ``seed + 1``. Either stream may be always ready
     (:func:`stream_consumer` refuses stalls on an always-ready ``o``). ``setup(ctx)``, if given, runs at time 0
-    (constant inputs; the streams wait ``start`` edges). Returns the run once every beat went in
-    and every output came out.
+    (constant inputs; the streams wait ``start`` edges). ``one_at_a_time``: the device takes a beat only
+    once the last one's output is out (its progress budget is ``latency`` per beat). Returns the run once
+    every beat went in and every output came out.
     """
     n_out = len(beats) if n_out is None else n_out
     run = StreamRun()
-    max_cycles = int(4 * (len(beats) + dut.latency) / (p_valid * p_ready)) + 200 + ready_after
+    per_beat = dut.latency + 1 if one_at_a_time else 1
+    max_cycles = int(4 * (len(beats) * per_beat + dut.latency) / (p_valid * p_ready)) + 200 + ready_after
     testbenches = []
     if setup is not None:
         async def setup_bench(ctx):

@@ -1,0 +1,176 @@
+"""The step guard's decision after a guarded step's measurement: keep the step or roll it back, the step
+scale, and the windowed stop rule's energy test.
+
+The RTL twin of what :meth:`golden_model.fixed.controller.Controller._advance_guarded` and
+:meth:`~golden_model.fixed.controller.Controller.run` decide from the exact energies, with
+:class:`golden_model.guard.StepScale`, :class:`golden_model.guard.EnergyWindow` and the energy part of
+:meth:`golden_model.fixed.engine.StopRule.converged`. The engine's guarded mode is to run it once per
+iteration, after the energy check (``docs/engine-guard.md``); every constant comes from
+:mod:`golden_model.guard` and the widths from the energy check's.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Mux, Signal, unsigned
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS
+from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
+from golden_model.guard import ENERGY_WINDOW, SCALE_GROW_AFTER, SCALE_MAX_SHIFT
+
+from .controller_units import shift_add_step
+
+__all__ = ["GuardDecision", "decision_input_layout", "decision_output_layout"]
+
+
+def decision_input_layout(energy_bits: int) -> data.StructLayout:
+    """One measurement: its exact ``energy`` (``energy_raw``), ``first`` (the run's start layout: no step
+    to judge) and ``with_momentum`` (the step carried momentum, β > 0: a rejection restarts it rather
+    than halving the scale)."""
+    return data.StructLayout({"energy": unsigned(energy_bits), "first": 1, "with_momentum": 1})
+
+
+def decision_output_layout(energy_bits: int) -> data.StructLayout:
+    """The decision: ``accepted`` (the energy did not rise), ``energy`` (the kept layout's), ``settled``
+    (the window is ready and its energy test passes), ``stalled`` (the scale passed its last halving)
+    and the step scale's ``shift`` for the next proposal (``s = 2^-shift``)."""
+    return data.StructLayout({"accepted": 1, "energy": unsigned(energy_bits), "settled": 1, "stalled": 1,
+                              "shift": range(SCALE_MAX_SHIFT + 2)})
+
+
+class GuardDecision(wiring.Component):
+    """A guarded step kept or rolled back, the step scale and the window's energy test, bit-exact with the
+    golden model::
+
+        accepted = E ≤ E_kept                          E_kept: the last kept layout's energy
+        E_kept   = E if accepted                       (a rolled-back step repeats E_kept)
+        scale    = accepted: the accepted count + 1; at SCALE_GROW_AFTER the shift − 1 (not below 0)
+                   rolled back: the count 0; the shift + 1 unless the step carried momentum
+        stalled  = shift > SCALE_MAX_SHIFT
+        window   ← (E_kept, accepted): the last ENERGY_WINDOW + 1 energies, the last ENERGY_WINDOW flags
+        settled  = full and a step taken in it, and
+                   (E_old == 0 ? E_kept == 0 : |E_kept − E_old| << 40 ≤ ε·E_old, or E_kept < floor)
+
+    The run's first measurement (``first``) restarts everything: the window holds only its energy.
+
+    Parameters
+    ----------
+    energy_bits : int
+        Width of the exact energy (:attr:`hdl.controller_units.EnergyCheck.energy_bits`).
+    window : int
+        The window's length in iterations (:data:`golden_model.guard.ENERGY_WINDOW`).
+
+    Members
+    -------
+    i : ``In(stream.Signature(decision_input_layout(energy_bits)))``
+    o : ``Out(stream.Signature(decision_output_layout(energy_bits)))``
+    tolerance : ``In(unsigned(ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS))``
+        ``ε`` raw (``StopRule.energy``), as :class:`~hdl.controller_units.EnergyCheck` takes it.
+    floor : ``In(unsigned(energy_bits))``
+        ``StopRule.floor`` (``energy_floor_raw``). Both sampled when an item is accepted.
+    shift : ``Out(range(SCALE_MAX_SHIFT + 2))``
+        The step scale's shift now (a register; the proposal pass reads it).
+
+    Contract
+    --------
+    One item at a time: ``i.ready`` is high while idle. The decision, the window and the scale are
+    updated in the clock after the transfer; ``ε·E_old`` then takes ``energy_bits`` clocks (an
+    LSB-first shift-add, with ``|E_kept − E_old|`` alongside), the compare's halves one more, and
+    ``o`` is a register: with ``o.ready`` high the output transfers :attr:`latency`
+    (``energy_bits + 4``) clock edges after the input.
+    """
+
+    def __init__(self, energy_bits: int, *, window: int = ENERGY_WINDOW):
+        for name, value in (("energy_bits", energy_bits), ("window", window)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < (2 if name == "energy_bits" else 1):
+                raise ValueError(f"{name} must be an int >= {2 if name == 'energy_bits' else 1}, not {value!r}")
+        self.energy_bits, self.window = energy_bits, window
+        self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
+        self.latency = energy_bits + 4
+        super().__init__({
+            "i": In(stream.Signature(decision_input_layout(energy_bits))),
+            "o": Out(stream.Signature(decision_output_layout(energy_bits))),
+            "tolerance": In(unsigned(self.tolerance_bits)),
+            "floor": In(unsigned(energy_bits)),
+            "shift": Out(range(SCALE_MAX_SHIFT + 2)),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        bits, size = self.energy_bits, self.window
+        beat = self.i.payload
+        kept = Signal(bits, reset_less=True, name="kept")  # the kept layout's energy
+        energies = [Signal(bits, reset_less=True, name=f"window{k}") for k in range(size + 1)]  # newest first
+        held = Signal(range(size + 2), name="held")  # energies in the window
+        taken = Signal(size, name="taken")  # the last `size` flags, newest in bit 0
+        accepted_count = Signal(range(SCALE_GROW_AFTER + 1), name="accepted_count")
+        shift = self.shift
+        tolerance = Signal(self.tolerance_bits, reset_less=True)
+        floor = Signal(bits, reset_less=True)
+        allowed = Signal(self.tolerance_bits + bits + 1, reset_less=True)  # ε·E_old
+        difference = Signal(bits + 1, reset_less=True)  # E_kept − E_old, two's complement
+        change = Signal(bits, reset_less=True)
+        steps = Signal(range(bits + 1), reset_less=True)
+        accepted = Signal(name="accepted")
+        idle, deciding, multiplying, halves, comparing = (Signal(name=n, init=int(n == "idle"))
+                                                           for n in ("idle", "deciding", "multiplying", "halves",
+                                                                     "comparing"))
+        energy, first, with_momentum = (Signal.like(v, name=n, reset_less=True) for n, v in
+                                        (("energy", beat.energy), ("first", beat.first),
+                                         ("with_momentum", beat.with_momentum)))
+        m.d.comb += self.i.ready.eq(idle)
+        with m.If(self.i.valid & idle):
+            m.d.sync += [idle.eq(0), deciding.eq(1), energy.eq(beat.energy), first.eq(beat.first),
+                         with_momentum.eq(beat.with_momentum), tolerance.eq(self.tolerance), floor.eq(self.floor)]
+
+        # the decision, the scale and the window, in one clock
+        rises = energy > kept
+        newest = Mux(first | ~rises, energy, kept)
+        with m.If(deciding):
+            m.d.sync += [deciding.eq(0), multiplying.eq(1), kept.eq(newest), accepted.eq(first | ~rises),
+                         energies[0].eq(newest), *(energies[k].eq(energies[k - 1]) for k in range(1, size + 1)),
+                         steps.eq(bits)]
+            with m.If(first):
+                m.d.sync += [held.eq(1), taken.eq(0), shift.eq(0), accepted_count.eq(0)]
+            with m.Else():
+                m.d.sync += [held.eq(Mux(held == size + 1, held, held + 1)), taken.eq(Cat(~rises, taken[:-1]))]
+                with m.If(~rises):
+                    with m.If(accepted_count + 1 >= SCALE_GROW_AFTER):
+                        m.d.sync += [shift.eq(Mux(shift > 0, shift - 1, 0)),
+                                     accepted_count.eq(Mux(shift > 0, 0, SCALE_GROW_AFTER))]
+                    with m.Else():
+                        m.d.sync += accepted_count.eq(accepted_count + 1)
+                with m.Else():
+                    m.d.sync += [accepted_count.eq(0), shift.eq(Mux(with_momentum, shift, shift + 1))]
+
+        # ε·E_old and |E_kept − E_old|, then the compare's halves, then their combination
+        oldest = energies[size]
+        with m.If(deciding):  # the multiplier, the window's oldest once the new energy is in, in the low bits
+            m.d.sync += allowed.eq(energies[size - 1])
+        with m.Elif(multiplying):
+            m.d.sync += [allowed.eq(shift_add_step(allowed, tolerance, bits)), steps.eq(steps - 1),
+                         difference.eq(kept - oldest), change.eq(Mux(difference[-1], -difference, difference))]
+            with m.If(steps == 1):
+                m.d.sync += [multiplying.eq(0), halves.eq(1)]
+        limit = allowed[ENERGY_TOL_FRAC_BITS:]
+        half = bits // 2
+        low_within, high_below, high_equal, below_floor, kept_zero, oldest_zero = (
+            Signal(name=n, reset_less=True) for n in ("low_within", "high_below", "high_equal", "below_floor",
+                                                      "kept_zero", "oldest_zero"))
+        m.d.sync += [low_within.eq(change[:half] <= limit[:half]), high_below.eq(change[half:] < limit[half:]),
+                     high_equal.eq(change[half:] == limit[half:]), below_floor.eq(kept < floor),
+                     kept_zero.eq(kept == 0), oldest_zero.eq(oldest == 0)]
+        within = high_below | (high_equal & low_within)
+        ready = (held == size + 1) & taken.any()
+        change_ok = Mux(oldest_zero, kept_zero, within)
+        with m.If(halves):
+            m.d.sync += [halves.eq(0), comparing.eq(1)]
+        with m.If(comparing):
+            out = self.o.payload
+            m.d.sync += [comparing.eq(0), self.o.valid.eq(1), out.accepted.eq(accepted), out.energy.eq(kept),
+                         out.settled.eq(~first & ready & (change_ok | below_floor)),
+                         out.stalled.eq(shift > SCALE_MAX_SHIFT), out.shift.eq(shift)]
+        with m.If(self.o.valid & self.o.ready):
+            m.d.sync += [self.o.valid.eq(0), idle.eq(1)]
+        return m

@@ -1,0 +1,152 @@
+"""RTL guard decision (hdl.GuardDecision) against the golden model's StepScale, EnergyWindow and
+StopRule, in Amaranth's simulator: every decision of long random runs, bit for bit, with gaps and
+back-pressure."""
+
+import gc
+import random
+import warnings
+
+import pytest
+from amaranth.hdl import UnusedElaboratable
+
+from golden_model.engine_spec.image import DEFAULT_CAPACITY
+from golden_model.fixed import FormatSet
+from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, StopRule
+from golden_model.guard import ENERGY_WINDOW, SCALE_GROW_AFTER, SCALE_MAX_SHIFT, EnergyWindow, StepScale
+from hdl.controller_units import EnergyCheck
+from hdl.guard_decision import GuardDecision
+from sim.payloads import pack, unpack
+from support.streams import run_streams
+
+ENERGY_BITS = EnergyCheck(FormatSet.preset("default"), DEFAULT_CAPACITY.entries).energy_bits
+TOLERANCE = round(1e-3 * 2**ENERGY_TOL_FRAC_BITS)
+
+
+def golden(items, tolerance, floor, size=ENERGY_WINDOW):
+    """``[(accepted, energy, settled, stalled, shift)]`` as ``Controller._advance_guarded`` and ``run`` decide."""
+    rule = StopRule(area=0, shape=0, energy=tolerance, floor=floor)
+    out, scale, window, kept = [], StepScale(), EnergyWindow(size), None
+    for energy, first, with_momentum in items:
+        if first:
+            scale, window, kept = StepScale(), EnergyWindow(size), energy
+            window.push(energy)
+            out.append((1, kept, 0, 0, 0))
+            continue
+        accepted = energy <= kept
+        if accepted:
+            kept, scale = energy, scale.accepted_step()
+        else:
+            scale = scale.rejected(with_momentum=bool(with_momentum))
+        window.push(kept, accepted)
+        settled = window.ready and rule.converged(window.oldest, kept, (0, 0))
+        out.append((int(accepted), kept, int(settled), int(scale.stalled), scale.shift))
+    return out
+
+
+def runs(seed: int, n_runs: int = 12, length: int = 90):
+    """Random runs, each starting with ``first``: energies falling by 10^-6 … 10^-1 a step, with rises
+    (rejected steps, some in long streaks that stall the scale), repeats, zeros and values near the
+    floor and at the top of the width; ``with_momentum`` at random."""
+    rng = random.Random(seed)
+    items = []
+    for r in range(n_runs):
+        energy = rng.choice([rng.getrandbits(ENERGY_BITS), rng.getrandbits(40), rng.getrandbits(12), 0])
+        items.append((energy, 1, 0))
+        streak = 0
+        for _ in range(length):
+            if streak == 0 and rng.random() < 0.04:
+                streak = rng.choice([2, 5, SCALE_MAX_SHIFT + 3])  # a run of rejections
+            kind = rng.random()
+            if streak:
+                streak -= 1
+                step = energy + rng.randint(1, max(1, energy // 100))  # a rise
+            elif kind < 0.05:
+                step = energy  # the same energy: accepted
+            elif kind < 0.08:
+                step = 0
+            else:
+                step = energy - int(energy * 10.0 ** rng.uniform(-6, -1))
+            energy_in = min(max(step, 0), (1 << ENERGY_BITS) - 1)
+            items.append((energy_in, 0, int(rng.random() < (0.3 if streak else 0.6))))
+            if energy_in <= energy:
+                energy = energy_in
+    return until_stalled(items)
+
+
+def until_stalled(items):
+    """``items`` with each run cut after its first ``stalled`` decision: there a run ends."""
+    kept, stopped = [], False
+    for item, decision in zip(items, golden(items, TOLERANCE, 0)):
+        stopped = False if item[1] else stopped
+        if not stopped:
+            kept.append(item)
+        stopped = stopped or bool(decision[3])
+    return kept
+
+
+def run_decision(items, tolerance, floor, *, seed=0, p_valid=1.0, p_ready=1.0):
+    dut = GuardDecision(ENERGY_BITS)
+    layout = dut.i.payload.shape()
+    beats = [pack(layout, {"energy": e, "first": f, "with_momentum": w}) for e, f, w in items]
+
+    def setup(ctx):
+        ctx.set(dut.tolerance, tolerance)
+        ctx.set(dut.floor, floor)
+
+    run = run_streams(dut, beats, seed=seed, p_valid=p_valid, p_ready=p_ready, setup=setup, one_at_a_time=True)
+    shape = dut.o.payload.shape()
+    got = [unpack(shape, raw) for raw in run.outputs]
+    return dut, run, [(d["accepted"], d["energy"], d["settled"], d["stalled"], d["shift"]) for d in got]
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_decisions_are_the_golden_models_with_gaps_and_back_pressure(seed):
+    items = runs(seed)
+    floor = 1 << 30
+    want = golden(items, TOLERANCE, floor)
+    # the runs reach what the decision must get right
+    assert {w[0] for w in want} == {0, 1} and {w[2] for w in want} == {0, 1} and {w[3] for w in want} == {0, 1}
+    assert max(w[4] for w in want) > SCALE_MAX_SHIFT and any(0 < w[4] < 3 for w in want)
+    _, _, got = run_decision(items, TOLERANCE, floor, seed=seed, p_valid=0.6, p_ready=0.5)
+    mismatch = [k for k, (g, w) in enumerate(zip(got, want)) if g != w]
+    assert not mismatch, f"{len(mismatch)} of {len(want)} differ, first at {mismatch[0]}: RTL {got[mismatch[0]]}, " \
+                         f"golden {want[mismatch[0]]}"
+
+
+def test_the_scale_grows_back_after_accepted_steps():
+    """A plain gradient step rolled back halves the scale; SCALE_GROW_AFTER accepted steps double it again."""
+    items = [(1000, 1, 0), (1001, 0, 0), (1002, 0, 0)] + [(900 - k, 0, 1) for k in range(SCALE_GROW_AFTER)]
+    _, _, got = run_decision(items, TOLERANCE, 0)
+    shifts = [g[4] for g in got]
+    assert shifts[:3] == [0, 1, 2] and shifts[3 + SCALE_GROW_AFTER - 2] == 2 and shifts[-1] == 1
+    assert got == golden(items, TOLERANCE, 0)
+
+
+def test_latency():
+    dut, run, _ = run_decision([(5, 1, 0), (4, 0, 0), (9, 0, 1)], TOLERANCE, 0)
+    assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * 3
+
+
+def test_parameter_validation():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        with pytest.raises(ValueError, match="energy_bits must be an int >= 2, not 1"):
+            GuardDecision(1)
+        with pytest.raises(ValueError, match="window must be an int >= 1, not 0"):
+            GuardDecision(ENERGY_BITS, window=0)
+        gc.collect()
+
+
+def test_the_energy_test_is_against_the_energy_a_window_back():
+    """Energies falling by 0.15·ε a step (1.5·ε over the window: not settled) around a halving: the test
+    the iteration the halving leaves the window must use ε times the energy a window back, not two back."""
+    rate = 0.15 * TOLERANCE / 2**ENERGY_TOL_FRAC_BITS
+    energies, energy = [], 1 << 60
+    for k in range(40):
+        energy = energy // 2 if k == 15 else energy - int(energy * rate)
+        energies.append(energy)
+    items = [(1 << 61, 1, 0)] + [(e, 0, 1) for e in energies]
+    want = golden(items, TOLERANCE, 0)
+    assert not any(w[2] for w in want) and all(w[0] for w in want)
+    _, _, got = run_decision(items, TOLERANCE, 0)
+    assert got == want
