@@ -18,29 +18,16 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from amaranth.hdl import Fragment, Instance  # noqa: E402
-
 from golden_model.engine_spec.image import DEFAULT_CAPACITY  # noqa: E402
 from golden_model.fixed import FormatSet  # noqa: E402
 from hdl import AreaError, ForcePass, GuardCertificate, Integrator  # noqa: E402
-from hdl.dsp import ECP5  # noqa: E402
+from hdl.dsp import mult18x18d_count as mult18x18d  # noqa: E402
 from hdl.engine import SpringflatEngine  # noqa: E402
+from sim.synth import TARGETS  # noqa: E402
 
 #: MULT18X18D blocks of the LFE5U-85F.
-ECP5_85F_DSP = 156
+ECP5_85F_DSP = TARGETS["ecp5"].capacity["dsps"]
 PRESETS = ("default", "narrow")
-
-
-def mult18x18d(component) -> int:
-    """``MULT18X18D`` instances in ``component`` elaborated for ECP5."""
-    count, fragments = 0, [Fragment.get(component, ECP5)]
-    while fragments:
-        for sub, _, _ in fragments.pop().subfragments:
-            if isinstance(sub, Instance):
-                count += sub.type == "MULT18X18D"
-            else:
-                fragments.append(sub)
-    return count
 
 
 def main() -> None:

@@ -18,11 +18,11 @@ The platform object also tells :class:`hdl.fifo.LutFIFO` that the device has dis
 
 from __future__ import annotations
 
-from amaranth.hdl import ClockSignal, Const, Instance, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import ClockSignal, Const, Fragment, Instance, Module, Mux, Signal, Value, signed, unsigned
 
 from golden_model.fixed.dsp import DSP_WIDTH, is_dsp_block
 
-__all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target"]
+__all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target", "mult18x18d_count"]
 
 
 class DspPlatform:
@@ -100,3 +100,15 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
         with m.If(enable):
             m.d.sync += updates
     return product
+
+
+def mult18x18d_count(component) -> int:
+    """``MULT18X18D`` instances in ``component`` elaborated with :data:`ECP5` (what ``synth`` maps)."""
+    count, fragments = 0, [Fragment.get(component, ECP5)]
+    while fragments:
+        for sub, _, _ in fragments.pop().subfragments:
+            if isinstance(sub, Instance):
+                count += sub.type == "MULT18X18D"
+            else:
+                fragments.append(sub)
+    return count

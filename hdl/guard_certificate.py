@@ -15,7 +15,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.fixed.guard import MOVE_WEIGHTS, floor_min_shift
+from golden_model.fixed.guard import EDGE_WEIGHT, MOVE_WEIGHTS, ROUNDING_MARGIN, floor_min_shift
 from golden_model.guard import FLOOR_SHIFT, GUARD_LEVELS
 
 from .fifo import LutFIFO
@@ -159,14 +159,14 @@ class GuardCertificate(wiring.Component):
         carried = {"floor_min": s["floor_min"], "wide": s["wide"],
                    "edges_ab": s["abs_ab_x"] + s["abs_ab_y"], "edges_ac": s["abs_ac_x"] + s["abs_ac_y"],
                    "moves_ab": MOVE_WEIGHTS[0] * s["norm_m0"] + MOVE_WEIGHTS[1] * s["norm_m1"],
-                   "moves_c": MOVE_WEIGHTS[2] * s["norm_m2"] + 8,
-                   **{f"alone{k}": weight * s[f"norm_m{k}"] + 8 for k, weight in enumerate(MOVE_WEIGHTS)}}
+                   "moves_c": MOVE_WEIGHTS[2] * s["norm_m2"] + ROUNDING_MARGIN,
+                   **{f"alone{k}": weight * s[f"norm_m{k}"] + ROUNDING_MARGIN for k, weight in enumerate(MOVE_WEIGHTS)}}
         alone = [f"alone{k}" for k in range(3)]
         margin_steps = [
             lambda c: {"floor_min": c["floor_min"], "wide": c["wide"], "edges": c["edges_ab"] + c["edges_ac"],
                        "moves": c["moves_ab"] + c["moves_c"], **{key: c[key] for key in alone}},
-            lambda c: {"floor_min": c["floor_min"], "wide": c["wide"], "margin": 2 * c["edges"] + c["moves"],
-                       **{f"stuck_margin{k}": 2 * c["edges"] + c[key] for k, key in enumerate(alone)}},
+            lambda c: {"floor_min": c["floor_min"], "wide": c["wide"], "margin": EDGE_WEIGHT * c["edges"] + c["moves"],
+                       **{f"stuck_margin{k}": EDGE_WEIGHT * c["edges"] + c[key] for k, key in enumerate(alone)}},
         ]
 
         def carry(stage_name):

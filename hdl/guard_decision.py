@@ -52,7 +52,9 @@ class GuardDecision(wiring.Component):
         settled  = full and a step taken in it, and
                    (E_old == 0 ? E_kept == 0 : |E_kept − E_old| << 40 ≤ ε·E_old, or E_kept < floor)
 
-    The run's first measurement (``first``) restarts everything: the window holds only its energy.
+    The run's first measurement (``first``) restarts everything: the window holds only its energy. A
+    decision with ``stalled`` ends the run as ``stalled`` whatever ``settled`` says (the golden model
+    stops before the window's test); the shift then stays at ``SCALE_MAX_SHIFT + 1``.
 
     Parameters
     ----------
@@ -141,8 +143,9 @@ class GuardDecision(wiring.Component):
                                      accepted_count.eq(Mux(shift > 0, 0, SCALE_GROW_AFTER))]
                     with m.Else():
                         m.d.sync += accepted_count.eq(accepted_count + 1)
-                with m.Else():
-                    m.d.sync += [accepted_count.eq(0), shift.eq(Mux(with_momentum, shift, shift + 1))]
+                with m.Else():  # (the shift stops one past SCALE_MAX_SHIFT: the run ends stalled there)
+                    m.d.sync += [accepted_count.eq(0),
+                                 shift.eq(Mux(with_momentum | (shift > SCALE_MAX_SHIFT), shift, shift + 1))]
 
         # ε·E_old and |E_kept − E_old|, then the compare's halves, then their combination
         oldest = energies[size]

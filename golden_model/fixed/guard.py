@@ -31,10 +31,15 @@ from ..guard import FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, node_levels
 from .format import Overflow, SaturationCounter, requantize, shift_round
 from .formats_set import FormatSet
 
-__all__ = ["MOVE_WEIGHTS", "proposal", "floor_min_shift", "floor_min_raw", "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw",
-           "commit"]
+__all__ = ["MOVE_WEIGHTS", "EDGE_WEIGHT", "ROUNDING_MARGIN", "proposal", "floor_min_shift", "floor_min_raw",
+           "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw", "commit"]
 
 SAT = Overflow.SATURATE
+
+#: The margin's weight on each corner's ``|V'|₁`` (corner a's move also moves both edges the margin measures).
+MOVE_WEIGHTS = (4, 2, 2)
+#: The margin's weight on the edges' ``|P_b − P_a|₁ + |P_c − P_a|₁``, and its constant part [lsb²].
+EDGE_WEIGHT, ROUNDING_MARGIN = 2, 8
 
 
 def proposal(fs: FormatSet, velocities: np.ndarray, force: np.ndarray, weights: np.ndarray, beta: int, shift: int,
@@ -102,13 +107,9 @@ def _terms_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: n
     x0 = cross(ab, ac)
     linear = [cross(move[k], opposite[k]) for k in range(3)]
     pair = [cross(move[k], move[(k + 1) % 3]) for k in range(3)]
-    edge_margin = 2 * (norm1(ab) + norm1(ac)) + 8
+    edge_margin = EDGE_WEIGHT * (norm1(ab) + norm1(ac)) + ROUNDING_MARGIN
     floor = np.minimum(x0, np.maximum(x0 >> FLOOR_SHIFT, floor_min))
     return x0, linear, pair, floor, edge_margin, [norm1(m) for m in move], wide
-
-
-#: The margin's weight on each corner's ``|V'|₁`` (corner a's move also moves both edges the margin measures).
-MOVE_WEIGHTS = (4, 2, 2)
 
 
 def triangle_levels_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, faces: np.ndarray, winding: float,

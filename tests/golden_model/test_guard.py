@@ -6,7 +6,7 @@ import pytest
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed, prepare
-from golden_model.fixed.guard import floor_min_raw, guarded_moves_raw
+from golden_model.fixed.guard import floor_min_raw, guarded_moves_raw, stuck_nodes_raw
 from golden_model.generate import delaunay_patch, spherical_cap
 from golden_model.guard import (FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, SCALE_GROW_AFTER, SCALE_MAX_SHIFT,
                                 StepScale, area_floor, guarded_moves)
@@ -178,3 +178,20 @@ def test_a_stuck_node_does_not_freeze_its_neighbours_in_fixed_point_as_in_float(
                                               np.full(2, 2e-6))
     assert np.array_equal(levels, float_levels) and np.array_equal(moves, float_moves)
     assert levels[2] > GUARD_LEVELS and np.array_equal(moves[1], [10, 0])
+
+
+def test_a_triangle_too_wide_for_face_edge_holds_its_corners_still_and_not_its_neighbours():
+    """Triangle (0, 1, 2) has an edge longer than face_edge holds: it is never trusted, so its corners are
+    stuck (their proposals zeroed before the certificate) and do not move; the small triangle (3, 5, 4)
+    beside it moves."""
+    edge = DEFAULT.face_edge
+    far = edge.raw_max + 1000  # past face_edge, inside position's range
+    assert far <= DEFAULT.position.raw_max
+    positions = np.array([[0, 0], [far, 0], [0, 1000], [far, 1000], [far + 1000, 2000], [far + 1000, 1000]],
+                         dtype=np.int64)
+    proposal = np.array([[5, 5], [5, 5], [5, 5], [5, 5], [5, 5], [5, 5]], dtype=np.int64)
+    faces = np.array([[0, 1, 2], [3, 5, 4]])
+    stuck = stuck_nodes_raw(DEFAULT, positions, proposal, faces, 1.0, np.zeros(2, dtype=np.int64))
+    assert stuck.tolist() == [True, True, True, False, False, False]
+    moves, levels = guarded_moves_raw(DEFAULT, positions, proposal, faces, 1.0, np.zeros(2, dtype=np.int64))
+    assert (levels[:3] > GUARD_LEVELS).all() and not moves[:3].any() and moves[3:].any()

@@ -13,13 +13,14 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, StopRule
 from golden_model.guard import ENERGY_WINDOW, SCALE_GROW_AFTER, SCALE_MAX_SHIFT, EnergyWindow, StepScale
+from golden_model.params import FlattenParams
 from hdl.controller_units import EnergyCheck
 from hdl.guard_decision import GuardDecision
 from sim.payloads import pack, unpack
 from support.streams import run_streams
 
 ENERGY_BITS = EnergyCheck(FormatSet.preset("default"), DEFAULT_CAPACITY.entries).energy_bits
-TOLERANCE = round(1e-3 * 2**ENERGY_TOL_FRAC_BITS)
+TOLERANCE = StopRule.of(FlattenParams(tol_energy=1e-3), FormatSet.preset("default")).energy  # ε = 1e-3 raw
 
 
 def golden(items, tolerance, floor, size=ENERGY_WINDOW):
@@ -150,3 +151,24 @@ def test_the_energy_test_is_against_the_energy_a_window_back():
     assert not any(w[2] for w in want) and all(w[0] for w in want)
     _, _, got = run_decision(items, TOLERANCE, 0)
     assert got == want
+
+
+@pytest.mark.parametrize("over, floor_offset, settled", [(0, 0, 1), (1, 0, 0), (1, 1, 1)])
+def test_the_energy_test_at_its_edges(over, floor_offset, settled):
+    """The change over the window exactly ⌊ε·E_old⌋ (settled) or one more (not), and the energy exactly
+    at the floor (not below it) or one under it (settled by the floor)."""
+    old = (1 << 70) + 12345
+    change = ((TOLERANCE * old) >> ENERGY_TOL_FRAC_BITS) + over
+    kept = old - change
+    items = [(old, 1, 0)] + [(old, 0, 0)] * (ENERGY_WINDOW - 1) + [(kept, 0, 0)]
+    floor = kept + floor_offset
+    want = golden(items, TOLERANCE, floor)
+    assert want[-1][2] == settled and not any(w[2] for w in want[:-1])
+    _, _, got = run_decision(items, TOLERANCE, floor)
+    assert got == want
+
+
+def test_a_stalled_scale_stays_one_past_the_last_halving():
+    items = [(10, 1, 0)] + [(11, 0, 0)] * (SCALE_MAX_SHIFT + 4)
+    _, _, got = run_decision(items, TOLERANCE, 0)
+    assert [g[4] for g in got][-3:] == [SCALE_MAX_SHIFT + 1] * 3 and all(g[3] for g in got[-3:])
