@@ -171,7 +171,8 @@ def _critical_path(block: str) -> dict:
         kinds = {"block RAM read": 1, **kinds}
     src = []
     for s in sources:
-        s = s[s.find("hdl/"):] if "hdl/" in s else s
+        # our sources from hdl/, a library's from its package (not this machine's site-packages path)
+        s = s[s.find("hdl/"):] if "hdl/" in s else s.split("site-packages/")[-1]
         if s not in src:
             src.append(s)
     start, end = (_rtl_name(cells[0].rsplit(".", 1)[0]), _rtl_name(cells[-1].rsplit(".", 1)[0])) if cells else (None, None)

@@ -135,6 +135,7 @@ Info:    routing  1.65  2.17 Net core.dt[4] (118,51) -> (119,58)
 Info:                          Sink core.$4_MULT18X18D.B4
 Info:                          Defined in:
 Info:                               /work/main/hdl/stepgen.py:205
+Info:                               /work/main/.venv/lib/python3.11/site-packages/amaranth/lib/memory.py:400
 Info:      logic  3.93  6.10 Source core.$4_MULT18X18D.P12
 Info:    routing  1.34  7.44 Net core.$4[12] (14,10) -> (14,9)
 Info:                          Sink core.dt_sq_TRELLIS_FF_Q_7.M
@@ -149,7 +150,7 @@ Info: Max frequency for clock '$glbnet$clk$TRELLIS_IO_IN': 134.37 MHz (FAIL at 1
                                 "MULT18X18D": {"used": 3, "available": 156}}
     cp = r["critical_path"]
     assert cp["from"] == "core.dt" and cp["to"] == "core.dt_sq" and cp["delay_ns"] == 7.44
-    assert cp["through"] == {"MULT18X18D": 1} and cp["rtl"] == ["hdl/stepgen.py:205"]
+    assert cp["through"] == {"MULT18X18D": 1} and cp["rtl"] == ["hdl/stepgen.py:205", "amaranth/lib/memory.py:400"]
     stat = {"design": {"num_cells_by_type": {"LUT4": 10, "CCU2C": 4, "TRELLIS_FF": 7, "MULT18X18D": 2,
                                              "DP16KD": 1}}}
     res = parse_yosys_stat(stat, TARGETS["ecp5"])
