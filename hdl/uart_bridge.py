@@ -260,6 +260,13 @@ class FrameBridge(wiring.Component):
                      crc_tx.valid.eq(tx.valid & tx.ready), wr.addr.eq(index), rd.addr.eq(index)]
         is_write = command == protocol.WRITE
         last_word = index == length - 1
+        # whether the frame reaches past the bus's last word: the 33-bit sum, then its compare, each in a
+        # register of its own (one carry chain of both in VERIFY was the board's critical path); address
+        # and length hold still from the length byte on, and SETTLE gives the two a clock when bytes
+        # come back to back
+        end = Signal(8 * protocol.ADDRESS_BYTES + 1, name="frame_end")
+        past_end = Signal(name="past_end")
+        m.d.sync += [end.eq(address + length), past_end.eq(end > (1 << self.addr_width))]
 
         def answer(code):
             m.d.sync += [status.eq(code), count.eq(0)]
@@ -310,11 +317,12 @@ class FrameBridge(wiring.Component):
             with m.State("CHECKSUM"):
                 m.d.comb += crc_rx.valid.eq(took)
                 with m.If(took):
-                    m.next = "VERIFY"
+                    m.next = "SETTLE"
                 with m.Elif(idle):
                     answer(protocol.TIMEOUT)
+            with m.State("SETTLE"):  # past_end's second register
+                m.next = "VERIFY"
             with m.State("VERIFY"):  # the CRC register has taken the CRC byte
-                past_end = (address + length) > (1 << self.addr_width)
                 with m.If(~crc_rx.match_detected):
                     answer(protocol.BAD_CHECKSUM)
                 with m.Elif(past_end):
