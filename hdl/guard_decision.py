@@ -12,7 +12,7 @@ iteration, after the energy check (``docs/engine-guard.md``); every constant com
 from __future__ import annotations
 
 from amaranth.hdl import Cat, Module, Mux, Signal, unsigned
-from amaranth.lib import data, stream, wiring
+from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS
@@ -20,23 +20,9 @@ from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
 from golden_model.guard import ENERGY_WINDOW, SCALE_GROW_AFTER, SCALE_MAX_SHIFT
 
 from .controller_units import shift_add_step
+from .layouts import decision_input_layout, decision_output_layout
 
-__all__ = ["GuardDecision", "decision_input_layout", "decision_output_layout"]
-
-
-def decision_input_layout(energy_bits: int) -> data.StructLayout:
-    """One measurement: its exact ``energy`` (``energy_raw``), ``first`` (the run's start layout: no step
-    to judge) and ``with_momentum`` (the step carried momentum, β > 0: a rejection restarts it rather
-    than halving the scale)."""
-    return data.StructLayout({"energy": unsigned(energy_bits), "first": 1, "with_momentum": 1})
-
-
-def decision_output_layout(energy_bits: int) -> data.StructLayout:
-    """The decision: ``accepted`` (the energy did not rise), ``energy`` (the kept layout's), ``settled``
-    (the window is ready and its energy test passes), ``stalled`` (the scale passed its last halving)
-    and the step scale's ``shift`` for the next proposal (``s = 2^-shift``)."""
-    return data.StructLayout({"accepted": 1, "energy": unsigned(energy_bits), "settled": 1, "stalled": 1,
-                              "shift": range(SCALE_MAX_SHIFT + 2)})
+__all__ = ["GuardDecision"]
 
 
 class GuardDecision(wiring.Component):
@@ -61,7 +47,8 @@ class GuardDecision(wiring.Component):
     energy_bits : int
         Width of the exact energy (:attr:`hdl.controller_units.EnergyCheck.energy_bits`).
     window : int
-        The window's length in iterations (:data:`golden_model.guard.ENERGY_WINDOW`).
+        The window's length in iterations (:data:`golden_model.guard.ENERGY_WINDOW`, the guarded mode's
+        default; a run constant in the golden model, which the engine's host is to check against it).
 
     Members
     -------

@@ -11,7 +11,7 @@ from amaranth.hdl import ShapeCastable, signed, unsigned
 from amaranth.lib import data
 
 from golden_model.fixed import MAX_PRODUCT_WIDTH, Format, FormatSet
-from golden_model.guard import GUARD_LEVELS
+from golden_model.guard import GUARD_LEVELS, SCALE_MAX_SHIFT
 from golden_model.engine_spec.image import MemoryLayout
 
 from .fixedpoint import shape_of
@@ -186,7 +186,8 @@ def errors_layout(fs: FormatSet) -> data.StructLayout:
 # ---------------------------------------------------------------- the controller's units
 # (hdl/area_error.py, hdl/controller_units.py)
 
-__all__ += ["triangle_layout", "certificate_layout", "certificate_level_shape", "certificate_result_layout", "area_saturations_layout",
+__all__ += ["triangle_layout", "certificate_layout", "certificate_level_shape", "certificate_result_layout",
+            "decision_input_layout", "decision_output_layout", "area_saturations_layout",
             "normalise_layout", "energy_sums_layout", "energy_result_layout", "word_layout", "weight_word_layout",
             "force_word_layout"]
 
@@ -224,6 +225,21 @@ def certificate_result_layout() -> data.StructLayout:
     set when corner ``k``'s own move alone fails the triangle's certificate at ``2^-GUARD_LEVELS`` (the
     triangle's part of ``stuck_nodes_raw``)."""
     return data.StructLayout({"level": certificate_level_shape(), "stuck": 3})
+
+
+def decision_input_layout(energy_bits: int) -> data.StructLayout:
+    """One measurement: its exact ``energy`` (``energy_raw``), ``first`` (the run's start layout: no step
+    to judge) and ``with_momentum`` (the step carried momentum, β > 0: a rejection restarts it rather
+    than halving the scale)."""
+    return data.StructLayout({"energy": unsigned(energy_bits), "first": 1, "with_momentum": 1})
+
+
+def decision_output_layout(energy_bits: int) -> data.StructLayout:
+    """The decision: ``accepted`` (the energy did not rise), ``energy`` (the kept layout's), ``settled``
+    (the window is ready and its energy test passes), ``stalled`` (the scale passed its last halving)
+    and the step scale's ``shift`` for the next proposal (``s = 2^-shift``)."""
+    return data.StructLayout({"accepted": 1, "energy": unsigned(energy_bits), "settled": 1, "stalled": 1,
+                              "shift": range(SCALE_MAX_SHIFT + 2)})
 
 
 def area_saturations_layout(fs: FormatSet) -> data.StructLayout:
