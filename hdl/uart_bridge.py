@@ -264,6 +264,10 @@ class FrameBridge(wiring.Component):
         # register of its own (one carry chain of both in VERIFY was the board's critical path); address
         # and length hold still from the length byte on, and SETTLE gives the two a clock when bytes
         # come back to back
+        # the word being sent, from the buffer's read a clock before (LOAD): the buffer's read, the byte
+        # select and the transmit CRC in one clock were the next critical path
+        sent_word = Signal(word_bits, name="sent_word")
+        m.d.sync += sent_word.eq(rd.data)
         end = Signal(8 * protocol.ADDRESS_BYTES + 1, name="frame_end")
         past_end = Signal(name="past_end")
         m.d.sync += [end.eq(address + length), past_end.eq(end > (1 << self.addr_width))]
@@ -361,18 +365,22 @@ class FrameBridge(wiring.Component):
                 with m.If(tx.ready):
                     m.d.sync += [index.eq(0), byte.eq(0)]
                     with m.If((status == protocol.OK) & ~is_write):
-                        m.next = "WORDS"
+                        m.next = "LOAD"
                     with m.Else():
                         m.next = "CRC"
+            with m.State("LOAD"):  # the word at `index` into `sent_word`
+                m.next = "WORDS"
             with m.State("WORDS"):  # the read's words from the buffer, big-endian
                 m.d.comb += [tx.valid.eq(1),
-                             tx.payload.eq(rd.data.word_select(~byte, 8))]  # ~byte = 3 - byte: 2 bits
+                             tx.payload.eq(sent_word.word_select(~byte, 8))]  # ~byte = 3 - byte: 2 bits
                 with m.If(tx.ready):
                     m.d.sync += byte.eq(byte + 1)
                     with m.If(byte == protocol.WORD_BYTES - 1):
                         m.d.sync += [byte.eq(0), index.eq(index + 1)]
                         with m.If(index == count - 1):
                             m.next = "CRC"
+                        with m.Else():
+                            m.next = "LOAD"
             with m.State("CRC"):
                 m.d.comb += [tx.valid.eq(1), tx.payload.eq(crc_tx.crc)]
                 with m.If(tx.ready):
