@@ -34,6 +34,7 @@ from amaranth.lib.memory import Memory, MemoryData, WritePort
 from amaranth.lib.wiring import In, Out
 
 from .dsp import dsp_target
+from .logic import or_tree
 from .rom import DP16KD_ADDRESS_PINS, DP16KD_CONFIGS, DP16KD_DATA_PINS, dp16kd, dp16kd_port
 
 __all__ = ["BlockRam", "dp16kd_banks"]
@@ -55,6 +56,12 @@ class BlockRam(wiring.Component):
     spread over the device crosses it, where a copy per block RAM can sit between the source and
     its block RAM. In generic RTL one register per port.
 
+    ``registered_select``: the word read passes two more registers, :attr:`latency` two clocks more. In the
+    ECP5 form with several banks these hold the bank select: each bank's word kept, or zeroed where it
+    is not the bank addressed, in a register beside the bank, then the banks' words ORed into a
+    register, so that no logic sits between a bank's output register and a route across the device
+    (``docs/synthesis.md``); with one bank, and in generic RTL, they only delay the word.
+
     ``name`` prefixes the ``DP16KD`` instances of the ECP5 form (``{name}_r{k}_{slice}``).
     ``contents`` is the generic form's :class:`amaranth.lib.memory.MemoryData`, for a testbench
     that reads the memory directly (``ctx.get(ram.contents[i])``).
@@ -63,8 +70,11 @@ class BlockRam(wiring.Component):
     #: Clocks from a read port's ``addr`` to its ``data``: the address registered in the block RAM,
     #: then its data in the output register.
     LATENCY = 2
+    #: Clocks ``registered_select`` adds: the banks' words kept or zeroed, then ORed.
+    SELECT_STAGES = 2
 
-    def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram", pin_registers: bool = False):
+    def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram", pin_registers: bool = False,
+                 registered_select: bool = False):
         if not isinstance(depth, int) or depth < 1:
             raise ValueError(f"BlockRam depth must be a positive integer, not {depth!r}")
         if not isinstance(read_ports, int) or read_ports < 1:
@@ -72,11 +82,13 @@ class BlockRam(wiring.Component):
         width = Shape.cast(shape).width
         if width < 1:
             raise ValueError(f"BlockRam word width must be at least 1, not {width}")
-        if not isinstance(pin_registers, bool):
-            raise TypeError(f"BlockRam pin_registers must be a bool, not {pin_registers!r}")
+        for flag, value in (("pin_registers", pin_registers), ("registered_select", registered_select)):
+            if not isinstance(value, bool):
+                raise TypeError(f"BlockRam {flag} must be a bool, not {value!r}")
         self.shape, self.depth, self.name, self.pin_registers = shape, depth, name, pin_registers
+        self.registered_select = registered_select
         #: Clocks from a read port's ``addr`` to its ``data``.
-        self.latency = self.LATENCY + pin_registers
+        self.latency = self.LATENCY + pin_registers + self.SELECT_STAGES * registered_select
         self.contents = MemoryData(shape=shape, depth=depth, init=[])
         addr_width = max(1, (depth - 1).bit_length())
         read = wiring.Signature({"addr": In(addr_width), "data": Out(shape)})
@@ -97,9 +109,18 @@ class BlockRam(wiring.Component):
         for k, port in enumerate(self.read):
             read = memory.read_port()
             landed = Signal(self.shape, reset_less=True, name=f"landed{k}")
-            m.d.comb += [read.addr.eq(self._pin(m, port.addr, f"r{k}_addr")), port.data.eq(landed)]
+            m.d.comb += [read.addr.eq(self._pin(m, port.addr, f"r{k}_addr")),
+                         Value.cast(port.data).eq(self._delayed(m, Value.cast(landed), f"r{k}"))]
             m.d.sync += landed.eq(read.data)
         return m
+
+    def _delayed(self, m: Module, value: Value, name: str) -> Value:
+        """``value`` through the ``registered_select`` stages (none without it)."""
+        for n in range(self.SELECT_STAGES * self.registered_select):
+            q = Signal(len(value), reset_less=True, name=f"{name}_select{n}")
+            m.d.sync += q.eq(value)
+            value = q
+        return value
 
     def _pin(self, m: Module, value: Value, name: str, *, kept: bool = False) -> Value:
         """``value``, or (``pin_registers``) ``value`` registered: a plain register, or with ``kept`` one
@@ -158,10 +179,26 @@ class BlockRam(wiring.Component):
                         **dp16kd_port("B", clock=ClockSignal(), address=adb_pins, read_data=dob))
             read_data = Value.cast(port.data)
             if banks == 1:
-                m.d.comb += read_data.eq(bank_data[0])
+                m.d.comb += read_data.eq(self._delayed(m, bank_data[0], f"r{k}"))
                 continue
-            # the bank of the word in the output registers: the address's high bits, latency clocks on
-            bank = [Signal(range(banks), name=f"r{k}_bank_q{n}") for n in range(1, self.latency + 1)]
+            # the bank of the word in the output registers: the address's high bits, carried to the clock
+            # of the banks' data (the address registered, in the pin registers, then read)
+            to_data = self.LATENCY + self.pin_registers
+            if self.registered_select:  # one flag per bank, the kept words ORed
+                flags = [[Signal(name=f"r{k}_bank{b}_q{n}") for n in range(1, to_data + 1)] for b in range(banks)]
+                kept = [Signal(width, reset_less=True, name=f"r{k}_bank{b}_kept") for b in range(banks)]
+                for b in range(banks):
+                    m.d.sync += [flags[b][0].eq(port.addr[address_bits:] == b),
+                                 *(flags[b][n].eq(flags[b][n - 1]) for n in range(1, to_data))]
+                    with m.If(flags[b][-1]):
+                        m.d.sync += kept[b].eq(bank_data[b])
+                    with m.Else():
+                        m.d.sync += kept[b].eq(0)
+                selected = Signal(width, reset_less=True, name=f"r{k}_selected")
+                m.d.sync += selected.eq(or_tree(kept))
+                m.d.comb += read_data.eq(selected)
+                continue
+            bank = [Signal(range(banks), name=f"r{k}_bank_q{n}") for n in range(1, to_data + 1)]
             m.d.sync += [bank[0].eq(port.addr[address_bits:]), *(bank[n].eq(bank[n - 1]) for n in range(1, len(bank)))]
             with m.Switch(bank[-1]):
                 for b in range(banks):

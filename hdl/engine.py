@@ -22,7 +22,7 @@ from .area_error import AreaError
 from .force_pass import ForcePass
 from .integrator import Integrator
 from .logic import mode_steps
-from .memory_windows import MemoryWindows
+from .memory_windows import MemoryWindows, needs_registered_select
 from .pass_sequencer import PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
 from .register_bank import RegisterBank
@@ -48,6 +48,11 @@ class SpringflatEngine(wiring.Component):
     entry_bank_depth : int
         Words per bank of the entry memory (a power of two; :data:`ENTRY_BANK_DEPTH`, the deepest
         DP16KD mode of a wide word; a test passes less to have several banks at a small capacity).
+    registered_select : bool or None
+        The node and triangle memories' bank select in registered stages, their reads two clocks
+        longer (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: where the node memories take
+        several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
+        ``default``). A test passes ``True`` to run those latencies at a small capacity.
 
     Members
     -------
@@ -92,7 +97,8 @@ class SpringflatEngine(wiring.Component):
     #: pipeline and the registered limit compare): :attr:`PhaseController.CHECK_SETTLE_CLOCKS`.
     CHECK_SETTLE_CLOCKS = PhaseController.CHECK_SETTLE_CLOCKS
 
-    def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH):
+    def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH,
+                 registered_select: bool | None = None):
         if isinstance(fs, str):
             fs = FormatSet.preset(fs)
         if not isinstance(fs, FormatSet):
@@ -102,8 +108,12 @@ class SpringflatEngine(wiring.Component):
         if isinstance(entry_bank_depth, bool) or not isinstance(entry_bank_depth, int) or entry_bank_depth < 2 \
                 or entry_bank_depth & (entry_bank_depth - 1):
             raise ValueError(f"entry_bank_depth must be a power of two >= 2, not {entry_bank_depth!r}")
+        if registered_select not in (None, True, False):
+            raise TypeError(f"registered_select must be a bool or None, not {registered_select!r}")
         self.fs, self.capacity = fs, capacity
         self.entry_bank_depth = entry_bank_depth
+        self.registered_select = needs_registered_select(fs, capacity) if registered_select is None \
+            else registered_select
         self.register_map = RegisterMap.build(fs, capacity)
         self.layouts = memory_layouts(fs, capacity)
         end = max(w.base + w.size for w in self.register_map.windows)
@@ -119,8 +129,9 @@ class SpringflatEngine(wiring.Component):
         m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width)
         m.submodules.registers = registers = RegisterBank(rmap, addr_width=self.addr_width, copies=UNIT_CONSTANTS)
         m.submodules.memories = memories = MemoryWindows(fs, cap, rmap, addr_width=self.addr_width,
-                                                         entry_bank_depth=self.entry_bank_depth)
-        m.submodules.sequencer = sequencer = PassSequencer(fs, rmap)
+                                                         entry_bank_depth=self.entry_bank_depth,
+                                                         registered_select=self.registered_select)
+        m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency)
         m.submodules.controller = controller = PhaseController(fs, rmap)
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True)
         m.submodules.area = area = AreaError(fs)

@@ -11,16 +11,32 @@ from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import BUS_WORD_BITS, EngineCapacity, memory_layouts
 from golden_model.engine_spec.register_map import RegisterMap
 
-from .block_ram import BlockRam
+from .block_ram import BlockRam, dp16kd_banks
 from .layouts import force_word_layout, vector_layout, weight_word_layout, word_layout
 from .logic import or_tree
 from .rom import ENTRY_BANK_DEPTH
 
 __all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
+           "needs_registered_select", "read_latency",
            "write_signature"]
 
-#: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`).
+#: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`), for the
+#: node and triangle memories of a capacity whose node memories are one bank each (:func:`read_latency`).
 READ_LATENCY = BlockRam.LATENCY
+
+
+def needs_registered_select(fs: FormatSet, capacity: EngineCapacity) -> bool:
+    """Whether the node memories take more than one bank of ``DP16KD`` (:func:`hdl.block_ram.dp16kd_banks`):
+    then the node and triangle memories select their banks in registered stages (:class:`BlockRam`'s
+    ``registered_select``), as the entry memory does; a bank multiplexer after the output registers of
+    banks spread over the die was the worst path at 3,072 vertices (``docs/synthesis.md``)."""
+    return dp16kd_banks(capacity.vertices, vector_layout(fs.position).size)[2] > 1
+
+
+def read_latency(registered_select: bool) -> int:
+    """Clocks from a node or triangle memory's read address register to its data: :data:`READ_LATENCY`,
+    and :attr:`BlockRam.SELECT_STAGES` more with ``registered_select``."""
+    return READ_LATENCY + BlockRam.SELECT_STAGES * registered_select
 #: The entry memory's bank select after the banks' output registers, one registered stage each: every
 #: bank's word kept or zeroed by that bank's own select flag in a register beside the bank, groups of
 #: up to :data:`ENTRY_GROUP` banks ORed, the groups ORed.
@@ -62,6 +78,9 @@ class MemoryWindows(wiring.Component):
         Width of the bus's word address.
     entry_bank_depth : int
         Words per bank of the entry memory (a power of two).
+    registered_select : bool
+        The node and triangle memories' read data through :class:`BlockRam`'s ``registered_select``:
+        :attr:`read_latency` (:func:`read_latency`) is two clocks more.
 
     Members
     -------
@@ -79,7 +98,7 @@ class MemoryWindows(wiring.Component):
     entry, triangle, position[3], velocity, weight_word, force_word : ``Out``
         The passes' read data: ``entry`` (the addressed bank's word, a register)
         :data:`ENTRY_LATENCY` (six) clocks after the entry address is in ``ent_addr``, every other
-        port :data:`READ_LATENCY` (two) clocks after its address register.
+        port :attr:`read_latency` (two, or four with ``registered_select``) clocks after its address register.
     force_write : ``In(write_signature(...))``
         The force pass's per-node results: written to the force memory (not on the bus).
     node_write : ``In(write_signature(...))``
@@ -119,7 +138,7 @@ class MemoryWindows(wiring.Component):
     """
 
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, register_map: RegisterMap, *, addr_width: int,
-                 entry_bank_depth: int = ENTRY_BANK_DEPTH):
+                 entry_bank_depth: int = ENTRY_BANK_DEPTH, registered_select: bool = False):
         if not isinstance(fs, FormatSet) or not isinstance(capacity, EngineCapacity):
             raise TypeError(f"MemoryWindows needs a FormatSet and an EngineCapacity, not {fs!r}, {capacity!r}")
         if not isinstance(register_map, RegisterMap) or register_map.capacity != capacity:
@@ -131,6 +150,11 @@ class MemoryWindows(wiring.Component):
             raise ValueError(f"entry_bank_depth must be a power of two >= 2, not {entry_bank_depth!r}")
         self.fs, self.capacity, self.register_map = fs, capacity, register_map
         self.entry_bank_depth = entry_bank_depth
+        self.registered_select = bool(registered_select)
+        #: Clocks from a node or triangle memory's address register to its data.
+        self.read_latency = read_latency(self.registered_select)
+        assert self.read_latency <= ENTRY_LATENCY, "the bus aligns every window's word to the entry's"
+        select = {"registered_select": self.registered_select}
         layouts = memory_layouts(fs, capacity)
         self.entry_shape, self.triangle_shape = word_layout(layouts["entries"]), word_layout(layouts["triangles"])
         pos_shape, vel_shape = vector_layout(fs.position), vector_layout(fs.velocity)
@@ -140,11 +164,11 @@ class MemoryWindows(wiring.Component):
         #: ``entry_bank_depth`` words: Yosys maps a bank of wide words to DP16KDs with no cascade,
         #: where a deeper memory gets a multiplexer after the block RAMs' outputs.
         self.rams = {
-            "positions": BlockRam(pos_shape, cap.vertices, read_ports=3, name="positions"),
-            "velocities": BlockRam(vel_shape, cap.vertices, name="velocities"),
-            "weights": BlockRam(weight_shape, cap.vertices, name="weights"),
-            "forces": BlockRam(force_shape, cap.vertices, name="forces"),
-            "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles"),
+            "positions": BlockRam(pos_shape, cap.vertices, read_ports=3, name="positions", **select),
+            "velocities": BlockRam(vel_shape, cap.vertices, name="velocities", **select),
+            "weights": BlockRam(weight_shape, cap.vertices, name="weights", **select),
+            "forces": BlockRam(force_shape, cap.vertices, name="forces", **select),
+            "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles", **select),
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
                                        name=f"entries{b}", pin_registers=True) for b in range(banks)},
         }
@@ -266,7 +290,7 @@ class MemoryWindows(wiring.Component):
                     read_data = self.rams["triangles"].read[0].data.as_value()
                 # the memories' data has landed (BlockRam); delayed to the entry's clock
                 word_value = read_data
-                for d in range(ENTRY_LATENCY - READ_LATENCY):
+                for d in range(ENTRY_LATENCY - self.read_latency):
                     aligned = Signal(len(read_data), name=f"bus_{w.name}_aligned{d}", reset_less=True)
                     m.d.sync += aligned.eq(word_value)
                     word_value = aligned

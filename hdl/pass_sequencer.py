@@ -22,7 +22,8 @@ from .memory_windows import ENTRY_LATENCY, READ_LATENCY, node_write_layout, writ
 __all__ = ["PassSequencer", "fetch_counter"]
 
 #: The force pass's clocks from the entry's address (E0) to ``ForcePass.i``: the entry read, its
-#: position addresses registered, their read.
+#: position addresses registered, their read (with the node memories' :data:`READ_LATENCY`; a sequencer
+#: takes its own from its ``read_latency``).
 FORCE_FETCH_LATENCY = ENTRY_LATENCY + 1 + READ_LATENCY
 #: The area pass's clocks from the triangle's address (T0) to ``AreaError.i``: the triangle's read, its
 #: corners' addresses registered, their read.
@@ -105,11 +106,18 @@ class PassSequencer(wiring.Component):
     drains on its own.
     """
 
-    def __init__(self, fs: FormatSet, register_map: RegisterMap):
+    def __init__(self, fs: FormatSet, register_map: RegisterMap, *, read_latency: int = READ_LATENCY):
         if not isinstance(fs, FormatSet) or not isinstance(register_map, RegisterMap):
             raise TypeError(f"PassSequencer needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
         cap: EngineCapacity = register_map.capacity
         self.fs, self.capacity = fs, cap
+        #: Each pass's clocks from its first address to its unit's input, for node and triangle memories
+        #: answering ``read_latency`` clocks after their address registers (:data:`FORCE_FETCH_LATENCY`,
+        #: :data:`AREA_FETCH_LATENCY`, :data:`NODE_FETCH_LATENCY` with :data:`READ_LATENCY`).
+        self.force_fetch_latency = FORCE_FETCH_LATENCY - READ_LATENCY + read_latency
+        self.area_fetch_latency = AREA_FETCH_LATENCY - 2 * READ_LATENCY + 2 * read_latency
+        self.node_fetch_latency = NODE_FETCH_LATENCY - READ_LATENCY + read_latency
+        self.read_latency = read_latency
         layouts = memory_layouts(fs, cap)
         sums = energy_sums_layout(fs, cap.entries)
         force_sig, integrator_sig = ForcePass.signature_of(fs, True, True), Integrator.signature_of(fs, None, True)
@@ -168,14 +176,14 @@ class PassSequencer(wiring.Component):
 
     def _force_pass(self, m: Module):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
-        e_valid = fetch_counter(m, self.entry_index, self.fetch_force, self.entries, "e", FORCE_FETCH_LATENCY + 1)
+        e_valid = fetch_counter(m, self.entry_index, self.fetch_force, self.entries, "e", self.force_fetch_latency + 1)
         entry_shape = self.entry.shape()
         ent_data = self.entry  # the addressed entry, at E6 (ENTRY_LATENCY)
         next_first = Signal(name="next_first")
         # the entry and its first flag carried from ENTRY_LATENCY to FORCE_FETCH_LATENCY, beside its
         # positions' read
         e_entry, e_first = ent_data, next_first
-        for k in range(ENTRY_LATENCY + 1, FORCE_FETCH_LATENCY + 1):
+        for k in range(ENTRY_LATENCY + 1, self.force_fetch_latency + 1):
             entry_k, first_k = Signal(entry_shape, reset_less=True, name=f"e{k}_entry"), Signal(name=f"e{k}_first")
             m.d.sync += [entry_k.eq(e_entry), first_k.eq(e_first)]
             e_entry, e_first = entry_k, first_k
@@ -183,7 +191,7 @@ class PassSequencer(wiring.Component):
             m.d.sync += [next_first.eq(ent_data.last), self.node_of_entry.eq(self.node_of_entry + ent_data.last)]
         beat, barrier = self.force_entry.payload, self.barrier_held
         m.d.comb += [
-            self.force_entry.valid.eq(e_valid[FORCE_FETCH_LATENCY]),
+            self.force_entry.valid.eq(e_valid[self.force_fetch_latency]),
             beat.first.eq(e_first), beat.last.eq(e_entry.last),
             beat.position.eq(self.position[0]), beat.neighbour.position.eq(self.position[1]),  # landed at E9
             beat.neighbour.rest.eq(e_entry.rest),
@@ -205,22 +213,25 @@ class PassSequencer(wiring.Component):
 
     def _area_pass(self, m: Module):
         """T0 … T5 into ``AreaError.i``, one triangle per clock."""
-        t_valid = fetch_counter(m, self.tri_index, self.fetch_area, self.triangles, "t", AREA_FETCH_LATENCY + 1)
-        t3_area, t4_area, t5_area = (Signal(shape_of(self.fs.face_area), reset_less=True, name=f"t{k}_area")
-                                     for k in (3, 4, 5))
-        m.d.sync += [t3_area.eq(self.triangle.area), t4_area.eq(t3_area), t5_area.eq(t4_area)]  # landed at T2
+        t_valid = fetch_counter(m, self.tri_index, self.fetch_area, self.triangles, "t", self.area_fetch_latency + 1)
+        # the triangle's area, landed with it (at T2), carried beside its corners' read (to T5)
+        area = self.triangle.area
+        for k in range(self.read_latency + 1, self.area_fetch_latency + 1):
+            area_k = Signal(shape_of(self.fs.face_area), reset_less=True, name=f"t{k}_area")
+            m.d.sync += area_k.eq(area)
+            area = area_k
         out = self.triangle_out
-        m.d.comb += [out.valid.eq(t_valid[AREA_FETCH_LATENCY]), out.payload.a.eq(self.position[0]),
+        m.d.comb += [out.valid.eq(t_valid[self.area_fetch_latency]), out.payload.a.eq(self.position[0]),
                      out.payload.b.eq(self.position[1]), out.payload.c.eq(self.position[2]),
-                     out.payload.area.eq(t5_area)]  # landed at T5
+                     out.payload.area.eq(area)]
         return t_valid
 
     def _integrate_pass(self, m: Module):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
-        n_valid = fetch_counter(m, self.node_index, self.fetch_nodes, self.vertices, "n", NODE_FETCH_LATENCY + 1)
+        n_valid = fetch_counter(m, self.node_index, self.fetch_nodes, self.vertices, "n", self.node_fetch_latency + 1)
         node = self.node_out.payload
         m.d.comb += [  # landed at N2
-            self.node_out.valid.eq(n_valid[NODE_FETCH_LATENCY]),
+            self.node_out.valid.eq(n_valid[self.node_fetch_latency]),
             node.node.position.eq(self.position[0]), node.node.velocity.eq(self.velocity),
             node.node.inv_mass.eq(self.weight_word.inv_mass), node.node.inv_mass_barrier.eq(self.weight_word.inv_mass_barrier),
             node.force.eq(self.force_word.force), node.inside.eq(self.force_word.inside),

@@ -39,10 +39,19 @@ def test_block_ram_with_pin_registers_reads_three_clocks_after_the_address(tmp_p
     check_block_ram(tmp_path, platform, shape, depth, pin_registers=True)
 
 
-def check_block_ram(tmp_path, platform, shape, depth, *, pin_registers):
+@pytest.mark.parametrize("platform", [None, ECP5], ids=["generic", "ecp5"])
+@pytest.mark.parametrize("shape, depth, pin_registers", [(unsigned(40), 600, False), (unsigned(52), 3072, False),
+                                                         (unsigned(40), 3000, True)])  # the last two in banks
+def test_block_ram_with_registered_select_reads_two_clocks_later(tmp_path, platform, shape, depth, pin_registers):
+    """The bank select (or, with one bank, the word) in two registers more: the read answers two clocks later."""
+    check_block_ram(tmp_path, platform, shape, depth, pin_registers=pin_registers, registered_select=True)
+
+
+def check_block_ram(tmp_path, platform, shape, depth, *, pin_registers, registered_select=False):
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
-    ram = BlockRam(shape, depth, read_ports=2, name="mem", pin_registers=pin_registers)
-    assert ram.latency == BlockRam.LATENCY + pin_registers
+    ram = BlockRam(shape, depth, read_ports=2, name="mem", pin_registers=pin_registers,
+                   registered_select=registered_select)
+    assert ram.latency == BlockRam.LATENCY + pin_registers + 2 * registered_select
     width = Shape.cast(shape).width
     abits = len(ram.write.addr)
     (tmp_path / "ram.v").write_text(verilog.convert(ram, name="ram", platform=platform))
@@ -71,6 +80,8 @@ def test_block_ram_refuses_bad_parameters():
             BlockRam(unsigned(8), 16, read_ports=0)
         with pytest.raises(ValueError, match="width"):
             BlockRam(unsigned(0), 16)
+        with pytest.raises(TypeError, match="registered_select must be a bool"):
+            BlockRam(unsigned(8), 16, registered_select=1)
 
 
 def test_dp16kd_banks_takes_the_fewest_block_rams():
