@@ -49,8 +49,8 @@ class SpringflatEngine(wiring.Component):
         Words per bank of the entry memory (a power of two; :data:`ENTRY_BANK_DEPTH`, the deepest
         DP16KD mode of a wide word; a test passes less to have several banks at a small capacity).
     registered_select : bool or None
-        The node and triangle memories' bank select in registered stages, their reads two clocks
-        longer (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: where the node memories take
+        The node and triangle memories built as the entry memory (pin registers, the bank select in
+        registered stages), their reads three clocks longer (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: where the node memories take
         several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
         ``default``). A test passes ``True`` to run those latencies at a small capacity.
 

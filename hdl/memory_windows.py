@@ -34,9 +34,9 @@ def needs_registered_select(fs: FormatSet, capacity: EngineCapacity) -> bool:
 
 
 def read_latency(registered_select: bool) -> int:
-    """Clocks from a node or triangle memory's read address register to its data: :data:`READ_LATENCY`,
-    and :attr:`BlockRam.SELECT_STAGES` more with ``registered_select``."""
-    return READ_LATENCY + BlockRam.SELECT_STAGES * registered_select
+    """Clocks from a node or triangle memory's read address register to its data: :data:`READ_LATENCY`;
+    with ``registered_select`` also the memories' pin registers (one clock) and :attr:`BlockRam.SELECT_STAGES`."""
+    return READ_LATENCY + (1 + BlockRam.SELECT_STAGES) * registered_select
 #: The entry memory's bank select after the banks' output registers, one registered stage each: every
 #: bank's word kept or zeroed by that bank's own select flag in a register beside the bank, groups of
 #: up to :data:`ENTRY_GROUP` banks ORed, the groups ORed.
@@ -79,8 +79,9 @@ class MemoryWindows(wiring.Component):
     entry_bank_depth : int
         Words per bank of the entry memory (a power of two).
     registered_select : bool
-        The node and triangle memories' read data through :class:`BlockRam`'s ``registered_select``:
-        :attr:`read_latency` (:func:`read_latency`) is two clocks more.
+        The node and triangle memories as the entry memory: every block RAM input in a register of its
+        own (:class:`BlockRam`'s ``pin_registers``: a write lands a clock later) and the read data through
+        its ``registered_select``; :attr:`read_latency` (:func:`read_latency`) is three clocks more.
 
     Members
     -------
@@ -98,7 +99,7 @@ class MemoryWindows(wiring.Component):
     entry, triangle, position[3], velocity, weight_word, force_word : ``Out``
         The passes' read data: ``entry`` (the addressed bank's word, a register)
         :data:`ENTRY_LATENCY` (six) clocks after the entry address is in ``ent_addr``, every other
-        port :attr:`read_latency` (two, or four with ``registered_select``) clocks after its address register.
+        port :attr:`read_latency` (two, or five with ``registered_select``) clocks after its address register.
     force_write : ``In(write_signature(...))``
         The force pass's per-node results: written to the force memory (not on the bus).
     node_write : ``In(write_signature(...))``
@@ -154,7 +155,7 @@ class MemoryWindows(wiring.Component):
         #: Clocks from a node or triangle memory's address register to its data.
         self.read_latency = read_latency(self.registered_select)
         assert self.read_latency <= ENTRY_LATENCY, "the bus aligns every window's word to the entry's"
-        select = {"registered_select": self.registered_select}
+        select = {"registered_select": self.registered_select, "pin_registers": self.registered_select}
         layouts = memory_layouts(fs, capacity)
         self.entry_shape, self.triangle_shape = word_layout(layouts["entries"]), word_layout(layouts["triangles"])
         pos_shape, vel_shape = vector_layout(fs.position), vector_layout(fs.velocity)
