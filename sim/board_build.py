@@ -216,8 +216,8 @@ def cmd_board(args, fs, capacity) -> int:
 
     if args.board is None:
         raise SynthError("give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)")
-    if args.target is not None or args.components or args.router != "auto" or args.freq is not None:
-        raise SynthError("--board takes --formats, --capacity, --seed, --baud and --out only")
+    if args.target is not None or args.components or args.router != "auto":
+        raise SynthError("--board takes --formats, --capacity, --seed, --freq, --baud and --out only")
     if args.baud is not None and args.baud <= 0:
         raise SynthError(f"--baud must be a positive number of bits per second, not {args.baud}")
     out = Path(args.out) if args.out else Path(f"board-{args.board}-{fs.name}")
@@ -228,6 +228,8 @@ def cmd_board(args, fs, capacity) -> int:
         parts += ["--seed", str(args.seed)]
     if args.baud:
         parts += ["--baud", str(args.baud)]
+    if args.freq is not None:
+        parts += ["--freq", f"{args.freq:g}"]
     start = time.monotonic()
 
     def progress(msg: str) -> None:
@@ -235,6 +237,7 @@ def cmd_board(args, fs, capacity) -> int:
             print(f"springflat synth [{time.monotonic() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
     report = run_board_build(fs, capacity, out, board=args.board, seed=args.seed, baud=args.baud, progress=progress,
+                             clock_hz=None if args.freq is None else args.freq * 1e6,
                              command=shlex.join(parts + ["--out", str(out)]))
     if args.json:
         print(strict_json(report))
