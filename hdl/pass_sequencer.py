@@ -19,17 +19,18 @@ from .layouts import (area_saturations_layout, energy_sums_layout, force_entry_l
                       vector_layout, weight_word_layout, word_layout)
 from .memory_windows import ENTRY_LATENCY, READ_LATENCY, node_write_layout, write_signature
 
-__all__ = ["PassSequencer", "fetch_counter"]
+__all__ = ["PassSequencer", "fetch_counter", "fetch_latencies"]
 
-#: The force pass's clocks from the entry's address (E0) to ``ForcePass.i``: the entry read, its
-#: position addresses registered, their read (with the node memories' :data:`READ_LATENCY`; a sequencer
-#: takes its own from its ``read_latency``).
-FORCE_FETCH_LATENCY = ENTRY_LATENCY + 1 + READ_LATENCY
-#: The area pass's clocks from the triangle's address (T0) to ``AreaError.i``: the triangle's read, its
-#: corners' addresses registered, their read.
-AREA_FETCH_LATENCY = READ_LATENCY + 1 + READ_LATENCY
-#: The integrate pass's clocks from the node's address (N0) to ``Integrator.i``: the node's read.
-NODE_FETCH_LATENCY = READ_LATENCY
+def fetch_latencies(read_latency: int) -> tuple[int, int, int]:
+    """``(force, area, node)``: each pass's clocks from its first address to its unit's input, for node and
+    triangle memories answering ``read_latency`` clocks after their address registers. The force pass: the
+    entry read, its position addresses registered, their read; the area pass: the triangle's read, its
+    corners' addresses registered, their read; the integrate pass: the node's read."""
+    return ENTRY_LATENCY + 1 + read_latency, read_latency + 1 + read_latency, read_latency
+
+
+#: :func:`fetch_latencies` with the node memories' :data:`READ_LATENCY` (one bank each).
+FORCE_FETCH_LATENCY, AREA_FETCH_LATENCY, NODE_FETCH_LATENCY = fetch_latencies(READ_LATENCY)
 
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
@@ -111,12 +112,8 @@ class PassSequencer(wiring.Component):
             raise TypeError(f"PassSequencer needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
         cap: EngineCapacity = register_map.capacity
         self.fs, self.capacity = fs, cap
-        #: Each pass's clocks from its first address to its unit's input, for node and triangle memories
-        #: answering ``read_latency`` clocks after their address registers (:data:`FORCE_FETCH_LATENCY`,
-        #: :data:`AREA_FETCH_LATENCY`, :data:`NODE_FETCH_LATENCY` with :data:`READ_LATENCY`).
-        self.force_fetch_latency = FORCE_FETCH_LATENCY - READ_LATENCY + read_latency
-        self.area_fetch_latency = AREA_FETCH_LATENCY - 2 * READ_LATENCY + 2 * read_latency
-        self.node_fetch_latency = NODE_FETCH_LATENCY - READ_LATENCY + read_latency
+        #: Each pass's clocks from its first address to its unit's input (:func:`fetch_latencies`).
+        self.force_fetch_latency, self.area_fetch_latency, self.node_fetch_latency = fetch_latencies(read_latency)
         self.read_latency = read_latency
         layouts = memory_layouts(fs, cap)
         sums = energy_sums_layout(fs, cap.entries)
@@ -214,7 +211,7 @@ class PassSequencer(wiring.Component):
     def _area_pass(self, m: Module):
         """T0 … T5 into ``AreaError.i``, one triangle per clock."""
         t_valid = fetch_counter(m, self.tri_index, self.fetch_area, self.triangles, "t", self.area_fetch_latency + 1)
-        # the triangle's area, landed with it (at T2), carried beside its corners' read (to T5)
+        # the triangle's area, landed with it, carried beside its corners' read
         area = self.triangle.area
         for k in range(self.read_latency + 1, self.area_fetch_latency + 1):
             area_k = Signal(shape_of(self.fs.face_area), reset_less=True, name=f"t{k}_area")

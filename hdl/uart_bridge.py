@@ -261,11 +261,11 @@ class FrameBridge(wiring.Component):
         is_write = command == protocol.WRITE
         last_word = index == length - 1
         # whether the frame reaches past the bus's last word: the 33-bit sum, then its compare, each in a
-        # register of its own (one carry chain of both in VERIFY was the board's critical path); address
+        # register of its own (not one carry chain of both in VERIFY); address
         # and length hold still from the length byte on, and SETTLE gives the two a clock when bytes
         # come back to back
-        # the word being sent, from the buffer's read a clock before (LOAD): the buffer's read, the byte
-        # select and the transmit CRC in one clock were the next critical path
+        # the word being sent, from the buffer's read a clock before (LOAD), so that the buffer's read, the
+        # byte select and the transmit CRC are not one clock's logic
         sent_word = Signal(word_bits, name="sent_word")
         m.d.sync += sent_word.eq(rd.data)
         end = Signal(8 * protocol.ADDRESS_BYTES + 1, name="frame_end")
