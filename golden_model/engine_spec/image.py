@@ -30,9 +30,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..guard import ENERGY_WINDOW
 from ..modes import MODE_CODE_BITS, RUN_MODES, RunMode, Step
 from ..fixed.controller import Controller, Setup
-from ..fixed.engine import ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, FixedProblem, StopRule, check_fixed_params
+from ..fixed.engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, FixedProblem, StopRule, check_fixed_params,
+                            energy_floor_raw)
 from ..fixed.measures import SAT, FixedPointError, Reciprocal, energy_frac_bits
 from ..fixed.format import Format, SaturationCounter, quantize, raw_range
 from ..fixed.formats_set import FormatSet
@@ -41,7 +43,7 @@ from ..fixed.pipeline import BarrierEntries, NeighbourStream
 __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
            "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "EngineImage",
            "build_image", "decode_nodes", "decode_entries", "decode_triangles", "constant_fault", "ImageRunResult",
-           "run_image", "BUS_WORD_BITS", "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS",
+           "run_image", "image_energy_window", "BUS_WORD_BITS", "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS",
            "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode"]
 
 BUS_WORD_BITS = 32
@@ -56,7 +58,7 @@ SATURATION_BITS = 32
 ENERGY_TOL_INT_BITS = 8
 """Integer bits of the relative-energy tolerance ε (u8.40 with :data:`ENERGY_TOL_FRAC_BITS`)."""
 
-RESULTS = ("none", "converged", "max-iterations", "diverged", "no-mesh", "bad-constants")
+RESULTS = ("none", "converged", "max-iterations", "diverged", "no-mesh", "bad-constants", "stalled")
 """The run's result codes, in code order (STATUS.result)."""
 
 ENGINE_RUN_MODES: tuple[RunMode, ...] = tuple(m for m in RUN_MODES if not m.guarded)
@@ -275,6 +277,7 @@ def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordFi
         WordField("tol_energy", ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS),
         WordField("max_iter", ITERATION_BITS),
         WordField("saturation_limit", SATURATION_BITS),
+        WordField("energy_floor", energy_width(fs, capacity)),
     )
 
 
@@ -297,7 +300,7 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str,
     fs, params, stream = problem.fs, problem.params, problem.stream
     mode = params.mode
     fixed_step = mode.step is Step.FIXED
-    rule = StopRule.of(params, fs)
+    rule = StopRule.of(params, fs, energy_floor_raw(problem))
     constants = {
         "vertices": len(stream.indptr) - 1, "entries": len(stream.neighbour), "triangles": len(problem.face_areas),
         "mode": mode.code, "barrier": int(stream.barrier is not None),
@@ -308,6 +311,7 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str,
         # an error never exceeds error's maximum, so a larger tolerance passes the same errors
         "tol_area": min(rule.area, fs.error.raw_max), "tol_shape": min(rule.shape, fs.error.raw_max),
         "tol_energy": rule.energy, "max_iter": params.max_iter, "saturation_limit": 0,
+        "energy_floor": rule.floor,
     }
     for f in run_constant_fields(fs, capacity):
         if not f.raw_min <= constants[f.name] <= f.raw_max:
@@ -424,6 +428,12 @@ def image_mode(constants: dict[str, int]) -> RunMode | None:
     return next((m for m in ENGINE_RUN_MODES if m.code == constants["mode"]), None)
 
 
+def image_energy_window(mode: RunMode) -> int:
+    """The stop rule's window ``W`` the engine runs ``mode`` with: the guard's :data:`ENERGY_WINDOW`
+    (accepted iterations), else Algorithm 1's one iteration."""
+    return ENERGY_WINDOW if mode.guarded else 1
+
+
 def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     """Algorithm 1 from START to done on the decoded images, as the engine runs it: the one controller
     model (:class:`~golden_model.fixed.controller.Controller`) on what the memories and run constants
@@ -439,7 +449,8 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     faces, areas = decode_triangles(image.triangles[:c["triangles"]], fs, capacity)
     setup = Setup(fs, image_mode(c), stream, faces, areas, c["half_spring"], c["damping"], c["dt"],
                   Reciprocal(c["area_reciprocal"], c["area_shift"]), Reciprocal(c["length_reciprocal"], c["length_shift"]),
-                  StopRule(c["tol_area"], c["tol_shape"], c["tol_energy"]), c["max_iter"], 1, c["saturation_limit"])
+                  StopRule(c["tol_area"], c["tol_shape"], c["tol_energy"], c["energy_floor"]), c["max_iter"],
+                  image_energy_window(image_mode(c)), c["saturation_limit"])
     counter = SaturationCounter()
     controller = Controller(setup, positions[:n], velocities[:n], counter)
     status, k = controller.run()

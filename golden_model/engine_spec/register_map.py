@@ -33,7 +33,7 @@ __all__ = ["MAGIC", "VERSION", "ACCESS", "STATES", "RESULTS", "REGISTER_BLOCKS",
 MAGIC = 0x5350_464C
 """ID register: ASCII ``SPFL``."""
 
-VERSION = (2, 0)
+VERSION = (2, 1)
 """(major, minor) of this register map; the major changes when an address or field moves."""
 
 ACCESS = {
@@ -180,7 +180,8 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
     ), "control")
     a.add("STATUS", "w1c", "state, result, interrupt", (
         BitField("state", 0, 2, "ro", "controller state", "state", codes=STATES),
-        BitField("result", 4, 3, "ro", "result of the last run (diverged: saturation_limit reached; no-mesh: "
+        BitField("result", 4, 3, "ro", "result of the last run (diverged: saturation_limit reached; stalled: the guarded step's scale "
+                                       "fell below 2^-SCALE_MAX_SHIFT; no-mesh: "
                                        "VERTICES is 0; bad-constants: see docs/engine.md)", "result", codes=RESULTS),
         BitField("irq_pending", 8, 1, "w1c", "a run ended (state done); write 1 to clear", "irq_pending"),
         BitField("saturated", 9, 1, "ro", "the last run counted saturation events (SATURATIONS > 0)", "saturated"),
@@ -237,6 +238,8 @@ _CONSTANT_TEXT = {
     "tol_energy": "ε raw, u8.40",
     "max_iter": "N_max",
     "saturation_limit": "stop as diverged after this many saturation events (0: never)",
+    "energy_floor": "the stop rule's energy floor, raw as ENERGY: with E_S and E_C within φ, an energy below "
+                    "it stops the run as converged (0: no floor)",
 }
 
 

@@ -65,7 +65,8 @@ class Controller:
     """The raw state of a run and Algorithm 1's loop around it.
 
     After :meth:`measure` the terms of the current layout's passes are in ``terms``, ``errors``
-    (E_S, E_C raw), ``energy_raw`` and, with momentum, ``power`` (S) and ``node_power``.
+    (E_S, E_C raw), ``energy_raw`` and, with unguarded momentum, ``power`` (S) and ``node_power``; the
+    guarded step forms those in :meth:`choose_step`, from the layout it steps from.
     """
 
     def __init__(self, setup: Setup, positions: np.ndarray, velocities: np.ndarray, counter: SaturationCounter):
@@ -97,15 +98,24 @@ class Controller:
         self.errors = (area_error(fs, s.area_reciprocal, s.faces, s.face_areas, self.raw_positions, self.counter),
                        shape_error(fs, s.length_reciprocal, self.terms.error_sums, self.counter))
         self.energy_raw = energy_raw(fs, s.half_spring, self.terms.error_square_sum, self.terms.barrier_energy_sum)
-        if s.mode.step is Step.MOMENTUM:
-            self.node_power = node_power(fs, self.terms.force, self.raw_velocities, self.counter)
-            self.power = power_sum(fs, self.node_power, self.counter)
+        if s.mode.step is Step.MOMENTUM and self.guard is None:
+            self._form_power()
         self._measured = self.raw_positions
+
+    def _form_power(self) -> None:
+        """``S = Σ F·V`` of the current layout's forces and the move that led to it, and its events."""
+        fs = self.setup.fs
+        self.node_power = node_power(fs, self.terms.force, self.raw_velocities, self.counter)
+        self.power = power_sum(fs, self.node_power, self.counter)
 
     def choose_step(self) -> int:
         """``dt`` for the coming integrate pass, as the run mode chooses it (β_k with momentum) [dt]."""
         s = self.setup
         if s.mode.step is Step.MOMENTUM:
+            if self.guard is not None:
+                # the guarded step forms S as it proposes (the engine's propose pass reads F and V
+                # together), so a trial layout that is rolled back never forms one
+                self._form_power()
             self.dt, self.momentum = self.momentum.next(self.power, s.fs)
         elif s.mode.step is Step.FIXED:
             self.dt = s.dt

@@ -55,7 +55,8 @@ def test_control_and_status_fields(regmap):
         "start": ("w1p", 1), "abort": ("w1p", 1), "irq_enable": ("rw", 1)}
     status = {f.name: f for f in regmap.register("STATUS").fields}
     assert status["state"].codes == ("idle", "running", "done") and status["state"].width == 2
-    assert status["result"].codes == ("none", "converged", "max-iterations", "diverged", "no-mesh", "bad-constants")
+    assert status["result"].codes == ("none", "converged", "max-iterations", "diverged", "no-mesh", "bad-constants",
+                                     "stalled")
     assert 2 ** status["result"].width >= len(RESULTS)
     assert status["irq_pending"].access == "w1c"
 
