@@ -10,7 +10,7 @@ from amaranth.hdl import Cat, Const, Mux, Value, signed, unsigned
 from golden_model.fixed import Format, Rounding
 from golden_model.fixed.dsp import DSP_WIDTH, Operand, dsp_partial_products
 
-__all__ = ["shape_of", "round_half_bit", "shift_round", "saturate", "clamp", "requantize", "dsp_operands",
+__all__ = ["shape_of", "round_half_bit", "shift_round", "variable_shift", "saturate", "clamp", "requantize", "dsp_operands",
            "sum_round"]
 
 
@@ -52,6 +52,24 @@ def shift_round(value, shift, rounding):
         return value.shift_right(shift)
     sticky = value[:shift - 1].any() if shift > 1 else Const(0)
     return round_half_bit(value.shift_right(shift - 1), rounding, sticky)
+
+
+def variable_shift(value, shift, rounding):
+    """``(t, sticky)`` for a variable ``shift`` (an unsigned value, 0 allowed): ``t = (2·value) >> shift``
+    (arithmetic), whose bit 0 is the half-lsb, and ``sticky``, any bit below it (only nearest_even
+    reads it; ``Const(0)`` otherwise). :func:`round_half_bit` of the pair is :func:`shift_round`
+    of ``value`` by ``shift`` (``shift = 0``: ``t = 2·value`` has no half bit, so it rounds back
+    to ``value`` exactly). Two halves so that the shifter and the rounding's carry chain can sit
+    in stages of their own.
+    """
+    rounding = Rounding(rounding)
+    value, shift = Value.cast(value), Value.cast(shift)
+    doubled = value.shift_left(1)
+    t = doubled >> shift
+    if rounding is not Rounding.NEAREST_EVEN:
+        return t, Const(0)
+    below = Cat(*(shift > i for i in range(len(doubled))))  # the bits shifted out past the half-lsb
+    return t, (doubled.as_unsigned() & below).any()
 
 
 def saturate(value, fmt):

@@ -14,8 +14,9 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import Format, FormatSet
+from golden_model.guard import SCALE_MAX_SHIFT
 
-from .fixedpoint import clamp, shape_of, shift_round
+from .fixedpoint import clamp, round_half_bit, shape_of, shift_round, variable_shift
 from .force_pass import format_set
 from .layouts import INTEGRATOR_EVENTS, integrator_input_layout, integrator_output_layout
 from .pipeline import EventCount, LiveValues, Pipeline, aligned_add, count_stages
@@ -58,6 +59,17 @@ class Integrator(wiring.Component):
         The momentum dynamics (``docs/dynamics.md``): ``dt`` carries ``β``, the step becomes
         ``V' = rq(β·V + a → velocity)``, ``P' = sat(P + V')``; ``half_dt_sq`` and ``damping`` are
         not used. Change it only between passes.
+    scale_shift : ``In(range(SCALE_MAX_SHIFT + 2))``
+        The guarded step's scale, ``2^-scale_shift`` (:class:`golden_model.guard.StepScale`'s shift, up
+        to ``SCALE_MAX_SHIFT + 1``): with ``momentum``, the step takes ``a' = rq(a·2^-scale_shift)``
+        for ``a`` (:func:`golden_model.fixed.guard.proposal`); 0 leaves it alone. The paper's step
+        ignores it. Registered; change it only between passes.
+    propose : ``In(1)``
+        With ``momentum``: a pass of proposals (the guarded mode's propose pass, whose position output
+        is not used): ``saturations`` then counts what :func:`~golden_model.fixed.guard.proposal` counts
+        (``accel`` and ``velocity``), not the position's saturation nor the power's (the guarded mode
+        forms ``S`` as it measures a layout). The outputs are the same either way. Registered; change it
+        only between passes.
     idle : ``Out(1)``
         No node in flight.
 
@@ -98,6 +110,8 @@ class Integrator(wiring.Component):
             "half_dt_sq": In(shape_of(fs.half_dt_sq)),
             "damping": In(shape_of(fs.damping)),
             "momentum": In(1),
+            "scale_shift": In(range(SCALE_MAX_SHIFT + 2)),
+            "propose": In(1),
             "idle": Out(1),
         })
 
@@ -121,9 +135,15 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     dt, half_dt_sq, damping = (Signal.like(p, name=f"{n}_r", reset_less=True) for n, p in (
         ("dt", ports.dt), ("half_dt_sq", ports.half_dt_sq), ("damping", ports.damping)))
     momentum = Signal(name="momentum_r", reset_less=True)
+    scale_shift = Signal.like(ports.scale_shift, name="scale_shift_r", reset_less=True)
+    # the gates of the events the proposal (propose) does not count: the position's and the power's
+    place = Signal(name="count_position_r", reset_less=True)
+    power_gate = Signal(name="count_power_r", reset_less=True)
     one = 1 << fs.damping.frac_bits  # the momentum step is not damped: × 1 exactly
     m.d.sync += [dt.eq(ports.dt), half_dt_sq.eq(ports.half_dt_sq),
-                 damping.eq(Mux(ports.momentum, one, ports.damping)), momentum.eq(ports.momentum)]
+                 damping.eq(Mux(ports.momentum, one, ports.damping)), momentum.eq(ports.momentum),
+                 scale_shift.eq(ports.scale_shift), place.eq(~(ports.momentum & ports.propose)),
+                 power_gate.eq(ports.momentum & ~ports.propose)]
 
     def rounded(value, from_frac, fmt):
         """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""
@@ -133,7 +153,7 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     # Saturation events: counted by a few small adders along the node (EventCount); a dynamics'
     # flags count only while it is the one in use.
     node_events = sum(INTEGRATOR_EVENTS.values())
-    count = EventCount(live, node_events.bit_length(), paper=~momentum, mom=momentum)
+    count = EventCount(live, node_events.bit_length(), paper=~momentum, mom=momentum, place=place, power=power_gate)
 
     def events(*flags, **gated):
         """The stage's event values (:class:`~hdl.pipeline.EventCount`; ``{}`` without ``saturations``)."""
@@ -161,10 +181,23 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     power = clamp(live["pw"], fs.power)
     live["pw"] = power[0]
     # the power counts only in the momentum dynamics: the controller forms S (and the golden model
-    # node_power) only there
-    live.update(events(mom=(power[1],)))  # registered by t5's first stage, beside the power's saturation
+    # node_power) only there; not in a proposal (the guarded mode forms S as it measures a layout)
+    live.update(events(power=(power[1],)))  # registered by t5's first stage, beside the power's saturation
+    # the momentum step's a' = a·2^-scale_shift rounded (the guarded proposal's step scale; a' = a at
+    # shift 0), alongside the multiply: the variable shift in its first stage, the rounding's carry
+    # chain in its second
+    for k in "xy":
+        live[f"as_{k}"], live[f"as_sticky_{k}"] = variable_shift(live[f"a_{k}"], scale_shift, rnd)
+
+    def scaled_accel(values):
+        rounded_a = {}
+        for k in "xy":
+            exact = round_half_bit(values[f"as_{k}"], rnd, values.pop(f"as_sticky_{k}"))
+            # a' = a at shift 0; past it |a'| ≤ |a|/2 + 1/2 lsb: in accel's range either way
+            rounded_a[f"as_{k}"] = exact[:fs.accel.width].as_signed()
+        return rounded_a
     # Δt·V, ½Δt²·a, Δt·a
-    live.multiply(tail, "t5",
+    live.multiply(tail, "t5", later=(scaled_accel,),
                   dtv_x=(dt, live["v_x"]), dtv_y=(dt, live["v_y"]),
                   ha_x=(half_dt_sq, live["a_x"]), ha_y=(half_dt_sq, live["a_y"]),
                   dta_x=(dt, live["a_x"]), dta_y=(dt, live["a_y"]))
@@ -181,11 +214,11 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     # that long adds its delay to the chain's).
     sums = {}
     for k in "xy":
-        for mode, second in (("paper", live[f"ha_{k}"]), ("mom", live[f"a_{k}"].shift_left(fs.half_dt_sq.frac_bits))):
+        for mode, second in (("paper", live[f"ha_{k}"]), ("mom", live[f"as_{k}"].shift_left(fs.half_dt_sq.frac_bits))):
             value, shift = aligned_add(live[f"dtv_{k}"], step_frac - fv, second, step_frac - fa)
             sums[f"step_{mode}_{k}"] = Value.cast(value).shift_left(shift)
         sums[f"kick_{k}"] = rounded(live[f"dta_{k}"], kick_frac, wide_v)
-    live.step(tail, "t6", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta", "a") for k in "xy"), **sums)
+    live.step(tail, "t6", drop=tuple(f"{n}_{k}" for n in ("dtv", "ha", "dta", "a", "as") for k in "xy"), **sums)
     kick = {k: clamp(live[f"kick_{k}"], wide_v) for k in "xy"}
     live.step(tail, "t7", **{f"step_{mode}_{k}": rounded(live[f"step_{mode}_{k}"], step_frac, wide_p)
                              for mode in ("paper", "mom") for k in "xy"},
@@ -212,7 +245,7 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     # V'·(1 − γ) alongside the position's saturation, then V'' = rq(V'·(1 − γ) → velocity)
     position = {k: clamp(live[f"p_{k}"], fs.position) for k in "xy"}
     live.update({f"p_{k}": position[k][0] for k in "xy"})
-    live.update(events(position["x"][1], position["y"][1]))
+    live.update(events(place=(position["x"][1], position["y"][1])))
     live.multiply(tail, "t10", drop=("v_x", "v_y"), vk_x=(live["v_x"], damping), vk_y=(live["v_y"], damping))
     vk_frac = fs.velocity.frac_bits + fs.damping.frac_bits
     live.step(tail, "t11", **{f"vk_{k}": rounded(live[f"vk_{k}"], vk_frac, fs.velocity) for k in "xy"})

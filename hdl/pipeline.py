@@ -245,12 +245,24 @@ class LiveValues(dict):
         pipe.stage(name)
         self.carry(pipe, name, drop, **new)
 
-    def multiply(self, pipe: Pipeline, name: str, drop=(), **products):
+    def multiply(self, pipe: Pipeline, name: str, drop=(), later=(), **products):
         """Whole products ``key=(a, b)`` (:meth:`Pipeline.multiply`), each then a carried value;
-        the carried values not in ``drop`` ride along (dropped in the multiply's first stage)."""
-        drops = [drop]
-        self.update(pipe.multiply(products, name,
-                                  lambda stage_name: self.carry(pipe, stage_name, drops.pop() if drops else ())))
+        the carried values not in ``drop`` ride along (dropped in the multiply's first stage).
+
+        ``later``: functions of these live values, each returning new values (``{name: value}``)
+        that the multiply's second, third, … stage registers: work of its own alongside the
+        multiply, in stages the multiply takes anyway.
+        """
+        drops, news = [drop], list(later)
+        first = [True]
+
+        def carry(stage_name):
+            new = {} if first[0] or not news else news.pop(0)(self)
+            first[0] = False
+            self.carry(pipe, stage_name, drops.pop() if drops else (), **new)
+
+        self.update(pipe.multiply(products, name, carry))
+        assert not news, f"{name}: {len(news)} of later's stages past the multiply's last"
 
 
 class EventCount:

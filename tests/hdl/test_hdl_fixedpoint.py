@@ -12,8 +12,8 @@ import pytest
 from amaranth.hdl import Module, Signal, signed, unsigned
 from amaranth.sim import Simulator
 
-from golden_model.fixed import Format, Overflow, Rounding, requantize as gm_requantize
-from hdl.fixedpoint import clamp, requantize
+from golden_model.fixed import Format, Overflow, Rounding, requantize as gm_requantize, shift_round as gm_shift_round
+from hdl.fixedpoint import clamp, requantize, round_half_bit, variable_shift
 from hdl.pipeline import aligned_add
 
 
@@ -80,3 +80,17 @@ def test_aligned_add_is_exact_on_every_input(a_shape, b_shape, a_shift, b_shift)
     got = _run_comb([a, b], [(out, value)], cases)
     assert shift == min(a_shift, b_shift)
     assert [g[0] << shift for g in got] == [(x << a_shift) + (y << b_shift) for x, y in cases]
+
+
+@pytest.mark.parametrize("rounding", list(Rounding))
+@pytest.mark.parametrize("shape", [signed(6), unsigned(5)], ids=str)
+def test_variable_shift_rounds_as_the_golden_shift_round_on_every_input(rounding, shape):
+    """``round_half_bit(*variable_shift(x, s))`` is ``shift_round(x, s)`` for every ``x`` and every
+    ``s`` from 0 (exact) past the value's width."""
+    x, s = Signal(shape), Signal(range(shape.width + 3))
+    out = Signal(signed(shape.width + 2))
+    cases = list(itertools.product(_values(shape), range(shape.width + 3)))
+    t, sticky = variable_shift(x, s, rounding)
+    got = _run_comb([x, s], [(out, round_half_bit(t, rounding, sticky))], cases)
+    want = [int(gm_shift_round(np.int64(v), k, rounding)) for v, k in cases]
+    assert [g[0] for g in got] == want

@@ -1,5 +1,5 @@
 """RTL integrate stage (hdl.Integrator) against the golden model's ``integrate`` /
-``integrate_momentum`` and ``node_power``, in Amaranth's simulator.
+``integrate_momentum`` and ``node_power``, and the guarded mode's ``proposal``, in Amaranth's simulator.
 
 Random nodes (state, force, both weights, ``inside``) in both dynamics, compared bit for bit and in
 order, with random gaps in the input (the stream helpers of :mod:`support.streams`).
@@ -13,7 +13,9 @@ import pytest
 from amaranth.hdl import UnusedElaboratable, unsigned
 
 from golden_model.fixed import FormatSet, SaturationCounter
+from golden_model.fixed.guard import proposal
 from golden_model.fixed.pipeline import NodeConstants, integrate, integrate_momentum, node_power
+from golden_model.guard import SCALE_MAX_SHIFT
 from hdl import Integrator, NodeUpdate
 from sim.payloads import pack_beats, unpack_beats
 from support.streams import run_streams
@@ -40,8 +42,9 @@ def random_nodes(fs, n, seed):
     }
 
 
-def check_integrator(dut, fs, nodes, constants, momentum=False, **kw):
-    """The nodes through the RTL against the golden model; returns the run."""
+def check_integrator(dut, fs, nodes, constants, momentum=False, scale_shift=0, propose=False, **kw):
+    """The nodes through the RTL against the golden model; returns the run (``scale_shift`` and
+    ``propose`` driven as given: the paper's step and a momentum step at shift 0 ignore them)."""
     vec = lambda a: {"x": a[:, 0], "y": a[:, 1]}  # noqa: E731
     beats = pack_beats(dut.i.payload.shape(), {
         "node": {"position": vec(nodes["position"]), "velocity": vec(nodes["velocity"]),
@@ -50,7 +53,8 @@ def check_integrator(dut, fs, nodes, constants, momentum=False, **kw):
 
     def setup(ctx):
         for port, value in ((dut.dt, constants.dt), (dut.half_dt_sq, constants.half_dt_sq),
-                            (dut.damping, constants.damping), (dut.momentum, momentum)):
+                            (dut.damping, constants.damping), (dut.momentum, momentum),
+                            (dut.scale_shift, scale_shift), (dut.propose, propose)):
             ctx.set(port, value)
 
     # the constants are registered once: the stream starts one edge later
@@ -160,12 +164,12 @@ def golden_events(fs, nodes, constants, momentum):
     return count(slice(None)), np.array([count(slice(i, i + 1)).total for i in range(n)])
 
 
-def integrator_saturations(fs, nodes, constants, momentum):
+def integrator_saturations(fs, nodes, constants, momentum, **kw):
     """The RTL's per-node ``saturations`` (a unit with ``saturations=True``, checked bit-exact first)."""
     dut = Integrator(fs, side=SIDE, saturations=True)
     n = len(nodes["inside"])
     run = check_integrator(dut, fs, dict(nodes, side=np.arange(n)), constants, momentum=momentum,
-                           seed=12, p_valid=0.8)
+                           seed=12, p_valid=0.8, **kw)
     return unpack_beats(dut.o.payload.shape(), run.outputs)["saturations"]
 
 
@@ -227,3 +231,79 @@ def test_saturations_leave_the_default_build_alone():
         assert counting.latency == plain.latency == LATENCY["default"]
         del plain, counting
         gc.collect()
+
+
+def test_the_paper_step_ignores_the_proposal_inputs():
+    """``scale_shift`` and ``propose`` leave the paper's step and its event count alone."""
+    fs = FormatSet.preset("default")
+    nodes = saturating_nodes(fs, 200, seed=24)
+    constants = NodeConstants(fs.dt.raw_max, fs.half_dt_sq.raw_max, 0, fs.damping.raw_max)
+    _, per_node = golden_events(fs, nodes, constants, False)
+    assert per_node.any()
+    got = integrator_saturations(fs, nodes, constants, False, scale_shift=SCALE_MAX_SHIFT - 3, propose=True)
+    assert np.array_equal(got, per_node)
+
+
+# ---------------------------------------------------------------- the guarded mode's proposal
+
+def check_proposals(fs, nodes, beta, shift, seed):
+    """One pass of proposals (``momentum``, ``propose``, ``scale_shift = shift``, β in ``dt``) against
+    :func:`golden_model.fixed.guard.proposal`: ``V'`` bit for bit, the power as ever, and each node's
+    ``saturations`` the events ``proposal`` counts for it. Returns the pass's golden counter."""
+    n = len(nodes["inside"])
+    dut = Integrator(fs, side=SIDE, saturations=True)
+    vec = lambda a: {"x": a[:, 0], "y": a[:, 1]}  # noqa: E731
+    beats = pack_beats(dut.i.payload.shape(), {
+        "node": {"position": vec(nodes["position"]), "velocity": vec(nodes["velocity"]),
+                 "inv_mass": nodes["inv_mass"], "inv_mass_barrier": nodes["inv_mass_barrier"]},
+        "force": vec(nodes["force"]), "inside": nodes["inside"].astype(np.int64), "side": np.arange(n)})
+
+    def setup(ctx):
+        for port, value in ((dut.dt, beta), (dut.half_dt_sq, 0), (dut.damping, 0), (dut.momentum, 1),
+                            (dut.scale_shift, shift), (dut.propose, 1)):
+            ctx.set(port, value)
+
+    run = run_streams(dut, beats, setup=setup, start=1, seed=seed, p_valid=0.7)
+    out = unpack_beats(dut.o.payload.shape(), run.outputs)
+    weights = np.where(nodes["inside"], nodes["inv_mass_barrier"], nodes["inv_mass"])
+    v, f = nodes["velocity"], nodes["force"]
+    counter = SaturationCounter()
+    want = proposal(fs, v, f, weights, beta, shift, counter)
+    per_node = np.zeros(n, dtype=np.int64)
+    for i in range(n):  # each node's own events
+        node_counter = SaturationCounter()
+        proposal(fs, v[i:i + 1], f[i:i + 1], weights[i:i + 1], beta, shift, node_counter)
+        per_node[i] = node_counter.total
+    assert per_node.sum() == counter.total
+    for name, got, expected in (("velocity.x", out["velocity"]["x"], want[:, 0]),
+                                ("velocity.y", out["velocity"]["y"], want[:, 1]),
+                                ("power", out["power"], node_power(fs, f, v)), ("side", out["side"], np.arange(n)),
+                                ("saturations", out["saturations"], per_node)):
+        bad = np.flatnonzero(got != expected)
+        assert bad.size == 0, f"shift {shift}, {name}: {bad.size} mismatches; first at node {int(bad[0])}: " \
+                              f"rtl {int(got[bad[0]])} golden {int(expected[bad[0]])}"
+    return counter
+
+
+@pytest.mark.parametrize("case", [*PRESETS, "tight"])
+def test_proposals_at_every_step_scale(case):
+    """Every shift 0 … SCALE_MAX_SHIFT + 1 with a random β: random nodes, and nodes that saturate (in the
+    presets accel and velocity; in the tight formats velocity, and the position and the power too, which
+    a proposal does not count)."""
+    fs = FormatSet.preset("default").replace(**TIGHT) if case == "tight" else FormatSet.preset(case)
+    rng = np.random.default_rng(30)
+    seen = set()
+    for shift in range(SCALE_MAX_SHIFT + 2):
+        beta = int(rng.integers(0, fs.dt.raw_max + 1))
+        if shift % 3 == 1:
+            nodes = random_nodes(fs, 40, seed=31 + shift)
+        else:
+            nodes = saturating_nodes(fs, 40, seed=31 + shift)
+        seen |= set(check_proposals(fs, nodes, beta, shift, seed=shift).saturations)
+    assert ({"velocity"} if case == "tight" else {"accel", "velocity"}) <= seen, seen
+    if case == "tight":  # the unguarded step would count more on the same nodes: propose drops it
+        nodes = saturating_nodes(fs, 100, seed=60)
+        counter, per_node = golden_events(fs, nodes, NodeConstants(fs.dt.raw_max, 0, 0, 0), True)
+        assert {"position", "power"} <= set(counter.saturations), counter
+        proposed = check_proposals(fs, nodes, fs.dt.raw_max, 0, seed=61)
+        assert proposed.total < counter.total
