@@ -10,6 +10,7 @@ from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .core import SpringflatCore
 from .force_pass import ForcePass
 from .guard_certificate import GuardCertificate
+from .guard_commit import GuardCommit
 from .guard_decision import GuardDecision
 from .integrator import Integrator
 from .level_scatter import LevelScatter
@@ -17,5 +18,5 @@ from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "GuardCertificate", "GuardDecision", "Integrator", "LevelScatter",
+__all__ = ["AreaError", "BetaDivider", "EnergyCheck", "ForcePass", "GuardCertificate", "GuardCommit", "GuardDecision", "Integrator", "LevelScatter",
            "Normaliser", "NodeUpdate", "RsqrtUnit", "SpringflatCore", "StepGenerator"]

@@ -84,7 +84,8 @@ class Integrator(wiring.Component):
     :class:`~hdl.node_update.NodeUpdate` straight from the node-header FIFO's LUT RAM); the
     weight is chosen as it lands for the first multiply. Both dynamics' step sums are formed and
     rounded and saturated side by side and the mode picks one in a stage of its own (neither in
-    front of the 50-bit adder nor behind the saturation: both were critical paths). Every
+    front of the 50-bit adder nor behind the saturation: both were critical paths). The proposal's
+    ``a'`` is shifted and rounded in the first two of the ``Δt·V`` multiply's stages, beside it. Every
     multiply's operands land in fabric registers first; one adder, rounding or saturation per stage.
     """
 

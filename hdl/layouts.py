@@ -187,6 +187,7 @@ def errors_layout(fs: FormatSet) -> data.StructLayout:
 # (hdl/area_error.py, hdl/controller_units.py)
 
 __all__ += ["triangle_layout", "certificate_layout", "certificate_level_shape", "certificate_result_layout",
+            "commit_input_layout", "commit_output_layout",
             "decision_input_layout", "decision_output_layout", "area_saturations_layout",
             "normalise_layout", "energy_sums_layout", "energy_result_layout", "word_layout", "weight_word_layout",
             "force_word_layout"]
@@ -225,6 +226,25 @@ def certificate_result_layout() -> data.StructLayout:
     set when corner ``k``'s own move alone fails the triangle's certificate at ``2^-GUARD_LEVELS`` (the
     triangle's part of ``stuck_nodes_raw``)."""
     return data.StructLayout({"level": certificate_level_shape(), "stuck": 3})
+
+
+def commit_input_layout(fs: FormatSet) -> data.StructLayout:
+    """One node of the guarded commit (:class:`~hdl.guard_commit.GuardCommit`): its ``position`` P
+    [position]; ``velocity`` [velocity], the proposal V' (0 for a stuck node) to commit, or the
+    committed move V to roll back; its three slot ``levels`` (each :func:`certificate_level_shape`,
+    the node's level their largest); ``stuck`` (held still) and ``rollback``."""
+    return data.StructLayout({
+        "position": vector_layout(fs.position), "velocity": vector_layout(fs.velocity),
+        "levels": data.ArrayLayout(certificate_level_shape(), 3), "stuck": 1, "rollback": 1,
+    })
+
+
+def commit_output_layout(fs: FormatSet) -> data.StructLayout:
+    """The node committed or rolled back: its new ``position`` [position] and ``velocity`` [velocity]
+    (the move taken; 0 after a rollback), its final ``level`` (:func:`certificate_level_shape`) and
+    ``fault``: a rollback whose ``P − V`` left the position range (no committed move does)."""
+    return data.StructLayout({"position": vector_layout(fs.position), "velocity": vector_layout(fs.velocity),
+                              "level": certificate_level_shape(), "fault": 1})
 
 
 def decision_input_layout(energy_bits: int) -> data.StructLayout:

@@ -250,8 +250,9 @@ class LiveValues(dict):
         the carried values not in ``drop`` ride along (dropped in the multiply's first stage).
 
         ``later``: functions of these live values, each returning new values (``{name: value}``)
-        that the multiply's second, third, … stage registers: work of its own alongside the
-        multiply, in stages the multiply takes anyway.
+        that the multiply's second, third, … stage registers (a function may also drop
+        values it has used: ``live.pop(name)``): work of its own alongside the multiply, in stages
+        the multiply takes anyway.
         """
         drops, news = [drop], list(later)
         first = [True]
@@ -272,8 +273,8 @@ class EventCount:
     and the next saturation stage adds them to the count: a clamp's flag reaches a register
     straight from its comparison, never through the count's adder in the same clock (that
     compare-then-add was the engine's critical path). :meth:`flush` adds the pending flags
-    for good. Flags given under a ``gates`` name count only while that gate is high; the gated
-    groups of a block are exclusive (at most one gate high), so a stage counts at most its
+    for good. Flags given under a ``gates`` name count only while that gate is high; the groups
+    one stage gives are exclusive (at most one of their gates high), so a stage counts at most its
     plain flags plus its widest group (:attr:`counted`, checked against the golden model's
     event tables).
     """

@@ -32,7 +32,7 @@ from .format import Overflow, SaturationCounter, requantize, shift_round
 from .formats_set import FormatSet
 
 __all__ = ["MOVE_WEIGHTS", "EDGE_WEIGHT", "ROUNDING_MARGIN", "proposal", "floor_min_shift", "floor_min_raw",
-           "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw", "commit"]
+           "triangle_levels_raw", "stuck_nodes_raw", "guarded_moves_raw", "taken_moves_raw", "commit"]
 
 SAT = Overflow.SATURATE
 
@@ -157,7 +157,17 @@ def guarded_moves_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, f
     face_level = triangle_levels_raw(fs, positions, free, faces, winding, floor_min)
     level = node_levels(face_level, faces, len(positions))
     level[stuck] = GUARD_LEVELS + 1
-    taken = free >> np.minimum(level, GUARD_LEVELS)[:, None]
+    return taken_moves_raw(fs, positions, free, level)
+
+
+def taken_moves_raw(fs: FormatSet, positions: np.ndarray, moves: np.ndarray, level: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """``(moves (V, 2) [velocity], node levels (V,))`` from the nodes' levels (0 … GUARD_LEVELS + 1): each
+    proposal [velocity] ``>> level`` (an arithmetic shift), 0 past GUARD_LEVELS; a node whose move would
+    leave the position range (either coordinate) does not move, its level ``GUARD_LEVELS + 1``. The last
+    step of :func:`guarded_moves_raw`."""
+    level = np.array(level, dtype=np.int64)
+    taken = moves >> np.minimum(level, GUARD_LEVELS)[:, None]
     target = positions + taken
     outside = ((target < fs.position.raw_min) | (target > fs.position.raw_max)).any(axis=1)
     level[outside] = GUARD_LEVELS + 1
