@@ -8,7 +8,7 @@ set and capacity: this module decodes that map, it defines no address of its own
 
 from __future__ import annotations
 
-from amaranth.hdl import Module
+from amaranth.hdl import Module, Mux
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -20,6 +20,7 @@ from golden_model.modes import Step
 from . import wishbone
 from .area_error import AreaError
 from .force_pass import ForcePass
+from .guard_passes import GUARD_PASSES, GuardPasses
 from .integrator import Integrator
 from .logic import mode_steps
 from .memory_windows import MemoryWindows, needs_registered_select
@@ -136,6 +137,7 @@ class SpringflatEngine(wiring.Component):
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True)
         m.submodules.area = area = AreaError(fs)
         m.submodules.integrator = integrator = Integrator(fs, saturations=True)
+        m.submodules.guard = guard = GuardPasses(fs, cap, read_latency=memories.read_latency)
         # SATURATIONS' sources, in the order they are summed in pairs
         producers = {"force": sequencer, "integrate": sequencer, "step": controller, "area": sequencer,
                      "length": sequencer, "power": sequencer, "shape_error": controller, "area_error": controller}
@@ -160,25 +162,48 @@ class SpringflatEngine(wiring.Component):
         _wire(m, tally, controller, "saturations")
         m.d.comb += [registers.irq_pending_set.eq(controller.irq_set),
                      registers.irq_pending_clear.eq(controller.starting), tally.clear.eq(controller.starting)]
+        # the accepted layout measured again after a rollback counts no event (the golden model restores
+        # its results)
+        measured = ("force", "area", "length", "shape_error", "area_error")
         for name, producer in producers.items():
-            _wire(m, producer, tally, f"{name}_events")
+            events = getattr(producer, f"{name}_events")
+            m.d.comb += getattr(tally, f"{name}_events").eq(
+                Mux(controller.measuring_again, 0, events) if name in measured else events)
 
         # the passes: the controller's flags, the memories' ports, the units' streams
         _wire(m, controller, sequencer, "fetch_force", "fetch_area", "fetch_nodes", "in_start", "in_force",
-              "in_area", "in_step", "in_integrate", "running", "area_clear")
-        _wire(m, controller, memories, "running", "in_area", "in_integrate", "fetch_nodes")
+              "in_area", "in_step", "in_integrate", "running", "area_clear", "guarded", "half_rate", "node_restart",
+              "triangle_restart")
+        _wire(m, controller, memories, "running", "fetch_nodes")
+        # the position ports read the triangles' corners in every triangle pass, the node in every node pass
+        m.d.comb += [memories.in_area.eq(controller.in_area | controller.in_stuck | controller.in_certify),
+                     memories.in_integrate.eq(controller.in_integrate | controller.in_hold | controller.in_commit
+                                              | controller.in_rollback)]
+        _wire(m, controller, guard, "in_step", "in_integrate", *(f"in_{name}" for name in GUARD_PASSES))
+        _wire(m, registers, guard, "vertices", "triangles")
+        _wire(m, sequencer, guard, "node_index", "node_landed", "triangle_landed", "corners")
+        _wire(m, memories, guard, "position", "proposal", "velocity")
+        m.d.comb += [guard.area.eq(sequencer.landed_area), controller.guard_done.eq(guard.done),
+                     controller.passes_idle.eq(sequencer.passes_idle & guard.idle),
+                     integrator.scale_shift.eq(controller.scale_shift),
+                     integrator.propose.eq(controller.guarded)]
         _wire(m, registers, sequencer, "vertices", "entries", "triangles", "barrier_held")
         _wire(m, memories, sequencer, "entry", "triangle", "position", "velocity", "weight_word", "force_word")
         _wire(m, sequencer, memories, "entry_index", "tri_index", "node_index", "node_of_entry")
         _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done", "done_fetching",
-              "passes_idle", "length_sum", "square_sum", "barrier_sum", "power_sum")
+              "length_sum", "square_sum", "barrier_sum", "power_sum")
         wiring.connect(m, sequencer.force_entry, force.i)
         wiring.connect(m, sequencer.triangle_out, area.i)
         wiring.connect(m, sequencer.node_out, integrator.i)
         wiring.connect(m, force.o, sequencer.forces)
         wiring.connect(m, integrator.o, sequencer.integrated)
         wiring.connect(m, sequencer.force_write, memories.force_write)
-        wiring.connect(m, sequencer.node_write, memories.node_write)
+        # the node memories' and the proposal memory's writers: one pass at a time, so the writer whose
+        # enable is high
+        for port in ("node_write", "proposal_write"):
+            ours, theirs, sink = getattr(guard, port), getattr(sequencer, port), getattr(memories, port)
+            m.d.comb += [sink.en.eq(ours.en | theirs.en), sink.addr.eq(Mux(ours.en, ours.addr, theirs.addr)),
+                         sink.data.eq(Mux(ours.en, ours.data, theirs.data))]
         m.d.comb += [sequencer.area_saturations.eq(area.saturations), sequencer.force_idle.eq(force.idle),
                      sequencer.area_idle.eq(area.idle), sequencer.integrator_idle.eq(integrator.idle),
                      controller.area_total.eq(area.total), area.clear.eq(controller.area_clear),

@@ -67,9 +67,9 @@ class Integrator(wiring.Component):
     propose : ``In(1)``
         With ``momentum``: a pass of proposals (the guarded mode's propose pass, whose position output
         is not used): ``saturations`` then counts what :func:`~golden_model.fixed.guard.proposal` counts
-        (``accel`` and ``velocity``), not the position's saturation nor the power's (the guarded mode
-        forms ``S`` as it measures a layout). The outputs are the same either way. Registered; change it
-        only between passes.
+        (``accel`` and ``velocity``) and the power's (the guarded step forms ``S`` as it proposes:
+        :meth:`~golden_model.fixed.controller.Controller.choose_step`), not the position's saturation.
+        The outputs are the same either way. Registered; change it only between passes.
     idle : ``Out(1)``
         No node in flight.
 
@@ -137,14 +137,14 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
         ("dt", ports.dt), ("half_dt_sq", ports.half_dt_sq), ("damping", ports.damping)))
     momentum = Signal(name="momentum_r", reset_less=True)
     scale_shift = Signal.like(ports.scale_shift, name="scale_shift_r", reset_less=True)
-    # the gates of the events the proposal (propose) does not count: the position's and the power's
+    # the gate of the events the proposal (propose) does not count: the position's
     place = Signal(name="count_position_r", reset_less=True)
     power_gate = Signal(name="count_power_r", reset_less=True)
     one = 1 << fs.damping.frac_bits  # the momentum step is not damped: × 1 exactly
     m.d.sync += [dt.eq(ports.dt), half_dt_sq.eq(ports.half_dt_sq),
                  damping.eq(Mux(ports.momentum, one, ports.damping)), momentum.eq(ports.momentum),
                  scale_shift.eq(ports.scale_shift), place.eq(~(ports.momentum & ports.propose)),
-                 power_gate.eq(ports.momentum & ~ports.propose)]
+                 power_gate.eq(ports.momentum)]
 
     def rounded(value, from_frac, fmt):
         """``value`` (``from_frac`` fraction bits) rounded to ``fmt``'s lsb; not yet saturated."""

@@ -7,7 +7,7 @@ from amaranth.hdl import Const, Value
 from golden_model.engine_spec.image import ENGINE_RUN_MODES
 from golden_model.modes import Step
 
-__all__ = ["or_tree", "mode_runs", "mode_steps"]
+__all__ = ["or_tree", "mode_runs", "mode_steps", "mode_guarded"]
 
 
 def or_tree(values) -> Value:
@@ -29,3 +29,8 @@ def mode_steps(code: Value, step: Step) -> Value:
     """1 where ``MODE.mode``'s ``code`` is a run mode the engine runs whose iteration takes ``step``:
     the units' one decode of the mode, from the golden model's table of modes."""
     return or_tree([Const(0), *(code == m.code for m in ENGINE_RUN_MODES if m.step is step)])
+
+
+def mode_guarded(code: Value) -> Value:
+    """1 where ``MODE.mode``'s ``code`` is a run mode the engine runs through the step guard."""
+    return or_tree([Const(0), *(code == m.code for m in ENGINE_RUN_MODES if m.guarded)])

@@ -104,6 +104,9 @@ class MemoryWindows(wiring.Component):
         The force pass's per-node results: written to the force memory (not on the bus).
     node_write : ``In(write_signature(...))``
         The integrator's results: written back to the position and velocity memories while running.
+    proposal, proposal_write : ``Out``, ``In(write_signature(...))``
+        The guarded step's proposals [velocity]: three copies, each read at its position port's address
+        (``proposal[k]`` beside ``position[k]``), written together while running; not on the bus.
 
     Port sources
     ------------
@@ -170,6 +173,8 @@ class MemoryWindows(wiring.Component):
             "weights": BlockRam(weight_shape, cap.vertices, name="weights", **select),
             "forces": BlockRam(force_shape, cap.vertices, name="forces", **select),
             "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles", **select),
+            # the guarded step's proposals, a copy per position port (a triangle's three corners at once)
+            **{f"proposals{k}": BlockRam(vel_shape, cap.vertices, name=f"proposals{k}", **select) for k in range(3)},
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
                                        name=f"entries{b}", pin_registers=True) for b in range(banks)},
         }
@@ -183,6 +188,8 @@ class MemoryWindows(wiring.Component):
             "velocity": Out(vel_shape), "weight_word": Out(weight_shape), "force_word": Out(force_shape),
             "force_write": In(write_signature(range(cap.vertices + 1), force_shape)),
             "node_write": In(write_signature(range(cap.vertices + 1), node_write_layout(fs))),
+            "proposal": Out(vel_shape).array(3),
+            "proposal_write": In(write_signature(range(cap.vertices + 1), vel_shape)),
         })
 
     def elaborate(self, platform):
@@ -204,6 +211,17 @@ class MemoryWindows(wiring.Component):
         # the force pass's per-node results, straight into the force memory (not on the bus)
         m.d.comb += [forces.write.addr.eq(self.force_write.addr), forces.write.data.eq(self.force_write.data),
                      forces.write.en.eq(self.force_write.en)]
+        # the guarded step's proposals (not on the bus): each copy read at its position port's address,
+        # written from registers as the node memories are
+        proposal_regs = (Signal.like(self.proposal_write.addr, name="prop_waddr"),
+                         Signal.like(self.proposal_write.data, name="prop_wdata"), Signal(name="prop_wen"))
+        m.d.sync += [proposal_regs[0].eq(self.proposal_write.addr), proposal_regs[1].eq(self.proposal_write.data),
+                     proposal_regs[2].eq(self.proposal_write.en & self.running)]
+        for k in range(3):
+            ram = self.rams[f"proposals{k}"]
+            m.d.comb += [self.proposal[k].eq(ram.read[0].data),
+                         ram.write.addr.eq(proposal_regs[0]), ram.write.data.eq(proposal_regs[1]),
+                         ram.write.en.eq(proposal_regs[2])]
 
         window_q, index_q, word_q = self._decode(m)
         bus_writing, new_words = self._bus_words(m, window_q, word_q, ent_data)
@@ -309,7 +327,10 @@ class MemoryWindows(wiring.Component):
         positions = self.rams["positions"].read
         read_ports = {"pos_a": positions[0], "pos_b": positions[1], "pos_c": positions[2],
                       "vel": self.rams["velocities"].read[0], "wgt": self.rams["weights"].read[0],
-                      "frc": self.rams["forces"].read[0], "tri": self.rams["triangles"].read[0]}
+                      "frc": self.rams["forces"].read[0], "tri": self.rams["triangles"].read[0],
+                      # the proposals' copies read at their position port's address, from registers of
+                      # their own (one register driving both memories' block RAMs would cross the device)
+                      **{f"prop_{c}": self.rams[f"proposals{k}"].read[0] for k, c in enumerate("abc")}}
         read_addr = {name: Signal.like(port.addr, name=f"{name}_addr") for name, port in read_ports.items()}
         m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
         t2_tri = self.rams["triangles"].read[0].data
@@ -322,10 +343,10 @@ class MemoryWindows(wiring.Component):
             ent_hot.eq(Cat(ent_next[bank_bits:] == b for b in range(len(ent_hot))) if len(ent_hot) > 1 else 1),
             read_addr["tri"].eq(Mux(running, self.tri_index, index_q)),
             *(read_addr[n].eq(Mux(running, self.node_index, index_q)) for n in ("vel", "wgt", "frc")),
-            read_addr["pos_b"].eq(Mux(in_area, t2_tri.b, ent_data.neighbour)),
-            read_addr["pos_c"].eq(Mux(in_area, t2_tri.c, ent_data.second)),
-            read_addr["pos_a"].eq(Mux(~running | in_nodes, Mux(running, self.node_index, index_q),
-                                      Mux(in_area, t2_tri.a, self.node_of_entry))),
+            *(read_addr[f"{port}_b"].eq(Mux(in_area, t2_tri.b, ent_data.neighbour)) for port in ("pos", "prop")),
+            *(read_addr[f"{port}_c"].eq(Mux(in_area, t2_tri.c, ent_data.second)) for port in ("pos", "prop")),
+            *(read_addr[f"{port}_a"].eq(Mux(~running | in_nodes, Mux(running, self.node_index, index_q),
+                                            Mux(in_area, t2_tri.a, self.node_of_entry))) for port in ("pos", "prop")),
         ]
 
     def _writes(self, m: Module, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks) -> None:

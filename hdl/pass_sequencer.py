@@ -65,6 +65,11 @@ class PassSequencer(wiring.Component):
     in_start, in_force, in_area, in_step, in_integrate, running, area_clear : ``In(1)``
         The controller's flags: the start phase restarts the force and area passes' counters and
         sums, the step phase the integrate pass's; the pass phases time the passes' ends.
+    guarded, half_rate, node_restart, triangle_restart : ``In(1)``
+        The guarded mode (the integrate pass proposes: its velocities go to ``proposal_write``, not to the
+        node memories), a triangle issued every other clock (the guard's triangle passes, for the
+        certificate's interval of 2), and the guard's passes' restarts of the node and triangle counters
+        (a pulse in the clock their fetch flag rises, when the counter still stands at its end).
     vertices, entries, triangles, momentum, barrier_held : ``In``
         Run constants (a momentum mode in MODE.mode gates S's saturation event; MODE.barrier's copy the barrier terms).
     entry, triangle, position[3], velocity, weight_word, force_word : ``In``
@@ -77,8 +82,13 @@ class PassSequencer(wiring.Component):
         The units' results and state.
     force_out_index, node_out_index : ``Out``
         The node of the unit's next result.
-    force_write, node_write : ``Out(write_signature(...))``
-        The force pass's results into the force memory, the integrator's into the node memories.
+    force_write, node_write, proposal_write : ``Out(write_signature(...))``
+        The force pass's results into the force memory, the integrator's into the node memories (or its
+        velocities, the proposals, into the proposal memory in the guarded mode).
+    node_landed, triangle_landed, corners[3], landed_area : ``Out``
+        For the guard's passes (:class:`~hdl.guard_passes.GuardPasses`): a node's, or a triangle's, data
+        landed this clock (its memories' words: ``position``, ``velocity``, the proposals), with the
+        triangle's corner indices and host area.
     force_done, area_done, integrate_done : ``Out(1)``
         A pass's end: one clock, registered, the clock after its last result.
     done_fetching, passes_idle : ``Out(1)``
@@ -133,6 +143,7 @@ class PassSequencer(wiring.Component):
             **{name: In(1) for name in PHASE_INPUTS}, "running": In(1), "area_clear": In(1),
             "vertices": In(width("vertices")), "entries": In(width("entries")), "triangles": In(width("triangles")),
             "momentum": In(1), "barrier_held": In(1),
+            "guarded": In(1), "half_rate": In(1), "node_restart": In(1), "triangle_restart": In(1),
             "entry": In(word_layout(layouts["entries"])), "triangle": In(word_layout(layouts["triangles"])),
             "position": In(vector_layout(fs.position)).array(3), "velocity": In(vector_layout(fs.velocity)),
             "weight_word": In(weight_word_layout(fs)), "force_word": In(force_word_layout(fs)),
@@ -147,6 +158,9 @@ class PassSequencer(wiring.Component):
             "force_out_index": Out(nodes), "node_out_index": Out(nodes),
             "force_write": Out(write_signature(nodes, force_word_layout(fs))),
             "node_write": Out(write_signature(nodes, node_write_layout(fs))),
+            "proposal_write": Out(write_signature(nodes, vector_layout(fs.velocity))),
+            "node_landed": Out(1), "triangle_landed": Out(1), "corners": Out(range(cap.vertices)).array(3),
+            "landed_area": Out(shape_of(fs.face_area)),
             "force_done": Out(1), "area_done": Out(1), "integrate_done": Out(1),
             "done_fetching": Out(1), "passes_idle": Out(1),
             "length_sum": Out(fs.error_acc.width + cap.vertices.bit_length()),
@@ -169,6 +183,10 @@ class PassSequencer(wiring.Component):
                          self.barrier_sum.eq(0), self.tri_index.eq(0)]
         with m.If(self.in_step):
             m.d.sync += [self.node_index.eq(0), self.node_out_index.eq(0), self.power_sum.eq(0)]
+        with m.If(self.node_restart):
+            m.d.sync += self.node_index.eq(0)
+        with m.If(self.triangle_restart):
+            m.d.sync += self.tri_index.eq(0)
         return m
 
     def _force_pass(self, m: Module):
@@ -210,15 +228,23 @@ class PassSequencer(wiring.Component):
 
     def _area_pass(self, m: Module):
         """T0 … T5 into ``AreaError.i``, one triangle per clock."""
-        t_valid = fetch_counter(m, self.tri_index, self.fetch_area, self.triangles, "t", self.area_fetch_latency + 1)
-        # the triangle's area, landed with it, carried beside its corners' read
-        area = self.triangle.area
+        # the guard's triangle passes issue every other clock (the certificate's interval of 2)
+        alternate = Signal(name="tri_alternate")
+        m.d.sync += alternate.eq(~alternate & self.half_rate)
+        t_valid = fetch_counter(m, self.tri_index, self.fetch_area & ~alternate, self.triangles, "t",
+                                self.area_fetch_latency + 1)
+        # the triangle's area and corners, landed with it, carried beside its corners' read
+        area, corners = self.triangle.area, [self.triangle.a, self.triangle.b, self.triangle.c]
         for k in range(self.read_latency + 1, self.area_fetch_latency + 1):
             area_k = Signal(shape_of(self.fs.face_area), reset_less=True, name=f"t{k}_area")
-            m.d.sync += area_k.eq(area)
-            area = area_k
+            corners_k = [Signal(range(self.capacity.vertices), reset_less=True, name=f"t{k}_corner{c}") for c in "abc"]
+            m.d.sync += [area_k.eq(area), *(ck.eq(c) for ck, c in zip(corners_k, corners))]
+            area, corners = area_k, corners_k
+        landed = t_valid[self.area_fetch_latency]
+        m.d.comb += [self.triangle_landed.eq(landed & ~self.in_area), self.landed_area.eq(area),
+                     *(out.eq(c) for out, c in zip(self.corners, corners))]
         out = self.triangle_out
-        m.d.comb += [out.valid.eq(t_valid[self.area_fetch_latency]), out.payload.a.eq(self.position[0]),
+        m.d.comb += [out.valid.eq(landed & self.in_area), out.payload.a.eq(self.position[0]),
                      out.payload.b.eq(self.position[1]), out.payload.c.eq(self.position[2]),
                      out.payload.area.eq(area)]
         return t_valid
@@ -227,8 +253,9 @@ class PassSequencer(wiring.Component):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
         n_valid = fetch_counter(m, self.node_index, self.fetch_nodes, self.vertices, "n", self.node_fetch_latency + 1)
         node = self.node_out.payload
+        landed = n_valid[self.node_fetch_latency]
         m.d.comb += [  # landed at N2
-            self.node_out.valid.eq(n_valid[self.node_fetch_latency]),
+            self.node_out.valid.eq(landed & self.in_integrate), self.node_landed.eq(landed),
             node.node.position.eq(self.position[0]), node.node.velocity.eq(self.velocity),
             node.node.inv_mass.eq(self.weight_word.inv_mass), node.node.inv_mass_barrier.eq(self.weight_word.inv_mass_barrier),
             node.force.eq(self.force_word.force), node.inside.eq(self.force_word.inside),
@@ -237,7 +264,10 @@ class PassSequencer(wiring.Component):
         m.d.comb += [self.node_write.addr.eq(self.node_out_index),
                      self.node_write.data.position.eq(self.integrated.payload.position),
                      self.node_write.data.velocity.eq(self.integrated.payload.velocity),
-                     self.node_write.en.eq(self.integrated.valid)]
+                     self.node_write.en.eq(self.integrated.valid & ~self.guarded),
+                     self.proposal_write.addr.eq(self.node_out_index),
+                     self.proposal_write.data.eq(self.integrated.payload.velocity),
+                     self.proposal_write.en.eq(self.integrated.valid & self.guarded)]
         with m.If(self.integrated.valid):
             m.d.sync += [self.node_out_index.eq(self.node_out_index + 1),
                          self.power_sum.eq(self.power_sum + self.integrated.payload.power)]

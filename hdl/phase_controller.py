@@ -12,23 +12,27 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet
 from golden_model.modes import Step
 from golden_model.engine_spec.image import ITERATION_BITS
+from golden_model.guard import SCALE_MAX_SHIFT
 from golden_model.engine_spec.register_map import RESULTS, STATES, RegisterMap
 
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
+from .guard_decision import GuardDecision
+from .guard_passes import GUARD_PASSES
 from .dsp import registered_product
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import energy_sums_layout
-from .logic import mode_runs, mode_steps, or_tree
+from .logic import mode_guarded, mode_runs, mode_steps, or_tree
 from .stepgen import StepGenerator, pending_is_zero
 
 __all__ = ["PhaseController", "PHASES"]
 
 #: The phases of a run, in code order (the ``phase`` debug code).
-PHASES = ("start", "force", "area", "math", "check", "step", "step_wait", "integrate", "drain")
+PHASES = ("start", "force", "area", "math", "decide", "check", "step", "step_wait", "integrate", *GUARD_PASSES, "drain")
 
 #: Run constants the controller reads from the register bank, and those it reads from their copies.
 CONSTANTS = ("vertices", "entries", "triangles", "mode", "dt", "max_iter", "saturation_limit",
-             "tol_area", "tol_shape", "area_reciprocal", "area_shift", "length_reciprocal", "length_shift")
+             "tol_area", "tol_shape", "area_reciprocal", "area_shift", "length_reciprocal", "length_shift",
+             "energy_floor")
 HELD = ("area_reciprocal", "area_shift", "length_reciprocal", "length_shift", "half_spring", "tol_energy")
 
 #: Results the controller holds (the register map's values).
@@ -51,6 +55,10 @@ class _Run:
     momentum_k: Signal
     momentum: Value  # MODE.mode selects the momentum step
     fixed_step: Value  # MODE.mode selects the fixed step
+    guarded: Value  # MODE.mode selects the guarded step
+    measuring_again: Signal  # the accepted layout measured again after a rollback (its events not counted)
+    accepted: Signal  # the decision's: the step just measured is kept
+    stalled: Signal  # the decision's: the step scale passed SCALE_MAX_SHIFT
 
 
 class PhaseController(wiring.Component):
@@ -133,7 +141,8 @@ class PhaseController(wiring.Component):
             **{name: In(width(name)) for name in CONSTANTS},
             **{f"{name}_held": In(width(name)) for name in HELD},
             "saturations": In(width("saturations")),
-            "force_done": In(1), "area_done": In(1), "integrate_done": In(1), "done_fetching": In(1),
+            "force_done": In(1), "area_done": In(1), "integrate_done": In(1), "guard_done": In(1),
+            "done_fetching": In(1),
             "passes_idle": In(1),
             "length_sum": In(fs.error_acc.width + self.capacity.vertices.bit_length()),
             "square_sum": In(sums["square_sum"].shape), "barrier_sum": In(sums["barrier_sum"].shape),
@@ -144,6 +153,8 @@ class PhaseController(wiring.Component):
             "running": Out(1), "starting": Out(1), "irq_set": Out(1),
             **{f"in_{name}": Out(1) for name in PHASES},
             "fetch_force": Out(1), "fetch_area": Out(1), "fetch_nodes": Out(1), "area_clear": Out(1),
+            "half_rate": Out(1), "node_restart": Out(1), "triangle_restart": Out(1), "guarded": Out(1),
+            "measuring_again": Out(1), "scale_shift": Out(range(SCALE_MAX_SHIFT + 2)),
             "step_dt": Out(shape_of(fs.dt)), "step_half": Out(shape_of(fs.half_dt_sq)),
             **{name: Out(width(name)) for name in RESULT_VALUES},
             **{f"{name}_events": Out(w) for name, w in self.event_widths.items()},
@@ -161,6 +172,7 @@ class PhaseController(wiring.Component):
             "beta": BetaDivider(fs, k_bits=ITERATION_BITS),
             "stepgen": StepGenerator(fs, saturations=True),
         }
+        units["decision"] = GuardDecision(units["energy_check"].energy_bits)
         for name, unit in units.items():
             m.submodules[name] = unit
         # the register is as wide as the energy check's tolerance (both from the golden model's
@@ -172,14 +184,17 @@ class PhaseController(wiring.Component):
         run = _Run(first_measure=Signal(name="first_measure"), math_pending=self.math_pending,
                    settled=Signal(name="settled"), fixed_load=Signal(name="fixed_load"),
                    fixed_half=self._fixed_half_dt_sq(m, platform), momentum_k=Signal(ITERATION_BITS, name="momentum_k"),
-                   momentum=mode_steps(self.mode, Step.MOMENTUM), fixed_step=mode_steps(self.mode, Step.FIXED))
+                   momentum=mode_steps(self.mode, Step.MOMENTUM), fixed_step=mode_steps(self.mode, Step.FIXED),
+                   guarded=mode_guarded(self.mode), measuring_again=self.measuring_again,
+                   accepted=Signal(name="accepted"), stalled=Signal(name="stalled"))
+        m.d.comb += self.guarded.eq(run.guarded)
         self._cycles(m)
         self._units(m, units, run)
         decisions, stepgen_idle = self._decisions(m, units, run)
         sequential_idle = ~Cat(*(u.i.valid for u in units.values())).any() \
             & units["norm_length"].i.ready & units["norm_area"].i.ready & units["energy_check"].i.ready \
-            & units["beta"].i.ready & stepgen_idle
-        m.d.sync += self.area_clear.eq(0)
+            & units["beta"].i.ready & units["decision"].i.ready & stepgen_idle
+        m.d.sync += [self.area_clear.eq(0), self.node_restart.eq(0), self.triangle_restart.eq(0)]
         # the drain's end, registered (the OR of every fetch stage's valid bit and the units' idle
         # flags into the fetch flags' enables is a path of its own): once true it stays true, as
         # nothing starts while draining
@@ -223,7 +238,7 @@ class PhaseController(wiring.Component):
         their pass until the unit's result is in (the next pass starts after the math phase)."""
         fs = self.fs
         norm_length, norm_area, energy = units["norm_length"], units["norm_area"], units["energy_check"]
-        beta, stepgen = units["beta"], units["stepgen"]
+        beta, stepgen, decision = units["beta"], units["stepgen"], units["decision"]
         length_total = Mux(self.length_sum > fs.error_acc.raw_max, fs.error_acc.raw_max, self.length_sum)
         m.d.comb += [
             energy.half_spring.eq(self.half_spring_held), energy.tolerance.eq(self.tol_energy_held),
@@ -237,6 +252,10 @@ class PhaseController(wiring.Component):
             norm_area.i.payload.mantissa.eq(self.area_reciprocal_held),
             norm_area.i.payload.shift.eq(self.area_shift_held),
             stepgen.i.payload.area_error.eq(self.area_error), stepgen.i.payload.shape_error.eq(self.shape_error),
+            decision.i.payload.energy.eq(self.energy), decision.i.payload.first.eq(run.first_measure),
+            decision.i.payload.with_momentum.eq(self.step_dt != 0),
+            decision.tolerance.eq(self.tol_energy_held), decision.floor.eq(self.energy_floor),
+            self.scale_shift.eq(decision.shift),
             self.step_events.eq(Mux(stepgen.o.valid, stepgen.o.payload.saturations, 0)),
             self.shape_error_events.eq(norm_length.o.valid & norm_length.o.payload.saturations),
             self.area_error_events.eq(norm_area.o.valid & norm_area.o.payload.saturations),
@@ -249,8 +268,12 @@ class PhaseController(wiring.Component):
         with m.If(norm_area.o.valid):
             m.d.sync += [self.area_error.eq(norm_area.o.payload.error), run.math_pending[1].eq(0)]
         with m.If(energy.o.valid):
-            m.d.sync += [self.energy.eq(energy.o.payload.energy), run.settled.eq(energy.o.payload.settled),
-                         run.math_pending[2].eq(0)]
+            m.d.sync += [self.energy.eq(energy.o.payload.energy), run.math_pending[2].eq(0)]
+            with m.If(~run.guarded):
+                m.d.sync += run.settled.eq(energy.o.payload.settled)
+        with m.If(decision.o.valid):  # the guarded step's stop rule is the window's
+            m.d.sync += [run.settled.eq(decision.o.payload.settled), run.accepted.eq(decision.o.payload.accepted),
+                         run.stalled.eq(decision.o.payload.stalled)]
         with m.If(beta.o.valid):
             m.d.sync += self.step_dt.eq(beta.o.payload)
         with m.If(stepgen.o.valid):
@@ -303,7 +326,7 @@ class PhaseController(wiring.Component):
             m.d.comb += self.irq_set.eq(1)
 
         norm_length, norm_area, energy = units["norm_length"], units["norm_area"], units["energy_check"]
-        beta, stepgen = units["beta"], units["stepgen"]
+        beta, stepgen, decision = units["beta"], units["stepgen"], units["decision"]
         abort, running = self.abort, self.running
         # ABORT while running drains what is in flight (still "running": START is ignored and the memories
         # answer err until nothing can write them any more), then goes idle with no result. The pass under
@@ -323,7 +346,7 @@ class PhaseController(wiring.Component):
                 finish("bad-constants")
             with m.Else():
                 set_state("running")
-                m.d.sync += [flags["start"].eq(1), run.first_measure.eq(1)]
+                m.d.sync += [flags["start"].eq(1), run.first_measure.eq(1), run.measuring_again.eq(0)]
         go = ~abort
         with m.If(go & flags["start"]):  # a measurement: the force pass
             m.d.sync += [self.fetch_force.eq(1), *move("start", "force")]
@@ -339,13 +362,28 @@ class PhaseController(wiring.Component):
         m.d.sync += [math_settle[0].eq(flags["math"] & (run.math_pending == 0)),
                      *(math_settle[k].eq(math_settle[k - 1]) for k in range(1, len(math_settle)))]
         with m.If(go & flags["math"] & math_settle[-1]):
-            m.d.sync += move("math", "check")
+            # the guarded step: each new layout's energy judged (kept or rolled back); the accepted layout
+            # measured again after a rollback is not
+            with m.If(run.guarded & ~run.measuring_again):
+                m.d.sync += [decision.i.valid.eq(1), *move("math", "decide")]
+            with m.Else():
+                m.d.sync += [run.measuring_again.eq(0), *move("math", "check")]
+        with m.If(go & flags["decide"] & decision.o.valid):
+            with m.If(decision.o.payload.accepted):
+                m.d.sync += move("decide", "check")
+            with m.Else():  # P − V and V = 0, then the accepted layout measured again
+                m.d.sync += [self.fetch_nodes.eq(1), self.node_restart.eq(1), run.measuring_again.eq(1),
+                             *move("decide", "rollback")]
+        with m.If(go & flags["rollback"] & self.guard_done):
+            m.d.sync += [self.fetch_nodes.eq(0), *move("rollback", "start")]
         with m.If(go & flags["check"]):
             # as run_image: the saturation limit first, then the stop rule (neither after the first
             # measurement), then the iteration limit
             m.d.sync += move("check")  # to the step phase, or the run is over
             with m.If(q["diverged_q"] & ~run.first_measure):
                 finish("diverged")
+            with m.Elif(run.guarded & run.stalled & ~run.first_measure):
+                finish("stalled")
             with m.Elif(q["converged_q"] & ~run.first_measure):
                 finish("converged")
             with m.Elif(q["at_max_iter_q"]):
@@ -366,10 +404,25 @@ class PhaseController(wiring.Component):
         with m.If(go & flags["drain"] & drained):
             set_state("idle")
             m.d.sync += move("drain")
-            m.d.sync += [self.result.eq(_code(RESULTS, "none")),
+            m.d.sync += [self.result.eq(_code(RESULTS, "none")), self.half_rate.eq(0),
                          self.fetch_force.eq(0), self.fetch_area.eq(0), self.fetch_nodes.eq(0)]
         with m.If(go & flags["integrate"] & self.integrate_done):
-            m.d.sync += [self.fetch_nodes.eq(0), *move("integrate", "start")]
+            with m.If(run.guarded):  # the proposals' certificate, then the commit
+                m.d.sync += [self.fetch_nodes.eq(0), self.fetch_area.eq(1), self.half_rate.eq(1),
+                             self.triangle_restart.eq(1), *move("integrate", "stuck")]
+            with m.Else():
+                m.d.sync += [self.fetch_nodes.eq(0), *move("integrate", "start")]
+        with m.If(go & flags["stuck"] & self.guard_done):
+            m.d.sync += [self.fetch_area.eq(0), self.half_rate.eq(0), self.fetch_nodes.eq(1), self.node_restart.eq(1),
+                         *move("stuck", "hold")]
+        with m.If(go & flags["hold"] & self.guard_done):
+            m.d.sync += [self.fetch_nodes.eq(0), self.fetch_area.eq(1), self.half_rate.eq(1),
+                         self.triangle_restart.eq(1), *move("hold", "certify")]
+        with m.If(go & flags["certify"] & self.guard_done):
+            m.d.sync += [self.fetch_area.eq(0), self.half_rate.eq(0), self.fetch_nodes.eq(1), self.node_restart.eq(1),
+                         *move("certify", "commit")]
+        with m.If(go & flags["commit"] & self.guard_done):
+            m.d.sync += [self.fetch_nodes.eq(0), *move("commit", "start")]
 
     def _momentum(self, m: Module, units, run: _Run) -> None:
         """``k`` and the restart for β_k, and ITERATIONS, each moved by a registered pulse of its own.
@@ -387,11 +440,13 @@ class PhaseController(wiring.Component):
         launch_pulse, step_pulse, iterate_pulse, restart_pulse, restart_clear, power_negative = (
             Signal(name=n) for n in ("launch_pulse", "step_pulse", "iterate_pulse", "restart_pulse",
                                      "restart_clear", "power_negative"))
-        launching = self.in_start & run.first_measure
+        # a rollback restarts the momentum (the rolled-back step's S is void), as a run's start does
+        launching = (self.in_start & run.first_measure) | (self.in_rollback & self.guard_done)
         stepping = go & self.in_step & run.momentum
         ending = go & self.in_integrate & self.integrate_done
+        committed = go & self.in_commit & self.guard_done  # the guarded step's iteration ends with its commit
         m.d.sync += [launch_pulse.eq(launching), step_pulse.eq(stepping), restart_clear.eq(launching | stepping),
-                     iterate_pulse.eq(ending),
+                     iterate_pulse.eq(Mux(run.guarded, committed, ending)),
                      restart_pulse.eq(ending & run.momentum & ~step_was_restart),
                      power_negative.eq(self.power_sum < 0)]
         with m.If(launch_pulse):  # a run's start: no momentum yet

@@ -58,7 +58,7 @@ COMPONENTS = (
     ComponentSpec("node_update", "node-update datapath: neighbour entries → updated nodes"),
     ComponentSpec(CORE_MODULE, "top: node-update datapath + step generator + step registers"),
     ComponentSpec("guard_certificate", "the step guard's inversion test: a triangle's corners and proposed moves "
-                                       "→ its level (docs/engine-guard.md; not yet in the engine)"),
+                                       "→ its level (docs/engine-guard.md; in the engine at II 2)"),
     ComponentSpec("guard_certificate_ii2", "the same at an initiation interval of 2: half the multipliers"),
 )
 

@@ -61,9 +61,9 @@ ENERGY_TOL_INT_BITS = 8
 RESULTS = ("none", "converged", "max-iterations", "diverged", "no-mesh", "bad-constants", "stalled")
 """The run's result codes, in code order (STATUS.result)."""
 
-ENGINE_RUN_MODES: tuple[RunMode, ...] = tuple(m for m in RUN_MODES if not m.guarded)
+ENGINE_RUN_MODES: tuple[RunMode, ...] = RUN_MODES
 """The run modes ``SpringflatEngine`` runs: ``MODE.mode`` holds one of their codes; START answers any
-other code (the guarded mode's) with ``bad-constants``."""
+other code with ``bad-constants``."""
 
 MODE_FIELDS = ("mode", "barrier")
 """The run constants that share the ``MODE`` register, from bit 0 up."""
@@ -326,10 +326,14 @@ UNGUARDED = {"guard": False, "energy_window": 1}
 
 
 def check_engine_params(params) -> None:
-    """Refuse, in one line, the run modes the engine does not have (the step guard, a windowed stop rule)."""
-    if params.guard or params.energy_window != 1:
-        raise FixedPointError("SpringflatEngine runs the momentum dynamics without the step guard and with "
-                              "Algorithm 1's one-iteration energy rule: add --no-guard --energy-window 1")
+    """Refuse, in one line, a stop rule's window the engine does not have: the guard's
+    :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it."""
+    window = image_energy_window(params.mode)
+    if params.energy_window != window:
+        hint = f"--energy-window {window}" if params.guard else "--energy-window 1 (or the guard, with its window)"
+        raise FixedPointError(f"SpringflatEngine's stop rule measures the energy change over {window} "
+                              f"{'accepted iterations' if params.guard else 'iteration'} in this mode, not "
+                              f"{params.energy_window}: use {hint}")
 
 
 def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
@@ -420,6 +424,7 @@ class ImageRunResult:
     saturations: int  # saturation events, stopped at 2**SATURATION_BITS - 1
     positions: np.ndarray  # (V, 2) raw [position]
     velocities: np.ndarray  # (V, 2) raw [velocity]
+    guard: object = None  # the guarded mode's GuardRecord (rejected steps, clipped and frozen node steps)
 
 
 def image_mode(constants: dict[str, int]) -> RunMode | None:
@@ -462,4 +467,4 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
                              "inv_mass": inv_mass[:n], "inv_mass_barrier": inv_mass_barrier[:n]})
     saturations = min(counter.total, (1 << SATURATION_BITS) - 1)
     return ImageRunResult(nodes, status, k, controller.errors[0], controller.errors[1], controller.energy_raw,
-                          saturations, positions, velocities)
+                          saturations, positions, velocities, controller.guard)

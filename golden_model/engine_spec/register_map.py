@@ -223,8 +223,7 @@ _CONSTANT_TEXT = {
     "vertices": "vertices of the loaded mesh (0: no mesh)",
     "entries": "neighbour entries of the loaded mesh",
     "triangles": "triangles of the loaded mesh",
-    "mode": "the run mode (docs/guard.md's table); the engine runs the unguarded ones, START answers "
-            "any other code with bad-constants",
+    "mode": "the run mode (docs/guard.md's table; the guarded one: docs/engine-guard.md)",
     "barrier": "1: the fold barrier's entry terms are on",
     "half_spring": "½C raw [spring]",
     "damping": "1 − γ raw [damping]",

@@ -32,6 +32,9 @@ RUNS = {  # both dynamics, with and without the barrier, fixed and variable step
     # the energy always passes: the iteration whose E_S first passes stops the run
     "momentum-area-gate": FlattenParams(dynamics="momentum", **UNGUARDED, tol_area=0.02, tol_shape=1.0, tol_energy=1.0,
                                         max_iter=60),
+    # the step guard with its window: the momentum dynamics' default
+    "momentum-guarded": FlattenParams(dynamics="momentum", max_iter=60),
+    "momentum-guarded-no-barrier": FlattenParams(dynamics="momentum", barrier=False, max_iter=60),
 }
 
 
@@ -213,7 +216,7 @@ def test_the_saturation_limit_stops_a_run_as_diverged():
     ({"area_reciprocal": 1 << 26}, "bad-constants"),  # not a u1.27 mantissa in [1, 2)
     ({"length_shift": 21}, "bad-constants"),  # normalise needs shift >= error.frac_bits + 2
     ({"mode": mode_named("paper-fixed").code, "dt": 0}, "bad-constants"),
-    ({"mode": mode_named("momentum-guarded").code}, "bad-constants"),  # a mode the engine does not run
+    ({"mode": mode_named("momentum-guarded").code}, None),  # every mode code is one the engine runs
     ({"mode": mode_named("paper-fixed").code, "dt": 1}, None),
     ({"max_iter": 0}, "bad-constants"),
     ({}, None),
@@ -248,3 +251,15 @@ def test_a_90000_vertex_mesh_images_at_a_large_capacity():
         np.testing.assert_array_equal(got, want)
     faces, _ = decode_triangles(image.triangles, DEFAULT, capacity)
     np.testing.assert_array_equal(faces, mesh.faces)
+
+
+@pytest.mark.parametrize("params, message", [
+    (FlattenParams(dynamics="momentum", energy_window=4), r"over 10 accepted iterations in this mode, not 4: use "
+                                                          r"--energy-window 10"),
+    (FlattenParams(dynamics="momentum", guard=False), r"over 1 iteration in this mode, not 10"),
+])
+def test_a_stop_rule_window_the_engine_lacks_is_refused_in_one_line(params, message):
+    mesh = MESHES["dome"]
+    with pytest.raises(FixedPointError, match=message) as info:
+        build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, DEFAULT), CAPACITY)
+    assert "\n" not in str(info.value)

@@ -104,6 +104,30 @@ def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select):
     assert read_back.cycles > 0
 
 
+# The guarded step (the momentum dynamics' default) from a Tutte layout squeezed across: steps are clipped
+# by the certificate and one is rolled back; without the barrier and squeezed further, nodes are also
+# held still (frozen) and the forces saturate, through the registered bank select's latencies.
+GUARDED = {
+    "clipped-and-rolled-back": (0.05, FlattenParams(dynamics="momentum", max_iter=12), False),
+    "frozen-and-saturating": (0.02, FlattenParams(dynamics="momentum", barrier=False, max_iter=12), True),
+}
+
+
+@pytest.mark.parametrize("case", GUARDED)
+def test_guarded_whole_run_matches_the_golden_model(case):
+    squeeze, params, registered_select = GUARDED[case]
+    layout = initial_layout(MESH, "tutte") * np.array([squeeze, 1.0])
+    image = build_image(prepare(MESH, layout, params, FS), CAPACITY)
+    expected = run_image(image, FS)
+    guard = expected.guard
+    assert guard.clipped > 0
+    assert guard.rejected > 0 if case == "clipped-and-rolled-back" else (guard.frozen > 0 and expected.saturations > 0)
+    dut = SpringflatEngine(FS, CAPACITY, registered_select=registered_select)
+    result, read_back = run_on_engine(dut, image)
+    assert result == expected.status
+    assert_same_run(read_back, expected)
+
+
 def test_every_iteration_state_matches_with_bus_wait_states():
     """The node memory after each integrate pass equals the golden model's state after that many iterations;
     the host's bus cycles come with random idle clocks between them."""
@@ -214,7 +238,7 @@ def test_bad_run_constants_answer_as_constant_fault_says():
         "reciprocal not u1.F": {"area_reciprocal": top - 1},
         "shift too small": {"length_shift": FS.error.frac_bits + 1},
         "fixed step of zero": {"mode": mode_named("paper-fixed").code, "dt": 0},
-        "a mode the engine does not run": {"mode": mode_named("momentum-guarded").code},
+        "the guarded mode": {"mode": mode_named("momentum-guarded").code},
         "a fixed step": {"mode": mode_named("paper-fixed").code, "dt": 1},
         "good": {},
     }

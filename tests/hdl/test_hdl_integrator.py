@@ -249,7 +249,8 @@ def test_the_paper_step_ignores_the_proposal_inputs():
 def check_proposals(fs, nodes, beta, shift, seed):
     """One pass of proposals (``momentum``, ``propose``, ``scale_shift = shift``, β in ``dt``) against
     :func:`golden_model.fixed.guard.proposal`: ``V'`` bit for bit, the power as ever, and each node's
-    ``saturations`` the events ``proposal`` counts for it. Returns the pass's golden counter."""
+    ``saturations`` the events ``proposal`` and the guarded step's ``node_power`` (S, formed as it
+    proposes) count for it. Returns the pass's golden counter."""
     n = len(nodes["inside"])
     dut = Integrator(fs, side=SIDE, saturations=True)
     vec = lambda a: {"x": a[:, 0], "y": a[:, 1]}  # noqa: E731
@@ -269,10 +270,12 @@ def check_proposals(fs, nodes, beta, shift, seed):
     v, f = nodes["velocity"], nodes["force"]
     counter = SaturationCounter()
     want = proposal(fs, v, f, weights, beta, shift, counter)
+    node_power(fs, f, v, counter)
     per_node = np.zeros(n, dtype=np.int64)
     for i in range(n):  # each node's own events
         node_counter = SaturationCounter()
         proposal(fs, v[i:i + 1], f[i:i + 1], weights[i:i + 1], beta, shift, node_counter)
+        node_power(fs, f[i:i + 1], v[i:i + 1], node_counter)
         per_node[i] = node_counter.total
     assert per_node.sum() == counter.total
     for name, got, expected in (("velocity.x", out["velocity"]["x"], want[:, 0]),
@@ -288,8 +291,8 @@ def check_proposals(fs, nodes, beta, shift, seed):
 @pytest.mark.parametrize("case", [*PRESETS, "tight"])
 def test_proposals_at_every_step_scale(case):
     """Every shift 0 … SCALE_MAX_SHIFT + 1 with a random β: random nodes, and nodes that saturate (in the
-    presets accel and velocity; in the tight formats velocity, and the position and the power too, which
-    a proposal does not count)."""
+    presets accel and velocity; in the tight formats velocity, and the position and the power too: a
+    proposal counts the power's, not the position's)."""
     fs = FormatSet.preset("default").replace(**TIGHT) if case == "tight" else FormatSet.preset(case)
     rng = np.random.default_rng(30)
     seen = set()

@@ -36,13 +36,18 @@ MODES = {
     "paper-fixed-barrier": dict(density="auto", step="fixed", dt=0.02, damping=0.05, barrier=True,
                                 tol_area=0.0, tol_shape=0.0),
     "momentum": dict(density="auto", dynamics="momentum", **UNGUARDED, barrier=True, tol_area=0.0, tol_shape=0.0),
+    # the step guard from a layout squeezed across: node steps clipped and held still by the certificate,
+    # a step rolled back, saturating forces
+    "momentum-guarded": dict(density="auto", dynamics="momentum", barrier=False, tol_area=0.0, tol_shape=0.0),
 }
+SQUEEZE = {"momentum-guarded": 0.01}
 
 
 def dome_image(mode: str, max_iter: int):
     mesh = dome_grid(4)
     params = FlattenParams(**MODES[mode], max_iter=max_iter)
-    return build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, DEFAULT), CAPACITY)
+    layout = initial_layout(mesh, "tutte") * np.array([SQUEEZE.get(mode, 1.0), 1.0])
+    return build_image(prepare(mesh, layout, params, DEFAULT), CAPACITY)
 
 
 @pytest.mark.parametrize("simulator, mode", [("verilator", m) for m in MODES] + [("icarus", "paper-variable")])
@@ -52,6 +57,10 @@ def test_whole_run_bit_exact(simulator, mode):
     need_simulator(simulator)
     max_iter, per_iteration = (2, 1) if simulator == "icarus" else (6, 2)
     image = dome_image(mode, max_iter)
+    if mode == "momentum-guarded" and simulator == "verilator":  # the run has each of the guard's events
+        want = run_image(image, DEFAULT)
+        assert want.guard.clipped > 0 and want.guard.frozen > 0 and want.guard.rejected > 0, want.guard
+        assert want.saturations > 0
     run = run_image_on_rtl(image, DEFAULT, simulator, wait_states=3, seed=7,
                            checks={"iteration_checks": per_iteration})
     r = run.result
@@ -66,14 +75,15 @@ def test_whole_run_bit_exact(simulator, mode):
     assert 0 <= r["python_share"] < 1 and r["cycles_per_second"] > 0
 
 
-def test_ecp5_flavour_whole_run_bit_exact():
+@pytest.mark.parametrize("mode", ["momentum", "momentum-guarded"])
+def test_ecp5_flavour_whole_run_bit_exact(mode):
     """What ``springflat synth --target ecp5`` synthesises (every memory a row of DP16KDs read through their
     output registers, the multipliers MULT18X18Ds, the step generator's tables DP16KD ROMs), on Icarus with
     the primitives' models: every iteration's state and the whole run equal run_image's. The DP16KD model
     reads X where a port reads bits the other writes at the same clock, so this also checks that no read
     whose data is used meets a write (BlockRam's timing contract)."""
     need_simulator("icarus")
-    image = dome_image("momentum", 2)
+    image = dome_image(mode, 2)
     run = run_image_on_rtl(image, DEFAULT, "icarus", wait_states=2, seed=11, checks={"iteration_checks": 1},
                            dsp="ecp5")
     r = run.result

@@ -1,0 +1,180 @@
+"""The guarded step's passes after the proposal: the stuck-node and certificate passes over the triangles,
+and the hold, commit and rollback passes over the nodes.
+
+The RTL twin of :func:`golden_model.fixed.guard.guarded_moves_raw` and :func:`~golden_model.fixed.guard.commit`
+(and of the rollback of :meth:`golden_model.fixed.controller.Controller._advance_guarded`), pass by pass as
+``docs/engine-guard.md`` plans them; the fetches are the :class:`~hdl.pass_sequencer.PassSequencer`'s.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.fixed import FormatSet
+from golden_model.engine_spec.image import EngineCapacity
+
+from .block_ram import BlockRam
+from .fifo import LutFIFO
+from .guard_certificate import GuardCertificate
+from .guard_commit import GuardCommit
+from .fixedpoint import shape_of
+from .layouts import certificate_level_shape, vector_layout
+from .level_scatter import LevelScatter
+from .memory_windows import node_write_layout, write_signature
+
+__all__ = ["GuardPasses", "GUARD_PASSES"]
+
+#: The guard's passes after the proposal, in the order an iteration runs them (``rollback`` only after a
+#: rejected step); each has the controller's phase flag ``in_<name>``.
+GUARD_PASSES = ("stuck", "hold", "certify", "commit", "rollback")
+
+
+class GuardPasses(wiring.Component):
+    """The guard's certificate unit, its three level scatters and the commit, fed by the sequencer's fetches.
+
+    * **stuck** (triangles, one per two clocks): :class:`~hdl.guard_certificate.GuardCertificate` on the
+      corners' positions and proposals; each corner's ``stuck`` bit into its slot's
+      :class:`~hdl.level_scatter.LevelScatter` (a maximum of 0/1 is an OR);
+    * **hold** (nodes): a node stuck in any slot gets a proposal of 0 (all three proposal copies
+      written), and its slots are cleared for the certificate;
+    * **certify** (triangles, one per two clocks): the certificate on the held proposals; each
+      triangle's ``level`` into its three corners' slots;
+    * **commit** (nodes): :class:`~hdl.guard_commit.GuardCommit` on the node's position, proposal and
+      its slots' levels: ``P + D`` and ``V = D`` into the node memories;
+    * **rollback** (nodes, a rejected step only): the same unit on the node's position and committed
+      move: ``P − V`` and ``V = 0``.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet`
+    capacity : :class:`~golden_model.engine_spec.image.EngineCapacity`
+    read_latency : int
+        Clocks from the node memories' address registers to their data (the scatters answer
+        :attr:`BlockRam.LATENCY <hdl.block_ram.BlockRam.LATENCY>` after theirs: their levels are
+        delayed by the difference).
+
+    Members
+    -------
+    in_stuck, in_hold, in_certify, in_commit, in_rollback : ``In(1)``
+        The controller's phase flags (one at a time).
+    vertices, triangles : ``In``
+        The mesh's counts (a pass's end).
+    node_index : ``In``
+        The sequencer's node counter: the scatters' lookups are registered from it as the memories'
+        read addresses are.
+    node_landed, triangle_landed, corners[3], area : ``In``
+        The sequencer's landed items (:class:`~hdl.pass_sequencer.PassSequencer`).
+    position[3], proposal[3], velocity : ``In``
+        The memories' read data (corner k's on port k; a node pass's on port 0).
+    proposal_write, node_write : ``Out(write_signature(...))``
+        The hold pass's proposals; the commit and rollback passes' positions and velocities.
+    done : ``Out(1)``
+        A pass's end: one clock, registered, after its last write.
+    idle : ``Out(1)``
+        No triangle owed by the certificate, no update in a scatter, no node in the commit (an aborted
+        run drains until then).
+    """
+
+    def __init__(self, fs: FormatSet, capacity: EngineCapacity, *, read_latency: int = BlockRam.LATENCY):
+        if not isinstance(fs, FormatSet) or not isinstance(capacity, EngineCapacity):
+            raise TypeError(f"GuardPasses needs a FormatSet and an EngineCapacity, not {fs!r}, {capacity!r}")
+        if isinstance(read_latency, bool) or not isinstance(read_latency, int) or read_latency < BlockRam.LATENCY:
+            raise ValueError(f"read_latency must be an int >= {BlockRam.LATENCY}, not {read_latency!r}")
+        self.fs, self.capacity, self.read_latency = fs, capacity, read_latency
+        nodes = range(capacity.vertices + 1)
+        pos, vel = vector_layout(fs.position), vector_layout(fs.velocity)
+        super().__init__({
+            **{f"in_{name}": In(1) for name in GUARD_PASSES}, "in_step": In(1), "in_integrate": In(1),
+            "vertices": In(nodes), "triangles": In(range(capacity.triangles + 1)),
+            "node_index": In(nodes), "node_landed": In(1), "triangle_landed": In(1),
+            "corners": In(range(capacity.vertices)).array(3), "area": In(shape_of(fs.face_area)),
+            "position": In(pos).array(3), "proposal": In(vel).array(3), "velocity": In(vel),
+            "proposal_write": Out(write_signature(nodes, vel)),
+            "node_write": Out(write_signature(nodes, node_write_layout(fs))),
+            "done": Out(1), "idle": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        fs, cap = self.fs, self.capacity
+        m.submodules.certificate = certificate = GuardCertificate(fs, interval=2)
+        m.submodules.commit = commit = GuardCommit(fs)
+        scatters = [LevelScatter(cap.vertices, name=f"guard_levels_{slot}") for slot in "abc"]
+        for slot, scatter in zip("abc", scatters):
+            m.submodules[f"scatter_{slot}"] = scatter
+
+        # the triangle passes: the certificate, and the corners beside it in a FIFO (results come in order)
+        corner_bits = len(self.corners[0])
+        m.submodules.corner_fifo = corner_fifo = LutFIFO(width=3 * corner_bits, depth=certificate.credits,
+                                                         checked=False)
+        beat = certificate.i.payload
+        m.d.comb += [
+            certificate.i.valid.eq(self.triangle_landed), certificate.winding_negative.eq(0),
+            beat.a.eq(self.position[0]), beat.b.eq(self.position[1]), beat.c.eq(self.position[2]),
+            beat.move_a.eq(self.proposal[0]), beat.move_b.eq(self.proposal[1]), beat.move_c.eq(self.proposal[2]),
+            beat.area.eq(self.area),
+            corner_fifo.w_data.eq(Cat(*self.corners)), corner_fifo.w_en.eq(self.triangle_landed),
+            certificate.o.ready.eq(1), corner_fifo.r_en.eq(certificate.o.valid),
+        ]
+        result = certificate.o.payload
+        for k, scatter in enumerate(scatters):
+            update = scatter.update
+            m.d.comb += [update.valid.eq(certificate.o.valid),
+                         update.payload.node.eq(corner_fifo.r_data[k * corner_bits:(k + 1) * corner_bits]),
+                         update.payload.level.eq(Mux(self.in_stuck, result.stuck[k], result.level))]
+        results = Signal(range(cap.triangles + 1), name="certified")
+        with m.If(certificate.o.valid):
+            m.d.sync += results.eq(results + 1)
+
+        # the node passes: the scatters' lookups registered as the memories' addresses are, their levels
+        # delayed to the memories' latency
+        lookup = Signal(range(cap.vertices + 1), name="level_lookup")
+        m.d.sync += lookup.eq(self.node_index)
+        levels = []
+        for k, scatter in enumerate(scatters):
+            m.d.comb += scatter.lookup.eq(lookup)
+            level = scatter.level
+            for d in range(self.read_latency - BlockRam.LATENCY):
+                later = Signal(certificate_level_shape(), name=f"guard_level{k}_{d}")
+                m.d.sync += later.eq(level)
+                level = later
+            levels.append(level)
+
+        # the proposal pass clears every node's slots for the stuck pass (whatever an aborted run left), the
+        # hold pass each node's behind its lookup for the certificate pass
+        hold = self.in_hold & self.node_landed
+        clearing = (self.in_integrate | self.in_hold) & self.node_landed
+        held = Signal(range(cap.vertices + 1), name="held_nodes")  # the node landed (nodes land in order)
+        stuck = Cat(*(level != 0 for level in levels)).any()
+        m.d.comb += [self.proposal_write.addr.eq(held), self.proposal_write.en.eq(hold),
+                     self.proposal_write.data.eq(Mux(stuck, 0, self.proposal[0]))]
+        for scatter in scatters:
+            m.d.comb += [scatter.clear.valid.eq(clearing), scatter.clear.payload.eq(held)]
+        with m.If(clearing):
+            m.d.sync += held.eq(held + 1)
+
+        c_in = commit.i.payload
+        m.d.comb += [commit.i.valid.eq((self.in_commit | self.in_rollback) & self.node_landed),
+                     c_in.position.eq(self.position[0]),
+                     c_in.velocity.eq(Mux(self.in_rollback, self.velocity, self.proposal[0])),
+                     *(c_in.levels[k].eq(level) for k, level in enumerate(levels)),
+                     c_in.stuck.eq(0), c_in.rollback.eq(self.in_rollback)]
+        committed = Signal(range(cap.vertices + 1), name="committed_nodes")
+        m.d.comb += [self.node_write.addr.eq(committed), self.node_write.en.eq(commit.o.valid),
+                     self.node_write.data.position.eq(commit.o.payload.position),
+                     self.node_write.data.velocity.eq(commit.o.payload.velocity)]
+        with m.If(commit.o.valid):
+            m.d.sync += committed.eq(committed + 1)
+
+        # a pass's end, registered; its counters restart the clock after
+        scatters_idle = Cat(*(s.idle for s in scatters)).all()
+        m.d.comb += self.idle.eq((corner_fifo.level == 0) & scatters_idle & commit.idle)
+        triangles_done = (self.in_stuck | self.in_certify) & (results == self.triangles) & scatters_idle
+        nodes_done = (self.in_hold & (held == self.vertices)) \
+            | ((self.in_commit | self.in_rollback) & (committed == self.vertices))
+        m.d.sync += self.done.eq((triangles_done | nodes_done) & ~self.done)
+        with m.If(self.done | self.in_step):
+            m.d.sync += [results.eq(0), held.eq(0), committed.eq(0)]
+        return m
