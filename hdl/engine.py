@@ -8,7 +8,7 @@ set and capacity: this module decodes that map, it defines no address of its own
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux
+from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -175,10 +175,14 @@ class SpringflatEngine(wiring.Component):
               "in_area", "in_step", "in_integrate", "running", "area_clear", "guarded", "half_rate", "node_restart",
               "triangle_restart")
         _wire(m, controller, memories, "running", "fetch_nodes")
-        # the position ports read the triangles' corners in every triangle pass, the node in every node pass
-        m.d.comb += [memories.in_area.eq(controller.in_area | controller.in_stuck | controller.in_certify),
-                     memories.in_integrate.eq(controller.in_integrate | controller.in_hold | controller.in_commit
-                                              | controller.in_rollback)]
+        # the position ports read the triangles' corners in every triangle pass, the node in every node pass:
+        # the phase flags ORed into registers (a clock late: a triangle's corners are addressed from its
+        # second clock on, and a node pass's first node from its fetch flag)
+        corner_pass, node_pass = Signal(name="corner_pass"), Signal(name="node_pass")
+        m.d.sync += [corner_pass.eq(controller.in_area | controller.in_stuck | controller.in_certify),
+                     node_pass.eq(controller.in_integrate | controller.in_hold | controller.in_commit
+                                  | controller.in_rollback)]
+        m.d.comb += [memories.in_area.eq(corner_pass), memories.in_integrate.eq(node_pass)]
         _wire(m, controller, guard, "in_step", "in_integrate", *(f"in_{name}" for name in GUARD_PASSES))
         _wire(m, registers, guard, "vertices", "triangles")
         _wire(m, sequencer, guard, "node_index", "node_landed", "triangle_landed", "corners")

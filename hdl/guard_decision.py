@@ -64,10 +64,11 @@ class GuardDecision(wiring.Component):
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle. The decision, the window and the scale are
-    updated in the clock after the transfer; ``ε·E_old`` then takes ``energy_bits`` clocks (an
-    LSB-first shift-add, with ``|E_kept − E_old|`` alongside), the compare's halves one more, and
+    updated two clocks after the transfer (the rise compared first); ``ε·E_old`` then takes
+    ``energy_bits`` clocks (an LSB-first shift-add, with ``|E_kept − E_old|`` alongside), the
+    compare's halves one more, and
     ``o`` is a register: with ``o.ready`` high the output transfers :attr:`latency`
-    (``energy_bits + 4``) clock edges after the input.
+    (``energy_bits + 5``) clock edges after the input.
     """
 
     def __init__(self, energy_bits: int, *, window: int = ENERGY_WINDOW):
@@ -76,7 +77,7 @@ class GuardDecision(wiring.Component):
                 raise ValueError(f"{name} must be an int >= {2 if name == 'energy_bits' else 1}, not {value!r}")
         self.energy_bits, self.window = energy_bits, window
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
-        self.latency = energy_bits + 4
+        self.latency = energy_bits + 5
         super().__init__({
             "i": In(stream.Signature(decision_input_layout(energy_bits))),
             "o": Out(stream.Signature(decision_output_layout(energy_bits))),
@@ -102,19 +103,23 @@ class GuardDecision(wiring.Component):
         change = Signal(bits, reset_less=True)
         steps = Signal(range(bits + 1), reset_less=True)
         accepted = Signal(name="accepted")
-        idle, deciding, multiplying, halves, comparing = (Signal(name=n, init=int(n == "idle"))
-                                                           for n in ("idle", "deciding", "multiplying", "halves",
-                                                                     "comparing"))
+        idle, rising, deciding, multiplying, halves, comparing = (
+            Signal(name=n, init=int(n == "idle"))
+            for n in ("idle", "rising", "deciding", "multiplying", "halves", "comparing"))
         energy, first, with_momentum = (Signal.like(v, name=n, reset_less=True) for n, v in
                                         (("energy", beat.energy), ("first", beat.first),
                                          ("with_momentum", beat.with_momentum)))
         m.d.comb += self.i.ready.eq(idle)
         with m.If(self.i.valid & idle):
-            m.d.sync += [idle.eq(0), deciding.eq(1), energy.eq(beat.energy), first.eq(beat.first),
+            m.d.sync += [idle.eq(0), rising.eq(1), energy.eq(beat.energy), first.eq(beat.first),
                          with_momentum.eq(beat.with_momentum), tolerance.eq(self.tolerance), floor.eq(self.floor)]
 
-        # the decision, the scale and the window, in one clock
-        rises = energy > kept
+        # the energy's compare in a clock of its own (a carry chain as wide as the energy, into the
+        # window's and the scale's enables, was the engine's worst path), then the decision, the scale
+        # and the window in one clock
+        rises = Signal(name="rises")
+        with m.If(rising):
+            m.d.sync += [rising.eq(0), deciding.eq(1), rises.eq(energy > kept)]
         newest = Mux(first | ~rises, energy, kept)
         with m.If(deciding):
             m.d.sync += [deciding.eq(0), multiplying.eq(1), kept.eq(newest), accepted.eq(first | ~rises),
@@ -145,13 +150,18 @@ class GuardDecision(wiring.Component):
                 m.d.sync += [multiplying.eq(0), halves.eq(1)]
         limit = allowed[ENERGY_TOL_FRAC_BITS:]
         half = bits // 2
-        low_within, high_below, high_equal, below_floor, kept_zero, oldest_zero = (
-            Signal(name=n, reset_less=True) for n in ("low_within", "high_below", "high_equal", "below_floor",
-                                                      "kept_zero", "oldest_zero"))
+        low_within, high_below, high_equal, kept_zero, oldest_zero = (
+            Signal(name=n, reset_less=True) for n in ("low_within", "high_below", "high_equal", "kept_zero",
+                                                      "oldest_zero"))
+        floor_low, floor_high, floor_equal = (Signal(name=n, reset_less=True)
+                                              for n in ("floor_low_below", "floor_high_below", "floor_high_equal"))
         m.d.sync += [low_within.eq(change[:half] <= limit[:half]), high_below.eq(change[half:] < limit[half:]),
-                     high_equal.eq(change[half:] == limit[half:]), below_floor.eq(kept < floor),
+                     high_equal.eq(change[half:] == limit[half:]),
+                     floor_low.eq(kept[:half] < floor[:half]), floor_high.eq(kept[half:] < floor[half:]),
+                     floor_equal.eq(kept[half:] == floor[half:]),
                      kept_zero.eq(kept == 0), oldest_zero.eq(oldest == 0)]
         within = high_below | (high_equal & low_within)
+        below_floor = floor_high | (floor_equal & floor_low)  # kept < floor, its halves compared apart
         ready = (held == size + 1) & taken.any()
         change_ok = Mux(oldest_zero, kept_zero, within)
         with m.If(halves):

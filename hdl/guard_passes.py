@@ -118,10 +118,12 @@ class GuardPasses(wiring.Component):
             corner_fifo.w_data.eq(Cat(*self.corners)), corner_fifo.w_en.eq(self.triangle_landed),
             certificate.o.ready.eq(1), corner_fifo.r_en.eq(certificate.o.valid),
         ]
+        # each corner's update registered before its scatter (the FIFO's LUT RAM read and the choice of
+        # level would otherwise run into the scatter's block RAM address)
         result = certificate.o.payload
         for k, scatter in enumerate(scatters):
             update = scatter.update
-            m.d.comb += [update.valid.eq(certificate.o.valid),
+            m.d.sync += [update.valid.eq(certificate.o.valid),
                          update.payload.node.eq(corner_fifo.r_data[k * corner_bits:(k + 1) * corner_bits]),
                          update.payload.level.eq(Mux(self.in_stuck, result.stuck[k], result.level))]
         results = Signal(range(cap.triangles + 1), name="certified")
@@ -148,7 +150,9 @@ class GuardPasses(wiring.Component):
         clearing = (self.in_integrate | self.in_hold) & self.node_landed
         held = Signal(range(cap.vertices + 1), name="held_nodes")  # the node landed (nodes land in order)
         stuck = Cat(*(level != 0 for level in levels)).any()
-        m.d.comb += [self.proposal_write.addr.eq(held), self.proposal_write.en.eq(hold),
+        # the held proposal written a clock later, from registers (the scatters' outputs through the stuck
+        # test and the zeroing would otherwise run into the proposal memories' write registers)
+        m.d.sync += [self.proposal_write.addr.eq(held), self.proposal_write.en.eq(hold),
                      self.proposal_write.data.eq(Mux(stuck, 0, self.proposal[0]))]
         for scatter in scatters:
             m.d.comb += [scatter.clear.valid.eq(clearing), scatter.clear.payload.eq(held)]
@@ -169,10 +173,10 @@ class GuardPasses(wiring.Component):
             m.d.sync += committed.eq(committed + 1)
 
         # a pass's end, registered; its counters restart the clock after
-        scatters_idle = Cat(*(s.idle for s in scatters)).all()
+        scatters_idle = Cat(*(s.idle & ~s.update.valid for s in scatters)).all()
         m.d.comb += self.idle.eq((corner_fifo.level == 0) & scatters_idle & commit.idle)
         triangles_done = (self.in_stuck | self.in_certify) & (results == self.triangles) & scatters_idle
-        nodes_done = (self.in_hold & (held == self.vertices)) \
+        nodes_done = (self.in_hold & (held == self.vertices) & ~self.proposal_write.en) \
             | ((self.in_commit | self.in_rollback) & (committed == self.vertices))
         m.d.sync += self.done.eq((triangles_done | nodes_done) & ~self.done)
         with m.If(self.done | self.in_step):

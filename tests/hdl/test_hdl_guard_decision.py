@@ -168,6 +168,24 @@ def test_the_energy_test_at_its_edges(over, floor_offset, settled):
     assert got == want
 
 
+@pytest.mark.parametrize("high, low, settled", [(-1, 1, 0), (0, 1, 1), (1, -1, 1), (0, 0, 0)])
+def test_the_floor_compare_across_the_energys_halves(high, low, settled):
+    """The floor against the kept energy where their halves disagree (the compare is split at half the
+    width): the floor's high half ``high`` above the energy's, its low half ``low`` above; the change
+    over the window too large, so the floor alone settles the run."""
+    half = ENERGY_BITS // 2
+    old = (1 << 70) + 12345
+    kept = old - (((TOLERANCE * old) >> ENERGY_TOL_FRAC_BITS) + 1)
+    kept_high, kept_low = kept >> half, kept & ((1 << half) - 1)
+    assert 0 < kept_low < (1 << half) - 1
+    floor = ((kept_high + high) << half) | (kept_low + low)
+    items = [(old, 1, 0)] + [(old, 0, 0)] * (ENERGY_WINDOW - 1) + [(kept, 0, 0)]
+    want = golden(items, TOLERANCE, floor)
+    assert want[-1][2] == settled
+    _, _, got = run_decision(items, TOLERANCE, floor)
+    assert got == want
+
+
 def test_a_stalled_scale_stays_one_past_the_last_halving():
     items = [(10, 1, 0)] + [(11, 0, 0)] * (SCALE_MAX_SHIFT + 4)
     _, _, got = run_decision(items, TOLERANCE, 0)
