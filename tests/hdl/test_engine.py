@@ -128,6 +128,69 @@ def test_guarded_whole_run_matches_the_golden_model(case):
     assert_same_run(read_back, expected)
 
 
+def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
+    """ABORT in the middle of each of the guard's passes (the scatters and proposals left half written), each
+    followed by a reload: the last, whole run is bit-exact with the golden model (the propose pass clears
+    what an aborted run left in the scatters). The clocks are taken from a first run's phases."""
+    from golden_model.engine_spec.register_map import STATES
+    from hdl.phase_controller import PHASES
+
+    squeeze, params, _ = GUARDED["clipped-and-rolled-back"]
+    image = build_image(prepare(MESH, initial_layout(MESH, "tutte") * np.array([squeeze, 1.0]), params, FS),
+                        CAPACITY)
+    guard_phases = ("decide", "rollback", "integrate", "stuck", "hold", "certify", "commit")
+    first_span = {}
+
+    def watch_phases(dut, spans):
+        async def watch(ctx):
+            phase, state, clock, last = dut.debug_signals["phase"], dut.debug_signals["state"], 0, None
+            while True:
+                await ctx.tick()
+                if ctx.get(state) != STATES.index("running"):
+                    continue
+                name = PHASES[ctx.get(phase)]
+                if name != last:
+                    spans.append([name, clock, clock])
+                spans[-1][2], last, clock = clock, name, clock + 1
+        return watch
+
+    spans = []
+    dut = SpringflatEngine(FS, CAPACITY)
+    run_on_engine(dut, image, {"watcher": watch_phases(dut, spans)})
+    for name, begin, end in spans:
+        if name in guard_phases and name not in first_span and end - begin >= 4:
+            first_span[name] = (begin + end) // 2
+    assert set(first_span) == set(guard_phases), spans
+
+    dut = SpringflatEngine(FS, CAPACITY)
+    aborted_in, out = [], {}
+
+    async def watch(ctx):
+        phase, last = dut.debug_signals["phase"], 0
+        while True:
+            await ctx.tick()
+            now = ctx.get(phase)
+            if PHASES[now] == "drain" and PHASES[last] != "drain":
+                aborted_in.append(PHASES[last])
+            last = now
+
+    def host(driver, bus):
+        for clock in first_span.values():
+            driver.load(image)
+            driver.start()
+            bus.idle(clock)
+            driver.abort()
+            bus.idle(300)
+        driver.load(image)
+        driver.start()
+        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+        out["read_back"] = driver.read_back()
+
+    simulate(dut, host, {"watcher": watch})
+    assert set(aborted_in) == set(guard_phases), (aborted_in, first_span)
+    assert_same_run(out["read_back"], run_image(image, FS))
+
+
 def test_every_iteration_state_matches_with_bus_wait_states():
     """The node memory after each integrate pass equals the golden model's state after that many iterations;
     the host's bus cycles come with random idle clocks between them."""
