@@ -247,19 +247,28 @@ class FrameBridge(wiring.Component):
         bus_address = Signal(self.addr_width)
 
         # the inter-byte timer: restarts at every byte; `idle` once `timeout` clocks passed without one
+        # (`idle` is a flip-flop holding `timer == timeout`, set from the clock before's compare with
+        # `timeout - 1`: the timer's wide compare stays off the FSM's next-state logic)
         timer = Signal(range(self.timeout + 1))
-        idle = Signal()
-        m.d.comb += [rx.ready.eq(1), idle.eq(timer == self.timeout), bus.sel.eq(~0)]
+        idle = Signal(name="idle")
+        m.d.comb += [rx.ready.eq(1), bus.sel.eq(~0)]
         took = rx.valid
         with m.If(took):
-            m.d.sync += timer.eq(0)
+            m.d.sync += [timer.eq(0), idle.eq(0)]
         with m.Elif(~idle):
-            m.d.sync += timer.eq(timer + 1)
+            m.d.sync += [timer.eq(timer + 1), idle.eq(timer == self.timeout - 1)]
 
         m.d.comb += [crc_rx.data.eq(rx.payload), crc_tx.data.eq(tx.payload),
                      crc_tx.valid.eq(tx.valid & tx.ready), wr.addr.eq(index), rd.addr.eq(index)]
         is_write = command == protocol.WRITE
-        last_word = index == length - 1
+        # whether `index` is the frame's last word, a flip-flop: `length - 1` and the compare with `index`
+        # each in a register of their own, not a carry chain into the FSM's next state. Every state that
+        # reads it (DATA, BUS, WORDS) comes at least two clocks after `length` or `index` last moved: DATA
+        # takes four bytes per word, GAP precedes every BUS, LOAD every WORDS. WORDS runs only after an OK
+        # answer, whose count is the length.
+        length_less = Signal(8, name="length_less")
+        last_word = Signal(name="last_word")
+        m.d.sync += [length_less.eq(length - 1), last_word.eq(index == length_less)]
         # whether the frame reaches past the bus's last word: the 33-bit sum, then its compare, each in a
         # register of its own (not one carry chain of both in VERIFY); address
         # and length hold still from the length byte on, and SETTLE gives the two a clock when bytes
@@ -377,7 +386,7 @@ class FrameBridge(wiring.Component):
                     m.d.sync += byte.eq(byte + 1)
                     with m.If(byte == protocol.WORD_BYTES - 1):
                         m.d.sync += [byte.eq(0), index.eq(index + 1)]
-                        with m.If(index == count - 1):
+                        with m.If(last_word):
                             m.next = "CRC"
                         with m.Else():
                             m.next = "LOAD"
