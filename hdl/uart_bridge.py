@@ -185,10 +185,10 @@ class FrameBridge(wiring.Component):
     target's answer time plus 2 clocks (the cycle's outputs are flip-flops, loaded in an idle clock before
     each cycle, so the route to a distant target starts at a register); the answer's first byte is offered
     the clock after the last access (after the CRC byte, for an answer without access). A bad command or length
-    is answered
-    ``timeout`` clocks after the last byte of the frame (the bridge drains the line first); a truncated
-    frame ``timeout`` clocks after its last byte. **Throughput**: one frame at a time; the line's byte
-    rate bounds it.
+    is answered once the line has been idle for ``timeout`` clocks after the last byte of the frame (the
+    bridge drains the line first), a truncated frame once it has been after its last byte: the answer's first
+    byte is offered ``timeout + 1`` clocks after the clock that took the last byte. **Throughput**: one frame
+    at a time; the line's byte rate bounds it.
 
     Parameters
     ----------
