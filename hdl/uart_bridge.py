@@ -402,7 +402,8 @@ class FrameBridge(wiring.Component):
 class UartBridge(wiring.Component):
     """:class:`UartRx` → :class:`FrameBridge` → :class:`UartTx`: the serial pins to a Wishbone initiator.
 
-    Latency and throughput: the blocks' (the line's byte rate bounds everything).
+    Latency and throughput: the blocks', and a register between the receiver and the frame bridge (a byte
+    reaches the frame bridge a clock after the receiver offers it); the line's byte rate bounds everything.
 
     Parameters
     ----------
@@ -432,7 +433,12 @@ class UartBridge(wiring.Component):
         m.submodules.receiver = rx = self.receiver
         m.submodules.transmitter = tx = self.transmitter
         m.submodules.frames = frames = self.frames
-        wiring.connect(m, rx.source, frames.rx)
+        # the receiver's byte into a register beside the frame bridge (the frame bridge is always ready):
+        # the receiver sits by the pin, and its valid flag into the frame bridge's next-state and status
+        # logic from there is a long path
+        byte_valid, byte = Signal(name="rx_byte_valid"), Signal(8, name="rx_byte_q", reset_less=True)
+        m.d.sync += [byte_valid.eq(rx.source.valid), byte.eq(rx.source.payload)]
+        m.d.comb += [rx.source.ready.eq(1), frames.rx.valid.eq(byte_valid), frames.rx.payload.eq(byte)]
         wiring.connect(m, frames.tx, tx.sink)
         wiring.connect(m, wiring.flipped(self.bus), frames.bus)
         m.d.comb += [rx.rx.eq(self.rx), self.tx.eq(tx.tx), self.error.eq(frames.error)]
