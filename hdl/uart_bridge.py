@@ -280,6 +280,10 @@ class FrameBridge(wiring.Component):
         end = Signal(8 * protocol.ADDRESS_BYTES + 1, name="frame_end")
         past_end = Signal(name="past_end")
         m.d.sync += [end.eq(address + length), past_end.eq(end > (1 << self.addr_width))]
+        # the checksum's test, a flip-flop too (the CRC register's compare with the residue, into VERIFY's
+        # logic, was a long path): the CRC register holds still from the CRC byte on, a clock before SETTLE
+        crc_good = Signal(name="crc_good")
+        m.d.sync += crc_good.eq(crc_rx.match_detected)
 
         def answer(code):
             m.d.sync += [status.eq(code), count.eq(0)]
@@ -333,10 +337,10 @@ class FrameBridge(wiring.Component):
                     m.next = "SETTLE"
                 with m.Elif(idle):
                     answer(protocol.TIMEOUT)
-            with m.State("SETTLE"):  # past_end's second register
+            with m.State("SETTLE"):  # past_end's second register, crc_good's
                 m.next = "VERIFY"
             with m.State("VERIFY"):  # the CRC register has taken the CRC byte
-                with m.If(~crc_rx.match_detected):
+                with m.If(~crc_good):
                     answer(protocol.BAD_CHECKSUM)
                 with m.Elif(past_end):
                     answer(protocol.BAD_ADDRESS)
