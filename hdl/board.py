@@ -290,14 +290,26 @@ class Ulx3sTop(Elaboratable):
                               heartbeat_bits=max(1, round(clock_hz).bit_length() - 2),
                               blink_bits=max(1, round(clock_hz * 0.05).bit_length()))
 
+    #: Flip-flops between the reset synchroniser and the ``sync`` domain's reset.
+    RESET_STAGES = 2
+
     def elaborate(self, platform):
         m = Module()
         m.domains.sync = sync = ClockDomain("sync")
         m.submodules.pll = pll = self.pll
         m.submodules.core = core = self.core
-        m.submodules.reset_sync = ResetSynchronizer(~pll.locked, domain="sync")
+        # The reset: synchronised to the PLL's clock in the `lock` domain, then RESET_STAGES plain
+        # flip-flops (high from configuration) before it is the `sync` domain's. The synchroniser sits
+        # by the PLL, in a corner of the die; the reset reaches some 2,000 flip-flops all over it, and
+        # a route from that corner to the far one takes most of a clock. The stages let the placer put
+        # the last one amid the flip-flops it resets (the links before it have a whole clock each).
+        m.domains.lock = lock = ClockDomain("lock", local=True)
+        m.submodules.reset_sync = ResetSynchronizer(~pll.locked, domain="lock")
+        stages = [Signal(init=1, reset_less=True, name=f"reset_stage{k}") for k in range(self.RESET_STAGES)]
+        m.d.lock += [stages[0].eq(lock.rst), *(stages[k].eq(stages[k - 1]) for k in range(1, len(stages)))]
         m.submodules.clk25 = clk25 = io.Buffer("i", platform.request("clk25", 0, dir="-"))
-        m.d.comb += [pll.clk_in.eq(clk25.i), sync.clk.eq(pll.clk_out)]
+        m.d.comb += [pll.clk_in.eq(clk25.i), sync.clk.eq(pll.clk_out), lock.clk.eq(pll.clk_out),
+                     sync.rst.eq(stages[-1])]
         platform.add_clock_constraint(sync.clk, self.clock_hz)
         uart = platform.request("uart", 0, dir="-")
         m.submodules.uart_rx = uart_rx = io.Buffer("i", uart.rx)

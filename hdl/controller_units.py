@@ -305,7 +305,7 @@ class EnergyCheck(wiring.Component):
             springs.eq(Mux(busy, Mux(in_springs, shift_add_step(springs, factor, self.square_bits), springs),
                            beat.square_sum)),
         ]
-        with m.If(start):
+        with m.If(~busy):  # loaded while idle, as the other registers (not by `start`: a long path)
             m.d.sync += [steps.eq(self.square_bits), last.eq(self.square_bits == 1)]
         with m.If(counting):
             m.d.sync += [steps.eq(steps - 1), last.eq(steps == 2)]

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from amaranth.hdl import Const, Value
+from amaranth.hdl import Const, Module, Signal, Value
 
 from golden_model.engine_spec.image import ENGINE_RUN_MODES
 from golden_model.modes import Step
 
-__all__ = ["or_tree", "mode_runs", "mode_steps", "mode_guarded"]
+__all__ = ["or_tree", "mode_runs", "mode_steps", "mode_guarded", "reset_echo"]
 
 
 def or_tree(values) -> Value:
@@ -34,3 +34,17 @@ def mode_steps(code: Value, step: Step) -> Value:
 def mode_guarded(code: Value) -> Value:
     """1 where ``MODE.mode``'s ``code`` is a run mode the engine runs through the step guard."""
     return or_tree([Const(0), *(code == m.code for m in ENGINE_RUN_MODES if m.guarded)])
+
+
+def reset_echo(m: Module, name: str) -> Signal:
+    """A flip-flop high while the ``sync`` domain is in reset and for the clock after it.
+
+    A register without the domain's reset whose clear is ``reset_echo(...) | clear`` holds, from the clock
+    after the reset on, what it would hold with the reset (it is cleared a clock later, while nothing can
+    read it yet). The point is placement: the domain's reset is one net across the whole device, and a
+    LUT of it and a clear driving a wide register's reset pins is a long path; this flip-flop, read by
+    that LUT alone, sits beside it.
+    """
+    echo = Signal(init=1, name=name)
+    m.d.sync += echo.eq(0)
+    return echo

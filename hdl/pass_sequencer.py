@@ -32,6 +32,13 @@ def fetch_latencies(read_latency: int) -> tuple[int, int, int]:
 #: :func:`fetch_latencies` with the node memories' :data:`READ_LATENCY` (one bank each).
 FORCE_FETCH_LATENCY, AREA_FETCH_LATENCY, NODE_FETCH_LATENCY = fetch_latencies(READ_LATENCY)
 
+#: The counters and sums the start phase restarts (the force and area passes'), and the step phase (the
+#: integrate pass's).
+RESTARTED_AT_START = ("entry_index", "node_of_entry", "force_out_index", "length_sum", "square_sum", "barrier_sum",
+                      "tri_index")
+RESTARTED_AT_STEP = ("node_index", "node_out_index", "power_sum")
+RESTARTED = RESTARTED_AT_START + RESTARTED_AT_STEP
+
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
 
@@ -171,27 +178,31 @@ class PassSequencer(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        e_valid, next_first = self._force_pass(m)
-        t_valid = self._area_pass(m)
-        n_valid = self._integrate_pass(m)
+        # The counters and sums are flip-flops without the domain's reset: the start or step phase clears
+        # them before any pass reads them, so the phase flag alone drives their reset pins (with the
+        # domain's reset, a net across the whole device, in front of it, one LUT fans out to some 200
+        # flip-flops' reset pins: a long path on the board).
+        r = {name: Signal.like(getattr(self, name), reset_less=True, name=f"{name}_q") for name in RESTARTED}
+        m.d.comb += [getattr(self, name).eq(q) for name, q in r.items()]
+        e_valid, next_first = self._force_pass(m, r)
+        t_valid = self._area_pass(m, r)
+        n_valid = self._integrate_pass(m, r)
         self._ends(m, e_valid, t_valid, n_valid)
         # The counters and sums restart from a phase flag, outside the phase machine's priority logic:
         # the force and area passes' in the start phase, the integrate pass's in the step phase.
         with m.If(self.in_start):
-            m.d.sync += [self.entry_index.eq(0), self.node_of_entry.eq(0), next_first.eq(1),
-                         self.force_out_index.eq(0), self.length_sum.eq(0), self.square_sum.eq(0),
-                         self.barrier_sum.eq(0), self.tri_index.eq(0)]
+            m.d.sync += [next_first.eq(1), *(r[name].eq(0) for name in RESTARTED_AT_START)]
         with m.If(self.in_step):
-            m.d.sync += [self.node_index.eq(0), self.node_out_index.eq(0), self.power_sum.eq(0)]
+            m.d.sync += [r[name].eq(0) for name in RESTARTED_AT_STEP]
         with m.If(self.node_restart):
-            m.d.sync += self.node_index.eq(0)
+            m.d.sync += r["node_index"].eq(0)
         with m.If(self.triangle_restart):
-            m.d.sync += self.tri_index.eq(0)
+            m.d.sync += r["tri_index"].eq(0)
         return m
 
-    def _force_pass(self, m: Module):
+    def _force_pass(self, m: Module, r: dict[str, Signal]):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
-        e_valid = fetch_counter(m, self.entry_index, self.fetch_force, self.entries, "e", self.force_fetch_latency + 1)
+        e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self.entries, "e", self.force_fetch_latency + 1)
         entry_shape = self.entry.shape()
         ent_data = self.entry  # the addressed entry, at E6 (ENTRY_LATENCY)
         next_first = Signal(name="next_first")
@@ -203,7 +214,7 @@ class PassSequencer(wiring.Component):
             m.d.sync += [entry_k.eq(e_entry), first_k.eq(e_first)]
             e_entry, e_first = entry_k, first_k
         with m.If(e_valid[ENTRY_LATENCY]):  # the owner of the entry after this one
-            m.d.sync += [next_first.eq(ent_data.last), self.node_of_entry.eq(self.node_of_entry + ent_data.last)]
+            m.d.sync += [next_first.eq(ent_data.last), r["node_of_entry"].eq(r["node_of_entry"] + ent_data.last)]
         beat, barrier = self.force_entry.payload, self.barrier_held
         m.d.comb += [
             self.force_entry.valid.eq(e_valid[self.force_fetch_latency]),
@@ -215,23 +226,23 @@ class PassSequencer(wiring.Component):
             beat.barrier.gain.eq(Mux(barrier, e_entry.gain, 0)),
         ]
         # per-node results: into the force memory, and the exact sums
-        m.d.comb += [self.force_write.addr.eq(self.force_out_index),
+        m.d.comb += [self.force_write.addr.eq(r["force_out_index"]),
                      self.force_write.data.force.eq(self.forces.payload.force),
                      self.force_write.data.inside.eq(self.forces.payload.inside),
                      self.force_write.en.eq(self.forces.valid)]
         with m.If(self.forces.valid):
-            m.d.sync += [self.force_out_index.eq(self.force_out_index + 1),
-                         self.length_sum.eq(self.length_sum + self.forces.payload.error_sum),
-                         self.square_sum.eq(self.square_sum + self.forces.payload.error_squares),
-                         self.barrier_sum.eq(self.barrier_sum + self.forces.payload.barrier_energy)]
+            m.d.sync += [r["force_out_index"].eq(r["force_out_index"] + 1),
+                         r["length_sum"].eq(r["length_sum"] + self.forces.payload.error_sum),
+                         r["square_sum"].eq(r["square_sum"] + self.forces.payload.error_squares),
+                         r["barrier_sum"].eq(r["barrier_sum"] + self.forces.payload.barrier_energy)]
         return e_valid, next_first
 
-    def _area_pass(self, m: Module):
+    def _area_pass(self, m: Module, r: dict[str, Signal]):
         """T0 … T5 into ``AreaError.i``, one triangle per clock."""
         # the guard's triangle passes issue every other clock (the certificate's interval of 2)
         alternate = Signal(name="tri_alternate")
         m.d.sync += alternate.eq(~alternate & self.half_rate)
-        t_valid = fetch_counter(m, self.tri_index, self.fetch_area & ~alternate, self.triangles, "t",
+        t_valid = fetch_counter(m, r["tri_index"], self.fetch_area & ~alternate, self.triangles, "t",
                                 self.area_fetch_latency + 1)
         # the triangle's area and corners, landed with it, carried beside its corners' read
         area, corners = self.triangle.area, [self.triangle.a, self.triangle.b, self.triangle.c]
@@ -249,9 +260,9 @@ class PassSequencer(wiring.Component):
                      out.payload.area.eq(area)]
         return t_valid
 
-    def _integrate_pass(self, m: Module):
+    def _integrate_pass(self, m: Module, r: dict[str, Signal]):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
-        n_valid = fetch_counter(m, self.node_index, self.fetch_nodes, self.vertices, "n", self.node_fetch_latency + 1)
+        n_valid = fetch_counter(m, r["node_index"], self.fetch_nodes, self.vertices, "n", self.node_fetch_latency + 1)
         node = self.node_out.payload
         landed = n_valid[self.node_fetch_latency]
         m.d.comb += [  # landed at N2
@@ -261,16 +272,16 @@ class PassSequencer(wiring.Component):
             node.force.eq(self.force_word.force), node.inside.eq(self.force_word.inside),
         ]
         # its results: back into the node memories, and S summed
-        m.d.comb += [self.node_write.addr.eq(self.node_out_index),
+        m.d.comb += [self.node_write.addr.eq(r["node_out_index"]),
                      self.node_write.data.position.eq(self.integrated.payload.position),
                      self.node_write.data.velocity.eq(self.integrated.payload.velocity),
                      self.node_write.en.eq(self.integrated.valid & ~self.guarded),
-                     self.proposal_write.addr.eq(self.node_out_index),
+                     self.proposal_write.addr.eq(r["node_out_index"]),
                      self.proposal_write.data.eq(self.integrated.payload.velocity),
                      self.proposal_write.en.eq(self.integrated.valid & self.guarded)]
         with m.If(self.integrated.valid):
-            m.d.sync += [self.node_out_index.eq(self.node_out_index + 1),
-                         self.power_sum.eq(self.power_sum + self.integrated.payload.power)]
+            m.d.sync += [r["node_out_index"].eq(r["node_out_index"] + 1),
+                         r["power_sum"].eq(r["power_sum"] + self.integrated.payload.power)]
         return n_valid
 
     def _ends(self, m: Module, e_valid, t_valid, n_valid) -> None:

@@ -21,7 +21,7 @@ from .guard_passes import GUARD_PASSES
 from .dsp import registered_product
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import energy_sums_layout
-from .logic import mode_guarded, mode_runs, mode_steps, or_tree
+from .logic import mode_guarded, mode_runs, mode_steps, or_tree, reset_echo
 from .stepgen import StepGenerator, pending_is_zero
 
 __all__ = ["PhaseController", "PHASES"]
@@ -188,7 +188,12 @@ class PhaseController(wiring.Component):
                    guarded=mode_guarded(self.mode), measuring_again=self.measuring_again,
                    accepted=Signal(name="accepted"), stalled=Signal(name="stalled"))
         m.d.comb += self.guarded.eq(run.guarded)
-        self._cycles(m)
+        # CYCLES and ITERATIONS have no domain reset: START and the reset's echo clear them (a LUT of the
+        # domain's reset and START driving their reset pins is a long path on the board)
+        iterations = Signal.like(self.iterations, reset_less=True, name="iterations_q")
+        m.d.comb += self.iterations.eq(iterations)
+        cleared = self.starting | reset_echo(m, "results_echo")
+        self._cycles(m, cleared)
         self._units(m, units, run)
         decisions, stepgen_idle = self._decisions(m, units, run)
         sequential_idle = ~Cat(*(u.i.valid for u in units.values())).any() \
@@ -201,7 +206,7 @@ class PhaseController(wiring.Component):
         drained = Signal(name="drained")
         m.d.sync += drained.eq(self.in_drain & self.passes_idle & sequential_idle & self.done_fetching)
         self._phases(m, units, run, decisions, drained, stepgen_idle)
-        self._momentum(m, units, run)
+        self._momentum(m, units, run, iterations, cleared)
         return m
 
     def _fixed_half_dt_sq(self, m: Module, platform) -> Signal:
@@ -218,18 +223,20 @@ class PhaseController(wiring.Component):
                      fixed_half.eq(clamp(fixed_rounded, fs.half_dt_sq)[0])]
         return fixed_half
 
-    def _cycles(self, m: Module) -> None:
+    def _cycles(self, m: Module, cleared) -> None:
         """CYCLES in two halves, the high half a clock behind the low half's wrap (registered because a
-        64-bit carry chain in one clock is among the longest paths); exact a clock after the run."""
-        cycles = self.cycles
+        64-bit carry chain in one clock is among the longest paths); exact a clock after the run.
+        Without the domain's reset: ``cleared`` (START accepted, or the reset's echo) clears it."""
+        cycles = Signal.like(self.cycles, reset_less=True, name="cycles_q")
+        m.d.comb += self.cycles.eq(cycles)
         half = len(cycles) // 2
-        cycles_wrapped = Signal(name="cycles_wrapped")
+        cycles_wrapped = Signal(name="cycles_wrapped", reset_less=True)
         m.d.sync += cycles_wrapped.eq(self.running & (cycles[:half] == (1 << half) - 1))
         with m.If(self.running):
             m.d.sync += cycles[:half].eq(cycles[:half] + 1)
         with m.If(cycles_wrapped):
             m.d.sync += cycles[half:].eq(cycles[half:] + 1)
-        with m.If(self.starting):
+        with m.If(cleared):
             m.d.sync += [cycles.eq(0), cycles_wrapped.eq(0)]
 
     def _units(self, m: Module, units, run: _Run) -> None:
@@ -339,7 +346,7 @@ class PhaseController(wiring.Component):
             m.d.sync += self.result.eq(_code(RESULTS, "none"))
         m.d.comb += self.starting.eq(self.start & ~abort & ~running)
         with m.If(self.starting):
-            m.d.sync += [self.iterations.eq(0), self.result.eq(_code(RESULTS, "none"))]
+            m.d.sync += self.result.eq(_code(RESULTS, "none"))
             with m.If(q["no_mesh_q"]):
                 finish("no-mesh")
             with m.Elif(q["bad_constants_q"]):
@@ -424,7 +431,7 @@ class PhaseController(wiring.Component):
         with m.If(go & flags["commit"] & self.guard_done):
             m.d.sync += [self.fetch_nodes.eq(0), *move("commit", "start")]
 
-    def _momentum(self, m: Module, units, run: _Run) -> None:
+    def _momentum(self, m: Module, units, run: _Run, iterations: Signal, cleared) -> None:
         """``k`` and the restart for β_k, and ITERATIONS, each moved by a registered pulse of its own.
 
         The divider's ``k`` is loaded on every clock: ``momentum_k`` and ``restart_pending`` stand still
@@ -458,4 +465,6 @@ class PhaseController(wiring.Component):
         with m.If(restart_pulse):
             m.d.sync += restart_pending.eq(power_negative)
         with m.If(iterate_pulse):
-            m.d.sync += self.iterations.eq(self.iterations + 1)
+            m.d.sync += iterations.eq(iterations + 1)
+        with m.If(cleared):  # (never with iterate_pulse, which comes while running)
+            m.d.sync += iterations.eq(0)

@@ -121,12 +121,20 @@ class RegisterBank(wiring.Component):
         m.d.sync += [getattr(self, f"{v}_held").eq(storage[v]) for v in self.copies]
 
         # DEC: the request and a one-hot register select, registered (the decode of the whole address
-        # into every register's write enable and the answer is a clock of its own)
+        # into every register's write enable and the answer is a clock of its own). The select decodes
+        # the address's low bits only, and `bus_reg_hit` is whether the address is a register's: a bit of
+        # a constant map of the offsets, indexed by the low bits, with the high bits zero. A write needs
+        # both; a read's word and read-only flag are used only on a hit. (The select's compares of the
+        # whole address and the OR of the select in front of the answer's logic were long paths.)
+        offset_bits = max(1, max(r.offset for r in registers).bit_length())
+        offset_map = Const(sum(1 << r.offset for r in registers), 1 << offset_bits)
+        low = self.address[:offset_bits]
         reg_select = Signal(len(registers))
+        bus_reg_hit = Signal(name="bus_reg_hit")
         m.d.sync += [self.bus_request.eq(self.request),
-                     reg_select.eq(Cat(self.address == r.offset for r in registers))]
-        bus_reg_hit = reg_select.any()
-        bus_write = self.bus_request & self.write & self.whole_word
+                     reg_select.eq(Cat(low == r.offset for r in registers)),
+                     bus_reg_hit.eq(offset_map.bit_select(low, 1) & (self.address[offset_bits:] == 0))]
+        bus_write = self.bus_request & self.write & self.whole_word & bus_reg_hit
 
         # reads and writes: a write acts in DEC's clock; the answer comes from the read word landed
         m.d.sync += [p.eq(0) for p in pulses.values()]

@@ -6,6 +6,8 @@ from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from .logic import reset_echo
+
 __all__ = ["SaturationTally"]
 
 
@@ -61,11 +63,14 @@ class SaturationTally(wiring.Component):
         pair_sums = [Signal(len(new_events) - 1, name=f"saturation_pair{k}") for k in range(len(event_regs) // 2)]
         m.d.sync += [p.eq(event_regs[2 * k] + event_regs[2 * k + 1]) for k, p in enumerate(pair_sums)]
         m.d.sync += new_events.eq(sum(pair_sums))
-        count = self.saturations
+        # the count has no domain reset: `clear` and the reset's echo clear it (a LUT of the domain's
+        # reset and `clear` driving its reset pins is a long path on the board)
+        count = Signal.like(self.saturations, reset_less=True, name="count")
+        m.d.comb += self.saturations.eq(count)
         total = count + new_events
         saturation_max = (1 << len(count)) - 1
         m.d.sync += count.eq(Mux(total > saturation_max, saturation_max, total))
-        with m.If(self.clear):
+        with m.If(self.clear | reset_echo(m, "count_echo")):
             m.d.sync += count.eq(0)
         m.d.sync += self.saturated.eq(count != 0)
         return m

@@ -185,10 +185,10 @@ class FrameBridge(wiring.Component):
     target's answer time plus 2 clocks (the cycle's outputs are flip-flops, loaded in an idle clock before
     each cycle, so the route to a distant target starts at a register); the answer's first byte is offered
     the clock after the last access (after the CRC byte, for an answer without access). A bad command or length
-    is answered
-    ``timeout`` clocks after the last byte of the frame (the bridge drains the line first); a truncated
-    frame ``timeout`` clocks after its last byte. **Throughput**: one frame at a time; the line's byte
-    rate bounds it.
+    is answered once the line has been idle for ``timeout`` clocks after the last byte of the frame (the
+    bridge drains the line first), a truncated frame once it has been after its last byte: the answer's first
+    byte is offered ``timeout + 1`` clocks after the clock that took the last byte. **Throughput**: one frame
+    at a time; the line's byte rate bounds it.
 
     Parameters
     ----------
@@ -247,19 +247,28 @@ class FrameBridge(wiring.Component):
         bus_address = Signal(self.addr_width)
 
         # the inter-byte timer: restarts at every byte; `idle` once `timeout` clocks passed without one
+        # (`idle` is a flip-flop holding `timer == timeout`, set from the clock before's compare with
+        # `timeout - 1`: the timer's wide compare stays off the FSM's next-state logic)
         timer = Signal(range(self.timeout + 1))
-        idle = Signal()
-        m.d.comb += [rx.ready.eq(1), idle.eq(timer == self.timeout), bus.sel.eq(~0)]
+        idle = Signal(name="idle")
+        m.d.comb += [rx.ready.eq(1), bus.sel.eq(~0)]
         took = rx.valid
         with m.If(took):
-            m.d.sync += timer.eq(0)
+            m.d.sync += [timer.eq(0), idle.eq(0)]
         with m.Elif(~idle):
-            m.d.sync += timer.eq(timer + 1)
+            m.d.sync += [timer.eq(timer + 1), idle.eq(timer == self.timeout - 1)]
 
         m.d.comb += [crc_rx.data.eq(rx.payload), crc_tx.data.eq(tx.payload),
                      crc_tx.valid.eq(tx.valid & tx.ready), wr.addr.eq(index), rd.addr.eq(index)]
         is_write = command == protocol.WRITE
-        last_word = index == length - 1
+        # whether `index` is the frame's last word, a flip-flop: `length - 1` and the compare with `index`
+        # each in a register of their own, not a carry chain into the FSM's next state. Every state that
+        # reads it (DATA, BUS, WORDS) comes at least two clocks after `length` or `index` last moved: DATA
+        # takes four bytes per word, GAP precedes every BUS, LOAD every WORDS. WORDS runs only after an OK
+        # answer, whose count is the length.
+        length_less = Signal(8, name="length_less")
+        last_word = Signal(name="last_word")
+        m.d.sync += [length_less.eq(length - 1), last_word.eq(index == length_less)]
         # whether the frame reaches past the bus's last word: the 33-bit sum, then its compare, each in a
         # register of its own (not one carry chain of both in VERIFY); address
         # and length hold still from the length byte on, and SETTLE gives the two a clock when bytes
@@ -271,6 +280,10 @@ class FrameBridge(wiring.Component):
         end = Signal(8 * protocol.ADDRESS_BYTES + 1, name="frame_end")
         past_end = Signal(name="past_end")
         m.d.sync += [end.eq(address + length), past_end.eq(end > (1 << self.addr_width))]
+        # the checksum's test, a flip-flop too (the CRC register's compare with the residue, into VERIFY's
+        # logic, was a long path): the CRC register holds still from the CRC byte on, a clock before SETTLE
+        crc_good = Signal(name="crc_good")
+        m.d.sync += crc_good.eq(crc_rx.match_detected)
 
         def answer(code):
             m.d.sync += [status.eq(code), count.eq(0)]
@@ -324,10 +337,10 @@ class FrameBridge(wiring.Component):
                     m.next = "SETTLE"
                 with m.Elif(idle):
                     answer(protocol.TIMEOUT)
-            with m.State("SETTLE"):  # past_end's second register
+            with m.State("SETTLE"):  # past_end's second register, crc_good's
                 m.next = "VERIFY"
             with m.State("VERIFY"):  # the CRC register has taken the CRC byte
-                with m.If(~crc_rx.match_detected):
+                with m.If(~crc_good):
                     answer(protocol.BAD_CHECKSUM)
                 with m.Elif(past_end):
                     answer(protocol.BAD_ADDRESS)
@@ -377,7 +390,7 @@ class FrameBridge(wiring.Component):
                     m.d.sync += byte.eq(byte + 1)
                     with m.If(byte == protocol.WORD_BYTES - 1):
                         m.d.sync += [byte.eq(0), index.eq(index + 1)]
-                        with m.If(index == count - 1):
+                        with m.If(last_word):
                             m.next = "CRC"
                         with m.Else():
                             m.next = "LOAD"
@@ -393,7 +406,8 @@ class FrameBridge(wiring.Component):
 class UartBridge(wiring.Component):
     """:class:`UartRx` → :class:`FrameBridge` → :class:`UartTx`: the serial pins to a Wishbone initiator.
 
-    Latency and throughput: the blocks' (the line's byte rate bounds everything).
+    Latency and throughput: the blocks', and a register between the receiver and the frame bridge (a byte
+    reaches the frame bridge a clock after the receiver offers it); the line's byte rate bounds everything.
 
     Parameters
     ----------
@@ -423,7 +437,12 @@ class UartBridge(wiring.Component):
         m.submodules.receiver = rx = self.receiver
         m.submodules.transmitter = tx = self.transmitter
         m.submodules.frames = frames = self.frames
-        wiring.connect(m, rx.source, frames.rx)
+        # the receiver's byte into a register beside the frame bridge (the frame bridge is always ready):
+        # the receiver sits by the pin, and its valid flag into the frame bridge's next-state and status
+        # logic from there is a long path
+        byte_valid, byte = Signal(name="rx_byte_valid"), Signal(8, name="rx_byte_q", reset_less=True)
+        m.d.sync += [byte_valid.eq(rx.source.valid), byte.eq(rx.source.payload)]
+        m.d.comb += [rx.source.ready.eq(1), frames.rx.valid.eq(byte_valid), frames.rx.payload.eq(byte)]
         wiring.connect(m, frames.tx, tx.sink)
         wiring.connect(m, wiring.flipped(self.bus), frames.bus)
         m.d.comb += [rx.rx.eq(self.rx), self.tx.eq(tx.tx), self.error.eq(frames.error)]

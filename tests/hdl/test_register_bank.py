@@ -119,6 +119,10 @@ def test_each_field_acts_as_its_access_type_says():
         assert (await wishbone_read(ctx, dut.bus, 5)).data == 0xFF
         assert ctx.get(bank.wide_held) == 0xFF_1234_5678
         assert (await wishbone_read(ctx, dut.bus, 3)).error
+        for unmapped in (8, 12, 14):  # a mapped word's offset in the low bits, but a high bit set
+            assert (await wishbone_read(ctx, dut.bus, unmapped)).error, unmapped
+        assert (await wishbone_write(ctx, dut.bus, 12, 0xDEAD)).error  # WIDE_LO's offset, a high bit set
+        assert ctx.get(bank.wide) == 0xFF_1234_5678
         # w1p: one clock high per write of 1, reads 0; the rw bit beside it is stored and read back
         await wishbone_write(ctx, dut.bus, 1, 0b1_0001)
         await wishbone_write(ctx, dut.bus, 1, 0b1_0010)

@@ -226,6 +226,38 @@ def test_bad_frames_make_no_bus_access():
     assert {"bad-checksum-write", "length-overlong", "truncated-data", "bad-command"} <= names
 
 
+@pytest.mark.parametrize("timeout", [1, 2, 7, TIMEOUT])
+def test_timeout_answers_come_timeout_clocks_after_the_last_byte(timeout):
+    """A truncated frame (in its address field, and after its length) and a bad command: the first answer
+    byte is offered ``timeout + 1`` clocks after the clock that took the last byte (the line idle for
+    ``timeout`` clocks, then the clock that moves to the answer), with the status the format gives."""
+    frames = {"truncated-address": (bytes([protocol.READ, 0, 0]), protocol.TIMEOUT),
+              "truncated-after-length": (bytes([protocol.READ, 0, 0, 0, 0, 1]), protocol.TIMEOUT),
+              "bad-command": (bytes([0x99]), protocol.BAD_COMMAND)}
+    for name, (burst, status) in frames.items():
+        dut = FrameBridge(addr_width=ADDR_WIDTH, timeout=timeout)
+        seen = {}
+
+        async def host(ctx):
+            ctx.set(dut.tx.ready, 1)
+            for b in burst:
+                ctx.set(dut.rx.valid, 1)
+                ctx.set(dut.rx.payload, b)
+                await ctx.tick()  # the clock that takes the byte
+            ctx.set(dut.rx.valid, 0)
+            for clocks in range(1, timeout + 10):
+                _, _, valid, payload = await ctx.tick().sample(dut.tx.valid, dut.tx.payload)
+                if valid:  # offered during the clock before this edge: `clocks - 1` after the last byte's
+                    seen.update(after=clocks - 1, status=payload)
+                    return
+
+        sim = Simulator(dut)
+        sim.add_clock(1e-8)
+        sim.add_testbench(host)
+        sim.run()
+        assert seen == {"after": timeout + 1, "status": status}, name
+
+
 # ------------------------------------------------------------------------------------------- the line
 def line_bits(byte: int, stop: int = 1) -> list[int]:
     return [0] + [(byte >> i) & 1 for i in range(8)] + [stop]
