@@ -163,24 +163,33 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
     assert set(first_span) == set(guard_phases), spans
 
     dut = SpringflatEngine(FS, CAPACITY)
-    aborted_in, out = [], {}
+    aborted_in, drained_at, out = [], [], {}
 
     async def watch(ctx):
-        phase, last = dut.debug_signals["phase"], 0
+        phase, state, last, clock = dut.debug_signals["phase"], dut.debug_signals["state"], 0, 0
         while True:
             await ctx.tick()
+            clock = clock + 1 if ctx.get(state) == STATES.index("running") else 0
             now = ctx.get(phase)
             if PHASES[now] == "drain" and PHASES[last] != "drain":
                 aborted_in.append(PHASES[last])
+                drained_at.append(clock)
             last = now
 
+    def abort_after(driver, bus, clocks):
+        driver.load(image)
+        driver.start()
+        bus.idle(clocks)
+        driver.abort()
+        bus.idle(300)
+
     def host(driver, bus):
+        # the clocks from START's write to the run's first clock, calibrated by a first abort
+        abort_after(driver, bus, first_span["decide"])
+        offset = drained_at[-1] - first_span["decide"]
+        aborted_in.clear()
         for clock in first_span.values():
-            driver.load(image)
-            driver.start()
-            bus.idle(clock)
-            driver.abort()
-            bus.idle(300)
+            abort_after(driver, bus, clock - offset)
         driver.load(image)
         driver.start()
         out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
