@@ -35,7 +35,7 @@ class GuardCommit(wiring.Component):
 
     A rollback's ``P − V`` is exact: the golden model's commit keeps ``P + V`` in range, so ``P − V`` is the
     position before it. A velocity memory holding a move no commit wrote could take it out of range; the
-    unit then neither wraps nor clamps: it keeps ``P``, and raises ``fault`` for the engine to report.
+    unit then neither wraps nor clamps: it keeps ``P``.
 
     Parameters
     ----------
@@ -52,8 +52,7 @@ class GuardCommit(wiring.Component):
     o : ``Out(stream.Signature(commit_output_layout(fs), always_ready=True))``
         One beat per node, in input order: the new ``position`` and ``velocity``, the node's final
         ``level`` (GUARD_LEVELS + 1 where held or out of range; 0 after a rollback) for the guard's
-        statistics, and ``fault`` (a rollback out of range, above). ``o.valid`` and the payload are
-        registers; the consumer takes every beat.
+        statistics. ``o.valid`` and the payload are registers; the consumer takes every beat.
     idle : ``Out(1)``
         No node in flight.
 
@@ -132,13 +131,13 @@ def _build(m: Module, fs: FormatSet, ports) -> int:
                  for k in "xy"},
               **{f"out_v_{k}": Mux(outside | rollback, 0, live[f"d_{k}"][:fs.velocity.width].as_signed())
                  for k in "xy"},
-              level=Mux(outside & ~rollback, held_level, live["level"]), fault=outside & rollback)
+              level=Mux(outside & ~rollback, held_level, live["level"]))
 
     out = ports.o.payload
     m.d.comb += [ports.o.valid.eq(pipe.valid),
                  out.position.x.eq(live["out_p_x"]), out.position.y.eq(live["out_p_y"]),
                  out.velocity.x.eq(live["out_v_x"]), out.velocity.y.eq(live["out_v_y"]),
-                 out.level.eq(live["level"]), out.fault.eq(live["fault"])]
+                 out.level.eq(live["level"])]
     in_flight = Signal(range(pipe.stages + 2), name="nodes_in_flight")
     m.d.sync += in_flight.eq(in_flight + ports.i.valid - ports.o.valid)
     m.d.comb += ports.idle.eq(in_flight == 0)

@@ -114,9 +114,9 @@ class GuardDecision(wiring.Component):
             m.d.sync += [idle.eq(0), rising.eq(1), energy.eq(beat.energy), first.eq(beat.first),
                          with_momentum.eq(beat.with_momentum), tolerance.eq(self.tolerance), floor.eq(self.floor)]
 
-        # the energy's compare in a clock of its own (a carry chain as wide as the energy, into the
-        # window's and the scale's enables, was the engine's worst path), then the decision, the scale
-        # and the window in one clock
+        # the energy's compare in a clock of its own (a carry chain as wide as the energy, feeding the
+        # window's and the scale's enables in the same clock, is too long a path at 125 MHz), then the
+        # decision, the scale and the window in one clock
         rises = Signal(name="rises")
         with m.If(rising):
             m.d.sync += [rising.eq(0), deciding.eq(1), rises.eq(energy > kept)]

@@ -241,10 +241,9 @@ def commit_input_layout(fs: FormatSet) -> data.StructLayout:
 
 def commit_output_layout(fs: FormatSet) -> data.StructLayout:
     """The node committed or rolled back: its new ``position`` [position] and ``velocity`` [velocity]
-    (the move taken; 0 after a rollback), its final ``level`` (:func:`certificate_level_shape`) and
-    ``fault``: a rollback whose ``P − V`` left the position range (no committed move does)."""
+    (the move taken; 0 after a rollback) and its final ``level`` (:func:`certificate_level_shape`)."""
     return data.StructLayout({"position": vector_layout(fs.position), "velocity": vector_layout(fs.velocity),
-                              "level": certificate_level_shape(), "fault": 1})
+                              "level": certificate_level_shape()})
 
 
 def decision_input_layout(energy_bits: int) -> data.StructLayout:

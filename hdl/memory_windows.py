@@ -327,12 +327,12 @@ class MemoryWindows(wiring.Component):
         positions = self.rams["positions"].read
         read_ports = {"pos_a": positions[0], "pos_b": positions[1], "pos_c": positions[2],
                       "vel": self.rams["velocities"].read[0], "wgt": self.rams["weights"].read[0],
-                      "frc": self.rams["forces"].read[0], "tri": self.rams["triangles"].read[0],
-                      # the proposals' copies read at their position port's address, from registers of
-                      # their own (one register driving both memories' block RAMs would cross the device)
-                      **{f"prop_{c}": self.rams[f"proposals{k}"].read[0] for k, c in enumerate("abc")}}
+                      "frc": self.rams["forces"].read[0], "tri": self.rams["triangles"].read[0]}
         read_addr = {name: Signal.like(port.addr, name=f"{name}_addr") for name, port in read_ports.items()}
         m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
+        # the proposals' copies read at their position port's address register (a second register with
+        # the same inputs would be merged into it by Yosys)
+        m.d.comb += [self.rams[f"proposals{k}"].read[0].addr.eq(read_addr[f"pos_{c}"]) for k, c in enumerate("abc")]
         t2_tri = self.rams["triangles"].read[0].data
         running, in_area = self.running, self.in_area
         in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight
@@ -343,10 +343,10 @@ class MemoryWindows(wiring.Component):
             ent_hot.eq(Cat(ent_next[bank_bits:] == b for b in range(len(ent_hot))) if len(ent_hot) > 1 else 1),
             read_addr["tri"].eq(Mux(running, self.tri_index, index_q)),
             *(read_addr[n].eq(Mux(running, self.node_index, index_q)) for n in ("vel", "wgt", "frc")),
-            *(read_addr[f"{port}_b"].eq(Mux(in_area, t2_tri.b, ent_data.neighbour)) for port in ("pos", "prop")),
-            *(read_addr[f"{port}_c"].eq(Mux(in_area, t2_tri.c, ent_data.second)) for port in ("pos", "prop")),
-            *(read_addr[f"{port}_a"].eq(Mux(~running | in_nodes, Mux(running, self.node_index, index_q),
-                                            Mux(in_area, t2_tri.a, self.node_of_entry))) for port in ("pos", "prop")),
+            read_addr["pos_b"].eq(Mux(in_area, t2_tri.b, ent_data.neighbour)),
+            read_addr["pos_c"].eq(Mux(in_area, t2_tri.c, ent_data.second)),
+            read_addr["pos_a"].eq(Mux(~running | in_nodes, Mux(running, self.node_index, index_q),
+                                      Mux(in_area, t2_tri.a, self.node_of_entry))),
         ]
 
     def _writes(self, m: Module, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks) -> None:

@@ -57,7 +57,6 @@ class _Run:
     fixed_step: Value  # MODE.mode selects the fixed step
     guarded: Value  # MODE.mode selects the guarded step
     measuring_again: Signal  # the accepted layout measured again after a rollback (its events not counted)
-    accepted: Signal  # the decision's: the step just measured is kept
     stalled: Signal  # the decision's: the step scale passed SCALE_MAX_SHIFT
 
 
@@ -186,7 +185,7 @@ class PhaseController(wiring.Component):
                    fixed_half=self._fixed_half_dt_sq(m, platform), momentum_k=Signal(ITERATION_BITS, name="momentum_k"),
                    momentum=mode_steps(self.mode, Step.MOMENTUM), fixed_step=mode_steps(self.mode, Step.FIXED),
                    guarded=mode_guarded(self.mode), measuring_again=self.measuring_again,
-                   accepted=Signal(name="accepted"), stalled=Signal(name="stalled"))
+                   stalled=Signal(name="stalled"))
         m.d.comb += self.guarded.eq(run.guarded)
         # CYCLES and ITERATIONS have no domain reset: START and the reset's echo clear them (a LUT of the
         # domain's reset and START driving their reset pins is a long path on the board)
@@ -279,8 +278,7 @@ class PhaseController(wiring.Component):
             with m.If(~run.guarded):
                 m.d.sync += run.settled.eq(energy.o.payload.settled)
         with m.If(decision.o.valid):  # the guarded step's stop rule is the window's
-            m.d.sync += [run.settled.eq(decision.o.payload.settled), run.accepted.eq(decision.o.payload.accepted),
-                         run.stalled.eq(decision.o.payload.stalled)]
+            m.d.sync += [run.settled.eq(decision.o.payload.settled), run.stalled.eq(decision.o.payload.stalled)]
         with m.If(beta.o.valid):
             m.d.sync += self.step_dt.eq(beta.o.payload)
         with m.If(stepgen.o.valid):

@@ -11,14 +11,13 @@ import warnings
 
 import numpy as np
 import pytest
-from amaranth.back import verilog
-from amaranth.hdl import Const, UnusedElaboratable, Value
+from amaranth.hdl import UnusedElaboratable
 
 from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.measures import area_sum
 from hdl.area_error import AreaError
 from sim.payloads import pack_beats
-from support.streams import StreamRun, run_testbenches, stream_producer
+from support.streams import StreamRun, run_testbenches, stream_producer, top_level_verilog
 
 PRESETS = ["default", "narrow"]
 SATURATION_NAMES = ("face_edge", "face_area", "area_sum")
@@ -173,8 +172,6 @@ def test_converts_to_verilog(preset, monkeypatch):
     """Top level: the constant ``i.ready`` is left out of the ports (amaranth-lang/amaranth#1574)."""
     monkeypatch.setenv("AMARANTH_USE_YOSYS", "builtin")
     fs = FormatSet.preset(preset)
-    dut = AreaError(fs)
-    ports = [Value.cast(v) for _, _, v in dut.signature.flatten(dut) if not isinstance(v, Const)]
-    text = verilog.convert(dut, name="area_error", ports=ports)
+    text = top_level_verilog(AreaError(fs), "area_error")
     assert "module area_error" in text
     assert f"output [{fs.error_acc.width - 1}:0] total;" in text

@@ -25,7 +25,8 @@ import numbers
 import random
 from dataclasses import dataclass, field
 
-from amaranth.hdl import Value
+from amaranth.back import verilog
+from amaranth.hdl import Const, Value
 from amaranth.sim import Simulator
 
 from sim.payloads import pack, unpack
@@ -226,3 +227,10 @@ def run_streams(dut, beats, n_out=None, *, seed=0, p_valid=1.0, p_ready=1.0, rea
                                     probe_ready=probe_ready))
     assert len(run.in_cycles) == len(beats) and len(run.outputs) == n_out
     return run
+
+
+def top_level_verilog(dut, name: str) -> str:
+    """``dut`` converted to Verilog as the top module ``name``, its ports the signature's members less the
+    constant ones (an ``always_ready`` stream's ``ready``; amaranth-lang/amaranth#1574)."""
+    ports = [Value.cast(v) for _, _, v in dut.signature.flatten(dut) if not isinstance(v, Const)]
+    return verilog.convert(dut, name=name, ports=ports)
