@@ -45,7 +45,9 @@ class SpringflatEngine(wiring.Component):
     ----------
     fs : :class:`~golden_model.fixed.FormatSet` or preset name
     capacity : :class:`~golden_model.engine_spec.image.EngineCapacity`
-        Depths of the node, entry and triangle memories.
+        Depths of the node, entry and triangle memories, and whether the step guard is built (its
+        passes, :class:`~hdl.guard_passes.GuardPasses`, and the proposal memories; without it START
+        answers a guarded mode with ``bad-constants`` and FEATURES.guard reads 0).
     entry_bank_depth : int
         Words per bank of the entry memory (a power of two; :data:`ENTRY_BANK_DEPTH`, the deepest
         DP16KD mode of a wide word; a test passes less to have several banks at a small capacity).
@@ -137,7 +139,9 @@ class SpringflatEngine(wiring.Component):
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True)
         m.submodules.area = area = AreaError(fs)
         m.submodules.integrator = integrator = Integrator(fs, saturations=True)
-        m.submodules.guard = guard = GuardPasses(fs, cap, read_latency=memories.read_latency)
+        guard = GuardPasses(fs, cap, read_latency=memories.read_latency) if cap.guard else None
+        if guard is not None:
+            m.submodules.guard = guard
         # SATURATIONS' sources, in the order they are summed in pairs
         producers = {"force": sequencer, "integrate": sequencer, "step": controller, "area": sequencer,
                      "length": sequencer, "power": sequencer, "shape_error": controller, "area_error": controller}
@@ -183,14 +187,16 @@ class SpringflatEngine(wiring.Component):
                      node_pass.eq(controller.in_integrate | controller.in_hold | controller.in_commit
                                   | controller.in_rollback)]
         m.d.comb += [memories.in_area.eq(corner_pass), memories.in_integrate.eq(node_pass)]
-        _wire(m, controller, guard, "in_step", "in_integrate", *(f"in_{name}" for name in GUARD_PASSES))
-        _wire(m, registers, guard, "vertices", "triangles")
-        _wire(m, sequencer, guard, "node_index", "node_landed", "triangle_landed", "corners")
-        _wire(m, memories, guard, "position", "proposal", "velocity")
-        m.d.comb += [guard.area.eq(sequencer.landed_area), controller.guard_done.eq(guard.done),
-                     controller.passes_idle.eq(sequencer.passes_idle & guard.idle),
-                     integrator.scale_shift.eq(controller.scale_shift),
-                     integrator.propose.eq(controller.guarded)]
+        m.d.comb += [integrator.scale_shift.eq(controller.scale_shift), integrator.propose.eq(controller.guarded)]
+        if guard is not None:
+            _wire(m, controller, guard, "in_step", "in_integrate", *(f"in_{name}" for name in GUARD_PASSES))
+            _wire(m, registers, guard, "vertices", "triangles")
+            _wire(m, sequencer, guard, "node_index", "node_landed", "triangle_landed", "corners")
+            _wire(m, memories, guard, "position", "proposal", "velocity")
+            m.d.comb += [guard.area.eq(sequencer.landed_area), controller.guard_done.eq(guard.done),
+                         controller.passes_idle.eq(sequencer.passes_idle & guard.idle)]
+        else:  # START refuses the guarded modes: no guard pass ever starts
+            m.d.comb += controller.passes_idle.eq(sequencer.passes_idle)
         _wire(m, registers, sequencer, "vertices", "entries", "triangles", "barrier_held")
         _wire(m, memories, sequencer, "entry", "triangle", "position", "velocity", "weight_word", "force_word")
         _wire(m, sequencer, memories, "entry_index", "tri_index", "node_index", "node_of_entry")
@@ -205,7 +211,11 @@ class SpringflatEngine(wiring.Component):
         # the node memories' and the proposal memory's writers: one pass at a time, so the writer whose
         # enable is high
         for port in ("node_write", "proposal_write"):
-            ours, theirs, sink = getattr(guard, port), getattr(sequencer, port), getattr(memories, port)
+            theirs, sink = getattr(sequencer, port), getattr(memories, port)
+            if guard is None:
+                m.d.comb += [sink.en.eq(theirs.en), sink.addr.eq(theirs.addr), sink.data.eq(theirs.data)]
+                continue
+            ours = getattr(guard, port)
             m.d.comb += [sink.en.eq(ours.en | theirs.en), sink.addr.eq(Mux(ours.en, ours.addr, theirs.addr)),
                          sink.data.eq(Mux(ours.en, ours.data, theirs.data))]
         m.d.comb += [sequencer.area_saturations.eq(area.saturations), sequencer.force_idle.eq(force.idle),

@@ -20,9 +20,10 @@ def or_tree(values) -> Value:
     return values[0]
 
 
-def mode_runs(code: Value) -> Value:
-    """1 where ``MODE.mode``'s ``code`` is a run mode the engine runs (``ENGINE_RUN_MODES``)."""
-    return or_tree(code == m.code for m in ENGINE_RUN_MODES)
+def mode_runs(code: Value, *, guard: bool = True) -> Value:
+    """1 where ``MODE.mode``'s ``code`` is a run mode the engine runs (``ENGINE_RUN_MODES``; without
+    ``guard``, the build without the step guard, not the guarded ones)."""
+    return or_tree(code == m.code for m in ENGINE_RUN_MODES if guard or not m.guarded)
 
 
 def mode_steps(code: Value, step: Step) -> Value:

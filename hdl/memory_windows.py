@@ -106,7 +106,8 @@ class MemoryWindows(wiring.Component):
         The integrator's results: written back to the position and velocity memories while running.
     proposal, proposal_write : ``Out``, ``In(write_signature(...))``
         The guarded step's proposals [velocity]: three copies, each read at its position port's address
-        (``proposal[k]`` beside ``position[k]``), written together while running; not on the bus.
+        (``proposal[k]`` beside ``position[k]``), written together while running; not on the bus. A
+        capacity without ``guard`` has no proposal memory (``proposal`` reads 0).
 
     Port sources
     ------------
@@ -174,7 +175,8 @@ class MemoryWindows(wiring.Component):
             "forces": BlockRam(force_shape, cap.vertices, name="forces", **select),
             "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles", **select),
             # the guarded step's proposals, a copy per position port (a triangle's three corners at once)
-            **{f"proposals{k}": BlockRam(vel_shape, cap.vertices, name=f"proposals{k}", **select) for k in range(3)},
+            **{f"proposals{k}": BlockRam(vel_shape, cap.vertices, name=f"proposals{k}", **select)
+               for k in range(3 if cap.guard else 0)},
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
                                        name=f"entries{b}", pin_registers=True) for b in range(banks)},
         }
@@ -213,11 +215,12 @@ class MemoryWindows(wiring.Component):
                      forces.write.en.eq(self.force_write.en)]
         # the guarded step's proposals (not on the bus): each copy read at its position port's address,
         # written from registers as the node memories are
+        # (none in a build without the guard: ``proposal`` reads 0)
         proposal_regs = (Signal.like(self.proposal_write.addr, name="prop_waddr"),
                          Signal.like(self.proposal_write.data, name="prop_wdata"), Signal(name="prop_wen"))
         m.d.sync += [proposal_regs[0].eq(self.proposal_write.addr), proposal_regs[1].eq(self.proposal_write.data),
                      proposal_regs[2].eq(self.proposal_write.en & self.running)]
-        for k in range(3):
+        for k in range(3 if self.capacity.guard else 0):
             ram = self.rams[f"proposals{k}"]
             m.d.comb += [self.proposal[k].eq(ram.read[0].data),
                          ram.write.addr.eq(proposal_regs[0]), ram.write.data.eq(proposal_regs[1]),
@@ -332,7 +335,8 @@ class MemoryWindows(wiring.Component):
         m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
         # the proposals' copies read at their position port's address register (a second register with
         # the same inputs would be merged into it by Yosys)
-        m.d.comb += [self.rams[f"proposals{k}"].read[0].addr.eq(read_addr[f"pos_{c}"]) for k, c in enumerate("abc")]
+        m.d.comb += [self.rams[f"proposals{k}"].read[0].addr.eq(read_addr[f"pos_{c}"])
+                     for k, c in enumerate("abc") if f"proposals{k}" in self.rams]
         t2_tri = self.rams["triangles"].read[0].data
         running, in_area = self.running, self.in_area
         in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight

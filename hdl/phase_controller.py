@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, Module, Mux, Signal, Value, signed
+from amaranth.hdl import C, Cat, Module, Mux, Signal, Value, signed
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -184,7 +184,8 @@ class PhaseController(wiring.Component):
                    settled=Signal(name="settled"), fixed_load=Signal(name="fixed_load"),
                    fixed_half=self._fixed_half_dt_sq(m, platform), momentum_k=Signal(ITERATION_BITS, name="momentum_k"),
                    momentum=mode_steps(self.mode, Step.MOMENTUM), fixed_step=mode_steps(self.mode, Step.FIXED),
-                   guarded=mode_guarded(self.mode), measuring_again=self.measuring_again,
+                   guarded=mode_guarded(self.mode) if self.capacity.guard else C(0, 1),
+                   measuring_again=self.measuring_again,
                    stalled=Signal(name="stalled"))
         m.d.comb += self.guarded.eq(run.guarded)
         # CYCLES and ITERATIONS have no domain reset: START and the reset's echo clear them (a LUT of the
@@ -301,7 +302,8 @@ class PhaseController(wiring.Component):
         bad_constants = ((self.vertices > cap.vertices) | (self.entries > cap.entries)
                          | (self.triangles > cap.triangles) | (self.entries == 0) | (self.triangles == 0)
                          | reciprocal_bad[0] | reciprocal_bad[1]
-                         | ~mode_runs(self.mode) | (run.fixed_step & (self.dt == 0)) | (self.max_iter == 0))
+                         | ~mode_runs(self.mode, guard=cap.guard) | (run.fixed_step & (self.dt == 0))
+                         | (self.max_iter == 0))
         stepgen = units["stepgen"]
         stepgen_idle = pending_is_zero(m, StepGenerator.latency_of(self.fs), stepgen.i, stepgen.o, name="stepgen_pending")
         names = ("no_mesh_q", "bad_constants_q", "converged_q", "diverged_q", "at_max_iter_q")

@@ -217,13 +217,15 @@ def cmd_board(args, fs, capacity) -> int:
     if args.board is None:
         raise SynthError("give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)")
     if args.target is not None or args.components or args.router != "auto":
-        raise SynthError("--board takes --formats, --capacity, --seed, --freq, --baud and --out only")
+        raise SynthError("--board takes --formats, --capacity, --no-guard, --seed, --freq, --baud and --out only")
     if args.baud is not None and args.baud <= 0:
         raise SynthError(f"--baud must be a positive number of bits per second, not {args.baud}")
     out = Path(args.out) if args.out else Path(f"board-{args.board}-{fs.name}")
     parts = ["springflat", "synth", "--board", args.board, "--formats", args.formats]
     if args.capacity:
         parts += ["--capacity", *(str(n) for n in args.capacity)]
+    if not getattr(args, "build_guard", True):
+        parts.append("--no-guard")
     if args.seed != 1:
         parts += ["--seed", str(args.seed)]
     if args.baud:

@@ -28,10 +28,10 @@ __all__ = ["board_capacity", "BoardRun", "run_on_board", "flatten_on_board", "ad
 
 
 def board_capacity(bus, fs: FormatSet) -> EngineCapacity:
-    """The capacity the engine behind ``bus`` was built with (its CAP_* registers)."""
+    """The capacity the engine behind ``bus`` was built with (its CAP_* registers and FEATURES.guard)."""
     probe = EngineDriver(bus, RegisterMap.build(fs, DEFAULT_CAPACITY))
     values = [probe.read_value(f"cap_{what}") for what in ("vertices", "entries", "triangles")]
-    return EngineCapacity(*values)
+    return EngineCapacity(*values, guard=bool(probe.read_value("feature_guard")))
 
 
 @dataclass(frozen=True, eq=False)

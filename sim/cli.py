@@ -170,7 +170,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     from .export import engine_capacity, export_engine_bundle, export_verilog
 
     formats = load_format_set(args.formats)
-    capacity = engine_capacity(args.capacity, formats)
+    capacity = engine_capacity(args.capacity, formats, guard=args.build_guard)
     out = Path(args.out)
     inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
     with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
@@ -180,7 +180,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
     print(f"{out / 'interface.md'}, {out / 'interface.json'}")
     print(f"{out / engine['files'][0]}: capacity {capacity.vertices} vertices, {capacity.entries} entries, "
-          f"{capacity.triangles} triangles; {engine['bus']}")
+          f"{capacity.triangles} triangles{'' if capacity.guard else ', no step guard'}; {engine['bus']}")
     print(", ".join(str(out / f) for f in engine["files"][1:]))
     return 0
 
@@ -237,6 +237,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="the engine's vertices, neighbour entries and triangles (default: "
                         "golden_model.engine_spec.image.DEFAULT_CAPACITY)")
+    p.add_argument("--no-guard", dest="build_guard", action="store_false",
+                   help="the engine without the step guard (no guarded mode; its block RAMs free for depth)")
     p.add_argument("--out", required=True, help="output directory")
     p.set_defaults(func=cmd_verilog)
 

@@ -112,6 +112,10 @@ class EngineDriver:
         if built != mapped:
             raise DriverError(f"the engine holds {built[0]} vertices / {built[1]} entries / {built[2]} triangles; "
                               f"the register map says {mapped[0]} / {mapped[1]} / {mapped[2]}")
+        guard = bool(self.read_value("feature_guard"))
+        if guard != self.map.capacity.guard:
+            raise DriverError(f"the engine was built {'with' if guard else 'without'} the step guard; the register "
+                              f"map says {'with' if self.map.capacity.guard else 'without'}")
 
     # ------------------------------------------------------------------ the run
     def load(self, image: EngineImage) -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from amaranth.hdl import Shape
@@ -214,21 +214,22 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
     (out / f"{ENGINE_MODULE}.v").write_text(verilog.convert(engine, name=ENGINE_MODULE, platform=platform))
     files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)]
     return {"module": ENGINE_MODULE, "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
-                                                          "triangles": capacity.triangles},
+                                                          "triangles": capacity.triangles, "guard": capacity.guard},
             "bus": "Wishbone B4 classic, 32-bit data, word addresses", "addr_width": engine.addr_width,
             "files": [f"{ENGINE_MODULE}.v", *files]}
 
 
-def engine_capacity(values, fs: FormatSet) -> EngineCapacity:
-    """``--capacity V E T`` as an :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the
-    default); a capacity the engine's register map cannot hold is a one-line :class:`ParameterError`."""
+def engine_capacity(values, fs: FormatSet, *, guard: bool = True) -> EngineCapacity:
+    """``--capacity V E T`` (and ``--no-guard``: ``guard`` False) as an
+    :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the default depths); a capacity the
+    engine's register map cannot hold is a one-line :class:`ParameterError`."""
     from golden_model.engine_spec.register_map import RegisterMap
     from golden_model.params import ParameterError
 
     if values is None:
-        return DEFAULT_CAPACITY
+        return DEFAULT_CAPACITY if guard else replace(DEFAULT_CAPACITY, guard=False)
     try:
-        capacity = EngineCapacity(*(int(v) for v in values))
+        capacity = EngineCapacity(*(int(v) for v in values), guard=guard)
         RegisterMap.build(fs, capacity)  # the address map must hold it
     except (TypeError, ValueError) as exc:
         raise ParameterError(f"--capacity V E T: {exc}") from None

@@ -27,7 +27,8 @@ from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent.parent / "docs" / "results" / "synthesis.csv"
 
-#: The columns. ``capacity`` is ``V/E/T`` for the engine, empty for the streaming components;
+#: The columns. ``capacity`` is ``V/E/T`` for the engine (`` no guard`` after it for a build without the
+#: step guard), empty for the streaming components;
 #: resources are Yosys's of the bare module (LUT4 counts a carry cell as two; ``lutram`` in
 #: 16×4-bit cells); ``fmax_mhz`` is nextpnr's after routing, empty when the design was not placed,
 #: and then ``critical_path`` says why; ``latency`` is the component's latency in clocks when it was
@@ -54,7 +55,8 @@ def read_rows(path: Path = RESULTS) -> list[dict[str, str]]:
 def write_rows(rows: list[dict[str, str]], path: Path = RESULTS) -> None:
     """Write ``rows`` sorted by configuration (target, preset, component, capacity, seed)."""
     def order(row):
-        capacity = tuple(int(v) for v in row["capacity"].split("/")) if row["capacity"] else ()
+        depths, _, guardless = row["capacity"].partition(" ")
+        capacity = (*(int(v) for v in depths.split("/")), bool(guardless)) if depths else ()
         component = (COMPONENT_ORDER.index(row["component"]) if row["component"] in COMPONENT_ORDER
                      else len(COMPONENT_ORDER), row["component"])
         return row["target"], row["preset"], component, capacity, int(row["seed"] or 0)
@@ -72,6 +74,14 @@ def _seed(nextpnr_command: str | None) -> str:
     return argv[argv.index("--seed") + 1] if "--seed" in argv else "1"
 
 
+def capacity_text(capacity: dict | None) -> str:
+    """The ``capacity`` column: ``V/E/T``, and `` no guard`` for an engine built without the step guard."""
+    if not capacity:
+        return ""
+    text = "/".join(str(capacity[k]) for k in ("vertices", "entries", "triangles"))
+    return text if capacity.get("guard", True) else f"{text} no guard"
+
+
 def rows_from_report(report: dict, date: str) -> list[dict[str, str]]:
     """One row per component of a ``springflat synth --json`` report (``synth_report.json``)."""
     rows = []
@@ -84,7 +94,7 @@ def rows_from_report(report: dict, date: str) -> list[dict[str, str]]:
             why = "not placed: " + "; ".join(c.get("does_not_fit") or ["no Fmax reported"])
         rows.append({
             "date": date, "target": report["target"], "preset": report["preset"], "component": name,
-            "capacity": "/".join(str(capacity[k]) for k in ("vertices", "entries", "triangles")) if capacity else "",
+            "capacity": capacity_text(capacity),
             "seed": _seed(c.get("nextpnr_command")) if c.get("fmax_mhz") else "",
             "constraint_mhz": f"{report['freq_mhz']:g}",
             "fmax_mhz": f"{c['fmax_mhz']:.2f}" if c.get("fmax_mhz") else "",

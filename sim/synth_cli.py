@@ -61,6 +61,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="springflat_engine's vertices, neighbour entries and triangles (default: "
                         "golden_model.engine_spec.image.DEFAULT_CAPACITY)")
+    p.add_argument("--no-guard", dest="build_guard", action="store_false",
+                   help="springflat_engine without the step guard: no guarded mode, and its block RAMs free for "
+                        "depth (3072 18432 6144 fits the ECP5-85F only so; docs/engine-guard.md)")
     p.add_argument("--router", choices=("auto", "router1", "router2"), default="auto",
                    help="nextpnr router (default auto: the timing-driven router1; router2 is not timing-driven)")
     p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
@@ -78,6 +81,8 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
         parts += ["--components", ",".join(args.components)]
     if args.capacity:
         parts += ["--capacity", *(str(n) for n in args.capacity)]
+    if not args.build_guard:
+        parts.append("--no-guard")
     if args.router != "auto":
         parts += ["--router", args.router]
     if args.seed != 1:
@@ -95,13 +100,14 @@ def cmd_synth(args: argparse.Namespace) -> int:
     from .export import engine_capacity
 
     fs = load_format_set(args.formats)
-    capacity = engine_capacity(args.capacity, fs)
+    capacity = engine_capacity(args.capacity, fs, guard=args.build_guard)
     if args.board is not None or args.target is None:
         from .board_build import cmd_board
 
         return cmd_board(args, fs, capacity)
-    if args.capacity and ENGINE not in (args.components or ()):
-        raise SynthError(f"--capacity sizes {ENGINE}: add it to --components")
+    for given, option in ((args.capacity, "--capacity sizes"), (not args.build_guard, "--no-guard builds")):
+        if given and ENGINE not in (args.components or ()):
+            raise SynthError(f"{option} {ENGINE}: add it to --components")
     out = Path(args.out) if args.out else Path(f"synth-{args.target}-{fs.name}")
     start = time.monotonic()
 

@@ -75,17 +75,23 @@ def _next_power_of_two(n: int) -> int:
 
 @dataclass(frozen=True)
 class EngineCapacity:
-    """The engine's memory depths, an elaboration parameter: vertices, neighbour entries, triangles."""
+    """The engine's memory depths, an elaboration parameter: vertices, neighbour entries, triangles;
+    and ``guard``: whether the build has the step guard's passes and memories (the proposals' three
+    copies and the level scatters), so runs the guarded modes. Without it the block RAMs go to depth:
+    3072 / 18432 / 6144 fits the ECP5-85F only so (``docs/engine-guard.md``)."""
 
     vertices: int
     entries: int
     triangles: int
+    guard: bool = True
 
     def __post_init__(self) -> None:
         for name in ("vertices", "entries", "triangles"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 2:
                 raise ValueError(f"EngineCapacity: {name} must be an int >= 2, got {value!r}")
+        if not isinstance(self.guard, bool):
+            raise ValueError(f"EngineCapacity: guard must be a bool, got {self.guard!r}")
 
     @property
     def vertex_index_bits(self) -> int:
@@ -325,9 +331,13 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str,
 UNGUARDED = {"guard": False, "energy_window": 1}
 
 
-def check_engine_params(params) -> None:
-    """Refuse, in one line, a stop rule's window the engine does not have: the guard's
-    :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it."""
+def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
+    """Refuse, in one line, a stop rule's window the engine does not have (the guard's
+    :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it), and the guarded step on a
+    ``capacity`` built without the guard."""
+    if capacity is not None and params.guard and not capacity.guard:
+        raise FixedPointError(f"this engine was built without the step guard, so it does not run "
+                              f"'{params.mode.name}': use --no-guard, or an engine built with the guard")
     window = image_energy_window(params.mode)
     if params.energy_window != window:
         hint = f"--energy-window {window}" if params.guard else "--energy-window 1 (or the guard, with its window)"
@@ -346,7 +356,7 @@ def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
     n_vertices, n_entries = len(stream.indptr) - 1, len(stream.neighbour)
     capacity.check(n_vertices, n_entries, len(problem.face_areas))
     check_fixed_params(problem.params, fs)
-    check_engine_params(problem.params)
+    check_engine_params(problem.params, capacity)
     constants = _run_constants(problem, capacity)
     layouts = memory_layouts(fs, capacity)
     positions = problem.initial_positions
@@ -397,7 +407,8 @@ def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCap
     """What the engine answers to START with these run constants: ``"no-mesh"`` (no vertices: nothing
     loaded since reset), ``"bad-constants"`` (a count over capacity or zero, a reciprocal that is not a
     u1.F mantissa or whose shift is too small for :meth:`Reciprocal.normalise`, a mode code the engine
-    does not run, a zero fixed step, no iterations), or ``None`` (the run starts)."""
+    does not run, a guarded mode on a build without the guard, a zero fixed step, no iterations), or
+    ``None`` (the run starts)."""
     if constants["vertices"] == 0:
         return "no-mesh"
     counts_ok = all(0 < constants[n] <= getattr(capacity, n) for n in ("vertices", "entries", "triangles"))
@@ -405,7 +416,8 @@ def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCap
     reciprocals_ok = all(top <= constants[f"{k}_reciprocal"] < 2 * top
                          and constants[f"{k}_shift"] >= fs.error.frac_bits + 2 for k in ("area", "length"))
     mode = image_mode(constants)
-    step_ok = mode is not None and (mode.step is not Step.FIXED or constants["dt"] > 0)
+    step_ok = mode is not None and (mode.step is not Step.FIXED or constants["dt"] > 0) \
+        and (capacity.guard or not mode.guarded)
     if not (counts_ok and reciprocals_ok and step_ok and constants["max_iter"] > 0):
         return "bad-constants"
     return None

@@ -33,7 +33,7 @@ __all__ = ["MAGIC", "VERSION", "ACCESS", "STATES", "RESULTS", "REGISTER_BLOCKS",
 MAGIC = 0x5350_464C
 """ID register: ASCII ``SPFL``."""
 
-VERSION = (2, 1)
+VERSION = (2, 2)
 """(major, minor) of this register map; the major changes when an address or field moves."""
 
 ACCESS = {
@@ -169,6 +169,9 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
             reset=format_hash(fs))
     for what in ("vertices", "entries", "triangles"):
         a.value(f"cap_{what}", 32, "ro", f"capacity: {what} the memories hold", ident, reset=getattr(capacity, what))
+    a.add("FEATURES", "ro", "what the build has beside its capacity", (
+        BitField("guard", 0, 1, "ro", "the step guard's passes and memories: the guarded modes run", "feature_guard"),
+    ), ident, int(capacity.guard))
 
     a.block()
     a.add("CONTROL", "rw", "start, abort, interrupt enable", (

@@ -263,3 +263,18 @@ def test_a_stop_rule_window_the_engine_lacks_is_refused_in_one_line(params, mess
     with pytest.raises(FixedPointError, match=message) as info:
         build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, DEFAULT), CAPACITY)
     assert "\n" not in str(info.value)
+
+
+def test_a_build_without_the_guard_refuses_the_guarded_step_in_one_line():
+    mesh = MESHES["dome"]
+    guardless = dataclasses.replace(CAPACITY, guard=False)
+    with pytest.raises(FixedPointError, match=r"built without the step guard, so it does not run 'momentum-guarded': "
+                                              r"use --no-guard") as info:
+        build_image(prepare(mesh, initial_layout(mesh, "tutte"), FlattenParams(dynamics="momentum"), DEFAULT),
+                    guardless)
+    assert "\n" not in str(info.value)
+    unguarded = FlattenParams(dynamics="momentum", guard=False, energy_window=1)
+    image = build_image(prepare(mesh, initial_layout(mesh, "tutte"), unguarded, DEFAULT), guardless)
+    assert image.capacity.guard is False
+    with pytest.raises(ValueError, match="EngineCapacity: guard must be a bool, got 1"):
+        EngineCapacity(10, 10, 10, guard=1)

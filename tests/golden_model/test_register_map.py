@@ -41,6 +41,13 @@ def test_identification_and_capacity_read_back_as_reset_values(regmap, fs):
     for what in ("vertices", "entries", "triangles"):
         r = regmap.register(f"CAP_{what.upper()}")
         assert (r.access, r.reset) == ("ro", getattr(SMALL, what))
+    features = regmap.register("FEATURES")
+    assert (features.access, features.reset, features.block) == ("ro", 1, regmap.register("ID").block)
+    guardless = RegisterMap.build(fs, dataclasses.replace(SMALL, guard=False))
+    assert guardless.register("FEATURES").reset == 0
+    # FEATURES took the identification block's free word: no other register moved
+    assert [(r.name, r.offset) for r in guardless.registers] == [(r.name, r.offset) for r in regmap.registers]
+    assert features.offset < regmap.register("CONTROL").offset
 
 
 def test_the_format_hash_tells_format_sets_apart_but_not_their_names():

@@ -298,10 +298,14 @@ def test_memory_access_while_running_is_a_bus_error_and_abort_then_a_clean_rerun
     assert_same_run(out["read_back"], run_image(rerun, FS))
 
 
-def test_bad_run_constants_answer_as_constant_fault_says():
+@pytest.mark.parametrize("guard", [True, False])
+def test_bad_run_constants_answer_as_constant_fault_says(guard):
+    """Each bad constant as ``constant_fault`` answers it, on a build with the guard and one without (which
+    refuses the guarded mode)."""
     from golden_model.engine_spec.image import constant_fault
 
-    image = image_of(RUNS["paper-variable"])
+    capacity = dataclasses.replace(CAPACITY, guard=guard)
+    image = image_of(RUNS["paper-variable"], capacity)
     top = 1 << (FS.reciprocal.width - 1)
     cases = {
         "no iterations": {"max_iter": 0},
@@ -314,11 +318,12 @@ def test_bad_run_constants_answer_as_constant_fault_says():
         "a fixed step": {"mode": mode_named("paper-fixed").code, "dt": 1},
         "good": {},
     }
-    dut = SpringflatEngine(FS, CAPACITY)
+    dut = SpringflatEngine(FS, capacity)
     answers = {}
 
     def host(driver, bus):
         driver.load(image)
+        answers["FEATURES.guard"] = driver.read_value("feature_guard")
         for name, change in cases.items():
             constants = {**image.constants, **change}
             for offset, word in sorted(driver.map.encode(constants).items()):
@@ -331,9 +336,23 @@ def test_bad_run_constants_answer_as_constant_fault_says():
                 bus.idle(400)
 
     simulate(dut, host)
+    assert answers["FEATURES.guard"] == guard
+    assert (constant_fault({**image.constants, **cases["the guarded mode"]}, FS, capacity) is None) == guard
     for name, change in cases.items():
-        expected = constant_fault({**image.constants, **change}, FS, CAPACITY)
+        expected = constant_fault({**image.constants, **change}, FS, capacity)
         assert answers[name] == (("done", expected) if expected else ("running", "none")), name
+
+
+def test_a_build_without_the_guard_runs_the_momentum_step_bit_exact():
+    """``EngineCapacity(guard=False)``: no guard passes or proposal memories, the unguarded momentum run as
+    the golden model's."""
+    capacity = dataclasses.replace(CAPACITY, guard=False)
+    image = image_of(RUNS["momentum-barrier"], capacity, init=INIT["momentum-barrier"])
+    expected = run_image(image, FS)
+    dut = SpringflatEngine(FS, capacity)
+    result, read_back = run_on_engine(dut, image)
+    assert result == expected.status and expected.iterations > 3
+    assert_same_run(read_back, expected)
 
 
 def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged():
