@@ -122,9 +122,9 @@ class EngineDriver:
         """Write the three memories and the run constants (the engine must not be running)."""
         self.identify()
         if image.capacity != self.map.capacity:
-            c, e = image.capacity, self.map.capacity
-            raise DriverError(f"the image was built for capacity {c.vertices}/{c.entries}/{c.triangles} "
-                              f"(vertices/entries/triangles); the engine has {e.vertices}/{e.entries}/{e.triangles}")
+            c, e = (f"{c.vertices}/{c.entries}/{c.triangles}{'' if c.guard else ' without the guard'}"
+                    for c in (image.capacity, self.map.capacity))
+            raise DriverError(f"the image was built for capacity {c} (vertices/entries/triangles); the engine has {e}")
         if self._status_fields()[0] == "running":
             raise DriverError("the engine is running: abort() or wait() before load()")
         for name, words in image.memories().items():

@@ -69,6 +69,17 @@ def test_an_image_for_another_capacity_is_refused(bus):
         driver.load(_image(capacity=EngineCapacity(64, 400, 256)))
     assert one_line(info) == ("the image was built for capacity 64/400/256 (vertices/entries/triangles); "
                                "the engine has 64/400/128")
+    guardless = dataclasses.replace(CAPACITY, guard=False)
+    with pytest.raises(DriverError) as info:
+        driver.load(_image(params=dataclasses.replace(PARAMS, max_iter=5), capacity=guardless))
+    assert one_line(info) == ("the image was built for capacity 64/400/128 without the guard "
+                               "(vertices/entries/triangles); the engine has 64/400/128")
+
+
+def test_a_map_with_or_without_the_guard_must_match_the_engine(bus):
+    with pytest.raises(DriverError) as info:
+        EngineDriver(bus, RegisterMap.build(DEFAULT, dataclasses.replace(CAPACITY, guard=False))).identify()
+    assert one_line(info) == "the engine was built with the step guard; the register map says without"
 
 
 def test_a_map_for_another_format_set_or_no_engine_is_refused(bus):
