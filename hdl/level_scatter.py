@@ -80,23 +80,29 @@ class LevelScatter(wiring.Component):
         m.d.sync += [waiting[0].eq(self.update.payload), valid[0].eq(self.update.valid),
                      waiting[1].eq(waiting[0]), valid[1].eq(valid[0])]
 
-        # the two writes before this clock's (last: one clock ago; earlier: two clocks ago)
-        write_layout = data.StructLayout({"node": range(self.depth), "level": certificate_level_shape(), "en": 1})
+        # the two writes before this clock's (last: one clock ago; earlier: two clocks ago), and whether each
+        # is to this update's node: compared a clock ahead, against the write and the last write of the
+        # clock before (which become ``last`` and ``earlier`` as the update moves on), so that only the
+        # maximum's compares lie between flip-flops and the block RAM's write port
+        write_layout = data.StructLayout({"level": certificate_level_shape(), "en": 1})
         last, earlier = Signal(write_layout, name="write_last"), Signal(write_layout, name="write_earlier")
+        last_node = Signal(range(self.depth), name="write_last_node")
+        to_last, collided = Signal(name="update_meets_last"), Signal(name="update_meets_earlier")
         node, level = waiting[1].node, waiting[1].level
-        collided = earlier.en & (earlier.node == node)
-        candidates = [level, Mux(collided, 0, port.data), Mux(last.en & (last.node == node), last.level, 0),
-                      Mux(collided, earlier.level, 0)]
-        largest = candidates[0]
-        for c in candidates[1:]:
-            largest = Mux(c > largest, c, largest)
+
+        def larger(a, b):
+            return Mux(a > b, a, b)
+
+        largest = larger(larger(level, Mux(to_last, last.level, 0)),
+                         larger(Mux(collided, 0, port.data), Mux(collided, earlier.level, 0)))
 
         write = ram.write
         with m.If(valid[1]):
             m.d.comb += [write.addr.eq(node), write.data.eq(largest), write.en.eq(1)]
         with m.Elif(self.clear.valid):
             m.d.comb += [write.addr.eq(self.clear.payload), write.data.eq(0), write.en.eq(1)]
-        m.d.sync += [last.node.eq(write.addr), last.level.eq(write.data), last.en.eq(write.en),
-                     earlier.eq(last)]
+        m.d.sync += [last.level.eq(write.data), last.en.eq(write.en), last_node.eq(write.addr), earlier.eq(last),
+                     to_last.eq(write.en & (write.addr == waiting[0].node)),
+                     collided.eq(last.en & (last_node == waiting[0].node))]
         m.d.comb += self.idle.eq(~(valid[0] | valid[1]))
         return m
