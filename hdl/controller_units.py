@@ -376,10 +376,12 @@ class BetaDivider(wiring.Component):
 
     Contract
     --------
-    One item at a time: ``i.ready`` is high while idle. ``latency`` = ``dt.frac_bits + 3`` clock
+    One item at a time: ``i.ready`` is high while idle. ``latency`` = ``dt.frac_bits + 4`` clock
     edges from the input transfer to the output transfer when ``o.ready`` is high (``F + 1``
-    quotient bits, the rounding, the output transfer): 21 for both presets. ``o.valid`` and
-    ``o.payload`` are registers.
+    quotient bits, the rounding into a register beside the quotient, ``o.payload``, the output
+    transfer): 22 for both presets. ``o.valid`` and ``o.payload`` are registers. The rounded β
+    has a register of its own because the quotient sits with the remainder's logic and
+    ``o.payload`` with β's consumers, across the device from each other in the engine.
     """
 
     def __init__(self, fs: FormatSet | str, k_bits: int = 21):
@@ -389,7 +391,7 @@ class BetaDivider(wiring.Component):
         self.fs = fs
         self.k_bits = k_bits
         self.quotient_bits = fs.dt.frac_bits + 1
-        self.latency = self.quotient_bits + 2
+        self.latency = self.quotient_bits + 3
         super().__init__({
             "i": In(stream.Signature(unsigned(k_bits))),
             "o": Out(stream.Signature(shape_of(fs.dt))),
@@ -415,7 +417,8 @@ class BetaDivider(wiring.Component):
         idle = Signal(init=1)
         dividing = Signal()
         last = Signal()  # the quotient bit being formed is the last one
-        rounding = Signal()
+        rounding, rounded = Signal(), Signal()
+        beta_q = Signal.like(beta, name="beta_rounded")
         m.d.comb += self.i.ready.eq(idle)
         with m.If(self.i.valid & idle):
             m.d.sync += [idle.eq(0), dividing.eq(1)]
@@ -429,7 +432,9 @@ class BetaDivider(wiring.Component):
         with m.If(dividing & last):
             m.d.sync += [dividing.eq(0), rounding.eq(1)]
         with m.If(rounding):
-            m.d.sync += [self.o.payload.eq(beta), self.o.valid.eq(1), rounding.eq(0)]
+            m.d.sync += [beta_q.eq(beta), rounded.eq(1), rounding.eq(0)]
+        with m.If(rounded):
+            m.d.sync += [self.o.payload.eq(beta_q), self.o.valid.eq(1), rounded.eq(0)]
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += [self.o.valid.eq(0), idle.eq(1)]
         return m
