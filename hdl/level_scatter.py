@@ -32,8 +32,9 @@ class LevelScatter(wiring.Component):
     update : ``In(stream.Signature(level_update_layout(depth), always_ready=True))``
         One corner per beat; any node, repeats included, back to back.
     clear : ``In(stream.Signature(range(depth), always_ready=True))``
-        Set a node's level to 0 (the pass before the updates). Clears and updates are separate
-        passes: an update pass's first beat comes after the clear pass's last, and not both in a clock.
+        Set a node's level to 0 (the pass before the updates; written a clock after the transfer).
+        Clears and updates are separate passes: an update pass's first beat comes after the clear
+        pass's last, and not both in a clock.
     lookup : ``In(range(depth))``; ``level`` : ``Out(certificate_level_shape())``
         ``level`` is the level of the node ``lookup`` named two clocks before; a lookup taken while
         ``idle`` sees every update before it. ``lookup`` is ignored in a clock with an update (the
@@ -96,13 +97,19 @@ class LevelScatter(wiring.Component):
         largest = larger(larger(level, Mux(to_last, last.level, 0)),
                          larger(Mux(collided, 0, port.data), Mux(collided, earlier.level, 0)))
 
+        # a clear is written a clock after its transfer, from registers (so the write port's multiplexer and
+        # the compare above read flip-flops only)
+        clear_node = Signal(range(self.depth), name="clear_node")
+        clearing = Signal(name="clearing")
+        m.d.sync += [clear_node.eq(self.clear.payload), clearing.eq(self.clear.valid)]
         write = ram.write
         with m.If(valid[1]):
             m.d.comb += [write.addr.eq(node), write.data.eq(largest), write.en.eq(1)]
-        with m.Elif(self.clear.valid):
-            m.d.comb += [write.addr.eq(self.clear.payload), write.data.eq(0), write.en.eq(1)]
+        with m.Elif(clearing):
+            m.d.comb += [write.addr.eq(clear_node), write.data.eq(0), write.en.eq(1)]
+        # (a clear is never the write just before an update's: that clear would have come with the update)
+        next_node = waiting[0].node
         m.d.sync += [last.level.eq(write.data), last.en.eq(write.en), last_node.eq(write.addr), earlier.eq(last),
-                     to_last.eq(write.en & (write.addr == waiting[0].node)),
-                     collided.eq(last.en & (last_node == waiting[0].node))]
+                     to_last.eq(valid[1] & (node == next_node)), collided.eq(last.en & (last_node == next_node))]
         m.d.comb += self.idle.eq(~(valid[0] | valid[1]))
         return m
