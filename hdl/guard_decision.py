@@ -115,8 +115,8 @@ class GuardDecision(wiring.Component):
                          with_momentum.eq(beat.with_momentum), tolerance.eq(self.tolerance), floor.eq(self.floor)]
 
         # the energy's compare in a clock of its own (a carry chain as wide as the energy, feeding the
-        # window's and the scale's enables in the same clock, is too long a path at 125 MHz), then the
-        # decision, the scale and the window in one clock
+        # window's and the scale's enables in the same clock, is too long a path for the engine's clock),
+        # then the decision, the scale and the window in one clock
         rises = Signal(name="rises")
         with m.If(rising):
             m.d.sync += [rising.eq(0), deciding.eq(1), rises.eq(energy > kept)]

@@ -146,9 +146,9 @@ class GuardPasses(wiring.Component):
 
         # the proposal pass clears every node's slots for the stuck pass (whatever an aborted run left), the
         # hold pass each node's behind its lookup for the certificate pass
-        # (the pass flags for the clears registered here, beside the scatters: the controller's flag, routed
-        # across the device into the scatters' write ports, was the worst path; no node lands in a node
-        # pass's first clock or after it ends, so the clock's delay changes no clear)
+        # (the pass flags for the clears registered here, beside the scatters, because the controller's flag
+        # would otherwise be routed across the device into the scatters' write ports; no node lands in a
+        # node pass's first clock or after it ends, so the clock's delay changes no clear)
         clearing_pass = Signal(name="clearing_pass")
         m.d.sync += clearing_pass.eq(self.in_integrate | self.in_hold)
         hold = self.in_hold & self.node_landed
