@@ -51,9 +51,10 @@ class GuardPasses(wiring.Component):
     fs : :class:`~golden_model.fixed.FormatSet`
     capacity : :class:`~golden_model.engine_spec.image.EngineCapacity`
     read_latency : int
-        Clocks from the node memories' address registers to their data (the scatters answer
-        :attr:`BlockRam.LATENCY <hdl.block_ram.BlockRam.LATENCY>` after theirs: their levels are
-        delayed by the difference).
+        Clocks from the node memories' address registers to their data. The scatters' lookups are taken
+        a clock before those registers, from ``node_index``, and answer
+        :attr:`LevelScatter.LOOKUP_LATENCY <hdl.level_scatter.LevelScatter.LOOKUP_LATENCY>` after it:
+        their levels are delayed by the difference.
 
     Members
     -------
@@ -62,8 +63,8 @@ class GuardPasses(wiring.Component):
     vertices, triangles : ``In``
         The mesh's counts (a pass's end).
     node_index : ``In``
-        The sequencer's node counter: the scatters' lookups are registered from it as the memories'
-        read addresses are.
+        The sequencer's node counter, from which the memories' read addresses are registered: the
+        scatters' lookup, a clock earlier.
     node_landed, triangle_landed, corners[3], area : ``In``
         The sequencer's landed items (:class:`~hdl.pass_sequencer.PassSequencer`).
     position[3], proposal[3], velocity : ``In``
@@ -80,8 +81,9 @@ class GuardPasses(wiring.Component):
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, *, read_latency: int = BlockRam.LATENCY):
         if not isinstance(fs, FormatSet) or not isinstance(capacity, EngineCapacity):
             raise TypeError(f"GuardPasses needs a FormatSet and an EngineCapacity, not {fs!r}, {capacity!r}")
-        if isinstance(read_latency, bool) or not isinstance(read_latency, int) or read_latency < BlockRam.LATENCY:
-            raise ValueError(f"read_latency must be an int >= {BlockRam.LATENCY}, not {read_latency!r}")
+        shortest = LevelScatter.LOOKUP_LATENCY - 1
+        if isinstance(read_latency, bool) or not isinstance(read_latency, int) or read_latency < shortest:
+            raise ValueError(f"read_latency must be an int >= {shortest}, not {read_latency!r}")
         self.fs, self.capacity, self.read_latency = fs, capacity, read_latency
         nodes = range(capacity.vertices + 1)
         pos, vel = vector_layout(fs.position), vector_layout(fs.velocity)
@@ -130,15 +132,13 @@ class GuardPasses(wiring.Component):
         with m.If(certificate.o.valid):
             m.d.sync += results.eq(results + 1)
 
-        # the node passes: the scatters' lookups registered as the memories' addresses are, their levels
-        # delayed to the memories' latency
-        lookup = Signal(range(cap.vertices + 1), name="level_lookup")
-        m.d.sync += lookup.eq(self.node_index)
+        # the node passes: the scatters' lookups a clock before the memories' address registers (the
+        # scatters register their block RAMs' words once more), their levels delayed to the memories' latency
         levels = []
         for k, scatter in enumerate(scatters):
-            m.d.comb += scatter.lookup.eq(lookup)
+            m.d.comb += scatter.lookup.eq(self.node_index)
             level = scatter.level
-            for d in range(self.read_latency - BlockRam.LATENCY):
+            for d in range(self.read_latency + 1 - LevelScatter.LOOKUP_LATENCY):
                 later = Signal(certificate_level_shape(), name=f"guard_level{k}_{d}")
                 m.d.sync += later.eq(level)
                 level = later
@@ -154,11 +154,16 @@ class GuardPasses(wiring.Component):
         hold = self.in_hold & self.node_landed
         clearing = clearing_pass & self.node_landed
         held = Signal(range(cap.vertices + 1), name="held_nodes")  # the node landed (nodes land in order)
-        stuck = Cat(*(level != 0 for level in levels)).any()
-        # the held proposal written a clock later, from registers (the scatters' outputs through the stuck
-        # test and the zeroing would otherwise run into the proposal memories' write registers)
-        m.d.sync += [self.proposal_write.addr.eq(held), self.proposal_write.en.eq(hold),
-                     self.proposal_write.data.eq(Mux(stuck, 0, self.proposal[0]))]
+        # the held proposal written two clocks later: the stuck test into a register beside the scatters, then
+        # the zeroing into the proposal memories' write registers (a route across the device from each)
+        stuck = Signal(name="hold_stuck")
+        hold_node = Signal(range(cap.vertices + 1), name="hold_node")
+        hold_proposal = Signal(vector_layout(self.fs.velocity), name="hold_proposal")
+        hold_write = Signal(name="hold_write")
+        m.d.sync += [stuck.eq(Cat(*(level != 0 for level in levels)).any()), hold_node.eq(held),
+                     hold_proposal.eq(self.proposal[0]), hold_write.eq(hold),
+                     self.proposal_write.addr.eq(hold_node), self.proposal_write.en.eq(hold_write),
+                     self.proposal_write.data.eq(Mux(stuck, 0, hold_proposal))]
         for scatter in scatters:
             m.d.comb += [scatter.clear.valid.eq(clearing), scatter.clear.payload.eq(held)]
         with m.If(clearing):
@@ -181,7 +186,7 @@ class GuardPasses(wiring.Component):
         scatters_idle = Cat(*(s.idle & ~s.update.valid for s in scatters)).all()
         m.d.comb += self.idle.eq((corner_fifo.level == 0) & scatters_idle & commit.idle)
         triangles_done = (self.in_stuck | self.in_certify) & (results == self.triangles) & scatters_idle
-        nodes_done = (self.in_hold & (held == self.vertices) & ~self.proposal_write.en) \
+        nodes_done = (self.in_hold & (held == self.vertices) & ~hold_write & ~self.proposal_write.en) \
             | ((self.in_commit | self.in_rollback) & (committed == self.vertices))
         m.d.sync += self.done.eq((triangles_done | nodes_done) & ~self.done)
         with m.If(self.done | self.in_step):

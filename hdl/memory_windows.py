@@ -28,8 +28,8 @@ READ_LATENCY = BlockRam.LATENCY
 def needs_registered_select(fs: FormatSet, capacity: EngineCapacity) -> bool:
     """Whether the node memories take more than one bank of ``DP16KD`` (:func:`hdl.block_ram.dp16kd_banks`):
     then the node and triangle memories select their banks in registered stages (:class:`BlockRam`'s
-    ``registered_select``), as the entry memory does; a bank multiplexer after the output registers of
-    banks spread over the die was the worst path at 3,072 vertices (``docs/synthesis.md``)."""
+    ``registered_select``), as the entry memory does: a bank multiplexer after the output registers of
+    banks spread over the die is a route across it with logic on the way (``docs/synthesis.md``)."""
     return dp16kd_banks(capacity.vertices, vector_layout(fs.position).size)[2] > 1
 
 
@@ -214,17 +214,19 @@ class MemoryWindows(wiring.Component):
         m.d.comb += [forces.write.addr.eq(self.force_write.addr), forces.write.data.eq(self.force_write.data),
                      forces.write.en.eq(self.force_write.en)]
         # the guarded step's proposals (not on the bus): each copy read at its position port's address,
-        # written from registers as the node memories are
-        # (none in a build without the guard: ``proposal`` reads 0)
-        proposal_regs = (Signal.like(self.proposal_write.addr, name="prop_waddr"),
-                         Signal.like(self.proposal_write.data, name="prop_wdata"), Signal(name="prop_wen"))
-        m.d.sync += [proposal_regs[0].eq(self.proposal_write.addr), proposal_regs[1].eq(self.proposal_write.data),
-                     proposal_regs[2].eq(self.proposal_write.en & self.running)]
-        for k in range(3 if self.capacity.guard else 0):
-            ram = self.rams[f"proposals{k}"]
-            m.d.comb += [self.proposal[k].eq(ram.read[0].data),
-                         ram.write.addr.eq(proposal_regs[0]), ram.write.data.eq(proposal_regs[1]),
-                         ram.write.en.eq(proposal_regs[2])]
+        # written from registers as the node memories are (none in a build without the guard: ``proposal``
+        # reads 0)
+        if self.capacity.guard:
+            proposal_regs = (Signal.like(self.proposal_write.addr, name="prop_waddr"),
+                             Signal.like(self.proposal_write.data, name="prop_wdata"), Signal(name="prop_wen"))
+            m.d.sync += [proposal_regs[0].eq(self.proposal_write.addr),
+                         proposal_regs[1].eq(self.proposal_write.data),
+                         proposal_regs[2].eq(self.proposal_write.en & self.running)]
+            for k in range(3):
+                ram = self.rams[f"proposals{k}"]
+                m.d.comb += [self.proposal[k].eq(ram.read[0].data),
+                             ram.write.addr.eq(proposal_regs[0]), ram.write.data.eq(proposal_regs[1]),
+                             ram.write.en.eq(proposal_regs[2])]
 
         window_q, index_q, word_q = self._decode(m)
         bus_writing, new_words = self._bus_words(m, window_q, word_q, ent_data)

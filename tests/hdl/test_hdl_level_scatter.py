@@ -40,10 +40,11 @@ def run_passes(passes, depth=DEPTH):
                 waited += 1
                 assert waited <= LevelScatter.LATENCY, "idle never rose"
             levels = []
-            for node in range(depth + 1):  # each answer after the second edge from its lookup's clock
+            lag = LevelScatter.LOOKUP_LATENCY - 1  # each answer after the third edge from its lookup's clock
+            for node in range(depth + lag):
                 ctx.set(dut.lookup, min(node, depth - 1))
                 await ctx.tick()
-                if node >= 1:
+                if node >= lag:
                     levels.append(ctx.get(dut.level))
             seen.append(np.array(levels))
 
@@ -78,9 +79,10 @@ def random_updates(rng, n, nodes, p_gap):
 
 def test_repeats_back_to_back_and_two_apart():
     """The hazards one by one, each node's last update the lower: the same node in consecutive clocks,
-    two clocks apart, three apart (after the writes it could miss), and clears between passes."""
+    two clocks apart, three apart, four apart (after the writes it could miss), and clears between passes."""
     passes = [([], [(5, 3), (5, 1)]), ([], [(6, 4), (7, 0), (6, 1)]), ([], [(8, 5), None, None, (8, 1)]),
-              ([], [(9, 2), (9, 6), (9, 1), (9, 0), (9, 3)]), ([9, 5], [(5, 1), (9, 0)])]
+              ([], [(10, 4), (11, 0), None, (12, 1), (10, 2)]),
+              ([], [(9, 2), (9, 6), (9, 1), (9, 0), (9, 3)]), ([9, 5], [(5, 1), (9, 0)]), ([10], [(10, 1), (13, 0), (10, 0)])]
     got = run_passes(passes)
     for k, (g, w) in enumerate(zip(got, expected(passes))):
         np.testing.assert_array_equal(g, w, err_msg=f"pass {k}")
