@@ -116,10 +116,19 @@ class GuardDecision(wiring.Component):
 
         # the energy's compare in a clock of its own (a carry chain as wide as the energy, feeding the
         # window's and the scale's enables in the same clock, is too long a path for the engine's clock),
-        # then the decision, the scale and the window in one clock
+        # then the decision, the scale and the window in one clock; the scale's next states (grown, shrunk) are
+        # formed beside the compare, from registers, so that only the choice between them follows its flag
         rises = Signal(name="rises")
+        grows = Signal(name="scale_grows", reset_less=True)
+        shift_grown, shift_shrunk = (Signal.like(shift, name=n, reset_less=True)
+                                     for n in ("shift_grown", "shift_shrunk"))
+        count_grown = Signal.like(accepted_count, name="count_grown", reset_less=True)
+        grows_now = accepted_count + 1 >= SCALE_GROW_AFTER
         with m.If(rising):
-            m.d.sync += [rising.eq(0), deciding.eq(1), rises.eq(energy > kept)]
+            m.d.sync += [rising.eq(0), deciding.eq(1), rises.eq(energy > kept), grows.eq(grows_now),
+                         shift_grown.eq(Mux(shift > 0, shift - 1, 0)),
+                         count_grown.eq(Mux(grows_now, Mux(shift > 0, 0, SCALE_GROW_AFTER), accepted_count + 1)),
+                         shift_shrunk.eq(Mux(with_momentum | (shift > SCALE_MAX_SHIFT), shift, shift + 1))]
         newest = Mux(first | ~rises, energy, kept)
         with m.If(deciding):
             m.d.sync += [deciding.eq(0), multiplying.eq(1), kept.eq(newest), accepted.eq(first | ~rises),
@@ -130,14 +139,11 @@ class GuardDecision(wiring.Component):
             with m.Else():
                 m.d.sync += [held.eq(Mux(held == size + 1, held, held + 1)), taken.eq(Cat(~rises, taken[:-1]))]
                 with m.If(~rises):
-                    with m.If(accepted_count + 1 >= SCALE_GROW_AFTER):
-                        m.d.sync += [shift.eq(Mux(shift > 0, shift - 1, 0)),
-                                     accepted_count.eq(Mux(shift > 0, 0, SCALE_GROW_AFTER))]
-                    with m.Else():
-                        m.d.sync += accepted_count.eq(accepted_count + 1)
+                    m.d.sync += accepted_count.eq(count_grown)
+                    with m.If(grows):
+                        m.d.sync += shift.eq(shift_grown)
                 with m.Else():  # (the shift stops one past SCALE_MAX_SHIFT: the run ends stalled there)
-                    m.d.sync += [accepted_count.eq(0),
-                                 shift.eq(Mux(with_momentum | (shift > SCALE_MAX_SHIFT), shift, shift + 1))]
+                    m.d.sync += [accepted_count.eq(0), shift.eq(shift_shrunk)]
 
         # ε·E_old and |E_kept − E_old|, then the compare's halves, then their combination
         oldest = energies[size]
