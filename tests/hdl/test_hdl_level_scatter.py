@@ -82,7 +82,8 @@ def test_repeats_back_to_back_and_two_apart():
     two clocks apart, three apart, four apart (after the writes it could miss), and clears between passes."""
     passes = [([], [(5, 3), (5, 1)]), ([], [(6, 4), (7, 0), (6, 1)]), ([], [(8, 5), None, None, (8, 1)]),
               ([], [(10, 4), (11, 0), None, (12, 1), (10, 2)]),
-              ([], [(9, 2), (9, 6), (9, 1), (9, 0), (9, 3)]), ([9, 5], [(5, 1), (9, 0)]), ([10], [(10, 1), (13, 0), (10, 0)])]
+              ([], [(9, 2), (9, 6), (9, 1), (9, 0), (9, 3)]), ([9, 5], [(5, 1), (9, 0)]),
+              ([10], [(10, 1), (13, 0), (10, 0)])]
     got = run_passes(passes)
     for k, (g, w) in enumerate(zip(got, expected(passes))):
         np.testing.assert_array_equal(g, w, err_msg=f"pass {k}")
