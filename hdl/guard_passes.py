@@ -35,7 +35,7 @@ class GuardPasses(wiring.Component):
     """The guard's certificate unit, its three level scatters and the commit, fed by the sequencer's fetches.
 
     * **stuck** (triangles, one per two clocks): :class:`~hdl.guard_certificate.GuardCertificate` on the
-      corners' positions and proposals; each corner's ``stuck`` bit into its slot's
+      corners' positions and proposals (the landed triangle registered first); each corner's ``stuck`` bit into its slot's
       :class:`~hdl.level_scatter.LevelScatter` (a maximum of 0/1 is an OR);
     * **hold** (nodes): a node stuck in any slot gets a proposal of 0 (all three proposal copies
       written), and its slots are cleared for the certificate;
@@ -111,13 +111,20 @@ class GuardPasses(wiring.Component):
         corner_bits = len(self.corners[0])
         m.submodules.corner_fifo = corner_fifo = LutFIFO(width=3 * corner_bits, depth=certificate.credits,
                                                          checked=False)
+        # the landed triangle registered here, beside the certificate: its valid flag is the sequencer's logic
+        # on the controller's phase flag, and would otherwise be routed across the device into the
+        # certificate's credit counter (the sequencer issues one triangle per two clocks, so the
+        # certificate is ready for each)
         beat = certificate.i.payload
+        landed = Signal(name="certify_landed")
+        landed_corners = Signal(3 * corner_bits, name="certify_corners", reset_less=True)
+        m.d.sync += [landed.eq(self.triangle_landed), landed_corners.eq(Cat(*self.corners)),
+                     beat.a.eq(self.position[0]), beat.b.eq(self.position[1]), beat.c.eq(self.position[2]),
+                     beat.move_a.eq(self.proposal[0]), beat.move_b.eq(self.proposal[1]),
+                     beat.move_c.eq(self.proposal[2]), beat.area.eq(self.area)]
         m.d.comb += [
-            certificate.i.valid.eq(self.triangle_landed), certificate.winding_negative.eq(0),
-            beat.a.eq(self.position[0]), beat.b.eq(self.position[1]), beat.c.eq(self.position[2]),
-            beat.move_a.eq(self.proposal[0]), beat.move_b.eq(self.proposal[1]), beat.move_c.eq(self.proposal[2]),
-            beat.area.eq(self.area),
-            corner_fifo.w_data.eq(Cat(*self.corners)), corner_fifo.w_en.eq(self.triangle_landed),
+            certificate.i.valid.eq(landed), certificate.winding_negative.eq(0),
+            corner_fifo.w_data.eq(landed_corners), corner_fifo.w_en.eq(landed),
             certificate.o.ready.eq(1), corner_fifo.r_en.eq(certificate.o.valid),
         ]
         # each corner's update registered before its scatter (the FIFO's LUT RAM read and the choice of
@@ -184,7 +191,7 @@ class GuardPasses(wiring.Component):
 
         # a pass's end, registered; its counters restart the clock after
         scatters_idle = Cat(*(s.idle & ~s.update.valid for s in scatters)).all()
-        m.d.comb += self.idle.eq((corner_fifo.level == 0) & scatters_idle & commit.idle)
+        m.d.comb += self.idle.eq(~landed & (corner_fifo.level == 0) & scatters_idle & commit.idle)
         triangles_done = (self.in_stuck | self.in_certify) & (results == self.triangles) & scatters_idle
         nodes_done = (self.in_hold & (held == self.vertices) & ~hold_write & ~self.proposal_write.en) \
             | ((self.in_commit | self.in_rollback) & (committed == self.vertices))
