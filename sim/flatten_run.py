@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.fixed.engine import check_fixed_params, flatten_fixed
+from golden_model.guard import SCALE_MAX_SHIFT
 from golden_model.mesh import Mesh
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten
@@ -151,7 +152,9 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> st
     if params.tol_area < 1 or params.tol_shape < 1:
         rule = f"E_S <= {params.tol_area:g}, E_C <= {params.tol_shape:g} and {rule}"
     why = {"converged": "the stop rule held", "max-iterations": f"N_max = {params.max_iter} reached",
-           "diverged": "a value stopped being finite"}[result.status]
+           "diverged": "a value stopped being finite",
+           "stalled": "no step lowered the energy any more (the guard's step scale fell below "
+                      f"2^-{SCALE_MAX_SHIFT}); the pattern is the last accepted, fold-free layout"}[result.status]
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 

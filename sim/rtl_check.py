@@ -70,6 +70,9 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         return cmd_rtl_check_engine(args, mesh, params)
     if args.capacity is not None or args.wait_states:
         raise UserError("--capacity and --wait-states apply to --engine-top")
+    if params.guard:
+        raise UserError("the datapath bench (rtl-check without --engine-top) has no step guard: add --engine-top "
+                        "for the guarded momentum dynamics, or --no-guard --energy-window 1")
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     if not 0 <= args.stall < 1:
@@ -153,7 +156,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     from golden_model.engine_spec.image import build_image
 
     from .engine_run import run_image_on_rtl, summary_line
-    from .run_options import UserError, load_format_set, strict_json
+    from .run_options import UserError, load_format_set, start_positions, strict_json
 
     if args.stall:
         raise UserError("--stall applies to the datapath bench; with --engine-top use --wait-states")
@@ -166,7 +169,8 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args)
     check_fixed_params(params, formats)
-    problem = prepare(mesh, _initial_layout(mesh, args.init), params, formats)
+    # the start flatten takes: a guarded run's folded start untangled (the datapath bench has no guard)
+    problem = prepare(mesh, start_positions(mesh, args.init, params, progress=False)[0], params, formats)
     image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity
     print(f"springflat: {args.sim}: exporting and building springflat_engine for capacity {capacity.vertices}/"
           f"{capacity.entries}/{capacity.triangles} (cached) and running the whole flattening ...", file=sys.stderr)

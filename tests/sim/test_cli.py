@@ -208,6 +208,31 @@ def test_bad_dynamics_parameters_are_one_line(tmp_path, args, message):
     assert not out.exists()
 
 
+def test_a_stalled_fixed_point_run_says_why_and_writes_its_layout(tmp_path):
+    """With ``floor`` rounding (one-signed errors bias the forces) the guarded fixed-point run on Surf1
+    reaches a point where no quantised step lowers the quantised energy: it ends ``stalled``, exit 0,
+    with the last accepted layout written, fold-free, and the stop line saying why."""
+    from golden_model.fixed import FormatSet
+
+    floor = tmp_path / "floor.json"
+    FormatSet.preset("default").replace(rounding="floor", name="default_floor").save(floor)
+    proc = run("flatten", "surf1", "--engine", "fixed", "--formats", floor, "--dynamics", "momentum",
+               "--out", "stalled.flat.obj", cwd=tmp_path)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stdout.startswith("surf1: stalled after ") and "folded 0" in proc.stdout, proc.stdout
+    assert "stopped: no step lowered the energy any more (the guard's step scale fell below 2^-20)" in proc.stderr
+    assert (tmp_path / "stalled.flat.obj").stat().st_size > 0
+
+
+def test_rtl_check_refuses_the_guard_on_the_datapath_bench(tmp_path):
+    """The datapath bench has no step guard: a guarded run is one line naming the way out, before any build."""
+    proc = run("rtl-check", "surf1", "--dynamics", "momentum", cwd=tmp_path)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "has no step guard: add --engine-top" in lines[0], proc.stderr
+    assert "building" not in proc.stderr
+
+
 @pytest.mark.slow
 def test_momentum_on_the_fixed_engine_matches_the_float_engine():
     common = ("flatten", "surf2", "--dynamics", "momentum", "--init", "tutte", "--max-iter", "60",

@@ -191,3 +191,29 @@ def test_flatten_engine_rtl_writes_the_fixed_engines_layout(tmp_path):
     assert (tmp_path / "rtl.flat.obj").read_text() == (tmp_path / "fixed.flat.obj").read_text()  # the layouts
     assert outs["rtl"]["iterations"] == outs["fixed"]["iterations"] == 5
     assert outs["rtl"]["status"] == outs["fixed"]["status"]
+
+
+def test_a_stalled_run_is_bit_exact_and_starts_as_flatten_does(tmp_path):
+    """``floor`` rounding stalls the guarded run on Surf1 (docs/fixed-point.md): the engine ends ``stalled``
+    at the fixed engine's iteration, bit-exact, from the start ``flatten`` takes (PCA folds 3 triangles
+    there, untangled first), and ``flatten --engine rtl`` writes the fixed engine's layout."""
+    need_simulator("verilator")
+    floor = tmp_path / "floor.json"
+    DEFAULT.replace(rounding="floor", name="default_floor").save(floor)
+    env = {**os.environ, "SPRINGFLAT_ENGINE_CAPACITY": "64,512,128"}
+    common = ["surf1", "--dynamics", "momentum", "--formats", str(floor), "--json"]
+    outs = {}
+    for engine in ("fixed", "rtl"):
+        proc = subprocess.run([SPRINGFLAT, "flatten", *common, "--engine", engine, "--out", f"{engine}.flat.obj"],
+                              capture_output=True, text=True, cwd=tmp_path, env=env, timeout=1200)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        outs[engine] = json.loads(proc.stdout)
+    assert outs["fixed"]["status"] == outs["rtl"]["status"] == "stalled"
+    assert outs["fixed"]["iterations"] == outs["rtl"]["iterations"] > 0 and outs["rtl"]["folded"] == 0
+    assert (tmp_path / "rtl.flat.obj").read_text() == (tmp_path / "fixed.flat.obj").read_text()
+    proc = subprocess.run([SPRINGFLAT, "rtl-check", *common, "--engine-top", "--capacity", "64", "512", "128"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    check = json.loads(proc.stdout)
+    assert (check["mismatches"], check["status"], check["iterations"]) == (0, "stalled", outs["fixed"]["iterations"])
+    assert "folds 3 triangles: untangling it" in proc.stderr
