@@ -90,7 +90,7 @@ class MeshOutcome:
     """What one mesh gave: its result or why it failed, and its output files.
 
     Attributes:
-        status: the run's status (``converged``, ``max-iterations``, ``diverged``) or ``failed``.
+        status: the run's status (``converged``, ``max-iterations``, ``diverged``, ``stalled``) or ``failed``.
         summary: the ``--json`` summary of a single run (``None`` when failed).
         line: the one-line result, or the error.
         notes: what the run said on stderr (mesh notes).
