@@ -143,7 +143,8 @@ class Pattern:
 
     Attributes:
         layout: ``(V, 2)`` float64, the flat pattern, in the mesh's units; row ``i`` is vertex ``i``.
-        status: ``converged``, ``max-iterations`` or ``diverged`` (then ``layout`` is the last finite state).
+        status: ``converged``, ``max-iterations``, ``stalled`` (no step lowers the energy any more:
+            ``layout`` is the last accepted one) or ``diverged`` (then ``layout`` is the last finite state).
         iterations: iterations run.
         area_error: ``E_S`` of ``layout`` (relative area error, eq. 16).
         shape_error: ``E_C`` of ``layout`` (relative edge-length error, eq. 17).
