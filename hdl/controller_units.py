@@ -376,12 +376,13 @@ class BetaDivider(wiring.Component):
 
     Contract
     --------
-    One item at a time: ``i.ready`` is high while idle. ``latency`` = ``dt.frac_bits + 4`` clock
+    One item at a time: ``i.ready`` is high while idle. ``latency`` = ``dt.frac_bits + 5`` clock
     edges from the input transfer to the output transfer when ``o.ready`` is high (``F + 1``
-    quotient bits, the rounding into a register beside the quotient, ``o.payload``, the output
-    transfer): 22 for both presets. ``o.valid`` and ``o.payload`` are registers. The rounded β
-    has a register of its own because the quotient sits with the remainder's logic and
-    ``o.payload`` with β's consumers, across the device from each other in the engine.
+    quotient bits, the quotient copied, the rounding, ``o.payload``, the output transfer): 23 for
+    both presets. ``o.valid`` and ``o.payload`` are registers. The quotient sits with the
+    remainder's logic and ``o.payload`` with β's consumers, across the device from each other in
+    the engine: the quotient's copy (no logic) and the rounded β (a carry chain) are two registers
+    on that way, so that no route across it ends in the rounding's carry chain.
     """
 
     def __init__(self, fs: FormatSet | str, k_bits: int = 21):
@@ -391,7 +392,7 @@ class BetaDivider(wiring.Component):
         self.fs = fs
         self.k_bits = k_bits
         self.quotient_bits = fs.dt.frac_bits + 1
-        self.latency = self.quotient_bits + 3
+        self.latency = self.quotient_bits + 4
         super().__init__({
             "i": In(stream.Signature(unsigned(k_bits))),
             "o": Out(stream.Signature(shape_of(fs.dt))),
@@ -406,7 +407,8 @@ class BetaDivider(wiring.Component):
         steps = Signal(range(self.quotient_bits + 1), reset_less=True)
         doubled = remainder.shift_left(1)
         fits = doubled >= divisor
-        beta, _ = clamp((quotient + 1).shift_right(1), fs.dt)
+        quotient_q = Signal.like(quotient, name="quotient_copy")
+        beta, _ = clamp((quotient_q + 1).shift_right(1), fs.dt)
 
         # Its phases as flip-flops of their own, no state code: an FSM's state register drove both the
         # 50 bits of remainder and quotient and, through ``i.ready``, the engine's phase machine, and
@@ -417,7 +419,7 @@ class BetaDivider(wiring.Component):
         idle = Signal(init=1)
         dividing = Signal()
         last = Signal()  # the quotient bit being formed is the last one
-        rounding, rounded = Signal(), Signal()
+        copying, rounding, rounded = Signal(), Signal(), Signal()
         beta_q = Signal.like(beta, name="beta_rounded")
         m.d.comb += self.i.ready.eq(idle)
         with m.If(self.i.valid & idle):
@@ -430,7 +432,10 @@ class BetaDivider(wiring.Component):
             last.eq(Mux(dividing, steps == 2, self.quotient_bits == 1)),
         ]
         with m.If(dividing & last):
-            m.d.sync += [dividing.eq(0), rounding.eq(1)]
+            m.d.sync += [dividing.eq(0), copying.eq(1)]
+        m.d.sync += quotient_q.eq(quotient)  # free-running: the quotient is whole in the copying clock only
+        with m.If(copying):
+            m.d.sync += [rounding.eq(1), copying.eq(0)]
         with m.If(rounding):
             m.d.sync += [beta_q.eq(beta), rounded.eq(1), rounding.eq(0)]
         with m.If(rounded):

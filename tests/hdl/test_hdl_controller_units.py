@@ -299,7 +299,7 @@ def test_beta_as_wide_as_the_iteration_counter():
 def test_beta_latency():
     fs = FormatSet.preset("default")
     dut, run, _ = check_beta(fs, [0, 1, 5, 1 << 20])
-    assert dut.latency == fs.dt.frac_bits + 4 == 22
+    assert dut.latency == fs.dt.frac_bits + 5 == 23
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * 4
 
 
