@@ -35,8 +35,8 @@ class GuardPasses(wiring.Component):
     """The guard's certificate unit, its three level scatters and the commit, fed by the sequencer's fetches.
 
     * **stuck** (triangles, one per two clocks): :class:`~hdl.guard_certificate.GuardCertificate` on the
-      corners' positions and proposals (the landed triangle registered first); each corner's ``stuck`` bit into its slot's
-      :class:`~hdl.level_scatter.LevelScatter` (a maximum of 0/1 is an OR);
+      corners' positions and proposals (the landed triangle registered first); each corner's ``stuck``
+      bit into its slot's :class:`~hdl.level_scatter.LevelScatter` (a maximum of 0/1 is an OR);
     * **hold** (nodes): a node stuck in any slot gets a proposal of 0 (all three proposal copies
       written), and its slots are cleared for the certificate;
     * **certify** (triangles, one per two clocks): the certificate on the held proposals; each
