@@ -34,13 +34,13 @@ class LevelScatter(wiring.Component):
     clear : ``In(stream.Signature(range(depth), always_ready=True))``
         Set a node's level to 0 (the pass before the updates; written a clock after the transfer).
         Clears and updates are separate passes: an update pass's first beat comes after the clear
-        pass's last, and not both in a clock.
+        pass's last, and a clear pass's first while ``idle``.
     lookup : ``In(range(depth))``; ``level`` : ``Out(certificate_level_shape())``
         ``level`` is the level of the node ``lookup`` named :attr:`LOOKUP_LATENCY` (three) clocks before,
         from a register; a lookup taken while ``idle`` sees every update before it. ``lookup`` is
         ignored in a clock with an update (the update reads the block RAM then).
     idle : ``Out(1)``
-        No update in flight: every update transferred before this clock is in the memory.
+        No update or clear in flight: every one transferred before this clock is in the memory.
 
     Contract
     --------
@@ -48,14 +48,16 @@ class LevelScatter(wiring.Component):
     gives an undefined word when a write to the same address lands at the clock edge where the read
     address is taken. Its word is registered once more in the fabric before any logic reads it (the
     block RAM's output is far from some of its readers: the maximum here, the engine's stuck test and
-    commit). An update's read is issued in its own clock and its maximum written three clocks later, so
-    it misses the writes of the three updates (or clears) before it: the largest of its read (dropped
-    where it collided with the write three clocks before), its level and those three writes' words to
-    the same node is the whole maximum, because each of those words is itself complete.
+    commit). The write port is a register too, beside the block RAM, so the maximum's logic ends in a
+    flip-flop and not in a route to the block RAM. An update's read is issued in its own clock and its
+    maximum written four clocks later, so it misses the writes of the four updates before it (the
+    earliest of which may be a clear): the largest of its read (dropped where it collided with the write
+    four clocks before), its level and those four writes' words to the same node is the whole maximum,
+    because each of those words is itself complete.
     """
 
     #: Clock edges from an update's transfer to the edge that writes its node's new level.
-    LATENCY = 3
+    LATENCY = 4
     #: Clocks from a ``lookup`` to its ``level``: the block RAM's two, then the fabric register.
     LOOKUP_LATENCY = BlockRam.LATENCY + 1
 
@@ -87,39 +89,42 @@ class LevelScatter(wiring.Component):
         m.d.sync += [waiting[0].eq(self.update.payload), valid[0].eq(self.update.valid),
                      *(w.eq(v) for w, v in zip(waiting[1:], waiting)), *(w.eq(v) for w, v in zip(valid[1:], valid))]
 
-        # the three writes before this clock's (``last``: one clock ago; ``middle``: two; ``earliest``: three,
-        # the one that collided with the read), and whether each is to this update's node: compared a clock
-        # ahead, against the registers that become ``last``, ``middle`` and ``earliest`` as the update moves
-        # on, so that only the maximum lies between flip-flops and the block RAM's write port
+        # the block RAM's write port is a register (``writing``): the maximum is computed into it, so the
+        # route to the block RAM starts at a flip-flop
         write_layout = data.StructLayout({"level": certificate_level_shape(), "node": range(self.depth), "en": 1})
+        writing = Signal(write_layout, name="write_port")
+        m.d.comb += [ram.write.addr.eq(writing.node), ram.write.data.eq(writing.level), ram.write.en.eq(writing.en)]
+
+        # the four writes an update's read misses, seen from the clock that computes its maximum: ``writing``
+        # (in the block RAM's port this clock), ``last`` (one clock before), ``middle`` (two) and ``earliest``
+        # (three: the one that collided with the read). Whether each is to this update's node is compared a
+        # clock ahead, against the registers that become them as the update moves on, so that only the
+        # maximum lies between flip-flops and the write port register.
         last, middle, earliest = (Signal(write_layout, name=f"write_{age}") for age in ("last", "middle", "earliest"))
-        to_last, to_middle = Signal(name="update_meets_last"), Signal(name="update_meets_middle")
-        collided = Signal(name="update_meets_earliest")
+        to_writing, to_last = Signal(name="update_meets_writing"), Signal(name="update_meets_last")
+        to_middle, collided = Signal(name="update_meets_middle"), Signal(name="update_meets_earliest")
         node, level = waiting[2].node, waiting[2].level
 
         def larger(a, b):
             return Mux(a > b, a, b)
 
-        largest = larger(larger(level, Mux(to_last, last.level, 0)),
+        largest = larger(larger(larger(level, Mux(to_writing, writing.level, 0)), Mux(to_last, last.level, 0)),
                          larger(Mux(to_middle, middle.level, 0), Mux(collided, earliest.level, read)))
 
-        # a clear is written a clock after its transfer, from registers (so the write port's multiplexer and
-        # the compares above read flip-flops only)
-        clear_node = Signal(range(self.depth), name="clear_node")
-        clearing = Signal(name="clearing")
-        m.d.sync += [clear_node.eq(self.clear.payload), clearing.eq(self.clear.valid)]
-        write = ram.write
+        # a clear goes into the write port register in its own clock and lands a clock after its transfer:
+        # an update transferred after it reads it or collides with it (``earliest``), and never misses it,
+        # which a maximum could not mend. So the three writes before an update's are updates' own.
         with m.If(valid[2]):
-            m.d.comb += [write.addr.eq(node), write.data.eq(largest), write.en.eq(1)]
-        with m.Elif(clearing):
-            m.d.comb += [write.addr.eq(clear_node), write.data.eq(0), write.en.eq(1)]
-        # (the two writes just before an update's are updates' own, never clears: a clear before them would
-        # have come with an update, which the contract rules out)
+            m.d.sync += [writing.node.eq(node), writing.level.eq(largest), writing.en.eq(1)]
+        with m.Elif(self.clear.valid):
+            m.d.sync += [writing.node.eq(self.clear.payload), writing.level.eq(0), writing.en.eq(1)]
+        with m.Else():
+            m.d.sync += writing.en.eq(0)
         next_node = waiting[1].node
-        m.d.sync += [last.level.eq(write.data), last.node.eq(write.addr), last.en.eq(write.en),
-                     middle.eq(last), earliest.eq(middle),
-                     to_last.eq(valid[2] & (node == next_node)),
+        m.d.sync += [last.eq(writing), middle.eq(last), earliest.eq(middle),
+                     to_writing.eq(valid[2] & (node == next_node)),
+                     to_last.eq(writing.en & (writing.node == next_node)),
                      to_middle.eq(last.en & (last.node == next_node)),
                      collided.eq(middle.en & (middle.node == next_node))]
-        m.d.comb += self.idle.eq(~(valid[0] | valid[1] | valid[2]))
+        m.d.comb += self.idle.eq(~(valid[0] | valid[1] | valid[2] | writing.en))
         return m

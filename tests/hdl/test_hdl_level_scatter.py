@@ -17,7 +17,8 @@ DEPTH = 64
 
 def run_passes(passes, depth=DEPTH):
     """Each pass ``(clears, updates)`` (node lists; updates ``(node, level)`` pairs, ``None`` for a clock
-    without one), then a lookup of every node once idle; returns the levels read after each pass."""
+    without one), then, once idle, a lookup of the last update's node and of every node; returns the levels
+    read after each pass."""
     dut = LevelScatter(depth)
     seen = []
 
@@ -39,14 +40,18 @@ def run_passes(passes, depth=DEPTH):
                 await ctx.tick()
                 waited += 1
                 assert waited <= LevelScatter.LATENCY, "idle never rose"
+            # the last update's node first, in the clock idle rises (its write must have landed), then all
+            beats = [b for b in updates if b is not None]
+            order = [beats[-1][0] if beats else 0, *range(depth)]
             levels = []
             lag = LevelScatter.LOOKUP_LATENCY - 1  # each answer after the third edge from its lookup's clock
-            for node in range(depth + lag):
-                ctx.set(dut.lookup, min(node, depth - 1))
+            for k in range(len(order) + lag):
+                ctx.set(dut.lookup, order[min(k, len(order) - 1)])
                 await ctx.tick()
-                if node >= lag:
+                if k >= lag:
                     levels.append(ctx.get(dut.level))
-            seen.append(np.array(levels))
+            assert levels[0] == levels[1 + order[0]], f"node {order[0]} read before its last write landed"
+            seen.append(np.array(levels[1:len(order)]))
 
     run_testbenches(dut, bench)
     return seen
@@ -79,11 +84,13 @@ def random_updates(rng, n, nodes, p_gap):
 
 def test_repeats_back_to_back_and_two_apart():
     """The hazards one by one, each node's last update the lower: the same node in consecutive clocks,
-    two clocks apart, three apart, four apart (after the writes it could miss), and clears between passes."""
+    two clocks apart, three apart, four apart (the write that collides with the read), five apart (after
+    the writes it could miss), clears between passes, an update right after its node's clear, and a pass
+    whose last update raises its node (read back in the clock ``idle`` rises)."""
     passes = [([], [(5, 3), (5, 1)]), ([], [(6, 4), (7, 0), (6, 1)]), ([], [(8, 5), None, None, (8, 1)]),
-              ([], [(10, 4), (11, 0), None, (12, 1), (10, 2)]),
+              ([], [(10, 4), (11, 0), None, (12, 1), (10, 2)]), ([], [(14, 6), None, None, None, None, (14, 2)]),
               ([], [(9, 2), (9, 6), (9, 1), (9, 0), (9, 3)]), ([9, 5], [(5, 1), (9, 0)]),
-              ([10], [(10, 1), (13, 0), (10, 0)])]
+              ([10], [(10, 1), (13, 0), (10, 0)]), ([], [(20, 2), (21, 5)])]
     got = run_passes(passes)
     for k, (g, w) in enumerate(zip(got, expected(passes))):
         np.testing.assert_array_equal(g, w, err_msg=f"pass {k}")
