@@ -50,10 +50,10 @@ class LevelScatter(wiring.Component):
     block RAM's output is far from some of its readers: the maximum here, the engine's stuck test and
     commit). The write port is a register too, beside the block RAM, so the maximum's logic ends in a
     flip-flop and not in a route to the block RAM. An update's read is issued in its own clock and its
-    maximum written four clocks later, so it misses the writes of the four updates before it (the
-    earliest of which may be a clear): the largest of its read (dropped where it collided with the write
-    four clocks before), its level and those four writes' words to the same node is the whole maximum,
-    because each of those words is itself complete.
+    maximum written four clocks later, so it misses the four writes before its own (the earliest may
+    be a clear's, the others are updates'): the largest of its read (dropped where it collided with
+    the write four clocks before), its level and those four writes' words to the same node is the
+    whole maximum, because each of those words is itself complete.
     """
 
     #: Clock edges from an update's transfer to the edge that writes its node's new level.
@@ -113,7 +113,7 @@ class LevelScatter(wiring.Component):
 
         # a clear goes into the write port register in its own clock and lands a clock after its transfer:
         # an update transferred after it reads it or collides with it (``earliest``), and never misses it,
-        # which a maximum could not mend. So the three writes before an update's are updates' own.
+        # which a maximum could not mend. So ``writing``, ``last`` and ``middle`` are updates' writes.
         with m.If(valid[2]):
             m.d.sync += [writing.node.eq(node), writing.level.eq(largest), writing.en.eq(1)]
         with m.Elif(self.clear.valid):

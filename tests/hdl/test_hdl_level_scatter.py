@@ -82,7 +82,7 @@ def random_updates(rng, n, nodes, p_gap):
     return beats
 
 
-def test_repeats_back_to_back_and_two_apart():
+def test_each_hazard_distance_and_an_update_after_a_clear():
     """The hazards one by one, each node's last update the lower: the same node in consecutive clocks,
     two clocks apart, three apart, four apart (the write that collides with the read), five apart (after
     the writes it could miss), clears between passes, an update right after its node's clear, and a pass
