@@ -225,10 +225,11 @@ class EnergyCheck(wiring.Component):
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle. ``latency`` clock edges from the input
-    transfer to the output transfer when ``o.ready`` is high: ``len(square_sum)`` steps of
-    ``Σe²·(3·½C)``, one for ``E``, ``energy_bits`` steps of ``ε·E_prev`` (with ``|E − E_prev|``
-    alongside), two for the comparison, one for the output register and the output transfer. ``o.valid`` and ``o.payload``
-    are registers. The adders are as wide as ``3·½C``, ``ε``, and (one clock each) ``E``.
+    transfer to the output transfer when ``o.ready`` is high: one to load ``Σe²`` into the multiply,
+    ``len(square_sum)`` steps of ``Σe²·(3·½C)``, one to copy the product, one for ``E``,
+    ``energy_bits`` steps of ``ε·E_prev`` (with ``|E − E_prev|`` alongside), two for the comparison,
+    one for the output register and the output transfer. ``o.valid`` and ``o.payload`` are
+    registers. The adders are as wide as ``3·½C``, ``ε``, and (one clock each) ``E``.
     """
 
     def __init__(self, fs: FormatSet | str, entries_capacity: int):
@@ -249,7 +250,7 @@ class EnergyCheck(wiring.Component):
                    + ((2 * ((1 << self.barrier_bits) - 1)) << self.barrier_shift))
         self.energy_bits = largest.bit_length()
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
-        self.latency = self.square_bits + self.energy_bits + 5
+        self.latency = self.square_bits + self.energy_bits + 7
         super().__init__({
             "i": In(stream.Signature(sums)),
             "o": Out(stream.Signature(energy_result_layout(self.energy_bits))),
@@ -263,7 +264,12 @@ class EnergyCheck(wiring.Component):
         factor = Signal(self.spring_factor_bits, reset_less=True)  # 3·½C
         barrier = Signal(self.barrier_bits, reset_less=True)
         first = Signal(reset_less=True)
+        # the shift-add multiply's register reads and feeds only registers of its own (``square`` in,
+        # ``product`` out), so that its loop (the register, the adder, the multiplicand) is placed together
+        # rather than pulled towards the sums' source and E's adder
+        square = Signal(self.square_bits, reset_less=True)
         springs = Signal(self.spring_factor_bits + self.square_bits + 1, reset_less=True)
+        product = Signal(self.spring_factor_bits + self.square_bits, reset_less=True)
         energy = Signal(self.energy_bits, reset_less=True)
         previous = Signal(self.energy_bits, reset_less=True)
         tolerance = Signal(self.tolerance_bits, reset_less=True)
@@ -274,7 +280,7 @@ class EnergyCheck(wiring.Component):
         energy_zero = Signal(reset_less=True)
         steps = Signal(range(max(self.square_bits, self.energy_bits) + 1), reset_less=True)
 
-        total = springs[:self.spring_factor_bits + self.square_bits].shift_left(self.springs_shift) + \
+        total = product.shift_left(self.springs_shift) + \
                 barrier.shift_left(1 + self.barrier_shift)
         within = Signal(reset_less=True)  # |E − E_prev| ≤ (ε·E_prev) >> 40, registered: read two clocks after the last step
         settled = Mux(first, 0, Mux(previous_zero, energy_zero, within))
@@ -285,8 +291,9 @@ class EnergyCheck(wiring.Component):
         # values a start needs), so ``i.ready`` reaches only the phase flip-flops.
         idle = Signal(init=1)
         busy = Signal()
-        in_springs, in_energy, in_tolerance, in_halves, in_within, in_compare = (
-            Signal(name=f"in_{n}") for n in ("springs", "energy", "tolerance", "halves", "within", "compare"))
+        in_load, in_springs, in_product, in_energy, in_tolerance, in_halves, in_within, in_compare = (
+            Signal(name=f"in_{n}")
+            for n in ("load", "springs", "product", "energy", "tolerance", "halves", "within", "compare"))
         last = Signal()  # the springs or tolerance phase's last step
         # ``in_springs | in_tolerance``, a flip-flop of its own: the step count's only control besides the
         # start and the energy phase (the phase flags also choose wide registers' inputs, and a LUT
@@ -295,22 +302,28 @@ class EnergyCheck(wiring.Component):
         start = self.i.valid & idle
         m.d.comb += self.i.ready.eq(idle)
         with m.If(start):
-            m.d.sync += [idle.eq(0), busy.eq(1), in_springs.eq(1), counting.eq(1)]
+            m.d.sync += [idle.eq(0), busy.eq(1), in_load.eq(1)]
+        with m.If(in_load):
+            m.d.sync += [in_load.eq(0), in_springs.eq(1), counting.eq(1)]
         m.d.sync += [
             # 3·½C as an adder: ``* 3`` became a combinational DSP block
             factor.eq(Mux(busy, factor, self.half_spring.shift_left(1) + self.half_spring)),
             barrier.eq(Mux(busy, barrier, beat.barrier_sum)),
             first.eq(Mux(busy, first, beat.first)),
             tolerance.eq(Mux(busy, tolerance, self.tolerance)),
-            springs.eq(Mux(busy, Mux(in_springs, shift_add_step(springs, factor, self.square_bits), springs),
-                           beat.square_sum)),
+            square.eq(Mux(busy, square, beat.square_sum)),
+            springs.eq(Mux(in_load, square, Mux(in_springs, shift_add_step(springs, factor, self.square_bits),
+                                                springs))),
+            product.eq(springs[:len(product)]),
         ]
         with m.If(~busy):  # loaded while idle, as the other registers (not by `start`: a long path)
             m.d.sync += [steps.eq(self.square_bits), last.eq(self.square_bits == 1)]
         with m.If(counting):
             m.d.sync += [steps.eq(steps - 1), last.eq(steps == 2)]
         with m.If(in_springs & last):
-            m.d.sync += [in_springs.eq(0), in_energy.eq(1), counting.eq(0)]
+            m.d.sync += [in_springs.eq(0), in_product.eq(1), counting.eq(0)]
+        with m.If(in_product):  # ``product`` takes the last step's result at this clock's edge
+            m.d.sync += [in_product.eq(0), in_energy.eq(1)]
         with m.If(in_energy):
             m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits),
                          last.eq(self.energy_bits == 1), in_energy.eq(0), in_tolerance.eq(1), counting.eq(1)]
