@@ -28,12 +28,12 @@ generic form carries, says the same to the synthesis tool).
 
 from __future__ import annotations
 
-from amaranth.hdl import ClockSignal, Instance, Module, Shape, Signal, Value
+from amaranth.hdl import ClockSignal, Module, Shape, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory, MemoryData, WritePort
 from amaranth.lib.wiring import In, Out
 
-from .dsp import dsp_target
+from .dsp import ECP5, dsp_target, kept_register
 from .logic import or_tree
 from .rom import DP16KD_ADDRESS_PINS, DP16KD_CONFIGS, DP16KD_DATA_PINS, dp16kd, dp16kd_port
 
@@ -127,14 +127,10 @@ class BlockRam(wiring.Component):
         ``TRELLIS_FF`` per bit marked ``keep``."""
         if not self.pin_registers:
             return value
+        if kept:
+            return kept_register(m, value, name=name, platform=ECP5)
         q = Signal(len(value), name=name)
-        if not kept:
-            m.d.sync += q.eq(value)
-            return q
-        for i in range(len(value)):
-            m.submodules[f"{name}_ff{i}"] = Instance(
-                "TRELLIS_FF", p_GSR="AUTO", p_CEMUX="1", p_CLKMUX="CLK", p_LSRMUX="LSR", p_REGSET="RESET",
-                i_CLK=ClockSignal(), i_LSR=0, i_DI=value[i], o_Q=q[i], a_keep=1)
+        m.d.sync += q.eq(value)
         return q
 
     def _dp16kd(self, m: Module) -> None:

@@ -22,7 +22,7 @@ from amaranth.hdl import ClockSignal, Const, Fragment, Instance, Module, Mux, Si
 
 from golden_model.fixed.dsp import DSP_WIDTH, is_dsp_block
 
-__all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target", "mult18x18d_count"]
+__all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target", "kept_register", "mult18x18d_count"]
 
 
 class DspPlatform:
@@ -42,6 +42,25 @@ ECP5 = DspPlatform("ecp5")
 def dsp_target(platform) -> str | None:
     """``"ecp5"`` when ``platform`` asks for ECP5 primitives, else ``None`` (generic RTL)."""
     return getattr(platform, "dsp", None)
+
+
+def kept_register(m: Module, value, *, name: str, platform=None) -> Signal:
+    """``value`` registered (a free-running flip-flop per bit), kept apart from identical registers.
+
+    A copy of a register placed beside one group of its loads: Yosys merges flip-flops with the same
+    input, so with ECP5 primitives each bit is a ``TRELLIS_FF`` instance marked ``keep``; in generic
+    RTL (simulation) a plain register.
+    """
+    value = Value.cast(value)
+    q = Signal(len(value), name=name)
+    if dsp_target(platform) != "ecp5":
+        m.d.sync += q.eq(value)
+        return q
+    for i in range(len(value)):
+        m.submodules[f"{name}_ff{i}"] = Instance(
+            "TRELLIS_FF", p_GSR="AUTO", p_CEMUX="1", p_CLKMUX="CLK", p_LSRMUX="LSR", p_REGSET="RESET",
+            i_CLK=ClockSignal(), i_LSR=0, i_DI=value[i], o_Q=q[i], a_keep=1)
+    return q
 
 
 def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None) -> Value:

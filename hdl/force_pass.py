@@ -17,6 +17,7 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
 
+from .dsp import kept_register
 from .fixedpoint import clamp, shape_of, shift_round, sum_round
 from .layouts import (FORCE_ENTRY_EVENTS, FORCE_NODE_EVENTS, force_entry_layout, force_saturations_max,
                       node_force_layout, vector_layout)
@@ -290,6 +291,7 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
     f_x, f_y = clamp(live["f_x"], fs.force), clamp(live["f_y"], fs.force)
     live.step(back, "b9", f_x=f_x[0], f_y=f_y[0], **events(f_x[1], f_y[1]))
     # B10: the entry's force, spring plus barrier, exact; the last saturation flags join the count
+    entry_before, first_before = back.valid, live["first"]
     live.step(back, "b10", drop=("fb_x", "fb_y"), f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"],
               **(count.flush() if saturations else {}))
 
@@ -310,12 +312,18 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
     if saturations:
         assert sum(count.counted) == entry_events, (count.counted, FORCE_ENTRY_EVENTS)
         sums["ev"] = (unsigned((fs.max_degree * entry_events).bit_length()), live["ev"], "add")
-    first, last, entry_valid = live["first"], live["last"], back.valid
+    last, entry_valid = live["last"], back.valid
+    # each accumulator's enable and restart from copies of B10's valid and first bits of its own (one
+    # pair fanned out to every accumulator's bits, spread over the device, is a path across it)
+    restart = {name: (kept_register(m, entry_before, name=f"b10_valid_{name}", platform=platform),
+                      kept_register(m, first_before, name=f"b10_first_{name}", platform=platform))
+               for name in sums}
     back.stage("b11", valid=entry_valid & last)
     live.clear()
     for name, (shape, term, combine) in sums.items():
         acc = live[name] = Signal(shape, name=f"acc_{name}", reset_less=True)
-        with m.If(entry_valid):
+        valid, first = restart[name]
+        with m.If(valid):
             m.d.sync += acc.eq(Mux(first, term, (acc | term) if combine == "or" else acc + term))
     # N1: the sums rounded;  N2: saturated (the exact energy partials ride along)
     live.step(back, "n1", f_x=rounded(live["f_x"], fs.force.frac_bits, fs.force_acc),

@@ -1,6 +1,6 @@
-// Simulation model of the ECP5 TRELLIS_FF flip-flop as springflat instantiates it (hdl/block_ram.py's
-// pin registers): CEMUX "1" (always enabled), LSR low, REGSET "RESET"; Q starts at 0. Any other use
-// stops the simulation.
+// Simulation model of the ECP5 TRELLIS_FF flip-flop as springflat instantiates it (hdl/dsp.py's
+// kept_register: the block RAMs' pin registers, register copies): CEMUX "1" (always enabled), LSR low,
+// REGSET "RESET"; Q starts at 0. Any other use stops the simulation.
 `timescale 1ns/1ps
 module TRELLIS_FF (input CLK, LSR, CE, DI, M, output reg Q);
     parameter GSR = "ENABLED";

@@ -7,15 +7,18 @@ output is taken on the clock it is offered.
 """
 
 import gc
+import re
 import warnings
 
 import numpy as np
 import pytest
-from amaranth.hdl import UnusedElaboratable, unsigned
+from amaranth.back import rtlil
+from amaranth.hdl import Elaboratable, Module, UnusedElaboratable, unsigned
 
 from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.pipeline import BarrierEntries, NeighbourStream, neighbour_terms, node_terms, barrier_terms
 from hdl import ForcePass, NodeUpdate
+from hdl.dsp import ECP5
 from hdl.layouts import force_saturations_max
 from sim.payloads import pack_beats, unpack_beats
 from support.streams import run_streams
@@ -284,3 +287,36 @@ def test_saturations_leave_the_default_build_alone():
         assert counting.stages == plain.stages
         del plain, counting
         gc.collect()
+
+
+
+class _Wrapped(Elaboratable):
+    """A component with constant ports (always-ready streams) converted as a submodule."""
+
+    def __init__(self, dut):
+        self.dut = dut
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.dut = self.dut
+        return m
+
+
+@pytest.mark.parametrize("energy, saturations", [(False, False), (True, True)])
+def test_each_accumulator_restarts_from_kept_copies_in_the_ecp5_form(energy, saturations):
+    """In the ECP5 form every accumulator reads B10's valid and first bits from kept flip-flops of its own
+    (one pair fanned out to all of them was a path across the device); the generic form has plain registers."""
+    names = {"f_x", "f_y", "e", "inside"} | ({"e_sq", "ch"} if energy else set()) | ({"ev"} if saturations else set())
+    for platform in (ECP5, None):
+        top = _Wrapped(ForcePass("default", energy=energy, saturations=saturations))
+        text = rtlil.convert(top, platform=platform, ports=[top.dut.i.valid, top.dut.o.valid])
+        for bit in ("valid", "first"):
+            copies = {name for name in names if f"b10_{bit}_{name}_ff0" in text}
+            assert copies == (names if platform is ECP5 else set()), (bit, platform, copies)
+            # each copy is read (beyond its declaration and the flip-flop driving it)
+            read = {name for name in copies
+                    if any(re.search(rf"\\b10_{bit}_{name}\b", line)
+                           and not line.lstrip().startswith(("wire ", "connect \\Q ")) for line in text.splitlines())}
+            assert read == copies, (bit, platform, read)
+        kept = len(re.findall(r"^\s*cell \\TRELLIS_FF ", text, re.M))
+        assert kept == (2 * len(names) if platform is ECP5 else 0), (platform, kept)
