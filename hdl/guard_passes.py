@@ -42,7 +42,8 @@ class GuardPasses(wiring.Component):
     * **certify** (triangles, one per two clocks): the certificate on the held proposals; each
       triangle's ``level`` into its three corners' slots;
     * **commit** (nodes): :class:`~hdl.guard_commit.GuardCommit` on the node's position, proposal and
-      its slots' levels: ``P + D`` and ``V = D`` into the node memories;
+      its slots' levels (the landed node registered first, one clock more per node pass): ``P + D``
+      and ``V = D`` into the node memories;
     * **rollback** (nodes, a rejected step only): the same unit on the node's position and committed
       move: ``P − V`` and ``V = 0``.
 
@@ -176,12 +177,25 @@ class GuardPasses(wiring.Component):
         with m.If(clearing):
             m.d.sync += held.eq(held + 1)
 
+        # the landed node registered here, beside the commit: the memories' words are routed across the
+        # device, and the commit's first stage starts a carry chain (−V) on them; the proposal or the
+        # velocity is chosen from these registers
         c_in = commit.i.payload
-        m.d.comb += [commit.i.valid.eq((self.in_commit | self.in_rollback) & self.node_landed),
-                     c_in.position.eq(self.position[0]),
-                     c_in.velocity.eq(Mux(self.in_rollback, self.velocity, self.proposal[0])),
-                     *(c_in.levels[k].eq(level) for k, level in enumerate(levels)),
-                     c_in.stuck.eq(0), c_in.rollback.eq(self.in_rollback)]
+        landed_node = Signal(name="commit_landed")
+        rollback = Signal(name="commit_rollback")
+        landed_position = Signal(vector_layout(fs.position), name="commit_position", reset_less=True)
+        landed_proposal = Signal(vector_layout(fs.velocity), name="commit_proposal", reset_less=True)
+        landed_velocity = Signal(vector_layout(fs.velocity), name="commit_velocity", reset_less=True)
+        landed_levels = [Signal(certificate_level_shape(), name=f"commit_level{k}", reset_less=True)
+                         for k in range(len(levels))]
+        m.d.sync += [landed_node.eq((self.in_commit | self.in_rollback) & self.node_landed),
+                     rollback.eq(self.in_rollback), landed_position.eq(self.position[0]),
+                     landed_proposal.eq(self.proposal[0]), landed_velocity.eq(self.velocity),
+                     *(q.eq(level) for q, level in zip(landed_levels, levels))]
+        m.d.comb += [commit.i.valid.eq(landed_node), c_in.position.eq(landed_position),
+                     c_in.velocity.eq(Mux(rollback, landed_velocity, landed_proposal)),
+                     *(c_in.levels[k].eq(level) for k, level in enumerate(landed_levels)),
+                     c_in.stuck.eq(0), c_in.rollback.eq(rollback)]
         committed = Signal(range(cap.vertices + 1), name="committed_nodes")
         m.d.comb += [self.node_write.addr.eq(committed), self.node_write.en.eq(commit.o.valid),
                      self.node_write.data.position.eq(commit.o.payload.position),
@@ -191,7 +205,7 @@ class GuardPasses(wiring.Component):
 
         # a pass's end, registered; its counters restart the clock after
         scatters_idle = Cat(*(s.idle & ~s.update.valid for s in scatters)).all()
-        m.d.comb += self.idle.eq(~landed & (corner_fifo.level == 0) & scatters_idle & commit.idle)
+        m.d.comb += self.idle.eq(~landed & (corner_fifo.level == 0) & scatters_idle & ~landed_node & commit.idle)
         triangles_done = (self.in_stuck | self.in_certify) & (results == self.triangles) & scatters_idle
         nodes_done = (self.in_hold & (held == self.vertices) & ~hold_write & ~self.proposal_write.en) \
             | ((self.in_commit | self.in_rollback) & (committed == self.vertices))
