@@ -53,11 +53,12 @@ class _Run:
     fixed_load: Signal
     fixed_half: Signal
     momentum_k: Signal
-    momentum: Value  # MODE.mode selects the momentum step
-    fixed_step: Value  # MODE.mode selects the fixed step
-    guarded: Value  # MODE.mode selects the guarded step
+    momentum: Signal  # MODE.mode selects the momentum step (registered)
+    fixed_step: Signal  # MODE.mode selects the fixed step (registered)
+    guarded: Value  # MODE.mode selects the guarded step (registered; 0 in a build without the guard)
     measuring_again: Signal  # the accepted layout measured again after a rollback (its events not counted)
     stalled: Signal  # the decision's: the step scale passed SCALE_MAX_SHIFT
+    abort: Signal  # CONTROL.abort registered once more, beside the phase machine
 
 
 class PhaseController(wiring.Component):
@@ -78,7 +79,8 @@ class PhaseController(wiring.Component):
     Members
     -------
     start, abort : ``In(1)``
-        CONTROL's pulses (registered in the register bank).
+        CONTROL's pulses (registered in the register bank). ABORT is registered once more here: a run
+        under way drains from the clock after the pulse; a write that sets both is not a start.
     the run constants of :data:`CONSTANTS` : ``In``; ``<name>_held`` of :data:`HELD` : ``In``
         As the register bank holds them; the held copies are read by the units.
     saturations : ``In``
@@ -114,11 +116,13 @@ class PhaseController(wiring.Component):
     are read (what they read is stable by then: START follows the last constant's write by a whole
     bus cycle, the check phase follows every pass and unit); the passes' ends come registered from
     the sequencer. A transition clears the phase flag it leaves and sets the one it enters, so a
-    flag's next value depends only on the blocks that enter or leave it and on ABORT (registered
-    because a phase code, or every transition writing every flag, takes the whole phase machine and
-    ``running``'s fan-out into each flag's logic). The wide registers (ITERATIONS, ``momentum_k``)
-    move on registered pulses the clock after their phase's block, and ``restart_pending`` on pulses
-    of its own: no control LUT drives both a wide register and a control flag.
+    flag's next value depends only on the blocks that enter or leave it and on ABORT (from a
+    register beside the phase machine, which the pulse from the register bank reaches in a clock of
+    its own; the flags are flip-flops because a phase code, or every transition writing every flag,
+    takes the whole phase machine and ``running``'s fan-out into each flag's logic). The wide
+    registers (ITERATIONS, ``momentum_k``) move on registered pulses the clock after their phase's
+    block, and ``restart_pending`` on pulses of its own: no control LUT drives both a wide register
+    and a control flag.
     """
 
     #: Clocks the check phase waits after the math phase's last result: the saturation tally's
@@ -183,10 +187,21 @@ class PhaseController(wiring.Component):
         run = _Run(first_measure=Signal(name="first_measure"), math_pending=self.math_pending,
                    settled=Signal(name="settled"), fixed_load=Signal(name="fixed_load"),
                    fixed_half=self._fixed_half_dt_sq(m, platform), momentum_k=Signal(ITERATION_BITS, name="momentum_k"),
-                   momentum=mode_steps(self.mode, Step.MOMENTUM), fixed_step=mode_steps(self.mode, Step.FIXED),
-                   guarded=mode_guarded(self.mode) if self.capacity.guard else C(0, 1),
+                   momentum=Signal(name="mode_momentum"), fixed_step=Signal(name="mode_fixed_step"),
+                   guarded=Signal(name="mode_guarded") if self.capacity.guard else C(0, 1),
                    measuring_again=self.measuring_again,
-                   stalled=Signal(name="stalled"))
+                   stalled=Signal(name="stalled"), abort=Signal(name="abort_q"))
+        # ABORT registered here: the register bank's pulse is routed across the device, and every phase
+        # flag and unit request depends on it (a run under way drains a clock later; START's refusal of a
+        # write that also sets ABORT, and the idle engine's answer, read the pulse itself)
+        m.d.sync += run.abort.eq(self.abort)
+        # MODE's decodes as flip-flops (MODE stands still during a run, and the phase machine first reads
+        # them after the first pass; START's check reads the code): a flag's or a request's next-state
+        # logic then reads one bit, not the code
+        m.d.sync += [run.momentum.eq(mode_steps(self.mode, Step.MOMENTUM)),
+                     run.fixed_step.eq(mode_steps(self.mode, Step.FIXED))]
+        if self.capacity.guard:
+            m.d.sync += run.guarded.eq(mode_guarded(self.mode))
         m.d.comb += self.guarded.eq(run.guarded)
         # CYCLES and ITERATIONS have no domain reset: START and the reset's echo clear them (a LUT of the
         # domain's reset and START driving their reset pins is a long path on the board)
@@ -302,7 +317,7 @@ class PhaseController(wiring.Component):
         bad_constants = ((self.vertices > cap.vertices) | (self.entries > cap.entries)
                          | (self.triangles > cap.triangles) | (self.entries == 0) | (self.triangles == 0)
                          | reciprocal_bad[0] | reciprocal_bad[1]
-                         | ~mode_runs(self.mode, guard=cap.guard) | (run.fixed_step & (self.dt == 0))
+                         | ~mode_runs(self.mode, guard=cap.guard) | (mode_steps(self.mode, Step.FIXED) & (self.dt == 0))
                          | (self.max_iter == 0))
         stepgen = units["stepgen"]
         stepgen_idle = pending_is_zero(m, StepGenerator.latency_of(self.fs), stepgen.i, stepgen.o, name="stepgen_pending")
@@ -334,17 +349,19 @@ class PhaseController(wiring.Component):
 
         norm_length, norm_area, energy = units["norm_length"], units["norm_area"], units["energy_check"]
         beta, stepgen, decision = units["beta"], units["stepgen"], units["decision"]
-        abort, running = self.abort, self.running
+        abort, running = run.abort, self.running
         # ABORT while running drains what is in flight (still "running": START is ignored and the memories
         # answer err until nothing can write them any more), then goes idle with no result. The pass under
-        # way fetches to its end (a node half fed to the force pass would never leave it).
+        # way fetches to its end (a node half fed to the force pass would never leave it). ABORT while not
+        # running goes idle from the pulse itself, and again from its copy: a run that ends in the pulse's
+        # clock is then aborted as a run that ended a clock before it would be.
         with m.If(abort & running):
             m.d.sync += [flag.eq(name == "drain") for name, flag in flags.items()]
             m.d.sync += [unit.i.valid.eq(0) for unit in units.values()]
-        with m.If(abort & ~running):
+        with m.If((self.abort | abort) & ~running):
             set_state("idle")
             m.d.sync += self.result.eq(_code(RESULTS, "none"))
-        m.d.comb += self.starting.eq(self.start & ~abort & ~running)
+        m.d.comb += self.starting.eq(self.start & ~self.abort & ~running)
         with m.If(self.starting):
             m.d.sync += self.result.eq(_code(RESULTS, "none"))
             with m.If(q["no_mesh_q"]):
@@ -440,7 +457,7 @@ class PhaseController(wiring.Component):
         own (the launch's or the step's), not by the pulses that move ``momentum_k``: registered so
         that no LUT is shared between the 32-bit update and the flag's enable."""
         beta = units["beta"]
-        go = ~self.abort
+        go = ~run.abort
         momentum_k = run.momentum_k
         restart_pending, step_was_restart = Signal(name="restart_pending"), Signal(name="step_was_restart")
         m.d.sync += beta.i.payload.eq(Mux(restart_pending, 0, momentum_k))
