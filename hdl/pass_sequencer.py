@@ -231,10 +231,20 @@ class PassSequencer(wiring.Component):
                      self.force_write.data.inside.eq(self.forces.payload.inside),
                      self.force_write.en.eq(self.forces.valid)]
         with m.If(self.forces.valid):
-            m.d.sync += [r["force_out_index"].eq(r["force_out_index"] + 1),
-                         r["length_sum"].eq(r["length_sum"] + self.forces.payload.error_sum),
-                         r["square_sum"].eq(r["square_sum"] + self.forces.payload.error_squares),
-                         r["barrier_sum"].eq(r["barrier_sum"] + self.forces.payload.barrier_energy)]
+            m.d.sync += r["force_out_index"].eq(r["force_out_index"] + 1)
+        # a node's terms land in registers beside the sums before they are added (the force pass's output
+        # is routed across the device, and its valid bit would be the enable of every sum bit at the end
+        # of that route); the sums are whole the clock after the index reaches the vertices, when the
+        # registered force_done reads them
+        payload = self.forces.payload
+        landed = Signal(name="force_terms_landed")
+        terms = {"length_sum": Signal.like(payload.error_sum, name="landed_error_sum", reset_less=True),
+                 "square_sum": Signal.like(payload.error_squares, name="landed_error_squares", reset_less=True),
+                 "barrier_sum": Signal.like(payload.barrier_energy, name="landed_barrier_energy", reset_less=True)}
+        m.d.sync += [landed.eq(self.forces.valid), terms["length_sum"].eq(payload.error_sum),
+                     terms["square_sum"].eq(payload.error_squares), terms["barrier_sum"].eq(payload.barrier_energy)]
+        with m.If(landed):
+            m.d.sync += [r[name].eq(r[name] + term) for name, term in terms.items()]
         return e_valid, next_first
 
     def _area_pass(self, m: Module, r: dict[str, Signal]):
