@@ -13,7 +13,8 @@ with the same latency; ``tests/sim/test_cocotb.py::test_ecp5_flavour_with_mult18
 simulates the primitive form against the golden model with a model of the primitive
 (``sim/models/MULT18X18D.v``).
 
-The platform object also tells :class:`hdl.fifo.LutFIFO` that the device has distributed RAM.
+The platform object also tells :class:`hdl.fifo.LutFIFO` that the device has distributed RAM, and
+:func:`kept_register` to make a register copy of ``TRELLIS_FF`` instances that Yosys keeps.
 """
 
 from __future__ import annotations

@@ -292,7 +292,8 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
     live.step(back, "b9", f_x=f_x[0], f_y=f_y[0], **events(f_x[1], f_y[1]))
     # B10: the entry's force, spring plus barrier, exact; the last saturation flags join the count
     entry_before, first_before = back.valid, live["first"]
-    live.step(back, "b10", drop=("fb_x", "fb_y"), f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"],
+    live.step(back, "b10", drop=("fb_x", "fb_y", "first"),
+              f_x=live["f_x"] + live["fb_x"], f_y=live["f_y"] + live["fb_y"],
               **(count.flush() if saturations else {}))
 
     # B11: per-node accumulators with guard bits (exact; rounded and saturated once, in N1, N2),

@@ -237,12 +237,11 @@ class PassSequencer(wiring.Component):
         # of that route); the sums are whole the clock after the index reaches the vertices, when the
         # registered force_done reads them
         payload = self.forces.payload
+        node_terms = {"length_sum": payload.error_sum, "square_sum": payload.error_squares,
+                      "barrier_sum": payload.barrier_energy}
         landed = Signal(name="force_terms_landed")
-        terms = {"length_sum": Signal.like(payload.error_sum, name="landed_error_sum", reset_less=True),
-                 "square_sum": Signal.like(payload.error_squares, name="landed_error_squares", reset_less=True),
-                 "barrier_sum": Signal.like(payload.barrier_energy, name="landed_barrier_energy", reset_less=True)}
-        m.d.sync += [landed.eq(self.forces.valid), terms["length_sum"].eq(payload.error_sum),
-                     terms["square_sum"].eq(payload.error_squares), terms["barrier_sum"].eq(payload.barrier_energy)]
+        terms = {name: Signal.like(term, name=f"landed_{name}", reset_less=True) for name, term in node_terms.items()}
+        m.d.sync += [landed.eq(self.forces.valid), *(terms[name].eq(term) for name, term in node_terms.items())]
         with m.If(landed):
             m.d.sync += [r[name].eq(r[name] + term) for name, term in terms.items()]
         return e_valid, next_first

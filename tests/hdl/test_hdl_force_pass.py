@@ -289,7 +289,6 @@ def test_saturations_leave_the_default_build_alone():
         gc.collect()
 
 
-
 class _Wrapped(Elaboratable):
     """A component with constant ports (always-ready streams) converted as a submodule."""
 
