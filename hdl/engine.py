@@ -231,7 +231,8 @@ class SpringflatEngine(wiring.Component):
         self.debug_signals = {"state": controller.state, "phase": controller.phase,
                               "entry_index": sequencer.entry_index, "force_out_index": sequencer.force_out_index,
                               "tri_index": sequencer.tri_index, "node_out_index": sequencer.node_out_index,
-                              "math_pending": controller.math_pending, "iterations": controller.iterations}
+                              "math_pending": controller.math_pending, "iterations": controller.iterations,
+                              "passes_idle": controller.passes_idle, "node_write": memories.node_write.en}
         return m
 
 

@@ -316,9 +316,11 @@ class PassSequencer(wiring.Component):
         ]
         # The fetch counters' compares registered (a counter's compare into the drain's end, itself
         # registered, is a path of its own): no pass starts in the drain phase or on the abort clock
-        # before it, so that clock's lag is never stale.
-        m.d.sync += self.done_fetching.eq(((self.entry_index == self.entries) | ~self.fetch_force)
-                                          & ((self.tri_index == self.triangles) | ~self.fetch_area)
-                                          & ((self.node_index == self.vertices) | ~self.fetch_nodes))
+        # before it, so that clock's lag is never stale. A guard pass restarts its counter in its first
+        # clock, while the counter still stands at the previous pass's end: not done in that clock.
+        m.d.sync += self.done_fetching.eq(
+            ((self.entry_index == self.entries) | ~self.fetch_force)
+            & (((self.tri_index == self.triangles) & ~self.triangle_restart) | ~self.fetch_area)
+            & (((self.node_index == self.vertices) & ~self.node_restart) | ~self.fetch_nodes))
         fetching = Cat(*e_valid, *t_valid, *n_valid).any()
         m.d.comb += self.passes_idle.eq(self.force_idle & self.area_idle & self.integrator_idle & ~fetching)
