@@ -86,7 +86,8 @@ class GuardCertificate(wiring.Component):
     the subsets' pair sums; the floor picked and the triple sums; the margin added, per subset ``S``
     less its index ``i``; ``X0 − floor + i`` per subset (a copy each, so that no value drives more
     than 7 adders); per subset and level ``X0 − floor + i + (Σ L >> r)`` and ``(Σ Q >> 2r) − i``, then
-    the sign of their sum; the level, the smallest safe one. Each stage does one add (a carry chain) of every value it forms.
+    the sign of their sum; the flags copied, with no logic, into registers of their own; the level, the smallest
+    safe one. Each stage does one add (a carry chain) of every value it forms.
     """
 
     def __init__(self, fs: FormatSet | str, *, interval: int = 1):
@@ -113,10 +114,10 @@ class GuardCertificate(wiring.Component):
     def stages_of(fs: FormatSet, interval: int = 1) -> int:
         """The pipeline's stages: beat, edges, narrowing, the multiply (:meth:`Pipeline.mul_stages` with
         landed operands and its adder levels), then the products whole, the cross products, three floor
-        stages, ``X0 − floor``, the two compare stages and the level; at II 2 also the operands' select
+        stages, ``X0 − floor``, the two compare stages, the flags' copies and the level; at II 2 also the operands' select
         before the multiply and the first products' register after it."""
         edge, move = shape_of(fs.face_edge), shape_of(fs.velocity)
-        return 12 + 2 * (interval - 1) + Pipeline.mul_stages(land_operands=True) \
+        return 13 + 2 * (interval - 1) + Pipeline.mul_stages(land_operands=True) \
             + reduce_levels((edge, edge), (move, edge), (move, move))
 
     @classmethod
@@ -244,6 +245,9 @@ class GuardCertificate(wiring.Component):
         s = stage("compare", wide=s["wide"], stuck=Cat(*((s[f"stuck_p{k}"] < 0) | s["wide"] for k in range(3))),
                   **{f"ok{i}_{r}": (s[f"p{i}_{r}"] + s[f"q{i}_{r}"] >= 0) if f"q{i}_{r}" in s else (s[f"p{i}_{r}"] >= i)
                      for i in subsets for r in levels})
+        # the flags copied into registers of their own, no logic between: each compare's flag then has one
+        # load and is placed at the end of its carry chain, and the level's choice reads the copies
+        s = stage("flags", **s)
         safe = [Cat(*(s[f"ok{i}_{r}"] for i in range(len(SUBSETS)))).all() & ~s["wide"] for r in levels]
         level = GUARD_LEVELS + 1
         for r in reversed(levels):  # the smallest safe level wins
