@@ -118,7 +118,8 @@ class PhaseController(wiring.Component):
     the sequencer. A transition clears the phase flag it leaves and sets the one it enters, so a
     flag's next value depends only on the blocks that enter or leave it and on ABORT (from a
     register beside the phase machine, which the pulse from the register bank reaches in a clock of
-    its own; the flags are flip-flops because a phase code, or every transition writing every flag,
+    its own; START's acceptance, likewise, sets the run's state and a register that enters the start
+    phase a clock later; the flags are flip-flops because a phase code, or every transition writing every flag,
     takes the whole phase machine and ``running``'s fan-out into each flag's logic). The wide
     registers (ITERATIONS, ``momentum_k``) move on registered pulses the clock after their phase's
     block, and ``restart_pending`` on pulses of its own: no control LUT drives both a wide register
@@ -350,6 +351,8 @@ class PhaseController(wiring.Component):
         norm_length, norm_area, energy = units["norm_length"], units["norm_area"], units["energy_check"]
         beta, stepgen, decision = units["beta"], units["stepgen"], units["decision"]
         abort, running = run.abort, self.running
+        launch = Signal(name="launch")  # a pulse: START took the run
+        m.d.sync += launch.eq(0)
         # ABORT while running drains what is in flight (still "running": START is ignored and the memories
         # answer err until nothing can write them any more), then goes idle with no result. The pass under
         # way fetches to its end (a node half fed to the force pass would never leave it). ABORT while not
@@ -370,8 +373,12 @@ class PhaseController(wiring.Component):
                 finish("bad-constants")
             with m.Else():
                 set_state("running")
-                m.d.sync += [flags["start"].eq(1), run.first_measure.eq(1), run.measuring_again.eq(0)]
+                m.d.sync += [launch.eq(1), run.first_measure.eq(1), run.measuring_again.eq(0)]
         go = ~abort
+        # the start phase entered a clock after the run's state, from a register of START's decision: the
+        # START write's decode sits by the register bank, the phase flags' logic by the units they drive
+        with m.If(go & launch):
+            m.d.sync += flags["start"].eq(1)
         with m.If(go & flags["start"]):  # a measurement: the force pass
             m.d.sync += [self.fetch_force.eq(1), *move("start", "force")]
         with m.If(go & flags["force"] & self.force_done):
