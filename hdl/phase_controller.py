@@ -111,11 +111,12 @@ class PhaseController(wiring.Component):
 
     Timing
     ------
-    Every decision is taken from flip-flops: START's checks of the constants and the check phase's
-    stop rule, iteration limit and saturation limit are compares registered the clock before they
-    are read (what they read is stable by then: START follows the last constant's write by a whole
-    bus cycle, the check phase follows every pass and unit); the passes' ends come registered from
-    the sequencer. A transition clears the phase flag it leaves and sets the one it enters, so a
+    Every decision is taken from flip-flops: the check phase's stop rule, iteration limit and
+    saturation limit are compares registered the clock before they are read (the check phase follows
+    every pass and unit), START's check of the constants is two registered stages (START's pulse
+    comes at least six clocks after a constant's write); the passes' ends come registered from the
+    sequencer, and the units' answers the phase machine waits for (the step's, the decision's) are
+    registered beside it, a clock after the unit's output. A transition clears the phase flag it leaves and sets the one it enters, so a
     flag's next value depends only on the blocks that enter or leave it and on ABORT (from a
     register beside the phase machine, which the pulse from the register bank reaches in a clock of
     its own; START's acceptance, likewise, sets the run's state and a register that enters the start
@@ -221,7 +222,7 @@ class PhaseController(wiring.Component):
         # nothing starts while draining
         drained = Signal(name="drained")
         m.d.sync += drained.eq(self.in_drain & self.passes_idle & sequential_idle & self.done_fetching)
-        self._phases(m, units, run, decisions, drained, stepgen_idle)
+        self._phases(m, units, run, decisions, drained)
         self._momentum(m, units, run, iterations, cleared)
         return m
 
@@ -315,24 +316,28 @@ class PhaseController(wiring.Component):
         top = 1 << (fs.reciprocal.width - 1)
         reciprocal_bad = [(getattr(self, f"{k}_reciprocal") < top) | (getattr(self, f"{k}_reciprocal") >= 2 * top)
                           | (getattr(self, f"{k}_shift") < fs.error.frac_bits + 2) for k in ("area", "length")]
-        bad_constants = ((self.vertices > cap.vertices) | (self.entries > cap.entries)
-                         | (self.triangles > cap.triangles) | (self.entries == 0) | (self.triangles == 0)
-                         | reciprocal_bad[0] | reciprocal_bad[1]
-                         | ~mode_runs(self.mode, guard=cap.guard) | (mode_steps(self.mode, Step.FIXED) & (self.dt == 0))
-                         | (self.max_iter == 0))
+        faults = [self.vertices > cap.vertices, self.entries > cap.entries, self.triangles > cap.triangles,
+                  self.entries == 0, self.triangles == 0, *reciprocal_bad, ~mode_runs(self.mode, guard=cap.guard),
+                  mode_steps(self.mode, Step.FIXED) & (self.dt == 0), self.max_iter == 0]
+        # in two registered stages, each fault and then their OR (MODE's decode and the compares into one
+        # flag is five LUTs across the register file): START's pulse comes at least six clocks after a
+        # constant's storage changes (its register answers two clocks after the write, the acknowledge
+        # is registered, and the next cycle's request and decode take two more)
+        constant_faults = Signal(len(faults), name="constant_faults_q")
+        m.d.sync += constant_faults.eq(Cat(*faults))
         stepgen = units["stepgen"]
         stepgen_idle = pending_is_zero(m, StepGenerator.latency_of(self.fs), stepgen.i, stepgen.o, name="stepgen_pending")
         names = ("no_mesh_q", "bad_constants_q", "converged_q", "diverged_q", "at_max_iter_q")
         q = {name: Signal(name=name) for name in names}
         limit = self.saturation_limit
-        m.d.sync += [q["no_mesh_q"].eq(self.vertices == 0), q["bad_constants_q"].eq(bad_constants),
+        m.d.sync += [q["no_mesh_q"].eq(self.vertices == 0), q["bad_constants_q"].eq(constant_faults.any()),
                      q["converged_q"].eq((self.area_error <= self.tol_area) & (self.shape_error <= self.tol_shape)
                                          & run.settled),
                      q["diverged_q"].eq((limit != 0) & (self.saturations >= limit)),
                      q["at_max_iter_q"].eq(self.iterations == self.max_iter)]
         return q, stepgen_idle
 
-    def _phases(self, m: Module, units, run: _Run, q, drained, stepgen_idle) -> None:
+    def _phases(self, m: Module, units, run: _Run, q, drained) -> None:
         """START, ABORT and the phase machine: one block per phase, each enabled by its one-hot flag
         (and the pass-end pulse it waits for), not by a decode of a phase code under ``running``."""
         flags = {name: getattr(self, f"in_{name}") for name in PHASES}
@@ -399,8 +404,11 @@ class PhaseController(wiring.Component):
                 m.d.sync += [decision.i.valid.eq(1), *move("math", "decide")]
             with m.Else():
                 m.d.sync += [run.measuring_again.eq(0), *move("math", "check")]
-        with m.If(go & flags["decide"] & decision.o.valid):
-            with m.If(decision.o.payload.accepted):
+        # the decision's answer registered beside the phase machine, as the step's
+        decided, accepted = Signal(name="decided"), Signal(name="decision_accepted")
+        m.d.sync += [decided.eq(decision.o.valid), accepted.eq(decision.o.payload.accepted)]
+        with m.If(go & flags["decide"] & decided):
+            with m.If(accepted):
                 m.d.sync += move("decide", "check")
             with m.Else():  # P − V and V = 0, then the accepted layout measured again
                 m.d.sync += [self.fetch_nodes.eq(1), self.node_restart.eq(1), run.measuring_again.eq(1),
@@ -429,8 +437,11 @@ class PhaseController(wiring.Component):
             with m.Else():
                 m.d.sync += stepgen.i.valid.eq(1)
             m.d.sync += move("step", "step_wait")
-        waiting = beta.i.valid | ~beta.i.ready | stepgen.i.valid | ~stepgen.i.ready
-        with m.If(go & flags["step_wait"] & ~waiting & ~beta.o.valid & ~stepgen.o.valid & stepgen_idle):
+        # the step is in (``step_dt`` and ``step_half`` loaded) the clock after a result, registered beside
+        # the phase machine: the units' output valid bits come from across the device
+        step_loaded = Signal(name="step_loaded")
+        m.d.sync += step_loaded.eq(beta.o.valid | stepgen.o.valid | run.fixed_load)
+        with m.If(go & flags["step_wait"] & step_loaded):
             m.d.sync += [self.fetch_nodes.eq(1), *move("step_wait", "integrate")]
         with m.If(go & flags["drain"] & drained):
             set_state("idle")

@@ -417,7 +417,9 @@ def test_bad_run_constants_answer_as_constant_fault_says(guard):
         answers["FEATURES.guard"] = driver.read_value("feature_guard")
         for name, change in cases.items():
             constants = {**image.constants, **change}
-            for offset, word in sorted(driver.map.encode(constants).items()):
+            # the changed constants' words written last, right before START: the check is current by then
+            changed = set(driver.map.encode({k: constants[k] for k in change}))
+            for offset, word in sorted(driver.map.encode(constants).items(), key=lambda item: (item[0] in changed, item[0])):
                 bus.write(offset, word)
             driver.start()
             bus.idle(20)
@@ -432,6 +434,55 @@ def test_bad_run_constants_answer_as_constant_fault_says(guard):
     for name, change in cases.items():
         expected = constant_fault({**image.constants, **change}, FS, capacity)
         assert answers[name] == (("done", expected) if expected else ("running", "none")), name
+
+
+def test_start_written_right_after_a_constant_is_checked_against_that_constant():
+    """The bus's fastest sequence, from the simulator's clock: a constant's write, then START's in the next
+    bus cycle (``stb`` held, back to back). START's check of the constants (two registered stages) answers
+    for the constant just written, bad or good again, as ``constant_fault`` does."""
+    from golden_model.engine_spec.image import constant_fault
+    from golden_model.engine_spec.register_map import RESULTS, STATES
+
+    image = image_of(RUNS["paper-variable"])
+    dut = SpringflatEngine(FS, CAPACITY)
+    register_map = dut.register_map
+    control, status = register_map.register("CONTROL"), register_map.register("STATUS")
+    bits = {f.name: f for f in (*control.fields, *status.fields)}
+    top = 1 << (FS.reciprocal.width - 1)
+    cases = [{"max_iter": 0}, {}, {"entries": CAPACITY.entries + 1}, {}, {"area_reciprocal": top - 1}, {},
+             {"mode": mode_named("paper-fixed").code, "dt": 0}, {"mode": mode_named("paper-fixed").code, "dt": 1}]
+    answers = []
+    bus = ThreadedBus(BusError)
+    bus.run(lambda: EngineDriver(bus, register_map).load(image))
+
+    def field(word, name):
+        return (word >> bits[name].lsb) & ((1 << bits[name].width) - 1)
+
+    async def bench(ctx):
+        await bus.serve(ctx, dut.bus)
+        for change in cases:
+            words = register_map.encode({**image.constants, **change})
+            for offset in sorted(register_map.encode(change)):
+                await wishbone_write(ctx, dut.bus, offset, words[offset], keep_stb=True)
+            await wishbone_write(ctx, dut.bus, control.offset, 1 << bits["start"].lsb)
+            word = (await wishbone_read(ctx, dut.bus, status.offset)).data
+            answers.append((STATES[field(word, "state")], RESULTS[field(word, "result")]))
+            if answers[-1][0] == "running":
+                await wishbone_write(ctx, dut.bus, control.offset, 1 << bits["abort"].lsb)
+                await ctx.tick().repeat(400)
+            for offset in sorted(register_map.encode(change)):  # the image's constants again
+                await wishbone_write(ctx, dut.bus, offset, register_map.encode(image.constants)[offset])
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(bench)
+    sim.run()
+    expected = []
+    for change in cases:
+        fault = constant_fault({**image.constants, **change}, FS, CAPACITY)
+        expected.append(("done", fault) if fault else ("running", "none"))
+    assert set(expected) == {("running", "none"), ("done", "bad-constants")}
+    assert answers == expected
 
 
 def test_a_build_without_the_guard_runs_the_momentum_step_bit_exact():
