@@ -20,6 +20,7 @@ from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
 from golden_model.guard import ENERGY_WINDOW, SCALE_GROW_AFTER, SCALE_MAX_SHIFT
 
 from .controller_units import shift_add_step
+from .dsp import kept_register
 from .layouts import decision_input_layout, decision_output_layout
 
 __all__ = ["GuardDecision"]
@@ -130,14 +131,24 @@ class GuardDecision(wiring.Component):
                          count_grown.eq(Mux(grows_now, Mux(shift > 0, 0, SCALE_GROW_AFTER), accepted_count + 1)),
                          shift_shrunk.eq(Mux(with_momentum | (shift > SCALE_MAX_SHIFT), shift, shift + 1))]
         newest = Mux(first | ~rises, energy, kept)
-        with m.If(deciding):
-            m.d.sync += [deciding.eq(0), multiplying.eq(1), kept.eq(newest), accepted.eq(first | ~rises),
-                         energies[0].eq(newest), *(energies[k].eq(energies[k - 1]) for k in range(1, size + 1)),
-                         steps.eq(bits)]
+        # `deciding` is `rising` a clock later; the window's energies and the kept energy with the scale each
+        # move on a copy of their own, placed by them (one flip-flop enabling them all and starting the
+        # multiply is a net across the device)
+        deciding_window = kept_register(m, rising, name="deciding_window", platform=platform)
+        deciding_scale = kept_register(m, rising, name="deciding_scale", platform=platform)
+        with m.If(deciding):  # the multiplier, the window's oldest once the new energy is in, in the low bits
+            m.d.sync += [deciding.eq(0), multiplying.eq(1), steps.eq(bits), allowed.eq(energies[size - 1])]
+        with m.If(deciding_window):
+            m.d.sync += [energies[0].eq(newest), *(energies[k].eq(energies[k - 1]) for k in range(1, size + 1))]
             with m.If(first):
-                m.d.sync += [held.eq(1), taken.eq(0), shift.eq(0), accepted_count.eq(0)]
+                m.d.sync += [held.eq(1), taken.eq(0)]
             with m.Else():
                 m.d.sync += [held.eq(Mux(held == size + 1, held, held + 1)), taken.eq(Cat(~rises, taken[:-1]))]
+        with m.If(deciding_scale):
+            m.d.sync += [kept.eq(newest), accepted.eq(first | ~rises)]
+            with m.If(first):
+                m.d.sync += [shift.eq(0), accepted_count.eq(0)]
+            with m.Else():
                 with m.If(~rises):
                     m.d.sync += accepted_count.eq(count_grown)
                     with m.If(grows):
@@ -147,9 +158,7 @@ class GuardDecision(wiring.Component):
 
         # ε·E_old and |E_kept − E_old|, then the compare's halves, then their combination
         oldest = energies[size]
-        with m.If(deciding):  # the multiplier, the window's oldest once the new energy is in, in the low bits
-            m.d.sync += allowed.eq(energies[size - 1])
-        with m.Elif(multiplying):
+        with m.If(multiplying):
             m.d.sync += [allowed.eq(shift_add_step(allowed, tolerance, bits)), steps.eq(steps - 1),
                          difference.eq(kept - oldest), change.eq(Mux(difference[-1], -difference, difference))]
             with m.If(steps == 1):

@@ -437,10 +437,12 @@ class PhaseController(wiring.Component):
             with m.Else():
                 m.d.sync += stepgen.i.valid.eq(1)
             m.d.sync += move("step", "step_wait")
-        # the step is in (``step_dt`` and ``step_half`` loaded) the clock after a result, registered beside
-        # the phase machine: the units' output valid bits come from across the device
-        step_loaded = Signal(name="step_loaded")
-        m.d.sync += step_loaded.eq(beta.o.valid | stepgen.o.valid | run.fixed_load)
+        # the step is in (``step_dt`` and ``step_half`` loaded) two clocks after a result: a register beside
+        # the units gathers their output valid bits, and a copy of it with no logic in front lands beside
+        # the phase machine (the units sit across the device; one register with the OR in front is placed
+        # by the units, and its route then ends in the phase machine's logic)
+        step_result, step_loaded = Signal(name="step_result"), Signal(name="step_loaded")
+        m.d.sync += [step_result.eq(beta.o.valid | stepgen.o.valid | run.fixed_load), step_loaded.eq(step_result)]
         with m.If(go & flags["step_wait"] & step_loaded):
             m.d.sync += [self.fetch_nodes.eq(1), *move("step_wait", "integrate")]
         with m.If(go & flags["drain"] & drained):

@@ -17,9 +17,11 @@ from golden_model.params import FlattenParams
 from hdl.controller_units import EnergyCheck
 from hdl.guard_decision import GuardDecision
 from sim.payloads import pack, unpack
+from support import refused_components
 from support.streams import run_streams
 
-ENERGY_BITS = EnergyCheck(FormatSet.preset("default"), DEFAULT_CAPACITY.entries).energy_bits
+with refused_components():  # built for its width only (else reported unused in whichever test frees it)
+    ENERGY_BITS = EnergyCheck(FormatSet.preset("default"), DEFAULT_CAPACITY.entries).energy_bits
 TOLERANCE = StopRule.of(FlattenParams(tol_energy=1e-3), FormatSet.preset("default")).energy  # ε = 1e-3 raw
 
 
