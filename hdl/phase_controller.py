@@ -115,13 +115,14 @@ class PhaseController(wiring.Component):
     saturation limit are compares registered the clock before they are read (the check phase follows
     every pass and unit), START's check of the constants is two registered stages (START's pulse
     comes at least six clocks after a constant's write); the passes' ends come registered from the
-    sequencer, and the units' answers the phase machine waits for (the step's, the decision's) are
-    registered beside it, a clock after the unit's output. A transition clears the phase flag it leaves and sets the one it enters, so a
-    flag's next value depends only on the blocks that enter or leave it and on ABORT (from a
-    register beside the phase machine, which the pulse from the register bank reaches in a clock of
-    its own; START's acceptance, likewise, sets the run's state and a register that enters the start
-    phase a clock later; the flags are flip-flops because a phase code, or every transition writing every flag,
-    takes the whole phase machine and ``running``'s fan-out into each flag's logic). The wide
+    sequencer, and the units' answers the phase machine waits for are registered beside it (the
+    decision's a clock after the unit's output, the step's two). A transition clears the phase flag
+    it leaves and sets the one it enters, so a flag's next value depends only on the blocks that
+    enter or leave it and on ABORT (from a register beside the phase machine, which the pulse from
+    the register bank reaches in a clock of its own; START's acceptance, likewise, sets the run's
+    state and a register that enters the start phase a clock later; the flags are flip-flops because
+    a phase code, or every transition writing every flag, takes the whole phase machine and
+    ``running``'s fan-out into each flag's logic). The wide
     registers (ITERATIONS, ``momentum_k``) move on registered pulses the clock after their phase's
     block, and ``restart_pending`` on pulses of its own: no control LUT drives both a wide register
     and a control flag.
