@@ -251,9 +251,12 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     vk_frac = fs.velocity.frac_bits + fs.damping.frac_bits
     live.step(tail, "t11", **{f"vk_{k}": rounded(live[f"vk_{k}"], vk_frac, fs.velocity) for k in "xy"})
     damped = {k: clamp(live[f"vk_{k}"], fs.velocity) for k in "xy"}
-    # (the last flags join the count in their own stage: one more would lengthen the node pass)
-    live.step(tail, "t12", **{f"vk_{k}": damped[k][0] for k in "xy"},
-              **(count.flush(damped["x"][1], damped["y"][1]) if saturations else {}))
+    live.step(tail, "t12", **{f"vk_{k}": damped[k][0] for k in "xy"}, **events(damped["x"][1], damped["y"][1]))
+    if saturations:
+        # the last flags join the count a clock later: the route from the damping's product into
+        # the clamp, then its flags through the count's adder in the same clock, was the engine's
+        # critical path (docs/engine-guard.md)
+        live.step(tail, "t13", **count.flush())
 
     out = ports.o.payload
     m.d.comb += [ports.o.valid.eq(tail.valid),

@@ -385,8 +385,14 @@ class MemoryWindows(wiring.Component):
                 write_regs["vel"][2].eq(node.en),
                 write_regs["wgt"][2].eq(0), write_regs["ent"][2].eq(0), write_regs["tri"][2].eq(0)]
         with m.Else():
+            # each memory's address register loads only for its own window: registers with the same
+            # logic are merged into one, which then drives block RAMs placed far apart (the
+            # triangle and weight memories' were the engine's critical path)
+            for n, window in (("wgt", node_k), ("ent", ent_k), ("tri", tri_k)):
+                with m.If(window_q == window):
+                    m.d.sync += write_regs[n][0].eq(index_q)
             m.d.sync += [
-                *(write_regs[n][0].eq(index_q) for n in write_ports),
+                *(write_regs[n][0].eq(index_q) for n in ("pos", "vel")),
                 Cat(write_regs["pos"][1].as_value(), write_regs["vel"][1].as_value(),
                     write_regs["wgt"][1].as_value()).eq(node_new),
                 write_regs["ent"][1].eq(ent_new), write_regs["tri"][1].eq(tri_new),
