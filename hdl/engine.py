@@ -32,10 +32,12 @@ from .saturation_tally import SaturationTally
 
 __all__ = ["SpringflatEngine"]
 
-#: The run constants the datapath units read, each through a copy register of its own in the register
-#: bank (:class:`~hdl.register_bank.RegisterBank`'s ``copies``).
+#: The run constants the datapath units, the pass sequencer and the guard read, each through a copy
+#: register of its own in the register bank (:class:`~hdl.register_bank.RegisterBank`'s ``copies``):
+#: a storage register read across the device is placed by its readers, and the bus's write decode
+#: then reaches its enable over the same distance.
 UNIT_CONSTANTS = ("barrier", "mode", "half_spring", "damping", "area_reciprocal", "area_shift",
-                  "length_reciprocal", "length_shift", "tol_energy")
+                  "length_reciprocal", "length_shift", "tol_energy", "vertices", "entries", "triangles")
 
 
 class SpringflatEngine(wiring.Component):
@@ -190,14 +192,16 @@ class SpringflatEngine(wiring.Component):
         m.d.comb += [integrator.scale_shift.eq(controller.scale_shift), integrator.propose.eq(controller.guarded)]
         if guard is not None:
             _wire(m, controller, guard, "in_step", "in_integrate", *(f"in_{name}" for name in GUARD_PASSES))
-            _wire(m, registers, guard, "vertices", "triangles")
+            m.d.comb += [guard.vertices.eq(registers.vertices_held), guard.triangles.eq(registers.triangles_held)]
             _wire(m, sequencer, guard, "node_index", "node_landed", "triangle_landed", "corners")
             _wire(m, memories, guard, "position", "proposal", "velocity")
             m.d.comb += [guard.area.eq(sequencer.landed_area), controller.guard_done.eq(guard.done),
                          controller.passes_idle.eq(sequencer.passes_idle & guard.idle)]
         else:  # START refuses the guarded modes: no guard pass ever starts
             m.d.comb += controller.passes_idle.eq(sequencer.passes_idle)
-        _wire(m, registers, sequencer, "vertices", "entries", "triangles", "barrier_held")
+        _wire(m, registers, sequencer, "barrier_held")
+        m.d.comb += [sequencer.vertices.eq(registers.vertices_held), sequencer.entries.eq(registers.entries_held),
+                     sequencer.triangles.eq(registers.triangles_held)]
         _wire(m, memories, sequencer, "entry", "triangle", "position", "velocity", "weight_word", "force_word")
         _wire(m, sequencer, memories, "entry_index", "tri_index", "node_index", "node_of_entry")
         _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done", "done_fetching",

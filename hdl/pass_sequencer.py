@@ -99,7 +99,7 @@ class PassSequencer(wiring.Component):
     force_done, area_done, integrate_done : ``Out(1)``
         A pass's end: one clock, registered, the clock after its last result.
     done_fetching, passes_idle : ``Out(1)``
-        No pass has an item left to issue (registered); no item in a fetch or a unit.
+        No pass has an item left to issue (two clocks behind the counters); no item in a fetch or a unit.
     length_sum, square_sum, barrier_sum, power_sum : ``Out``
         The passes' exact sums (Σ|L − d|, Σe², Σc·h of the force pass; S of the integrate pass),
         still from a pass's end until the next pass restarts them.
@@ -314,13 +314,19 @@ class PassSequencer(wiring.Component):
             self.power_events.eq(self.integrate_done & self.momentum
                                  & ((power > fs.power_acc.raw_max) | (power < fs.power_acc.raw_min))),
         ]
-        # The fetch counters' compares registered (a counter's compare into the drain's end, itself
-        # registered, is a path of its own): no pass starts in the drain phase or on the abort clock
-        # before it, so that clock's lag is never stale. A guard pass restarts its counter in its first
-        # clock, while the counter still stands at the previous pass's end: not done in that clock.
+        # The fetch counters' compares in registers beside the counters, then `done_fetching` from
+        # those (a counter's compare routed across the device into the drain's end was a critical
+        # path), two clocks behind the counters. A guard pass restarts its counter in its first clock,
+        # while the counter still stands at the previous pass's end: neither that clock's compare nor
+        # `done_fetching` a clock later reads it as done. A pass without a restart pulse starts from a
+        # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.
+        at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
+        m.d.sync += at_end.eq(Cat(self.entry_index == self.entries,
+                                  (self.tri_index == self.triangles) & ~self.triangle_restart,
+                                  (self.node_index == self.vertices) & ~self.node_restart))
         m.d.sync += self.done_fetching.eq(
-            ((self.entry_index == self.entries) | ~self.fetch_force)
-            & (((self.tri_index == self.triangles) & ~self.triangle_restart) | ~self.fetch_area)
-            & (((self.node_index == self.vertices) & ~self.node_restart) | ~self.fetch_nodes))
+            (at_end[0] | ~self.fetch_force)
+            & ((at_end[1] & ~self.triangle_restart) | ~self.fetch_area)
+            & ((at_end[2] & ~self.node_restart) | ~self.fetch_nodes))
         fetching = Cat(*e_valid, *t_valid, *n_valid).any()
         m.d.comb += self.passes_idle.eq(self.force_idle & self.area_idle & self.integrator_idle & ~fetching)
