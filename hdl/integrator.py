@@ -41,7 +41,7 @@ class Integrator(wiring.Component):
         counts them (``saturations`` of :func:`~hdl.layouts.integrator_output_layout`, up to
         :data:`~hdl.layouts.INTEGRATOR_EVENTS`: 13). Every saturation stage's overflow bits
         (those of the dynamics in use) are added into a running count that rides with the node;
-        no stage, no multiply more.
+        one stage more (the last flags' addition), no multiply more.
 
     Members
     -------
