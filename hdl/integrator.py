@@ -253,9 +253,8 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     damped = {k: clamp(live[f"vk_{k}"], fs.velocity) for k in "xy"}
     live.step(tail, "t12", **{f"vk_{k}": damped[k][0] for k in "xy"}, **events(damped["x"][1], damped["y"][1]))
     if saturations:
-        # the last flags join the count a clock later: the route from the damping's product into
-        # the clamp, then its flags through the count's adder in the same clock, was the engine's
-        # critical path (docs/engine-guard.md)
+        # the last flags join the count a clock later, so that the route from the damping's product
+        # ends in the clamp's flag registers, not in the count's adder (docs/engine-guard.md)
         live.step(tail, "t13", **count.flush())
 
     out = ports.o.payload

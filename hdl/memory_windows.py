@@ -386,8 +386,7 @@ class MemoryWindows(wiring.Component):
                 write_regs["wgt"][2].eq(0), write_regs["ent"][2].eq(0), write_regs["tri"][2].eq(0)]
         with m.Else():
             # each memory's address register loads only for its own window: registers with the same
-            # logic are merged into one, which then drives block RAMs placed far apart (the
-            # triangle and weight memories' were the engine's critical path)
+            # logic would be merged into one, which then drives block RAMs placed far apart
             for n, window in (("wgt", node_k), ("ent", ent_k), ("tri", tri_k)):
                 with m.If(window_q == window):
                     m.d.sync += write_regs[n][0].eq(index_q)

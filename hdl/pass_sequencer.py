@@ -315,8 +315,8 @@ class PassSequencer(wiring.Component):
                                  & ((power > fs.power_acc.raw_max) | (power < fs.power_acc.raw_min))),
         ]
         # The fetch counters' compares in registers beside the counters, then `done_fetching` from
-        # those (a counter's compare routed across the device into the drain's end was a critical
-        # path), two clocks behind the counters. A guard pass restarts its counter in its first clock,
+        # those, two clocks behind the counters, so that no compare's logic sits on the route across
+        # the device into the drain's end. A guard pass restarts its counter in its first clock,
         # while the counter still stands at the previous pass's end: neither that clock's compare nor
         # `done_fetching` a clock later reads it as done. A pass without a restart pulse starts from a
         # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.

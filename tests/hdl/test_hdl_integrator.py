@@ -222,8 +222,8 @@ def test_saturations_zero_without_events(momentum):
 
 
 def test_saturations_leave_the_default_build_alone():
-    """``saturations=False`` (the default) has the layout and stages it had; the count is 4 bits (13 events),
-    its last flags added in a stage of their own."""
+    """``saturations=False`` (the default) has no count field and the plain stages; the count is 4 bits
+    (13 events), its last flags added in a stage of their own."""
     with warnings.catch_warnings():  # built for their attributes only, never elaborated
         warnings.simplefilter("ignore", UnusedElaboratable)
         plain, counting = Integrator("default", side=SIDE), Integrator("default", side=SIDE, saturations=True)
