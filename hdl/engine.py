@@ -204,7 +204,7 @@ class SpringflatEngine(wiring.Component):
                      sequencer.triangles.eq(registers.triangles_held)]
         _wire(m, memories, sequencer, "entry", "triangle", "position", "velocity", "weight_word", "force_word")
         _wire(m, sequencer, memories, "entry_index", "tri_index", "node_index", "node_of_entry")
-        _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done", "done_fetching",
+        _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done",
               "length_sum", "square_sum", "barrier_sum", "power_sum")
         wiring.connect(m, sequencer.force_entry, force.i)
         wiring.connect(m, sequencer.triangle_out, area.i)

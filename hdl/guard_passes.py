@@ -75,8 +75,8 @@ class GuardPasses(wiring.Component):
     done : ``Out(1)``
         A pass's end: one clock, registered, after its last write.
     idle : ``Out(1)``
-        No triangle owed by the certificate, no update in a scatter, no node in the commit (an aborted
-        run drains until then).
+        Registered: in the clock before, no triangle was owed by the certificate, no update was in a
+        scatter and no node in the commit (an aborted run drains until then).
     """
 
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, *, read_latency: int = BlockRam.LATENCY):
@@ -205,7 +205,7 @@ class GuardPasses(wiring.Component):
 
         # a pass's end, registered; its counters restart the clock after
         scatters_idle = Cat(*(s.idle & ~s.update.valid for s in scatters)).all()
-        m.d.comb += self.idle.eq(~landed & (corner_fifo.level == 0) & scatters_idle & ~landed_node & commit.idle)
+        m.d.sync += self.idle.eq(~landed & (corner_fifo.level == 0) & scatters_idle & ~landed_node & commit.idle)
         triangles_done = (self.in_stuck | self.in_certify) & (results == self.triangles) & scatters_idle
         nodes_done = (self.in_hold & (held == self.vertices) & ~hold_write & ~self.proposal_write.en) \
             | ((self.in_commit | self.in_rollback) & (committed == self.vertices))

@@ -98,8 +98,9 @@ class PassSequencer(wiring.Component):
         triangle's corner indices and host area.
     force_done, area_done, integrate_done : ``Out(1)``
         A pass's end: one clock, registered, the clock after its last result.
-    done_fetching, passes_idle : ``Out(1)``
-        No pass has an item left to issue (two clocks behind the counters); no item in a fetch or a unit.
+    passes_idle : ``Out(1)``
+        Registered: in the clock before, no pass had an item left to issue (its counter at its end
+        two clocks before that) and no item was in a fetch or a unit.
     length_sum, square_sum, barrier_sum, power_sum : ``Out``
         The passes' exact sums (Σ|L − d|, Σe², Σc·h of the force pass; S of the integrate pass),
         still from a pass's end until the next pass restarts them.
@@ -169,7 +170,7 @@ class PassSequencer(wiring.Component):
             "node_landed": Out(1), "triangle_landed": Out(1), "corners": Out(range(cap.vertices)).array(3),
             "landed_area": Out(shape_of(fs.face_area)),
             "force_done": Out(1), "area_done": Out(1), "integrate_done": Out(1),
-            "done_fetching": Out(1), "passes_idle": Out(1),
+            "passes_idle": Out(1),
             "length_sum": Out(fs.error_acc.width + cap.vertices.bit_length()),
             "square_sum": Out(sums["square_sum"].shape), "barrier_sum": Out(sums["barrier_sum"].shape),
             "power_sum": Out(signed(fs.power.width + cap.vertices.bit_length())),
@@ -324,9 +325,12 @@ class PassSequencer(wiring.Component):
         m.d.sync += at_end.eq(Cat(self.entry_index == self.entries,
                                   (self.tri_index == self.triangles) & ~self.triangle_restart,
                                   (self.node_index == self.vertices) & ~self.node_restart))
-        m.d.sync += self.done_fetching.eq(
+        done_fetching = Signal(name="done_fetching")
+        m.d.sync += done_fetching.eq(
             (at_end[0] | ~self.fetch_force)
             & ((at_end[1] & ~self.triangle_restart) | ~self.fetch_area)
             & ((at_end[2] & ~self.node_restart) | ~self.fetch_nodes))
+        # the passes' idle state registered here too, for the drain's end (hdl.phase_controller)
         fetching = Cat(*e_valid, *t_valid, *n_valid).any()
-        m.d.comb += self.passes_idle.eq(self.force_idle & self.area_idle & self.integrator_idle & ~fetching)
+        m.d.sync += self.passes_idle.eq(self.force_idle & self.area_idle & self.integrator_idle & ~fetching
+                                        & done_fetching)

@@ -85,8 +85,11 @@ class PhaseController(wiring.Component):
         As the register bank holds them; the held copies are read by the units.
     saturations : ``In``
         SATURATIONS (:class:`~hdl.saturation_tally.SaturationTally`).
-    force_done, area_done, integrate_done, done_fetching, passes_idle : ``In(1)``
+    force_done, area_done, integrate_done : ``In(1)``
         From the :class:`~hdl.pass_sequencer.PassSequencer`.
+    passes_idle : ``In(1)``
+        Registered: in the clock before, every pass had fetched its last item and none was in a
+        fetch, a unit or a guard pass (the sequencer's and the guard's ``passes_idle`` and ``idle``).
     length_sum, square_sum, barrier_sum, power_sum, area_total : ``In``
         The passes' sums (``area_total`` from :class:`~hdl.area_error.AreaError`).
     state, result, running : ``Out``
@@ -148,7 +151,6 @@ class PhaseController(wiring.Component):
             **{f"{name}_held": In(width(name)) for name in HELD},
             "saturations": In(width("saturations")),
             "force_done": In(1), "area_done": In(1), "integrate_done": In(1), "guard_done": In(1),
-            "done_fetching": In(1),
             "passes_idle": In(1),
             "length_sum": In(fs.error_acc.width + self.capacity.vertices.bit_length()),
             "square_sum": In(sums["square_sum"].shape), "barrier_sum": In(sums["barrier_sum"].shape),
@@ -214,15 +216,20 @@ class PhaseController(wiring.Component):
         self._cycles(m, cleared)
         self._units(m, units, run)
         decisions, stepgen_idle = self._decisions(m, units, run)
-        sequential_idle = ~Cat(*(u.i.valid for u in units.values())).any() \
-            & units["norm_length"].i.ready & units["norm_area"].i.ready & units["energy_check"].i.ready \
-            & units["beta"].i.ready & units["decision"].i.ready & stepgen_idle
         m.d.sync += [self.area_clear.eq(0), self.node_restart.eq(0), self.triangle_restart.eq(0)]
-        # the drain's end, registered (the OR of every fetch stage's valid bit and the units' idle
-        # flags into the fetch flags' enables is a path of its own): once true it stays true, as
-        # nothing starts while draining
+        # The drain's end in two registered stages, so that no unit's request is routed across the
+        # device into a wide AND: first each unit's idle state in a register of its own, which the
+        # placer puts by the unit (as the sequencer and the guard register theirs), then `drained`
+        # from those and the drain flag of this clock and the last. Every first-stage register tells
+        # of the clock before, so `drained` also asks that the engine was draining then: nothing
+        # starts while draining, so all idle in a draining clock stays all idle, and the drain ends
+        # exactly one clock after it would with the AND in one stage.
+        units_idle = Signal(len(units) + 1, name="units_idle")
+        m.d.sync += units_idle.eq(Cat(*(~u.i.valid & u.i.ready for u in units.values()), stepgen_idle))
+        was_draining = Signal(name="was_draining")
         drained = Signal(name="drained")
-        m.d.sync += drained.eq(self.in_drain & self.passes_idle & sequential_idle & self.done_fetching)
+        m.d.sync += [was_draining.eq(self.in_drain),
+                     drained.eq(self.in_drain & was_draining & self.passes_idle & units_idle.all())]
         self._phases(m, units, run, decisions, drained)
         self._momentum(m, units, run, iterations, cleared)
         return m
