@@ -59,14 +59,14 @@ class GuardCommit(wiring.Component):
     Contract
     --------
     Throughput: one node per clock (II = 1), rollbacks and commits mixed freely. Latency: :attr:`latency`
-    (4) clocks from a node's transfer on ``i`` to its result on ``o`` (the stages built, counted). No
+    (5) clocks from a node's transfer on ``i`` to its result on ``o`` (the stages built, counted). No
     back-pressure.
 
     Structure
     ---------
     A free-running pipeline, one kind of work per stage: C1 the node's level (the largest of three,
-    and whether it is held) and ``−V``; C2 the move, ``V' >> level`` (a shifter of three mux levels) or
-    ``−V`` or 0; C3 ``P + D`` (the position's carry chain); C4 the range test on the sum's top bits and
+    and whether it is held); C1b that level copied, with no logic, and ``−V``; C2 the move,
+    ``V' >> level`` (a shifter of three mux levels) or ``−V`` or 0; C3 ``P + D`` (the position's carry chain); C4 the range test on the sum's top bits and
     the choice of the outputs (its flag fans out to every output bit: behind a carry chain it would be
     the stage's longest path).
     """
@@ -112,9 +112,13 @@ def _build(m: Module, fs: FormatSet, ports) -> int:
     for level in levels[1:]:
         largest = Mux(level > largest, level, largest)
     held = node.stuck | Value.cast(largest > GUARD_LEVELS)
-    # C1: the node's level, whether it is held, and −V for a rollback (one more bit: −raw_min)
+    # C1: the node's level and whether it is held, in registers placed by the compares (the level's
+    # next consumer, the shifter, is wide and far: a route across ends in C2's copies, not here)
     live.step(pipe, "c1", p_x=node.position.x, p_y=node.position.y, v_x=node.velocity.x, v_y=node.velocity.y,
-              neg_x=-node.velocity.x, neg_y=-node.velocity.y, level=largest, held=held, rollback=node.rollback)
+              level=largest, held=held, rollback=node.rollback)
+    # C1b: the level and held copied, with no logic, for the shifter; −V for a rollback (one more bit:
+    # −raw_min)
+    live.step(pipe, "c1b", neg_x=-live["v_x"], neg_y=-live["v_y"])
     # C2: D = V' >> level (the shift by a level past GUARD_LEVELS is never used: D = 0 there), or −V
     move = {k: Mux(live["rollback"], live[f"neg_{k}"], Mux(live["held"], 0, live[f"v_{k}"] >> live["level"]))
             for k in "xy"}

@@ -177,7 +177,7 @@ def test_a_rollback_out_of_range_keeps_the_position():
 
 
 #: Independent pin of the stages GuardCommit builds.
-LATENCY = 4
+LATENCY = 5
 
 
 @pytest.mark.parametrize("preset", PRESETS)
