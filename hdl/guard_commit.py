@@ -66,9 +66,9 @@ class GuardCommit(wiring.Component):
     ---------
     A free-running pipeline, one kind of work per stage: C1 the node's level (the largest of three,
     and whether it is held); C1b that level copied, with no logic, and ``−V``; C2 the move,
-    ``V' >> level`` (a shifter of three mux levels) or ``−V`` or 0; C3 ``P + D`` (the position's carry chain); C4 the range test on the sum's top bits and
-    the choice of the outputs (its flag fans out to every output bit: behind a carry chain it would be
-    the stage's longest path).
+    ``V' >> level`` (a shifter of three mux levels) or ``−V`` or 0; C3 ``P + D`` (the position's carry
+    chain); C4 the range test on the sum's top bits and the choice of the outputs (its flag fans out to
+    every output bit: behind a carry chain it would be the stage's longest path).
     """
 
     def __init__(self, fs: FormatSet | str):
@@ -113,7 +113,7 @@ def _build(m: Module, fs: FormatSet, ports) -> int:
         largest = Mux(level > largest, level, largest)
     held = node.stuck | Value.cast(largest > GUARD_LEVELS)
     # C1: the node's level and whether it is held, in registers placed by the compares (the level's
-    # next consumer, the shifter, is wide and far: a route across ends in C2's copies, not here)
+    # next consumer, the shifter, is wide and far: a route across ends in C1b's copies, not here)
     live.step(pipe, "c1", p_x=node.position.x, p_y=node.position.y, v_x=node.velocity.x, v_y=node.velocity.y,
               level=largest, held=held, rollback=node.rollback)
     # C1b: the level and held copied, with no logic, for the shifter; −V for a rollback (one more bit:
