@@ -197,10 +197,11 @@ def interface_markdown(interface: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
+def export_engine(fs: FormatSet, capacity, out: Path, platform=None, registered_select: bool | None = None) -> dict:
     """Write the engine's Verilog (``springflat_engine.v``, top ``springflat_engine``) and its register
     map (``register_map.md``, ``register_map.json``, ``springflat_regs.h``: :mod:`sim.register_map_export`);
-    return a short description (module, capacity, bus, files)."""
+    return a short description (module, capacity, bus, files). ``registered_select``: the engine's
+    (``None``: its default for the capacity)."""
     from amaranth.back import verilog
 
     from golden_model.engine_spec.register_map import RegisterMap
@@ -210,7 +211,7 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
 
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     out.mkdir(parents=True, exist_ok=True)
-    engine = SpringflatEngine(fs, capacity)
+    engine = SpringflatEngine(fs, capacity, registered_select=registered_select)
     (out / f"{ENGINE_MODULE}.v").write_text(verilog.convert(engine, name=ENGINE_MODULE, platform=platform))
     files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)]
     return {"module": ENGINE_MODULE, "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
@@ -273,10 +274,11 @@ def memory_image_markdown(fs: FormatSet, capacity) -> str:
     return "\n".join(lines)
 
 
-def export_engine_bundle(fs: FormatSet, capacity, out: Path, platform=None) -> dict:
+def export_engine_bundle(fs: FormatSet, capacity, out: Path, platform=None,
+                         registered_select: bool | None = None) -> dict:
     """:func:`export_engine` plus ``memory_image.md`` (:func:`memory_image_markdown`): what a handoff of
     the engine holds. Returns :func:`export_engine`'s description with the file added."""
-    info = export_engine(fs, capacity, out, platform=platform)
+    info = export_engine(fs, capacity, out, platform=platform, registered_select=registered_select)
     (out / "memory_image.md").write_text(memory_image_markdown(fs, capacity))
     info["files"].append("memory_image.md")
     return info
