@@ -23,7 +23,7 @@ from .force_pass import ForcePass
 from .guard_passes import GUARD_PASSES, GuardPasses
 from .integrator import Integrator
 from .logic import mode_steps
-from .memory_windows import MemoryWindows, needs_registered_select
+from .memory_windows import MemoryWindows, needs_pin_registers, needs_registered_select
 from .pass_sequencer import PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
 from .register_bank import RegisterBank
@@ -58,6 +58,12 @@ class SpringflatEngine(wiring.Component):
         registered stages), their reads three clocks longer (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: where the node memories take
         several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
         ``default``). A test passes ``True`` to run those latencies at a small capacity.
+    pin_registers : bool or None
+        The node and triangle memories' block RAM inputs each in a register of their own, without the
+        registered select (implied by ``registered_select``): their writes land a clock later, their
+        reads take a clock more (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: in a build with
+        the guard (:func:`~hdl.memory_windows.needs_pin_registers`). A test passes ``False`` to run a
+        guarded build without them.
 
     Members
     -------
@@ -103,7 +109,7 @@ class SpringflatEngine(wiring.Component):
     CHECK_SETTLE_CLOCKS = PhaseController.CHECK_SETTLE_CLOCKS
 
     def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH,
-                 registered_select: bool | None = None):
+                 registered_select: bool | None = None, pin_registers: bool | None = None):
         if isinstance(fs, str):
             fs = FormatSet.preset(fs)
         if not isinstance(fs, FormatSet):
@@ -113,12 +119,17 @@ class SpringflatEngine(wiring.Component):
         if isinstance(entry_bank_depth, bool) or not isinstance(entry_bank_depth, int) or entry_bank_depth < 2 \
                 or entry_bank_depth & (entry_bank_depth - 1):
             raise ValueError(f"entry_bank_depth must be a power of two >= 2, not {entry_bank_depth!r}")
-        if registered_select not in (None, True, False):
-            raise TypeError(f"registered_select must be a bool or None, not {registered_select!r}")
+        for flag, value in (("registered_select", registered_select), ("pin_registers", pin_registers)):
+            if value is not None and not isinstance(value, bool):
+                raise TypeError(f"{flag} must be a bool or None, not {value!r}")
         self.fs, self.capacity = fs, capacity
         self.entry_bank_depth = entry_bank_depth
         self.registered_select = needs_registered_select(fs, capacity) if registered_select is None \
             else registered_select
+        if pin_registers is False and self.registered_select:
+            raise ValueError("registered_select needs the pin registers: pin_registers=False contradicts it")
+        self.pin_registers = self.registered_select or (needs_pin_registers(capacity) if pin_registers is None
+                                                        else pin_registers)
         self.register_map = RegisterMap.build(fs, capacity)
         self.layouts = memory_layouts(fs, capacity)
         end = max(w.base + w.size for w in self.register_map.windows)
@@ -135,7 +146,8 @@ class SpringflatEngine(wiring.Component):
         m.submodules.registers = registers = RegisterBank(rmap, addr_width=self.addr_width, copies=UNIT_CONSTANTS)
         m.submodules.memories = memories = MemoryWindows(fs, cap, rmap, addr_width=self.addr_width,
                                                          entry_bank_depth=self.entry_bank_depth,
-                                                         registered_select=self.registered_select)
+                                                         registered_select=self.registered_select,
+                                                         pin_registers=self.pin_registers)
         m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency)
         m.submodules.controller = controller = PhaseController(fs, rmap)
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True)

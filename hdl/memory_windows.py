@@ -17,7 +17,7 @@ from .logic import or_tree
 from .rom import ENTRY_BANK_DEPTH
 
 __all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
-           "needs_registered_select", "read_latency",
+           "needs_pin_registers", "needs_registered_select", "read_latency",
            "write_signature"]
 
 #: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`), for the
@@ -33,10 +33,20 @@ def needs_registered_select(fs: FormatSet, capacity: EngineCapacity) -> bool:
     return dp16kd_banks(capacity.vertices, vector_layout(fs.position).size)[2] > 1
 
 
-def read_latency(registered_select: bool) -> int:
+def needs_pin_registers(capacity: EngineCapacity) -> bool:
+    """Whether the node and triangle memories take a register of their own before every block RAM input
+    (:class:`BlockRam`'s ``pin_registers``) without a registered bank select: in a build with the guard.
+    Its three proposal memories fill the device's block RAM columns so far that one memory's block RAMs
+    lie far apart, and one read address register driving them all is a route across the die
+    (``docs/engine-guard.md``)."""
+    return capacity.guard
+
+
+def read_latency(registered_select: bool, pin_registers: bool = False) -> int:
     """Clocks from a node or triangle memory's read address register to its data: :data:`READ_LATENCY`;
-    with ``registered_select`` also the memories' pin registers (one clock) and :attr:`BlockRam.SELECT_STAGES`."""
-    return READ_LATENCY + (1 + BlockRam.SELECT_STAGES) * registered_select
+    with ``pin_registers`` (which ``registered_select`` implies) one clock more, and with
+    ``registered_select`` :attr:`BlockRam.SELECT_STAGES` more again."""
+    return READ_LATENCY + (pin_registers or registered_select) + BlockRam.SELECT_STAGES * registered_select
 #: The entry memory's bank select after the banks' output registers, one registered stage each: every
 #: bank's word kept or zeroed by that bank's own select flag in a register beside the bank, groups of
 #: up to :data:`ENTRY_GROUP` banks ORed, the groups ORed.
@@ -82,6 +92,9 @@ class MemoryWindows(wiring.Component):
         The node and triangle memories as the entry memory: every block RAM input in a register of its
         own (:class:`BlockRam`'s ``pin_registers``: a write lands a clock later) and the read data through
         its ``registered_select``; :attr:`read_latency` (:func:`read_latency`) is three clocks more.
+    pin_registers : bool
+        The node and triangle memories' pin registers alone (implied by ``registered_select``): a write
+        lands a clock later, :attr:`read_latency` is one clock more.
 
     Members
     -------
@@ -99,7 +112,8 @@ class MemoryWindows(wiring.Component):
     entry, triangle, position[3], velocity, weight_word, force_word : ``Out``
         The passes' read data: ``entry`` (the addressed bank's word, a register)
         :data:`ENTRY_LATENCY` (six) clocks after the entry address is in ``ent_addr``, every other
-        port :attr:`read_latency` (two, or five with ``registered_select``) clocks after its address register.
+        port :attr:`read_latency` (two, three with ``pin_registers``, five with ``registered_select``) clocks
+        after its address register.
     force_write : ``In(write_signature(...))``
         The force pass's per-node results: written to the force memory (not on the bus).
     node_write : ``In(write_signature(...))``
@@ -143,7 +157,8 @@ class MemoryWindows(wiring.Component):
     """
 
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, register_map: RegisterMap, *, addr_width: int,
-                 entry_bank_depth: int = ENTRY_BANK_DEPTH, registered_select: bool = False):
+                 entry_bank_depth: int = ENTRY_BANK_DEPTH, registered_select: bool = False,
+                 pin_registers: bool = False):
         if not isinstance(fs, FormatSet) or not isinstance(capacity, EngineCapacity):
             raise TypeError(f"MemoryWindows needs a FormatSet and an EngineCapacity, not {fs!r}, {capacity!r}")
         if not isinstance(register_map, RegisterMap) or register_map.capacity != capacity:
@@ -156,10 +171,11 @@ class MemoryWindows(wiring.Component):
         self.fs, self.capacity, self.register_map = fs, capacity, register_map
         self.entry_bank_depth = entry_bank_depth
         self.registered_select = bool(registered_select)
+        self.pin_registers = bool(pin_registers) or self.registered_select
         #: Clocks from a node or triangle memory's address register to its data.
-        self.read_latency = read_latency(self.registered_select)
+        self.read_latency = read_latency(self.registered_select, self.pin_registers)
         assert self.read_latency <= ENTRY_LATENCY, "the bus aligns every window's word to the entry's"
-        select = {"registered_select": self.registered_select, "pin_registers": self.registered_select}
+        select = {"registered_select": self.registered_select, "pin_registers": self.pin_registers}
         layouts = memory_layouts(fs, capacity)
         self.entry_shape, self.triangle_shape = word_layout(layouts["entries"]), word_layout(layouts["triangles"])
         pos_shape, vel_shape = vector_layout(fs.position), vector_layout(fs.velocity)

@@ -3,9 +3,12 @@ bit for bit against the golden model's image-driven controller (``run_image``), 
 bad requests. (The exported Verilog on Icarus and Verilator: ``tests/sim/test_engine_rtl.py``.)"""
 
 import dataclasses
+import gc
+import warnings
 
 import numpy as np
 import pytest
+from amaranth.hdl import UnusedElaboratable
 from amaranth.sim import Simulator
 
 from golden_model.modes import mode_named
@@ -88,20 +91,40 @@ def assert_same_run(read_back, expected):
 # exported Verilog.
 # The second run stores its 66 entries in banks of 8 words (nine banks used of 32, in three of the bank
 # select's groups of four), the first in one.
-# The third runs the node and triangle memories' reads through the registered bank select (two clocks
-# longer), which the engine takes at capacities whose node memories need several block RAM banks.
-@pytest.mark.parametrize("run, bank_depth, registered_select", [("paper-variable", 256, False),
-                                                                ("paper-fixed-barrier-damped", 8, False),
-                                                                ("momentum-barrier", 8, True)])
-def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select):
+# The node and triangle memories' reads: in the first run straight from the block RAMs (two clocks), in
+# the second through the pin registers the engine takes in a build with the guard (three), in the third
+# also through the registered bank select (five), which the engine takes at capacities whose node
+# memories need several block RAM banks.
+@pytest.mark.parametrize("run, bank_depth, registered_select, pin_registers, latency", [
+    ("paper-variable", 256, False, False, 2),
+    ("paper-fixed-barrier-damped", 8, False, None, 3),
+    ("momentum-barrier", 8, True, None, 5)])
+def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, pin_registers, latency):
     image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
     expected = run_image(image, FS)
-    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=bank_depth, registered_select=registered_select)
+    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=bank_depth, registered_select=registered_select,
+                           pin_registers=pin_registers)
     assert dut.registered_select is registered_select
+    assert dut.pin_registers is (latency > 2)
     result, read_back = run_on_engine(dut, image)
     assert result == expected.status
     assert_same_run(read_back, expected)
     assert read_back.cycles > 0
+
+
+def test_the_memories_registers_are_checked_and_follow_the_build():
+    """Pin registers by default where the guard is built, not without it; the registered select needs them."""
+    with warnings.catch_warnings():  # engines built here are never elaborated
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        assert SpringflatEngine(FS, CAPACITY).pin_registers is True
+        assert SpringflatEngine(FS, dataclasses.replace(CAPACITY, guard=False)).pin_registers is False
+        assert SpringflatEngine(FS, CAPACITY, registered_select=True).pin_registers is True
+        for flag in ("registered_select", "pin_registers"):
+            with pytest.raises(TypeError, match=f"{flag} must be a bool or None, not 1"):
+                SpringflatEngine(FS, CAPACITY, **{flag: 1})
+        with pytest.raises(ValueError, match="registered_select needs the pin registers"):
+            SpringflatEngine(FS, CAPACITY, registered_select=True, pin_registers=False)
+        gc.collect()
 
 
 # The guarded step (the momentum dynamics' default) from a Tutte layout squeezed across: steps are clipped
