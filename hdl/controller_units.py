@@ -27,7 +27,6 @@ from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
 from golden_model.fixed.measures import energy_frac_bits
 from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS
 
-from .dsp import kept_register
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import energy_result_layout, energy_sums_layout, normalise_layout, saturations_shape
 
@@ -227,7 +226,6 @@ class EnergyCheck(wiring.Component):
     --------
     One item at a time: ``i.ready`` is high while idle. ``latency`` clock edges from the input
     transfer to the output transfer when ``o.ready`` is high: one to load ``Σe²`` into the multiply,
-    one for the multiply's controls to reach it (copies of the phase flags beside its register),
     ``len(square_sum)`` steps of ``Σe²·(3·½C)``, one to copy the product, one for ``E``,
     ``energy_bits`` steps of ``ε·E_prev`` (with ``|E − E_prev|`` alongside), two for the comparison,
     one for the output register and the output transfer. ``o.valid`` and ``o.payload`` are
@@ -252,7 +250,7 @@ class EnergyCheck(wiring.Component):
                    + ((2 * ((1 << self.barrier_bits) - 1)) << self.barrier_shift))
         self.energy_bits = largest.bit_length()
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
-        self.latency = self.square_bits + self.energy_bits + 8
+        self.latency = self.square_bits + self.energy_bits + 7
         super().__init__({
             "i": In(stream.Signature(sums)),
             "o": Out(stream.Signature(energy_result_layout(self.energy_bits))),
@@ -293,9 +291,9 @@ class EnergyCheck(wiring.Component):
         # values a start needs), so ``i.ready`` reaches only the phase flip-flops.
         idle = Signal(init=1)
         busy = Signal()
-        in_load, in_springs, in_product, in_copy, in_energy, in_tolerance, in_halves, in_within, in_compare = (
+        in_load, in_springs, in_product, in_energy, in_tolerance, in_halves, in_within, in_compare = (
             Signal(name=f"in_{n}")
-            for n in ("load", "springs", "product", "copy", "energy", "tolerance", "halves", "within", "compare"))
+            for n in ("load", "springs", "product", "energy", "tolerance", "halves", "within", "compare"))
         last = Signal()  # the springs or tolerance phase's last step
         # ``in_springs | in_tolerance``, a flip-flop of its own: the step count's only control besides the
         # start and the energy phase (the phase flags also choose wide registers' inputs, and a LUT
@@ -307,11 +305,6 @@ class EnergyCheck(wiring.Component):
             m.d.sync += [idle.eq(0), busy.eq(1), in_load.eq(1)]
         with m.If(in_load):
             m.d.sync += [in_load.eq(0), in_springs.eq(1), counting.eq(1)]
-        # the multiply's register reads its phase a clock late, from copies of the flags of its own
-        # (placed beside it: the flags themselves sit by the phase logic, a route across the device away),
-        # so that the product is whole a clock after ``in_product`` and E is formed in ``in_energy``
-        springs_load = kept_register(m, in_load, name="springs_load", platform=platform)
-        springs_step = kept_register(m, in_springs, name="springs_step", platform=platform)
         m.d.sync += [
             # 3·½C as an adder: ``* 3`` became a combinational DSP block
             factor.eq(Mux(busy, factor, self.half_spring.shift_left(1) + self.half_spring)),
@@ -319,8 +312,8 @@ class EnergyCheck(wiring.Component):
             first.eq(Mux(busy, first, beat.first)),
             tolerance.eq(Mux(busy, tolerance, self.tolerance)),
             square.eq(Mux(busy, square, beat.square_sum)),
-            springs.eq(Mux(springs_load, square, Mux(springs_step, shift_add_step(springs, factor, self.square_bits),
-                                                     springs))),
+            springs.eq(Mux(in_load, square, Mux(in_springs, shift_add_step(springs, factor, self.square_bits),
+                                                springs))),
             product.eq(springs[:len(product)]),
         ]
         with m.If(~busy):  # loaded while idle, as the other registers (not by `start`: a long path)
@@ -329,10 +322,8 @@ class EnergyCheck(wiring.Component):
             m.d.sync += [steps.eq(steps - 1), last.eq(steps == 2)]
         with m.If(in_springs & last):
             m.d.sync += [in_springs.eq(0), in_product.eq(1), counting.eq(0)]
-        with m.If(in_product):  # ``springs`` takes the last step's result at this clock's edge
-            m.d.sync += [in_product.eq(0), in_copy.eq(1)]
-        with m.If(in_copy):  # ``product`` takes it at this clock's edge
-            m.d.sync += [in_copy.eq(0), in_energy.eq(1)]
+        with m.If(in_product):  # ``product`` takes the last step's result at this clock's edge
+            m.d.sync += [in_product.eq(0), in_energy.eq(1)]
         with m.If(in_energy):
             m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits),
                          last.eq(self.energy_bits == 1), in_energy.eq(0), in_tolerance.eq(1), counting.eq(1)]

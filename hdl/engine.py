@@ -23,7 +23,7 @@ from .force_pass import ForcePass
 from .guard_passes import GUARD_PASSES, GuardPasses
 from .integrator import Integrator
 from .logic import mode_steps
-from .memory_windows import MemoryWindows, needs_pin_registers, needs_registered_select
+from .memory_windows import MemoryWindows, needs_registered_select
 from .pass_sequencer import PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
 from .register_bank import RegisterBank
@@ -61,9 +61,9 @@ class SpringflatEngine(wiring.Component):
     pin_registers : bool or None
         The node and triangle memories' block RAM inputs each in a register of their own, without the
         registered select (implied by ``registered_select``): their writes land a clock later, their
-        reads take a clock more (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: in a build with
-        the guard (:func:`~hdl.memory_windows.needs_pin_registers`). A test passes ``False`` to run a
-        guarded build without them.
+        reads take a clock more (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: only with
+        ``registered_select``. A build option for timing trials (``docs/engine-guard.md``: at
+        ``DEFAULT_CAPACITY`` with the guard it did not raise Fmax).
 
     Members
     -------
@@ -128,8 +128,7 @@ class SpringflatEngine(wiring.Component):
             else registered_select
         if pin_registers is False and self.registered_select:
             raise ValueError("registered_select needs the pin registers: pin_registers=False contradicts it")
-        self.pin_registers = self.registered_select or (needs_pin_registers(capacity) if pin_registers is None
-                                                        else pin_registers)
+        self.pin_registers = self.registered_select or bool(pin_registers)
         self.register_map = RegisterMap.build(fs, capacity)
         self.layouts = memory_layouts(fs, capacity)
         end = max(w.base + w.size for w in self.register_map.windows)

@@ -65,11 +65,11 @@ class GuardDecision(wiring.Component):
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle. The decision, the window and the scale are
-    updated three clocks after the transfer (the rise compared by halves, then the halves combined);
-    ``ε·E_old`` then takes ``energy_bits`` clocks (an LSB-first shift-add, with ``|E_kept − E_old|``
-    alongside), the compare's halves one more, and
+    updated two clocks after the transfer (the rise compared first); ``ε·E_old`` then takes
+    ``energy_bits`` clocks (an LSB-first shift-add, with ``|E_kept − E_old|`` alongside), the
+    compare's halves one more, and
     ``o`` is a register: with ``o.ready`` high the output transfers :attr:`latency`
-    (``energy_bits + 6``) clock edges after the input.
+    (``energy_bits + 5``) clock edges after the input.
     """
 
     def __init__(self, energy_bits: int, *, window: int = ENERGY_WINDOW):
@@ -78,7 +78,7 @@ class GuardDecision(wiring.Component):
                 raise ValueError(f"{name} must be an int >= {2 if name == 'energy_bits' else 1}, not {value!r}")
         self.energy_bits, self.window = energy_bits, window
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
-        self.latency = energy_bits + 6
+        self.latency = energy_bits + 5
         super().__init__({
             "i": In(stream.Signature(decision_input_layout(energy_bits))),
             "o": Out(stream.Signature(decision_output_layout(energy_bits))),
@@ -104,9 +104,9 @@ class GuardDecision(wiring.Component):
         change = Signal(bits, reset_less=True)
         steps = Signal(range(bits + 1), reset_less=True)
         accepted = Signal(name="accepted")
-        idle, rising, combining, deciding, multiplying, halves, comparing = (
+        idle, rising, deciding, multiplying, halves, comparing = (
             Signal(name=n, init=int(n == "idle"))
-            for n in ("idle", "rising", "combining", "deciding", "multiplying", "halves", "comparing"))
+            for n in ("idle", "rising", "deciding", "multiplying", "halves", "comparing"))
         energy, first, with_momentum = (Signal.like(v, name=n, reset_less=True) for n, v in
                                         (("energy", beat.energy), ("first", beat.first),
                                          ("with_momentum", beat.with_momentum)))
@@ -115,14 +115,10 @@ class GuardDecision(wiring.Component):
             m.d.sync += [idle.eq(0), rising.eq(1), energy.eq(beat.energy), first.eq(beat.first),
                          with_momentum.eq(beat.with_momentum), tolerance.eq(self.tolerance), floor.eq(self.floor)]
 
-        # the energy's compare in two clocks of its own, its halves then their combination (a carry chain as
-        # wide as the energy is most of a clock; feeding the window's and the scale's enables in the same clock,
-        # or a route after it, is too long a path for the engine's clock), then the decision, the scale and the
-        # window in one clock; the scale's next states (grown, shrunk) are formed beside the compare, from
-        # registers, so that only the choice between them follows its flag
-        rise_half = bits // 2
-        rise_high, rise_equal, rise_low = (Signal(name=n, reset_less=True)
-                                           for n in ("rise_high_above", "rise_high_equal", "rise_low_above"))
+        # the energy's compare in a clock of its own (a carry chain as wide as the energy, feeding the
+        # window's and the scale's enables in the same clock, is too long a path for the engine's clock),
+        # then the decision, the scale and the window in one clock; the scale's next states (grown, shrunk) are
+        # formed beside the compare, from registers, so that only the choice between them follows its flag
         rises = Signal(name="rises")
         grows = Signal(name="scale_grows", reset_less=True)
         shift_grown, shift_shrunk = (Signal.like(shift, name=n, reset_less=True)
@@ -130,20 +126,16 @@ class GuardDecision(wiring.Component):
         count_grown = Signal.like(accepted_count, name="count_grown", reset_less=True)
         grows_now = accepted_count + 1 >= SCALE_GROW_AFTER
         with m.If(rising):
-            m.d.sync += [rising.eq(0), combining.eq(1), rise_high.eq(energy[rise_half:] > kept[rise_half:]),
-                         rise_equal.eq(energy[rise_half:] == kept[rise_half:]),
-                         rise_low.eq(energy[:rise_half] > kept[:rise_half]), grows.eq(grows_now),
+            m.d.sync += [rising.eq(0), deciding.eq(1), rises.eq(energy > kept), grows.eq(grows_now),
                          shift_grown.eq(Mux(shift > 0, shift - 1, 0)),
                          count_grown.eq(Mux(grows_now, Mux(shift > 0, 0, SCALE_GROW_AFTER), accepted_count + 1)),
                          shift_shrunk.eq(Mux(with_momentum | (shift > SCALE_MAX_SHIFT), shift, shift + 1))]
-        with m.If(combining):  # energy > kept
-            m.d.sync += [combining.eq(0), deciding.eq(1), rises.eq(rise_high | (rise_equal & rise_low))]
         newest = Mux(first | ~rises, energy, kept)
-        # `deciding` is `combining` a clock later; the window's energies and the kept energy with the scale each
+        # `deciding` is `rising` a clock later; the window's energies and the kept energy with the scale each
         # move on a copy of their own, placed by them (one flip-flop enabling them all and starting the
         # multiply is a net across the device)
-        deciding_window = kept_register(m, combining, name="deciding_window", platform=platform)
-        deciding_scale = kept_register(m, combining, name="deciding_scale", platform=platform)
+        deciding_window = kept_register(m, rising, name="deciding_window", platform=platform)
+        deciding_scale = kept_register(m, rising, name="deciding_scale", platform=platform)
         with m.If(deciding):  # the multiplier, the window's oldest once the new energy is in, in the low bits
             m.d.sync += [deciding.eq(0), multiplying.eq(1), steps.eq(bits), allowed.eq(energies[size - 1])]
         with m.If(deciding_window):

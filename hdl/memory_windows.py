@@ -17,7 +17,7 @@ from .logic import or_tree
 from .rom import ENTRY_BANK_DEPTH
 
 __all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
-           "needs_pin_registers", "needs_registered_select", "read_latency",
+           "needs_registered_select", "read_latency",
            "write_signature"]
 
 #: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`), for the
@@ -31,15 +31,6 @@ def needs_registered_select(fs: FormatSet, capacity: EngineCapacity) -> bool:
     ``registered_select``), as the entry memory does: a bank multiplexer after the output registers of
     banks spread over the die is a route across it with logic on the way (``docs/synthesis.md``)."""
     return dp16kd_banks(capacity.vertices, vector_layout(fs.position).size)[2] > 1
-
-
-def needs_pin_registers(capacity: EngineCapacity) -> bool:
-    """Whether the node and triangle memories take a register of their own before every block RAM input
-    (:class:`BlockRam`'s ``pin_registers``) without a registered bank select: in a build with the guard.
-    Its three proposal memories fill the device's block RAM columns so far that one memory's block RAMs
-    lie far apart, and one read address register driving them all is a route across the die
-    (``docs/engine-guard.md``)."""
-    return capacity.guard
 
 
 def read_latency(registered_select: bool, pin_registers: bool = False) -> int:

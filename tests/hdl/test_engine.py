@@ -91,13 +91,13 @@ def assert_same_run(read_back, expected):
 # exported Verilog.
 # The second run stores its 66 entries in banks of 8 words (nine banks used of 32, in three of the bank
 # select's groups of four), the first in one.
-# The node and triangle memories' reads: in the first run straight from the block RAMs (two clocks), in
-# the second through the pin registers the engine takes in a build with the guard (three), in the third
-# also through the registered bank select (five), which the engine takes at capacities whose node
-# memories need several block RAM banks.
+# The node and triangle memories' reads: in the first run straight from the block RAMs (two clocks, the
+# default), in the second through the pin registers alone (three, a build option), in the third also
+# through the registered bank select (five), which the engine takes at capacities whose node memories
+# need several block RAM banks.
 @pytest.mark.parametrize("run, bank_depth, registered_select, pin_registers, latency", [
-    ("paper-variable", 256, False, False, 2),
-    ("paper-fixed-barrier-damped", 8, False, None, 3),
+    ("paper-variable", 256, False, None, 2),
+    ("paper-fixed-barrier-damped", 8, False, True, 3),
     ("momentum-barrier", 8, True, None, 5)])
 def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, pin_registers, latency):
     image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
@@ -113,11 +113,12 @@ def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, 
 
 
 def test_the_memories_registers_are_checked_and_follow_the_build():
-    """Pin registers by default where the guard is built, not without it; the registered select needs them."""
+    """No pin registers by default, with or without the guard; the registered select needs them."""
     with warnings.catch_warnings():  # engines built here are never elaborated
         warnings.simplefilter("ignore", UnusedElaboratable)
-        assert SpringflatEngine(FS, CAPACITY).pin_registers is True
+        assert SpringflatEngine(FS, CAPACITY).pin_registers is False
         assert SpringflatEngine(FS, dataclasses.replace(CAPACITY, guard=False)).pin_registers is False
+        assert SpringflatEngine(FS, CAPACITY, pin_registers=True).pin_registers is True
         assert SpringflatEngine(FS, CAPACITY, registered_select=True).pin_registers is True
         for flag in ("registered_select", "pin_registers"):
             with pytest.raises(TypeError, match=f"{flag} must be a bool or None, not 1"):

@@ -127,8 +127,6 @@ def test_the_scale_grows_back_after_accepted_steps():
 
 def test_latency():
     dut, run, _ = run_decision([(5, 1, 0), (4, 0, 0), (9, 0, 1)], TOLERANCE, 0)
-    # the rise's halves, their combination, the decision, the multiply, the halves, the compare, o
-    assert dut.latency == dut.energy_bits + 6
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * 3
 
 
@@ -187,21 +185,6 @@ def test_the_floor_compare_across_the_energys_halves(high, low, settled):
     want = golden(items, TOLERANCE, floor)
     assert want[-1][2] == settled
     _, _, got = run_decision(items, TOLERANCE, floor)
-    assert got == want
-
-
-@pytest.mark.parametrize("high, low, accepted", [(1, -1, 0), (0, 1, 0), (-1, 1, 1), (0, 0, 1), (0, -1, 1)])
-def test_the_rise_compare_across_the_energys_halves(high, low, accepted):
-    """A step's energy against the kept one where their halves disagree (the rise is compared split at half
-    the width): the new energy's high half ``high`` above the kept one's, its low half ``low`` above."""
-    half = ENERGY_BITS // 2
-    kept = (1 << 70) + (5 << half) + 12345
-    kept_high, kept_low = kept >> half, kept & ((1 << half) - 1)
-    energy = ((kept_high + high) << half) | (kept_low + low)
-    items = [(kept, 1, 0), (energy, 0, 1)]
-    want = golden(items, TOLERANCE, 0)
-    assert want[-1][0] == accepted
-    _, _, got = run_decision(items, TOLERANCE, 0)
     assert got == want
 
 
