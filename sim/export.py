@@ -197,11 +197,11 @@ def interface_markdown(interface: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def export_engine(fs: FormatSet, capacity, out: Path, platform=None, registered_select: bool | None = None) -> dict:
+def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_options: dict | None = None) -> dict:
     """Write the engine's Verilog (``springflat_engine.v``, top ``springflat_engine``) and its register
     map (``register_map.md``, ``register_map.json``, ``springflat_regs.h``: :mod:`sim.register_map_export`);
-    return a short description (module, capacity, bus, files). ``registered_select``: the engine's
-    (``None``: its default for the capacity)."""
+    return a short description (module, capacity, bus, files). ``engine_options``: keyword arguments of
+    :class:`~hdl.engine.SpringflatEngine` for a trial build (``None``: its defaults for the capacity)."""
     from amaranth.back import verilog
 
     from golden_model.engine_spec.register_map import RegisterMap
@@ -211,7 +211,7 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, registered_
 
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     out.mkdir(parents=True, exist_ok=True)
-    engine = SpringflatEngine(fs, capacity, registered_select=registered_select)
+    engine = SpringflatEngine(fs, capacity, **(engine_options or {}))
     (out / f"{ENGINE_MODULE}.v").write_text(verilog.convert(engine, name=ENGINE_MODULE, platform=platform))
     files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)]
     return {"module": ENGINE_MODULE, "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
@@ -275,10 +275,10 @@ def memory_image_markdown(fs: FormatSet, capacity) -> str:
 
 
 def export_engine_bundle(fs: FormatSet, capacity, out: Path, platform=None,
-                         registered_select: bool | None = None) -> dict:
+                         engine_options: dict | None = None) -> dict:
     """:func:`export_engine` plus ``memory_image.md`` (:func:`memory_image_markdown`): what a handoff of
     the engine holds. Returns :func:`export_engine`'s description with the file added."""
-    info = export_engine(fs, capacity, out, platform=platform, registered_select=registered_select)
+    info = export_engine(fs, capacity, out, platform=platform, engine_options=engine_options)
     (out / "memory_image.md").write_text(memory_image_markdown(fs, capacity))
     info["files"].append("memory_image.md")
     return info

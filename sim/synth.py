@@ -224,7 +224,7 @@ def _port_bits(info: dict) -> int:
 
 def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=None, progress=None,
                   router: str = "auto", seed: int = 1, command: str | None = None, capacity=None,
-                  registered_select: bool | None = None) -> dict:
+                  engine_options: dict | None = None) -> dict:
     """Synthesise, place and route ``components`` of format set ``fs`` for ``target``.
 
     Returns the report dict: ``target``, ``device``, ``preset``, ``freq_mhz``, the top's
@@ -235,7 +235,8 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     ``springflat_engine`` (:data:`ENGINE`) is built at ``capacity`` (default
     :data:`~golden_model.engine_spec.image.DEFAULT_CAPACITY`); its entry has ``capacity`` and no
     latency or II (it runs whole iterations), and the report's ``engine`` lists its bundle files;
-    ``registered_select`` is the engine's (``None``: :class:`~hdl.engine.SpringflatEngine`'s default).
+    ``engine_options``: keyword arguments of :class:`~hdl.engine.SpringflatEngine` for a trial build
+    (its memories' ``registered_select``, ``pin_registers``; ``None``: the engine's defaults).
     ``router`` is nextpnr's router: ``auto`` (default) is the timing-driven ``router1``, which
     routes the core in about five minutes; ``router2`` is faster on congested designs but not
     timing-driven.
@@ -279,8 +280,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     if ENGINE in components:
         say(f"exporting {ENGINE} (capacity {capacity.vertices} vertices, {capacity.entries} entries, "
             f"{capacity.triangles} triangles) with its register map")
-        report["engine"] = export_engine_bundle(fs, capacity, out, platform=platform,
-                                                registered_select=registered_select)
+        report["engine"] = export_engine_bundle(fs, capacity, out, platform=platform, engine_options=engine_options)
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     _write_constraints(out, freq)
 
@@ -289,7 +289,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
         if name == ENGINE:
             # Whole iterations, not a stream: no latency or II; the Wishbone port (~90 bits) would fit the
             # pins, but goes through the same wrapper so that every path to and from it is register to register.
-            core = SpringflatEngine(fs, capacity, registered_select=registered_select)
+            core = SpringflatEngine(fs, capacity, **(engine_options or {}))
             wrapper = SerialWrapper(core)
             entry = {"latency": None, "ii": None, "port_bits": wrapper.in_width + wrapper.out_width,
                      "capacity": report["engine"]["capacity"]}
