@@ -7,7 +7,7 @@ writes them into ``DIR`` as ``<mesh name><ending>``, where the endings are the v
 ``--history``, ``--plot`` and ``--distortion`` (``--out .dxf --out .pdf``), each mesh's files all or
 none (:func:`sim.outputs.all_or_nothing`).
 
-Workers: a :class:`concurrent.futures.ProcessPoolExecutor` with ``--jobs`` processes (default: the
+Workers: a :class:`sim.workers.WorkerPool` with ``--jobs`` processes (default: the
 cores this process may use), or with ``--scheduler ADDRESS`` a Dask cluster (``distributed.Client``);
 ``--scheduler local`` starts Dask's own ``LocalCluster`` of ``--jobs`` single-threaded worker
 processes.  Either way the outputs are the same bytes.
@@ -27,6 +27,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 from golden_model.builtin import is_builtin
 from golden_model.layouts import LAYOUT_METHODS
@@ -37,6 +38,7 @@ from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_output_path
 from .patterns import PATTERN_SUFFIXES, pattern_kind
 from .run_options import USER_ERRORS, UserError, integer_argument, params_from_args, resolve_mesh, strict_json
+from .workers import WorkerPool
 
 #: The output options a batch takes endings for, with the file kinds each accepts.
 OUTPUT_OPTIONS = (("out", "--out", PATTERN_SUFFIXES), ("history", "--history", None), ("plot", "--plot", (".png",)),
@@ -202,12 +204,6 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
         raise UserError("several meshes write their outputs to --out-dir DIR (the endings name the files)")
     if args.out_dir is not None:
         out_dir = Path(args.out_dir)
-        if out_dir.exists() and not out_dir.is_dir():
-            raise UserError(f"--out-dir '{out_dir}' exists and is not a directory")
-        try:
-            out_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise OutputWriteError(out_dir, exc, "--out-dir") from None
         names = _names(meshes)
         for option, ending in endings:
             what, suffixes = next((w, s) for o, w, s in OUTPUT_OPTIONS if o == option)
@@ -246,9 +242,9 @@ def _died(job: BatchJob, exc: BaseException) -> MeshOutcome:
 
 def _pool_outcomes(jobs: list[BatchJob], workers: int):
     """Each job's outcome as it finishes, on a local process pool."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as pool:
+    with WorkerPool(min(workers, len(jobs))) as pool:
         futures = {pool.submit(flatten_one, job): job for job in jobs}
         for future in as_completed(futures):
             job = futures[future]
@@ -293,9 +289,38 @@ def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
                 yield _died(by_key[future.key], exc)
 
 
+@contextlib.contextmanager
+def _output_directory(path: Path | None) -> Iterator[None]:
+    """``--out-dir`` made, with its missing parents, for the block; on an exception (a refusal, Ctrl-C)
+    those of them still empty are removed again: a batch that ends so leaves no empty directory."""
+    if path is None:
+        yield
+        return
+    if path.exists() and not path.is_dir():
+        raise UserError(f"--out-dir '{path}' exists and is not a directory")
+    missing = [p for p in (path, *path.parents) if not p.exists()]
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputWriteError(path, exc, "--out-dir") from None
+    try:
+        yield
+    except BaseException:
+        for made in missing:  # the deepest first
+            try:
+                made.rmdir()
+            except OSError:  # not empty: a mesh's files are in it
+                break
+        raise
+
+
 def cmd_batch(args: argparse.Namespace) -> int:
     """Flatten every mesh given; print a line per mesh as it finishes, then a table; the exit status."""
-    meshes = [args.mesh, *args.more_meshes]
+    with _output_directory(None if args.out_dir is None else Path(args.out_dir)):
+        return _run_batch(args, [args.mesh, *args.more_meshes])
+
+
+def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     endings, workers = _check_batch(args, meshes)
     names = _names(meshes)
     options = {k: v for k, v in vars(args).items() if k not in ("func", "mesh", "more_meshes")}

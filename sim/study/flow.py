@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import math
-import signal
 import time
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable, Sequence
 
@@ -21,6 +20,7 @@ from golden_model.study.knobs import (
 )
 from golden_model.study.records import AccuracyTarget, FixedOutcome, RunRecord, compare, run_fixed
 
+from ..workers import WorkerPool
 from .cost import Cost, cost
 
 _WORKER_CASES: list[StudyCase] | None = None
@@ -29,9 +29,6 @@ _WORKER_CASES: list[StudyCase] | None = None
 def _init_worker(cases: list[StudyCase]) -> None:
     global _WORKER_CASES
     _WORKER_CASES = cases
-    # Ctrl-C reaches the whole process group: the parent stops the study (and says so in one line);
-    # a worker finishes its run quietly instead of printing a traceback of its own
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _worker_task(fs: FormatSet, index: int) -> FixedOutcome:
@@ -164,7 +161,7 @@ class Study:
         self._float: dict[str, FlattenResult] = {}
         self._runs: dict[tuple[str, str], RunRecord] = {}  # (fs_key, case) -> record (config label "")
         self._configs: dict[str, Config] = {}  # label -> fully evaluated config
-        self._pool: ProcessPoolExecutor | None = None
+        self._pool: WorkerPool | None = None
         self._external = executor
         self._fail_counts = {c.name: 0 for c in self.cases}
         self._knob_failure: dict[str, str] = {}  # knob -> the case that last failed a change of it
@@ -174,7 +171,10 @@ class Study:
     def __enter__(self) -> "Study":
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, exc_type, exc_value, traceback) -> None:
+        if exc_type is not None and self._pool is not None:  # Ctrl-C, say: the runs in flight are not waited for
+            self._pool.stop()
+            self._pool = None
         self.close()
 
     def close(self) -> None:
@@ -188,7 +188,7 @@ class Study:
         if self.workers <= 1:
             return None
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(self.workers, initializer=_init_worker, initargs=(self.cases,))
+            self._pool = WorkerPool(self.workers, initializer=_init_worker, initargs=(self.cases,))
         return self._pool
 
     def float_result(self, case: StudyCase) -> FlattenResult:

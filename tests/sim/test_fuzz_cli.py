@@ -1117,14 +1117,15 @@ def test_study_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys
     assert seen == [False] and "run/s" not in capsys.readouterr().err
 
 
-def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, timeout: float = 600):
+def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, timeout: float = 600,
+               env: dict[str, str] | None = None):
     """Run ``springflat argv`` in a session of its own; once ``ready()`` holds (or at once), wait ``after`` s
     and send SIGINT to the whole group (as Ctrl-C in a terminal does). Returns the finished process."""
     import signal
     import time
 
     proc = subprocess.Popen([SPRINGFLAT, *argv], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, env=None if env is None else {**os.environ, **env})
     start = time.monotonic()
     ready = ready or _past_python_start_up(proc.pid)
     while not ready() and proc.poll() is None and time.monotonic() - start < timeout:
@@ -1188,6 +1189,59 @@ def test_real_exit_ctrl_c_during_a_directory_output_leaves_nothing(command, name
     assert err.splitlines()[-1] == "springflat: interrupted"
     assert all(line.startswith("springflat") for line in err.splitlines()), err  # synth's step lines at most
     assert os.listdir(tmp_path) == []
+
+
+#: Loaded by the program through PYTHONPATH: the worker pool's start stops for 3 s, after a marker file
+#: appears, either just after the first worker is forked ("fork": the executor does not know it yet) or
+#: just before the executor's thread starts ("thread": the workers are forked, nothing tells them to end).
+#: A Ctrl-C in either window once left workers blocked on the executor's queue and the program's exit
+#: waiting for them for ever.
+_SLOW_POOL_START = """
+import os, time
+from concurrent.futures import process
+from multiprocessing import process as mp_process
+
+def pause():
+    if not os.path.exists(os.environ["SPRINGFLAT_TEST_MARKER"]):
+        open(os.environ["SPRINGFLAT_TEST_MARKER"], "w").close()
+        time.sleep(3)
+
+if os.environ["SPRINGFLAT_TEST_WINDOW"] == "fork":
+    _start = mp_process.BaseProcess.start
+    def start(self):
+        _start(self)
+        pause()
+    mp_process.BaseProcess.start = start
+else:
+    _start = process._ExecutorManagerThread.start
+    def start(self):
+        pause()
+        _start(self)
+    process._ExecutorManagerThread.start = start
+"""
+
+
+@pytest.mark.parametrize("window", ["fork", "thread"])
+@pytest.mark.parametrize("command", [
+    ["study", "dome", "--sweep", "none", "--no-optimise", "--workers", "2", "--max-iter", "5", "--out", "s"],
+    ["flatten", "m.obj", "n.obj", "--jobs", "2", "--out-dir", "d"],
+], ids=["study", "batch"])
+def test_real_exit_ctrl_c_while_the_worker_pool_starts_ends_the_program(command, window, tmp_path):
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(_SLOW_POOL_START)
+    work = tmp_path / "work"
+    work.mkdir()
+    for name in ("m.obj", "n.obj"):
+        (work / name).write_text(obj())
+    marker = tmp_path / "pool-starting"
+    code, out, err = _interrupt(command, work, after=0.5, ready=marker.exists, timeout=120,
+                                env={"PYTHONPATH": str(site), "SPRINGFLAT_TEST_MARKER": str(marker),
+                                     "SPRINGFLAT_TEST_WINDOW": window})
+    assert (code, out) == (130, ""), err
+    assert err.splitlines()[-1] == "springflat: interrupted"
+    assert all(line.startswith("springflat") for line in err.splitlines()), err
+    assert sorted(os.listdir(work)) == ["m.obj", "n.obj"]
 
 
 def test_an_existing_output_directory_keeps_its_other_files(tmp_path, monkeypatch, capsys):

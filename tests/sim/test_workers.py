@@ -1,0 +1,68 @@
+"""sim.workers.WorkerPool: workers that ignore SIGINT, and an exit by exception that ends them.
+
+(The pool's start under SIGINT, the window where a Ctrl-C used to leave the program waiting for ever,
+is checked on the real program: tests/sim/test_fuzz_cli.py.)"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from concurrent.futures.process import BrokenProcessPool
+
+import pytest
+
+from sim.workers import WorkerPool
+
+
+def _interrupt_myself_then_answer() -> int:
+    os.kill(os.getpid(), signal.SIGINT)
+    time.sleep(0.2)  # the signal is handled (or ignored) before the answer
+    return 7
+
+
+def _ignores_sigint() -> bool:
+    return signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
+def _record(path: str) -> None:
+    global _RECORDED
+    _RECORDED = path
+
+
+_RECORDED = ""
+
+
+def _recorded() -> str:
+    return _RECORDED
+
+
+def test_a_worker_ignores_sigint_and_finishes_its_task():
+    """Ignored, not only swallowed by the handler a worker forked under held-back SIGINT inherits."""
+    with WorkerPool(1) as pool:
+        assert pool.submit(_ignores_sigint).result(timeout=60)
+        assert pool.submit(_interrupt_myself_then_answer).result(timeout=60) == 7
+
+
+def test_the_callers_initializer_still_runs_in_each_worker():
+    with WorkerPool(1, initializer=_record, initargs=("given",)) as pool:
+        assert pool.submit(_recorded).result(timeout=60) == "given"
+
+
+def test_leaving_the_pool_by_an_exception_ends_the_runs_in_flight():
+    """Not waited for: the running task is lost (the pool is broken) and every worker has ended."""
+    with pytest.raises(RuntimeError, match="stop"):
+        with WorkerPool(2) as pool:
+            future = pool.submit(time.sleep, 60)
+            processes = list(pool._processes.values())
+            while not future.running():
+                time.sleep(0.01)
+            raise RuntimeError("stop")
+    assert future.done() and isinstance(future.exception(timeout=0), BrokenProcessPool)
+    assert not any(process.is_alive() for process in processes)
+
+
+def test_leaving_the_pool_normally_waits_for_the_tasks():
+    with WorkerPool(2) as pool:
+        futures = [pool.submit(pow, 2, n) for n in range(8)]
+    assert [f.result(timeout=0) for f in futures] == [2 ** n for n in range(8)]
