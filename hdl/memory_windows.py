@@ -17,11 +17,11 @@ from .logic import or_tree
 from .rom import ENTRY_BANK_DEPTH
 
 __all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
-           "needs_registered_select", "read_latency",
-           "write_signature"]
+           "needs_registered_select", "write_signature"]
 
 #: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`), for the
-#: node and triangle memories of a capacity whose node memories are one bank each (:func:`read_latency`).
+#: node and triangle memories of a capacity whose node memories are one bank each and have no pin registers
+#: (:attr:`MemoryWindows.read_latency`).
 READ_LATENCY = BlockRam.LATENCY
 
 
@@ -33,11 +33,6 @@ def needs_registered_select(fs: FormatSet, capacity: EngineCapacity) -> bool:
     return dp16kd_banks(capacity.vertices, vector_layout(fs.position).size)[2] > 1
 
 
-def read_latency(registered_select: bool, pin_registers: bool = False) -> int:
-    """Clocks from a node or triangle memory's read address register to its data: :data:`READ_LATENCY`;
-    with ``pin_registers`` (which ``registered_select`` implies) one clock more, and with
-    ``registered_select`` :attr:`BlockRam.SELECT_STAGES` more again."""
-    return READ_LATENCY + (pin_registers or registered_select) + BlockRam.SELECT_STAGES * registered_select
 #: The entry memory's bank select after the banks' output registers, one registered stage each: every
 #: bank's word kept or zeroed by that bank's own select flag in a register beside the bank, groups of
 #: up to :data:`ENTRY_GROUP` banks ORed, the groups ORed.
@@ -82,7 +77,7 @@ class MemoryWindows(wiring.Component):
     registered_select : bool
         The node and triangle memories as the entry memory: every block RAM input in a register of its
         own (:class:`BlockRam`'s ``pin_registers``: a write lands a clock later) and the read data through
-        its ``registered_select``; :attr:`read_latency` (:func:`read_latency`) is three clocks more.
+        its ``registered_select``; :attr:`read_latency` is three clocks more.
     pin_registers : bool
         The node and triangle memories' pin registers alone (implied by ``registered_select``): a write
         lands a clock later, :attr:`read_latency` is one clock more.
@@ -164,7 +159,7 @@ class MemoryWindows(wiring.Component):
         self.registered_select = bool(registered_select)
         self.pin_registers = bool(pin_registers) or self.registered_select
         #: Clocks from a node or triangle memory's address register to its data.
-        self.read_latency = read_latency(self.registered_select, self.pin_registers)
+        self.read_latency = READ_LATENCY + self.pin_registers + BlockRam.SELECT_STAGES * self.registered_select
         assert self.read_latency <= ENTRY_LATENCY, "the bus aligns every window's word to the entry's"
         select = {"registered_select": self.registered_select, "pin_registers": self.pin_registers}
         layouts = memory_layouts(fs, capacity)
