@@ -216,7 +216,7 @@ def cmd_board(args, fs, capacity) -> int:
 
     if args.board is None:
         raise SynthError("give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)")
-    if args.target is not None or args.components or args.router != "auto":
+    if args.target is not None or args.components or args.router != "auto" or args.placer_timing != "default":
         raise SynthError("--board takes --formats, --capacity, --no-guard, --seed, --freq, --baud and --out only")
     if args.baud is not None and args.baud <= 0:
         raise SynthError(f"--baud must be a positive number of bits per second, not {args.baud}")

@@ -44,7 +44,8 @@ from golden_model.params import ParameterError
 
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["TARGETS", "SynthError", "DoesNotFit", "run_synthesis", "parse_yosys_stat", "parse_nextpnr_log"]
+__all__ = ["PLACER_TIMING", "TARGETS", "SynthError", "DoesNotFit", "nextpnr_argv", "placer_options", "run_synthesis",
+           "parse_yosys_stat", "parse_nextpnr_log"]
 
 
 class SynthError(ParameterError):
@@ -93,6 +94,11 @@ TARGETS = {
         ff_prefix="SB_DFF",
     ),
 }
+#: nextpnr's placer options of each ``placer_timing``: ``strong`` raises the heap placer's criticality
+#: exponent and timing weight from nextpnr's defaults (2 and 10) to 4 and 20, which weighs the long
+#: routes of a device-filling design more (``docs/engine-guard.md``: the guarded engine's seed 1 on one
+#: netlist, 118.16 MHz with the defaults, 124.42 with these).
+PLACER_TIMING = {"default": (), "strong": ("--placer-heap-critexp", "4", "--placer-heap-timingweight", "20")}
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
 TOP = CORE_MODULE
@@ -222,9 +228,31 @@ def _port_bits(info: dict) -> int:
     return sum(p["width"] for p in info["ports"])
 
 
+def placer_options(placer_timing: str) -> tuple[str, ...]:
+    """nextpnr's placer options for ``placer_timing`` (:data:`PLACER_TIMING`), or :class:`SynthError`."""
+    if placer_timing not in PLACER_TIMING:
+        raise SynthError(f"unknown placer timing {placer_timing!r} (choose from {', '.join(PLACER_TIMING)})")
+    return PLACER_TIMING[placer_timing]
+
+
+def nextpnr_argv(target: Target, top: str, freq_mhz: float, router: str, seed: int,
+                 placer_timing: str = "default") -> list[str]:
+    """nextpnr's command line for the wrapped module ``top`` (its Yosys JSON ``top.TARGET.json``): the
+    device, ``--freq`` in MHz, the report and log files beside it, ``router`` (``auto``: router1), the
+    placer ``seed`` and :data:`PLACER_TIMING`'s options."""
+    name = target.name
+    argv = [*target.nextpnr_args, "--json", f"{top}.{name}.json", "--freq", f"{freq_mhz:g}",
+            "--report", f"{top}.{name}.nextpnr.json", "--timing-allow-fail",
+            "--router", "router1" if router == "auto" else router, "--seed", str(seed),
+            *placer_options(placer_timing), "--log", f"{top}.{name}.nextpnr.log"]
+    if name == "ecp5":
+        argv += ["--lpf", "clock.lpf"]
+    return argv
+
+
 def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=None, progress=None,
                   router: str = "auto", seed: int = 1, command: str | None = None, capacity=None,
-                  engine_options: dict | None = None) -> dict:
+                  engine_options: dict | None = None, placer_timing: str = "default") -> dict:
     """Synthesise, place and route ``components`` of format set ``fs`` for ``target``.
 
     Returns the report dict: ``target``, ``device``, ``preset``, ``freq_mhz``, the top's
@@ -239,7 +267,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     (its memories' ``registered_select``, ``pin_registers``; ``None``: the engine's defaults).
     ``router`` is nextpnr's router: ``auto`` (default) is the timing-driven ``router1``, which
     routes the core in about five minutes; ``router2`` is faster on congested designs but not
-    timing-driven.
+    timing-driven. ``placer_timing`` chooses nextpnr's placer options (:data:`PLACER_TIMING`).
     ``progress`` is called with one-line messages (the tool step being run); ``command`` is the
     command line recorded in ``reproduce.sh``.
     """
@@ -259,6 +287,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     freq = float(freq_mhz) if freq_mhz is not None else DEFAULT_FREQ[target]
     if not (0 < freq <= 1000):
         raise SynthError(f"--freq must be in (0, 1000] MHz, got {freq_mhz}")
+    placer_options(placer_timing)  # an unknown one refused before any work
     names = [c.module for c in COMPONENTS]
     specs = {c.module: c for c in COMPONENTS}
     components = list(components) if components else names
@@ -336,13 +365,9 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             status, log = _run_tool(TOOL["yosys"], ["-q", "-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
             if status != 0:
                 raise SynthError(f"yosys failed on {wtop}: {_error_line(log)}")
-            use_router = "router1" if router == "auto" else router
-            entry["router"] = use_router
-            argv = [*tgt.nextpnr_args, "--json", f"{wtop}.{target}.json", "--freq", f"{freq:g}",
-                    "--report", f"{wtop}.{target}.nextpnr.json", "--timing-allow-fail", "--router", use_router,
-                    "--seed", str(seed), "--log", f"{wtop}.{target}.nextpnr.log"]
-            if target == "ecp5":
-                argv += ["--lpf", "clock.lpf"]
+            entry["router"] = "router1" if router == "auto" else router
+            entry["placer_timing"] = placer_timing
+            argv = nextpnr_argv(tgt, wtop, freq, router, seed, placer_timing)
             entry["nextpnr_command"] = f"nextpnr-{'ecp5' if target == 'ecp5' else 'ice40'} " + shlex.join(argv)
             say(f"[{target} {name}] nextpnr place and route at {freq:g} MHz "
                 f"({'20-40 minutes' if name == ENGINE else 'a few minutes' if name in ('node_update', TOP) else 'under a minute'})")

@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from .synth import ENGINE, TARGETS, DoesNotFit, SynthError, report_markdown, run_synthesis
+from .synth import ENGINE, PLACER_TIMING, TARGETS, DoesNotFit, SynthError, report_markdown, run_synthesis
 
 __all__ = ["add_parser", "cmd_synth"]
 
@@ -66,6 +66,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         "depth (3072 18432 6144 fits the ECP5-85F only so; docs/engine-guard.md)")
     p.add_argument("--router", choices=("auto", "router1", "router2"), default="auto",
                    help="nextpnr router (default auto: the timing-driven router1; router2 is not timing-driven)")
+    p.add_argument("--placer-timing", choices=tuple(PLACER_TIMING), default="default",
+                   help="nextpnr's placer: default, or strong (the heap placer's criticality exponent and timing "
+                        "weight 4 and 20 instead of 2 and 10: more weight on long routes)")
     p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -85,6 +88,8 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
         parts.append("--no-guard")
     if args.router != "auto":
         parts += ["--router", args.router]
+    if args.placer_timing != "default":
+        parts += ["--placer-timing", args.placer_timing]
     if args.seed != 1:
         parts += ["--seed", str(args.seed)]
     parts += ["--out", str(out)]
@@ -124,7 +129,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
         try:
             report = run_synthesis(fs, args.target, args.freq, build, components=args.components,
                                    progress=lambda msg: progress(shown(msg)), router=args.router, seed=args.seed,
-                                   command=_command_line(args, out), capacity=capacity)
+                                   command=_command_line(args, out), capacity=capacity,
+                                   placer_timing=args.placer_timing)
         except SynthError as exc:  # a tool failed: its logs are kept in --out, when there are any
             failure = SynthError(shown(str(exc)))
             if not any(build.iterdir()):

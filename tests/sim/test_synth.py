@@ -19,7 +19,7 @@ import pytest
 
 from sim import cli
 from support.ram_traffic import icarus_run, ram_reads, random_ram_traffic
-from sim.synth import TARGETS, parse_nextpnr_log, parse_yosys_stat
+from sim.synth import TARGETS, SynthError, parse_nextpnr_log, parse_yosys_stat
 from sim.synth_cli import add_parser
 
 pytestmark = pytest.mark.slow  # simulator builds and place-and-route: minutes
@@ -119,6 +119,32 @@ def test_bad_requests(argv, message, capsys, tmp_path):
     assert status == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("springflat: error:") and message in lines[0]
+
+
+def test_nextpnr_argv_default_is_the_recorded_command_and_strong_adds_the_placer_weights():
+    """The default is the command the engine's recorded rows ran (docs/results/synthesis.csv); strong adds
+    the heap placer's criticality exponent 4 and timing weight 20, nothing else."""
+    from sim.synth import nextpnr_argv
+
+    recorded = ("--85k --package CABGA381 --lpf-allow-unconstrained --json springflat_engine_pnr.ecp5.json "
+                "--freq 125 --report springflat_engine_pnr.ecp5.nextpnr.json --timing-allow-fail --router router1 "
+                "--seed 1 --log springflat_engine_pnr.ecp5.nextpnr.log --lpf clock.lpf").split()
+    assert nextpnr_argv(TARGETS["ecp5"], "springflat_engine_pnr", 125.0, "auto", 1) == recorded
+    strong = nextpnr_argv(TARGETS["ecp5"], "springflat_engine_pnr", 125.0, "auto", 1, "strong")
+    pairs = {(a, b) for a, b in zip(strong, strong[1:])}
+    assert {("--placer-heap-critexp", "4"), ("--placer-heap-timingweight", "20")} <= pairs
+    assert sorted(strong) == sorted(recorded + ["--placer-heap-critexp", "4", "--placer-heap-timingweight", "20"])
+    with pytest.raises(SynthError, match="unknown placer timing 'fast'"):
+        nextpnr_argv(TARGETS["ecp5"], "x", 125.0, "auto", 1, "fast")
+
+
+def test_the_placer_timing_is_in_the_bundles_command_line(tmp_path):
+    from sim.synth_cli import _command_line
+
+    argv = ["synth", "--target", "ecp5", "--components", "springflat_engine", "--placer-timing", "strong", "--seed", "2"]
+    line = _command_line(cli.build_parser().parse_args(argv), tmp_path / "o")
+    assert "--placer-timing strong --seed 2" in line
+    assert "--placer-timing" not in _command_line(cli.build_parser().parse_args(argv[:5]), tmp_path / "o")
 
 
 def test_parsers():
