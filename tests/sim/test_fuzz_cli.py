@@ -1133,7 +1133,12 @@ def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, ti
     time.sleep(after)
     assert proc.poll() is None, "the command ended before it could be interrupted"
     os.killpg(proc.pid, signal.SIGINT)
-    out, err = proc.communicate(timeout=timeout)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:  # a hang fails the test without leaving its processes behind
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise
     return proc.returncode, out, err
 
 
@@ -1194,8 +1199,8 @@ def test_real_exit_ctrl_c_during_a_directory_output_leaves_nothing(command, name
 #: Loaded by the program through PYTHONPATH: the worker pool's start stops for 3 s, after a marker file
 #: appears, either just after the first worker is forked ("fork": the executor does not know it yet) or
 #: just before the executor's thread starts ("thread": the workers are forked, nothing tells them to end).
-#: A Ctrl-C in either window once left workers blocked on the executor's queue and the program's exit
-#: waiting for them for ever.
+#: A Ctrl-C in either window must not leave workers blocked on the executor's queue and the program's
+#: exit waiting for them for ever.
 _SLOW_POOL_START = """
 import os, time
 from concurrent.futures import process
