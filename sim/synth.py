@@ -96,8 +96,7 @@ TARGETS = {
 }
 #: nextpnr's placer options of each ``placer_timing``: ``strong`` raises the heap placer's criticality
 #: exponent and timing weight from nextpnr's defaults (2 and 10) to 4 and 20, which weighs the long
-#: routes of a device-filling design more (``docs/engine-guard.md``: the guarded engine's seed 1 on one
-#: netlist, 118.16 MHz with the defaults, 124.42 with these).
+#: routes of a device-filling design more (measured on the guarded engine: ``docs/engine-guard.md``).
 PLACER_TIMING = {"default": (), "strong": ("--placer-heap-critexp", "4", "--placer-heap-timingweight", "20")}
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
