@@ -1,9 +1,11 @@
-"""A trial, not a default: the guarded momentum step with a graph-Laplacian preconditioner (float only).
+"""A trial, not a default: the guarded momentum step with a graph-Laplacian preconditioner or larger Jacobi
+weights (float only).
 
 Usage::
 
     .venv/bin/python benchmarks/laplacian_step_trial.py                      # issue 25's four patches
     .venv/bin/python benchmarks/laplacian_step_trial.py --corpus [--only NAME ...] [--kinds KIND ...]
+    .venv/bin/python benchmarks/laplacian_step_trial.py [--corpus] --variants jacobi jacobi2
 
 The default step proposes ``V' = β_k·V + s·w_i·f_i`` with the Jacobi weights ``w_i = 2/(C·deg_i)``
 (``docs/guard.md``). The trial replaces ``w_i·f_i`` by ``K⁻¹f`` with ``K = C·((1 + δ)·D − A)``, the
@@ -18,6 +20,8 @@ Variants beside the default (``jacobi``):
 * ``hybrid``: ``K⁻¹f``; a rolled-back plain gradient step (no momentum) switches to the Jacobi step for
   ``HYBRID_JACOBI_STEPS`` accepted steps instead of halving the scale (the global direction, clipped
   node by node by the guard, stops being a descent direction near the floor; the local one does not);
+* ``jacobi2``: the Jacobi step with twice the weights, ``2·w_i`` (the momentum step's stability bound,
+  ``w·λ < 2(1 + β)``, leaves that room where the springs' stiffness is well below its bound ``C·deg_i``);
 * ``sweeps`` (the four patches only): ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from ``w·f``, each one
   more pass over the neighbours, the kind of preconditioner the engine's passes could run.
 
@@ -61,7 +65,7 @@ from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, 
 DELTA = 0.01
 #: ``hybrid``: accepted Jacobi steps after a rolled-back gradient step, before the Laplacian step again.
 HYBRID_JACOBI_STEPS = 20
-VARIANTS = ("jacobi", "laplacian", "hybrid")
+VARIANTS = ("jacobi", "laplacian", "hybrid", "jacobi2")
 #: Four patches only: ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from the default's ``w·f`` (one more
 #: pass over the neighbours each, as the engine could run them).
 SWEEPS = 8
@@ -113,8 +117,9 @@ class _Trial(reference._Jacobi):
             self.momentum_k = 0
         power = float(np.sum(forces * self.velocities))
         jacobi_left = getattr(self, "_jacobi_left", 0)
-        if self.variant == "jacobi" or (self.variant == "hybrid" and jacobi_left > 0):
-            step = guard.scale.value * self.model.step_weights(self.positions, self.signed)[:, None] * forces
+        if self.variant in ("jacobi", "jacobi2") or (self.variant == "hybrid" and jacobi_left > 0):
+            factor = 2.0 if self.variant == "jacobi2" else 1.0
+            step = factor * guard.scale.value * self.model.step_weights(self.positions, self.signed)[:, None] * forces
         elif self.variant == "sweeps":
             step = guard.scale.value * self._sweeps(forces)
         else:
@@ -166,8 +171,7 @@ def file_defaults(mesh) -> FlattenParams:
                          max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
 
 
-def generated() -> None:
-    variants = VARIANTS + ("sweeps",)
+def generated(variants: tuple[str, ...]) -> None:
     print("| patch | minimum's E_C | " + " | ".join(f"{v}: to within 1 %" for v in variants) + " | "
           + " | ".join(f"{v}: default stop (status, it, E_C)" for v in variants) + " |")
     print("|---" * (2 + 2 * len(variants)) + "|")
@@ -185,21 +189,21 @@ def generated() -> None:
         print(f"| {name} | {target:.4f} | " + " | ".join(within) + " | " + " | ".join(stopped) + " |", flush=True)
 
 
-def corpus(directory: Path, only: list[str] | None, kinds: list[str] | None) -> None:
+def corpus(directory: Path, only: list[str] | None, kinds: list[str] | None, variants: tuple[str, ...]) -> None:
     from corpus_table import EC_TOLERANCE, patches
 
     cache_path = directory / "peers.json"
     cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
-    print("| mesh | V | " + " | ".join(f"{v}: status, it, s, E_C, folded" for v in VARIANTS) + " | SLIM E_C | ARAP E_C (folded) |")
-    print("|---" * (4 + len(VARIANTS)) + "|")
-    totals = {v: [0, 0.0, 0, 0] for v in VARIANTS}  # iterations, seconds, E_C misses, folded runs
+    print("| mesh | V | " + " | ".join(f"{v}: status, it, s, E_C, folded" for v in variants) + " | SLIM E_C | ARAP E_C (folded) |")
+    print("|---" * (4 + len(variants)) + "|")
+    totals = {v: [0, 0.0, 0, 0] for v in variants}  # iterations, seconds, E_C misses, folded runs
     for entry in patches(directory, only, kinds):
         mesh = load_mesh(directory / f"{entry['name']}.ply")
         p0 = start_layout(mesh, "auto").positions
         peers = cache.get(entry["patch"]["sha256"], {})
         slim, arap = peers.get("slim", {}), peers.get("arap", {})
         cells = []
-        for variant in VARIANTS:
+        for variant in variants:
             start = time.perf_counter()
             r = run(variant, mesh, p0, file_defaults(mesh))
             seconds = time.perf_counter() - start
@@ -227,11 +231,15 @@ def main() -> None:
                         metavar="DIR", help="the corpus's no-option runs (default DIR: build/corpus)")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="with --corpus: only these patches")
     parser.add_argument("--kinds", nargs="+", metavar="KIND", help="with --corpus: only these kinds")
+    parser.add_argument("--variants", nargs="+", choices=VARIANTS + ("sweeps",), metavar="VARIANT",
+                        help=f"the steps to compare (default: all; {', '.join(VARIANTS)}, and sweeps without --corpus)")
     args = parser.parse_args()
     if args.corpus is None:
-        generated()
+        generated(tuple(args.variants or VARIANTS + ("sweeps",)))
+    elif "sweeps" in (args.variants or ()):
+        parser.error("sweeps runs on the four patches only, not with --corpus")
     else:
-        corpus(args.corpus, args.only, args.kinds)
+        corpus(args.corpus, args.only, args.kinds, tuple(args.variants or VARIANTS))
 
 
 if __name__ == "__main__":
