@@ -17,8 +17,9 @@ demo: $(STAMP)
 
 # One pytest worker per core (pytest-xdist); a test file stays on one worker, so its module
 # fixtures run once. Exports and simulator builds shared across files are cached under build/
-# behind file locks (sim.cocotb_support.build_lock).
-PYTEST := $(VENV)/bin/python -m pytest -n auto --dist loadfile
+# behind file locks (sim.cocotb_support.build_lock). The slowest tests are listed at the end, so a
+# CI log shows where its time goes.
+PYTEST := $(VENV)/bin/python -m pytest -n auto --dist loadfile --durations=25
 
 test: $(STAMP)
 	$(PYTEST)

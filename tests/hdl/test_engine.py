@@ -1,6 +1,7 @@
 """SpringflatEngine on Amaranth's simulator: whole flattenings through the Wishbone bus and the host driver,
 bit for bit against the golden model's image-driven controller (``run_image``), and the engine's answers to
-bad requests. (The exported Verilog on Icarus and Verilator: ``tests/sim/test_engine_rtl.py``.)"""
+bad requests. The step guard: ``test_engine_guard.py``; the saturation events: ``test_engine_saturation.py``;
+the exported Verilog on Icarus and Verilator: ``tests/sim/test_engine_rtl.py``."""
 
 import dataclasses
 import gc
@@ -12,78 +13,14 @@ from amaranth.hdl import UnusedElaboratable
 from amaranth.sim import Simulator
 
 from golden_model.modes import mode_named
-from golden_model.fixed import FormatSet
-from golden_model.fixed.engine import prepare
-from golden_model.fixed.format import Format
-from golden_model.engine_spec.image import EngineCapacity, build_image, run_image
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
-from golden_model.params import FlattenParams
+from golden_model.engine_spec.image import run_image
 from hdl.engine import SpringflatEngine
+from support.engine_sim import (CAPACITY, FS, INIT, MESH, RUNS, assert_same_run, image_of, run_on_engine,
+                                simulate)
 from support.wishbone import ThreadedBus, wishbone_read, wishbone_write
 from sim.engine_driver import BusError, EngineDriver
-from golden_model.engine_spec.image import UNGUARDED
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
-
-FS = FormatSet.preset("default")
-CAPACITY = EngineCapacity(32, 256, 64)
-MESH = dome_grid(4)  # 16 vertices, 66 entries, 18 triangles
-
-RUNS = {
-    "paper-variable": FlattenParams(density="auto", max_iter=4),
-    "paper-fixed-barrier-damped": FlattenParams(density="auto", step="fixed", dt=0.2, damping=0.1, barrier=True,
-                                                max_iter=4),
-    # from the PCA layout the momentum restarts (S < 0) at the third and eighth steps
-    "momentum-barrier": FlattenParams(dynamics="momentum", **UNGUARDED, max_iter=9),
-}
-INIT = {"momentum-barrier": "pca"}
-
-
-def image_of(params: FlattenParams, capacity: EngineCapacity = CAPACITY, init: str = "tutte"):
-    problem = prepare(MESH, initial_layout(MESH, init), params, FS)
-    return build_image(problem, capacity)
-
-
-def simulate(dut, host, watch=None):
-    """Run ``host(driver, bus)`` (the synchronous driver, in a thread) against ``dut`` on the simulator."""
-    bus = ThreadedBus(BusError, wait_states=watch.get("wait_states") if watch else None)
-    bus.run(lambda: host(EngineDriver(bus, dut.register_map), bus))
-    sim = Simulator(dut)
-    sim.add_clock(1e-8)
-
-    async def bench(ctx):
-        await bus.serve(ctx, dut.bus)
-
-    sim.add_testbench(bench)
-    if watch and "watcher" in watch:
-        sim.add_testbench(watch["watcher"], background=True)
-    sim.run()
-    return bus
-
-
-def run_on_engine(dut, image, watch=None):
-    """Load ``image``, start, wait, read back: ``(result, read_back)``."""
-    out = {}
-
-    def host(driver, bus):
-        driver.load(image)
-        driver.start()
-        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
-        out["read_back"] = driver.read_back()
-
-    simulate(dut, host, watch)
-    return out["result"], out["read_back"]
-
-
-def assert_same_run(read_back, expected):
-    assert read_back.result == expected.status
-    assert read_back.iterations == expected.iterations
-    assert read_back.saturations == expected.saturations
-    assert (read_back.area_error, read_back.shape_error, read_back.energy) == (
-        expected.area_error, expected.shape_error, expected.energy)
-    np.testing.assert_array_equal(read_back.positions, expected.positions)
-    np.testing.assert_array_equal(read_back.velocities, expected.velocities)
 
 
 # The paper dynamics with variable step and the fixed step with barrier run here in one case each (the
@@ -126,193 +63,6 @@ def test_the_memories_registers_are_checked_and_follow_the_build():
         with pytest.raises(ValueError, match="registered_select needs the pin registers"):
             SpringflatEngine(FS, CAPACITY, registered_select=True, pin_registers=False)
         gc.collect()
-
-
-# The guarded step (the momentum dynamics' default) from a Tutte layout squeezed across: steps are clipped
-# by the certificate and one is rolled back; without the barrier and squeezed further, nodes are also
-# held still (frozen) and the forces saturate, through the registered bank select's latencies.
-GUARDED = {
-    "clipped-and-rolled-back": (0.05, FlattenParams(dynamics="momentum", max_iter=12), False),
-    "frozen-and-saturating": (0.02, FlattenParams(dynamics="momentum", barrier=False, max_iter=12), True),
-}
-
-
-@pytest.mark.parametrize("case", GUARDED)
-def test_guarded_whole_run_matches_the_golden_model(case):
-    squeeze, params, registered_select = GUARDED[case]
-    layout = initial_layout(MESH, "tutte") * np.array([squeeze, 1.0])
-    image = build_image(prepare(MESH, layout, params, FS), CAPACITY)
-    expected = run_image(image, FS)
-    guard = expected.guard
-    assert guard.clipped > 0
-    assert guard.rejected > 0 if case == "clipped-and-rolled-back" else (guard.frozen > 0 and expected.saturations > 0)
-    dut = SpringflatEngine(FS, CAPACITY, registered_select=registered_select)
-    result, read_back = run_on_engine(dut, image)
-    assert result == expected.status
-    assert_same_run(read_back, expected)
-
-
-def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
-    """ABORT in the middle of each of the guard's passes (the scatters and proposals left half written), each
-    followed by a reload: the last, whole run is bit-exact with the golden model (the propose pass clears
-    what an aborted run left in the scatters). The clocks are taken from a first run's phases."""
-    from golden_model.engine_spec.register_map import STATES
-    from hdl.phase_controller import PHASES
-
-    squeeze, params, _ = GUARDED["clipped-and-rolled-back"]
-    image = build_image(prepare(MESH, initial_layout(MESH, "tutte") * np.array([squeeze, 1.0]), params, FS),
-                        CAPACITY)
-    guard_phases = ("decide", "rollback", "integrate", "stuck", "hold", "certify", "commit")
-    first_span = {}
-
-    def watch_phases(dut, spans):
-        async def watch(ctx):
-            phase, state, clock, last = dut.debug_signals["phase"], dut.debug_signals["state"], 0, None
-            while True:
-                await ctx.tick()
-                if ctx.get(state) != STATES.index("running"):
-                    continue
-                name = PHASES[ctx.get(phase)]
-                if name != last:
-                    spans.append([name, clock, clock])
-                spans[-1][2], last, clock = clock, name, clock + 1
-        return watch
-
-    spans = []
-    dut = SpringflatEngine(FS, CAPACITY)
-    run_on_engine(dut, image, {"watcher": watch_phases(dut, spans)})
-    for name, begin, end in spans:
-        if name in guard_phases and name not in first_span and end - begin >= 4:
-            first_span[name] = (begin + end) // 2
-    assert set(first_span) == set(guard_phases), spans
-
-    dut = SpringflatEngine(FS, CAPACITY)
-    aborted_in, drained_at, out = [], [], {}
-
-    async def watch(ctx):
-        phase, state, last, clock = dut.debug_signals["phase"], dut.debug_signals["state"], 0, 0
-        while True:
-            await ctx.tick()
-            clock = clock + 1 if ctx.get(state) == STATES.index("running") else 0
-            now = ctx.get(phase)
-            if PHASES[now] == "drain" and PHASES[last] != "drain":
-                aborted_in.append(PHASES[last])
-                drained_at.append(clock)
-            last = now
-
-    def abort_after(driver, bus, clocks):
-        driver.load(image)
-        driver.start()
-        bus.idle(clocks)
-        driver.abort()
-        bus.idle(300)
-
-    def host(driver, bus):
-        # the clocks from START's write to the run's first clock, calibrated by a first abort
-        abort_after(driver, bus, first_span["decide"])
-        offset = drained_at[-1] - first_span["decide"]
-        aborted_in.clear()
-        for clock in first_span.values():
-            abort_after(driver, bus, clock - offset)
-        driver.load(image)
-        driver.start()
-        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
-        out["read_back"] = driver.read_back()
-
-    simulate(dut, host, {"watcher": watch})
-    assert set(aborted_in) == set(guard_phases), (aborted_in, first_span)
-    assert_same_run(out["read_back"], run_image(image, FS))
-
-
-def test_abort_in_the_first_clock_of_a_guard_pass_drains_the_whole_pass():
-    """ABORT whose registered copy falls in the first clock of a guard pass, when the pass's counter still
-    stands at the previous pass's end (it restarts at that clock's end): the drain waits for the pass, so
-    once STATUS reads idle nothing is in flight and nothing writes the node memory. The abort is written
-    from the simulator's clock (not the host thread's), in three clocks around the one that lands it in
-    the pass's first clock; a first run measures the passes' clocks and the abort's lag."""
-    from golden_model.engine_spec.register_map import STATES
-    from hdl.phase_controller import PHASES
-
-    squeeze, params, _ = GUARDED["clipped-and-rolled-back"]
-    image = build_image(prepare(MESH, initial_layout(MESH, "tutte") * np.array([squeeze, 1.0]), params, FS),
-                        CAPACITY)
-    dut = SpringflatEngine(FS, CAPACITY)
-    control = dut.register_map.register("CONTROL")
-    start, abort = ({f.name: 1 << f.lsb for f in control.fields}[name] for name in ("start", "abort"))
-    idle, running = STATES.index("idle"), STATES.index("running")
-    targets = {"certify": "hold", "commit": "certify"}  # a triangle pass's restart, a node pass's
-    log = []  # per clock: (phase name or None when not running, state, passes_idle, node memory written)
-    bus = ThreadedBus(BusError)
-    bus.run(lambda: EngineDriver(bus, dut.register_map).load(image))
-
-    async def watch(ctx):
-        s = dut.debug_signals
-        while True:
-            await ctx.tick()
-            state = ctx.get(s["state"])
-            log.append((PHASES[ctx.get(s["phase"])] if state == running else None, state,
-                        ctx.get(s["passes_idle"]), ctx.get(s["node_write"])))
-
-    def first_clock(phase, since):
-        return next(t for t in range(since, len(log)) if log[t][0] == phase)
-
-    async def until(ctx, clock):
-        while len(log) < clock:
-            await ctx.tick()
-
-    async def run(ctx, seen, abort_at):
-        """START, then once phase ``seen`` has begun ABORT at the clock ``abort_at(START's clock)``; then
-        80 clocks after STATUS reads idle. The clocks of START and of ABORT's write."""
-        await wishbone_write(ctx, dut.bus, control.offset, start)
-        began = len(log)
-        while not any(phase == seen for phase, *_ in log[began:]):
-            await ctx.tick()
-        await until(ctx, abort_at(began))
-        written = len(log)
-        await wishbone_write(ctx, dut.bus, control.offset, abort)
-        while log[-1][1] != idle:
-            await ctx.tick()
-        await ctx.tick().repeat(80)
-        return began, written
-
-    runs = {}
-
-    async def bench(ctx):
-        await bus.serve(ctx, dut.bus)
-        # the first run: each pass's first clock from the hold pass's, and the lag from the abort's
-        # write to the drain's first clock
-        clocks = {}
-
-        def in_commit(began):
-            clocks.update({name: first_clock(name, began) for name in ("hold", "certify", "commit")})
-            return clocks["commit"] + 3
-
-        _, written = await run(ctx, "commit", in_commit)
-        lag = first_clock("drain", clocks["commit"]) - written
-        for target, before in targets.items():
-            span = clocks[target] - clocks[before]
-            for shift in (-1, 0, 1):
-                def at(began):  # the drain's first clock is the pass's second: ABORT's copy in its first
-                    return first_clock(before, began) + span + 1 - lag + shift
-                runs[target, shift] = await run(ctx, before, at)
-
-    sim = Simulator(dut)
-    sim.add_clock(1e-8)
-    sim.add_testbench(bench)
-    sim.add_testbench(watch, background=True)
-    sim.run()
-
-    landed_in_first_clock = set()
-    for (target, shift), (began, _) in runs.items():
-        drain = first_clock("drain", began)
-        clocks_in_target = sum(1 for phase, *_ in log[began:drain] if phase == target)
-        if clocks_in_target == 1 and log[drain - 1][0] == target:
-            landed_in_first_clock.add(target)
-        stopped = next(t for t in range(drain, len(log)) if log[t][1] == idle)
-        after = log[stopped:stopped + 80]
-        assert len(after) == 80
-        assert all(passes_idle and not written for _, _, passes_idle, written in after), (target, shift, after)
-    assert landed_in_first_clock == set(targets), runs
 
 
 def test_every_iteration_state_matches_with_bus_wait_states():
@@ -520,55 +270,6 @@ def test_a_build_without_the_guard_runs_the_momentum_step_bit_exact():
     result, read_back = run_on_engine(dut, image)
     assert result == expected.status and expected.iterations > 3
     assert_same_run(read_back, expected)
-
-
-def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged():
-    """A run that saturates (a large spring constant and step): SATURATIONS equals the golden model's
-    count, and with a saturation limit the run stops as diverged at the same iteration."""
-    params = FlattenParams(step="fixed", dt=0.9, spring=7.0, density="auto", max_iter=6)
-    image = image_of(params)
-    expected = run_image(image, FS)
-    assert expected.saturations > 10  # the case saturates
-    limited = dataclasses.replace(image, constants={**image.constants, "saturation_limit": 4})
-    expected_limited = run_image(limited, FS)
-    assert expected_limited.status == "diverged"
-    for img, exp in ((image, expected), (limited, expected_limited)):
-        _, read_back = run_on_engine(SpringflatEngine(FS, CAPACITY), img)
-        assert_same_run(read_back, exp)
-
-
-@pytest.mark.parametrize("dynamics", ["momentum", "paper"])
-def test_area_and_shape_sum_saturations_are_counted(dynamics):
-    """Narrow face_edge and error_acc formats: the area pass's and the E_C sum's saturation events reach
-    SATURATIONS as the golden model counts them (the test above saturates only the force pass and the
-    integrator)."""
-    fs = dataclasses.replace(FS, face_edge=Format(True, 0, 22), error_acc=Format(False, 2, 16))
-    params = FlattenParams(dynamics=dynamics, density="auto", max_iter=6,
-                           **(UNGUARDED if dynamics == "momentum" else {}))
-    image = build_image(prepare(MESH, initial_layout(MESH, "tutte"), params, fs), CAPACITY)
-    expected = run_image(image, fs)
-    assert expected.saturations > 10  # the case saturates
-    _, read_back = run_on_engine(SpringflatEngine(fs, CAPACITY), image)
-    assert_same_run(read_back, expected)
-
-
-def test_error_measure_saturations_are_counted_before_the_limit_is_tested():
-    """A layout twice the mesh's size: E_S and E_C are 1 or more at every measurement, the only events
-    (the normalisers saturate; two per measurement). Counted as the golden model counts them, and with
-    a limit of 4 the run stops as diverged after its one iteration, not at N_max: the check phase waits until the
-    normalisers' events are in the count (without that wait it saw 3 and went on). 72 triangles: the area
-    normaliser answers after the energy check, so its event is the math phase's last."""
-    params = FlattenParams(density="auto", max_iter=1)
-    mesh, capacity = dome_grid(7), EngineCapacity(64, 512, 128)
-    image = build_image(prepare(mesh, 2.0 * initial_layout(mesh, "tutte"), params, FS), capacity)
-    expected = run_image(image, FS)
-    assert (expected.saturations, expected.status) == (4, "max-iterations")
-    limited = dataclasses.replace(image, constants={**image.constants, "saturation_limit": 4})
-    expected_limited = run_image(limited, FS)
-    assert (expected_limited.status, expected_limited.iterations) == ("diverged", 1)
-    for img, exp in ((image, expected), (limited, expected_limited)):
-        _, read_back = run_on_engine(SpringflatEngine(FS, capacity), img)
-        assert_same_run(read_back, exp)
 
 
 def test_bus_answers_take_the_documented_clocks():
