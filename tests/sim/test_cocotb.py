@@ -56,9 +56,11 @@ def _paper_params(name, step):
                 tol_energy=p.tol_energy, max_iter=p.max_iter, step=step)
 
 
-@pytest.mark.parametrize("mesh", ["surf1", "surf2"])
+@pytest.mark.parametrize("simulator, mesh", [("verilator", "surf1"), ("verilator", "surf2"), ("icarus", "surf1")])
 def test_closed_loop_on_paper_meshes(simulator, mesh):
-    """A whole flattening through the RTL, to the end, with the paper's parameters."""
+    """A whole flattening through the RTL, to the end, with the paper's parameters (Icarus, some ten times
+    slower, on Surf1 alone)."""
+    need_simulator(simulator)
     config = {"mesh": mesh, "init": "pca", "params": _paper_params(mesh, "variable"),
               "step_latency": SpringflatCore.step_latency_of(DEFAULT)}
     run = run_bench(simulator, DEFAULT, "springflat_core", "closed_loop", config)
@@ -72,10 +74,12 @@ def test_closed_loop_on_paper_meshes(simulator, mesh):
     assert abs(r["shape_error"] - r["float_shape_error"]) <= 1e-3
 
 
-@pytest.mark.parametrize("barrier", [True, False])
+@pytest.mark.parametrize("simulator, barrier", [("verilator", True), ("verilator", False), ("icarus", True)])
 def test_closed_loop_momentum_dynamics(simulator, barrier, tmp_path):
     """The momentum dynamics through the RTL: β_k from the controller, restarts from the RTL's F·V,
-    the barrier's forces in the stream; every iteration bit for bit, the end against the float model."""
+    the barrier's forces in the stream; every iteration bit for bit, the end against the float model
+    (Icarus, some ten times slower, with the barrier alone)."""
+    need_simulator(simulator)
     from golden_model.generate import spherical_cap
     from golden_model.mesh_io import save_obj
 
