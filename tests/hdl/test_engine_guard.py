@@ -2,6 +2,8 @@
 model's ``run_image``, and ABORT in each of the guard's passes (the drain, then a clean rerun). The unguarded
 runs and the bus's answers: ``tests/hdl/test_engine.py``."""
 
+import dataclasses
+
 import pytest
 from amaranth.sim import Simulator
 
@@ -35,7 +37,10 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
     from golden_model.engine_spec.register_map import STATES
     from hdl.phase_controller import PHASES
 
+    # the run up to its rolled-back step, the seventh (the golden model's record says so)
     image = guarded_image("clipped-and-rolled-back")
+    image = dataclasses.replace(image, constants={**image.constants, "max_iter": 7})
+    assert run_image(image, FS).guard.rejected == 1
     guard_phases = ("decide", "rollback", "integrate", "stuck", "hold", "certify", "commit")
     first_span = {}
 
