@@ -81,8 +81,8 @@ def test_ecp5_flavour_whole_run_bit_exact(mode):
     output registers, the multipliers MULT18X18Ds, the step generator's tables DP16KD ROMs), on Icarus with
     the primitives' models: a two-iteration run's state equals run_image's. The DP16KD model reads X where
     a port reads bits the other writes at the same clock, so this also checks that no read whose data is
-    used meets a write (BlockRam's timing contract). (Icarus runs these models at about 60 clocks per
-    second, most of them the bus's loading and reading back: so one run, no run per iteration.)"""
+    used meets a write (BlockRam's timing contract). (Icarus runs these models slowly, most of the clocks
+    the bus's loading and reading back: so one run, no run per iteration.)"""
     need_simulator("icarus")
     image = dome_image(mode, 2)
     run = run_image_on_rtl(image, DEFAULT, "icarus", wait_states=2, seed=11, dsp="ecp5")

@@ -39,9 +39,10 @@ GUARDED = {
 }
 
 
-def image_of(params: FlattenParams, capacity: EngineCapacity = CAPACITY, init: str = "tutte"):
-    problem = prepare(MESH, initial_layout(MESH, init), params, FS)
-    return build_image(problem, capacity)
+def image_of(params: FlattenParams, capacity: EngineCapacity = CAPACITY, init: str = "tutte", squeeze: float = 1.0):
+    """The image of ``MESH`` from its ``init`` layout, squeezed across (x scaled) by ``squeeze``."""
+    layout = initial_layout(MESH, init) * np.array([squeeze, 1.0])
+    return build_image(prepare(MESH, layout, params, FS), capacity)
 
 
 def simulate(dut, host, watch=None):
@@ -88,5 +89,4 @@ def assert_same_run(read_back, expected):
 def guarded_image(case: str):
     """The image of ``GUARDED[case]``: the Tutte layout squeezed across by the case's factor."""
     squeeze, params, _ = GUARDED[case]
-    layout = initial_layout(MESH, "tutte") * np.array([squeeze, 1.0])
-    return build_image(prepare(MESH, layout, params, FS), CAPACITY)
+    return image_of(params, squeeze=squeeze)
