@@ -51,6 +51,33 @@ def test_a_run_over_the_bus_is_the_golden_models(bus, params):
     assert back.saturations == reference.extra["saturations"]
 
 
+def test_a_rerun_after_reloading_the_node_memory_only(bus):
+    """A run writes only the node memory: reloading it (and the constants) runs the same image again,
+    and the reload writes no other memory's words."""
+    driver = EngineDriver(bus, MAP)
+    image = _image()
+    driver.load(image)
+    driver.start()
+    driver.wait()
+    first = driver.read_back()
+    written = []
+    write = bus.write
+    bus.write = lambda address, value: (written.append(address), write(address, value))[1]
+    driver.load(image, memories=("nodes",))
+    nodes = MAP.window("nodes")
+    in_windows = [a for a in written if a >= min(w.base for w in MAP.windows)]
+    assert len(in_windows) == image.nodes.size
+    assert all(nodes.base <= a < nodes.base + nodes.depth * nodes.stride for a in in_windows)
+    driver.start()
+    driver.wait()
+    again = driver.read_back()
+    assert (again.result, again.iterations, again.energy) == (first.result, first.iterations, first.energy)
+    np.testing.assert_array_equal(again.positions, first.positions)
+    with pytest.raises(DriverError) as info:
+        driver.load(image, memories=("nodes", "vertices"))
+    assert one_line(info) == "no memory named 'vertices' (the engine has nodes, entries, triangles)"
+
+
 def test_start_with_no_mesh_loaded(bus):
     driver = EngineDriver(bus, MAP)
     with pytest.raises(DriverError) as info:

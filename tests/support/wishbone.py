@@ -60,7 +60,8 @@ class ThreadedBus:
 
     The driver is synchronous (it is also used with cocotb and with a pure-Python model); the
     simulator's testbenches are coroutines. :meth:`serve` takes the driver's requests from a queue
-    and runs each as a Wishbone cycle; ``idle(n)`` lets the driver wait ``n`` clocks (a poll).
+    and runs each as a Wishbone cycle; ``idle(n)`` lets the driver wait ``n`` clocks (a poll). The
+    simulated time stands still between requests, so a run's clocks do not depend on the threads.
     """
 
     def __init__(self, error: type[Exception] = RuntimeError, wait_states=None):
@@ -103,15 +104,14 @@ class ThreadedBus:
         self._thread.start()
 
     async def serve(self, ctx, bus) -> None:
-        """Serve requests until the host is done (re-raising its exception)."""
-        import queue
+        """Serve requests until the host is done (re-raising its exception).
 
+        The simulator waits for each request rather than ticking while the host thread works: the
+        clocks between two requests are exactly the ones the driver asks for (``idle``) and the
+        answers' own, whatever the threads' scheduling, and no clock is simulated for a host that is
+        only computing its next word (an engine's load used to spend most of its time so)."""
         while True:
-            try:
-                kind, a, b = self._requests.get_nowait()
-            except queue.Empty:
-                await ctx.tick()
-                continue
+            kind, a, b = self._requests.get()
             if kind == "done":
                 return
             if kind == "failed":
