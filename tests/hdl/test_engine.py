@@ -150,8 +150,8 @@ def test_memory_access_while_running_is_a_bus_error_and_abort_then_a_clean_rerun
         bus.idle(300)
         out["status"] = driver._status_fields()
         out["memory_after_abort"] = bus.read(window.address(0, 0))
-        # a clean rerun: the aborted run moved the nodes, so the host loads the image again
-        driver.load(rerun)
+        # a clean rerun: the aborted run moved the nodes, so the host loads them again (and the constants)
+        driver.load(rerun, memories=("nodes",))
         driver.start()
         out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
         out["read_back"] = driver.read_back()
