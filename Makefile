@@ -15,14 +15,14 @@ demo: $(STAMP)
 	$(VENV)/bin/springflat flatten surf1 --out demo/surf1.obj --history demo/surf1.csv --plot demo/surf1.png
 	@echo "wrote demo/surf1.obj, demo/surf1.csv, demo/surf1.png"
 
-# One pytest worker per core and one more (pytest-xdist): a quarter of a run on two workers left a
-# core idle (simulator builds and starts, the host threads of the bus benches, the last file), and
-# the third takes that time. A test file stays on one worker, so its module fixtures run once.
-# Exports and simulator builds shared across files are cached under build/ behind file locks
+# One pytest worker per core (pytest-xdist; a worker more than the cores was measured no faster),
+# each with one BLAS/OpenMP thread, so that two workers do not start a pool of threads each on two
+# cores. A test file stays on one worker, so its module fixtures run once. Exports and simulator
+# builds shared across files are cached under build/ behind file locks
 # (sim.cocotb_support.build_lock). The slowest tests are listed at the end, so a CI log shows where
 # its time goes.
-WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
-PYTEST := $(VENV)/bin/python -m pytest -n $(WORKERS) --dist loadfile --durations=25
+PYTEST := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
+	$(VENV)/bin/python -m pytest -n auto --dist loadfile --durations=25
 
 test: $(STAMP)
 	$(PYTEST)

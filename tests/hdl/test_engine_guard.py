@@ -2,15 +2,15 @@
 model's ``run_image``, and ABORT in each of the guard's passes (the drain, then a clean rerun). The unguarded
 runs and the bus's answers: ``tests/hdl/test_engine.py``."""
 
-import dataclasses
-
 import pytest
 from amaranth.sim import Simulator
 
 from golden_model.engine_spec.image import run_image
+from golden_model.params import FlattenParams
 from hdl.engine import SpringflatEngine
 from sim.engine_driver import BusError, EngineDriver
-from support.engine_sim import CAPACITY, FS, GUARDED, assert_same_run, guarded_image, run_on_engine, simulate
+from support.engine_sim import (CAPACITY, FS, GUARDED, assert_same_run, guarded_image, image_of, run_on_engine,
+                                simulate)
 from support.wishbone import ThreadedBus, wishbone_write
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
@@ -38,9 +38,9 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
     from golden_model.engine_spec.register_map import STATES
     from hdl.phase_controller import PHASES
 
-    # the run up to its rolled-back step, the seventh (the golden model's record says so)
-    image = guarded_image("clipped-and-rolled-back")
-    image = dataclasses.replace(image, constants={**image.constants, "max_iter": 7})
+    # stretched across, the guarded run rolls back its fifth step (the golden model's record says so): the
+    # run up to it
+    image = image_of(FlattenParams(dynamics="momentum", max_iter=5), squeeze=1.2)
     assert run_image(image, FS).guard.rejected == 1
     guard_phases = ("decide", "rollback", "integrate", "stuck", "hold", "certify", "commit")
     dut = SpringflatEngine(FS, CAPACITY)
