@@ -20,7 +20,7 @@ import numpy as np
 from golden_model.fixed import FormatSet
 
 from .cocotb_support import BUILD_ROOT, SimulatorError, build_lock, run_bench, verilog_sources
-from .engine_run import CLOCK_HALF_PERIOD_NS, TIMING_MAKE_FLAGS, _make_flags
+from .engine_run import CLOCK_HALF_PERIOD_NS, TIMING_MAKE_FLAGS, _make_flags, top_ports
 
 __all__ = ["SWEEP_MODULE", "sweep_on_verilator"]
 
@@ -61,12 +61,11 @@ endmodule
 """
 
 
-def _port_width(verilog: str, port: str) -> int:
-    for line in verilog.splitlines():
-        words = line.replace(";", "").split()
-        if words[:1] in (["input"], ["output"]) and words[-1] == port:
-            return int(words[1][1:].split(":")[0]) + 1 if len(words) == 3 else 1
-    raise SimulatorError(f"the exported Verilog has no port {port}")
+def _port_width(verilog: str, module: str, port: str) -> int:
+    for _, width, name in top_ports(verilog, module):
+        if name == port:
+            return int(width[1:].split(":")[0]) + 1 if width else 1
+    raise SimulatorError(f"the exported {module} has no port {port}")
 
 
 def sweep_on_verilator(toplevel: str, fs: FormatSet, beats: np.ndarray) -> np.ndarray:
@@ -76,7 +75,7 @@ def sweep_on_verilator(toplevel: str, fs: FormatSet, beats: np.ndarray) -> np.nd
     beats = np.asarray(beats, dtype=np.int64)
     exported = verilog_sources(fs)
     source = (exported / f"{toplevel}.v").read_text()
-    in_width, out_width = _port_width(source, "i__payload"), _port_width(source, "o__payload")
+    in_width, out_width = (_port_width(source, toplevel, port) for port in ("i__payload", "o__payload"))
     if in_width > 63 or out_width > 63:
         raise SimulatorError(f"{toplevel}'s payloads ({in_width}, {out_width} bits) are wider than a sweep's 63")
     n = len(beats)

@@ -109,7 +109,7 @@ class ThreadedBus:
         The simulator waits for each request rather than ticking while the host thread works: the
         clocks between two requests are exactly the ones the driver asks for (``idle``) and the
         answers' own, whatever the threads' scheduling, and no clock is simulated for a host that is
-        only computing its next word (ticking meanwhile, an engine's load spent most of its clocks so)."""
+        only computing its next word (ticking meanwhile, most of an engine load's clocks would be the host's)."""
         while True:
             kind, a, b = self._requests.get()
             if kind == "done":
