@@ -9,14 +9,14 @@ import warnings
 
 import numpy as np
 import pytest
-from amaranth.hdl import UnusedElaboratable
+from amaranth.hdl import UnusedElaboratable, Value
 from amaranth.sim import Simulator
 
 from golden_model.modes import mode_named
 from golden_model.engine_spec.image import run_image
 from hdl.engine import SpringflatEngine
-from support.engine_sim import (CAPACITY, FS, INIT, MESH, RUNS, assert_same_run, image_of, run_on_engine,
-                                simulate)
+from support.engine_sim import (CAPACITY, FS, INIT, MESH, RUNS, PreloadableEngine, assert_same_run, image_of,
+                                load_directly, run_on_engine, simulate)
 from support.wishbone import ThreadedBus, wishbone_read, wishbone_write
 from sim.engine_driver import BusError, EngineDriver
 
@@ -39,8 +39,8 @@ pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: secon
 def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, pin_registers, latency):
     image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
     expected = run_image(image, FS)
-    dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=bank_depth, registered_select=registered_select,
-                           pin_registers=pin_registers)
+    dut = PreloadableEngine(FS, CAPACITY, entry_bank_depth=bank_depth, registered_select=registered_select,
+                            pin_registers=pin_registers)
     assert dut.registered_select is registered_select
     assert dut.pin_registers is (latency > 2)
     result, read_back = run_on_engine(dut, image)
@@ -48,6 +48,35 @@ def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, 
     assert_same_run(read_back, expected)
     assert read_back.cycles > 0
 
+
+
+def test_a_preload_leaves_every_block_ram_as_the_bus_load_does():
+    """The other tests' shortcut (``support.engine_sim.preload``: the simulator writes an image's rows into
+    the block RAMs) against the bus: the same image loaded over Wishbone and preloaded leaves every word
+    of every block RAM equal, the mesh's entries in nine banks and the barrier's triangle fields set."""
+    image = image_of(RUNS["momentum-barrier"], init=INIT["momentum-barrier"])
+    contents = []
+    for over_the_bus in (True, False):
+        dut = PreloadableEngine(FS, CAPACITY, entry_bank_depth=8)
+
+        def snapshot(ctx):
+            contents.append({name: [ctx.get(Value.cast(ram.contents[i])) for i in range(ram.depth)]
+                             for name, ram in dut.memory_windows.rams.items()})
+
+        def host(driver, bus):
+            if over_the_bus:
+                driver.load(image)
+            else:
+                load_directly(driver, bus, dut, image)
+            bus.in_simulator(snapshot)
+
+        simulate(dut, host)
+    over_the_bus, preloaded = contents
+    assert len([name for name in over_the_bus if name.startswith("entries")]) == CAPACITY.entries // 8
+    for name in ("positions", "weights", "triangles", "entries8"):  # 66 entries: 9 banks of 8 (a run starts at rest)
+        assert any(over_the_bus[name]), name  # each kind of row written
+    assert not any(over_the_bus["entries9"])
+    assert preloaded == over_the_bus
 
 def test_the_memories_registers_are_checked_and_follow_the_build():
     """No pin registers by default, with or without the guard; the registered select needs them."""
@@ -183,11 +212,11 @@ def test_bad_run_constants_answer_as_constant_fault_says(guard):
         "a fixed step": {"mode": mode_named("paper-fixed").code, "dt": 1},
         "good": {},
     }
-    dut = SpringflatEngine(FS, capacity)
+    dut = PreloadableEngine(FS, capacity)
     answers = {}
 
     def host(driver, bus):
-        driver.load(image)
+        load_directly(driver, bus, dut, image)
         answers["FEATURES.guard"] = driver.read_value("feature_guard")
         for name, change in cases.items():
             constants = {**image.constants, **change}
@@ -218,7 +247,7 @@ def test_start_written_right_after_a_constant_is_checked_against_that_constant()
     from golden_model.engine_spec.register_map import RESULTS, STATES
 
     image = image_of(RUNS["paper-variable"])
-    dut = SpringflatEngine(FS, CAPACITY)
+    dut = PreloadableEngine(FS, CAPACITY)
     register_map = dut.register_map
     control, status = register_map.register("CONTROL"), register_map.register("STATUS")
     bits = {f.name: f for f in (*control.fields, *status.fields)}
@@ -227,7 +256,7 @@ def test_start_written_right_after_a_constant_is_checked_against_that_constant()
              {"mode": mode_named("paper-fixed").code, "dt": 0}, {"mode": mode_named("paper-fixed").code, "dt": 1}]
     answers = []
     bus = ThreadedBus(BusError)
-    bus.run(lambda: EngineDriver(bus, register_map).load(image))
+    bus.run(lambda: load_directly(EngineDriver(bus, register_map), bus, dut, image))
 
     def field(word, name):
         return (word >> bits[name].lsb) & ((1 << bits[name].width) - 1)
@@ -266,7 +295,7 @@ def test_a_build_without_the_guard_runs_the_momentum_step_bit_exact():
     capacity = dataclasses.replace(CAPACITY, guard=False)
     image = image_of(RUNS["momentum-barrier"], capacity, init=INIT["momentum-barrier"])
     expected = run_image(image, FS)
-    dut = SpringflatEngine(FS, capacity)
+    dut = PreloadableEngine(FS, capacity)
     result, read_back = run_on_engine(dut, image)
     assert result == expected.status and expected.iterations > 3
     assert_same_run(read_back, expected)

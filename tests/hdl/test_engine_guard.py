@@ -7,10 +7,9 @@ from amaranth.sim import Simulator
 
 from golden_model.engine_spec.image import run_image
 from golden_model.params import FlattenParams
-from hdl.engine import SpringflatEngine
 from sim.engine_driver import BusError, EngineDriver
-from support.engine_sim import (CAPACITY, FS, GUARDED, assert_same_run, guarded_image, image_of, run_on_engine,
-                                simulate)
+from support.engine_sim import (CAPACITY, FS, GUARDED, PreloadableEngine, assert_same_run, guarded_image, image_of,
+                                load_directly, run_on_engine, simulate)
 from support.wishbone import ThreadedBus, wishbone_write
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
@@ -24,7 +23,7 @@ def test_guarded_whole_run_matches_the_golden_model(case):
     guard = expected.guard
     assert guard.clipped > 0
     assert guard.rejected > 0 if case == "clipped-and-rolled-back" else (guard.frozen > 0 and expected.saturations > 0)
-    dut = SpringflatEngine(FS, CAPACITY, registered_select=registered_select)
+    dut = PreloadableEngine(FS, CAPACITY, registered_select=registered_select)
     result, read_back = run_on_engine(dut, image)
     assert result == expected.status
     assert_same_run(read_back, expected)
@@ -43,7 +42,7 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
     image = image_of(FlattenParams(dynamics="momentum", max_iter=5), squeeze=1.2)
     assert run_image(image, FS).guard.rejected == 1
     guard_phases = ("decide", "rollback", "integrate", "stuck", "hold", "certify", "commit")
-    dut = SpringflatEngine(FS, CAPACITY)
+    dut = PreloadableEngine(FS, CAPACITY)
     spans, aborted_in, drained_at, out = [], [], [], {}  # spans: [phase, first clock, last clock] of a run
 
     async def watch(ctx):
@@ -62,14 +61,14 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
             last = now
 
     def abort_after(driver, bus, clocks):
-        driver.load(image, memories=("nodes",))
+        load_directly(driver, bus, dut, image, memories=("nodes",))
         driver.start()
         bus.idle(clocks)
         driver.abort()
         bus.idle(300)
 
     def host(driver, bus):
-        driver.load(image)
+        load_directly(driver, bus, dut, image)
         driver.start()
         driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
         first_span = {}  # each guard phase's first span of at least 4 clocks: its middle clock
@@ -84,7 +83,7 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
         aborted_in.clear()
         for clock in first_span.values():
             abort_after(driver, bus, clock - offset)
-        driver.load(image, memories=("nodes",))
+        load_directly(driver, bus, dut, image, memories=("nodes",))
         driver.start()
         out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
         out["read_back"] = driver.read_back()
@@ -104,14 +103,14 @@ def test_abort_in_the_first_clock_of_a_guard_pass_drains_the_whole_pass():
     from hdl.phase_controller import PHASES
 
     image = guarded_image("clipped-and-rolled-back")
-    dut = SpringflatEngine(FS, CAPACITY)
+    dut = PreloadableEngine(FS, CAPACITY)
     control = dut.register_map.register("CONTROL")
     start, abort = ({f.name: 1 << f.lsb for f in control.fields}[name] for name in ("start", "abort"))
     idle, running = STATES.index("idle"), STATES.index("running")
     targets = {"certify": "hold", "commit": "certify"}  # a triangle pass's restart, a node pass's
     log = []  # per clock: (phase name or None when not running, state, passes_idle, node memory written)
     bus = ThreadedBus(BusError)
-    bus.run(lambda: EngineDriver(bus, dut.register_map).load(image))
+    bus.run(lambda: load_directly(EngineDriver(bus, dut.register_map), bus, dut, image))
 
     async def watch(ctx):
         s = dut.debug_signals

@@ -12,8 +12,7 @@ from golden_model.fixed.format import Format
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.params import FlattenParams
-from hdl.engine import SpringflatEngine
-from support.engine_sim import CAPACITY, FS, MESH, assert_same_run, image_of, run_on_engine
+from support.engine_sim import CAPACITY, FS, MESH, PreloadableEngine, assert_same_run, image_of, run_on_engine
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
 
@@ -29,7 +28,7 @@ def test_saturation_events_are_counted_and_the_limit_stops_the_run_as_diverged()
     expected_limited = run_image(limited, FS)
     assert expected_limited.status == "diverged"
     for img, exp in ((image, expected), (limited, expected_limited)):
-        _, read_back = run_on_engine(SpringflatEngine(FS, CAPACITY), img)
+        _, read_back = run_on_engine(PreloadableEngine(FS, CAPACITY), img)
         assert_same_run(read_back, exp)
 
 
@@ -44,7 +43,7 @@ def test_area_and_shape_sum_saturations_are_counted(dynamics):
     image = build_image(prepare(MESH, initial_layout(MESH, "tutte"), params, fs), CAPACITY)
     expected = run_image(image, fs)
     assert expected.saturations > 10  # the case saturates
-    _, read_back = run_on_engine(SpringflatEngine(fs, CAPACITY), image)
+    _, read_back = run_on_engine(PreloadableEngine(fs, CAPACITY), image)
     assert_same_run(read_back, expected)
 
 
@@ -64,5 +63,5 @@ def test_error_measure_saturations_are_counted_before_the_limit_is_tested():
     assert (expected_limited.status, expected_limited.iterations, expected_limited.saturations) == ("diverged", 1, 4)
     # the limited run alone on the engine: a check that went on at 3 counted events would end at N_max
     # (max-iterations), and its count is compared
-    _, read_back = run_on_engine(SpringflatEngine(FS, capacity), limited)
+    _, read_back = run_on_engine(PreloadableEngine(FS, capacity), limited)
     assert_same_run(read_back, expected_limited)

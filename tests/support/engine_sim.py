@@ -5,6 +5,7 @@ comparison of a read-back with the golden model's ``run_image``."""
 from __future__ import annotations
 
 import numpy as np
+from amaranth.hdl import Value
 from amaranth.sim import Simulator
 
 from golden_model.engine_spec.image import UNGUARDED, EngineCapacity, build_image
@@ -13,6 +14,7 @@ from golden_model.fixed.engine import prepare
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.params import FlattenParams
+from hdl.engine import SpringflatEngine
 from sim.engine_driver import BusError, EngineDriver
 
 from .wishbone import ThreadedBus
@@ -45,6 +47,51 @@ def image_of(params: FlattenParams, capacity: EngineCapacity = CAPACITY, init: s
     return build_image(prepare(MESH, layout, params, FS), capacity)
 
 
+class PreloadableEngine(SpringflatEngine):
+    """:class:`SpringflatEngine` that keeps its :class:`~hdl.memory_windows.MemoryWindows` at elaboration
+    (:attr:`memory_windows`), so that a testbench can write an image's rows into the block RAMs
+    directly (:func:`preload`): over the bus each 32-bit word is a read-modify-write of some 13 clocks, and
+    on the Python simulator a load took longer than the few iterations it fed. The hardware is
+    :class:`SpringflatEngine`'s; ``tests/hdl/test_engine.py`` checks that a preload leaves every block RAM as
+    the bus load does."""
+
+    memory_windows = None
+
+    def elaborate(self, platform):
+        m = super().elaborate(platform)
+        self.memory_windows = m.submodules.memories
+        return m
+
+
+def preload(ctx, windows, image, memories=("nodes", "entries", "triangles")) -> None:
+    """Write ``image``'s rows of ``memories`` into the block RAMs of ``windows`` (a testbench's ``ctx``), as
+    the bus windows' write-back writes them: a row is its 32-bit words, the first the lowest; a node row
+    is the position, velocity and weight words side by side; the entries are in banks of
+    ``windows.entry_bank_depth`` rows."""
+    rams = windows.rams
+    for name in memories:
+        for index, words in enumerate(getattr(image, name)):
+            row = sum(int(word) << (32 * k) for k, word in enumerate(words))
+            if name == "nodes":
+                for ram_name in ("positions", "velocities", "weights"):
+                    ram = rams[ram_name]
+                    width = len(Value.cast(ram.contents[index]))
+                    ctx.set(Value.cast(ram.contents[index]), row & ((1 << width) - 1))
+                    row >>= width
+            elif name == "entries":
+                bank, address = divmod(index, windows.entry_bank_depth)
+                ctx.set(Value.cast(rams[f"entries{bank}"].contents[address]), row)
+            else:
+                ctx.set(Value.cast(rams["triangles"].contents[index]), row)
+
+
+def load_directly(driver, bus, dut: PreloadableEngine, image, memories=("nodes", "entries", "triangles")) -> None:
+    """``driver.load(image)`` with the memories written by :func:`preload` and only the run constants over
+    the bus."""
+    bus.in_simulator(lambda ctx: preload(ctx, dut.memory_windows, image, memories))
+    driver.load(image, memories=())
+
+
 def simulate(dut, host, watch=None):
     """Run ``host(driver, bus)`` (the synchronous driver, in a thread) against ``dut`` on the simulator."""
     bus = ThreadedBus(BusError, wait_states=watch.get("wait_states") if watch else None)
@@ -63,11 +110,15 @@ def simulate(dut, host, watch=None):
 
 
 def run_on_engine(dut, image, watch=None):
-    """Load ``image``, start, wait, read back: ``(result, read_back)``."""
+    """Load ``image`` (a :class:`PreloadableEngine`: :func:`load_directly`), start, wait, read back:
+    ``(result, read_back)``."""
     out = {}
 
     def host(driver, bus):
-        driver.load(image)
+        if isinstance(dut, PreloadableEngine):
+            load_directly(driver, bus, dut, image)
+        else:
+            driver.load(image)
         driver.start()
         out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
         out["read_back"] = driver.read_back()

@@ -89,6 +89,10 @@ class ThreadedBus:
     def idle(self, clocks: int) -> None:
         self._call(("idle", clocks, 0))
 
+    def in_simulator(self, action) -> None:
+        """Run ``action(ctx)`` in the testbench, between two clocks (e.g. ``ctx.set`` on a memory's rows)."""
+        self._call(("call", action, 0))
+
     def run(self, host) -> None:
         """Run ``host()`` (the driver's calls) in a thread; :meth:`serve` ends when it returns."""
         import threading
@@ -118,6 +122,10 @@ class ThreadedBus:
                 raise a
             if kind == "idle":
                 await ctx.tick().repeat(a)
+                self._answers.put(None)
+                continue
+            if kind == "call":
+                a(ctx)
                 self._answers.put(None)
                 continue
             answer = await wishbone_cycle(ctx, bus, a, write=kind == "write", data=b, idle=self._wait_states())
