@@ -8,7 +8,7 @@ import numpy as np
 from amaranth.hdl import Value
 from amaranth.sim import Simulator
 
-from golden_model.engine_spec.image import UNGUARDED, EngineCapacity, build_image
+from golden_model.engine_spec.image import BUS_WORD_BITS, UNGUARDED, EngineCapacity, build_image, node_word_layout
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.generate import dome_grid
@@ -63,31 +63,43 @@ class PreloadableEngine(SpringflatEngine):
         return m
 
 
-def preload(ctx, windows, image, memories=("nodes", "entries", "triangles")) -> None:
-    """Write ``image``'s rows of ``memories`` into the block RAMs of ``windows`` (a testbench's ``ctx``), as
-    the bus windows' write-back writes them: a row is its 32-bit words, the first the lowest; a node row
-    is the position, velocity and weight words side by side; the entries are in banks of
-    ``windows.entry_bank_depth`` rows."""
+#: Where the node window's fields (``node_word_layout``) live in the engine: memory, then its word's field.
+NODE_FIELDS = {"position_x": ("positions", "x"), "position_y": ("positions", "y"),
+               "velocity_x": ("velocities", "x"), "velocity_y": ("velocities", "y"),
+               "inv_mass": ("weights", "inv_mass"), "inv_mass_barrier": ("weights", "inv_mass_barrier")}
+
+
+def preload(ctx, windows, image, memories=None, fs: FormatSet = FS) -> None:
+    """Write ``image``'s rows of ``memories`` (default: all of :meth:`EngineImage.memories`) into the block RAMs
+    of ``windows`` (a testbench's ``ctx``), as the bus windows' write-back writes them: a node row's fields
+    (unpacked with ``node_word_layout``) into the position, velocity and weight memories' words
+    (:data:`NODE_FIELDS`), an entry or triangle row whole, its bus words side by side, the first the lowest;
+    the entries in banks of ``windows.entry_bank_depth`` rows."""
     rams = windows.rams
-    for name in memories:
-        for index, words in enumerate(getattr(image, name)):
-            row = sum(int(word) << (32 * k) for k, word in enumerate(words))
-            if name == "nodes":
-                for ram_name in ("positions", "velocities", "weights"):
+    rows = image.memories()
+    for name in memories if memories is not None else rows:
+        if name == "nodes":
+            fields = node_word_layout(fs, image.capacity).unpack(rows[name])
+            for index in range(len(rows[name])):
+                words: dict[str, dict[str, int]] = {}
+                for field, (ram_name, member) in NODE_FIELDS.items():
+                    words.setdefault(ram_name, {})[member] = int(fields[field][index])
+                for ram_name, members in words.items():
                     ram = rams[ram_name]
-                    width = len(Value.cast(ram.contents[index]))
-                    ctx.set(Value.cast(ram.contents[index]), row & ((1 << width) - 1))
-                    row >>= width
-            elif name == "entries":
+                    ctx.set(Value.cast(ram.contents[index]), ram.shape.const(members).as_bits())
+            continue
+        for index, row_words in enumerate(rows[name]):
+            row = sum(int(word) << (BUS_WORD_BITS * k) for k, word in enumerate(row_words))
+            if name == "entries":
                 bank, address = divmod(index, windows.entry_bank_depth)
                 ctx.set(Value.cast(rams[f"entries{bank}"].contents[address]), row)
             else:
-                ctx.set(Value.cast(rams["triangles"].contents[index]), row)
+                ctx.set(Value.cast(rams[name].contents[index]), row)
 
 
-def load_directly(driver, bus, dut: PreloadableEngine, image, memories=("nodes", "entries", "triangles")) -> None:
-    """``driver.load(image)`` with the memories written by :func:`preload` and only the run constants over
-    the bus."""
+def load_directly(driver, bus, dut: PreloadableEngine, image, memories=None) -> None:
+    """``driver.load(image)`` with the memories (default all) written by :func:`preload` and only the run
+    constants over the bus."""
     bus.in_simulator(lambda ctx: preload(ctx, dut.memory_windows, image, memories))
     driver.load(image, memories=())
 
