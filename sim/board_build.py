@@ -25,7 +25,8 @@ import shlex
 import time
 from pathlib import Path
 
-from .synth import _FMAX, SynthError, _critical_path, _error_line, _run_tool, _tool_versions
+from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, _FMAX, SynthError, _critical_path, _error_line, _run_tool,
+                    _tool_versions)
 
 __all__ = ["BOARDS", "NAME", "run_board_build", "collect_report", "parse_lpf_pins", "parse_clocks", "board_markdown"]
 
@@ -216,7 +217,7 @@ def cmd_board(args, fs, capacity) -> int:
 
     if args.board is None:
         raise SynthError("give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)")
-    if args.target is not None or args.components or args.router != "auto" or args.placer_timing != "default":
+    if args.target is not None or args.components or args.router != DEFAULT_ROUTER or args.placer_timing != DEFAULT_PLACER_TIMING:
         raise SynthError("--board takes --formats, --capacity, --no-guard, --seed, --freq, --baud and --out only")
     if args.baud is not None and args.baud <= 0:
         raise SynthError(f"--baud must be a positive number of bits per second, not {args.baud}")

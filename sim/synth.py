@@ -44,7 +44,7 @@ from golden_model.params import ParameterError
 
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["PLACER_TIMING", "TARGETS", "SynthError", "DoesNotFit", "nextpnr_argv", "placer_options", "run_synthesis",
+__all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "SynthError", "DoesNotFit", "nextpnr_argv", "placer_options", "run_synthesis",
            "parse_yosys_stat", "parse_nextpnr_log"]
 
 
@@ -98,6 +98,11 @@ TARGETS = {
 #: exponent and timing weight from nextpnr's defaults (2 and 10) to 4 and 20, which weighs the long
 #: routes of a device-filling design more (measured on the guarded engine: ``docs/engine-guard.md``).
 PLACER_TIMING = {"default": (), "strong": ("--placer-heap-critexp", "4", "--placer-heap-timingweight", "20")}
+DEFAULT_PLACER_TIMING = "default"
+
+#: nextpnr's routers by the name ``--router`` takes: ``auto`` is the timing-driven ``router1``.
+ROUTERS = {"auto": "router1", "router1": "router1", "router2": "router2"}
+DEFAULT_ROUTER = "auto"
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
 TOP = CORE_MODULE
@@ -235,14 +240,14 @@ def placer_options(placer_timing: str) -> tuple[str, ...]:
 
 
 def nextpnr_argv(target: Target, top: str, freq_mhz: float, router: str, seed: int,
-                 placer_timing: str = "default") -> list[str]:
+                 placer_timing: str = DEFAULT_PLACER_TIMING) -> list[str]:
     """nextpnr's command line for the wrapped module ``top`` (its Yosys JSON ``top.TARGET.json``): the
     device, ``--freq`` in MHz, the report and log files beside it, ``router`` (``auto``: router1), the
     placer ``seed`` and :data:`PLACER_TIMING`'s options."""
     name = target.name
     argv = [*target.nextpnr_args, "--json", f"{top}.{name}.json", "--freq", f"{freq_mhz:g}",
             "--report", f"{top}.{name}.nextpnr.json", "--timing-allow-fail",
-            "--router", "router1" if router == "auto" else router, "--seed", str(seed),
+            "--router", ROUTERS[router], "--seed", str(seed),
             *placer_options(placer_timing), "--log", f"{top}.{name}.nextpnr.log"]
     if name == "ecp5":
         argv += ["--lpf", "clock.lpf"]
@@ -250,8 +255,8 @@ def nextpnr_argv(target: Target, top: str, freq_mhz: float, router: str, seed: i
 
 
 def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=None, progress=None,
-                  router: str = "auto", seed: int = 1, command: str | None = None, capacity=None,
-                  engine_options: dict | None = None, placer_timing: str = "default") -> dict:
+                  router: str = DEFAULT_ROUTER, seed: int = 1, command: str | None = None, capacity=None,
+                  engine_options: dict | None = None, placer_timing: str = DEFAULT_PLACER_TIMING) -> dict:
     """Synthesise, place and route ``components`` of format set ``fs`` for ``target``.
 
     Returns the report dict: ``target``, ``device``, ``preset``, ``freq_mhz``, the top's
@@ -287,6 +292,8 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     if not (0 < freq <= 1000):
         raise SynthError(f"--freq must be in (0, 1000] MHz, got {freq_mhz}")
     placer_options(placer_timing)  # an unknown one refused before any work
+    if router not in ROUTERS:
+        raise SynthError(f"unknown router {router!r} (choose from {', '.join(ROUTERS)})")
     names = [c.module for c in COMPONENTS]
     specs = {c.module: c for c in COMPONENTS}
     components = list(components) if components else names
@@ -364,7 +371,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             status, log = _run_tool(TOOL["yosys"], ["-q", "-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
             if status != 0:
                 raise SynthError(f"yosys failed on {wtop}: {_error_line(log)}")
-            entry["router"] = "router1" if router == "auto" else router
+            entry["router"] = ROUTERS[router]
             entry["placer_timing"] = placer_timing
             argv = nextpnr_argv(tgt, wtop, freq, router, seed, placer_timing)
             entry["nextpnr_command"] = f"nextpnr-{'ecp5' if target == 'ecp5' else 'ice40'} " + shlex.join(argv)

@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from .synth import ENGINE, PLACER_TIMING, TARGETS, DoesNotFit, SynthError, report_markdown, run_synthesis
+from .synth import DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS, DoesNotFit, SynthError, report_markdown, run_synthesis
 
 __all__ = ["add_parser", "cmd_synth"]
 
@@ -64,9 +64,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
                    help="springflat_engine without the step guard: no guarded mode, and its block RAMs free for "
                         "depth (3072 18432 6144 fits the ECP5-85F only so; docs/engine-guard.md)")
-    p.add_argument("--router", choices=("auto", "router1", "router2"), default="auto",
+    p.add_argument("--router", choices=tuple(ROUTERS), default=DEFAULT_ROUTER,
                    help="nextpnr router (default auto: the timing-driven router1; router2 is not timing-driven)")
-    p.add_argument("--placer-timing", choices=tuple(PLACER_TIMING), default="default",
+    p.add_argument("--placer-timing", choices=tuple(PLACER_TIMING), default=DEFAULT_PLACER_TIMING,
                    help="nextpnr's placer: default, or strong (the heap placer's criticality exponent and timing "
                         "weight 4 and 20 instead of 2 and 10: more weight on long routes)")
     p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
@@ -86,9 +86,9 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
         parts += ["--capacity", *(str(n) for n in args.capacity)]
     if not args.build_guard:
         parts.append("--no-guard")
-    if args.router != "auto":
+    if args.router != DEFAULT_ROUTER:
         parts += ["--router", args.router]
-    if args.placer_timing != "default":
+    if args.placer_timing != DEFAULT_PLACER_TIMING:
         parts += ["--placer-timing", args.placer_timing]
     if args.seed != 1:
         parts += ["--seed", str(args.seed)]
