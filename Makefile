@@ -17,12 +17,13 @@ demo: $(STAMP)
 
 # One pytest worker per core (pytest-xdist; a worker more than the cores was measured no faster),
 # each with one BLAS/OpenMP thread, so that two workers do not start a pool of threads each on two
-# cores. A test file stays on one worker, so its module fixtures run once. Exports and simulator
+# cores. A test file stays on one worker, so its module fixtures run once, and files start in
+# collection order, the longest first (tests/conftest.py: LONGEST_FIRST). Exports and simulator
 # builds shared across files are cached under build/ behind file locks
 # (sim.cocotb_support.build_lock). The slowest tests are listed at the end, so a CI log shows where
 # its time goes.
 PYTEST := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 \
-	$(VENV)/bin/python -m pytest -n auto --dist loadfile --durations=25
+	$(VENV)/bin/python -m pytest -n auto --dist loadfile --no-loadscope-reorder --durations=25
 
 test: $(STAMP)
 	$(PYTEST)

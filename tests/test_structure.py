@@ -106,3 +106,11 @@ def test_no_file_over_800_lines():
     lengths = source_lengths()
     over = {f: n for f, n in lengths.items() if n > MAX_LINES}
     assert not over, f"files over {MAX_LINES} lines (split them): {over}"
+
+
+def test_the_longest_first_files_exist():
+    """``make test`` starts these files first (``tests/conftest.py``); a renamed one would silently start last."""
+    from conftest import LONGEST_FIRST, TESTS
+
+    missing = [name for name in LONGEST_FIRST if not (TESTS / name).is_file()]
+    assert not missing, f"LONGEST_FIRST names files that do not exist: {missing}"
