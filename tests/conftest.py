@@ -5,12 +5,10 @@ Plain helpers and paths are in :mod:`support` (``tests/support/``), importable f
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from sim.cocotb_support import SIMULATORS
-from support import need_simulator, refused_components
+from support import LONGEST_FIRST, TESTS, need_simulator, refused_components
 
 
 @pytest.fixture(params=SIMULATORS)
@@ -25,15 +23,6 @@ def unelaborated():
     """Components built only for their attributes (widths, port bits) are not reported as unused."""
     with refused_components():
         yield
-
-
-#: The test files that take longest (simulator builds, whole runs on simulators), in the order to start them,
-#: longest first. ``make test`` hands whole files to its workers in collection order (``--dist loadfile
-#: --no-loadscope-reorder``; pytest-xdist's default order, most tests first, started these last and left
-#: one worker alone with them at the end); started first, the short files fill in around them.
-LONGEST_FIRST = ("sim/test_cocotb.py", "sim/test_engine_rtl.py", "hdl/test_engine.py", "hdl/test_engine_guard.py",
-                 "sim/test_synth.py", "hdl/test_engine_saturation.py", "hdl/test_hdl_block_ram.py")
-TESTS = Path(__file__).resolve().parent
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

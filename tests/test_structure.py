@@ -14,10 +14,9 @@ import ast
 from pathlib import Path
 
 import numpy as np
-import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from support import REPO
+from support import LONGEST_FIRST, REPO, TESTS
 
 PACKAGES = ("golden_model", "hdl", "sim")
 MAX_LINES = 800
@@ -110,7 +109,5 @@ def test_no_file_over_800_lines():
 
 def test_the_longest_first_files_exist():
     """``make test`` starts these files first (``tests/conftest.py``); a renamed one would silently start last."""
-    from conftest import LONGEST_FIRST, TESTS
-
     missing = [name for name in LONGEST_FIRST if not (TESTS / name).is_file()]
     assert not missing, f"LONGEST_FIRST names files that do not exist: {missing}"

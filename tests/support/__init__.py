@@ -23,6 +23,14 @@ DATA = REPO / "tests" / "data"
 SCANS = DATA / "scans"
 SPRINGFLAT = str(Path(sys.executable).parent / "springflat")
 """The console script of this environment."""
+TESTS = REPO / "tests"
+
+#: The test files that take longest (simulator builds, whole runs on simulators), in the order to start them,
+#: longest first. ``make test`` hands whole files to its workers in collection order (``--dist loadfile
+#: --no-loadscope-reorder``; pytest-xdist's default order, most tests first, started these last and left
+#: one worker alone with them at the end); started first, the short files fill in around them.
+LONGEST_FIRST = ("sim/test_cocotb.py", "sim/test_engine_rtl.py", "hdl/test_engine.py", "hdl/test_engine_guard.py",
+                 "sim/test_synth.py", "hdl/test_engine_saturation.py", "hdl/test_hdl_block_ram.py")
 
 
 def run_springflat(*args, cwd=None, timeout: float = 600) -> subprocess.CompletedProcess:
