@@ -18,7 +18,7 @@ demo: $(STAMP)
 # One pytest worker per core (pytest-xdist; a worker more than the cores was measured no faster),
 # each with one BLAS/OpenMP thread, so that two workers do not start a pool of threads each on two
 # cores. A test file stays on one worker, so its module fixtures run once, and files start in
-# collection order, the longest first (tests/conftest.py: LONGEST_FIRST). Exports and simulator
+# collection order, the longest first (tests/support: LONGEST_FIRST). Exports and simulator
 # builds shared across files are cached under build/ behind file locks
 # (sim.cocotb_support.build_lock). The slowest tests are listed at the end, so a CI log shows where
 # its time goes.

@@ -9,7 +9,8 @@ import sys
 import time
 from pathlib import Path
 
-from .synth import DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS, DoesNotFit, SynthError, report_markdown, run_synthesis
+from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS, DoesNotFit,
+                    SynthError, report_markdown, run_synthesis)
 
 __all__ = ["add_parser", "cmd_synth"]
 
