@@ -149,18 +149,19 @@ class AreaError(wiring.Component):
         # |A − |A'||, 0 for a stage without a triangle: the accumulator then adds a register straight
         # (registered because a valid bit gating the term in front of the adder would reach the
         # 37-bit carry chain from across the die)
+        # (the events gated the same way: a valid bit in front of the counts' adders is a long path too)
         s = stage("diff", diff=Mux(pipe.valid, Mux(host > new, host - new, new - host)[:fs.face_area.width], 0),
-                  edge_events=s["edge_events"], area_events=s["area_events"])
+                  edge_events=Mux(pipe.valid, s["edge_events"], 0), area_events=pipe.valid & s["area_events"])
 
         # The accumulator: all terms are non-negative, so saturating each partial sum gives the
         # golden model's saturation of the exact sum (once past raw_max, it stays past).
-        counts, valid = self.saturations, pipe.valid
+        counts = self.saturations
         # ``clear`` chooses between the sums and the term alone after the adders, not in front of them
         # (in front, clear would feed the 37-bit carry chain: a long path from the controller)
         clear = self.clear
         summed, sum_over = clamp(self.total + s["diff"], fs.error_acc)
         alone, alone_over = clamp(s["diff"], fs.error_acc)
-        edge_events, area_events = Mux(valid, s["edge_events"], 0), valid & s["area_events"]
+        edge_events, area_events = s["edge_events"], s["area_events"]
         m.d.sync += [
             self.total.eq(Mux(clear, alone, summed)),
             counts.face_edge.eq(Mux(clear, edge_events, counts.face_edge + edge_events)),

@@ -3,7 +3,7 @@ read-modify-write of a window word, and each port's multiplexer between the bus 
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -12,6 +12,7 @@ from golden_model.engine_spec.image import BUS_WORD_BITS, EngineCapacity, memory
 from golden_model.engine_spec.register_map import RegisterMap
 
 from .block_ram import BlockRam, dp16kd_banks
+from .dsp import kept_register
 from .layouts import force_word_layout, vector_layout, weight_word_layout, word_layout
 from .logic import or_tree
 from .rom import ENTRY_BANK_DEPTH
@@ -117,7 +118,8 @@ class MemoryWindows(wiring.Component):
     pass's, the position memory's second and third ports the entry's neighbour and second node or
     the triangle's corners, its first port the node of the entry, a corner or the integrate pass's
     node. Writes: the bus's read-modify-write while idle, the integrator's results while running,
-    each port's address, data and enable landed in registers before the block RAM. Every memory is
+    each port's address, data and enable landed in registers before the block RAM, the choice made by a
+    copy of ``running`` of the port's own, a clock late. Every memory is
     a :class:`~hdl.block_ram.BlockRam` (its data in a register two clocks after the address); no read
     whose data is used meets a write to its address in the same clock (the passes read ahead of
     the integrate pass's writes; the bus reads and writes while idle, a word's write-back after its
@@ -233,7 +235,7 @@ class MemoryWindows(wiring.Component):
         window_q, index_q, word_q = self._decode(m)
         bus_writing, new_words = self._bus_words(m, window_q, word_q, ent_data)
         self._read_addresses(m, index_q, ent_addr, ent_hot, bank_bits, ent_data)
-        self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks)
+        self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks, platform)
         return m
 
     def _entry_read(self, m: Module, entry_banks, ent_addr, ent_hot):
@@ -357,7 +359,8 @@ class MemoryWindows(wiring.Component):
                                       Mux(in_area, t2_tri.a, self.node_of_entry))),
         ]
 
-    def _writes(self, m: Module, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks) -> None:
+    def _writes(self, m: Module, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks,
+                platform) -> None:
         """Each write port's address, data and enable registers: the bus's write-back while idle, the
         integrator's results while running (the entry banks: one enable flag per bank)."""
         write_ports = {"pos": self.rams["positions"].write, "vel": self.rams["velocities"].write,
@@ -378,28 +381,40 @@ class MemoryWindows(wiring.Component):
         node_k, node_new = new_words["nodes"]
         ent_k, ent_new = new_words["entries"]
         tri_k, tri_new = new_words["triangles"]
-        with m.If(self.running):
-            node = self.node_write
-            m.d.sync += [
-                write_regs["pos"][0].eq(node.addr), write_regs["pos"][1].eq(node.data.position),
-                write_regs["pos"][2].eq(node.en),
-                write_regs["vel"][0].eq(node.addr), write_regs["vel"][1].eq(node.data.velocity),
-                write_regs["vel"][2].eq(node.en),
-                write_regs["wgt"][2].eq(0), write_regs["ent"][2].eq(0), write_regs["tri"][2].eq(0)]
-        with m.Else():
-            # each memory's address register loads only for its own window: registers with the same
-            # logic would be merged into one, which then drives block RAMs placed far apart
-            for n, window in (("wgt", node_k), ("ent", ent_k), ("tri", tri_k)):
-                with m.If(window_q == window):
-                    m.d.sync += write_regs[n][0].eq(index_q)
-            m.d.sync += [
-                *(write_regs[n][0].eq(index_q) for n in ("pos", "vel")),
-                Cat(write_regs["pos"][1].as_value(), write_regs["vel"][1].as_value(),
-                    write_regs["wgt"][1].as_value()).eq(node_new),
-                write_regs["ent"][1].eq(ent_new), write_regs["tri"][1].eq(tri_new),
-                *(write_regs[n][2].eq(bus_writing & (window_q == node_k)) for n in ("pos", "vel", "wgt")),
-                write_regs["ent"][2].eq(Cat(bus_writing & (window_q == ent_k)
-                                            & (index_q[bank_bits:] == b if len(entry_banks) > 1 else 1)
-                                            for b in range(len(entry_banks)))),
-                write_regs["tri"][2].eq(bus_writing & (window_q == tri_k)),
-            ]
+        node = self.node_write
+        pos_bits, vel_bits = (len(Value.cast(write_regs[n][1])) for n in ("pos", "vel"))
+        node_writing = bus_writing & (window_q == node_k)
+        # while idle, the bus's write-back: (address, data, enable); an address of None loads only for
+        # its own window (registers with the same logic would be merged into one, which then drives
+        # block RAMs placed far apart)
+        from_bus = {
+            "pos": (index_q, node_new[:pos_bits], node_writing),
+            "vel": (index_q, node_new[pos_bits:pos_bits + vel_bits], node_writing),
+            "wgt": (None, node_new[pos_bits + vel_bits:], node_writing),
+            "ent": (None, ent_new, Cat(bus_writing & (window_q == ent_k)
+                                       & (index_q[bank_bits:] == b if len(entry_banks) > 1 else 1)
+                                       for b in range(len(entry_banks)))),
+            "tri": (None, tri_new, bus_writing & (window_q == tri_k)),
+        }
+        own_window = {"wgt": node_k, "ent": ent_k, "tri": tri_k}
+        # while running, the integrator's results into the node memories; the others hold, not enabled
+        from_passes = {"pos": (node.addr, node.data.position, node.en), "vel": (node.addr, node.data.velocity, node.en)}
+        for name, (addr, word, en) in write_regs.items():
+            # the choice from a copy of ``running`` of each port's own, beside its registers, a clock late:
+            # the controller's flip-flop drives logic all over the device, and its route into these
+            # multiplexers was a critical path. A clock late is safe: no pass writes in the start phase's
+            # first clock, the bus's last write has been answered before START, and nothing writes once a
+            # run has drained.
+            with m.If(kept_register(m, self.running, name=f"{name}_writes_running", platform=platform)):
+                if name in from_passes:
+                    m.d.sync += [reg.eq(value) for reg, value in zip((addr, word, en), from_passes[name])]
+                else:
+                    m.d.sync += en.eq(0)
+            with m.Else():
+                bus_addr, bus_data, bus_en = from_bus[name]
+                if bus_addr is None:
+                    with m.If(window_q == own_window[name]):
+                        m.d.sync += addr.eq(index_q)
+                else:
+                    m.d.sync += addr.eq(bus_addr)
+                m.d.sync += [word.eq(bus_data), en.eq(bus_en)]
