@@ -49,6 +49,8 @@ class SaturationTally(wiring.Component):
                 raise ValueError(f"event source {name!r}: needs an identifier and a positive width, not {width!r}")
         if isinstance(count_bits, bool) or not isinstance(count_bits, int) or count_bits < 1:
             raise ValueError(f"count_bits must be a positive int, not {count_bits!r}")
+        #: Width of the sum of one clock's events (the pairs' sums, then their sum).
+        self.events_bits = max(sources.values()) + (len(sources) - 1).bit_length()
         self.sources, self.count_bits = sources, count_bits
         super().__init__({
             **{f"{name}_events": In(width) for name, width in sources.items()},
@@ -59,17 +61,20 @@ class SaturationTally(wiring.Component):
         m = Module()
         event_regs = [Signal(width, name=f"saturation_event{k}") for k, width in enumerate(self.sources.values())]
         m.d.sync += [r.eq(getattr(self, f"{name}_events")) for r, name in zip(event_regs, self.sources)]
-        new_events = Signal(max(len(r) for r in event_regs) + (len(event_regs) - 1).bit_length(), name="new_events")
-        pair_sums = [Signal(len(new_events) - 1, name=f"saturation_pair{k}") for k in range(len(event_regs) // 2)]
+        new_events = Signal(self.events_bits, name="new_events")
+        pair_sums = [Signal(max(self.sources.values()) + 1, name=f"saturation_pair{k}")
+                     for k in range(len(event_regs) // 2)]
         m.d.sync += [p.eq(event_regs[2 * k] + event_regs[2 * k + 1]) for k, p in enumerate(pair_sums)]
         m.d.sync += new_events.eq(sum(pair_sums))
         # the count has no domain reset: `clear` and the reset's echo clear it (a LUT of the domain's
         # reset and `clear` driving its reset pins is a long path on the board)
         count = Signal.like(self.saturations, reset_less=True, name="count")
         m.d.comb += self.saturations.eq(count)
+        # past the maximum exactly when the sum has a bit set above the count's width: an OR of those
+        # bits chooses, not a compare (a second carry chain after the adder's, on the count's loop)
         total = count + new_events
         saturation_max = (1 << len(count)) - 1
-        m.d.sync += count.eq(Mux(total > saturation_max, saturation_max, total))
+        m.d.sync += count.eq(Mux(total[len(count):].any(), saturation_max, total[:len(count)]))
         with m.If(self.clear | reset_echo(m, "count_echo")):
             m.d.sync += count.eq(0)
         m.d.sync += self.saturated.eq(count != 0)
