@@ -69,32 +69,33 @@ NODE_FIELDS = {"position_x": ("positions", "x"), "position_y": ("positions", "y"
                "inv_mass": ("weights", "inv_mass"), "inv_mass_barrier": ("weights", "inv_mass_barrier")}
 
 
-def preload(ctx, windows, image, memories=None, fs: FormatSet = FS) -> None:
+def preload(ctx, windows, image, memories=None) -> None:
     """Write ``image``'s rows of ``memories`` (default: all of :meth:`EngineImage.memories`) into the block RAMs
     of ``windows`` (a testbench's ``ctx``), as the bus windows' write-back writes them: a node row's fields
-    (unpacked with ``node_word_layout``) into the position, velocity and weight memories' words
-    (:data:`NODE_FIELDS`), an entry or triangle row whole, its bus words side by side, the first the lowest;
-    the entries in banks of ``windows.entry_bank_depth`` rows."""
+    (unpacked with ``node_word_layout`` of the windows' format set) into the position, velocity and weight
+    memories' words (:data:`NODE_FIELDS`), an entry or triangle row whole, its bus words side by side, the
+    first the lowest; the entries in banks of ``windows.entry_bank_depth`` rows."""
     rams = windows.rams
     rows = image.memories()
+    members_of: dict[str, dict[str, str]] = {}  # memory -> {its word's member: the node field}
+    for field, (ram_name, member) in NODE_FIELDS.items():
+        members_of.setdefault(ram_name, {})[member] = field
     for name in memories if memories is not None else rows:
         if name == "nodes":
-            fields = node_word_layout(fs, image.capacity).unpack(rows[name])
-            for index in range(len(rows[name])):
-                words: dict[str, dict[str, int]] = {}
-                for field, (ram_name, member) in NODE_FIELDS.items():
-                    words.setdefault(ram_name, {})[member] = int(fields[field][index])
-                for ram_name, members in words.items():
-                    ram = rams[ram_name]
-                    ctx.set(Value.cast(ram.contents[index]), ram.shape.const(members).as_bits())
-            continue
-        for index, row_words in enumerate(rows[name]):
-            row = sum(int(word) << (BUS_WORD_BITS * k) for k, word in enumerate(row_words))
-            if name == "entries":
-                bank, address = divmod(index, windows.entry_bank_depth)
-                ctx.set(Value.cast(rams[f"entries{bank}"].contents[address]), row)
-            else:
-                ctx.set(Value.cast(rams[name].contents[index]), row)
+            fields = node_word_layout(windows.fs, image.capacity).unpack(rows[name])
+            for ram_name, members in members_of.items():
+                ram = rams[ram_name]
+                for index in range(len(rows[name])):
+                    word = {member: int(fields[field][index]) for member, field in members.items()}
+                    ctx.set(Value.cast(ram.contents[index]), ram.shape.const(word).as_bits())
+        else:
+            for index, row_words in enumerate(rows[name]):
+                row = sum(int(word) << (BUS_WORD_BITS * k) for k, word in enumerate(row_words))
+                if name == "entries":
+                    bank, address = divmod(index, windows.entry_bank_depth)
+                    ctx.set(Value.cast(rams[f"entries{bank}"].contents[address]), row)
+                else:
+                    ctx.set(Value.cast(rams[name].contents[index]), row)
 
 
 def load_directly(driver, bus, dut: PreloadableEngine, image, memories=None) -> None:
