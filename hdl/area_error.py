@@ -146,10 +146,9 @@ class AreaError(wiring.Component):
         s = stage("area_sat", area_new=area_new, area=s["area"], edge_events=s["edge_events"],
                   area_events=area_over)
         host, new = s["area"], s["area_new"]
-        # |A − |A'||, 0 for a stage without a triangle: the accumulator then adds a register straight
-        # (registered because a valid bit gating the term in front of the adder would reach the
-        # 37-bit carry chain from across the die)
-        # (the events gated the same way: a valid bit in front of the counts' adders is a long path too)
+        # |A − |A'||, 0 for a stage without a triangle, and the events gated the same way: the accumulator
+        # and the counts then add registers straight (a valid bit gating them in front of the adders
+        # would reach their carry chains from across the die)
         s = stage("diff", diff=Mux(pipe.valid, Mux(host > new, host - new, new - host)[:fs.face_area.width], 0),
                   edge_events=Mux(pipe.valid, s["edge_events"], 0), area_events=pipe.valid & s["area_events"])
 

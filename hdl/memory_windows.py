@@ -401,8 +401,8 @@ class MemoryWindows(wiring.Component):
         from_passes = {"pos": (node.addr, node.data.position, node.en), "vel": (node.addr, node.data.velocity, node.en)}
         for name, (addr, word, en) in write_regs.items():
             # the choice from a copy of ``running`` of each port's own, beside its registers, a clock late:
-            # the controller's flip-flop drives logic all over the device, and its route into these
-            # multiplexers was a critical path. A clock late is safe: no pass writes in the start phase's
+            # the controller's flip-flop drives logic all over the device, so a route from it into these
+            # multiplexers crosses the die. A clock late is safe: no pass writes in the start phase's
             # first clock, the bus's last write has been answered before START, and nothing writes once a
             # run has drained.
             with m.If(kept_register(m, self.running, name=f"{name}_writes_running", platform=platform)):
