@@ -384,19 +384,19 @@ class MemoryWindows(wiring.Component):
         node = self.node_write
         pos_bits, vel_bits = (len(Value.cast(write_regs[n][1])) for n in ("pos", "vel"))
         node_writing = bus_writing & (window_q == node_k)
-        # while idle, the bus's write-back: (address, data, enable); an address of None loads only for
-        # its own window (registers with the same logic would be merged into one, which then drives
-        # block RAMs placed far apart)
+        # while idle, the bus's write-back: (the window for which the bus's index loads the address, None for
+        # any window; data; enable). A port loads the index only for its own window where another port's address
+        # register would otherwise have the same logic: Yosys merges such registers into one, which then
+        # drives block RAMs placed far apart.
         from_bus = {
-            "pos": (index_q, node_new[:pos_bits], node_writing),
-            "vel": (index_q, node_new[pos_bits:pos_bits + vel_bits], node_writing),
-            "wgt": (None, node_new[pos_bits + vel_bits:], node_writing),
-            "ent": (None, ent_new, Cat(bus_writing & (window_q == ent_k)
-                                       & (index_q[bank_bits:] == b if len(entry_banks) > 1 else 1)
-                                       for b in range(len(entry_banks)))),
-            "tri": (None, tri_new, bus_writing & (window_q == tri_k)),
+            "pos": (None, node_new[:pos_bits], node_writing),
+            "vel": (None, node_new[pos_bits:pos_bits + vel_bits], node_writing),
+            "wgt": (node_k, node_new[pos_bits + vel_bits:], node_writing),
+            "ent": (ent_k, ent_new, Cat(bus_writing & (window_q == ent_k)
+                                        & (index_q[bank_bits:] == b if len(entry_banks) > 1 else 1)
+                                        for b in range(len(entry_banks)))),
+            "tri": (tri_k, tri_new, bus_writing & (window_q == tri_k)),
         }
-        own_window = {"wgt": node_k, "ent": ent_k, "tri": tri_k}
         # while running, the integrator's results into the node memories; the others hold, not enabled
         from_passes = {"pos": (node.addr, node.data.position, node.en), "vel": (node.addr, node.data.velocity, node.en)}
         for name, (addr, word, en) in write_regs.items():
@@ -411,10 +411,10 @@ class MemoryWindows(wiring.Component):
                 else:
                     m.d.sync += en.eq(0)
             with m.Else():
-                bus_addr, bus_data, bus_en = from_bus[name]
-                if bus_addr is None:
-                    with m.If(window_q == own_window[name]):
-                        m.d.sync += addr.eq(index_q)
+                load_window, bus_data, bus_en = from_bus[name]
+                if load_window is None:
+                    m.d.sync += addr.eq(index_q)
                 else:
-                    m.d.sync += addr.eq(bus_addr)
+                    with m.If(window_q == load_window):
+                        m.d.sync += addr.eq(index_q)
                 m.d.sync += [word.eq(bus_data), en.eq(bus_en)]
