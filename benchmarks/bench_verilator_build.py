@@ -40,10 +40,10 @@ def main() -> int:
         # before sim.cocotb_support reads it: the cache starts empty
         os.environ["CCACHE_DIR"] = str(Path(scratch) / "ccache")
         import sim.cocotb_support as cocotb_support
-        import sim.engine_run as engine_run
+        from sim.engine_run import run_image_on_rtl
 
-        # the build tree in the scratch directory (both modules hold the path)
-        cocotb_support.BUILD_ROOT = engine_run.BUILD_ROOT = Path(scratch) / "cocotb"
+        # the build tree in the scratch directory (every build reads it at call time)
+        cocotb_support.BUILD_ROOT = Path(scratch) / "cocotb"
         default = FormatSet.preset("default")
         other = Rounding.FLOOR if default.rounding is not Rounding.FLOOR else Rounding.HALF_UP
         capacity = EngineCapacity(*args.capacity)
@@ -53,7 +53,7 @@ def main() -> int:
         for k, fs in enumerate((default, default.replace(rounding=other, name=f"default_{other.value}"))):
             image = build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), capacity)
             started = time.perf_counter()
-            run = engine_run.run_image_on_rtl(image, fs, "verilator")
+            run = run_image_on_rtl(image, fs, "verilator")
             total = time.perf_counter() - started
             if not run.passed:
                 print(f"build {k + 1}: the run was not bit-exact", file=sys.stderr)

@@ -26,7 +26,8 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
 from golden_model.engine_spec.image import EngineCapacity
 
-from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
+from . import cocotb_support
+from .cocotb_support import _formats_key, build_lock, run_bench
 
 __all__ = ["BOARD_SIM_MODULE", "SIM_DIVISOR", "SIM_TIMEOUT", "BoardSimTop", "board_sources", "BoardSimRun",
            "run_board_sim"]
@@ -83,7 +84,8 @@ def board_sources(fs: FormatSet, capacity: EngineCapacity) -> Path:
 
     here = Path(__file__).resolve()
     key = _formats_key(fs) + "-" + __import__("hashlib").sha256(here.read_bytes()).hexdigest()[:8]
-    directory = BUILD_ROOT / key / "board" / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}"
+    size = f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}"
+    directory = cocotb_support.BUILD_ROOT / key / "board" / size
     target = directory / f"{BOARD_SIM_MODULE}.v"
     with build_lock(directory):
         if not target.exists():

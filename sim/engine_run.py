@@ -26,7 +26,8 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
 from golden_model.engine_spec.image import EngineCapacity, EngineImage, build_image
 
-from .cocotb_support import BUILD_ROOT, _formats_key, build_lock, run_bench
+from . import cocotb_support
+from .cocotb_support import _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
@@ -157,7 +158,7 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
 
     if dsp is not None and dsp not in PRIMITIVE_MODELS:
         raise SimulatorError(f"no simulation model for DSP flavour {dsp!r} (choose from {', '.join(PRIMITIVE_MODELS)})")
-    directory = (BUILD_ROOT / _formats_key(fs, dsp) / "engine"
+    directory = (cocotb_support.BUILD_ROOT / _formats_key(fs, dsp) / "engine"
                  / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}")
     exported = directory / f"{ENGINE_MODULE}.v"
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
@@ -280,7 +281,7 @@ def harness_ceiling(fs: FormatSet, cycles: int = 5_000_000, build: str = "defaul
     clock and wait, built like the engine: the speed the harness alone allows."""
     flags, make_flags = build_flags("verilator", build)
     key = hashlib.sha256(repr((flags, make_flags, cycles)).encode()).hexdigest()[:8]
-    directory = BUILD_ROOT / "harness-probe" / key
+    directory = cocotb_support.BUILD_ROOT / "harness-probe" / key
     internal = build in INTERNAL_CLOCK_BUILDS
     with build_lock(directory):
         (directory / "harness_probe.v").write_text(HARNESS_PROBE.format(

@@ -19,7 +19,8 @@ import numpy as np
 
 from golden_model.fixed import FormatSet
 
-from .cocotb_support import BUILD_ROOT, SimulatorError, build_lock, run_bench, verilog_sources
+from . import cocotb_support
+from .cocotb_support import SimulatorError, build_lock, run_bench, verilog_sources
 from .engine_run import CLOCK_HALF_PERIOD_NS, TIMING_MAKE_FLAGS, _make_flags, top_ports
 
 __all__ = ["SWEEP_MODULE", "sweep_on_verilator"]
@@ -80,7 +81,7 @@ def sweep_on_verilator(toplevel: str, fs: FormatSet, beats: np.ndarray) -> np.nd
         raise SimulatorError(f"{toplevel}'s payloads ({in_width}, {out_width} bits) are wider than a sweep's 63")
     n = len(beats)
     key = hashlib.sha256(repr((exported.parent.name, toplevel, n, TIMING_MAKE_FLAGS)).encode())  # the export's key
-    directory = BUILD_ROOT / "sweep" / f"{toplevel}-{key.hexdigest()[:12]}"
+    directory = cocotb_support.BUILD_ROOT / "sweep" / f"{toplevel}-{key.hexdigest()[:12]}"
     with build_lock(directory):
         if not (directory / f"{SWEEP_MODULE}.v").exists():
             (directory / f"{toplevel}.v").write_text(source)
