@@ -54,11 +54,10 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 
 import golden_model.reference as reference  # noqa: E402
 from golden_model.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap  # noqa: E402
-from golden_model.guard import guarded_moves  # noqa: E402
 from golden_model.layouts import initial_layout, start_layout  # noqa: E402
 from golden_model.mesh_io import load_mesh  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
-from golden_model.reference import flatten, iterations_to_within, momentum_beta  # noqa: E402
+from golden_model.reference import flatten, iterations_to_within  # noqa: E402
 from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius  # noqa: E402
 
 #: ``K = C·((1 + δ)·D − A)``.
@@ -79,8 +78,8 @@ RUN = dict(tol_area=1.0, tol_shape=1.0, tol_energy=0.0, energy_window=1000)  # e
 
 
 class _Trial(reference._Jacobi):
-    """``reference._Jacobi`` with the trial's direction in the guarded momentum step (``_advance_momentum``
-    as the default's, with ``w·f`` replaced)."""
+    """``reference._Jacobi`` with the trial's direction in the guarded momentum step: its ``w·f``
+    (``_force_step``) replaced, and for ``hybrid`` what a rolled-back step does (``_after_rejection``)."""
 
     variant = "jacobi"
 
@@ -107,51 +106,25 @@ class _Trial(reference._Jacobi):
             x = x + 0.5 * inverse * (forces - self.params.spring * (degree * x - adjacency @ x))
         return x
 
-    def _advance_momentum(self) -> None:
-        guard = self.guard
-        if guard is None:
+    def _force_step(self, forces: np.ndarray) -> np.ndarray:
+        if self.guard is None:
             raise ValueError("the trial is the guarded step's")
-        forces = self.forces()
-        if self.restart:
-            self.velocities[:] = 0.0
-            self.momentum_k = 0
-        power = float(np.sum(forces * self.velocities))
-        jacobi_left = getattr(self, "_jacobi_left", 0)
+        # hybrid: the Jacobi steps left, counted down by a taken step (a rolled-back one restores it)
+        self._jacobi_left_before = jacobi_left = getattr(self, "_jacobi_left", 0)
+        self._jacobi_left = jacobi_left - 1
         if self.variant in ("jacobi", "jacobi2") or (self.variant == "hybrid" and jacobi_left > 0):
             factor = 2.0 if self.variant == "jacobi2" else 1.0
-            step = factor * guard.scale.value * self.model.step_weights(self.positions, self.signed)[:, None] * forces
-        elif self.variant == "sweeps":
-            step = guard.scale.value * self._sweeps(forces)
-        else:
-            step = guard.scale.value * self._laplacian_solve(forces)
-        proposal = momentum_beta(self.momentum_k) * self.velocities + step
-        with_momentum = self.momentum_k > 0
-        mesh = self.model.mesh
-        moves, levels = guarded_moves(self.positions, proposal, mesh.faces, self.model.winding, 2.0 * mesh.face_areas)
-        guard.count_levels(levels)
-        before = (self.positions, self.delta, self.length, self.signed)
-        self.positions = self.positions + moves
-        self._refresh()
-        energy = self.energy_of_layout()
-        self.accepted = energy <= self.energy
-        if self.accepted:
-            self.energy = energy
-            self._jacobi_left = jacobi_left - 1
-            self.velocities = moves
-            self.momentum_k += 1
-            self.restart = power < 0
-            guard.scale = guard.scale.accepted_step()
-            return
-        self.positions, self.delta, self.length, self.signed = before
-        self.velocities = np.zeros_like(self.velocities)
-        self.momentum_k = 0
-        self.restart = False
-        guard.rejected += 1
+            return factor * super()._force_step(forces)
+        if self.variant == "sweeps":
+            return self._sweeps(forces)
+        return self._laplacian_solve(forces)
+
+    def _after_rejection(self, with_momentum: bool) -> None:
+        self._jacobi_left = jacobi_left = self._jacobi_left_before
         if self.variant == "hybrid" and not with_momentum and jacobi_left <= 0:
             self._jacobi_left = HYBRID_JACOBI_STEPS  # the Jacobi step next, the scale kept
             return
-        guard.scale = guard.scale.rejected(with_momentum)
-        self.stalled = guard.scale.stalled
+        super()._after_rejection(with_momentum)
 
 
 def run(variant: str, mesh, p0: np.ndarray, params: FlattenParams):

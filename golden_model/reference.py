@@ -461,10 +461,10 @@ class _Jacobi:
             self.velocities[:] = 0.0
             self.momentum_k = 0
         power = float(np.sum(forces * self.velocities))  # S = Σ f·V, acted on next iteration
-        weights = self.model.step_weights(self.positions, self.signed)
+        step = self._force_step(forces)
         if guard is not None:
-            weights = guard.scale.value * weights
-        proposal = momentum_beta(self.momentum_k) * self.velocities + weights[:, None] * forces
+            step = guard.scale.value * step  # a power of two: exactly (s·w)·f
+        proposal = momentum_beta(self.momentum_k) * self.velocities + step
         with_momentum = self.momentum_k > 0
         if guard is None:
             self.velocities = proposal
@@ -495,8 +495,18 @@ class _Jacobi:
             self.momentum_k = 0
             self.restart = False
             guard.rejected += 1
-            guard.scale = guard.scale.rejected(with_momentum)
-            self.stalled = guard.scale.stalled
+            self._after_rejection(with_momentum)
+
+    def _force_step(self, forces: np.ndarray) -> np.ndarray:
+        """The momentum step's force term ``w·f`` (length units, before the guard's scale), ``w`` the step
+        weights of the current layout (``SpringModel.step_weights``)."""
+        return self.model.step_weights(self.positions, self.signed)[:, None] * forces
+
+    def _after_rejection(self, with_momentum: bool) -> None:
+        """A rolled-back step's effect on the guard's scale: it halves after a plain gradient step."""
+        guard = self.guard
+        guard.scale = guard.scale.rejected(with_momentum)
+        self.stalled = guard.scale.stalled
 
     def energy_of_layout(self) -> float:
         """The energy the stop rule and the guard watch (springs + barrier) of the current layout."""
