@@ -11,6 +11,7 @@ from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import EngineCapacity, memory_layouts
 from golden_model.engine_spec.register_map import RegisterMap
 
+from .dsp import kept_register
 from .fixedpoint import shape_of
 from .force_pass import ForcePass
 from .integrator import Integrator
@@ -185,7 +186,7 @@ class PassSequencer(wiring.Component):
         # flip-flops' reset pins: a long path on the board).
         r = {name: Signal.like(getattr(self, name), reset_less=True, name=f"{name}_q") for name in RESTARTED}
         m.d.comb += [getattr(self, name).eq(q) for name, q in r.items()]
-        e_valid, next_first = self._force_pass(m, r)
+        e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
         self._ends(m, e_valid, t_valid, n_valid)
@@ -201,7 +202,7 @@ class PassSequencer(wiring.Component):
             m.d.sync += r["tri_index"].eq(0)
         return m
 
-    def _force_pass(self, m: Module, r: dict[str, Signal]):
+    def _force_pass(self, m: Module, r: dict[str, Signal], platform):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
         e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self.entries, "e", self.force_fetch_latency + 1)
         entry_shape = self.entry.shape()
@@ -216,7 +217,11 @@ class PassSequencer(wiring.Component):
             e_entry, e_first = entry_k, first_k
         with m.If(e_valid[ENTRY_LATENCY]):  # the owner of the entry after this one
             m.d.sync += [next_first.eq(ent_data.last), r["node_of_entry"].eq(r["node_of_entry"] + ent_data.last)]
-        beat, barrier = self.force_entry.payload, self.barrier_held
+        # MODE.barrier gates the entry's barrier terms through a copy of its own beside the gating: the
+        # register bank's copy sits by the bus decode, and a route from it into this multiplexer crosses
+        # the die. A clock late is safe: it is a run constant, written a bus cycle or more before START.
+        beat = self.force_entry.payload
+        barrier = kept_register(m, self.barrier_held, name="force_barrier", platform=platform)
         m.d.comb += [
             self.force_entry.valid.eq(e_valid[self.force_fetch_latency]),
             beat.first.eq(e_first), beat.last.eq(e_entry.last),
