@@ -16,6 +16,7 @@ from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import EngineCapacity
 
 from .block_ram import BlockRam
+from .dsp import kept_register
 from .fifo import LutFIFO
 from .guard_certificate import GuardCertificate
 from .guard_commit import GuardCommit
@@ -203,13 +204,30 @@ class GuardPasses(wiring.Component):
         with m.If(commit.o.valid):
             m.d.sync += committed.eq(committed + 1)
 
+        # Each counter's end (``count == size``) a flag beside it, set in the clock it steps from size − 1, so
+        # that a pass's end reads flags: the sizes come from the register bank across the die, and a
+        # compare of a counter with them in front of ``done`` was the critical path. The sizes are run
+        # constants, copied beside the counters (two clocks late; no guard pass runs in a run's first
+        # passes), and at least 1 in any run START accepts, so every flag is clear when its counter restarts.
+        last = {}
+        for name, size in (("vertex", self.vertices), ("triangle", self.triangles)):
+            copy = kept_register(m, size, name=f"guard_{name}s", platform=platform)
+            last[name] = Signal.like(size, name=f"guard_last_{name}", reset_less=True)
+            m.d.sync += last[name].eq(copy - 1)
+        ends = {}
+        for counter, steps, name in ((results, certificate.o.valid, "triangle"), (held, clearing, "vertex"),
+                                     (committed, commit.o.valid, "vertex")):
+            ends[counter.name] = end = Signal(name=f"{counter.name}_end")
+            with m.If(steps):
+                m.d.sync += end.eq(counter == last[name])
+
         # a pass's end, registered; its counters restart the clock after
         scatters_idle = Cat(*(s.idle & ~s.update.valid for s in scatters)).all()
         m.d.sync += self.idle.eq(~landed & (corner_fifo.level == 0) & scatters_idle & ~landed_node & commit.idle)
-        triangles_done = (self.in_stuck | self.in_certify) & (results == self.triangles) & scatters_idle
-        nodes_done = (self.in_hold & (held == self.vertices) & ~hold_write & ~self.proposal_write.en) \
-            | ((self.in_commit | self.in_rollback) & (committed == self.vertices))
+        triangles_done = (self.in_stuck | self.in_certify) & ends["certified"] & scatters_idle
+        nodes_done = (self.in_hold & ends["held_nodes"] & ~hold_write & ~self.proposal_write.en) \
+            | ((self.in_commit | self.in_rollback) & ends["committed_nodes"])
         m.d.sync += self.done.eq((triangles_done | nodes_done) & ~self.done)
         with m.If(self.done | self.in_step):
-            m.d.sync += [results.eq(0), held.eq(0), committed.eq(0)]
+            m.d.sync += [results.eq(0), held.eq(0), committed.eq(0), *(end.eq(0) for end in ends.values())]
         return m
