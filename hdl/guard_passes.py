@@ -205,8 +205,8 @@ class GuardPasses(wiring.Component):
             m.d.sync += committed.eq(committed + 1)
 
         # Each counter's end (``count == size``) a flag beside it, set in the clock it steps from size − 1, so
-        # that a pass's end reads flags: the sizes come from the register bank across the die, and a
-        # compare of a counter with them in front of ``done`` was the critical path. The sizes are run
+        # that a pass's end reads flags: the sizes come from the register bank across the die, and a compare
+        # with them in front of ``done`` puts that route before five levels of logic. The sizes are run
         # constants, copied beside the counters (two clocks late; no guard pass runs in a run's first
         # passes), and at least 1 in any run START accepts, so every flag is clear when its counter restarts.
         last = {}

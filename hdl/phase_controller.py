@@ -291,9 +291,9 @@ class PhaseController(wiring.Component):
             self.shape_error_events.eq(norm_length.o.valid & norm_length.o.payload.saturations),
             self.area_error_events.eq(norm_area.o.valid & norm_area.o.payload.saturations),
         ]
-        # the step generator's events registered beside it: its output valid bit, routed across the die into
-        # the tally's first stage, was the board's worst path. They land in the step-wait phase, a clock
-        # later, long before the next check phase reads SATURATIONS.
+        # the step generator's events registered beside it, so that its output valid bit is not routed across
+        # the die into the tally's first stage through their gating. They land in the step-wait phase, a
+        # clock later, long before the next check phase reads SATURATIONS.
         m.d.sync += self.step_events.eq(Mux(stepgen.o.valid, stepgen.o.payload.saturations, 0))
         for unit in units.values():
             with m.If(unit.i.valid & unit.i.ready):
