@@ -2,7 +2,7 @@
 
 Usage: .venv/bin/python benchmarks/board_build.py [--seed 1] [--out build/board-ulx3s-85f]
 
-Runs Yosys, nextpnr-ecp5 and ecppack (YoWASP) on :class:`hdl.board.Ulx3sTop` (the PLL to 125 MHz, the
+Runs Yosys, nextpnr-ecp5 and ecppack (YoWASP) on :class:`hdl.board.Ulx3sTop` (the PLL to 100 MHz, the
 UART bridge at 1 Mbaud, the LEDs, the engine at ``DEFAULT_CAPACITY``) and prints the report: per clock
 the Fmax after routing and the critical path, the device utilisation, the bitstream's size and each
 tool's time. It takes tens of minutes on this machine, so it is not a test; ``docs/board.md`` holds its

@@ -33,7 +33,7 @@ __all__ = ["BOARD_SIM_MODULE", "SIM_DIVISOR", "SIM_TIMEOUT", "BoardSimTop", "boa
            "run_board_sim"]
 
 BOARD_SIM_MODULE = "springflat_board_sim"
-#: Clocks per UART bit in simulation (the board: 125 at 1 Mbaud); small, so a frame takes few clocks.
+#: Clocks per UART bit in simulation (the board: 100 at 1 Mbaud and 100 MHz); small, so a frame takes few clocks.
 SIM_DIVISOR = 4
 #: The bridge's inter-byte timeout in simulation (clocks): 20 byte times.
 SIM_TIMEOUT = 20 * 10 * SIM_DIVISOR

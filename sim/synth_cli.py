@@ -54,7 +54,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
                    help="clock constraint for nextpnr (default 150 for ecp5, 48 for ice40); with --board the "
-                        "engine's clock from the PLL (default 125)")
+                        "engine's clock from the PLL (default 100)")
     p.add_argument("--out", default=None, help="bundle directory (default synth-TARGET-PRESET)")
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
                    help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core,"

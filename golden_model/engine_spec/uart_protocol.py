@@ -74,8 +74,9 @@ WORD_BYTES = 4
 #: command, address, length
 HEADER_BYTES = 1 + ADDRESS_BYTES + 1
 
-#: The line rate the board top is built for unless told otherwise (bits per second). 125 MHz / 1 Mbaud is
-#: a whole 125 clocks per bit, and the board's FT231X serves 1 Mbaud exactly (3 MHz / 3).
+#: The line rate the board top is built for unless told otherwise (bits per second). 1 Mbaud is a whole
+#: number of clocks per bit at the board's engine clocks (100 at 100 MHz, 125 at 125 MHz), and the board's
+#: FT231X serves it exactly (3 MHz / 3).
 DEFAULT_BAUD = 1_000_000
 #: An idle line for this long inside a frame ends it as truncated (:data:`TIMEOUT`). Long against a
 #: USB-serial adapter's gaps between packets (about 1 ms), short against a person.

@@ -128,11 +128,11 @@ def test_the_top_for_the_ulx3s_85f(tmp_path):
     assert re.search(r'LOCATE COMP "clk25_0__io" SITE "G2";', lpf)
     for i, ball in enumerate("B2 C2 C1 D2 D1 E2 E1 H3".split()):
         assert f'LOCATE COMP "led_{i}__io" SITE "{ball}";' in lpf
-    assert re.search(r'FREQUENCY NET "\S+" 125000000\.0 HZ;', lpf)
+    assert re.search(r'FREQUENCY NET "\S+" 100000000\.0 HZ;', lpf)
     assert re.search(r'FREQUENCY PORT "clk25_0__io" 25000000\.0 HZ;', lpf)
     rtlil = files["top.il"]
     assert "EHXPLLL" in rtlil and "MULT18X18D" in rtlil and "DP16KD" in rtlil
-    for name, value in (("CLKI_DIV", 1), ("CLKFB_DIV", 5), ("CLKOP_DIV", 5), ("CLKOP_CPHASE", 4)):
+    for name, value in (("CLKI_DIV", 1), ("CLKFB_DIV", 4), ("CLKOP_DIV", 6), ("CLKOP_CPHASE", 5)):
         assert re.search(rf"parameter \\{name} {value}\b", rtlil), name
 
 
@@ -155,11 +155,11 @@ def test_synth_board_refusals_are_one_line(argv, message, capsys, tmp_path):
 
 
 def test_an_unreachable_baud_is_one_line(capsys, tmp_path):
-    """12 Mbaud at 125 MHz is 10.4 clocks per bit: 10 is 4.2 % fast, refused before anything is built."""
+    """12 Mbaud at 100 MHz is 8.33 clocks per bit: 8 is 4.2 % fast, refused before anything is built."""
     from sim.cli import main
 
     assert main(["synth", "--board", "ulx3s-85f", "--baud", "12000000", "--out", str(tmp_path / "out")]) == 2
-    assert capsys.readouterr().err == ("springflat: error: 1.2e+07 baud at 125 MHz: 10 clocks per bit is 4.2 % off "
+    assert capsys.readouterr().err == ("springflat: error: 1.2e+07 baud at 100 MHz: 8 clocks per bit is 4.2 % off "
                                        "(at most 2 %)\n")
     assert not (tmp_path / "out").exists()
 
