@@ -30,11 +30,10 @@ from .uart_bridge import UartBridge, timeout_clocks, uart_divisor
 __all__ = ["LEDS", "PllConfig", "pll_config", "EcpPll", "StateLeds", "BoardCore", "Ulx3sTop", "Ulx3s85fPlatform",
            "OSCILLATOR_HZ", "ENGINE_CLOCK_HZ"]
 
-#: The ULX3S's oscillator and the engine clock the top asks the PLL for (the engine's placement target):
-#: a clock the guarded engine's board build meets, not the 125 MHz the engine alone is closed towards
-#: (docs/board.md); ``synth --board --freq`` builds for another.
+#: The ULX3S's oscillator. The engine clock the top asks the PLL for is the protocol's
+#: :data:`~golden_model.engine_spec.uart_protocol.ENGINE_CLOCK_HZ`; ``synth --board --freq`` builds for another.
 OSCILLATOR_HZ = 25e6
-ENGINE_CLOCK_HZ = 100e6
+ENGINE_CLOCK_HZ = protocol.ENGINE_CLOCK_HZ
 
 #: What each LED shows, LED 0 first (BoardCore drives 0-6, the top adds the PLL's lock on 7).
 LEDS = ("heartbeat", "idle", "running", "done", "error", "uart_rx", "uart_tx", "pll_locked")

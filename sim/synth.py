@@ -44,8 +44,8 @@ from golden_model.params import ParameterError
 
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "SynthError", "DoesNotFit",
-           "nextpnr_argv", "placer_options", "run_synthesis", "parse_yosys_stat", "parse_nextpnr_log"]
+__all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ",
+           "SynthError", "DoesNotFit", "nextpnr_argv", "placer_options", "run_synthesis", "parse_yosys_stat", "parse_nextpnr_log"]
 
 
 class SynthError(ParameterError):

@@ -9,8 +9,10 @@ import sys
 import time
 from pathlib import Path
 
-from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS, DoesNotFit,
-                    SynthError, report_markdown, run_synthesis)
+from golden_model.engine_spec import uart_protocol as protocol
+
+from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS,
+                    DoesNotFit, SynthError, report_markdown, run_synthesis)
 
 __all__ = ["add_parser", "cmd_synth"]
 
@@ -50,11 +52,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--board", choices=("ulx3s-85f",), default=None,
                    help="instead of --target: the board top (PLL, UART bridge, LEDs, the engine at --capacity) "
                         "to a bitstream with its timing report and pin list (docs/board.md)")
-    p.add_argument("--baud", type=int, default=None, help="--board: the UART's rate (default 1000000)")
+    p.add_argument("--baud", type=int, default=None,
+                   help=f"--board: the UART's rate (default {protocol.DEFAULT_BAUD})")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
-                   help="clock constraint for nextpnr (default 150 for ecp5, 48 for ice40); with --board the "
-                        "engine's clock from the PLL (default 100)")
+                   help="clock constraint for nextpnr (default "
+                        + ", ".join(f"{mhz:g} for {target}" for target, mhz in DEFAULT_FREQ.items())
+                        + f"); with --board the engine's clock from the PLL (default {protocol.ENGINE_CLOCK_HZ / 1e6:g})")
     p.add_argument("--out", default=None, help="bundle directory (default synth-TARGET-PRESET)")
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
                    help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core,"
