@@ -18,7 +18,7 @@ from golden_model.engine_spec.register_map import RESULTS, STATES, RegisterMap
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .guard_decision import GuardDecision
 from .guard_passes import GUARD_PASSES
-from .dsp import registered_product
+from .dsp import kept_register, registered_product
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import energy_sums_layout
 from .logic import mode_guarded, mode_runs, mode_steps, or_tree, reset_echo
@@ -59,6 +59,7 @@ class _Run:
     measuring_again: Signal  # the accepted layout measured again after a rollback (its events not counted)
     stalled: Signal  # the decision's: the step scale passed SCALE_MAX_SHIFT
     abort: Signal  # CONTROL.abort registered once more, beside the phase machine
+    requests: dict  # {unit name: a pulse, the phase machine's request, which sets the unit's input valid}
 
 
 class PhaseController(wiring.Component):
@@ -195,7 +196,8 @@ class PhaseController(wiring.Component):
                    momentum=Signal(name="mode_momentum"), fixed_step=Signal(name="mode_fixed_step"),
                    guarded=Signal(name="mode_guarded") if self.capacity.guard else C(0, 1),
                    measuring_again=self.measuring_again,
-                   stalled=Signal(name="stalled"), abort=Signal(name="abort_q"))
+                   stalled=Signal(name="stalled"), abort=Signal(name="abort_q"),
+                   requests={name: Signal(name=f"{name}_request") for name in units})
         # ABORT registered here: the register bank's pulse is routed across the device, and every phase
         # flag and unit request depends on it (a run under way drains a clock later; START's refusal of a
         # write that also sets ABORT, and the idle engine's answer, read the pulse itself)
@@ -214,7 +216,7 @@ class PhaseController(wiring.Component):
         m.d.comb += self.iterations.eq(iterations)
         cleared = self.starting | reset_echo(m, "results_echo")
         self._cycles(m, cleared)
-        self._units(m, units, run)
+        self._units(m, units, run, platform)
         decisions, stepgen_idle = self._decisions(m, units, run)
         m.d.sync += [self.area_clear.eq(0), self.node_restart.eq(0), self.triangle_restart.eq(0)]
         # The drain's end in two registered stages, so that no unit's request is routed across the
@@ -225,7 +227,8 @@ class PhaseController(wiring.Component):
         # starts while draining, so all idle in a draining clock stays all idle, and the drain ends
         # exactly one clock after it would with the AND in one stage.
         units_idle = Signal(len(units) + 1, name="units_idle")
-        m.d.sync += units_idle.eq(Cat(*(~u.i.valid & u.i.ready for u in units.values()), stepgen_idle))
+        m.d.sync += units_idle.eq(Cat(*(~run.requests[name] & ~u.i.valid & u.i.ready for name, u in units.items()),
+                                      stepgen_idle))
         was_draining = Signal(name="was_draining")
         drained = Signal(name="drained")
         m.d.sync += [was_draining.eq(self.in_drain),
@@ -264,10 +267,11 @@ class PhaseController(wiring.Component):
         with m.If(cleared):
             m.d.sync += [cycles.eq(0), cycles_wrapped.eq(0)]
 
-    def _units(self, m: Module, units, run: _Run) -> None:
-        """The units' requests and results. A request's valid is set by the phase machine and held until
-        taken; the payloads are the sums and registers themselves, which hold still from the end of
-        their pass until the unit's result is in (the next pass starts after the math phase)."""
+    def _units(self, m: Module, units, run: _Run, platform) -> None:
+        """The units' requests and results. A request's valid is set a clock after the phase machine's
+        request pulse and held until taken; the payloads are the sums and registers themselves, which
+        hold still from the end of their pass until the unit's result is in (the next pass starts after
+        the math phase)."""
         fs = self.fs
         norm_length, norm_area, energy = units["norm_length"], units["norm_area"], units["energy_check"]
         beta, stepgen, decision = units["beta"], units["stepgen"], units["decision"]
@@ -295,8 +299,19 @@ class PhaseController(wiring.Component):
         # the die into the tally's first stage through their gating. They land in the step-wait phase, a
         # clock later, long before the next check phase reads SATURATIONS.
         m.d.sync += self.step_events.eq(Mux(stepgen.o.valid, stepgen.o.payload.saturations, 0))
-        for unit in units.values():
+        # Each unit's input valid beside the unit, set from the phase machine's request pulse and cleared
+        # by ABORT from a copy of its own (``kept_register``): no phase flag or ABORT reaches it through the
+        # phase machine's logic (the units sit across the device from it). A request lands a clock after
+        # its phase move, an ABORT's clear a clock after the drain begins: the drain waits for a request
+        # in flight (``units_idle``), as for a unit that took its request in the ABORT's clock.
+        for name, unit in units.items():
+            request, abort = run.requests[name], kept_register(m, run.abort, name=f"{name}_abort", platform=platform)
+            m.d.sync += request.eq(0)
+            with m.If(request):
+                m.d.sync += unit.i.valid.eq(1)
             with m.If(unit.i.valid & unit.i.ready):
+                m.d.sync += unit.i.valid.eq(0)
+            with m.If(abort):
                 m.d.sync += unit.i.valid.eq(0)
         with m.If(norm_length.o.valid):
             m.d.sync += [self.shape_error.eq(norm_length.o.payload.error), run.math_pending[0].eq(0)]
@@ -364,8 +379,7 @@ class PhaseController(wiring.Component):
             m.d.sync += self.result.eq(_code(RESULTS, code))
             m.d.comb += self.irq_set.eq(1)
 
-        norm_length, norm_area, energy = units["norm_length"], units["norm_area"], units["energy_check"]
-        beta, stepgen, decision = units["beta"], units["stepgen"], units["decision"]
+        beta, stepgen, decision, requests = units["beta"], units["stepgen"], units["decision"], run.requests
         abort, running = run.abort, self.running
         launch = Signal(name="launch")  # a pulse: START took the run
         m.d.sync += launch.eq(0)
@@ -376,7 +390,6 @@ class PhaseController(wiring.Component):
         # clock is then aborted as a run that ended a clock before it would be.
         with m.If(abort & running):
             m.d.sync += [flag.eq(name == "drain") for name, flag in flags.items()]
-            m.d.sync += [unit.i.valid.eq(0) for unit in units.values()]
         with m.If((self.abort | abort) & ~running):
             set_state("idle")
             m.d.sync += self.result.eq(_code(RESULTS, "none"))
@@ -399,10 +412,10 @@ class PhaseController(wiring.Component):
             m.d.sync += [self.fetch_force.eq(1), *move("start", "force")]
         with m.If(go & flags["force"] & self.force_done):
             m.d.sync += [self.fetch_force.eq(0), self.fetch_area.eq(1), *move("force", "area"),
-                         run.math_pending.eq(0b111), norm_length.i.valid.eq(1), energy.i.valid.eq(1),
+                         run.math_pending.eq(0b111), requests["norm_length"].eq(1), requests["energy_check"].eq(1),
                          self.area_clear.eq(1)]
         with m.If(go & flags["area"] & self.area_done):
-            m.d.sync += [self.fetch_area.eq(0), *move("area", "math"), norm_area.i.valid.eq(1)]
+            m.d.sync += [self.fetch_area.eq(0), *move("area", "math"), requests["norm_area"].eq(1)]
         # the last result's clock t clears its math_pending bit (seen at t+1); its event reaches diverged_q
         # at t+5: the check phase starts then, CHECK_SETTLE_CLOCKS after math_pending reads 0
         math_settle = [Signal(name=f"math_settle{k}") for k in range(self.CHECK_SETTLE_CLOCKS)]
@@ -412,7 +425,7 @@ class PhaseController(wiring.Component):
             # the guarded step: each new layout's energy judged (kept or rolled back); the accepted layout
             # measured again after a rollback is not
             with m.If(run.guarded & ~run.measuring_again):
-                m.d.sync += [decision.i.valid.eq(1), *move("math", "decide")]
+                m.d.sync += [requests["decision"].eq(1), *move("math", "decide")]
             with m.Else():
                 m.d.sync += [run.measuring_again.eq(0), *move("math", "check")]
         # the decision's answer registered beside the phase machine, as the step's
@@ -442,11 +455,11 @@ class PhaseController(wiring.Component):
                 m.d.sync += [run.first_measure.eq(0), *move("check", "step")]
         with m.If(go & flags["step"]):
             with m.If(run.momentum):
-                m.d.sync += beta.i.valid.eq(1)
+                m.d.sync += requests["beta"].eq(1)
             with m.Elif(run.fixed_step):
                 m.d.sync += run.fixed_load.eq(1)
             with m.Else():
-                m.d.sync += stepgen.i.valid.eq(1)
+                m.d.sync += requests["stepgen"].eq(1)
             m.d.sync += move("step", "step_wait")
         # the step is in (``step_dt`` and ``step_half`` loaded) two clocks after a result: a register beside
         # the units gathers their output valid bits, and a copy of it with no logic in front lands beside

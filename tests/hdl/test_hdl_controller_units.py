@@ -241,9 +241,9 @@ def test_energy_change_exactly_at_the_tolerance(preset):
 def test_energy_latency(preset):
     fs = FormatSet.preset(preset)
     dut, run, _, _ = check_energy(fs, 1000, 3, 1 << 30, [(7, 9, 1), (8, 9, 0), (8, 9, 0)])
-    # two clocks besides the multiply's and ε·E_prev's steps and E, the compare and output's: Σe² loaded, the
-    # product copied
-    assert dut.latency == dut.square_bits + dut.energy_bits + 5 + 2
+    # three clocks besides the multiply's and ε·E_prev's steps and E, the compare and output's: Σe² loaded, the
+    # product copied, ε·E_prev copied beside the compare
+    assert dut.latency == dut.square_bits + dut.energy_bits + 5 + 3
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * 3
 
 
