@@ -39,6 +39,8 @@ RESTARTED_AT_START = ("entry_index", "node_of_entry", "force_out_index", "length
                       "tri_index")
 RESTARTED_AT_STEP = ("node_index", "node_out_index", "power_sum")
 RESTARTED = RESTARTED_AT_START + RESTARTED_AT_STEP
+#: The run's sums among them (read by the controller's units), restarted a clock after their phase.
+SUMS = ("length_sum", "square_sum", "barrier_sum", "power_sum")
 
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
@@ -191,11 +193,20 @@ class PassSequencer(wiring.Component):
         n_valid = self._integrate_pass(m, r)
         self._ends(m, e_valid, t_valid, n_valid)
         # The counters and sums restart from a phase flag, outside the phase machine's priority logic:
-        # the force and area passes' in the start phase, the integrate pass's in the step phase.
+        # the force and area passes' in the start phase, the integrate pass's in the step phase. The run's
+        # sums, which the placer puts by the math units that read them, across the device from the phase
+        # machine, restart from a copy of the flag of their own (``kept_register``), a clock later: their
+        # pass's first terms arrive tens of clocks after the phase.
+        start_copy = kept_register(m, self.in_start, name="sums_restart_at_start", platform=platform)
+        step_copy = kept_register(m, self.in_step, name="sums_restart_at_step", platform=platform)
         with m.If(self.in_start):
-            m.d.sync += [next_first.eq(1), *(r[name].eq(0) for name in RESTARTED_AT_START)]
+            m.d.sync += [next_first.eq(1), *(r[name].eq(0) for name in RESTARTED_AT_START if name not in SUMS)]
+        with m.If(start_copy):
+            m.d.sync += [r[name].eq(0) for name in RESTARTED_AT_START if name in SUMS]
         with m.If(self.in_step):
-            m.d.sync += [r[name].eq(0) for name in RESTARTED_AT_STEP]
+            m.d.sync += [r[name].eq(0) for name in RESTARTED_AT_STEP if name not in SUMS]
+        with m.If(step_copy):
+            m.d.sync += [r[name].eq(0) for name in RESTARTED_AT_STEP if name in SUMS]
         with m.If(self.node_restart):
             m.d.sync += r["node_index"].eq(0)
         with m.If(self.triangle_restart):
