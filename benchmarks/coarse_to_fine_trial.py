@@ -20,6 +20,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import igl
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -68,6 +69,22 @@ def coarse_with_path_lengths(fine: Mesh, n: int) -> Mesh:
     return coarse
 
 
+def decimated(fine: Mesh) -> Mesh:
+    """libigl's ``decimate`` of ``fine`` to a quarter of its faces."""
+    vertices, faces, _, _ = igl.decimate(np.asfortranarray(fine.vertices), np.asfortranarray(fine.faces, dtype=np.int32),
+                                         len(fine.faces) // 4)
+    return Mesh(np.asarray(vertices), np.asarray(faces), name=f"{fine.name}, decimated")
+
+
+def prolong_by_closest_point(fine: Mesh, coarse: Mesh, layout: np.ndarray) -> np.ndarray:
+    """Each fine vertex at its closest point on the coarse 3D mesh, carried to ``layout`` barycentrically."""
+    _, face, closest = igl.point_mesh_squared_distance(fine.vertices, coarse.vertices, coarse.faces.astype(np.int64))
+    corners = coarse.faces[face]
+    v = coarse.vertices
+    weights = igl.barycentric_coordinates(closest, v[corners[:, 0]], v[corners[:, 1]], v[corners[:, 2]])
+    return np.einsum("ij,ijk->ik", weights, layout[corners])
+
+
 def main() -> None:
     print("| patch | coarse rest lengths | fine from Tutte | " + " | ".join(
         f"coarse {k if k is not None else 'to the stop rule'}: coarse it, fine it, work" for k in COARSE_ITERATIONS) + " |")
@@ -78,21 +95,31 @@ def main() -> None:
         target = flatten(fine, p0, FlattenParams(dynamics="momentum", max_iter=3000, **RUN)).final.shape_error
         direct = iterations_to_within(flatten(fine, p0, FlattenParams(dynamics="momentum", max_iter=400, **RUN))
                                       .history.shape_error, target)
-        for lengths, coarse in (("plain", make(COARSE)), ("paths", coarse_with_path_lengths(fine, COARSE))):
+        def on_grid(layout: np.ndarray, _coarse: Mesh) -> np.ndarray:
+            return prolong(layout, COARSE)
+
+        def by_closest_point(layout: np.ndarray, coarse: Mesh) -> np.ndarray:
+            return prolong_by_closest_point(fine, coarse, layout)
+        variants = (("plain", make(COARSE), on_grid), ("paths", coarse_with_path_lengths(fine, COARSE), on_grid),
+                    ("decimated", decimated(fine), by_closest_point))
+        for lengths, coarse, to_fine in variants:
             cells = []
             for k in COARSE_ITERATIONS:
                 params = (FlattenParams(dynamics="momentum", max_iter=k, **RUN) if k is not None else
                           FlattenParams(dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=FILE_TOL_ENERGY,
                                         max_iter=400))
                 first = flatten(coarse, initial_layout(coarse, "tutte"), params)
-                start = prolong(first.positions, COARSE)
-                assert folded_faces(start, fine.faces).sum() == 0
+                start = to_fine(first.positions, coarse)
+                folds = int(folded_faces(start, fine.faces).sum())
+                if folds:
+                    cells.append(f"{first.iterations}, start folds {folds}")
+                    continue
                 reached = iterations_to_within(flatten(fine, start, FlattenParams(dynamics="momentum", max_iter=400,
                                                                                   **RUN)).history.shape_error, target)
                 work = (f"{reached + first.iterations * coarse.n_vertices / fine.n_vertices:.0f}" if reached is not None
                         else "—")
                 cells.append(f"{first.iterations}, {reached if reached is not None else '> 400'}, {work}")
-            print(f"| {name} | {lengths} | {direct} | " + " | ".join(cells) + " |", flush=True)
+            print(f"| {name} | {lengths} ({coarse.n_vertices} V) | {direct} | " + " | ".join(cells) + " |", flush=True)
 
 
 if __name__ == "__main__":
