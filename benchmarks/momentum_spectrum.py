@@ -27,20 +27,14 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from golden_model.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap  # noqa: E402
 from golden_model.layouts import initial_layout  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 import golden_model.reference as reference  # noqa: E402
 from golden_model.reference import SpringModel, _Jacobi, flatten, iterations_to_within  # noqa: E402
+from laplacian_step_trial import MESHES, RUN  # noqa: E402  (issue 25's four patches, run exactly max_iter)
 
-MESHES = {
-    "spherical cap, 15 rings": lambda: spherical_cap(15),
-    "bumpy 31×31": lambda: bumpy_grid(31),
-    "saddle 31×31": lambda: saddle_grid(31),
-    "cylinder strip 31×31, 180°": lambda: rolled_grid(31, 31, arc_degrees=180)[0],
-}
-RUN = dict(tol_area=1.0, tol_shape=1.0, tol_energy=0.0, energy_window=1000)  # exactly max_iter iterations
 BOUND = 120
 #: Multiples of the default step weights measured (1: the default).
 FACTORS = (1.0, 1.5, 2.0, 2.5, 3.0)
