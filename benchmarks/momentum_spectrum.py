@@ -3,7 +3,7 @@ Jacobi-weighted Hessian at the minimum (float, docs/guard.md "Speed to the minim
 
 Usage::
 
-    .venv/bin/python benchmarks/momentum_spectrum.py      # issue 25's four patches, about a minute
+    .venv/bin/python benchmarks/momentum_spectrum.py      # issue 25's four patches, 25 s of CPU
 
 For each patch at ~15 edges of radius: the minimum (3,000 iterations of the defaults from Tutte, as
 ``tests/golden_model/test_dynamics.py`` measures), the Hessian ``H`` of the springs' energy there by central
