@@ -2,7 +2,7 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/coarse_to_fine_trial.py      # a few seconds
+    .venv/bin/python benchmarks/coarse_to_fine_trial.py      # about 20 s of CPU
 
 The bumpy patch, the saddle and the cylinder strip are 31×31 vertex grids; the 16×16 grid of the same surface
 holds every other row and column of them. The trial flattens the coarse grid from its Tutte layout with the
