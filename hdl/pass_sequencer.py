@@ -33,14 +33,16 @@ def fetch_latencies(read_latency: int) -> tuple[int, int, int]:
 #: :func:`fetch_latencies` with the node memories' :data:`READ_LATENCY` (one bank each).
 FORCE_FETCH_LATENCY, AREA_FETCH_LATENCY, NODE_FETCH_LATENCY = fetch_latencies(READ_LATENCY)
 
-#: The counters and sums the start phase restarts (the force and area passes'), and the step phase (the
-#: integrate pass's).
-RESTARTED_AT_START = ("entry_index", "node_of_entry", "force_out_index", "length_sum", "square_sum", "barrier_sum",
-                      "tri_index")
-RESTARTED_AT_STEP = ("node_index", "node_out_index", "power_sum")
-RESTARTED = RESTARTED_AT_START + RESTARTED_AT_STEP
-#: The run's sums among them (read by the controller's units), restarted a clock after their phase.
-SUMS = ("length_sum", "square_sum", "barrier_sum", "power_sum")
+#: The counters and sums the sequencer restarts, each with the phase flag that restarts it (``in_start``: the
+#: force and area passes', ``in_step``: the integrate pass's) and whether it is one of the run's sums (read by
+#: the controller's units), which restart a clock after their phase.
+RESTARTS = {
+    "entry_index": ("in_start", False), "node_of_entry": ("in_start", False), "force_out_index": ("in_start", False),
+    "length_sum": ("in_start", True), "square_sum": ("in_start", True), "barrier_sum": ("in_start", True),
+    "tri_index": ("in_start", False),
+    "node_index": ("in_step", False), "node_out_index": ("in_step", False), "power_sum": ("in_step", True),
+}
+RESTARTED = tuple(RESTARTS)
 
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
@@ -197,16 +199,16 @@ class PassSequencer(wiring.Component):
         # sums, which the placer puts by the math units that read them, across the device from the phase
         # machine, restart from a copy of the flag of their own (``kept_register``), a clock later: their
         # pass's first terms arrive tens of clocks after the phase.
-        start_copy = kept_register(m, self.in_start, name="sums_restart_at_start", platform=platform)
-        step_copy = kept_register(m, self.in_step, name="sums_restart_at_step", platform=platform)
-        with m.If(self.in_start):
-            m.d.sync += [next_first.eq(1), *(r[name].eq(0) for name in RESTARTED_AT_START if name not in SUMS)]
-        with m.If(start_copy):
-            m.d.sync += [r[name].eq(0) for name in RESTARTED_AT_START if name in SUMS]
-        with m.If(self.in_step):
-            m.d.sync += [r[name].eq(0) for name in RESTARTED_AT_STEP if name not in SUMS]
-        with m.If(step_copy):
-            m.d.sync += [r[name].eq(0) for name in RESTARTED_AT_STEP if name in SUMS]
+        copies = {phase: kept_register(m, getattr(self, phase), platform=platform,
+                                       name=f"sums_restart_at_{phase.removeprefix('in_')}")
+                  for phase in ("in_start", "in_step")}
+        for phase, copy in copies.items():
+            with m.If(getattr(self, phase)):
+                m.d.sync += [r[name].eq(0) for name, (at, is_sum) in RESTARTS.items() if at == phase and not is_sum]
+                if phase == "in_start":
+                    m.d.sync += next_first.eq(1)
+            with m.If(copy):
+                m.d.sync += [r[name].eq(0) for name, (at, is_sum) in RESTARTS.items() if at == phase and is_sum]
         with m.If(self.node_restart):
             m.d.sync += r["node_index"].eq(0)
         with m.If(self.triangle_restart):
