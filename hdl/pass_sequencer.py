@@ -205,10 +205,10 @@ class PassSequencer(wiring.Component):
         for phase, copy in copies.items():
             with m.If(getattr(self, phase)):
                 m.d.sync += [r[name].eq(0) for name, (at, is_sum) in RESTARTS.items() if at == phase and not is_sum]
-                if phase == "in_start":
-                    m.d.sync += next_first.eq(1)
             with m.If(copy):
                 m.d.sync += [r[name].eq(0) for name, (at, is_sum) in RESTARTS.items() if at == phase and is_sum]
+        with m.If(self.in_start):
+            m.d.sync += next_first.eq(1)
         with m.If(self.node_restart):
             m.d.sync += r["node_index"].eq(0)
         with m.If(self.triangle_restart):
