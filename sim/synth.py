@@ -376,7 +376,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             argv = nextpnr_argv(tgt, wtop, freq, router, seed, placer_timing)
             entry["nextpnr_command"] = f"nextpnr-{'ecp5' if target == 'ecp5' else 'ice40'} " + shlex.join(argv)
             say(f"[{target} {name}] nextpnr place and route at {freq:g} MHz "
-                f"({'20-40 minutes' if name == ENGINE else 'a few minutes' if name in ('node_update', TOP) else 'under a minute'})")
+                f"({'20-60 minutes' if name == ENGINE else 'a few minutes' if name in ('node_update', TOP) else 'under a minute'})")
             t0 = time.monotonic()
             status, text = _run_tool(tgt.nextpnr, argv, out, f"{wtop}.{target}.nextpnr.stdout")
             entry["nextpnr_seconds"] = round(time.monotonic() - t0, 1)
