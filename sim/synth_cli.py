@@ -70,7 +70,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="springflat_engine without the step guard: no guarded mode, and its block RAMs free for "
                         "depth (3072 18432 6144 fits the ECP5-85F only so; docs/engine-guard.md)")
     p.add_argument("--router", choices=tuple(ROUTERS), default=DEFAULT_ROUTER,
-                   help="nextpnr router (default auto: the timing-driven router1; router2 is not timing-driven)")
+                   help="nextpnr router (default auto: the timing-driven router1; router1-ripup: router1 with its "
+                        "timing-driven rip-up, --tmg-ripup; router2 is not timing-driven)")
     p.add_argument("--placer-timing", choices=tuple(PLACER_TIMING), default=DEFAULT_PLACER_TIMING,
                    help="nextpnr's placer: default, or strong (the heap placer's criticality exponent and timing "
                         "weight 4 and 20 instead of 2 and 10: more weight on long routes)")

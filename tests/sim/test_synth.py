@@ -139,6 +139,11 @@ def test_nextpnr_argv_default_is_the_recorded_command_and_strong_adds_the_placer
     assert sorted(strong) == sorted(recorded + ["--placer-heap-critexp", "4", "--placer-heap-timingweight", "20"])
     with pytest.raises(SynthError, match="unknown placer timing 'fast'"):
         nextpnr_argv(TARGETS["ecp5"], "x", 125.0, "auto", 1, "fast")
+    # router1-ripup: the recorded command with router1's timing-driven rip-up, nothing else
+    ripup = nextpnr_argv(TARGETS["ecp5"], "springflat_engine_pnr", 125.0, "router1-ripup", 2)
+    at = ripup.index("--router")
+    assert ripup[at:at + 3] == ["--router", "router1", "--tmg-ripup"]
+    assert ripup[:at + 2] + ripup[at + 3:] == nextpnr_argv(TARGETS["ecp5"], "springflat_engine_pnr", 125.0, "auto", 2)
 
 
 def test_the_placer_timing_is_in_the_bundles_command_line(tmp_path):
