@@ -102,8 +102,8 @@ DEFAULT_PLACER_TIMING = "default"
 
 #: nextpnr's routers by the name ``--router`` takes, each with its options: ``auto`` is the timing-driven
 #: ``router1``; ``router1-ripup`` adds its timing-driven rip-up (``--tmg-ripup``: arcs that fail timing
-#: are ripped up and routed again), which routes the guarded engine's seed-2 placement at 125 MHz where
-#: plain ``router1`` leaves it 0.05 ns short (``docs/engine-guard-timing.md``).
+#: are ripped up and routed again), for a placement whose last paths plain ``router1`` leaves just short
+#: of the constraint (the guarded engine's: ``docs/engine-guard-timing.md``).
 ROUTERS = {"auto": ("router1",), "router1": ("router1",), "router1-ripup": ("router1", "--tmg-ripup"),
            "router2": ("router2",)}
 DEFAULT_ROUTER = "auto"
