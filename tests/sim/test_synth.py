@@ -139,7 +139,12 @@ def test_nextpnr_argv_default_is_the_recorded_command_and_strong_adds_the_placer
     assert sorted(strong) == sorted(recorded + ["--placer-heap-critexp", "4", "--placer-heap-timingweight", "20"])
     with pytest.raises(SynthError, match="unknown placer timing 'fast'"):
         nextpnr_argv(TARGETS["ecp5"], "x", 125.0, "auto", 1, "fast")
-    # router1-ripup: the recorded command with router1's timing-driven rip-up, nothing else
+
+
+def test_nextpnr_argv_router1_ripup_adds_the_timing_driven_ripup_and_nothing_else():
+    """``router1-ripup`` is the default command with ``--tmg-ripup`` after ``--router router1``."""
+    from sim.synth import nextpnr_argv
+
     ripup = nextpnr_argv(TARGETS["ecp5"], "springflat_engine_pnr", 125.0, "router1-ripup", 2)
     at = ripup.index("--router")
     assert ripup[at:at + 3] == ["--router", "router1", "--tmg-ripup"]
