@@ -23,7 +23,8 @@ from amaranth.hdl import ClockSignal, Const, Fragment, Instance, Module, Mux, Si
 
 from golden_model.fixed.dsp import DSP_WIDTH, is_dsp_block
 
-__all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target", "kept_register", "mult18x18d_count"]
+__all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target", "kept_register", "ecp5_instance_count",
+           "mult18x18d_count"]
 
 
 class DspPlatform:
@@ -122,13 +123,19 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
     return product
 
 
-def mult18x18d_count(component) -> int:
-    """``MULT18X18D`` instances in ``component`` elaborated with :data:`ECP5` (what ``synth`` maps)."""
+def ecp5_instance_count(component, cell: str) -> int:
+    """Instances of the ECP5 primitive ``cell`` (``"MULT18X18D"``, ``"DP16KD"``) in ``component``
+    elaborated with :data:`ECP5`: what ``synth`` maps, counted without running Yosys."""
     count, fragments = 0, [Fragment.get(component, ECP5)]
     while fragments:
         for sub, _, _ in fragments.pop().subfragments:
             if isinstance(sub, Instance):
-                count += sub.type == "MULT18X18D"
+                count += sub.type == cell
             else:
                 fragments.append(sub)
     return count
+
+
+def mult18x18d_count(component) -> int:
+    """``MULT18X18D`` instances in ``component`` elaborated with :data:`ECP5` (what ``synth`` maps)."""
+    return ecp5_instance_count(component, "MULT18X18D")

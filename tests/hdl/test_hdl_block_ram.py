@@ -91,3 +91,17 @@ def test_dp16kd_banks_takes_the_fewest_block_rams():
     assert dp16kd_banks(3072, 66) == (18, 1024, 3)  # 12, where one 4K x 4 bank takes 17
     assert dp16kd_banks(6144, 65) == (9, 2048, 3)  # 24, tied with 6 banks of 1K x 18: fewer banks
     assert dp16kd_banks(4096, 4) == (4, 4096, 1)
+
+
+@pytest.mark.parametrize("shape, depth, read_ports, expected", [
+    (unsigned(18), 3072, 2, 6),  # 1K×18: 3 banks of 1 block RAM, a copy per read port
+    (unsigned(33), 1000, 1, 2),  # 1K×18: 1 bank, two slices side by side
+    (unsigned(8), 4000, 1, 2),   # 4K×4 and 2K×9 both take 2; one bank (4K×4) wins the tie
+])
+def test_ecp5_instance_count_counts_the_block_rams_a_memory_maps_to(shape, depth, read_ports, expected):
+    """The count benchmarks/bram_budget.py sizes capacities with, against the DP16KD configurations by hand."""
+    from hdl.dsp import ecp5_instance_count
+
+    ram = BlockRam(shape, depth, read_ports=read_ports)
+    assert ecp5_instance_count(ram, "DP16KD") == expected
+    assert ecp5_instance_count(ram, "MULT18X18D") == 0
