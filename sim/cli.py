@@ -33,10 +33,10 @@ from golden_model.layouts import LAYOUT_METHODS
 from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
-from .exit_codes import EXIT_DIVERGED, EXIT_INTERRUPTED, EXIT_USAGE
+from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
 from .flatten_run import check_print_size, human_line, json_summary, run_flatten, what_was_used, write_outputs
 from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
-    reset_interrupted
+    received_signal, reset_interrupted
 from .patterns import PATTERN_SUFFIXES, PatternDrawing, add_pattern_options, scale_note
 from .run_options import (
     USER_ERRORS,
@@ -266,7 +266,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     reset_interrupted()
     handler = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, on_interrupt) if handler else None  # Ctrl-C: one line, status 130
+    # Ctrl-C or kill: one line, status 130 or 143 (sim.exit_codes.STOP_SIGNALS)
+    previous = {name: signal.signal(getattr(signal, name), on_interrupt) for name in STOP_SIGNALS} if handler else {}
     try:
         try:
             status = args.func(args)
@@ -287,11 +288,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         if argv is None:  # the program itself, which ends now (not a caller running it in-process)
             _quiet_after_interrupt()
-        print("springflat: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        line, status = STOP_SIGNALS[received_signal().name]
+        print(f"springflat: {line}", file=sys.stderr)
+        return status
     finally:
-        if handler:
-            signal.signal(signal.SIGINT, previous)
+        for name, before in previous.items():
+            signal.signal(getattr(signal, name), before)
 
 
 if __name__ == "__main__":

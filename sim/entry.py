@@ -3,8 +3,9 @@
 A thin door in front of :func:`sim.cli.main`. Importing the commands takes a second or two (numpy,
 scipy, matplotlib), and a Ctrl-C in that time must end the program like one during a command, with
 the one line ``springflat: interrupted`` and status 130 — not a traceback from inside an import,
-nor the ImportError that a C extension's import cut short by the signal turns into. So SIGINT is
-only recorded while the commands are imported, and answered once they are.
+nor the ImportError that a C extension's import cut short by the signal turns into. So SIGINT (and
+SIGTERM, answered alike with ``springflat: terminated`` and 143) is only recorded while the commands
+are imported, and answered once they are.
 """
 
 from __future__ import annotations
@@ -12,24 +13,30 @@ from __future__ import annotations
 import signal
 import sys
 
-from .exit_codes import EXIT_INTERRUPTED
+from .exit_codes import STOP_SIGNALS
 
 
-def _interrupted() -> int:
-    print("springflat: interrupted", file=sys.stderr)
-    return EXIT_INTERRUPTED
+def _stopped(name: str) -> int:
+    line, status = STOP_SIGNALS[name]
+    print(f"springflat: {line}", file=sys.stderr)
+    return status
 
 
 def main() -> int:
-    received: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    received: list[str] = []
+
+    def record(signum, frame) -> None:
+        received.append(signal.Signals(signum).name)
+
+    previous = {name: signal.signal(getattr(signal, name), record) for name in STOP_SIGNALS}
     try:
         from .cli import main as run_command
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for name, before in previous.items():
+            signal.signal(getattr(signal, name), before)
     if received:
-        return _interrupted()
+        return _stopped(received[0])
     try:
         return run_command()  # installs its own handler (sim.outputs.on_interrupt)
     except KeyboardInterrupt:  # in the instants before that handler, or after it is removed
-        return _interrupted()
+        return _stopped("SIGINT")

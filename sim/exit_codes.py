@@ -10,3 +10,9 @@ EXIT_DIVERGED = 3
 """A run diverged (its last finite layout is still written)."""
 EXIT_INTERRUPTED = 130
 """Ctrl-C (SIGINT), as a shell reports it: 128 + 2."""
+EXIT_TERMINATED = 143
+"""SIGTERM (``kill``, a job's time limit), as a shell reports it: 128 + 15."""
+
+#: The signals a command ends on cleanly (outputs not put in place, child processes killed), each with
+#: its one line after ``springflat: `` and its status.
+STOP_SIGNALS = {"SIGINT": ("interrupted", EXIT_INTERRUPTED), "SIGTERM": ("terminated", EXIT_TERMINATED)}

@@ -10,7 +10,7 @@ The policy: outputs are regular files.  A symbolic link is written through (its
 final target is replaced, the link stays); a path that is not a regular file (a
 device, a FIFO, a socket, a directory), or a link to one, is refused and never
 replaced; no output may be the same file as an input or another output
-(:func:`check_distinct`, by device and inode).  SIGINT (:func:`on_interrupt`)
+(:func:`check_distinct`, by device and inode).  SIGINT or SIGTERM (:func:`on_interrupt`)
 never lets anything be put in place afterwards.
 """
 
@@ -229,54 +229,69 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
             os.unlink(tmp)
 
 
-#: Set by :func:`on_interrupt` (SIGINT); the commits of :func:`atomic_write`, :func:`all_or_nothing` and
+#: Set by :func:`on_interrupt` (SIGINT or SIGTERM); the commits of :func:`atomic_write`, :func:`all_or_nothing` and
 #: :func:`atomic_directory` refuse to put anything in place once it is set.
 _INTERRUPTED = threading.Event()
+#: The signal that set it (``signal.SIGINT`` until one arrives).
+_RECEIVED = [signal.SIGINT]
 
 
 def on_interrupt(signum, frame) -> None:
-    """The commands' SIGINT handler: :class:`KeyboardInterrupt`, as Python's own.
+    """The commands' SIGINT and SIGTERM handler: :class:`KeyboardInterrupt`, as Python's own for SIGINT.
 
+    So a ``kill`` ends a command as Ctrl-C does: nothing is put in place, and the child process a
+    command waits on (``subprocess.run``: Yosys, nextpnr) is killed on the way out instead of running on.
     Inside a finaliser (``__del__``, run by the garbage collector anywhere) Python would print
     the exception and drop it; there the signal is only recorded and sent again a moment later.
     Either way no output is put in place afterwards (:func:`check_not_interrupted`).
     """
     _INTERRUPTED.set()
+    _RECEIVED[0] = signal.Signals(signum)
     while frame is not None:
         if frame.f_code.co_name == "__del__":
-            threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+            threading.Timer(0.05, os.kill, (os.getpid(), signum)).start()
             return
         frame = frame.f_back
     raise KeyboardInterrupt
 
 
+def received_signal() -> signal.Signals:
+    """The signal :func:`on_interrupt` last answered (SIGINT if none)."""
+    return _RECEIVED[0]
+
+
 def reset_interrupted() -> None:
-    """Forget an earlier SIGINT (a command run in-process after another)."""
+    """Forget an earlier signal (a command run in-process after another)."""
     _INTERRUPTED.clear()
+    _RECEIVED[0] = signal.SIGINT
 
 
 def check_not_interrupted() -> None:
-    """:class:`KeyboardInterrupt` if SIGINT arrived (even one a finaliser swallowed): nothing is committed."""
+    """:class:`KeyboardInterrupt` if SIGINT or SIGTERM arrived (even one a finaliser swallowed): nothing is
+    committed."""
     if _INTERRUPTED.is_set():
         raise KeyboardInterrupt
 
 
 @contextmanager
 def deferred_interrupts() -> Iterator[None]:
-    """Hold SIGINT back for the duration of the block (a few renames), then raise it: an interrupt
-    never leaves half of a set of outputs in place.  Outside the main thread: no effect."""
+    """Hold SIGINT and SIGTERM back for the duration of the block (a few renames), then raise them: an
+    interrupt never leaves half of a set of outputs in place.  Outside the main thread: no effect."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     received: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    held = (signal.SIGINT, signal.SIGTERM)
+    previous = {signum: signal.signal(signum, lambda signum, frame: received.append(signum)) for signum in held}
     try:
         check_not_interrupted()
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     if received:
         _INTERRUPTED.set()
+        _RECEIVED[0] = signal.Signals(received[0])
         raise KeyboardInterrupt
 
 

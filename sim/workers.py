@@ -5,7 +5,9 @@ the commands that run on a pool (``study``, a ``flatten`` batch) end within a mo
 and nothing else:
 
 - the workers ignore SIGINT: the parent answers it for all of them, and no worker prints a
-  traceback of its own;
+  traceback of its own; and SIGTERM, which :meth:`WorkerPool.stop` ends them with, has its default
+  action in a forked child, not the command's handler (which would raise in the worker, or never run
+  in one stuck on a lock another thread held at the fork);
 - a task is submitted with SIGINT held back (:func:`sim.outputs.deferred_interrupts`).  The first
   submit forks the workers and starts the executor's thread; a ``KeyboardInterrupt`` raised in the
   middle of that leaves workers the executor has not recorded, blocked on its queue, and the
@@ -16,13 +18,38 @@ and nothing else:
 
 from __future__ import annotations
 
+import os
 import signal
+import threading
 from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Any, Callable
 
 from .outputs import deferred_interrupts
 
 __all__ = ["WorkerPool"]
+
+
+_SIGTERM_HANDLER: list = []
+
+
+def _sigterm_default_for_the_fork() -> None:
+    if threading.current_thread() is threading.main_thread():  # where signal.signal may be called
+        _SIGTERM_HANDLER.append(signal.signal(signal.SIGTERM, signal.SIG_DFL))
+
+
+def _sigterm_handler_back() -> None:
+    if _SIGTERM_HANDLER:
+        signal.signal(signal.SIGTERM, _SIGTERM_HANDLER.pop())
+
+
+def _sigterm_default_in_the_child() -> None:
+    _SIGTERM_HANDLER.clear()
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+# SIGTERM's default action is set around every fork, so the child has it from its first instruction.
+os.register_at_fork(before=_sigterm_default_for_the_fork, after_in_parent=_sigterm_handler_back,
+                    after_in_child=_sigterm_default_in_the_child)
 
 
 def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> None:

