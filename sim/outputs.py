@@ -281,14 +281,16 @@ def deferred_interrupts() -> Iterator[None]:
         yield
         return
     received: list[int] = []
-    held = (signal.SIGINT, signal.SIGTERM)
-    previous = {signum: signal.signal(signum, lambda signum, frame: received.append(signum)) for signum in held}
+    def hold(signum, frame) -> None:
+        received.append(signum)
+
+    previous = {held: signal.signal(held, hold) for held in (signal.SIGINT, signal.SIGTERM)}
     try:
         check_not_interrupted()
         yield
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        for held, handler in previous.items():
+            signal.signal(held, handler)
     if received:
         _INTERRUPTED.set()
         _RECEIVED[0] = signal.Signals(received[0])

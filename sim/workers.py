@@ -8,7 +8,7 @@ and nothing else:
   traceback of its own; and SIGTERM, which :meth:`WorkerPool.stop` ends them with, has its default
   action in a forked child, not the command's handler (which would raise in the worker, or never run
   in one stuck on a lock another thread held at the fork);
-- a task is submitted with SIGINT held back (:func:`sim.outputs.deferred_interrupts`).  The first
+- a task is submitted with SIGINT and SIGTERM held back (:func:`sim.outputs.deferred_interrupts`).  The first
   submit forks the workers and starts the executor's thread; a ``KeyboardInterrupt`` raised in the
   middle of that leaves workers the executor has not recorded, blocked on its queue, and the
   program's exit waits for them for ever;
