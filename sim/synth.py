@@ -275,7 +275,8 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     (its memories' ``registered_select``, ``pin_registers``; ``None``: the engine's defaults).
     ``router`` is nextpnr's router (:data:`ROUTERS`): ``auto`` (default) is the timing-driven ``router1``,
     which routes the core in about five minutes; ``router1-ripup`` adds its timing-driven rip-up;
-    ``router2`` is faster on congested designs but not timing-driven. ``placer_timing`` chooses nextpnr's placer options (:data:`PLACER_TIMING`).
+    ``router2`` is faster on congested designs but not timing-driven. ``placer_timing`` chooses nextpnr's
+    placer options (:data:`PLACER_TIMING`).
     ``progress`` is called with one-line messages (the tool step being run); ``command`` is the
     command line recorded in ``reproduce.sh``.
     """
