@@ -11,7 +11,8 @@ Elaborated with :data:`hdl.dsp.ECP5` as the platform, each read port is
 therefore a row of ``DP16KD`` instances, port A written and port B read with
 ``REGMODE_B = "OUTREG"``, one instance per column slice of the word, in the configuration that
 holds ``depth`` words in the fewest block RAMs (:func:`dp16kd_banks`); every read port has its own
-copy of the memory, as Yosys makes for a memory with several read ports. Where that takes several
+copy of the memory, as Yosys makes for a memory with several read ports (or, with
+``shared_write_port``, every two read ports one: below). Where that takes several
 banks (a depth above 2,048, or just above a power of two: 3,072 words of 66 bits are 3 banks of
 1K×18, 12 block RAMs, where one 4K×4 bank takes 17), the addressed bank's word is selected after
 the output registers, by the address's high bits registered alongside: a multiplexer between the
@@ -24,11 +25,20 @@ is registered at a later edge. A read and a write of the same address at the sam
 collision: the generic form returns the old word, a ``DP16KD`` an undefined one (the simulation
 model returns X), so a user must never use such a read's data (Yosys's ``no_rw_check``, which the
 generic form carries, says the same to the synthesis tool).
+
+``shared_write_port``: a ``DP16KD`` has two ports, and a copy's write port (A) reads whenever it does
+not write. With it, ``read_ports`` ports take :attr:`copies` = ⌈read_ports / 2⌉ copies of the
+memory instead of one per port: read port ``k`` reads port B of copy ``k`` while ``k <``
+:attr:`copies`, else port A of copy ``k - copies`` (its address on the pins in every clock without
+a write, ``WRITEMODE_A = "NORMAL"``), with the same latency. Such a *shared* port
+(:attr:`shared_reads`) does not read at an edge where a write is issued (any address): the word it
+answers for that edge is undefined (the generic form answers all ones, so that a bench whose
+design used one would see it), and its user must not need it.
 """
 
 from __future__ import annotations
 
-from amaranth.hdl import ClockSignal, Module, Shape, Signal, Value
+from amaranth.hdl import ClockSignal, Const, Module, Mux, Shape, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory, MemoryData, WritePort
 from amaranth.lib.wiring import In, Out
@@ -74,7 +84,7 @@ class BlockRam(wiring.Component):
     SELECT_STAGES = 2
 
     def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram", pin_registers: bool = False,
-                 registered_select: bool = False):
+                 registered_select: bool = False, shared_write_port: bool = False):
         if not isinstance(depth, int) or depth < 1:
             raise ValueError(f"BlockRam depth must be a positive integer, not {depth!r}")
         if not isinstance(read_ports, int) or read_ports < 1:
@@ -82,11 +92,16 @@ class BlockRam(wiring.Component):
         width = Shape.cast(shape).width
         if width < 1:
             raise ValueError(f"BlockRam word width must be at least 1, not {width}")
-        for flag, value in (("pin_registers", pin_registers), ("registered_select", registered_select)):
+        for flag, value in (("pin_registers", pin_registers), ("registered_select", registered_select),
+                            ("shared_write_port", shared_write_port)):
             if not isinstance(value, bool):
                 raise TypeError(f"BlockRam {flag} must be a bool, not {value!r}")
         self.shape, self.depth, self.name, self.pin_registers = shape, depth, name, pin_registers
         self.registered_select = registered_select
+        #: Copies of the memory: one per read port, or with ``shared_write_port`` one per two.
+        self.copies = -(-read_ports // 2) if shared_write_port else read_ports
+        #: The read ports served by a copy's write port (none without ``shared_write_port``).
+        self.shared_reads = range(self.copies, read_ports)
         #: Clocks from a read port's ``addr`` to its ``data``.
         self.latency = self.LATENCY + pin_registers + self.SELECT_STAGES * registered_select
         self.contents = MemoryData(shape=shape, depth=depth, init=[])
@@ -106,12 +121,20 @@ class BlockRam(wiring.Component):
         m.d.comb += [write.addr.eq(self._pin(m, self.write.addr, "w_addr")),
                      write.data.eq(self._pin(m, Value.cast(self.write.data), "w_data")),
                      write.en.eq(self._pin(m, self.write.en, "w_en"))]
+        # a shared port's read at an edge with a write: all ones, a clock later where its word lands
+        wrote = Signal(name="wrote")
+        if self.shared_reads:
+            m.d.sync += wrote.eq(write.en)
         for k, port in enumerate(self.read):
             read = memory.read_port()
             landed = Signal(self.shape, reset_less=True, name=f"landed{k}")
             m.d.comb += [read.addr.eq(self._pin(m, port.addr, f"r{k}_addr")),
                          Value.cast(port.data).eq(self._delayed(m, Value.cast(landed), f"r{k}"))]
-            m.d.sync += landed.eq(read.data)
+            if k in self.shared_reads:
+                width = Shape.cast(self.shape).width
+                m.d.sync += Value.cast(landed).eq(Mux(wrote, Const((1 << width) - 1, width), Value.cast(read.data)))
+            else:
+                m.d.sync += landed.eq(read.data)
         return m
 
     def _delayed(self, m: Module, value: Value, name: str) -> Value:
@@ -139,43 +162,51 @@ class BlockRam(wiring.Component):
         address_bits = (words - 1).bit_length()
         shift = DP16KD_ADDRESS_PINS - address_bits
         # In the 18-bit configuration the two lowest address pins of a writing port are its byte
-        # enables (Yosys's brams_map_16kd.v): both high, every write is a whole word.
-        ada = Signal(DP16KD_ADDRESS_PINS, name="w_ada")
+        # enables (Yosys's brams_map_16kd.v): both high, every write is a whole word (a read ignores them).
         low = 0b11 if slice_width == DP16KD_DATA_PINS else 0
-        m.d.comb += ada.eq((self.write.addr[:address_bits] << shift) | low)
         write_bank = self.write.addr[address_bits:]
         write_data = Value.cast(self.write.data)
-        for k, port in enumerate(self.read):
-            adb = Signal(DP16KD_ADDRESS_PINS, name=f"r{k}_adb")
-            m.d.comb += adb.eq(port.addr[:address_bits] << shift)
-            bank_data = [Signal(width, name=f"r{k}_bank{b}_data") for b in range(banks)]
+        # each read port's bank words: port B of its copy, or a shared port's, port A of the copy it shares
+        bank_data = [[Signal(width, name=f"r{k}_bank{b}_data") for b in range(banks)] for k in range(len(self.read))]
+        for c in range(self.copies):
+            port = self.read[c]
+            shared = self.read[c + self.copies] if c + self.copies < len(self.read) else None
             for b in range(banks):
                 write_enable = self.write.en & (write_bank == b) if banks > 1 else self.write.en
+                # port A's address: the write's in a clock that writes this bank, else the shared port's
+                a_addr = self.write.addr[:address_bits] if shared is None else \
+                    Mux(write_enable, self.write.addr[:address_bits], shared.addr[:address_bits])
                 for s, lo in enumerate(range(0, width, slice_width)):
                     bits = min(slice_width, width - lo)
-                    dia = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_dia")
-                    dob = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_dob")
-                    inst = f"{self.name}_r{k}_{b}_{s}"
+                    dia = Signal(DP16KD_DATA_PINS, name=f"r{c}_{b}_{s}_dia")
+                    doa = Signal(DP16KD_DATA_PINS, name=f"r{c}_{b}_{s}_doa")
+                    dob = Signal(DP16KD_DATA_PINS, name=f"r{c}_{b}_{s}_dob")
+                    inst = f"{self.name}_r{c}_{b}_{s}"
+                    ada_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_ada")
+                    adb_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_adb")
                     if self.pin_registers:  # this block RAM's own copy of every input that varies
-                        ada_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_ada")
-                        adb_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_adb")
                         m.d.comb += [
-                            ada_pins.eq((self._pin(m, self.write.addr[:address_bits], f"{inst}_wa", kept=True)
-                                         << shift) | low),
+                            ada_pins.eq((self._pin(m, a_addr, f"{inst}_wa", kept=True) << shift) | low),
                             adb_pins.eq(self._pin(m, port.addr[:address_bits], f"{inst}_ra", kept=True) << shift),
                             dia.eq(self._pin(m, write_data[lo:lo + bits], f"{inst}_wd", kept=True))]
                         wea = self._pin(m, write_enable, f"{inst}_we", kept=True)
                     else:
-                        ada_pins, adb_pins, wea = ada, adb, write_enable
-                        m.d.comb += dia.eq(write_data[lo:lo + bits])
-                    m.d.comb += bank_data[b][lo:lo + bits].eq(dob[:bits])
+                        m.d.comb += [ada_pins.eq((a_addr << shift) | low),
+                                     adb_pins.eq(port.addr[:address_bits] << shift),
+                                     dia.eq(write_data[lo:lo + bits])]
+                        wea = write_enable
+                    m.d.comb += bank_data[c][b][lo:lo + bits].eq(dob[:bits])
+                    if shared is not None:
+                        m.d.comb += bank_data[c + self.copies][b][lo:lo + bits].eq(doa[:bits])
                     m.submodules[inst] = dp16kd(
-                        slice_width, regmode_b="OUTREG",
-                        **dp16kd_port("A", clock=ClockSignal(), address=ada_pins, write_data=dia, write_enable=wea),
+                        slice_width, regmode_a="NOREG" if shared is None else "OUTREG", regmode_b="OUTREG",
+                        **dp16kd_port("A", clock=ClockSignal(), address=ada_pins, write_data=dia, write_enable=wea,
+                                      read_data=None if shared is None else doa),
                         **dp16kd_port("B", clock=ClockSignal(), address=adb_pins, read_data=dob))
+        for k, port in enumerate(self.read):
             read_data = Value.cast(port.data)
             if banks == 1:
-                m.d.comb += read_data.eq(self._delayed(m, bank_data[0], f"r{k}"))
+                m.d.comb += read_data.eq(self._delayed(m, bank_data[k][0], f"r{k}"))
                 continue
             # the bank of the word in the output registers: the address's high bits, carried to the clock
             # of the banks' data (the address registered, in the pin registers, then read)
@@ -187,7 +218,7 @@ class BlockRam(wiring.Component):
                     m.d.sync += [flags[b][0].eq(port.addr[address_bits:] == b),
                                  *(flags[b][n].eq(flags[b][n - 1]) for n in range(1, to_data))]
                     with m.If(flags[b][-1]):
-                        m.d.sync += kept[b].eq(bank_data[b])
+                        m.d.sync += kept[b].eq(bank_data[k][b])
                     with m.Else():
                         m.d.sync += kept[b].eq(0)
                 selected = Signal(width, reset_less=True, name=f"r{k}_selected")
@@ -199,7 +230,7 @@ class BlockRam(wiring.Component):
             with m.Switch(bank[-1]):
                 for b in range(banks):
                     with m.Case(b):
-                        m.d.comb += read_data.eq(bank_data[b])
+                        m.d.comb += read_data.eq(bank_data[k][b])
 
 
 def dp16kd_banks(depth: int, width: int) -> tuple[int, int, int]:

@@ -106,9 +106,9 @@ class MemoryWindows(wiring.Component):
     node_write : ``In(write_signature(...))``
         The integrator's results: written back to the position and velocity memories while running.
     proposal, proposal_write : ``Out``, ``In(write_signature(...))``
-        The guarded step's proposals [velocity]: three copies, each read at its position port's address
-        (``proposal[k]`` beside ``position[k]``), written together while running; not on the bus. A
-        capacity without ``guard`` has no proposal memory (``proposal`` reads 0).
+        The guarded step's proposals [velocity]: three read ports, each at its position port's address
+        (``proposal[k]`` beside ``position[k]``), written while running; not on the bus. A capacity
+        without ``guard`` has no proposal memory (``proposal`` reads 0).
 
     Port sources
     ------------
@@ -124,6 +124,15 @@ class MemoryWindows(wiring.Component):
     whose data is used meets a write to its address in the same clock (the passes read ahead of
     the integrate pass's writes; the bus reads and writes while idle, a word's write-back after its
     read): BlockRam's timing contract.
+
+    With ``pin_registers`` the position and proposal memories are two copies each, not three: the third
+    port (``position[2]``, ``proposal[2]``, the triangle's third corner and the entry's second node)
+    reads the first copy's write port (:class:`~hdl.block_ram.BlockRam`'s ``shared_write_port``), so its
+    word is undefined for an edge where that memory is written. Only the node passes (integrate, hold,
+    commit, rollback) write them, and none of them uses the third port: the force, area and guard
+    triangle passes, which do, start after a node pass's last write (the whole-run tests with the
+    registered select compare every iteration with the golden model, on a generic form that answers
+    such a read with all ones).
 
     The entry memory
     ----------------
@@ -164,6 +173,10 @@ class MemoryWindows(wiring.Component):
         self.read_latency = READ_LATENCY + self.pin_registers + BlockRam.SELECT_STAGES * self.registered_select
         assert self.read_latency <= ENTRY_LATENCY, "the bus aligns every window's word to the entry's"
         select = {"registered_select": self.registered_select, "pin_registers": self.pin_registers}
+        # a triangle's three corners at once: where the pins are registered, the third port reads the first
+        # copy's write port, and its address multiplexer sits before a pin register beside the block RAM
+        # (the passes never read a corner at an edge with a write to the node memories: see the class)
+        corners = {"read_ports": 3, "shared_write_port": self.pin_registers, **select}
         layouts = memory_layouts(fs, capacity)
         self.entry_shape, self.triangle_shape = word_layout(layouts["entries"]), word_layout(layouts["triangles"])
         pos_shape, vel_shape = vector_layout(fs.position), vector_layout(fs.velocity)
@@ -173,14 +186,13 @@ class MemoryWindows(wiring.Component):
         #: ``entry_bank_depth`` words: Yosys maps a bank of wide words to DP16KDs with no cascade,
         #: where a deeper memory gets a multiplexer after the block RAMs' outputs.
         self.rams = {
-            "positions": BlockRam(pos_shape, cap.vertices, read_ports=3, name="positions", **select),
+            "positions": BlockRam(pos_shape, cap.vertices, name="positions", **corners),
             "velocities": BlockRam(vel_shape, cap.vertices, name="velocities", **select),
             "weights": BlockRam(weight_shape, cap.vertices, name="weights", **select),
             "forces": BlockRam(force_shape, cap.vertices, name="forces", **select),
             "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles", **select),
-            # the guarded step's proposals, a copy per position port (a triangle's three corners at once)
-            **{f"proposals{k}": BlockRam(vel_shape, cap.vertices, name=f"proposals{k}", **select)
-               for k in range(3 if cap.guard else 0)},
+            # the guarded step's proposals, a read port per position port
+            **({"proposals": BlockRam(vel_shape, cap.vertices, name="proposals", **corners)} if cap.guard else {}),
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
                                        name=f"entries{b}", pin_registers=True) for b in range(banks)},
         }
@@ -226,11 +238,10 @@ class MemoryWindows(wiring.Component):
             m.d.sync += [proposal_regs[0].eq(self.proposal_write.addr),
                          proposal_regs[1].eq(self.proposal_write.data),
                          proposal_regs[2].eq(self.proposal_write.en & self.running)]
-            for k in range(3):
-                ram = self.rams[f"proposals{k}"]
-                m.d.comb += [self.proposal[k].eq(ram.read[0].data),
-                             ram.write.addr.eq(proposal_regs[0]), ram.write.data.eq(proposal_regs[1]),
-                             ram.write.en.eq(proposal_regs[2])]
+            ram = self.rams["proposals"]
+            m.d.comb += [*(self.proposal[k].eq(port.data) for k, port in enumerate(ram.read)),
+                         ram.write.addr.eq(proposal_regs[0]), ram.write.data.eq(proposal_regs[1]),
+                         ram.write.en.eq(proposal_regs[2])]
 
         window_q, index_q, word_q = self._decode(m)
         bus_writing, new_words = self._bus_words(m, window_q, word_q, ent_data)
@@ -339,10 +350,10 @@ class MemoryWindows(wiring.Component):
                       "frc": self.rams["forces"].read[0], "tri": self.rams["triangles"].read[0]}
         read_addr = {name: Signal.like(port.addr, name=f"{name}_addr") for name, port in read_ports.items()}
         m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
-        # the proposals' copies read at their position port's address register (a second register with
+        # the proposals' ports read at their position port's address register (a second register with
         # the same inputs would be merged into it by Yosys)
-        m.d.comb += [self.rams[f"proposals{k}"].read[0].addr.eq(read_addr[f"pos_{c}"])
-                     for k, c in enumerate("abc") if f"proposals{k}" in self.rams]
+        if "proposals" in self.rams:
+            m.d.comb += [port.addr.eq(read_addr[f"pos_{c}"]) for port, c in zip(self.rams["proposals"].read, "abc")]
         t2_tri = self.rams["triangles"].read[0].data
         running, in_area = self.running, self.in_area
         in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight

@@ -72,6 +72,53 @@ def check_block_ram(tmp_path, platform, shape, depth, *, pin_registers, register
         assert [int(line[-width:], 2) for line in lines[skip:]] == want[skip:], f"read port {k}"
 
 
+@pytest.mark.parametrize("platform", [None, ECP5], ids=["generic", "ecp5"])
+@pytest.mark.parametrize("shape, depth, pin_registers, registered_select", [
+    (unsigned(40), 600, False, False), (unsigned(30), 2100, False, False),  # the last in banks
+    (unsigned(52), 3072, True, True)])  # the proposal memory's word and banks above DEFAULT_CAPACITY
+def test_block_ram_shares_a_copys_write_port_with_a_read_port(tmp_path, platform, shape, depth, pin_registers,
+                                                              registered_select):
+    """Three read ports in two copies: the third reads the first copy's write port, the same words with the
+    same latency at every edge without a write; at an edge with a write its word is undefined (the generic
+    form's all ones)."""
+    os.environ["AMARANTH_USE_YOSYS"] = "builtin"
+    ram = BlockRam(shape, depth, read_ports=3, name="mem", pin_registers=pin_registers,
+                   registered_select=registered_select, shared_write_port=True)
+    assert (ram.copies, list(ram.shared_reads)) == (2, [2])
+    width = Shape.cast(shape).width
+    abits = len(ram.write.addr)
+    (tmp_path / "ram.v").write_text(verilog.convert(ram, name="ram", platform=platform))
+    rng = np.random.default_rng(depth + width)
+    we, waddr, wdata, raddr = random_ram_traffic(rng, depth, width, 2500)
+    skip = ram.latency - 1  # the generic form's registers start undefined
+    want = ram_reads(we, waddr, wdata, raddr, depth, skip)
+    # the clocks whose word answers a read issued at an edge with a write
+    undefined = {k + skip for k in np.flatnonzero(we)}
+    for k in range(3):  # each read port, the others reading elsewhere
+        others = "".join(f", .read__{j}__addr({abits}'d{j}), .read__{j}__data()" for j in range(3) if j != k)
+        ports = (f"ram dut(.clk(clk), .rst(1'b0), .write__en(we), .write__addr(waddr[{abits - 1}:0]), "
+                 f".write__data(wdata[{width - 1}:0]), .read__{k}__addr(raddr[{abits - 1}:0]), "
+                 f".read__{k}__data(q[{width - 1}:0]){others});")
+        lines = icarus_run(tmp_path, ["ram.v"], "ram", ports, we, waddr, wdata, raddr)
+        words = [line[-width:] for line in lines]
+        checked = [c for c in range(skip, len(want)) if k not in ram.shared_reads or c not in undefined]
+        assert len(checked) > len(want) // 3
+        assert [int(words[c], 2) for c in checked] == [want[c] for c in checked], f"read port {k}"
+        if k in ram.shared_reads and platform is None:
+            assert {words[c] for c in undefined if c < len(words)} == {"1" * width}
+
+
+def test_shared_write_port_takes_a_copy_per_two_read_ports():
+    from hdl.dsp import ecp5_instance_count
+
+    for read_ports, copies in ((1, 1), (2, 1), (3, 2), (4, 2)):
+        shared = BlockRam(unsigned(66), 3072, read_ports=read_ports, shared_write_port=True)
+        assert shared.copies == copies
+        assert ecp5_instance_count(shared, "DP16KD") == 12 * copies  # 1K×18: 3 banks of 4 block RAMs
+    with refused_components():  # never elaborated
+        assert BlockRam(unsigned(66), 3072, read_ports=3).copies == 3
+
+
 def test_block_ram_refuses_bad_parameters():
     with refused_components():  # collected here, not in whichever test runs when the collector next does
         with pytest.raises(ValueError, match="depth"):
@@ -82,6 +129,8 @@ def test_block_ram_refuses_bad_parameters():
             BlockRam(unsigned(0), 16)
         with pytest.raises(TypeError, match="registered_select must be a bool"):
             BlockRam(unsigned(8), 16, registered_select=1)
+        with pytest.raises(TypeError, match="shared_write_port must be a bool"):
+            BlockRam(unsigned(8), 16, read_ports=2, shared_write_port="yes")
 
 
 def test_dp16kd_banks_takes_the_fewest_block_rams():
