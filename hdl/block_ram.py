@@ -121,20 +121,19 @@ class BlockRam(wiring.Component):
         m.d.comb += [write.addr.eq(self._pin(m, self.write.addr, "w_addr")),
                      write.data.eq(self._pin(m, Value.cast(self.write.data), "w_data")),
                      write.en.eq(self._pin(m, self.write.en, "w_en"))]
-        # a shared port's read at an edge with a write: all ones, a clock later where its word lands
+        # a shared port's read at an edge with a write (``wrote`` the clock after): its word lands as all ones
         wrote = Signal(name="wrote")
         if self.shared_reads:
             m.d.sync += wrote.eq(write.en)
+        width = Shape.cast(self.shape).width
+        ones = Const((1 << width) - 1, width)
         for k, port in enumerate(self.read):
             read = memory.read_port()
             landed = Signal(self.shape, reset_less=True, name=f"landed{k}")
             m.d.comb += [read.addr.eq(self._pin(m, port.addr, f"r{k}_addr")),
                          Value.cast(port.data).eq(self._delayed(m, Value.cast(landed), f"r{k}"))]
-            if k in self.shared_reads:
-                width = Shape.cast(self.shape).width
-                m.d.sync += Value.cast(landed).eq(Mux(wrote, Const((1 << width) - 1, width), Value.cast(read.data)))
-            else:
-                m.d.sync += landed.eq(read.data)
+            read_data = Mux(wrote, ones, Value.cast(read.data)) if k in self.shared_reads else Value.cast(read.data)
+            m.d.sync += Value.cast(landed).eq(read_data)
         return m
 
     def _delayed(self, m: Module, value: Value, name: str) -> Value:
