@@ -67,8 +67,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="springflat_engine's vertices, neighbour entries and triangles (default: "
                         "golden_model.engine_spec.image.DEFAULT_CAPACITY)")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
-                   help="springflat_engine without the step guard: no guarded mode, and its block RAMs free for "
-                        "depth (3072 18432 6144 fits the ECP5-85F only so; docs/engine-guard.md)")
+                   help="springflat_engine without the step guard: no guarded mode and fewer block RAMs "
+                        "(docs/engine-guard.md)")
     p.add_argument("--router", choices=tuple(ROUTERS), default=DEFAULT_ROUTER,
                    help="nextpnr router (default auto: the timing-driven router1; router1-ripup: router1 with its "
                         "timing-driven rip-up, --tmg-ripup; router2 is not timing-driven)")

@@ -76,9 +76,9 @@ def _next_power_of_two(n: int) -> int:
 @dataclass(frozen=True)
 class EngineCapacity:
     """The engine's memory depths, an elaboration parameter: vertices, neighbour entries, triangles;
-    and ``guard``: whether the build has the step guard's passes and memories (the proposals' three
-    copies and the level scatters), so runs the guarded modes. Without it the block RAMs go to depth:
-    3072 / 18432 / 6144 fits the ECP5-85F only so (``docs/engine-guard.md``)."""
+    and ``guard``: whether the build has the step guard's passes and memories (the proposal memory and
+    the level scatters), so runs the guarded modes. Both builds fit the ECP5-85F's block RAMs up to
+    3072 / 18432 / 6144 (``docs/synthesis.md``)."""
 
     vertices: int
     entries: int
