@@ -162,74 +162,89 @@ class BlockRam(wiring.Component):
         shift = DP16KD_ADDRESS_PINS - address_bits
         # In the 18-bit configuration the two lowest address pins of a writing port are its byte
         # enables (Yosys's brams_map_16kd.v): both high, every write is a whole word (a read ignores them).
+        ada = Signal(DP16KD_ADDRESS_PINS, name="w_ada")
         low = 0b11 if slice_width == DP16KD_DATA_PINS else 0
+        m.d.comb += ada.eq((self.write.addr[:address_bits] << shift) | low)
         write_bank = self.write.addr[address_bits:]
         write_data = Value.cast(self.write.data)
-        # each read port's bank words: port B of its copy, or a shared port's, port A of the copy it shares
-        bank_data = [[Signal(width, name=f"r{k}_bank{b}_data") for b in range(banks)] for k in range(len(self.read))]
-        for c in range(self.copies):
-            port = self.read[c]
-            shared = self.read[c + self.copies] if c + self.copies < len(self.read) else None
+        for k in range(self.copies):  # copy k: read port k on port B, a shared read port on port A
+            port = self.read[k]
+            shared_k = k + self.copies
+            shared = self.read[shared_k] if shared_k < len(self.read) else None
+            adb = Signal(DP16KD_ADDRESS_PINS, name=f"r{k}_adb")
+            m.d.comb += adb.eq(port.addr[:address_bits] << shift)
+            bank_data = [Signal(width, name=f"r{k}_bank{b}_data") for b in range(banks)]
+            shared_data = [Signal(width, name=f"r{shared_k}_bank{b}_data") for b in range(banks)] if shared else []
             for b in range(banks):
                 write_enable = self.write.en & (write_bank == b) if banks > 1 else self.write.en
-                # port A's address: the write's in a clock that writes this bank, else the shared port's
-                a_addr = self.write.addr[:address_bits] if shared is None else \
-                    Mux(write_enable, self.write.addr[:address_bits], shared.addr[:address_bits])
+                # port A's address: the write's, or with a shared port, the write's in a clock that writes
+                # this bank and the shared port's in any other
+                write_addr = self.write.addr[:address_bits]
+                a_addr = write_addr if shared is None else Mux(write_enable, write_addr, shared.addr[:address_bits])
+                if shared is not None and not self.pin_registers:
+                    shared_ada = Signal(DP16KD_ADDRESS_PINS, name=f"r{shared_k}_bank{b}_ada")
+                    m.d.comb += shared_ada.eq((a_addr << shift) | low)
                 for s, lo in enumerate(range(0, width, slice_width)):
                     bits = min(slice_width, width - lo)
-                    dia = Signal(DP16KD_DATA_PINS, name=f"r{c}_{b}_{s}_dia")
-                    doa = Signal(DP16KD_DATA_PINS, name=f"r{c}_{b}_{s}_doa")
-                    dob = Signal(DP16KD_DATA_PINS, name=f"r{c}_{b}_{s}_dob")
-                    inst = f"{self.name}_r{c}_{b}_{s}"
-                    ada_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_ada")
-                    adb_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_adb")
+                    dia = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_dia")
+                    dob = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_dob")
+                    inst = f"{self.name}_r{k}_{b}_{s}"
                     if self.pin_registers:  # this block RAM's own copy of every input that varies
+                        ada_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_ada")
+                        adb_pins = Signal(DP16KD_ADDRESS_PINS, name=f"{inst}_adb")
                         m.d.comb += [
                             ada_pins.eq((self._pin(m, a_addr, f"{inst}_wa", kept=True) << shift) | low),
                             adb_pins.eq(self._pin(m, port.addr[:address_bits], f"{inst}_ra", kept=True) << shift),
                             dia.eq(self._pin(m, write_data[lo:lo + bits], f"{inst}_wd", kept=True))]
                         wea = self._pin(m, write_enable, f"{inst}_we", kept=True)
                     else:
-                        m.d.comb += [ada_pins.eq((a_addr << shift) | low),
-                                     adb_pins.eq(port.addr[:address_bits] << shift),
-                                     dia.eq(write_data[lo:lo + bits])]
-                        wea = write_enable
-                    m.d.comb += bank_data[c][b][lo:lo + bits].eq(dob[:bits])
-                    if shared is not None:
-                        m.d.comb += bank_data[c + self.copies][b][lo:lo + bits].eq(doa[:bits])
+                        ada_pins, adb_pins, wea = ada if shared is None else shared_ada, adb, write_enable
+                        m.d.comb += dia.eq(write_data[lo:lo + bits])
+                    m.d.comb += bank_data[b][lo:lo + bits].eq(dob[:bits])
+                    port_a = {}
+                    if shared is not None:  # port A read too, through its output register
+                        doa = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_doa")
+                        m.d.comb += shared_data[b][lo:lo + bits].eq(doa[:bits])
+                        port_a = {"regmode_a": "OUTREG", "read_data": doa}
                     m.submodules[inst] = dp16kd(
-                        slice_width, regmode_a="NOREG" if shared is None else "OUTREG", regmode_b="OUTREG",
+                        slice_width, regmode_a=port_a.pop("regmode_a", "NOREG"), regmode_b="OUTREG",
                         **dp16kd_port("A", clock=ClockSignal(), address=ada_pins, write_data=dia, write_enable=wea,
-                                      read_data=None if shared is None else doa),
+                                      **port_a),
                         **dp16kd_port("B", clock=ClockSignal(), address=adb_pins, read_data=dob))
-        for k, port in enumerate(self.read):
-            read_data = Value.cast(port.data)
-            if banks == 1:
-                m.d.comb += read_data.eq(self._delayed(m, bank_data[k][0], f"r{k}"))
-                continue
-            # the bank of the word in the output registers: the address's high bits, carried to the clock
-            # of the banks' data (the address registered, in the pin registers, then read)
-            to_data = self.LATENCY + self.pin_registers
-            if self.registered_select:  # one flag per bank, the kept words ORed
-                flags = [[Signal(name=f"r{k}_bank{b}_q{n}") for n in range(1, to_data + 1)] for b in range(banks)]
-                kept = [Signal(width, reset_less=True, name=f"r{k}_bank{b}_kept") for b in range(banks)]
-                for b in range(banks):
-                    m.d.sync += [flags[b][0].eq(port.addr[address_bits:] == b),
-                                 *(flags[b][n].eq(flags[b][n - 1]) for n in range(1, to_data))]
-                    with m.If(flags[b][-1]):
-                        m.d.sync += kept[b].eq(bank_data[k][b])
-                    with m.Else():
-                        m.d.sync += kept[b].eq(0)
-                selected = Signal(width, reset_less=True, name=f"r{k}_selected")
-                m.d.sync += selected.eq(or_tree(kept))
-                m.d.comb += read_data.eq(selected)
-                continue
-            bank = [Signal(range(banks), name=f"r{k}_bank_q{n}") for n in range(1, to_data + 1)]
-            m.d.sync += [bank[0].eq(port.addr[address_bits:]), *(bank[n].eq(bank[n - 1]) for n in range(1, len(bank)))]
-            with m.Switch(bank[-1]):
-                for b in range(banks):
-                    with m.Case(b):
-                        m.d.comb += read_data.eq(bank_data[k][b])
+            self._bank_select(m, k, port, bank_data, banks, address_bits)
+            if shared is not None:
+                self._bank_select(m, shared_k, shared, shared_data, banks, address_bits)
+
+    def _bank_select(self, m: Module, k: int, port, bank_data: list, banks: int, address_bits: int) -> None:
+        """Read port ``k``'s word from its banks' words (output registers), selected by the address's high bits."""
+        width = Shape.cast(self.shape).width
+        read_data = Value.cast(port.data)
+        if banks == 1:
+            m.d.comb += read_data.eq(self._delayed(m, bank_data[0], f"r{k}"))
+            return
+        # the bank of the word in the output registers: the address's high bits, carried to the clock
+        # of the banks' data (the address registered, in the pin registers, then read)
+        to_data = self.LATENCY + self.pin_registers
+        if self.registered_select:  # one flag per bank, the kept words ORed
+            flags = [[Signal(name=f"r{k}_bank{b}_q{n}") for n in range(1, to_data + 1)] for b in range(banks)]
+            kept = [Signal(width, reset_less=True, name=f"r{k}_bank{b}_kept") for b in range(banks)]
+            for b in range(banks):
+                m.d.sync += [flags[b][0].eq(port.addr[address_bits:] == b),
+                             *(flags[b][n].eq(flags[b][n - 1]) for n in range(1, to_data))]
+                with m.If(flags[b][-1]):
+                    m.d.sync += kept[b].eq(bank_data[b])
+                with m.Else():
+                    m.d.sync += kept[b].eq(0)
+            selected = Signal(width, reset_less=True, name=f"r{k}_selected")
+            m.d.sync += selected.eq(or_tree(kept))
+            m.d.comb += read_data.eq(selected)
+            return
+        bank = [Signal(range(banks), name=f"r{k}_bank_q{n}") for n in range(1, to_data + 1)]
+        m.d.sync += [bank[0].eq(port.addr[address_bits:]), *(bank[n].eq(bank[n - 1]) for n in range(1, len(bank)))]
+        with m.Switch(bank[-1]):
+            for b in range(banks):
+                with m.Case(b):
+                    m.d.comb += read_data.eq(bank_data[b])
 
 
 def dp16kd_banks(depth: int, width: int) -> tuple[int, int, int]:

@@ -191,8 +191,12 @@ class MemoryWindows(wiring.Component):
             "weights": BlockRam(weight_shape, cap.vertices, name="weights", **select),
             "forces": BlockRam(force_shape, cap.vertices, name="forces", **select),
             "triangles": BlockRam(self.triangle_shape, cap.triangles, name="triangles", **select),
-            # the guarded step's proposals, a read port per position port
-            **({"proposals": BlockRam(vel_shape, cap.vertices, name="proposals", **corners)} if cap.guard else {}),
+            # the guarded step's proposals, a read port per position port: with shared write ports one memory
+            # of three ports, else a memory per port (the netlist DEFAULT_CAPACITY's timing rows were placed
+            # from: a rename alone moves nextpnr's placement)
+            **({} if not cap.guard else
+               {"proposals": BlockRam(vel_shape, cap.vertices, name="proposals", **corners)} if self.pin_registers else
+               {f"proposals{k}": BlockRam(vel_shape, cap.vertices, name=f"proposals{k}", **select) for k in range(3)}),
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
                                        name=f"entries{b}", pin_registers=True) for b in range(banks)},
         }
@@ -238,16 +242,25 @@ class MemoryWindows(wiring.Component):
             m.d.sync += [proposal_regs[0].eq(self.proposal_write.addr),
                          proposal_regs[1].eq(self.proposal_write.data),
                          proposal_regs[2].eq(self.proposal_write.en & self.running)]
-            ram = self.rams["proposals"]
-            m.d.comb += [*(self.proposal[k].eq(port.data) for k, port in enumerate(ram.read)),
-                         ram.write.addr.eq(proposal_regs[0]), ram.write.data.eq(proposal_regs[1]),
-                         ram.write.en.eq(proposal_regs[2])]
+            proposals = iter(self.proposal)
+            for ram in self._proposal_rams():
+                m.d.comb += [*(next(proposals).eq(port.data) for port in ram.read),
+                             ram.write.addr.eq(proposal_regs[0]), ram.write.data.eq(proposal_regs[1]),
+                             ram.write.en.eq(proposal_regs[2])]
 
         window_q, index_q, word_q = self._decode(m)
         bus_writing, new_words = self._bus_words(m, window_q, word_q, ent_data)
         self._read_addresses(m, index_q, ent_addr, ent_hot, bank_bits, ent_data)
         self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks, platform)
         return m
+
+    def _proposal_rams(self) -> list[BlockRam]:
+        """The proposal memories: one of three read ports, or three of one (none without the guard)."""
+        return [ram for name, ram in self.rams.items() if name.startswith("proposals")]
+
+    def _proposal_ports(self) -> list:
+        """The proposal memories' read ports, one per position port."""
+        return [port for ram in self._proposal_rams() for port in ram.read]
 
     def _entry_read(self, m: Module, entry_banks, ent_addr, ent_hot):
         """The entry memory's read, E0 (``ent_addr``, ``ent_hot``) to E6 (the returned register): see the
@@ -352,8 +365,7 @@ class MemoryWindows(wiring.Component):
         m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
         # the proposals' ports read at their position port's address register (a second register with
         # the same inputs would be merged into it by Yosys)
-        if "proposals" in self.rams:
-            m.d.comb += [port.addr.eq(read_addr[f"pos_{c}"]) for port, c in zip(self.rams["proposals"].read, "abc")]
+        m.d.comb += [port.addr.eq(read_addr[f"pos_{c}"]) for port, c in zip(self._proposal_ports(), "abc")]
         t2_tri = self.rams["triangles"].read[0].data
         running, in_area = self.running, self.in_area
         in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight
