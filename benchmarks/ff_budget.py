@@ -31,7 +31,7 @@ from golden_model.fixed import FormatSet  # noqa: E402
 from hdl.dsp import ECP5  # noqa: E402
 from hdl.engine import SpringflatEngine  # noqa: E402
 from sim.synth import TARGETS, TOOL  # noqa: E402
-from sim.synth import _error_line as error_line, _run_tool as run_tool  # noqa: E402
+from sim.synth import error_line, run_tool  # noqa: E402
 
 TOP = "springflat_engine"
 #: Flip-flops (TRELLIS_FF) of the LFE5U-85F.

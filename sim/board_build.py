@@ -25,7 +25,7 @@ import shlex
 import time
 from pathlib import Path
 
-from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, _FMAX, SynthError, _critical_path, _error_line, _run_tool,
+from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, _FMAX, SynthError, _critical_path, error_line, run_tool,
                     _tool_versions)
 
 __all__ = ["BOARDS", "NAME", "run_board_build", "collect_report", "parse_lpf_pins", "parse_clocks", "board_markdown"]
@@ -129,14 +129,14 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     for name, tool, argv, how_long in steps:
         say(f"{name} ({how_long})")
         started = time.monotonic()
-        status, text = _run_tool(tool, argv, out, f"{NAME}.{name}.stdout")
+        status, text = run_tool(tool, argv, out, f"{NAME}.{name}.stdout")
         report["seconds"][name] = round(time.monotonic() - started, 1)
         if status == 0 and name == "nextpnr":  # the timing report and pins, whatever ecppack does next
             collect_report(out, report, clock_hz)
             _write(out, report)
         if status != 0:
             log = out / (f"{NAME}.tim" if name == "nextpnr" else f"{NAME}.rpt")
-            reason = _error_line(log.read_text() if log.exists() and name != "ecppack" else text)
+            reason = error_line(log.read_text() if log.exists() and name != "ecppack" else text)
             _write(out, report)
             raise SynthError(f"{name} failed: {reason} (logs in {out}"
                              + (f"; the placed and routed design is {NAME}.config" if name == "ecppack" else "") + ")")

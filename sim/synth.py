@@ -45,7 +45,8 @@ from golden_model.params import ParameterError
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ",
-           "SynthError", "DoesNotFit", "nextpnr_argv", "placer_options", "run_synthesis", "parse_yosys_stat", "parse_nextpnr_log"]
+           "SynthError", "DoesNotFit", "error_line", "nextpnr_argv", "placer_options", "run_synthesis", "run_tool",
+           "parse_yosys_stat", "parse_nextpnr_log"]
 
 
 class SynthError(ParameterError):
@@ -203,13 +204,14 @@ def _critical_path(block: str) -> dict:
             "through": kinds, "rtl": src, "summary": summary}
 
 
-def _error_line(log: str) -> str:
+def error_line(log: str) -> str:
+    """The line of a tool's ``log`` that says why it failed: its last ``ERROR`` line, else its last line."""
     errors = [line.strip() for line in log.splitlines() if line.startswith("ERROR")]
     return errors[-1] if errors else (log.strip().splitlines() or ["(no output)"])[-1]
 
 
 # ------------------------------------------------------------------------------------ running
-def _run_tool(tool: str, argv: list[str], cwd: Path, log_name: str) -> tuple[int, str]:
+def run_tool(tool: str, argv: list[str], cwd: Path, log_name: str) -> tuple[int, str]:
     """Run a YoWASP entry point (``module:function``) in ``cwd``; return (status, combined output)."""
     module, function = tool.split(":")
     code = f"import sys, {module}; sys.exit({module}.{function}(sys.argv[1:]))"
@@ -345,9 +347,9 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
         (out / f"{name}.{target}.ys").write_text(script)
         say(f"[{target} {name}] yosys {tgt.yosys_synth.split()[0]} (bare module)")
         t0 = time.monotonic()
-        status, log = _run_tool(TOOL["yosys"], ["-q", "-s", f"{name}.{target}.ys"], out, f"{name}.{target}.yosys.log")
+        status, log = run_tool(TOOL["yosys"], ["-q", "-s", f"{name}.{target}.ys"], out, f"{name}.{target}.yosys.log")
         if status != 0:
-            raise SynthError(f"yosys failed on {name}: {_error_line(log)} (log: {out / f'{name}.{target}.yosys.log'})")
+            raise SynthError(f"yosys failed on {name}: {error_line(log)} (log: {out / f'{name}.{target}.yosys.log'})")
         stat = json.loads((out / f"{name}.{target}.stat.json").read_text())
         entry.update(parse_yosys_stat(stat, tgt))
         entry["yosys_seconds"] = round(time.monotonic() - t0, 1)
@@ -373,9 +375,9 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
                       f"write_json {wtop}.{target}.json\ntee -q -o {wtop}.{target}.stat.json stat -json\n")
             (out / f"{wtop}.{target}.ys").write_text(script)
             say(f"[{target} {name}] yosys {tgt.yosys_synth.split()[0]} (with serial I/O wrapper)")
-            status, log = _run_tool(TOOL["yosys"], ["-q", "-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
+            status, log = run_tool(TOOL["yosys"], ["-q", "-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
             if status != 0:
-                raise SynthError(f"yosys failed on {wtop}: {_error_line(log)}")
+                raise SynthError(f"yosys failed on {wtop}: {error_line(log)}")
             entry["router"] = " ".join(ROUTERS[router])
             entry["placer_timing"] = placer_timing
             argv = nextpnr_argv(tgt, wtop, freq, router, seed, placer_timing)
@@ -383,12 +385,12 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             say(f"[{target} {name}] nextpnr place and route at {freq:g} MHz "
                 f"({'20-60 minutes' if name == ENGINE else 'a few minutes' if name in ('node_update', TOP) else 'under a minute'})")
             t0 = time.monotonic()
-            status, text = _run_tool(tgt.nextpnr, argv, out, f"{wtop}.{target}.nextpnr.stdout")
+            status, text = run_tool(tgt.nextpnr, argv, out, f"{wtop}.{target}.nextpnr.stdout")
             entry["nextpnr_seconds"] = round(time.monotonic() - t0, 1)
             log_file = out / f"{wtop}.{target}.nextpnr.log"
             log = log_file.read_text() if log_file.exists() else text
             if status != 0:
-                reason = _error_line(log)
+                reason = error_line(log)
                 entry["fits"] = False
                 entry["does_not_fit"] = [f"nextpnr: {reason}"]
                 say(f"[{target} {name}] nextpnr failed: {reason}")

@@ -205,7 +205,7 @@ def test_dp16kd_model_reads_what_yosys_maps(tmp_path, width, depth):
     import subprocess
 
     from sim.cocotb_support import REPO
-    from sim.synth import TOOL, _run_tool
+    from sim.synth import TOOL, run_tool
 
     if shutil.which("iverilog") is None:
         pytest.fail("Icarus Verilog (iverilog) is not on PATH")
@@ -218,7 +218,7 @@ def test_dp16kd_model_reads_what_yosys_maps(tmp_path, width, depth):
         f"  initial $readmemh(\"rom.hex\", mem);\n"
         f"  always @(posedge clk) q <= mem[addr];\nendmodule\n")
     (tmp_path / "rom.hex").write_text("".join(f"{w:x}\n" for w in words))
-    code, log = _run_tool(TOOL["yosys"], ["-q", "-p", "read_verilog rom.v; synth_ecp5 -top rom; write_verilog -noattr net.v"],
+    code, log = run_tool(TOOL["yosys"], ["-q", "-p", "read_verilog rom.v; synth_ecp5 -top rom; write_verilog -noattr net.v"],
                           tmp_path, "yosys.log")
     assert code == 0, log[-2000:]
     netlist = (tmp_path / "net.v").read_text()
@@ -242,7 +242,7 @@ def test_dp16kd_model_is_the_ram_yosys_maps(tmp_path, width, depth):
     reads, so the model's write pins (WE, CE, the 18-bit configuration's byte enables on AD1/AD0) and
     read pins are the device's as Yosys uses them: the ones :class:`hdl.block_ram.BlockRam` drives. A
     read of the row being written at the same clock reads X."""
-    from sim.synth import TOOL, _run_tool
+    from sim.synth import TOOL, run_tool
 
     abits = (depth - 1).bit_length()
     (tmp_path / "ram.v").write_text(
@@ -251,7 +251,7 @@ def test_dp16kd_model_is_the_ram_yosys_maps(tmp_path, width, depth):
         f"  (* no_rw_check *) reg [{width - 1}:0] mem [0:{depth - 1}];\n"
         f"  integer i; initial for (i = 0; i < {depth}; i = i + 1) mem[i] = 0;\n"
         f"  always @(posedge clk) begin if (we) mem[waddr] <= wdata; q <= mem[raddr]; end\nendmodule\n")
-    code, log = _run_tool(TOOL["yosys"], ["-q", "-p", "read_verilog ram.v; synth_ecp5 -top ram; write_verilog -noattr net.v"],
+    code, log = run_tool(TOOL["yosys"], ["-q", "-p", "read_verilog ram.v; synth_ecp5 -top ram; write_verilog -noattr net.v"],
                           tmp_path, "yosys.log")
     assert code == 0, log[-2000:]
     netlist = (tmp_path / "net.v").read_text()
