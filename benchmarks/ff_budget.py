@@ -8,7 +8,8 @@ Elaborates the engine for ECP5 (``DP16KD``, ``MULT18X18D`` and the ``keep`` pin 
 them), converts it to RTLIL and has Yosys count every flip-flop bit per module after ``proc`` and
 ``opt_clean``, before ``synth_ecp5``'s optimisation, which merges and removes about a tenth (at 3072 /
 18432 / 6144: 63,012 and 42,339 flip-flops after it, against 68,532 and 46,937 here). Units are the
-engine's submodules with their own submodules folded in. About twenty seconds per build.
+engine's submodules with their own submodules folded in. About twenty seconds per build. The last row
+adds a second lane's units (:data:`LANE_UNITS`) to the total: a sum of the measured units, not a build.
 docs/synthesis.md quotes the table: the guarded engine above ``DEFAULT_CAPACITY`` is placed short of
 its clock with three-quarters of the 85F's flip-flops in use.
 """
@@ -34,6 +35,10 @@ from sim.synth import TARGETS, TOOL  # noqa: E402
 from sim.synth import error_line, run_tool  # noqa: E402
 
 TOP = "springflat_engine"
+#: The units a second lane (issue 29's ``lanes = 2``) would hold again: its force pass, area unit and
+#: integrator, and with the guard its certificate, scatters and commit (each lane certifies its share of
+#: the triangles and commits its share of the nodes).
+LANE_UNITS = ("force", "area", "integrator", "guard")
 #: Flip-flops (TRELLIS_FF) of the LFE5U-85F.
 ECP5_85F_FF = TARGETS["ecp5"].capacity["ffs"]
 #: A flip-flop cell of Yosys's ``stat -width`` (``$dff_66``, ``$sdffe_1``, …) or a kept ``TRELLIS_FF``.
@@ -85,6 +90,9 @@ def main(argv: list[str] | None = None) -> None:
     totals = {guard: sum(bits.values()) for guard, bits in builds.items()}
     print(f"| total | {totals[True]:,} ({totals[True] / ECP5_85F_FF:.0%} of the 85F's {ECP5_85F_FF:,}) | "
           f"{totals[False]:,} ({totals[False] / ECP5_85F_FF:.0%}) |")
+    lanes = {guard: totals[guard] + sum(bits.get(unit, 0) for unit in LANE_UNITS) for guard, bits in builds.items()}
+    print(f"| two lanes (the total and the lane's units again) | {lanes[True]:,} ({lanes[True] / ECP5_85F_FF:.0%}) | "
+          f"{lanes[False]:,} ({lanes[False] / ECP5_85F_FF:.0%}) |")
 
 
 if __name__ == "__main__":
