@@ -222,14 +222,15 @@ def certificate_level_shape():
     return unsigned((GUARD_LEVELS + 1).bit_length())
 
 
-#: A corner the stuck pass holds still, in its slot of the guard's level scatters: above every level, so a
-#: node's largest value says whether any of its triangles held it and otherwise is its level.
-STUCK_MARK = GUARD_LEVELS + 2
+#: A corner the stuck pass holds still, in its slot of the guard's level scatters: the bit above a level's,
+#: so above every level: a node's largest value says whether any of its triangles held it and otherwise
+#: is its level.
+STUCK_MARK = 1 << (GUARD_LEVELS + 1).bit_length()
 
 
 def guard_slot_shape():
     """A node's value in one slot of the guard's level scatters: a level (:func:`certificate_level_shape`)
-    or :data:`STUCK_MARK`, which alone sets the top bit."""
+    or :data:`STUCK_MARK`, the only value with the top bit set."""
     return unsigned(STUCK_MARK.bit_length())
 
 
