@@ -207,7 +207,6 @@ class SpringflatEngine(wiring.Component):
             _wire(m, sequencer, guard, "node_index", "node_landed", "triangle_landed", "corners")
             _wire(m, memories, guard, "position", "proposal", "velocity")
             m.d.comb += [guard.area.eq(sequencer.landed_area), controller.guard_done.eq(guard.done),
-                         controller.guard_stuck.eq(guard.stuck_found),
                          controller.passes_idle.eq(sequencer.passes_idle & guard.idle)]
         else:  # START refuses the guarded modes: no guard pass ever starts
             m.d.comb += controller.passes_idle.eq(sequencer.passes_idle)

@@ -21,7 +21,7 @@ from .fifo import LutFIFO
 from .guard_certificate import GuardCertificate
 from .guard_commit import GuardCommit
 from .fixedpoint import shape_of
-from .layouts import STUCK_MARK, certificate_level_shape, guard_slot_shape, vector_layout
+from .layouts import certificate_level_shape, vector_layout
 from .level_scatter import LevelScatter
 from .memory_windows import node_write_layout, write_signature
 
@@ -36,18 +36,15 @@ class GuardPasses(wiring.Component):
     """The guard's certificate unit, its three level scatters and the commit, fed by the sequencer's fetches.
 
     * **stuck** (triangles, one per two clocks): :class:`~hdl.guard_certificate.GuardCertificate` on the
-      corners' positions and proposals (the landed triangle registered first); into each corner's slot
-      of a :class:`~hdl.level_scatter.LevelScatter`, :data:`~hdl.layouts.STUCK_MARK` where the corner's
-      ``stuck`` bit is set and the triangle's ``level`` elsewhere; ``stuck_found`` if any corner was held;
-    * **hold** (nodes; only after a stuck pass that held a corner): a node marked in any slot gets a
-      proposal of 0 (all three proposal copies written), and its slots are cleared for the certificate;
-    * **certify** (triangles, one per two clocks; only after a hold pass): the certificate on the held
-      proposals; each triangle's ``level`` into its three corners' slots;
+      corners' positions and proposals (the landed triangle registered first); each corner's ``stuck``
+      bit into its slot's :class:`~hdl.level_scatter.LevelScatter` (a maximum of 0/1 is an OR);
+    * **hold** (nodes): a node stuck in any slot gets a proposal of 0 (all three proposal copies
+      written), and its slots are cleared for the certificate;
+    * **certify** (triangles, one per two clocks): the certificate on the held proposals; each
+      triangle's ``level`` into its three corners' slots;
     * **commit** (nodes): :class:`~hdl.guard_commit.GuardCommit` on the node's position, proposal and
       its slots' levels (the landed node registered first, one clock more per node pass): ``P + D``
-      and ``V = D`` into the node memories. After a stuck pass that held no corner the slots hold the
-      levels the certificate pass would give (it would take them on the same proposals, the hold pass
-      zeroing none), so the controller goes from the stuck pass straight to the commit;
+      and ``V = D`` into the node memories;
     * **rollback** (nodes, a rejected step only): the same unit on the node's position and committed
       move: ``P − V`` and ``V = 0``.
 
@@ -78,9 +75,6 @@ class GuardPasses(wiring.Component):
         The hold pass's proposals; the commit and rollback passes' positions and velocities.
     done : ``Out(1)``
         A pass's end: one clock, registered, after its last write.
-    stuck_found : ``Out(1)``
-        Registered: the stuck pass since the last proposal pass held a corner (set a clock after the
-        update that marked it, before ``done``; cleared by the proposal pass).
     idle : ``Out(1)``
         Registered: in the clock before, no triangle was owed by the certificate, no update was in a
         scatter and no node in the commit (an aborted run drains until then).
@@ -103,7 +97,7 @@ class GuardPasses(wiring.Component):
             "position": In(pos).array(3), "proposal": In(vel).array(3), "velocity": In(vel),
             "proposal_write": Out(write_signature(nodes, vel)),
             "node_write": Out(write_signature(nodes, node_write_layout(fs))),
-            "done": Out(1), "idle": Out(1), "stuck_found": Out(1),
+            "done": Out(1), "idle": Out(1),
         })
 
     def elaborate(self, platform):
@@ -111,8 +105,7 @@ class GuardPasses(wiring.Component):
         fs, cap = self.fs, self.capacity
         m.submodules.certificate = certificate = GuardCertificate(fs, interval=2)
         m.submodules.commit = commit = GuardCommit(fs)
-        scatters = [LevelScatter(cap.vertices, shape=guard_slot_shape(), name=f"guard_levels_{slot}")
-                    for slot in "abc"]
+        scatters = [LevelScatter(cap.vertices, name=f"guard_levels_{slot}") for slot in "abc"]
         for slot, scatter in zip("abc", scatters):
             m.submodules[f"scatter_{slot}"] = scatter
 
@@ -143,12 +136,7 @@ class GuardPasses(wiring.Component):
             update = scatter.update
             m.d.sync += [update.valid.eq(certificate.o.valid),
                          update.payload.node.eq(corner_fifo.r_data[k * corner_bits:(k + 1) * corner_bits]),
-                         update.payload.level.eq(Mux(self.in_stuck & result.stuck[k], STUCK_MARK, result.level))]
-        # any corner held, from the registered updates (the mark alone sets a slot value's top bit)
-        with m.If(self.in_integrate):
-            m.d.sync += self.stuck_found.eq(0)
-        with m.Elif(Cat(*(s.update.valid & s.update.payload.level[-1] for s in scatters)).any()):
-            m.d.sync += self.stuck_found.eq(1)
+                         update.payload.level.eq(Mux(self.in_stuck, result.stuck[k], result.level))]
         results = Signal(range(cap.triangles + 1), name="certified")
         with m.If(certificate.o.valid):
             m.d.sync += results.eq(results + 1)
@@ -160,7 +148,7 @@ class GuardPasses(wiring.Component):
             m.d.comb += scatter.lookup.eq(self.node_index)
             level = scatter.level
             for d in range(self.read_latency + 1 - LevelScatter.LOOKUP_LATENCY):
-                later = Signal(guard_slot_shape(), name=f"guard_level{k}_{d}")
+                later = Signal(certificate_level_shape(), name=f"guard_level{k}_{d}")
                 m.d.sync += later.eq(level)
                 level = later
             levels.append(level)
@@ -181,7 +169,7 @@ class GuardPasses(wiring.Component):
         hold_node = Signal(range(cap.vertices + 1), name="hold_node")
         hold_proposal = Signal(vector_layout(self.fs.velocity), name="hold_proposal")
         hold_write = Signal(name="hold_write")
-        m.d.sync += [stuck.eq(Cat(*(level[-1] for level in levels)).any()), hold_node.eq(held),
+        m.d.sync += [stuck.eq(Cat(*(level != 0 for level in levels)).any()), hold_node.eq(held),
                      hold_proposal.eq(self.proposal[0]), hold_write.eq(hold),
                      self.proposal_write.addr.eq(hold_node), self.proposal_write.en.eq(hold_write),
                      self.proposal_write.data.eq(Mux(stuck, 0, hold_proposal))]
@@ -204,9 +192,7 @@ class GuardPasses(wiring.Component):
         m.d.sync += [landed_node.eq((self.in_commit | self.in_rollback) & self.node_landed),
                      rollback.eq(self.in_rollback), landed_position.eq(self.position[0]),
                      landed_proposal.eq(self.proposal[0]), landed_velocity.eq(self.velocity),
-                     # a commit's slots hold levels alone: a hold pass clears each node's marks, and the
-                     # controller skips it only after a stuck pass that marked none
-                     *(q.eq(level[:len(q)]) for q, level in zip(landed_levels, levels))]
+                     *(q.eq(level) for q, level in zip(landed_levels, levels))]
         m.d.comb += [commit.i.valid.eq(landed_node), c_in.position.eq(landed_position),
                      c_in.velocity.eq(Mux(rollback, landed_velocity, landed_proposal)),
                      *(c_in.levels[k].eq(level) for k, level in enumerate(landed_levels)),

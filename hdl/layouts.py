@@ -187,7 +187,6 @@ def errors_layout(fs: FormatSet) -> data.StructLayout:
 # (hdl/area_error.py, hdl/controller_units.py)
 
 __all__ += ["triangle_layout", "certificate_layout", "certificate_level_shape", "certificate_result_layout",
-            "STUCK_MARK", "guard_slot_shape",
             "commit_input_layout", "commit_output_layout",
             "decision_input_layout", "decision_output_layout", "area_saturations_layout",
             "normalise_layout", "energy_sums_layout", "energy_result_layout", "word_layout", "weight_word_layout",
@@ -220,18 +219,6 @@ def certificate_level_shape():
     """A triangle's guard level: 0 … GUARD_LEVELS (its corners move by 2^-level of their proposals), or
     GUARD_LEVELS + 1 (they do not move)."""
     return unsigned((GUARD_LEVELS + 1).bit_length())
-
-
-#: A corner the stuck pass holds still, in its slot of the guard's level scatters: the bit above a level's,
-#: so above every level: a node's largest value says whether any of its triangles held it and otherwise
-#: is its level.
-STUCK_MARK = 1 << (GUARD_LEVELS + 1).bit_length()
-
-
-def guard_slot_shape():
-    """A node's value in one slot of the guard's level scatters: a level (:func:`certificate_level_shape`)
-    or :data:`STUCK_MARK`, the only value with the top bit set."""
-    return unsigned(STUCK_MARK.bit_length())
 
 
 def certificate_result_layout() -> data.StructLayout:

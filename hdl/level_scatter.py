@@ -9,7 +9,7 @@ largest of the three slots' (``docs/engine-guard.md``).
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Shape, Signal
+from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -19,34 +19,23 @@ from .layouts import certificate_level_shape
 __all__ = ["LevelScatter", "level_update_layout"]
 
 
-def level_update_layout(depth: int, shape=None) -> data.StructLayout:
-    """One corner's update: ``node`` (its index, ``range(depth)``) and the triangle's ``level`` (``shape``,
-    default :func:`~hdl.layouts.certificate_level_shape`)."""
-    return data.StructLayout({"node": range(depth), "level": certificate_level_shape() if shape is None else shape})
+def level_update_layout(depth: int) -> data.StructLayout:
+    """One corner's update: ``node`` (its index, ``range(depth)``) and the triangle's ``level``."""
+    return data.StructLayout({"node": range(depth), "level": certificate_level_shape()})
 
 
 class LevelScatter(wiring.Component):
     """``level[node] = max(level[node], update.level)`` for ``depth`` nodes, one update per clock.
 
-    Parameters
-    ----------
-    depth : int
-        Nodes.
-    shape : unsigned :class:`~amaranth.hdl.Shape`
-        A value's shape: :func:`~hdl.layouts.certificate_level_shape` unless given (the engine's guard
-        scatters levels and :data:`~hdl.layouts.STUCK_MARK`, :func:`~hdl.layouts.guard_slot_shape`).
-    name : str
-        The block RAM's name.
-
     Members
     -------
-    update : ``In(stream.Signature(level_update_layout(depth, shape), always_ready=True))``
+    update : ``In(stream.Signature(level_update_layout(depth), always_ready=True))``
         One corner per beat; any node, repeats included, back to back.
     clear : ``In(stream.Signature(range(depth), always_ready=True))``
         Set a node's level to 0 (the pass before the updates; written a clock after the transfer).
         Clears and updates are separate passes: an update pass's first beat comes after the clear
         pass's last, and a clear pass's first while ``idle``.
-    lookup : ``In(range(depth))``; ``level`` : ``Out(shape)``
+    lookup : ``In(range(depth))``; ``level`` : ``Out(certificate_level_shape())``
         ``level`` is the level of the node ``lookup`` named :attr:`LOOKUP_LATENCY` (three) clocks before,
         from a register; a lookup taken while ``idle`` sees every update before it. ``lookup`` is
         ignored in a clock with an update (the update reads the block RAM then).
@@ -72,32 +61,29 @@ class LevelScatter(wiring.Component):
     #: Clocks from a ``lookup`` to its ``level``: the block RAM's two, then the fabric register.
     LOOKUP_LATENCY = BlockRam.LATENCY + 1
 
-    def __init__(self, depth: int, *, shape=None, name: str = "levels"):
+    def __init__(self, depth: int, *, name: str = "levels"):
         if not isinstance(depth, int) or depth < 1:
             raise ValueError(f"LevelScatter depth must be a positive integer, not {depth!r}")
-        shape = certificate_level_shape() if shape is None else shape
-        if not isinstance(shape, Shape) or shape.signed:
-            raise TypeError(f"LevelScatter shape must be an unsigned Shape, not {shape!r}")
-        self.depth, self.shape, self.name = depth, shape, name
+        self.depth, self.name = depth, name
         super().__init__({
-            "update": In(stream.Signature(level_update_layout(depth, shape), always_ready=True)),
+            "update": In(stream.Signature(level_update_layout(depth), always_ready=True)),
             "clear": In(stream.Signature(range(depth), always_ready=True)),
             "lookup": In(range(depth)),
-            "level": Out(shape),
+            "level": Out(certificate_level_shape()),
             "idle": Out(1),
         })
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.ram = ram = BlockRam(self.shape, self.depth, name=self.name)
+        m.submodules.ram = ram = BlockRam(certificate_level_shape(), self.depth, name=self.name)
         port = ram.read[0]
-        read = Signal(self.shape, name="read_level")
+        read = Signal(certificate_level_shape(), name="read_level")
         m.d.comb += [port.addr.eq(Mux(self.update.valid, self.update.payload.node, self.lookup)),
                      self.level.eq(read)]
         m.d.sync += read.eq(port.data)
 
         # the update's node and level while its read is under way (three clocks)
-        layout = level_update_layout(self.depth, self.shape)
+        layout = level_update_layout(self.depth)
         waiting = [Signal(layout, name=f"update{k}") for k in (1, 2, 3)]
         valid = [Signal(name=f"update{k}_valid") for k in (1, 2, 3)]
         m.d.sync += [waiting[0].eq(self.update.payload), valid[0].eq(self.update.valid),
@@ -105,7 +91,7 @@ class LevelScatter(wiring.Component):
 
         # the block RAM's write port is a register (``writing``): the maximum is computed into it, so the
         # route to the block RAM starts at a flip-flop
-        write_layout = data.StructLayout({"level": self.shape, "node": range(self.depth), "en": 1})
+        write_layout = data.StructLayout({"level": certificate_level_shape(), "node": range(self.depth), "en": 1})
         writing = Signal(write_layout, name="write_port")
         m.d.comb += [ram.write.addr.eq(writing.node), ram.write.data.eq(writing.level), ram.write.en.eq(writing.en)]
 

@@ -88,9 +88,6 @@ class PhaseController(wiring.Component):
         SATURATIONS (:class:`~hdl.saturation_tally.SaturationTally`).
     force_done, area_done, integrate_done : ``In(1)``
         From the :class:`~hdl.pass_sequencer.PassSequencer`.
-    guard_done, guard_stuck : ``In(1)``
-        From the :class:`~hdl.guard_passes.GuardPasses`: a guard pass's end, and whether the stuck pass
-        held a corner (if not, the hold and certify passes are skipped: the commit follows the stuck pass).
     passes_idle : ``In(1)``
         Registered: in the clock before, every pass had fetched its last item and none was in a
         fetch, a unit or a guard pass (the sequencer's and the guard's ``passes_idle`` and ``idle``).
@@ -155,7 +152,7 @@ class PhaseController(wiring.Component):
             **{f"{name}_held": In(width(name)) for name in HELD},
             "saturations": In(width("saturations")),
             "force_done": In(1), "area_done": In(1), "integrate_done": In(1), "guard_done": In(1),
-            "guard_stuck": In(1), "passes_idle": In(1),
+            "passes_idle": In(1),
             "length_sum": In(fs.error_acc.width + self.capacity.vertices.bit_length()),
             "square_sum": In(sums["square_sum"].shape), "barrier_sum": In(sums["barrier_sum"].shape),
             "power_sum": In(signed(fs.power.width + self.capacity.vertices.bit_length())),
@@ -484,11 +481,8 @@ class PhaseController(wiring.Component):
             with m.Else():
                 m.d.sync += [self.fetch_nodes.eq(0), *move("integrate", "start")]
         with m.If(go & flags["stuck"] & self.guard_done):
-            m.d.sync += [self.fetch_area.eq(0), self.half_rate.eq(0), self.fetch_nodes.eq(1), self.node_restart.eq(1)]
-            with m.If(self.guard_stuck):
-                m.d.sync += move("stuck", "hold")
-            with m.Else():  # no corner held: the scatters hold the levels the certificate pass would give
-                m.d.sync += move("stuck", "commit")
+            m.d.sync += [self.fetch_area.eq(0), self.half_rate.eq(0), self.fetch_nodes.eq(1), self.node_restart.eq(1),
+                         *move("stuck", "hold")]
         with m.If(go & flags["hold"] & self.guard_done):
             m.d.sync += [self.fetch_nodes.eq(0), self.fetch_area.eq(1), self.half_rate.eq(1),
                          self.triangle_restart.eq(1), *move("hold", "certify")]
