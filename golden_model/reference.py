@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 
 from .guard import ENERGY_FLOOR, GUARD_LEVELS, EnergyWindow, StepScale, guarded_moves
-from .mesh import Mesh, folded_faces, layout_orientation, signed_areas_2d
+from .mesh import Mesh, folded_by_area, layout_orientation, signed_areas_2d
 from .modes import Step
 from .params import FlattenParams, ParameterError
 from .results import FlattenResult, History, Measurement, Status
@@ -227,11 +227,14 @@ def barrier_forces(positions: np.ndarray, faces: np.ndarray, face_areas: np.ndar
     short = _barrier_shortfall(positions, faces, winding, 2.0 * face_areas, kappa, signed)
     active = np.flatnonzero(short)  # the barrier acts on few faces: only theirs are gathered
     faces = faces[active]
-    coefficient = 0.25 * gain * spring * winding * short[active]
-    p = positions[faces]  # (F, 3, 2)
-    pj, pk = np.roll(p, -1, axis=1), np.roll(p, -2, axis=1)
-    gradient = np.stack([pj[..., 1] - pk[..., 1], pk[..., 0] - pj[..., 0]], axis=-1)
-    return _scatter(faces.ravel(), coefficient[:, None, None] * gradient, len(positions))
+    coefficient = (0.25 * gain * spring * winding * short[active])[:, None]
+    # (F, 3) per coordinate, corner i's column; j = i + 1 and k = i + 2 (mod 3) its side
+    x, y = np.ascontiguousarray(positions[:, 0]).take(faces), np.ascontiguousarray(positions[:, 1]).take(faces)
+    j, k = [1, 2, 0], [2, 0, 1]
+    n = len(positions)
+    nodes = faces.ravel()
+    return np.column_stack([np.bincount(nodes, weights=(coefficient * (y[:, j] - y[:, k])).ravel(), minlength=n),
+                            np.bincount(nodes, weights=(coefficient * (x[:, k] - x[:, j])).ravel(), minlength=n)])
 
 
 
@@ -298,10 +301,11 @@ def variable_step(area_error, shape_error):
 
 
 def measure(model: SpringModel, positions: np.ndarray, length: np.ndarray | None = None,
-            signed: np.ndarray | None = None) -> Measurement:
+            signed: np.ndarray | None = None, energy: float | None = None) -> Measurement:
     """``E_S``, ``E_C``, energy and flipped count of ``positions``.
 
-    ``length`` (the 2D edge lengths) may be passed when already computed.
+    ``length`` (the 2D edge lengths), ``signed`` (the faces' signed areas) and ``energy`` (springs and
+    barrier) may be passed when already computed for ``positions``.
     """
     mesh = model.mesh
     if length is None:
@@ -312,12 +316,21 @@ def measure(model: SpringModel, positions: np.ndarray, length: np.ndarray | None
     area_error = float(np.sum(np.abs(mesh.face_areas - np.abs(signed))) / np.sum(mesh.face_areas))
     shape_error = float(np.sum(np.abs(mesh.rest_lengths - length)) / np.sum(mesh.rest_lengths))
     flipped = int(np.sum(model.orientation * signed < 0))
-    folded = int(np.count_nonzero(folded_faces(positions, mesh.faces)))
+    folded = int(np.count_nonzero(folded_by_area(signed)))
+    if energy is None:
+        energy = layout_energy(model, positions, length, signed)
+    return Measurement(area_error, shape_error, energy, flipped, folded)
+
+
+def layout_energy(model: SpringModel, positions: np.ndarray, length: np.ndarray, signed: np.ndarray) -> float:
+    """The energy the stop rule and the guard watch: springs (eqs. 1, 3) plus the fold barrier, of
+    ``positions`` with its edge ``length`` and faces' ``signed`` areas."""
+    mesh = model.mesh
     energy = spring_energy(length, mesh.rest_lengths, model.spring)
     if model.barrier is not None:
         energy += barrier_energy(positions, mesh.faces, mesh.face_areas, model.winding, *model.barrier, model.spring,
                                  signed)
-    return Measurement(area_error, shape_error, energy, flipped, folded)
+    return energy
 
 
 # --------------------------------------------------------------------------- penalty
@@ -420,9 +433,10 @@ class _Jacobi:
                                       y.take(self.edges[:, 1]) - y.take(self.edges[:, 0])])
         self.length = np.hypot(self.delta[:, 0], self.delta[:, 1])
         self.signed = signed_areas_2d(self.positions, self.model.mesh.faces)
+        self._layout_energy = None  # energy_of_layout's, once asked for
 
     def measure(self) -> Measurement:
-        return measure(self.model, self.positions, self.length, self.signed)
+        return measure(self.model, self.positions, self.length, self.signed, self._layout_energy)
 
     def forces(self) -> np.ndarray:
         """Spring forces (eq. 2) plus the barrier's, all from the current positions."""
@@ -478,7 +492,7 @@ class _Jacobi:
         mesh = self.model.mesh
         moves, levels = guarded_moves(self.positions, proposal, mesh.faces, self.model.winding, 2.0 * mesh.face_areas)
         guard.count_levels(levels)
-        before = (self.positions, self.delta, self.length, self.signed)
+        before = (self.positions, self.delta, self.length, self.signed, self._layout_energy)
         self.positions = self.positions + moves
         self._refresh()
         energy = self.energy_of_layout()
@@ -490,7 +504,7 @@ class _Jacobi:
             self.restart = power < 0
             guard.scale = guard.scale.accepted_step()
         else:
-            self.positions, self.delta, self.length, self.signed = before
+            self.positions, self.delta, self.length, self.signed, self._layout_energy = before
             self.velocities = np.zeros_like(self.velocities)
             self.momentum_k = 0
             self.restart = False
@@ -510,12 +524,9 @@ class _Jacobi:
 
     def energy_of_layout(self) -> float:
         """The energy the stop rule and the guard watch (springs + barrier) of the current layout."""
-        model = self.model
-        energy = spring_energy(self.length, self.rest, model.spring)
-        if model.barrier is not None:
-            energy += barrier_energy(self.positions, model.mesh.faces, model.mesh.face_areas, model.winding,
-                                     *model.barrier, model.spring, self.signed)
-        return energy
+        if self._layout_energy is None:
+            self._layout_energy = layout_energy(self.model, self.positions, self.length, self.signed)
+        return self._layout_energy
 
 
 class _Sequential:
