@@ -35,14 +35,12 @@ from golden_model.files import describe_os_error, read_file_bytes
 from golden_model.mesh import MeshError
 
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
-from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_output_path
-from .patterns import PATTERN_SUFFIXES, pattern_kind
-from .run_options import USER_ERRORS, UserError, integer_argument, params_from_args, resolve_mesh, strict_json
+from .flatten_run import OUTPUT_OPTIONS, output_paths
+from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path
+from .patterns import pattern_kind
+from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, resolve_mesh,
+                          strict_json)
 from .workers import WorkerPool
-
-#: The output options a batch takes endings for, with the file kinds each accepts.
-OUTPUT_OPTIONS = (("out", "--out", PATTERN_SUFFIXES), ("history", "--history", None), ("plot", "--plot", (".png",)),
-                  ("distortion", "--distortion", (".csv",)))
 
 
 def add_batch_options(parser: argparse.ArgumentParser) -> None:
@@ -164,14 +162,12 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
 def _endings(args: argparse.Namespace) -> tuple[tuple[str, str], ...]:
     """``(option, ending)`` of every output asked for; an ending is a file-name tail such as ``.pdf``."""
     endings = []
-    for option, what, _ in OUTPUT_OPTIONS:
-        values = getattr(args, option)
-        for value in (values or []) if option == "out" else ([] if values is None else [values]):
-            text = str(value)
-            if not text or "/" in text or os.sep in text:
-                raise UserError(f"in a batch, {what} takes a file-name ending such as .pdf, not '{text}': each mesh "
-                                f"writes --out-dir/<mesh name><ending>")
-            endings.append((option, text))
+    for option, what, value in output_paths(args):
+        text = str(value)
+        if not text or "/" in text or os.sep in text:
+            raise UserError(f"in a batch, {what} takes a file-name ending such as .pdf, not '{text}': each mesh "
+                            f"writes --out-dir/<mesh name><ending>")
+        endings.append((option, text))
     tails = [e for _, e in endings]
     for tail in tails:
         if tails.count(tail) > 1:
@@ -205,11 +201,15 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
     if args.out_dir is not None:
         out_dir = Path(args.out_dir)
         names = _names(meshes)
+        flags = {option: (what, suffixes) for option, what, suffixes in OUTPUT_OPTIONS}
         for option, ending in endings:
-            what, suffixes = next((w, s) for o, w, s in OUTPUT_OPTIONS if o == option)
-            check_output_path(out_dir / f"{names[0]}{ending}", what, suffixes)
+            check_output_path(out_dir / f"{names[0]}{ending}", *flags[option])
             if option == "out":
                 pattern_kind(Path(ending))
+        # no mesh's output may be a mesh of the batch (or the --init or --formats file), nor another's output
+        check_distinct([(flags[option][0], out_dir / f"{name}{ending}") for name in names for option, ending in endings],
+                       [item for mesh in meshes
+                        for item in input_files(argparse.Namespace(**{**vars(args), "mesh": mesh}))])
     else:
         _names(meshes)
     return endings, jobs

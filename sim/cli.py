@@ -34,10 +34,11 @@ from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
-from .flatten_run import check_print_size, human_line, json_summary, run_flatten, what_was_used, write_outputs
+from .flatten_run import (OUTPUT_OPTIONS, check_print_size, human_line, json_summary, output_paths, run_flatten,
+                          what_was_used, write_outputs)
 from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
     received_signal, reset_interrupted
-from .patterns import PATTERN_SUFFIXES, PatternDrawing, add_pattern_options, scale_note
+from .patterns import PatternDrawing, add_pattern_options, scale_note
 from .run_options import (
     USER_ERRORS,
     UserError,
@@ -98,11 +99,9 @@ def divergence_hint(params: FlattenParams) -> str:
 
 def check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before the run, an output path that cannot work, and two outputs that are one file."""
-    for path, what, suffixes in ([(path, "--out", PATTERN_SUFFIXES) for path in args.out or ()]
-                                 + [(args.history, "--history", None), (args.plot, "--plot", (".png",)),
-                                    (args.distortion, "--distortion", (".csv",))]):
-        if path is not None:
-            check_output_path(path, what, suffixes)
+    suffixes = {flag: endings for _, flag, endings in OUTPUT_OPTIONS}
+    for _, flag, path in output_paths(args):
+        check_output_path(path, flag, suffixes[flag])
     if args.init is None:
         args.init = default_init(args.mesh)
     _check_distinct_files(args)
@@ -151,9 +150,7 @@ def _error_resolution_note(formats: FormatSet | None) -> str | None:
 def _check_distinct_files(args: argparse.Namespace) -> None:
     """No two outputs may be one file, and no output may be an input (the mesh, the --init or --formats
     file), compared by device and inode."""
-    check_distinct([("--out", path) for path in args.out or ()]
-                   + [("--history", args.history), ("--plot", args.plot), ("--distortion", args.distortion)],
-                   input_files(args))
+    check_distinct([(flag, path) for _, flag, path in output_paths(args)], input_files(args))
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
@@ -213,7 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the pattern, by its ending (repeat for several): .dxf (cut line on layer CUT), .pdf or "
                         ".svg (true scale on --paper sheets), .obj (the 3D mesh with the pattern as vt), "
                         ".flat.obj (the layout, z = 0), .flat.svg (the layout coloured by distortion)")
-    p.add_argument("--history", type=Path, help="per-iteration CSV")
+    p.add_argument("--history", type=Path, metavar="FILE.csv", help="per-iteration CSV")
     p.add_argument("--plot", type=Path, help="PNG of the layouts and error curves")
     p.add_argument("--json", action="store_true", help="print one JSON object with the results")
     add_pattern_options(p)

@@ -21,8 +21,23 @@ from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
-from .patterns import PatternDrawing, check_mesh_fits, run_caption, write_pattern_file
+from .patterns import PATTERN_SUFFIXES, PatternDrawing, check_mesh_fits, run_caption, write_pattern_file
 from .run_options import UserError, default_init, load_format_set, start_positions
+
+#: ``flatten``'s output options: ``(argparse dest, flag, the file endings it takes)``. ``--out`` may be given
+#: several times; in a batch each value is an ending (``--out .pdf``) appended to each mesh's name.
+OUTPUT_OPTIONS = (("out", "--out", PATTERN_SUFFIXES), ("history", "--history", (".csv",)),
+                  ("plot", "--plot", (".png",)), ("distortion", "--distortion", (".csv",)))
+
+
+def output_paths(args: argparse.Namespace) -> list[tuple[str, str, Path]]:
+    """``(dest, flag, path)`` of every output given to ``flatten`` (``--out`` once per value)."""
+    paths = []
+    for dest, flag, _ in OUTPUT_OPTIONS:
+        value = getattr(args, dest, None)
+        for path in (value or []) if dest == "out" else ([] if value is None else [value]):
+            paths.append((dest, flag, path))
+    return paths
 
 
 def _progress(total: int, enabled: bool):

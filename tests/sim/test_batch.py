@@ -115,6 +115,26 @@ def test_batch_refusals_are_one_line_before_any_run(tmp_path, monkeypatch, capsy
     assert os.listdir(tmp_path) == ["in"]  # an --out-dir the batch made is removed again
 
 
+@pytest.mark.parametrize("out_dir, args, message", [
+    ("in", ["--out", ".obj"], "--out 'in/dome00.obj' is the same file as the mesh 'in/dome00.obj'"),
+    ("in", ["--history", ".obj"], "--history 'in/dome00.obj' must end in .csv"),
+    (".", ["--out", ".flat.obj"], "--out 'dome00.flat.obj' is the same file as the mesh 'in/dome00.obj'"),
+    ("linked", ["--out", ".pdf"], "--out 'linked/dome00.pdf' is the same file as the mesh 'in/dome01.off'"),
+])
+def test_no_output_of_a_batch_replaces_one_of_its_meshes(tmp_path, monkeypatch, capsys, out_dir, args, message):
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 2, 0)
+    os.link("in/dome00.obj", "dome00.flat.obj")  # a mesh that is another's output name, by a hard link
+    os.mkdir("linked")
+    os.symlink("../in/dome01.off", "linked/dome00.pdf")  # a namesake in --out-dir that links to a mesh
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    assert main(["flatten", "in/dome00.obj", "in/dome01.off", "dome00.flat.obj", "--max-iter", "3",
+                 "--out-dir", out_dir, *args]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"springflat: error: {message}"]
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
 def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "a", 1, 0)

@@ -539,7 +539,8 @@ OUTPUTS: dict[str, Case] = {
     "plot directory not writable": Case(["--plot", "ro/p.png"], 2, r"cannot write --plot 'ro/p.png': permission denied",
                                         files={"ro/keep": ""}, deny=("ro", errno.EACCES)),
     "plot wrong suffix": Case(["--plot", "p.jpg"], 2, r"must end in .png"),
-    "out and history the same file": Case(["--out", "o.obj", "--history", "./o.obj"], 2, r"same file"),
+    "history and distortion the same file": Case(["--history", "h.csv", "--distortion", "./h.csv"], 2, r"same file"),
+    "history over the mesh": Case(["--history", "m.obj"], 2, r"--history 'm.obj' must end in .csv"),
     "out overwrites the mesh": Case(["--out", "m.obj"], 2, r"same file"),
     "svg upper-case suffix": Case(["--out", "o.SVG"]),
     "existing outputs replaced": Case(["--out", "o.obj", "--history", "h.csv"], files={"o.obj": "old", "h.csv": "old"}),
@@ -942,25 +943,26 @@ ROUND_TWO_OUTPUTS: dict[str, Case] = {
     "history is a dangling link": Case(["--history", "h.csv"], links={"h.csv": "new.csv"}),
     "history is a link into a missing directory": Case(["--history", "h.csv"], 2, r"directory '.*gone' does not exist",
                                                        links={"h.csv": "gone/h.csv"}),
-    "history overwrites the --init file": Case(["--init", "l.txt", "--history", "l.txt"], 2,
-                                               r"^springflat: error: --history 'l.txt' is the same file as --init "
-                                               r"'l.txt'$", files={"l.txt": layout_text()}),
+    "history overwrites the --init file": Case(["--init", "l.csv", "--history", "l.csv"], 2,
+                                               r"^springflat: error: --history 'l.csv' is the same file as --init "
+                                               r"'l.csv'$", files={"l.csv": layout_text()}),
     "history overwrites the --init file, spelled another way": Case(
-        ["--init", "l.txt", "--history", "d/../l.txt"], 2, r"--history 'd/../l.txt' is the same file as --init 'l.txt'",
-        files={"l.txt": layout_text(), "d/k": ""}),
+        ["--init", "l.csv", "--history", "d/../l.csv"], 2, r"--history 'd/../l.csv' is the same file as --init 'l.csv'",
+        files={"l.csv": layout_text(), "d/k": ""}),
     "history overwrites the --init file through a link": Case(
-        ["--init", "l.txt", "--history", "h.csv"], 2, r"--history 'h.csv' is the same file as --init 'l.txt'",
-        files={"l.txt": layout_text()}, links={"h.csv": "l.txt"}),
+        ["--init", "l.csv", "--history", "h.csv"], 2, r"--history 'h.csv' is the same file as --init 'l.csv'",
+        files={"l.csv": layout_text()}, links={"h.csv": "l.csv"}),
     "history overwrites the formats file": Case(
-        ["--engine", "fixed", "--formats", "f.json", "--history", "./f.json"], 2,
-        r"--history '(\./)?f.json' is the same file as --formats 'f.json'", files={"f.json": _formats_json()}),
+        ["--engine", "fixed", "--formats", "f.json", "--history", "h.csv"], 2,
+        r"--history 'h.csv' is the same file as --formats 'f.json'", files={"f.json": _formats_json()},
+        links={"h.csv": "f.json"}),
     "out is a hard link to the mesh": Case(["--out", "h.obj"], 2, r"--out 'h.obj' is the same file as the mesh 'm.obj'",
                                            links={"h.obj": "hard:m.obj"}),
     "out is a symbolic link to the mesh": Case(["--out", "s.obj"], 2, r"--out 's.obj' is the same file as the mesh",
                                                links={"s.obj": "m.obj"}),
-    "history and plot the same new file, spelled two ways": Case(
-        ["--history", "h.png", "--plot", "d/../h.png"], 2, r"--plot 'd/../h.png' is the same file as --history 'h.png'",
-        files={"d/k": ""}),
+    "history and distortion the same new file, spelled two ways": Case(
+        ["--history", "h.csv", "--distortion", "d/../h.csv"], 2,
+        r"--distortion 'd/../h.csv' is the same file as --history 'h.csv'", files={"d/k": ""}),
     "a 255-byte name": Case(["--history", _long_name("h", 255, ".csv")]),
     "a 255-byte --out name": Case(["--out", _long_name("o", 255, ".obj"), "--history", "h.csv"]),
     "a 255-byte name of two-byte characters": Case(["--history", _long_name("\u00e9", 255, ".csv")]),
