@@ -38,8 +38,8 @@ from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .flatten_run import OUTPUT_OPTIONS, output_paths
 from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path
 from .patterns import pattern_kind
-from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, resolve_mesh,
-                          strict_json)
+from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
+                          resolve_mesh, strict_json)
 from .workers import WorkerPool
 
 
@@ -48,7 +48,7 @@ def add_batch_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("more_meshes", nargs="*", metavar="MESH",
                         help="more meshes, right after the first (no option between them): a batch, one result "
                              "line each")
-    parser.add_argument("--out-dir", type=Path, default=None, metavar="DIR",
+    parser.add_argument("--out-dir", type=path_argument, default=None, metavar="DIR",
                         help="batch: write DIR/<mesh name><ending> for each ending given to --out, --history, "
                              "--plot and --distortion (e.g. --out .dxf --out .pdf --distortion .csv)")
     parser.add_argument("--jobs", type=integer_argument, default=None, metavar="N",

@@ -47,6 +47,7 @@ from .run_options import (
     input_files,
     load_format_set,
     params_from_args,
+    path_argument,
     resolve_mesh,
     strict_json,
 )
@@ -206,12 +207,12 @@ def build_parser() -> argparse.ArgumentParser:
     from .board_run import add_board_options
 
     add_board_options(p)
-    p.add_argument("--out", type=Path, action="append", metavar="FILE",
+    p.add_argument("--out", type=path_argument, action="append", metavar="FILE",
                    help="the pattern, by its ending (repeat for several): .dxf (cut line on layer CUT), .pdf or "
                         ".svg (true scale on --paper sheets), .obj (the 3D mesh with the pattern as vt), "
                         ".flat.obj (the layout, z = 0), .flat.svg (the layout coloured by distortion)")
-    p.add_argument("--history", type=Path, metavar="FILE.csv", help="per-iteration CSV")
-    p.add_argument("--plot", type=Path, help="PNG of the layouts and error curves")
+    p.add_argument("--history", type=path_argument, metavar="FILE.csv", help="per-iteration CSV")
+    p.add_argument("--plot", type=path_argument, metavar="FILE.png", help="PNG of the layouts and error curves")
     p.add_argument("--json", action="store_true", help="print one JSON object with the results")
     add_pattern_options(p)
     from .batch import add_batch_options
@@ -221,7 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("paper", help="reproduce the paper's Tables VI-VII and figures",
                        description="Run Surf1 and Surf2 with fixed and variable steps; write a markdown report.")
-    p.add_argument("--out", default="paper-report", help="output directory (default paper-report)")
+    p.add_argument("--out", type=path_argument, default="paper-report", help="output directory (default paper-report)")
     p.add_argument("--init", choices=LAYOUT_METHODS, default="pca", help="initial layout (default pca)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=cmd_paper)
@@ -236,7 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "golden_model.engine_spec.image.DEFAULT_CAPACITY)")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
                    help="the engine without the step guard (no guarded mode; its block RAMs free for depth)")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", type=path_argument, required=True, help="output directory")
     p.set_defaults(func=cmd_verilog)
 
     from .rtl_check import add_parser as add_rtl_check_parser

@@ -21,6 +21,7 @@ from golden_model.engine_spec.image import check_engine_params
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, SimulatorError, run_bench
+from .run_options import path_argument
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["add_parser", "cmd_rtl_check"]
@@ -43,7 +44,7 @@ def add_parser(sub, add_run_options) -> None:
     p.add_argument("--wait-states", type=int, default=0, metavar="N",
                    help="with --engine-top: up to N random idle clocks before each bus cycle (default 0)")
     p.add_argument("--iterations", type=int, default=None, metavar="N", help="stop after at most N iterations")
-    p.add_argument("--waves", type=Path, default=None, metavar="PATH", help="write the waveform (FST/VCD) here")
+    p.add_argument("--waves", type=path_argument, default=None, metavar="PATH", help="write the waveform (FST/VCD) here")
     p.add_argument("--stall", type=float, default=0.0, metavar="P",
                    help="probability of a random stall on each side per clock (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object with the results")

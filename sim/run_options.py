@@ -67,6 +67,13 @@ def integer_argument(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
 
 
+def path_argument(text: str) -> Path:
+    """A path option's value; an empty one (``--out ''``) would name the current directory, so it is refused."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return Path(text)
+
+
 def add_run_options(parser: argparse.ArgumentParser) -> None:
     """The options every command that runs the algorithm shares."""
     builtins = ", ".join(BUILTIN_MESHES)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from golden_model.engine_spec import uart_protocol as protocol
 
+from .run_options import path_argument
 from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS,
                     DoesNotFit, SynthError, report_markdown, run_synthesis)
 
@@ -59,7 +60,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                    help="clock constraint for nextpnr (default "
                         + ", ".join(f"{mhz:g} for {target}" for target, mhz in DEFAULT_FREQ.items())
                         + f"); with --board the engine's clock from the PLL (default {protocol.ENGINE_CLOCK_HZ / 1e6:g})")
-    p.add_argument("--out", default=None, help="bundle directory (default synth-TARGET-PRESET)")
+    p.add_argument("--out", type=path_argument, default=None, help="bundle directory (default synth-TARGET-PRESET)")
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
                    help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core,"
                         "springflat_engine (default: all but springflat_engine)")

@@ -104,6 +104,8 @@ BAD_ARGS = [
     (["--step", "wobbly"], "invalid choice"),
     (["--plot", "p.jpg"], "must end in .png"),
     (["--out", "nodir/x.obj"], "does not exist"),
+    (["--out", ""], "argument --out: expected a path, got ''"),
+    (["--out", "o.obj", "--history", "h.obj"], "--history 'h.obj' must end in .csv"),
 ]
 
 
@@ -122,6 +124,14 @@ def test_bad_arguments(tmp_path, args, message):
     proc = run("flatten", *args, "--out", "o.obj", "--history", "h.csv", cwd=tmp_path) \
         if "--out" not in args else run("flatten", *args, cwd=tmp_path)
     _assert_clean_failure(proc, message, tmp_path, before)
+
+
+@pytest.mark.parametrize("command", [["verilog"], ["paper", "--quiet"], ["study", "surf1", "--quiet"], ["synth"],
+                                     ["rtl-check"], ["flatten", "surf1", "surf2", "--out", ".obj"]])
+def test_an_empty_output_path_is_refused_before_anything_is_written(tmp_path, command):
+    option = "--waves" if command[0] == "rtl-check" else "--out-dir" if "--out" in command else "--out"
+    proc = run(*command, option, "", cwd=tmp_path)  # '' would be the current directory
+    _assert_clean_failure(proc, f"argument {option}: expected a path, got ''", tmp_path, [])
 
 
 @pytest.mark.parametrize("name, message", [
