@@ -137,8 +137,9 @@ def triangle_levels(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarr
 def node_levels(face_levels: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """``(V,)`` each node's level: the largest of its triangles' (its smallest move fraction)."""
     level = np.zeros(n_vertices, dtype=np.int64)
-    for r in np.unique(face_levels[face_levels > 0]):  # ascending: a later (larger) level overwrites
-        level[faces[face_levels == r].ravel()] = r
+    raised = np.flatnonzero(face_levels)
+    for k in range(3):
+        np.maximum.at(level, faces[raised, k], face_levels[raised])
     return level
 
 
