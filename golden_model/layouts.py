@@ -52,7 +52,7 @@ from .mesh_io import read_obj_vertices
 
 __all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
            "arap_layout", "slim_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS",
-           "SLIM_MAX_ITERATIONS"]
+           "SLIM_MAX_ITERATIONS", "check_layout", "init_name", "ARRAY_START"]
 
 LAYOUT_METHODS = ("tutte", "pca", "harmonic", "lscm", "arap", "slim")
 #: The start of mesh files: ARAP, and SLIM from Tutte where ARAP folds (docs/guard.md measures the choice).
@@ -335,16 +335,37 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
             if isinstance(exc, LayoutError):
                 raise
             raise LayoutError(f"cannot parse layout '{path}': {str(exc).splitlines()[0]}") from None
+    return check_layout(positions, n_vertices, f"layout '{path}'")
+
+
+def check_layout(positions, n_vertices: int, what: str) -> np.ndarray:
+    """``positions`` as a ``(n_vertices, 2)`` float64 array of finite coordinates within
+    :data:`COORDINATE_LIMIT`, else a :class:`LayoutError` naming ``what`` (a layout file, the init array)."""
+    positions = np.asarray(positions)
+    if positions.dtype.kind not in "iuf":
+        raise LayoutError(f"{what} holds {positions.dtype} values, not real numbers")
+    if positions.ndim != 2 or positions.shape[1] != 2:
+        raise LayoutError(f"{what} has shape {positions.shape}, expected ({n_vertices}, 2): one x y row per vertex")
+    positions = positions.astype(np.float64)
     if len(positions) != n_vertices:
-        raise LayoutError(f"layout '{path}' has {len(positions)} rows but the mesh has {n_vertices} vertices")
+        raise LayoutError(f"{what} has {len(positions)} rows but the mesh has {n_vertices} vertices")
     if not np.isfinite(positions).all():
-        raise LayoutError(f"layout '{path}' has a non-finite coordinate")
+        raise LayoutError(f"{what} has a non-finite coordinate")
     magnitude = np.abs(positions).max(axis=1, initial=0.0)
     if (magnitude > COORDINATE_LIMIT).any():
         row = int(np.flatnonzero(magnitude > COORDINATE_LIMIT)[0])
-        raise LayoutError(f"layout '{path}': row {row + 1} has a coordinate of magnitude {magnitude[row]:.3g}, "
+        raise LayoutError(f"{what}: row {row + 1} has a coordinate of magnitude {magnitude[row]:.3g}, "
                           f"outside the supported range |x| <= {COORDINATE_LIMIT:g}")
     return positions
+
+
+#: What :func:`initial_layout` and :func:`start_layout` call a start given as an array (the Python API's ``init``).
+ARRAY_START = "array"
+
+
+def init_name(init) -> str:
+    """How a start is named to the user: the method or file as given, :data:`ARRAY_START` for an array."""
+    return ARRAY_START if isinstance(init, np.ndarray) else str(init)
 
 
 def _obj_layout_notes(path: Path, data: bytes, vertices: np.ndarray, faces: np.ndarray) -> list[str]:
@@ -371,10 +392,12 @@ _METHODS = {"tutte": tutte_layout, "pca": pca_layout, "harmonic": harmonic_layou
             "arap": arap_layout, "slim": slim_layout}
 
 
-def initial_layout(mesh: Mesh, init: str | Path, notes: list[str] | None = None) -> np.ndarray:
+def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] | None = None) -> np.ndarray:
     """``P0`` for ``init`` = one of :data:`LAYOUT_METHODS`, :data:`AUTO_START` (here: ARAP as it is;
-    :func:`start_layout` untangles) or a layout file path (what an OBJ layout has that is not used goes
-    to ``notes``, see :func:`load_layout`)."""
+    :func:`start_layout` untangles), a layout file path (what an OBJ layout has that is not used goes
+    to ``notes``, see :func:`load_layout`) or a ``(V, 2)`` array (checked as a file's rows are)."""
+    if isinstance(init, np.ndarray):
+        return check_layout(init, mesh.n_vertices, "the init array")
     method = _METHODS.get("arap" if str(init) == AUTO_START else str(init))
     if method is not None:
         return method(mesh)
@@ -398,7 +421,7 @@ def _folds(mesh: Mesh, positions: np.ndarray) -> int:
     return int(np.count_nonzero(folded_faces(positions, mesh.faces)))
 
 
-def start_layout(mesh: Mesh, init: str | Path, progress=None, untangle_seconds: float = 20.0) -> StartLayout:
+def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untangle_seconds: float = 20.0) -> StartLayout:
     """The initial layout for ``init`` (:data:`AUTO_START`, a method or a file), fold-free where possible.
 
     The guarded dynamics keeps a fold-free start fold-free but cannot clear a fold. ``auto`` is ARAP,
@@ -411,12 +434,14 @@ def start_layout(mesh: Mesh, init: str | Path, progress=None, untangle_seconds: 
     from .untangle import untangle_layout
 
     say = progress or (lambda text: None)
-    name = str(init)
+    name = init_name(init)
     method = "arap" if name == AUTO_START else name
-    described = f"the {method} layout" if method in _METHODS else f"the layout '{name}'"
-    say(f"computing {described}" if method in _METHODS else f"reading {described}")
+    described = (f"the {method} layout" if method in _METHODS else "the init array" if name == ARRAY_START
+                 else f"the layout '{name}'")
+    if name != ARRAY_START:
+        say(f"computing {described}" if method in _METHODS else f"reading {described}")
     read_notes: list[str] = []
-    positions = initial_layout(mesh, method, read_notes)
+    positions = initial_layout(mesh, init if name == ARRAY_START else method, read_notes)
     folded = _folds(mesh, positions)
     if folded == 0:
         return StartLayout(positions, method, 0, read_notes)

@@ -61,6 +61,19 @@ def signed_areas_2d(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * ((xb - xa) * (yc - ya) - (yb - ya) * (xc - xa))
 
 
+def printable_name(name: str) -> str:
+    """``name`` as one line of valid text, for the headers and titles of the files that carry it: the bytes
+    of a file name that were not UTF-8 (Python's surrogate escapes) and control characters (a newline would
+    start a record of its own in an OBJ header) as backslash escapes (``\\xff``, ``\\n``)."""
+    name = str(name)
+    try:
+        raw = name.encode("utf-8", "surrogateescape")
+    except UnicodeEncodeError:  # a surrogate that no undecodable byte gave
+        raw = name.encode("utf-8", "backslashreplace")
+    text = raw.decode("utf-8", "backslashreplace")
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in text)
+
+
 @dataclass(frozen=True, eq=False)
 class Mesh:
     """A validated triangle-mesh disk.
@@ -77,6 +90,7 @@ class Mesh:
     _validated: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "name", printable_name(self.name))
         vertices = np.ascontiguousarray(self.vertices, dtype=np.float64)
         faces = np.ascontiguousarray(self.faces)
         object.__setattr__(self, "vertices", vertices)

@@ -206,8 +206,9 @@ def _write_uv_obj(path: str, drawing: PatternDrawing) -> None:
     with open(path, "w", encoding="utf-8") as out:
         out.write(f"# springflat pattern of '{drawing.name}': v = the 3D mesh in {drawing.units}, "
                   "vt = the flattened pattern\n")
-        out.write(f"# vt = (x - {origin[0]!r}, y - {origin[1]!r}) / {size!r}: the pattern scaled into [0, 1]; "
-                  f"multiply by {size!r} {drawing.units} for its true size\n")
+        x0, y0, scale = float(origin[0]), float(origin[1]), float(size)  # repr: the shortest exact decimal
+        out.write(f"# vt = (x - {x0!r}, y - {y0!r}) / {scale!r}: the pattern scaled into [0, 1]; "
+                  f"multiply by {scale!r} {drawing.units} for its true size\n")
         if drawing.caption:
             out.write(f"# {drawing.caption}\n")
         np.savetxt(out, drawing.vertices, fmt="v %.17g %.17g %.17g")

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
-from golden_model.layouts import AUTO_START, LAYOUT_METHODS, LayoutError, initial_layout, start_layout
+from golden_model.layouts import AUTO_START, LAYOUT_METHODS, LayoutError, init_name, initial_layout, start_layout
 from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes
@@ -181,7 +181,7 @@ def start_positions(mesh: Mesh, init: str, params: FlattenParams, progress: bool
         positions = initial_layout(mesh, init, notes)
         for note in notes:
             print(f"springflat: note: {note}", file=sys.stderr)
-        return positions, "arap" if init == AUTO_START else init
+        return positions, "arap" if init_name(init) == AUTO_START else init_name(init)
     say = (lambda text: print(f"springflat: {text} ...", file=sys.stderr)) if progress else None
     start = start_layout(mesh, init, progress=say)
     if not progress:

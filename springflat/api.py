@@ -216,8 +216,9 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         V: ``(V, 3)`` vertex positions (any length unit), or a ``trimesh.Trimesh`` (then no ``F``).
         F: ``(F, 3)`` 0-based vertex indices of the triangles.
         name: the mesh's name, for the pattern files.
-        init: the initial layout: ``tutte``, ``pca``, ``harmonic``, ``lscm``, ``arap`` (default), a
-            layout file, or a ``(V, 2)`` array.
+        init: the initial layout: ``auto`` (the default: ARAP, or SLIM from Tutte where ARAP folds), ``tutte``,
+            ``pca``, ``harmonic``, ``lscm``, ``arap``, ``slim``, a layout file, or a ``(V, 2)`` array; a file or an
+            array is checked (shape, finite, range) and, with the guarded dynamics, untangled where it folds.
         **options: the options of ``springflat flatten`` (listed below and in :data:`OPTIONS`), the flag
             without its dashes and with ``_`` for ``-``: ``max_iter=500`` is ``--max-iter 500``.  Each value
             is checked as the command line checks the same text.  Left out, an option has the default of a
@@ -233,6 +234,9 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     """
     vertices, faces = _arrays(V, F)
     args = _namespace(options)
+    if args.engine == "board":
+        raise ParameterError("engine 'board' needs the board's serial port: run springflat flatten MESH --engine board "
+                             "--port DEVICE (docs/board.md); the API runs the float, fixed and rtl engines")
     mesh = Mesh(vertices, faces, name=name)  # validated here: errors name no temporary file
     with tempfile.TemporaryDirectory(prefix="springflat-api-") as tmp:
         path = Path(tmp) / "mesh.obj"
@@ -240,17 +244,12 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         _, defaults = resolve_mesh(str(path))
         params = params_from_args(args, defaults)
         args.mesh = str(path)
-        if init is not None and not isinstance(init, (str, Path)):
-            positions = np.asarray(init, dtype=np.float64)
-            args.init = "array"
-            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                result = choose_engine(args)(mesh, positions, params)
-        else:
-            args.init = None if init is None else str(init)
-            result = run_flatten(args, mesh, params)
+        # an array is checked, and untangled where it folds, as a layout file is (run_flatten's start)
+        args.init = None if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
+        result = run_flatten(args, mesh, params)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
-                   final.folded, area_ratio(result.positions, mesh.faces, mesh.face_areas), name, mesh.vertices,
+                   final.folded, area_ratio(result.positions, mesh.faces, mesh.face_areas), mesh.name, mesh.vertices,
                    mesh.faces, args.init, params, result)
 
 

@@ -126,6 +126,56 @@ def test_trimesh_and_an_initial_array(ear):
     np.testing.assert_array_equal(again.layout, from_arrays.layout)
 
 
+@pytest.mark.parametrize("layout, message", [
+    (lambda P: np.full_like(P, np.nan), "the init array has a non-finite coordinate"),
+    (lambda P: P * 1e300, "the init array: row 1 has a coordinate of magnitude"),
+    (lambda P: P[:-1], "the init array has {m} rows but the mesh has {n} vertices"),
+    (lambda P: np.column_stack([P, P[:, :1]]), r"the init array has shape \({n}, 3\), expected \({n}, 2\)"),
+    (lambda P: P.astype(complex), "the init array holds complex128 values, not real numbers"),
+])
+def test_an_initial_array_is_checked_as_a_layout_file_is(ear, layout, message):
+    from golden_model.layouts import LayoutError
+
+    V, F = ear
+    with pytest.raises(LayoutError, match=message.format(n=len(V), m=len(V) - 1)):
+        springflat.flatten(V, F, init=layout(springflat.flatten(V, F, max_iter=1).result.initial_positions))
+
+
+def test_a_folded_initial_array_is_untangled_as_a_layout_file_is(ear, tmp_path):
+    V, F = ear
+    folded = springflat.flatten(V, F, init="tutte", max_iter=1).result.initial_positions.copy()
+    folded[: len(folded) // 3, 0] *= -1  # a third of the nodes mirrored: triangles across the cut fold
+    path = tmp_path / "folded.txt"
+    np.savetxt(path, folded, fmt="%.17g")
+    from_array = springflat.flatten(V, F, init=folded, max_iter=5)
+    from_file = springflat.flatten(V, F, init=path, max_iter=5)
+    assert from_array.init == "array, untangled" and from_file.init == f"{path}, untangled"
+    assert from_array.result.initial.folded == 0
+    np.testing.assert_array_equal(from_array.layout, from_file.layout)
+
+
+def test_the_board_engine_is_refused_by_the_api_with_what_to_run_instead(ear):
+    V, F = ear
+    with pytest.raises(ParameterError, match="engine 'board' needs the board's serial port: run springflat flatten"):
+        springflat.flatten(V, F, engine="board")
+
+
+@pytest.mark.parametrize("name, shown", [("evil\nv 9 9 9\nf 1 2 3", "evil\\nv 9 9 9\\nf 1 2 3"),
+                                         ("bad\udcff", "bad\\xff"), ("tab\tstop", "tab\\tstop")],
+                         ids=["newline", "undecodable byte", "tab"])
+def test_a_name_with_control_characters_or_undecodable_bytes_is_one_line_of_text_in_every_file(ear, tmp_path, name,
+                                                                                                 shown):
+    V, F = ear
+    pattern = springflat.flatten(V, F, name=name, max_iter=2)
+    assert pattern.name == shown
+    for suffix in (".obj", ".svg", ".pdf", ".dxf"):
+        springflat.write_pattern(tmp_path / f"p{suffix}", pattern)
+    obj = (tmp_path / "p.obj").read_text(encoding="utf-8").splitlines()
+    assert obj[0] == f"# springflat pattern of '{shown}': v = the 3D mesh in mm, vt = the flattened pattern"
+    assert sum(line.startswith("v ") for line in obj) == len(V) and sum(line.startswith("f ") for line in obj) == len(F)
+    assert shown in (tmp_path / "p.svg").read_text(encoding="utf-8")
+
+
 def test_bad_arrays_are_one_line_mesh_errors_without_a_temporary_path():
     V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], float)
     with pytest.raises(MeshError) as refused:
