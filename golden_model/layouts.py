@@ -41,6 +41,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -421,7 +422,8 @@ def _folds(mesh: Mesh, positions: np.ndarray) -> int:
     return int(np.count_nonzero(folded_faces(positions, mesh.faces)))
 
 
-def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untangle_seconds: float = 20.0) -> StartLayout:
+def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untangle_seconds: float = 20.0,
+                 slim: Callable[[], np.ndarray] | None = None) -> StartLayout:
     """The initial layout for ``init`` (:data:`AUTO_START`, a method or a file), fold-free where possible.
 
     The guarded dynamics keeps a fold-free start fold-free but cannot clear a fold. ``auto`` is ARAP,
@@ -429,7 +431,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     beats untangling ARAP's layout on E_C and on time. Any other start with folds is untangled
     (:func:`golden_model.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
     folded is returned with its count, and the notes say why. ``progress(text)`` is called before
-    each long step.
+    each long step. ``slim()`` gives :func:`slim_layout`'s layout of ``mesh`` when ARAP folds (default: it
+    computes it; a caller may have started it beside ARAP, on another core).
     """
     from .untangle import untangle_layout
 
@@ -450,7 +453,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
         notes = [f"{described} folds {folded} triangle{plural}: starting from SLIM on Tutte's layout instead "
                  "(fold-free by construction)"]
         say(notes[-1])
-        return StartLayout(slim_layout(mesh), "slim", 0, notes)
+        return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
     notes = read_notes + [f"{described} folds {folded} triangle{plural}: untangling it"]
     say(notes[-1])
     untangled = untangle_layout(mesh, positions, time_limit=untangle_seconds)

@@ -69,7 +69,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
     params = params_from_args(args, defaults)
     check_outputs(args)
     check_print_size(args, mesh)
-    result = run_flatten(args, mesh, params, progress=sys.stderr.isatty())  # progress to a terminal only
+    result = run_flatten(args, mesh, params, progress=sys.stderr.isatty(),  # progress to a terminal only
+                         second_core=True)  # one mesh: SLIM's start may run beside ARAP
     write_outputs(args, mesh, result)
     if args.json:
         print(strict_json(json_summary(args, mesh, params, result)))

@@ -73,11 +73,13 @@ def choose_engine(args: argparse.Namespace):
     return flatten
 
 
-def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, progress: bool = False) -> FlattenResult:
+def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, progress: bool = False,
+                second_core: bool = False) -> FlattenResult:
     """One flattening as ``args`` asks (initial layout, engine); sets ``args.init`` to the layout used.
 
     What the formats or the engine cannot run is refused before any layout work; a guarded run starts
-    fold-free where that can be had (:func:`~sim.run_options.start_positions`)."""
+    fold-free where that can be had (:func:`~sim.run_options.start_positions`; ``second_core``: SLIM may run beside
+    ARAP)."""
     if args.init is None:
         args.init = default_init(args.mesh)
     if args.engine in ("fixed", "rtl", "board"):
@@ -87,7 +89,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
 
             check_engine_params(params)
     engine = choose_engine(args)
-    positions, args.init = start_positions(mesh, args.init, params, sys.stderr.isatty())
+    positions, args.init = start_positions(mesh, args.init, params, sys.stderr.isatty(), second_core)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
     with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         return engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))

@@ -7,15 +7,19 @@ mesh's default parameters and initial layout, argument types and the one-line us
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import os
 import sys
 from pathlib import Path
+from typing import Callable, Iterator
 
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
-from golden_model.layouts import AUTO_START, LAYOUT_METHODS, LayoutError, init_name, initial_layout, start_layout
+from golden_model.layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_name, initial_layout, slim_layout,
+                                   start_layout)
 from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes
@@ -173,9 +177,35 @@ def default_init(mesh_name: str) -> str:
     return "pca" if is_builtin(mesh_name) and not Path(mesh_name).is_file() else AUTO_START
 
 
-def start_positions(mesh: Mesh, init: str, params: FlattenParams, progress: bool) -> tuple[np.ndarray, str]:
+#: From this many vertices ARAP takes seconds here, and a guarded ``--init auto`` run with a second core
+#: computes SLIM's start there while ARAP runs (:func:`slim_beside_arap`).
+SLIM_BESIDE_ARAP_VERTICES = 5000
+
+
+@contextlib.contextmanager
+def slim_beside_arap(mesh: Mesh, enabled: bool) -> Iterator[Callable[[], np.ndarray] | None]:
+    """``slim`` for :func:`~golden_model.layouts.start_layout`: where ``enabled``, the mesh has
+    :data:`SLIM_BESIDE_ARAP_VERTICES` or more and this process may use two cores, SLIM's layout computed
+    in a worker process from the start, so that where ARAP folds its layout is ready sooner (the same
+    bytes: the same function on the same mesh); ``None`` (SLIM after ARAP, where needed) otherwise.
+    Leaving the block ends the worker, whether its layout was used or not."""
+    if not (enabled and mesh.n_vertices >= SLIM_BESIDE_ARAP_VERTICES and len(os.sched_getaffinity(0)) > 1):
+        yield None
+        return
+    from .workers import WorkerPool
+
+    with WorkerPool(1) as pool:
+        try:
+            yield pool.submit(slim_layout, mesh).result
+        finally:
+            pool.stop()  # ARAP did not fold, or SLIM's layout has arrived: nothing left to wait for
+
+
+def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, progress: bool,
+                    second_core: bool = False) -> tuple[np.ndarray, str]:
     """``(P0, what it is)``. A guarded run starts fold-free where that can be had (``start_layout``: folds are
-    untangled, and what was done is one note each on stderr); the paper dynamics takes the layout as it is."""
+    untangled, and what was done is one note each on stderr); the paper dynamics takes the layout as it is.
+    ``second_core``: ``--init auto`` may compute SLIM's start beside ARAP (:func:`slim_beside_arap`)."""
     if not params.guard:
         notes: list[str] = []
         positions = initial_layout(mesh, init, notes)
@@ -183,7 +213,8 @@ def start_positions(mesh: Mesh, init: str, params: FlattenParams, progress: bool
             print(f"springflat: note: {note}", file=sys.stderr)
         return positions, "arap" if init_name(init) == AUTO_START else init_name(init)
     say = (lambda text: print(f"springflat: {text} ...", file=sys.stderr)) if progress else None
-    start = start_layout(mesh, init, progress=say)
+    with slim_beside_arap(mesh, second_core and init_name(init) == AUTO_START) as slim:
+        start = start_layout(mesh, init, progress=say, slim=slim)
     if not progress:
         for note in start.notes:
             print(f"springflat: note: {note}", file=sys.stderr)

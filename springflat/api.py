@@ -246,7 +246,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         args.mesh = str(path)
         # an array is checked, and untangled where it folds, as a layout file is (run_flatten's start)
         args.init = None if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
-        result = run_flatten(args, mesh, params)
+        result = run_flatten(args, mesh, params, second_core=True)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
                    final.folded, area_ratio(result.positions, mesh.faces, mesh.face_areas), mesh.name, mesh.vertices,

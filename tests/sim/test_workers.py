@@ -66,3 +66,38 @@ def test_leaving_the_pool_normally_waits_for_the_tasks():
     with WorkerPool(2) as pool:
         futures = [pool.submit(pow, 2, n) for n in range(8)]
     assert [f.result(timeout=0) for f in futures] == [2 ** n for n in range(8)]
+
+
+def _slim_that_takes_a_minute(mesh):
+    time.sleep(60)
+
+
+def test_slim_beside_arap_gives_slims_layout_and_leaves_no_process(monkeypatch):
+    import multiprocessing
+
+    import numpy as np
+
+    from golden_model.layouts import slim_layout
+    from golden_model.mesh_io import load_mesh
+    from golden_model.params import FlattenParams
+    from sim import run_options
+    from support import SCANS
+
+    mesh = load_mesh(SCANS / "bunny_ear.obj")
+    monkeypatch.setattr(run_options, "SLIM_BESIDE_ARAP_VERTICES", 1)
+    with run_options.slim_beside_arap(mesh, enabled=True) as slim:
+        assert slim is not None and multiprocessing.active_children()
+        np.testing.assert_array_equal(slim(), slim_layout(mesh))  # the same function, the same bytes
+    assert not multiprocessing.active_children()
+    monkeypatch.setattr(run_options, "slim_layout", _slim_that_takes_a_minute)
+    started = time.perf_counter()
+    with run_options.slim_beside_arap(mesh, enabled=True) as slim:  # not asked for: ARAP did not fold
+        pass
+    assert not multiprocessing.active_children() and time.perf_counter() - started < 10  # stopped, not awaited
+    monkeypatch.undo()
+    with run_options.slim_beside_arap(mesh, enabled=False) as slim:
+        assert slim is None
+    guarded = FlattenParams(dynamics="momentum")
+    alone, beside = (run_options.start_positions(mesh, "auto", guarded, False, second) for second in (False, True))
+    np.testing.assert_array_equal(alone[0], beside[0])
+    assert alone[1] == beside[1]
