@@ -37,7 +37,7 @@ from golden_model.mesh import MeshError
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .flatten_run import OUTPUT_OPTIONS, output_paths
 from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path
-from .patterns import pattern_kind
+from .patterns import error_text, pattern_kind
 from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
                           resolve_mesh, strict_json)
 from .workers import WorkerPool
@@ -395,8 +395,8 @@ def summary_table(outcomes: list[MeshOutcome]) -> str:
             rows.append((o.name, "failed", "", "", "", "", f"{o.seconds:.1f}"))
         else:
             s = o.summary
-            rows.append((o.name, s["status"], str(s["iterations"]), f"{s['area_error']:.4f}",
-                         f"{s['shape_error']:.4f}", str(s["folded"]), f"{o.seconds:.1f}"))
+            rows.append((o.name, s["status"], str(s["iterations"]), error_text(s["area_error"]),
+                         error_text(s["shape_error"]), str(s["folded"]), f"{o.seconds:.1f}"))
     widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
     lines = ["  ".join(cell.ljust(w) if k < 2 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths)))
              for row in rows]

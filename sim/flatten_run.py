@@ -21,7 +21,8 @@ from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
-from .patterns import PATTERN_SUFFIXES, PatternDrawing, check_mesh_fits, run_caption, write_pattern_file
+from .patterns import (PATTERN_SUFFIXES, PatternDrawing, check_mesh_fits, error_text, run_caption,
+                       write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 
 #: ``flatten``'s output options: ``(argparse dest, flag, the file endings it takes)``. ``--out`` may be given
@@ -107,8 +108,8 @@ def human_line(mesh: Mesh, result: FlattenResult) -> str:
     """The one-line result a person reads."""
     final = result.final
     return (f"{mesh.name}: {result.status} after {result.iterations} iterations: "
-            f"E_S {result.initial.area_error:.4f} -> {final.area_error:.4f}, "
-            f"E_C {result.initial.shape_error:.4f} -> {final.shape_error:.4f}, "
+            f"E_S {error_text(result.initial.area_error)} -> {error_text(final.area_error)}, "
+            f"E_C {error_text(result.initial.shape_error)} -> {error_text(final.shape_error)}, "
             f"folded {final.folded} (flipped against P0: {final.flipped})"
             + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed"
                else "")

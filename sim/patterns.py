@@ -69,6 +69,7 @@ EDGE_MIN_MM = 2.0         # ... the median edge is at least this long on paper
 SCALE_BAR_MAX_MM = 80.0   # the scale bar is the longest 1, 2 or 5 x 10^k units not longer than this
 FONT_MM = 3.2             # text height of the title block
 MAX_SHEETS = 400          # more sheets than this is a wrong --units, not a pattern to print
+MAX_PAGE_MM = 14400 / (72.0 / 25.4)  # a PDF page's largest side, 14,400 pt (PDF 1.7, annex C): 5.08 m
 SMALL_PATTERN_MM = 10.0   # a pattern smaller than this at 1:1 gets a note about --units
 PT_PER_MM = 72.0 / 25.4
 
@@ -157,7 +158,7 @@ class PatternDrawing:
 
 def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int) -> str:
     """The line under the name on each sheet."""
-    return (f"{status} after {iterations} iterations: E_S {area_error:.4f}, E_C {shape_error:.4f}, "
+    return (f"{status} after {iterations} iterations: E_S {error_text(area_error)}, E_C {error_text(shape_error)}, "
             f"{folded} folded")
 
 
@@ -321,13 +322,29 @@ def scale_note(drawing: PatternDrawing) -> str | None:
             "if the mesh is in metres, centimetres or inches, say so with --units m, cm or in")
 
 
+def error_text(error: float) -> str:
+    """E_S or E_C as printed: four decimals, or three significant digits once the value is 10,000 or more
+    (a diverged run's 1e300 is not 300 digits)."""
+    return f"{error:.4f}" if abs(error) < 1e4 or not math.isfinite(error) else f"{error:.3g}"
+
+
+def count_text(count: int) -> str:
+    """A count as a person reads it: ``1,234``, or ``3.2e+17`` past a million (not 300 digits)."""
+    return f"{count:,}" if count < 10**6 else f"{float(count):.2g}"
+
+
 def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None:
-    """Refuse a print of more than :data:`MAX_SHEETS` sheets (a wrong ``--units``, most likely)."""
-    _, _, _, rows, cols = _grid(size, paper, OVERLAP_MM)
+    """Refuse a print of more than :data:`MAX_SHEETS` sheets, or a ``fit`` page with a side above
+    :data:`MAX_PAGE_MM` (a wrong ``--units``, most likely)."""
+    page, _, _, rows, cols = _grid(size, paper, OVERLAP_MM)
     if rows * cols > MAX_SHEETS:
         raise PatternError(f"the pattern is {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m at 1:1 with --units "
-                           f"{units}: {rows * cols} {paper} sheets (at most {MAX_SHEETS}); check --units, "
+                           f"{units}: {count_text(rows * cols)} {paper} sheets (at most {MAX_SHEETS}); check --units, "
                            "or write .dxf")
+    if max(page) > MAX_PAGE_MM:
+        raise PatternError(f"the pattern is {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m at 1:1 with --units "
+                           f"{units}: a page larger than a PDF's {MAX_PAGE_MM / 1000:.3g} m a side; check --units, "
+                           "print it tiled (--paper a4 or letter), or write .dxf")
 
 
 def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
@@ -336,10 +353,15 @@ def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
     A pattern covers about the mesh's area (its area error E_S aside): half of it over one window's area is
     a lower bound of the sheets needed.
     """
-    if paper == "fit":
+    area_mm2 = float(mesh.face_areas.sum()) * check_units(units) ** 2
+    if paper == "fit":  # the pattern's box holds about the mesh's area: its longer side is at least √area
+        if math.sqrt(area_mm2) > MAX_PAGE_MM:
+            side = math.sqrt(area_mm2) / 1000
+            raise PatternError(f"the mesh's area is about {side:.3g} x {side:.3g} m at 1:1 with --units {units}: "
+                               f"a page larger than a PDF's {MAX_PAGE_MM / 1000:.3g} m a side; check --units, print "
+                               "it tiled (--paper a4 or letter), or write .dxf")
         return
     page, _, window, _, _ = _grid((0.0, 0.0), paper, OVERLAP_MM)
-    area_mm2 = float(mesh.face_areas.sum()) * check_units(units) ** 2
     least = 0.5 * area_mm2 / (window[2] * window[3])
     if least > MAX_SHEETS:
         side = math.sqrt(area_mm2) / 1000
@@ -381,7 +403,7 @@ def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = O
     """
     page, landscape, window, rows, cols = _grid(size, paper, overlap)
     if rows * cols > MAX_SHEETS:
-        raise PatternError(f"a pattern of {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m needs {rows * cols} "
+        raise PatternError(f"a pattern of {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m needs {count_text(rows * cols)} "
                            f"{paper} sheets, more than {MAX_SHEETS}")
     sx, sy = window[2] - overlap, window[3] - overlap
     covered = (window[2] + (cols - 1) * sx, window[3] + (rows - 1) * sy)

@@ -73,6 +73,20 @@ def test_human_summary_line():
     assert proc.stdout.startswith("surf2: max-iterations after 3 iterations")
 
 
+def test_a_run_whose_errors_grow_huge_prints_them_in_a_few_digits():
+    from golden_model.results import FlattenResult, History, Measurement
+    from sim.flatten_run import human_line
+
+    history = History()
+    history.append(float("nan"), Measurement(0.26154, 0.09301, 1.0, 0, 0))
+    history.append(1.0, Measurement(1.2812e217, 8.5e108, 1e300, 4, 2))
+    mesh = builtin_mesh("surf1")[0]
+    result = FlattenResult(mesh.vertices[:, :2], mesh.vertices[:, :2], mesh.vertices[:, :2], history, "max-iterations",
+                           1, None, 1.0)
+    assert human_line(mesh, result) == ("surf1: max-iterations after 1 iterations: E_S 0.2615 -> 1.28e+217, "
+                                        "E_C 0.0930 -> 8.5e+108, folded 2 (flipped against P0: 4)")
+
+
 def _bad_files(tmp):
     files = {}
     files["garbage.obj"] = "this is not a mesh\nv 1 2\nf 1 2 3\n"

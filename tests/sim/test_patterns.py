@@ -334,6 +334,13 @@ def test_refusals_leave_no_file(tmp_path):
     drawing = PatternDrawing.of(mesh, mesh.vertices[:, :2] * 1e4, "m")  # tens of kilometres at 1:1
     with pytest.raises(PatternError, match=f"at most {MAX_SHEETS}"):
         write_pattern_file(tmp_path / "huge.pdf", drawing)
+    for suffix in (".pdf", ".svg"):  # one page of tens of kilometres is none a viewer opens
+        with pytest.raises(PatternError, match=r"a page larger than a PDF's 5.08 m a side; check --units, print it"):
+            write_pattern_file(tmp_path / f"huge{suffix}", drawing, paper="fit")
+    astronomical = PatternDrawing.of(mesh, mesh.vertices[:, :2] * 1e150, "m")
+    # (1e153 mm)² over a window of about 270 x 170 mm: some 2e301 sheets, as a count, not 302 digits
+    with pytest.raises(PatternError, match=r": 2\.\de\+301 a4 sheets \(at most"):
+        write_pattern_file(tmp_path / "huge.pdf", astronomical)
     with pytest.raises(PatternError, match="must end in"):
         write_pattern_file(tmp_path / "x.txt", drawing)
     with pytest.raises(PatternError, match="units must be one of"):
@@ -414,6 +421,16 @@ def test_a_pattern_too_small_for_its_units_gets_a_note(tmp_path):
                            "--out", str(tmp_path / "b.pdf")], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert re.search(r"note: the pattern is [\d.]+ x [\d.]+ mm at 1:1 with --units mm", proc.stderr)
+
+
+def test_a_fit_page_beyond_a_pdfs_largest_is_refused_before_the_run(tmp_path):
+    proc = subprocess.run([SPRINGFLAT, "flatten", str(SCANS / "nefertiti_face.obj"), "--units", "m", "--paper", "fit",
+                           "--out", str(tmp_path / "n.pdf")], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.splitlines() == ["springflat: error: the mesh's area is about 189 x 189 m at 1:1 with --units m: "
+                                        "a page larger than a PDF's 5.08 m a side; check --units, print it tiled "
+                                        "(--paper a4 or letter), or write .dxf"]
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_print_of_too_many_sheets_is_refused_before_the_run(tmp_path):
