@@ -27,6 +27,8 @@ __all__ = ["SIMULATORS", "SimulatorError", "missing_simulator", "prepare_environ
            "build_lock"]
 
 SIMULATORS = ("icarus", "verilator")
+#: The waveform each simulator writes under cocotb's runner: Icarus FST, Verilator VCD (``--trace``).
+WAVE_SUFFIX = {"icarus": ".fst", "verilator": ".vcd"}
 BENCH_PACKAGE = "sim.cocotb_benches"
 REPO = Path(__file__).resolve().parents[1]
 BUILD_ROOT = REPO / "build" / "cocotb"
@@ -182,7 +184,7 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     build_args = ["-Wno-fatal", "-Wno-WIDTHEXPAND", "-Wno-WIDTHTRUNC", "-O2"] if sim == "verilator" else []
     build_args += list(extra_build_args)
     if sim == "verilator" and waves:
-        build_args += ["--trace-structs"]  # cocotb adds --trace (VCD; FST would need liblz4 headers)
+        build_args += ["--trace-structs"]  # cocotb adds --trace (VCD; FST would need liblz4 headers): WAVE_SUFFIX
     try:
         with build_lock(build_dir):
             runner.build(sources=[*files, *PRIMITIVE_MODELS.get(dsp, [])], hdl_toplevel=toplevel,

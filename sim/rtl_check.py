@@ -20,7 +20,7 @@ from golden_model.fixed.engine import check_fixed_params, prepare
 from golden_model.engine_spec.image import check_engine_params
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
-from .cocotb_support import SIMULATORS, SimulatorError, run_bench
+from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, run_bench
 from .run_options import path_argument
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
@@ -44,7 +44,8 @@ def add_parser(sub, add_run_options) -> None:
     p.add_argument("--wait-states", type=int, default=0, metavar="N",
                    help="with --engine-top: up to N random idle clocks before each bus cycle (default 0)")
     p.add_argument("--iterations", type=int, default=None, metavar="N", help="stop after at most N iterations")
-    p.add_argument("--waves", type=path_argument, default=None, metavar="PATH", help="write the waveform (FST/VCD) here")
+    p.add_argument("--waves", type=path_argument, default=None, metavar="PATH",
+                   help="write the waveform here: FILE.fst with icarus, FILE.vcd with verilator")
     p.add_argument("--stall", type=float, default=0.0, metavar="P",
                    help="probability of a random stall on each side per clock (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object with the results")
@@ -63,7 +64,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     if args.init is None:
         args.init = default_init(args.mesh)
     if args.waves is not None:  # before any build or run: a path that cannot take the waveform is one line
-        check_output_path(args.waves, "--waves")
+        check_output_path(args.waves, "--waves", (WAVE_SUFFIX[args.sim],))  # the format the simulator writes
         check_distinct([("--waves", args.waves)], input_files(args))
     load_format_set(args.formats)  # a formats file that cannot work is refused before the run mode
     check_engine_params(params)

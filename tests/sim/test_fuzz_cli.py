@@ -1070,14 +1070,20 @@ def test_an_output_directory_that_is_not_one_is_refused_at_once(command, kind, t
 def test_rtl_check_waves_onto_a_directory_is_one_line_before_anything(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "m.obj").write_text(obj())
-    (tmp_path / "w").mkdir()
+    (tmp_path / "w.vcd").mkdir()
     for extra in ([], ["--engine-top"]):
-        code = main(["rtl-check", "m.obj", "--waves", "w", *extra])
+        code = main(["rtl-check", "m.obj", "--waves", "w.vcd", *extra])
         err = capsys.readouterr().err.splitlines()
-        assert code == 2 and err == ["springflat: error: --waves 'w' is a directory"], err  # no "building" line
-    code = main(["rtl-check", "m.obj", "--waves", "m.obj"])
+        assert code == 2 and err == ["springflat: error: --waves 'w.vcd' is a directory"], err  # no "building" line
+    (tmp_path / "m.vcd").symlink_to("m.obj")
+    code = main(["rtl-check", "m.obj", "--waves", "m.vcd"])
     assert code == 2 and capsys.readouterr().err.splitlines() == [
-        "springflat: error: --waves 'm.obj' is the same file as the mesh 'm.obj'"]
+        "springflat: error: --waves 'm.vcd' is the same file as the mesh 'm.obj'"]
+    for sim, other in (("verilator", "w.fst"), ("icarus", "w.vcd")):  # the format the simulator writes, by name
+        code = main(["rtl-check", "m.obj", "--sim", sim, "--waves", other])
+        suffix = {"verilator": ".vcd", "icarus": ".fst"}[sim]
+        assert code == 2 and capsys.readouterr().err.splitlines() == [
+            f"springflat: error: --waves '{other}' must end in {suffix}"]
 
 
 def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
