@@ -99,8 +99,9 @@ class FlattenParams:
         if not 0 <= finite("damping", self.damping) < 1:
             raise ParameterError(f"damping must be in [0, 1), got {self.damping}")
         for name in ("penalty_kappa", "penalty_gain", "tol_area", "tol_shape", "tol_energy"):
-            if finite(name, getattr(self, name)) < 0:
-                raise ParameterError(f"{name.replace('_', '-')} must be >= 0, got {getattr(self, name)}")
+            flag = name.replace("_", "-")  # as the option is spelled, in every message about it
+            if finite(flag, getattr(self, name)) < 0:
+                raise ParameterError(f"{flag} must be >= 0, got {getattr(self, name)}")
         if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
             raise ParameterError(f"max-iter must be an integer >= 1, got {self.max_iter!r}")
         if self.dynamics not in DYNAMICS:

@@ -461,6 +461,7 @@ PARAMETERS: dict[str, Case] = {
     "dt zero": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "0"], 2, r"dt must be > 0"),
     "dt nan": Case(["--dt", "nan"], 2, r"dt must be a finite number"),
     "dt inf": Case(["--dt", "inf"], 2, r"dt must be a finite number"),
+    "tol-area nan": Case(["--tol-area", "nan"], 2, r"tol-area must be a finite number"),
     "dt text": Case(["--dt", "fast"], 2, r"expected a number"),
     "damping 1": Case(["--dynamics", "paper", "--damping", "1"], 2, r"damping"),
     "max-iter 0": Case(["--max-iter", "0"], 2, r"max-iter"),
