@@ -53,6 +53,10 @@ def load_mesh_with_notes(path: str | Path) -> tuple[Mesh, list[str]]:
     if suffix == ".obj":
         obj = read_obj(path, data)
         vertices, faces, notes = obj.vertices, obj.faces, obj.notes
+        if len(vertices) == 0 and len(faces) == 0 and any(
+                line.strip() and not line.lstrip().startswith(b"#") for line in data.splitlines()):
+            raise MeshError(f"cannot parse mesh '{path}': no 'v' or 'f' line in {len(data):,} bytes: not an OBJ "
+                            "file (or not a text one)")
     elif suffix in (".ply", ".off"):
         where = f"cannot parse mesh '{path}'"
         vertices, polygons = (read_ply if suffix == ".ply" else read_off)(data, where)
@@ -71,9 +75,14 @@ def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]
     """STL (ASCII or binary) through trimesh, equal corners merged."""
     import trimesh  # heavy import, only needed for STL
 
-    binary = len(data) >= 84 and len(data) == 84 + 50 * int.from_bytes(data[80:84], "little")
+    count = int.from_bytes(data[80:84], "little") if len(data) >= 84 else 0
+    binary = len(data) >= 84 and len(data) == 84 + 50 * count
     if binary and len(data) == 84:
         raise MeshError(f"invalid mesh '{path}': the binary STL holds 0 triangles")
+    if not binary and len(data) >= 84 and not (data.lstrip()[:5].lower() == b"solid" and b"facet" in data):
+        raise MeshError(f"cannot parse mesh '{path}': not a text STL (no 'solid ... facet'), and as a binary STL "
+                        f"its header's {count:,} triangles would take {84 + 50 * count:,} bytes, not {len(data):,} "
+                        "(truncated or damaged?)")
     if not binary:
         # text: trimesh would guess a non-UTF-8 encoding with charset_normalizer (an optional
         # dependency); STL keywords and numbers are ASCII, so undecodable bytes are replaced

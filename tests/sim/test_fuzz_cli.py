@@ -780,7 +780,14 @@ ROUND_TWO_MESHES: dict[str, Case] = {
     "stl with 0 triangles and a header that is not UTF-8": Case(
         ["m.stl"], 2, r"the binary STL holds 0 triangles", files={"m.stl": _stl_no_triangles(b"\xff" * 80)}),
     "stl with 0 triangles, a header that is not UTF-8 and a stray byte": Case(
-        ["m.stl"], 2, r"invalid mesh 'm.stl': mesh is empty", files={"m.stl": _stl_no_triangles(b"\xff" * 80, b"\n")}),
+        ["m.stl"], 2, r"cannot parse mesh 'm.stl': not a text STL \(no 'solid ... facet'\), and as a binary STL its "
+                      r"header's 0 triangles would take 84 bytes, not 85 \(truncated or damaged\?\)$",
+        files={"m.stl": _stl_no_triangles(b"\xff" * 80, b"\n")}),
+    "stl binary, truncated": Case(
+        ["m.stl"], 2, r"its header's 2 triangles would take 184 bytes, not 134",
+        files={"m.stl": (b"\0" * 80 + struct.pack("<I", 2) + b"\0" * 50)}),
+    "obj that is no text": Case(["m.obj"], 2, r"cannot parse mesh 'm.obj': no 'v' or 'f' line in 64 bytes: not an OBJ",
+                                files={"m.obj": bytes(range(64))}),
     "stl text that is not UTF-8": Case(["m.stl"], 2, r"invalid mesh 'm.stl': mesh is empty",
                                        files={"m.stl": b"solid \xe9\xff\nendsolid\n"}),
     "stl text that is not UTF-8, with triangles": Case(
