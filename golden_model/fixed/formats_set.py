@@ -464,8 +464,9 @@ class FormatSet:
     def names_preset(path_or_preset: str | Path) -> bool:
         """Whether :meth:`load` reads ``path_or_preset`` as a preset name (a string without a directory
         part and without the suffix ``.json``), not as a file."""
-        p = Path(path_or_preset)
-        return isinstance(path_or_preset, str) and p.suffix != ".json" and len(p.parts) == 1
+        p = Path(path_or_preset)  # Path drops a leading './': the text itself must name no directory
+        return (isinstance(path_or_preset, str) and p.suffix != ".json" and len(p.parts) == 1
+                and "/" not in path_or_preset)
 
     @classmethod
     def load(cls, path_or_preset: str | Path) -> FormatSet:
@@ -480,7 +481,8 @@ class FormatSet:
         """Load ``golden_model/data/formats/<name>.json``."""
         p = PRESET_DIR / f"{name}.json"
         if not p.is_file():
-            raise ValueError(f"unknown FormatSet preset {name!r}; available: {cls.presets()}")
+            raise ValueError(f"unknown FormatSet preset {name!r}; available: {cls.presets()} (or a file: a path with "
+                             "a directory part or ending in .json)")
         return cls.from_dict(json.loads(p.read_text()))
 
     @staticmethod
