@@ -324,7 +324,7 @@ def all_or_nothing() -> Iterator[None]:
 
 def check_output_directory(out: Path, what: str = "--out") -> None:
     """Fail early on an output directory that cannot work: it must be a directory if it exists (a link to
-    one counts), and its parent must exist and take a new directory."""
+    one counts), its parent must exist, and it (if it exists) or its parent must take a new directory."""
     out = Path(out)
     try:
         target = output_target(out)
@@ -334,7 +334,7 @@ def check_output_directory(out: Path, what: str = "--out") -> None:
         parent = target.parent if str(target.parent) else Path(".")
         if not parent.is_dir():
             raise OutputError(f"{what} '{out}': directory '{parent}' does not exist")
-        os.rmdir(_make_temporary(parent, target.name, is_dir=True))
+        os.rmdir(_make_temporary(_build_parent(target), target.name, is_dir=True))
     except OSError as exc:
         raise OutputWriteError(out, exc, what) from None
 
@@ -342,8 +342,10 @@ def check_output_directory(out: Path, what: str = "--out") -> None:
 @contextmanager
 def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = (),
                      inputs: list[tuple[str, Path | None]] = ()) -> Iterator[Path]:
-    """Yield a new empty directory beside ``out`` to build an output directory in; at the end of the block
-    its contents become ``out``: all of them, or (on an exception, an interrupt included) none.
+    """Yield a new empty directory to build an output directory in; at the end of the block its contents
+    become ``out``: all of them, or (on an exception, an interrupt included) none. It is made beside a new
+    ``out``, and inside an existing one (hidden, removed at the end): on the file system the files end on,
+    so that renames put them there (an existing ``out`` may be a mount point, a file system of its own).
 
     A new ``out`` is the built directory, renamed.  An existing ``out`` (or the directory a link
     points to) keeps the files the build did not write; those it did write replace their namesakes,
@@ -355,7 +357,7 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
     out = Path(out)
     check_output_directory(out, what)
     target = output_target(out)
-    build = _make_temporary(target.parent if str(target.parent) else Path("."), target.name, is_dir=True)
+    build = _make_temporary(_build_parent(target), target.name, is_dir=True)
     try:
         yield build
         with deferred_interrupts():
@@ -369,6 +371,11 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
     finally:
         if build.exists():
             shutil.rmtree(build, ignore_errors=True)
+
+
+def _build_parent(target: Path) -> Path:
+    """Where :func:`atomic_directory` builds ``target``: inside it when it exists, else beside it."""
+    return target if target.is_dir() else target.parent if str(target.parent) else Path(".")
 
 
 def _umask() -> int:

@@ -1334,6 +1334,34 @@ def test_an_existing_output_directory_keeps_its_other_files(tmp_path, monkeypatc
     assert capsys.readouterr().out == "wrote r/report.md\n"
 
 
+def test_an_existing_output_directory_on_a_file_system_of_its_own_takes_the_files(tmp_path, monkeypatch, capsys):
+    """``r`` stands for a mount point: a rename into it from anywhere outside fails as across file systems."""
+    import errno
+
+    import sim.outputs
+    import sim.paper
+
+    def tiny_report(out, init="pca", progress=True):
+        (out / "report.md").write_text("new\n")
+        return out / "report.md"
+
+    mount = (tmp_path / "r").resolve()
+
+    def rename_within_the_mount_only(source, destination, real=os.replace):
+        if (Path(source).resolve().is_relative_to(mount)) != (Path(destination).resolve().is_relative_to(mount)):
+            raise OSError(errno.EXDEV, os.strerror(errno.EXDEV), str(source), None, str(destination))
+        return real(source, destination)
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    monkeypatch.setattr(sim.outputs.os, "replace", rename_within_the_mount_only)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "mine.txt").write_text("keep")
+    assert main(["paper", "--out", "r"]) == 0, capsys.readouterr().err
+    assert sorted(os.listdir(tmp_path / "r")) == ["mine.txt", "report.md"]  # and no build directory left
+    assert (tmp_path / "r" / "report.md").read_text() == "new\n" and os.listdir(tmp_path) == ["r"]
+
+
 @pytest.mark.parametrize("what", ["mesh", "init", "formats"])
 def test_real_exit_a_named_pipe_as_input_does_not_block(tmp_path, what):
     name = "p.json" if what == "formats" else "p.obj"
