@@ -732,6 +732,15 @@ def write_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str 
     iteration.  ``vertices`` (the mesh's 3D positions) are needed for the
     colours; without them the faces are plain grey.
     """
+    import warnings
+
+    with warnings.catch_warnings(), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        # a diverged run's 1e300 on a log axis: matplotlib's overflow notes are no news to the user
+        warnings.simplefilter("ignore", RuntimeWarning)
+        _draw_plot(path, result, faces, title, vertices)
+
+
+def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str, vertices: np.ndarray | None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")

@@ -171,6 +171,13 @@ def test_diverged_run_exits_nonzero_but_writes_finite_layout(tmp_path):
     assert len(vertices) == 7 and np.isfinite(np.array(vertices, dtype=float)).all()
 
 
+def test_a_diverged_runs_plot_is_written_without_warnings(tmp_path):
+    proc = run("flatten", "surf1", "--dynamics", "paper", "--step", "fixed", "--dt", "50", "--max-iter", "60",
+               "--plot", tmp_path / "p.png")  # errors past 1e300 on the plot's log axis
+    assert proc.returncode == 3 and (tmp_path / "p.png").stat().st_size > 0
+    assert all(line.startswith("springflat: ") for line in proc.stderr.splitlines()), proc.stderr
+
+
 @pytest.mark.slow
 def test_paper_report(tmp_path):
     proc = run("paper", "--out", tmp_path / "rep", "--quiet")
