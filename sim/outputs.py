@@ -119,6 +119,10 @@ def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = 
     """
     path = Path(path)
     if suffixes and path.suffix.lower() not in suffixes:
+        if path.name.lower() in suffixes:  # '.pdf': a hidden name with no suffix, meant as an ending
+            example = path.parent / f"pattern{path.name}"
+            raise OutputError(f"{what} '{path}' is a file-name ending, not a file name: name the file (e.g. "
+                              f"'{example}'), or give --out-dir DIR for a batch, which takes endings")
         raise OutputError(f"{what} '{path}' must end in {' or '.join(suffixes)}")
     try:
         target = output_target(path)

@@ -42,6 +42,8 @@ def load_mesh_with_notes(path: str | Path) -> tuple[Mesh, list[str]]:
     is no valid disk "invalid mesh …" with the validation's message (for OBJ
     followed by the file line it points at).
     """
+    if not str(path).strip():
+        raise MeshError("the mesh path is empty: name an OBJ, PLY, OFF or STL file")
     path = Path(path)
     data = read_file_bytes(path, "mesh", MeshError)
     suffix = path.suffix.lower()
