@@ -135,11 +135,12 @@ def triangle_levels(positions: np.ndarray, proposal: np.ndarray, faces: np.ndarr
 
 
 def node_levels(face_levels: np.ndarray, faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """``(V,)`` each node's level: the largest of its triangles' (its smallest move fraction)."""
+    """``(V,)`` each node's level: the largest of its triangles' (its smallest move fraction). ``faces`` is
+    ``(F, k)``: each row's corners take its level (a test passes one corner slot, ``k = 1``)."""
     level = np.zeros(n_vertices, dtype=np.int64)
     raised = np.flatnonzero(face_levels)
-    for k in range(3):
-        np.maximum.at(level, faces[raised, k], face_levels[raised])
+    for corner in faces[raised].T:
+        np.maximum.at(level, corner, face_levels[raised])
     return level
 
 

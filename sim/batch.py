@@ -167,6 +167,9 @@ def _endings(args: argparse.Namespace) -> tuple[tuple[str, str], ...]:
         if not text or "/" in text or os.sep in text:
             raise UserError(f"in a batch, {what} takes a file-name ending such as .pdf, not '{text}': each mesh "
                             f"writes --out-dir/<mesh name><ending>")
+        if text[0].isalnum():  # 'x.dxf' would write 'bunnyx.dxf': a file name given where an ending belongs
+            raise UserError(f"in a batch, {what} takes a file-name ending that starts with a separator, such as "
+                            f".pdf or _flat.pdf, not '{text}' (each mesh writes --out-dir/<mesh name><ending>)")
         endings.append((option, text))
     tails = [e for _, e in endings]
     for tail in tails:

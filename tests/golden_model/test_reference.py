@@ -223,7 +223,7 @@ def test_penalty_run_keeps_triangles_unflipped():
     ({"dt": 0}, "dt"),
     ({"damping": 1.0}, "damping"),
     ({"tol_area": -0.1}, "tol-area"),
-    ({"tol_energy": float("nan")}, "tol_energy"),
+    ({"tol_energy": float("nan")}, "tol-energy must be a finite number"),
     ({"max_iter": 0}, "max-iter"),
     ({"step": "adaptive"}, "step"),
     ({"update": "random"}, "update"),

@@ -99,6 +99,8 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["--out-dir", "o", "--out", "sub/.pdf"], "takes a file-name ending such as .pdf"),
+    (["--out-dir", "o", "--out", "x.pdf"], "takes a file-name ending that starts with a separator, such as .pdf or "
+                                           "_flat.pdf, not 'x.pdf'"),
     (["--out", ".pdf"], "write their outputs to --out-dir"),
     (["--out-dir", "o", "--out", ".csv", "--distortion", ".csv"], "given twice"),
     (["--out-dir", "o/sub", "--out", ".png"], "must end in .dxf"),
