@@ -188,8 +188,12 @@ def slim_beside_arap(mesh: Mesh, enabled: bool) -> Iterator[Callable[[], np.ndar
     :data:`SLIM_BESIDE_ARAP_VERTICES` or more and this process may use two cores, SLIM's layout computed
     in a worker process from the start, so that where ARAP folds its layout is ready sooner (the same
     bytes: the same function on the same mesh); ``None`` (SLIM after ARAP, where needed) otherwise.
-    Leaving the block ends the worker, whether its layout was used or not."""
-    if not (enabled and mesh.n_vertices >= SLIM_BESIDE_ARAP_VERTICES and len(os.sched_getaffinity(0)) > 1):
+    Leaving the block ends the worker, whether its layout was used or not. Not in a daemonic process (a
+    caller's ``multiprocessing.Pool`` worker), which may not have children."""
+    import multiprocessing
+
+    if not (enabled and mesh.n_vertices >= SLIM_BESIDE_ARAP_VERTICES and len(os.sched_getaffinity(0)) > 1
+            and not multiprocessing.current_process().daemon):
         yield None
         return
     from .workers import WorkerPool

@@ -101,3 +101,21 @@ def test_slim_beside_arap_gives_slims_layout_and_leaves_no_process(monkeypatch):
     alone, beside = (run_options.start_positions(mesh, "auto", guarded, False, second) for second in (False, True))
     np.testing.assert_array_equal(alone[0], beside[0])
     assert alone[1] == beside[1]
+
+
+def _slim_worker_started_here(_) -> bool:
+    from golden_model.mesh_io import load_mesh
+    from sim import run_options
+    from support import SCANS
+
+    run_options.SLIM_BESIDE_ARAP_VERTICES = 1
+    with run_options.slim_beside_arap(load_mesh(SCANS / "bunny_ear.obj"), enabled=True) as slim:
+        return slim is not None
+
+
+def test_no_slim_worker_from_a_daemonic_process():
+    """springflat.flatten called in a user's multiprocessing.Pool worker, which may not have children."""
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.map(_slim_worker_started_here, [0]) == [False]
