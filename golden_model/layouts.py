@@ -336,12 +336,13 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
             if isinstance(exc, LayoutError):
                 raise
             raise LayoutError(f"cannot parse layout '{path}': {str(exc).splitlines()[0]}") from None
-    return check_layout(positions, n_vertices, f"layout '{path}'")
+    return check_layout(positions, n_vertices, f"layout '{path}'", faces)
 
 
-def check_layout(positions, n_vertices: int, what: str) -> np.ndarray:
+def check_layout(positions, n_vertices: int, what: str, faces: np.ndarray | None = None) -> np.ndarray:
     """``positions`` as a ``(n_vertices, 2)`` float64 array of finite coordinates within
-    :data:`COORDINATE_LIMIT`, else a :class:`LayoutError` naming ``what`` (a layout file, the init array)."""
+    :data:`COORDINATE_LIMIT`, else a :class:`LayoutError` naming ``what`` (a layout file, the init array);
+    with the mesh's ``faces``, also one in which some triangle has an area (not all on a line or a point)."""
     positions = np.asarray(positions)
     if positions.dtype.kind not in "iuf":
         raise LayoutError(f"{what} holds {positions.dtype} values, not real numbers")
@@ -357,6 +358,9 @@ def check_layout(positions, n_vertices: int, what: str) -> np.ndarray:
         row = int(np.flatnonzero(magnitude > COORDINATE_LIMIT)[0])
         raise LayoutError(f"{what}: row {row + 1} has a coordinate of magnitude {magnitude[row]:.3g}, "
                           f"outside the supported range |x| <= {COORDINATE_LIMIT:g}")
+    if faces is not None and not np.any(signed_areas_2d(positions, faces)):
+        raise LayoutError(f"{what} has no triangle of non-zero area (its vertices on one line or point, or too "
+                          "close together for an area to be represented): no start to flatten from")
     return positions
 
 
@@ -398,7 +402,7 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
     :func:`start_layout` untangles), a layout file path (what an OBJ layout has that is not used goes
     to ``notes``, see :func:`load_layout`) or a ``(V, 2)`` array (checked as a file's rows are)."""
     if isinstance(init, np.ndarray):
-        return check_layout(init, mesh.n_vertices, "the init array")
+        return check_layout(init, mesh.n_vertices, "the init array", mesh.faces)
     method = _METHODS.get("arap" if str(init) == AUTO_START else str(init))
     if method is not None:
         return method(mesh)
