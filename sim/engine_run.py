@@ -72,6 +72,7 @@ CLOCK_HALF_PERIOD_NS = 5
 VERILATOR_BUILDS = {
     "default": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
     "internal-clock": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
+    "inline-all": (VERILATOR_SPEED_FLAGS + ("--timing", "--inline-mult", "-1"), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
     "gpi-clock": (VERILATOR_SPEED_FLAGS, VERILATOR_MAKE_FLAGS),
     "x-randomised": (VERILATOR_SPEED_FLAGS[:3], VERILATOR_MAKE_FLAGS),  # Verilator's default X handling
     "cxx-O2": (VERILATOR_SPEED_FLAGS, r"OPT_FAST=-O2"),
@@ -84,7 +85,7 @@ VERILATOR_BUILDS = {
 
 
 #: Builds whose harness makes its own clock (:func:`simulation_harness`); the bench then starts none.
-INTERNAL_CLOCK_BUILDS = frozenset({"default", "internal-clock"})
+INTERNAL_CLOCK_BUILDS = frozenset({"default", "internal-clock", "inline-all"})
 
 
 def build_flags(simulator: str, build: str = "default") -> tuple[tuple[str, ...], str]:
