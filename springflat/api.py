@@ -28,7 +28,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from golden_model.mesh import Mesh
+from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes, save_obj
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
@@ -205,7 +205,16 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
         if not (hasattr(V, "vertices") and hasattr(V, "faces")):
             raise TypeError("flatten(V, F) takes two arrays, or one trimesh.Trimesh")
         V, F = V.vertices, V.faces
-    return np.asarray(V), np.asarray(F)
+    arrays = []
+    for name, value, what in (("V", V, "(V, 3) vertex positions"), ("F", F, "(F, 3) vertex indices")):
+        try:
+            array = np.asarray(value)
+        except (TypeError, ValueError) as exc:  # ragged rows, objects that are no arrays
+            raise MeshError(f"{name} must be an array of {what}: {str(exc).splitlines()[0]}") from None
+        if array.dtype.kind not in "iufb":  # strings, complex numbers, objects: nothing to take silently
+            raise MeshError(f"{name} must be an array of {what}, got {array.dtype} values")
+        arrays.append(array)
+    return arrays[0], arrays[1]
 
 
 def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.ndarray | None = None,
@@ -228,7 +237,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         a :class:`Pattern` (``.layout`` is the ``(V, 2)`` numpy array).
 
     Raises:
-        golden_model.mesh.MeshError: ``V``, ``F`` are not one manifold disk (a ``ValueError``).
+        golden_model.mesh.MeshError: ``V``, ``F`` are no arrays of numbers, or not one manifold disk (a ``ValueError``).
         golden_model.params.ParameterError: an option out of its domain (a ``ValueError``).
         TypeError: an unknown keyword.
     """
@@ -263,6 +272,10 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     distortion).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
     :mod:`sim.patterns`.  The file appears whole or not at all.
     """
+    if not isinstance(pattern, Pattern):
+        raise TypeError(f"write_pattern takes the Pattern that flatten returns, not {type(pattern).__name__}")
+    if not isinstance(dxf_edges, bool):
+        raise TypeError(f"dxf_edges must be True or False, got {dxf_edges!r}")
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
     write_pattern_file(Path(path), PatternDrawing.of(pattern.mesh, pattern.layout, units, caption), paper=paper,

@@ -176,6 +176,26 @@ def test_a_name_with_control_characters_or_undecodable_bytes_is_one_line_of_text
     assert shown in (tmp_path / "p.svg").read_text(encoding="utf-8")
 
 
+@pytest.mark.parametrize("make, message", [
+    (lambda V, F: ([[0, 0, 0], [1, 0]], F), r"V must be an array of \(V, 3\) vertex positions: setting an array"),
+    (lambda V, F: (V.astype(complex), F), r"V must be an array of \(V, 3\) vertex positions, got complex128 values"),
+    (lambda V, F: (V.astype(str), F), r"V must be an array of \(V, 3\) vertex positions, got <U\d+ values"),
+    (lambda V, F: (V, F.astype(str)), r"F must be an array of \(F, 3\) vertex indices, got <U\d+ values"),
+])
+def test_arrays_that_are_no_arrays_of_numbers_are_mesh_errors(ear, make, message):
+    with pytest.raises(MeshError, match=message):
+        springflat.flatten(*make(*ear), max_iter=1)
+
+
+def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
+    V, F = ear
+    with pytest.raises(TypeError, match="write_pattern takes the Pattern that flatten returns, not tuple"):
+        springflat.write_pattern(tmp_path / "x.dxf", (V, F))
+    with pytest.raises(TypeError, match="dxf_edges must be True or False, got 'no'"):
+        springflat.write_pattern(tmp_path / "x.dxf", springflat.flatten(V, F, max_iter=1), dxf_edges="no")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_bad_arrays_are_one_line_mesh_errors_without_a_temporary_path():
     V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], float)
     with pytest.raises(MeshError) as refused:
