@@ -162,7 +162,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
 def _endings(args: argparse.Namespace) -> tuple[tuple[str, str], ...]:
     """``(option, ending)`` of every output asked for; an ending is a file-name tail such as ``.pdf``."""
     endings = []
-    for option, what, value in output_paths(args):
+    for option, what, _, value in output_paths(args):
         text = str(value)
         if not text or "/" in text or os.sep in text:
             raise UserError(f"in a batch, {what} takes a file-name ending such as .pdf, not '{text}': each mesh "

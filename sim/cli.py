@@ -34,8 +34,8 @@ from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
-from .flatten_run import (OUTPUT_OPTIONS, check_print_size, human_line, json_summary, output_paths, run_flatten,
-                          what_was_used, write_outputs)
+from .flatten_run import (check_print_size, human_line, json_summary, output_paths, run_flatten, what_was_used,
+                          write_outputs)
 from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
     received_signal, reset_interrupted
 from .patterns import PatternDrawing, add_pattern_options, scale_note
@@ -101,9 +101,8 @@ def divergence_hint(params: FlattenParams) -> str:
 
 def check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before the run, an output path that cannot work, and two outputs that are one file."""
-    suffixes = {flag: endings for _, flag, endings in OUTPUT_OPTIONS}
-    for _, flag, path in output_paths(args):
-        check_output_path(path, flag, suffixes[flag])
+    for _, flag, endings, path in output_paths(args):
+        check_output_path(path, flag, endings)
     if args.init is None:
         args.init = default_init(args.mesh)
     _check_distinct_files(args)
@@ -152,7 +151,7 @@ def _error_resolution_note(formats: FormatSet | None) -> str | None:
 def _check_distinct_files(args: argparse.Namespace) -> None:
     """No two outputs may be one file, and no output may be an input (the mesh, the --init or --formats
     file), compared by device and inode."""
-    check_distinct([(flag, path) for _, flag, path in output_paths(args)], input_files(args))
+    check_distinct([(flag, path) for _, flag, _, path in output_paths(args)], input_files(args))
 
 
 def cmd_paper(args: argparse.Namespace) -> int:

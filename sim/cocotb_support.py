@@ -184,7 +184,7 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     build_args = ["-Wno-fatal", "-Wno-WIDTHEXPAND", "-Wno-WIDTHTRUNC", "-O2"] if sim == "verilator" else []
     build_args += list(extra_build_args)
     if sim == "verilator" and waves:
-        build_args += ["--trace-structs"]  # cocotb adds --trace (VCD; FST would need liblz4 headers): WAVE_SUFFIX
+        build_args += ["--trace-structs"]  # cocotb adds --trace (VCD: WAVE_SUFFIX; FST would need liblz4 headers)
     try:
         with build_lock(build_dir):
             runner.build(sources=[*files, *PRIMITIVE_MODELS.get(dsp, [])], hdl_toplevel=toplevel,

@@ -31,13 +31,13 @@ OUTPUT_OPTIONS = (("out", "--out", PATTERN_SUFFIXES), ("history", "--history", (
                   ("plot", "--plot", (".png",)), ("distortion", "--distortion", (".csv",)))
 
 
-def output_paths(args: argparse.Namespace) -> list[tuple[str, str, Path]]:
-    """``(dest, flag, path)`` of every output given to ``flatten`` (``--out`` once per value)."""
+def output_paths(args: argparse.Namespace) -> list[tuple[str, str, tuple[str, ...], Path]]:
+    """``(dest, flag, endings it takes, path)`` of every output given to ``flatten`` (``--out`` once per value)."""
     paths = []
-    for dest, flag, _ in OUTPUT_OPTIONS:
+    for dest, flag, endings in OUTPUT_OPTIONS:
         value = getattr(args, dest, None)
         for path in (value or []) if dest == "out" else ([] if value is None else [value]):
-            paths.append((dest, flag, path))
+            paths.append((dest, flag, endings, path))
     return paths
 
 

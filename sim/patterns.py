@@ -69,9 +69,9 @@ EDGE_MIN_MM = 2.0         # ... the median edge is at least this long on paper
 SCALE_BAR_MAX_MM = 80.0   # the scale bar is the longest 1, 2 or 5 x 10^k units not longer than this
 FONT_MM = 3.2             # text height of the title block
 MAX_SHEETS = 400          # more sheets than this is a wrong --units, not a pattern to print
-MAX_PAGE_MM = 14400 / (72.0 / 25.4)  # a PDF page's largest side, 14,400 pt (PDF 1.7, annex C): 5.08 m
 SMALL_PATTERN_MM = 10.0   # a pattern smaller than this at 1:1 gets a note about --units
 PT_PER_MM = 72.0 / 25.4
+MAX_PAGE_MM = 14400 / PT_PER_MM  # a PDF page's largest side, 14,400 pt (PDF 1.7, annex C): 5.08 m
 
 
 class PatternError(OutputError):
@@ -342,9 +342,13 @@ def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None
                            f"{units}: {count_text(rows * cols)} {paper} sheets (at most {MAX_SHEETS}); check --units, "
                            "or write .dxf")
     if max(page) > MAX_PAGE_MM:
-        raise PatternError(f"the pattern is {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m at 1:1 with --units "
-                           f"{units}: a page larger than a PDF's {MAX_PAGE_MM / 1000:.3g} m a side; check --units, "
-                           "print it tiled (--paper a4 or letter), or write .dxf")
+        raise _page_too_large(f"the pattern is {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m", units)
+
+
+def _page_too_large(what: str, units: str) -> PatternError:
+    """The refusal of a ``fit`` page above :data:`MAX_PAGE_MM`, ``what`` the size that shows it."""
+    return PatternError(f"{what} at 1:1 with --units {units}: a page larger than a PDF's {MAX_PAGE_MM / 1000:.3g} m "
+                        "a side; check --units, print it tiled (--paper a4 or letter), or write .dxf")
 
 
 def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
@@ -357,9 +361,7 @@ def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
     if paper == "fit":  # the pattern's box holds about the mesh's area: its longer side is at least √area
         if math.sqrt(area_mm2) > MAX_PAGE_MM:
             side = math.sqrt(area_mm2) / 1000
-            raise PatternError(f"the mesh's area is about {side:.3g} x {side:.3g} m at 1:1 with --units {units}: "
-                               f"a page larger than a PDF's {MAX_PAGE_MM / 1000:.3g} m a side; check --units, print "
-                               "it tiled (--paper a4 or letter), or write .dxf")
+            raise _page_too_large(f"the mesh's area is about {side:.3g} x {side:.3g} m", units)
         return
     page, _, window, _, _ = _grid((0.0, 0.0), paper, OVERLAP_MM)
     least = 0.5 * area_mm2 / (window[2] * window[3])

@@ -33,7 +33,7 @@ from golden_model.mesh_io import load_mesh_with_notes, save_obj
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options
-from sim.flatten_run import choose_engine, run_flatten
+from sim.flatten_run import run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import area_ratio
 from sim.patterns import PatternDrawing, run_caption, write_pattern_file
