@@ -34,6 +34,7 @@ from golden_model.layouts import LAYOUT_METHODS
 from golden_model.files import describe_os_error, read_file_bytes
 from golden_model.mesh import MeshError
 
+from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .flatten_run import OUTPUT_OPTIONS, output_paths
 from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path
@@ -191,8 +192,9 @@ def _names(meshes: list[str]) -> list[str]:
 
 def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tuple[str, str], ...], int]:
     """Refuse what a batch cannot do, before any run; returns the endings and the worker count."""
-    if args.engine == "rtl":
-        raise UserError("--engine rtl runs one mesh at a time (the simulator build is shared): drop it for a batch")
+    single = engine_named(args.engine).single
+    if single:
+        raise UserError(f"--engine {args.engine} runs one mesh at a time ({single}): drop it for a batch")
     if args.init is not None and args.init not in LAYOUT_METHODS:
         raise UserError(f"in a batch, --init takes a method ({', '.join(LAYOUT_METHODS)}), not a layout file")
     jobs = default_jobs() if args.jobs is None else args.jobs

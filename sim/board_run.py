@@ -87,7 +87,7 @@ def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = 
     if run.mismatches:
         raise EngineRunError(f"the engine on {transport} does not match the golden model: {run.mismatches[0]}")
     r = run.readback
-    return engine_flatten_result(problem, r.positions, r.velocities, r.result, r.iterations, {
+    return engine_flatten_result(problem, r.positions, r.velocities, r.result, r.iterations, "board", {
         "saturations": r.saturations, "simulator": transport, "cycles": r.cycles,
         "cycles_per_iteration": r.cycles / max(r.iterations, 1), "load_seconds": round(run.load_seconds, 3),
         "run_seconds": round(run.run_seconds, 3), "readback_seconds": round(run.readback_seconds, 3)})
@@ -108,7 +108,7 @@ def board_engine(formats: FormatSet, port: str | None, baud: int):
     """``--engine board``: the engine function ``cmd_flatten`` calls; every failure is one line (``UserError``)."""
     import sys
 
-    from golden_model.fixed.engine import check_fixed_params, prepare
+    from golden_model.fixed.engine import prepare
 
     from .engine_driver import EngineError
     from .run_options import UserError
@@ -119,8 +119,7 @@ def board_engine(formats: FormatSet, port: str | None, baud: int):
     if baud <= 0:
         raise UserError(f"--baud must be a positive number of bits per second, not {baud}")
 
-    def engine(mesh, positions, params, on_iteration=None):
-        check_fixed_params(params, formats)
+    def engine(mesh, positions, params, on_iteration=None):  # the parameters checked by choose_engine
         problem = prepare(mesh, positions, params, formats)
         try:
             link = open_port(port, baud)

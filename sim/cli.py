@@ -33,9 +33,10 @@ from golden_model.layouts import LAYOUT_METHODS
 from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
+from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
-from .flatten_run import (check_print_size, human_line, json_summary, output_paths, run_flatten, what_was_used,
-                          write_outputs)
+from .flatten_run import (check_print_size, human_line, json_summary, output_paths, run_flatten, run_formats,
+                          what_was_used, write_outputs)
 from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
     received_signal, reset_interrupted
 from .patterns import PatternDrawing, add_pattern_options, scale_note
@@ -77,7 +78,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
     else:
         print(human_line(mesh, result))
         print(what_was_used(params, args.init, result), file=sys.stderr)
-    formats = load_format_set(args.formats or "default") if args.engine in ("fixed", "rtl", "board") else None
+    formats = run_formats(args)
     scale = scale_note(PatternDrawing.of(mesh, result.positions, args.units)) if any(
         str(path).lower().endswith((".pdf", ".svg", ".dxf")) and not str(path).lower().endswith(".flat.svg")
         for path in args.out or ()) else None  # a print or cut at the wrong scale; vt and layouts have none
@@ -119,7 +120,7 @@ def _energy_rule_note(params: FlattenParams, result: FlattenResult) -> str | Non
     minimum that floor can be above ``--tol-energy`` (docs/dynamics.md), so the rule cannot hold.
     """
     energy = np.asarray(result.history.energy[-ENERGY_NOTE_WINDOW - 1:], dtype=float)
-    if (result.engine == "float" or result.status != "max-iterations" or not params.tol_energy > 0
+    if (not engine_named(result.engine).fixed_point or result.status != "max-iterations" or not params.tol_energy > 0
             or len(energy) <= ENERGY_NOTE_WINDOW or not np.isfinite(energy).all()):
         return None
     steps = np.diff(energy)
@@ -185,10 +186,8 @@ def cmd_verilog(args: argparse.Namespace) -> int:
 
 def add_engine_options(parser: argparse.ArgumentParser) -> None:
     """``--engine`` and ``--formats`` of ``flatten`` (also the keywords of ``springflat.flatten``)."""
-    parser.add_argument("--engine", choices=("float", "fixed", "rtl", "board"), default="float",
-                        help="float reference (default), the bit-exact fixed-point golden model, rtl: the whole "
-                             "flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed), or "
-                             "board: the engine on a ULX3S over its USB-UART (--port; docs/board.md)")
+    parser.add_argument("--engine", choices=ENGINE_NAMES, default=DEFAULT_ENGINE,
+                        help="; ".join(f"{e.name}: {e.help}" for e in ENGINES))
     parser.add_argument("--formats", default=None, metavar="PRESET|FILE",
                         help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
 

@@ -315,17 +315,18 @@ def flatten_on_rtl(problem: FixedProblem, capacity: EngineCapacity, simulator: s
         first = (run.result.get("first_mismatches") or ["the simulation ended without a result"])[0]
         raise EngineRunError(f"the {simulator} run of the engine does not match the golden model: {first}")
     r = run.result
-    return engine_flatten_result(problem, run.positions, run.velocities, r["status"], r["iterations"], {
+    return engine_flatten_result(problem, run.positions, run.velocities, r["status"], r["iterations"], "rtl", {
         "saturations": r["saturations"], "simulator": simulator, "cycles": r["cycles"],
         "cycles_per_iteration": r["cycles_per_iteration"], "cycles_per_second": r["cycles_per_second"]})
 
 
 def engine_flatten_result(problem: FixedProblem, positions: np.ndarray, velocities: np.ndarray, status: str,
-                          iterations: int, extra: dict):
+                          iterations: int, engine_name: str, extra: dict):
     """An engine's read-back (raw positions and velocities, as ``EngineDriver.read_back`` gives them) as the
     :class:`~golden_model.results.FlattenResult` that ``flatten`` writes, in mesh units. The engine keeps no
     per-iteration record, so the history holds two rows: the initial layout and the engine's final one, both
-    measured by the golden model. ``extra`` goes into ``result.extra`` (``saturations`` among it)."""
+    measured by the golden model. ``engine_name`` is the result's ``engine`` (``rtl``, ``board``:
+    :data:`sim.engines.ENGINES`); ``extra`` goes into ``result.extra`` (``saturations`` among it)."""
     import math
 
     from golden_model.fixed import SaturationCounter
@@ -338,7 +339,7 @@ def engine_flatten_result(problem: FixedProblem, positions: np.ndarray, velociti
     engine.raw_positions, engine.raw_velocities = positions.copy(), velocities.copy()
     history.append(math.nan, engine.measure())
     result = FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
-                           history, status, iterations, problem.params, problem.density, engine="fixed")
+                           history, status, iterations, problem.params, problem.density, engine=engine_name)
     result.extra.update({"formats": problem.fs.name, "scale": problem.scale, **extra})
     return result
 
@@ -355,3 +356,38 @@ def summary_line(name: str, simulator: str, run: EngineRun) -> str:
             f"{r['run_seconds']:.2f} s = {r['cycles_per_second']:.0f} simulated cycles/s, Python "
             f"{100 * r['python_share']:.1f} % of it")
 
+
+def rtl_engine(formats: FormatSet):
+    """``--engine rtl``: the whole flattening through SpringflatEngine on Verilator, run as
+    :func:`flatten_on_rtl` runs it (``sim.flatten_run.choose_engine`` has checked the parameters), with the engine's default capacity (``SPRINGFLAT_ENGINE_CAPACITY=V,E,T`` overrides it: the tests use a
+    small engine); a mesh over capacity is a one-line error."""
+    import sys
+    import tempfile
+
+    from golden_model.fixed.engine import prepare
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
+
+    from .cocotb_support import SimulatorError
+    from .run_options import UserError
+
+    capacity = DEFAULT_CAPACITY
+    if os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
+        try:
+            capacity = EngineCapacity(*(int(v) for v in os.environ["SPRINGFLAT_ENGINE_CAPACITY"].split(",")))
+        except (TypeError, ValueError) as exc:
+            raise UserError(f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
+
+    def engine(mesh, positions, params, on_iteration=None):
+        problem = prepare(mesh, positions, params, formats)
+        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build
+        print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
+              f"{capacity.entries}/{capacity.triangles} (cached) and running the flattening ...", file=sys.stderr)
+        with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
+            try:  # the simulator's own output goes to a log: stdout is for the result
+                with contextlib.redirect_stdout(sys.stderr):
+                    return flatten_on_rtl(problem, capacity, "verilator", work=Path(tmp) / "run",
+                                          log_file=Path(tmp) / "simulation.log")
+            except (SimulatorError, EngineRunError) as exc:
+                raise UserError(str(exc)) from None
+
+    return engine

@@ -12,14 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from golden_model.fixed.engine import check_fixed_params, flatten_fixed
+from golden_model.fixed.engine import check_fixed_params
 from golden_model.guard import SCALE_MAX_SHIFT
 from golden_model.mesh import Mesh
 from golden_model.params import FlattenParams
-from golden_model.reference import flatten
 from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
+from .engines import ENGINES, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (PATTERN_SUFFIXES, PatternDrawing, check_mesh_fits, error_text, run_caption,
                        write_pattern_file)
@@ -55,23 +55,26 @@ def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
         check_mesh_fits(mesh, args.units, args.paper)
 
 
-def choose_engine(args: argparse.Namespace):
-    """The engine ``--engine`` and ``--formats`` name: ``engine(mesh, P0, params, on_iteration=None)``."""
-    if args.engine == "fixed":
-        formats = load_format_set(args.formats or "default")
+def choose_engine(args: argparse.Namespace, params: FlattenParams):
+    """The run ``--engine`` and ``--formats`` name, ``run(mesh, P0, params, on_iteration=None)``, once
+    the checks of what its formats and the engine cannot run have passed."""
+    engine = engine_named(args.engine)
+    if not engine.fixed_point and args.formats is not None:
+        raise UserError("--formats applies to the fixed-point engines: --engine "
+                        + ", ".join(e.name for e in ENGINES if e.fixed_point))
+    formats = run_formats(args)
+    if engine.fixed_point:
+        check_fixed_params(params, formats)
+    if engine.hardware:
+        from golden_model.engine_spec.image import check_engine_params
 
-        def engine(*run_args, **kw):
-            return flatten_fixed(*run_args, fs=formats, **kw)
-        return engine
-    if args.engine == "rtl":
-        return _rtl_engine(load_format_set(args.formats or "default"))
-    if args.engine == "board":  # the engine on a board, over its UART (sim/board_run.py)
-        from .board_run import board_engine
+        check_engine_params(params)
+    return engine.make(args, formats)
 
-        return board_engine(load_format_set(args.formats or "default"), args.port, args.baud)
-    if args.formats is not None:
-        raise UserError("--formats applies to --engine fixed and --engine rtl")
-    return flatten
+
+def run_formats(args: argparse.Namespace):
+    """The format set a run of ``args`` uses (``--formats``, or the default set), ``None`` for a float run."""
+    return load_format_set(args.formats or "default") if engine_named(args.engine).fixed_point else None
 
 
 def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, progress: bool = False,
@@ -83,13 +86,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     ARAP)."""
     if args.init is None:
         args.init = default_init(args.mesh)
-    if args.engine in ("fixed", "rtl", "board"):
-        check_fixed_params(params, load_format_set(args.formats or "default"))
-        if args.engine in ("rtl", "board"):
-            from golden_model.engine_spec.image import check_engine_params
-
-            check_engine_params(params)
-    engine = choose_engine(args)
+    engine = choose_engine(args, params)
     positions, args.init = start_positions(mesh, args.init, params, sys.stderr.isatty(), second_core)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
     with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -111,50 +108,9 @@ def human_line(mesh: Mesh, result: FlattenResult) -> str:
             f"E_S {error_text(result.initial.area_error)} -> {error_text(final.area_error)}, "
             f"E_C {error_text(result.initial.shape_error)} -> {error_text(final.shape_error)}, "
             f"folded {final.folded} (flipped against P0: {final.flipped})"
-            + (f", {result.extra['saturations']} saturation events" if result.engine == "fixed"
-               else "")
+            + (f", {result.extra['saturations']} saturation events" if "saturations" in result.extra else "")
             + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
                if "simulator" in result.extra else ""))
-
-
-def _rtl_engine(formats):
-    """``--engine rtl``: the whole flattening through SpringflatEngine on Verilator (``sim.engine_run``),
-    with the engine's default capacity (``SPRINGFLAT_ENGINE_CAPACITY=V,E,T`` overrides it: the tests use a
-    small engine); a mesh over capacity is a one-line error."""
-    import contextlib
-    import os
-
-    from golden_model.fixed.engine import check_fixed_params, prepare
-    from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, check_engine_params
-
-    capacity = DEFAULT_CAPACITY
-    if os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
-        try:
-            capacity = EngineCapacity(*(int(v) for v in os.environ["SPRINGFLAT_ENGINE_CAPACITY"].split(",")))
-        except (TypeError, ValueError) as exc:
-            raise UserError(f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
-
-    from .cocotb_support import SimulatorError
-    from .engine_run import EngineRunError, flatten_on_rtl
-
-    def engine(mesh, positions, params, on_iteration=None):
-        import tempfile
-
-        check_fixed_params(params, formats)
-        check_engine_params(params)
-        problem = prepare(mesh, positions, params, formats)
-        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build
-        print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
-              f"{capacity.entries}/{capacity.triangles} (cached) and running the flattening ...", file=sys.stderr)
-        with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
-            try:  # the simulator's own output goes to a log: stdout is for the result
-                with contextlib.redirect_stdout(sys.stderr):
-                    return flatten_on_rtl(problem, capacity, "verilator", work=Path(tmp) / "run",
-                                          log_file=Path(tmp) / "simulation.log")
-            except (SimulatorError, EngineRunError) as exc:
-                raise UserError(str(exc)) from None
-
-    return engine
 
 
 def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> str:

@@ -33,6 +33,7 @@ from golden_model.mesh_io import load_mesh_with_notes, save_obj
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options
+from sim.engines import ENGINES, engine_named
 from sim.flatten_run import run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import area_ratio
@@ -243,9 +244,11 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     """
     vertices, faces = _arrays(V, F)
     args = _namespace(options)
-    if args.engine == "board":
-        raise ParameterError("engine 'board' needs the board's serial port: run springflat flatten MESH --engine board "
-                             "--port DEVICE (docs/board.md); the API runs the float, fixed and rtl engines")
+    engine = engine_named(args.engine)
+    if not engine.api:
+        raise ParameterError(f"engine {engine.name!r}, {engine.help}, runs from the command line: springflat flatten "
+                             f"MESH --engine {engine.name}; the API runs the "
+                             + ", ".join(e.name for e in ENGINES if e.api) + " engines")
     mesh = Mesh(vertices, faces, name=name)  # validated here: errors name no temporary file
     with tempfile.TemporaryDirectory(prefix="springflat-api-") as tmp:
         path = Path(tmp) / "mesh.obj"

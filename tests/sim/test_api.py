@@ -156,7 +156,8 @@ def test_a_folded_initial_array_is_untangled_as_a_layout_file_is(ear, tmp_path):
 
 def test_the_board_engine_is_refused_by_the_api_with_what_to_run_instead(ear):
     V, F = ear
-    with pytest.raises(ParameterError, match="engine 'board' needs the board's serial port: run springflat flatten"):
+    with pytest.raises(ParameterError, match=r"engine 'board', the engine on a ULX3S over its USB-UART \(--port; docs/board.md\), runs from the command "
+                       r"line: springflat flatten MESH --engine board; the API runs the float, fixed, rtl engines"):
         springflat.flatten(V, F, engine="board")
 
 

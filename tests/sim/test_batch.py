@@ -104,7 +104,8 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
     (["--out", ".pdf"], "write their outputs to --out-dir"),
     (["--out-dir", "o", "--out", ".csv", "--distortion", ".csv"], "given twice"),
     (["--out-dir", "o/sub", "--out", ".png"], "must end in .dxf"),
-    (["--out-dir", "o", "--engine", "rtl"], "--engine rtl runs one mesh at a time"),
+    (["--out-dir", "o", "--engine", "rtl"], "--engine rtl runs one mesh at a time (the simulator build is shared)"),
+    (["--out-dir", "o", "--engine", "board", "--port", "p"], "--engine board runs one mesh at a time (one board answers"),
     (["--init", "layout.txt"], "--init takes a method"),
     (["--jobs", "0"], "--jobs must be >= 1"),
 ])

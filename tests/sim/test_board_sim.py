@@ -44,7 +44,7 @@ def test_surf1_over_the_simulated_uart_is_byte_identical_to_engine_fixed(tmp_pat
             "truncated frame": protocol.TIMEOUT, "bad command": protocol.BAD_COMMAND}
     assert {name: (f["status"], f["bus_accesses"]) for name, f in r["bad_frames"].items()} == {
         name: (status, 0) for name, status in want.items()}
-    result = engine_flatten_result(problem, run.positions, run.velocities, r["status"], r["iterations"],
+    result = engine_flatten_result(problem, run.positions, run.velocities, r["status"], r["iterations"], "board",
                                    {"saturations": r["saturations"]})
     final = result.final  # the file as --out writes it: the layout as vt, the run's line in its header
     caption = run_caption(result.status, result.iterations, final.area_error, final.shape_error, final.folded)

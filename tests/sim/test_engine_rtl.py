@@ -192,6 +192,7 @@ def test_flatten_engine_rtl_writes_the_fixed_engines_layout(tmp_path):
     assert (tmp_path / "rtl.flat.obj").read_text() == (tmp_path / "fixed.flat.obj").read_text()  # the layouts
     assert outs["rtl"]["iterations"] == outs["fixed"]["iterations"] == 5
     assert outs["rtl"]["status"] == outs["fixed"]["status"]
+    assert (outs["rtl"]["engine"], outs["fixed"]["engine"]) == ("rtl", "fixed")  # each result names its engine
 
 
 def test_a_stalled_run_is_bit_exact_and_starts_as_flatten_does(tmp_path):

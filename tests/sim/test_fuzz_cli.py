@@ -479,7 +479,7 @@ PARAMETERS: dict[str, Case] = {
     "unknown option": Case(["--warp", "9"], 2, r"unrecognized arguments"),
     "bad choice": Case(["--step", "wobbly"], 2, r"invalid choice"),
     "init unknown name": Case(["--init", "spiral"], 2, r"cannot read layout 'spiral': no such file"),
-    "formats with float engine": Case(["--formats", "narrow"], 2, r"--formats applies to --engine fixed"),
+    "formats with float engine": Case(["--formats", "narrow"], 2, r"--formats applies to the fixed-point engines: --engine fixed, rtl, board"),
     # legal extremes: the run ends (possibly diverged), with strict JSON and no warnings
     "spring 1e300": Case(["--spring", "1e300"]),
     "spring 1e-300": Case(["--spring", "1e-300"]),
@@ -568,7 +568,7 @@ def test_an_unwritable_output_is_refused_before_the_run(tmp_path, monkeypatch, c
     def no_run(*args, **kwargs):
         raise AssertionError("the run started although --history cannot be written")
 
-    monkeypatch.setattr("sim.flatten_run.flatten", no_run)
+    monkeypatch.setattr("golden_model.reference.flatten", no_run)
     case = Case(["m.obj", "--out", "o.obj", "--history", "ro/h.csv"], 2,
                 r"cannot write --history 'ro/h.csv': permission denied", files={"m.obj": obj(), "ro/keep": ""},
                 deny=("ro", errno.EACCES))

@@ -1,0 +1,98 @@
+"""The engines ``springflat flatten --engine`` runs: one description that the command line's choices and
+help, the checks before a run, what a batch and the Python API refuse, and each result's ``engine`` label
+derive from.
+
+=========  ===========  ==========================  =====  ===  ==========================================
+engine     fixed point  SpringflatEngine's checks   batch  API  runs
+=========  ===========  ==========================  =====  ===  ==========================================
+``float``  no           no                          yes    yes  the float reference (``golden_model.reference``)
+``fixed``  yes          no                          yes    yes  the bit-exact golden model (``golden_model.fixed``)
+``rtl``    yes          yes                         no     yes  the engine's Verilog on Verilator (``sim.engine_run``)
+``board``  yes          yes                         no     no   the engine on a ULX3S over its UART (``sim.board_run``)
+=========  ===========  ==========================  =====  ===  ==========================================
+
+Adding an engine is a row in :data:`ENGINES` and the function that makes its run.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from typing import Callable
+
+__all__ = ["Engine", "ENGINES", "ENGINE_NAMES", "DEFAULT_ENGINE", "engine_named"]
+
+#: ``run(mesh, P0, params, on_iteration=None) -> FlattenResult``
+RunFunction = Callable[..., object]
+
+
+@dataclass(frozen=True)
+class Engine:
+    """One engine of ``flatten --engine``.
+
+    Attributes:
+        name: the ``--engine`` value, and the ``engine`` of its results (the JSON summary's ``"engine"``).
+        fixed_point: runs a fixed-point format set (``--formats``, saturation counts, the formats' checks).
+        hardware: runs ``SpringflatEngine`` (its parameter checks, ``check_engine_params``, apply).
+        single: why it runs one mesh at a time, in the command (``None``: a batch may run it in its workers).
+        api: the Python API (``springflat.flatten``) can run it (no port or other device to name).
+        help: the ``--help`` text.
+        make: ``make(args, formats) -> run``: the run function for ``args`` (``--port``, ...) and the loaded
+            format set (``None`` for float).
+    """
+
+    name: str
+    fixed_point: bool
+    hardware: bool
+    single: str | None
+    api: bool
+    help: str
+    make: Callable[[argparse.Namespace, object], RunFunction]
+
+
+def _float(args: argparse.Namespace, formats) -> RunFunction:
+    from golden_model.reference import flatten
+
+    return flatten
+
+
+def _fixed(args: argparse.Namespace, formats) -> RunFunction:
+    from golden_model.fixed.engine import flatten_fixed
+
+    def run(*run_args, **kw):
+        return flatten_fixed(*run_args, fs=formats, **kw)
+    return run
+
+
+def _rtl(args: argparse.Namespace, formats) -> RunFunction:
+    from .engine_run import rtl_engine
+
+    return rtl_engine(formats)
+
+
+def _board(args: argparse.Namespace, formats) -> RunFunction:
+    from .board_run import board_engine
+
+    return board_engine(formats, args.port, args.baud)
+
+
+ENGINES: tuple[Engine, ...] = (
+    Engine("float", False, False, None, True, "the float reference (the default)", _float),
+    Engine("fixed", True, False, None, True, "the bit-exact fixed-point golden model", _fixed),
+    Engine("rtl", True, True, "the simulator build is shared", True,
+           "the whole flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)", _rtl),
+    Engine("board", True, True, "one board answers on one port", False,
+           "the engine on a ULX3S over its USB-UART (--port; docs/board.md)", _board),
+)
+
+#: The ``--engine`` choices, in table order.
+ENGINE_NAMES: tuple[str, ...] = tuple(e.name for e in ENGINES)
+DEFAULT_ENGINE = "float"
+
+
+def engine_named(name: str) -> Engine:
+    """The engine ``--engine name`` chooses (``ValueError`` for a name no engine has)."""
+    for engine in ENGINES:
+        if engine.name == name:
+            return engine
+    raise ValueError(f"no engine {name!r} (engines: {', '.join(ENGINE_NAMES)})")
