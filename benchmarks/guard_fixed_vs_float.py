@@ -12,7 +12,8 @@ the mesh file's defaults): ``golden_model.generate.hard_patches()`` and the corp
 ``cone_tip`` and ``cad_sliver`` patches (docs/corpus.md; a missing corpus is skipped with a note).
 Per mesh the status, iterations, rolled-back steps and saturation events of each engine and
 |ΔE_S|, |ΔE_C|, and whether the row meets issue 25's bar (same status, iterations within ±1,
-|ΔE_S|, |ΔE_C| <= 1e-3); a mesh the default formats cannot hold is "refused" with the reason.
+|ΔE_S|, |ΔE_C| <= 1e-3); a mesh the formats (``--formats``, a preset: default ``default``) cannot hold is
+"refused" with the reason.
 ``--perturbed`` adds the float run from ``P0·(1 + 1e-9)`` beside it: how far the float model's own
 stopping point moves under a perturbation far below fixed point's rounding. docs/guard.md quotes the tables.
 """
@@ -30,6 +31,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from golden_model.fixed import FormatSet  # noqa: E402
 from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.fixed.measures import FixedPointError  # noqa: E402
 from golden_model.generate import (delaunay_patch, dome_grid, hard_patches, rolled_grid, saddle_grid,  # noqa: E402
@@ -101,7 +103,8 @@ def fast_subset(corpus: Path, only: list[str] | None) -> Iterator[tuple[str, Mes
 PERTURBATION = 1e-9
 
 
-def row(name: str, mesh: Mesh, p0: np.ndarray, params: FlattenParams, perturbed: bool) -> tuple[str, bool]:
+def row(name: str, mesh: Mesh, p0: np.ndarray, params: FlattenParams, perturbed: bool,
+        formats: FormatSet) -> tuple[str, bool]:
     a = flatten(mesh, p0, params)
     extra = ""
     if perturbed:
@@ -109,7 +112,7 @@ def row(name: str, mesh: Mesh, p0: np.ndarray, params: FlattenParams, perturbed:
         extra = (f" {c.status}, {c.iterations} | {abs(a.final.area_error - c.final.area_error):.1e} | "
                  f"{abs(a.final.shape_error - c.final.shape_error):.1e} |")
     try:
-        b = flatten_fixed(mesh, p0, params)
+        b = flatten_fixed(mesh, p0, params, formats)
     except FixedPointError as exc:
         return f"| {name} | {a.status} / refused: {exc} | {a.iterations} / – | | | | | no |{extra}", False
     ds, dc = abs(a.final.area_error - b.final.area_error), abs(a.final.shape_error - b.final.shape_error)
@@ -127,6 +130,8 @@ def main() -> None:
     parser.add_argument("--perturbed", action="store_true",
                         help=f"also run float from P0·(1 + {PERTURBATION:g}): how far float moves from itself")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="only rows whose name starts with one of these")
+    parser.add_argument("--formats", default="default", choices=FormatSet.presets(),
+                        help="the fixed-point model's preset (default %(default)s)")
     args = parser.parse_args()
     rows = fast_subset(args.corpus, args.only) if args.fast_subset else generated_from_tutte(args.only)
     head = "| mesh | status (float / fixed) | iterations | rolled back | saturations | |ΔE_S| | |ΔE_C| | within the bar |"
@@ -137,7 +142,7 @@ def main() -> None:
     met = total = 0
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         for name, mesh, p0, params in rows:
-            line, ok = row(name, mesh, p0, params, args.perturbed)
+            line, ok = row(name, mesh, p0, params, args.perturbed, FormatSet.preset(args.formats))
             met, total = met + ok, total + 1
             print(line, flush=True)
     print(f"\n{met} of {total} within the bar (same status, iterations ±{MAX_ITERATION_GAP}, "

@@ -82,7 +82,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
     scale = scale_note(PatternDrawing.of(mesh, result.positions, args.units)) if any(
         str(path).lower().endswith((".pdf", ".svg", ".dxf")) and not str(path).lower().endswith(".flat.svg")
         for path in args.out or ()) else None  # a print or cut at the wrong scale; vt and layouts have none
-    for note in (scale, _energy_rule_note(params, result), _error_resolution_note(formats)):
+    for note in (scale, _energy_rule_note(params, result), _error_resolution_note(formats),
+                 _saturation_note(result)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":
@@ -149,6 +150,17 @@ def _error_resolution_note(formats: FormatSet | None) -> str | None:
             f"{formats.error.lsb:.3g}, the values above are rounded to that")
 
 
+def _saturation_note(result: FlattenResult) -> str | None:
+    """A fixed-point run that clamped values: which, and where wider formats are."""
+    events = result.extra.get("saturation_events") or {}
+    if not result.extra.get("saturations"):
+        return None
+    fields = ", ".join(f"{name} {count}" for name, count in sorted(events.items(), key=lambda item: -item[1])[:3])
+    return (f"format set '{result.extra['formats']}' clamped {result.extra['saturations']} values to its range"
+            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's; a format set with "
+            f"more integer bits holds them (presets: {', '.join(FormatSet.presets())}; docs/fixed-point.md)")
+
+
 def _check_distinct_files(args: argparse.Namespace) -> None:
     """No two outputs may be one file, and no output may be an input (the mesh, the --init or --formats
     file), compared by device and inode."""
@@ -189,7 +201,8 @@ def add_engine_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--engine", choices=ENGINE_NAMES, default=DEFAULT_ENGINE,
                         help="; ".join(f"{e.name}: {e.help}" for e in ENGINES))
     parser.add_argument("--formats", default=None, metavar="PRESET|FILE",
-                        help="fixed-point format set: a preset (default, narrow) or a JSON file (default: default)")
+                        help=f"fixed-point format set: a preset ({', '.join(FormatSet.presets())}; docs/fixed-point.md) or a "
+                             "JSON file (default: default)")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -20,7 +20,8 @@ from typing import Callable, TypeVar
 
 from golden_model.fixed import FORMAT_FIELDS, FormatSet
 
-PRESETS = ("default", "narrow")
+#: The presets the docs tabulate: every one (``golden_model/data/formats``).
+PRESETS = tuple(FormatSet.presets())
 T = TypeVar("T")
 
 
@@ -57,13 +58,13 @@ def _source_comment(path: str, name: str) -> str:
 
 
 def format_presets() -> str:
-    """Every field of the two presets: formats with their widths, then the knobs."""
-    d, n = _preset("default"), _preset("narrow")
-    rows = [[f"`{f}`", getattr(d, f), getattr(d, f).width, getattr(n, f), getattr(n, f).width] for f in FORMAT_FIELDS]
+    """Every field of the presets: formats with their widths, then the knobs."""
+    sets = [_preset(p) for p in PRESETS]
+    rows = [[f"`{f}`", *(x for fs in sets for x in (getattr(fs, f), getattr(fs, f).width))] for f in FORMAT_FIELDS]
     for knob in ("rsqrt_seed_bits", "rsqrt_newton_steps", "lut_index_bits", "lut_interpolate", "max_degree"):
-        rows.append([f"`{knob}`", getattr(d, knob), "", getattr(n, knob), ""])
-    rows.append(["`rounding`", d.rounding.value, "", n.rounding.value, ""])
-    return _table(["signal", "default", "bits", "narrow", "bits"], rows)
+        rows.append([f"`{knob}`", *(x for fs in sets for x in (getattr(fs, knob), ""))])
+    rows.append(["`rounding`", *(x for fs in sets for x in (fs.rounding.value, ""))])
+    return _table(["signal", *(x for p in PRESETS for x in (p, "bits"))], rows)
 
 
 def knob_domains() -> str:
@@ -202,15 +203,16 @@ def node_update_contract() -> str:
     rows = [["initiation interval", "1 neighbour entry per clock", 1, 1]]
     for p, (latency, _, parts, rsqrt, step, _) in cols.items():
         rows.append([f"latency, {p} preset", f"{latency} clocks ({' + '.join(map(str, parts))})", rsqrt, step])
-    d, nn = cols["default"][5], cols["narrow"][5]
+    dsp = {p: col[5] for p, col in cols.items()}
 
-    def both(unit: str) -> str:  # one number when the presets agree, else default / narrow
-        return str(d[unit]) if d[unit] == nn[unit] else f"{d[unit]} / {nn[unit]}"
+    def every(unit: str) -> str:  # one number when the presets agree, else one per preset, in PRESETS' order
+        counts = [str(dsp[p][unit]) for p in PRESETS]
+        return counts[0] if len(set(counts)) == 1 else " / ".join(counts)
 
     rows.append(["multipliers (18×18 DSP blocks, ECP5)",
-                 f"default {d['node_update'] + d['rsqrt']}, narrow {nn['node_update'] + nn['rsqrt']}, each incl. the "
-                 f"rsqrt unit's {both('rsqrt')} (the core adds the step generator's {both('step_generator')}: "
-                 f"{sum(d.values())}, {sum(nn.values())})", both("rsqrt"), both("step_generator")])
+                 ", ".join(f"{p} {dsp[p]['node_update'] + dsp[p]['rsqrt']}" for p in PRESETS) + ", each incl. the "
+                 f"rsqrt unit's {every('rsqrt')} (the core adds the step generator's {every('step_generator')}: "
+                 f"{', '.join(str(sum(dsp[p].values())) for p in PRESETS)})", every("rsqrt"), every("step_generator")])
     fs = _preset("default")
     rows.append(["memories", f"seed ROM (block RAM; default {fs.rsqrt_config().seed_table_size} entries), header "
                  f"FIFO and result FIFO ({cols['default'][1]} entries), both distributed RAM in "
@@ -229,7 +231,7 @@ def node_update_flip_flops() -> str:
 
 
 def unit_figures() -> str:
-    """Latency and ``MULT18X18D`` blocks of every unit in ``hdl/``, both presets."""
+    """Latency and ``MULT18X18D`` blocks of every unit in ``hdl/``, every preset."""
     from hdl import AreaError, BetaDivider, EnergyCheck, ForcePass, Integrator, Normaliser, RsqrtUnit, StepGenerator
 
     entries = 8192
@@ -257,9 +259,9 @@ def unit_figures() -> str:
     names = ["`RsqrtUnit`", "`StepGenerator`", "`StepGenerator`, `lut_interpolate` off", "`ForcePass`",
              "`ForcePass(energy=True)`", "`Integrator`", "`AreaError`", "`Normaliser`: `cycles(shift)`, shift from "
              "F + 2 up", f"`EnergyCheck` at {entries:,} entries", "`BetaDivider`"]
-    d, n = rows["default"], rows["narrow"]
-    return _table(["unit", "latency, default", "latency, narrow", "`MULT18X18D`, default", "`MULT18X18D`, narrow"],
-                  [[name, d[i][0], n[i][0], d[i][1], n[i][1]] for i, name in enumerate(names)])
+    return _table(["unit", *(f"latency, {p}" for p in PRESETS), *(f"`MULT18X18D`, {p}" for p in PRESETS)],
+                  [[name, *(rows[p][i][0] for p in PRESETS), *(rows[p][i][1] for p in PRESETS)]
+                   for i, name in enumerate(names)])
 
 
 # ----------------------------------------------------------------------------- docs/synthesis.md
@@ -273,9 +275,9 @@ def synth_components() -> str:
     rows = []
     for spec in COMPONENTS:
         info = {p: _quietly(lambda: describe(spec.build(_preset(p)), _preset(p), spec.module)) for p in PRESETS}
-        rows.append([f"`{spec.module}`", info["default"]["initiation_interval"], info["default"]["latency"],
-                         info["narrow"]["latency"], sum(port["width"] for port in info["default"]["ports"])])
-    return _table(["component", "II", "latency, default", "latency, narrow", "port bits, default"], rows)
+        rows.append([f"`{spec.module}`", info["default"]["initiation_interval"],
+                     *(info[p]["latency"] for p in PRESETS), sum(port["width"] for port in info["default"]["ports"])])
+    return _table(["component", "II", *(f"latency, {p}" for p in PRESETS), "port bits, default"], rows)
 
 
 def _current_latency(row: dict[str, str]) -> int | None:

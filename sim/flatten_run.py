@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from golden_model.fixed.engine import check_fixed_params
+from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding
+from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT
 from golden_model.mesh import Mesh
 from golden_model.params import FlattenParams
@@ -69,7 +70,32 @@ def choose_engine(args: argparse.Namespace, params: FlattenParams):
         from golden_model.engine_spec.image import check_engine_params
 
         check_engine_params(params)
-    return engine.make(args, formats)
+    run = engine.make(args, formats)
+    return _naming_presets_that_hold(run, formats) if engine.fixed_point else run
+
+
+def _naming_presets_that_hold(run, formats):
+    """``run``, whose refusal of a problem its format set cannot hold names the presets that hold it."""
+    def hinted(mesh, positions, params, **kw):
+        try:
+            return run(mesh, positions, params, **kw)
+        except FixedPointError as exc:
+            if _holds(mesh, positions, params, formats):  # refused for something else (the engine's capacity)
+                raise
+            holding = presets_holding(mesh, positions, params)
+            if not holding:
+                raise
+            raise FixedPointError(f"{exc}; the preset{'s' if len(holding) > 1 else ''} {', '.join(holding)} "
+                                  f"{'hold' if len(holding) > 1 else 'holds'} it: --formats {holding[-1]}") from None
+    return hinted
+
+
+def _holds(mesh: Mesh, positions, params: FlattenParams, formats) -> bool:
+    try:
+        prepare(mesh, positions, params, formats)
+    except FixedPointError:
+        return False
+    return True
 
 
 def run_formats(args: argparse.Namespace):

@@ -12,10 +12,9 @@ import pytest
 
 from golden_model.fixed import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.pipeline import accumulator_guard_bits
-from support import DOCS
+from support import DOCS, PRESETS
 
 ROOT = DOCS.parent
-PRESETS = ("default", "narrow")
 
 
 def flat(text: str) -> str:

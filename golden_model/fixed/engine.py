@@ -45,7 +45,7 @@ from .measures import SAT, FixedPointError, Reciprocal, _doubled_areas, energy_f
 from .pipeline import BarrierEntries, NeighbourStream, NodeConstants
 from .steplut import DT_MAX, DT_MIN, dt_constant, half_dt_sq, lut_value_float
 
-__all__ = ["FixedProblem", "prepare", "flatten_fixed", "load_formats", "energy_to_float", "StopRule",
+__all__ = ["FixedProblem", "prepare", "presets_holding", "flatten_fixed", "load_formats", "energy_to_float", "StopRule",
            "ENERGY_TOL_FRAC_BITS", "run_fixed"]
 
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
@@ -407,6 +407,19 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
             raise FixedPointError(f"{option} {tolerance:g} rounds to 0 in error {fs.error} of format set '{fs.name}' "
                                   f"(lsb {fs.error.lsb:.3g}): the rule could never hold; use a larger tolerance, "
                                   "or an error format with more fraction bits")
+
+
+def presets_holding(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams) -> list[str]:
+    """The preset format sets (:meth:`FormatSet.presets`) that hold this problem: those :func:`prepare`
+    scales it into without a :class:`FixedPointError`."""
+    holding = []
+    for name in FormatSet.presets():
+        try:
+            prepare(mesh, initial_positions, params, FormatSet.preset(name))
+        except FixedPointError:
+            continue
+        holding.append(name)
+    return holding
 
 
 def flatten_fixed(

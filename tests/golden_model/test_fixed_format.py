@@ -34,6 +34,7 @@ from golden_model.fixed import (
     sub,
     to_float,
 )
+from support import PRESETS
 
 try:  # dev dependency, pinned: fxpmath==0.4.10 (rounding semantics read from that version)
     from fxpmath import Fxp
@@ -335,11 +336,11 @@ def test_to_float_and_scalars():
 
 
 # ----------------------------------------------------------------- FormatSet
-@pytest.mark.parametrize("name", ["default", "narrow"])
+@pytest.mark.parametrize("name", PRESETS)
 def test_presets_load_and_roundtrip(name, tmp_path):
     fs = FormatSet.preset(name)
     assert fs.name == name and FormatSet.load(name) == fs
-    assert set(FormatSet.presets()) >= {"default", "narrow"}
+    assert set(FormatSet.presets()) >= {"default", "narrow", "wide"}
     p = tmp_path / "x.json"
     fs.save(p)
     assert FormatSet.load(p) == fs and FormatSet.load(str(p)) == fs

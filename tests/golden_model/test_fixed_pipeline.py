@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import subprocess
 from fractions import Fraction
 
@@ -10,7 +11,7 @@ import pytest
 
 from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet, SaturationCounter, rsqrt_with_config
-from golden_model.fixed.engine import FixedEngine, flatten_fixed, prepare
+from golden_model.fixed.engine import FixedEngine, flatten_fixed, prepare, presets_holding
 from golden_model.fixed.measures import FixedPointError, Reciprocal
 from golden_model.fixed.pipeline import (NeighbourStream, NodeConstants, edge_terms, neighbour_terms,
                                          node_update)
@@ -19,13 +20,13 @@ from golden_model.layouts import initial_layout, tutte_layout
 from golden_model.mesh import Mesh, signed_areas_2d
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten
-from support import SPRINGFLAT
+from support import PRESETS, SPRINGFLAT
 
 DEFAULT = FormatSet.preset("default")
 NARROW = FormatSet.preset("narrow")
 
 
-@pytest.mark.parametrize("fs", [DEFAULT, NARROW], ids=["default", "narrow"])
+@pytest.mark.parametrize("fs", [FormatSet.preset(p) for p in PRESETS], ids=PRESETS)
 def test_edge_terms_equal_the_per_entry_definition(fs):
     mesh = dome_grid(9)
     problem = prepare(mesh, tutte_layout(mesh), FlattenParams(density="auto"), fs)
@@ -33,7 +34,7 @@ def test_edge_terms_equal_the_per_entry_definition(fs):
     rng = np.random.default_rng(0)
     saturated = 0
     for trial in range(24):
-        spread = 2 ** (fs.position.frac_bits - 10 + trial % 14)
+        spread = 2 ** (fs.position.frac_bits - 10 + trial % 16)  # up to 32 mean edges: every preset's delta saturates
         p = problem.initial_positions + rng.integers(-spread, spread, size=problem.initial_positions.shape)
         if trial % 2:  # make rounding ties likely
             p = (p >> 3 << 3) | 4 * rng.integers(0, 2, size=p.shape)
@@ -322,6 +323,20 @@ def test_cli_fixed_engine(tmp_path):
     assert narrow["saturations"] > 0 and narrow["saturation_events"]
 
 
+def test_cli_notes_the_saturations_of_a_run_and_the_fields_that_saturated():
+    proc = subprocess.run([SPRINGFLAT, "flatten", "surf2", "--init", "tutte", "--engine", "fixed", "--formats", "narrow"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    notes = [line for line in proc.stderr.splitlines() if "clamped" in line]
+    assert len(notes) == 1 and re.fullmatch(
+        r"springflat: note: format set 'narrow' clamped (\d+) values to its range \((rsqrt|one_minus_dr) \d+.*\), which "
+        r"moves the result away from the float reference's; a format set with more integer bits holds them \(presets: "
+        r"default, narrow, wide; docs/fixed-point.md\)", notes[0]), notes
+    quiet = subprocess.run([SPRINGFLAT, "flatten", "surf2", "--init", "tutte", "--engine", "fixed"],
+                           capture_output=True, text=True)
+    assert quiet.returncode == 0 and "clamped" not in quiet.stderr  # no saturation, no note
+
+
 @pytest.mark.parametrize("formats, message", [
     ("nosuchpreset", "unknown FormatSet preset"),
     ("bad.json", "product spring*spring (1/2 C * u)"),
@@ -345,6 +360,38 @@ def test_cli_refuses_a_mesh_out_of_range(tmp_path):
                           capture_output=True, text=True, cwd=tmp_path)
     assert proc.returncode == 2 and "too many edges across" in proc.stderr and "Traceback" not in proc.stderr
     assert not (tmp_path / "o.obj").exists()
+
+
+def _wheel(spokes: int) -> Mesh:
+    """A cone's tip as CAD tessellates it: one vertex with ``spokes`` neighbours, the ring around it."""
+    angle = 2 * np.pi * np.arange(spokes) / spokes
+    vertices = np.vstack([[0.0, 0.0, 0.5], np.column_stack([np.cos(angle), np.sin(angle), np.zeros(spokes)])])
+    faces = np.array([[0, 1 + i, 1 + (i + 1) % spokes] for i in range(spokes)])
+    return Mesh(vertices, faces, name="wheel")
+
+
+def test_presets_holding_are_the_presets_a_problem_fits():
+    wheel, dome = _wheel(40), dome_grid(9)
+    assert presets_holding(wheel, tutte_layout(wheel), FlattenParams(dynamics="momentum")) == ["wide"]  # degree 40
+    assert presets_holding(dome, tutte_layout(dome), FlattenParams(density="auto")) == ["default", "narrow", "wide"]
+
+
+def test_cli_names_the_preset_that_holds_a_mesh_the_default_formats_refuse(tmp_path):
+    from golden_model.mesh_io import save_obj
+
+    wheel = _wheel(40)
+    save_obj(tmp_path / "wheel.obj", wheel.vertices, wheel.faces)
+    proc = subprocess.run([SPRINGFLAT, "flatten", "wheel.obj", "--engine", "fixed", "--out", "o.obj"],
+                          capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stderr == (
+        "springflat: error: a node has 40 neighbours; format set 'default' accumulates at most 32 (max_degree); "
+        "the preset wide holds it: --formats wide\n")
+    assert not (tmp_path / "o.obj").exists()
+    proc = subprocess.run([SPRINGFLAT, "flatten", "wheel.obj", "--engine", "fixed", "--formats", "wide", "--json"],
+                          capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert (summary["formats"], summary["status"], summary["folded"]) == ("wide", "converged", 0)
 
 
 def test_per_node_sums_are_exact_where_float64_is_not():

@@ -19,9 +19,8 @@ from golden_model.layouts import initial_layout
 from golden_model.engine_spec.image import UNGUARDED
 from golden_model.params import FlattenParams
 from sim.register_map_export import EXPORT_FILES, c_header, markdown, to_json, write_exports
-from support import DOCS
+from support import DOCS, PRESETS
 
-PRESETS = FormatSet.presets()
 SMALL = EngineCapacity(vertices=100, entries=600, triangles=200)
 
 

@@ -23,6 +23,7 @@ from golden_model.fixed import (
     rsqrt_with_config,
 )
 from golden_model.fixed.rsqrt import _sweep_points, measure_rsqrt, rsqrt
+from support import PRESETS
 
 FAITHFUL = 1.0  # stated bound: strictly less than one output ulp
 
@@ -119,7 +120,7 @@ def _exhaustive(cfg: RsqrtConfig, chunk: int = 1 << 21) -> tuple[int, int]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("preset", ["default", "narrow"])
+@pytest.mark.parametrize("preset", PRESETS)
 def test_rsqrt_faithful_presets(preset):
     """Exhaustive where the input is at most 24 bits wide, else a dense sweep plus all boundaries."""
     cfg = FormatSet.preset(preset).rsqrt_config()

@@ -25,8 +25,8 @@ from golden_model.fixed import (
     to_float,
 )
 from golden_model.fixed.steplut import measure_step_size
+from support import PRESETS
 
-PRESETS = ["default", "narrow"]
 
 
 def _variants():

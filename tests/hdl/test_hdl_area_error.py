@@ -17,9 +17,9 @@ from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.measures import area_sum
 from hdl.area_error import AreaError
 from sim.payloads import pack_beats
+from support import PRESETS
 from support.streams import StreamRun, run_testbenches, stream_producer, top_level_verilog
 
-PRESETS = ["default", "narrow"]
 SATURATION_NAMES = ("face_edge", "face_area", "area_sum")
 
 

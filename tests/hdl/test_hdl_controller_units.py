@@ -22,9 +22,9 @@ from golden_model.fixed.measures import Reciprocal, energy_raw, momentum_beta_ra
 from golden_model.engine_spec.image import ITERATION_BITS
 from hdl.controller_units import BetaDivider, EnergyCheck, Normaliser
 from sim.payloads import pack, unpack_beats
+from support import PRESETS
 from support.streams import StreamRun, run_testbenches, stream_consumer, stream_producer
 
-PRESETS = ["default", "narrow"]
 
 
 def run_items(dut, beats, cycles, *, seed=0, p_valid=1.0, p_ready=1.0, setup=None):

@@ -22,7 +22,8 @@ from hdl.dsp import ECP5
 from hdl.layouts import force_saturations_max
 from sim.payloads import pack_beats, unpack_beats
 from support.streams import run_streams
-from test_hdl_node_update import PRESETS, check_idle, random_stream
+from support import PRESETS
+from test_hdl_node_update import check_idle, random_stream
 
 
 def force_beats(layout, stream: NeighbourStream, positions: np.ndarray) -> list[int]:
@@ -98,7 +99,7 @@ def test_random_nodes_with_input_gaps(preset, barrier, energy):
 
 #: Independent pins of the stages the pass builds: front, barrier side line, rsqrt unit, back
 #: (NodeUpdate's share is pinned in tests/hdl/test_hdl_node_update.py and docs/hardware.md).
-STAGES = {"default": (14, 18, 28, 29), "narrow": (12, 15, 28, 23)}
+STAGES = {"default": (14, 18, 28, 29), "narrow": (12, 15, 28, 23), "wide": (14, 18, 28, 29)}
 
 
 @pytest.mark.parametrize("preset", PRESETS)

@@ -19,9 +19,9 @@ from hdl.dsp import mult18x18d_count
 from hdl.guard_certificate import GuardCertificate
 from hdl.layouts import certificate_result_layout
 from sim.payloads import pack_beats
+from support import PRESETS
 from support.streams import run_streams
 
-PRESETS = ["default", "narrow"]
 
 
 def golden(fs, corners, moves, areas, winding):

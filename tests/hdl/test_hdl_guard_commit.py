@@ -15,9 +15,9 @@ from golden_model.fixed.guard import (commit, floor_min_raw, guarded_moves_raw, 
 from golden_model.guard import GUARD_LEVELS, node_levels
 from hdl.guard_commit import GuardCommit
 from sim.payloads import pack_beats, unpack_beats
+from support import PRESETS
 from support.streams import run_streams, top_level_verilog
 
-PRESETS = ["default", "narrow"]
 HELD = GUARD_LEVELS + 1
 
 

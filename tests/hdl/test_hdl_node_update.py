@@ -21,10 +21,10 @@ from golden_model.layouts import initial_layout
 from golden_model.params import FlattenParams
 from hdl import NodeUpdate
 from sim.payloads import pass_beats, unpack_beats
+from support import PRESETS
 from support.streams import run_streams
 from golden_model.engine_spec.image import UNGUARDED
 
-PRESETS = ["default", "narrow"]
 
 
 def simulate(dut, beats, n_out, constants, *, momentum=False, **kw):
@@ -150,7 +150,7 @@ def test_builtin_meshes_over_several_iterations(preset, mesh_name):
 
 #: The documented latency (``docs/hardware.md``'s contract table; ``tests/test_docs.py`` checks that it says
 #: these numbers): front + rsqrt unit + back + tail, plus the result FIFO's write and the output register.
-LATENCY = {"default": (102, (14, 28, 29, 28)), "narrow": (91, (12, 28, 23, 25))}
+LATENCY = {"default": (102, (14, 28, 29, 28)), "narrow": (91, (12, 28, 23, 25)), "wide": (102, (14, 28, 29, 28))}
 
 
 @pytest.mark.parametrize("preset", PRESETS)

@@ -602,7 +602,7 @@ FORMAT_SETS: dict[str, Case] = {
     "preset narrow": Case(["--formats", "narrow"]),
     "json file": Case(["--formats", "f.json"], files={"f.json": _formats_json()}),
     "json file CRLF": Case(["--formats", "f.json"], files={"f.json": _formats_json().replace("\n", "\r\n")}),
-    "unknown preset": Case(["--formats", "wide"], 2, r"unknown FormatSet preset 'wide'"),
+    "unknown preset": Case(["--formats", "huge"], 2, r"unknown FormatSet preset 'huge'; available: \['default', 'narrow', 'wide'\]"),
     "missing file": Case(["--formats", "nope.json"], 2, r"formats file 'nope.json' not found"),
     "a file named by a path without .json": Case(["--formats", "./f"], files={"f": _formats_json()}),
     "directory": Case(["--formats", "d.json"], 2, r"cannot read formats file 'd.json': is a directory",

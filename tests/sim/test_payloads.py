@@ -10,6 +10,7 @@ from amaranth.lib import data
 from golden_model.fixed import FormatSet
 from hdl.layouts import entry_layout, errors_layout, result_layout, step_layout
 from sim.payloads import leaves, pack, pack_beats, unpack, unpack_beats
+from support import PRESETS
 
 LAYOUTS = {"entry": entry_layout, "result": result_layout, "step": step_layout, "errors": errors_layout}
 
@@ -31,7 +32,7 @@ def beat(fields, k):
     return {name: beat(value, k) if isinstance(value, dict) else int(value[k]) for name, value in fields.items()}
 
 
-@pytest.mark.parametrize("preset", ["default", "narrow"])
+@pytest.mark.parametrize("preset", PRESETS)
 @pytest.mark.parametrize("name", LAYOUTS)
 def test_one_beat_and_many_beats_agree(preset, name):
     layout = LAYOUTS[name](FormatSet.preset(preset))

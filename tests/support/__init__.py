@@ -24,6 +24,8 @@ SCANS = DATA / "scans"
 SPRINGFLAT = str(Path(sys.executable).parent / "springflat")
 """The console script of this environment."""
 TESTS = REPO / "tests"
+PRESETS: tuple[str, ...] = tuple(__import__("golden_model.fixed", fromlist=["FormatSet"]).FormatSet.presets())
+"""Every preset format set (``golden_model/data/formats``): the tests that cover each take them from here."""
 
 #: The test files that take longest (simulator builds, whole runs on simulators), in the order to start them,
 #: longest first. ``make test`` hands whole files to its workers in collection order (``--dist loadfile
