@@ -204,8 +204,8 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               "the mesh's edge lengths vary too much for these formats")
     shortest = float(scaled_rest.min())
     if shortest <= 1.0 / fs.rsqrt.max:
-        raise FixedPointError(f"the shortest edge is {shortest:.4g} mean edge lengths; the rsqrt format "
-                              f"{fs.rsqrt} of '{fs.name}' needs edges above {1.0 / fs.rsqrt.max:.4g}: "
+        raise FixedPointError(f"the shortest edge is {shortest:.3g} mean edge lengths; the rsqrt format "
+                              f"{fs.rsqrt} of '{fs.name}' needs edges above {1.0 / fs.rsqrt.max:.3g}: "
                               "the mesh's edge lengths vary too much for these formats")
     rest_raw = quantize(scaled_rest, fs.rest_length, HOST_ROUNDING, SAT)
     _refuse_zeros(rest_raw, scaled_rest, "an edge's rest length", "rest_length", fs)
