@@ -72,7 +72,8 @@ def cell(run: dict) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--presets", nargs="+", default=FormatSet.presets(), choices=FormatSet.presets())
-    parser.add_argument("--corpus", type=Path, default=REPO / "build" / "corpus", help="corpus directory (default %(default)s)")
+    parser.add_argument("--corpus", type=Path, default=REPO / "build" / "corpus",
+                        help="corpus directory (default %(default)s)")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="only these patches")
     parser.add_argument("--jobs", type=int, default=1, help="patches run at once (default 1)")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write the rows as JSON")

@@ -157,8 +157,9 @@ def _saturation_note(result: FlattenResult) -> str | None:
         return None
     fields = ", ".join(f"{name} {count}" for name, count in sorted(events.items(), key=lambda item: -item[1])[:3])
     return (f"format set '{result.extra['formats']}' clamped {result.extra['saturations']} values to its range"
-            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's; a format set with "
-            f"more integer bits holds them (presets: {', '.join(FormatSet.presets())}; docs/fixed-point.md)")
+            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's; "
+            f"a format set with more integer bits holds them (presets: {', '.join(FormatSet.presets())}; "
+            "docs/fixed-point.md)")
 
 
 def _check_distinct_files(args: argparse.Namespace) -> None:
@@ -201,8 +202,8 @@ def add_engine_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--engine", choices=ENGINE_NAMES, default=DEFAULT_ENGINE,
                         help="; ".join(f"{e.name}: {e.help}" for e in ENGINES))
     parser.add_argument("--formats", default=None, metavar="PRESET|FILE",
-                        help=f"fixed-point format set: a preset ({', '.join(FormatSet.presets())}; docs/fixed-point.md) or a "
-                             "JSON file (default: default)")
+                        help=f"fixed-point format set: a preset ({', '.join(FormatSet.presets())}; "
+                             "docs/fixed-point.md) or a JSON file (default: default)")
 
 
 def build_parser() -> argparse.ArgumentParser:

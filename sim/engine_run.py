@@ -358,9 +358,10 @@ def summary_line(name: str, simulator: str, run: EngineRun) -> str:
 
 
 def rtl_engine(formats: FormatSet):
-    """``--engine rtl``: the whole flattening through SpringflatEngine on Verilator, run as
-    :func:`flatten_on_rtl` runs it (``sim.flatten_run.choose_engine`` has checked the parameters), with the engine's default capacity (``SPRINGFLAT_ENGINE_CAPACITY=V,E,T`` overrides it: the tests use a
-    small engine); a mesh over capacity is a one-line error."""
+    """``--engine rtl``: the whole flattening through SpringflatEngine on Verilator (:func:`flatten_on_rtl`;
+    ``sim.flatten_run.choose_engine`` has checked the parameters), with the engine's default capacity
+    (``SPRINGFLAT_ENGINE_CAPACITY=V,E,T`` overrides it: the tests use a small engine); a mesh over capacity
+    is a one-line error."""
     import sys
     import tempfile
 

@@ -45,8 +45,8 @@ from .measures import SAT, FixedPointError, Reciprocal, _doubled_areas, energy_f
 from .pipeline import BarrierEntries, NeighbourStream, NodeConstants
 from .steplut import DT_MAX, DT_MIN, dt_constant, half_dt_sq, lut_value_float
 
-__all__ = ["FixedProblem", "prepare", "presets_holding", "flatten_fixed", "load_formats", "energy_to_float", "StopRule",
-           "ENERGY_TOL_FRAC_BITS", "run_fixed"]
+__all__ = ["FixedProblem", "prepare", "presets_holding", "flatten_fixed", "load_formats", "energy_to_float",
+           "StopRule", "ENERGY_TOL_FRAC_BITS", "run_fixed"]
 
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
 

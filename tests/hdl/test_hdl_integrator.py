@@ -95,7 +95,7 @@ def test_random_nodes_with_input_gaps(preset, momentum):
 
 
 #: Independent pins of the stages the integrator builds (NodeUpdate's tail_stages).
-LATENCY = {"default": 28, "narrow": 25}
+LATENCY = {"default": 28, "narrow": 25, "wide": 28}
 
 
 @pytest.mark.parametrize("preset", PRESETS)

@@ -10,7 +10,7 @@ import pytest
 from golden_model.generate import dome_grid
 from golden_model.mesh_io import save_obj
 from sim.cli import main
-from support import run_springflat as run
+from support import PRESETS, run_springflat as run
 
 ENDINGS = ["--out", ".dxf", "--out", ".pdf", "--out", ".svg", "--out", ".obj", "--distortion", ".csv"]
 
@@ -161,4 +161,5 @@ def test_study_on_a_dask_local_cluster_gives_the_pools_results(tmp_path):
     def runs(folder):  # every column but the wall time of each run
         with open(tmp_path / folder / "results.csv", newline="") as f:
             return [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
-    assert runs("pool") == runs("dask") and len(runs("pool")) == 8
+    # the base set, each other preset, lut_index_bits from 5 to 10
+    assert runs("pool") == runs("dask") and len(runs("pool")) == 1 + (len(PRESETS) - 1) + 6
