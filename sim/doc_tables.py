@@ -98,7 +98,7 @@ def accuracy_bounds() -> str:
 
 
 def rsqrt_accuracy() -> str:
-    """``measure_rsqrt`` of both presets' rsqrt units (a few seconds: 13M evaluations)."""
+    """``measure_rsqrt`` of every preset's rsqrt unit (a few seconds: 13M evaluations)."""
     from golden_model.fixed.rsqrt import measure_rsqrt
 
     rows = []
@@ -113,7 +113,7 @@ def rsqrt_accuracy() -> str:
 
 
 def step_accuracy() -> str:
-    """``measure_step_size`` of both presets' step generators (exhaustive over each error's domain)."""
+    """``measure_step_size`` of every preset's step generator (exhaustive over each error's domain)."""
     from golden_model.fixed.steplut import measure_step_size
 
     rows = []
@@ -132,7 +132,7 @@ def step_accuracy() -> str:
 
 
 def preset_costs() -> str:
-    """``sim.study.cost.cost`` of both presets."""
+    """``sim.study.cost.cost`` of every preset."""
     from .study.cost import cost
 
     return _table(["preset", "total bits", "DSP (18×18)", "ROM bits"],
