@@ -96,3 +96,20 @@ def test_fixed_point_keeps_the_guarantees_on_the_hard_patches(name):
     _, b = _float_and_fixed(name)
     assert b.status in ("converged", "max-iterations", "stalled")
     assert np.all(np.diff(b.history.energy) <= 0) and max(b.history.folded) == 0
+
+
+@pytest.mark.slow
+def test_the_wide_preset_holds_the_slivers_and_keeps_the_guarantees():
+    """The patch the default formats refuse (its slivers' barrier gain) runs in the wide preset, with the same
+    guarantees and no saturation event."""
+    from golden_model.fixed import FormatSet
+    from golden_model.fixed.engine import flatten_fixed
+    from golden_model.fixed.measures import FixedPointError
+
+    mesh = PATCHES["slivers"]
+    start, params = start_layout(mesh, "auto"), file_defaults(mesh)
+    with pytest.raises(FixedPointError, match="the barrier gain"):
+        flatten_fixed(mesh, start.positions, params)
+    b = flatten_fixed(mesh, start.positions, params, FormatSet.preset("wide"))
+    assert (b.status, b.extra["saturations"]) == ("converged", 0)
+    assert np.all(np.diff(b.history.energy) <= 0) and max(b.history.folded) == 0
