@@ -85,8 +85,9 @@ def _naming_presets_that_hold(run, formats):
             holding = presets_holding(mesh, positions, params)
             if not holding:
                 raise
-            raise FixedPointError(f"{exc}; the preset{'s' if len(holding) > 1 else ''} {', '.join(holding)} "
-                                  f"{'hold' if len(holding) > 1 else 'holds'} it: --formats {holding[-1]}") from None
+            hint = (f"the preset {holding[0]} holds it: --formats {holding[0]}" if len(holding) == 1 else
+                    f"the presets {', '.join(holding)} hold it: --formats NAME")
+            raise FixedPointError(f"{exc}; {hint}") from None
     return hinted
 
 

@@ -276,3 +276,19 @@ def test_momentum_on_the_fixed_engine_matches_the_float_engine():
     assert fixed["saturations"] == 0 and fixed["barrier"] is True
     assert abs(fixed["shape_error"] - floating["shape_error"]) <= 1e-3
     assert abs(fixed["area_error"] - floating["area_error"]) <= 1e-3
+
+
+@pytest.mark.parametrize("holding, hint", [([], None), (["wide"], "the preset wide holds it: --formats wide"),
+                                           (["narrow", "wide"], "the presets narrow, wide hold it: --formats NAME")])
+def test_a_fixed_point_refusal_names_the_presets_that_hold_the_mesh(monkeypatch, holding, hint):
+    import sim.flatten_run as flatten_run
+    from golden_model.fixed.measures import FixedPointError
+
+    def refuse(*args, **kw):
+        raise FixedPointError("too wide for these formats")
+
+    monkeypatch.setattr(flatten_run, "_holds", lambda *args: False)
+    monkeypatch.setattr(flatten_run, "presets_holding", lambda *args: holding)
+    with pytest.raises(FixedPointError) as info:
+        flatten_run._naming_presets_that_hold(refuse, None)("mesh", "P0", "params")
+    assert str(info.value) == "too wide for these formats" + (f"; {hint}" if hint else "")
