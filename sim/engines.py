@@ -2,14 +2,9 @@
 help, the checks before a run, what a batch and the Python API refuse, and each result's ``engine`` label
 derive from.
 
-=========  ===========  ==========================  =====  ===  ==========================================
-engine     fixed point  SpringflatEngine's checks   batch  API  runs
-=========  ===========  ==========================  =====  ===  ==========================================
-``float``  no           no                          yes    yes  the float reference (``golden_model.reference``)
-``fixed``  yes          no                          yes    yes  the bit-exact golden model (``golden_model.fixed``)
-``rtl``    yes          yes                         no     yes  the engine's Verilog on Verilator (``sim.engine_run``)
-``board``  yes          yes                         no     no   the engine on a ULX3S over its UART (``sim.board_run``)
-=========  ===========  ==========================  =====  ===  ==========================================
+Each :class:`Engine` says whether it runs fixed-point formats, runs ``SpringflatEngine`` (its parameter
+checks), may run in a batch's workers and in the Python API, and how its run is made (``float``: the float
+reference, ``fixed``: the golden model, ``rtl``: the Verilog on Verilator, ``board``: a ULX3S over its UART).
 
 Adding an engine is a row in :data:`ENGINES` and the function that makes its run.
 """

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from golden_model.fixed import FormatSet
+
 REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
 DATA = REPO / "tests" / "data"
@@ -24,7 +26,7 @@ SCANS = DATA / "scans"
 SPRINGFLAT = str(Path(sys.executable).parent / "springflat")
 """The console script of this environment."""
 TESTS = REPO / "tests"
-PRESETS: tuple[str, ...] = tuple(__import__("golden_model.fixed", fromlist=["FormatSet"]).FormatSet.presets())
+PRESETS: tuple[str, ...] = tuple(FormatSet.presets())
 """Every preset format set (``golden_model/data/formats``): the tests that cover each take them from here."""
 
 #: The test files that take longest (simulator builds, whole runs on simulators), in the order to start them,
