@@ -12,7 +12,7 @@ the mesh file's defaults): ``golden_model.generate.hard_patches()`` and the corp
 ``cone_tip`` and ``cad_sliver`` patches (docs/corpus.md; a missing corpus is skipped with a note).
 Per mesh the status, iterations, rolled-back steps and saturation events of each engine and
 |ΔE_S|, |ΔE_C|, and whether the row meets issue 25's bar (same status, iterations within ±1,
-|ΔE_S|, |ΔE_C| <= 1e-3); a mesh the formats (``--formats``, a preset: default ``default``) cannot hold is
+|ΔE_S|, |ΔE_C| <= 1e-3); a mesh the formats (``--formats``, a preset or a format-set file: default ``default``) cannot hold is
 "refused" with the reason.
 ``--perturbed`` adds the float run from ``P0·(1 + 1e-9)`` beside it: how far the float model's own
 stopping point moves under a perturbation far below fixed point's rounding. docs/guard.md quotes the tables.
@@ -130,9 +130,14 @@ def main() -> None:
     parser.add_argument("--perturbed", action="store_true",
                         help=f"also run float from P0·(1 + {PERTURBATION:g}): how far float moves from itself")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="only rows whose name starts with one of these")
-    parser.add_argument("--formats", default="default", choices=FormatSet.presets(),
-                        help="the fixed-point model's preset (default %(default)s)")
+    parser.add_argument("--formats", default="default", metavar="PRESET|PATH",
+                        help=f"the fixed-point model's format set: a preset ({', '.join(FormatSet.presets())}) or a "
+                             "format-set file (default %(default)s)")
     args = parser.parse_args()
+    try:
+        formats = FormatSet.load(args.formats)
+    except (OSError, ValueError) as exc:
+        parser.error(str(exc))
     rows = fast_subset(args.corpus, args.only) if args.fast_subset else generated_from_tutte(args.only)
     head = "| mesh | status (float / fixed) | iterations | rolled back | saturations | |ΔE_S| | |ΔE_C| | within the bar |"
     if args.perturbed:
@@ -142,7 +147,7 @@ def main() -> None:
     met = total = 0
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         for name, mesh, p0, params in rows:
-            line, ok = row(name, mesh, p0, params, args.perturbed, FormatSet.preset(args.formats))
+            line, ok = row(name, mesh, p0, params, args.perturbed, formats)
             met, total = met + ok, total + 1
             print(line, flush=True)
     print(f"\n{met} of {total} within the bar (same status, iterations ±{MAX_ITERATION_GAP}, "

@@ -1,5 +1,5 @@
-"""A trial, not a default: the guarded momentum step with a graph-Laplacian preconditioner or larger Jacobi
-weights (float only).
+"""A trial, not a default: the guarded momentum step with a graph-Laplacian preconditioner, larger Jacobi
+weights, a speed restart, or nonlinear conjugate gradients (float only).
 
 Usage::
 
@@ -26,6 +26,14 @@ Variants beside the default (``jacobi``):
   relaxation): besides the gradient restart, an accepted move shorter than the one before
   (``‖V_k‖ < ‖V_{k−1}‖``) restarts the momentum, from ``SPEED_RESTART_AFTER`` iterations after the last
   restart on;
+* ``cg``: Jacobi-preconditioned nonlinear conjugate gradients instead of the momentum (Polak–Ribière+,
+  ``d = w·f + γ·d_prev``, ``γ = max(0, (w·f)·(f − f_prev) / (w_prev·f_prev)·f_prev)``, ``d := w·f`` where
+  ``d`` is not a descent direction). Each iteration tries the step ``α·d`` (the guard's certificate on it),
+  fits a parabola through the energy there, the energy and its slope ``−f·d`` at the layout, and tries its
+  minimum ``α*`` too; the lower of the two is taken if it does not raise the energy, else ``d := w·f`` and
+  ``α`` halves. Two energy evaluations an iteration against the default's one: a line search the engine's
+  passes do not have, tried for what it would give. A Krylov method adapts to the spectrum where the
+  heavy ball's fixed schedule cannot (isolated slow modes cost it a few iterations each);
 * ``sweeps`` (the four patches only): ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from ``w·f``, each one
   more pass over the neighbours, the kind of preconditioner the engine's passes could run.
 
@@ -58,6 +66,7 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 
 import golden_model.reference as reference  # noqa: E402
 from golden_model.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap  # noqa: E402
+from golden_model.guard import guarded_moves  # noqa: E402
 from golden_model.layouts import initial_layout, start_layout  # noqa: E402
 from golden_model.mesh_io import load_mesh  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
@@ -70,7 +79,7 @@ DELTA = 0.01
 HYBRID_JACOBI_STEPS = 20
 #: ``speed``: iterations since the last restart before a shorter move restarts the momentum.
 SPEED_RESTART_AFTER = 10
-VARIANTS = ("jacobi", "laplacian", "hybrid", "jacobi2", "speed")
+VARIANTS = ("jacobi", "laplacian", "hybrid", "jacobi2", "speed", "cg")
 #: Four patches only: ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from the default's ``w·f`` (one more
 #: pass over the neighbours each, as the engine could run them).
 SWEEPS = 8
@@ -112,7 +121,55 @@ class _Trial(reference._Jacobi):
             x = x + 0.5 * inverse * (forces - self.params.spring * (degree * x - adjacency @ x))
         return x
 
+    def _try(self, proposal: np.ndarray) -> tuple[float, tuple]:
+        """The energy of the layout the guard lets ``proposal`` reach, and that layout's state (not taken)."""
+        mesh = self.model.mesh
+        moves, _ = guarded_moves(self.positions, proposal, mesh.faces, self.model.winding, 2.0 * mesh.face_areas)
+        before = (self.positions, self.delta, self.length, self.signed, self._layout_energy)
+        self.positions = self.positions + moves
+        self._refresh()
+        energy = self.energy_of_layout()
+        reached = (self.positions, self.delta, self.length, self.signed, self._layout_energy)
+        self.positions, self.delta, self.length, self.signed, self._layout_energy = before
+        return energy, reached
+
+    def _advance_cg(self) -> None:
+        forces = self.forces()
+        z = self.model.step_weights(self.positions, self.signed)[:, None] * forces
+        previous, alpha = getattr(self, "_cg_previous", None), getattr(self, "_cg_alpha", 1.0)
+        direction = z
+        if previous is not None:
+            forces_before, z_before, direction_before = previous
+            gamma = max(0.0, float(np.sum(z * (forces - forces_before))) / float(np.sum(z_before * forces_before)))
+            direction = z + gamma * direction_before
+            if float(np.sum(direction * forces)) <= 0.0:
+                direction = z
+        slope = float(np.sum(forces * direction))  # −dE/dα at α = 0
+        energy_1, reached_1 = self._try(alpha * direction)
+        curvature = 2.0 * (energy_1 - self.energy + alpha * slope) / alpha**2
+        best = (energy_1, reached_1)
+        if curvature > 0.0:
+            alpha_star = slope / curvature
+            energy_2, reached_2 = self._try(alpha_star * direction)
+            if energy_2 < energy_1:
+                best = (energy_2, reached_2)
+        else:
+            alpha_star = 2.0 * alpha
+        self.accepted = best[0] <= self.energy
+        if self.accepted:
+            self.energy = best[0]
+            self.positions, self.delta, self.length, self.signed, self._layout_energy = best[1]
+            self._cg_previous, self._cg_alpha = (forces, z, direction), alpha_star
+        else:
+            self._cg_previous, self._cg_alpha = None, min(alpha_star, alpha / 2.0)
+            self.guard.rejected += 1
+
     def _advance_momentum(self) -> None:
+        if self.variant == "cg":
+            if self.guard is None:
+                raise ValueError("the trial is the guarded step's")
+            self._advance_cg()
+            return
         speed_before, k = float(np.sum(self.velocities**2)), self.momentum_k
         super()._advance_momentum()
         if self.variant == "speed" and self.accepted and k >= SPEED_RESTART_AFTER \
