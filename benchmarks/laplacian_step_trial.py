@@ -31,7 +31,7 @@ Variants beside the default (``jacobi``):
   ``d`` is not a descent direction). Each iteration tries the step ``α·d`` (the guard's certificate on it),
   fits a parabola through the energy there, the energy and its slope ``−f·d`` at the layout, and tries its
   minimum ``α*`` too; the lower of the two is taken if it does not raise the energy, else ``d := w·f`` and
-  ``α`` halves. Two energy evaluations an iteration against the default's one: a line search the engine's
+  ``α`` halves. Up to two energy evaluations an iteration against the default's one: a line search the engine's
   passes do not have, tried for what it would give. A Krylov method adapts to the spectrum where the
   heavy ball's fixed schedule cannot (isolated slow modes cost it a few iterations each);
 * ``sweeps`` (the four patches only): ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from ``w·f``, each one
