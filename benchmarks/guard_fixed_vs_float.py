@@ -13,7 +13,7 @@ the mesh file's defaults): ``golden_model.generate.hard_patches()`` and the corp
 Per mesh the status, iterations, rolled-back steps and saturation events of each engine and
 |ΔE_S|, |ΔE_C|, and whether the row meets issue 25's bar (same status, iterations within ±1,
 |ΔE_S|, |ΔE_C| <= 1e-3); a mesh the formats (``--formats``, a preset or a format-set file: default ``default``) cannot hold is
-"refused" with the reason.
+"refused" with the reason; ``--rsqrt-frac-bits N`` resolves the lengths finer than the set does.
 ``--perturbed`` adds the float run from ``P0·(1 + 1e-9)`` beside it: how far the float model's own
 stopping point moves under a perturbation far below fixed point's rounding. docs/guard.md quotes the tables.
 """
@@ -122,6 +122,15 @@ def row(name: str, mesh: Mesh, p0: np.ndarray, params: FlattenParams, perturbed:
             f"{ds:.1e} | {dc:.1e} | {'yes' if ok else 'no'} |{extra}"), ok
 
 
+def finer_lengths(fs: FormatSet, rsqrt_frac_bits: int) -> FormatSet:
+    """``fs`` with ``rsqrt_frac_bits`` fraction bits of ``rsqrt`` (lengths resolved finer) and ``length_sq``'s
+    fraction bits cut, where needed, so that ``length_sq * rsqrt`` stays within 63 bits."""
+    r, q = fs.rsqrt, fs.length_sq
+    keep = min(q.frac_bits, 63 - q.int_bits - r.int_bits - rsqrt_frac_bits)
+    return fs.replace(rsqrt=f"u{r.int_bits}.{rsqrt_frac_bits}", length_sq=f"u{q.int_bits}.{keep}",
+                      name=f"{fs.name}, rsqrt u{r.int_bits}.{rsqrt_frac_bits}, length_sq u{q.int_bits}.{keep}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fast-subset", action="store_true",
@@ -133,9 +142,14 @@ def main() -> None:
     parser.add_argument("--formats", default="default", metavar="PRESET|PATH",
                         help=f"the fixed-point model's format set: a preset ({', '.join(FormatSet.presets())}) or a "
                              "format-set file (default %(default)s)")
+    parser.add_argument("--rsqrt-frac-bits", type=int, metavar="N",
+                        help="resolve lengths finer: N fraction bits of rsqrt, length_sq's cut to keep their product "
+                             "in 63 bits (the golden model's int64)")
     args = parser.parse_args()
     try:
         formats = FormatSet.load(args.formats)
+        if args.rsqrt_frac_bits is not None:
+            formats = finer_lengths(formats, args.rsqrt_frac_bits)
     except (OSError, ValueError) as exc:
         parser.error(str(exc))
     rows = fast_subset(args.corpus, args.only) if args.fast_subset else generated_from_tutte(args.only)
