@@ -37,9 +37,9 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
     from golden_model.engine_spec.register_map import STATES
     from hdl.phase_controller import PHASES
 
-    # stretched across, the guarded run rolls back its fifth step (the golden model's record says so): the
+    # stretched across, the guarded run rolls back its fourth step (the golden model's record says so): the
     # run up to it
-    image = image_of(FlattenParams(dynamics="momentum", max_iter=5), squeeze=1.2)
+    image = image_of(FlattenParams(dynamics="momentum", max_iter=4), squeeze=4.0)
     assert run_image(image, FS).guard.rejected == 1
     guard_phases = ("decide", "rollback", "integrate", "stuck", "hold", "certify", "commit")
     dut = PreloadableEngine(FS, CAPACITY)
