@@ -206,12 +206,23 @@ def add_engine_options(parser: argparse.ArgumentParser) -> None:
                              "docs/fixed-point.md) or a JSON file (default: default)")
 
 
+def installed_version() -> str:
+    """The installed distribution's version (``pyproject.toml``), or a word saying it is not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("springflat")
+    except PackageNotFoundError:
+        return "(not installed: run 'make test' or 'make demo')"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="springflat",
         description="Flatten triangle-mesh patches with the variable step-size mass-spring method, "
                     "and verify its fixed-point hardware.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")

@@ -14,6 +14,11 @@ line's option handling and the writers) and nothing in the project imports it.
 
 from __future__ import annotations
 
+from sim.cli import installed_version
+
 from .api import OPTIONS, MeshNote, Pattern, flatten, read_mesh, write_pattern
 
-__all__ = ["flatten", "read_mesh", "write_pattern", "Pattern", "OPTIONS", "MeshNote"]
+__all__ = ["flatten", "read_mesh", "write_pattern", "Pattern", "OPTIONS", "MeshNote", "__version__"]
+
+#: The installed version, as ``springflat --version`` prints it.
+__version__ = installed_version()

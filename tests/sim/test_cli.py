@@ -67,6 +67,20 @@ def test_flatten_file_mesh_to_svg_with_options(tmp_path):
     assert len(polygons) == mesh.n_faces
 
 
+def test_version_is_the_projects():
+    """``springflat --version`` and ``springflat.__version__``: the version pyproject.toml gives (the
+    command on stdout, exit 0)."""
+    import tomllib
+
+    import springflat
+    from support import REPO
+
+    want = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["version"]
+    proc = run("--version")
+    assert (proc.returncode, proc.stdout, proc.stderr) == (0, f"springflat {want}\n", "")
+    assert springflat.__version__ == want
+
+
 def test_human_summary_line():
     proc = run("flatten", "surf2", "--max-iter", "3")
     assert proc.returncode == 0
