@@ -72,8 +72,8 @@ FIXED_MISSES = {
     "noisy finger": "the fixed run saturates (684 events) and stops ~70 iterations before float, 3.8e-3 apart on "
                     "E_S; float from a start perturbed by 1e-9 stops 10 iterations apart too",
     "noisy horn": "within 1e-3 on E_S and E_C but ~27 iterations apart: the fixed forces' ~1e-3 relative error "
-                  "(rsqrt's 14 fraction bits) and the guard's discrete choices move the stopping point; float "
-                  "from a start perturbed by 1e-9 stops 28 apart",
+                  "and the guard's discrete choices move the stopping point (with rsqrt's 17 fraction bits in "
+                  "'wide' still 11 apart); float from a start perturbed by 1e-9 stops 28 apart",
     "slivers": "refused: the barrier gain μC/(4X*) of its slivers (868) does not fit the default barrier_gain format",
 }
 
