@@ -31,7 +31,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from golden_model.fixed import FormatSet  # noqa: E402
+from golden_model.fixed import MAX_PRODUCT_WIDTH, FormatSet  # noqa: E402
 from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.fixed.measures import FixedPointError  # noqa: E402
 from golden_model.generate import (delaunay_patch, dome_grid, hard_patches, rolled_grid, saddle_grid,  # noqa: E402
@@ -124,9 +124,10 @@ def row(name: str, mesh: Mesh, p0: np.ndarray, params: FlattenParams, perturbed:
 
 def finer_lengths(fs: FormatSet, rsqrt_frac_bits: int) -> FormatSet:
     """``fs`` with ``rsqrt_frac_bits`` fraction bits of ``rsqrt`` (lengths resolved finer) and ``length_sq``'s
-    fraction bits cut, where needed, so that ``length_sq * rsqrt`` stays within 63 bits."""
+    fraction bits cut, where needed, so that ``length_sq * rsqrt`` stays within the golden model's
+    :data:`~golden_model.fixed.MAX_PRODUCT_WIDTH` bits."""
     r, q = fs.rsqrt, fs.length_sq
-    keep = min(q.frac_bits, 63 - q.int_bits - r.int_bits - rsqrt_frac_bits)
+    keep = min(q.frac_bits, MAX_PRODUCT_WIDTH - q.int_bits - r.int_bits - rsqrt_frac_bits)
     return fs.replace(rsqrt=f"u{r.int_bits}.{rsqrt_frac_bits}", length_sq=f"u{q.int_bits}.{keep}",
                       name=f"{fs.name}, rsqrt u{r.int_bits}.{rsqrt_frac_bits}, length_sq u{q.int_bits}.{keep}")
 
@@ -144,7 +145,7 @@ def main() -> None:
                              "format-set file (default %(default)s)")
     parser.add_argument("--rsqrt-frac-bits", type=int, metavar="N",
                         help="resolve lengths finer: N fraction bits of rsqrt, length_sq's cut to keep their product "
-                             "in 63 bits (the golden model's int64)")
+                             f"in {MAX_PRODUCT_WIDTH} bits (the golden model's int64)")
     args = parser.parse_args()
     try:
         formats = FormatSet.load(args.formats)

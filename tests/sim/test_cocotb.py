@@ -84,13 +84,9 @@ def _first_restart(mesh, params: dict) -> int:
 
     engine = FixedEngine(prepare(mesh, initial_layout(mesh, "tutte"), FlattenParams(**params), DEFAULT),
                          SaturationCounter())
-    engine.measure()
-    for k in range(1, params["max_iter"] + 1):
-        engine.choose_step()
-        engine.advance()
-        if engine.momentum.restart:  # S < 0 in iteration k: iteration k + 1 restarts
-            return k + 1
-    return params["max_iter"] + 1
+    restarts = []  # S < 0 in iteration k: iteration k + 1 restarts
+    engine.run(on_iteration=lambda k: engine.momentum.restart and restarts.append(k + 1))
+    return min(restarts, default=params["max_iter"] + 1)
 
 
 @pytest.mark.parametrize("simulator, barrier", [("verilator", True), ("verilator", False), ("icarus", True)])
