@@ -32,6 +32,12 @@ WAVE_SUFFIX = {"icarus": ".fst", "verilator": ".vcd"}
 BENCH_PACKAGE = "sim.cocotb_benches"
 REPO = Path(__file__).resolve().parents[1]
 BUILD_ROOT = REPO / "build" / "cocotb"
+#: The files whose ``assert`` statements cocotb has pytest rewrite (``COCOTB_REWRITE_ASSERTION_FILES``):
+#: the benches only. cocotb's default, ``*.py``, rewrites every module the bench imports (numpy,
+#: scipy, the golden model, cocotb itself) at every simulator start: about 4 s of CPU per run. The
+#: pytest configuration cocotb makes for the rewriting loads no plugins (``PYTEST_DISABLE_PLUGIN_AUTOLOAD``):
+#: their modules would be rewritten too.
+REWRITE_ASSERTION_FILES = "*/cocotb_benches/*.py"
 #: ccache's store for the Verilator builds' C++ objects (:func:`prepare_environment`); ``make clean`` removes it.
 CCACHE_DIR = REPO / "build" / "ccache"
 
@@ -199,7 +205,9 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
             test_module=f"{BENCH_PACKAGE}.{bench}", hdl_toplevel=toplevel, testcase=testcase, build_dir=build_dir,
             test_dir=work, waves=waves, timescale=("1ns", "1ps"), results_xml=str(results_xml), log_file=log_file,
             extra_env={"SPRINGFLAT_BENCH_CONFIG": str(config_path), "SPRINGFLAT_BENCH_RESULT": str(result_path),
-                       "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])},
+                       "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+                       "COCOTB_REWRITE_ASSERTION_FILES": REWRITE_ASSERTION_FILES,
+                       "PYTEST_DISABLE_PLUGIN_AUTOLOAD": "1"},
         )
     except SystemExit:  # the runner exits when a test failed; the results file says which
         pass

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import sys
 from dataclasses import dataclass, field
 
 from cocotb.clock import Clock
@@ -24,9 +25,17 @@ def formats(config: dict) -> FormatSet:
     return FormatSet.from_dict(config["formats"])
 
 
+def rewritten_modules() -> list[str]:
+    """The loaded modules whose ``assert`` statements pytest rewrote (``COCOTB_REWRITE_ASSERTION_FILES``,
+    :data:`sim.cocotb_support.REWRITE_ASSERTION_FILES`): the benches, nothing they import."""
+    return sorted(name for name, module in list(sys.modules.items())
+                  if type(getattr(getattr(module, "__spec__", None), "loader", None)).__name__
+                  == "AssertionRewritingHook")
+
+
 def write_result(result: dict) -> None:
     with open(os.environ["SPRINGFLAT_BENCH_RESULT"], "w") as f:
-        json.dump(result, f, indent=1)
+        json.dump({**result, "rewritten_modules": rewritten_modules()}, f, indent=1)
 
 
 async def start_clock_and_reset(dut, idle: tuple[str, ...] = (), cycles: int = 3) -> None:

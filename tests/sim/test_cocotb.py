@@ -139,6 +139,9 @@ def test_a_broken_expectation_fails(simulator, bench, toplevel, config):
     run = run_bench(simulator, DEFAULT, toplevel, bench, config, testcase=toplevel if bench == "units" else None)
     assert run.failed == 1
     assert run.result["mismatches"] >= 1
+    # pytest rewrote the bench's asserts (a failure shows its values), and no module the bench imports
+    assert f"sim.cocotb_benches.{bench}" in run.result["rewritten_modules"]
+    assert all(name.split(".")[:2] == ["sim", "cocotb_benches"] for name in run.result["rewritten_modules"])
     if bench != "units":
         assert "iteration" in run.result["first_mismatches"][0]
 
