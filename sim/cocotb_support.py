@@ -34,7 +34,7 @@ REPO = Path(__file__).resolve().parents[1]
 BUILD_ROOT = REPO / "build" / "cocotb"
 #: The files whose ``assert`` statements cocotb has pytest rewrite (``COCOTB_REWRITE_ASSERTION_FILES``):
 #: the benches only. cocotb's default, ``*.py``, rewrites every module the bench imports (numpy,
-#: scipy, the golden model, cocotb itself) at every simulator start: about 4 s of CPU per run. The
+#: scipy, the golden model, cocotb itself) at every simulator start: 3–4 s of CPU per run. The
 #: pytest configuration cocotb makes for the rewriting loads no plugins (``PYTEST_DISABLE_PLUGIN_AUTOLOAD``):
 #: their modules would be rewritten too.
 REWRITE_ASSERTION_FILES = "*/cocotb_benches/*.py"
