@@ -31,7 +31,7 @@ from .cocotb_support import _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
-           "EngineRunError", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl",
+           "EngineRunError", "engine_directory", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl",
            "engine_flatten_result",
            "summary_line",
            "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo",
@@ -143,6 +143,14 @@ def simulation_harness(verilog: str, internal_clock: bool = False) -> str:
             f"endmodule\n")
 
 
+def engine_directory(fs: FormatSet, capacity: EngineCapacity, dsp: str | None = None) -> Path:
+    """Where :func:`engine_sources` exports the engine for ``fs``, ``capacity`` and the Verilog flavour ``dsp``:
+    one directory per distinct Verilog (a build without the step guard is another design at the same depths)."""
+    depths = f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}"
+    return (cocotb_support.BUILD_ROOT / _formats_key(fs, dsp) / "engine"
+            / (depths if capacity.guard else f"{depths}-no-guard"))
+
+
 def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator",
                    dsp: str | None = None, build: str = "default") -> Path:
     """Export ``springflat_engine.v`` for ``fs`` and ``capacity`` once; return a directory per
@@ -159,8 +167,7 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
 
     if dsp is not None and dsp not in PRIMITIVE_MODELS:
         raise SimulatorError(f"no simulation model for DSP flavour {dsp!r} (choose from {', '.join(PRIMITIVE_MODELS)})")
-    directory = (cocotb_support.BUILD_ROOT / _formats_key(fs, dsp) / "engine"
-                 / f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}")
+    directory = engine_directory(fs, capacity, dsp)
     exported = directory / f"{ENGINE_MODULE}.v"
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
     flags = build_flags(simulator, build)

@@ -7,6 +7,7 @@ a few iterations; Verilator takes the three dynamics modes. Every case shares on
 per simulator).
 """
 
+import dataclasses
 import json
 import os
 import re
@@ -21,7 +22,7 @@ from golden_model.engine_spec.image import EngineCapacity, build_image, run_imag
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.params import FlattenParams
-from sim.engine_run import engine_sources, run_image_on_rtl, simulation_harness, top_ports
+from sim.engine_run import engine_directory, engine_sources, run_image_on_rtl, simulation_harness, top_ports
 from sim.top_names import ENGINE_MODULE
 from golden_model.engine_spec.image import UNGUARDED
 from support import SPRINGFLAT, need_simulator
@@ -123,6 +124,15 @@ def test_a_broken_expectation_fails():
                            checks={"broken_expectation": True})
     assert not run.passed and run.mismatches == 1
     assert run.result["first_mismatches"][0].startswith("whole run: node 8 position.y: rtl ")
+
+
+def test_each_design_has_its_own_export_directory():
+    """A build without the step guard is another Verilog at the same depths, and so is the ECP5 flavour:
+    neither may reuse (or overwrite) the guarded export of a cached build."""
+    guardless = dataclasses.replace(CAPACITY, guard=False)
+    directories = {engine_directory(DEFAULT, CAPACITY), engine_directory(DEFAULT, guardless),
+                   engine_directory(DEFAULT, CAPACITY, "ecp5"), engine_directory(DEFAULT, guardless, "ecp5")}
+    assert len(directories) == 4
 
 
 #: A Yosys ``always @*`` block that only assigns a constant: it has no input, so an event-driven
