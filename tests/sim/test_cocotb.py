@@ -84,8 +84,13 @@ def _first_restart(mesh, params: dict) -> int:
 
     engine = FixedEngine(prepare(mesh, initial_layout(mesh, "tutte"), FlattenParams(**params), DEFAULT),
                          SaturationCounter())
-    restarts = []  # S < 0 in iteration k: iteration k + 1 restarts
-    engine.run(on_iteration=lambda k: engine.momentum.restart and restarts.append(k + 1))
+    restarts = []
+
+    def note_restart(k: int) -> None:
+        if engine.momentum.restart:  # S < 0 in iteration k: iteration k + 1 restarts
+            restarts.append(k + 1)
+
+    engine.run(on_iteration=note_restart)
     return min(restarts, default=params["max_iter"] + 1)
 
 
