@@ -84,8 +84,9 @@ def board_sources(fs: FormatSet, capacity: EngineCapacity) -> Path:
 
     here = Path(__file__).resolve()
     key = _formats_key(fs) + "-" + __import__("hashlib").sha256(here.read_bytes()).hexdigest()[:8]
-    size = f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}"
-    directory = cocotb_support.BUILD_ROOT / key / "board" / size
+    from .engine_run import capacity_key
+
+    directory = cocotb_support.BUILD_ROOT / key / "board" / capacity_key(capacity)
     target = directory / f"{BOARD_SIM_MODULE}.v"
     with build_lock(directory):
         if not target.exists():
@@ -117,7 +118,7 @@ def run_board_sim(problem: FixedProblem, capacity: EngineCapacity, *, work: Path
     work = Path(work) if work is not None else sources / "runs" / f"{os.getpid()}-{time.time_ns()}"
     work.mkdir(parents=True, exist_ok=True)
     (work / "problem.pkl").write_bytes(pickle.dumps(problem))
-    config = {"capacity": [capacity.vertices, capacity.entries, capacity.triangles], "divisor": SIM_DIVISOR,
+    config = {"capacity": [capacity.vertices, capacity.entries, capacity.triangles, capacity.guard], "divisor": SIM_DIVISOR,
               "timeout": SIM_TIMEOUT, "bad_frames": bad_frames}
     flags, make_flags = build_flags("verilator", "gpi-clock")  # the bench starts cocotb's clock
     with _make_flags(make_flags):

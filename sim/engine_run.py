@@ -31,7 +31,7 @@ from .cocotb_support import _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
-           "EngineRunError", "engine_directory", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl",
+           "EngineRunError", "capacity_key", "engine_directory", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl",
            "engine_flatten_result",
            "summary_line",
            "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo",
@@ -146,9 +146,13 @@ def simulation_harness(verilog: str, internal_clock: bool = False) -> str:
 def engine_directory(fs: FormatSet, capacity: EngineCapacity, dsp: str | None = None) -> Path:
     """Where :func:`engine_sources` exports the engine for ``fs``, ``capacity`` and the Verilog flavour ``dsp``:
     one directory per distinct Verilog (a build without the step guard is another design at the same depths)."""
+    return cocotb_support.BUILD_ROOT / _formats_key(fs, dsp) / "engine" / capacity_key(capacity)
+
+
+def capacity_key(capacity: EngineCapacity) -> str:
+    """A directory name per elaborated capacity: the depths, and whether the build has the step guard."""
     depths = f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}"
-    return (cocotb_support.BUILD_ROOT / _formats_key(fs, dsp) / "engine"
-            / (depths if capacity.guard else f"{depths}-no-guard"))
+    return depths if capacity.guard else f"{depths}-no-guard"
 
 
 def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator",
@@ -244,7 +248,7 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
     work.mkdir(parents=True, exist_ok=True)
     np.savez(work / "image.npz", nodes=image.nodes, entries=image.entries, triangles=image.triangles)
     config = {"capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
-                           "triangles": capacity.triangles},
+                           "triangles": capacity.triangles, "guard": capacity.guard},
               "constants": {k: int(v) for k, v in image.constants.items()},
               "wait_states": wait_states, "seed": seed,
               "internal_clock": simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS,

@@ -54,3 +54,30 @@ def test_surf1_over_the_simulated_uart_is_byte_identical_to_engine_fixed(tmp_pat
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "board.obj").read_bytes() == (tmp_path / "fixed.obj").read_bytes()
     assert r["status"] == "converged" and r["iterations"] > 10 and r["cycles"] > r["iterations"] * 100
+
+
+class _BenchCalled(Exception):
+    pass
+
+
+def test_the_board_bench_is_told_the_capacity_it_runs_on(monkeypatch, tmp_path):
+    """run_board_sim hands the bench the whole capacity, the step guard included (the driver checks
+    FEATURES.guard against the register map it builds from it)."""
+    import dataclasses
+
+    import sim.board_sim as board_sim
+
+    seen = []
+
+    def bench(simulator, fs, module, name, config, **kwargs):
+        seen.append(config["capacity"])
+        raise _BenchCalled
+
+    monkeypatch.setattr(board_sim, "board_sources", lambda *args, **kwargs: tmp_path)
+    monkeypatch.setattr(board_sim, "run_bench", bench)
+    _, problem = cli_problem(["surf1"])
+    guardless = dataclasses.replace(CAPACITY, guard=False)
+    for capacity in (CAPACITY, guardless):
+        with pytest.raises(_BenchCalled):
+            run_board_sim(problem, capacity, work=tmp_path / str(capacity.guard))
+    assert [EngineCapacity(*c) for c in seen] == [CAPACITY, guardless]
