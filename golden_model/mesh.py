@@ -23,8 +23,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["Mesh", "MeshError", "triangle_areas_3d", "signed_areas_2d", "COORDINATE_LIMIT",
-           "MIN_MESH_SIZE"]
+__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "oriented_mesh", "orient_consistently",
+           "triangle_areas_3d", "signed_areas_2d", "COORDINATE_LIMIT", "MIN_MESH_SIZE"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
 #: times the squared longest edge of the mesh.
@@ -43,6 +43,11 @@ MIN_MESH_SIZE = 1e-50
 
 class MeshError(ValueError):
     """A mesh that cannot be flattened; the message is one line for the user."""
+
+
+class InconsistentOrientation(MeshError):
+    """Two faces run through their shared edge the same way: the faces are not wound consistently
+    (:func:`oriented_mesh` turns them to agree, where the mesh is orientable)."""
 
 
 
@@ -364,6 +369,12 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
     if n_parts != 1:
         raise MeshError(f"mesh is not a single disk: it has {n_parts} connected components")
     _check_vertex_manifold(faces, side_edge, counts, n)
+    same_way = _same_way_pairs(faces, side_edge, counts)
+    if len(same_way):
+        f, g = sorted(same_way[0, :2])
+        a, b = edges[same_way[0, 2]]
+        raise InconsistentOrientation(f"faces {f} and {g} run through their shared edge ({a}, {b}) the same way: "
+                                      "the faces are not wound consistently")
 
     boundary = edges[counts == 1]
     if len(boundary) == 0:
@@ -378,6 +389,69 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
         raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")
 
 
+def _interior_side_pairs(side_edge: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two face sides (``3·face + k``) of every interior edge, in edge order."""
+    sides = np.flatnonzero(counts[side_edge] == 2)
+    pairs = sides[np.argsort(side_edge[sides], kind="stable")].reshape(-1, 2)
+    return pairs[:, 0], pairs[:, 1]
+
+
+def _same_way_pairs(faces: np.ndarray, side_edge: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """``(face, face, edge)`` rows of the interior edges that both their faces run through from the same
+    vertex: in a consistently wound mesh each interior edge is run one way by one face and back by the other."""
+    s, t = _interior_side_pairs(side_edge, counts)
+    same = faces.reshape(-1)[s] == faces.reshape(-1)[t]  # side k starts at corner k
+    return np.column_stack([s[same] // 3, t[same] // 3, side_edge[s[same]]])
+
+
+def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
+    """``faces`` with the fewest faces turned (two corners swapped) so that every interior edge is run both
+    ways, and how many were turned. ``faces`` must form a connected manifold; a non-orientable one (a Möbius
+    strip) raises :class:`MeshError`."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    faces = np.asarray(faces, dtype=np.int64)
+    _, side_edge, counts = _unique_edges(faces)
+    s, t = _interior_side_pairs(side_edge, counts)
+    f, g = s // 3, t // 3
+    same = faces.reshape(-1)[s] == faces.reshape(-1)[t]
+    m = len(faces)
+    # weight 1: the neighbours agree, 2: one of them must turn (0 would be no edge in a sparse matrix)
+    graph = sp.coo_matrix((np.where(same, 2, 1), (f, g)), shape=(m, m)).tocsr()
+    graph = graph.maximum(graph.T)
+    order, parent = breadth_first_order(graph, 0, directed=False, return_predecessors=True)
+    if len(order) != m:
+        raise MeshError(f"mesh is not a single disk: face {int(np.setdiff1d(np.arange(m), order)[0])} shares no "
+                        "edge with face 0")
+    turn = np.zeros(m, dtype=bool)
+    crossing = np.asarray(graph[order[1:], parent[order[1:]]]).ravel() == 2
+    turned = turn.tolist()
+    for face, above, cross in zip(order[1:].tolist(), parent[order[1:]].tolist(), crossing.tolist()):
+        turned[face] = turned[above] != cross  # a face agrees with its BFS parent once both are turned
+    turn[:] = turned
+    if 2 * turn.sum() > m:  # turn the fewer faces
+        turn = ~turn
+    result = faces.copy()
+    result[turn] = result[turn][:, [0, 2, 1]]
+    if len(_same_way_pairs(result, *_unique_edges(result)[1:])):  # a turned face's sides are other edges
+        raise MeshError("mesh is not orientable (like a Möbius strip): its faces cannot all be wound the same way")
+    return result, int(turn.sum())
+
+
+def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh") -> tuple[Mesh, list[str]]:
+    """A :class:`Mesh` of ``vertices`` and ``faces``, the faces first wound consistently if they are not
+    (:func:`orient_consistently`); the notes say how many faces were turned. Any other problem raises
+    :class:`MeshError` as ``Mesh`` does."""
+    try:
+        return Mesh(vertices, faces, name=name), []
+    except InconsistentOrientation:
+        turned_faces, turned = orient_consistently(faces)
+    plural = "s" if turned != 1 else ""
+    return Mesh(vertices, turned_faces, name=name), [
+        f"{turned} face{plural} wound against {'their' if plural else 'its'} neighbours: turned to agree with the "
+        f"other {len(faces) - turned} (the pattern's faces keep the turned winding)"]
+
+
 def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.ndarray, n: int) -> None:
     """Each vertex's incident triangles must form one fan (no pinched vertices).
 
@@ -389,11 +463,7 @@ def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.
     # Side k of face f runs from corner k to corner k+1.
     side_from = corner.reshape(-1)
     side_to = np.roll(corner, -1, axis=1).reshape(-1)
-    interior = counts[side_edge] == 2
-    sides = np.flatnonzero(interior)
-    order = np.argsort(side_edge[sides], kind="stable")
-    pairs = sides[order].reshape(-1, 2)  # the two face sides of each interior edge
-    s, t = pairs[:, 0], pairs[:, 1]
+    s, t = _interior_side_pairs(side_edge, counts)
     v_s_from = faces.reshape(-1)[side_from[s]]
     # Match corners of the same vertex on both sides of the shared edge.
     same = v_s_from == faces.reshape(-1)[side_from[t]]

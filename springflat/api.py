@@ -28,7 +28,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from golden_model.mesh import Mesh, MeshError
+from golden_model.mesh import Mesh, MeshError, oriented_mesh
 from golden_model.mesh_io import load_mesh_with_notes, save_obj
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
@@ -44,7 +44,8 @@ __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh
 
 
 class MeshNote(UserWarning):
-    """What :func:`read_mesh` changed or ignored in a file (polygons triangulated, STL corners merged, ...)."""
+    """What :func:`read_mesh` changed or ignored in a file (polygons triangulated, STL corners merged, faces
+    wound against their neighbours turned, ...), or :func:`flatten` in its arrays (faces turned)."""
 
 
 @dataclass(frozen=True)
@@ -249,7 +250,9 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         raise ParameterError(f"engine {engine.name!r}, {engine.help}, runs from the command line: springflat flatten "
                              f"MESH --engine {engine.name}; the API runs the "
                              + ", ".join(e.name for e in ENGINES if e.api) + " engines")
-    mesh = Mesh(vertices, faces, name=name)  # validated here: errors name no temporary file
+    mesh, notes = oriented_mesh(vertices, faces, name=name)  # validated here: errors name no temporary file
+    for note in notes:
+        warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     with tempfile.TemporaryDirectory(prefix="springflat-api-") as tmp:
         path = Path(tmp) / "mesh.obj"
         save_obj(path, mesh.vertices, mesh.faces)

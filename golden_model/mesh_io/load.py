@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files import read_file_bytes
-from ..mesh import Mesh, MeshError
+from ..mesh import Mesh, MeshError, oriented_mesh
 from .obj import obj_line_hint, read_obj
 from .off import read_off
 from .ply import read_ply
@@ -34,7 +34,8 @@ def load_mesh_with_notes(path: str | Path) -> tuple[Mesh, list[str]]:
     :func:`read_obj`).  STL goes through trimesh; it stores each triangle
     with its own three corners and no shared vertices, so for STL only,
     exactly equal corner coordinates are merged, numbered in order of first
-    appearance.
+    appearance.  Faces wound against their neighbours are turned to agree
+    with the majority (:func:`golden_model.mesh.oriented_mesh`), with a note.
 
     A file that cannot be read raises :class:`MeshError` "cannot read mesh
     '<path>': <reason>" (no such file, permission denied, ...); one that is
@@ -66,7 +67,8 @@ def load_mesh_with_notes(path: str | Path) -> tuple[Mesh, list[str]]:
     else:
         vertices, faces, notes = read_stl(data, path)
     try:
-        return Mesh(vertices, faces, name=path.stem), notes
+        mesh, turned = oriented_mesh(vertices, faces, name=path.stem)
+        return mesh, notes + turned
     except MeshError as exc:
         if suffix == ".obj":
             hint = obj_line_hint(str(exc), obj)

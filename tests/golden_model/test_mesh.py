@@ -5,8 +5,8 @@ import pytest
 import trimesh
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import Mesh, MeshError
-from golden_model.mesh_io import load_mesh, save_obj
+from golden_model.mesh import InconsistentOrientation, Mesh, MeshError, oriented_mesh
+from golden_model.mesh_io import load_mesh, load_mesh_with_notes, save_obj
 from golden_model.generate import grid_faces, grid_uv, rolled_grid
 
 SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
@@ -429,3 +429,75 @@ def test_an_unreadable_mesh_is_one_line(tmp_path):
         load_mesh(tmp_path / ("n" * 300 + ".obj"))
     with pytest.raises(MeshError, match=r"^cannot read mesh '.*nope\.ply': no such file$"):
         load_mesh(tmp_path / "nope.ply")
+
+
+def _grid(n: int = 6):
+    uv = grid_uv(n, n)
+    return np.column_stack([uv, 0.3 * (uv**2).sum(axis=1)]), grid_faces(n, n)
+
+
+def _each_interior_edge_run_both_ways(faces: np.ndarray) -> bool:
+    """Counted here from the directed sides, not with the module's helpers: a consistently wound disk
+    has no directed edge twice."""
+    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    return len(np.unique(directed, axis=0)) == len(directed)
+
+
+def _mobius(n: int = 12):
+    vertices, faces = [], []
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        for w in (-0.3, 0.3):
+            vertices.append([(1 + w * np.cos(a / 2)) * np.cos(a), (1 + w * np.cos(a / 2)) * np.sin(a), w * np.sin(a / 2)])
+    for i in range(n):
+        a0, a1 = 2 * i, 2 * i + 1
+        b0, b1 = (2 * i + 2, 2 * i + 3) if i < n - 1 else (1, 0)  # the half twist: the strip's sides swap
+        faces += [[a0, b0, b1], [a0, b1, a1]]
+    return np.array(vertices), np.array(faces)
+
+
+def test_faces_wound_against_their_neighbours_are_refused_naming_them():
+    vertices, faces = _grid()
+    assert _each_interior_edge_run_both_ways(faces)
+    faces[3] = faces[3][[0, 2, 1]]
+    assert not _each_interior_edge_run_both_ways(faces)
+    with pytest.raises(InconsistentOrientation, match=r"faces (3 and \d+|\d+ and 3) run through their shared edge") as info:
+        Mesh(vertices, faces)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("turned", [[3], list(range(1, 31)), list(range(30)), list(range(1, 50, 2))])
+def test_oriented_mesh_turns_the_fewer_faces_and_says_how_many(turned):
+    vertices, faces = _grid()
+    given = faces.copy()
+    given[turned] = given[turned][:, [0, 2, 1]]
+    mesh, notes = oriented_mesh(vertices, given)
+    assert _each_interior_edge_run_both_ways(mesh.faces)
+    expected = min(len(turned), len(faces) - len(turned))
+    assert (mesh.faces != given).any(axis=1).sum() == expected  # the fewer faces turned, the others as given
+    assert np.array_equal(np.sort(mesh.faces, axis=1), np.sort(given, axis=1))  # the same triangles
+    assert notes == [f"{expected} face{'s' if expected != 1 else ''} wound against "
+                     f"{'their' if expected != 1 else 'its'} neighbours: turned to agree with the other "
+                     f"{len(faces) - expected} (the pattern's faces keep the turned winding)"]
+
+
+def test_a_consistent_mesh_is_left_as_it_is():
+    vertices, faces = _grid()
+    mesh, notes = oriented_mesh(vertices, faces)
+    assert notes == [] and np.array_equal(mesh.faces, faces)
+
+
+def test_a_mobius_strip_is_refused_as_not_orientable():
+    vertices, faces = _mobius()
+    with pytest.raises(MeshError, match="not orientable"):
+        oriented_mesh(vertices, faces)
+
+
+def test_a_file_with_a_turned_face_loads_wound_consistently_with_a_note(tmp_path):
+    vertices, faces = _grid()
+    faces[7] = faces[7][[0, 2, 1]]
+    save_obj(tmp_path / "turned.obj", vertices, faces)
+    mesh, notes = load_mesh_with_notes(tmp_path / "turned.obj")
+    assert _each_interior_edge_run_both_ways(mesh.faces)
+    assert notes == ["1 face wound against its neighbours: turned to agree with the other 49 (the pattern's faces "
+                     "keep the turned winding)"]

@@ -218,3 +218,14 @@ def test_write_pattern_and_read_mesh(ear, tmp_path):
     doc, auditor = recover.readfile(tmp_path / "ear.dxf")
     assert not auditor.has_errors and doc.header["$INSUNITS"] == 6
     assert doc.ezdxf_metadata()["springflat_mesh"] == "ear"
+
+
+def test_arrays_with_a_face_wound_against_its_neighbours_are_turned_with_a_note():
+    from golden_model.generate import grid_faces, grid_uv
+
+    uv = grid_uv(6, 6)
+    faces = grid_faces(6, 6)
+    faces[3] = faces[3][[0, 2, 1]]
+    with pytest.warns(springflat.MeshNote, match="1 face wound against its neighbours: turned"):
+        pattern = springflat.flatten(np.column_stack([uv, 0.3 * (uv**2).sum(axis=1)]), faces, max_iter=20)
+    assert pattern.folded == 0 and pattern.faces[3].tolist() == faces[3][[0, 2, 1]].tolist()

@@ -306,3 +306,26 @@ def test_a_fixed_point_refusal_names_the_presets_that_hold_the_mesh(monkeypatch,
     with pytest.raises(FixedPointError) as info:
         flatten_run._naming_presets_that_hold(refuse, None)("mesh", "P0", "params")
     assert str(info.value) == "too wide for these formats" + (f"; {hint}" if hint else "")
+
+
+@pytest.mark.parametrize("engine", ["float", "fixed"])
+def test_a_face_wound_against_its_neighbours_is_turned_and_the_pattern_has_no_fold(tmp_path, engine):
+    """A scan's file with one face written the other way round: the run turns it (a note says so) and the
+    pattern, counted with the faces as written to it, has every triangle on one side."""
+    from golden_model.generate import grid_faces, grid_uv
+    from golden_model.mesh_io import read_obj, save_obj
+
+    uv = grid_uv(6, 6)
+    faces = grid_faces(6, 6)
+    faces[3] = faces[3][[0, 2, 1]]
+    save_obj(tmp_path / "turned.obj", np.column_stack([uv, 0.3 * (uv**2).sum(axis=1)]), faces)
+    out = tmp_path / "turned.flat.obj"
+    proc = run("flatten", tmp_path / "turned.obj", "--engine", engine, "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert "springflat: note: turned: 1 face wound against its neighbours: turned to agree" in proc.stderr
+    written = read_obj(out, out.read_bytes())
+    p, f = written.vertices[:, :2], np.asarray(written.faces)
+    a, b, c = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    signed = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    assert (signed > 0).all() or (signed < 0).all()
+    assert "folded 0" in proc.stdout
