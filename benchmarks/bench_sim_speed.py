@@ -1,7 +1,7 @@
 """Where a whole engine run's Verilator time goes: one workload on several builds of the engine, in one run.
 
 Usage: .venv/bin/python benchmarks/bench_sim_speed.py [--side 45] [--iterations 40] [--repeats 3]
-       [--builds gpi-clock,default,x-randomised,cxx-O2,verilator-O3,threads-2,pgo] [--harness]
+       [--builds gpi-clock,default,x-randomised,cxx-O2,verilator-O3,threads-2,pgo] [--harness] [--guardless]
 
 The workload is ``bench_engine_sim.py``'s: ``dome_grid(45)`` (2,025 vertices, 11,792 entries, 3,872
 triangles), the paper's dynamics with the variable step from a Tutte layout, tolerances 0 so the run goes to
@@ -14,6 +14,10 @@ are measured round-robin ``--repeats`` times, so a change in the machine's load 
 has each build's median simulated cycles per second from START to done (the engine's CYCLES register over
 the wall time), its spread, and the ratio to the first build. Every run must be bit-exact with ``run_image``.
 
+With ``--guardless`` it also runs the workload on ``default``'s build of the engine without the step guard
+(``EngineCapacity(guard=False)``: no guard passes, no proposal memories), round-robin with the others: what the
+guard's logic costs the simulator while the paper's dynamics leaves it idle.
+
 With ``--harness`` it also measures the harness alone (``sim.engine_run.harness_ceiling``: a counter under the
 bench's clock and wait, 5 million cycles) for ``gpi-clock`` and ``default``, after the engine's runs.
 """
@@ -24,6 +28,7 @@ import argparse
 import statistics
 import sys
 import time
+from dataclasses import replace
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
@@ -34,10 +39,14 @@ from golden_model.params import FlattenParams
 from sim.engine_run import VERILATOR_BUILDS, harness_ceiling, prepare_pgo, run_image_on_rtl
 
 
-def image_for(side: int, iterations: int, fs: FormatSet):
+#: The pseudo-build of ``--guardless``: ``default``'s flags on the engine built without the step guard.
+GUARDLESS = "default, no guard"
+
+
+def image_for(side: int, iterations: int, fs: FormatSet, capacity=DEFAULT_CAPACITY):
     mesh = dome_grid(side)
     params = FlattenParams(density="auto", tol_area=0.0, tol_shape=0.0, max_iter=iterations)
-    return build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), DEFAULT_CAPACITY)
+    return build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), capacity)
 
 
 def main() -> int:
@@ -47,6 +56,8 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--builds", default="gpi-clock,default,x-randomised,verilator-O3,pgo")
     parser.add_argument("--harness", action="store_true", help="also measure the harness alone")
+    parser.add_argument("--guardless", action="store_true",
+                        help="also measure the default build of the engine without the step guard (model size)")
     args = parser.parse_args()
     builds = [b.strip() for b in args.builds.split(",") if b.strip()]
     unknown = [b for b in builds if b not in VERILATOR_BUILDS or b == "pgo-generate"]
@@ -54,6 +65,13 @@ def main() -> int:
         parser.error(f"unknown build {unknown[0]!r} (choose from {', '.join(VERILATOR_BUILDS)})")
     fs = FormatSet.preset("default")
     image = image_for(args.side, args.iterations, fs)
+    images = {build: image for build in builds}
+    if args.guardless:  # the same run on a smaller model: the paper's dynamics uses none of the guard
+        builds.append(GUARDLESS)
+        images[GUARDLESS] = image_for(args.side, args.iterations, fs, replace(DEFAULT_CAPACITY, guard=False))
+
+    def run_on(build: str):
+        return run_image_on_rtl(images[build], fs, "verilator", build="default" if build == GUARDLESS else build)
     started = time.monotonic()
 
     def say(msg):
@@ -68,7 +86,7 @@ def main() -> int:
                 print(f"pgo training run not bit-exact: {training.result.get('first_mismatches')}", file=sys.stderr)
                 return 1
         say(f"{build}: building and a first run")
-        run = run_image_on_rtl(image, fs, "verilator", build=build)
+        run = run_on(build)
         if not run.passed:
             print(f"{build}: not bit-exact: {run.result.get('first_mismatches', run.result)}", file=sys.stderr)
             return 1
@@ -76,7 +94,7 @@ def main() -> int:
     cycles = None
     for repeat in range(args.repeats):
         for build in builds:
-            run = run_image_on_rtl(image, fs, "verilator", build=build)
+            run = run_on(build)
             if not run.passed:
                 print(f"{build}: not bit-exact: {run.result.get('first_mismatches')}", file=sys.stderr)
                 return 1
@@ -93,7 +111,7 @@ def main() -> int:
     print("|---|---|---|---|---|---|")
     base = statistics.median(speeds[builds[0]])
     for build in builds:
-        flags, make = VERILATOR_BUILDS[build]
+        flags, make = VERILATOR_BUILDS["default" if build == GUARDLESS else build]
         median = statistics.median(speeds[build])
         ratio = f"{median / base:.2f}x"
         print(f"| {build} | `{' '.join(flags)}` | `{make.replace(chr(92), '')}` | {median:,.0f} | "
