@@ -431,7 +431,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     """The initial layout for ``init`` (:data:`AUTO_START`, a method or a file), fold-free where possible.
 
     The guarded dynamics keeps a fold-free start fold-free but cannot clear a fold. ``auto`` is ARAP,
-    or SLIM from Tutte (fold-free by construction) where ARAP folds: measured on the corpus, that
+    or SLIM from Tutte (fold-free by construction) where ARAP folds or fails: measured on the corpus, that
     beats untangling ARAP's layout on E_C and on time. Any other start with folds is untangled
     (:func:`golden_model.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
     folded is returned with its count, and the notes say why. ``progress(text)`` is called before
@@ -448,7 +448,14 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     if name != ARRAY_START:
         say(f"computing {described}" if method in _METHODS else f"reading {described}")
     read_notes: list[str] = []
-    positions = initial_layout(mesh, init if name == ARRAY_START else method, read_notes)
+    try:
+        positions = initial_layout(mesh, init if name == ARRAY_START else method, read_notes)
+    except LayoutError as exc:
+        if name != AUTO_START or "needs libigl" in str(exc):
+            raise
+        notes = [f"{exc}: starting from SLIM on Tutte's layout instead (fold-free by construction)"]
+        say(notes[-1])
+        return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
     folded = _folds(mesh, positions)
     if folded == 0:
         return StartLayout(positions, method, 0, read_notes)

@@ -84,7 +84,7 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("mesh", nargs="?", default="surf1",
                         help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
-                        help="initial layout: auto (arap; where it folds, slim from tutte), tutte, pca, "
+                        help="initial layout: auto (arap; where it folds or fails, slim from tutte), tutte, pca, "
                              "harmonic, lscm, arap, slim (libigl) or a file of V rows 'x y' / an OBJ (default: "
                              "pca for built-ins, auto for files); with the guarded dynamics any other start "
                              "with folds is untangled")
@@ -173,7 +173,7 @@ def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
 
 def default_init(mesh_name: str) -> str:
     """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), ``auto`` for files
-    (ARAP; SLIM from Tutte where ARAP folds: golden_model.layouts.start_layout)."""
+    (ARAP; SLIM from Tutte where ARAP folds or fails: golden_model.layouts.start_layout)."""
     return "pca" if is_builtin(mesh_name) and not Path(mesh_name).is_file() else AUTO_START
 
 

@@ -207,3 +207,21 @@ def test_libigl_exception_is_a_layout_error(monkeypatch, method, function):
     with pytest.raises(LayoutError, match=rf"^{method} layout failed: igl.{function} raised RuntimeError: "
                                           r"solver exploded$"):
         initial_layout(dome_grid(6), method)
+
+
+def test_auto_starts_from_slim_where_arap_fails():
+    """A 1e-9 sliver makes libigl's ARAP return non-finite coordinates: ``auto`` (which the user did not ask
+    to be ARAP) then starts from SLIM on Tutte's layout, with a note; ``arap`` asked for by name fails."""
+    from golden_model.layouts import start_layout
+
+    uv = grid_uv(6, 6)
+    vertices = np.column_stack([uv, 0.1 * (uv**2).sum(axis=1)])
+    vertices[14] = vertices[13] + [1e-9, 0, 0]
+    mesh = Mesh(vertices, grid_faces(6, 6))
+    with pytest.raises(LayoutError, match="arap layout failed"):
+        start_layout(mesh, "arap")
+    start = start_layout(mesh, "auto")
+    assert start.method == "slim" and start.folded == 0 and np.isfinite(start.positions).all()
+    assert start.notes == ["arap layout failed: igl.arap_solve returned non-finite coordinates for 35 of 36 vertices: "
+                           "starting from SLIM on Tutte's layout instead (fold-free by construction)"]
+    assert not folded_faces(start.positions, mesh.faces).any()
