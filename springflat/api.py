@@ -276,7 +276,9 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     scale on ``paper`` = ``a4``, ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the 3D mesh with
     the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured by
     distortion).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
-    :mod:`sim.patterns`.  The file appears whole or not at all.
+    :mod:`sim.patterns`.  The file appears whole or not at all, and an existing file at ``path`` is replaced:
+    the arrays carry no file name, so unlike ``springflat flatten --out`` this cannot refuse the mesh's own
+    file (a ``.obj`` written there replaces the mesh with the triangulated mesh and its ``vt``).
     """
     if not isinstance(pattern, Pattern):
         raise TypeError(f"write_pattern takes the Pattern that flatten returns, not {type(pattern).__name__}")
