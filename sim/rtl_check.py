@@ -37,7 +37,8 @@ def add_parser(sub, add_run_options) -> None:
                    help="simulator (default verilator)")
     p.add_argument("--engine-top", action="store_true",
                    help="run the whole flattening through SpringflatEngine (springflat_engine.v, driven over "
-                        "its Wishbone bus) and compare it bit for bit with the golden model's run_image")
+                        "its Wishbone bus) and compare it bit for bit with the golden model's run_image (what a "
+                        "guarded run, a mesh file's default, always does)")
     p.add_argument("--capacity", type=int, nargs=3, default=None, metavar=("V", "E", "T"),
                    help="with --engine-top: the engine's vertices, neighbour entries and triangles "
                         "(default: DEFAULT_CAPACITY)")
@@ -68,13 +69,18 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         check_distinct([("--waves", args.waves)], input_files(args))
     load_format_set(args.formats)  # a formats file that cannot work is refused before the run mode
     check_engine_params(params)
+    if params.guard and not args.engine_top:
+        if args.stall:  # asked for the datapath bench, which has no guard
+            raise UserError("the datapath bench (--stall) has no step guard: drop --stall for the whole engine "
+                            "(--engine-top, with --wait-states), or add --no-guard --energy-window 1")
+        print("springflat: note: the guarded momentum dynamics (the default for mesh files) runs on the whole "
+              "engine only: checking SpringflatEngine (--engine-top); the datapath bench takes --no-guard "
+              "--energy-window 1", file=sys.stderr)
+        args.engine_top = True
     if args.engine_top:
         return cmd_rtl_check_engine(args, mesh, params)
     if args.capacity is not None or args.wait_states:
         raise UserError("--capacity and --wait-states apply to --engine-top")
-    if params.guard:
-        raise UserError("the datapath bench (rtl-check without --engine-top) has no step guard: add --engine-top "
-                        "for the guarded momentum dynamics, or --no-guard --energy-window 1")
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     if not 0 <= args.stall < 1:

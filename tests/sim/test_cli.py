@@ -272,11 +272,12 @@ def test_a_stalled_fixed_point_run_says_why_and_writes_its_layout(tmp_path):
 
 
 def test_rtl_check_refuses_the_guard_on_the_datapath_bench(tmp_path):
-    """The datapath bench has no step guard: a guarded run is one line naming the way out, before any build."""
-    proc = run("rtl-check", "surf1", "--dynamics", "momentum", cwd=tmp_path)
+    """The datapath bench (asked for with --stall) has no step guard: a guarded run is one line naming the
+    ways out, before any build."""
+    proc = run("rtl-check", "surf1", "--dynamics", "momentum", "--stall", "0.2", cwd=tmp_path)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "has no step guard: add --engine-top" in lines[0], proc.stderr
+    assert len(lines) == 1 and "the datapath bench (--stall) has no step guard: drop --stall" in lines[0], proc.stderr
     assert "building" not in proc.stderr
 
 

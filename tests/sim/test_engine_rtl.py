@@ -175,6 +175,23 @@ def test_rtl_check_engine_top_cli(tmp_path):
         assert key in r
 
 
+def test_rtl_check_on_a_mesh_file_with_its_defaults_runs_the_whole_engine(tmp_path):
+    """A mesh file's defaults are the guarded momentum dynamics, which only the whole engine runs: rtl-check
+    says so in a note and checks SpringflatEngine, bit-exact, instead of refusing its own defaults."""
+    from golden_model.mesh_io import save_obj
+
+    need_simulator("verilator")
+    mesh = dome_grid(4)
+    save_obj(tmp_path / "dome.obj", mesh.vertices, mesh.faces)
+    proc = subprocess.run([SPRINGFLAT, "rtl-check", "dome.obj", "--capacity", "64", "512", "128", "--iterations", "3",
+                           "--json"], capture_output=True, text=True, cwd=tmp_path, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "springflat: note: the guarded momentum dynamics (the default for mesh files) runs on the whole engine only" \
+        in proc.stderr
+    r = json.loads(proc.stdout)
+    assert (r["mismatches"], r["top"], r["iterations"]) == (0, "springflat_engine", 3)
+
+
 @pytest.mark.parametrize("command", [["rtl-check", "surf2", "--engine-top"], ["flatten", "surf2", "--engine", "rtl"]])
 def test_a_mesh_over_capacity_is_refused_in_one_line(command, tmp_path):
     """Refused before anything is built: exit 2 and one line naming the count and the capacity."""
