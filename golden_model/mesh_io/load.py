@@ -31,7 +31,8 @@ def load_mesh_with_notes(path: str | Path) -> tuple[Mesh, list[str]]:
     Vertex *i* of the file is node *i* in every format but STL.  OBJ is read
     by :func:`read_obj`, PLY (ASCII and binary) and OFF by the project's own
     readers; polygons are fan-triangulated in file order, with a note (see
-    :func:`read_obj`).  STL goes through trimesh; it stores each triangle
+    :func:`read_obj`).  Binary STL goes through trimesh, text STL through
+    :func:`read_text_stl`; STL stores each triangle
     with its own three corners and no shared vertices, so for STL only,
     exactly equal corner coordinates are merged, numbered in order of first
     appearance.  Faces wound against their neighbours are turned to agree
@@ -76,7 +77,7 @@ def load_mesh_with_notes(path: str | Path) -> tuple[Mesh, list[str]]:
 
 
 def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """STL (ASCII or binary) through trimesh, equal corners merged."""
+    """STL (binary through trimesh, text by :func:`read_text_stl`), equal corners merged."""
     import trimesh  # heavy import, only needed for STL
 
     count = int.from_bytes(data[80:84], "little") if len(data) >= 84 else 0
@@ -87,23 +88,112 @@ def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]
         raise MeshError(f"cannot parse mesh '{path}': not a text STL (no 'solid ... facet'), and as a binary STL "
                         f"its header's {count:,} triangles would take {84 + 50 * count:,} bytes, not {len(data):,} "
                         "(truncated or damaged?)")
-    if not binary:
-        # text: trimesh would guess a non-UTF-8 encoding with charset_normalizer (an optional
-        # dependency); STL keywords and numbers are ASCII, so undecodable bytes are replaced
-        data = data.decode("utf-8", errors="replace").encode("utf-8")
-    try:
-        loaded = trimesh.load(io.BytesIO(data), file_type="stl", process=False, maintain_order=True, force="mesh")
-        vertices = np.asarray(loaded.vertices, dtype=np.float64)
-        faces = np.asarray(loaded.faces)
-    except Exception as exc:  # trimesh raises many types on malformed files
-        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise MeshError(f"cannot parse mesh '{path}': {reason}") from None
     notes = []
+    if not binary:
+        vertices, faces = read_text_stl(data, f"cannot parse mesh '{path}'", notes)
+    else:
+        try:
+            loaded = trimesh.load(io.BytesIO(data), file_type="stl", process=False, maintain_order=True, force="mesh")
+            vertices = np.asarray(loaded.vertices, dtype=np.float64)
+            faces = np.asarray(loaded.faces)
+        except Exception as exc:  # trimesh raises many types on malformed files
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise MeshError(f"cannot parse mesh '{path}': {reason}") from None
     if len(vertices):
         corners = len(vertices)
         vertices, faces = _merge_exact_duplicates(vertices, faces)
         notes.append(f"merged {corners} STL triangle corners into {len(vertices)} shared vertices")
     return vertices, faces, notes
+
+
+def read_text_stl(data: bytes, where: str, notes: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """A text STL's triangles as ``(3F, 3)`` corners and ``(F, 3)`` faces (corner ``3f + k``), read line by
+    line so that a malformed or truncated file is refused naming the line (``where``: the message's start).
+    ``solid`` … ``endsolid`` may repeat; a file that ends after a whole facet without ``endsolid`` is read,
+    with a note (it may be truncated)."""
+    text = data.decode("utf-8", errors="replace")  # keywords and numbers are ASCII
+    lines = text.splitlines()
+    if lines and not text.endswith(("\n", "\r")):  # a line cut short: say so where the grammar breaks on it
+        where_last = len(lines)
+    else:
+        where_last = 0
+
+    def refused(line_no: int, what: str) -> MeshError:
+        cut = ", the file's last line, cut short: truncated?" if line_no == where_last else ""
+        return MeshError(f"{where}: line {line_no}: {what}{cut}")
+
+    corners: list[list[float]] = []
+    expect = "solid"  # the next keyword the grammar allows (with 'endsolid' after a facet)
+    line_no = 0
+    for line_no, line in enumerate(lines, start=1):
+        words = line.split()
+        if not words:
+            continue
+        keyword = words[0].lower()
+        if expect == "solid":
+            if keyword != "solid":
+                raise refused(line_no, f"expected 'solid', got {_shown(line)}")
+            expect = "facet"
+        elif expect == "facet":
+            if keyword == "endsolid":
+                expect = "solid"
+            elif keyword == "facet" and len(words) == 5 and words[1].lower() == "normal":
+                _numbers(words[2:], refused, line_no)
+                expect, loop = "outer", 0
+            else:
+                raise refused(line_no, f"expected 'facet normal nx ny nz' or 'endsolid', got "
+                                f"{_shown(line)}")
+        elif expect == "outer":
+            if [w.lower() for w in words] != ["outer", "loop"]:
+                raise refused(line_no, f"expected 'outer loop', got {_shown(line)}")
+            expect = "vertex"
+        elif expect == "vertex":
+            if keyword == "vertex" and len(words) == 4:
+                corners.append(_numbers(words[1:], refused, line_no))
+                loop += 1
+                expect = "endloop" if loop == 3 else "vertex"
+            else:
+                raise refused(line_no, f"expected 'vertex x y z' (corner {loop + 1} of 3), got "
+                                f"{_shown(line)}")
+        elif expect == "endloop":
+            if keyword != "endloop":
+                raise refused(line_no, f"expected 'endloop' after three vertices (STL holds "
+                                f"triangles), got {_shown(line)}")
+            expect = "endfacet"
+        elif expect == "endfacet":
+            if keyword != "endfacet":
+                raise refused(line_no, f"expected 'endfacet', got {_shown(line)}")
+            expect = "facet"
+    if expect not in ("solid", "facet"):
+        raise MeshError(f"{where}: the file ends inside facet {len(corners) // 3 + 1} (after line {line_no}): "
+                        "truncated?")
+    if expect == "facet":
+        notes.append(f"no 'endsolid' after the last of {len(corners) // 3} facets (line {line_no}): the file may "
+                     "be truncated")
+    faces = np.arange(len(corners), dtype=np.int64).reshape(-1, 3)
+    return np.array(corners, dtype=np.float64).reshape(-1, 3), faces
+
+
+def _numbers(words: list[str], refused, line_no: int) -> list[float]:
+    try:
+        return [float(w) for w in words]
+    except ValueError:
+        bad = next(w for w in words if not _is_number(w))
+        raise refused(line_no, f"{_shown(bad)} is not a number") from None
+
+
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+        return True
+    except ValueError:
+        return False
+
+
+def _shown(text: str, limit: int = 40) -> str:
+    """``text`` quoted for a one-line message, shortened."""
+    text = text.strip()
+    return repr(text if len(text) <= limit else text[:limit] + "…")
 
 
 def _merge_exact_duplicates(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

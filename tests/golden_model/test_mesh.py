@@ -400,6 +400,40 @@ def test_ply_and_off_refusals_are_one_line(tmp_path, text, message):
     assert "\n" not in str(info.value)
 
 
+_STL_FACET = ("  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n      vertex 1 0 0\n      vertex 0 1 0\n"
+              "    endloop\n  endfacet\n")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("solid s\n" + _STL_FACET.replace("vertex 1 0 0", "vertex 1 abc 0") + "endsolid s\n",
+     r"line 5: 'abc' is not a number$"),
+    ("solid s\n" + _STL_FACET.replace("      vertex 0 1 0\n", "") + "endsolid s\n",
+     r"line 6: expected 'vertex x y z' \(corner 3 of 3\), got 'endloop'$"),
+    ("solid s\n" + _STL_FACET.replace("    endloop\n", "      vertex 1 1 0\n    endloop\n") + "endsolid s\n",
+     r"line 7: expected 'endloop' after three vertices \(STL holds triangles\), got 'vertex 1 1 0'$"),
+    ("solid s\n" + _STL_FACET + _STL_FACET[:47], r"line 11: expected 'vertex x y z' \(corner 1 of 3\), got 'verte', "
+     r"the file's last line, cut short: truncated\?$"),
+    ("solid s\n" + _STL_FACET + _STL_FACET[:55], r"the file ends inside facet 2 \(after line 11\): truncated\?$"),
+    ("solid s\n  facet 0 0 1\n", r"line 2: expected 'facet normal nx ny nz' or 'endsolid', got 'facet 0 0 1'$"),
+])
+def test_text_stl_refusals_name_the_line(tmp_path, text, message):
+    """A text STL is read line by line (golden_model.mesh_io.load.read_text_stl): a malformed or cut file is
+    refused naming the line, not with a parser's internal message."""
+    path = tmp_path / "m.stl"
+    path.write_text(text)
+    with pytest.raises(MeshError, match=r"^cannot parse mesh '.*': " + message) as info:
+        load_mesh(path)
+    assert "\n" not in str(info.value)
+
+
+def test_a_text_stl_without_endsolid_is_read_with_a_note(tmp_path):
+    path = tmp_path / "m.stl"
+    path.write_text("solid s\n" + _STL_FACET + _STL_FACET.replace("vertex 0 0 0", "vertex 1 1 0"))
+    mesh, notes = load_mesh_with_notes(path)
+    assert (mesh.n_vertices, mesh.n_faces) == (4, 2)
+    assert notes[0] == "no 'endsolid' after the last of 2 facets (line 15): the file may be truncated"
+
+
 def test_off_variants(tmp_path):
     path = tmp_path / "m.off"
     path.write_text("COFF 4 2 0  # counts on the keyword's line\n0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n"
