@@ -87,8 +87,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":
-        print(f"springflat: the run diverged at iteration {result.iterations + 1} ({divergence_hint(params)}); "
-              "outputs hold the last finite state", file=sys.stderr)
+        print(f"springflat: iteration {result.iterations + 1} left the finite numbers ({divergence_hint(params)}); "
+              f"the outputs hold the layout after iteration {result.iterations}, the last finite one", file=sys.stderr)
         return EXIT_DIVERGED
     return 0
 

@@ -185,6 +185,9 @@ def test_diverged_run_exits_nonzero_but_writes_finite_layout(tmp_path):
     vertices = [line.split()[1:] for line in (tmp_path / "o.flat.obj").read_text().splitlines()
                 if line.startswith("v ")]
     assert len(vertices) == 7 and np.isfinite(np.array(vertices, dtype=float)).all()
+    n = json.loads(proc.stdout)["iterations"]  # the iterations whose layouts were finite
+    assert (f"springflat: iteration {n + 1} left the finite numbers (" in proc.stderr
+            and f"the outputs hold the layout after iteration {n}, the last finite one" in proc.stderr)
 
 
 def test_a_diverged_runs_plot_is_written_without_warnings(tmp_path):
