@@ -105,9 +105,20 @@ def check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before the run, an output path that cannot work, and two outputs that are one file."""
     for _, flag, endings, path in output_paths(args):
         check_output_path(path, flag, endings)
+    _check_options_used(args)
     if args.init is None:
         args.init = default_init(args.mesh)
     _check_distinct_files(args)
+
+
+def _check_options_used(args: argparse.Namespace) -> None:
+    """Refuse an option that this run would ignore (one line naming what it needs)."""
+    if args.dxf_edges and not any(str(path).lower().endswith(".dxf") for path in args.out or ()):
+        raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
+    if args.port is not None and args.engine != "board":
+        raise UserError("--port is the board's serial port: add --engine board")
+    if args.jobs is not None and args.jobs < 1:
+        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
 
 
 #: Iterations :func:`_energy_rule_note` looks back over.

@@ -23,7 +23,7 @@ from golden_model.layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_
 from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes
-from golden_model.modes import DYNAMICS
+from golden_model.modes import DYNAMICS, Step
 from golden_model.params import FlattenParams, ParameterError
 
 from .outputs import OutputError
@@ -240,7 +240,24 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> Flatt
         value = getattr(args, option)
         if value is not None:
             changes[option] = value
-    return defaults.with_(**changes)
+    params = defaults.with_(**changes)
+    _check_options_apply(args, params)
+    return params
+
+
+def _check_options_apply(args: argparse.Namespace, params: FlattenParams) -> None:
+    """Refuse an option given for a part of the run that these parameters leave out (it would be ignored)."""
+    if args.dt is not None and params.mode.step is not Step.FIXED:
+        raise ParameterError("--dt is the size of the paper dynamics' fixed step: add --step fixed" if
+                             params.dynamics == "paper" else
+                             "the momentum dynamics takes no --dt (its step is the weighted force): drop --dt")
+    for option in ("penalty_kappa", "penalty_gain"):
+        if getattr(args, option) is not None and not params.penalty:
+            raise ParameterError(f"--{option.replace('_', '-')} sets the penalty: add --penalty")
+    for option in ("barrier_threshold", "barrier_gain"):
+        if getattr(args, option) is not None and not params.barrier:
+            flag = f"--{option.replace('_', '-')}"
+            raise ParameterError(f"{flag} sets the fold barrier, which this run has off: add --barrier (or drop {flag})")
 
 
 def strict_json(summary: dict) -> str:

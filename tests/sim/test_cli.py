@@ -136,6 +136,17 @@ BAD_ARGS = [
     (["--out", ".dxf"], "--out '.dxf' is a file-name ending, not a file name: name the file (e.g. 'pattern.dxf')"),
     ([""], "the mesh path is empty"),
     (["--out", "o.obj", "--history", "h.obj"], "--history 'h.obj' must end in .csv"),
+    # options that this run would ignore
+    (["--dt", "0.5"], "--dt is the size of the paper dynamics' fixed step: add --step fixed"),
+    (["--dynamics", "momentum", "--dt", "0.5"], "the momentum dynamics takes no --dt"),
+    (["--barrier-gain", "3"], "--barrier-gain sets the fold barrier, which this run has off: add --barrier"),
+    (["--dynamics", "momentum", "--no-barrier", "--barrier-threshold", "0.3"], "--barrier-threshold sets the fold "
+                                                                              "barrier, which this run has off"),
+    (["--penalty-gain", "5"], "--penalty-gain sets the penalty: add --penalty"),
+    (["--penalty-kappa", "2"], "--penalty-kappa sets the penalty: add --penalty"),
+    (["--port", "/nowhere"], "--port is the board's serial port: add --engine board"),
+    (["--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf"),
+    (["--jobs", "0"], "--jobs must be >= 1, got 0"),
 ]
 
 
