@@ -48,6 +48,7 @@ from .run_options import (
     input_files,
     load_format_set,
     params_from_args,
+    file_path_argument,
     path_argument,
     resolve_mesh,
     strict_json,
@@ -242,12 +243,12 @@ def build_parser() -> argparse.ArgumentParser:
     from .board_run import add_board_options
 
     add_board_options(p)
-    p.add_argument("--out", type=path_argument, action="append", metavar="FILE",
+    p.add_argument("--out", type=file_path_argument, action="append", metavar="FILE",
                    help="the pattern, by its ending (repeat for several): .dxf (cut line on layer CUT), .pdf or "
                         ".svg (true scale on --paper sheets), .obj (the 3D mesh with the pattern as vt), "
                         ".flat.obj (the layout, z = 0), .flat.svg (the layout coloured by distortion)")
-    p.add_argument("--history", type=path_argument, metavar="FILE.csv", help="per-iteration CSV")
-    p.add_argument("--plot", type=path_argument, metavar="FILE.png", help="PNG of the layouts and error curves")
+    p.add_argument("--history", type=file_path_argument, metavar="FILE.csv", help="per-iteration CSV")
+    p.add_argument("--plot", type=file_path_argument, metavar="FILE.png", help="PNG of the layouts and error curves")
     p.add_argument("--json", action="store_true", help="print one JSON object with the results")
     add_pattern_options(p)
     from .batch import add_batch_options

@@ -44,7 +44,7 @@ from golden_model.mesh import Mesh, folded_faces
 from golden_model.mesh_io import save_obj
 
 from .outputs import OutputError, atomic_write, write_layout
-from .run_options import path_argument
+from .run_options import file_path_argument
 
 #: Length units a mesh may be in, and millimetres per unit.
 UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
@@ -104,7 +104,7 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
                              "or fit: one page the pattern's size (default a4)")
     parser.add_argument("--dxf-edges", action="store_true",
                         help="also write every mesh edge to the DXF, on layer MESH (the boundary is on CUT)")
-    parser.add_argument("--distortion", type=path_argument, default=None, metavar="FILE.csv",
+    parser.add_argument("--distortion", type=file_path_argument, default=None, metavar="FILE.csv",
                         help="per-triangle area ratio and per-edge strain as CSV")
 
 

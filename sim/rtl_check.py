@@ -21,7 +21,7 @@ from golden_model.engine_spec.image import check_engine_params
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, run_bench
-from .run_options import path_argument
+from .run_options import file_path_argument
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["add_parser", "cmd_rtl_check"]
@@ -45,7 +45,7 @@ def add_parser(sub, add_run_options) -> None:
     p.add_argument("--wait-states", type=int, default=0, metavar="N",
                    help="with --engine-top: up to N random idle clocks before each bus cycle (default 0)")
     p.add_argument("--iterations", type=int, default=None, metavar="N", help="stop after at most N iterations")
-    p.add_argument("--waves", type=path_argument, default=None, metavar="PATH",
+    p.add_argument("--waves", type=file_path_argument, default=None, metavar="PATH",
                    help="write the waveform here: FILE.fst with icarus, FILE.vcd with verilator")
     p.add_argument("--stall", type=float, default=0.0, metavar="P",
                    help="probability of a random stall on each side per clock (default 0)")

@@ -78,6 +78,15 @@ def path_argument(text: str) -> Path:
     return Path(text)
 
 
+def file_path_argument(text: str) -> Path:
+    """A file option's value: a path (:func:`path_argument`) that does not end in a separator, which names
+    a directory (``Path`` would drop it, and ``--out new.dxf/`` write the file ``new.dxf``)."""
+    path = path_argument(text)
+    if text.endswith(("/", os.sep)):
+        raise argparse.ArgumentTypeError(f"expected a file name, got {text!r} (a trailing '/' names a directory)")
+    return path
+
+
 def add_run_options(parser: argparse.ArgumentParser) -> None:
     """The options every command that runs the algorithm shares."""
     builtins = ", ".join(BUILTIN_MESHES)

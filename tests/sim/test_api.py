@@ -194,6 +194,8 @@ def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
         springflat.write_pattern(tmp_path / "x.dxf", (V, F))
     with pytest.raises(TypeError, match="dxf_edges must be True or False, got 'no'"):
         springflat.write_pattern(tmp_path / "x.dxf", springflat.flatten(V, F, max_iter=1), dxf_edges="no")
+    with pytest.raises(ValueError, match="expected a file name, got '.*x.dxf/' \\(a trailing '/' names a directory"):
+        springflat.write_pattern(f"{tmp_path}/x.dxf/", springflat.flatten(V, F, max_iter=1))
     assert list(tmp_path.iterdir()) == []
 
 

@@ -133,6 +133,8 @@ BAD_ARGS = [
     (["--plot", "p.jpg"], "must end in .png"),
     (["--out", "nodir/x.obj"], "does not exist"),
     (["--out", ""], "argument --out: expected a path, got ''"),
+    (["--out", "newdir.dxf/"], "argument --out: expected a file name, got 'newdir.dxf/' (a trailing '/' names a "
+                               "directory)"),
     (["--out", ".dxf"], "--out '.dxf' is a file-name ending, not a file name: name the file (e.g. 'pattern.dxf')"),
     ([""], "the mesh path is empty"),
     (["--out", "o.obj", "--history", "h.obj"], "--history 'h.obj' must end in .csv"),
