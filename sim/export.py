@@ -26,7 +26,7 @@ from golden_model.fixed import FormatSet, exp_table
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from hdl.dsp import dsp_target
 
-from .top_names import CORE_MODULE, ENGINE_MODULE
+from .top_names import COMPONENT_SUMMARIES, CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["COMPONENTS", "ENGINE_MODULE", "export_verilog", "export_engine", "export_engine_bundle",
            "engine_capacity", "memory_image_markdown", "describe"]
@@ -52,15 +52,7 @@ class ComponentSpec:
                 "guard_certificate_ii2": lambda fs: hdl.GuardCertificate(fs, interval=2)}[self.module](fs)
 
 
-COMPONENTS = (
-    ComponentSpec("rsqrt_unit", "reciprocal square root, |Δ|² → r"),
-    ComponentSpec("step_generator", "exp-LUT step generator, (E_S, E_C) → (Δt, ½Δt²)"),
-    ComponentSpec("node_update", "node-update datapath: neighbour entries → updated nodes"),
-    ComponentSpec(CORE_MODULE, "top: node-update datapath + step generator + step registers"),
-    ComponentSpec("guard_certificate", "the step guard's inversion test: a triangle's corners and proposed moves "
-                                       "→ its level (docs/engine-guard.md; in the engine at II 2)"),
-    ComponentSpec("guard_certificate_ii2", "the same at an initiation interval of 2: half the multipliers"),
-)
+COMPONENTS = tuple(ComponentSpec(module, summary) for module, summary in COMPONENT_SUMMARIES.items())
 
 
 def _fields(layout, fs: FormatSet, offset=0, path=()):

@@ -12,6 +12,7 @@ from pathlib import Path
 from golden_model.engine_spec import uart_protocol as protocol
 
 from .run_options import path_argument
+from .top_names import COMPONENT_SUMMARIES
 from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS,
                     DoesNotFit, SynthError, report_markdown, run_synthesis)
 
@@ -29,9 +30,7 @@ def _positive(text: str) -> float:
 
 
 def _component_list(text: str) -> list[str]:
-    from .export import COMPONENTS
-
-    names = [c.module for c in COMPONENTS] + [ENGINE]
+    names = [*COMPONENT_SUMMARIES, ENGINE]
     chosen = [c.strip() for c in text.split(",") if c.strip()]
     for c in chosen:
         if c not in names:
@@ -62,8 +61,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         + f"); with --board the engine's clock from the PLL (default {protocol.ENGINE_CLOCK_HZ / 1e6:g})")
     p.add_argument("--out", type=path_argument, default=None, help="bundle directory (default synth-TARGET-PRESET)")
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
-                   help="comma-separated subset of rsqrt_unit,step_generator,node_update,springflat_core,"
-                        "springflat_engine (default: all but springflat_engine)")
+                   help=f"comma-separated subset of {', '.join([*COMPONENT_SUMMARIES, ENGINE])} (default: all but "
+                        f"{ENGINE})")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="springflat_engine's vertices, neighbour entries and triangles (default: "
                         "golden_model.engine_spec.image.DEFAULT_CAPACITY)")

@@ -267,3 +267,15 @@ def test_dp16kd_model_is_the_ram_yosys_maps(tmp_path, width, depth):
     raddr[:] = waddr
     lines = icarus_run(tmp_path, ["net.v"], "ram", ports, we, waddr, wdata, raddr)
     assert all("x" in line[-width:] for line in lines[1:])
+
+
+def test_the_help_names_every_component_synth_takes(capsys):
+    """--components' help lists what the option accepts: every exported component and the engine."""
+    from sim.export import COMPONENTS
+    from sim.top_names import ENGINE_MODULE
+
+    with pytest.raises(SystemExit):
+        cli.main(["synth", "--help"])
+    text = " ".join(capsys.readouterr().out.split())  # argparse's line wrapping undone
+    for module in [c.module for c in COMPONENTS] + [ENGINE_MODULE]:
+        assert f"{module}," in text or f"{module} (default" in text, module
