@@ -283,6 +283,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_rtl_check_parser(sub, add_run_options)
     add_study_parser(sub)
     add_synth_parser(sub)
+    parser.commands = sub.choices  # each command's parser by name (main's errors point at its --help)
     return parser
 
 
@@ -297,7 +298,9 @@ def _quiet_after_interrupt() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extras = parser.parse_known_args(argv)
+    if extras:  # refused by the command's own parser, so that the message points at its --help
+        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}")
     reset_interrupted()
     handler = threading.current_thread() is threading.main_thread()
     # Ctrl-C or kill: one line, status 130 or 143 (sim.exit_codes.STOP_SIGNALS)

@@ -130,6 +130,7 @@ BAD_ARGS = [
     (["--init", "missing-layout.txt"], "no such file"),
     (["--init", "short.txt"], "rows but the mesh has 7"),
     (["--step", "wobbly"], "invalid choice"),
+    (["--bogus"], "unrecognized arguments: --bogus (see 'springflat flatten --help')"),
     (["--plot", "p.jpg"], "must end in .png"),
     (["--out", "nodir/x.obj"], "does not exist"),
     (["--out", ""], "argument --out: expected a path, got ''"),
