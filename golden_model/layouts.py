@@ -331,12 +331,23 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
                 raise LayoutError(
                     f"layout '{path}': row {bad + 1} has {len(rows[bad])} values, expected 2 (x y)"
                 )
-            positions = np.array(rows, dtype=np.float64).reshape(-1, 2)
-        except (UnicodeDecodeError, ValueError) as exc:
+            positions = np.array([[_layout_number(v, path, k) for v in r] for k, r in enumerate(rows)],
+                                 dtype=np.float64).reshape(-1, 2)
+        except UnicodeDecodeError as exc:
+            raise LayoutError(f"cannot parse layout '{path}': not a text file (byte {exc.start} is not UTF-8 "
+                              "text): a layout is a text file of 'x y' rows or an OBJ") from None
+        except ValueError as exc:
             if isinstance(exc, LayoutError):
                 raise
             raise LayoutError(f"cannot parse layout '{path}': {str(exc).splitlines()[0]}") from None
     return check_layout(positions, n_vertices, f"layout '{path}'", faces)
+
+
+def _layout_number(text: str, path: Path, row: int) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise LayoutError(f"cannot parse layout '{path}': row {row + 1} has {text[:20]!r}, not a number") from None
 
 
 def check_layout(positions, n_vertices: int, what: str, faces: np.ndarray | None = None) -> np.ndarray:
@@ -379,10 +390,16 @@ def _obj_layout_notes(path: Path, data: bytes, vertices: np.ndarray, faces: np.n
 
     notes = []
     try:
-        own = read_obj(path, data).faces
-        differ = len(own) != len(faces) or not np.array_equal(np.unique(np.sort(own, axis=1), axis=0),
-                                                              np.unique(np.sort(faces, axis=1), axis=0))
-        what = "no faces" if len(own) == 0 else f"{len(own)} faces that are not the mesh's {len(faces)}"
+        own = np.asarray(read_obj(path, data).faces, dtype=np.int64).reshape(-1, 3)
+        if len(own) == 0:
+            differ, what = True, "no faces"
+        else:
+            # each triangle as its vertex set (a turned winding is the same triangle)
+            theirs = {tuple(t) for t in np.sort(faces, axis=1).tolist()}
+            foreign = sum(tuple(t) not in theirs for t in np.sort(own, axis=1).tolist())
+            differ = foreign > 0 or len(own) != len(faces)
+            what = (f"{foreign} of its {len(own)} faces not among the mesh's {len(faces)}" if foreign else
+                    f"{len(own)} faces where the mesh has {len(faces)}")
     except MeshError as exc:
         differ, what = True, f"faces that cannot be read ({str(exc).split(': ', 1)[-1]})"
     if differ:

@@ -339,10 +339,11 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
         else:
             pending.append(job)
     pending.sort(key=lambda job: -len(job.data or b""))  # the largest first: the last task to start is short
+    count = min(workers, max(1, len(pending)))
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, "local")
-             else f"{min(workers, max(1, len(pending)))} {'Dask ' if args.scheduler else ''}worker processes")
+             else f"{count} {'Dask ' if args.scheduler else ''}worker process{'es' if count != 1 else ''}")
     if not args.json:
-        print(f"springflat: {len(meshes)} meshes on {where}", file=sys.stderr)
+        print(f"springflat: {len(meshes)} mesh{'es' if len(meshes) != 1 else ''} on {where}", file=sys.stderr)
     done = 0
 
     def report(outcome: MeshOutcome) -> None:

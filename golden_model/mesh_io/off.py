@@ -24,9 +24,12 @@ def read_off(data: bytes, where: str) -> tuple[np.ndarray, Polygons]:
     if "#" in text:
         lines = [line.split("#", 1)[0] for line in lines]
     rows = [(number, tokens) for number, tokens in enumerate(map(str.split, lines), 1) if tokens]
-    if not rows or rows[0][1][0] not in _OFF_KEYWORDS:
-        first = rows[0][1][0][:20] if rows else "nothing"
-        raise MeshError(f"{where}: not an OFF file (it starts with {first!r}; binary and 4D/nD OFF are not supported)")
+    if not rows:
+        raise MeshError(f"{where}: the file is empty{' but for comments and blank lines' if text.strip() else ''}: "
+                        "no 'OFF' header, no vertices, no faces")
+    if rows[0][1][0] not in _OFF_KEYWORDS:
+        raise MeshError(f"{where}: not an OFF file (it starts with {rows[0][1][0][:20]!r}; binary and 4D/nD OFF are "
+                        "not supported)")
     count_line, header = rows[0][0], rows[0][1][1:]
     if header[:1] == ["BINARY"]:
         raise MeshError(f"{where}: binary OFF is not supported (write it as text OFF, PLY or OBJ)")

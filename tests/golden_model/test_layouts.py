@@ -225,3 +225,14 @@ def test_auto_starts_from_slim_where_arap_fails():
     assert start.notes == ["arap layout failed: igl.arap_solve returned non-finite coordinates for 35 of 36 vertices: "
                            "starting from SLIM on Tutte's layout instead (fold-free by construction)"]
     assert not folded_faces(start.positions, mesh.faces).any()
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"\x89PNG\r\n\x1a\n", r"^cannot parse layout '.*l.txt': not a text file \(byte 0 is not UTF-8 text\): a layout "
+                           r"is a text file of 'x y' rows or an OBJ$"),
+    (b"0 0\n# a comment\n\n1 x\n", r"^cannot parse layout '.*l.txt': row 2 has 'x', not a number$"),
+])
+def test_an_unreadable_layout_file_is_one_line_naming_what(tmp_path, content, message):
+    (tmp_path / "l.txt").write_bytes(content)
+    with pytest.raises(LayoutError, match=message):
+        load_layout(tmp_path / "l.txt", 2)

@@ -390,6 +390,8 @@ def test_ply_ascii_with_tabs_crlf_and_mixed_faces(tmp_path):
     ("OFF\n3 1\n0 0 0\n1 0 0\n", r"the file ends early"),
     ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", r"line 6: face with 2 corners"),
     ("OFF BINARY\n", r"binary OFF is not supported"),
+    ("", r"the file is empty: no 'OFF' header, no vertices, no faces"),
+    ("# a comment\n\n", r"the file is empty but for comments and blank lines: no 'OFF' header"),
     ("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", r"line 4: vertex coordinate 'x' is not a number"),
 ])
 def test_ply_and_off_refusals_are_one_line(tmp_path, text, message):

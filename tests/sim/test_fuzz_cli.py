@@ -821,8 +821,12 @@ ROUND_TWO_LAYOUTS: dict[str, Case] = {
         ["--init", "l.obj"], note=r"note: layout 'l.obj' has no faces: only its vertices' x, y are used",
         files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]), faces=np.zeros((0, 3), dtype=int))}),
     "obj layout with other faces": Case(
-        ["--init", "l.obj"], note=r"note: layout 'l.obj' has 18 faces that are not the mesh's 18: only its vertices'",
+        ["--init", "l.obj"], note=r"note: layout 'l.obj' has 18 of its 18 faces not among the mesh's 18: only its vertices'",
         files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]), faces=_flip_diagonals(F))}),
+    "obj layout with two other faces": Case(
+        ["--init", "l.obj"], note=r"note: layout 'l.obj' has 2 of its 18 faces not among the mesh's 18: only its",
+        files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0 * UV[:, 0]]),
+                            faces=np.vstack([_flip_diagonals(F)[:2], F[2:]]))}),
     "obj layout with z": Case(
         ["--init", "l.obj"], note=r"note: layout 'l.obj' has z up to 0\.2, not a flat layout: only x, y are used",
         files={"l.obj": obj(np.column_stack([LAYOUT_ROWS, 0.2 * UV[:, 0]]))}),
