@@ -127,7 +127,7 @@ def _ascii_indices(numbers: np.ndarray, element: str) -> np.ndarray:
     if bad.any():
         value = float(numbers[np.flatnonzero(bad)[0]])
         what = "out of range" if not abs(value) < INDEX_LIMIT else "not an integer"
-        raise ValueError(f"element '{element}' has an index {value:.17g} that is {what}")
+        raise ValueError(f"element '{element}' has an index {value!r} that is {what}")  # repr: the shortest exact
     return numbers.astype(np.int64)
 
 

@@ -780,6 +780,9 @@ ROUND_TWO_MESHES: dict[str, Case] = {
                                    files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 99999999999999999999")}),
     "ply fractional index": Case(["m.ply"], 2, r"element 'face' has an index 5.5 that is not an integer",
                                  files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 5.5")}),
+    "ply fractional index with no exact binary form": Case(
+        ["m.ply"], 2, r"element 'face' has an index 7.7 that is not an integer$",
+        files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 7.7")}),
     "stl with 0 triangles": Case(["m.stl"], 2, r"invalid mesh 'm.stl': the binary STL holds 0 triangles",
                                  files={"m.stl": _stl_no_triangles()}),
     "stl with 0 triangles and a header that is not UTF-8": Case(
