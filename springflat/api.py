@@ -197,6 +197,8 @@ def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
     reader changed (polygons fan-triangulated, STL corners merged) is a :class:`MeshNote` warning.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"read_mesh takes a file path (str or pathlib.Path), not {type(path).__name__}")
     mesh, notes = load_mesh_with_notes(path)
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
@@ -204,6 +206,8 @@ def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
+    if F is not None and hasattr(V, "vertices") and hasattr(V, "faces"):
+        raise TypeError(f"flatten takes a {type(V).__name__} alone (its faces are its own), or two arrays V, F")
     if F is None:
         if not (hasattr(V, "vertices") and hasattr(V, "faces")):
             raise TypeError("flatten(V, F) takes two arrays, or one trimesh.Trimesh")

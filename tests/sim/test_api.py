@@ -6,6 +6,7 @@ import subprocess
 
 import numpy as np
 import pytest
+import trimesh
 
 import springflat
 from golden_model.mesh import MeshError
@@ -112,6 +113,10 @@ def test_unknown_keywords_and_wrong_types_are_type_errors(ear):
         springflat.flatten(V, F, barrier="yes")
     with pytest.raises(TypeError, match="trimesh"):
         springflat.flatten(V)
+    with pytest.raises(TypeError, match="flatten takes a Trimesh alone \\(its faces are its own\\), or two arrays"):
+        springflat.flatten(trimesh.Trimesh(V, F, process=False), F)
+    with pytest.raises(TypeError, match="read_mesh takes a file path \\(str or pathlib.Path\\), not NoneType"):
+        springflat.read_mesh(None)
 
 
 def test_trimesh_and_an_initial_array(ear):
