@@ -101,7 +101,9 @@ def _holds(mesh: Mesh, positions, params: FlattenParams, formats) -> bool:
 
 def run_formats(args: argparse.Namespace):
     """The format set a run of ``args`` uses (``--formats``, or the default set), ``None`` for a float run."""
-    return load_format_set(args.formats or "default") if engine_named(args.engine).fixed_point else None
+    if not engine_named(args.engine).fixed_point:
+        return None
+    return load_format_set("default" if args.formats is None else args.formats)
 
 
 def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, progress: bool = False,

@@ -38,8 +38,12 @@ class UserError(ValueError):
 def load_format_set(spec: str):
     """:func:`golden_model.fixed.engine.load_formats` (a preset name or a JSON file), with the file errors it
     leaves to the caller made one line: an OS error reading the file, and JSON nested beyond Python's limit."""
+    from golden_model.fixed import FormatSet
     from golden_model.fixed.engine import load_formats
 
+    if not spec.strip():
+        raise UserError(f"the formats '{spec}' are empty: name a preset ({', '.join(FormatSet.presets())}) or a JSON "
+                        "file")
     try:
         return load_formats(spec)
     except OSError as exc:

@@ -150,6 +150,8 @@ BAD_ARGS = [
     (["--port", "/nowhere"], "--port is the board's serial port: add --engine board"),
     (["--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf"),
     (["--jobs", "0"], "--jobs must be >= 1, got 0"),
+    (["--engine", "fixed", "--formats", ""], "the formats '' are empty: name a preset (default, narrow, wide) or a "
+                                             "JSON file"),
 ]
 
 
