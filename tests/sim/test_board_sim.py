@@ -17,7 +17,7 @@ from sim.cli import build_parser
 from sim.engine_run import engine_flatten_result
 from sim.patterns import PatternDrawing, run_caption, write_pattern_file
 from sim.run_options import default_init, load_format_set, params_from_args, resolve_mesh
-from support import SPRINGFLAT, need_simulator
+from support import SPRINGFLAT, BenchCalled, need_simulator, record_bench_configs
 
 pytestmark = pytest.mark.slow  # a Verilator build of the engine (cached)
 
@@ -56,10 +56,6 @@ def test_surf1_over_the_simulated_uart_is_byte_identical_to_engine_fixed(tmp_pat
     assert r["status"] == "converged" and r["iterations"] > 10 and r["cycles"] > r["iterations"] * 100
 
 
-class _BenchCalled(Exception):
-    pass
-
-
 def test_the_board_bench_is_told_the_capacity_it_runs_on(monkeypatch, tmp_path):
     """run_board_sim hands the bench the whole capacity, the step guard included (the driver checks
     FEATURES.guard against the register map it builds from it)."""
@@ -67,17 +63,10 @@ def test_the_board_bench_is_told_the_capacity_it_runs_on(monkeypatch, tmp_path):
 
     import sim.board_sim as board_sim
 
-    seen = []
-
-    def bench(simulator, fs, module, name, config, **kwargs):
-        seen.append(config["capacity"])
-        raise _BenchCalled
-
-    monkeypatch.setattr(board_sim, "board_sources", lambda *args, **kwargs: tmp_path)
-    monkeypatch.setattr(board_sim, "run_bench", bench)
+    seen = record_bench_configs(monkeypatch, board_sim, "board_sources", tmp_path)
     _, problem = cli_problem(["surf1"])
     guardless = dataclasses.replace(CAPACITY, guard=False)
     for capacity in (CAPACITY, guardless):
-        with pytest.raises(_BenchCalled):
+        with pytest.raises(BenchCalled):
             run_board_sim(problem, capacity, work=tmp_path / str(capacity.guard))
-    assert [EngineCapacity(*c) for c in seen] == [CAPACITY, guardless]
+    assert [EngineCapacity(*config["capacity"]) for config in seen] == [CAPACITY, guardless]

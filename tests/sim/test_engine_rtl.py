@@ -25,7 +25,7 @@ from golden_model.params import FlattenParams
 from sim.engine_run import engine_directory, engine_sources, run_image_on_rtl, simulation_harness, top_ports
 from sim.top_names import ENGINE_MODULE
 from golden_model.engine_spec.image import UNGUARDED
-from support import SPRINGFLAT, need_simulator
+from support import SPRINGFLAT, BenchCalled, need_simulator, record_bench_configs
 
 pytestmark = pytest.mark.slow  # simulator builds (Verilator: minutes, cached)
 
@@ -248,26 +248,16 @@ def test_a_stalled_run_is_bit_exact_and_starts_as_flatten_does(tmp_path):
     assert "folds 3 triangles: untangling it" in proc.stderr
 
 
-class _BenchCalled(Exception):
-    pass
-
-
 def test_the_bench_is_told_the_capacity_it_runs_on(monkeypatch, tmp_path):
     """run_image_on_rtl hands the bench the whole capacity, the step guard included: a build without the
     guard must be driven with its own register map (the driver checks FEATURES.guard against it)."""
     import sim.engine_run as engine_run
 
-    seen = []
-
-    def bench(simulator, fs, module, name, config, **kwargs):
-        seen.append(config["capacity"])
-        raise _BenchCalled
-
-    monkeypatch.setattr(engine_run, "engine_sources", lambda *args, **kwargs: tmp_path)
-    monkeypatch.setattr(engine_run, "run_bench", bench)
+    seen = record_bench_configs(monkeypatch, engine_run, "engine_sources", tmp_path)
     image = dome_image("paper-variable", 2)
-    for guard in (True, False):
-        with pytest.raises(_BenchCalled):
-            run_image_on_rtl(dataclasses.replace(image, capacity=dataclasses.replace(CAPACITY, guard=guard)),
-                             DEFAULT, "verilator", work=tmp_path / str(guard))
-    assert [EngineCapacity(**c) for c in seen] == [CAPACITY, dataclasses.replace(CAPACITY, guard=False)]
+    guardless = dataclasses.replace(CAPACITY, guard=False)
+    for capacity in (CAPACITY, guardless):
+        with pytest.raises(BenchCalled):
+            run_image_on_rtl(dataclasses.replace(image, capacity=capacity), DEFAULT, "verilator",
+                             work=tmp_path / str(capacity.guard))
+    assert [EngineCapacity(**config["capacity"]) for config in seen] == [CAPACITY, guardless]

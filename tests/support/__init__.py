@@ -71,3 +71,23 @@ def refused_components():
         warnings.simplefilter("ignore", UnusedElaboratable)
         yield
         gc.collect()
+
+
+class BenchCalled(Exception):
+    """Raised by :func:`record_bench_configs`' stand-in for ``run_bench``: the call was made, nothing simulated."""
+
+
+def record_bench_configs(monkeypatch, module, export: str, directory: Path) -> list[dict]:
+    """Replace ``module``'s ``run_bench`` with a stand-in that records each bench's config and raises
+    :class:`BenchCalled`, and its export function ``export`` with one that returns ``directory``: what a flow
+    hands the bench, without a build or a simulator. Returns the list the configs are appended to."""
+    seen: list[dict] = []
+
+    def bench(simulator, fs, toplevel, name, config, **kwargs):
+        seen.append(config)
+        raise BenchCalled
+
+    monkeypatch.setattr(module, export, lambda *args, **kwargs: directory)
+    monkeypatch.setattr(module, "run_bench", bench)
+    return seen
+
