@@ -170,3 +170,30 @@ def test_the_engine_clock_and_refusals():
         warnings.simplefilter("ignore", UnusedElaboratable)
         _test_the_engine_clock_and_refusals_body()
         gc.collect()
+
+
+@pytest.mark.parametrize("stop", ["interrupt", "tool failure"])
+def test_a_stopped_board_build_leaves_no_half_built_out(monkeypatch, capsys, tmp_path, stop):
+    """The build is made beside --out and put in place whole: stopped (Ctrl-C, or a kill, which the command
+    turns into the same interrupt) it leaves nothing; a tool that fails leaves its logs in --out, named so."""
+    import sim.board_build as board_build
+    from sim.cli import main
+    from sim.synth import SynthError
+
+    def build(fs, capacity, out, **kwargs):
+        (out / "springflat_ulx3s.il").write_text("half a design\n")
+        kwargs["progress"](f"elaborated into {out}")
+        if stop == "interrupt":
+            raise KeyboardInterrupt
+        raise SynthError(f"yosys failed: out of luck (logs in {out})")
+
+    monkeypatch.setattr(board_build, "run_board_build", build)
+    out = tmp_path / "out"
+    status = main(["synth", "--board", "ulx3s-85f", "--capacity", "16", "64", "16", "--out", str(out)])
+    err = capsys.readouterr().err
+    if stop == "interrupt":
+        assert status == 130 and not out.exists() and list(tmp_path.iterdir()) == []
+    else:
+        assert status == 2 and (out / "springflat_ulx3s.il").read_text() == "half a design\n"
+        assert f"springflat: error: yosys failed: out of luck (logs in {out})" in err
+    assert f"elaborated into {out}\n" in err  # progress names --out, not the directory it is built in
