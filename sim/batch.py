@@ -30,13 +30,13 @@ from pathlib import Path
 from typing import Iterator
 
 from golden_model.builtin import is_builtin
-from golden_model.layouts import LAYOUT_METHODS
+from golden_model.layouts import AUTO_START, LAYOUT_METHODS
 from golden_model.files import describe_os_error, read_file_bytes
 from golden_model.mesh import MeshError
 
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
-from .flatten_run import OUTPUT_OPTIONS, output_paths
+from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
 from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path
 from .patterns import error_text, pattern_kind
 from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
@@ -195,14 +195,17 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
     single = engine_named(args.engine).single
     if single:
         raise UserError(f"--engine {args.engine} runs one mesh at a time ({single}): drop it for a batch")
-    if args.init is not None and args.init not in LAYOUT_METHODS:
-        raise UserError(f"in a batch, --init takes a method ({', '.join(LAYOUT_METHODS)}), not a layout file")
+    if args.init is not None and args.init not in (AUTO_START,) + LAYOUT_METHODS:
+        raise UserError(f"in a batch, --init takes a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}), not a "
+                        "layout file")
+    check_options_used(args)
     jobs = default_jobs() if args.jobs is None else args.jobs
     if jobs < 1:
         raise UserError(f"--jobs must be >= 1, got {jobs}")
     endings = _endings(args)
     if endings and args.out_dir is None:
-        raise UserError("several meshes write their outputs to --out-dir DIR (the endings name the files)")
+        raise UserError("a batch (several meshes, or --scheduler) writes its outputs to --out-dir DIR (the endings "
+                        "name the files)")
     if args.out_dir is not None:
         out_dir = Path(args.out_dir)
         names = _names(meshes)
@@ -296,8 +299,9 @@ def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
 
 @contextlib.contextmanager
 def _output_directory(path: Path | None) -> Iterator[None]:
-    """``--out-dir`` made, with its missing parents, for the block; on an exception (a refusal, Ctrl-C)
-    those of them still empty are removed again: a batch that ends so leaves no empty directory."""
+    """``--out-dir`` made, with its missing parents, for the block; at its end those of them still empty are
+    removed again (a refusal, Ctrl-C, every mesh failed, no output asked for): a batch leaves no empty
+    directory that it made."""
     if path is None:
         yield
         return
@@ -310,13 +314,12 @@ def _output_directory(path: Path | None) -> Iterator[None]:
         raise OutputWriteError(path, exc, "--out-dir") from None
     try:
         yield
-    except BaseException:
+    finally:
         for made in missing:  # the deepest first
             try:
                 made.rmdir()
             except OSError:  # not empty: a mesh's files are in it
                 break
-        raise
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
@@ -353,7 +356,9 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
             sys.stderr.write(outcome.notes)
         if args.json:
             record = {"source": outcome.source, "mesh": outcome.name, "seconds": round(outcome.seconds, 3)}
-            record.update(outcome.summary if outcome.summary else {"status": "failed", "error": outcome.line})
+            record.update(outcome.summary or {})
+            if outcome.failed:  # also a run that finished but whose files could not be written
+                record.update(status="failed", error=outcome.line)
             record["files"] = [str(Path(args.out_dir) / f"{outcome.name}{e}") for e, _ in outcome.files] \
                 if args.out_dir is not None and not outcome.failed else []
             print(strict_json(record), flush=True)
@@ -385,7 +390,7 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
         for o in ordered:
             statuses[o.status] = statuses.get(o.status, 0) + 1
         counts = ", ".join(f"{n} {s}" for s, n in statuses.items())
-        print(f"{len(ordered)} meshes: {counts}; {elapsed:.1f} s on {where}")
+        print(f"{len(ordered)} mesh{'es' if len(ordered) != 1 else ''}: {counts}; {elapsed:.1f} s on {where}")
     if failed:
         print(f"springflat: error: {len(failed)} of {len(ordered)} meshes failed: "
               f"{', '.join(o.source for o in failed)}", file=sys.stderr)
@@ -397,7 +402,7 @@ def summary_table(outcomes: list[MeshOutcome]) -> str:
     """A plain-text table: one row per mesh, in the order given."""
     rows = [("mesh", "status", "iterations", "E_S", "E_C", "folded", "seconds")]
     for o in outcomes:
-        if o.summary is None:
+        if o.failed or o.summary is None:
             rows.append((o.name, "failed", "", "", "", "", f"{o.seconds:.1f}"))
         else:
             s = o.summary

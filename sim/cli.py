@@ -35,7 +35,7 @@ from golden_model.results import FlattenResult
 
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
-from .flatten_run import (check_print_size, human_line, json_summary, output_paths, run_flatten, run_formats,
+from .flatten_run import (check_options_used, check_print_size, human_line, json_summary, output_paths, run_flatten, run_formats,
                           what_was_used, write_outputs)
 from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
     received_signal, reset_interrupted
@@ -106,20 +106,12 @@ def check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before the run, an output path that cannot work, and two outputs that are one file."""
     for _, flag, endings, path in output_paths(args):
         check_output_path(path, flag, endings)
-    _check_options_used(args)
+    check_options_used(args)
+    if args.jobs is not None:
+        raise UserError("--jobs sets a batch's worker processes: give several meshes, or --out-dir DIR")
     if args.init is None:
         args.init = default_init(args.mesh)
     _check_distinct_files(args)
-
-
-def _check_options_used(args: argparse.Namespace) -> None:
-    """Refuse an option that this run would ignore (one line naming what it needs)."""
-    if args.dxf_edges and not any(str(path).lower().endswith(".dxf") for path in args.out or ()):
-        raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
-    if args.port is not None and args.engine != "board":
-        raise UserError("--port is the board's serial port: add --engine board")
-    if args.jobs is not None and args.jobs < 1:
-        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
 
 
 #: Iterations :func:`_energy_rule_note` looks back over.

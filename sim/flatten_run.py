@@ -56,13 +56,30 @@ def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
         check_mesh_fits(mesh, args.units, args.paper)
 
 
+def check_formats_option(args: argparse.Namespace) -> None:
+    """``--formats`` belongs to the fixed-point engines."""
+    if not engine_named(args.engine).fixed_point and args.formats is not None:
+        raise UserError("--formats applies to the fixed-point engines: --engine "
+                        + ", ".join(e.name for e in ENGINES if e.fixed_point))
+
+
+def check_options_used(args: argparse.Namespace) -> None:
+    """Refuse, before any run, an option of ``flatten`` that this run (or batch: ``--out`` then holds
+    endings) would ignore, in one line naming what it needs."""
+    check_formats_option(args)
+    if args.dxf_edges and not any(str(path).lower().endswith(".dxf") for path in args.out or ()):
+        raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
+    if args.port is not None and args.engine != "board":
+        raise UserError("--port is the board's serial port: add --engine board")
+    if args.jobs is not None and args.jobs < 1:
+        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
+
+
 def choose_engine(args: argparse.Namespace, params: FlattenParams):
     """The run ``--engine`` and ``--formats`` name, ``run(mesh, P0, params, on_iteration=None)``, once
     the checks of what its formats and the engine cannot run have passed."""
     engine = engine_named(args.engine)
-    if not engine.fixed_point and args.formats is not None:
-        raise UserError("--formats applies to the fixed-point engines: --engine "
-                        + ", ".join(e.name for e in ENGINES if e.fixed_point))
+    check_formats_option(args)
     formats = run_formats(args)
     if engine.fixed_point:
         check_fixed_params(params, formats)

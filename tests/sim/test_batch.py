@@ -101,7 +101,9 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
     (["--out-dir", "o", "--out", "sub/.pdf"], "takes a file-name ending such as .pdf"),
     (["--out-dir", "o", "--out", "x.pdf"], "takes a file-name ending that starts with a separator, such as .pdf or "
                                            "_flat.pdf, not 'x.pdf'"),
-    (["--out", ".pdf"], "write their outputs to --out-dir"),
+    (["--out", ".pdf"], "a batch (several meshes, or --scheduler) writes its outputs to --out-dir DIR"),
+    (["--out-dir", "o", "--formats", "narrow"], "--formats applies to the fixed-point engines"),
+    (["--out-dir", "o", "--out", ".pdf", "--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern"),
     (["--out-dir", "o", "--out", ".csv", "--distortion", ".csv"], "given twice"),
     (["--out-dir", "o/sub", "--out", ".png"], "must end in .dxf"),
     (["--out-dir", "o", "--engine", "rtl"], "--engine rtl runs one mesh at a time (the simulator build is shared)"),
@@ -136,6 +138,38 @@ def test_no_output_of_a_batch_replaces_one_of_its_meshes(tmp_path, monkeypatch, 
     err = capsys.readouterr().err.splitlines()
     assert err == [f"springflat: error: {message}"]
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
+def test_a_mesh_whose_files_cannot_be_written_is_failed_in_the_table_and_the_json(tmp_path, monkeypatch, capsys):
+    """The run finished but its file could not be put in place (a dangling link into a missing directory):
+    the mesh is failed everywhere, not only in the count; --init auto is a method a batch takes."""
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 2, 0)
+    os.mkdir("o")
+    os.symlink("nowhere/x.dxf", "o/dome01.dxf")
+    argv = ["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "o", "--out", ".dxf", "--init", "auto",
+            "--max-iter", "5"]
+    assert main(argv) == 2
+    out = capsys.readouterr().out.splitlines()
+    rows = {line.split()[0]: line.split()[1] for line in out if line.startswith("dome")}
+    assert rows["dome01"] == "failed" and rows["dome00"] in {"converged", "max-iterations"}
+    assert out[-1].startswith("2 meshes: 1 ") and "1 failed" in out[-1]
+    assert main([*argv, "--json"]) == 2
+    records = {r["mesh"]: r for r in map(json.loads, capsys.readouterr().out.splitlines()) if "mesh" in r}
+    assert records["dome01"]["status"] == "failed" and "cannot write 'o/dome01.dxf'" in records["dome01"]["error"]
+    assert records["dome01"]["files"] == [] and records["dome00"]["files"] == ["o/dome00.dxf"]
+
+
+@pytest.mark.parametrize("args", [["--max-iter", "3"], ["--out", ".svg", "--step", "fixed", "--dt", "50",
+                                                         "--dynamics", "paper"]])
+def test_a_batch_that_writes_nothing_leaves_no_out_dir_it_made(tmp_path, monkeypatch, capsys, args):
+    """No output asked for, or every mesh failed (a fixed step that diverges writes no print): the --out-dir
+    the batch made, and its missing parents, are gone again."""
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 2, 0)
+    main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "new/o", *args])
+    capsys.readouterr()
+    assert os.listdir(tmp_path) == ["in"]
 
 
 def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):

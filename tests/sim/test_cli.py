@@ -150,6 +150,7 @@ BAD_ARGS = [
     (["--port", "/nowhere"], "--port is the board's serial port: add --engine board"),
     (["--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf"),
     (["--jobs", "0"], "--jobs must be >= 1, got 0"),
+    (["--jobs", "3"], "--jobs sets a batch's worker processes: give several meshes, or --out-dir DIR"),
     (["--engine", "fixed", "--formats", ""], "the formats '' are empty: name a preset (default, narrow, wide) or a "
                                              "JSON file"),
 ]
