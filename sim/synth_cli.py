@@ -29,6 +29,17 @@ def _positive(text: str) -> float:
     return value
 
 
+def _seed(text: str) -> int:
+    """nextpnr's ``--seed``: a C ``int``; a value it would refuse after synthesis is refused here."""
+    try:
+        seed = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if not -2**31 <= seed < 2**31:
+        raise argparse.ArgumentTypeError(f"nextpnr takes a 32-bit seed, -2147483648 to 2147483647, not {seed}")
+    return seed
+
+
 def _component_list(text: str) -> list[str]:
     names = [*COMPONENT_SUMMARIES, ENGINE]
     chosen = [c.strip() for c in text.split(",") if c.strip()]
@@ -75,7 +86,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--placer-timing", choices=tuple(PLACER_TIMING), default=DEFAULT_PLACER_TIMING,
                    help="nextpnr's placer: default, or strong (the heap placer's criticality exponent and timing "
                         "weight 4 and 20 instead of 2 and 10: more weight on long routes)")
-    p.add_argument("--seed", type=int, default=1, help="nextpnr placer seed (default 1)")
+    p.add_argument("--seed", type=_seed, default=1, help="nextpnr placer seed, a 32-bit integer (default 1)")
     p.add_argument("--json", action="store_true", help="print the report as one JSON object")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cmd_synth)
@@ -116,6 +127,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
         from .board_build import cmd_board
 
         return cmd_board(args, fs, capacity)
+    if args.baud is not None:
+        raise SynthError("--baud sets the board's UART: add --board ulx3s-85f (and drop --target)")
     for given, option in ((args.capacity, "--capacity sizes"), (not args.build_guard, "--no-guard builds")):
         if given and ENGINE not in (args.components or ()):
             raise SynthError(f"{option} {ENGINE}: add it to --components")

@@ -116,6 +116,10 @@ def test_ice40_does_not_fit(tmp_path, capsys):
     (["synth", "--target", "ecp5", "--components", "springflat_engine", "--capacity", "64", "300"],
      "expected 3 arguments"),
     (["synth", "--target", "ecp5", "--capacity", "64", "300", "128"], "add it to --components"),
+    (["synth", "--target", "ecp5", "--seed", "99999999999999999999"], "nextpnr takes a 32-bit seed, -2147483648 to "
+                                                                      "2147483647, not 99999999999999999999"),
+    (["synth", "--target", "ecp5", "--seed", "one"], "argument --seed: expected an integer, got 'one'"),
+    (["synth", "--target", "ecp5", "--baud", "9600"], "--baud sets the board's UART: add --board ulx3s-85f"),
 ])
 def test_bad_requests(argv, message, capsys, tmp_path):
     status, out, err = run(argv + ["--out", str(tmp_path / "x")], capsys)
