@@ -118,8 +118,8 @@ def run_board_sim(problem: FixedProblem, capacity: EngineCapacity, *, work: Path
     work = Path(work) if work is not None else sources / "runs" / f"{os.getpid()}-{time.time_ns()}"
     work.mkdir(parents=True, exist_ok=True)
     (work / "problem.pkl").write_bytes(pickle.dumps(problem))
-    config = {"capacity": [capacity.vertices, capacity.entries, capacity.triangles, capacity.guard], "divisor": SIM_DIVISOR,
-              "timeout": SIM_TIMEOUT, "bad_frames": bad_frames}
+    config = {"capacity": [capacity.vertices, capacity.entries, capacity.triangles, capacity.guard],
+              "divisor": SIM_DIVISOR, "timeout": SIM_TIMEOUT, "bad_frames": bad_frames}
     flags, make_flags = build_flags("verilator", "gpi-clock")  # the bench starts cocotb's clock
     with _make_flags(make_flags):
         run = run_bench("verilator", fs, BOARD_SIM_MODULE, "board", config, work=work, log_file=log_file,

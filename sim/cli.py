@@ -35,8 +35,8 @@ from golden_model.results import FlattenResult
 
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
-from .flatten_run import (check_options_used, check_print_size, human_line, json_summary, output_paths, run_flatten, run_formats,
-                          what_was_used, write_outputs)
+from .flatten_run import (check_options_used, check_print_size, human_line, json_summary, output_paths, run_flatten,
+                          run_formats, what_was_used, write_outputs)
 from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
     received_signal, reset_interrupted
 from .patterns import PatternDrawing, add_pattern_options, scale_note
@@ -45,10 +45,10 @@ from .run_options import (
     UserError,
     add_run_options,
     default_init,
+    file_path_argument,
     input_files,
     load_format_set,
     params_from_args,
-    file_path_argument,
     path_argument,
     resolve_mesh,
     strict_json,

@@ -31,7 +31,8 @@ from .cocotb_support import _formats_key, build_lock, run_bench
 from .top_names import ENGINE_MODULE, ENGINE_SIM_MODULE
 
 __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "EngineRun",
-           "EngineRunError", "capacity_key", "engine_directory", "engine_sources", "run_engine", "run_image_on_rtl", "flatten_on_rtl",
+           "EngineRunError", "capacity_key", "engine_directory", "engine_sources", "run_engine", "run_image_on_rtl",
+           "flatten_on_rtl",
            "engine_flatten_result",
            "summary_line",
            "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo",

@@ -270,7 +270,8 @@ def _check_options_apply(args: argparse.Namespace, params: FlattenParams) -> Non
     for option in ("barrier_threshold", "barrier_gain"):
         if getattr(args, option) is not None and not params.barrier:
             flag = f"--{option.replace('_', '-')}"
-            raise ParameterError(f"{flag} sets the fold barrier, which this run has off: add --barrier (or drop {flag})")
+            raise ParameterError(f"{flag} sets the fold barrier, which this run has off: add --barrier (or drop "
+                                 f"{flag})")
 
 
 def strict_json(summary: dict) -> str:
