@@ -213,10 +213,8 @@ def cmd_board(args, fs, capacity) -> int:
     """``springflat synth --board BOARD``: the bitstream, or one line on what is wrong."""
     import sys
 
-    from golden_model.fixed.formats_set import FormatSet
-
-    from .outputs import atomic_directory
     from .run_options import strict_json
+    from .synth_cli import build_in_place
 
     if args.board is None:
         raise SynthError("give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)")
@@ -243,23 +241,9 @@ def cmd_board(args, fs, capacity) -> int:
         if not args.quiet:
             print(f"springflat synth [{time.monotonic() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
-    inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
-    failure = None
-    with atomic_directory(out, inputs=inputs) as build:  # all of the build or nothing, also on Ctrl-C or kill
-        def shown(text: str) -> str:  # the build is made beside --out: name --out
-            return text.replace(str(build), str(out))
-
-        try:
-            report = run_board_build(fs, capacity, build, board=args.board, seed=args.seed, baud=args.baud,
-                                     progress=lambda msg: progress(shown(msg)),
-                                     clock_hz=None if args.freq is None else args.freq * 1e6,
-                                     command=shlex.join(parts + ["--out", str(out)]))
-        except SynthError as exc:  # a tool failed: its logs are kept in --out, when there are any
-            failure = SynthError(shown(str(exc)))
-            if not any(build.iterdir()):
-                raise failure from None
-    if failure is not None:
-        raise failure
+    report = build_in_place(out, args.formats, lambda build, shown: run_board_build(
+        fs, capacity, build, board=args.board, seed=args.seed, baud=args.baud, progress=lambda msg: progress(shown(msg)),
+        clock_hz=None if args.freq is None else args.freq * 1e6, command=shlex.join(parts + ["--out", str(out)])))
     if args.json:
         print(strict_json(report))
     else:

@@ -8,6 +8,7 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 from golden_model.engine_spec import uart_protocol as protocol
 
@@ -113,10 +114,32 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
     return shlex.join(parts)
 
 
-def cmd_synth(args: argparse.Namespace) -> int:
+def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str], str]], dict]) -> dict:
+    """``build(directory, shown)``'s report, the files it wrote put in place as ``out`` whole (all or nothing,
+    also on Ctrl-C or a kill: :func:`sim.outputs.atomic_directory`). ``shown(text)`` names ``out`` where
+    ``text`` names the directory built in. A tool that fails (:class:`SynthError`) leaves its logs in ``out``,
+    when there are any, and its message names them there. ``formats``: ``--formats``, an input no output may
+    replace."""
     from golden_model.fixed.formats_set import FormatSet
 
     from .outputs import atomic_directory
+
+    inputs = [("--formats", None if FormatSet.names_preset(formats) else Path(formats))]
+    failure = None
+    with atomic_directory(out, inputs=inputs) as directory:
+        def shown(text: str) -> str:
+            return text.replace(str(directory), str(out))
+
+        try:
+            return build(directory, shown)
+        except SynthError as exc:
+            failure = SynthError(shown(str(exc)))
+            if not any(directory.iterdir()):
+                raise failure from None
+    raise failure
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
     from .run_options import load_format_set, strict_json
 
     from .export import engine_capacity
@@ -139,23 +162,10 @@ def cmd_synth(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"springflat synth [{time.monotonic() - start:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
-    inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
-    failure = None
-    with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
-        def shown(text: str) -> str:  # the bundle is built beside --out: name --out
-            return text.replace(str(build), str(out))
-
-        try:
-            report = run_synthesis(fs, args.target, args.freq, build, components=args.components,
-                                   progress=lambda msg: progress(shown(msg)), router=args.router, seed=args.seed,
-                                   command=_command_line(args, out), capacity=capacity,
-                                   placer_timing=args.placer_timing)
-        except SynthError as exc:  # a tool failed: its logs are kept in --out, when there are any
-            failure = SynthError(shown(str(exc)))
-            if not any(build.iterdir()):
-                raise failure from None
-    if failure is not None:
-        raise failure
+    report = build_in_place(out, args.formats, lambda build, shown: run_synthesis(
+        fs, args.target, args.freq, build, components=args.components, progress=lambda msg: progress(shown(msg)),
+        router=args.router, seed=args.seed, command=_command_line(args, out), capacity=capacity,
+        placer_timing=args.placer_timing))
     if args.json:
         print(strict_json(report))
     else:
