@@ -423,12 +423,11 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
     if len(order) != m:
         raise MeshError(f"mesh is not a single disk: face {int(np.setdiff1d(np.arange(m), order)[0])} shares no "
                         "edge with face 0")
-    turn = np.zeros(m, dtype=bool)
     crossing = np.asarray(graph[order[1:], parent[order[1:]]]).ravel() == 2
-    turned = turn.tolist()
+    turned = [False] * m  # face 0 keeps its winding; each face is reached after its BFS parent
     for face, above, cross in zip(order[1:].tolist(), parent[order[1:]].tolist(), crossing.tolist()):
-        turned[face] = turned[above] != cross  # a face agrees with its BFS parent once both are turned
-    turn[:] = turned
+        turned[face] = turned[above] != cross  # turned unlike its parent exactly when the two disagree
+    turn = np.array(turned)
     if 2 * turn.sum() > m:  # turn the fewer faces
         turn = ~turn
     result = faces.copy()
