@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -141,8 +142,7 @@ def read_text_stl(data: bytes, where: str, notes: list[str]) -> tuple[np.ndarray
                 _numbers(words[2:], refused, line_no)
                 expect, loop = "outer", 0
             else:
-                raise refused(line_no, f"expected 'facet normal nx ny nz' or 'endsolid', got "
-                                f"{_shown(line)}")
+                raise refused(line_no, f"expected 'facet normal nx ny nz' or 'endsolid', got {_shown(line)}")
         elif expect == "outer":
             if [w.lower() for w in words] != ["outer", "loop"]:
                 raise refused(line_no, f"expected 'outer loop', got {_shown(line)}")
@@ -153,12 +153,11 @@ def read_text_stl(data: bytes, where: str, notes: list[str]) -> tuple[np.ndarray
                 loop += 1
                 expect = "endloop" if loop == 3 else "vertex"
             else:
-                raise refused(line_no, f"expected 'vertex x y z' (corner {loop + 1} of 3), got "
-                                f"{_shown(line)}")
+                raise refused(line_no, f"expected 'vertex x y z' (corner {loop + 1} of 3), got {_shown(line)}")
         elif expect == "endloop":
             if keyword != "endloop":
-                raise refused(line_no, f"expected 'endloop' after three vertices (STL holds "
-                                f"triangles), got {_shown(line)}")
+                raise refused(line_no, "expected 'endloop' after three vertices (STL holds triangles), got "
+                                       f"{_shown(line)}")
             expect = "endfacet"
         elif expect == "endfacet":
             if keyword != "endfacet":
@@ -174,7 +173,7 @@ def read_text_stl(data: bytes, where: str, notes: list[str]) -> tuple[np.ndarray
     return np.array(corners, dtype=np.float64).reshape(-1, 3), faces
 
 
-def _numbers(words: list[str], refused, line_no: int) -> list[float]:
+def _numbers(words: list[str], refused: Callable[[int, str], MeshError], line_no: int) -> list[float]:
     try:
         return [float(w) for w in words]
     except ValueError:
