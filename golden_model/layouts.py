@@ -467,8 +467,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     read_notes: list[str] = []
     try:
         positions = initial_layout(mesh, init if name == ARRAY_START else method, read_notes)
-    except LayoutError as exc:
-        if name != AUTO_START or "needs libigl" in str(exc):
+    except LayoutError as exc:  # (without libigl, SLIM below says so in its own words)
+        if name != AUTO_START:
             raise
         notes = [f"{exc}: starting from SLIM on Tutte's layout instead (fold-free by construction)"]
         say(notes[-1])
