@@ -232,16 +232,19 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         V: ``(V, 3)`` vertex positions (any length unit), or a ``trimesh.Trimesh`` (then no ``F``).
         F: ``(F, 3)`` 0-based vertex indices of the triangles.
         name: the mesh's name, for the pattern files.
-        init: the initial layout: ``auto`` (the default: ARAP, or SLIM from Tutte where ARAP folds or fails), ``tutte``,
-            ``pca``, ``harmonic``, ``lscm``, ``arap``, ``slim``, a layout file, or a ``(V, 2)`` array; a file or an
-            array is checked (shape, finite, range) and, with the guarded dynamics, untangled where it folds.
+        init: the initial layout: ``auto`` (the default: ARAP, or SLIM from Tutte where ARAP folds or fails),
+            ``tutte``, ``pca``, ``harmonic``, ``lscm``, ``arap``, ``slim``, a layout file, or a ``(V, 2)`` array; a
+            file or an array is checked (shape, finite, range) and, with the guarded dynamics, untangled where it
+            folds.
         **options: the options of ``springflat flatten`` (listed below and in :data:`OPTIONS`), the flag
             without its dashes and with ``_`` for ``-``: ``max_iter=500`` is ``--max-iter 500``.  Each value
             is checked as the command line checks the same text.  Left out, an option has the default of a
             mesh *file* on the command line (``springflat flatten mesh.obj``).
 
     Returns:
-        a :class:`Pattern` (``.layout`` is the ``(V, 2)`` numpy array).
+        a :class:`Pattern` (``.layout`` is the ``(V, 2)`` numpy array). Faces wound against their neighbours
+        are turned to agree with the rest first (a :class:`MeshNote` warning says how many); ``.faces`` holds
+        them so.
 
     Raises:
         golden_model.mesh.MeshError: ``V``, ``F`` are no arrays of numbers, or not one manifold disk (a ``ValueError``).
