@@ -25,8 +25,8 @@ import shlex
 import time
 from pathlib import Path
 
-from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, _FMAX, SynthError, _critical_path, error_line, run_tool,
-                    _tool_versions)
+from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, _FMAX, SynthError, _critical_path, build_in_place,
+                    error_line, run_tool, _tool_versions)
 
 __all__ = ["BOARDS", "NAME", "run_board_build", "collect_report", "parse_lpf_pins", "parse_clocks", "board_markdown"]
 
@@ -214,7 +214,6 @@ def cmd_board(args, fs, capacity) -> int:
     import sys
 
     from .run_options import strict_json
-    from .synth_cli import build_in_place
 
     if args.board is None:
         raise SynthError("give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)")

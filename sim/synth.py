@@ -39,18 +39,44 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from golden_model.params import ParameterError
 
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ",
-           "SynthError", "DoesNotFit", "error_line", "nextpnr_argv", "placer_options", "run_synthesis", "run_tool",
+           "SynthError", "DoesNotFit", "build_in_place", "error_line", "nextpnr_argv", "placer_options", "run_synthesis", "run_tool",
            "parse_yosys_stat", "parse_nextpnr_log"]
 
 
 class SynthError(ParameterError):
     """A bad request or a failed tool run; the message is one line."""
+
+
+def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str], str]], dict]) -> dict:
+    """``build(directory, shown)``'s report, the files it wrote put in place as ``out`` whole (all or nothing,
+    also on Ctrl-C or a kill: :func:`sim.outputs.atomic_directory`). ``shown(text)`` names ``out`` where
+    ``text`` names the directory built in. A tool that fails (:class:`SynthError`) leaves its logs in ``out``,
+    when there are any, and its message names them there. ``formats``: ``--formats``, an input no output may
+    replace."""
+    from golden_model.fixed.formats_set import FormatSet
+
+    from .outputs import atomic_directory
+
+    inputs = [("--formats", None if FormatSet.names_preset(formats) else Path(formats))]
+    failure = None
+    with atomic_directory(out, inputs=inputs) as directory:
+        def shown(text: str) -> str:
+            return text.replace(str(directory), str(out))
+
+        try:
+            return build(directory, shown)
+        except SynthError as exc:
+            failure = SynthError(shown(str(exc)))
+            if not any(directory.iterdir()):
+                raise failure from None
+    raise failure
 
 
 class DoesNotFit(SynthError):

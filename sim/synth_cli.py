@@ -8,14 +8,13 @@ import shlex
 import sys
 import time
 from pathlib import Path
-from typing import Callable
 
 from golden_model.engine_spec import uart_protocol as protocol
 
 from .run_options import path_argument
 from .top_names import COMPONENT_SUMMARIES
 from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS,
-                    DoesNotFit, SynthError, report_markdown, run_synthesis)
+                    DoesNotFit, SynthError, build_in_place, report_markdown, run_synthesis)
 
 __all__ = ["add_parser", "cmd_synth"]
 
@@ -112,31 +111,6 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
         parts += ["--seed", str(args.seed)]
     parts += ["--out", str(out)]
     return shlex.join(parts)
-
-
-def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str], str]], dict]) -> dict:
-    """``build(directory, shown)``'s report, the files it wrote put in place as ``out`` whole (all or nothing,
-    also on Ctrl-C or a kill: :func:`sim.outputs.atomic_directory`). ``shown(text)`` names ``out`` where
-    ``text`` names the directory built in. A tool that fails (:class:`SynthError`) leaves its logs in ``out``,
-    when there are any, and its message names them there. ``formats``: ``--formats``, an input no output may
-    replace."""
-    from golden_model.fixed.formats_set import FormatSet
-
-    from .outputs import atomic_directory
-
-    inputs = [("--formats", None if FormatSet.names_preset(formats) else Path(formats))]
-    failure = None
-    with atomic_directory(out, inputs=inputs) as directory:
-        def shown(text: str) -> str:
-            return text.replace(str(directory), str(out))
-
-        try:
-            return build(directory, shown)
-        except SynthError as exc:
-            failure = SynthError(shown(str(exc)))
-            if not any(directory.iterdir()):
-                raise failure from None
-    raise failure
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
