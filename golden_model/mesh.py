@@ -396,11 +396,17 @@ def _interior_side_pairs(side_edge: np.ndarray, counts: np.ndarray) -> tuple[np.
     return pairs[:, 0], pairs[:, 1]
 
 
-def _same_way_pairs(faces: np.ndarray, side_edge: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """``(face, face, edge)`` rows of the interior edges that both their faces run through from the same
-    vertex: in a consistently wound mesh each interior edge is run one way by one face and back by the other."""
+def _interior_sides_run_same_way(faces: np.ndarray, side_edge: np.ndarray,
+                                 counts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_interior_side_pairs`, and whether the two faces run their edge from the same vertex: in a
+    consistently wound mesh each interior edge is run one way by one face and back by the other."""
     s, t = _interior_side_pairs(side_edge, counts)
-    same = faces.reshape(-1)[s] == faces.reshape(-1)[t]  # side k starts at corner k
+    return s, t, faces.reshape(-1)[s] == faces.reshape(-1)[t]  # side k starts at corner k
+
+
+def _same_way_pairs(faces: np.ndarray, side_edge: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """``(face, face, edge)`` rows of the interior edges that both their faces run the same way."""
+    s, t, same = _interior_sides_run_same_way(faces, side_edge, counts)
     return np.column_stack([s[same] // 3, t[same] // 3, side_edge[s[same]]])
 
 
@@ -412,9 +418,8 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
 
     faces = np.asarray(faces, dtype=np.int64)
     _, side_edge, counts = _unique_edges(faces)
-    s, t = _interior_side_pairs(side_edge, counts)
+    s, t, same = _interior_sides_run_same_way(faces, side_edge, counts)
     f, g = s // 3, t // 3
-    same = faces.reshape(-1)[s] == faces.reshape(-1)[t]
     m = len(faces)
     # weight 1: the neighbours agree, 2: one of them must turn (0 would be no edge in a sparse matrix)
     graph = sp.coo_matrix((np.where(same, 2, 1), (f, g)), shape=(m, m)).tocsr()
