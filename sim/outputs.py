@@ -55,6 +55,14 @@ class OutputWriteError(OutputError):
         super().__init__(f"cannot write {what + ' ' if what else ''}'{path}': {describe_os_error(error)}")
 
 
+def directory_name_problem(text: str) -> str | None:
+    """Why ``text`` cannot name an output file, if it ends in a separator (which names a directory:
+    ``Path`` would drop it, and ``new.dxf/`` would write the file ``new.dxf``); ``None`` if it does not."""
+    if text.endswith(("/", os.sep)):
+        return f"expected a file name, got {text!r} (a trailing '/' names a directory)"
+    return None
+
+
 def output_target(path: Path) -> Path:
     """The file an output path writes: ``path`` itself or, for a symbolic link, the file the link finally
     points to (written through: the link stays, its target is replaced; see :func:`atomic_write`)."""

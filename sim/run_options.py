@@ -23,10 +23,10 @@ from golden_model.layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_
 from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes
-from golden_model.modes import DYNAMICS, Step
+from golden_model.modes import DYNAMICS, RUN_MODES, Step
 from golden_model.params import FlattenParams, ParameterError
 
-from .outputs import OutputError
+from .outputs import OutputError, directory_name_problem
 
 USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
 
@@ -83,11 +83,11 @@ def path_argument(text: str) -> Path:
 
 
 def file_path_argument(text: str) -> Path:
-    """A file option's value: a path (:func:`path_argument`) that does not end in a separator, which names
-    a directory (``Path`` would drop it, and ``--out new.dxf/`` write the file ``new.dxf``)."""
+    """A file option's value: a path (:func:`path_argument`) that does not name a directory
+    (:func:`~sim.outputs.directory_name_problem`)."""
     path = path_argument(text)
-    if text.endswith(("/", os.sep)):
-        raise argparse.ArgumentTypeError(f"expected a file name, got {text!r} (a trailing '/' names a directory)")
+    if (problem := directory_name_problem(text)) is not None:
+        raise argparse.ArgumentTypeError(problem)
     return path
 
 
@@ -261,9 +261,10 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> Flatt
 def _check_options_apply(args: argparse.Namespace, params: FlattenParams) -> None:
     """Refuse an option given for a part of the run that these parameters leave out (it would be ignored)."""
     if args.dt is not None and params.mode.step is not Step.FIXED:
-        raise ParameterError("--dt is the size of the paper dynamics' fixed step: add --step fixed" if
-                             params.dynamics == "paper" else
-                             "the momentum dynamics takes no --dt (its step is the weighted force): drop --dt")
+        has_fixed_step = any(m.dynamics == params.dynamics and m.step is Step.FIXED for m in RUN_MODES)
+        raise ParameterError(f"--dt is the size of the {params.dynamics} dynamics' fixed step: add --step "
+                             f"{Step.FIXED.value}" if has_fixed_step else
+                             f"the {params.dynamics} dynamics takes no --dt (it has no fixed step): drop --dt")
     for option in ("penalty_kappa", "penalty_gain"):
         if getattr(args, option) is not None and not params.penalty:
             raise ParameterError(f"--{option.replace('_', '-')} sets the penalty: add --penalty")
