@@ -15,7 +15,7 @@ import argparse
 from dataclasses import dataclass
 from typing import Callable
 
-__all__ = ["Engine", "ENGINES", "ENGINE_NAMES", "DEFAULT_ENGINE", "engine_named"]
+__all__ = ["Engine", "ENGINES", "ENGINE_NAMES", "DEFAULT_ENGINE", "SERIAL_ENGINE_NAMES", "engine_named"]
 
 #: ``run(mesh, P0, params, on_iteration=None) -> FlattenResult``
 RunFunction = Callable[..., object]
@@ -31,6 +31,7 @@ class Engine:
         hardware: runs ``SpringflatEngine`` (its parameter checks, ``check_engine_params``, apply).
         single: why it runs one mesh at a time, in the command (``None``: a batch may run it in its workers).
         api: the Python API (``springflat.flatten``) can run it (no port or other device to name).
+        serial: it talks to a device over a serial port (``--port``, ``--baud``).
         help: the ``--help`` text.
         make: ``make(args, formats) -> run``: the run function for ``args`` (``--port``, ...) and the loaded
             format set (``None`` for float).
@@ -41,6 +42,7 @@ class Engine:
     hardware: bool
     single: str | None
     api: bool
+    serial: bool
     help: str
     make: Callable[[argparse.Namespace, object], RunFunction]
 
@@ -72,17 +74,19 @@ def _board(args: argparse.Namespace, formats) -> RunFunction:
 
 
 ENGINES: tuple[Engine, ...] = (
-    Engine("float", False, False, None, True, "the float reference (the default)", _float),
-    Engine("fixed", True, False, None, True, "the bit-exact fixed-point golden model", _fixed),
-    Engine("rtl", True, True, "the simulator build is shared", True,
+    Engine("float", False, False, None, True, False, "the float reference (the default)", _float),
+    Engine("fixed", True, False, None, True, False, "the bit-exact fixed-point golden model", _fixed),
+    Engine("rtl", True, True, "the simulator build is shared", True, False,
            "the whole flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)", _rtl),
-    Engine("board", True, True, "one board answers on one port", False,
+    Engine("board", True, True, "one board answers on one port", False, True,
            "the engine on a ULX3S over its USB-UART (--port; docs/board.md)", _board),
 )
 
 #: The ``--engine`` choices, in table order.
 ENGINE_NAMES: tuple[str, ...] = tuple(e.name for e in ENGINES)
 DEFAULT_ENGINE = "float"
+#: The engines that take ``--port``.
+SERIAL_ENGINE_NAMES: tuple[str, ...] = tuple(e.name for e in ENGINES if e.serial)
 
 
 def engine_named(name: str) -> Engine:

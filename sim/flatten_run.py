@@ -20,7 +20,7 @@ from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
-from .engines import ENGINES, engine_named
+from .engines import ENGINES, SERIAL_ENGINE_NAMES, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (PATTERN_SUFFIXES, PatternDrawing, check_mesh_fits, error_text, run_caption,
                        write_pattern_file)
@@ -69,8 +69,8 @@ def check_options_used(args: argparse.Namespace) -> None:
     check_formats_option(args)
     if args.dxf_edges and not any(str(path).lower().endswith(".dxf") for path in args.out or ()):
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
-    if args.port is not None and args.engine != "board":
-        raise UserError("--port is the board's serial port: add --engine board")
+    if args.port is not None and not engine_named(args.engine).serial:
+        raise UserError(f"--port names a serial port: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")
     if args.jobs is not None and args.jobs < 1:
         raise UserError(f"--jobs must be >= 1, got {args.jobs}")
 

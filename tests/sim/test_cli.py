@@ -147,7 +147,7 @@ BAD_ARGS = [
                                                                               "barrier, which this run has off"),
     (["--penalty-gain", "5"], "--penalty-gain sets the penalty: add --penalty"),
     (["--penalty-kappa", "2"], "--penalty-kappa sets the penalty: add --penalty"),
-    (["--port", "/nowhere"], "--port is the board's serial port: add --engine board"),
+    (["--port", "/nowhere"], "--port names a serial port: add --engine board"),
     (["--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf"),
     (["--jobs", "0"], "--jobs must be >= 1, got 0"),
     (["--jobs", "3"], "--jobs sets a batch's worker processes: give several meshes, or --out-dir DIR"),
