@@ -22,8 +22,8 @@ from golden_model.results import FlattenResult
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
-from .patterns import (PATTERN_SUFFIXES, PatternDrawing, check_mesh_fits, error_text, run_caption,
-                       write_pattern_file)
+from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, PatternDrawing, check_mesh_fits, error_text, on_sheets,
+                       run_caption, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 
 #: ``flatten``'s output options: ``(argparse dest, flag, the file endings it takes)``. ``--out`` may be given
@@ -51,9 +51,8 @@ def _progress(total: int, enabled: bool):
 
 def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
     """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units)."""
-    if any(str(path).lower().endswith((".pdf", ".svg")) and not str(path).lower().endswith(".flat.svg")
-           for path in args.out or ()):
-        check_mesh_fits(mesh, args.units, args.paper)
+    if any(on_sheets(path) for path in args.out or ()):
+        check_mesh_fits(mesh, args.units, args.paper or DEFAULT_PAPER)
 
 
 def check_formats_option(args: argparse.Namespace) -> None:
@@ -69,6 +68,8 @@ def check_options_used(args: argparse.Namespace) -> None:
     check_formats_option(args)
     if args.dxf_edges and not any(str(path).lower().endswith(".dxf") for path in args.out or ()):
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
+    if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
+        raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg")
     if args.port is not None and not engine_named(args.engine).serial:
         raise UserError(f"--port names a serial port: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")
     if args.jobs is not None and args.jobs < 1:
@@ -184,7 +185,7 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
     final = result.final
     drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
         result.status, result.iterations, final.area_error, final.shape_error, final.folded))
-    jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=args.paper, dxf_edges=args.dxf_edges))
+    jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=args.paper or DEFAULT_PAPER, dxf_edges=args.dxf_edges))
             for path in args.out or ()]
     jobs += [(args.history, "--history", lambda path: write_history(path, result)),
              (args.plot, "--plot", lambda path: write_plot(path, result, mesh.faces, title=title,

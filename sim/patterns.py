@@ -54,6 +54,10 @@ DXF_INSUNITS = {"mm": 4, "cm": 5, "m": 6, "in": 1}
 #: Paper sizes in millimetres (portrait); ``fit`` is one page the size of the pattern.
 PAPER_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}
 PAPERS = (*PAPER_MM, "fit")
+#: The sheet when none is named (``--paper``, ``write_pattern``'s ``paper``).
+DEFAULT_PAPER = "a4"
+#: The pattern kinds drawn on sheets of ``paper``.
+SHEET_KINDS = ("pdf", "svg")
 #: What ``--out`` accepts (:func:`pattern_kind` tells the kind of each).
 PATTERN_SUFFIXES = (".dxf", ".pdf", ".svg", ".obj")
 
@@ -87,6 +91,15 @@ def pattern_kind(path: Path) -> str:
     raise PatternError(f"'{path}' must end in {', '.join(PATTERN_SUFFIXES)} (or .flat.obj, .flat.svg)")
 
 
+def on_sheets(path: Path | str) -> bool:
+    """Whether ``path`` (or a batch's ending) names a pattern drawn on paper sheets, ``--paper``'s:
+    ``.pdf`` or ``.svg``, not ``.flat.svg``."""
+    try:
+        return pattern_kind(Path(path)) in SHEET_KINDS
+    except PatternError:
+        return False
+
+
 def check_units(units: str) -> float:
     """Millimetres per unit of ``units`` (one of :data:`UNITS`)."""
     if units not in UNIT_MM:
@@ -99,7 +112,7 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--units", choices=UNITS, default="mm",
                         help="the mesh's length unit, stated in every output and used for true-scale "
                              "PDF/SVG and DXF $INSUNITS (default mm)")
-    parser.add_argument("--paper", choices=PAPERS, default="a4",
+    parser.add_argument("--paper", choices=PAPERS, default=None,  # None: not given (DEFAULT_PAPER)
                         help="PDF/SVG sheet: a4 or letter (tiled with overlap marks when the pattern is larger), "
                              "or fit: one page the pattern's size (default a4)")
     parser.add_argument("--dxf-edges", action="store_true",
@@ -162,7 +175,8 @@ def run_caption(status: str, iterations: int, area_error: float, shape_error: fl
             f"{folded} folded")
 
 
-def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = "a4", dxf_edges: bool = False) -> None:
+def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFAULT_PAPER,
+                       dxf_edges: bool = False) -> None:
     """Write ``drawing`` to ``path`` in the format its ending names (:func:`pattern_kind`)."""
     kind = pattern_kind(path)
     if paper not in PAPERS:

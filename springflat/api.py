@@ -38,7 +38,7 @@ from sim.engines import ENGINES, engine_named
 from sim.flatten_run import run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import OutputError, area_ratio, directory_name_problem
-from sim.patterns import PatternDrawing, run_caption, write_pattern_file
+from sim.patterns import DEFAULT_PAPER, PatternDrawing, run_caption, write_pattern_file
 from sim.run_options import add_run_options, params_from_args, resolve_mesh
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
@@ -276,7 +276,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
                    mesh.faces, args.init, params, result)
 
 
-def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str = "a4",
+def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str = DEFAULT_PAPER,
                   dxf_edges: bool = False) -> None:
     """Write ``pattern`` to ``path``, the format named by its ending (as ``springflat flatten --out``).
 

@@ -149,6 +149,8 @@ BAD_ARGS = [
     (["--penalty-kappa", "2"], "--penalty-kappa sets the penalty: add --penalty"),
     (["--port", "/nowhere"], "--port names a serial port: add --engine board"),
     (["--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf"),
+    (["--paper", "letter"], "--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg"),
+    (["--paper", "fit", "--out", "l.flat.svg"], "--paper is the sheet of a PDF or SVG pattern"),
     (["--jobs", "0"], "--jobs must be >= 1, got 0"),
     (["--jobs", "3"], "--jobs sets a batch's worker processes: give several meshes, or --out-dir DIR"),
     (["--engine", "fixed", "--formats", ""], "the formats '' are empty: name a preset (default, narrow, wide) or a "
