@@ -100,13 +100,16 @@ def add_board_options(parser) -> None:
     parser.add_argument("--port", default=None, metavar="DEVICE|URL",
                         help="--engine board: the board's serial port (/dev/ttyUSB0, COM3, or a pyserial URL "
                              "such as socket://host:port)")
-    parser.add_argument("--baud", type=int, default=DEFAULT_BAUD,
+    parser.add_argument("--baud", type=int, default=None,  # None: not given (DEFAULT_BAUD)
                         help=f"--engine board: the UART's rate, as the bitstream was built (default {DEFAULT_BAUD})")
 
 
-def board_engine(formats: FormatSet, port: str | None, baud: int):
-    """``--engine board``: the engine function ``cmd_flatten`` calls; every failure is one line (``UserError``)."""
+def board_engine(formats: FormatSet, port: str | None, baud: int | None):
+    """``--engine board``: the engine function ``cmd_flatten`` calls; every failure is one line (``UserError``).
+    ``baud``: ``None`` for :data:`~golden_model.engine_spec.uart_protocol.DEFAULT_BAUD`."""
     import sys
+
+    from golden_model.engine_spec.uart_protocol import DEFAULT_BAUD
 
     from golden_model.fixed.engine import prepare
 
@@ -116,6 +119,7 @@ def board_engine(formats: FormatSet, port: str | None, baud: int):
 
     if not port:
         raise UserError("--engine board needs --port DEVICE (the board's serial port, e.g. /dev/ttyUSB0)")
+    baud = DEFAULT_BAUD if baud is None else baud
     if baud <= 0:
         raise UserError(f"--baud must be a positive number of bits per second, not {baud}")
 

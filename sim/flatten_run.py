@@ -70,8 +70,9 @@ def check_options_used(args: argparse.Namespace) -> None:
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
     if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
         raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg")
-    if args.port is not None and not engine_named(args.engine).serial:
-        raise UserError(f"--port names a serial port: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")
+    for option in ("port", "baud"):
+        if getattr(args, option) is not None and not engine_named(args.engine).serial:
+            raise UserError(f"--{option} sets the serial port: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")
     if args.jobs is not None and args.jobs < 1:
         raise UserError(f"--jobs must be >= 1, got {args.jobs}")
 

@@ -23,7 +23,7 @@ from golden_model.layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_
 from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes
-from golden_model.modes import DYNAMICS, RUN_MODES, Step
+from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.params import FlattenParams, ParameterError
 
 from .outputs import OutputError, directory_name_problem
@@ -117,12 +117,13 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--energy-window", type=integer_argument, default=None, metavar="W",
                         help="iterations over which the stop rule measures the relative energy change "
                              "(default: 1 with paper, as Algorithm 1; 10 with momentum)")
-    parser.add_argument("--step", choices=("variable", "fixed"), default="variable",
-                        help="step-size mode (default variable, eqs. 18-20)")
+    parser.add_argument("--step", choices=STEP_MODES, default=None,
+                        help="the paper dynamics' step-size mode (default variable, eqs. 18-20)")
     parser.add_argument("--dt", type=number_argument, default=None, help="fixed step size (default 0.01)")
     parser.add_argument("--update", choices=("jacobi", "sequential"), default="jacobi",
                         help="update order: jacobi (synchronous, default) or sequential (Algorithm 1)")
-    parser.add_argument("--damping", type=number_argument, default=None, help="velocity damping gamma in [0, 1) (default 0)")
+    parser.add_argument("--damping", type=number_argument, default=None,
+                        help="the paper dynamics' velocity damping gamma in [0, 1) (default 0)")
     parser.add_argument("--penalty", action="store_true", help="apply the overlap penalty (eqs. 10-11)")
     parser.add_argument("--penalty-kappa", type=number_argument, default=None, help="penalty threshold kappa (default 1)")
     parser.add_argument("--penalty-gain", type=number_argument, default=None, help="penalty gain lambda (default 1)")
@@ -240,14 +241,14 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
 
 def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> FlattenParams:
     """Apply the command-line overrides to ``defaults`` (validated)."""
-    changes = {"step": args.step, "update": args.update, "penalty": args.penalty or defaults.penalty}
+    changes = {"update": args.update, "penalty": args.penalty or defaults.penalty}
     if args.dynamics is not None and args.dynamics != defaults.dynamics:
         changes["dynamics"] = args.dynamics
         for follower in ("barrier", "guard", "energy_window"):
             changes[follower] = None  # follows the dynamics unless given
         if defaults.tol_energy == FILE_TOL_ENERGY and args.dynamics == "paper":  # a mesh file's defaults
             changes["tol_energy"] = FILE_TOL_ENERGY_PAPER
-    for option in ("dt", "damping", "penalty_kappa", "penalty_gain", "spring", "density",
+    for option in ("step", "dt", "damping", "penalty_kappa", "penalty_gain", "spring", "density",
                    "tol_area", "tol_shape", "tol_energy", "max_iter", "barrier", "barrier_threshold",
                    "barrier_gain", "guard", "energy_window"):
         value = getattr(args, option)
@@ -260,6 +261,10 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> Flatt
 
 def _check_options_apply(args: argparse.Namespace, params: FlattenParams) -> None:
     """Refuse an option given for a part of the run that these parameters leave out (it would be ignored)."""
+    if args.step is not None and args.step not in {m.step.value for m in RUN_MODES if m.dynamics == params.dynamics}:
+        owner = next(m.dynamics for m in RUN_MODES if m.step.value == args.step)
+        raise ParameterError(f"--step {args.step} is a step of the {owner} dynamics, not of the {params.dynamics} "
+                             f"dynamics: drop --step, or add --dynamics {owner}")
     if args.dt is not None and params.mode.step is not Step.FIXED:
         has_fixed_step = any(m.dynamics == params.dynamics and m.step is Step.FIXED for m in RUN_MODES)
         raise ParameterError(f"--dt is the size of the {params.dynamics} dynamics' fixed step: add --step "

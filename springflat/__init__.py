@@ -7,6 +7,8 @@
 * :func:`read_mesh` reads an OBJ, PLY, OFF or STL disk patch as ``(V, F)`` arrays.
 * :func:`flatten` flattens ``(V, F)`` (or a ``trimesh.Trimesh``) and returns a :class:`Pattern`.
 * :func:`write_pattern` writes a :class:`Pattern` as DXF, true-scale PDF or SVG, or OBJ with ``vt``.
+* What they refuse raises :class:`MeshError` (the mesh), :class:`ParameterError` (an option) or
+  :class:`OutputError` (a file to write), each a ``ValueError`` with a one-line message.
 
 This package sits on top of the project (``golden_model`` for the algorithm, ``sim`` for the command
 line's option handling and the writers) and nothing in the project imports it.
@@ -16,9 +18,14 @@ from __future__ import annotations
 
 from sim.cli import installed_version
 
+from golden_model.mesh import MeshError
+from golden_model.params import ParameterError
+from sim.outputs import OutputError
+
 from .api import OPTIONS, MeshNote, Pattern, flatten, read_mesh, write_pattern
 
-__all__ = ["flatten", "read_mesh", "write_pattern", "Pattern", "OPTIONS", "MeshNote", "__version__"]
+__all__ = ["flatten", "read_mesh", "write_pattern", "Pattern", "OPTIONS", "MeshNote", "MeshError", "ParameterError",
+           "OutputError", "__version__"]
 
 #: The installed version, as ``springflat --version`` prints it.
 __version__ = installed_version()

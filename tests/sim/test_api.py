@@ -88,6 +88,7 @@ def test_keywords_change_the_run_as_the_flags_do(ear, capsys):
     ({"damping": 0.2}, ["--damping", "0.2"]),            # a domain rule: damping is the paper dynamics'
     ({"barrier_threshold": 0}, ["--barrier-threshold", "0"]),
     ({"engine": "quantum"}, ["--engine", "quantum"]),
+    ({"step": "fixed"}, ["--step", "fixed"]),             # the momentum dynamics has no step to choose
 ])
 def test_a_value_the_command_refuses_the_api_refuses(ear, capsys, options, flags):
     V, F = ear
@@ -199,9 +200,16 @@ def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
         springflat.write_pattern(tmp_path / "x.dxf", (V, F))
     with pytest.raises(TypeError, match="dxf_edges must be True or False, got 'no'"):
         springflat.write_pattern(tmp_path / "x.dxf", springflat.flatten(V, F, max_iter=1), dxf_edges="no")
-    with pytest.raises(ValueError, match="expected a file name, got '.*x.dxf/' \\(a trailing '/' names a directory"):
+    with pytest.raises(springflat.OutputError, match="expected a file name, got '.*x.dxf/' \\(a trailing '/' names a "
+                                                    "directory"):
         springflat.write_pattern(f"{tmp_path}/x.dxf/", springflat.flatten(V, F, max_iter=1))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_api_s_errors_are_importable_from_the_package():
+    assert (springflat.MeshError, springflat.ParameterError) == (MeshError, ParameterError)
+    assert all(issubclass(e, ValueError) for e in (springflat.MeshError, springflat.ParameterError,
+                                                   springflat.OutputError))
 
 
 def test_bad_arrays_are_one_line_mesh_errors_without_a_temporary_path():

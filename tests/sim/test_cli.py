@@ -147,7 +147,11 @@ BAD_ARGS = [
                                                                               "barrier, which this run has off"),
     (["--penalty-gain", "5"], "--penalty-gain sets the penalty: add --penalty"),
     (["--penalty-kappa", "2"], "--penalty-kappa sets the penalty: add --penalty"),
-    (["--port", "/nowhere"], "--port names a serial port: add --engine board"),
+    (["--port", "/nowhere"], "--port sets the serial port: add --engine board"),
+    (["--baud", "9600"], "--baud sets the serial port: add --engine board"),
+    (["--dynamics", "momentum", "--step", "fixed"], "--step fixed is a step of the paper dynamics, not of the "
+                                                    "momentum dynamics: drop --step, or add --dynamics paper"),
+    (["--dynamics", "momentum", "--step", "variable"], "--step variable is a step of the paper dynamics"),
     (["--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf"),
     (["--paper", "letter"], "--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg"),
     (["--paper", "fit", "--out", "l.flat.svg"], "--paper is the sheet of a PDF or SVG pattern"),
