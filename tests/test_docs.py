@@ -2,8 +2,9 @@
 
 The tables of docs/ that are functions of the code are generated blocks (``sim.docgen``; ``tests/sim/test_docgen.py``
 keeps them current). What is left here: numbers stated in the prose of ``hdl/`` docstrings and of the presets'
-``notes`` (code and data, not generated), one fact about the code the units' table relied on, and that the
-design docs carry no commit hashes or session diary.
+``notes`` (code and data, not generated), one fact about the code the units' table relied on, that the
+design docs carry no commit hashes or session diary, and that the relative links of the README and the docs reach
+their files and headings.
 """
 
 import re
@@ -201,3 +202,47 @@ def test_design_docs_keep_no_history(path):
     """The docs state the design and the current figures; the history is git's (and docs/results/ keeps
     the measured rows, each with its date and command)."""
     assert history_in(path.read_text(encoding="utf-8")) == []
+
+
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+FENCE = re.compile(r"^```.*?^```", re.S | re.M)
+
+
+def heading_anchors(text: str) -> set[str]:
+    """The anchors GitHub gives a Markdown file's headings: lower case, the text of links and code kept,
+    other punctuation dropped, blanks as ``-``, and ``-1``, ``-2`` ... on repeats."""
+    anchors: set[str] = set()
+    for heading in re.findall(r"^#+ +(.+?) *$", FENCE.sub("", text), re.M):
+        slug = re.sub(r"[^\w\- ]", "", re.sub(r"\[([^]]*)\]\([^)]*\)", r"\1", heading).lower()).replace(" ", "-")
+        anchor, repeat = slug, 0
+        while anchor in anchors:
+            repeat += 1
+            anchor = f"{slug}-{repeat}"
+        anchors.add(anchor)
+    return anchors
+
+
+def broken_links(path) -> list[str]:
+    """The relative links of a Markdown file whose file, or heading after ``#``, does not exist."""
+    text = path.read_text(encoding="utf-8")
+    broken = []
+    for target in LINK.findall(FENCE.sub("", text)):
+        if re.match(r"[a-z]+:", target):  # https:, mailto:
+            continue
+        file, _, anchor = target.partition("#")
+        linked = (path.parent / file).resolve() if file else path
+        if not linked.exists():
+            broken.append(target)
+        elif anchor and linked.suffix == ".md" and anchor not in heading_anchors(linked.read_text(encoding="utf-8")):
+            broken.append(target)
+    return broken
+
+
+def test_heading_anchors_follow_github():
+    assert heading_anchors("# The per-node pipeline (`golden_model/fixed/pipeline.py`)\n## A, b\n## A, b\n") == {
+        "the-per-node-pipeline-golden_modelfixedpipelinepy", "a-b", "a-b-1"}
+
+
+@pytest.mark.parametrize("path", [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))], ids=lambda p: p.name)
+def test_relative_links_reach_a_file_and_its_heading(path):
+    assert broken_links(path) == []
