@@ -37,7 +37,7 @@ from golden_model.mesh import MeshError
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
-from .outputs import OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path
+from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path
 from .patterns import error_text, pattern_kind
 from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
                           resolve_mesh, strict_json)
@@ -143,10 +143,10 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 params = params_from_args(args, defaults)
                 check_print_size(args, mesh)
                 result = run_flatten(args, mesh, params)
-                write_outputs(args, mesh, result)
+                written = write_outputs(args, mesh, result)
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)
-            files = [(ending, path.read_bytes()) for _, ending, path in names]
+            files = [(ending, path.read_bytes()) for _, ending, path in names if path in written]
             return MeshOutcome(job.source, job.name, result.status, summary, line, stderr.getvalue(), files,
                                time.perf_counter() - start)
         except USER_ERRORS + (UserError,) as exc:
@@ -203,6 +203,9 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
     if jobs < 1:
         raise UserError(f"--jobs must be >= 1, got {jobs}")
     endings = _endings(args)
+    if args.out_dir is not None and not endings:
+        raise UserError("--out-dir holds the batch's files, and none is asked for: add --out .ENDING (or --history, "
+                        "--plot, --distortion)")
     if endings and args.out_dir is None:
         raise UserError("a batch (several meshes, or --scheduler) writes its outputs to --out-dir DIR (the endings "
                         "name the files)")
@@ -211,9 +214,10 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
         names = _names(meshes)
         flags = {option: (what, suffixes) for option, what, suffixes in OUTPUT_OPTIONS}
         for option, ending in endings:
-            check_output_path(out_dir / f"{names[0]}{ending}", *flags[option])
             if option == "out":
                 pattern_kind(Path(ending))
+            for name in names:  # before any run: a later mesh's obstacle must not end the batch
+                check_output_path(out_dir / f"{name}{ending}", *flags[option])
         # no mesh's output may be a mesh of the batch (or the --init or --formats file), nor another's output
         check_distinct([(flags[option][0], out_dir / f"{name}{ending}") for name in names for option, ending in endings],
                        [item for mesh in meshes
@@ -240,7 +244,7 @@ def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:
             for ending, data in outcome.files:
                 with atomic_write(out_dir / f"{outcome.name}{ending}") as tmp:
                     Path(tmp).write_bytes(data)
-    except OutputWriteError as exc:
+    except OutputError as exc:  # one that turned up during the run (a directory or FIFO of its name)
         outcome.status, outcome.line = "failed", str(exc)
 
 

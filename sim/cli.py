@@ -35,8 +35,8 @@ from golden_model.results import FlattenResult
 
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
-from .flatten_run import (check_options_used, check_print_size, human_line, json_summary, output_paths, run_flatten,
-                          run_formats, what_was_used, write_outputs)
+from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, human_line, json_summary, output_paths,
+                          run_flatten, run_formats, what_was_used, write_outputs)
 from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
     received_signal, reset_interrupted
 from .patterns import PatternDrawing, add_pattern_options, scale_note
@@ -88,8 +88,10 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":
-        print(f"springflat: iteration {result.iterations + 1} left the finite numbers ({divergence_hint(params)}); "
-              f"the outputs hold the layout after iteration {result.iterations}, the last finite one", file=sys.stderr)
+        kept = [flag for flag in PATTERN_OUTPUTS if getattr(args, flag[2:])]
+        print(f"springflat: iteration {result.iterations + 1} left the finite numbers ({divergence_hint(params)})"
+              + (f"; no pattern written ({', '.join(kept)}), an existing file is kept" if kept else ""),
+              file=sys.stderr)
         return EXIT_DIVERGED
     return 0
 

@@ -7,7 +7,7 @@ them before the commands are imported.
 EXIT_USAGE = 2
 """Bad arguments or input: one line ``springflat: error: ...``."""
 EXIT_DIVERGED = 3
-"""A run diverged (its last finite layout is still written)."""
+"""A run diverged (no pattern is written; the history and plot show the run)."""
 EXIT_INTERRUPTED = 130
 """Ctrl-C (SIGINT), as a shell reports it: 128 + 2."""
 EXIT_TERMINATED = 143

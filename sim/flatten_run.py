@@ -180,26 +180,36 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> st
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 
-def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> None:
-    """Write the outputs asked for: all of them, or (on an error) none."""
+#: The outputs a diverged run does not write: its last finite layout is no pattern, and a non-zero exit must
+#: not leave a fresh target (an existing file is kept). ``--history`` and ``--plot`` show the divergence.
+PATTERN_OUTPUTS = ("--out", "--distortion")
+
+
+def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> list[Path]:
+    """Write the outputs asked for: all of them, or (on an error) none; a diverged run's only those that
+    are not :data:`PATTERN_OUTPUTS`. The paths written."""
     title = f"{mesh.name} ({result.engine} engine)"
     final = result.final
     drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
         result.status, result.iterations, final.area_error, final.shape_error, final.folded))
-    jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=args.paper or DEFAULT_PAPER, dxf_edges=args.dxf_edges))
+    jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=args.paper or DEFAULT_PAPER,
+                                                            dxf_edges=args.dxf_edges))
             for path in args.out or ()]
     jobs += [(args.history, "--history", lambda path: write_history(path, result)),
              (args.plot, "--plot", lambda path: write_plot(path, result, mesh.faces, title=title,
                                                            vertices=mesh.vertices)),
              (args.distortion, "--distortion",
               lambda path: write_distortion_csv(path, distortion(mesh, result.positions), args.units))]
+    written = []
     with all_or_nothing():
         for path, what, write in jobs:
-            if path is None:
+            if path is None or (result.status == "diverged" and what in PATTERN_OUTPUTS):
                 continue
+            written.append(path)
             try:
                 write(path)
             except OutputWriteError as exc:
                 raise OutputWriteError(exc.path, exc.error, what) from None
             except OSError as exc:
                 raise OutputWriteError(path, exc, what) from None
+    return written

@@ -71,8 +71,8 @@ def output_target(path: Path) -> Path:
 
 
 def _refuse_special(target: Path, path: Path, what: str) -> None:
-    """An existing ``target`` that is not a regular file (a directory, a device, a FIFO, a socket) is refused:
-    springflat never replaces one."""
+    """An existing ``target`` that is not a regular file (a directory, a device, a FIFO, a socket), or that
+    the user may not write, is refused: springflat never replaces one (a rename would, permission or not)."""
     try:
         st = os.stat(target)
     except FileNotFoundError:
@@ -83,6 +83,9 @@ def _refuse_special(target: Path, path: Path, what: str) -> None:
         via = f" (the link's target '{target}')" if target != Path(path) else ""
         raise OutputError(f"{what} '{path}'{via} is a {file_kind(st.st_mode)}, not a regular file: "
                           "springflat writes regular files only")
+    if not os.access(target, os.W_OK):
+        raise OutputError(f"{what} '{path}' is read-only: springflat does not replace a file you may not write "
+                          "(make it writable, or name another)")
 
 
 #: Bytes a temporary name may always take, whatever the target's name: every file system in use

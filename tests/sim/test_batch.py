@@ -110,6 +110,8 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
     (["--out-dir", "o", "--engine", "board", "--port", "p"], "--engine board runs one mesh at a time (one board answers"),
     (["--init", "layout.txt"], "--init takes a method"),
     (["--jobs", "0"], "--jobs must be >= 1"),
+    (["--out-dir", "o", "--max-iter", "3"], "--out-dir holds the batch's files, and none is asked for: add --out "
+                                            ".ENDING"),
 ])
 def test_batch_refusals_are_one_line_before_any_run(tmp_path, monkeypatch, capsys, args, message):
     monkeypatch.chdir(tmp_path)
@@ -140,34 +142,60 @@ def test_no_output_of_a_batch_replaces_one_of_its_meshes(tmp_path, monkeypatch, 
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
 
+@pytest.mark.parametrize("obstacle", ["directory", "fifo", "dangling link into a missing directory"])
+def test_an_obstacle_to_a_later_meshs_file_is_refused_before_any_run(tmp_path, monkeypatch, capsys, obstacle):
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 3, 0)
+    os.mkdir("o")
+    {"directory": os.mkdir, "fifo": os.mkfifo,
+     "dangling link into a missing directory": lambda path: os.symlink("nowhere/x.dxf", path)}[obstacle]("o/dome02.dxf")
+    assert main(["flatten", "in/dome00.obj", "in/dome01.off", "in/dome02.obj", "--out-dir", "o", "--out", ".dxf",
+                 "--max-iter", "3"]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("springflat: error: ") and "o/dome02.dxf" in err and len(err.splitlines()) == 1
+    assert sorted(os.listdir("o")) == ["dome02.dxf"]
+
+
 def test_a_mesh_whose_files_cannot_be_written_is_failed_in_the_table_and_the_json(tmp_path, monkeypatch, capsys):
-    """The run finished but its file could not be put in place (a dangling link into a missing directory):
-    the mesh is failed everywhere, not only in the count; --init auto is a method a batch takes."""
+    """The run finished but its file could not be put in place (a directory of its name made during the run):
+    the mesh is failed everywhere, not only in the count, and the others' files are written; --init auto is a
+    method a batch takes."""
+    import sim.batch
+
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "in", 2, 0)
     os.mkdir("o")
-    os.symlink("nowhere/x.dxf", "o/dome01.dxf")
+    real_write_files = sim.batch._write_files
+
+    def obstacle_during_the_run(out_dir, outcome):
+        if outcome.name == "dome01" and not (out_dir / "dome01.dxf").exists():
+            os.mkdir(out_dir / "dome01.dxf")
+        real_write_files(out_dir, outcome)
+
+    monkeypatch.setattr(sim.batch, "_write_files", obstacle_during_the_run)
     argv = ["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "o", "--out", ".dxf", "--init", "auto",
-            "--max-iter", "5"]
+            "--max-iter", "5", "--jobs", "1"]
     assert main(argv) == 2
     out = capsys.readouterr().out.splitlines()
     rows = {line.split()[0]: line.split()[1] for line in out if line.startswith("dome")}
     assert rows["dome01"] == "failed" and rows["dome00"] in {"converged", "max-iterations"}
     assert out[-1].startswith("2 meshes: 1 ") and "1 failed" in out[-1]
+    os.remove("o/dome00.dxf")
+    os.rmdir("o/dome01.dxf")
     assert main([*argv, "--json"]) == 2
     records = {r["mesh"]: r for r in map(json.loads, capsys.readouterr().out.splitlines()) if "mesh" in r}
-    assert records["dome01"]["status"] == "failed" and "cannot write 'o/dome01.dxf'" in records["dome01"]["error"]
+    assert records["dome01"]["status"] == "failed" and records["dome01"]["error"] == "output 'o/dome01.dxf' is a directory"
     assert records["dome01"]["files"] == [] and records["dome00"]["files"] == ["o/dome00.dxf"]
+    assert os.path.isfile("o/dome00.dxf")
 
 
-@pytest.mark.parametrize("args", [["--max-iter", "3"], ["--out", ".svg", "--step", "fixed", "--dt", "50",
-                                                         "--dynamics", "paper"]])
-def test_a_batch_that_writes_nothing_leaves_no_out_dir_it_made(tmp_path, monkeypatch, capsys, args):
-    """No output asked for, or every mesh failed (a fixed step that diverges writes no print): the --out-dir
-    the batch made, and its missing parents, are gone again."""
+def test_a_batch_that_writes_nothing_leaves_no_out_dir_it_made(tmp_path, monkeypatch, capsys):
+    """Every run diverged (a diverged run writes no pattern): the --out-dir the batch made, and its missing
+    parents, are gone again."""
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "in", 2, 0)
-    main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "new/o", *args])
+    assert main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "new/o", "--out", ".svg", "--step", "fixed",
+                 "--dt", "50", "--dynamics", "paper"]) == 3
     capsys.readouterr()
     assert os.listdir(tmp_path) == ["in"]
 

@@ -200,17 +200,20 @@ def test_bad_mesh_files(tmp_path, name, message):
     assert proc.stdout == ""
 
 
-def test_diverged_run_exits_nonzero_but_writes_finite_layout(tmp_path):
+def test_a_diverged_run_exits_nonzero_keeps_an_existing_pattern_and_writes_its_history(tmp_path):
+    """Its last finite layout is no pattern: --out and --distortion are not written (an existing file kept),
+    --history is, with the finite iterations."""
+    (tmp_path / "o.flat.obj").write_text("a good pattern\n")
     proc = run("flatten", "surf1", "--step", "fixed", "--dt", "1000", "--max-iter", "1000",
-               "--out", tmp_path / "o.flat.obj", "--json")
+               "--out", tmp_path / "o.flat.obj", "--distortion", tmp_path / "d.csv", "--history", tmp_path / "h.csv",
+               "--json")
     assert proc.returncode == 3
     assert json.loads(proc.stdout)["status"] == "diverged"
-    vertices = [line.split()[1:] for line in (tmp_path / "o.flat.obj").read_text().splitlines()
-                if line.startswith("v ")]
-    assert len(vertices) == 7 and np.isfinite(np.array(vertices, dtype=float)).all()
+    assert (tmp_path / "o.flat.obj").read_text() == "a good pattern\n" and not (tmp_path / "d.csv").exists()
     n = json.loads(proc.stdout)["iterations"]  # the iterations whose layouts were finite
+    assert len((tmp_path / "h.csv").read_text().splitlines()) == n + 2  # header, P0, n iterations
     assert (f"springflat: iteration {n + 1} left the finite numbers (" in proc.stderr
-            and f"the outputs hold the layout after iteration {n}, the last finite one" in proc.stderr)
+            and "; no pattern written (--out, --distortion), an existing file is kept" in proc.stderr)
 
 
 def test_a_diverged_runs_plot_is_written_without_warnings(tmp_path):

@@ -690,7 +690,7 @@ def _unreadable_command(tmp_path) -> list[str] | None:
     return prefix if blocked else None
 
 
-@pytest.mark.parametrize("what", ["mesh", "layout", "formats", "out"])
+@pytest.mark.parametrize("what", ["mesh", "layout", "formats", "out", "read-only out"])
 def test_real_permission_denied(tmp_path, what):
     prefix = _unreadable_command(tmp_path)
     if prefix is None:
@@ -699,11 +699,12 @@ def test_real_permission_denied(tmp_path, what):
     (tmp_path / "l.txt").write_text(layout_text())
     (tmp_path / "f.json").write_text(_formats_json())
     (tmp_path / "ro").mkdir()
+    (tmp_path / "kept.obj").write_text("a file its owner keeps\n")
     args = {"mesh": ["m.obj"], "layout": ["m.obj", "--init", "l.txt"],
             "formats": ["m.obj", "--engine", "fixed", "--formats", "f.json"],
-            "out": ["m.obj", "--out", "ro/o.obj"]}[what]
-    target = {"mesh": "m.obj", "layout": "l.txt", "formats": "f.json", "out": "ro"}[what]
-    (tmp_path / target).chmod(0o500 if what == "out" else 0)
+            "out": ["m.obj", "--out", "ro/o.obj"], "read-only out": ["m.obj", "--out", "kept.obj"]}[what]
+    target = {"mesh": "m.obj", "layout": "l.txt", "formats": "f.json", "out": "ro", "read-only out": "kept.obj"}[what]
+    (tmp_path / target).chmod({"out": 0o500, "read-only out": 0o444}.get(what, 0))
     before = _tree(tmp_path)
     try:
         command = [SPRINGFLAT, "flatten", *args, "--json"]
@@ -712,9 +713,13 @@ def test_real_permission_denied(tmp_path, what):
         proc = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=300)
     finally:
         (tmp_path / target).chmod(0o700)
-    kind = {"mesh": "read mesh", "layout": "read layout", "formats": "read formats file", "out": "write --out"}[what]
-    _one_error_line(proc, rf"^springflat: error: cannot {kind} '{'ro/o.obj' if what == 'out' else target}': "
-                          "permission denied$")
+    if what == "read-only out":  # a rename would replace it: refused as a shell's '>' would be
+        _one_error_line(proc, r"^springflat: error: --out 'kept.obj' is read-only: springflat does not replace a "
+                              r"file you may not write \(make it writable, or name another\)$")
+    else:
+        kind = {"mesh": "read mesh", "layout": "read layout", "formats": "read formats file", "out": "write --out"}[what]
+        _one_error_line(proc, rf"^springflat: error: cannot {kind} '{'ro/o.obj' if what == 'out' else target}': "
+                              "permission denied$")
     assert _tree(tmp_path) == before
 
 
