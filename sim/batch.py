@@ -7,8 +7,8 @@ writes them into ``DIR`` as ``<mesh name><ending>``, where the endings are the v
 ``--history``, ``--plot`` and ``--distortion`` (``--out .dxf --out .pdf``), each mesh's files all or
 none (:func:`sim.outputs.all_or_nothing`).
 
-Workers: a :class:`sim.workers.WorkerPool` with ``--jobs`` processes (default: the
-cores this process may use), or with ``--scheduler ADDRESS`` a Dask cluster (``distributed.Client``);
+Workers: ``--jobs`` processes (default: the cores this process may use), each a
+:class:`sim.workers.WorkerPool` of one, fed one mesh at a time (:func:`_pool_outcomes`), or with ``--scheduler ADDRESS`` a Dask cluster (``distributed.Client``);
 ``--scheduler local`` starts Dask's own ``LocalCluster`` of ``--jobs`` single-threaded worker
 processes.  Either way the outputs are the same bytes.
 
@@ -249,21 +249,42 @@ def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:
 
 
 def _died(job: BatchJob, exc: BaseException) -> MeshOutcome:
-    return MeshOutcome(job.source, job.name, "failed", line=f"the worker failed: {type(exc).__name__}: {exc}")
+    from concurrent.futures.process import BrokenProcessPool
+
+    line = ("its worker process died (killed by a signal, or out of memory)" if isinstance(exc, BrokenProcessPool)
+            else f"the worker failed: {type(exc).__name__}: {exc}")
+    return MeshOutcome(job.source, job.name, "failed", line=line)
 
 
 def _pool_outcomes(jobs: list[BatchJob], workers: int):
-    """Each job's outcome as it finishes, on a local process pool."""
-    from concurrent.futures import as_completed
+    """Each job's outcome as it finishes, on local worker processes: a pool of one process per worker, fed
+    one job at a time, so that a worker that dies fails its own mesh only and its pool is replaced for the
+    others (one pool of many processes fails every task it holds when any of them dies)."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+    from concurrent.futures.process import BrokenProcessPool
 
-    with WorkerPool(min(workers, len(jobs))) as pool:
-        futures = {pool.submit(flatten_one, job): job for job in jobs}
-        for future in as_completed(futures):
-            job = futures[future]
-            try:
-                yield future.result()
-            except Exception as exc:  # noqa: BLE001 - a worker that died fails its mesh only
-                yield _died(job, exc)
+    queue = list(jobs)
+    running: dict = {}  # future -> (its pool, its job)
+    with contextlib.ExitStack() as pools:
+        def start(pool: WorkerPool) -> None:
+            job = queue.pop(0)
+            running[pool.submit(flatten_one, job)] = (pool, job)
+
+        for _ in range(min(workers, len(queue))):
+            start(pools.enter_context(WorkerPool(1)))
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                pool, job = running.pop(future)
+                try:
+                    outcome = future.result()
+                except Exception as exc:  # noqa: BLE001 - a worker that died fails its mesh only
+                    outcome = _died(job, exc)
+                    if isinstance(exc, BrokenProcessPool):
+                        pool = pools.enter_context(WorkerPool(1))
+                if queue:
+                    start(pool)
+                yield outcome
 
 
 @contextlib.contextmanager

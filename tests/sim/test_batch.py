@@ -142,6 +142,32 @@ def test_no_output_of_a_batch_replaces_one_of_its_meshes(tmp_path, monkeypatch, 
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
 
+def _dies_on_dome01(job):
+    """``flatten_one``, whose worker process dies on the mesh ``dome01`` (a crash, or the kernel's OOM killer)."""
+    import sim.batch
+
+    if job.name == "dome01":
+        os._exit(9)
+    return sim.batch.REAL_FLATTEN_ONE(job)
+
+
+def test_a_worker_that_dies_fails_its_mesh_only(tmp_path, monkeypatch, capsys):
+    import sim.batch
+
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 6, 0)
+    monkeypatch.setattr(sim.batch, "REAL_FLATTEN_ONE", sim.batch.flatten_one, raising=False)
+    monkeypatch.setattr(sim.batch, "flatten_one", _dies_on_dome01)  # the workers are forked: they have it too
+    meshes = sorted(str(p) for p in (tmp_path / "in").iterdir() if p.name != "corrupt.obj")
+    assert main(["flatten", *meshes, "--out-dir", "o", "--out", ".dxf", "--max-iter", "3", "--jobs", "2"]) == 2
+    out = capsys.readouterr().out.splitlines()
+    rows = {line.split()[0]: line.split()[1] for line in out if line.startswith("dome")}
+    assert rows.pop("dome01") == "failed" and set(rows.values()) == {"max-iterations"} and len(rows) == 5, out
+    assert any(line.endswith("dome01.off: failed: its worker process died (killed by a signal, or out of memory)")
+               for line in out), out
+    assert sorted(os.listdir("o")) == [f"dome0{k}.dxf" for k in (0, 2, 3, 4, 5)]
+
+
 @pytest.mark.parametrize("obstacle", ["directory", "fifo", "dangling link into a missing directory"])
 def test_an_obstacle_to_a_later_meshs_file_is_refused_before_any_run(tmp_path, monkeypatch, capsys, obstacle):
     monkeypatch.chdir(tmp_path)
