@@ -115,7 +115,7 @@ class MeshOutcome:
 
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
-    from .flatten_run import check_print_size, human_line, json_summary, run_flatten, write_outputs
+    from .flatten_run import check_print_size, human_line, json_summary, run_flatten, scale_note_of, write_outputs
 
     start = time.perf_counter()
     stderr = io.StringIO()
@@ -144,6 +144,8 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 check_print_size(args, mesh)
                 result = run_flatten(args, mesh, params)
                 written = write_outputs(args, mesh, result)
+                if (note := scale_note_of(args, mesh, result)) is not None:  # a folder of prints at 1:1000
+                    print(f"springflat: note: {job.name}: {note}", file=sys.stderr)
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)
             files = [(ending, path.read_bytes()) for _, ending, path in names if path in written]

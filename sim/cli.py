@@ -36,10 +36,10 @@ from golden_model.results import FlattenResult
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
 from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, human_line, json_summary, output_paths,
-                          run_flatten, run_formats, what_was_used, write_outputs)
+                          run_flatten, run_formats, scale_note_of, what_was_used, write_outputs)
 from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
     received_signal, reset_interrupted
-from .patterns import PatternDrawing, add_pattern_options, scale_note
+from .patterns import add_pattern_options
 from .run_options import (
     USER_ERRORS,
     UserError,
@@ -80,10 +80,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(human_line(mesh, result))
         print(what_was_used(params, args.init, result), file=sys.stderr)
     formats = run_formats(args)
-    scale = scale_note(PatternDrawing.of(mesh, result.positions, args.units)) if any(
-        str(path).lower().endswith((".pdf", ".svg", ".dxf")) and not str(path).lower().endswith(".flat.svg")
-        for path in args.out or ()) else None  # a print or cut at the wrong scale; vt and layouts have none
-    for note in (scale, _energy_rule_note(params, result), _error_resolution_note(formats),
+    for note in (scale_note_of(args, mesh, result), _energy_rule_note(params, result), _error_resolution_note(formats),
                  _saturation_note(result)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)

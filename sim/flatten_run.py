@@ -22,8 +22,8 @@ from golden_model.results import FlattenResult
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
-from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, PatternDrawing, check_mesh_fits, error_text, on_sheets,
-                       run_caption, write_pattern_file)
+from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_mesh_fits,
+                       error_text, kind_or_none, on_sheets, run_caption, scale_note, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 
 #: ``flatten``'s output options: ``(argparse dest, flag, the file endings it takes)``. ``--out`` may be given
@@ -178,6 +178,14 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> st
            "stalled": "no step lowered the energy any more (the guard's step scale fell below "
                       f"2^-{SCALE_MAX_SHIFT}); the pattern is the last accepted, fold-free layout"}[result.status]
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
+
+
+def scale_note_of(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> str | None:
+    """:func:`~sim.patterns.scale_note` of a run that writes a pattern at 1:1 (a print or a cut: a wrong
+    ``--units`` would spoil it; ``vt`` and layouts have no scale)."""
+    if result.status == "diverged" or not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
+        return None
+    return scale_note(PatternDrawing.of(mesh, result.positions, args.units))
 
 
 #: The outputs a diverged run does not write: its last finite layout is no pattern, and a non-zero exit must

@@ -58,6 +58,8 @@ PAPERS = (*PAPER_MM, "fit")
 DEFAULT_PAPER = "a4"
 #: The pattern kinds drawn on sheets of ``paper``.
 SHEET_KINDS = ("pdf", "svg")
+#: The pattern kinds at 1:1 in ``units`` (a print, or a cut line); the others are texture or layout files.
+TRUE_SCALE_KINDS = ("dxf", *SHEET_KINDS)
 #: What ``--out`` accepts (:func:`pattern_kind` tells the kind of each).
 PATTERN_SUFFIXES = (".dxf", ".pdf", ".svg", ".obj")
 
@@ -91,13 +93,18 @@ def pattern_kind(path: Path) -> str:
     raise PatternError(f"'{path}' must end in {', '.join(PATTERN_SUFFIXES)} (or .flat.obj, .flat.svg)")
 
 
+def kind_or_none(path: Path | str) -> str | None:
+    """:func:`pattern_kind` of ``path`` (or of a batch's ending), ``None`` for a name no pattern has."""
+    try:
+        return pattern_kind(Path(path))
+    except PatternError:
+        return None
+
+
 def on_sheets(path: Path | str) -> bool:
     """Whether ``path`` (or a batch's ending) names a pattern drawn on paper sheets, ``--paper``'s:
     ``.pdf`` or ``.svg``, not ``.flat.svg``."""
-    try:
-        return pattern_kind(Path(path)) in SHEET_KINDS
-    except PatternError:
-        return False
+    return kind_or_none(path) in SHEET_KINDS
 
 
 def check_units(units: str) -> float:

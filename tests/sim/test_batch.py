@@ -142,6 +142,24 @@ def test_no_output_of_a_batch_replaces_one_of_its_meshes(tmp_path, monkeypatch, 
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
 
+def test_a_batch_of_prints_at_a_likely_wrong_scale_gets_the_single_runs_note(tmp_path, monkeypatch, capsys):
+    """Meshes in metres printed with the default --units mm: each mesh's note, as a single run prints it."""
+    monkeypatch.chdir(tmp_path)
+    os.mkdir("in")
+    for k in range(2):
+        mesh = dome_grid(5)
+        save_obj(f"in/part{k}.obj", mesh.vertices * 0.1, mesh.faces)  # 0.1 m
+    assert main(["flatten", "in/part0.obj", "in/part1.obj", "--out-dir", "o", "--out", ".pdf", "--out", ".obj",
+                 "--max-iter", "3", "--jobs", "1"]) == 0
+    err = capsys.readouterr().err
+    for k in range(2):
+        assert (f"springflat: note: part{k}: the pattern is " in err
+                and " mm at 1:1 with --units mm: if the mesh is in metres, centimetres or inches" in err), err
+    assert main(["flatten", "in/part0.obj", "in/part1.obj", "--out-dir", "o2", "--out", ".obj", "--max-iter", "3",
+                 "--jobs", "1"]) == 0
+    assert "the pattern is" not in capsys.readouterr().err  # texture coordinates have no scale
+
+
 def _dies_on_dome01(job):
     """``flatten_one``, whose worker process dies on the mesh ``dome01`` (a crash, or the kernel's OOM killer)."""
     import sim.batch
