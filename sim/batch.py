@@ -375,6 +375,14 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     if not args.json:
         print(f"springflat: {len(meshes)} mesh{'es' if len(meshes) != 1 else ''} on {where}", file=sys.stderr)
     done = 0
+    unwritable: list[OSError] = []  # the standard output's error: the batch goes on, its files are written
+
+    def say(line: str) -> None:
+        if not unwritable:
+            try:
+                print(line, flush=True)
+            except OSError as exc:
+                unwritable.append(exc)
 
     def report(outcome: MeshOutcome) -> None:
         nonlocal done
@@ -388,11 +396,11 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
                 record.update(status="failed", error=outcome.line)
             record["files"] = [str(Path(args.out_dir) / f"{outcome.name}{e}") for e, _ in outcome.files] \
                 if args.out_dir is not None and not outcome.failed else []
-            print(strict_json(record), flush=True)
+            say(strict_json(record))
         elif outcome.failed:
-            print(f"[{done}/{len(meshes)}] {outcome.source}: failed: {outcome.line}", flush=True)
+            say(f"[{done}/{len(meshes)}] {outcome.source}: failed: {outcome.line}")
         else:
-            print(f"[{done}/{len(meshes)}] {outcome.line} ({outcome.seconds:.1f} s)", flush=True)
+            say(f"[{done}/{len(meshes)}] {outcome.line} ({outcome.seconds:.1f} s)")
 
     for outcome in outcomes.values():
         report(outcome)
@@ -409,15 +417,19 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     failed = [o for o in ordered if o.failed]
     diverged = [o for o in ordered if o.status == "diverged"]
     if args.json:
-        print(strict_json({"batch": {"meshes": len(ordered), "failed": len(failed), "diverged": len(diverged),
-                                     "seconds": round(elapsed, 3), "workers": where}}))
+        say(strict_json({"batch": {"meshes": len(ordered), "failed": len(failed), "diverged": len(diverged),
+                                   "seconds": round(elapsed, 3), "workers": where}}))
     else:
-        print(summary_table(ordered))
+        say(summary_table(ordered))
         statuses = {}
         for o in ordered:
             statuses[o.status] = statuses.get(o.status, 0) + 1
         counts = ", ".join(f"{n} {s}" for s, n in statuses.items())
-        print(f"{len(ordered)} mesh{'es' if len(ordered) != 1 else ''}: {counts}; {elapsed:.1f} s on {where}")
+        say(f"{len(ordered)} mesh{'es' if len(ordered) != 1 else ''}: {counts}; {elapsed:.1f} s on {where}")
+    if unwritable:
+        written = sum(1 for o in ordered if o.files and not o.failed) if args.out_dir is not None else 0
+        raise OutputError(f"cannot write standard output: {describe_os_error(unwritable[0])} (the batch ran to its "
+                          f"end: {written} mesh{'es' if written != 1 else ''}' files written to --out-dir)")
     if failed:
         print(f"springflat: error: {len(failed)} of {len(ordered)} meshes failed: "
               f"{', '.join(o.source for o in failed)}", file=sys.stderr)

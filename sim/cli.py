@@ -37,8 +37,8 @@ from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
 from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, human_line, json_summary, output_paths,
                           run_flatten, run_formats, scale_note_of, what_was_used, write_outputs)
-from .outputs import atomic_directory, check_distinct, check_not_interrupted, check_output_path, on_interrupt, \
-    received_signal, reset_interrupted
+from .outputs import STANDARD_OUTPUT, NamedStandardOutput, atomic_directory, check_distinct, check_not_interrupted, \
+    check_output_path, on_interrupt, received_signal, reset_interrupted
 from .patterns import add_pattern_options
 from .run_options import (
     USER_ERRORS,
@@ -296,9 +296,11 @@ def main(argv: list[str] | None = None) -> int:
     handler = threading.current_thread() is threading.main_thread()
     # Ctrl-C or kill: one line, status 130 or 143 (sim.exit_codes.STOP_SIGNALS)
     previous = {name: signal.signal(getattr(signal, name), on_interrupt) for name in STOP_SIGNALS} if handler else {}
+    stdout, sys.stdout = sys.stdout, NamedStandardOutput(sys.stdout)
     try:
         try:
             status = args.func(args)
+            sys.stdout.flush()  # a full disk or a closed pipe is one line here, not a message at exit
             check_not_interrupted()  # a Ctrl-C a finaliser swallowed still ends the command as interrupted
             return status
         except Exception:
@@ -310,8 +312,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"springflat: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except OSError as exc:  # a file operation the commands do not name themselves
-        name = f" '{exc.filename}'" if exc.filename else ""
-        print(f"springflat: error: cannot access{name}: {describe_os_error(exc)}", file=sys.stderr)
+        what = ("write standard output" if exc.filename == STANDARD_OUTPUT else
+                f"access '{exc.filename}'" if exc.filename else "access")
+        print(f"springflat: error: cannot {what}: {describe_os_error(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         if argv is None:  # the program itself, which ends now (not a caller running it in-process)
@@ -320,6 +323,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"springflat: {line}", file=sys.stderr)
         return status
     finally:
+        sys.stdout = stdout
         for name, before in previous.items():
             signal.signal(getattr(signal, name), before)
 

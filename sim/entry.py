@@ -10,6 +10,7 @@ are imported, and answered once they are.
 
 from __future__ import annotations
 
+import io
 import signal
 import sys
 
@@ -23,6 +24,8 @@ def _stopped(name: str) -> int:
 
 
 def main() -> int:
+    if sys.stderr is None:  # started with its standard error closed (2>&-): what it says there is dropped,
+        sys.stderr = io.StringIO()  # not sent to print()'s default, the standard output (a --json line)
     received: list[str] = []
 
     def record(signum, frame) -> None:

@@ -55,6 +55,33 @@ class OutputWriteError(OutputError):
         super().__init__(f"cannot write {what + ' ' if what else ''}'{path}': {describe_os_error(error)}")
 
 
+#: The ``filename`` of an OS error writing the standard output (:class:`NamedStandardOutput`).
+STANDARD_OUTPUT = "<standard output>"
+
+
+class NamedStandardOutput:
+    """``sys.stdout`` whose write errors (a full disk, a closed pipe) are ``OSError`` naming it
+    (:data:`STANDARD_OUTPUT`): a command's error line can then say what it could not write."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, STANDARD_OUTPUT) from None
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, STANDARD_OUTPUT) from None
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
 def directory_name_problem(text: str) -> str | None:
     """Why ``text`` cannot name an output file, if it ends in a separator (which names a directory:
     ``Path`` would drop it, and ``new.dxf/`` would write the file ``new.dxf``); ``None`` if it does not."""

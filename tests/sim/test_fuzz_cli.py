@@ -1081,6 +1081,40 @@ def test_as_root_a_device_survives_history_out_and_plot(tmp_path, monkeypatch, c
         assert stat.S_ISCHR(now.st_mode) and (now.st_ino, now.st_rdev) == (st.st_ino, st.st_rdev), name
 
 
+def test_a_closed_standard_error_drops_the_notes_and_the_run_goes_on(tmp_path):
+    (tmp_path / "m.obj").write_text(obj())
+    proc = subprocess.run([SPRINGFLAT, "flatten", "m.obj", "--max-iter", "5", "--out", "m.dxf", "--json"],
+                          stdout=subprocess.PIPE, text=True, cwd=tmp_path, timeout=300, preexec_fn=lambda: os.close(2))
+    assert proc.returncode == 0 and json.loads(proc.stdout)["iterations"] == 5  # the one JSON line, no note in it
+    assert (tmp_path / "m.dxf").stat().st_size > 0
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
+@pytest.mark.parametrize("batch", [False, True], ids=["single", "batch"])
+def test_as_root_a_full_standard_output_is_one_line_and_a_batch_runs_to_its_end(tmp_path, batch):
+    """The standard output on a stand-in of /dev/full (1, 7) made in tmp_path: one line naming it, status 2,
+    and the files written (a batch does not give up its meshes for its table)."""
+    import stat
+
+    os.mknod(tmp_path / "full", 0o666 | stat.S_IFCHR, os.makedev(1, 7))
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "n.obj").write_text(obj())
+    args = (["m.obj", "n.obj", "--jobs", "1", "--out-dir", "o", "--out", ".dxf"] if batch else
+            ["m.obj", "--out", "m.dxf"])
+    with open(tmp_path / "full", "w") as full:
+        proc = subprocess.run([SPRINGFLAT, "flatten", *args, "--max-iter", "5"], stdout=full, stderr=subprocess.PIPE,
+                              text=True, cwd=tmp_path, timeout=300)
+    errors = [line for line in proc.stderr.splitlines() if "error" in line]
+    assert proc.returncode == 2 and len(errors) == 1, proc.stderr
+    assert errors[0].startswith("springflat: error: cannot write standard output: no space left on device"), errors
+    assert "Exception" not in proc.stderr and "Traceback" not in proc.stderr
+    if batch:
+        assert sorted(os.listdir(tmp_path / "o")) == ["m.dxf", "n.dxf"]
+        assert errors[0].endswith("(the batch ran to its end: 2 meshes' files written to --out-dir)")
+    else:
+        assert (tmp_path / "m.dxf").stat().st_size > 0
+
+
 @pytest.mark.parametrize("command", [["verilog"], ["paper"], ["study", "dome"], ["synth", "--target", "ecp5"]])
 @pytest.mark.parametrize("kind", ["file", "fifo"])
 def test_an_output_directory_that_is_not_one_is_refused_at_once(command, kind, tmp_path, monkeypatch, capsys):
