@@ -90,6 +90,15 @@ def directory_name_problem(text: str) -> str | None:
     return None
 
 
+def ending_name_problem(path: Path, what: str) -> str | None:
+    """Why ``path`` is a file-name ending (``.pdf``, ``.flat.svg``: a batch's ``--out``) given where a file
+    name belongs, if its name is hidden: that would write a dot file nobody asked for. ``None`` if not."""
+    if not Path(path).name.startswith("."):
+        return None
+    return (f"{what} '{path}' is a file-name ending, not a file name: name the file (e.g. "
+            f"'{Path(path).parent / ('pattern' + Path(path).name)}')")
+
+
 def output_target(path: Path) -> Path:
     """The file an output path writes: ``path`` itself or, for a symbolic link, the file the link finally
     points to (written through: the link stays, its target is replaced; see :func:`atomic_write`)."""
@@ -156,11 +165,9 @@ def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = 
     directory without write permission or a name too long is refused up front.
     """
     path = Path(path)
+    if (problem := ending_name_problem(path, what)) is not None:
+        raise OutputError(f"{problem}, or give --out-dir DIR for a batch, which takes endings")
     if suffixes and path.suffix.lower() not in suffixes:
-        if path.name.lower() in suffixes:  # '.pdf': a hidden name with no suffix, meant as an ending
-            example = path.parent / f"pattern{path.name}"
-            raise OutputError(f"{what} '{path}' is a file-name ending, not a file name: name the file (e.g. "
-                              f"'{example}'), or give --out-dir DIR for a batch, which takes endings")
         raise OutputError(f"{what} '{path}' must end in {' or '.join(suffixes)}")
     try:
         target = output_target(path)

@@ -37,7 +37,7 @@ from sim.cli import add_engine_options
 from sim.engines import ENGINES, engine_named
 from sim.flatten_run import run_flatten
 from sim.distortion import Distortion, distortion
-from sim.outputs import OutputError, area_ratio, directory_name_problem
+from sim.outputs import OutputError, area_ratio, directory_name_problem, ending_name_problem
 from sim.patterns import DEFAULT_PAPER, PatternDrawing, run_caption, write_pattern_file
 from sim.run_options import add_run_options, params_from_args, resolve_mesh
 
@@ -292,8 +292,12 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         raise TypeError(f"write_pattern takes the Pattern that flatten returns, not {type(pattern).__name__}")
     if not isinstance(dxf_edges, bool):
         raise TypeError(f"dxf_edges must be True or False, got {dxf_edges!r}")
+    if isinstance(path, str) and not path.strip():
+        raise OutputError(f"write_pattern: expected a file name, got {path!r}")
     if isinstance(path, str) and (problem := directory_name_problem(path)) is not None:
         raise OutputError(f"write_pattern: {problem}")
+    if (problem := ending_name_problem(Path(path), "write_pattern: the path")) is not None:
+        raise OutputError(problem)
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
     write_pattern_file(Path(path), PatternDrawing.of(pattern.mesh, pattern.layout, units, caption), paper=paper,

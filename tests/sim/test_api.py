@@ -203,6 +203,11 @@ def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
     with pytest.raises(springflat.OutputError, match="expected a file name, got '.*x.dxf/' \\(a trailing '/' names a "
                                                     "directory"):
         springflat.write_pattern(f"{tmp_path}/x.dxf/", springflat.flatten(V, F, max_iter=1))
+    for path, message in [("", "write_pattern: expected a file name, got ''"),
+                          (tmp_path / ".dxf", "write_pattern: the path '.*/.dxf' is a file-name ending, not a file "
+                                              "name: name the file \\(e.g. '.*/pattern.dxf'\\)")]:
+        with pytest.raises(springflat.OutputError, match=message):
+            springflat.write_pattern(path, springflat.flatten(V, F, max_iter=1))
     assert list(tmp_path.iterdir()) == []
 
 

@@ -137,6 +137,11 @@ BAD_ARGS = [
     (["--out", "newdir.dxf/"], "argument --out: expected a file name, got 'newdir.dxf/' (a trailing '/' names a "
                                "directory)"),
     (["--out", ".dxf"], "--out '.dxf' is a file-name ending, not a file name: name the file (e.g. 'pattern.dxf')"),
+    (["--out", ".flat.svg"], "--out '.flat.svg' is a file-name ending, not a file name: name the file (e.g. "
+                             "'pattern.flat.svg'), or give --out-dir DIR for a batch"),
+    (["--out", "o.obj", "--history", ".history.csv"], "--history '.history.csv' is a file-name ending, not a file name"),
+    (["--distortion", "d/.distortion.csv"], "--distortion 'd/.distortion.csv' is a file-name ending, not a file name: "
+                                            "name the file (e.g. 'd/pattern.distortion.csv')"),
     ([""], "the mesh path is empty"),
     (["--out", "o.obj", "--history", "h.obj"], "--history 'h.obj' must end in .csv"),
     # options that this run would ignore
