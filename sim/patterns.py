@@ -369,7 +369,8 @@ def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None
 def _page_too_large(what: str, units: str) -> PatternError:
     """The refusal of a ``fit`` page above :data:`MAX_PAGE_MM`, ``what`` the size that shows it."""
     return PatternError(f"{what} at 1:1 with --units {units}: a page larger than a PDF's {MAX_PAGE_MM / 1000:.3g} m "
-                        "a side; check --units, print it tiled (--paper a4 or letter), or write .dxf")
+                        "a side (an SVG's pages are the PDF's); check --units, print it tiled (--paper a4 or "
+                        "letter), or write .dxf")
 
 
 def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:

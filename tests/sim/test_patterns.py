@@ -335,7 +335,8 @@ def test_refusals_leave_no_file(tmp_path):
     with pytest.raises(PatternError, match=f"at most {MAX_SHEETS}"):
         write_pattern_file(tmp_path / "huge.pdf", drawing)
     for suffix in (".pdf", ".svg"):  # one page of tens of kilometres is none a viewer opens
-        with pytest.raises(PatternError, match=r"a page larger than a PDF's 5.08 m a side; check --units, print it"):
+        with pytest.raises(PatternError, match=r"a page larger than a PDF's 5.08 m a side \(an SVG's pages are the "
+                                               r"PDF's\); check --units, print it"):
             write_pattern_file(tmp_path / f"huge{suffix}", drawing, paper="fit")
     astronomical = PatternDrawing.of(mesh, mesh.vertices[:, :2] * 1e150, "m")
     # (1e153 mm)² over a window of about 270 x 170 mm: some 2e301 sheets, as a count, not 302 digits
@@ -428,7 +429,8 @@ def test_a_fit_page_beyond_a_pdfs_largest_is_refused_before_the_run(tmp_path):
                            "--out", str(tmp_path / "n.pdf")], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.splitlines() == ["springflat: error: the mesh's area is about 189 x 189 m at 1:1 with --units m: "
-                                        "a page larger than a PDF's 5.08 m a side; check --units, print it tiled "
+                                        "a page larger than a PDF's 5.08 m a side (an SVG's pages are the PDF's); "
+                                        "check --units, print it tiled "
                                         "(--paper a4 or letter), or write .dxf"]
     assert list(tmp_path.iterdir()) == []
 
