@@ -19,6 +19,8 @@ handing ``resolve_mesh`` the arrays as a temporary OBJ: ``flatten(V, F)`` gives 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import os
 import tempfile
 import warnings
@@ -46,7 +48,8 @@ __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh
 
 class MeshNote(UserWarning):
     """What :func:`read_mesh` changed or ignored in a file (polygons triangulated, STL corners merged, faces
-    wound against their neighbours turned, ...), or :func:`flatten` in its arrays (faces turned)."""
+    wound against their neighbours turned, ...), or :func:`flatten` in its arrays (faces turned) or its start
+    (a folded layout untangled, SLIM's start where ARAP folds): the command's notes."""
 
 
 @dataclass(frozen=True)
@@ -269,7 +272,12 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         args.mesh = str(path)
         # an array is checked, and untangled where it folds, as a layout file is (run_flatten's start)
         args.init = None if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
-        result = run_flatten(args, mesh, params, second_core=True)
+        said = io.StringIO()  # the command's notes on stderr (the start untangled, ...) are warnings here
+        with contextlib.redirect_stderr(said):
+            result = run_flatten(args, mesh, params, second_core=True)
+    for line in said.getvalue().splitlines():
+        warnings.warn(f"{mesh.name}: {line.removeprefix('springflat: note: ').removeprefix('springflat: ')}",
+                      MeshNote, stacklevel=2)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
                    final.folded, area_ratio(result.positions, mesh.faces, mesh.face_areas), mesh.name, mesh.vertices,

@@ -153,8 +153,11 @@ def test_a_folded_initial_array_is_untangled_as_a_layout_file_is(ear, tmp_path):
     folded[: len(folded) // 3, 0] *= -1  # a third of the nodes mirrored: triangles across the cut fold
     path = tmp_path / "folded.txt"
     np.savetxt(path, folded, fmt="%.17g")
-    from_array = springflat.flatten(V, F, init=folded, max_iter=5)
-    from_file = springflat.flatten(V, F, init=path, max_iter=5)
+    with pytest.warns(springflat.MeshNote) as notes:
+        from_array = springflat.flatten(V, F, init=folded, max_iter=5)
+    assert any("folds" in str(note.message) and "untangling it" in str(note.message) for note in notes), notes.list
+    with pytest.warns(springflat.MeshNote, match="folds 773 triangles: untangling it"):
+        from_file = springflat.flatten(V, F, init=path, max_iter=5)
     assert from_array.init == "array, untangled" and from_file.init == f"{path}, untangled"
     assert from_array.result.initial.folded == 0
     np.testing.assert_array_equal(from_array.layout, from_file.layout)
