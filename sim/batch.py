@@ -186,6 +186,8 @@ def _names(meshes: list[str]) -> list[str]:
     names = [m if is_builtin(m) and not Path(m).is_file() else Path(m).stem for m in meshes]
     seen: dict[str, str] = {}
     for mesh, name in zip(meshes, names):
+        if name in seen and seen[name] == mesh:
+            raise UserError(f"the mesh '{mesh}' is given twice")
         if name in seen:
             raise UserError(f"'{seen[name]}' and '{mesh}' are both named '{name}': their outputs would collide")
         seen[name] = mesh
@@ -334,6 +336,8 @@ def _output_directory(path: Path | None) -> Iterator[None]:
         return
     if path.exists() and not path.is_dir():
         raise UserError(f"--out-dir '{path}' exists and is not a directory")
+    if path.is_symlink() and not path.exists():
+        raise UserError(f"--out-dir '{path}' is a symbolic link to '{os.readlink(path)}', which does not exist")
     missing = [p for p in (path, *path.parents) if not p.exists()]
     try:
         path.mkdir(parents=True, exist_ok=True)

@@ -250,6 +250,18 @@ def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
     write_meshes(tmp_path / "b", 1, 0)
     assert main(["flatten", "a/dome00.obj", "b/dome00.obj", "--out-dir", "o", "--out", ".dxf"]) == 2
     assert "are both named 'dome00'" in capsys.readouterr().err
+    assert main(["flatten", "a/dome00.obj", "a/dome00.obj", "--out-dir", "o", "--out", ".dxf"]) == 2
+    assert capsys.readouterr().err == "springflat: error: the mesh 'a/dome00.obj' is given twice\n"
+
+
+def test_an_out_dir_that_is_a_dangling_link_is_refused_naming_it(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "a", 2, 0)
+    os.symlink("nowhere", "o")
+    assert main(["flatten", "a/dome00.obj", "a/dome01.off", "--out-dir", "o", "--out", ".dxf"]) == 2
+    assert capsys.readouterr().err == ("springflat: error: --out-dir 'o' is a symbolic link to 'nowhere', which does "
+                                       "not exist\n")
+    assert sorted(os.listdir()) == ["a", "o"] and os.path.islink("o")
 
 
 @pytest.mark.slow
