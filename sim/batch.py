@@ -292,6 +292,33 @@ def _pool_outcomes(jobs: list[BatchJob], workers: int):
 
 
 @contextlib.contextmanager
+def _quiet_dask_workers() -> Iterator[None]:
+    """Dask's warnings while the block starts worker processes (each reads its logging levels from the
+    environment on its start), and in this process from now on, left out: the ones a stopped batch gives
+    (a task cancelled, a worker killed; multiprocessing's resource tracker, started here too, on the
+    semaphores of a killed worker, which it removes) are not for the user; errors still show."""
+    import logging
+
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    before = {name: os.environ.get(name) for name in QUIET_DASK_ENVIRONMENT}
+    for name, value in QUIET_DASK_ENVIRONMENT.items():
+        os.environ[name] = ",".join(filter(None, (before[name], value))) if name == "PYTHONWARNINGS" else value
+    try:
+        yield
+    finally:
+        for name, value in before.items():
+            if value is None:
+                del os.environ[name]
+            else:
+                os.environ[name] = value
+
+
+#: The environment of the processes a local cluster starts: Dask's ``logging.distributed`` level, and the
+#: resource tracker's warning filter.
+QUIET_DASK_ENVIRONMENT = {"DASK_LOGGING__DISTRIBUTED": "error", "PYTHONWARNINGS": "ignore:resource_tracker:UserWarning"}
+
+
+@contextlib.contextmanager
 def dask_client(scheduler: str, workers: int):
     """A ``distributed.Client``: of a new ``LocalCluster`` of ``workers`` single-threaded processes for
     ``local``, else connected to the scheduler at ``scheduler`` (a one-line error when it cannot be reached)."""
@@ -300,9 +327,10 @@ def dask_client(scheduler: str, workers: int):
     except ImportError:  # pragma: no cover - a dependency of springflat
         raise UserError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
     with contextlib.ExitStack() as stack:
-        if scheduler == "local":
-            cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                       dashboard_address=None))
+        if scheduler == "local":  # Ctrl-C is this process's to answer: it ends the workers (sim.dask_worker)
+            with _quiet_dask_workers():
+                cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                           dashboard_address=None, preload=["sim.dask_worker"]))
             client = stack.enter_context(Client(cluster))
         else:
             try:
