@@ -32,7 +32,7 @@ from typing import Iterator
 from golden_model.builtin import is_builtin
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS
 from golden_model.files import describe_os_error, read_file_bytes
-from golden_model.mesh import MeshError
+from golden_model.mesh import MeshError, printable_name
 
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
@@ -473,11 +473,12 @@ def summary_table(outcomes: list[MeshOutcome]) -> str:
     """A plain-text table: one row per mesh, in the order given."""
     rows = [("mesh", "status", "iterations", "E_S", "E_C", "folded", "seconds")]
     for o in outcomes:
+        name = printable_name(o.name)  # a file's stem may hold a newline: one row each
         if o.failed or o.summary is None:
-            rows.append((o.name, "failed", "", "", "", "", f"{o.seconds:.1f}"))
+            rows.append((name, "failed", "", "", "", "", f"{o.seconds:.1f}"))
         else:
             s = o.summary
-            rows.append((o.name, s["status"], str(s["iterations"]), error_text(s["area_error"]),
+            rows.append((name, s["status"], str(s["iterations"]), error_text(s["area_error"]),
                          error_text(s["shape_error"]), str(s["folded"]), f"{o.seconds:.1f}"))
     widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
     lines = ["  ".join(cell.ljust(w) if k < 2 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths)))

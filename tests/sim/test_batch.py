@@ -254,6 +254,19 @@ def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
     assert capsys.readouterr().err == "springflat: error: the mesh 'a/dome00.obj' is given twice\n"
 
 
+def test_the_table_has_one_row_per_mesh_whatever_its_file_name(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    mesh = dome_grid(5)
+    for name in ("a\nb.obj", "plain.obj"):
+        save_obj(name, mesh.vertices * 100, mesh.faces)
+    assert main(["flatten", "a\nb.obj", "plain.obj", "--out-dir", "o", "--out", ".dxf", "--max-iter", "3"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    header = next(k for k, line in enumerate(lines) if line.startswith("mesh "))
+    table = lines[header + 1:header + 3]
+    assert [row.split()[0] for row in table] == ["a\\nb", "plain"], table
+    assert sorted(os.listdir("o")) == ["a\nb.dxf", "plain.dxf"]
+
+
 def test_an_out_dir_that_is_a_dangling_link_is_refused_naming_it(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "a", 2, 0)
