@@ -221,7 +221,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
             if option == "out":
                 pattern_kind(Path(ending))
             for name in names:  # before any run: a later mesh's obstacle must not end the batch
-                check_output_path(out_dir / f"{name}{ending}", *flags[option])
+                check_output_path(out_dir / f"{name}{ending}", *flags[option], typed=False)
         # no mesh's output may be a mesh of the batch (or the --init or --formats file), nor another's output
         check_distinct([(flags[option][0], out_dir / f"{name}{ending}") for name in names for option, ending in endings],
                        [item for mesh in meshes
@@ -255,15 +255,20 @@ def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:
 def _died(job: BatchJob, exc: BaseException) -> MeshOutcome:
     from concurrent.futures.process import BrokenProcessPool
 
-    line = ("its worker process died (killed by a signal, or out of memory)" if isinstance(exc, BrokenProcessPool)
-            else f"the worker failed: {type(exc).__name__}: {exc}")
+    if isinstance(exc, BrokenProcessPool) and exc.__cause__ is None:
+        line = "its worker process died (killed by a signal, or out of memory)"
+    else:  # a result that could not be sent back, ...: what caused it
+        cause = exc.__cause__ or exc
+        line = f"the worker failed: {type(cause).__name__}: {cause}"
     return MeshOutcome(job.source, job.name, "failed", line=line)
 
 
 def _pool_outcomes(jobs: list[BatchJob], workers: int):
     """Each job's outcome as it finishes, on local worker processes: a pool of one process per worker, fed
     one job at a time, so that a worker that dies fails its own mesh only and its pool is replaced for the
-    others (one pool of many processes fails every task it holds when any of them dies)."""
+    others (one pool of many processes fails every task it holds when any of them dies). A pool's process is
+    forked while the other pools' threads run; those threads hold only their own pool's queue locks, which the
+    new process never takes (it reads its own pool's queues), so the fork cannot leave it a lock held."""
     from concurrent.futures import FIRST_COMPLETED, wait
     from concurrent.futures.process import BrokenProcessPool
 
@@ -284,7 +289,7 @@ def _pool_outcomes(jobs: list[BatchJob], workers: int):
                     outcome = future.result()
                 except Exception as exc:  # noqa: BLE001 - a worker that died fails its mesh only
                     outcome = _died(job, exc)
-                    if isinstance(exc, BrokenProcessPool):
+                    if isinstance(exc, BrokenProcessPool) and queue:
                         pool = pools.enter_context(WorkerPool(1))
                 if queue:
                     start(pool)
@@ -293,19 +298,22 @@ def _pool_outcomes(jobs: list[BatchJob], workers: int):
 
 @contextlib.contextmanager
 def _quiet_dask_workers() -> Iterator[None]:
-    """Dask's warnings while the block starts worker processes (each reads its logging levels from the
-    environment on its start), and in this process from now on, left out: the ones a stopped batch gives
-    (a task cancelled, a worker killed; multiprocessing's resource tracker, started here too, on the
-    semaphores of a killed worker, which it removes) are not for the user; errors still show."""
+    """Dask's warnings in the block, in this process and in the worker processes it starts (each reads its
+    logging levels from the environment on its start), left out: the ones a stopped batch gives (a task
+    cancelled, a worker killed; multiprocessing's resource tracker, started here too, on the semaphores
+    of a killed worker, which it removes) are not for the user; errors still show."""
     import logging
 
-    logging.getLogger("distributed").setLevel(logging.ERROR)
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
     before = {name: os.environ.get(name) for name in QUIET_DASK_ENVIRONMENT}
     for name, value in QUIET_DASK_ENVIRONMENT.items():
         os.environ[name] = ",".join(filter(None, (before[name], value))) if name == "PYTHONWARNINGS" else value
     try:
         yield
     finally:
+        logger.setLevel(level)
         for name, value in before.items():
             if value is None:
                 del os.environ[name]
@@ -328,9 +336,9 @@ def dask_client(scheduler: str, workers: int):
         raise UserError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
     with contextlib.ExitStack() as stack:
         if scheduler == "local":  # Ctrl-C is this process's to answer: it ends the workers (sim.dask_worker)
-            with _quiet_dask_workers():
-                cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                                           dashboard_address=None, preload=["sim.dask_worker"]))
+            stack.enter_context(_quiet_dask_workers())  # for the cluster's life: its end warns too
+            cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                       dashboard_address=None, preload=["sim.dask_worker"]))
             client = stack.enter_context(Client(cluster))
         else:
             try:
@@ -357,7 +365,7 @@ def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):
 @contextlib.contextmanager
 def _output_directory(path: Path | None) -> Iterator[None]:
     """``--out-dir`` made, with its missing parents, for the block; at its end those of them still empty are
-    removed again (a refusal, Ctrl-C, every mesh failed, no output asked for): a batch leaves no empty
+    removed again (a refusal, Ctrl-C, no mesh wrote a file): a batch leaves no empty
     directory that it made."""
     if path is None:
         yield
@@ -430,7 +438,7 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
                 if args.out_dir is not None and not outcome.failed else []
             say(strict_json(record))
         elif outcome.failed:
-            say(f"[{done}/{len(meshes)}] {outcome.source}: failed: {outcome.line}")
+            say(f"[{done}/{len(meshes)}] {printable_name(outcome.source)}: failed: {outcome.line}")
         else:
             say(f"[{done}/{len(meshes)}] {outcome.line} ({outcome.seconds:.1f} s)")
 
@@ -458,13 +466,15 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
             statuses[o.status] = statuses.get(o.status, 0) + 1
         counts = ", ".join(f"{n} {s}" for s, n in statuses.items())
         say(f"{len(ordered)} mesh{'es' if len(ordered) != 1 else ''}: {counts}; {elapsed:.1f} s on {where}")
-    if unwritable:
-        written = sum(1 for o in ordered if o.files and not o.failed) if args.out_dir is not None else 0
-        raise OutputError(f"cannot write standard output: {describe_os_error(unwritable[0])} (the batch ran to its "
-                          f"end: {written} mesh{'es' if written != 1 else ''}' files written to --out-dir)")
     if failed:
         print(f"springflat: error: {len(failed)} of {len(ordered)} meshes failed: "
-              f"{', '.join(o.source for o in failed)}", file=sys.stderr)
+              f"{', '.join(printable_name(o.source) for o in failed)}", file=sys.stderr)
+    if unwritable:  # the table is lost: status 2 whatever the runs gave
+        written = sum(1 for o in ordered if o.files and not o.failed)
+        raise OutputError(f"cannot write standard output: {describe_os_error(unwritable[0])} (the batch ran to its "
+                          "end" + (f": {written} mesh{'es' if written != 1 else ''}' files written to --out-dir)"
+                                   if args.out_dir is not None else ")"))
+    if failed:
         return EXIT_USAGE
     return EXIT_DIVERGED if diverged else 0
 

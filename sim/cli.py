@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import signal
 import sys
 import threading
@@ -37,8 +38,8 @@ from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
 from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, human_line, json_summary, output_paths,
                           run_flatten, run_formats, scale_note_of, what_was_used, write_outputs)
-from .outputs import STANDARD_OUTPUT, NamedStandardOutput, atomic_directory, check_distinct, check_not_interrupted, \
-    check_output_path, on_interrupt, received_signal, reset_interrupted
+from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
+    check_not_interrupted, check_output_path, ending_name_problem, on_interrupt, received_signal, reset_interrupted
 from .patterns import add_pattern_options
 from .run_options import (
     USER_ERRORS,
@@ -85,9 +86,11 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":
-        kept = [flag for flag in PATTERN_OUTPUTS if getattr(args, flag[2:])]
+        unwritten = [(flag, path) for _, flag, _, path in output_paths(args) if flag in PATTERN_OUTPUTS]
+        kept = [f"'{path}'" for _, path in unwritten if os.path.lexists(path)]
         print(f"springflat: iteration {result.iterations + 1} left the finite numbers ({divergence_hint(params)})"
-              + (f"; no pattern written ({', '.join(kept)}), an existing file is kept" if kept else ""),
+              + (f"; no pattern written ({', '.join(dict.fromkeys(flag for flag, _ in unwritten))})" if unwritten else "")
+              + (f", {' and '.join(kept)} kept as {'they were' if len(kept) > 1 else 'it was'}" if kept else ""),
               file=sys.stderr)
         return EXIT_DIVERGED
     return 0
@@ -104,6 +107,8 @@ def divergence_hint(params: FlattenParams) -> str:
 def check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before the run, an output path that cannot work, and two outputs that are one file."""
     for _, flag, endings, path in output_paths(args):
+        if (problem := ending_name_problem(path, flag)) is not None:
+            raise OutputError(f"{problem}, or give --out-dir DIR for a batch, which takes endings")
         check_output_path(path, flag, endings)
     check_options_used(args)
     if args.jobs is not None:
@@ -296,7 +301,9 @@ def main(argv: list[str] | None = None) -> int:
     handler = threading.current_thread() is threading.main_thread()
     # Ctrl-C or kill: one line, status 130 or 143 (sim.exit_codes.STOP_SIGNALS)
     previous = {name: signal.signal(getattr(signal, name), on_interrupt) for name in STOP_SIGNALS} if handler else {}
-    stdout, sys.stdout = sys.stdout, NamedStandardOutput(sys.stdout)
+    stdout = sys.stdout
+    if stdout is not None:  # (closed: print() skips it)
+        sys.stdout = NamedStandardOutput(stdout)
     try:
         try:
             status = args.func(args)

@@ -26,6 +26,8 @@ def _stopped(name: str) -> int:
 def main() -> int:
     if sys.stderr is None:  # started with its standard error closed (2>&-): what it says there is dropped,
         sys.stderr = io.StringIO()  # not sent to print()'s default, the standard output (a --json line)
+    if sys.stdout is None:  # closed (>&-): what it prints there is dropped; its files are still written
+        sys.stdout = io.StringIO()
     received: list[str] = []
 
     def record(signum, frame) -> None:

@@ -52,7 +52,12 @@ def _progress(total: int, enabled: bool):
 def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
     """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units)."""
     if any(on_sheets(path) for path in args.out or ()):
-        check_mesh_fits(mesh, args.units, args.paper or DEFAULT_PAPER)
+        check_mesh_fits(mesh, args.units, paper_of(args))
+
+
+def paper_of(args: argparse.Namespace) -> str:
+    """The sheet of the run's PDF and SVG patterns: ``--paper``, or :data:`~sim.patterns.DEFAULT_PAPER`."""
+    return args.paper or DEFAULT_PAPER
 
 
 def check_formats_option(args: argparse.Namespace) -> None:
@@ -70,9 +75,9 @@ def check_options_used(args: argparse.Namespace) -> None:
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
     if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
         raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg")
-    for option in ("port", "baud"):
+    for option, what in (("port", "the serial port"), ("baud", "the serial port's rate")):
         if getattr(args, option) is not None and not engine_named(args.engine).serial:
-            raise UserError(f"--{option} sets the serial port: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")
+            raise UserError(f"--{option} sets {what}: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")
     if args.jobs is not None and args.jobs < 1:
         raise UserError(f"--jobs must be >= 1, got {args.jobs}")
 
@@ -126,16 +131,17 @@ def run_formats(args: argparse.Namespace):
 
 
 def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, progress: bool = False,
-                second_core: bool = False) -> FlattenResult:
+                second_core: bool = False, notes: list[str] | None = None) -> FlattenResult:
     """One flattening as ``args`` asks (initial layout, engine); sets ``args.init`` to the layout used.
 
     What the formats or the engine cannot run is refused before any layout work; a guarded run starts
     fold-free where that can be had (:func:`~sim.run_options.start_positions`; ``second_core``: SLIM may run beside
-    ARAP)."""
+    ARAP; ``notes``: where its notes go instead of stderr)."""
     if args.init is None:
         args.init = default_init(args.mesh)
     engine = choose_engine(args, params)
-    positions, args.init = start_positions(mesh, args.init, params, sys.stderr.isatty(), second_core)
+    positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
+                                           notes)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
     with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         return engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
@@ -200,7 +206,7 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
     final = result.final
     drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
         result.status, result.iterations, final.area_error, final.shape_error, final.folded))
-    jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=args.paper or DEFAULT_PAPER,
+    jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=paper_of(args),
                                                             dxf_edges=args.dxf_edges))
             for path in args.out or ()]
     jobs += [(args.history, "--history", lambda path: write_history(path, result)),

@@ -156,17 +156,19 @@ def _make_temporary(directory: Path, name: str, *, is_dir: bool = False) -> Path
     raise FileExistsError(errno.EEXIST, "no free temporary name", str(directory))
 
 
-def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = None) -> None:
+def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = None, typed: bool = True) -> None:
     """Fail early (before a long run) on an output path that cannot work.
 
     Besides the suffix and the directory, this refuses a path that exists and is
-    not a regular file (a symbolic link counts as its target), and creates and
-    removes a temporary file where :func:`atomic_write` will, so that a
-    directory without write permission or a name too long is refused up front.
+    not a regular file (a symbolic link counts as its target) or that the user
+    may not write, and creates and removes a temporary file where
+    :func:`atomic_write` will, so that a directory without write permission or a
+    name too long is refused up front. ``typed``: the user typed the name, so a
+    hidden one is a file-name ending given for a file (:func:`ending_name_problem`).
     """
     path = Path(path)
-    if (problem := ending_name_problem(path, what)) is not None:
-        raise OutputError(f"{problem}, or give --out-dir DIR for a batch, which takes endings")
+    if typed and (problem := ending_name_problem(path, what)) is not None:  # a batch builds '.scan.dxf' for '.scan'
+        raise OutputError(problem)
     if suffixes and path.suffix.lower() not in suffixes:
         raise OutputError(f"{what} '{path}' must end in {' or '.join(suffixes)}")
     try:

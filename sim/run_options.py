@@ -220,22 +220,28 @@ def slim_beside_arap(mesh: Mesh, enabled: bool) -> Iterator[Callable[[], np.ndar
 
 
 def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, progress: bool,
-                    second_core: bool = False) -> tuple[np.ndarray, str]:
+                    second_core: bool = False, notes: list[str] | None = None) -> tuple[np.ndarray, str]:
     """``(P0, what it is)``. A guarded run starts fold-free where that can be had (``start_layout``: folds are
-    untangled, and what was done is one note each on stderr); the paper dynamics takes the layout as it is.
-    ``second_core``: ``--init auto`` may compute SLIM's start beside ARAP (:func:`slim_beside_arap`)."""
+    untangled, and what was done is one note each on stderr, or appended to ``notes`` when it is given);
+    the paper dynamics takes the layout as it is. ``second_core``: ``--init auto`` may compute SLIM's start
+    beside ARAP (:func:`slim_beside_arap`)."""
+    def tell(said: list[str]) -> None:
+        if notes is not None:
+            notes.extend(said)
+        else:
+            for note in said:
+                print(f"springflat: note: {note}", file=sys.stderr)
+
     if not params.guard:
-        notes: list[str] = []
-        positions = initial_layout(mesh, init, notes)
-        for note in notes:
-            print(f"springflat: note: {note}", file=sys.stderr)
+        said: list[str] = []
+        positions = initial_layout(mesh, init, said)
+        tell(said)
         return positions, "arap" if init_name(init) == AUTO_START else init_name(init)
     say = (lambda text: print(f"springflat: {text} ...", file=sys.stderr)) if progress else None
     with slim_beside_arap(mesh, second_core and init_name(init) == AUTO_START) as slim:
         start = start_layout(mesh, init, progress=say, slim=slim)
     if not progress:
-        for note in start.notes:
-            print(f"springflat: note: {note}", file=sys.stderr)
+        tell(start.notes)
     return start.positions, start.method
 
 

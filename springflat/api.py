@@ -19,8 +19,6 @@ handing ``resolve_mesh`` the arrays as a temporary OBJ: ``flatten(V, F)`` gives 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import os
 import tempfile
 import warnings
@@ -272,12 +270,10 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         args.mesh = str(path)
         # an array is checked, and untangled where it folds, as a layout file is (run_flatten's start)
         args.init = None if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
-        said = io.StringIO()  # the command's notes on stderr (the start untangled, ...) are warnings here
-        with contextlib.redirect_stderr(said):
-            result = run_flatten(args, mesh, params, second_core=True)
-    for line in said.getvalue().splitlines():
-        warnings.warn(f"{mesh.name}: {line.removeprefix('springflat: note: ').removeprefix('springflat: ')}",
-                      MeshNote, stacklevel=2)
+        run_notes: list[str] = []  # the command's notes on stderr (the start untangled, ...) are warnings here
+        result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
+    for note in run_notes:
+        warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
                    final.folded, area_ratio(result.positions, mesh.faces, mesh.face_areas), mesh.name, mesh.vertices,

@@ -257,14 +257,16 @@ def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
 def test_the_table_has_one_row_per_mesh_whatever_its_file_name(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     mesh = dome_grid(5)
-    for name in ("a\nb.obj", "plain.obj"):
+    for name in ("a\nb.obj", "plain.obj", ".hidden.obj"):  # a hidden file's outputs are hidden too
         save_obj(name, mesh.vertices * 100, mesh.faces)
-    assert main(["flatten", "a\nb.obj", "plain.obj", "--out-dir", "o", "--out", ".dxf", "--max-iter", "3"]) == 0
+    assert main(["flatten", "a\nb.obj", "plain.obj", ".hidden.obj", "--out-dir", "o", "--out", ".dxf",
+                 "--max-iter", "3"]) == 0
     lines = capsys.readouterr().out.splitlines()
     header = next(k for k, line in enumerate(lines) if line.startswith("mesh "))
-    table = lines[header + 1:header + 3]
-    assert [row.split()[0] for row in table] == ["a\\nb", "plain"], table
-    assert sorted(os.listdir("o")) == ["a\nb.dxf", "plain.dxf"]
+    table = lines[header + 1:header + 4]
+    assert [row.split()[0] for row in table] == ["a\\nb", "plain", ".hidden"], table
+    assert header == 3  # the lines as each mesh finishes: one each
+    assert sorted(os.listdir("o")) == [".hidden.dxf", "a\nb.dxf", "plain.dxf"]
 
 
 def test_an_out_dir_that_is_a_dangling_link_is_refused_naming_it(tmp_path, monkeypatch, capsys):

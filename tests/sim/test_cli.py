@@ -153,7 +153,7 @@ BAD_ARGS = [
     (["--penalty-gain", "5"], "--penalty-gain sets the penalty: add --penalty"),
     (["--penalty-kappa", "2"], "--penalty-kappa sets the penalty: add --penalty"),
     (["--port", "/nowhere"], "--port sets the serial port: add --engine board"),
-    (["--baud", "9600"], "--baud sets the serial port: add --engine board"),
+    (["--baud", "9600"], "--baud sets the serial port's rate: add --engine board"),
     (["--dynamics", "momentum", "--step", "fixed"], "--step fixed is a step of the paper dynamics, not of the "
                                                     "momentum dynamics: drop --step, or add --dynamics paper"),
     (["--dynamics", "momentum", "--step", "variable"], "--step variable is a step of the paper dynamics"),
@@ -218,7 +218,7 @@ def test_a_diverged_run_exits_nonzero_keeps_an_existing_pattern_and_writes_its_h
     n = json.loads(proc.stdout)["iterations"]  # the iterations whose layouts were finite
     assert len((tmp_path / "h.csv").read_text().splitlines()) == n + 2  # header, P0, n iterations
     assert (f"springflat: iteration {n + 1} left the finite numbers (" in proc.stderr
-            and "; no pattern written (--out, --distortion), an existing file is kept" in proc.stderr)
+            and f"; no pattern written (--out, --distortion), '{tmp_path / 'o.flat.obj'}' kept as it was" in proc.stderr)
 
 
 def test_a_diverged_runs_plot_is_written_without_warnings(tmp_path):

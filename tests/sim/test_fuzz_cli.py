@@ -525,7 +525,7 @@ def test_parameters(name, tmp_path, monkeypatch, capsys):
             assert summary["energy"] is None and "energy" in summary["non_finite"]  # was Infinity
         if case.code == 3:  # a diverged run writes no pattern; its history holds P0 and the finite iterations
             assert not (tmp_path / "flat.obj").exists()
-            if (tmp_path / "h.csv").exists():
+            if "--history" in case.args:
                 assert len((tmp_path / "h.csv").read_text().splitlines()) == summary["iterations"] + 2
         else:
             assert np.isfinite(np.array([line.split()[1:] for line in (tmp_path / "flat.obj").read_text().splitlines()
@@ -1089,8 +1089,20 @@ def test_a_closed_standard_error_drops_the_notes_and_the_run_goes_on(tmp_path):
     assert (tmp_path / "m.dxf").stat().st_size > 0
 
 
-@pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
 @pytest.mark.parametrize("batch", [False, True], ids=["single", "batch"])
+def test_a_closed_standard_output_drops_the_lines_and_the_run_goes_on(tmp_path, batch):
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "n.obj").write_text(obj())
+    args = ["m.obj", "n.obj", "--out-dir", "o", "--out", ".dxf"] if batch else ["m.obj", "--out", "m.dxf"]
+    proc = subprocess.run([SPRINGFLAT, "flatten", *args, "--max-iter", "5"], stderr=subprocess.PIPE, text=True,
+                          cwd=tmp_path, timeout=300, preexec_fn=lambda: os.close(1))
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert all(line.startswith("springflat: ") for line in proc.stderr.splitlines()), proc.stderr
+    assert sorted(os.listdir(tmp_path / "o")) == ["m.dxf", "n.dxf"] if batch else (tmp_path / "m.dxf").is_file()
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
+@pytest.mark.parametrize("batch", [False, True, "no files"], ids=["single", "batch", "batch without files"])
 def test_as_root_a_full_standard_output_is_one_line_and_a_batch_runs_to_its_end(tmp_path, batch):
     """The standard output on a stand-in of /dev/full (1, 7) made in tmp_path: one line naming it, status 2,
     and the files written (a batch does not give up its meshes for its table)."""
@@ -1099,8 +1111,8 @@ def test_as_root_a_full_standard_output_is_one_line_and_a_batch_runs_to_its_end(
     os.mknod(tmp_path / "full", 0o666 | stat.S_IFCHR, os.makedev(1, 7))
     (tmp_path / "m.obj").write_text(obj())
     (tmp_path / "n.obj").write_text(obj())
-    args = (["m.obj", "n.obj", "--jobs", "1", "--out-dir", "o", "--out", ".dxf"] if batch else
-            ["m.obj", "--out", "m.dxf"])
+    args = {False: ["m.obj", "--out", "m.dxf"], True: ["m.obj", "n.obj", "--jobs", "1", "--out-dir", "o", "--out", ".dxf"],
+            "no files": ["m.obj", "n.obj", "--jobs", "1"]}[batch]
     with open(tmp_path / "full", "w") as full:
         proc = subprocess.run([SPRINGFLAT, "flatten", *args, "--max-iter", "5"], stdout=full, stderr=subprocess.PIPE,
                               text=True, cwd=tmp_path, timeout=300)
@@ -1108,7 +1120,9 @@ def test_as_root_a_full_standard_output_is_one_line_and_a_batch_runs_to_its_end(
     assert proc.returncode == 2 and len(errors) == 1, proc.stderr
     assert errors[0].startswith("springflat: error: cannot write standard output: no space left on device"), errors
     assert "Exception" not in proc.stderr and "Traceback" not in proc.stderr
-    if batch:
+    if batch == "no files":
+        assert errors[0].endswith("(the batch ran to its end)")
+    elif batch:
         assert sorted(os.listdir(tmp_path / "o")) == ["m.dxf", "n.dxf"]
         assert errors[0].endswith("(the batch ran to its end: 2 meshes' files written to --out-dir)")
     else:
