@@ -41,7 +41,7 @@ from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write
 from .patterns import error_text, pattern_kind
 from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
                           resolve_mesh, strict_json)
-from .workers import WorkerPool
+from .workers import WorkerPool, local_workers
 
 
 def add_batch_options(parser: argparse.ArgumentParser) -> None:
@@ -57,14 +57,6 @@ def add_batch_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
                         help="batch on a Dask cluster: a scheduler address (tcp://host:8786), or local for Dask's "
                              "LocalCluster with --jobs worker processes")
-
-
-def default_jobs() -> int:
-    """The cores this process may run on."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 @dataclass(frozen=True)
@@ -203,9 +195,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
         raise UserError(f"in a batch, --init takes a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}), not a "
                         "layout file")
     check_options_used(args)
-    jobs = default_jobs() if args.jobs is None else args.jobs
-    if jobs < 1:
-        raise UserError(f"--jobs must be >= 1, got {jobs}")
+    jobs = local_workers(args.jobs, "--jobs")
     endings = _endings(args)
     if args.out_dir is not None and not endings:
         raise UserError("--out-dir holds the batch's files, and none is asked for: add --out .ENDING (or --history, "

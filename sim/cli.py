@@ -19,11 +19,14 @@ a number that is not finite is ``null`` and its key is listed in
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import os
 import signal
 import sys
 import threading
+import traceback
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -286,10 +289,16 @@ def build_parser() -> argparse.ArgumentParser:
 def _quiet_after_interrupt() -> None:
     """After Ctrl-C, the objects a half-done step leaves are collected: their finalisers' warnings (such as
     amaranth's UnusedElaboratable for a half-elaborated design) and errors are noise, not for the user."""
-    import warnings
-
     warnings.simplefilter("ignore")
     sys.unraisablehook = lambda unraisable: None
+
+
+def _refused_by_a_component(exc: ValueError) -> bool:
+    """Whether ``exc`` is an RTL component's refusal of its parameters (raised in an ``__init__`` under
+    ``hdl/``): a format set the golden model runs that the RTL cannot build (a velocity finer than the
+    positions it is added to, ...)."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    return bool(frames) and Path(frames[-1].filename).parent.name == "hdl" and frames[-1].name == "__init__"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -317,6 +326,16 @@ def main(argv: list[str] | None = None) -> int:
             raise
     except USER_ERRORS + (UserError,) as exc:
         print(f"springflat: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except ValueError as exc:
+        if not _refused_by_a_component(exc):
+            raise
+        print(f"springflat: error: the RTL cannot be built with format set '{getattr(args, 'formats', None)}': {exc}",
+              file=sys.stderr)
+        with warnings.catch_warnings():  # the half-built components' "created but never used" are noise
+            warnings.simplefilter("ignore")
+            traceback.clear_frames(exc.__traceback__)
+            gc.collect()
         return EXIT_USAGE
     except OSError as exc:  # a file operation the commands do not name themselves
         what = ("write standard output" if exc.filename == STANDARD_OUTPUT else

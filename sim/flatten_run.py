@@ -25,6 +25,7 @@ from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_mesh_fits,
                        error_text, kind_or_none, on_sheets, run_caption, scale_note, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
+from .workers import local_workers
 
 #: ``flatten``'s output options: ``(argparse dest, flag, the file endings it takes)``. ``--out`` may be given
 #: several times; in a batch each value is an ending (``--out .pdf``) appended to each mesh's name.
@@ -78,8 +79,8 @@ def check_options_used(args: argparse.Namespace) -> None:
     for option, what in (("port", "the serial port"), ("baud", "the serial port's rate")):
         if getattr(args, option) is not None and not engine_named(args.engine).serial:
             raise UserError(f"--{option} sets {what}: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")
-    if args.jobs is not None and args.jobs < 1:
-        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.jobs is not None:
+        local_workers(args.jobs, "--jobs")
 
 
 def choose_engine(args: argparse.Namespace, params: FlattenParams):

@@ -442,12 +442,14 @@ def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...
     check_distinct([("output", out / p.relative_to(build)) for p in files], list(inputs))
     for p in files:
         _refuse_special(target / p.relative_to(build), out / p.relative_to(build), "output")
+    written = {p.relative_to(build) for p in files}  # before the moves empty the build
+    input_files = {_identity(path) for _, path in inputs if path is not None}
     for p in files:
         destination = target / p.relative_to(build)
         destination.parent.mkdir(parents=True, exist_ok=True)
         os.replace(p, destination)
-    for name in stale:
-        if not (build / name).exists() and (target / name).is_file():
+    for name in stale:  # an earlier result this run did not write again; never an input of this run
+        if Path(name) not in written and (target / name).is_file() and _identity(target / name) not in input_files:
             (target / name).unlink()
 
 

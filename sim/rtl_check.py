@@ -145,25 +145,12 @@ def _save_waves(source: Path, waves: Path) -> None:
         raise OutputWriteError(exc.path, exc.error, "--waves") from None
 
 
-def engine_capacity(args: argparse.Namespace):
-    """``--capacity V E T`` as an :class:`EngineCapacity` (one-line error), else the default."""
-    from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
-
-    from .run_options import UserError
-
-    if args.capacity is None:
-        return DEFAULT_CAPACITY
-    try:
-        return EngineCapacity(*args.capacity)
-    except ValueError as exc:
-        raise UserError(f"--capacity: {exc}") from None
-
-
 def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     """The whole flattening through ``springflat_engine``: exit 0 when bit-exact, 1 (one line) if not."""
     from golden_model.engine_spec.image import build_image
 
     from .engine_run import run_image_on_rtl, summary_line
+    from .export import engine_capacity
     from .run_options import UserError, load_format_set, start_positions, strict_json
 
     if args.stall:
@@ -175,7 +162,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
             raise UserError(f"--iterations must be >= 1, got {args.iterations}")
         params = dataclasses.replace(params, max_iter=min(params.max_iter, args.iterations))
     formats = load_format_set(args.formats)
-    capacity = engine_capacity(args)
+    capacity = engine_capacity(args.capacity, formats)  # one line for what the register map cannot hold
     check_fixed_params(params, formats)
     # the start flatten takes: a guarded run's folded start untangled (the datapath bench has no guard)
     problem = prepare(mesh, start_positions(mesh, args.init, params, progress=False)[0], params, formats)

@@ -26,7 +26,36 @@ from typing import Any, Callable
 
 from .outputs import deferred_interrupts
 
-__all__ = ["WorkerPool"]
+__all__ = ["WorkerPool", "usable_cores", "local_workers", "MAX_WORKERS_PER_CORE"]
+
+#: Local worker processes per usable core at most (``flatten --jobs``, ``study --workers``): each is a
+#: Python process with numpy and the model; more would only share the cores and fill the memory.
+MAX_WORKERS_PER_CORE = 4
+
+
+def usable_cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def local_workers(value: int | None, option: str) -> int:
+    """The local worker processes ``option`` asks for (``None``: one per usable core); a
+    :class:`~golden_model.params.ParameterError` below 1 or above :data:`MAX_WORKERS_PER_CORE` per core."""
+    from golden_model.params import ParameterError
+
+    cores = usable_cores()
+    if value is None:
+        return cores
+    if value < 1:
+        raise ParameterError(f"{option} must be >= 1, got {value}")
+    if value > MAX_WORKERS_PER_CORE * cores:
+        raise ParameterError(f"{option} {value}: at most {MAX_WORKERS_PER_CORE * cores} local worker processes "
+                             f"({MAX_WORKERS_PER_CORE} per core, {cores} here); more would only share the cores and "
+                             "fill the memory")
+    return value
 
 
 _SIGTERM_HANDLER: list = []

@@ -18,7 +18,6 @@ import argparse
 import contextlib
 import csv
 import math
-import os
 import shlex
 import sys
 from pathlib import Path
@@ -44,6 +43,7 @@ from golden_model.study import (
 
 from ..outputs import atomic_directory, atomic_write, check_output_directory
 from ..run_options import integer_argument, load_format_set, number_argument, path_argument
+from ..workers import local_workers
 from .cost import multipliers
 from .flow import ConfigSummary, StudyResult, run_study
 
@@ -52,13 +52,6 @@ __all__ = ["add_parser", "cmd_study", "write_outputs", "PLOT_FILES"]
 PLOT_FILES = {"bits": "study-bits.png", "knobs": "study-knobs.png", "pareto": "study-pareto.png"}
 _BOTH = {"both": ("pca", "tutte"), "pca": ("pca",), "tutte": ("tutte",)}
 _STEPS = {"both": ("fixed", "variable"), "fixed": ("fixed",), "variable": ("variable",)}
-
-
-def _default_workers() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -130,9 +123,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     target = AccuracyTarget(args.target)
     if args.max_iter is not None and args.max_iter < 1:
         raise ParameterError(f"--max-iter must be >= 1, got {args.max_iter}")
-    workers = _default_workers() if args.workers is None else args.workers
-    if workers < 1:
-        raise ParameterError(f"--workers must be >= 1, got {workers}")
+    workers = local_workers(args.workers, "--workers")
     base = load_format_set(args.base)
     out = Path(args.out)
     check_output_directory(out)  # before the study: the report is written at its end

@@ -161,6 +161,7 @@ BAD_ARGS = [
     (["--paper", "letter"], "--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg"),
     (["--paper", "fit", "--out", "l.flat.svg"], "--paper is the sheet of a PDF or SVG pattern"),
     (["--jobs", "0"], "--jobs must be >= 1, got 0"),
+    (["--jobs", "1000000"], "--jobs 1000000: at most "),
     (["--jobs", "3"], "--jobs sets a batch's worker processes: give several meshes, or --out-dir DIR"),
     (["--engine", "fixed", "--formats", ""], "the formats '' are empty: name a preset (default, narrow, wide) or a "
                                              "JSON file"),

@@ -960,6 +960,24 @@ def test_every_command_refuses_a_billion_newton_steps_at_once(command, tmp_path,
     assert sorted(p.name for p in tmp_path.iterdir()) == ["f.json", "m.obj"]
 
 
+@pytest.mark.parametrize("command", [["verilog", "--out", "v"], ["synth", "--target", "ecp5", "--out", "y"],
+                                     ["rtl-check", "m.obj", "--json"]])
+def test_the_rtl_commands_refuse_a_format_set_the_rtl_cannot_build_in_one_line(command, tmp_path, monkeypatch,
+                                                                                capsys):
+    """No Newton step: the golden model runs it, the force pass cannot (its barrier needs more stages than
+    the rsqrt unit's). One line naming it, nothing written, no component's 'never used' warning."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "f.json").write_text(_formats(rsqrt_newton_steps=0))
+    code = main([*command, "--formats", "f.json"])
+    err = capsys.readouterr().err.splitlines()
+    err = [line for line in err if not line.startswith("springflat") or "error" in line]  # the steps said on the way
+    assert code == 2 and len(err) == 1, err
+    assert re.fullmatch(r"springflat: error: the RTL cannot be built with format set 'f.json': the fold barrier needs "
+                        r"\d+ stages, more than the rsqrt unit's \d+ it runs beside", err[0]), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.json", "m.obj"]
+
+
 ROUND_TWO_OUTPUTS: dict[str, Case] = {
     "history is a named pipe": Case(["--history", "h.csv"], 2,
                                     r"^springflat: error: --history 'h.csv' is a named pipe \(FIFO\), not a regular "

@@ -1,5 +1,6 @@
 """The plot and SVG colour each face by its area distortion |A'|/A and mark folded faces."""
 
+import os
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -202,3 +203,24 @@ def test_plot_marks_folded_faces(tmp_path):
     write_plot(plain, dataclasses.replace(result, positions=mesh.vertices[:, :2]), mesh.faces, vertices=mesh.vertices)
     unfolded = matplotlib.image.imread(plain)[..., :3][:, : image.shape[1] // 2]
     assert black > (unfolded.max(axis=2) < 0.08).sum() + 200
+
+
+def _build(out, files: dict[str, str], **kw) -> None:
+    from sim.outputs import atomic_directory
+
+    with atomic_directory(out, stale=("chosen.json",), **kw) as build:
+        for name, text in files.items():
+            (build / name).write_text(text)
+
+
+def test_a_directory_output_keeps_what_this_run_wrote_and_drops_a_stale_result(tmp_path):
+    """``stale``: an earlier run's result this run did not write again is removed; one it did write is its
+    new one; one that is an input of this run (study's --base) is never removed."""
+    out = tmp_path / "study"
+    _build(out, {"report.md": "1", "chosen.json": "first"})
+    _build(out, {"report.md": "2", "chosen.json": "second"})  # over an existing --out
+    assert (out / "chosen.json").read_text() == "second" and (out / "report.md").read_text() == "2"
+    _build(out, {"report.md": "3"}, inputs=[("--base", out / "chosen.json")])  # no pick, from its own choice
+    assert (out / "chosen.json").read_text() == "second"
+    _build(out, {"report.md": "4"})  # no pick: the old one would mislead
+    assert sorted(os.listdir(out)) == ["report.md"]

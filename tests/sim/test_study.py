@@ -246,6 +246,8 @@ def test_parser_defaults():
     (["no-such-mesh"], "unknown mesh"),
     (["--base", "no/such/formats.json"], "not found"),
     (["--target", "0"], "--target"),
+    (["--workers", "0"], "--workers must be >= 1, got 0"),
+    (["--workers", "1000000"], "--workers 1000000: at most .* local worker processes"),
 ])
 def test_bad_input_is_a_parameter_error(tmp_path, argv, message):
     with pytest.raises(ParameterError, match=message):
