@@ -195,7 +195,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
         raise UserError(f"in a batch, --init takes a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}), not a "
                         "layout file")
     check_options_used(args)
-    jobs = local_workers(args.jobs, "--jobs")
+    jobs = local_workers(args.jobs, "--jobs", args.scheduler)
     endings = _endings(args)
     if args.out_dir is not None and not endings:
         raise UserError("--out-dir holds the batch's files, and none is asked for: add --out .ENDING (or --history, "

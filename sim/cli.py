@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.files import describe_os_error
 from golden_model.fixed.formats_set import FormatSet
 from golden_model.layouts import LAYOUT_METHODS
@@ -197,6 +198,8 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     out = Path(args.out)
     inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
     with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
+        print(f"springflat verilog: exporting every component and springflat_engine (capacity "
+              f"{capacity.as_option()}) to {out} ...", file=sys.stderr)  # half a minute of silence otherwise
         interface = export_verilog(formats, build)
         engine = export_engine_bundle(formats, capacity, build)
     for name, c in interface["components"].items():
@@ -269,7 +272,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="the engine's vertices, neighbour entries and triangles (default: "
-                        "golden_model.engine_spec.image.DEFAULT_CAPACITY)")
+                        f"{DEFAULT_CAPACITY.as_option()})")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
                    help="the engine without the step guard (no guarded mode; its block RAMs free for depth)")
     p.add_argument("--out", type=path_argument, required=True, help="output directory")

@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 from golden_model.fixed.engine import check_fixed_params, prepare
-from golden_model.engine_spec.image import check_engine_params
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, check_engine_params
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, run_bench
@@ -41,7 +41,7 @@ def add_parser(sub, add_run_options) -> None:
                         "guarded run, a mesh file's default, always does)")
     p.add_argument("--capacity", type=int, nargs=3, default=None, metavar=("V", "E", "T"),
                    help="with --engine-top: the engine's vertices, neighbour entries and triangles "
-                        "(default: DEFAULT_CAPACITY)")
+                        f"(default: {DEFAULT_CAPACITY.as_option()})")
     p.add_argument("--wait-states", type=int, default=0, metavar="N",
                    help="with --engine-top: up to N random idle clocks before each bus cycle (default 0)")
     p.add_argument("--iterations", type=int, default=None, metavar="N", help="stop after at most N iterations")

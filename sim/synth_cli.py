@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from golden_model.engine_spec import uart_protocol as protocol
+from golden_model.engine_spec.image import DEFAULT_CAPACITY
 
 from .run_options import path_argument
 from .top_names import COMPONENT_SUMMARIES
@@ -76,7 +77,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         f"{ENGINE})")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="springflat_engine's vertices, neighbour entries and triangles (default: "
-                        "golden_model.engine_spec.image.DEFAULT_CAPACITY)")
+                        f"{DEFAULT_CAPACITY.as_option()})")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
                    help="springflat_engine without the step guard: no guarded mode and fewer block RAMs "
                         "(docs/engine-guard.md)")

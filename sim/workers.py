@@ -41,11 +41,15 @@ def usable_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def local_workers(value: int | None, option: str) -> int:
+def local_workers(value: int | None, option: str, scheduler: str | None = None) -> int:
     """The local worker processes ``option`` asks for (``None``: one per usable core); a
-    :class:`~golden_model.params.ParameterError` below 1 or above :data:`MAX_WORKERS_PER_CORE` per core."""
+    :class:`~golden_model.params.ParameterError` below 1 or above :data:`MAX_WORKERS_PER_CORE` per core, or
+    given beside a Dask ``scheduler`` address (whose cluster has its own workers)."""
     from golden_model.params import ParameterError
 
+    if value is not None and scheduler not in (None, "local"):
+        raise ParameterError(f"{option} sets the local worker processes; the Dask scheduler at '{scheduler}' has "
+                             f"its own workers: drop {option}")
     cores = usable_cores()
     if value is None:
         return cores

@@ -93,6 +93,10 @@ class EngineCapacity:
         if not isinstance(self.guard, bool):
             raise ValueError(f"EngineCapacity: guard must be a bool, got {self.guard!r}")
 
+    def as_option(self) -> str:
+        """``V E T``, as ``--capacity`` takes them."""
+        return f"{self.vertices} {self.entries} {self.triangles}"
+
     @property
     def vertex_index_bits(self) -> int:
         """Bits of a vertex index (``0 .. vertices − 1``)."""

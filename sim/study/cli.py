@@ -123,7 +123,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     target = AccuracyTarget(args.target)
     if args.max_iter is not None and args.max_iter < 1:
         raise ParameterError(f"--max-iter must be >= 1, got {args.max_iter}")
-    workers = local_workers(args.workers, "--workers")
+    workers = local_workers(args.workers, "--workers", args.scheduler)
     base = load_format_set(args.base)
     out = Path(args.out)
     check_output_directory(out)  # before the study: the report is written at its end

@@ -110,6 +110,8 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
     (["--out-dir", "o", "--engine", "board", "--port", "p"], "--engine board runs one mesh at a time (one board answers"),
     (["--init", "layout.txt"], "--init takes a method"),
     (["--jobs", "0"], "--jobs must be >= 1"),
+    (["--out-dir", "o", "--out", ".dxf", "--jobs", "2", "--scheduler", "tcp://127.0.0.1:8786"],
+     "--jobs sets the local worker processes; the Dask scheduler at 'tcp://127.0.0.1:8786' has its own workers"),
     (["--out-dir", "o", "--max-iter", "3"], "--out-dir holds the batch's files, and none is asked for: add --out "
                                             ".ENDING"),
 ])

@@ -248,6 +248,8 @@ def test_parser_defaults():
     (["--target", "0"], "--target"),
     (["--workers", "0"], "--workers must be >= 1, got 0"),
     (["--workers", "1000000"], "--workers 1000000: at most .* local worker processes"),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "--workers sets the local worker processes; the "
+                                                               "Dask scheduler at 'tcp://127.0.0.1:8786' has its own"),
 ])
 def test_bad_input_is_a_parameter_error(tmp_path, argv, message):
     with pytest.raises(ParameterError, match=message):
