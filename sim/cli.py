@@ -237,7 +237,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "and verify its fixed-point hardware.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+    # not required here: main() names an unknown option before it asks for the command
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
 
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
     add_run_options(p)
@@ -307,6 +308,9 @@ def _refused_by_a_component(exc: ValueError) -> bool:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args, extras = parser.parse_known_args(argv)
+    if args.command is None:
+        parser.error(f"unrecognized arguments: {' '.join(extras)}" if extras else
+                     "the following arguments are required: COMMAND")
     if extras:  # refused by the command's own parser, so that the message points at its --help
         parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}")
     reset_interrupted()
@@ -319,7 +323,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         try:
             status = args.func(args)
-            sys.stdout.flush()  # a full disk or a closed pipe is one line here, not a message at exit
+            if sys.stdout is not None:
+                sys.stdout.flush()  # a full disk or a closed pipe is one line here, not a message at exit
             check_not_interrupted()  # a Ctrl-C a finaliser swallowed still ends the command as interrupted
             return status
         except Exception:

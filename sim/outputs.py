@@ -383,6 +383,8 @@ def check_output_directory(out: Path, what: str = "--out") -> None:
             st = os.stat(target)
             raise OutputError(f"{what} '{out}' exists and is a {file_kind(st.st_mode)}, not a directory")
         parent = target.parent if str(target.parent) else Path(".")
+        if parent.exists() and not parent.is_dir():
+            raise OutputError(f"{what} '{out}': '{parent}' is not a directory")
         if not parent.is_dir():
             raise OutputError(f"{what} '{out}': directory '{parent}' does not exist")
         os.rmdir(_make_temporary(_build_parent(target), target.name, is_dir=True))

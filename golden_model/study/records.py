@@ -26,7 +26,7 @@ class AccuracyTarget:
 
     def __post_init__(self) -> None:
         if not (isinstance(self.error, (int, float)) and math.isfinite(self.error) and self.error > 0):
-            raise ParameterError(f"--target must be a positive number, got {self.error!r}")
+            raise ParameterError(f"--target must be a positive finite number, got {self.error!r}")
 
     def failures(self, r: "RunRecord") -> list[str]:
         """Why ``r`` misses the target (empty when it meets it)."""

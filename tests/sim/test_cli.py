@@ -365,3 +365,15 @@ def test_a_face_wound_against_its_neighbours_is_turned_and_the_pattern_has_no_fo
     signed = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
     assert (signed > 0).all() or (signed < 0).all()
     assert "folded 0" in proc.stdout
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--bogus"], "unrecognized arguments: --bogus (see 'springflat --help')"),
+    ([], "the following arguments are required: COMMAND (see 'springflat --help')"),
+])
+def test_no_command_names_the_unknown_option_or_asks_for_one(capsys, argv, message):
+    from sim.cli import main
+
+    with pytest.raises(SystemExit) as ended:
+        main(argv)
+    assert ended.value.code == 2 and capsys.readouterr().err == f"springflat: error: {message}\n"

@@ -1161,6 +1161,9 @@ def test_an_output_directory_that_is_not_one_is_refused_at_once(command, kind, t
     assert code == 2 and len(err) == 1 and re.fullmatch(
         rf"springflat: error: --out 'f.txt' exists and is {what}, not a directory", err[0]), err
     assert os.listdir(tmp_path) == ["f.txt"]
+    code = main([*command, "--out", "f.txt/sub"])
+    assert code == 2 and capsys.readouterr().err.splitlines() == [
+        "springflat: error: --out 'f.txt/sub': 'f.txt' is not a directory"]
 
 
 def test_rtl_check_waves_onto_a_directory_is_one_line_before_anything(tmp_path, monkeypatch, capsys):
