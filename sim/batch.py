@@ -8,9 +8,9 @@ writes them into ``DIR`` as ``<mesh name><ending>``, where the endings are the v
 none (:func:`sim.outputs.all_or_nothing`).
 
 Workers: ``--jobs`` processes (default: the cores this process may use), each a
-:class:`sim.workers.WorkerPool` of one, fed one mesh at a time (:func:`_pool_outcomes`), or with ``--scheduler ADDRESS`` a Dask cluster (``distributed.Client``);
-``--scheduler local`` starts Dask's own ``LocalCluster`` of ``--jobs`` single-threaded worker
-processes.  Either way the outputs are the same bytes.
+:class:`sim.workers.WorkerPool` of one, fed one mesh at a time (:func:`_pool_outcomes`), or with
+``--scheduler ADDRESS`` a Dask cluster (``distributed.Client``); ``--scheduler local`` starts Dask's own
+``LocalCluster`` of ``--jobs`` single-threaded worker processes.  Either way the outputs are the same bytes.
 
 A mesh that fails (unreadable, invalid, a worker that died) is reported on its line and in the table,
 and the others go on; the exit status is 2 when any mesh failed, else 3 when any run diverged, else 0.

@@ -92,8 +92,9 @@ def cmd_flatten(args: argparse.Namespace) -> int:
     if result.status == "diverged":
         unwritten = [(flag, path) for _, flag, _, path in output_paths(args) if flag in PATTERN_OUTPUTS]
         kept = [f"'{path}'" for _, path in unwritten if os.path.lexists(path)]
+        flags = ", ".join(dict.fromkeys(flag for flag, _ in unwritten))
         print(f"springflat: iteration {result.iterations + 1} left the finite numbers ({divergence_hint(params)})"
-              + (f"; no pattern written ({', '.join(dict.fromkeys(flag for flag, _ in unwritten))})" if unwritten else "")
+              + (f"; no pattern written ({flags})" if unwritten else "")
               + (f", {' and '.join(kept)} kept as {'they were' if len(kept) > 1 else 'it was'}" if kept else ""),
               file=sys.stderr)
         return EXIT_DIVERGED
