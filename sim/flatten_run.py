@@ -72,7 +72,7 @@ def check_options_used(args: argparse.Namespace) -> None:
     """Refuse, before any run, an option of ``flatten`` that this run (or batch: ``--out`` then holds
     endings) would ignore, in one line naming what it needs."""
     check_formats_option(args)
-    if args.dxf_edges and not any(str(path).lower().endswith(".dxf") for path in args.out or ()):
+    if args.dxf_edges and not any(kind_or_none(path) == "dxf" for path in args.out or ()):
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
     if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
         raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg")
