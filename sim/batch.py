@@ -297,9 +297,9 @@ def _quiet_dask_workers() -> Iterator[None]:
     logger = logging.getLogger("distributed")
     level = logger.level
     logger.setLevel(logging.ERROR)
-    before = {name: os.environ.get(name) for name in QUIET_DASK_ENVIRONMENT}
-    for name, value in QUIET_DASK_ENVIRONMENT.items():
-        os.environ[name] = ",".join(filter(None, (before[name], value))) if name == "PYTHONWARNINGS" else value
+    before = {name: os.environ.get(name) for name in (*QUIET_DASK_ENVIRONMENT, "PYTHONWARNINGS")}
+    os.environ.update(QUIET_DASK_ENVIRONMENT)
+    os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (before["PYTHONWARNINGS"], *QUIET_DASK_WARNINGS)))
     try:
         yield
     finally:
@@ -311,9 +311,11 @@ def _quiet_dask_workers() -> Iterator[None]:
                 os.environ[name] = value
 
 
-#: The environment of the processes a local cluster starts: Dask's ``logging.distributed`` level, and the
-#: resource tracker's warning filter.
-QUIET_DASK_ENVIRONMENT = {"DASK_LOGGING__DISTRIBUTED": "error", "PYTHONWARNINGS": "ignore:resource_tracker:UserWarning"}
+#: The environment of the processes a local cluster starts: Dask's ``logging.distributed`` level.
+QUIET_DASK_ENVIRONMENT = {"DASK_LOGGING__DISTRIBUTED": "error"}
+#: The warning filters added to theirs (``PYTHONWARNINGS``, a comma-separated list the user's own may be
+#: in): the resource tracker's.
+QUIET_DASK_WARNINGS = ("ignore:resource_tracker:UserWarning",)
 
 
 @contextlib.contextmanager
