@@ -13,7 +13,7 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
 
-from .fixedpoint import clamp, requantize, shape_of, shift_round
+from .fixedpoint import FormatSetNotBuildable, clamp, requantize, shape_of, shift_round
 from .layouts import area_saturations_layout, triangle_layout
 from .pipeline import Pipeline, reduce_levels
 
@@ -84,9 +84,9 @@ class AreaError(wiring.Component):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"AreaError needs a FormatSet or a preset name, not {fs!r}")
         if fs.face_edge.frac_bits != fs.position.frac_bits:  # FormatSet checks it; the edges rely on it
-            raise ValueError(f"face_edge {fs.face_edge} needs position's {fs.position.frac_bits} fraction bits")
+            raise FormatSetNotBuildable(f"face_edge {fs.face_edge} needs position's {fs.position.frac_bits} fraction bits")
         if fs.face_area.frac_bits != fs.error_acc.frac_bits:
-            raise ValueError(f"face_area {fs.face_area} needs error_acc's {fs.error_acc.frac_bits} fraction bits")
+            raise FormatSetNotBuildable(f"face_area {fs.face_area} needs error_acc's {fs.error_acc.frac_bits} fraction bits")
         self.fs = fs
         self.latency = self.latency_of(fs)
         super().__init__({

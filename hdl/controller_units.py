@@ -27,7 +27,7 @@ from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
 from golden_model.fixed.measures import energy_frac_bits
 from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS
 
-from .fixedpoint import clamp, shape_of, shift_round
+from .fixedpoint import FormatSetNotBuildable, clamp, shape_of, shift_round
 from .layouts import energy_result_layout, energy_sums_layout, normalise_layout, saturations_shape
 
 __all__ = ["shift_add_step", "Normaliser", "EnergyCheck", "BetaDivider"]
@@ -100,7 +100,7 @@ class Normaliser(wiring.Component):
     def __init__(self, fs: FormatSet | str, *, saturations: bool = False):
         fs = _check_fs("Normaliser", fs)
         if fs.reciprocal.width < 2:
-            raise ValueError(f"Normaliser needs a reciprocal of at least 2 bits (the shift steps are "
+            raise FormatSetNotBuildable(f"Normaliser needs a reciprocal of at least 2 bits (the shift steps are "
                              f"worked out during the multiply steps), not {fs.reciprocal.width}")
         self.fs = fs
         self.saturations = bool(saturations)

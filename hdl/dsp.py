@@ -23,6 +23,8 @@ from amaranth.hdl import ClockSignal, Const, Fragment, Instance, Module, Mux, Si
 
 from golden_model.fixed.dsp import DSP_WIDTH, is_dsp_block
 
+from .fixedpoint import FormatSetNotBuildable
+
 __all__ = ["ECP5", "DspPlatform", "registered_product", "dsp_target", "kept_register", "ecp5_instance_count",
            "mult18x18d_count"]
 
@@ -79,7 +81,7 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
     for op in (a, b):
         limit = DSP_WIDTH if (op.shape().signed or not is_signed) else DSP_WIDTH - 1
         if len(op) > limit:
-            raise ValueError(f"{name}: a {len(op)}-bit {'signed' if op.shape().signed else 'unsigned'} operand "
+            raise FormatSetNotBuildable(f"{name}: a {len(op)}-bit {'signed' if op.shape().signed else 'unsigned'} operand "
                              f"does not fit an {DSP_WIDTH}-bit multiplier operand")
     product = Signal(shape, name=name, reset_less=True)
     # A 1-bit operand (the top bit of an unsigned operand in a signed product) makes the

@@ -18,7 +18,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet
 
 from .dsp import kept_register
-from .fixedpoint import clamp, shape_of, shift_round, sum_round
+from .fixedpoint import FormatSetNotBuildable, clamp, shape_of, shift_round, sum_round
 from .layouts import (FORCE_ENTRY_EVENTS, FORCE_NODE_EVENTS, force_entry_layout, force_saturations_max,
                       node_force_layout, vector_layout)
 from .pipeline import EventCount, LiveValues, Pipeline, count_stages
@@ -122,12 +122,12 @@ class ForcePass(wiring.Component):
     def __init__(self, fs: FormatSet | str, *, energy: bool = False, saturations: bool = False):
         fs = format_set(fs, "ForcePass")
         if fs.delta.frac_bits > fs.position.frac_bits:
-            raise ValueError(f"delta {fs.delta} cannot have more fraction bits than position {fs.position}")
+            raise FormatSetNotBuildable(f"delta {fs.delta} cannot have more fraction bits than position {fs.position}")
         self.fs, self.energy, self.saturations = fs, bool(energy), bool(saturations)
         super().__init__(self.signature_of(fs, self.energy, self.saturations))
         self.stages = _stage_counts(fs, self.energy, self.saturations)
         if self.stages.barrier > self.stages.rsqrt:
-            raise ValueError(f"the fold barrier needs {self.stages.barrier} stages, more than the rsqrt unit's "
+            raise FormatSetNotBuildable(f"the fold barrier needs {self.stages.barrier} stages, more than the rsqrt unit's "
                              f"{self.stages.rsqrt} it runs beside")
         self.latency = self.stages.latency
 

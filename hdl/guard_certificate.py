@@ -19,7 +19,7 @@ from golden_model.fixed.guard import EDGE_WEIGHT, MOVE_WEIGHTS, ROUNDING_MARGIN,
 from golden_model.guard import FLOOR_SHIFT, GUARD_LEVELS
 
 from .fifo import LutFIFO
-from .fixedpoint import clamp, shape_of, shift_round
+from .fixedpoint import FormatSetNotBuildable, clamp, shape_of, shift_round
 from .layouts import certificate_layout, certificate_result_layout
 from .pipeline import Pipeline, reduce_levels
 
@@ -98,7 +98,7 @@ class GuardCertificate(wiring.Component):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"GuardCertificate needs a FormatSet or a preset name, not {fs!r}")
         if not fs.position.frac_bits == fs.velocity.frac_bits == fs.face_edge.frac_bits:
-            raise ValueError(f"the certificate needs position {fs.position}, velocity {fs.velocity} and face_edge "
+            raise FormatSetNotBuildable(f"the certificate needs position {fs.position}, velocity {fs.velocity} and face_edge "
                              f"{fs.face_edge} to share their fraction bits")
         self.fs, self.interval = fs, interval
         self.latency = self.latency_of(fs, interval)

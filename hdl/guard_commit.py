@@ -16,7 +16,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet
 from golden_model.guard import GUARD_LEVELS
 
-from .fixedpoint import clamp
+from .fixedpoint import FormatSetNotBuildable, clamp
 from .force_pass import format_set
 from .layouts import commit_input_layout, commit_output_layout
 from .pipeline import LiveValues, Pipeline, count_stages
@@ -74,12 +74,12 @@ class GuardCommit(wiring.Component):
     def __init__(self, fs: FormatSet | str):
         fs = format_set(fs, "GuardCommit")
         if fs.velocity.frac_bits != fs.position.frac_bits:
-            raise ValueError(f"a move is added to a position: velocity {fs.velocity} needs position's "
+            raise FormatSetNotBuildable(f"a move is added to a position: velocity {fs.velocity} needs position's "
                              f"{fs.position.frac_bits} fraction bits")
         if not (fs.position.signed and fs.velocity.signed):
-            raise ValueError(f"position {fs.position} and velocity {fs.velocity} must be signed")
+            raise FormatSetNotBuildable(f"position {fs.position} and velocity {fs.velocity} must be signed")
         if fs.velocity.width > fs.position.width:
-            raise ValueError(f"velocity {fs.velocity} is wider than position {fs.position}: a move could "
+            raise FormatSetNotBuildable(f"velocity {fs.velocity} is wider than position {fs.position}: a move could "
                              f"step over the whole position range")
         self.fs = fs
         super().__init__(self.signature_of(fs))

@@ -16,7 +16,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import Format, FormatSet
 from golden_model.guard import SCALE_MAX_SHIFT
 
-from .fixedpoint import clamp, round_half_bit, shape_of, shift_round, variable_shift
+from .fixedpoint import FormatSetNotBuildable, clamp, round_half_bit, shape_of, shift_round, variable_shift
 from .force_pass import format_set
 from .layouts import INTEGRATOR_EVENTS, integrator_input_layout, integrator_output_layout
 from .pipeline import EventCount, LiveValues, Pipeline, aligned_add, count_stages
@@ -92,7 +92,7 @@ class Integrator(wiring.Component):
     def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None, saturations: bool = False):
         fs = format_set(fs, "Integrator")
         if fs.velocity.frac_bits != fs.position.frac_bits:
-            raise ValueError(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
+            raise FormatSetNotBuildable(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
                              f"{fs.position.frac_bits} fraction bits")
         if side is not None:
             Shape.cast(side)  # a clear error now rather than at elaboration

@@ -19,6 +19,7 @@ from amaranth.hdl import ClockSignal, Const, Instance, Module, Signal, Value, un
 from amaranth.lib.memory import Memory
 
 from .dsp import dsp_target
+from .fixedpoint import FormatSetNotBuildable
 
 __all__ = ["DP16KD_CONFIGS", "ENTRY_BANK_DEPTH", "dp16kd", "dp16kd_config", "dp16kd_initvals", "dp16kd_port",
            "registered_rom"]
@@ -37,7 +38,7 @@ def dp16kd_config(depth: int) -> tuple[int, int]:
     for width, words in DP16KD_CONFIGS:
         if words >= depth:
             return width, (words - 1).bit_length()
-    raise ValueError(f"a ROM of {depth} words does not fit one DP16KD column (at most 16384)")
+    raise FormatSetNotBuildable(f"a ROM of {depth} words does not fit one DP16KD column (at most 16384)")
 
 
 def dp16kd_initvals(words, width: int) -> dict[str, str]:

@@ -11,7 +11,7 @@ from amaranth.lib.wiring import In, Out
 import golden_model.fixed.rsqrt as golden_rsqrt
 from golden_model.fixed import FormatSet, Rounding, RsqrtConfig, rsqrt_stages
 
-from .fixedpoint import round_half_bit, saturate, shift_round
+from .fixedpoint import FormatSetNotBuildable, round_half_bit, saturate, shift_round
 from .pipeline import Pipeline, reduce_levels
 from .rom import registered_rom
 
@@ -78,11 +78,11 @@ class RsqrtUnit(wiring.Component):
         if not isinstance(config, RsqrtConfig):
             raise TypeError(f"RsqrtUnit needs a FormatSet or an RsqrtConfig, not {config!r}")
         if config.fmt_in.signed:
-            raise ValueError(
+            raise FormatSetNotBuildable(
                 f"RsqrtUnit input format must be unsigned, not {config.fmt_in} "
                 f"(the golden model refuses negative inputs)")
         if config.fmt_out.signed:
-            raise ValueError(f"RsqrtUnit output format must be unsigned, not {config.fmt_out}")
+            raise FormatSetNotBuildable(f"RsqrtUnit output format must be unsigned, not {config.fmt_out}")
         self._config = config
         self._rounding = Rounding(golden_rsqrt.INTERNAL_ROUNDING)
         self.latency = self.latency_of(config)

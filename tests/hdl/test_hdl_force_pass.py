@@ -19,6 +19,7 @@ from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.pipeline import BarrierEntries, NeighbourStream, neighbour_terms, node_terms, barrier_terms
 from hdl import ForcePass, NodeUpdate
 from hdl.dsp import ECP5
+from hdl.fixedpoint import FormatSetNotBuildable
 from hdl.layouts import force_saturations_max
 from sim.payloads import pack_beats, unpack_beats
 from support.streams import run_streams
@@ -134,7 +135,7 @@ def test_refuses_what_it_cannot_build():
         warnings.simplefilter("ignore", UnusedElaboratable)
         with pytest.raises(TypeError, match="ForcePass needs a FormatSet"):
             ForcePass(3)
-        with pytest.raises(ValueError, match="more fraction bits than position"):
+        with pytest.raises(FormatSetNotBuildable, match="more fraction bits than position"):
             ForcePass(FormatSet.preset("narrow").replace(delta="s3.16"))
         gc.collect()
 

@@ -16,6 +16,7 @@ from golden_model.fixed.dsp import Operand, dsp_blocks
 from golden_model.fixed.guard import floor_min_raw, stuck_nodes_raw, triangle_levels_raw
 from golden_model.guard import GUARD_LEVELS
 from hdl.dsp import mult18x18d_count
+from hdl.fixedpoint import FormatSetNotBuildable
 from hdl.guard_certificate import GuardCertificate
 from hdl.layouts import certificate_result_layout
 from sim.payloads import pack_beats
@@ -141,7 +142,7 @@ def test_parameter_validation():
         warnings.simplefilter("ignore", UnusedElaboratable)
         with pytest.raises(TypeError, match="GuardCertificate needs a FormatSet or a preset name, not 3"):
             GuardCertificate(3)
-        with pytest.raises(ValueError, match="share their fraction bits"):
+        with pytest.raises(FormatSetNotBuildable, match="share their fraction bits"):
             GuardCertificate(other)
         with pytest.raises(ValueError, match="interval must be 1 or 2, not 3"):
             GuardCertificate(fs, interval=3)

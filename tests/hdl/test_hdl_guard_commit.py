@@ -13,6 +13,7 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.guard import (commit, floor_min_raw, guarded_moves_raw, stuck_nodes_raw, taken_moves_raw,
                                       triangle_levels_raw)
 from golden_model.guard import GUARD_LEVELS, node_levels
+from hdl.fixedpoint import FormatSetNotBuildable
 from hdl.guard_commit import GuardCommit
 from sim.payloads import pack_beats, unpack_beats
 from support import PRESETS
@@ -198,9 +199,9 @@ def test_parameter_validation():
         warnings.simplefilter("ignore", UnusedElaboratable)
         with pytest.raises(TypeError, match="GuardCommit needs a FormatSet or a preset name, not 3"):
             GuardCommit(3)
-        with pytest.raises(ValueError, match="fraction bits"):
+        with pytest.raises(FormatSetNotBuildable, match="fraction bits"):
             GuardCommit(fs.replace(velocity="s3.20"))
-        with pytest.raises(ValueError, match="wider than position"):
+        with pytest.raises(FormatSetNotBuildable, match="wider than position"):
             GuardCommit(fs.replace(velocity="s12.22"))
         gc.collect()
 

@@ -17,6 +17,7 @@ from golden_model.fixed.guard import proposal
 from golden_model.fixed.pipeline import NodeConstants, integrate, integrate_momentum, node_power
 from golden_model.guard import SCALE_MAX_SHIFT
 from hdl import Integrator, NodeUpdate
+from hdl.fixedpoint import FormatSetNotBuildable
 from sim.payloads import pack_beats, unpack_beats
 from support.streams import run_streams
 from test_hdl_node_update import PRESETS, random_constants
@@ -123,7 +124,7 @@ def test_refuses_what_it_cannot_build():
         warnings.simplefilter("ignore", UnusedElaboratable)
         with pytest.raises(TypeError, match="Integrator needs a FormatSet"):
             Integrator(None)
-        with pytest.raises(ValueError, match="fraction bits"):
+        with pytest.raises(FormatSetNotBuildable, match="fraction bits"):
             Integrator(FormatSet.preset("narrow").replace(velocity="s3.16"))
         gc.collect()
 
