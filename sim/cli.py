@@ -43,7 +43,7 @@ from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
 from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, human_line, json_summary, output_paths,
                           run_flatten, run_formats, scale_note_of, what_was_used, write_outputs)
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
-    check_not_interrupted, check_output_path, ending_name_problem, on_interrupt, received_signal, reset_interrupted
+    check_not_interrupted, check_output_path, on_interrupt, received_signal, reset_interrupted
 from .patterns import add_pattern_options
 from .run_options import (
     USER_ERRORS,
@@ -112,9 +112,7 @@ def divergence_hint(params: FlattenParams) -> str:
 def check_outputs(args: argparse.Namespace) -> None:
     """Refuse, before the run, an output path that cannot work, and two outputs that are one file."""
     for _, flag, endings, path in output_paths(args):
-        if (problem := ending_name_problem(path, flag)) is not None:
-            raise OutputError(f"{problem}, or give --out-dir DIR for a batch, which takes endings")
-        check_output_path(path, flag, endings)
+        check_output_path(path, flag, endings, ending_hint=", or give --out-dir DIR for a batch, which takes endings")
     check_options_used(args)
     if args.jobs is not None:
         raise UserError("--jobs sets a batch's worker processes: give several meshes, or --out-dir DIR")

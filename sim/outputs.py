@@ -156,7 +156,8 @@ def _make_temporary(directory: Path, name: str, *, is_dir: bool = False) -> Path
     raise FileExistsError(errno.EEXIST, "no free temporary name", str(directory))
 
 
-def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = None, typed: bool = True) -> None:
+def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = None, typed: bool = True,
+                      ending_hint: str = "") -> None:
     """Fail early (before a long run) on an output path that cannot work.
 
     Besides the suffix and the directory, this refuses a path that exists and is
@@ -164,11 +165,12 @@ def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = 
     may not write, and creates and removes a temporary file where
     :func:`atomic_write` will, so that a directory without write permission or a
     name too long is refused up front. ``typed``: the user typed the name, so a
-    hidden one is a file-name ending given for a file (:func:`ending_name_problem`).
+    hidden one is a file-name ending given for a file (:func:`ending_name_problem`), refused with
+    ``ending_hint`` added (what the command takes endings in).
     """
     path = Path(path)
     if typed and (problem := ending_name_problem(path, what)) is not None:  # a batch builds '.scan.dxf' for '.scan'
-        raise OutputError(problem)
+        raise OutputError(problem + ending_hint)
     if suffixes and path.suffix.lower() not in suffixes:
         raise OutputError(f"{what} '{path}' must end in {' or '.join(suffixes)}")
     try:
