@@ -80,6 +80,8 @@ def parse_knobs(text: str | Sequence[str] | None) -> list[str]:
     items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
     if not items:
         raise ParameterError("--sweep: empty knob list (use 'none' for no sweep)")
+    if len(items) > 1 and "none" in (item.lower() for item in items):
+        raise ParameterError(f"--sweep {','.join(items)}: 'none' sweeps nothing: give it alone, or drop it")
     chosen: set[str] = set()
     for item in items:
         low = item.lower()

@@ -72,8 +72,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--sweep", default="all", metavar="KNOBS",
                    help="comma list of knobs to sweep one at a time: all (default), none, frac (every signal "
                         f"class) or some of {', '.join(KNOBS)}")
-    p.add_argument("--bits", default=":".join(map(str, DEFAULT_BITS)), metavar="MIN:MAX[:STEP]",
-                   help="fraction bits tried for each signal class (default %(default)s)")
+    p.add_argument("--bits", default=None, metavar="MIN:MAX[:STEP]",
+                   help="fraction bits tried for each signal class --sweep sweeps (default "
+                        f"{':'.join(map(str, DEFAULT_BITS))})")
     p.add_argument("--base", default="default", metavar="PRESET|FILE",
                    help="format set the sweeps and the optimiser start from (default: default)")
     p.add_argument("--target", type=number_argument, default=1e-3,
@@ -118,8 +119,12 @@ def _progress_bars(enabled: bool):
 
 def cmd_study(args: argparse.Namespace) -> int:
     """Run the study described by ``args`` and write the report; returns the exit status."""
-    bits = parse_bits(args.bits)
+    bits = DEFAULT_BITS if args.bits is None else parse_bits(args.bits)
     knobs = parse_knobs(args.sweep)
+    classes_swept = any(knob in SIGNAL_CLASSES for knob in knobs)
+    if args.bits is not None and not classes_swept:
+        raise ParameterError(f"--bits sets the fraction bits swept for each signal class; --sweep {args.sweep} "
+                             "sweeps none: add frac, or a class, to --sweep")
     target = AccuracyTarget(args.target)
     if args.max_iter is not None and args.max_iter < 1:
         raise ParameterError(f"--max-iter must be >= 1, got {args.max_iter}")
@@ -144,7 +149,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     finally:
         close()
     command = " ".join(["springflat study", *map(shlex.quote, args.meshes or STUDY_MESHES),
-                        f"--init {args.init} --step {args.step} --sweep {shlex.quote(args.sweep)} --bits {args.bits}",
+                        f"--init {args.init} --step {args.step} --sweep {shlex.quote(args.sweep)}",
+                        *([f"--bits {':'.join(map(str, bits))}"] if classes_swept else []),
                         f"--base {shlex.quote(str(args.base))} --target {args.target:g} --cost {args.cost}",
                         "--optimise" if args.optimise else "--no-optimise",
                         *([f"--max-iter {args.max_iter}"] if args.max_iter is not None else []),

@@ -243,6 +243,10 @@ def test_parser_defaults():
     (["--bits", "20:8"], "--bits"),
     (["--bits", "x"], "--bits"),
     (["--sweep", "nonsense"], "--sweep"),
+    (["--sweep", "none,frac"], "--sweep none,frac: 'none' sweeps nothing: give it alone, or drop it"),
+    (["--sweep", "none", "--bits", "8:12"], "--bits sets the fraction bits swept for each signal class; --sweep "
+                                            "none sweeps none: add frac, or a class, to --sweep"),
+    (["--sweep", "lut_interpolate,rounding", "--bits", "8:12"], "--sweep lut_interpolate,rounding sweeps none"),
     (["no-such-mesh"], "unknown mesh"),
     (["--base", "no/such/formats.json"], "not found"),
     (["--target", "0"], "--target"),
