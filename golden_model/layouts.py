@@ -39,6 +39,7 @@ any libigl failure (an exception or a non-finite result) is a
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -312,7 +313,12 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
     if str(path) == "":
         raise LayoutError(f"the layout '' is empty: name a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}) or a file")
     path = Path(path)
-    data = read_file_bytes(path, "layout", LayoutError)
+    try:
+        data = read_file_bytes(path, "layout", LayoutError)
+    except LayoutError as exc:
+        if len(path.parts) == 1 and not path.suffix and not os.path.lexists(path):  # a method's name mistyped?
+            raise LayoutError(f"{exc}, nor a start method ({', '.join((AUTO_START,) + LAYOUT_METHODS)})") from None
+        raise
     if path.suffix.lower() == ".obj":
         try:
             vertices = read_obj_vertices(data, f"cannot parse layout '{path}'")

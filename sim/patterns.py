@@ -334,13 +334,15 @@ def pattern_size_mm(drawing: PatternDrawing) -> tuple[float, float]:
     return float(extent[0]), float(extent[1])
 
 
-def scale_note(drawing: PatternDrawing) -> str | None:
-    """A note when the pattern is so small at 1:1 that ``units`` is likely wrong, else ``None``."""
+def scale_note(drawing: PatternDrawing, units_option: str = "--units {}") -> str | None:
+    """A note when the pattern is so small at 1:1 that ``units`` is likely wrong, else ``None``;
+    ``units_option`` spells the option that sets it (the API's ``units='{}'``)."""
     width, height = pattern_size_mm(drawing)
     if max(width, height) >= SMALL_PATTERN_MM:
         return None
-    return (f"the pattern is {width:.3g} x {height:.3g} mm at 1:1 with --units {drawing.units}: "
-            "if the mesh is in metres, centimetres or inches, say so with --units m, cm or in")
+    others = [units_option.format(units) for units in ("m", "cm", "in")]
+    return (f"the pattern is {width:.3g} x {height:.3g} mm at 1:1 with {units_option.format(drawing.units)}: "
+            f"if the mesh is in metres, centimetres or inches, say so with {', '.join(others[:2])} or {others[2]}")
 
 
 def error_text(error: float) -> str:

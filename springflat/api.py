@@ -29,6 +29,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from golden_model.layouts import LayoutError
 from golden_model.mesh import Mesh, MeshError, oriented_mesh
 from golden_model.mesh_io import load_mesh_with_notes, save_obj
 from golden_model.params import FlattenParams, ParameterError
@@ -38,8 +39,9 @@ from sim.engines import ENGINES, engine_named
 from sim.flatten_run import run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import OutputError, area_ratio, directory_name_problem, ending_name_problem
-from sim.patterns import DEFAULT_PAPER, PatternDrawing, run_caption, write_pattern_file
-from sim.run_options import add_run_options, params_from_args, resolve_mesh
+from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, kind_or_none, on_sheets, run_caption,
+                          scale_note, write_pattern_file)
+from sim.run_options import UserError, add_run_options, params_from_args, resolve_mesh
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
 
@@ -141,7 +143,7 @@ def _namespace(options: Mapping[str, Any]) -> argparse.Namespace:
     return argparse.Namespace(**values)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Pattern:
     """The result of :func:`flatten`.
 
@@ -175,6 +177,11 @@ class Pattern:
     params: FlattenParams
     result: FlattenResult
 
+    def __repr__(self) -> str:  # the arrays and the run's history are for their own attributes
+        return (f"Pattern(name={self.name!r}, status={self.status!r}, iterations={self.iterations}, "
+                f"area_error={self.area_error:.6g}, shape_error={self.shape_error:.6g}, folded={self.folded}, "
+                f"{len(self.vertices)} vertices, {len(self.faces)} faces)")
+
     @cached_property
     def mesh(self) -> Mesh:
         """The 3D mesh as :class:`golden_model.mesh.Mesh`."""
@@ -200,10 +207,19 @@ def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"read_mesh takes a file path (str or pathlib.Path), not {type(path).__name__}")
+    if (problem := _nul_problem(path)) is not None:
+        raise MeshError(f"cannot read mesh {problem}")
     mesh, notes = load_mesh_with_notes(path)
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     return mesh.vertices, mesh.faces
+
+
+def _nul_problem(path: Any) -> str | None:
+    """``'path': ...`` when ``path`` holds a NUL character, which no file name can (the OS refuses it)."""
+    if isinstance(path, (str, os.PathLike)) and "\0" in str(os.fspath(path)):
+        return f"{str(os.fspath(path))!r}: a file name cannot hold a NUL character"
+    return None
 
 
 def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -216,7 +232,7 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
     arrays = []
     for name, value, what in (("V", V, "(V, 3) vertex positions"), ("F", F, "(F, 3) vertex indices")):
         try:
-            array = np.asarray(value)
+            array = np.array(value)  # a copy: the Pattern must not change when the caller's arrays do
         except (TypeError, ValueError) as exc:  # ragged rows, objects that are no arrays
             raise MeshError(f"{name} must be an array of {what}: {str(exc).splitlines()[0]}") from None
         if array.dtype.kind not in "iufb":  # strings, complex numbers, objects: nothing to take silently
@@ -232,7 +248,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     Args:
         V: ``(V, 3)`` vertex positions (any length unit), or a ``trimesh.Trimesh`` (then no ``F``).
         F: ``(F, 3)`` 0-based vertex indices of the triangles.
-        name: the mesh's name, for the pattern files.
+        name: the mesh's name (a string), for the pattern files.
         init: the initial layout: ``auto`` (the default: ARAP, or SLIM from Tutte where ARAP folds or fails),
             ``tutte``, ``pca``, ``harmonic``, ``lscm``, ``arap``, ``slim``, a layout file, or a ``(V, 2)`` array; a
             file or an array is checked (shape, finite, range) and, with the guarded dynamics, untangled where it
@@ -249,9 +265,14 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
 
     Raises:
         golden_model.mesh.MeshError: ``V``, ``F`` are no arrays of numbers, or not one manifold disk (a ``ValueError``).
-        golden_model.params.ParameterError: an option out of its domain (a ``ValueError``).
-        TypeError: an unknown keyword.
+        golden_model.params.ParameterError: an option out of its domain, options that do not go together,
+            or an ``init`` that cannot be used (a ``ValueError``).
+        TypeError: an unknown keyword, or a ``name`` that is not a string.
     """
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a string (the mesh's name on the pattern files), not {type(name).__name__}")
+    if (problem := _nul_problem(init)) is not None:
+        raise ParameterError(f"init {problem}")
     vertices, faces = _arrays(V, F)
     args = _namespace(options)
     engine = engine_named(args.engine)
@@ -271,7 +292,10 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         # an array is checked, and untangled where it folds, as a layout file is (run_flatten's start)
         args.init = None if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
         run_notes: list[str] = []  # the command's notes on stderr (the start untangled, ...) are warnings here
-        result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
+        try:
+            result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
+        except (UserError, LayoutError) as exc:  # the command line's one line: options, or the start, refused
+            raise ParameterError(str(exc)) from None
     for note in run_notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
@@ -280,17 +304,24 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
                    mesh.faces, args.init, params, result)
 
 
-def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str = DEFAULT_PAPER,
+def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str | None = None,
                   dxf_edges: bool = False) -> None:
     """Write ``pattern`` to ``path``, the format named by its ending (as ``springflat flatten --out``).
 
     ``.dxf`` (cut line on layer ``CUT``; ``dxf_edges``: mesh edges on ``MESH``), ``.pdf`` / ``.svg`` (true
-    scale on ``paper`` = ``a4``, ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the 3D mesh with
-    the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured by
-    distortion).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
-    :mod:`sim.patterns`.  The file appears whole or not at all, and an existing file at ``path`` is replaced:
-    the arrays carry no file name, so unlike ``springflat flatten --out`` this cannot refuse the mesh's own
-    file (a ``.obj`` written there replaces the mesh with the triangulated mesh and its ``vt``).
+    scale on ``paper`` = ``a4`` (the default), ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the
+    3D mesh with the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured
+    by distortion).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
+    :mod:`sim.patterns`; a true-scale pattern (DXF, PDF, SVG) under 10 mm across gives a :class:`MeshNote`
+    warning that ``units`` is likely wrong.  The file appears whole or not at all, and an existing regular
+    file at ``path`` that may be written is replaced (a read-only one is refused): the arrays carry no file
+    name, so unlike ``springflat flatten --out`` this cannot refuse the mesh's own file (a ``.obj`` written
+    there replaces the mesh with the triangulated mesh and its ``vt``).
+
+    Raises:
+        OutputError: a path that cannot be written, or a ``diverged`` pattern (its last finite layout is no
+            pattern: the command writes none either); ``dxf_edges`` without a ``.dxf`` path, or ``paper``
+            without a ``.pdf`` / ``.svg`` one, which would ignore them.
     """
     if not isinstance(pattern, Pattern):
         raise TypeError(f"write_pattern takes the Pattern that flatten returns, not {type(pattern).__name__}")
@@ -300,12 +331,23 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         raise OutputError(f"write_pattern: expected a file name, got {path!r}")
     if isinstance(path, str) and (problem := directory_name_problem(path)) is not None:
         raise OutputError(f"write_pattern: {problem}")
+    if (problem := _nul_problem(path)) is not None:
+        raise OutputError(f"write_pattern: {problem}")
     if (problem := ending_name_problem(Path(path), "write_pattern: the path")) is not None:
         raise OutputError(problem)
+    if pattern.status == "diverged":
+        raise OutputError(f"write_pattern: the run diverged after {pattern.iterations} iterations: its last finite "
+                          "layout is no pattern")
+    if dxf_edges and kind_or_none(path) != "dxf":
+        raise OutputError(f"write_pattern: dxf_edges draws the mesh's edges into a DXF pattern, not '{path}'")
+    if paper is not None and not on_sheets(path):
+        raise OutputError(f"write_pattern: paper is the sheet of a PDF or SVG pattern, not '{path}'")
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
-    write_pattern_file(Path(path), PatternDrawing.of(pattern.mesh, pattern.layout, units, caption), paper=paper,
-                       dxf_edges=dxf_edges)
+    drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
+    write_pattern_file(Path(path), drawing, paper=paper or DEFAULT_PAPER, dxf_edges=dxf_edges)
+    if kind_or_none(path) in TRUE_SCALE_KINDS and (note := scale_note(drawing, "units='{}'")) is not None:
+        warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
 
 
 def _options_doc() -> str:

@@ -3,6 +3,7 @@
 import json
 import re
 import subprocess
+import warnings
 
 import numpy as np
 import pytest
@@ -140,10 +141,8 @@ def test_trimesh_and_an_initial_array(ear):
     (lambda P: P.astype(complex), "the init array holds complex128 values, not real numbers"),
 ])
 def test_an_initial_array_is_checked_as_a_layout_file_is(ear, layout, message):
-    from golden_model.layouts import LayoutError
-
     V, F = ear
-    with pytest.raises(LayoutError, match=message.format(n=len(V), m=len(V) - 1)):
+    with pytest.raises(ParameterError, match=message.format(n=len(V), m=len(V) - 1)):
         springflat.flatten(V, F, init=layout(springflat.flatten(V, F, max_iter=1).result.initial_positions))
 
 
@@ -179,9 +178,9 @@ def test_a_name_with_control_characters_or_undecodable_bytes_is_one_line_of_text
     pattern = springflat.flatten(V, F, name=name, max_iter=2)
     assert pattern.name == shown
     for suffix in (".obj", ".svg", ".pdf", ".dxf"):
-        springflat.write_pattern(tmp_path / f"p{suffix}", pattern)
+        springflat.write_pattern(tmp_path / f"p{suffix}", pattern, units="m")  # (a scan in metres)
     obj = (tmp_path / "p.obj").read_text(encoding="utf-8").splitlines()
-    assert obj[0] == f"# springflat pattern of '{shown}': v = the 3D mesh in mm, vt = the flattened pattern"
+    assert obj[0] == f"# springflat pattern of '{shown}': v = the 3D mesh in m, vt = the flattened pattern"
     assert sum(line.startswith("v ") for line in obj) == len(V) and sum(line.startswith("f ") for line in obj) == len(F)
     assert shown in (tmp_path / "p.svg").read_text(encoding="utf-8")
 
@@ -252,3 +251,59 @@ def test_arrays_with_a_face_wound_against_its_neighbours_are_turned_with_a_note(
     with pytest.warns(springflat.MeshNote, match="1 face wound against its neighbours: turned"):
         pattern = springflat.flatten(np.column_stack([uv, 0.3 * (uv**2).sum(axis=1)]), faces, max_iter=20)
     assert pattern.folded == 0 and pattern.faces[3].tolist() == faces[3][[0, 2, 1]].tolist()
+
+
+def test_write_pattern_refuses_a_diverged_pattern_and_options_the_format_would_ignore(ear, tmp_path):
+    V, F = ear
+    diverged = springflat.flatten(V, F, dynamics="paper", step="fixed", dt=1e6, max_iter=100)
+    assert diverged.status == "diverged"
+    for path in ("d.dxf", "d.obj", "d.flat.obj", "d.flat.svg"):
+        with pytest.raises(springflat.OutputError, match=r"^write_pattern: the run diverged after \d+ iterations: its "
+                                                         r"last finite layout is no pattern$"):
+            springflat.write_pattern(tmp_path / path, diverged)
+    pattern = springflat.flatten(V, F, max_iter=1)
+    with pytest.raises(springflat.OutputError, match="dxf_edges draws the mesh's edges into a DXF pattern, not "):
+        springflat.write_pattern(tmp_path / "p.pdf", pattern, dxf_edges=True)
+    with pytest.raises(springflat.OutputError, match="paper is the sheet of a PDF or SVG pattern, not "):
+        springflat.write_pattern(tmp_path / "p.dxf", pattern, paper="letter")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_pattern_notes_a_true_scale_pattern_too_small_for_its_units(ear, tmp_path):
+    V, F = ear  # a scan in metres: a few centimetres across
+    pattern = springflat.flatten(V, F, max_iter=1)
+    with pytest.warns(springflat.MeshNote, match=r"mm at 1:1 with units='mm': if the mesh is in metres, centimetres "
+                                                 r"or inches, say so with units='m', units='cm' or units='in'"):
+        springflat.write_pattern(tmp_path / "ear.dxf", pattern)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no note at the right units, nor for a texture
+        springflat.write_pattern(tmp_path / "ear.pdf", pattern, units="m")
+        springflat.write_pattern(tmp_path / "ear.obj", pattern)
+
+
+def test_a_pattern_keeps_its_own_arrays_and_prints_short(ear):
+    V, F = (array.copy() for array in ear)
+    pattern = springflat.flatten(V, F, max_iter=1, name="ear")
+    V *= 1000
+    F[:] = 0
+    np.testing.assert_array_equal(pattern.vertices, ear[0])
+    np.testing.assert_array_equal(pattern.faces, ear[1])
+    assert re.fullmatch(rf"Pattern\(name='ear', status='max-iterations', iterations=1, area_error=\S+, "
+                        rf"shape_error=\S+, folded=0, {len(V)} vertices, {len(F)} faces\)", repr(pattern))
+
+
+def test_the_api_raises_only_its_documented_errors_on_paths_and_options(ear):
+    V, F = ear
+    with pytest.raises(MeshError, match=r"^cannot read mesh 'a\\x00b.obj': a file name cannot hold a NUL character"):
+        springflat.read_mesh("a\0b.obj")
+    with pytest.raises(ParameterError, match="^init 'a\\\\x00b.txt': a file name cannot hold a NUL character"):
+        springflat.flatten(V, F, init="a\0b.txt")
+    with pytest.raises(springflat.OutputError, match="a file name cannot hold a NUL character"):
+        springflat.write_pattern("a\0b.svg", springflat.flatten(V, F, max_iter=1))
+    with pytest.raises(ParameterError, match="^--formats applies to the fixed-point engines"):
+        springflat.flatten(V, F, formats="wide")
+    with pytest.raises(ParameterError, match=r"^cannot read layout 'ARAP': no such file, nor a start method \(auto, "
+                                             r"tutte, pca, harmonic, lscm, arap, slim\)$"):
+        springflat.flatten(V, F, init="ARAP")
+    with pytest.raises(TypeError, match="name must be a string"):
+        springflat.flatten(V, F, name=None)
