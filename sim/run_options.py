@@ -132,7 +132,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="area density rho or 'auto' = 1/min m_i (default: 2 for built-ins, auto for files)")
     parser.add_argument("--tol-area", type=number_argument, default=None, help="area error tolerance phi_S")
     parser.add_argument("--tol-shape", type=number_argument, default=None, help="shape error tolerance phi_C")
-    parser.add_argument("--tol-energy", type=number_argument, default=None, help="relative energy change tolerance epsilon")
+    parser.add_argument("--tol-energy", type=number_argument, default=None,
+                        help="relative energy change tolerance epsilon over the --energy-window (0: only an energy "
+                             "that no longer changes at all stops the run)")
     parser.add_argument("--max-iter", type=integer_argument, default=None, help="iteration limit N_max")
 
 
