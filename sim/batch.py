@@ -154,17 +154,25 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                            time.perf_counter() - start)
 
 
+def in_a_batch(args: argparse.Namespace) -> str:
+    """``in a batch``, with what made one when it is not several meshes: one mesh with ``--out-dir`` or
+    ``--scheduler`` is a batch too, which a single run's file name would not tell its user."""
+    if args.more_meshes:
+        return "in a batch"
+    return f"in a batch ({'--out-dir' if args.out_dir is not None else '--scheduler'} makes one, of one mesh here)"
+
+
 def _endings(args: argparse.Namespace) -> tuple[tuple[str, str], ...]:
     """``(option, ending)`` of every output asked for; an ending is a file-name tail such as ``.pdf``."""
     endings = []
     for option, what, _, value in output_paths(args):
         text = str(value)
         if not text or "/" in text or os.sep in text:
-            raise UserError(f"in a batch, {what} takes a file-name ending such as .pdf, not '{text}': each mesh "
-                            f"writes --out-dir/<mesh name><ending>")
+            raise UserError(f"{in_a_batch(args)}, {what} takes a file-name ending such as .pdf, not '{text}': each "
+                            f"mesh writes --out-dir/<mesh name><ending>")
         if text[0].isalnum():  # 'x.dxf' would write 'bunnyx.dxf': a file name given where an ending belongs
-            raise UserError(f"in a batch, {what} takes a file-name ending that starts with a separator, such as "
-                            f".pdf or _flat.pdf, not '{text}' (each mesh writes --out-dir/<mesh name><ending>)")
+            raise UserError(f"{in_a_batch(args)}, {what} takes a file-name ending that starts with a separator, such "
+                            f"as .pdf or _flat.pdf, not '{text}' (each mesh writes --out-dir/<mesh name><ending>)")
         endings.append((option, text))
     tails = [e for _, e in endings]
     for tail in tails:
@@ -192,7 +200,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
     if single:
         raise UserError(f"--engine {args.engine} runs one mesh at a time ({single}): drop it for a batch")
     if args.init is not None and args.init not in (AUTO_START,) + LAYOUT_METHODS:
-        raise UserError(f"in a batch, --init takes a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}), not a "
+        raise UserError(f"{in_a_batch(args)}, --init takes a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}), not a "
                         "layout file")
     check_options_used(args)
     jobs = local_workers(args.jobs, "--jobs", args.scheduler)

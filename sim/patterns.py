@@ -117,7 +117,7 @@ def check_units(units: str) -> float:
 def add_pattern_options(parser: argparse.ArgumentParser) -> None:
     """The ``flatten`` options of the pattern outputs (``--units``, ``--paper``, ``--dxf-edges``, ``--distortion``)."""
     parser.add_argument("--units", choices=UNITS, default="mm",
-                        help="the mesh's length unit, stated in every output and used for true-scale "
+                        help="the mesh's length unit, stated in every pattern file and used for true-scale "
                              "PDF/SVG and DXF $INSUNITS (default mm)")
     parser.add_argument("--paper", choices=PAPERS, default=None,  # None: not given (DEFAULT_PAPER)
                         help="PDF/SVG sheet: a4 or letter (tiled with overlap marks when the pattern is larger), "
@@ -190,7 +190,8 @@ def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFA
         raise PatternError(f"paper must be one of {', '.join(PAPERS)}, got {paper!r}")
     if kind == "flat.obj":
         with atomic_write(path) as tmp:
-            save_obj(tmp, drawing.layout, drawing.faces)
+            save_obj(tmp, drawing.layout, drawing.faces,
+                     f"springflat layout of '{drawing.name}': x, y in {drawing.units}, z = 0")
     elif kind == "flat.svg":
         write_layout(path, drawing.layout, drawing.faces, vertices=drawing.vertices, units=drawing.units)
     elif kind == "obj":

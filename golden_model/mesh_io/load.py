@@ -203,12 +203,14 @@ def _merge_exact_duplicates(vertices: np.ndarray, faces: np.ndarray) -> tuple[np
     return vertices[np.sort(first)], rank[inverse.reshape(-1)][faces]
 
 
-def save_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray) -> None:
-    """Write an OBJ with ``vertices`` (V×2 padded with z = 0, or V×3) and 1-based faces."""
+def save_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray,
+             comment: str = "written by springflat") -> None:
+    """Write an OBJ with ``vertices`` (V×2 padded with z = 0, or V×3) and 1-based faces, after the one-line
+    ``comment``."""
     vertices = np.asarray(vertices, dtype=np.float64)
     if vertices.shape[1] == 2:
         vertices = np.column_stack([vertices, np.zeros(len(vertices))])
     with open(path, "w", encoding="ascii") as out:
-        out.write("# written by springflat\n")
+        out.write(f"# {comment}\n")
         np.savetxt(out, vertices, fmt="v %.17g %.17g %.17g")
         np.savetxt(out, np.asarray(faces) + 1, fmt="f %d %d %d")

@@ -124,6 +124,21 @@ def test_batch_refusals_are_one_line_before_any_run(tmp_path, monkeypatch, capsy
     assert os.listdir(tmp_path) == ["in"]  # an --out-dir the batch made is removed again
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--scheduler", "local", "--out", "x.svg"], "in a batch (--scheduler makes one, of one mesh here), --out takes a "
+                                                 "file-name ending that starts with a separator"),
+    (["--out-dir", "o", "--out", ".svg", "--init", "layout.txt"], "in a batch (--out-dir makes one, of one mesh "
+                                                                  "here), --init takes a method"),
+])
+def test_a_batch_of_one_mesh_says_what_made_it_a_batch(tmp_path, monkeypatch, capsys, args, message):
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 1, 0)
+    assert main(["flatten", "in/dome00.obj", *args]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("springflat: error: ") and message in err[0], err
+    assert os.listdir(tmp_path) == ["in"]
+
+
 @pytest.mark.parametrize("out_dir, args, message", [
     ("in", ["--out", ".obj"], "--out 'in/dome00.obj' is the same file as the mesh 'in/dome00.obj'"),
     ("in", ["--history", ".obj"], "--history 'in/dome00.obj' must end in .csv"),

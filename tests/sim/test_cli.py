@@ -28,6 +28,7 @@ def test_flatten_round_trip(tmp_path):
     surf1, _ = builtin_mesh("surf1")
     assert flat.faces.tolist() == surf1.faces.tolist()
     assert (flat.vertices[:, 2] == 0).all()
+    assert out.read_text().splitlines()[0] == "# springflat layout of 'surf1': x, y in mm, z = 0"
 
     with open(hist, newline="") as f:
         rows = list(csv.reader(f))
