@@ -40,8 +40,8 @@ from golden_model.results import FlattenResult
 
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
-from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, human_line, json_summary, output_paths,
-                          run_flatten, run_formats, scale_note_of, what_was_used, write_outputs)
+from .flatten_run import (PATTERN_OUTPUTS, RAN_AWAY, check_options_used, check_print_size, human_line, json_summary,
+                          output_paths, run_flatten, run_formats, scale_note_of, what_was_used, write_outputs)
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
     check_not_interrupted, check_output_path, on_interrupt, received_signal, reset_interrupted
 from .patterns import add_pattern_options
@@ -93,7 +93,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         unwritten = [(flag, path) for _, flag, _, path in output_paths(args) if flag in PATTERN_OUTPUTS]
         kept = [f"'{path}'" for _, path in unwritten if os.path.lexists(path)]
         flags = ", ".join(dict.fromkeys(flag for flag, _ in unwritten))
-        print(f"springflat: iteration {result.iterations + 1} left the finite numbers ({divergence_hint(params)})"
+        print(f"springflat: iteration {result.iterations + 1} ran away: {RAN_AWAY} ({divergence_hint(params)})"
               + (f"; no pattern written ({flags})" if unwritten else "")
               + (f", {' and '.join(kept)} kept as {'they were' if len(kept) > 1 else 'it was'}" if kept else ""),
               file=sys.stderr)

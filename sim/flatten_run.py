@@ -15,7 +15,7 @@ import numpy as np
 from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT
-from golden_model.mesh import Mesh
+from golden_model.mesh import COORDINATE_LIMIT, Mesh
 from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
@@ -181,7 +181,7 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> st
     if params.tol_area < 1 or params.tol_shape < 1:
         rule = f"E_S <= {params.tol_area:g}, E_C <= {params.tol_shape:g} and {rule}"
     why = {"converged": "the stop rule held", "max-iterations": f"N_max = {params.max_iter} reached",
-           "diverged": "a value stopped being finite",
+           "diverged": RAN_AWAY,
            "stalled": "no step lowered the energy any more (the guard's step scale fell below "
                       f"2^-{SCALE_MAX_SHIFT}); the pattern is the last accepted, fold-free layout"}[result.status]
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
@@ -194,6 +194,9 @@ def scale_note_of(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
         return None
     return scale_note(PatternDrawing.of(mesh, result.positions, args.units))
 
+
+#: What a diverged float run did (:func:`golden_model.reference.in_range`).
+RAN_AWAY = f"a value stopped being finite, or a coordinate passed {COORDINATE_LIMIT:g}"
 
 #: The outputs a diverged run does not write: its last finite layout is no pattern, and a non-zero exit must
 #: not leave a fresh target (an existing file is kept). ``--history`` and ``--plot`` show the divergence.

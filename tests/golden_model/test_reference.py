@@ -231,3 +231,21 @@ def test_penalty_run_keeps_triangles_unflipped():
 def test_parameters_are_validated(changes, message):
     with pytest.raises(ParameterError, match=message):
         FlattenParams(**changes)
+
+
+def test_a_layout_that_runs_past_the_coordinate_limit_has_diverged():
+    """Undamped, with a fixed step far too large, the paper dynamics grows for hundreds of iterations before
+    anything overflows: past COORDINATE_LIMIT (the range a layout file may hold) the run is ``diverged``,
+    with the last state inside it, not ``max-iterations`` with a layout no start would accept."""
+    from golden_model.mesh import COORDINATE_LIMIT
+    from golden_model.reference import in_range
+
+    assert in_range(np.array([[COORDINATE_LIMIT, -COORDINATE_LIMIT]]))
+    for bad in (np.nextafter(COORDINATE_LIMIT, np.inf), np.inf, np.nan):
+        assert not in_range(np.array([[0.0, bad]]))
+    mesh = dome_grid(6)
+    params = FlattenParams(step="fixed", dt=0.3, max_iter=3000, tol_area=0, tol_shape=0, tol_energy=0)
+    result = flatten(mesh, initial_layout(mesh, "tutte"), params)
+    assert result.status == "diverged" and 100 < result.iterations < 3000, (result.status, result.iterations)
+    assert np.abs(result.positions).max() <= COORDINATE_LIMIT
+    assert np.isfinite(result.final.energy)
