@@ -7,6 +7,8 @@ import csv
 import dataclasses
 import json
 import math
+import os
+import re
 
 import numpy as np
 import pytest
@@ -259,6 +261,19 @@ def test_bad_input_is_a_parameter_error(tmp_path, argv, message):
     with pytest.raises(ParameterError, match=message):
         cmd_study(_parse([*argv, "--out", str(tmp_path / "out"), "--quiet"]))
     assert not (tmp_path / "out").exists()
+
+
+def test_a_mesh_path_that_cannot_be_read_says_why_not_unknown_mesh(tmp_path, monkeypatch):
+    from golden_model.mesh import MeshError
+
+    monkeypatch.chdir(tmp_path)
+    os.mkfifo("pipe")
+    for name, message in [("./pipe", "cannot read mesh 'pipe': is a named pipe (FIFO), not a regular file"),
+                          ("pipe", "cannot read mesh 'pipe': is a named pipe"),
+                          ("no/such.obj", "cannot read mesh 'no/such.obj': no such file")]:
+        with pytest.raises(MeshError, match=re.escape(message)):
+            cmd_study(_parse([name, "--sweep", "none", "--no-optimise", "--out", "out", "--quiet"]))
+    assert sorted(os.listdir()) == ["pipe"]
 
 
 @pytest.mark.slow
