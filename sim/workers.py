@@ -26,7 +26,7 @@ from typing import Any, Callable
 
 from .outputs import deferred_interrupts
 
-__all__ = ["WorkerPool", "usable_cores", "local_workers", "MAX_WORKERS_PER_CORE"]
+__all__ = ["WorkerPool", "usable_cores", "local_workers", "check_scheduler_address", "MAX_WORKERS_PER_CORE"]
 
 #: Local worker processes per usable core at most (``flatten --jobs``, ``study --workers``): each is a
 #: Python process with numpy and the model; more would only share the cores and fill the memory.
@@ -44,9 +44,12 @@ def usable_cores() -> int:
 def local_workers(value: int | None, option: str, scheduler: str | None = None) -> int:
     """The local worker processes ``option`` asks for (``None``: one per usable core); a
     :class:`~golden_model.params.ParameterError` below 1 or above :data:`MAX_WORKERS_PER_CORE` per core, or
-    given beside a Dask ``scheduler`` address (whose cluster has its own workers)."""
+    given beside a Dask ``scheduler`` address (whose cluster has its own workers); a malformed address
+    (:func:`check_scheduler_address`)."""
     from golden_model.params import ParameterError
 
+    if scheduler not in (None, "local"):
+        check_scheduler_address(scheduler)  # a malformed address refused now, not after Dask's timeout
     if value is not None and scheduler not in (None, "local"):
         raise ParameterError(f"{option} sets the local worker processes; the Dask scheduler at '{scheduler}' has "
                              f"its own workers: drop {option}")
@@ -60,6 +63,28 @@ def local_workers(value: int | None, option: str, scheduler: str | None = None) 
                              f"({MAX_WORKERS_PER_CORE} per core, {cores} here); more would only share the cores and "
                              "fill the memory")
     return value
+
+
+def check_scheduler_address(scheduler: str) -> None:
+    """Refuse a ``--scheduler`` address that Dask could never connect to: an unknown protocol, no host, or a
+    port that is no number in 1-65535 (Dask would try it until its timeout)."""
+    from distributed.comm import parse_address
+    from distributed.comm.addressing import parse_host_port
+    from distributed.comm.registry import backends
+
+    from golden_model.params import ParameterError
+
+    expected = "expected 'local' or PROTOCOL://HOST:PORT, such as tcp://host:8786"
+    try:
+        protocol, location = parse_address(scheduler)
+        host, port = parse_host_port(location, 8786) if protocol in ("tcp", "tls", "ws", "wss") else (location, 1)
+    except (ValueError, TypeError):
+        raise ParameterError(f"--scheduler '{scheduler}': not a Dask address ({expected})") from None
+    if protocol not in backends:
+        raise ParameterError(f"--scheduler '{scheduler}': Dask has no protocol '{protocol}' ({', '.join(backends)})")
+    if not host or not 1 <= port <= 65535:
+        problem = "no host" if not host else f"port {port} is not in 1-65535"
+        raise ParameterError(f"--scheduler '{scheduler}': {problem} ({expected})")
 
 
 _SIGTERM_HANDLER: list = []

@@ -114,6 +114,9 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
      "--jobs sets the local worker processes; the Dask scheduler at 'tcp://127.0.0.1:8786' has its own workers"),
     (["--out-dir", "o", "--max-iter", "3"], "--out-dir holds the batch's files, and none is asked for: add --out "
                                             ".ENDING"),
+    (["--out-dir", "o", "--out", ".dxf", "--scheduler", "tcp://127.0.0.1:99999"], "--scheduler "
+     "'tcp://127.0.0.1:99999': port 99999 is not in 1-65535 (expected 'local' or PROTOCOL://HOST:PORT"),
+    (["--out-dir", "o", "--out", ".dxf", "--scheduler", "tpc://host:8786"], "Dask has no protocol 'tpc'"),
 ])
 def test_batch_refusals_are_one_line_before_any_run(tmp_path, monkeypatch, capsys, args, message):
     monkeypatch.chdir(tmp_path)

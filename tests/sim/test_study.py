@@ -254,6 +254,7 @@ def test_parser_defaults():
     (["--target", "0"], "--target"),
     (["--workers", "0"], "--workers must be >= 1, got 0"),
     (["--workers", "1000000"], "--workers 1000000: at most .* local worker processes"),
+    (["--scheduler", "tcp://host:65536"], "--scheduler 'tcp://host:65536': port 65536 is not in 1-65535"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "--workers sets the local worker processes; the "
                                                                "Dask scheduler at 'tcp://127.0.0.1:8786' has its own"),
 ])
