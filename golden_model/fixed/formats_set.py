@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -84,6 +85,12 @@ KNOB_DOMAINS: dict[str, tuple[int, int]] = {
     "lut_index_bits": (1, 12),  # an exp table of 2^b + 1 entries: 4,097 at 12
     "max_degree": (1, 1024),  # ceil(log2) guard bits in every accumulator: 10 at 1024
 }
+
+#: What a format set's ``name`` may hold: it names directories (``synth-ecp5-NAME``) and goes into the
+#: exported Verilog, C header and reports, where a newline, a quote, ``*/`` or a ``/`` would break out of a
+#: comment or a directory.  The study's labels (``position=12``, ``base:default``, ``opt-03``) fit.
+NAME_CHARACTERS = "letters, digits, spaces and . _ : = + -"
+NAME_PATTERN = re.compile(r"[A-Za-z0-9 ._:=+-]{1,64}")
 
 #: Formats the datapath widens by one integer bit (the adder input of the position and
 #: velocity updates, ``pipeline._wide``): they take at most ``MAX_WIDTH - 1`` bits.
@@ -209,6 +216,9 @@ class FormatSet:
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not NAME_PATTERN.fullmatch(self.name):
+            raise ValueError(f"the format set's name {self.name!r} must be 1 to 64 {NAME_CHARACTERS} (it names "
+                             "the synthesis bundle and goes into the exported files)")
         for f in FORMAT_FIELDS:
             v = getattr(self, f)
             if not isinstance(v, Format):
