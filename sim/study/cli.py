@@ -50,6 +50,8 @@ from .flow import ConfigSummary, StudyResult, run_study
 __all__ = ["add_parser", "cmd_study", "write_outputs", "PLOT_FILES"]
 
 PLOT_FILES = {"bits": "study-bits.png", "knobs": "study-knobs.png", "pareto": "study-pareto.png"}
+#: Every file the report may hold (``chosen.json`` when a format set meets the target).
+REPORT_FILES = ("results.csv", "summary.csv", "report.md", "chosen.json", *PLOT_FILES.values())
 _BOTH = {"both": ("pca", "tutte"), "pca": ("pca",), "tutte": ("tutte",)}
 _STEPS = {"both": ("fixed", "variable"), "fixed": ("fixed",), "variable": ("variable",)}
 
@@ -131,7 +133,9 @@ def cmd_study(args: argparse.Namespace) -> int:
     workers = local_workers(args.workers, "--workers", args.scheduler)
     base = load_format_set(args.base)
     out = Path(args.out)
-    check_output_directory(out)  # before the study: the report is written at its end
+    inputs = [("--base", None if FormatSet.names_preset(args.base) else Path(args.base)),
+              *(("a mesh", Path(m)) for m in args.meshes or ())]
+    check_output_directory(out, files=REPORT_FILES, inputs=inputs)  # before the study: the report is its end
     cases = build_cases(args.meshes or list(STUDY_MESHES), _BOTH[args.init], _STEPS[args.step], args.max_iter)
 
     update, close, totals = _progress_bars(not args.quiet and sys.stderr.isatty())  # bars on a terminal only
@@ -155,8 +159,6 @@ def cmd_study(args: argparse.Namespace) -> int:
                         "--optimise" if args.optimise else "--no-optimise",
                         *([f"--max-iter {args.max_iter}"] if args.max_iter is not None else []),
                         f"--out {shlex.quote(str(out))}"])
-    inputs = [("--base", None if FormatSet.names_preset(args.base) else Path(args.base)),
-              *(("a mesh", Path(m)) for m in args.meshes or ())]
     with atomic_directory(out, stale=("chosen.json",), inputs=inputs) as build:  # all of it or nothing
         write_outputs(result, build, command=command)
     chosen = result.chosen

@@ -9,6 +9,7 @@ import json
 import math
 import os
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,7 +29,7 @@ from golden_model.study import (
     parse_knobs,
     sweep_configs,
 )
-from sim.study.cli import add_parser, cmd_study
+from sim.study.cli import REPORT_FILES, add_parser, cmd_study
 from sim.study.cost import cost, multipliers
 from sim.study.flow import Study
 
@@ -264,6 +265,22 @@ def test_bad_input_is_a_parameter_error(tmp_path, argv, message):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_report_that_would_replace_its_own_base_is_refused_before_the_study(tmp_path, monkeypatch):
+    """study's docs check a choice with --base study-report/chosen.json: into the default --out the new
+    chosen.json would replace it. Refused at once (it was refused after the whole study), nothing written."""
+    from sim.outputs import OutputError
+
+    monkeypatch.chdir(tmp_path)
+    Path("study-report").mkdir()
+    FormatSet.preset("default").save("study-report/chosen.json")
+    before = Path("study-report/chosen.json").read_bytes()
+    with pytest.raises(OutputError, match=r"^output 'study-report/chosen.json' is the same file as --base "
+                                          r"'study-report/chosen.json'$"):
+        cmd_study(_parse(["surf1", "--base", "study-report/chosen.json", "--sweep", "none", "--no-optimise",
+                          "--quiet"]))
+    assert os.listdir("study-report") == ["chosen.json"] and Path("study-report/chosen.json").read_bytes() == before
+
+
 def test_a_mesh_path_that_cannot_be_read_says_why_not_unknown_mesh(tmp_path, monkeypatch):
     from golden_model.mesh import MeshError
 
@@ -284,6 +301,7 @@ def test_cmd_study_writes_outputs(tmp_path, capsys):
                    "--bits", "10:18:4", "--max-iter", "40", "--workers", "1", "--out", str(out), "--quiet"])
     assert cmd_study(args) == 0
     assert "chosen" in capsys.readouterr().out
+    assert set(os.listdir(out)) == set(REPORT_FILES)  # what is checked before the study is what it writes
     with open(out / "summary.csv", newline="") as f:
         summary = list(csv.DictReader(f))
     with open(out / "results.csv", newline="") as f:
