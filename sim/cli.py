@@ -66,6 +66,20 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):
         self.exit(EXIT_USAGE, f"springflat: error: {message} (see '{self.prog} --help')\n")
 
+    def _print_message(self, message: str, file=None) -> None:
+        """argparse's, without its silence on a failed write: ``--help`` or ``--version`` into a full disk
+        or a closed pipe is the one line on the standard error and status 2, not a lost text and status 0."""
+        if not message:
+            return
+        file = sys.stderr if file is None else file
+        try:
+            file.write(message)
+            file.flush()
+        except OSError as exc:
+            if file is not sys.stderr:
+                print(f"springflat: error: cannot write standard output: {describe_os_error(exc)}", file=sys.stderr)
+            raise SystemExit(EXIT_USAGE) from None
+
 
 def cmd_flatten(args: argparse.Namespace) -> int:
     if args.more_meshes or args.out_dir is not None or args.scheduler is not None:

@@ -1517,3 +1517,16 @@ def test_a_255_byte_output_directory_name(tmp_path, monkeypatch, capsys):
     assert main(["paper", "--out", name]) == 0
     assert os.listdir(tmp_path) == [name] and os.listdir(tmp_path / name) == ["report.md"]
     capsys.readouterr()
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
+@pytest.mark.parametrize("argv", [["--help"], ["flatten", "--help"], ["--version"]])
+def test_as_root_help_or_version_into_a_full_standard_output_is_one_line_and_status_2(tmp_path, argv):
+    """argparse drops a failed write of its help: the text was lost and the status 0."""
+    import stat
+
+    os.mknod(tmp_path / "full", 0o666 | stat.S_IFCHR, os.makedev(1, 7))
+    with open(tmp_path / "full", "w") as full:
+        proc = subprocess.run([SPRINGFLAT, *argv], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
+    assert (proc.returncode, proc.stderr) == (2, "springflat: error: cannot write standard output: no space left on "
+                                                 "device\n")
