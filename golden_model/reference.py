@@ -17,7 +17,7 @@ The model (spec "Model"):
   iteration ``k+1`` uses the errors measured after iteration ``k``;
 * stopping (Algorithm 1): ``converged`` when ``E_S ≤ φ_S``, ``E_C ≤ φ_C`` and
   ``ΔE ≤ ε``; ``max-iterations`` after ``N_max``; ``diverged`` when a value
-  stops being finite, or a coordinate leaves the range a layout file may hold (:func:`in_range`); ``stalled`` when the guarded step finds no step that lowers the energy
+  stops being finite, or the layout runs away (:func:`runaway_width`); ``stalled`` when the guarded step finds no step that lowers the energy
   (docs/guard.md).  At least one iteration runs.
 
 ``jacobi`` (synchronous) is vectorised over edges; ``sequential`` follows
@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 
 from .guard import ENERGY_FLOOR, GUARD_LEVELS, EnergyWindow, StepScale, guarded_moves
-from .mesh import COORDINATE_LIMIT, Mesh, folded_by_area, layout_orientation, signed_areas_2d
+from .mesh import Mesh, folded_by_area, layout_orientation, signed_areas_2d
 from .modes import Step
 from .params import FlattenParams, ParameterError
 from .results import FlattenResult, History, Measurement, Status
@@ -375,13 +375,22 @@ def energy_floor(mesh: Mesh, params: FlattenParams) -> float:
     return ENERGY_FLOOR * params.spring * float(np.sum(mesh.rest_lengths**2))
 
 
-def in_range(positions: np.ndarray) -> bool:
-    """Whether every coordinate of ``positions`` is finite and within :data:`~golden_model.mesh.COORDINATE_LIMIT`
-    (1e50), the range a mesh or a layout file may hold: beyond it a run has diverged, as a value that stops
-    being finite says (an undamped run can grow for thousands of iterations before it overflows, and its
-    layout would be refused as a start)."""
-    with np.errstate(invalid="ignore"):
-        return bool((np.abs(positions) <= COORDINATE_LIMIT).all())
+#: A layout wider than this many times the larger of the 3D mesh and the start has run away: no flattening
+#: is within twenty orders of magnitude of that, and the run is ``diverged`` while its numbers are still
+#: finite (an undamped run can grow for thousands of iterations before anything overflows).
+RUNAWAY_FACTOR = 1e20
+
+
+def runaway_width(mesh: Mesh, start: np.ndarray) -> float:
+    """The layout width past which a run from ``start`` has run away (:data:`RUNAWAY_FACTOR`), in the mesh's
+    units: widths are bounding-box sides, so a layout that merely drifts does not count."""
+    return RUNAWAY_FACTOR * max(float(np.ptp(mesh.vertices, axis=0).max()), float(np.ptp(start, axis=0).max()))
+
+
+def in_range(positions: np.ndarray, width: float) -> bool:
+    """Whether ``positions`` are finite and no wider than ``width`` (:func:`runaway_width`)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        return bool(np.isfinite(positions).all() and np.ptp(positions, axis=0).max() <= width)
 
 
 def _converged(energy_before: float, after: Measurement, params: FlattenParams, floor: float = 0.0) -> bool:
@@ -638,6 +647,7 @@ def run(engine, params: FlattenParams, density: float, initial_positions: np.nda
     window = EnergyWindow(params.energy_window)
     window.push(current.energy)
     floor = energy_floor(engine.model.mesh, params)
+    width = runaway_width(engine.model.mesh, initial_positions)
     saved = (engine.positions.copy(), engine.velocities.copy())
     status: Status = "max-iterations"
     k = 0
@@ -646,7 +656,7 @@ def run(engine, params: FlattenParams, density: float, initial_positions: np.nda
         with np.errstate(over="ignore", invalid="ignore"):
             engine.advance(dt)
             after = engine.measure()
-        if not (after.finite() and np.isfinite(engine.velocities).all() and in_range(engine.positions)):
+        if not (after.finite() and np.isfinite(engine.velocities).all() and in_range(engine.positions, width)):
             status = "diverged"
             engine.positions, engine.velocities = saved
             break

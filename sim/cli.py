@@ -116,7 +116,11 @@ def cmd_flatten(args: argparse.Namespace) -> int:
 
 
 def divergence_hint(params: FlattenParams) -> str:
-    """What to try after a diverged run, naming only options its mode takes (only an unguarded run diverges)."""
+    """What to try after a diverged run, naming only options its mode takes. A guarded run's energy never
+    rises, so only numbers at the ends of their ranges overflow it (a spring constant of 1e300 on a mesh
+    1e45 across)."""
+    if params.dynamics == "momentum" and params.guard:
+        return "the guarded run's numbers overflowed: bring --spring, --density or the mesh's size nearer 1"
     if params.dynamics == "momentum":
         return "the momentum dynamics without its guard: drop --no-guard"
     step = "a smaller --dt" if params.step == "fixed" else "--step fixed with a small --dt"

@@ -15,8 +15,9 @@ import numpy as np
 from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT
-from golden_model.mesh import COORDINATE_LIMIT, Mesh
+from golden_model.mesh import Mesh
 from golden_model.params import FlattenParams
+from golden_model.reference import RUNAWAY_FACTOR
 from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
@@ -195,8 +196,9 @@ def scale_note_of(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
     return scale_note(PatternDrawing.of(mesh, result.positions, args.units))
 
 
-#: What a diverged float run did (:func:`golden_model.reference.in_range`).
-RAN_AWAY = f"a value stopped being finite, or a coordinate passed {COORDINATE_LIMIT:g}"
+#: What a diverged float run did (:func:`golden_model.reference.runaway_width`).
+RAN_AWAY = (f"a value stopped being finite, or the layout grew {RUNAWAY_FACTOR:g} times wider than the mesh and "
+            "the start")
 
 #: The outputs a diverged run does not write: its last finite layout is no pattern, and a non-zero exit must
 #: not leave a fresh target (an existing file is kept). ``--history`` and ``--plot`` show the divergence.

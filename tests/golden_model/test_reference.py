@@ -233,19 +233,26 @@ def test_parameters_are_validated(changes, message):
         FlattenParams(**changes)
 
 
-def test_a_layout_that_runs_past_the_coordinate_limit_has_diverged():
-    """Undamped, with a fixed step far too large, the paper dynamics grows for hundreds of iterations before
-    anything overflows: past COORDINATE_LIMIT (the range a layout file may hold) the run is ``diverged``,
-    with the last state inside it, not ``max-iterations`` with a layout no start would accept."""
+def test_a_layout_that_runs_away_has_diverged_while_its_numbers_are_finite():
+    """Undamped, with a fixed step too large, the paper dynamics grows for thousands of iterations before
+    anything overflows (this run reached N_max at 1.5e28 mesh widths, E_S 4.8e51, as max-iterations): a
+    layout RUNAWAY_FACTOR times wider than the mesh and the start is ``diverged``, with the last state
+    before it. A mesh at the end of the coordinate range is no runaway."""
     from golden_model.mesh import COORDINATE_LIMIT
-    from golden_model.reference import in_range
+    from golden_model.reference import RUNAWAY_FACTOR, in_range, runaway_width
 
-    assert in_range(np.array([[COORDINATE_LIMIT, -COORDINATE_LIMIT]]))
-    for bad in (np.nextafter(COORDINATE_LIMIT, np.inf), np.inf, np.nan):
-        assert not in_range(np.array([[0.0, bad]]))
+    assert in_range(np.array([[0.0, 0.0], [1.0, 0.0]]), 1.0)
+    for bad in (np.nextafter(1.0, 2.0), np.inf, np.nan):
+        assert not in_range(np.array([[0.0, 0.0], [bad, 0.0]]), 1.0)
     mesh = dome_grid(6)
-    params = FlattenParams(step="fixed", dt=0.3, max_iter=3000, tol_area=0, tol_shape=0, tol_energy=0)
-    result = flatten(mesh, initial_layout(mesh, "tutte"), params)
-    assert result.status == "diverged" and 100 < result.iterations < 3000, (result.status, result.iterations)
-    assert np.abs(result.positions).max() <= COORDINATE_LIMIT
-    assert np.isfinite(result.final.energy)
+    start = initial_layout(mesh, "tutte")
+    params = FlattenParams(step="fixed", dt=0.05, max_iter=3000, tol_area=0, tol_shape=0, tol_energy=0)
+    result = flatten(mesh, start, params)
+    width = runaway_width(mesh, start)
+    assert result.status == "diverged" and 1000 < result.iterations < 3000, (result.status, result.iterations)
+    assert width == RUNAWAY_FACTOR * max(np.ptp(mesh.vertices, axis=0).max(), np.ptp(start, axis=0).max())
+    assert np.ptp(result.positions, axis=0).max() <= width
+    assert np.isfinite(result.velocities).all() and np.isfinite(result.final.energy)
+    huge = Mesh(mesh.vertices * (COORDINATE_LIMIT / np.abs(mesh.vertices).max()), mesh.faces)
+    assert flatten(huge, initial_layout(huge, "tutte"), FlattenParams(dynamics="momentum", max_iter=50)).status != \
+        "diverged"
