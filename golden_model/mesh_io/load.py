@@ -210,7 +210,7 @@ def save_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray,
     vertices = np.asarray(vertices, dtype=np.float64)
     if vertices.shape[1] == 2:
         vertices = np.column_stack([vertices, np.zeros(len(vertices))])
-    with open(path, "w", encoding="ascii") as out:
+    with open(path, "w", encoding="utf-8") as out:  # (the comment may name the mesh: any text)
         out.write(f"# {comment}\n")
         np.savetxt(out, vertices, fmt="v %.17g %.17g %.17g")
         np.savetxt(out, np.asarray(faces) + 1, fmt="f %d %d %d")

@@ -170,19 +170,22 @@ def test_the_board_engine_is_refused_by_the_api_with_what_to_run_instead(ear):
 
 
 @pytest.mark.parametrize("name, shown", [("evil\nv 9 9 9\nf 1 2 3", "evil\\nv 9 9 9\\nf 1 2 3"),
-                                         ("bad\udcff", "bad\\xff"), ("tab\tstop", "tab\\tstop")],
-                         ids=["newline", "undecodable byte", "tab"])
+                                         ("bad\udcff", "bad\\xff"), ("tab\tstop", "tab\\tstop"),
+                                         ("Kopf ü", "Kopf ü")],
+                         ids=["newline", "undecodable byte", "tab", "not ascii"])
 def test_a_name_with_control_characters_or_undecodable_bytes_is_one_line_of_text_in_every_file(ear, tmp_path, name,
                                                                                                  shown):
     V, F = ear
     pattern = springflat.flatten(V, F, name=name, max_iter=2)
     assert pattern.name == shown
-    for suffix in (".obj", ".svg", ".pdf", ".dxf"):
+    for suffix in (".obj", ".flat.obj", ".svg", ".pdf", ".dxf"):
         springflat.write_pattern(tmp_path / f"p{suffix}", pattern, units="m")  # (a scan in metres)
     obj = (tmp_path / "p.obj").read_text(encoding="utf-8").splitlines()
     assert obj[0] == f"# springflat pattern of '{shown}': v = the 3D mesh in m, vt = the flattened pattern"
     assert sum(line.startswith("v ") for line in obj) == len(V) and sum(line.startswith("f ") for line in obj) == len(F)
     assert shown in (tmp_path / "p.svg").read_text(encoding="utf-8")
+    assert (tmp_path / "p.flat.obj").read_text(encoding="utf-8").splitlines()[0] == \
+        f"# springflat layout of '{shown}': x, y in m, z = 0"
 
 
 @pytest.mark.parametrize("make, message", [
