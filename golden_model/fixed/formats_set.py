@@ -88,9 +88,10 @@ KNOB_DOMAINS: dict[str, tuple[int, int]] = {
 
 #: What a format set's ``name`` may hold: it names directories (``synth-ecp5-NAME``) and goes into the
 #: exported Verilog, C header and reports, where a newline, a quote, ``*/`` or a ``/`` would break out of a
-#: comment or a directory.  The study's labels (``position=12``, ``base:default``, ``opt-03``) fit.
-NAME_CHARACTERS = "letters, digits, spaces and . _ : = + -"
-NAME_PATTERN = re.compile(r"[A-Za-z0-9 ._:=+-]{1,64}")
+#: comment or a directory.  The study's labels (``position=12``, ``base:default``, ``opt-03``) and the
+#: benchmarks' (``default, rsqrt u8.20, length_sq u7.28``) fit.
+NAME_CHARACTERS = "letters, digits, inner spaces and . , _ : = + -"
+NAME_PATTERN = re.compile(r"[A-Za-z0-9.,_:=+-]([A-Za-z0-9 .,_:=+-]{0,62}[A-Za-z0-9.,_:=+-])?")
 
 #: Formats the datapath widens by one integer bit (the adder input of the position and
 #: velocity updates, ``pipeline._wide``): they take at most ``MAX_WIDTH - 1`` bits.

@@ -336,13 +336,15 @@ def test_to_float_and_scalars():
 
 
 # ----------------------------------------------------------------- FormatSet
-@pytest.mark.parametrize("name", ["../out", "x\nmodule injected; endmodule", "a */ int x; /*", "", "n" * 65, "é"])
+@pytest.mark.parametrize("name", ["../out", "x\nmodule injected; endmodule", "a */ int x; /*", "", "n" * 65, "é",
+                                  " lead", "trail "])
 def test_a_name_that_could_leave_a_directory_or_a_comment_is_refused(name):
     """The name makes the synthesis bundle's directory and is written into the Verilog, the C header and the
     reports: a '/', a newline or '*/' would escape them."""
-    with pytest.raises(ValueError, match=r"the format set's name .* must be 1 to 64 letters, digits, spaces"):
+    with pytest.raises(ValueError, match=r"the format set's name .* must be 1 to 64 letters, digits, inner spaces"):
         FormatSet.from_dict({**FormatSet.preset("default").to_dict(), "name": name})
-    assert FormatSet.preset("default").replace(name="base:default position=12 opt-03").name
+    for fine in ("base:default position=12 opt-03", "default, rsqrt u8.20, length_sq u7.28", "x", "n" * 64):
+        assert FormatSet.preset("default").replace(name=fine).name == fine
 
 
 @pytest.mark.parametrize("name", PRESETS)
