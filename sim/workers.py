@@ -70,7 +70,7 @@ def check_scheduler_address(scheduler: str) -> None:
     port that is no number in 1-65535 (Dask would try it until its timeout)."""
     from distributed.comm import parse_address
     from distributed.comm.addressing import parse_host_port
-    from distributed.comm.registry import backends
+    from distributed.comm.registry import backends, get_backend
 
     from golden_model.params import ParameterError
 
@@ -80,8 +80,11 @@ def check_scheduler_address(scheduler: str) -> None:
         host, port = parse_host_port(location, 8786) if protocol in ("tcp", "tls", "ws", "wss") else (location, 1)
     except (ValueError, TypeError):
         raise ParameterError(f"--scheduler '{scheduler}': not a Dask address ({expected})") from None
-    if protocol not in backends:
-        raise ParameterError(f"--scheduler '{scheduler}': Dask has no protocol '{protocol}' ({', '.join(backends)})")
+    try:
+        get_backend(protocol)  # (loads a plug-in's protocol from its entry point)
+    except ValueError:
+        raise ParameterError(f"--scheduler '{scheduler}': Dask has no protocol '{protocol}' "
+                             f"({', '.join(sorted(backends))})") from None
     if not host or not 1 <= port <= 65535:
         problem = "no host" if not host else f"port {port} is not in 1-65535"
         raise ParameterError(f"--scheduler '{scheduler}': {problem} ({expected})")
