@@ -8,16 +8,11 @@ rounding shift :func:`shift_round`, then a clamp into ``fmt``.
 from amaranth.hdl import Cat, Const, Mux, Value, signed, unsigned
 
 from golden_model.fixed import Format, Rounding
+from golden_model.fixed.formats_set import FormatSetNotBuildable
 from golden_model.fixed.dsp import DSP_WIDTH, Operand, dsp_partial_products
 
 __all__ = ["FormatSetNotBuildable", "shape_of", "round_half_bit", "shift_round", "variable_shift", "saturate", "clamp", "requantize", "dsp_operands",
            "sum_round"]
-
-
-class FormatSetNotBuildable(ValueError):
-    """A component's refusal of a format set that the golden model runs but this RTL cannot build: a velocity
-    finer than the positions it is added to, a barrier longer than the rsqrt unit beside it, an operand wider
-    than a DSP block's. The command line says it in one line, naming the format set."""
 
 
 def round_half_bit(t, rounding, sticky=Const(0)):

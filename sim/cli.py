@@ -33,7 +33,7 @@ import numpy as np
 
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.files import describe_os_error
-from golden_model.fixed.formats_set import FormatSet
+from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.layouts import LAYOUT_METHODS
 from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
@@ -314,12 +314,13 @@ def _quiet_after_interrupt() -> None:
     sys.unraisablehook = lambda unraisable: None
 
 
-def _refused_by_a_component(exc: ValueError) -> bool:
-    """Whether ``exc`` is an RTL component's refusal of a format set the golden model runs (a velocity
-    finer than the positions it is added to, ...)."""
-    from hdl.fixedpoint import FormatSetNotBuildable  # (Amaranth's import only on this rare path)
-
-    return isinstance(exc, FormatSetNotBuildable)
+def forget_half_built_components(exc: FormatSetNotBuildable) -> None:
+    """Collect, quietly, the RTL components built before ``exc`` refused the format set: each would warn
+    "created but never used" (Amaranth's ``UnusedElaboratable``), noise after the one line that says why."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traceback.clear_frames(exc.__traceback__)
+        gc.collect()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -352,15 +353,10 @@ def main(argv: list[str] | None = None) -> int:
     except USER_ERRORS + (UserError,) as exc:
         print(f"springflat: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    except ValueError as exc:
-        if not _refused_by_a_component(exc):
-            raise
+    except FormatSetNotBuildable as exc:
         print(f"springflat: error: the RTL cannot be built with format set '{getattr(args, 'formats', None)}': {exc}",
               file=sys.stderr)
-        with warnings.catch_warnings():  # the half-built components' "created but never used" are noise
-            warnings.simplefilter("ignore")
-            traceback.clear_frames(exc.__traceback__)
-            gc.collect()
+        forget_half_built_components(exc)
         return EXIT_USAGE
     except OSError as exc:  # a file operation the commands do not name themselves
         what = ("write standard output" if exc.filename == STANDARD_OUTPUT else

@@ -29,12 +29,13 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from golden_model.fixed.formats_set import FormatSetNotBuildable
 from golden_model.layouts import LayoutError
 from golden_model.mesh import Mesh, MeshError, oriented_mesh
 from golden_model.mesh_io import load_mesh_with_notes, save_obj
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
-from sim.cli import add_engine_options
+from sim.cli import add_engine_options, forget_half_built_components
 from sim.engines import ENGINES, engine_named
 from sim.flatten_run import run_flatten
 from sim.distortion import Distortion, distortion
@@ -296,6 +297,9 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
             result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
         except (UserError, LayoutError) as exc:  # the command line's one line: options, or the start, refused
             raise ParameterError(str(exc)) from None
+        except FormatSetNotBuildable as exc:  # engine="rtl"
+            forget_half_built_components(exc)
+            raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
     for note in run_notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
@@ -345,7 +349,7 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
     drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
-    write_pattern_file(Path(path), drawing, paper=paper or DEFAULT_PAPER, dxf_edges=dxf_edges)
+    write_pattern_file(Path(path), drawing, paper=DEFAULT_PAPER if paper is None else paper, dxf_edges=dxf_edges)
     if kind_or_none(path) in TRUE_SCALE_KINDS and (note := scale_note(drawing, "units='{}'")) is not None:
         warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
 

@@ -86,6 +86,13 @@ KNOB_DOMAINS: dict[str, tuple[int, int]] = {
     "max_degree": (1, 1024),  # ceil(log2) guard bits in every accumulator: 10 at 1024
 }
 
+class FormatSetNotBuildable(ValueError):
+    """An RTL component's refusal (``hdl``) of a format set that the golden model runs but the RTL cannot
+    build: a velocity finer than the positions it is added to, a barrier longer than the rsqrt unit beside
+    it, an operand wider than a DSP block's. Here, so that the command line and the API can catch it without
+    importing Amaranth; the command line says it in one line, naming the format set."""
+
+
 #: What a format set's ``name`` may hold: it names directories (``synth-ecp5-NAME``) and goes into the
 #: exported Verilog, C header and reports, where a newline, a quote, ``*/`` or a ``/`` would break out of a
 #: comment or a directory.  The study's labels (``position=12``, ``base:default``, ``opt-03``) and the

@@ -310,3 +310,18 @@ def test_the_api_raises_only_its_documented_errors_on_paths_and_options(ear):
         springflat.flatten(V, F, init="ARAP")
     with pytest.raises(TypeError, match="name must be a string"):
         springflat.flatten(V, F, name=None)
+    with pytest.raises(springflat.OutputError, match="paper must be one of a4, letter, fit, got ''"):
+        springflat.write_pattern("p.pdf", springflat.flatten(V, F, max_iter=1), paper="")
+
+
+def test_a_format_set_the_rtl_cannot_build_is_a_parameter_error(ear, tmp_path):
+    import json
+
+    from golden_model.fixed import FormatSet
+
+    V, F = ear
+    formats = FormatSet.preset("default").to_dict()
+    formats["formats"]["delta"] = "s3.23"  # finer than position's 22 fraction bits: the force pass refuses it
+    (tmp_path / "f.json").write_text(json.dumps(formats))
+    with pytest.raises(ParameterError, match="delta s3.23 cannot have more fraction bits than position"):
+        springflat.flatten(V, F, engine="rtl", formats=str(tmp_path / "f.json"), max_iter=1)
