@@ -376,18 +376,20 @@ def all_or_nothing() -> Iterator[None]:
 
 
 def check_output_directory(out: Path, what: str = "--out", files: tuple[str, ...] = (),
-                           inputs: list[tuple[str, Path | None]] = ()) -> None:
+                           inputs: list[tuple[str, Path | None]] = (), labels: dict[str, str] | None = None) -> None:
     """Fail early on an output directory that cannot work: it must be a directory if it exists (a link to
     one counts), its parent must exist, and it (if it exists) or its parent must take a new directory.
     ``files``: names the command may write into it, refused now (not after the work, as
-    :func:`atomic_directory` would) where one is anything but a regular file or one of ``inputs``."""
+    :func:`atomic_directory` would) where one is anything but a regular file or one of ``inputs``;
+    ``labels``: what a message calls one of them (``output`` by default)."""
     out = Path(out)
+    labels = labels or {}
     try:
         target = output_target(out)
-        check_distinct([("output", out / name) for name in files], list(inputs))
+        check_distinct([(labels.get(name, "output"), out / name) for name in files], list(inputs))
         for name in files:
             if os.path.lexists(target / name):
-                _refuse_special(target / name, out / name, "output")
+                _refuse_special(target / name, out / name, labels.get(name, "output"))
         if target.exists() and not target.is_dir():
             st = os.stat(target)
             raise OutputError(f"{what} '{out}' exists and is a {file_kind(st.st_mode)}, not a directory")

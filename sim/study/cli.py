@@ -126,7 +126,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     classes_swept = any(knob in SIGNAL_CLASSES for knob in knobs)
     if args.bits is not None and not classes_swept:
         raise ParameterError(f"--bits sets the fraction bits swept for each signal class; --sweep {args.sweep} "
-                             "sweeps none: add frac, or a class, to --sweep")
+                             "sweeps no signal class: add frac, or a class, to --sweep")
     target = AccuracyTarget(args.target)
     if args.max_iter is not None and args.max_iter < 1:
         raise ParameterError(f"--max-iter must be >= 1, got {args.max_iter}")
@@ -135,7 +135,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     out = Path(args.out)
     inputs = [("--base", None if FormatSet.names_preset(args.base) else Path(args.base)),
               *(("a mesh", Path(m)) for m in args.meshes or ())]
-    check_output_directory(out, files=REPORT_FILES, inputs=inputs)  # before the study: the report is its end
+    check_output_directory(out, files=REPORT_FILES, inputs=inputs,  # before the study: the report is its end
+                           labels={"chosen.json": "output (written when a format set meets the target)"})
     cases = build_cases(args.meshes or list(STUDY_MESHES), _BOTH[args.init], _STEPS[args.step], args.max_iter)
 
     update, close, totals = _progress_bars(not args.quiet and sys.stderr.isatty())  # bars on a terminal only

@@ -248,8 +248,8 @@ def test_parser_defaults():
     (["--sweep", "nonsense"], "--sweep"),
     (["--sweep", "none,frac"], "--sweep none,frac: 'none' sweeps nothing: give it alone, or drop it"),
     (["--sweep", "none", "--bits", "8:12"], "--bits sets the fraction bits swept for each signal class; --sweep "
-                                            "none sweeps none: add frac, or a class, to --sweep"),
-    (["--sweep", "lut_interpolate,rounding", "--bits", "8:12"], "--sweep lut_interpolate,rounding sweeps none"),
+                                            "none sweeps no signal class: add frac, or a class, to --sweep"),
+    (["--sweep", "lut_interpolate,rounding", "--bits", "8:12"], "--sweep lut_interpolate,rounding sweeps no signal class"),
     (["no-such-mesh"], "unknown mesh"),
     (["--base", "no/such/formats.json"], "not found"),
     (["--target", "0"], "--target"),
@@ -274,7 +274,8 @@ def test_a_report_that_would_replace_its_own_base_is_refused_before_the_study(tm
     Path("study-report").mkdir()
     FormatSet.preset("default").save("study-report/chosen.json")
     before = Path("study-report/chosen.json").read_bytes()
-    with pytest.raises(OutputError, match=r"^output 'study-report/chosen.json' is the same file as --base "
+    with pytest.raises(OutputError, match=r"^output \(written when a format set meets the target\) "
+                                          r"'study-report/chosen.json' is the same file as --base "
                                           r"'study-report/chosen.json'$"):
         cmd_study(_parse(["surf1", "--base", "study-report/chosen.json", "--sweep", "none", "--no-optimise",
                           "--quiet"]))
