@@ -76,7 +76,9 @@ def _format_of(field_name: str, port: str) -> str | None:
            "first": None, "last": None,
            # guard_certificate's triangle: corners, their proposed moves, the host's area
            "a": "position", "b": "position", "c": "position", "move_a": "velocity", "move_b": "velocity",
-           "move_c": "velocity", "area": "face_area"}
+           "move_c": "velocity", "area": "face_area",
+           # the fold barrier's triangle of an entry: its third corner, κX* and the gain
+           "second": "position", "threshold": "area", "gain": "barrier_gain", "power": "power"}
     for part in reversed(leaf):
         if part in key:
             return key[part]
@@ -85,6 +87,12 @@ def _format_of(field_name: str, port: str) -> str | None:
     if port in ("i",):
         return "length_sq"
     return None
+
+
+def _holds(fmt, field: dict) -> bool:
+    """Whether a field of this width and signedness can hold ``fmt``: a name that guessed the wrong class
+    gives no format rather than a wrong one."""
+    return fmt.width == field["width"] and fmt.signed == field["signed"]
 
 
 def describe(component, fs: FormatSet, name: str) -> dict:
@@ -102,15 +110,16 @@ def describe(component, fs: FormatSet, name: str) -> dict:
             fields = list(_fields(shape, fs))
             for f in fields:
                 cls = _format_of(f["field"], path[0])
-                if cls:
+                if cls and _holds(getattr(fs, cls), f):
                     f["format"] = f"{cls} {getattr(fs, cls)}"
             payloads[port] = fields
         else:
             cls = {"dt": "dt", "half_dt_sq": "half_dt_sq", "half_spring": "spring", "damping": "damping"}.get(port)
             if cls is None and port == "i__payload":
                 cls = "length_sq"
-            if cls:
-                payloads[port] = [{"field": "(whole port)", "lsb": 0, "width": width, "format": f"{cls} {getattr(fs, cls)}"}]
+            field = {"field": "(whole port)", "lsb": 0, "width": width, "signed": Shape.cast(shape).signed}
+            if cls and _holds(getattr(fs, cls), field):
+                payloads[port] = [{**field, "format": f"{cls} {getattr(fs, cls)}"}]
     info = {"module": name, "ports": ports, "payload_layouts": payloads, "latency": component.latency,
             "initiation_interval": getattr(component, "interval", 1)}
     if hasattr(component, "step_latency"):
@@ -152,7 +161,7 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "entries.ready (a register) falls before more results are owed (accepted, not yet "
                      "taken from the output) than the result FIFO holds (`credits` below: at most that many are "
                      "ever owed); with results.ready held high it never falls.",
-                     "Throughput = Fmax x II = Fmax neighbour entries per second.",
+                     "Throughput = Fmax / II: one neighbour entry (node_update, springflat_core) or item per II clocks.",
                      ("Multipliers: ECP5 MULT18X18D instances with their input and output registers in use "
                       "(REG_INPUTA/B_CLK, REG_OUTPUT_CLK = CLK0); the generic Verilog of `springflat verilog` "
                       "has the same registers in the fabric and the same latency."

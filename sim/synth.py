@@ -18,7 +18,7 @@ bus at a given :class:`~golden_model.engine_spec.image.EngineCapacity`) the flow
 
 Every number in the result comes from a tool report; nothing is estimated. The bundle in
 ``out_dir`` holds the Verilog, the ROM ``.hex`` files, ``clock.lpf`` / ``clock.sdc``,
-``interface.md`` (extended with the measured Fmax and throughput = Fmax × II),
+``interface.md`` (extended with the measured Fmax and throughput = Fmax / II),
 ``synth_report.json`` / ``synth_report.md``, every tool log and report, the Yosys scripts, and
 ``reproduce.sh`` with the exact command. With the engine, the bundle also holds
 ``springflat_engine.v``, its register map (``register_map.md``, ``register_map.json``,
@@ -467,14 +467,14 @@ def _write_bundle(out: Path, report: dict, interface: dict) -> None:
     if report.get("command"):
         (out / "reproduce.sh").write_text("#!/bin/sh\n# Reproduces this bundle (run from the springflat checkout, "
                                           "venv active).\nset -e\n" + report["command"] + "\n")
-    # interface.md gets the measured clock and throughput (Fmax x II).
+    # interface.md gets the measured clock and throughput (Fmax / II).
     lines = ["", f"## Measured on {report['device']} ({report['target']})", "",
              "| component | latency | II | Fmax (MHz) | throughput (items/s) |", "|---|---|---|---|---|"]
     for name, c in report["components"].items():
         fmax = f"{c['fmax_mhz']:.2f}" if c["fmax_mhz"] else "not placed (" + "; ".join(c["does_not_fit"]) + ")"
         thr = f"{c['throughput_per_s']:.3g}" if c.get("throughput_per_s") else "—"
         lines.append(f"| `{name}` | {_or_dash(c['latency'])} | {_or_dash(c['ii'])} | {fmax} | {thr} |")
-    lines += ["", "Throughput = Fmax × II items per second (node_update / springflat_core: neighbour entries "
+    lines += ["", "Throughput = Fmax / II items per second (node_update / springflat_core: neighbour entries "
               "per second). Fmax is nextpnr's after routing, with the component inside the serial I/O wrapper "
               "(`<module>_pnr.v`); see `synth_report.md`.", ""]
     with open(out / "interface.md", "a") as f:

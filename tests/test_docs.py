@@ -246,3 +246,12 @@ def test_heading_anchors_follow_github():
 @pytest.mark.parametrize("path", [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))], ids=lambda p: p.name)
 def test_relative_links_reach_a_file_and_its_heading(path):
     assert broken_links(path) == []
+
+
+def test_the_board_self_test_expects_the_register_maps_id_and_version():
+    """docs/board.md's bring-up reads ID and VERSION: the values it tells a bench to expect are the map's."""
+    from golden_model.engine_spec.register_map import MAGIC, VERSION
+
+    expected = re.search(r"# expect (0x[0-9a-f]+) (0x[0-9a-f]+)", (DOCS / "board.md").read_text())
+    assert expected, "docs/board.md no longer says what the self-test reads"
+    assert (int(expected[1], 16), int(expected[2], 16)) == (MAGIC, VERSION[0] << 16 | VERSION[1])

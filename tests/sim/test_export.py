@@ -117,3 +117,30 @@ def test_bad_capacity_is_one_line_and_writes_nothing(tmp_path, capacity, message
     assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("springflat: error:"), proc.stderr
     assert message in lines[0]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("preset", ["default", "narrow"])
+def test_every_payload_field_is_given_the_format_it_holds(preset):
+    """interface.md's formats: each multi-bit field has one, and it is as wide and as signed as the field
+    (the fold barrier's fields were all given length_sq's, the core's none). The guard's 3-bit level and
+    stuck counts are integers."""
+    import warnings
+
+    from golden_model.fixed import Format
+    from sim.export import COMPONENTS, describe
+
+    fs = FormatSet.preset(preset)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (described, never elaborated)
+        described = [describe(spec.build(fs), fs, spec.module) for spec in COMPONENTS]
+    for info in described:
+        for port, fields in info["payload_layouts"].items():
+            for f in fields:
+                where = (info["module"], port, f["field"])
+                if f["width"] == 1 or f["field"] in ("level", "stuck"):
+                    continue
+                assert "format" in f, where
+                fmt = Format.parse(f["format"].split()[1])
+                assert (fmt.width, fmt.signed) == (f["width"], f["signed"]), where
+    core = {f["field"]: f["format"] for f in described[3]["payload_layouts"]["entries__payload"] if "format" in f}
+    assert core["barrier.threshold"] == f"area {fs.area}" and core["barrier.gain"] == f"barrier_gain {fs.barrier_gain}"
