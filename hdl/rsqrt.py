@@ -190,8 +190,8 @@ class RsqrtUnit(wiring.Component):
         stage("rom")
         index = mant[cfg.seed_index_shift:]
         assert cfg.seed_index_offset + cfg.seed_table_size <= 1 << len(index)
-        seed = registered_rom(m, [0] * cfg.seed_index_offset + cfg.seed_table().tolist(), cfg.seed_frac_bits,
-                              index, name="seed_rom", enable=advance, platform=platform)
+        seed = registered_rom(m, seed_rom_words(cfg), cfg.seed_frac_bits, index, name="seed_rom", enable=advance,
+                              platform=platform)
         mant = reg(mant, mant.shape(), "rom_mant")
         dn_r = reg(dn_r, dn_r.shape(), "rom_dn")
         sat_r = reg(sat_r, 1, "rom_sat")
@@ -277,3 +277,9 @@ class RsqrtUnit(wiring.Component):
             ]
         assert pipe.stages + 1 == self.latency, (pipe.stages + 1, self.latency)
         return m
+
+
+def seed_rom_words(cfg: RsqrtConfig) -> list[int]:
+    """The rsqrt unit's seed ROM, word by word: indexed by the mantissa's top bits themselves (no
+    subtraction on the address path), so the rows below ``cfg.seed_index_offset`` are never read and hold 0."""
+    return [0] * cfg.seed_index_offset + [int(v) for v in cfg.seed_table()]

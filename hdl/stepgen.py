@@ -141,35 +141,7 @@ class StepGenerator(wiring.Component):
 
     @property
     def _error_max(self):
-        """Largest error after the clamp to 1.0 (``fs.error.raw_max`` for ``u0.F``)."""
-        return min(self._fs.error.raw_max, 1 << self._fs.error.frac_bits)
-
-    def _rom_rows(self):
-        """``(layout, rows)`` of the exp ROM, derived from :func:`~golden_model.fixed.exp_table`.
-
-        Only the reachable addresses are stored (``0 .. k_max``). Interpolating, row ``k`` holds
-        ``base = T[k]`` and ``slope = T[min(k+1, 2**n)] - T[k]`` (>= 0: the table is
-        non-decreasing), the slope field as wide as the largest difference needs.
-        """
-        fs = self._fs
-        table = [int(v) for v in exp_table(fs.lut_index_bits, fs.lut_entry)]
-        r = fs.lut_frac_bits
-        if self._interpolating:
-            k_max = self._error_max >> r
-            last = len(table) - 1
-            slopes = [table[min(k + 1, last)] - table[k] for k in range(k_max + 1)]
-            slope_bits = lut_slope_bits(fs.lut_index_bits, fs.lut_entry)  # as FormatSet.products() has it
-            assert min(slopes) >= 0 and max(slopes) < 1 << slope_bits
-            layout = data.StructLayout({
-                "base": unsigned(fs.lut_entry.width),
-                "slope": unsigned(slope_bits),
-            })
-            rows = [{"base": table[k], "slope": slopes[k]} for k in range(k_max + 1)]
-        else:
-            k_max = int(gm_shift_round(self._error_max, r, fs.rounding)) if r else self._error_max
-            layout = data.StructLayout({"base": unsigned(fs.lut_entry.width)})
-            rows = [{"base": table[k]} for k in range(k_max + 1)]
-        return layout, rows
+        return error_max(self._fs)
 
     def elaborate(self, platform):
         m = Module()
@@ -206,7 +178,7 @@ class StepGenerator(wiring.Component):
         # address registered in the DP16KD, its output register on), because the LUT ROM's
         # multiplexer tree, six LUT levels, was among the engine's longest paths. Same rows, same
         # two stages, so the same function and latency.
-        layout, rows = self._rom_rows()
+        layout, rows = exp_rom_rows(fs)
         block_ram = dsp_target(platform) == "ecp5"
         if not block_ram:
             m.submodules.exp_rom = exp_rom = Memory(shape=layout, depth=len(rows), init=rows,
@@ -315,6 +287,38 @@ class StepGenerator(wiring.Component):
                 m.d.sync += self.o.payload.saturations.eq(events["count"])
         assert pipe.stages + 1 == self.latency, (pipe.stages + 1, self.latency)
         return m
+
+
+def error_max(fs: FormatSet) -> int:
+    """Largest error after the clamp to 1.0 (``fs.error.raw_max`` for ``u0.F``), raw."""
+    return min(fs.error.raw_max, 1 << fs.error.frac_bits)
+
+
+def exp_rom_rows(fs: FormatSet) -> tuple[data.StructLayout, list[dict]]:
+    """``(layout, rows)`` of the step generator's exp ROM, derived from :func:`~golden_model.fixed.exp_table`.
+
+    Only the reachable addresses are stored (``0 .. k_max``). Interpolating, row ``k`` holds
+    ``base = T[k]`` and ``slope = T[min(k+1, 2**n)] - T[k]`` (>= 0: the table is
+    non-decreasing), the slope field as wide as the largest difference needs.
+    """
+    table = [int(v) for v in exp_table(fs.lut_index_bits, fs.lut_entry)]
+    r = fs.lut_frac_bits
+    if fs.interpolates:
+        k_max = error_max(fs) >> r
+        last = len(table) - 1
+        slopes = [table[min(k + 1, last)] - table[k] for k in range(k_max + 1)]
+        slope_bits = lut_slope_bits(fs.lut_index_bits, fs.lut_entry)  # as FormatSet.products() has it
+        assert min(slopes) >= 0 and max(slopes) < 1 << slope_bits
+        layout = data.StructLayout({
+            "base": unsigned(fs.lut_entry.width),
+            "slope": unsigned(slope_bits),
+        })
+        rows = [{"base": table[k], "slope": slopes[k]} for k in range(k_max + 1)]
+    else:
+        k_max = int(gm_shift_round(error_max(fs), r, fs.rounding)) if r else error_max(fs)
+        layout = data.StructLayout({"base": unsigned(fs.lut_entry.width)})
+        rows = [{"base": table[k]} for k in range(k_max + 1)]
+    return layout, rows
 
 
 def stepgen_idle_signal(m: Module, stepgen: StepGenerator):

@@ -80,7 +80,7 @@ class BoardSimTop(wiring.Component):
 
 def board_sources(fs: FormatSet, capacity: EngineCapacity) -> Path:
     """Export ``springflat_board_sim.v`` once per format set, capacity and RTL; return its directory."""
-    from amaranth.back import verilog
+    from .export import verilog_of
 
     here = Path(__file__).resolve()
     key = _formats_key(fs) + "-" + __import__("hashlib").sha256(here.read_bytes()).hexdigest()[:8]
@@ -90,8 +90,7 @@ def board_sources(fs: FormatSet, capacity: EngineCapacity) -> Path:
     target = directory / f"{BOARD_SIM_MODULE}.v"
     with build_lock(directory):
         if not target.exists():
-            os.environ["AMARANTH_USE_YOSYS"] = "builtin"
-            text = verilog.convert(BoardSimTop(fs, capacity), name=BOARD_SIM_MODULE)
+            text = verilog_of(BoardSimTop(fs, capacity), BOARD_SIM_MODULE)
             partial = target.with_suffix(".v.partial")
             partial.write_text(text)
             partial.rename(target)

@@ -5,8 +5,8 @@ Writes into ``--out DIR``:
 * ``rsqrt_unit.v``, ``step_generator.v``, ``node_update.v`` and the top
   ``springflat_core.v`` (Amaranth's builtin Yosys, ``AMARANTH_USE_YOSYS=builtin``
   for reproducible output);
-* ``rsqrt_seed.hex`` and ``exp_table.hex``: the ROM contents (also inlined in
-  the Verilog), one hex word per line, from the golden model's table functions;
+* ``rsqrt_seed.hex`` and ``exp_table.hex``: the two ROMs as the Verilog holds them (also inlined
+  there), one hex word per line from address 0 (:func:`write_rom_images`);
 * ``interface.json`` and ``interface.md``: ports (name, direction, width),
   the bit layout of every stream payload with each field's format, latency,
   initiation interval, the stream protocol, and the format set.
@@ -22,7 +22,7 @@ from pathlib import Path
 from amaranth.hdl import Shape
 from amaranth.lib import data, wiring
 
-from golden_model.fixed import FormatSet, exp_table
+from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from hdl.dsp import dsp_target
 
@@ -89,6 +89,25 @@ def _format_of(field_name: str, port: str) -> str | None:
     return None
 
 
+def write_rom_images(fs: FormatSet, out: Path) -> None:
+    """``rsqrt_seed.hex`` and ``exp_table.hex``: the rsqrt unit's ``seed_rom`` and the step generator's
+    ``exp_rom`` word by word, as the Verilog's ``initial`` blocks fill them (``$readmemh`` reads them, its
+    ``//`` first line included), each line one word from address 0."""
+    from hdl.rsqrt import seed_rom_words
+    from hdl.stepgen import exp_rom_rows
+
+    cfg = fs.rsqrt_config()
+    seed = seed_rom_words(cfg)
+    (out / "rsqrt_seed.hex").write_text(
+        f"// rsqrt_unit seed_rom: {len(seed)} words of {cfg.seed_frac_bits} bits, u0.{cfg.seed_frac_bits} seeds; "
+        f"rows below {cfg.seed_index_offset} are never read and hold 0\n" + "".join(f"{v:x}\n" for v in seed))
+    layout, rows = exp_rom_rows(fs)
+    fields = ", ".join(f"{name} [{f.offset + f.shape.width - 1}:{f.offset}]" for name, f in layout)
+    (out / "exp_table.hex").write_text(
+        f"// step_generator exp_rom: {len(rows)} words of {layout.size} bits: {fields}; base: the exp table's "
+        f"entry (lut_entry {fs.lut_entry}), slope: the next entry minus it\n" + "".join(f"{layout.const(row).as_value().value:x}\n" for row in rows))
+
+
 def _holds(fmt, field: dict) -> bool:
     """Whether a field of this width and signedness can hold ``fmt``: a name that guessed the wrong class
     gives no format rather than a wrong one."""
@@ -136,21 +155,15 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
     with their own registers instead of generic registered multipliers (same function, same
     latency).
     """
-    from amaranth.back import verilog
-
-    os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     out.mkdir(parents=True, exist_ok=True)
     components = {}
     for spec in COMPONENTS:
         component = spec.build(fs)
-        text = verilog.convert(component, name=spec.module, platform=platform)
-        (out / f"{spec.module}.v").write_text(text)
+        (out / f"{spec.module}.v").write_text(verilog_of(component, spec.module, platform))
         info = describe(component, fs, spec.module)
         info["summary"] = spec.summary
         components[spec.module] = info
-    cfg = fs.rsqrt_config()
-    (out / "rsqrt_seed.hex").write_text("".join(f"{int(v):x}\n" for v in cfg.seed_table()))
-    (out / "exp_table.hex").write_text("".join(f"{int(v):x}\n" for v in exp_table(fs.lut_index_bits, fs.lut_entry)))
+    write_rom_images(fs, out)
     interface = {"format_set": fs.to_dict(), "stream_protocol": STREAM_PROTOCOL, "components": components,
                  "notes": [
                      "A node's header (position, velocity, 1/m) rides on its first neighbour entry (first = 1); "
@@ -198,22 +211,29 @@ def interface_markdown(interface: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def verilog_of(elaboratable, name: str, platform=None) -> str:
+    """The Verilog of ``elaboratable`` as every bundle ships it: through Amaranth's builtin Yosys (the same
+    text on every machine) and without ``src`` attributes, which held this checkout's absolute paths (two
+    clones wrote different Verilog, and an FPGA engineer's copy named the build machine's files)."""
+    from amaranth.back import verilog
+
+    os.environ["AMARANTH_USE_YOSYS"] = "builtin"
+    return verilog.convert(elaboratable, name=name, platform=platform, emit_src=False)
+
+
 def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_options: dict | None = None) -> dict:
     """Write the engine's Verilog (``springflat_engine.v``, top ``springflat_engine``) and its register
     map (``register_map.md``, ``register_map.json``, ``springflat_regs.h``: :mod:`sim.register_map_export`);
     return a short description (module, capacity, bus, files). ``engine_options``: keyword arguments of
     :class:`~hdl.engine.SpringflatEngine` for a trial build (``None``: its defaults for the capacity)."""
-    from amaranth.back import verilog
-
     from golden_model.engine_spec.register_map import RegisterMap
     from hdl.engine import SpringflatEngine
 
     from .register_map_export import write_exports
 
-    os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     out.mkdir(parents=True, exist_ok=True)
     engine = SpringflatEngine(fs, capacity, **(engine_options or {}))
-    (out / f"{ENGINE_MODULE}.v").write_text(verilog.convert(engine, name=ENGINE_MODULE, platform=platform))
+    (out / f"{ENGINE_MODULE}.v").write_text(verilog_of(engine, ENGINE_MODULE, platform))
     files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)]
     return {"module": ENGINE_MODULE, "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                                                           "triangles": capacity.triangles, "guard": capacity.guard},

@@ -308,15 +308,13 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     ``progress`` is called with one-line messages (the tool step being run); ``command`` is the
     command line recorded in ``reproduce.sh``.
     """
-    from amaranth.back import verilog
-
     from hdl.dsp import DspPlatform
     from hdl.io_wrapper import SerialWrapper
 
     from golden_model.engine_spec.image import DEFAULT_CAPACITY
     from hdl.engine import SpringflatEngine
 
-    from .export import COMPONENTS, export_engine_bundle, export_verilog
+    from .export import COMPONENTS, export_engine_bundle, export_verilog, verilog_of
 
     if target not in TARGETS:
         raise SynthError(f"unknown target {target!r} (choose from {', '.join(TARGETS)})")
@@ -366,7 +364,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             wrapper = SerialWrapper(specs[name].build(fs))
             entry = {"latency": info["latency"], "ii": info["initiation_interval"], "port_bits": _port_bits(info)}
         entry["wrapper"] = {"in_bits": wrapper.in_width, "out_bits": wrapper.out_width}
-        (out / f"{name}_pnr.v").write_text(verilog.convert(wrapper, name=f"{name}_pnr", platform=platform))
+        (out / f"{name}_pnr.v").write_text(verilog_of(wrapper, f"{name}_pnr", platform))
 
         # 1. Yosys on the bare module: the component's own resources.
         script = f"read_verilog {name}.v\n{tgt.yosys_synth.format(top=name)}\ntee -q -o {name}.{target}.stat.json stat -json\n"

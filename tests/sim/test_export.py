@@ -47,7 +47,13 @@ def test_files_and_interface_match_the_verilog(exported):
     width = {p["name"]: p["width"] for p in core["ports"]}["entries__payload"]
     assert sum(f["width"] for f in fields.values()) == width  # the fields tile the port
     assert fields["first"]["lsb"] == 0 and fields["node.position.x"]["format"] == "position s10.14"
-    assert (exported / "rsqrt_seed.hex").read_text().count("\n") == FormatSet.preset("narrow").rsqrt_config().seed_table_size
+    for module, rom, image in [("rsqrt_unit", "seed_rom", "rsqrt_seed.hex"), ("step_generator", "exp_rom",
+                                                                            "exp_table.hex")]:
+        inlined = {int(a): int(v, 16) for a, v in re.findall(rf"^\s*{rom}\[(\d+)\] = \d+'h([0-9a-f]+);",
+                                                          (exported / f"{module}.v").read_text(), re.M)}
+        words = [int(line, 16) for line in (exported / image).read_text().splitlines() if not line.startswith("//")]
+        assert words == [inlined[a] for a in range(len(inlined))], image  # the ROM as $readmemh would fill it
+    assert "src" not in (exported / "springflat_core.v").read_text()  # no paths of this checkout
     assert "| `entries__payload` | input |" in (exported / "interface.md").read_text()
 
 
