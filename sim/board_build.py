@@ -184,8 +184,10 @@ def _write(out: Path, report: dict) -> None:
             lines.append(f"| `{p['port']}` | {p['site']} | {p.get('IO_TYPE', '')} | {rest} | {p['role']} |")
         (out / "pins.md").write_text("\n".join(lines) + "\n")
     if report.get("command"):
-        (out / "reproduce.sh").write_text("#!/bin/sh\n# Reproduces this build (run from the springflat checkout, "
-                                          "venv active).\nset -e\n" + report["command"] + "\n")
+        from .synth import write_reproduce_script
+
+        write_reproduce_script(out, report["command"], [(tool.upper(), text.split(" ", 1)[1])
+                                                       for tool, text in report.get("steps", {}).items()])
 
 
 def board_markdown(report: dict) -> str:
@@ -205,7 +207,8 @@ def board_markdown(report: dict) -> str:
     lines += [f"| {k} | {v['used']} | {v['available']} |" for k, v in report["utilisation"].items()]
     lines += ["", "Tool time: " + ", ".join(f"{k} {v:.0f} s" for k, v in report["seconds"].items()) + "."]
     if report.get("command"):
-        lines += ["", "Reproduce:", "", "    " + report["command"]]
+        lines += ["", "Reproduce: `./reproduce.sh` runs the tools again on this bundle's files (no springflat needed); "
+                  "springflat made it with", "", "    " + report["command"]]
     return "\n".join(lines) + "\n"
 
 

@@ -58,6 +58,7 @@ from .run_options import (
     resolve_mesh,
     strict_json,
 )
+from .version import installed_version
 
 
 class _Parser(argparse.ArgumentParser):
@@ -235,16 +236,6 @@ def add_engine_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--formats", default=None, metavar="PRESET|FILE",
                         help=f"fixed-point format set: a preset ({', '.join(FormatSet.presets())}; "
                              "docs/fixed-point.md) or a JSON file (default: default)")
-
-
-def installed_version() -> str:
-    """The installed distribution's version (``pyproject.toml``), or a word saying it is not installed."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("springflat")
-    except PackageNotFoundError:
-        return "(not installed: run 'make test' or 'make demo')"
 
 
 def build_parser() -> argparse.ArgumentParser:

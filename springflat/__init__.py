@@ -16,7 +16,7 @@ line's option handling and the writers) and nothing in the project imports it.
 
 from __future__ import annotations
 
-from sim.cli import installed_version
+from sim.version import installed_version
 
 from golden_model.mesh import MeshError
 from golden_model.params import ParameterError

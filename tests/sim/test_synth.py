@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 
 import numpy as np
@@ -83,7 +84,12 @@ def test_ecp5_step_generator_narrow(tmp_path, capsys):
                  "interface.md", "interface.json", "synth_report.md", "synth_report.json", "reproduce.sh"):
         assert (out_dir / name).is_file(), name
     assert 'FREQUENCY PORT "clk" 100 MHZ;' in (out_dir / "clock.lpf").read_text()
-    assert "springflat synth --target ecp5 --formats narrow" in (out_dir / "reproduce.sh").read_text()
+    reproduce = (out_dir / "reproduce.sh").read_text()
+    assert "#   springflat synth --target ecp5 --formats narrow" in reproduce and os.access(out_dir / "reproduce.sh", os.X_OK)
+    assert reproduce.splitlines()[-3:] == ['"$YOSYS" -q -s step_generator.ecp5.ys',  # the tools on the bundle alone
+                                           '"$YOSYS" -q -s step_generator_pnr.ecp5.ys',
+                                           '"$NEXTPNR" ' + comp["nextpnr_command"].split(" ", 1)[1]]
+    assert "Executing SYNTH_LATTICE pass" in (out_dir / "step_generator.ecp5.yosys.log").read_text()  # its whole log
     assert "Fmax" in (out_dir / "interface.md").read_text()
     assert "[ecp5 step_generator] nextpnr" in err  # progress names each tool step
 
