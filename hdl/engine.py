@@ -131,8 +131,7 @@ class SpringflatEngine(wiring.Component):
         self.pin_registers = self.registered_select or bool(pin_registers)
         self.register_map = RegisterMap.build(fs, capacity)
         self.layouts = memory_layouts(fs, capacity)
-        end = max(w.base + w.size for w in self.register_map.windows)
-        self.addr_width = (end - 1).bit_length()
+        self.addr_width = self.register_map.address_bits
         super().__init__({
             "bus": In(wishbone.Signature(addr_width=self.addr_width)),
             "irq": Out(1),

@@ -114,9 +114,22 @@ def _holds(fmt, field: dict) -> bool:
     return fmt.width == field["width"] and fmt.signed == field["signed"]
 
 
+def verilog_ports(component) -> list[dict]:
+    """``{name, direction, width}`` of each port of ``component``'s Verilog module (``clk``, ``rst``, then its
+    signature's members as Amaranth names them: ``bus__adr``)."""
+    ports = [{"name": "clk", "direction": "input", "width": 1}, {"name": "rst", "direction": "input", "width": 1}]
+    for path, member in component.signature.members.flatten():
+        if member.is_port:
+            shape = member.shape
+            ports.append({"name": "__".join(str(p) for p in path),
+                          "direction": "input" if member.flow == wiring.In else "output",
+                          "width": shape.size if isinstance(shape, data.Layout) else Shape.cast(shape).width})
+    return ports
+
+
 def describe(component, fs: FormatSet, name: str) -> dict:
     """Ports, payload layouts, latency and formats of one component."""
-    ports = [{"name": "clk", "direction": "input", "width": 1}, {"name": "rst", "direction": "input", "width": 1}]
+    ports = verilog_ports(component)
     payloads = {}
     for path, member in component.signature.members.flatten():
         if not member.is_port:
@@ -124,7 +137,6 @@ def describe(component, fs: FormatSet, name: str) -> dict:
         port = "__".join(str(p) for p in path)
         shape = member.shape
         width = shape.size if isinstance(shape, data.Layout) else Shape.cast(shape).width
-        ports.append({"name": port, "direction": "input" if member.flow == wiring.In else "output", "width": width})
         if isinstance(shape, data.Layout):
             fields = list(_fields(shape, fs))
             for f in fields:
@@ -235,6 +247,14 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
     engine = SpringflatEngine(fs, capacity, **(engine_options or {}))
     (out / f"{ENGINE_MODULE}.v").write_text(verilog_of(engine, ENGINE_MODULE, platform))
     files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)]
+    with open(out / "register_map.md", "a", encoding="utf-8") as f:  # the module the map is the bus of
+        f.write("\n".join(["", f"## Ports of `{ENGINE_MODULE}`", "",
+                            "`rst` is synchronous and active high (hold it over a clock edge); `irq` is "
+                            "`irq_pending & irq_enable` (STATUS, CONTROL above): high from a run's end until "
+                            "`irq_pending` is cleared. The bus's timing: docs/engine.md, 'The bus'.", "",
+                            "| port | direction | bits |", "|---|---|---|",
+                            *(f"| `{p['name']}` | {p['direction']} | {p['width']} |" for p in verilog_ports(engine)),
+                            ""]))
     return {"module": ENGINE_MODULE, "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                                                           "triangles": capacity.triangles, "guard": capacity.guard},
             "bus": "Wishbone B4 classic, 32-bit data, word addresses", "addr_width": engine.addr_width,

@@ -68,7 +68,8 @@ def markdown(m: RegisterMap, level: int = 1) -> str:
         f"Generated from `golden_model.engine_spec.register_map.RegisterMap` for format set `{m.formats}` "
         f"(FORMAT_HASH `0x{m.format_hash:08X}`) and capacity {m.capacity.vertices} vertices, "
         f"{m.capacity.entries} entries, {m.capacity.triangles} triangles. Do not edit.", "",
-        f"Bus: {bus['protocol']}, {bus['data_bits']}-bit data, `adr` a {bus['address']} address (byte address >> 2), "
+        f"Bus: {bus['protocol']}, {bus['data_bits']}-bit data, `adr` a {bus['address']} address of "
+        f"{bus['address_bits']} bits (byte address >> 2), "
         f"`sel` {bus['sel']}. `err` answers: {bus['err']}.", "",
         "Access: " + "; ".join(f"`{k}` {v}" for k, v in ACCESS.items()) + ".", "",
         "Values wider than 32 bits span consecutive registers, least significant word first; signed values are "
@@ -114,7 +115,8 @@ def c_header(m: RegisterMap) -> str:
              "/* Generated from golden_model.engine_spec.register_map.RegisterMap; do not edit. */",
              "/* Addresses are 32-bit-word addresses (Wishbone adr): byte address = ADDR * ADDR_UNIT_BYTES. */",
              f"#ifndef {guard}", f"#define {guard}", "",
-             _define(_c_name("ADDR_UNIT_BYTES"), 4), _define(_c_name("MAGIC"), MAGIC),
+             _define(_c_name("ADDR_UNIT_BYTES"), 4), _define(_c_name("ADDR_BITS"), m.address_bits),
+             _define(_c_name("MAGIC"), MAGIC),
              _define(_c_name("VERSION_MAJOR"), VERSION[0]), _define(_c_name("VERSION_MINOR"), VERSION[1]),
              _define(_c_name("FORMAT_HASH"), m.format_hash), ""]
     for r in m.registers:

@@ -313,6 +313,11 @@ class RegisterMap:
         if r.reset & ~used:
             raise ValueError(f"register map: {r.name}: reset {r.reset:#x} sets bits outside its fields")
 
+    @property
+    def address_bits(self) -> int:
+        """The width of the bus's word address ``adr``: enough for the last memory window's last word."""
+        return (max(w.base + w.size for w in self.windows) - 1).bit_length()
+
     # ------------------------------------------------------------------ lookups
     def register(self, name: str) -> Register:
         for r in self.registers:
@@ -378,6 +383,7 @@ class RegisterMap:
     def to_dict(self) -> dict:
         return {
             "bus": {"protocol": "Wishbone B4 classic", "data_bits": BUS_WORD_BITS, "address": "32-bit word",
+                    "address_bits": self.address_bits,
                     "sel": "all ones", "err": "partial write, unmapped address, write to a read-only register, "
                                               "memory access while running"},
             "version": list(VERSION), "magic": MAGIC, "formats": self.formats, "format_hash": self.format_hash,

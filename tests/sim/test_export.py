@@ -69,6 +69,20 @@ def test_bad_formats_and_out(tmp_path):
 
 # ------------------------------------------------------------------ the engine and its register map
 @pytest.mark.slow
+@pytest.mark.slow
+def test_the_register_map_gives_the_engines_ports_as_its_verilog_has_them(exported):
+    """An FPGA engineer wires the module from register_map.md: its port table and the adr width it states
+    are the Verilog's (the width moves with the capacity)."""
+    ports = _verilog_ports((exported / "springflat_engine.v").read_text(), "springflat_engine")
+    text = (exported / "register_map.md").read_text()
+    table = {name: (direction, int(bits)) for name, direction, bits in
+             re.findall(r"^\| `(\w+)` \| (input|output) \| (\d+) \|$", text, re.M)}
+    assert table == ports and "irq" in table
+    assert f"address of {ports['bus__adr'][1]} bits" in text
+    assert re.search(rf"#define SPRINGFLAT_ADDR_BITS +0x{ports['bus__adr'][1]:X}u",
+                     (exported / "springflat_regs.h").read_text())
+
+
 def test_the_engine_ships_with_its_register_map_at_the_default_capacity(exported):
     """Without --capacity the engine is DEFAULT_CAPACITY's; the JSON map is the one the golden model builds."""
     from golden_model.engine_spec.image import DEFAULT_CAPACITY
