@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -187,15 +188,27 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "taken from the output) than the result FIFO holds (`credits` below: at most that many are "
                      "ever owed); with results.ready held high it never falls.",
                      "Throughput = Fmax / II: one neighbour entry (node_update, springflat_core) or item per II clocks.",
+                     "Reset: rst is synchronous and active high; hold it over a rising clock edge. Simulating with "
+                     "Icarus, compile with -g2005: in -g2012 mode Icarus sets `reg ... = value` initialisers "
+                     "without an event, so the time-0 trigger of Yosys's `always @*` blocks (YosysHQ/yosys#2273) "
+                     "never fires and their outputs stay X until an input changes (a `reg rst = 1;` testbench "
+                     "deadlocks node_update). Verilator is not affected.",
                      ("Multipliers: ECP5 MULT18X18D instances with their input and output registers in use "
                       "(REG_INPUTA/B_CLK, REG_OUTPUT_CLK = CLK0); the generic Verilog of `springflat verilog` "
-                      "has the same registers in the fabric and the same latency."
+                      "has the same registers in the fabric and the same latency. ROMs and RAMs: DP16KD block "
+                      "RAMs (and TRELLIS_FF pin registers). To simulate this Verilog, read the vendor's models "
+                      "or those in `sim_models/` (MULT18X18D.v, DP16KD.v, TRELLIS_FF.v: written for the modes "
+                      "used here, any other stops the simulation)."
                       if dsp_target(platform) == "ecp5" else
                       "Multipliers: generic registered multipliers (operands and product registered, "
                       "two clocks), written as 18x18 partial products."),
                  ]}
     (out / "interface.json").write_text(json.dumps(interface, indent=2) + "\n")
     (out / "interface.md").write_text(interface_markdown(interface))
+    if dsp_target(platform) == "ecp5":  # the primitives' simulation models go with the Verilog that needs them
+        (out / "sim_models").mkdir(exist_ok=True)
+        for model in sorted((Path(__file__).parent / "models").glob("*.v")):
+            shutil.copyfile(model, out / "sim_models" / model.name)
     return interface
 
 

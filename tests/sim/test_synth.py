@@ -90,6 +90,7 @@ def test_ecp5_step_generator_narrow(tmp_path, capsys):
                                            '"$YOSYS" -q -s step_generator_pnr.ecp5.ys',
                                            '"$NEXTPNR" ' + comp["nextpnr_command"].split(" ", 1)[1]]
     assert "Executing SYNTH_LATTICE pass" in (out_dir / "step_generator.ecp5.yosys.log").read_text()  # its whole log
+    assert sorted(p.name for p in (out_dir / "sim_models").iterdir()) == ["DP16KD.v", "MULT18X18D.v", "TRELLIS_FF.v"]
     assert "Fmax" in (out_dir / "interface.md").read_text()
     assert "[ecp5 step_generator] nextpnr" in err  # progress names each tool step
 
