@@ -104,7 +104,7 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     platform = _ulx3s_85f()()
     say(f"elaborating the ULX3S-85F top (capacity {capacity.vertices}/{capacity.entries}/{capacity.triangles}, "
         f"{clock_hz / 1e6:g} MHz, {baud} baud)")
-    plan = platform.build(top, name=NAME, do_build=False, emit_src=False,  # (as sim.export.verilog_of)
+    plan = platform.build(top, name=NAME, do_build=False,
                           script_after_synth=f"tee -q -o {NAME}.stat.json stat -json")
     plan.extract(str(out))
     report = {"board": board, "device": "LFE5U-85F-6 CABGA381 (Radiona ULX3S)", "preset": fs.name,

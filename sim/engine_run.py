@@ -394,7 +394,8 @@ def rtl_engine(formats: FormatSet):
         problem = prepare(mesh, positions, params, formats)
         capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
-              f"{capacity.entries}/{capacity.triangles} (cached) and running the flattening ...", file=sys.stderr)
+              f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running "
+              "the flattening ...", file=sys.stderr)
         with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
             try:  # the simulator's own output goes to a log: stdout is for the result
                 with contextlib.redirect_stdout(sys.stderr):

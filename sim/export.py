@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -238,12 +239,31 @@ def interface_markdown(interface: dict) -> str:
 
 def verilog_of(elaboratable, name: str, platform=None) -> str:
     """The Verilog of ``elaboratable`` as every bundle ships it: through Amaranth's builtin Yosys (the same
-    text on every machine) and without ``src`` attributes, which held this checkout's absolute paths (two
-    clones wrote different Verilog, and an FPGA engineer's copy named the build machine's files)."""
+    text on every machine), its ``src`` attributes relative (:func:`relative_sources`)."""
     from amaranth.back import verilog
 
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
-    return verilog.convert(elaboratable, name=name, platform=platform, emit_src=False)
+    return relative_sources(verilog.convert(elaboratable, name=name, platform=platform))
+
+
+#: The checkout, whose absolute path Amaranth writes into ``src`` attributes.
+CHECKOUT = Path(__file__).resolve().parents[1]
+
+
+def relative_sources(text: str) -> str:
+    """``text`` with each ``src`` attribute's file named from the checkout (``hdl/stepgen.py:205``) or from
+    its installed package (``amaranth/lib/memory.py:400``) instead of this machine's absolute path: two
+    clones write the same Verilog, and nextpnr's critical paths still name the RTL lines."""
+    def relative(location: str) -> str:
+        path, _, line = location.rpartition(":")
+        for root in (f"site-packages{os.sep}", f"{CHECKOUT}{os.sep}"):  # (the venv may be in the checkout)
+            if root in path:
+                path = path.split(root, 1)[1]
+                break
+        return f"{path}:{line}" if path else location
+
+    return re.sub(r'(\(\* src = ")([^"]*)(" \*\))',
+                  lambda m: m[1] + "|".join(relative(part) for part in m[2].split("|")) + m[3], text)
 
 
 def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_options: dict | None = None) -> dict:

@@ -93,7 +93,8 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     config = {"mesh": mesh_spec, "init": init_spec, "params": params.as_dict(), "iterations": args.iterations,
               "step_latency": SpringflatCore.step_latency_of(formats), "p_valid": 1 - args.stall,
               "p_ready": 1 - args.stall}
-    print(f"springflat: {args.sim}: building the model (cached; the first Verilator build takes ~1 min) "
+    first = "; the first Verilator build takes about a minute" if args.sim == "verilator" else ""
+    print(f"springflat: {args.sim}: building the model (once per format set, then reused{first}) "
           "and running the closed loop ...", file=sys.stderr)
     with tempfile.TemporaryDirectory(prefix="springflat-rtl-") as tmp:
         log = Path(tmp) / "simulation.log"
@@ -168,7 +169,8 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     problem = prepare(mesh, start_positions(mesh, args.init, params, progress=False)[0], params, formats)
     image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity
     print(f"springflat: {args.sim}: exporting and building springflat_engine for capacity {capacity.vertices}/"
-          f"{capacity.entries}/{capacity.triangles} (cached) and running the whole flattening ...", file=sys.stderr)
+          f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running the "
+          "whole flattening ...", file=sys.stderr)
     with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
         log = Path(tmp) / "simulation.log"
         try:
