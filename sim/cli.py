@@ -78,7 +78,11 @@ class _Parser(argparse.ArgumentParser):
             file.flush()
         except OSError as exc:
             if file is not sys.stderr:
-                print(f"springflat: error: cannot write standard output: {describe_os_error(exc)}", file=sys.stderr)
+                try:
+                    print(f"springflat: error: cannot write standard output: {describe_os_error(exc)}",
+                          file=sys.stderr)
+                except OSError:  # (nowhere left to say it)
+                    pass
             raise SystemExit(EXIT_USAGE) from None
 
 

@@ -93,8 +93,9 @@ def _format_of(field_name: str, port: str) -> str | None:
 
 def write_rom_images(fs: FormatSet, out: Path) -> None:
     """``rsqrt_seed.hex`` and ``exp_table.hex``: the rsqrt unit's ``seed_rom`` and the step generator's
-    ``exp_rom`` word by word, as the Verilog's ``initial`` blocks fill them (``$readmemh`` reads them, its
-    ``//`` first line included), each line one word from address 0."""
+    ``exp_rom`` word by word from address 0, one word a line (``$readmemh`` reads them, the ``//`` first
+    line included): what the generic Verilog's ``initial`` blocks fill them with, and what the ECP5
+    flavour's DP16KD ``INITVAL`` parameters hold."""
     from hdl.rsqrt import seed_rom_words
     from hdl.stepgen import exp_rom_rows
 
@@ -105,9 +106,10 @@ def write_rom_images(fs: FormatSet, out: Path) -> None:
         f"rows below {cfg.seed_index_offset} are never read and hold 0\n" + "".join(f"{v:x}\n" for v in seed))
     layout, rows = exp_rom_rows(fs)
     fields = ", ".join(f"{name} [{f.offset + f.shape.width - 1}:{f.offset}]" for name, f in layout)
+    slope = ", slope: the next entry minus it (interpolated)" if fs.interpolates else ""
     (out / "exp_table.hex").write_text(
         f"// step_generator exp_rom: {len(rows)} words of {layout.size} bits: {fields}; base: the exp table's "
-        f"entry (lut_entry {fs.lut_entry}), slope: the next entry minus it\n" + "".join(f"{layout.const(row).as_value().value:x}\n" for row in rows))
+        f"entry (lut_entry {fs.lut_entry}){slope}\n" + "".join(f"{layout.const(row).as_value().value:x}\n" for row in rows))
 
 
 def _holds(fmt, field: dict) -> bool:
@@ -254,11 +256,16 @@ def relative_sources(text: str) -> str:
     """``text`` with each ``src`` attribute's file named from the checkout (``hdl/stepgen.py:205``) or from
     its installed package (``amaranth/lib/memory.py:400``) instead of this machine's absolute path: two
     clones write the same Verilog, and nextpnr's critical paths still name the RTL lines."""
+    import sysconfig
+
+    # the installed packages' directories first: the venv may be in the checkout
+    roots = [*dict.fromkeys(sysconfig.get_paths()[key] for key in ("purelib", "platlib")), str(CHECKOUT)]
+
     def relative(location: str) -> str:
         path, _, line = location.rpartition(":")
-        for root in (f"site-packages{os.sep}", f"{CHECKOUT}{os.sep}"):  # (the venv may be in the checkout)
-            if root in path:
-                path = path.split(root, 1)[1]
+        for root in roots:
+            if path.startswith(root + os.sep):
+                path = path[len(root) + 1:]
                 break
         return f"{path}:{line}" if path else location
 

@@ -68,8 +68,8 @@ def markdown(m: RegisterMap, level: int = 1) -> str:
         f"Generated from `golden_model.engine_spec.register_map.RegisterMap` for format set `{m.formats}` "
         f"(FORMAT_HASH `0x{m.format_hash:08X}`) and capacity {m.capacity.vertices} vertices, "
         f"{m.capacity.entries} entries, {m.capacity.triangles} triangles. Do not edit.", "",
-        f"Bus: {bus['protocol']}, {bus['data_bits']}-bit data, `adr` a {bus['address']} address of "
-        f"{bus['address_bits']} bits (byte address >> 2), "
+        f"Bus: {bus['protocol']}, {bus['data_bits']}-bit data, `adr` a {bus['address_bits']}-bit address of "
+        f"{bus['address']}s (byte address >> 2), "
         f"`sel` {bus['sel']}. `err` answers: {bus['err']}.", "",
         "Access: " + "; ".join(f"`{k}` {v}" for k, v in ACCESS.items()) + ".", "",
         "Values wider than 32 bits span consecutive registers, least significant word first; signed values are "

@@ -20,7 +20,7 @@ Every number in the result comes from a tool report; nothing is estimated. The b
 ``out_dir`` holds the Verilog, the ROM ``.hex`` files, ``clock.lpf`` / ``clock.sdc``,
 ``interface.md`` (extended with the measured Fmax and throughput = Fmax / II),
 ``synth_report.json`` / ``synth_report.md``, every tool log and report, the Yosys scripts, and
-``reproduce.sh`` with the exact command. With the engine, the bundle also holds
+``reproduce.sh``, which runs the tools again on the bundle's files. With the engine, the bundle also holds
 ``springflat_engine.v``, its register map (``register_map.md``, ``register_map.json``,
 ``springflat_regs.h``) and ``memory_image.md`` (:func:`sim.export.export_engine_bundle`).
 
@@ -472,9 +472,10 @@ def reproduce_script(command: str, steps: list[tuple[str, str]], family: str = "
     packages = dict.fromkeys(REPRODUCE_TOOLS[tool][1].format(family=family) for tool in used)
     lines = ["#!/bin/sh",
              "# Runs this bundle's tools again on its own files, in its directory (no springflat needed).",
-             f"# {', '.join(used)} name the tools (default: YoWASP's, pip install {' '.join(packages)}).",
+             f"# The variable{'s' if len(used) > 1 else ''} {', '.join(used)} name{'' if len(used) > 1 else 's'} "
+             f"the tool{'s' if len(used) > 1 else ''} (default: YoWASP's, pip install {' '.join(packages)}).",
              f"# Made by springflat {installed_version()} with, from its checkout (venv active):",
-             f"#   {command}",
+             *(f"#   {line}" for line in command.splitlines()),  # (a newline in a quoted name stays a comment)
              "set -e", 'cd "$(dirname "$0")"',
              *(f'{tool}="${{{tool}:-{default}}}"' for tool, default in defaults.items()),
              *(f'"${tool}" {arguments}' for tool, arguments in steps)]

@@ -82,7 +82,7 @@ def check_scheduler_address(scheduler: str) -> None:
         raise ParameterError(f"--scheduler '{scheduler}': not a Dask address ({expected})") from None
     try:
         get_backend(protocol)  # (loads a plug-in's protocol from its entry point)
-    except ValueError:
+    except (ValueError, ImportError):  # unknown, or a plug-in that cannot be loaded
         raise ParameterError(f"--scheduler '{scheduler}': Dask has no protocol '{protocol}' "
                              f"({', '.join(sorted(backends))})") from None
     if not host or not 1 <= port <= 65535:

@@ -525,6 +525,9 @@ def test_parameters(name, tmp_path, monkeypatch, capsys):
         if "1e300 on a 1e45" in name and "density" not in name and "penalty" not in name:
             assert summary["energy"] is None and "energy" in summary["non_finite"]  # was Infinity
         if case.code == 3:  # a diverged run writes no pattern; its history holds P0 and the finite iterations
+            guarded = "--dynamics" not in case.args and "--no-guard" not in case.args
+            assert ("the guarded run's numbers overflowed: bring --spring, --density or the mesh's size nearer 1"
+                    in outcome.err) == guarded, outcome.err  # the hint names what the run took
             assert not (tmp_path / "flat.obj").exists()
             if "--history" in case.args:
                 assert len((tmp_path / "h.csv").read_text().splitlines()) == summary["iterations"] + 2
@@ -1530,3 +1533,16 @@ def test_as_root_help_or_version_into_a_full_standard_output_is_one_line_and_sta
         proc = subprocess.run([SPRINGFLAT, *argv], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
     assert (proc.returncode, proc.stderr) == (2, "springflat: error: cannot write standard output: no space left on "
                                                  "device\n")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["--version"]])
+def test_help_or_version_into_a_closed_pipe_is_one_line_and_status_2(argv):
+    """The reader gone before the text is written (the read end closed first): EPIPE, not silence."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        proc = subprocess.run([SPRINGFLAT, *argv], stdout=write, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write)
+    assert (proc.returncode, proc.stderr) == (2, "springflat: error: cannot write standard output: broken pipe\n")
+
