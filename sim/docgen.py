@@ -90,8 +90,15 @@ def _tables() -> dict[str, Callable[[], str]]:
     }
 
 
+def _host_scaling() -> str:
+    from .export import host_scaling_markdown
+
+    return host_scaling_markdown()
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
     "run-modes": _run_modes,
+    "host-scaling": _host_scaling,
     "guard-constants": _guard_constants,
     "register-map": _register_map,
     **_tables(),

@@ -351,8 +351,48 @@ def memory_image_markdown(fs: FormatSet, capacity) -> str:
               "`decode_nodes`/`decode_entries`/`decode_triangles`); reference host driver: "
               "`sim/engine_driver.py`. The full contract (run constants, controller passes, error answers) is "
               "docs/engine.md in the springflat repository; the field tables with bit ranges are in "
-              "`register_map.md`.", ""]
+              "`register_map.md`.", "", "## How the host fills the images", "", host_scaling_markdown(), ""]
     return "\n".join(lines)
+
+
+def host_scaling_markdown() -> str:
+    """How the host turns a mesh, a start layout and the run's parameters into the images: what
+    :func:`golden_model.fixed.engine.prepare` and :func:`golden_model.engine_spec.image.build_image` do, for a
+    host written without them (``memory_image.md``, and the generated block of docs/engine.md)."""
+    from golden_model.fixed.engine import HOST_ROUNDING, POSITION_HEADROOM
+    from golden_model.reference import MOMENTUM_STIFFNESS_BUDGET
+
+    return "\n".join([
+        f"Every conversion rounds {HOST_ROUNDING.value.replace('_', ' ')} and must fit its format; a value that "
+        "does not, or that rounds to 0 where 0 would change its meaning, is refused (`prepare` raises "
+        "`FixedPointError`, one line). `[fmt]` is a field's format in the format set.",
+        "",
+        "1. **Scale.** `k = -floor(log2(mean rest length) + 1/2)`, `s = 2^k` (rest lengths: the mesh's 3D edge "
+        "lengths), so that the mean edge is about 1: lengths are multiplied by `s`, areas by `s^2`. Read "
+        "positions back divided by `s`.",
+        f"2. **nodes**, in vertex order. `position = P0 * s` [position], every scaled coordinate within "
+        f"{POSITION_HEADROOM:g} times the format's largest value (room for the layout to grow); velocities 0. `inv_mass`: with the momentum dynamics the "
+        "weight `w_i = 2/(C*deg_i)` (`deg_i` the node's neighbour count, `C` the spring constant); with the "
+        "paper's, `1/m_i` with `m_i = (rho/3) * sum of the node's triangles' 3D areas` (unscaled; `rho = "
+        "1/min m` at `rho = 1` for `auto`). `inv_mass_barrier`: with the fold barrier in the momentum dynamics "
+        f"`min(w_i, {MOMENTUM_STIFFNESS_BUDGET:g}/(C*deg_i + 2*b_i))`, `b_i = sum over the node's triangles of "
+        "mu*C*(|e|^2/X* + 2*kappa)/4` (`e` the 3D edge opposite the node, `X*` twice the triangle's 3D area); "
+        "otherwise `inv_mass`. A weight must keep at least 5 bits (raw 16 or more).",
+        "3. **entries**, node by node in vertex order, each node's ring: its neighbours in cyclic order such "
+        "that entries `k` and `k+1` (the last and the first, cyclically) span the node's triangle `(i, j_k, "
+        "j_k+1)` in the mesh's winding; a boundary node's ring starts after its boundary gap. `rest = |e| * s` "
+        "[rest_length]. The fold barrier: with `sigma` the sign of the scaled start's total signed area, for "
+        "`sigma = +1` entry `k` carries the triangle `(i, j_k, j_k+1)` and `second = j_k+1`; for `sigma = -1` "
+        "entry `k+1` carries it and `second = j_k`. `threshold = kappa * X* * s^2` [area], `gain = mu*C / (4 * "
+        "X* * s^2)` [barrier_gain]. An entry without a triangle (or without the barrier): `second = neighbour`, "
+        "`threshold = gain = 0`.",
+        "4. **triangles**: the corners as in the mesh, `area = A * s^2` [face_area] (`A` the 3D area).",
+        "5. **Run constants**: `half_spring = C/2` [spring], `damping = 1 - gamma` [damping]. A reciprocal of a "
+        "raw total `T` with `b` = the reciprocal format's width: `shift = b + bit_length(T) - 1`, `mantissa = "
+        "round_half_up(2^shift / T)`, and if that is `2^b`, `mantissa/2` and `shift - 1`. `area_*` take `T` = "
+        "the sum of the raw triangle areas; `length_*` the sum of the raw `rest` over all entries (every edge "
+        "twice) shifted up to error_acc's fraction bits. The tolerances and the rest: the run constants' table.",
+    ])
 
 
 def export_engine_bundle(fs: FormatSet, capacity, out: Path, platform=None,
