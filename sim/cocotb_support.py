@@ -31,7 +31,21 @@ SIMULATORS = ("icarus", "verilator")
 WAVE_SUFFIX = {"icarus": ".fst", "verilator": ".vcd"}
 BENCH_PACKAGE = "sim.cocotb_benches"
 REPO = Path(__file__).resolve().parents[1]
-BUILD_ROOT = REPO / "build" / "cocotb"
+
+
+def build_directory() -> Path:
+    """Where the exports and simulator builds are kept: ``SPRINGFLAT_BUILD_DIR`` when set; else the
+    checkout's ``build/`` (the README's set-up installs springflat from its checkout); else, for a copy
+    installed elsewhere (no ``pyproject.toml`` beside its packages), the user's cache,
+    ``$XDG_CACHE_HOME/springflat`` or ``~/.cache/springflat``, never the installed packages' directory."""
+    if os.environ.get("SPRINGFLAT_BUILD_DIR"):
+        return Path(os.environ["SPRINGFLAT_BUILD_DIR"]).resolve()
+    if (REPO / "pyproject.toml").is_file():
+        return REPO / "build"
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "springflat"
+
+
+BUILD_ROOT = build_directory() / "cocotb"
 #: The files whose ``assert`` statements cocotb has pytest rewrite (``COCOTB_REWRITE_ASSERTION_FILES``):
 #: the benches only. cocotb's default, ``*.py``, rewrites every module the bench imports (numpy,
 #: scipy, the golden model, cocotb itself) at every simulator start: 3–4 s of CPU per run. The
@@ -39,7 +53,7 @@ BUILD_ROOT = REPO / "build" / "cocotb"
 #: their modules would be rewritten too.
 REWRITE_ASSERTION_FILES = "*/cocotb_benches/*.py"
 #: ccache's store for the Verilator builds' C++ objects (:func:`prepare_environment`); ``make clean`` removes it.
-CCACHE_DIR = REPO / "build" / "ccache"
+CCACHE_DIR = build_directory() / "ccache"
 
 
 class SimulatorError(RuntimeError):

@@ -1,11 +1,14 @@
 """The engine's named Verilator builds (sim/engine_run.py, benchmarks/bench_sim_speed.py): the flags each
 changes, and the harness that makes its own clock."""
 
+import os
+
 import pytest
 
 from sim.engine_run import (INTERNAL_CLOCK_BUILDS, VERILATOR_BUILDS, VERILATOR_MAKE_FLAGS, VERILATOR_SPEED_FLAGS,
                             build_flags, simulation_harness)
 from sim.top_names import ENGINE_MODULE
+from support import REPO
 
 VERILOG = f"""module {ENGINE_MODULE}(clk, rst, bus__cyc, bus__ack);
   input clk;
@@ -38,3 +41,19 @@ def test_the_internal_clock_harness():
     for text in (plain, own):
         assert ".clk(clk)" in text and ".rst(rst_q)" in text and "always @(posedge clk) rst_q <= rst;" in text
     assert INTERNAL_CLOCK_BUILDS == {"default", "internal-clock", "inline-all"}  # the trials of the default
+
+
+def test_the_builds_go_where_springflat_build_dir_says(tmp_path):
+    """An FPGA engineer's checkout may be read-only, or an installed copy's directory site-packages: the
+    variable moves the builds and ccache's store; unset, a checkout keeps them in its build/."""
+    import subprocess
+    import sys
+
+    code = "import sim.cocotb_support as c; print(c.BUILD_ROOT); print(c.CCACHE_DIR)"
+    env = {k: v for k, v in os.environ.items() if k != "SPRINGFLAT_BUILD_DIR"}
+    moved = subprocess.run([sys.executable, "-c", code], env={**env, "SPRINGFLAT_BUILD_DIR": str(tmp_path)},
+                           capture_output=True, text=True, check=True).stdout.split()
+    assert moved == [str(tmp_path / "cocotb"), str(tmp_path / "ccache")]
+    default = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                             check=True).stdout.split()
+    assert default == [str(REPO / "build" / "cocotb"), str(REPO / "build" / "ccache")]
