@@ -17,8 +17,8 @@ The model (spec "Model"):
   iteration ``k+1`` uses the errors measured after iteration ``k``;
 * stopping (Algorithm 1): ``converged`` when ``E_S ≤ φ_S``, ``E_C ≤ φ_C`` and
   ``ΔE ≤ ε``; ``max-iterations`` after ``N_max``; ``diverged`` when a value
-  stops being finite, or the layout runs away (:func:`runaway_width`); ``stalled`` when the guarded step finds no step that lowers the energy
-  (docs/guard.md).  At least one iteration runs.
+  stops being finite, or the layout runs away (:func:`runaway_width`); ``stalled`` when the guarded
+  step finds no step that lowers the energy (docs/guard.md).  At least one iteration runs.
 
 ``jacobi`` (synchronous) is vectorised over edges; ``sequential`` follows
 Algorithm 1 literally, node by node in index order.

@@ -84,9 +84,11 @@ class AreaError(wiring.Component):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"AreaError needs a FormatSet or a preset name, not {fs!r}")
         if fs.face_edge.frac_bits != fs.position.frac_bits:  # FormatSet checks it; the edges rely on it
-            raise FormatSetNotBuildable(f"face_edge {fs.face_edge} needs position's {fs.position.frac_bits} fraction bits")
+            raise FormatSetNotBuildable(
+                f"face_edge {fs.face_edge} needs position's {fs.position.frac_bits} fraction bits")
         if fs.face_area.frac_bits != fs.error_acc.frac_bits:
-            raise FormatSetNotBuildable(f"face_area {fs.face_area} needs error_acc's {fs.error_acc.frac_bits} fraction bits")
+            raise FormatSetNotBuildable(
+                f"face_area {fs.face_area} needs error_acc's {fs.error_acc.frac_bits} fraction bits")
         self.fs = fs
         self.latency = self.latency_of(fs)
         super().__init__({

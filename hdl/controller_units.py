@@ -101,7 +101,7 @@ class Normaliser(wiring.Component):
         fs = _check_fs("Normaliser", fs)
         if fs.reciprocal.width < 2:
             raise FormatSetNotBuildable(f"Normaliser needs a reciprocal of at least 2 bits (the shift steps are "
-                             f"worked out during the multiply steps), not {fs.reciprocal.width}")
+                                        f"worked out during the multiply steps), not {fs.reciprocal.width}")
         self.fs = fs
         self.saturations = bool(saturations)
         self.product_bits = fs.error_acc.width + fs.reciprocal.width + 1

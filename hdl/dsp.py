@@ -81,8 +81,9 @@ def registered_product(m: Module, a, b, *, name: str, enable=None, platform=None
     for op in (a, b):
         limit = DSP_WIDTH if (op.shape().signed or not is_signed) else DSP_WIDTH - 1
         if len(op) > limit:
-            raise FormatSetNotBuildable(f"{name}: a {len(op)}-bit {'signed' if op.shape().signed else 'unsigned'} operand "
-                             f"does not fit an {DSP_WIDTH}-bit multiplier operand")
+            raise FormatSetNotBuildable(
+                f"{name}: a {len(op)}-bit {'signed' if op.shape().signed else 'unsigned'} operand "
+                f"does not fit an {DSP_WIDTH}-bit multiplier operand")
     product = Signal(shape, name=name, reset_less=True)
     # A 1-bit operand (the top bit of an unsigned operand in a signed product) makes the
     # product a multiplexer: fabric logic, not a DSP block (the rule the study's cost counts with).

@@ -11,8 +11,8 @@ from golden_model.fixed import Format, Rounding
 from golden_model.fixed.formats_set import FormatSetNotBuildable
 from golden_model.fixed.dsp import DSP_WIDTH, Operand, dsp_partial_products
 
-__all__ = ["FormatSetNotBuildable", "shape_of", "round_half_bit", "shift_round", "variable_shift", "saturate", "clamp", "requantize", "dsp_operands",
-           "sum_round"]
+__all__ = ["FormatSetNotBuildable", "shape_of", "round_half_bit", "shift_round", "variable_shift", "saturate", "clamp",
+           "requantize", "dsp_operands", "sum_round"]
 
 
 def round_half_bit(t, rounding, sticky=Const(0)):

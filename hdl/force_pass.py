@@ -127,8 +127,9 @@ class ForcePass(wiring.Component):
         super().__init__(self.signature_of(fs, self.energy, self.saturations))
         self.stages = _stage_counts(fs, self.energy, self.saturations)
         if self.stages.barrier > self.stages.rsqrt:
-            raise FormatSetNotBuildable(f"the fold barrier needs {self.stages.barrier} stages, more than the rsqrt unit's "
-                             f"{self.stages.rsqrt} it runs beside")
+            raise FormatSetNotBuildable(
+                f"the fold barrier needs {self.stages.barrier} stages, more than the rsqrt unit's "
+                f"{self.stages.rsqrt} it runs beside")
         self.latency = self.stages.latency
 
     @staticmethod

@@ -98,8 +98,9 @@ class GuardCertificate(wiring.Component):
         if not isinstance(fs, FormatSet):
             raise TypeError(f"GuardCertificate needs a FormatSet or a preset name, not {fs!r}")
         if not fs.position.frac_bits == fs.velocity.frac_bits == fs.face_edge.frac_bits:
-            raise FormatSetNotBuildable(f"the certificate needs position {fs.position}, velocity {fs.velocity} and face_edge "
-                             f"{fs.face_edge} to share their fraction bits")
+            raise FormatSetNotBuildable(
+                f"the certificate needs position {fs.position}, velocity {fs.velocity} and face_edge "
+                f"{fs.face_edge} to share their fraction bits")
         self.fs, self.interval = fs, interval
         self.latency = self.latency_of(fs, interval)
         #: Triangles that may be owed at once: the result FIFO's depth (a power of two above the latency).

@@ -75,12 +75,12 @@ class GuardCommit(wiring.Component):
         fs = format_set(fs, "GuardCommit")
         if fs.velocity.frac_bits != fs.position.frac_bits:
             raise FormatSetNotBuildable(f"a move is added to a position: velocity {fs.velocity} needs position's "
-                             f"{fs.position.frac_bits} fraction bits")
+                                        f"{fs.position.frac_bits} fraction bits")
         if not (fs.position.signed and fs.velocity.signed):
             raise FormatSetNotBuildable(f"position {fs.position} and velocity {fs.velocity} must be signed")
         if fs.velocity.width > fs.position.width:
             raise FormatSetNotBuildable(f"velocity {fs.velocity} is wider than position {fs.position}: a move could "
-                             f"step over the whole position range")
+                                        f"step over the whole position range")
         self.fs = fs
         super().__init__(self.signature_of(fs))
         self.latency = count_stages(lambda m: _build(m, fs, self.signature_of(fs).create()))

@@ -93,7 +93,7 @@ class Integrator(wiring.Component):
         fs = format_set(fs, "Integrator")
         if fs.velocity.frac_bits != fs.position.frac_bits:
             raise FormatSetNotBuildable(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
-                             f"{fs.position.frac_bits} fraction bits")
+                                        f"{fs.position.frac_bits} fraction bits")
         if side is not None:
             Shape.cast(side)  # a clear error now rather than at elaboration
         self.fs, self.side, self.saturations = fs, side, bool(saturations)

@@ -200,8 +200,8 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
     if single:
         raise UserError(f"--engine {args.engine} runs one mesh at a time ({single}): drop it for a batch")
     if args.init is not None and args.init not in (AUTO_START,) + LAYOUT_METHODS:
-        raise UserError(f"{in_a_batch(args)}, --init takes a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}), not a "
-                        "layout file")
+        raise UserError(f"{in_a_batch(args)}, --init takes a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}), "
+                        "not a layout file")
     check_options_used(args)
     jobs = local_workers(args.jobs, "--jobs", args.scheduler)
     endings = _endings(args)

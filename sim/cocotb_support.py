@@ -23,6 +23,8 @@ from filelock import FileLock
 
 from golden_model.fixed import FormatSet
 
+from .version import SOURCE_ROOT
+
 __all__ = ["SIMULATORS", "SimulatorError", "missing_simulator", "prepare_environment", "BenchRun", "run_bench",
            "build_lock"]
 
@@ -30,7 +32,7 @@ SIMULATORS = ("icarus", "verilator")
 #: The waveform each simulator writes under cocotb's runner: Icarus FST, Verilator VCD (``--trace``).
 WAVE_SUFFIX = {"icarus": ".fst", "verilator": ".vcd"}
 BENCH_PACKAGE = "sim.cocotb_benches"
-REPO = Path(__file__).resolve().parents[1]
+REPO = SOURCE_ROOT
 
 
 def build_directory() -> Path:

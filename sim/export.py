@@ -109,7 +109,8 @@ def write_rom_images(fs: FormatSet, out: Path) -> None:
     slope = ", slope: the next entry minus it (interpolated)" if fs.interpolates else ""
     (out / "exp_table.hex").write_text(
         f"// step_generator exp_rom: {len(rows)} words of {layout.size} bits: {fields}; base: the exp table's "
-        f"entry (lut_entry {fs.lut_entry}){slope}\n" + "".join(f"{layout.const(row).as_value().value:x}\n" for row in rows))
+        f"entry (lut_entry {fs.lut_entry}){slope}\n"
+        + "".join(f"{layout.const(row).as_value().value:x}\n" for row in rows))
 
 
 def _holds(fmt, field: dict) -> bool:
@@ -190,7 +191,8 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "entries.ready (a register) falls before more results are owed (accepted, not yet "
                      "taken from the output) than the result FIFO holds (`credits` below: at most that many are "
                      "ever owed); with results.ready held high it never falls.",
-                     "Throughput = Fmax / II: one neighbour entry (node_update, springflat_core) or item per II clocks.",
+                     "Throughput = Fmax / II: one neighbour entry (node_update, springflat_core) or item per II "
+                     "clocks.",
                      "Reset: rst is synchronous and active high; hold it over a rising clock edge. Simulating with "
                      "Icarus, compile with -g2005: in -g2012 mode Icarus sets `reg ... = value` initialisers "
                      "without an event, so the time-0 trigger of Yosys's `always @*` blocks (YosysHQ/yosys#2273) "
@@ -248,18 +250,16 @@ def verilog_of(elaboratable, name: str, platform=None) -> str:
     return relative_sources(verilog.convert(elaboratable, name=name, platform=platform))
 
 
-#: The checkout, whose absolute path Amaranth writes into ``src`` attributes.
-CHECKOUT = Path(__file__).resolve().parents[1]
-
-
 def relative_sources(text: str) -> str:
     """``text`` with each ``src`` attribute's file named from the checkout (``hdl/stepgen.py:205``) or from
     its installed package (``amaranth/lib/memory.py:400``) instead of this machine's absolute path: two
     clones write the same Verilog, and nextpnr's critical paths still name the RTL lines."""
     import sysconfig
 
+    from .version import SOURCE_ROOT
+
     # the installed packages' directories first: the venv may be in the checkout
-    roots = [*dict.fromkeys(sysconfig.get_paths()[key] for key in ("purelib", "platlib")), str(CHECKOUT)]
+    roots = [*dict.fromkeys(sysconfig.get_paths()[key] for key in ("purelib", "platlib")), str(SOURCE_ROOT)]
 
     def relative(location: str) -> str:
         path, _, line = location.rpartition(":")
@@ -371,7 +371,8 @@ def host_scaling_markdown() -> str:
         "lengths), so that the mean edge is about 1: lengths are multiplied by `s`, areas by `s^2`. Read "
         "positions back divided by `s`.",
         f"2. **nodes**, in vertex order. `position = P0 * s` [position], every scaled coordinate within "
-        f"{POSITION_HEADROOM:g} times the format's largest value (room for the layout to grow); velocities 0. `inv_mass`: with the momentum dynamics the "
+        f"{POSITION_HEADROOM:g} times the format's largest value (room for the layout to grow); velocities 0. "
+        "`inv_mass`: with the momentum dynamics the "
         "weight `w_i = 2/(C*deg_i)` (`deg_i` the node's neighbour count, `C` the spring constant); with the "
         "paper's, `1/m_i` with `m_i = (rho/3) * sum of the node's triangles' 3D areas` (unscaled; `rho = "
         "1/min m` at `rho = 1` for `auto`). `inv_mass_barrier`: with the fold barrier in the momentum dynamics "

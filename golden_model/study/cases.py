@@ -71,7 +71,7 @@ def resolve_study_mesh(name: str) -> tuple[str, Mesh, FlattenParams]:
 
             _GENERATED = generated_meshes()
         return name.lower(), _GENERATED[name.lower()], GENERATED_PARAMS
-    if path.is_file() or os.path.lexists(path) or path.suffix or len(path.parts) > 1:
+    if os.path.lexists(path) or path.suffix or len(path.parts) > 1:
         return path.stem, load_mesh(path), GENERATED_PARAMS  # (what is wrong with a path: load_mesh says it)
     raise ParameterError(f"unknown mesh '{name}': expected one of {', '.join(STUDY_MESHES)} or a mesh file")
 
