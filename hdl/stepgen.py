@@ -187,10 +187,12 @@ class StepGenerator(wiring.Component):
         error, addrs, read_data = {}, {}, {}
         for lane in lanes:
             error[lane] = e = self.i.payload[lane]
-            above_one = e > self._error_max
             if self._error_max < fs.error.raw_max:  # u1.F: values above 1.0 clamp to 1.0
+                above_one = e > self._error_max
                 error[lane] = e = Mux(above_one, self._error_max, e)
-            count(above_one)  # a constant 0 for u0.F (there is no more than 1.0)
+            else:  # u0.F: there is no more than 1.0 (a compare would be constant: lint's CMPCONST)
+                above_one = C(0, 1)
+            count(above_one)
             if self._interpolating:
                 addr = e >> r
             elif r:

@@ -281,7 +281,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("verilog", help="export the RTL as Verilog with its interface description",
                        description="Write Verilog of every component, ROM contents and interface.md/json, and the "
                                    "engine (springflat_engine.v) with its register map (register_map.md, "
-                                   "register_map.json, springflat_regs.h) and memory_image.md.")
+                                   "register_map.json, springflat_regs.h), memory_image.md, and "
+                                   "verilator_waivers.vlt (the lint rules the generated Verilog breaks by "
+                                   "construction).")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="the engine's vertices, neighbour entries and triangles (default: "

@@ -23,6 +23,7 @@ from filelock import FileLock
 
 from golden_model.fixed import FormatSet
 
+from .lint import WAIVER_FILE, write_waivers
 from .version import SOURCE_ROOT
 
 __all__ = ["SIMULATORS", "SimulatorError", "missing_simulator", "prepare_environment", "BenchRun", "run_bench",
@@ -135,7 +136,7 @@ def _formats_key(fs: FormatSet, dsp: str | None = None) -> str:
     must not reuse old Verilog)."""
     digest = hashlib.sha256(fs.to_json().encode())
     digest.update(repr(dsp).encode())
-    for source in sorted((REPO / "hdl").glob("*.py")) + [REPO / "sim" / "export.py"] + PRIMITIVE_MODELS.get(dsp, []):
+    for source in sorted((REPO / "hdl").glob("*.py")) + [REPO / "sim" / "export.py", REPO / "sim" / "lint.py"] + PRIMITIVE_MODELS.get(dsp, []):
         digest.update(source.read_bytes())
     return digest.hexdigest()[:12]
 
@@ -203,12 +204,16 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
     config_path.write_text(json.dumps({**config, "formats": fs.to_dict()}))
 
     runner = get_runner(sim)
-    build_args = ["-Wno-fatal", "-Wno-WIDTHEXPAND", "-Wno-WIDTHTRUNC", "-O2"] if sim == "verilator" else []
+    # the generated Verilog's waived lint rules (sim.lint, written under the lock); -Wno-fatal for
+    # the harnesses and models
+    build_args = ["-Wno-fatal", str(build_dir / WAIVER_FILE), "-O2"] if sim == "verilator" else []
     build_args += list(extra_build_args)
     if sim == "verilator" and waves:
         build_args += ["--trace-structs"]  # cocotb adds --trace (VCD: WAVE_SUFFIX; FST would need liblz4 headers)
     try:
         with build_lock(build_dir):
+            if sim == "verilator":
+                write_waivers(build_dir)
             runner.build(sources=[*files, *PRIMITIVE_MODELS.get(dsp, [])], hdl_toplevel=toplevel,
                          build_dir=build_dir, build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
                          always=False, verbose=False, log_file=log_file)

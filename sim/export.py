@@ -9,7 +9,9 @@ Writes into ``--out DIR``:
   there), one hex word per line from address 0 (:func:`write_rom_images`);
 * ``interface.json`` and ``interface.md``: ports (name, direction, width),
   the bit layout of every stream payload with each field's format, latency,
-  initiation interval, the stream protocol, and the format set.
+  initiation interval, the stream protocol, and the format set;
+* ``verilator_waivers.vlt``: the Verilator lint rules the generated Verilog breaks by construction,
+  each with its reason (:mod:`sim.lint`).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from hdl.dsp import dsp_target
 
+from .lint import WAIVER_FILE, write_waivers
 from .top_names import COMPONENT_SUMMARIES, CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["COMPONENTS", "ENGINE_MODULE", "export_verilog", "export_engine", "export_engine_bundle",
@@ -181,6 +184,7 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
         info["summary"] = spec.summary
         components[spec.module] = info
     write_rom_images(fs, out)
+    write_waivers(out)
     interface = {"format_set": fs.to_dict(), "stream_protocol": STREAM_PROTOCOL, "components": components,
                  "notes": [
                      "A node's header (position, velocity, 1/m) rides on its first neighbour entry (first = 1); "
@@ -198,6 +202,8 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "without an event, so the time-0 trigger of Yosys's `always @*` blocks (YosysHQ/yosys#2273) "
                      "never fires and their outputs stay X until an input changes (a `reg rst = 1;` testbench "
                      "deadlocks node_update). Verilator is not affected.",
+                     f"Lint: `verilator --lint-only -Wall {WAIVER_FILE} FILE.v` is clean; the file waives the rules "
+                     "the generated Verilog breaks by construction, each with its reason.",
                      ("Multipliers: ECP5 MULT18X18D instances with their input and output registers in use "
                       "(REG_INPUTA/B_CLK, REG_OUTPUT_CLK = CLK0); the generic Verilog of `springflat verilog` "
                       "has the same registers in the fabric and the same latency. ROMs and RAMs: DP16KD block "
@@ -286,7 +292,7 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
     out.mkdir(parents=True, exist_ok=True)
     engine = SpringflatEngine(fs, capacity, **(engine_options or {}))
     (out / f"{ENGINE_MODULE}.v").write_text(verilog_of(engine, ENGINE_MODULE, platform))
-    files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)]
+    files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)] + [write_waivers(out).name]
     with open(out / "register_map.md", "a", encoding="utf-8") as f:  # the module the map is the bus of
         f.write("\n".join(["", f"## Ports of `{ENGINE_MODULE}`", "",
                             "`rst` is synchronous and active high (hold it over a clock edge); `irq` is "
