@@ -25,6 +25,7 @@ import shlex
 import time
 from pathlib import Path
 
+from .export import relative_sources
 from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, _FMAX, SynthError, _critical_path, build_in_place,
                     error_line, run_tool, _tool_versions)
 
@@ -107,6 +108,8 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     plan = platform.build(top, name=NAME, do_build=False,
                           script_after_synth=f"tee -q -o {NAME}.stat.json stat -json")
     plan.extract(str(out))
+    rtlil = out / f"{NAME}.il"  # what Yosys reads: its src attributes as the bundles name them
+    rtlil.write_text(relative_sources(rtlil.read_text()))
     report = {"board": board, "device": "LFE5U-85F-6 CABGA381 (Radiona ULX3S)", "preset": fs.name,
               "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                            "triangles": capacity.triangles},

@@ -257,15 +257,17 @@ def verilog_of(elaboratable, name: str, platform=None) -> str:
 
 
 def relative_sources(text: str) -> str:
-    """``text`` with each ``src`` attribute's file named from the checkout (``hdl/stepgen.py:205``) or from
-    its installed package (``amaranth/lib/memory.py:400``) instead of this machine's absolute path: two
-    clones write the same Verilog, and nextpnr's critical paths still name the RTL lines."""
+    """``text`` (Verilog or RTLIL) with each ``src`` attribute's file named from the checkout
+    (``hdl/stepgen.py:205``) or from its installed package (``amaranth/lib/memory.py:400``) instead of
+    this machine's absolute path: two clones write the same Verilog, and nextpnr's critical paths still
+    name the RTL lines."""
     import sysconfig
 
     from .version import SOURCE_ROOT
 
-    # the installed packages' directories first: the venv may be in the checkout
-    roots = [*dict.fromkeys(sysconfig.get_paths()[key] for key in ("purelib", "platlib")), str(SOURCE_ROOT)]
+    # the installed packages' directories first (the venv may be in the checkout), Python's own library last
+    roots = [*dict.fromkeys(sysconfig.get_paths()[key] for key in ("purelib", "platlib")), str(SOURCE_ROOT),
+             sysconfig.get_paths()["stdlib"]]
 
     def relative(location: str) -> str:
         path, _, line = location.rpartition(":")
@@ -275,7 +277,7 @@ def relative_sources(text: str) -> str:
                 break
         return f"{path}:{line}" if path else location
 
-    return re.sub(r'(\(\* src = ")([^"]*)(" \*\))',
+    return re.sub(r'(\(\* src = "|attribute \\src ")([^"]*)(")',
                   lambda m: m[1] + "|".join(relative(part) for part in m[2].split("|")) + m[3], text)
 
 

@@ -3,6 +3,7 @@
 import json
 import re
 import subprocess
+from pathlib import Path
 
 import pytest
 
@@ -57,6 +58,25 @@ def test_files_and_interface_match_the_verilog(exported):
     assert sources and not [s for s in sources if str(REPO) in s or s.startswith("/")]  # no paths of this machine
     assert any(s.startswith("hdl/") for s in sources) and any(s.startswith("amaranth/") for s in sources)
     assert "| `entries__payload` | input |" in (exported / "interface.md").read_text()
+
+
+def test_the_board_builds_rtlil_names_its_sources_as_the_verilog_does():
+    """The board build's RTLIL (what Yosys reads, and its debug Verilog) gets the same relative ``src``
+    names as the bundles' Verilog, in both attribute syntaxes; a path outside the roots stays."""
+    import contextlib
+
+    from amaranth import hdl
+    from sim.export import relative_sources
+
+    stepgen = Path(REPO) / "hdl" / "stepgen.py"
+    memory = Path(hdl.__file__).parent.parent / "lib" / "memory.py"
+    stdlib = Path(contextlib.__file__)
+    rtlil = (f'attribute \\src "{stepgen}:190|{memory}:400"\n  attribute \\src "/elsewhere/x.py:3"\n'
+             f'  attribute \\src "{stdlib}:141"\n')
+    verilog = f'(* src = "{stepgen}:190" *)\n'
+    assert relative_sources(rtlil) == ('attribute \\src "hdl/stepgen.py:190|amaranth/lib/memory.py:400"\n'
+                                       '  attribute \\src "/elsewhere/x.py:3"\n  attribute \\src "contextlib.py:141"\n')
+    assert relative_sources(verilog) == '(* src = "hdl/stepgen.py:190" *)\n'
 
 
 @pytest.mark.slow
