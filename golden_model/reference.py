@@ -27,6 +27,7 @@ Algorithm 1 literally, node by node in index order.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Callable
@@ -375,6 +376,22 @@ def energy_floor(mesh: Mesh, params: FlattenParams) -> float:
     return ENERGY_FLOOR * params.spring * float(np.sum(mesh.rest_lengths**2))
 
 
+#: The smallest ``C·Σd²`` (the springs' energy scale, mesh units²) a float run accepts: the energy at a
+#: strain of 1e-6, where the stop rule still compares, is then a normal float (below it, energies
+#: underflow to 0 and an unmoved layout would pass the stop rule as converged).
+MIN_ENERGY_SCALE = sys.float_info.min * 1e12
+
+
+def check_energy_scale(mesh: Mesh, spring: float) -> None:
+    """Refuse a spring constant whose energies underflow on ``mesh`` (:data:`MIN_ENERGY_SCALE`)."""
+    scale = spring * float(np.sum(mesh.rest_lengths**2))
+    if scale < MIN_ENERGY_SCALE:
+        raise ParameterError(
+            f"spring constant C = {spring:g} is too small for this mesh: its energies (C times the squared "
+            f"edge lengths, {scale:.3g} in all) underflow below what a float resolves (about "
+            f"{MIN_ENERGY_SCALE:.0e}); bring --spring nearer 1")
+
+
 #: A layout wider than this many times the larger of the 3D mesh and the start has run away: no flattening
 #: is within twenty orders of magnitude of that, and the run is ``diverged`` while its numbers are still
 #: finite (an undamped run can grow for thousands of iterations before anything overflows).
@@ -615,6 +632,7 @@ def flatten(
     initial_positions = np.asarray(initial_positions, dtype=np.float64)
     if initial_positions.shape != (mesh.n_vertices, 2):
         raise ParameterError(f"initial layout must have shape ({mesh.n_vertices}, 2), got {initial_positions.shape}")
+    check_energy_scale(mesh, params.spring)
     barrier = (params.barrier_threshold, params.barrier_gain) if params.barrier else None
     model = SpringModel.build(mesh, initial_positions, params.spring, params.density, barrier)
     engine = (_Jacobi if params.update == "jacobi" else _Sequential)(model, params, initial_positions)

@@ -1,5 +1,6 @@
 """Float reference: hand-computed values, gradients, update orders, convergence."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -256,3 +257,22 @@ def test_a_layout_that_runs_away_has_diverged_while_its_numbers_are_finite():
     huge = Mesh(mesh.vertices * (COORDINATE_LIMIT / np.abs(mesh.vertices).max()), mesh.faces)
     assert flatten(huge, initial_layout(huge, "tutte"), FlattenParams(dynamics="momentum", max_iter=50)).status != \
         "diverged"
+
+
+def test_a_spring_constant_whose_energies_underflow_is_refused():
+    """C·Σd² below MIN_ENERGY_SCALE is refused: its energies underflow to 0, and an unmoved layout
+    passed the stop rule as converged. The momentum step is independent of C (its weights carry 1/C),
+    so a small C that still resolves takes the same run as the default."""
+    from golden_model.reference import MIN_ENERGY_SCALE
+
+    mesh = dome_grid(8)
+    start = initial_layout(mesh, "tutte")
+    scale = float(np.sum(mesh.rest_lengths**2))
+    params = FlattenParams(dynamics="momentum", max_iter=300)
+    with pytest.raises(ParameterError, match=r"spring constant C = .* is too small for this mesh.*--spring"):
+        flatten(mesh, start, dataclasses.replace(params, spring=MIN_ENERGY_SCALE / scale / 2))
+    small = flatten(mesh, start, dataclasses.replace(params, spring=4 * MIN_ENERGY_SCALE / scale))
+    default = flatten(mesh, start, params)
+    assert default.status == small.status == "converged"
+    assert small.iterations == default.iterations > 10
+    assert small.history.shape_error[-1] == pytest.approx(default.history.shape_error[-1], rel=1e-6)
