@@ -376,10 +376,10 @@ def energy_floor(mesh: Mesh, params: FlattenParams) -> float:
     return ENERGY_FLOOR * params.spring * float(np.sum(mesh.rest_lengths**2))
 
 
-#: The smallest ``C·Σd²`` (the springs' energy scale, mesh units²) a float run accepts: the energy at a
-#: strain of 1e-6, where the stop rule still compares, is then a normal float (below it, energies
-#: underflow to 0 and an unmoved layout would pass the stop rule as converged).
-MIN_ENERGY_SCALE = sys.float_info.min * 1e12
+#: The smallest ``C·Σd²`` (the springs' energy scale, mesh units²) a float run accepts: the guard's energy
+#: floor (``ENERGY_FLOOR·C·Σd²``, an rms strain of about 1e-3) is then a normal float. Below it, energies
+#: lose their precision and then underflow to 0, and an unmoved layout passed the stop rule as converged.
+MIN_ENERGY_SCALE = sys.float_info.min / ENERGY_FLOOR
 
 
 def check_energy_scale(mesh: Mesh, spring: float) -> None:
@@ -389,7 +389,7 @@ def check_energy_scale(mesh: Mesh, spring: float) -> None:
         raise ParameterError(
             f"spring constant C = {spring:g} is too small for this mesh: its energies (C times the squared "
             f"edge lengths, {scale:.3g} in all) underflow below what a float resolves (about "
-            f"{MIN_ENERGY_SCALE:.0e}); bring --spring nearer 1")
+            f"{MIN_ENERGY_SCALE:.0e}); bring --spring nearer 1, or the mesh's coordinates")
 
 
 #: A layout wider than this many times the larger of the 3D mesh and the start has run away: no flattening

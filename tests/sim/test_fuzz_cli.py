@@ -501,9 +501,9 @@ PARAMETERS: dict[str, Case] = {
                                                files={"m.obj": obj(vertices=V * 1e45)}),
     "penalty gain 1e300 on a 1e45 mesh": Case(["--no-guard", "--penalty", "--penalty-gain", "1e300"], 3,
                                               files={"m.obj": obj(vertices=V * 1e45)}),
-    "paper density and spring 1e-300 on a 1e-45 mesh": Case(
-        ["--dynamics", "paper", "--density", "1e-300", "--spring", "1e-300"], 3,
-        files={"m.obj": obj(vertices=V * 1e-45)}),
+    "paper density and spring 1e-300 on a 1e-45 mesh": Case(  # energies of 1e-390: all 0
+        ["--dynamics", "paper", "--density", "1e-300", "--spring", "1e-300"], 2,
+        files={"m.obj": obj(vertices=V * 1e-45)}, note=r"spring constant C = 1e-300 is too small for this mesh"),
     "fixed engine on a 1e45 mesh": Case(["--engine", "fixed"], files={"m.obj": obj(vertices=V * 1e45)}),
     "fixed engine on a 1e-45 mesh": Case(["--engine", "fixed"], files={"m.obj": obj(vertices=V * 1e-45)}),
 }
