@@ -82,7 +82,7 @@ def _ply_ascii(body: bytes, elements) -> dict:
         elif len(props) == 1 and count and _uniform_ascii_list(tokens, pos, count):
             length = int(tokens[pos])
             block = _ascii_numbers(tokens[pos:pos + count * (length + 1)], name, count * (length + 1))
-            columns = {props[0][0]: (_ascii_indices(block.reshape(count, length + 1)[:, 1:].ravel(), name),
+            columns = {props[0][0]: (_whole_indices(block.reshape(count, length + 1)[:, 1:].ravel(), name),
                                      np.full(count, length, dtype=np.int64))}
             pos += count * (length + 1)
         else:
@@ -94,7 +94,7 @@ def _ply_ascii(body: bytes, elements) -> dict:
                         raw[prop].append(tokens[pos] if pos < len(tokens) else b"")
                         pos += 1
                     else:
-                        length = int(_ascii_numbers(tokens[pos:pos + 1], name, 1)[0])
+                        length = _list_length(_ascii_numbers(tokens[pos:pos + 1], name, 1)[0], name)
                         raw[prop].extend(tokens[pos + 1:pos + 1 + length])
                         lengths[prop].append(length)
                         pos += 1 + length
@@ -102,7 +102,7 @@ def _ply_ascii(body: bytes, elements) -> dict:
                 raise ValueError(f"the file ends inside element '{name}' (fewer values than the header declares)")
             for prop, items in raw.items():
                 numbers = _ascii_numbers(items, name, len(items) if prop in lengths else count)
-                columns[prop] = ((_ascii_indices(numbers, name), np.asarray(lengths[prop], dtype=np.int64))
+                columns[prop] = ((_whole_indices(numbers, name), np.asarray(lengths[prop], dtype=np.int64))
                                  if prop in lengths else numbers)
         values[name] = columns
     if pos < len(tokens):
@@ -120,14 +120,31 @@ def _uniform_ascii_list(tokens: list, pos: int, count: int) -> bool:
     return len(lengths) == count and len(tokens) >= pos + count * stride and all(t == first for t in lengths)
 
 
-def _ascii_indices(numbers: np.ndarray, element: str) -> np.ndarray:
-    """The int64 indices of ASCII PLY list values read as floats; a fraction or a value past
-    :data:`INDEX_LIMIT` is refused (no silent truncation or wrap-around)."""
-    bad = ~(np.abs(numbers) < INDEX_LIMIT) | (numbers != np.floor(numbers))
+def _list_length(value, element: str) -> int:
+    """A list's length as the file gives it (a number of the header's count type): refused unless it
+    is a whole number from 0 to :data:`INDEX_LIMIT` (no truncated fraction, no overflow)."""
+    number = float(value)
+    if not 0 <= number < INDEX_LIMIT or number != int(number):
+        raise ValueError(f"element '{element}' has a list length {np.asarray(value)!s} that is not a whole "
+                         "number of values")  # as the file's type prints it (a float32's 3.9, not 3.9000000953674316)
+    return int(number)
+
+
+def _whole_indices(numbers: np.ndarray, element: str) -> np.ndarray:
+    """The int64 indices of PLY list values (as floats, ASCII, or of the header's type, binary; a float
+    type is legal PLY); a fraction or a value past :data:`INDEX_LIMIT` is refused (no silent truncation
+    or wrap-around)."""
+    given = np.asarray(numbers)
+    numbers = given.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(numbers) < INDEX_LIMIT) | (numbers != np.floor(numbers))
     if bad.any():
-        value = float(numbers[np.flatnonzero(bad)[0]])
-        what = "out of range" if not abs(value) < INDEX_LIMIT else "not an integer"
-        raise ValueError(f"element '{element}' has an index {value!r} that is {what}")  # repr: the shortest exact
+        first = np.flatnonzero(bad)[0]
+        value = float(numbers[first])
+        what = ("not a number" if value != value else "out of range" if not abs(value) < INDEX_LIMIT
+                else "not an integer")
+        # as the file's type prints it: the shortest exact form (a float32's 2.6, not 2.5999999046325684)
+        raise ValueError(f"element '{element}' has an index {given[first]!s} that is {what}")
     return numbers.astype(np.int64)
 
 
@@ -164,7 +181,7 @@ def _ply_binary(body: bytes, elements, order: str) -> dict:
         uniform = _uniform_binary(body, pos, count, props, order)
         if uniform is not None:
             block = take(uniform, count, name)
-            values[name] = {prop: (block[prop].ravel().astype(np.int64), block[prop + "#"].astype(np.int64))
+            values[name] = {prop: (_whole_indices(block[prop].ravel(), name), block[prop + "#"].astype(np.int64))
                             if count_type else block[prop]
                             for prop, _, count_type in props}
             continue
@@ -177,10 +194,10 @@ def _ply_binary(body: bytes, elements, order: str) -> dict:
                 if count_type is None:
                     columns[prop].append(take(scalar[prop], 1, name)[0])
                 else:
-                    length = int(take(counter[prop], 1, name)[0])
+                    length = _list_length(take(counter[prop], 1, name)[0], name)
                     columns[prop].append(take(scalar[prop], length, name))
                     lengths[prop].append(length)
-        values[name] = {prop: ((np.concatenate(items).astype(np.int64) if items else np.zeros(0, dtype=np.int64)),
+        values[name] = {prop: ((_whole_indices(np.concatenate(items), name) if items else np.zeros(0, dtype=np.int64)),
                                np.asarray(lengths[prop], dtype=np.int64)) if prop in lengths else np.asarray(items)
                         for prop, items in columns.items()}
     return values
@@ -199,7 +216,10 @@ def _uniform_binary(body: bytes, pos: int, count: int, props, order: str) -> np.
         counter = np.dtype(order + _PLY_TYPES[count_type])
         if offset + counter.itemsize > len(body):
             return None
-        length = int(np.frombuffer(body, dtype=counter, count=1, offset=offset)[0])
+        try:
+            length = _list_length(np.frombuffer(body, dtype=counter, count=1, offset=offset)[0], "")
+        except ValueError:
+            return None  # the row-by-row read names the bad length
         fields += [(prop + "#", counter), (prop, order + _PLY_TYPES[t], (length,))]
         offset += counter.itemsize + length * np.dtype(_PLY_TYPES[t]).itemsize
     dtype = np.dtype(fields)

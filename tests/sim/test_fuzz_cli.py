@@ -24,6 +24,7 @@ import builtins
 import errno
 import io
 import json
+import math
 import os
 import re
 import shutil
@@ -123,6 +124,14 @@ def ply_binary(faces=F) -> bytes:
     body = b"".join(struct.pack("<3d", *v) for v in V)
     body += b"".join(struct.pack(f"<B{len(f)}i", len(f), *f) for f in np.asarray(faces).tolist())
     return head + body
+
+
+def ply_binary_floats(rows) -> bytes:
+    """Binary PLY whose face lists are floats, the count too (legal PLY): each row ``[count, *indices]``."""
+    head = ("ply\nformat binary_little_endian 1.0\n" f"element vertex {len(V)}\n"
+            "property double x\nproperty double y\nproperty double z\n" f"element face {len(rows)}\n"
+            "property list float float vertex_indices\nend_header\n").encode()
+    return head + b"".join(struct.pack("<3d", *v) for v in V) + b"".join(struct.pack(f"<{len(r)}f", *r) for r in rows)
 
 
 def off(faces=F, sep=" ", nl="\n", counts_on_header=False, comments=False) -> str:
@@ -797,6 +806,19 @@ ROUND_TWO_MESHES: dict[str, Case] = {
     "ply fractional index with no exact binary form": Case(
         ["m.ply"], 2, r"element 'face' has an index 7.7 that is not an integer$",
         files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3 0 1 7.7")}),
+    "ply list length inf": Case(["m.ply"], 2, r"element 'face' has a list length inf that is not a whole number",
+                                files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\ninf 0 1 5")}),
+    "ply fractional list length": Case(["m.ply"], 2, r"element 'face' has a list length 3.5 that is not a whole",
+                                       files={"m.ply": ply_ascii().replace("\n3 0 1 5", "\n3.5 0 1 5")}),
+    "ply binary float indices": Case(["m.ply"], 2, r"element 'face' has an index 2.6 that is not an integer$",
+                                     files={"m.ply": ply_binary_floats([[3, 0, 1, 5], [3, 1, 5, 2.6]])}),
+    "ply binary float index nan": Case(["m.ply"], 2, r"element 'face' has an index nan that is not a number$",
+                                       files={"m.ply": ply_binary_floats([[3, 0, 1, 5], [3, 1, 5, math.nan]])}),
+    "ply binary list length inf": Case(["m.ply"], 2, r"element 'face' has a list length inf that is not a whole",
+                                       files={"m.ply": ply_binary_floats([[3, 0, 1, 5], [math.inf, 1, 5, 2]])}),
+    "ply binary fractional list length": Case(
+        ["m.ply"], 2, r"element 'face' has a list length 3.9 that is not a whole",
+        files={"m.ply": ply_binary_floats([[3.9, 0, 1, 5], [3, 1, 5, 2]])}),
     "stl with 0 triangles": Case(["m.stl"], 2, r"invalid mesh 'm.stl': the binary STL holds 0 triangles",
                                  files={"m.stl": _stl_no_triangles()}),
     "stl with 0 triangles and a header that is not UTF-8": Case(
