@@ -5,7 +5,8 @@ scipy, matplotlib), and a Ctrl-C in that time must end the program like one duri
 the one line ``springflat: interrupted`` and status 130 — not a traceback from inside an import,
 nor the ImportError that a C extension's import cut short by the signal turns into. So SIGINT (and
 SIGTERM, answered alike with ``springflat: terminated`` and 143) is only recorded while the commands
-are imported, and answered once they are.
+are imported, and answered once they are; from then on, also in the instants before the command
+installs its own handler and after it puts it back, as the command answers it.
 """
 
 from __future__ import annotations
@@ -34,14 +35,22 @@ def main() -> int:
         received.append(signal.Signals(signum).name)
 
     previous = {name: signal.signal(getattr(signal, name), record) for name in STOP_SIGNALS}
+    answer = None
     try:
         from .cli import main as run_command
+        from .outputs import on_interrupt as answer, received_signal
     finally:
+        # from here on a signal is answered as in a command (KeyboardInterrupt, the signal noted), also
+        # before the command installs that handler itself and after it is put back: with the default
+        # action a kill in those instants ended the program with no line
         for name, before in previous.items():
-            signal.signal(getattr(signal, name), before)
+            signal.signal(getattr(signal, name), answer or before)
     if received:
         return _stopped(received[0])
     try:
-        return run_command()  # installs its own handler (sim.outputs.on_interrupt)
-    except KeyboardInterrupt:  # in the instants before that handler, or after it is removed
-        return _stopped("SIGINT")
+        status = run_command()
+        for name in STOP_SIGNALS:  # the command is done, its outputs in place: its status stands
+            signal.signal(getattr(signal, name), record)
+    except KeyboardInterrupt:  # in the instants before the command's handler, or after it is removed
+        return _stopped(received_signal().name)
+    return status

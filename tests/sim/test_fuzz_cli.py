@@ -28,6 +28,7 @@ import math
 import os
 import re
 import shutil
+import signal
 import struct
 import subprocess
 import sys
@@ -1251,10 +1252,10 @@ def test_study_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys
 
 
 def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, timeout: float = 600,
-               env: dict[str, str] | None = None):
+               env: dict[str, str] | None = None, signum: int = signal.SIGINT):
     """Run ``springflat argv`` in a session of its own; once ``ready()`` holds (or at once), wait ``after`` s
-    and send SIGINT to the whole group (as Ctrl-C in a terminal does). Returns the finished process."""
-    import signal
+    and send ``signum`` (SIGINT: as Ctrl-C in a terminal does) to the whole group. Returns the finished
+    process."""
     import time
 
     proc = subprocess.Popen([SPRINGFLAT, *argv], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -1265,7 +1266,7 @@ def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, ti
         time.sleep(0.02)
     time.sleep(after)
     assert proc.poll() is None, "the command ended before it could be interrupted"
-    os.killpg(proc.pid, signal.SIGINT)
+    os.killpg(proc.pid, signum)
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:  # a hang fails the test without leaving its processes behind
@@ -1309,6 +1310,40 @@ def test_real_exit_ctrl_c_during_flatten_leaves_no_output(tmp_path, after):
                                  "--history", "h.csv", "--plot", "p.png"], tmp_path, after=after)
     assert (code, out, err) == (130, "", "springflat: interrupted\n")
     assert os.listdir(tmp_path) == ["m.obj"]
+
+
+#: Loaded by the program through PYTHONPATH: the command's argument parsing, after the console script has
+#: imported the commands and before the command installs its own signal handler, stops for 3 s once a
+#: marker file appears.
+_SLOW_ARGUMENT_PARSING = """
+import argparse, os, time
+_parse = argparse.ArgumentParser.parse_known_args
+def parse_known_args(self, *args, **kwargs):
+    if not os.path.exists(os.environ["SPRINGFLAT_TEST_MARKER"]):
+        open(os.environ["SPRINGFLAT_TEST_MARKER"], "w").close()
+        time.sleep(3)
+    return _parse(self, *args, **kwargs)
+argparse.ArgumentParser.parse_known_args = parse_known_args
+"""
+
+
+@pytest.mark.parametrize("signum, line, status", [(signal.SIGINT, "interrupted", 130),
+                                                  (signal.SIGTERM, "terminated", 143)], ids=["SIGINT", "SIGTERM"])
+def test_real_exit_a_signal_between_the_imports_and_the_command_is_one_line(signum, line, status, tmp_path):
+    """Between the console script's imports and the command's own handler a kill had the default action:
+    status -15, no line."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(_SLOW_ARGUMENT_PARSING)
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "m.obj").write_text(obj())
+    marker = tmp_path / "parsing"
+    code, out, err = _interrupt(["flatten", "m.obj", "--out", "o.obj"], work, after=0.5, ready=marker.exists,
+                                timeout=120, signum=signum,
+                                env={"PYTHONPATH": str(site), "SPRINGFLAT_TEST_MARKER": str(marker)})
+    assert (code, out, err) == (status, "", f"springflat: {line}\n")
+    assert os.listdir(work) == ["m.obj"]
 
 
 @pytest.mark.slow
