@@ -110,13 +110,14 @@ OPTIONS: Mapping[str, OptionSpec] = _record_options()
 
 
 def _option_value(spec: OptionSpec, value: Any) -> Any:
-    """``value`` checked and converted as the command line would the same text."""
-    if spec.action == "store_true" or spec.action is argparse.BooleanOptionalAction:
-        if isinstance(value, (bool, np.bool_)) or (value is None and spec.action != "store_true"):
-            return None if value is None else bool(value)
-        raise ParameterError(f"{spec.keyword} must be True or False, got {value!r}")
+    """``value`` checked and converted as the command line would the same text; ``None`` is the option left
+    out (its default), whichever option it is."""
     if value is None:
-        return None
+        return spec.default
+    if spec.action == "store_true" or spec.action is argparse.BooleanOptionalAction:
+        if isinstance(value, (bool, np.bool_)):
+            return bool(value)
+        raise ParameterError(f"{spec.keyword} must be True or False, got {value!r}")
     if isinstance(value, (bool, np.bool_)):
         raise ParameterError(f"{spec.keyword} takes a value ({spec.flag}), not {value!r}")
     text = value if isinstance(value, str) else str(value)
@@ -256,8 +257,8 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
             folds.
         **options: the options of ``springflat flatten`` (listed below and in :data:`OPTIONS`), the flag
             without its dashes and with ``_`` for ``-``: ``max_iter=500`` is ``--max-iter 500``.  Each value
-            is checked as the command line checks the same text.  Left out, an option has the default of a
-            mesh *file* on the command line (``springflat flatten mesh.obj``).
+            is checked as the command line checks the same text.  Left out (or ``None``), an option has the
+            default of a mesh *file* on the command line (``springflat flatten mesh.obj``).
 
     Returns:
         a :class:`Pattern` (``.layout`` is the ``(V, 2)`` numpy array). Faces wound against their neighbours
@@ -327,6 +328,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
             pattern: the command writes none either); ``dxf_edges`` without a ``.dxf`` path, or ``paper``
             without a ``.pdf`` / ``.svg`` one, which would ignore them.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"write_pattern takes a file path (str or pathlib.Path), not {type(path).__name__}")
     if not isinstance(pattern, Pattern):
         raise TypeError(f"write_pattern takes the Pattern that flatten returns, not {type(pattern).__name__}")
     if not isinstance(dxf_edges, bool):

@@ -199,8 +199,21 @@ def test_arrays_that_are_no_arrays_of_numbers_are_mesh_errors(ear, make, message
         springflat.flatten(*make(*ear), max_iter=1)
 
 
+def test_none_is_an_option_left_out_whichever_option_it_is(ear):
+    """``engine=None`` raised a bare ValueError and ``update=None``, ``penalty=None`` a ParameterError, where
+    ``dynamics=None`` meant the default: ``None`` is now the default for every option."""
+    V, F = ear
+    reference = springflat.flatten(V, F)
+    for keyword in springflat.OPTIONS:
+        pattern = springflat.flatten(V, F, **{keyword: None})
+        assert pattern.params == reference.params, keyword
+        np.testing.assert_array_equal(pattern.layout, reference.layout)
+
+
 def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
     V, F = ear
+    with pytest.raises(TypeError, match="write_pattern takes a file path \\(str or pathlib.Path\\), not NoneType"):
+        springflat.write_pattern(None, springflat.flatten(V, F, max_iter=1))
     with pytest.raises(TypeError, match="write_pattern takes the Pattern that flatten returns, not tuple"):
         springflat.write_pattern(tmp_path / "x.dxf", (V, F))
     with pytest.raises(TypeError, match="dxf_edges must be True or False, got 'no'"):
