@@ -353,7 +353,9 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
     edges, side_edge, counts = _unique_edges(faces)
     size = float(np.abs(vertices[edges[:, 0]] - vertices[edges[:, 1]]).max())  # no squares: cannot underflow
     if 0 < size < MIN_MESH_SIZE:  # size 0: every face is degenerate, said below
-        raise MeshError(f"mesh is too small: its longest edge is about {size:.3g}, below the supported "
+        # its length, from differences scaled by the largest (their squares would underflow)
+        length = size * float(np.linalg.norm((vertices[edges[:, 0]] - vertices[edges[:, 1]]) / size, axis=1).max())
+        raise MeshError(f"mesh is too small: its longest edge is {length:.3g} long, below the supported "
                         f"{MIN_MESH_SIZE:g} (squared lengths and areas would underflow); scale it up")
     longest = float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).max())
     areas = triangle_areas_3d(vertices, faces)

@@ -449,8 +449,9 @@ def test_coordinates_outside_the_range_are_refused_naming_it():
                                         r"range \|x\| <= 1e\+50$"):
         Mesh(np.where(np.arange(4)[:, None] == 2, -1e51, SQUARE_V), SQUARE_F)
     Mesh(SQUARE_V * 1e50, SQUARE_F)  # the limit itself is in range
-    with pytest.raises(MeshError, match=r"^mesh is too small: its longest edge is about 1e-150, below the supported "
-                                        r"1e-50 .*underflow"):
+    # the longest edge is the square's diagonal, 1.41e-150 (not its largest coordinate difference, 1e-150)
+    with pytest.raises(MeshError, match=r"^mesh is too small: its longest edge is 1.41e-150 long, below the "
+                                        r"supported 1e-50 .*underflow"):
         Mesh(SQUARE_V * 1e-150, SQUARE_F)
     Mesh(SQUARE_V * 1e-50, SQUARE_F)
     with pytest.raises(MeshError, match="degenerate"):  # all at one point: no size at all
