@@ -66,7 +66,9 @@ BUILTIN_MESHES: dict[str, tuple[list, list, PaperParameters]] = {
 
 
 def is_builtin(name: str) -> bool:
-    """True when ``name`` names a built-in mesh (case-insensitive)."""
+    """True when ``name`` names a built-in mesh (case-insensitive). It means the built-in even where a file
+    of that name exists: a mesh file's name ends in its format (``.obj``, ...), so that file could not be
+    read as one."""
     return name.lower() in BUILTIN_MESHES
 
 

@@ -183,7 +183,7 @@ def _endings(args: argparse.Namespace) -> tuple[tuple[str, str], ...]:
 
 def _names(meshes: list[str]) -> list[str]:
     """Each mesh's name (file stem or built-in name); two meshes of one name would share files."""
-    names = [m if is_builtin(m) and not Path(m).is_file() else Path(m).stem for m in meshes]
+    names = [m if is_builtin(m) else Path(m).stem for m in meshes]
     seen: dict[str, str] = {}
     for mesh, name in zip(meshes, names):
         if name in seen and seen[name] == mesh:
@@ -231,7 +231,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
 
 def _job(source: str, name: str, options: dict, endings) -> BatchJob | MeshOutcome:
     """The job of one mesh, or its failure when its file cannot be read here."""
-    if is_builtin(source) and not Path(source).is_file():
+    if is_builtin(source):
         return BatchJob(source, name, None, options, endings)
     try:
         return BatchJob(source, name, read_file_bytes(Path(source), "mesh", MeshError), options, endings)

@@ -174,7 +174,10 @@ def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
     dynamics with the fold barrier, stopped at the energy minimum (relative energy change
     ``FILE_TOL_ENERGY``, no E_S/E_C thresholds) with ``N_max`` sized to the mesh's radius in edges.
     """
-    if is_builtin(name) and not Path(name).is_file():
+    if is_builtin(name):  # a file of that name has no mesh format's ending: it could not be read
+        if Path(name).is_file():
+            print(f"springflat: note: '{name}' is the built-in mesh; the file of that name here is not read "
+                  "(a mesh file's name ends in its format: .obj, .ply, .off, .stl)", file=sys.stderr)
         mesh, paper = builtin_mesh(name)
         return mesh, FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
                                    tol_shape=paper.tol_shape, tol_energy=paper.tol_energy,
@@ -190,7 +193,7 @@ def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
 def default_init(mesh_name: str) -> str:
     """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), ``auto`` for files
     (ARAP; SLIM from Tutte where ARAP folds or fails: golden_model.layouts.start_layout)."""
-    return "pca" if is_builtin(mesh_name) and not Path(mesh_name).is_file() else AUTO_START
+    return "pca" if is_builtin(mesh_name) else AUTO_START
 
 
 #: From this many vertices ARAP takes seconds here, and a guarded ``--init auto`` run with a second core

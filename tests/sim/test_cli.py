@@ -379,3 +379,19 @@ def test_no_command_names_the_unknown_option_or_asks_for_one(capsys, argv, messa
     with pytest.raises(SystemExit) as ended:
         main(argv)
     assert ended.value.code == 2 and capsys.readouterr().err == f"springflat: error: {message}\n"
+
+
+def test_a_built_in_name_means_the_built_in_even_beside_a_file_of_that_name(tmp_path, monkeypatch, capsys):
+    """A file named ``surf1`` (no mesh format's ending, so it could not be read) made ``flatten surf1`` fail
+    with "unknown format ''" in its directory; the built-in runs, with a note, and the file is left alone."""
+    from sim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "surf1").write_text("not a mesh\n")
+    assert main(["flatten", "surf1", "--max-iter", "3", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["mesh"] == "surf1"
+    assert "note: 'surf1' is the built-in mesh; the file of that name here is not read" in err
+    assert (tmp_path / "surf1").read_text() == "not a mesh\n"
+    assert main(["flatten", "surf1", "surf2", "--max-iter", "3", "--out-dir", "d", "--out", ".flat.obj"]) == 0
+    assert sorted(p.name for p in (tmp_path / "d").iterdir()) == ["surf1.flat.obj", "surf2.flat.obj"]  # a batch too
