@@ -51,6 +51,7 @@ import scipy.sparse.linalg as spla
 from .files import read_file_bytes
 from .mesh import COORDINATE_LIMIT, Mesh, MeshError, signed_areas_2d
 from .mesh_io import read_obj_vertices
+from .mesh_io.polygons import is_plain
 
 __all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
            "arap_layout", "slim_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS",
@@ -351,6 +352,8 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
 
 def _layout_number(text: str, path: Path, row: int) -> float:
     try:
+        if not is_plain(text):  # float() reads 1_0 as 10 and any script's digits
+            raise ValueError
         return float(text)
     except ValueError:
         raise LayoutError(f"cannot parse layout '{path}': row {row + 1} has {text[:20]!r}, not a number") from None

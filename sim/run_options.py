@@ -23,6 +23,7 @@ from golden_model.layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_
 from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes
+from golden_model.mesh_io.polygons import is_float, is_int
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.params import FlattenParams, ParameterError
 
@@ -62,17 +63,17 @@ def _density(text: str) -> float | str:
 
 
 def number_argument(text: str) -> float:
-    try:
+    """A number option's value, written as a number is (``float`` alone also reads ``1_0`` and ``٣``)."""
+    if is_float(text.strip()):
         return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    raise argparse.ArgumentTypeError(f"expected a number, got {text!r}")
 
 
 def integer_argument(text: str) -> int:
-    try:
+    """An integer option's value, written as an integer is (``int`` alone also reads ``1_0`` and ``٣``)."""
+    if is_int(text.strip()):
         return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}")
 
 
 def path_argument(text: str) -> Path:

@@ -13,7 +13,7 @@ from ..mesh import Mesh, MeshError, oriented_mesh
 from .obj import obj_line_hint, read_obj
 from .off import read_off
 from .ply import read_ply
-from .polygons import triangulate_polygons
+from .polygons import first_unplain, is_float, triangulate_polygons
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
@@ -175,18 +175,12 @@ def read_text_stl(data: bytes, where: str, notes: list[str]) -> tuple[np.ndarray
 
 def _numbers(words: list[str], refused: Callable[[int, str], MeshError], line_no: int) -> list[float]:
     try:
+        if first_unplain(words) is not None:
+            raise ValueError
         return [float(w) for w in words]
     except ValueError:
-        bad = next(w for w in words if not _is_number(w))
+        bad = next(w for w in words if not is_float(w))
         raise refused(line_no, f"{_shown(bad)} is not a number") from None
-
-
-def _is_number(word: str) -> bool:
-    try:
-        float(word)
-        return True
-    except ValueError:
-        return False
 
 
 def _shown(text: str, limit: int = 40) -> str:

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..files import read_file_bytes
 from ..mesh import MeshError
-from .polygons import Polygons, is_int, plural, text_coordinates, triangulate_polygons
+from .polygons import Polygons, first_unplain, is_int, plural, text_coordinates, triangulate_polygons
 
 #: Free-form geometry statements: they define curves and surfaces the
 #: project would silently drop, so a file using them is refused.
@@ -233,7 +233,7 @@ def _obj_corner_slots(
     corners: list[str], corner_line: np.ndarray, where: str
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """The vertex, texture and normal index of each face corner, and whether each is written."""
-    fast = _obj_uniform_corners(corners)
+    fast = _obj_uniform_corners(corners) if first_unplain(corners) is None else None
     if fast is not None:
         return fast
     parts = [corner.split("/") for corner in corners]
@@ -246,6 +246,8 @@ def _obj_corner_slots(
         # the vertex index is never optional: an empty one fails the conversion below
         strings = [p[0] for p in parts] if k == 0 else [p[k] if ok else "0" for p, ok in zip(parts, present)]
         try:
+            if first_unplain(strings) is not None:
+                raise ValueError
             slots.append(np.fromiter(map(int, strings), dtype=np.int64, count=len(strings)))
         except ValueError:
             c = next(c for c, text in enumerate(strings) if not is_int(text))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh import MeshError
-from .polygons import INDEX_LIMIT, Polygons, checked_polygons, is_float
+from .polygons import INDEX_LIMIT, Polygons, checked_polygons, first_unplain, is_float
 
 #: PLY scalar types and their numpy codes (byte order added for binary files).
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -152,6 +152,8 @@ def _ascii_numbers(items: list, element: str, expected: int) -> np.ndarray:
     if len(items) < expected:
         raise ValueError(f"the file ends inside element '{element}' (fewer values than the header declares)")
     try:
+        if first_unplain(items) is not None:
+            raise ValueError
         return np.array(items, dtype=np.bytes_).astype(np.float64)
     except ValueError:
         bad = next(t for t in items if not is_float(t.decode("ascii", errors="replace")))

@@ -97,25 +97,46 @@ def plural(n: int, word: str, words: str | None = None) -> str:
     return f"{n} {word}" if n == 1 else f"{n} {words or word + 's'}"
 
 
+def is_plain(text: str | bytes) -> bool:
+    """Whether ``text`` holds only what a number in a mesh file is written with: ASCII, and no ``_``.
+    Python's ``float`` and ``int`` also read digit separators (``1_0`` is 10) and any script's digits
+    (``٣`` is 3), which no mesh format writes: taken silently, they would be other numbers than meant."""
+    return text.isascii() and (b"_" if isinstance(text, bytes) else "_") not in text
+
+
+def first_unplain(tokens) -> int | None:
+    """The index of the first of ``tokens`` (str or bytes) that is not :func:`is_plain`, or None (one join
+    and two scans where all are plain: files are large)."""
+    if not len(tokens):
+        return None
+    if is_plain((b"" if isinstance(tokens[0], bytes) else "").join(tokens)):
+        return None
+    return next(k for k, token in enumerate(tokens) if not is_plain(token))
+
+
 def is_float(text: str) -> bool:
+    """Whether ``text`` is a number as a mesh file writes one (:func:`is_plain`, and ``float`` reads it)."""
     try:
         float(text)
     except ValueError:
         return False
-    return True
+    return is_plain(text)
 
 
 def is_int(text: str) -> bool:
+    """Whether ``text`` is an integer as a mesh file writes one (:func:`is_plain`, and ``int`` reads it)."""
     try:
         int(text)
     except ValueError:
         return False
-    return True
+    return is_plain(text)
 
 
 def text_coordinates(coords: list[str], vertex_line: np.ndarray, where: str) -> np.ndarray:
     """``(V, 3)`` floats from the flat x, y, z strings; a token that is no number is refused with its line."""
     try:
+        if first_unplain(coords) is not None:
+            raise ValueError
         return np.fromiter(map(float, coords), dtype=np.float64, count=len(coords)).reshape(-1, 3)
     except ValueError:
         k = next(k for k, value in enumerate(coords) if not is_float(value))
