@@ -119,7 +119,9 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
             Path(mesh_path).write_bytes(job.data)
         out = Path(tmp) / "out"
         out.mkdir()
-        names = [(option, ending, out / f"{job.name}{ending}") for option, ending in job.endings]
+        # the ending alone picks a pattern's kind: in 'ear.flat' + '.obj' the mesh name's '.flat' is no ending
+        stem = job.name.replace(".", "_")
+        names = [(option, ending, out / f"{stem}{ending}") for option, ending in job.endings]
         args = argparse.Namespace(**job.options)
         args.mesh = mesh_path
         for option, _, _ in OUTPUT_OPTIONS:

@@ -316,3 +316,17 @@ def test_study_on_a_dask_local_cluster_gives_the_pools_results(tmp_path):
             return [{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(f)]
     # the base set, each other preset, lut_index_bits from 5 to 10
     assert runs("pool") == runs("dask") and len(runs("pool")) == 1 + (len(PRESETS) - 1) + 6
+
+
+def test_a_mesh_name_with_a_dot_gets_the_kind_its_ending_names(tmp_path, monkeypatch, capsys):
+    """``ear.flat.obj`` with ``--out .obj`` is the mesh with texture coordinates, ``--out .svg`` the sheets:
+    the mesh's name ends in ``.flat``, the endings given do not."""
+    monkeypatch.chdir(tmp_path)
+    mesh = dome_grid(5)
+    save_obj("ear.flat.obj", mesh.vertices * 100, mesh.faces)
+    assert main(["flatten", "ear.flat.obj", "--out-dir", "o", "--out", ".obj", "--out", ".svg",
+                 "--max-iter", "3"]) == 0
+    assert sorted(os.listdir("o")) == ["ear.flat.obj", "ear.flat.svg"]
+    obj = Path("o/ear.flat.obj").read_text()
+    assert sum(line.startswith("vt ") for line in obj.splitlines()) == mesh.n_vertices and " 1/1 " in obj
+    assert 'id="sheet-' in Path("o/ear.flat.svg").read_text()
