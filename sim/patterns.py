@@ -244,6 +244,7 @@ def _write_uv_obj(path: str, drawing: PatternDrawing) -> None:
 
 def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
     import ezdxf
+    from ezdxf import zoom
 
     previous = ezdxf.options.write_fixed_meta_data_for_testing
     ezdxf.options.write_fixed_meta_data_for_testing = True  # no dates or GUIDs: the same input, the same bytes
@@ -256,6 +257,14 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
             doc.layers.add("MESH", color=8)
             for a, b in drawing.layout[drawing.edges].tolist():
                 msp.add_line(a, b, dxfattribs={"layer": "MESH"})
+        # the drawing's extents: ezdxf leaves them at ±1e20 ("not set"), and a viewer's "zoom extents" then
+        # shows nothing useful; both the header and the model space are set (ezdxf copies the latter on save,
+        # unless it is the origin)
+        drawn = drawing.layout if edges else drawing.boundary_points
+        low, high = (*drawn.min(axis=0), 0.0), (*drawn.max(axis=0), 0.0)
+        msp.dxf.extmin, msp.dxf.extmax = low, high
+        doc.header["$EXTMIN"], doc.header["$EXTMAX"] = low, high
+        zoom.window(msp, low[:2], high[:2])  # the file opens showing the pattern
         meta = doc.ezdxf_metadata()
         meta["springflat_mesh"] = drawing.name
         meta["springflat_units"] = drawing.units

@@ -72,6 +72,11 @@ def test_dxf_has_a_closed_cut_line_of_the_patterns_length_and_declares_its_units
     assert len(points) == len(mesh.boundary_loop)
     lines = doc.modelspace().query('LINE[layer=="MESH"]')
     assert len(lines) == (mesh.n_edges if units == "m" else 0)
+    # the extents a viewer zooms to: those of what is drawn (ezdxf's bounding box of the entities)
+    box = ezdxf.bbox.extents(doc.modelspace())
+    size = float(np.max(box.size))
+    assert np.allclose(doc.header["$EXTMIN"], box.extmin, rtol=0, atol=1e-9 * size)
+    assert np.allclose(doc.header["$EXTMAX"], box.extmax, rtol=0, atol=1e-9 * size)
 
 
 def test_dxf_without_edges_has_only_the_cut_line(bunny, tmp_path):
