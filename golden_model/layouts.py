@@ -31,8 +31,9 @@
   an empty path is refused.
 
 Every computed layout is oriented so that most faces are counter-clockwise
-(mirrored otherwise), which makes pictures comparable; the flattening itself
-does not depend on it.  libigl is imported on first use of a libigl method;
+(mirrored otherwise), and a given one (a file, an array) is mirrored where its
+bulk is clockwise, with a note: a pattern is seen from the mesh's front, and a
+mirror image would be cut the wrong way round. The dynamics does not depend on it.  libigl is imported on first use of a libigl method;
 any libigl failure (an exception or a non-finite result) is a
 :class:`LayoutError` naming the method.
 """
@@ -428,11 +429,28 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
     :func:`start_layout` untangles), a layout file path (what an OBJ layout has that is not used goes
     to ``notes``, see :func:`load_layout`) or a ``(V, 2)`` array (checked as a file's rows are)."""
     if isinstance(init, np.ndarray):
-        return check_layout(init, mesh.n_vertices, "the init array", mesh.faces)
+        return _facing_the_front(check_layout(init, mesh.n_vertices, "the init array", mesh.faces), mesh,
+                                 "the init array", notes)
     method = _METHODS.get("arap" if str(init) == AUTO_START else str(init))
     if method is not None:
         return method(mesh)
-    return load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes)
+    return _facing_the_front(load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes), mesh,
+                             f"the layout '{init}'", notes)
+
+
+def _facing_the_front(positions: np.ndarray, mesh: Mesh, what: str, notes: list[str] | None) -> np.ndarray:
+    """A given layout mirrored in x where its bulk is clockwise (its total signed area below 0 by more than
+    rounding, 1e-9 of its bounding box: a degenerate layout is left as it is), with a note: a pattern is cut and printed as seen from the mesh's front (its faces'
+    winding), as every computed start is; a mirror image (texture coordinates with y down, say) would
+    be cut the wrong way round."""
+    total = float(np.sum(signed_areas_2d(positions, mesh.faces), dtype=np.float64))
+    extent = np.ptp(positions, axis=0)
+    if total >= -1e-9 * float(extent[0] * extent[1]):  # counter-clockwise, or degenerate (rounding's sign)
+        return positions
+    if notes is not None:
+        notes.append(f"{what} is a mirror image of the mesh (most of its area runs clockwise, as texture "
+                     "coordinates with y down do): mirrored in x, so that the pattern shows the mesh's front")
+    return positions * np.array([-1.0, 1.0])
 
 
 @dataclass(frozen=True)

@@ -162,6 +162,24 @@ def test_a_folded_initial_array_is_untangled_as_a_layout_file_is(ear, tmp_path):
     np.testing.assert_array_equal(from_array.layout, from_file.layout)
 
 
+def test_a_mirror_image_start_is_mirrored_so_that_the_pattern_shows_the_meshs_front(ear, tmp_path):
+    """A layout given clockwise (y-down texture coordinates, say) would be cut the wrong way round."""
+    from golden_model.mesh import layout_orientation
+
+    V, F = ear
+    start = springflat.flatten(V, F, max_iter=1).result.initial_positions
+    assert layout_orientation(start, F) > 0  # the computed start faces the front
+    mirrored = start * [1.0, -1.0]
+    path = tmp_path / "uv.txt"
+    np.savetxt(path, mirrored, fmt="%.17g")
+    for init, what in ((mirrored, "the init array"), (path, f"the layout '{path}'")):
+        with pytest.warns(springflat.MeshNote, match=f"{what} is a mirror image of the mesh .*: mirrored in x"):
+            pattern = springflat.flatten(V, F, init=init, max_iter=20)
+        assert layout_orientation(pattern.layout, F) > 0 and pattern.folded == 0
+        # mirrored in x rather than back in y: the same start up to that one mirror
+        np.testing.assert_array_equal(pattern.result.initial_positions, start * [-1.0, -1.0])
+
+
 def test_the_board_engine_is_refused_by_the_api_with_what_to_run_instead(ear):
     V, F = ear
     with pytest.raises(ParameterError, match=r"engine 'board', the engine on a ULX3S over its USB-UART \(--port; docs/board.md\), runs from the command "
