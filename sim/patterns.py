@@ -7,9 +7,10 @@ The writer is chosen by the file name's ending (:func:`pattern_kind`):
                edge as a ``LINE`` on layer ``MESH``; coordinates in the mesh's units, 1:1, ``$INSUNITS`` and
                ``$MEASUREMENT`` set from ``units`` (ezdxf).
 ``.pdf``       true scale (1 mm of pattern = 1 mm of paper for ``units="mm"``), on ``paper`` sheets
-               (A4, Letter, or ``fit``: one page the pattern's size), tiled with overlap marks when the
-               pattern is larger than one sheet; every sheet carries the mesh's name, the units, its
-               label and a scale bar to check the print (reportlab).
+               (A4, Letter, or ``fit``: one page around the pattern), tiled with overlap marks when the
+               pattern is larger than one sheet (a sheet that would hold nothing of it is left out);
+               every sheet carries the mesh's name, the units, the run, its label when tiled and a scale
+               bar to check the print (reportlab).
 ``.svg``       the same sheets as the PDF in one SVG document, user unit = 1 mm; tiled sheets lie side
                by side in their grid, each declared as an Inkscape page.
 ``.obj``       the 3D mesh (``v``, full precision) with the pattern as texture coordinates ``vt`` (scaled
@@ -33,9 +34,9 @@ from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 from xml.sax.saxutils import escape
 
 import numpy as np
@@ -51,7 +52,8 @@ UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 UNITS = tuple(UNIT_MM)
 #: DXF ``$INSUNITS`` codes of :data:`UNITS` (AutoCAD: 1 inches, 4 millimetres, 5 centimetres, 6 metres).
 DXF_INSUNITS = {"mm": 4, "cm": 5, "m": 6, "in": 1}
-#: Paper sizes in millimetres (portrait); ``fit`` is one page the size of the pattern.
+#: Paper sizes in millimetres (portrait); ``fit`` is one page around the pattern (:data:`FIT_PAD_MM`, the margin
+#: and the title block).
 PAPER_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}
 PAPERS = (*PAPER_MM, "fit")
 #: The sheet when none is named (``--paper``, ``write_pattern``'s ``paper``).
@@ -74,6 +76,9 @@ EDGE_WIDTH_MM = 0.06      # mesh edges, drawn only when ...
 EDGE_MIN_MM = 2.0         # ... the median edge is at least this long on paper
 SCALE_BAR_MAX_MM = 80.0   # the scale bar is the longest 1, 2 or 5 x 10^k units not longer than this
 FONT_MM = 3.2             # text height of the title block
+CAP_HEIGHT_EM = 0.72      # Helvetica's cap height, in font sizes (a label's size is its cap height)
+MIN_TEXT_SCALE = 0.6      # a title-block line too long for its room is set down to this fraction, then cut
+TEXT_GAP_MM = 5.0         # between the title block's left column and the scale bar
 MAX_SHEETS = 400          # more sheets than this is a wrong --units, not a pattern to print
 SMALL_PATTERN_MM = 10.0   # a pattern smaller than this at 1:1 gets a note about --units
 PT_PER_MM = 72.0 / 25.4
@@ -121,7 +126,8 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
                              "PDF/SVG and DXF $INSUNITS (default mm)")
     parser.add_argument("--paper", choices=PAPERS, default=None,  # None: not given (DEFAULT_PAPER)
                         help="PDF/SVG sheet: a4 or letter (tiled with overlap marks when the pattern is larger), "
-                             f"or fit: one page the pattern's size (default {DEFAULT_PAPER})")
+                             f"or fit: one page around the pattern, for a roll plotter (default {DEFAULT_PAPER}); a cutter "
+                             "takes the .dxf, which holds the cut line alone")
     parser.add_argument("--dxf-edges", action="store_true",
                         help="also write every mesh edge to the DXF, on layer MESH (the boundary is on CUT)")
     parser.add_argument("--distortion", type=file_path_argument, default=None, metavar="FILE.csv",
@@ -203,7 +209,7 @@ def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFA
     else:
         size = pattern_size_mm(drawing)
         check_sheet_count(size, paper, drawing.units)
-        plan = plan_sheets(size, paper)
+        plan = without_blank_sheets(plan_sheets(size, paper), drawing)
         with atomic_write(path) as tmp:
             (_write_pdf if kind == "pdf" else _write_svg)(tmp, drawing, plan)
 
@@ -310,7 +316,8 @@ class SheetPlan:
         rows, cols: the grid.
         shift: ``(x, y)`` mm added to the pattern so that it sits centred on the grid of windows.
         overlap: mm shared by adjacent windows.
-        sheets: row by row from the top, each left to right.
+        sheets: row by row from the top, each left to right (the grid's, less the blank ones).
+        blank: sheets of the grid left out, as nothing of the pattern falls in their window.
     """
 
     paper: str
@@ -322,6 +329,7 @@ class SheetPlan:
     shift: tuple[float, float]
     overlap: float
     sheets: tuple[Sheet, ...]
+    blank: int = 0
 
     @property
     def stride(self) -> tuple[float, float]:
@@ -334,7 +342,8 @@ class SheetPlan:
         paper = {"a4": "A4", "letter": "Letter"}[self.paper] + (" landscape" if self.landscape else " portrait")
         if len(self.sheets) == 1:
             return f"one {paper} sheet"
-        return (f"{len(self.sheets)} {paper} sheets ({self.cols} columns x {self.rows} rows, "
+        blank = f", {self.blank} blank left out" if self.blank else ""
+        return (f"{len(self.sheets)} {paper} sheets ({self.cols} columns x {self.rows} rows{blank}, "
                 f"overlap {self.overlap:g} mm)")
 
 
@@ -449,6 +458,30 @@ def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = O
     return SheetPlan(paper, landscape, page, window, rows, cols, shift, overlap, sheets)
 
 
+def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
+    """``plan`` less the sheets whose window holds nothing of the pattern (no node in it, and the cut
+    line's filled outline does not meet it): an L-shaped pattern's empty corner is not printed. The others
+    keep their labels, so that the grid still shows where each goes."""
+    from matplotlib.path import Path as Outline
+    from matplotlib.transforms import Bbox
+
+    if len(plan.sheets) == 1:
+        return plan
+    q = _pattern_mm(drawing, plan)
+    cut = q[drawing.boundary]
+    outline = Outline(np.vstack([cut, cut[:1]]), closed=True)  # a closed path's last vertex is not drawn
+    size = np.array(plan.window[2:])
+
+    def drawn(sheet: Sheet) -> bool:
+        low = np.array(sheet.offset)
+        high = low + size
+        return bool(np.all((q >= low) & (q <= high), axis=1).any()) or outline.intersects_bbox(
+            Bbox([low, high]), filled=True)
+
+    kept = tuple(sheet for sheet in plan.sheets if drawn(sheet))
+    return replace(plan, sheets=kept, blank=len(plan.sheets) - len(kept))
+
+
 def _row_name(index: int) -> str:
     """A, B, ..., Z, AA, AB, ... for row 0, 1, ..."""
     name = ""
@@ -506,6 +539,39 @@ def _unit_label(length: float, units: str) -> str:
     return f"{length:g} {units}" + (f" ({mm:g} mm)" if units in ("cm", "m") else "")
 
 
+def _text_width(text: str, size: float, bold: bool = False) -> float:
+    """Width in mm of ``text`` set in Helvetica (SVG: Helvetica or Arial, the same widths) of cap height
+    ``size`` mm."""
+    from reportlab.pdfbase.pdfmetrics import stringWidth
+
+    return stringWidth(text, "Helvetica-Bold" if bold else "Helvetica", size / CAP_HEIGHT_EM)
+
+
+def _shortened_middle(text: str, cut: int) -> str:
+    """``text`` with ``cut`` characters taken from its middle and ``...`` in their place."""
+    keep = max(len(text) - cut, 2)
+    return text[:(keep + 1) // 2] + "..." + text[len(text) - keep // 2:]
+
+
+def _fitted(text: str, room: float, size: float, bold: bool = False,
+            shorter: Callable[[int], str] | None = None) -> tuple[str, float]:
+    """``(text, size)`` that fit in ``room`` mm: ``text`` as it is, or set smaller (down to
+    :data:`MIN_TEXT_SCALE` of ``size``), or shortened at that size by ``shorter(n)`` (``n`` characters
+    fewer; default: cut at the end, ``...`` in their place)."""
+    width = _text_width(text, size, bold)
+    if width <= room:
+        return text, size
+    smaller = size * room / width
+    if smaller >= MIN_TEXT_SCALE * size:
+        return text, smaller * (1 - 1e-9)  # rounding must not put it over the edge
+    smallest = MIN_TEXT_SCALE * size
+    shorter = shorter or (lambda n: text[:max(len(text) - n, 1)] + "...")
+    for cut in range(1, len(text)):
+        if _text_width(short := shorter(cut), smallest, bold) <= room:
+            return short, smallest
+    return shorter(len(text)), smallest
+
+
 def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple[list[Stroke], list[Label]]:
     """The frame, overlap marks, title block and scale bar of one sheet, in page mm."""
     x0, y0, w, h = plan.window
@@ -534,24 +600,31 @@ def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple
         mark((x0, y0 + plan.overlap), (x0 + w, y0 + plan.overlap), by_place[(r - 1, c)],
              (x0 + w / 2, y0 + plan.overlap + 1.5), "middle")
 
-    # title block: name and units, the run, the sheet; the scale bar at the right
-    top = y0 - 5.0
-    labels.append(Label(x0, top, f"{drawing.name}: springflat cutting pattern, scale 1:1, units {drawing.units}",
-                        FONT_MM, bold=True, name="title"))
-    if drawing.caption:
-        labels.append(Label(x0, top - 1.5 * FONT_MM, drawing.caption, 0.8 * FONT_MM))
-    where = f"sheet {sheet.label} of {len(plan.sheets)}: " if len(plan.sheets) > 1 else ""
-    labels.append(Label(x0, top - 3.0 * FONT_MM, f"{where}{plan.describe()}; print at 100 % (no fit to page)",
-                        0.8 * FONT_MM, name="sheet"))
+    # title block: name and units, the run across the window; the sheet and how to print it at the left,
+    # the scale bar at the right; a line too long for its room is set smaller, then shortened
     length, length_mm = scale_bar(drawing.units)
-    bar_y = MARGIN_MM + 3.0
+    bar_label = _unit_label(length, drawing.units)
     right = x0 + w
+    bar_room = max(length_mm, _text_width(bar_label, 0.9 * FONT_MM))
+    left_room = w - bar_room - TEXT_GAP_MM
+    top = y0 - 5.0
+    suffix = f": springflat cutting pattern, scale 1:1, units {drawing.units}"
+    title, size = _fitted(drawing.name + suffix, w, FONT_MM, True,
+                          lambda n: _shortened_middle(drawing.name, n) + suffix)
+    labels.append(Label(x0, top, title, size, bold=True, name="title"))
+    if drawing.caption:
+        caption, size = _fitted(drawing.caption, w, 0.8 * FONT_MM)
+        labels.append(Label(x0, top - 1.5 * FONT_MM, caption, size))
+    where = f"sheet {sheet.label} of {len(plan.sheets)}: " if len(plan.sheets) > 1 else ""
+    for row, (text, name) in enumerate(((f"{where}{plan.describe()}", "sheet"),
+                                        ("print at 100 % (no fit to page) and measure the scale bar", None)), 3):
+        text, size = _fitted(text, left_room, 0.8 * FONT_MM)
+        labels.append(Label(x0, top - 1.5 * (row - 1) * FONT_MM, text, size, name=name))
+    bar_y = MARGIN_MM + 3.0
     strokes.append(Stroke(((right - length_mm, bar_y), (right, bar_y)), 0.5, name="scale-bar"))
     for x in (right - length_mm, right):
         strokes.append(Stroke(((x, bar_y - 1.5), (x, bar_y + 1.5)), 0.3))
-    labels.append(Label(right - length_mm / 2, bar_y + 2.5, _unit_label(length, drawing.units), 0.9 * FONT_MM,
-                        "middle", name="scale-label"))
-    labels.append(Label(right - length_mm - 2.0, bar_y - 1.0, "scale check:", 0.8 * FONT_MM, "end"))
+    labels.append(Label(right - length_mm / 2, bar_y + 2.5, bar_label, 0.9 * FONT_MM, "middle", name="scale-label"))
     return strokes, labels
 
 
@@ -590,6 +663,7 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     canvas.setAuthor("springflat")
     canvas.setCreator("springflat")
     canvas.setSubject(f"{plan.describe()}; {drawing.caption}" if drawing.caption else plan.describe())
+    canvas.setViewerPreference("PrintScaling", "None")  # the print dialog offers 100 %, not "fit to page"
 
     edges, folded, cut = _pattern_parts(drawing, plan)
     sx, sy = plan.stride
@@ -648,7 +722,7 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             canvas.drawPath(line, stroke=1, fill=0)
         canvas.setFillGray(0.0)
         for label in labels:
-            canvas.setFont("Helvetica-Bold" if label.bold else "Helvetica", label.size / 0.72)  # cap height ~0.72 em
+            canvas.setFont("Helvetica-Bold" if label.bold else "Helvetica", label.size / CAP_HEIGHT_EM)
             draw = {"start": canvas.drawString, "middle": canvas.drawCentredString,
                     "end": canvas.drawRightString}[label.anchor]
             draw(label.x, label.y, label.text)
@@ -740,7 +814,7 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
                 weight = ' font-weight="bold"' if label.bold else ""
                 ident = f' class="{label.name}"' if label.name else ""
                 write(f'<text x="{_svg_num(label.x)}" y="{_svg_num(page_h - label.y)}" '
-                      f'font-family="Helvetica, Arial, sans-serif" font-size="{_svg_num(label.size / 0.72)}"'
+                      f'font-family="Helvetica, Arial, sans-serif" font-size="{_svg_num(label.size / CAP_HEIGHT_EM)}"'
                       f'{anchor}{weight}{ident}>{escape(label.text)}</text>\n')
             write("</g>\n")
         write("</svg>\n")

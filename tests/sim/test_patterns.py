@@ -195,6 +195,7 @@ def test_pdf_page_size_and_scale_bar_are_true_to_a_tenth_of_a_millimetre(bunny, 
     printed_length = float(np.linalg.norm(np.roll(cut[0], -1, axis=0) - cut[0], axis=1).sum())
     assert printed_length == pytest.approx(boundary_length(mesh, layout) * 1000.0, abs=0.1)
     assert reader.metadata.title.startswith("bunny_face")
+    assert reader.trailer["/Root"]["/ViewerPreferences"]["/PrintScaling"] == "/None"  # the dialog's default: 100 %
 
 
 @pytest.mark.slow
@@ -209,13 +210,22 @@ def test_pdf_of_a_large_pattern_is_tiled_with_overlap_marks_on_letter(tmp_path):
     reader = PdfReader(path)
     size = (np.ptp(layout, axis=0) * 1000.0).tolist()
     plan = plan_sheets(tuple(size), "letter")
-    assert len(reader.pages) == len(plan.sheets) > 1
+    assert 1 < len(reader.pages) <= len(plan.sheets)
     page_mm = sorted((215.9, 279.4), reverse=plan.landscape)
     labels = []
+    cut_points = len(mesh.boundary_loop)
+    shown = np.zeros(cut_points, bool)
     for page in reader.pages:
         assert abs(float(page.mediabox.width) * PT - page_mm[0]) < 0.1
         assert abs(float(page.mediabox.height) * PT - page_mm[1]) < 0.1
         paths, texts = pdf_page_contents(reader, page)
+        # the page shows part of the pattern, and together the pages show all of it: the cut line in page
+        # mm (the form placed; the clip to the window not applied) against the window
+        cut = np.array(next(sub for subpaths, op in paths for sub in subpaths if len(sub) == cut_points))
+        x, y, w, h = plan.window
+        inside = (cut[:, 0] >= x) & (cut[:, 0] <= x + w) & (cut[:, 1] >= y) & (cut[:, 1] <= y + h)
+        assert inside.any()
+        shown |= inside
         printed, stated = scale_bar_check(paths, texts)
         assert abs(printed - stated) < 0.1
         words = " ".join(t for t, _ in texts)
@@ -223,8 +233,33 @@ def test_pdf_of_a_large_pattern_is_tiled_with_overlap_marks_on_letter(tmp_path):
         assert "overlaps here" in words
         dashed = [sub for subpaths, op in paths for sub in subpaths if op == "S"]
         assert dashed
-    assert [int(n) for _, n in labels] == [len(plan.sheets)] * len(plan.sheets)
-    assert len({label for label, _ in labels}) == len(plan.sheets)
+    assert shown.all()
+    assert [int(n) for _, n in labels] == [len(reader.pages)] * len(reader.pages)
+    assert len({label for label, _ in labels}) == len(reader.pages)
+
+
+def test_a_sheet_that_would_be_blank_is_left_out_and_said(tmp_path):
+    """A diagonal strip on a 3 x 3 grid of sheets: the corners away from the diagonal hold nothing."""
+    from pypdf import PdfReader
+
+    t = np.linspace(0.0, 1.0, 60)
+    along = np.column_stack([t * 520.0, t * 700.0])  # mm, corner to corner of 3 x 3 portrait A4 windows
+    across = np.array([-12.0, 12.0]) / math.sqrt(2)
+    vertices = np.vstack([along + across, along - across])
+    n = len(t)
+    faces = np.array([f for k in range(n - 1) for f in ((k, n + k, k + 1), (k + 1, n + k, n + k + 1))])
+    mesh = Mesh(np.column_stack([vertices, np.zeros(2 * n)]), faces)
+    path = tmp_path / "strip.pdf"
+    write_pattern_file(path, PatternDrawing.of(mesh, vertices, "mm"), paper="a4")
+    plan = plan_sheets(tuple(np.ptp(vertices, axis=0).tolist()), "a4")
+    assert (plan.rows, plan.cols) == (3, 3)
+    reader = PdfReader(path)
+    words = [" ".join(t for t, _ in pdf_page_contents(reader, page)[1]) for page in reader.pages]
+    labels = sorted(re.search(r"sheet (\w+) of", w).group(1) for w in words)
+    # from the bottom left (C1) to the top right (A3): the other two corners hold nothing of it
+    assert {"C1", "B2", "A3"} <= set(labels) and not {"A1", "C3"} & set(labels)
+    said = f"{len(labels)} A4 portrait sheets (3 columns x 3 rows, {9 - len(labels)} blank left out, overlap 10 mm)"
+    assert all(said in w for w in words)
 
 
 # --------------------------------------------------------------------------- SVG
@@ -449,3 +484,62 @@ def test_a_print_of_too_many_sheets_is_refused_before_the_run(tmp_path):
     assert proc.stderr.splitlines() == [f"springflat: error: the mesh's area is about 189 x 189 m at 1:1 with "
                                         f"--units m: more than {MAX_SHEETS} a4 sheets; check --units, or write .dxf"]
     assert list(tmp_path.iterdir()) == []
+
+
+def _svg_boxes(path):
+    """Per sheet of an SVG: ``(texts, strokes)``, each a list of ``(x0, y0, x1, y1)`` boxes in page mm
+    (y down). A text's box from reportlab's Helvetica widths (Arial's are the same) and its font size:
+    0.22 em below the baseline to 0.75 em above it."""
+    from reportlab.pdfbase.pdfmetrics import stringWidth
+
+    root = ET.parse(path).getroot()
+    sheets = []
+    for group in root.findall(f"{SVG}g"):
+        texts, strokes = [], []
+        for text in group.findall(f"{SVG}text"):
+            size = float(text.get("font-size"))
+            width = stringWidth(text.text, "Helvetica-Bold" if text.get("font-weight") == "bold" else "Helvetica",
+                                size)
+            x = float(text.get("x")) - {"start": 0, "middle": width / 2, "end": width}[text.get("text-anchor", "start")]
+            y = float(text.get("y"))
+            texts.append((text.text, (x, y - 0.75 * size, x + width, y + 0.22 * size)))
+        for line in group.findall(f"{SVG}polyline"):
+            points = np.array([p.split(",") for p in line.get("points").split()], float)
+            strokes.append((line.get("class"), (*points.min(axis=0), *points.max(axis=0))))
+        sheets.append((texts, strokes))
+    return sheets
+
+
+def _overlap(a, b) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+@pytest.mark.parametrize("size, paper, units, name", [
+    ((300.0, 350.0), "a4", "m", "armadillo_strip"),                   # tiled portrait: 2 x 2 sheets
+    ((120.0, 40.0), "fit", "cm", "a_rather_long_mesh_name_from_a_scanner_export_2026-12-04_left_shoe_upper_v2"),
+    ((100.0, 150.0), "letter", "in", "ear"),
+    ((2000.0, 900.0), "fit", "mm", "panel"),
+])
+def test_title_block_lines_stay_on_the_page_and_clear_of_each_other_and_the_scale_bar(tmp_path, size, paper, units,
+                                                                                     name):
+    mesh = dome_grid(6)
+    layout = (mesh.vertices[:, :2] - mesh.vertices[:, :2].min(axis=0)) / np.ptp(mesh.vertices[:, :2], axis=0)
+    layout = layout * np.array(size) / MM[units]
+    drawing = PatternDrawing.of(mesh, layout, units, "converged after 1234 iterations: E_S 0.0123, E_C 0.0456, "
+                                                     "0 folded")
+    drawing = PatternDrawing(**{**drawing.__dict__, "name": name})
+    path = tmp_path / "p.svg"
+    write_pattern_file(path, drawing, paper=paper)
+    plan = plan_sheets(size, paper)
+    assert paper != "a4" or (plan.cols, plan.rows, plan.landscape) == (2, 2, False)
+    for texts, strokes in _svg_boxes(path):
+        scale = [box for kind, box in strokes if kind == "scale-bar"]
+        assert len(scale) == 1
+        title = [text for text, _ in texts if "springflat cutting pattern" in text]
+        assert len(title) == 1 and title[0].endswith(f"scale 1:1, units {units}") and title[0][:3] == name[:3]
+        for k, (text, box) in enumerate(texts):
+            assert 10 - 1e-6 <= box[0] and box[2] <= plan.page[0] - 10 + 1e-6, (text, box)
+            assert 10 - 1e-6 <= box[1] and box[3] <= plan.page[1] - 10 + 1e-6, (text, box)
+            assert not _overlap(box, scale[0]), text
+            for other, other_box in texts[k + 1:]:
+                assert not _overlap(box, other_box), (text, other)
