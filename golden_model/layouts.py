@@ -32,10 +32,11 @@
 
 Every computed layout is oriented so that most faces are counter-clockwise
 (mirrored otherwise), and a given one (a file, an array) is mirrored where its
-bulk is clockwise, with a note: a pattern is seen from the mesh's front, and a
-mirror image would be cut the wrong way round. The dynamics does not depend on it.  libigl is imported on first use of a libigl method;
-any libigl failure (an exception or a non-finite result) is a
-:class:`LayoutError` naming the method.
+bulk is clockwise (in y, which puts y-down texture coordinates upright), with
+a note: a pattern is seen from the mesh's front, and a mirror image would be
+cut the wrong way round. The dynamics does not depend on it.  libigl is
+imported on first use of a libigl method; any libigl failure (an exception or
+a non-finite result) is a :class:`LayoutError` naming the method.
 """
 
 from __future__ import annotations
@@ -439,7 +440,7 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
 
 
 def _facing_the_front(positions: np.ndarray, mesh: Mesh, what: str, notes: list[str] | None) -> np.ndarray:
-    """A given layout mirrored in x where its bulk is clockwise (its total signed area below 0 by more than
+    """A given layout mirrored in y where its bulk is clockwise (its total signed area below 0 by more than
     rounding, 1e-9 of its bounding box: a degenerate layout is left as it is), with a note: a pattern is cut and printed as seen from the mesh's front (its faces'
     winding), as every computed start is; a mirror image (texture coordinates with y down, say) would
     be cut the wrong way round."""
@@ -449,8 +450,8 @@ def _facing_the_front(positions: np.ndarray, mesh: Mesh, what: str, notes: list[
         return positions
     if notes is not None:
         notes.append(f"{what} is a mirror image of the mesh (most of its area runs clockwise, as texture "
-                     "coordinates with y down do): mirrored in x, so that the pattern shows the mesh's front")
-    return positions * np.array([-1.0, 1.0])
+                     "coordinates with y down do): mirrored in y, so that the pattern shows the mesh's front")
+    return positions * np.array([1.0, -1.0])  # y: a y-down texture layout comes out upright
 
 
 @dataclass(frozen=True)

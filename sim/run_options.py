@@ -100,8 +100,8 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
                         help="initial layout: auto (arap; where it folds or fails, slim from tutte), tutte, pca, "
                              "harmonic, lscm, arap, slim (libigl) or a file of V rows 'x y' / an OBJ (default: "
-                             "pca for built-ins, auto for files); with the guarded dynamics any other start "
-                             "with folds is untangled")
+                             "pca for built-ins, auto for files); a file that is a mirror image of the mesh (clockwise) is "
+                             "mirrored back in y; with the guarded dynamics any other start with folds is untangled")
     parser.add_argument("--dynamics", choices=DYNAMICS, default=None,
                         help="paper (eqs. 7-9) or momentum (docs/dynamics.md); default: paper for built-ins, "
                              "momentum for files")
@@ -231,23 +231,27 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
     untangled, and what was done is one note each on stderr, or appended to ``notes`` when it is given);
     the paper dynamics takes the layout as it is. ``second_core``: ``--init auto`` may compute SLIM's start
     beside ARAP (:func:`slim_beside_arap`)."""
-    def tell(said: list[str]) -> None:
+    def tell(told: list[str]) -> None:
         if notes is not None:
-            notes.extend(said)
+            notes.extend(told)
         else:
-            for note in said:
+            for note in told:
                 print(f"springflat: note: {note}", file=sys.stderr)
 
     if not params.guard:
-        said: list[str] = []
-        positions = initial_layout(mesh, init, said)
-        tell(said)
+        read: list[str] = []
+        positions = initial_layout(mesh, init, read)
+        tell(read)
         return positions, "arap" if init_name(init) == AUTO_START else init_name(init)
-    say = (lambda text: print(f"springflat: {text} ...", file=sys.stderr)) if progress else None
+    said: list[str] = []  # the notes a progress line has given
+
+    def say(text: str) -> None:
+        said.append(text)
+        print(f"springflat: {text} ...", file=sys.stderr)
+
     with slim_beside_arap(mesh, second_core and init_name(init) == AUTO_START) as slim:
-        start = start_layout(mesh, init, progress=say, slim=slim)
-    if not progress:
-        tell(start.notes)
+        start = start_layout(mesh, init, progress=say if progress else None, slim=slim)
+    tell([note for note in start.notes if note not in said])  # what the progress lines have not said
     return start.positions, start.method
 
 

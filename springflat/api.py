@@ -253,8 +253,9 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         name: the mesh's name (a string), for the pattern files.
         init: the initial layout: ``auto`` (the default: ARAP, or SLIM from Tutte where ARAP folds or fails),
             ``tutte``, ``pca``, ``harmonic``, ``lscm``, ``arap``, ``slim``, a layout file, or a ``(V, 2)`` array; a
-            file or an array is checked (shape, finite, range) and, with the guarded dynamics, untangled where it
-            folds.
+            file or an array is checked (shape, finite, range), mirrored back in y where it is a mirror image of
+            the mesh (clockwise, as y-down texture coordinates are), and, with the guarded dynamics, untangled
+            where it folds.
         **options: the options of ``springflat flatten`` (listed below and in :data:`OPTIONS`), the flag
             without its dashes and with ``_`` for ``-``: ``max_iter=500`` is ``--max-iter 500``.  Each value
             is checked as the command line checks the same text.  Left out (or ``None``), an option has the

@@ -173,11 +173,11 @@ def test_a_mirror_image_start_is_mirrored_so_that_the_pattern_shows_the_meshs_fr
     path = tmp_path / "uv.txt"
     np.savetxt(path, mirrored, fmt="%.17g")
     for init, what in ((mirrored, "the init array"), (path, f"the layout '{path}'")):
-        with pytest.warns(springflat.MeshNote, match=f"{what} is a mirror image of the mesh .*: mirrored in x"):
+        with pytest.warns(springflat.MeshNote, match=f"{what} is a mirror image of the mesh .*: mirrored in y"):
             pattern = springflat.flatten(V, F, init=init, max_iter=20)
         assert layout_orientation(pattern.layout, F) > 0 and pattern.folded == 0
-        # mirrored in x rather than back in y: the same start up to that one mirror
-        np.testing.assert_array_equal(pattern.result.initial_positions, start * [-1.0, -1.0])
+        # mirrored back in y, the way y-down texture coordinates come out upright: the computed start itself
+        np.testing.assert_array_equal(pattern.result.initial_positions, start)
 
 
 def test_the_board_engine_is_refused_by_the_api_with_what_to_run_instead(ear):

@@ -395,3 +395,25 @@ def test_a_built_in_name_means_the_built_in_even_beside_a_file_of_that_name(tmp_
     assert (tmp_path / "surf1").read_text() == "not a mesh\n"
     assert main(["flatten", "surf1", "surf2", "--max-iter", "3", "--out-dir", "d", "--out", ".flat.obj"]) == 0
     assert sorted(p.name for p in (tmp_path / "d").iterdir()) == ["surf1.flat.obj", "surf2.flat.obj"]  # a batch too
+
+
+@pytest.mark.parametrize("terminal", [False, True])
+def test_the_notes_on_a_given_start_are_printed_with_progress_lines_or_without(tmp_path, monkeypatch, capsys,
+                                                                            terminal):
+    """With stderr a terminal the start's long steps are progress lines; a note on reading the start (a
+    mirror image mirrored back) is printed all the same, once."""
+    import sys
+
+    from golden_model.mesh_io import save_obj
+    from sim.cli import main
+
+    mesh = dome_grid(6)
+    monkeypatch.chdir(tmp_path)
+    save_obj("dome.obj", mesh.vertices * 100, mesh.faces)
+    np.savetxt("uv.txt", mesh.vertices[:, :2] * [100, -100], fmt="%.17g")  # y down: clockwise
+    if terminal:
+        monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    assert main(["flatten", "dome.obj", "--init", "uv.txt", "--max-iter", "3"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("the layout 'uv.txt' is a mirror image of the mesh") == 1, err
+    assert ("reading the layout 'uv.txt' ..." in err) == terminal
