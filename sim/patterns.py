@@ -459,24 +459,29 @@ def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = O
 
 
 def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
-    """``plan`` less the sheets whose window holds nothing of the pattern (no node in it, and the cut
-    line's filled outline does not meet it): an L-shaped pattern's empty corner is not printed. The others
-    keep their labels, so that the grid still shows where each goes."""
+    """``plan`` less the sheets whose window holds nothing of the pattern (no triangle meets it: the cut
+    line, mesh edges and folded triangles all lie on the triangles): an L-shaped pattern's empty corner is
+    not printed. The others keep their labels, so that the grid still shows where each goes."""
     from matplotlib.path import Path as Outline
     from matplotlib.transforms import Bbox
 
     if len(plan.sheets) == 1:
         return plan
-    q = _pattern_mm(drawing, plan)
-    cut = q[drawing.boundary]
-    outline = Outline(np.vstack([cut, cut[:1]]), closed=True)  # a closed path's last vertex is not drawn
+    nodes = _pattern_mm(drawing, plan)
+    corners = nodes[drawing.faces]  # (F, 3, 2)
+    low_corner, high_corner = corners.min(axis=1), corners.max(axis=1)
     size = np.array(plan.window[2:])
 
     def drawn(sheet: Sheet) -> bool:
         low = np.array(sheet.offset)
         high = low + size
-        return bool(np.all((q >= low) & (q <= high), axis=1).any()) or outline.intersects_bbox(
-            Bbox([low, high]), filled=True)
+        if np.all((nodes >= low) & (nodes <= high), axis=1).any():  # a node in the window
+            return True
+        # else a triangle meets the window only if its box does and it crosses or covers the window
+        near = np.flatnonzero(np.all((low_corner <= high) & (high_corner >= low), axis=1))
+        window = Bbox([low, high])
+        return any(Outline(np.vstack([corners[t], corners[t][:1]]), closed=True).intersects_bbox(window, filled=True)
+                   for t in near)  # (a closed path's last vertex is not drawn)
 
     kept = tuple(sheet for sheet in plan.sheets if drawn(sheet))
     return replace(plan, sheets=kept, blank=len(plan.sheets) - len(kept))
@@ -541,10 +546,13 @@ def _unit_label(length: float, units: str) -> str:
 
 def _text_width(text: str, size: float, bold: bool = False) -> float:
     """Width in mm of ``text`` set in Helvetica (SVG: Helvetica or Arial, the same widths) of cap height
-    ``size`` mm."""
+    ``size`` mm; a character beyond Latin-1, which Helvetica lacks and a viewer draws in another font, is
+    counted 1 em, about its widest."""
     from reportlab.pdfbase.pdfmetrics import stringWidth
 
-    return stringWidth(text, "Helvetica-Bold" if bold else "Helvetica", size / CAP_HEIGHT_EM)
+    em = size / CAP_HEIGHT_EM
+    latin = "".join(c for c in text if ord(c) < 256)
+    return stringWidth(latin, "Helvetica-Bold" if bold else "Helvetica", em) + (len(text) - len(latin)) * em
 
 
 def _shortened_middle(text: str, cut: int) -> str:
@@ -557,7 +565,7 @@ def _fitted(text: str, room: float, size: float, bold: bool = False,
             shorter: Callable[[int], str] | None = None) -> tuple[str, float]:
     """``(text, size)`` that fit in ``room`` mm: ``text`` as it is, or set smaller (down to
     :data:`MIN_TEXT_SCALE` of ``size``), or shortened at that size by ``shorter(n)`` (``n`` characters
-    fewer; default: cut at the end, ``...`` in their place)."""
+    fewer, the fewest that fit; default: cut at the end, ``...`` in their place)."""
     width = _text_width(text, size, bold)
     if width <= room:
         return text, size
@@ -566,10 +574,19 @@ def _fitted(text: str, room: float, size: float, bold: bool = False,
         return text, smaller * (1 - 1e-9)  # rounding must not put it over the edge
     smallest = MIN_TEXT_SCALE * size
     shorter = shorter or (lambda n: text[:max(len(text) - n, 1)] + "...")
-    for cut in range(1, len(text)):
-        if _text_width(short := shorter(cut), smallest, bold) <= room:
-            return short, smallest
-    return shorter(len(text)), smallest
+    low, high = 1, len(text)  # shorter(high) is as short as it gets; bisect for the fewest cut that fits
+    while low < high:
+        middle = (low + high) // 2
+        if _text_width(shorter(middle), smallest, bold) <= room:
+            high = middle
+        else:
+            low = middle + 1
+    return shorter(low), smallest
+
+
+def pattern_title(drawing: PatternDrawing, name: str | None = None) -> str:
+    """The first line of every sheet, the PDF's and the SVG's title: the name (or ``name``), scale, units."""
+    return f"{drawing.name if name is None else name}: springflat cutting pattern, scale 1:1, units {drawing.units}"
 
 
 def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple[list[Stroke], list[Label]]:
@@ -608,9 +625,8 @@ def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple
     bar_room = max(length_mm, _text_width(bar_label, 0.9 * FONT_MM))
     left_room = w - bar_room - TEXT_GAP_MM
     top = y0 - 5.0
-    suffix = f": springflat cutting pattern, scale 1:1, units {drawing.units}"
-    title, size = _fitted(drawing.name + suffix, w, FONT_MM, True,
-                          lambda n: _shortened_middle(drawing.name, n) + suffix)
+    title, size = _fitted(pattern_title(drawing), w, FONT_MM, True,
+                          lambda n: pattern_title(drawing, _shortened_middle(drawing.name, n)))
     labels.append(Label(x0, top, title, size, bold=True, name="title"))
     if drawing.caption:
         caption, size = _fitted(drawing.caption, w, 0.8 * FONT_MM)
@@ -658,8 +674,8 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     from reportlab.pdfgen.canvas import Canvas
 
     canvas = Canvas(path, pagesize=(plan.page[0] * PT_PER_MM, plan.page[1] * PT_PER_MM), invariant=1,
-                    pageCompression=1)
-    canvas.setTitle(f"{drawing.name}: cutting pattern, scale 1:1, units {drawing.units}")
+                    pageCompression=1, pdfVersion=(1, 6))  # 1.6: /PrintScaling below
+    canvas.setTitle(pattern_title(drawing))
     canvas.setAuthor("springflat")
     canvas.setCreator("springflat")
     canvas.setSubject(f"{plan.describe()}; {drawing.caption}" if drawing.caption else plan.describe())
@@ -755,7 +771,7 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     total_h = plan.rows * page_h + (plan.rows - 1) * SVG_GAP_MM
     edges, folded, cut = _pattern_parts(drawing, plan)
     x0, y0, w, h = plan.window
-    title = f"{drawing.name}: springflat cutting pattern, scale 1:1, units {drawing.units}"
+    title = pattern_title(drawing)
 
     def place(sheet: Sheet) -> tuple[float, float]:
         return sheet.col * (page_w + SVG_GAP_MM), (plan.rows - 1 - sheet.row) * (page_h + SVG_GAP_MM)

@@ -196,6 +196,7 @@ def test_pdf_page_size_and_scale_bar_are_true_to_a_tenth_of_a_millimetre(bunny, 
     assert printed_length == pytest.approx(boundary_length(mesh, layout) * 1000.0, abs=0.1)
     assert reader.metadata.title.startswith("bunny_face")
     assert reader.trailer["/Root"]["/ViewerPreferences"]["/PrintScaling"] == "/None"  # the dialog's default: 100 %
+    assert reader.pdf_header == "%PDF-1.6"  # the version that has /PrintScaling
 
 
 @pytest.mark.slow
@@ -260,6 +261,33 @@ def test_a_sheet_that_would_be_blank_is_left_out_and_said(tmp_path):
     assert {"C1", "B2", "A3"} <= set(labels) and not {"A1", "C3"} & set(labels)
     said = f"{len(labels)} A4 portrait sheets (3 columns x 3 rows, {9 - len(labels)} blank left out, overlap 10 mm)"
     assert all(said in w for w in words)
+
+
+def test_a_sheet_crossed_only_by_folded_triangles_is_printed(tmp_path):
+    """A square fan whose centre node lies far outside it: four long folded triangles cross windows that
+    hold no node and lie outside the cut line, and they are drawn there."""
+    from pypdf import PdfReader
+
+    vertices = np.array([[0.0, 0.0], [300.0, 0.0], [300.0, 300.0], [0.0, 300.0], [150.0, 150.0]])
+    faces = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    mesh = Mesh(np.column_stack([vertices, np.zeros(5)]), faces)
+    layout = vertices.copy()
+    layout[4] = (1500.0, 150.0)
+    path = tmp_path / "fan.pdf"
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, "mm"), paper="a4")
+    plan = plan_sheets(tuple(np.ptp(layout, axis=0).tolist()), "a4")
+    reader = PdfReader(path)
+    printed = {re.search(r"sheet (\w+) of", " ".join(t for t, _ in pdf_page_contents(reader, page)[1])).group(1)
+               for page in reader.pages}
+    # where the triangles are, by dense sampling, in the grid's frame (the layout's box corner at plan.shift)
+    a, b = np.meshgrid(np.linspace(0, 1, 300), np.linspace(0, 1, 300))
+    inside = (a + b) <= 1
+    weights = np.column_stack([a[inside], b[inside], 1 - a[inside] - b[inside]])
+    samples = np.vstack([weights @ layout[f] for f in faces]) - layout.min(axis=0) + plan.shift
+    w, h = plan.window[2:]
+    hit = {s.label for s in plan.sheets
+           if np.any(np.all((samples >= s.offset) & (samples <= np.add(s.offset, (w, h))), axis=1))}
+    assert len(hit) > 4 and hit <= printed, (hit, printed)
 
 
 # --------------------------------------------------------------------------- SVG
@@ -488,8 +516,9 @@ def test_a_print_of_too_many_sheets_is_refused_before_the_run(tmp_path):
 
 def _svg_boxes(path):
     """Per sheet of an SVG: ``(texts, strokes)``, each a list of ``(x0, y0, x1, y1)`` boxes in page mm
-    (y down). A text's box from reportlab's Helvetica widths (Arial's are the same) and its font size:
-    0.22 em below the baseline to 0.75 em above it."""
+    (y down). A text's box from reportlab's Helvetica widths (Arial's are the same), a character beyond
+    Latin-1 (drawn in a fallback font) 1 em wide, and its font size: 0.22 em below the baseline to 0.75 em
+    above it."""
     from reportlab.pdfbase.pdfmetrics import stringWidth
 
     root = ET.parse(path).getroot()
@@ -498,8 +527,9 @@ def _svg_boxes(path):
         texts, strokes = [], []
         for text in group.findall(f"{SVG}text"):
             size = float(text.get("font-size"))
-            width = stringWidth(text.text, "Helvetica-Bold" if text.get("font-weight") == "bold" else "Helvetica",
-                                size)
+            latin = "".join(c for c in text.text if ord(c) < 256)
+            width = stringWidth(latin, "Helvetica-Bold" if text.get("font-weight") == "bold" else "Helvetica",
+                                size) + (len(text.text) - len(latin)) * size
             x = float(text.get("x")) - {"start": 0, "middle": width / 2, "end": width}[text.get("text-anchor", "start")]
             y = float(text.get("y"))
             texts.append((text.text, (x, y - 0.75 * size, x + width, y + 0.22 * size)))
@@ -519,7 +549,9 @@ def _overlap(a, b) -> bool:
     ((120.0, 40.0), "fit", "cm", "a_rather_long_mesh_name_from_a_scanner_export_2026-12-04_left_shoe_upper_v2"),
     ((100.0, 150.0), "letter", "in", "ear"),
     ((2000.0, 900.0), "fit", "mm", "panel"),
-])
+    ((120.0, 40.0), "fit", "mm", "日本語のメッシュ" * 10),
+    ((120.0, 40.0), "fit", "mm", "x" * 20000),  # an API name of any length: set small and shortened, at once
+], ids=["tiled-portrait", "fit-long-name", "letter", "fit-wide", "fit-cjk-name", "fit-20000-characters"])
 def test_title_block_lines_stay_on_the_page_and_clear_of_each_other_and_the_scale_bar(tmp_path, size, paper, units,
                                                                                      name):
     mesh = dome_grid(6)
