@@ -50,7 +50,10 @@ def main() -> int:
     try:
         status = run_command()
         for name in STOP_SIGNALS:  # the command is done, its outputs in place: its status stands
-            signal.signal(getattr(signal, name), record)
+            # ignored, not recorded: Python's shutdown puts a Python handler back to the default action
+            # (and a signal in that time, tens of milliseconds, killed the finished program with no line),
+            # but leaves an ignored signal ignored
+            signal.signal(getattr(signal, name), signal.SIG_IGN)
     except KeyboardInterrupt:  # in the instants before the command's handler, or after it is removed
         return _stopped(received_signal().name)
     return status

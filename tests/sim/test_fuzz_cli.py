@@ -1362,6 +1362,36 @@ def test_real_exit_a_signal_between_the_imports_and_the_command_is_one_line(sign
     assert os.listdir(work) == ["m.obj"]
 
 
+#: Loaded by the program through PYTHONPATH: an object whose finaliser, in Python's shutdown after the command
+#: has finished (past the point where Python drops its signal handlers), makes a marker file and waits 2 s.
+_SLOW_SHUTDOWN = """
+import os, time
+class _SlowShutdown:
+    def __del__(self, _open=open, _sleep=time.sleep, _marker=os.environ["SPRINGFLAT_TEST_MARKER"]):
+        _open(_marker, "w").close()
+        _sleep(2)
+_slow = _SlowShutdown()
+"""
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_real_exit_a_signal_while_a_finished_command_shuts_down_leaves_its_status(signum, tmp_path):
+    """The command is done and its files are written: a Ctrl-C as Python shuts down killed the program
+    (status -2, no line) beside complete outputs."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(_SLOW_SHUTDOWN)
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "m.obj").write_text(obj())
+    marker = tmp_path / "shutting-down"
+    code, out, err = _interrupt(["flatten", "m.obj", "--out", "o.obj", "--max-iter", "3"], work, after=0.3,
+                                ready=marker.exists, timeout=120, signum=signum,
+                                env={"PYTHONPATH": str(site), "SPRINGFLAT_TEST_MARKER": str(marker)})
+    assert code == 0 and "interrupted" not in err and "terminated" not in err, (code, err)
+    assert sorted(os.listdir(work)) == ["m.obj", "o.obj"]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("command, name", [
     (["verilog", "--out", "v"], "v"),
