@@ -461,6 +461,8 @@ def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...
     for p in files:
         destination = target / p.relative_to(build)
         destination.parent.mkdir(parents=True, exist_ok=True)
+        if destination.exists():  # a replaced file keeps its mode, as atomic_write's do
+            os.chmod(p, _file_mode(destination))
         os.replace(p, destination)
     for name in stale:  # an earlier result this run did not write again; never an input of this run
         if Path(name) not in written and (target / name).is_file() and _identity(target / name) not in input_files:

@@ -213,6 +213,23 @@ def _build(out, files: dict[str, str], **kw) -> None:
             (build / name).write_text(text)
 
 
+def test_a_file_a_directory_output_replaces_keeps_its_mode(tmp_path):
+    """As a single output file does (README): a report made private stays private when the command runs again."""
+    import stat
+
+    out = tmp_path / "report"
+    _build(out, {"report.md": "1", "figure.png": "1"})
+    os.chmod(out / "report.md", 0o600)
+    os.chmod(out / "figure.png", 0o640)
+    _build(out, {"report.md": "2", "figure.png": "2", "new.csv": "2"})
+    modes = {name: stat.S_IMODE(os.stat(out / name).st_mode) for name in ("report.md", "figure.png", "new.csv")}
+    assert (modes["report.md"], modes["figure.png"]) == (0o600, 0o640)
+    assert (out / "report.md").read_text() == "2"
+    umask = os.umask(0)
+    os.umask(umask)
+    assert modes["new.csv"] == 0o666 & ~umask  # a new file: the umask's
+
+
 def test_a_directory_output_keeps_what_this_run_wrote_and_drops_a_stale_result(tmp_path):
     """``stale``: an earlier run's result this run did not write again is removed; one it did write is its
     new one; one that is an input of this run (study's --base) is never removed."""
