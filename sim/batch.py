@@ -27,7 +27,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from golden_model.builtin import is_builtin
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS
@@ -37,7 +37,8 @@ from golden_model.mesh import MeshError, printable_name
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
-from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path
+from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path, \
+    when_interrupted
 from .patterns import error_text, pattern_kind
 from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
                           resolve_mesh, strict_json)
@@ -337,6 +338,7 @@ def dask_client(scheduler: str, workers: int):
     except ImportError:  # pragma: no cover - a dependency of springflat
         raise UserError("--scheduler needs dask.distributed: pip install 'dask[distributed]'") from None
     with contextlib.ExitStack() as stack:
+        quiet = stack.enter_context(_quiet_when_abandoned())  # last out: after the cluster and client close
         if scheduler == "local":  # Ctrl-C is this process's to answer: it ends the workers (sim.dask_worker)
             stack.enter_context(_quiet_dask_workers())  # for the cluster's life: its end warns too
             cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
@@ -347,7 +349,34 @@ def dask_client(scheduler: str, workers: int):
                 client = stack.enter_context(Client(scheduler, timeout="10s"))
             except (OSError, TimeoutError, ValueError) as exc:
                 raise UserError(f"cannot reach the Dask scheduler at '{scheduler}': {exc}") from None
-        yield client
+        try:
+            yield client
+        except BaseException:  # an error, Ctrl-C, a kill: the command says in one line what happened
+            quiet()
+            raise
+
+
+@contextlib.contextmanager
+def _quiet_when_abandoned() -> Iterator[Callable[[], None]]:
+    """A function that turns logging off until the block ends, called where the work is abandoned, and
+    called by a stop signal the moment it arrives: Dask and tornado then log, from their own thread, the
+    tasks in flight cancelled, their results "forgotten", a stream closed, which are the abandon's, not the
+    user's (the command says in one line what happened). ``logging.disable``, as Dask's configuration
+    gives its loggers levels of their own."""
+    import logging
+
+    disabled = []
+
+    def quiet() -> None:
+        logging.disable(logging.CRITICAL)
+        disabled.append(True)
+
+    try:
+        with when_interrupted(quiet):
+            yield quiet
+    finally:
+        if disabled:
+            logging.disable(logging.NOTSET)
 
 
 def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):

@@ -29,7 +29,7 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -287,6 +287,19 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
 _INTERRUPTED = threading.Event()
 #: The signal that set it (``signal.SIGINT`` until one arrives).
 _RECEIVED = [signal.SIGINT]
+#: Called by :func:`on_interrupt` as a signal arrives, before anything else runs (:func:`when_interrupted`).
+_INTERRUPT_HOOKS: list[Callable[[], None]] = []
+
+
+@contextmanager
+def when_interrupted(hook: Callable[[], None]) -> Iterator[None]:
+    """In the block, ``hook()`` is called the moment SIGINT or SIGTERM arrives (in :func:`on_interrupt`), before
+    the ``KeyboardInterrupt`` unwinds anything: for what other threads must stop doing at once."""
+    _INTERRUPT_HOOKS.append(hook)
+    try:
+        yield
+    finally:
+        _INTERRUPT_HOOKS.remove(hook)
 
 
 def on_interrupt(signum, frame) -> None:
@@ -300,6 +313,8 @@ def on_interrupt(signum, frame) -> None:
     """
     _INTERRUPTED.set()
     _RECEIVED[0] = signal.Signals(signum)
+    for hook in list(_INTERRUPT_HOOKS):
+        hook()
     while frame is not None:
         if frame.f_code.co_name == "__del__":
             threading.Timer(0.05, os.kill, (os.getpid(), signum)).start()
