@@ -438,18 +438,30 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
     target = output_target(out)
     build = _make_temporary(_build_parent(target), target.name, is_dir=True)
     try:
-        yield build
-        with deferred_interrupts():
-            os.chmod(build, 0o777 & ~current_umask())
-            if not target.exists():
-                os.rename(build, target)
-                return
-            _merge_directory(build, target, out, stale, inputs)
-    except OSError as exc:
-        raise OutputWriteError(out, exc, what) from None
+        try:
+            yield build
+        except OSError as exc:
+            if exc.filename is not None and not _inside(exc.filename, build):
+                raise  # not a write of the output: a tool that cannot be started, an input
+            raise OutputWriteError(out, exc, what) from None
+        try:
+            with deferred_interrupts():
+                os.chmod(build, 0o777 & ~current_umask())
+                if not target.exists():
+                    os.rename(build, target)
+                    return
+                _merge_directory(build, target, out, stale, inputs)
+        except OSError as exc:
+            raise OutputWriteError(out, exc, what) from None
     finally:
         if build.exists():
             shutil.rmtree(build, ignore_errors=True)
+
+
+def _inside(path: str | bytes | os.PathLike, directory: Path) -> bool:
+    """Whether ``path`` is ``directory`` or lies in it (both made absolute, links not followed)."""
+    path, directory = os.path.abspath(os.fsdecode(path)), os.path.abspath(directory)
+    return os.path.commonpath([path, directory]) == directory
 
 
 def _build_parent(target: Path) -> Path:

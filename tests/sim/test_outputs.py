@@ -230,6 +230,25 @@ def test_a_file_a_directory_output_replaces_keeps_its_mode(tmp_path):
     assert modes["new.csv"] == 0o666 & ~umask  # a new file: the umask's
 
 
+def test_an_os_error_of_a_directory_commands_work_is_not_called_an_output_error(tmp_path):
+    """A tool that cannot be started (its file not executable) is named as what failed, not --out."""
+    import subprocess
+
+    from sim.outputs import OutputWriteError, atomic_directory
+
+    tool = tmp_path / "tool"
+    tool.write_text("#!/bin/sh\n")
+    tool.chmod(0o644)
+    with pytest.raises(PermissionError) as raised:
+        with atomic_directory(tmp_path / "out"):
+            subprocess.run([str(tool)])
+    assert raised.value.filename == str(tool) and not (tmp_path / "out").exists()
+    with pytest.raises(OutputWriteError, match="cannot write --out '.*out': .*"):  # a write into the build is one
+        with atomic_directory(tmp_path / "out") as build:
+            (build / "sub").write_text("")
+            open(build / "sub" / "x", "w")
+
+
 def test_a_directory_output_keeps_what_this_run_wrote_and_drops_a_stale_result(tmp_path):
     """``stale``: an earlier run's result this run did not write again is removed; one it did write is its
     new one; one that is an input of this run (study's --base) is never removed."""
