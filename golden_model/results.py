@@ -46,8 +46,12 @@ class History:
     folded: list[int] = field(default_factory=list)
     #: whether the iteration's step was taken (the guard rolls back a step that raises the energy)
     accepted: list[bool] = field(default_factory=list)
+    #: each row's iteration number: its index, unless a row skips iterations (an engine's final row)
+    iteration: list[int] = field(default_factory=list)
 
-    def append(self, dt: float, m: Measurement, accepted: bool = True) -> None:
+    def append(self, dt: float, m: Measurement, accepted: bool = True, iteration: int | None = None) -> None:
+        """Add the row of ``iteration`` (default: the next, ``len(self)``)."""
+        self.iteration.append(len(self) if iteration is None else iteration)
         self.accepted.append(accepted)
         self.dt.append(dt)
         self.area_error.append(m.area_error)
@@ -62,7 +66,8 @@ class History:
     def rows(self) -> list[tuple]:
         """``(iteration, dt, area_error, shape_error, energy, flipped, folded)`` rows."""
         return [
-            (k, self.dt[k], self.area_error[k], self.shape_error[k], self.energy[k], self.flipped[k], self.folded[k])
+            (self.iteration[k], self.dt[k], self.area_error[k], self.shape_error[k], self.energy[k], self.flipped[k],
+             self.folded[k])
             for k in range(len(self))
         ]
 

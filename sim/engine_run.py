@@ -349,7 +349,7 @@ def engine_flatten_result(problem: FixedProblem, positions: np.ndarray, velociti
     history = History()
     history.append(math.nan, engine.measure())
     engine.raw_positions, engine.raw_velocities = positions.copy(), velocities.copy()
-    history.append(math.nan, engine.measure())
+    history.append(math.nan, engine.measure(), iteration=iterations)
     result = FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
                            history, status, iterations, problem.params, problem.density, engine=engine_name)
     result.extra.update({"formats": problem.fs.name, "scale": problem.scale, **extra})

@@ -885,7 +885,7 @@ def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str,
         ax_bar.set_axis_off()
 
     history = result.history
-    k = np.arange(len(history))
+    k = np.array(history.iteration)
     curves = [(np.asarray(history.area_error, dtype=float), "tab:green", "area error $E_S$"),
               (np.asarray(history.shape_error, dtype=float), "tab:purple", "shape error $E_C$")]
     params = result.params

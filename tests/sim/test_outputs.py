@@ -260,3 +260,27 @@ def test_a_directory_output_keeps_what_this_run_wrote_and_drops_a_stale_result(t
     assert (out / "chosen.json").read_text() == "second"
     _build(out, {"report.md": "4"})  # no pick: the old one would mislead
     assert sorted(os.listdir(out)) == ["report.md"]
+
+
+def test_an_engines_history_numbers_its_final_row_by_the_iterations_run(tmp_path):
+    """The engine keeps no per-iteration record: its history is the initial row and the final one, which is
+    iteration N (the CSV and the plot's axis said 1)."""
+    import csv
+
+    import numpy as np
+
+    from golden_model.builtin import builtin_mesh
+    from golden_model.fixed.engine import prepare
+    from golden_model.fixed.formats_set import FormatSet
+    from golden_model.layouts import initial_layout
+    from golden_model.params import FlattenParams
+    from sim.engine_run import engine_flatten_result
+    from sim.outputs import write_history
+
+    mesh, _ = builtin_mesh("surf2")
+    problem = prepare(mesh, initial_layout(mesh, "pca"), FlattenParams(), FormatSet.preset("default"))
+    raw = problem.initial_positions
+    result = engine_flatten_result(problem, raw, np.zeros_like(raw), "max-iterations", 150, "rtl", {})
+    write_history(tmp_path / "h.csv", result)
+    with open(tmp_path / "h.csv", newline="") as f:
+        assert [row["iteration"] for row in csv.DictReader(f)] == ["0", "150"]
