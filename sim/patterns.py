@@ -50,6 +50,7 @@ from .run_options import file_path_argument
 #: Length units a mesh may be in, and millimetres per unit.
 UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 UNITS = tuple(UNIT_MM)
+UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches"}
 #: DXF ``$INSUNITS`` codes of :data:`UNITS` (AutoCAD: 1 inches, 4 millimetres, 5 centimetres, 6 metres).
 DXF_INSUNITS = {"mm": 4, "cm": 5, "m": 6, "in": 1}
 #: Paper sizes in millimetres (portrait); ``fit`` is one page around the pattern (:data:`FIT_PAD_MM`, the margin
@@ -359,9 +360,18 @@ def scale_note(drawing: PatternDrawing, units_option: str = "--units {}") -> str
     width, height = pattern_size_mm(drawing)
     if max(width, height) >= SMALL_PATTERN_MM:
         return None
-    others = [units_option.format(units) for units in ("m", "cm", "in")]
-    return (f"the pattern is {width:.3g} x {height:.3g} mm at 1:1 with {units_option.format(drawing.units)}: "
-            f"if the mesh is in metres, centimetres or inches, say so with {', '.join(others[:2])} or {others[2]}")
+    larger = [units for units in ("m", "cm", "in") if UNIT_MM[units] > UNIT_MM[drawing.units]]
+    said = f"the pattern is {width:.3g} x {height:.3g} mm at 1:1 with {units_option.format(drawing.units)}"
+    if not larger:  # metres: no larger unit to suggest
+        return said
+    names = [UNIT_NAMES[units] for units in larger]
+    options = [units_option.format(units) for units in larger]
+    return f"{said}: if the mesh is in {_either(names)}, say so with {_either(options)}"
+
+
+def _either(words: list[str]) -> str:
+    """``a``, ``a or b``, ``a, b or c``."""
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} or {words[-1]}"
 
 
 def error_text(error: float) -> str:

@@ -492,6 +492,23 @@ def test_a_pattern_too_small_for_its_units_gets_a_note(tmp_path):
     assert re.search(r"note: the pattern is [\d.]+ x [\d.]+ mm at 1:1 with --units mm", proc.stderr)
 
 
+@pytest.mark.parametrize("units, suggested", [
+    ("mm", "if the mesh is in metres, centimetres or inches, say so with --units m, --units cm or --units in"),
+    ("cm", "if the mesh is in metres or inches, say so with --units m or --units in"),
+    ("in", "if the mesh is in metres, say so with --units m"),
+    ("m", None),
+])
+def test_the_small_pattern_note_suggests_only_larger_units_than_the_one_given(units, suggested):
+    """A pattern under 10 mm at 1:1: the unit given is not suggested back, nor a smaller one."""
+    from sim.patterns import scale_note
+
+    mesh = dome_grid(5)
+    drawing = PatternDrawing.of(mesh, mesh.vertices[:, :2] * 0.05 / MM[units], units)  # 0.05 mm wide
+    note = scale_note(drawing)
+    assert note.startswith("the pattern is 0.05 x 0.05 mm at 1:1 with --units " + units)
+    assert (note.split(": ", 1)[1] if ": " in note else None) == suggested
+
+
 def test_a_fit_page_beyond_a_pdfs_largest_is_refused_before_the_run(tmp_path):
     proc = subprocess.run([SPRINGFLAT, "flatten", str(SCANS / "nefertiti_face.obj"), "--units", "m", "--paper", "fit",
                            "--out", str(tmp_path / "n.pdf")], capture_output=True, text=True, timeout=300)
