@@ -1343,21 +1343,26 @@ argparse.ArgumentParser.parse_known_args = parse_known_args
 """
 
 
+def _interrupt_with_site(tmp_path: Path, sitecustomize: str, options: list[str], after: float, signum: int):
+    """``springflat flatten m.obj OPTIONS`` in ``tmp_path/work`` with ``sitecustomize`` loaded, signalled ``after``
+    s once the marker file it makes (``SPRINGFLAT_TEST_MARKER``) appears: ``(work, status, stdout, stderr)``."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(sitecustomize)
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "m.obj").write_text(obj())
+    marker = tmp_path / "marker"
+    return (work, *_interrupt(["flatten", "m.obj", *options], work, after=after, ready=marker.exists, timeout=120,
+                              signum=signum, env={"PYTHONPATH": str(site), "SPRINGFLAT_TEST_MARKER": str(marker)}))
+
+
 @pytest.mark.parametrize("signum, line, status", [(signal.SIGINT, "interrupted", 130),
                                                   (signal.SIGTERM, "terminated", 143)], ids=["SIGINT", "SIGTERM"])
 def test_real_exit_a_signal_between_the_imports_and_the_command_is_one_line(signum, line, status, tmp_path):
     """Between the console script's imports and the command's own handler a kill had the default action:
     status -15, no line."""
-    site = tmp_path / "site"
-    site.mkdir()
-    (site / "sitecustomize.py").write_text(_SLOW_ARGUMENT_PARSING)
-    work = tmp_path / "work"
-    work.mkdir()
-    (work / "m.obj").write_text(obj())
-    marker = tmp_path / "parsing"
-    code, out, err = _interrupt(["flatten", "m.obj", "--out", "o.obj"], work, after=0.5, ready=marker.exists,
-                                timeout=120, signum=signum,
-                                env={"PYTHONPATH": str(site), "SPRINGFLAT_TEST_MARKER": str(marker)})
+    work, code, out, err = _interrupt_with_site(tmp_path, _SLOW_ARGUMENT_PARSING, ["--out", "o.obj"], 0.5, signum)
     assert (code, out, err) == (status, "", f"springflat: {line}\n")
     assert os.listdir(work) == ["m.obj"]
 
@@ -1378,16 +1383,8 @@ _slow = _SlowShutdown()
 def test_real_exit_a_signal_while_a_finished_command_shuts_down_leaves_its_status(signum, tmp_path):
     """The command is done and its files are written: a Ctrl-C as Python shuts down killed the program
     (status -2, no line) beside complete outputs."""
-    site = tmp_path / "site"
-    site.mkdir()
-    (site / "sitecustomize.py").write_text(_SLOW_SHUTDOWN)
-    work = tmp_path / "work"
-    work.mkdir()
-    (work / "m.obj").write_text(obj())
-    marker = tmp_path / "shutting-down"
-    code, out, err = _interrupt(["flatten", "m.obj", "--out", "o.obj", "--max-iter", "3"], work, after=0.3,
-                                ready=marker.exists, timeout=120, signum=signum,
-                                env={"PYTHONPATH": str(site), "SPRINGFLAT_TEST_MARKER": str(marker)})
+    work, code, out, err = _interrupt_with_site(tmp_path, _SLOW_SHUTDOWN, ["--out", "o.obj", "--max-iter", "3"], 0.3,
+                                                signum)
     assert code == 0 and "interrupted" not in err and "terminated" not in err, (code, err)
     assert sorted(os.listdir(work)) == ["m.obj", "o.obj"]
 
