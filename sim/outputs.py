@@ -437,6 +437,7 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
     check_output_directory(out, what)
     target = output_target(out)
     build = _make_temporary(_build_parent(target), target.name, is_dir=True)
+    building = _BUILDING.set((build, out, list(inputs)))
     try:
         try:
             yield build
@@ -454,8 +455,28 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
         except OSError as exc:
             raise OutputWriteError(out, exc, what) from None
     finally:
+        _BUILDING.reset(building)
         if build.exists():
             shutil.rmtree(build, ignore_errors=True)
+
+
+#: The :func:`atomic_directory` being built: ``(build, out, inputs)`` (:func:`check_build_so_far`).
+_BUILDING: ContextVar[tuple[Path, Path, list] | None] = ContextVar("springflat_building", default=None)
+
+
+def check_build_so_far() -> None:
+    """Refuse now, not after the work, a file already in the :func:`atomic_directory` being built that would
+    replace one of its inputs when it is put in place (a ``--formats`` file named as a bundle's file,
+    inside ``--out``). Called before a long step (a synthesis tool's run); nothing outside such a block."""
+    if (building := _BUILDING.get()) is not None:
+        build, out, inputs = building
+        _check_no_input_replaced(build, out, inputs)
+
+
+def _check_no_input_replaced(build: Path, out: Path, inputs: list[tuple[str, Path | None]]) -> None:
+    """:func:`check_distinct` of every file in ``build`` (as the ``out`` file it becomes) against ``inputs``."""
+    files = sorted(p for p in build.rglob("*") if not p.is_dir())
+    check_distinct([("output", out / p.relative_to(build)) for p in files], list(inputs))
 
 
 def _inside(path: str | bytes | os.PathLike, directory: Path) -> bool:
@@ -479,8 +500,8 @@ def current_umask() -> int:
 def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...],
                      inputs: list[tuple[str, Path | None]]) -> None:
     """Move every file of ``build`` into ``target`` (same relative paths), replacing regular files only."""
+    _check_no_input_replaced(build, out, inputs)
     files = sorted(p for p in build.rglob("*") if not p.is_dir())
-    check_distinct([("output", out / p.relative_to(build)) for p in files], list(inputs))
     for p in files:
         _refuse_special(target / p.relative_to(build), out / p.relative_to(build), "output")
     written = {p.relative_to(build) for p in files}  # before the moves empty the build

@@ -239,6 +239,9 @@ def error_line(log: str) -> str:
 # ------------------------------------------------------------------------------------ running
 def run_tool(tool: str, argv: list[str], cwd: Path, log_name: str) -> tuple[int, str]:
     """Run a YoWASP entry point (``module:function``) in ``cwd``; return (status, combined output)."""
+    from .outputs import check_build_so_far
+
+    check_build_so_far()  # a clash with an input is refused before the tool's minutes, not after them
     module, function = tool.split(":")
     code = f"import sys, {module}; sys.exit({module}.{function}(sys.argv[1:]))"
     proc = subprocess.run([sys.executable, "-c", code, *argv], cwd=cwd, capture_output=True, text=True)

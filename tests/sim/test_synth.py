@@ -113,6 +113,29 @@ def test_ice40_does_not_fit(tmp_path, capsys):
     assert (out_dir / "synth_report.md").is_file()
 
 
+def test_an_output_that_would_replace_the_formats_file_is_refused_before_any_tool_runs(tmp_path, capsys,
+                                                                                        monkeypatch):
+    """``--formats out/interface.json --out out``: the bundle's interface.json would replace it. Refused once the
+    Verilog is exported, before Yosys and nextpnr (minutes, an hour for the engine), not after them."""
+    import sim.synth
+    from golden_model.fixed.formats_set import FormatSet
+
+    def no_tool(*args, **kwargs):
+        raise AssertionError("a synthesis tool ran")
+
+    monkeypatch.setattr(sim.synth.subprocess, "run", no_tool)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    formats = out_dir / "interface.json"
+    formats.write_text(FormatSet.preset("narrow").to_json())
+    before = formats.read_bytes()
+    status, out, err = run(["synth", "--target", "ice40", "--components", "step_generator", "--formats", str(formats),
+                            "--out", str(out_dir), "--quiet"], capsys)
+    assert status == 2
+    assert err.strip() == f"springflat: error: output '{formats}' is the same file as --formats '{formats}'"
+    assert os.listdir(out_dir) == ["interface.json"] and formats.read_bytes() == before
+
+
 @pytest.mark.parametrize("argv, message", [
     (["synth", "--target", "xc7"], "invalid choice: 'xc7'"),
     (["synth", "--target", "ecp5", "--freq", "-5"], "frequency"),
