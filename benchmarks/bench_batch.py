@@ -1,7 +1,7 @@
 """A 20-mesh batch against 20 separate runs of ``springflat flatten`` (issue 28: at most 0.6x).
 
-The meshes are the four shipped scans in metres (``bunny_face``, ``bunny_ear``, ``bunny_back``,
-``armadillo_strip``), five copies each, every one written as a DXF and a tiled A4 PDF:
+The meshes are four shipped scans: the three bunny scans, in metres, and ``armadillo_strip``, in model
+units read as metres; five copies each, every one written as a DXF and a tiled A4 PDF:
 
 * separate: ``springflat flatten MESH --units m --out DIR/NAME.dxf --out DIR/NAME.pdf``, one after
   the other (what a shell loop does);

@@ -365,18 +365,16 @@ def _quiet_when_abandoned() -> Iterator[Callable[[], None]]:
     gives its loggers levels of their own."""
     import logging
 
-    disabled = []
+    before = logging.root.manager.disable  # what the caller had disabled (logging.disable's own state)
 
     def quiet() -> None:
         logging.disable(logging.CRITICAL)
-        disabled.append(True)
 
     try:
         with when_interrupted(quiet):
             yield quiet
     finally:
-        if disabled:
-            logging.disable(logging.NOTSET)
+        logging.disable(before)
 
 
 def _dask_outcomes(jobs: list[BatchJob], scheduler: str, workers: int):

@@ -6,7 +6,8 @@ the one line ``springflat: interrupted`` and status 130 — not a traceback from
 nor the ImportError that a C extension's import cut short by the signal turns into. So SIGINT (and
 SIGTERM, answered alike with ``springflat: terminated`` and 143) is only recorded while the commands
 are imported, and answered once they are; from then on, also in the instants before the command
-installs its own handler and after it puts it back, as the command answers it.
+installs its own handler and after it puts it back, as the command answers it. Once the program has
+its status (the command's, a usage error's, an interrupt's), both are ignored while Python shuts down.
 """
 
 from __future__ import annotations
@@ -25,6 +26,17 @@ def _stopped(name: str) -> int:
 
 
 def main() -> int:
+    try:
+        return _run()
+    finally:  # done, its outputs in place or not, its status said: the status stands
+        for name in STOP_SIGNALS:
+            # ignored, not answered: Python's shutdown puts a Python handler back to the default action (and a
+            # signal in that time, tens of milliseconds, killed the finished program with no line), but leaves
+            # an ignored signal ignored
+            signal.signal(getattr(signal, name), signal.SIG_IGN)
+
+
+def _run() -> int:
     if sys.stderr is None:  # started with its standard error closed (2>&-): what it says there is dropped,
         sys.stderr = io.StringIO()  # not sent to print()'s default, the standard output (a --json line)
     if sys.stdout is None:  # closed (>&-): what it prints there is dropped; its files are still written
@@ -49,11 +61,6 @@ def main() -> int:
         return _stopped(received[0])
     try:
         status = run_command()
-        for name in STOP_SIGNALS:  # the command is done, its outputs in place: its status stands
-            # ignored, not recorded: Python's shutdown puts a Python handler back to the default action
-            # (and a signal in that time, tens of milliseconds, killed the finished program with no line),
-            # but leaves an ignored signal ignored
-            signal.signal(getattr(signal, name), signal.SIG_IGN)
     except KeyboardInterrupt:  # in the instants before the command's handler, or after it is removed
         return _stopped(received_signal().name)
     return status

@@ -442,7 +442,7 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
         try:
             yield build
         except OSError as exc:
-            if exc.filename is not None and not _inside(exc.filename, build):
+            if _names_paths_outside(exc, build):
                 raise  # not a write of the output: a tool that cannot be started, an input
             raise OutputWriteError(out, exc, what) from None
         try:
@@ -479,10 +479,13 @@ def _check_no_input_replaced(build: Path, out: Path, inputs: list[tuple[str, Pat
     check_distinct([("output", out / p.relative_to(build)) for p in files], list(inputs))
 
 
-def _inside(path: str | bytes | os.PathLike, directory: Path) -> bool:
-    """Whether ``path`` is ``directory`` or lies in it (both made absolute, links not followed)."""
-    path, directory = os.path.abspath(os.fsdecode(path)), os.path.abspath(directory)
-    return os.path.commonpath([path, directory]) == directory
+def _names_paths_outside(error: OSError, directory: Path) -> bool:
+    """Whether ``error`` names a path and none of the paths it names (``filename``, and ``filename2`` of a copy
+    or a rename) is ``directory`` or lies in it (made absolute, links not followed)."""
+    names = [name for name in (error.filename, error.filename2) if isinstance(name, (str, bytes, os.PathLike))]
+    inside = os.path.abspath(directory)
+    return bool(names) and all(os.path.commonpath([os.path.abspath(os.fsdecode(name)), inside]) != inside
+                               for name in names)
 
 
 def _build_parent(target: Path) -> Path:
@@ -509,8 +512,8 @@ def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...
     for p in files:
         destination = target / p.relative_to(build)
         destination.parent.mkdir(parents=True, exist_ok=True)
-        if destination.exists():  # a replaced file keeps its mode, as atomic_write's do
-            os.chmod(p, _file_mode(destination))
+        if destination.exists():  # a replaced file keeps its mode, as atomic_write's do; a new script stays runnable
+            os.chmod(p, _file_mode(destination) | (stat.S_IMODE(os.stat(p).st_mode) & 0o111))
         os.replace(p, destination)
     for name in stale:  # an earlier result this run did not write again; never an input of this run
         if Path(name) not in written and (target / name).is_file() and _identity(target / name) not in input_files:

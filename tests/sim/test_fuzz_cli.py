@@ -1379,14 +1379,18 @@ _slow = _SlowShutdown()
 """
 
 
+@pytest.mark.parametrize("options, status, files", [
+    (["--out", "o.obj", "--max-iter", "3"], 0, ["m.obj", "o.obj"]),
+    (["--no-such-option"], 2, ["m.obj"]),  # a usage error's status (argparse's exit) stands too
+], ids=["written", "usage-error"])
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_real_exit_a_signal_while_a_finished_command_shuts_down_leaves_its_status(signum, tmp_path):
+def test_real_exit_a_signal_while_a_finished_command_shuts_down_leaves_its_status(signum, options, status, files,
+                                                                                  tmp_path):
     """The command is done and its files are written: a Ctrl-C as Python shuts down killed the program
     (status -2, no line) beside complete outputs."""
-    work, code, out, err = _interrupt_with_site(tmp_path, _SLOW_SHUTDOWN, ["--out", "o.obj", "--max-iter", "3"], 0.3,
-                                                signum)
-    assert code == 0 and "interrupted" not in err and "terminated" not in err, (code, err)
-    assert sorted(os.listdir(work)) == ["m.obj", "o.obj"]
+    work, code, out, err = _interrupt_with_site(tmp_path, _SLOW_SHUTDOWN, options, 0.3, signum)
+    assert code == status and "interrupted" not in err and "terminated" not in err, (code, err)
+    assert sorted(os.listdir(work)) == files
 
 
 @pytest.mark.slow

@@ -217,6 +217,8 @@ def test_a_file_a_directory_output_replaces_keeps_its_mode(tmp_path):
     """As a single output file does (README): a report made private stays private when the command runs again."""
     import stat
 
+    from sim.outputs import atomic_directory
+
     out = tmp_path / "report"
     _build(out, {"report.md": "1", "figure.png": "1"})
     os.chmod(out / "report.md", 0o600)
@@ -224,6 +226,15 @@ def test_a_file_a_directory_output_replaces_keeps_its_mode(tmp_path):
     _build(out, {"report.md": "2", "figure.png": "2", "new.csv": "2"})
     modes = {name: stat.S_IMODE(os.stat(out / name).st_mode) for name in ("report.md", "figure.png", "new.csv")}
     assert (modes["report.md"], modes["figure.png"]) == (0o600, 0o640)
+    # a script the command makes runnable stays runnable over an old copy that lost its execute bits
+    with atomic_directory(out) as build:
+        (build / "reproduce.sh").write_text("#!/bin/sh\n")
+        (build / "reproduce.sh").chmod(0o755)
+    os.chmod(out / "reproduce.sh", 0o644)
+    with atomic_directory(out) as build:
+        (build / "reproduce.sh").write_text("#!/bin/sh\n")
+        (build / "reproduce.sh").chmod(0o755)
+    assert stat.S_IMODE(os.stat(out / "reproduce.sh").st_mode) == 0o755
     assert (out / "report.md").read_text() == "2"
     umask = os.umask(0)
     os.umask(umask)
@@ -247,6 +258,13 @@ def test_an_os_error_of_a_directory_commands_work_is_not_called_an_output_error(
         with atomic_directory(tmp_path / "out") as build:
             (build / "sub").write_text("")
             open(build / "sub" / "x", "w")
+    # a copy into the build that fails names the source first and the build second (a full disk): the output's
+    with pytest.raises(OutputWriteError, match="no space left on device"):
+        with atomic_directory(tmp_path / "out") as build:
+            raise OSError(28, "No space left on device", str(tool), None, str(build / "copy.v"))
+    with pytest.raises(OutputWriteError):  # a descriptor, not a path: the output's (no traceback)
+        with atomic_directory(tmp_path / "out"):
+            os.stat(987654)
 
 
 def test_a_directory_output_keeps_what_this_run_wrote_and_drops_a_stale_result(tmp_path):
@@ -284,3 +302,31 @@ def test_an_engines_history_numbers_its_final_row_by_the_iterations_run(tmp_path
     write_history(tmp_path / "h.csv", result)
     with open(tmp_path / "h.csv", newline="") as f:
         assert [row["iteration"] for row in csv.DictReader(f)] == ["0", "150"]
+
+
+def test_a_stop_signal_turns_logging_off_in_a_dask_block_and_the_callers_level_comes_back(monkeypatch):
+    """sim.outputs.on_interrupt runs the block's hook at once (Dask's loop thread logs the abandon from then on);
+    after the block, logging.disable is what the caller had."""
+    import logging
+    import signal
+
+    from sim.batch import _quiet_when_abandoned
+    from sim.outputs import on_interrupt, reset_interrupted
+
+    before = logging.root.manager.disable
+    logging.disable(logging.WARNING)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with _quiet_when_abandoned():
+                assert logging.root.manager.disable == logging.WARNING
+                on_interrupt(signal.SIGINT, None)
+        assert logging.root.manager.disable == logging.WARNING
+        with pytest.raises(KeyboardInterrupt):
+            with _quiet_when_abandoned():
+                try:
+                    on_interrupt(signal.SIGINT, None)
+                finally:
+                    assert logging.root.manager.disable == logging.CRITICAL  # off the moment the signal came
+    finally:
+        reset_interrupted()
+        logging.disable(before)
