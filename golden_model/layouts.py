@@ -441,9 +441,9 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
 
 def _facing_the_front(positions: np.ndarray, mesh: Mesh, what: str, notes: list[str] | None) -> np.ndarray:
     """A given layout mirrored in y where its bulk is clockwise (its total signed area below 0 by more than
-    rounding, 1e-9 of its bounding box: a degenerate layout is left as it is), with a note: a pattern is cut and printed as seen from the mesh's front (its faces'
-    winding), as every computed start is; a mirror image (texture coordinates with y down, say) would
-    be cut the wrong way round."""
+    rounding, 1e-9 of its bounding box: a degenerate layout is left as it is), with a note: a pattern is
+    cut and printed as seen from the mesh's front (its faces' winding), as every computed start is; a
+    mirror image (texture coordinates with y down, say) would be cut the wrong way round."""
     total = float(np.sum(signed_areas_2d(positions, mesh.faces), dtype=np.float64))
     extent = np.ptp(positions, axis=0)
     if total >= -1e-9 * float(extent[0] * extent[1]):  # counter-clockwise, or degenerate (rounding's sign)

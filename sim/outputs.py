@@ -470,12 +470,16 @@ def check_build_so_far() -> None:
     inside ``--out``). Called before a long step (a synthesis tool's run); nothing outside such a block."""
     if (building := _BUILDING.get()) is not None:
         build, out, inputs = building
-        _check_no_input_replaced(build, out, inputs)
+        _check_no_input_replaced(_built_files(build), build, out, inputs)
 
 
-def _check_no_input_replaced(build: Path, out: Path, inputs: list[tuple[str, Path | None]]) -> None:
-    """:func:`check_distinct` of every file in ``build`` (as the ``out`` file it becomes) against ``inputs``."""
-    files = sorted(p for p in build.rglob("*") if not p.is_dir())
+def _built_files(build: Path) -> list[Path]:
+    """The files in ``build`` so far, sorted."""
+    return sorted(p for p in build.rglob("*") if not p.is_dir())
+
+
+def _check_no_input_replaced(files: list[Path], build: Path, out: Path, inputs: list[tuple[str, Path | None]]) -> None:
+    """:func:`check_distinct` of ``files`` of ``build`` (as the ``out`` files they become) against ``inputs``."""
     check_distinct([("output", out / p.relative_to(build)) for p in files], list(inputs))
 
 
@@ -503,8 +507,8 @@ def current_umask() -> int:
 def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...],
                      inputs: list[tuple[str, Path | None]]) -> None:
     """Move every file of ``build`` into ``target`` (same relative paths), replacing regular files only."""
-    _check_no_input_replaced(build, out, inputs)
-    files = sorted(p for p in build.rglob("*") if not p.is_dir())
+    files = _built_files(build)
+    _check_no_input_replaced(files, build, out, inputs)
     for p in files:
         _refuse_special(target / p.relative_to(build), out / p.relative_to(build), "output")
     written = {p.relative_to(build) for p in files}  # before the moves empty the build

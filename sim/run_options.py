@@ -100,8 +100,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
                         help="initial layout: auto (arap; where it folds or fails, slim from tutte), tutte, pca, "
                              "harmonic, lscm, arap, slim (libigl) or a file of V rows 'x y' / an OBJ (default: "
-                             "pca for built-ins, auto for files); a file that is a mirror image of the mesh (clockwise) is "
-                             "mirrored back in y; with the guarded dynamics any other start with folds is untangled")
+                             "pca for built-ins, auto for files); a file that is a mirror image of the mesh "
+                             "(clockwise) is mirrored back in y; with the guarded dynamics any other start with "
+                             "folds is untangled")
     parser.add_argument("--dynamics", choices=DYNAMICS, default=None,
                         help="paper (eqs. 7-9) or momentum (docs/dynamics.md); default: paper for built-ins, "
                              "momentum for files")
