@@ -51,7 +51,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .files import read_file_bytes
-from .mesh import COORDINATE_LIMIT, Mesh, MeshError, signed_areas_2d
+from .mesh import COORDINATE_LIMIT, Mesh, MeshError, layout_orientation, signed_areas_2d
 from .mesh_io import read_obj_vertices
 from .mesh_io.polygons import is_plain
 
@@ -79,8 +79,9 @@ class LayoutError(ValueError):
 
 
 def _counter_clockwise(positions: np.ndarray, mesh: Mesh) -> np.ndarray:
-    """Mirror ``positions`` in x when most of the mesh's faces are clockwise."""
-    if np.sum(signed_areas_2d(positions, mesh.faces) < 0) > mesh.n_faces / 2:
+    """Mirror ``positions`` in x when the layout's bulk is clockwise (its total signed area below 0:
+    :func:`~golden_model.mesh.layout_orientation`, the orientation folds are counted against)."""
+    if layout_orientation(positions, mesh.faces) < 0:
         positions = positions * np.array([-1.0, 1.0])
     return positions
 

@@ -236,3 +236,24 @@ def test_an_unreadable_layout_file_is_one_line_naming_what(tmp_path, content, me
     (tmp_path / "l.txt").write_bytes(content)
     with pytest.raises(LayoutError, match=message):
         load_layout(tmp_path / "l.txt", 2)
+
+
+def test_a_computed_start_is_oriented_by_its_area_as_folds_are_counted():
+    """A folded start whose faces are mostly clockwise by count but whose bulk (its total signed area)
+    is counter-clockwise is left as it is: the rule is the one its folds are counted against, so the
+    few large faces stay the pattern and the many slivers are its folds."""
+    from golden_model.layouts import _counter_clockwise
+    from golden_model.mesh import layout_orientation
+
+    angles = np.radians([0.0, 170.0, 169.0, 168.0, 167.0])  # an open fan: one wide face, three slivers back
+    positions = np.vstack([[0.0, 0.0], 10.0 * np.column_stack([np.cos(angles), np.sin(angles)])])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5]])
+    vertices = np.column_stack([positions, np.zeros(6)])
+    vertices[2:, 2] = [0.1, 0.2, 0.3, 0.4]  # the 3D fan is not flat
+    mesh = Mesh(vertices, faces)
+    assert np.sum(signed_areas_2d(positions, faces) < 0) == 3 and layout_orientation(positions, faces) > 0
+    kept = _counter_clockwise(positions, mesh)
+    assert np.array_equal(kept, positions)
+    assert folded_faces(kept, faces).sum() == 3
+    mirrored = positions * np.array([1.0, -1.0])
+    assert np.array_equal(_counter_clockwise(mirrored, mesh), mirrored * np.array([-1.0, 1.0]))
