@@ -133,8 +133,8 @@ class FlattenParams:
             if self.update != "jacobi":
                 raise ParameterError("the momentum dynamics updates all nodes together: use --update jacobi")
             if self.damping:
-                raise ParameterError("damping belongs to the paper dynamics (--dynamics paper); the momentum "
-                                     "dynamics damps by its restart (drop --damping)")
+                raise ParameterError("--damping belongs to the paper dynamics; the momentum dynamics damps by its "
+                                     "restart: drop --damping, or add --dynamics paper")
 
     @property
     def mode(self) -> RunMode:

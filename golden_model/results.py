@@ -119,12 +119,15 @@ class FlattenResult:
             "initial_flipped": initial.flipped,
             "initial_folded": initial.folded,
             "engine": self.engine,
+            "mode": self.params.mode.name,
             "dynamics": self.params.dynamics,
-            "step": self.params.step,
+            "step": self.params.mode.step.value,  # "momentum": that dynamics has no step of its own to choose
+            "guard": self.params.guard,
+            "energy_window": self.params.energy_window,
             "update": self.params.update,
             "damping": self.params.damping,
             "penalty": self.params.penalty,
             "barrier": self.params.barrier,
-            "density": self.density,
+            **({"density": self.density} if self.params.dynamics == "paper" else {}),  # momentum: w = 2/(C deg)
             **self.extra,
         }

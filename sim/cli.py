@@ -125,9 +125,10 @@ def divergence_hint(params: FlattenParams) -> str:
     rises, so only numbers at the ends of their ranges overflow it (a spring constant of 1e300 on a mesh
     1e45 across)."""
     if params.dynamics == "momentum" and params.guard:
-        return "the guarded run's numbers overflowed: bring --spring, --density or the mesh's size nearer 1"
+        return "the guarded run's numbers overflowed: bring --spring or the mesh's size nearer 1"
     if params.dynamics == "momentum":
-        return "the momentum dynamics without its guard: drop --no-guard"
+        return ("the momentum dynamics without its guard: drop --no-guard; with --spring or the mesh's size far "
+                "from 1 a guarded run overflows too")
     step = "a smaller --dt" if params.step == "fixed" else "--step fixed with a small --dt"
     return f"the paper dynamics has no guard: try --damping 0.05, {step}, or --dynamics momentum"
 

@@ -171,14 +171,17 @@ def human_line(mesh: Mesh, result: FlattenResult) -> str:
 
 def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> str:
     """One line: dynamics, initial layout, stop rule, and why the run stopped."""
+    barrier = (f", fold barrier (kappa {params.barrier_threshold:g}, mu {params.barrier_gain:g})" if params.barrier
+               else "")
+    penalty = ", overlap penalty" if params.penalty else ""
     if params.dynamics == "momentum":
-        dynamics = "momentum dynamics" + (f", fold barrier (kappa {params.barrier_threshold:g}, mu "
-                                          f"{params.barrier_gain:g})" if params.barrier else ", no barrier")
+        dynamics = ("momentum dynamics, " + ("step guard" if params.guard else "no step guard")
+                    + (barrier or ", no barrier") + penalty)
     else:
         dynamics = (f"paper dynamics, {params.step} step" + (f", damping {params.damping:g}" if params.damping else "")
-                    + (f", fold barrier (kappa {params.barrier_threshold:g}, mu {params.barrier_gain:g})"
-                       if params.barrier else ""))
-    rule = f"relative energy change <= {params.tol_energy:g}"
+                    + barrier + penalty)
+    rule = f"relative energy change <= {params.tol_energy:g}" + (
+        f" over {params.energy_window} iterations" if params.energy_window > 1 else "")
     if params.tol_area < 1 or params.tol_shape < 1:
         rule = f"E_S <= {params.tol_area:g}, E_C <= {params.tol_shape:g} and {rule}"
     why = {"converged": "the stop rule held", "max-iterations": f"N_max = {params.max_iter} reached",

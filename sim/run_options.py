@@ -131,7 +131,8 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--penalty-gain", type=number_argument, default=None, help="penalty gain lambda (default 1)")
     parser.add_argument("--spring", type=number_argument, default=None, help="spring constant C (default 0.5)")
     parser.add_argument("--density", type=_density, default=None,
-                        help="area density rho or 'auto' = 1/min m_i (default: 2 for built-ins, auto for files)")
+                        help="the paper dynamics' area density rho or 'auto' = 1/min m_i (default: 2 for built-ins, "
+                             "auto for files; the momentum dynamics weighs each node by 2/(C deg) instead)")
     parser.add_argument("--tol-area", type=number_argument, default=None, help="area error tolerance phi_S")
     parser.add_argument("--tol-shape", type=number_argument, default=None, help="shape error tolerance phi_C")
     parser.add_argument("--tol-energy", type=number_argument, default=None,
@@ -287,6 +288,13 @@ def _check_options_apply(args: argparse.Namespace, params: FlattenParams) -> Non
         raise ParameterError(f"--dt is the size of the {params.dynamics} dynamics' fixed step: add --step "
                              f"{Step.FIXED.value}" if has_fixed_step else
                              f"the {params.dynamics} dynamics takes no --dt (it has no fixed step): drop --dt")
+    if params.dynamics == "momentum":  # it weighs each node by 2/(C·deg_i) and damps by its restart
+        if args.density is not None:
+            raise ParameterError("--density sets the paper dynamics' node masses; the momentum dynamics weighs "
+                                 "each node by 2/(C deg) instead: drop --density, or add --dynamics paper")
+        if args.damping is not None:
+            raise ParameterError("--damping belongs to the paper dynamics; the momentum dynamics damps by its "
+                                 "restart: drop --damping, or add --dynamics paper")
     for option in ("penalty_kappa", "penalty_gain"):
         if getattr(args, option) is not None and not params.penalty:
             raise ParameterError(f"--{option.replace('_', '-')} sets the penalty: add --penalty")

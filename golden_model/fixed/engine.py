@@ -224,6 +224,10 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
         inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "1/m", fs,
                                          "use --density auto (or a larger density), or a wider inv_mass format")
     if min(w.min() for w in (inv_mass_raw, inv_mass_barrier_raw) if w is not None) < 16:
+        if params.dynamics == "momentum":
+            raise FixedPointError(f"the weight w_i down to {inv_mass.min():.3g} keeps fewer than 5 bits in "
+                                  f"{fs.inv_mass} of format set '{fs.name}': use a smaller --spring, or a wider "
+                                  "inv_mass format")
         raise FixedPointError(f"1/m down to {inv_mass.min():.3g} keeps fewer than 5 bits in {fs.inv_mass} "
                               f"of format set '{fs.name}': the node masses vary too much (lower the density)")
     half_spring = int(_quantize_checked(0.5 * params.spring, fs.spring, "C/2", fs, "use a smaller --spring"))

@@ -83,6 +83,18 @@ def test_barrier_gain_that_does_not_fit_is_refused():
     assert "\n" not in str(info.value)
 
 
+@pytest.mark.parametrize("dynamics, message", [
+    ("momentum", r"the weight w_i down to .* use a smaller --spring, or a wider inv_mass format"),
+    ("paper", r"1/m down to .* the node masses vary too much \(lower the density\)")])
+def test_weights_too_small_for_their_format_name_what_the_mode_takes(dynamics, message):
+    """Momentum weights are 2/(C deg): its advice is the spring (it has no density), the paper's the masses."""
+    mesh = saddle_grid(5)
+    coarse = DEFAULT.replace(inv_mass="u3.6")  # 16 raw units are 0.25
+    params = FlattenParams(dynamics=dynamics, spring=4.0, density=64.0)  # w = 2/(C deg) < 0.1; 1/m < 0.2
+    with pytest.raises(FixedPointError, match=message):
+        prepare(mesh, initial_layout(mesh, "tutte"), params, coarse)
+
+
 @pytest.mark.parametrize("barrier", [True, False])
 def test_fixed_and_float_stop_together_within_one_percent_of_the_minimum(generated, barrier):
     """The stop rule E_C <= E_C* + max(1 % of E_C*, 1e-4) (iterations_to_within's band; the cylinder's

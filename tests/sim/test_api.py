@@ -90,6 +90,8 @@ def test_keywords_change_the_run_as_the_flags_do(ear, capsys):
     ({"barrier_threshold": 0}, ["--barrier-threshold", "0"]),
     ({"engine": "quantum"}, ["--engine", "quantum"]),
     ({"step": "fixed"}, ["--step", "fixed"]),             # the momentum dynamics has no step to choose
+    ({"density": 1e-6}, ["--density", "1e-6"]),           # nor node masses (its weights are 2/(C deg))
+    ({"damping": 0}, ["--damping", "0"]),                 # nor damping, even none
 ])
 def test_a_value_the_command_refuses_the_api_refuses(ear, capsys, options, flags):
     V, F = ear

@@ -22,6 +22,7 @@ def test_flatten_round_trip(tmp_path):
                 "initial_area_error", "initial_shape_error", "engine", "step", "update"):
         assert key in summary
     assert (summary["engine"], summary["step"], summary["update"]) == ("float", "variable", "jacobi")
+    assert (summary["mode"], summary["guard"], summary["density"]) == ("paper-variable", False, 2.0)
     assert summary["status"] == "converged"
 
     flat = load_mesh(out)
@@ -158,6 +159,10 @@ BAD_ARGS = [
     (["--dynamics", "momentum", "--step", "fixed"], "--step fixed is a step of the paper dynamics, not of the "
                                                     "momentum dynamics: drop --step, or add --dynamics paper"),
     (["--dynamics", "momentum", "--step", "variable"], "--step variable is a step of the paper dynamics"),
+    (["--dynamics", "momentum", "--density", "1e-6"], "--density sets the paper dynamics' node masses; the "
+                                                      "momentum dynamics weighs each node by 2/(C deg) instead"),
+    (["--dynamics", "momentum", "--damping", "0"], "--damping belongs to the paper dynamics; the momentum "
+                                                   "dynamics damps by its restart: drop --damping"),
     (["--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf"),
     (["--paper", "letter"], "--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg"),
     (["--paper", "fit", "--out", "l.flat.svg"], "--paper is the sheet of a PDF or SVG pattern"),
@@ -269,8 +274,13 @@ def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap()
     assert summary["folded"] == 0
     assert summary["shape_error"] <= arap_error
     assert summary["init"] == "arap" and "stopped: the stop rule held" in summary["used"]
+    assert (summary["mode"], summary["step"], summary["guard"], summary["energy_window"]) == \
+        ("momentum-guarded", "momentum", True, 10) and "density" not in summary  # the weights are 2/(C deg)
+    assert "relative energy change <= 0.001 over 10 iterations" in summary["used"]
     human = run("flatten", str(path), "--max-iter", "5")
-    assert "used momentum dynamics, fold barrier" in human.stderr and "N_max = 5 reached" in human.stderr
+    assert "used momentum dynamics, step guard, fold barrier" in human.stderr and "N_max = 5 reached" in human.stderr
+    unguarded = run("flatten", str(path), "--max-iter", "5", "--no-guard", "--penalty")
+    assert "used momentum dynamics, no step guard, fold barrier (kappa 0.5, mu 4), overlap penalty" in unguarded.stderr
 
 
 @pytest.mark.parametrize("args, message", [
@@ -417,3 +427,31 @@ def test_the_notes_on_a_given_start_are_printed_with_progress_lines_or_without(t
     err = capsys.readouterr().err
     assert err.count("the layout 'uv.txt' is a mirror image of the mesh") == 1, err
     assert ("reading the layout 'uv.txt' ..." in err) == terminal
+
+
+@pytest.mark.parametrize("mode", [["--dynamics", "paper"], ["--dynamics", "paper", "--step", "fixed"],
+                                  ["--dynamics", "momentum"], ["--dynamics", "momentum", "--no-guard"]],
+                         ids=["paper", "paper-fixed", "momentum", "momentum-unguarded"])
+def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
+    """Each option the hint tells the user to give is accepted beside the run's own options (one it says to
+    drop need not be)."""
+    import re
+
+    from golden_model.params import FlattenParams
+    from sim.cli import build_parser, divergence_hint
+    from sim.run_options import params_from_args
+
+    parser = build_parser()
+    defaults = FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=1e-3)
+    hint = divergence_hint(params_from_args(parser.parse_args(["flatten", "m.obj", *mode]), defaults))
+    values = {"--spring": ["2"], "--damping": ["0.05"], "--dt": ["0.01"], "--step": ["fixed"],
+              "--dynamics": ["momentum"]}
+    named = [flag for dropped, flag in re.findall(r"(drop )?(--[a-z-]+)", hint) if not dropped]
+    assert named, hint
+    for flag in named:
+        given = [*mode, flag, *values[flag]]
+        if flag == "--dt" and "fixed" not in mode:
+            given += ["--step", "fixed"]  # the hint says "--step fixed with a small --dt"
+        if flag == "--dynamics":
+            given = [flag, *values[flag]]
+        params_from_args(parser.parse_args(["flatten", "m.obj", *given]), defaults)  # refused: ParameterError

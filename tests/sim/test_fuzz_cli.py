@@ -499,8 +499,10 @@ PARAMETERS: dict[str, Case] = {
     "spring with a digit separator": Case(["--spring", "1_0"], 2, r"argument --spring: expected a number, got '1_0'"),
     "max-iter in arabic-indic digits": Case(["--max-iter", "\u0663"], 2,
                                             r"argument --max-iter: expected an integer, got '\u0663'"),
-    "density 1e300": Case(["--density", "1e300"]),
-    "density 1e-300": Case(["--density", "1e-300"]),
+    "paper density 1e300": Case(["--dynamics", "paper", "--density", "1e300"]),
+    "paper density 1e-300": Case(["--dynamics", "paper", "--density", "1e-300"], 3),  # masses of 1e-300 run away
+    "density with the momentum dynamics": Case(["--density", "1e-6"], 2,
+                                               r"--density sets the paper dynamics' node masses"),
     "dt 1e300 paper": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1e300"], 3),
     "dt 1e-320 paper": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1e-320"]),
     "dt 1000 paper diverges": Case(["--dynamics", "paper", "--step", "fixed", "--dt", "1000"], 3),
@@ -541,7 +543,7 @@ def test_parameters(name, tmp_path, monkeypatch, capsys):
             assert summary["energy"] is None and "energy" in summary["non_finite"]  # was Infinity
         if case.code == 3:  # a diverged run writes no pattern; its history holds P0 and the finite iterations
             guarded = "--dynamics" not in case.args and "--no-guard" not in case.args
-            assert ("the guarded run's numbers overflowed: bring --spring, --density or the mesh's size nearer 1"
+            assert ("the guarded run's numbers overflowed: bring --spring or the mesh's size nearer 1"
                     in outcome.err) == guarded, outcome.err  # the hint names what the run took
             assert not (tmp_path / "flat.obj").exists()
             if "--history" in case.args:
