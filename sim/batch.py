@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import io
 import os
 import sys
@@ -70,6 +71,9 @@ class BatchJob:
         data: the file's bytes (``None`` for a built-in).
         options: the run's options (``argparse`` namespace entries of ``flatten``).
         endings: ``{option: ending}`` of the outputs to write (``out`` may have several).
+        scratch: where the worker makes its private directory: the local pool's directory, which this
+            process removes however the worker ends (a Ctrl-C ends it at once, with no clean-up of its
+            own); ``None`` on a Dask cluster (the worker's temporary directory).
     """
 
     source: str
@@ -77,6 +81,7 @@ class BatchJob:
     data: bytes | None
     options: dict
     endings: tuple[tuple[str, str], ...]
+    scratch: str | None = None
 
 
 @dataclass
@@ -112,7 +117,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
 
     start = time.perf_counter()
     stderr = io.StringIO()
-    with tempfile.TemporaryDirectory(prefix="springflat-batch-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="springflat-batch-", dir=job.scratch) as tmp:
         mesh_path = job.source
         if job.data is not None:
             (Path(tmp) / "in").mkdir()
@@ -275,9 +280,11 @@ def _pool_outcomes(jobs: list[BatchJob], workers: int):
 
     queue = list(jobs)
     running: dict = {}  # future -> (its pool, its job)
-    with contextlib.ExitStack() as pools:
+    # the workers' directories in one of this process's, removed once the workers have ended (stopped by a
+    # Ctrl-C, or killed), with whatever they held
+    with tempfile.TemporaryDirectory(prefix="springflat-batch-") as scratch, contextlib.ExitStack() as pools:
         def start(pool: WorkerPool) -> None:
-            job = queue.pop(0)
+            job = dataclasses.replace(queue.pop(0), scratch=scratch)
             running[pool.submit(flatten_one, job)] = (pool, job)
 
         for _ in range(min(workers, len(queue))):

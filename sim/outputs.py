@@ -343,8 +343,13 @@ def check_not_interrupted() -> None:
 
 @contextmanager
 def deferred_interrupts() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back for the duration of the block (a few renames), then raise them: an
-    interrupt never leaves half of a set of outputs in place.  Outside the main thread: no effect."""
+    """Hold SIGINT and SIGTERM back for the duration of the block (a few renames), then answer them: an
+    interrupt never leaves half of a set of outputs in place.  Outside the main thread: no effect.
+
+    Under a command's handler (:func:`on_interrupt`) the answer is the command's (``KeyboardInterrupt``,
+    the signal noted); in a program that uses the API the signal goes to the handler that program had (a
+    ``KeyboardInterrupt`` for Python's own SIGINT handler, its own SIGTERM handler, or the default action),
+    and nothing is noted: its next write works as before."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -360,6 +365,9 @@ def deferred_interrupts() -> Iterator[None]:
         for held, handler in previous.items():
             signal.signal(held, handler)
     if received:
+        if previous[received[0]] is not on_interrupt:  # a program using the API: its own handler answers
+            signal.raise_signal(received[0])
+            return
         _INTERRUPTED.set()
         _RECEIVED[0] = signal.Signals(received[0])
         raise KeyboardInterrupt

@@ -91,10 +91,12 @@ def check_scheduler_address(scheduler: str) -> None:
 
 
 _SIGTERM_HANDLER: list = []
+#: Set while a :class:`WorkerPool` may fork its workers (in its ``submit``): only those forks are touched.
+_FORKING_WORKERS = threading.Event()
 
 
 def _sigterm_default_for_the_fork() -> None:
-    if threading.current_thread() is threading.main_thread():  # where signal.signal may be called
+    if _FORKING_WORKERS.is_set() and threading.current_thread() is threading.main_thread():  # (signal.signal)
         _SIGTERM_HANDLER.append(signal.signal(signal.SIGTERM, signal.SIG_DFL))
 
 
@@ -104,11 +106,13 @@ def _sigterm_handler_back() -> None:
 
 
 def _sigterm_default_in_the_child() -> None:
-    _SIGTERM_HANDLER.clear()
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if _SIGTERM_HANDLER:  # a worker's fork (the default action is already its own)
+        _SIGTERM_HANDLER.clear()
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-# SIGTERM's default action is set around every fork, so the child has it from its first instruction.
+# SIGTERM's default action is set around a worker's fork, so the worker has it from its first instruction;
+# the forks of a program that uses the API are left alone (its children keep its handlers).
 os.register_at_fork(before=_sigterm_default_for_the_fork, after_in_parent=_sigterm_handler_back,
                     after_in_child=_sigterm_default_in_the_child)
 
@@ -127,8 +131,12 @@ class WorkerPool(ProcessPoolExecutor):
         super().__init__(max_workers, initializer=_start_worker, initargs=(initializer, initargs))
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
-        with deferred_interrupts():
-            return super().submit(fn, *args, **kwargs)
+        with deferred_interrupts():  # (the workers are forked here: ProcessPoolExecutor starts them in submit)
+            _FORKING_WORKERS.set()
+            try:
+                return super().submit(fn, *args, **kwargs)
+            finally:
+                _FORKING_WORKERS.clear()
 
     def stop(self) -> None:
         """Cancel the queued tasks, end the workers (the runs in flight are lost) and wait for the

@@ -358,3 +358,32 @@ def test_a_format_set_the_rtl_cannot_build_is_a_parameter_error(ear, tmp_path):
     (tmp_path / "f.json").write_text(json.dumps(formats))
     with pytest.raises(ParameterError, match="delta s3.23 cannot have more fraction bits than position"):
         springflat.flatten(V, F, engine="rtl", formats=str(tmp_path / "f.json"), max_iter=1)
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_a_signal_while_write_pattern_commits_goes_to_the_programs_own_handler_and_leaves_no_trace(
+        ear, tmp_path, monkeypatch, signum):
+    """The signal is held while the file is put in place, then answered by the handler the program had; the
+    next write works (a Jupyter session that survives a Ctrl-C can go on writing patterns)."""
+    import os
+    import signal as signals
+
+    pattern = springflat.flatten(*ear, max_iter=3)
+    calls = []
+    number = getattr(signals, signum)
+    before = signals.signal(number, lambda n, frame: calls.append(n))
+    real = os.replace
+
+    def replace_as_the_signal_arrives(src, dst):
+        os.kill(os.getpid(), number)
+        return real(src, dst)
+
+    try:
+        monkeypatch.setattr(os, "replace", replace_as_the_signal_arrives)
+        springflat.write_pattern(tmp_path / "first.dxf", pattern, units="m")
+        monkeypatch.setattr(os, "replace", real)
+        assert calls == [number]  # the program's own handler, once, after the commit
+        springflat.write_pattern(tmp_path / "second.dxf", pattern, units="m")
+    finally:
+        signals.signal(number, before)
+    assert (tmp_path / "first.dxf").read_bytes() == (tmp_path / "second.dxf").read_bytes()

@@ -1426,6 +1426,28 @@ def test_real_exit_ctrl_c_on_a_study_on_a_dask_local_cluster_is_one_line(tmp_pat
     assert os.listdir(tmp_path) == []
 
 
+def test_real_exit_ctrl_c_on_a_local_batch_leaves_no_temporary_directory(tmp_path):
+    """The workers end at once on Ctrl-C, with no clean-up of their own; their private directories (each a
+    copy of its mesh and its half-written outputs) are in one of the main process's, which it removes."""
+    import shutil
+
+    work, scratch = tmp_path / "work", tmp_path / "tmp"
+    work.mkdir()
+    scratch.mkdir()
+    for k in range(2):
+        shutil.copy(SCANS / "bunny_face.obj", work / f"m{k}.obj")
+
+    def a_worker_has_begun() -> bool:
+        return any(path.name == "out" for path in scratch.rglob("out"))
+
+    code, out, err = _interrupt(["flatten", "m0.obj", "m1.obj", "--jobs", "2", "--out-dir", "d", "--out", ".dxf",
+                                 "--max-iter", "4000", "--tol-energy", "0"],
+                                work, after=0.3, ready=a_worker_has_begun, timeout=300, env={"TMPDIR": str(scratch)})
+    assert (code, err.splitlines()[-1:]) == (130, ["springflat: interrupted"]), err
+    assert list(scratch.iterdir()) == []
+    assert sorted(os.listdir(work)) == ["m0.obj", "m1.obj"]
+
+
 @pytest.mark.slow
 def test_real_exit_ctrl_c_on_a_dask_local_batch_is_one_line(tmp_path):
     """Ctrl-C reaches the local cluster's worker processes too: they ignore it (sim.dask_worker), no traceback

@@ -119,3 +119,33 @@ def test_no_slim_worker_from_a_daemonic_process():
 
     with multiprocessing.get_context("fork").Pool(1) as pool:
         assert pool.map(_slim_worker_started_here, [0]) == [False]
+
+
+def _sigterm_handler_of_a_worker() -> str:
+    return repr(signal.getsignal(signal.SIGTERM))
+
+
+def test_only_a_pools_own_workers_get_sigterms_default_action():
+    """A worker ends at once on SIGTERM (its pool's stop), from its first instruction; a process that a
+    program using the API forks itself keeps that program's SIGTERM handler."""
+    def mine(signum, frame):
+        pass
+
+    before = signal.signal(signal.SIGTERM, mine)
+    try:
+        read, write = os.pipe()
+        child = os.fork()
+        if child == 0:  # the program's own child
+            os.write(write, (signal.getsignal(signal.SIGTERM) is mine).to_bytes(1, "big"))
+            os._exit(0)
+        os.close(write)
+        kept = os.read(read, 1)
+        os.close(read)
+        os.waitpid(child, 0)
+        with WorkerPool(1) as pool:
+            in_worker = pool.submit(_sigterm_handler_of_a_worker).result()
+        assert signal.getsignal(signal.SIGTERM) is mine  # and the program's own, after the pool's fork
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert kept == b"\x01"
+    assert in_worker == repr(signal.SIG_DFL)
