@@ -19,6 +19,7 @@ a number that is not finite is ``null`` and its key is listed in
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import math
 import os
@@ -365,7 +366,8 @@ def main(argv: list[str] | None = None) -> int:
         if argv is None:  # the program itself, which ends now (not a caller running it in-process)
             _quiet_after_interrupt()
         line, status = STOP_SIGNALS[received_signal().name]
-        print(f"springflat: {line}", file=sys.stderr)
+        with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone (EIO)
+            print(f"springflat: {line}", file=sys.stderr)
         return status
     finally:
         sys.stdout = stdout

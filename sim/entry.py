@@ -4,10 +4,11 @@ A thin door in front of :func:`sim.cli.main`. Importing the commands takes a sec
 scipy, matplotlib), and a Ctrl-C in that time must end the program like one during a command, with
 the one line ``springflat: interrupted`` and status 130 — not a traceback from inside an import,
 nor the ImportError that a C extension's import cut short by the signal turns into. So SIGINT (and
-SIGTERM, answered alike with ``springflat: terminated`` and 143) is only recorded while the commands
-are imported, and answered once they are; from then on, also in the instants before the command
-installs its own handler and after it puts it back, as the command answers it. Once the program has
-its status (the command's, a usage error's, an interrupt's), both are ignored while Python shuts down.
+SIGTERM and SIGHUP, answered alike with ``springflat: terminated`` and 143 and ``springflat: hung up``
+and 129) is only recorded while the commands are imported, and answered once they are; from then on,
+also in the instants before the command installs its own handler and after it puts it back, as the
+command answers it. Once the program has its status (the command's, a usage error's, an interrupt's),
+all three are ignored while Python shuts down.
 """
 
 from __future__ import annotations
@@ -21,7 +22,10 @@ from .exit_codes import STOP_SIGNALS
 
 def _stopped(name: str) -> int:
     line, status = STOP_SIGNALS[name]
-    print(f"springflat: {line}", file=sys.stderr)
+    try:
+        print(f"springflat: {line}", file=sys.stderr)
+    except OSError:  # after SIGHUP the terminal may be gone (EIO)
+        pass
     return status
 
 

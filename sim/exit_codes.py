@@ -8,6 +8,8 @@ EXIT_USAGE = 2
 """Bad arguments or input: one line ``springflat: error: ...``."""
 EXIT_DIVERGED = 3
 """A run diverged (no pattern is written; the history and plot show the run)."""
+EXIT_HUNG_UP = 129
+"""SIGHUP (the terminal closed, an SSH session dropped), as a shell reports it: 128 + 1."""
 EXIT_INTERRUPTED = 130
 """Ctrl-C (SIGINT), as a shell reports it: 128 + 2."""
 EXIT_TERMINATED = 143
@@ -15,4 +17,5 @@ EXIT_TERMINATED = 143
 
 #: The signals a command ends on cleanly (outputs not put in place, child processes killed), each with
 #: its one line after ``springflat: `` and its status.
-STOP_SIGNALS = {"SIGINT": ("interrupted", EXIT_INTERRUPTED), "SIGTERM": ("terminated", EXIT_TERMINATED)}
+STOP_SIGNALS = {"SIGINT": ("interrupted", EXIT_INTERRUPTED), "SIGTERM": ("terminated", EXIT_TERMINATED),
+                "SIGHUP": ("hung up", EXIT_HUNG_UP)}

@@ -10,7 +10,7 @@ The policy: outputs are regular files.  A symbolic link is written through (its
 final target is replaced, the link stays); a path that is not a regular file (a
 device, a FIFO, a socket, a directory), or a link to one, is refused and never
 replaced; no output may be the same file as an input or another output
-(:func:`check_distinct`, by device and inode).  SIGINT or SIGTERM (:func:`on_interrupt`)
+(:func:`check_distinct`, by device and inode).  SIGINT, SIGTERM or SIGHUP (:func:`on_interrupt`)
 never lets anything be put in place afterwards.
 """
 
@@ -38,6 +38,8 @@ from golden_model.files import describe_os_error
 from golden_model.mesh import folded_faces, signed_areas_2d, triangle_areas_3d
 from golden_model.mesh_io import save_obj
 from golden_model.results import FlattenResult
+
+from .exit_codes import STOP_SIGNALS
 
 HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded")
 LAYOUT_SUFFIXES = (".obj", ".svg")
@@ -282,7 +284,7 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
             os.unlink(tmp)
 
 
-#: Set by :func:`on_interrupt` (SIGINT or SIGTERM); the commits of :func:`atomic_write`, :func:`all_or_nothing` and
+#: Set by :func:`on_interrupt` (SIGINT, SIGTERM or SIGHUP); the commits of :func:`atomic_write`, :func:`all_or_nothing` and
 #: :func:`atomic_directory` refuse to put anything in place once it is set.
 _INTERRUPTED = threading.Event()
 #: The signal that set it (``signal.SIGINT`` until one arrives).
@@ -293,7 +295,7 @@ _INTERRUPT_HOOKS: list[Callable[[], None]] = []
 
 @contextmanager
 def when_interrupted(hook: Callable[[], None]) -> Iterator[None]:
-    """In the block, ``hook()`` is called the moment SIGINT or SIGTERM arrives (in :func:`on_interrupt`), before
+    """In the block, ``hook()`` is called the moment SIGINT, SIGTERM or SIGHUP arrives (in :func:`on_interrupt`), before
     the ``KeyboardInterrupt`` unwinds anything: for what other threads must stop doing at once."""
     _INTERRUPT_HOOKS.append(hook)
     try:
@@ -303,7 +305,7 @@ def when_interrupted(hook: Callable[[], None]) -> Iterator[None]:
 
 
 def on_interrupt(signum, frame) -> None:
-    """The commands' SIGINT and SIGTERM handler: :class:`KeyboardInterrupt`, as Python's own for SIGINT.
+    """The commands' SIGINT, SIGTERM and SIGHUP handler: :class:`KeyboardInterrupt`, as Python's own for SIGINT.
 
     So a ``kill`` ends a command as Ctrl-C does: nothing is put in place, and the child process a
     command waits on (``subprocess.run``: Yosys, nextpnr) is killed on the way out instead of running on.
@@ -335,7 +337,7 @@ def reset_interrupted() -> None:
 
 
 def check_not_interrupted() -> None:
-    """:class:`KeyboardInterrupt` if SIGINT or SIGTERM arrived (even one a finaliser swallowed): nothing is
+    """:class:`KeyboardInterrupt` if SIGINT, SIGTERM or SIGHUP arrived (even one a finaliser swallowed): nothing is
     committed."""
     if _INTERRUPTED.is_set():
         raise KeyboardInterrupt
@@ -343,7 +345,7 @@ def check_not_interrupted() -> None:
 
 @contextmanager
 def deferred_interrupts() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back for the duration of the block (a few renames), then answer them: an
+    """Hold SIGINT, SIGTERM and SIGHUP back for the duration of the block (a few renames), then answer them: an
     interrupt never leaves half of a set of outputs in place.  Outside the main thread: no effect.
 
     Under a command's handler (:func:`on_interrupt`) the answer is the command's (``KeyboardInterrupt``,
@@ -357,7 +359,7 @@ def deferred_interrupts() -> Iterator[None]:
     def hold(signum, frame) -> None:
         received.append(signum)
 
-    previous = {held: signal.signal(held, hold) for held in (signal.SIGINT, signal.SIGTERM)}
+    previous = {held: signal.signal(held, hold) for held in (getattr(signal, name) for name in STOP_SIGNALS)}
     try:
         check_not_interrupted()
         yield

@@ -5,10 +5,10 @@ the commands that run on a pool (``study``, a ``flatten`` batch) end within a mo
 and nothing else:
 
 - the workers ignore SIGINT: the parent answers it for all of them, and no worker prints a
-  traceback of its own; and SIGTERM, which :meth:`WorkerPool.stop` ends them with, has its default
-  action in a forked child, not the command's handler (which would raise in the worker, or never run
+  traceback of its own; and SIGTERM, which :meth:`WorkerPool.stop` ends them with (and SIGHUP, which
+  a closed terminal sends them), has its default action in a forked child, not the command's handler (which would raise in the worker, or never run
   in one stuck on a lock another thread held at the fork);
-- a task is submitted with SIGINT and SIGTERM held back (:func:`sim.outputs.deferred_interrupts`).  The first
+- a task is submitted with SIGINT, SIGTERM and SIGHUP held back (:func:`sim.outputs.deferred_interrupts`).  The first
   submit forks the workers and starts the executor's thread; a ``KeyboardInterrupt`` raised in the
   middle of that leaves workers the executor has not recorded, blocked on its queue, and the
   program's exit waits for them for ever;
@@ -90,29 +90,34 @@ def check_scheduler_address(scheduler: str) -> None:
         raise ParameterError(f"--scheduler '{scheduler}': {problem} ({expected})")
 
 
-_SIGTERM_HANDLER: list = []
+#: The signals a worker takes with their default action (it ends at once): SIGTERM, which
+#: :meth:`WorkerPool.stop` sends, and SIGHUP, which a closed terminal sends the whole group.
+_DEFAULT_IN_WORKERS = (signal.SIGTERM, signal.SIGHUP)
+_HANDLERS_BEFORE_FORK: list[dict] = []
 #: Set while a :class:`WorkerPool` may fork its workers (in its ``submit``): only those forks are touched.
 _FORKING_WORKERS = threading.Event()
 
 
 def _sigterm_default_for_the_fork() -> None:
     if _FORKING_WORKERS.is_set() and threading.current_thread() is threading.main_thread():  # (signal.signal)
-        _SIGTERM_HANDLER.append(signal.signal(signal.SIGTERM, signal.SIG_DFL))
+        _HANDLERS_BEFORE_FORK.append({n: signal.signal(n, signal.SIG_DFL) for n in _DEFAULT_IN_WORKERS})
 
 
 def _sigterm_handler_back() -> None:
-    if _SIGTERM_HANDLER:
-        signal.signal(signal.SIGTERM, _SIGTERM_HANDLER.pop())
+    if _HANDLERS_BEFORE_FORK:
+        for signum, handler in _HANDLERS_BEFORE_FORK.pop().items():
+            signal.signal(signum, handler)
 
 
 def _sigterm_default_in_the_child() -> None:
-    if _SIGTERM_HANDLER:  # a worker's fork (the default action is already its own)
-        _SIGTERM_HANDLER.clear()
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if _HANDLERS_BEFORE_FORK:  # a worker's fork (the default actions are already its own)
+        _HANDLERS_BEFORE_FORK.clear()
+        for signum in _DEFAULT_IN_WORKERS:
+            signal.signal(signum, signal.SIG_DFL)
 
 
-# SIGTERM's default action is set around a worker's fork, so the worker has it from its first instruction;
-# the forks of a program that uses the API are left alone (its children keep its handlers).
+# SIGTERM's and SIGHUP's default actions are set around a worker's fork, so the worker has them from its
+# first instruction; the forks of a program that uses the API are left alone (its children keep its handlers).
 os.register_at_fork(before=_sigterm_default_for_the_fork, after_in_parent=_sigterm_handler_back,
                     after_in_child=_sigterm_default_in_the_child)
 

@@ -85,6 +85,24 @@ def test_a_dask_local_cluster_writes_the_same_bytes_as_the_process_pool(tmp_path
         assert (tmp_path / "pool" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes(), name
 
 
+def test_a_local_cluster_beside_another_on_the_dashboards_port_says_nothing(tmp_path):
+    """Its scheduler's HTTP server takes a free port: with 8787 taken (another springflat run's cluster, or
+    the user's own) a batch printed three lines of Dask's "Port 8787 is already in use" warning."""
+    import socket
+
+    meshes = [m for m in write_meshes(tmp_path / "in", 2, 0) if "corrupt" not in m.name]
+    with socket.socket() as taken:
+        try:
+            taken.bind(("127.0.0.1", 8787))
+        except OSError:
+            pytest.skip("port 8787 is in use here already")
+        taken.listen()
+        proc = run("flatten", *meshes, "--out-dir", tmp_path / "out", "--out", ".dxf", "--scheduler", "local",
+                   "--jobs", "1")
+    assert proc.returncode == 0, proc.stderr
+    assert "already in use" not in proc.stderr and "Warning" not in proc.stderr, proc.stderr
+
+
 @pytest.mark.slow
 def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
     from distributed import LocalCluster

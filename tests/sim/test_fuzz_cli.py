@@ -1311,6 +1311,23 @@ def _building(cwd: Path, name: str):
     return lambda: any(p.name.startswith(f".{name}.") for p in cwd.iterdir())
 
 
+@pytest.mark.parametrize("after", [0.0, 1.0])
+def test_real_exit_a_hang_up_during_flatten_leaves_no_output(tmp_path, after):
+    """A closed terminal (SIGHUP to the group) ends a run as Ctrl-C does: no output file and no temporary
+    one; status 129 (128 + 1) and one line."""
+    from golden_model.generate import dome_grid
+    from golden_model.mesh_io import save_obj
+
+    mesh = dome_grid(64)
+    save_obj(tmp_path / "m.obj", mesh.vertices, mesh.faces)
+    code, out, err = _interrupt(["flatten", "m.obj", "--max-iter", "100000", "--tol-area", "0", "--tol-energy", "0",
+                                 "--no-guard", "--energy-window", "1", "--out", "o.pdf", "--out", "o.svg",
+                                 "--history", "h.csv", "--plot", "p.png"], tmp_path, after=after,
+                                signum=signal.SIGHUP)
+    assert (code, out, err) == (129, "", "springflat: hung up\n")
+    assert os.listdir(tmp_path) == ["m.obj"]
+
+
 @pytest.mark.parametrize("after", [0.0, 0.8, 2.5])
 def test_real_exit_ctrl_c_during_flatten_leaves_no_output(tmp_path, after):
     """Ctrl-C while importing, early, or during the run: one line, status 130, no file. (Counted from the
