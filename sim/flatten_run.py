@@ -224,15 +224,21 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
              (args.distortion, "--distortion",
               lambda path: write_distortion_csv(path, distortion(mesh, result.positions), args.units))]
     written = []
-    with all_or_nothing():
-        for path, what, write in jobs:
-            if path is None or (result.status == "diverged" and what in PATTERN_OUTPUTS):
-                continue
-            written.append(path)
-            try:
-                write(path)
-            except OutputWriteError as exc:
-                raise OutputWriteError(exc.path, exc.error, what) from None
-            except OSError as exc:
-                raise OutputWriteError(path, exc, what) from None
+    try:
+        with all_or_nothing():
+            for path, what, write in jobs:
+                if path is None or (result.status == "diverged" and what in PATTERN_OUTPUTS):
+                    continue
+                written.append(path)
+                try:
+                    write(path)
+                except OutputWriteError as exc:
+                    raise OutputWriteError(exc.path, exc.error, what) from None
+                except OSError as exc:
+                    raise OutputWriteError(path, exc, what) from None
+    except OutputWriteError as exc:  # one that failed as they were put in place: named by its option
+        if exc.what:
+            raise
+        named = next((what for path, what, _ in jobs if path == exc.path), "")
+        raise OutputWriteError(exc.path, exc.error, named) from None
     return written

@@ -16,6 +16,7 @@ never lets anything be put in place afterwards.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import errno
 import math
@@ -53,7 +54,7 @@ class OutputWriteError(OutputError):
     """An OS error on an output: ``cannot write [<what> ]'<path>': <reason>``."""
 
     def __init__(self, path: Path, error: OSError, what: str = ""):
-        self.path, self.error = path, error
+        self.path, self.error, self.what = path, error, what
         super().__init__(f"cannot write {what + ' ' if what else ''}'{path}': {describe_os_error(error)}")
 
 
@@ -247,6 +248,65 @@ def _replace(tmp: Path, target: Path, path: Path) -> None:
     os.replace(tmp, target)
 
 
+def _put_in_place(moves: list[tuple[Path, Path, Path]], what: str = "") -> None:
+    """Rename each ``(source, target, shown)`` over its target, all of them or none: a target's old file is
+    kept under a temporary name beside it (a hard link, or a copy where the file system allows none) until
+    every rename is done. Where one fails (a file that may not be replaced, a busy mount point), those done
+    are undone, the old files put back, and :class:`OutputWriteError` names its ``shown`` path."""
+    done: list[tuple[Path, Path | None]] = []  # (target, its old file's temporary name or None if it was new)
+
+    def undo(error: OSError, shown: Path):
+        for target, kept in reversed(done):
+            with contextlib.suppress(OSError):  # as much as can be put back
+                if kept is None:
+                    os.unlink(target)
+                else:
+                    os.replace(kept, target)
+        done.clear()
+        return OutputWriteError(shown, error, what)
+
+    try:
+        for source, target, shown in moves:
+            try:
+                kept = _keep_old_file(target)
+            except OSError as exc:
+                raise undo(exc, shown) from None
+            try:
+                os.replace(source, target)
+            except OSError as exc:
+                if kept is not None:
+                    os.unlink(kept)
+                raise undo(exc, shown) from None
+            done.append((target, kept))
+    finally:
+        for _, kept in done:
+            if kept is not None and os.path.lexists(kept):
+                os.unlink(kept)
+
+
+def _keep_old_file(target: Path) -> Path | None:
+    """A second name beside ``target`` for its file (``None`` if there is none): a hard link, or a copy."""
+    if not os.path.lexists(target):
+        return None
+    for _ in range(100):
+        kept = Path(target).parent / temporary_name(Path(target).name, secrets.token_hex(4))
+        try:
+            os.link(target, kept, follow_symlinks=False)
+            return kept
+        except FileExistsError:
+            continue
+        except OSError:  # no hard links here (a FAT file system, a protected link): a copy
+            try:
+                with open(target, "rb") as original, open(kept, "xb") as copy:
+                    shutil.copyfileobj(original, copy)
+            except BaseException:
+                if os.path.lexists(kept):
+                    os.unlink(kept)
+                raise
+            return kept
+    raise FileExistsError(errno.EEXIST, "no free temporary name", str(Path(target).parent))
+
+
 @contextmanager
 def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
     """Yield a temporary path next to ``path``'s file; rename it over that file on success.
@@ -387,11 +447,7 @@ def all_or_nothing() -> Iterator[None]:
         with deferred_interrupts():
             for _, target, path in pending:  # checked again just before: nothing is renamed if one fails
                 _refuse_special(target, path, "output")
-            for tmp, target, path in pending:
-                try:
-                    os.replace(tmp, target)
-                except OSError as exc:
-                    raise OutputWriteError(path, exc) from None
+            _put_in_place(pending)
     finally:
         if token is not None:
             _PENDING.reset(token)
@@ -451,6 +507,10 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
     try:
         try:
             yield build
+        except OutputWriteError as exc:  # a file of the build (atomic_write): named as the file it becomes
+            if _names_paths_outside(OSError(0, "", str(exc.path)), build):
+                raise
+            raise OutputWriteError(out / os.path.relpath(exc.path, build), exc.error, what) from None
         except OSError as exc:
             if _names_paths_outside(exc, build):
                 raise  # not a write of the output: a tool that cannot be started, an input
@@ -461,7 +521,7 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
                 if not target.exists():
                     os.rename(build, target)
                     return
-                _merge_directory(build, target, out, stale, inputs)
+                _merge_directory(build, target, out, stale, inputs, what)
         except OSError as exc:
             raise OutputWriteError(out, exc, what) from None
     finally:
@@ -515,20 +575,23 @@ def current_umask() -> int:
 
 
 def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...],
-                     inputs: list[tuple[str, Path | None]]) -> None:
-    """Move every file of ``build`` into ``target`` (same relative paths), replacing regular files only."""
+                     inputs: list[tuple[str, Path | None]], what: str) -> None:
+    """Move every file of ``build`` into ``target`` (same relative paths), replacing regular files only, all
+    of them or none (:func:`_put_in_place`)."""
     files = _built_files(build)
     _check_no_input_replaced(files, build, out, inputs)
     for p in files:
         _refuse_special(target / p.relative_to(build), out / p.relative_to(build), "output")
     written = {p.relative_to(build) for p in files}  # before the moves empty the build
     input_files = {_identity(path) for _, path in inputs if path is not None}
+    moves = []
     for p in files:
         destination = target / p.relative_to(build)
         destination.parent.mkdir(parents=True, exist_ok=True)
         if destination.exists():  # a replaced file keeps its mode, as atomic_write's do; a new script stays runnable
             os.chmod(p, _file_mode(destination) | (stat.S_IMODE(os.stat(p).st_mode) & 0o111))
-        os.replace(p, destination)
+        moves.append((p, destination, out / p.relative_to(build)))
+    _put_in_place(moves, what)
     for name in stale:  # an earlier result this run did not write again; never an input of this run
         if Path(name) not in written and (target / name).is_file() and _identity(target / name) not in input_files:
             (target / name).unlink()

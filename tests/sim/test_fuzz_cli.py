@@ -1704,3 +1704,82 @@ def test_help_or_version_into_a_closed_pipe_is_one_line_and_status_2(argv):
         os.close(write)
     assert (proc.returncode, proc.stderr) == (2, "springflat: error: cannot write standard output: broken pipe\n")
 
+
+
+def _refusing_replace(monkeypatch, name: str):
+    """``os.replace`` that fails, as over a file one may not replace (EPERM), onto a file named ``name``."""
+    import errno
+
+    real = os.replace
+
+    def replace(src, dst, **kwargs):
+        if os.path.basename(dst) == name:
+            raise PermissionError(errno.EPERM, "Operation not permitted", str(dst))
+        return real(src, dst, **kwargs)
+
+    monkeypatch.setattr(os, "replace", replace)
+
+
+def test_outputs_put_in_place_all_or_none_when_a_rename_fails(tmp_path, monkeypatch, capsys):
+    """--out is renamed first, --history then fails (a file in a sticky directory owned by another user, one
+    with chattr +a, a busy bind mount): --out gets its old file back; the message names --history."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a.svg").write_text("old pattern")
+    (tmp_path / "h.csv").write_text("old history")
+    _refusing_replace(monkeypatch, "h.csv")
+    assert main(["flatten", "surf1", "--out", "a.svg", "--history", "h.csv"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == ("springflat: error: cannot write --history 'h.csv': "
+                                                        "operation not permitted")
+    assert (tmp_path / "a.svg").read_text() == "old pattern" and (tmp_path / "h.csv").read_text() == "old history"
+    assert sorted(os.listdir(tmp_path)) == ["a.svg", "h.csv"]
+
+
+def test_a_directory_output_put_in_place_all_or_none_when_a_rename_fails(tmp_path, monkeypatch, capsys):
+    """paper into an existing directory: figure.png is renamed, report.md fails; figure.png gets its old file
+    back (a report beside figures of another run would mislead), a new file goes again, and the message names
+    the file."""
+    import sim.paper
+
+    def tiny_report(out, init="pca", progress=True):
+        (out / "figure.png").write_bytes(b"new png")
+        (out / "new.csv").write_text("new")
+        report = out / "report.md"
+        report.write_text("new report\n")
+        return report
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r").mkdir()
+    (tmp_path / "r" / "figure.png").write_bytes(b"old png")
+    (tmp_path / "r" / "report.md").write_text("old report\n")
+    _refusing_replace(monkeypatch, "report.md")
+    assert main(["paper", "--out", "r", "--quiet"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == ("springflat: error: cannot write --out 'r/report.md': "
+                                                        "operation not permitted")
+    assert sorted(os.listdir(tmp_path / "r")) == ["figure.png", "report.md"]
+    assert (tmp_path / "r" / "figure.png").read_bytes() == b"old png"
+
+
+def test_a_file_of_a_directory_output_that_cannot_be_written_is_named_as_it_would_be(tmp_path, monkeypatch, capsys):
+    """A full disk while paper writes a figure: the message names the figure in --out, not the hidden
+    directory it was built in, which is gone."""
+    import errno
+
+    import sim.outputs
+    import sim.paper
+
+    def tiny_report(out, init="pca", progress=True):
+        with sim.outputs.atomic_write(out / "figure.png") as tmp:
+            Path(tmp).write_bytes(b"png")
+        return out / "report.md"
+
+    def full(tmp):
+        raise OSError(errno.ENOSPC, "No space left on device", str(tmp))
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    monkeypatch.setattr(sim.outputs, "_flush_to_disk", full)
+    monkeypatch.chdir(tmp_path)
+    assert main(["paper", "--out", "r", "--quiet"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == ("springflat: error: cannot write --out 'r/figure.png': "
+                                                        "no space left on device")
+    assert os.listdir(tmp_path) == []
