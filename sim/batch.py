@@ -414,7 +414,8 @@ def _output_directory(path: Path | None) -> Iterator[None]:
         raise UserError(f"--out-dir '{path}' exists and is not a directory")
     if path.is_symlink() and not path.exists():
         raise UserError(f"--out-dir '{path}' is a symbolic link to '{os.readlink(path)}', which does not exist")
-    missing = [p for p in (path, *path.parents) if not p.exists()]
+    # ('a/../b' makes 'a' and 'b': 'a/..' names no directory of its own)
+    missing = [p for p in (path, *path.parents) if not p.exists() and p.name not in ("", ".", "..")]
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -425,8 +426,8 @@ def _output_directory(path: Path | None) -> Iterator[None]:
         for made in missing:  # the deepest first
             try:
                 made.rmdir()
-            except OSError:  # not empty: a mesh's files are in it
-                break
+            except OSError:  # not empty: a mesh's files are in it (and so in each one above it)
+                continue
 
 
 def cmd_batch(args: argparse.Namespace) -> int:

@@ -129,8 +129,15 @@ class UartBus:
 def open_port(port: str, baud: int = protocol.DEFAULT_BAUD, timeout_s: float = 2.0):
     """A pyserial port: a device (``/dev/ttyUSB0``, ``COM3``) or a pyserial URL (``socket://host:port``).
     Raises :class:`LinkError` (one line) when it cannot be opened."""
+    import urllib.parse
+
     import serial
 
+    url = urllib.parse.urlsplit(port)
+    if "://" in port and "file" in urllib.parse.parse_qs(url.query):  # spy://...?file=PATH truncates PATH
+        raise LinkError(f"the serial port '{port}' names a log file (file=), which springflat would write "
+                        "unchecked (it could replace any file, a mesh too): leave out file= (spy:// then logs "
+                        "to standard error)")
     try:
         return serial.serial_for_url(port, baudrate=baud, timeout=timeout_s, write_timeout=timeout_s)
     except (serial.SerialException, ValueError, OSError) as exc:

@@ -271,12 +271,13 @@ def test_a_mesh_whose_files_cannot_be_written_is_failed_in_the_table_and_the_jso
     assert os.path.isfile("o/dome00.dxf")
 
 
-def test_a_batch_that_writes_nothing_leaves_no_out_dir_it_made(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("out_dir", ["new/o", "new/../other/o"])
+def test_a_batch_that_writes_nothing_leaves_no_out_dir_it_made(tmp_path, monkeypatch, capsys, out_dir):
     """Every run diverged (a diverged run writes no pattern): the --out-dir the batch made, and its missing
-    parents, are gone again."""
+    parents, are gone again (with '..': 'new' and 'other')."""
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "in", 2, 0)
-    assert main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "new/o", "--out", ".svg", "--step", "fixed",
+    assert main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", out_dir, "--out", ".svg", "--step", "fixed",
                  "--dt", "50", "--dynamics", "paper"]) == 3
     capsys.readouterr()
     assert os.listdir(tmp_path) == ["in"]

@@ -190,3 +190,15 @@ def test_flatten_engine_board_writes_the_fixed_engines_layout(tmp_path):
     assert "engine cycles on the board on socket://" in outs["board"]
     assert outs["board"].split(":")[1] == outs["fixed"].split(":")[1]  # status and iterations
     assert server.frames > 10
+
+
+def test_a_port_url_that_names_a_log_file_is_refused_and_the_file_left_alone(tmp_path):
+    """pyserial's spy:// truncates its file= at once, with none of the checks an output gets (it could be the
+    mesh being flattened): refused; another URL still opens."""
+    mesh = tmp_path / "ear.obj"
+    mesh.write_text("v 0 0 0\n")
+    with pytest.raises(LinkError, match=r"names a log file \(file=\), which springflat would write unchecked"):
+        open_port(f"spy://loop://?file={mesh}")
+    assert mesh.read_text() == "v 0 0 0\n"
+    port = open_port("loop://")
+    port.close()
