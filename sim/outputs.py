@@ -122,7 +122,9 @@ def _refuse_special(target: Path, path: Path, what: str) -> None:
         via = f" (the link's target '{target}')" if target != Path(path) else ""
         raise OutputError(f"{what} '{path}'{via} is a {file_kind(st.st_mode)}, not a regular file: "
                           "springflat writes regular files only")
-    if not os.access(target, os.W_OK):
+    # a file with no write permission for anyone is read-only for root too (root may write it, but a user who
+    # took every write bit away, in a container where everyone is root, meant it to stay)
+    if not os.access(target, os.W_OK) or not st.st_mode & 0o222:
         raise OutputError(f"{what} '{path}' is read-only: springflat does not replace a file you may not write "
                           "(make it writable, or name another)")
 

@@ -39,7 +39,7 @@ from sim.cli import add_engine_options, forget_half_built_components
 from sim.engines import ENGINES, engine_named
 from sim.flatten_run import run_flatten
 from sim.distortion import Distortion, distortion
-from sim.outputs import OutputError, area_ratio, directory_name_problem, ending_name_problem
+from sim.outputs import OutputError, area_ratio, check_output_path, directory_name_problem, ending_name_problem
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, kind_or_none, on_sheets, run_caption,
                           scale_note, write_pattern_file)
 from sim.run_options import UserError, add_run_options, params_from_args, resolve_mesh
@@ -350,6 +350,7 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         raise OutputError(f"write_pattern: dxf_edges draws the mesh's edges into a DXF pattern, not '{path}'")
     if paper is not None and not on_sheets(path):
         raise OutputError(f"write_pattern: paper is the sheet of a PDF or SVG pattern, not '{path}'")
+    check_output_path(Path(path), "write_pattern: the path", typed=False)  # a missing directory, named
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
     drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)

@@ -345,6 +345,9 @@ def test_the_api_raises_only_its_documented_errors_on_paths_and_options(ear):
         springflat.flatten(V, F, name=None)
     with pytest.raises(springflat.OutputError, match="paper must be one of a4, letter, fit, got ''"):
         springflat.write_pattern("p.pdf", springflat.flatten(V, F, max_iter=1), paper="")
+    with pytest.raises(springflat.OutputError, match=r"^write_pattern: the path 'no/where/p.dxf': directory "
+                                                     r"'no/where' does not exist$"):  # not "no such file"
+        springflat.write_pattern("no/where/p.dxf", springflat.flatten(V, F, max_iter=1))
 
 
 def test_a_format_set_the_rtl_cannot_build_is_a_parameter_error(ear, tmp_path):

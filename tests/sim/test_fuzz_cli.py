@@ -749,6 +749,29 @@ def test_real_permission_denied(tmp_path, what):
     assert _tree(tmp_path) == before
 
 
+def test_a_file_nobody_may_write_is_refused_as_output_even_for_root(tmp_path, monkeypatch, capsys):
+    """chmod a-w is the user's "keep this": root (in a container everyone is) could write the file, but it is
+    refused all the same, and a file writable by its owner alone is replaced as before."""
+    monkeypatch.chdir(tmp_path)
+    kept = tmp_path / "kept.svg"
+    kept.write_text("keep\n")
+    kept.chmod(0o444)
+    assert main(["flatten", "surf1", "--out", "kept.svg"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == ("springflat: error: --out 'kept.svg' is read-only: springflat "
+                                                        "does not replace a file you may not write (make it "
+                                                        "writable, or name another)")
+    assert kept.read_text() == "keep\n"
+    kept.chmod(0o644)
+    assert main(["flatten", "surf1", "--out", "kept.svg"]) == 0
+    assert kept.read_text().startswith("<?xml") and stat_mode(kept) == 0o644
+
+
+def stat_mode(path: Path) -> int:
+    import stat
+
+    return stat.S_IMODE(path.stat().st_mode)
+
+
 # --------------------------------------------------------------------------- issue 26: outputs, inputs, format sets
 #
 # Policy (README "Outputs", docs/hardware.md "Outputs"): an output is written as a new file renamed over
