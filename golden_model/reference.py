@@ -392,16 +392,20 @@ def check_energy_scale(mesh: Mesh, spring: float) -> None:
             f"{MIN_ENERGY_SCALE:.0e}); bring --spring nearer 1, or the mesh's coordinates")
 
 
-#: A layout wider than this many times the larger of the 3D mesh and the start has run away: no flattening
-#: is within twenty orders of magnitude of that, and the run is ``diverged`` while its numbers are still
-#: finite (an undamped run can grow for thousands of iterations before anything overflows).
-RUNAWAY_FACTOR = 1e20
+#: A layout wider than this many times the mesh's edges laid end to end (or than the start) has run away:
+#: the mesh is connected, so a layout whose every edge is at most k times its 3D length is at most k times
+#: their sum wide, and this one has an edge stretched ten thousandfold. The run is ``diverged`` while its
+#: numbers are still finite (an undamped run can grow for thousands of iterations before anything
+#: overflows; the literal overlap penalty's runs grew to 1e15 mesh widths and ended as ``max-iterations``).
+RUNAWAY_FACTOR = 1e4
 
 
 def runaway_width(mesh: Mesh, start: np.ndarray) -> float:
     """The layout width past which a run from ``start`` has run away (:data:`RUNAWAY_FACTOR`), in the mesh's
-    units: widths are bounding-box sides, so a layout that merely drifts does not count."""
-    return RUNAWAY_FACTOR * max(float(np.ptp(mesh.vertices, axis=0).max()), float(np.ptp(start, axis=0).max()))
+    units: :data:`RUNAWAY_FACTOR` times the sum of the mesh's edge lengths, or the start's width if that is
+    larger; widths are bounding-box sides, so a layout that merely drifts does not count."""
+    return RUNAWAY_FACTOR * max(float(np.sum(mesh.rest_lengths)), float(np.ptp(mesh.vertices, axis=0).max()),
+                                float(np.ptp(start, axis=0).max()))
 
 
 def in_range(positions: np.ndarray, width: float) -> bool:

@@ -200,8 +200,8 @@ def scale_note_of(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
 
 
 #: What a diverged float run did (:func:`golden_model.reference.runaway_width`).
-RAN_AWAY = (f"a value stopped being finite, or the layout grew {RUNAWAY_FACTOR:g} times wider than the mesh and "
-            "the start")
+RAN_AWAY = (f"a value stopped being finite, or the layout grew {RUNAWAY_FACTOR:g} times wider than the mesh's "
+            "edges laid end to end")
 
 #: The outputs a diverged run does not write: its last finite layout is no pattern, and a non-zero exit must
 #: not leave a fresh target (an existing file is kept). ``--history`` and ``--plot`` show the divergence.
