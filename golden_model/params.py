@@ -86,34 +86,34 @@ class FlattenParams:
                 raise ParameterError(f"{name} must be a finite number, got {value!r}")
             return float(value)
 
-        if finite("spring constant C", self.spring) <= 0:
-            raise ParameterError(f"spring constant C must be > 0, got {self.spring}")
-        if self.density != "auto" and finite("density", self.density) <= 0:
-            raise ParameterError(f"density must be > 0 or 'auto', got {self.density}")
+        if finite("--spring (the spring constant C)", self.spring) <= 0:
+            raise ParameterError(f"--spring (the spring constant C) must be > 0, got {self.spring}")
+        if self.density != "auto" and finite("--density", self.density) <= 0:
+            raise ParameterError(f"--density must be > 0 or 'auto', got {self.density}")
         if self.step not in STEP_MODES:
             raise ParameterError(f"step must be one of {STEP_MODES}, got {self.step!r}")
-        if finite("dt", self.dt) <= 0:
-            raise ParameterError(f"dt must be > 0, got {self.dt}")
+        if finite("--dt", self.dt) <= 0:
+            raise ParameterError(f"--dt must be > 0, got {self.dt}")
         if self.update not in UPDATE_ORDERS:
             raise ParameterError(f"update must be one of {UPDATE_ORDERS}, got {self.update!r}")
-        if not 0 <= finite("damping", self.damping) < 1:
-            raise ParameterError(f"damping must be in [0, 1), got {self.damping}")
+        if not 0 <= finite("--damping", self.damping) < 1:
+            raise ParameterError(f"--damping must be in [0, 1), got {self.damping}")
         for name in ("penalty_kappa", "penalty_gain", "tol_area", "tol_shape", "tol_energy"):
-            flag = name.replace("_", "-")  # as the option is spelled, in every message about it
+            flag = "--" + name.replace("_", "-")  # as the option is spelled, in every message about it
             if finite(flag, getattr(self, name)) < 0:
                 raise ParameterError(f"{flag} must be >= 0, got {getattr(self, name)}")
         if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
-            raise ParameterError(f"max-iter must be an integer >= 1, got {self.max_iter!r}")
+            raise ParameterError(f"--max-iter must be an integer >= 1, got {self.max_iter!r}")
         if self.dynamics not in DYNAMICS:
             raise ParameterError(f"dynamics must be one of {DYNAMICS}, got {self.dynamics!r}")
         if self.barrier is None:
             object.__setattr__(self, "barrier", self.dynamics == "momentum")
         if not isinstance(self.barrier, bool):
             raise ParameterError(f"barrier must be true or false, got {self.barrier!r}")
-        if not 0 < finite("barrier threshold", self.barrier_threshold) <= 1:
-            raise ParameterError(f"barrier threshold kappa must be in (0, 1], got {self.barrier_threshold}")
-        if not 0 < finite("barrier gain", self.barrier_gain) <= 16:
-            raise ParameterError(f"barrier gain mu must be in (0, 16], got {self.barrier_gain}")
+        if not 0 < finite("--barrier-threshold", self.barrier_threshold) <= 1:
+            raise ParameterError(f"--barrier-threshold (kappa) must be in (0, 1], got {self.barrier_threshold}")
+        if not 0 < finite("--barrier-gain", self.barrier_gain) <= 16:
+            raise ParameterError(f"--barrier-gain (mu) must be in (0, 16], got {self.barrier_gain}")
         if self.guard is None:
             object.__setattr__(self, "guard", self.dynamics == "momentum")
         if not isinstance(self.guard, bool):
@@ -122,7 +122,7 @@ class FlattenParams:
             object.__setattr__(self, "energy_window", ENERGY_WINDOW if self.dynamics == "momentum" else 1)
         if (isinstance(self.energy_window, bool) or not isinstance(self.energy_window, int)
                 or not 1 <= self.energy_window <= 1000):
-            raise ParameterError(f"energy-window must be an integer in [1, 1000], got {self.energy_window!r}")
+            raise ParameterError(f"--energy-window must be an integer in [1, 1000], got {self.energy_window!r}")
         if self.guard and self.dynamics != "momentum":
             raise ParameterError("the step guard belongs to the momentum dynamics (--dynamics momentum); "
                                  "the paper dynamics has none (drop --guard)")

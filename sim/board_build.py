@@ -225,7 +225,8 @@ def cmd_board(args, fs, capacity) -> int:
         raise SynthError("give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)")
     if (args.target is not None or args.components or args.router != DEFAULT_ROUTER
             or args.placer_timing != DEFAULT_PLACER_TIMING):
-        raise SynthError("--board takes --formats, --capacity, --no-guard, --seed, --freq, --baud and --out only")
+        raise SynthError("--board takes --formats, --capacity, --no-guard, --seed, --freq, --baud, --out, --json "
+                         "and --quiet only")
     if args.baud is not None and args.baud <= 0:
         raise SynthError(f"--baud must be a positive number of bits per second, not {args.baud}")
     out = Path(args.out) if args.out else Path(f"board-{args.board}-{fs.name}")

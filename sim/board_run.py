@@ -101,7 +101,8 @@ def add_board_options(parser) -> None:
                         help="--engine board: the board's serial port (/dev/ttyUSB0, COM3, or a pyserial URL "
                              "such as socket://host:port)")
     parser.add_argument("--baud", type=int, default=None,  # None: not given (DEFAULT_BAUD)
-                        help=f"--engine board: the UART's rate, as the bitstream was built (default {DEFAULT_BAUD})")
+                        help=f"--engine board: the UART's rate in bit/s, as the bitstream was built (default "
+                             f"{DEFAULT_BAUD})")
 
 
 def board_engine(formats: FormatSet, port: str | None, baud: int | None):

@@ -63,7 +63,13 @@ from .version import installed_version
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the project's one-line error format."""
+    """argparse with the project's one-line error format, and no abbreviated options: ``rtl-check --engine
+    fixed`` (``flatten``'s option) would have been taken as ``--engine-top`` and refused ``fixed``, and a
+    script's abbreviation would change meaning with the next option added."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         self.exit(EXIT_USAGE, f"springflat: error: {message} (see '{self.prog} --help')\n")
@@ -192,9 +198,10 @@ def _saturation_note(result: FlattenResult) -> str | None:
     if not result.extra.get("saturations"):
         return None
     fields = ", ".join(f"{name} {count}" for name, count in sorted(events.items(), key=lambda item: -item[1])[:3])
+    others = [name for name in FormatSet.presets() if name != result.extra["formats"]]
     return (f"format set '{result.extra['formats']}' clamped {result.extra['saturations']} values to its range"
             + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's; "
-            f"a format set with more integer bits holds them (presets: {', '.join(FormatSet.presets())}; "
+            f"a format set with more integer bits holds them (other presets: {', '.join(others)}; "
             "docs/fixed-point.md)")
 
 

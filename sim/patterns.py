@@ -128,7 +128,7 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--paper", choices=PAPERS, default=None,  # None: not given (DEFAULT_PAPER)
                         help="PDF/SVG sheet: a4 or letter (tiled with overlap marks when the pattern is larger), "
                              f"or fit: one page around the pattern, for a roll plotter (default {DEFAULT_PAPER}); "
-                             "a cutter takes the .dxf, which holds the cut line alone")
+                             "a cutter takes the .dxf, which holds the cut line alone (unless --dxf-edges)")
     parser.add_argument("--dxf-edges", action="store_true",
                         help="also write every mesh edge to the DXF, on layer MESH (the boundary is on CUT)")
     parser.add_argument("--distortion", type=file_path_argument, default=None, metavar="FILE.csv",

@@ -48,7 +48,9 @@ def add_parser(sub, add_run_options) -> None:
     p.add_argument("--waves", type=file_path_argument, default=None, metavar="PATH",
                    help="write the waveform here: FILE.fst with icarus, FILE.vcd with verilator")
     p.add_argument("--stall", type=float, default=0.0, metavar="P",
-                   help="probability of a random stall on each side per clock (default 0)")
+                   help="the datapath bench's probability of a random stall on each side per clock (default 0; "
+                        "not with --engine-top, which has --wait-states, nor the guarded dynamics, which only the "
+                        "engine runs)")
     p.add_argument("--json", action="store_true", help="print one JSON object with the results")
     p.set_defaults(func=cmd_rtl_check)
 

@@ -60,18 +60,20 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                     "and report LUT4, flip-flops, DSPs, block RAM, Fmax after routing and the critical path per "
                     "component and for the top (springflat_core). springflat_engine (the whole engine behind "
                     "its Wishbone bus, --capacity) is opt-in. Writes the handoff bundle to --out.")
-    p.add_argument("--target", choices=tuple(TARGETS), help="ecp5 (LFE5U-85F) or ice40 (UP5K)")
+    p.add_argument("--target", choices=tuple(TARGETS),
+                   help="ecp5 (LFE5U-85F) or ice40 (UP5K); one of --target and --board is needed")
     p.add_argument("--board", choices=("ulx3s-85f",), default=None,
                    help="instead of --target: the board top (PLL, UART bridge, LEDs, the engine at --capacity) "
                         "to a bitstream with its timing report and pin list (docs/board.md)")
     p.add_argument("--baud", type=int, default=None,
-                   help=f"--board: the UART's rate (default {protocol.DEFAULT_BAUD})")
+                   help=f"--board: the UART's rate in bit/s (default {protocol.DEFAULT_BAUD})")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
                    help="clock constraint for nextpnr (default "
                         + ", ".join(f"{mhz:g} for {target}" for target, mhz in DEFAULT_FREQ.items())
                         + f"); with --board the engine's clock from the PLL (default {protocol.ENGINE_CLOCK_HZ / 1e6:g})")
-    p.add_argument("--out", type=path_argument, default=None, help="bundle directory (default synth-TARGET-PRESET)")
+    p.add_argument("--out", type=path_argument, default=None,
+                   help="bundle directory (default synth-TARGET-PRESET; with --board board-BOARD-PRESET)")
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
                    help=f"comma-separated subset of {', '.join([*COMPONENT_SUMMARIES, ENGINE])} (default: all but "
                         f"{ENGINE})")

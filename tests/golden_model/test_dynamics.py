@@ -122,10 +122,10 @@ def test_restart_zeroes_the_velocity_one_iteration_after_s_turns_negative():
 
 
 @pytest.mark.parametrize("changes, message", [
-    (dict(barrier_threshold=0.0), "barrier threshold kappa must be in (0, 1]"),
-    (dict(barrier_threshold=1.5), "barrier threshold kappa must be in (0, 1]"),
-    (dict(barrier_gain=-1.0), "barrier gain mu must be in (0, 16]"),
-    (dict(barrier_gain=float("nan")), "barrier gain must be a finite number"),
+    (dict(barrier_threshold=0.0), "--barrier-threshold (kappa) must be in (0, 1]"),
+    (dict(barrier_threshold=1.5), "--barrier-threshold (kappa) must be in (0, 1]"),
+    (dict(barrier_gain=-1.0), "--barrier-gain (mu) must be in (0, 16]"),
+    (dict(barrier_gain=float("nan")), "--barrier-gain must be a finite number"),
     (dict(dynamics="verlet"), "dynamics must be one of"),
     (dict(dynamics="momentum", update="sequential"), "use --update jacobi"),
     (dict(dynamics="momentum", damping=0.1), "drop --damping"),

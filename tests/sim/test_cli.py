@@ -284,8 +284,8 @@ def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap()
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--barrier-threshold", "0"], "barrier threshold kappa must be in (0, 1]"),
-    (["--barrier-gain", "100"], "barrier gain mu must be in (0, 16]"),
+    (["--barrier-threshold", "0"], "--barrier-threshold (kappa) must be in (0, 1]"),
+    (["--barrier-gain", "100"], "--barrier-gain (mu) must be in (0, 16]"),
     (["--dynamics", "momentum", "--update", "sequential"], "use --update jacobi"),
     (["--dynamics", "momentum", "--engine", "fixed", "--formats", "FORMATS"], "same fraction bits"),
 ])
@@ -455,3 +455,17 @@ def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
         if flag == "--dynamics":
             given = [flag, *values[flag]]
         params_from_args(parser.parse_args(["flatten", "m.obj", *given]), defaults)  # refused: ParameterError
+
+
+@pytest.mark.parametrize("argv, unknown", [
+    (["rtl-check", "surf1", "--engine", "fixed"], "--engine fixed"),  # flatten's option, not --engine-top
+    (["flatten", "surf1", "--max", "3"], "--max 3"),
+])
+def test_an_abbreviated_option_is_not_taken_for_a_longer_one(argv, unknown, capsys):
+    from sim.cli import main
+
+    with pytest.raises(SystemExit) as stopped:
+        main(argv)
+    assert stopped.value.code == 2
+    assert f"springflat: error: unrecognized arguments: {unknown} (see 'springflat {argv[0]} --help')" in \
+        capsys.readouterr().err
