@@ -2,6 +2,7 @@
 
 import csv
 import json
+import os
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -469,3 +470,14 @@ def test_an_abbreviated_option_is_not_taken_for_a_longer_one(argv, unknown, caps
     assert stopped.value.code == 2
     assert f"springflat: error: unrecognized arguments: {unknown} (see 'springflat {argv[0]} --help')" in \
         capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [["--out", "x\ny/z.svg"], ["--out", "z.svg\n"], ["--bogus\tflag"]],
+                         ids=["a newline in a missing directory", "a name ending in a newline", "a tab"])
+def test_an_error_about_a_name_with_control_characters_is_one_line(tmp_path, args):
+    """The name is quoted with its control characters escaped, as in the files' headers: a raw newline made the
+    error two lines (and a terminal takes an escape sequence as a command)."""
+    proc = run("flatten", "surf1", *args, cwd=tmp_path)
+    assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1, proc.stderr
+    assert proc.stderr.startswith("springflat: error: ") and "\t" not in proc.stderr
+    assert os.listdir(tmp_path) == []
