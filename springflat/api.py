@@ -240,7 +240,11 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
         if array.dtype.kind not in "iufb":  # strings, complex numbers, objects: nothing to take silently
             raise MeshError(f"{name} must be an array of {what}, got {array.dtype} values")
         arrays.append(array)
-    return arrays[0], arrays[1]
+    faces = arrays[1]
+    if faces.dtype.kind == "f" and faces.size and np.isfinite(faces).all() and (faces == np.round(faces)).all() \
+            and np.abs(faces).max() < 2**53:  # whole numbers as floats (np.loadtxt's): the indices they are
+        faces = faces.astype(np.int64)
+    return arrays[0], faces
 
 
 def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.ndarray | None = None,

@@ -213,6 +213,7 @@ def test_a_name_with_control_characters_or_undecodable_bytes_is_one_line_of_text
     (lambda V, F: (V.astype(complex), F), r"V must be an array of \(V, 3\) vertex positions, got complex128 values"),
     (lambda V, F: (V.astype(str), F), r"V must be an array of \(V, 3\) vertex positions, got <U\d+ values"),
     (lambda V, F: (V, F.astype(str)), r"F must be an array of \(F, 3\) vertex indices, got <U\d+ values"),
+    (lambda V, F: (V, F + 0.5), r"face indices must be integers"),  # whole numbers as floats are taken (below)
 ])
 def test_arrays_that_are_no_arrays_of_numbers_are_mesh_errors(ear, make, message):
     with pytest.raises(MeshError, match=message):
@@ -390,3 +391,11 @@ def test_a_signal_while_write_pattern_commits_goes_to_the_programs_own_handler_a
     finally:
         signals.signal(number, before)
     assert (tmp_path / "first.dxf").read_bytes() == (tmp_path / "second.dxf").read_bytes()
+
+
+def test_faces_given_as_whole_floats_are_their_indices(ear):
+    """np.loadtxt reads a CSV of indices as floats: they are the same faces, the same pattern."""
+    V, F = ear
+    as_floats = springflat.flatten(V, F.astype(float), max_iter=3)
+    assert np.array_equal(as_floats.layout, springflat.flatten(V, F, max_iter=3).layout)
+    assert as_floats.faces.dtype.kind == "i"
