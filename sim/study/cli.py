@@ -160,12 +160,15 @@ def cmd_study(args: argparse.Namespace) -> int:
                         "--optimise" if args.optimise else "--no-optimise",
                         *([f"--max-iter {args.max_iter}"] if args.max_iter is not None else []),
                         f"--out {shlex.quote(str(out))}"])
+    earlier_choice = (out / "chosen.json").is_file()
     with atomic_directory(out, stale=("chosen.json",), inputs=inputs) as build:  # all of it or nothing
         write_outputs(result, build, command=command)
     chosen = result.chosen
     if chosen is None:
         print(f"no configuration meets the target {target.error:g} on the {len(cases)} cases; "
-              f"wrote {out / 'report.md'}")
+              f"wrote {out / 'report.md'}"
+              + (f"; removed {out / 'chosen.json'}, an earlier run's choice, which this report does not make"
+                 if earlier_choice else ""))
     else:
         base_s = result.summary_of(result.base.label)
         print(f"chosen {chosen.config.label}: {chosen.cost.total_bits} datapath bits, {chosen.cost.dsp} DSP, "

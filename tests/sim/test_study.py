@@ -282,6 +282,19 @@ def test_a_report_that_would_replace_its_own_base_is_refused_before_the_study(tm
     assert os.listdir("study-report") == ["chosen.json"] and Path("study-report/chosen.json").read_bytes() == before
 
 
+def test_an_earlier_choice_that_this_report_does_not_make_is_removed_and_said(tmp_path, monkeypatch, capsys):
+    """A chosen.json beside a report that chose nothing would mislead (a build would take it); it goes, and the
+    result line says so."""
+    monkeypatch.chdir(tmp_path)
+    Path("s").mkdir()
+    FormatSet.preset("narrow").save("s/chosen.json")
+    assert cmd_study(_parse(["dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--max-iter", "5",
+                             "--target", "1e-15", "--out", "s", "--quiet"])) == 0  # a target nothing meets
+    assert not Path("s/chosen.json").exists()
+    assert capsys.readouterr().out.rstrip().endswith("; removed s/chosen.json, an earlier run's choice, which this "
+                                                     "report does not make")
+
+
 def test_a_mesh_path_that_cannot_be_read_says_why_not_unknown_mesh(tmp_path, monkeypatch):
     from golden_model.mesh import MeshError
 
