@@ -224,6 +224,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 def cmd_verilog(args: argparse.Namespace) -> int:
     from .export import engine_capacity, export_engine_bundle, export_verilog
+    from .outputs import check_build_so_far
 
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats, guard=args.build_guard)
@@ -233,6 +234,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
         print(f"springflat verilog: exporting every component and springflat_engine (capacity "
               f"{capacity.as_option()}) to {out} ...", file=sys.stderr)  # half a minute of silence otherwise
         interface = export_verilog(formats, build)
+        check_build_so_far()  # a --formats file named interface.json: refused before the engine's export
         engine = export_engine_bundle(formats, capacity, build)
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")

@@ -136,6 +136,28 @@ def test_an_output_that_would_replace_the_formats_file_is_refused_before_any_too
     assert os.listdir(out_dir) == ["interface.json"] and formats.read_bytes() == before
 
 
+def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_the_engines_export(tmp_path, capsys,
+                                                                                                 monkeypatch):
+    """``verilog --formats out/interface.json --out out``: refused once the components are exported, before the
+    engine's bundle (the longer half of the export)."""
+    import sim.export
+    from golden_model.fixed.formats_set import FormatSet
+
+    def no_engine(*args, **kwargs):
+        raise AssertionError("the engine was exported")
+
+    monkeypatch.setattr(sim.export, "export_engine_bundle", no_engine)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    formats = out_dir / "interface.json"
+    formats.write_text(FormatSet.preset("narrow").to_json())
+    before = formats.read_bytes()
+    status, out, err = run(["verilog", "--formats", str(formats), "--out", str(out_dir)], capsys)
+    assert status == 2
+    assert err.splitlines()[-1] == f"springflat: error: output '{formats}' is the same file as --formats '{formats}'"
+    assert os.listdir(out_dir) == ["interface.json"] and formats.read_bytes() == before
+
+
 @pytest.mark.parametrize("argv, message", [
     (["synth", "--target", "xc7"], "invalid choice: 'xc7'"),
     (["synth", "--target", "ecp5", "--freq", "-5"], "frequency"),
