@@ -287,7 +287,8 @@ def _put_in_place(moves: list[tuple[Path, Path, Path]], what: str = "") -> None:
 
 
 def _keep_old_file(target: Path) -> Path | None:
-    """A second name beside ``target`` for its file (``None`` if there is none): a hard link, or a copy."""
+    """A second name beside ``target`` for its file (``None`` if there is none): a hard link, or a copy (of a
+    symbolic link: the link)."""
     if not os.path.lexists(target):
         return None
     for _ in range(100):
@@ -298,13 +299,16 @@ def _keep_old_file(target: Path) -> Path | None:
         except FileExistsError:
             continue
         except OSError:  # no hard links here (a FAT file system, a protected link): a copy
-            try:
-                with open(target, "rb") as original, open(kept, "xb") as copy:
+            if os.path.islink(target):  # a link in a directory output, which its new file replaces
+                os.symlink(os.readlink(target), kept)
+                return kept
+            with open(target, "rb") as original, open(kept, "xb") as copy:
+                try:
                     shutil.copyfileobj(original, copy)
-            except BaseException:
-                if os.path.lexists(kept):
+                    shutil.copymode(target, kept)
+                except BaseException:
                     os.unlink(kept)
-                raise
+                    raise
             return kept
     raise FileExistsError(errno.EEXIST, "no free temporary name", str(Path(target).parent))
 

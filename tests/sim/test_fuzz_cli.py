@@ -1743,18 +1743,27 @@ def _refusing_replace(monkeypatch, name: str):
     monkeypatch.setattr(os, "replace", replace)
 
 
-def test_outputs_put_in_place_all_or_none_when_a_rename_fails(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("hard_links", [True, False], ids=["hard links", "no hard links"])
+def test_outputs_put_in_place_all_or_none_when_a_rename_fails(tmp_path, monkeypatch, capsys, hard_links):
     """--out is renamed first, --history then fails (a file in a sticky directory owned by another user, one
-    with chattr +a, a busy bind mount): --out gets its old file back; the message names --history."""
+    with chattr +a, a busy bind mount): --out gets its old file back, its mode too where the old file was kept
+    as a copy (no hard links: a FAT file system, protected links); the message names --history."""
+    import errno
+
     monkeypatch.chdir(tmp_path)
     (tmp_path / "a.svg").write_text("old pattern")
+    (tmp_path / "a.svg").chmod(0o640)
     (tmp_path / "h.csv").write_text("old history")
     _refusing_replace(monkeypatch, "h.csv")
+    if not hard_links:
+        def no_link(*args, **kwargs):
+            raise PermissionError(errno.EPERM, "Operation not permitted")
+        monkeypatch.setattr(os, "link", no_link)
     assert main(["flatten", "surf1", "--out", "a.svg", "--history", "h.csv"]) == 2
     assert capsys.readouterr().err.splitlines()[-1] == ("springflat: error: cannot write --history 'h.csv': "
                                                         "operation not permitted")
     assert (tmp_path / "a.svg").read_text() == "old pattern" and (tmp_path / "h.csv").read_text() == "old history"
-    assert sorted(os.listdir(tmp_path)) == ["a.svg", "h.csv"]
+    assert sorted(os.listdir(tmp_path)) == ["a.svg", "h.csv"] and stat_mode(tmp_path / "a.svg") == 0o640
 
 
 def test_a_directory_output_put_in_place_all_or_none_when_a_rename_fails(tmp_path, monkeypatch, capsys):
