@@ -41,7 +41,7 @@ from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
-from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS
+from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS, answered_signals
 from .flatten_run import (PATTERN_OUTPUTS, RAN_AWAY, check_options_used, check_print_size, human_line, json_summary,
                           output_paths, run_flatten, run_formats, scale_note_of, what_was_used, write_outputs)
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
@@ -342,8 +342,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}")
     reset_interrupted()
     handler = threading.current_thread() is threading.main_thread()
-    # Ctrl-C or kill: one line, status 130 or 143 (sim.exit_codes.STOP_SIGNALS)
-    previous = {name: signal.signal(getattr(signal, name), on_interrupt) for name in STOP_SIGNALS} if handler else {}
+    # Ctrl-C, kill or a hang-up: one line, status 130, 143 or 129 (sim.exit_codes.STOP_SIGNALS), unless ignored
+    previous = ({name: signal.signal(getattr(signal, name), on_interrupt) for name in answered_signals()}
+                if handler else {})
     stdout = sys.stdout
     if stdout is not None:  # (closed: print() skips it)
         sys.stdout = NamedStandardOutput(stdout)

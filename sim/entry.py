@@ -7,8 +7,8 @@ nor the ImportError that a C extension's import cut short by the signal turns in
 SIGTERM and SIGHUP, answered alike with ``springflat: terminated`` and 143 and ``springflat: hung up``
 and 129) is only recorded while the commands are imported, and answered once they are; from then on,
 also in the instants before the command installs its own handler and after it puts it back, as the
-command answers it. Once the program has its status (the command's, a usage error's, an interrupt's),
-all three are ignored while Python shuts down.
+command answers it; one that is ignored when it starts (``nohup``'s SIGHUP) stays ignored. Once the program
+has its status (the command's, a usage error's, an interrupt's), all three are ignored while Python shuts down.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import io
 import signal
 import sys
 
-from .exit_codes import STOP_SIGNALS
+from .exit_codes import STOP_SIGNALS, answered_signals
 
 
 def _stopped(name: str) -> int:
@@ -50,7 +50,7 @@ def _run() -> int:
     def record(signum, frame) -> None:
         received.append(signal.Signals(signum).name)
 
-    previous = {name: signal.signal(getattr(signal, name), record) for name in STOP_SIGNALS}
+    previous = {name: signal.signal(getattr(signal, name), record) for name in answered_signals()}
     answer = None
     try:
         from .cli import main as run_command

@@ -1,8 +1,10 @@
 """The exit statuses of ``springflat`` (besides 0 and 1), in one place.
 
-A module of its own with no imports, so that the console script's door (:mod:`sim.entry`) can use
-them before the commands are imported.
+A module of its own with no imports but the standard library's ``signal``, so that the console script's
+door (:mod:`sim.entry`) can use them before the commands are imported.
 """
+
+import signal
 
 EXIT_USAGE = 2
 """Bad arguments or input: one line ``springflat: error: ...``."""
@@ -19,3 +21,9 @@ EXIT_TERMINATED = 143
 #: its one line after ``springflat: `` and its status.
 STOP_SIGNALS = {"SIGINT": ("interrupted", EXIT_INTERRUPTED), "SIGTERM": ("terminated", EXIT_TERMINATED),
                 "SIGHUP": ("hung up", EXIT_HUNG_UP)}
+
+
+def answered_signals() -> list[str]:
+    """The :data:`STOP_SIGNALS` a command answers: those not ignored now. An ignored one stays ignored, as
+    the shell or the user meant: ``nohup`` (SIGHUP), a script's background job (SIGINT)."""
+    return [name for name in STOP_SIGNALS if signal.getsignal(getattr(signal, name)) is not signal.SIG_IGN]

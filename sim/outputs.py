@@ -425,16 +425,20 @@ def deferred_interrupts() -> Iterator[None]:
     def hold(signum, frame) -> None:
         received.append(signum)
 
-    previous = {held: signal.signal(held, hold) for held in (getattr(signal, name) for name in STOP_SIGNALS)}
+    # an ignored signal stays ignored; one with a handler Python did not install (None) is left to it
+    held = [number for number in (getattr(signal, name) for name in STOP_SIGNALS)
+            if signal.getsignal(number) not in (signal.SIG_IGN, None)]
+    previous = {number: signal.signal(number, hold) for number in held}
     try:
         check_not_interrupted()
         yield
     finally:
-        for held, handler in previous.items():
-            signal.signal(held, handler)
+        for number, handler in previous.items():
+            signal.signal(number, handler)
     if received:
-        if previous[received[0]] is not on_interrupt:  # a program using the API: its own handler answers
-            signal.raise_signal(received[0])
+        if previous[received[0]] is not on_interrupt:  # a program using the API: its own handlers answer
+            for number in dict.fromkeys(received):
+                signal.raise_signal(number)
             return
         _INTERRUPTED.set()
         _RECEIVED[0] = signal.Signals(received[0])

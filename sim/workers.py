@@ -91,35 +91,41 @@ def check_scheduler_address(scheduler: str) -> None:
 
 
 #: The signals a worker takes with their default action (it ends at once): SIGTERM, which
-#: :meth:`WorkerPool.stop` sends, and SIGHUP, which a closed terminal sends the whole group.
+#: :meth:`WorkerPool.stop` sends, and SIGHUP, which a closed terminal sends the whole group; one the
+#: program ignores (``nohup``'s SIGHUP) its workers ignore too.
 _DEFAULT_IN_WORKERS = (signal.SIGTERM, signal.SIGHUP)
+#: The handlers a worker's fork set aside in the main thread, to be put back in the parent after it.
 _HANDLERS_BEFORE_FORK: list[dict] = []
 #: Set while a :class:`WorkerPool` may fork its workers (in its ``submit``): only those forks are touched.
 _FORKING_WORKERS = threading.Event()
 
 
-def _sigterm_default_for_the_fork() -> None:
+def _default_actions_for_the_fork() -> None:
     if _FORKING_WORKERS.is_set() and threading.current_thread() is threading.main_thread():  # (signal.signal)
-        _HANDLERS_BEFORE_FORK.append({n: signal.signal(n, signal.SIG_DFL) for n in _DEFAULT_IN_WORKERS})
+        # held back while the handlers are swapped: one arriving now is answered by the parent's handler after
+        # the fork (the child starts with none pending)
+        signal.pthread_sigmask(signal.SIG_BLOCK, _DEFAULT_IN_WORKERS)
+        _HANDLERS_BEFORE_FORK.append({n: signal.signal(n, signal.SIG_DFL) for n in _DEFAULT_IN_WORKERS
+                                      if signal.getsignal(n) not in (signal.SIG_IGN, None)})
 
 
-def _sigterm_handler_back() -> None:
-    if _HANDLERS_BEFORE_FORK:
+def _handlers_back_in_the_parent() -> None:
+    if _HANDLERS_BEFORE_FORK and threading.current_thread() is threading.main_thread():
         for signum, handler in _HANDLERS_BEFORE_FORK.pop().items():
             signal.signal(signum, handler)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _DEFAULT_IN_WORKERS)
 
 
-def _sigterm_default_in_the_child() -> None:
-    if _HANDLERS_BEFORE_FORK:  # a worker's fork (the default actions are already its own)
+def _default_actions_in_the_child() -> None:
+    if _HANDLERS_BEFORE_FORK:  # a worker's fork: its default actions (or ignored signals) are already its own
         _HANDLERS_BEFORE_FORK.clear()
-        for signum in _DEFAULT_IN_WORKERS:
-            signal.signal(signum, signal.SIG_DFL)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _DEFAULT_IN_WORKERS)
 
 
 # SIGTERM's and SIGHUP's default actions are set around a worker's fork, so the worker has them from its
 # first instruction; the forks of a program that uses the API are left alone (its children keep its handlers).
-os.register_at_fork(before=_sigterm_default_for_the_fork, after_in_parent=_sigterm_handler_back,
-                    after_in_child=_sigterm_default_in_the_child)
+os.register_at_fork(before=_default_actions_for_the_fork, after_in_parent=_handlers_back_in_the_parent,
+                    after_in_child=_default_actions_in_the_child)
 
 
 def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> None:

@@ -1351,6 +1351,41 @@ def test_real_exit_a_hang_up_during_flatten_leaves_no_output(tmp_path, after):
     assert os.listdir(tmp_path) == ["m.obj"]
 
 
+def test_real_exit_a_hang_up_that_nohup_ignores_stays_ignored(tmp_path):
+    """Started with SIGHUP ignored (``nohup``, ``trap '' HUP``), a batch runs on when the terminal closes, its
+    workers too; Ctrl-C still ends it."""
+    import time
+
+    from golden_model.generate import dome_grid
+    from golden_model.mesh_io import save_obj
+
+    mesh = dome_grid(64)
+    for name in ("m.obj", "n.obj"):
+        save_obj(tmp_path / name, mesh.vertices, mesh.faces)
+    proc = subprocess.Popen([SPRINGFLAT, "flatten", "m.obj", "n.obj", "--jobs", "2", "--out-dir", "d", "--out",
+                             ".dxf", "--max-iter", "100000", "--tol-area", "0", "--tol-energy", "0", "--no-guard",
+                             "--energy-window", "1"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
+    try:
+        ready = _past_python_start_up(proc.pid)
+        start = time.monotonic()
+        while not ready() and time.monotonic() - start < 120:
+            time.sleep(0.02)
+        time.sleep(2.0)  # the workers are running
+        os.killpg(proc.pid, signal.SIGHUP)
+        time.sleep(1.0)
+        assert proc.poll() is None, proc.communicate()
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert (proc.returncode, err.splitlines()[-1:]) == (130, ["springflat: interrupted"]), err
+    assert "died" not in out, out  # no worker ended by the hang-up either
+
+
 @pytest.mark.parametrize("after", [0.0, 0.8, 2.5])
 def test_real_exit_ctrl_c_during_flatten_leaves_no_output(tmp_path, after):
     """Ctrl-C while importing, early, or during the run: one line, status 130, no file. (Counted from the
