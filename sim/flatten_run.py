@@ -240,5 +240,5 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
         if exc.what:
             raise
         named = next((what for path, what, _ in jobs if path == exc.path), "")
-        raise OutputWriteError(exc.path, exc.error, named) from None
+        raise OutputWriteError(exc.path, exc.error, named, exc.left) from None
     return written

@@ -53,9 +53,10 @@ class OutputError(ValueError):
 class OutputWriteError(OutputError):
     """An OS error on an output: ``cannot write [<what> ]'<path>': <reason>``."""
 
-    def __init__(self, path: Path, error: OSError, what: str = ""):
-        self.path, self.error, self.what = path, error, what
-        super().__init__(f"cannot write {what + ' ' if what else ''}'{path}': {describe_os_error(error)}")
+    def __init__(self, path: Path, error: OSError, what: str = "", left: str = ""):
+        self.path, self.error, self.what, self.left = path, error, what, left
+        super().__init__(f"cannot write {what + ' ' if what else ''}'{path}': {describe_os_error(error)}"
+                         + (f"; {left}" if left else ""))
 
 
 #: The ``filename`` of an OS error writing the standard output (:class:`NamedStandardOutput`).
@@ -127,6 +128,22 @@ def _refuse_special(target: Path, path: Path, what: str) -> None:
     if not os.access(target, os.W_OK) or not st.st_mode & 0o222:
         raise OutputError(f"{what} '{path}' is read-only: springflat does not replace a file you may not write "
                           "(make it writable, or name another)")
+    if _sticky_and_not_ours(target, st):
+        raise OutputError(f"{what} '{path}' is another user's file in a sticky directory (as /tmp is): only its "
+                          "owner may replace it (name another file)")
+
+
+def _sticky_and_not_ours(target: Path, st: os.stat_result) -> bool:
+    """Whether ``target`` (its ``st``) is in a sticky directory whose owner, like the file's, is someone else:
+    there only they may rename over it, whatever the file's mode (root may)."""
+    me = os.geteuid()
+    if me == 0 or st.st_uid == me:
+        return False
+    try:
+        parent = os.stat(Path(target).parent if str(Path(target).parent) else ".")
+    except OSError:
+        return False
+    return bool(parent.st_mode & stat.S_ISVTX) and parent.st_uid != me
 
 
 #: Bytes a temporary name may always take, whatever the target's name: every file system in use
@@ -254,18 +271,25 @@ def _put_in_place(moves: list[tuple[Path, Path, Path]], what: str = "") -> None:
     """Rename each ``(source, target, shown)`` over its target, all of them or none: a target's old file is
     kept under a temporary name beside it (a hard link, or a copy where the file system allows none) until
     every rename is done. Where one fails (a file that may not be replaced, a busy mount point), those done
-    are undone, the old files put back, and :class:`OutputWriteError` names its ``shown`` path."""
-    done: list[tuple[Path, Path | None]] = []  # (target, its old file's temporary name or None if it was new)
+    are undone, the old files put back, and :class:`OutputWriteError` names its ``shown`` path (and any file
+    that could not be put back, with where its old file is)."""
+    done: list[tuple[Path, Path | None | object, Path]] = []  # (target, its old file's second name, None if it
+    # was new, the path as given)
 
-    def undo(error: OSError, shown: Path):
-        for target, kept in reversed(done):
-            with contextlib.suppress(OSError):  # as much as can be put back
-                if kept is None:
+    def undo(error: OSError, shown: Path) -> OutputWriteError:
+        left = []
+        for target, kept, given in reversed(done):
+            try:
+                if kept is _NOT_KEPT:
+                    left.append(f"'{given}' is the new file (its old one could not be kept)")
+                elif kept is None:
                     os.unlink(target)
                 else:
                     os.replace(kept, target)
+            except OSError:
+                left.append(f"'{given}' is the new file" + ("" if kept is None else f", its old one '{kept}'"))
         done.clear()
-        return OutputWriteError(shown, error, what)
+        return OutputWriteError(shown, error, what, "; ".join(left))
 
     try:
         for source, target, shown in moves:
@@ -276,19 +300,26 @@ def _put_in_place(moves: list[tuple[Path, Path, Path]], what: str = "") -> None:
             try:
                 os.replace(source, target)
             except OSError as exc:
-                if kept is not None:
-                    os.unlink(kept)
+                if isinstance(kept, Path):
+                    with contextlib.suppress(OSError):  # (in a sticky directory a second name may stay)
+                        os.unlink(kept)
                 raise undo(exc, shown) from None
-            done.append((target, kept))
+            done.append((target, kept, shown))
     finally:
-        for _, kept in done:
-            if kept is not None and os.path.lexists(kept):
-                os.unlink(kept)
+        for _, kept, _ in done:
+            if isinstance(kept, Path):
+                with contextlib.suppress(OSError):
+                    os.unlink(kept)
 
 
-def _keep_old_file(target: Path) -> Path | None:
+#: What :func:`_keep_old_file` gives for a file it could neither link nor copy (a full disk).
+_NOT_KEPT = object()
+
+
+def _keep_old_file(target: Path) -> Path | None | object:
     """A second name beside ``target`` for its file (``None`` if there is none): a hard link, or a copy (of a
-    symbolic link: the link)."""
+    symbolic link: the link); :data:`_NOT_KEPT` where neither can be made (the rename goes ahead: only
+    its undoing is lost)."""
     if not os.path.lexists(target):
         return None
     for _ in range(100):
@@ -299,17 +330,25 @@ def _keep_old_file(target: Path) -> Path | None:
         except FileExistsError:
             continue
         except OSError:  # no hard links here (a FAT file system, a protected link): a copy
+            pass
+        try:
             if os.path.islink(target):  # a link in a directory output, which its new file replaces
                 os.symlink(os.readlink(target), kept)
                 return kept
-            with open(target, "rb") as original, open(kept, "xb") as copy:
-                try:
-                    shutil.copyfileobj(original, copy)
-                    shutil.copymode(target, kept)
-                except BaseException:
-                    os.unlink(kept)
-                    raise
+            fd = os.open(kept, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o600)
+        except FileExistsError:
+            continue
+        except OSError:
+            return _NOT_KEPT
+        try:
+            with open(target, "rb") as original, open(fd, "wb") as copy:
+                shutil.copyfileobj(original, copy)
+            shutil.copymode(target, kept)
             return kept
+        except OSError:  # a full disk, a file one may not read
+            with contextlib.suppress(OSError):
+                os.unlink(kept)
+            return _NOT_KEPT
     raise FileExistsError(errno.EEXIST, "no free temporary name", str(Path(target).parent))
 
 

@@ -1850,3 +1850,51 @@ def test_a_file_of_a_directory_output_that_cannot_be_written_is_named_as_it_woul
     assert capsys.readouterr().err.splitlines()[-1] == ("springflat: error: cannot write --out 'r/figure.png': "
                                                         "no space left on device")
     assert os.listdir(tmp_path) == []
+
+
+def test_another_users_file_in_a_sticky_directory_is_refused_before_the_run(tmp_path, monkeypatch, capsys):
+    """In a sticky directory (/tmp) only a file's owner (or the directory's) may rename over it: refused up
+    front, not found out as the outputs are put in place."""
+    import stat
+
+    monkeypatch.chdir(tmp_path)
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o1777)
+    (shared / "h.csv").write_text("theirs")
+    (shared / "h.csv").chmod(0o666)
+    me = os.stat(shared / "h.csv").st_uid + 1  # someone who owns neither the file nor the directory
+    monkeypatch.setattr(os, "geteuid", lambda: me)
+    assert main(["flatten", "surf1", "--out", "a.svg", "--history", "shared/h.csv"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        "springflat: error: --history 'shared/h.csv' is another user's file in a sticky directory (as /tmp is): "
+        "only its owner may replace it (name another file)")
+    assert sorted(os.listdir(tmp_path)) == ["shared"] and (shared / "h.csv").read_text() == "theirs"
+    assert stat.S_IMODE(os.stat(shared).st_mode) & stat.S_ISVTX
+
+
+def test_a_file_whose_old_version_could_not_be_kept_is_named_when_a_later_rename_fails(tmp_path, monkeypatch,
+                                                                                          capsys):
+    """No hard link and no room for a copy: the renames go ahead (as they did before they could be undone);
+    where a later one fails, the message says which file is already the new one."""
+    import errno
+    import shutil
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a.svg").write_text("old pattern")
+    (tmp_path / "h.csv").write_text("old history")
+    _refusing_replace(monkeypatch, "h.csv")
+
+    def no_link(*args, **kwargs):
+        raise PermissionError(errno.EPERM, "Operation not permitted")
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "link", no_link)
+    monkeypatch.setattr(shutil, "copyfileobj", full)
+    assert main(["flatten", "surf1", "--out", "a.svg", "--history", "h.csv"]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"springflat: error: cannot write --history 'h.csv': operation not permitted; "
+        f"'a.svg' is the new file (its old one could not be kept)")
+    assert (tmp_path / "h.csv").read_text() == "old history" and sorted(os.listdir(tmp_path)) == ["a.svg", "h.csv"]
