@@ -16,6 +16,7 @@ problem.
 
 from __future__ import annotations
 
+import unicodedata
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -70,13 +71,25 @@ def printable_name(name: str) -> str:
     """``name`` as one line of valid text, for the headers and titles of the files that carry it: the bytes
     of a file name that were not UTF-8 (Python's surrogate escapes) and control characters (a newline would
     start a record of its own in an OBJ header) as backslash escapes (``\\xff``, ``\\n``)."""
-    name = str(name)
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in _valid_text(name))
+
+
+def one_line(text: str) -> str:
+    """``text`` as one line for a terminal (an error line): a file name's undecodable bytes, control characters
+    and line or paragraph separators as backslash escapes; every other character as it is (a no-break space
+    in a file name stays one, so that the name can be copied from the message)."""
+    return "".join(repr(ch)[1:-1] if unicodedata.category(ch) in ("Cc", "Zl", "Zp") else ch
+                   for ch in _valid_text(text))
+
+
+def _valid_text(text: str) -> str:
+    """``text`` with the surrogates that stand for a file name's undecodable bytes as ``\\xff`` escapes."""
+    text = str(text)
     try:
-        raw = name.encode("utf-8", "surrogateescape")
+        raw = text.encode("utf-8", "surrogateescape")
     except UnicodeEncodeError:  # a surrogate that no undecodable byte gave
-        raw = name.encode("utf-8", "backslashreplace")
-    text = raw.decode("utf-8", "backslashreplace")
-    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in text)
+        raw = text.encode("utf-8", "backslashreplace")
+    return raw.decode("utf-8", "backslashreplace")
 
 
 @dataclass(frozen=True, eq=False)

@@ -33,7 +33,7 @@ from typing import Callable, Iterator
 from golden_model.builtin import is_builtin
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS
 from golden_model.files import describe_os_error, read_file_bytes
-from golden_model.mesh import MeshError, printable_name
+from golden_model.mesh import MeshError, one_line, printable_name
 
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
@@ -479,7 +479,7 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
                 if args.out_dir is not None and not outcome.failed else []
             say(strict_json(record))
         elif outcome.failed:
-            say(f"[{done}/{len(meshes)}] {printable_name(outcome.source)}: failed: {outcome.line}")
+            say(f"[{done}/{len(meshes)}] {printable_name(outcome.source)}: failed: {one_line(outcome.line)}")
         else:
             say(f"[{done}/{len(meshes)}] {outcome.line} ({outcome.seconds:.1f} s)")
 

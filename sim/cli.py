@@ -36,7 +36,7 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.files import describe_os_error
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.layouts import LAYOUT_METHODS
-from golden_model.mesh import printable_name
+from golden_model.mesh import one_line
 from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
@@ -73,7 +73,7 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
 
     def error(self, message: str):
-        self.exit(EXIT_USAGE, f"springflat: error: {printable_name(message)} (see '{self.prog} --help')\n")
+        self.exit(EXIT_USAGE, f"springflat: error: {one_line(message)} (see '{self.prog} --help')\n")
 
     def _print_message(self, message: str, file=None) -> None:
         """argparse's, without its silence on a failed write: ``--help`` or ``--version`` into a full disk
@@ -361,18 +361,18 @@ def main(argv: list[str] | None = None) -> int:
             check_not_interrupted()
             raise
     except USER_ERRORS + (UserError,) as exc:
-        print(f"springflat: error: {printable_name(str(exc))}", file=sys.stderr)  # a newline in a path: one line
+        print(f"springflat: error: {one_line(str(exc))}", file=sys.stderr)  # a newline in a path: one line
         return EXIT_USAGE
     except FormatSetNotBuildable as exc:
-        print(f"springflat: error: the RTL cannot be built with format set "
-              f"'{printable_name(str(getattr(args, 'formats', None)))}': {exc}",
+        print(one_line(f"springflat: error: the RTL cannot be built with format set "
+                       f"'{getattr(args, 'formats', None)}': {exc}"),
               file=sys.stderr)
         forget_half_built_components(exc)
         return EXIT_USAGE
     except OSError as exc:  # a file operation the commands do not name themselves
         what = ("write standard output" if exc.filename == STANDARD_OUTPUT else
                 f"access '{exc.filename}'" if exc.filename else "access")
-        print(f"springflat: error: {printable_name(f'cannot {what}: {describe_os_error(exc)}')}", file=sys.stderr)
+        print(f"springflat: error: {one_line(f'cannot {what}: {describe_os_error(exc)}')}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         if argv is None:  # the program itself, which ends now (not a caller running it in-process)

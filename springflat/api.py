@@ -354,7 +354,10 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         raise OutputError(f"write_pattern: dxf_edges draws the mesh's edges into a DXF pattern, not '{path}'")
     if paper is not None and not on_sheets(path):
         raise OutputError(f"write_pattern: paper is the sheet of a PDF or SVG pattern, not '{path}'")
-    check_output_path(Path(path), "write_pattern: the path", typed=False)  # a missing directory, named
+    try:
+        check_output_path(Path(path), "the path", typed=False)  # a missing directory, named
+    except OutputError as exc:
+        raise OutputError(f"write_pattern: {exc}") from None
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
     drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)

@@ -349,6 +349,9 @@ def test_the_api_raises_only_its_documented_errors_on_paths_and_options(ear):
     with pytest.raises(springflat.OutputError, match=r"^write_pattern: the path 'no/where/p.dxf': directory "
                                                      r"'no/where' does not exist$"):  # not "no such file"
         springflat.write_pattern("no/where/p.dxf", springflat.flatten(V, F, max_iter=1))
+    with pytest.raises(springflat.OutputError, match=r"^write_pattern: cannot write the path 'x{300}\.dxf': file "
+                                                     r"name too long$"):
+        springflat.write_pattern("x" * 300 + ".dxf", springflat.flatten(V, F, max_iter=1))
 
 
 def test_a_format_set_the_rtl_cannot_build_is_a_parameter_error(ear, tmp_path):

@@ -481,3 +481,11 @@ def test_an_error_about_a_name_with_control_characters_is_one_line(tmp_path, arg
     assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1, proc.stderr
     assert proc.stderr.startswith("springflat: error: ") and "\t" not in proc.stderr
     assert os.listdir(tmp_path) == []
+
+
+def test_an_error_keeps_a_no_break_space_of_a_name_so_that_it_can_be_copied(tmp_path):
+    """Only control characters and line separators are escaped; a no-break space (macOS puts one in its
+    screenshots' names) stays itself."""
+    proc = run("flatten", "surf1", "--out", "Screen\u00a0Shot/z.svg", cwd=tmp_path)
+    assert proc.returncode == 2
+    assert "'Screen\u00a0Shot/z.svg'" in proc.stderr and "\\xa0" not in proc.stderr, proc.stderr
