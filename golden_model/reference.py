@@ -395,8 +395,8 @@ def check_energy_scale(mesh: Mesh, spring: float) -> None:
 #: A layout wider than this many times the mesh's edges laid end to end (or than the start) has run away:
 #: the mesh is connected, so a layout whose every edge is at most k times its 3D length is at most k times
 #: their sum wide, and this one has an edge stretched ten thousandfold. The run is ``diverged`` while its
-#: numbers are still finite (an undamped run can grow for thousands of iterations before anything
-#: overflows; the literal overlap penalty's runs grew to 1e15 mesh widths and ended as ``max-iterations``).
+#: numbers are still finite: an undamped run, or the paper's overlap penalty as written, can grow for
+#: thousands of iterations before anything overflows.
 RUNAWAY_FACTOR = 1e4
 
 

@@ -125,9 +125,9 @@ class FlattenResult:
             "guard": self.params.guard,
             "energy_window": self.params.energy_window,
             "update": self.params.update,
-            "damping": self.params.damping,
             "penalty": self.params.penalty,
             "barrier": self.params.barrier,
-            **({"density": self.density} if self.params.dynamics == "paper" else {}),  # momentum: w = 2/(C deg)
+            # the paper dynamics' alone: the momentum dynamics weighs each node by 2/(C deg) and damps by restarts
+            **({"damping": self.params.damping, "density": self.density} if self.params.dynamics == "paper" else {}),
             **self.extra,
         }

@@ -64,9 +64,9 @@ from .version import installed_version
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with the project's one-line error format, and no abbreviated options: ``rtl-check --engine
-    fixed`` (``flatten``'s option) would have been taken as ``--engine-top`` and refused ``fixed``, and a
-    script's abbreviation would change meaning with the next option added."""
+    """argparse with the project's one-line error format, and no abbreviated options: with them ``rtl-check
+    --engine fixed`` (``flatten``'s option) is taken as ``--engine-top`` and ``fixed`` refused, and a
+    script's abbreviation changes meaning with the next option added."""
 
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("allow_abbrev", False)

@@ -389,8 +389,8 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
             os.unlink(tmp)
 
 
-#: Set by :func:`on_interrupt` (SIGINT, SIGTERM or SIGHUP); the commits of :func:`atomic_write`, :func:`all_or_nothing` and
-#: :func:`atomic_directory` refuse to put anything in place once it is set.
+#: Set by :func:`on_interrupt` (SIGINT, SIGTERM or SIGHUP); the commits of :func:`atomic_write`,
+#: :func:`all_or_nothing` and :func:`atomic_directory` refuse to put anything in place once it is set.
 _INTERRUPTED = threading.Event()
 #: The signal that set it (``signal.SIGINT`` until one arrives).
 _RECEIVED = [signal.SIGINT]

@@ -134,14 +134,14 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="the paper dynamics' area density rho or 'auto' = 1/min m_i (default: 2 for built-ins, "
                              "auto for files; the momentum dynamics weighs each node by 2/(C deg) instead)")
     parser.add_argument("--tol-area", type=number_argument, default=None,
-                        help="area error tolerance phi_S (default: the paper's for built-ins, Tables II and IV; 1, off, "
-                             "for files)")
+                        help="area error tolerance phi_S (default: the paper's for built-ins, Tables II and IV; "
+                             "1, off, for files)")
     parser.add_argument("--tol-shape", type=number_argument, default=None,
                         help="shape error tolerance phi_C (default: the paper's for built-ins; 1, off, for files)")
     parser.add_argument("--tol-energy", type=number_argument, default=None,
                         help="relative energy change tolerance epsilon over the --energy-window (0: only an energy "
-                             "that no longer changes at all stops the run; default: the paper's for built-ins; for files "
-                             f"{FILE_TOL_ENERGY:g}, {FILE_TOL_ENERGY_PAPER:g} with --dynamics paper)")
+                             "that no longer changes at all stops the run; default: the paper's for built-ins; for "
+                             f"files {FILE_TOL_ENERGY:g}, {FILE_TOL_ENERGY_PAPER:g} with --dynamics paper)")
     parser.add_argument("--max-iter", type=integer_argument, default=None,
                         help="iteration limit N_max (default: the paper's for built-ins; for files "
                              f"max({FILE_MIN_ITER}, {FILE_ITER_PER_EDGE} x the mesh's radius in edges))")

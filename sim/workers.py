@@ -6,10 +6,11 @@ and nothing else:
 
 - the workers ignore SIGINT: the parent answers it for all of them, and no worker prints a
   traceback of its own; and SIGTERM, which :meth:`WorkerPool.stop` ends them with (and SIGHUP, which
-  a closed terminal sends them), has its default action in a forked child, not the command's handler (which would raise in the worker, or never run
-  in one stuck on a lock another thread held at the fork);
-- a task is submitted with SIGINT, SIGTERM and SIGHUP held back (:func:`sim.outputs.deferred_interrupts`).  The first
-  submit forks the workers and starts the executor's thread; a ``KeyboardInterrupt`` raised in the
+  a closed terminal sends them), has its default action in a forked child, not the command's handler
+  (which would raise in the worker, or never run in one stuck on a lock another thread held at the
+  fork); a signal the program ignores (``nohup``'s SIGHUP) its workers ignore too;
+- a task is submitted with SIGINT, SIGTERM and SIGHUP held back (:func:`sim.outputs.deferred_interrupts`).
+  The first submit forks the workers and starts the executor's thread; a ``KeyboardInterrupt`` raised in the
   middle of that leaves workers the executor has not recorded, blocked on its queue, and the
   program's exit waits for them for ever;
 - leaving the ``with`` block by an exception ends the workers (their runs are lost) instead of

@@ -251,7 +251,9 @@ def test_a_layout_that_runs_away_has_diverged_while_its_numbers_are_finite():
     result = flatten(mesh, start, params)
     width = runaway_width(mesh, start)
     assert result.status == "diverged" and 500 < result.iterations < 3000, (result.status, result.iterations)
-    assert width == RUNAWAY_FACTOR * mesh.rest_lengths.sum()  # (wider than the mesh's and the start's boxes)
+    # no runaway: a layout whose every edge is at most RUNAWAY_FACTOR times its 3D length (the mesh is connected)
+    stretch = np.max(np.linalg.norm(np.subtract(*start[mesh.edges.T]), axis=1) / mesh.rest_lengths)
+    assert in_range(start * (RUNAWAY_FACTOR / stretch), width)
     assert np.ptp(result.positions, axis=0).max() <= width
     assert np.isfinite(result.velocities).all() and np.isfinite(result.final.energy)
     huge = Mesh(mesh.vertices * (COORDINATE_LIMIT / np.abs(mesh.vertices).max()), mesh.faces)
@@ -287,3 +289,18 @@ def test_a_spring_constant_whose_energies_underflow_is_refused():
     assert default.status == small.status == "converged"
     assert small.iterations == default.iterations > 10
     assert small.history.shape_error[-1] == pytest.approx(default.history.shape_error[-1], rel=1e-6)
+
+
+def test_no_layout_within_the_runaway_factor_of_its_edges_is_a_runaway():
+    """A strip rolled ten times round has a 3D box 30 times narrower than its unrolled length, and Tutte's
+    start is a circle: its exact layout, with every edge stretched up to RUNAWAY_FACTOR times, is still no
+    runaway (a bound on the boxes alone called it one)."""
+    from golden_model.generate import rolled_grid
+    from golden_model.reference import RUNAWAY_FACTOR, in_range, runaway_width
+
+    rolled, unrolled = rolled_grid(40, 3, arc_degrees=3600.0)
+    vertices, unrolled = rolled.vertices * [1.0, 0.01, 1.0], unrolled * [1.0, 0.01]
+    mesh = Mesh(vertices, rolled.faces)
+    width = runaway_width(mesh, initial_layout(mesh, "tutte"))
+    stretch = np.max(np.linalg.norm(np.subtract(*unrolled[mesh.edges.T]), axis=1) / mesh.rest_lengths)
+    assert in_range(unrolled * (0.99 * RUNAWAY_FACTOR / stretch), width)
