@@ -1292,6 +1292,13 @@ def test_study_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys
     assert seen == [False] and "run/s" not in capsys.readouterr().err
 
 
+def _as_in_a_terminal() -> None:
+    """The stop signals' default actions, as a terminal's foreground job has them, whatever this run of the
+    tests inherited (under ``nohup`` SIGHUP is ignored, and springflat leaves an ignored signal ignored)."""
+    for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(number, signal.SIG_DFL)
+
+
 def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, timeout: float = 600,
                env: dict[str, str] | None = None, signum: int = signal.SIGINT):
     """Run ``springflat argv`` in a session of its own; once ``ready()`` holds (or at once), wait ``after`` s
@@ -1300,7 +1307,8 @@ def _interrupt(argv: list[str], cwd: Path, *, after: float = 0.0, ready=None, ti
     import time
 
     proc = subprocess.Popen([SPRINGFLAT, *argv], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, env=None if env is None else {**os.environ, **env})
+                            start_new_session=True, env=None if env is None else {**os.environ, **env},
+                            preexec_fn=_as_in_a_terminal)
     start = time.monotonic()
     ready = ready or _past_python_start_up(proc.pid)
     while not ready() and proc.poll() is None and time.monotonic() - start < timeout:
