@@ -341,7 +341,7 @@ def _keep_old_file(target: Path) -> Path | None | object:
         except OSError:
             return _NOT_KEPT
         try:
-            with open(target, "rb") as original, open(fd, "wb") as copy:
+            with open(fd, "wb") as copy, open(target, "rb") as original:  # (the descriptor closed either way)
                 shutil.copyfileobj(original, copy)
             shutil.copymode(target, kept)
             return kept
