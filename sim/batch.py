@@ -309,7 +309,10 @@ def _quiet_dask_workers() -> Iterator[None]:
     """Dask's warnings in the block, in this process and in the worker processes it starts (each reads its
     logging levels from the environment on its start), left out: the ones a stopped batch gives (a task
     cancelled, a worker killed; multiprocessing's resource tracker, started here too, on the semaphores
-    of a killed worker, which it removes) are not for the user; errors still show."""
+    of a killed worker, which it removes) are not for the user; errors still show in this process. The
+    workers log only what is critical: their errors are this process's to report (a task's exception comes
+    back with its result, a dead worker as such), and the one a Ctrl-C can give (a heartbeat that finds the
+    scheduler gone while the cluster closes) is not the user's."""
     import logging
 
     logger = logging.getLogger("distributed")
@@ -330,7 +333,7 @@ def _quiet_dask_workers() -> Iterator[None]:
 
 
 #: The environment of the processes a local cluster starts: Dask's ``logging.distributed`` level.
-QUIET_DASK_ENVIRONMENT = {"DASK_LOGGING__DISTRIBUTED": "error"}
+QUIET_DASK_ENVIRONMENT = {"DASK_LOGGING__DISTRIBUTED": "critical"}
 #: The warning filters added to theirs (``PYTHONWARNINGS``, a comma-separated list the user's own may be
 #: in): the resource tracker's.
 QUIET_DASK_WARNINGS = ("ignore:resource_tracker:UserWarning",)
