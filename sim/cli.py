@@ -32,11 +32,13 @@ from pathlib import Path
 
 import numpy as np
 
+from golden_model.builtin import is_builtin
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.files import describe_os_error
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.layouts import LAYOUT_METHODS
 from golden_model.mesh import one_line
+from golden_model.mesh_io import MESH_SUFFIXES
 from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
@@ -339,7 +341,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unrecognized arguments: {' '.join(extras)}" if extras else
                      "the following arguments are required: COMMAND")
     if extras:  # refused by the command's own parser, so that the message points at its --help
-        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}")
+        meshes = [extra for extra in extras if is_builtin(extra) or Path(extra).suffix.lower() in MESH_SUFFIXES]
+        after_options = (f": the meshes of a batch come together, before the options ({args.command} MESH MESH "
+                         "... --option ...)" if args.command == "flatten" and meshes else "")
+        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}{after_options}")
     reset_interrupted()
     handler = threading.current_thread() is threading.main_thread()
     # Ctrl-C, kill or a hang-up: one line, status 130, 143 or 129 (sim.exit_codes.STOP_SIGNALS), unless ignored

@@ -489,3 +489,19 @@ def test_an_error_keeps_a_no_break_space_of_a_name_so_that_it_can_be_copied(tmp_
     proc = run("flatten", "surf1", "--out", "Screen\u00a0Shot/z.svg", cwd=tmp_path)
     assert proc.returncode == 2
     assert "'Screen\u00a0Shot/z.svg'" in proc.stderr and "\\xa0" not in proc.stderr, proc.stderr
+
+
+@pytest.mark.parametrize("argv, hint", [
+    (["flatten", "surf1", "--max-iter", "3", "surf2"], True),  # a mesh after an option
+    (["flatten", "surf1", "--max-iter", "3", "ear.OBJ"], True),
+    (["flatten", "surf1", "--json", "yes"], False),  # no mesh: no word on meshes
+])
+def test_a_mesh_given_after_an_option_is_told_where_it_goes(argv, hint, capsys):
+    from sim.cli import main
+
+    with pytest.raises(SystemExit) as stopped:
+        main(argv)
+    err = capsys.readouterr().err
+    assert stopped.value.code == 2 and err.startswith(f"springflat: error: unrecognized arguments: {argv[-1]}")
+    assert ("the meshes of a batch come together, before the options (flatten MESH MESH ... --option ...)"
+            in err) == hint, err
