@@ -55,6 +55,12 @@ class RunMode:
     guarded: bool
     description: str
 
+    @property
+    def has_masses(self) -> bool:
+        """Whether the mode's nodes have masses from the area density and their velocities a damping (the
+        paper's Euler step); the momentum step weighs each node by 2/(C·deg_i) and damps by its restart."""
+        return self.step is not Step.MOMENTUM
+
 
 RUN_MODES: tuple[RunMode, ...] = (
     RunMode("paper-variable", 0, "paper", Step.VARIABLE, False,

@@ -21,6 +21,16 @@ class ParameterError(ValueError):
     """A parameter outside its domain; the message is one line for the user."""
 
 
+#: The parameters of a mode with masses alone (:attr:`RunMode.has_masses`), each with why another mode
+#: refuses it.
+MASS_PARAMETERS = {
+    "density": "--density sets the paper dynamics' node masses; the momentum dynamics weighs each node by "
+               "2/(C deg) instead: drop --density, or add --dynamics paper",
+    "damping": "--damping belongs to the paper dynamics; the momentum dynamics damps by its restart: drop "
+               "--damping, or add --dynamics paper",
+}
+
+
 @dataclass(frozen=True)
 class FlattenParams:
     """Parameters of one flattening run (defaults: the paper's Table II).
@@ -133,8 +143,7 @@ class FlattenParams:
             if self.update != "jacobi":
                 raise ParameterError("the momentum dynamics updates all nodes together: use --update jacobi")
             if self.damping:
-                raise ParameterError("--damping belongs to the paper dynamics; the momentum dynamics damps by its "
-                                     "restart: drop --damping, or add --dynamics paper")
+                raise ParameterError(MASS_PARAMETERS["damping"])
 
     @property
     def mode(self) -> RunMode:

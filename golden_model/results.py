@@ -127,7 +127,6 @@ class FlattenResult:
             "update": self.params.update,
             "penalty": self.params.penalty,
             "barrier": self.params.barrier,
-            # the paper dynamics' alone: the momentum dynamics weighs each node by 2/(C deg) and damps by restarts
-            **({"damping": self.params.damping, "density": self.density} if self.params.dynamics == "paper" else {}),
+            **({"damping": self.params.damping, "density": self.density} if self.params.mode.has_masses else {}),
             **self.extra,
         }

@@ -352,7 +352,7 @@ def dask_client(scheduler: str, workers: int):
         if scheduler == "local":  # Ctrl-C is this process's to answer: it ends the workers (sim.dask_worker)
             stack.enter_context(_quiet_dask_workers())  # for the cluster's life: its end warns too
             # no dashboard; the scheduler's HTTP server (its health routes) on a free port, not on the
-            # dashboard's 8787, where a second cluster (another springflat run) warned that it was taken
+            # dashboard's 8787, so that clusters side by side (two springflat runs) do not warn of each other
             cluster = stack.enter_context(LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                                        dashboard_address=None,
                                                        scheduler_kwargs={"dashboard_address": ":0"},

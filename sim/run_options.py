@@ -25,7 +25,7 @@ from golden_model.mesh import Mesh, MeshError
 from golden_model.mesh_io import load_mesh_with_notes
 from golden_model.mesh_io.polygons import is_float, is_int
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
-from golden_model.params import FlattenParams, ParameterError
+from golden_model.params import MASS_PARAMETERS, FlattenParams, ParameterError
 
 from .outputs import OutputError, directory_name_problem
 
@@ -294,13 +294,9 @@ def _check_options_apply(args: argparse.Namespace, params: FlattenParams) -> Non
         raise ParameterError(f"--dt is the size of the {params.dynamics} dynamics' fixed step: add --step "
                              f"{Step.FIXED.value}" if has_fixed_step else
                              f"the {params.dynamics} dynamics takes no --dt (it has no fixed step): drop --dt")
-    if params.dynamics == "momentum":  # it weighs each node by 2/(C·deg_i) and damps by its restart
-        if args.density is not None:
-            raise ParameterError("--density sets the paper dynamics' node masses; the momentum dynamics weighs "
-                                 "each node by 2/(C deg) instead: drop --density, or add --dynamics paper")
-        if args.damping is not None:
-            raise ParameterError("--damping belongs to the paper dynamics; the momentum dynamics damps by its "
-                                 "restart: drop --damping, or add --dynamics paper")
+    for option, why in MASS_PARAMETERS.items():  # given at all, even as the default's value
+        if getattr(args, option) is not None and not params.mode.has_masses:
+            raise ParameterError(why)
     for option in ("penalty_kappa", "penalty_gain"):
         if getattr(args, option) is not None and not params.penalty:
             raise ParameterError(f"--{option.replace('_', '-')} sets the penalty: add --penalty")

@@ -224,7 +224,7 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
         inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "1/m", fs,
                                          "use --density auto (or a larger density), or a wider inv_mass format")
     if min(w.min() for w in (inv_mass_raw, inv_mass_barrier_raw) if w is not None) < 16:
-        if params.dynamics == "momentum":
+        if not params.mode.has_masses:
             raise FixedPointError(f"the weight w_i down to {inv_mass.min():.3g} keeps fewer than 5 bits in "
                                   f"{fs.inv_mass} of format set '{fs.name}': use a smaller --spring, or a wider "
                                   "inv_mass format")

@@ -1878,7 +1878,7 @@ def test_another_users_file_in_a_sticky_directory_is_refused_before_the_run(tmp_
         "springflat: error: --history 'shared/h.csv' is another user's file in a sticky directory (as /tmp is): "
         "only its owner may replace it (name another file)")
     assert sorted(os.listdir(tmp_path)) == ["shared"] and (shared / "h.csv").read_text() == "theirs"
-    assert stat.S_IMODE(os.stat(shared).st_mode) & stat.S_ISVTX
+    assert stat_mode(shared) & stat.S_ISVTX
 
 
 def test_a_file_whose_old_version_could_not_be_kept_is_named_when_a_later_rename_fails(tmp_path, monkeypatch,
