@@ -336,14 +336,17 @@ def test_legal_mesh(name, tmp_path, monkeypatch, capsys):
 
 # --------------------------------------------------------------------------- malformed meshes
 
-def _long_name() -> str:
-    return "x" * 300 + ".obj"
+def _long_name(stem_char: str, total_bytes: int, suffix: str) -> str:
+    """A file name of exactly ``total_bytes`` bytes in UTF-8 (``stem_char`` may take two)."""
+    width = len(stem_char.encode())
+    stem = stem_char * ((total_bytes - len(suffix)) // width)
+    return stem + "x" * (total_bytes - len(suffix) - len(stem.encode())) + suffix
 
 
 MALFORMED_MESHES: dict[str, Case] = {
     "missing file": Case(["nope.obj"], 2, r"cannot read mesh 'nope.obj': no such file"),
     "directory": Case(["d.obj"], 2, r"cannot read mesh 'd.obj': is a directory", files={"d.obj/x": ""}),
-    "file name too long": Case([_long_name()], 2, r"cannot read mesh 'x+\.obj': file name too long"),
+    "file name too long": Case([_long_name("x", 304, ".obj")], 2, r"cannot read mesh 'x+\.obj': file name too long"),
     "permission denied": Case(["m.obj"], 2, r"^springflat: error: cannot read mesh 'm.obj': permission denied$",
                               files={"m.obj": obj()}, deny=("m.obj", errno.EACCES)),
     "I/O error": Case(["m.obj"], 2, r"cannot read mesh 'm.obj': input/output error",
@@ -779,13 +782,6 @@ def stat_mode(path: Path) -> int:
 # that is not a regular file (a device, a named pipe, a socket, a directory), or a link to one, is
 # refused in one line and never replaced; no output may be the same file (device and inode) as an
 # input or another output.
-
-
-def _long_name(stem_char: str, total_bytes: int, suffix: str) -> str:
-    """A file name of exactly ``total_bytes`` bytes in UTF-8 (``stem_char`` may take two)."""
-    width = len(stem_char.encode())
-    stem = stem_char * ((total_bytes - len(suffix)) // width)
-    return stem + "x" * (total_bytes - len(suffix) - len(stem.encode())) + suffix
 
 
 def _stl_no_triangles(header: bytes = b"\0" * 80, tail: bytes = b"") -> bytes:
@@ -1648,18 +1644,22 @@ def test_real_exit_ctrl_c_while_the_worker_pool_starts_ends_the_program(command,
     assert sorted(os.listdir(work)) == ["m.obj", "n.obj"]
 
 
+def _fake_paper_report(monkeypatch, files: dict[str, str]) -> None:
+    """``paper`` writes ``files`` (name: text) into its output directory and returns its ``report.md``."""
+    import sim.paper
+
+    def report(out, init="pca", progress=True):
+        for name, text in files.items():
+            (out / name).write_text(text)
+        return out / "report.md"
+
+    monkeypatch.setattr(sim.paper, "reproduce_paper", report)
+
+
 def test_an_existing_output_directory_keeps_its_other_files(tmp_path, monkeypatch, capsys):
     """paper into an existing directory: its files replace their namesakes, other files stay; the report's
     figures are referred to by name, so they work from --out."""
-    import sim.paper
-
-    def tiny_report(out, init="pca", progress=True):
-        (out / "figure.png").write_bytes(b"png")
-        report = out / "report.md"
-        report.write_text("![figure](figure.png)\n")
-        return report
-
-    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    _fake_paper_report(monkeypatch, {"figure.png": "png", "report.md": "![figure](figure.png)\n"})
     monkeypatch.chdir(tmp_path)
     (tmp_path / "r").mkdir()
     (tmp_path / "r" / "mine.txt").write_text("keep")
@@ -1677,11 +1677,6 @@ def test_an_existing_output_directory_on_a_file_system_of_its_own_takes_the_file
     import errno
 
     import sim.outputs
-    import sim.paper
-
-    def tiny_report(out, init="pca", progress=True):
-        (out / "report.md").write_text("new\n")
-        return out / "report.md"
 
     mount = (tmp_path / "r").resolve()
 
@@ -1690,7 +1685,7 @@ def test_an_existing_output_directory_on_a_file_system_of_its_own_takes_the_file
             raise OSError(errno.EXDEV, os.strerror(errno.EXDEV), str(source), None, str(destination))
         return real(source, destination)
 
-    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    _fake_paper_report(monkeypatch, {"report.md": "new\n"})
     monkeypatch.setattr(sim.outputs.os, "replace", rename_within_the_mount_only)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "r").mkdir()
@@ -1732,13 +1727,7 @@ def test_a_fixed_point_run_at_its_energy_floor_says_so(engine, iterations, noted
 
 def test_a_255_byte_output_directory_name(tmp_path, monkeypatch, capsys):
     """The temporary sibling an output directory is built in fits wherever the directory's name fits."""
-    import sim.paper
-
-    def tiny_report(out, init="pca", progress=True):
-        (out / "report.md").write_text("report\n")
-        return out / "report.md"
-
-    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    _fake_paper_report(monkeypatch, {"report.md": "report\n"})
     monkeypatch.chdir(tmp_path)
     name = _long_name("r", 255, "")
     assert main(["paper", "--out", name]) == 0
@@ -1813,16 +1802,7 @@ def test_a_directory_output_put_in_place_all_or_none_when_a_rename_fails(tmp_pat
     """paper into an existing directory: figure.png is renamed, report.md fails; figure.png gets its old file
     back (a report beside figures of another run would mislead), a new file goes again, and the message names
     the file."""
-    import sim.paper
-
-    def tiny_report(out, init="pca", progress=True):
-        (out / "figure.png").write_bytes(b"new png")
-        (out / "new.csv").write_text("new")
-        report = out / "report.md"
-        report.write_text("new report\n")
-        return report
-
-    monkeypatch.setattr(sim.paper, "reproduce_paper", tiny_report)
+    _fake_paper_report(monkeypatch, {"figure.png": "new png", "new.csv": "new", "report.md": "new report\n"})
     monkeypatch.chdir(tmp_path)
     (tmp_path / "r").mkdir()
     (tmp_path / "r" / "figure.png").write_bytes(b"old png")
