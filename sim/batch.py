@@ -220,7 +220,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
         raise UserError("a batch (several meshes, or --scheduler) writes its outputs to --out-dir DIR (the endings "
                         "name the files)")
     if args.out_dir is not None:
-        out_dir = Path(args.out_dir)
+        out_dir = args.out_dir
         names = _names(meshes)
         flags = {option: (what, suffixes) for option, what, suffixes in OUTPUT_OPTIONS}
         for option, ending in endings:
@@ -435,7 +435,7 @@ def _output_directory(path: Path | None) -> Iterator[None]:
 
 def cmd_batch(args: argparse.Namespace) -> int:
     """Flatten every mesh given; print a line per mesh as it finishes, then a table; the exit status."""
-    with _output_directory(None if args.out_dir is None else Path(args.out_dir)):
+    with _output_directory(None if args.out_dir is None else args.out_dir):
         return _run_batch(args, [args.mesh, *args.more_meshes])
 
 
@@ -478,7 +478,7 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
             record.update(outcome.summary or {})
             if outcome.failed:  # also a run that finished but whose files could not be written
                 record.update(status="failed", error=outcome.line)
-            record["files"] = [str(Path(args.out_dir) / f"{outcome.name}{e}") for e, _ in outcome.files] \
+            record["files"] = [str(args.out_dir / f"{outcome.name}{e}") for e, _ in outcome.files] \
                 if args.out_dir is not None and not outcome.failed else []
             say(strict_json(record))
         elif outcome.failed:
@@ -493,7 +493,7 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
                   else _dask_outcomes(pending, args.scheduler, workers))
         for outcome in stream:
             if args.out_dir is not None and not outcome.failed:
-                _write_files(Path(args.out_dir), outcome)
+                _write_files(args.out_dir, outcome)
             outcomes[outcome.name] = outcome
             report(outcome)
     ordered = [outcomes[name] for name in names]

@@ -91,7 +91,7 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
     baud = baud or protocol.DEFAULT_BAUD
     clock_hz = clock_hz or ENGINE_CLOCK_HZ
     say = progress or (lambda msg: None)
-    out = Path(out_dir)
+    out = out_dir if isinstance(out_dir, Path) else Path(out_dir)  # keeps a TypedPath as typed
     if out.exists() and not out.is_dir():
         raise SynthError(f"--out '{out}' exists and is not a directory")
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
@@ -229,7 +229,7 @@ def cmd_board(args, fs, capacity) -> int:
                          "and --quiet only")
     if args.baud is not None and args.baud <= 0:
         raise SynthError(f"--baud must be a positive number of bits per second, not {args.baud}")
-    out = Path(args.out) if args.out else Path(f"board-{args.board}-{fs.name}")
+    out = args.out if args.out else Path(f"board-{args.board}-{fs.name}")
     parts = ["springflat", "synth", "--board", args.board, "--formats", args.formats]
     if args.capacity:
         parts += ["--capacity", *(str(n) for n in args.capacity)]

@@ -217,7 +217,7 @@ def _check_distinct_files(args: argparse.Namespace) -> None:
 def cmd_paper(args: argparse.Namespace) -> int:
     from .paper import reproduce_paper
 
-    out = Path(args.out)
+    out = args.out
     with atomic_directory(out) as build:  # all of the report or nothing, also on Ctrl-C
         report = reproduce_paper(build, init=args.init, progress=not args.quiet)
     print(f"wrote {out / report.name}")
@@ -230,7 +230,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
 
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats, guard=args.build_guard)
-    out = Path(args.out)
+    out = args.out
     inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
     with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
         print(f"springflat verilog: exporting every component and springflat_engine (capacity "

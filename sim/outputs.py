@@ -106,7 +106,7 @@ def ending_name_problem(path: Path, what: str) -> str | None:
 def output_target(path: Path) -> Path:
     """The file an output path writes: ``path`` itself or, for a symbolic link, the file the link finally
     points to (written through: the link stays, its target is replaced; see :func:`atomic_write`)."""
-    path = Path(path)
+    path = path if isinstance(path, Path) else Path(path)  # keeps a TypedPath as typed
     return Path(os.path.realpath(path)) if path.is_symlink() else path
 
 
@@ -190,7 +190,7 @@ def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = 
     hidden one is a file-name ending given for a file (:func:`ending_name_problem`), refused with
     ``ending_hint`` added (what the command takes endings in).
     """
-    path = Path(path)
+    path = path if isinstance(path, Path) else Path(path)  # keeps a TypedPath as typed
     if typed and (problem := ending_name_problem(path, what)) is not None:  # a batch builds '.scan.dxf' for '.scan'
         raise OutputError(problem + ending_hint)
     if suffixes and path.suffix.lower() not in suffixes:
@@ -366,7 +366,7 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
     An OS error (here or in the caller's block) removes the temporary file
     and is raised as :class:`OutputWriteError` naming ``path``.
     """
-    path = Path(path)
+    path = path if isinstance(path, Path) else Path(path)  # keeps a TypedPath as typed
     tmp = None
     try:
         target = output_target(path)
@@ -512,7 +512,7 @@ def check_output_directory(out: Path, what: str = "--out", files: tuple[str, ...
     ``files``: names the command may write into it, refused now (not after the work, as
     :func:`atomic_directory` would) where one is anything but a regular file or one of ``inputs``;
     ``labels``: what a message calls one of them (``output`` by default)."""
-    out = Path(out)
+    out = out if isinstance(out, Path) else Path(out)  # keeps a TypedPath as typed
     labels = labels or {}
     try:
         target = output_target(out)
@@ -548,7 +548,7 @@ def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = ()
     ``stale``: names removed from an existing ``out`` unless the build wrote them (a result an
     earlier run left that would now mislead).
     """
-    out = Path(out)
+    out = out if isinstance(out, Path) else Path(out)  # keeps a TypedPath as typed
     check_output_directory(out, what)
     target = output_target(out)
     build = _make_temporary(_build_parent(target), target.name, is_dir=True)

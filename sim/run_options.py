@@ -76,11 +76,26 @@ def integer_argument(text: str) -> int:
     raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}")
 
 
+class TypedPath(type(Path())):
+    """A path option's value that prints as the user typed it, so that messages quote it so:
+    pathlib drops a leading ``./`` and doubled slashes (``--out ./x.dxf`` would be quoted as ``x.dxf``).
+    Paths made from it (its parent, a sibling) print as pathlib makes them."""
+
+    def __str__(self) -> str:
+        return self.__dict__.get("typed") or super().__str__()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({str(self)!r})"
+
+
 def path_argument(text: str) -> Path:
-    """A path option's value; an empty one (``--out ''``) would name the current directory, so it is refused."""
+    """A path option's value (a :class:`TypedPath`); an empty one (``--out ''``) would name the current
+    directory, so it is refused."""
     if not text.strip():
         raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
-    return Path(text)
+    path = TypedPath(text)
+    path.typed = text
+    return path
 
 
 def file_path_argument(text: str) -> Path:

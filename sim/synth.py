@@ -336,7 +336,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
         raise SynthError(f"unknown component {unknown[0]!r} (choose from {', '.join(names + [ENGINE])})")
     capacity = capacity or DEFAULT_CAPACITY
     say = progress or (lambda msg: None)
-    out = Path(out_dir)
+    out = out_dir if isinstance(out_dir, Path) else Path(out_dir)  # keeps a TypedPath as typed
     if out.exists() and not out.is_dir():
         raise SynthError(f"--out '{out}' exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)

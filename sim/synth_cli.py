@@ -132,7 +132,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     for given, option in ((args.capacity, "--capacity sizes"), (not args.build_guard, "--no-guard builds")):
         if given and ENGINE not in (args.components or ()):
             raise SynthError(f"{option} {ENGINE}: add it to --components")
-    out = Path(args.out) if args.out else Path(f"synth-{args.target}-{fs.name}")
+    out = args.out if args.out else Path(f"synth-{args.target}-{fs.name}")
     start = time.monotonic()
 
     def progress(msg: str) -> None:

@@ -560,6 +560,8 @@ def test_parameters(name, tmp_path, monkeypatch, capsys):
 
 OUTPUTS: dict[str, Case] = {
     "out in a missing directory": Case(["--out", "no/where.obj"], 2, r"directory 'no' does not exist"),
+    "out quoted as typed": Case(["--out", ".//no/where.obj"], 2, r"--out '\.//no/where\.obj': directory 'no' "),
+    "history quoted as typed": Case(["--history", "./h.png"], 2, r"--history '\./h\.png' must end in \.csv"),
     "out is a directory": Case(["--out", "d.obj"], 2, r"is a directory", files={"d.obj/x": ""}),
     "out wrong suffix": Case(["--out", "o.png"], 2, r"must end in .dxf or .pdf or .svg or .obj"),
     "out parent is a file": Case(["--out", "f/o.obj"], 2, r"--out 'f/o.obj'", files={"f": "x"}),
