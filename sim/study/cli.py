@@ -132,7 +132,7 @@ def cmd_study(args: argparse.Namespace) -> int:
         raise ParameterError(f"--max-iter must be >= 1, got {args.max_iter}")
     workers = local_workers(args.workers, "--workers", args.scheduler)
     base = load_format_set(args.base)
-    out = Path(args.out)
+    out = args.out
     inputs = [("--base", None if FormatSet.names_preset(args.base) else Path(args.base)),
               *(("a mesh", Path(m)) for m in args.meshes or ())]
     check_output_directory(out, files=REPORT_FILES, inputs=inputs,  # before the study: the report is its end
