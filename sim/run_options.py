@@ -77,15 +77,14 @@ def integer_argument(text: str) -> int:
 
 
 class TypedPath(type(Path())):
-    """A path option's value that prints as the user typed it, so that messages quote it so:
+    """A path option's value that formats as the user typed it, so that messages (f-strings) quote it so:
     pathlib drops a leading ``./`` and doubled slashes (``--out ./x.dxf`` would be quoted as ``x.dxf``).
-    Paths made from it (its parent, a sibling) print as pathlib makes them."""
+    ``str()``, comparison and hashing stay pathlib's; paths made from it (its parent, a sibling) format as
+    pathlib makes them."""
 
-    def __str__(self) -> str:
-        return self.__dict__.get("typed") or super().__str__()
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}({str(self)!r})"
+    def __format__(self, spec: str) -> str:
+        typed = self.__dict__.get("typed")
+        return format(str(self) if typed is None else typed, spec)
 
 
 def path_argument(text: str) -> Path:
