@@ -161,6 +161,38 @@ def test_start_without_a_mesh_answers_no_mesh_and_running_memory_access_is_a_bus
     assert not answers["memory_idle"]
 
 
+def test_partial_reads_are_answered_and_an_abandoned_cycle_gets_no_answer():
+    """A read takes whole words whatever its sel (a CPU's byte load picks its bytes); a cycle the host abandons
+    before its answer leaves the next cycles their own answers (they had each come one cycle late)."""
+    dut = SpringflatEngine(FS, CAPACITY)
+    rmap = dut.register_map
+    max_iter, cap_vertices, ident = (rmap.register(name) for name in ("MAX_ITER", "CAP_VERTICES", "ID"))
+    nodes = rmap.window("nodes")
+    answers = {}
+
+    async def bench(ctx):
+        await wishbone_write(ctx, dut.bus, max_iter.offset, 1234)
+        await wishbone_write(ctx, dut.bus, nodes.address(0, 0), 77)
+        answers["partial"] = await wishbone_read(ctx, dut.bus, max_iter.offset, sel=0b0001)
+        answers["partial window"] = await wishbone_read(ctx, dut.bus, nodes.address(0, 0), sel=0b0010)
+        with pytest.raises(TimeoutError):  # abandoned after 2 clocks: the answer takes longer
+            await wishbone_read(ctx, dut.bus, ident.offset, timeout=2)
+        ctx.set(dut.bus.cyc, 0)
+        ctx.set(dut.bus.stb, 0)
+        await ctx.tick()
+        answers["after"] = [await wishbone_read(ctx, dut.bus, register.offset)
+                            for register in (cap_vertices, max_iter, cap_vertices)]
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(bench)
+    sim.run()
+    assert (answers["partial"].error, answers["partial"].data) == (False, 1234)
+    assert (answers["partial window"].error, answers["partial window"].data) == (False, 77)
+    assert [(a.error, a.data) for a in answers["after"]] == [(False, CAPACITY.vertices), (False, 1234),
+                                                             (False, CAPACITY.vertices)]
+
+
 def test_memory_access_while_running_is_a_bus_error_and_abort_then_a_clean_rerun():
     image = image_of(dataclasses.replace(RUNS["paper-variable"], max_iter=50))
     dut = SpringflatEngine(FS, CAPACITY)

@@ -47,6 +47,42 @@ class RegisterFile(wiring.Component):
         return m
 
 
+class PipelinedRegisterFile(wiring.Component):
+    """``REGISTERS`` read/write words that answer every request ``latency`` clocks after it, in order, each
+    with the address it was made with, as the engine's register bank and memory windows do (a request
+    in flight is not cancelled by another)."""
+
+    bus: In(wishbone.Signature(addr_width=4))
+
+    def __init__(self, latency: int):
+        assert latency >= 1
+        self.latency = latency
+        super().__init__()
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=4)
+        wiring.connect(m, wiring.flipped(self.bus), hs.bus)
+        words = [Signal(32, name=f"word{i}") for i in range(REGISTERS)]
+        valid = [Signal(name=f"valid{k}") for k in range(self.latency)]
+        address = [Signal(4, name=f"address{k}") for k in range(self.latency)]
+        write = [Signal(name=f"write{k}") for k in range(self.latency)]
+        data = [Signal(32, name=f"data{k}") for k in range(self.latency)]
+        m.d.sync += [valid[0].eq(hs.request), address[0].eq(hs.address), write[0].eq(hs.write),
+                     data[0].eq(hs.write_data)]
+        for k in range(1, self.latency):
+            m.d.sync += [valid[k].eq(valid[k - 1]), address[k].eq(address[k - 1]), write[k].eq(write[k - 1]),
+                         data[k].eq(data[k - 1])]
+        last = self.latency - 1
+        m.d.comb += [hs.done.eq(valid[last]), hs.error.eq(address[last] >= REGISTERS)]
+        for i, word in enumerate(words):
+            with m.If(address[last] == i):
+                m.d.comb += hs.data.eq(word)
+                with m.If(valid[last] & write[last]):
+                    m.d.sync += word.eq(data[last])
+        return m
+
+
 def run(dut, bench):
     sim = Simulator(dut)
     sim.add_clock(1e-8)
@@ -136,6 +172,33 @@ def test_abandoned_cycle_is_not_answered():
             ack, err = (await ctx.tick().sample(dut.bus.ack, dut.bus.err))[2:]
             assert not ack and not err
         assert not (await wishbone_read(ctx, dut.bus, 0)).error
+
+    run(dut, bench)
+
+
+@pytest.mark.parametrize("latency", [3, 8])
+@pytest.mark.parametrize("write", [False, True], ids=["read", "write"])
+def test_the_cycle_after_an_abandoned_one_gets_its_own_answer(latency, write):
+    """A cycle abandoned while the target works on it, then new cycles at once: each is answered with its
+    own word, not the abandoned request's (whose answer came after the next cycle had started)."""
+    dut = PipelinedRegisterFile(latency)
+
+    async def bench(ctx):
+        for i in range(REGISTERS):
+            assert not (await wishbone_write(ctx, dut.bus, i, 100 + i)).error
+        ctx.set(dut.bus.cyc, 1)
+        ctx.set(dut.bus.stb, 1)
+        ctx.set(dut.bus.we, int(write))
+        ctx.set(dut.bus.adr, 0)
+        ctx.set(dut.bus.dat_w, 7)
+        ctx.set(dut.bus.sel, 0xF)
+        await ctx.tick().repeat(2)
+        ctx.set(dut.bus.cyc, 0)
+        ctx.set(dut.bus.stb, 0)
+        await ctx.tick()
+        for i in (1, 2, 3, 1):
+            answer = await wishbone_read(ctx, dut.bus, i)
+            assert (answer.error, answer.data) == (False, 100 + i), (i, answer)
 
     run(dut, bench)
 
