@@ -160,19 +160,19 @@ def main(argv: list[str] | None = None) -> int:
 
     from golden_model.fixed.engine import load_formats
     from golden_model.fixed.measures import FixedPointError
-    from golden_model.engine_spec.image import EngineCapacity
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 
     parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
     parser.add_argument("--formats", default="default")
     parser.add_argument("--capacity", nargs=3, type=int, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
-                        default=(16384, 131072, 32768))
+                        default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles),
+                        help="the engine's capacity (default: the one springflat verilog and synth build)")
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
     try:
         m = RegisterMap.build(load_formats(args.formats), EngineCapacity(*args.capacity))
     except (FixedPointError, ValueError) as exc:
-        print(f"error: {exc}")
-        return 2
+        parser.exit(2, f"{parser.prog}: error: {exc}\n")
     for path in write_exports(m, args.out):
         print(path)
     return 0

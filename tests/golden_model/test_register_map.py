@@ -241,5 +241,5 @@ def test_the_engine_doc_holds_the_generated_map():
     blocks = {m.group("name"): m.group("body") for m in BLOCK.finditer((DOCS / "engine.md").read_text())}
     assert "register-map" in blocks, "docs/engine.md lost its generated register map"
     formats, capacity = DOC_MAP
-    regmap = RegisterMap.build(FormatSet.preset(formats), EngineCapacity(*capacity))
+    regmap = RegisterMap.build(FormatSet.preset(formats), capacity)
     assert blocks["register-map"].rstrip() == markdown(regmap, level=3).rstrip()
