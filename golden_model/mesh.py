@@ -25,7 +25,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 __all__ = ["Mesh", "MeshError", "InconsistentOrientation", "oriented_mesh", "orient_consistently",
-           "triangle_areas_3d", "signed_areas_2d", "COORDINATE_LIMIT", "MIN_MESH_SIZE"]
+           "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
 #: times the squared longest edge of the mesh.
@@ -233,6 +233,65 @@ def folded_by_area(signed: np.ndarray, orientation: float | None = None) -> np.n
     if orientation is None:
         orientation = 1.0 if float(np.sum(signed, dtype=np.float64)) >= 0 else -1.0
     return orientation * signed <= 0
+
+
+#: Candidate side pairs :func:`boundary_crossings` tests at once (bounds its memory, about 100 MB).
+_CROSSING_CHUNK = 1 << 20
+
+
+def boundary_crossings(positions: np.ndarray, loop: np.ndarray) -> int:
+    """How many pairs of sides of the closed polygon ``positions[loop]`` meet (cross, touch or overlap),
+    sides that follow one another not counted: 0 for a simple boundary.
+
+    A fold-free layout of a disk covers no point twice exactly where its boundary is simple (a local
+    homeomorphism of a disk onto the plane is one to one when the boundary's image is a simple closed
+    curve), so a positive count on a fold-free pattern means flaps lying on each other: a cut pattern
+    whose cut line crosses itself. ``positions`` ``(V, 2)``, ``loop`` (:attr:`Mesh.boundary_loop`)
+    ``(n,)``. A sweep along the layout's longer extent: sides are paired only where their extents
+    overlap on that axis and then on the other; exact orientation tests decide the rest.
+    """
+    a = np.asarray(positions, dtype=np.float64)[np.asarray(loop)]
+    b = np.roll(a, -1, axis=0)
+    n = len(a)
+    if n < 4:
+        return 0
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0)))
+    order = np.argsort(lo[:, axis], kind="stable")
+    lo_sorted = lo[order, axis]
+    ends = np.searchsorted(lo_sorted, hi[order, axis], side="right")  # sorted sides starting within mine
+    counts = np.maximum(ends - np.arange(1, n + 1), 0)
+    crossings, first = 0, 0
+    cumulative = np.cumsum(counts)
+    while first < n:
+        last = int(np.searchsorted(cumulative, (cumulative[first - 1] if first else 0) + _CROSSING_CHUNK,
+                                   side="right"))
+        last = max(last, first + 1)
+        block = counts[first:last]
+        i = np.repeat(np.arange(first, last), block)
+        j = i + 1 + (np.arange(int(block.sum())) - np.repeat(np.cumsum(block) - block, block))
+        i, j = order[i], order[j]
+        other = 1 - axis
+        near = (lo[i, other] <= hi[j, other]) & (lo[j, other] <= hi[i, other])
+        gap = np.abs(i - j)
+        near &= (gap != 1) & (gap != n - 1)  # sides that follow one another share a corner
+        i, j = i[near], j[near]
+        crossings += int(np.count_nonzero(_sides_meet(a[i], b[i], a[j], b[j])))
+        first = last
+    return crossings
+
+
+def _cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``(p − o) × (q − o)`` row by row."""
+    return (p[:, 0] - o[:, 0]) * (q[:, 1] - o[:, 1]) - (p[:, 1] - o[:, 1]) * (q[:, 0] - o[:, 0])
+
+
+def _sides_meet(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Whether side ``ab`` meets side ``cd``, row by row, for sides whose boxes overlap: each side's ends
+    are not strictly on one side of the other's line (collinear sides with overlapping boxes meet)."""
+    d1, d2 = _cross(a, b, c), _cross(a, b, d)
+    d3, d4 = _cross(c, d, a), _cross(c, d, b)
+    return (np.sign(d1) * np.sign(d2) <= 0) & (np.sign(d3) * np.sign(d4) <= 0)
 
 
 @dataclass(frozen=True, eq=False)

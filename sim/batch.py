@@ -113,7 +113,8 @@ class MeshOutcome:
 
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
-    from .flatten_run import check_print_size, human_line, json_summary, run_flatten, scale_note_of, write_outputs
+    from .flatten_run import (check_print_size, human_line, json_summary, overlap_note, run_flatten, scale_note_of,
+                              write_outputs)
 
     start = time.perf_counter()
     stderr = io.StringIO()
@@ -142,9 +143,11 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 mesh, defaults = resolve_mesh(mesh_path)
                 params = params_from_args(args, defaults)
                 check_print_size(args, mesh)
-                result = run_flatten(args, mesh, params)
+                notes: list[str] = []  # each named by its mesh: the workers' notes come in any order
+                result = run_flatten(args, mesh, params, notes=notes)
                 written = write_outputs(args, mesh, result)
-                if (note := scale_note_of(args, mesh, result)) is not None:  # a folder of prints at 1:1000
+                notes += [overlap_note(result), scale_note_of(args, mesh, result)]  # a folder of prints at 1:1000
+                for note in filter(None, notes):
                     print(f"springflat: note: {job.name}: {note}", file=sys.stderr)
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)

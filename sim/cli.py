@@ -45,7 +45,8 @@ from golden_model.results import FlattenResult
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS, answered_signals
 from .flatten_run import (PATTERN_OUTPUTS, RAN_AWAY, check_options_used, check_print_size, human_line, json_summary,
-                          output_paths, run_flatten, run_formats, scale_note_of, what_was_used, write_outputs)
+                          output_paths, overlap_note, run_flatten, run_formats, scale_note_of, what_was_used,
+                          write_outputs)
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
     check_not_interrupted, check_output_path, on_interrupt, received_signal, reset_interrupted
 from .patterns import add_pattern_options
@@ -114,8 +115,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(human_line(mesh, result))
         print(what_was_used(params, args.init, result), file=sys.stderr)
     formats = run_formats(args)
-    for note in (scale_note_of(args, mesh, result), _energy_rule_note(params, result), _error_resolution_note(formats),
-                 _saturation_note(result)):
+    for note in (overlap_note(result), scale_note_of(args, mesh, result), _energy_rule_note(params, result),
+                 _error_resolution_note(formats), _saturation_note(result)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":

@@ -15,7 +15,7 @@ import numpy as np
 from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT
-from golden_model.mesh import Mesh
+from golden_model.mesh import Mesh, boundary_crossings
 from golden_model.params import FlattenParams
 from golden_model.reference import RUNAWAY_FACTOR
 from golden_model.results import FlattenResult
@@ -146,7 +146,22 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
                                            notes)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
     with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        return engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
+        result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
+    if result.status != "diverged":
+        result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loop)
+    return result
+
+
+def overlap_note(result: FlattenResult) -> str | None:
+    """A pattern whose boundary crosses itself: flaps lie on each other, though no triangle need be folded
+    (the guard keeps triangles from folding, not distant parts of the pattern from meeting)."""
+    crossings = result.extra.get("boundary_crossings", 0)
+    if not crossings:
+        return None
+    return (f"the pattern overlaps itself: its boundary crosses itself at {crossings} "
+            f"point{'s' if crossings > 1 else ''}{', though no triangle is folded' if not result.final.folded else ''}"
+            " (parts of the pattern lie on each other, and a cut along the boundary crosses itself); springflat keeps "
+            "triangles from folding, not parts of the pattern from overlapping (docs/guard.md)")
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:

@@ -37,7 +37,7 @@ from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options, forget_half_built_components
 from sim.engines import ENGINES, engine_named
-from sim.flatten_run import run_flatten
+from sim.flatten_run import overlap_note, run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import OutputError, area_ratio, check_output_path, directory_name_problem, ending_name_problem
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, kind_or_none, on_sheets, run_caption,
@@ -157,6 +157,8 @@ class Pattern:
         area_error: ``E_S`` of ``layout`` (relative area error, eq. 16).
         shape_error: ``E_C`` of ``layout`` (relative edge-length error, eq. 17).
         folded: triangles whose orientation disagrees with the pattern's.
+        boundary_crossings: points where the pattern's boundary crosses itself (a property): where it
+            is not 0, parts of the pattern lie on each other though no triangle need be folded.
         area_ratio: ``(F,)`` ``|A'_t| / A_t`` per triangle (1 = area kept).
         name: the mesh's name (printed on PDF/SVG sheets).
         vertices, faces: the mesh, ``(V, 3)`` float64 and ``(F, 3)`` int64.
@@ -183,6 +185,11 @@ class Pattern:
         return (f"Pattern(name={self.name!r}, status={self.status!r}, iterations={self.iterations}, "
                 f"area_error={self.area_error:.6g}, shape_error={self.shape_error:.6g}, folded={self.folded}, "
                 f"{len(self.vertices)} vertices, {len(self.faces)} faces)")
+
+    @property
+    def boundary_crossings(self) -> int:
+        """Points where the boundary crosses itself; 0 for a pattern that covers no point twice (fold-free)."""
+        return self.result.extra.get("boundary_crossings", 0)
 
     @cached_property
     def mesh(self) -> Mesh:
@@ -306,7 +313,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         except FormatSetNotBuildable as exc:  # engine="rtl"
             forget_half_built_components(exc)
             raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
-    for note in run_notes:
+    for note in run_notes + [note for note in (overlap_note(result),) if note]:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,

@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import InconsistentOrientation, Mesh, MeshError, oriented_mesh
+from golden_model.mesh import InconsistentOrientation, Mesh, MeshError, boundary_crossings, oriented_mesh
 from golden_model.mesh_io import load_mesh, load_mesh_with_notes, save_obj
 from golden_model.generate import grid_faces, grid_uv, rolled_grid
 
@@ -538,3 +538,57 @@ def test_a_file_with_a_turned_face_loads_wound_consistently_with_a_note(tmp_path
     assert _each_interior_edge_run_both_ways(mesh.faces)
     assert notes == ["1 face wound against its neighbours: turned to agree with the other 49 (the pattern's faces "
                      "keep the turned winding)"]
+
+
+# --------------------------------------------------------------------------- boundary crossings
+
+
+def _crossing_pairs_by_hand(polygon: np.ndarray) -> int:
+    """Every pair of sides of the closed polygon, one by one: those that are not neighbours and meet."""
+    def side(p, q, r):  # > 0: r left of pq
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+    def on_segment(p, q, r):  # r, collinear with pq, within its box
+        return min(p[0], q[0]) <= r[0] <= max(p[0], q[0]) and min(p[1], q[1]) <= r[1] <= max(p[1], q[1])
+
+    n, count = len(polygon), 0
+    for i in range(n):
+        for j in range(i + 2, n):
+            if i == 0 and j == n - 1:
+                continue
+            a, b, c, d = polygon[i], polygon[(i + 1) % n], polygon[j], polygon[(j + 1) % n]
+            d1, d2, d3, d4 = side(a, b, c), side(a, b, d), side(c, d, a), side(c, d, b)
+            if ((d1 > 0 > d2 or d1 < 0 < d2) and (d3 > 0 > d4 or d3 < 0 < d4)) \
+                    or (d1 == 0 and on_segment(a, b, c)) or (d2 == 0 and on_segment(a, b, d)) \
+                    or (d3 == 0 and on_segment(c, d, a)) or (d4 == 0 and on_segment(c, d, b)):
+                count += 1
+    return count
+
+
+def test_boundary_crossings_of_simple_and_self_crossing_loops():
+    angle = np.linspace(0.0, 2 * np.pi, 2001)[:-1]
+    circle = np.c_[np.cos(angle), np.sin(angle)]
+    assert boundary_crossings(circle, np.arange(len(circle))) == 0
+    bow_tie = np.array([[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]])  # its two long sides cross once
+    assert boundary_crossings(bow_tie, np.arange(4)) == 1
+    assert boundary_crossings(bow_tie, np.array([0, 2, 1, 3])) == 0  # the same corners, walked round
+    # a loop that goes round twice: each side of the first turn crosses the second turn's near sides
+    twice = np.c_[np.cos(2 * angle), np.sin(2 * angle)] * (1 + 0.1 * angle)[:, None]
+    assert boundary_crossings(twice, np.arange(len(twice))) >= 1
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_boundary_crossings_count_the_pairs_a_pair_by_pair_test_finds(seed, monkeypatch):
+    """Random polygons, on a coarse grid every third seed (collinear sides and shared points); odd seeds
+    test the candidate pairs a few at a time, as a long boundary is."""
+    import golden_model.mesh
+
+    if seed % 2:
+        monkeypatch.setattr(golden_model.mesh, "_CROSSING_CHUNK", 3)
+    rng = np.random.default_rng(seed)
+    polygon = rng.normal(size=(int(rng.integers(4, 30)), 2))
+    if seed % 3 == 0:
+        polygon = np.round(polygon * 2) / 2
+    positions = np.vstack([rng.normal(size=(3, 2)), polygon])  # the loop picks its rows out of a layout
+    loop = np.arange(3, len(positions))
+    assert boundary_crossings(positions, loop) == _crossing_pairs_by_hand(polygon)

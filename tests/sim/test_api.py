@@ -402,3 +402,38 @@ def test_faces_given_as_whole_floats_are_their_indices(ear):
     as_floats = springflat.flatten(V, F.astype(float), max_iter=3)
     assert np.array_equal(as_floats.layout, springflat.flatten(V, F, max_iter=3).layout)
     assert as_floats.faces.dtype.kind == "i"
+
+
+def _strip_wound_past_a_turn() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A flat 40 × 1 strip (V, F) and a fold-free layout of it wound through 430°: its end lies on its start."""
+    columns = 41
+    u, v = np.meshgrid(np.arange(columns, dtype=float), np.arange(2, dtype=float))
+    vertices = np.c_[u.ravel(), v.ravel(), np.zeros(u.size)]
+    faces = np.array([[k, k + 1, k + columns + 1] for k in range(columns - 1)]
+                     + [[k, k + columns + 1, k + columns] for k in range(columns - 1)])
+    angle, radius = u.ravel() / (columns - 1) * np.radians(430), 7.0 - v.ravel()  # counter-clockwise, as the mesh
+    return vertices, faces, np.c_[radius * np.cos(angle), radius * np.sin(angle)]
+
+
+def test_a_pattern_that_overlaps_itself_says_so_though_no_triangle_is_folded():
+    """Fold-free is not one to one: a pattern whose boundary crosses itself has parts lying on each other."""
+    vertices, faces, wound = _strip_wound_past_a_turn()
+    with pytest.warns(springflat.MeshNote, match=r"overlaps itself: its boundary crosses itself at \d+ points"):
+        pattern = springflat.flatten(vertices, faces, init=wound, max_iter=1)
+    assert pattern.folded == 0 and pattern.boundary_crossings > 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        flat = springflat.flatten(vertices, faces, init=vertices[:, :2], max_iter=1)  # the strip as it is
+    assert flat.boundary_crossings == 0
+
+
+def test_the_json_counts_the_boundary_crossings(tmp_path, capsys):
+    vertices, faces, wound = _strip_wound_past_a_turn()
+    trimesh.Trimesh(vertices, faces, process=False).export(tmp_path / "strip.obj")
+    np.savetxt(tmp_path / "wound.txt", wound)
+    assert main(["flatten", str(tmp_path / "strip.obj"), "--init", str(tmp_path / "wound.txt"), "--max-iter", "1",
+                 "--json"]) == 0
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert summary["folded"] == 0 and summary["boundary_crossings"] > 0
+    assert "the pattern overlaps itself" in captured.err

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from golden_model.generate import dome_grid
+from golden_model.generate import dome_grid, grid_faces, grid_uv
 from golden_model.mesh_io import save_obj
 from sim.cli import main
 from support import PRESETS, run_springflat as run
@@ -196,6 +196,21 @@ def test_a_batch_of_prints_at_a_likely_wrong_scale_gets_the_single_runs_note(tmp
     assert main(["flatten", "in/part0.obj", "in/part1.obj", "--out-dir", "o2", "--out", ".obj", "--max-iter", "3",
                  "--jobs", "1"]) == 0
     assert "the pattern is" not in capsys.readouterr().err  # texture coordinates have no scale
+
+
+def test_a_batch_names_the_mesh_of_each_start_note(tmp_path, monkeypatch, capsys):
+    """The start's notes (ARAP failed: SLIM instead) come from workers in any order: each names its mesh."""
+    monkeypatch.chdir(tmp_path)
+    os.mkdir("in")
+    uv = grid_uv(6, 6)
+    vertices = np.column_stack([uv, 0.1 * (uv**2).sum(axis=1)])
+    vertices[14] = vertices[13] + [1e-9, 0, 0]  # a sliver on which libigl's ARAP returns non-finite coordinates
+    for k in range(2):
+        save_obj(f"in/sliver{k}.obj", vertices, grid_faces(6, 6))
+    assert main(["flatten", "in/sliver0.obj", "in/sliver1.obj", "--out-dir", "o", "--out", ".obj", "--max-iter", "3",
+                 "--jobs", "1"]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "arap layout failed" in line]
+    assert sorted(line.split(": ")[2] for line in notes) == ["sliver0", "sliver1"], notes
 
 
 def _dies_on_dome01(job):
