@@ -21,7 +21,7 @@ from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_name, initial_layout, slim_layout,
                                    start_layout)
 from golden_model.files import describe_os_error
-from golden_model.mesh import Mesh, MeshError
+from golden_model.mesh import Mesh, MeshError, folded_faces
 from golden_model.mesh_io import load_mesh_with_notes
 from golden_model.mesh_io.polygons import is_float, is_int
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
@@ -112,7 +112,8 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("mesh", nargs="?", default="surf1",
                         help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
-                        help="initial layout: auto (arap; where it folds or fails, slim from tutte), tutte, pca, "
+                        help="initial layout: auto (arap; for a guarded run, where it folds or fails, slim from "
+                             "tutte), tutte, pca, "
                              "harmonic, lscm, arap, slim (libigl) or a file of V rows 'x y' / an OBJ (default: "
                              "pca for built-ins, auto for files); a file that is a mirror image of the mesh "
                              "(clockwise) is mirrored back in y; with the guarded dynamics any other start with "
@@ -251,7 +252,7 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
                     second_core: bool = False, notes: list[str] | None = None) -> tuple[np.ndarray, str]:
     """``(P0, what it is)``. A guarded run starts fold-free where that can be had (``start_layout``: folds are
     untangled, and what was done is one note each on stderr, or appended to ``notes`` when it is given);
-    the paper dynamics takes the layout as it is. ``second_core``: ``--init auto`` may compute SLIM's start
+    an unguarded run takes the layout as it is (``auto``: ARAP's, with a note where it folds). ``second_core``: ``--init auto`` may compute SLIM's start
     beside ARAP (:func:`slim_beside_arap`)."""
     def tell(told: list[str]) -> None:
         if notes is not None:
@@ -263,6 +264,10 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
     if not params.guard:
         read: list[str] = []
         positions = initial_layout(mesh, init, read)
+        if init_name(init) == AUTO_START and (folds := int(np.count_nonzero(folded_faces(positions, mesh.faces)))):
+            read.append(f"the arap layout folds {folds} triangle{'s' if folds > 1 else ''}: without the step guard "
+                        "the run starts from it as it is (the guarded dynamics, the default for mesh files, would "
+                        "start from SLIM on Tutte's layout, fold-free)")
         tell(read)
         return positions, "arap" if init_name(init) == AUTO_START else init_name(init)
     said: list[str] = []  # the notes a progress line has given

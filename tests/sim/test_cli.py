@@ -505,3 +505,21 @@ def test_a_mesh_given_after_an_option_is_told_where_it_goes(argv, hint, capsys):
     assert stopped.value.code == 2 and err.startswith(f"springflat: error: unrecognized arguments: {argv[-1]}")
     assert ("the meshes of a batch come together, before the options (flatten MESH MESH ... --option ...)"
             in err) == hint, err
+
+
+@pytest.mark.parametrize("options", [["--dynamics", "paper"], ["--no-guard"]], ids=["paper", "momentum-unguarded"])
+def test_an_unguarded_run_from_a_folded_arap_start_says_so(options, tmp_path):
+    """auto falls back to SLIM for a guarded run only; an unguarded one starts from ARAP's folds, with a note."""
+    from golden_model.generate import hard_patches
+    from golden_model.mesh_io import save_obj
+
+    mesh = hard_patches()["slivers"]  # ARAP folds 8 of its triangles
+    save_obj(tmp_path / "slivers.obj", mesh.vertices, mesh.faces)
+    proc = run("flatten", str(tmp_path / "slivers.obj"), *options, "--max-iter", "1", "--json", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert ("springflat: note: the arap layout folds 8 triangles: without the step guard the run starts from it as "
+            "it is") in proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["init"] == "arap" and summary["initial_folded"] == 8
+    guarded = run("flatten", str(tmp_path / "slivers.obj"), "--max-iter", "1", "--json", cwd=tmp_path)
+    assert json.loads(guarded.stdout)["init"] == "slim" and "without the step guard" not in guarded.stderr
