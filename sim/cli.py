@@ -19,6 +19,7 @@ a number that is not finite is ``null`` and its key is listed in
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import contextlib
 import gc
 import math
@@ -168,7 +169,8 @@ def _energy_rule_note(params: FlattenParams, result: FlattenResult) -> str | Non
     """
     energy = np.asarray(result.history.energy[-ENERGY_NOTE_WINDOW - 1:], dtype=float)
     if (not engine_named(result.engine).fixed_point or result.status != "max-iterations" or not params.tol_energy > 0
-            or len(energy) <= ENERGY_NOTE_WINDOW or not np.isfinite(energy).all()):
+            or len(energy) <= ENERGY_NOTE_WINDOW or not np.isfinite(energy).all()
+            or result.extra.get("saturations")):  # clamped values, not rounding, move that energy
         return None
     steps = np.diff(energy)
     if np.count_nonzero(steps > 0) < ENERGY_NOTE_WINDOW // 4:  # still descending, not at the floor
@@ -202,11 +204,27 @@ def _saturation_note(result: FlattenResult) -> str | None:
     if not result.extra.get("saturations"):
         return None
     fields = ", ".join(f"{name} {count}" for name, count in sorted(events.items(), key=lambda item: -item[1])[:3])
-    others = [name for name in FormatSet.presets() if name != result.extra["formats"]]
+    formats = load_format_set(result.extra["formats"])
+    wider = [name for name in FormatSet.presets() if _holds_more(FormatSet.preset(name), formats, events)]
+    final = result.final
+    at_the_top = max(final.area_error, final.shape_error) >= formats.error.max  # E_S, E_C clamped: no flattening
     return (f"format set '{result.extra['formats']}' clamped {result.extra['saturations']} values to its range"
-            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's; "
-            f"a format set with more integer bits holds them (other presets: {', '.join(others)}; "
-            "docs/fixed-point.md)")
+            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's"
+            + ("; E_S or E_C is at the top of its format: the run ran away (the float engine calls such a run "
+               "diverged), and the pattern is no flattening" if at_the_top else "")
+            + (f"; a format set with more integer bits holds them (presets: {', '.join(wider)}; docs/fixed-point.md)"
+               if wider else "; no preset has more integer bits there: a --formats FILE can (docs/fixed-point.md)"))
+
+
+def _holds_more(candidate: FormatSet, formats: FormatSet, clamped: dict[str, int]) -> bool:
+    """Whether ``candidate`` has more integer bits than ``formats`` where values were clamped: at least as
+    many in each clamped signal that is a format and more in one (or, where none is, in every format at
+    least as many and more in one)."""
+    signals = [field.name for field in dataclasses.fields(FormatSet)
+               if hasattr(getattr(formats, field.name), "int_bits")]
+    signals = [name for name in signals if name in clamped] or signals
+    pairs = [(getattr(candidate, name).int_bits, getattr(formats, name).int_bits) for name in signals]
+    return all(mine >= theirs for mine, theirs in pairs) and any(mine > theirs for mine, theirs in pairs)
 
 
 def _check_distinct_files(args: argparse.Namespace) -> None:

@@ -330,11 +330,22 @@ def test_cli_notes_the_saturations_of_a_run_and_the_fields_that_saturated():
     notes = [line for line in proc.stderr.splitlines() if "clamped" in line]
     assert len(notes) == 1 and re.fullmatch(
         r"springflat: note: format set 'narrow' clamped (\d+) values to its range \((rsqrt|one_minus_dr) \d+.*\), which "
-        r"moves the result away from the float reference's; a format set with more integer bits holds them \(other "
+        r"moves the result away from the float reference's; a format set with more integer bits holds them \("
         r"presets: default, wide; docs/fixed-point.md\)", notes[0]), notes  # not narrow itself
     quiet = subprocess.run([SPRINGFLAT, "flatten", "surf2", "--init", "tutte", "--engine", "fixed"],
                            capture_output=True, text=True)
     assert quiet.returncode == 0 and "clamped" not in quiet.stderr  # no saturation, no note
+
+
+def test_cli_a_fixed_point_run_that_ran_away_into_its_range_says_so():
+    """The fixed-point engine clamps a runaway instead of diverging: the note says E_S/E_C sit at the top of
+    their format and names only a preset with more integer bits where it clamped; no note that blames the
+    energy rule's rounding."""
+    proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "fixed", "--dynamics", "paper", "--step",
+                           "fixed", "--dt", "0.9", "--max-iter", "200"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "E_S or E_C is at the top of its format: the run ran away" in proc.stderr
+    assert "holds them (presets: wide;" in proc.stderr and "rounding" not in proc.stderr
 
 
 @pytest.mark.parametrize("formats, message", [
