@@ -138,11 +138,20 @@ def divergence_hint(params: FlattenParams) -> str:
     1e45 across)."""
     if params.dynamics == "momentum" and params.guard:
         return "the guarded run's numbers overflowed: bring --spring or the mesh's size nearer 1"
+    penalty = (f"the overlap penalty pushes nodes apart unchecked: try a smaller --penalty-gain than "
+               f"{params.penalty_gain:g}, or drop --penalty; " if params.penalty else "")
     if params.dynamics == "momentum":
-        return ("the momentum dynamics without its guard: drop --no-guard; with --spring or the mesh's size far "
-                "from 1 a guarded run overflows too")
+        return (penalty + "the momentum dynamics without its guard: drop --no-guard"
+                + (" and --penalty (the guard does not take it)" if params.penalty else "")
+                + "; with --spring or the mesh's size far from 1 a guarded run overflows too")
     step = "a smaller --dt" if params.step == "fixed" else "--step fixed with a small --dt"
-    return f"the paper dynamics has no guard: try --damping 0.05, {step}, or --dynamics momentum"
+    damping = (f"a larger --damping than {params.damping:g}" if params.damping >= DIVERGENCE_DAMPING
+               else f"--damping {DIVERGENCE_DAMPING:g}")
+    return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or --dynamics momentum"
+
+
+#: The damping :func:`divergence_hint` suggests to an undamped paper run.
+DIVERGENCE_DAMPING = 0.05
 
 
 def check_outputs(args: argparse.Namespace) -> None:

@@ -431,8 +431,11 @@ def test_the_notes_on_a_given_start_are_printed_with_progress_lines_or_without(t
 
 
 @pytest.mark.parametrize("mode", [["--dynamics", "paper"], ["--dynamics", "paper", "--step", "fixed"],
-                                  ["--dynamics", "momentum"], ["--dynamics", "momentum", "--no-guard"]],
-                         ids=["paper", "paper-fixed", "momentum", "momentum-unguarded"])
+                                  ["--dynamics", "momentum"], ["--dynamics", "momentum", "--no-guard"],
+                                  ["--dynamics", "momentum", "--no-guard", "--penalty"],
+                                  ["--dynamics", "paper", "--penalty", "--damping", "0.2"]],
+                         ids=["paper", "paper-fixed", "momentum", "momentum-unguarded", "momentum-unguarded-penalty",
+                              "paper-penalty-damped"])
 def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
     """Each option the hint tells the user to give is accepted beside the run's own options (one it says to
     drop need not be)."""
@@ -446,9 +449,12 @@ def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
     defaults = FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=1e-3)
     hint = divergence_hint(params_from_args(parser.parse_args(["flatten", "m.obj", *mode]), defaults))
     values = {"--spring": ["2"], "--damping": ["0.05"], "--dt": ["0.01"], "--step": ["fixed"],
-              "--dynamics": ["momentum"]}
-    named = [flag for dropped, flag in re.findall(r"(drop )?(--[a-z-]+)", hint) if not dropped]
+              "--dynamics": ["momentum"], "--penalty-gain": ["0.1"]}
+    named = [flag for dropped, flag in re.findall(r"(drop |and )?(--[a-z-]+)", hint) if not dropped]
     assert named, hint
+    assert ("--penalty-gain" in hint) == ("--penalty" in mode)  # the penalty is what ran away, if given
+    if "--damping" in mode:
+        assert "a larger --damping than 0.2" in hint
     for flag in named:
         given = [*mode, flag, *values[flag]]
         if flag == "--dt" and "fixed" not in mode:
