@@ -76,7 +76,8 @@ def check_options_used(args: argparse.Namespace) -> None:
     if args.dxf_edges and not any(kind_or_none(path) == "dxf" for path in args.out or ()):
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
     if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
-        raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg")
+        raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg (a .flat.svg is "
+                        "the layout drawn to fit, not a pattern on sheets)")
     for option, what in (("port", "the serial port"), ("baud", "the serial port's rate")):
         if getattr(args, option) is not None and not engine_named(args.engine).serial:
             raise UserError(f"--{option} sets {what}: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")

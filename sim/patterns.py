@@ -344,7 +344,8 @@ class SheetPlan:
         if len(self.sheets) == 1:
             return f"one {paper} sheet"
         blank = f", {self.blank} blank left out" if self.blank else ""
-        return (f"{len(self.sheets)} {paper} sheets ({self.cols} columns x {self.rows} rows{blank}, "
+        columns, rows = (f"{n} {word}{'s' if n != 1 else ''}" for n, word in ((self.cols, "column"), (self.rows, "row")))
+        return (f"{len(self.sheets)} {paper} sheets ({columns} x {rows}{blank}, "
                 f"overlap {self.overlap:g} mm)")
 
 

@@ -383,7 +383,7 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
         raise FixedPointError(f"the step guard's certificate is exact only with face_edge ({fs.face_edge}) at "
                               f"position's ({fs.position}) fraction bits: format set '{fs.name}'")
     if 0 < params.tol_energy < math.ldexp(1, -ENERGY_TOL_FRAC_BITS - 1):
-        raise FixedPointError(f"tol_energy {params.tol_energy:g} is below the controller's resolution "
+        raise FixedPointError(f"--tol-energy {params.tol_energy:g} is below the controller's resolution "
                               f"2^-{ENERGY_TOL_FRAC_BITS} ({math.ldexp(1, -ENERGY_TOL_FRAC_BITS):.3g}); use 0 or a larger value")
     finer = "choose a format set with more fraction bits for it"
     if params.dynamics == "momentum":  # β_k = k/(k+3) goes into the Δt port: its first non-zero value

@@ -48,7 +48,7 @@ def test_relative_energy_change_in_integers():
 def test_a_tolerance_below_the_resolution_is_refused():
     mesh = spherical_cap(3)
     params = FlattenParams(tol_energy=1e-14)
-    with pytest.raises(FixedPointError, match=r"tol_energy 1e-14 is below the controller's resolution 2\^-40"):
+    with pytest.raises(FixedPointError, match=r"--tol-energy 1e-14 is below the controller's resolution 2\^-40"):
         flatten_fixed(mesh, initial_layout(mesh, "tutte"), params, DEFAULT)
 
 
