@@ -345,6 +345,8 @@ def _long_name(stem_char: str, total_bytes: int, suffix: str) -> str:
 
 MALFORMED_MESHES: dict[str, Case] = {
     "missing file": Case(["nope.obj"], 2, r"cannot read mesh 'nope.obj': no such file"),
+    "a built-in's name mistyped": Case(["surf3"], 2, r"cannot read mesh 'surf3': no such file, and no built-in mesh "
+                                                     r"of that name \(built-in: surf1, surf2; "),
     "directory": Case(["d.obj"], 2, r"cannot read mesh 'd.obj': is a directory", files={"d.obj/x": ""}),
     "file name too long": Case([_long_name("x", 304, ".obj")], 2, r"cannot read mesh 'x+\.obj': file name too long"),
     "permission denied": Case(["m.obj"], 2, r"^springflat: error: cannot read mesh 'm.obj': permission denied$",
