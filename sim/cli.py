@@ -253,7 +253,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 
 def cmd_verilog(args: argparse.Namespace) -> int:
-    from .export import engine_capacity, export_engine_bundle, export_verilog
+    from .export import bundle_readme, engine_capacity, export_engine_bundle, export_verilog
     from .outputs import check_build_so_far
 
     formats = load_format_set(args.formats)
@@ -266,12 +266,15 @@ def cmd_verilog(args: argparse.Namespace) -> int:
         interface = export_verilog(formats, build)
         check_build_so_far()  # a --formats file named interface.json: refused before the engine's export
         engine = export_engine_bundle(formats, capacity, build)
+        files = sorted(path.name for path in Path(build).iterdir() if path.is_file()) + ["README.md"]
+        (Path(build) / "README.md").write_text(bundle_readme(formats, capacity, sorted(files), installed_version()))
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
     print(f"{out / 'interface.md'}, {out / 'interface.json'}")
     print(f"{out / engine['files'][0]}: capacity {capacity.vertices} vertices, {capacity.entries} entries, "
           f"{capacity.triangles} triangles{'' if capacity.guard else ', no step guard'}; {engine['bus']}")
     print(", ".join(str(out / f) for f in engine["files"][1:]))
+    print(f"{out / 'README.md'}: which file is which")
     return 0
 
 
@@ -325,7 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "engine (springflat_engine.v) with its register map (register_map.md, "
                                    "register_map.json, springflat_regs.h), memory_image.md, and "
                                    "verilator_waivers.vlt (the lint rules the generated Verilog breaks by "
-                                   "construction).")
+                                   "construction); README.md says which file is which.")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="the engine's vertices, neighbour entries and triangles (default: "

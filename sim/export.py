@@ -404,6 +404,42 @@ def host_scaling_markdown() -> str:
     ])
 
 
+#: What each file of ``springflat verilog``'s bundle is (besides the components' ``.v``, from
+#: :data:`~sim.top_names.COMPONENT_SUMMARIES`): :func:`bundle_readme` lists them, and a test checks that every
+#: file the command writes is here.
+BUNDLE_FILES = {
+    f"{ENGINE_MODULE}.v": "the whole flattener behind its Wishbone bus: the top to put in a system",
+    "register_map.md": "the engine's register map, memory windows, bus behaviour and ports",
+    "register_map.json": "register_map.md's map as JSON, for scripts",
+    "springflat_regs.h": "register_map.md's map for C: one macro per register, field and window",
+    "memory_image.md": "what the host writes into the memory windows before START, and how it scales the mesh",
+    "interface.md": "the components' stream ports, payload bit layouts, latencies, and the fixed-point formats",
+    "interface.json": "interface.md's content as JSON, for scripts",
+    "rsqrt_seed.hex": "the rsqrt unit's seed ROM, one word per line ($readmemh); the Verilog holds the same words "
+                      "inline (initial blocks), so no tool needs the file",
+    "exp_table.hex": "the step generator's exp-LUT ROM, one word per line ($readmemh); also inline in the Verilog",
+    WAIVER_FILE: "Verilator lint waivers: the rules the generated Verilog breaks by construction, each with its reason",
+    "README.md": "this file",
+}
+
+
+def bundle_readme(fs: FormatSet, capacity, files: list[str], version: str) -> str:
+    """``README.md`` of ``springflat verilog``'s bundle: which file is which, the top, clock and reset."""
+    described = {**{f"{module}.v": summary for module, summary in COMPONENT_SUMMARIES.items()}, **BUNDLE_FILES}
+    lines = [f"# springflat {version}: Verilog bundle (format set `{fs.name}`)", "",
+             f"The top for a system is `{ENGINE_MODULE}` in `{ENGINE_MODULE}.v`: the whole flattening behind a "
+             f"Wishbone B4 classic target, for {capacity.vertices} vertices, {capacity.entries} neighbour entries and "
+             f"{capacity.triangles} triangles{'' if capacity.guard else ', built without the step guard'}. The "
+             "other modules are the datapath's parts, each a top of its own for a design of your own. Every `.v` "
+             "file is self-contained (one top and the modules it instantiates, no includes): give a tool one file.",
+             "", "One clock, `clk` (rising edge); `rst` is synchronous and active high (hold it over a rising edge). "
+             "The generic Verilog (`springflat verilog`) has no vendor primitives; `springflat synth` maps it to "
+             "ECP5 or iCE40 and reports resources and Fmax, and `--board ulx3s-85f` builds a bitstream "
+             "(springflat's docs/synthesis.md and docs/board.md).", "", "| file | what |", "|---|---|"]
+    lines += [f"| `{name}` | {described[name].replace('|', chr(92) + '|')} |" for name in files]  # '|' escaped
+    return "\n".join(lines) + "\n"
+
+
 def export_engine_bundle(fs: FormatSet, capacity, out: Path, platform=None,
                          engine_options: dict | None = None) -> dict:
     """:func:`export_engine` plus ``memory_image.md`` (:func:`memory_image_markdown`): what a handoff of

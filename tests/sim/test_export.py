@@ -19,6 +19,16 @@ def exported(tmp_path_factory):
     return out
 
 
+def test_the_bundles_readme_says_what_every_file_is(exported):
+    """README.md lists every file the command wrote, each with what it is, and names the top."""
+    readme = (exported / "README.md").read_text()
+    listed = re.findall(r"^\| `([^`]+)` \| (.+) \|$", readme, re.M)
+    assert sorted(name for name, _ in listed) == sorted(p.name for p in exported.iterdir() if p.is_file())
+    assert all(what.strip() for _, what in listed)
+    assert "The top for a system is `springflat_engine` in `springflat_engine.v`" in readme
+    assert not [what for _, what in listed if re.search(r"(?<!\\)\|", what)]  # a '|' in a cell is escaped
+
+
 def _verilog_ports(text: str, module: str) -> dict[str, tuple[str, int]]:
     body = text[text.index(f"module {module}("):]
     body = body[:body.index("endmodule")]
