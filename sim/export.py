@@ -164,7 +164,7 @@ def describe(component, fs: FormatSet, name: str) -> dict:
     if hasattr(component, "step_latency"):
         info["step_latency"] = component.step_latency
     if hasattr(component, "result_depth"):
-        info["credits"] = component.result_depth
+        info["credits"], info["result_depth"] = component.credits, component.result_depth
     return info
 
 
@@ -192,9 +192,10 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "node_update / springflat_core: one result per node, in input order; error_sum is the node's "
                      "sum of |L - d| over the positions it was given.",
                      "node_update / springflat_core: the datapath never stalls; back-pressure is a credit count. "
-                     "entries.ready (a register) falls before more results are owed (accepted, not yet "
-                     "taken from the output) than the result FIFO holds (`credits` below: at most that many are "
-                     "ever owed); with results.ready held high it never falls.",
+                     "entries.ready (a register) falls once `credits` nodes (below) are owed (accepted, not yet "
+                     "taken from the output); two more may be on their way in by then, so up to `result_depth` = "
+                     "credits + 2 are ever owed, and the result FIFO holds that many; with results.ready held high "
+                     "entries.ready never falls.",
                      "Throughput = Fmax / II: one neighbour entry (node_update, springflat_core) or item per II "
                      "clocks.",
                      "Reset: rst is synchronous and active high; hold it over a rising clock edge. Simulating with "
@@ -231,7 +232,8 @@ def interface_markdown(interface: dict) -> str:
         lines += [f"## `{name}` — {c['summary']}", "",
                   f"Latency {c['latency']} clocks, initiation interval {c['initiation_interval']}"
                   + (f"; errors → step {c['step_latency']} clocks" if "step_latency" in c else "")
-                  + (f"; credits {c['credits']} results" if "credits" in c else "") + ".", "",
+                  + (f"; credits {c['credits']}, result FIFO {c['result_depth']} results" if "credits" in c else "")
+                  + ".", "",
                   "| port | direction | width |", "|---|---|---|"]
         lines += [f"| `{p['name']}` | {p['direction']} | {p['width']} |" for p in c["ports"]]
         for port, fields in c["payload_layouts"].items():
