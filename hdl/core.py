@@ -63,7 +63,7 @@ class SpringflatCore(wiring.Component):
         self._datapath = NodeUpdate(fs)
         self._stepgen = StepGenerator(fs)
         self.latency = self._datapath.latency
-        self.result_depth = self._datapath.result_depth
+        self.credits, self.result_depth = self._datapath.credits, self._datapath.result_depth
         self.step_latency = self.step_latency_of(fs)
         super().__init__({
             "entries": In(stream.Signature(entry_layout(fs))),

@@ -214,7 +214,11 @@ def node_update_contract() -> str:
                  f"rsqrt unit's {every('rsqrt')} (the core adds the step generator's {every('step_generator')}: "
                  f"{', '.join(str(sum(dsp[p].values())) for p in PRESETS)})", every("rsqrt"), every("step_generator")])
     fs = _preset("default")
-    rows.append(["memories", f"seed ROM (block RAM; default {fs.rsqrt_config().seed_table_size} entries), header "
+    from hdl.rsqrt import seed_rom_words
+
+    seeds = fs.rsqrt_config()
+    rows.append(["memories", f"seed ROM (block RAM; default {len(seed_rom_words(seeds)):,} words, the "
+                 f"{seeds.seed_table_size:,} an input can address filled), header "
                  f"FIFO and result FIFO ({cols['default'][1]} entries), both distributed RAM in "
                  f"{NodeUpdate.FIFO_SLICE_BITS}-bit column slices", "seed ROM",
                  f"exp table ({1 << fs.lut_index_bits} rows)"])

@@ -206,7 +206,7 @@ def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
         return mesh, FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
                                    tol_shape=paper.tol_shape, tol_energy=paper.tol_energy,
                                    max_iter=paper.max_iter)
-    if not Path(name).suffix and not os.path.lexists(name):  # no file, no format: a built-in's name mistyped?
+    if name.strip() and not Path(name).suffix and not os.path.lexists(name):  # a built-in's name mistyped?
         raise MeshError(f"cannot read mesh '{name}': no such file, and no built-in mesh of that name (built-in: "
                         f"{', '.join(BUILTIN_MESHES)}; a mesh file's name ends in its format: .obj, .ply, .off, .stl)")
     mesh, notes = load_mesh_with_notes(name)
