@@ -76,7 +76,7 @@ class RegisterBank(wiring.Component):
     A register write acts at DEC's clock edge: ``rw`` storage holds the word the clock after DEC,
     a ``w1p`` port is high that clock. A register answers two clocks after DEC (the one-hot select's
     AND-OR into groups of eight, landed, then their OR, landed): ``error`` for a write to a ``ro``
-    register or of a partial word. A request that is neither a register nor an idle window is refused
+    register or a partial word. A request that is neither a register nor an idle window is refused
     (``error``) the clock after DEC. A window's answer is passed on as it comes.
     """
 
@@ -201,13 +201,13 @@ class RegisterBank(wiring.Component):
         landed_error = Signal(reset_less=True)
         m.d.sync += [reg_pending.eq(self.bus_request & bus_reg_hit), reg_answer.eq(reg_pending),
                      refused.eq(self.bus_request & ~bus_reg_hit & ~self.window_hit),
-                     landed_word.eq(read_word), landed_error.eq(self.write & (read_only | ~self.whole_word))]
+                     landed_word.eq(read_word), landed_error.eq((read_only & self.write) | ~self.whole_word)]
         with m.If(reg_answer):
             m.d.comb += [self.done.eq(1), self.error.eq(landed_error), self.data.eq(landed_word)]
         with m.Elif(refused):
             m.d.comb += [self.done.eq(1), self.error.eq(1)]
         with m.Elif(self.window_answer):
-            m.d.comb += [self.done.eq(1), self.error.eq(self.write & ~self.whole_word), self.data.eq(self.window_data)]
+            m.d.comb += [self.done.eq(1), self.error.eq(~self.whole_word), self.data.eq(self.window_data)]
 
 
 def _field_values(register_map: RegisterMap) -> dict[str, tuple[str, int]]:

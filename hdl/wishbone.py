@@ -8,8 +8,7 @@ name. The signature is the *initiator's* view (``Out`` = driven by the host); a 
 Classic cycles (Wishbone B4 §3.2): the initiator holds ``cyc``, ``stb``, ``we``, ``adr``,
 ``dat_w`` and ``sel`` until the target answers with ``ack`` or ``err`` for one clock; a read's
 ``dat_r`` is valid with that ``ack``. ``adr`` addresses 32-bit words (byte address >> 2) and
-``sel`` has one bit per byte; the engine writes only whole words (``sel`` all ones) and answers a
-read with the whole word whatever its ``sel`` (an initiator's byte load takes its bytes from it).
+``sel`` has one bit per byte; the engine accepts only whole words (``sel`` all ones).
 """
 
 from __future__ import annotations
@@ -59,10 +58,8 @@ class TargetHandshake(wiring.Component):
     raising ``done`` (with ``error`` for an ``err`` answer, and for reads ``data``) exactly
     any number of clocks after ``request`` (in the same clock at the earliest). ``ack``/``err``
     are registered and high for one clock; back-to-back cycles (``stb`` held high with the next
-    request right after an answer) are taken. A cycle the initiator abandons (``cyc`` low) before
-    its answer gets none: the target still answers its request (a write it took may have acted),
-    and that answer is dropped; a new cycle waits for it, so that every answer goes to its own
-    cycle and the request registers hold still while the target works on them.
+    request right after an answer) are taken. A cycle abandoned (``cyc`` low) before its answer gets
+    none, but the target's late answer goes to the next cycle: a host must not abandon (docs/engine.md).
 
     Members
     -------
@@ -89,20 +86,18 @@ class TargetHandshake(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         bus = self.bus
-        busy = Signal()  # a request has been taken and the target has not yet answered it
-        live = Signal()  # and the cycle that made it still holds cyc: the answer is its
+        busy = Signal()  # a cycle has been taken and not yet answered
         # While ack/err is out, the initiator still shows the answered cycle's request: it takes
         # the answer at this clock edge and only then presents its next cycle (or drops stb).
         start = bus.cyc & bus.stb & ~busy & ~bus.ack & ~bus.err
         m.d.sync += self.request.eq(start)
         with m.If(start):
-            m.d.sync += [busy.eq(1), live.eq(1), self.address.eq(bus.adr), self.write.eq(bus.we),
+            m.d.sync += [busy.eq(1), self.address.eq(bus.adr), self.write.eq(bus.we),
                          self.write_data.eq(bus.dat_w), self.whole_word.eq(bus.sel.all())]
-        with m.If(~bus.cyc):
-            m.d.sync += live.eq(0)
         m.d.sync += [bus.ack.eq(0), bus.err.eq(0)]
         with m.If(busy & self.done):
-            answered = live & bus.cyc
-            m.d.sync += [busy.eq(0), bus.ack.eq(answered & ~self.error),
-                         bus.err.eq(answered & self.error), bus.dat_r.eq(self.data)]
+            m.d.sync += [busy.eq(0), bus.ack.eq(bus.cyc & ~self.error),
+                         bus.err.eq(bus.cyc & self.error), bus.dat_r.eq(self.data)]
+        with m.If(~bus.cyc):
+            m.d.sync += busy.eq(0)
         return m

@@ -6,8 +6,7 @@ interface: the RTL decodes it, the driver (``sim/engine_driver.py``) and the exp
 (markdown, JSON, C header: ``sim/register_map_export.py``) read it.
 
 **Bus.** Wishbone B4 classic, 32-bit ``dat``; ``adr`` is a 32-bit-word address (byte address
->> 2); a write's ``sel`` must be all ones, a read answers the whole word whatever its ``sel``.
-``err`` answers a partial write (``sel`` not all ones), an
+>> 2); ``sel`` must be all ones.  ``err`` answers a partial access (``sel`` not all ones), an
 address no register or memory word decodes to (the holes at the end of a window's stride
 included), a write to a read-only register, and any memory-window access while the engine runs.
 
@@ -385,7 +384,7 @@ class RegisterMap:
         return {
             "bus": {"protocol": "Wishbone B4 classic", "data_bits": BUS_WORD_BITS, "address": "32-bit word",
                     "address_bits": self.address_bits,
-                    "sel": "all ones for a write (a read answers the whole word)", "err": "partial write, unmapped address, write to a read-only register, "
+                    "sel": "all ones", "err": "partial access, unmapped address, write to a read-only register, "
                                               "memory access while running"},
             "version": list(VERSION), "magic": MAGIC, "formats": self.formats, "format_hash": self.format_hash,
             "capacity": asdict(self.capacity), "access": ACCESS, "states": list(STATES), "results": list(RESULTS),

@@ -176,6 +176,9 @@ def test_abandoned_cycle_is_not_answered():
     run(dut, bench)
 
 
+@pytest.mark.xfail(strict=True, reason="known limitation (docs/engine.md, 'The bus'): the answer to an abandoned "
+                                      "request goes to the next cycle; the fix moved the engine's placement below "
+                                      "125 MHz, so it is not in the RTL")
 @pytest.mark.parametrize("latency", [3, 8])
 @pytest.mark.parametrize("write", [False, True], ids=["read", "write"])
 def test_the_cycle_after_an_abandoned_one_gets_its_own_answer(latency, write):
