@@ -248,7 +248,9 @@ def boundary_crossings(positions: np.ndarray, loop: np.ndarray) -> int:
     curve), so a positive count on a fold-free pattern means flaps lying on each other: a cut pattern
     whose cut line crosses itself. ``positions`` ``(V, 2)``, ``loop`` (:attr:`Mesh.boundary_loop`)
     ``(n,)``. A sweep along the layout's longer extent: sides are paired only where their extents
-    overlap on that axis and then on the other; exact orientation tests decide the rest.
+    overlap on that axis and then on the other; orientation tests (float, so sides that all but touch
+    may go either way) decide the rest. A side through a corner meets both sides there, and a side of
+    length 0 makes the sides on either side of it meet.
     """
     a = np.asarray(positions, dtype=np.float64)[np.asarray(loop)]
     b = np.roll(a, -1, axis=0)

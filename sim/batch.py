@@ -111,6 +111,12 @@ class MeshOutcome:
         return self.status == "failed"
 
 
+def _tell(name: str, notes: list[str | None]) -> None:
+    """A batch mesh's notes on (its captured) stderr, each named by its mesh."""
+    for note in filter(None, notes):
+        print(f"springflat: note: {name}: {note}", file=sys.stderr)
+
+
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
     from .flatten_run import (check_print_size, human_line, json_summary, overlap_note, run_flatten, scale_note_of,
@@ -144,11 +150,12 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 params = params_from_args(args, defaults)
                 check_print_size(args, mesh)
                 notes: list[str] = []  # each named by its mesh: the workers' notes come in any order
-                result = run_flatten(args, mesh, params, notes=notes)
+                try:
+                    result = run_flatten(args, mesh, params, notes=notes)
+                finally:  # the start's notes also where the engine then refuses the mesh
+                    _tell(job.name, notes)
                 written = write_outputs(args, mesh, result)
-                notes += [overlap_note(result), scale_note_of(args, mesh, result)]  # a folder of prints at 1:1000
-                for note in filter(None, notes):
-                    print(f"springflat: note: {job.name}: {note}", file=sys.stderr)
+                _tell(job.name, [overlap_note(result), scale_note_of(args, mesh, result)])  # prints at 1:1000
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)
             files = [(ending, path.read_bytes()) for _, ending, path in names if path in written]

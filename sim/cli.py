@@ -117,7 +117,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(what_was_used(params, args.init, result), file=sys.stderr)
     formats = run_formats(args)
     for note in (overlap_note(result), scale_note_of(args, mesh, result), _energy_rule_note(params, result),
-                 _error_resolution_note(formats), _saturation_note(result)):
+                 _error_resolution_note(formats), _saturation_note(result, formats)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":
@@ -207,13 +207,12 @@ def _error_resolution_note(formats: FormatSet | None) -> str | None:
             f"{formats.error.lsb:.3g}, the values above are rounded to that")
 
 
-def _saturation_note(result: FlattenResult) -> str | None:
-    """A fixed-point run that clamped values: which, and where wider formats are."""
+def _saturation_note(result: FlattenResult, formats: FormatSet | None) -> str | None:
+    """A fixed-point run (of format set ``formats``) that clamped values: which, and where wider formats are."""
     events = result.extra.get("saturation_events") or {}
     if not result.extra.get("saturations"):
         return None
     fields = ", ".join(f"{name} {count}" for name, count in sorted(events.items(), key=lambda item: -item[1])[:3])
-    formats = load_format_set(result.extra["formats"])
     wider = [name for name in FormatSet.presets() if _holds_more(FormatSet.preset(name), formats, events)]
     final = result.final
     at_the_top = max(final.area_error, final.shape_error) >= formats.error.max  # E_S, E_C clamped: no flattening

@@ -148,21 +148,22 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
     with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
-    if result.status != "diverged":
-        result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loop)
+    # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
+    fold_free = result.status != "diverged" and not result.final.folded
+    result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loop) if fold_free else None
     return result
 
 
 def overlap_note(result: FlattenResult) -> str | None:
     """A pattern whose boundary crosses itself: flaps lie on each other, though no triangle need be folded
     (the guard keeps triangles from folding, not distant parts of the pattern from meeting)."""
-    crossings = result.extra.get("boundary_crossings", 0)
+    crossings = result.extra.get("boundary_crossings")
     if not crossings:
         return None
-    return (f"the pattern overlaps itself: its boundary crosses itself at {crossings} "
-            f"point{'s' if crossings > 1 else ''}{', though no triangle is folded' if not result.final.folded else ''}"
-            " (parts of the pattern lie on each other, and a cut along the boundary crosses itself); springflat keeps "
-            "triangles from folding, not parts of the pattern from overlapping (docs/guard.md)")
+    return (f"the pattern overlaps itself, though no triangle is folded: {crossings} pair{'s' if crossings > 1 else ''}"
+            " of its boundary's sides meet (parts of the pattern lie on each other, and a cut along the boundary "
+            "crosses itself); springflat keeps triangles from folding, not parts of the pattern from overlapping "
+            "(docs/guard.md)")
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:

@@ -266,7 +266,13 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
 
     if not params.guard:
         read: list[str] = []
-        positions = initial_layout(mesh, init, read)
+        try:
+            positions = initial_layout(mesh, init, read)
+        except LayoutError as exc:
+            if init_name(init) != AUTO_START:
+                raise
+            raise LayoutError(f"{exc}; without the step guard --init auto takes no other start: give --init slim "
+                              "(SLIM on Tutte's layout, where a guarded run, the default for mesh files, starts)") from None
         if init_name(init) == AUTO_START and (folds := int(np.count_nonzero(folded_faces(positions, mesh.faces)))):
             read.append(f"the arap layout folds {folds} triangle{'s' if folds > 1 else ''}: without the step guard "
                         "the run starts from it as it is (the guarded dynamics, the default for mesh files, would "

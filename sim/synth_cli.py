@@ -147,8 +147,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
         print(strict_json(report))
     else:
         print(report_markdown(report), end="")
-        print(f"bundle: {out}/ (synth_report.md, synth_report.json, interface.md, reproduce.sh)")
+        print(f"bundle: {Path(out)}/ (synth_report.md, synth_report.json, interface.md, reproduce.sh)")
     if report["does_not_fit"]:
         what = "; ".join(f"{n}: {', '.join(p)}" for n, p in report["does_not_fit"].items())
-        raise DoesNotFit(f"does not fit {report['device']}: {what} (synthesis numbers are in {out}/synth_report.md)")
+        raise DoesNotFit(f"does not fit {report['device']}: {what} (synthesis numbers are in {out / 'synth_report.md'})")
     return 0

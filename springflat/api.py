@@ -157,8 +157,8 @@ class Pattern:
         area_error: ``E_S`` of ``layout`` (relative area error, eq. 16).
         shape_error: ``E_C`` of ``layout`` (relative edge-length error, eq. 17).
         folded: triangles whose orientation disagrees with the pattern's.
-        boundary_crossings: points where the pattern's boundary crosses itself (a property): where it
-            is not 0, parts of the pattern lie on each other though no triangle need be folded.
+        boundary_crossings: pairs of the boundary's sides that meet, on a fold-free pattern (a property;
+            ``None`` for a folded or diverged one): where it is not 0, parts of the pattern lie on each other.
         area_ratio: ``(F,)`` ``|A'_t| / A_t`` per triangle (1 = area kept).
         name: the mesh's name (printed on PDF/SVG sheets).
         vertices, faces: the mesh, ``(V, 3)`` float64 and ``(F, 3)`` int64.
@@ -187,9 +187,10 @@ class Pattern:
                 f"{len(self.vertices)} vertices, {len(self.faces)} faces)")
 
     @property
-    def boundary_crossings(self) -> int:
-        """Points where the boundary crosses itself; 0 for a pattern that covers no point twice (fold-free)."""
-        return self.result.extra.get("boundary_crossings", 0)
+    def boundary_crossings(self) -> int | None:
+        """Pairs of the boundary's sides that meet: 0 for a fold-free pattern that covers no point twice;
+        ``None`` where not counted (a folded or diverged pattern)."""
+        return self.result.extra.get("boundary_crossings")
 
     @cached_property
     def mesh(self) -> Mesh:

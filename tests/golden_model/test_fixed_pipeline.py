@@ -348,6 +348,16 @@ def test_cli_a_fixed_point_run_that_ran_away_into_its_range_says_so():
     assert "holds them (presets: wide;" in proc.stderr and "rounding" not in proc.stderr
 
 
+def test_cli_the_saturation_note_of_a_format_set_file(tmp_path):
+    """The note judges the set the run used, also one from a file (its name is no preset's)."""
+    DEFAULT.replace(name="mine").save(tmp_path / "mine.json")
+    proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "fixed", "--formats", tmp_path / "mine.json",
+                           "--dynamics", "paper", "--step", "fixed", "--dt", "0.9", "--max-iter", "200", "--out",
+                           tmp_path / "o.flat.obj"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "format set 'mine' clamped" in proc.stderr and "holds them (presets: wide;" in proc.stderr
+
+
 @pytest.mark.parametrize("formats, message", [
     ("nosuchpreset", "unknown FormatSet preset"),
     ("bad.json", "product spring*spring (1/2 C * u)"),

@@ -198,8 +198,10 @@ def test_a_batch_of_prints_at_a_likely_wrong_scale_gets_the_single_runs_note(tmp
     assert "the pattern is" not in capsys.readouterr().err  # texture coordinates have no scale
 
 
-def test_a_batch_names_the_mesh_of_each_start_note(tmp_path, monkeypatch, capsys):
-    """The start's notes (ARAP failed: SLIM instead) come from workers in any order: each names its mesh."""
+@pytest.mark.parametrize("engine, status", [("float", 0), ("fixed", 2)])
+def test_a_batch_names_the_mesh_of_each_start_note(engine, status, tmp_path, monkeypatch, capsys):
+    """The start's notes (ARAP failed: SLIM instead) come from workers in any order: each names its mesh, also
+    where the engine then refuses the mesh (the fixed-point formats do not hold its 1e-9 edge)."""
     monkeypatch.chdir(tmp_path)
     os.mkdir("in")
     uv = grid_uv(6, 6)
@@ -208,7 +210,7 @@ def test_a_batch_names_the_mesh_of_each_start_note(tmp_path, monkeypatch, capsys
     for k in range(2):
         save_obj(f"in/sliver{k}.obj", vertices, grid_faces(6, 6))
     assert main(["flatten", "in/sliver0.obj", "in/sliver1.obj", "--out-dir", "o", "--out", ".obj", "--max-iter", "3",
-                 "--jobs", "1"]) == 0
+                 "--jobs", "1", "--engine", engine]) == status
     notes = [line for line in capsys.readouterr().err.splitlines() if "arap layout failed" in line]
     assert sorted(line.split(": ")[2] for line in notes) == ["sliver0", "sliver1"], notes
 

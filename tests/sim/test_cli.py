@@ -529,3 +529,20 @@ def test_an_unguarded_run_from_a_folded_arap_start_says_so(options, tmp_path):
     assert summary["init"] == "arap" and summary["initial_folded"] == 8
     guarded = run("flatten", str(tmp_path / "slivers.obj"), "--max-iter", "1", "--json", cwd=tmp_path)
     assert json.loads(guarded.stdout)["init"] == "slim" and "without the step guard" not in guarded.stderr
+    assert summary["folded"] > 0 and summary["boundary_crossings"] is None  # counted on fold-free patterns only
+
+
+def test_an_unguarded_run_where_arap_fails_names_the_start_to_give(tmp_path):
+    from golden_model.generate import grid_faces, grid_uv
+    from golden_model.mesh_io import save_obj
+
+    uv = grid_uv(6, 6)
+    vertices = np.column_stack([uv, 0.1 * (uv**2).sum(axis=1)])
+    vertices[14] = vertices[13] + [1e-9, 0, 0]  # libigl's ARAP returns non-finite coordinates here
+    save_obj(tmp_path / "sliver.obj", vertices, grid_faces(6, 6))
+    proc = run("flatten", str(tmp_path / "sliver.obj"), "--dynamics", "paper", cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stderr.endswith("without the step guard --init auto takes no other start: "
+                                                         "give --init slim (SLIM on Tutte's layout, where a guarded "
+                                                         "run, the default for mesh files, starts)\n"), proc.stderr
+    assert run("flatten", str(tmp_path / "sliver.obj"), "--dynamics", "paper", "--init", "slim", "--max-iter", "3",
+               cwd=tmp_path).returncode == 0
