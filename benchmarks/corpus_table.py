@@ -45,7 +45,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from golden_model.layouts import harmonic_layout, tutte_layout  # noqa: E402
-from golden_model.mesh import Mesh  # noqa: E402
+from golden_model.mesh import Mesh, boundary_crossings  # noqa: E402
 from golden_model.mesh_io import load_mesh  # noqa: E402
 from golden_model.reference import SpringModel, measure  # noqa: E402
 
@@ -66,8 +66,8 @@ SLIM_TOLERANCE = 1e-6  # relative energy change per iteration
 BARRIER_SETTINGS = [("no barrier", ["--no-barrier"])] + [
     (f"kappa {k} mu {m}", ["--barrier-threshold", str(k), "--barrier-gain", str(m)])
     for k in (0.05, 0.5, 1) for m in (0.01, 4, 16)]
-#: Version of the peer computation; a change invalidates the cache.
-PEER_VERSION = 1
+#: Version of the peer computation; a change invalidates the cache (2: boundary crossings counted).
+PEER_VERSION = 2
 _CACHE_LOCK = threading.Lock()
 
 
@@ -82,13 +82,16 @@ class Layout:
     folded: int
     iterations: int
     status: str = "ok"
+    #: pairs of the boundary's sides that meet, on a fold-free layout (``None`` on a folded one)
+    crossings: int | None = None
 
     @classmethod
     def of(cls, method: str, mesh: Mesh, positions: np.ndarray, seconds: float, iterations: int) -> "Layout":
         if not np.isfinite(positions).all():
             return cls(method, seconds, math.nan, math.nan, mesh.n_faces, iterations, "non-finite")
         m = measure(SpringModel.build(mesh, positions, 0.5, "auto"), positions)
-        return cls(method, seconds, m.area_error, m.shape_error, m.folded, iterations)
+        crossings = None if m.folded else boundary_crossings(positions, mesh.boundary_loop)
+        return cls(method, seconds, m.area_error, m.shape_error, m.folded, iterations, crossings=crossings)
 
 
 @dataclass
@@ -105,6 +108,8 @@ class Run:
     message: str = ""
     #: folded triangles of the run's start layout (from its JSON)
     initial_folded: int | None = None
+    #: pairs of the pattern's boundary sides that meet, on a fold-free pattern (its JSON's boundary_crossings)
+    crossings: int | None = None
 
 
 @dataclass
@@ -235,7 +240,8 @@ def springflat(patch: Path, extra: list[str], timeout: float) -> Run:
         lines = done.stderr.strip().splitlines()
         return Run(args, seconds, "error", message=lines[-1] if lines else f"exit status {done.returncode}")
     return Run(args, seconds, str(result["status"]), int(result["iterations"]), float(result["area_error"]),
-               float(result["shape_error"]), int(result["folded"]), initial_folded=int(result["initial_folded"]))
+               float(result["shape_error"]), int(result["folded"]), initial_folded=int(result["initial_folded"]),
+               crossings=result.get("boundary_crossings"))
 
 
 def bar_failures(run: Run, arap: Layout, slim: Layout) -> list[str]:
@@ -286,7 +292,7 @@ def markdown(rows: list[Row], command: str) -> str:
         lines.append(f"| {r.name} | {r.kind} | {r.vertices} | {start} | {s.status} | {s.iterations if s.iterations is not None else '-'} "
                      f"| {s.seconds:.1f} | {_f(s.area_error)} | {_f(s.shape_error)} | "
                      f"{s.folded if s.folded is not None else '-'} | {peer_cell(r.arap)} | {peer_cell(r.slim)} | {verdict} |")
-    lines += ["", summary(rows), "", *kind_table(rows)]
+    lines += ["", summary(rows), "", overlaps(rows), "", *kind_table(rows)]
     return "\n".join(lines) + "\n"
 
 
@@ -305,6 +311,19 @@ def kind_table(rows: list[Row]) -> list[str]:
                      f"{sum(r.springflat.status == 'max-iterations' for r in group)} | "
                      f"{sum(bool(r.springflat.initial_folded) for r in group)} |")
     return lines
+
+
+def overlaps(rows: list[Row]) -> str:
+    """Which fold-free layouts overlap themselves (their boundary's sides meet), per method: not in the bar."""
+    def listed(layouts: list[tuple[str, int | None]]) -> str:
+        found = [f"{name} ({count})" for name, count in layouts if count]
+        counted = sum(count is not None for _, count in layouts)
+        return f"{len(found)} of {counted} fold-free" + (f": {', '.join(found)}" if found else "")
+
+    return ("Overlaps (fold-free layouts whose boundary crosses itself; pairs of sides that meet), not part of the "
+            f"bar: springflat {listed([(r.name, r.springflat.crossings) for r in rows])}; "
+            f"ARAP {listed([(r.name, r.arap.crossings) for r in rows])}; "
+            f"SLIM {listed([(r.name, r.slim.crossings) for r in rows])}.")
 
 
 def summary(rows: list[Row]) -> str:
