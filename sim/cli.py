@@ -19,8 +19,8 @@ a number that is not finite is ``null`` and its key is listed in
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import contextlib
+import dataclasses
 import gc
 import math
 import os

@@ -149,8 +149,8 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
-    fold_free = result.status != "diverged" and not result.final.folded
-    result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loop) if fold_free else None
+    if result.status != "diverged" and not result.final.folded:
+        result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loop)
     return result
 
 

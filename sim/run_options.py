@@ -255,8 +255,8 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
                     second_core: bool = False, notes: list[str] | None = None) -> tuple[np.ndarray, str]:
     """``(P0, what it is)``. A guarded run starts fold-free where that can be had (``start_layout``: folds are
     untangled, and what was done is one note each on stderr, or appended to ``notes`` when it is given);
-    an unguarded run takes the layout as it is (``auto``: ARAP's, with a note where it folds). ``second_core``: ``--init auto`` may compute SLIM's start
-    beside ARAP (:func:`slim_beside_arap`)."""
+    an unguarded run takes the layout as it is (``auto``: ARAP's, with a note where it folds).
+    ``second_core``: ``--init auto`` may compute SLIM's start beside ARAP (:func:`slim_beside_arap`)."""
     def tell(told: list[str]) -> None:
         if notes is not None:
             notes.extend(told)
@@ -272,7 +272,8 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
             if init_name(init) != AUTO_START:
                 raise
             raise LayoutError(f"{exc}; without the step guard --init auto takes no other start: give --init slim "
-                              "(SLIM on Tutte's layout, where a guarded run, the default for mesh files, starts)") from None
+                              "(SLIM on Tutte's layout, where a guarded run, the default for mesh files, starts)"
+                              ) from None
         if init_name(init) == AUTO_START and (folds := int(np.count_nonzero(folded_faces(positions, mesh.faces)))):
             read.append(f"the arap layout folds {folds} triangle{'s' if folds > 1 else ''}: without the step guard "
                         "the run starts from it as it is (the guarded dynamics, the default for mesh files, would "

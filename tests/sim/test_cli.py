@@ -529,7 +529,7 @@ def test_an_unguarded_run_from_a_folded_arap_start_says_so(options, tmp_path):
     assert summary["init"] == "arap" and summary["initial_folded"] == 8
     guarded = run("flatten", str(tmp_path / "slivers.obj"), "--max-iter", "1", "--json", cwd=tmp_path)
     assert json.loads(guarded.stdout)["init"] == "slim" and "without the step guard" not in guarded.stderr
-    assert summary["folded"] > 0 and summary["boundary_crossings"] is None  # counted on fold-free patterns only
+    assert summary["folded"] > 0 and "boundary_crossings" not in summary  # counted on fold-free patterns only
 
 
 def test_an_unguarded_run_where_arap_fails_names_the_start_to_give(tmp_path):
