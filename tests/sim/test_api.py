@@ -157,8 +157,9 @@ def test_a_folded_initial_array_is_untangled_as_a_layout_file_is(ear, tmp_path):
     with pytest.warns(springflat.MeshNote) as notes:
         from_array = springflat.flatten(V, F, init=folded, max_iter=5)
     assert any("folds" in str(note.message) and "untangling it" in str(note.message) for note in notes), notes.list
-    with pytest.warns(springflat.MeshNote, match="folds 773 triangles: untangling it"):
+    with pytest.warns(springflat.MeshNote) as file_notes:  # the untangled layout overlaps itself too, and says so
         from_file = springflat.flatten(V, F, init=path, max_iter=5)
+    assert any("folds 773 triangles: untangling it" in str(note.message) for note in file_notes), file_notes.list
     assert from_array.init == "array, untangled" and from_file.init == f"{path}, untangled"
     assert from_array.result.initial.folded == 0
     np.testing.assert_array_equal(from_array.layout, from_file.layout)
