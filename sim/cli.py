@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import gc
 import math
 import os
@@ -36,7 +35,7 @@ import numpy as np
 from golden_model.builtin import is_builtin
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.files import describe_os_error
-from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
+from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet, FormatSetNotBuildable
 from golden_model.layouts import LAYOUT_METHODS
 from golden_model.mesh import one_line
 from golden_model.mesh_io import MESH_SUFFIXES
@@ -228,9 +227,7 @@ def _holds_more(candidate: FormatSet, formats: FormatSet, clamped: dict[str, int
     """Whether ``candidate`` has more integer bits than ``formats`` where values were clamped: at least as
     many in each clamped signal that is a format and more in one (or, where none is, in every format at
     least as many and more in one)."""
-    signals = [field.name for field in dataclasses.fields(FormatSet)
-               if hasattr(getattr(formats, field.name), "int_bits")]
-    signals = [name for name in signals if name in clamped] or signals
+    signals = [name for name in FORMAT_FIELDS if name in clamped] or list(FORMAT_FIELDS)
     pairs = [(getattr(candidate, name).int_bits, getattr(formats, name).int_bits) for name in signals]
     return all(mine >= theirs for mine, theirs in pairs) and any(mine > theirs for mine, theirs in pairs)
 
@@ -265,8 +262,8 @@ def cmd_verilog(args: argparse.Namespace) -> int:
         interface = export_verilog(formats, build)
         check_build_so_far()  # a --formats file named interface.json: refused before the engine's export
         engine = export_engine_bundle(formats, capacity, build)
-        files = sorted(path.name for path in Path(build).iterdir() if path.is_file()) + ["README.md"]
-        (Path(build) / "README.md").write_text(bundle_readme(formats, capacity, sorted(files), installed_version()))
+        files = sorted([path.name for path in Path(build).iterdir() if path.is_file()] + ["README.md"])
+        (Path(build) / "README.md").write_text(bundle_readme(formats, capacity, files, installed_version()))
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
     print(f"{out / 'interface.md'}, {out / 'interface.json'}")

@@ -315,7 +315,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         except FormatSetNotBuildable as exc:  # engine="rtl"
             forget_half_built_components(exc)
             raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
-    for note in run_notes + [note for note in (overlap_note(result),) if note]:
+    for note in filter(None, [*run_notes, overlap_note(result)]):
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
