@@ -24,7 +24,7 @@ import numpy as np
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedProblem
-from golden_model.engine_spec.image import EngineCapacity, EngineImage, build_image
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, EngineImage, build_image
 
 from . import cocotb_support
 from .cocotb_support import _formats_key, build_lock, run_bench
@@ -369,30 +369,42 @@ def summary_line(name: str, simulator: str, run: EngineRun) -> str:
             f"{100 * r['python_share']:.1f} % of it")
 
 
+def rtl_capacity() -> EngineCapacity:
+    """The capacity ``--engine rtl`` builds: :data:`DEFAULT_CAPACITY`, or ``SPRINGFLAT_ENGINE_CAPACITY=V,E,T``
+    (the tests use a small engine)."""
+    from .run_options import UserError
+
+    if not os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
+        return DEFAULT_CAPACITY
+    try:
+        return EngineCapacity(*(int(v) for v in os.environ["SPRINGFLAT_ENGINE_CAPACITY"].split(",")))
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
+
+
+def check_rtl_capacity(mesh) -> None:
+    """Refuse, in one line (:class:`FixedPointError`), a mesh over :func:`rtl_capacity`: its counts are the
+    mesh's own, so this comes before any layout work."""
+    rtl_capacity().check(mesh.n_vertices, len(mesh.rings.neighbour), mesh.n_faces)
+
+
 def rtl_engine(formats: FormatSet):
     """``--engine rtl``: the whole flattening through SpringflatEngine on Verilator (:func:`flatten_on_rtl`;
-    ``sim.flatten_run.choose_engine`` has checked the parameters), with the engine's default capacity
-    (``SPRINGFLAT_ENGINE_CAPACITY=V,E,T`` overrides it: the tests use a small engine); a mesh over capacity
-    is a one-line error."""
+    ``sim.flatten_run.choose_engine`` has checked the parameters), at :func:`rtl_capacity`; a mesh over
+    capacity is a one-line error."""
     import sys
     import tempfile
 
     from golden_model.fixed.engine import prepare
-    from golden_model.engine_spec.image import DEFAULT_CAPACITY
 
     from .cocotb_support import SimulatorError
     from .run_options import UserError
 
-    capacity = DEFAULT_CAPACITY
-    if os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
-        try:
-            capacity = EngineCapacity(*(int(v) for v in os.environ["SPRINGFLAT_ENGINE_CAPACITY"].split(",")))
-        except (TypeError, ValueError) as exc:
-            raise UserError(f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
+    capacity = rtl_capacity()
 
     def engine(mesh, positions, params, on_iteration=None):
         problem = prepare(mesh, positions, params, formats)
-        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build
+        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build (API callers)
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
               f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running "
               "the flattening ...", file=sys.stderr)

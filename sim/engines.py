@@ -35,6 +35,8 @@ class Engine:
         help: the ``--help`` text.
         make: ``make(args, formats) -> run``: the run function for ``args`` (``--port``, ...) and the loaded
             format set (``None`` for float).
+        check_mesh: ``check_mesh(mesh)`` refuses a mesh the engine cannot hold whatever its layout, before the
+            layout is computed (``None``: no such limit is known before the run).
     """
 
     name: str
@@ -45,6 +47,7 @@ class Engine:
     serial: bool
     help: str
     make: Callable[[argparse.Namespace, object], RunFunction]
+    check_mesh: Callable[[object], None] | None = None
 
 
 def _float(args: argparse.Namespace, formats) -> RunFunction:
@@ -67,6 +70,12 @@ def _rtl(args: argparse.Namespace, formats) -> RunFunction:
     return rtl_engine(formats)
 
 
+def _rtl_holds(mesh) -> None:
+    from .engine_run import check_rtl_capacity
+
+    check_rtl_capacity(mesh)
+
+
 def _board(args: argparse.Namespace, formats) -> RunFunction:
     from .board_run import board_engine
 
@@ -77,7 +86,8 @@ ENGINES: tuple[Engine, ...] = (
     Engine("float", False, False, None, True, False, "the float reference (the default)", _float),
     Engine("fixed", True, False, None, True, False, "the bit-exact fixed-point golden model", _fixed),
     Engine("rtl", True, True, "the simulator build is shared", True, False,
-           "the whole flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)", _rtl),
+           "the whole flattening through SpringflatEngine's Verilog on Verilator (bit-exact with fixed)", _rtl,
+           _rtl_holds),
     Engine("board", True, True, "one board answers on one port", False, True,
            "the engine on a ULX3S over its USB-UART (--port; docs/board.md)", _board),
 )

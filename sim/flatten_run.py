@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding
+from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding, scale_mesh
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT
 from golden_model.mesh import Mesh, boundary_crossings
@@ -109,13 +109,32 @@ def _naming_presets_that_hold(run, formats):
         except FixedPointError as exc:
             if _holds(mesh, positions, params, formats):  # refused for something else (the engine's capacity)
                 raise
-            holding = presets_holding(mesh, positions, params)
-            if not holding:
-                raise
-            hint = (f"the preset {holding[0]} holds it: --formats {holding[0]}" if len(holding) == 1 else
-                    f"the presets {', '.join(holding)} hold it: --formats NAME")
-            raise FixedPointError(f"{exc}; {hint}") from None
+            raise _with_presets_hint(exc, presets_holding(mesh, positions, params)) from None
     return hinted
+
+
+def _with_presets_hint(exc: FixedPointError, holding: list[str]) -> FixedPointError:
+    """``exc``, naming the presets in ``holding`` (those that hold what it refused), if any."""
+    if not holding:
+        return exc
+    hint = (f"the preset {holding[0]} holds it: --formats {holding[0]}" if len(holding) == 1 else
+            f"the presets {', '.join(holding)} hold it: --formats NAME")
+    return FixedPointError(f"{exc}; {hint}")
+
+
+def check_engine_holds(args: argparse.Namespace, mesh: Mesh, params: FlattenParams) -> None:
+    """Refuse, before any layout work, a mesh that the run's formats or engine cannot hold whatever its
+    layout (a node's degree, its edge lengths or weights in the formats, the engine's capacity), in one line
+    naming the presets that hold it; what depends on the layout (its extent) is checked when the run starts."""
+    engine = engine_named(args.engine)
+    if not engine.fixed_point:
+        return
+    try:
+        scale_mesh(mesh, params, run_formats(args))
+    except FixedPointError as exc:
+        raise _with_presets_hint(exc, presets_holding(mesh, None, params)) from None
+    if engine.check_mesh is not None:
+        engine.check_mesh(mesh)
 
 
 def _holds(mesh: Mesh, positions, params: FlattenParams, formats) -> bool:
@@ -143,6 +162,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     if args.init is None:
         args.init = default_init(args.mesh)
     engine = choose_engine(args, params)
+    check_engine_holds(args, mesh, params)
     positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
                                            notes)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way

@@ -45,8 +45,8 @@ from .measures import SAT, FixedPointError, Reciprocal, _doubled_areas, energy_f
 from .pipeline import BarrierEntries, NeighbourStream, NodeConstants
 from .steplut import DT_MAX, DT_MIN, dt_constant, half_dt_sq, lut_value_float
 
-__all__ = ["FixedProblem", "prepare", "presets_holding", "flatten_fixed", "load_formats", "energy_to_float",
-           "StopRule", "ENERGY_TOL_FRAC_BITS", "run_fixed"]
+__all__ = ["FixedProblem", "ScaledMesh", "scale_mesh", "prepare", "presets_holding", "flatten_fixed", "load_formats",
+           "energy_to_float", "StopRule", "ENERGY_TOL_FRAC_BITS", "run_fixed"]
 
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
 
@@ -172,30 +172,40 @@ def _refuse_zeros(raw: np.ndarray, value: np.ndarray, what: str, field: str, fs:
                               f"'{fs.name}' (lsb {fmt.lsb:.3g}); choose a format set with more fraction bits for it")
 
 
-def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs: FormatSet) -> FixedProblem:
-    """Scale the problem into ``fs`` and precompute the controller's constants.
+@dataclass(frozen=True, eq=False)
+class ScaledMesh:
+    """What :func:`prepare` takes from the mesh and the parameters alone, scaled into a format set: every
+    refusal that no layout can avoid comes from building it."""
 
-    Raises :class:`FixedPointError` with one line naming the first quantity
-    that does not fit.
-    """
+    scale_exp: int
+    rest: np.ndarray  # (E,) raw [rest_length], per edge
+    inv_mass: np.ndarray  # (V,) raw [inv_mass]
+    inv_mass_barrier: np.ndarray | None  # (V,) raw [inv_mass], the barrier's weights (momentum with barrier)
+    half_spring: int
+    damping: int
+    face_areas: np.ndarray  # (F,) raw [face_area], scaled by 4**k
+    density: float
+
+    @property
+    def scale(self) -> float:
+        return 2.0**self.scale_exp
+
+
+def scale_mesh(mesh: Mesh, params: FlattenParams, fs: FormatSet) -> ScaledMesh:
+    """The mesh's constants in ``fs`` (positions scaled by ``2**k`` so that the mean edge is about 1).
+
+    Raises :class:`FixedPointError` with one line naming the first quantity that does not fit, whatever
+    the initial layout: callers refuse such a mesh before computing a layout (:func:`prepare` checks the
+    layout's own extent after this)."""
     check_fixed_params(params, fs)
     rest = mesh.rest_lengths
     k = -int(math.floor(math.log2(float(rest.mean())) + 0.5))
     scale = 2.0**k
-    wider = "choose a format set with more integer bits"
 
     degree = int(np.diff(mesh.neighbours[0]).max())
     if degree > fs.max_degree:
         raise FixedPointError(f"a node has {degree} neighbours; format set '{fs.name}' accumulates at most "
                               f"{fs.max_degree} (max_degree)")
-    p0 = np.asarray(initial_positions, dtype=np.float64) * scale
-    extent = float(np.max(np.abs(p0)))
-    if extent > POSITION_HEADROOM * fs.position.max:
-        raise FixedPointError(
-            f"the initial layout spans ±{extent:.4g} mean edge lengths; format set '{fs.name}' holds positions "
-            f"up to ±{fs.position.max:.4g} ({fs.position}) with room to grow up to ±{POSITION_HEADROOM * fs.position.max:.4g}: "
-            f"the mesh has too many edges across for these formats; {wider}")
-    positions = quantize(p0, fs.position, HOST_ROUNDING, SAT)
     scaled_rest = rest * scale
     longest = float(scaled_rest.max())
     if longest >= fs.delta.max or longest >= fs.rest_length.max:
@@ -232,25 +242,46 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
                               f"of format set '{fs.name}': the node masses vary too much (lower the density)")
     half_spring = int(_quantize_checked(0.5 * params.spring, fs.spring, "C/2", fs, "use a smaller --spring"))
     damping = int(quantize(1.0 - params.damping, fs.damping, HOST_ROUNDING, SAT))
-
-    rings = mesh.rings  # the stream's order: a node's triangles are consecutive entries
-    winding = layout_orientation(positions.astype(np.float64), mesh.faces)
-    barrier = _barrier_entries(mesh, params, fs, scale, winding) if params.barrier else None
-    stream = NeighbourStream(rings.indptr, rings.neighbour, rest_raw[rings.edge_id], inv_mass_raw, barrier,
-                             inv_mass_barrier_raw)
+    if params.barrier:  # its thresholds and gains do not depend on which corner's entry carries them
+        _barrier_entries(mesh, params, fs, scale, 1.0)
     if mesh.n_faces >= 1 << (MAX_PRODUCT_WIDTH - fs.face_area.width):  # Σ|A − |A'|| must fit int64
         raise FixedPointError(f"the mesh has {mesh.n_faces} triangles; the area sum of format set '{fs.name}' "
                               f"takes fewer than 2^{MAX_PRODUCT_WIDTH - fs.face_area.width} ({fs.face_area})")
     face_areas = _quantize_checked(mesh.face_areas * scale * scale, fs.face_area, "a triangle's area", fs,
                                    "the mesh's triangles vary too much in size for these formats")
     _refuse_zeros(face_areas, mesh.face_areas * scale * scale, "a triangle's area", "face_area", fs)
-    mantissa_bits = fs.reciprocal.width
-    area_total = int(face_areas.sum())  # [face_area], exact
+    return ScaledMesh(k, rest_raw, inv_mass_raw, inv_mass_barrier_raw, half_spring, damping, face_areas,
+                      model_density)
+
+
+def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs: FormatSet) -> FixedProblem:
+    """Scale the problem into ``fs`` and precompute the controller's constants.
+
+    Raises :class:`FixedPointError` with one line naming the first quantity
+    that does not fit: the mesh's (:func:`scale_mesh`), then the layout's.
+    """
+    scaled = scale_mesh(mesh, params, fs)
+    p0 = np.asarray(initial_positions, dtype=np.float64) * scaled.scale
+    extent = float(np.max(np.abs(p0)))
+    if extent > POSITION_HEADROOM * fs.position.max:
+        raise FixedPointError(
+            f"the initial layout spans ±{extent:.4g} mean edge lengths; format set '{fs.name}' holds positions "
+            f"up to ±{fs.position.max:.4g} ({fs.position}) with room to grow up to ±{POSITION_HEADROOM * fs.position.max:.4g}: "
+            f"the mesh has too many edges across for these formats; choose a format set with more integer bits")
+    positions = quantize(p0, fs.position, HOST_ROUNDING, SAT)
+
+    rings = mesh.rings  # the stream's order: a node's triangles are consecutive entries
+    winding = layout_orientation(positions.astype(np.float64), mesh.faces)
+    barrier = _barrier_entries(mesh, params, fs, scaled.scale, winding) if params.barrier else None
+    stream = NeighbourStream(rings.indptr, rings.neighbour, scaled.rest[rings.edge_id], scaled.inv_mass, barrier,
+                             scaled.inv_mass_barrier)
+    area_total = int(scaled.face_areas.sum())  # [face_area], exact
     length_total = int(stream.rest.sum()) << (fs.error_acc.frac_bits - fs.rest_length.frac_bits)  # [error_acc]
     orientation = np.where(_doubled_areas(fs, positions, mesh.faces) >= 0, 1, -1)
-    return FixedProblem(fs, mesh, params, k, stream, half_spring, damping, face_areas,
-                        Reciprocal.of(area_total, mantissa_bits), Reciprocal.of(length_total, mantissa_bits),
-                        orientation, positions, model_density, winding)
+    mantissa_bits = fs.reciprocal.width
+    return FixedProblem(fs, mesh, params, scaled.scale_exp, stream, scaled.half_spring, scaled.damping,
+                        scaled.face_areas, Reciprocal.of(area_total, mantissa_bits),
+                        Reciprocal.of(length_total, mantissa_bits), orientation, positions, scaled.density, winding)
 
 
 def _barrier_entries(mesh: Mesh, params: FlattenParams, fs: FormatSet, scale: float,
@@ -413,13 +444,17 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
                                   "or an error format with more fraction bits")
 
 
-def presets_holding(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams) -> list[str]:
+def presets_holding(mesh: Mesh, initial_positions: np.ndarray | None, params: FlattenParams) -> list[str]:
     """The preset format sets (:meth:`FormatSet.presets`) that hold this problem: those :func:`prepare`
-    scales it into without a :class:`FixedPointError`."""
+    scales it into without a :class:`FixedPointError` (with ``initial_positions`` ``None``: those that hold
+    the mesh, :func:`scale_mesh`)."""
     holding = []
     for name in FormatSet.presets():
         try:
-            prepare(mesh, initial_positions, params, FormatSet.preset(name))
+            if initial_positions is None:
+                scale_mesh(mesh, params, FormatSet.preset(name))
+            else:
+                prepare(mesh, initial_positions, params, FormatSet.preset(name))
         except FixedPointError:
             continue
         holding.append(name)

@@ -394,6 +394,7 @@ def _wheel(spokes: int) -> Mesh:
 def test_presets_holding_are_the_presets_a_problem_fits():
     wheel, dome = _wheel(40), dome_grid(9)
     assert presets_holding(wheel, tutte_layout(wheel), FlattenParams(dynamics="momentum")) == ["wide"]  # degree 40
+    assert presets_holding(wheel, None, FlattenParams(dynamics="momentum")) == ["wide"]  # the mesh alone decides it
     assert presets_holding(dome, tutte_layout(dome), FlattenParams(density="auto")) == ["default", "narrow", "wide"]
 
 

@@ -546,3 +546,34 @@ def test_an_unguarded_run_where_arap_fails_names_the_start_to_give(tmp_path):
                                                          "run, the default for mesh files, starts)\n"), proc.stderr
     assert run("flatten", str(tmp_path / "sliver.obj"), "--dynamics", "paper", "--init", "slim", "--max-iter", "3",
                cwd=tmp_path).returncode == 0
+
+
+@pytest.mark.parametrize("engine, capacity, message", [
+    ("fixed", None, "a node has 40 neighbours; format set 'default' accumulates at most 32 (max_degree); the preset "
+                    "wide holds it: --formats wide"),
+    ("rtl", "8,64,32", "the mesh has 41 vertices; the engine holds at most 8 (capacity vertices=8, entries=64, "
+                       "triangles=32)"),
+])
+def test_what_the_mesh_alone_cannot_run_is_refused_before_the_start_is_computed(tmp_path, monkeypatch, capsys, engine,
+                                                                                 capacity, message):
+    """A cone's tip of 40 spokes (a degree the default formats cannot sum), or a mesh over the engine's capacity:
+    no layout changes that, so the refusal comes before the start (ARAP on a big scan takes seconds)."""
+    import sim.flatten_run as flatten_run
+    from golden_model.mesh_io import save_obj
+    from sim.cli import main
+
+    def no_start(*args, **kw):
+        raise AssertionError("the start was computed before the refusal")
+
+    angle = 2 * np.pi * np.arange(40) / 40
+    save_obj(tmp_path / "wheel.obj", np.vstack([[0.0, 0.0, 0.5], np.column_stack([np.cos(angle), np.sin(angle),
+                                                                                   np.zeros(40)])]),
+             np.array([[0, 1 + i, 1 + (i + 1) % 40] for i in range(40)]))
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(flatten_run, "start_positions", no_start)
+    if capacity:
+        monkeypatch.setenv("SPRINGFLAT_ENGINE_CAPACITY", capacity)
+    formats = ["--formats", "wide"] if capacity else []  # wide holds the mesh: the capacity is what refuses it
+    assert main(["flatten", "wheel.obj", "--engine", engine, *formats, "--out", "o.dxf"]) == 2
+    assert capsys.readouterr().err == f"springflat: error: {message}\n"
+    assert not (tmp_path / "o.dxf").exists()
