@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 from golden_model.fixed import FormatSet
+from sim.clock import ENGINE_TARGET_MHZ
 from sim.synth import run_synthesis
 
 
@@ -30,7 +31,7 @@ def main() -> int:
                         help="the block RAM inputs' registers alone, without the registered select")
     args = parser.parse_args()
     options = {"pin_registers": True} if args.pin_registers else {"registered_select": True}
-    report = run_synthesis(FormatSet.preset("default"), "ecp5", 125.0, args.out, components=["springflat_engine"],
+    report = run_synthesis(FormatSet.preset("default"), "ecp5", ENGINE_TARGET_MHZ, args.out, components=["springflat_engine"],
                            seed=args.seed, engine_options=options,
                            progress=lambda msg: print(msg, file=sys.stderr, flush=True),
                            command=" ".join(["benchmarks/synth_registered_select_trial.py", *sys.argv[1:]]))

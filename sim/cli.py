@@ -250,6 +250,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 def cmd_verilog(args: argparse.Namespace) -> int:
     from .export import bundle_readme, engine_capacity, export_engine_bundle, export_verilog
+    from .clock import ENGINE_TARGET_MHZ, clock_sdc
     from .outputs import check_build_so_far
 
     formats = load_format_set(args.formats)
@@ -262,6 +263,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
         interface = export_verilog(formats, build)
         check_build_so_far()  # a --formats file named interface.json: refused before the engine's export
         engine = export_engine_bundle(formats, capacity, build)
+        (Path(build) / "clock.sdc").write_text(clock_sdc(ENGINE_TARGET_MHZ))
         files = sorted([path.name for path in Path(build).iterdir() if path.is_file()] + ["README.md"])
         (Path(build) / "README.md").write_text(bundle_readme(formats, capacity, files, installed_version()))
     for name, c in interface["components"].items():
@@ -270,6 +272,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     print(f"{out / engine['files'][0]}: capacity {capacity.vertices} vertices, {capacity.entries} entries, "
           f"{capacity.triangles} triangles{'' if capacity.guard else ', no step guard'}; {engine['bus']}")
     print(", ".join(str(out / f) for f in engine["files"][1:]))
+    print(f"{out / 'clock.sdc'}: clk at {ENGINE_TARGET_MHZ:g} MHz")
     print(f"{out / 'README.md'}: which file is which")
     return 0
 

@@ -30,6 +30,7 @@ from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from hdl.dsp import dsp_target
 
+from .clock import ENGINE_TARGET_MHZ
 from .lint import WAIVER_FILE, write_waivers
 from .top_names import COMPONENT_SUMMARIES, CORE_MODULE, ENGINE_MODULE
 
@@ -420,6 +421,9 @@ BUNDLE_FILES = {
     "rsqrt_seed.hex": "the rsqrt unit's seed ROM, one word per line ($readmemh); the Verilog holds the same words "
                       "inline (initial blocks), so no tool needs the file",
     "exp_table.hex": "the step generator's exp-LUT ROM, one word per line ($readmemh); also inline in the Verilog",
+    "clock.sdc": f"the clock `clk` at {ENGINE_TARGET_MHZ:g} MHz, which the engine at the default capacity meets on the "
+                 "ECP5-85F (`springflat synth` reports Fmax for your capacity; a larger one may need a slower clock), "
+                 "as SDC (Vivado's XDC takes the same line)",
     WAIVER_FILE: "Verilator lint waivers: the rules the generated Verilog breaks by construction, each with its reason",
     "README.md": "this file",
 }

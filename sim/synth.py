@@ -43,6 +43,7 @@ from typing import Callable
 
 from golden_model.params import ParameterError
 
+from .clock import write_clock_constraints
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ",
@@ -351,7 +352,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             f"{capacity.triangles} triangles) with its register map")
         report["engine"] = export_engine_bundle(fs, capacity, out, platform=platform, engine_options=engine_options)
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
-    _write_constraints(out, freq)
+    write_clock_constraints(out, freq)
 
     t_all = time.monotonic()
     for name in components:
@@ -491,11 +492,6 @@ def write_reproduce_script(out: Path, command: str, steps: list[tuple[str, str]]
 
     (out / "reproduce.sh").write_text(reproduce_script(command, steps, family))
     os.chmod(out / "reproduce.sh", 0o777 & ~current_umask())
-
-
-def _write_constraints(out: Path, freq: float) -> None:
-    (out / "clock.lpf").write_text(f'FREQUENCY PORT "clk" {freq:g} MHZ;\n')
-    (out / "clock.sdc").write_text(f"create_clock -period {1000.0 / freq:.3f} -name clk [get_ports clk]\n")
 
 
 def _write_bundle(out: Path, report: dict, interface: dict) -> None:

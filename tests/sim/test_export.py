@@ -29,6 +29,11 @@ def test_the_bundles_readme_says_what_every_file_is(exported):
     assert not [what for _, what in listed if re.search(r"(?<!\\)\|", what)]  # a '|' in a cell is escaped
 
 
+def test_the_bundle_constrains_its_clock_at_the_engines_125_mhz(exported):
+    """An FPGA tool given the bundle gets the clock the engine is timed for: 125 MHz, an 8 ns period."""
+    assert (exported / "clock.sdc").read_text() == "create_clock -period 8.000 -name clk [get_ports clk]\n"
+
+
 def _verilog_ports(text: str, module: str) -> dict[str, tuple[str, int]]:
     body = text[text.index(f"module {module}("):]
     body = body[:body.index("endmodule")]
