@@ -87,11 +87,11 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--cost", choices=("bits", "dsp"), default="bits",
                    help="what 'cheapest' minimises first: total datapath bits (default) or estimated DSP blocks")
     p.add_argument("--max-iter", type=integer_argument, default=None, help="override every case's iteration limit")
-    p.add_argument("--workers", type=integer_argument, default=None,
-                   help="worker processes (default: the CPUs available)")
+    p.add_argument("--jobs", "--workers", dest="jobs", type=integer_argument, default=None, metavar="N",
+                   help="worker processes (default: the CPUs available); --workers is its older name")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
                    help="run the fixed-point runs on a Dask cluster: a scheduler address (tcp://host:8786), or "
-                        "local for Dask's LocalCluster with --workers processes")
+                        "local for Dask's LocalCluster with --jobs processes")
     p.add_argument("--out", type=path_argument, default=Path("study-report"), help="output directory (default study-report)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_study)
@@ -130,7 +130,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     target = AccuracyTarget(args.target)
     if args.max_iter is not None and args.max_iter < 1:
         raise ParameterError(f"--max-iter must be >= 1, got {args.max_iter}")
-    workers = local_workers(args.workers, "--workers", args.scheduler)
+    workers = local_workers(args.jobs, "--jobs", args.scheduler)
     base = load_format_set(args.base)
     out = args.out
     inputs = [("--base", None if FormatSet.names_preset(args.base) else Path(args.base)),

@@ -253,10 +253,11 @@ def test_parser_defaults():
     (["no-such-mesh"], "unknown mesh"),
     (["--base", "no/such/formats.json"], "not found"),
     (["--target", "0"], "--target"),
-    (["--workers", "0"], "--workers must be >= 1, got 0"),
-    (["--workers", "1000000"], "--workers 1000000: at most .* local worker processes"),
+    (["--jobs", "0"], "--jobs must be >= 1, got 0"),
+    (["--workers", "0"], "--jobs must be >= 1, got 0"),  # its older name, the same option
+    (["--jobs", "1000000"], "--jobs 1000000: at most .* local worker processes"),
     (["--scheduler", "tcp://host:65536"], "--scheduler 'tcp://host:65536': port 65536 is not in 1-65535"),
-    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:8786"], "--workers sets the local worker processes; the "
+    (["--jobs", "2", "--scheduler", "tcp://127.0.0.1:8786"], "--jobs sets the local worker processes; the "
                                                                "Dask scheduler at 'tcp://127.0.0.1:8786' has its own"),
 ])
 def test_bad_input_is_a_parameter_error(tmp_path, argv, message):
