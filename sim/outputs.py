@@ -91,6 +91,9 @@ def directory_name_problem(text: str) -> str | None:
     ``Path`` would drop it, and ``new.dxf/`` would write the file ``new.dxf``); ``None`` if it does not."""
     if text.endswith(("/", os.sep)):
         return f"expected a file name, got {text!r} (a trailing '/' names a directory)"
+    last = text.replace(os.sep, "/").rsplit("/", 1)[-1]
+    if last in (".", ".."):  # Path drops a final '.': 'new.dxf/.' would write the file new.dxf
+        return f"expected a file name, got {text!r} (a trailing '{last}' names a directory)"
     return None
 
 
@@ -182,7 +185,8 @@ def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = 
                       ending_hint: str = "") -> None:
     """Fail early (before a long run) on an output path that cannot work.
 
-    Besides the suffix and the directory, this refuses a path that exists and is
+    Besides the suffix (of the name, and of a symbolic link's target: a link to a mesh is refused) and the
+    directory, this refuses a path that exists and is
     not a regular file (a symbolic link counts as its target) or that the user
     may not write, and creates and removes a temporary file where
     :func:`atomic_write` will, so that a directory without write permission or a
@@ -203,6 +207,9 @@ def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = 
         if not parent.is_dir():
             raise OutputError(f"{what} '{path}': '{parent}' is not a directory")
         _refuse_special(target, path, what)
+        if suffixes and path.is_symlink() and target.suffix.lower() not in suffixes:  # a link to a mesh, say
+            raise OutputError(f"{what} '{path}' is a symbolic link to '{target}', which does not end in "
+                              f"{' or '.join(suffixes)}: springflat does not write over it")
         os.unlink(_make_temporary(parent, target.name))
     except OSError as exc:
         raise OutputWriteError(path, exc, what) from None

@@ -39,7 +39,8 @@ from sim.cli import add_engine_options, forget_half_built_components
 from sim.engines import ENGINES, engine_named
 from sim.flatten_run import overlap_note, run_flatten
 from sim.distortion import Distortion, distortion
-from sim.outputs import OutputError, area_ratio, check_output_path, directory_name_problem, ending_name_problem
+from sim.outputs import (OutputError, area_ratio, check_output_path, directory_name_problem, ending_name_problem,
+                         output_target)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, kind_or_none, on_sheets, run_caption,
                           scale_note, write_pattern_file)
 from sim.run_options import UserError, add_run_options, params_from_args, resolve_mesh
@@ -367,6 +368,9 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         check_output_path(Path(path), "the path", typed=False)  # a missing directory, named
     except OutputError as exc:
         raise OutputError(f"write_pattern: {exc}") from None
+    if Path(path).is_symlink() and kind_or_none(target := output_target(Path(path))) != kind_or_none(path):
+        raise OutputError(f"write_pattern: the path '{path}' is a symbolic link to '{target}', which does not end in "
+                          f"{Path(path).suffix}: springflat does not write over it")  # a link to a mesh, say
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
     drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)

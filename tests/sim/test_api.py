@@ -232,6 +232,17 @@ def test_none_is_an_option_left_out_whichever_option_it_is(ear):
         np.testing.assert_array_equal(pattern.layout, reference.layout)
 
 
+def test_write_pattern_does_not_write_a_pattern_through_a_link_to_a_mesh(ear, tmp_path):
+    """A link named like a pattern that points at a mesh: the mesh would have become a DXF."""
+    V, F = ear
+    (tmp_path / "scan.obj").write_text("a mesh\n")
+    (tmp_path / "link.dxf").symlink_to("scan.obj")
+    with pytest.raises(springflat.OutputError, match="write_pattern: the path '.*link.dxf' is a symbolic link to "
+                                                    "'.*scan.obj', which does not end in .dxf"):
+        springflat.write_pattern(tmp_path / "link.dxf", springflat.flatten(V, F, max_iter=1))
+    assert (tmp_path / "scan.obj").read_text() == "a mesh\n"
+
+
 def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
     V, F = ear
     with pytest.raises(TypeError, match="write_pattern takes a file path \\(str or pathlib.Path\\), not NoneType"):
@@ -243,6 +254,9 @@ def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
     with pytest.raises(springflat.OutputError, match="expected a file name, got '.*x.dxf/' \\(a trailing '/' names a "
                                                     "directory"):
         springflat.write_pattern(f"{tmp_path}/x.dxf/", springflat.flatten(V, F, max_iter=1))
+    with pytest.raises(springflat.OutputError, match="expected a file name, got '.*x.dxf/.' \\(a trailing '.' names a "
+                                                    "directory"):
+        springflat.write_pattern(f"{tmp_path}/x.dxf/.", springflat.flatten(V, F, max_iter=1))
     for path, message in [("", "write_pattern: expected a file name, got ''"),
                           (tmp_path / ".dxf", "write_pattern: the path '.*/.dxf' is a file-name ending, not a file "
                                               "name: name the file \\(e.g. '.*/pattern.dxf'\\)")]:

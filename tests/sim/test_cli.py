@@ -3,6 +3,7 @@
 import csv
 import json
 import os
+from pathlib import Path
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -139,6 +140,10 @@ BAD_ARGS = [
     (["--out", ""], "argument --out: expected a path, got ''"),
     (["--out", "newdir.dxf/"], "argument --out: expected a file name, got 'newdir.dxf/' (a trailing '/' names a "
                                "directory)"),
+    (["--out", "newdir.dxf/."], "argument --out: expected a file name, got 'newdir.dxf/.' (a trailing '.' names a "
+                                "directory)"),
+    (["--out", "o.obj", "--history", "h.csv/.."], "argument --history: expected a file name, got 'h.csv/..' (a "
+                                                  "trailing '..' names a directory)"),
     (["--out", ".dxf"], "--out '.dxf' is a file-name ending, not a file name: name the file (e.g. 'pattern.dxf')"),
     (["--out", ".flat.svg"], "--out '.flat.svg' is a file-name ending, not a file name: name the file (e.g. "
                              "'pattern.flat.svg'), or give --out-dir DIR for a batch"),
@@ -577,3 +582,26 @@ def test_what_the_mesh_alone_cannot_run_is_refused_before_the_start_is_computed(
     assert main(["flatten", "wheel.obj", "--engine", engine, *formats, "--out", "o.dxf"]) == 2
     assert capsys.readouterr().err == f"springflat: error: {message}\n"
     assert not (tmp_path / "o.dxf").exists()
+
+
+@pytest.mark.parametrize("option, link, target", [("--out", "pattern.dxf", "scan.ply"), ("--history", "h.csv", "m.obj"),
+                                                  ("--plot", "p.png", "new.stl")])
+def test_an_output_that_links_to_a_file_of_another_kind_is_refused_and_the_file_kept(tmp_path, monkeypatch, capsys,
+                                                                                      option, link, target):
+    """A symbolic link named like a pattern but pointing at a mesh (existing, or not yet: the link would create it)
+    is refused: the link's name passed the suffix check, and the mesh behind it would have become a DXF."""
+    from sim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    if target != "new.stl":
+        Path(target).write_text("a mesh\n")
+    os.symlink(target, link)
+    extra = [] if option == "--out" else ["--out", "o.obj"]
+    assert main(["flatten", "surf1", "--max-iter", "3", *extra, option, link]) == 2
+    assert capsys.readouterr().err == (f"springflat: error: {option} '{link}' is a symbolic link to '{tmp_path / target}'"
+                                       f", which does not end in {SUFFIXES[option]}: springflat does not write over it\n")
+    assert (Path(target).read_text() == "a mesh\n") if target != "new.stl" else not Path(target).exists()
+    assert not Path("o.obj").exists()
+
+
+SUFFIXES = {"--out": ".dxf or .pdf or .svg or .obj", "--history": ".csv", "--plot": ".png"}
