@@ -34,7 +34,7 @@ from .clock import ENGINE_TARGET_MHZ
 from .lint import WAIVER_FILE, write_waivers
 from .top_names import COMPONENT_SUMMARIES, CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["COMPONENTS", "ENGINE_MODULE", "export_verilog", "export_engine", "export_engine_bundle",
+__all__ = ["COMPONENTS", "ENGINE_MODULE", "rtl_refusal", "export_verilog", "export_engine", "export_engine_bundle",
            "engine_capacity", "memory_image_markdown", "describe"]
 
 STREAM_PROTOCOL = (
@@ -167,6 +167,21 @@ def describe(component, fs: FormatSet, name: str) -> dict:
     if hasattr(component, "result_depth"):
         info["credits"], info["result_depth"] = component.credits, component.result_depth
     return info
+
+
+def rtl_refusal(fs: FormatSet, capacity: EngineCapacity = DEFAULT_CAPACITY) -> str | None:
+    """Why the RTL cannot be built with ``fs`` (every component and the engine at ``capacity`` check their
+    format set as they are made, before any elaboration: a fraction of a second), ``None`` if it can."""
+    from golden_model.fixed.formats_set import FormatSetNotBuildable
+    from hdl.engine import SpringflatEngine
+
+    try:
+        for spec in COMPONENTS:
+            spec.build(fs)
+        SpringflatEngine(fs, capacity)
+    except FormatSetNotBuildable as exc:
+        return str(exc)
+    return None
 
 
 def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:

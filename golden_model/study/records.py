@@ -75,11 +75,14 @@ class RunRecord:
 
     @property
     def d_area(self) -> float:
-        return abs(self.area_error_fixed - self.area_error_float)
+        """``|ΔE_S|`` of the two runs' E_S as the step sees them, clamped to 1 (eqs. 18–20): an E_S of 1 or more is
+        held just below 1 by ``error`` (u0.F), so a float 1.44 against a fixed 0.99999 is no deviation."""
+        return abs(min(self.area_error_fixed, 1.0) - min(self.area_error_float, 1.0))
 
     @property
     def d_shape(self) -> float:
-        return abs(self.shape_error_fixed - self.shape_error_float)
+        """``|ΔE_C|``, clamped to 1 as :attr:`d_area`."""
+        return abs(min(self.shape_error_fixed, 1.0) - min(self.shape_error_float, 1.0))
 
     @property
     def deviation(self) -> float:
@@ -88,6 +91,7 @@ class RunRecord:
 
     @property
     def d_iterations(self) -> int:
+        """Fixed − float iterations; 0 for a refused run (which the target counts as refused, not by this)."""
         return self.iterations_fixed - self.iterations_float if not self.error else 0
 
     @property
@@ -100,8 +104,9 @@ class RunRecord:
             "config": self.config, "case": self.case, "mesh": self.mesh, "init": self.init, "step": self.step,
             "status_float": self.status_float, "status_fixed": self.status_fixed,
             "status_match": int(self.status_match),
-            "iterations_float": self.iterations_float, "iterations_fixed": self.iterations_fixed,
-            "d_iterations": self.d_iterations,
+            "iterations_float": self.iterations_float,  # a refused run has no iterations: empty cells
+            "iterations_fixed": None if self.error else self.iterations_fixed,
+            "d_iterations": None if self.error else self.d_iterations,
             "area_error_float": self.area_error_float, "area_error_fixed": self.area_error_fixed,
             "d_area_error": self.d_area, "shape_error_float": self.shape_error_float,
             "shape_error_fixed": self.shape_error_fixed, "d_shape_error": self.d_shape,

@@ -336,3 +336,42 @@ def test_cmd_study_writes_outputs(tmp_path, capsys):
     for png in ("study-bits.png", "study-knobs.png", "study-pareto.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert f"]({png})" in report
+
+
+def test_an_e_of_1_or_more_held_just_below_1_is_no_deviation_and_a_refused_run_has_no_iterations():
+    """Surf1 from Tutte cut at 60 iterations: float E_S 1.4434, the fixed run's E_S held at 0.99999 by u0.20 while
+    the layouts agree to 1.3e-4 mean edges. The step clamps E to 1 (eqs. 18-20), so the record compares E as the
+    step sees it; a refused run's iteration cells are empty, not a match of 0."""
+    from golden_model.study.records import RunRecord
+
+    ended = RunRecord("c", "surf1/tutte/variable", "surf1", "tutte", "variable", "max-iterations", "max-iterations", 60,
+                      60, 1.4434, 1 - 2**-20, 0.62, 0.6201, 1.3e-4, 5e-5, 11, "area_error:11", measure_clamps=11)
+    assert ended.d_area == 2**-20 and ended.d_shape == pytest.approx(1e-4)
+    assert not AccuracyTarget(1e-3).failures(ended)
+    apart = dataclasses.replace(ended, area_error_fixed=0.5)  # a fixed E below 1 against a float one above
+    assert apart.d_area == 0.5 and AccuracyTarget(1e-3).failures(apart) == ["|dE| 0.5 > 0.001"]
+    refused = RunRecord("c", "d/pca/fixed", "delaunay", "pca", "fixed", "converged", "refused", 40, 0, 0.01,
+                        math.nan, 0.02, math.nan, math.nan, math.nan, 0, "", error="the shortest edge is 0.05")
+    row = refused.row(AccuracyTarget())
+    assert (row["iterations_float"], row["iterations_fixed"], row["d_iterations"], row["meets_target"]) == (40, None,
+                                                                                                           None, 0)
+
+
+def test_the_choice_says_how_it_was_made_and_whether_the_rtl_can_build_it(tmp_path, monkeypatch, capsys):
+    """--no-optimise: chosen.json must not claim the optimiser; a pick without the rsqrt unit's Newton step runs in
+    the golden model but the RTL refuses it, which chosen.json, the report and stderr say."""
+    monkeypatch.chdir(tmp_path)
+    FormatSet.preset("narrow").replace(name="no-newton", rsqrt_newton_steps=0).save("no-newton.json")
+    assert cmd_study(_parse(["dome", "--sweep", "none", "--no-optimise", "--jobs", "1", "--max-iter", "5",
+                             "--base", "no-newton.json", "--out", "s", "--quiet"])) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("chosen base:no-newton: ")
+    notes = json.loads(Path("s/chosen.json").read_text())["notes"]["_"]
+    assert "(cost metric bits, among the base, the presets and the sweeps: the optimiser did not run)" in notes
+    assert "greedy" not in notes and "on 4 cases: dome;" in notes
+    refusal = "the fold barrier needs"
+    assert f"The RTL cannot be built with it (the golden model runs it): {refusal}" in notes
+    assert f"**The RTL cannot be built with it** (`verilog`, `rtl-check` and `synth` refuse it" in Path(
+        "s/report.md").read_text()
+    assert err.startswith("springflat: note: the RTL cannot be built with s/chosen.json (the golden model runs it): "
+                          f"{refusal}")
