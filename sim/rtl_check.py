@@ -20,7 +20,7 @@ from golden_model.fixed.engine import check_fixed_params, prepare
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, check_engine_params
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
-from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, run_bench
+from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, missing_simulator, run_bench
 from .run_options import file_path_argument
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
@@ -47,7 +47,7 @@ def add_parser(sub, add_run_options) -> None:
     p.add_argument("--iterations", type=int, default=None, metavar="N", help="stop after at most N iterations")
     p.add_argument("--waves", type=file_path_argument, default=None, metavar="PATH",
                    help="write the waveform here: FILE.fst with icarus, FILE.vcd with verilator")
-    p.add_argument("--stall", type=float, default=0.0, metavar="P",
+    p.add_argument("--stall", type=float, default=None, metavar="P",
                    help="the datapath bench's probability of a random stall on each side per clock (default 0; "
                         "not with --engine-top, which has --wait-states, nor the guarded dynamics, which only the "
                         "engine runs)")
@@ -66,13 +66,15 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     params = params_from_args(args, defaults)
     if args.init is None:
         args.init = default_init(args.mesh)
+    if (missing := missing_simulator(args.sim)) is not None:  # before the start and the "building" line
+        raise UserError(missing)
     if args.waves is not None:  # before any build or run: a path that cannot take the waveform is one line
         check_output_path(args.waves, "--waves", (WAVE_SUFFIX[args.sim],))  # the format the simulator writes
         check_distinct([("--waves", args.waves)], input_files(args))
     load_format_set(args.formats)  # a formats file that cannot work is refused before the run mode
     check_engine_params(params)
     if params.guard and not args.engine_top:
-        if args.stall:  # asked for the datapath bench, which has no guard
+        if args.stall is not None:  # asked for the datapath bench, which has no guard
             raise UserError("the datapath bench (--stall) has no step guard: drop --stall for the whole engine "
                             "(--engine-top, with --wait-states), or add --no-guard --energy-window 1")
         print("springflat: note: the guarded momentum dynamics (the default for mesh files) runs on the whole "
@@ -85,16 +87,17 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         raise UserError("--capacity and --wait-states apply to --engine-top")
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
-    if not 0 <= args.stall < 1:
-        raise UserError(f"--stall must be in [0, 1), got {args.stall}")
+    stall = 0.0 if args.stall is None else args.stall
+    if not 0 <= stall < 1:
+        raise UserError(f"--stall must be in [0, 1), got {stall}")
     formats = load_format_set(args.formats)
     check_fixed_params(params, formats)
     prepare(mesh, _initial_layout(mesh, args.init), params, formats)  # refuses what the formats cannot hold
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())
     init_spec = args.init if args.init in LAYOUT_METHODS + (AUTO_START,) else str(Path(args.init).resolve())
     config = {"mesh": mesh_spec, "init": init_spec, "params": params.as_dict(), "iterations": args.iterations,
-              "step_latency": SpringflatCore.step_latency_of(formats), "p_valid": 1 - args.stall,
-              "p_ready": 1 - args.stall}
+              "step_latency": SpringflatCore.step_latency_of(formats), "p_valid": 1 - stall,
+              "p_ready": 1 - stall}
     first = "; the first Verilator build takes about a minute" if args.sim == "verilator" else ""
     print(f"springflat: {args.sim}: building the model (once per format set, then reused{first}) "
           "and running the closed loop ...", file=sys.stderr)
@@ -148,6 +151,21 @@ def _save_waves(source: Path, waves: Path) -> None:
         raise OutputWriteError(exc.path, exc.error, "--waves") from None
 
 
+def _engine_measures(result: dict, problem) -> dict:
+    """The engine's read-back E_S, E_C and energy as the datapath check and ``flatten --json`` give them (float,
+    mesh units), and as read (``*_raw``: [error] and :func:`energy_raw` integers)."""
+    from golden_model.fixed.engine import energy_to_float
+    from golden_model.fixed.format import to_float
+
+    if "area_error" not in result:  # a bench that failed before its read-back
+        return {}
+    error = problem.fs.error
+    return {"area_error": float(to_float(result["area_error"], error)),
+            "shape_error": float(to_float(result["shape_error"], error)),
+            "energy": energy_to_float(problem, result["energy"]), "area_error_raw": result["area_error"],
+            "shape_error_raw": result["shape_error"], "energy_raw": result["energy"]}
+
+
 def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     """The whole flattening through ``springflat_engine``: exit 0 when bit-exact, 1 (one line) if not."""
     from golden_model.engine_spec.image import build_image
@@ -156,7 +174,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     from .export import engine_capacity
     from .run_options import UserError, load_format_set, start_positions, strict_json
 
-    if args.stall:
+    if args.stall is not None:
         raise UserError("--stall applies to the datapath bench; with --engine-top use --wait-states")
     if args.wait_states < 0:
         raise UserError(f"--wait-states must be >= 0, got {args.wait_states}")
@@ -188,7 +206,8 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
             _save_waves(run.waves, args.waves)
     summary = {"mesh": mesh.name, "simulator": args.sim, "formats": formats.name, "top": ENGINE_MODULE,
                "capacity": list(args.capacity or (capacity.vertices, capacity.entries, capacity.triangles)),
-               "vertices": mesh.n_vertices, **run.result, "wall_seconds": run.wall_seconds}
+               "vertices": mesh.n_vertices, **run.result, **_engine_measures(run.result, problem),
+               "wall_seconds": run.wall_seconds}
     if args.json:
         print(strict_json(summary))
     else:

@@ -171,8 +171,11 @@ def test_rtl_check_engine_top_cli(tmp_path):
     assert proc.returncode == 0, proc.stderr[-2000:]
     r = json.loads(proc.stdout)
     assert (r["mismatches"], r["top"], r["simulator"], r["iterations"]) == (0, "springflat_engine", "verilator", 4)
-    for key in ("cycles", "cycles_per_iteration", "cycles_per_second", "python_share", "status", "area_error"):
+    for key in ("cycles", "cycles_per_iteration", "cycles_per_second", "python_share", "status"):
         assert key in r
+    # E as every other command gives it (a float), and the register's integer beside it: [error] is u0.20
+    assert r["area_error"] == r["area_error_raw"] / 2**20 and 0 < r["area_error"] < 1
+    assert r["shape_error"] == r["shape_error_raw"] / 2**20 and isinstance(r["energy_raw"], int)
 
 
 def test_rtl_check_on_a_mesh_file_with_its_defaults_runs_the_whole_engine(tmp_path):
