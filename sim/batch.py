@@ -119,8 +119,8 @@ def _tell(name: str, notes: list[str | None]) -> None:
 
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
-    from .flatten_run import (check_print_size, human_line, json_summary, overlap_note, run_flatten, scale_note_of,
-                              write_outputs)
+    from .flatten_run import (check_print_size, divergence_note, human_line, json_summary, pattern_notes, run_flatten,
+                              scale_note_of, write_outputs)
 
     start = time.perf_counter()
     stderr = io.StringIO()
@@ -155,7 +155,8 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 finally:  # the start's notes also where the engine then refuses the mesh
                     _tell(job.name, notes)
                 written = write_outputs(args, mesh, result)
-                _tell(job.name, [overlap_note(result), scale_note_of(args, mesh, result)])  # prints at 1:1000
+                _tell(job.name, [divergence_note(params, result), *pattern_notes(params, result),
+                                 scale_note_of(args, mesh, result)])  # prints at 1:1000
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)
             files = [(ending, path.read_bytes()) for _, ending, path in names if path in written]

@@ -44,9 +44,9 @@ from golden_model.results import FlattenResult
 
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS, answered_signals
-from .flatten_run import (PATTERN_OUTPUTS, RAN_AWAY, check_options_used, check_print_size, human_line, json_summary,
-                          output_paths, overlap_note, run_flatten, run_formats, scale_note_of, what_was_used,
-                          write_outputs)
+from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, divergence_note, human_line,
+                          json_summary, output_paths, pattern_notes, run_flatten, run_formats, scale_note_of,
+                          what_was_used, write_outputs)
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
     check_not_interrupted, check_output_path, on_interrupt, received_signal, reset_interrupted
 from .patterns import add_pattern_options
@@ -115,7 +115,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(human_line(mesh, result))
         print(what_was_used(params, args.init, result), file=sys.stderr)
     formats = run_formats(args)
-    for note in (overlap_note(result), scale_note_of(args, mesh, result), _energy_rule_note(params, result),
+    for note in (*pattern_notes(params, result), scale_note_of(args, mesh, result), _energy_rule_note(params, result),
                  _error_resolution_note(formats), _saturation_note(result, formats)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
@@ -123,34 +123,12 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         unwritten = [(flag, path) for _, flag, _, path in output_paths(args) if flag in PATTERN_OUTPUTS]
         kept = [f"'{path}'" for _, path in unwritten if os.path.lexists(path)]
         flags = ", ".join(dict.fromkeys(flag for flag, _ in unwritten))
-        print(f"springflat: iteration {result.iterations + 1} ran away: {RAN_AWAY} ({divergence_hint(params)})"
+        print(f"springflat: {divergence_note(params, result)}"
               + (f"; no pattern written ({flags})" if unwritten else "")
               + (f", {' and '.join(kept)} kept as {'they were' if len(kept) > 1 else 'it was'}" if kept else ""),
               file=sys.stderr)
         return EXIT_DIVERGED
     return 0
-
-
-def divergence_hint(params: FlattenParams) -> str:
-    """What to try after a diverged run, naming only options its mode takes. A guarded run's energy never
-    rises, so only numbers at the ends of their ranges overflow it (a spring constant of 1e300 on a mesh
-    1e45 across)."""
-    if params.dynamics == "momentum" and params.guard:
-        return "the guarded run's numbers overflowed: bring --spring or the mesh's size nearer 1"
-    penalty = (f"the overlap penalty pushes nodes apart unchecked: try a smaller --penalty-gain than "
-               f"{params.penalty_gain:g}, or drop --penalty; " if params.penalty else "")
-    if params.dynamics == "momentum":
-        return (penalty + "the momentum dynamics without its guard: drop --no-guard"
-                + (" and --penalty (the guard does not take it)" if params.penalty else "")
-                + "; with --spring or the mesh's size far from 1 a guarded run overflows too")
-    step = "a smaller --dt" if params.step == "fixed" else "--step fixed with a small --dt"
-    damping = (f"a larger --damping than {params.damping:g}" if params.damping >= DIVERGENCE_DAMPING
-               else f"--damping {DIVERGENCE_DAMPING:g}")
-    return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or --dynamics momentum"
-
-
-#: The damping :func:`divergence_hint` suggests to an undamped paper run.
-DIVERGENCE_DAMPING = 0.05
 
 
 def check_outputs(args: argparse.Namespace) -> None:

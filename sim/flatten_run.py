@@ -186,6 +186,71 @@ def overlap_note(result: FlattenResult) -> str | None:
             "(docs/guard.md)")
 
 
+def divergence_hint(params: FlattenParams) -> str:
+    """What to try after a diverged run, naming only options its mode takes. A guarded run's energy never
+    rises, so only numbers at the ends of their ranges overflow it (a spring constant of 1e300 on a mesh
+    1e45 across)."""
+    if params.dynamics == "momentum" and params.guard:
+        return "the guarded run's numbers overflowed: bring --spring or the mesh's size nearer 1"
+    penalty = (f"the overlap penalty pushes nodes apart unchecked: try a smaller --penalty-gain than "
+               f"{params.penalty_gain:g}, or drop --penalty; " if params.penalty else "")
+    if params.dynamics == "momentum":
+        return (penalty + "the momentum dynamics without its guard: drop --no-guard"
+                + (" and --penalty (the guard does not take it)" if params.penalty else "")
+                + "; with --spring or the mesh's size far from 1 a guarded run overflows too")
+    step = "a smaller --dt" if params.step == "fixed" else "--step fixed with a small --dt"
+    damping = (f"a larger --damping than {params.damping:g}" if params.damping >= DIVERGENCE_DAMPING
+               else f"--damping {DIVERGENCE_DAMPING:g}")
+    return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or --dynamics momentum"
+
+
+#: The damping :func:`divergence_hint` suggests to an undamped paper run.
+DIVERGENCE_DAMPING = 0.05
+
+
+def divergence_note(params: FlattenParams, result: FlattenResult) -> str | None:
+    """Where a diverged run ran away, what that means, and what to try (:func:`divergence_hint`)."""
+    if result.status != "diverged":
+        return None
+    return f"iteration {result.iterations + 1} ran away: {RAN_AWAY} ({divergence_hint(params)})"
+
+
+def fold_note(params: FlattenParams, result: FlattenResult, api: bool = False) -> str | None:
+    """A pattern that ends with folded triangles (not diverged): it is no piece to cut as it is; what keeps
+    triangles from folding, in the command line's words or (``api``) the Python API's."""
+    folded = result.final.folded
+    if result.status == "diverged" or not folded:
+        return None
+    if params.dynamics == "momentum" and params.guard:
+        why = ("the step guard adds no fold, but keeps those of its start (untangling could not remove them; "
+               "docs/guard.md)")
+    elif params.dynamics == "momentum":
+        why = ("the step guard keeps every triangle from folding: "
+               + ("guard=True" if api else "drop --no-guard") + " (docs/guard.md)")
+    else:
+        why = ("the paper dynamics does not keep triangles from folding; the momentum dynamics with its step guard "
+               "does: " + ("dynamics='momentum'" if api else "--dynamics momentum") + " (docs/guard.md)")
+    return (f"the pattern has {folded} folded triangle{'s' if folded > 1 else ''}, flipped over their neighbours: "
+            f"cut along its boundary it is not the mesh's piece; {why}")
+
+
+def growth_note(params: FlattenParams, result: FlattenResult, api: bool = False) -> str | None:
+    """A layout that grew away from the mesh (E_S above 1: its area off by more than the mesh's own) without
+    tripping the runaway rule (``RUNAWAY_FACTOR`` times wider): no pattern to cut, though the run ended."""
+    initial, final = result.initial.area_error, result.final.area_error
+    if result.status == "diverged" or not final > max(1.0, initial):
+        return None
+    return (f"the layout grew away from the mesh: E_S {error_text(initial)} -> {error_text(final)}, its area off by "
+            f"{final:.3g} times the mesh's: no pattern to cut, though it stayed under the runaway rule's "
+            f"{RUNAWAY_FACTOR:g} times" + ("" if api else f"; {divergence_hint(params)}"))
+
+
+def pattern_notes(params: FlattenParams, result: FlattenResult, api: bool = False) -> list[str]:
+    """What a person must know about a pattern before cutting it: grown away, folded, or overlapping."""
+    return [note for note in (growth_note(params, result, api), fold_note(params, result, api), overlap_note(result))
+            if note]
+
+
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:
     """What ``--json`` prints: the mesh, the run's summary, the distortion's worst 1 %, what was used."""
     return {"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,

@@ -37,7 +37,7 @@ from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options, forget_half_built_components
 from sim.engines import ENGINES, engine_named
-from sim.flatten_run import overlap_note, run_flatten
+from sim.flatten_run import pattern_notes, run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import (OutputError, area_ratio, check_output_path, directory_name_problem, ending_name_problem,
                          output_target)
@@ -316,7 +316,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         except FormatSetNotBuildable as exc:  # engine="rtl"
             forget_half_built_components(exc)
             raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
-    for note in filter(None, [*run_notes, overlap_note(result)]):
+    for note in [*run_notes, *pattern_notes(params, result, api=True)]:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,

@@ -453,3 +453,18 @@ def test_the_json_counts_the_boundary_crossings(tmp_path, capsys):
     summary = json.loads(captured.out)
     assert summary["folded"] == 0 and summary["boundary_crossings"] > 0
     assert "the pattern overlaps itself" in captured.err
+
+
+def test_a_folded_pattern_warns_in_the_apis_words():
+    """Surf1 under the paper's dynamics from PCA ends with 3 folded triangles: a MeshNote says so, naming the
+    keyword that keeps triangles from folding (not the command line's --dynamics)."""
+    from golden_model.builtin import builtin_mesh
+
+    mesh, _ = builtin_mesh("surf1")
+    with pytest.warns(springflat.MeshNote) as caught:
+        pattern = springflat.flatten(mesh.vertices, mesh.faces, dynamics="paper", init="pca", name="surf1")
+    notes = [str(w.message) for w in caught if "folded" in str(w.message)]
+    assert pattern.folded == 3 and notes == [
+        "surf1: the pattern has 3 folded triangles, flipped over their neighbours: cut along its boundary it is not "
+        "the mesh's piece; the paper dynamics does not keep triangles from folding; the momentum dynamics with its "
+        "step guard does: dynamics='momentum' (docs/guard.md)"]

@@ -447,7 +447,8 @@ def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
     import re
 
     from golden_model.params import FlattenParams
-    from sim.cli import build_parser, divergence_hint
+    from sim.cli import build_parser
+    from sim.flatten_run import divergence_hint
     from sim.run_options import params_from_args
 
     parser = build_parser()
@@ -605,3 +606,80 @@ def test_an_output_that_links_to_a_file_of_another_kind_is_refused_and_the_file_
 
 
 SUFFIXES = {"--out": ".dxf or .pdf or .svg or .obj", "--history": ".csv", "--plot": ".png"}
+
+
+def _ended(status="converged", folded=0, area_before=0.3, area_after=0.1):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(status=status, iterations=100, extra={},
+                           initial=SimpleNamespace(area_error=area_before, folded=0),
+                           final=SimpleNamespace(area_error=area_after, folded=folded))
+
+
+@pytest.mark.parametrize("mode, api, remedy", [
+    ([], False, "the step guard adds no fold, but keeps those of its start"),
+    (["--no-guard"], False, "the step guard keeps every triangle from folding: drop --no-guard"),
+    (["--no-guard"], True, "the step guard keeps every triangle from folding: guard=True"),
+    (["--dynamics", "paper"], False, "the momentum dynamics with its step guard does: --dynamics momentum"),
+    (["--dynamics", "paper"], True, "the momentum dynamics with its step guard does: dynamics='momentum'"),
+])
+def test_a_folded_pattern_is_said_with_what_keeps_triangles_from_folding(mode, api, remedy):
+    from golden_model.params import FlattenParams
+    from sim.cli import build_parser
+    from sim.flatten_run import fold_note
+    from sim.run_options import params_from_args
+
+    defaults = FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=1e-3)
+    params = params_from_args(build_parser().parse_args(["flatten", "m.obj", *mode]), defaults)
+    assert fold_note(params, _ended(folded=0), api) is None
+    assert fold_note(params, _ended(status="diverged", folded=9), api) is None  # a diverged run says so itself
+    one, many = fold_note(params, _ended(folded=1), api), fold_note(params, _ended(folded=246), api)
+    assert one.startswith("the pattern has 1 folded triangle, flipped") and remedy in one
+    assert many.startswith("the pattern has 246 folded triangles, flipped") and remedy in many
+
+
+def test_a_layout_grown_away_from_the_mesh_is_said_though_it_did_not_run_away(capsys, tmp_path, monkeypatch):
+    """The paper's penalty on Surf1 grows the layout to 3e5 times the mesh's area in 100 iterations, under the
+    runaway rule's 1e4 times wider: exit 0 and a pattern, so the note must say that it is none."""
+    from sim.cli import main
+    from sim.flatten_run import growth_note
+
+    assert growth_note(None, _ended(area_before=0.3, area_after=0.9)) is None  # worse, but not grown away
+    assert growth_note(None, _ended(area_before=1.5, area_after=1.2)) is None  # a start beyond 1 that improved
+    assert growth_note(None, _ended(status="diverged", area_after=5.0)) is None
+    monkeypatch.chdir(tmp_path)
+    assert main(["flatten", "surf1", "--penalty", "--out", "pen.dxf"]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "grew away" in line]
+    assert notes == ["springflat: note: the layout grew away from the mesh: E_S 0.2615 -> 3.05e+05, its area off "
+                     "by 3.05e+05 times the mesh's: no pattern to cut, though it stayed under the runaway rule's 10000 "
+                     "times; the overlap penalty pushes nodes apart unchecked: try a smaller --penalty-gain than 1, or "
+                     "drop --penalty; the paper dynamics has no guard: try --damping 0.05, --step fixed with a small "
+                     "--dt, or --dynamics momentum"]
+
+
+def test_rtl_check_with_its_simulator_missing_says_so_before_anything(tmp_path, monkeypatch, capsys):
+    """No 'building the model ...' line (nor the start's work) before the one line that the simulator is missing."""
+    import shutil
+
+    import sim.cocotb_support
+    from sim.cli import main
+
+    real_which = shutil.which
+    monkeypatch.setattr(sim.cocotb_support.shutil, "which",
+                        lambda tool, *a, **kw: None if tool in ("iverilog", "vvp") else real_which(tool, *a, **kw))
+    monkeypatch.chdir(tmp_path)
+    for extra in ([], ["--engine-top"]):
+        assert main(["rtl-check", "surf1", "--sim", "icarus", *extra]) == 2
+        assert capsys.readouterr().err == ("springflat: error: Icarus Verilog is not installed: install it ('sudo "
+                                           "apt-get install iverilog'; 'make test' installs it when it runs as root)\n")
+
+
+def test_rtl_check_engine_top_refuses_stall_whatever_its_value(tmp_path, monkeypatch, capsys):
+    """--stall 0 was taken silently with --engine-top while --stall 0.1 was refused: any --stall is refused."""
+    from sim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    for value in ("0", "0.1"):
+        assert main(["rtl-check", "surf1", "--engine-top", "--stall", value]) == 2
+        assert capsys.readouterr().err == ("springflat: error: --stall applies to the datapath bench; with "
+                                           "--engine-top use --wait-states\n")
