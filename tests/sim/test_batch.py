@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -302,8 +303,12 @@ def test_a_batch_that_writes_nothing_leaves_no_out_dir_it_made(tmp_path, monkeyp
     write_meshes(tmp_path / "in", 2, 0)
     assert main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", out_dir, "--out", ".svg", "--step", "fixed",
                  "--dt", "50", "--dynamics", "paper"]) == 3
-    capsys.readouterr()
+    err = capsys.readouterr().err
     assert os.listdir(tmp_path) == ["in"]
+    for name in ("dome00", "dome01"):  # each diverged mesh says where it ran away and what to try, as a single run
+        assert re.search(f"springflat: note: {name}: iteration [0-9]+ ran away: a value stopped being finite, or the "
+                         "layout grew .* \\(the paper dynamics has no guard: try --damping 0.05, a smaller --dt, or "
+                         "--dynamics momentum\\)", err), err
 
 
 def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
