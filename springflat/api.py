@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import tempfile
 import warnings
 from dataclasses import dataclass
@@ -41,8 +42,8 @@ from sim.flatten_run import pattern_notes, run_flatten
 from sim.distortion import Distortion, distortion
 from sim.outputs import (OutputError, area_ratio, check_output_path, directory_name_problem, ending_name_problem,
                          output_target)
-from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, kind_or_none, on_sheets, run_caption,
-                          scale_note, write_pattern_file)
+from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, kind_or_none, on_sheets,
+                          run_caption, scale_note, write_pattern_file)
 from sim.run_options import UserError, add_run_options, params_from_args, resolve_mesh
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
@@ -155,8 +156,8 @@ class Pattern:
         status: ``converged``, ``max-iterations``, ``stalled`` (no step lowers the energy any more:
             ``layout`` is the last accepted one) or ``diverged`` (then ``layout`` is the last finite state).
         iterations: iterations run.
-        area_error: ``E_S`` of ``layout`` (relative area error, eq. 16).
-        shape_error: ``E_C`` of ``layout`` (relative edge-length error, eq. 17).
+        area_error: ``E_S`` of ``layout`` (relative area error, eq. 12).
+        shape_error: ``E_C`` of ``layout`` (relative edge-length error, eq. 14).
         folded: triangles whose orientation disagrees with the pattern's.
         boundary_crossings: pairs of the boundary's sides that meet, on a fold-free pattern (a property;
             ``None`` for a folded or diverged one): where it is not 0, parts of the pattern lie on each other.
@@ -373,10 +374,21 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
                           f"{Path(path).suffix}: springflat does not write over it")  # a link to a mesh, say
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
-    drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
-    write_pattern_file(Path(path), drawing, paper=DEFAULT_PAPER if paper is None else paper, dxf_edges=dxf_edges)
+    try:
+        drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
+        write_pattern_file(Path(path), drawing, paper=DEFAULT_PAPER if paper is None else paper, dxf_edges=dxf_edges)
+    except PatternError as exc:  # the command's words for the same refusal ("check --units") in the API's
+        raise PatternError(f"write_pattern: {_in_api_words(str(exc))}") from None
     if kind_or_none(path) in TRUE_SCALE_KINDS and (note := scale_note(drawing, "units='{}'")) is not None:
         warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
+
+
+def _in_api_words(message: str) -> str:
+    """A message of :mod:`sim.patterns`, whose options are the command line's (``--units m``, ``--paper a4 or
+    letter``), with ``write_pattern``'s keywords (``units='m'``, ``paper='a4' or 'letter'``)."""
+    message = re.sub(r"--(units|paper) (\w+)( or (\w+))?",
+                     lambda m: f"{m[1]}='{m[2]}'" + (f" or '{m[4]}'" if m[4] else ""), message)
+    return re.sub(r"--(units|paper)\b", r"\1", message)
 
 
 def _options_doc() -> str:

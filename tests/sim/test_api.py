@@ -468,3 +468,24 @@ def test_a_folded_pattern_warns_in_the_apis_words():
         "surf1: the pattern has 3 folded triangles, flipped over their neighbours: cut along its boundary it is not "
         "the mesh's piece; the paper dynamics does not keep triangles from folding; the momentum dynamics with its "
         "step guard does: dynamics='momentum' (docs/guard.md)"]
+
+
+def test_write_patterns_refusals_speak_the_apis_keywords(tmp_path):
+    """The print-size refusals name units= and paper=, not the command line's --units and --paper, and every
+    refusal of write_pattern starts with its name."""
+    from golden_model.builtin import builtin_mesh
+
+    mesh, _ = builtin_mesh("surf1")
+    big = springflat.flatten(mesh.vertices * 1000, mesh.faces, max_iter=3)
+    with pytest.raises(springflat.OutputError) as info:
+        springflat.write_pattern(tmp_path / "huge.pdf", big, units="m")
+    assert re.fullmatch(r"write_pattern: the pattern is .* m at 1:1 with units='m': .* a4 sheets \(at most 400\); "
+                        r"check units, or write \.dxf", str(info.value)), str(info.value)
+    with pytest.raises(springflat.OutputError) as info:
+        springflat.write_pattern(tmp_path / "fit.svg", springflat.flatten(mesh.vertices * 50, mesh.faces, max_iter=3),
+                                 units="m", paper="fit")
+    assert str(info.value).endswith("check units, print it tiled (paper='a4' or 'letter'), or write .dxf")
+    assert "--" not in str(info.value)
+    with pytest.raises(springflat.OutputError, match="^write_pattern: units must be one of mm, cm, m, in, got 'ft'$"):
+        springflat.write_pattern(tmp_path / "p.dxf", big, units="ft")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
