@@ -245,7 +245,9 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
     for name, value, what in (("V", V, "(V, 3) vertex positions"), ("F", F, "(F, 3) vertex indices")):
         try:
             array = np.array(value)  # a copy: the Pattern must not change when the caller's arrays do
-        except (TypeError, ValueError) as exc:  # ragged rows, objects that are no arrays
+        except ValueError:  # ragged rows (numpy's own words name its internals)
+            raise MeshError(f"{name} must be an array of {what}: its rows are not all of one length") from None
+        except TypeError as exc:  # objects that are no arrays
             raise MeshError(f"{name} must be an array of {what}: {str(exc).splitlines()[0]}") from None
         if array.dtype.kind not in "iufb":  # strings, complex numbers, objects: nothing to take silently
             raise MeshError(f"{name} must be an array of {what}, got {array.dtype} values")
@@ -294,6 +296,9 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     vertices, faces = _arrays(V, F)
     args = _namespace(options)
     engine = engine_named(args.engine)
+    if getattr(args, "formats", None) is not None and not engine.fixed_point:  # the command's check says --engine
+        raise ParameterError("formats applies to the fixed-point engines: "
+                             + " or ".join(f"engine={e.name!r}" for e in ENGINES if e.fixed_point and e.api))
     if not engine.api:
         raise ParameterError(f"engine {engine.name!r}, {engine.help}, runs from the command line: springflat flatten "
                              f"MESH --engine {engine.name}; the API runs the "
