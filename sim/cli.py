@@ -42,6 +42,7 @@ from golden_model.mesh_io import MESH_SUFFIXES
 from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
+from .clock import ENGINE_TARGET_MHZ
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS, answered_signals
 from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, divergence_note, human_line,
@@ -228,7 +229,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 def cmd_verilog(args: argparse.Namespace) -> int:
     from .export import bundle_readme, engine_capacity, export_engine_bundle, export_verilog
-    from .clock import ENGINE_TARGET_MHZ, clock_sdc
+    from .clock import clock_sdc
     from .outputs import check_build_so_far
 
     formats = load_format_set(args.formats)
@@ -246,7 +247,8 @@ def cmd_verilog(args: argparse.Namespace) -> int:
         (Path(build) / "README.md").write_text(bundle_readme(formats, capacity, files, installed_version()))
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
-    print(f"{out / 'interface.md'}, {out / 'interface.json'}")
+    print(f"{out / 'interface.md'}, {out / 'interface.json'}; ROM contents {out / 'rsqrt_seed.hex'}, "
+          f"{out / 'exp_table.hex'}")
     print(f"{out / engine['files'][0]}: capacity {capacity.vertices} vertices, {capacity.entries} entries, "
           f"{capacity.triangles} triangles{'' if capacity.guard else ', no step guard'}; {engine['bus']}")
     print(", ".join(str(out / f) for f in engine["files"][1:]))
@@ -305,7 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "engine (springflat_engine.v) with its register map (register_map.md, "
                                    "register_map.json, springflat_regs.h), memory_image.md, and "
                                    "verilator_waivers.vlt (the lint rules the generated Verilog breaks by "
-                                   "construction); README.md says which file is which.")
+                                   f"construction), clock.sdc (clk at the engine's {ENGINE_TARGET_MHZ:g} MHz); README.md says which "
+                                   "file is which.")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="the engine's vertices, neighbour entries and triangles (default: "

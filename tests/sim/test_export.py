@@ -12,11 +12,23 @@ from support import REPO, SPRINGFLAT
 
 
 @pytest.fixture(scope="module")
-def exported(tmp_path_factory):
+def exported_run(tmp_path_factory):
+    """The bundle's directory and what the command printed."""
     out = tmp_path_factory.mktemp("verilog")
     proc = subprocess.run([SPRINGFLAT, "verilog", "--formats", "narrow", "--out", out], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    return out
+    return out, proc.stdout
+
+
+@pytest.fixture(scope="module")
+def exported(exported_run):
+    return exported_run[0]
+
+
+def test_the_command_names_every_file_it_wrote(exported_run):
+    out, stdout = exported_run
+    named = set(re.findall(r"(?:^|, | )(" + re.escape(str(out)) + r"/[^\s,:;]+)", stdout, re.M))
+    assert named == {str(p) for p in out.iterdir() if p.is_file()}
 
 
 def test_the_bundles_readme_says_what_every_file_is(exported):
