@@ -38,9 +38,9 @@ from golden_model.mesh import MeshError, one_line, printable_name
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
-from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_output_path, \
-    when_interrupted
-from .patterns import error_text, pattern_kind
+from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
+    check_output_path, file_ending, when_interrupted
+from .patterns import error_text, pattern_ending, pattern_kind
 from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
                           resolve_mesh, strict_json)
 from .workers import WorkerPool, local_workers
@@ -120,7 +120,7 @@ def _tell(name: str, notes: list[str | None]) -> None:
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
     from .flatten_run import (check_print_size, divergence_note, human_line, json_summary, pattern_notes, run_flatten,
-                              scale_note_of, write_outputs)
+                              run_formats, scale_note_of, write_outputs)
 
     start = time.perf_counter()
     stderr = io.StringIO()
@@ -155,7 +155,8 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 finally:  # the start's notes also where the engine then refuses the mesh
                     _tell(job.name, notes)
                 written = write_outputs(args, mesh, result)
-                _tell(job.name, [divergence_note(params, result), *pattern_notes(params, result),
+                _tell(job.name, [divergence_note(params, result),
+                                 *pattern_notes(params, result, formats=run_formats(args)),
                                  scale_note_of(args, mesh, result)])  # prints at 1:1000
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)
@@ -243,6 +244,10 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
         check_distinct([(flags[option][0], out_dir / f"{name}{ending}") for name in names for option, ending in endings],
                        [item for mesh in meshes
                         for item in input_files(argparse.Namespace(**{**vars(args), "mesh": mesh}))])
+        for option, ending in endings:
+            for name in names:
+                check_link_target(out_dir / f"{name}{ending}", flags[option][0],
+                                  pattern_ending if option == "out" else file_ending)
     else:
         _names(meshes)
     return endings, jobs

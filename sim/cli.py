@@ -35,7 +35,7 @@ import numpy as np
 from golden_model.builtin import is_builtin
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.files import describe_os_error
-from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet, FormatSetNotBuildable
+from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.layouts import LAYOUT_METHODS
 from golden_model.mesh import one_line
 from golden_model.mesh_io import MESH_SUFFIXES
@@ -49,8 +49,9 @@ from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size,
                           json_summary, output_paths, pattern_notes, run_flatten, run_formats, scale_note_of,
                           what_was_used, write_outputs)
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
-    check_not_interrupted, check_output_path, on_interrupt, received_signal, reset_interrupted
-from .patterns import add_pattern_options
+    check_link_target, check_not_interrupted, check_output_path, file_ending, on_interrupt, received_signal, \
+    reset_interrupted
+from .patterns import add_pattern_options, pattern_ending
 from .run_options import (
     USER_ERRORS,
     UserError,
@@ -116,8 +117,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(human_line(mesh, result))
         print(what_was_used(params, args.init, result), file=sys.stderr)
     formats = run_formats(args)
-    for note in (*pattern_notes(params, result), scale_note_of(args, mesh, result), _energy_rule_note(params, result),
-                 _error_resolution_note(formats), _saturation_note(result, formats)):
+    for note in (*pattern_notes(params, result, formats=formats), scale_note_of(args, mesh, result),
+                 _energy_rule_note(params, result), _error_resolution_note(formats)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)
     if result.status == "diverged":
@@ -133,7 +134,8 @@ def cmd_flatten(args: argparse.Namespace) -> int:
 
 
 def check_outputs(args: argparse.Namespace) -> None:
-    """Refuse, before the run, an output path that cannot work, and two outputs that are one file."""
+    """Refuse, before the run, an output path that cannot work, two outputs that are one file, and an output
+    that links to a file of another kind."""
     for _, flag, endings, path in output_paths(args):
         check_output_path(path, flag, endings, ending_hint=", or give --out-dir DIR for a batch, which takes endings")
     check_options_used(args)
@@ -142,6 +144,8 @@ def check_outputs(args: argparse.Namespace) -> None:
     if args.init is None:
         args.init = default_init(args.mesh)
     _check_distinct_files(args)
+    for dest, flag, _, path in output_paths(args):
+        check_link_target(path, flag, pattern_ending if dest == "out" else file_ending)
 
 
 #: Iterations :func:`_energy_rule_note` looks back over.
@@ -183,32 +187,6 @@ def _error_resolution_note(formats: FormatSet | None) -> str | None:
         return None
     return (f"format set '{formats.name}' holds E_S and E_C in error {formats.error}: they are multiples of "
             f"{formats.error.lsb:.3g}, the values above are rounded to that")
-
-
-def _saturation_note(result: FlattenResult, formats: FormatSet | None) -> str | None:
-    """A fixed-point run (of format set ``formats``) that clamped values: which, and where wider formats are."""
-    events = result.extra.get("saturation_events") or {}
-    if not result.extra.get("saturations"):
-        return None
-    fields = ", ".join(f"{name} {count}" for name, count in sorted(events.items(), key=lambda item: -item[1])[:3])
-    wider = [name for name in FormatSet.presets() if _holds_more(FormatSet.preset(name), formats, events)]
-    final = result.final
-    at_the_top = max(final.area_error, final.shape_error) >= formats.error.max  # E_S, E_C clamped: no flattening
-    return (f"format set '{result.extra['formats']}' clamped {result.extra['saturations']} values to its range"
-            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's"
-            + ("; E_S or E_C is at the top of its format: the run ran away (the float engine calls such a run "
-               "diverged), and the pattern is no flattening" if at_the_top else "")
-            + (f"; a format set with more integer bits holds them (presets: {', '.join(wider)}; docs/fixed-point.md)"
-               if wider else "; no preset has more integer bits there: a --formats FILE can (docs/fixed-point.md)"))
-
-
-def _holds_more(candidate: FormatSet, formats: FormatSet, clamped: dict[str, int]) -> bool:
-    """Whether ``candidate`` has more integer bits than ``formats`` where values were clamped: at least as
-    many in each clamped signal that is a format and more in one (or, where none is, in every format at
-    least as many and more in one)."""
-    signals = [name for name in FORMAT_FIELDS if name in clamped] or list(FORMAT_FIELDS)
-    pairs = [(getattr(candidate, name).int_bits, getattr(formats, name).int_bits) for name in signals]
-    return all(mine >= theirs for mine, theirs in pairs) and any(mine > theirs for mine, theirs in pairs)
 
 
 def _check_distinct_files(args: argparse.Namespace) -> None:
@@ -307,8 +285,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "engine (springflat_engine.v) with its register map (register_map.md, "
                                    "register_map.json, springflat_regs.h), memory_image.md, and "
                                    "verilator_waivers.vlt (the lint rules the generated Verilog breaks by "
-                                   f"construction), clock.sdc (clk at the engine's {ENGINE_TARGET_MHZ:g} MHz); README.md says which "
-                                   "file is which.")
+                                   f"construction), clock.sdc (clk at the engine's {ENGINE_TARGET_MHZ:g} MHz); "
+                                   "README.md says which file is which.")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
                    help="the engine's vertices, neighbour entries and triangles (default: "

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding, scale_mesh
+from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT
 from golden_model.mesh import Mesh, boundary_crossings
@@ -124,8 +125,8 @@ def _with_presets_hint(exc: FixedPointError, holding: list[str]) -> FixedPointEr
 
 def check_engine_holds(args: argparse.Namespace, mesh: Mesh, params: FlattenParams) -> None:
     """Refuse, before any layout work, a mesh that the run's formats or engine cannot hold whatever its
-    layout (a node's degree, its edge lengths or weights in the formats, the engine's capacity), in one line
-    naming the presets that hold it; what depends on the layout (its extent) is checked when the run starts."""
+    layout: a node's degree, its edge lengths or weights in the formats (one line naming the presets that hold
+    the mesh), the engine's capacity. What depends on the layout (its extent) is checked when the run starts."""
     engine = engine_named(args.engine)
     if not engine.fixed_point:
         return
@@ -221,15 +222,19 @@ def fold_note(params: FlattenParams, result: FlattenResult, api: bool = False) -
     folded = result.final.folded
     if result.status == "diverged" or not folded:
         return None
+    penalty = (" and penalty=False" if api else " and --penalty") if params.penalty else ""  # the guard refuses it
     if params.dynamics == "momentum" and params.guard:
         why = ("the step guard adds no fold, but keeps those of its start (untangling could not remove them; "
                "docs/guard.md)")
     elif params.dynamics == "momentum":
         why = ("the step guard keeps every triangle from folding: "
-               + ("guard=True" if api else "drop --no-guard") + " (docs/guard.md)")
-    else:
+               + ("guard=True" if api else "drop --no-guard") + penalty + " (docs/guard.md)")
+    else:  # the momentum dynamics refuses the paper dynamics' own options
+        own = "step, dt, damping, density" if api else "--step, --dt, --damping, --density"
         why = ("the paper dynamics does not keep triangles from folding; the momentum dynamics with its step guard "
-               "does: " + ("dynamics='momentum'" if api else "--dynamics momentum") + " (docs/guard.md)")
+               "does: " + ("dynamics='momentum'" if api else "--dynamics momentum")
+               + ((", penalty=False" if api else " without --penalty") if params.penalty else "")
+               + f" (it takes none of {own}; docs/guard.md)")
     return (f"the pattern has {folded} folded triangle{'s' if folded > 1 else ''}, flipped over their neighbours: "
             f"cut along its boundary it is not the mesh's piece; {why}")
 
@@ -245,10 +250,40 @@ def growth_note(params: FlattenParams, result: FlattenResult, api: bool = False)
             f"{RUNAWAY_FACTOR:g} times" + ("" if api else f"; {divergence_hint(params)}"))
 
 
-def pattern_notes(params: FlattenParams, result: FlattenResult, api: bool = False) -> list[str]:
-    """What a person must know about a pattern before cutting it: grown away, folded, or overlapping."""
-    return [note for note in (growth_note(params, result, api), fold_note(params, result, api), overlap_note(result))
-            if note]
+def saturation_note(result: FlattenResult, formats: FormatSet | None, api: bool = False) -> str | None:
+    """A fixed-point run (of format set ``formats``) that clamped values: which, and where wider formats are
+    (``api``: in the Python API's words)."""
+    events = result.extra.get("saturation_events") or {}
+    if not result.extra.get("saturations"):
+        return None
+    fields = ", ".join(f"{name} {count}" for name, count in sorted(events.items(), key=lambda item: -item[1])[:3])
+    wider = [name for name in FormatSet.presets() if _holds_more(FormatSet.preset(name), formats, events)]
+    final = result.final
+    at_the_top = max(final.area_error, final.shape_error) >= formats.error.max  # E_S, E_C clamped: no flattening
+    return (f"format set '{result.extra['formats']}' clamped {result.extra['saturations']} values to its range"
+            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's"
+            + ("; E_S or E_C is at the top of its format: the run ran away (the float engine calls such a run "
+               "diverged), and the pattern is no flattening" if at_the_top else "")
+            + (f"; a format set with more integer bits holds them (presets: {', '.join(wider)}; docs/fixed-point.md)"
+               if wider else "; no preset has more integer bits there: a "
+               + ("formats=FILE" if api else "--formats FILE") + " can (docs/fixed-point.md)"))
+
+
+def _holds_more(candidate: FormatSet, formats: FormatSet, clamped: dict[str, int]) -> bool:
+    """Whether ``candidate`` has more integer bits than ``formats`` where values were clamped: at least as
+    many in each clamped signal that is a format and more in one (or, where none is, in every format at
+    least as many and more in one)."""
+    signals = [name for name in FORMAT_FIELDS if name in clamped] or list(FORMAT_FIELDS)
+    pairs = [(getattr(candidate, name).int_bits, getattr(formats, name).int_bits) for name in signals]
+    return all(mine >= theirs for mine, theirs in pairs) and any(mine > theirs for mine, theirs in pairs)
+
+
+def pattern_notes(params: FlattenParams, result: FlattenResult, api: bool = False,
+                  formats: FormatSet | None = None) -> list[str]:
+    """What a person must know about a pattern before cutting it: grown away, folded, overlapping, or (a
+    fixed-point run of ``formats``) clamped, at the top of its format where it ran away."""
+    return [note for note in (growth_note(params, result, api), fold_note(params, result, api), overlap_note(result),
+                              saturation_note(result, formats, api)) if note]
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:

@@ -181,12 +181,26 @@ def _make_temporary(directory: Path, name: str, *, is_dir: bool = False) -> Path
     raise FileExistsError(errno.EEXIST, "no free temporary name", str(directory))
 
 
+def file_ending(path: Path) -> str:
+    """A file name's kind as its name says it: its last suffix, lower case (``.csv``)."""
+    return Path(path).suffix.lower()
+
+
+def check_link_target(path: Path, what: str, ending: Callable[[Path], str | None] = file_ending) -> None:
+    """Refuse a symbolic link whose target's name does not end as the link's own does (``ending``: a pattern's
+    ``.pdf`` linking to a mesh's ``.obj``): the output would be written through it over a file of another kind.
+    Callers check it after :func:`check_distinct`, which names a link to an input as that input."""
+    path = path if isinstance(path, Path) else Path(path)
+    if path.is_symlink() and ending(target := output_target(path)) != ending(path):
+        raise OutputError(f"{what} '{path}' is a symbolic link to '{target}', whose name does not end in "
+                          f"{ending(path)}: springflat does not write over it")
+
+
 def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = None, typed: bool = True,
                       ending_hint: str = "") -> None:
     """Fail early (before a long run) on an output path that cannot work.
 
-    Besides the suffix (of the name, and of a symbolic link's target: a link to a mesh is refused) and the
-    directory, this refuses a path that exists and is
+    Besides the suffix and the directory, this refuses a path that exists and is
     not a regular file (a symbolic link counts as its target) or that the user
     may not write, and creates and removes a temporary file where
     :func:`atomic_write` will, so that a directory without write permission or a
@@ -207,9 +221,6 @@ def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = 
         if not parent.is_dir():
             raise OutputError(f"{what} '{path}': '{parent}' is not a directory")
         _refuse_special(target, path, what)
-        if suffixes and path.is_symlink() and target.suffix.lower() not in suffixes:  # a link to a mesh, say
-            raise OutputError(f"{what} '{path}' is a symbolic link to '{target}', which does not end in "
-                              f"{' or '.join(suffixes)}: springflat does not write over it")
         os.unlink(_make_temporary(parent, target.name))
     except OSError as exc:
         raise OutputWriteError(path, exc, what) from None

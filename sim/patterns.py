@@ -107,6 +107,13 @@ def kind_or_none(path: Path | str) -> str | None:
         return None
 
 
+def pattern_ending(path: Path | str) -> str | None:
+    """The ending that names ``path``'s pattern kind (``.pdf``, ``.flat.obj``), ``None`` for a name no pattern
+    has: what a symbolic link's target must share with the link (:func:`sim.outputs.check_output_path`)."""
+    kind = kind_or_none(path)
+    return None if kind is None else "." + kind
+
+
 def on_sheets(path: Path | str) -> bool:
     """Whether ``path`` (or a batch's ending) names a pattern drawn on paper sheets, ``--paper``'s:
     ``.pdf`` or ``.svg``, not ``.flat.svg``."""

@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from golden_model.fixed.engine import check_fixed_params, prepare
+from golden_model.fixed.engine import check_fixed_params, prepare, scale_mesh
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, check_engine_params
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
@@ -58,7 +58,7 @@ def add_parser(sub, add_run_options) -> None:
 def cmd_rtl_check(args: argparse.Namespace) -> int:
     from hdl import SpringflatCore
 
-    from .outputs import check_distinct, check_output_path
+    from .outputs import check_distinct, check_link_target, check_output_path
     from .run_options import (UserError, default_init, input_files, load_format_set, params_from_args, resolve_mesh,
                               strict_json)
 
@@ -71,6 +71,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     if args.waves is not None:  # before any build or run: a path that cannot take the waveform is one line
         check_output_path(args.waves, "--waves", (WAVE_SUFFIX[args.sim],))  # the format the simulator writes
         check_distinct([("--waves", args.waves)], input_files(args))
+        check_link_target(args.waves, "--waves")
     load_format_set(args.formats)  # a formats file that cannot work is refused before the run mode
     check_engine_params(params)
     if params.guard and not args.engine_top:
@@ -92,6 +93,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         raise UserError(f"--stall must be in [0, 1), got {stall}")
     formats = load_format_set(args.formats)
     check_fixed_params(params, formats)
+    scale_mesh(mesh, params, formats)  # what no layout changes, before the start is computed
     prepare(mesh, _initial_layout(mesh, args.init), params, formats)  # refuses what the formats cannot hold
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())
     init_spec = args.init if args.init in LAYOUT_METHODS + (AUTO_START,) else str(Path(args.init).resolve())
@@ -185,6 +187,8 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats)  # one line for what the register map cannot hold
     check_fixed_params(params, formats)
+    scale_mesh(mesh, params, formats)  # what no layout changes is refused before the start is computed
+    capacity.check(mesh.n_vertices, len(mesh.rings.neighbour), mesh.n_faces)
     # the start flatten takes: a guarded run's folded start untangled (the datapath bench has no guard)
     problem = prepare(mesh, start_positions(mesh, args.init, params, progress=False)[0], params, formats)
     image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity

@@ -38,12 +38,12 @@ from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options, forget_half_built_components
 from sim.engines import ENGINES, engine_named
-from sim.flatten_run import pattern_notes, run_flatten
+from sim.flatten_run import pattern_notes, run_flatten, run_formats
 from sim.distortion import Distortion, distortion
-from sim.outputs import (OutputError, area_ratio, check_output_path, directory_name_problem, ending_name_problem,
-                         output_target)
+from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
+                         ending_name_problem)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, kind_or_none, on_sheets,
-                          run_caption, scale_note, write_pattern_file)
+                          pattern_ending, run_caption, scale_note, write_pattern_file)
 from sim.run_options import UserError, add_run_options, params_from_args, resolve_mesh
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
@@ -322,7 +322,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         except FormatSetNotBuildable as exc:  # engine="rtl"
             forget_half_built_components(exc)
             raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
-    for note in [*run_notes, *pattern_notes(params, result, api=True)]:
+    for note in [*run_notes, *pattern_notes(params, result, api=True, formats=run_formats(args))]:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
@@ -370,13 +370,11 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         raise OutputError(f"write_pattern: dxf_edges draws the mesh's edges into a DXF pattern, not '{path}'")
     if paper is not None and not on_sheets(path):
         raise OutputError(f"write_pattern: paper is the sheet of a PDF or SVG pattern, not '{path}'")
-    try:
-        check_output_path(Path(path), "the path", typed=False)  # a missing directory, named
+    try:  # a missing directory, a link to a mesh, ... named
+        check_output_path(Path(path), "the path", typed=False)
+        check_link_target(Path(path), "the path", pattern_ending)
     except OutputError as exc:
         raise OutputError(f"write_pattern: {exc}") from None
-    if Path(path).is_symlink() and kind_or_none(target := output_target(Path(path))) != kind_or_none(path):
-        raise OutputError(f"write_pattern: the path '{path}' is a symbolic link to '{target}', which does not end in "
-                          f"{Path(path).suffix}: springflat does not write over it")  # a link to a mesh, say
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded)
     try:

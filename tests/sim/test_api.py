@@ -239,7 +239,7 @@ def test_write_pattern_does_not_write_a_pattern_through_a_link_to_a_mesh(ear, tm
     (tmp_path / "scan.obj").write_text("a mesh\n")
     (tmp_path / "link.dxf").symlink_to("scan.obj")
     with pytest.raises(springflat.OutputError, match="write_pattern: the path '.*link.dxf' is a symbolic link to "
-                                                    "'.*scan.obj', which does not end in .dxf"):
+                                                    "'.*scan.obj', whose name does not end in .dxf"):
         springflat.write_pattern(tmp_path / "link.dxf", springflat.flatten(V, F, max_iter=1))
     assert (tmp_path / "scan.obj").read_text() == "a mesh\n"
 
@@ -469,7 +469,7 @@ def test_a_folded_pattern_warns_in_the_apis_words():
     assert pattern.folded == 3 and notes == [
         "surf1: the pattern has 3 folded triangles, flipped over their neighbours: cut along its boundary it is not "
         "the mesh's piece; the paper dynamics does not keep triangles from folding; the momentum dynamics with its "
-        "step guard does: dynamics='momentum' (docs/guard.md)"]
+        "step guard does: dynamics='momentum' (it takes none of step, dt, damping, density; docs/guard.md)"]
 
 
 def test_write_patterns_refusals_speak_the_apis_keywords(tmp_path):
@@ -491,3 +491,20 @@ def test_write_patterns_refusals_speak_the_apis_keywords(tmp_path):
     with pytest.raises(springflat.OutputError, match="^write_pattern: units must be one of mm, cm, m, in, got 'ft'$"):
         springflat.write_pattern(tmp_path / "p.dxf", big, units="ft")
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_fixed_point_run_that_ran_away_into_its_range_warns_in_the_api_too():
+    """The fixed-point engine holds a runaway at the top of its formats (E_S just below 1) instead of diverging: the
+    API says so as the command does, where the grown-away note (E_S above 1) cannot see it."""
+    from golden_model.builtin import builtin_mesh
+
+    mesh, _ = builtin_mesh("surf1")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        pattern = springflat.flatten(mesh.vertices, mesh.faces, engine="fixed", dynamics="paper", step="fixed", dt=0.9,
+                                     max_iter=200, init="pca", name="surf1", tol_area=0, tol_shape=0, tol_energy=0,
+                                     density=2.0, spring=0.5)  # the command's Surf1: its paper parameters
+    notes = [str(w.message) for w in caught if issubclass(w.category, springflat.MeshNote)]
+    assert pattern.status == "max-iterations" and pattern.area_error < 1
+    assert any(note.startswith("surf1: format set 'default' clamped") and "E_S or E_C is at the top of its format: "
+               "the run ran away" in note for note in notes), notes

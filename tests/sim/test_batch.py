@@ -165,14 +165,14 @@ def test_a_batch_of_one_mesh_says_what_made_it_a_batch(tmp_path, monkeypatch, ca
     ("in", ["--out", ".obj"], "--out 'in/dome00.obj' is the same file as the mesh 'in/dome00.obj'"),
     ("in", ["--history", ".obj"], "--history 'in/dome00.obj' must end in .csv"),
     (".", ["--out", ".flat.obj"], "--out 'dome00.flat.obj' is the same file as the mesh 'in/dome00.obj'"),
-    ("linked", ["--out", ".obj"], "--out 'linked/dome01.obj' is the same file as the mesh 'in/dome00.obj'"),
+    ("linked", ["--out", ".pdf"], "--out 'linked/dome00.pdf' is the same file as the mesh 'in/dome01.off'"),
 ])
 def test_no_output_of_a_batch_replaces_one_of_its_meshes(tmp_path, monkeypatch, capsys, out_dir, args, message):
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "in", 2, 0)
     os.link("in/dome00.obj", "dome00.flat.obj")  # a mesh that is another's output name, by a hard link
     os.mkdir("linked")
-    os.symlink("../in/dome00.obj", "linked/dome01.obj")  # a namesake in --out-dir that links to a mesh
+    os.symlink("../in/dome01.off", "linked/dome00.pdf")  # a namesake in --out-dir that links to a mesh
     before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
     assert main(["flatten", "in/dome00.obj", "in/dome01.off", "dome00.flat.obj", "--max-iter", "3",
                  "--out-dir", out_dir, *args]) == 2

@@ -585,12 +585,14 @@ def test_what_the_mesh_alone_cannot_run_is_refused_before_the_start_is_computed(
     assert not (tmp_path / "o.dxf").exists()
 
 
-@pytest.mark.parametrize("option, link, target", [("--out", "pattern.dxf", "scan.ply"), ("--history", "h.csv", "m.obj"),
+@pytest.mark.parametrize("option, link, target", [("--out", "pattern.dxf", "scan.ply"), ("--out", "p.pdf", "scan.obj"),
+                                                  ("--out", "q.flat.obj", "scan.obj"), ("--history", "h.csv", "m.obj"),
                                                   ("--plot", "p.png", "new.stl")])
 def test_an_output_that_links_to_a_file_of_another_kind_is_refused_and_the_file_kept(tmp_path, monkeypatch, capsys,
                                                                                       option, link, target):
     """A symbolic link named like a pattern but pointing at a mesh (existing, or not yet: the link would create it)
-    is refused: the link's name passed the suffix check, and the mesh behind it would have become a DXF."""
+    is refused: the link's name passed the suffix check, and the mesh behind it would have become a PDF. A
+    ``.pdf`` link to an ``.obj`` passes a suffix check (.obj is a pattern's ending too): the endings must match."""
     from sim.cli import main
 
     monkeypatch.chdir(tmp_path)
@@ -599,13 +601,21 @@ def test_an_output_that_links_to_a_file_of_another_kind_is_refused_and_the_file_
     os.symlink(target, link)
     extra = [] if option == "--out" else ["--out", "o.obj"]
     assert main(["flatten", "surf1", "--max-iter", "3", *extra, option, link]) == 2
+    ending = ".flat.obj" if link.endswith(".flat.obj") else Path(link).suffix
     assert capsys.readouterr().err == (f"springflat: error: {option} '{link}' is a symbolic link to '{tmp_path / target}'"
-                                       f", which does not end in {SUFFIXES[option]}: springflat does not write over it\n")
+                                       f", whose name does not end in {ending}: springflat does not write over it\n")
     assert (Path(target).read_text() == "a mesh\n") if target != "new.stl" else not Path(target).exists()
     assert not Path("o.obj").exists()
 
 
-SUFFIXES = {"--out": ".dxf or .pdf or .svg or .obj", "--history": ".csv", "--plot": ".png"}
+def test_an_output_linking_to_a_file_of_its_kind_is_written_through(tmp_path, monkeypatch):
+    from sim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    Path("old.pdf").write_text("an old pattern\n")
+    os.symlink("old.pdf", "p.pdf")
+    assert main(["flatten", "surf1", "--max-iter", "3", "--out", "p.pdf"]) == 0
+    assert Path("p.pdf").is_symlink() and Path("old.pdf").read_bytes().startswith(b"%PDF")
 
 
 def _ended(status="converged", folded=0, area_before=0.3, area_after=0.1):
@@ -622,6 +632,12 @@ def _ended(status="converged", folded=0, area_before=0.3, area_after=0.1):
     (["--no-guard"], True, "the step guard keeps every triangle from folding: guard=True"),
     (["--dynamics", "paper"], False, "the momentum dynamics with its step guard does: --dynamics momentum"),
     (["--dynamics", "paper"], True, "the momentum dynamics with its step guard does: dynamics='momentum'"),
+    # the guard refuses the penalty, and the momentum dynamics the paper dynamics' options: the remedy says so
+    (["--dynamics", "paper", "--penalty"], False, "--dynamics momentum without --penalty (it takes none of --step, "
+                                                  "--dt, --damping, --density"),
+    (["--dynamics", "paper", "--penalty"], True, "dynamics='momentum', penalty=False (it takes none of step, dt,"),
+    (["--no-guard", "--penalty"], False, "drop --no-guard and --penalty"),
+    (["--no-guard", "--penalty"], True, "guard=True and penalty=False"),
 ])
 def test_a_folded_pattern_is_said_with_what_keeps_triangles_from_folding(mode, api, remedy):
     from golden_model.params import FlattenParams
@@ -675,7 +691,7 @@ def test_rtl_check_with_its_simulator_missing_says_so_before_anything(tmp_path, 
 
 
 def test_rtl_check_engine_top_refuses_stall_whatever_its_value(tmp_path, monkeypatch, capsys):
-    """--stall 0 was taken silently with --engine-top while --stall 0.1 was refused: any --stall is refused."""
+    """The engine bench has no stall option (it has --wait-states): any --stall, 0 included, is refused."""
     from sim.cli import main
 
     monkeypatch.chdir(tmp_path)
