@@ -11,34 +11,20 @@ elaborated RTLIL; the measured synthesis tables are rows of ``docs/results/synth
 
 from __future__ import annotations
 
-import gc
 import re
-import warnings
 from functools import cache
 from pathlib import Path
-from typing import Callable, TypeVar
 
 from golden_model.fixed import FORMAT_FIELDS, FormatSet
 
+from .export import quietly
+
 #: The presets the docs tabulate: every one (``golden_model/data/formats``).
 PRESETS = tuple(FormatSet.presets())
-T = TypeVar("T")
 
 
 def _preset(name: str) -> FormatSet:
     return FormatSet.preset(name)
-
-
-def _quietly(read: Callable[[], T]) -> T:
-    """``read()``, which builds components only for their attributes (latencies, stage counts) and returns
-    plain values: the components it leaves behind are collected here, not reported as unused elaboratables."""
-    from amaranth.hdl import UnusedElaboratable
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UnusedElaboratable)
-        value = read()
-        gc.collect()
-    return value
 
 
 def _table(header: list[str], rows: list[list[object]]) -> str:
@@ -199,7 +185,7 @@ def node_update_contract() -> str:
         return (n.latency, n.credits, parts, RsqrtUnit.latency_of(fs.rsqrt_config()), StepGenerator.latency_of(fs),
                 _fs_dsp(fs))
 
-    cols = {p: _quietly(lambda: column(_preset(p))) for p in PRESETS}
+    cols = {p: quietly(lambda: column(_preset(p))) for p in PRESETS}
     rows = [["initiation interval", "1 neighbour entry per clock", 1, 1]]
     for p, (latency, _, parts, rsqrt, step, _) in cols.items():
         rows.append([f"latency, {p} preset", f"{latency} clocks ({' + '.join(map(str, parts))})", rsqrt, step])
@@ -259,7 +245,7 @@ def unit_figures() -> str:
             [str(beta.latency), "none"],
         ]
 
-    rows = {p: _quietly(lambda: column(_preset(p))) for p in PRESETS}
+    rows = {p: quietly(lambda: column(_preset(p))) for p in PRESETS}
     names = ["`RsqrtUnit`", "`StepGenerator`", "`StepGenerator`, `lut_interpolate` off", "`ForcePass`",
              "`ForcePass(energy=True)`", "`Integrator`", "`AreaError`", "`Normaliser`: `cycles(shift)`, shift from "
              "F + 2 up", f"`EnergyCheck` at {entries:,} entries", "`BetaDivider`"]
@@ -278,7 +264,7 @@ def synth_components() -> str:
 
     rows = []
     for spec in COMPONENTS:
-        info = {p: _quietly(lambda: describe(spec.build(_preset(p)), _preset(p), spec.module)) for p in PRESETS}
+        info = {p: quietly(lambda: describe(spec.build(_preset(p)), _preset(p), spec.module)) for p in PRESETS}
         rows.append([f"`{spec.module}`", info["default"]["initiation_interval"],
                      *(info[p]["latency"] for p in PRESETS), sum(port["width"] for port in info["default"]["ports"])])
     return _table(["component", "II", *(f"latency, {p}" for p in PRESETS), "port bits, default"], rows)
@@ -291,7 +277,7 @@ def _current_latency(row: dict[str, str]) -> int | None:
     if not row["latency"] or row["preset"] not in PRESETS:
         return None
     fs = _preset(row["preset"])
-    return _quietly({"rsqrt_unit": lambda: RsqrtUnit.latency_of(fs.rsqrt_config()),
+    return quietly({"rsqrt_unit": lambda: RsqrtUnit.latency_of(fs.rsqrt_config()),
                      "step_generator": lambda: StepGenerator.latency_of(fs),
                      "node_update": lambda: NodeUpdate(fs).latency,
                      "springflat_core": lambda: NodeUpdate(fs).latency,
@@ -368,7 +354,7 @@ def datapath_throughput(target: str = "ecp5") -> str:
         fs = _preset(p)
         dsp = _fs_dsp(fs)
         per_datapath = dsp["node_update"] + dsp["rsqrt"]
-        ports = _quietly(lambda: describe(NodeUpdate(fs), fs, "node_update"))["ports"]
+        ports = quietly(lambda: describe(NodeUpdate(fs), fs, "node_update"))["ports"]
         entry_bits = next(port["width"] for port in ports if port["name"] == "i__payload")
         row = measured.get(p)
         if row:

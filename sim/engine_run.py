@@ -404,7 +404,7 @@ def rtl_engine(formats: FormatSet):
 
     def engine(mesh, positions, params, on_iteration=None):
         problem = prepare(mesh, positions, params, formats)
-        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build (API callers)
+        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build, whoever calls
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
               f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running "
               "the flattening ...", file=sys.stderr)

@@ -16,12 +16,15 @@ Writes into ``--out DIR``:
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import re
 import shutil
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable, TypeVar
 
 from amaranth.hdl import Shape
 from amaranth.lib import data, wiring
@@ -34,8 +37,10 @@ from .clock import ENGINE_TARGET_MHZ
 from .lint import WAIVER_FILE, write_waivers
 from .top_names import COMPONENT_SUMMARIES, CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["COMPONENTS", "ENGINE_MODULE", "rtl_refusal", "export_verilog", "export_engine", "export_engine_bundle",
+__all__ = ["COMPONENTS", "ENGINE_MODULE", "quietly", "rtl_refusal", "export_verilog", "export_engine", "export_engine_bundle",
            "engine_capacity", "memory_image_markdown", "describe"]
+
+T = TypeVar("T")
 
 STREAM_PROTOCOL = (
     "Each stream is `valid`, `ready`, `payload` (amaranth.lib.stream): a beat transfers on a rising clock "
@@ -169,19 +174,34 @@ def describe(component, fs: FormatSet, name: str) -> dict:
     return info
 
 
+def quietly(read: Callable[[], T]) -> T:
+    """``read()``, which builds components only to look at them (latencies, stage counts, their checks) and
+    returns plain values: the components it leaves behind are collected here, not reported as unused
+    elaboratables later, wherever the garbage collector happens to run."""
+    from amaranth.hdl import UnusedElaboratable
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        value = read()
+        gc.collect()
+    return value
+
+
 def rtl_refusal(fs: FormatSet, capacity: EngineCapacity = DEFAULT_CAPACITY) -> str | None:
     """Why the RTL cannot be built with ``fs`` (every component and the engine at ``capacity`` check their
     format set as they are made, before any elaboration: a fraction of a second), ``None`` if it can."""
     from golden_model.fixed.formats_set import FormatSetNotBuildable
     from hdl.engine import SpringflatEngine
 
-    try:
-        for spec in COMPONENTS:
-            spec.build(fs)
-        SpringflatEngine(fs, capacity)
-    except FormatSetNotBuildable as exc:
-        return str(exc)
-    return None
+    def build() -> str | None:
+        try:
+            for spec in COMPONENTS:
+                spec.build(fs)
+            SpringflatEngine(fs, capacity)
+        except FormatSetNotBuildable as exc:
+            return str(exc)
+        return None
+    return quietly(build)
 
 
 def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
@@ -436,9 +456,9 @@ BUNDLE_FILES = {
     "rsqrt_seed.hex": "the rsqrt unit's seed ROM, one word per line ($readmemh); the Verilog holds the same words "
                       "inline (initial blocks), so no tool needs the file",
     "exp_table.hex": "the step generator's exp-LUT ROM, one word per line ($readmemh); also inline in the Verilog",
-    "clock.sdc": f"the clock `clk` at {ENGINE_TARGET_MHZ:g} MHz, which the engine at the default capacity meets on the "
-                 "ECP5-85F (`springflat synth` reports Fmax for your capacity; a larger one may need a slower clock), "
-                 "as SDC (Vivado's XDC takes the same line)",
+    "clock.sdc": f"the clock `clk` at {ENGINE_TARGET_MHZ:g} MHz, which the engine of the `default` format set at the "
+                 "default capacity meets on the ECP5-85F (`springflat synth` reports Fmax for yours: another format set "
+                 "or a larger capacity may need a slower clock), as SDC (Vivado's XDC takes the same line)",
     WAIVER_FILE: "Verilator lint waivers: the rules the generated Verilog breaks by construction, each with its reason",
     "README.md": "this file",
 }

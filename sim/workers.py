@@ -29,7 +29,7 @@ from .outputs import deferred_interrupts
 
 __all__ = ["WorkerPool", "usable_cores", "local_workers", "check_scheduler_address", "MAX_WORKERS_PER_CORE"]
 
-#: Local worker processes per usable core at most (``flatten --jobs``, ``study --workers``): each is a
+#: Local worker processes per usable core at most (``flatten --jobs``, ``study --jobs``): each is a
 #: Python process with numpy and the model; more would only share the cores and fill the memory.
 MAX_WORKERS_PER_CORE = 4
 

@@ -209,8 +209,9 @@ def chosen_formats(result: StudyResult) -> FormatSet | None:
     if chosen is None:
         return None
     meshes = sorted({c.mesh_name for c in result.cases})
-    how = (f"greedy word-length optimiser, cost metric {result.metric}" if _optimised(result) else
-           f"cost metric {result.metric}, among the base, the presets and the sweeps: the optimiser did not run")
+    how = (f"greedy word-length optimiser, cost metric {result.metric}" if chosen.config.kind == "optimiser" else
+           f"cost metric {result.metric}, among the base, the presets and the sweeps"
+           + ("" if _optimised(result) else ": the optimiser did not run"))
     refusal = _rtl_refusal(chosen.config.fs)
     notes = {"_": (f"Chosen by 'springflat study' ({how}) "
                    f"as the cheapest configuration meeting max |dE_S|, |dE_C| <= {result.target.error:g} vs the "
