@@ -43,7 +43,7 @@ from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write
 from .patterns import error_text, pattern_ending, pattern_kind
 from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
                           resolve_mesh, strict_json)
-from .workers import WorkerPool, local_workers
+from .workers import WorkerPool, local_workers, wait_for_one
 
 
 def add_batch_options(parser: argparse.ArgumentParser) -> None:
@@ -291,7 +291,6 @@ def _pool_outcomes(jobs: list[BatchJob], workers: int):
     others (one pool of many processes fails every task it holds when any of them dies). A pool's process is
     forked while the other pools' threads run; those threads hold only their own pool's queue locks, which the
     new process never takes (it reads its own pool's queues), so the fork cannot leave it a lock held."""
-    from concurrent.futures import FIRST_COMPLETED, wait
     from concurrent.futures.process import BrokenProcessPool
 
     queue = list(jobs)
@@ -306,7 +305,7 @@ def _pool_outcomes(jobs: list[BatchJob], workers: int):
         for _ in range(min(workers, len(queue))):
             start(pools.enter_context(WorkerPool(1)))
         while running:
-            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            done = wait_for_one(running)
             for future in done:
                 pool, job = running.pop(future)
                 try:

@@ -242,11 +242,12 @@ def slim_beside_arap(mesh: Mesh, enabled: bool) -> Iterator[Callable[[], np.ndar
             and not multiprocessing.current_process().daemon):
         yield None
         return
-    from .workers import WorkerPool
+    from .workers import WorkerPool, result_of
 
     with WorkerPool(1) as pool:
         try:
-            yield pool.submit(slim_layout, mesh).result
+            future = pool.submit(slim_layout, mesh)
+            yield lambda: result_of(future)
         finally:
             pool.stop()  # ARAP did not fold, or SLIM's layout has arrived: nothing left to wait for
 

@@ -22,12 +22,13 @@ from __future__ import annotations
 import os
 import signal
 import threading
-from concurrent.futures import Future, ProcessPoolExecutor
-from typing import Any, Callable
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import Any, Callable, Iterable
 
 from .outputs import deferred_interrupts
 
-__all__ = ["WorkerPool", "usable_cores", "local_workers", "check_scheduler_address", "MAX_WORKERS_PER_CORE"]
+__all__ = ["WorkerPool", "wait_for_one", "result_of", "usable_cores", "local_workers", "check_scheduler_address",
+           "MAX_WORKERS_PER_CORE"]
 
 #: Local worker processes per usable core at most (``flatten --jobs``, ``study --jobs``): each is a
 #: Python process with numpy and the model; more would only share the cores and fill the memory.
@@ -127,6 +128,29 @@ def _default_actions_in_the_child() -> None:
 # first instruction; the forks of a program that uses the API are left alone (its children keep its handlers).
 os.register_at_fork(before=_default_actions_for_the_fork, after_in_parent=_handlers_back_in_the_parent,
                     after_in_child=_default_actions_in_the_child)
+
+
+#: Seconds the main thread waits on its workers at a time (:func:`wait_for_one`).
+WAIT_SLICE_S = 0.2
+
+
+def wait_for_one(futures: Iterable[Future]) -> set[Future]:
+    """The futures of ``futures`` that are done, once at least one is, waited for in slices of
+    :data:`WAIT_SLICE_S`. The kernel may hand a Ctrl-C (SIGINT to the process) to any of its threads, a pool's
+    manager or feeder thread too; CPython then only notes it, and runs the Python handler when the main thread
+    next runs bytecode. A wait without a timeout would hold the main thread until a run ends (minutes): a
+    wait in slices answers the signal within one."""
+    futures = list(futures)
+    while True:
+        done, _ = wait(futures, timeout=WAIT_SLICE_S, return_when=FIRST_COMPLETED)
+        if done:
+            return done
+
+
+def result_of(future: Future) -> Any:
+    """``future.result()``, waited for as :func:`wait_for_one` waits: a Ctrl-C is answered within a slice."""
+    wait_for_one([future])
+    return future.result()
 
 
 def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> None:

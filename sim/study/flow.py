@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable, Sequence
 
@@ -20,7 +20,7 @@ from golden_model.study.knobs import (
 )
 from golden_model.study.records import AccuracyTarget, FixedOutcome, RunRecord, compare, run_fixed
 
-from ..workers import WorkerPool
+from ..workers import WorkerPool, wait_for_one
 from .cost import Cost, cost
 
 _WORKER_CASES: list[StudyCase] | None = None
@@ -231,7 +231,7 @@ class Study:
                 pending[future] = (fs, i)
             if not pending:
                 break
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            done = wait_for_one(pending)
             for fut in done:
                 fs, i = pending.pop(fut)
                 rec = self._record(fs, i, fut.result())

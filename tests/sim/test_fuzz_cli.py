@@ -1373,8 +1373,8 @@ def test_real_exit_a_hang_up_that_nohup_ignores_stays_ignored(tmp_path):
     proc = subprocess.Popen([SPRINGFLAT, "flatten", "m.obj", "n.obj", "--jobs", "2", "--out-dir", "d", "--out",
                              ".dxf", "--max-iter", "100000", "--tol-area", "0", "--tol-energy", "0", "--no-guard",
                              "--energy-window", "1"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
+                            text=True, start_new_session=True,  # SIGINT as a terminal has it, SIGHUP ignored
+                            preexec_fn=lambda: (_as_in_a_terminal(), signal.signal(signal.SIGHUP, signal.SIG_IGN)))
     try:
         ready = _past_python_start_up(proc.pid)
         start = time.monotonic()
@@ -1392,6 +1392,47 @@ def test_real_exit_a_hang_up_that_nohup_ignores_stays_ignored(tmp_path):
             proc.communicate()
     assert (proc.returncode, err.splitlines()[-1:]) == (130, ["springflat: interrupted"]), err
     assert "died" not in out, out  # no worker ended by the hang-up either
+
+
+#: ``tgkill``'s system call number, by machine: a signal to one thread of a process.
+TGKILL = {"x86_64": 234, "aarch64": 131}
+
+
+@pytest.mark.skipif(os.uname().machine not in TGKILL, reason="tgkill's number is known for x86_64 and aarch64")
+def test_real_exit_a_ctrl_c_that_a_pool_thread_receives_stops_the_batch(tmp_path):
+    """The kernel hands a process's SIGINT to any of its threads, a worker pool's manager thread too. CPython
+    runs the handler in the main thread only, which waited on the workers without a timeout: under load a Ctrl-C
+    hung the batch until its runs ended (minutes). Sent here to one thread that is not the main one. (``study``
+    waits on its pool with the same :func:`sim.workers.wait_for_one`.)"""
+    import ctypes
+    import time
+
+    from golden_model.generate import dome_grid
+    from golden_model.mesh_io import save_obj
+
+    mesh = dome_grid(64)
+    for name in ("m.obj", "n.obj"):
+        save_obj(tmp_path / name, mesh.vertices, mesh.faces)
+    proc = subprocess.Popen([SPRINGFLAT, "flatten", "m.obj", "n.obj", "--jobs", "2", "--out-dir", "d", "--out", ".dxf",
+                             "--max-iter", "100000", "--tol-area", "0", "--tol-energy", "0", "--no-guard",
+                             "--energy-window", "1"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True, preexec_fn=_as_in_a_terminal)
+    libc = ctypes.CDLL(None, use_errno=True)
+    try:
+        start = time.monotonic()
+        while not Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split():  # the workers run
+            assert time.monotonic() - start < 120 and proc.poll() is None, "the batch never started its workers"
+            time.sleep(0.1)
+        time.sleep(1.0)
+        # the pool's threads (a thread may end between the listing and the signal: the next one then)
+        others = sorted((int(t) for t in os.listdir(f"/proc/{proc.pid}/task") if int(t) != proc.pid), reverse=True)
+        assert any(libc.syscall(TGKILL[os.uname().machine], proc.pid, tid, int(signal.SIGINT)) == 0 for tid in others)
+        out, err = proc.communicate(timeout=30)  # a run alone takes minutes
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert (proc.returncode, err.splitlines()[-1:]) == (130, ["springflat: interrupted"]), err
 
 
 @pytest.mark.parametrize("after", [0.0, 0.8, 2.5])
