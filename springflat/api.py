@@ -31,6 +31,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from golden_model.fixed.formats_set import FormatSetNotBuildable
+from golden_model.fixed.measures import FixedPointError
 from golden_model.layouts import LayoutError
 from golden_model.mesh import Mesh, MeshError, oriented_mesh
 from golden_model.mesh_io import load_mesh_with_notes, save_obj
@@ -317,6 +318,8 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         run_notes: list[str] = []  # the command's notes on stderr (the start untangled, ...) are warnings here
         try:
             result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
+        except FixedPointError as exc:  # the formats cannot hold the mesh: the presets that can, by keyword
+            raise FixedPointError(_in_api_words(str(exc))) from None
         except (UserError, LayoutError) as exc:  # the command line's one line: options, or the start, refused
             raise ParameterError(str(exc)) from None
         except FormatSetNotBuildable as exc:  # engine="rtl"
@@ -387,11 +390,12 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
 
 
 def _in_api_words(message: str) -> str:
-    """A message of :mod:`sim.patterns`, whose options are the command line's (``--units m``, ``--paper a4 or
-    letter``), with ``write_pattern``'s keywords (``units='m'``, ``paper='a4' or 'letter'``)."""
-    message = re.sub(r"--(units|paper) (\w+)( or (\w+))?",
+    """A message of the command's, whose options are the command line's (``--units m``, ``--paper a4 or
+    letter``, ``--formats wide``), with the API's keywords (``units='m'``, ``paper='a4' or 'letter'``,
+    ``formats='wide'``)."""
+    message = re.sub(r"--(units|paper|formats) (\w+)( or (\w+))?",
                      lambda m: f"{m[1]}='{m[2]}'" + (f" or '{m[4]}'" if m[4] else ""), message)
-    return re.sub(r"--(units|paper)\b", r"\1", message)
+    return re.sub(r"--(units|paper|formats)\b", r"\1", message)
 
 
 def _options_doc() -> str:

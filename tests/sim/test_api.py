@@ -508,3 +508,14 @@ def test_a_fixed_point_run_that_ran_away_into_its_range_warns_in_the_api_too():
     assert pattern.status == "max-iterations" and pattern.area_error < 1
     assert any(note.startswith("surf1: format set 'default' clamped") and "E_S or E_C is at the top of its format: "
                "the run ran away" in note for note in notes), notes
+
+
+def test_a_mesh_the_formats_cannot_hold_names_the_preset_by_its_keyword():
+    """A cone's tip of 40 spokes: the default formats sum at most 32 neighbours; the API names formats='wide'."""
+    angle = 2 * np.pi * np.arange(40) / 40
+    V = np.vstack([[0.0, 0.0, 0.5], np.column_stack([np.cos(angle), np.sin(angle), np.zeros(40)])])
+    F = np.array([[0, 1 + i, 1 + (i + 1) % 40] for i in range(40)])
+    with pytest.raises(ParameterError) as info:  # a FixedPointError, which is a ParameterError
+        springflat.flatten(V, F, engine="fixed")
+    assert str(info.value) == ("a node has 40 neighbours; format set 'default' accumulates at most 32 (max_degree); "
+                               "the preset wide holds it: formats='wide'")
