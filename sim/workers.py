@@ -1,6 +1,6 @@
 """A local process pool that Ctrl-C stops at once and never leaves waiting: :class:`WorkerPool`.
 
-Ctrl-C in a terminal sends SIGINT to the whole process group, workers included.  Three things make
+Ctrl-C in a terminal sends SIGINT to the whole process group, workers included.  Four things make
 the commands that run on a pool (``study``, a ``flatten`` batch) end within a moment, with one line
 and nothing else:
 
@@ -14,7 +14,9 @@ and nothing else:
   middle of that leaves workers the executor has not recorded, blocked on its queue, and the
   program's exit waits for them for ever;
 - leaving the ``with`` block by an exception ends the workers (their runs are lost) instead of
-  waiting for the runs in flight.
+  waiting for the runs in flight;
+- the main thread waits on the workers in slices (:func:`wait_for_one`): the kernel may hand the signal
+  to a pool's thread, and CPython runs the handler in the main thread only.
 """
 
 from __future__ import annotations
