@@ -119,7 +119,7 @@ def _with_presets_hint(exc: FixedPointError, holding: list[str]) -> FixedPointEr
     if not holding:
         return exc
     hint = (f"the preset {holding[0]} holds it: --formats {holding[0]}" if len(holding) == 1 else
-            f"the presets {', '.join(holding)} hold it: --formats NAME")
+            f"the presets {', '.join(holding)} hold it: --formats {' or '.join(holding)}")
     return FixedPointError(f"{exc}; {hint}")
 
 
@@ -187,6 +187,21 @@ def overlap_note(result: FlattenResult) -> str | None:
             "(docs/guard.md)")
 
 
+def _guard_on(params: FlattenParams, api: bool = False) -> str:
+    """The options that give an unguarded run the step guard, followed literally: the guard refuses the
+    penalty, and the momentum dynamics the paper dynamics' own options (``api``: the API's keywords)."""
+    if params.dynamics == "momentum":
+        if api:
+            return "guard=True" + (", penalty=False and no penalty_gain or penalty_kappa" if params.penalty else "")
+        return "drop --no-guard" + (", --penalty, --penalty-gain and --penalty-kappa" if params.penalty else "")
+    penalty = ""
+    if params.penalty:
+        penalty = (" without penalty, penalty_gain or penalty_kappa" if api
+                   else " without --penalty, --penalty-gain or --penalty-kappa")
+    return (("dynamics='momentum'" if api else "--dynamics momentum") + penalty + " (it takes none of "
+            + ("step, dt, damping, density" if api else "--step, --dt, --damping, --density") + ")")
+
+
 def divergence_hint(params: FlattenParams) -> str:
     """What to try after a diverged run, naming only options its mode takes. A guarded run's energy never
     rises, so only numbers at the ends of their ranges overflow it (a spring constant of 1e300 on a mesh
@@ -196,13 +211,12 @@ def divergence_hint(params: FlattenParams) -> str:
     penalty = (f"the overlap penalty pushes nodes apart unchecked: try a smaller --penalty-gain than "
                f"{params.penalty_gain:g}, or drop --penalty; " if params.penalty else "")
     if params.dynamics == "momentum":
-        return (penalty + "the momentum dynamics without its guard: drop --no-guard"
-                + (" and --penalty (the guard does not take it)" if params.penalty else "")
+        return (penalty + f"the momentum dynamics without its guard: {_guard_on(params)}"
                 + "; with --spring or the mesh's size far from 1 a guarded run overflows too")
     step = "a smaller --dt" if params.step == "fixed" else "--step fixed with a small --dt"
     damping = (f"a larger --damping than {params.damping:g}" if params.damping >= DIVERGENCE_DAMPING
                else f"--damping {DIVERGENCE_DAMPING:g}")
-    return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or --dynamics momentum"
+    return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or {_guard_on(params)}"
 
 
 #: The damping :func:`divergence_hint` suggests to an undamped paper run.
@@ -222,19 +236,14 @@ def fold_note(params: FlattenParams, result: FlattenResult, api: bool = False) -
     folded = result.final.folded
     if result.status == "diverged" or not folded:
         return None
-    penalty = (" and penalty=False" if api else " and --penalty") if params.penalty else ""  # the guard refuses it
     if params.dynamics == "momentum" and params.guard:
         why = ("the step guard adds no fold, but keeps those of its start (untangling could not remove them; "
                "docs/guard.md)")
     elif params.dynamics == "momentum":
-        why = ("the step guard keeps every triangle from folding: "
-               + ("guard=True" if api else "drop --no-guard") + penalty + " (docs/guard.md)")
-    else:  # the momentum dynamics refuses the paper dynamics' own options
-        own = "step, dt, damping, density" if api else "--step, --dt, --damping, --density"
+        why = f"the step guard keeps every triangle from folding: {_guard_on(params, api)}; docs/guard.md"
+    else:
         why = ("the paper dynamics does not keep triangles from folding; the momentum dynamics with its step guard "
-               "does: " + ("dynamics='momentum'" if api else "--dynamics momentum")
-               + ((", penalty=False" if api else " without --penalty") if params.penalty else "")
-               + f" (it takes none of {own}; docs/guard.md)")
+               f"does: {_guard_on(params, api)}; docs/guard.md")
     return (f"the pattern has {folded} folded triangle{'s' if folded > 1 else ''}, flipped over their neighbours: "
             f"cut along its boundary it is not the mesh's piece; {why}")
 
@@ -250,23 +259,25 @@ def growth_note(params: FlattenParams, result: FlattenResult, api: bool = False)
             f"{RUNAWAY_FACTOR:g} times" + ("" if api else f"; {divergence_hint(params)}"))
 
 
-def saturation_note(result: FlattenResult, formats: FormatSet | None, api: bool = False) -> str | None:
-    """A fixed-point run (of format set ``formats``) that clamped values: which, and where wider formats are
-    (``api``: in the Python API's words)."""
+def saturation_note(params: FlattenParams, result: FlattenResult, formats: FormatSet | None,
+                    api: bool = False) -> str | None:
+    """A fixed-point run (of format set ``formats``) that clamped values: which, and where wider formats are;
+    one that ran away to the top of its formats: what to try instead (wider formats only move the top).
+    ``api``: in the Python API's words."""
     events = result.extra.get("saturation_events") or {}
     if not result.extra.get("saturations"):
         return None
     fields = ", ".join(f"{name} {count}" for name, count in sorted(events.items(), key=lambda item: -item[1])[:3])
-    wider = [name for name in FormatSet.presets() if _holds_more(FormatSet.preset(name), formats, events)]
+    note = (f"format set '{result.extra['formats']}' clamped {result.extra['saturations']} values to its range"
+            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's")
     final = result.final
-    at_the_top = max(final.area_error, final.shape_error) >= formats.error.max  # E_S, E_C clamped: no flattening
-    return (f"format set '{result.extra['formats']}' clamped {result.extra['saturations']} values to its range"
-            + (f" ({fields})" if fields else "") + ", which moves the result away from the float reference's"
-            + ("; E_S or E_C is at the top of its format: the run ran away (the float engine calls such a run "
-               "diverged), and the pattern is no flattening" if at_the_top else "")
-            + (f"; a format set with more integer bits holds them (presets: {', '.join(wider)}; docs/fixed-point.md)"
-               if wider else "; no preset has more integer bits there: a "
-               + ("formats=FILE" if api else "--formats FILE") + " can (docs/fixed-point.md)"))
+    if max(final.area_error, final.shape_error) >= formats.error.max:  # E_S, E_C clamped: no flattening
+        return (note + "; E_S or E_C is at the top of its format: the run ran away (the float engine calls such a "
+                "run diverged), and the pattern is no flattening" + ("" if api else f"; {divergence_hint(params)}"))
+    wider = [name for name in FormatSet.presets() if _holds_more(FormatSet.preset(name), formats, events)]
+    return (note + (f"; a format set with more integer bits holds them (presets: {', '.join(wider)}; "
+                    "docs/fixed-point.md)" if wider else "; no preset has more integer bits there: a "
+                    + ("formats=FILE" if api else "--formats FILE") + " can (docs/fixed-point.md)"))
 
 
 def _holds_more(candidate: FormatSet, formats: FormatSet, clamped: dict[str, int]) -> bool:
@@ -283,7 +294,7 @@ def pattern_notes(params: FlattenParams, result: FlattenResult, api: bool = Fals
     """What a person must know about a pattern before cutting it: grown away, folded, overlapping, or (a
     fixed-point run of ``formats``) clamped, at the top of its format where it ran away."""
     return [note for note in (growth_note(params, result, api), fold_note(params, result, api), overlap_note(result),
-                              saturation_note(result, formats, api)) if note]
+                              saturation_note(params, result, formats, api)) if note]
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:

@@ -191,9 +191,10 @@ def check_link_target(path: Path, what: str, ending: Callable[[Path], str | None
     ``.pdf`` linking to a mesh's ``.obj``): the output would be written through it over a file of another kind.
     Callers check it after :func:`check_distinct`, which names a link to an input as that input."""
     path = path if isinstance(path, Path) else Path(path)
-    if path.is_symlink() and ending(target := output_target(path)) != ending(path):
-        raise OutputError(f"{what} '{path}' is a symbolic link to '{target}', whose name does not end in "
-                          f"{ending(path)}: springflat does not write over it")
+    if path.is_symlink() and (kind := ending(target := output_target(path))) != ending(path):
+        raise OutputError(f"{what} '{path}' is a symbolic link to '{target}', a file of another kind "
+                          f"({kind or target.suffix.lower() or 'no ending'}, not {ending(path)}): springflat does not "
+                          "write over it")
 
 
 def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = None, typed: bool = True,

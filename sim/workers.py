@@ -143,6 +143,8 @@ def wait_for_one(futures: Iterable[Future]) -> set[Future]:
     next runs bytecode. A wait without a timeout would hold the main thread until a run ends (minutes): a
     wait in slices answers the signal within one."""
     futures = list(futures)
+    if not futures:
+        return set()
     while True:
         done, _ = wait(futures, timeout=WAIT_SLICE_S, return_when=FIRST_COMPLETED)
         if done:

@@ -393,8 +393,8 @@ def _in_api_words(message: str) -> str:
     """A message of the command's, whose options are the command line's (``--units m``, ``--paper a4 or
     letter``, ``--formats wide``), with the API's keywords (``units='m'``, ``paper='a4' or 'letter'``,
     ``formats='wide'``)."""
-    message = re.sub(r"--(units|paper|formats) (\w+)( or (\w+))?",
-                     lambda m: f"{m[1]}='{m[2]}'" + (f" or '{m[4]}'" if m[4] else ""), message)
+    message = re.sub(r"--(units|paper|formats) (\w+(?: or \w+)*)",
+                     lambda m: f"{m[1]}=" + " or ".join(f"'{value}'" for value in m[2].split(" or ")), message)
     return re.sub(r"--(units|paper|formats)\b", r"\1", message)
 
 

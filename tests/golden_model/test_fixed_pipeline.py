@@ -339,23 +339,27 @@ def test_cli_notes_the_saturations_of_a_run_and_the_fields_that_saturated():
 
 def test_cli_a_fixed_point_run_that_ran_away_into_its_range_says_so():
     """The fixed-point engine clamps a runaway instead of diverging: the note says E_S/E_C sit at the top of
-    their format and names only a preset with more integer bits where it clamped; no note that blames the
-    energy rule's rounding."""
+    their format and what to try against a runaway (wider formats only move the top: 'wide' ends there too);
+    no note that blames the energy rule's rounding."""
     proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "fixed", "--dynamics", "paper", "--step",
                            "fixed", "--dt", "0.9", "--max-iter", "200"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    assert "E_S or E_C is at the top of its format: the run ran away" in proc.stderr
-    assert "holds them (presets: wide;" in proc.stderr and "rounding" not in proc.stderr
+    assert ("E_S or E_C is at the top of its format: the run ran away (the float engine calls such a run diverged), "
+            "and the pattern is no flattening; the paper dynamics has no guard: try --damping 0.05, a smaller --dt, "
+            "or --dynamics momentum") in proc.stderr
+    assert "holds them" not in proc.stderr and "rounding" not in proc.stderr
 
 
 def test_cli_the_saturation_note_of_a_format_set_file(tmp_path):
-    """The note judges the set the run used, also one from a file (its name is no preset's)."""
-    DEFAULT.replace(name="mine").save(tmp_path / "mine.json")
-    proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "fixed", "--formats", tmp_path / "mine.json",
-                           "--dynamics", "paper", "--step", "fixed", "--dt", "0.9", "--max-iter", "200", "--out",
-                           tmp_path / "o.flat.obj"], capture_output=True, text=True)
+    """The note judges the set the run used, also one from a file (its name is no preset's): Surf2 clamps 66
+    values in narrow's formats (one_minus_dr, rsqrt) without running away; default and wide hold them."""
+    FormatSet.preset("narrow").replace(name="mine").save(tmp_path / "mine.json")
+    proc = subprocess.run([SPRINGFLAT, "flatten", "surf2", "--engine", "fixed", "--formats", tmp_path / "mine.json",
+                           "--out", tmp_path / "o.flat.obj"], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    assert "format set 'mine' clamped" in proc.stderr and "holds them (presets: wide;" in proc.stderr
+    assert ("format set 'mine' clamped 66 values to its range (one_minus_dr 54, rsqrt 12), which moves the result "
+            "away from the float reference's; a format set with more integer bits holds them (presets: default, "
+            "wide;") in proc.stderr
 
 
 @pytest.mark.parametrize("formats, message", [

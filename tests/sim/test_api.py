@@ -239,7 +239,7 @@ def test_write_pattern_does_not_write_a_pattern_through_a_link_to_a_mesh(ear, tm
     (tmp_path / "scan.obj").write_text("a mesh\n")
     (tmp_path / "link.dxf").symlink_to("scan.obj")
     with pytest.raises(springflat.OutputError, match="write_pattern: the path '.*link.dxf' is a symbolic link to "
-                                                    "'.*scan.obj', whose name does not end in .dxf"):
+                                                    "'.*scan.obj', a file of another kind \\(.obj, not .dxf\\)"):
         springflat.write_pattern(tmp_path / "link.dxf", springflat.flatten(V, F, max_iter=1))
     assert (tmp_path / "scan.obj").read_text() == "a mesh\n"
 
@@ -469,7 +469,7 @@ def test_a_folded_pattern_warns_in_the_apis_words():
     assert pattern.folded == 3 and notes == [
         "surf1: the pattern has 3 folded triangles, flipped over their neighbours: cut along its boundary it is not "
         "the mesh's piece; the paper dynamics does not keep triangles from folding; the momentum dynamics with its "
-        "step guard does: dynamics='momentum' (it takes none of step, dt, damping, density; docs/guard.md)"]
+        "step guard does: dynamics='momentum' (it takes none of step, dt, damping, density); docs/guard.md"]
 
 
 def test_write_patterns_refusals_speak_the_apis_keywords(tmp_path):
@@ -519,3 +519,12 @@ def test_a_mesh_the_formats_cannot_hold_names_the_preset_by_its_keyword():
         springflat.flatten(V, F, engine="fixed")
     assert str(info.value) == ("a node has 40 neighbours; format set 'default' accumulates at most 32 (max_degree); "
                                "the preset wide holds it: formats='wide'")
+
+
+def test_the_commands_option_words_become_the_apis_keywords():
+    from springflat.api import _in_api_words
+
+    assert _in_api_words("the presets default, narrow, wide hold it: --formats default or narrow or wide") == \
+        "the presets default, narrow, wide hold it: formats='default' or 'narrow' or 'wide'"
+    assert _in_api_words("check --units, print it tiled (--paper a4 or letter), or with --units m") == \
+        "check units, print it tiled (paper='a4' or 'letter'), or with units='m'"

@@ -308,7 +308,7 @@ def test_a_batch_that_writes_nothing_leaves_no_out_dir_it_made(tmp_path, monkeyp
     for name in ("dome00", "dome01"):  # each diverged mesh says where it ran away and what to try, as a single run
         assert re.search(f"springflat: note: {name}: iteration [0-9]+ ran away: a value stopped being finite, or the "
                          "layout grew .* \\(the paper dynamics has no guard: try --damping 0.05, a smaller --dt, or "
-                         "--dynamics momentum\\)", err), err
+                         "--dynamics momentum \\(it takes none of --step, --dt, --damping, --density\\)\\)", err), err
 
 
 def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):

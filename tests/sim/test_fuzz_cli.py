@@ -1072,6 +1072,10 @@ ROUND_TWO_OUTPUTS: dict[str, Case] = {
         ["--engine", "fixed", "--formats", "f.json", "--history", "h.csv"], 2,
         r"--history 'h.csv' is the same file as --formats 'f.json'", files={"f.json": _formats_json()},
         links={"h.csv": "f.json"}),
+    "history is a hard link to the formats file": Case(
+        ["--engine", "fixed", "--formats", "f.json", "--history", "h.csv"], 2,
+        r"--history 'h.csv' is the same file as --formats 'f.json'", files={"f.json": _formats_json()},
+        links={"h.csv": "hard:f.json"}),
     "out is a hard link to the mesh": Case(["--out", "h.obj"], 2, r"--out 'h.obj' is the same file as the mesh 'm.obj'",
                                            links={"h.obj": "hard:m.obj"}),
     "out is a symbolic link to the mesh": Case(["--out", "s.obj"], 2, r"--out 's.obj' is the same file as the mesh",
