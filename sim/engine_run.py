@@ -382,12 +382,6 @@ def rtl_capacity() -> EngineCapacity:
         raise UserError(f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
 
 
-def check_rtl_capacity(mesh) -> None:
-    """Refuse, in one line (:class:`FixedPointError`), a mesh over :func:`rtl_capacity`: its counts are the
-    mesh's own, so this comes before any layout work."""
-    rtl_capacity().check(mesh.n_vertices, len(mesh.rings.neighbour), mesh.n_faces)
-
-
 def rtl_engine(formats: FormatSet):
     """``--engine rtl``: the whole flattening through SpringflatEngine on Verilator (:func:`flatten_on_rtl`;
     ``sim.flatten_run.choose_engine`` has checked the parameters), at :func:`rtl_capacity`; a mesh over
@@ -404,7 +398,7 @@ def rtl_engine(formats: FormatSet):
 
     def engine(mesh, positions, params, on_iteration=None):
         problem = prepare(mesh, positions, params, formats)
-        capacity.check(mesh.n_vertices, len(problem.stream.neighbour), mesh.n_faces)  # before any build, whoever calls
+        capacity.check_mesh(mesh)  # before any build, whoever calls
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
               f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running "
               "the flattening ...", file=sys.stderr)

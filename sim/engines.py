@@ -71,9 +71,9 @@ def _rtl(args: argparse.Namespace, formats) -> RunFunction:
 
 
 def _rtl_holds(mesh) -> None:
-    from .engine_run import check_rtl_capacity
+    from .engine_run import rtl_capacity
 
-    check_rtl_capacity(mesh)
+    rtl_capacity().check_mesh(mesh)
 
 
 def _board(args: argparse.Namespace, formats) -> RunFunction:

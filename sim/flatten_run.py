@@ -17,12 +17,13 @@ from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT
 from golden_model.mesh import Mesh, boundary_crossings
+from golden_model.modes import Step
 from golden_model.params import FlattenParams
 from golden_model.reference import RUNAWAY_FACTOR
 from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
-from .engines import ENGINES, SERIAL_ENGINE_NAMES, engine_named
+from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_mesh_fits,
                        error_text, kind_or_none, on_sheets, run_caption, scale_note, write_pattern_file)
@@ -86,9 +87,10 @@ def check_options_used(args: argparse.Namespace) -> None:
         local_workers(args.jobs, "--jobs")
 
 
-def choose_engine(args: argparse.Namespace, params: FlattenParams):
+def choose_engine(args: argparse.Namespace, params: FlattenParams, mesh: Mesh):
     """The run ``--engine`` and ``--formats`` name, ``run(mesh, P0, params, on_iteration=None)``, once
-    the checks of what its formats and the engine cannot run have passed."""
+    the checks of what its formats and the engine cannot run have passed: the parameters', and the mesh's
+    whatever its layout (:func:`check_engine_holds`), before any layout work."""
     engine = engine_named(args.engine)
     check_formats_option(args)
     formats = run_formats(args)
@@ -98,6 +100,7 @@ def choose_engine(args: argparse.Namespace, params: FlattenParams):
         from golden_model.engine_spec.image import check_engine_params
 
         check_engine_params(params)
+    check_engine_holds(engine, formats, mesh, params)
     run = engine.make(args, formats)
     return _naming_presets_that_hold(run, formats) if engine.fixed_point else run
 
@@ -123,15 +126,14 @@ def _with_presets_hint(exc: FixedPointError, holding: list[str]) -> FixedPointEr
     return FixedPointError(f"{exc}; {hint}")
 
 
-def check_engine_holds(args: argparse.Namespace, mesh: Mesh, params: FlattenParams) -> None:
-    """Refuse, before any layout work, a mesh that the run's formats or engine cannot hold whatever its
-    layout: a node's degree, its edge lengths or weights in the formats (one line naming the presets that hold
-    the mesh), the engine's capacity. What depends on the layout (its extent) is checked when the run starts."""
-    engine = engine_named(args.engine)
+def check_engine_holds(engine: Engine, formats: FormatSet | None, mesh: Mesh, params: FlattenParams) -> None:
+    """Refuse a mesh that ``engine`` and its ``formats`` cannot hold whatever its layout: a node's degree, its
+    edge lengths or weights in the formats (one line naming the presets that hold the mesh), the engine's
+    capacity. What depends on the layout (its extent) is checked when the run starts."""
     if not engine.fixed_point:
         return
     try:
-        scale_mesh(mesh, params, run_formats(args))
+        scale_mesh(mesh, params, formats)
     except FixedPointError as exc:
         raise _with_presets_hint(exc, presets_holding(mesh, None, params)) from None
     if engine.check_mesh is not None:
@@ -162,8 +164,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     ARAP; ``notes``: where its notes go instead of stderr)."""
     if args.init is None:
         args.init = default_init(args.mesh)
-    engine = choose_engine(args, params)
-    check_engine_holds(args, mesh, params)
+    engine = choose_engine(args, params, mesh)
     positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
                                            notes)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
@@ -190,7 +191,7 @@ def overlap_note(result: FlattenResult) -> str | None:
 def _guard_on(params: FlattenParams, api: bool = False) -> str:
     """The options that give an unguarded run the step guard, followed literally: the guard refuses the
     penalty, and the momentum dynamics the paper dynamics' own options (``api``: the API's keywords)."""
-    if params.dynamics == "momentum":
+    if not params.mode.has_masses:  # the momentum dynamics, unguarded
         if api:
             return "guard=True" + (", penalty=False and no penalty_gain or penalty_kappa" if params.penalty else "")
         return "drop --no-guard" + (", --penalty, --penalty-gain and --penalty-kappa" if params.penalty else "")
@@ -206,14 +207,15 @@ def divergence_hint(params: FlattenParams) -> str:
     """What to try after a diverged run, naming only options its mode takes. A guarded run's energy never
     rises, so only numbers at the ends of their ranges overflow it (a spring constant of 1e300 on a mesh
     1e45 across)."""
-    if params.dynamics == "momentum" and params.guard:
+    mode = params.mode
+    if mode.guarded:
         return "the guarded run's numbers overflowed: bring --spring or the mesh's size nearer 1"
     penalty = (f"the overlap penalty pushes nodes apart unchecked: try a smaller --penalty-gain than "
                f"{params.penalty_gain:g}, or drop --penalty; " if params.penalty else "")
-    if params.dynamics == "momentum":
+    if not mode.has_masses:
         return (penalty + f"the momentum dynamics without its guard: {_guard_on(params)}"
                 + "; with --spring or the mesh's size far from 1 a guarded run overflows too")
-    step = "a smaller --dt" if params.step == "fixed" else "--step fixed with a small --dt"
+    step = "a smaller --dt" if mode.step is Step.FIXED else "--step fixed with a small --dt"
     damping = (f"a larger --damping than {params.damping:g}" if params.damping >= DIVERGENCE_DAMPING
                else f"--damping {DIVERGENCE_DAMPING:g}")
     return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or {_guard_on(params)}"
@@ -236,10 +238,10 @@ def fold_note(params: FlattenParams, result: FlattenResult, api: bool = False) -
     folded = result.final.folded
     if result.status == "diverged" or not folded:
         return None
-    if params.dynamics == "momentum" and params.guard:
+    if params.mode.guarded:
         why = ("the step guard adds no fold, but keeps those of its start (untangling could not remove them; "
                "docs/guard.md)")
-    elif params.dynamics == "momentum":
+    elif not params.mode.has_masses:
         why = f"the step guard keeps every triangle from folding: {_guard_on(params, api)}; docs/guard.md"
     else:
         why = ("the paper dynamics does not keep triangles from folding; the momentum dynamics with its step guard "

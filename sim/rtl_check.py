@@ -188,7 +188,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     capacity = engine_capacity(args.capacity, formats)  # one line for what the register map cannot hold
     check_fixed_params(params, formats)
     scale_mesh(mesh, params, formats)  # what no layout changes is refused before the start is computed
-    capacity.check(mesh.n_vertices, len(mesh.rings.neighbour), mesh.n_faces)
+    capacity.check_mesh(mesh)
     # the start flatten takes: a guarded run's folded start untangled (the datapath bench has no guard)
     problem = prepare(mesh, start_positions(mesh, args.init, params, progress=False)[0], params, formats)
     image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity

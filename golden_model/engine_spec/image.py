@@ -39,6 +39,7 @@ from ..fixed.measures import SAT, FixedPointError, Reciprocal, energy_frac_bits
 from ..fixed.format import Format, SaturationCounter, quantize, raw_range
 from ..fixed.formats_set import FormatSet
 from ..fixed.pipeline import BarrierEntries, NeighbourStream
+from ..mesh import Mesh
 
 __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
            "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "EngineImage",
@@ -114,6 +115,11 @@ class EngineCapacity:
                     f"the mesh has {count} {'neighbour entries' if name == 'entries' else name}; the engine holds "
                     f"at most {getattr(self, name)} (capacity vertices={self.vertices}, entries={self.entries}, "
                     f"triangles={self.triangles})")
+
+    def check_mesh(self, mesh: Mesh) -> None:
+        """:meth:`check` of ``mesh``'s own counts (its neighbour entries are its rings': two per edge), which
+        no layout changes: callers refuse it before computing one."""
+        self.check(mesh.n_vertices, len(mesh.rings.neighbour), mesh.n_faces)
 
 
 #: The engine's capacity unless a flow says otherwise: a 2,000-vertex patch (about 6 entries and 2

@@ -1405,9 +1405,9 @@ TGKILL = {"x86_64": 234, "aarch64": 131}
 @pytest.mark.skipif(os.uname().machine not in TGKILL, reason="tgkill's number is known for x86_64 and aarch64")
 def test_real_exit_a_ctrl_c_that_a_pool_thread_receives_stops_the_batch(tmp_path):
     """The kernel hands a process's SIGINT to any of its threads, a worker pool's manager thread too. CPython
-    runs the handler in the main thread only, which waited on the workers without a timeout: under load a Ctrl-C
-    hung the batch until its runs ended (minutes). Sent here to one thread that is not the main one. (``study``
-    waits on its pool with the same :func:`sim.workers.wait_for_one`.)"""
+    runs the handler in the main thread only, so that thread must not wait on the workers without a timeout
+    (it would hold the batch until its runs end, minutes). Sent here to one thread that is not the main one.
+    (``study`` waits on its pool with the same :func:`sim.workers.wait_for_one`.)"""
     import ctypes
     import time
 
