@@ -469,11 +469,12 @@ def check_not_interrupted() -> None:
 
 @contextmanager
 def deferred_interrupts() -> Iterator[None]:
-    """Hold SIGINT, SIGTERM and SIGHUP back for the duration of the block (a few renames), then answer them: an
-    interrupt never leaves half of a set of outputs in place.  Outside the main thread: no effect.
+    """Hold SIGINT, SIGTERM and SIGHUP back for the duration of the block (a few renames, a slice of a wait), then
+    answer them: an interrupt never leaves half of a set of outputs in place, or a lock held.  Outside the main
+    thread: no effect.
 
-    Under a command's handler (:func:`on_interrupt`) the answer is the command's (``KeyboardInterrupt``,
-    the signal noted); in a program that uses the API the signal goes to the handler that program had (a
+    Under a command's handler (:func:`on_interrupt`) the answer is the command's (its hooks run,
+    ``KeyboardInterrupt``, the signal noted); in a program that uses the API the signal goes to the handler that program had (a
     ``KeyboardInterrupt`` for Python's own SIGINT handler, its own SIGTERM handler, or the default action),
     and nothing is noted: its next write works as before."""
     if threading.current_thread() is not threading.main_thread():
@@ -498,9 +499,7 @@ def deferred_interrupts() -> Iterator[None]:
             for number in dict.fromkeys(received):
                 signal.raise_signal(number)
             return
-        _INTERRUPTED.set()
-        _RECEIVED[0] = signal.Signals(received[0])
-        raise KeyboardInterrupt
+        on_interrupt(received[0], None)  # the command's answer: its hooks too (what other threads must stop)
 
 
 @contextmanager

@@ -141,12 +141,15 @@ def wait_for_one(futures: Iterable[Future]) -> set[Future]:
     :data:`WAIT_SLICE_S`. The kernel may hand a Ctrl-C (SIGINT to the process) to any of its threads, a pool's
     manager or feeder thread too; CPython then only notes it, and runs the Python handler when the main thread
     next runs bytecode. A wait without a timeout would hold the main thread until a run ends (minutes): a
-    wait in slices answers the signal within one."""
+    wait in slices answers the signal within one, at the end of the slice. Not inside it: ``wait`` takes every
+    future's lock in turn, and a ``KeyboardInterrupt`` raised between two would leave a lock held, and the
+    thread that completes that future (a pool's, Dask's client loop) blocked on it for ever."""
     futures = list(futures)
     if not futures:
         return set()
     while True:
-        done, _ = wait(futures, timeout=WAIT_SLICE_S, return_when=FIRST_COMPLETED)
+        with deferred_interrupts():
+            done, _ = wait(futures, timeout=WAIT_SLICE_S, return_when=FIRST_COMPLETED)
         if done:
             return done
 

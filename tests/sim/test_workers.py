@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
+from concurrent.futures import Future, _base
 from concurrent.futures.process import BrokenProcessPool
 
 import pytest
 
-from sim.workers import WorkerPool
+from sim.workers import WorkerPool, wait_for_one
 
 
 def _interrupt_myself_then_answer() -> int:
@@ -149,3 +151,39 @@ def test_only_a_pools_own_workers_get_sigterms_default_action():
         signal.signal(signal.SIGTERM, before)
     assert kept == b"\x01"
     assert in_worker == repr(signal.SIG_DFL)
+
+
+@pytest.mark.parametrize("under_the_command", [False, True], ids=["python's-handler", "the-command's"])
+def test_a_ctrl_c_while_the_wait_takes_the_futures_locks_leaves_none_held(monkeypatch, under_the_command):
+    """``wait`` takes every future's lock in turn; a Ctrl-C between two must not leave one held: the thread
+    that completes that future (a pool's, Dask's client loop) would wait on it for ever, and the program with
+    it. The signal arrives here between the first lock and the second, and is answered after the slice."""
+    from sim.outputs import on_interrupt, when_interrupted
+
+    futures = [Future() for _ in range(3)]
+
+    def take_the_locks_with_a_ctrl_c_between(self):
+        first, *rest = self.futures
+        first._condition.acquire()
+        signal.raise_signal(signal.SIGINT)
+        for future in rest:
+            future._condition.acquire()
+
+    monkeypatch.setattr(_base._AcquireFutures, "__enter__", take_the_locks_with_a_ctrl_c_between)
+    monkeypatch.setattr("sim.outputs._INTERRUPTED", threading.Event())  # (the command's answer notes the signal)
+    hooks_ran = []
+    before = signal.signal(signal.SIGINT, on_interrupt if under_the_command else signal.default_int_handler)
+    try:
+        with when_interrupted(lambda: hooks_ran.append(True)), pytest.raises(KeyboardInterrupt):
+            wait_for_one(futures)
+    finally:
+        signal.signal(signal.SIGINT, before)
+    completing = [threading.Thread(target=f.set_result, args=(1,), daemon=True) for f in futures]
+    for thread in completing:
+        thread.start()
+        thread.join(5)
+    stuck = [i for i, thread in enumerate(completing) if thread.is_alive()]
+    for i in stuck:  # (freed, so the thread ends)
+        futures[i]._condition.release()
+    assert stuck == []
+    assert hooks_ran == ([True] if under_the_command else [])  # the command's hooks (Dask's quiet) still run
