@@ -271,6 +271,24 @@ def _file_mode(target: Path) -> int:
         return 0o666 & ~current_umask()
 
 
+def _keep_owner(tmp: Path, target: Path) -> None:
+    """``tmp`` takes the owner and group of the ``target`` it replaces, as far as this process may give them:
+    root gives both (a user's pattern rewritten under ``sudo`` stays the user's), another user only a group
+    it belongs to. Before the mode is set: a change of owner clears the set-user-ID and set-group-ID bits."""
+    try:
+        old, new = os.stat(target), os.stat(tmp)
+    except FileNotFoundError:
+        return
+    if (old.st_uid, old.st_gid) == (new.st_uid, new.st_gid):
+        return
+    for uid in (old.st_uid, -1):
+        try:
+            os.chown(tmp, uid, old.st_gid)
+            return
+        except OSError:  # not ours to give (or a file system without owners): the writer's
+            continue
+
+
 def _flush_to_disk(tmp: Path) -> None:
     """fsync the temporary file: a full disk or an I/O error shows now, before the rename, not later."""
     fd = os.open(tmp, os.O_RDONLY | getattr(os, "O_CLOEXEC", 0))
@@ -380,7 +398,8 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
     regular file is never replaced (:class:`OutputError`).  The temporary name
     fits wherever the target's does (:func:`temporary_name`).  The data is
     flushed to disk before the rename, so a full disk or an I/O error is
-    reported and leaves the old file as it was; a replaced file keeps its mode.
+    reported and leaves the old file as it was; a replaced file keeps its mode, and its owner and group
+    as far as this process may give them (:func:`_keep_owner`).
     Inside :func:`all_or_nothing` the rename waits for the end of that block.
     An OS error (here or in the caller's block) removes the temporary file
     and is raised as :class:`OutputWriteError` naming ``path``.
@@ -393,6 +412,7 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
         tmp = _make_temporary(target.parent if str(target.parent) else Path("."), target.name)
         yield str(tmp)
         _flush_to_disk(tmp)
+        _keep_owner(tmp, target)
         os.chmod(tmp, _file_mode(target))  # the temporary file is 0600
         pending = _PENDING.get()
         if pending is None:
@@ -655,7 +675,8 @@ def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...
     for p in files:
         destination = target / p.relative_to(build)
         destination.parent.mkdir(parents=True, exist_ok=True)
-        if destination.exists():  # a replaced file keeps its mode, as atomic_write's do; a new script stays runnable
+        if destination.exists():  # a replaced file keeps its owner and mode, as atomic_write's do; a new script stays runnable
+            _keep_owner(p, destination)
             os.chmod(p, _file_mode(destination) | (stat.S_IMODE(os.stat(p).st_mode) & 0o111))
         moves.append((p, destination, out / p.relative_to(build)))
     _put_in_place(moves, what)

@@ -1111,6 +1111,22 @@ def test_a_replaced_output_keeps_its_mode(tmp_path, monkeypatch, capsys):
     assert (tmp_path / "h.csv").stat().st_mode & 0o777 == 0o640
 
 
+@pytest.mark.skipif(os.geteuid() != 0, reason="only root may give a file to another user")
+def test_a_replaced_output_keeps_its_owner_and_group(tmp_path, monkeypatch, capsys):
+    """A user's pattern rewritten under sudo stays the user's: a 0600 file given to root could no longer be
+    read by the user it belonged to."""
+    for name in ("h.csv", "p.dxf"):
+        (tmp_path / name).write_text("old")
+        os.chown(tmp_path / name, 1234, 5678)
+        (tmp_path / name).chmod(0o600)
+    run_case(Case(["m.obj", "--max-iter", "5", "--history", "h.csv", "--out", "p.dxf"], files={"m.obj": obj()}),
+             tmp_path, monkeypatch, capsys)
+    for name in ("h.csv", "p.dxf"):
+        st = (tmp_path / name).stat()
+        assert (st.st_uid, st.st_gid, st.st_mode & 0o777) == (1234, 5678, 0o600), name
+        assert (tmp_path / name).read_text() != "old"
+
+
 @pytest.mark.parametrize("err", [errno.ENOSPC, errno.EIO])
 def test_a_write_error_is_one_line_and_leaves_the_old_file(err, tmp_path, monkeypatch, capsys):
     """Data that cannot reach the disk (a full disk, an I/O error: reported by fsync before the rename)."""
