@@ -126,8 +126,10 @@ def cmd_study(args: argparse.Namespace) -> int:
     knobs = parse_knobs(args.sweep)
     classes_swept = any(knob in SIGNAL_CLASSES for knob in knobs)
     if args.bits is not None and not classes_swept:
+        remedy = ("give --sweep frac, or a class, instead" if not knobs
+                  else "add frac, or a class, to --sweep")  # ('none' is given alone)
         raise ParameterError(f"--bits sets the fraction bits swept for each signal class; --sweep {args.sweep} "
-                             "sweeps no signal class: add frac, or a class, to --sweep")
+                             f"sweeps no signal class: {remedy}")
     target = AccuracyTarget(args.target)
     if args.max_iter is not None and args.max_iter < 1:
         raise ParameterError(f"--max-iter must be >= 1, got {args.max_iter}")

@@ -248,7 +248,7 @@ def test_parser_defaults():
     (["--sweep", "nonsense"], "--sweep"),
     (["--sweep", "none,frac"], "--sweep none,frac: 'none' sweeps nothing: give it alone, or drop it"),
     (["--sweep", "none", "--bits", "8:12"], "--bits sets the fraction bits swept for each signal class; --sweep "
-                                            "none sweeps no signal class: add frac, or a class, to --sweep"),
+                                            "none sweeps no signal class: give --sweep frac, or a class, instead"),
     (["--sweep", "lut_interpolate,rounding", "--bits", "8:12"], "--sweep lut_interpolate,rounding sweeps no signal class"),
     (["no-such-mesh"], "unknown mesh"),
     (["--base", "no/such/formats.json"], "not found"),
