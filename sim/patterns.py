@@ -402,14 +402,16 @@ def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None
                            f"{units}: {count_text(rows * cols)} {paper} sheets (at most {MAX_SHEETS}); check --units, "
                            "or write .dxf")
     if max(page) > MAX_PAGE_MM:
-        raise _page_too_large(f"the pattern is {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m", units)
+        raise _page_too_large(f"the pattern is {size[0] / 1000:.3g} x {size[1] / 1000:.3g} m", units, size)
 
 
-def _page_too_large(what: str, units: str) -> PatternError:
-    """The refusal of a ``fit`` page above :data:`MAX_PAGE_MM`, ``what`` the size that shows it."""
+def _page_too_large(what: str, units: str, size: tuple[float, float]) -> PatternError:
+    """The refusal of a ``fit`` page above :data:`MAX_PAGE_MM`, ``what`` the size that shows it; the papers it
+    suggests are those that print a pattern of ``size`` mm in at most :data:`MAX_SHEETS` sheets."""
+    tiled = [paper for paper in PAPER_MM if _sheet_count(size, paper) <= MAX_SHEETS]
+    remedy = f"print it tiled (--paper {' or '.join(tiled)}), " if tiled else ""
     return PatternError(f"{what} at 1:1 with --units {units}: a page larger than a PDF's {MAX_PAGE_MM / 1000:.3g} m "
-                        "a side (an SVG's pages are the PDF's); check --units, print it tiled (--paper a4 or "
-                        "letter), or write .dxf")
+                        f"a side (an SVG's pages are the PDF's); check --units, {remedy}or write .dxf")
 
 
 def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
@@ -422,7 +424,7 @@ def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
     if paper == "fit":  # the pattern's box holds about the mesh's area: its longer side is at least √area
         if math.sqrt(area_mm2) > MAX_PAGE_MM:
             side = math.sqrt(area_mm2) / 1000
-            raise _page_too_large(f"the mesh's area is about {side:.3g} x {side:.3g} m", units)
+            raise _page_too_large(f"the mesh's area is about {side:.3g} x {side:.3g} m", units, (side * 1000,) * 2)
         return
     page, _, window, _, _ = _grid((0.0, 0.0), paper, OVERLAP_MM)
     least = 0.5 * area_mm2 / (window[2] * window[3])
@@ -430,6 +432,12 @@ def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
         side = math.sqrt(area_mm2) / 1000
         raise PatternError(f"the mesh's area is about {side:.3g} x {side:.3g} m at 1:1 with --units {units}: more "
                            f"than {MAX_SHEETS} {paper} sheets; check --units, or write .dxf")
+
+
+def _sheet_count(size: tuple[float, float], paper: str) -> int:
+    """The sheets of ``paper`` a pattern of ``size`` mm takes (:func:`plan_sheets`)."""
+    _, _, _, rows, cols = _grid(size, paper, OVERLAP_MM)
+    return rows * cols
 
 
 def _tiles(length: float, window: float, overlap: float) -> int:

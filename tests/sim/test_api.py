@@ -483,9 +483,13 @@ def test_write_patterns_refusals_speak_the_apis_keywords(tmp_path):
         springflat.write_pattern(tmp_path / "huge.pdf", big, units="m")
     assert re.fullmatch(r"write_pattern: the pattern is .* m at 1:1 with units='m': .* a4 sheets \(at most 400\); "
                         r"check units, or write \.dxf", str(info.value)), str(info.value)
+    x, y = np.meshgrid(np.linspace(0.0, 5.5, 12), np.linspace(0.0, 1.0, 3))  # a 5.5 x 1 m strip, slightly bent
+    strip_v = np.column_stack([x.ravel(), y.ravel(), 0.01 * np.sin(x.ravel())])
+    strip_f = np.array([[r * 12 + c, r * 12 + c + 1, (r + 1) * 12 + c + 1] for r in range(2) for c in range(11)]
+                       + [[r * 12 + c, (r + 1) * 12 + c + 1, (r + 1) * 12 + c] for r in range(2) for c in range(11)])
     with pytest.raises(springflat.OutputError) as info:
-        springflat.write_pattern(tmp_path / "fit.svg", springflat.flatten(mesh.vertices * 50, mesh.faces, max_iter=3),
-                                 units="m", paper="fit")
+        springflat.write_pattern(tmp_path / "fit.svg", springflat.flatten(strip_v, strip_f, max_iter=3), units="m",
+                                 paper="fit")
     assert str(info.value).endswith("check units, print it tiled (paper='a4' or 'letter'), or write .dxf")
     assert "--" not in str(info.value)
     with pytest.raises(springflat.OutputError, match="^write_pattern: units must be one of mm, cm, m, in, got 'ft'$"):

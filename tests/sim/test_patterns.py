@@ -402,10 +402,18 @@ def test_refusals_leave_no_file(tmp_path):
     drawing = PatternDrawing.of(mesh, mesh.vertices[:, :2] * 1e4, "m")  # tens of kilometres at 1:1
     with pytest.raises(PatternError, match=f"at most {MAX_SHEETS}"):
         write_pattern_file(tmp_path / "huge.pdf", drawing)
-    for suffix in (".pdf", ".svg"):  # one page of tens of kilometres is none a viewer opens
+    xy = mesh.vertices[:, :2] - mesh.vertices[:, :2].min(axis=0)
+    strip = PatternDrawing.of(mesh, xy / xy.max(axis=0) * (5.5, 1.0), "m")  # 5.5 x 1 m: 147 a4 sheets, 150 letter
+    for suffix in (".pdf", ".svg"):  # one page of tens of kilometres is none a viewer opens, nor are 10^6 sheets
         with pytest.raises(PatternError, match=r"a page larger than a PDF's 5.08 m a side \(an SVG's pages are the "
-                                               r"PDF's\); check --units, print it"):
+                                               r"PDF's\); check --units, or write \.dxf$"):
             write_pattern_file(tmp_path / f"huge{suffix}", drawing, paper="fit")
+        with pytest.raises(PatternError, match=r"the pattern is 5.5 x 1 m .*; check --units, print it tiled "
+                                               r"\(--paper a4 or letter\), or write \.dxf$"):
+            write_pattern_file(tmp_path / f"strip{suffix}", strip, paper="fit")
+    write_pattern_file(tmp_path / "strip.pdf", strip, paper="letter")  # as suggested
+    assert (tmp_path / "strip.pdf").stat().st_size > 0
+    (tmp_path / "strip.pdf").unlink()
     astronomical = PatternDrawing.of(mesh, mesh.vertices[:, :2] * 1e150, "m")
     # (1e153 mm)² over a window of about 270 x 170 mm: some 2e301 sheets, as a count, not 302 digits
     with pytest.raises(PatternError, match=r": 2\.\de\+301 a4 sheets \(at most"):
@@ -515,8 +523,7 @@ def test_a_fit_page_beyond_a_pdfs_largest_is_refused_before_the_run(tmp_path):
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.splitlines() == ["springflat: error: the mesh's area is about 189 x 189 m at 1:1 with --units m: "
                                         "a page larger than a PDF's 5.08 m a side (an SVG's pages are the PDF's); "
-                                        "check --units, print it tiled "
-                                        "(--paper a4 or letter), or write .dxf"]
+                                        "check --units, or write .dxf"]  # (no paper prints that area in 400 sheets)
     assert list(tmp_path.iterdir()) == []
 
 
