@@ -114,7 +114,7 @@ class MeshOutcome:
 def _tell(name: str, notes: list[str | None]) -> None:
     """A batch mesh's notes on (its captured) stderr, each named by its mesh."""
     for note in filter(None, notes):
-        print(f"springflat: note: {name}: {note}", file=sys.stderr)
+        print(f"springflat: note: {printable_name(name)}: {note}", file=sys.stderr)
 
 
 def flatten_one(job: BatchJob) -> MeshOutcome:
@@ -489,11 +489,13 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
         if outcome.notes:
             sys.stderr.write(outcome.notes)
         if args.json:
-            record = {"source": outcome.source, "mesh": outcome.name, "seconds": round(outcome.seconds, 3)}
+            # names as the table prints them: a file name's undecodable bytes as \xff, not lone surrogates
+            record = {"source": printable_name(outcome.source), "mesh": printable_name(outcome.name),
+                      "seconds": round(outcome.seconds, 3)}
             record.update(outcome.summary or {})
             if outcome.failed:  # also a run that finished but whose files could not be written
                 record.update(status="failed", error=outcome.line)
-            record["files"] = [str(args.out_dir / f"{outcome.name}{e}") for e, _ in outcome.files] \
+            record["files"] = [printable_name(str(args.out_dir / f"{outcome.name}{e}")) for e, _ in outcome.files] \
                 if args.out_dir is not None and not outcome.failed else []
             say(strict_json(record))
         elif outcome.failed:

@@ -377,3 +377,25 @@ def test_a_mesh_name_with_a_dot_gets_the_kind_its_ending_names(tmp_path, monkeyp
     obj = Path("o/ear.flat.obj").read_text()
     assert sum(line.startswith("vt ") for line in obj.splitlines()) == mesh.n_vertices and " 1/1 " in obj
     assert 'id="sheet-' in Path("o/ear.flat.svg").read_text()
+
+
+def test_a_file_name_with_undecodable_bytes_is_written_one_way_in_a_batchs_notes_and_json(tmp_path, monkeypatch,
+                                                                                          capsys):
+    """As the table prints it (``\\xff``): a lone surrogate in JSON names no file a reader can open (jq reads
+    U+FFFD), and the notes said the name one way, the table another."""
+    mesh = dome_grid(5)
+    odd = os.fsdecode(b"odd\xffname")
+    save_obj(tmp_path / f"{odd}.obj", mesh.vertices * 0.5, mesh.faces)  # half a millimetre: a scale note
+    save_obj(tmp_path / "plain.obj", mesh.vertices * 100, mesh.faces)
+    monkeypatch.chdir(tmp_path)
+    assert main(["flatten", f"{odd}.obj", "plain.obj", "--out-dir", "out", "--out", ".pdf", "--max-iter", "5",
+                 "--json"]) == 0
+    out, err = capsys.readouterr()
+    records = [json.loads(line) for line in out.splitlines()]
+    odd_record = next(r for r in records if r.get("mesh", "").startswith("odd"))
+    assert odd_record["mesh"] == "odd\\xffname" and odd_record["source"] == "odd\\xffname.obj"
+    assert odd_record["files"] == [os.path.join("out", "odd\\xffname.pdf")]
+    notes = [line for line in err.splitlines() if line.startswith("springflat: note: odd")]
+    assert notes and all(line.startswith("springflat: note: odd\\xffname: ") for line in notes), err
+    assert (tmp_path / "out" / f"{odd}.pdf").is_file()  # the file itself has the name's own bytes
+    assert all("\udcff" not in line for line in [*out.splitlines(), *err.splitlines()])
