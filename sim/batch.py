@@ -214,6 +214,19 @@ def _names(meshes: list[str]) -> list[str]:
     return names
 
 
+def _check_no_two_meshes_write_one_name(meshes: list[str], names: list[str], endings: tuple[tuple[str, str], ...],
+                                        out_dir: Path) -> None:
+    """Refuse two meshes whose names and endings make one file name (``a`` with ``.flat.obj``, ``a.flat`` with
+    ``.obj``), naming both (the same-file check after this could only name the file twice)."""
+    flags = {option: flag for option, flag, _ in OUTPUT_OPTIONS}
+    writer: dict[str, str] = {}
+    for mesh, name in zip(meshes, names):
+        for option, ending in endings:
+            which = f"'{mesh}' with {flags[option]} {ending}"
+            if writer.setdefault(f"{name}{ending}", which) != which:
+                raise UserError(f"{writer[f'{name}{ending}']} and {which} would both write '{out_dir / f'{name}{ending}'}'")
+
+
 def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tuple[str, str], ...], int]:
     """Refuse what a batch cannot do, before any run; returns the endings and the worker count."""
     single = engine_named(args.engine).single
@@ -240,6 +253,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
                 pattern_kind(Path(ending))
             for name in names:  # before any run: a later mesh's obstacle must not end the batch
                 check_output_path(out_dir / f"{name}{ending}", *flags[option], typed=False)
+        _check_no_two_meshes_write_one_name(meshes, names, endings, out_dir)
         # no mesh's output may be a mesh of the batch (or the --init or --formats file), nor another's output
         check_distinct([(flags[option][0], out_dir / f"{name}{ending}") for name in names for option, ending in endings],
                        [item for mesh in meshes

@@ -399,3 +399,17 @@ def test_a_file_name_with_undecodable_bytes_is_written_one_way_in_a_batchs_notes
     assert notes and all(line.startswith("springflat: note: odd\\xffname: ") for line in notes), err
     assert (tmp_path / "out" / f"{odd}.pdf").is_file()  # the file itself has the name's own bytes
     assert all("\udcff" not in line for line in [*out.splitlines(), *err.splitlines()])
+
+
+def test_two_meshes_whose_names_and_endings_make_one_file_name_are_both_named(tmp_path, monkeypatch, capsys):
+    mesh = dome_grid(5)
+    (tmp_path / "in").mkdir()
+    for name in ("a.obj", "a.flat.obj"):
+        save_obj(tmp_path / "in" / name, mesh.vertices, mesh.faces)
+    monkeypatch.chdir(tmp_path)
+    assert main(["flatten", "in/a.obj", "in/a.flat.obj", "--out-dir", "out", "--out", ".obj", "--out",
+                 ".flat.obj"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "springflat: error: 'in/a.obj' with --out .flat.obj and 'in/a.flat.obj' with --out .obj would both write "
+        f"'{os.path.join('out', 'a.flat.obj')}'"]
+    assert not (tmp_path / "out").exists()
