@@ -296,7 +296,26 @@ def pattern_notes(params: FlattenParams, result: FlattenResult, api: bool = Fals
     """What a person must know about a pattern before cutting it: grown away, folded, overlapping, or (a
     fixed-point run of ``formats``) clamped, at the top of its format where it ran away."""
     return [note for note in (growth_note(params, result, api), fold_note(params, result, api), overlap_note(result),
-                              saturation_note(params, result, formats, api)) if note]
+                              saturation_note(params, result, formats, api), still_note(params, result, formats, api))
+            if note]
+
+
+def still_note(params: FlattenParams, result: FlattenResult, formats: FormatSet | None,
+               api: bool = False) -> str | None:
+    """A fixed-point run (of ``formats``) that stopped with the energy it started with, to the bit: its steps
+    rounded to no move (the paper dynamics starts from rest, its first moves ½Δt²·F/m), so the relative
+    energy change was 0 and the stop rule held while the float run would go on. The run's words are true
+    (the layout no longer changes) but the pattern is its start."""
+    energy = np.asarray(result.history.energy)
+    if formats is None or result.status != "converged" or len(energy) < 2 or not np.all(energy == energy[0]):
+        return None
+    float_engine = "engine='float'" if api else "--engine float"
+    momentum = (f"; the momentum dynamics does not start from rest: {_guard_on(params, api)}"
+                if params.mode.has_masses else "")
+    return (f"the run stopped without changing the layout's energy: its steps round to no move in the "
+            f"{formats.position.frac_bits} fraction bits of the positions (format set '{formats.name}'), so the "
+            f"stop rule held at once, and the pattern is its start; the float engine moves it ({float_engine}), "
+            f"if slowly where E_S and E_C are small{momentum}")
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:

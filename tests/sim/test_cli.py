@@ -682,6 +682,49 @@ def test_a_layout_grown_away_from_the_mesh_is_said_though_it_did_not_run_away(ca
                      "of --step, --dt, --damping, --density)"]
 
 
+def _gently_curved_grid(n: int = 6):
+    """An n x n grid on the unit square, bent by 0.3·(x-½)² + 0.2·(y-½)²: nearly developable, so from its PCA
+    start the paper's variable step is small (E_S 0.02, E_C 0.01)."""
+    x, y = (a.ravel() for a in np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n)))
+    vertices = np.column_stack([x, y, 0.3 * (x - 0.5) ** 2 + 0.2 * (y - 0.5) ** 2])
+    a = np.array([j * n + i for j in range(n - 1) for i in range(n - 1)])
+    return vertices, np.vstack([np.column_stack([a, a + 1, a + n + 1]), np.column_stack([a, a + n + 1, a + n])])
+
+
+def test_a_fixed_point_run_whose_steps_round_to_no_move_says_its_pattern_is_its_start(tmp_path, monkeypatch, capsys):
+    """From rest the paper dynamics' first moves are ½Δt²·F/m, below the positions' last bit on this grid: the
+    energy does not change to the bit and the stop rule holds at iteration 1 ("converged") while the float run
+    goes on. The note says so, and its remedies run when followed literally."""
+    import warnings
+
+    import springflat
+    from golden_model.mesh_io import save_obj
+    from sim.cli import main
+
+    vertices, faces = _gently_curved_grid()
+    monkeypatch.chdir(tmp_path)
+    save_obj(tmp_path / "grid.obj", vertices, faces)
+    argv = ["flatten", "grid.obj", "--dynamics", "paper", "--init", "pca", "--max-iter", "50"]
+    assert main([*argv, "--engine", "fixed"]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("grid: converged after 1 iterations: E_S 0.0201 -> 0.0201")
+    notes = [line for line in err.splitlines() if "without changing" in line]
+    assert notes == ["springflat: note: the run stopped without changing the layout's energy: its steps round to no "
+                     "move in the 22 fraction bits of the positions (format set 'default'), so the stop rule held at "
+                     "once, and the pattern is its start; the float engine moves it (--engine float), if slowly where "
+                     "E_S and E_C are small; the momentum dynamics does not start from rest: --dynamics momentum (it "
+                     "takes none of --step, --dt, --damping, --density)"]
+    for remedy in (["--engine", "float"], ["--engine", "fixed", "--dynamics", "momentum"]):  # followed literally
+        assert main(["flatten", "grid.obj", "--init", "pca", "--max-iter", "50", *remedy]) == 0
+        out, err = capsys.readouterr()
+        assert "converged after 1 iterations" not in out and "without changing" not in err, remedy
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        springflat.flatten(vertices, faces, engine="fixed", dynamics="paper", init="pca", max_iter=50)
+    assert any("without changing the layout's energy" in str(w.message) and "(engine='float')" in str(w.message)
+               and "dynamics='momentum'" in str(w.message) for w in caught)
+
+
 def test_rtl_check_with_its_simulator_missing_says_so_before_anything(tmp_path, monkeypatch, capsys):
     """No 'building the model ...' line (nor the start's work) before the one line that the simulator is missing."""
     import shutil
