@@ -197,8 +197,9 @@ def run_caption(status: str, iterations: int, area_error: float, shape_error: fl
 
 
 def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFAULT_PAPER,
-                       dxf_edges: bool = False) -> None:
-    """Write ``drawing`` to ``path`` in the format its ending names (:func:`pattern_kind`)."""
+                       dxf_edges: bool = False, turn: bool = True) -> None:
+    """Write ``drawing`` to ``path`` in the format its ending names (:func:`pattern_kind`); on sheets (PDF, SVG)
+    turned where that takes fewer (:func:`turned_to_fit`; ``turn=False``: as laid)."""
     kind = pattern_kind(path)
     if paper not in PAPERS:
         raise PatternError(f"paper must be one of {', '.join(PAPERS)}, got {paper!r}")
@@ -215,6 +216,8 @@ def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFA
         with atomic_write(path) as tmp:
             _write_dxf(tmp, drawing, dxf_edges)
     else:
+        if turn:
+            drawing = turned_to_fit(drawing, paper)
         size = pattern_size_mm(drawing)
         check_sheet_count(size, paper, drawing.units)
         plan = without_blank_sheets(plan_sheets(size, paper), drawing)
@@ -360,6 +363,42 @@ def pattern_size_mm(drawing: PatternDrawing) -> tuple[float, float]:
     """Width and height of the pattern on paper at 1:1, mm."""
     extent = (drawing.layout.max(axis=0) - drawing.layout.min(axis=0)) * check_units(drawing.units)
     return float(extent[0]), float(extent[1])
+
+
+#: How much smaller a ``fit`` page must be for :func:`turned_to_fit` to turn the pattern (a share of its area).
+FIT_TURN_GAIN = 0.01
+
+
+def turned_to_fit(drawing: PatternDrawing, paper: str) -> PatternDrawing:
+    """``drawing`` turned on the sheets (a rotation about its centre, never a mirror) to the orientation whose
+    box takes the fewest sheets of ``paper`` (``fit``: the smallest page), or as it is unless turning saves a
+    sheet (``fit``: :data:`FIT_TURN_GAIN` of the page's area). The orientations tried are those of the
+    sides of the pattern's convex hull: a box of least area has a side on one (Freeman and Shapira, 1975).
+    The layout's own frame, which the DXF and the OBJs keep, is the start's: a diagonal strip lies as it was."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = drawing.layout[ConvexHull(drawing.layout).vertices]
+    except (QhullError, ValueError):  # a layout on a line has no hull (it is refused as degenerate before)
+        return drawing
+    sides = np.roll(hull, -1, axis=0) - hull
+    scale = check_units(drawing.units)
+
+    def cost(angle: float) -> tuple[float, float]:
+        c, s = math.cos(angle), math.sin(angle)
+        turned = hull @ np.array([[c, s], [-s, c]])
+        width, height = (turned.max(axis=0) - turned.min(axis=0)) * scale
+        page, _, _, rows, cols = _grid((float(width), float(height)), paper, OVERLAP_MM)
+        return (page[0] * page[1], 0.0) if paper == "fit" else (float(rows * cols), float(width * height))
+
+    angles = -np.arctan2(sides[:, 1], sides[:, 0])
+    best = min(angles, key=cost)
+    kept, turned = cost(0.0), cost(best)
+    if paper == "fit" and turned[0] > (1 - FIT_TURN_GAIN) * kept[0] or paper != "fit" and turned[0] >= kept[0]:
+        return drawing
+    c, s = math.cos(best), math.sin(best)
+    centre = (drawing.layout.max(axis=0) + drawing.layout.min(axis=0)) / 2
+    return replace(drawing, layout=(drawing.layout - centre) @ np.array([[c, s], [-s, c]]) + centre)
 
 
 def scale_note(drawing: PatternDrawing, units_option: str = "--units {}") -> str | None:

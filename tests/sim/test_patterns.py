@@ -207,7 +207,7 @@ def test_pdf_of_a_large_pattern_is_tiled_with_overlap_marks_on_letter(tmp_path):
     layout = mesh.vertices[:, [0, 1]]  # the projection: a stand-in layout, no run needed
     drawing = PatternDrawing.of(mesh, layout, "m")
     path = tmp_path / "armadillo.pdf"
-    write_pattern_file(path, drawing, paper="letter")
+    write_pattern_file(path, drawing, paper="letter", turn=False)  # the tiling as laid (turning: its own tests)
     reader = PdfReader(path)
     size = (np.ptp(layout, axis=0) * 1000.0).tolist()
     plan = plan_sheets(tuple(size), "letter")
@@ -251,7 +251,7 @@ def test_a_sheet_that_would_be_blank_is_left_out_and_said(tmp_path):
     faces = np.array([f for k in range(n - 1) for f in ((k, n + k, k + 1), (k + 1, n + k, n + k + 1))])
     mesh = Mesh(np.column_stack([vertices, np.zeros(2 * n)]), faces)
     path = tmp_path / "strip.pdf"
-    write_pattern_file(path, PatternDrawing.of(mesh, vertices, "mm"), paper="a4")
+    write_pattern_file(path, PatternDrawing.of(mesh, vertices, "mm"), paper="a4", turn=False)  # (as laid)
     plan = plan_sheets(tuple(np.ptp(vertices, axis=0).tolist()), "a4")
     assert (plan.rows, plan.cols) == (3, 3)
     reader = PdfReader(path)
@@ -314,7 +314,7 @@ def test_svg_tiles_each_sheet_as_a_page(tmp_path):
     mesh = load_mesh(SCANS / "armadillo_strip.obj")
     layout = mesh.vertices[:, [0, 1]]
     path = tmp_path / "armadillo.svg"
-    write_pattern_file(path, PatternDrawing.of(mesh, layout, "m"), paper="a4")
+    write_pattern_file(path, PatternDrawing.of(mesh, layout, "m"), paper="a4", turn=False)  # (as laid)
     root = ET.parse(path).getroot()
     pages = root.findall(f".//{INKSCAPE}page")
     plan = plan_sheets(tuple((np.ptp(layout, axis=0) * 1000.0).tolist()), "a4")
@@ -410,7 +410,7 @@ def test_refusals_leave_no_file(tmp_path):
             write_pattern_file(tmp_path / f"huge{suffix}", drawing, paper="fit")
         with pytest.raises(PatternError, match=r"the pattern is 5.5 x 1 m .*; check --units, print it tiled "
                                                r"\(--paper a4 or letter\), or write \.dxf$"):
-            write_pattern_file(tmp_path / f"strip{suffix}", strip, paper="fit")
+            write_pattern_file(tmp_path / f"strip{suffix}", strip, paper="fit", turn=False)
     write_pattern_file(tmp_path / "strip.pdf", strip, paper="letter")  # as suggested
     assert (tmp_path / "strip.pdf").stat().st_size > 0
     (tmp_path / "strip.pdf").unlink()
@@ -585,7 +585,7 @@ def test_title_block_lines_stay_on_the_page_and_clear_of_each_other_and_the_scal
                                                      "0 folded")
     drawing = PatternDrawing(**{**drawing.__dict__, "name": name})
     path = tmp_path / "p.svg"
-    write_pattern_file(path, drawing, paper=paper)
+    write_pattern_file(path, drawing, paper=paper, turn=False)  # (the page as laid)
     plan = plan_sheets(size, paper)
     assert paper != "a4" or (plan.cols, plan.rows, plan.landscape) == (2, 2, False)
     for texts, strokes in _svg_boxes(path):
@@ -599,3 +599,66 @@ def test_title_block_lines_stay_on_the_page_and_clear_of_each_other_and_the_scal
             assert not _overlap(box, scale[0]), text
             for other, other_box in texts[k + 1:]:
                 assert not _overlap(box, other_box), (text, other)
+
+
+def _diagonal_strip(angle_degrees: float, length: float = 1500.0, width: float = 150.0):
+    """A flat strip ``length`` x ``width`` mm laid at ``angle_degrees``: its mesh and layout."""
+    t = np.linspace(0.0, 1.0, 40)
+    a = math.radians(angle_degrees)
+    along = np.column_stack([t * length * math.cos(a), t * length * math.sin(a)])
+    across = np.array([-math.sin(a), math.cos(a)]) * width
+    layout = np.vstack([along, along + across])
+    n = len(t)
+    faces = np.array([f for k in range(n - 1) for f in ((k, k + 1, n + k), (k + 1, n + k + 1, n + k))])
+    return Mesh(np.column_stack([layout, np.zeros(2 * n)]), faces), layout
+
+
+@pytest.mark.parametrize("kind", ["pdf", "svg"])
+def test_a_diagonal_pattern_is_turned_on_the_sheets_to_take_fewer(tmp_path, kind):
+    """A 1.5 m x 15 cm strip laid at 35 degrees: its box as laid is 1.31 x 0.98 m, an 8 x 4 grid of A4 sheets
+    (14 printed, the blank ones left out); turned along its length it takes one row of 6 landscape ones. The
+    DXF keeps the layout's frame; the turn is a rotation (lengths kept, the front still up), never a mirror."""
+    from pypdf import PdfReader
+
+    from sim.patterns import pattern_size_mm, turned_to_fit
+
+    mesh, layout = _diagonal_strip(35.0)
+    drawing = PatternDrawing.of(mesh, layout, "mm")
+    turned = turned_to_fit(drawing, "a4")
+    width, height = sorted(pattern_size_mm(turned))
+    assert width == pytest.approx(150.0, abs=1e-6) and height == pytest.approx(1500.0, abs=1e-6)
+    edges = mesh.edges
+    assert np.allclose(np.linalg.norm(np.diff(turned.layout[edges], axis=1), axis=2),
+                       np.linalg.norm(np.diff(layout[edges], axis=1), axis=2), rtol=0, atol=1e-9)
+
+    def signed_areas(xy):
+        a, b, c = (xy[mesh.faces[:, k]] for k in range(3))
+        (ux, uy), (vx, vy) = (b - a).T, (c - a).T
+        return ux * vy - uy * vx
+
+    assert np.allclose(signed_areas(turned.layout), signed_areas(layout))  # turned, not mirrored
+    counts = {}
+    for turn in (True, False):
+        path = tmp_path / f"strip-{turn}.{kind}"
+        write_pattern_file(path, drawing, paper="a4", turn=turn)
+        counts[turn] = (len(PdfReader(path).pages) if kind == "pdf"
+                        else len(ET.parse(path).getroot().findall(f".//{INKSCAPE}page")))
+    assert counts == {True: 6, False: 14}, counts
+    write_pattern_file(tmp_path / "strip.dxf", drawing)
+    import ezdxf
+
+    cut = ezdxf.readfile(tmp_path / "strip.dxf").modelspace().query("LWPOLYLINE")[0]
+    assert np.allclose(np.array(cut.get_points("xy")), layout[mesh.boundary_loop], atol=1e-9)
+
+
+def test_a_pattern_that_turning_would_not_save_a_sheet_is_left_as_laid():
+    from sim.patterns import turned_to_fit
+
+    mesh, layout = _diagonal_strip(0.0)  # along x already: as few sheets as any turn gives
+    drawing = PatternDrawing.of(mesh, layout, "mm")
+    assert turned_to_fit(drawing, "a4") is drawing and turned_to_fit(drawing, "letter") is drawing
+    small_mesh, small = _diagonal_strip(35.0, length=150.0, width=20.0)  # one sheet either way
+    small_drawing = PatternDrawing.of(small_mesh, small, "mm")
+    assert turned_to_fit(small_drawing, "a4") is small_drawing
+    fit = turned_to_fit(PatternDrawing.of(mesh, _diagonal_strip(35.0)[1], "mm"), "fit")  # a smaller page
+    assert sorted(np.ptp(fit.layout, axis=0)) == pytest.approx([150.0, 1500.0], abs=1e-6)
