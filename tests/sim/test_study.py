@@ -375,3 +375,9 @@ def test_the_choice_says_how_it_was_made_and_whether_the_rtl_can_build_it(tmp_pa
         "s/report.md").read_text()
     assert err.startswith("springflat: note: the RTL cannot be built with s/chosen.json (the golden model runs it): "
                           f"{refusal}")
+
+
+def test_a_study_of_under_a_second_does_not_say_0_s():
+    from sim.study.cli import _seconds
+
+    assert [_seconds(t) for t in (0.43, 9.96, 12.6, 135.2)] == ["0.4 s", "10.0 s", "13 s", "135 s"]
