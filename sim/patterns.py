@@ -370,11 +370,13 @@ FIT_TURN_GAIN = 0.01
 
 
 def turned_to_fit(drawing: PatternDrawing, paper: str) -> PatternDrawing:
-    """``drawing`` turned on the sheets (a rotation about its centre, never a mirror) to the orientation whose
-    box takes the fewest sheets of ``paper`` (``fit``: the smallest page), or as it is unless turning saves a
-    sheet (``fit``: :data:`FIT_TURN_GAIN` of the page's area). The orientations tried are those of the
-    sides of the pattern's convex hull: a box of least area has a side on one (Freeman and Shapira, 1975).
-    The layout's own frame, which the DXF and the OBJs keep, is the start's: a diagonal strip lies as it was."""
+    """``drawing`` turned on the sheets (a rotation about its centre, never a mirror) along the side of its
+    convex hull whose box takes the fewest sheets of ``paper`` (``fit``: the smallest page a PDF can have), if
+    that prints fewer sheets than the layout as laid (blank ones left out; ``fit``: a page smaller by
+    :data:`FIT_TURN_GAIN` of its area, or one where the laid page is too large). A box of least area has a
+    side on the hull (Freeman and Shapira, 1975); the fewest sheets need not, so this is the best of those
+    sides, never worse than as laid. The layout's own frame, which the DXF and the OBJs keep, is the
+    start's: a diagonal strip lies as it was."""
     from scipy.spatial import ConvexHull, QhullError
 
     try:
@@ -384,21 +386,42 @@ def turned_to_fit(drawing: PatternDrawing, paper: str) -> PatternDrawing:
     sides = np.roll(hull, -1, axis=0) - hull
     scale = check_units(drawing.units)
 
-    def cost(angle: float) -> tuple[float, float]:
-        c, s = math.cos(angle), math.sin(angle)
-        turned = hull @ np.array([[c, s], [-s, c]])
-        width, height = (turned.max(axis=0) - turned.min(axis=0)) * scale
-        page, _, _, rows, cols = _grid((float(width), float(height)), paper, OVERLAP_MM)
-        return (page[0] * page[1], 0.0) if paper == "fit" else (float(rows * cols), float(width * height))
+    def box_cost(angle: float) -> tuple[float, float]:
+        """(sheets of the grid, or the fit page's area; the box's area): what the hull turned by ``angle`` takes."""
+        width, height = (np.ptp(_turned(hull, angle, 0.0), axis=0) * scale).tolist()
+        page, _, _, rows, cols = _grid((width, height), paper, OVERLAP_MM)
+        if paper == "fit":
+            return (page[0] * page[1] if max(page) <= MAX_PAGE_MM else math.inf), 0.0
+        return float(rows * cols), width * height
 
-    angles = -np.arctan2(sides[:, 1], sides[:, 0])
-    best = min(angles, key=cost)
-    kept, turned = cost(0.0), cost(best)
-    if paper == "fit" and turned[0] > (1 - FIT_TURN_GAIN) * kept[0] or paper != "fit" and turned[0] >= kept[0]:
+    best = min(-np.arctan2(sides[:, 1], sides[:, 0]), key=box_cost)
+    kept, turned = box_cost(0.0)[0], box_cost(best)[0]
+    if paper == "fit":
+        if not turned < (1 - FIT_TURN_GAIN) * kept:
+            return drawing
+        return replace(drawing, layout=_turned(drawing.layout, best, _centre(drawing.layout)))
+    if not turned < kept:
         return drawing
-    c, s = math.cos(best), math.sin(best)
-    centre = (drawing.layout.max(axis=0) + drawing.layout.min(axis=0)) / 2
-    return replace(drawing, layout=(drawing.layout - centre) @ np.array([[c, s], [-s, c]]) + centre)
+    candidate = replace(drawing, layout=_turned(drawing.layout, best, _centre(drawing.layout)))
+    return candidate if _printed_sheets(candidate, paper) < _printed_sheets(drawing, paper) else drawing
+
+
+def _centre(points: np.ndarray) -> np.ndarray:
+    return (points.max(axis=0) + points.min(axis=0)) / 2
+
+
+def _turned(points: np.ndarray, angle: float, centre) -> np.ndarray:
+    """``points`` rotated by ``angle`` (radians, anticlockwise) about ``centre``."""
+    c, s = math.cos(angle), math.sin(angle)
+    return (points - centre) @ np.array([[c, s], [-s, c]]) + centre
+
+
+def _printed_sheets(drawing: PatternDrawing, paper: str) -> float:
+    """The sheets of ``paper`` that print ``drawing`` (blank ones left out); infinite past :data:`MAX_SHEETS`."""
+    size = pattern_size_mm(drawing)
+    if _sheet_count(size, paper) > MAX_SHEETS:
+        return math.inf
+    return len(without_blank_sheets(plan_sheets(size, paper), drawing).sheets)
 
 
 def scale_note(drawing: PatternDrawing, units_option: str = "--units {}") -> str | None:

@@ -662,3 +662,46 @@ def test_a_pattern_that_turning_would_not_save_a_sheet_is_left_as_laid():
     assert turned_to_fit(small_drawing, "a4") is small_drawing
     fit = turned_to_fit(PatternDrawing.of(mesh, _diagonal_strip(35.0)[1], "mm"), "fit")  # a smaller page
     assert sorted(np.ptp(fit.layout, axis=0)) == pytest.approx([150.0, 1500.0], abs=1e-6)
+
+
+def _l_shape(arm: float, width: float, step: float = 10.0):
+    """An L of two arms ``arm`` mm long and ``width`` mm wide on a ``step`` grid: its mesh and layout."""
+    xs = np.arange(0.0, arm + step / 2, step)
+    index = {}
+    for i, x in enumerate(xs):
+        for j, y in enumerate(xs):
+            if x <= width or y <= width:
+                index[i, j] = len(index)
+    faces = []
+    for i in range(len(xs) - 1):
+        for j in range(len(xs) - 1):
+            corners = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]
+            if all(c in index for c in corners) and (xs[i + 1] <= width or xs[j + 1] <= width):
+                a, b, c, d = (index[c] for c in corners)
+                faces += [(a, b, c), (a, c, d)]
+    layout = np.array([(xs[i], xs[j]) for (i, j) in index], dtype=float)
+    return Mesh(np.column_stack([layout, np.zeros(len(layout))]), np.array(faces)), layout
+
+
+def test_a_turn_whose_grid_is_smaller_but_prints_more_sheets_is_not_taken(tmp_path):
+    """An L of two 1 m arms, 4 cm wide: turned along its hull's diagonal side its grid has 24 A4 sheets
+    against 28, but 14 of them hold some of it against 10 as laid (its empty corner is left out)."""
+    from pypdf import PdfReader
+
+    from sim.patterns import turned_to_fit
+
+    mesh, layout = _l_shape(1000.0, 40.0)
+    drawing = PatternDrawing.of(mesh, layout, "mm")
+    assert turned_to_fit(drawing, "a4") is drawing
+    write_pattern_file(tmp_path / "l.pdf", drawing, paper="a4")
+    assert len(PdfReader(tmp_path / "l.pdf").pages) == 10
+
+
+def test_a_fit_page_is_not_turned_past_the_largest_a_pdf_has(tmp_path):
+    """A 5.2 m x 10 cm strip at 45 degrees fits a 3.8 m page as laid; its smallest page, turned, would be
+    5.2 m long, past the 5.08 m a PDF can have: it is printed as laid, not refused."""
+    from pypdf import PdfReader
+
+    mesh, layout = _diagonal_strip(45.0, length=5200.0, width=100.0)
+    write_pattern_file(tmp_path / "s.pdf", PatternDrawing.of(mesh, layout, "mm"), paper="fit")
+    assert len(PdfReader(tmp_path / "s.pdf").pages) == 1
