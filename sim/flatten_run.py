@@ -300,22 +300,29 @@ def pattern_notes(params: FlattenParams, result: FlattenResult, api: bool = Fals
             if note]
 
 
+#: E_S and E_C below which a start is a flattening already (a flat patch, its errors the formats' rounding):
+#: :func:`still_note` says nothing of a run that left it as it was.
+STILL_START_ERROR = 1e-4
+
+
 def still_note(params: FlattenParams, result: FlattenResult, formats: FormatSet | None,
                api: bool = False) -> str | None:
-    """A fixed-point run (of ``formats``) that stopped with the energy it started with, to the bit: its steps
-    rounded to no move (the paper dynamics starts from rest, its first moves ½Δt²·F/m), so the relative
-    energy change was 0 and the stop rule held while the float run would go on. The run's words are true
-    (the layout no longer changes) but the pattern is its start."""
+    """A fixed-point run (of ``formats``) of the paper dynamics that stopped with the energy it started with,
+    to the bit, a nonzero one: from rest its first moves, ½Δt²·F/m, rounded to no move, so the relative
+    energy change was 0 and the stop rule held while the float run may go on. The run's words are true
+    (the layout no longer changes) but the pattern is its start. (The momentum dynamics does not start from
+    rest; a start whose E_S and E_C are below :data:`STILL_START_ERROR` is a flattening already.)"""
     energy = np.asarray(result.history.energy)
-    if formats is None or result.status != "converged" or len(energy) < 2 or not np.all(energy == energy[0]):
+    if (formats is None or not params.mode.has_masses or result.status != "converged" or len(energy) < 2
+            or max(result.initial.area_error, result.initial.shape_error) < STILL_START_ERROR
+            or not np.all(energy == energy[0])):
         return None
     float_engine = "engine='float'" if api else "--engine float"
-    momentum = (f"; the momentum dynamics does not start from rest: {_guard_on(params, api)}"
-                if params.mode.has_masses else "")
     return (f"the run stopped without changing the layout's energy: its steps round to no move in the "
             f"{formats.position.frac_bits} fraction bits of the positions (format set '{formats.name}'), so the "
-            f"stop rule held at once, and the pattern is its start; the float engine moves it ({float_engine}), "
-            f"if slowly where E_S and E_C are small{momentum}")
+            f"stop rule held at once, and the pattern is its start; the float engine, whose steps are not rounded, "
+            f"may move it ({float_engine}), if slowly where E_S and E_C are small; the momentum dynamics does not "
+            f"start from rest: {_guard_on(params, api)}")
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:

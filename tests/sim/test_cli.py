@@ -711,9 +711,9 @@ def test_a_fixed_point_run_whose_steps_round_to_no_move_says_its_pattern_is_its_
     notes = [line for line in err.splitlines() if "without changing" in line]
     assert notes == ["springflat: note: the run stopped without changing the layout's energy: its steps round to no "
                      "move in the 22 fraction bits of the positions (format set 'default'), so the stop rule held at "
-                     "once, and the pattern is its start; the float engine moves it (--engine float), if slowly where "
-                     "E_S and E_C are small; the momentum dynamics does not start from rest: --dynamics momentum (it "
-                     "takes none of --step, --dt, --damping, --density)"]
+                     "once, and the pattern is its start; the float engine, whose steps are not rounded, may move it "
+                     "(--engine float), if slowly where E_S and E_C are small; the momentum dynamics does not start "
+                     "from rest: --dynamics momentum (it takes none of --step, --dt, --damping, --density)"]
     for remedy in (["--engine", "float"], ["--engine", "fixed", "--dynamics", "momentum"]):  # followed literally
         assert main(["flatten", "grid.obj", "--init", "pca", "--max-iter", "50", *remedy]) == 0
         out, err = capsys.readouterr()
@@ -723,6 +723,12 @@ def test_a_fixed_point_run_whose_steps_round_to_no_move_says_its_pattern_is_its_
         springflat.flatten(vertices, faces, engine="fixed", dynamics="paper", init="pca", max_iter=50)
     assert any("without changing the layout's energy" in str(w.message) and "(engine='float')" in str(w.message)
                and "dynamics='momentum'" in str(w.message) for w in caught)
+    # a flat patch starts exact (energy 0): there is nothing to move, in float either, and no note
+    save_obj(tmp_path / "flat.obj", vertices * [1.0, 1.0, 0.0], faces)
+    for dynamics in ("paper", "momentum"):
+        assert main(["flatten", "flat.obj", "--dynamics", dynamics, "--init", "pca", "--engine", "fixed"]) == 0
+        out, err = capsys.readouterr()
+        assert "E_S 0.0000 -> 0.0000" in out and "without changing" not in err, dynamics
 
 
 def test_rtl_check_with_its_simulator_missing_says_so_before_anything(tmp_path, monkeypatch, capsys):
