@@ -25,7 +25,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 __all__ = ["Mesh", "MeshError", "InconsistentOrientation", "oriented_mesh", "orient_consistently",
-           "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE"]
+           "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE",
+           "printable_name", "one_line", "valid_text"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
 #: times the squared longest edge of the mesh.
@@ -71,7 +72,7 @@ def printable_name(name: str) -> str:
     """``name`` as one line of valid text, for the headers and titles of the files that carry it: the bytes
     of a file name that were not UTF-8 (Python's surrogate escapes) and control characters (a newline would
     start a record of its own in an OBJ header) as backslash escapes (``\\xff``, ``\\n``)."""
-    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in _valid_text(name))
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in valid_text(name))
 
 
 def one_line(text: str) -> str:
@@ -79,10 +80,10 @@ def one_line(text: str) -> str:
     and line or paragraph separators as backslash escapes; every other character as it is (a no-break space
     in a file name stays one, so that the name can be copied from the message)."""
     return "".join(repr(ch)[1:-1] if unicodedata.category(ch) in ("Cc", "Zl", "Zp") else ch
-                   for ch in _valid_text(text))
+                   for ch in valid_text(text))
 
 
-def _valid_text(text: str) -> str:
+def valid_text(text: str) -> str:
     """``text`` with the surrogates that stand for a file name's undecodable bytes as ``\\xff`` escapes."""
     text = str(text)
     try:

@@ -33,7 +33,7 @@ from typing import Callable, Iterator
 from golden_model.builtin import is_builtin
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS
 from golden_model.files import describe_os_error, read_file_bytes
-from golden_model.mesh import MeshError, one_line, printable_name
+from golden_model.mesh import MeshError, one_line, printable_name, valid_text
 
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
@@ -503,13 +503,14 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
         if outcome.notes:
             sys.stderr.write(outcome.notes)
         if args.json:
-            # names as the table prints them: a file name's undecodable bytes as \xff, not lone surrogates
-            record = {"source": printable_name(outcome.source), "mesh": printable_name(outcome.name),
+            # a file name's undecodable bytes as \xff, as the table prints them, not lone surrogates (which no
+            # JSON reader can turn back into a name); any other character as it is (JSON escapes its own)
+            record = {"source": valid_text(outcome.source), "mesh": printable_name(outcome.name),
                       "seconds": round(outcome.seconds, 3)}
             record.update(outcome.summary or {})
             if outcome.failed:  # also a run that finished but whose files could not be written
                 record.update(status="failed", error=outcome.line)
-            record["files"] = [printable_name(str(args.out_dir / f"{outcome.name}{e}")) for e, _ in outcome.files] \
+            record["files"] = [valid_text(str(args.out_dir / f"{outcome.name}{e}")) for e, _ in outcome.files] \
                 if args.out_dir is not None and not outcome.failed else []
             say(strict_json(record))
         elif outcome.failed:

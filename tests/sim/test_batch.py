@@ -387,14 +387,18 @@ def test_a_file_name_with_undecodable_bytes_is_written_one_way_in_a_batchs_notes
     odd = os.fsdecode(b"odd\xffname")
     save_obj(tmp_path / f"{odd}.obj", mesh.vertices * 0.5, mesh.faces)  # half a millimetre: a scale note
     save_obj(tmp_path / "plain.obj", mesh.vertices * 100, mesh.faces)
+    save_obj(tmp_path / "no\u00a0break.obj", mesh.vertices * 100, mesh.faces)  # valid text: named as it is
     monkeypatch.chdir(tmp_path)
-    assert main(["flatten", f"{odd}.obj", "plain.obj", "--out-dir", "out", "--out", ".pdf", "--max-iter", "5",
-                 "--json"]) == 0
+    assert main(["flatten", f"{odd}.obj", "plain.obj", "no\u00a0break.obj", "--out-dir", "out", "--out", ".pdf",
+                 "--max-iter", "5", "--json"]) == 0
     out, err = capsys.readouterr()
     records = [json.loads(line) for line in out.splitlines()]
     odd_record = next(r for r in records if r.get("mesh", "").startswith("odd"))
     assert odd_record["mesh"] == "odd\\xffname" and odd_record["source"] == "odd\\xffname.obj"
     assert odd_record["files"] == [os.path.join("out", "odd\\xffname.pdf")]
+    spaced = next(r for r in records if r.get("source", "").startswith("no"))
+    assert spaced["source"] == "no\u00a0break.obj" and spaced["files"] == [os.path.join("out", "no\u00a0break.pdf")]
+    assert Path(spaced["files"][0]).is_file()
     notes = [line for line in err.splitlines() if line.startswith("springflat: note: odd")]
     assert notes and all(line.startswith("springflat: note: odd\\xffname: ") for line in notes), err
     assert (tmp_path / "out" / f"{odd}.pdf").is_file()  # the file itself has the name's own bytes
