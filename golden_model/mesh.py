@@ -460,9 +460,8 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
     on_boundary = np.unique(boundary)
     n_loops = connected_components(bgraph, directed=False)[0] - (n - len(on_boundary))
     if n_loops != 1:
-        holes = n_loops - 1
-        raise MeshError(f"mesh is not a disk: it has {n_loops} boundary loops (an outer one and "
-                        f"{holes} hole{'s' if holes > 1 else ''}), expected one")
+        raise MeshError(f"mesh is not a disk: it has {n_loops} boundary loops where a disk has one (holes, or a "
+                        "tube's ends)")
     euler = n - len(edges) + len(faces)
     if euler != 1:
         raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")

@@ -189,7 +189,7 @@ def cmd_study(args: argparse.Namespace) -> int:
 
 def _seconds(seconds: float) -> str:
     """A duration as a person reads it: ``0.4 s`` (not ``0 s``), ``12 s``, ``135 s``."""
-    return f"{seconds:.1f} s" if seconds < 10 else f"{seconds:.0f} s"
+    return f"{seconds:.1f} s" if round(seconds, 1) < 10 else f"{seconds:.0f} s"
 
 
 def _fmt(x: Any, digits: int = 3) -> str:
@@ -537,5 +537,5 @@ def report_markdown(result: StudyResult, chosen_fs: FormatSet | None, command: s
     lines += ["", "## Every configuration", "", *_SUMMARY_HEAD]
     lines += [_summary_row(s) for s in result.summaries]
     lines += ["", f"Per-run details: `results.csv` (one row per configuration × case); per configuration: "
-              f"`summary.csv`. Fixed-point run time: {cpu:.0f} s summed over the runs kept.", ""]
+              f"`summary.csv`. Fixed-point run time: {_seconds(cpu)} summed over the runs kept.", ""]
     return "\n".join(lines)

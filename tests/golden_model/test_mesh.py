@@ -98,7 +98,7 @@ BAD_MESHES = {
                        "2 connected components"),
     "closed": (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float),
                np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]]), "closed"),
-    "annulus": (*_annulus(), r"2 boundary loops \(an outer one and 1 hole\)"),
+    "annulus": (*_annulus(), r"it has 2 boundary loops where a disk has one \(holes, or a tube's ends\)"),
 }
 
 

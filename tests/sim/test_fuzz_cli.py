@@ -1127,6 +1127,29 @@ def test_a_replaced_output_keeps_its_owner_and_group(tmp_path, monkeypatch, caps
         assert (tmp_path / name).read_text() != "old"
 
 
+def test_a_replaced_output_keeps_its_group_where_only_that_may_be_given(tmp_path, monkeypatch, capsys):
+    """A user who may not give a file away (not root) may still keep its group, one they belong to: the
+    owner becomes the writer's, the group stays (chown is refused here for any owner but 'unchanged')."""
+    import errno as errors
+
+    real_chown = os.chown
+    gid = os.getgid() + 1 if os.geteuid() == 0 else os.getgid()  # (as root: any group shows it kept)
+
+    def chown_as_a_user(path, uid, group):
+        if uid != -1:
+            raise PermissionError(errors.EPERM, "Operation not permitted")
+        real_chown(path, uid, group)
+
+    (tmp_path / "h.csv").write_text("old")
+    if os.geteuid() == 0:
+        real_chown(tmp_path / "h.csv", 0, gid)
+    monkeypatch.setattr(os, "chown", chown_as_a_user)
+    run_case(Case(["m.obj", "--max-iter", "5", "--history", "h.csv"], files={"m.obj": obj()}), tmp_path, monkeypatch,
+             capsys)
+    st = (tmp_path / "h.csv").stat()
+    assert (st.st_uid, st.st_gid) == (os.geteuid(), gid) and (tmp_path / "h.csv").read_text() != "old"
+
+
 @pytest.mark.parametrize("err", [errno.ENOSPC, errno.EIO])
 def test_a_write_error_is_one_line_and_leaves_the_old_file(err, tmp_path, monkeypatch, capsys):
     """Data that cannot reach the disk (a full disk, an I/O error: reported by fsync before the rename)."""

@@ -380,4 +380,4 @@ def test_the_choice_says_how_it_was_made_and_whether_the_rtl_can_build_it(tmp_pa
 def test_a_study_of_under_a_second_does_not_say_0_s():
     from sim.study.cli import _seconds
 
-    assert [_seconds(t) for t in (0.43, 9.96, 12.6, 135.2)] == ["0.4 s", "10.0 s", "13 s", "135 s"]
+    assert [_seconds(t) for t in (0.43, 9.94, 9.96, 12.6, 135.2)] == ["0.4 s", "9.9 s", "10 s", "13 s", "135 s"]
