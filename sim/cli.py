@@ -379,6 +379,8 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout = stdout
         for name, before in previous.items():
             signal.signal(getattr(signal, name), before)
+        if argv is not None:  # a caller running it in-process goes on: its own writes are not this command's
+            reset_interrupted()
 
 
 if __name__ == "__main__":

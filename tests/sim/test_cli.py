@@ -757,3 +757,29 @@ def test_rtl_check_engine_top_refuses_stall_whatever_its_value(tmp_path, monkeyp
         assert main(["rtl-check", "surf1", "--engine-top", "--stall", value]) == 2
         assert capsys.readouterr().err == ("springflat: error: --stall applies to the datapath bench; with "
                                            "--engine-top use --wait-states\n")
+
+
+def test_a_program_that_ran_a_command_in_process_and_saw_it_interrupted_can_write_after_it(tmp_path, monkeypatch):
+    """main() notes a Ctrl-C so that nothing of its command is put in place; a program that called it goes on,
+    and its own writes afterwards (the API's) are not that command's."""
+    import signal
+
+    import springflat
+    import sim.cli
+    from golden_model.builtin import builtin_mesh
+    from sim.cli import main
+
+    def interrupted(*args, **kwargs):
+        signal.raise_signal(signal.SIGINT)  # as Ctrl-C during the run: the command's handler answers it
+
+    monkeypatch.setattr(sim.cli, "run_flatten", interrupted)
+    monkeypatch.chdir(tmp_path)
+    assert main(["flatten", "surf1", "--out", "p.dxf"]) == 130
+    assert not Path("p.dxf").exists()
+    mesh, _ = builtin_mesh("surf1")
+    pattern = springflat.flatten(mesh.vertices * 100, mesh.faces, max_iter=3)  # (135 mm: no scale note)
+    try:
+        springflat.write_pattern("after.dxf", pattern)
+    except KeyboardInterrupt:  # (not raised on: it would end the test session)
+        pytest.fail("the program's own write after the command was refused as the command's interrupt")
+    assert Path("after.dxf").stat().st_size > 0
