@@ -222,9 +222,9 @@ def _check_no_two_meshes_write_one_name(meshes: list[str], names: list[str], end
     writer: dict[str, str] = {}
     for mesh, name in zip(meshes, names):
         for option, ending in endings:
-            which = f"'{mesh}' with {flags[option]} {ending}"
-            if writer.setdefault(f"{name}{ending}", which) != which:
-                raise UserError(f"{writer[f'{name}{ending}']} and {which} would both write '{out_dir / f'{name}{ending}'}'")
+            which, file = f"'{mesh}' with {flags[option]} {ending}", f"{name}{ending}"
+            if writer.setdefault(file, which) != which:
+                raise UserError(f"{writer[file]} and {which} would both write '{out_dir / file}'")
 
 
 def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tuple[str, str], ...], int]:

@@ -494,9 +494,9 @@ def deferred_interrupts() -> Iterator[None]:
     thread: no effect.
 
     Under a command's handler (:func:`on_interrupt`) the answer is the command's (its hooks run,
-    ``KeyboardInterrupt``, the signal noted); in a program that uses the API the signal goes to the handler that program had (a
-    ``KeyboardInterrupt`` for Python's own SIGINT handler, its own SIGTERM handler, or the default action),
-    and nothing is noted: its next write works as before."""
+    ``KeyboardInterrupt``, the signal noted); in a program that uses the API the signal goes to the handler
+    that program had (a ``KeyboardInterrupt`` for Python's own SIGINT handler, its own SIGTERM handler, or
+    the default action), and nothing is noted: its next write works as before."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -675,8 +675,9 @@ def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...
     for p in files:
         destination = target / p.relative_to(build)
         destination.parent.mkdir(parents=True, exist_ok=True)
-        if destination.exists():  # a replaced file keeps its owner and mode, as atomic_write's do; a new script stays runnable
+        if destination.exists():  # a replaced file keeps its owner and mode, as atomic_write's do
             _keep_owner(p, destination)
+            # (and a new script its execute bits: it stays runnable over an old copy that lost them)
             os.chmod(p, _file_mode(destination) | (stat.S_IMODE(os.stat(p).st_mode) & 0o111))
         moves.append((p, destination, out / p.relative_to(build)))
     _put_in_place(moves, what)

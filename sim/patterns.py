@@ -371,7 +371,7 @@ FIT_TURN_GAIN = 0.01
 
 def turned_to_fit(drawing: PatternDrawing, paper: str) -> PatternDrawing:
     """``drawing`` turned on the sheets (a rotation about its centre, never a mirror) along the side of its
-    convex hull whose box takes the fewest sheets of ``paper`` (``fit``: the smallest page a PDF can have), if
+    convex hull whose box takes the fewest sheets of ``paper`` (``fit``: the smallest page, within a PDF's), if
     that prints fewer sheets than the layout as laid (blank ones left out; ``fit``: a page smaller by
     :data:`FIT_TURN_GAIN` of its area, or one where the laid page is too large). A box of least area has a
     side on the hull (Freeman and Shapira, 1975); the fewest sheets need not, so this is the best of those

@@ -226,7 +226,7 @@ def test_a_file_a_directory_output_replaces_keeps_its_mode(tmp_path):
     _build(out, {"report.md": "2", "figure.png": "2", "new.csv": "2"})
     modes = {name: stat.S_IMODE(os.stat(out / name).st_mode) for name in ("report.md", "figure.png", "new.csv")}
     assert (modes["report.md"], modes["figure.png"]) == (0o600, 0o640)
-    if os.geteuid() == 0:  # (only root may give a file to another user) a user's report rewritten under sudo stays theirs
+    if os.geteuid() == 0:  # a user's report rewritten under sudo stays theirs (only root may give a file away)
         os.chown(out / "report.md", 1234, 5678)
         _build(out, {"report.md": "2"})
         assert (os.stat(out / "report.md").st_uid, os.stat(out / "report.md").st_gid) == (1234, 5678)
