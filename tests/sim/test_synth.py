@@ -335,3 +335,13 @@ def test_the_help_names_every_component_synth_takes(capsys):
     text = " ".join(capsys.readouterr().out.split())  # argparse's line wrapping undone
     for module in [c.module for c in COMPONENTS] + [ENGINE_MODULE]:
         assert f"{module}," in text or f"{module} (default" in text, module
+
+
+def test_the_engine_is_constrained_at_its_own_target_unless_freq_says_otherwise():
+    """An engine that meets its 125 MHz must not be reported as missing the components' 150 MHz."""
+    from sim.synth import DEFAULT_FREQ, ENGINE, default_freq
+
+    assert default_freq("ecp5", [ENGINE]) == 125.0
+    assert default_freq("ecp5", ["springflat_core", ENGINE]) == 125.0
+    assert default_freq("ecp5", ["springflat_core"]) == DEFAULT_FREQ["ecp5"] != 125.0
+    assert default_freq("ice40", [ENGINE]) == DEFAULT_FREQ["ice40"]
