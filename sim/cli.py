@@ -23,6 +23,7 @@ import contextlib
 import gc
 import math
 import os
+import re
 import signal
 import sys
 import threading
@@ -77,8 +78,26 @@ class _Parser(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
 
+    def parse_known_args(self, args=None, namespace=None):
+        self._argv = list(sys.argv[1:] if args is None else args)  # for error()'s hint
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str):
-        self.exit(EXIT_USAGE, f"springflat: error: {one_line(message)} (see '{self.prog} --help')\n")
+        self.exit(EXIT_USAGE, f"springflat: error: {one_line(message)}{self._dash_value_hint(message)} "
+                              f"(see '{self.prog} --help')\n")
+
+    def _dash_value_hint(self, message: str) -> str:
+        """argparse reads a value that starts with '-' and is not a plain negative number (``-4:8``, ``-1e-3``)
+        as an option, and says only "expected one argument": name the way to give it."""
+        match = re.fullmatch(r"argument (\S+): expected one argument", message)
+        if not match:
+            return ""
+        argv = getattr(self, "_argv", [])
+        for option in match.group(1).split("/"):
+            for token, value in zip(argv, argv[1:]):
+                if token == option and re.match(r"-[0-9.]", value):
+                    return f"; a value that starts with '-' is read as an option: write {option}={value}"
+        return ""
 
     def _print_message(self, message: str, file=None) -> None:
         """argparse's, without its silence on a failed write: ``--help`` or ``--version`` into a full disk

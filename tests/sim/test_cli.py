@@ -487,6 +487,28 @@ def test_an_abbreviated_option_is_not_taken_for_a_longer_one(argv, unknown, caps
         capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, hint", [
+    (["study", "--bits", "-4:8"], "write --bits=-4:8"),
+    (["flatten", "surf1", "--tol-energy", "-1e-3"], "write --tol-energy=-1e-3"),
+    (["flatten", "surf1", "--tol-energy"], None),  # no value at all: nothing to rewrite
+])
+def test_a_value_that_starts_with_a_dash_is_named_with_the_way_to_give_it(argv, hint, capsys):
+    """argparse takes ``-4:8`` (not a plain negative number) for an option and says only "expected one
+    argument"; the error says how to pass the value."""
+    from sim.cli import main
+
+    with pytest.raises(SystemExit) as stopped:
+        main(argv)
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err
+    option = next(token for token in argv if token.startswith("--"))
+    assert f"springflat: error: argument {option}: expected one argument" in err and err.count("\n") == 1
+    if hint:
+        assert f"; a value that starts with '-' is read as an option: {hint} (see" in err
+    else:
+        assert "starts with '-'" not in err
+
+
 @pytest.mark.parametrize("args", [["--out", "x\ny/z.svg"], ["--out", "z.svg\n"], ["--bogus\tflag"]],
                          ids=["a newline in a missing directory", "a name ending in a newline", "a tab"])
 def test_an_error_about_a_name_with_control_characters_is_one_line(tmp_path, args):
