@@ -350,7 +350,7 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> st
     barrier = (f", fold barrier (kappa {params.barrier_threshold:g}, mu {params.barrier_gain:g})" if params.barrier
                else "")
     penalty = ", overlap penalty" if params.penalty else ""
-    if params.dynamics == "momentum":
+    if params.mode.step is Step.MOMENTUM:
         dynamics = ("momentum dynamics, " + ("step guard" if params.guard else "no step guard")
                     + (barrier or ", no barrier") + penalty)
     else:

@@ -38,6 +38,7 @@ from golden_model.files import file_kind, resolved_parent_key, same_file_key
 from golden_model.files import describe_os_error
 from golden_model.mesh import folded_faces, signed_areas_2d, triangle_areas_3d
 from golden_model.mesh_io import save_obj
+from golden_model.modes import Step
 from golden_model.results import FlattenResult
 
 from .exit_codes import STOP_SIGNALS
@@ -1099,7 +1100,7 @@ def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str,
     ax_errors.set_xlabel("iteration", fontsize=8)
     ax_errors.set_ylabel("relative error (dotted: tolerance)", fontsize=8)
     ax_errors.tick_params(which="both", labelsize=7)
-    how = "momentum dynamics" if params.dynamics == "momentum" else f"paper dynamics, {params.step} step"
+    how = "momentum dynamics" if params.mode.step is Step.MOMENTUM else f"paper dynamics, {params.step} step"
     ax_errors.set_title(f"errors ({how})", fontsize=9)
     ax_errors.grid(alpha=0.3)
 

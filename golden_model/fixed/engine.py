@@ -86,7 +86,7 @@ class FixedProblem:
 
     @property
     def momentum(self) -> bool:
-        return self.params.dynamics == "momentum"
+        return self.params.mode.step is Step.MOMENTUM
 
     @property
     def scale(self) -> float:
@@ -221,7 +221,7 @@ def scale_mesh(mesh: Mesh, params: FlattenParams, fs: FormatSet) -> ScaledMesh:
     _refuse_zeros(rest_raw, scaled_rest, "an edge's rest length", "rest_length", fs)
     model_density = mesh.auto_density() if params.density == "auto" else float(params.density)
     inv_mass_barrier_raw = None
-    if params.dynamics == "momentum":
+    if params.mode.step is Step.MOMENTUM:
         inv_mass = node_weights(mesh, params.spring)
         inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "the weight 2/(C deg)", fs,
                                          "use a larger --spring, or a wider inv_mass format")
@@ -407,7 +407,7 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
                               "use --update jacobi")
     if params.penalty:
         raise FixedPointError("the penalty is not part of the fixed-point pipeline; drop --penalty")
-    if params.dynamics == "momentum" and fs.velocity.frac_bits != fs.position.frac_bits:
+    if params.mode.step is Step.MOMENTUM and fs.velocity.frac_bits != fs.position.frac_bits:
         raise FixedPointError(f"the momentum dynamics adds V to P directly: format set '{fs.name}' needs velocity "
                               f"({fs.velocity}) and position ({fs.position}) with the same fraction bits")
     if params.guard and fs.face_edge.frac_bits != fs.position.frac_bits:
@@ -417,9 +417,9 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
         raise FixedPointError(f"--tol-energy {params.tol_energy:g} is below the controller's resolution "
                               f"2^-{ENERGY_TOL_FRAC_BITS} ({math.ldexp(1, -ENERGY_TOL_FRAC_BITS):.3g}); use 0 or a larger value")
     finer = "choose a format set with more fraction bits for it"
-    if params.dynamics == "momentum":  # β_k = k/(k+3) goes into the Δt port: its first non-zero value
+    if params.mode.step is Step.MOMENTUM:  # β_k = k/(k+3) goes into the Δt port: its first non-zero value
         _fits("the momentum factor beta_1", 0.25, "dt", fs, finer)
-    elif params.step == "fixed":
+    elif params.mode.step is Step.FIXED:
         if params.dt > fs.dt.max or float(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) == 0:
             raise FixedPointError(f"dt {params.dt} does not fit format set '{fs.name}' ({fs.dt}: "
                                   f"{fs.dt.lsb:.3g} .. {fs.dt.max:.6g})")
