@@ -518,7 +518,10 @@ def deferred_interrupts() -> Iterator[None]:
     if received:
         if previous[received[0]] is not on_interrupt:  # a program using the API: its own handlers answer
             for number in dict.fromkeys(received):
-                signal.raise_signal(number)
+                if callable(previous[number]):  # called, not raised again: a wakeup fd (asyncio's
+                    previous[number](number, None)  # add_signal_handler) has had the signal once already
+                else:
+                    signal.raise_signal(number)  # SIG_DFL: the default action
             return
         on_interrupt(received[0], None)  # the command's answer: its hooks too (what other threads must stop)
 

@@ -5,6 +5,7 @@ is checked on the real program: tests/sim/test_fuzz_cli.py.)"""
 
 from __future__ import annotations
 
+import asyncio
 import os
 import signal
 import threading
@@ -187,3 +188,24 @@ def test_a_ctrl_c_while_the_wait_takes_the_futures_locks_leaves_none_held(monkey
         futures[i]._condition.release()
     assert stuck == []
     assert hooks_ran == ([True] if under_the_command else [])  # the command's hooks (Dask's quiet) still run
+
+
+def test_a_signal_held_through_a_slice_reaches_an_asyncio_program_once():
+    """A program that takes SIGINT through asyncio's ``add_signal_handler`` gets a signal that arrived while
+    the API held it (a slice of a wait, a set of renames) once: asyncio is told through its wakeup fd,
+    which the signal had reached already; raising it again after the slice told asyncio twice."""
+    from sim.outputs import deferred_interrupts
+
+    async def program() -> list[str]:
+        loop = asyncio.get_running_loop()
+        seen: list[str] = []
+        loop.add_signal_handler(signal.SIGINT, seen.append, "SIGINT")
+        try:
+            with deferred_interrupts():
+                signal.raise_signal(signal.SIGINT)
+            await asyncio.sleep(0.2)
+        finally:
+            loop.remove_signal_handler(signal.SIGINT)
+        return seen
+
+    assert asyncio.run(program()) == ["SIGINT"]
