@@ -216,11 +216,13 @@ def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFA
         with atomic_write(path) as tmp:
             _write_dxf(tmp, drawing, dxf_edges)
     else:
+        plan = None
         if turn:
-            drawing = turned_to_fit(drawing, paper)
+            drawing, plan = _turned_to_fit(drawing, paper)
         size = pattern_size_mm(drawing)
         check_sheet_count(size, paper, drawing.units)
-        plan = without_blank_sheets(plan_sheets(size, paper), drawing)
+        if plan is None:
+            plan = without_blank_sheets(plan_sheets(size, paper), drawing)
         with atomic_write(path) as tmp:
             (_write_pdf if kind == "pdf" else _write_svg)(tmp, drawing, plan)
 
@@ -377,12 +379,18 @@ def turned_to_fit(drawing: PatternDrawing, paper: str) -> PatternDrawing:
     side on the hull (Freeman and Shapira, 1975); the fewest sheets need not, so this is the best of those
     sides, never worse than as laid. The layout's own frame, which the DXF and the OBJs keep, is the
     start's: a diagonal strip lies as it was."""
+    return _turned_to_fit(drawing, paper)[0]
+
+
+def _turned_to_fit(drawing: PatternDrawing, paper: str) -> tuple[PatternDrawing, SheetPlan | None]:
+    """:func:`turned_to_fit`'s drawing, with its sheets where the choice counted them (else ``None``): finding
+    the blank sheets of a large pattern takes as long as the rest of its choice."""
     from scipy.spatial import ConvexHull, QhullError
 
     try:
         hull = drawing.layout[ConvexHull(drawing.layout).vertices]
     except (QhullError, ValueError):  # a layout on a line has no hull (it is refused as degenerate before)
-        return drawing
+        return drawing, None
     sides = np.roll(hull, -1, axis=0) - hull
     scale = check_units(drawing.units)
 
@@ -398,12 +406,13 @@ def turned_to_fit(drawing: PatternDrawing, paper: str) -> PatternDrawing:
     kept, turned = box_cost(0.0)[0], box_cost(best)[0]
     if paper == "fit":
         if not turned < (1 - FIT_TURN_GAIN) * kept:
-            return drawing
-        return replace(drawing, layout=_turned(drawing.layout, best, _centre(drawing.layout)))
+            return drawing, None
+        return replace(drawing, layout=_turned(drawing.layout, best, _centre(drawing.layout))), None
     if not turned < kept:
-        return drawing
+        return drawing, None
     candidate = replace(drawing, layout=_turned(drawing.layout, best, _centre(drawing.layout)))
-    return candidate if _printed_sheets(candidate, paper) < _printed_sheets(drawing, paper) else drawing
+    (turned_plan, turned_sheets), (laid_plan, laid_sheets) = (_printed_sheets(d, paper) for d in (candidate, drawing))
+    return (candidate, turned_plan) if turned_sheets < laid_sheets else (drawing, laid_plan)
 
 
 def _centre(points: np.ndarray) -> np.ndarray:
@@ -416,12 +425,14 @@ def _turned(points: np.ndarray, angle: float, centre) -> np.ndarray:
     return (points - centre) @ np.array([[c, s], [-s, c]]) + centre
 
 
-def _printed_sheets(drawing: PatternDrawing, paper: str) -> float:
-    """The sheets of ``paper`` that print ``drawing`` (blank ones left out); infinite past :data:`MAX_SHEETS`."""
+def _printed_sheets(drawing: PatternDrawing, paper: str) -> tuple[SheetPlan | None, float]:
+    """The sheets of ``paper`` that print ``drawing`` (blank ones left out) and their number; ``(None,
+    infinity)`` past :data:`MAX_SHEETS`."""
     size = pattern_size_mm(drawing)
     if _sheet_count(size, paper) > MAX_SHEETS:
-        return math.inf
-    return len(without_blank_sheets(plan_sheets(size, paper), drawing).sheets)
+        return None, math.inf
+    plan = without_blank_sheets(plan_sheets(size, paper), drawing)
+    return plan, len(plan.sheets)
 
 
 def scale_note(drawing: PatternDrawing, units_option: str = "--units {}") -> str | None:

@@ -651,6 +651,21 @@ def test_a_diagonal_pattern_is_turned_on_the_sheets_to_take_fewer(tmp_path, kind
     assert np.allclose(np.array(cut.get_points("xy")), layout[mesh.boundary_loop], atol=1e-9)
 
 
+@pytest.mark.parametrize("angle, written", [(35.0, "turned"), (0.0, "as laid")])
+def test_the_sheets_a_turn_was_chosen_on_are_the_ones_written(tmp_path, monkeypatch, angle, written):
+    """Finding a large pattern's blank sheets takes as long as the rest of the turn's choice: the plan that
+    decided it is the one printed, not found a second time (a strip at 35 degrees: as laid and turned,
+    two; along x already, the grid's sheets decide and the laid one is found once)."""
+    import sim.patterns
+
+    found = []
+    counted = sim.patterns.without_blank_sheets
+    monkeypatch.setattr(sim.patterns, "without_blank_sheets", lambda plan, d: found.append(d) or counted(plan, d))
+    mesh, layout = _diagonal_strip(angle)
+    write_pattern_file(tmp_path / "strip.pdf", PatternDrawing.of(mesh, layout, "mm"), paper="a4")
+    assert len(found) == (2 if written == "turned" else 1)
+
+
 def test_a_pattern_that_turning_would_not_save_a_sheet_is_left_as_laid():
     from sim.patterns import turned_to_fit
 
