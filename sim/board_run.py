@@ -21,17 +21,22 @@ from golden_model.fixed.engine import FixedProblem
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, build_image, run_image
 from golden_model.engine_spec.register_map import RegisterMap
 
-from .engine_driver import EngineDriver, EngineReadBack
+from .engine_driver import DriverError, EngineDriver, EngineReadBack
 from .engine_run import EngineRunError, engine_flatten_result
 
 __all__ = ["board_capacity", "BoardRun", "run_on_board", "flatten_on_board", "add_board_options", "board_engine"]
 
 
 def board_capacity(bus, fs: FormatSet) -> EngineCapacity:
-    """The capacity the engine behind ``bus`` was built with (its CAP_* registers and FEATURES.guard)."""
+    """The capacity the engine behind ``bus`` was built with (its CAP_* registers and FEATURES.guard), once its
+    ID, version and format set say it is an engine this driver speaks to (:class:`DriverError` if not)."""
     probe = EngineDriver(bus, RegisterMap.build(fs, DEFAULT_CAPACITY))
+    probe.identify_engine()
     values = [probe.read_value(f"cap_{what}") for what in ("vertices", "entries", "triangles")]
-    return EngineCapacity(*values, guard=bool(probe.read_value("feature_guard")))
+    try:
+        return EngineCapacity(*values, guard=bool(probe.read_value("feature_guard")))
+    except ValueError as exc:
+        raise DriverError(f"the engine reports a capacity it cannot have ({exc})") from None
 
 
 @dataclass(frozen=True, eq=False)

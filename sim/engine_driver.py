@@ -96,8 +96,9 @@ class EngineDriver:
         return STATES[_get(self._status, word, "state")], _field(self._status, "result").codes[
             _get(self._status, word, "result")]
 
-    def identify(self) -> None:
-        """Check that the bus holds this map's engine: magic, major version, format set, capacity."""
+    def identify_engine(self) -> None:
+        """Check that the bus holds a springflat engine of this map's major version and format set (the
+        registers that say so sit at the same addresses whatever the capacity)."""
         ident = self.read_value("id")
         if ident != MAGIC:
             raise DriverError(f"no springflat engine on this bus: ID reads 0x{ident:08X}, expected 0x{MAGIC:08X}")
@@ -107,6 +108,10 @@ class EngineDriver:
         if self.read_value("format_hash") != self.map.format_hash:
             raise DriverError(f"the engine was built for another format set than '{self.map.formats}' "
                               "(FORMAT_HASH differs)")
+
+    def identify(self) -> None:
+        """Check that the bus holds this map's engine: magic, major version, format set, capacity."""
+        self.identify_engine()
         built = tuple(self.read_value(f"cap_{w}") for w in ("vertices", "entries", "triangles"))
         mapped = (self.map.capacity.vertices, self.map.capacity.entries, self.map.capacity.triangles)
         if built != mapped:

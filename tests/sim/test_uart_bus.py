@@ -14,12 +14,12 @@ from golden_model.engine_spec import uart_protocol as protocol
 from golden_model.fixed.engine import flatten_fixed, prepare
 from golden_model.engine_spec.image import UNGUARDED
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, build_image
-from golden_model.engine_spec.register_map import RegisterMap
+from golden_model.engine_spec.register_map import MAGIC, RegisterMap
 from golden_model.generate import dome_grid
 from golden_model.layouts import initial_layout
 from golden_model.params import FlattenParams
 from sim.board_run import board_capacity, run_on_board
-from sim.engine_driver import BusError, EngineDriver, ModelBus
+from sim.engine_driver import BusError, DriverError, EngineDriver, ModelBus
 from sim.uart_bus import LinkError, UartBus, open_port
 from support import SPRINGFLAT
 
@@ -94,6 +94,46 @@ def test_the_capacity_registers_do_not_move_with_the_capacity():
             for w in ("VERTICES", "ENTRIES", "TRIANGLES")]
     bus = UartBus(ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP)))
     assert board_capacity(bus, DEFAULT) == CAPACITY
+
+
+class SameWord:
+    """A bus whose every read answers ``word``: something that speaks the frames but is no engine."""
+
+    def __init__(self, word: int):
+        self.word = word
+
+    def read(self, address: int) -> int:
+        return self.word
+
+    def write(self, address: int, value: int) -> None:
+        pass
+
+
+@pytest.mark.parametrize("word", [0, 0xFFFF_FFFF])
+def test_a_bus_that_holds_no_engine_is_named_before_its_capacity_is_trusted(word):
+    """The ID is checked before the CAP_* registers are read: their zeros (or ones) made a ValueError of
+    EngineCapacity, or a register map past the 32-bit address space, each a traceback from the command."""
+    with pytest.raises(DriverError, match=rf"^no springflat engine on this bus: ID reads 0x{word:08X}, expected "):
+        board_capacity(SameWord(word), DEFAULT)
+    engine = ModelBus(MAP, DEFAULT)
+    cap_vertices = MAP.register("CAP_VERTICES").offset
+    engine_with_no_vertices = SameWord(0)
+    engine_with_no_vertices.read = lambda a: 0 if a == cap_vertices else engine.read(a)
+    with pytest.raises(DriverError, match=r"^the engine reports a capacity it cannot have \(EngineCapacity: vertices "):
+        board_capacity(engine_with_no_vertices, DEFAULT)
+
+
+@pytest.mark.slow  # a CLI run
+def test_flatten_engine_board_on_a_link_to_no_engine_is_one_line(tmp_path):
+    server = FrameServer(DEFAULT_CAPACITY)
+    server.target = protocol.ReferenceTarget(lambda a: 0, server.bus.write, addr_width(MAP))
+    proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "board", "--port",
+                           f"socket://127.0.0.1:{server.port}", "--out", "out.obj"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.splitlines()[-1] == ("springflat: error: no springflat engine on this bus: ID reads 0x00000000, "
+                                            f"expected 0x{MAGIC:08X}")
+    assert not (tmp_path / "out.obj").exists()
 
 
 def test_error_answers_and_timeouts_are_one_line():
