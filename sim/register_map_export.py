@@ -161,6 +161,9 @@ def main(argv: list[str] | None = None) -> int:
     from golden_model.fixed.engine import load_formats
     from golden_model.fixed.measures import FixedPointError
     from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
+    from golden_model.mesh import one_line
+
+    from .outputs import OutputError, atomic_directory
 
     parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
     parser.add_argument("--formats", default="default")
@@ -173,8 +176,14 @@ def main(argv: list[str] | None = None) -> int:
         m = RegisterMap.build(load_formats(args.formats), EngineCapacity(*args.capacity))
     except (FixedPointError, ValueError) as exc:
         parser.exit(2, f"{parser.prog}: error: {exc}\n")
-    for path in write_exports(m, args.out):
-        print(path)
+    out = Path(args.out)
+    try:
+        with atomic_directory(out) as build:  # all three files in place, or none
+            names = [path.name for path in write_exports(m, build)]
+    except OutputError as exc:
+        parser.exit(2, f"{parser.prog}: error: {one_line(str(exc))}\n")
+    for name in names:
+        print(out / name)
     return 0
 
 

@@ -234,6 +234,26 @@ def test_write_exports_writes_all_three(regmap, tmp_path):
     assert paths[2].read_text() == c_header(regmap) and paths[0].read_text() == markdown(regmap)
 
 
+@pytest.mark.parametrize("case", ["a file", "under a file", "a directory in the way"])
+def test_the_export_command_refuses_an_output_it_cannot_write_in_one_line_and_writes_nothing(tmp_path, capsys, case):
+    """``python -m sim.register_map_export --out DIR``: a DIR that is a file, lies under one, or holds a
+    directory where a file goes was a traceback, the last after register_map.md had been written."""
+    from sim.register_map_export import main
+
+    (tmp_path / "afile").write_text("mine\n")
+    (tmp_path / "e5" / "register_map.json").mkdir(parents=True)
+    out = {"a file": "afile", "under a file": "afile/sub", "a directory in the way": "e5"}[case]
+    with pytest.raises(SystemExit) as stopped:
+        main(["--out", str(tmp_path / out)])
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("python -m sim.register_map_export: error: ") and err.count("\n") == 1
+    assert (tmp_path / "afile").read_text() == "mine\n"
+    assert sorted(p.name for p in (tmp_path / "e5").iterdir()) == ["register_map.json"]
+    assert main(["--out", str(tmp_path / "new")]) == 0
+    assert sorted(p.name for p in (tmp_path / "new").iterdir()) == sorted(EXPORT_FILES)
+
+
 def test_the_engine_doc_holds_the_generated_map():
     """docs/engine.md's register-map block is the export's markdown of sim.docgen's DOC_MAP: it cannot drift."""
     from sim.docgen import BLOCK, DOC_MAP
