@@ -239,8 +239,9 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "without an event, so the time-0 trigger of Yosys's `always @*` blocks (YosysHQ/yosys#2273) "
                      "never fires and their outputs stay X until an input changes (a `reg rst = 1;` testbench "
                      "deadlocks node_update). Verilator is not affected.",
-                     f"Lint: `verilator --lint-only -Wall {WAIVER_FILE} FILE.v` is clean; the file waives the rules "
-                     "the generated Verilog breaks by construction, each with its reason.",
+                     f"Lint: `verilator --lint-only -Wall --top-module TOP {WAIVER_FILE} TOP.v` (and `sim_models/*.v` "
+                     "beside an ECP5 file: their unused models are tops of their own without `--top-module`) is clean; "
+                     "the file waives the rules the generated Verilog breaks by construction, each with its reason.",
                      ("Multipliers: ECP5 MULT18X18D instances with their input and output registers in use "
                       "(REG_INPUTA/B_CLK, REG_OUTPUT_CLK = CLK0); the generic Verilog of `springflat verilog` "
                       "has the same registers in the fabric and the same latency. ROMs and RAMs: DP16KD block "

@@ -4,8 +4,8 @@ construction, waived one by one with the reason, in a Verilator configuration fi
 ``springflat verilog`` and ``springflat synth`` put the file, ``verilator_waivers.vlt``, beside the
 Verilog, so that an FPGA engineer's lint run is clean::
 
-    verilator --lint-only -Wall verilator_waivers.vlt springflat_engine.v
-    verilator --lint-only -Wall verilator_waivers.vlt step_generator.v sim_models/*.v   # ECP5 flavour
+    verilator --lint-only -Wall --top-module springflat_engine verilator_waivers.vlt springflat_engine.v
+    verilator --lint-only -Wall --top-module step_generator verilator_waivers.vlt step_generator.v sim_models/*.v   # ECP5 flavour
 
 and the cocotb builds read the same file (:mod:`sim.cocotb_support`). Every other rule of ``-Wall``
 stays on: a new kind of warning in the generated Verilog (a latch, a multiple driver, a width
@@ -60,7 +60,7 @@ def waiver_text(waivers=WAIVERS) -> str:
     """The Verilator configuration file (``.vlt``) that switches ``waivers`` off, each with its reason."""
     lines = ["`verilator_config",
              "// Lint rules that springflat's generated Verilog breaks by construction (sim/lint.py);",
-             "// every other rule of -Wall stays on.  verilator --lint-only -Wall verilator_waivers.vlt FILE.v", ""]
+             "// every other rule of -Wall stays on.  verilator --lint-only -Wall --top-module TOP verilator_waivers.vlt FILE.v", ""]
     for waiver in waivers:
         lines += [f"// {waiver.rule}: {waiver.reason}", f'lint_off -rule {waiver.rule} -file "{waiver.files}"']
     return "\n".join(lines) + "\n"
