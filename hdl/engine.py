@@ -23,7 +23,7 @@ from .force_pass import ForcePass
 from .guard_passes import GUARD_PASSES, GuardPasses
 from .integrator import Integrator
 from .logic import mode_steps
-from .memory_windows import MemoryWindows, needs_registered_select
+from .memory_windows import WINDOW_STEPS, MemoryWindows, needs_registered_select
 from .pass_sequencer import PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
 from .register_bank import RegisterBank
@@ -107,6 +107,13 @@ class SpringflatEngine(wiring.Component):
     #: Clocks the check phase waits after the math phase's last result (the saturation tally's
     #: pipeline and the registered limit compare): :attr:`PhaseController.CHECK_SETTLE_CLOCKS`.
     CHECK_SETTLE_CLOCKS = PhaseController.CHECK_SETTLE_CLOCKS
+
+    #: Clocks from ``stb`` to the target raising ``ack`` or ``err`` (the initiator samples it at the next
+    #: edge), every capacity and build option alike: a register (the handshake's request register, the
+    #: registered decode, the read word's two AND-OR stages, ``ack``); a memory word, read or write (the
+    #: decode, then :data:`~hdl.memory_windows.WINDOW_STEPS`); an ``err`` for a word that decodes to nothing
+    #: or a memory word while running. ``tests/hdl/test_engine.py`` measures them.
+    BUS_ANSWER_CLOCKS = {"register": 5, "memory word": 3 + WINDOW_STEPS, "err": 4}
 
     def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH,
                  registered_select: bool | None = None, pin_registers: bool | None = None):

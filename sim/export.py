@@ -334,11 +334,18 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
     engine = SpringflatEngine(fs, capacity, **(engine_options or {}))
     (out / f"{ENGINE_MODULE}.v").write_text(verilog_of(engine, ENGINE_MODULE, platform))
     files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)] + [write_waivers(out).name]
+    answer = SpringflatEngine.BUS_ANSWER_CLOCKS
     with open(out / "register_map.md", "a", encoding="utf-8") as f:  # the module the map is the bus of
         f.write("\n".join(["", f"## Ports of `{ENGINE_MODULE}`", "",
                             "`rst` is synchronous and active high (hold it over a clock edge); `irq` is "
                             "`irq_pending & irq_enable` (STATUS, CONTROL above): high from a run's end until "
-                            "`irq_pending` is cleared. The bus's timing: docs/engine.md, 'The bus'.", "",
+                            "`irq_pending` is cleared.", "",
+                            "Bus timing: `ack` and `err` are registered, high for one clock; the engine raises "
+                            f"them {answer['register']} clocks after `stb` rises for a register, "
+                            f"{answer['memory word']} for a memory word (read or write) and {answer['err']} for an "
+                            "`err` (an unmapped word, or a memory word while the engine runs). A cycle presented while "
+                            "the last answer's `ack` is still out starts a clock later. The rest of the bus's "
+                            "contract: the header of this file.", "",
                             "| port | direction | bits |", "|---|---|---|",
                             *(f"| `{p['name']}` | {p['direction']} | {p['width']} |" for p in verilog_ports(engine)),
                             ""]))
