@@ -329,6 +329,10 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str,
         "tol_energy": rule.energy, "max_iter": params.max_iter, "saturation_limit": 0,
         "energy_floor": rule.floor,
     }
+    if rule.energy >> (ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS):  # (said as given: its raw value is 2^40 times it)
+        raise FixedPointError(f"--tol-energy {params.tol_energy:g} does not fit the engine's TOL_ENERGY register "
+                              f"(u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS}: below {2**ENERGY_TOL_INT_BITS}); use a "
+                              "smaller value")
     for f in run_constant_fields(fs, capacity):
         if not f.raw_min <= constants[f.name] <= f.raw_max:
             raise FixedPointError(f"run constant {f.name} = {constants[f.name]} does not fit the engine's "

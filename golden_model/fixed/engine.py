@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 from typing import Callable
 
 import numpy as np
@@ -129,10 +130,12 @@ class StopRule:
     @classmethod
     def of(cls, params: FlattenParams, fs: FormatSet, floor: int = 0) -> "StopRule":
         """The host's quantisation: ``φ`` floored to the error lsb (a raw error passes exactly when
-        its value does), ``ε`` rounded half up."""
+        its value does; a ``φ`` past error's maximum, which no error exceeds, as that maximum), ``ε`` rounded
+        half up (exactly: ``1e300`` is a tolerance too, not a float overflow)."""
         lsb = fs.error.frac_bits
-        return cls(math.floor(math.ldexp(params.tol_area, lsb)), math.floor(math.ldexp(params.tol_shape, lsb)),
-                   math.floor(math.ldexp(params.tol_energy, ENERGY_TOL_FRAC_BITS) + 0.5), floor)
+        area, shape = (math.floor(math.ldexp(min(tol, fs.error.max), lsb)) for tol in (params.tol_area, params.tol_shape))
+        energy = math.floor(Fraction(params.tol_energy) * 2**ENERGY_TOL_FRAC_BITS + Fraction(1, 2))
+        return cls(area, shape, energy, floor)
 
     def converged(self, energy_before: int, energy_after: int, errors: tuple[int, int]) -> bool:
         if energy_before == 0:
@@ -230,7 +233,8 @@ def scale_mesh(mesh: Mesh, params: FlattenParams, fs: FormatSet) -> ScaledMesh:
             inv_mass_barrier_raw = _quantize_checked(inv_mass, fs.inv_mass, "the barrier weight w_i", fs,
                                                      "use a larger --spring, or a wider inv_mass format")
     else:
-        inv_mass = 1.0 / mesh.masses(model_density)
+        with np.errstate(over="ignore"):  # masses below 1/float's maximum: an infinite 1/m, refused below
+            inv_mass = 1.0 / mesh.masses(model_density)
         inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "1/m", fs,
                                          "use --density auto (or a larger density), or a wider inv_mass format")
     if min(w.min() for w in (inv_mass_raw, inv_mass_barrier_raw) if w is not None) < 16:

@@ -391,7 +391,8 @@ def quantize(
     xa = np.asarray(x, dtype=np.float64)
     if np.isnan(xa).any():
         raise ValueError(f"quantize to {fmt}: NaN input")
-    v = _round_float(np.ldexp(xa, fmt.frac_bits), mode)
+    with np.errstate(over="ignore"):  # a value past float's range is +-inf here, and saturates below
+        v = _round_float(np.ldexp(xa, fmt.frac_bits), mode)
     lim = float(1 << MAX_WIDTH)  # > every raw_max, exactly representable
     # Clipping to +-2**62 keeps out-of-range values out of range and makes the
     # int64 conversion exact, so range tests below are exact integer compares.

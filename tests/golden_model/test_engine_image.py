@@ -1,6 +1,7 @@
 """The engine's memory images and image-driven controller (golden_model.engine_spec.image)."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -157,9 +158,14 @@ def test_tolerances_above_one_are_clamped_to_the_error_range():
 
 def test_an_energy_tolerance_the_register_cannot_hold_is_refused():
     mesh = MESHES["dome"]
-    params = RUNS["paper-variable"].with_(tol_energy=300.0)
-    with pytest.raises(FixedPointError, match=r"^run constant tol_energy = \d+ does not fit the engine's 48-bit"):
-        build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, DEFAULT), CAPACITY)
+    for tol_energy in (256.0, 1e300):  # (1e300 was a float overflow on its way into the register)
+        params = RUNS["paper-variable"].with_(tol_energy=tol_energy)
+        with pytest.raises(FixedPointError, match=rf"^--tol-energy {re.escape(f'{tol_energy:g}')} does not fit the engine's TOL_ENERGY "
+                                                  r"register \(u8\.40: below 256\); use a smaller value$"):
+            build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, DEFAULT), CAPACITY)
+    params = RUNS["paper-variable"].with_(tol_energy=255.9)
+    assert build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, DEFAULT), CAPACITY).constants[
+        "tol_energy"] == round(255.9 * 2**40)
 
 
 def _check_bit_identical(mesh: Mesh, params: FlattenParams, fs: FormatSet = DEFAULT) -> None:

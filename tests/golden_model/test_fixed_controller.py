@@ -25,11 +25,12 @@ DEFAULT = FormatSet.preset("default")
 
 
 def test_tolerances_are_floored_to_the_error_lsb():
-    """A raw error passes the integer test exactly when its value passes the float one."""
+    """A raw error (at most error's maximum) passes the integer test exactly when its value passes the float
+    one; a tolerance past float's range once scaled (1e303) is one as well."""
     lsb = 2.0 ** -DEFAULT.error.frac_bits
-    for tol in (0.0, lsb, 0.01, 0.4, 0.4 + lsb / 3, 1.0, 2.5):
+    for tol in (0.0, lsb, 0.01, 0.4, 0.4 + lsb / 3, 1.0, 2.5, 1e303):
         rule = StopRule.of(FlattenParams(tol_area=tol, tol_shape=tol), DEFAULT)
-        for raw in range(max(0, rule.area - 3), rule.area + 4):
+        for raw in range(max(0, rule.area - 3), min(rule.area + 4, DEFAULT.error.raw_max + 1)):
             assert (raw <= rule.area) == (raw * lsb <= tol), (tol, raw)
             assert (raw <= rule.shape) == (raw * lsb <= tol), (tol, raw)
 

@@ -515,6 +515,13 @@ PARAMETERS: dict[str, Case] = {
     "paper spring 1e300": Case(["--dynamics", "paper", "--spring", "1e300"], 3),
     "tol-energy 1e300": Case(["--tol-energy", "1e300"]),
     "fixed engine": Case(["--engine", "fixed"]),
+    # tolerances past float's range once scaled into the controller's integers (an OverflowError traceback)
+    "fixed tol-energy 1e300": Case(["--engine", "fixed", "--tol-energy", "1e300"]),
+    "fixed tol-area 1e303": Case(["--engine", "fixed", "--tol-area", "1e303"]),
+    # constants past float's range when scaled into their formats: the refusal alone, no numpy warning
+    "fixed spring 1e305": Case(["--engine", "fixed", "--spring", "1e305"], 2, r"C/2 5e\+304 does not fit"),
+    "fixed paper density 1e-320": Case(["--engine", "fixed", "--dynamics", "paper", "--density", "1e-320"], 2,
+                                       r"1/m inf does not fit"),
     # in-range meshes at the ends of the range, with extreme parameters: the energy overflows to inf
     "spring 1e300 on a 1e45 mesh": Case(["--spring", "1e300"], 3, files={"m.obj": obj(vertices=V * 1e45)}),
     "paper spring 1e300 on a 1e45 mesh": Case(["--dynamics", "paper", "--spring", "1e300"], 3,
