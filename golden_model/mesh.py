@@ -426,13 +426,13 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
         raise MeshError(f"vertex {int(np.flatnonzero(~used)[0])} is not used by any face")
 
     edges, side_edge, counts = _unique_edges(faces)
-    size = float(np.abs(vertices[edges[:, 0]] - vertices[edges[:, 1]]).max())  # no squares: cannot underflow
-    if 0 < size < MIN_MESH_SIZE:  # size 0: every face is degenerate, said below
-        # its length, from differences scaled by the largest (their squares would underflow)
-        length = size * float(np.linalg.norm((vertices[edges[:, 0]] - vertices[edges[:, 1]]) / size, axis=1).max())
-        raise MeshError(f"mesh is too small: its longest edge is {length:.3g} long, below the supported "
+    differences = vertices[edges[:, 0]] - vertices[edges[:, 1]]
+    size = float(np.abs(differences).max())  # no squares: cannot underflow
+    # the longest edge's length, from the differences scaled by the largest (their squares could underflow)
+    longest = size * float(np.linalg.norm(differences / size, axis=1).max()) if size > 0 else 0.0
+    if 0 < longest < MIN_MESH_SIZE:  # 0: every face is degenerate, said below
+        raise MeshError(f"mesh is too small: its longest edge is {longest:.3g} long, below the supported "
                         f"{MIN_MESH_SIZE:g} (squared lengths and areas would underflow); scale it up")
-    longest = float(np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1).max())
     areas = triangle_areas_3d(vertices, faces)
     degenerate = areas <= DEGENERATE_RELATIVE_AREA * longest**2
     if degenerate.any():

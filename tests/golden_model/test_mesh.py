@@ -454,6 +454,8 @@ def test_coordinates_outside_the_range_are_refused_naming_it():
                                         r"supported 1e-50 .*underflow"):
         Mesh(SQUARE_V * 1e-150, SQUARE_F)
     Mesh(SQUARE_V * 1e-50, SQUARE_F)
+    # the length decides, as the message says: a diagonal of 1.56e-50 whose coordinates differ by 9e-51
+    Mesh(np.array([[0.0, 0.0, 0.0], [9e-51, 9e-51, 9e-51], [9e-51, 0.0, 0.0]]), np.array([[0, 1, 2]]))
     with pytest.raises(MeshError, match="degenerate"):  # all at one point: no size at all
         Mesh(SQUARE_V * 0, SQUARE_F)
 
