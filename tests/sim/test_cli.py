@@ -438,9 +438,10 @@ def test_the_notes_on_a_given_start_are_printed_with_progress_lines_or_without(t
 @pytest.mark.parametrize("mode", [["--dynamics", "paper"], ["--dynamics", "paper", "--step", "fixed"],
                                   ["--dynamics", "momentum"], ["--dynamics", "momentum", "--no-guard"],
                                   ["--dynamics", "momentum", "--no-guard", "--penalty"],
-                                  ["--dynamics", "paper", "--penalty", "--damping", "0.2"]],
+                                  ["--dynamics", "paper", "--penalty", "--damping", "0.2"],
+                                  ["--dynamics", "paper", "--penalty", "--penalty-kappa", "1e308"]],
                          ids=["paper", "paper-fixed", "momentum", "momentum-unguarded", "momentum-unguarded-penalty",
-                              "paper-penalty-damped"])
+                              "paper-penalty-damped", "paper-penalty-raised-kappa"])
 def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
     """Each option the hint tells the user to give is accepted beside the run's own options (one it says to
     drop need not be)."""
@@ -455,7 +456,7 @@ def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
     defaults = FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=1e-3)
     hint = divergence_hint(params_from_args(parser.parse_args(["flatten", "m.obj", *mode]), defaults))
     values = {"--spring": ["2"], "--damping": ["0.05"], "--dt": ["0.01"], "--step": ["fixed"],
-              "--dynamics": ["momentum"], "--penalty-gain": ["0.1"]}
+              "--dynamics": ["momentum"], "--penalty-gain": ["0.1"], "--penalty-kappa": ["0.5"]}
     # what it says to drop or leave out ("drop --no-guard, --penalty ...", "without --penalty ...", "(it takes none
     # of --step ...)") need not be accepted: the flags left are the ones it tells the user to give
     kept = re.sub(r"\([^)]*\)|(drop|without) --[a-z-]+(, --[a-z-]+)*((,)? (and|or) --[a-z-]+)?", "", hint)
@@ -464,6 +465,8 @@ def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
     assert ("--penalty-gain" in hint) == ("--penalty" in mode)  # the penalty is what ran away, if given
     if "--damping" in mode:
         assert "a larger --damping than 0.2" in hint
+    # the threshold where the user raised it (a kappa of 1e308 ran away, and the hint named only the gain)
+    assert ("a smaller --penalty-gain than 1 or --penalty-kappa than 1e+308" in hint) == ("--penalty-kappa" in mode)
     for flag in named:
         given = [*mode, flag, *values[flag]]
         if flag == "--dt" and "fixed" not in mode:
