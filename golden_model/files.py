@@ -89,9 +89,10 @@ def describe_os_error(exc: OSError) -> str:
     return text[:1].lower() + text[1:]
 
 
-def read_file_bytes(path: Path, what: str, error: type[ValueError]) -> bytes:
+def read_file_bytes(path: str | Path, what: str, error: type[ValueError]) -> bytes:
     """The bytes of the regular file ``path``; any OS error, and a path that is no regular file (a FIFO, a
-    device: :func:`read_regular_file`), becomes ``error("cannot read <what> '<path>': <reason>")``."""
+    device: :func:`read_regular_file`), becomes ``error("cannot read <what> '<path>': <reason>")``. Give a
+    name as typed: pathlib drops a trailing ``/``, which makes ``scan.obj/`` (no file, the OS says) the file."""
     try:
         return read_regular_file(path)  # a FIFO or a device is refused, never opened
     except OSError as exc:

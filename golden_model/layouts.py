@@ -316,13 +316,14 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
     """
     if str(path) == "":
         raise LayoutError(f"the layout '' is empty: name a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}) or a file")
-    path = Path(path)
     try:
-        data = read_file_bytes(path, "layout", LayoutError)
+        data = read_file_bytes(path, "layout", LayoutError)  # (before Path(), which drops a trailing '/')
     except LayoutError as exc:
+        path = Path(path)
         if len(path.parts) == 1 and not path.suffix and not os.path.lexists(path):  # a method's name mistyped?
             raise LayoutError(f"{exc}, nor a start method ({', '.join((AUTO_START,) + LAYOUT_METHODS)})") from None
         raise
+    path = Path(path)
     if path.suffix.lower() == ".obj":
         try:
             vertices = read_obj_vertices(data, f"cannot parse layout '{path}'")

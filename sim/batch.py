@@ -272,7 +272,7 @@ def _job(source: str, name: str, options: dict, endings) -> BatchJob | MeshOutco
     if is_builtin(source):
         return BatchJob(source, name, None, options, endings)
     try:
-        return BatchJob(source, name, read_file_bytes(Path(source), "mesh", MeshError), options, endings)
+        return BatchJob(source, name, read_file_bytes(source, "mesh", MeshError), options, endings)
     except MeshError as exc:
         return MeshOutcome(source, name, "failed", line=str(exc))
 

@@ -47,8 +47,8 @@ def load_mesh_with_notes(path: str | Path) -> tuple[Mesh, list[str]]:
     """
     if not str(path).strip():
         raise MeshError("the mesh path is empty: name an OBJ, PLY, OFF or STL file")
+    data = read_file_bytes(path, "mesh", MeshError)  # (before Path(), which drops a trailing '/')
     path = Path(path)
-    data = read_file_bytes(path, "mesh", MeshError)
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise MeshError(
