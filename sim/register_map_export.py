@@ -120,7 +120,10 @@ def c_header(m: RegisterMap) -> str:
              _define(_c_name("VERSION_MAJOR"), VERSION[0]), _define(_c_name("VERSION_MINOR"), VERSION[1]),
              _define(_c_name("FORMAT_HASH"), m.format_hash), ""]
     for r in m.registers:
-        lines += [f"/* {r.name} ({r.access}): {r.description} */", _define(_c_name(r.name, "ADDR"), r.offset),
+        # a field of another access than its register's (CONTROL's w1p start, STATUS's ro state) says its own
+        others = ", ".join(f"{f.name} {f.access}" for f in r.fields if f.access != r.access)
+        access = f"{r.access}; {others}" if others else r.access
+        lines += [f"/* {r.name} ({access}): {r.description} */", _define(_c_name(r.name, "ADDR"), r.offset),
                   _define(_c_name(r.name, "RESET"), r.reset)]
         for f in r.fields:
             lines += [_define(_c_name(r.name, f.name, "SHIFT"), f.lsb), _define(_c_name(r.name, f.name, "MASK"), f.mask),

@@ -211,6 +211,17 @@ def _expected_defines(regmap):
     return want
 
 
+def test_the_c_header_says_each_fields_access_where_it_is_not_its_registers(regmap):
+    """CONTROL is rw but its start and abort are w1p, STATUS w1c but its state ro: a header that said only
+    'CONTROL (rw)' told a driver writer to read back a pulse."""
+    comments = {line.split(" ")[1]: line for line in c_header(regmap).splitlines() if line.startswith("/* ")}
+    for register in regmap.registers:
+        line = comments[register.name]
+        for f in register.fields:
+            assert (f"{f.name} {f.access}" in line) == (f.access != register.access), line
+    assert comments["CONTROL"].startswith("/* CONTROL (rw; start w1p, abort w1p): ")
+
+
 def test_the_c_header_compiles_and_holds_the_map(regmap, tmp_path):
     compiler = shutil.which("cc") or shutil.which("gcc")
     if compiler is None:
