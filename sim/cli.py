@@ -227,13 +227,15 @@ def cmd_paper(args: argparse.Namespace) -> int:
 def cmd_verilog(args: argparse.Namespace) -> int:
     from .export import bundle_readme, engine_capacity, export_engine_bundle, export_verilog
     from .clock import clock_sdc
+    from .synth import earlier_bundle_files
     from .outputs import check_build_so_far
 
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats, guard=args.build_guard)
     out = args.out
     inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
-    with atomic_directory(out, inputs=inputs) as build:  # all of the bundle or nothing, also on Ctrl-C
+    with atomic_directory(out, inputs=inputs,  # all of the bundle or nothing, also on Ctrl-C
+                          stale=earlier_bundle_files(out)) as build:
         print(f"springflat verilog: exporting every component and springflat_engine (capacity "
               f"{capacity.as_option()}) to {out} ...", file=sys.stderr)  # half a minute of silence otherwise
         interface = export_verilog(formats, build)

@@ -30,7 +30,7 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -576,7 +576,7 @@ def check_output_directory(out: Path, what: str = "--out", files: tuple[str, ...
 
 
 @contextmanager
-def atomic_directory(out: Path, what: str = "--out", stale: tuple[str, ...] = (),
+def atomic_directory(out: Path, what: str = "--out", stale: Sequence[str] = (),
                      inputs: list[tuple[str, Path | None]] = ()) -> Iterator[Path]:
     """Yield a new empty directory to build an output directory in; at the end of the block its contents
     become ``out``: all of them, or (on an exception, an interrupt included) none. It is made beside a new

@@ -46,13 +46,36 @@ from golden_model.params import ParameterError
 from .clock import ENGINE_TARGET_MHZ, write_clock_constraints
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ", "default_freq",
+__all__ = ["earlier_bundle_files", "PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ", "default_freq",
            "SynthError", "DoesNotFit", "build_in_place", "error_line", "nextpnr_argv", "placer_options", "run_synthesis", "run_tool",
            "parse_yosys_stat", "parse_nextpnr_log"]
 
 
 class SynthError(ParameterError):
     """A bad request or a failed tool run; the message is one line."""
+
+
+def earlier_bundle_files(out: Path) -> tuple[str, ...]:
+    """The files of an earlier ``springflat verilog`` or ``synth`` bundle in the directory ``out``, by the names
+    those commands give them (never another file; not a README.md, which may be the user's):
+    :func:`~sim.outputs.atomic_directory`'s ``stale``, so that a new bundle does not keep another target's logs,
+    or an ECP5 bundle's primitive models beside generic Verilog, that this run did not write again."""
+    from .cocotb_support import PRIMITIVE_MODELS
+    from .export import BUNDLE_FILES, COMPONENTS
+    from .outputs import output_target
+
+    target = output_target(out)
+    if not target.is_dir():
+        return ()
+    tops = [name for spec in COMPONENTS for name in (spec.module, f"{spec.module}_pnr")] + [ENGINE_MODULE,
+                                                                                             f"{ENGINE_MODULE}_pnr"]
+    names = {f"{top}.v" for top in tops} | {
+        f"{top}.{family}.{kind}" for top in tops for family in TARGETS
+        for kind in ("ys", "stat.json", "yosys.log", "json", "nextpnr.json", "nextpnr.log", "nextpnr.stdout")}
+    names |= {name for name in BUNDLE_FILES if name != "README.md"} | {
+        "clock.lpf", "clock.sdc", "reproduce.sh", "synth_report.md", "synth_report.json",
+        *(f"sim_models/{model.name}" for models in PRIMITIVE_MODELS.values() for model in models)}
+    return tuple(sorted(name for name in names if (target / name).is_file()))
 
 
 def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str], str]], dict]) -> dict:
@@ -67,13 +90,15 @@ def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str
 
     inputs = [("--formats", None if FormatSet.names_preset(formats) else Path(formats))]
     failure = None
-    with atomic_directory(out, inputs=inputs) as directory:
+    stale = list(earlier_bundle_files(out))  # an earlier bundle's files this run does not write again
+    with atomic_directory(out, inputs=inputs, stale=stale) as directory:
         def shown(text: str) -> str:
             return text.replace(str(directory), str(out))
 
         try:
             return build(directory, shown)
         except SynthError as exc:
+            stale.clear()  # a failed run's logs join the earlier bundle, which stays whole
             failure = SynthError(shown(str(exc)))
             if not any(directory.iterdir()):
                 raise failure from None

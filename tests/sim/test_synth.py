@@ -345,3 +345,37 @@ def test_the_engine_is_constrained_at_its_own_target_unless_freq_says_otherwise(
     assert default_freq("ecp5", ["springflat_core", ENGINE]) == 125.0
     assert default_freq("ecp5", ["springflat_core"]) == DEFAULT_FREQ["ecp5"] != 125.0
     assert default_freq("ice40", [ENGINE]) == DEFAULT_FREQ["ice40"]
+
+
+def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_it_did_not_write(tmp_path):
+    """An ice40 synth into an ECP5 bundle's directory kept the ECP5 primitives' models and logs beside generic
+    Verilog. The earlier bundle's files this run does not write go (by the names the commands give them: a
+    file of the user's stays); a run whose tools fail leaves the earlier bundle whole, with its logs added."""
+    from sim.synth import build_in_place
+
+    out = tmp_path / "bundle"
+    earlier = ["sim_models/DP16KD.v", "step_generator.ecp5.ys", "step_generator_pnr.ecp5.nextpnr.log",
+               "step_generator.v", "reproduce.sh"]
+    for name in earlier + ["notes.txt", "README.md", "my_top.v"]:
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text("earlier\n")
+
+    def failing(directory, shown):
+        (directory / "step_generator.ice40.yosys.log").write_text("yosys failed\n")
+        raise SynthError("yosys failed")
+
+    with pytest.raises(SynthError):
+        build_in_place(out, "narrow", failing)
+    assert all((out / name).read_text() == "earlier\n" for name in earlier)
+    assert (out / "step_generator.ice40.yosys.log").is_file()
+
+    def ice40(directory, shown):
+        for name in ("step_generator.v", "step_generator.ice40.ys", "reproduce.sh"):
+            (directory / name).write_text("new\n")
+        return {}
+
+    build_in_place(out, "narrow", ice40)
+    kept = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    assert kept == ["README.md", "my_top.v", "notes.txt", "reproduce.sh", "step_generator.ice40.ys",
+                    "step_generator.v"]
+    assert (out / "step_generator.v").read_text() == "new\n" and (out / "notes.txt").read_text() == "earlier\n"
