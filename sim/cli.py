@@ -352,8 +352,12 @@ def main(argv: list[str] | None = None) -> int:
                      "the following arguments are required: COMMAND")
     if extras:  # refused by the command's own parser, so that the message points at its --help
         meshes = [extra for extra in extras if is_builtin(extra) or Path(extra).suffix.lower() in MESH_SUFFIXES]
-        after_options = (f": the meshes of a batch come together, before the options ({args.command} MESH MESH "
-                         "... --option ...)" if args.command == "flatten" and meshes else "")
+        dashed = [extra for extra in meshes if extra.startswith("-")]
+        if dashed:  # a file's name that argparse took for an option
+            after_options = f": a file named with a leading '-' is read as an option: write ./{dashed[0]}"
+        else:
+            after_options = (f": the meshes of a batch come together, before the options ({args.command} MESH "
+                             "MESH ... --option ...)" if args.command == "flatten" and meshes else "")
         parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}{after_options}")
     reset_interrupted()
     handler = threading.current_thread() is threading.main_thread()

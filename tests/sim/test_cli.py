@@ -490,6 +490,19 @@ def test_an_abbreviated_option_is_not_taken_for_a_longer_one(argv, unknown, caps
         capsys.readouterr().err
 
 
+def test_a_mesh_file_named_with_a_leading_dash_is_named_with_the_way_to_give_it(capsys):
+    """``flatten -dash.obj``: argparse takes the name for an option; the error said the meshes of a batch come
+    before the options, for a single mesh."""
+    from sim.cli import main
+
+    with pytest.raises(SystemExit) as stopped:
+        main(["flatten", "-dash.obj"])
+    assert stopped.value.code == 2
+    assert capsys.readouterr().err == ("springflat: error: unrecognized arguments: -dash.obj: a file named with a "
+                                       "leading '-' is read as an option: write ./-dash.obj (see 'springflat flatten "
+                                       "--help')\n")
+
+
 @pytest.mark.parametrize("argv, hint", [
     (["study", "--bits", "-4:8"], "write --bits=-4:8"),
     (["flatten", "surf1", "--tol-energy", "-1e-3"], "write --tol-energy=-1e-3"),
