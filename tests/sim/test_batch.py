@@ -136,6 +136,10 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
     (["--out-dir", "o", "--out", ".dxf", "--scheduler", "tcp://127.0.0.1:99999"], "--scheduler "
      "'tcp://127.0.0.1:99999': port 99999 is not in 1-65535 (expected 'local' or PROTOCOL://HOST:PORT"),
     (["--out-dir", "o", "--out", ".dxf", "--scheduler", "tpc://host:8786"], "Dask has no protocol 'tpc'"),
+    # Dask's Client takes no address without a port: refused before the batch says where it runs
+    (["--out-dir", "o", "--out", ".dxf", "--scheduler", "foo"], "--scheduler 'foo': no port (expected 'local' or "
+                                                                 "PROTOCOL://HOST:PORT"),
+    (["--out-dir", "o", "--out", ".dxf", "--scheduler", "tcp://foo"], "--scheduler 'tcp://foo': no port"),
 ])
 def test_batch_refusals_are_one_line_before_any_run(tmp_path, monkeypatch, capsys, args, message):
     monkeypatch.chdir(tmp_path)
