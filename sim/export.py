@@ -413,7 +413,8 @@ def host_scaling_markdown() -> str:
     """How the host turns a mesh, a start layout and the run's parameters into the images: what
     :func:`golden_model.fixed.engine.prepare` and :func:`golden_model.engine_spec.image.build_image` do, for a
     host written without them (``memory_image.md``, and the generated block of docs/engine.md)."""
-    from golden_model.fixed.engine import HOST_ROUNDING, POSITION_HEADROOM
+    from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS, ITERATION_BITS, SATURATION_BITS
+    from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, POSITION_HEADROOM
     from golden_model.reference import MOMENTUM_STIFFNESS_BUDGET
 
     return "\n".join([
@@ -446,7 +447,31 @@ def host_scaling_markdown() -> str:
         "raw total `T` with `b` = the reciprocal format's width: `shift = b + bit_length(T) - 1`, `mantissa = "
         "round_half_up(2^shift / T)`, and if that is `2^b`, `mantissa/2` and `shift - 1`. `area_*` take `T` = "
         "the sum of the raw triangle areas; `length_*` the sum of the raw `rest` over all entries (every edge "
-        "twice) shifted up to error_acc's fraction bits. The tolerances and the rest: the run constants' table.",
+        "twice) shifted up to error_acc's fraction bits. Each run constant, in its register (register_map.md):",
+        "",
+        "| Constant | Width | Meaning |",
+        "|---|---|---|",
+        "| `vertices`, `entries`, `triangles` | capacity's bits | the loaded mesh's counts (`vertices = 0`: no mesh, "
+        "the reset value) |",
+        "| `mode`, `barrier` | the run mode's code, 1 (register `MODE`) | the run mode (`golden_model/modes.py`'s "
+        "`RUN_MODES`, the table in `docs/guard.md`; the engine runs all of them, `ENGINE_RUN_MODES`), the fold "
+        "barrier |",
+        "| `half_spring` | [spring] | ½C |",
+        "| `damping` | [damping] | 1 − γ (paper dynamics) |",
+        "| `dt` | [dt] | the fixed Δt (mode `paper-fixed`), 0 otherwise |",
+        "| `area_reciprocal`, `area_shift` | [reciprocal], shift bits | 1/ΣA for E_S (`Reciprocal`) |",
+        "| `length_reciprocal`, `length_shift` | [reciprocal], shift bits | 1/Σd for E_C |",
+        "| `tol_area`, `tol_shape` | [error] | φ_S, φ_C floored to the error lsb (`StopRule`), clamped to error's "
+        "maximum (an error never exceeds it, so the test is unchanged) |",
+        f"| `tol_energy` | u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS} | ε at 2^-{ENERGY_TOL_FRAC_BITS}, rounded "
+        "half up (`StopRule`) |",
+        "| `energy_floor` | ENERGY's width, raw as ENERGY | with E_S and E_C within φ, an energy below it stops the "
+        "run as converged (`energy_floor_raw`: `golden_model/guard.py`'s `ENERGY_FLOOR` times the energy of every "
+        "edge at twice its rest length, ½C·Σd² over the entries, floored; 0 where the float model has none: "
+        "unguarded runs, ε = 0) |",
+        f"| `max_iter` | {ITERATION_BITS} | N_max |",
+        f"| `saturation_limit` | {SATURATION_BITS} | stop as `diverged` after this many saturation events; 0 (the "
+        "host's default): never |",
     ])
 
 

@@ -173,6 +173,8 @@ def test_capacity_option_sizes_the_engine_and_its_map(tmp_path):
     entries = rmap.window("entries")
     assert f"| `entries` | `0x{entries.base:X}` | 300 | {sum(f.width for f in entries.fields)} |" in image
     assert "docs/engine.md" in image and "register_map.md" in image
+    # and how each run constant is formed: the bundle sent the host's writer to docs/engine.md for them
+    assert "| `tol_energy` | u8.40 | ε at 2^-40, rounded half up" in image and "| `energy_floor` |" in image
 
 
 @pytest.mark.parametrize("capacity, message", [
