@@ -369,6 +369,13 @@ def engine_capacity(values, fs: FormatSet, *, guard: bool = True) -> EngineCapac
         RegisterMap.build(fs, capacity)  # the address map must hold it
     except (TypeError, ValueError) as exc:
         raise ParameterError(f"--capacity V E T: {exc}") from None
+    v, fillable = max(capacity.vertices, 3), capacity.fillable_vertices  # (a mesh has a triangle at least)
+    if fillable < v:  # a typo's memories, which no mesh could fill
+        held = (f"at most {fillable} vertices (give more entries or triangles, or fewer vertices)" if fillable >= 3
+                else "no mesh")
+        raise ParameterError(f"--capacity {capacity.as_option()}: a disk mesh of {v} vertices has at least "
+                             f"{4 * v - 6} neighbour entries and {v - 2} triangle{'s' if v > 3 else ''}; these depths "
+                             f"hold {held}")
     return capacity
 
 

@@ -107,6 +107,12 @@ class EngineCapacity:
         """Bits of a count ``0 .. capacity`` of ``what`` (``"vertices"``, ``"entries"``, ``"triangles"``)."""
         return getattr(self, what).bit_length()
 
+    @property
+    def fillable_vertices(self) -> int:
+        """The most vertices a disk mesh within these depths can have: one of ``V`` vertices has at least
+        ``V − 2`` triangles and ``2V − 3`` edges (a fan; ``V − E + T = 1``), so ``4V − 6`` neighbour entries."""
+        return min(self.vertices, (self.entries + 6) // 4, self.triangles + 2)
+
     def check(self, vertices: int, entries: int, triangles: int) -> None:
         """Refuse counts over capacity: a one-line :class:`FixedPointError` naming the first."""
         for name, count in (("vertices", vertices), ("entries", entries), ("triangles", triangles)):

@@ -149,6 +149,21 @@ def test_the_images_decode_to_the_problem(run):
     assert c["mode"] == mode_named("momentum" if run == "momentum-barrier" else "paper-fixed").code
 
 
+@pytest.mark.parametrize("v", [3, 4, 17])
+def test_the_fillable_vertices_are_those_of_the_leanest_disk_a_fan(v):
+    """A fan of ``v`` vertices (a convex polygon's triangles from one corner) is the disk with the fewest
+    entries and triangles for its vertices: depths that hold it hold ``v`` vertices, one entry or triangle
+    fewer do not (``springflat verilog --capacity`` refuses such depths)."""
+    angles = np.linspace(0.0, np.pi, v)
+    fan = Mesh(np.column_stack([np.cos(angles), np.sin(angles), np.zeros(v)]),
+               np.array([(0, i, i + 1) for i in range(1, v - 1)]))
+    entries, triangles = 2 * len(fan.edges), len(fan.faces)
+    assert EngineCapacity(v, entries, max(triangles, 2)).fillable_vertices == v
+    assert EngineCapacity(v, entries - 1, max(triangles, 2)).fillable_vertices < v
+    if triangles > 2:
+        assert EngineCapacity(v, entries, triangles - 1).fillable_vertices < v
+
+
 def test_tolerances_above_one_are_clamped_to_the_error_range():
     mesh = MESHES["dome"]
     params = RUNS["paper-variable"].with_(tol_area=3.0)

@@ -182,6 +182,13 @@ def test_capacity_option_sizes_the_engine_and_its_map(tmp_path):
     (["64", "300"], "expected 3 arguments"),
     (["64", "x", "128"], "invalid int value: 'x'"),
     (["268435456", "1073741824", "1073741824"], "do not fit a 32-bit byte address"),
+    # memories no disk mesh could fill (a typo: 8 entries for 64 vertices), or that hold no triangle at all
+    (["64", "8", "16"], "--capacity 64 8 16: a disk mesh of 64 vertices has at least 250 neighbour entries and 62 "
+                        "triangles; these depths hold at most 3 vertices (give more entries or triangles, or fewer "
+                        "vertices)"),
+    (["64", "249", "62"], "these depths hold at most 63 vertices"),
+    (["2", "2", "2"], "--capacity 2 2 2: a disk mesh of 3 vertices has at least 6 neighbour entries and 1 triangle; "
+                      "these depths hold no mesh"),
 ])
 def test_bad_capacity_is_one_line_and_writes_nothing(tmp_path, capacity, message):
     out = tmp_path / "v"
