@@ -588,7 +588,8 @@ def atomic_directory(out: Path, what: str = "--out", stale: Sequence[str] = (),
     one rename each with SIGINT held back, after checking that none of them is anything but a
     regular file, nor one of ``inputs`` (``(what, path)`` as for :func:`check_distinct`).
     ``stale``: names removed from an existing ``out`` unless the build wrote them (a result an
-    earlier run left that would now mislead).
+    earlier run left that would now mislead), read when the block ends (a caller may fill it in the
+    block); a directory they leave empty goes too.
     """
     out = out if isinstance(out, Path) else Path(out)  # keeps a TypedPath as typed
     check_output_directory(out, what)
@@ -685,9 +686,14 @@ def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...
             os.chmod(p, _file_mode(destination) | (stat.S_IMODE(os.stat(p).st_mode) & 0o111))
         moves.append((p, destination, out / p.relative_to(build)))
     _put_in_place(moves, what)
+    emptied = set()
     for name in stale:  # an earlier result this run did not write again; never an input of this run
         if Path(name) not in written and (target / name).is_file() and _identity(target / name) not in input_files:
             (target / name).unlink()
+            emptied.add((target / name).parent)
+    for directory in sorted(emptied, key=lambda d: -len(d.parts)):  # (sim_models/ of an earlier bundle)
+        if directory != target and not any(directory.iterdir()):
+            directory.rmdir()
 
 
 # --------------------------------------------------------------------------- per-face distortion colouring

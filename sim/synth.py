@@ -56,16 +56,21 @@ class SynthError(ParameterError):
 
 
 def earlier_bundle_files(out: Path) -> tuple[str, ...]:
-    """The files of an earlier ``springflat verilog`` or ``synth`` bundle in the directory ``out``, by the names
-    those commands give them (never another file; not a README.md, which may be the user's):
-    :func:`~sim.outputs.atomic_directory`'s ``stale``, so that a new bundle does not keep another target's logs,
-    or an ECP5 bundle's primitive models beside generic Verilog, that this run did not write again."""
+    """The files of an earlier ``springflat verilog`` or ``synth`` bundle in the directory ``out`` (one whose
+    ``interface.json`` is a bundle's), by the names those commands give them (never another file; not a
+    README.md, which may be the user's): :func:`~sim.outputs.atomic_directory`'s ``stale``, so that a new bundle
+    does not keep another target's logs, or an ECP5 bundle's primitive models beside generic Verilog, that this
+    run did not write again. A directory that holds no bundle keeps every file."""
     from .cocotb_support import PRIMITIVE_MODELS
     from .export import BUNDLE_FILES, COMPONENTS
     from .outputs import output_target
 
     target = output_target(out)
-    if not target.is_dir():
+    try:
+        interface = json.loads((target / "interface.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return ()
+    if not (isinstance(interface, dict) and {"format_set", "components"} <= interface.keys()):
         return ()
     tops = [name for spec in COMPONENTS for name in (spec.module, f"{spec.module}_pnr")] + [ENGINE_MODULE,
                                                                                              f"{ENGINE_MODULE}_pnr"]
@@ -90,15 +95,17 @@ def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str
 
     inputs = [("--formats", None if FormatSet.names_preset(formats) else Path(formats))]
     failure = None
-    stale = list(earlier_bundle_files(out))  # an earlier bundle's files this run does not write again
+    earlier = earlier_bundle_files(out)
+    stale: list[str] = []  # filled once the tools have succeeded: a failed run's logs join the earlier bundle
     with atomic_directory(out, inputs=inputs, stale=stale) as directory:
         def shown(text: str) -> str:
             return text.replace(str(directory), str(out))
 
         try:
-            return build(directory, shown)
+            report = build(directory, shown)
+            stale.extend(earlier)  # an earlier bundle's files this run did not write again
+            return report
         except SynthError as exc:
-            stale.clear()  # a failed run's logs join the earlier bundle, which stays whole
             failure = SynthError(shown(str(exc)))
             if not any(directory.iterdir()):
                 raise failure from None

@@ -359,14 +359,19 @@ def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_i
     for name in earlier + ["notes.txt", "README.md", "my_top.v"]:
         (out / name).parent.mkdir(parents=True, exist_ok=True)
         (out / name).write_text("earlier\n")
+    mine = tmp_path / "project"  # no bundle here (no bundle's interface.json): files of those names are the user's
+    mine.mkdir()
+    (mine / "reproduce.sh").write_text("mine\n")
+    (mine / "interface.json").write_text('{"mine": 1}\n')
 
     def failing(directory, shown):
         (directory / "step_generator.ice40.yosys.log").write_text("yosys failed\n")
         raise SynthError("yosys failed")
 
+    (out / "interface.json").write_text('{"format_set": {}, "components": {}}\n')  # the earlier bundle's
     with pytest.raises(SynthError):
         build_in_place(out, "narrow", failing)
-    assert all((out / name).read_text() == "earlier\n" for name in earlier)
+    assert all((out / name).read_text() == "earlier\n" for name in earlier) and (out / "interface.json").is_file()
     assert (out / "step_generator.ice40.yosys.log").is_file()
 
     def ice40(directory, shown):
@@ -375,7 +380,11 @@ def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_i
         return {}
 
     build_in_place(out, "narrow", ice40)
-    kept = sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+    kept = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
     assert kept == ["README.md", "my_top.v", "notes.txt", "reproduce.sh", "step_generator.ice40.ys",
-                    "step_generator.v"]
+                    "step_generator.v"]  # sim_models/ too, emptied
     assert (out / "step_generator.v").read_text() == "new\n" and (out / "notes.txt").read_text() == "earlier\n"
+    build_in_place(mine, "narrow", ice40)
+    assert (mine / "interface.json").read_text() == '{"mine": 1}\n'
+    assert sorted(p.name for p in mine.iterdir()) == ["interface.json", "reproduce.sh", "step_generator.ice40.ys",
+                                                      "step_generator.v"]
