@@ -34,9 +34,11 @@ def board_capacity(bus, fs: FormatSet) -> EngineCapacity:
     probe.identify_engine()
     values = [probe.read_value(f"cap_{what}") for what in ("vertices", "entries", "triangles")]
     try:
-        return EngineCapacity(*values, guard=bool(probe.read_value("feature_guard")))
+        capacity = EngineCapacity(*values, guard=bool(probe.read_value("feature_guard")))
+        RegisterMap.build(fs, capacity)  # (its address map must fit the bus)
     except ValueError as exc:
         raise DriverError(f"the engine reports a capacity it cannot have ({exc})") from None
+    return capacity
 
 
 @dataclass(frozen=True, eq=False)

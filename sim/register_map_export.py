@@ -163,8 +163,12 @@ def main(argv: list[str] | None = None) -> int:
 
     from golden_model.fixed.engine import load_formats
     from golden_model.fixed.measures import FixedPointError
-    from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
+    from golden_model.fixed.formats_set import FormatSet
     from golden_model.mesh import one_line
+    from golden_model.params import ParameterError
+
+    from .export import engine_capacity
 
     from .outputs import OutputError, atomic_directory
 
@@ -176,12 +180,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True)
     args = parser.parse_args(argv)
     try:
-        m = RegisterMap.build(load_formats(args.formats), EngineCapacity(*args.capacity))
-    except (FixedPointError, ValueError) as exc:
+        formats = load_formats(args.formats)
+        m = RegisterMap.build(formats, engine_capacity(args.capacity, formats))  # (--capacity's checks)
+    except (FixedPointError, ParameterError, ValueError) as exc:
         parser.exit(2, f"{parser.prog}: error: {exc}\n")
     out = Path(args.out)
     try:
-        with atomic_directory(out) as build:  # all three files in place, or none
+        inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
+        with atomic_directory(out, inputs=inputs) as build:  # all three files in place, or none
             names = [path.name for path in write_exports(m, build)]
     except OutputError as exc:
         parser.exit(2, f"{parser.prog}: error: {one_line(str(exc))}\n")

@@ -330,8 +330,7 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str,
         "dt": int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) if fixed_step else 0,
         "area_reciprocal": problem.area_reciprocal.mantissa, "area_shift": problem.area_reciprocal.shift,
         "length_reciprocal": problem.length_reciprocal.mantissa, "length_shift": problem.length_reciprocal.shift,
-        # an error never exceeds error's maximum, so a larger tolerance passes the same errors
-        "tol_area": min(rule.area, fs.error.raw_max), "tol_shape": min(rule.shape, fs.error.raw_max),
+        "tol_area": rule.area, "tol_shape": rule.shape,  # (StopRule clamps them to error's maximum)
         "tol_energy": rule.energy, "max_iter": params.max_iter, "saturation_limit": 0,
         "energy_floor": rule.floor,
     }

@@ -233,8 +233,8 @@ def scale_mesh(mesh: Mesh, params: FlattenParams, fs: FormatSet) -> ScaledMesh:
             inv_mass_barrier_raw = _quantize_checked(inv_mass, fs.inv_mass, "the barrier weight w_i", fs,
                                                      "use a larger --spring, or a wider inv_mass format")
     else:
-        with np.errstate(over="ignore"):  # masses below 1/float's maximum: an infinite 1/m, refused below
-            inv_mass = 1.0 / mesh.masses(model_density)
+        with np.errstate(over="ignore", divide="ignore"):  # masses below 1/float's maximum (or 0 in float):
+            inv_mass = 1.0 / mesh.masses(model_density)  # an infinite 1/m, refused below
         inv_mass_raw = _quantize_checked(inv_mass, fs.inv_mass, "1/m", fs,
                                          "use --density auto (or a larger density), or a wider inv_mass format")
     if min(w.min() for w in (inv_mass_raw, inv_mass_barrier_raw) if w is not None) < 16:

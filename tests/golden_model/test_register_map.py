@@ -263,6 +263,14 @@ def test_the_export_command_refuses_an_output_it_cannot_write_in_one_line_and_wr
     assert sorted(p.name for p in (tmp_path / "e5").iterdir()) == ["register_map.json"]
     assert main(["--out", str(tmp_path / "new")]) == 0
     assert sorted(p.name for p in (tmp_path / "new").iterdir()) == sorted(EXPORT_FILES)
+    # a --formats file the export would replace is refused, as verilog's and synth's are
+    formats = tmp_path / "new" / "register_map.json"
+    FormatSet.preset("default").save(formats)
+    before = formats.read_text()
+    with pytest.raises(SystemExit) as stopped:
+        main(["--formats", str(formats), "--out", str(tmp_path / "new")])
+    assert stopped.value.code == 2 and "is the same file as --formats" in capsys.readouterr().err
+    assert formats.read_text() == before
 
 
 def test_the_engine_doc_holds_the_generated_map():

@@ -121,6 +121,11 @@ def test_a_bus_that_holds_no_engine_is_named_before_its_capacity_is_trusted(word
     engine_with_no_vertices.read = lambda a: 0 if a == cap_vertices else engine.read(a)
     with pytest.raises(DriverError, match=r"^the engine reports a capacity it cannot have \(EngineCapacity: vertices "):
         board_capacity(engine_with_no_vertices, DEFAULT)
+    engine_with_every_vertex = SameWord(0)  # a count no address map holds: refused as the map is built
+    engine_with_every_vertex.read = lambda a: 0xFFFF_FFFF if a == cap_vertices else engine.read(a)
+    with pytest.raises(DriverError, match=r"^the engine reports a capacity it cannot have \(register map: .* do not "
+                                          r"fit a 32-bit byte address\)$"):
+        board_capacity(engine_with_every_vertex, DEFAULT)
 
 
 @pytest.mark.slow  # a CLI run
