@@ -81,11 +81,13 @@ def check_scheduler_address(scheduler: str) -> None:
     expected = "expected 'local' or PROTOCOL://HOST:PORT, such as tcp://host:8786"
     try:
         protocol, location = parse_address(scheduler)
-        # (no default port: Dask's Client refuses an address without one, "missing port number")
-        host, port = parse_host_port(location) if protocol in ("tcp", "tls", "ws", "wss") else (location, 1)
-    except (ValueError, TypeError) as exc:
-        problem = "no port" if "missing port" in str(exc) else "not a Dask address"
-        raise ParameterError(f"--scheduler '{scheduler}': {problem} ({expected})") from None
+        # tcp and tls need a port (Dask's Client refuses an address without one); a websocket's is its URL's
+        host, port = (parse_host_port(location, 0) if protocol in ("tcp", "tls") else
+                      parse_host_port(location, 8786) if protocol in ("ws", "wss") else (location, 1))
+    except (ValueError, TypeError):
+        raise ParameterError(f"--scheduler '{scheduler}': not a Dask address ({expected})") from None
+    if port == 0 and not location.endswith(":0"):
+        raise ParameterError(f"--scheduler '{scheduler}': no port ({expected})")
     try:
         get_backend(protocol)  # (loads a plug-in's protocol from its entry point)
     except (ValueError, ImportError):  # unknown, or a plug-in that cannot be loaded

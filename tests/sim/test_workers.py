@@ -209,3 +209,18 @@ def test_a_signal_held_through_a_slice_reaches_an_asyncio_program_once():
         return seen
 
     assert asyncio.run(program()) == ["SIGINT"]
+
+
+@pytest.mark.parametrize("address, problem", [
+    ("foo", "no port"), ("tcp://foo", "no port"), ("tls://foo", "no port"), ("tcp://foo:0", "port 0 is not in 1-65535"),
+    ("tcp://foo:8786", None), ("ws://foo", None), ("wss://foo/dask", None),  # a websocket's port is its URL's
+])
+def test_a_scheduler_address_dask_could_not_connect_to_is_refused_before_the_run(address, problem):
+    from golden_model.params import ParameterError
+    from sim.workers import check_scheduler_address
+
+    if problem is None:
+        check_scheduler_address(address)
+    else:
+        with pytest.raises(ParameterError, match=rf"^--scheduler '{address}': {problem} \(expected 'local' or "):
+            check_scheduler_address(address)
