@@ -373,9 +373,10 @@ def engine_capacity(values, fs: FormatSet, *, guard: bool = True) -> EngineCapac
     if fillable < v:  # a typo's memories, which no mesh could fill
         held = (f"at most {fillable} vertices (give more entries or triangles, or fewer vertices)" if fillable >= 3
                 else "no mesh")
+        entries, triangles = EngineCapacity.least_for(v)
         raise ParameterError(f"--capacity {capacity.as_option()}: a disk mesh of {v} vertices has at least "
-                             f"{4 * v - 6} neighbour entries and {v - 2} triangle{'s' if v > 3 else ''}; these depths "
-                             f"hold {held}")
+                             f"{entries} neighbour entries and {triangles} triangle{'s' if triangles > 1 else ''}; "
+                             f"these depths hold {held}")
     return capacity
 
 
@@ -410,9 +411,10 @@ def memory_image_markdown(fs: FormatSet, capacity) -> str:
                      f"{w.stride} | {fields} |")
     lines += ["", "Reference packer: `golden_model.engine_spec.image.build_image(problem, capacity)` (and "
               "`decode_nodes`/`decode_entries`/`decode_triangles`); reference host driver: "
-              "`sim/engine_driver.py`. The full contract (run constants, controller passes, error answers) is "
-              "docs/engine.md in the springflat repository; the field tables with bit ranges are in "
-              "`register_map.md`.", "", "## How the host fills the images", "", host_scaling_markdown(), ""]
+              "`sim/engine_driver.py`. The host's part of the contract is below (the run constants with it); the "
+              "controller's passes and error answers are docs/engine.md in the springflat repository; the field "
+              "tables with bit ranges are in `register_map.md`.", "", "## How the host fills the images", "",
+              host_scaling_markdown(), ""]
     return "\n".join(lines)
 
 
@@ -421,6 +423,7 @@ def host_scaling_markdown() -> str:
     :func:`golden_model.fixed.engine.prepare` and :func:`golden_model.engine_spec.image.build_image` do, for a
     host written without them (``memory_image.md``, and the generated block of docs/engine.md)."""
     from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS, ITERATION_BITS, SATURATION_BITS
+    from golden_model.guard import ENERGY_FLOOR
     from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, POSITION_HEADROOM
     from golden_model.reference import MOMENTUM_STIFFNESS_BUDGET
 
@@ -460,9 +463,8 @@ def host_scaling_markdown() -> str:
         "|---|---|---|",
         "| `vertices`, `entries`, `triangles` | capacity's bits | the loaded mesh's counts (`vertices = 0`: no mesh, "
         "the reset value) |",
-        "| `mode`, `barrier` | the run mode's code, 1 (register `MODE`) | the run mode (`golden_model/modes.py`'s "
-        "`RUN_MODES`, the table in `docs/guard.md`; the engine runs all of them, `ENGINE_RUN_MODES`), the fold "
-        "barrier |",
+        "| `mode`, `barrier` | the run mode's code, 1 (register `MODE`) | the run mode (`MODE.mode`'s codes in "
+        "`register_map.md`; the engine runs all of them), the fold barrier |",
         "| `half_spring` | [spring] | ½C |",
         "| `damping` | [damping] | 1 − γ (paper dynamics) |",
         "| `dt` | [dt] | the fixed Δt (mode `paper-fixed`), 0 otherwise |",
@@ -473,8 +475,8 @@ def host_scaling_markdown() -> str:
         f"| `tol_energy` | u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS} | ε at 2^-{ENERGY_TOL_FRAC_BITS}, rounded "
         "half up (`StopRule`) |",
         "| `energy_floor` | ENERGY's width, raw as ENERGY | with E_S and E_C within φ, an energy below it stops the "
-        "run as converged (`energy_floor_raw`: `golden_model/guard.py`'s `ENERGY_FLOOR` times the energy of every "
-        "edge at twice its rest length, ½C·Σd² over the entries, floored; 0 where the float model has none: "
+        f"run as converged (`energy_floor_raw`: {ENERGY_FLOOR:g} times the energy of every edge at twice its "
+        "rest length, ½C·Σd² over the entries in ENERGY's units, floored; 0 where the float model has none: "
         "unguarded runs, ε = 0) |",
         f"| `max_iter` | {ITERATION_BITS} | N_max |",
         f"| `saturation_limit` | {SATURATION_BITS} | stop as `diverged` after this many saturation events; 0 (the "

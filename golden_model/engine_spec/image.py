@@ -107,10 +107,15 @@ class EngineCapacity:
         """Bits of a count ``0 .. capacity`` of ``what`` (``"vertices"``, ``"entries"``, ``"triangles"``)."""
         return getattr(self, what).bit_length()
 
+    @staticmethod
+    def least_for(vertices: int) -> tuple[int, int]:
+        """``(entries, triangles)`` of the leanest disk mesh of ``vertices`` vertices, a fan: ``V − 2`` triangles
+        and ``2V − 3`` edges (``V − E + T = 1``), so ``4V − 6`` neighbour entries."""
+        return 4 * vertices - 6, vertices - 2
+
     @property
     def fillable_vertices(self) -> int:
-        """The most vertices a disk mesh within these depths can have: one of ``V`` vertices has at least
-        ``V − 2`` triangles and ``2V − 3`` edges (a fan; ``V − E + T = 1``), so ``4V − 6`` neighbour entries."""
+        """The most vertices a disk mesh within these depths can have (:meth:`least_for` inverted)."""
         return min(self.vertices, (self.entries + 6) // 4, self.triangles + 2)
 
     def check(self, vertices: int, entries: int, triangles: int) -> None:

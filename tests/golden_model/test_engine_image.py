@@ -158,6 +158,7 @@ def test_the_fillable_vertices_are_those_of_the_leanest_disk_a_fan(v):
     fan = Mesh(np.column_stack([np.cos(angles), np.sin(angles), np.zeros(v)]),
                np.array([(0, i, i + 1) for i in range(1, v - 1)]))
     entries, triangles = 2 * len(fan.edges), len(fan.faces)
+    assert EngineCapacity.least_for(v) == (entries, triangles)
     assert EngineCapacity(v, entries, max(triangles, 2)).fillable_vertices == v
     assert EngineCapacity(v, entries - 1, max(triangles, 2)).fillable_vertices < v
     if triangles > 2:
