@@ -104,10 +104,10 @@ def read_obj(path: str | Path, data: bytes | None = None) -> ObjContents:
     Text is UTF-8 (a byte-order mark is skipped); lines end in LF, CRLF or CR;
     tokens are separated by any whitespace, tabs included.
     """
+    if data is None:
+        data = read_file_bytes(path, "mesh", MeshError)  # (before Path(), which drops a trailing '/')
     path = Path(path)
     where = f"cannot parse mesh '{path}'"
-    if data is None:
-        data = read_file_bytes(path, "mesh", MeshError)
     text = data.decode("utf-8-sig", errors="replace")
 
     statements, numbers = _obj_lines(text)

@@ -464,12 +464,15 @@ def test_a_file_named_with_a_trailing_slash_is_not_read(tmp_path):
     """``scan.obj/`` names no file (the OS says "not a directory"); pathlib drops the slash, and the file was
     read as if it had been named without it."""
     from golden_model.layouts import LayoutError, load_layout
+    from golden_model.mesh_io import read_obj
 
     square = tmp_path / "square.obj"
     square.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n")
     load_mesh(str(square))
     with pytest.raises(MeshError, match=r"^cannot read mesh '.*square\.obj/': not a directory$"):
         load_mesh(f"{square}/")
+    with pytest.raises(MeshError, match=r"^cannot read mesh '.*square\.obj/': not a directory$"):
+        read_obj(f"{square}/")
     with pytest.raises(LayoutError, match=r"^cannot read layout '.*square\.obj/': not a directory$"):
         load_layout(f"{square}/", 4)
 

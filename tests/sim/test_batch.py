@@ -421,3 +421,15 @@ def test_two_meshes_whose_names_and_endings_make_one_file_name_are_both_named(tm
         "springflat: error: 'in/a.obj' with --out .flat.obj and 'in/a.flat.obj' with --out .obj would both write "
         f"'{os.path.join('out', 'a.flat.obj')}'"]
     assert not (tmp_path / "out").exists()
+
+
+def test_a_mesh_named_with_a_trailing_slash_fails_as_no_file_in_a_batch(tmp_path, monkeypatch, capsys):
+    """``dome00.obj/`` names no file ("not a directory"): the batch read the file named without the slash."""
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 2, 0)
+    assert main(["flatten", "in/dome00.obj/", "in/dome01.off", "--out-dir", "o", "--out", ".flat.obj", "--json",
+                 "--max-iter", "2"]) == 2
+    records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    by_mesh = {r["mesh"]: r for r in records[:-1]}
+    assert by_mesh["dome00"]["status"] == "failed" and "not a directory" in by_mesh["dome00"]["error"]
+    assert by_mesh["dome01"]["status"] != "failed"
