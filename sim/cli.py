@@ -95,7 +95,7 @@ class _Parser(argparse.ArgumentParser):
         argv = getattr(self, "_argv", [])
         for option in match.group(1).split("/"):
             for token, value in zip(argv, argv[1:]):
-                if token == option and re.match(r"-[0-9.]", value):
+                if token == option and re.match(r"-([0-9.]|inf|nan)", value, re.IGNORECASE):
                     return f"; a value that starts with '-' is read as an option: write {option}={value}"
         return ""
 
@@ -354,11 +354,11 @@ def main(argv: list[str] | None = None) -> int:
         meshes = [extra for extra in extras if is_builtin(extra) or Path(extra).suffix.lower() in MESH_SUFFIXES]
         dashed = [extra for extra in meshes if extra.startswith("-")]
         if dashed:  # a file's name that argparse took for an option
-            after_options = f": a file named with a leading '-' is read as an option: write ./{dashed[0]}"
+            hint = f": a file named with a leading '-' is read as an option: write ./{dashed[0]}"
         else:
-            after_options = (f": the meshes of a batch come together, before the options ({args.command} MESH "
-                             "MESH ... --option ...)" if args.command == "flatten" and meshes else "")
-        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}{after_options}")
+            hint = (f": the meshes of a batch come together, before the options ({args.command} MESH "
+                    "MESH ... --option ...)" if args.command == "flatten" and meshes else "")
+        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}{hint}")
     reset_interrupted()
     handler = threading.current_thread() is threading.main_thread()
     # Ctrl-C, kill or a hang-up: one line, status 130, 143 or 129 (sim.exit_codes.STOP_SIGNALS), unless ignored

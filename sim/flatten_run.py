@@ -7,7 +7,6 @@ through here."""
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -212,7 +211,7 @@ def divergence_hint(params: FlattenParams) -> str:
     if mode.guarded:
         return "the guarded run's numbers overflowed: bring --spring or the mesh's size nearer 1"
     smaller = f"--penalty-gain than {params.penalty_gain:g}" + (  # kappa, where the user raised it
-        f" or --penalty-kappa than {params.penalty_kappa:g}" if params.penalty_kappa > DEFAULT_PENALTY_KAPPA else "")
+        f" or --penalty-kappa than {params.penalty_kappa:g}" if params.penalty_kappa > FlattenParams.penalty_kappa else "")
     penalty = (f"the overlap penalty pushes nodes apart unchecked: try a smaller {smaller}, or drop --penalty; "
                if params.penalty else "")
     if not mode.has_masses:
@@ -223,9 +222,6 @@ def divergence_hint(params: FlattenParams) -> str:
                else f"--damping {DIVERGENCE_DAMPING:g}")
     return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or {_guard_on(params)}"
 
-
-#: The overlap penalty's default threshold: :func:`divergence_hint` names a larger one.
-DEFAULT_PENALTY_KAPPA = next(f.default for f in dataclasses.fields(FlattenParams) if f.name == "penalty_kappa")
 
 #: The damping :func:`divergence_hint` suggests to an undamped paper run.
 DIVERGENCE_DAMPING = 0.05

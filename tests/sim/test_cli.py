@@ -506,6 +506,7 @@ def test_a_mesh_file_named_with_a_leading_dash_is_named_with_the_way_to_give_it(
 @pytest.mark.parametrize("argv, hint", [
     (["study", "--bits", "-4:8"], "write --bits=-4:8"),
     (["flatten", "surf1", "--tol-energy", "-1e-3"], "write --tol-energy=-1e-3"),
+    (["flatten", "surf1", "--tol-energy", "-inf"], "write --tol-energy=-inf"),
     (["flatten", "surf1", "--tol-energy"], None),  # no value at all: nothing to rewrite
 ])
 def test_a_value_that_starts_with_a_dash_is_named_with_the_way_to_give_it(argv, hint, capsys):
