@@ -61,7 +61,8 @@ def waiver_text(waivers=WAIVERS) -> str:
     lines = ["`verilator_config",
              "// Lint rules that springflat's generated Verilog breaks by construction (sim/lint.py);",
              "// every other rule of -Wall stays on.",
-             "// verilator --lint-only -Wall --top-module TOP verilator_waivers.vlt TOP.v [sim_models/*.v]", ""]
+             "// Lint: verilator --lint-only -Wall --top-module TOP verilator_waivers.vlt TOP.v [sim_models' .v files]",
+             ""]  # (a comment that starts '// verilator' is a directive to Verilator)
     for waiver in waivers:
         lines += [f"// {waiver.rule}: {waiver.reason}", f'lint_off -rule {waiver.rule} -file "{waiver.files}"']
     return "\n".join(lines) + "\n"
