@@ -225,7 +225,8 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 
 def cmd_verilog(args: argparse.Namespace) -> int:
-    from .export import bundle_readme, engine_capacity, export_engine_bundle, export_verilog
+    from .export import bundle_readme, export_engine_bundle, export_verilog
+    from .register_map_export import engine_capacity
     from .clock import clock_sdc
     from .synth import earlier_bundle_files
     from .outputs import check_build_so_far

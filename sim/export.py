@@ -22,7 +22,7 @@ import os
 import re
 import shutil
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, TypeVar
 
@@ -38,7 +38,7 @@ from .lint import WAIVER_FILE, write_waivers
 from .top_names import COMPONENT_SUMMARIES, CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["COMPONENTS", "ENGINE_MODULE", "quietly", "rtl_refusal", "export_verilog", "export_engine", "export_engine_bundle",
-           "engine_capacity", "memory_image_markdown", "describe"]
+           "memory_image_markdown", "describe"]
 
 T = TypeVar("T")
 
@@ -353,31 +353,6 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
                                                           "triangles": capacity.triangles, "guard": capacity.guard},
             "bus": "Wishbone B4 classic, 32-bit data, word addresses", "addr_width": engine.addr_width,
             "files": [f"{ENGINE_MODULE}.v", *files]}
-
-
-def engine_capacity(values, fs: FormatSet, *, guard: bool = True) -> EngineCapacity:
-    """``--capacity V E T`` (and ``--no-guard``: ``guard`` False) as an
-    :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the default depths); a capacity the
-    engine's register map cannot hold is a one-line :class:`ParameterError`."""
-    from golden_model.engine_spec.register_map import RegisterMap
-    from golden_model.params import ParameterError
-
-    if values is None:
-        return DEFAULT_CAPACITY if guard else replace(DEFAULT_CAPACITY, guard=False)
-    try:
-        capacity = EngineCapacity(*(int(v) for v in values), guard=guard)
-        RegisterMap.build(fs, capacity)  # the address map must hold it
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"--capacity V E T: {exc}") from None
-    v, fillable = max(capacity.vertices, 3), capacity.fillable_vertices  # (a mesh has a triangle at least)
-    if fillable < v:  # a typo's memories, which no mesh could fill
-        held = (f"at most {fillable} vertices (give more entries or triangles, or fewer vertices)" if fillable >= 3
-                else "no mesh")
-        entries, triangles = EngineCapacity.least_for(v)
-        raise ParameterError(f"--capacity {capacity.as_option()}: a disk mesh of {v} vertices has at least "
-                             f"{entries} neighbour entries and {triangles} triangle{'s' if triangles > 1 else ''}; "
-                             f"these depths hold {held}")
-    return capacity
 
 
 def memory_image_markdown(fs: FormatSet, capacity) -> str:

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import replace
 from pathlib import Path
 
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from golden_model.engine_spec.register_map import ACCESS, MAGIC, REGISTER_BLOCKS, VERSION, BitField, \
     MemoryWindow, Register, RegisterMap
 
-__all__ = ["markdown", "to_json", "c_header", "write_exports", "EXPORT_FILES"]
+__all__ = ["markdown", "to_json", "c_header", "write_exports", "engine_capacity", "EXPORT_FILES"]
 
 EXPORT_FILES = ("register_map.md", "register_map.json", "springflat_regs.h")
 PREFIX = "SPRINGFLAT"
@@ -157,18 +159,40 @@ def write_exports(m: RegisterMap, out_dir: str | Path) -> list[Path]:
     return paths
 
 
+def engine_capacity(values, fs, *, guard: bool = True) -> EngineCapacity:
+    """``--capacity V E T`` (and ``--no-guard``: ``guard`` False) as an
+    :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the default depths); a capacity the
+    engine's register map cannot hold is a one-line :class:`ParameterError`."""
+    from golden_model.params import ParameterError
+
+    if values is None:
+        return DEFAULT_CAPACITY if guard else replace(DEFAULT_CAPACITY, guard=False)
+    try:
+        capacity = EngineCapacity(*(int(v) for v in values), guard=guard)
+        RegisterMap.build(fs, capacity)  # the address map must hold it
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"--capacity V E T: {exc}") from None
+    v, fillable = max(capacity.vertices, 3), capacity.fillable_vertices  # (a mesh has a triangle at least)
+    if fillable < v:  # a typo's memories, which no mesh could fill
+        held = (f"at most {fillable} vertices (give more entries or triangles, or fewer vertices)" if fillable >= 3
+                else "no mesh")
+        entries, triangles = EngineCapacity.least_for(v)
+        raise ParameterError(f"--capacity {capacity.as_option()}: a disk mesh of {v} vertices has at least "
+                             f"{entries} neighbour entries and {triangles} triangle{'s' if triangles > 1 else ''}; "
+                             f"these depths hold {held}")
+    return capacity
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m sim.register_map_export --formats PRESET|FILE --capacity V E T --out DIR``."""
     import argparse
 
     from golden_model.fixed.engine import load_formats
     from golden_model.fixed.measures import FixedPointError
-    from golden_model.engine_spec.image import DEFAULT_CAPACITY
     from golden_model.fixed.formats_set import FormatSet
     from golden_model.mesh import one_line
     from golden_model.params import ParameterError
 
-    from .export import engine_capacity
 
     from .outputs import OutputError, atomic_directory
 

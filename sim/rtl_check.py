@@ -173,7 +173,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     from golden_model.engine_spec.image import build_image
 
     from .engine_run import run_image_on_rtl, summary_line
-    from .export import engine_capacity
+    from .register_map_export import engine_capacity
     from .run_options import UserError, load_format_set, start_positions, strict_json
 
     if args.stall is not None:

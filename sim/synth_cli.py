@@ -121,7 +121,7 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
 def cmd_synth(args: argparse.Namespace) -> int:
     from .run_options import load_format_set, strict_json
 
-    from .export import engine_capacity
+    from .register_map_export import engine_capacity
 
     fs = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, fs, guard=args.build_guard)
