@@ -61,13 +61,15 @@ def earlier_bundle_files(out: Path) -> tuple[str, ...]:
     README.md, which may be the user's): :func:`~sim.outputs.atomic_directory`'s ``stale``, so that a new bundle
     does not keep another target's logs, or an ECP5 bundle's primitive models beside generic Verilog, that this
     run did not write again. A directory that holds no bundle keeps every file."""
+    from golden_model.files import read_regular_file
+
     from .cocotb_support import PRIMITIVE_MODELS
     from .export import BUNDLE_FILES, COMPONENTS
     from .outputs import output_target
 
     target = output_target(out)
     try:
-        interface = json.loads((target / "interface.json").read_text(encoding="utf-8"))
+        interface = json.loads(read_regular_file(target / "interface.json"))  # (a FIFO of that name: not read)
     except (OSError, ValueError):
         return ()
     if not (isinstance(interface, dict) and {"format_set", "components"} <= interface.keys()):

@@ -388,3 +388,20 @@ def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_i
     assert (mine / "interface.json").read_text() == '{"mine": 1}\n'
     assert sorted(p.name for p in mine.iterdir()) == ["interface.json", "reproduce.sh", "step_generator.ice40.ys",
                                                       "step_generator.v"]
+
+
+def test_an_interface_json_that_is_a_fifo_is_not_read_for_an_earlier_bundle(tmp_path):
+    """Whether ``--out`` holds an earlier bundle is read from its interface.json: a FIFO of that name would block
+    the command; it is no bundle's."""
+    import threading
+
+    from sim.synth import earlier_bundle_files
+
+    os.mkfifo(tmp_path / "interface.json")
+    found = []
+    reader = threading.Thread(target=lambda: found.append(earlier_bundle_files(tmp_path)), daemon=True)
+    reader.start()
+    reader.join(10)
+    if reader.is_alive():  # (unblock the reader, so the thread ends)
+        os.close(os.open(tmp_path / "interface.json", os.O_WRONLY | os.O_NONBLOCK))
+    assert found == [()]
