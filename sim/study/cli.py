@@ -413,10 +413,21 @@ def _cost_cells(s: ConfigSummary) -> str:
     return f"{s.cost.total_bits} | {s.cost.dsp} | {s.cost.rom_bits}"
 
 
+def _runs_count(value: int | None) -> str:
+    """A count over the runs, or '–' where none ran."""
+    return "–" if value is None else str(value)
+
+
+def _text_cell(text: str) -> str:
+    """Free text as one markdown table cell: its pipes (``|dE| 3.8e-05 > 1e-07``) would split it."""
+    return text.replace("|", "\\|")
+
+
 def _summary_row(s: ConfigSummary) -> str:
-    return (f"| {s.config.label} | {_cost_cells(s)} | {_fmt(s.worst_deviation)} | {_fmt(s.worst_max_position)} | "
-            f"{s.max_abs_d_iterations} | {s.status_mismatches} | {s.saturations} | {s.refused} | "
-            f"{'yes' if s.meets else 'no'} | {s.first_failure or s.config.error} |")
+    return (f"| {_text_cell(s.config.label)} | {_cost_cells(s)} | {_fmt(s.worst_deviation)} | "
+            f"{_fmt(s.worst_max_position)} | {_runs_count(s.max_abs_d_iterations)} | "
+            f"{_runs_count(s.status_mismatches)} | {_runs_count(s.saturations)} | "
+            f"{s.refused} | {'yes' if s.meets else 'no'} | {_text_cell(s.first_failure or s.config.error or '')} |")
 
 
 _SUMMARY_HEAD = ["| config | total bits | DSP | ROM bits | worst \\|ΔE\\| | worst max pos. err. | max \\|Δit\\| | "
@@ -506,11 +517,11 @@ def report_markdown(result: StudyResult, chosen_fs: FormatSet | None, command: s
                       "| step | move | total bits | DSP | ROM bits | worst \\|ΔE\\| | moves rejected first |",
                       "|---:|---|---:|---:|---:|---:|---:|"]
             for k, st in enumerate(opt.steps, 1):
-                lines.append(f"| {k} | {st.move} | {st.cost.total_bits} | {st.cost.dsp} | {st.cost.rom_bits} | "
+                lines.append(f"| {k} | {_text_cell(st.move)} | {st.cost.total_bits} | {st.cost.dsp} | {st.cost.rom_bits} | "
                              f"{st.worst_deviation:.3g} | {st.rejected} |")
             lines += ["", "Why no further single move is acceptable from the result:", "",
                       "| move | reason |", "|---|---|"]
-            lines += [f"| {m} | {why} |" for m, why in opt.rejected]
+            lines += [f"| {_text_cell(m)} | {_text_cell(why)} |" for m, why in opt.rejected]
 
     sweep = [s for s in result.summaries if s.config.kind == "sweep"]
     if sweep:

@@ -54,9 +54,10 @@ class ConfigSummary:
     worst_deviation: float
     worst_max_position: float
     worst_rms_position: float
-    max_abs_d_iterations: int
-    status_mismatches: int
-    saturations: int  # beyond the error measures' own clamp (RunRecord.measure_clamps)
+    # None where no case ran (every one refused): no run, so nothing matched or differed
+    max_abs_d_iterations: int | None
+    status_mismatches: int | None
+    saturations: int | None  # beyond the error measures' own clamp (RunRecord.measure_clamps)
     first_failure: str  # "<case>: <reason>"
 
     @property
@@ -73,8 +74,10 @@ class ConfigSummary:
             "cases": self.cases, "failed_cases": self.failed, "refused_cases": self.refused,
             "worst_d_area_error": self.worst_d_area, "worst_d_shape_error": self.worst_d_shape,
             "worst_deviation": self.worst_deviation, "worst_max_position_error": self.worst_max_position,
-            "worst_rms_position_error": self.worst_rms_position, "max_abs_d_iterations": self.max_abs_d_iterations,
-            "status_mismatches": self.status_mismatches, "saturations": self.saturations,
+            "worst_rms_position_error": self.worst_rms_position,
+            **{name: "" if value is None else value for name, value in (
+                ("max_abs_d_iterations", self.max_abs_d_iterations), ("status_mismatches", self.status_mismatches),
+                ("saturations", self.saturations))},
             "meets_target": int(self.meets), "first_failure": self.first_failure,
             "formats": " ".join(f"{f}={getattr(fs, f)}" for f in FORMAT_FIELDS) if fs else "",
             "knobs": (f"seed={fs.rsqrt_seed_bits} newton={fs.rsqrt_newton_steps} lut={fs.lut_index_bits}"
@@ -98,15 +101,15 @@ def summarise(config: Config, records: Sequence[RunRecord], target: AccuracyTarg
             first = first or f"{r.case}: {'; '.join(why)}"
     if config.fs is None and not records:
         first = f"invalid: {config.error}"
+    ran = [r for r in records if not r.error]
     return ConfigSummary(
         config, cost(config.fs) if config.fs is not None else None, len(records), failed,
         sum(1 for r in records if r.error),
         _nanmax(r.d_area for r in records if not r.error), _nanmax(r.d_shape for r in records if not r.error),
         _nanmax(r.deviation for r in records), _nanmax(r.max_position_error for r in records),
         _nanmax(r.rms_position_error for r in records),
-        max((abs(r.d_iterations) for r in records), default=0),
-        sum(1 for r in records if not r.error and not r.status_match),
-        sum(r.saturations - r.measure_clamps for r in records), first)
+        *((max(abs(r.d_iterations) for r in ran), sum(1 for r in ran if not r.status_match),
+           sum(r.saturations - r.measure_clamps for r in ran)) if ran else (None, None, None)), first)
 
 
 Progress = Callable[[str, int], None]

@@ -357,6 +357,28 @@ def test_an_e_of_1_or_more_held_just_below_1_is_no_deviation_and_a_refused_run_h
                                                                                                            None, 0)
 
 
+def test_a_configuration_whose_runs_were_all_refused_has_no_counts_and_its_reason_keeps_its_cell():
+    """summary.csv had 0 for a refused configuration's iterations, status mismatches and saturations (read: all
+    matched); report.md's cells split at the reason's '|dE|' pipes, so the reason and its numbers were lost."""
+    from golden_model.study.records import RunRecord
+    from sim.study.cli import _summary_row
+    from golden_model.study.knobs import Config
+    from sim.study.flow import summarise
+
+    refused = RunRecord("c", "d/pca/fixed", "delaunay", "pca", "fixed", "converged", "refused", 40, 0, 0.01,
+                        math.nan, 0.02, math.nan, math.nan, math.nan, 0, "", error="the shortest edge is 0.05")
+    ran = RunRecord("c", "s/pca/fixed", "surf1", "pca", "fixed", "converged", "converged", 40, 43, 0.01, 0.0101,
+                    0.02, 0.02, 1e-4, 5e-5, 0, "")
+    config = Config("c", FormatSet.preset("default"), kind="base")
+    nothing_ran = summarise(config, [refused], AccuracyTarget(1e-7))
+    row = nothing_ran.row()
+    assert (row["max_abs_d_iterations"], row["status_mismatches"], row["saturations"]) == ("", "", "")
+    some_ran = summarise(config, [refused, ran], AccuracyTarget(1e-7))
+    assert (some_ran.max_abs_d_iterations, some_ran.status_mismatches, some_ran.saturations) == (3, 0, 0)
+    cells = _summary_row(summarise(config, [ran], AccuracyTarget(1e-7))).split(" | ")
+    assert len(cells) == 12 and cells[-1] == "s/pca/fixed: iterations 43 vs 40; \\|dE\\| 0.0001 > 1e-07 |"
+
+
 def test_the_choice_says_how_it_was_made_and_whether_the_rtl_can_build_it(tmp_path, monkeypatch, capsys):
     """--no-optimise: chosen.json must not claim the optimiser; a pick without the rsqrt unit's Newton step runs in
     the golden model but the RTL refuses it, which chosen.json, the report and stderr say."""
