@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import MISSING, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -130,6 +130,17 @@ def accumulator_guard_bits(max_degree: int) -> int:
 UNITS = ("node_update", "rsqrt", "step_generator", "controller")
 """Where a product is computed: the RTL's node-update datapath, its rsqrt unit, the step
 generator, or the controller around them (``golden_model.fixed.engine``; not in the RTL)."""
+
+
+def _no_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object, refusing a key given twice (json keeps the last silently: ``"max_degree": 32,
+    "max_degree": 33`` would be 33)."""
+    seen: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in seen:
+            raise ValueError(f"the key {key!r} is given twice")
+        seen[key] = value
+    return seen
 
 
 def _json_kind(value: Any) -> str:
@@ -472,10 +483,14 @@ class FormatSet:
         notes = d.pop("notes", {})
         if not isinstance(notes, dict):
             raise ValueError(f"FormatSet {name!r}: 'notes' must be an object, not {_json_kind(notes)}")
-        known = {f.name for f in fields(cls)} - set(FORMAT_FIELDS) - {"name", "notes"}
-        unknown = set(d) - known
+        knobs = [f for f in fields(cls) if f.name not in FORMAT_FIELDS and f.name not in ("name", "notes")]
+        unknown = set(d) - {f.name for f in knobs}
         if unknown:
             raise ValueError(f"FormatSet {name!r}: unknown keys {sorted(unknown)}")
+        missing = [f.name for f in knobs if f.name not in d and f.default is MISSING]  # (rounding, max_degree:
+        if missing:                                                                # defaults, docs/fixed-point.md)
+            raise ValueError(f"FormatSet {name!r}: missing the knob{'s' if len(missing) > 1 else ''} "
+                             f"{', '.join(missing)}")
         return cls(**fmts, **d, name=name, notes=dict(notes))
 
     @staticmethod
@@ -492,7 +507,7 @@ class FormatSet:
         opened), or a preset by name (``"default"``, ``"narrow"``)."""
         if cls.names_preset(path_or_preset):
             return cls.preset(str(path_or_preset))
-        return cls.from_dict(json.loads(read_regular_file(path_or_preset)))
+        return cls.from_dict(json.loads(read_regular_file(path_or_preset), object_pairs_hook=_no_repeated_keys))
 
     @classmethod
     def preset(cls, name: str) -> FormatSet:

@@ -362,6 +362,21 @@ def test_presets_load_and_roundtrip(name, tmp_path):
     assert isinstance(fs.rounding, Rounding)
 
 
+def test_a_format_file_missing_a_knob_or_giving_one_twice_is_named_in_one_line(tmp_path):
+    """A missing knob was Python's "__init__() missing 1 required positional argument"; a key given twice was
+    taken silently (the last value won). rounding and max_degree may be left out: they have defaults."""
+    d = FormatSet.preset("default").to_dict()
+    without = {k: v for k, v in d.items() if k not in ("lut_index_bits", "rsqrt_seed_bits")}
+    with pytest.raises(ValueError, match=r"^FormatSet 'default': missing the knobs rsqrt_seed_bits, lut_index_bits$"):
+        FormatSet.from_dict(without)
+    optional = {k: v for k, v in d.items() if k not in ("rounding", "max_degree")}
+    assert FormatSet.from_dict(optional) == FormatSet.preset("default").replace(name="default")
+    path = tmp_path / "twice.json"
+    path.write_text(json.dumps(d, indent=1).replace('"max_degree": 32', '"max_degree": 32, "max_degree": 33'))
+    with pytest.raises(ValueError, match=r"^the key 'max_degree' is given twice$"):
+        FormatSet.load(path)
+
+
 def test_narrow_preset_respects_dsp_budget():
     """narrow: every node-datapath multiplier operand <= 18 bits except L = length_sq*r (rsqrt input)."""
     fs = FormatSet.preset("narrow")
