@@ -44,6 +44,7 @@ from .knobs import (
     parse_knobs,
     preset_configs,
     sweep_configs,
+    unexercised_classes,
 )
 from .records import RESULT_COLUMNS, AccuracyTarget, FixedOutcome, RunRecord, compare, measure_clamps, run_fixed
 
@@ -53,4 +54,5 @@ __all__ = [
     "StudyCase", "Config", "RunRecord", "AccuracyTarget", "FixedOutcome",
     "resolve_study_mesh", "build_cases", "parse_bits", "parse_knobs", "make_config", "class_frac_bits",
     "class_changes", "sweep_configs", "preset_configs", "fs_key", "run_fixed", "compare", "measure_clamps",
+    "unexercised_classes",
 ]

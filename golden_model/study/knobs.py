@@ -8,7 +8,8 @@ from typing import Any, Iterable, Sequence
 
 from ..fixed.format import Rounding
 from ..fixed.formats_set import CONTROLLER_FIELDS, FORMAT_FIELDS, FormatSet
-from ..params import ParameterError
+from ..modes import Step
+from ..params import FlattenParams, ParameterError
 
 SIGNAL_CLASSES: dict[str, tuple[str, ...]] = {
     "position": ("position", "delta", "face_edge"),
@@ -34,6 +35,18 @@ All fields of a class shift by the same number of fraction bits (their offsets
 in the base set are kept); the class's value is the first field's fraction bits.
 """
 assert sorted(f for fs in SIGNAL_CLASSES.values() for f in fs) == sorted(FORMAT_FIELDS)
+
+def unexercised_classes(params: Iterable[FlattenParams]) -> tuple[str, ...]:
+    """The signal classes that no run with one of ``params`` reads, so whose fraction bits change no result:
+    ``area`` and ``barrier`` without the fold barrier, ``power`` (the momentum restart's) without the momentum
+    dynamics, ``damping`` where the paper dynamics' ``1 − γ`` is 1 exactly (no damping). The optimiser leaves
+    them at the base's widths: bits taken off there would save nothing the study measured."""
+    params = list(params)
+    used = {"area": any(p.barrier for p in params), "barrier": any(p.barrier for p in params),
+            "power": any(p.mode.step is Step.MOMENTUM for p in params),
+            "damping": any(p.mode.has_masses and p.damping != 0 for p in params)}
+    return tuple(cls for cls in SIGNAL_CLASSES if not used.get(cls, True))
+
 
 DATAPATH_FIELDS: tuple[str, ...] = tuple(f for f in FORMAT_FIELDS
                                          if f not in ("error", "lut_entry") + CONTROLLER_FIELDS)

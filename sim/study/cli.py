@@ -40,6 +40,7 @@ from golden_model.study import (
     parse_knobs,
     preset_configs,
     sweep_configs,
+    unexercised_classes,
 )
 
 from ..outputs import atomic_directory, atomic_write, check_output_directory
@@ -506,9 +507,14 @@ def report_markdown(result: StudyResult, chosen_fs: FormatSet | None, command: s
                   "`springflat flatten --engine fixed --formats chosen.json` loads it):", "", "```json",
                   chosen_fs.to_json().rstrip(), "```"]
 
+    unexercised = unexercised_classes(c.params for c in result.cases)
     opt = result.optimisation
     if opt is not None:
         lines += ["", "## Optimiser", ""]
+        if unexercised:
+            lines += [f"Not moved: {', '.join(unexercised)}, which no case reads (their widths change no result "
+                      "here: the cases run no fold barrier, no momentum dynamics, or no damping), so they keep "
+                      f"`{base.fs.name}`'s widths.", ""]
         if opt.best is None:
             lines.append(f"Not run: {opt.reason}.")
         else:
@@ -533,6 +539,10 @@ def report_markdown(result: StudyResult, chosen_fs: FormatSet | None, command: s
         for cls, fields in SIGNAL_CLASSES.items():
             runs = [s for s in sweep if s.config.knob == cls]
             if not runs:
+                continue
+            if cls in unexercised:  # any width "meets": no finding
+                lines.append(f"| {cls} | {'+'.join(fields)} | {class_frac_bits(base.fs, cls)} | – (no case reads "
+                             "it) | – |")
                 continue
             ok = [s for s in runs if s.meets and s.config.value < class_frac_bits(base.fs, cls)]
             best = min(ok, key=lambda s: s.config.value) if ok else None

@@ -16,7 +16,7 @@ from golden_model.results import FlattenResult
 from golden_model.study.cases import StudyCase
 from golden_model.study.knobs import (
     DEFAULT_BITS, DEFAULT_STRIDES, KNOBS, SIGNAL_CLASSES, Config, class_frac_bits,
-    class_changes, fs_key, make_config, preset_configs, sweep_configs,
+    class_changes, fs_key, make_config, preset_configs, sweep_configs, unexercised_classes,
 )
 from golden_model.study.records import AccuracyTarget, FixedOutcome, RunRecord, compare, run_fixed
 
@@ -158,6 +158,8 @@ class Study:
         if len(set(names)) != len(names):
             raise ParameterError("study case names must be unique")
         self.cases = list(cases)
+        #: classes no case reads (:func:`~golden_model.study.unexercised_classes`): the optimiser keeps them
+        self.unexercised = unexercised_classes(c.params for c in self.cases)
         self.target = target
         self.workers = max(1, int(workers))
         self.progress = progress
@@ -363,11 +365,11 @@ class Study:
 
         return estimate, pruned
 
-    @staticmethod
-    def _moves(fs: FormatSet, strides: Sequence[int] = (1,)) -> list[tuple[str, str, Any, dict[str, Any]]]:
-        """Cost-reducing single moves from ``fs``: ``(name, knob, value, changes)``."""
+    def _moves(self, fs: FormatSet, strides: Sequence[int] = (1,)) -> list[tuple[str, str, Any, dict[str, Any]]]:
+        """Cost-reducing single moves from ``fs``: ``(name, knob, value, changes)``; none of a class no case
+        reads (:attr:`unexercised`)."""
         moves = []
-        for cls in SIGNAL_CLASSES:
+        for cls in (c for c in SIGNAL_CLASSES if c not in self.unexercised):
             for k in sorted(set(strides) | {1}):
                 bits = class_frac_bits(fs, cls) - k
                 try:

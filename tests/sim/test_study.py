@@ -153,6 +153,26 @@ def test_float_reference_computed_once(monkeypatch, surf1_cases):
     assert len(calls) == len(surf1_cases)
 
 
+def test_classes_no_case_reads_change_no_result_and_the_optimiser_keeps_them(surf1_cases):
+    """The built-ins run the paper dynamics undamped and without the fold barrier: area, barrier, power and
+    damping are never read, so any width of theirs 'meets the target' and the optimiser took them to 0 bits,
+    'savings' of nothing measured (a chosen.json with area s8.0). It keeps them at the base's widths."""
+    from golden_model.params import FlattenParams
+    from golden_model.study import GENERATED_PARAMS, unexercised_classes
+
+    assert unexercised_classes(c.params for c in surf1_cases) == ("damping", "area", "barrier", "power")
+    assert unexercised_classes([GENERATED_PARAMS]) == ("area", "barrier", "power")  # damped: damping is read
+    assert unexercised_classes([FlattenParams(dynamics="momentum")]) == ("damping",)  # barrier and restart on
+    d = FormatSet.preset("default")
+    st = Study(surf1_cases)
+    narrowed = make_config(d, "narrowed", area="s8.0", barrier_gain="u8.0", barrier_coeff="u4.0", power="s9.0",
+                           power_acc="s30.0", damping="u1.0")
+    base, cut = st.evaluate([Config("base", d, "base"), narrowed])
+    assert [(r.d_area, r.d_shape, r.d_iterations) for r in st.records(narrowed)] == [
+        (r.d_area, r.d_shape, r.d_iterations) for r in st.records(Config("base", d, "base"))]
+    assert not {knob for _, knob, _, _ in st._moves(d, (1, 2, 4, 8))} & {"damping", "area", "barrier", "power"}
+
+
 def test_records_match_an_independent_run(surf1_cases):
     d = FormatSet.preset("default")
     st = Study(surf1_cases)
