@@ -344,8 +344,11 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
                             f"them {answer['register']} clocks after `stb` rises for a register, "
                             f"{answer['memory word']} for a memory word (read or write) and {answer['err']} for an "
                             "`err` (an unmapped word, or a memory word while the engine runs). A cycle presented while "
-                            "the last answer's `ack` is still out starts a clock later. The rest of the bus's "
-                            "contract: the header of this file.", "",
+                            "the last answer's `ack` is still out starts a clock later. **A host must not abandon a "
+                            "cycle** (drop `cyc` before `ack` or `err`): the engine still answers the request it took "
+                            "(a write acts), and that answer goes to the next cycle; an interconnect that times cycles "
+                            "out must wait longer than the memory word's answer. The rest of the bus's contract: the "
+                            "header of this file.", "",
                             "| port | direction | bits |", "|---|---|---|",
                             *(f"| `{p['name']}` | {p['direction']} | {p['width']} |" for p in verilog_ports(engine)),
                             ""]))

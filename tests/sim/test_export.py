@@ -133,6 +133,7 @@ def test_the_register_map_gives_the_engines_ports_as_its_verilog_has_them(export
     clocks = SpringflatEngine.BUS_ANSWER_CLOCKS
     assert (f"raises them {clocks['register']} clocks after `stb` rises for a register, {clocks['memory word']} "
             f"for a memory word (read or write) and {clocks['err']} for an `err`") in text
+    assert "**A host must not abandon a cycle**" in text  # its late answer goes to the next cycle (docs/engine.md)
     assert re.search(rf"#define SPRINGFLAT_ADDR_BITS +0x{ports['bus__adr'][1]:X}u",
                      (exported / "springflat_regs.h").read_text())
 
