@@ -222,7 +222,7 @@ def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFA
         size = pattern_size_mm(drawing)
         check_sheet_count(size, paper, drawing.units)
         if plan is None:
-            plan = without_blank_sheets(plan_sheets(size, paper), drawing)
+            plan = _printed_sheets(drawing, paper)[0]  # (within MAX_SHEETS: checked above)
         with atomic_write(path) as tmp:
             (_write_pdf if kind == "pdf" else _write_svg)(tmp, drawing, plan)
 
