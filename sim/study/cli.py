@@ -165,7 +165,8 @@ def cmd_study(args: argparse.Namespace) -> int:
                         *([f"--max-iter {args.max_iter}"] if args.max_iter is not None else []),
                         f"--out {shlex.quote(str(out))}"])
     earlier_choice = (out / "chosen.json").is_file()
-    with atomic_directory(out, stale=("chosen.json",), inputs=inputs) as build:  # all of it or nothing
+    # all of it or nothing; an earlier run's choice and sweep plots would pass for this report's
+    with atomic_directory(out, stale=("chosen.json", PLOT_FILES["bits"], PLOT_FILES["knobs"]), inputs=inputs) as build:
         write_outputs(result, build, command=command)
     chosen = result.chosen
     if chosen is None:
@@ -243,6 +244,11 @@ def _rtl_refusal(fs: FormatSet) -> str | None:
     return rtl_refusal(fs)
 
 
+def _swept(result: StudyResult) -> bool:
+    """Whether any knob was swept (not ``--sweep none``): the sweep plots and their report section."""
+    return any(s.config.kind == "sweep" for s in result.summaries)
+
+
 def _optimised(result: StudyResult) -> bool:
     """Whether the greedy optimiser ran (``--optimise``, and a base that meets the target)."""
     return result.optimisation is not None and result.optimisation.best is not None
@@ -267,11 +273,12 @@ def write_outputs(result: StudyResult, out: Path, command: str = "springflat stu
             fs.save(tmp)
     elif (out / "chosen.json").exists():
         (out / "chosen.json").unlink()  # a stale choice from an earlier run would mislead
-    for key, name in PLOT_FILES.items():
+    plots = {PLOT_FILES["pareto"]: _plot_pareto}
+    if _swept(result):  # else empty axes, which the report does not link
+        plots |= {PLOT_FILES["bits"]: _plot_bits, PLOT_FILES["knobs"]: _plot_knobs}
+    for name, plot in plots.items():
         paths[name] = out / name
-    _plot_bits(result, paths[PLOT_FILES["bits"]])
-    _plot_knobs(result, paths[PLOT_FILES["knobs"]])
-    _plot_pareto(result, paths[PLOT_FILES["pareto"]])
+        plot(result, paths[name])
     with atomic_write(paths["report.md"]) as tmp:
         Path(tmp).write_text(report_markdown(result, fs, command), encoding="utf-8")
     return paths
@@ -529,8 +536,8 @@ def report_markdown(result: StudyResult, chosen_fs: FormatSet | None, command: s
                       "| move | reason |", "|---|---|"]
             lines += [f"| {_text_cell(m)} | {_text_cell(why)} |" for m, why in opt.rejected]
 
-    sweep = [s for s in result.summaries if s.config.kind == "sweep"]
-    if sweep:
+    if _swept(result):
+        sweep = [s for s in result.summaries if s.config.kind == "sweep"]
         lines += ["", "## One-knob sweeps", "",
                   f"Each signal class's fraction bits, everything else at `{base.fs.name}`: the fewest swept bits "
                   "that still meet the target (in isolation — combined reductions add up).", "",

@@ -316,6 +316,20 @@ def test_an_earlier_choice_that_this_report_does_not_make_is_removed_and_said(tm
                                                      "report does not make")
 
 
+def test_a_study_that_sweeps_nothing_draws_no_sweep_plots_and_removes_an_earlier_runs(tmp_path, monkeypatch):
+    """--sweep none: the sweep plots would be empty axes (the report links none); an earlier run's would pass for
+    this one's."""
+    monkeypatch.chdir(tmp_path)
+    Path("s").mkdir()
+    for name in ("study-bits.png", "study-knobs.png"):
+        Path("s", name).write_bytes(b"an earlier run's plot")
+    assert cmd_study(_parse(["dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--max-iter", "5",
+                             "--out", "s", "--quiet"])) == 0
+    assert sorted(os.listdir("s")) == sorted(set(REPORT_FILES) - {"study-bits.png", "study-knobs.png"})
+    report = Path("s/report.md").read_text()
+    assert "](study-pareto.png)" in report and "](study-bits.png)" not in report
+
+
 def test_a_mesh_path_that_cannot_be_read_says_why_not_unknown_mesh(tmp_path, monkeypatch):
     from golden_model.mesh import MeshError
 
