@@ -55,6 +55,18 @@ class SynthError(ParameterError):
     """A bad request or a failed tool run; the message is one line."""
 
 
+#: What Yosys and nextpnr write for one top on one target, as ``TOP.TARGET.KIND`` (:func:`tool_file`).
+TOOL_FILE_KINDS = ("ys", "stat.json", "yosys.log", "json", "nextpnr.json", "nextpnr.log", "nextpnr.stdout")
+
+
+def tool_file(top: str, target: str, kind: str) -> str:
+    """The bundle's name for Yosys's or nextpnr's ``kind`` file (:data:`TOOL_FILE_KINDS`) of ``top`` on
+    ``target``: the script, ``stat -json``, the netlist, nextpnr's report and the logs."""
+    if kind not in TOOL_FILE_KINDS:
+        raise ValueError(f"unknown tool file kind {kind!r} (one of {', '.join(TOOL_FILE_KINDS)})")
+    return f"{top}.{target}.{kind}"
+
+
 def earlier_bundle_files(out: Path) -> tuple[str, ...]:
     """The files of an earlier ``springflat verilog`` or ``synth`` bundle in the directory ``out`` (one whose
     ``interface.json`` is a bundle's), by the names those commands give them (never another file; not a
@@ -77,8 +89,7 @@ def earlier_bundle_files(out: Path) -> tuple[str, ...]:
     tops = [name for spec in COMPONENTS for name in (spec.module, f"{spec.module}_pnr")] + [ENGINE_MODULE,
                                                                                              f"{ENGINE_MODULE}_pnr"]
     names = {f"{top}.v" for top in tops} | {
-        f"{top}.{family}.{kind}" for top in tops for family in TARGETS
-        for kind in ("ys", "stat.json", "yosys.log", "json", "nextpnr.json", "nextpnr.log", "nextpnr.stdout")}
+        tool_file(top, family, kind) for top in tops for family in TARGETS for kind in TOOL_FILE_KINDS}
     names |= {name for name in BUNDLE_FILES if name != "README.md"} | {
         "clock.lpf", "clock.sdc", "reproduce.sh", "synth_report.md", "synth_report.json",
         *(f"sim_models/{model.name}" for models in PRIMITIVE_MODELS.values() for model in models)}
@@ -322,10 +333,10 @@ def nextpnr_argv(target: Target, top: str, freq_mhz: float, router: str, seed: i
     device, ``--freq`` in MHz, the report and log files beside it, ``router`` (``auto``: router1), the
     placer ``seed`` and :data:`PLACER_TIMING`'s options."""
     name = target.name
-    argv = [*target.nextpnr_args, "--json", f"{top}.{name}.json", "--freq", f"{freq_mhz:g}",
-            "--report", f"{top}.{name}.nextpnr.json", "--timing-allow-fail",
+    argv = [*target.nextpnr_args, "--json", tool_file(top, name, "json"), "--freq", f"{freq_mhz:g}",
+            "--report", tool_file(top, name, "nextpnr.json"), "--timing-allow-fail",
             "--router", *ROUTERS[router], "--seed", str(seed),
-            *placer_options(placer_timing), "--log", f"{top}.{name}.nextpnr.log"]
+            *placer_options(placer_timing), "--log", tool_file(top, name, "nextpnr.log")]
     if name == "ecp5":
         argv += ["--lpf", "clock.lpf"]
     return argv
@@ -412,14 +423,15 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
         (out / f"{name}_pnr.v").write_text(verilog_of(wrapper, f"{name}_pnr", platform))
 
         # 1. Yosys on the bare module: the component's own resources.
-        script = f"read_verilog {name}.v\n{tgt.yosys_synth.format(top=name)}\ntee -q -o {name}.{target}.stat.json stat -json\n"
-        (out / f"{name}.{target}.ys").write_text(script)
+        files = {kind: tool_file(name, target, kind) for kind in TOOL_FILE_KINDS}
+        script = f"read_verilog {name}.v\n{tgt.yosys_synth.format(top=name)}\ntee -q -o {files['stat.json']} stat -json\n"
+        (out / files["ys"]).write_text(script)
         say(f"[{target} {name}] yosys {tgt.yosys_synth.split()[0]} (bare module)")
         t0 = time.monotonic()
-        status, log = run_tool(TOOL["yosys"], ["-s", f"{name}.{target}.ys"], out, f"{name}.{target}.yosys.log")
+        status, log = run_tool(TOOL["yosys"], ["-s", files["ys"]], out, files["yosys.log"])
         if status != 0:
-            raise SynthError(f"yosys failed on {name}: {error_line(log)} (log: {out / f'{name}.{target}.yosys.log'})")
-        stat = json.loads((out / f"{name}.{target}.stat.json").read_text())
+            raise SynthError(f"yosys failed on {name}: {error_line(log)} (log: {out / files['yosys.log']})")
+        stat = json.loads((out / files["stat.json"]).read_text())
         entry.update(parse_yosys_stat(stat, tgt))
         entry["yosys_seconds"] = round(time.monotonic() - t0, 1)
 
@@ -440,11 +452,12 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
         else:
             # 2. Yosys on the wrapped module, then nextpnr on it.
             wtop = f"{name}_pnr"
+            files = {kind: tool_file(wtop, target, kind) for kind in TOOL_FILE_KINDS}
             script = (f"read_verilog {wtop}.v\n{tgt.yosys_synth.format(top=wtop)}\n"
-                      f"write_json {wtop}.{target}.json\ntee -q -o {wtop}.{target}.stat.json stat -json\n")
-            (out / f"{wtop}.{target}.ys").write_text(script)
+                      f"write_json {files['json']}\ntee -q -o {files['stat.json']} stat -json\n")
+            (out / files["ys"]).write_text(script)
             say(f"[{target} {name}] yosys {tgt.yosys_synth.split()[0]} (with serial I/O wrapper)")
-            status, log = run_tool(TOOL["yosys"], ["-s", f"{wtop}.{target}.ys"], out, f"{wtop}.{target}.yosys.log")
+            status, log = run_tool(TOOL["yosys"], ["-s", files["ys"]], out, files["yosys.log"])
             if status != 0:
                 raise SynthError(f"yosys failed on {wtop}: {error_line(log)}")
             entry["router"] = " ".join(ROUTERS[router])
@@ -454,9 +467,9 @@ def run_synthesis(fs, target: str, freq_mhz: float | None, out_dir, components=N
             say(f"[{target} {name}] nextpnr place and route at {freq:g} MHz "
                 f"({'20-60 minutes' if name == ENGINE else 'a few minutes' if name in ('node_update', TOP) else 'under a minute'})")
             t0 = time.monotonic()
-            status, text = run_tool(tgt.nextpnr, argv, out, f"{wtop}.{target}.nextpnr.stdout")
+            status, text = run_tool(tgt.nextpnr, argv, out, files["nextpnr.stdout"])
             entry["nextpnr_seconds"] = round(time.monotonic() - t0, 1)
-            log_file = out / f"{wtop}.{target}.nextpnr.log"
+            log_file = out / files["nextpnr.log"]
             log = log_file.read_text() if log_file.exists() else text
             if status != 0:
                 reason = error_line(log)
@@ -542,9 +555,9 @@ def _write_bundle(out: Path, report: dict, interface: dict) -> None:
         target = report["target"]
         steps = []
         for name, c in report["components"].items():
-            steps.append(("YOSYS", "-q -s " + shlex.quote(f"{name}.{target}.ys")))
+            steps.append(("YOSYS", "-q -s " + shlex.quote(tool_file(name, target, "ys"))))
             if c.get("nextpnr_command"):
-                steps += [("YOSYS", "-q -s " + shlex.quote(f"{name}_pnr.{target}.ys")),
+                steps += [("YOSYS", "-q -s " + shlex.quote(tool_file(f"{name}_pnr", target, "ys"))),
                           ("NEXTPNR", c["nextpnr_command"].split(" ", 1)[1])]
         write_reproduce_script(out, report["command"], steps, "ecp5" if target == "ecp5" else "ice40")
     # interface.md gets the measured clock and throughput (Fmax / II).
