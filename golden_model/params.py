@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields, replace
 
+import numpy as np
+
 from .guard import ENERGY_WINDOW
 from .modes import DYNAMICS, STEP_MODES, RunMode, run_mode
 
@@ -91,6 +93,10 @@ class FlattenParams:
     energy_window: int | None = None
 
     def __post_init__(self) -> None:
+        for f in fields(self):  # a numpy scalar as its Python value (np.float32(0.5) is 0.5, np.int64(500) 500)
+            if isinstance(value := getattr(self, f.name), np.generic):
+                object.__setattr__(self, f.name, value.item())
+
         def finite(name: str, value: float) -> float:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ParameterError(f"{name} must be a finite number, got {value!r}")

@@ -234,6 +234,18 @@ def test_parameters_are_validated(changes, message):
         FlattenParams(**changes)
 
 
+def test_numpy_scalars_are_their_python_values():
+    """A value taken from an array (np.int64, np.float32, np.bool_) is a number like any other: it was refused
+    as 'must be an integer >= 1, got np.int64(500)'; the parameters keep Python types."""
+    params = FlattenParams(max_iter=np.int64(500), spring=np.float32(0.5), barrier=np.bool_(True),
+                           dynamics=np.str_("momentum"), energy_window=np.uint8(4))
+    assert (params.max_iter, params.spring, params.barrier, params.dynamics, params.energy_window) == (
+        500, 0.5, True, "momentum", 4)
+    assert [type(v) for v in (params.max_iter, params.spring, params.barrier)] == [int, float, bool]
+    with pytest.raises(ParameterError, match=r"max-iter must be an integer >= 1, got 2\.5"):
+        FlattenParams(max_iter=np.float64(2.5))
+
+
 def test_a_layout_that_runs_away_has_diverged_while_its_numbers_are_finite():
     """Undamped, with a fixed step too large, the paper dynamics grows for thousands of iterations before
     anything overflows (this run reached N_max at 1.5e28 mesh widths, E_S 4.8e51, as max-iterations): a
