@@ -39,7 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["GUARD_LEVELS", "FLOOR_SHIFT", "FLOOR_MIN_SHIFT", "SCALE_GROW_AFTER", "SCALE_MAX_SHIFT",
-           "ENERGY_WINDOW", "ENERGY_FLOOR", "area_floor", "triangle_levels", "node_levels", "stuck_nodes", "guarded_moves",
+           "ENERGY_WINDOW", "ENERGY_FLOOR", "energy_floor_fraction", "area_floor", "triangle_levels", "node_levels",
+           "stuck_nodes", "guarded_moves",
            "StepScale", "EnergyWindow"]
 
 #: Move fractions 1, 1/2, …, 2^-GUARD_LEVELS; a node none of them keeps safe does not move.
@@ -54,10 +55,19 @@ SCALE_GROW_AFTER = 20
 SCALE_MAX_SHIFT = 20
 #: Iterations over which the momentum dynamics' stop rule measures the energy change.
 ENERGY_WINDOW = 10
-#: The momentum dynamics' stop rule also holds once the energy is below this fraction of ``C·Σ d²``
-#: (the energy of a layout with every edge at twice its length), an rms strain of 1e-3: ``E → 0``
-#: on a developable patch, where its relative change stays large however exact the layout is.
+#: The momentum dynamics' stop rule also holds once the energy is below a fraction of ``C·Σ d²`` (the
+#: energy of a layout with every edge at twice its length): ``E → 0`` on a developable patch, where its
+#: relative change stays large however exact the layout is. This is the largest fraction, an rms strain of
+#: 1e-3; a smaller ``--tol-energy`` lowers it (:func:`energy_floor_fraction`).
 ENERGY_FLOOR = 1e-6
+
+
+def energy_floor_fraction(tol_energy: float) -> float:
+    """The stop rule's energy floor as a fraction of ``C·Σd²``: ``min(ε, 1e-3)²``, an rms strain of
+    ``min(ε, 1e-3)`` (``ε`` the relative energy change the rule asks for, ``tol_energy``), at most
+    :data:`ENERGY_FLOOR`. A tighter ``ε`` asks a developable patch, which the floor stops, for a more exact
+    layout; a looser one would stop a patch whose minimum lies above the floor before it got there."""
+    return min(ENERGY_FLOOR, tol_energy * tol_energy)
 
 
 def area_floor(doubled: np.ndarray, doubled_rest: np.ndarray) -> np.ndarray:

@@ -34,7 +34,7 @@ from typing import Callable
 
 import numpy as np
 
-from .guard import ENERGY_FLOOR, GUARD_LEVELS, EnergyWindow, StepScale, guarded_moves
+from .guard import ENERGY_FLOOR, GUARD_LEVELS, EnergyWindow, StepScale, energy_floor_fraction, guarded_moves
 from .mesh import Mesh, folded_by_area, layout_orientation, signed_areas_2d
 from .modes import Step
 from .params import FlattenParams, ParameterError
@@ -369,15 +369,15 @@ def penalty_moves(model: SpringModel, positions: np.ndarray, kappa: float, gain:
 
 def energy_floor(mesh: Mesh, params: FlattenParams) -> float:
     """The energy below which the stop rule's energy part holds whatever its change:
-    ``ENERGY_FLOOR·C·Σd²`` in the guarded momentum mode; 0 (no floor) in the other modes, whose stop
-    rule is the one the engine has, and with ``tol_energy = 0``, which asks for no energy stop."""
+    ``energy_floor_fraction(ε)·C·Σd²`` in the guarded momentum mode; 0 (no floor) in the other modes, whose
+    stop rule is the one the engine has, and with ``tol_energy = 0``, which asks for no energy stop."""
     if not (params.guard and params.tol_energy > 0):
         return 0.0
-    return ENERGY_FLOOR * params.spring * float(np.sum(mesh.rest_lengths**2))
+    return energy_floor_fraction(params.tol_energy) * params.spring * float(np.sum(mesh.rest_lengths**2))
 
 
 #: The smallest ``C·Σd²`` (the springs' energy scale, mesh units²) a float run accepts: the guard's energy
-#: floor (``ENERGY_FLOOR·C·Σd²``, an rms strain of about 1e-3) is then a normal float. Below it, energies
+#: floor at its largest (``ENERGY_FLOOR·C·Σd²``, an rms strain of 1e-3) is then a normal float. Below it, energies
 #: lose their precision and then underflow to 0, and an unmoved layout passed the stop rule as converged.
 MIN_ENERGY_SCALE = sys.float_info.min / ENERGY_FLOOR
 

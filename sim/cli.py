@@ -134,7 +134,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(strict_json(json_summary(args, mesh, params, result)))
     else:
         print(human_line(mesh, result))
-        print(what_was_used(params, args.init, result), file=sys.stderr)
+        print(what_was_used(params, args.init, result, mesh), file=sys.stderr)
     formats = run_formats(args)
     for note in (*pattern_notes(params, result, formats=formats), scale_note_of(args, mesh, result),
                  _energy_rule_note(params, result), _error_resolution_note(formats)):

@@ -19,6 +19,7 @@ from __future__ import annotations
 import gc
 import json
 import os
+import math
 import re
 import shutil
 import warnings
@@ -453,9 +454,9 @@ def host_scaling_markdown() -> str:
         f"| `tol_energy` | u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS} | ε at 2^-{ENERGY_TOL_FRAC_BITS}, rounded "
         "half up (`StopRule`) |",
         "| `energy_floor` | ENERGY's width, raw as ENERGY | with E_S and E_C within φ, an energy below it stops the "
-        f"run as converged (`energy_floor_raw`: {ENERGY_FLOOR:g} times the energy of every edge at twice its "
-        "rest length, ½C·Σd² over the entries in ENERGY's units, floored; 0 where the float model has none: "
-        "unguarded runs, ε = 0) |",
+        f"run as converged (`energy_floor_raw`: min(ε, {math.sqrt(ENERGY_FLOOR):g})² times the energy of every "
+        "edge at twice its rest length, ½C·Σd² over the entries in ENERGY's units, floored; 0 where the float model "
+        "has none: unguarded runs, ε = 0) |",
         f"| `max_iter` | {ITERATION_BITS} | N_max |",
         f"| `saturation_limit` | {SATURATION_BITS} | stop as `diverged` after this many saturation events; 0 (the "
         "host's default): never |",

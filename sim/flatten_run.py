@@ -7,6 +7,7 @@ through here."""
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -15,11 +16,11 @@ import numpy as np
 from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding, scale_mesh
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
-from golden_model.guard import SCALE_MAX_SHIFT
+from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_fraction
 from golden_model.mesh import Mesh, boundary_crossings
 from golden_model.modes import Step
 from golden_model.params import FlattenParams
-from golden_model.reference import RUNAWAY_FACTOR
+from golden_model.reference import RUNAWAY_FACTOR, energy_floor
 from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
@@ -332,7 +333,7 @@ def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, re
     return {"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
             **result.summary(), "units": args.units,
             "distortion": worst_summary(distortion(mesh, result.positions)),
-            "used": what_was_used(params, args.init, result)[len("springflat: "):]}
+            "used": what_was_used(params, args.init, result, mesh)[len("springflat: "):]}
 
 
 def human_line(mesh: Mesh, result: FlattenResult) -> str:
@@ -347,8 +348,9 @@ def human_line(mesh: Mesh, result: FlattenResult) -> str:
                if "simulator" in result.extra else ""))
 
 
-def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> str:
-    """One line: dynamics, initial layout, stop rule, and why the run stopped."""
+def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh: Mesh) -> str:
+    """One line: dynamics, initial layout, stop rule (with the energy floor where the mode has one), and why
+    the run stopped."""
     barrier = (f", fold barrier (kappa {params.barrier_threshold:g}, mu {params.barrier_gain:g})" if params.barrier
                else "")
     penalty = ", overlap penalty" if params.penalty else ""
@@ -360,9 +362,15 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult) -> st
                     + barrier + penalty)
     rule = f"relative energy change <= {params.tol_energy:g}" + (
         f" over {params.energy_window} iterations" if params.energy_window > 1 else "")
+    floor = energy_floor(mesh, params)
+    strain = math.sqrt(energy_floor_fraction(params.tol_energy))
+    if floor > 0:
+        rule += f", or an energy below the floor of an rms edge strain of {strain:g}"
     if params.tol_area < 1 or params.tol_shape < 1:
         rule = f"E_S <= {params.tol_area:g}, E_C <= {params.tol_shape:g} and {rule}"
-    why = {"converged": "the stop rule held", "max-iterations": f"N_max = {params.max_iter} reached",
+    held = ("the energy fell below the floor (a smaller --tol-energy lowers it)" if result.final.energy < floor
+            else "the stop rule held")
+    why = {"converged": held, "max-iterations": f"N_max = {params.max_iter} reached",
            "diverged": RAN_AWAY,
            "stalled": "no step lowered the energy any more (the guard's step scale fell below "
                       f"2^-{SCALE_MAX_SHIFT}); the pattern is the last accepted, fold-free layout"}[result.status]

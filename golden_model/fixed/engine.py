@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..guard import ENERGY_FLOOR
+from ..guard import energy_floor_fraction
 from ..mesh import Mesh, folded_by_area, layout_orientation
 from ..modes import Step
 from ..params import FlattenParams
@@ -146,14 +146,14 @@ class StopRule:
 
 
 def energy_floor_raw(problem: "FixedProblem") -> int:
-    """:func:`golden_model.reference.energy_floor` in :func:`energy_raw` units: ``ENERGY_FLOOR`` times the
-    exact energy of every edge at twice its rest length (``½C·Σd²`` over the entries), floored; 0 where
-    the float model has no floor."""
+    """:func:`golden_model.reference.energy_floor` in :func:`energy_raw` units: ``energy_floor_fraction(ε)``
+    times the exact energy of every edge at twice its rest length (``½C·Σd²`` over the entries), floored; 0
+    where the float model has no floor."""
     if not (problem.params.guard and problem.params.tol_energy > 0):
         return 0
     rest = problem.stream.rest
     reference = energy_raw(problem.fs, problem.half_spring, int(np.sum(rest * rest, dtype=object)), 0)
-    return math.floor(ENERGY_FLOOR * reference)
+    return math.floor(energy_floor_fraction(problem.params.tol_energy) * reference)
 
 
 def _quantize_checked(x: np.ndarray | float, fmt: Format, what: str, fs: FormatSet, hint: str) -> np.ndarray:

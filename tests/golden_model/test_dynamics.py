@@ -173,3 +173,30 @@ def test_guarded_defaults_reach_the_minimum_within_120_iterations_at_radius_15(n
     count = iterations_to_within(result.history.shape_error, minimum.final.shape_error)
     assert count is not None and count <= 120, (name, count)
     assert max(result.history.folded) == 0
+
+
+def test_a_smaller_tol_energy_lowers_the_floor_that_stops_a_developable_patch():
+    """A developable patch's energy falls to 0 and its relative change stays large, so the floor stops it: an
+    rms edge strain of min(ε, 1e-3). With the default ε the rolled grid stops short of its exact layout; a
+    smaller ε (which alone could not tighten the run: the floor stopped it first) takes it much closer, in
+    float and in fixed point (whose floor the engine's ENERGY_FLOOR register takes from the same host)."""
+    from golden_model.fixed.engine import energy_floor_raw, prepare
+    from golden_model.fixed.formats_set import FormatSet
+    from golden_model.reference import energy_floor
+
+    mesh, _ = rolled_grid(8, 8, arc_degrees=90.0)
+    p0 = initial_layout(mesh, "tutte")
+    scale = FlattenParams().spring * float(np.sum(mesh.rest_lengths**2))  # C·Σd²
+    results = {}
+    for tol in (1e-3, 1e-6):
+        params = FlattenParams(dynamics="momentum", tol_energy=tol, max_iter=3000)
+        assert energy_floor(mesh, params) == pytest.approx(min(tol, 1e-3) ** 2 * scale, rel=1e-12)
+        results[tol] = flatten(mesh, p0, params)
+        assert results[tol].status == "converged"
+    assert 1e-7 * scale < results[1e-3].final.energy < 1e-6 * scale  # stopped on the default floor
+    assert results[1e-6].final.energy < 1e-12 * scale
+    assert results[1e-6].final.shape_error < results[1e-3].final.shape_error / 100
+    fs = FormatSet.preset("default")
+    default, tight, loose = (energy_floor_raw(prepare(mesh, p0, FlattenParams(dynamics="momentum", tol_energy=tol), fs))
+                             for tol in (1e-3, 1e-6, 1e-2))
+    assert tight == pytest.approx(default * 1e-6, abs=1) and loose == default

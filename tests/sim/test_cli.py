@@ -282,7 +282,8 @@ def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap()
     assert summary["init"] == "arap" and "stopped: the stop rule held" in summary["used"]
     assert (summary["mode"], summary["step"], summary["guard"], summary["energy_window"]) == \
         ("momentum-guarded", "momentum", True, 10) and "density" not in summary and "damping" not in summary
-    assert "relative energy change <= 0.001 over 10 iterations" in summary["used"]
+    assert ("relative energy change <= 0.001 over 10 iterations, or an energy below the floor of an rms edge "
+            "strain of 0.001;") in summary["used"]
     human = run("flatten", str(path), "--max-iter", "5")
     assert "used momentum dynamics, step guard, fold barrier" in human.stderr and "N_max = 5 reached" in human.stderr
     unguarded = run("flatten", str(path), "--max-iter", "5", "--no-guard", "--penalty")
@@ -822,3 +823,19 @@ def test_a_program_that_ran_a_command_in_process_and_saw_it_interrupted_can_writ
     except KeyboardInterrupt:  # (not raised on: it would end the test session)
         pytest.fail("the program's own write after the command was refused as the command's interrupt")
     assert Path("after.dxf").stat().st_size > 0
+
+
+def test_the_run_line_says_when_the_energy_floor_stopped_a_developable_patch(tmp_path):
+    """A rolled grid from ARAP stops on the floor (its energy falls to 0 while its relative change stays large),
+    which the run line says, with the option that lowers it; a smaller --tol-energy lowers it (an rms strain
+    of min(eps, 1e-3)). It said 'the stop rule held' while the energy still fell 6 % an iteration."""
+    from golden_model.generate import rolled_grid
+    from golden_model.mesh_io import save_obj
+
+    mesh, _ = rolled_grid(8, 8, arc_degrees=90.0)
+    save_obj(tmp_path / "rolled.obj", mesh.vertices, mesh.faces)
+    for extra, strain in [((), "0.001"), (("--tol-energy", "1e-6"), "1e-06")]:
+        done = run("flatten", str(tmp_path / "rolled.obj"), *extra)
+        assert done.returncode == 0, done.stderr
+        assert (f"or an energy below the floor of an rms edge strain of {strain}; stopped: the energy fell below "
+                "the floor (a smaller --tol-energy lowers it)") in done.stderr
