@@ -24,8 +24,8 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
-from golden_model.fixed.measures import energy_frac_bits
-from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS
+from golden_model.fixed.measures import energy_shifts
+from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS, energy_width
 
 from .fixedpoint import FormatSetNotBuildable, clamp, shape_of, shift_round
 from .layouts import energy_result_layout, energy_sums_layout, normalise_layout, saturations_shape
@@ -242,14 +242,10 @@ class EnergyCheck(wiring.Component):
         sums = energy_sums_layout(fs, entries_capacity)
         self.square_bits = sums["square_sum"].shape.width
         self.barrier_bits = sums["barrier_sum"].shape.width
-        frac = energy_frac_bits(fs)
-        self.springs_shift = frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits
-        self.barrier_shift = frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits
+        self.springs_shift, self.barrier_shift = energy_shifts(fs)
         self.half_spring_bits = fs.spring.width - 1
         self.spring_factor_bits = self.half_spring_bits + 2  # 3·½C
-        largest = (((3 * ((1 << self.half_spring_bits) - 1) * ((1 << self.square_bits) - 1)) << self.springs_shift)
-                   + ((2 * ((1 << self.barrier_bits) - 1)) << self.barrier_shift))
-        self.energy_bits = largest.bit_length()
+        self.energy_bits = energy_width(fs, entries_capacity)
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
         self.latency = self.square_bits + self.energy_bits + 8
         super().__init__({

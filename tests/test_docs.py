@@ -158,17 +158,6 @@ def test_preset_notes_state_the_formats_numbers(preset):
     assert checked >= (25 if preset == "default" else 3), checked
 
 
-def test_the_energy_checks_width_is_the_engines(unelaborated):
-    """``EnergyCheck``'s energy width is the engine's ``energy_width`` (a fact about the code, not a table:
-    docs/hardware-units.md's latencies are generated from ``EnergyCheck`` itself)."""
-    from golden_model.engine_spec.image import EngineCapacity, energy_width
-    from hdl import EnergyCheck
-
-    for name in PRESETS:
-        fs = FormatSet.preset(name)
-        assert EnergyCheck(fs, 8192).energy_bits == energy_width(fs, EngineCapacity(1024, 8192, 2048)), name
-
-
 # ----------------------------------------------------------------------------- no history in the design docs
 
 #: Tokens of 7–40 hex digits in docs/ that are not commit hashes, each with the reason.

@@ -35,7 +35,7 @@ from ..modes import MODE_CODE_BITS, RUN_MODES, RunMode, Step
 from ..fixed.controller import Controller, Setup
 from ..fixed.engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, FixedProblem, StopRule, check_fixed_params,
                             energy_floor_raw)
-from ..fixed.measures import SAT, FixedPointError, Reciprocal, energy_frac_bits
+from ..fixed.measures import SAT, FixedPointError, Reciprocal, energy_shifts
 from ..fixed.format import Format, SaturationCounter, quantize, raw_range
 from ..fixed.formats_set import FormatSet
 from ..fixed.pipeline import BarrierEntries, NeighbourStream
@@ -267,14 +267,13 @@ def _reciprocal_shift_bits(fs: FormatSet, capacity: EngineCapacity) -> int:
     return (fs.reciprocal.width + max(area_total, length_total).bit_length() - 1).bit_length()
 
 
-def energy_width(fs: FormatSet, capacity: EngineCapacity) -> int:
-    """Bits of :func:`~golden_model.fixed.measures.energy_raw` for any layout of a mesh within ``capacity``:
-    every entry's ``e = |L − d|`` at most rest_length's and ``c·h`` at most barrier_coeff's times area's maximum."""
-    frac = energy_frac_bits(fs)
-    springs = 3 * fs.spring.raw_max * capacity.entries * fs.rest_length.raw_max ** 2 << (
-        frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits)
-    barrier = 2 * capacity.entries * fs.barrier_coeff.raw_max * fs.area.raw_max << (
-        frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits)
+def energy_width(fs: FormatSet, entries: int) -> int:
+    """Bits of :func:`~golden_model.fixed.measures.energy_raw` for any layout of a mesh of at most ``entries``
+    neighbour entries (an engine's ``capacity.entries``): every entry's ``e = |L − d|`` at most rest_length's and
+    ``c·h`` at most barrier_coeff's times area's maximum; the ENERGY registers' width and the energy check's."""
+    springs_shift, barrier_shift = energy_shifts(fs)
+    springs = 3 * fs.spring.raw_max * entries * fs.rest_length.raw_max ** 2 << springs_shift
+    barrier = 2 * entries * fs.barrier_coeff.raw_max * fs.area.raw_max << barrier_shift
     return (springs + barrier).bit_length()
 
 
@@ -304,7 +303,7 @@ def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordFi
         WordField("tol_energy", ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS),
         WordField("max_iter", ITERATION_BITS),
         WordField("saturation_limit", SATURATION_BITS),
-        WordField("energy_floor", energy_width(fs, capacity)),
+        WordField("energy_floor", energy_width(fs, capacity.entries)),
     )
 
 

@@ -197,7 +197,7 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
     a.value("area_error", fs.error.width, "ro", "E_S of the final layout, raw [error]", res, fmt="error")
     a.value("shape_error", fs.error.width, "ro", "E_C of the final layout, raw [error]", res, fmt="error")
     a.value("cycles", 64, "ro", "clock cycles of the last run, START to done", res)
-    a.value("energy", energy_width(fs, capacity), "ro", "3·energy of the final layout, raw (energy_raw)", res)
+    a.value("energy", energy_width(fs, capacity.entries), "ro", "3·energy of the final layout, raw (energy_raw)", res)
 
     a.block()
     constants = run_constant_fields(fs, capacity)

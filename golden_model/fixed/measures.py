@@ -106,10 +106,15 @@ def energy_raw(fs: FormatSet, half_spring: int, square_sum: int, barrier_sum: in
     triangle's ``½μC·X*·(κ − X/X*)²₊`` is ``2·c·h`` of each of its three entries. Three times the
     sum keeps both parts integers; the stopping rule only compares ratios.
     """
+    springs_shift, barrier_shift = energy_shifts(fs)
+    return ((3 * half_spring * int(square_sum)) << springs_shift) + ((2 * int(barrier_sum)) << barrier_shift)
+
+
+def energy_shifts(fs: FormatSet) -> tuple[int, int]:
+    """The left shifts that bring ``3·½C·Σe²`` (at spring's plus twice rest_length's fraction bits) and
+    ``2·Σc·h`` (at barrier_coeff's plus area's) to :func:`energy_frac_bits` (:func:`energy_raw`)."""
     frac = energy_frac_bits(fs)
-    springs = (3 * half_spring * int(square_sum)) << (frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits)
-    barrier = (2 * int(barrier_sum)) << (frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits)
-    return springs + barrier
+    return frac - fs.spring.frac_bits - 2 * fs.rest_length.frac_bits, frac - fs.barrier_coeff.frac_bits - fs.area.frac_bits
 
 
 def power_sum(fs: FormatSet, power: np.ndarray, counter: SaturationCounter | None = None) -> int:

@@ -99,7 +99,7 @@ def test_energy_width_holds_the_largest_energy():
                       error_squares=per_node * DEFAULT.rest_length.raw_max ** 2,
                       barrier_energies=per_node * (DEFAULT.barrier_coeff.raw_max * DEFAULT.area.raw_max))
     energy = energy_raw(DEFAULT, DEFAULT.spring.raw_max, worst.error_square_sum, worst.barrier_energy_sum)
-    assert energy_width(DEFAULT, cap) == energy.bit_length()
+    assert energy_width(DEFAULT, cap.entries) == energy.bit_length()
 
 
 @pytest.mark.parametrize("what, capacity", [
