@@ -4,7 +4,11 @@ Subcommands:
 
 * ``flatten [MESH]``: flatten a mesh (a file or a built-in, default ``surf1``); with several meshes or
   ``--out-dir``, a batch on all cores or a Dask cluster (:mod:`sim.batch`);
-* ``paper [--out DIR]``: reproduce the paper's Tables VI–VII and figures.
+* ``paper [--out DIR]``: reproduce the paper's Tables VI–VII and figures;
+* ``verilog``: the RTL as Verilog with its interface description (:mod:`sim.export`);
+* ``rtl-check``: a flattening through the RTL on a Verilog simulator (:mod:`sim.rtl_check`);
+* ``study``: the fixed-point error study and word-length optimiser (:mod:`sim.study`);
+* ``synth``: synthesis, placement and routing for ECP5 or iCE40, and the handoff bundle (:mod:`sim.synth`).
 
 Bad input never produces a traceback: every user error, an unreadable or
 unwritable file included, is one line on stderr (``springflat: error: ...``)

@@ -90,7 +90,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="what 'cheapest' minimises first: total datapath bits (default) or estimated DSP blocks")
     p.add_argument("--max-iter", type=integer_argument, default=None, help="override every case's iteration limit")
     p.add_argument("--jobs", "--workers", dest="jobs", type=integer_argument, default=None, metavar="N",
-                   help="worker processes (default: the CPUs available); --workers is its older name")
+                   help="worker processes (default: the CPUs available); alias --workers")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
                    help="run the fixed-point runs on a Dask cluster: a scheduler address (tcp://host:8786), or "
                         "local for Dask's LocalCluster with --jobs processes")
