@@ -26,6 +26,7 @@ from golden_model.engine_spec.register_map import STATES, RegisterMap
 
 from .engine import SpringflatEngine
 from .uart_bridge import UartBridge, timeout_clocks, uart_divisor
+from .wishbone import DATA_WIDTH
 
 __all__ = ["LEDS", "PllConfig", "pll_config", "EcpPll", "StateLeds", "BoardCore", "Ulx3sTop", "Ulx3s85fPlatform",
            "OSCILLATOR_HZ", "ENGINE_CLOCK_HZ"]
@@ -157,7 +158,7 @@ class StateLeds(wiring.Component):
                 raise ValueError(f"{name} must be a positive integer, not {value!r}")
         self.map, self.heartbeat_bits, self.blink_bits = register_map, heartbeat_bits, blink_bits
         super().__init__({"cyc": In(1), "stb": In(1), "we": In(1), "ack": In(1), "adr": In(addr_width),
-                          "dat_w": In(32), "dat_r": In(32), "irq": In(1), "bridge_error": In(1),
+                          "dat_w": In(DATA_WIDTH), "dat_r": In(DATA_WIDTH), "irq": In(1), "bridge_error": In(1),
                           "rx_byte": In(1), "tx_byte": In(1), "leds": Out(len(LEDS) - 1)})
 
     def elaborate(self, platform):

@@ -230,12 +230,12 @@ class FrameBridge(wiring.Component):
                                xor_output=protocol.CRC8["xor_output"])(data_width=8)
         m.submodules.crc_rx = crc_rx = params.create()
         m.submodules.crc_tx = crc_tx = params.create()
-        m.submodules.buffer = buffer = Memory(shape=32, depth=self.max_words, init=[],
+        word_bits = 8 * protocol.WORD_BYTES
+        m.submodules.buffer = buffer = Memory(shape=word_bits, depth=self.max_words, init=[],
                                               attrs={"ram_style": "distributed"})
         wr = buffer.write_port()
         rd = buffer.read_port(domain="comb")
 
-        word_bits = 8 * protocol.WORD_BYTES
         command = Signal(8)
         address = Signal(8 * protocol.ADDRESS_BYTES)
         length = Signal(8)

@@ -17,10 +17,12 @@ from amaranth.hdl import Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from golden_model.engine_spec.image import BUS_WORD_BITS
+
 __all__ = ["Signature", "TargetHandshake", "DATA_WIDTH", "GRANULARITY"]
 
 #: Bus data width (bits) and ``sel`` granularity (bits per ``sel`` bit).
-DATA_WIDTH = 32
+DATA_WIDTH = BUS_WORD_BITS
 GRANULARITY = 8
 
 

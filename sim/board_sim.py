@@ -47,7 +47,7 @@ class BoardSimTop(wiring.Component):
     send_valid, send_data : ``In``; send_ready : ``Out``: a byte to send to the board (host → board).
     recv_valid, recv_data : ``Out``: a byte received from the board, ``recv_valid`` high for one clock.
     accesses : ``Out(32)``: bus cycles answered (``ack`` or ``err``) since reset.
-    bridge_busy : ``Out(1)``; leds : ``Out(7)``
+    bridge_busy : ``Out(1)``; leds : the core's LEDs but the PLL's lock (:data:`hdl.board.LEDS`)
     """
 
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, *, divisor: int = SIM_DIVISOR,
@@ -58,7 +58,8 @@ class BoardSimTop(wiring.Component):
         self.core = BoardCore(fs, capacity, divisor=divisor, timeout=timeout, heartbeat_bits=8, blink_bits=4)
         self.host_tx, self.host_rx = UartTx(divisor), UartRx(divisor)
         super().__init__({"send_valid": In(1), "send_data": In(8), "send_ready": Out(1), "recv_valid": Out(1),
-                          "recv_data": Out(8), "accesses": Out(32), "bridge_busy": Out(1), "leds": Out(7)})
+                          "recv_data": Out(8), "accesses": Out(32), "bridge_busy": Out(1),
+                          "leds": Out(len(self.core.leds))})
 
     def elaborate(self, platform):
         m = Module()

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import gc
 import json
-import os
 import math
+import os
 import re
 import shutil
 import warnings
@@ -31,7 +31,7 @@ from amaranth.hdl import Shape
 from amaranth.lib import data, wiring
 
 from golden_model.fixed import FormatSet
-from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
+from golden_model.engine_spec.image import BUS_WORD_BITS, DEFAULT_CAPACITY, EngineCapacity
 from hdl.dsp import dsp_target
 
 from .clock import ENGINE_TARGET_MHZ
@@ -355,7 +355,7 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
                             ""]))
     return {"module": ENGINE_MODULE, "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
                                                           "triangles": capacity.triangles, "guard": capacity.guard},
-            "bus": "Wishbone B4 classic, 32-bit data, word addresses", "addr_width": engine.addr_width,
+            "bus": f"Wishbone B4 classic, {BUS_WORD_BITS}-bit data, word addresses", "addr_width": engine.addr_width,
             "files": [f"{ENGINE_MODULE}.v", *files]}
 
 
@@ -370,8 +370,8 @@ def memory_image_markdown(fs: FormatSet, capacity) -> str:
              "The host loads three memories over the Wishbone bus while the engine is idle, writes the run "
              "constants (registers, `register_map.md`) and writes CONTROL.start; the engine writes positions and "
              "velocities back in place in the `nodes` memory. Each memory word is the fields below, first field "
-             "at bit 0, no padding between fields; over the bus a word is `ceil(bits/32)` 32-bit words (word 0 = "
-             "bits 31:0) at a stride of the next power of two: entry `i`, word `k` at `base + i*stride + k` "
+             f"at bit 0, no padding between fields; over the bus a word is `ceil(bits/{BUS_WORD_BITS})` "
+             f"{BUS_WORD_BITS}-bit words (word 0 = bits {BUS_WORD_BITS - 1}:0) at a stride of the next power of two: entry `i`, word `k` at `base + i*stride + k` "
              "(word addresses; byte address = 4 x word address). Signed fields are two's complement of their "
              "width; a field's format is the format set's (`interface.json`'s `format_set`, or the golden "
              "model's `FormatSet`).", "",

@@ -12,7 +12,7 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
-from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
+from golden_model.engine_spec.image import BUS_WORD_BITS, DEFAULT_CAPACITY, EngineCapacity
 from golden_model.engine_spec.register_map import ACCESS, MAGIC, REGISTER_BLOCKS, VERSION, BitField, \
     MemoryWindow, Register, RegisterMap
 
@@ -74,7 +74,7 @@ def markdown(m: RegisterMap, level: int = 1) -> str:
         f"{bus['address']}s (byte address >> 2), "
         f"`sel` {bus['sel']}. `err` answers: {bus['err']}.", "",
         "Access: " + "; ".join(f"`{k}` {v}" for k, v in ACCESS.items()) + ".", "",
-        "Values wider than 32 bits span consecutive registers, least significant word first; signed values are "
+        f"Values wider than {BUS_WORD_BITS} bits span consecutive registers, least significant word first; signed values are "
         "two's complement over the value's width.", "",
     ]
     for block in REGISTER_BLOCKS:
@@ -115,9 +115,10 @@ def c_header(m: RegisterMap) -> str:
     lines = [f"/* SpringflatEngine register map v{VERSION[0]}.{VERSION[1]}: format set '{m.formats}', capacity "
              f"{m.capacity.vertices} vertices / {m.capacity.entries} entries / {m.capacity.triangles} triangles. */",
              "/* Generated from golden_model.engine_spec.register_map.RegisterMap; do not edit. */",
-             "/* Addresses are 32-bit-word addresses (Wishbone adr): byte address = ADDR * ADDR_UNIT_BYTES. */",
+             f"/* Addresses are {BUS_WORD_BITS}-bit-word addresses (Wishbone adr): byte address = ADDR * "
+             "ADDR_UNIT_BYTES. */",
              f"#ifndef {guard}", f"#define {guard}", "",
-             _define(_c_name("ADDR_UNIT_BYTES"), 4), _define(_c_name("ADDR_BITS"), m.address_bits),
+             _define(_c_name("ADDR_UNIT_BYTES"), BUS_WORD_BITS // 8), _define(_c_name("ADDR_BITS"), m.address_bits),
              _define(_c_name("MAGIC"), MAGIC),
              _define(_c_name("VERSION_MAJOR"), VERSION[0]), _define(_c_name("VERSION_MINOR"), VERSION[1]),
              _define(_c_name("FORMAT_HASH"), m.format_hash), ""]

@@ -47,6 +47,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+from .image import BUS_WORD_BITS
+
 __all__ = ["READ", "WRITE", "COMMANDS", "OK", "BAD_CHECKSUM", "BAD_LENGTH", "BAD_COMMAND", "TIMEOUT", "BUS_ERROR",
            "BAD_ADDRESS", "STATUS_NAMES", "MAX_WORDS", "ADDRESS_BYTES", "WORD_BYTES", "HEADER_BYTES",
            "ENGINE_CLOCK_HZ", "DEFAULT_BAUD", "INTER_BYTE_TIMEOUT_S", "CRC8", "crc8", "encode_read", "encode_write", "answer_bytes",
@@ -70,7 +72,7 @@ STATUS_NAMES = {OK: "ok", BAD_CHECKSUM: "bad checksum", BAD_LENGTH: "bad length"
 #: checksum has been checked). 64 words make a write frame of 263 bytes, 97 % payload.
 MAX_WORDS = 64
 ADDRESS_BYTES = 4
-WORD_BYTES = 4
+WORD_BYTES = BUS_WORD_BITS // 8
 #: command, address, length
 HEADER_BYTES = 1 + ADDRESS_BYTES + 1
 
