@@ -400,7 +400,8 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
     title = f"{mesh.name} ({result.engine} engine)"
     final = result.final
     drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
-        result.status, result.iterations, final.area_error, final.shape_error, final.folded))
+        result.status, result.iterations, final.area_error, final.shape_error, final.folded,
+        result.extra.get("boundary_crossings")))
     jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=paper_of(args),
                                                             dxf_edges=args.dxf_edges))
             for path in args.out or ()]

@@ -55,7 +55,9 @@ UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "in
 DXF_INSUNITS = {"mm": 4, "cm": 5, "m": 6, "in": 1}
 #: Paper sizes in millimetres (portrait); ``fit`` is one page around the pattern (:data:`FIT_PAD_MM`, the margin
 #: and the title block).
-PAPER_MM = {"a4": (210.0, 297.0), "letter": (215.9, 279.4)}
+#: The sheets ``--paper`` names: (the name a sheet's label prints, portrait width and height in mm).
+PAPER_SHEETS = {"a4": ("A4", 210.0, 297.0), "a3": ("A3", 297.0, 420.0), "letter": ("Letter", 215.9, 279.4)}
+PAPER_MM = {paper: (width, height) for paper, (_, width, height) in PAPER_SHEETS.items()}
 PAPERS = (*PAPER_MM, "fit")
 #: The sheet when none is named (``--paper``, ``write_pattern``'s ``paper``).
 DEFAULT_PAPER = "a4"
@@ -82,6 +84,7 @@ MIN_TEXT_SCALE = 0.6      # a title-block line too long for its room is set down
 TEXT_GAP_MM = 5.0         # between the title block's left column and the scale bar
 MAX_SHEETS = 400          # more sheets than this is a wrong --units, not a pattern to print
 SMALL_PATTERN_MM = 10.0   # a pattern smaller than this at 1:1 gets a note about --units
+LARGE_PATTERN_MM = 5000.0  # ... and one larger than this (a DXF has no sheet limit to refuse it)
 PT_PER_MM = 72.0 / 25.4
 MAX_PAGE_MM = 14400 / PT_PER_MM  # a PDF page's largest side, 14,400 pt (PDF 1.7, annex C): 5.08 m
 
@@ -132,8 +135,9 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--units", choices=UNITS, default="mm",
                         help="the mesh's length unit, stated in every pattern file and used for true-scale "
                              "PDF/SVG and DXF $INSUNITS (default mm)")
-    parser.add_argument("--paper", choices=PAPERS, default=None,  # None: not given (DEFAULT_PAPER)
-                        help="PDF/SVG sheet: a4 or letter (tiled with overlap marks when the pattern is larger), "
+    parser.add_argument("--paper", type=str.lower, choices=PAPERS, default=None,  # None: not given (DEFAULT_PAPER)
+                        help=f"PDF/SVG sheet: {_either(list(PAPER_MM))} (tiled with overlap marks when the pattern is "
+                             "larger; any case), "
                              f"or fit: one page around the pattern, for a roll plotter (default {DEFAULT_PAPER}); "
                              "a cutter takes the .dxf, which holds the cut line alone (unless --dxf-edges)")
     parser.add_argument("--dxf-edges", action="store_true",
@@ -190,10 +194,12 @@ class PatternDrawing:
         return float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
 
 
-def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int) -> str:
-    """The line under the name on each sheet."""
+def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int,
+                crossings: int | None = None) -> str:
+    """The line under the name on each sheet; ``crossings``: pairs of the boundary's sides that meet (a cut
+    line that crosses itself, on a pattern with no fold), said when there are any."""
     return (f"{status} after {iterations} iterations: E_S {error_text(area_error)}, E_C {error_text(shape_error)}, "
-            f"{folded} folded")
+            f"{folded} folded" + (f", its boundary crosses itself {crossings} times" if crossings else ""))
 
 
 def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFAULT_PAPER,
@@ -352,7 +358,7 @@ class SheetPlan:
     def describe(self) -> str:
         if self.paper == "fit":
             return f"one {self.page[0]:.0f} x {self.page[1]:.0f} mm page"
-        paper = {"a4": "A4", "letter": "Letter"}[self.paper] + (" landscape" if self.landscape else " portrait")
+        paper = PAPER_SHEETS[self.paper][0] + (" landscape" if self.landscape else " portrait")
         if len(self.sheets) == 1:
             return f"one {paper} sheet"
         blank = f", {self.blank} blank left out" if self.blank else ""
@@ -412,7 +418,8 @@ def _turned_to_fit(drawing: PatternDrawing, paper: str) -> tuple[PatternDrawing,
         return drawing, None
     candidate = replace(drawing, layout=_turned(drawing.layout, best, _centre(drawing.layout)))
     (turned_plan, turned_sheets), (laid_plan, laid_sheets) = (_printed_sheets(d, paper) for d in (candidate, drawing))
-    return (candidate, turned_plan) if turned_sheets < laid_sheets else (drawing, laid_plan)
+    # past MAX_SHEETS both: the turned one, on the smaller grid, is the size the refusal names
+    return (candidate, turned_plan) if turned_sheets < laid_sheets or laid_sheets == math.inf else (drawing, laid_plan)
 
 
 def _centre(points: np.ndarray) -> np.ndarray:
@@ -436,17 +443,22 @@ def _printed_sheets(drawing: PatternDrawing, paper: str) -> tuple[SheetPlan | No
 
 
 def scale_note(drawing: PatternDrawing, units_option: str = "--units {}") -> str | None:
-    """A note when the pattern is so small at 1:1 that ``units`` is likely wrong, else ``None``;
-    ``units_option`` spells the option that sets it (the API's ``units='{}'``)."""
+    """A note when the pattern is so small (under :data:`SMALL_PATTERN_MM`) or so large (over
+    :data:`LARGE_PATTERN_MM`) at 1:1 that ``units`` is likely wrong, else ``None``; ``units_option`` spells
+    the option that sets it (the API's ``units='{}'``)."""
     width, height = pattern_size_mm(drawing)
-    if max(width, height) >= SMALL_PATTERN_MM:
+    if SMALL_PATTERN_MM <= max(width, height) <= LARGE_PATTERN_MM:
         return None
-    larger = [units for units in ("m", "cm", "in") if UNIT_MM[units] > UNIT_MM[drawing.units]]
-    said = f"the pattern is {width:.3g} x {height:.3g} mm at 1:1 with {units_option.format(drawing.units)}"
-    if not larger:  # metres: no larger unit to suggest
+    small = max(width, height) < SMALL_PATTERN_MM
+    likely = [units for units in ("m", "cm", "in", "mm")
+              if (UNIT_MM[units] > UNIT_MM[drawing.units]) == small and units != drawing.units]
+    said = (f"the pattern is {width:.3g} x {height:.3g} mm" if small else
+            f"the pattern is {width / 1000:.3g} x {height / 1000:.3g} m") + \
+        f" at 1:1 with {units_option.format(drawing.units)}"
+    if not likely:  # metres or millimetres: no larger or smaller unit to suggest
         return said
-    names = [UNIT_NAMES[units] for units in larger]
-    options = [units_option.format(units) for units in larger]
+    names = [UNIT_NAMES[units] for units in likely]
+    options = [units_option.format(units) for units in likely]
     return f"{said}: if the mesh is in {_either(names)}, say so with {_either(options)}"
 
 
@@ -482,7 +494,7 @@ def _page_too_large(what: str, units: str, size: tuple[float, float]) -> Pattern
     """The refusal of a ``fit`` page above :data:`MAX_PAGE_MM`, ``what`` the size that shows it; the papers it
     suggests are those that print a pattern of ``size`` mm in at most :data:`MAX_SHEETS` sheets."""
     tiled = [paper for paper in PAPER_MM if _sheet_count(size, paper) <= MAX_SHEETS]
-    remedy = f"print it tiled (--paper {' or '.join(tiled)}), " if tiled else ""
+    remedy = f"print it tiled (--paper {_either(tiled)}), " if tiled else ""
     return PatternError(f"{what} at 1:1 with --units {units}: a page larger than a PDF's {MAX_PAGE_MM / 1000:.3g} m "
                         f"a side (an SVG's pages are the PDF's); check --units, {remedy}or write .dxf")
 

@@ -338,7 +338,7 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     """Write ``pattern`` to ``path``, the format named by its ending (as ``springflat flatten --out``).
 
     ``.dxf`` (cut line on layer ``CUT``; ``dxf_edges``: mesh edges on ``MESH``), ``.pdf`` / ``.svg`` (true
-    scale on ``paper`` = ``a4`` (the default), ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the
+    scale on ``paper`` = ``a4`` (the default), ``a3``, ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the
     3D mesh with the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured
     by distortion).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
     :mod:`sim.patterns`; a true-scale pattern (DXF, PDF, SVG) under 10 mm across gives a :class:`MeshNote`
@@ -379,10 +379,11 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     except OutputError as exc:
         raise OutputError(f"write_pattern: {exc}") from None
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
-                          pattern.folded)
+                          pattern.folded, pattern.boundary_crossings)
     try:
         drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
-        write_pattern_file(Path(path), drawing, paper=DEFAULT_PAPER if paper is None else paper, dxf_edges=dxf_edges)
+        write_pattern_file(Path(path), drawing, paper=DEFAULT_PAPER if paper is None else str(paper).lower(),
+                           dxf_edges=dxf_edges)
     except PatternError as exc:  # the command's words for the same refusal ("check --units") in the API's
         raise PatternError(f"write_pattern: {_in_api_words(str(exc))}") from None
     if kind_or_none(path) in TRUE_SCALE_KINDS and (note := scale_note(drawing, "units='{}'")) is not None:
@@ -391,10 +392,13 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
 
 def _in_api_words(message: str) -> str:
     """A message of the command's, whose options are the command line's (``--units m``, ``--paper a4 or
-    letter``, ``--formats wide``), with the API's keywords (``units='m'``, ``paper='a4' or 'letter'``,
+    letter``, ``--formats wide``), with the API's keywords (``units='m'``, ``paper='a4', 'a3' or 'letter'``,
     ``formats='wide'``)."""
-    message = re.sub(r"--(units|paper|formats) (\w+(?: or \w+)*)",
-                     lambda m: f"{m[1]}=" + " or ".join(f"'{value}'" for value in m[2].split(" or ")), message)
+    def quoted(values: str) -> str:  # "a4, a3 or letter": "'a4', 'a3' or 'letter'"
+        parts = re.split(r"(, | or )", values)
+        return "".join(part if k % 2 else f"'{part}'" for k, part in enumerate(parts))
+
+    message = re.sub(r"--(units|paper|formats) (\w+(?:(?:, | or )\w+)*)", lambda m: f"{m[1]}={quoted(m[2])}", message)
     return re.sub(r"--(units|paper|formats)\b", r"\1", message)
 
 

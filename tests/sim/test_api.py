@@ -361,7 +361,7 @@ def test_the_api_raises_only_its_documented_errors_on_paths_and_options(ear):
         springflat.flatten(V, F, init="ARAP")
     with pytest.raises(TypeError, match="name must be a string"):
         springflat.flatten(V, F, name=None)
-    with pytest.raises(springflat.OutputError, match="paper must be one of a4, letter, fit, got ''"):
+    with pytest.raises(springflat.OutputError, match="paper must be one of a4, a3, letter, fit, got ''"):
         springflat.write_pattern("p.pdf", springflat.flatten(V, F, max_iter=1), paper="")
     with pytest.raises(springflat.OutputError, match=r"^write_pattern: the path 'no/where/p.dxf': directory "
                                                      r"'no/where' does not exist$"):  # not "no such file"
@@ -490,7 +490,7 @@ def test_write_patterns_refusals_speak_the_apis_keywords(tmp_path):
     with pytest.raises(springflat.OutputError) as info:
         springflat.write_pattern(tmp_path / "fit.svg", springflat.flatten(strip_v, strip_f, max_iter=3), units="m",
                                  paper="fit")
-    assert str(info.value).endswith("check units, print it tiled (paper='a4' or 'letter'), or write .dxf")
+    assert str(info.value).endswith("check units, print it tiled (paper='a4', 'a3' or 'letter'), or write .dxf")
     assert "--" not in str(info.value)
     with pytest.raises(springflat.OutputError, match="^write_pattern: units must be one of mm, cm, m, in, got 'ft'$"):
         springflat.write_pattern(tmp_path / "p.dxf", big, units="ft")

@@ -409,7 +409,7 @@ def test_refusals_leave_no_file(tmp_path):
                                                r"PDF's\); check --units, or write \.dxf$"):
             write_pattern_file(tmp_path / f"huge{suffix}", drawing, paper="fit")
         with pytest.raises(PatternError, match=r"the pattern is 5.5 x 1 m .*; check --units, print it tiled "
-                                               r"\(--paper a4 or letter\), or write \.dxf$"):
+                                               r"\(--paper a4, a3 or letter\), or write \.dxf$"):
             write_pattern_file(tmp_path / f"strip{suffix}", strip, paper="fit", turn=False)
     write_pattern_file(tmp_path / "strip.pdf", strip, paper="letter")  # as suggested
     assert (tmp_path / "strip.pdf").stat().st_size > 0
@@ -720,3 +720,64 @@ def test_a_fit_page_is_not_turned_past_the_largest_a_pdf_has(tmp_path):
     mesh, layout = _diagonal_strip(45.0, length=5200.0, width=100.0)
     write_pattern_file(tmp_path / "s.pdf", PatternDrawing.of(mesh, layout, "mm"), paper="fit")
     assert len(PdfReader(tmp_path / "s.pdf").pages) == 1
+
+
+def _rectangle(width: float, height: float, angle_degrees: float = 0.0) -> tuple[Mesh, np.ndarray]:
+    """A flat width × height grid (mesh units) and its layout turned by ``angle_degrees``."""
+    from golden_model.generate import grid_faces, grid_uv
+
+    uv = grid_uv(5, 5, width, height)
+    a = math.radians(angle_degrees)
+    return Mesh(np.column_stack([uv, np.zeros(len(uv))]), grid_faces(5, 5)), uv @ np.array(
+        [[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+
+
+def test_a_print_refused_for_its_sheets_names_the_turned_patterns_size(tmp_path):
+    """6 x 4 m laid at 30°: more than MAX_SHEETS A4 sheets either way; the refusal named the slanted box
+    (7.2 x 6.46 m, 1,000-odd sheets) while the docs promise the turned pattern's size."""
+    mesh, layout = _rectangle(6.0, 4.0, 30.0)
+    with pytest.raises(PatternError, match=r"^the pattern is (6 x 4|4 x 6) m at 1:1 with --units m: \d+ a4 sheets"):
+        write_pattern_file(tmp_path / "big.pdf", PatternDrawing.of(mesh, layout, "m"))
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("units, suggested", [
+    ("m", "if the mesh is in centimetres, inches or millimetres, say so with --units cm, --units in or --units mm"),
+    ("in", "if the mesh is in centimetres or millimetres, say so with --units cm or --units mm"),
+    ("mm", None),
+])
+def test_the_large_pattern_note_suggests_only_smaller_units_than_the_one_given(units, suggested):
+    """A pattern over 5 m at 1:1 (a DXF has no sheet limit to refuse it): the mirror of the small note."""
+    from sim.patterns import scale_note
+
+    mesh, layout = _rectangle(6000.0 / MM[units], 4000.0 / MM[units])
+    note = scale_note(PatternDrawing.of(mesh, layout, units))
+    assert note.startswith(f"the pattern is 6 x 4 m at 1:1 with --units {units}")
+    assert (note.split(": ", 1)[1] if ": " in note else None) == suggested
+    assert scale_note(PatternDrawing.of(mesh, layout * 0.8, units)) is None  # 4.8 m: no note
+
+
+def test_paper_names_are_case_blind_and_a3_tiles(tmp_path):
+    """--paper A4 was refused as an invalid choice; A3 is a common pattern printer's sheet."""
+    from sim.patterns import PAPER_MM, plan_sheets
+
+    proc = subprocess.run([SPRINGFLAT, "flatten", str(SCANS / "bunny_ear.obj"), "--max-iter", "3", "--paper", "A3",
+                           "--out", str(tmp_path / "d.pdf")], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert PAPER_MM["a3"] == (297.0, 420.0) and len(plan_sheets((600.0, 400.0), "a3").sheets) < len(
+        plan_sheets((600.0, 400.0), "a4").sheets)
+
+
+def test_the_sheets_caption_says_the_boundary_crosses_itself():
+    from sim.patterns import run_caption
+
+    assert run_caption("converged", 12, 0.01, 0.02, 0, 10) == ("converged after 12 iterations: E_S 0.0100, E_C "
+                                                               "0.0200, 0 folded, its boundary crosses itself 10 times")
+    assert run_caption("converged", 12, 0.01, 0.02, 0, 0).endswith("0 folded")
+
+
+def test_the_apis_words_quote_each_value_of_a_list():
+    from springflat.api import _in_api_words
+
+    assert _in_api_words("print it tiled (--paper a4, a3 or letter); say so with --units cm or --units mm") == \
+        "print it tiled (paper='a4', 'a3' or 'letter'); say so with units='cm' or units='mm'"
