@@ -232,7 +232,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     from .export import bundle_readme, export_engine_bundle, export_verilog
     from .register_map_export import engine_capacity
     from .clock import clock_sdc
-    from .synth import earlier_bundle_files
+    from .synth import earlier_bundle_files, record_bundle_files
     from .outputs import check_build_so_far
 
     formats = load_format_set(args.formats)
@@ -249,6 +249,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
         (Path(build) / "clock.sdc").write_text(clock_sdc(ENGINE_TARGET_MHZ))
         files = sorted([path.name for path in Path(build).iterdir() if path.is_file()] + ["README.md"])
         (Path(build) / "README.md").write_text(bundle_readme(formats, capacity, files, installed_version()))
+        record_bundle_files(Path(build))
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
     print(f"{out / 'interface.md'}, {out / 'interface.json'}; ROM contents {out / 'rsqrt_seed.hex'}, "

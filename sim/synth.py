@@ -38,7 +38,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Callable, Sequence
 
 from golden_model.params import ParameterError
@@ -46,7 +46,7 @@ from golden_model.params import ParameterError
 from .clock import ENGINE_TARGET_MHZ, write_clock_constraints
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["earlier_bundle_files", "PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ", "default_freq",
+__all__ = ["earlier_bundle_files", "record_bundle_files", "BUNDLE_FILES_KEY", "PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ", "default_freq",
            "SynthError", "DoesNotFit", "build_in_place", "error_line", "nextpnr_argv", "placer_options", "run_synthesis", "run_tool",
            "parse_yosys_stat", "parse_nextpnr_log"]
 
@@ -67,16 +67,32 @@ def tool_file(top: str, target: str, kind: str) -> str:
     return f"{top}.{target}.{kind}"
 
 
+#: interface.json's key listing the files of a ``verilog`` or ``synth`` bundle, as paths relative to it.
+BUNDLE_FILES_KEY = "bundle_files"
+
+
+def record_bundle_files(directory: Path, also: Sequence[str] = ()) -> None:
+    """List in ``directory``'s interface.json (under :data:`BUNDLE_FILES_KEY`) every file of the bundle built
+    there, as relative POSIX paths, and ``also`` (an earlier bundle's files that stay beside a failed run's):
+    what a later bundle into the same directory removes where it does not write it again
+    (:func:`earlier_bundle_files`). A build without an interface.json (a board build's) lists none."""
+    path = directory / "interface.json"
+    if not path.is_file():
+        return
+    interface = json.loads(path.read_text())
+    interface[BUNDLE_FILES_KEY] = sorted({p.relative_to(directory).as_posix() for p in directory.rglob("*")
+                                          if p.is_file()} | set(also))
+    path.write_text(json.dumps(interface, indent=2) + "\n")
+
+
 def earlier_bundle_files(out: Path) -> tuple[str, ...]:
-    """The files of an earlier ``springflat verilog`` or ``synth`` bundle in the directory ``out`` (one whose
-    ``interface.json`` is a bundle's), by the names those commands give them (never another file; not a
-    README.md, which may be the user's): :func:`~sim.outputs.atomic_directory`'s ``stale``, so that a new bundle
-    does not keep another target's logs, or an ECP5 bundle's primitive models beside generic Verilog, that this
-    run did not write again. A directory that holds no bundle keeps every file."""
+    """The files an earlier ``springflat verilog`` or ``synth`` bundle in the directory ``out`` wrote, as its
+    interface.json lists them (:func:`record_bundle_files`) and still there:
+    :func:`~sim.outputs.atomic_directory`'s ``stale``, so that a new bundle does not keep another target's
+    logs, or an ECP5 bundle's primitive models beside generic Verilog, that this run did not write again. A
+    file the list does not name is the user's and stays; a directory without such a list keeps every file."""
     from golden_model.files import read_regular_file
 
-    from .cocotb_support import PRIMITIVE_MODELS
-    from .export import BUNDLE_FILES, COMPONENTS
     from .outputs import output_target
 
     target = output_target(out)
@@ -84,15 +100,11 @@ def earlier_bundle_files(out: Path) -> tuple[str, ...]:
         interface = json.loads(read_regular_file(target / "interface.json"))  # (a FIFO of that name: not read)
     except (OSError, ValueError):
         return ()
-    if not (isinstance(interface, dict) and {"format_set", "components"} <= interface.keys()):
+    listed = interface.get(BUNDLE_FILES_KEY) if isinstance(interface, dict) else None
+    if not isinstance(listed, list):
         return ()
-    tops = [name for spec in COMPONENTS for name in (spec.module, f"{spec.module}_pnr")] + [ENGINE_MODULE,
-                                                                                             f"{ENGINE_MODULE}_pnr"]
-    names = {f"{top}.v" for top in tops} | {
-        tool_file(top, family, kind) for top in tops for family in TARGETS for kind in TOOL_FILE_KINDS}
-    names |= {name for name in BUNDLE_FILES if name != "README.md"} | {
-        "clock.lpf", "clock.sdc", "reproduce.sh", "synth_report.md", "synth_report.json",
-        *(f"sim_models/{model.name}" for models in PRIMITIVE_MODELS.values() for model in models)}
+    names = {name for name in listed if isinstance(name, str) and name
+             and not PurePosixPath(name).is_absolute() and ".." not in PurePosixPath(name).parts}
     return tuple(sorted(name for name in names if (target / name).is_file()))
 
 
@@ -116,12 +128,14 @@ def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str
 
         try:
             report = build(directory, shown)
+            record_bundle_files(directory)
             stale.extend(earlier)  # an earlier bundle's files this run did not write again
             return report
         except SynthError as exc:
             failure = SynthError(shown(str(exc)))
             if not any(directory.iterdir()):
                 raise failure from None
+            record_bundle_files(directory, also=earlier)  # its logs join the earlier bundle, which stays
     raise failure
 
 

@@ -152,6 +152,16 @@ def test_the_engine_ships_with_its_register_map_at_the_default_capacity(exported
     assert rmap.capacity == DEFAULT_CAPACITY
 
 
+def test_the_bundles_interface_lists_its_files(exported):
+    """What a later bundle into the same directory removes where it does not write it again (a user's file of a
+    bundle file's name, clock.lpf say, was removed by its name)."""
+    from sim.synth import BUNDLE_FILES_KEY, earlier_bundle_files
+
+    files = sorted(p.relative_to(exported).as_posix() for p in exported.rglob("*") if p.is_file())
+    assert json.loads((exported / "interface.json").read_text())[BUNDLE_FILES_KEY] == files
+    assert earlier_bundle_files(exported) == tuple(files) and "clock.lpf" not in files
+
+
 @pytest.mark.slow  # two elaborations of every component: ~20 s
 def test_capacity_option_sizes_the_engine_and_its_map(tmp_path):
     from golden_model.engine_spec.image import EngineCapacity

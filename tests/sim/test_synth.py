@@ -349,14 +349,15 @@ def test_the_engine_is_constrained_at_its_own_target_unless_freq_says_otherwise(
 
 def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_it_did_not_write(tmp_path):
     """An ice40 synth into an ECP5 bundle's directory kept the ECP5 primitives' models and logs beside generic
-    Verilog. The earlier bundle's files this run does not write go (by the names the commands give them: a
-    file of the user's stays); a run whose tools fail leaves the earlier bundle whole, with its logs added."""
-    from sim.synth import build_in_place
+    Verilog. The files the earlier bundle's interface.json lists that this run does not write go; every other
+    file stays, also one named as a bundle's file (a user's clock.lpf beside a plain Verilog bundle was deleted
+    by name); a run whose tools fail leaves the earlier bundle whole, with its logs added."""
+    from sim.synth import BUNDLE_FILES_KEY, build_in_place
 
     out = tmp_path / "bundle"
     earlier = ["sim_models/DP16KD.v", "step_generator.ecp5.ys", "step_generator_pnr.ecp5.nextpnr.log",
-               "step_generator.v", "reproduce.sh"]
-    for name in earlier + ["notes.txt", "README.md", "my_top.v"]:
+               "step_generator.v", "reproduce.sh", "README.md"]
+    for name in earlier + ["notes.txt", "my_top.v", "clock.lpf", "synth_report.md"]:  # the last four: the user's
         (out / name).parent.mkdir(parents=True, exist_ok=True)
         (out / name).write_text("earlier\n")
     mine = tmp_path / "project"  # no bundle here (no bundle's interface.json): files of those names are the user's
@@ -364,11 +365,13 @@ def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_i
     (mine / "reproduce.sh").write_text("mine\n")
     (mine / "interface.json").write_text('{"mine": 1}\n')
 
-    def failing(directory, shown):
+    def failing(directory, shown):  # the Verilog exported, then Yosys failed
+        (directory / "interface.json").write_text('{"format_set": {}, "components": {}}\n')
         (directory / "step_generator.ice40.yosys.log").write_text("yosys failed\n")
         raise SynthError("yosys failed")
 
-    (out / "interface.json").write_text('{"format_set": {}, "components": {}}\n')  # the earlier bundle's
+    (out / "interface.json").write_text(json.dumps({"format_set": {}, "components": {},  # the earlier bundle's
+                                                    BUNDLE_FILES_KEY: earlier + ["interface.json", "../x", "/etc/x"]}))
     with pytest.raises(SynthError):
         build_in_place(out, "narrow", failing)
     assert all((out / name).read_text() == "earlier\n" for name in earlier) and (out / "interface.json").is_file()
@@ -377,15 +380,17 @@ def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_i
     def ice40(directory, shown):
         for name in ("step_generator.v", "step_generator.ice40.ys", "reproduce.sh"):
             (directory / name).write_text("new\n")
+        (directory / "interface.json").write_text('{"format_set": {}, "components": {}}\n')
         return {}
 
     build_in_place(out, "narrow", ice40)
     kept = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
-    assert kept == ["README.md", "my_top.v", "notes.txt", "reproduce.sh", "step_generator.ice40.ys",
-                    "step_generator.v"]  # sim_models/ too, emptied
+    assert kept == ["clock.lpf", "interface.json", "my_top.v", "notes.txt", "reproduce.sh", "step_generator.ice40.ys",
+                    "step_generator.v", "synth_report.md"]  # sim_models/ too, emptied; the failed run's log too
     assert (out / "step_generator.v").read_text() == "new\n" and (out / "notes.txt").read_text() == "earlier\n"
+    assert json.loads((out / "interface.json").read_text())[BUNDLE_FILES_KEY] == [
+        "interface.json", "reproduce.sh", "step_generator.ice40.ys", "step_generator.v"]  # what this run wrote
     build_in_place(mine, "narrow", ice40)
-    assert (mine / "interface.json").read_text() == '{"mine": 1}\n'
     assert sorted(p.name for p in mine.iterdir()) == ["interface.json", "reproduce.sh", "step_generator.ice40.ys",
                                                       "step_generator.v"]
 
