@@ -55,7 +55,7 @@ from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size,
                           what_was_used, write_outputs)
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
     check_link_target, check_not_interrupted, check_output_path, file_ending, on_interrupt, received_signal, \
-    reset_interrupted
+    record_written_outputs, reset_interrupted, written_outputs
 from .patterns import add_pattern_options, pattern_ending
 from .run_options import (
     USER_ERRORS,
@@ -366,6 +366,7 @@ def main(argv: list[str] | None = None) -> int:
                     "MESH ... --option ...)" if args.command == "flatten" and meshes else "")
         parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extras)}{hint}")
     reset_interrupted()
+    record_written_outputs(True)
     handler = threading.current_thread() is threading.main_thread()
     # Ctrl-C, kill or a hang-up: one line, status 130, 143 or 129 (sim.exit_codes.STOP_SIGNALS), unless ignored
     previous = ({name: signal.signal(getattr(signal, name), on_interrupt) for name in answered_signals()}
@@ -403,10 +404,14 @@ def main(argv: list[str] | None = None) -> int:
         if argv is None:  # the program itself, which ends now (not a caller running it in-process)
             _quiet_after_interrupt()
         line, status = STOP_SIGNALS[received_signal().name]
+        if written := written_outputs():  # put in place before the signal, while the command still printed
+            shown = ", ".join(written[:3]) + (f" and {len(written) - 3} more" if len(written) > 3 else "")
+            line += f" after writing {shown}, which are complete"
         with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone (EIO)
             print(f"springflat: {line}", file=sys.stderr)
         return status
     finally:
+        record_written_outputs(False)
         sys.stdout = stdout
         for name, before in previous.items():
             signal.signal(getattr(signal, name), before)

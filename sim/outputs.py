@@ -419,6 +419,7 @@ def atomic_write(path: Path, mode: str = "w") -> Iterator[str]:
         if pending is None:
             with deferred_interrupts():
                 _replace(tmp, target, path)
+                _written(path)
         else:
             pending.append((tmp, target, path))
         tmp = None
@@ -481,6 +482,28 @@ def reset_interrupted() -> None:
     _RECEIVED[0] = signal.SIGINT
 
 
+#: The outputs a command has put in place, as given (``None``: not recording, as in the API's calls).
+_WRITTEN: list[str] | None = None
+
+
+def record_written_outputs(recording: bool) -> None:
+    """Start (``True``: from none) or stop recording the outputs put in place (:func:`written_outputs`)."""
+    global _WRITTEN
+    _WRITTEN = [] if recording else None
+
+
+def written_outputs() -> tuple[str, ...]:
+    """The outputs put in place since :func:`record_written_outputs` started: a signal that comes after them
+    (while the command still prints) cannot take them back, and its line says so."""
+    return tuple(_WRITTEN or ())
+
+
+def _written(*paths: Path | str, directory: bool = False) -> None:
+    """Record ``paths`` as put in place; a file of a directory being built (``directory`` false) is not yet."""
+    if _WRITTEN is not None and (directory or _BUILDING.get() is None):
+        _WRITTEN.extend(str(path) for path in paths)
+
+
 def check_not_interrupted() -> None:
     """:class:`KeyboardInterrupt` if SIGINT, SIGTERM or SIGHUP arrived (even one a finaliser swallowed): nothing is
     committed."""
@@ -539,6 +562,7 @@ def all_or_nothing() -> Iterator[None]:
             for _, target, path in pending:  # checked again just before: nothing is renamed if one fails
                 _refuse_special(target, path, "output")
             _put_in_place(pending)
+            _written(*(path for _, _, path in pending))
     finally:
         if token is not None:
             _PENDING.reset(token)
@@ -612,8 +636,9 @@ def atomic_directory(out: Path, what: str = "--out", stale: Sequence[str] = (),
                 os.chmod(build, 0o777 & ~current_umask())
                 if not target.exists():
                     os.rename(build, target)
-                    return
-                _merge_directory(build, target, out, stale, inputs, what)
+                else:
+                    _merge_directory(build, target, out, stale, inputs, what)
+                _written(out, directory=True)
         except OSError as exc:
             raise OutputWriteError(out, exc, what) from None
     finally:

@@ -839,3 +839,27 @@ def test_the_run_line_says_when_the_energy_floor_stopped_a_developable_patch(tmp
         assert done.returncode == 0, done.stderr
         assert (f"or an energy below the floor of an rms edge strain of {strain}; stopped: the energy fell below "
                 "the floor (a smaller --tol-energy lowers it)") in done.stderr
+
+
+@pytest.mark.parametrize("command, written", [(["flatten", "surf1", "--max-iter", "3", "--out", "p.dxf",
+                                                "--out", "p.svg"], "p.dxf, p.svg"),
+                                               (["paper", "--quiet", "--out", "report"], "report")])
+def test_a_signal_after_the_outputs_are_in_place_says_they_were_written(tmp_path, monkeypatch, capsys, command,
+                                                                        written):
+    """Ctrl-C while the command still prints, after its outputs replaced the old ones: status 130 said
+    'interrupted' as if nothing had been written; the line names what was, complete."""
+    import signal
+
+    import sim.cli
+
+    def interrupted(*args, **kwargs):
+        signal.raise_signal(signal.SIGINT)
+
+    monkeypatch.setattr(sim.cli, "human_line", interrupted)  # flatten: the result line after its outputs
+    monkeypatch.setattr(sim.cli, "print", lambda *a, **k: interrupted() if a and str(a[0]).startswith("wrote")
+                        else print(*a, **k), raising=False)  # paper: its 'wrote' line
+    monkeypatch.chdir(tmp_path)
+    assert sim.cli.main(command) == 130
+    assert capsys.readouterr().err.splitlines()[-1] == f"springflat: interrupted after writing {written}, which are " \
+                                                       "complete"
+    assert all(Path(name).exists() for name in written.split(", "))
