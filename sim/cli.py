@@ -350,6 +350,12 @@ def forget_half_built_components(exc: FormatSetNotBuildable) -> None:
         gc.collect()
 
 
+def _say(line: str) -> None:
+    """An error's line on stderr, if stderr takes it (a full disk or a closed terminal: the status says it)."""
+    with contextlib.suppress(OSError):
+        print(line, file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args, extras = parser.parse_known_args(argv)
@@ -387,18 +393,17 @@ def main(argv: list[str] | None = None) -> int:
             check_not_interrupted()
             raise
     except USER_ERRORS + (UserError,) as exc:
-        print(f"springflat: error: {one_line(str(exc))}", file=sys.stderr)  # a newline in a path: one line
+        _say(f"springflat: error: {one_line(str(exc))}")  # a newline in a path: one line
         return EXIT_USAGE
     except FormatSetNotBuildable as exc:
-        print(one_line(f"springflat: error: the RTL cannot be built with format set "
-                       f"'{getattr(args, 'formats', None)}': {exc}"),
-              file=sys.stderr)
+        _say(one_line(f"springflat: error: the RTL cannot be built with format set "
+                      f"'{getattr(args, 'formats', None)}': {exc}"))
         forget_half_built_components(exc)
         return EXIT_USAGE
     except OSError as exc:  # a file operation the commands do not name themselves
         what = ("write standard output" if exc.filename == STANDARD_OUTPUT else
                 f"access '{exc.filename}'" if exc.filename else "access")
-        print(f"springflat: error: {one_line(f'cannot {what}: {describe_os_error(exc)}')}", file=sys.stderr)
+        _say(f"springflat: error: {one_line(f'cannot {what}: {describe_os_error(exc)}')}")
         return EXIT_USAGE
     except KeyboardInterrupt:
         if argv is None:  # the program itself, which ends now (not a caller running it in-process)

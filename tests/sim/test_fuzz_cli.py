@@ -1267,6 +1267,21 @@ def test_as_root_a_full_standard_output_is_one_line_and_a_batch_runs_to_its_end(
         assert (tmp_path / "m.dxf").stat().st_size > 0
 
 
+@pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
+def test_as_root_a_full_standard_error_ends_with_the_usage_status_not_an_uncaught_error(tmp_path):
+    """Standard error on a stand-in of /dev/full: the run line cannot be said, and the error line about it
+    neither; status 1 came from the second, uncaught. Now status 2, the files written."""
+    import stat
+
+    os.mknod(tmp_path / "full", 0o666 | stat.S_IFCHR, os.makedev(1, 7))
+    (tmp_path / "m.obj").write_text(obj())
+    with open(tmp_path / "full", "w") as full:
+        proc = subprocess.run([SPRINGFLAT, "flatten", "m.obj", "--out", "m.dxf", "--max-iter", "5"],
+                              stdout=subprocess.PIPE, stderr=full, text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 2 and proc.stdout.startswith("m: ")
+    assert (tmp_path / "m.dxf").stat().st_size > 0
+
+
 @pytest.mark.parametrize("command", [["verilog"], ["paper"], ["study", "dome"], ["synth", "--target", "ecp5"]])
 @pytest.mark.parametrize("kind", ["file", "fifo"])
 def test_an_output_directory_that_is_not_one_is_refused_at_once(command, kind, tmp_path, monkeypatch, capsys):
