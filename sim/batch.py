@@ -40,7 +40,7 @@ from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
 from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
     check_output_path, file_ending, when_interrupted
-from .patterns import error_text, pattern_ending, pattern_kind
+from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind
 from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
                           resolve_mesh, strict_json)
 from .workers import WorkerPool, local_workers, wait_for_one
@@ -262,6 +262,8 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
             for name in names:
                 check_link_target(out_dir / f"{name}{ending}", flags[option][0],
                                   pattern_ending if option == "out" else file_ending)
+                if option == "out":
+                    check_not_a_mesh(out_dir / f"{name}{ending}", flags[option][0])
     else:
         _names(meshes)
     return endings, jobs

@@ -56,7 +56,7 @@ from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size,
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
     check_link_target, check_not_interrupted, check_output_path, file_ending, on_interrupt, received_signal, \
     record_written_outputs, reset_interrupted, written_outputs
-from .patterns import add_pattern_options, pattern_ending
+from .patterns import add_pattern_options, check_not_a_mesh, pattern_ending
 from .run_options import (
     USER_ERRORS,
     UserError,
@@ -169,6 +169,8 @@ def check_outputs(args: argparse.Namespace) -> None:
     _check_distinct_files(args)
     for dest, flag, _, path in output_paths(args):
         check_link_target(path, flag, pattern_ending if dest == "out" else file_ending)
+        if dest == "out":
+            check_not_a_mesh(path, flag)
 
 
 #: Iterations :func:`_energy_rule_note` looks back over.

@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import stat
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -44,7 +46,7 @@ import numpy as np
 from golden_model.mesh import Mesh, folded_faces
 from golden_model.mesh_io import save_obj
 
-from .outputs import OutputError, atomic_write, write_layout
+from .outputs import OutputError, atomic_write, output_target, write_layout
 from .run_options import file_path_argument
 
 #: Length units a mesh may be in, and millimetres per unit.
@@ -202,6 +204,30 @@ def run_caption(status: str, iterations: int, area_error: float, shape_error: fl
             f"{folded} folded" + (f", its boundary crosses itself {crossings} times" if crossings else ""))
 
 
+#: How springflat's own OBJ files begin (a pattern's ``.obj``, a layout's ``.flat.obj``): an existing ``.obj``
+#: that does not is a mesh (a scan named as the output, or reached through a link), which no output replaces.
+OWN_OBJ_HEADER = b"# springflat "
+
+
+def check_not_a_mesh(path: Path, what: str = "--out") -> None:
+    """Refuse an OBJ output over an existing regular file that springflat did not write (:data:`OWN_OBJ_HEADER`)."""
+    path = path if isinstance(path, Path) else Path(path)
+    if path.suffix.lower() != ".obj":
+        return
+    target = output_target(path)
+    try:
+        if not stat.S_ISREG(os.stat(target).st_mode):
+            return  # (not a file to replace: check_output_path says what it is)
+        with open(target, "rb") as existing:
+            head = existing.read(len(OWN_OBJ_HEADER))
+    except OSError:
+        return  # missing, or unreadable: the write says why
+    if head != OWN_OBJ_HEADER:
+        shown = f"'{path}'" + (f" (a link to '{target}')" if path.is_symlink() else "")
+        raise PatternError(f"{what} {shown} is an OBJ file springflat did not write (a mesh?): it replaces only its "
+                           "own patterns and layouts; remove it, or name another file")
+
+
 def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFAULT_PAPER,
                        dxf_edges: bool = False, turn: bool = True) -> None:
     """Write ``drawing`` to ``path`` in the format its ending names (:func:`pattern_kind`); on sheets (PDF, SVG)
@@ -209,6 +235,7 @@ def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFA
     kind = pattern_kind(path)
     if paper not in PAPERS:
         raise PatternError(f"paper must be one of {', '.join(PAPERS)}, got {paper!r}")
+    check_not_a_mesh(path, "the pattern file")
     if kind == "flat.obj":
         with atomic_write(path) as tmp:
             save_obj(tmp, drawing.layout, drawing.faces,

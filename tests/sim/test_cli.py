@@ -221,13 +221,13 @@ def test_bad_mesh_files(tmp_path, name, message):
 def test_a_diverged_run_exits_nonzero_keeps_an_existing_pattern_and_writes_its_history(tmp_path):
     """Its last finite layout is no pattern: --out and --distortion are not written (an existing file kept),
     --history is, with the finite iterations."""
-    (tmp_path / "o.flat.obj").write_text("a good pattern\n")
+    (tmp_path / "o.flat.obj").write_text("# springflat layout of 'a good pattern'\n")
     proc = run("flatten", "surf1", "--step", "fixed", "--dt", "1000", "--max-iter", "1000",
                "--out", tmp_path / "o.flat.obj", "--distortion", tmp_path / "d.csv", "--history", tmp_path / "h.csv",
                "--json")
     assert proc.returncode == 3
     assert json.loads(proc.stdout)["status"] == "diverged"
-    assert (tmp_path / "o.flat.obj").read_text() == "a good pattern\n" and not (tmp_path / "d.csv").exists()
+    assert (tmp_path / "o.flat.obj").read_text() == "# springflat layout of 'a good pattern'\n" and not (tmp_path / "d.csv").exists()
     n = json.loads(proc.stdout)["iterations"]  # the iterations whose layouts were finite
     assert len((tmp_path / "h.csv").read_text().splitlines()) == n + 2  # header, P0, n iterations
     assert (f"springflat: iteration {n + 1} ran away: a value stopped being finite, or the layout grew 10000 times "
@@ -863,3 +863,36 @@ def test_a_signal_after_the_outputs_are_in_place_says_they_were_written(tmp_path
     assert capsys.readouterr().err.splitlines()[-1] == f"springflat: interrupted after writing {written}, which are " \
                                                        "complete"
     assert all(Path(name).exists() for name in written.split(", "))
+
+
+def test_an_obj_output_never_replaces_a_mesh_that_springflat_did_not_write(tmp_path, monkeypatch):
+    """`--out scan.obj` (or a link to a scan) replaced an unrelated mesh: only the run's inputs were protected.
+    An OBJ springflat wrote (its first line says so) is replaced as before; so in a batch and in the API."""
+    import warnings
+
+    import springflat
+
+    monkeypatch.chdir(tmp_path)
+    scan = (SCANS / "bunny_ear.obj").read_bytes()
+    Path("scan.obj").write_bytes(scan)
+    os.symlink("scan.obj", "link.obj")  # (a link to a file of another ending is refused as such)
+    for out in ("scan.obj", "link.obj"):
+        done = run("flatten", "surf1", "--max-iter", "2", "--out", out, cwd=tmp_path)
+        assert done.returncode == 2 and done.stderr.startswith(f"springflat: error: --out '{out}'")
+        assert "is an OBJ file springflat did not write (a mesh?)" in done.stderr
+    Path("o").mkdir()
+    Path("o/bunny_face.obj").write_bytes(scan)
+    done = run("flatten", str(SCANS / "bunny_ear.obj"), str(SCANS / "bunny_face.obj"), "--max-iter", "2",
+               "--out-dir", "o", "--out", ".obj", cwd=tmp_path)
+    assert done.returncode == 2 and "'o/bunny_face.obj' is an OBJ file springflat did not write" in done.stderr
+    assert Path("scan.obj").read_bytes() == scan == Path("o/bunny_face.obj").read_bytes()
+    assert os.listdir("o") == ["bunny_face.obj"]
+    for _ in range(2):  # its own: written, then replaced
+        assert run("flatten", "surf1", "--max-iter", "2", "--out", "own.obj", cwd=tmp_path).returncode == 0
+    mesh, _ = builtin_mesh("surf1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pattern = springflat.flatten(mesh.vertices, mesh.faces, max_iter=2)
+    with pytest.raises(springflat.OutputError, match="is an OBJ file springflat did not write"):
+        springflat.write_pattern("scan.obj", pattern)
+    assert Path("scan.obj").read_bytes() == scan
