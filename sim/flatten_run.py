@@ -47,11 +47,27 @@ def output_paths(args: argparse.Namespace) -> list[tuple[str, str, tuple[str, ..
     return paths
 
 
+class _NoProgress:
+    """A run's progress bar when none is shown: tqdm starts its monitor thread, which stays for the process's
+    life, even for a disabled bar (an API call shows none)."""
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def __enter__(self) -> "_NoProgress":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+
 def _progress(total: int, enabled: bool):
-    """A tqdm bar on stderr that appears only for runs longer than ~2 s."""
+    """A tqdm bar on stderr that appears only for runs longer than ~2 s (``enabled``), else :class:`_NoProgress`."""
+    if not enabled:
+        return _NoProgress()
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="it", delay=2.0, disable=not enabled, file=sys.stderr, leave=False)
+    return tqdm(total=total, unit="it", delay=2.0, file=sys.stderr, leave=False)
 
 
 def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
@@ -204,35 +220,45 @@ def _guard_on(params: FlattenParams, api: bool = False) -> str:
             + ("step, dt, damping, density" if api else "--step, --dt, --damping, --density") + ")")
 
 
-def divergence_hint(params: FlattenParams) -> str:
-    """What to try after a diverged run, naming only options its mode takes. A guarded run's energy never
-    rises, so only numbers at the ends of their ranges overflow it (a spring constant of 1e300 on a mesh
-    1e45 across)."""
+def _option(name: str, value: object = None, api: bool = False) -> str:
+    """An option as the command line spells it (``--penalty-gain 2``) or the API's keyword (``penalty_gain=2``)."""
+    if api:
+        return name if value is None else f"{name}={value!r}"
+    return f"--{name.replace('_', '-')}" + ("" if value is None else f" {value}")
+
+
+def divergence_hint(params: FlattenParams, api: bool = False) -> str:
+    """What to try after a diverged run, naming only options its mode takes (``api``: the API's keywords). A
+    guarded run's energy never rises, so only numbers at the ends of their ranges overflow it (a spring
+    constant of 1e300 on a mesh 1e45 across)."""
     mode = params.mode
     if mode.guarded:
-        return "the guarded run's numbers overflowed: bring --spring or the mesh's size nearer 1"
-    smaller = f"--penalty-gain than {params.penalty_gain:g}" + (  # kappa, where the user raised it
-        f" or --penalty-kappa than {params.penalty_kappa:g}" if params.penalty_kappa > FlattenParams.penalty_kappa else "")
-    penalty = (f"the overlap penalty pushes nodes apart unchecked: try a smaller {smaller}, or drop --penalty; "
-               if params.penalty else "")
+        return f"the guarded run's numbers overflowed: bring {_option('spring', api=api)} or the mesh's size nearer 1"
+    smaller = f"{_option('penalty_gain', api=api)} than {params.penalty_gain:g}" + (  # kappa, where the user raised it
+        f" or {_option('penalty_kappa', api=api)} than {params.penalty_kappa:g}"
+        if params.penalty_kappa > FlattenParams.penalty_kappa else "")
+    penalty = (f"the overlap penalty pushes nodes apart unchecked: try a smaller {smaller}, or drop "
+               f"{_option('penalty', api=api)}; " if params.penalty else "")
     if not mode.has_masses:
-        return (penalty + f"the momentum dynamics without its guard: {_guard_on(params)}"
-                + "; with --spring or the mesh's size far from 1 a guarded run overflows too")
-    step = "a smaller --dt" if mode.step is Step.FIXED else "--step fixed with a small --dt"
-    damping = (f"a larger --damping than {params.damping:g}" if params.damping >= DIVERGENCE_DAMPING
-               else f"--damping {DIVERGENCE_DAMPING:g}")
-    return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or {_guard_on(params)}"
+        return (penalty + f"the momentum dynamics without its guard: {_guard_on(params, api)}"
+                + f"; with {_option('spring', api=api)} or the mesh's size far from 1 a guarded run overflows too")
+    dt = _option("dt", api=api)
+    step = f"a smaller {dt}" if mode.step is Step.FIXED else f"{_option('step', 'fixed', api)} with a small {dt}"
+    damping = (f"a larger {_option('damping', api=api)} than {params.damping:g}" if params.damping >= DIVERGENCE_DAMPING
+               else _option("damping", DIVERGENCE_DAMPING, api))
+    return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or {_guard_on(params, api)}"
 
 
 #: The damping :func:`divergence_hint` suggests to an undamped paper run.
 DIVERGENCE_DAMPING = 0.05
 
 
-def divergence_note(params: FlattenParams, result: FlattenResult) -> str | None:
-    """Where a diverged run ran away, what that means, and what to try (:func:`divergence_hint`)."""
+def divergence_note(params: FlattenParams, result: FlattenResult, api: bool = False) -> str | None:
+    """Where a diverged run ran away, what that means, and what to try (:func:`divergence_hint`; ``api``: in
+    the API's keywords)."""
     if result.status != "diverged":
         return None
-    return f"iteration {result.iterations + 1} ran away: {RAN_AWAY} ({divergence_hint(params)})"
+    return f"iteration {result.iterations + 1} ran away: {RAN_AWAY} ({divergence_hint(params, api)})"
 
 
 def fold_note(params: FlattenParams, result: FlattenResult, api: bool = False) -> str | None:

@@ -39,7 +39,7 @@ from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options, forget_half_built_components
 from sim.engines import ENGINES, engine_named
-from sim.flatten_run import pattern_notes, run_flatten, run_formats
+from sim.flatten_run import divergence_note, pattern_notes, run_flatten, run_formats
 from sim.distortion import Distortion, distortion
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
                          ending_name_problem)
@@ -325,7 +325,9 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         except FormatSetNotBuildable as exc:  # engine="rtl"
             forget_half_built_components(exc)
             raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
-    for note in [*run_notes, *pattern_notes(params, result, api=True, formats=run_formats(args))]:
+    notes = [*run_notes, divergence_note(params, result, api=True),
+             *pattern_notes(params, result, api=True, formats=run_formats(args))]
+    for note in filter(None, notes):
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
@@ -341,11 +343,10 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     scale on ``paper`` = ``a4`` (the default), ``a3``, ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the
     3D mesh with the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured
     by distortion).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
-    :mod:`sim.patterns`; a true-scale pattern (DXF, PDF, SVG) under 10 mm across gives a :class:`MeshNote`
-    warning that ``units`` is likely wrong.  The file appears whole or not at all, and an existing regular
-    file at ``path`` that may be written is replaced (a read-only one is refused): the arrays carry no file
-    name, so unlike ``springflat flatten --out`` this cannot refuse the mesh's own file (a ``.obj`` written
-    there replaces the mesh with the triangulated mesh and its ``vt``).
+    :mod:`sim.patterns`; a true-scale pattern (DXF, PDF, SVG) under 10 mm or over 5 m across gives a
+    :class:`MeshNote` warning that ``units`` is likely wrong.  The file appears whole or not at all, and an
+    existing regular file at ``path`` that may be written is replaced (a read-only one is refused), but for
+    an ``.obj`` springflat did not write (a mesh, the pattern's own too: refused, as by the command).
 
     Raises:
         OutputError: a path that cannot be written, or a ``diverged`` pattern (its last finite layout is no
