@@ -8,6 +8,8 @@ from __future__ import annotations
 import asyncio
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 from concurrent.futures import Future, _base
@@ -224,3 +226,18 @@ def test_a_scheduler_address_dask_could_not_connect_to_is_refused_before_the_run
     else:
         with pytest.raises(ParameterError, match=rf"^--scheduler '{address}': {problem} \(expected 'local' or "):
             check_scheduler_address(address)
+
+
+def test_workers_do_not_run_the_callers_script_again_whatever_start_method_it_chose(tmp_path):
+    """Under ``spawn`` (macOS's default) or ``forkserver`` (Linux's from Python 3.14) a worker re-imports the
+    main module: an API call's hidden SLIM worker ran a caller's unguarded top-level code a second time."""
+    script = tmp_path / "script.py"
+    script.write_text("import multiprocessing, os\n"
+                      "multiprocessing.set_start_method('spawn', force=True)\n"
+                      "print('top-level ran', flush=True)\n"
+                      "from sim.workers import WorkerPool\n"
+                      "with WorkerPool(1) as pool:\n"
+                      "    print('worker', pool.submit(os.getpid).result() != os.getpid(), flush=True)\n")
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == ["top-level ran", "worker True"]
