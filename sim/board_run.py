@@ -104,10 +104,12 @@ def add_board_options(parser) -> None:
     """``--port`` and ``--baud`` of ``flatten --engine board``."""
     from golden_model.engine_spec.uart_protocol import DEFAULT_BAUD
 
+    from .run_options import integer_argument
+
     parser.add_argument("--port", default=None, metavar="DEVICE|URL",
                         help="--engine board: the board's serial port (/dev/ttyUSB0, COM3, or a pyserial URL "
                              "such as socket://host:port)")
-    parser.add_argument("--baud", type=int, default=None,  # None: not given (DEFAULT_BAUD)
+    parser.add_argument("--baud", type=integer_argument, default=None,  # None: not given (DEFAULT_BAUD)
                         help=f"--engine board: the UART's rate in bit/s, as the bitstream was built (default "
                              f"{DEFAULT_BAUD})")
 

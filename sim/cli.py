@@ -64,6 +64,7 @@ from .run_options import (
     default_init,
     file_path_argument,
     input_files,
+    integer_argument,
     load_format_set,
     params_from_args,
     path_argument,
@@ -317,7 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    f"construction), clock.sdc (clk at the engine's {ENGINE_TARGET_MHZ:g} MHz); "
                                    "README.md says which file is which.")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
-    p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
+    p.add_argument("--capacity", nargs=3, type=integer_argument, default=None, metavar=("V", "E", "T"),
                    help="the engine's vertices, neighbour entries and triangles (default: "
                         f"{DEFAULT_CAPACITY.as_option()})")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",

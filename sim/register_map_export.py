@@ -196,10 +196,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
     from .outputs import OutputError, atomic_directory
+    from .run_options import integer_argument
 
     parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
     parser.add_argument("--formats", default="default")
-    parser.add_argument("--capacity", nargs=3, type=int, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
+    parser.add_argument("--capacity", nargs=3, type=integer_argument, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
                         default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles),
                         help="the engine's capacity (default: the one springflat verilog and synth build)")
     parser.add_argument("--out", required=True)

@@ -21,7 +21,7 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY, check_engine_params
 from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, missing_simulator, run_bench
-from .run_options import file_path_argument
+from .run_options import file_path_argument, integer_argument
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["add_parser", "cmd_rtl_check"]
@@ -39,12 +39,12 @@ def add_parser(sub, add_run_options) -> None:
                    help="run the whole flattening through SpringflatEngine (springflat_engine.v, driven over "
                         "its Wishbone bus) and compare it bit for bit with the golden model's run_image (what a "
                         "guarded run, a mesh file's default, always does)")
-    p.add_argument("--capacity", type=int, nargs=3, default=None, metavar=("V", "E", "T"),
+    p.add_argument("--capacity", type=integer_argument, nargs=3, default=None, metavar=("V", "E", "T"),
                    help="with --engine-top: the engine's vertices, neighbour entries and triangles "
                         f"(default: {DEFAULT_CAPACITY.as_option()})")
-    p.add_argument("--wait-states", type=int, default=0, metavar="N",
+    p.add_argument("--wait-states", type=integer_argument, default=0, metavar="N",
                    help="with --engine-top: up to N random idle clocks before each bus cycle (default 0)")
-    p.add_argument("--iterations", type=int, default=None, metavar="N", help="stop after at most N iterations")
+    p.add_argument("--iterations", type=integer_argument, default=None, metavar="N", help="stop after at most N iterations")
     p.add_argument("--waves", type=file_path_argument, default=None, metavar="PATH",
                    help="write the waveform here: FILE.fst with icarus, FILE.vcd with verilator")
     p.add_argument("--stall", type=float, default=None, metavar="P",

@@ -13,7 +13,7 @@ from golden_model.engine_spec import uart_protocol as protocol
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 
 from .clock import ENGINE_TARGET_MHZ
-from .run_options import path_argument
+from .run_options import integer_argument, path_argument
 from .top_names import COMPONENT_SUMMARIES
 from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS,
                     DoesNotFit, SynthError, build_in_place, report_markdown, run_synthesis)
@@ -66,7 +66,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--board", choices=("ulx3s-85f",), default=None,
                    help="instead of --target: the board top (PLL, UART bridge, LEDs, the engine at --capacity) "
                         "to a bitstream with its timing report and pin list (docs/board.md)")
-    p.add_argument("--baud", type=int, default=None,
+    p.add_argument("--baud", type=integer_argument, default=None,
                    help=f"--board: the UART's rate in bit/s (default {protocol.DEFAULT_BAUD})")
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--freq", type=_positive, default=None, metavar="MHZ",
@@ -79,7 +79,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
                    help=f"comma-separated subset of {', '.join([*COMPONENT_SUMMARIES, ENGINE])} (default: all but "
                         f"{ENGINE})")
-    p.add_argument("--capacity", nargs=3, type=int, default=None, metavar=("V", "E", "T"),
+    p.add_argument("--capacity", nargs=3, type=integer_argument, default=None, metavar=("V", "E", "T"),
                    help="springflat_engine's vertices, neighbour entries and triangles (default: "
                         f"{DEFAULT_CAPACITY.as_option()})")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",

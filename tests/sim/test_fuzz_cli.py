@@ -2002,3 +2002,15 @@ def test_a_file_whose_old_version_could_not_be_kept_is_named_when_a_later_rename
         f"springflat: error: cannot write --history 'h.csv': operation not permitted; "
         f"'a.svg' is the new file (its old one could not be kept)")
     assert (tmp_path / "h.csv").read_text() == "old history" and sorted(os.listdir(tmp_path)) == ["a.svg", "h.csv"]
+
+
+@pytest.mark.parametrize("command", [["verilog", "--capacity", "1_024", "6144", "2048"], ["rtl-check", "--iterations", "1_0"],
+                                     ["rtl-check", "--wait-states", "٣"], ["synth", "--baud", "١١٥٢٠٠"],
+                                     ["flatten", "surf1", "--engine", "board", "--baud", "1_0"]])
+def test_every_integer_option_is_written_as_an_integer_is(command, tmp_path):
+    """--capacity, --baud, --iterations and --wait-states took Python's int(), which reads '1_024' and Arabic-Indic
+    digits; --max-iter refused them. One reader for all."""
+    done = subprocess.run([SPRINGFLAT, *command], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert done.returncode == 2 and re.search(r"error: argument --[a-z-]+: expected an integer, got '.+'",
+                                              done.stderr), done.stderr
+    assert list(tmp_path.iterdir()) == []
