@@ -22,8 +22,9 @@ import json
 import zlib
 from dataclasses import asdict, dataclass, field
 
-from .image import (BUS_WORD_BITS, ITERATION_BITS, MODE_FIELDS, RESULTS, SATURATION_BITS, EngineCapacity, WordField,
-                    energy_width, memory_layouts, run_constant_fields)
+from .image import (BUS_WORD_BITS, ENERGY_TOL_INT_BITS, ITERATION_BITS, MODE_FIELDS, RESULTS, SATURATION_BITS,
+                    EngineCapacity, WordField, energy_width, memory_layouts, run_constant_fields)
+from ..fixed.engine import ENERGY_TOL_FRAC_BITS
 from ..modes import RUN_MODES
 from ..fixed.formats_set import FormatSet
 
@@ -237,7 +238,7 @@ _CONSTANT_TEXT = {
     "length_shift": "shift of 1/Σd",
     "tol_area": "φ_S raw [error]",
     "tol_shape": "φ_C raw [error]",
-    "tol_energy": "ε raw, u8.40",
+    "tol_energy": f"ε raw, u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS}",
     "max_iter": "N_max",
     "saturation_limit": "stop as diverged after this many saturation events (0: never)",
     "energy_floor": "the stop rule's energy floor, raw as ENERGY: with E_S and E_C within φ, an energy below "
