@@ -9,6 +9,9 @@ from __future__ import annotations
 
 import json
 import re
+import signal
+import sys
+import threading
 from dataclasses import replace
 from pathlib import Path
 
@@ -194,29 +197,44 @@ def main(argv: list[str] | None = None) -> int:
     from golden_model.mesh import one_line
     from golden_model.params import ParameterError
 
-
-    from .outputs import OutputError, atomic_directory
-    from .run_options import integer_argument
+    from .exit_codes import STOP_SIGNALS, answered_signals
+    from .outputs import OutputError, atomic_directory, describe_os_error, on_interrupt, received_signal, \
+        reset_interrupted
+    from .run_options import integer_argument, path_argument
 
     parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
     parser.add_argument("--formats", default="default")
     parser.add_argument("--capacity", nargs=3, type=integer_argument, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
                         default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles),
                         help="the engine's capacity (default: the one springflat verilog and synth build)")
-    parser.add_argument("--out", required=True)
+    parser.add_argument("--out", required=True, type=path_argument)
     args = parser.parse_args(argv)
+    reset_interrupted()
+    # Ctrl-C, kill or a hang-up: one line and the command's status (no traceback, no directory half built)
+    previous = ({name: signal.signal(getattr(signal, name), on_interrupt) for name in answered_signals()}
+                if threading.current_thread() is threading.main_thread() else {})
     try:
-        formats = load_formats(args.formats)
-        m = RegisterMap.build(formats, engine_capacity(args.capacity, formats))  # (--capacity's checks)
-    except (FixedPointError, ParameterError, ValueError) as exc:
-        parser.exit(2, f"{parser.prog}: error: {exc}\n")
-    out = Path(args.out)
-    try:
-        inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
-        with atomic_directory(out, inputs=inputs) as build:  # all three files in place, or none
-            names = [path.name for path in write_exports(m, build)]
-    except OutputError as exc:
-        parser.exit(2, f"{parser.prog}: error: {one_line(str(exc))}\n")
+        try:
+            formats = load_formats(args.formats)
+            m = RegisterMap.build(formats, engine_capacity(args.capacity, formats))  # (--capacity's checks)
+        except (FixedPointError, ParameterError, ValueError) as exc:
+            parser.exit(2, f"{parser.prog}: error: {exc}\n")
+        except OSError as exc:  # a --formats file that cannot be read (a FIFO, a directory)
+            parser.exit(2, f"{parser.prog}: error: cannot read --formats '{args.formats}': {describe_os_error(exc)}\n")
+        out = args.out
+        try:
+            inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
+            with atomic_directory(out, inputs=inputs) as build:  # all three files in place, or none
+                names = [path.name for path in write_exports(m, build)]
+        except OutputError as exc:
+            parser.exit(2, f"{parser.prog}: error: {one_line(str(exc))}\n")
+    except KeyboardInterrupt:
+        line, status = STOP_SIGNALS[received_signal().name]
+        print(f"{parser.prog}: {line}", file=sys.stderr)
+        return status
+    finally:
+        for name, before in previous.items():
+            signal.signal(getattr(signal, name), before)
     for name in names:
         print(out / name)
     return 0

@@ -282,3 +282,30 @@ def test_the_engine_doc_holds_the_generated_map():
     formats, capacity = DOC_MAP
     regmap = RegisterMap.build(FormatSet.preset(formats), capacity)
     assert blocks["register-map"].rstrip() == markdown(regmap, level=3).rstrip()
+
+def test_the_export_command_says_in_one_line_what_is_wrong_with_its_inputs(tmp_path, capsys):
+    """A --formats FIFO was a NotRegularFileError traceback; --out '' wrote into the current directory."""
+    import os
+
+    from sim.register_map_export import main
+
+    os.mkfifo(tmp_path / "f.json")
+    for args, said in [(["--formats", str(tmp_path / "f.json"), "--out", str(tmp_path / "o")],
+                        f"cannot read --formats '{tmp_path / 'f.json'}': is a named pipe (FIFO), not a regular file"),
+                       (["--out", ""], "argument --out: expected a path, got ''")]:
+        with pytest.raises(SystemExit) as stopped:
+            main(args)
+        assert stopped.value.code == 2
+        assert capsys.readouterr().err.splitlines()[-1] == f"python -m sim.register_map_export: error: {said}"
+    assert os.listdir(tmp_path) == ["f.json"]
+
+
+def test_the_export_command_answers_ctrl_c_in_one_line_with_nothing_written(tmp_path, capsys, monkeypatch):
+    import signal
+
+    import sim.register_map_export as export
+
+    monkeypatch.setattr(export, "write_exports", lambda m, build: signal.raise_signal(signal.SIGINT))
+    assert export.main(["--out", str(tmp_path / "o")]) == 130
+    assert capsys.readouterr().err == "python -m sim.register_map_export: interrupted\n"
+    assert list(tmp_path.iterdir()) == []
