@@ -212,9 +212,15 @@ def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
     mesh, notes = load_mesh_with_notes(name)
     for note in notes:
         print(f"springflat: note: {mesh.name}: {note}", file=sys.stderr)
-    return mesh, FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0,
-                               tol_energy=FILE_TOL_ENERGY,
-                               max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
+    return mesh, file_defaults(mesh)
+
+
+def file_defaults(mesh: Mesh) -> FlattenParams:
+    """A mesh file's parameters (the API's arrays take them too): the momentum dynamics with the fold barrier
+    and the guard, stopped at the energy minimum (``FILE_TOL_ENERGY``, no E_S/E_C thresholds), ``N_max``
+    sized to the mesh's radius in edges."""
+    return FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=FILE_TOL_ENERGY,
+                         max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
 
 
 def default_init(mesh_name: str) -> str:

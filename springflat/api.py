@@ -10,10 +10,10 @@ namespace then goes through :func:`sim.run_options.params_from_args` like the co
 checks each value's domain (:class:`golden_model.params.ParameterError`).  A new option of the
 command line is a new keyword here with no edit.
 
-One set of defaults.  Arrays get the defaults of a mesh *file* (:func:`sim.run_options.resolve_mesh`:
-the momentum dynamics with the fold barrier, stopped at the energy minimum, an ARAP start), obtained by
-handing ``resolve_mesh`` the arrays as a temporary OBJ: ``flatten(V, F)`` gives the layout that
-``springflat flatten mesh.obj`` gives for the same ``V``, ``F``.
+One set of defaults.  Arrays get the defaults of a mesh *file* (:func:`sim.run_options.file_defaults`,
+which the command takes for a file: the momentum dynamics with the fold barrier, stopped at the energy
+minimum, an ARAP start): ``flatten(V, F)`` gives the layout that ``springflat flatten mesh.obj`` gives for
+the same ``V``, ``F``.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import tempfile
 import warnings
 from dataclasses import dataclass
 from functools import cached_property
@@ -32,9 +31,9 @@ import numpy as np
 
 from golden_model.fixed.formats_set import FormatSetNotBuildable
 from golden_model.fixed.measures import FixedPointError
-from golden_model.layouts import LayoutError
+from golden_model.layouts import AUTO_START, LayoutError
 from golden_model.mesh import Mesh, MeshError, oriented_mesh
-from golden_model.mesh_io import load_mesh_with_notes, save_obj
+from golden_model.mesh_io import load_mesh_with_notes
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options, forget_half_built_components
@@ -45,7 +44,7 @@ from sim.outputs import (OutputError, area_ratio, check_link_target, check_outpu
                          ending_name_problem)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, kind_or_none, on_sheets,
                           pattern_ending, run_caption, scale_note, write_pattern_file)
-from sim.run_options import UserError, add_run_options, params_from_args, resolve_mesh
+from sim.run_options import UserError, add_run_options, file_defaults, params_from_args
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
 
@@ -307,24 +306,20 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     mesh, notes = oriented_mesh(vertices, faces, name=name)  # validated here: errors name no temporary file
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
-    with tempfile.TemporaryDirectory(prefix="springflat-api-") as tmp:
-        path = Path(tmp) / "mesh.obj"
-        save_obj(path, mesh.vertices, mesh.faces)
-        _, defaults = resolve_mesh(str(path))
-        params = params_from_args(args, defaults)
-        args.mesh = str(path)
-        # an array is checked, and untangled where it folds, as a layout file is (run_flatten's start)
-        args.init = None if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
-        run_notes: list[str] = []  # the command's notes on stderr (the start untangled, ...) are warnings here
-        try:
-            result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
-        except FixedPointError as exc:  # the formats cannot hold the mesh: the presets that can, by keyword
-            raise FixedPointError(_in_api_words(str(exc))) from None
-        except (UserError, LayoutError) as exc:  # the command line's one line: options, or the start, refused
-            raise ParameterError(str(exc)) from None
-        except FormatSetNotBuildable as exc:  # engine="rtl"
-            forget_half_built_components(exc)
-            raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
+    params = params_from_args(args, file_defaults(mesh))
+    args.mesh = mesh.name
+    # a mesh file's start (AUTO_START); an array is checked, and untangled where it folds, as a layout file is
+    args.init = AUTO_START if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
+    run_notes: list[str] = []  # the command's notes on stderr (the start untangled, ...) are warnings here
+    try:
+        result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
+    except FixedPointError as exc:  # the formats cannot hold the mesh: the presets that can, by keyword
+        raise FixedPointError(_in_api_words(str(exc))) from None
+    except (UserError, LayoutError) as exc:  # the command line's one line: options, or the start, refused
+        raise ParameterError(str(exc)) from None
+    except FormatSetNotBuildable as exc:  # engine="rtl"
+        forget_half_built_components(exc)
+        raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
     notes = [*run_notes, divergence_note(params, result, api=True),
              *pattern_notes(params, result, api=True, formats=run_formats(args))]
     for note in filter(None, notes):
