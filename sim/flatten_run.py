@@ -26,8 +26,9 @@ from golden_model.results import FlattenResult
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
-from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_mesh_fits,
-                       error_text, kind_or_none, on_sheets, run_caption, scale_note, write_pattern_file)
+from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
+                       check_mesh_fits, error_text, kind_or_none, on_sheets, run_caption, scale_note,
+                       write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
 
@@ -71,9 +72,12 @@ def _progress(total: int, enabled: bool):
 
 
 def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
-    """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units)."""
+    """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units), and a
+    ``--grain`` normal to the whole surface."""
     if any(on_sheets(path) for path in args.out or ()):
         check_mesh_fits(mesh, args.units, paper_of(args))
+    if args.grain is not None:
+        check_grain(mesh, args.grain)
 
 
 def paper_of(args: argparse.Namespace) -> str:
@@ -94,6 +98,9 @@ def check_options_used(args: argparse.Namespace) -> None:
     check_formats_option(args)
     if args.dxf_edges and not any(kind_or_none(path) == "dxf" for path in args.out or ()):
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
+    if args.grain is not None and not args.out:
+        raise UserError("--grain turns the pattern files and draws their grain line: add --out NAME.dxf, .pdf, .svg, "
+                        ".obj or .flat.obj")
     if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
         raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg (a .flat.svg is "
                         "the layout drawn to fit, not a pattern on sheets)")
@@ -428,6 +435,8 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
     drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
         result.status, result.iterations, final.area_error, final.shape_error, final.folded,
         result.extra.get("boundary_crossings")))
+    if args.grain is not None and args.out and result.status != "diverged":
+        drawing = drawing.with_grain(args.grain)
     jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=paper_of(args),
                                                             dxf_edges=args.dxf_edges))
             for path in args.out or ()]

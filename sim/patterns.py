@@ -79,6 +79,8 @@ SVG_GAP_MM = 10.0         # space between tiled sheets in an SVG
 CUT_WIDTH_MM = 0.3        # the cut line
 EDGE_WIDTH_MM = 0.06      # mesh edges, drawn only when ...
 EDGE_MIN_MM = 2.0         # ... the median edge is at least this long on paper
+GRAIN_WIDTH_MM = 0.2      # the grain line and its arrowheads (--grain) ...
+GRAIN_GREY = 0.35         # ... in this grey (0 black, 1 white)
 SCALE_BAR_MAX_MM = 80.0   # the scale bar is the longest 1, 2 or 5 x 10^k units not longer than this
 FONT_MM = 3.2             # text height of the title block
 CAP_HEIGHT_EM = 0.72      # Helvetica's cap height, in font sizes (a label's size is its cap height)
@@ -142,6 +144,10 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
                              "larger; any case), "
                              f"or fit: one page around the pattern, for a roll plotter (default {DEFAULT_PAPER}); "
                              "a cutter takes the .dxf, which holds the cut line alone (unless --dxf-edges)")
+    parser.add_argument("--grain", type=grain_argument, default=None, metavar="x|y|z|X,Y,Z",
+                        help="turn the pattern files so that this 3D direction of the mesh (-z: the other way), as "
+                             "laid on the pattern, points up the page, and draw it as a grain line (default: the "
+                             "layout's own frame, turned to fit the sheets)")
     parser.add_argument("--dxf-edges", action="store_true",
                         help="also write every mesh edge to the DXF, on layer MESH (the boundary is on CUT)")
     parser.add_argument("--distortion", type=file_path_argument, default=None, metavar="FILE.csv",
@@ -164,6 +170,8 @@ class PatternDrawing:
         edges: ``(E, 2)`` the unique edges (:attr:`Mesh.edges`).
         units: one of :data:`UNITS`.
         caption: one line about the run (status, errors), printed under the name.
+        grain: the 3D direction the pattern was turned to carry up the page (:meth:`with_grain`), as the
+            user named it (``z``, ``1,0,0``), or ``""``: the layout's own frame, no grain line.
     """
 
     name: str
@@ -174,6 +182,7 @@ class PatternDrawing:
     edges: np.ndarray
     units: str = "mm"
     caption: str = ""
+    grain: str = ""
 
     @classmethod
     def of(cls, mesh: Mesh, layout: np.ndarray, units: str = "mm", caption: str = "") -> "PatternDrawing":
@@ -194,6 +203,91 @@ class PatternDrawing:
         """Length of the closed cut line, in ``units``."""
         p = self.boundary_points
         return float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
+
+    def with_grain(self, grain: str) -> "PatternDrawing":
+        """The drawing turned so that the 3D direction ``grain`` (:func:`grain_direction`), as the triangles
+        carry it onto the pattern, points up (+y), with a grain line on every pattern file."""
+        angle = grain_angle(self.vertices, self.faces, self.layout, grain_direction(grain))
+        return replace(self, layout=_turned(self.layout, math.pi / 2 - angle, _centre(self.layout)), grain=grain)
+
+    def grain_line(self) -> np.ndarray:
+        """``(2, 2)`` the grain line's ends (bottom, top) in ``units``: vertical, through the vertex nearest the
+        pattern's area centroid, :data:`GRAIN_LINE_FRACTION` of its height long."""
+        q = self.layout[self.faces]
+        a, b = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
+        areas = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / 2
+        centroid = (areas[:, None] * q.mean(axis=1)).sum(axis=0) / areas.sum()
+        x, y = self.layout[np.argmin(np.linalg.norm(self.layout - centroid, axis=1))]
+        half = GRAIN_LINE_FRACTION * float(np.ptp(self.layout[:, 1])) / 2
+        return np.array([[x, y - half], [x, y + half]])
+
+
+#: A grain line's length, as a fraction of the pattern's height, and its arrowheads', of its length.
+GRAIN_LINE_FRACTION = 0.5
+GRAIN_HEAD_FRACTION = 0.06
+
+
+def grain_argument(text: str) -> str:
+    """``--grain``'s value, checked (:func:`grain_direction`) and kept as typed."""
+    try:
+        grain_direction(text)
+    except PatternError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--grain {text!r}: ")) from None
+    return text
+
+
+def check_grain(mesh: Mesh, text: str) -> None:
+    """Refuse, before a run, a grain direction normal to the whole surface (:func:`grain_angle`'s test that
+    needs no layout)."""
+    grain_angle(mesh.vertices, mesh.faces, mesh.vertices[:, :2], grain_direction(text), layout_known=False)
+
+
+def grain_arrow(line: np.ndarray) -> list[np.ndarray]:
+    """A grain line's strokes: the line (bottom, top) and an arrowhead at each end (three points each)."""
+    (x, y0), (_, y1) = line
+    head = GRAIN_HEAD_FRACTION * (y1 - y0)
+    return [line, np.array([[x - head / 2, y1 - head], [x, y1], [x + head / 2, y1 - head]]),
+            np.array([[x - head / 2, y0 + head], [x, y0], [x + head / 2, y0 + head]])]
+#: ``--grain``'s named directions.
+GRAIN_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+
+
+def grain_direction(text: str) -> np.ndarray:
+    """``--grain``'s 3D direction: ``x``, ``y``, ``z`` (``-z``: the other way) or three numbers ``X,Y,Z`` in the
+    mesh's frame; a unit vector, or :class:`PatternError`."""
+    word = text.strip().lower()
+    sign, axis = (-1.0, word[1:]) if word.startswith("-") and word[1:] in GRAIN_AXES else (1.0, word)
+    try:
+        vector = sign * np.array(GRAIN_AXES[axis]) if axis in GRAIN_AXES else np.array(
+            [float(part) for part in text.split(",")])
+    except ValueError:
+        vector = np.empty(0)
+    if vector.shape != (3,) or not np.isfinite(vector).all() or not np.linalg.norm(vector) > 0:
+        raise PatternError(f"--grain {text!r}: expected x, y or z (-z: the other way) or a 3D direction X,Y,Z "
+                           "that is not zero")
+    return vector / np.linalg.norm(vector)
+
+
+def grain_angle(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray, direction: np.ndarray,
+                layout_known: bool = True) -> float:
+    """The angle (radians, anticlockwise from +x) at which ``direction`` (a 3D unit vector) lies on the pattern:
+    each triangle's affine map carries the direction's part in its plane onto the layout; the mean over the
+    triangles, weighted by their 3D areas. :class:`PatternError` where the direction is normal to the surface
+    (it lies in no triangle's plane)."""
+    p, q = vertices[faces], layout[faces]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    u1, u2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
+    g11, g12, g22 = (e1 * e1).sum(axis=1), (e1 * e2).sum(axis=1), (e2 * e2).sum(axis=1)
+    r1, r2 = e1 @ direction, e2 @ direction
+    gram = g11 * g22 - g12 * g12  # (2 × the 3D area)²: the direction's plane part is a·e1 + b·e2
+    a, b = (g22 * r1 - g12 * r2) / gram, (g11 * r2 - g12 * r1) / gram
+    area = np.sqrt(gram) / 2
+    mean = (area[:, None] * (a[:, None] * u1 + b[:, None] * u2)).sum(axis=0)
+    in_plane = (area * np.linalg.norm(np.cross(np.cross(e1, e2), direction), axis=1) / np.sqrt(gram)).sum()
+    if not in_plane > 1e-6 * area.sum() or (layout_known and not np.linalg.norm(mean) > 1e-3 * in_plane):
+        raise PatternError("--grain: the direction is normal to the surface (it lies in none of its triangles), or "
+                           "its parts on the pattern cancel out: it has no direction there; name one along the surface")
+    return float(np.arctan2(mean[1], mean[0]))
 
 
 def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int,
@@ -231,7 +325,7 @@ def check_not_a_mesh(path: Path, what: str = "--out") -> None:
 def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFAULT_PAPER,
                        dxf_edges: bool = False, turn: bool = True) -> None:
     """Write ``drawing`` to ``path`` in the format its ending names (:func:`pattern_kind`); on sheets (PDF, SVG)
-    turned where that takes fewer (:func:`turned_to_fit`; ``turn=False``: as laid)."""
+    turned where that takes fewer (:func:`turned_to_fit`; ``turn=False``, or a drawing with a grain: as laid)."""
     kind = pattern_kind(path)
     if paper not in PAPERS:
         raise PatternError(f"paper must be one of {', '.join(PAPERS)}, got {paper!r}")
@@ -250,7 +344,7 @@ def write_pattern_file(path: Path, drawing: PatternDrawing, *, paper: str = DEFA
             _write_dxf(tmp, drawing, dxf_edges)
     else:
         plan = None
-        if turn:
+        if turn and not drawing.grain:  # (a grain fixes the pattern's turn)
             drawing, plan = _turned_to_fit(drawing, paper)
         size = pattern_size_mm(drawing)
         check_sheet_count(size, paper, drawing.units)
@@ -309,6 +403,10 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
             doc.layers.add("MESH", color=8)
             for a, b in drawing.layout[drawing.edges].tolist():
                 msp.add_line(a, b, dxfattribs={"layer": "MESH"})
+        if drawing.grain:
+            doc.layers.add("GRAIN", color=5)
+            for stroke in grain_arrow(drawing.grain_line()):
+                msp.add_lwpolyline(stroke.tolist(), format="xy", dxfattribs={"layer": "GRAIN"})
         # the drawing's extents: ezdxf leaves them at ±1e20 ("not set"), and a viewer's "zoom extents" then
         # shows nothing useful; both the header and the model space are set (ezdxf copies the latter on save,
         # unless it is the origin)
@@ -322,6 +420,8 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
         meta["springflat_units"] = drawing.units
         if drawing.caption:
             meta["springflat_run"] = drawing.caption
+        if drawing.grain:
+            meta["springflat_grain"] = drawing.grain
         # ezdxf adds a CLASS per object type in use while saving, in the order of a set (the hash seed's):
         # register them first, sorted, so that the file does not depend on the process
         for dxftype in sorted(doc.entitydb.dxf_types_in_use()):
@@ -792,6 +892,15 @@ def _pattern_mm(drawing: PatternDrawing, plan: SheetPlan) -> np.ndarray:
     return (drawing.layout - drawing.layout.min(axis=0)) * check_units(drawing.units) + np.array(plan.shift)
 
 
+def _grain_mm(drawing: PatternDrawing, plan: SheetPlan) -> list[np.ndarray]:
+    """The grain line's strokes (:func:`grain_arrow`) in the grid's mm, as :func:`_pattern_mm` places the
+    pattern; none without a grain."""
+    if not drawing.grain:
+        return []
+    origin, scale = drawing.layout.min(axis=0), check_units(drawing.units)
+    return [(stroke - origin) * scale + np.array(plan.shift) for stroke in grain_arrow(drawing.grain_line())]
+
+
 def _pattern_parts(drawing: PatternDrawing, plan: SheetPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(edges (E', 2, 2), folded faces (K, 3, 2), cut line (B, 2))`` in the grid's mm; no edges when they
     would merge on paper (median under :data:`EDGE_MIN_MM`)."""
@@ -851,6 +960,16 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     canvas.setLineWidth(CUT_WIDTH_MM)
     canvas.setStrokeGray(0.0)
     canvas.drawPath(path_, stroke=1, fill=0)
+    grain = _grain_mm(drawing, plan)
+    if grain:
+        path_ = canvas.beginPath()
+        for stroke in grain:
+            path_.moveTo(*stroke[0])
+            for point in stroke[1:].tolist():
+                path_.lineTo(*point)
+        canvas.setLineWidth(GRAIN_WIDTH_MM)
+        canvas.setStrokeGray(GRAIN_GREY)
+        canvas.drawPath(path_, stroke=1, fill=0)
     canvas.endForm()
 
     x0, y0, w, h = plan.window
@@ -946,6 +1065,13 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             write("</g>\n")
         write(f'<polygon id="cut" points="{_svg_points(cut.tolist(), 0.0)}" stroke="#000000" '
               f'stroke-width="{_svg_num(CUT_WIDTH_MM)}"/>\n')
+        grain, grey = _grain_mm(drawing, plan), round(255 * GRAIN_GREY)
+        if grain:
+            write(f'<g id="grain" stroke="#{grey:02x}{grey:02x}{grey:02x}" '
+                  f'stroke-width="{_svg_num(GRAIN_WIDTH_MM)}">\n')
+            for stroke in grain:
+                write(f'<polyline points="{_svg_points(stroke.tolist(), 0.0)}"/>\n')
+            write("</g>\n")
         write("</g>\n</defs>\n")
         for sheet in plan.sheets:
             px, py = place(sheet)

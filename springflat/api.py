@@ -331,13 +331,15 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
 
 
 def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str | None = None,
-                  dxf_edges: bool = False) -> None:
+                  dxf_edges: bool = False, grain: str | None = None) -> None:
     """Write ``pattern`` to ``path``, the format named by its ending (as ``springflat flatten --out``).
 
     ``.dxf`` (cut line on layer ``CUT``; ``dxf_edges``: mesh edges on ``MESH``), ``.pdf`` / ``.svg`` (true
     scale on ``paper`` = ``a4`` (the default), ``a3``, ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the
     3D mesh with the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured
-    by distortion).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
+    by distortion).  ``grain`` (``x``, ``y``, ``z``, ``-z``, or ``"X,Y,Z"``): the pattern turned so that this 3D
+    direction of the mesh, as laid on it, points up, with a grain line (as ``--grain``); by default the layout's
+    own frame.  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
     :mod:`sim.patterns`; a true-scale pattern (DXF, PDF, SVG) under 10 mm or over 5 m across gives a
     :class:`MeshNote` warning that ``units`` is likely wrong.  The file appears whole or not at all, and an
     existing regular file at ``path`` that may be written is replaced (a read-only one is refused), but for
@@ -378,6 +380,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
                           pattern.folded, pattern.boundary_crossings)
     try:
         drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
+        if grain is not None:
+            drawing = drawing.with_grain(str(grain))
         write_pattern_file(Path(path), drawing, paper=DEFAULT_PAPER if paper is None else str(paper).lower(),
                            dxf_edges=dxf_edges)
     except PatternError as exc:  # the command's words for the same refusal ("check --units") in the API's
@@ -395,7 +399,7 @@ def _in_api_words(message: str) -> str:
         return "".join(part if k % 2 else f"'{part}'" for k, part in enumerate(parts))
 
     message = re.sub(r"--(units|paper|formats) (\w+(?:(?:, | or )\w+)*)", lambda m: f"{m[1]}={quoted(m[2])}", message)
-    return re.sub(r"--(units|paper|formats)\b", r"\1", message)
+    return re.sub(r"--(units|paper|formats|grain)\b", r"\1", message)
 
 
 def _options_doc() -> str:

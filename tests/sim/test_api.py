@@ -59,7 +59,7 @@ def test_the_options_are_the_command_lines_run_and_engine_options():
     flatten_parser = build_parser()._subparsers._group_actions[0].choices["flatten"]
     flags = {flag for action in flatten_parser._actions for flag in action.option_strings if flag.startswith("--")}
     not_run_options = {"--help", "--out", "--history", "--plot", "--json", "--units", "--paper", "--dxf-edges",
-                       "--distortion", "--out-dir", "--jobs", "--scheduler", "--port", "--baud"}
+                       "--grain", "--distortion", "--out-dir", "--jobs", "--scheduler", "--port", "--baud"}
     negations = {flag for flag in flags if flag.startswith("--no-") and "--" + flag[5:] in flags}  # --[no-]barrier
     assert {spec.flag for spec in springflat.OPTIONS.values()} == flags - not_run_options - negations
     for spec in springflat.OPTIONS.values():
@@ -545,3 +545,15 @@ def test_a_call_leaves_no_thread_behind():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "['MainThread']"
+
+
+def test_write_pattern_takes_a_grain(ear, tmp_path):
+    import ezdxf
+
+    V, F = ear
+    pattern = springflat.flatten(V * 1000, F, max_iter=5)
+    springflat.write_pattern(tmp_path / "g.dxf", pattern, grain="z")
+    assert len(ezdxf.readfile(tmp_path / "g.dxf").modelspace().query('LWPOLYLINE[layer=="GRAIN"]')) == 3
+    with pytest.raises(springflat.OutputError, match=r"^write_pattern: grain 'q': expected x, y or z"):
+        springflat.write_pattern(tmp_path / "h.dxf", pattern, grain="q")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.dxf"]

@@ -781,3 +781,59 @@ def test_the_apis_words_quote_each_value_of_a_list():
 
     assert _in_api_words("print it tiled (--paper a4, a3 or letter); say so with --units cm or --units mm") == \
         "print it tiled (paper='a4', 'a3' or 'letter'); say so with units='cm' or units='mm'"
+
+
+def test_grain_turns_a_developable_pattern_so_that_the_direction_points_up():
+    """The rolled grid's generators (3D y) unroll to parallel lines: laid at 30°, --grain y turns them
+    vertical; -y turns them the other way up; a flat square laid as a diamond comes back square."""
+    from golden_model.generate import rolled_grid
+    from sim.patterns import _turned, grain_angle, grain_direction
+
+    mesh, unrolled = rolled_grid(8, 8, arc_degrees=90.0)
+    laid = _turned(unrolled, math.radians(30.0), np.zeros(2))
+    assert math.degrees(grain_angle(mesh.vertices, mesh.faces, laid, grain_direction("y"))) == pytest.approx(120.0)
+    for grain, up in (("y", 1.0), ("-y", -1.0), ("0,2,0", 1.0)):
+        turned = PatternDrawing.of(mesh, laid).with_grain(grain).layout
+        generator = turned[8:] - turned[:-8]  # vertex k to k + 8: one row up, along 3D y
+        assert np.allclose(generator[:, 0], 0.0, atol=1e-12) and np.all(np.sign(generator[:, 1]) == up)
+    square, uv = _rectangle(100.0, 100.0, 45.0)
+    drawing = PatternDrawing.of(square, uv).with_grain("x")
+    assert np.allclose(np.ptp(drawing.layout, axis=0), [100.0, 100.0])
+    (x0, y0), (x1, y1) = drawing.grain_line()
+    assert x0 == x1 and y1 - y0 == pytest.approx(50.0)
+
+
+@pytest.mark.parametrize("grain, message", [
+    ("z", "the direction is normal to the surface"),  # a flat patch: z lies in none of its triangles
+    ("0,0,0", "that is not zero"), ("1,2", "a 3D direction X,Y,Z"), ("w", "expected x, y or z")])
+def test_a_grain_the_pattern_cannot_have_is_refused(grain, message):
+    square, uv = _rectangle(100.0, 100.0)
+    with pytest.raises(PatternError, match=message):
+        PatternDrawing.of(square, uv).with_grain(grain)
+
+
+def test_the_grain_line_is_in_every_pattern_file_and_the_sheets_keep_the_turn(tmp_path):
+    """--grain: the DXF's GRAIN layer (a vertical line, an arrowhead at each end), the PDF and SVG draw it too,
+    and the sheets are not turned again to fit (the grain fixes the turn)."""
+    import ezdxf
+
+    from golden_model.mesh_io import save_obj
+
+    square, uv = _rectangle(100.0, 60.0, 45.0)
+    save_obj(tmp_path / "sq.obj", square.vertices, square.faces)
+    proc = subprocess.run([SPRINGFLAT, "flatten", "sq.obj", "--tol-energy", "1e-9", "--grain", "x", "--out", "sq.dxf",
+                           "--out", "sq.svg", "--out", "sq.pdf"], capture_output=True, text=True, cwd=tmp_path,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    doc = ezdxf.readfile(tmp_path / "sq.dxf")
+    strokes = [[tuple(p[:2]) for p in e.get_points()] for e in doc.modelspace().query('LWPOLYLINE[layer=="GRAIN"]')]
+    assert len(strokes) == 3 and strokes[0][0][0] == pytest.approx(strokes[0][1][0])
+    cut = np.array([p[:2] for p in doc.modelspace().query('LWPOLYLINE[layer=="CUT"]')[0].get_points()])
+    assert np.ptp(cut, axis=0) == pytest.approx([60.0, 100.0], abs=1e-3)  # 3D x (100 mm) up the page
+    assert doc.ezdxf_metadata()["springflat_grain"] == "x"
+    svg = (tmp_path / "sq.svg").read_text()
+    assert svg.count('<g id="grain"') == 1 and svg.count("<polyline points=") >= 3
+    assert b"/Length" in (tmp_path / "sq.pdf").read_bytes()
+    refused = subprocess.run([SPRINGFLAT, "flatten", "sq.obj", "--grain", "x"], capture_output=True, text=True,
+                             cwd=tmp_path, timeout=300)
+    assert refused.returncode == 2 and "--grain turns the pattern files" in refused.stderr
