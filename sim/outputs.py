@@ -25,6 +25,8 @@ import secrets
 import shutil
 import signal
 import stat
+import struct
+import sys
 import threading
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -223,9 +225,38 @@ def check_output_path(path: Path, what: str, suffixes: tuple[str, ...] | None = 
         if not parent.is_dir():
             raise OutputError(f"{what} '{path}': '{parent}' is not a directory")
         _refuse_special(target, path, what)
+        _refuse_locked_directory(parent, f"{what} '{path}'")
         os.unlink(_make_temporary(parent, target.name))
     except OSError as exc:
         raise OutputWriteError(path, exc, what) from None
+
+
+#: Linux's inode flags (``chattr``) that keep a directory's files from being replaced: ``a``, ``i``.
+_LOCKING_FLAGS = {0x20: "append-only (chattr +a): no file in it can be replaced, nor a temporary one removed",
+                  0x10: "immutable (chattr +i): no file in it can be written"}
+#: ``FS_IOC_GETFLAGS``: ``_IOR('f', 1, long)``.
+_FS_IOC_GETFLAGS = (2 << 30) | (struct.calcsize("l") << 16) | (ord("f") << 8) | 1
+
+
+def _refuse_locked_directory(directory: Path, what: str) -> None:
+    """Refuse a directory whose inode flags keep its files from being replaced, before a probe file is made in it
+    (one that an append-only directory then keeps: each attempt left one). Where the flags cannot be read
+    (another system, another file system), the writes say what goes wrong."""
+    try:
+        import fcntl
+
+        fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+    except (ImportError, OSError):
+        return
+    try:
+        flags = int.from_bytes(fcntl.ioctl(fd, _FS_IOC_GETFLAGS, bytes(struct.calcsize("l")))[:4], sys.byteorder)
+    except OSError:
+        return
+    finally:
+        os.close(fd)
+    for flag, why in _LOCKING_FLAGS.items():
+        if flags & flag:
+            raise OutputError(f"{what}: directory '{directory}' is {why}")
 
 
 def _identity(path: Path) -> tuple:
@@ -594,6 +625,7 @@ def check_output_directory(out: Path, what: str = "--out", files: tuple[str, ...
             raise OutputError(f"{what} '{out}': '{parent}' is not a directory")
         if not parent.is_dir():
             raise OutputError(f"{what} '{out}': directory '{parent}' does not exist")
+        _refuse_locked_directory(_build_parent(target), f"{what} '{out}'")
         os.rmdir(_make_temporary(_build_parent(target), target.name, is_dir=True))
     except OSError as exc:
         raise OutputWriteError(out, exc, what) from None

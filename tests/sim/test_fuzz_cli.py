@@ -2014,3 +2014,25 @@ def test_every_integer_option_is_written_as_an_integer_is(command, tmp_path):
     assert done.returncode == 2 and re.search(r"error: argument --[a-z-]+: expected an integer, got '.+'",
                                               done.stderr), done.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("chattr") is None, reason="chattr needs root")
+@pytest.mark.parametrize("flag, why", [("+a", "append-only (chattr +a)"), ("+i", "immutable (chattr +i)")])
+@pytest.mark.parametrize("command", [["flatten", "surf1", "--max-iter", "2", "--out", "d/x.dxf"], ["verilog", "--out", "d"],
+                                     ["paper", "--quiet", "--out", "d/rep"]])
+def test_as_root_a_directory_whose_files_cannot_be_replaced_is_refused_before_a_probe_file_is_left(
+        tmp_path, flag, why, command):
+    """An append-only directory kept the empty probe file (or directory) of every attempt: it can be made there,
+    not removed; the message said only 'operation not permitted'."""
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "x.dxf").write_text("old")
+    if subprocess.run(["chattr", flag, str(tmp_path / "d")], capture_output=True).returncode != 0:
+        pytest.skip("this file system keeps no inode flags")
+    try:
+        done = subprocess.run([SPRINGFLAT, *command], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+        assert done.returncode == 2 and done.stderr.rstrip().endswith(f"directory 'd' is {why}: no file in it can "
+                                                                      + ("be replaced, nor a temporary one removed"
+                                                                         if flag == "+a" else "be written")), done.stderr
+        assert os.listdir(tmp_path / "d") == ["x.dxf"]
+    finally:
+        subprocess.run(["chattr", "-" + flag[1:], str(tmp_path / "d")], check=True)
