@@ -36,7 +36,7 @@ from golden_model.files import describe_os_error, read_file_bytes
 from golden_model.mesh import MeshError, one_line, printable_name, valid_text
 
 from .engines import engine_named
-from .exit_codes import EXIT_DIVERGED, EXIT_USAGE
+from .exit_codes import EXIT_DIVERGED, EXIT_MESHES_FAILED
 from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
     check_output_path, file_ending, when_interrupted
@@ -553,7 +553,7 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
                           "end" + (f": {written} mesh{'es' if written != 1 else ''}' files written to --out-dir)"
                                    if args.out_dir is not None else ")"))
     if failed:
-        return EXIT_USAGE
+        return EXIT_MESHES_FAILED
     return EXIT_DIVERGED if diverged else 0
 
 

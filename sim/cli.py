@@ -15,7 +15,7 @@ unwritable file included, is one line on stderr (``springflat: error: ...``)
 and exit status 2, and leaves no file behind; Ctrl-C is the one line
 ``springflat: interrupted`` and exit status 130, with no output left behind
 (the policy for output paths: :mod:`sim.outputs`).  A run that diverges exits with
-status 3 after writing what was asked for.  ``--json`` prints standard JSON:
+status 3 after writing what was asked for; a batch some of whose meshes failed, with status 4.  ``--json`` prints standard JSON:
 a number that is not finite is ``null`` and its key is listed in
 ``non_finite`` (the status, ``diverged``, says why).
 """

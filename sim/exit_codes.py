@@ -10,6 +10,9 @@ EXIT_USAGE = 2
 """Bad arguments or input: one line ``springflat: error: ...``."""
 EXIT_DIVERGED = 3
 """A run diverged (no pattern is written; the history and plot show the run)."""
+EXIT_MESHES_FAILED = 4
+"""A batch ran to its end and some of its meshes failed (the others' files are written); a batch refused
+before its first run is :data:`EXIT_USAGE`."""
 EXIT_HUNG_UP = 129
 """SIGHUP (the terminal closed, an SSH session dropped), as a shell reports it: 128 + 1."""
 EXIT_INTERRUPTED = 130

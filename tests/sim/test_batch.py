@@ -44,7 +44,7 @@ def test_a_corrupt_mesh_is_reported_and_the_other_19_finish(tmp_path):
     meshes = write_meshes(tmp_path / "in", 19, 7)
     out = tmp_path / "out"
     proc = run("flatten", *meshes, "--out-dir", out, *ENDINGS, "--jobs", "2")
-    assert proc.returncode == 2, proc.stderr
+    assert proc.returncode == 4, proc.stderr  # (2 is a batch refused before any run)
     lines = proc.stdout.splitlines()
     results = [line for line in lines if line.startswith("[")]
     assert len(results) == 20 and sorted(int(r[1:r.index("/")]) for r in results) == list(range(1, 21))
@@ -63,7 +63,7 @@ def test_a_corrupt_mesh_is_reported_and_the_other_19_finish(tmp_path):
 def test_batch_json_lines(tmp_path):
     meshes = write_meshes(tmp_path / "in", 3, 1)
     proc = run("flatten", *meshes, "surf1", "--out-dir", tmp_path / "out", "--history", ".history.csv", "--json")
-    assert proc.returncode == 2
+    assert proc.returncode == 4
     records = [json.loads(line) for line in proc.stdout.splitlines()]
     by_mesh = {r["mesh"]: r for r in records[:-1]}
     assert set(by_mesh) == {"dome00", "dome01", "dome02", "corrupt", "surf1"}
@@ -78,7 +78,7 @@ def test_a_dask_local_cluster_writes_the_same_bytes_as_the_process_pool(tmp_path
     meshes = write_meshes(tmp_path / "in", 5, 2)
     pool = run("flatten", *meshes, "--out-dir", tmp_path / "pool", *ENDINGS, "--jobs", "2")
     dask = run("flatten", *meshes, "--out-dir", tmp_path / "dask", *ENDINGS, "--scheduler", "local", "--jobs", "2")
-    assert pool.returncode == dask.returncode == 2, dask.stderr
+    assert pool.returncode == dask.returncode == 4, dask.stderr
     assert "on 2 Dask worker processes" in dask.stdout
     names = sorted(p.name for p in (tmp_path / "pool").iterdir())
     assert len(names) == 5 * 5 and names == sorted(p.name for p in (tmp_path / "dask").iterdir())
@@ -112,7 +112,7 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
     with LocalCluster(n_workers=1, threads_per_worker=1, host="127.0.0.1", dashboard_address=None) as cluster:
         proc = run("flatten", *meshes, "--out-dir", tmp_path / "out", "--out", ".dxf", "--scheduler",
                    cluster.scheduler_address)
-    assert proc.returncode == 2 and f"on Dask scheduler {cluster.scheduler_address}" in proc.stdout
+    assert proc.returncode == 4 and f"on Dask scheduler {cluster.scheduler_address}" in proc.stdout
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["dome00.dxf", "dome01.dxf", "dome02.dxf"]
 
 
@@ -203,7 +203,7 @@ def test_a_batch_of_prints_at_a_likely_wrong_scale_gets_the_single_runs_note(tmp
     assert "the pattern is" not in capsys.readouterr().err  # texture coordinates have no scale
 
 
-@pytest.mark.parametrize("engine, status", [("float", 0), ("fixed", 2)])
+@pytest.mark.parametrize("engine, status", [("float", 0), ("fixed", 4)])
 def test_a_batch_names_the_mesh_of_each_start_note(engine, status, tmp_path, monkeypatch, capsys):
     """The start's notes (ARAP failed: SLIM instead) come from workers in any order: each names its mesh. The
     fixed-point formats cannot hold the mesh's 1e-9 edge: that refusal comes before the start, so there is no
@@ -243,7 +243,7 @@ def test_a_worker_that_dies_fails_its_mesh_only(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sim.batch, "REAL_FLATTEN_ONE", sim.batch.flatten_one, raising=False)
     monkeypatch.setattr(sim.batch, "flatten_one", _dies_on_dome01)  # the workers are forked: they have it too
     meshes = sorted(str(p) for p in (tmp_path / "in").iterdir() if p.name != "corrupt.obj")
-    assert main(["flatten", *meshes, "--out-dir", "o", "--out", ".dxf", "--max-iter", "3", "--jobs", "2"]) == 2
+    assert main(["flatten", *meshes, "--out-dir", "o", "--out", ".dxf", "--max-iter", "3", "--jobs", "2"]) == 4
     out = capsys.readouterr().out.splitlines()
     rows = {line.split()[0]: line.split()[1] for line in out if line.startswith("dome")}
     assert rows.pop("dome01") == "failed" and set(rows.values()) == {"max-iterations"} and len(rows) == 5, out
@@ -285,14 +285,14 @@ def test_a_mesh_whose_files_cannot_be_written_is_failed_in_the_table_and_the_jso
     monkeypatch.setattr(sim.batch, "_write_files", obstacle_during_the_run)
     argv = ["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "o", "--out", ".dxf", "--init", "auto",
             "--max-iter", "5", "--jobs", "1"]
-    assert main(argv) == 2
+    assert main(argv) == 4
     out = capsys.readouterr().out.splitlines()
     rows = {line.split()[0]: line.split()[1] for line in out if line.startswith("dome")}
     assert rows["dome01"] == "failed" and rows["dome00"] in {"converged", "max-iterations"}
     assert out[-1].startswith("2 meshes: 1 ") and "1 failed" in out[-1]
     os.remove("o/dome00.dxf")
     os.rmdir("o/dome01.dxf")
-    assert main([*argv, "--json"]) == 2
+    assert main([*argv, "--json"]) == 4
     records = {r["mesh"]: r for r in map(json.loads, capsys.readouterr().out.splitlines()) if "mesh" in r}
     assert records["dome01"]["status"] == "failed" and records["dome01"]["error"] == "output 'o/dome01.dxf' is a directory"
     assert records["dome01"]["files"] == [] and records["dome00"]["files"] == ["o/dome00.dxf"]
@@ -428,7 +428,7 @@ def test_a_mesh_named_with_a_trailing_slash_fails_as_no_file_in_a_batch(tmp_path
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "in", 2, 0)
     assert main(["flatten", "in/dome00.obj/", "in/dome01.off", "--out-dir", "o", "--out", ".flat.obj", "--json",
-                 "--max-iter", "2"]) == 2
+                 "--max-iter", "2"]) == 4
     records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     by_mesh = {r["mesh"]: r for r in records[:-1]}
     assert by_mesh["dome00"]["status"] == "failed" and "not a directory" in by_mesh["dome00"]["error"]
