@@ -149,15 +149,17 @@ def _namespace(options: Mapping[str, Any]) -> argparse.Namespace:
 
 @dataclass(frozen=True, eq=False, repr=False)
 class Pattern:
-    """The result of :func:`flatten`.
+    """The result of :func:`flatten`. Its arrays are read-only, as its fields are frozen: its errors, its
+    ``area_ratio`` and :meth:`distortion` are of those arrays (to change a layout, ``layout.copy()``).
 
     Attributes:
         layout: ``(V, 2)`` float64, the flat pattern, in the mesh's units; row ``i`` is vertex ``i``.
         status: ``converged``, ``max-iterations``, ``stalled`` (no step lowers the energy any more:
             ``layout`` is the last accepted one) or ``diverged`` (then ``layout`` is the last finite state).
         iterations: iterations run.
-        area_error: ``E_S`` of ``layout`` (relative area error, eq. 12).
-        shape_error: ``E_C`` of ``layout`` (relative edge-length error, eq. 14).
+        area_error: ``E_S`` of ``layout`` (relative area error, eq. 12); for ``engine="fixed"`` the golden
+            model's own sum, rounded in its formats (what the engine reports), not recomputed from ``layout``.
+        shape_error: ``E_C`` of ``layout`` (relative edge-length error, eq. 14); likewise.
         folded: triangles whose orientation disagrees with the pattern's.
         boundary_crossings: pairs of the boundary's sides that meet, on a fold-free pattern (a property;
             ``None`` for a folded or diverged one): where it is not 0, parts of the pattern lie on each other.
@@ -325,9 +327,11 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     for note in filter(None, notes):
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
+    ratio = area_ratio(result.positions, mesh.faces, mesh.face_areas)
+    for array in (result.positions, ratio, mesh.vertices, mesh.faces):  # the values above are of these arrays
+        array.setflags(write=False)
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
-                   final.folded, area_ratio(result.positions, mesh.faces, mesh.face_areas), mesh.name, mesh.vertices,
-                   mesh.faces, args.init, params, result)
+                   final.folded, ratio, mesh.name, mesh.vertices, mesh.faces, args.init, params, result)
 
 
 def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str | None = None,

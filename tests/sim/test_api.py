@@ -557,3 +557,14 @@ def test_write_pattern_takes_a_grain(ear, tmp_path):
     with pytest.raises(springflat.OutputError, match=r"^write_pattern: grain 'q': expected x, y or z"):
         springflat.write_pattern(tmp_path / "h.dxf", pattern, grain="q")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.dxf"]
+
+
+def test_a_patterns_arrays_are_read_only(ear):
+    """A frozen Pattern whose arrays could be edited in place (p.layout *= 1000) went stale: its errors, area
+    ratios and distortion were of the old values."""
+    V, F = ear
+    pattern = springflat.flatten(V, F, max_iter=2)
+    for array in (pattern.layout, pattern.area_ratio, pattern.vertices, pattern.faces):
+        with pytest.raises(ValueError, match="read-only"):
+            array[...] = 0
+    assert np.array_equal(pattern.layout.copy() * 2, pattern.layout * 2)  # a copy is the caller's to change
