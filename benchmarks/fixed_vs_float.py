@@ -28,9 +28,7 @@ from golden_model.reference import flatten
 def cases():
     for name in ("surf1", "surf2"):
         mesh, paper = builtin_mesh(name)
-        yield name, mesh, FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
-                                        tol_shape=paper.tol_shape, tol_energy=paper.tol_energy,
-                                        max_iter=paper.max_iter)
+        yield name, mesh, paper.flatten_params()
     for name, mesh in generated_meshes().items():
         yield name, mesh, FlattenParams(density="auto", damping=0.05, tol_area=0.01, tol_shape=0.01,
                                         tol_energy=0.05, max_iter=300)

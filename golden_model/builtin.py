@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mesh import Mesh
+from .params import FlattenParams
 
 __all__ = ["BUILTIN_MESHES", "PaperParameters", "builtin_mesh", "is_builtin"]
 
@@ -30,6 +31,11 @@ class PaperParameters:
     #: iterations the paper reports for the fixed and the variable step.
     paper_iterations_fixed: int
     paper_iterations_variable: int
+
+    def flatten_params(self, **changes) -> FlattenParams:
+        """The run's parameters: the paper dynamics with this set's C, ρ, φ_S, φ_C, ε and N_max, and ``changes``."""
+        return FlattenParams(spring=self.spring, density=self.density, tol_area=self.tol_area,
+                             tol_shape=self.tol_shape, tol_energy=self.tol_energy, max_iter=self.max_iter, **changes)
 
 
 _SURF1_VERTICES = [

@@ -41,8 +41,7 @@ class MeshRuns:
 
 def run_mesh(name: str, init: str) -> MeshRuns:
     mesh, paper = builtin_mesh(name)
-    params = FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
-                           tol_shape=paper.tol_shape, tol_energy=paper.tol_energy, max_iter=paper.max_iter)
+    params = paper.flatten_params()
     positions = initial_layout(mesh, init)
     fixed = flatten(mesh, positions, params.with_(step="fixed"))
     variable = flatten(mesh, positions, params.with_(step="variable"))

@@ -203,9 +203,7 @@ def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
             print(f"springflat: note: '{name}' is the built-in mesh; the file of that name here is not read "
                   "(a mesh file's name ends in its format: .obj, .ply, .off, .stl)", file=sys.stderr)
         mesh, paper = builtin_mesh(name)
-        return mesh, FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
-                                   tol_shape=paper.tol_shape, tol_energy=paper.tol_energy,
-                                   max_iter=paper.max_iter)
+        return mesh, paper.flatten_params()
     if name.strip() and not Path(name).suffix and not os.path.lexists(name):  # a built-in's name mistyped?
         raise MeshError(f"cannot read mesh '{name}': no such file, and no built-in mesh of that name (built-in: "
                         f"{', '.join(BUILTIN_MESHES)}; a mesh file's name ends in its format: .obj, .ply, .off, .stl)")

@@ -62,9 +62,7 @@ def resolve_study_mesh(name: str) -> tuple[str, Mesh, FlattenParams]:
     path = Path(name)
     if is_builtin(name):
         mesh, paper = builtin_mesh(name)
-        return name.lower(), mesh, FlattenParams(spring=paper.spring, density=paper.density,
-                                                 tol_area=paper.tol_area, tol_shape=paper.tol_shape,
-                                                 tol_energy=paper.tol_energy, max_iter=paper.max_iter)
+        return name.lower(), mesh, paper.flatten_params()
     if name.lower() in GENERATED_MESH_NAMES:  # (a file of that name has no mesh format's ending)
         if _GENERATED is None:
             from ..generate import generated_meshes

@@ -282,8 +282,7 @@ def _acceptance(mesh, p0, params):
 @pytest.mark.parametrize("step", ["fixed", "variable"])
 def test_default_preset_follows_float_on_paper_meshes(name, init, step):
     mesh, paper = builtin_mesh(name)
-    params = FlattenParams(spring=paper.spring, density=paper.density, tol_area=paper.tol_area,
-                           tol_shape=paper.tol_shape, tol_energy=paper.tol_energy, max_iter=paper.max_iter, step=step)
+    params = paper.flatten_params(step=step)
     _acceptance(mesh, initial_layout(mesh, init), params)
 
 
