@@ -14,9 +14,11 @@ import numpy as np
 from .guard import ENERGY_WINDOW
 from .modes import DYNAMICS, STEP_MODES, RunMode, run_mode
 
-__all__ = ["FlattenParams", "ParameterError", "UPDATE_ORDERS"]
+__all__ = ["FlattenParams", "ParameterError", "UPDATE_ORDERS", "BARRIER_GAIN_MAX"]
 
 UPDATE_ORDERS = ("jacobi", "sequential")
+#: The fold barrier's largest stiffness μ, relative to the springs' C.
+BARRIER_GAIN_MAX = 16.0
 
 
 class ParameterError(ValueError):
@@ -128,8 +130,8 @@ class FlattenParams:
             raise ParameterError(f"barrier must be true or false, got {self.barrier!r}")
         if not 0 < finite("--barrier-threshold", self.barrier_threshold) <= 1:
             raise ParameterError(f"--barrier-threshold (kappa) must be in (0, 1], got {self.barrier_threshold}")
-        if not 0 < finite("--barrier-gain", self.barrier_gain) <= 16:
-            raise ParameterError(f"--barrier-gain (mu) must be in (0, 16], got {self.barrier_gain}")
+        if not 0 < finite("--barrier-gain", self.barrier_gain) <= BARRIER_GAIN_MAX:
+            raise ParameterError(f"--barrier-gain (mu) must be in (0, {BARRIER_GAIN_MAX:g}], got {self.barrier_gain}")
         if self.guard is None:
             object.__setattr__(self, "guard", self.dynamics == "momentum")
         if not isinstance(self.guard, bool):

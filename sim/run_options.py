@@ -25,7 +25,8 @@ from golden_model.mesh import Mesh, MeshError, folded_faces
 from golden_model.mesh_io import load_mesh_with_notes
 from golden_model.mesh_io.polygons import is_float, is_int
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
-from golden_model.params import MASS_PARAMETERS, FlattenParams, ParameterError
+from golden_model.guard import ENERGY_WINDOW
+from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
 
 from .outputs import OutputError, directory_name_problem
 
@@ -106,6 +107,10 @@ def file_path_argument(text: str) -> Path:
     return path
 
 
+#: The parameters' defaults, which the options' help states.
+_PARAMS = FlattenParams()
+
+
 def add_run_options(parser: argparse.ArgumentParser) -> None:
     """The options every command that runs the algorithm shares."""
     builtins = ", ".join(BUILTIN_MESHES)
@@ -125,26 +130,31 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                         help="the fold barrier (default: on with momentum, off with paper)")
     parser.add_argument("--barrier-threshold", type=number_argument, default=None,
                         help="barrier threshold kappa in (0, 1]: the fraction of its 3D area below which a "
-                             "triangle is pushed back (default 0.5)")
+                             f"triangle is pushed back (default {_PARAMS.barrier_threshold:g})")
     parser.add_argument("--barrier-gain", type=number_argument, default=None,
-                        help="barrier stiffness mu in (0, 16], relative to the springs' C (default 4)")
+                        help=f"barrier stiffness mu in (0, {BARRIER_GAIN_MAX:g}], relative to the springs' C (default "
+                             f"{_PARAMS.barrier_gain:g})")
     parser.add_argument("--guard", action=argparse.BooleanOptionalAction, default=None,
                         help="the momentum dynamics' step guard: no accepted step raises the energy or inverts a "
                              "triangle (default: on with momentum; docs/guard.md)")
     parser.add_argument("--energy-window", type=integer_argument, default=None, metavar="W",
                         help="iterations over which the stop rule measures the relative energy change "
-                             "(default: 1 with paper, as Algorithm 1; 10 with momentum)")
+                             f"(default: 1 with paper, as Algorithm 1; {ENERGY_WINDOW} with momentum)")
     parser.add_argument("--step", choices=STEP_MODES, default=None,
-                        help="the paper dynamics' step-size mode (default variable, eqs. 18-20)")
-    parser.add_argument("--dt", type=number_argument, default=None, help="fixed step size (default 0.01)")
-    parser.add_argument("--update", choices=("jacobi", "sequential"), default="jacobi",
-                        help="update order: jacobi (synchronous, default) or sequential (Algorithm 1)")
+                        help=f"the paper dynamics' step-size mode (default {_PARAMS.step}, eqs. 18-20)")
+    parser.add_argument("--dt", type=number_argument, default=None, help=f"fixed step size (default {_PARAMS.dt:g})")
+    parser.add_argument("--update", choices=UPDATE_ORDERS, default=_PARAMS.update,
+                        help="update order: jacobi (synchronous) or sequential (Algorithm 1); default "
+                             f"{_PARAMS.update}")
     parser.add_argument("--damping", type=number_argument, default=None,
-                        help="the paper dynamics' velocity damping gamma in [0, 1) (default 0)")
+                        help=f"the paper dynamics' velocity damping gamma in [0, 1) (default {_PARAMS.damping:g})")
     parser.add_argument("--penalty", action="store_true", help="apply the overlap penalty (eqs. 10-11)")
-    parser.add_argument("--penalty-kappa", type=number_argument, default=None, help="penalty threshold kappa (default 1)")
-    parser.add_argument("--penalty-gain", type=number_argument, default=None, help="penalty gain lambda (default 1)")
-    parser.add_argument("--spring", type=number_argument, default=None, help="spring constant C (default 0.5)")
+    parser.add_argument("--penalty-kappa", type=number_argument, default=None,
+                        help=f"penalty threshold kappa (default {_PARAMS.penalty_kappa:g})")
+    parser.add_argument("--penalty-gain", type=number_argument, default=None,
+                        help=f"penalty gain lambda (default {_PARAMS.penalty_gain:g})")
+    parser.add_argument("--spring", type=number_argument, default=None,
+                        help=f"spring constant C (default {_PARAMS.spring:g})")
     parser.add_argument("--density", type=_density, default=None,
                         help="the paper dynamics' area density rho or 'auto' = 1/min m_i (default: 2 for built-ins, "
                              "auto for files; the momentum dynamics weighs each node by 2/(C deg) instead)")
