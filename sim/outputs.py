@@ -745,12 +745,22 @@ def _merge_directory(build: Path, target: Path, out: Path, stale: tuple[str, ...
     _put_in_place(moves, what)
     emptied = set()
     for name in stale:  # an earlier result this run did not write again; never an input of this run
-        if Path(name) not in written and (target / name).is_file() and _identity(target / name) not in input_files:
+        if (Path(name) not in written and in_directory(target, name) and (target / name).is_file()
+                and _identity(target / name) not in input_files):
             (target / name).unlink()
             emptied.add((target / name).parent)
     for directory in sorted(emptied, key=lambda d: -len(d.parts)):  # (sim_models/ of an earlier bundle)
         if directory != target and not any(directory.iterdir()):
             directory.rmdir()
+
+
+def in_directory(directory: Path, name: str) -> bool:
+    """Whether the relative path ``name`` is a file's place inside ``directory`` itself: not absolute, no
+    ``..``, and no part of it a symbolic link (through which a removal would reach a file elsewhere)."""
+    parts = Path(name).parts
+    if not parts or Path(name).is_absolute() or ".." in parts:
+        return False
+    return not any((directory.joinpath(*parts[:k])).is_symlink() for k in range(1, len(parts) + 1))
 
 
 # --------------------------------------------------------------------------- per-face distortion colouring

@@ -38,7 +38,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Callable, Sequence
 
 from golden_model.params import ParameterError
@@ -93,7 +93,7 @@ def earlier_bundle_files(out: Path) -> tuple[str, ...]:
     file the list does not name is the user's and stays; a directory without such a list keeps every file."""
     from golden_model.files import read_regular_file
 
-    from .outputs import output_target
+    from .outputs import in_directory, output_target
 
     target = output_target(out)
     try:
@@ -103,8 +103,7 @@ def earlier_bundle_files(out: Path) -> tuple[str, ...]:
     listed = interface.get(BUNDLE_FILES_KEY) if isinstance(interface, dict) else None
     if not isinstance(listed, list):
         return ()
-    names = {name for name in listed if isinstance(name, str) and name
-             and not PurePosixPath(name).is_absolute() and ".." not in PurePosixPath(name).parts}
+    names = {name for name in listed if isinstance(name, str) and in_directory(target, name)}
     return tuple(sorted(name for name in names if (target / name).is_file()))
 
 

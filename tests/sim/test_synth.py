@@ -410,3 +410,26 @@ def test_an_interface_json_that_is_a_fifo_is_not_read_for_an_earlier_bundle(tmp_
     if reader.is_alive():  # (unblock the reader, so the thread ends)
         os.close(os.open(tmp_path / "interface.json", os.O_WRONLY | os.O_NONBLOCK))
     assert found == [()]
+
+
+def test_an_earlier_bundles_list_removes_nothing_outside_its_directory(tmp_path):
+    """interface.json is a file in the user's directory: a name in its list through a linked subdirectory
+    (models -> ../victim), or with '..', or absolute, named a file elsewhere, which the cleanup removed."""
+    from sim.synth import BUNDLE_FILES_KEY, build_in_place, earlier_bundle_files
+
+    victim, out = tmp_path / "victim", tmp_path / "bundle"
+    victim.mkdir()
+    out.mkdir()
+    (victim / "keep.txt").write_text("mine\n")
+    (out / "models").symlink_to(victim)
+    (out / "old.v").write_text("earlier\n")
+    listed = ["models/keep.txt", "../victim/keep.txt", str(victim / "keep.txt"), "old.v", 7, ""]
+    (out / "interface.json").write_text(json.dumps({"format_set": {}, "components": {}, BUNDLE_FILES_KEY: listed}))
+    assert earlier_bundle_files(out) == ("old.v",)
+
+    def bundle(directory, shown):
+        (directory / "new.v").write_text("new\n")
+        return {}
+
+    build_in_place(out, "narrow", bundle)
+    assert (victim / "keep.txt").read_text() == "mine\n" and not (out / "old.v").exists()
