@@ -4,10 +4,11 @@ The writer is chosen by the file name's ending (:func:`pattern_kind`):
 
 =============  ==========================================================================================
 ``.dxf``       the boundary as one closed ``LWPOLYLINE`` on layer ``CUT``; with ``dxf_edges`` every mesh
-               edge as a ``LINE`` on layer ``MESH``; coordinates in the mesh's units, 1:1, ``$INSUNITS`` and
-               ``$MEASUREMENT`` set from ``units`` (ezdxf).
+               edge as a ``LINE`` on layer ``MESH``; with a grain (``--grain``) its line on layer ``GRAIN``;
+               coordinates in the mesh's units, 1:1, ``$INSUNITS`` and ``$MEASUREMENT`` set from ``units``
+               (ezdxf).
 ``.pdf``       true scale (1 mm of pattern = 1 mm of paper for ``units="mm"``), on ``paper`` sheets
-               (A4, Letter, or ``fit``: one page around the pattern), tiled with overlap marks when the
+               (A4, A3, Letter, or ``fit``: one page around the pattern), tiled with overlap marks when the
                pattern is larger than one sheet (a sheet that would hold nothing of it is left out);
                every sheet carries the mesh's name, the units, the run, its label when tiled and a scale
                bar to check the print (reportlab).
@@ -55,9 +56,8 @@ UNITS = tuple(UNIT_MM)
 UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches"}
 #: DXF ``$INSUNITS`` codes of :data:`UNITS` (AutoCAD: 1 inches, 4 millimetres, 5 centimetres, 6 metres).
 DXF_INSUNITS = {"mm": 4, "cm": 5, "m": 6, "in": 1}
-#: Paper sizes in millimetres (portrait); ``fit`` is one page around the pattern (:data:`FIT_PAD_MM`, the margin
-#: and the title block).
-#: The sheets ``--paper`` names: (the name a sheet's label prints, portrait width and height in mm).
+#: The sheets ``--paper`` names: (the name a sheet's label prints, portrait width and height in mm); ``fit``
+#: is one page around the pattern (:data:`FIT_PAD_MM`, the margin and the title block).
 PAPER_SHEETS = {"a4": ("A4", 210.0, 297.0), "a3": ("A3", 297.0, 420.0), "letter": ("Letter", 215.9, 279.4)}
 PAPER_MM = {paper: (width, height) for paper, (_, width, height) in PAPER_SHEETS.items()}
 PAPERS = (*PAPER_MM, "fit")
@@ -204,11 +204,12 @@ class PatternDrawing:
         p = self.boundary_points
         return float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
 
-    def with_grain(self, grain: str) -> "PatternDrawing":
+    def with_grain(self, grain: str | Sequence[float]) -> "PatternDrawing":
         """The drawing turned so that the 3D direction ``grain`` (:func:`grain_direction`), as the triangles
         carry it onto the pattern, points up (+y), with a grain line on every pattern file."""
         angle = grain_angle(self.vertices, self.faces, self.layout, grain_direction(grain))
-        return replace(self, layout=_turned(self.layout, math.pi / 2 - angle, _centre(self.layout)), grain=grain)
+        return replace(self, layout=_turned(self.layout, math.pi / 2 - angle, _centre(self.layout)),
+                       grain=grain_text(grain))
 
     def grain_line(self) -> np.ndarray:
         """``(2, 2)`` the grain line's ends (bottom, top) in ``units``: vertical, through the vertex nearest the
@@ -252,9 +253,10 @@ def grain_arrow(line: np.ndarray) -> list[np.ndarray]:
 GRAIN_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 
-def grain_direction(text: str) -> np.ndarray:
+def grain_direction(grain: str | Sequence[float]) -> np.ndarray:
     """``--grain``'s 3D direction: ``x``, ``y``, ``z`` (``-z``: the other way) or three numbers ``X,Y,Z`` in the
-    mesh's frame; a unit vector, or :class:`PatternError`."""
+    mesh's frame (the API also takes a sequence of three); a unit vector, or :class:`PatternError`."""
+    text = grain if isinstance(grain, str) else ",".join(map(str, grain)) if _is_sequence(grain) else repr(grain)
     word = text.strip().lower()
     sign, axis = (-1.0, word[1:]) if word.startswith("-") and word[1:] in GRAIN_AXES else (1.0, word)
     try:
@@ -262,32 +264,57 @@ def grain_direction(text: str) -> np.ndarray:
             [float(part) for part in text.split(",")])
     except ValueError:
         vector = np.empty(0)
-    if vector.shape != (3,) or not np.isfinite(vector).all() or not np.linalg.norm(vector) > 0:
+    if vector.shape != (3,) or not np.isfinite(vector).all() or not np.abs(vector).max() > 0:
         raise PatternError(f"--grain {text!r}: expected x, y or z (-z: the other way) or a 3D direction X,Y,Z "
                            "that is not zero")
+    vector = vector / np.abs(vector).max()  # (1e308 or 1e-320 components: the norm neither overflows nor vanishes)
     return vector / np.linalg.norm(vector)
+
+
+def _is_sequence(value: object) -> bool:
+    return isinstance(value, (list, tuple, np.ndarray))
+
+
+def grain_text(grain: str | Sequence[float]) -> str:
+    """A grain as the files name it: as typed, or ``X,Y,Z`` for the API's sequence."""
+    return grain if isinstance(grain, str) else ",".join(f"{float(v):g}" for v in grain)
 
 
 def grain_angle(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray, direction: np.ndarray,
                 layout_known: bool = True) -> float:
-    """The angle (radians, anticlockwise from +x) at which ``direction`` (a 3D unit vector) lies on the pattern:
-    each triangle's affine map carries the direction's part in its plane onto the layout; the mean over the
-    triangles, weighted by their 3D areas. :class:`PatternError` where the direction is normal to the surface
-    (it lies in no triangle's plane)."""
+    """The angle (radians, anticlockwise from +x) at which ``direction`` (a 3D unit vector) lies on the pattern.
+
+    Each triangle's affine map carries the direction's part in its plane onto the layout. A grain is an axis:
+    those pieces are averaged as axes (their doubled angles, each weighted by its length and its triangle's 3D
+    area), so that pieces pointing opposite ways along one line (across a half-pipe, say) reinforce rather than
+    cancel; the axis is then pointed the way most of them point. :class:`PatternError` where the direction is
+    normal to the surface (it lies in no triangle's plane), or its pieces point every way (``layout_known``
+    false: the first test alone, which needs no layout)."""
     p, q = vertices[faces], layout[faces]
     e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
     u1, u2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
     g11, g12, g22 = (e1 * e1).sum(axis=1), (e1 * e2).sum(axis=1), (e2 * e2).sum(axis=1)
     r1, r2 = e1 @ direction, e2 @ direction
     gram = g11 * g22 - g12 * g12  # (2 × the 3D area)²: the direction's plane part is a·e1 + b·e2
-    a, b = (g22 * r1 - g12 * r2) / gram, (g11 * r2 - g12 * r1) / gram
     area = np.sqrt(gram) / 2
-    mean = (area[:, None] * (a[:, None] * u1 + b[:, None] * u2)).sum(axis=0)
     in_plane = (area * np.linalg.norm(np.cross(np.cross(e1, e2), direction), axis=1) / np.sqrt(gram)).sum()
-    if not in_plane > 1e-6 * area.sum() or (layout_known and not np.linalg.norm(mean) > 1e-3 * in_plane):
-        raise PatternError("--grain: the direction is normal to the surface (it lies in none of its triangles), or "
-                           "its parts on the pattern cancel out: it has no direction there; name one along the surface")
-    return float(np.arctan2(mean[1], mean[0]))
+    if not in_plane > 1e-6 * area.sum():
+        raise PatternError("--grain: the direction is normal to the surface (it lies in none of its triangles): it "
+                           "has no direction on the pattern; name one along the surface")
+    if not layout_known:
+        return 0.0
+    a, b = (g22 * r1 - g12 * r2) / gram, (g11 * r2 - g12 * r1) / gram
+    pieces = a[:, None] * u1 + b[:, None] * u2
+    length = np.linalg.norm(pieces, axis=1)
+    weight = np.divide(area, length, out=np.zeros_like(area), where=length > 0)  # area × length × (unit doubled)
+    doubled = np.column_stack([pieces[:, 0] ** 2 - pieces[:, 1] ** 2, 2 * pieces[:, 0] * pieces[:, 1]])
+    axis = (weight[:, None] * doubled).sum(axis=0)
+    if not np.linalg.norm(axis) > 1e-3 * (area * length).sum():
+        raise PatternError("--grain: the direction's pieces on the pattern point every way (no one line carries "
+                           "it): name another")
+    angle = float(np.arctan2(axis[1], axis[0])) / 2
+    along = (area[:, None] * pieces).sum(axis=0) @ np.array([math.cos(angle), math.sin(angle)])
+    return angle if along >= 0 else angle + math.pi
 
 
 def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int,
@@ -298,13 +325,15 @@ def run_caption(status: str, iterations: int, area_error: float, shape_error: fl
             f"{folded} folded" + (f", its boundary crosses itself {crossings} times" if crossings else ""))
 
 
-#: How springflat's own OBJ files begin (a pattern's ``.obj``, a layout's ``.flat.obj``): an existing ``.obj``
-#: that does not is a mesh (a scan named as the output, or reached through a link), which no output replaces.
-OWN_OBJ_HEADER = b"# springflat "
+#: How springflat's own OBJ files begin (a pattern's ``.obj``, a layout's ``.flat.obj``): an existing non-empty
+#: ``.obj`` that does not is a mesh (a scan named as the output, or reached through a link), which no output
+#: replaces. (``save_obj``'s default line, ``# written by springflat``, heads meshes too: the shipped scans.)
+OWN_OBJ_HEADERS = (b"# springflat ",)
 
 
 def check_not_a_mesh(path: Path, what: str = "--out") -> None:
-    """Refuse an OBJ output over an existing regular file that springflat did not write (:data:`OWN_OBJ_HEADER`)."""
+    """Refuse an OBJ output over an existing non-empty regular file that springflat did not write
+    (:data:`OWN_OBJ_HEADERS`)."""
     path = path if isinstance(path, Path) else Path(path)
     if path.suffix.lower() != ".obj":
         return
@@ -313,10 +342,10 @@ def check_not_a_mesh(path: Path, what: str = "--out") -> None:
         if not stat.S_ISREG(os.stat(target).st_mode):
             return  # (not a file to replace: check_output_path says what it is)
         with open(target, "rb") as existing:
-            head = existing.read(len(OWN_OBJ_HEADER))
+            head = existing.read(max(map(len, OWN_OBJ_HEADERS)))
     except OSError:
         return  # missing, or unreadable: the write says why
-    if head != OWN_OBJ_HEADER:
+    if head and not head.startswith(OWN_OBJ_HEADERS):
         shown = f"'{path}'" + (f" (a link to '{target}')" if path.is_symlink() else "")
         raise PatternError(f"{what} {shown} is an OBJ file springflat did not write (a mesh?): it replaces only its "
                            "own patterns and layouts; remove it, or name another file")

@@ -2,6 +2,7 @@
 
 import json
 import math
+import os
 import re
 import subprocess
 import xml.etree.ElementTree as ET
@@ -819,9 +820,9 @@ def test_the_grain_line_is_in_every_pattern_file_and_the_sheets_keep_the_turn(tm
 
     from golden_model.mesh_io import save_obj
 
-    square, uv = _rectangle(100.0, 60.0, 45.0)
-    save_obj(tmp_path / "sq.obj", square.vertices, square.faces)
-    proc = subprocess.run([SPRINGFLAT, "flatten", "sq.obj", "--tol-energy", "1e-9", "--grain", "x", "--out", "sq.dxf",
+    strip, _ = _rectangle(400.0, 40.0)  # across 3D y when --grain y: 400 mm wide, which the sheets would turn upright
+    save_obj(tmp_path / "sq.obj", strip.vertices, strip.faces)
+    proc = subprocess.run([SPRINGFLAT, "flatten", "sq.obj", "--tol-energy", "1e-9", "--grain", "y", "--out", "sq.dxf",
                            "--out", "sq.svg", "--out", "sq.pdf"], capture_output=True, text=True, cwd=tmp_path,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
@@ -829,11 +830,50 @@ def test_the_grain_line_is_in_every_pattern_file_and_the_sheets_keep_the_turn(tm
     strokes = [[tuple(p[:2]) for p in e.get_points()] for e in doc.modelspace().query('LWPOLYLINE[layer=="GRAIN"]')]
     assert len(strokes) == 3 and strokes[0][0][0] == pytest.approx(strokes[0][1][0])
     cut = np.array([p[:2] for p in doc.modelspace().query('LWPOLYLINE[layer=="CUT"]')[0].get_points()])
-    assert np.ptp(cut, axis=0) == pytest.approx([60.0, 100.0], abs=1e-3)  # 3D x (100 mm) up the page
-    assert doc.ezdxf_metadata()["springflat_grain"] == "x"
-    svg = (tmp_path / "sq.svg").read_text()
-    assert svg.count('<g id="grain"') == 1 and svg.count("<polyline points=") >= 3
-    assert b"/Length" in (tmp_path / "sq.pdf").read_bytes()
+    assert np.ptp(cut, axis=0) == pytest.approx([400.0, 40.0], abs=1e-3)  # 3D y (40 mm) up the page
+    assert doc.ezdxf_metadata()["springflat_grain"] == "y"
+    ns = {"s": "http://www.w3.org/2000/svg"}
+    assert len(ET.parse(tmp_path / "sq.svg").getroot().findall(".//s:g[@id='grain']/s:polyline", ns)) == 3
+    # a grain at 45° to the strip leaves it slanted on the sheets, which would have turned it straight
+    assert subprocess.run([SPRINGFLAT, "flatten", "sq.obj", "--tol-energy", "1e-9", "--grain", "1,1,0", "--out",
+                           "slant.svg"], capture_output=True, cwd=tmp_path, timeout=300).returncode == 0
+    cut_svg = np.array([[float(v) for v in point.split(",")] for point in ET.parse(tmp_path / "slant.svg").getroot().find(
+        ".//s:polygon[@id='cut']", ns).get("points").split()])
+    assert np.ptp(cut_svg, axis=0) == pytest.approx([440.0 / math.sqrt(2)] * 2, abs=1e-3)
+    from pypdf import PdfReader
+
+    forms = PdfReader(tmp_path / "sq.pdf").pages[0]["/Resources"]["/XObject"]
+    assert any(b"\n.35 G\n" in form.get_object().get_data() for form in forms.values())  # the grain line's grey
     refused = subprocess.run([SPRINGFLAT, "flatten", "sq.obj", "--grain", "x"], capture_output=True, text=True,
                              cwd=tmp_path, timeout=300)
     assert refused.returncode == 2 and "--grain turns the pattern files" in refused.stderr
+
+
+def test_a_grain_across_a_half_pipe_is_an_axis_not_cancelling_pieces():
+    """Across a half-pipe (0° to 180°) the direction x runs one way on one side and back on the other: summed
+    with their signs its pieces cancelled and --grain x was refused; as an axis it lies along the unrolled arc.
+    Components of any size are a direction (1e308 overflowed the norm, 1e-320 was 'zero')."""
+    import warnings
+
+    from golden_model.generate import rolled_grid
+
+    mesh, unrolled = rolled_grid(13, 5, arc_degrees=180.0)
+    for grain in ("x", "1e308,0,0", "1e-320,0,0", (2.0, 0.0, 0.0)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            turned = PatternDrawing.of(mesh, unrolled).with_grain(grain).layout
+        across = turned[1:13] - turned[:12]  # along the arc, one row
+        assert np.allclose(across[:, 0], 0.0, atol=1e-9) and np.all(across[:, 1] > 0), grain
+
+
+def test_a_grain_normal_to_the_surface_is_refused_before_the_run(tmp_path, monkeypatch, capsys):
+    from golden_model.mesh_io import save_obj
+    import sim.cli
+
+    square, _ = _rectangle(100.0, 100.0)
+    save_obj(tmp_path / "sq.obj", square.vertices, square.faces)
+    monkeypatch.setattr(sim.cli, "run_flatten", lambda *a, **k: pytest.fail("the run started"))
+    monkeypatch.chdir(tmp_path)
+    assert sim.cli.main(["flatten", "sq.obj", "--grain", "z", "--out", "sq.dxf"]) == 2
+    assert "--grain: the direction is normal to the surface" in capsys.readouterr().err
+    assert sorted(os.listdir()) == ["sq.obj"]
