@@ -147,7 +147,7 @@ class StateLeds(wiring.Component):
 
     Members
     -------
-    cyc, stb, we, ack : ``In(1)``; adr : ``In(addr_width)``; dat_w, dat_r : ``In(32)``: the bus, watched.
+    cyc, stb, we, ack : ``In(1)``; adr : ``In(addr_width)``; dat_w, dat_r : ``In(DATA_WIDTH)``: the bus, watched.
     irq, bridge_error, rx_byte, tx_byte : ``In(1)``
     leds : ``Out(7)``, :data:`LEDS` 0-6.
     """

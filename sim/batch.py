@@ -13,7 +13,8 @@ Workers: ``--jobs`` processes (default: the cores this process may use), each a
 ``LocalCluster`` of ``--jobs`` single-threaded worker processes.  Either way the outputs are the same bytes.
 
 A mesh that fails (unreadable, invalid, a worker that died) is reported on its line and in the table,
-and the others go on; the exit status is 2 when any mesh failed, else 3 when any run diverged, else 0.
+and the others go on; the exit status is 4 when any mesh failed, else 3 when any run diverged, else 0
+(2: the batch was refused before its first run).
 """
 
 from __future__ import annotations

@@ -371,9 +371,11 @@ def memory_image_markdown(fs: FormatSet, capacity) -> str:
              "constants (registers, `register_map.md`) and writes CONTROL.start; the engine writes positions and "
              "velocities back in place in the `nodes` memory. Each memory word is the fields below, first field "
              f"at bit 0, no padding between fields; over the bus a word is `ceil(bits/{BUS_WORD_BITS})` "
-             f"{BUS_WORD_BITS}-bit words (word 0 = bits {BUS_WORD_BITS - 1}:0) at a stride of the next power of two: entry `i`, word `k` at `base + i*stride + k` "
-             "(word addresses; byte address = 4 x word address). Signed fields are two's complement of their "
-             "width; a field's format is the format set's (`interface.json`'s `format_set`, or the golden "
+             f"{BUS_WORD_BITS}-bit words (word 0 = bits {BUS_WORD_BITS - 1}:0) at a stride of the next power of "
+             "two: entry `i`, word `k` at `base + i*stride + k` "
+             f"(word addresses; byte address = {BUS_WORD_BITS // 8} x word address). Signed fields are two's "
+             "complement of their width; a field's format is the format set's (`interface.json`'s `format_set`, "
+             "or the golden "
              "model's `FormatSet`).", "",
              "* `nodes`: vertices in mesh order; the initial layout scaled by the host (`prepare`), zero "
              "velocities, `inv_mass_barrier = inv_mass` where no second weight applies.",

@@ -240,8 +240,10 @@ _FS_IOC_GETFLAGS = (2 << 30) | (struct.calcsize("l") << 16) | (ord("f") << 8) | 
 
 def _refuse_locked_directory(directory: Path, what: str) -> None:
     """Refuse a directory whose inode flags keep its files from being replaced, before a probe file is made in it
-    (one that an append-only directory then keeps: each attempt left one). Where the flags cannot be read
-    (another system, another file system), the writes say what goes wrong."""
+    (which an append-only directory would keep: it can be made there, not removed). On Linux only (the ioctl
+    is Linux's); where the flags cannot be read (another file system), the writes say what goes wrong."""
+    if sys.platform != "linux":
+        return
     try:
         import fcntl
 

@@ -235,6 +235,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for name, before in previous.items():
             signal.signal(getattr(signal, name), before)
+        if argv is not None:  # a caller running it in-process goes on: its own writes are not this command's
+            reset_interrupted()
     for name in names:
         print(out / name)
     return 0

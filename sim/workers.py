@@ -24,6 +24,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, Callable, Iterable
@@ -171,21 +172,22 @@ def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> N
         initializer(*initargs)
 
 
-#: How workers start: forked where the system can (they then share the parent's imports, and a caller's
-#: script is not run again in them, as under ``spawn`` or ``forkserver``, which a program may have chosen
-#: for its own processes, and which re-import its main module: an API call's hidden SLIM worker ran the
-#: caller's top-level code a second time).
-_START_METHOD = "fork" if "fork" in multiprocessing.get_all_start_methods() else None
+def _start_method() -> str | None:
+    """How workers start: forked on Linux while the process has one thread (they share the parent's imports,
+    and a caller's script does not run again in them, as under ``spawn`` or ``forkserver``, which a program
+    may have chosen, and which re-import its main module); elsewhere, or beside other threads (where forking
+    is unsafe), the system's default."""
+    return "fork" if sys.platform == "linux" and threading.active_count() == 1 else None
 
 
 class WorkerPool(ProcessPoolExecutor):
     """A :class:`~concurrent.futures.ProcessPoolExecutor` of ``max_workers`` processes whose workers
     ignore SIGINT, whose start cannot be cut in half by it, and which :meth:`stop` ends at once; forked
-    where the system can, whatever start method the program chose (:data:`_START_METHOD`)."""
+    where that is safe, whatever start method the program chose (:func:`_start_method`)."""
 
     def __init__(self, max_workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()):
         super().__init__(max_workers, initializer=_start_worker, initargs=(initializer, initargs),
-                         mp_context=multiprocessing.get_context(_START_METHOD))
+                         mp_context=multiprocessing.get_context(_start_method()))
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
         with deferred_interrupts():  # (the workers are forked here: ProcessPoolExecutor starts them in submit)

@@ -383,7 +383,7 @@ class RegisterMap:
     # ------------------------------------------------------------------ JSON
     def to_dict(self) -> dict:
         return {
-            "bus": {"protocol": "Wishbone B4 classic", "data_bits": BUS_WORD_BITS, "address": "32-bit word",
+            "bus": {"protocol": "Wishbone B4 classic", "data_bits": BUS_WORD_BITS, "address": f"{BUS_WORD_BITS}-bit word",
                     "address_bits": self.address_bits,
                     "sel": "all ones", "err": "partial access, unmapped address, write to a read-only register, "
                                               "memory access while running"},

@@ -74,7 +74,7 @@ def test_every_run_constant_and_result_has_its_width(regmap, fs):
     assert regmap.value_width("area_error") == regmap.value_width("shape_error") == fs.error.width
     assert regmap.value_width("cycles") == 64
     assert [r.name for r, _ in regmap.value_fields("cycles")] == ["CYCLES_LO", "CYCLES_HI"]
-    width = energy_width(fs, SMALL)
+    width = energy_width(fs, SMALL.entries)
     names = [r.name for r, _ in regmap.value_fields("energy")]
     assert names == [f"ENERGY_{k}" for k in range(-(-width // 32))] and regmap.value_width("energy") == width
     assert len(names) >= 3  # a wide value spans as many registers as it needs

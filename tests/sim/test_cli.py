@@ -834,11 +834,15 @@ def test_the_run_line_says_when_the_energy_floor_stopped_a_developable_patch(tmp
 
     mesh, _ = rolled_grid(8, 8, arc_degrees=90.0)
     save_obj(tmp_path / "rolled.obj", mesh.vertices, mesh.faces)
+    iterations = []
     for extra, strain in [((), "0.001"), (("--tol-energy", "1e-6"), "1e-06")]:
-        done = run("flatten", str(tmp_path / "rolled.obj"), *extra)
+        done = run("flatten", str(tmp_path / "rolled.obj"), "--init", "tutte", "--json", *extra)  # (ARAP: exact)
         assert done.returncode == 0, done.stderr
-        assert (f"or an energy below the floor of an rms edge strain of {strain}; stopped: the energy fell below "
-                "the floor (a smaller --tol-energy lowers it)") in done.stderr
+        summary = json.loads(done.stdout)
+        assert summary["used"].endswith(f"or an energy below the floor of an rms edge strain of {strain}; stopped: "
+                                        "the energy fell below the floor (a smaller --tol-energy lowers it)")
+        iterations.append(summary["iterations"])
+    assert iterations[1] > iterations[0] + 20  # the lower floor: a longer, more exact run
 
 
 @pytest.mark.parametrize("command, written", [(["flatten", "surf1", "--max-iter", "3", "--out", "p.dxf",
@@ -889,6 +893,8 @@ def test_an_obj_output_never_replaces_a_mesh_that_springflat_did_not_write(tmp_p
     assert os.listdir("o") == ["bunny_face.obj"]
     for _ in range(2):  # its own: written, then replaced
         assert run("flatten", "surf1", "--max-iter", "2", "--out", "own.obj", cwd=tmp_path).returncode == 0
+    Path("empty.obj").write_bytes(b"")  # no mesh
+    assert run("flatten", "surf1", "--max-iter", "2", "--out", "empty.obj", cwd=tmp_path).returncode == 0
     mesh, _ = builtin_mesh("surf1")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -194,7 +194,7 @@ def test_capacity_option_sizes_the_engine_and_its_map(tmp_path):
 @pytest.mark.parametrize("capacity, message", [
     (["1", "300", "128"], "vertices must be an int >= 2, got 1"),
     (["64", "300"], "expected 3 arguments"),
-    (["64", "x", "128"], "invalid int value: 'x'"),
+    (["64", "x", "128"], "argument --capacity: expected an integer, got 'x'"),
     (["268435456", "1073741824", "1073741824"], "do not fit a 32-bit byte address"),
     # memories no disk mesh could fill (a typo: 8 entries for 64 vertices), or that hold no triangle at all
     (["64", "8", "16"], "--capacity 64 8 16: a disk mesh of 64 vertices has at least 250 neighbour entries and 62 "
