@@ -25,7 +25,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
 from golden_model.fixed.measures import energy_shifts
-from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS, energy_width
+from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS, energy_check_width
 
 from .fixedpoint import FormatSetNotBuildable, clamp, shape_of, shift_round
 from .layouts import energy_result_layout, energy_sums_layout, normalise_layout, saturations_shape
@@ -245,7 +245,7 @@ class EnergyCheck(wiring.Component):
         self.springs_shift, self.barrier_shift = energy_shifts(fs)
         self.half_spring_bits = fs.spring.width - 1
         self.spring_factor_bits = self.half_spring_bits + 2  # 3·½C
-        self.energy_bits = energy_width(fs, entries_capacity)
+        self.energy_bits = energy_check_width(fs, self.square_bits, self.barrier_bits)
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
         self.latency = self.square_bits + self.energy_bits + 8
         super().__init__({

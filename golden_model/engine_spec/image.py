@@ -42,7 +42,8 @@ from ..fixed.pipeline import BarrierEntries, NeighbourStream
 from ..mesh import Mesh
 
 __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
-           "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "EngineImage",
+           "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "energy_check_width",
+           "EngineImage",
            "build_image", "decode_nodes", "decode_entries", "decode_triangles", "constant_fault", "ImageRunResult",
            "run_image", "image_energy_window", "BUS_WORD_BITS", "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS",
            "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode"]
@@ -275,6 +276,18 @@ def energy_width(fs: FormatSet, entries: int) -> int:
     springs = 3 * fs.spring.raw_max * entries * fs.rest_length.raw_max ** 2 << springs_shift
     barrier = 2 * entries * fs.barrier_coeff.raw_max * fs.area.raw_max << barrier_shift
     return (springs + barrier).bit_length()
+
+
+def energy_check_width(fs: FormatSet, square_bits: int, barrier_bits: int) -> int:
+    """Bits of :func:`~golden_model.fixed.measures.energy_raw` for any sums the energy check's input registers
+    hold (``Σe²`` of ``square_bits``, ``Σc·h`` of ``barrier_bits``, ``½C`` at spring's maximum): its adder's width.
+    At least :func:`energy_width` of the capacity those registers are sized for, and a bit more where a
+    register's all-ones exceeds what any layout reaches (74 against 73 at ``DEFAULT_CAPACITY``): the ENERGY
+    registers take the low :func:`energy_width` bits, which hold every energy a layout has."""
+    springs_shift, barrier_shift = energy_shifts(fs)
+    half_spring = (1 << (fs.spring.width - 1)) - 1
+    return ((3 * half_spring * ((1 << square_bits) - 1) << springs_shift)
+            + (2 * ((1 << barrier_bits) - 1) << barrier_shift)).bit_length()
 
 
 def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordField, ...]:

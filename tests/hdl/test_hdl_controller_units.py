@@ -332,3 +332,15 @@ def test_converts_to_verilog(unit, monkeypatch):
     assert f"module {unit}" in text
     for port in ("i__valid", "i__ready", "o__valid", "o__ready"):
         assert f" {port};" in text
+
+
+@pytest.mark.parametrize("entries", [6, 8192, 12288, 18432])
+def test_the_energy_checks_adder_holds_every_energy_the_energy_registers_hold(entries):
+    """The check's width is its input registers' bound (energy_check_width), the ENERGY registers' the bound of
+    any layout (energy_width): never narrower, so the registers' low bits are the energy itself."""
+    from golden_model.engine_spec.image import energy_width
+    from hdl import EnergyCheck
+
+    for name in ("default", "narrow", "wide"):
+        fs = FormatSet.preset(name)
+        assert EnergyCheck(fs, entries).energy_bits >= energy_width(fs, entries), (name, entries)
