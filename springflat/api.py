@@ -25,7 +25,7 @@ import warnings
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -335,7 +335,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
 
 
 def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str | None = None,
-                  dxf_edges: bool = False, grain: str | None = None) -> None:
+                  dxf_edges: bool = False, grain: str | Sequence[float] | None = None) -> None:
     """Write ``pattern`` to ``path``, the format named by its ending (as ``springflat flatten --out``).
 
     ``.dxf`` (cut line on layer ``CUT``; ``dxf_edges``: mesh edges on ``MESH``), ``.pdf`` / ``.svg`` (true
@@ -385,7 +385,7 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     try:
         drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
         if grain is not None:
-            drawing = drawing.with_grain(str(grain))
+            drawing = drawing.with_grain(grain)
         write_pattern_file(Path(path), drawing, paper=DEFAULT_PAPER if paper is None else str(paper).lower(),
                            dxf_edges=dxf_edges)
     except PatternError as exc:  # the command's words for the same refusal ("check --units") in the API's

@@ -568,3 +568,15 @@ def test_a_patterns_arrays_are_read_only(ear):
         with pytest.raises(ValueError, match="read-only"):
             array[...] = 0
     assert np.array_equal(pattern.layout.copy() * 2, pattern.layout * 2)  # a copy is the caller's to change
+
+
+def test_write_pattern_takes_a_grain_as_three_numbers(ear, tmp_path):
+    """The docs give grain=(1, 0, 1): it was passed on as the text '(1, 0, 1)', which no grain reads."""
+    import ezdxf
+
+    V, F = ear
+    pattern = springflat.flatten(V * 1000, F, max_iter=5)
+    springflat.write_pattern(tmp_path / "g.dxf", pattern, grain=(0, 0, 2))
+    doc = ezdxf.readfile(tmp_path / "g.dxf")
+    assert doc.ezdxf_metadata()["springflat_grain"] == "0,0,2"
+    assert len(doc.modelspace().query('LWPOLYLINE[layer=="GRAIN"]')) == 3
