@@ -238,9 +238,8 @@ def grain_argument(text: str) -> str:
 
 
 def check_grain(mesh: Mesh, text: str) -> None:
-    """Refuse, before a run, a grain direction normal to the whole surface (:func:`grain_angle`'s test that
-    needs no layout)."""
-    grain_angle(mesh.vertices, mesh.faces, mesh.vertices[:, :2], grain_direction(text), layout_known=False)
+    """Refuse, before a run, a grain direction normal to the whole surface (:func:`_along_surface`)."""
+    _along_surface(mesh.vertices[mesh.faces], grain_direction(text))
 
 
 def grain_arrow(line: np.ndarray) -> list[np.ndarray]:
@@ -256,7 +255,10 @@ GRAIN_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 def grain_direction(grain: str | Sequence[float]) -> np.ndarray:
     """``--grain``'s 3D direction: ``x``, ``y``, ``z`` (``-z``: the other way) or three numbers ``X,Y,Z`` in the
     mesh's frame (the API also takes a sequence of three); a unit vector, or :class:`PatternError`."""
-    text = grain if isinstance(grain, str) else ",".join(map(str, grain)) if _is_sequence(grain) else repr(grain)
+    try:
+        text = grain_text(grain)
+    except (TypeError, ValueError):  # not a string, nor a sequence of numbers
+        text = repr(grain)
     word = text.strip().lower()
     sign, axis = (-1.0, word[1:]) if word.startswith("-") and word[1:] in GRAIN_AXES else (1.0, word)
     try:
@@ -271,25 +273,31 @@ def grain_direction(grain: str | Sequence[float]) -> np.ndarray:
     return vector / np.linalg.norm(vector)
 
 
-def _is_sequence(value: object) -> bool:
-    return isinstance(value, (list, tuple, np.ndarray))
-
-
 def grain_text(grain: str | Sequence[float]) -> str:
-    """A grain as the files name it: as typed, or ``X,Y,Z`` for the API's sequence."""
+    """A grain as the files name it: as typed, or ``X,Y,Z`` for the API's sequence (``TypeError`` or
+    ``ValueError`` for anything else)."""
     return grain if isinstance(grain, str) else ",".join(f"{float(v):g}" for v in grain)
 
 
-def grain_angle(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray, direction: np.ndarray,
-                layout_known: bool = True) -> float:
+def _along_surface(triangles: np.ndarray, direction: np.ndarray) -> None:
+    """:class:`PatternError` where ``direction`` is normal to the surface of ``triangles`` (``(F, 3, 3)``): its
+    part in their planes, weighted by their areas, is below a millionth of it."""
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])  # 2 × area long
+    double_area = np.linalg.norm(normals, axis=1)
+    in_plane = np.linalg.norm(np.cross(normals, direction), axis=1).sum()  # Σ 2·area·|direction's plane part|
+    if not in_plane > 1e-6 * double_area.sum():
+        raise PatternError("--grain: the direction is normal to the surface (it lies in none of its triangles): it "
+                           "has no direction on the pattern; name one along the surface")
+
+
+def grain_angle(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray, direction: np.ndarray) -> float:
     """The angle (radians, anticlockwise from +x) at which ``direction`` (a 3D unit vector) lies on the pattern.
 
     Each triangle's affine map carries the direction's part in its plane onto the layout. A grain is an axis:
     those pieces are averaged as axes (their doubled angles, each weighted by its length and its triangle's 3D
     area), so that pieces pointing opposite ways along one line (across a half-pipe, say) reinforce rather than
     cancel; the axis is then pointed the way most of them point. :class:`PatternError` where the direction is
-    normal to the surface (it lies in no triangle's plane), or its pieces point every way (``layout_known``
-    false: the first test alone, which needs no layout)."""
+    normal to the surface (:func:`_along_surface`), or its pieces point every way."""
     p, q = vertices[faces], layout[faces]
     e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
     u1, u2 = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
@@ -297,12 +305,7 @@ def grain_angle(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray, dir
     r1, r2 = e1 @ direction, e2 @ direction
     gram = g11 * g22 - g12 * g12  # (2 × the 3D area)²: the direction's plane part is a·e1 + b·e2
     area = np.sqrt(gram) / 2
-    in_plane = (area * np.linalg.norm(np.cross(np.cross(e1, e2), direction), axis=1) / np.sqrt(gram)).sum()
-    if not in_plane > 1e-6 * area.sum():
-        raise PatternError("--grain: the direction is normal to the surface (it lies in none of its triangles): it "
-                           "has no direction on the pattern; name one along the surface")
-    if not layout_known:
-        return 0.0
+    _along_surface(p, direction)
     a, b = (g22 * r1 - g12 * r2) / gram, (g11 * r2 - g12 * r1) / gram
     pieces = a[:, None] * u1 + b[:, None] * u2
     length = np.linalg.norm(pieces, axis=1)
@@ -916,9 +919,10 @@ def _median_edge_mm(drawing: PatternDrawing) -> float:
     return float(np.median(np.linalg.norm(p[:, 1] - p[:, 0], axis=1))) * check_units(drawing.units)
 
 
-def _pattern_mm(drawing: PatternDrawing, plan: SheetPlan) -> np.ndarray:
-    """``(V, 2)`` the layout in mm, shifted onto the grid of windows."""
-    return (drawing.layout - drawing.layout.min(axis=0)) * check_units(drawing.units) + np.array(plan.shift)
+def _pattern_mm(drawing: PatternDrawing, plan: SheetPlan, points: np.ndarray | None = None) -> np.ndarray:
+    """``points`` (in ``units``; by default the layout) in mm, shifted onto the grid of windows with the layout."""
+    points = drawing.layout if points is None else points
+    return (points - drawing.layout.min(axis=0)) * check_units(drawing.units) + np.array(plan.shift)
 
 
 def _grain_mm(drawing: PatternDrawing, plan: SheetPlan) -> list[np.ndarray]:
@@ -926,8 +930,7 @@ def _grain_mm(drawing: PatternDrawing, plan: SheetPlan) -> list[np.ndarray]:
     pattern; none without a grain."""
     if not drawing.grain:
         return []
-    origin, scale = drawing.layout.min(axis=0), check_units(drawing.units)
-    return [(stroke - origin) * scale + np.array(plan.shift) for stroke in grain_arrow(drawing.grain_line())]
+    return [_pattern_mm(drawing, plan, stroke) for stroke in grain_arrow(drawing.grain_line())]
 
 
 def _pattern_parts(drawing: PatternDrawing, plan: SheetPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
