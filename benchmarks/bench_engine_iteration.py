@@ -35,8 +35,8 @@ from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed, prepare
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.mesh import Mesh
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten

@@ -2,7 +2,7 @@
 
 Usage: .venv/bin/python benchmarks/bench_engine_sim.py [--side 45] [--iterations 20] [--simulator verilator]
 
-A generated 45 × 45 grid on a dome (``golden_model.generate.dome_grid``: 2,025 vertices, 11,792
+A generated 45 × 45 grid on a dome (``sim.generate.dome_grid``: 2,025 vertices, 11,792
 neighbour entries, 3,872 triangles; a 2,000-point ``delaunay_patch`` is refused by the ``default``
 formats, its boundary edges over 8 mean edge lengths), the paper's dynamics with the
 variable step from a Tutte layout, tolerances 0 so the run goes to ``N_max``; the engine at
@@ -27,8 +27,8 @@ import time
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, build_image
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from sim.cocotb_support import SIMULATORS, run_bench
 from sim.engine_run import run_image_on_rtl

@@ -25,11 +25,11 @@ import numpy as np
 from golden_model.fixed import FormatSet, SaturationCounter
 from golden_model.fixed.engine import FixedEngine, prepare
 from golden_model.engine_spec.image import EngineCapacity, build_image
-from golden_model.layouts import pca_layout, tutte_layout
+from sim.layouts import pca_layout, tutte_layout
 from golden_model.mesh import Mesh, signed_areas_2d
 from golden_model.params import FlattenParams
 from golden_model.reference import SpringModel, _Jacobi, variable_step
-from golden_model.generate import grid_faces, grid_uv
+from sim.generate import grid_faces, grid_uv
 
 
 def dome(n: int) -> Mesh:

@@ -18,8 +18,8 @@ import numpy as np
 
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed
-from golden_model.generate import grid_faces, grid_uv
-from golden_model.layouts import tutte_layout
+from sim.generate import grid_faces, grid_uv
+from sim.layouts import tutte_layout
 from golden_model.mesh import Mesh
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten

@@ -33,8 +33,8 @@ from dataclasses import replace
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, build_image
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from sim.engine_run import VERILATOR_BUILDS, harness_ceiling, prepare_pgo, run_image_on_rtl
 

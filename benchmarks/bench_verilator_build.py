@@ -26,8 +26,8 @@ from pathlib import Path
 from golden_model.engine_spec.image import EngineCapacity, build_image
 from golden_model.fixed import FormatSet, Rounding
 from golden_model.fixed.engine import prepare
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 
 

@@ -25,8 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from golden_model.generate import bumpy_grid, grid_faces, rolled_grid, saddle_grid  # noqa: E402
-from golden_model.layouts import initial_layout  # noqa: E402
+from sim.generate import bumpy_grid, grid_faces, rolled_grid, saddle_grid  # noqa: E402
+from sim.layouts import initial_layout  # noqa: E402
 from golden_model.mesh import Mesh, folded_faces  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 from golden_model.reference import flatten, iterations_to_within  # noqa: E402

@@ -7,7 +7,7 @@ see docs/corpus.md).  For every patch of ``benchmarks/corpus/manifest.json`` fou
   subprocess; the wall time of the whole command, its status, iterations, E_S, E_C and folded triangles
   from its JSON.  A run past ``--timeout`` counts as a failure.
 * **ARAP**: libigl ARAP from the harmonic layout, iterated in chunks of 10 until no node moves more than
-  1e-9 x the boundary length in a chunk, or 1,000 iterations (golden_model.layouts.arap_layout stops at 100).
+  1e-9 x the boundary length in a chunk, or 1,000 iterations (sim.layouts.arap_layout stops at 100).
 * **SLIM**: libigl SLIM (symmetric Dirichlet) from Tutte's embedding, one iteration at a time until the
   energy changes by less than 1e-6 relative, or 200 iterations.
 
@@ -44,9 +44,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from golden_model.layouts import harmonic_layout, tutte_layout  # noqa: E402
+from sim.layouts import harmonic_layout, tutte_layout  # noqa: E402
 from golden_model.mesh import Mesh, boundary_crossings  # noqa: E402
-from golden_model.mesh_io import load_mesh  # noqa: E402
+from sim.mesh_io import load_mesh  # noqa: E402
 from golden_model.reference import SpringModel, measure  # noqa: E402
 
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"
@@ -130,7 +130,7 @@ class Row:
 def arap_converged(mesh: Mesh) -> tuple[np.ndarray, int]:
     """libigl ARAP from the harmonic layout to convergence: ``(positions, iterations)``.
 
-    As ``golden_model.layouts.arap_layout`` (one boundary vertex pinned, ``with_dynamics`` off) but
+    As ``sim.layouts.arap_layout`` (one boundary vertex pinned, ``with_dynamics`` off) but
     up to :data:`ARAP_MAX_ITERATIONS`, stopping after a chunk of :data:`ARAP_CHUNK` iterations that
     moved no node more than :data:`ARAP_TOLERANCE` x the boundary length.
     """

@@ -14,9 +14,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from golden_model.generate import rolled_grid, saddle_grid, spherical_cap  # noqa: E402
-from golden_model.layouts import initial_layout  # noqa: E402
-from golden_model.mesh_io import load_mesh  # noqa: E402
+from sim.generate import rolled_grid, saddle_grid, spherical_cap  # noqa: E402
+from sim.layouts import initial_layout  # noqa: E402
+from sim.mesh_io import load_mesh  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 from golden_model.reference import SpringModel, flatten, measure  # noqa: E402
 from golden_model.reference import iterations_to_within as within  # noqa: E402

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from golden_model.generate import rolled_grid
-from golden_model.layouts import initial_layout
+from sim.generate import rolled_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten
 

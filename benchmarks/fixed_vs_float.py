@@ -19,8 +19,8 @@ from golden_model.builtin import builtin_mesh
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed
 from golden_model.fixed.measures import FixedPointError
-from golden_model.generate import generated_meshes
-from golden_model.layouts import initial_layout
+from sim.generate import generated_meshes
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten
 

@@ -31,8 +31,8 @@ from guard_fixed_vs_float import MANIFEST, file_defaults  # noqa: E402
 from golden_model.fixed import FormatSet  # noqa: E402
 from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.fixed.measures import FixedPointError  # noqa: E402
-from golden_model.layouts import start_layout  # noqa: E402
-from golden_model.mesh_io import load_mesh  # noqa: E402
+from sim.layouts import start_layout  # noqa: E402
+from sim.mesh_io import load_mesh  # noqa: E402
 from golden_model.reference import flatten  # noqa: E402
 
 

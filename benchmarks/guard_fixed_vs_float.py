@@ -8,7 +8,7 @@ Usage::
 Default: from Tutte's layout on generated patches (the momentum dynamics, the barrier, the guard, the
 energy change over 10 iterations <= FILE_TOL_ENERGY). ``--fast-subset``: the kinds that broke the
 unguarded dynamics (issue 25), as a no-option ``springflat flatten`` runs them (the ``auto`` start,
-the mesh file's defaults): ``golden_model.generate.hard_patches()`` and the corpus's ``taco``,
+the mesh file's defaults): ``sim.generate.hard_patches()`` and the corpus's ``taco``,
 ``cone_tip`` and ``cad_sliver`` patches (docs/corpus.md; a missing corpus is skipped with a note).
 Per mesh the status, iterations, rolled-back steps and saturation events of each engine and
 |ΔE_S|, |ΔE_C|, and whether the row meets issue 25's bar (same status, iterations within ±1,
@@ -34,11 +34,11 @@ sys.path.insert(0, str(REPO))
 from golden_model.fixed import MAX_PRODUCT_WIDTH, FormatSet  # noqa: E402
 from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.fixed.measures import FixedPointError  # noqa: E402
-from golden_model.generate import (delaunay_patch, dome_grid, hard_patches, rolled_grid, saddle_grid,  # noqa: E402
+from sim.generate import (delaunay_patch, dome_grid, hard_patches, rolled_grid, saddle_grid,  # noqa: E402
                                    spherical_cap)
-from golden_model.layouts import start_layout, tutte_layout  # noqa: E402
+from sim.layouts import start_layout, tutte_layout  # noqa: E402
 from golden_model.mesh import Mesh  # noqa: E402
-from golden_model.mesh_io import load_mesh  # noqa: E402
+from sim.mesh_io import load_mesh  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 from golden_model.reference import flatten  # noqa: E402
 from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius  # noqa: E402

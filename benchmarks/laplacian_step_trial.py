@@ -65,10 +65,10 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
 import golden_model.reference as reference  # noqa: E402
-from golden_model.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap  # noqa: E402
+from sim.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap  # noqa: E402
 from golden_model.guard import guarded_moves  # noqa: E402
-from golden_model.layouts import initial_layout, start_layout  # noqa: E402
-from golden_model.mesh_io import load_mesh  # noqa: E402
+from sim.layouts import initial_layout, start_layout  # noqa: E402
+from sim.mesh_io import load_mesh  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 from golden_model.reference import flatten, iterations_to_within  # noqa: E402
 from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius  # noqa: E402

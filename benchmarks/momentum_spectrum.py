@@ -29,7 +29,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from golden_model.layouts import initial_layout  # noqa: E402
+from sim.layouts import initial_layout  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 import golden_model.reference as reference  # noqa: E402
 from golden_model.reference import SpringModel, _Jacobi, flatten, iterations_to_within  # noqa: E402

@@ -15,8 +15,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from golden_model.builtin import builtin_mesh  # noqa: E402
 from golden_model.fixed import FormatSet  # noqa: E402
 from golden_model.fixed.engine import flatten_fixed  # noqa: E402
-from golden_model.generate import rolled_grid, saddle_grid, spherical_cap  # noqa: E402
-from golden_model.layouts import initial_layout  # noqa: E402
+from sim.generate import rolled_grid, saddle_grid, spherical_cap  # noqa: E402
+from sim.layouts import initial_layout  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 from golden_model.reference import flatten  # noqa: E402
 

@@ -4,7 +4,7 @@ A :class:`Mesh` is the 3D patch to flatten: ``V`` vertices ``Q`` (metres or any
 consistent length unit) and ``F`` triangles.  Vertex *i* in a file is node *i*
 everywhere in the project (float reference, fixed-point golden model, RTL
 streams): nothing is merged or reordered, except for STL, which has no shared
-vertices at all (see :func:`golden_model.mesh_io.load_mesh`, which reads mesh files).
+vertices at all (see :func:`sim.mesh_io.load_mesh`, which reads mesh files).
 
 Validation follows ``spec.md`` ("Bad input"): a mesh must be a single
 connected manifold disk with exactly one boundary loop, no degenerate or
@@ -21,8 +21,6 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 __all__ = ["Mesh", "MeshError", "InconsistentOrientation", "oriented_mesh", "orient_consistently",
            "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE",
@@ -441,8 +439,7 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
         e = edges[np.flatnonzero(counts > 2)[0]]
         raise MeshError(f"mesh is non-manifold: edge ({e[0]}, {e[1]}) is shared by more than two faces")
 
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    n_parts, _ = connected_components(graph, directed=False)
+    n_parts = count_components(n, edges[:, 0], edges[:, 1])
     if n_parts != 1:
         raise MeshError(f"mesh is not a single disk: it has {n_parts} connected components")
     _check_vertex_manifold(faces, side_edge, counts, n)
@@ -456,15 +453,47 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
     boundary = edges[counts == 1]
     if len(boundary) == 0:
         raise MeshError("mesh is not a disk: it is closed (no boundary loop)")
-    bgraph = sp.coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(n, n))
     on_boundary = np.unique(boundary)
-    n_loops = connected_components(bgraph, directed=False)[0] - (n - len(on_boundary))
+    n_loops = count_components(n, boundary[:, 0], boundary[:, 1]) - (n - len(on_boundary))
     if n_loops != 1:
         raise MeshError(f"mesh is not a disk: it has {n_loops} boundary loops where a disk has one (holes, or a "
                         "tube's ends)")
     euler = n - len(edges) + len(faces)
     if euler != 1:
         raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")
+
+
+def component_labels(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The connected component of each of ``n`` nodes joined by the undirected edges ``(a[k], b[k])``: the
+    smallest node of its component (so ``len(np.unique(labels))`` counts the components).
+
+    Vectorised hooking and pointer jumping: each round points every component's root at the smallest root
+    an edge reaches from it, then follows the pointers to their roots; a round that changes nothing has no
+    edge left between two components. The rounds grow with the logarithm of a component's span on a mesh.
+    """
+    label = np.arange(n)
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    while True:
+        la, lb = label[a], label[b]
+        low = np.minimum(la, lb)
+        hooked = label.copy()
+        np.minimum.at(hooked, la, low)
+        np.minimum.at(hooked, lb, low)
+        while True:  # every pointer runs downwards, so this ends at the roots
+            jumped = hooked[hooked]
+            if np.array_equal(jumped, hooked):
+                break
+            hooked = jumped
+        if np.array_equal(hooked, label):
+            return label
+        label = hooked
+
+
+def count_components(n: int, a: np.ndarray, b: np.ndarray) -> int:
+    """How many connected components ``n`` nodes joined by the edges ``(a[k], b[k])`` form (a node on no edge
+    is one)."""
+    return int(np.count_nonzero(component_labels(n, a, b) == np.arange(n)))
 
 
 def _interior_side_pairs(side_edge: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -492,25 +521,30 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
     """``faces`` with the fewest faces turned (two corners swapped) so that every interior edge is run both
     ways, and how many were turned. ``faces`` must form a connected manifold; a non-orientable one (a Möbius
     strip) raises :class:`MeshError`."""
-    from scipy.sparse.csgraph import breadth_first_order
-
     faces = np.asarray(faces, dtype=np.int64)
     _, side_edge, counts = _unique_edges(faces)
     s, t, same = _interior_sides_run_same_way(faces, side_edge, counts)
-    f, g = s // 3, t // 3
     m = len(faces)
-    # weight 1: the neighbours agree, 2: one of them must turn (0 would be no edge in a sparse matrix)
-    graph = sp.coo_matrix((np.where(same, 2, 1), (f, g)), shape=(m, m)).tocsr()
-    graph = graph.maximum(graph.T)
-    order, parent = breadth_first_order(graph, 0, directed=False, return_predecessors=True)
-    if len(order) != m:
-        raise MeshError(f"mesh is not a single disk: face {int(np.setdiff1d(np.arange(m), order)[0])} shares no "
+    # each face's neighbours across its interior edges, and whether one of the two must turn to agree
+    f, g = np.r_[s // 3, t // 3], np.r_[t // 3, s // 3]
+    order = np.argsort(f, kind="stable")
+    neighbour, crossing = g[order], np.r_[same, same][order]
+    start = np.searchsorted(f[order], np.arange(m + 1))
+    turn = np.full(m, -1, dtype=np.int8)  # face 0 keeps its winding; the others follow, breadth first
+    turn[0] = 0
+    front = np.array([0])
+    while len(front):
+        lengths = start[front + 1] - start[front]
+        sides = np.repeat(start[front] - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
+        parent, child, cross = np.repeat(front, lengths), neighbour[sides], crossing[sides]
+        new = turn[child] < 0
+        child, first = np.unique(child[new], return_index=True)
+        turn[child] = turn[parent[new][first]] ^ cross[new][first]  # turned unlike its parent where they disagree
+        front = child
+    if (turn < 0).any():
+        raise MeshError(f"mesh is not a single disk: face {int(np.flatnonzero(turn < 0)[0])} shares no "
                         "edge with face 0")
-    crossing = np.asarray(graph[order[1:], parent[order[1:]]]).ravel() == 2
-    turned = [False] * m  # face 0 keeps its winding; each face is reached after its BFS parent
-    for face, above, cross in zip(order[1:].tolist(), parent[order[1:]].tolist(), crossing.tolist()):
-        turned[face] = turned[above] != cross  # turned unlike its parent exactly when the two disagree
-    turn = np.array(turned)
+    turn = turn.astype(bool)
     if 2 * turn.sum() > m:  # turn the fewer faces
         turn = ~turn
     result = faces.copy()
@@ -552,8 +586,7 @@ def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.
     a = np.concatenate([side_from[s], side_to[s]])
     b = np.concatenate([np.where(same, side_from[t], side_to[t]), np.where(same, side_to[t], side_from[t])])
     m = 3 * n_faces
-    graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m))
-    _, label = connected_components(graph, directed=False)
+    label = component_labels(m, a, b)
     corner_vertex = faces.reshape(-1)
     fans = np.unique(corner_vertex * m + label)  # one key per (vertex, fan)
     fans_per_vertex = np.bincount(fans // m, minlength=n)

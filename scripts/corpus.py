@@ -13,12 +13,12 @@ this script makes them, by default in ``build/corpus`` (``build/`` is ignored by
 ``download`` and ``from-mirror`` put the originals in ``OUT/originals`` and then run ``build``;
 ``build`` checks every original's sha256, cuts it and checks the patch's sha256.  The patches are
 binary little-endian PLY files ``OUT/<name>.ply`` (double coordinates, copied bit for bit from the
-original; int32 triangles), which :func:`golden_model.mesh_io.load_mesh` reads.
+original; int32 triangles), which :func:`sim.mesh_io.load_mesh` reads.
 
 Every patch is cut the same deterministic way (no randomness, no decimation, no smoothing):
 
 1. Read the original (trimesh, ``process=False``; STL corners that are bit-identical are merged,
-   as :func:`golden_model.mesh_io.load_mesh` does; triangle strips of a PLY are unrolled).  Drop
+   as :func:`sim.mesh_io.load_mesh` does; triangle strips of a PLY are unrolled).  Drop
    unreferenced vertices, triangles with a repeated corner or zero area, repeated triangles and
    every triangle on an edge that more than two triangles share.
 2. Geodesic distance ``d`` on the edge graph (Dijkstra, weight = 3D edge length) from the vertex
@@ -54,7 +54,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from golden_model.mesh import Mesh, MeshError  # noqa: E402
-from golden_model.mesh_io import load_mesh  # noqa: E402
+from sim.mesh_io import load_mesh  # noqa: E402
 
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"
 DEFAULT_OUT = REPO / "build" / "corpus"

@@ -46,7 +46,7 @@ sys.path.insert(0, str(REPO / "scripts"))
 
 from corpus import clean, cut_patch, read_original  # noqa: E402  (the cutting method, generalised there)
 from golden_model.mesh import Mesh  # noqa: E402
-from golden_model.mesh_io import save_obj  # noqa: E402
+from sim.mesh_io import save_obj  # noqa: E402
 
 #: name -> (source file, kind, seed point(s), target vertex count in the ball)
 SOURCES = {

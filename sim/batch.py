@@ -32,13 +32,13 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from golden_model.builtin import is_builtin
-from golden_model.layouts import AUTO_START, LAYOUT_METHODS
 from golden_model.files import describe_os_error, read_file_bytes
 from golden_model.mesh import MeshError, one_line, printable_name, valid_text
 
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_MESHES_FAILED
 from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
+from .layouts import AUTO_START, LAYOUT_METHODS
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
     check_output_path, file_ending, when_interrupted
 from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind

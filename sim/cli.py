@@ -41,9 +41,7 @@ from golden_model.builtin import is_builtin
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.files import describe_os_error
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
-from golden_model.layouts import LAYOUT_METHODS
 from golden_model.mesh import one_line
-from golden_model.mesh_io import MESH_SUFFIXES
 from golden_model.params import FlattenParams
 from golden_model.results import FlattenResult
 
@@ -53,6 +51,8 @@ from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS, answered_signal
 from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, divergence_note, human_line,
                           json_summary, output_paths, pattern_notes, run_flatten, run_formats, scale_note_of,
                           what_was_used, write_outputs)
+from .layouts import LAYOUT_METHODS
+from .mesh_io import MESH_SUFFIXES
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
     check_link_target, check_not_interrupted, check_output_path, file_ending, on_interrupt, received_signal, \
     record_written_outputs, reset_interrupted, written_outputs

@@ -39,11 +39,11 @@ import numpy as np
 from golden_model.files import file_kind, resolved_parent_key, same_file_key
 from golden_model.files import describe_os_error
 from golden_model.mesh import folded_faces, signed_areas_2d, triangle_areas_3d
-from golden_model.mesh_io import save_obj
 from golden_model.modes import Step
 from golden_model.results import FlattenResult
 
 from .exit_codes import STOP_SIGNALS
+from .mesh_io import save_obj
 
 HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded")
 LAYOUT_SUFFIXES = (".obj", ".svg")

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh
-from golden_model.layouts import LAYOUT_METHODS, initial_layout
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten
 from golden_model.results import FlattenResult
 
+from .layouts import LAYOUT_METHODS, initial_layout
 from .outputs import atomic_write, write_history
 
 TABLE_HEAD_ROWS = 22

@@ -45,8 +45,8 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from golden_model.mesh import Mesh, folded_faces
-from golden_model.mesh_io import save_obj
 
+from .mesh_io import save_obj
 from .outputs import OutputError, atomic_write, output_target, write_layout
 from .run_options import file_path_argument
 

@@ -18,9 +18,9 @@ from pathlib import Path
 
 from golden_model.fixed.engine import check_fixed_params, prepare, scale_mesh
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, check_engine_params
-from golden_model.layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 
 from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, missing_simulator, run_bench
+from .layouts import AUTO_START, LAYOUT_METHODS, initial_layout
 from .run_options import file_path_argument, integer_argument
 from .top_names import CORE_MODULE, ENGINE_MODULE
 

@@ -18,16 +18,16 @@ from typing import Callable, Iterator
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
-from golden_model.layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_name, initial_layout, slim_layout,
-                                   start_layout)
 from golden_model.files import describe_os_error
 from golden_model.mesh import Mesh, MeshError, folded_faces
-from golden_model.mesh_io import load_mesh_with_notes
-from golden_model.mesh_io.polygons import is_float, is_int
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.guard import ENERGY_WINDOW
 from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
 
+from .layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_name, initial_layout, slim_layout,
+                                   start_layout)
+from .mesh_io import load_mesh_with_notes
+from .mesh_io.polygons import is_float, is_int
 from .outputs import OutputError, directory_name_problem
 
 USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
@@ -233,7 +233,7 @@ def file_defaults(mesh: Mesh) -> FlattenParams:
 
 def default_init(mesh_name: str) -> str:
     """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), ``auto`` for files
-    (ARAP; SLIM from Tutte where ARAP folds or fails: golden_model.layouts.start_layout)."""
+    (ARAP; SLIM from Tutte where ARAP folds or fails: sim.layouts.start_layout)."""
     return "pca" if is_builtin(mesh_name) else AUTO_START
 
 
@@ -244,7 +244,7 @@ SLIM_BESIDE_ARAP_VERTICES = 5000
 
 @contextlib.contextmanager
 def slim_beside_arap(mesh: Mesh, enabled: bool) -> Iterator[Callable[[], np.ndarray] | None]:
-    """``slim`` for :func:`~golden_model.layouts.start_layout`: where ``enabled``, the mesh has
+    """``slim`` for :func:`~sim.layouts.start_layout`: where ``enabled``, the mesh has
     :data:`SLIM_BESIDE_ARAP_VERTICES` or more and this process may use two cores, SLIM's layout computed
     in a worker process from the start, so that where ARAP folds its layout is ready sooner (the same
     bytes: the same function on the same mesh); ``None`` (SLIM after ARAP, where needed) otherwise.

@@ -31,9 +31,9 @@ import numpy as np
 
 from golden_model.fixed.formats_set import FormatSetNotBuildable
 from golden_model.fixed.measures import FixedPointError
-from golden_model.layouts import AUTO_START, LayoutError
+from sim.layouts import AUTO_START, LayoutError
 from golden_model.mesh import Mesh, MeshError, oriented_mesh
-from golden_model.mesh_io import load_mesh_with_notes
+from sim.mesh_io import load_mesh_with_notes
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options, forget_half_built_components
@@ -215,7 +215,7 @@ def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """``(V, F)`` of an OBJ, PLY, OFF or STL disk patch: ``(V, 3)`` float64 positions, ``(F, 3)`` int64
     vertex indices (0-based), in the file's vertex order.
 
-    The file must be one manifold disk (:func:`golden_model.mesh_io.load_mesh_with_notes`); anything else
+    The file must be one manifold disk (:func:`sim.mesh_io.load_mesh_with_notes`); anything else
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
     reader changed (polygons fan-triangulated, STL corners merged) is a :class:`MeshNote` warning.
     """

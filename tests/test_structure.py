@@ -11,6 +11,7 @@ imports itself).
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -94,6 +95,32 @@ def test_the_package_direction_holds():
     rank = {pkg: k for k, pkg in enumerate(PACKAGES)}
     upward = sorted((a, b) for a, b in import_edges(modules) if rank[b.split(".")[0]] > rank[a.split(".")[0]])
     assert not upward, f"imports against golden_model <- hdl <- sim: {upward}"
+
+
+def outside_imports(path: Path) -> set[str]:
+    """The top-level names of the absolute imports in one file, at any depth (as :func:`import_edges` reads)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+def test_the_golden_model_needs_numpy_alone():
+    """golden_model is the model, numpy only (the README's layout): libraries such as libigl, scipy or trimesh
+    belong to the flows in sim/ (start layouts, untangling, mesh files, generated meshes)."""
+    allowed = set(sys.stdlib_module_names) | {"numpy", "golden_model"}
+    found = {module: sorted(outside_imports(path) - allowed) for module, path in package_modules(("golden_model",)).items()}
+    outside = {module: names for module, names in found.items() if names}
+    assert not outside, f"golden_model imports beyond numpy: {outside}"
+
+
+def test_the_numpy_alone_check_sees_a_function_level_import(tmp_path):
+    """The check itself: an import inside a function counts."""
+    (tmp_path / "m.py").write_text("import numpy as np\nfrom . import x\ndef f():\n    from scipy.sparse import csgraph\n")
+    assert outside_imports(tmp_path / "m.py") == {"numpy", "scipy"}
 
 
 def source_lengths() -> dict[str, int]:

@@ -2,7 +2,8 @@
 
 A *study* runs the bit-exact fixed-point engine (:func:`~golden_model.fixed.engine.flatten_fixed`)
 with many :class:`~golden_model.fixed.FormatSet` configurations over a set of
-*cases* (mesh × initial layout × step mode, :mod:`.cases`) and compares every run with the
+*cases* (mesh × initial layout × step mode, :class:`StudyCase`; built from mesh names by
+:mod:`sim.study.cases`) and compares every run with the
 float reference (:func:`~golden_model.reference.flatten`).
 
 Per run (:class:`RunRecord`, :mod:`.records`): final ``E_S`` and ``E_C`` absolute deviation from
@@ -27,7 +28,7 @@ The flow that runs a study (the process pool, the RTL cost model, the greedy wor
 optimiser) is :mod:`sim.study`; this package is the model part only.
 """
 
-from .cases import GENERATED_MESH_NAMES, GENERATED_PARAMS, STUDY_MESHES, StudyCase, build_cases, resolve_study_mesh
+from .cases import GENERATED_MESH_NAMES, GENERATED_PARAMS, STUDY_MESHES, StudyCase
 from .knobs import (
     DATAPATH_FIELDS,
     DEFAULT_BITS,
@@ -52,7 +53,7 @@ __all__ = [
     "GENERATED_PARAMS", "STUDY_MESHES", "GENERATED_MESH_NAMES", "SIGNAL_CLASSES", "DATAPATH_FIELDS", "KNOBS",
     "OTHER_KNOB_VALUES", "DEFAULT_BITS", "DEFAULT_STRIDES", "RESULT_COLUMNS",
     "StudyCase", "Config", "RunRecord", "AccuracyTarget", "FixedOutcome",
-    "resolve_study_mesh", "build_cases", "parse_bits", "parse_knobs", "make_config", "class_frac_bits",
+    "parse_bits", "parse_knobs", "make_config", "class_frac_bits",
     "class_changes", "sweep_configs", "preset_configs", "fs_key", "run_fixed", "compare", "measure_clamps",
     "unexercised_classes",
 ]

@@ -2,18 +2,12 @@
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
-from ..builtin import builtin_mesh, is_builtin
-from ..layouts import initial_layout
 from ..mesh import Mesh
-from ..mesh_io import load_mesh
-from ..params import FlattenParams, ParameterError
+from ..params import FlattenParams
 
 GENERATED_PARAMS = FlattenParams(density="auto", damping=0.05, tol_area=0.01, tol_shape=0.01, tol_energy=0.05,
                                  max_iter=300)
@@ -47,57 +41,3 @@ class StudyCase:
     def work(self) -> int:
         """A run-time estimate (entries × iteration budget), for scheduling."""
         return (2 * self.mesh.n_edges + self.mesh.n_vertices) * self.params.max_iter
-
-
-_GENERATED: dict[str, Mesh] | None = None
-
-
-def resolve_study_mesh(name: str) -> tuple[str, Mesh, FlattenParams]:
-    """``(display name, mesh, default parameters)`` for a built-in, generated or file mesh.
-
-    Built-ins take their paper parameter sets (jacobi, no damping); generated
-    and file meshes take :data:`GENERATED_PARAMS`.
-    """
-    global _GENERATED
-    path = Path(name)
-    if is_builtin(name):
-        mesh, paper = builtin_mesh(name)
-        return name.lower(), mesh, paper.flatten_params()
-    if name.lower() in GENERATED_MESH_NAMES:  # (a file of that name has no mesh format's ending)
-        if _GENERATED is None:
-            from ..generate import generated_meshes
-
-            _GENERATED = generated_meshes()
-        return name.lower(), _GENERATED[name.lower()], GENERATED_PARAMS
-    if os.path.lexists(path) or path.suffix or len(path.parts) > 1:
-        return path.stem, load_mesh(path), GENERATED_PARAMS  # (what is wrong with a path: load_mesh says it)
-    raise ParameterError(f"unknown mesh '{name}': expected one of {', '.join(STUDY_MESHES)} or a mesh file")
-
-
-def build_cases(meshes: Sequence[str] = STUDY_MESHES, inits: Sequence[str] = ("pca", "tutte"),
-                steps: Sequence[str] = ("fixed", "variable"), max_iter: int | None = None) -> list[StudyCase]:
-    """Every combination mesh × init × step (meshes in the given order, duplicates dropped)."""
-    if not meshes:
-        raise ParameterError("no meshes to study")
-    for init in inits:
-        if init not in ("pca", "tutte"):
-            raise ParameterError(f"unknown initial layout '{init}': expected pca or tutte")
-    cases: list[StudyCase] = []
-    seen: set[str] = set()
-    for spec in meshes:
-        label, mesh, params = resolve_study_mesh(spec)
-        if label in seen:
-            if spec.lower() in seen:
-                continue  # the same mesh twice
-            k = 2
-            while f"{label}-{k}" in seen:
-                k += 1
-            label = f"{label}-{k}"
-        seen.add(label)
-        if max_iter is not None:
-            params = params.with_(max_iter=max_iter)
-        for init in inits:
-            p0 = initial_layout(mesh, init)
-            for step in steps:
-                cases.append(StudyCase(f"{label}/{init}/{step}", label, mesh, init, p0, params.with_(step=step)))
-    return cases

@@ -198,7 +198,7 @@ async def closed_loop(dut):
 
 def config_initial(problem, config):
     """The float P0 the problem was built from (the same layout the float reference starts at)."""
-    from golden_model.layouts import initial_layout
+    from sim.layouts import initial_layout
 
     return initial_layout(problem.mesh, config.get("init", "tutte"))
 

@@ -36,8 +36,8 @@ def compare(outputs: list[int], want, layout, iteration: int) -> list[str]:
 
 def load_problem(config, fs):
     from golden_model.builtin import builtin_mesh, is_builtin
-    from golden_model.layouts import initial_layout
-    from golden_model.mesh_io import load_mesh
+    from sim.layouts import initial_layout
+    from sim.mesh_io import load_mesh
 
     name = config.get("mesh", "surf2")
     mesh = builtin_mesh(name)[0] if is_builtin(name) else load_mesh(name)

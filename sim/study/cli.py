@@ -34,7 +34,6 @@ from golden_model.study import (
     SIGNAL_CLASSES,
     STUDY_MESHES,
     AccuracyTarget,
-    build_cases,
     class_frac_bits,
     parse_bits,
     parse_knobs,
@@ -46,6 +45,7 @@ from golden_model.study import (
 from ..outputs import atomic_directory, atomic_write, check_output_directory
 from ..run_options import integer_argument, load_format_set, number_argument, path_argument
 from ..workers import local_workers
+from .cases import build_cases
 from .cost import multipliers
 from .flow import ConfigSummary, StudyResult, run_study
 

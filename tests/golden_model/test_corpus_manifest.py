@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from golden_model.mesh_io import load_mesh, save_obj
+from sim.mesh_io import load_mesh, save_obj
 from support import REPO
 
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from golden_model.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap
-from golden_model.layouts import initial_layout
+from sim.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.reference import (
     barrier_energy,
@@ -146,7 +146,7 @@ def test_barrier_defaults_follow_the_dynamics():
 def test_strongly_curved_scans_end_fold_free_and_below_arap(scan):
     """From a flip-free ARAP layout, momentum + the default barrier: no folds, E_C below ARAP's."""
 
-    from golden_model.mesh_io import load_mesh
+    from sim.mesh_io import load_mesh
     from golden_model.reference import SpringModel, measure
 
     mesh = load_mesh(SCANS / f"{scan}.obj")

@@ -16,8 +16,8 @@ from golden_model.fixed.engine import (
 )
 from golden_model.fixed.measures import FixedPointError, energy_raw
 from golden_model.fixed.pipeline import exact_sum, node_terms
-from golden_model.generate import spherical_cap
-from golden_model.layouts import initial_layout
+from sim.generate import spherical_cap
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from golden_model.reference import SpringModel, barrier_energy, measure
 

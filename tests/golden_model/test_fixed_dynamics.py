@@ -8,8 +8,8 @@ from golden_model.fixed.engine import flatten_fixed, prepare
 from golden_model.fixed.measures import FixedPointError, momentum_beta_raw
 from golden_model.fixed.format import to_float
 from golden_model.fixed.pipeline import barrier_terms
-from golden_model.generate import delaunay_patch, rolled_grid, saddle_grid, spherical_cap
-from golden_model.layouts import initial_layout
+from sim.generate import delaunay_patch, rolled_grid, saddle_grid, spherical_cap
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from golden_model.reference import barrier_active_nodes, barrier_forces, flatten
 

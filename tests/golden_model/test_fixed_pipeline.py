@@ -15,8 +15,8 @@ from golden_model.fixed.engine import FixedEngine, flatten_fixed, prepare, prese
 from golden_model.fixed.measures import FixedPointError, Reciprocal
 from golden_model.fixed.pipeline import (NeighbourStream, NodeConstants, edge_terms, neighbour_terms,
                                          node_update)
-from golden_model.generate import dome_grid, generated_meshes, grid_faces, grid_uv, rolled_grid
-from golden_model.layouts import initial_layout, tutte_layout
+from sim.generate import dome_grid, generated_meshes, grid_faces, grid_uv, rolled_grid
+from sim.layouts import initial_layout, tutte_layout
 from golden_model.mesh import Mesh, signed_areas_2d
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten
@@ -378,7 +378,7 @@ def test_cli_bad_formats(tmp_path, formats, message):
 
 def test_cli_refuses_a_mesh_out_of_range(tmp_path):
     mesh = _strip(1200)
-    from golden_model.mesh_io import save_obj
+    from sim.mesh_io import save_obj
     save_obj(tmp_path / "strip.obj", mesh.vertices, mesh.faces)
     proc = subprocess.run([SPRINGFLAT, "flatten", "strip.obj", "--engine", "fixed", "--out", "o.obj"],
                           capture_output=True, text=True, cwd=tmp_path)
@@ -402,7 +402,7 @@ def test_presets_holding_are_the_presets_a_problem_fits():
 
 
 def test_cli_names_the_preset_that_holds_a_mesh_the_default_formats_refuse(tmp_path):
-    from golden_model.mesh_io import save_obj
+    from sim.mesh_io import save_obj
 
     wheel = _wheel(40)
     save_obj(tmp_path / "wheel.obj", wheel.vertices, wheel.faces)

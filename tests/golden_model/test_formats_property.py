@@ -34,8 +34,8 @@ from golden_model.fixed.engine import flatten_fixed
 from golden_model.fixed.measures import FixedPointError
 from golden_model.fixed.format import Format
 from golden_model.fixed.formats_set import FORMAT_FIELDS, KNOB_DOMAINS, FormatSet
-from golden_model.generate import dome_grid, rolled_grid, saddle_grid, spherical_cap
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid, rolled_grid, saddle_grid, spherical_cap
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten
 from support import one_line

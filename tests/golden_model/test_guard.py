@@ -7,10 +7,10 @@ import pytest
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed, prepare
 from golden_model.fixed.guard import floor_min_raw, guarded_moves_raw, stuck_nodes_raw
-from golden_model.generate import delaunay_patch, spherical_cap
+from sim.generate import delaunay_patch, spherical_cap
 from golden_model.guard import (FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, SCALE_GROW_AFTER, SCALE_MAX_SHIFT,
                                 StepScale, area_floor, guarded_moves)
-from golden_model.layouts import initial_layout
+from sim.layouts import initial_layout
 from golden_model.mesh import folded_faces, signed_areas_2d
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.reference import flatten
@@ -141,7 +141,7 @@ def test_guard_options_are_checked():
 
 
 def test_a_folded_start_is_untangled_before_the_guarded_dynamics(tmp_path):
-    from golden_model.layouts import start_layout
+    from sim.layouts import start_layout
 
     mesh = spherical_cap(6)
     folded = initial_layout(mesh, "tutte")

@@ -4,8 +4,8 @@
 import numpy as np
 import pytest
 
-from golden_model.generate import hard_patches
-from golden_model.layouts import initial_layout, slim_layout, start_layout
+from sim.generate import hard_patches
+from sim.layouts import initial_layout, slim_layout, start_layout
 from golden_model.mesh import folded_faces
 from golden_model.params import FlattenParams
 from golden_model.reference import SpringModel, flatten, measure

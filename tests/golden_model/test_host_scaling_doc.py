@@ -13,8 +13,8 @@ import pytest
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.fixed.format import quantize
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 
 

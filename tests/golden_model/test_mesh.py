@@ -5,9 +5,10 @@ import pytest
 import trimesh
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import InconsistentOrientation, Mesh, MeshError, boundary_crossings, oriented_mesh
-from golden_model.mesh_io import load_mesh, load_mesh_with_notes, save_obj
-from golden_model.generate import grid_faces, grid_uv, rolled_grid
+from golden_model.mesh import (InconsistentOrientation, Mesh, MeshError, boundary_crossings, component_labels,
+                                count_components, oriented_mesh)
+from sim.mesh_io import load_mesh, load_mesh_with_notes, save_obj
+from sim.generate import grid_faces, grid_uv, rolled_grid
 
 SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
 SQUARE_F = np.array([[0, 1, 2], [0, 2, 3]])
@@ -140,7 +141,7 @@ def test_unparseable_and_unknown_files(tmp_path):
 
 
 def test_rings_are_cyclic_fans_in_the_mesh_winding():
-    from golden_model.generate import generated_meshes
+    from sim.generate import generated_meshes
     for mesh in list(generated_meshes().values())[:3]:
         rings = mesh.rings
         indptr, neighbours, _ = mesh.neighbours
@@ -177,7 +178,7 @@ def test_folded_faces_counts_against_the_whole_pattern():
 
 # --------------------------------------------------------------------------- OBJ reader
 
-from golden_model.mesh_io import load_mesh_with_notes  # noqa: E402
+from sim.mesh_io import load_mesh_with_notes  # noqa: E402
 
 UNIT_SQUARE_OBJ = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
 
@@ -208,7 +209,7 @@ def test_obj_the_issue_face_with_negative_triples(tmp_path):
             + "vt 0 0\n" * 9 + "vn 0 0 1\n" * 6 + "f -18/-9/-6 -17/-8/-5 -16/-7/-4\n")
     with pytest.raises(MeshError, match=r"vertex 3 is not used by any face \(file line 4\)"):
         load_mesh(_obj(tmp_path, text))  # the face is read; the 15 unused vertices are the validation's business
-    from golden_model.mesh_io import read_obj
+    from sim.mesh_io import read_obj
     assert read_obj(_obj(tmp_path, text)).faces.tolist() == [[0, 1, 2]]
 
 
@@ -419,7 +420,7 @@ _STL_FACET = ("  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n      v
     ("solid s\n  facet 0 0 1\n", r"line 2: expected 'facet normal nx ny nz' or 'endsolid', got 'facet 0 0 1'$"),
 ])
 def test_text_stl_refusals_name_the_line(tmp_path, text, message):
-    """A text STL is read line by line (golden_model.mesh_io.load.read_text_stl): a malformed or cut file is
+    """A text STL is read line by line (sim.mesh_io.load.read_text_stl): a malformed or cut file is
     refused naming the line, not with a parser's internal message."""
     path = tmp_path / "m.stl"
     path.write_text(text)
@@ -463,8 +464,8 @@ def test_coordinates_outside_the_range_are_refused_naming_it():
 def test_a_file_named_with_a_trailing_slash_is_not_read(tmp_path):
     """``scan.obj/`` names no file (the OS says "not a directory"); pathlib drops the slash, and the file was
     read as if it had been named without it."""
-    from golden_model.layouts import LayoutError, load_layout
-    from golden_model.mesh_io import read_obj
+    from sim.layouts import LayoutError, load_layout
+    from sim.mesh_io import read_obj
 
     square = tmp_path / "square.obj"
     square.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n")
@@ -611,3 +612,24 @@ def test_boundary_crossings_count_the_pairs_a_pair_by_pair_test_finds(seed, monk
     positions = np.vstack([rng.normal(size=(3, 2)), polygon])  # the loop picks its rows out of a layout
     loop = np.arange(3, len(positions))
     assert boundary_crossings(positions, loop) == _crossing_pairs_by_hand(polygon)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_component_labels_give_scipys_components(seed):
+    """The numpy components against scipy's, on random sparse graphs and a randomly numbered chain (the
+    longest span for the hooking)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    if seed == 0:
+        order = rng.permutation(n)
+        a, b = order[:-1], order[1:]
+    else:
+        a, b = rng.integers(0, n, (2, int(rng.integers(0, 500))))
+    count, theirs = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)), directed=False)
+    labels = component_labels(n, a, b)
+    assert count_components(n, a, b) == count == len(np.unique(labels))
+    assert len(np.unique(np.column_stack([labels, theirs]), axis=0)) == count  # the same partition
+    assert all(labels[i] == np.flatnonzero(labels == labels[i]).min() for i in range(n))  # each part's smallest node

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.layouts import initial_layout
+from sim.layouts import initial_layout
 from golden_model.mesh import Mesh
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.reference import (
@@ -19,7 +19,7 @@ from golden_model.reference import (
     spring_forces,
     variable_step,
 )
-from golden_model.generate import dome_grid, rolled_grid
+from sim.generate import dome_grid, rolled_grid
 
 SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
 SQUARE_F = np.array([[0, 1, 2], [0, 2, 3]])
@@ -307,7 +307,7 @@ def test_no_layout_within_the_runaway_factor_of_its_edges_is_a_runaway():
     """A strip rolled ten times round has a 3D box 30 times narrower than its unrolled length, and Tutte's
     start is a circle: its exact layout, with every edge stretched up to RUNAWAY_FACTOR times, is still no
     runaway (a bound on the boxes alone called it one)."""
-    from golden_model.generate import rolled_grid
+    from sim.generate import rolled_grid
     from golden_model.reference import RUNAWAY_FACTOR, in_range, runaway_width
 
     rolled, unrolled = rolled_grid(40, 3, arc_degrees=3600.0)

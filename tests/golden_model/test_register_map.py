@@ -14,8 +14,8 @@ from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import (RESULTS, EngineCapacity, build_image, energy_width, memory_layouts,
                                              run_constant_fields)
 from golden_model.engine_spec.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.engine_spec.image import UNGUARDED
 from golden_model.params import FlattenParams
 from sim.register_map_export import EXPORT_FILES, c_header, markdown, to_json, write_exports

@@ -9,8 +9,8 @@ import pytest
 from golden_model.engine_spec.image import EngineCapacity, UNGUARDED, build_image, run_image
 from golden_model.fixed.engine import prepare
 from golden_model.fixed.format import Format
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from support.engine_sim import CAPACITY, FS, MESH, PreloadableEngine, assert_same_run, image_of, run_on_engine
 

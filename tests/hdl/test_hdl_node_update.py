@@ -17,7 +17,7 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import FixedEngine, prepare
 from golden_model.fixed.pipeline import BarrierEntries, NeighbourStream, NodeConstants, node_update
 from golden_model.fixed import SaturationCounter
-from golden_model.layouts import initial_layout
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from hdl import NodeUpdate
 from sim.payloads import pass_beats, unpack_beats
@@ -234,7 +234,7 @@ def test_random_nodes_with_barrier_triangles(preset, momentum):
 @pytest.mark.parametrize("preset", PRESETS)
 def test_momentum_flattening_over_several_iterations(preset):
     """A 4-ring spherical cap with the barrier: iterations 0..5 of the momentum dynamics, restarts included."""
-    from golden_model.generate import spherical_cap
+    from sim.generate import spherical_cap
     fs = FormatSet.preset(preset)
     mesh = spherical_cap(4)
     params = FlattenParams(dynamics="momentum", **UNGUARDED)

@@ -12,7 +12,7 @@ import trimesh
 
 import springflat
 from golden_model.mesh import MeshError
-from golden_model.mesh_io import load_mesh
+from sim.mesh_io import load_mesh
 from golden_model.params import ParameterError
 from sim.cli import main
 from support import REPO, SPRINGFLAT
@@ -297,7 +297,7 @@ def test_write_pattern_and_read_mesh(ear, tmp_path):
 
 
 def test_arrays_with_a_face_wound_against_its_neighbours_are_turned_with_a_note():
-    from golden_model.generate import grid_faces, grid_uv
+    from sim.generate import grid_faces, grid_uv
 
     uv = grid_uv(6, 6)
     faces = grid_faces(6, 6)

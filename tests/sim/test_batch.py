@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from golden_model.generate import dome_grid, grid_faces, grid_uv
-from golden_model.mesh_io import save_obj
+from sim.generate import dome_grid, grid_faces, grid_uv
+from sim.mesh_io import save_obj
 from sim.cli import main
 from support import PRESETS, run_springflat as run
 

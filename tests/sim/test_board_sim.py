@@ -11,7 +11,7 @@ from golden_model.engine_spec import uart_protocol as protocol
 from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import EngineCapacity
 from golden_model.engine_spec.register_map import MAGIC, VERSION
-from golden_model.layouts import initial_layout
+from sim.layouts import initial_layout
 from sim.board_sim import run_board_sim
 from sim.cli import build_parser
 from sim.engine_run import engine_flatten_result

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh_io import load_mesh
-from golden_model.generate import dome_grid
+from sim.mesh_io import load_mesh
+from sim.generate import dome_grid
 from support import SCANS, run_springflat as run
 
 
@@ -265,7 +265,7 @@ def test_variable_step_beats_fixed_on_surf1():
 @pytest.mark.slow
 def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap():
     """Defaults for files: momentum, fold barrier, ARAP start, stop at the energy minimum."""
-    from golden_model.layouts import initial_layout
+    from sim.layouts import initial_layout
     from golden_model.reference import SpringModel, measure
 
     path = SCANS / "bunny_face.obj"
@@ -367,8 +367,8 @@ def test_a_fixed_point_refusal_names_the_presets_that_hold_the_mesh(monkeypatch,
 def test_a_face_wound_against_its_neighbours_is_turned_and_the_pattern_has_no_fold(tmp_path, engine):
     """A scan's file with one face written the other way round: the run turns it (a note says so) and the
     pattern, counted with the faces as written to it, has every triangle on one side."""
-    from golden_model.generate import grid_faces, grid_uv
-    from golden_model.mesh_io import read_obj, save_obj
+    from sim.generate import grid_faces, grid_uv
+    from sim.mesh_io import read_obj, save_obj
 
     uv = grid_uv(6, 6)
     faces = grid_faces(6, 6)
@@ -421,7 +421,7 @@ def test_the_notes_on_a_given_start_are_printed_with_progress_lines_or_without(t
     mirror image mirrored back) is printed all the same, once."""
     import sys
 
-    from golden_model.mesh_io import save_obj
+    from sim.mesh_io import save_obj
     from sim.cli import main
 
     mesh = dome_grid(6)
@@ -565,8 +565,8 @@ def test_a_mesh_given_after_an_option_is_told_where_it_goes(argv, hint, capsys):
 @pytest.mark.parametrize("options", [["--dynamics", "paper"], ["--no-guard"]], ids=["paper", "momentum-unguarded"])
 def test_an_unguarded_run_from_a_folded_arap_start_says_so(options, tmp_path):
     """auto falls back to SLIM for a guarded run only; an unguarded one starts from ARAP's folds, with a note."""
-    from golden_model.generate import hard_patches
-    from golden_model.mesh_io import save_obj
+    from sim.generate import hard_patches
+    from sim.mesh_io import save_obj
 
     mesh = hard_patches()["slivers"]  # ARAP folds 8 of its triangles
     save_obj(tmp_path / "slivers.obj", mesh.vertices, mesh.faces)
@@ -582,8 +582,8 @@ def test_an_unguarded_run_from_a_folded_arap_start_says_so(options, tmp_path):
 
 
 def test_an_unguarded_run_where_arap_fails_names_the_start_to_give(tmp_path):
-    from golden_model.generate import grid_faces, grid_uv
-    from golden_model.mesh_io import save_obj
+    from sim.generate import grid_faces, grid_uv
+    from sim.mesh_io import save_obj
 
     uv = grid_uv(6, 6)
     vertices = np.column_stack([uv, 0.1 * (uv**2).sum(axis=1)])
@@ -608,7 +608,7 @@ def test_what_the_mesh_alone_cannot_run_is_refused_before_the_start_is_computed(
     """A cone's tip of 40 spokes (a degree the default formats cannot sum), or a mesh over the engine's capacity:
     no layout changes that, so the refusal comes before the start (ARAP on a big scan takes seconds)."""
     import sim.flatten_run as flatten_run
-    from golden_model.mesh_io import save_obj
+    from sim.mesh_io import save_obj
     from sim.cli import main
 
     def no_start(*args, **kw):
@@ -738,7 +738,7 @@ def test_a_fixed_point_run_whose_steps_round_to_no_move_says_its_pattern_is_its_
     import warnings
 
     import springflat
-    from golden_model.mesh_io import save_obj
+    from sim.mesh_io import save_obj
     from sim.cli import main
 
     vertices, faces = _gently_curved_grid()
@@ -829,8 +829,8 @@ def test_the_run_line_says_when_the_energy_floor_stopped_a_developable_patch(tmp
     """A rolled grid from ARAP stops on the floor (its energy falls to 0 while its relative change stays large),
     which the run line says, with the option that lowers it; a smaller --tol-energy lowers it (an rms strain
     of min(eps, 1e-3)). It said 'the stop rule held' while the energy still fell 6 % an iteration."""
-    from golden_model.generate import rolled_grid
-    from golden_model.mesh_io import save_obj
+    from sim.generate import rolled_grid
+    from sim.mesh_io import save_obj
 
     mesh, _ = rolled_grid(8, 8, arc_degrees=90.0)
     save_obj(tmp_path / "rolled.obj", mesh.vertices, mesh.faces)

@@ -79,7 +79,7 @@ def _first_restart(mesh, params: dict) -> int:
     """The iteration of the golden model's first momentum restart from Tutte (its ``S < 0`` the one before)."""
     from golden_model.fixed.engine import FixedEngine, prepare
     from golden_model.fixed.format import SaturationCounter
-    from golden_model.layouts import initial_layout
+    from sim.layouts import initial_layout
     from golden_model.params import FlattenParams
 
     engine = FixedEngine(prepare(mesh, initial_layout(mesh, "tutte"), FlattenParams(**params), DEFAULT),
@@ -102,8 +102,8 @@ def test_closed_loop_momentum_dynamics(simulator, barrier, tmp_path):
     the fixed-point run's one restart is its seventh iteration, ``S < 0`` in its sixth; the four-ring cap's
     first restart is its sixteenth)."""
     need_simulator(simulator)
-    from golden_model.generate import spherical_cap
-    from golden_model.mesh_io import save_obj
+    from sim.generate import spherical_cap
+    from sim.mesh_io import save_obj
 
     cap = spherical_cap(4 if simulator == "verilator" else 2)
     path = tmp_path / "cap.obj"
@@ -169,8 +169,8 @@ def test_rtl_check_cli_on_an_unseen_mesh(simulator, tmp_path, dynamics):
     import sys
     from pathlib import Path
 
-    from golden_model.generate import delaunay_patch
-    from golden_model.mesh_io import save_obj
+    from sim.generate import delaunay_patch
+    from sim.mesh_io import save_obj
 
     nodes = 100 if simulator == "icarus" else 220
     mesh = delaunay_patch(nodes, seed=11)

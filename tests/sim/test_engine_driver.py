@@ -9,8 +9,8 @@ from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import flatten_fixed, prepare
 from golden_model.engine_spec.image import EngineCapacity, build_image
 from golden_model.engine_spec.register_map import RegisterMap
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from sim.engine_driver import BusError, DriverError, EngineDriver, ModelBus
 from golden_model.engine_spec.image import UNGUARDED

@@ -19,8 +19,8 @@ import pytest
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import EngineCapacity, build_image, run_image
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from sim.engine_run import engine_directory, engine_sources, run_image_on_rtl, simulation_harness, top_ports
 from sim.top_names import ENGINE_MODULE
@@ -181,7 +181,7 @@ def test_rtl_check_engine_top_cli(tmp_path):
 def test_rtl_check_on_a_mesh_file_with_its_defaults_runs_the_whole_engine(tmp_path):
     """A mesh file's defaults are the guarded momentum dynamics, which only the whole engine runs: rtl-check
     says so in a note and checks SpringflatEngine, bit-exact, instead of refusing its own defaults."""
-    from golden_model.mesh_io import save_obj
+    from sim.mesh_io import save_obj
 
     need_simulator("verilator")
     mesh = dome_grid(4)

@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from golden_model.generate import grid_faces, grid_uv
-from golden_model.mesh_io import load_mesh_with_notes, read_obj
+from sim.generate import grid_faces, grid_uv
+from sim.mesh_io import load_mesh_with_notes, read_obj
 from sim.cli import main
 from support import SCANS, SPRINGFLAT
 
@@ -1414,8 +1414,8 @@ def _building(cwd: Path, name: str):
 def test_real_exit_a_hang_up_during_flatten_leaves_no_output(tmp_path, after):
     """A closed terminal (SIGHUP to the group) ends a run as Ctrl-C does: no output file and no temporary
     one; status 129 (128 + 1) and one line."""
-    from golden_model.generate import dome_grid
-    from golden_model.mesh_io import save_obj
+    from sim.generate import dome_grid
+    from sim.mesh_io import save_obj
 
     mesh = dome_grid(64)
     save_obj(tmp_path / "m.obj", mesh.vertices, mesh.faces)
@@ -1432,8 +1432,8 @@ def test_real_exit_a_hang_up_that_nohup_ignores_stays_ignored(tmp_path):
     workers too; Ctrl-C still ends it."""
     import time
 
-    from golden_model.generate import dome_grid
-    from golden_model.mesh_io import save_obj
+    from sim.generate import dome_grid
+    from sim.mesh_io import save_obj
 
     mesh = dome_grid(64)
     for name in ("m.obj", "n.obj"):
@@ -1475,8 +1475,8 @@ def test_real_exit_a_ctrl_c_that_a_pool_thread_receives_stops_the_batch(tmp_path
     import ctypes
     import time
 
-    from golden_model.generate import dome_grid
-    from golden_model.mesh_io import save_obj
+    from sim.generate import dome_grid
+    from sim.mesh_io import save_obj
 
     mesh = dome_grid(64)
     for name in ("m.obj", "n.obj"):
@@ -1508,8 +1508,8 @@ def test_real_exit_ctrl_c_during_flatten_leaves_no_output(tmp_path, after):
     """Ctrl-C while importing, early, or during the run: one line, status 130, no file. (Counted from the
     start of the imports: within Python's own start-up, before any of springflat's code runs, CPython
     answers for itself.)"""
-    from golden_model.generate import dome_grid
-    from golden_model.mesh_io import save_obj
+    from sim.generate import dome_grid
+    from sim.mesh_io import save_obj
 
     mesh = dome_grid(64)  # long enough to be running at 2.5 s
     save_obj(tmp_path / "m.obj", mesh.vertices, mesh.faces)
@@ -1828,8 +1828,8 @@ def test_a_fixed_point_run_at_its_energy_floor_says_so(engine, iterations, noted
     """The cap from ARAP, the unguarded dynamics under Algorithm 1's per-iteration rule: the fixed-point
     energy reaches its rounding floor (~1e-5 relative) well before N_max = 130 and never meets ε = 1e-7
     (docs/dynamics.md); 20 iterations are still descending."""
-    from golden_model.generate import spherical_cap
-    from golden_model.mesh_io import save_obj
+    from sim.generate import spherical_cap
+    from sim.mesh_io import save_obj
 
     cap = spherical_cap()
     save_obj(tmp_path / "cap.obj", cap.vertices, cap.faces)

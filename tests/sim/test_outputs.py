@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from matplotlib.colors import to_rgba
 
-from golden_model.generate import dome_grid
-from golden_model.layouts import tutte_layout
+from sim.generate import dome_grid
+from sim.layouts import tutte_layout
 from golden_model.mesh import folded_faces, triangle_areas_3d
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten
@@ -295,7 +295,7 @@ def test_an_engines_history_numbers_its_final_row_by_the_iterations_run(tmp_path
     from golden_model.builtin import builtin_mesh
     from golden_model.fixed.engine import prepare
     from golden_model.fixed.formats_set import FormatSet
-    from golden_model.layouts import initial_layout
+    from sim.layouts import initial_layout
     from golden_model.params import FlattenParams
     from sim.engine_run import engine_flatten_result
     from sim.outputs import write_history

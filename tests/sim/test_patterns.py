@@ -10,9 +10,9 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from golden_model.generate import dome_grid
+from sim.generate import dome_grid
 from golden_model.mesh import Mesh
-from golden_model.mesh_io import load_mesh, read_obj
+from sim.mesh_io import load_mesh, read_obj
 from sim.distortion import DISTORTION_HEADER, distortion, worst_summary, write_distortion_csv
 from sim.patterns import (MAX_SHEETS, OVERLAP_MM, PatternDrawing, PatternError, plan_sheets, write_pattern_file)
 from support import SCANS, SPRINGFLAT
@@ -725,7 +725,7 @@ def test_a_fit_page_is_not_turned_past_the_largest_a_pdf_has(tmp_path):
 
 def _rectangle(width: float, height: float, angle_degrees: float = 0.0) -> tuple[Mesh, np.ndarray]:
     """A flat width × height grid (mesh units) and its layout turned by ``angle_degrees``."""
-    from golden_model.generate import grid_faces, grid_uv
+    from sim.generate import grid_faces, grid_uv
 
     uv = grid_uv(5, 5, width, height)
     a = math.radians(angle_degrees)
@@ -787,7 +787,7 @@ def test_the_apis_words_quote_each_value_of_a_list():
 def test_grain_turns_a_developable_pattern_so_that_the_direction_points_up():
     """The rolled grid's generators (3D y) unroll to parallel lines: laid at 30°, --grain y turns them
     vertical; -y turns them the other way up; a flat square laid as a diamond comes back square."""
-    from golden_model.generate import rolled_grid
+    from sim.generate import rolled_grid
     from sim.patterns import _turned, grain_angle, grain_direction
 
     mesh, unrolled = rolled_grid(8, 8, arc_degrees=90.0)
@@ -818,7 +818,7 @@ def test_the_grain_line_is_in_every_pattern_file_and_the_sheets_keep_the_turn(tm
     and the sheets are not turned again to fit (the grain fixes the turn)."""
     import ezdxf
 
-    from golden_model.mesh_io import save_obj
+    from sim.mesh_io import save_obj
 
     strip, _ = _rectangle(400.0, 40.0)  # across 3D y when --grain y: 400 mm wide, which the sheets would turn upright
     save_obj(tmp_path / "sq.obj", strip.vertices, strip.faces)
@@ -855,7 +855,7 @@ def test_a_grain_across_a_half_pipe_is_an_axis_not_cancelling_pieces():
     Components of any size are a direction (1e308 overflowed the norm, 1e-320 was 'zero')."""
     import warnings
 
-    from golden_model.generate import rolled_grid
+    from sim.generate import rolled_grid
 
     mesh, unrolled = rolled_grid(13, 5, arc_degrees=180.0)
     for grain in ("x", "1e308,0,0", "1e-320,0,0", (2.0, 0.0, 0.0)):
@@ -867,7 +867,7 @@ def test_a_grain_across_a_half_pipe_is_an_axis_not_cancelling_pieces():
 
 
 def test_a_grain_normal_to_the_surface_is_refused_before_the_run(tmp_path, monkeypatch, capsys):
-    from golden_model.mesh_io import save_obj
+    from sim.mesh_io import save_obj
     import sim.cli
 
     square, _ = _rectangle(100.0, 100.0)

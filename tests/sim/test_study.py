@@ -22,13 +22,13 @@ from golden_model.reference import flatten
 from golden_model.study import (
     AccuracyTarget,
     Config,
-    build_cases,
     class_changes,
     make_config,
     parse_bits,
     parse_knobs,
     sweep_configs,
 )
+from sim.study.cases import build_cases
 from sim.study.cli import REPORT_FILES, add_parser, cmd_study
 from sim.study.cost import cost, multipliers
 from sim.study.flow import Study

@@ -15,8 +15,8 @@ from golden_model.fixed.engine import flatten_fixed, prepare
 from golden_model.engine_spec.image import UNGUARDED
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity, build_image
 from golden_model.engine_spec.register_map import MAGIC, RegisterMap
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from sim.board_run import board_capacity, run_on_board
 from sim.engine_driver import BusError, DriverError, EngineDriver, ModelBus

@@ -84,8 +84,8 @@ def test_slim_beside_arap_gives_slims_layout_and_leaves_no_process(monkeypatch, 
 
     import numpy as np
 
-    from golden_model.layouts import slim_layout
-    from golden_model.mesh_io import load_mesh
+    from sim.layouts import slim_layout
+    from sim.mesh_io import load_mesh
     from golden_model.params import FlattenParams
     from sim import run_options
     from support import SCANS
@@ -111,7 +111,7 @@ def test_slim_beside_arap_gives_slims_layout_and_leaves_no_process(monkeypatch, 
 
 
 def _slim_worker_started_here(_) -> bool:
-    from golden_model.mesh_io import load_mesh
+    from sim.mesh_io import load_mesh
     from sim import run_options
     from support import SCANS
 

@@ -11,8 +11,8 @@ from amaranth.sim import Simulator
 from golden_model.engine_spec.image import BUS_WORD_BITS, UNGUARDED, EngineCapacity, build_image, node_word_layout
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
-from golden_model.generate import dome_grid
-from golden_model.layouts import initial_layout
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
 from hdl.engine import SpringflatEngine
 from sim.engine_driver import BusError, EngineDriver

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh import MeshError
+from golden_model.mesh import MeshError
 from .polygons import INDEX_LIMIT, Polygons, checked_polygons, is_int, plural, text_coordinates
 
 #: OFF keywords: vertex colours (C), normals (N) and texture coordinates (ST) follow x y z and are ignored.

@@ -8,8 +8,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..files import read_file_bytes
-from ..mesh import Mesh, MeshError, oriented_mesh
+from golden_model.files import read_file_bytes
+from golden_model.mesh import Mesh, MeshError, oriented_mesh
 from .obj import obj_line_hint, read_obj
 from .off import read_off
 from .ply import read_ply

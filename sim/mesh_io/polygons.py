@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..mesh import COORDINATE_LIMIT, MeshError
+from golden_model.mesh import COORDINATE_LIMIT, MeshError
 
 #: Largest magnitude a face index read from a text file may have; far beyond any vertex count, and
 #: exactly representable in float64 (PLY ASCII numbers are read as floats), so a larger index is

@@ -7,7 +7,7 @@ import pytest
 
 from golden_model.builtin import builtin_mesh
 import igl
-from golden_model.layouts import (
+from sim.layouts import (
     LAYOUT_METHODS,
     LayoutError,
     arap_layout,
@@ -19,7 +19,7 @@ from golden_model.layouts import (
     tutte_layout,
 )
 from golden_model.mesh import Mesh, folded_faces, signed_areas_2d
-from golden_model.generate import delaunay_patch, dome_grid, grid_faces, grid_uv, rolled_grid, saddle_grid
+from sim.generate import delaunay_patch, dome_grid, grid_faces, grid_uv, rolled_grid, saddle_grid
 
 
 def test_tutte_boundary_circle_and_barycentric_interior():
@@ -212,7 +212,7 @@ def test_libigl_exception_is_a_layout_error(monkeypatch, method, function):
 def test_auto_starts_from_slim_where_arap_fails():
     """A 1e-9 sliver makes libigl's ARAP return non-finite coordinates: ``auto`` (which the user did not ask
     to be ARAP) then starts from SLIM on Tutte's layout, with a note; ``arap`` asked for by name fails."""
-    from golden_model.layouts import start_layout
+    from sim.layouts import start_layout
 
     uv = grid_uv(6, 6)
     vertices = np.column_stack([uv, 0.1 * (uv**2).sum(axis=1)])
@@ -242,7 +242,7 @@ def test_a_computed_start_is_oriented_by_its_area_as_folds_are_counted():
     """A folded start whose faces are mostly clockwise by count but whose bulk (its total signed area)
     is counter-clockwise is left as it is: the rule is the one its folds are counted against, so the
     few large faces stay the pattern and the many slivers are its folds."""
-    from golden_model.layouts import _counter_clockwise
+    from sim.layouts import _counter_clockwise
     from golden_model.mesh import layout_orientation
 
     angles = np.radians([0.0, 170.0, 169.0, 168.0, 167.0])  # an open fan: one wide face, three slivers back

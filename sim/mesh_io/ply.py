@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh import MeshError
+from golden_model.mesh import MeshError
 from .polygons import INDEX_LIMIT, Polygons, checked_polygons, first_unplain, is_float
 
 #: PLY scalar types and their numpy codes (byte order added for binary files).

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import read_file_bytes
-from ..mesh import MeshError
+from golden_model.files import read_file_bytes
+from golden_model.mesh import MeshError
 from .polygons import Polygons, first_unplain, is_int, plural, text_coordinates, triangulate_polygons
 
 #: Free-form geometry statements: they define curves and surfaces the

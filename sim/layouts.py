@@ -50,8 +50,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .files import read_file_bytes
-from .mesh import COORDINATE_LIMIT, Mesh, MeshError, layout_orientation, signed_areas_2d
+from golden_model.files import read_file_bytes
+from golden_model.mesh import COORDINATE_LIMIT, Mesh, MeshError, layout_orientation, signed_areas_2d
 from .mesh_io import read_obj_vertices
 from .mesh_io.polygons import is_plain
 
@@ -468,7 +468,7 @@ class StartLayout:
 
 
 def _folds(mesh: Mesh, positions: np.ndarray) -> int:
-    from .mesh import folded_faces
+    from golden_model.mesh import folded_faces
 
     return int(np.count_nonzero(folded_faces(positions, mesh.faces)))
 
@@ -480,7 +480,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     The guarded dynamics keeps a fold-free start fold-free but cannot clear a fold. ``auto`` is ARAP,
     or SLIM from Tutte (fold-free by construction) where ARAP folds or fails: measured on the corpus, that
     beats untangling ARAP's layout on E_C and on time. Any other start with folds is untangled
-    (:func:`golden_model.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
+    (:func:`sim.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
     folded is returned with its count, and the notes say why. ``progress(text)`` is called before
     each long step. ``slim()`` gives :func:`slim_layout`'s layout of ``mesh`` when ARAP folds (default: it
     computes it; a caller may have started it beside ARAP, on another core).

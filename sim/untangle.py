@@ -25,7 +25,7 @@ import numpy as np
 from scipy.optimize import minimize
 from threadpoolctl import threadpool_limits
 
-from .mesh import Mesh, layout_orientation
+from golden_model.mesh import Mesh, layout_orientation
 
 __all__ = ["UntangleResult", "untangle_layout", "symmetric_dirichlet", "UNTANGLE_THETA"]
 
