@@ -28,7 +28,7 @@ from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
                        check_mesh_fits, error_text, kind_or_none, on_sheets, run_caption, scale_note,
-                       write_pattern_file)
+                       seam_length, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
 
@@ -101,6 +101,9 @@ def check_options_used(args: argparse.Namespace) -> None:
     if args.grain is not None and not args.out:
         raise UserError("--grain turns the pattern files and draws their grain line: add --out NAME.dxf, .pdf, .svg, "
                         ".obj or .flat.obj")
+    if args.seam_allowance is not None and not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
+        raise UserError("--seam-allowance draws the cut line outside the pattern's edge: add --out NAME.dxf, .pdf or "
+                        ".svg")
     if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
         raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg (a .flat.svg is "
                         "the layout drawn to fit, not a pattern on sheets)")
@@ -437,6 +440,8 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
         result.extra.get("boundary_crossings")))
     if args.grain is not None and args.out and result.status != "diverged":
         drawing = drawing.with_grain(args.grain)
+    if args.seam_allowance is not None:
+        drawing = drawing.with_seam(seam_length(args.seam_allowance, args.units))
     jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=paper_of(args),
                                                             dxf_edges=args.dxf_edges))
             for path in args.out or ()]

@@ -38,6 +38,7 @@ import math
 import os
 import stat
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Callable, Sequence
 from xml.sax.saxutils import escape
@@ -77,6 +78,10 @@ FIT_PAD_MM = 5.0          # room around the pattern in a ``fit`` window
 FIT_MIN_WIDTH_MM = 160.0  # a ``fit`` page is at least this wide (room for the title block)
 SVG_GAP_MM = 10.0         # space between tiled sheets in an SVG
 CUT_WIDTH_MM = 0.3        # the cut line
+SEW_WIDTH_MM = 0.2        # the sew line, inside the cut line when there is a seam allowance ...
+SEW_DASH_MM = (3.0, 1.5)  # ... dashed: on and off
+SEAM_ARC_SEGMENTS = 32    # chords a quarter circle has where the cut line turns round a corner of the sew line
+SEAM_MARGIN = 1e-3        # the cut line is at least the allowance, at most this share more, from the sew line
 EDGE_WIDTH_MM = 0.06      # mesh edges, drawn only when ...
 EDGE_MIN_MM = 2.0         # ... the median edge is at least this long on paper
 GRAIN_WIDTH_MM = 0.2      # the grain line and its arrowheads (--grain) ...
@@ -148,6 +153,10 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
                         help="turn the pattern files so that this 3D direction of the mesh (-z: the other way), as "
                              "laid on the pattern, points up the page, and draw it as a grain line (default: the "
                              "layout's own frame, turned to fit the sheets)")
+    parser.add_argument("--seam-allowance", type=seam_allowance_argument, default=None, metavar="LENGTH",
+                        help="add a seam allowance: the cut line runs this far outside the pattern's edge, which is "
+                             "drawn as the sew line (dashed; DXF layer SEW); a length in --units, or with its "
+                             "unit: 10mm, 1.5cm, 0.375in (default: none, the pattern's edge is the cut line)")
     parser.add_argument("--dxf-edges", action="store_true",
                         help="also write every mesh edge to the DXF, on layer MESH (the boundary is on CUT)")
     parser.add_argument("--distortion", type=file_path_argument, default=None, metavar="FILE.csv",
@@ -172,6 +181,8 @@ class PatternDrawing:
         caption: one line about the run (status, errors), printed under the name.
         grain: the 3D direction the pattern was turned to carry up the page (:meth:`with_grain`), as the
             user named it (``z``, ``1,0,0``), or ``""``: the layout's own frame, no grain line.
+        seam: the seam allowance in ``units`` (:meth:`with_seam`): the cut line runs this far outside the
+            boundary, which becomes the sew line; 0: the boundary is the cut line.
     """
 
     name: str
@@ -183,6 +194,7 @@ class PatternDrawing:
     units: str = "mm"
     caption: str = ""
     grain: str = ""
+    seam: float = 0.0
 
     @classmethod
     def of(cls, mesh: Mesh, layout: np.ndarray, units: str = "mm", caption: str = "") -> "PatternDrawing":
@@ -196,13 +208,31 @@ class PatternDrawing:
 
     @property
     def boundary_points(self) -> np.ndarray:
-        """``(B, 2)`` the cut line's corners, in ``units`` (closed: the last joins the first)."""
+        """``(B, 2)`` the pattern's edge, in ``units`` (closed: the last joins the first): the cut line, or the
+        sew line where there is a seam allowance."""
         return self.layout[self.boundary]
 
     def boundary_length(self) -> float:
-        """Length of the closed cut line, in ``units``."""
+        """Length of the pattern's closed edge, in ``units``."""
         p = self.boundary_points
         return float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
+
+    @cached_property
+    def cut_points(self) -> np.ndarray:
+        """``(K, 2)`` the cut line's corners, in ``units`` (closed): the boundary, or the seam allowance's
+        outline (:func:`seam_outline`)."""
+        return seam_outline(self.boundary_points, self.seam) if self.seam > 0 else self.boundary_points
+
+    @property
+    def drawn_points(self) -> np.ndarray:
+        """Every point that sets the drawing's extent: the layout and the cut line, in ``units``."""
+        return np.vstack([self.layout, self.cut_points]) if self.seam > 0 else self.layout
+
+    def with_seam(self, allowance: float) -> "PatternDrawing":
+        """The drawing with a seam allowance of ``allowance`` ``units`` (0: none)."""
+        if not (math.isfinite(allowance) and allowance >= 0):
+            raise PatternError(f"a seam allowance is a length of 0 or more, got {allowance!r}")
+        return replace(self, seam=float(allowance))
 
     def with_grain(self, grain: str | Sequence[float]) -> "PatternDrawing":
         """The drawing turned so that the 3D direction ``grain`` (:func:`grain_direction`), as the triangles
@@ -221,6 +251,55 @@ class PatternDrawing:
         x, y = self.layout[np.argmin(np.linalg.norm(self.layout - centroid, axis=1))]
         half = GRAIN_LINE_FRACTION * float(np.ptp(self.layout[:, 1])) / 2
         return np.array([[x, y - half], [x, y + half]])
+
+
+def seam_allowance_argument(text: str) -> str:
+    """``--seam-allowance``: a length, bare (in ``--units``) or with one of :data:`UNITS` (``10mm``), checked
+    here and turned into ``--units`` by :func:`seam_length` once those are known."""
+    try:
+        seam_length(text, "mm")
+    except PatternError as exc:
+        raise argparse.ArgumentTypeError(str(exc).replace("a seam allowance is a length", "expected a length")) from None
+    return text
+
+
+def seam_length(value: str | float, units: str) -> float:
+    """A seam allowance in ``units``: a number is in ``units`` already, a text may end in a unit (``10mm``,
+    ``1.5 cm``)."""
+    scale = check_units(units)
+    number, unit = value, units
+    if isinstance(value, str):
+        text = value.strip().lower()
+        unit = next((u for u in sorted(UNIT_MM, key=len, reverse=True) if text.endswith(u)), units)
+        text = text[:-len(unit)].strip() if text.endswith(unit) else text
+        try:
+            number = float(text)
+        except ValueError:
+            raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}") from None
+    elif isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}")
+    number = float(number)
+    if not (math.isfinite(number) and number >= 0):
+        raise PatternError(f"a seam allowance is a length of 0 or more, got {value!r}")
+    return number * UNIT_MM[unit] / scale
+
+
+def seam_outline(points: np.ndarray, allowance: float) -> np.ndarray:
+    """``(K, 2)`` the closed cut line ``allowance`` outside the closed sew line ``points``: the outline of the
+    points within that distance of the area the sew line encloses (shapely's buffer, round joins), so every
+    point of the sew line has the full allowance, and the zigzag of a scanned boundary's short edges is not
+    carried out to the cut line (mitred joins would make each of its bends a spike). The buffer is
+    :data:`SEAM_MARGIN` wider than asked: its rounded corners are chords, and GEOS simplifies the sew line by
+    a small share of the distance first, each of which brings the line a little closer (up to 0.05 % on a
+    scan). A sew line that crosses itself (a pattern that overlaps itself) is outlined around the area it
+    covers, without its holes."""
+    import shapely
+
+    covered = shapely.make_valid(shapely.Polygon(points))
+    grown = covered.buffer(allowance * (1 + SEAM_MARGIN), quad_segs=SEAM_ARC_SEGMENTS)
+    parts = getattr(grown, "geoms", [grown])
+    outline = max(parts, key=lambda part: part.area).exterior
+    return np.asarray(outline.coords, dtype=np.float64)[:-1]
 
 
 #: A grain line's length, as a fraction of the pattern's height, and its arrowheads', of its length.
@@ -430,7 +509,13 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
         doc = ezdxf.new("R2010", units=DXF_INSUNITS[drawing.units])
         doc.layers.add("CUT", color=7)
         msp = doc.modelspace()
-        msp.add_lwpolyline(drawing.boundary_points.tolist(), format="xy", close=True, dxfattribs={"layer": "CUT"})
+        msp.add_lwpolyline(drawing.cut_points.tolist(), format="xy", close=True, dxfattribs={"layer": "CUT"})
+        if drawing.seam > 0:
+            on, off = (length / check_units(drawing.units) for length in SEW_DASH_MM)
+            doc.linetypes.add("SEW", pattern=[on + off, on, -off], description="sew line")
+            doc.layers.add("SEW", color=3, linetype="SEW")
+            msp.add_lwpolyline(drawing.boundary_points.tolist(), format="xy", close=True,
+                               dxfattribs={"layer": "SEW"})
         if edges:
             doc.layers.add("MESH", color=8)
             for a, b in drawing.layout[drawing.edges].tolist():
@@ -442,7 +527,7 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
         # the drawing's extents: ezdxf leaves them at ±1e20 ("not set"), and a viewer's "zoom extents" then
         # shows nothing useful; both the header and the model space are set (ezdxf copies the latter on save,
         # unless it is the origin)
-        drawn = drawing.layout if edges else drawing.boundary_points
+        drawn = np.vstack([drawing.layout if edges else drawing.boundary_points, drawing.cut_points])
         low, high = (*drawn.min(axis=0), 0.0), (*drawn.max(axis=0), 0.0)
         msp.dxf.extmin, msp.dxf.extmax = low, high
         doc.header["$EXTMIN"], doc.header["$EXTMAX"] = low, high
@@ -454,6 +539,8 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
             meta["springflat_run"] = drawing.caption
         if drawing.grain:
             meta["springflat_grain"] = drawing.grain
+        if drawing.seam > 0:
+            meta["springflat_seam_allowance"] = f"{drawing.seam!r} {drawing.units}"
         # ezdxf adds a CLASS per object type in use while saving, in the order of a set (the hash seed's):
         # register them first, sorted, so that the file does not depend on the process
         for dxftype in sorted(doc.entitydb.dxf_types_in_use()):
@@ -527,8 +614,9 @@ class SheetPlan:
 
 
 def pattern_size_mm(drawing: PatternDrawing) -> tuple[float, float]:
-    """Width and height of the pattern on paper at 1:1, mm."""
-    extent = (drawing.layout.max(axis=0) - drawing.layout.min(axis=0)) * check_units(drawing.units)
+    """Width and height of the pattern on paper at 1:1 (with its seam allowance), mm."""
+    drawn = drawing.drawn_points
+    extent = (drawn.max(axis=0) - drawn.min(axis=0)) * check_units(drawing.units)
     return float(extent[0]), float(extent[1])
 
 
@@ -553,7 +641,7 @@ def _turned_to_fit(drawing: PatternDrawing, paper: str) -> tuple[PatternDrawing,
     from scipy.spatial import ConvexHull, QhullError
 
     try:
-        hull = drawing.layout[ConvexHull(drawing.layout).vertices]
+        hull = drawing.drawn_points[ConvexHull(drawing.drawn_points).vertices]
     except (QhullError, ValueError):  # a layout on a line has no hull (it is refused as degenerate before)
         return drawing, None
     sides = np.roll(hull, -1, axis=0) - hull
@@ -605,7 +693,7 @@ def scale_note(drawing: PatternDrawing, units_option: str = "--units {}") -> str
     """A note when the pattern is so small (under :data:`SMALL_PATTERN_MM`) or so large (over
     :data:`LARGE_PATTERN_MM`) at 1:1 that ``units`` is likely wrong, else ``None``; ``units_option`` spells
     the option that sets it (the API's ``units='{}'``)."""
-    width, height = pattern_size_mm(drawing)
+    width, height = pattern_size_mm(replace(drawing, seam=0.0))  # the pattern's size, not the allowance chosen
     if SMALL_PATTERN_MM <= max(width, height) <= LARGE_PATTERN_MM:
         return None
     small = max(width, height) < SMALL_PATTERN_MM
@@ -730,8 +818,8 @@ def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = O
 
 def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
     """``plan`` less the sheets whose window holds nothing of the pattern (no triangle meets it: the cut
-    line, mesh edges and folded triangles all lie on the triangles): an L-shaped pattern's empty corner is
-    not printed. The others keep their labels, so that the grid still shows where each goes."""
+    line, mesh edges and folded triangles all lie on the triangles; with a seam allowance, the area inside
+    the cut line, which holds them all): an L-shaped pattern's empty corner is not printed. The others keep their labels, so that the grid still shows where each goes."""
     from matplotlib.path import Path as Outline
     from matplotlib.transforms import Bbox
 
@@ -753,7 +841,16 @@ def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
         return any(Outline(np.vstack([corners[t], corners[t][:1]]), closed=True).intersects_bbox(window, filled=True)
                    for t in near)  # (a closed path's last vertex is not drawn)
 
-    kept = tuple(sheet for sheet in plan.sheets if drawn(sheet))
+    def allowance_drawn(sheet: Sheet) -> bool:  # the seam allowance, between the triangles and the cut line
+        low = np.array(sheet.offset)
+        return cut.intersects_bbox(Bbox([low, low + size]), filled=True)
+
+    if drawing.seam > 0:
+        cut_mm = _pattern_mm(drawing, plan, drawing.cut_points)
+        cut = Outline(np.vstack([cut_mm, cut_mm[:1]]), closed=True)
+        kept = tuple(sheet for sheet in plan.sheets if allowance_drawn(sheet))
+    else:
+        kept = tuple(sheet for sheet in plan.sheets if drawn(sheet))
     return replace(plan, sheets=kept, blank=len(plan.sheets) - len(kept))
 
 
@@ -856,7 +953,9 @@ def _fitted(text: str, room: float, size: float, bold: bool = False,
 
 def pattern_title(drawing: PatternDrawing, name: str | None = None) -> str:
     """The first line of every sheet, the PDF's and the SVG's title: the name (or ``name``), scale, units."""
-    return f"{drawing.name if name is None else name}: springflat cutting pattern, scale 1:1, units {drawing.units}"
+    seam = f", seam allowance {_unit_label(drawing.seam, drawing.units)} included" if drawing.seam > 0 else ""
+    return (f"{drawing.name if name is None else name}: springflat cutting pattern, scale 1:1, units "
+            f"{drawing.units}{seam}")
 
 
 def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple[list[Stroke], list[Label]]:
@@ -920,9 +1019,10 @@ def _median_edge_mm(drawing: PatternDrawing) -> float:
 
 
 def _pattern_mm(drawing: PatternDrawing, plan: SheetPlan, points: np.ndarray | None = None) -> np.ndarray:
-    """``points`` (in ``units``; by default the layout) in mm, shifted onto the grid of windows with the layout."""
+    """``points`` (in ``units``; by default the layout) in mm, shifted onto the grid of windows with the drawing
+    (the layout and its cut line)."""
     points = drawing.layout if points is None else points
-    return (points - drawing.layout.min(axis=0)) * check_units(drawing.units) + np.array(plan.shift)
+    return (points - drawing.drawn_points.min(axis=0)) * check_units(drawing.units) + np.array(plan.shift)
 
 
 def _grain_mm(drawing: PatternDrawing, plan: SheetPlan) -> list[np.ndarray]:
@@ -933,13 +1033,17 @@ def _grain_mm(drawing: PatternDrawing, plan: SheetPlan) -> list[np.ndarray]:
     return [_pattern_mm(drawing, plan, stroke) for stroke in grain_arrow(drawing.grain_line())]
 
 
-def _pattern_parts(drawing: PatternDrawing, plan: SheetPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(edges (E', 2, 2), folded faces (K, 3, 2), cut line (B, 2))`` in the grid's mm; no edges when they
-    would merge on paper (median under :data:`EDGE_MIN_MM`)."""
+def _pattern_parts(drawing: PatternDrawing, plan: SheetPlan
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(edges (E', 2, 2), folded faces (K, 3, 2), cut line (B, 2), sew line (B', 2) or None)`` in the grid's
+    mm; no edges when they would merge on paper (median under :data:`EDGE_MIN_MM`); a sew line where there
+    is a seam allowance."""
     q = _pattern_mm(drawing, plan)
     edges = q[drawing.edges] if _median_edge_mm(drawing) >= EDGE_MIN_MM else np.empty((0, 2, 2))
     folded = q[drawing.faces[folded_faces(drawing.layout, drawing.faces)]]
-    return edges, folded, q[drawing.boundary]
+    if drawing.seam > 0:
+        return edges, folded, _pattern_mm(drawing, plan, drawing.cut_points), q[drawing.boundary]
+    return edges, folded, q[drawing.boundary], None
 
 
 # --------------------------------------------------------------------------- PDF (reportlab)
@@ -960,7 +1064,7 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     canvas.setSubject(f"{plan.describe()}; {drawing.caption}" if drawing.caption else plan.describe())
     canvas.setViewerPreference("PrintScaling", "None")  # the print dialog offers 100 %, not "fit to page"
 
-    edges, folded, cut = _pattern_parts(drawing, plan)
+    edges, folded, cut, sew = _pattern_parts(drawing, plan)
     sx, sy = plan.stride
     grid = (plan.window[2] + (plan.cols - 1) * sx, plan.window[3] + (plan.rows - 1) * sy)
     canvas.beginForm("pattern", -PT_PER_MM, -PT_PER_MM, (grid[0] + 1) * PT_PER_MM, (grid[1] + 1) * PT_PER_MM)
@@ -992,6 +1096,16 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     canvas.setLineWidth(CUT_WIDTH_MM)
     canvas.setStrokeGray(0.0)
     canvas.drawPath(path_, stroke=1, fill=0)
+    if sew is not None:
+        path_ = canvas.beginPath()
+        path_.moveTo(*sew[0])
+        for point in sew[1:].tolist():
+            path_.lineTo(*point)
+        path_.close()
+        canvas.setLineWidth(SEW_WIDTH_MM)
+        canvas.setDash(list(SEW_DASH_MM))
+        canvas.drawPath(path_, stroke=1, fill=0)
+        canvas.setDash([])
     grain = _grain_mm(drawing, plan)
     if grain:
         path_ = canvas.beginPath()
@@ -1058,7 +1172,7 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     page_w, page_h = plan.page
     total_w = plan.cols * page_w + (plan.cols - 1) * SVG_GAP_MM
     total_h = plan.rows * page_h + (plan.rows - 1) * SVG_GAP_MM
-    edges, folded, cut = _pattern_parts(drawing, plan)
+    edges, folded, cut, sew = _pattern_parts(drawing, plan)
     x0, y0, w, h = plan.window
     title = pattern_title(drawing)
 
@@ -1097,6 +1211,10 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             write("</g>\n")
         write(f'<polygon id="cut" points="{_svg_points(cut.tolist(), 0.0)}" stroke="#000000" '
               f'stroke-width="{_svg_num(CUT_WIDTH_MM)}"/>\n')
+        if sew is not None:
+            write(f'<polygon id="sew" points="{_svg_points(sew.tolist(), 0.0)}" stroke="#000000" '
+                  f'stroke-width="{_svg_num(SEW_WIDTH_MM)}" '
+                  f'stroke-dasharray="{_svg_num(SEW_DASH_MM[0])} {_svg_num(SEW_DASH_MM[1])}"/>\n')
         grain, grey = _grain_mm(drawing, plan), round(255 * GRAIN_GREY)
         if grain:
             write(f'<g id="grain" stroke="#{grey:02x}{grey:02x}{grey:02x}" '

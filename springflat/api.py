@@ -43,7 +43,7 @@ from sim.distortion import Distortion, distortion
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
                          ending_name_problem)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, kind_or_none, on_sheets,
-                          pattern_ending, run_caption, scale_note, write_pattern_file)
+                          pattern_ending, run_caption, scale_note, seam_length, write_pattern_file)
 from sim.run_options import UserError, add_run_options, file_defaults, params_from_args
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
@@ -335,7 +335,8 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
 
 
 def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str | None = None,
-                  dxf_edges: bool = False, grain: str | Sequence[float] | None = None) -> None:
+                  dxf_edges: bool = False, grain: str | Sequence[float] | None = None,
+                  seam_allowance: float | str | None = None) -> None:
     """Write ``pattern`` to ``path``, the format named by its ending (as ``springflat flatten --out``).
 
     ``.dxf`` (cut line on layer ``CUT``; ``dxf_edges``: mesh edges on ``MESH``), ``.pdf`` / ``.svg`` (true
@@ -343,7 +344,9 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     3D mesh with the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured
     by distortion).  ``grain`` (``x``, ``y``, ``z``, ``-z``, or ``"X,Y,Z"``): the pattern turned so that this 3D
     direction of the mesh, as laid on it, points up, with a grain line (as ``--grain``); by default the layout's
-    own frame.  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
+    own frame.  ``seam_allowance`` (a length in ``units``, or a text with its unit: ``"10mm"``): the cut line
+    runs this far outside the pattern's edge, which is drawn as the sew line (as ``--seam-allowance``; DXF, PDF
+    and SVG only).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
     :mod:`sim.patterns`; a true-scale pattern (DXF, PDF, SVG) under 10 mm or over 5 m across gives a
     :class:`MeshNote` warning that ``units`` is likely wrong.  The file appears whole or not at all, and an
     existing regular file at ``path`` that may be written is replaced (a read-only one is refused), but for
@@ -351,8 +354,10 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
 
     Raises:
         OutputError: a path that cannot be written, or a ``diverged`` pattern (its last finite layout is no
-            pattern: the command writes none either); ``dxf_edges`` without a ``.dxf`` path, or ``paper``
-            without a ``.pdf`` / ``.svg`` one, which would ignore them.
+            pattern: the command writes none either); ``dxf_edges`` without a ``.dxf`` path, ``paper``
+            without a ``.pdf`` / ``.svg`` one, or ``seam_allowance`` without one of those three, which would
+            ignore them.
+        PatternError: a seam allowance that is not a length of 0 or more.
     """
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"write_pattern takes a file path (str or pathlib.Path), not {type(path).__name__}")
@@ -375,6 +380,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         raise OutputError(f"write_pattern: dxf_edges draws the mesh's edges into a DXF pattern, not '{path}'")
     if paper is not None and not on_sheets(path):
         raise OutputError(f"write_pattern: paper is the sheet of a PDF or SVG pattern, not '{path}'")
+    if seam_allowance is not None and kind_or_none(path) not in TRUE_SCALE_KINDS:
+        raise OutputError(f"write_pattern: seam_allowance draws the cut line of a DXF, PDF or SVG pattern, not '{path}'")
     try:  # a missing directory, a link to a mesh, ... named
         check_output_path(Path(path), "the path", typed=False)
         check_link_target(Path(path), "the path", pattern_ending)
@@ -386,6 +393,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
         if grain is not None:
             drawing = drawing.with_grain(grain)
+        if seam_allowance is not None:
+            drawing = drawing.with_seam(seam_length(seam_allowance, units))
         write_pattern_file(Path(path), drawing, paper=DEFAULT_PAPER if paper is None else str(paper).lower(),
                            dxf_edges=dxf_edges)
     except PatternError as exc:  # the command's words for the same refusal ("check --units") in the API's
