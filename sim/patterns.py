@@ -3,7 +3,8 @@
 The writer is chosen by the file name's ending (:func:`pattern_kind`):
 
 =============  ==========================================================================================
-``.dxf``       the boundary as one closed ``LWPOLYLINE`` on layer ``CUT``; with ``dxf_edges`` every mesh
+``.dxf``       the boundary as one closed ``LWPOLYLINE`` on layer ``CUT`` (with a seam allowance the cut line
+               there, the boundary on layer ``SEW``); with ``dxf_edges`` every mesh
                edge as a ``LINE`` on layer ``MESH``; with a grain (``--grain``) its line on layer ``GRAIN``;
                coordinates in the mesh's units, 1:1, ``$INSUNITS`` and ``$MEASUREMENT`` set from ``units``
                (ezdxf).
@@ -259,7 +260,8 @@ def seam_allowance_argument(text: str) -> str:
     try:
         seam_length(text, "mm")
     except PatternError as exc:
-        raise argparse.ArgumentTypeError(str(exc).replace("a seam allowance is a length", "expected a length")) from None
+        message = str(exc).replace("a seam allowance is a length", "expected a length")
+        raise argparse.ArgumentTypeError(message) from None
     return text
 
 
@@ -819,7 +821,8 @@ def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = O
 def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
     """``plan`` less the sheets whose window holds nothing of the pattern (no triangle meets it: the cut
     line, mesh edges and folded triangles all lie on the triangles; with a seam allowance, the area inside
-    the cut line, which holds them all): an L-shaped pattern's empty corner is not printed. The others keep their labels, so that the grid still shows where each goes."""
+    the cut line, which holds them all): an L-shaped pattern's empty corner is not printed. The others keep their
+    labels, so that the grid still shows where each goes."""
     from matplotlib.path import Path as Outline
     from matplotlib.transforms import Bbox
 

@@ -381,7 +381,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     if paper is not None and not on_sheets(path):
         raise OutputError(f"write_pattern: paper is the sheet of a PDF or SVG pattern, not '{path}'")
     if seam_allowance is not None and kind_or_none(path) not in TRUE_SCALE_KINDS:
-        raise OutputError(f"write_pattern: seam_allowance draws the cut line of a DXF, PDF or SVG pattern, not '{path}'")
+        raise OutputError(f"write_pattern: seam_allowance draws the cut line of a DXF, PDF or SVG pattern, "
+                          f"not '{path}'")
     try:  # a missing directory, a link to a mesh, ... named
         check_output_path(Path(path), "the path", typed=False)
         check_link_target(Path(path), "the path", pattern_ending)

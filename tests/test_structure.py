@@ -112,14 +112,16 @@ def test_the_golden_model_needs_numpy_alone():
     """golden_model is the model, numpy only (the README's layout): libraries such as libigl, scipy or trimesh
     belong to the flows in sim/ (start layouts, untangling, mesh files, generated meshes)."""
     allowed = set(sys.stdlib_module_names) | {"numpy", "golden_model"}
-    found = {module: sorted(outside_imports(path) - allowed) for module, path in package_modules(("golden_model",)).items()}
+    modules = package_modules(("golden_model",))
+    found = {module: sorted(outside_imports(path) - allowed) for module, path in modules.items()}
     outside = {module: names for module, names in found.items() if names}
     assert not outside, f"golden_model imports beyond numpy: {outside}"
 
 
 def test_the_numpy_alone_check_sees_a_function_level_import(tmp_path):
     """The check itself: an import inside a function counts."""
-    (tmp_path / "m.py").write_text("import numpy as np\nfrom . import x\ndef f():\n    from scipy.sparse import csgraph\n")
+    (tmp_path / "m.py").write_text("import numpy as np\nfrom . import x\n"
+                                   "def f():\n    from scipy.sparse import csgraph\n")
     assert outside_imports(tmp_path / "m.py") == {"numpy", "scipy"}
 
 
