@@ -45,6 +45,7 @@ from amaranth.lib.wiring import In, Out
 
 from .dsp import ECP5, dsp_target, kept_register
 from .logic import or_tree
+from .parameters import check_int
 from .rom import DP16KD_ADDRESS_PINS, DP16KD_CONFIGS, DP16KD_DATA_PINS, dp16kd, dp16kd_port
 
 __all__ = ["BlockRam", "dp16kd_banks"]
@@ -85,10 +86,8 @@ class BlockRam(wiring.Component):
 
     def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram", pin_registers: bool = False,
                  registered_select: bool = False, shared_write_port: bool = False):
-        if not isinstance(depth, int) or depth < 1:
-            raise ValueError(f"BlockRam depth must be a positive integer, not {depth!r}")
-        if not isinstance(read_ports, int) or read_ports < 1:
-            raise ValueError(f"BlockRam needs at least one read port, not {read_ports!r}")
+        check_int("BlockRam depth", depth)
+        check_int("BlockRam read_ports", read_ports)
         width = Shape.cast(shape).width
         if width < 1:
             raise ValueError(f"BlockRam word width must be at least 1, not {width}")

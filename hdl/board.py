@@ -25,6 +25,7 @@ from golden_model.engine_spec.image import RESULTS, EngineCapacity
 from golden_model.engine_spec.register_map import STATES, RegisterMap
 
 from .engine import SpringflatEngine
+from .parameters import check_int
 from .uart_bridge import UartBridge, timeout_clocks, uart_divisor
 from .wishbone import DATA_WIDTH
 
@@ -154,8 +155,7 @@ class StateLeds(wiring.Component):
 
     def __init__(self, register_map: RegisterMap, addr_width: int, *, heartbeat_bits: int, blink_bits: int):
         for name, value in (("heartbeat_bits", heartbeat_bits), ("blink_bits", blink_bits)):
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, not {value!r}")
+            check_int(name, value)
         self.map, self.heartbeat_bits, self.blink_bits = register_map, heartbeat_bits, blink_bits
         super().__init__({"cyc": In(1), "stb": In(1), "we": In(1), "ack": In(1), "adr": In(addr_width),
                           "dat_w": In(DATA_WIDTH), "dat_r": In(DATA_WIDTH), "irq": In(1), "bridge_error": In(1),

@@ -29,6 +29,7 @@ from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS, energy_check_wid
 
 from .fixedpoint import FormatSetNotBuildable, clamp, shape_of, shift_round
 from .layouts import energy_result_layout, energy_sums_layout, normalise_layout, saturations_shape
+from .parameters import check_int
 
 __all__ = ["shift_add_step", "Normaliser", "EnergyCheck", "BetaDivider"]
 
@@ -235,8 +236,7 @@ class EnergyCheck(wiring.Component):
 
     def __init__(self, fs: FormatSet | str, entries_capacity: int):
         fs = _check_fs("EnergyCheck", fs)
-        if isinstance(entries_capacity, bool) or not isinstance(entries_capacity, int) or entries_capacity < 1:
-            raise ValueError(f"entries_capacity must be a positive int, not {entries_capacity!r}")
+        check_int("entries_capacity", entries_capacity)
         self.fs = fs
         self.entries_capacity = entries_capacity
         sums = energy_sums_layout(fs, entries_capacity)
@@ -403,8 +403,7 @@ class BetaDivider(wiring.Component):
 
     def __init__(self, fs: FormatSet | str, k_bits: int = 21):
         fs = _check_fs("BetaDivider", fs)
-        if isinstance(k_bits, bool) or not isinstance(k_bits, int) or k_bits < 1:
-            raise ValueError(f"k_bits must be a positive int, not {k_bits!r}")
+        check_int("k_bits", k_bits)
         self.fs = fs
         self.k_bits = k_bits
         self.quotient_bits = fs.dt.frac_bits + 1

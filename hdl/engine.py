@@ -24,6 +24,7 @@ from .guard_passes import GUARD_PASSES, GuardPasses
 from .integrator import Integrator
 from .logic import mode_steps
 from .memory_windows import WINDOW_STEPS, MemoryWindows, needs_registered_select
+from .parameters import check_power_of_two
 from .pass_sequencer import PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
 from .register_bank import RegisterBank
@@ -123,9 +124,7 @@ class SpringflatEngine(wiring.Component):
             raise TypeError(f"SpringflatEngine needs a FormatSet or a preset name, not {fs!r}")
         if not isinstance(capacity, EngineCapacity):
             raise TypeError(f"SpringflatEngine needs an EngineCapacity, not {capacity!r}")
-        if isinstance(entry_bank_depth, bool) or not isinstance(entry_bank_depth, int) or entry_bank_depth < 2 \
-                or entry_bank_depth & (entry_bank_depth - 1):
-            raise ValueError(f"entry_bank_depth must be a power of two >= 2, not {entry_bank_depth!r}")
+        check_power_of_two("entry_bank_depth", entry_bank_depth)
         for flag, value in (("registered_select", registered_select), ("pin_registers", pin_registers)):
             if value is not None and not isinstance(value, bool):
                 raise TypeError(f"{flag} must be a bool or None, not {value!r}")

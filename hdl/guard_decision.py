@@ -22,6 +22,7 @@ from golden_model.guard import ENERGY_WINDOW, SCALE_GROW_AFTER, SCALE_MAX_SHIFT
 from .controller_units import shift_add_step
 from .dsp import kept_register
 from .layouts import decision_input_layout, decision_output_layout
+from .parameters import check_int
 
 __all__ = ["GuardDecision"]
 
@@ -73,9 +74,8 @@ class GuardDecision(wiring.Component):
     """
 
     def __init__(self, energy_bits: int, *, window: int = ENERGY_WINDOW):
-        for name, value in (("energy_bits", energy_bits), ("window", window)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < (2 if name == "energy_bits" else 1):
-                raise ValueError(f"{name} must be an int >= {2 if name == 'energy_bits' else 1}, not {value!r}")
+        check_int("energy_bits", energy_bits, 2)
+        check_int("window", window)
         self.energy_bits, self.window = energy_bits, window
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
         self.latency = energy_bits + 5

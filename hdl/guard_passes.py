@@ -24,6 +24,7 @@ from .fixedpoint import shape_of
 from .layouts import certificate_level_shape, vector_layout
 from .level_scatter import LevelScatter
 from .memory_windows import node_write_layout, write_signature
+from .parameters import check_int
 
 __all__ = ["GuardPasses", "GUARD_PASSES"]
 
@@ -84,8 +85,7 @@ class GuardPasses(wiring.Component):
         if not isinstance(fs, FormatSet) or not isinstance(capacity, EngineCapacity):
             raise TypeError(f"GuardPasses needs a FormatSet and an EngineCapacity, not {fs!r}, {capacity!r}")
         shortest = LevelScatter.LOOKUP_LATENCY - 1
-        if isinstance(read_latency, bool) or not isinstance(read_latency, int) or read_latency < shortest:
-            raise ValueError(f"read_latency must be an int >= {shortest}, not {read_latency!r}")
+        check_int("read_latency", read_latency, shortest)
         self.fs, self.capacity, self.read_latency = fs, capacity, read_latency
         nodes = range(capacity.vertices + 1)
         pos, vel = vector_layout(fs.position), vector_layout(fs.velocity)

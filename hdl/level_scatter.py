@@ -15,6 +15,7 @@ from amaranth.lib.wiring import In, Out
 
 from .block_ram import BlockRam
 from .layouts import certificate_level_shape
+from .parameters import check_int
 
 __all__ = ["LevelScatter", "level_update_layout"]
 
@@ -62,8 +63,7 @@ class LevelScatter(wiring.Component):
     LOOKUP_LATENCY = BlockRam.LATENCY + 1
 
     def __init__(self, depth: int, *, name: str = "levels"):
-        if not isinstance(depth, int) or depth < 1:
-            raise ValueError(f"LevelScatter depth must be a positive integer, not {depth!r}")
+        check_int("LevelScatter depth", depth)
         self.depth, self.name = depth, name
         super().__init__({
             "update": In(stream.Signature(level_update_layout(depth), always_ready=True)),

@@ -15,6 +15,7 @@ from .block_ram import BlockRam, dp16kd_banks
 from .dsp import kept_register
 from .layouts import force_word_layout, vector_layout, weight_word_layout, word_layout
 from .logic import or_tree
+from .parameters import check_power_of_two
 from .rom import ENTRY_BANK_DEPTH
 
 __all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
@@ -162,9 +163,7 @@ class MemoryWindows(wiring.Component):
             raise ValueError(f"MemoryWindows needs the RegisterMap of capacity {capacity}, not {register_map!r}")
         if sorted(w.name for w in register_map.windows) != sorted(memory_layouts(fs, capacity)):
             raise ValueError(f"MemoryWindows decodes the windows {sorted(memory_layouts(fs, capacity))}")
-        if isinstance(entry_bank_depth, bool) or not isinstance(entry_bank_depth, int) or entry_bank_depth < 2 \
-                or entry_bank_depth & (entry_bank_depth - 1):
-            raise ValueError(f"entry_bank_depth must be a power of two >= 2, not {entry_bank_depth!r}")
+        check_power_of_two("entry_bank_depth", entry_bank_depth)
         self.fs, self.capacity, self.register_map = fs, capacity, register_map
         self.entry_bank_depth = entry_bank_depth
         self.registered_select = bool(registered_select)

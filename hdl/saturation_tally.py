@@ -7,6 +7,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from .logic import reset_echo
+from .parameters import check_int
 
 __all__ = ["SaturationTally"]
 
@@ -47,8 +48,7 @@ class SaturationTally(wiring.Component):
         for name, width in sources.items():
             if not name.isidentifier() or isinstance(width, bool) or not isinstance(width, int) or width < 1:
                 raise ValueError(f"event source {name!r}: needs an identifier and a positive width, not {width!r}")
-        if isinstance(count_bits, bool) or not isinstance(count_bits, int) or count_bits < 1:
-            raise ValueError(f"count_bits must be a positive int, not {count_bits!r}")
+        check_int("count_bits", count_bits)
         #: Width of the sum of one clock's events (the pairs' sums, then their sum).
         self.events_bits = max(sources.values()) + (len(sources) - 1).bit_length()
         self.sources, self.count_bits = sources, count_bits

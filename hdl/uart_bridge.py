@@ -24,6 +24,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.engine_spec import uart_protocol as protocol
 
 from . import wishbone
+from .parameters import check_int
 
 __all__ = ["UartRx", "UartTx", "FrameBridge", "UartBridge", "uart_divisor", "timeout_clocks"]
 
@@ -45,11 +46,6 @@ def uart_divisor(clock_hz: float, baud: float) -> int:
 def timeout_clocks(clock_hz: float, seconds: float = protocol.INTER_BYTE_TIMEOUT_S) -> int:
     """The inter-byte timeout in clocks."""
     return max(1, round(clock_hz * seconds))
-
-
-def _check_positive(name: str, value, minimum: int = 1) -> None:
-    if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
-        raise ValueError(f"{name} must be an integer of at least {minimum}, not {value!r}")
 
 
 class UartRx(wiring.Component):
@@ -81,7 +77,7 @@ class UartRx(wiring.Component):
     MIN_DIVISOR = 4
 
     def __init__(self, divisor: int):
-        _check_positive("divisor", divisor, self.MIN_DIVISOR)
+        check_int("divisor", divisor, self.MIN_DIVISOR)
         self.divisor = divisor
         super().__init__({"rx": In(1, init=1), "source": Out(stream.Signature(8)), "overrun": Out(1),
                           "framing_error": Out(1)})
@@ -150,7 +146,7 @@ class UartTx(wiring.Component):
     """
 
     def __init__(self, divisor: int):
-        _check_positive("divisor", divisor, UartRx.MIN_DIVISOR)
+        check_int("divisor", divisor, UartRx.MIN_DIVISOR)
         self.divisor = divisor
         super().__init__({"sink": In(stream.Signature(8)), "tx": Out(1, init=1)})
 
@@ -210,11 +206,11 @@ class FrameBridge(wiring.Component):
     """
 
     def __init__(self, *, addr_width: int, timeout: int, max_words: int = protocol.MAX_WORDS):
-        _check_positive("addr_width", addr_width)
+        check_int("addr_width", addr_width)
         if addr_width > 8 * protocol.ADDRESS_BYTES:
             raise ValueError(f"addr_width must be at most {8 * protocol.ADDRESS_BYTES}, not {addr_width}")
-        _check_positive("timeout", timeout)
-        _check_positive("max_words", max_words)
+        check_int("timeout", timeout)
+        check_int("max_words", max_words)
         if max_words > protocol.MAX_WORDS:
             raise ValueError(f"max_words must be at most {protocol.MAX_WORDS} (the frame format's), not {max_words}")
         self.addr_width, self.timeout, self.max_words = addr_width, timeout, max_words

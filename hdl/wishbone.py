@@ -19,6 +19,8 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.engine_spec.image import BUS_WORD_BITS
 
+from .parameters import check_int
+
 __all__ = ["Signature", "TargetHandshake", "DATA_WIDTH", "GRANULARITY"]
 
 #: Bus data width (bits) and ``sel`` granularity (bits per ``sel`` bit).
@@ -30,8 +32,7 @@ class Signature(wiring.Signature):
     """Wishbone B4 classic with ``err``, ``DATA_WIDTH``-bit data and ``addr_width``-bit word addresses."""
 
     def __init__(self, *, addr_width: int):
-        if not isinstance(addr_width, int) or addr_width < 1:
-            raise ValueError(f"addr_width must be a positive integer, not {addr_width!r}")
+        check_int("addr_width", addr_width)
         self.addr_width = addr_width
         super().__init__({
             "cyc": Out(1),

@@ -123,7 +123,7 @@ def test_block_ram_refuses_bad_parameters():
     with refused_components():  # collected here, not in whichever test runs when the collector next does
         with pytest.raises(ValueError, match="depth"):
             BlockRam(unsigned(8), 0)
-        with pytest.raises(ValueError, match="read port"):
+        with pytest.raises(ValueError, match="read_ports must be an int >= 1"):
             BlockRam(unsigned(8), 16, read_ports=0)
         with pytest.raises(ValueError, match="width"):
             BlockRam(unsigned(0), 16)

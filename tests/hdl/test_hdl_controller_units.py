@@ -316,9 +316,9 @@ def test_parameter_validation():
                 unit(3)
         with pytest.raises(TypeError, match="EnergyCheck needs a FormatSet"):
             EnergyCheck(None, 10)
-        with pytest.raises(ValueError, match="entries_capacity must be a positive int, not 0"):
+        with pytest.raises(ValueError, match="entries_capacity must be an int >= 1, not 0"):
             EnergyCheck("default", 0)
-        with pytest.raises(ValueError, match="k_bits must be a positive int, not 0"):
+        with pytest.raises(ValueError, match="k_bits must be an int >= 1, not 0"):
             BetaDivider("default", k_bits=0)
         gc.collect()
 

@@ -118,6 +118,6 @@ def test_parameter_validation():
     # A component whose __init__ raises is still reported as unused when collected.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UnusedElaboratable)
-        with pytest.raises(ValueError, match="depth must be a positive integer"):
+        with pytest.raises(ValueError, match="depth must be an int >= 1"):
             LevelScatter(0)
         gc.collect()

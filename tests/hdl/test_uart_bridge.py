@@ -45,7 +45,7 @@ def test_encode_and_decode():
 
 
 def _test_parameters_are_checked_body():
-    with pytest.raises(ValueError, match="divisor must be an integer of at least 4"):
+    with pytest.raises(ValueError, match="divisor must be an int >= 4"):
         UartRx(3)
     with pytest.raises(ValueError, match="divisor"):
         UartTx(2.5)
