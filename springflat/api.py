@@ -29,7 +29,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from golden_model.fixed.formats_set import FormatSetNotBuildable
+from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.fixed.measures import FixedPointError
 from sim.layouts import AUTO_START, LayoutError
 from golden_model.mesh import Mesh, MeshError, oriented_mesh
@@ -42,7 +42,8 @@ from sim.flatten_run import divergence_note, pattern_notes, run_flatten, run_for
 from sim.distortion import Distortion, distortion
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
                          ending_name_problem)
-from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, kind_or_none, on_sheets,
+from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, add_pattern_options,
+                          kind_or_none, on_sheets,
                           pattern_ending, run_caption, scale_note, seam_length, write_pattern_file)
 from sim.run_options import UserError, add_run_options, file_defaults, params_from_args
 
@@ -308,7 +309,10 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     mesh, notes = oriented_mesh(vertices, faces, name=name)  # validated here: errors name no temporary file
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
-    params = params_from_args(args, file_defaults(mesh))
+    try:
+        params = params_from_args(args, file_defaults(mesh))
+    except ParameterError as exc:  # the model's words are the command line's
+        raise ParameterError(_in_api_words(str(exc))) from None
     args.mesh = mesh.name
     # a mesh file's start (AUTO_START); an array is checked, and untangled where it folds, as a layout file is
     args.init = AUTO_START if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
@@ -318,7 +322,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     except FixedPointError as exc:  # the formats cannot hold the mesh: the presets that can, by keyword
         raise FixedPointError(_in_api_words(str(exc))) from None
     except (UserError, LayoutError) as exc:  # the command line's one line: options, or the start, refused
-        raise ParameterError(str(exc)) from None
+        raise ParameterError(_in_api_words(str(exc))) from None
     except FormatSetNotBuildable as exc:  # engine="rtl"
         forget_half_built_components(exc)
         raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
@@ -404,16 +408,71 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
 
 
+def _pattern_options() -> Mapping[str, OptionSpec]:
+    recorder = _Recorder()
+    add_pattern_options(recorder)  # type: ignore[arg-type]
+    return recorder.specs
+
+
+#: The pattern options of ``springflat flatten`` (``--units``, ``--paper``, ...): :func:`write_pattern`'s keywords.
+_PATTERN_OPTIONS: Mapping[str, OptionSpec] = _pattern_options()
+
+#: A flag in a message, and what follows it: one word, or a list of them (``a4, a3 or letter``), up to the next flag.
+_FLAG = re.compile(r"(?P<drop>drop )?--(?P<no>no-)?(?P<name>[a-z][a-z0-9-]*)"
+                   r"(?P<values> (?!--)[^\s,;:()]+(?:(?:, | or )(?!--)[^\s,;:()]+)*)?")
+
+
+def _takes(spec: OptionSpec, word: str) -> bool:
+    """Whether ``word`` is a value of the option (not the next word of the sentence): by its choices, its
+    type, or (``--formats``, a preset or a file) a preset's name."""
+    if spec.action is not None:
+        return False
+    if spec.choices is not None:
+        return word in map(str, spec.choices)
+    if spec.type is None:
+        return spec.keyword == "formats" and word in FormatSet.presets()
+    try:
+        spec.type(word)
+    except (argparse.ArgumentTypeError, TypeError, ValueError):
+        return False
+    return True
+
+
+def _keyword_value(word: str) -> str:
+    """A value as Python spells it: a number as it is, a word quoted."""
+    try:
+        float(word)
+    except ValueError:
+        return repr(word)
+    return word
+
+
 def _in_api_words(message: str) -> str:
     """A message of the command's, whose options are the command line's (``--units m``, ``--paper a4 or
-    letter``, ``--formats wide``), with the API's keywords (``units='m'``, ``paper='a4', 'a3' or 'letter'``,
-    ``formats='wide'``)."""
-    def quoted(values: str) -> str:  # "a4, a3 or letter": "'a4', 'a3' or 'letter'"
-        parts = re.split(r"(, | or )", values)
-        return "".join(part if k % 2 else f"'{part}'" for k, part in enumerate(parts))
+    letter``, ``drop --damping``, ``use --no-guard``, ``drop --guard``), in the API's keywords (``units='m'``,
+    ``paper='a4' or 'letter'``, ``drop damping``, ``use guard=False``, ``guard=False``): every option of
+    :data:`OPTIONS` and of the pattern files, its values checked by the option's own type or choices."""
+    def spelled(match: re.Match) -> str:
+        keyword = match["name"].replace("-", "_")
+        spec = OPTIONS.get(keyword) or _PATTERN_OPTIONS.get(keyword)
+        if spec is None:
+            return match[0]
+        values = match["values"] or ""
+        parts = re.split(r"(, | or )", values[1:]) if values else []
+        taken = 0  # the words that are values: the first few, up to one that is the sentence's
+        while taken < len(parts) and _takes(spec, parts[taken]):
+            taken += 2
+        rest = "".join(parts[taken - 1:]) if taken else values
+        drop = match["drop"] or ""
+        if spec.action is not None:  # a switch: what it is set to (dropping it: set the other way)
+            on = not match["no"] if not drop else bool(match["no"])
+            return f"{keyword}={on}{values}"
+        if taken:
+            return drop + f"{keyword}=" + "".join(part if k % 2 else _keyword_value(part)
+                                                  for k, part in enumerate(parts[:taken - 1])) + rest
+        return f"{drop}{keyword}{values}"
 
-    message = re.sub(r"--(units|paper|formats) (\w+(?:(?:, | or )\w+)*)", lambda m: f"{m[1]}={quoted(m[2])}", message)
-    return re.sub(r"--(units|paper|formats|grain)\b", r"\1", message)
+    return _FLAG.sub(spelled, message)
 
 
 def _options_doc() -> str:

@@ -107,8 +107,11 @@ def test_a_value_the_command_refuses_the_api_refuses(ear, capsys, options, flags
     err = capsys.readouterr().err
     if "argument --" in err:  # argparse refused the text: both name the value
         assert flags[1] in str(refused.value) and flags[1] in err
-    else:  # a domain rule: the very same message
-        assert f"springflat: error: {refused.value}" in err
+    else:  # a domain rule: the very same message, the API's in its keywords
+        from springflat.api import _in_api_words
+
+        said = err.strip().removeprefix("springflat: error: ")
+        assert "--" in said and str(refused.value) == _in_api_words(said) and "--" not in str(refused.value)
 
 
 def test_unknown_keywords_and_wrong_types_are_type_errors(ear):
@@ -537,6 +540,25 @@ def test_the_commands_option_words_become_the_apis_keywords():
     assert _in_api_words("check --units, print it tiled (--paper a4 or letter), or with --units m") == \
         "check units, print it tiled (paper='a4' or 'letter'), or with units='m'"
 
+
+
+def test_the_commands_switches_and_drops_become_keyword_values():
+    from springflat.api import _in_api_words
+
+    assert _in_api_words("the paper dynamics has none (drop --guard); drop --damping, or use --no-guard") == \
+        "the paper dynamics has none (guard=False); drop damping, or use guard=False"
+    assert _in_api_words("--tol-energy 1e-30 is below; --damping belongs to it; --formats applies") == \
+        "tol_energy=1e-30 is below; damping belongs to it; formats applies"
+
+
+@pytest.mark.parametrize("options", [dict(spring=-1), dict(dynamics="paper", guard=True), dict(damping=0.5),
+                                     dict(engine="fixed", tol_energy=1e-30), dict(penalty=True),
+                                     dict(barrier_gain=1e9)])
+def test_a_refused_keyword_is_named_as_a_keyword_not_a_flag(ear, options):
+    V, F = ear
+    with pytest.raises(ValueError) as info:
+        springflat.flatten(V, F, **options)
+    assert "--" not in str(info.value) and any(keyword in str(info.value) for keyword in options), str(info.value)
 
 def test_a_call_leaves_no_thread_behind():
     """The first call started tqdm's monitor thread, for the process's life, though it shows no bar."""
