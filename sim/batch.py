@@ -13,7 +13,8 @@ Workers: ``--jobs`` processes (default: the cores this process may use), each a
 ``LocalCluster`` of ``--jobs`` single-threaded worker processes.  Either way the outputs are the same bytes.
 
 A mesh that fails (unreadable, invalid, a worker that died) is reported on its line and in the table,
-and the others go on; the exit status is 4 when any mesh failed, else 3 when any run diverged, else 0
+and the others go on; with ``--skip-existing`` a mesh whose every output file is in ``DIR`` already is
+``skipped`` (an interrupted batch run again goes on where it stopped); the exit status is 4 when any mesh failed, else 3 when any run diverged, else 0
 (2: the batch was refused before its first run).
 """
 
@@ -48,7 +49,8 @@ from .workers import WorkerPool, local_workers, wait_for_one
 
 
 def add_batch_options(parser: argparse.ArgumentParser) -> None:
-    """The batch options of ``flatten``: more meshes, ``--out-dir``, ``--jobs``, ``--scheduler``."""
+    """The batch options of ``flatten``: more meshes, ``--out-dir``, ``--jobs``, ``--skip-existing``,
+    ``--scheduler``."""
     parser.add_argument("more_meshes", nargs="*", metavar="MESH",
                         help="more meshes, right after the first (no option between them): a batch, one result "
                              "line each")
@@ -57,6 +59,9 @@ def add_batch_options(parser: argparse.ArgumentParser) -> None:
                              "--plot and --distortion (e.g. --out .dxf --out .pdf --distortion .csv)")
     parser.add_argument("--jobs", type=integer_argument, default=None, metavar="N",
                         help="batch: worker processes (default: every core)")
+    parser.add_argument("--skip-existing", action="store_true",
+                        help="batch: skip a mesh whose every output file is in --out-dir already (to go on after "
+                             "an interrupted batch: each mesh's files are written all or none)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
                         help="batch on a Dask cluster: a scheduler address (tcp://host:8786), or local for Dask's "
                              "LocalCluster with --jobs worker processes")
@@ -90,7 +95,8 @@ class MeshOutcome:
     """What one mesh gave: its result or why it failed, and its output files.
 
     Attributes:
-        status: the run's status (``converged``, ``max-iterations``, ``diverged``, ``stalled``) or ``failed``.
+        status: the run's status (``converged``, ``max-iterations``, ``diverged``, ``stalled``), ``failed``, or
+            ``skipped`` (``--skip-existing``: its files were there).
         summary: the ``--json`` summary of a single run (``None`` when failed).
         line: the one-line result, or the error.
         notes: what the run said on stderr (mesh notes).
@@ -278,6 +284,12 @@ def _job(source: str, name: str, options: dict, endings) -> BatchJob | MeshOutco
         return BatchJob(source, name, read_file_bytes(source, "mesh", MeshError), options, endings)
     except MeshError as exc:
         return MeshOutcome(source, name, "failed", line=str(exc))
+
+
+def _already_written(out_dir: Path, name: str, endings: tuple[tuple[str, str], ...]) -> bool:
+    """Whether every output file of the mesh ``name`` is in ``out_dir`` (``--skip-existing``): a batch writes a
+    mesh's files all or none, so an interrupted batch left each mesh with all of them or none."""
+    return all((out_dir / f"{name}{ending}").is_file() for _, ending in endings)
 
 
 def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:
@@ -479,6 +491,9 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     outcomes: dict[str, MeshOutcome] = {}
     pending: list[BatchJob] = []
     for source, name in zip(meshes, names):
+        if args.skip_existing and _already_written(args.out_dir, name, endings):
+            outcomes[name] = MeshOutcome(source, name, "skipped", line=f"skipped: its files are in {args.out_dir}")
+            continue
         job = _job(source, name, options, endings)
         if isinstance(job, MeshOutcome):
             outcomes[name] = job
@@ -513,11 +528,16 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
             record.update(outcome.summary or {})
             if outcome.failed:  # also a run that finished but whose files could not be written
                 record.update(status="failed", error=outcome.line)
-            record["files"] = [valid_text(str(args.out_dir / f"{outcome.name}{e}")) for e, _ in outcome.files] \
+            elif outcome.status == "skipped":
+                record["status"] = "skipped"
+            files = [e for _, e in endings] if outcome.status == "skipped" else [e for e, _ in outcome.files]
+            record["files"] = [valid_text(str(args.out_dir / f"{outcome.name}{e}")) for e in files] \
                 if args.out_dir is not None and not outcome.failed else []
             say(strict_json(record))
         elif outcome.failed:
             say(f"[{done}/{len(meshes)}] {printable_name(outcome.source)}: failed: {one_line(outcome.line)}")
+        elif outcome.status == "skipped":
+            say(f"[{done}/{len(meshes)}] {printable_name(outcome.source)}: {outcome.line}")
         else:
             say(f"[{done}/{len(meshes)}] {outcome.line} ({outcome.seconds:.1f} s)")
 
@@ -564,7 +584,7 @@ def summary_table(outcomes: list[MeshOutcome]) -> str:
     for o in outcomes:
         name = printable_name(o.name)  # a file's stem may hold a newline: one row each
         if o.failed or o.summary is None:
-            rows.append((name, "failed", "", "", "", "", f"{o.seconds:.1f}"))
+            rows.append((name, o.status if o.status == "skipped" else "failed", "", "", "", "", f"{o.seconds:.1f}"))
         else:
             s = o.summary
             rows.append((name, s["status"], str(s["iterations"]), error_text(s["area_error"]),

@@ -104,6 +104,8 @@ def check_options_used(args: argparse.Namespace) -> None:
     if args.seam_allowance is not None and not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
         raise UserError("--seam-allowance draws the cut line outside the pattern's edge: add --out NAME.dxf, .pdf or "
                         ".svg")
+    if args.skip_existing and args.out_dir is None:
+        raise UserError("--skip-existing skips a batch's meshes whose files are in --out-dir: add --out-dir DIR")
     if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
         raise UserError("--paper is the sheet of a PDF or SVG pattern: add --out NAME.pdf or NAME.svg (a .flat.svg is "
                         "the layout drawn to fit, not a pattern on sheets)")

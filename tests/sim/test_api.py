@@ -59,8 +59,8 @@ def test_the_options_are_the_command_lines_run_and_engine_options():
     flatten_parser = build_parser()._subparsers._group_actions[0].choices["flatten"]
     flags = {flag for action in flatten_parser._actions for flag in action.option_strings if flag.startswith("--")}
     not_run_options = {"--help", "--out", "--history", "--plot", "--json", "--units", "--paper", "--dxf-edges",
-                       "--grain", "--seam-allowance", "--distortion", "--out-dir", "--jobs", "--scheduler", "--port",
-                       "--baud"}
+                       "--grain", "--seam-allowance", "--distortion", "--out-dir", "--jobs", "--skip-existing",
+                       "--scheduler", "--port", "--baud"}
     negations = {flag for flag in flags if flag.startswith("--no-") and "--" + flag[5:] in flags}  # --[no-]barrier
     assert {spec.flag for spec in springflat.OPTIONS.values()} == flags - not_run_options - negations
     for spec in springflat.OPTIONS.values():

@@ -433,3 +433,40 @@ def test_a_mesh_named_with_a_trailing_slash_fails_as_no_file_in_a_batch(tmp_path
     by_mesh = {r["mesh"]: r for r in records[:-1]}
     assert by_mesh["dome00"]["status"] == "failed" and "not a directory" in by_mesh["dome00"]["error"]
     assert by_mesh["dome01"]["status"] != "failed"
+
+
+def test_skip_existing_goes_on_after_an_interrupted_batch(tmp_path, monkeypatch, capsys):
+    """A batch stopped after its first mesh (its files written, the second's not): run again with
+    --skip-existing, the first is skipped, its files untouched, and the second runs; a mesh with only some of its
+    files runs again."""
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 3, 0)
+    argv = ["flatten", "in/dome00.obj", "in/dome01.off", "in/dome02.obj", "--out-dir", "o", "--out", ".dxf",
+            "--history", ".csv", "--max-iter", "5", "--jobs", "1"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    first = {name: os.stat(f"o/{name}").st_mtime_ns for name in ("dome00.dxf", "dome00.csv")}
+    os.remove("o/dome01.dxf")
+    os.remove("o/dome01.csv")  # never written: the batch stopped before dome01 finished
+    os.remove("o/dome02.csv")  # only its pattern there
+    assert main([*argv, "--skip-existing"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    rows = {line.split()[0]: line.split()[1] for line in out if line.startswith("dome")}
+    assert rows == {"dome00": "skipped", "dome01": rows["dome01"], "dome02": rows["dome02"]}
+    assert {rows["dome01"], rows["dome02"]} <= {"converged", "max-iterations"}
+    assert "[1/3] in/dome00.obj: skipped: its files are in o" in out
+    assert out[-1].startswith("3 meshes: 1 skipped, ")
+    assert {name: os.stat(f"o/{name}").st_mtime_ns for name in first} == first
+    assert sorted(os.listdir("o")) == sorted(f"dome0{k}.{e}" for k in range(3) for e in ("dxf", "csv"))
+    assert main([*argv, "--skip-existing", "--json"]) == 0
+    records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [r["status"] for r in records[:-1]] == ["skipped"] * 3
+    assert records[0]["files"] == ["o/dome00.dxf", "o/dome00.csv"]
+
+
+def test_skip_existing_without_an_out_dir_is_refused(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["flatten", "surf1", "--out", "a.dxf", "--skip-existing"]) == 2
+    assert capsys.readouterr().err.strip() == ("springflat: error: --skip-existing skips a batch's meshes whose files "
+                                               "are in --out-dir: add --out-dir DIR")
+    assert os.listdir(tmp_path) == []
