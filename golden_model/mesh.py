@@ -22,7 +22,8 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "oriented_mesh", "orient_consistently",
+__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "oriented_mesh", "orient_consistently", "component_labels",
+           "count_components", "parity_roots",
            "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE",
            "printable_name", "one_line", "valid_text"]
 
@@ -463,31 +464,43 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
         raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")
 
 
+def parity_roots(n: int, a: np.ndarray, b: np.ndarray, differ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(root, parity)`` of ``n`` nodes joined by the edges ``(a[k], b[k])``, each edge saying whether its two
+    nodes differ (``differ[k]``): each node's component's smallest node, and whether the node differs from it,
+    as the edges of a spanning tree say (an edge that disagrees with the tree is not looked at: the caller
+    checks). Vectorised hooking and pointer jumping: each round follows every pointer to its root, carrying
+    the parity along, then hooks each root that an edge joins to a smaller root under the smallest such; a
+    round that finds no edge between two roots ends it. Every pointer runs to a smaller node, so there is no
+    cycle, and the rounds grow with the logarithm of a component's span on a mesh, not with its diameter."""
+    label = np.arange(n)
+    parity = np.zeros(n, dtype=bool)
+    while True:
+        while True:  # to the roots, the parity along
+            jumped = label[label]
+            if np.array_equal(jumped, label):
+                break
+            parity = parity ^ parity[label]
+            label = jumped
+        ra, rb = label[a], label[b]
+        apart = ra != rb
+        if not apart.any():
+            return label, parity
+        # each root joined to a smaller one hooks under the smallest, by one of the edges that join them
+        high, low = np.maximum(ra, rb)[apart], np.minimum(ra, rb)[apart]
+        implied = (parity[a] ^ parity[b] ^ differ)[apart]  # whether the two roots differ, by this edge
+        order = np.lexsort((low, high))
+        high, low, implied = high[order], low[order], implied[order]
+        first = np.r_[True, high[1:] != high[:-1]]
+        label[high[first]] = low[first]
+        parity[high[first]] = implied[first]
+
+
 def component_labels(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The connected component of each of ``n`` nodes joined by the undirected edges ``(a[k], b[k])``: the
-    smallest node of its component (so ``len(np.unique(labels))`` counts the components).
-
-    Vectorised hooking and pointer jumping: each round points every component's root at the smallest root
-    an edge reaches from it, then follows the pointers to their roots; a round that changes nothing has no
-    edge left between two components. The rounds grow with the logarithm of a component's span on a mesh.
-    """
-    label = np.arange(n)
+    smallest node of its component (so ``len(np.unique(labels))`` counts the components); see
+    :func:`parity_roots`."""
     a = np.asarray(a, dtype=np.int64)
-    b = np.asarray(b, dtype=np.int64)
-    while True:
-        la, lb = label[a], label[b]
-        low = np.minimum(la, lb)
-        hooked = label.copy()
-        np.minimum.at(hooked, la, low)
-        np.minimum.at(hooked, lb, low)
-        while True:  # every pointer runs downwards, so this ends at the roots
-            jumped = hooked[hooked]
-            if np.array_equal(jumped, hooked):
-                break
-            hooked = jumped
-        if np.array_equal(hooked, label):
-            return label
-        label = hooked
+    return parity_roots(n, a, np.asarray(b, dtype=np.int64), np.zeros(len(a), dtype=bool))[0]
 
 
 def count_components(n: int, a: np.ndarray, b: np.ndarray) -> int:
@@ -525,26 +538,10 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
     _, side_edge, counts = _unique_edges(faces)
     s, t, same = _interior_sides_run_same_way(faces, side_edge, counts)
     m = len(faces)
-    # each face's neighbours across its interior edges, and whether one of the two must turn to agree
-    f, g = np.r_[s // 3, t // 3], np.r_[t // 3, s // 3]
-    order = np.argsort(f, kind="stable")
-    neighbour, crossing = g[order], np.r_[same, same][order]
-    start = np.searchsorted(f[order], np.arange(m + 1))
-    turn = np.full(m, -1, dtype=np.int8)  # face 0 keeps its winding; the others follow, breadth first
-    turn[0] = 0
-    front = np.array([0])
-    while len(front):
-        lengths = start[front + 1] - start[front]
-        sides = np.repeat(start[front] - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
-        parent, child, cross = np.repeat(front, lengths), neighbour[sides], crossing[sides]
-        new = turn[child] < 0
-        child, first = np.unique(child[new], return_index=True)
-        turn[child] = turn[parent[new][first]] ^ cross[new][first]  # turned unlike its parent where they disagree
-        front = child
-    if (turn < 0).any():
-        raise MeshError(f"mesh is not a single disk: face {int(np.flatnonzero(turn < 0)[0])} shares no "
+    root, turn = parity_roots(m, s // 3, t // 3, same)
+    if (root != 0).any():
+        raise MeshError(f"mesh is not a single disk: face {int(np.flatnonzero(root != 0)[0])} shares no "
                         "edge with face 0")
-    turn = turn.astype(bool)
     if 2 * turn.sum() > m:  # turn the fewer faces
         turn = ~turn
     result = faces.copy()

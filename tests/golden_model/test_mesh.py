@@ -6,7 +6,7 @@ import trimesh
 
 from golden_model.builtin import builtin_mesh
 from golden_model.mesh import (InconsistentOrientation, Mesh, MeshError, boundary_crossings, component_labels,
-                                count_components, oriented_mesh)
+                                count_components, orient_consistently, oriented_mesh)
 from sim.mesh_io import load_mesh, load_mesh_with_notes, save_obj
 from sim.generate import grid_faces, grid_uv, rolled_grid
 
@@ -633,3 +633,15 @@ def test_component_labels_give_scipys_components(seed):
     assert count_components(n, a, b) == count == len(np.unique(labels))
     assert len(np.unique(np.column_stack([labels, theirs]), axis=0)) == count  # the same partition
     assert all(labels[i] == np.flatnonzero(labels == labels[i]).min() for i in range(n))  # each part's smallest node
+
+
+def test_a_long_strip_wound_at_random_is_wound_consistently():
+    """A 3 x 10,001 strip (diameter 10,000 faces, where a breadth-first front takes as many steps) with a third
+    of its faces turned: every interior edge run both ways after, the fewer faces turned."""
+    faces = grid_faces(3, 10001)
+    given = faces.copy()
+    turned = np.random.default_rng(3).random(len(faces)) < 0.3
+    given[turned] = given[turned][:, [0, 2, 1]]
+    result, count = orient_consistently(given)
+    assert _each_interior_edge_run_both_ways(result)
+    assert count == min(turned.sum(), len(faces) - turned.sum())
