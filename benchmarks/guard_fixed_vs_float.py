@@ -35,7 +35,7 @@ from golden_model.fixed import MAX_PRODUCT_WIDTH, FormatSet  # noqa: E402
 from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.fixed.measures import FixedPointError  # noqa: E402
 from sim.generate import (delaunay_patch, dome_grid, hard_patches, rolled_grid, saddle_grid,  # noqa: E402
-                                   spherical_cap)
+                          spherical_cap)
 from sim.layouts import start_layout, tutte_layout  # noqa: E402
 from golden_model.mesh import Mesh  # noqa: E402
 from sim.mesh_io import load_mesh  # noqa: E402

@@ -6,6 +6,8 @@ valid disk (see :mod:`golden_model.mesh`).
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from golden_model.mesh import Mesh
@@ -68,14 +70,18 @@ def delaunay_patch(n_points: int = 150, seed: int = 0, height: float = 0.25) -> 
     return Mesh(np.column_stack([uv, z]), faces, name="delaunay")
 
 
+#: How each generated mesh of the fixed-point acceptance checks (and the study's) is made, by name.
+GENERATED_MESHES: dict[str, Callable[[], Mesh]] = {
+    "developable": lambda: rolled_grid(8, 8, arc_degrees=90)[0],
+    "dome": lambda: dome_grid(8, height=0.3),
+    "saddle": lambda: saddle_grid(8, height=0.3),
+    "delaunay": lambda: delaunay_patch(150),
+}
+
+
 def generated_meshes() -> dict[str, Mesh]:
-    """The generated meshes of the fixed-point acceptance checks."""
-    return {
-        "developable": rolled_grid(8, 8, arc_degrees=90)[0],
-        "dome": dome_grid(8, height=0.3),
-        "saddle": saddle_grid(8, height=0.3),
-        "delaunay": delaunay_patch(150),
-    }
+    """The generated meshes of the fixed-point acceptance checks (:data:`GENERATED_MESHES`), made."""
+    return {name: make() for name, make in GENERATED_MESHES.items()}
 
 
 def spherical_cap(rings: int = 10, half_angle_degrees: float = 60.0, radius: float = 1.0) -> Mesh:

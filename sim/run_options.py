@@ -25,7 +25,7 @@ from golden_model.guard import ENERGY_WINDOW
 from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
 
 from .layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_name, initial_layout, slim_layout,
-                                   start_layout)
+                      start_layout)
 from .mesh_io import load_mesh_with_notes
 from .mesh_io.polygons import is_float, is_int
 from .outputs import OutputError, directory_name_problem

@@ -10,8 +10,8 @@
 * What they refuse raises :class:`MeshError` (the mesh), :class:`ParameterError` (an option) or
   :class:`OutputError` (a file to write), each a ``ValueError`` with a one-line message.
 
-This package sits on top of the project (``golden_model`` for the algorithm, ``sim`` for the command
-line's option handling and the writers) and nothing in the project imports it.
+This package sits on top of the project (``golden_model`` for the algorithm, ``sim`` for the mesh files,
+the start layouts, the command line's option handling and the writers) and nothing in the project imports it.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ The flow that runs a study (the process pool, the RTL cost model, the greedy wor
 optimiser) is :mod:`sim.study`; this package is the model part only.
 """
 
-from .cases import GENERATED_MESH_NAMES, GENERATED_PARAMS, STUDY_MESHES, StudyCase
+from .cases import GENERATED_PARAMS, StudyCase
 from .knobs import (
     DATAPATH_FIELDS,
     DEFAULT_BITS,
@@ -50,7 +50,7 @@ from .knobs import (
 from .records import RESULT_COLUMNS, AccuracyTarget, FixedOutcome, RunRecord, compare, measure_clamps, run_fixed
 
 __all__ = [
-    "GENERATED_PARAMS", "STUDY_MESHES", "GENERATED_MESH_NAMES", "SIGNAL_CLASSES", "DATAPATH_FIELDS", "KNOBS",
+    "GENERATED_PARAMS", "SIGNAL_CLASSES", "DATAPATH_FIELDS", "KNOBS",
     "OTHER_KNOB_VALUES", "DEFAULT_BITS", "DEFAULT_STRIDES", "RESULT_COLUMNS",
     "StudyCase", "Config", "RunRecord", "AccuracyTarget", "FixedOutcome",
     "parse_bits", "parse_knobs", "make_config", "class_frac_bits",

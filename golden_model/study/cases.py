@@ -13,10 +13,6 @@ GENERATED_PARAMS = FlattenParams(density="auto", damping=0.05, tol_area=0.01, to
                                  max_iter=300)
 """Parameters of generated and file meshes in a study (built-ins use their paper sets)."""
 
-GENERATED_MESH_NAMES = ("developable", "dome", "saddle", "delaunay")
-STUDY_MESHES = ("surf1", "surf2") + GENERATED_MESH_NAMES
-"""The default meshes of a study."""
-
 
 @dataclass(frozen=True, eq=False)
 class StudyCase:

@@ -1,8 +1,9 @@
 """``springflat study``: the flow of fixed-point error studies and word-length optimisation.
 
-The model part (cases, knobs, comparison records) is :mod:`golden_model.study`; here are the
-RTL cost model (:mod:`.cost`), the runs over a process pool or a caller's executor with the
-greedy optimiser (:mod:`.flow`) and the command with its files and plots (:mod:`.cli`).
+The model part (a case, knobs, comparison records) is :mod:`golden_model.study`; here are the cases
+built from mesh names with their start layouts (:mod:`.cases`), the RTL cost model (:mod:`.cost`), the runs
+over a process pool or a caller's executor with the greedy optimiser (:mod:`.flow`) and the command with its
+files and plots (:mod:`.cli`).
 
 **Cost model** (:func:`~.cost.cost`): ``total_bits`` = sum of the widths of the node
 datapath formats (:data:`~golden_model.study.DATAPATH_FIELDS`: every format but the step

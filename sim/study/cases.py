@@ -10,12 +10,16 @@ from typing import Sequence
 from golden_model.builtin import builtin_mesh, is_builtin
 from golden_model.mesh import Mesh
 from golden_model.params import FlattenParams, ParameterError
-from golden_model.study import GENERATED_MESH_NAMES, GENERATED_PARAMS, STUDY_MESHES, StudyCase
+from golden_model.study import GENERATED_PARAMS, StudyCase
 
+from ..generate import GENERATED_MESHES
 from ..layouts import initial_layout
 from ..mesh_io import load_mesh
 
-_GENERATED: dict[str, Mesh] | None = None
+#: The generated meshes a study takes by name.
+GENERATED_MESH_NAMES = tuple(GENERATED_MESHES)
+#: The default meshes of a study.
+STUDY_MESHES = ("surf1", "surf2") + GENERATED_MESH_NAMES
 
 
 def resolve_study_mesh(name: str) -> tuple[str, Mesh, FlattenParams]:
@@ -24,17 +28,12 @@ def resolve_study_mesh(name: str) -> tuple[str, Mesh, FlattenParams]:
     Built-ins take their paper parameter sets (jacobi, no damping); generated
     and file meshes take :data:`GENERATED_PARAMS`.
     """
-    global _GENERATED
     path = Path(name)
     if is_builtin(name):
         mesh, paper = builtin_mesh(name)
         return name.lower(), mesh, paper.flatten_params()
     if name.lower() in GENERATED_MESH_NAMES:  # (a file of that name has no mesh format's ending)
-        if _GENERATED is None:
-            from ..generate import generated_meshes
-
-            _GENERATED = generated_meshes()
-        return name.lower(), _GENERATED[name.lower()], GENERATED_PARAMS
+        return name.lower(), GENERATED_MESHES[name.lower()](), GENERATED_PARAMS
     if os.path.lexists(path) or path.suffix or len(path.parts) > 1:
         return path.stem, load_mesh(path), GENERATED_PARAMS  # (what is wrong with a path: load_mesh says it)
     raise ParameterError(f"unknown mesh '{name}': expected one of {', '.join(STUDY_MESHES)} or a mesh file")

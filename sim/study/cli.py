@@ -32,7 +32,6 @@ from golden_model.study import (
     GENERATED_PARAMS,
     KNOBS,
     SIGNAL_CLASSES,
-    STUDY_MESHES,
     AccuracyTarget,
     class_frac_bits,
     parse_bits,
@@ -45,7 +44,7 @@ from golden_model.study import (
 from ..outputs import atomic_directory, atomic_write, check_output_directory
 from ..run_options import integer_argument, load_format_set, number_argument, path_argument
 from ..workers import local_workers
-from .cases import build_cases
+from .cases import STUDY_MESHES, build_cases
 from .cost import multipliers
 from .flow import ConfigSummary, StudyResult, run_study
 

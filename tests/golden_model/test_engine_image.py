@@ -12,8 +12,8 @@ from golden_model.fixed.engine import flatten_fixed, prepare
 from golden_model.fixed.measures import FixedPointError, energy_raw
 from golden_model.fixed.pipeline import NodeTerms
 from golden_model.engine_spec.image import (EngineCapacity, MemoryLayout, WordField, build_image, constant_fault,
-                                             decode_entries, decode_nodes, decode_triangles, energy_width,
-                                             memory_layouts, run_image)
+                                            decode_entries, decode_nodes, decode_triangles, energy_width,
+                                            memory_layouts, run_image)
 from sim.generate import dome_grid, generated_meshes, grid_faces, grid_uv
 from sim.layouts import initial_layout
 from golden_model.mesh import Mesh

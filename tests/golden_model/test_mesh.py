@@ -6,7 +6,7 @@ import trimesh
 
 from golden_model.builtin import builtin_mesh
 from golden_model.mesh import (InconsistentOrientation, Mesh, MeshError, boundary_crossings, component_labels,
-                                count_components, orient_consistently, oriented_mesh)
+                               count_components, orient_consistently, oriented_mesh)
 from sim.mesh_io import load_mesh, load_mesh_with_notes, save_obj
 from sim.generate import grid_faces, grid_uv, rolled_grid
 

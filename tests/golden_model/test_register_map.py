@@ -12,7 +12,7 @@ from golden_model.modes import RUN_MODES, mode_named
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import prepare
 from golden_model.engine_spec.image import (RESULTS, EngineCapacity, build_image, energy_width, memory_layouts,
-                                             run_constant_fields)
+                                            run_constant_fields)
 from golden_model.engine_spec.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
 from sim.generate import dome_grid
 from sim.layouts import initial_layout
