@@ -11,7 +11,7 @@ from sim.generate import delaunay_patch, spherical_cap
 from golden_model.guard import (FLOOR_MIN_SHIFT, FLOOR_SHIFT, GUARD_LEVELS, SCALE_GROW_AFTER, SCALE_MAX_SHIFT,
                                 StepScale, area_floor, guarded_moves)
 from sim.layouts import initial_layout
-from golden_model.mesh import folded_faces, signed_areas_2d
+from golden_model.mesh import signed_areas_2d
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.reference import flatten
 
@@ -138,20 +138,6 @@ def test_guard_options_are_checked():
         FlattenParams(energy_window=0)
     assert FlattenParams(dynamics="momentum").guard and not FlattenParams().guard
     assert FlattenParams(dynamics="momentum").energy_window == 10 and FlattenParams().energy_window == 1
-
-
-def test_a_folded_start_is_untangled_before_the_guarded_dynamics(tmp_path):
-    from sim.layouts import start_layout
-
-    mesh = spherical_cap(6)
-    folded = initial_layout(mesh, "tutte")
-    folded[0] = folded[mesh.boundary_loop[0]] * 1.3  # the pole dragged past the rim: its fan folds
-    assert folded_faces(folded, mesh.faces).sum() > 0
-    path = tmp_path / "folded.txt"
-    np.savetxt(path, folded)
-    start = start_layout(mesh, str(path))
-    assert start.folded == 0 and folded_faces(start.positions, mesh.faces).sum() == 0
-    assert "untangl" in start.method and len(start.notes) == 1
 
 
 def test_fixed_point_margin_covers_the_rounding_of_a_shortened_move():

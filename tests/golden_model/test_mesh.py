@@ -1,14 +1,13 @@
-"""Mesh loading, validation and topology."""
+"""The mesh: validation, topology, orientation and boundary crossings (the files: tests/sim/test_mesh_io.py)."""
 
 import numpy as np
 import pytest
-import trimesh
 
 from golden_model.builtin import builtin_mesh
 from golden_model.mesh import (InconsistentOrientation, Mesh, MeshError, boundary_crossings, component_labels,
                                count_components, orient_consistently, oriented_mesh)
-from sim.mesh_io import load_mesh, load_mesh_with_notes, save_obj
-from sim.generate import grid_faces, grid_uv, rolled_grid
+from sim.generate import grid_faces, grid_uv
+from sim.mesh_io import load_mesh_with_notes, save_obj
 
 SQUARE_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
 SQUARE_F = np.array([[0, 1, 2], [0, 2, 3]])
@@ -45,32 +44,6 @@ def test_builtins_are_the_papers_meshes():
     assert surf2.faces[-1].tolist() == [0, 4, 8]
     assert (p1.tol_area, p1.tol_shape, p1.max_iter) == (0.16, 0.40, 100)
     assert (p2.tol_area, p2.tol_shape, p2.max_iter) == (0.30, 0.25, 150)
-
-
-@pytest.mark.parametrize("suffix", [".obj", ".ply", ".off", ".stl"])
-def test_load_keeps_vertex_order(tmp_path, suffix):
-    mesh, _ = rolled_grid(5, 4)
-    # shuffle the vertex numbering so that file order is not sorted in any way
-    perm = np.random.default_rng(1).permutation(mesh.n_vertices)
-    inverse = np.argsort(perm)
-    vertices, faces = mesh.vertices[perm], inverse[mesh.faces]
-    path = tmp_path / f"m{suffix}"
-    trimesh.Trimesh(vertices, faces, process=False).export(path)
-    loaded = load_mesh(path)
-    if suffix == ".stl":  # STL has no shared vertices: numbered by first appearance
-        first = list(dict.fromkeys(faces.ravel().tolist()))
-        vertices = vertices[first]
-        faces = np.argsort(first)[faces]
-    assert np.allclose(loaded.vertices, vertices, atol=1e-6)
-    assert loaded.faces.tolist() == faces.tolist()
-
-
-def test_save_obj_round_trip(tmp_path):
-    mesh = Mesh(SQUARE_V, SQUARE_F)
-    save_obj(tmp_path / "s.obj", SQUARE_V[:, :2] * 3, SQUARE_F)
-    loaded = load_mesh(tmp_path / "s.obj")
-    assert loaded.vertices.tolist() == (np.column_stack([SQUARE_V[:, :2] * 3, np.zeros(4)])).tolist()
-    assert loaded.faces.tolist() == mesh.faces.tolist()
 
 
 def _annulus():
@@ -129,17 +102,6 @@ def test_handle_is_refused():
         Mesh(vertices, np.array(faces))
 
 
-def test_unparseable_and_unknown_files(tmp_path):
-    garbage = tmp_path / "g.ply"
-    garbage.write_bytes(b"ply\nformat nonsense\n\x00\x01")
-    with pytest.raises(MeshError, match="cannot parse"):
-        load_mesh(garbage)
-    with pytest.raises(MeshError, match="unknown format"):
-        load_mesh(tmp_path / "x.dae") if (tmp_path / "x.dae").write_text("x") else None
-    with pytest.raises(MeshError, match="no such file"):
-        load_mesh(tmp_path / "missing.obj")
-
-
 def test_rings_are_cyclic_fans_in_the_mesh_winding():
     from sim.generate import generated_meshes
     for mesh in list(generated_meshes().values())[:3]:
@@ -176,275 +138,6 @@ def test_folded_faces_counts_against_the_whole_pattern():
     assert folded_faces(folded, mesh.faces).tolist() == [False, True]
 
 
-# --------------------------------------------------------------------------- OBJ reader
-
-from sim.mesh_io import load_mesh_with_notes  # noqa: E402
-
-UNIT_SQUARE_OBJ = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
-
-
-def _obj(tmp_path, text, name="m.obj"):
-    path = tmp_path / name
-    path.write_text(text)
-    return path
-
-
-def test_obj_negative_indices_with_texture_and_normals(tmp_path):
-    # negative indices count back from the vertices (texture coordinates, normals) read so far
-    text = (UNIT_SQUARE_OBJ + "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
-            "f -4/-4/-1 -3/-3/-1 -2/-2/-1\n"
-            "f -4/-4/-1 -2/-2/-1 -1/-1/-1\n"
-            "v 2 0 0\nv 2 1 0\nvt 1 0\nvt 1 1\n"
-            "f -5/-2/-1 -2/-2/-1 -1/-1/-1\n"
-            "f -5/-6/-1 -1/-1/-1 -4/-4/-1\n")
-    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]]
-    assert mesh.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0]]
-    assert notes == []
-
-
-def test_obj_the_issue_face_with_negative_triples(tmp_path):
-    # the issue's "f -18/-9/-6 -17/-8/-5 -16/-7/-4": 18 vertices, 9 texture coordinates, 6 normals before it
-    text = ("v 0 0 0\nv 1 0 0\nv 0 1 0\n" + "".join(f"v {i} {i * i % 7} {i % 3}\n" for i in range(15))
-            + "vt 0 0\n" * 9 + "vn 0 0 1\n" * 6 + "f -18/-9/-6 -17/-8/-5 -16/-7/-4\n")
-    with pytest.raises(MeshError, match=r"vertex 3 is not used by any face \(file line 4\)"):
-        load_mesh(_obj(tmp_path, text))  # the face is read; the 15 unused vertices are the validation's business
-    from sim.mesh_io import read_obj
-    assert read_obj(_obj(tmp_path, text)).faces.tolist() == [[0, 1, 2]]
-
-
-def test_obj_vertex_and_normal_form(tmp_path):
-    text = UNIT_SQUARE_OBJ + "vn 0 0 1\nf 1//1 2//1 3//1\nf 1//1 3//1 -1//-1\n"
-    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and notes == []
-
-
-def test_obj_vertex_and_texture_form(tmp_path):
-    text = UNIT_SQUARE_OBJ + "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"
-    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and notes == []
-
-
-def test_obj_mixed_corner_forms_in_one_file(tmp_path):
-    text = UNIT_SQUARE_OBJ + "vt 0 0\nvn 0 0 1\nf 1 2/1 3//1\nf 1/1/1 3 4\n"
-    assert load_mesh(_obj(tmp_path, text)).faces.tolist() == [[0, 1, 2], [0, 2, 3]]
-
-
-def test_obj_quads_and_pentagons_are_fan_triangulated(tmp_path):
-    text = ("v 0 0 0\nv 2 0 0\nv 3 1.5 0\nv 1 2.5 0\nv -1 1.5 0\nv 4 0 0\nv 4.5 1.5 0\nv 3.5 3 0\n"
-            "f 1 2 3 4 5\n"     # pentagon
-            "f 2 6 7 3\n"       # quad
-            "f 3 7 8\n")        # a triangle stays as it is
-    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [1, 5, 6], [1, 6, 2], [2, 6, 7]]
-    assert notes == ["2 polygons (4 to 5 corners) fan-triangulated into 5 triangles"]
-    quad, quad_notes = load_mesh_with_notes(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3 4\n", "q.obj"))
-    assert quad.faces.tolist() == [[0, 1, 2], [0, 2, 3]]
-    assert quad_notes == ["1 polygon (4 corners) fan-triangulated into 2 triangles"]
-
-
-def test_obj_polygon_that_cannot_be_fanned_is_refused(tmp_path):
-    # reflex at corner 4: the fan from corner 1 would fold triangle (1, 3, 4)
-    text = "v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 0.2 0\nv 0 1 0\nf 1 2 3 4 5\n"
-    with pytest.raises(MeshError, match=r"line 6: polygon with 5 corners cannot be fan-triangulated") as info:
-        load_mesh(_obj(tmp_path, text))
-    assert "\n" not in str(info.value)
-
-
-def test_obj_groups_and_objects_make_one_mesh(tmp_path):
-    text = ("mtllib scene.mtl\no left\ng part1\nusemtl red\ns 1\n" + UNIT_SQUARE_OBJ + "f 1 2 3\n"
-            "g part2\ns off\nf 1 3 4\n"
-            "o right\ng part3\nusemtl blue\nv 2 0 0\nv 2 1 0\nf 2 5 6\nf 2 6 3\n")
-    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
-    assert mesh.n_vertices == 6
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]]
-    assert notes == ["2 'o' objects and 3 'g' groups read as one mesh (OBJ numbers vertices across the whole file)"]
-
-
-def test_obj_vertex_i_of_the_file_is_node_i(tmp_path):
-    mesh, _ = rolled_grid(5, 4)
-    perm = np.random.default_rng(7).permutation(mesh.n_vertices)
-    inverse = np.argsort(perm)
-    vertices, faces = mesh.vertices[perm], inverse[mesh.faces]
-    # faces listed in scrambled order, each with its own texture coordinates (trimesh would split vertices)
-    order = np.random.default_rng(8).permutation(len(faces))
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
-    lines += [f"vt {k / 100} 0" for k in range(3 * len(faces))]
-    lines += [f"f {a + 1}/{3 * k + 1} {b + 1}/{3 * k + 2} {c + 1}/{3 * k + 3}"
-              for k, (a, b, c) in enumerate(faces[order].tolist())]
-    loaded = load_mesh(_obj(tmp_path, "\n".join(lines) + "\n"))
-    assert loaded.vertices.tolist() == vertices.tolist()
-    assert loaded.faces.tolist() == faces[order].tolist()
-
-
-def test_obj_ignored_statements_are_noted(tmp_path):
-    text = ("# a comment\n" + UNIT_SQUARE_OBJ.replace("v 1 1 0", "v 1 1 0 0.2 0.3 0.4")
-            + "vp 0.5\nl 1 2 3\nl 3 4\np 1\nfoo bar\nbaz\nfoo\n"
-            + "f 1 2 \\\n  3  # continued\nf 1 3 4\n")
-    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]]
-    assert mesh.vertices[2].tolist() == [1, 1, 0]
-    assert notes == [
-        "ignored 1 'vp' parameter-space vertex",
-        "ignored 2 'l' line elements",
-        "ignored 1 'p' point element",
-        "ignored 3 unknown statements: 'foo' (2, first at line 10), 'baz' (1, first at line 11)",
-        "ignored the extra values (weight w or colour r g b) of 1 'v' line",
-    ]
-
-
-OBJ_REFUSALS = {
-    "index 0": (UNIT_SQUARE_OBJ + "f 1 2 3\nf 0 3 4\n",
-                r"line 6: face vertex index 0 \(OBJ indices start at 1\)"),
-    "negative too far back": (UNIT_SQUARE_OBJ + "f -1 -2 -5\n",
-                              r"line 5: face refers to vertex -5 but only 4 vertices precede it"),
-    "positive beyond the file": (UNIT_SQUARE_OBJ + "f 1 2 9\n",
-                                 r"line 5: face refers to vertex 9 but the file has only 4 vertices"),
-    "texture index 0": (UNIT_SQUARE_OBJ + "vt 0 0\nf 1/1 2/0 3/1\n",
-                        r"line 6: face texture coordinate index 0 \(OBJ indices start at 1\)"),
-    "normal out of range": (UNIT_SQUARE_OBJ + "vn 0 0 1\nf 1//1 2//2 3//1\n",
-                            r"line 6: face refers to normal 2 but the file has only 1 normal"),
-    "free-form type": ("v 0 0 0\nv 1 0 0\ncstype bspline\n",
-                       r"line 3: free-form geometry \('cstype'\) is not supported"),
-    "curv": ("v 0 0 0\nv 1 0 0\ncurv 0 1 1 2\n", r"line 3: free-form geometry \('curv'\) is not supported"),
-    "two-corner face": (UNIT_SQUARE_OBJ + "f 1 2\n", r"line 5: face 'f' with 2 corners \(a face needs at least 3\)"),
-    "bad number": ("v 0 0 0\nv 1 0.5.1 0\n", r"line 2: vertex coordinate '0.5.1' is not a number"),
-    "two coordinates": ("v 0 0 0\nv 1 0\n", r"line 2: vertex 'v' with 2 coordinates \(needs x y z\)"),
-    "bad corner": (UNIT_SQUARE_OBJ + "f 1 2 3/x\n", r"line 5: face corner '3/x' is not i, i/t, i//n or i/t/n"),
-    "only lines": (UNIT_SQUARE_OBJ + "l 1 2 3 4 1\n",
-                   r"no faces \('f'\), only line \('l'\) or point \('p'\) elements"),
-}
-
-
-@pytest.mark.parametrize("case", OBJ_REFUSALS)
-def test_obj_refusals_name_the_construct(tmp_path, case):
-    text, message = OBJ_REFUSALS[case]
-    path = _obj(tmp_path, text, "x.obj")
-    with pytest.raises(MeshError, match=r"^cannot parse mesh '.*x\.obj': " + message) as info:
-        load_mesh(path)
-    assert "\n" not in str(info.value)
-
-
-def test_obj_validation_message_points_at_the_file_line(tmp_path):
-    # the validation's own message, then the OBJ line it is about
-    with pytest.raises(MeshError, match=r"invalid mesh .*: vertex 4 is not used by any face \(file line 5\)$"):
-        load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "v 9 9 9\nf 1 2 3 4\n"))
-    repeated = r"invalid mesh .*: face 1 repeats a vertex \(degenerate triangle\) \(file line 6\)$"
-    with pytest.raises(MeshError, match=repeated):
-        load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3\nf 1 3 3\n"))
-
-
-# --------------------------------------------------------------------------- PLY and OFF, ranges (issue 14)
-
-PLY_V = np.array([[0, 0, 0], [2, 0, 0], [3, 1.5, 0], [1, 2.5, 0], [-1, 1.5, 0], [4, 0, 0], [4.5, 1.5, 0], [3.5, 3, 0]])
-
-
-def _ply_binary_mixed(order: str) -> bytes:
-    """Big- or little-endian PLY: an extra element before the faces, properties out of x y z order,
-    a pentagon, a quad and a triangle with a per-face flag after each list."""
-    import struct
-
-    endian = {"<": "binary_little_endian", ">": "binary_big_endian"}[order]
-    head = (f"ply\nformat {endian} 1.0\ncomment mixed\nelement vertex {len(PLY_V)}\n"
-            "property float z\nproperty double x\nproperty uchar red\nproperty double y\n"
-            "element edge 1\nproperty int vertex1\nproperty int vertex2\n"
-            "element face 3\nproperty list uchar uint vertex_index\nproperty uchar flags\nend_header\n").encode()
-    body = b"".join(struct.pack(order + "fdBd", z, x, 7, y) for x, y, z in PLY_V.tolist())
-    body += struct.pack(order + "ii", 0, 1)
-    for face in ([0, 1, 2, 3, 4], [1, 5, 6, 2], [2, 6, 7]):
-        body += struct.pack(f"{order}B{len(face)}IB", len(face), *face, 1)
-    return head + body
-
-
-@pytest.mark.parametrize("order", ["<", ">"])
-def test_ply_binary_polygons_are_fanned_in_file_order(tmp_path, order):
-    path = tmp_path / "m.ply"
-    path.write_bytes(_ply_binary_mixed(order))
-    mesh, notes = load_mesh_with_notes(path)
-    assert mesh.vertices.tolist() == PLY_V.tolist()
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [1, 5, 6], [1, 6, 2], [2, 6, 7]]
-    assert notes == ["2 polygons (4 to 5 corners) fan-triangulated into 5 triangles"]
-
-
-def test_ply_ascii_with_tabs_crlf_and_mixed_faces(tmp_path):
-    rows = ["ply", "format ascii 1.0", f"element vertex {len(PLY_V)}", "property double x", "property double y",
-            "property double z", "element face 3", "property list uchar int vertex_indices", "end_header"]
-    rows += ["\t".join(map(repr, v)) for v in PLY_V.tolist()] + ["5\t0 1 2 3 4", "4 1\t5 6 2", "3 2 6 7"]
-    path = tmp_path / "m.ply"
-    path.write_bytes("\r\n".join(rows).encode() + b"\r\n")
-    mesh, notes = load_mesh_with_notes(path)
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [1, 5, 6], [1, 6, 2], [2, 6, 7]]
-    assert notes == ["2 polygons (4 to 5 corners) fan-triangulated into 5 triangles"]
-
-
-@pytest.mark.parametrize("text, message", [
-    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-     "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n",
-     r"the file ends inside element 'face'"),
-    ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
-     "end_header\n0 zero 0\n", r"element 'vertex' has a value 'zero' that is not a number"),
-    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-     "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n",
-     r"face 0: face refers to vertex 3, outside 0..2"),
-    ("ply\nformat binary_middle_endian 1.0\nend_header\n", r"no 'format ascii\|binary"),
-    ("ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n", r"header line 4 'property quad x'"),
-    ("OFF\n3 1\n0 0 0\n1 0 0\n", r"the file ends early"),
-    ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", r"line 6: face with 2 corners"),
-    ("OFF BINARY\n", r"binary OFF is not supported"),
-    ("", r"the file is empty: no 'OFF' header, no vertices, no faces"),
-    ("# a comment\n\n", r"the file is empty but for comments and blank lines: no 'OFF' header"),
-    ("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", r"line 4: vertex coordinate 'x' is not a number"),
-])
-def test_ply_and_off_refusals_are_one_line(tmp_path, text, message):
-    path = tmp_path / ("m.ply" if text.startswith("ply") else "m.off")
-    path.write_text(text)
-    with pytest.raises(MeshError, match=r"^cannot parse mesh '.*': .*" + message) as info:
-        load_mesh(path)
-    assert "\n" not in str(info.value)
-
-
-_STL_FACET = ("  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n      vertex 1 0 0\n      vertex 0 1 0\n"
-              "    endloop\n  endfacet\n")
-
-
-@pytest.mark.parametrize("text, message", [
-    ("solid s\n" + _STL_FACET.replace("vertex 1 0 0", "vertex 1 abc 0") + "endsolid s\n",
-     r"line 5: 'abc' is not a number$"),
-    ("solid s\n" + _STL_FACET.replace("      vertex 0 1 0\n", "") + "endsolid s\n",
-     r"line 6: expected 'vertex x y z' \(corner 3 of 3\), got 'endloop'$"),
-    ("solid s\n" + _STL_FACET.replace("    endloop\n", "      vertex 1 1 0\n    endloop\n") + "endsolid s\n",
-     r"line 7: expected 'endloop' after three vertices \(STL holds triangles\), got 'vertex 1 1 0'$"),
-    ("solid s\n" + _STL_FACET + _STL_FACET[:47], r"line 11: expected 'vertex x y z' \(corner 1 of 3\), got 'verte', "
-     r"the file's last line, cut short: truncated\?$"),
-    ("solid s\n" + _STL_FACET + _STL_FACET[:55], r"the file ends inside facet 2 \(after line 11\): truncated\?$"),
-    ("solid s\n  facet 0 0 1\n", r"line 2: expected 'facet normal nx ny nz' or 'endsolid', got 'facet 0 0 1'$"),
-])
-def test_text_stl_refusals_name_the_line(tmp_path, text, message):
-    """A text STL is read line by line (sim.mesh_io.load.read_text_stl): a malformed or cut file is
-    refused naming the line, not with a parser's internal message."""
-    path = tmp_path / "m.stl"
-    path.write_text(text)
-    with pytest.raises(MeshError, match=r"^cannot parse mesh '.*': " + message) as info:
-        load_mesh(path)
-    assert "\n" not in str(info.value)
-
-
-def test_a_text_stl_without_endsolid_is_read_with_a_note(tmp_path):
-    path = tmp_path / "m.stl"
-    path.write_text("solid s\n" + _STL_FACET + _STL_FACET.replace("vertex 0 0 0", "vertex 1 1 0"))
-    mesh, notes = load_mesh_with_notes(path)
-    assert (mesh.n_vertices, mesh.n_faces) == (4, 2)
-    assert notes[0] == "no 'endsolid' after the last of 2 facets (line 15): the file may be truncated"
-
-
-def test_off_variants(tmp_path):
-    path = tmp_path / "m.off"
-    path.write_text("COFF 4 2 0  # counts on the keyword's line\n0 0 0 255 0 0 255\n1 0 0 0 255 0 255\n"
-                    "1 1 0 0 0 255 255\n0 1 0 9 9 9 255\n3 0 1 2 200 10 10\n3\t0 2 3\n")
-    mesh, notes = load_mesh_with_notes(path)
-    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]] and notes == []
-
-
 def test_coordinates_outside_the_range_are_refused_naming_it():
     with pytest.raises(MeshError, match=r"^vertex 2 has a coordinate of magnitude 1e\+51, outside the supported "
                                         r"range \|x\| <= 1e\+50$"):
@@ -459,33 +152,6 @@ def test_coordinates_outside_the_range_are_refused_naming_it():
     Mesh(np.array([[0.0, 0.0, 0.0], [9e-51, 9e-51, 9e-51], [9e-51, 0.0, 0.0]]), np.array([[0, 1, 2]]))
     with pytest.raises(MeshError, match="degenerate"):  # all at one point: no size at all
         Mesh(SQUARE_V * 0, SQUARE_F)
-
-
-def test_a_file_named_with_a_trailing_slash_is_not_read(tmp_path):
-    """``scan.obj/`` names no file (the OS says "not a directory"); pathlib drops the slash, and the file was
-    read as if it had been named without it."""
-    from sim.layouts import LayoutError, load_layout
-    from sim.mesh_io import read_obj
-
-    square = tmp_path / "square.obj"
-    square.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n")
-    load_mesh(str(square))
-    with pytest.raises(MeshError, match=r"^cannot read mesh '.*square\.obj/': not a directory$"):
-        load_mesh(f"{square}/")
-    with pytest.raises(MeshError, match=r"^cannot read mesh '.*square\.obj/': not a directory$"):
-        read_obj(f"{square}/")
-    with pytest.raises(LayoutError, match=r"^cannot read layout '.*square\.obj/': not a directory$"):
-        load_layout(f"{square}/", 4)
-
-
-def test_an_unreadable_mesh_is_one_line(tmp_path):
-    (tmp_path / "d.obj").mkdir()
-    with pytest.raises(MeshError, match=r"^cannot read mesh '.*d\.obj': is a directory$"):
-        load_mesh(tmp_path / "d.obj")
-    with pytest.raises(MeshError, match=r"^cannot read mesh '.*': file name too long$"):
-        load_mesh(tmp_path / ("n" * 300 + ".obj"))
-    with pytest.raises(MeshError, match=r"^cannot read mesh '.*nope\.ply': no such file$"):
-        load_mesh(tmp_path / "nope.ply")
 
 
 def _grid(n: int = 6):

@@ -2,11 +2,13 @@
 
 import math
 
+import igl
 import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-import igl
+from golden_model.mesh import Mesh, folded_faces, signed_areas_2d
+from sim.generate import delaunay_patch, dome_grid, grid_faces, grid_uv, rolled_grid, saddle_grid, spherical_cap
 from sim.layouts import (
     LAYOUT_METHODS,
     LayoutError,
@@ -16,10 +18,9 @@ from sim.layouts import (
     load_layout,
     lscm_layout,
     pca_layout,
+    start_layout,
     tutte_layout,
 )
-from golden_model.mesh import Mesh, folded_faces, signed_areas_2d
-from sim.generate import delaunay_patch, dome_grid, grid_faces, grid_uv, rolled_grid, saddle_grid
 
 
 def test_tutte_boundary_circle_and_barycentric_interior():
@@ -257,3 +258,15 @@ def test_a_computed_start_is_oriented_by_its_area_as_folds_are_counted():
     assert folded_faces(kept, faces).sum() == 3
     mirrored = positions * np.array([1.0, -1.0])
     assert np.array_equal(_counter_clockwise(mirrored, mesh), mirrored * np.array([-1.0, 1.0]))
+
+
+def test_a_folded_start_is_untangled_before_the_guarded_dynamics(tmp_path):
+    mesh = spherical_cap(6)
+    folded = initial_layout(mesh, "tutte")
+    folded[0] = folded[mesh.boundary_loop[0]] * 1.3  # the pole dragged past the rim: its fan folds
+    assert folded_faces(folded, mesh.faces).sum() > 0
+    path = tmp_path / "folded.txt"
+    np.savetxt(path, folded)
+    start = start_layout(mesh, str(path))
+    assert start.folded == 0 and folded_faces(start.positions, mesh.faces).sum() == 0
+    assert "untangl" in start.method and len(start.notes) == 1
