@@ -12,7 +12,7 @@ The writer is chosen by the file name's ending (:func:`pattern_kind`):
                (A4, A3, Letter, or ``fit``: one page around the pattern), tiled with overlap marks when the
                pattern is larger than one sheet (a sheet that would hold nothing of it is left out);
                every sheet carries the mesh's name, the units, the run, its label when tiled and a scale
-               bar to check the print (reportlab).
+               bar to check the print, and the piece its name (reportlab).
 ``.svg``       the same sheets as the PDF in one SVG document, user unit = 1 mm; tiled sheets lie side
                by side in their grid, each declared as an Inkscape page.
 ``.obj``       the 3D mesh (``v``, full precision) with the pattern as texture coordinates ``vt`` (scaled
@@ -87,6 +87,8 @@ EDGE_WIDTH_MM = 0.06      # mesh edges, drawn only when ...
 EDGE_MIN_MM = 2.0         # ... the median edge is at least this long on paper
 GRAIN_WIDTH_MM = 0.2      # the grain line and its arrowheads (--grain) ...
 GRAIN_GREY = 0.35         # ... in this grey (0 black, 1 white)
+PIECE_LABEL_MAX_MM = 6.0  # the piece's name on the piece itself: at most this tall (cap height) ...
+PIECE_LABEL_MIN_MM = 1.5  # ... and left out where it would be smaller than this to fit
 SCALE_BAR_MAX_MM = 80.0   # the scale bar is the longest 1, 2 or 5 x 10^k units not longer than this
 FONT_MM = 3.2             # text height of the title block
 CAP_HEIGHT_EM = 0.72      # Helvetica's cap height, in font sizes (a label's size is its cap height)
@@ -1049,6 +1051,32 @@ def _pattern_parts(drawing: PatternDrawing, plan: SheetPlan
     return edges, folded, q[drawing.boundary], None
 
 
+def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
+    """The piece's name on the piece, in the grid's mm (so that it stays on the piece once the sheets are
+    trimmed away): centred on the point inside the pattern farthest from its edge (shapely's ``polylabel``),
+    as tall as fits in the circle there, up to :data:`PIECE_LABEL_MAX_MM`; ``None`` where it would be smaller
+    than :data:`PIECE_LABEL_MIN_MM`."""
+    import shapely
+    from shapely.ops import polylabel
+
+    edge = _pattern_mm(drawing, plan, drawing.boundary_points)
+    area = shapely.make_valid(shapely.Polygon(edge))
+    parts = [part for part in getattr(area, "geoms", [area]) if part.geom_type == "Polygon"]
+    if not parts:
+        return None
+    largest = max(parts, key=lambda part: part.area)
+    centre = polylabel(largest, tolerance=max(0.01, 1e-4 * math.sqrt(largest.area)))
+    room = largest.exterior.distance(centre)  # the largest circle about the centre inside the piece
+    for ring in largest.interiors:
+        room = min(room, ring.distance(centre))
+    name = drawing.name
+    aspect = _text_width(name, 1.0) / 1.0  # width per mm of cap height
+    size = min(PIECE_LABEL_MAX_MM, 0.9 * 2 * room / math.hypot(aspect, 1.0))
+    if size < PIECE_LABEL_MIN_MM:
+        return None
+    return Label(centre.x, centre.y - size / 2, name, size, "middle", name="piece-label")
+
+
 # --------------------------------------------------------------------------- PDF (reportlab)
 
 
@@ -1119,6 +1147,11 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
         canvas.setLineWidth(GRAIN_WIDTH_MM)
         canvas.setStrokeGray(GRAIN_GREY)
         canvas.drawPath(path_, stroke=1, fill=0)
+    label = piece_label(drawing, plan)
+    if label is not None:
+        canvas.setFillGray(GRAIN_GREY)
+        canvas.setFont("Helvetica", label.size / CAP_HEIGHT_EM)
+        canvas.drawCentredString(label.x, label.y, label.text)
     canvas.endForm()
 
     x0, y0, w, h = plan.window
@@ -1225,6 +1258,12 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             for stroke in grain:
                 write(f'<polyline points="{_svg_points(stroke.tolist(), 0.0)}"/>\n')
             write("</g>\n")
+        label = piece_label(drawing, plan)
+        if label is not None:
+            write(f'<text class="{label.name}" x="{_svg_num(label.x)}" y="{_svg_num(-label.y)}" stroke="none" '
+                  f'fill="#{grey:02x}{grey:02x}{grey:02x}" font-family="Helvetica, Arial, sans-serif" '
+                  f'font-size="{_svg_num(label.size / CAP_HEIGHT_EM)}" text-anchor="middle">{escape(label.text)}'
+                  '</text>\n')
         write("</g>\n</defs>\n")
         for sheet in plan.sheets:
             px, py = place(sheet)

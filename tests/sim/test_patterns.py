@@ -877,3 +877,52 @@ def test_a_grain_normal_to_the_surface_is_refused_before_the_run(tmp_path, monke
     assert sim.cli.main(["flatten", "sq.obj", "--grain", "z", "--out", "sq.dxf"]) == 2
     assert "--grain: the direction is normal to the surface" in capsys.readouterr().err
     assert sorted(os.listdir()) == ["sq.obj"]
+
+
+def _label_box_inside(root, ident: str) -> tuple[str, bool]:
+    """The piece label's text, and whether its box (reportlab's Helvetica widths, cap height from its font size)
+    lies inside the pattern's polygon ``ident`` of the SVG's pattern group (both in the group's y-down frame)."""
+    from matplotlib.path import Path as Outline
+    from reportlab.pdfbase.pdfmetrics import stringWidth
+
+    label = root.find(f".//{SVG}g[@id='pattern']/{SVG}text[@class='piece-label']")
+    polygon = np.array([p.split(",") for p in root.find(f".//{SVG}polygon[@id='{ident}']").get("points").split()],
+                       float)
+    em = float(label.get("font-size"))
+    width, cap = stringWidth(label.text, "Helvetica", em), 0.718 * em  # Helvetica's cap height, from its metrics
+    x, baseline = float(label.get("x")), float(label.get("y"))
+    corners = [(x - width / 2, baseline), (x + width / 2, baseline), (x - width / 2, baseline - cap),
+               (x + width / 2, baseline - cap)]
+    return label.text, bool(Outline(polygon).contains_points(corners).all())
+
+
+@pytest.mark.parametrize("seam", [0.0, 0.005])
+def test_the_piece_carries_its_name_inside_its_edge(bunny, tmp_path, seam):
+    """Trimmed out of its sheet, a piece keeps its name: the label lies inside the sew line (the edge)."""
+    mesh, layout = bunny
+    drawing = PatternDrawing.of(mesh, layout, "m").with_seam(seam)
+    write_pattern_file(tmp_path / "bunny.svg", drawing)
+    text, inside = _label_box_inside(ET.parse(tmp_path / "bunny.svg").getroot(), "sew" if seam else "cut")
+    assert text == "bunny_face" and inside
+
+
+def test_a_piece_too_small_for_its_name_has_none_on_it(tmp_path):
+    from sim.patterns import PIECE_LABEL_MIN_MM
+
+    mesh, layout = _rectangle(20.0, 1.5)  # mm: room for 1.35 mm of cap height at most, under the least size
+    assert 0.9 * 1.5 < PIECE_LABEL_MIN_MM
+    write_pattern_file(tmp_path / "sliver.svg", PatternDrawing.of(mesh, layout, "mm"))
+    root = ET.parse(tmp_path / "sliver.svg").getroot()
+    assert root.find(f".//{SVG}text[@class='piece-label']") is None
+    write_pattern_file(tmp_path / "piece.svg", PatternDrawing.of(*_rectangle(120.0, 60.0), "mm"))
+    assert _label_box_inside(ET.parse(tmp_path / "piece.svg").getroot(), "cut")[1]
+
+
+def test_the_pdfs_piece_label_is_drawn_with_the_pattern(bunny, tmp_path):
+    from pypdf import PdfReader
+
+    mesh, layout = bunny
+    write_pattern_file(tmp_path / "bunny.pdf", PatternDrawing.of(mesh, layout, "m"))
+    reader = PdfReader(tmp_path / "bunny.pdf")
+    texts = [text for text, _ in pdf_page_contents(reader, reader.pages[0])[1]]
+    assert texts.count("bunny_face") == 1  # the piece's own label, beside the title block's longer line
