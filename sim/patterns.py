@@ -1080,6 +1080,16 @@ def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
 # --------------------------------------------------------------------------- PDF (reportlab)
 
 
+def _closed_path(canvas, points: np.ndarray):
+    """A reportlab path round the closed polygon ``points`` (page mm)."""
+    path = canvas.beginPath()
+    path.moveTo(*points[0])
+    for point in points[1:].tolist():
+        path.lineTo(*point)
+    path.close()
+    return path
+
+
 def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     """One page per sheet; the pattern is one form XObject, placed and clipped on each page.
 
@@ -1119,23 +1129,13 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             path_.close()
         canvas.setFillGray(0.0)
         canvas.drawPath(path_, stroke=0, fill=1)
-    path_ = canvas.beginPath()
-    path_.moveTo(*cut[0])
-    for point in cut[1:].tolist():
-        path_.lineTo(*point)
-    path_.close()
     canvas.setLineWidth(CUT_WIDTH_MM)
     canvas.setStrokeGray(0.0)
-    canvas.drawPath(path_, stroke=1, fill=0)
+    canvas.drawPath(_closed_path(canvas, cut), stroke=1, fill=0)
     if sew is not None:
-        path_ = canvas.beginPath()
-        path_.moveTo(*sew[0])
-        for point in sew[1:].tolist():
-            path_.lineTo(*point)
-        path_.close()
         canvas.setLineWidth(SEW_WIDTH_MM)
         canvas.setDash(list(SEW_DASH_MM))
-        canvas.drawPath(path_, stroke=1, fill=0)
+        canvas.drawPath(_closed_path(canvas, sew), stroke=1, fill=0)
         canvas.setDash([])
     grain = _grain_mm(drawing, plan)
     if grain:

@@ -227,3 +227,16 @@ def test_the_api_writes_an_allowance_and_refuses_it_where_it_would_be_ignored(tm
         springflat.write_pattern(tmp_path / "q.pdf", pattern, units="m", seam_allowance=-1)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.svg"]
 
+
+
+def test_the_pdf_draws_the_sew_line_dashed_inside_the_cut_line(tmp_path):
+    from pypdf import PdfReader
+
+    mesh, layout = rectangle(185.0, 100.0)
+    forms = {}
+    for name, drawing in (("plain", PatternDrawing.of(mesh, layout, "mm")),
+                          ("seamed", PatternDrawing.of(mesh, layout, "mm").with_seam(10.0))):
+        write_pattern_file(tmp_path / f"{name}.pdf", drawing)
+        page = PdfReader(tmp_path / f"{name}.pdf").pages[0]
+        forms[name] = b"".join(x.get_object().get_data() for x in page["/Resources"]["/XObject"].values())
+    assert b"[3 1.5] 0 d" in forms["seamed"] and b"[3 1.5] 0 d" not in forms["plain"]
