@@ -27,7 +27,7 @@ from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
-                       check_mesh_fits, error_text, kind_or_none, on_sheets, run_caption, scale_note,
+                       check_mesh_fits, check_seam_fits, error_text, kind_or_none, on_sheets, run_caption, scale_note,
                        seam_length, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
@@ -73,11 +73,15 @@ def _progress(total: int, enabled: bool):
 
 def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
     """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units), and a
-    ``--grain`` normal to the whole surface."""
+    ``--grain`` normal to the whole surface, and a seam allowance longer than half the mesh's edge."""
     if any(on_sheets(path) for path in args.out or ()):
         check_mesh_fits(mesh, args.units, paper_of(args))
     if args.grain is not None:
         check_grain(mesh, args.grain)
+    if args.seam_allowance is not None:  # the 3D edge's length: the pattern's, to its strain
+        loop = mesh.vertices[mesh.boundary_loop]
+        check_seam_fits(seam_length(args.seam_allowance, args.units),
+                        float(np.linalg.norm(np.roll(loop, -1, axis=0) - loop, axis=1).sum()), args.units)
 
 
 def paper_of(args: argparse.Namespace) -> str:
@@ -102,8 +106,8 @@ def check_options_used(args: argparse.Namespace) -> None:
         raise UserError("--grain turns the pattern files and draws their grain line: add --out NAME.dxf, .pdf, .svg, "
                         ".obj or .flat.obj")
     if args.seam_allowance is not None and not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
-        raise UserError("--seam-allowance draws the cut line outside the pattern's edge: add --out NAME.dxf, .pdf or "
-                        ".svg")
+        raise UserError("--seam-allowance draws the cut line outside the pattern's edge: add a .dxf, .pdf or .svg "
+                        "--out")
     if args.skip_existing and args.out_dir is None:
         raise UserError("--skip-existing skips a batch's meshes whose files are in --out-dir: add --out-dir DIR")
     if args.paper is not None and not any(on_sheets(path) for path in args.out or ()):
@@ -367,9 +371,11 @@ def still_note(params: FlattenParams, result: FlattenResult, formats: FormatSet 
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:
-    """What ``--json`` prints: the mesh, the run's summary, the distortion's worst 1 %, what was used."""
+    """What ``--json`` prints: the mesh, the run's summary, the distortion's worst 1 %, what was used (and the
+    seam allowance of the pattern files, in ``units``, where one is asked for)."""
+    seam = {} if args.seam_allowance is None else {"seam_allowance": seam_length(args.seam_allowance, args.units)}
     return {"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
-            **result.summary(), "units": args.units,
+            **result.summary(), "units": args.units, **seam,
             "distortion": worst_summary(distortion(mesh, result.positions)),
             "used": what_was_used(params, args.init, result, mesh)[len("springflat: "):]}
 

@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import stat
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -46,7 +47,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from golden_model.mesh import Mesh, folded_faces
+from golden_model.mesh import Mesh, boundary_crossings, folded_faces
 
 from .mesh_io import save_obj
 from .outputs import OutputError, atomic_write, output_target, write_layout
@@ -151,7 +152,8 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
                         help=f"PDF/SVG sheet: {_either(list(PAPER_MM))} (tiled with overlap marks when the pattern is "
                              "larger; any case), "
                              f"or fit: one page around the pattern, for a roll plotter (default {DEFAULT_PAPER}); "
-                             "a cutter takes the .dxf, which holds the cut line alone (unless --dxf-edges)")
+                             "a cutter takes the .dxf, whose layer CUT holds the cut line alone (SEW: the sew line of "
+                             "--seam-allowance, MESH: --dxf-edges)")
     parser.add_argument("--grain", type=grain_argument, default=None, metavar="x|y|z|X,Y,Z",
                         help="turn the pattern files so that this 3D direction of the mesh (-z: the other way), as "
                              "laid on the pattern, points up the page, and draw it as a grain line (default: the "
@@ -161,7 +163,7 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
                              "drawn as the sew line (dashed; DXF layer SEW); a length in --units, or with its "
                              "unit: 10mm, 1.5cm, 0.375in (default: none, the pattern's edge is the cut line)")
     parser.add_argument("--dxf-edges", action="store_true",
-                        help="also write every mesh edge to the DXF, on layer MESH (the boundary is on CUT)")
+                        help="also write every mesh edge to the DXF, on layer MESH (the cut line is on CUT)")
     parser.add_argument("--distortion", type=file_path_argument, default=None, metavar="FILE.csv",
                         help="per-triangle area ratio and per-edge strain as CSV")
 
@@ -224,7 +226,7 @@ class PatternDrawing:
     def cut_points(self) -> np.ndarray:
         """``(K, 2)`` the cut line's corners, in ``units`` (closed): the boundary, or the seam allowance's
         outline (:func:`seam_outline`)."""
-        return seam_outline(self.boundary_points, self.seam) if self.seam > 0 else self.boundary_points
+        return seam_outline(self, self.seam) if self.seam > 0 else self.boundary_points
 
     @property
     def drawn_points(self) -> np.ndarray:
@@ -232,9 +234,10 @@ class PatternDrawing:
         return np.vstack([self.layout, self.cut_points]) if self.seam > 0 else self.layout
 
     def with_seam(self, allowance: float) -> "PatternDrawing":
-        """The drawing with a seam allowance of ``allowance`` ``units`` (0: none)."""
+        """The drawing with a seam allowance of ``allowance`` ``units`` (0: none; :func:`check_seam_fits`)."""
         if not (math.isfinite(allowance) and allowance >= 0):
             raise PatternError(f"a seam allowance is a length of 0 or more, got {allowance!r}")
+        check_seam_fits(allowance, self.boundary_length(), self.units)
         return replace(self, seam=float(allowance))
 
     def with_grain(self, grain: str | Sequence[float]) -> "PatternDrawing":
@@ -267,43 +270,78 @@ def seam_allowance_argument(text: str) -> str:
     return text
 
 
+#: A seam allowance's text: a decimal number (ASCII digits), then one of :data:`UNITS` as written (SI symbols are
+#: case-sensitive: ``M`` would be mega), or none (the pattern's ``--units``).
+_LENGTH = re.compile(r"\s*(?P<number>[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)\s*"
+                     rf"(?P<unit>{'|'.join(sorted(UNIT_MM, key=len, reverse=True))})?\s*")
+
+
 def seam_length(value: str | float, units: str) -> float:
     """A seam allowance in ``units``: a number is in ``units`` already, a text may end in a unit (``10mm``,
-    ``1.5 cm``)."""
+    ``1.5 cm``; :data:`_LENGTH`)."""
     scale = check_units(units)
-    number, unit = value, units
+    unit = units
     if isinstance(value, str):
-        text = value.strip().lower()
-        unit = next((u for u in sorted(UNIT_MM, key=len, reverse=True) if text.endswith(u)), units)
-        text = text[:-len(unit)].strip() if text.endswith(unit) else text
-        try:
-            number = float(text)
-        except ValueError:
-            raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}") from None
+        match = _LENGTH.fullmatch(value)
+        if match is None:
+            raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}")
+        number, unit = float(match["number"]), match["unit"] or units
     elif isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}")
-    number = float(number)
-    if not (math.isfinite(number) and number >= 0):
+    else:
+        try:
+            number = float(value)
+        except OverflowError:
+            number = math.inf
+        if not math.isfinite(number):
+            raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}")
+    if number < 0:
         raise PatternError(f"a seam allowance is a length of 0 or more, got {value!r}")
-    return number * UNIT_MM[unit] / scale
+    return number if unit == units else number * UNIT_MM[unit] / scale
 
 
-def seam_outline(points: np.ndarray, allowance: float) -> np.ndarray:
-    """``(K, 2)`` the closed cut line ``allowance`` outside the closed sew line ``points``: the outline of the
-    points within that distance of the area the sew line encloses (shapely's buffer, round joins), so every
-    point of the sew line has the full allowance, and the zigzag of a scanned boundary's short edges is not
-    carried out to the cut line (mitred joins would make each of its bends a spike). The buffer is
-    :data:`SEAM_MARGIN` wider than asked: its rounded corners are chords, and GEOS simplifies the sew line by
-    a small share of the distance first, each of which brings the line a little closer (up to 0.05 % on a
-    scan). A sew line that crosses itself (a pattern that overlaps itself) is outlined around the area it
-    covers, without its holes."""
-    import shapely
+def check_seam_fits(allowance: float, edge_length: float, units: str) -> None:
+    """Refuse a seam allowance (in ``units``) longer than half the pattern's edge (``edge_length`` ``units``
+    round; a pattern is never wider than that): a wrong unit, most likely (``10`` meant as mm with ``--units
+    m``), which would make the print a refusal for its size and the cut line a blob."""
+    if allowance > edge_length / 2:
+        raise PatternError(f"a seam allowance of {seam_text(allowance, units)} is more than half the length of the "
+                           f"pattern's edge, {seam_text(edge_length, units)}: check its length and unit (10mm, "
+                           "0.375in)")
 
-    covered = shapely.make_valid(shapely.Polygon(points))
-    grown = covered.buffer(allowance * (1 + SEAM_MARGIN), quad_segs=SEAM_ARC_SEGMENTS)
+
+def seam_text(length: float, units: str) -> str:
+    """A length in ``units`` as the sheets print it: ``0.01 m (10 mm)``, ``0.375 in (9.525 mm)``, ``10 mm``."""
+    return f"{length:.6g} {units}" + (f" ({length * UNIT_MM[units]:.6g} mm)" if units != "mm" else "")
+
+
+def seam_outline(drawing: PatternDrawing, allowance: float) -> np.ndarray:
+    """``(K, 2)`` the closed cut line ``allowance`` outside the pattern's material (:func:`material`): the
+    outline of the points within that distance of it (shapely's buffer, round joins), so every point of the
+    sew line has the full allowance, and the zigzag of a scanned boundary's short edges is not carried out to
+    the cut line (mitred joins would make each of its bends a spike). The buffer is :data:`SEAM_MARGIN` wider
+    than asked: its rounded corners are chords, and GEOS simplifies the outline by a small share of the
+    distance first, each of which brings the line a little closer (up to 0.05 % on a scan). Holes of the
+    buffered area (where a pattern overlaps itself round an empty middle) are left out: the cut line is one."""
+    grown = material(drawing).buffer(allowance * (1 + SEAM_MARGIN), quad_segs=SEAM_ARC_SEGMENTS)
     parts = getattr(grown, "geoms", [grown])
     outline = max(parts, key=lambda part: part.area).exterior
     return np.asarray(outline.coords, dtype=np.float64)[:-1]
+
+
+def material(drawing: PatternDrawing):
+    """The area the pattern covers, a shapely geometry in ``units``: the polygon of its boundary, or, where a
+    triangle is folded or the boundary crosses itself (parts of the pattern lie on each other), the union of
+    its triangles (a folded flap can lie outside the boundary's polygon)."""
+    import shapely
+
+    folded = folded_faces(drawing.layout, drawing.faces)
+    if not folded.any() and boundary_crossings(drawing.layout, drawing.boundary) == 0:
+        return shapely.Polygon(drawing.boundary_points)
+    corners = drawing.layout[drawing.faces]
+    a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    kept = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) > 0  # (a triangle of no area covers nothing)
+    return shapely.union_all(shapely.polygons(corners[kept]))
 
 
 #: A grain line's length, as a fraction of the pattern's height, and its arrowheads', of its length.
@@ -544,7 +582,7 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
         if drawing.grain:
             meta["springflat_grain"] = drawing.grain
         if drawing.seam > 0:
-            meta["springflat_seam_allowance"] = f"{drawing.seam!r} {drawing.units}"
+            meta["springflat_seam_allowance"] = f"{drawing.seam:.12g} {drawing.units}"
         # ezdxf adds a CLASS per object type in use while saving, in the order of a set (the hash seed's):
         # register them first, sorted, so that the file does not depend on the process
         for dxftype in sorted(doc.entitydb.dxf_types_in_use()):
@@ -726,7 +764,9 @@ def error_text(error: float) -> str:
 
 def count_text(count: int) -> str:
     """A count as a person reads it: ``1,234``, or ``3.2e+17`` past a million (not 300 digits)."""
-    return f"{count:,}" if count < 10**6 else f"{float(count):.2g}"
+    if count < 10**6:
+        return f"{count:,}"
+    return f"{float(count):.2g}" if count < 10**300 else f"about 10^{len(str(count)) - 1}"
 
 
 def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None:
@@ -822,8 +862,8 @@ def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = O
 
 def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
     """``plan`` less the sheets whose window holds nothing of the pattern (no triangle meets it: the cut
-    line, mesh edges and folded triangles all lie on the triangles; with a seam allowance, the area inside
-    the cut line, which holds them all): an L-shaped pattern's empty corner is not printed. The others keep their
+    line, mesh edges and folded triangles all lie on the triangles; with a seam allowance, also the area inside
+    the cut line): an L-shaped pattern's empty corner is not printed. The others keep their
     labels, so that the grid still shows where each goes."""
     from matplotlib.path import Path as Outline
     from matplotlib.transforms import Bbox
@@ -853,9 +893,7 @@ def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
     if drawing.seam > 0:
         cut_mm = _pattern_mm(drawing, plan, drawing.cut_points)
         cut = Outline(np.vstack([cut_mm, cut_mm[:1]]), closed=True)
-        kept = tuple(sheet for sheet in plan.sheets if allowance_drawn(sheet))
-    else:
-        kept = tuple(sheet for sheet in plan.sheets if drawn(sheet))
+    kept = tuple(sheet for sheet in plan.sheets if drawn(sheet) or (drawing.seam > 0 and allowance_drawn(sheet)))
     return replace(plan, sheets=kept, blank=len(plan.sheets) - len(kept))
 
 
@@ -958,7 +996,7 @@ def _fitted(text: str, room: float, size: float, bold: bool = False,
 
 def pattern_title(drawing: PatternDrawing, name: str | None = None) -> str:
     """The first line of every sheet, the PDF's and the SVG's title: the name (or ``name``), scale, units."""
-    seam = f", seam allowance {_unit_label(drawing.seam, drawing.units)} included" if drawing.seam > 0 else ""
+    seam = f", seam allowance {seam_text(drawing.seam, drawing.units)} included" if drawing.seam > 0 else ""
     return (f"{drawing.name if name is None else name}: springflat cutting pattern, scale 1:1, units "
             f"{drawing.units}{seam}")
 

@@ -2,6 +2,7 @@
 pattern's edge, the edge as the sew line, in every true-scale pattern file. Distances are measured here with
 numpy (point to segment) and matplotlib's point-in-polygon test, not with shapely, which draws the line."""
 
+import json
 import math
 import re
 import subprocess
@@ -63,7 +64,7 @@ def test_the_cut_line_keeps_the_allowance_from_the_whole_sew_line(case, bunny):
         mesh, layout = bunny
         allowance = 0.01  # 10 mm on a face 90 mm across, whose boundary edges are about 1 mm
     sew = layout[mesh.boundary_loop]
-    cut = seam_outline(sew, allowance)
+    cut = seam_outline(PatternDrawing.of(mesh, layout), allowance)
     gap = distance_to_polygon(along(cut), sew)
     assert gap.min() >= allowance, gap.min() / allowance  # no point of the cut line closer than the allowance
     assert gap.max() <= allowance * (1 + MARGIN + 1e-9), gap.max() / allowance  # and none much farther
@@ -75,7 +76,7 @@ def test_the_cut_line_keeps_the_allowance_from_the_whole_sew_line(case, bunny):
 
 def test_a_rectangles_cut_line_is_its_allowance_larger_each_way():
     mesh, layout = rectangle(100.0, 60.0)
-    cut = seam_outline(layout[mesh.boundary_loop], 10.0)
+    cut = seam_outline(PatternDrawing.of(mesh, layout), 10.0)
     assert ([120.0, 80.0] <= np.ptp(cut, axis=0)).all() and (np.ptp(cut, axis=0) <= [120.02, 80.02]).all()
 
 
@@ -86,9 +87,8 @@ def test_a_sew_line_that_crosses_itself_gets_one_simple_cut_line_around_it():
     angle = uv[:, 0] * 2.4 * math.pi
     radius = 0.3 + uv[:, 1]
     layout = np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
-    sew = layout[mesh.boundary_loop]
     assert boundary_crossings(layout, mesh.boundary_loop) > 0
-    cut = seam_outline(sew, 0.02)
+    cut = seam_outline(PatternDrawing.of(mesh, layout), 0.02)
     assert boundary_crossings(cut, np.arange(len(cut))) == 0
     outline = Outline(np.vstack([cut, cut[:1]]), closed=True)
     assert outline.contains_points(layout).all()
@@ -99,13 +99,15 @@ def test_a_sew_line_that_crosses_itself_gets_one_simple_cut_line_around_it():
 
 
 @pytest.mark.parametrize("value, units, expected", [
-    ("10", "mm", 10.0), (10, "mm", 10.0), ("10mm", "m", 0.01), ("1.5 CM", "mm", 15.0), ("0.375in", "mm", 9.525),
-    ("0.01m", "cm", 1.0), (np.float32(2.5), "cm", 2.5), ("0", "mm", 0.0)])
+    ("10", "mm", 10.0), (10, "mm", 10.0), ("10mm", "m", 0.01), ("1.5 cm", "mm", 15.0), ("0.375in", "mm", 9.525),
+    ("0.01m", "cm", 1.0), (np.float32(2.5), "cm", 2.5), ("0", "mm", 0.0), (" +.5in ", "in", 0.5),
+    ("1e1mm", "mm", 10.0)])
 def test_an_allowance_is_read_in_the_pattern_units_or_its_own(value, units, expected):
     assert seam_length(value, units) == pytest.approx(expected, rel=1e-12)
 
 
-@pytest.mark.parametrize("value", ["-1", "abc", "nan", "inf", "mm", "10 ft", -0.5, float("nan"), True, None])
+@pytest.mark.parametrize("value", ["-1", "abc", "nan", "inf", "mm", "10 ft", "1_0", "10M", "1.5 CM", "\u0663",
+                                   "0x10", "1,5cm", -0.5, float("nan"), float("inf"), 10**400, True, None])
 def test_an_allowance_that_is_not_a_length_of_0_or_more_is_refused(value):
     with pytest.raises(PatternError, match=r"^a seam allowance is a length"):
         seam_length(value, "mm")
@@ -199,14 +201,22 @@ def test_the_command_takes_an_allowance_with_its_unit_and_refuses_what_ignores_i
                           "--out", str(tmp_path / "b.dxf")], capture_output=True, text=True)
     assert ran.returncode == 0, ran.stderr
     assert (tmp_path / "a.dxf").read_bytes() == (tmp_path / "b.dxf").read_bytes()
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(mesh), "--units", "m", "--seam-allowance", "0.007m",
+                          "--out", str(tmp_path / "c.svg"), "--json"], capture_output=True, text=True)
+    assert ran.returncode == 0 and json.loads(ran.stdout)["seam_allowance"] == 0.007  # as given: no round trip
+    (tmp_path / "c.svg").unlink()
     for args, message in (
             (["--seam-allowance", "10", "--out", str(tmp_path / "c.obj")],
-             r"--seam-allowance draws the cut line outside the pattern's edge: add --out NAME\.dxf, \.pdf or \.svg"),
+             r"--seam-allowance draws the cut line outside the pattern's edge: add a \.dxf, \.pdf or \.svg --out"),
             (["--seam-allowance", "10"], r"--seam-allowance draws the cut line"),
             (["--seam-allowance=-2", "--out", str(tmp_path / "c.dxf")],
              r"argument --seam-allowance: expected a length of 0 or more, got '-2'"),
             (["--seam-allowance", "1 foot", "--out", str(tmp_path / "c.dxf")],
-             r"argument --seam-allowance: expected a length such as 10, 10mm or 0\.375in, got '1 foot'")):
+             r"argument --seam-allowance: expected a length such as 10, 10mm or 0\.375in, got '1 foot'"),
+            (["--units", "m", "--seam-allowance", "10", "--out", str(tmp_path / "c.pdf")],  # 10 m, meant as mm
+             r"^springflat: error: a seam allowance of 10 m \(10000 mm\) is more than half the length of the "
+             r"pattern's edge, 0\.\d+ m \(\d+\.\d+ mm\): check its length and unit"),
+            (["--seam-allowance", "1e200", "--out", str(tmp_path / "c.dxf")], r"is more than half the length")):
         ran = subprocess.run([SPRINGFLAT, "flatten", str(mesh), *args], capture_output=True, text=True)
         assert ran.returncode == 2 and len(ran.stderr.strip().splitlines()) == 1, ran.stderr
         assert re.search(message, ran.stderr), ran.stderr
@@ -240,3 +250,34 @@ def test_the_pdf_draws_the_sew_line_dashed_inside_the_cut_line(tmp_path):
         page = PdfReader(tmp_path / f"{name}.pdf").pages[0]
         forms[name] = b"".join(x.get_object().get_data() for x in page["/Resources"]["/XObject"].values())
     assert b"[3 1.5] 0 d" in forms["seamed"] and b"[3 1.5] 0 d" not in forms["plain"]
+
+
+def _folded_back_strip():
+    """A 100 x 20 mm strip whose last 30 mm are folded back over the strip (a fold along x = 70): folded
+    triangles, and material (the flap's edge) that the boundary's own polygon does not hold as inside."""
+    uv = grid_uv(11, 3, 100.0, 20.0)
+    mesh = Mesh(np.column_stack([uv, np.zeros(len(uv))]), grid_faces(11, 3))
+    layout = uv.copy()
+    beyond = layout[:, 0] > 70.0
+    layout[beyond, 0] = 140.0 - layout[beyond, 0]
+    layout[beyond, 1] += 5.0  # the flap a little off the strip: it sticks out across its top edge
+    return mesh, layout
+
+
+def test_a_folded_patterns_cut_line_holds_all_its_material():
+    from golden_model.mesh import folded_faces
+
+    mesh, layout = _folded_back_strip()
+    assert folded_faces(layout, mesh.faces).any()
+    cut = seam_outline(PatternDrawing.of(mesh, layout), 5.0)
+    outline = Outline(np.vstack([cut, cut[:1]]), closed=True)
+    a, b = np.meshgrid(np.linspace(0, 1, 12), np.linspace(0, 1, 12))
+    inside = a + b <= 1
+    weights = np.column_stack([a[inside], b[inside], 1 - a[inside] - b[inside]])
+    material = np.vstack([weights @ layout[f] for f in mesh.faces])  # points of every triangle, folded or not
+    assert outline.contains_points(material).all()
+    sides = np.stack([cut, np.roll(cut, -1, axis=0)], axis=1)
+    t = np.clip(((material[:, None] - sides[:, 0]) * (sides[:, 1] - sides[:, 0])).sum(2)
+                / ((sides[:, 1] - sides[:, 0]) ** 2).sum(1), 0, 1)
+    nearest = sides[:, 0] + t[..., None] * (sides[:, 1] - sides[:, 0])
+    assert np.linalg.norm(material[:, None] - nearest, axis=2).min() >= 5.0  # the full allowance round it all
