@@ -47,6 +47,7 @@ sys.path.insert(0, str(REPO))
 from sim.layouts import harmonic_layout, tutte_layout  # noqa: E402
 from golden_model.mesh import Mesh, boundary_crossings  # noqa: E402
 from sim.mesh_io import load_mesh  # noqa: E402
+from sim.outputs import OutputError, check_output_path, write_text_file  # noqa: E402
 from golden_model.reference import SpringModel, measure  # noqa: E402
 
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"
@@ -423,20 +424,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--render", type=Path, metavar="JSON", help="run nothing: print (and --markdown) the table "
                                                                       "of a --json file written before")
     args = parser.parse_args(argv)
+    for what, path in (("--markdown", args.markdown), ("--json", args.json)):  # before the hour of runs
+        if path is not None:
+            try:
+                check_output_path(path, what, typed=False)
+            except OutputError as exc:
+                parser.error(str(exc))
     if args.render:
         saved = json.loads(args.render.read_text())
         if "runs" in saved:  # a --barrier-sweep's
             text = sweep_markdown(saved["runs"], saved["command"])
             print(text)
             if args.markdown:
-                args.markdown.write_text(text)
+                write_text_file(args.markdown, text)
             return 0
         rows = [Row(**{**r, "springflat": Run(**r["springflat"]), "arap": Layout(**r["arap"]),
                        "slim": Layout(**r["slim"])}) for r in saved["rows"]]
         text = markdown(rows, saved["command"])
         print(text)
         if args.markdown:
-            args.markdown.write_text(text)
+            write_text_file(args.markdown, text)
         return 0
     entries = patches(args.corpus, args.only, args.kinds)
     extra = shlex.split(args.springflat_args)
@@ -451,9 +458,9 @@ def main(argv: list[str] | None = None) -> int:
         text = sweep_markdown(results, command)
         print(text)
         if args.markdown:
-            args.markdown.write_text(text)
+            write_text_file(args.markdown, text)
         if args.json:
-            args.json.write_text(json.dumps({"command": command, "runs": results}, indent=1))
+            write_text_file(args.json, json.dumps({"command": command, "runs": results}, indent=1))
         return 0
 
     if args.init:
@@ -477,11 +484,11 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(rows, command)
     print(text)
     if args.markdown:
-        args.markdown.write_text(text)
+        write_text_file(args.markdown, text)
     if args.json:
-        args.json.write_text(json.dumps({"command": command, "ec_tolerance": EC_TOLERANCE, "time_limit": TIME_LIMIT,
-                                         "summary": summary(rows), "rows": [asdict(r) for r in rows]},
-                                        indent=1, allow_nan=True))
+        write_text_file(args.json, json.dumps({"command": command, "ec_tolerance": EC_TOLERANCE,
+                                               "time_limit": TIME_LIMIT, "summary": summary(rows),
+                                               "rows": [asdict(r) for r in rows]}, indent=1, allow_nan=True))
     return 0
 
 

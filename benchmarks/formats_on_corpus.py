@@ -33,6 +33,7 @@ from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.fixed.measures import FixedPointError  # noqa: E402
 from sim.layouts import start_layout  # noqa: E402
 from sim.mesh_io import load_mesh  # noqa: E402
+from sim.outputs import OutputError, check_output_path, write_text_file  # noqa: E402
 from golden_model.reference import flatten  # noqa: E402
 
 
@@ -78,6 +79,11 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=1, help="patches run at once (default 1)")
     parser.add_argument("--json", type=Path, metavar="FILE", help="also write the rows as JSON")
     args = parser.parse_args()
+    if args.json is not None:  # before the runs
+        try:
+            check_output_path(args.json, "--json", typed=False)
+        except OutputError as exc:
+            parser.error(str(exc))
     names = [e["name"] for e in json.loads(MANIFEST.read_text())["patches"] if not args.only or e["name"] in args.only]
     missing = [n for n in names if not (args.corpus / f"{n}.ply").is_file()]
     if missing:
@@ -102,7 +108,7 @@ def main() -> None:
         print(f"`{p}`: holds {len(held)} of {len(rows)}; {len(clean)} without a saturation event; "
               f"{folded} end folded; largest |ΔE_S|, |ΔE_C| against float {worst:.1e}")
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+        write_text_file(args.json, json.dumps(rows, indent=1) + "\n")
 
 
 if __name__ == "__main__":

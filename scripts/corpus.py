@@ -55,6 +55,7 @@ sys.path.insert(0, str(REPO))
 
 from golden_model.mesh import Mesh, MeshError  # noqa: E402
 from sim.mesh_io import load_mesh  # noqa: E402
+from sim.outputs import write_text_file  # noqa: E402
 
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"
 DEFAULT_OUT = REPO / "build" / "corpus"
@@ -427,7 +428,7 @@ def build(manifest_path: Path, originals: Path, out: Path, names: list[str] | No
         print(f"{name}: {stats.vertices} vertices, {stats.faces} faces, min angle {stats.min_angle_deg:.3g} deg, "
               f"area ratio {stats.area_ratio:.3g}", flush=True)
     if record:
-        manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
+        write_text_file(manifest_path, json.dumps(manifest, indent=1) + "\n")
     if failures:
         raise CorpusError(f"{failures} of {len(entries)} patches failed")
     return 0

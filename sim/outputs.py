@@ -472,6 +472,14 @@ _RECEIVED = [signal.SIGINT]
 _INTERRUPT_HOOKS: list[Callable[[], None]] = []
 
 
+def write_text_file(path: Path, text: str) -> None:
+    """``text`` into ``path`` through :func:`atomic_write`: whole or not at all, never in place of a FIFO, a
+    device or a directory (for the benchmark and corpus scripts' ``--markdown`` and ``--json`` files, written
+    after long runs; check them first with :func:`check_output_path`)."""
+    with atomic_write(path) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
+
+
 @contextmanager
 def when_interrupted(hook: Callable[[], None]) -> Iterator[None]:
     """In the block, ``hook()`` is called the moment SIGINT, SIGTERM or SIGHUP arrives (in :func:`on_interrupt`), before

@@ -170,3 +170,21 @@ def test_download_offline_fails_with_one_line(synthetic, capsys, monkeypatch):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("corpus: error: cannot download http://127.0.0.1:9/")
     assert "this needs internet" in err[0]
+
+
+@pytest.mark.parametrize("script, option", [("corpus_table.py", "--markdown"), ("corpus_table.py", "--json"),
+                                            ("formats_on_corpus.py", "--json")])
+def test_a_benchmark_refuses_an_output_it_cannot_write_before_its_runs(tmp_path, script, option):
+    """A FIFO as the table's file: refused in one error line before any run (it waited on the FIFO, after an
+    hour of runs, then wrote into it)."""
+    import os
+    import subprocess
+
+    os.mkfifo(tmp_path / "fifo")
+    args = ["--render", str(tmp_path / "none.json")] if script == "corpus_table.py" else []
+    ran = subprocess.run([sys.executable, str(REPO / "benchmarks" / script), *args, option, str(tmp_path / "fifo")],
+                         capture_output=True, text=True, timeout=120)
+    assert ran.returncode == 2, ran.stderr
+    assert ran.stderr.strip().splitlines()[-1] == (f"{script}: error: {option} '{tmp_path / 'fifo'}' is a named pipe "
+                                                   "(FIFO), not a regular file: springflat writes regular files only")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo"]
