@@ -22,7 +22,7 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "oriented_mesh", "orient_consistently", "component_labels",
+__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "fill_holes", "oriented_mesh", "orient_consistently", "component_labels",
            "count_components", "parity_roots",
            "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE",
            "printable_name", "one_line", "valid_text"]
@@ -49,6 +49,10 @@ class MeshError(ValueError):
 class InconsistentOrientation(MeshError):
     """Two faces run through their shared edge the same way: the faces are not wound consistently
     (:func:`oriented_mesh` turns them to agree, where the mesh is orientable)."""
+
+
+class HoledMesh(MeshError):
+    """A disk with holes: more than one boundary loop (:func:`fill_holes` closes all but the outer one)."""
 
 
 
@@ -457,7 +461,7 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
     on_boundary = np.unique(boundary)
     n_loops = count_components(n, boundary[:, 0], boundary[:, 1]) - (n - len(on_boundary))
     if n_loops != 1:
-        raise MeshError(f"mesh is not a disk: it has {n_loops} boundary loops where a disk has one (holes, or a "
+        raise HoledMesh(f"mesh is not a disk: it has {n_loops} boundary loops where a disk has one (holes, or a "
                         "tube's ends)")
     euler = n - len(edges) + len(faces)
     if euler != 1:
@@ -551,18 +555,62 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
     return result, int(turn.sum())
 
 
-def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh") -> tuple[Mesh, list[str]]:
+def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh",
+                  fill: bool = False) -> tuple[Mesh, list[str]]:
     """A :class:`Mesh` of ``vertices`` and ``faces``, the faces first wound consistently if they are not
-    (:func:`orient_consistently`); the notes say how many faces were turned. Any other problem raises
-    :class:`MeshError` as ``Mesh`` does."""
-    try:
-        return Mesh(vertices, faces, name=name), []
-    except InconsistentOrientation:
-        turned_faces, turned = orient_consistently(faces)
-    plural = "s" if turned != 1 else ""
-    return Mesh(vertices, turned_faces, name=name), [
-        f"{turned} face{plural} wound against {'their' if plural else 'its'} neighbours: turned to agree with the "
-        f"other {len(faces) - turned} (the pattern's faces keep the turned winding)"]
+    (:func:`orient_consistently`), and (``fill``) its holes closed (:func:`fill_holes`); the notes say how many
+    faces were turned and what was filled. Any other problem raises :class:`MeshError` as ``Mesh`` does."""
+    notes: list[str] = []
+    turned = filled = False
+    while True:
+        try:
+            return Mesh(vertices, faces, name=name), notes
+        except InconsistentOrientation:
+            if turned:
+                raise
+            faces, count = orient_consistently(faces)
+            turned = True
+            plural = "s" if count != 1 else ""
+            notes.append(f"{count} face{plural} wound against {'their' if plural else 'its'} neighbours: turned to "
+                         f"agree with the other {len(faces) - count} (the pattern's faces keep the turned winding)")
+        except HoledMesh:
+            if not fill or filled:
+                raise
+            vertices, faces, note = fill_holes(vertices, faces)
+            filled = True
+            notes.append(note)
+
+
+def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
+    """``(vertices, faces, note)`` with every boundary loop but the longest (the outer edge, by its 3D length)
+    closed by a fan of triangles about a new vertex at the mean of the hole's vertices. The new vertices come
+    after the mesh's own (vertex ``i`` stays node ``i``), the new faces after its faces, wound as the mesh's (each
+    hole side run back the other way): ``faces`` must be wound consistently. For a scan's holes, which are
+    no part of the piece; a cut-out the piece must keep is not a hole to fill."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    n = len(vertices)
+    sides = _directed_boundary_edges(faces)
+    lengths = np.linalg.norm(vertices[sides[:, 1]] - vertices[sides[:, 0]], axis=1)
+    loops, side_loop = np.unique(component_labels(n, sides[:, 0], sides[:, 1])[sides[:, 0]], return_inverse=True)
+    loop_length = np.bincount(side_loop, weights=lengths)
+    holes = np.argsort(-loop_length, kind="stable")[1:].tolist()
+    centres, fans = [], []
+    for count, hole in enumerate(holes):
+        hole_sides = sides[side_loop == hole]
+        centres.append(vertices[np.unique(hole_sides)].mean(axis=0))
+        fans.append(np.column_stack([hole_sides[:, 1], hole_sides[:, 0], np.full(len(hole_sides), n + count)]))
+    added = sum(len(fan) for fan in fans)
+    rounds = loop_length[holes]
+    plural = "s" if len(holes) != 1 else ""
+    note = (f"{len(holes)} hole{plural} closed ({_length_range(rounds)} round, beside an outer edge "
+            f"{loop_length.max():.4g} round) by {added} triangles about {len(holes)} new "
+            f"{'vertices' if plural else 'vertex'} ({n} on): the pattern covers {'them' if plural else 'it'}")
+    return np.vstack([vertices, *centres]), np.vstack([faces, *fans]), note
+
+
+def _length_range(lengths: np.ndarray) -> str:
+    return f"{lengths.min():.4g}" if lengths.min() == lengths.max() else f"{lengths.min():.4g} to {lengths.max():.4g}"
 
 
 def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.ndarray, n: int) -> None:

@@ -153,7 +153,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 setattr(args, option, path)
         try:
             with contextlib.redirect_stderr(stderr):
-                mesh, defaults = resolve_mesh(mesh_path)
+                mesh, defaults = resolve_mesh(mesh_path, args.fill_holes)
                 params = params_from_args(args, defaults)
                 check_print_size(args, mesh)
                 notes: list[str] = []  # each named by its mesh: the workers' notes come in any order

@@ -128,7 +128,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         from .batch import cmd_batch
 
         return cmd_batch(args)
-    mesh, defaults = resolve_mesh(args.mesh)
+    mesh, defaults = resolve_mesh(args.mesh, args.fill_holes)
     params = params_from_args(args, defaults)
     check_outputs(args)
     check_print_size(args, mesh)

@@ -116,6 +116,10 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     builtins = ", ".join(BUILTIN_MESHES)
     parser.add_argument("mesh", nargs="?", default="surf1",
                         help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
+    parser.add_argument("--fill-holes", action="store_true",
+                        help="close the mesh's holes (each boundary loop but the longest) with fans of triangles "
+                             "before flattening, for a scan's holes: the pattern covers them (default: a mesh with "
+                             "holes is refused)")
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
                         help="initial layout: auto (arap; for a guarded run, where it folds or fails, slim from "
                              "tutte), tutte, pca, "
@@ -201,8 +205,8 @@ def edge_radius(mesh: Mesh) -> int:
     return depth
 
 
-def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
-    """The mesh and its default parameters.
+def resolve_mesh(name: str, fill_holes: bool = False) -> tuple[Mesh, FlattenParams]:
+    """The mesh (a file's holes closed with ``fill_holes``) and its default parameters.
 
     Built-ins: the paper's sets (paper dynamics, Table II/IV tolerances).  Files: the momentum
     dynamics with the fold barrier, stopped at the energy minimum (relative energy change
@@ -217,7 +221,7 @@ def resolve_mesh(name: str) -> tuple[Mesh, FlattenParams]:
     if name.strip() and not Path(name).suffix and not os.path.lexists(name):  # a built-in's name mistyped?
         raise MeshError(f"cannot read mesh '{name}': no such file, and no built-in mesh of that name (built-in: "
                         f"{', '.join(BUILTIN_MESHES)}; a mesh file's name ends in its format: .obj, .ply, .off, .stl)")
-    mesh, notes = load_mesh_with_notes(name)
+    mesh, notes = load_mesh_with_notes(name, fill_holes=fill_holes)
     for note in notes:
         print(f"springflat: note: {mesh.name}: {note}", file=sys.stderr)
     return mesh, file_defaults(mesh)

@@ -32,7 +32,7 @@ import numpy as np
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.fixed.measures import FixedPointError
 from sim.layouts import AUTO_START, LayoutError
-from golden_model.mesh import Mesh, MeshError, oriented_mesh
+from golden_model.mesh import HoledMesh, Mesh, MeshError, oriented_mesh
 from sim.mesh_io import load_mesh_with_notes
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
@@ -212,9 +212,10 @@ class Pattern:
         return self.distortion().strain
 
 
-def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+def read_mesh(path: str | Path, fill_holes: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``(V, F)`` of an OBJ, PLY, OFF or STL disk patch: ``(V, 3)`` float64 positions, ``(F, 3)`` int64
-    vertex indices (0-based), in the file's vertex order.
+    vertex indices (0-based), in the file's vertex order; with ``fill_holes`` its holes are closed first
+    (as ``--fill-holes``: a vertex at each hole's centre after the file's, a fan of triangles after its faces).
 
     The file must be one manifold disk (:func:`sim.mesh_io.load_mesh_with_notes`); anything else
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
@@ -224,7 +225,12 @@ def read_mesh(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         raise TypeError(f"read_mesh takes a file path (str or pathlib.Path), not {type(path).__name__}")
     if (problem := _nul_problem(path)) is not None:
         raise MeshError(f"cannot read mesh {problem}")
-    mesh, notes = load_mesh_with_notes(path)
+    if not isinstance(fill_holes, (bool, np.bool_)):
+        raise TypeError(f"fill_holes must be True or False, got {fill_holes!r}")
+    try:
+        mesh, notes = load_mesh_with_notes(path, fill_holes=bool(fill_holes))
+    except MeshError as exc:  # (a holed mesh's names the command's option)
+        raise MeshError(_in_api_words(str(exc))) from None
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     return mesh.vertices, mesh.faces
@@ -306,7 +312,10 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         raise ParameterError(f"engine {engine.name!r}, {engine.help}, runs from the command line: springflat flatten "
                              f"MESH --engine {engine.name}; the API runs the "
                              + ", ".join(e.name for e in ENGINES if e.api) + " engines")
-    mesh, notes = oriented_mesh(vertices, faces, name=name)  # validated here: errors name no temporary file
+    try:  # validated here: errors name no temporary file
+        mesh, notes = oriented_mesh(vertices, faces, name=name, fill=args.fill_holes)
+    except HoledMesh as exc:
+        raise MeshError(f"{exc}; fill_holes=True closes all but the outer edge") from None
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     try:

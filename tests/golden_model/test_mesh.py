@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import (InconsistentOrientation, Mesh, MeshError, boundary_crossings, component_labels,
+from golden_model.mesh import (HoledMesh, InconsistentOrientation, Mesh, MeshError, boundary_crossings, component_labels,
                                count_components, orient_consistently, oriented_mesh)
 from sim.generate import grid_faces, grid_uv
 from sim.mesh_io import load_mesh_with_notes, save_obj
@@ -311,3 +311,59 @@ def test_a_long_strip_wound_at_random_is_wound_consistently():
     result, count = orient_consistently(given)
     assert _each_interior_edge_run_both_ways(result)
     assert count == min(turned.sum(), len(faces) - turned.sum())
+
+
+def _holed_grid(n: int = 9, cells=((2, 2), (5, 4))):
+    """A bumpy n x n grid with the cells at ``cells`` (row, column) taken out: one hole each."""
+    uv = grid_uv(n, n)
+    vertices = np.column_stack([uv, 0.2 * (uv**2).sum(axis=1)])
+    faces = grid_faces(n, n)
+    holes = [{i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1} for i, j in cells]
+    return vertices, faces[[not any(set(f) <= h for h in holes) for f in faces.tolist()]]
+
+
+def test_a_mesh_with_holes_is_refused_as_one_the_fill_can_close():
+    vertices, faces = _holed_grid()
+    with pytest.raises(HoledMesh, match=r"^mesh is not a disk: it has 3 boundary loops where a disk has one"):
+        Mesh(vertices, faces)
+
+
+def test_filling_closes_each_hole_with_a_fan_after_the_meshs_own_vertices_and_faces():
+    vertices, faces = _holed_grid()
+    mesh, notes = oriented_mesh(vertices, faces, fill=True)
+    n, m = len(vertices), len(faces)
+    assert mesh.n_vertices == n + 2 and mesh.n_faces == m + 8  # a square hole: four sides, four triangles
+    np.testing.assert_array_equal(mesh.vertices[:n], vertices)
+    np.testing.assert_array_equal(mesh.faces[:m], faces)
+    assert _each_interior_edge_run_both_ways(mesh.faces)
+    # a new vertex at each hole's centre, the mean of the cell's four corners; the note gives the holes' lengths
+    rounds = []
+    for i, j in ((2, 2), (5, 4)):
+        corners = vertices[[i * 9 + j, i * 9 + j + 1, (i + 1) * 9 + j + 1, (i + 1) * 9 + j]]
+        assert np.abs(mesh.vertices[n:] - corners.mean(axis=0)).max(axis=1).min() < 1e-12
+        rounds.append(np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1).sum())
+    assert notes[0].startswith(f"2 holes closed ({min(rounds):.4g} to {max(rounds):.4g} round, beside an outer edge ")
+    assert notes[0].endswith("by 8 triangles about 2 new vertices (81 on): the pattern covers them")
+
+
+def test_filling_follows_the_turning_of_faces_wound_against_their_neighbours():
+    vertices, faces = _holed_grid()
+    given = faces.copy()
+    given[::7] = given[::7][:, [0, 2, 1]]
+    mesh, notes = oriented_mesh(vertices, given, fill=True)
+    assert _each_interior_edge_run_both_ways(mesh.faces) and len(notes) == 2
+    assert notes[0].endswith("(the pattern's faces keep the turned winding)") and "holes closed" in notes[1]
+
+
+def test_a_tubes_shorter_end_is_the_hole():
+    """A cone frustum open at both ends: two loops; the narrower end is filled, a cup."""
+    k, rings = 16, 5
+    angle = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    radius = np.linspace(1.0, 0.5, rings)
+    vertices = np.array([[r * np.cos(a), r * np.sin(a), z] for z, r in enumerate(radius) for a in angle])
+    faces = np.array([f for z in range(rings - 1) for i in range(k)
+                      for f in ((z * k + i, z * k + (i + 1) % k, (z + 1) * k + i),
+                                ((z + 1) * k + i, z * k + (i + 1) % k, (z + 1) * k + (i + 1) % k))])
+    mesh, _ = oriented_mesh(vertices, faces, fill=True)
+    np.testing.assert_allclose(mesh.vertices[-1], [0.0, 0.0, rings - 1], atol=1e-12)  # the narrow end's centre
+    assert set(mesh.boundary_loop.tolist()) == set(range(k))  # the wide end is the edge

@@ -343,3 +343,58 @@ def test_an_unreadable_mesh_is_one_line(tmp_path):
         load_mesh(tmp_path / ("n" * 300 + ".obj"))
     with pytest.raises(MeshError, match=r"^cannot read mesh '.*nope\.ply': no such file$"):
         load_mesh(tmp_path / "nope.ply")
+
+
+def _holed_obj(path):
+    """A gently curved 100 mm square grid, 21 x 21 vertices, with two cells taken out: two holes."""
+    from sim.generate import grid_faces, grid_uv
+
+    n = 21
+    uv = grid_uv(n, n, 100.0, 100.0)
+    vertices = np.column_stack([uv, 10 * np.sin(uv[:, 0] / 30)])
+    faces = grid_faces(n, n)
+    holes = [{i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1} for i, j in ((5, 5), (12, 14))]
+    save_obj(path, vertices, faces[[not any(set(f) <= h for h in holes) for f in faces.tolist()]])
+    return len(vertices)
+
+
+def test_a_mesh_file_with_holes_is_refused_naming_the_fill_and_read_with_it(tmp_path):
+    n = _holed_obj(tmp_path / "holed.obj")
+    with pytest.raises(MeshError, match=r"^invalid mesh '.*holed\.obj': mesh is not a disk: it has 3 boundary loops "
+                                        r"where a disk has one \(holes, or a tube's ends\); --fill-holes closes all "
+                                        r"but the outer edge$"):
+        load_mesh(tmp_path / "holed.obj")
+    mesh, notes = load_mesh_with_notes(tmp_path / "holed.obj", fill_holes=True)
+    assert mesh.n_vertices == n + 2 and len(notes) == 1 and notes[0].startswith("2 holes closed (")
+
+
+def test_the_command_flattens_a_holed_scan_with_fill_holes_and_the_api_too(tmp_path):
+    import subprocess
+    import warnings
+
+    import springflat
+    from golden_model.mesh import folded_faces
+    from support import SPRINGFLAT
+
+    _holed_obj(tmp_path / "holed.obj")
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj"), "--out", str(tmp_path / "p.flat.obj")],
+                         capture_output=True, text=True)
+    assert ran.returncode == 2 and ran.stderr.strip().endswith("--fill-holes closes all but the outer edge")
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj"), "--fill-holes", "--json",
+                          "--out", str(tmp_path / "p.flat.obj")], capture_output=True, text=True)
+    assert ran.returncode == 0, ran.stderr
+    assert "springflat: note: holed: 2 holes closed (" in ran.stderr
+    layout = load_mesh(tmp_path / "p.flat.obj")
+    assert layout.n_vertices == 443 and not folded_faces(layout.vertices[:, :2], layout.faces).any()
+    with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge$"):
+        springflat.read_mesh(tmp_path / "holed.obj")
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        V, F = springflat.read_mesh(tmp_path / "holed.obj", fill_holes=True)
+    assert V.shape == (443, 3) and "2 holes closed" in str(said[0].message)
+    V0, F0 = V[:441], F[:-8]  # the file's own: its holes open again
+    with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge$"):
+        springflat.flatten(V0, F0)
+    with pytest.warns(springflat.MeshNote, match=r"^mesh: 2 holes closed \("):
+        pattern = springflat.flatten(V0, F0, fill_holes=True)
+    assert pattern.layout.shape == (443, 2) and pattern.folded == 0
