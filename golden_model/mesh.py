@@ -22,9 +22,8 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "fill_holes", "oriented_mesh", "orient_consistently", "component_labels",
-           "count_components", "parity_roots",
-           "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE",
+__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "fill_holes", "oriented_mesh",
+           "orient_consistently", "component_labels", "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE",
            "printable_name", "one_line", "valid_text"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
@@ -53,7 +52,6 @@ class InconsistentOrientation(MeshError):
 
 class HoledMesh(MeshError):
     """A disk with holes: more than one boundary loop (:func:`fill_holes` closes all but the outer one)."""
-
 
 
 def triangle_areas_3d(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

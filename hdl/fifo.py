@@ -15,6 +15,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from .dsp import dsp_target
+from .parameters import check_int, check_power_of_two
 
 __all__ = ["LutFIFO", "SlicedFIFO"]
 
@@ -36,10 +37,8 @@ class LutFIFO(Elaboratable):
     """
 
     def __init__(self, *, width: int, depth: int, checked: bool = True, start: int = 0):
-        if width < 1:
-            raise ValueError(f"LutFIFO width must be at least 1, not {width}")
-        if depth < 2 or depth & (depth - 1):
-            raise ValueError(f"LutFIFO depth must be a power of two of at least 2, not {depth}")
+        check_int("LutFIFO width", width)
+        check_power_of_two("LutFIFO depth", depth)
         self.width, self.depth, self.checked, self.start = width, depth, checked, start % depth
         self.w_data = Signal(width)
         self.w_en = Signal()
@@ -117,8 +116,9 @@ class SlicedFIFO(wiring.Component):
 
     def __init__(self, *, width: int, depth: int, slice_bits: int, registered: bool = False,
                  write_register: bool = False):
-        if width < 1 or slice_bits < 1:
-            raise ValueError(f"SlicedFIFO needs positive width and slice_bits, not {width}, {slice_bits}")
+        check_int("SlicedFIFO width", width)
+        check_int("SlicedFIFO slice_bits", slice_bits)
+        check_power_of_two("SlicedFIFO depth", depth)
         self.width, self.depth, self.slice_bits, self.registered = width, depth, slice_bits, registered
         self.write_register = write_register
         super().__init__({"w_stream": In(stream.Signature(width)), "r_stream": Out(stream.Signature(width))})

@@ -46,8 +46,9 @@ class SaturationTally(wiring.Component):
         if not sources or len(sources) % 2:
             raise ValueError(f"SaturationTally sums its sources in pairs: it needs an even number, not {len(sources)}")
         for name, width in sources.items():
-            if not name.isidentifier() or isinstance(width, bool) or not isinstance(width, int) or width < 1:
-                raise ValueError(f"event source {name!r}: needs an identifier and a positive width, not {width!r}")
+            if not name.isidentifier():
+                raise ValueError(f"event source {name!r}: its name must be an identifier")
+            check_int(f"event source {name!r}'s width", width)
         check_int("count_bits", count_bits)
         #: Width of the sum of one clock's events (the pairs' sums, then their sum).
         self.events_bits = max(sources.values()) + (len(sources) - 1).bit_length()

@@ -14,8 +14,8 @@ Workers: ``--jobs`` processes (default: the cores this process may use), each a
 
 A mesh that fails (unreadable, invalid, a worker that died) is reported on its line and in the table,
 and the others go on; with ``--skip-existing`` a mesh whose every output file is in ``DIR`` already is
-``skipped`` (an interrupted batch run again goes on where it stopped); the exit status is 4 when any mesh failed, else 3 when any run diverged, else 0
-(2: the batch was refused before its first run).
+``skipped`` (an interrupted batch run again goes on where it stopped); the exit status is 4 when any mesh
+failed, else 3 when any run diverged, else 0 (2: the batch was refused before its first run).
 """
 
 from __future__ import annotations
@@ -254,13 +254,15 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
     if args.out_dir is not None:
         out_dir = args.out_dir
         names = _names(meshes)
+        if args.skip_existing:  # the files of a mesh that is skipped are not written: nothing to check
+            names = [name for name in names if not _already_written(out_dir, name, endings)]
         flags = {option: (what, suffixes) for option, what, suffixes in OUTPUT_OPTIONS}
         for option, ending in endings:
             if option == "out":
                 pattern_kind(Path(ending))
             for name in names:  # before any run: a later mesh's obstacle must not end the batch
                 check_output_path(out_dir / f"{name}{ending}", *flags[option], typed=False)
-        _check_no_two_meshes_write_one_name(meshes, names, endings, out_dir)
+        _check_no_two_meshes_write_one_name(meshes, _names(meshes), endings, out_dir)
         # no mesh's output may be a mesh of the batch (or the --init or --formats file), nor another's output
         check_distinct([(flags[option][0], out_dir / f"{name}{ending}") for name in names for option, ending in endings],
                        [item for mesh in meshes
@@ -492,7 +494,8 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     pending: list[BatchJob] = []
     for source, name in zip(meshes, names):
         if args.skip_existing and _already_written(args.out_dir, name, endings):
-            outcomes[name] = MeshOutcome(source, name, "skipped", line=f"skipped: its files are in {args.out_dir}")
+            outcomes[name] = MeshOutcome(source, name, "skipped",
+                                         line=f"skipped: its files are in {printable_name(str(args.out_dir))}")
             continue
         job = _job(source, name, options, endings)
         if isinstance(job, MeshOutcome):
@@ -503,8 +506,11 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     count = min(workers, max(1, len(pending)))
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, "local")
              else f"{count} {'Dask ' if args.scheduler else ''}worker process{'es' if count != 1 else ''}")
+    skipped = len(meshes) - len(pending) - sum(o.failed for o in outcomes.values())
     if not args.json:
-        print(f"springflat: {len(meshes)} mesh{'es' if len(meshes) != 1 else ''} on {where}", file=sys.stderr)
+        print(f"springflat: {len(meshes)} mesh{'es' if len(meshes) != 1 else ''}"
+              + (f" ({skipped} skipped: their files are in {printable_name(str(args.out_dir))})" if skipped else "")
+              + (f" on {where}" if pending else ""), file=sys.stderr)
     done = 0
     unwritable: list[OSError] = []  # the standard output's error: the batch goes on, its files are written
 
@@ -557,6 +563,7 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     diverged = [o for o in ordered if o.status == "diverged"]
     if args.json:
         say(strict_json({"batch": {"meshes": len(ordered), "failed": len(failed), "diverged": len(diverged),
+                                   "skipped": sum(o.status == "skipped" for o in ordered),
                                    "seconds": round(elapsed, 3), "workers": where}}))
     else:
         say(summary_table(ordered))

@@ -27,8 +27,8 @@ from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
-                       check_mesh_fits, check_seam_fits, error_text, kind_or_none, on_sheets, run_caption, scale_note,
-                       seam_length, write_pattern_file)
+                       check_mesh_fits, check_seam_fits, error_text, kind_or_none, loop_length, on_sheets, run_caption,
+                       scale_note, seam_length, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
 
@@ -74,14 +74,13 @@ def _progress(total: int, enabled: bool):
 def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
     """A PDF or SVG that could only be refused after the run is refused before it (a wrong --units), and a
     ``--grain`` normal to the whole surface, and a seam allowance longer than half the mesh's edge."""
+    seam = 0.0 if args.seam_allowance is None else seam_length(args.seam_allowance, args.units)
+    if seam:  # the 3D edge's length: the pattern's, to its strain (the drawing checks the longer of the two)
+        check_seam_fits(seam, loop_length(mesh.vertices[mesh.boundary_loop]), args.units)
     if any(on_sheets(path) for path in args.out or ()):
-        check_mesh_fits(mesh, args.units, paper_of(args))
+        check_mesh_fits(mesh, args.units, paper_of(args), seam)
     if args.grain is not None:
         check_grain(mesh, args.grain)
-    if args.seam_allowance is not None:  # the 3D edge's length: the pattern's, to its strain
-        loop = mesh.vertices[mesh.boundary_loop]
-        check_seam_fits(seam_length(args.seam_allowance, args.units),
-                        float(np.linalg.norm(np.roll(loop, -1, axis=0) - loop, axis=1).sum()), args.units)
 
 
 def paper_of(args: argparse.Namespace) -> str:
@@ -448,7 +447,7 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
         result.extra.get("boundary_crossings")))
     if args.grain is not None and args.out and result.status != "diverged":
         drawing = drawing.with_grain(args.grain)
-    if args.seam_allowance is not None:
+    if args.seam_allowance is not None and result.status != "diverged":
         drawing = drawing.with_seam(seam_length(args.seam_allowance, args.units))
     jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=paper_of(args),
                                                             dxf_edges=args.dxf_edges))

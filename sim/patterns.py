@@ -90,6 +90,8 @@ GRAIN_WIDTH_MM = 0.2      # the grain line and its arrowheads (--grain) ...
 GRAIN_GREY = 0.35         # ... in this grey (0 black, 1 white)
 PIECE_LABEL_MAX_MM = 6.0  # the piece's name on the piece itself: at most this tall (cap height) ...
 PIECE_LABEL_MIN_MM = 1.5  # ... and left out where it would be smaller than this to fit
+GRAIN_CLEARANCE_MM = 1.0  # ... and this far from the grain line
+DESCENDER_EM = 0.21       # Helvetica's descender, in font sizes (below the baseline: g, p, y)
 SCALE_BAR_MAX_MM = 80.0   # the scale bar is the longest 1, 2 or 5 x 10^k units not longer than this
 FONT_MM = 3.2             # text height of the title block
 CAP_HEIGHT_EM = 0.72      # Helvetica's cap height, in font sizes (a label's size is its cap height)
@@ -219,14 +221,18 @@ class PatternDrawing:
 
     def boundary_length(self) -> float:
         """Length of the pattern's closed edge, in ``units``."""
-        p = self.boundary_points
-        return float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
+        return loop_length(self.boundary_points)
 
     @cached_property
+    def cut_loops(self) -> list[np.ndarray]:
+        """The cut line's closed loops, in ``units``: the boundary, or the seam allowance's outline
+        (:func:`seam_outlines`: the outer loop first, then any hole the allowance leaves inside it)."""
+        return seam_outlines(self, self.seam) if self.seam > 0 else [self.boundary_points]
+
+    @property
     def cut_points(self) -> np.ndarray:
-        """``(K, 2)`` the cut line's corners, in ``units`` (closed): the boundary, or the seam allowance's
-        outline (:func:`seam_outline`)."""
-        return seam_outline(self, self.seam) if self.seam > 0 else self.boundary_points
+        """``(K, 2)`` the cut line's outer loop's corners, in ``units`` (closed)."""
+        return self.cut_loops[0]
 
     @property
     def drawn_points(self) -> np.ndarray:
@@ -234,10 +240,12 @@ class PatternDrawing:
         return np.vstack([self.layout, self.cut_points]) if self.seam > 0 else self.layout
 
     def with_seam(self, allowance: float) -> "PatternDrawing":
-        """The drawing with a seam allowance of ``allowance`` ``units`` (0: none; :func:`check_seam_fits`)."""
+        """The drawing with a seam allowance of ``allowance`` ``units`` (0: none), checked against the longer of
+        its edge's 2D and 3D lengths (:func:`check_seam_fits`; the command checks the 3D one before the run)."""
         if not (math.isfinite(allowance) and allowance >= 0):
-            raise PatternError(f"a seam allowance is a length of 0 or more, got {allowance!r}")
-        check_seam_fits(allowance, self.boundary_length(), self.units)
+            raise PatternError(f"a seam allowance is {LENGTH_AT_LEAST_0}, got {allowance!r}")
+        edge = max(self.boundary_length(), loop_length(self.vertices[self.boundary]))
+        check_seam_fits(allowance, edge, self.units)
         return replace(self, seam=float(allowance))
 
     def with_grain(self, grain: str | Sequence[float]) -> "PatternDrawing":
@@ -264,10 +272,22 @@ def seam_allowance_argument(text: str) -> str:
     here and turned into ``--units`` by :func:`seam_length` once those are known."""
     try:
         seam_length(text, "mm")
-    except PatternError as exc:
-        message = str(exc).replace("a seam allowance is a length", "expected a length")
-        raise argparse.ArgumentTypeError(message) from None
+    except NotALength as exc:
+        raise argparse.ArgumentTypeError(f"expected {exc.wanted}, got {text!r}") from None
     return text
+
+
+#: What a seam allowance must be, as its refusals say.
+LENGTH_EXAMPLE = "a length such as 10, 10mm or 0.375in"
+LENGTH_AT_LEAST_0 = "a length of 0 or more"
+
+
+class NotALength(PatternError):
+    """A seam allowance that is no length: ``wanted`` says what it must be."""
+
+    def __init__(self, wanted: str, value: object):
+        super().__init__(f"a seam allowance is {wanted}, got {value!r}")
+        self.wanted = wanted
 
 
 #: A seam allowance's text: a decimal number (ASCII digits), then one of :data:`UNITS` as written (SI symbols are
@@ -278,26 +298,32 @@ _LENGTH = re.compile(r"\s*(?P<number>[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE
 
 def seam_length(value: str | float, units: str) -> float:
     """A seam allowance in ``units``: a number is in ``units`` already, a text may end in a unit (``10mm``,
-    ``1.5 cm``; :data:`_LENGTH`)."""
+    ``1.5 cm``; :data:`_LENGTH`). Anything else raises :class:`NotALength`."""
     scale = check_units(units)
     unit = units
     if isinstance(value, str):
         match = _LENGTH.fullmatch(value)
         if match is None:
-            raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}")
+            raise NotALength(LENGTH_EXAMPLE, value)
         number, unit = float(match["number"]), match["unit"] or units
     elif isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}")
+        raise NotALength(LENGTH_EXAMPLE, value)
     else:
         try:
             number = float(value)
-        except OverflowError:
+        except OverflowError:  # an int past float's range
             number = math.inf
-        if not math.isfinite(number):
-            raise PatternError(f"a seam allowance is a length such as 10, 10mm or 0.375in, got {value!r}")
+    if not math.isfinite(number):  # (a text such as 1e400 too)
+        raise NotALength(LENGTH_EXAMPLE, value)
     if number < 0:
-        raise PatternError(f"a seam allowance is a length of 0 or more, got {value!r}")
+        raise NotALength(LENGTH_AT_LEAST_0, value)
+    number += 0.0  # -0 is 0
     return number if unit == units else number * UNIT_MM[unit] / scale
+
+
+def loop_length(points: np.ndarray) -> float:
+    """The length of the closed polygon ``points`` (its last corner joined to its first)."""
+    return float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
 
 
 def check_seam_fits(allowance: float, edge_length: float, units: str) -> None:
@@ -315,18 +341,19 @@ def seam_text(length: float, units: str) -> str:
     return f"{length:.6g} {units}" + (f" ({length * UNIT_MM[units]:.6g} mm)" if units != "mm" else "")
 
 
-def seam_outline(drawing: PatternDrawing, allowance: float) -> np.ndarray:
-    """``(K, 2)`` the closed cut line ``allowance`` outside the pattern's material (:func:`material`): the
-    outline of the points within that distance of it (shapely's buffer, round joins), so every point of the
-    sew line has the full allowance, and the zigzag of a scanned boundary's short edges is not carried out to
-    the cut line (mitred joins would make each of its bends a spike). The buffer is :data:`SEAM_MARGIN` wider
-    than asked: its rounded corners are chords, and GEOS simplifies the outline by a small share of the
-    distance first, each of which brings the line a little closer (up to 0.05 % on a scan). Holes of the
-    buffered area (where a pattern overlaps itself round an empty middle) are left out: the cut line is one."""
+def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]:
+    """The closed loops of the cut line ``allowance`` outside the pattern's material (:func:`material`), outer
+    loop first: the outline of the points within that distance of it (shapely's buffer, round joins), so every
+    point of the sew line has the full allowance, and the zigzag of a scanned boundary's short edges is not
+    carried out to the cut line (mitred joins would make each of its bends a spike). The buffer is
+    :data:`SEAM_MARGIN` wider than asked: its rounded corners are chords, and GEOS simplifies the outline by a
+    small share of the distance first, each of which brings the line a little closer (up to 0.05 % on a scan).
+    A hole the allowance leaves (a C-shaped piece whose slit the allowances close, a pattern that overlaps
+    itself round an empty middle) is a loop of the cut line too: its middle is no material."""
     grown = material(drawing).buffer(allowance * (1 + SEAM_MARGIN), quad_segs=SEAM_ARC_SEGMENTS)
     parts = getattr(grown, "geoms", [grown])
-    outline = max(parts, key=lambda part: part.area).exterior
-    return np.asarray(outline.coords, dtype=np.float64)[:-1]
+    largest = max(parts, key=lambda part: part.area)
+    return [np.asarray(ring.coords, dtype=np.float64)[:-1] for ring in (largest.exterior, *largest.interiors)]
 
 
 def material(drawing: PatternDrawing):
@@ -551,7 +578,8 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
         doc = ezdxf.new("R2010", units=DXF_INSUNITS[drawing.units])
         doc.layers.add("CUT", color=7)
         msp = doc.modelspace()
-        msp.add_lwpolyline(drawing.cut_points.tolist(), format="xy", close=True, dxfattribs={"layer": "CUT"})
+        for loop in drawing.cut_loops:
+            msp.add_lwpolyline(loop.tolist(), format="xy", close=True, dxfattribs={"layer": "CUT"})
         if drawing.seam > 0:
             on, off = (length / check_units(drawing.units) for length in SEW_DASH_MM)
             doc.linetypes.add("SEW", pattern=[on + off, on, -off], description="sew line")
@@ -683,15 +711,17 @@ def _turned_to_fit(drawing: PatternDrawing, paper: str) -> tuple[PatternDrawing,
     from scipy.spatial import ConvexHull, QhullError
 
     try:
-        hull = drawing.drawn_points[ConvexHull(drawing.drawn_points).vertices]
+        hull = drawing.layout[ConvexHull(drawing.layout).vertices]
     except (QhullError, ValueError):  # a layout on a line has no hull (it is refused as degenerate before)
         return drawing, None
     sides = np.roll(hull, -1, axis=0) - hull
     scale = check_units(drawing.units)
+    # a seam allowance adds itself on each side of every box: no need to outline each turn's cut line
+    grown = 2 * drawing.seam * (1 + SEAM_MARGIN)
 
     def box_cost(angle: float) -> tuple[float, float]:
         """(sheets of the grid, or the fit page's area; the box's area): what the hull turned by ``angle`` takes."""
-        width, height = (np.ptp(_turned(hull, angle, 0.0), axis=0) * scale).tolist()
+        width, height = ((np.ptp(_turned(hull, angle, 0.0), axis=0) + grown) * scale).tolist()
         page, _, _, rows, cols = _grid((width, height), paper, OVERLAP_MM)
         if paper == "fit":
             return (page[0] * page[1] if max(page) <= MAX_PAGE_MM else math.inf), 0.0
@@ -766,7 +796,10 @@ def count_text(count: int) -> str:
     """A count as a person reads it: ``1,234``, or ``3.2e+17`` past a million (not 300 digits)."""
     if count < 10**6:
         return f"{count:,}"
-    return f"{float(count):.2g}" if count < 10**300 else f"about 10^{len(str(count)) - 1}"
+    try:
+        return f"{float(count):.2g}"
+    except OverflowError:  # past float's range
+        return f"about 10^{len(str(count)) - 1}"
 
 
 def check_sheet_count(size: tuple[float, float], paper: str, units: str) -> None:
@@ -790,13 +823,15 @@ def _page_too_large(what: str, units: str, size: tuple[float, float]) -> Pattern
                         f"a side (an SVG's pages are the PDF's); check --units, {remedy}or write .dxf")
 
 
-def check_mesh_fits(mesh: Mesh, units: str, paper: str) -> None:
+def check_mesh_fits(mesh: Mesh, units: str, paper: str, seam: float = 0.0) -> None:
     """Refuse, before a run, a print that will need more than :data:`MAX_SHEETS` sheets whatever the layout.
 
-    A pattern covers about the mesh's area (its area error E_S aside): half of it over one window's area is
-    a lower bound of the sheets needed.
+    A pattern covers about the mesh's area (its area error E_S aside), and a seam allowance of ``seam`` (in
+    ``units``) adds at least its edge's length times the allowance: half of that over one window's area is a
+    lower bound of the sheets needed.
     """
-    area_mm2 = float(mesh.face_areas.sum()) * check_units(units) ** 2
+    area = float(mesh.face_areas.sum()) + seam * loop_length(mesh.vertices[mesh.boundary_loop])
+    area_mm2 = area * check_units(units) ** 2
     if paper == "fit":  # the pattern's box holds about the mesh's area: its longer side is at least √area
         if math.sqrt(area_mm2) > MAX_PAGE_MM:
             side = math.sqrt(area_mm2) / 1000
@@ -862,9 +897,9 @@ def plan_sheets(size: tuple[float, float], paper: str = "a4", overlap: float = O
 
 def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
     """``plan`` less the sheets whose window holds nothing of the pattern (no triangle meets it: the cut
-    line, mesh edges and folded triangles all lie on the triangles; with a seam allowance, also the area inside
-    the cut line): an L-shaped pattern's empty corner is not printed. The others keep their
-    labels, so that the grid still shows where each goes."""
+    line, mesh edges and folded triangles all lie on the triangles; with a seam allowance, the area inside the
+    cut line, which holds them and the allowance): an L-shaped pattern's empty corner is not printed. The
+    others keep their labels, so that the grid still shows where each goes."""
     from matplotlib.path import Path as Outline
     from matplotlib.transforms import Bbox
 
@@ -886,14 +921,15 @@ def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
         return any(Outline(np.vstack([corners[t], corners[t][:1]]), closed=True).intersects_bbox(window, filled=True)
                    for t in near)  # (a closed path's last vertex is not drawn)
 
-    def allowance_drawn(sheet: Sheet) -> bool:  # the seam allowance, between the triangles and the cut line
-        low = np.array(sheet.offset)
-        return cut.intersects_bbox(Bbox([low, low + size]), filled=True)
+    if drawing.seam > 0:  # the area inside the cut line, which holds the triangles and the allowance
+        import shapely
 
-    if drawing.seam > 0:
-        cut_mm = _pattern_mm(drawing, plan, drawing.cut_points)
-        cut = Outline(np.vstack([cut_mm, cut_mm[:1]]), closed=True)
-    kept = tuple(sheet for sheet in plan.sheets if drawn(sheet) or (drawing.seam > 0 and allowance_drawn(sheet)))
+        loops = [_pattern_mm(drawing, plan, loop) for loop in drawing.cut_loops]
+        cut = shapely.Polygon(loops[0], loops[1:])
+        kept = tuple(sheet for sheet in plan.sheets
+                     if cut.intersects(shapely.box(*sheet.offset, *np.add(sheet.offset, size))))
+    else:
+        kept = tuple(sheet for sheet in plan.sheets if drawn(sheet))
     return replace(plan, sheets=kept, blank=len(plan.sheets) - len(kept))
 
 
@@ -1077,16 +1113,15 @@ def _grain_mm(drawing: PatternDrawing, plan: SheetPlan) -> list[np.ndarray]:
 
 
 def _pattern_parts(drawing: PatternDrawing, plan: SheetPlan
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
-    """``(edges (E', 2, 2), folded faces (K, 3, 2), cut line (B, 2), sew line (B', 2) or None)`` in the grid's
-    mm; no edges when they would merge on paper (median under :data:`EDGE_MIN_MM`); a sew line where there
-    is a seam allowance."""
+                   ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray | None]:
+    """``(edges (E', 2, 2), folded faces (K, 3, 2), the cut line's loops [(B, 2), ...], sew line (B', 2) or
+    None)`` in the grid's mm; no edges when they would merge on paper (median under :data:`EDGE_MIN_MM`); a sew
+    line where there is a seam allowance."""
     q = _pattern_mm(drawing, plan)
     edges = q[drawing.edges] if _median_edge_mm(drawing) >= EDGE_MIN_MM else np.empty((0, 2, 2))
     folded = q[drawing.faces[folded_faces(drawing.layout, drawing.faces)]]
-    if drawing.seam > 0:
-        return edges, folded, _pattern_mm(drawing, plan, drawing.cut_points), q[drawing.boundary]
-    return edges, folded, q[drawing.boundary], None
+    cut = [_pattern_mm(drawing, plan, loop) for loop in drawing.cut_loops]
+    return edges, folded, cut, q[drawing.boundary] if drawing.seam > 0 else None
 
 
 def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
@@ -1099,6 +1134,8 @@ def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
 
     edge = _pattern_mm(drawing, plan, drawing.boundary_points)
     area = shapely.make_valid(shapely.Polygon(edge))
+    for stroke in _grain_mm(drawing, plan):  # beside the grain line, which runs through the piece's middle
+        area = area.difference(shapely.LineString(stroke).buffer(GRAIN_CLEARANCE_MM))
     parts = [part for part in getattr(area, "geoms", [area]) if part.geom_type == "Polygon"]
     if not parts:
         return None
@@ -1109,7 +1146,8 @@ def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
         room = min(room, ring.distance(centre))
     name = drawing.name
     aspect = _text_width(name, 1.0) / 1.0  # width per mm of cap height
-    size = min(PIECE_LABEL_MAX_MM, 0.9 * 2 * room / math.hypot(aspect, 1.0))
+    # the box about the centre: the name's width, and its cap height plus a descender's depth below it
+    size = min(PIECE_LABEL_MAX_MM, 0.9 * 2 * room / math.hypot(aspect, 1.0 + 2 * DESCENDER_EM * CAP_HEIGHT_EM))
     if size < PIECE_LABEL_MIN_MM:
         return None
     return Label(centre.x, centre.y - size / 2, name, size, "middle", name="piece-label")
@@ -1169,7 +1207,8 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
         canvas.drawPath(path_, stroke=0, fill=1)
     canvas.setLineWidth(CUT_WIDTH_MM)
     canvas.setStrokeGray(0.0)
-    canvas.drawPath(_closed_path(canvas, cut), stroke=1, fill=0)
+    for loop in cut:
+        canvas.drawPath(_closed_path(canvas, loop), stroke=1, fill=0)
     if sew is not None:
         canvas.setLineWidth(SEW_WIDTH_MM)
         canvas.setDash(list(SEW_DASH_MM))
@@ -1283,8 +1322,10 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             for triangle in folded.tolist():
                 write(f'<polygon points="{_svg_points(triangle, 0.0)}"/>\n')
             write("</g>\n")
-        write(f'<polygon id="cut" points="{_svg_points(cut.tolist(), 0.0)}" stroke="#000000" '
-              f'stroke-width="{_svg_num(CUT_WIDTH_MM)}"/>\n')
+        for k, loop in enumerate(cut):  # the outer loop, then the holes the allowance leaves
+            name = 'id="cut"' if k == 0 else 'class="cut-hole"'
+            write(f'<polygon {name} points="{_svg_points(loop.tolist(), 0.0)}" stroke="#000000" '
+                  f'stroke-width="{_svg_num(CUT_WIDTH_MM)}"/>\n')
         if sew is not None:
             write(f'<polygon id="sew" points="{_svg_points(sew.tolist(), 0.0)}" stroke="#000000" '
                   f'stroke-width="{_svg_num(SEW_WIDTH_MM)}" '

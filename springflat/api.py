@@ -31,21 +31,22 @@ import numpy as np
 
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.fixed.measures import FixedPointError
-from sim.layouts import AUTO_START, LayoutError
 from golden_model.mesh import HoledMesh, Mesh, MeshError, oriented_mesh
-from sim.mesh_io import load_mesh_with_notes
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options, forget_half_built_components
+from sim.distortion import Distortion, distortion
 from sim.engines import ENGINES, engine_named
 from sim.flatten_run import divergence_note, pattern_notes, run_flatten, run_formats
-from sim.distortion import Distortion, distortion
+from sim.layouts import AUTO_START, LAYOUT_METHODS, LayoutError
+from sim.mesh_io import load_mesh_with_notes
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
                          ending_name_problem)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, add_pattern_options,
-                          kind_or_none, on_sheets,
-                          pattern_ending, run_caption, scale_note, seam_length, write_pattern_file)
-from sim.run_options import UserError, add_run_options, file_defaults, params_from_args
+                          kind_or_none, on_sheets, pattern_ending, run_caption, scale_note, seam_length,
+                          write_pattern_file)
+from sim.run_options import (UserError, add_run_options, file_defaults, file_path_argument, params_from_args,
+                             path_argument)
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
 
@@ -101,15 +102,16 @@ class _Recorder:
     add_mutually_exclusive_group = add_argument_group
 
 
-def _record_options() -> Mapping[str, OptionSpec]:
+def _record_options(*adders: Callable[[argparse.ArgumentParser], None]) -> Mapping[str, OptionSpec]:
+    """The options the ``adders`` (``add_run_options``, ...) add to a parser, by keyword."""
     recorder = _Recorder()
-    add_run_options(recorder)  # type: ignore[arg-type]
-    add_engine_options(recorder)  # type: ignore[arg-type]
+    for add in adders:
+        add(recorder)  # type: ignore[arg-type]
     return recorder.specs
 
 
 #: Every keyword option of :func:`flatten`: the run and engine options of ``springflat flatten``.
-OPTIONS: Mapping[str, OptionSpec] = _record_options()
+OPTIONS: Mapping[str, OptionSpec] = _record_options(add_run_options, add_engine_options)
 
 
 def _option_value(spec: OptionSpec, value: Any) -> Any:
@@ -417,29 +419,27 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
         warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
 
 
-def _pattern_options() -> Mapping[str, OptionSpec]:
-    recorder = _Recorder()
-    add_pattern_options(recorder)  # type: ignore[arg-type]
-    return recorder.specs
-
-
 #: The pattern options of ``springflat flatten`` (``--units``, ``--paper``, ...): :func:`write_pattern`'s keywords.
-_PATTERN_OPTIONS: Mapping[str, OptionSpec] = _pattern_options()
+_PATTERN_OPTIONS: Mapping[str, OptionSpec] = _record_options(add_pattern_options)
 
 #: A flag in a message, and what follows it: one word, or a list of them (``a4, a3 or letter``), up to the next flag.
 _FLAG = re.compile(r"(?P<drop>drop )?--(?P<no>no-)?(?P<name>[a-z][a-z0-9-]*)"
-                   r"(?P<values> (?!--)[^\s,;:()]+(?:(?:, | or )(?!--)[^\s,;:()]+)*)?")
+                   r"(?P<values> (?!--)[^\s,;:()]*[^\s,;:().](?:(?:, | or )(?!--)[^\s,;:()]*[^\s,;:().])*)?")
+
+#: The words an option that takes any text (a method or a file, a preset or a file) takes as a value in a message.
+_VALUE_WORDS: Mapping[str, Callable[[], Sequence[str]]] = {"formats": FormatSet.presets,
+                                                         "init": lambda: (AUTO_START, *LAYOUT_METHODS)}
 
 
 def _takes(spec: OptionSpec, word: str) -> bool:
     """Whether ``word`` is a value of the option (not the next word of the sentence): by its choices, its
-    type, or (``--formats``, a preset or a file) a preset's name."""
-    if spec.action is not None:
+    type, or (an option of any text: :data:`_VALUE_WORDS`) the words it names; a file name is never taken."""
+    if spec.action is not None or spec.type in (file_path_argument, path_argument):
         return False
     if spec.choices is not None:
         return word in map(str, spec.choices)
     if spec.type is None:
-        return spec.keyword == "formats" and word in FormatSet.presets()
+        return spec.keyword in _VALUE_WORDS and word in _VALUE_WORDS[spec.keyword]()
     try:
         spec.type(word)
     except (argparse.ArgumentTypeError, TypeError, ValueError):

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import (HoledMesh, InconsistentOrientation, Mesh, MeshError, boundary_crossings, component_labels,
-                               count_components, orient_consistently, oriented_mesh)
+from golden_model.mesh import (HoledMesh, InconsistentOrientation, Mesh, MeshError, boundary_crossings,
+                               component_labels, count_components, orient_consistently, oriented_mesh)
 from sim.generate import grid_faces, grid_uv
 from sim.mesh_io import load_mesh_with_notes, save_obj
 

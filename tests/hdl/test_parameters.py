@@ -7,6 +7,7 @@ from golden_model.engine_spec.image import EngineCapacity
 from golden_model.fixed import FormatSet
 from hdl.block_ram import BlockRam
 from hdl.engine import SpringflatEngine
+from hdl.fifo import LutFIFO, SlicedFIFO
 from hdl.parameters import check_int, check_power_of_two
 from hdl.saturation_tally import SaturationTally
 from hdl.wishbone import Signature
@@ -42,5 +43,11 @@ def test_the_components_refuse_through_the_checks():
             SaturationTally({"a": 1, "b": 1}, count_bits=0)
         with pytest.raises(ValueError, match=r"^entry_bank_depth must be a power of two >= 2, not 96$"):
             SpringflatEngine(FormatSet.preset("default"), EngineCapacity(64, 512, 128), entry_bank_depth=96)
+        with pytest.raises(ValueError, match=r"^SlicedFIFO depth must be a power of two >= 2, not 0$"):
+            SlicedFIFO(width=8, depth=0, slice_bits=4)
+        with pytest.raises(ValueError, match=r"^LutFIFO width must be an int >= 1, not True$"):
+            LutFIFO(width=True, depth=4)
+        with pytest.raises(ValueError, match=r"^event source 'a'.s width must be an int >= 1, not 2.0$"):
+            SaturationTally({"a": 2.0, "b": 1}, count_bits=4)
     with pytest.raises(ValueError, match=r"^addr_width must be an int >= 1, not 0$"):
         Signature(addr_width=0)

@@ -541,7 +541,6 @@ def test_the_commands_option_words_become_the_apis_keywords():
         "check units, print it tiled (paper='a4' or 'letter'), or with units='m'"
 
 
-
 def test_the_commands_switches_and_drops_become_keyword_values():
     from springflat.api import _in_api_words
 
@@ -549,6 +548,9 @@ def test_the_commands_switches_and_drops_become_keyword_values():
         "the paper dynamics has none (guard=False); drop damping, or use guard=False"
     assert _in_api_words("--tol-energy 1e-30 is below; --damping belongs to it; --formats applies") == \
         "tol_energy=1e-30 is below; damping belongs to it; formats applies"
+    # a method is quoted as an init, a file name never taken for a value, a full stop not part of one
+    assert _in_api_words("give --init slim; --distortion writes a CSV; at most --max-iter 10.") == \
+        "give init='slim'; distortion writes a CSV; at most max_iter=10."
 
 
 @pytest.mark.parametrize("options", [dict(spring=-1), dict(dynamics="paper", guard=True), dict(damping=0.5),

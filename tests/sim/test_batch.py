@@ -458,10 +458,15 @@ def test_skip_existing_goes_on_after_an_interrupted_batch(tmp_path, monkeypatch,
     assert out[-1].startswith("3 meshes: 1 skipped, ")
     assert {name: os.stat(f"o/{name}").st_mtime_ns for name in first} == first
     assert sorted(os.listdir("o")) == sorted(f"dome0{k}.{e}" for k in range(3) for e in ("dxf", "csv"))
+    os.chmod("o/dome00.dxf", 0o444)  # a finished file made read-only: its mesh is skipped, not refused
     assert main([*argv, "--skip-existing", "--json"]) == 0
-    records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    captured = capsys.readouterr()
+    records = [json.loads(line) for line in captured.out.splitlines()]
     assert [r["status"] for r in records[:-1]] == ["skipped"] * 3
     assert records[0]["files"] == ["o/dome00.dxf", "o/dome00.csv"]
+    assert records[-1]["batch"]["skipped"] == 3
+    assert main([*argv, "--skip-existing"]) == 0
+    assert capsys.readouterr().err.splitlines()[0] == "springflat: 3 meshes (3 skipped: their files are in o)"
 
 
 def test_skip_existing_without_an_out_dir_is_refused(tmp_path, monkeypatch, capsys):

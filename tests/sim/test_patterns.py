@@ -433,6 +433,11 @@ def test_every_format_is_reproducible_byte_for_byte(tmp_path):
         write_pattern_file(tmp_path / f"a.{ending}", drawing, dxf_edges=True)
         write_pattern_file(tmp_path / f"b.{ending}", drawing, dxf_edges=True)
         assert (tmp_path / f"a.{ending}").read_bytes() == (tmp_path / f"b.{ending}").read_bytes(), ending
+    for ending in ("dxf", "pdf", "svg"):  # a seam allowance's cut line, outlined anew for each drawing
+        for name in ("c", "d"):
+            write_pattern_file(tmp_path / f"{name}.{ending}", PatternDrawing.of(
+                mesh, mesh.vertices[:, :2] * 100, "mm", "a caption").with_seam(5.0).with_grain("x"))
+        assert (tmp_path / f"c.{ending}").read_bytes() == (tmp_path / f"d.{ending}").read_bytes(), ending
 
 
 # --------------------------------------------------------------------------- distortion
@@ -926,3 +931,23 @@ def test_the_pdfs_piece_label_is_drawn_with_the_pattern(bunny, tmp_path):
     reader = PdfReader(tmp_path / "bunny.pdf")
     texts = [text for text, _ in pdf_page_contents(reader, reader.pages[0])[1]]
     assert texts.count("bunny_face") == 1  # the piece's own label, beside the title block's longer line
+
+
+def test_the_piece_label_keeps_clear_of_the_grain_line(bunny, tmp_path):
+    """The grain line runs through the vertex nearest the centroid, where the label would be centred: the
+    name goes beside it, not struck through."""
+    from reportlab.pdfbase.pdfmetrics import stringWidth
+
+    mesh, layout = bunny
+    write_pattern_file(tmp_path / "grain.svg", PatternDrawing.of(mesh, layout, "m").with_grain("y"))
+    root = ET.parse(tmp_path / "grain.svg").getroot()
+    strokes = [np.array([p.split(",") for p in line.get("points").split()], float)
+               for line in root.findall(f".//{SVG}g[@id='grain']/{SVG}polyline")]
+    shaft = max(strokes, key=lambda stroke: np.ptp(stroke[:, 1]))  # the line itself, not an arrowhead
+    label = root.find(f".//{SVG}text[@class='piece-label']")
+    em = float(label.get("font-size"))
+    x, baseline, half = float(label.get("x")), float(label.get("y")), stringWidth(label.text, "Helvetica", em) / 2
+    top, bottom = baseline - 0.718 * em, baseline + 0.21 * em  # (y down in the SVG)
+    assert np.ptp(shaft[:, 0]) < 1e-6  # vertical
+    crosses = x - half <= shaft[0, 0] <= x + half and shaft[:, 1].min() <= bottom and top <= shaft[:, 1].max()
+    assert not crosses, (x - half, x + half, shaft[0, 0])
