@@ -22,9 +22,10 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "fill_holes", "oriented_mesh",
-           "orient_consistently", "component_labels", "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT", "MIN_MESH_SIZE",
-           "printable_name", "one_line", "valid_text"]
+__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "fill_holes", "boundary_loops",
+           "hole_triangles", "oriented_mesh", "orient_consistently", "component_labels", "count_components",
+           "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT",
+           "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
 #: times the squared longest edge of the mesh.
@@ -458,10 +459,12 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
         raise MeshError("mesh is not a disk: it is closed (no boundary loop)")
     on_boundary = np.unique(boundary)
     n_loops = count_components(n, boundary[:, 0], boundary[:, 1]) - (n - len(on_boundary))
-    if n_loops != 1:
-        raise HoledMesh(f"mesh is not a disk: it has {n_loops} boundary loops where a disk has one (holes, or a "
-                        "tube's ends)")
     euler = n - len(edges) + len(faces)
+    if n_loops != 1:
+        message = f"mesh is not a disk: it has {n_loops} boundary loops where a disk has one (holes, or a tube's ends)"
+        if euler != 2 - n_loops:  # a disk with holes has 2 - loops; closing them would not leave a disk
+            raise MeshError(f"{message}, and handles (Euler characteristic {euler}, expected {2 - n_loops})")
+        raise HoledMesh(message)
     if euler != 1:
         raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")
 
@@ -577,34 +580,95 @@ def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh",
             vertices, faces, note = fill_holes(vertices, faces)
             filled = True
             notes.append(note)
+        except MeshError as exc:
+            if filled:  # (a face or a count that is the fill's, not the file's)
+                raise MeshError(f"{exc}, with the holes closed") from None
+            raise
 
 
 def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
-    """``(vertices, faces, note)`` with every boundary loop but the longest (the outer edge, by its 3D length)
-    closed by a fan of triangles about a new vertex at the mean of the hole's vertices. The new vertices come
-    after the mesh's own (vertex ``i`` stays node ``i``), the new faces after its faces, wound as the mesh's (each
-    hole side run back the other way): ``faces`` must be wound consistently. For a scan's holes, which are
-    no part of the piece; a cut-out the piece must keep is not a hole to fill."""
+    """``(vertices, faces, note)`` with every boundary loop but the outer edge closed by triangles between its
+    own vertices (:func:`hole_triangles`), which come after the mesh's faces, wound as the mesh's (each hole
+    side run back the other way): ``faces`` must be wound consistently. No vertex is added. The outer edge is
+    the loop that spans the most area (the length of its vector area ``½Σ vᵢ × vᵢ₊₁``): a comb-shaped hole can
+    be longer than the piece's edge. For a scan's holes, which are no part of the piece; a cut-out the piece
+    must keep is not a hole to fill (the note says when the holes are more than :data:`LARGE_FILL` of the
+    piece's area)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    n = len(vertices)
-    sides = _directed_boundary_edges(faces)
-    lengths = np.linalg.norm(vertices[sides[:, 1]] - vertices[sides[:, 0]], axis=1)
-    loops, side_loop = np.unique(component_labels(n, sides[:, 0], sides[:, 1])[sides[:, 0]], return_inverse=True)
-    loop_length = np.bincount(side_loop, weights=lengths)
-    holes = np.argsort(-loop_length, kind="stable")[1:].tolist()
-    centres, fans = [], []
-    for count, hole in enumerate(holes):
-        hole_sides = sides[side_loop == hole]
-        centres.append(vertices[np.unique(hole_sides)].mean(axis=0))
-        fans.append(np.column_stack([hole_sides[:, 1], hole_sides[:, 0], np.full(len(hole_sides), n + count)]))
-    added = sum(len(fan) for fan in fans)
-    rounds = loop_length[holes]
+    loops = boundary_loops(faces)
+    spans = [np.linalg.norm(np.cross(vertices[loop], vertices[np.roll(loop, -1)]).sum(axis=0)) / 2 for loop in loops]
+    outer = int(np.argmax(spans))
+    holes = [loop for k, loop in enumerate(loops) if k != outer]
+    fill = np.vstack([hole_triangles(vertices, loop) for loop in holes])
+    lengths = np.array([_loop_length(vertices[loop]) for loop in loops])
+    share = triangle_areas_3d(vertices, fill).sum() / triangle_areas_3d(vertices, faces).sum()
     plural = "s" if len(holes) != 1 else ""
-    note = (f"{len(holes)} hole{plural} closed ({_length_range(rounds)} round, beside an outer edge "
-            f"{loop_length.max():.4g} round) by {added} triangles about {len(holes)} new "
-            f"{'vertices' if plural else 'vertex'} ({n} on): the pattern covers {'them' if plural else 'it'}")
-    return np.vstack([vertices, *centres]), np.vstack([faces, *fans]), note
+    note = (f"{len(holes)} hole{plural} closed by {len(fill)} triangles (edge{plural} "
+            f"{_length_range(np.delete(lengths, outer))} long, the piece's outer edge {lengths[outer]:.4g}, in the "
+            f"mesh's units): the pattern covers {'them' if plural else 'it'}")
+    if share > LARGE_FILL:
+        note += (f"; {'they are' if plural else 'it is'} {share:.0%} of the piece's area: a cut-out the piece must "
+                 "keep is no hole to fill")
+    return vertices, np.vstack([faces, fill]), note
+
+
+#: The share of a piece's area past which the note on filled holes says they may be cut-outs.
+LARGE_FILL = 0.1
+
+
+def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """Each boundary loop's vertices in order, walked the way its sides run in their faces (each boundary vertex
+    on one loop: a manifold mesh)."""
+    sides = _directed_boundary_edges(np.asarray(faces, dtype=np.int64))
+    following = dict(zip(sides[:, 0].tolist(), sides[:, 1].tolist()))
+    loops, seen = [], set()
+    for start in sorted(following):
+        if start in seen:
+            continue
+        loop = [start]
+        while following[loop[-1]] != start:
+            loop.append(following[loop[-1]])
+        seen.update(loop)
+        loops.append(np.array(loop, dtype=np.int64))
+    return loops
+
+
+def hole_triangles(vertices: np.ndarray, loop: np.ndarray) -> np.ndarray:
+    """``(k - 2, 3)`` triangles between the ``k`` vertices of the hole whose edge runs ``loop`` (the way its
+    sides run in their faces), wound as the mesh's faces (each side of the loop run back): ear clipping of the
+    loop seen from its best-fitting plane, each ear a corner that turns the loop's way and holds no other
+    corner, so that a C- or L-shaped hole is covered once. A hole whose edge crosses itself seen from that
+    plane has no such ear left at some point: :class:`MeshError`."""
+    polygon = np.asarray(loop, dtype=np.int64)[::-1]  # the fill runs each hole side the other way
+    points = vertices[polygon] - vertices[polygon].mean(axis=0)
+    flat = points @ np.linalg.svd(points, full_matrices=False)[2][:2].T
+    x, y = flat[:, 0], flat[:, 1]
+    turn = np.sign(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))  # the loop's way round, seen from the plane
+    tolerance = 1e-12 * float(np.ptp(flat, axis=0).max()) ** 2
+    alive = list(range(len(polygon)))
+    triangles = []
+    while len(alive) > 3:
+        for k in range(len(alive)):
+            a, b, c = alive[k - 1], alive[k], alive[(k + 1) % len(alive)]
+            if turn * _cross(flat[[a]], flat[[b]], flat[[c]])[0] <= tolerance:  # turns the other way, or not
+                continue
+            others = flat[[r for r in alive if r not in (a, b, c)]]
+            inside = np.all([turn * _cross(flat[[p]], flat[[q]], others) >= -tolerance
+                             for p, q in ((a, b), (b, c), (c, a))], axis=0)
+            if not inside.any():
+                triangles.append(polygon[[a, b, c]])
+                del alive[k]
+                break
+        else:
+            raise MeshError(f"the hole whose edge runs through vertices {int(polygon[0])}, {int(polygon[1])}, ... "
+                            "cannot be filled: its edge crosses itself, seen from the hole's plane")
+    triangles.append(polygon[alive])
+    return np.array(triangles, dtype=np.int64)
+
+
+def _loop_length(points: np.ndarray) -> float:
+    return float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
 
 
 def _length_range(lengths: np.ndarray) -> str:

@@ -254,15 +254,16 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
     if args.out_dir is not None:
         out_dir = args.out_dir
         names = _names(meshes)
-        if args.skip_existing:  # the files of a mesh that is skipped are not written: nothing to check
-            names = [name for name in names if not _already_written(out_dir, name, endings)]
+        # a skipped mesh's files are not written (a finished one made read-only is no obstacle), but they must
+        # still be its outputs: not a mesh of the batch, nor an OBJ springflat did not write
+        written = [name for name in names if not (args.skip_existing and _already_written(out_dir, name, endings))]
         flags = {option: (what, suffixes) for option, what, suffixes in OUTPUT_OPTIONS}
         for option, ending in endings:
             if option == "out":
                 pattern_kind(Path(ending))
-            for name in names:  # before any run: a later mesh's obstacle must not end the batch
+            for name in written:  # before any run: a later mesh's obstacle must not end the batch
                 check_output_path(out_dir / f"{name}{ending}", *flags[option], typed=False)
-        _check_no_two_meshes_write_one_name(meshes, _names(meshes), endings, out_dir)
+        _check_no_two_meshes_write_one_name(meshes, names, endings, out_dir)
         # no mesh's output may be a mesh of the batch (or the --init or --formats file), nor another's output
         check_distinct([(flags[option][0], out_dir / f"{name}{ending}") for name in names for option, ending in endings],
                        [item for mesh in meshes
@@ -506,10 +507,13 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     count = min(workers, max(1, len(pending)))
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler not in (None, "local")
              else f"{count} {'Dask ' if args.scheduler else ''}worker process{'es' if count != 1 else ''}")
+    if not pending:  # every mesh skipped, or unreadable here: no worker starts
+        where = "no worker process"
     skipped = len(meshes) - len(pending) - sum(o.failed for o in outcomes.values())
     if not args.json:
         print(f"springflat: {len(meshes)} mesh{'es' if len(meshes) != 1 else ''}"
-              + (f" ({skipped} skipped: their files are in {printable_name(str(args.out_dir))})" if skipped else "")
+              + (f" ({skipped} skipped: {'their' if skipped > 1 else 'its'} files are in "
+                 f"{printable_name(str(args.out_dir))})" if skipped else "")
               + (f" on {where}" if pending else ""), file=sys.stderr)
     done = 0
     unwritable: list[OSError] = []  # the standard output's error: the batch goes on, its files are written

@@ -117,9 +117,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("mesh", nargs="?", default="surf1",
                         help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
     parser.add_argument("--fill-holes", action="store_true",
-                        help="close the mesh's holes (each boundary loop but the longest) with fans of triangles "
-                             "before flattening, for a scan's holes: the pattern covers them (default: a mesh with "
-                             "holes is refused)")
+                        help="close the mesh's holes (each boundary loop but the outer edge) with triangles between "
+                             "their own vertices before flattening, for a scan's holes: the pattern covers them "
+                             "(default: a mesh with holes is refused)")
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
                         help="initial layout: auto (arap; for a guarded run, where it folds or fails, slim from "
                              "tutte), tutte, pca, "

@@ -166,10 +166,25 @@ def result_of(future: Future) -> Any:
     return future.result()
 
 
-def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> None:
+def _start_worker(parent: int, initializer: Callable[..., None] | None, initargs: tuple) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _die_with(parent)
     if initializer is not None:
         initializer(*initargs)
+
+
+def _die_with(parent: int) -> None:
+    """End this worker when the process ``parent`` that started it dies, even by SIGKILL, which gives it no
+    chance to stop its workers: they waited on its pipe for ever (Linux's ``PR_SET_PDEATHSIG``; elsewhere
+    nothing is done)."""
+    if sys.platform != "linux":
+        return
+    import ctypes
+
+    pr_set_pdeathsig = 1
+    ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent:  # it died before the request: nobody is left to send the signal
+        os._exit(1)
 
 
 def _start_method() -> str | None:
@@ -182,11 +197,12 @@ def _start_method() -> str | None:
 
 class WorkerPool(ProcessPoolExecutor):
     """A :class:`~concurrent.futures.ProcessPoolExecutor` of ``max_workers`` processes whose workers
-    ignore SIGINT, whose start cannot be cut in half by it, and which :meth:`stop` ends at once; forked
+    ignore SIGINT, whose start cannot be cut in half by it, which :meth:`stop` ends at once, and which end
+    when their parent dies (:func:`_die_with`); forked
     where that is safe, whatever start method the program chose (:func:`_start_method`)."""
 
     def __init__(self, max_workers: int, initializer: Callable[..., None] | None = None, initargs: tuple = ()):
-        super().__init__(max_workers, initializer=_start_worker, initargs=(initializer, initargs),
+        super().__init__(max_workers, initializer=_start_worker, initargs=(os.getpid(), initializer, initargs),
                          mp_context=multiprocessing.get_context(_start_method()))
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:

@@ -217,7 +217,7 @@ class Pattern:
 def read_mesh(path: str | Path, fill_holes: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``(V, F)`` of an OBJ, PLY, OFF or STL disk patch: ``(V, 3)`` float64 positions, ``(F, 3)`` int64
     vertex indices (0-based), in the file's vertex order; with ``fill_holes`` its holes are closed first
-    (as ``--fill-holes``: a vertex at each hole's centre after the file's, a fan of triangles after its faces).
+    (as ``--fill-holes``: triangles between each hole's own vertices after the file's faces; no vertex added).
 
     The file must be one manifold disk (:func:`sim.mesh_io.load_mesh_with_notes`); anything else
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the

@@ -328,22 +328,59 @@ def test_a_mesh_with_holes_is_refused_as_one_the_fill_can_close():
         Mesh(vertices, faces)
 
 
-def test_filling_closes_each_hole_with_a_fan_after_the_meshs_own_vertices_and_faces():
+def _flat_area(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Signed areas of ``faces`` seen from above (x, y), counter-clockwise positive."""
+    a, b, c = (points[faces[:, k], :2] for k in range(3))
+    return ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]) / 2
+
+
+def test_filling_closes_each_hole_with_triangles_of_its_own_corners_after_the_meshs_faces():
     vertices, faces = _holed_grid()
     mesh, notes = oriented_mesh(vertices, faces, fill=True)
-    n, m = len(vertices), len(faces)
-    assert mesh.n_vertices == n + 2 and mesh.n_faces == m + 8  # a square hole: four sides, four triangles
-    np.testing.assert_array_equal(mesh.vertices[:n], vertices)
+    m = len(faces)
+    assert mesh.n_vertices == len(vertices) and mesh.n_faces == m + 4  # a square hole: two triangles
     np.testing.assert_array_equal(mesh.faces[:m], faces)
     assert _each_interior_edge_run_both_ways(mesh.faces)
-    # a new vertex at each hole's centre, the mean of the cell's four corners; the note gives the holes' lengths
-    rounds = []
-    for i, j in ((2, 2), (5, 4)):
-        corners = vertices[[i * 9 + j, i * 9 + j + 1, (i + 1) * 9 + j + 1, (i + 1) * 9 + j]]
-        assert np.abs(mesh.vertices[n:] - corners.mean(axis=0)).max(axis=1).min() < 1e-12
-        rounds.append(np.linalg.norm(np.roll(corners, -1, axis=0) - corners, axis=1).sum())
-    assert notes[0].startswith(f"2 holes closed ({min(rounds):.4g} to {max(rounds):.4g} round, beside an outer edge ")
-    assert notes[0].endswith("by 8 triangles about 2 new vertices (81 on): the pattern covers them")
+    corners = {i * 9 + j + d for i, j in ((2, 2), (5, 4)) for d in (0, 1, 9, 10)}
+    assert set(mesh.faces[m:].ravel().tolist()) == corners
+    # seen from above the grid is flat and wound counter-clockwise: the fill covers the two cells, once
+    fill = _flat_area(vertices, mesh.faces[m:])
+    assert (fill > 0).all() and fill.sum() == pytest.approx(2 / 64)
+    assert notes == ["2 holes closed by 4 triangles (edges " + notes[0].split("(edges ", 1)[1]]
+    assert notes[0].endswith("in the mesh's units): the pattern covers them") and "%" not in notes[0]
+
+
+def _grid_without(n: int, cells) -> tuple[np.ndarray, np.ndarray]:
+    """A flat n x n grid (0 to 1) less the cells (row, column) given: one hole of their shape."""
+    uv = grid_uv(n, n)
+    faces = grid_faces(n, n)
+    gone = [{i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1} for i, j in cells]
+    return np.column_stack([uv, np.zeros(len(uv))]), faces[[not any(set(f) <= g for g in gone) for f in faces.tolist()]]
+
+
+@pytest.mark.parametrize("shape, cells", [
+    ("C", [(3, 3), (3, 4), (3, 5), (4, 3), (5, 3), (5, 4), (5, 5)]),
+    ("L", [(2, 2), (3, 2), (4, 2), (5, 2), (5, 3), (5, 4)]),
+    ("comb", [(1, c) for c in range(1, 8)] + [(r, c) for r in range(2, 7) for c in (1, 3, 5, 7)]),
+])
+def test_a_hole_of_any_shape_is_covered_once_and_the_outer_edge_kept(shape, cells):
+    """The fill's triangles, seen from above, all turn the mesh's way and add up to the hole's area: a fan
+    about the hole's centre folded over the piece on a C or an L; the comb's hole is longer than the piece's
+    edge, which must stay open."""
+    vertices, faces = _grid_without(10, cells)
+    mesh, notes = oriented_mesh(vertices, faces, fill=True)
+    fill = _flat_area(vertices, mesh.faces[len(faces):])
+    assert (fill > 0).all() and fill.sum() == pytest.approx(len(cells) / 81)
+    assert len(mesh.boundary_loop) == 36  # the square's edge, 4 x 9 sides
+    assert (_flat_area(vertices, mesh.faces) > 0).all()
+
+
+def test_holes_over_a_tenth_of_the_piece_are_said_to_be_maybe_cut_outs():
+    cells = [(2, c) for c in range(1, 8)] + [(r, 1) for r in range(3, 8)]  # an L of 12 of the 81 cells
+    vertices, faces = _grid_without(10, cells)
+    notes = oriented_mesh(vertices, faces, fill=True)[1]
+    assert notes[0].endswith(f"; it is {12 / 69:.0%} of the piece's area: a cut-out the piece must keep is no hole "
+                             "to fill")  # of the 69 cells left
 
 
 def test_filling_follows_the_turning_of_faces_wound_against_their_neighbours():
@@ -355,7 +392,7 @@ def test_filling_follows_the_turning_of_faces_wound_against_their_neighbours():
     assert notes[0].endswith("(the pattern's faces keep the turned winding)") and "holes closed" in notes[1]
 
 
-def test_a_tubes_shorter_end_is_the_hole():
+def test_a_tubes_narrower_end_is_the_hole():
     """A cone frustum open at both ends: two loops; the narrower end is filled, a cup."""
     k, rings = 16, 5
     angle = np.linspace(0, 2 * np.pi, k, endpoint=False)
@@ -365,5 +402,23 @@ def test_a_tubes_shorter_end_is_the_hole():
                       for f in ((z * k + i, z * k + (i + 1) % k, (z + 1) * k + i),
                                 ((z + 1) * k + i, z * k + (i + 1) % k, (z + 1) * k + (i + 1) % k))])
     mesh, _ = oriented_mesh(vertices, faces, fill=True)
-    np.testing.assert_allclose(mesh.vertices[-1], [0.0, 0.0, rings - 1], atol=1e-12)  # the narrow end's centre
+    assert set(mesh.faces[len(faces):].ravel().tolist()) == set(range((rings - 1) * k, rings * k))  # narrow end
     assert set(mesh.boundary_loop.tolist()) == set(range(k))  # the wide end is the edge
+
+
+def test_holes_in_a_mesh_with_a_handle_are_refused_as_handles_not_as_holes_to_fill():
+    """A torus with two cells taken out: two boundary loops, but closing them leaves a torus, no disk; the
+    refusal says so at once instead of naming the fill."""
+    k = 8
+    angle = 2 * np.pi * np.arange(k) / k
+    vertices = np.array([[(2 + np.cos(b)) * np.cos(a), (2 + np.cos(b)) * np.sin(a), np.sin(b)]
+                         for a in angle for b in angle])
+    cells = [(i, j) for i in range(k) for j in range(k) if (i, j) not in ((1, 1), (5, 4))]
+    faces = np.array([f for i, j in cells for a, b, c, d in [(i * k + j, ((i + 1) % k) * k + j,
+                                                                ((i + 1) % k) * k + (j + 1) % k, i * k + (j + 1) % k)]
+                      for f in ((a, b, c), (a, c, d))])
+    with pytest.raises(MeshError, match=r"^mesh is not a disk: it has 2 boundary loops where a disk has one "
+                                        r"\(holes, or a tube's ends\), and handles \(Euler characteristic -2, "
+                                        r"expected 0\)$") as info:
+        oriented_mesh(vertices, faces, fill=True)
+    assert not isinstance(info.value, HoledMesh)

@@ -475,3 +475,18 @@ def test_skip_existing_without_an_out_dir_is_refused(tmp_path, monkeypatch, caps
     assert capsys.readouterr().err.strip() == ("springflat: error: --skip-existing skips a batch's meshes whose files "
                                                "are in --out-dir: add --out-dir DIR")
     assert os.listdir(tmp_path) == []
+
+
+def test_skip_existing_does_not_take_a_mesh_or_a_foreign_obj_for_an_output(tmp_path, monkeypatch, capsys):
+    """An output that is one of the batch's meshes, or an OBJ springflat did not write, is no finished output:
+    refused as without --skip-existing (they were reported skipped, the patterns never written)."""
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 2, 0)
+    assert main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "in", "--out", ".obj",
+                 "--skip-existing"]) == 2
+    assert "is the same file as the mesh" in capsys.readouterr().err
+    os.mkdir("o")
+    save_obj(tmp_path / "o" / "dome00.obj", np.eye(3), np.array([[0, 1, 2]]))  # a user's mesh, no springflat header
+    assert main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "o", "--out", ".obj",
+                 "--skip-existing"]) == 2
+    assert "springflat did not write" in capsys.readouterr().err

@@ -365,7 +365,7 @@ def test_a_mesh_file_with_holes_is_refused_naming_the_fill_and_read_with_it(tmp_
                                         r"but the outer edge$"):
         load_mesh(tmp_path / "holed.obj")
     mesh, notes = load_mesh_with_notes(tmp_path / "holed.obj", fill_holes=True)
-    assert mesh.n_vertices == n + 2 and len(notes) == 1 and notes[0].startswith("2 holes closed (")
+    assert mesh.n_vertices == n and len(notes) == 1 and notes[0].startswith("2 holes closed by 4 triangles (")
 
 
 def test_the_command_flattens_a_holed_scan_with_fill_holes_and_the_api_too(tmp_path):
@@ -383,18 +383,18 @@ def test_the_command_flattens_a_holed_scan_with_fill_holes_and_the_api_too(tmp_p
     ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj"), "--fill-holes", "--json",
                           "--out", str(tmp_path / "p.flat.obj")], capture_output=True, text=True)
     assert ran.returncode == 0, ran.stderr
-    assert "springflat: note: holed: 2 holes closed (" in ran.stderr
+    assert "springflat: note: holed: 2 holes closed by 4 triangles (" in ran.stderr
     layout = load_mesh(tmp_path / "p.flat.obj")
-    assert layout.n_vertices == 443 and not folded_faces(layout.vertices[:, :2], layout.faces).any()
+    assert layout.n_vertices == 441 and not folded_faces(layout.vertices[:, :2], layout.faces).any()
     with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge$"):
         springflat.read_mesh(tmp_path / "holed.obj")
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         V, F = springflat.read_mesh(tmp_path / "holed.obj", fill_holes=True)
-    assert V.shape == (443, 3) and "2 holes closed" in str(said[0].message)
-    V0, F0 = V[:441], F[:-8]  # the file's own: its holes open again
+    assert V.shape == (441, 3) and "2 holes closed" in str(said[0].message)
+    V0, F0 = V, F[:-4]  # the file's own faces: its holes open again
     with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge$"):
         springflat.flatten(V0, F0)
-    with pytest.warns(springflat.MeshNote, match=r"^mesh: 2 holes closed \("):
-        pattern = springflat.flatten(V0, F0, fill_holes=True)
-    assert pattern.layout.shape == (443, 2) and pattern.folded == 0
+    with pytest.warns(springflat.MeshNote, match=r"^mesh: 2 holes closed by 4 triangles \("):
+        pattern = springflat.flatten(V0, F0, fill_holes=True, init=V0[:, :2])  # a layout of the file's vertices
+    assert pattern.layout.shape == (441, 2) and pattern.folded == 0

@@ -18,6 +18,7 @@ from concurrent.futures.process import BrokenProcessPool
 import pytest
 
 from sim.workers import WorkerPool, wait_for_one
+from support import REPO
 
 
 def _interrupt_myself_then_answer() -> int:
@@ -243,3 +244,35 @@ def test_workers_do_not_run_the_callers_script_again_whatever_start_method_it_ch
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines() == ["top-level ran", "worker True"]
+
+
+def _gone(pid: int) -> bool:
+    """Whether the process ``pid`` has ended (a zombie no one has reaped yet counts as ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="PR_SET_PDEATHSIG is Linux's")
+def test_a_worker_ends_when_its_parent_is_killed(tmp_path):
+    """SIGKILL gives the pool's process no chance to stop its workers: they waited on its pipe for ever."""
+    script = ("import sys, time\nsys.path.insert(0, %r)\nfrom sim.workers import WorkerPool\n"
+              "import os\npool = WorkerPool(1)\nprint(pool.submit(os.getpid).result(), flush=True)\n"
+              "pool.submit(time.sleep, 600)\ntime.sleep(600)\n") % str(REPO)
+    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    worker = None
+    try:
+        worker = int(parent.stdout.readline())
+        assert not _gone(worker)
+        parent.kill()
+        parent.wait(timeout=30)
+        deadline = time.monotonic() + 30
+        while not _gone(worker) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _gone(worker)
+    finally:
+        parent.kill()
+        if worker is not None and not _gone(worker):  # (the check failed: no orphan left behind)
+            os.kill(worker, signal.SIGKILL)
