@@ -589,24 +589,27 @@ def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh",
 def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
     """``(vertices, faces, note)`` with every boundary loop but the outer edge closed by triangles between its
     own vertices (:func:`hole_triangles`), which come after the mesh's faces, wound as the mesh's (each hole
-    side run back the other way): ``faces`` must be wound consistently. No vertex is added. The outer edge is
-    the loop that spans the most area (the length of its vector area ``½Σ vᵢ × vᵢ₊₁``): a comb-shaped hole can
-    be longer than the piece's edge. For a scan's holes, which are no part of the piece; a cut-out the piece
-    must keep is not a hole to fill (the note says when the holes are more than :data:`LARGE_FILL` of the
-    piece's area)."""
+    side run back the other way). ``faces`` must be a consistently wound manifold (as :class:`Mesh` checks
+    before it raises :class:`HoledMesh`). No vertex is added. The outer edge is the loop whose corners lie
+    farthest apart (its box's diagonal): the piece's edge reaches round all of it, a hole only round its own
+    part; neither a loop's length (a comb-shaped hole) nor its vector area (a sheet rolled nearly closed) says
+    that. For a scan's holes, which are no part of the piece; a cut-out the piece must keep is not a hole to
+    fill (the note says when the holes are more than :data:`LARGE_FILL` of the piece's area). A mesh with one
+    loop is returned as it is, with no note."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     loops = boundary_loops(faces)
-    spans = [np.linalg.norm(np.cross(vertices[loop], vertices[np.roll(loop, -1)]).sum(axis=0)) / 2 for loop in loops]
-    outer = int(np.argmax(spans))
+    if len(loops) < 2:
+        return vertices, faces, ""
+    outer = int(np.argmax([np.linalg.norm(np.ptp(vertices[loop], axis=0)) for loop in loops]))
     holes = [loop for k, loop in enumerate(loops) if k != outer]
     fill = np.vstack([hole_triangles(vertices, loop) for loop in holes])
     lengths = np.array([_loop_length(vertices[loop]) for loop in loops])
     share = triangle_areas_3d(vertices, fill).sum() / triangle_areas_3d(vertices, faces).sum()
     plural = "s" if len(holes) != 1 else ""
-    note = (f"{len(holes)} hole{plural} closed by {len(fill)} triangles (edge{plural} "
-            f"{_length_range(np.delete(lengths, outer))} long, the piece's outer edge {lengths[outer]:.4g}, in the "
-            f"mesh's units): the pattern covers {'them' if plural else 'it'}")
+    note = (f"{len(holes)} hole{plural} closed by {len(fill)} triangle{'s' if len(fill) != 1 else ''} "
+            f"(edge{plural} {_length_range(np.delete(lengths, outer))} long, the piece's outer edge "
+            f"{lengths[outer]:.4g}, in the mesh's units): the pattern covers {'them' if plural else 'it'}")
     if share > LARGE_FILL:
         note += (f"; {'they are' if plural else 'it is'} {share:.0%} of the piece's area: a cut-out the piece must "
                  "keep is no hole to fill")
@@ -618,10 +621,12 @@ LARGE_FILL = 0.1
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """Each boundary loop's vertices in order, walked the way its sides run in their faces (each boundary vertex
-    on one loop: a manifold mesh)."""
+    """Each boundary loop's vertices in order, walked the way its sides run in their faces. ``faces`` must be a
+    consistently wound manifold (each boundary vertex starts one boundary side): :class:`MeshError` else."""
     sides = _directed_boundary_edges(np.asarray(faces, dtype=np.int64))
     following = dict(zip(sides[:, 0].tolist(), sides[:, 1].tolist()))
+    if len(following) != len(sides) or set(following.values()) != set(following):
+        raise MeshError("the boundary's sides do not make loops: the mesh is not a consistently wound manifold")
     loops, seen = [], set()
     for start in sorted(following):
         if start in seen:
@@ -637,19 +642,31 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
 def hole_triangles(vertices: np.ndarray, loop: np.ndarray) -> np.ndarray:
     """``(k - 2, 3)`` triangles between the ``k`` vertices of the hole whose edge runs ``loop`` (the way its
     sides run in their faces), wound as the mesh's faces (each side of the loop run back): ear clipping of the
-    loop seen from its best-fitting plane, each ear a corner that turns the loop's way and holds no other
-    corner, so that a C- or L-shaped hole is covered once. A hole whose edge crosses itself seen from that
-    plane has no such ear left at some point: :class:`MeshError`."""
+    loop seen along its vector area's normal (``Σ vᵢ × vᵢ₊₁``: a saddle-shaped hole's edge is simple from
+    there), each ear a corner that turns the loop's way and holds no other corner, so that a C- or L-shaped
+    hole is covered once; the search goes on round the loop from each ear it clips, so the triangles do not all
+    meet at one corner. :class:`MeshError` for a hole that encloses no area (a crack, a T-junction's slit) or
+    where no ear is left (its edge crosses itself, seen along that normal; one that crosses itself may also be
+    filled with a triangle turned over, which the run then counts as folded)."""
     polygon = np.asarray(loop, dtype=np.int64)[::-1]  # the fill runs each hole side the other way
     points = vertices[polygon] - vertices[polygon].mean(axis=0)
-    flat = points @ np.linalg.svd(points, full_matrices=False)[2][:2].T
-    x, y = flat[:, 0], flat[:, 1]
-    turn = np.sign(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))  # the loop's way round, seen from the plane
-    tolerance = 1e-12 * float(np.ptp(flat, axis=0).max()) ** 2
+    normal = np.cross(points, np.roll(points, -1, axis=0)).sum(axis=0)
+    size = float(np.ptp(points, axis=0).max())
+    where = f"the hole whose edge runs through vertices {int(polygon[0])}, {int(polygon[1])}, {int(polygon[2])}"
+    if np.linalg.norm(normal) <= 1e-9 * size**2:
+        raise MeshError(f"{where}, ... cannot be filled: it encloses no area (a crack or a T-junction's slit)")
+    u = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal / np.linalg.norm(normal), u)
+    flat = points @ np.column_stack([u, v])  # the loop turns counter-clockwise, seen along the normal
+    turn = np.sign(np.sum(flat[:, 0] * np.roll(flat[:, 1], -1) - np.roll(flat[:, 0], -1) * flat[:, 1]))
+    tolerance = 1e-12 * size**2
     alive = list(range(len(polygon)))
     triangles = []
+    k = 0
     while len(alive) > 3:
-        for k in range(len(alive)):
+        for step in range(len(alive)):
+            k = (k + 1) % len(alive) if step else k % len(alive)
             a, b, c = alive[k - 1], alive[k], alive[(k + 1) % len(alive)]
             if turn * _cross(flat[[a]], flat[[b]], flat[[c]])[0] <= tolerance:  # turns the other way, or not
                 continue
@@ -659,10 +676,10 @@ def hole_triangles(vertices: np.ndarray, loop: np.ndarray) -> np.ndarray:
             if not inside.any():
                 triangles.append(polygon[[a, b, c]])
                 del alive[k]
+                k += 1  # the next search starts past c, whose ear would share a with this one
                 break
         else:
-            raise MeshError(f"the hole whose edge runs through vertices {int(polygon[0])}, {int(polygon[1])}, ... "
-                            "cannot be filled: its edge crosses itself, seen from the hole's plane")
+            raise MeshError(f"{where}, ... cannot be filled: its edge crosses itself, seen across the hole")
     triangles.append(polygon[alive])
     return np.array(triangles, dtype=np.int64)
 

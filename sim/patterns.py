@@ -318,7 +318,10 @@ def seam_length(value: str | float, units: str) -> float:
     if number < 0:
         raise NotALength(LENGTH_AT_LEAST_0, value)
     number += 0.0  # -0 is 0
-    return number if unit == units else number * UNIT_MM[unit] / scale
+    length = number if unit == units else number * UNIT_MM[unit] / scale
+    if not math.isfinite(length):  # (1e306m in mm)
+        raise NotALength(LENGTH_EXAMPLE, value)
+    return length
 
 
 def loop_length(points: np.ndarray) -> float:
@@ -827,8 +830,8 @@ def check_mesh_fits(mesh: Mesh, units: str, paper: str, seam: float = 0.0) -> No
     """Refuse, before a run, a print that will need more than :data:`MAX_SHEETS` sheets whatever the layout.
 
     A pattern covers about the mesh's area (its area error E_S aside), and a seam allowance of ``seam`` (in
-    ``units``) adds at least its edge's length times the allowance: half of that over one window's area is a
-    lower bound of the sheets needed.
+    ``units``) about its edge's length times the allowance (less where the edge is concave or jagged): half of
+    that over one window's area is a lower bound of the sheets needed, the half taking up that excess.
     """
     area = float(mesh.face_areas.sum()) + seam * loop_length(mesh.vertices[mesh.boundary_loop])
     area_mm2 = area * check_units(units) ** 2
@@ -1147,7 +1150,7 @@ def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
     name = drawing.name
     aspect = _text_width(name, 1.0) / 1.0  # width per mm of cap height
     # the box about the centre: the name's width, and its cap height plus a descender's depth below it
-    size = min(PIECE_LABEL_MAX_MM, 0.9 * 2 * room / math.hypot(aspect, 1.0 + 2 * DESCENDER_EM * CAP_HEIGHT_EM))
+    size = min(PIECE_LABEL_MAX_MM, 0.9 * 2 * room / math.hypot(aspect, 1.0 + 2 * DESCENDER_EM / CAP_HEIGHT_EM))
     if size < PIECE_LABEL_MIN_MM:
         return None
     return Label(centre.x, centre.y - size / 2, name, size, "middle", name="piece-label")

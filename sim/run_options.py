@@ -19,7 +19,7 @@ import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.files import describe_os_error
-from golden_model.mesh import Mesh, MeshError, folded_faces
+from golden_model.mesh import HoledMesh, Mesh, MeshError, folded_faces
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.guard import ENERGY_WINDOW
 from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
@@ -221,7 +221,10 @@ def resolve_mesh(name: str, fill_holes: bool = False) -> tuple[Mesh, FlattenPara
     if name.strip() and not Path(name).suffix and not os.path.lexists(name):  # a built-in's name mistyped?
         raise MeshError(f"cannot read mesh '{name}': no such file, and no built-in mesh of that name (built-in: "
                         f"{', '.join(BUILTIN_MESHES)}; a mesh file's name ends in its format: .obj, .ply, .off, .stl)")
-    mesh, notes = load_mesh_with_notes(name, fill_holes=fill_holes)
+    try:
+        mesh, notes = load_mesh_with_notes(name, fill_holes=fill_holes)
+    except HoledMesh as exc:
+        raise MeshError(f"{exc}; --fill-holes closes all but the outer edge") from None
     for note in notes:
         print(f"springflat: note: {mesh.name}: {note}", file=sys.stderr)
     return mesh, file_defaults(mesh)

@@ -174,16 +174,20 @@ def _start_worker(parent: int, initializer: Callable[..., None] | None, initargs
 
 
 def _die_with(parent: int) -> None:
-    """End this worker when the process ``parent`` that started it dies, even by SIGKILL, which gives it no
-    chance to stop its workers: they waited on its pipe for ever (Linux's ``PR_SET_PDEATHSIG``; elsewhere
-    nothing is done)."""
-    if sys.platform != "linux":
+    """End this worker when the process ``parent`` that forked it dies, even by SIGKILL, which gives it no
+    chance to stop its workers, which would wait on its pipe (Linux's ``PR_SET_PDEATHSIG``, best effort:
+    nothing is done elsewhere, where the call is missing, or for a worker a fork server or spawn started,
+    whose parent is not ``parent``)."""
+    if sys.platform != "linux" or os.getppid() != parent:
         return
-    import ctypes
+    try:
+        import ctypes
 
-    pr_set_pdeathsig = 1
-    ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
-    if os.getppid() != parent:  # it died before the request: nobody is left to send the signal
+        pr_set_pdeathsig = 1
+        ctypes.CDLL(None).prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # it died between the two checks: nobody is left to send the signal
         os._exit(1)
 
 

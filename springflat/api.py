@@ -231,8 +231,8 @@ def read_mesh(path: str | Path, fill_holes: bool = False) -> tuple[np.ndarray, n
         raise TypeError(f"fill_holes must be True or False, got {fill_holes!r}")
     try:
         mesh, notes = load_mesh_with_notes(path, fill_holes=bool(fill_holes))
-    except MeshError as exc:  # (a holed mesh's names the command's option)
-        raise MeshError(_in_api_words(str(exc))) from None
+    except HoledMesh as exc:
+        raise MeshError(f"{exc}; fill_holes=True closes all but the outer edge") from None
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     return mesh.vertices, mesh.faces

@@ -175,8 +175,8 @@ def test_download_offline_fails_with_one_line(synthetic, capsys, monkeypatch):
 @pytest.mark.parametrize("script, option", [("corpus_table.py", "--markdown"), ("corpus_table.py", "--json"),
                                             ("formats_on_corpus.py", "--json")])
 def test_a_benchmark_refuses_an_output_it_cannot_write_before_its_runs(tmp_path, script, option):
-    """A FIFO as the table's file: refused in one error line before any run (it waited on the FIFO, after an
-    hour of runs, then wrote into it)."""
+    """A FIFO as the table's file: refused in one error line before any run (else the table would go into it after
+    the runs), nothing written."""
     import os
     import subprocess
 

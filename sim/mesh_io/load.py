@@ -38,7 +38,8 @@ def load_mesh_with_notes(path: str | Path, fill_holes: bool = False) -> tuple[Me
     exactly equal corner coordinates are merged, numbered in order of first
     appearance.  Faces wound against their neighbours are turned to agree
     with the majority (:func:`golden_model.mesh.oriented_mesh`), with a note; with ``fill_holes``, holes
-    are closed (:func:`golden_model.mesh.fill_holes`), with a note, and without it refused naming the option.
+    are closed (:func:`golden_model.mesh.fill_holes`), with a note, and without it refused as a
+    :class:`golden_model.mesh.HoledMesh`.
 
     A file that cannot be read raises :class:`MeshError` "cannot read mesh
     '<path>': <reason>" (no such file, permission denied, ...); one that is
@@ -72,8 +73,8 @@ def load_mesh_with_notes(path: str | Path, fill_holes: bool = False) -> tuple[Me
     try:
         mesh, turned = oriented_mesh(vertices, faces, name=path.stem, fill=fill_holes)
         return mesh, notes + turned
-    except HoledMesh as exc:
-        raise MeshError(f"invalid mesh '{path}': {exc}; --fill-holes closes all but the outer edge") from None
+    except HoledMesh as exc:  # (the commands that can fill it say how)
+        raise HoledMesh(f"invalid mesh '{path}': {exc}") from None
     except MeshError as exc:
         if suffix == ".obj":
             hint = obj_line_hint(str(exc), obj)

@@ -5,7 +5,8 @@ import pytest
 
 from golden_model.builtin import builtin_mesh
 from golden_model.mesh import (HoledMesh, InconsistentOrientation, Mesh, MeshError, boundary_crossings,
-                               component_labels, count_components, orient_consistently, oriented_mesh)
+                               component_labels, count_components, fill_holes, hole_triangles, orient_consistently,
+                               oriented_mesh)
 from sim.generate import grid_faces, grid_uv
 from sim.mesh_io import load_mesh_with_notes, save_obj
 
@@ -346,8 +347,11 @@ def test_filling_closes_each_hole_with_triangles_of_its_own_corners_after_the_me
     # seen from above the grid is flat and wound counter-clockwise: the fill covers the two cells, once
     fill = _flat_area(vertices, mesh.faces[m:])
     assert (fill > 0).all() and fill.sum() == pytest.approx(2 / 64)
-    assert notes == ["2 holes closed by 4 triangles (edges " + notes[0].split("(edges ", 1)[1]]
-    assert notes[0].endswith("in the mesh's units): the pattern covers them") and "%" not in notes[0]
+    rounds = sorted(np.linalg.norm(np.diff(vertices[[a, a + 1, a + 10, a + 9, a]], axis=0), axis=1).sum()
+                    for a in (2 * 9 + 2, 5 * 9 + 4))
+    edge = np.linalg.norm(np.diff(vertices[np.r_[mesh.boundary_loop, mesh.boundary_loop[0]]], axis=0), axis=1).sum()
+    assert notes == [f"2 holes closed by 4 triangles (edges {rounds[0]:.4g} to {rounds[1]:.4g} long, the piece's outer "
+                     f"edge {edge:.4g}, in the mesh's units): the pattern covers them"]
 
 
 def _grid_without(n: int, cells) -> tuple[np.ndarray, np.ndarray]:
@@ -364,9 +368,8 @@ def _grid_without(n: int, cells) -> tuple[np.ndarray, np.ndarray]:
     ("comb", [(1, c) for c in range(1, 8)] + [(r, c) for r in range(2, 7) for c in (1, 3, 5, 7)]),
 ])
 def test_a_hole_of_any_shape_is_covered_once_and_the_outer_edge_kept(shape, cells):
-    """The fill's triangles, seen from above, all turn the mesh's way and add up to the hole's area: a fan
-    about the hole's centre folded over the piece on a C or an L; the comb's hole is longer than the piece's
-    edge, which must stay open."""
+    """The fill's triangles, seen from above, all turn the mesh's way and add up to the hole's area (a C or an L
+    is no star about its centre); the comb's hole is longer than the piece's edge, which must stay open."""
     vertices, faces = _grid_without(10, cells)
     mesh, notes = oriented_mesh(vertices, faces, fill=True)
     fill = _flat_area(vertices, mesh.faces[len(faces):])
@@ -422,3 +425,40 @@ def test_holes_in_a_mesh_with_a_handle_are_refused_as_handles_not_as_holes_to_fi
                                         r"expected 0\)$") as info:
         oriented_mesh(vertices, faces, fill=True)
     assert not isinstance(info.value, HoledMesh)
+
+
+
+def test_a_sheet_rolled_nearly_shut_keeps_its_outer_edge_open():
+    """A 10 x 10 grid rolled 330 degrees round with a slot of 5 cells: the rolled edge spans less vector area
+    than a hole might, but its corners lie farther apart; the slot is filled."""
+    vertices, faces = _grid_without(10, [(4, c) for c in range(2, 7)])
+    angle = vertices[:, 0] * np.radians(330)
+    rolled = np.column_stack([0.3 * np.cos(angle), 0.3 * np.sin(angle), vertices[:, 1]])
+    mesh, _ = oriented_mesh(rolled, faces, fill=True)
+    assert len(mesh.boundary_loop) == 36 and mesh.n_faces == len(faces) + 10  # a 12-corner slot: 10 triangles
+
+
+def test_a_hole_that_encloses_no_area_is_refused_as_a_crack():
+    """Three vertices of a slit (a T-junction's): no triangle can cover it."""
+    vertices = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [1, 1, 0], [1.5, 1, 0], [0.5, 1, 0]], float)
+    loop = np.array([4, 5, 6])
+    with pytest.raises(MeshError, match=r"^the hole whose edge runs through vertices .* cannot be filled: it "
+                                        r"encloses no area \(a crack or a T-junction's slit\)$"):
+        hole_triangles(vertices, loop)
+
+
+def test_a_saddle_shaped_hole_is_filled_seen_along_its_normal():
+    """A round hole whose edge rises and falls twice as much as it is wide: from the plane of largest spread it
+    crosses itself; seen along its vector area's normal it is a circle."""
+    theta = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    vertices = np.column_stack([np.cos(theta), np.sin(theta), 1.2 * np.cos(2 * theta)])
+    triangles = hole_triangles(vertices, np.arange(40))
+    assert triangles.shape == (38, 3) and _flat_area(vertices, triangles).sum() == pytest.approx(
+        -0.5 * 40 * np.sin(2 * np.pi / 40))  # the loop run back: clockwise seen from above
+    assert np.bincount(triangles.ravel()).max() < 15  # not a fan from one corner
+
+
+def test_a_mesh_without_holes_is_left_as_it_is_by_the_fill():
+    vertices, faces = _grid_without(5, [])
+    filled_vertices, filled_faces, note = fill_holes(vertices, faces)
+    assert note == "" and np.array_equal(filled_faces, faces) and np.array_equal(filled_vertices, vertices)

@@ -479,7 +479,7 @@ def test_skip_existing_without_an_out_dir_is_refused(tmp_path, monkeypatch, caps
 
 def test_skip_existing_does_not_take_a_mesh_or_a_foreign_obj_for_an_output(tmp_path, monkeypatch, capsys):
     """An output that is one of the batch's meshes, or an OBJ springflat did not write, is no finished output:
-    refused as without --skip-existing (they were reported skipped, the patterns never written)."""
+    refused as without --skip-existing, not taken for a finished pattern."""
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "in", 2, 0)
     assert main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "in", "--out", ".obj",

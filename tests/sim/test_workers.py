@@ -257,7 +257,7 @@ def _gone(pid: int) -> bool:
 
 @pytest.mark.skipif(sys.platform != "linux", reason="PR_SET_PDEATHSIG is Linux's")
 def test_a_worker_ends_when_its_parent_is_killed(tmp_path):
-    """SIGKILL gives the pool's process no chance to stop its workers: they waited on its pipe for ever."""
+    """SIGKILL gives the pool's process no chance to stop its workers, which would wait on its pipe."""
     script = ("import sys, time\nsys.path.insert(0, %r)\nfrom sim.workers import WorkerPool\n"
               "import os\npool = WorkerPool(1)\nprint(pool.submit(os.getpid).result(), flush=True)\n"
               "pool.submit(time.sleep, 600)\ntime.sleep(600)\n") % str(REPO)
