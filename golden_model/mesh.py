@@ -23,8 +23,8 @@ from functools import cached_property
 import numpy as np
 
 __all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "fill_holes", "boundary_loops",
-           "hole_triangles", "oriented_mesh", "orient_consistently", "component_labels", "count_components",
-           "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT",
+           "hole_triangles", "loop_length", "oriented_mesh", "orient_consistently", "component_labels",
+           "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT",
            "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
@@ -604,7 +604,7 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     outer = int(np.argmax([np.linalg.norm(np.ptp(vertices[loop], axis=0)) for loop in loops]))
     holes = [loop for k, loop in enumerate(loops) if k != outer]
     fill = np.vstack([hole_triangles(vertices, loop) for loop in holes])
-    lengths = np.array([_loop_length(vertices[loop]) for loop in loops])
+    lengths = np.array([loop_length(vertices[loop]) for loop in loops])
     share = triangle_areas_3d(vertices, fill).sum() / triangle_areas_3d(vertices, faces).sum()
     plural = "s" if len(holes) != 1 else ""
     note = (f"{len(holes)} hole{plural} closed by {len(fill)} triangle{'s' if len(fill) != 1 else ''} "
@@ -684,7 +684,8 @@ def hole_triangles(vertices: np.ndarray, loop: np.ndarray) -> np.ndarray:
     return np.array(triangles, dtype=np.int64)
 
 
-def _loop_length(points: np.ndarray) -> float:
+def loop_length(points: np.ndarray) -> float:
+    """The length of the closed polygon ``points`` (its last corner joined to its first)."""
     return float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
 
 

@@ -234,8 +234,10 @@ def _check_no_two_meshes_write_one_name(meshes: list[str], names: list[str], end
                 raise UserError(f"{writer[file]} and {which} would both write '{out_dir / file}'")
 
 
-def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tuple[str, str], ...], int]:
-    """Refuse what a batch cannot do, before any run; returns the endings and the worker count."""
+def _check_batch(args: argparse.Namespace, meshes: list[str]
+                 ) -> tuple[tuple[tuple[str, str], ...], int, frozenset[str]]:
+    """Refuse what a batch cannot do, before any run; returns the endings, the worker count and the names of
+    the meshes ``--skip-existing`` skips (their files all in ``--out-dir``)."""
     single = engine_named(args.engine).single
     if single:
         raise UserError(f"--engine {args.engine} runs one mesh at a time ({single}): drop it for a batch")
@@ -256,7 +258,8 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
         names = _names(meshes)
         # a skipped mesh's files are not written (a finished one made read-only is no obstacle), but they must
         # still be its outputs: not a mesh of the batch, nor an OBJ springflat did not write
-        written = [name for name in names if not (args.skip_existing and _already_written(out_dir, name, endings))]
+        skipped = frozenset(name for name in names if args.skip_existing and _already_written(out_dir, name, endings))
+        written = [name for name in names if name not in skipped]
         flags = {option: (what, suffixes) for option, what, suffixes in OUTPUT_OPTIONS}
         for option, ending in endings:
             if option == "out":
@@ -276,7 +279,8 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]) -> tuple[tuple[tup
                     check_not_a_mesh(out_dir / f"{name}{ending}", flags[option][0])
     else:
         _names(meshes)
-    return endings, jobs
+        skipped = frozenset()
+    return endings, jobs, skipped
 
 
 def _job(source: str, name: str, options: dict, endings) -> BatchJob | MeshOutcome:
@@ -487,14 +491,14 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 
 def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
-    endings, workers = _check_batch(args, meshes)
+    endings, workers, skipped_names = _check_batch(args, meshes)
     names = _names(meshes)
     options = {k: v for k, v in vars(args).items() if k not in ("func", "mesh", "more_meshes")}
     start = time.perf_counter()
     outcomes: dict[str, MeshOutcome] = {}
     pending: list[BatchJob] = []
     for source, name in zip(meshes, names):
-        if args.skip_existing and _already_written(args.out_dir, name, endings):
+        if name in skipped_names:
             outcomes[name] = MeshOutcome(source, name, "skipped",
                                          line=f"skipped: its files are in {printable_name(str(args.out_dir))}")
             continue

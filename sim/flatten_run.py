@@ -17,7 +17,7 @@ from golden_model.fixed.engine import check_fixed_params, prepare, presets_holdi
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_fraction
-from golden_model.mesh import Mesh, boundary_crossings
+from golden_model.mesh import Mesh, boundary_crossings, loop_length
 from golden_model.modes import Step
 from golden_model.params import FlattenParams
 from golden_model.reference import RUNAWAY_FACTOR, energy_floor
@@ -27,8 +27,8 @@ from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
-                       check_mesh_fits, check_seam_fits, error_text, kind_or_none, loop_length, on_sheets, run_caption,
-                       scale_note, seam_length, write_pattern_file)
+                       check_mesh_fits, check_seam_fits, error_text, kind_or_none, on_sheets, run_caption, scale_note,
+                       seam_length, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
 

@@ -47,7 +47,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from golden_model.mesh import Mesh, boundary_crossings, folded_faces
+from golden_model.mesh import Mesh, boundary_crossings, folded_faces, loop_length
 
 from .mesh_io import save_obj
 from .outputs import OutputError, atomic_write, output_target, write_layout
@@ -322,11 +322,6 @@ def seam_length(value: str | float, units: str) -> float:
     if not math.isfinite(length):  # (1e306m in mm)
         raise NotALength(LENGTH_EXAMPLE, value)
     return length
-
-
-def loop_length(points: np.ndarray) -> float:
-    """The length of the closed polygon ``points`` (its last corner joined to its first)."""
-    return float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
 
 
 def check_seam_fits(allowance: float, edge_length: float, units: str) -> None:
