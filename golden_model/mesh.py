@@ -11,18 +11,21 @@ connected manifold disk with exactly one boundary loop, no degenerate or
 duplicate triangles, no out-of-range indices and only finite coordinates
 within the supported range (:data:`COORDINATE_LIMIT`, :data:`MIN_MESH_SIZE`).
 Every failure raises :class:`MeshError` with a one-line message naming the
-problem.
+problem.  A disk with holes (cut-outs: more boundary loops, no handles) is a
+mesh only where it is asked for (``Mesh(..., holes=True)``, :class:`Holes`).
 """
 
 from __future__ import annotations
 
+import enum
 import unicodedata
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 
-__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "fill_holes", "boundary_loops",
+__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes", "boundary_loops",
+           "outer_loop",
            "hole_triangles", "loop_length", "oriented_mesh", "orient_consistently", "component_labels",
            "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT",
            "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
@@ -53,6 +56,17 @@ class InconsistentOrientation(MeshError):
 
 class HoledMesh(MeshError):
     """A disk with holes: more than one boundary loop (:func:`fill_holes` closes all but the outer one)."""
+
+
+class Holes(enum.Enum):
+    """What reading a mesh does with its holes, the boundary loops besides its outer edge."""
+
+    #: refused (:class:`HoledMesh`): a scan's holes are usually defects, so the user chooses
+    REFUSE = "refuse"
+    #: closed by :func:`fill_holes`: the pattern covers them
+    FILL = "fill"
+    #: kept: cut-outs in the pattern (the start layouts are computed on the filled disk, :attr:`Mesh.disk`)
+    KEEP = "keep"
 
 
 def triangle_areas_3d(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -97,17 +111,20 @@ def valid_text(text: str) -> str:
 
 @dataclass(frozen=True, eq=False)
 class Mesh:
-    """A validated triangle-mesh disk.
+    """A validated triangle-mesh disk, or with ``holes`` a disk with holes (cut-outs).
 
     Attributes:
         vertices: ``(V, 3)`` float64 3D positions ``Q``.
         faces: ``(F, 3)`` int64 vertex indices, 0-based.
         name: a label for reports (file stem or built-in name).
+        holes: whether boundary loops besides the outer edge are allowed (else :class:`HoledMesh`);
+            handles never are.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     name: str = "mesh"
+    holes: bool = False
     _validated: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -115,7 +132,7 @@ class Mesh:
         vertices = np.ascontiguousarray(self.vertices, dtype=np.float64)
         faces = np.ascontiguousarray(self.faces)
         object.__setattr__(self, "vertices", vertices)
-        _validate(vertices, faces)
+        _validate(vertices, faces, bool(self.holes))
         object.__setattr__(self, "faces", faces.astype(np.int64))
         object.__setattr__(self, "_validated", True)
 
@@ -148,27 +165,32 @@ class Mesh:
         return triangle_areas_3d(self.vertices, self.faces)
 
     @cached_property
-    def boundary_loop(self) -> np.ndarray:
-        """Boundary vertex indices in loop order.
+    def boundary_loops(self) -> list[np.ndarray]:
+        """Each boundary loop's vertex indices in order, the outer edge first (:func:`outer_loop`), then the
+        holes' (none on a disk). Each starts at its smallest vertex index and runs the way its sides run in
+        their faces, so the faces are on its left: the outer edge placed counter-clockwise gives a
+        consistently wound mesh positive orientation (and each hole's edge runs clockwise)."""
+        loops = boundary_loops(self.faces)
+        outer = outer_loop(self.vertices, loops)
+        return [loops[outer], *loops[:outer], *loops[outer + 1:]]
 
-        Starts at the smallest boundary vertex index and walks the way its
-        outgoing boundary edge runs in its face, so the face is on the left:
-        placing this loop counter-clockwise gives a consistently wound mesh
-        positive orientation.
-        """
-        directed = _directed_boundary_edges(self.faces)
-        start = int(directed[:, 0].min())
-        adjacent: dict[int, list[int]] = {}
-        for a, b in directed.tolist():
-            adjacent.setdefault(a, []).append(b)
-            adjacent.setdefault(b, []).append(a)
-        first = directed[directed[:, 0] == start][0, 1]
-        loop = [start, int(first)]
-        for _ in range(len(directed) - 2):
-            before, here = loop[-2], loop[-1]
-            a, b = adjacent[here]
-            loop.append(b if a == before else a)
-        return np.asarray(loop, dtype=np.int64)
+    @property
+    def boundary_loop(self) -> np.ndarray:
+        """The outer edge's vertex indices in order (:attr:`boundary_loops`' first)."""
+        return self.boundary_loops[0]
+
+    @property
+    def n_holes(self) -> int:
+        return len(self.boundary_loops) - 1
+
+    @cached_property
+    def disk(self) -> "Mesh":
+        """This mesh, with any holes closed (:func:`fill_holes`: triangles between each hole's vertices after
+        the faces, no vertex added): what a start layout that needs a disk is computed on; its positions are
+        this mesh's."""
+        if self.n_holes == 0:
+            return self
+        return Mesh(self.vertices, fill_holes(self.vertices, self.faces)[1], name=self.name)
 
     @cached_property
     def neighbours(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -242,21 +264,27 @@ def folded_by_area(signed: np.ndarray, orientation: float | None = None) -> np.n
 _CROSSING_CHUNK = 1 << 20
 
 
-def boundary_crossings(positions: np.ndarray, loop: np.ndarray) -> int:
-    """How many pairs of sides of the closed polygon ``positions[loop]`` meet (cross, touch or overlap),
-    sides that follow one another not counted: 0 for a simple boundary.
+def boundary_crossings(positions: np.ndarray, loops: np.ndarray | list[np.ndarray]) -> int:
+    """How many pairs of sides of the closed polygons ``positions[loop]``, ``loop`` in ``loops``, meet (cross,
+    touch or overlap), sides that follow one another not counted: 0 for a simple boundary.
 
     A fold-free layout of a disk covers no point twice exactly where its boundary is simple (a local
     homeomorphism of a disk onto the plane is one to one when the boundary's image is a simple closed
     curve), so a positive count on a fold-free pattern means flaps lying on each other: a cut pattern
-    whose cut line crosses itself. ``positions`` ``(V, 2)``, ``loop`` (:attr:`Mesh.boundary_loop`)
-    ``(n,)``. A sweep along the layout's longer extent: sides are paired only where their extents
-    overlap on that axis and then on the other; orientation tests (float, so sides that all but touch
-    may go either way) decide the rest. A side through a corner meets both sides there, and a side of
-    length 0 makes the sides on either side of it meet.
+    whose cut line crosses itself. The same holds for a disk with holes whose loops are simple and meet
+    neither one another: a point's cover count is the sum of the loops' winding numbers about it, +1 inside
+    the outer edge and −1 inside a hole's, never negative, so each hole lies inside the outer edge and
+    outside the others. ``positions`` ``(V, 2)``, ``loops``: one loop (:attr:`Mesh.boundary_loop`) ``(n,)``
+    or a list of them (:attr:`Mesh.boundary_loops`), which share no vertex. A sweep along the layout's longer
+    extent: sides are paired only where their extents overlap on that axis and then on the other;
+    orientation tests (float, so sides that all but touch may go either way) decide the rest. A side through
+    a corner meets both sides there, and a side of length 0 makes the sides on either side of it meet.
     """
-    a = np.asarray(positions, dtype=np.float64)[np.asarray(loop)]
-    b = np.roll(a, -1, axis=0)
+    loops = [np.asarray(loops)] if isinstance(loops, np.ndarray) and np.ndim(loops) == 1 else list(loops)
+    starts = np.concatenate([np.asarray(loop, dtype=np.int64) for loop in loops])
+    ends = np.concatenate([np.roll(np.asarray(loop, dtype=np.int64), -1) for loop in loops])
+    points = np.asarray(positions, dtype=np.float64)
+    a, b = points[starts], points[ends]
     n = len(a)
     if n < 4:
         return 0
@@ -264,8 +292,8 @@ def boundary_crossings(positions: np.ndarray, loop: np.ndarray) -> int:
     axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0)))
     order = np.argsort(lo[:, axis], kind="stable")
     lo_sorted = lo[order, axis]
-    ends = np.searchsorted(lo_sorted, hi[order, axis], side="right")  # sorted sides starting within mine
-    counts = np.maximum(ends - np.arange(1, n + 1), 0)
+    reach = np.searchsorted(lo_sorted, hi[order, axis], side="right")  # sorted sides starting within mine
+    counts = np.maximum(reach - np.arange(1, n + 1), 0)
     crossings, first = 0, 0
     cumulative = np.cumsum(counts)
     while first < n:
@@ -278,8 +306,7 @@ def boundary_crossings(positions: np.ndarray, loop: np.ndarray) -> int:
         i, j = order[i], order[j]
         other = 1 - axis
         near = (lo[i, other] <= hi[j, other]) & (lo[j, other] <= hi[i, other])
-        gap = np.abs(i - j)
-        near &= (gap != 1) & (gap != n - 1)  # sides that follow one another share a corner
+        near &= (ends[i] != starts[j]) & (ends[j] != starts[i])  # sides that follow one another share a corner
         i, j = i[near], j[near]
         crossings += int(np.count_nonzero(_sides_meet(a[i], b[i], a[j], b[j])))
         first = last
@@ -388,8 +415,9 @@ def _directed_boundary_edges(faces: np.ndarray) -> np.ndarray:
     return sides[counts[side_edge] == 1]
 
 
-def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
-    """Raise :class:`MeshError` unless the arrays form a single manifold disk."""
+def _validate(vertices: np.ndarray, faces: np.ndarray, holes: bool = False) -> None:
+    """Raise :class:`MeshError` unless the arrays form a single manifold disk (with ``holes``, or a disk with
+    holes)."""
     if vertices.ndim != 2 or vertices.shape[1] != 3:
         raise MeshError(f"vertices must be a (V, 3) array, got shape {vertices.shape}")
     if len(vertices) == 0 or faces.size == 0:
@@ -464,8 +492,9 @@ def _validate(vertices: np.ndarray, faces: np.ndarray) -> None:
         message = f"mesh is not a disk: it has {n_loops} boundary loops where a disk has one (holes, or a tube's ends)"
         if euler != 2 - n_loops:  # a disk with holes has 2 - loops; closing them would not leave a disk
             raise MeshError(f"{message}, and handles (Euler characteristic {euler}, expected {2 - n_loops})")
-        raise HoledMesh(message)
-    if euler != 1:
+        if not holes:
+            raise HoledMesh(message)
+    elif euler != 1:
         raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")
 
 
@@ -557,15 +586,19 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh",
-                  fill: bool = False) -> tuple[Mesh, list[str]]:
+                  holes: Holes = Holes.REFUSE) -> tuple[Mesh, list[str]]:
     """A :class:`Mesh` of ``vertices`` and ``faces``, the faces first wound consistently if they are not
-    (:func:`orient_consistently`), and (``fill``) its holes closed (:func:`fill_holes`); the notes say how many
-    faces were turned and what was filled. Any other problem raises :class:`MeshError` as ``Mesh`` does."""
+    (:func:`orient_consistently`), and its holes refused, closed (:func:`fill_holes`) or kept as ``holes``
+    says; the notes say how many faces were turned and what was filled or kept. Any other problem raises
+    :class:`MeshError` as ``Mesh`` does."""
     notes: list[str] = []
     turned = filled = False
     while True:
         try:
-            return Mesh(vertices, faces, name=name), notes
+            mesh = Mesh(vertices, faces, name=name, holes=holes is Holes.KEEP)
+            if mesh.n_holes:
+                notes.append(kept_holes_note(mesh))
+            return mesh, notes
         except InconsistentOrientation:
             if turned:
                 raise
@@ -575,7 +608,7 @@ def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh",
             notes.append(f"{count} face{plural} wound against {'their' if plural else 'its'} neighbours: turned to "
                          f"agree with the other {len(faces) - count} (the pattern's faces keep the turned winding)")
         except HoledMesh:
-            if not fill or filled:
+            if holes is not Holes.FILL or filled:
                 raise
             vertices, faces, note = fill_holes(vertices, faces)
             filled = True
@@ -590,10 +623,8 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     """``(vertices, faces, note)`` with every boundary loop but the outer edge closed by triangles between its
     own vertices (:func:`hole_triangles`), which come after the mesh's faces, wound as the mesh's (each hole
     side run back the other way). ``faces`` must be a consistently wound manifold (as :class:`Mesh` checks
-    before it raises :class:`HoledMesh`). No vertex is added. The outer edge is the loop whose corners lie
-    farthest apart (its box's diagonal): the piece's edge reaches round all of it, a hole only round its own
-    part; neither a loop's length (a comb-shaped hole) nor its vector area (a sheet rolled nearly closed) says
-    that. For a scan's holes, which are no part of the piece; a cut-out the piece must keep is not a hole to
+    before it raises :class:`HoledMesh`). No vertex is added. The outer edge is :func:`outer_loop`'s. For a
+    scan's holes, which are no part of the piece; a cut-out the piece must keep is not a hole to
     fill (the note says when the holes are more than :data:`LARGE_FILL` of the piece's area). A mesh with one
     loop is returned as it is, with no note."""
     vertices = np.asarray(vertices, dtype=np.float64)
@@ -601,7 +632,7 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     loops = boundary_loops(faces)
     if len(loops) < 2:
         return vertices, faces, ""
-    outer = int(np.argmax([np.linalg.norm(np.ptp(vertices[loop], axis=0)) for loop in loops]))
+    outer = outer_loop(vertices, loops)
     holes = [loop for k, loop in enumerate(loops) if k != outer]
     fill = np.vstack([hole_triangles(vertices, loop) for loop in holes])
     lengths = np.array([loop_length(vertices[loop]) for loop in loops])
@@ -618,6 +649,23 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
 
 #: The share of a piece's area past which the note on filled holes says they may be cut-outs.
 LARGE_FILL = 0.1
+
+
+def outer_loop(vertices: np.ndarray, loops: list[np.ndarray]) -> int:
+    """Which of ``loops`` (:func:`boundary_loops`) is the piece's outer edge: the loop whose corners lie
+    farthest apart (its box's diagonal). The piece's edge reaches round all of it, a hole only round its own
+    part; neither a loop's length (a comb-shaped hole) nor its vector area (a sheet rolled nearly closed)
+    says that."""
+    return int(np.argmax([np.linalg.norm(np.ptp(vertices[loop], axis=0)) for loop in loops]))
+
+
+def kept_holes_note(mesh: Mesh) -> str:
+    """The note on a mesh whose holes are kept as cut-outs: how many, their edges' lengths."""
+    lengths = np.array([loop_length(mesh.vertices[loop]) for loop in mesh.boundary_loops[1:]])
+    plural = "s" if len(lengths) != 1 else ""
+    return (f"{len(lengths)} hole{plural} kept as cut-out{plural} (edge{plural} {_length_range(lengths)} long, the "
+            f"piece's outer edge {loop_length(mesh.vertices[mesh.boundary_loop]):.4g}, in the mesh's units); the "
+            "start layout is computed with them closed")
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:

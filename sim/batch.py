@@ -43,8 +43,8 @@ from .layouts import AUTO_START, LAYOUT_METHODS
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
     check_output_path, file_ending, when_interrupted
 from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind
-from .run_options import (USER_ERRORS, UserError, input_files, integer_argument, params_from_args, path_argument,
-                          resolve_mesh, strict_json)
+from .run_options import (USER_ERRORS, UserError, holes_mode, input_files, integer_argument, params_from_args,
+                          path_argument, resolve_mesh, strict_json)
 from .workers import WorkerPool, local_workers, wait_for_one
 
 
@@ -153,7 +153,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 setattr(args, option, path)
         try:
             with contextlib.redirect_stderr(stderr):
-                mesh, defaults = resolve_mesh(mesh_path, args.fill_holes)
+                mesh, defaults = resolve_mesh(mesh_path, holes_mode(args))
                 params = params_from_args(args, defaults)
                 check_print_size(args, mesh)
                 notes: list[str] = []  # each named by its mesh: the workers' notes come in any order

@@ -63,6 +63,7 @@ from .run_options import (
     add_run_options,
     default_init,
     file_path_argument,
+    holes_mode,
     input_files,
     integer_argument,
     load_format_set,
@@ -128,7 +129,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         from .batch import cmd_batch
 
         return cmd_batch(args)
-    mesh, defaults = resolve_mesh(args.mesh, args.fill_holes)
+    mesh, defaults = resolve_mesh(args.mesh, holes_mode(args))
     params = params_from_args(args, defaults)
     check_outputs(args)
     check_print_size(args, mesh)

@@ -204,7 +204,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
     if result.status != "diverged" and not result.final.folded:
-        result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loop)
+        result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loops)
     return result
 
 
@@ -370,10 +370,11 @@ def still_note(params: FlattenParams, result: FlattenResult, formats: FormatSet 
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:
-    """What ``--json`` prints: the mesh, the run's summary, the distortion's worst 1 %, what was used (and the
-    seam allowance of the pattern files, in ``units``, where one is asked for)."""
+    """What ``--json`` prints: the mesh (its kept holes, the cut-outs), the run's summary, the distortion's worst
+    1 %, what was used (and the seam allowance of the pattern files, in ``units``, where one is asked for)."""
     seam = {} if args.seam_allowance is None else {"seam_allowance": seam_length(args.seam_allowance, args.units)}
-    return {"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "init": args.init,
+    return {"mesh": mesh.name, "vertices": mesh.n_vertices, "faces": mesh.n_faces, "holes": mesh.n_holes,
+            "init": args.init,
             **result.summary(), "units": args.units, **seam,
             "distortion": worst_summary(distortion(mesh, result.positions)),
             "used": what_was_used(params, args.init, result, mesh)[len("springflat: "):]}

@@ -203,3 +203,19 @@ def bumpy_grid(n: int = 31, height: float = 0.08, bumps: int = 3) -> Mesh:
     uv = grid_uv(n, n) - 0.5
     z = height * np.sin(2 * np.pi * bumps * uv[:, 0]) * np.sin(2 * np.pi * bumps * uv[:, 1])
     return Mesh(np.column_stack([uv, z]), grid_faces(n, n), name="bumpy")
+
+
+def holed_dome(n: int = 16, height: float = 0.3, holes: tuple[tuple[int, int, int], ...] = ((5, 5, 3),)) -> Mesh:
+    """:func:`dome_grid` with rectangular cut-outs: each ``(row, column, size)`` removes the grid's cells of
+    rows and columns ``row .. row + size − 1``, ``column .. column + size − 1`` (holes must not touch the edge
+    or each other). A disk with holes, ``Mesh(..., holes=True)``."""
+    dome = dome_grid(n, height)
+    cells = np.ones((n - 1, n - 1), dtype=bool)
+    for row, column, size in holes:
+        cells[row:row + size, column:column + size] = False
+    keep = np.concatenate([cells.ravel(), cells.ravel()])  # grid_faces: two triangles a cell, in two runs
+    faces = dome.faces[keep]
+    used = np.unique(faces)
+    renumber = np.full(n * n, -1)
+    renumber[used] = np.arange(len(used))
+    return Mesh(dome.vertices[used], renumber[faces], name="holed dome", holes=True)

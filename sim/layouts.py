@@ -435,8 +435,8 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
         return _facing_the_front(check_layout(init, mesh.n_vertices, "the init array", mesh.faces), mesh,
                                  "the init array", notes)
     method = _METHODS.get("arap" if str(init) == AUTO_START else str(init))
-    if method is not None:
-        return method(mesh)
+    if method is not None:  # (a method needs a disk: a mesh's holes are closed for it, their vertices its own)
+        return method(mesh.disk)
     return _facing_the_front(load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes), mesh,
                              f"the layout '{init}'", notes)
 
@@ -502,7 +502,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
             raise
         notes = [f"{exc}: starting from SLIM on Tutte's layout instead (fold-free by construction)"]
         say(notes[-1])
-        return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
+        return StartLayout(slim_layout(mesh.disk) if slim is None else slim(), "slim", 0, notes)
     folded = _folds(mesh, positions)
     if folded == 0:
         return StartLayout(positions, method, 0, read_notes)
@@ -511,7 +511,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
         notes = [f"{described} folds {folded} triangle{plural}: starting from SLIM on Tutte's layout instead "
                  "(fold-free by construction)"]
         say(notes[-1])
-        return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
+        return StartLayout(slim_layout(mesh.disk) if slim is None else slim(), "slim", 0, notes)
     notes = read_notes + [f"{described} folds {folded} triangle{plural}: untangling it"]
     say(notes[-1])
     untangled = untangle_layout(mesh, positions, time_limit=untangle_seconds)

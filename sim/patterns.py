@@ -3,8 +3,8 @@
 The writer is chosen by the file name's ending (:func:`pattern_kind`):
 
 =============  ==========================================================================================
-``.dxf``       the boundary as one closed ``LWPOLYLINE`` on layer ``CUT`` (with a seam allowance the cut line
-               there, the boundary on layer ``SEW``); with ``dxf_edges`` every mesh
+``.dxf``       the boundary as closed ``LWPOLYLINE`` entities on layer ``CUT``, the outer edge and each kept hole's
+               (with a seam allowance the cut line there, the boundary on layer ``SEW``); with ``dxf_edges`` every mesh
                edge as a ``LINE`` on layer ``MESH``; with a grain (``--grain``) its line on layer ``GRAIN``;
                coordinates in the mesh's units, 1:1, ``$INSUNITS`` and ``$MEASUREMENT`` set from ``units``
                (ezdxf).
@@ -182,7 +182,7 @@ class PatternDrawing:
         vertices: ``(V, 3)`` the 3D mesh, in ``units``.
         faces: ``(F, 3)`` vertex indices.
         layout: ``(V, 2)`` the pattern, in ``units``.
-        boundary: ``(B,)`` the boundary loop's vertex indices in order (:attr:`Mesh.boundary_loop`).
+        boundary: ``(B,)`` the outer edge's vertex indices in order (:attr:`Mesh.boundary_loop`).
         edges: ``(E, 2)`` the unique edges (:attr:`Mesh.edges`).
         units: one of :data:`UNITS`.
         caption: one line about the run (status, errors), printed under the name.
@@ -190,6 +190,8 @@ class PatternDrawing:
             user named it (``z``, ``1,0,0``), or ``""``: the layout's own frame, no grain line.
         seam: the seam allowance in ``units`` (:meth:`with_seam`): the cut line runs this far outside the
             boundary, which becomes the sew line; 0: the boundary is the cut line.
+        holes: each kept hole's edge, vertex indices in order (:attr:`Mesh.boundary_loops` after the first):
+            cut-outs, which the cut line and the sew line go round too.
     """
 
     name: str
@@ -202,6 +204,7 @@ class PatternDrawing:
     caption: str = ""
     grain: str = ""
     seam: float = 0.0
+    holes: tuple[np.ndarray, ...] = ()
 
     @classmethod
     def of(cls, mesh: Mesh, layout: np.ndarray, units: str = "mm", caption: str = "") -> "PatternDrawing":
@@ -211,7 +214,8 @@ class PatternDrawing:
         if not np.isfinite(layout).all():
             raise PatternError("the layout has a non-finite coordinate")
         check_units(units)
-        return cls(mesh.name, mesh.vertices, mesh.faces, layout, mesh.boundary_loop, mesh.edges, units, caption)
+        return cls(mesh.name, mesh.vertices, mesh.faces, layout, mesh.boundary_loop, mesh.edges, units, caption,
+                   holes=tuple(mesh.boundary_loops[1:]))
 
     @property
     def boundary_points(self) -> np.ndarray:
@@ -220,14 +224,20 @@ class PatternDrawing:
         return self.layout[self.boundary]
 
     def boundary_length(self) -> float:
-        """Length of the pattern's closed edge, in ``units``."""
+        """Length of the pattern's closed outer edge, in ``units``."""
         return loop_length(self.boundary_points)
+
+    @property
+    def edge_loops(self) -> list[np.ndarray]:
+        """The pattern's edge as closed loops of ``(B, 2)`` points in ``units``: the outer edge, then each kept
+        hole's."""
+        return [self.boundary_points, *(self.layout[hole] for hole in self.holes)]
 
     @cached_property
     def cut_loops(self) -> list[np.ndarray]:
-        """The cut line's closed loops, in ``units``: the boundary, or the seam allowance's outline
-        (:func:`seam_outlines`: the outer loop first, then any hole the allowance leaves inside it)."""
-        return seam_outlines(self, self.seam) if self.seam > 0 else [self.boundary_points]
+        """The cut line's closed loops, in ``units``: the edge's (:attr:`edge_loops`), or the seam allowance's
+        outline (:func:`seam_outlines`: the outer loop first, then any hole the allowance leaves inside it)."""
+        return seam_outlines(self, self.seam) if self.seam > 0 else self.edge_loops
 
     @property
     def cut_points(self) -> np.ndarray:
@@ -355,14 +365,14 @@ def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]
 
 
 def material(drawing: PatternDrawing):
-    """The area the pattern covers, a shapely geometry in ``units``: the polygon of its boundary, or, where a
-    triangle is folded or the boundary crosses itself (parts of the pattern lie on each other), the union of
-    its triangles (a folded flap can lie outside the boundary's polygon)."""
+    """The area the pattern covers, a shapely geometry in ``units``: the polygon of its outer edge less its kept
+    holes, or, where a triangle is folded or the boundary crosses itself (parts of the pattern lie on each
+    other), the union of its triangles (a folded flap can lie outside the boundary's polygon)."""
     import shapely
 
     folded = folded_faces(drawing.layout, drawing.faces)
-    if not folded.any() and boundary_crossings(drawing.layout, drawing.boundary) == 0:
-        return shapely.Polygon(drawing.boundary_points)
+    if not folded.any() and boundary_crossings(drawing.layout, [drawing.boundary, *drawing.holes]) == 0:
+        return shapely.Polygon(drawing.boundary_points, drawing.edge_loops[1:])
     corners = drawing.layout[drawing.faces]
     a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     kept = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) > 0  # (a triangle of no area covers nothing)
@@ -582,8 +592,8 @@ def _write_dxf(path: str, drawing: PatternDrawing, edges: bool) -> None:
             on, off = (length / check_units(drawing.units) for length in SEW_DASH_MM)
             doc.linetypes.add("SEW", pattern=[on + off, on, -off], description="sew line")
             doc.layers.add("SEW", color=3, linetype="SEW")
-            msp.add_lwpolyline(drawing.boundary_points.tolist(), format="xy", close=True,
-                               dxfattribs={"layer": "SEW"})
+            for loop in drawing.edge_loops:
+                msp.add_lwpolyline(loop.tolist(), format="xy", close=True, dxfattribs={"layer": "SEW"})
         if edges:
             doc.layers.add("MESH", color=8)
             for a, b in drawing.layout[drawing.edges].tolist():
@@ -1111,15 +1121,17 @@ def _grain_mm(drawing: PatternDrawing, plan: SheetPlan) -> list[np.ndarray]:
 
 
 def _pattern_parts(drawing: PatternDrawing, plan: SheetPlan
-                   ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray | None]:
-    """``(edges (E', 2, 2), folded faces (K, 3, 2), the cut line's loops [(B, 2), ...], sew line (B', 2) or
-    None)`` in the grid's mm; no edges when they would merge on paper (median under :data:`EDGE_MIN_MM`); a sew
-    line where there is a seam allowance."""
+                   ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]:
+    """``(edges (E', 2, 2), folded faces (K, 3, 2), the cut line's loops [(B, 2), ...], the sew line's loops
+    [(B', 2), ...])`` in the grid's mm; no edges when they would merge on paper (median under
+    :data:`EDGE_MIN_MM`); a sew line (the outer edge's and each kept hole's loop) where there is a seam
+    allowance, else none."""
     q = _pattern_mm(drawing, plan)
     edges = q[drawing.edges] if _median_edge_mm(drawing) >= EDGE_MIN_MM else np.empty((0, 2, 2))
     folded = q[drawing.faces[folded_faces(drawing.layout, drawing.faces)]]
     cut = [_pattern_mm(drawing, plan, loop) for loop in drawing.cut_loops]
-    return edges, folded, cut, q[drawing.boundary] if drawing.seam > 0 else None
+    sew = [_pattern_mm(drawing, plan, loop) for loop in drawing.edge_loops] if drawing.seam > 0 else []
+    return edges, folded, cut, sew
 
 
 def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
@@ -1130,8 +1142,8 @@ def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
     import shapely
     from shapely.ops import polylabel
 
-    edge = _pattern_mm(drawing, plan, drawing.boundary_points)
-    area = shapely.make_valid(shapely.Polygon(edge))
+    outer, *holes = (_pattern_mm(drawing, plan, loop) for loop in drawing.edge_loops)
+    area = shapely.make_valid(shapely.Polygon(outer, holes))
     for stroke in _grain_mm(drawing, plan):  # beside the grain line, which runs through the piece's middle
         area = area.difference(shapely.LineString(stroke).buffer(GRAIN_CLEARANCE_MM))
     parts = [part for part in getattr(area, "geoms", [area]) if part.geom_type == "Polygon"]
@@ -1207,10 +1219,11 @@ def _write_pdf(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
     canvas.setStrokeGray(0.0)
     for loop in cut:
         canvas.drawPath(_closed_path(canvas, loop), stroke=1, fill=0)
-    if sew is not None:
+    if sew:
         canvas.setLineWidth(SEW_WIDTH_MM)
         canvas.setDash(list(SEW_DASH_MM))
-        canvas.drawPath(_closed_path(canvas, sew), stroke=1, fill=0)
+        for loop in sew:
+            canvas.drawPath(_closed_path(canvas, loop), stroke=1, fill=0)
         canvas.setDash([])
     grain = _grain_mm(drawing, plan)
     if grain:
@@ -1320,12 +1333,13 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             for triangle in folded.tolist():
                 write(f'<polygon points="{_svg_points(triangle, 0.0)}"/>\n')
             write("</g>\n")
-        for k, loop in enumerate(cut):  # the outer loop, then the holes the allowance leaves
+        for k, loop in enumerate(cut):  # the outer loop, then the holes: kept ones, or the allowance's
             name = 'id="cut"' if k == 0 else 'class="cut-hole"'
             write(f'<polygon {name} points="{_svg_points(loop.tolist(), 0.0)}" stroke="#000000" '
                   f'stroke-width="{_svg_num(CUT_WIDTH_MM)}"/>\n')
-        if sew is not None:
-            write(f'<polygon id="sew" points="{_svg_points(sew.tolist(), 0.0)}" stroke="#000000" '
+        for k, loop in enumerate(sew):  # the outer edge, then the kept holes' edges
+            name = 'id="sew"' if k == 0 else 'class="sew-hole"'
+            write(f'<polygon {name} points="{_svg_points(loop.tolist(), 0.0)}" stroke="#000000" '
                   f'stroke-width="{_svg_num(SEW_WIDTH_MM)}" '
                   f'stroke-dasharray="{_svg_num(SEW_DASH_MM[0])} {_svg_num(SEW_DASH_MM[1])}"/>\n')
         grain, grey = _grain_mm(drawing, plan), round(255 * GRAIN_GREY)

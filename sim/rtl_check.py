@@ -59,10 +59,10 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     from hdl import SpringflatCore
 
     from .outputs import check_distinct, check_link_target, check_output_path
-    from .run_options import (UserError, default_init, input_files, load_format_set, params_from_args, resolve_mesh,
-                              strict_json)
+    from .run_options import (UserError, default_init, holes_mode, input_files, load_format_set, params_from_args,
+                              resolve_mesh, strict_json)
 
-    mesh, defaults = resolve_mesh(args.mesh, args.fill_holes)
+    mesh, defaults = resolve_mesh(args.mesh, holes_mode(args))
     params = params_from_args(args, defaults)
     if args.init is None:
         args.init = default_init(args.mesh)

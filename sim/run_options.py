@@ -19,7 +19,7 @@ import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.files import describe_os_error
-from golden_model.mesh import HoledMesh, Mesh, MeshError, folded_faces
+from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, folded_faces
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.guard import ENERGY_WINDOW
 from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
@@ -116,10 +116,14 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     builtins = ", ".join(BUILTIN_MESHES)
     parser.add_argument("mesh", nargs="?", default="surf1",
                         help=f"OBJ/PLY/OFF/STL file or a built-in mesh ({builtins}); default surf1")
-    parser.add_argument("--fill-holes", action="store_true",
-                        help="close the mesh's holes (each boundary loop but the outer edge) with triangles between "
-                             "their own vertices before flattening, for a scan's holes: the pattern covers them "
-                             "(default: a mesh with holes is refused)")
+    holes = parser.add_mutually_exclusive_group()
+    holes.add_argument("--fill-holes", action="store_true",
+                       help="close the mesh's holes (each boundary loop but the outer edge) with triangles between "
+                            "their own vertices before flattening, for a scan's holes: the pattern covers them "
+                            "(default: a mesh with holes is refused)")
+    holes.add_argument("--keep-holes", action="store_true",
+                       help="keep the mesh's holes as cut-outs in the pattern (its start layout is computed with "
+                            "them closed)")
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
                         help="initial layout: auto (arap; for a guarded run, where it folds or fails, slim from "
                              "tutte), tutte, pca, "
@@ -196,7 +200,7 @@ def edge_radius(mesh: Mesh) -> int:
     adjacency = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])),
                               shape=(mesh.n_vertices, mesh.n_vertices)).tocsr()
     reached = np.zeros(mesh.n_vertices, dtype=bool)
-    reached[mesh.boundary_loop] = True
+    reached[np.concatenate(mesh.boundary_loops)] = True
     frontier, depth = reached.copy(), 0
     while not reached.all():
         frontier = (adjacency @ frontier.astype(float) > 0) & ~reached
@@ -205,8 +209,19 @@ def edge_radius(mesh: Mesh) -> int:
     return depth
 
 
-def resolve_mesh(name: str, fill_holes: bool = False) -> tuple[Mesh, FlattenParams]:
-    """The mesh (a file's holes closed with ``fill_holes``) and its default parameters.
+def holes_mode(args: argparse.Namespace) -> Holes:
+    """What ``--fill-holes`` / ``--keep-holes`` ask done with a mesh's holes (one or neither)."""
+    if args.fill_holes and args.keep_holes:
+        raise UserError("--fill-holes and --keep-holes: a hole is closed or kept, give one of them")
+    return Holes.FILL if args.fill_holes else Holes.KEEP if args.keep_holes else Holes.REFUSE
+
+
+#: The refusal's hint for a mesh with holes, naming the options that take it.
+HOLES_HINT = "--fill-holes closes all but the outer edge, --keep-holes keeps them as cut-outs"
+
+
+def resolve_mesh(name: str, holes: Holes = Holes.REFUSE) -> tuple[Mesh, FlattenParams]:
+    """The mesh (a file's holes refused, closed or kept as ``holes`` says) and its default parameters.
 
     Built-ins: the paper's sets (paper dynamics, Table II/IV tolerances).  Files: the momentum
     dynamics with the fold barrier, stopped at the energy minimum (relative energy change
@@ -222,9 +237,9 @@ def resolve_mesh(name: str, fill_holes: bool = False) -> tuple[Mesh, FlattenPara
         raise MeshError(f"cannot read mesh '{name}': no such file, and no built-in mesh of that name (built-in: "
                         f"{', '.join(BUILTIN_MESHES)}; a mesh file's name ends in its format: .obj, .ply, .off, .stl)")
     try:
-        mesh, notes = load_mesh_with_notes(name, fill_holes=fill_holes)
+        mesh, notes = load_mesh_with_notes(name, holes=holes)
     except HoledMesh as exc:
-        raise MeshError(f"{exc}; --fill-holes closes all but the outer edge") from None
+        raise MeshError(f"{exc}; {HOLES_HINT}") from None
     for note in notes:
         print(f"springflat: note: {mesh.name}: {note}", file=sys.stderr)
     return mesh, file_defaults(mesh)
@@ -267,7 +282,7 @@ def slim_beside_arap(mesh: Mesh, enabled: bool) -> Iterator[Callable[[], np.ndar
 
     with WorkerPool(1) as pool:
         try:
-            future = pool.submit(slim_layout, mesh)
+            future = pool.submit(slim_layout, mesh.disk)
             yield lambda: result_of(future)
         finally:
             pool.stop()  # ARAP did not fold, or SLIM's layout has arrived: nothing left to wait for

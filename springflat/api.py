@@ -31,7 +31,7 @@ import numpy as np
 
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.fixed.measures import FixedPointError
-from golden_model.mesh import HoledMesh, Mesh, MeshError, oriented_mesh
+from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, oriented_mesh
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.results import FlattenResult
 from sim.cli import add_engine_options, forget_half_built_components
@@ -45,8 +45,8 @@ from sim.outputs import (OutputError, area_ratio, check_link_target, check_outpu
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, add_pattern_options,
                           kind_or_none, on_sheets, pattern_ending, run_caption, scale_note, seam_length,
                           write_pattern_file)
-from sim.run_options import (UserError, add_run_options, file_defaults, file_path_argument, params_from_args,
-                             path_argument)
+from sim.run_options import (HOLES_HINT, UserError, add_run_options, file_defaults, file_path_argument, holes_mode,
+                             params_from_args, path_argument)
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
 
@@ -202,7 +202,7 @@ class Pattern:
     @cached_property
     def mesh(self) -> Mesh:
         """The 3D mesh as :class:`golden_model.mesh.Mesh`."""
-        return Mesh(self.vertices, self.faces, name=self.name)
+        return Mesh(self.vertices, self.faces, name=self.name, holes=True)
 
     def distortion(self) -> Distortion:
         """Per-triangle area ratio and per-edge strain (:class:`sim.distortion.Distortion`)."""
@@ -214,10 +214,11 @@ class Pattern:
         return self.distortion().strain
 
 
-def read_mesh(path: str | Path, fill_holes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def read_mesh(path: str | Path, fill_holes: bool = False, keep_holes: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """``(V, F)`` of an OBJ, PLY, OFF or STL disk patch: ``(V, 3)`` float64 positions, ``(F, 3)`` int64
     vertex indices (0-based), in the file's vertex order; with ``fill_holes`` its holes are closed first
-    (as ``--fill-holes``: triangles between each hole's own vertices after the file's faces; no vertex added).
+    (as ``--fill-holes``: triangles between each hole's own vertices after the file's faces; no vertex added);
+    with ``keep_holes`` a disk with holes is read as it is (for ``flatten(V, F, keep_holes=True)``).
 
     The file must be one manifold disk (:func:`sim.mesh_io.load_mesh_with_notes`); anything else
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
@@ -227,15 +228,25 @@ def read_mesh(path: str | Path, fill_holes: bool = False) -> tuple[np.ndarray, n
         raise TypeError(f"read_mesh takes a file path (str or pathlib.Path), not {type(path).__name__}")
     if (problem := _nul_problem(path)) is not None:
         raise MeshError(f"cannot read mesh {problem}")
-    if not isinstance(fill_holes, (bool, np.bool_)):
-        raise TypeError(f"fill_holes must be True or False, got {fill_holes!r}")
+    for keyword, value in (("fill_holes", fill_holes), ("keep_holes", keep_holes)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{keyword} must be True or False, got {value!r}")
+    holes = _holes(argparse.Namespace(fill_holes=bool(fill_holes), keep_holes=bool(keep_holes)))
     try:
-        mesh, notes = load_mesh_with_notes(path, fill_holes=bool(fill_holes))
+        mesh, notes = load_mesh_with_notes(path, holes=holes)
     except HoledMesh as exc:
-        raise MeshError(f"{exc}; fill_holes=True closes all but the outer edge") from None
+        raise MeshError(f"{exc}; {_in_api_words(HOLES_HINT)}") from None
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     return mesh.vertices, mesh.faces
+
+
+def _holes(args: argparse.Namespace) -> Holes:
+    """:func:`sim.run_options.holes_mode`, its refusal in the API's words."""
+    try:
+        return holes_mode(args)
+    except UserError as exc:
+        raise ParameterError(_in_api_words(str(exc))) from None
 
 
 def _nul_problem(path: Any) -> str | None:
@@ -315,9 +326,9 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
                              f"MESH --engine {engine.name}; the API runs the "
                              + ", ".join(e.name for e in ENGINES if e.api) + " engines")
     try:  # validated here: errors name no temporary file
-        mesh, notes = oriented_mesh(vertices, faces, name=name, fill=args.fill_holes)
+        mesh, notes = oriented_mesh(vertices, faces, name=name, holes=_holes(args))
     except HoledMesh as exc:
-        raise MeshError(f"{exc}; fill_holes=True closes all but the outer edge") from None
+        raise MeshError(f"{exc}; {_in_api_words(HOLES_HINT)}") from None
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     try:

@@ -9,7 +9,7 @@ from typing import Callable
 import numpy as np
 
 from golden_model.files import read_file_bytes
-from golden_model.mesh import HoledMesh, Mesh, MeshError, oriented_mesh
+from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, oriented_mesh
 from .obj import obj_line_hint, read_obj
 from .off import read_off
 from .ply import read_ply
@@ -26,7 +26,7 @@ def load_mesh(path: str | Path) -> Mesh:
     return load_mesh_with_notes(path)[0]
 
 
-def load_mesh_with_notes(path: str | Path, fill_holes: bool = False) -> tuple[Mesh, list[str]]:
+def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple[Mesh, list[str]]:
     """Load and validate a mesh file; also return one-line notes on what was changed or ignored.
 
     Vertex *i* of the file is node *i* in every format but STL.  OBJ is read
@@ -37,9 +37,9 @@ def load_mesh_with_notes(path: str | Path, fill_holes: bool = False) -> tuple[Me
     with its own three corners and no shared vertices, so for STL only,
     exactly equal corner coordinates are merged, numbered in order of first
     appearance.  Faces wound against their neighbours are turned to agree
-    with the majority (:func:`golden_model.mesh.oriented_mesh`), with a note; with ``fill_holes``, holes
-    are closed (:func:`golden_model.mesh.fill_holes`), with a note, and without it refused as a
-    :class:`golden_model.mesh.HoledMesh`.
+    with the majority (:func:`golden_model.mesh.oriented_mesh`), with a note; holes are refused as a
+    :class:`golden_model.mesh.HoledMesh`, closed (:func:`golden_model.mesh.fill_holes`) or kept, as ``holes``
+    says, with a note.
 
     A file that cannot be read raises :class:`MeshError` "cannot read mesh
     '<path>': <reason>" (no such file, permission denied, ...); one that is
@@ -71,7 +71,7 @@ def load_mesh_with_notes(path: str | Path, fill_holes: bool = False) -> tuple[Me
     else:
         vertices, faces, notes = read_stl(data, path)
     try:
-        mesh, turned = oriented_mesh(vertices, faces, name=path.stem, fill=fill_holes)
+        mesh, turned = oriented_mesh(vertices, faces, name=path.stem, holes=holes)
         return mesh, notes + turned
     except HoledMesh as exc:  # (the commands that can fill it say how)
         raise HoledMesh(f"invalid mesh '{path}': {exc}") from None

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import (HoledMesh, InconsistentOrientation, Mesh, MeshError, boundary_crossings,
+from golden_model.mesh import (HoledMesh, Holes, InconsistentOrientation, Mesh, MeshError, boundary_crossings,
                                component_labels, count_components, fill_holes, hole_triangles, orient_consistently,
                                oriented_mesh)
 from sim.generate import grid_faces, grid_uv
@@ -337,7 +337,7 @@ def _flat_area(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def test_filling_closes_each_hole_with_triangles_of_its_own_corners_after_the_meshs_faces():
     vertices, faces = _holed_grid()
-    mesh, notes = oriented_mesh(vertices, faces, fill=True)
+    mesh, notes = oriented_mesh(vertices, faces, holes=Holes.FILL)
     m = len(faces)
     assert mesh.n_vertices == len(vertices) and mesh.n_faces == m + 4  # a square hole: two triangles
     np.testing.assert_array_equal(mesh.faces[:m], faces)
@@ -371,7 +371,7 @@ def test_a_hole_of_any_shape_is_covered_once_and_the_outer_edge_kept(shape, cell
     """The fill's triangles, seen from above, all turn the mesh's way and add up to the hole's area (a C or an L
     is no star about its centre); the comb's hole is longer than the piece's edge, which must stay open."""
     vertices, faces = _grid_without(10, cells)
-    mesh, notes = oriented_mesh(vertices, faces, fill=True)
+    mesh, notes = oriented_mesh(vertices, faces, holes=Holes.FILL)
     fill = _flat_area(vertices, mesh.faces[len(faces):])
     assert (fill > 0).all() and fill.sum() == pytest.approx(len(cells) / 81)
     assert len(mesh.boundary_loop) == 36  # the square's edge, 4 x 9 sides
@@ -381,7 +381,7 @@ def test_a_hole_of_any_shape_is_covered_once_and_the_outer_edge_kept(shape, cell
 def test_holes_over_a_tenth_of_the_piece_are_said_to_be_maybe_cut_outs():
     cells = [(2, c) for c in range(1, 8)] + [(r, 1) for r in range(3, 8)]  # an L of 12 of the 81 cells
     vertices, faces = _grid_without(10, cells)
-    notes = oriented_mesh(vertices, faces, fill=True)[1]
+    notes = oriented_mesh(vertices, faces, holes=Holes.FILL)[1]
     assert notes[0].endswith(f"; it is {12 / 69:.0%} of the piece's area: a cut-out the piece must keep is no hole "
                              "to fill")  # of the 69 cells left
 
@@ -390,7 +390,7 @@ def test_filling_follows_the_turning_of_faces_wound_against_their_neighbours():
     vertices, faces = _holed_grid()
     given = faces.copy()
     given[::7] = given[::7][:, [0, 2, 1]]
-    mesh, notes = oriented_mesh(vertices, given, fill=True)
+    mesh, notes = oriented_mesh(vertices, given, holes=Holes.FILL)
     assert _each_interior_edge_run_both_ways(mesh.faces) and len(notes) == 2
     assert notes[0].endswith("(the pattern's faces keep the turned winding)") and "holes closed" in notes[1]
 
@@ -404,7 +404,7 @@ def test_a_tubes_narrower_end_is_the_hole():
     faces = np.array([f for z in range(rings - 1) for i in range(k)
                       for f in ((z * k + i, z * k + (i + 1) % k, (z + 1) * k + i),
                                 ((z + 1) * k + i, z * k + (i + 1) % k, (z + 1) * k + (i + 1) % k))])
-    mesh, _ = oriented_mesh(vertices, faces, fill=True)
+    mesh, _ = oriented_mesh(vertices, faces, holes=Holes.FILL)
     assert set(mesh.faces[len(faces):].ravel().tolist()) == set(range((rings - 1) * k, rings * k))  # narrow end
     assert set(mesh.boundary_loop.tolist()) == set(range(k))  # the wide end is the edge
 
@@ -423,7 +423,7 @@ def test_holes_in_a_mesh_with_a_handle_are_refused_as_handles_not_as_holes_to_fi
     with pytest.raises(MeshError, match=r"^mesh is not a disk: it has 2 boundary loops where a disk has one "
                                         r"\(holes, or a tube's ends\), and handles \(Euler characteristic -2, "
                                         r"expected 0\)$") as info:
-        oriented_mesh(vertices, faces, fill=True)
+        oriented_mesh(vertices, faces, holes=Holes.FILL)
     assert not isinstance(info.value, HoledMesh)
 
 
@@ -434,7 +434,7 @@ def test_a_sheet_rolled_nearly_shut_keeps_its_outer_edge_open():
     vertices, faces = _grid_without(10, [(4, c) for c in range(2, 7)])
     angle = vertices[:, 0] * np.radians(330)
     rolled = np.column_stack([0.3 * np.cos(angle), 0.3 * np.sin(angle), vertices[:, 1]])
-    mesh, _ = oriented_mesh(rolled, faces, fill=True)
+    mesh, _ = oriented_mesh(rolled, faces, holes=Holes.FILL)
     assert len(mesh.boundary_loop) == 36 and mesh.n_faces == len(faces) + 10  # a 12-corner slot: 10 triangles
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from golden_model.mesh import Mesh, MeshError
+from golden_model.mesh import Holes, Mesh, MeshError
 from sim.generate import rolled_grid
 from sim.mesh_io import load_mesh, load_mesh_with_notes, save_obj
 
@@ -365,7 +365,7 @@ def test_a_mesh_file_with_holes_is_refused_as_holed_and_read_with_the_fill(tmp_p
     with pytest.raises(HoledMesh, match=r"^invalid mesh '.*holed\.obj': mesh is not a disk: it has 3 boundary "
                                         r"loops where a disk has one \(holes, or a tube's ends\)$"):
         load_mesh(tmp_path / "holed.obj")  # (the command and the API add how to fill it: a study cannot)
-    mesh, notes = load_mesh_with_notes(tmp_path / "holed.obj", fill_holes=True)
+    mesh, notes = load_mesh_with_notes(tmp_path / "holed.obj", holes=Holes.FILL)
     assert mesh.n_vertices == n and len(notes) == 1 and notes[0].startswith("2 holes closed by 4 triangles (")
 
 
@@ -380,21 +380,22 @@ def test_the_command_flattens_a_holed_scan_with_fill_holes_and_the_api_too(tmp_p
     _holed_obj(tmp_path / "holed.obj")
     ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj"), "--out", str(tmp_path / "p.flat.obj")],
                          capture_output=True, text=True)
-    assert ran.returncode == 2 and ran.stderr.strip().endswith("--fill-holes closes all but the outer edge")
+    assert ran.returncode == 2 and ran.stderr.strip().endswith(
+        "--fill-holes closes all but the outer edge, --keep-holes keeps them as cut-outs")
     ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj"), "--fill-holes", "--json",
                           "--out", str(tmp_path / "p.flat.obj")], capture_output=True, text=True)
     assert ran.returncode == 0, ran.stderr
     assert "springflat: note: holed: 2 holes closed by 4 triangles (" in ran.stderr
     layout = load_mesh(tmp_path / "p.flat.obj")
     assert layout.n_vertices == 441 and not folded_faces(layout.vertices[:, :2], layout.faces).any()
-    with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge$"):
+    with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge, keep_holes=True keeps them as cut-outs$"):
         springflat.read_mesh(tmp_path / "holed.obj")
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")
         V, F = springflat.read_mesh(tmp_path / "holed.obj", fill_holes=True)
     assert V.shape == (441, 3) and "2 holes closed" in str(said[0].message)
     V0, F0 = V, F[:-4]  # the file's own faces: its holes open again
-    with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge$"):
+    with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge, keep_holes=True keeps them as cut-outs$"):
         springflat.flatten(V0, F0)
     with pytest.warns(springflat.MeshNote, match=r"^mesh: 2 holes closed by 4 triangles \("):
         pattern = springflat.flatten(V0, F0, fill_holes=True, init=V0[:, :2])  # a layout of the file's vertices
