@@ -230,20 +230,22 @@ def test_a_file_with_a_turned_face_loads_wound_consistently_with_a_note(tmp_path
 # --------------------------------------------------------------------------- boundary crossings
 
 
-def _crossing_pairs_by_hand(polygon: np.ndarray) -> int:
-    """Every pair of sides of the closed polygon, one by one: those that are not neighbours and meet."""
+def _crossing_pairs_by_hand(positions: np.ndarray, loops: list[np.ndarray]) -> int:
+    """Every pair of sides of the closed polygons ``positions[loop]``, one by one: those that share no corner
+    and meet."""
     def side(p, q, r):  # > 0: r left of pq
         return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
 
     def on_segment(p, q, r):  # r, collinear with pq, within its box
         return min(p[0], q[0]) <= r[0] <= max(p[0], q[0]) and min(p[1], q[1]) <= r[1] <= max(p[1], q[1])
 
-    n, count = len(polygon), 0
-    for i in range(n):
-        for j in range(i + 2, n):
-            if i == 0 and j == n - 1:
+    sides = [(int(loop[k]), int(loop[(k + 1) % len(loop)])) for loop in loops for k in range(len(loop))]
+    count = 0
+    for i, (p, q) in enumerate(sides):
+        for r, t in sides[i + 1:]:
+            if {p, q} & {r, t}:
                 continue
-            a, b, c, d = polygon[i], polygon[(i + 1) % n], polygon[j], polygon[(j + 1) % n]
+            a, b, c, d = positions[p], positions[q], positions[r], positions[t]
             d1, d2, d3, d4 = side(a, b, c), side(a, b, d), side(c, d, a), side(c, d, b)
             if ((d1 > 0 > d2 or d1 < 0 < d2) and (d3 > 0 > d4 or d3 < 0 < d4)) \
                     or (d1 == 0 and on_segment(a, b, c)) or (d2 == 0 and on_segment(a, b, d)) \
@@ -278,7 +280,36 @@ def test_boundary_crossings_count_the_pairs_a_pair_by_pair_test_finds(seed, monk
         polygon = np.round(polygon * 2) / 2
     positions = np.vstack([rng.normal(size=(3, 2)), polygon])  # the loop picks its rows out of a layout
     loop = np.arange(3, len(positions))
-    assert boundary_crossings(positions, loop) == _crossing_pairs_by_hand(polygon)
+    assert boundary_crossings(positions, loop) == _crossing_pairs_by_hand(positions, [loop])
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_boundary_crossings_of_several_loops_count_the_pairs_a_pair_by_pair_test_finds(seed, monkeypatch):
+    """An outer edge and holes, drawn at random (on a coarse grid every third seed): every pair of sides that
+    meet, within a loop or between two, as a disk with holes has them."""
+    import golden_model.mesh
+
+    if seed % 2:
+        monkeypatch.setattr(golden_model.mesh, "_CROSSING_CHUNK", 3)
+    rng = np.random.default_rng(100 + seed)
+    sizes = rng.integers(3, 12, size=int(rng.integers(2, 5)))
+    positions = rng.normal(size=(int(sizes.sum()) + 2, 2))
+    if seed % 3 == 0:
+        positions = np.round(positions * 2) / 2
+    order = rng.permutation(len(positions))[:int(sizes.sum())]  # the loops pick their rows out of a layout
+    loops = np.split(order, np.cumsum(sizes)[:-1])
+    assert boundary_crossings(positions, loops) == _crossing_pairs_by_hand(positions, loops)
+
+
+def test_holes_inside_the_outer_edge_do_not_cross_it_and_one_moved_across_it_does():
+    square = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]])
+    hole = np.array([[1.0, 1.0], [1.0, 2.0], [2.0, 2.0], [2.0, 1.0]])  # clockwise, as a hole's edge runs
+    positions = np.vstack([square, hole, hole + [1.5, 1.5]])
+    outer, first, second = np.arange(4), np.arange(4, 8), np.arange(8, 12)
+    assert boundary_crossings(positions, [outer, first]) == 0
+    assert boundary_crossings(positions, [outer, first, second]) == 0  # (corner to corner apart: 0.5 gap)
+    assert boundary_crossings(np.vstack([square, hole + [2.5, 0.0]]), [outer, first]) == 2  # over the right side
+    assert boundary_crossings(np.vstack([square, hole, hole + [0.5, 0.5]]), [outer, first, second]) == 2
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -409,7 +440,8 @@ def test_a_tubes_narrower_end_is_the_hole():
     assert set(mesh.boundary_loop.tolist()) == set(range(k))  # the wide end is the edge
 
 
-def test_holes_in_a_mesh_with_a_handle_are_refused_as_handles_not_as_holes_to_fill():
+@pytest.mark.parametrize("holes", [Holes.FILL, Holes.KEEP])
+def test_holes_in_a_mesh_with_a_handle_are_refused_as_handles_not_as_holes_to_fill(holes):
     """A torus with two cells taken out: two boundary loops, but closing them leaves a torus, no disk; the
     refusal says so at once instead of naming the fill."""
     k = 8
@@ -423,7 +455,7 @@ def test_holes_in_a_mesh_with_a_handle_are_refused_as_handles_not_as_holes_to_fi
     with pytest.raises(MeshError, match=r"^mesh is not a disk: it has 2 boundary loops where a disk has one "
                                         r"\(holes, or a tube's ends\), and handles \(Euler characteristic -2, "
                                         r"expected 0\)$") as info:
-        oriented_mesh(vertices, faces, holes=Holes.FILL)
+        oriented_mesh(vertices, faces, holes=holes)
     assert not isinstance(info.value, HoledMesh)
 
 
@@ -462,3 +494,41 @@ def test_a_mesh_without_holes_is_left_as_it_is_by_the_fill():
     vertices, faces = _grid_without(5, [])
     filled_vertices, filled_faces, note = fill_holes(vertices, faces)
     assert note == "" and np.array_equal(filled_faces, faces) and np.array_equal(filled_vertices, vertices)
+
+
+def test_a_disk_with_holes_is_a_mesh_where_asked_its_outer_edge_first_and_its_disk_closed():
+    vertices, faces = _holed_grid()
+    mesh = Mesh(vertices, faces, holes=True)
+    assert mesh.n_holes == 2 and [len(loop) for loop in mesh.boundary_loops] == [32, 4, 4]
+    np.testing.assert_array_equal(mesh.boundary_loop, mesh.boundary_loops[0])
+    outer, *holes = mesh.boundary_loops
+    assert set(outer.tolist()) == {k for k in range(81) if k // 9 in (0, 8) or k % 9 in (0, 8)}
+    flat = vertices[:, :2]  # seen from above, the faces counter-clockwise: the outer edge too, each hole's not
+    twice_area = [np.sum(flat[loop, 0] * np.roll(flat[loop, 1], -1) - np.roll(flat[loop, 0], -1) * flat[loop, 1])
+                  for loop in mesh.boundary_loops]
+    assert twice_area[0] > 0 and all(area < 0 for area in twice_area[1:])
+    assert {frozenset(hole.tolist()) for hole in holes} == {frozenset({20, 21, 29, 30}), frozenset({49, 50, 58, 59})}
+    disk = mesh.disk
+    assert disk.n_holes == 0 and disk.n_faces == len(faces) + 4 and disk.vertices is mesh.vertices
+    np.testing.assert_array_equal(disk.faces[:len(faces)], faces)
+    assert disk.disk is disk
+    mesh_of_disk = Mesh(vertices, disk.faces, holes=True)  # holes allowed, none there
+    assert mesh_of_disk.n_holes == 0 and mesh_of_disk.disk is mesh_of_disk
+    swap = np.arange(81)
+    swap[[0, 20]] = [20, 0]  # a hole's corner is vertex 0: its loop is still not the outer edge
+    renumbered = Mesh(vertices[swap], swap[faces], holes=True)
+    assert [len(loop) for loop in renumbered.boundary_loops] == [32, 4, 4] and 0 in renumbered.boundary_loops[1]
+
+
+def test_kept_holes_are_said_with_their_edges_lengths():
+    vertices, faces = _holed_grid()
+    mesh, notes = oriented_mesh(vertices, faces, holes=Holes.KEEP)
+    assert mesh.n_holes == 2 and mesh.n_faces == len(faces)
+    hole_edges = sorted(float(np.linalg.norm(np.roll(vertices[h], -1, axis=0) - vertices[h], axis=1).sum())
+                        for h in mesh.boundary_loops[1:])
+    assert notes == [f"2 holes kept as cut-outs (edges {hole_edges[0]:.4g} to {hole_edges[1]:.4g} long, the piece's "
+                     f"outer edge {np.linalg.norm(np.diff(vertices[np.r_[mesh.boundary_loop, mesh.boundary_loop[0]]], axis=0), axis=1).sum():.4g}, "
+                     "in the mesh's units); the start layout is computed with them closed"]
+    assert oriented_mesh(*_holed_grid(cells=()), holes=Holes.KEEP)[1] == []  # no hole, no note
+    with pytest.raises(HoledMesh):
+        oriented_mesh(vertices, faces)

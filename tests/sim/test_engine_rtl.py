@@ -195,6 +195,22 @@ def test_rtl_check_on_a_mesh_file_with_its_defaults_runs_the_whole_engine(tmp_pa
     assert (r["mismatches"], r["top"], r["iterations"]) == (0, "springflat_engine", 3)
 
 
+def test_the_engine_runs_a_mesh_with_kept_holes_bit_exact(tmp_path):
+    """A disk with a hole (a cut-out): the engine needs nothing of a disk, and rtl-check takes --keep-holes."""
+    from sim.generate import holed_dome
+    from sim.mesh_io import save_obj
+
+    need_simulator("verilator")
+    mesh = holed_dome(7, holes=((2, 2, 2),))
+    save_obj(tmp_path / "holed.obj", mesh.vertices, mesh.faces)
+    proc = subprocess.run([SPRINGFLAT, "rtl-check", "holed.obj", "--keep-holes", "--capacity", "64", "512", "128",
+                           "--iterations", "4", "--json"], capture_output=True, text=True, cwd=tmp_path, timeout=1200)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "1 hole kept as cut-out" in proc.stderr
+    r = json.loads(proc.stdout)
+    assert (r["mismatches"], r["top"], r["iterations"]) == (0, "springflat_engine", 4)
+
+
 @pytest.mark.parametrize("command", [["rtl-check", "surf2", "--engine-top"], ["flatten", "surf2", "--engine", "rtl"]])
 def test_a_mesh_over_capacity_is_refused_in_one_line(command, tmp_path):
     """Refused before anything is built: exit 2 and one line naming the count and the capacity."""

@@ -1,0 +1,109 @@
+"""Holes kept as cut-outs (``--keep-holes``, ``keep_holes=True``): the run, its guarantees, the pattern files."""
+
+import json
+import subprocess
+import warnings
+
+import ezdxf
+import numpy as np
+import pytest
+import shapely
+
+import springflat
+from golden_model.mesh import MeshError, folded_faces, signed_areas_2d, triangle_areas_3d
+from golden_model.params import ParameterError
+from sim.generate import holed_dome
+from sim.layouts import load_layout
+from sim.mesh_io import save_obj
+from support import SPRINGFLAT
+
+#: A 160 mm dome, 16 × 16 vertices, with a 3 × 3-cell and a 4 × 4-cell cut-out.
+HOLES = ((2, 2, 3), (8, 8, 4))
+
+
+def _holed_file(path):
+    mesh = holed_dome(16, holes=HOLES)
+    save_obj(path, mesh.vertices * 160.0, mesh.faces)
+    return mesh
+
+
+def _polygon_area(points: np.ndarray) -> float:
+    """Signed area of the closed polygon ``points``: positive counter-clockwise."""
+    x, y = points[:, 0], points[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def _dxf_loops(path, layer: str) -> list[np.ndarray]:
+    return [np.array([p[:2] for p in e.get_points()]) for e in ezdxf.readfile(path).modelspace()
+            if e.dxftype() == "LWPOLYLINE" and e.dxf.layer == layer and e.closed]
+
+
+def test_the_command_keeps_the_holes_open_fold_free_and_cuts_round_them(tmp_path):
+    mesh = _holed_file(tmp_path / "holed.obj")
+    outs = [str(tmp_path / name) for name in ("p.flat.obj", "p.dxf", "p.svg", "p.pdf")]
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj"), "--keep-holes", "--json",
+                          "--seam-allowance", "3mm", *(a for out in outs for a in ("--out", out))],
+                         capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr
+    assert "springflat: note: holed: 2 holes kept as cut-outs (edges " in ran.stderr
+    summary = json.loads(ran.stdout)
+    assert (summary["status"], summary["folded"], summary["holes"], summary["faces"]) == ("converged", 0, 2,
+                                                                                          mesh.n_faces)
+    assert summary["boundary_crossings"] == 0
+    layout = load_layout(tmp_path / "p.flat.obj", mesh.n_vertices, faces=mesh.faces)
+    assert not folded_faces(layout, mesh.faces).any()
+    # each hole stays open, about the size the surface gives it: its fill's 3D area, within 10 % (a hole's edge
+    # is not flat on the dome, and the layout's areas are off by E_S on average, more near the holes)
+    outer, *holes = mesh.boundary_loops
+    fill = mesh.disk.faces[mesh.n_faces:]
+    for hole in holes:
+        inside = fill[np.isin(fill, hole).all(axis=1)]
+        area_3d = float(triangle_areas_3d(mesh.vertices * 160.0, inside).sum())
+        assert -_polygon_area(layout[hole]) == pytest.approx(area_3d, rel=0.1)  # a hole's edge runs clockwise
+    assert _polygon_area(layout[outer]) > 0
+    # the DXF: the sew line is the pattern's edge, outer edge and holes; the cut line 3 mm outside it, into the holes
+    sew, cut = _dxf_loops(outs[1], "SEW"), _dxf_loops(outs[1], "CUT")
+    assert len(sew) == len(cut) == 3
+    for line, loop in zip(sew, mesh.boundary_loops):
+        np.testing.assert_allclose(line, layout[loop], atol=1e-9)
+    material = shapely.Polygon(sew[0], sew[1:])
+    cut_area = shapely.Polygon(cut[0], cut[1:])
+    assert cut_area.contains(material)
+    for ring in (cut_area.exterior, *cut_area.interiors):  # every cut point 3 mm from the piece, within the buffer's
+        distances = [material.distance(shapely.Point(p)) for p in np.asarray(ring.coords)]
+        assert min(distances) >= 3.0 * (1 - 1e-9) and max(distances) <= 3.0 * 1.002
+    svg = (tmp_path / "p.svg").read_text()
+    assert svg.count('class="cut-hole"') == 2 and svg.count('class="sew-hole"') == 2
+
+
+def test_without_an_option_a_holed_mesh_is_refused_naming_both_and_both_at_once_are_refused(tmp_path):
+    _holed_file(tmp_path / "holed.obj")
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj")], capture_output=True, text=True,
+                         timeout=120)
+    assert ran.returncode == 2 and ran.stderr.strip().endswith(
+        "--fill-holes closes all but the outer edge, --keep-holes keeps them as cut-outs")
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj"), "--fill-holes", "--keep-holes"],
+                         capture_output=True, text=True, timeout=120)
+    assert ran.returncode == 2 and "not allowed with argument" in ran.stderr and not (tmp_path / "out").exists()
+
+
+def test_the_api_reads_and_flattens_a_mesh_with_its_holes_kept(tmp_path):
+    mesh = _holed_file(tmp_path / "holed.obj")
+    with pytest.raises(MeshError, match=r"fill_holes=True closes all but the outer edge, keep_holes=True keeps "
+                                        r"them as cut-outs$"):
+        springflat.read_mesh(tmp_path / "holed.obj")
+    with pytest.raises(ParameterError, match=r"^fill_holes=True and keep_holes=True: a hole is closed or kept, give "
+                                             r"one of them$"):
+        springflat.read_mesh(tmp_path / "holed.obj", fill_holes=True, keep_holes=True)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        V, F = springflat.read_mesh(tmp_path / "holed.obj", keep_holes=True)
+    assert F.shape == mesh.faces.shape and "2 holes kept as cut-outs" in str(said[0].message)
+    with pytest.raises(ParameterError, match=r"^fill_holes=True and keep_holes=True: "):
+        springflat.flatten(V, F, fill_holes=True, keep_holes=True)
+    with pytest.warns(springflat.MeshNote, match=r"2 holes kept as cut-outs"):
+        pattern = springflat.flatten(V, F, keep_holes=True, name="holed")
+    assert pattern.folded == 0 and pattern.boundary_crossings == 0 and pattern.mesh.n_holes == 2
+    assert (np.sign(signed_areas_2d(pattern.layout, F)) > 0).all()
+    springflat.write_pattern(tmp_path / "api.dxf", pattern)
+    assert len(_dxf_loops(tmp_path / "api.dxf", "CUT")) == 3
