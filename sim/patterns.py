@@ -339,13 +339,14 @@ def check_seam_fits(allowance: float, edge_length: float, units: str) -> None:
     round; a pattern is never wider than that): a wrong unit, most likely (``10`` meant as mm with ``--units
     m``), which would make the print a refusal for its size and the cut line a blob."""
     if allowance > edge_length / 2:
-        raise PatternError(f"a seam allowance of {seam_text(allowance, units)} is more than half the length of the "
-                           f"pattern's edge, {seam_text(edge_length, units)}: check its length and unit (10mm, "
+        raise PatternError(f"a seam allowance of {length_text(allowance, units)} is more than half the length of the "
+                           f"pattern's edge, {length_text(edge_length, units)}: check its length and unit (10mm, "
                            "0.375in)")
 
 
-def seam_text(length: float, units: str) -> str:
-    """A length in ``units`` as the sheets print it: ``0.01 m (10 mm)``, ``0.375 in (9.525 mm)``, ``10 mm``."""
+def length_text(length: float, units: str) -> str:
+    """A length in ``units`` as the sheets and messages print it, in mm too for a ruler: ``0.01 m (10 mm)``,
+    ``0.375 in (9.525 mm)``, ``10 mm``."""
     return f"{length:.6g} {units}" + (f" ({length * UNIT_MM[units]:.6g} mm)" if units != "mm" else "")
 
 
@@ -992,12 +993,6 @@ class Label:
     name: str | None = None
 
 
-def _unit_label(length: float, units: str) -> str:
-    """``50 mm``, ``2 in``, ``5 cm (50 mm)``: metric lengths also in mm, for a ruler."""
-    mm = length * UNIT_MM[units]
-    return f"{length:g} {units}" + (f" ({mm:g} mm)" if units in ("cm", "m") else "")
-
-
 def _text_width(text: str, size: float, bold: bool = False) -> float:
     """Width in mm of ``text`` set in Helvetica (SVG: Helvetica or Arial, the same widths) of cap height
     ``size`` mm; a character beyond Latin-1, which Helvetica lacks and a viewer draws in another font, is
@@ -1040,7 +1035,7 @@ def _fitted(text: str, room: float, size: float, bold: bool = False,
 
 def pattern_title(drawing: PatternDrawing, name: str | None = None) -> str:
     """The first line of every sheet, the PDF's and the SVG's title: the name (or ``name``), scale, units."""
-    seam = f", seam allowance {seam_text(drawing.seam, drawing.units)} included" if drawing.seam > 0 else ""
+    seam = f", seam allowance {length_text(drawing.seam, drawing.units)} included" if drawing.seam > 0 else ""
     return (f"{drawing.name if name is None else name}: springflat cutting pattern, scale 1:1, units "
             f"{drawing.units}{seam}")
 
@@ -1076,7 +1071,7 @@ def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple
     # title block: name and units, the run across the window; the sheet and how to print it at the left,
     # the scale bar at the right; a line too long for its room is set smaller, then shortened
     length, length_mm = scale_bar(drawing.units)
-    bar_label = _unit_label(length, drawing.units)
+    bar_label = length_text(length, drawing.units)
     right = x0 + w
     bar_room = max(length_mm, _text_width(bar_label, 0.9 * FONT_MM))
     left_room = w - bar_room - TEXT_GAP_MM
