@@ -27,9 +27,10 @@ byte-for-byte reproducible: no dates, GUIDs or random IDs (ezdxf's fixed metadat
 
 Sheet geometry (page coordinates in millimetres, origin at the lower left, y up): a margin of
 :data:`MARGIN_MM` on every side, a title block of :data:`TITLE_MM` at the bottom, and the pattern's
-window above it.  Adjacent windows share a strip of :data:`OVERLAP_MM`: a dashed line on each sheet
-shows where its neighbour's window begins, with crosses where that line meets the window's frame, so
-that sheets are trimmed along one frame edge and laid onto the neighbour's dashed line.
+window above it.  Adjacent windows share a strip of :data:`OVERLAP_MM`: a grey chain line on each sheet
+(:data:`GUIDE_DASH_MM`, unlike the sew line's dashes) shows where its neighbour's window begins, with
+crosses where that line meets the window's frame, so that sheets are trimmed along one frame edge and laid
+onto the neighbour's chain line.
 """
 
 from __future__ import annotations
@@ -82,6 +83,8 @@ SVG_GAP_MM = 10.0         # space between tiled sheets in an SVG
 CUT_WIDTH_MM = 0.3        # the cut line
 SEW_WIDTH_MM = 0.2        # the sew line, inside the cut line when there is a seam allowance ...
 SEW_DASH_MM = (3.0, 1.5)  # ... dashed: on and off
+#: The overlap guides' chain line (on, off, on, off; mm), grey: not to be taken for the dashed sew line.
+GUIDE_DASH_MM = (6.0, 1.5, 0.5, 1.5)
 SEAM_ARC_SEGMENTS = 32    # chords a quarter circle has where the cut line turns round a corner of the sew line
 SEAM_MARGIN = 1e-3        # the cut line is at least the allowance, at most this share more, from the sew line
 EDGE_WIDTH_MM = 0.06      # mesh edges, drawn only when ...
@@ -971,12 +974,12 @@ def scale_bar(units: str) -> tuple[float, float]:
 
 @dataclass(frozen=True)
 class Stroke:
-    """A polyline on a sheet, mm; ``grey`` 0 = black; ``dash`` mm on/off or ``None``; ``name`` its SVG class."""
+    """A polyline on a sheet, mm; ``grey`` 0 = black; ``dash`` mm on, off, ... or ``None``; ``name`` its SVG class."""
 
     points: tuple[tuple[float, float], ...]
     width: float
     grey: float = 0.0
-    dash: tuple[float, float] | None = None
+    dash: tuple[float, ...] | None = None
     name: str | None = None
 
 
@@ -1050,7 +1053,7 @@ def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple
     cross = 3.0
 
     def mark(a: tuple[float, float], b: tuple[float, float], neighbour: Sheet, at: tuple[float, float], anchor: str):
-        strokes.append(Stroke((a, b), 0.2, 0.3, dash=(2.0, 1.5), name=f"overlap-{neighbour.label}"))
+        strokes.append(Stroke((a, b), 0.2, 0.45, dash=GUIDE_DASH_MM, name=f"overlap-{neighbour.label}"))
         for px, py in (a, b):
             strokes.append(Stroke(((px - cross, py), (px + cross, py)), 0.2, 0.0))
             strokes.append(Stroke(((px, py - cross), (px, py + cross)), 0.2, 0.0))
@@ -1362,8 +1365,9 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             strokes, labels = sheet_marks(plan, sheet, drawing)
             for stroke in strokes:
                 grey = round(255 * stroke.grey)
+                dashes = " ".join(_svg_num(length) for length in stroke.dash or ())
                 attributes = (f' class="{stroke.name}"' if stroke.name else "") + (
-                    f' stroke-dasharray="{_svg_num(stroke.dash[0])} {_svg_num(stroke.dash[1])}"' if stroke.dash else "")
+                    f' stroke-dasharray="{dashes}"' if dashes else "")
                 write(f'<polyline points="{_svg_points(stroke.points, page_h)}" fill="none" '
                       f'stroke="#{grey:02x}{grey:02x}{grey:02x}" stroke-width="{_svg_num(stroke.width)}"'
                       f'{attributes}/>\n')

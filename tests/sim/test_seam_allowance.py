@@ -255,6 +255,20 @@ def test_the_pdf_draws_the_sew_line_dashed(tmp_path):
     assert b"[3 1.5] 0 d" in forms["seamed"] and b"[3 1.5] 0 d" not in forms["plain"]
 
 
+def test_tiled_sheets_overlap_guides_are_not_drawn_like_the_sew_line(tmp_path):
+    """On a pattern tiled over several sheets with an allowance, the guides where a neighbour's sheet overlaps
+    are a grey chain line, the sew line even black dashes: one is not taken for the other."""
+    mesh, layout = rectangle(400.0, 100.0)
+    write_pattern_file(tmp_path / "p.svg", PatternDrawing.of(mesh, layout, "mm").with_seam(10.0))
+    root = ET.parse(tmp_path / "p.svg").getroot()
+    sew = root.find(f".//{SVG}polygon[@id='sew']")
+    guides = [line for line in root.iter(f"{SVG}polyline") if line.get("class", "").startswith("overlap-")]
+    assert sew is not None and guides
+    for guide in guides:
+        assert guide.get("stroke-dasharray") != sew.get("stroke-dasharray")
+        assert guide.get("stroke") != sew.get("stroke") and len(guide.get("stroke-dasharray").split()) == 4
+
+
 def _folded_back_strip():
     """A 100 x 20 mm strip whose last 30 mm are folded back over the strip (a fold along x = 70): folded
     triangles, and material (the flap's edge) that the boundary's own polygon does not hold as inside."""
