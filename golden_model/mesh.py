@@ -27,7 +27,8 @@ import numpy as np
 __all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes", "boundary_loops",
            "outer_loop",
            "hole_triangles", "loop_length", "oriented_mesh", "orient_consistently", "component_labels",
-           "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "COORDINATE_LIMIT",
+           "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes",
+           "COORDINATE_LIMIT",
            "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
@@ -271,10 +272,9 @@ def boundary_crossings(positions: np.ndarray, loops: np.ndarray | list[np.ndarra
     A fold-free layout of a disk covers no point twice exactly where its boundary is simple (a local
     homeomorphism of a disk onto the plane is one to one when the boundary's image is a simple closed
     curve), so a positive count on a fold-free pattern means flaps lying on each other: a cut pattern
-    whose cut line crosses itself. The same holds for a disk with holes whose loops are simple and meet
-    neither one another: a point's cover count is the sum of the loops' winding numbers about it, +1 inside
-    the outer edge and −1 inside a hole's, never negative, so each hole lies inside the outer edge and
-    outside the others. ``positions`` ``(V, 2)``, ``loops``: one loop (:attr:`Mesh.boundary_loop`) ``(n,)``
+    whose cut line crosses itself. On a disk with holes, a simple loop can still wrap the piece over a hole
+    (:func:`turned_holes`); with none turned, the same holds. ``positions`` ``(V, 2)``, ``loops``: one loop
+    (:attr:`Mesh.boundary_loop`) ``(n,)``
     or a list of them (:attr:`Mesh.boundary_loops`), which share no vertex. A sweep along the layout's longer
     extent: sides are paired only where their extents overlap on that axis and then on the other;
     orientation tests (float, so sides that all but touch may go either way) decide the rest. A side through
@@ -311,6 +311,27 @@ def boundary_crossings(positions: np.ndarray, loops: np.ndarray | list[np.ndarra
         crossings += int(np.count_nonzero(_sides_meet(a[i], b[i], a[j], b[j])))
         first = last
     return crossings
+
+
+def turned_holes(positions: np.ndarray, faces: np.ndarray, loops: list[np.ndarray]) -> int:
+    """How many holes (``loops[1:]``, :attr:`Mesh.boundary_loops`) run the pattern's own way round: the piece
+    wraps over such a hole (the corners of its edge span more than a turn between them), and covers it twice.
+
+    A fold-free layout of a disk with holes covers a point as many times as the loops wind round it (each
+    taken the way its sides run in their faces). With the outer edge the pattern's way round and each hole's
+    the other way, and no two sides meeting (:func:`boundary_crossings`), that is 1 inside the outer edge and
+    −1 inside a hole's, never below 0: each hole lies inside the outer edge and outside the others, and no
+    point is covered twice. A hole's loop that is simple but runs the pattern's way winds +1 round the hole
+    instead: the hole is covered by the piece, twice with the outer edge's. ``positions`` ``(V, 2)``; a hole
+    of no area is not counted here (its sides meet)."""
+    orientation = layout_orientation(positions, faces)
+    points = np.asarray(positions, dtype=np.float64)
+    turned = 0
+    for loop in loops[1:]:
+        x, y = points[loop, 0], points[loop, 1]
+        if orientation * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)) > 0:
+            turned += 1
+    return turned
 
 
 def _cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -664,8 +685,8 @@ def kept_holes_note(mesh: Mesh) -> str:
     lengths = np.array([loop_length(mesh.vertices[loop]) for loop in mesh.boundary_loops[1:]])
     plural = "s" if len(lengths) != 1 else ""
     return (f"{len(lengths)} hole{plural} kept as cut-out{plural} (edge{plural} {_length_range(lengths)} long, the "
-            f"piece's outer edge {loop_length(mesh.vertices[mesh.boundary_loop]):.4g}, in the mesh's units); the "
-            "start layout is computed with them closed")
+            f"piece's outer edge {loop_length(mesh.vertices[mesh.boundary_loop]):.4g}, in the mesh's units); a "
+            f"computed start layout closes {'them' if plural else 'it'} first")
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:

@@ -17,7 +17,7 @@ from golden_model.fixed.engine import check_fixed_params, prepare, presets_holdi
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_fraction
-from golden_model.mesh import Mesh, boundary_crossings, loop_length
+from golden_model.mesh import Mesh, boundary_crossings, loop_length, turned_holes
 from golden_model.modes import Step
 from golden_model.params import FlattenParams
 from golden_model.reference import RUNAWAY_FACTOR, energy_floor
@@ -27,8 +27,8 @@ from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
-                       check_mesh_fits, check_seam_fits, error_text, kind_or_none, on_sheets, run_caption, scale_note,
-                       seam_length, write_pattern_file)
+                       check_mesh_fits, check_seam_fits, closed_holes_note, error_text, kind_or_none, on_sheets,
+                       run_caption, scale_note, seam_length, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
 
@@ -205,19 +205,27 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
     if result.status != "diverged" and not result.final.folded:
         result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loops)
+        if mesh.n_holes:
+            result.extra["turned_holes"] = turned_holes(result.positions, mesh.faces, mesh.boundary_loops)
     return result
 
 
 def overlap_note(result: FlattenResult) -> str | None:
-    """A pattern whose boundary crosses itself: flaps lie on each other, though no triangle need be folded
-    (the guard keeps triangles from folding, not distant parts of the pattern from meeting)."""
+    """A pattern whose boundary crosses itself, or that wraps over a kept hole: flaps lie on each other, though
+    no triangle need be folded (the guard keeps triangles from folding, not distant parts of the pattern from
+    meeting)."""
     crossings = result.extra.get("boundary_crossings")
-    if not crossings:
+    turned = result.extra.get("turned_holes")
+    if not crossings and not turned:
         return None
-    return (f"the pattern overlaps itself, though no triangle is folded: {crossings} pair{'s' if crossings > 1 else ''}"
-            " of its boundary's sides meet (parts of the pattern lie on each other, and a cut along the boundary "
-            "crosses itself); springflat keeps triangles from folding, not parts of the pattern from overlapping "
-            "(docs/guard.md)")
+    what = []
+    if crossings:
+        what.append(f"{crossings} pair{'s' if crossings > 1 else ''} of its boundary's sides meet")
+    if turned:
+        what.append(f"it wraps over {turned} of its holes, covering {'them' if turned > 1 else 'it'} twice")
+    return (f"the pattern overlaps itself, though no triangle is folded: {' and '.join(what)}; parts of the pattern "
+            "lie on each other, and a cut along the boundary does not give the piece; springflat keeps triangles "
+            "from folding, not parts of the pattern from overlapping (docs/guard.md)")
 
 
 def _guard_on(params: FlattenParams, api: bool = False) -> str:
@@ -421,12 +429,17 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh:
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 
-def scale_note_of(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> str | None:
-    """:func:`~sim.patterns.scale_note` of a run that writes a pattern at 1:1 (a print or a cut: a wrong
-    ``--units`` would spoil it; ``vt`` and layouts have no scale)."""
+def sheet_notes_of(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> list[str]:
+    """The notes on a run that writes a pattern at 1:1 (a print or a cut; ``vt`` and layouts have no scale):
+    :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it) and, with a seam allowance,
+    :func:`~sim.patterns.closed_holes_note`."""
     if result.status == "diverged" or not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
-        return None
-    return scale_note(PatternDrawing.of(mesh, result.positions, args.units))
+        return []
+    drawing = PatternDrawing.of(mesh, result.positions, args.units)
+    notes = [scale_note(drawing)]
+    if args.seam_allowance is not None and mesh.n_holes:
+        notes.append(closed_holes_note(drawing.with_seam(seam_length(args.seam_allowance, args.units))))
+    return [note for note in notes if note]
 
 
 #: What a diverged float run did (:func:`golden_model.reference.runaway_width`).
@@ -445,7 +458,7 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
     final = result.final
     drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
         result.status, result.iterations, final.area_error, final.shape_error, final.folded,
-        result.extra.get("boundary_crossings")))
+        result.extra.get("boundary_crossings"), result.extra.get("turned_holes")))
     if args.grain is not None and args.out and result.status != "diverged":
         drawing = drawing.with_grain(args.grain)
     if args.seam_allowance is not None and result.status != "diverged":

@@ -434,11 +434,24 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
     if isinstance(init, np.ndarray):
         return _facing_the_front(check_layout(init, mesh.n_vertices, "the init array", mesh.faces), mesh,
                                  "the init array", notes)
-    method = _METHODS.get("arap" if str(init) == AUTO_START else str(init))
-    if method is not None:  # (a method needs a disk: a mesh's holes are closed for it, their vertices its own)
-        return method(mesh.disk)
+    name = "arap" if str(init) == AUTO_START else str(init)
+    if name in _METHODS:  # (a method needs a disk: a mesh's holes are closed for it, their vertices its own)
+        return _METHODS[name](_disk(mesh, name))
     return _facing_the_front(load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes), mesh,
                              f"the layout '{init}'", notes)
+
+
+def _disk(mesh: Mesh, method: str) -> Mesh:
+    """``mesh`` with its holes closed (:attr:`Mesh.disk`) for the start ``method``. A hole that cannot be closed
+    (a slit, kept as a cut-out): ``pca``, a projection, takes the mesh as it is; any other method is refused as
+    a :class:`LayoutError` that says what start works."""
+    try:
+        return mesh.disk
+    except MeshError as exc:
+        if method == "pca":
+            return mesh
+        raise LayoutError(f"the {method} start is computed with the mesh's holes closed, and {exc}: give --init "
+                          "pca or a layout of the mesh (--init FILE)") from None
 
 
 def _facing_the_front(positions: np.ndarray, mesh: Mesh, what: str, notes: list[str] | None) -> np.ndarray:
@@ -483,7 +496,9 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     (:func:`sim.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
     folded is returned with its count, and the notes say why. ``progress(text)`` is called before
     each long step. ``slim()`` gives :func:`slim_layout`'s layout of ``mesh`` when ARAP folds (default: it
-    computes it; a caller may have started it beside ARAP, on another core).
+    computes it; a caller may have started it beside ARAP, on another core). A computed start of a mesh with
+    holes is its disk's (:attr:`Mesh.disk`: the holes closed), folds counted and untangled there too, so that
+    each hole starts open and the right way round; a given layout is the mesh's own.
     """
     from .untangle import untangle_layout
 
@@ -492,6 +507,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     method = "arap" if name == AUTO_START else name
     described = (f"the {method} layout" if method in _METHODS else "the init array" if name == ARRAY_START
                  else f"the layout '{name}'")
+    if method in _METHODS:
+        mesh = _disk(mesh, method)
     if name != ARRAY_START:
         say(f"computing {described}" if method in _METHODS else f"reading {described}")
     read_notes: list[str] = []
@@ -502,7 +519,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
             raise
         notes = [f"{exc}: starting from SLIM on Tutte's layout instead (fold-free by construction)"]
         say(notes[-1])
-        return StartLayout(slim_layout(mesh.disk) if slim is None else slim(), "slim", 0, notes)
+        return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
     folded = _folds(mesh, positions)
     if folded == 0:
         return StartLayout(positions, method, 0, read_notes)
@@ -511,7 +528,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
         notes = [f"{described} folds {folded} triangle{plural}: starting from SLIM on Tutte's layout instead "
                  "(fold-free by construction)"]
         say(notes[-1])
-        return StartLayout(slim_layout(mesh.disk) if slim is None else slim(), "slim", 0, notes)
+        return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
     notes = read_notes + [f"{described} folds {folded} triangle{plural}: untangling it"]
     say(notes[-1])
     untangled = untangle_layout(mesh, positions, time_limit=untangle_seconds)

@@ -48,7 +48,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from golden_model.mesh import Mesh, boundary_crossings, folded_faces, loop_length
+from golden_model.mesh import Mesh, boundary_crossings, folded_faces, loop_length, turned_holes
 
 from .mesh_io import save_obj
 from .outputs import OutputError, atomic_write, output_target, write_layout
@@ -270,14 +270,17 @@ class PatternDrawing:
 
     def grain_line(self) -> np.ndarray:
         """``(2, 2)`` the grain line's ends (bottom, top) in ``units``: vertical, through the vertex nearest the
-        pattern's area centroid, :data:`GRAIN_LINE_FRACTION` of its height long."""
+        pattern's area centroid, :data:`GRAIN_LINE_FRACTION` of its height long; where that line leaves the
+        piece (a hole, a C-shaped piece's gap), on the vertical through the piece that runs longest in it
+        (:func:`grain_on_material`)."""
         q = self.layout[self.faces]
         a, b = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
         areas = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / 2
         centroid = (areas[:, None] * q.mean(axis=1)).sum(axis=0) / areas.sum()
         x, y = self.layout[np.argmin(np.linalg.norm(self.layout - centroid, axis=1))]
         half = GRAIN_LINE_FRACTION * float(np.ptp(self.layout[:, 1])) / 2
-        return np.array([[x, y - half], [x, y + half]])
+        line = np.array([[x, y - half], [x, y + half]])
+        return grain_on_material(line, material(self), float(centroid[0]))
 
 
 def seam_allowance_argument(text: str) -> str:
@@ -353,6 +356,25 @@ def length_text(length: float, units: str) -> str:
     return f"{length:.6g} {units}" + (f" ({length * UNIT_MM[units]:.6g} mm)" if units != "mm" else "")
 
 
+def closed_holes_note(drawing: PatternDrawing) -> str | None:
+    """Kept holes that the seam allowance closes on the cut line (a hole narrower than twice the allowance): the
+    cut line does not go round them, so they are cut after sewing, along their sew line; ``None`` if none."""
+    if drawing.seam <= 0 or not drawing.holes:
+        return None
+    import shapely
+
+    cut = shapely.Polygon(drawing.cut_loops[0], drawing.cut_loops[1:])
+    closed = sum(cut.covers(shapely.Polygon(loop).representative_point()) for loop in drawing.edge_loops[1:])
+    if not closed:
+        return None
+    which = (f"{closed} of the {len(drawing.holes)} kept holes" if closed < len(drawing.holes)
+             else "the kept hole" if closed == 1 else f"all {closed} kept holes")
+    return (f"{which} {'are' if closed > 1 else 'is'} narrower than twice the "
+            f"seam allowance ({length_text(drawing.seam, drawing.units)}): the cut line does not go round "
+            f"{'them' if closed > 1 else 'it'}; cut {'them' if closed > 1 else 'it'} out along the sew line "
+            "after sewing")
+
+
 def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]:
     """The closed loops of the cut line ``allowance`` outside the pattern's material (:func:`material`), outer
     loop first: the outline of the points within that distance of it (shapely's buffer, round joins), so every
@@ -370,17 +392,52 @@ def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]
 
 def material(drawing: PatternDrawing):
     """The area the pattern covers, a shapely geometry in ``units``: the polygon of its outer edge less its kept
-    holes, or, where a triangle is folded or the boundary crosses itself (parts of the pattern lie on each
-    other), the union of its triangles (a folded flap can lie outside the boundary's polygon)."""
+    holes, or, where a triangle is folded, the boundary crosses itself or the pattern wraps over a hole (parts
+    of the pattern lie on each other), the union of its triangles (a folded flap can lie outside the
+    boundary's polygon)."""
     import shapely
 
     folded = folded_faces(drawing.layout, drawing.faces)
-    if not folded.any() and boundary_crossings(drawing.layout, [drawing.boundary, *drawing.holes]) == 0:
+    loops = [drawing.boundary, *drawing.holes]
+    if not folded.any() and boundary_crossings(drawing.layout, loops) == 0 \
+            and turned_holes(drawing.layout, drawing.faces, loops) == 0:
         return shapely.Polygon(drawing.boundary_points, drawing.edge_loops[1:])
     corners = drawing.layout[drawing.faces]
     a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     kept = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) > 0  # (a triangle of no area covers nothing)
     return shapely.union_all(shapely.polygons(corners[kept]))
+
+
+#: Verticals :func:`grain_on_material` tries across the piece.
+GRAIN_CANDIDATES = 64
+
+
+def grain_on_material(line: np.ndarray, area, centre_x: float) -> np.ndarray:
+    """``line`` (vertical, ``(2, 2)``) where it lies on ``area`` (the piece's material, shapely, allowing for
+    rounding); else the longest stretch of any of :data:`GRAIN_CANDIDATES` verticals across ``area`` (the one
+    nearest ``centre_x`` among the longest), with the line as long as before, or 90 % of that stretch where
+    that is shorter, about its middle: a grain line that crossed a hole or a gap would be laid on nothing."""
+    import shapely
+
+    size = max(float(np.ptp(np.asarray(area.bounds).reshape(2, 2), axis=0).max()), 1e-300)
+    if area.buffer(1e-9 * size).covers(shapely.LineString(line)):
+        return line
+    low_x, low_y, high_x, high_y = area.bounds
+    best = None
+    for x in np.linspace(low_x, high_x, GRAIN_CANDIDATES + 2)[1:-1]:
+        across = area.intersection(shapely.LineString([(x, low_y - 1), (x, high_y + 1)]))
+        for piece in getattr(across, "geoms", [across]):
+            if piece.geom_type != "LineString" or piece.is_empty:
+                continue
+            key = (round(piece.length / size, 6), -abs(x - centre_x))
+            if best is None or key > best[0]:
+                best = (key, x, piece.bounds[1], piece.bounds[3])
+    if best is None:  # (an area no vertical crosses: the line as it was)
+        return line
+    _, x, bottom, top = best
+    half = min(float(line[1, 1] - line[0, 1]), 0.9 * (top - bottom)) / 2
+    middle = (bottom + top) / 2
+    return np.array([[x, middle - half], [x, middle + half]])
 
 
 #: A grain line's length, as a fraction of the pattern's height, and its arrowheads', of its length.
@@ -481,11 +538,13 @@ def grain_angle(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray, dir
 
 
 def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int,
-                crossings: int | None = None) -> str:
+                crossings: int | None = None, turned: int | None = None) -> str:
     """The line under the name on each sheet; ``crossings``: pairs of the boundary's sides that meet (a cut
-    line that crosses itself, on a pattern with no fold), said when there are any."""
+    line that crosses itself, on a pattern with no fold), ``turned``: holes the pattern wraps over
+    (:func:`golden_model.mesh.turned_holes`), each said when there are any."""
     return (f"{status} after {iterations} iterations: E_S {error_text(area_error)}, E_C {error_text(shape_error)}, "
-            f"{folded} folded" + (f", its boundary crosses itself {crossings} times" if crossings else ""))
+            f"{folded} folded" + (f", its boundary crosses itself {crossings} times" if crossings else "")
+            + (f", it wraps over {turned} of its holes" if turned else ""))
 
 
 #: How springflat's own OBJ files begin (a pattern's ``.obj``, a layout's ``.flat.obj``): an existing non-empty

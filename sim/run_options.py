@@ -280,9 +280,14 @@ def slim_beside_arap(mesh: Mesh, enabled: bool) -> Iterator[Callable[[], np.ndar
         return
     from .workers import WorkerPool, result_of
 
+    try:
+        disk = mesh.disk
+    except MeshError:  # (a kept slit: the start says why, after ARAP)
+        yield None
+        return
     with WorkerPool(1) as pool:
         try:
-            future = pool.submit(slim_layout, mesh.disk)
+            future = pool.submit(slim_layout, disk)
             yield lambda: result_of(future)
         finally:
             pool.stop()  # ARAP did not fold, or SLIM's layout has arrived: nothing left to wait for

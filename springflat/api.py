@@ -43,8 +43,8 @@ from sim.mesh_io import load_mesh_with_notes
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
                          ending_name_problem)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, add_pattern_options,
-                          kind_or_none, on_sheets, pattern_ending, run_caption, scale_note, seam_length,
-                          write_pattern_file)
+                          closed_holes_note, kind_or_none, on_sheets, pattern_ending, run_caption, scale_note,
+                          seam_length, write_pattern_file)
 from sim.run_options import (HOLES_HINT, UserError, add_run_options, file_defaults, file_path_argument, holes_mode,
                              params_from_args, path_argument)
 
@@ -166,6 +166,8 @@ class Pattern:
         folded: triangles whose orientation disagrees with the pattern's.
         boundary_crossings: pairs of the boundary's sides that meet, on a fold-free pattern (a property;
             ``None`` for a folded or diverged one): where it is not 0, parts of the pattern lie on each other.
+        turned_holes: kept holes the pattern wraps over (a property; ``None`` without holes, or for a folded
+            or diverged pattern): where it is not 0, the piece covers those holes twice.
         area_ratio: ``(F,)`` ``|A'_t| / A_t`` per triangle (1 = area kept).
         name: the mesh's name (printed on PDF/SVG sheets).
         vertices, faces: the mesh, ``(V, 3)`` float64 and ``(F, 3)`` int64.
@@ -198,6 +200,12 @@ class Pattern:
         """Pairs of the boundary's sides that meet: 0 for a fold-free pattern that covers no point twice;
         ``None`` where not counted (a folded or diverged pattern)."""
         return self.result.extra.get("boundary_crossings")
+
+    @property
+    def turned_holes(self) -> int | None:
+        """Holes kept with ``keep_holes`` that the pattern wraps over (covers twice), on a fold-free pattern with
+        holes; ``None`` otherwise."""
+        return self.result.extra.get("turned_holes")
 
     @cached_property
     def mesh(self) -> Mesh:
@@ -415,7 +423,7 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     except OutputError as exc:
         raise OutputError(f"write_pattern: {exc}") from None
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
-                          pattern.folded, pattern.boundary_crossings)
+                          pattern.folded, pattern.boundary_crossings, pattern.turned_holes)
     try:
         drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
         if grain is not None:
@@ -426,8 +434,10 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
                            dxf_edges=dxf_edges)
     except PatternError as exc:  # the command's words for the same refusal ("check --units") in the API's
         raise PatternError(f"write_pattern: {_in_api_words(str(exc))}") from None
-    if kind_or_none(path) in TRUE_SCALE_KINDS and (note := scale_note(drawing, "units='{}'")) is not None:
-        warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
+    if kind_or_none(path) in TRUE_SCALE_KINDS:
+        for note in (scale_note(drawing, "units='{}'"), closed_holes_note(drawing)):
+            if note is not None:
+                warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
 
 
 #: The pattern options of ``springflat flatten`` (``--units``, ``--paper``, ...): :func:`write_pattern`'s keywords.

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import (HoledMesh, Holes, InconsistentOrientation, Mesh, MeshError, boundary_crossings,
+from golden_model.mesh import (HoledMesh, Holes, InconsistentOrientation, Mesh, MeshError, boundary_crossings, turned_holes,
                                component_labels, count_components, fill_holes, hole_triangles, orient_consistently,
                                oriented_mesh)
 from sim.generate import grid_faces, grid_uv
@@ -528,7 +528,19 @@ def test_kept_holes_are_said_with_their_edges_lengths():
                         for h in mesh.boundary_loops[1:])
     assert notes == [f"2 holes kept as cut-outs (edges {hole_edges[0]:.4g} to {hole_edges[1]:.4g} long, the piece's "
                      f"outer edge {np.linalg.norm(np.diff(vertices[np.r_[mesh.boundary_loop, mesh.boundary_loop[0]]], axis=0), axis=1).sum():.4g}, "
-                     "in the mesh's units); the start layout is computed with them closed"]
+                     "in the mesh's units); a computed start layout closes them first"]
     assert oriented_mesh(*_holed_grid(cells=()), holes=Holes.KEEP)[1] == []  # no hole, no note
     with pytest.raises(HoledMesh):
         oriented_mesh(vertices, faces)
+
+
+def test_a_hole_whose_edge_runs_the_patterns_way_round_is_turned():
+    vertices, faces = _holed_grid()
+    mesh = Mesh(vertices, faces, holes=True)
+    flat = vertices[:, :2].copy()
+    assert turned_holes(flat, faces, mesh.boundary_loops) == 0
+    assert turned_holes(flat * [-1.0, 1.0], faces, mesh.boundary_loops) == 0  # mirrored: both the other way round
+    hole = mesh.boundary_loops[1]
+    flat[hole] = flat[hole][[1, 0, 3, 2]]  # the hole's corners swapped in pairs: its square walked the other way
+    assert turned_holes(flat, faces, mesh.boundary_loops) == 1
+    assert turned_holes(flat, faces, mesh.boundary_loops[:1]) == 0  # (the outer edge alone: no hole)

@@ -107,3 +107,91 @@ def test_the_api_reads_and_flattens_a_mesh_with_its_holes_kept(tmp_path):
     assert (np.sign(signed_areas_2d(pattern.layout, F)) > 0).all()
     springflat.write_pattern(tmp_path / "api.dxf", pattern)
     assert len(_dxf_loops(tmp_path / "api.dxf", "CUT")) == 3
+
+
+def _bump_with_a_hole_on_top():
+    """A 100 mm grid over a 60 mm high bump, the 2 × 2 cells at its top cut out: the surface round the hole
+    holds more angle than a flat piece can, so the energy's minimum wraps the piece over the hole."""
+    from sim.generate import grid_faces, grid_uv
+
+    n = 21
+    uv = grid_uv(n, n, 100.0, 100.0) - 50.0
+    vertices = np.column_stack([uv, 60 * np.exp(-(uv**2).sum(axis=1) / (2 * 12.0**2))])
+    cells = np.ones((n - 1, n - 1), dtype=bool)
+    cells[9:11, 9:11] = False
+    faces = grid_faces(n, n)[np.concatenate([cells.ravel(), cells.ravel()])]
+    used = np.unique(faces)
+    renumber = np.full(n * n, -1)
+    renumber[used] = np.arange(len(used))
+    return vertices[used], renumber[faces]
+
+
+def test_a_piece_that_wraps_over_a_hole_is_said_to_overlap_and_its_start_is_open(tmp_path):
+    from golden_model.mesh import Mesh, boundary_crossings, turned_holes
+    from sim.layouts import start_layout
+
+    V, F = _bump_with_a_hole_on_top()
+    mesh = Mesh(V, F, holes=True)
+    # computed on the disk: the hole starts open and the right way round (harmonic's and LSCM's fold the fill's
+    # triangles and are untangled with them; the untangler's free outer edge may cross itself, the hole's not)
+    for init in ("auto", "harmonic", "lscm"):
+        start = start_layout(mesh, init).positions
+        assert not folded_faces(start, mesh.disk.faces).any(), init
+        assert turned_holes(start, F, mesh.boundary_loops) == 0 and boundary_crossings(start, mesh.boundary_loops[1:]) == 0
+    with pytest.warns(springflat.MeshNote, match=r"the pattern overlaps itself, though no triangle is folded: it "
+                                                 r"wraps over 1 of its holes, covering it twice"):
+        pattern = springflat.flatten(V, F, keep_holes=True, name="bump")
+    assert (pattern.status, pattern.folded, pattern.turned_holes) == ("converged", 0, 1)
+    triangles = [shapely.Polygon(pattern.layout[t]) for t in F]
+    assert sum(t.area for t in triangles) - shapely.union_all(triangles).area > 1.0  # mm²: covered twice, truly
+    springflat.write_pattern(tmp_path / "bump.dxf", pattern, seam_allowance=2.0)
+    cut = _dxf_loops(tmp_path / "bump.dxf", "CUT")
+    assert shapely.Polygon(cut[0], cut[1:]).buffer(1e-6).contains(shapely.union_all(triangles))
+    assert "it wraps over 1 of its holes" in str(ezdxf.readfile(tmp_path / "bump.dxf").ezdxf_metadata().get(
+        "springflat_run"))
+
+
+def test_the_grain_line_lies_on_a_ring_not_across_its_hole(tmp_path):
+    from sim.patterns import PatternDrawing, material
+
+    mesh = holed_dome(16, holes=((2, 2, 11),))  # a ring two cells wide: its middle is the hole
+    pattern = springflat.flatten(mesh.vertices * 160.0, mesh.faces, keep_holes=True)
+    drawing = PatternDrawing.of(pattern.mesh, pattern.layout).with_grain("y")
+    line = shapely.LineString(drawing.grain_line())
+    assert line.length > 0.3 * float(np.ptp(drawing.layout[:, 1]))
+    assert material(drawing).buffer(1e-6).covers(line)
+
+
+def test_a_seam_allowance_that_closes_kept_holes_on_the_cut_line_says_so(tmp_path):
+    _holed_file(tmp_path / "holed.obj")
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "holed.obj"), "--keep-holes", "--seam-allowance",
+                          "18mm", "--out", str(tmp_path / "p.dxf")], capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr  # the holes are about 32 and 43 mm across
+    assert ("springflat: note: 1 of the 2 kept holes is narrower than twice the seam allowance (18 mm): the cut line "
+            "does not go round it; cut it out along the sew line after sewing") in ran.stderr
+    assert len(_dxf_loops(tmp_path / "p.dxf", "CUT")) == 2 and len(_dxf_loops(tmp_path / "p.dxf", "SEW")) == 3
+
+
+def test_a_kept_slit_starts_from_pca_or_a_file_and_a_start_that_needs_it_closed_says_so(tmp_path):
+    from sim.generate import grid_faces, grid_uv
+
+    n = 11  # a slit: the middle row's three inner vertices doubled, the faces below them on the copies
+    uv = grid_uv(n, n, 100.0, 100.0)
+    vertices = np.column_stack([uv, 0.002 * ((uv - 50.0)**2).sum(axis=1)])
+    faces = grid_faces(n, n)
+    slit = [5 * n + k for k in (4, 5, 6)]
+    copies = {v: len(vertices) + i for i, v in enumerate(slit)}
+    vertices = np.vstack([vertices, vertices[slit]])
+    below = (faces // n).max(axis=1) <= 5  # rows 4 to 5: the cells under the middle row
+    faces[below] = np.vectorize(lambda v: copies.get(v, v))(faces[below])
+    save_obj(tmp_path / "slit.obj", vertices, faces)
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "slit.obj"), "--keep-holes"], capture_output=True,
+                         text=True, timeout=300)
+    assert ran.returncode == 2 and ran.stderr.strip().splitlines()[-1].startswith(
+        "springflat: error: the arap start is computed with the mesh's holes closed, and the hole whose edge runs")
+    assert ran.stderr.strip().endswith("encloses no area (a crack or a T-junction's slit): give --init pca or a "
+                                       "layout of the mesh (--init FILE)")
+    ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "slit.obj"), "--keep-holes", "--init", "pca",
+                          "--json"], capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr
+    assert json.loads(ran.stdout)["folded"] == 0
