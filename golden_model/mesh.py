@@ -786,4 +786,5 @@ def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.
     fans_per_vertex = np.bincount(fans // m, minlength=n)
     if (fans_per_vertex > 1).any():
         v = int(np.flatnonzero(fans_per_vertex > 1)[0])
-        raise MeshError(f"mesh is non-manifold at vertex {v} (its triangles form more than one fan)")
+        raise MeshError(f"mesh is non-manifold at vertex {v} (its triangles form more than one fan: a pinch, or "
+                        "holes or the outer edge meeting at a corner)")

@@ -544,3 +544,10 @@ def test_a_hole_whose_edge_runs_the_patterns_way_round_is_turned():
     flat[hole] = flat[hole][[1, 0, 3, 2]]  # the hole's corners swapped in pairs: its square walked the other way
     assert turned_holes(flat, faces, mesh.boundary_loops) == 1
     assert turned_holes(flat, faces, mesh.boundary_loops[:1]) == 0  # (the outer edge alone: no hole)
+
+
+def test_holes_meeting_at_a_corner_are_refused_saying_so():
+    vertices, faces = _holed_grid(cells=((2, 2), (3, 3)))  # two cells out, corner to corner: vertex 30 pinched
+    with pytest.raises(MeshError, match=r"^mesh is non-manifold at vertex 30 \(its triangles form more than one fan: "
+                                        r"a pinch, or holes or the outer edge meeting at a corner\)$"):
+        Mesh(vertices, faces, holes=True)
