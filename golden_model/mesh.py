@@ -12,7 +12,7 @@ duplicate triangles, no out-of-range indices and only finite coordinates
 within the supported range (:data:`COORDINATE_LIMIT`, :data:`MIN_MESH_SIZE`).
 Every failure raises :class:`MeshError` with a one-line message naming the
 problem.  A disk with holes (cut-outs: more boundary loops, no handles) is a
-mesh only where it is asked for (``Mesh(..., holes=True)``, :class:`Holes`).
+mesh only where it is asked for (``Mesh(..., allow_holes=True)``, :class:`Holes`).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ __all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "Holes",
            "outer_loop",
            "hole_triangles", "loop_length", "oriented_mesh", "orient_consistently", "component_labels",
            "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes",
+           "loop_signed_area",
            "COORDINATE_LIMIT",
            "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
 
@@ -112,20 +113,20 @@ def valid_text(text: str) -> str:
 
 @dataclass(frozen=True, eq=False)
 class Mesh:
-    """A validated triangle-mesh disk, or with ``holes`` a disk with holes (cut-outs).
+    """A validated triangle-mesh disk, or with ``allow_holes`` a disk with holes (cut-outs).
 
     Attributes:
         vertices: ``(V, 3)`` float64 3D positions ``Q``.
         faces: ``(F, 3)`` int64 vertex indices, 0-based.
         name: a label for reports (file stem or built-in name).
-        holes: whether boundary loops besides the outer edge are allowed (else :class:`HoledMesh`);
+        allow_holes: whether boundary loops besides the outer edge are allowed (else :class:`HoledMesh`);
             handles never are.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     name: str = "mesh"
-    holes: bool = False
+    allow_holes: bool = False
     _validated: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -133,7 +134,7 @@ class Mesh:
         vertices = np.ascontiguousarray(self.vertices, dtype=np.float64)
         faces = np.ascontiguousarray(self.faces)
         object.__setattr__(self, "vertices", vertices)
-        _validate(vertices, faces, bool(self.holes))
+        _validate(vertices, faces, bool(self.allow_holes))
         object.__setattr__(self, "faces", faces.astype(np.int64))
         object.__setattr__(self, "_validated", True)
 
@@ -280,7 +281,8 @@ def boundary_crossings(positions: np.ndarray, loops: np.ndarray | list[np.ndarra
     orientation tests (float, so sides that all but touch may go either way) decide the rest. A side through
     a corner meets both sides there, and a side of length 0 makes the sides on either side of it meet.
     """
-    loops = [np.asarray(loops)] if isinstance(loops, np.ndarray) and np.ndim(loops) == 1 else list(loops)
+    one_loop = np.ndim(loops) == 1 if isinstance(loops, np.ndarray) else bool(len(loops)) and np.ndim(loops[0]) == 0
+    loops = [loops] if one_loop else list(loops)
     starts = np.concatenate([np.asarray(loop, dtype=np.int64) for loop in loops])
     ends = np.concatenate([np.roll(np.asarray(loop, dtype=np.int64), -1) for loop in loops])
     points = np.asarray(positions, dtype=np.float64)
@@ -314,24 +316,22 @@ def boundary_crossings(positions: np.ndarray, loops: np.ndarray | list[np.ndarra
 
 
 def turned_holes(positions: np.ndarray, faces: np.ndarray, loops: list[np.ndarray]) -> int:
-    """How many holes (``loops[1:]``, :attr:`Mesh.boundary_loops`) run the pattern's own way round: the piece
-    wraps over such a hole (the corners of its edge span more than a turn between them), and covers it twice.
+    """How many of ``loops`` (:attr:`Mesh.boundary_loops`) beyond one run the pattern's own way round, on a layout
+    whose loops' sides do not meet (:func:`boundary_crossings` 0; elsewhere the count means nothing): 0 where
+    the fold-free layout ``positions`` ``(V, 2)`` covers no point twice, else the holes the piece wraps over.
 
-    A fold-free layout of a disk with holes covers a point as many times as the loops wind round it (each
-    taken the way its sides run in their faces). With the outer edge the pattern's way round and each hole's
-    the other way, and no two sides meeting (:func:`boundary_crossings`), that is 1 inside the outer edge and
-    −1 inside a hole's, never below 0: each hole lies inside the outer edge and outside the others, and no
-    point is covered twice. A hole's loop that is simple but runs the pattern's way winds +1 round the hole
-    instead: the hole is covered by the piece, twice with the outer edge's. ``positions`` ``(V, 2)``; a hole
-    of no area is not counted here (its sides meet)."""
+    A fold-free layout covers each point as often as its boundary's loops wind round it, each taken the way
+    its sides run in their faces. On a layout that covers no point twice, the covered area is one piece with
+    holes: its outer edge runs the pattern's way round and each hole's edge the other way. Conversely, with
+    loops that do not meet, one running the pattern's way (+1 inside it) and the others the other way (−1
+    inside each), the count is never below 0 only if each of those lies inside the first and outside the
+    others: 1 on the piece, 0 in a hole. A further loop run the pattern's way winds +1 round a hole the
+    piece wraps over (its corners hold less angle than an open flat hole needs: on top of a bump), which the
+    piece covers twice."""
     orientation = layout_orientation(positions, faces)
     points = np.asarray(positions, dtype=np.float64)
-    turned = 0
-    for loop in loops[1:]:
-        x, y = points[loop, 0], points[loop, 1]
-        if orientation * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)) > 0:
-            turned += 1
-    return turned
+    running_its_way = sum(orientation * loop_signed_area(points[loop]) > 0 for loop in loops)
+    return max(int(running_its_way) - 1, 0)
 
 
 def _cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -436,9 +436,9 @@ def _directed_boundary_edges(faces: np.ndarray) -> np.ndarray:
     return sides[counts[side_edge] == 1]
 
 
-def _validate(vertices: np.ndarray, faces: np.ndarray, holes: bool = False) -> None:
-    """Raise :class:`MeshError` unless the arrays form a single manifold disk (with ``holes``, or a disk with
-    holes)."""
+def _validate(vertices: np.ndarray, faces: np.ndarray, allow_holes: bool = False) -> None:
+    """Raise :class:`MeshError` unless the arrays form a single manifold disk (with ``allow_holes``, or a disk
+    with holes)."""
     if vertices.ndim != 2 or vertices.shape[1] != 3:
         raise MeshError(f"vertices must be a (V, 3) array, got shape {vertices.shape}")
     if len(vertices) == 0 or faces.size == 0:
@@ -513,7 +513,7 @@ def _validate(vertices: np.ndarray, faces: np.ndarray, holes: bool = False) -> N
         message = f"mesh is not a disk: it has {n_loops} boundary loops where a disk has one (holes, or a tube's ends)"
         if euler != 2 - n_loops:  # a disk with holes has 2 - loops; closing them would not leave a disk
             raise MeshError(f"{message}, and handles (Euler characteristic {euler}, expected {2 - n_loops})")
-        if not holes:
+        if not allow_holes:
             raise HoledMesh(message)
     elif euler != 1:
         raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")
@@ -616,7 +616,7 @@ def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh",
     turned = filled = False
     while True:
         try:
-            mesh = Mesh(vertices, faces, name=name, holes=holes is Holes.KEEP)
+            mesh = Mesh(vertices, faces, name=name, allow_holes=holes is Holes.KEEP)
             if mesh.n_holes:
                 notes.append(kept_holes_note(mesh))
             return mesh, notes
@@ -660,8 +660,8 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
     share = triangle_areas_3d(vertices, fill).sum() / triangle_areas_3d(vertices, faces).sum()
     plural = "s" if len(holes) != 1 else ""
     note = (f"{len(holes)} hole{plural} closed by {len(fill)} triangle{'s' if len(fill) != 1 else ''} "
-            f"(edge{plural} {_length_range(np.delete(lengths, outer))} long, the piece's outer edge "
-            f"{lengths[outer]:.4g}, in the mesh's units): the pattern covers {'them' if plural else 'it'}")
+            f"({_edges_text(np.delete(lengths, outer), lengths[outer])}): the pattern covers "
+            f"{'them' if plural else 'it'}")
     if share > LARGE_FILL:
         note += (f"; {'they are' if plural else 'it is'} {share:.0%} of the piece's area: a cut-out the piece must "
                  "keep is no hole to fill")
@@ -682,10 +682,9 @@ def outer_loop(vertices: np.ndarray, loops: list[np.ndarray]) -> int:
 
 def kept_holes_note(mesh: Mesh) -> str:
     """The note on a mesh whose holes are kept as cut-outs: how many, their edges' lengths."""
-    lengths = np.array([loop_length(mesh.vertices[loop]) for loop in mesh.boundary_loops[1:]])
-    plural = "s" if len(lengths) != 1 else ""
-    return (f"{len(lengths)} hole{plural} kept as cut-out{plural} (edge{plural} {_length_range(lengths)} long, the "
-            f"piece's outer edge {loop_length(mesh.vertices[mesh.boundary_loop]):.4g}, in the mesh's units); a "
+    lengths = np.array([loop_length(mesh.vertices[loop]) for loop in mesh.boundary_loops])
+    plural = "s" if len(lengths) != 2 else ""
+    return (f"{len(lengths) - 1} hole{plural} kept as cut-out{plural} ({_edges_text(lengths[1:], lengths[0])}); a "
             f"computed start layout closes {'them' if plural else 'it'} first")
 
 
@@ -728,7 +727,7 @@ def hole_triangles(vertices: np.ndarray, loop: np.ndarray) -> np.ndarray:
     u /= np.linalg.norm(u)
     v = np.cross(normal / np.linalg.norm(normal), u)
     flat = points @ np.column_stack([u, v])  # the loop turns counter-clockwise, seen along the normal
-    turn = np.sign(np.sum(flat[:, 0] * np.roll(flat[:, 1], -1) - np.roll(flat[:, 0], -1) * flat[:, 1]))
+    turn = np.sign(loop_signed_area(flat))
     tolerance = 1e-12 * size**2
     alive = list(range(len(polygon)))
     triangles = []
@@ -758,8 +757,18 @@ def loop_length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
 
 
-def _length_range(lengths: np.ndarray) -> str:
-    return f"{lengths.min():.4g}" if lengths.min() == lengths.max() else f"{lengths.min():.4g} to {lengths.max():.4g}"
+def loop_signed_area(points: np.ndarray) -> float:
+    """The signed area of the closed 2D polygon ``points`` ``(n, 2)``: positive when it runs counter-clockwise."""
+    x, y = points[:, 0], points[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def _edges_text(hole_edges: np.ndarray, outer_edge: float) -> str:
+    """``edges 3.1 to 4.2 long, the piece's outer edge 40, in the mesh's units``: the holes' edges' lengths."""
+    low, high = hole_edges.min(), hole_edges.max()
+    lengths = f"{low:.4g}" if low == high else f"{low:.4g} to {high:.4g}"
+    return (f"edge{'s' if len(hole_edges) != 1 else ''} {lengths} long, the piece's outer edge {outer_edge:.4g}, in "
+            "the mesh's units")
 
 
 def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.ndarray, n: int) -> None:

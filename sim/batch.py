@@ -127,7 +127,7 @@ def _tell(name: str, notes: list[str | None]) -> None:
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
     from .flatten_run import (check_print_size, divergence_note, human_line, json_summary, pattern_notes, run_flatten,
-                              run_formats, sheet_notes_of, write_outputs)
+                              run_formats, notes_on_cut_files, write_outputs)
 
     start = time.perf_counter()
     stderr = io.StringIO()
@@ -164,7 +164,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 written = write_outputs(args, mesh, result)
                 _tell(job.name, [divergence_note(params, result),
                                  *pattern_notes(params, result, formats=run_formats(args)),
-                                 *sheet_notes_of(args, mesh, result)])  # prints at 1:1000
+                                 *notes_on_cut_files(args, mesh, result)])  # prints at 1:1000
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)
             files = [(ending, path.read_bytes()) for _, ending, path in names if path in written]

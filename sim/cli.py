@@ -49,7 +49,7 @@ from .clock import ENGINE_TARGET_MHZ
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS, answered_signals
 from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, divergence_note, human_line,
-                          json_summary, output_paths, pattern_notes, run_flatten, run_formats, sheet_notes_of,
+                          json_summary, output_paths, pattern_notes, run_flatten, run_formats, notes_on_cut_files,
                           what_was_used, write_outputs)
 from .layouts import LAYOUT_METHODS
 from .mesh_io import MESH_SUFFIXES
@@ -142,7 +142,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(human_line(mesh, result))
         print(what_was_used(params, args.init, result, mesh), file=sys.stderr)
     formats = run_formats(args)
-    for note in (*pattern_notes(params, result, formats=formats), *sheet_notes_of(args, mesh, result),
+    for note in (*pattern_notes(params, result, formats=formats), *notes_on_cut_files(args, mesh, result),
                  _energy_rule_note(params, result), _error_resolution_note(formats)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)

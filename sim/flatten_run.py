@@ -205,7 +205,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
     if result.status != "diverged" and not result.final.folded:
         result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loops)
-        if mesh.n_holes:
+        if mesh.n_holes and not result.extra["boundary_crossings"]:  # (where sides meet, loops have no sense)
             result.extra["turned_holes"] = turned_holes(result.positions, mesh.faces, mesh.boundary_loops)
     return result
 
@@ -429,7 +429,7 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh:
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 
-def sheet_notes_of(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> list[str]:
+def notes_on_cut_files(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> list[str]:
     """The notes on a run that writes a pattern at 1:1 (a print or a cut; ``vt`` and layouts have no scale):
     :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it) and, with a seam allowance,
     :func:`~sim.patterns.closed_holes_note`."""

@@ -206,16 +206,22 @@ def bumpy_grid(n: int = 31, height: float = 0.08, bumps: int = 3) -> Mesh:
 
 
 def holed_dome(n: int = 16, height: float = 0.3, holes: tuple[tuple[int, int, int], ...] = ((5, 5, 3),)) -> Mesh:
-    """:func:`dome_grid` with rectangular cut-outs: each ``(row, column, size)`` removes the grid's cells of
-    rows and columns ``row .. row + size − 1``, ``column .. column + size − 1`` (holes must not touch the edge
-    or each other). A disk with holes, ``Mesh(..., holes=True)``."""
-    dome = dome_grid(n, height)
-    cells = np.ones((n - 1, n - 1), dtype=bool)
+    """:func:`dome_grid` with square cut-outs: each ``(row, column, size)`` removes the grid's cells of rows and
+    columns ``row .. row + size − 1``, ``column .. column + size − 1`` (holes must not touch the edge or each
+    other; :func:`grid_with_cut_outs`)."""
+    cut = np.zeros((n - 1, n - 1), dtype=bool)
     for row, column, size in holes:
-        cells[row:row + size, column:column + size] = False
-    keep = np.concatenate([cells.ravel(), cells.ravel()])  # grid_faces: two triangles a cell, in two runs
-    faces = dome.faces[keep]
+        cut[row:row + size, column:column + size] = True
+    return grid_with_cut_outs(dome_grid(n, height).vertices, n, cut, name="holed dome")
+
+
+def grid_with_cut_outs(vertices: np.ndarray, n: int, cut: np.ndarray, name: str = "grid") -> Mesh:
+    """The ``n × n`` vertex grid ``vertices`` (row-major, :func:`grid_faces`) without the cells where ``cut``
+    ``(n − 1, n − 1)`` is true, its unused vertices dropped (the rest in order): a disk with holes,
+    ``Mesh(..., allow_holes=True)``."""
+    keep = ~np.asarray(cut, dtype=bool).ravel()
+    faces = grid_faces(n, n)[np.concatenate([keep, keep])]  # two triangles a cell, in two runs
     used = np.unique(faces)
     renumber = np.full(n * n, -1)
     renumber[used] = np.arange(len(used))
-    return Mesh(dome.vertices[used], renumber[faces], name="holed dome", holes=True)
+    return Mesh(np.asarray(vertices)[used], renumber[faces], name=name, allow_holes=True)

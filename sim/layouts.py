@@ -56,7 +56,7 @@ from .mesh_io import read_obj_vertices
 from .mesh_io.polygons import is_plain
 
 __all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
-           "arap_layout", "slim_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS",
+           "arap_layout", "slim_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS", "NoDiskStart",
            "SLIM_MAX_ITERATIONS", "check_layout", "init_name", "ARRAY_START"]
 
 LAYOUT_METHODS = ("tutte", "pca", "harmonic", "lscm", "arap", "slim")
@@ -76,6 +76,10 @@ dynamics takes it from there (docs/guard.md)."""
 
 class LayoutError(ValueError):
     """A layout that cannot be used; the message is one line for the user."""
+
+
+class NoDiskStart(LayoutError):
+    """A computed start that needs the mesh's holes closed, where one cannot be (a slit kept as a cut-out)."""
 
 
 def _counter_clockwise(positions: np.ndarray, mesh: Mesh) -> np.ndarray:
@@ -443,15 +447,15 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
 
 def _disk(mesh: Mesh, method: str) -> Mesh:
     """``mesh`` with its holes closed (:attr:`Mesh.disk`) for the start ``method``. A hole that cannot be closed
-    (a slit, kept as a cut-out): ``pca``, a projection, takes the mesh as it is; any other method is refused as
-    a :class:`LayoutError` that says what start works."""
+    (a slit, kept as a cut-out): ``pca``, a projection, takes the mesh as it is; any other method is refused
+    (:class:`NoDiskStart`), saying what start works."""
     try:
         return mesh.disk
     except MeshError as exc:
         if method == "pca":
             return mesh
-        raise LayoutError(f"the {method} start is computed with the mesh's holes closed, and {exc}: give --init "
-                          "pca or a layout of the mesh (--init FILE)") from None
+        raise NoDiskStart(f"the {method} layout, a start computed with the mesh's holes closed, cannot be had: "
+                          f"{exc}; start from --init pca or from a layout of the mesh's vertices") from None
 
 
 def _facing_the_front(positions: np.ndarray, mesh: Mesh, what: str, notes: list[str] | None) -> np.ndarray:
@@ -507,15 +511,16 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     method = "arap" if name == AUTO_START else name
     described = (f"the {method} layout" if method in _METHODS else "the init array" if name == ARRAY_START
                  else f"the layout '{name}'")
+    closed = ""
     if method in _METHODS:
-        mesh = _disk(mesh, method)
+        mesh, closed = _disk(mesh, method), " (with the holes closed)" if mesh.n_holes else ""
     if name != ARRAY_START:
         say(f"computing {described}" if method in _METHODS else f"reading {described}")
     read_notes: list[str] = []
     try:
         positions = initial_layout(mesh, init if name == ARRAY_START else method, read_notes)
     except LayoutError as exc:  # (without libigl, SLIM below says so in its own words)
-        if name != AUTO_START:
+        if name != AUTO_START or isinstance(exc, NoDiskStart):
             raise
         notes = [f"{exc}: starting from SLIM on Tutte's layout instead (fold-free by construction)"]
         say(notes[-1])
@@ -525,16 +530,16 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
         return StartLayout(positions, method, 0, read_notes)
     plural = "s" if folded != 1 else ""
     if name == AUTO_START:
-        notes = [f"{described} folds {folded} triangle{plural}: starting from SLIM on Tutte's layout instead "
+        notes = [f"{described} folds {folded} triangle{plural}{closed}: starting from SLIM on Tutte's layout instead "
                  "(fold-free by construction)"]
         say(notes[-1])
         return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
-    notes = read_notes + [f"{described} folds {folded} triangle{plural}: untangling it"]
+    notes = read_notes + [f"{described} folds {folded} triangle{plural}{closed}: untangling it"]
     say(notes[-1])
     untangled = untangle_layout(mesh, positions, time_limit=untangle_seconds)
     if untangled.folded == 0:
         return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, untangled", 0, notes)
-    notes.append(f"untangling left {untangled.folded} of {folded} folded triangles after {untangled.seconds:.0f} s; "
+    notes.append(f"untangling left {untangled.folded} of {folded} folded triangles{closed} after {untangled.seconds:.0f} s; "
                  "the guarded dynamics cannot clear them (the default --init auto starts fold-free)")
     if untangled.folded < folded:
         return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, partly untangled",

@@ -48,7 +48,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from golden_model.mesh import Mesh, boundary_crossings, folded_faces, loop_length, turned_holes
+from golden_model.mesh import Mesh, boundary_crossings, folded_faces, loop_length, loop_signed_area, turned_holes
 
 from .mesh_io import save_obj
 from .outputs import OutputError, atomic_write, output_target, write_layout
@@ -83,8 +83,9 @@ SVG_GAP_MM = 10.0         # space between tiled sheets in an SVG
 CUT_WIDTH_MM = 0.3        # the cut line
 SEW_WIDTH_MM = 0.2        # the sew line, inside the cut line when there is a seam allowance ...
 SEW_DASH_MM = (3.0, 1.5)  # ... dashed: on and off
-#: The overlap guides' chain line (on, off, on, off; mm), grey: not to be taken for the dashed sew line.
+#: The overlap guides' chain line (on, off, on, off; mm) and its grey: not to be taken for the sew line.
 GUIDE_DASH_MM = (6.0, 1.5, 0.5, 1.5)
+GUIDE_GREY = 0.45
 SEAM_ARC_SEGMENTS = 32    # chords a quarter circle has where the cut line turns round a corner of the sew line
 SEAM_MARGIN = 1e-3        # the cut line is at least the allowance, at most this share more, from the sew line
 EDGE_WIDTH_MM = 0.06      # mesh edges, drawn only when ...
@@ -237,6 +238,11 @@ class PatternDrawing:
         return [self.boundary_points, *(self.layout[hole] for hole in self.holes)]
 
     @cached_property
+    def covered(self):
+        """The area the pattern covers (:func:`material`), kept: the seam allowance and the grain line ask."""
+        return material(self)
+
+    @cached_property
     def cut_loops(self) -> list[np.ndarray]:
         """The cut line's closed loops, in ``units``: the edge's (:attr:`edge_loops`), or the seam allowance's
         outline (:func:`seam_outlines`: the outer loop first, then any hole the allowance leaves inside it)."""
@@ -280,7 +286,7 @@ class PatternDrawing:
         x, y = self.layout[np.argmin(np.linalg.norm(self.layout - centroid, axis=1))]
         half = GRAIN_LINE_FRACTION * float(np.ptp(self.layout[:, 1])) / 2
         line = np.array([[x, y - half], [x, y + half]])
-        return grain_on_material(line, material(self), float(centroid[0]))
+        return grain_on_material(line, self.covered, float(centroid[0]))
 
 
 def seam_allowance_argument(text: str) -> str:
@@ -358,21 +364,24 @@ def length_text(length: float, units: str) -> str:
 
 def closed_holes_note(drawing: PatternDrawing) -> str | None:
     """Kept holes that the seam allowance closes on the cut line (a hole narrower than twice the allowance): the
-    cut line does not go round them, so they are cut after sewing, along their sew line; ``None`` if none."""
-    if drawing.seam <= 0 or not drawing.holes:
+    cut line goes round no part of them, so they are cut after sewing, along their sew line; ``None`` if none,
+    or where the pattern overlaps itself (:func:`overlaps`: its holes are no cut-outs to speak of)."""
+    if drawing.seam <= 0 or not drawing.holes or overlaps(drawing):
         return None
     import shapely
 
-    cut = shapely.Polygon(drawing.cut_loops[0], drawing.cut_loops[1:])
-    closed = sum(cut.covers(shapely.Polygon(loop).representative_point()) for loop in drawing.edge_loops[1:])
+    openings = [shapely.Polygon(loop).representative_point() for loop in drawing.cut_loops[1:]]
+    closed = sum(not any(shapely.Polygon(hole).contains(point) for point in openings)
+                 for hole in drawing.edge_loops[1:])
     if not closed:
         return None
-    which = (f"{closed} of the {len(drawing.holes)} kept holes" if closed < len(drawing.holes)
-             else "the kept hole" if closed == 1 else f"all {closed} kept holes")
-    return (f"{which} {'are' if closed > 1 else 'is'} narrower than twice the "
-            f"seam allowance ({length_text(drawing.seam, drawing.units)}): the cut line does not go round "
-            f"{'them' if closed > 1 else 'it'}; cut {'them' if closed > 1 else 'it'} out along the sew line "
-            "after sewing")
+    count = len(drawing.holes)
+    which = (f"{closed} of the {count} kept holes" if closed < count else "the kept hole" if closed == 1
+             else "both kept holes" if closed == 2 else f"all {closed} kept holes")
+    them = "them" if closed > 1 else "it"
+    return (f"{which} {'are' if closed > 1 else 'is'} narrower than twice the seam allowance "
+            f"({length_text(drawing.seam, drawing.units)}): the cut line does not go round {them}; cut {them} out "
+            "along the sew line after sewing")
 
 
 def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]:
@@ -384,43 +393,61 @@ def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]
     small share of the distance first, each of which brings the line a little closer (up to 0.05 % on a scan).
     A hole the allowance leaves (a C-shaped piece whose slit the allowances close, a pattern that overlaps
     itself round an empty middle) is a loop of the cut line too: its middle is no material."""
-    grown = material(drawing).buffer(allowance * (1 + SEAM_MARGIN), quad_segs=SEAM_ARC_SEGMENTS)
+    grown = drawing.covered.buffer(allowance * (1 + SEAM_MARGIN), quad_segs=SEAM_ARC_SEGMENTS)
     parts = getattr(grown, "geoms", [grown])
     largest = max(parts, key=lambda part: part.area)
     return [np.asarray(ring.coords, dtype=np.float64)[:-1] for ring in (largest.exterior, *largest.interiors)]
 
 
-def material(drawing: PatternDrawing):
-    """The area the pattern covers, a shapely geometry in ``units``: the polygon of its outer edge less its kept
-    holes, or, where a triangle is folded, the boundary crosses itself or the pattern wraps over a hole (parts
-    of the pattern lie on each other), the union of its triangles (a folded flap can lie outside the
-    boundary's polygon)."""
+def overlaps(drawing: PatternDrawing) -> bool:
+    """Whether parts of the pattern lie on each other: a triangle folded, sides of its boundary that meet
+    (:func:`~golden_model.mesh.boundary_crossings`) or a hole it wraps over
+    (:func:`~golden_model.mesh.turned_holes`)."""
+    loops = [drawing.boundary, *drawing.holes]
+    return bool(folded_faces(drawing.layout, drawing.faces).any() or boundary_crossings(drawing.layout, loops)
+                or turned_holes(drawing.layout, drawing.faces, loops))
+
+
+def edge_polygon(loops: list[np.ndarray]):
+    """The shapely polygon of a pattern's edge loops that do not overlap (:func:`overlaps`): the loop that
+    encloses the most area is the outer edge (in the layout, whichever loop of the mesh it is), the others its
+    holes."""
     import shapely
 
-    folded = folded_faces(drawing.layout, drawing.faces)
-    loops = [drawing.boundary, *drawing.holes]
-    if not folded.any() and boundary_crossings(drawing.layout, loops) == 0 \
-            and turned_holes(drawing.layout, drawing.faces, loops) == 0:
-        return shapely.Polygon(drawing.boundary_points, drawing.edge_loops[1:])
+    outer = max(range(len(loops)), key=lambda k: abs(loop_signed_area(loops[k])))
+    return shapely.Polygon(loops[outer], [loop for k, loop in enumerate(loops) if k != outer])
+
+
+def material(drawing: PatternDrawing):
+    """The area the pattern covers, a shapely geometry in ``units``: the polygon of its edge (:func:`edge_polygon`),
+    or, where parts of the pattern lie on each other (:func:`overlaps`), the union of its triangles (a folded
+    flap can lie outside the boundary's polygon). :attr:`PatternDrawing.covered` keeps it."""
+    import shapely
+
+    if not overlaps(drawing):
+        return edge_polygon(drawing.edge_loops)
     corners = drawing.layout[drawing.faces]
     a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     kept = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) > 0  # (a triangle of no area covers nothing)
     return shapely.union_all(shapely.polygons(corners[kept]))
 
 
-#: Verticals :func:`grain_on_material` tries across the piece.
+#: Verticals :func:`grain_on_material` tries across the piece, and the share of the longest stretch on the
+#: piece a moved grain line may take at most.
 GRAIN_CANDIDATES = 64
+GRAIN_STRETCH_SHARE = 0.9
 
 
 def grain_on_material(line: np.ndarray, area, centre_x: float) -> np.ndarray:
     """``line`` (vertical, ``(2, 2)``) where it lies on ``area`` (the piece's material, shapely, allowing for
     rounding); else the longest stretch of any of :data:`GRAIN_CANDIDATES` verticals across ``area`` (the one
-    nearest ``centre_x`` among the longest), with the line as long as before, or 90 % of that stretch where
-    that is shorter, about its middle: a grain line that crossed a hole or a gap would be laid on nothing."""
+    nearest ``centre_x`` among the longest), with a line as long as ``line``, or :data:`GRAIN_STRETCH_SHARE`
+    of that stretch where that is shorter, about its middle: a grain line that crossed a hole or a gap would
+    be laid on nothing."""
     import shapely
 
     size = max(float(np.ptp(np.asarray(area.bounds).reshape(2, 2), axis=0).max()), 1e-300)
-    if area.buffer(1e-9 * size).covers(shapely.LineString(line)):
+    if area.buffer(1e-9 * size).covers(shapely.LineString(line)):  # (its ends may lie on the edge)
         return line
     low_x, low_y, high_x, high_y = area.bounds
     best = None
@@ -435,7 +462,7 @@ def grain_on_material(line: np.ndarray, area, centre_x: float) -> np.ndarray:
     if best is None:  # (an area no vertical crosses: the line as it was)
         return line
     _, x, bottom, top = best
-    half = min(float(line[1, 1] - line[0, 1]), 0.9 * (top - bottom)) / 2
+    half = min(float(line[1, 1] - line[0, 1]), GRAIN_STRETCH_SHARE * (top - bottom)) / 2
     middle = (bottom + top) / 2
     return np.array([[x, middle - half], [x, middle + half]])
 
@@ -1112,7 +1139,7 @@ def sheet_marks(plan: SheetPlan, sheet: Sheet, drawing: PatternDrawing) -> tuple
     cross = 3.0
 
     def mark(a: tuple[float, float], b: tuple[float, float], neighbour: Sheet, at: tuple[float, float], anchor: str):
-        strokes.append(Stroke((a, b), 0.2, 0.45, dash=GUIDE_DASH_MM, name=f"overlap-{neighbour.label}"))
+        strokes.append(Stroke((a, b), 0.2, GUIDE_GREY, dash=GUIDE_DASH_MM, name=f"overlap-{neighbour.label}"))
         for px, py in (a, b):
             strokes.append(Stroke(((px - cross, py), (px + cross, py)), 0.2, 0.0))
             strokes.append(Stroke(((px, py - cross), (px, py + cross)), 0.2, 0.0))
@@ -1199,8 +1226,7 @@ def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
     import shapely
     from shapely.ops import polylabel
 
-    outer, *holes = (_pattern_mm(drawing, plan, loop) for loop in drawing.edge_loops)
-    area = shapely.make_valid(shapely.Polygon(outer, holes))
+    area = shapely.make_valid(edge_polygon([_pattern_mm(drawing, plan, loop) for loop in drawing.edge_loops]))
     for stroke in _grain_mm(drawing, plan):  # beside the grain line, which runs through the piece's middle
         area = area.difference(shapely.LineString(stroke).buffer(GRAIN_CLEARANCE_MM))
     parts = [part for part in getattr(area, "geoms", [area]) if part.geom_type == "Polygon"]
@@ -1398,7 +1424,7 @@ def _write_svg(path: str, drawing: PatternDrawing, plan: SheetPlan) -> None:
             name = 'id="sew"' if k == 0 else 'class="sew-hole"'
             write(f'<polygon {name} points="{_svg_points(loop.tolist(), 0.0)}" stroke="#000000" '
                   f'stroke-width="{_svg_num(SEW_WIDTH_MM)}" '
-                  f'stroke-dasharray="{_svg_num(SEW_DASH_MM[0])} {_svg_num(SEW_DASH_MM[1])}"/>\n')
+                  f'stroke-dasharray="{" ".join(_svg_num(length) for length in SEW_DASH_MM)}"/>\n')
         grain, grey = _grain_mm(drawing, plan), round(255 * GRAIN_GREY)
         if grain:
             write(f'<g id="grain" stroke="#{grey:02x}{grey:02x}{grey:02x}" '

@@ -24,7 +24,7 @@ from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.guard import ENERGY_WINDOW
 from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
 
-from .layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, init_name, initial_layout, slim_layout,
+from .layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, NoDiskStart, init_name, initial_layout, slim_layout,
                       start_layout)
 from .mesh_io import load_mesh_with_notes
 from .mesh_io.polygons import is_float, is_int
@@ -311,7 +311,7 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
         try:
             positions = initial_layout(mesh, init, read)
         except LayoutError as exc:
-            if init_name(init) != AUTO_START:
+            if init_name(init) != AUTO_START or isinstance(exc, NoDiskStart):
                 raise
             raise LayoutError(f"{exc}; without the step guard --init auto takes no other start: give --init slim "
                               "(SLIM on Tutte's layout, where a guarded run, the default for mesh files, starts)"

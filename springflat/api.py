@@ -166,8 +166,8 @@ class Pattern:
         folded: triangles whose orientation disagrees with the pattern's.
         boundary_crossings: pairs of the boundary's sides that meet, on a fold-free pattern (a property;
             ``None`` for a folded or diverged one): where it is not 0, parts of the pattern lie on each other.
-        turned_holes: kept holes the pattern wraps over (a property; ``None`` without holes, or for a folded
-            or diverged pattern): where it is not 0, the piece covers those holes twice.
+        turned_holes: kept holes the pattern wraps over (a property; ``None`` without holes, or for a folded,
+            diverged or crossing pattern): where it is not 0, the piece covers those holes twice.
         area_ratio: ``(F,)`` ``|A'_t| / A_t`` per triangle (1 = area kept).
         name: the mesh's name (printed on PDF/SVG sheets).
         vertices, faces: the mesh, ``(V, 3)`` float64 and ``(F, 3)`` int64.
@@ -204,13 +204,13 @@ class Pattern:
     @property
     def turned_holes(self) -> int | None:
         """Holes kept with ``keep_holes`` that the pattern wraps over (covers twice), on a fold-free pattern with
-        holes; ``None`` otherwise."""
+        holes whose boundary does not cross itself; ``None`` otherwise."""
         return self.result.extra.get("turned_holes")
 
     @cached_property
     def mesh(self) -> Mesh:
         """The 3D mesh as :class:`golden_model.mesh.Mesh`."""
-        return Mesh(self.vertices, self.faces, name=self.name, holes=True)
+        return Mesh(self.vertices, self.faces, name=self.name, allow_holes=True)
 
     def distortion(self) -> Distortion:
         """Per-triangle area ratio and per-edge strain (:class:`sim.distortion.Distortion`)."""

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
-from golden_model.mesh import (HoledMesh, Holes, InconsistentOrientation, Mesh, MeshError, boundary_crossings, turned_holes,
-                               component_labels, count_components, fill_holes, hole_triangles, orient_consistently,
-                               oriented_mesh)
+from golden_model.mesh import (HoledMesh, Holes, InconsistentOrientation, Mesh, MeshError, boundary_crossings,
+                               component_labels, count_components, fill_holes, folded_faces, hole_triangles,
+                               orient_consistently, oriented_mesh, turned_holes)
 from sim.generate import grid_faces, grid_uv
 from sim.mesh_io import load_mesh_with_notes, save_obj
 
@@ -498,7 +498,7 @@ def test_a_mesh_without_holes_is_left_as_it_is_by_the_fill():
 
 def test_a_disk_with_holes_is_a_mesh_where_asked_its_outer_edge_first_and_its_disk_closed():
     vertices, faces = _holed_grid()
-    mesh = Mesh(vertices, faces, holes=True)
+    mesh = Mesh(vertices, faces, allow_holes=True)
     assert mesh.n_holes == 2 and [len(loop) for loop in mesh.boundary_loops] == [32, 4, 4]
     np.testing.assert_array_equal(mesh.boundary_loop, mesh.boundary_loops[0])
     outer, *holes = mesh.boundary_loops
@@ -512,23 +512,23 @@ def test_a_disk_with_holes_is_a_mesh_where_asked_its_outer_edge_first_and_its_di
     assert disk.n_holes == 0 and disk.n_faces == len(faces) + 4 and disk.vertices is mesh.vertices
     np.testing.assert_array_equal(disk.faces[:len(faces)], faces)
     assert disk.disk is disk
-    mesh_of_disk = Mesh(vertices, disk.faces, holes=True)  # holes allowed, none there
+    mesh_of_disk = Mesh(vertices, disk.faces, allow_holes=True)  # holes allowed, none there
     assert mesh_of_disk.n_holes == 0 and mesh_of_disk.disk is mesh_of_disk
     swap = np.arange(81)
     swap[[0, 20]] = [20, 0]  # a hole's corner is vertex 0: its loop is still not the outer edge
-    renumbered = Mesh(vertices[swap], swap[faces], holes=True)
+    renumbered = Mesh(vertices[swap], swap[faces], allow_holes=True)
     assert [len(loop) for loop in renumbered.boundary_loops] == [32, 4, 4] and 0 in renumbered.boundary_loops[1]
 
 
 def test_kept_holes_are_said_with_their_edges_lengths():
-    vertices, faces = _holed_grid()
+    vertices, faces = _holed_grid()  # a hole a cell of 1/8 on a gentle bowl: a little over 0.5 round, the piece 4
     mesh, notes = oriented_mesh(vertices, faces, holes=Holes.KEEP)
     assert mesh.n_holes == 2 and mesh.n_faces == len(faces)
-    hole_edges = sorted(float(np.linalg.norm(np.roll(vertices[h], -1, axis=0) - vertices[h], axis=1).sum())
-                        for h in mesh.boundary_loops[1:])
-    assert notes == [f"2 holes kept as cut-outs (edges {hole_edges[0]:.4g} to {hole_edges[1]:.4g} long, the piece's "
-                     f"outer edge {np.linalg.norm(np.diff(vertices[np.r_[mesh.boundary_loop, mesh.boundary_loop[0]]], axis=0), axis=1).sum():.4g}, "
-                     "in the mesh's units); a computed start layout closes them first"]
+    assert notes == ["2 holes kept as cut-outs (edges 0.5039 to 0.5155 long, the piece's outer edge 4.104, in the "
+                     "mesh's units); a computed start layout closes them first"]
+    one = oriented_mesh(*_holed_grid(cells=((2, 2),)), holes=Holes.KEEP)[1]
+    assert one == ["1 hole kept as cut-out (edge 0.5039 long, the piece's outer edge 4.104, in the mesh's units); a "
+                   "computed start layout closes it first"]
     assert oriented_mesh(*_holed_grid(cells=()), holes=Holes.KEEP)[1] == []  # no hole, no note
     with pytest.raises(HoledMesh):
         oriented_mesh(vertices, faces)
@@ -536,7 +536,7 @@ def test_kept_holes_are_said_with_their_edges_lengths():
 
 def test_a_hole_whose_edge_runs_the_patterns_way_round_is_turned():
     vertices, faces = _holed_grid()
-    mesh = Mesh(vertices, faces, holes=True)
+    mesh = Mesh(vertices, faces, allow_holes=True)
     flat = vertices[:, :2].copy()
     assert turned_holes(flat, faces, mesh.boundary_loops) == 0
     assert turned_holes(flat * [-1.0, 1.0], faces, mesh.boundary_loops) == 0  # mirrored: both the other way round
@@ -546,8 +546,31 @@ def test_a_hole_whose_edge_runs_the_patterns_way_round_is_turned():
     assert turned_holes(flat, faces, mesh.boundary_loops[:1]) == 0  # (the outer edge alone: no hole)
 
 
+def test_a_layout_whose_hole_became_its_outer_edge_is_not_turned():
+    """A flat ring laid out by z -> 1/z (orientation-preserving, one to one): its inner edge is the layout's
+    outer edge and its outer edge a hole, the mesh's loops the other way round, and nothing overlaps."""
+    rings, sectors = 6, 48
+    radius = np.linspace(1.0, 2.0, rings)
+    angle = 2 * np.pi * np.arange(sectors) / sectors
+    z = (radius[:, None] * np.exp(1j * angle[None, :])).ravel()
+    vertices = np.column_stack([z.real, z.imag, np.zeros(len(z))])
+    faces = []
+    for r in range(rings - 1):
+        for k in range(sectors):
+            a, b = r * sectors + k, r * sectors + (k + 1) % sectors
+            faces += [(a, b, b + sectors), (a, b + sectors, a + sectors)]
+    mesh = Mesh(vertices, np.array(faces), allow_holes=True)
+    assert len(mesh.boundary_loop) == sectors and np.allclose(np.abs(z[mesh.boundary_loop]), 2.0)  # outer in 3D
+    inverted = 1.0 / z
+    layout = np.column_stack([inverted.real, inverted.imag])
+    assert not folded_faces(layout, mesh.faces).any()
+    assert boundary_crossings(layout, mesh.boundary_loops) == 0
+    assert turned_holes(layout, mesh.faces, mesh.boundary_loops) == 0
+    assert turned_holes(vertices[:, :2], mesh.faces, mesh.boundary_loops) == 0
+
+
 def test_holes_meeting_at_a_corner_are_refused_saying_so():
     vertices, faces = _holed_grid(cells=((2, 2), (3, 3)))  # two cells out, corner to corner: vertex 30 pinched
     with pytest.raises(MeshError, match=r"^mesh is non-manifold at vertex 30 \(its triangles form more than one fan: "
                                         r"a pinch, or holes or the outer edge meeting at a corner\)$"):
-        Mesh(vertices, faces, holes=True)
+        Mesh(vertices, faces, allow_holes=True)

@@ -951,3 +951,10 @@ def test_the_piece_label_keeps_clear_of_the_grain_line(bunny, tmp_path):
     assert np.ptp(shaft[:, 0]) < 1e-6  # vertical
     crosses = x - half <= shaft[0, 0] <= x + half and shaft[:, 1].min() <= bottom and top <= shaft[:, 1].max()
     assert not crosses, (x - half, x + half, shaft[0, 0])
+
+
+def test_lengths_on_the_sheets_and_in_messages_give_their_millimetres():
+    from sim.patterns import length_text
+
+    assert [length_text(2.0, "in"), length_text(0.01, "m"), length_text(5.0, "cm"), length_text(10.0, "mm")] == [
+        "2 in (50.8 mm)", "0.01 m (10 mm)", "5 cm (50 mm)", "10 mm"]
