@@ -4,12 +4,16 @@ Run: ``.venv/bin/python benchmarks/corpus_table.py`` (build the corpus first: ``
 see docs/corpus.md).  For every patch of ``benchmarks/corpus/manifest.json`` found in ``--corpus``:
 
 * **springflat**: ``springflat flatten PATCH --json`` (the ``.venv/bin/springflat`` of this tree) in a
-  subprocess; the wall time of the whole command, its status, iterations, E_S, E_C and folded triangles
-  from its JSON.  A run past ``--timeout`` counts as a failure.
+  subprocess, with ``--keep-holes`` for the ``holed`` kind's patches (the option they need); the wall time
+  of the whole command, its status, iterations, E_S, E_C and folded triangles from its JSON.  A run past
+  ``--timeout`` counts as a failure.
 * **ARAP**: libigl ARAP from the harmonic layout, iterated in chunks of 10 until no node moves more than
   1e-9 x the boundary length in a chunk, or 1,000 iterations (sim.layouts.arap_layout stops at 100).
 * **SLIM**: libigl SLIM (symmetric Dirichlet) from Tutte's embedding, one iteration at a time until the
   energy changes by less than 1e-6 relative, or 200 iterations.
+
+A patch with holes gives both peers the start springflat's computed starts take: the harmonic and Tutte
+layouts of the patch with its holes closed (``Mesh.disk``), then ARAP or SLIM on the patch's own triangles.
 
 E_S, E_C and folded are the project's own measures (``golden_model.reference.measure``: spec eqs. 12 and
 14, each layout at its own scale; folded against the pattern's own orientation).  The peers depend only on
@@ -45,8 +49,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from sim.layouts import harmonic_layout, tutte_layout  # noqa: E402
-from golden_model.mesh import Mesh, boundary_crossings  # noqa: E402
-from sim.mesh_io import load_mesh  # noqa: E402
+from golden_model.mesh import Holes, Mesh, boundary_crossings, turned_holes  # noqa: E402
+from sim.mesh_io import load_mesh_with_notes  # noqa: E402
 from sim.outputs import OutputError, check_output_path, write_text_file  # noqa: E402
 from golden_model.reference import SpringModel, measure  # noqa: E402
 
@@ -85,14 +89,19 @@ class Layout:
     status: str = "ok"
     #: pairs of the boundary's sides that meet, on a fold-free layout (``None`` on a folded one)
     crossings: int | None = None
+    #: holes the layout wraps over, where no sides meet (``None`` without holes)
+    turned: int | None = None
 
     @classmethod
     def of(cls, method: str, mesh: Mesh, positions: np.ndarray, seconds: float, iterations: int) -> "Layout":
         if not np.isfinite(positions).all():
             return cls(method, seconds, math.nan, math.nan, mesh.n_faces, iterations, "non-finite")
         m = measure(SpringModel.build(mesh, positions, 0.5, "auto"), positions)
-        crossings = None if m.folded else boundary_crossings(positions, mesh.boundary_loop)
-        return cls(method, seconds, m.area_error, m.shape_error, m.folded, iterations, crossings=crossings)
+        crossings = None if m.folded else boundary_crossings(positions, mesh.boundary_loops)
+        turned = (turned_holes(positions, mesh.faces, mesh.boundary_loops) if mesh.n_holes and crossings == 0
+                  else None)
+        return cls(method, seconds, m.area_error, m.shape_error, m.folded, iterations, crossings=crossings,
+                   turned=turned)
 
 
 @dataclass
@@ -111,6 +120,8 @@ class Run:
     initial_folded: int | None = None
     #: pairs of the pattern's boundary sides that meet, on a fold-free pattern (its JSON's boundary_crossings)
     crossings: int | None = None
+    #: kept holes the pattern wraps over (its JSON's turned_holes)
+    turned: int | None = None
 
 
 @dataclass
@@ -139,7 +150,7 @@ def arap_converged(mesh: Mesh) -> tuple[np.ndarray, int]:
 
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
     faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
-    positions = harmonic_layout(mesh)
+    positions = harmonic_layout(mesh.disk)
     loop = mesh.boundary_loop
     pinned = np.array([loop[0]], dtype=np.int32)
     targets = np.ascontiguousarray(positions[pinned.astype(np.int64)])
@@ -184,7 +195,7 @@ def slim_converged(mesh: Mesh) -> tuple[np.ndarray, int]:
 
     vertices = np.asfortranarray(mesh.vertices, dtype=np.float64)
     faces = np.asfortranarray(mesh.faces, dtype=np.int32)
-    start = np.asfortranarray(tutte_layout(mesh))
+    start = np.asfortranarray(tutte_layout(mesh.disk))
     data = igl.slim_precompute(vertices, faces, start, igl.MappingEnergyType.SYMMETRIC_DIRICHLET,
                                np.zeros(0, dtype=np.int32), np.zeros((0, 2), order="F"), 0.0)
     energy = symmetric_dirichlet(mesh, start)
@@ -242,7 +253,7 @@ def springflat(patch: Path, extra: list[str], timeout: float) -> Run:
         return Run(args, seconds, "error", message=lines[-1] if lines else f"exit status {done.returncode}")
     return Run(args, seconds, str(result["status"]), int(result["iterations"]), float(result["area_error"]),
                float(result["shape_error"]), int(result["folded"]), initial_folded=int(result["initial_folded"]),
-               crossings=result.get("boundary_crossings"))
+               crossings=result.get("boundary_crossings"), turned=result.get("turned_holes"))
 
 
 def bar_failures(run: Run, arap: Layout, slim: Layout) -> list[str]:
@@ -321,10 +332,14 @@ def overlaps(rows: list[Row]) -> str:
         counted = sum(count is not None for _, count in layouts)
         return f"{len(found)} of {counted} fold-free" + (f": {', '.join(found)}" if found else "")
 
-    return ("Overlaps (fold-free layouts whose boundary crosses itself; pairs of sides that meet), not part of the "
-            f"bar: springflat {listed([(r.name, r.springflat.crossings) for r in rows])}; "
-            f"ARAP {listed([(r.name, r.arap.crossings) for r in rows])}; "
-            f"SLIM {listed([(r.name, r.slim.crossings) for r in rows])}.")
+    def counted(layout: Layout | Run) -> int | None:
+        return None if layout.crossings is None else layout.crossings + (layout.turned or 0)
+
+    return ("Overlaps (fold-free layouts whose boundary crosses itself, or that wrap over a kept hole; pairs of "
+            "sides that meet plus holes wrapped over), not part of the "
+            f"bar: springflat {listed([(r.name, counted(r.springflat)) for r in rows])}; "
+            f"ARAP {listed([(r.name, counted(r.arap)) for r in rows])}; "
+            f"SLIM {listed([(r.name, counted(r.slim)) for r in rows])}.")
 
 
 def summary(rows: list[Row]) -> str:
@@ -363,11 +378,16 @@ def patches(corpus: Path, only: list[str] | None, kinds: list[str] | None) -> li
     return entries
 
 
+def holed(entry: dict) -> bool:
+    """A patch with cut-outs (the ``holed`` kind): springflat runs it with ``--keep-holes``."""
+    return bool(entry["recipe"].get("cut_outs"))
+
+
 def table_row(entry: dict, corpus: Path, extra: list[str], timeout: float, cache_path: Path, cache: dict) -> Row:
     patch = corpus / f"{entry['name']}.ply"
-    mesh = load_mesh(patch)
+    mesh = load_mesh_with_notes(patch, holes=Holes.KEEP if holed(entry) else Holes.REFUSE)[0]
     arap, slim = peers_for(mesh, entry["patch"]["sha256"], cache_path, cache)
-    run = springflat(patch, extra, timeout)
+    run = springflat(patch, [*extra, "--keep-holes"] if holed(entry) else extra, timeout)
     row = Row(entry["name"], entry["kind"], mesh.n_vertices, mesh.n_faces, run, arap, slim)
     row.failures = bar_failures(run, arap, slim)
     return row
@@ -377,7 +397,7 @@ def sweep_rows(entry: dict, corpus: Path, extra: list[str], timeout: float) -> l
     patch = corpus / f"{entry['name']}.ply"
     out = []
     for label, setting in BARRIER_SETTINGS:
-        run = springflat(patch, [*extra, *setting], timeout)
+        run = springflat(patch, [*extra, *setting, *(["--keep-holes"] if holed(entry) else [])], timeout)
         out.append({"name": entry["name"], "kind": entry["kind"], "setting": label, **asdict(run)})
     return out
 

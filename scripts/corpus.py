@@ -29,9 +29,13 @@ Every patch is cut the same deterministic way (no randomness, no decimation, no 
    set of unkept triangles that the kept ones enclose (all but the one holding the triangle
    farthest from the seed); add the whole one-ring of every vertex whose kept triangles form more
    than one fan (pinched vertex); drop ears (triangles with two or three boundary edges).
-5. Renumber the kept vertices in original order; the result must be a single manifold disk with
-   one boundary loop (:class:`golden_model.mesh.Mesh`), and reading the written file back must
-   give the same arrays.
+5. A recipe's ``cut_outs`` (the ``holed`` kind, for ``--keep-holes``), each a seed point and a
+   target: drop the patch's triangles whose corners all lie within the target-th smallest
+   edge-graph distance from the vertex nearest the seed, then repeat step 4 without adding back
+   enclosed triangles (the cut-outs are holes).
+6. Renumber the kept vertices in original order; the result must be a single manifold disk with
+   one boundary loop, or with ``cut_outs`` a disk with holes (:class:`golden_model.mesh.Mesh`), and
+   reading the written file back must give the same arrays.
 """
 
 from __future__ import annotations
@@ -53,15 +57,15 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from golden_model.mesh import Mesh, MeshError  # noqa: E402
-from sim.mesh_io import load_mesh  # noqa: E402
+from golden_model.mesh import Holes, Mesh, MeshError  # noqa: E402
+from sim.mesh_io import load_mesh_with_notes  # noqa: E402
 from sim.outputs import write_text_file  # noqa: E402
 
 MANIFEST = REPO / "benchmarks" / "corpus" / "manifest.json"
 DEFAULT_OUT = REPO / "build" / "corpus"
 RAW_URL = "https://raw.githubusercontent.com/{repo}/{commit}/{path}"
 
-#: The kinds of patch the corpus covers (the kinds that broke the flattener in issue 25).
+#: The kinds of patch the corpus covers (the kinds that broke the flattener in issue 25, and cut-outs).
 KINDS = {
     "dense_scan": "dense scanned surface (faces, statues), many small triangles",
     "cad_crease": "CAD panel with sharp feature lines (creases)",
@@ -70,6 +74,7 @@ KINDS = {
     "taco": "strongly curved cap folded like a taco (ears, fins)",
     "cad_sliver": "CAD tessellation with slivers (min angle < 1 deg, area ratio > 1e4)",
     "gentle": "gently curved patch",
+    "holed": "a patch with cut-outs (holes kept with --keep-holes)",
 }
 
 
@@ -251,17 +256,40 @@ def distances(vertices: np.ndarray, faces: np.ndarray, method: str, points) -> n
     raise CorpusError(f"unknown cut method {method!r} (use ball or strip)")
 
 
-def cut_patch(vertices: np.ndarray, faces: np.ndarray, method: str, points, target: int) -> tuple[np.ndarray, np.ndarray]:
-    """The disk patch of the recipe (module docstring, steps 2-5 without the check)."""
-    d = distances(vertices, faces, method, points)
-    faces = faces[np.isfinite(d[faces]).all(axis=1)]  # the seed's connected part of the original only
+def _within(vertices: np.ndarray, faces: np.ndarray, method: str, points, target: int,
+            d: np.ndarray | None = None) -> np.ndarray:
+    """``(F,)`` bool: the triangles whose corners all lie within the ``target``-th smallest distance ``d`` from
+    the recipe's seed (by default computed on ``faces``: a cut-out's distances are the patch's own)."""
+    d = distances(vertices, faces, method, points) if d is None else d
     finite = np.sort(d[np.isfinite(d)])
     if target > len(finite):
         raise CorpusError(f"target {target} exceeds the {len(finite)} vertices reachable from the seed")
-    radius = finite[target - 1]
-    keep = np.all(d[faces] <= radius, axis=1)
-    adjacency = face_adjacency(faces)
+    return np.all(d[faces] <= finite[target - 1], axis=1)
+
+
+def cut_patch(vertices: np.ndarray, faces: np.ndarray, method: str, points, target: int,
+              cut_outs: list[dict] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """The patch of the recipe (module docstring, steps 2-6 without the check)."""
+    d = distances(vertices, faces, method, points)
+    faces = faces[np.isfinite(d[faces]).all(axis=1)]  # the seed's connected part of the original only
     far = int(np.argmax(d[faces].min(axis=1)))
+    keep = _settled(faces, _within(vertices, faces, method, points, target, d), far)
+    for cut in cut_outs:
+        inside = np.flatnonzero(keep)
+        keep[inside[_within(vertices, faces[inside], "ball", [cut["seed"]], int(cut["target"]))]] = False
+    if cut_outs:
+        keep = _settled(faces, keep, None)
+    kept = faces[keep]
+    used = np.unique(kept)
+    remap = np.full(len(vertices), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    return vertices[used], remap[kept]
+
+
+def _settled(faces: np.ndarray, keep: np.ndarray, far: int | None) -> np.ndarray:
+    """Step 4 on ``keep`` until nothing changes; with ``far`` None, enclosed triangles are not added back."""
+    keep = keep.copy()
+    adjacency = face_adjacency(faces)
     for _ in range(200):
         before = keep.copy()
         idx = np.flatnonzero(keep)
@@ -269,7 +297,7 @@ def cut_patch(vertices: np.ndarray, faces: np.ndarray, method: str, points, targ
         keep[:] = False
         keep[idx[label == np.bincount(label).argmax()]] = True
         out = np.flatnonzero(~keep)
-        if len(out):
+        if len(out) and far is not None:
             _, label = connected_components(adjacency[~keep][:, ~keep], directed=False)
             outer = label[np.searchsorted(out, far)] if not keep[far] else -1
             keep[out[label != outer]] = True
@@ -279,14 +307,8 @@ def cut_patch(vertices: np.ndarray, faces: np.ndarray, method: str, points, targ
         idx = np.flatnonzero(keep)
         keep[idx[boundary_edge_counts(faces[keep]) >= 2]] = False
         if np.array_equal(before, keep):
-            break
-    else:
-        raise CorpusError("patch clean-up did not settle")
-    kept = faces[keep]
-    used = np.unique(kept)
-    remap = np.full(len(vertices), -1, dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    return vertices[used], remap[kept]
+            return keep
+    raise CorpusError("patch clean-up did not settle")
 
 
 # --------------------------------------------------------------------------- patch files and figures
@@ -313,11 +335,12 @@ class PatchFigures:
     min_angle_deg: float
     area_ratio: float  # largest / smallest triangle area
     total_curvature: float  # interior angle defect / 2π (a hemisphere is 1)
+    holes: int = 0  # cut-outs (the holed kind)
 
     def as_dict(self) -> dict:
         return {"vertices": self.vertices, "faces": self.faces, "boundary_vertices": self.boundary_vertices,
                 "min_angle_deg": round(self.min_angle_deg, 4), "area_ratio": float(f"{self.area_ratio:.4g}"),
-                "total_curvature": round(self.total_curvature, 4)}
+                "total_curvature": round(self.total_curvature, 4), **({"holes": self.holes} if self.holes else {})}
 
 
 def figures(mesh: Mesh) -> PatchFigures:
@@ -332,11 +355,12 @@ def figures(mesh: Mesh) -> PatchFigures:
     angles = np.column_stack(angles)
     angle_sum = np.bincount(f.ravel(), weights=angles.ravel(), minlength=len(v))
     interior = np.ones(len(v), dtype=bool)
-    interior[mesh.boundary_loop] = False
+    interior[np.concatenate(mesh.boundary_loops)] = False
     defect = float(np.sum(2 * np.pi - angle_sum[interior]))
     area = mesh.face_areas
-    return PatchFigures(mesh.n_vertices, mesh.n_faces, len(mesh.boundary_loop), float(np.degrees(angles.min())),
-                        float(area.max() / area.min()), defect / (2 * np.pi))
+    return PatchFigures(mesh.n_vertices, mesh.n_faces, int(interior.size - interior.sum()),
+                        float(np.degrees(angles.min())), float(area.max() / area.min()), defect / (2 * np.pi),
+                        mesh.n_holes)
 
 
 # --------------------------------------------------------------------------- manifest
@@ -378,8 +402,12 @@ def originals_of(entries: list[dict]) -> dict[str, dict]:
 
 def cut_entry(entry: dict, source: tuple[np.ndarray, np.ndarray]) -> tuple[bytes, Mesh]:
     recipe = entry["recipe"]
-    vertices, faces = cut_patch(*source, recipe["method"], recipe["seeds"], int(recipe["target"]))
-    return ply_bytes(vertices, faces), Mesh(vertices, faces, name=entry["name"])
+    cut_outs = recipe.get("cut_outs", [])
+    vertices, faces = cut_patch(*source, recipe["method"], recipe["seeds"], int(recipe["target"]), cut_outs)
+    mesh = Mesh(vertices, faces, name=entry["name"], allow_holes=bool(cut_outs))
+    if mesh.n_holes != len(cut_outs):
+        raise CorpusError(f"{entry['name']}: {mesh.n_holes} holes where the recipe cuts {len(cut_outs)} out")
+    return ply_bytes(vertices, faces), mesh
 
 
 def build(manifest_path: Path, originals: Path, out: Path, names: list[str] | None, record: bool) -> int:
@@ -410,7 +438,7 @@ def build(manifest_path: Path, originals: Path, out: Path, names: list[str] | No
         target = out / f"{name}.ply"
         partial = out / f"{name}.partial.ply"  # load_mesh reads by suffix
         partial.write_bytes(data)
-        back = load_mesh(partial)
+        back = load_mesh_with_notes(partial, holes=Holes.KEEP if mesh.n_holes else Holes.REFUSE)[0]
         if not (np.array_equal(back.vertices, mesh.vertices) and np.array_equal(back.faces, mesh.faces)):
             partial.unlink()
             raise CorpusError(f"{name}: the written PLY does not read back to the same mesh")

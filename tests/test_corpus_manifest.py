@@ -64,7 +64,12 @@ def test_every_patch_has_licence_checksums_recipe_and_size(manifest):
         assert len(recipe["seeds"]) == (1 if recipe["method"] == "ball" else 2), where
         assert all(len(s) == 3 for s in recipe["seeds"]), where
         assert 500 <= p["patch"]["vertices"] <= 100_000, where
-        assert p["patch"]["faces"] > p["patch"]["vertices"], where
+        assert p["patch"]["faces"] > p["patch"]["vertices"] - 2 * len(recipe.get("cut_outs", [])), where
+        if p["kind"] == "holed":  # each cut-out one hole
+            assert recipe["cut_outs"] and p["patch"]["holes"] == len(recipe["cut_outs"]), where
+            assert all(len(c["seed"]) == 3 and c["target"] >= 8 for c in recipe["cut_outs"]), where
+        else:
+            assert "cut_outs" not in recipe and "holes" not in p["patch"], where
 
 
 def test_sizes_reach_the_large_end(manifest):
@@ -134,6 +139,27 @@ def test_build_cuts_a_disk_the_reader_accepts_and_checks_its_sha256(synthetic, c
     # a plain build checks the recorded sha256 and passes
     assert corpus.main(["--manifest", str(manifest_path), "build", "--originals", str(originals),
                         "--out", str(out)]) == 0
+
+
+def test_a_recipes_cut_outs_are_holes_of_the_patch(synthetic):
+    from golden_model.mesh import Holes, MeshError
+    from sim.mesh_io import load_mesh_with_notes
+
+    manifest_path, originals, out = synthetic
+    assert corpus.main(["--manifest", str(manifest_path), "build", "--originals", str(originals),
+                        "--out", str(out), "--record"]) == 0
+    plain = load_mesh(out / "sphere_cap.ply")
+    data = json.loads(manifest_path.read_text())
+    seed = _uv_sphere()[0][1 + 2 * 16 + 4].tolist()  # a vertex of the cap's third ring
+    data["patches"][0]["recipe"]["cut_outs"] = [{"seed": seed, "target": 4}]
+    manifest_path.write_text(json.dumps(data))
+    assert corpus.main(["--manifest", str(manifest_path), "build", "--originals", str(originals),
+                        "--out", str(out), "--record"]) == 0
+    with pytest.raises(MeshError, match="boundary loops"):
+        load_mesh(out / "sphere_cap.ply")
+    mesh = load_mesh_with_notes(out / "sphere_cap.ply", holes=Holes.KEEP)[0]
+    assert mesh.n_holes == 1 and mesh.n_faces < plain.n_faces and seed in mesh.vertices[mesh.boundary_loops[1]].tolist()
+    assert json.loads(manifest_path.read_text())["patches"][0]["patch"]["holes"] == 1
 
 
 def load_mesh_like_obj(path: Path) -> np.ndarray:
