@@ -49,7 +49,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from sim.layouts import harmonic_layout, tutte_layout  # noqa: E402
-from golden_model.mesh import Holes, Mesh, boundary_crossings, turned_holes  # noqa: E402
+from golden_model.mesh import Holes, Mesh, overlap_counts  # noqa: E402
 from sim.mesh_io import load_mesh_with_notes  # noqa: E402
 from sim.outputs import OutputError, check_output_path, write_text_file  # noqa: E402
 from golden_model.reference import SpringModel, measure  # noqa: E402
@@ -97,9 +97,7 @@ class Layout:
         if not np.isfinite(positions).all():
             return cls(method, seconds, math.nan, math.nan, mesh.n_faces, iterations, "non-finite")
         m = measure(SpringModel.build(mesh, positions, 0.5, "auto"), positions)
-        crossings = None if m.folded else boundary_crossings(positions, mesh.boundary_loops)
-        turned = (turned_holes(positions, mesh.faces, mesh.boundary_loops) if mesh.n_holes and crossings == 0
-                  else None)
+        crossings, turned = (None, None) if m.folded else overlap_counts(positions, mesh.faces, mesh.boundary_loops)
         return cls(method, seconds, m.area_error, m.shape_error, m.folded, iterations, crossings=crossings,
                    turned=turned)
 
@@ -326,20 +324,22 @@ def kind_table(rows: list[Row]) -> list[str]:
 
 
 def overlaps(rows: list[Row]) -> str:
-    """Which fold-free layouts overlap themselves (their boundary's sides meet), per method: not in the bar."""
-    def listed(layouts: list[tuple[str, int | None]]) -> str:
-        found = [f"{name} ({count})" for name, count in layouts if count]
-        counted = sum(count is not None for _, count in layouts)
-        return f"{len(found)} of {counted} fold-free" + (f": {', '.join(found)}" if found else "")
+    """Which fold-free layouts overlap themselves, per method: their boundary's sides meet (pairs of sides), or
+    they wrap over kept holes (holes). Not in the bar."""
+    def what(layout: Layout | Run) -> str:
+        parts = [f"{layout.crossings} pair{'s' if layout.crossings > 1 else ''}"] if layout.crossings else []
+        parts += [f"{layout.turned} hole{'s' if layout.turned > 1 else ''} wrapped over"] if layout.turned else []
+        return ", ".join(parts)
 
-    def counted(layout: Layout | Run) -> int | None:
-        return None if layout.crossings is None else layout.crossings + (layout.turned or 0)
+    def listed(layouts: list[tuple[str, Layout | Run]]) -> str:
+        found = [f"{name} ({what(layout)})" for name, layout in layouts if what(layout)]
+        fold_free = sum(layout.crossings is not None for _, layout in layouts)
+        return f"{len(found)} of {fold_free} fold-free" + (f": {', '.join(found)}" if found else "")
 
-    return ("Overlaps (fold-free layouts whose boundary crosses itself, or that wrap over a kept hole; pairs of "
-            "sides that meet plus holes wrapped over), not part of the "
-            f"bar: springflat {listed([(r.name, counted(r.springflat)) for r in rows])}; "
-            f"ARAP {listed([(r.name, counted(r.arap)) for r in rows])}; "
-            f"SLIM {listed([(r.name, counted(r.slim)) for r in rows])}.")
+    return ("Overlaps (fold-free layouts whose boundary's sides meet, or that wrap over a kept hole), not part of the "
+            f"bar: springflat {listed([(r.name, r.springflat) for r in rows])}; "
+            f"ARAP {listed([(r.name, r.arap) for r in rows])}; "
+            f"SLIM {listed([(r.name, r.slim) for r in rows])}.")
 
 
 def summary(rows: list[Row]) -> str:
@@ -383,9 +383,14 @@ def holed(entry: dict) -> bool:
     return bool(entry["recipe"].get("cut_outs"))
 
 
+def load_patch(entry: dict, corpus: Path) -> Mesh:
+    """The patch of ``entry`` in ``corpus``, a ``holed`` one with its holes kept."""
+    return load_mesh_with_notes(corpus / f"{entry['name']}.ply", holes=Holes.KEEP if holed(entry) else Holes.REFUSE)[0]
+
+
 def table_row(entry: dict, corpus: Path, extra: list[str], timeout: float, cache_path: Path, cache: dict) -> Row:
     patch = corpus / f"{entry['name']}.ply"
-    mesh = load_mesh_with_notes(patch, holes=Holes.KEEP if holed(entry) else Holes.REFUSE)[0]
+    mesh = load_patch(entry, corpus)
     arap, slim = peers_for(mesh, entry["patch"]["sha256"], cache_path, cache)
     run = springflat(patch, [*extra, "--keep-holes"] if holed(entry) else extra, timeout)
     row = Row(entry["name"], entry["kind"], mesh.n_vertices, mesh.n_faces, run, arap, slim)

@@ -32,19 +32,19 @@ from golden_model.fixed import FormatSet  # noqa: E402
 from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.fixed.measures import FixedPointError  # noqa: E402
 from sim.layouts import start_layout  # noqa: E402
-from sim.mesh_io import load_mesh  # noqa: E402
+from corpus_table import load_patch  # noqa: E402
 from sim.outputs import OutputError, check_output_path, write_text_file  # noqa: E402
 from golden_model.reference import flatten  # noqa: E402
 
 
-def runs(path: Path, presets: tuple[str, ...]) -> dict:
-    """The float run and one fixed-point run per preset of the patch at ``path`` (plain values)."""
-    mesh = load_mesh(path)
+def runs(entry: dict, corpus: Path, presets: tuple[str, ...]) -> dict:
+    """The float run and one fixed-point run per preset of the manifest's patch ``entry`` (plain values)."""
+    mesh = load_patch(entry, corpus)
     params = file_defaults(mesh)
     p0 = start_layout(mesh, "auto").positions
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         ref = flatten(mesh, p0, params)
-        out = {"name": path.stem, "vertices": mesh.n_vertices, "float": _summary(ref)}
+        out = {"name": entry["name"], "vertices": mesh.n_vertices, "float": _summary(ref)}
         for preset in presets:
             try:
                 result = flatten_fixed(mesh, p0, params, FormatSet.preset(preset))
@@ -84,7 +84,8 @@ def main() -> None:
             check_output_path(args.json, "--json", typed=False)
         except OutputError as exc:
             parser.error(str(exc))
-    names = [e["name"] for e in json.loads(MANIFEST.read_text())["patches"] if not args.only or e["name"] in args.only]
+    entries = [e for e in json.loads(MANIFEST.read_text())["patches"] if not args.only or e["name"] in args.only]
+    names = [e["name"] for e in entries]
     missing = [n for n in names if not (args.corpus / f"{n}.ply").is_file()]
     if missing:
         raise SystemExit(f"{len(missing)} corpus patches missing from '{args.corpus}' (docs/corpus.md builds them)")
@@ -94,7 +95,7 @@ def main() -> None:
     print("|---|---|---|" + "---|" * len(presets))
     rows = []
     with ProcessPoolExecutor(args.jobs) as pool:
-        for row in pool.map(runs, [args.corpus / f"{n}.ply" for n in names], [presets] * len(names)):
+        for row in pool.map(runs, entries, [args.corpus] * len(entries), [presets] * len(entries)):
             rows.append(row)
             f = row["float"]
             print(f"| {row['name']} | {row['vertices']:,} | {f['status']}, {f['iterations']}, {f['shape_error']:.4f} | "

@@ -68,7 +68,6 @@ import golden_model.reference as reference  # noqa: E402
 from sim.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap  # noqa: E402
 from golden_model.guard import guarded_moves  # noqa: E402
 from sim.layouts import initial_layout, start_layout  # noqa: E402
-from sim.mesh_io import load_mesh  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 from golden_model.reference import flatten, iterations_to_within  # noqa: E402
 from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius  # noqa: E402
@@ -234,7 +233,7 @@ def generated(variants: tuple[str, ...]) -> None:
 
 
 def corpus(directory: Path, only: list[str] | None, kinds: list[str] | None, variants: tuple[str, ...]) -> None:
-    from corpus_table import EC_TOLERANCE, patches
+    from corpus_table import EC_TOLERANCE, load_patch, patches
 
     cache_path = directory / "peers.json"
     cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
@@ -242,7 +241,7 @@ def corpus(directory: Path, only: list[str] | None, kinds: list[str] | None, var
     print("|---" * (4 + len(variants)) + "|")
     totals = {v: [0, 0.0, 0, 0] for v in variants}  # iterations, seconds, E_C misses, folded runs
     for entry in patches(directory, only, kinds):
-        mesh = load_mesh(directory / f"{entry['name']}.ply")
+        mesh = load_patch(entry, directory)
         p0 = start_layout(mesh, "auto").positions
         peers = cache.get(entry["patch"]["sha256"], {})
         slim, arap = peers.get("slim", {}), peers.get("arap", {})

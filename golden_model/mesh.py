@@ -24,10 +24,13 @@ from functools import cached_property
 
 import numpy as np
 
+from .graph import component_labels, count_components, parity_roots
+
 __all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes", "boundary_loops",
            "outer_loop",
            "hole_triangles", "loop_length", "oriented_mesh", "orient_consistently", "component_labels",
            "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes",
+           "overlap_counts",
            "loop_signed_area",
            "COORDINATE_LIMIT",
            "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
@@ -315,6 +318,15 @@ def boundary_crossings(positions: np.ndarray, loops: np.ndarray | list[np.ndarra
     return crossings
 
 
+def overlap_counts(positions: np.ndarray, faces: np.ndarray, loops: list[np.ndarray]) -> tuple[int, int | None]:
+    """``(crossings, turned)`` of a fold-free layout ``positions`` ``(V, 2)`` with boundary ``loops``
+    (:attr:`Mesh.boundary_loops`): its loops' sides that meet (:func:`boundary_crossings`), and, where none
+    do and there are holes, the holes it wraps over (:func:`turned_holes`; ``None`` otherwise). Both 0: the
+    layout covers no point twice."""
+    crossings = boundary_crossings(positions, loops)
+    return crossings, turned_holes(positions, faces, loops) if len(loops) > 1 and crossings == 0 else None
+
+
 def turned_holes(positions: np.ndarray, faces: np.ndarray, loops: list[np.ndarray]) -> int:
     """How many of ``loops`` (:attr:`Mesh.boundary_loops`) beyond one run the pattern's own way round, on a layout
     whose loops' sides do not meet (:func:`boundary_crossings` 0; elsewhere the count means nothing): 0 where
@@ -519,51 +531,6 @@ def _validate(vertices: np.ndarray, faces: np.ndarray, allow_holes: bool = False
         raise MeshError(f"mesh is not a disk: Euler characteristic {euler} (handles), expected 1")
 
 
-def parity_roots(n: int, a: np.ndarray, b: np.ndarray, differ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(root, parity)`` of ``n`` nodes joined by the edges ``(a[k], b[k])``, each edge saying whether its two
-    nodes differ (``differ[k]``): each node's component's smallest node, and whether the node differs from it,
-    as the edges of a spanning tree say (an edge that disagrees with the tree is not looked at: the caller
-    checks). Vectorised hooking and pointer jumping: each round follows every pointer to its root, carrying
-    the parity along, then hooks each root that an edge joins to a smaller root under the smallest such; a
-    round that finds no edge between two roots ends it. Every pointer runs to a smaller node, so there is no
-    cycle, and the rounds grow with the logarithm of a component's span on a mesh, not with its diameter."""
-    label = np.arange(n)
-    parity = np.zeros(n, dtype=bool)
-    while True:
-        while True:  # to the roots, the parity along
-            jumped = label[label]
-            if np.array_equal(jumped, label):
-                break
-            parity = parity ^ parity[label]
-            label = jumped
-        ra, rb = label[a], label[b]
-        apart = ra != rb
-        if not apart.any():
-            return label, parity
-        # each root joined to a smaller one hooks under the smallest, by one of the edges that join them
-        high, low = np.maximum(ra, rb)[apart], np.minimum(ra, rb)[apart]
-        implied = (parity[a] ^ parity[b] ^ differ)[apart]  # whether the two roots differ, by this edge
-        order = np.lexsort((low, high))
-        high, low, implied = high[order], low[order], implied[order]
-        first = np.r_[True, high[1:] != high[:-1]]
-        label[high[first]] = low[first]
-        parity[high[first]] = implied[first]
-
-
-def component_labels(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The connected component of each of ``n`` nodes joined by the undirected edges ``(a[k], b[k])``: the
-    smallest node of its component (so ``len(np.unique(labels))`` counts the components); see
-    :func:`parity_roots`."""
-    a = np.asarray(a, dtype=np.int64)
-    return parity_roots(n, a, np.asarray(b, dtype=np.int64), np.zeros(len(a), dtype=bool))[0]
-
-
-def count_components(n: int, a: np.ndarray, b: np.ndarray) -> int:
-    """How many connected components ``n`` nodes joined by the edges ``(a[k], b[k])`` form (a node on no edge
-    is one)."""
-    return int(np.count_nonzero(component_labels(n, a, b) == np.arange(n)))
-
-
 def _interior_side_pairs(side_edge: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The two face sides (``3·face + k``) of every interior edge, in edge order."""
     sides = np.flatnonzero(counts[side_edge] == 2)
@@ -683,8 +650,9 @@ def outer_loop(vertices: np.ndarray, loops: list[np.ndarray]) -> int:
 def kept_holes_note(mesh: Mesh) -> str:
     """The note on a mesh whose holes are kept as cut-outs: how many, their edges' lengths."""
     lengths = np.array([loop_length(mesh.vertices[loop]) for loop in mesh.boundary_loops])
-    plural = "s" if len(lengths) != 2 else ""
-    return (f"{len(lengths) - 1} hole{plural} kept as cut-out{plural} ({_edges_text(lengths[1:], lengths[0])}); a "
+    holes = len(lengths) - 1
+    plural = "s" if holes != 1 else ""
+    return (f"{holes} hole{plural} kept as cut-out{plural} ({_edges_text(lengths[1:], lengths[0])}); a "
             f"computed start layout closes {'them' if plural else 'it'} first")
 
 

@@ -256,11 +256,9 @@ def distances(vertices: np.ndarray, faces: np.ndarray, method: str, points) -> n
     raise CorpusError(f"unknown cut method {method!r} (use ball or strip)")
 
 
-def _within(vertices: np.ndarray, faces: np.ndarray, method: str, points, target: int,
-            d: np.ndarray | None = None) -> np.ndarray:
-    """``(F,)`` bool: the triangles whose corners all lie within the ``target``-th smallest distance ``d`` from
-    the recipe's seed (by default computed on ``faces``: a cut-out's distances are the patch's own)."""
-    d = distances(vertices, faces, method, points) if d is None else d
+def _within(faces: np.ndarray, d: np.ndarray, target: int) -> np.ndarray:
+    """``(F,)`` bool: the triangles whose corners all lie within the ``target``-th smallest of the distances
+    ``d`` ``(V,)`` (infinite: not reached)."""
     finite = np.sort(d[np.isfinite(d)])
     if target > len(finite):
         raise CorpusError(f"target {target} exceeds the {len(finite)} vertices reachable from the seed")
@@ -268,15 +266,16 @@ def _within(vertices: np.ndarray, faces: np.ndarray, method: str, points, target
 
 
 def cut_patch(vertices: np.ndarray, faces: np.ndarray, method: str, points, target: int,
-              cut_outs: list[dict] = ()) -> tuple[np.ndarray, np.ndarray]:
+              cut_outs: tuple[dict, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
     """The patch of the recipe (module docstring, steps 2-6 without the check)."""
     d = distances(vertices, faces, method, points)
     faces = faces[np.isfinite(d[faces]).all(axis=1)]  # the seed's connected part of the original only
     far = int(np.argmax(d[faces].min(axis=1)))
-    keep = _settled(faces, _within(vertices, faces, method, points, target, d), far)
-    for cut in cut_outs:
+    keep = _settled(faces, _within(faces, d, target), far)
+    for cut in cut_outs:  # distances on the patch, from each cut-out's seed
         inside = np.flatnonzero(keep)
-        keep[inside[_within(vertices, faces[inside], "ball", [cut["seed"]], int(cut["target"]))]] = False
+        on_patch = distances(vertices, faces[inside], "ball", [cut["seed"]])
+        keep[inside[_within(faces[inside], on_patch, int(cut["target"]))]] = False
     if cut_outs:
         keep = _settled(faces, keep, None)
     kept = faces[keep]
@@ -402,11 +401,12 @@ def originals_of(entries: list[dict]) -> dict[str, dict]:
 
 def cut_entry(entry: dict, source: tuple[np.ndarray, np.ndarray]) -> tuple[bytes, Mesh]:
     recipe = entry["recipe"]
-    cut_outs = recipe.get("cut_outs", [])
+    cut_outs = tuple(recipe.get("cut_outs", ()))
     vertices, faces = cut_patch(*source, recipe["method"], recipe["seeds"], int(recipe["target"]), cut_outs)
     mesh = Mesh(vertices, faces, name=entry["name"], allow_holes=bool(cut_outs))
-    if mesh.n_holes != len(cut_outs):
-        raise CorpusError(f"{entry['name']}: {mesh.n_holes} holes where the recipe cuts {len(cut_outs)} out")
+    if mesh.n_holes != len(cut_outs):  # (cut-outs that merged, or that reached the patch's edge)
+        raise CorpusError(f"{entry['name']}: the recipe cuts {len(cut_outs)} out, the patch has "
+                          f"{mesh.n_holes} hole{'s' if mesh.n_holes != 1 else ''}")
     return ply_bytes(vertices, faces), mesh
 
 

@@ -17,7 +17,7 @@ from golden_model.fixed.engine import check_fixed_params, prepare, presets_holdi
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_fraction
-from golden_model.mesh import Mesh, boundary_crossings, loop_length, turned_holes
+from golden_model.mesh import Mesh, loop_length, overlap_counts
 from golden_model.modes import Step
 from golden_model.params import FlattenParams
 from golden_model.reference import RUNAWAY_FACTOR, energy_floor
@@ -204,9 +204,10 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
     if result.status != "diverged" and not result.final.folded:
-        result.extra["boundary_crossings"] = boundary_crossings(result.positions, mesh.boundary_loops)
-        if mesh.n_holes and not result.extra["boundary_crossings"]:  # (where sides meet, loops have no sense)
-            result.extra["turned_holes"] = turned_holes(result.positions, mesh.faces, mesh.boundary_loops)
+        crossings, turned = overlap_counts(result.positions, mesh.faces, mesh.boundary_loops)
+        result.extra["boundary_crossings"] = crossings
+        if turned is not None:
+            result.extra["turned_holes"] = turned
     return result
 
 

@@ -513,14 +513,16 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
                  else f"the layout '{name}'")
     closed = ""
     if method in _METHODS:
-        mesh, closed = _disk(mesh, method), " (with the holes closed)" if mesh.n_holes else ""
+        disk = _disk(mesh, method)
+        closed = " (with the holes closed)" if disk.n_holes < mesh.n_holes else ""
+        mesh = disk
     if name != ARRAY_START:
         say(f"computing {described}" if method in _METHODS else f"reading {described}")
     read_notes: list[str] = []
     try:
         positions = initial_layout(mesh, init if name == ARRAY_START else method, read_notes)
     except LayoutError as exc:  # (without libigl, SLIM below says so in its own words)
-        if name != AUTO_START or isinstance(exc, NoDiskStart):
+        if name != AUTO_START:
             raise
         notes = [f"{exc}: starting from SLIM on Tutte's layout instead (fold-free by construction)"]
         say(notes[-1])
@@ -530,8 +532,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
         return StartLayout(positions, method, 0, read_notes)
     plural = "s" if folded != 1 else ""
     if name == AUTO_START:
-        notes = [f"{described} folds {folded} triangle{plural}{closed}: starting from SLIM on Tutte's layout instead "
-                 "(fold-free by construction)"]
+        notes = [f"{described} folds {folded} triangle{plural}{closed}: starting from SLIM on Tutte's layout "
+                 "instead (fold-free by construction)"]
         say(notes[-1])
         return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
     notes = read_notes + [f"{described} folds {folded} triangle{plural}{closed}: untangling it"]
@@ -539,7 +541,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     untangled = untangle_layout(mesh, positions, time_limit=untangle_seconds)
     if untangled.folded == 0:
         return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, untangled", 0, notes)
-    notes.append(f"untangling left {untangled.folded} of {folded} folded triangles{closed} after {untangled.seconds:.0f} s; "
+    notes.append(f"untangling left {untangled.folded} of {folded} folded triangles{closed} after "
+                 f"{untangled.seconds:.0f} s; "
                  "the guarded dynamics cannot clear them (the default --init auto starts fold-free)")
     if untangled.folded < folded:
         return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, partly untangled",

@@ -48,7 +48,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from golden_model.mesh import Mesh, boundary_crossings, folded_faces, loop_length, loop_signed_area, turned_holes
+from golden_model.mesh import Mesh, folded_faces, loop_length, loop_signed_area, overlap_counts
 
 from .mesh_io import save_obj
 from .outputs import OutputError, atomic_write, output_target, write_layout
@@ -83,8 +83,9 @@ SVG_GAP_MM = 10.0         # space between tiled sheets in an SVG
 CUT_WIDTH_MM = 0.3        # the cut line
 SEW_WIDTH_MM = 0.2        # the sew line, inside the cut line when there is a seam allowance ...
 SEW_DASH_MM = (3.0, 1.5)  # ... dashed: on and off
-#: The overlap guides' chain line (on, off, on, off; mm) and its grey: not to be taken for the sew line.
+#: The overlap guides' chain line (on, off, on, off; mm): not to be taken for the sew line's dashes.
 GUIDE_DASH_MM = (6.0, 1.5, 0.5, 1.5)
+#: The overlap guides' grey (0 black, 1 white).
 GUIDE_GREY = 0.45
 SEAM_ARC_SEGMENTS = 32    # chords a quarter circle has where the cut line turns round a corner of the sew line
 SEAM_MARGIN = 1e-3        # the cut line is at least the allowance, at most this share more, from the sew line
@@ -223,19 +224,27 @@ class PatternDrawing:
 
     @property
     def boundary_points(self) -> np.ndarray:
-        """``(B, 2)`` the pattern's edge, in ``units`` (closed: the last joins the first): the cut line, or the
-        sew line where there is a seam allowance."""
-        return self.layout[self.boundary]
+        """``(B, 2)`` the pattern's outer edge, in ``units`` (closed: the last joins the first): the cut line, or
+        the sew line where there is a seam allowance."""
+        return self.edge_loops[0]
 
     def boundary_length(self) -> float:
         """Length of the pattern's closed outer edge, in ``units``."""
         return loop_length(self.boundary_points)
 
-    @property
+    @cached_property
     def edge_loops(self) -> list[np.ndarray]:
-        """The pattern's edge as closed loops of ``(B, 2)`` points in ``units``: the outer edge, then each kept
-        hole's."""
-        return [self.boundary_points, *(self.layout[hole] for hole in self.holes)]
+        """The pattern's edge as closed loops of ``(B, 2)`` points in ``units``: its outer edge, then each kept
+        hole's. The outer edge is the loop that encloses the most area in the layout (whichever loop of the mesh
+        it is: a ring's inner edge can end up outside)."""
+        loops = [self.layout[loop] for loop in (self.boundary, *self.holes)]
+        outer = max(range(len(loops)), key=lambda k: abs(loop_signed_area(loops[k])))
+        return [loops[outer], *loops[:outer], *loops[outer + 1:]]
+
+    @cached_property
+    def overlapping(self) -> bool:
+        """:func:`overlaps`, kept."""
+        return overlaps(self)
 
     @cached_property
     def covered(self):
@@ -366,7 +375,7 @@ def closed_holes_note(drawing: PatternDrawing) -> str | None:
     """Kept holes that the seam allowance closes on the cut line (a hole narrower than twice the allowance): the
     cut line goes round no part of them, so they are cut after sewing, along their sew line; ``None`` if none,
     or where the pattern overlaps itself (:func:`overlaps`: its holes are no cut-outs to speak of)."""
-    if drawing.seam <= 0 or not drawing.holes or overlaps(drawing):
+    if drawing.seam <= 0 or not drawing.holes or drawing.overlapping:
         return None
     import shapely
 
@@ -403,19 +412,18 @@ def overlaps(drawing: PatternDrawing) -> bool:
     """Whether parts of the pattern lie on each other: a triangle folded, sides of its boundary that meet
     (:func:`~golden_model.mesh.boundary_crossings`) or a hole it wraps over
     (:func:`~golden_model.mesh.turned_holes`)."""
-    loops = [drawing.boundary, *drawing.holes]
-    return bool(folded_faces(drawing.layout, drawing.faces).any() or boundary_crossings(drawing.layout, loops)
-                or turned_holes(drawing.layout, drawing.faces, loops))
+    if folded_faces(drawing.layout, drawing.faces).any():
+        return True
+    crossings, turned = overlap_counts(drawing.layout, drawing.faces, [drawing.boundary, *drawing.holes])
+    return bool(crossings or turned)
 
 
 def edge_polygon(loops: list[np.ndarray]):
-    """The shapely polygon of a pattern's edge loops that do not overlap (:func:`overlaps`): the loop that
-    encloses the most area is the outer edge (in the layout, whichever loop of the mesh it is), the others its
-    holes."""
+    """The shapely polygon of a pattern's edge loops that do not overlap (:func:`overlaps`), the outer edge
+    first (:attr:`PatternDrawing.edge_loops`), the others its holes."""
     import shapely
 
-    outer = max(range(len(loops)), key=lambda k: abs(loop_signed_area(loops[k])))
-    return shapely.Polygon(loops[outer], [loop for k, loop in enumerate(loops) if k != outer])
+    return shapely.Polygon(loops[0], loops[1:])
 
 
 def material(drawing: PatternDrawing):
@@ -424,7 +432,7 @@ def material(drawing: PatternDrawing):
     flap can lie outside the boundary's polygon). :attr:`PatternDrawing.covered` keeps it."""
     import shapely
 
-    if not overlaps(drawing):
+    if not drawing.overlapping:
         return edge_polygon(drawing.edge_loops)
     corners = drawing.layout[drawing.faces]
     a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
@@ -432,9 +440,9 @@ def material(drawing: PatternDrawing):
     return shapely.union_all(shapely.polygons(corners[kept]))
 
 
-#: Verticals :func:`grain_on_material` tries across the piece, and the share of the longest stretch on the
-#: piece a moved grain line may take at most.
+#: Verticals :func:`grain_on_material` tries across the piece.
 GRAIN_CANDIDATES = 64
+#: The share of the longest vertical stretch across the piece that a moved grain line takes at most.
 GRAIN_STRETCH_SHARE = 0.9
 
 

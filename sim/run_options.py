@@ -282,7 +282,7 @@ def slim_beside_arap(mesh: Mesh, enabled: bool) -> Iterator[Callable[[], np.ndar
 
     try:
         disk = mesh.disk
-    except MeshError:  # (a kept slit: the start says why, after ARAP)
+    except MeshError:  # (a kept slit: the start refuses it, saying why)
         yield None
         return
     with WorkerPool(1) as pool:

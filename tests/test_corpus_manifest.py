@@ -64,10 +64,11 @@ def test_every_patch_has_licence_checksums_recipe_and_size(manifest):
         assert len(recipe["seeds"]) == (1 if recipe["method"] == "ball" else 2), where
         assert all(len(s) == 3 for s in recipe["seeds"]), where
         assert 500 <= p["patch"]["vertices"] <= 100_000, where
-        assert p["patch"]["faces"] > p["patch"]["vertices"] - 2 * len(recipe.get("cut_outs", [])), where
+        holes = p["patch"].get("holes", 0)  # Euler: V - E + F = 1 - holes, and 2E = 3F + B
+        assert p["patch"]["faces"] == 2 * p["patch"]["vertices"] - p["patch"]["boundary_vertices"] - 2 + 2 * holes, where
         if p["kind"] == "holed":  # each cut-out one hole
-            assert recipe["cut_outs"] and p["patch"]["holes"] == len(recipe["cut_outs"]), where
-            assert all(len(c["seed"]) == 3 and c["target"] >= 8 for c in recipe["cut_outs"]), where
+            assert recipe["cut_outs"] and holes == len(recipe["cut_outs"]), where
+            assert all(len(c["seed"]) == 3 and c["target"] > 0 for c in recipe["cut_outs"]), where
         else:
             assert "cut_outs" not in recipe and "holes" not in p["patch"], where
 
@@ -160,6 +161,10 @@ def test_a_recipes_cut_outs_are_holes_of_the_patch(synthetic):
     mesh = load_mesh_with_notes(out / "sphere_cap.ply", holes=Holes.KEEP)[0]
     assert mesh.n_holes == 1 and mesh.n_faces < plain.n_faces and seed in mesh.vertices[mesh.boundary_loops[1]].tolist()
     assert json.loads(manifest_path.read_text())["patches"][0]["patch"]["holes"] == 1
+    data["patches"][0]["recipe"]["cut_outs"] *= 2  # the same cut-out twice: one hole, not two
+    manifest_path.write_text(json.dumps(data))
+    assert corpus.main(["--manifest", str(manifest_path), "build", "--originals", str(originals),
+                        "--out", str(out), "--record"]) == 1
 
 
 def load_mesh_like_obj(path: Path) -> np.ndarray:

@@ -261,6 +261,7 @@ def test_boundary_crossings_of_simple_and_self_crossing_loops():
     bow_tie = np.array([[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]])  # its two long sides cross once
     assert boundary_crossings(bow_tie, np.arange(4)) == 1
     assert boundary_crossings(bow_tie, np.array([0, 2, 1, 3])) == 0  # the same corners, walked round
+    assert boundary_crossings(bow_tie, [0, 1, 2, 3]) == 1  # one loop as a plain list
     # a loop that goes round twice: each side of the first turn crosses the second turn's near sides
     twice = np.c_[np.cos(2 * angle), np.sin(2 * angle)] * (1 + 0.1 * angle)[:, None]
     assert boundary_crossings(twice, np.arange(len(twice))) >= 1

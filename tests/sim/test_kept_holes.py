@@ -135,8 +135,12 @@ def test_a_piece_that_wraps_over_a_hole_is_said_to_overlap_and_its_start_is_open
     # computed on the disk: the hole starts open and the right way round (harmonic's and LSCM's fold the fill's
     # triangles and are untangled with them; the untangler's free outer edge may cross itself, the hole's not)
     for init in ("auto", "harmonic", "lscm"):
-        start = start_layout(mesh, init).positions
+        layout = start_layout(mesh, init)
+        start = layout.positions
         assert not folded_faces(start, mesh.disk.faces).any(), init
+        if init != "auto":
+            assert any(re.fullmatch(rf"the {init} layout folds \d+ triangles? \(with the holes closed\): untangling "
+                                    r"it", note) for note in layout.notes), layout.notes
         assert turned_holes(start, F, mesh.boundary_loops) == 0 and boundary_crossings(start, mesh.boundary_loops[1:]) == 0
     with pytest.warns(springflat.MeshNote, match=r"the pattern overlaps itself, though no triangle is folded: it "
                                                  r"wraps over 1 of its holes, covering it twice"):
@@ -196,6 +200,10 @@ def test_a_kept_slit_starts_from_pca_or_a_file_and_a_start_that_needs_it_closed_
             r"hole whose edge runs through vertices \d+, \d+, \d+, \.\.\. cannot be filled: it encloses no area \(a "
             r"crack or a T-junction's slit\); start from --init pca or from a layout of the mesh's vertices",
             ran.stderr.strip().splitlines()[-1]), ran.stderr
+    with pytest.raises(ParameterError, match=r"the arap layout, a start computed with the mesh's holes closed, cannot "
+                                             r"be had: .* start from init='pca' or from a layout of the mesh's "
+                                             r"vertices$"):
+        springflat.flatten(vertices, faces, keep_holes=True)
     np.savetxt(tmp_path / "start.txt", vertices[:, :2])
     for init in ("pca", str(tmp_path / "start.txt")):
         ran = subprocess.run([SPRINGFLAT, "flatten", str(tmp_path / "slit.obj"), "--keep-holes", "--init", init,
