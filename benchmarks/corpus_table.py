@@ -5,8 +5,7 @@ see docs/corpus.md).  For every patch of ``benchmarks/corpus/manifest.json`` fou
 
 * **springflat**: ``springflat flatten PATCH --json`` (the ``.venv/bin/springflat`` of this tree) in a
   subprocess, with ``--keep-holes`` for the ``holed`` kind's patches (the option they need); the wall time
-  of the whole command, its status, iterations, E_S, E_C (of the piece's own triangles, for a patch with
-  holes) and folded triangles from its JSON.  A run past
+  of the whole command, its status, iterations, E_S, E_C and folded triangles from its JSON.  A run past
   ``--timeout`` counts as a failure.
 * **ARAP**: libigl ARAP from the harmonic layout, iterated in chunks of 10 until no node moves more than
   1e-9 x the boundary length in a chunk, or 1,000 iterations (sim.layouts.arap_layout stops at 100).
@@ -250,11 +249,8 @@ def springflat(patch: Path, extra: list[str], timeout: float) -> Run:
     except ValueError:
         lines = done.stderr.strip().splitlines()
         return Run(args, seconds, "error", message=lines[-1] if lines else f"exit status {done.returncode}")
-    # a patch with kept holes: the piece's own errors, not the run's with the fill that held the holes open
-    return Run(args, seconds, str(result["status"]), int(result["iterations"]),
-               float(result.get("piece_area_error", result["area_error"])),
-               float(result.get("piece_shape_error", result["shape_error"])), int(result["folded"]),
-               initial_folded=int(result["initial_folded"]),
+    return Run(args, seconds, str(result["status"]), int(result["iterations"]), float(result["area_error"]),
+               float(result["shape_error"]), int(result["folded"]), initial_folded=int(result["initial_folded"]),
                crossings=result.get("boundary_crossings"), turned=result.get("turned_holes"))
 
 

@@ -652,8 +652,8 @@ def kept_holes_note(mesh: Mesh) -> str:
     lengths = np.array([loop_length(mesh.vertices[loop]) for loop in mesh.boundary_loops])
     holes = len(lengths) - 1
     plural = "s" if holes != 1 else ""
-    return (f"{holes} hole{plural} kept as cut-out{plural} ({_edges_text(lengths[1:], lengths[0])}); "
-            f"{'their' if plural else 'its'} fill holds {'them' if plural else 'it'} open during the run")
+    return (f"{holes} hole{plural} kept as cut-out{plural} ({_edges_text(lengths[1:], lengths[0])}); a "
+            f"computed start layout closes {'them' if plural else 'it'} first")
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:

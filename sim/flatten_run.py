@@ -17,10 +17,10 @@ from golden_model.fixed.engine import check_fixed_params, prepare, presets_holdi
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_fraction
-from golden_model.mesh import Mesh, MeshError, loop_length, overlap_counts
+from golden_model.mesh import Mesh, loop_length, overlap_counts
 from golden_model.modes import Step
 from golden_model.params import FlattenParams
-from golden_model.reference import RUNAWAY_FACTOR, SpringModel, energy_floor, measure
+from golden_model.reference import RUNAWAY_FACTOR, energy_floor
 from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
@@ -196,16 +196,12 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     ARAP; ``notes``: where its notes go instead of stderr)."""
     if args.init is None:
         args.init = default_init(args.mesh)
-    run_mesh = held_open(mesh, notes)
-    engine = choose_engine(args, params, run_mesh)
-    positions, args.init = start_positions(run_mesh, args.init, params, notes is None and sys.stderr.isatty(),
-                                           second_core, notes)
+    engine = choose_engine(args, params, mesh)
+    positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
+                                           notes)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
     with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        result = engine(run_mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
-    if run_mesh is not mesh and result.status != "diverged":  # the piece itself: its own triangles and edges
-        piece = measure(SpringModel.build(mesh, result.positions, params.spring, "auto"), result.positions)
-        result.extra["piece_area_error"], result.extra["piece_shape_error"] = piece.area_error, piece.shape_error
+        result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
     if result.status != "diverged" and not result.final.folded:
         crossings, turned = overlap_counts(result.positions, mesh.faces, mesh.boundary_loops)
@@ -213,24 +209,6 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
         if turned is not None:
             result.extra["turned_holes"] = turned
     return result
-
-
-def held_open(mesh: Mesh, notes: list[str] | None = None) -> Mesh:
-    """The mesh a run of ``mesh`` flattens: with kept holes, its disk (:attr:`Mesh.disk`), whose fill holds each
-    hole open, its springs pulling the hole's chords to their 3D lengths and the guard keeping its triangles
-    from folding, so that the piece can neither close a hole nor wrap over it; the pattern is the mesh's own
-    triangles. A hole the fill cannot close (a slit) is left free, with a note (to ``notes``, else stderr)."""
-    if not mesh.n_holes:
-        return mesh
-    try:
-        return mesh.disk
-    except MeshError as exc:
-        note = f"the kept holes run free, not held open by a fill: {exc}"
-        if notes is None:
-            print(f"springflat: note: {note}", file=sys.stderr)
-        else:
-            notes.append(note)
-        return mesh
 
 
 def overlap_note(result: FlattenResult) -> str | None:
@@ -418,8 +396,6 @@ def human_line(mesh: Mesh, result: FlattenResult) -> str:
             f"E_S {error_text(result.initial.area_error)} -> {error_text(final.area_error)}, "
             f"E_C {error_text(result.initial.shape_error)} -> {error_text(final.shape_error)}, "
             f"folded {final.folded} (flipped against P0: {final.flipped})"
-            + (f"; the piece, its holes' fill left out: E_S {error_text(result.extra['piece_area_error'])}, "
-               f"E_C {error_text(result.extra['piece_shape_error'])}" if "piece_area_error" in result.extra else "")
             + (f", {result.extra['saturations']} saturation events" if "saturations" in result.extra else "")
             + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
                if "simulator" in result.extra else ""))

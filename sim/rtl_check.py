@@ -62,11 +62,8 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     from .run_options import (UserError, default_init, holes_mode, input_files, load_format_set, params_from_args,
                               resolve_mesh, strict_json)
 
-    from .flatten_run import held_open
-
     mesh, defaults = resolve_mesh(args.mesh, holes_mode(args))
     params = params_from_args(args, defaults)
-    mesh = held_open(mesh)  # kept holes: what flatten runs, the mesh with their fill
     if args.init is None:
         args.init = default_init(args.mesh)
     if (missing := missing_simulator(args.sim)) is not None:  # before the start and the "building" line

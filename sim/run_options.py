@@ -122,8 +122,8 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                             "their own vertices before flattening, for a scan's holes: the pattern covers them "
                             "(default: a mesh with holes is refused)")
     holes.add_argument("--keep-holes", action="store_true",
-                       help="keep the mesh's holes as cut-outs in the pattern (a fill holds each hole open during "
-                            "the run)")
+                       help="keep the mesh's holes as cut-outs in the pattern (its start layout is computed with "
+                            "them closed)")
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
                         help="initial layout: auto (arap; for a guarded run, where it folds or fails, slim from "
                              "tutte), tutte, pca, "

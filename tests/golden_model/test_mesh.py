@@ -526,10 +526,10 @@ def test_kept_holes_are_said_with_their_edges_lengths():
     mesh, notes = oriented_mesh(vertices, faces, holes=Holes.KEEP)
     assert mesh.n_holes == 2 and mesh.n_faces == len(faces)
     assert notes == ["2 holes kept as cut-outs (edges 0.5039 to 0.5155 long, the piece's outer edge 4.104, in the "
-                     "mesh's units); their fill holds them open during the run"]
+                     "mesh's units); a computed start layout closes them first"]
     one = oriented_mesh(*_holed_grid(cells=((2, 2),)), holes=Holes.KEEP)[1]
-    assert one == ["1 hole kept as cut-out (edge 0.5039 long, the piece's outer edge 4.104, in the mesh's units); its "
-                   "fill holds it open during the run"]
+    assert one == ["1 hole kept as cut-out (edge 0.5039 long, the piece's outer edge 4.104, in the mesh's units); a "
+                   "computed start layout closes it first"]
     assert oriented_mesh(*_holed_grid(cells=()), holes=Holes.KEEP)[1] == []  # no hole, no note
     with pytest.raises(HoledMesh):
         oriented_mesh(vertices, faces)

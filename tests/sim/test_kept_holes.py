@@ -52,7 +52,6 @@ def test_the_command_keeps_the_holes_open_fold_free_and_cuts_round_them(tmp_path
     assert (summary["status"], summary["folded"], summary["holes"], summary["faces"]) == ("converged", 0, 2,
                                                                                           mesh.n_faces)
     assert (summary["boundary_crossings"], summary["turned_holes"]) == (0, 0)
-    assert 0 < summary["piece_shape_error"] != summary["shape_error"]  # the piece's own, not the run's with the fill
     layout = load_layout(tmp_path / "p.flat.obj", mesh.n_vertices, faces=mesh.faces)
     assert not folded_faces(layout, mesh.faces).any()
     # each hole stays open, about the size the surface gives it: its fill's 3D area, within 10 % (a hole's edge
@@ -127,13 +126,9 @@ def _bump_with_a_hole_on_top():
     return mesh.vertices, mesh.faces
 
 
-def test_a_hole_on_top_of_a_bump_is_held_open_where_left_free_the_piece_wraps_over_it(tmp_path):
-    from golden_model.mesh import Mesh, boundary_crossings, loop_signed_area, turned_holes
-    from golden_model.reference import flatten
-    from sim.flatten_run import overlap_note
+def test_a_piece_that_wraps_over_a_hole_is_said_to_overlap_and_its_start_is_open(tmp_path):
+    from golden_model.mesh import Mesh, boundary_crossings, turned_holes
     from sim.layouts import start_layout
-    from sim.patterns import PatternDrawing, closed_holes_note
-    from sim.run_options import file_defaults
 
     V, F = _bump_with_a_hole_on_top()
     mesh = Mesh(V, F, allow_holes=True)
@@ -147,28 +142,20 @@ def test_a_hole_on_top_of_a_bump_is_held_open_where_left_free_the_piece_wraps_ov
             assert any(re.fullmatch(rf"the {init} layout folds \d+ triangles? \(with the holes closed\): untangling "
                                     r"it", note) for note in layout.notes), layout.notes
         assert turned_holes(start, F, mesh.boundary_loops) == 0 and boundary_crossings(start, mesh.boundary_loops[1:]) == 0
-    # --keep-holes: the fill holds the hole open; the piece's own errors are given beside the run's
-    with warnings.catch_warnings(record=True) as said:
-        warnings.simplefilter("always")
+    with pytest.warns(springflat.MeshNote, match=r"the pattern overlaps itself, though no triangle is folded: it "
+                                                 r"wraps over 1 of its holes, covering it twice"):
         pattern = springflat.flatten(V, F, keep_holes=True, name="bump")
-    assert not [w for w in said if "overlaps itself" in str(w.message)]
-    assert (pattern.status, pattern.folded, pattern.boundary_crossings, pattern.turned_holes) == ("converged", 0, 0, 0)
-    hole = mesh.boundary_loops[1]
-    assert loop_signed_area(pattern.layout[hole]) < -1.0  # mm²: open, and the right way round
-    piece = pattern.result.extra
-    assert 0 < piece["piece_shape_error"] and 0 < piece["piece_area_error"] and piece["piece_shape_error"] != pattern.shape_error
-    # left free (the patch's own triangles alone), the energy's minimum wraps the piece over the hole: said so
-    free = flatten(mesh, start_layout(mesh, "auto").positions, file_defaults(mesh))
-    assert (free.status, free.final.folded, turned_holes(free.positions, F, mesh.boundary_loops)) == ("converged", 0, 1)
-    triangles = [shapely.Polygon(free.positions[t]) for t in F]
+    assert (pattern.status, pattern.folded, pattern.turned_holes) == ("converged", 0, 1)
+    triangles = [shapely.Polygon(pattern.layout[t]) for t in F]
     assert sum(t.area for t in triangles) - shapely.union_all(triangles).area > 1.0  # mm²: covered twice, truly
-    free.extra.update(boundary_crossings=0, turned_holes=1)
-    assert overlap_note(free).startswith("the pattern overlaps itself, though no triangle is folded: it wraps over 1 "
-                                         "of its holes, covering it twice")
-    drawing = PatternDrawing.of(mesh, free.positions).with_seam(2.0)
-    assert closed_holes_note(drawing) is None  # its hole is covered: no cut-out to close
-    cut = drawing.cut_loops
+    with warnings.catch_warnings(record=True) as said:  # its hole is covered: no cut-out to close
+        warnings.simplefilter("always")
+        springflat.write_pattern(tmp_path / "bump.dxf", pattern, seam_allowance=2.0)
+    assert not [w for w in said if "narrower than twice the seam allowance" in str(w.message)]
+    cut = _dxf_loops(tmp_path / "bump.dxf", "CUT")
     assert shapely.Polygon(cut[0], cut[1:]).buffer(1e-6).contains(shapely.union_all(triangles))
+    assert "it wraps over 1 of its holes" in str(ezdxf.readfile(tmp_path / "bump.dxf").ezdxf_metadata().get(
+        "springflat_run"))
 
 
 def test_the_grain_line_lies_on_a_ring_not_across_its_hole(tmp_path):
@@ -224,8 +211,7 @@ def test_a_kept_slit_starts_from_pca_or_a_file_and_a_start_that_needs_it_closed_
         assert ran.returncode == 0, ran.stderr
         summary = json.loads(ran.stdout)
         # the slit opens where the surface pulls it apart, or the piece wraps over it: either is said
-        assert summary["folded"] == 0 and summary["holes"] == 1 and "piece_shape_error" not in summary
-        assert "springflat: note: the kept holes run free, not held open by a fill: the hole whose edge" in ran.stderr
+        assert summary["folded"] == 0 and summary["holes"] == 1
         overlapping = summary["boundary_crossings"] or summary.get("turned_holes")
         assert bool(overlapping) == ("the pattern overlaps itself" in ran.stderr)
 
