@@ -1237,7 +1237,7 @@ def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
     area = shapely.make_valid(edge_polygon([_pattern_mm(drawing, plan, loop) for loop in drawing.edge_loops]))
     for stroke in _grain_mm(drawing, plan):  # beside the grain line, which runs through the piece's middle
         area = area.difference(shapely.LineString(stroke).buffer(GRAIN_CLEARANCE_MM))
-    parts = [part for part in getattr(area, "geoms", [area]) if part.geom_type == "Polygon"]
+    parts = [part for part in getattr(area, "geoms", [area]) if part.geom_type == "Polygon" and not part.is_empty]
     if not parts:
         return None
     largest = max(parts, key=lambda part: part.area)

@@ -958,3 +958,11 @@ def test_lengths_on_the_sheets_and_in_messages_give_their_millimetres():
 
     assert [length_text(2.0, "in"), length_text(0.01, "m"), length_text(5.0, "cm"), length_text(10.0, "mm")] == [
         "2 in (50.8 mm)", "0.01 m (10 mm)", "5 cm (50 mm)", "10 mm"]
+
+
+def test_a_piece_narrower_than_the_grain_lines_clearance_gets_no_label_and_no_error(tmp_path):
+    """The label keeps clear of the grain line; on a piece a few mm wide nothing is left beside it."""
+    square, uv = _rectangle(1.6, 1.7)
+    write_pattern_file(tmp_path / "p.svg", PatternDrawing.of(square, uv).with_grain("y"))
+    svg = (tmp_path / "p.svg").read_text()
+    assert 'class="piece-label"' not in svg and 'id="grain"' in svg
