@@ -501,8 +501,10 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     folded is returned with its count, and the notes say why. ``progress(text)`` is called before
     each long step. ``slim()`` gives :func:`slim_layout`'s layout of ``mesh`` when ARAP folds (default: it
     computes it; a caller may have started it beside ARAP, on another core). A computed start of a mesh with
-    holes is its disk's (:attr:`Mesh.disk`: the holes closed), folds counted and untangled there too, so that
-    each hole starts open and the right way round; a given layout is the mesh's own.
+    holes is computed on its disk (:attr:`Mesh.disk`: the holes closed); ``auto`` counts ARAP's folds with the
+    fill's, so that its start, ARAP's or SLIM's, has each hole open and the right way round; any other start's
+    folds are the mesh's own, untangled on the mesh (untangling a fill, which is no part of the pattern, can
+    tangle the piece).
     """
     from .untangle import untangle_layout
 
@@ -512,7 +514,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     described = (f"the {method} layout" if method in _METHODS else "the init array" if name == ARRAY_START
                  else f"the layout '{name}'")
     closed = ""
-    if method in _METHODS:
+    if name == AUTO_START:  # ARAP's folds counted with its fill's: where the fill folds, SLIM's fold-free disk
         disk = _disk(mesh, method)
         closed = " (with the holes closed)" if disk.n_holes < mesh.n_holes else ""
         mesh = disk

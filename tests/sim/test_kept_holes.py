@@ -126,22 +126,31 @@ def _bump_with_a_hole_on_top():
     return mesh.vertices, mesh.faces
 
 
-def test_a_piece_that_wraps_over_a_hole_is_said_to_overlap_and_its_start_is_open(tmp_path):
+def test_a_piece_that_wraps_over_a_hole_is_said_to_overlap_and_its_start_is_open(tmp_path, monkeypatch):
     from golden_model.mesh import Mesh, boundary_crossings, turned_holes
     from sim.layouts import start_layout
 
     V, F = _bump_with_a_hole_on_top()
     mesh = Mesh(V, F, allow_holes=True)
-    # computed on the disk: the hole starts open and the right way round (harmonic's and LSCM's fold the fill's
-    # triangles and are untangled with them; the untangler's free outer edge may cross itself, the hole's not)
-    for init in ("auto", "harmonic", "lscm"):
+    # auto: ARAP's folds counted with the fill's, so the hole starts open and the right way round
+    start = start_layout(mesh, "auto").positions
+    assert not folded_faces(start, mesh.disk.faces).any()
+    assert turned_holes(start, F, mesh.boundary_loops) == 0 and boundary_crossings(start, mesh.boundary_loops) == 0
+    # harmonic's and LSCM's layouts of the disk fold the fill's triangles, not the piece's: nothing is untangled
+    # (untangling a fill, no part of the pattern, can tangle the piece)
+    for init in ("harmonic", "lscm"):
         layout = start_layout(mesh, init)
-        start = layout.positions
-        assert not folded_faces(start, mesh.disk.faces).any(), init
-        if init != "auto":
-            assert any(re.fullmatch(rf"the {init} layout folds \d+ triangles? \(with the holes closed\): untangling "
-                                    r"it", note) for note in layout.notes), layout.notes
-        assert turned_holes(start, F, mesh.boundary_loops) == 0 and boundary_crossings(start, mesh.boundary_loops[1:]) == 0
+        assert folded_faces(layout.positions, mesh.disk.faces).any() and not folded_faces(layout.positions, F).any()
+        assert (layout.method, layout.notes) == (init, [])
+    # where ARAP folds the fill, auto takes SLIM's layout of the disk, fold-free with its fill
+    import sim.layouts
+
+    monkeypatch.setitem(sim.layouts._METHODS, "arap", sim.layouts.harmonic_layout)
+    layout = start_layout(mesh, "auto")
+    assert layout.method == "slim" and not folded_faces(layout.positions, mesh.disk.faces).any()
+    assert layout.notes == ["the arap layout folds 4 triangles (with the holes closed): starting from SLIM on Tutte's "
+                            "layout instead (fold-free by construction)"]
+    monkeypatch.undo()
     with pytest.warns(springflat.MeshNote, match=r"the pattern overlaps itself, though no triangle is folded: it "
                                                  r"wraps over 1 of its holes, covering it twice"):
         pattern = springflat.flatten(V, F, keep_holes=True, name="bump")
