@@ -401,10 +401,14 @@ def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]
     :data:`SEAM_MARGIN` wider than asked: its rounded corners are chords, and GEOS simplifies the outline by a
     small share of the distance first, each of which brings the line a little closer (up to 0.05 % on a scan).
     A hole the allowance leaves (a C-shaped piece whose slit the allowances close, a pattern that overlaps
-    itself round an empty middle) is a loop of the cut line too: its middle is no material."""
+    itself round an empty middle) is a loop of the cut line too: its middle is no material. The outer loop
+    runs counter-clockwise and the holes clockwise, as the sew line does on a pattern seen from the mesh's
+    front (a cutter's offset side follows a loop's direction; GEOS gives them the other way round)."""
+    from shapely.geometry.polygon import orient
+
     grown = drawing.covered.buffer(allowance * (1 + SEAM_MARGIN), quad_segs=SEAM_ARC_SEGMENTS)
     parts = getattr(grown, "geoms", [grown])
-    largest = max(parts, key=lambda part: part.area)
+    largest = orient(max(parts, key=lambda part: part.area), sign=1.0)
     return [np.asarray(ring.coords, dtype=np.float64)[:-1] for ring in (largest.exterior, *largest.interiors)]
 
 

@@ -263,3 +263,17 @@ def test_a_grain_line_through_a_c_shaped_pieces_gap_moves_onto_the_piece():
     (x0, y0), (x1, y1) = drawing.grain_line()
     assert x0 == x1 and x0 < 20.0 and y1 - y0 == pytest.approx(50.0)  # on the back, half the height long
     assert drawing.covered.covers(shapely.LineString([(x0, y0), (x1, y1)]))
+
+
+def test_the_dxf_loops_run_one_way_with_or_without_a_seam_allowance(tmp_path):
+    """Outer loops counter-clockwise, holes clockwise, on CUT and SEW alike (a cutter offsets by direction)."""
+    from golden_model.mesh import loop_signed_area
+
+    mesh = holed_dome(16, holes=((2, 2, 3), (8, 8, 4)))
+    pattern = springflat.flatten(mesh.vertices * 160.0, mesh.faces, keep_holes=True)
+    for name, seam in (("plain.dxf", None), ("seamed.dxf", 3.0)):
+        springflat.write_pattern(tmp_path / name, pattern, seam_allowance=seam)
+        for layer in ("CUT", "SEW") if seam else ("CUT",):
+            loops = _dxf_loops(tmp_path / name, layer)
+            signs = [np.sign(loop_signed_area(loop)) for loop in loops]
+            assert len(loops) == 3 and signs == [1.0, -1.0, -1.0], (name, layer, signs)
