@@ -27,13 +27,9 @@ import numpy as np
 from .graph import component_labels, count_components, parity_roots
 
 __all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes", "boundary_loops",
-           "outer_loop",
-           "hole_triangles", "loop_length", "oriented_mesh", "orient_consistently", "component_labels",
-           "count_components", "parity_roots", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes",
-           "overlap_counts",
-           "loop_signed_area",
-           "COORDINATE_LIMIT",
-           "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
+           "outer_loop", "hole_triangles", "loop_length", "loop_signed_area", "oriented_mesh", "orient_consistently",
+           "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes", "overlap_counts",
+           "COORDINATE_LIMIT", "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
 #: times the squared longest edge of the mesh.
@@ -195,7 +191,8 @@ class Mesh:
         this mesh's."""
         if self.n_holes == 0:
             return self
-        return Mesh(self.vertices, fill_holes(self.vertices, self.faces)[1], name=self.name)
+        fill = [hole_triangles(self.vertices, hole) for hole in self.boundary_loops[1:]]
+        return Mesh(self.vertices, np.vstack([self.faces, *fill]), name=self.name)
 
     @cached_property
     def neighbours(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

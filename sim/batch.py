@@ -127,7 +127,7 @@ def _tell(name: str, notes: list[str | None]) -> None:
 def flatten_one(job: BatchJob) -> MeshOutcome:
     """Run one mesh of a batch (in a worker): the steps of ``springflat flatten`` on a private directory."""
     from .flatten_run import (check_print_size, divergence_note, human_line, json_summary, pattern_notes, run_flatten,
-                              run_formats, notes_on_cut_files, write_outputs)
+                              notes_on_cut_files, pattern_drawing, run_formats, write_outputs)
 
     start = time.perf_counter()
     stderr = io.StringIO()
@@ -153,7 +153,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 setattr(args, option, path)
         try:
             with contextlib.redirect_stderr(stderr):
-                mesh, defaults = resolve_mesh(mesh_path, holes_mode(args))
+                mesh, defaults = resolve_mesh(mesh_path, holes_mode(args.fill_holes, args.keep_holes))
                 params = params_from_args(args, defaults)
                 check_print_size(args, mesh)
                 notes: list[str] = []  # each named by its mesh: the workers' notes come in any order
@@ -161,10 +161,11 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                     result = run_flatten(args, mesh, params, notes=notes)
                 finally:  # the start's notes also where the engine then refuses the mesh
                     _tell(job.name, notes)
-                written = write_outputs(args, mesh, result)
+                drawing = pattern_drawing(args, mesh, result)
+                written = write_outputs(args, mesh, result, drawing)
                 _tell(job.name, [divergence_note(params, result),
                                  *pattern_notes(params, result, formats=run_formats(args)),
-                                 *notes_on_cut_files(args, mesh, result)])  # prints at 1:1000
+                                 *notes_on_cut_files(args, mesh, result, drawing)])  # prints at 1:1000
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)
             files = [(ending, path.read_bytes()) for _, ending, path in names if path in written]

@@ -49,8 +49,8 @@ from .clock import ENGINE_TARGET_MHZ
 from .engines import DEFAULT_ENGINE, ENGINE_NAMES, ENGINES, engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_USAGE, STOP_SIGNALS, answered_signals
 from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size, divergence_note, human_line,
-                          json_summary, output_paths, pattern_notes, run_flatten, run_formats, notes_on_cut_files,
-                          what_was_used, write_outputs)
+                          json_summary, notes_on_cut_files, output_paths, pattern_drawing, pattern_notes, run_flatten,
+                          run_formats, what_was_used, write_outputs)
 from .layouts import LAYOUT_METHODS
 from .mesh_io import MESH_SUFFIXES
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
@@ -129,20 +129,21 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         from .batch import cmd_batch
 
         return cmd_batch(args)
-    mesh, defaults = resolve_mesh(args.mesh, holes_mode(args))
+    mesh, defaults = resolve_mesh(args.mesh, holes_mode(args.fill_holes, args.keep_holes))
     params = params_from_args(args, defaults)
     check_outputs(args)
     check_print_size(args, mesh)
     result = run_flatten(args, mesh, params, progress=sys.stderr.isatty(),  # progress to a terminal only
                          second_core=True)  # one mesh: SLIM's start may run beside ARAP
-    write_outputs(args, mesh, result)
+    drawing = pattern_drawing(args, mesh, result)  # the files' and their notes' (the seam outline once)
+    write_outputs(args, mesh, result, drawing)
     if args.json:
         print(strict_json(json_summary(args, mesh, params, result)))
     else:
         print(human_line(mesh, result))
         print(what_was_used(params, args.init, result, mesh), file=sys.stderr)
     formats = run_formats(args)
-    for note in (*pattern_notes(params, result, formats=formats), *notes_on_cut_files(args, mesh, result),
+    for note in (*pattern_notes(params, result, formats=formats), *notes_on_cut_files(args, mesh, result, drawing),
                  _energy_rule_note(params, result), _error_resolution_note(formats)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)

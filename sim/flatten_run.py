@@ -430,16 +430,17 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh:
     return f"springflat: used {dynamics}, initial layout {init}; stop rule: {rule}; stopped: {why}"
 
 
-def notes_on_cut_files(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> list[str]:
+def notes_on_cut_files(args: argparse.Namespace, mesh: Mesh, result: FlattenResult,
+                       drawing: PatternDrawing) -> list[str]:
     """The notes on a run that writes a pattern at 1:1 (a print or a cut; ``vt`` and layouts have no scale):
-    :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it) and, with a seam allowance,
-    :func:`~sim.patterns.closed_holes_note`."""
+    :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it; of the layout as the run left it) and,
+    with a seam allowance, :func:`~sim.patterns.closed_holes_note` of ``drawing``, the files' own
+    (:func:`pattern_drawing`)."""
     if result.status == "diverged" or not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
         return []
-    drawing = PatternDrawing.of(mesh, result.positions, args.units)
-    notes = [scale_note(drawing)]
-    if args.seam_allowance is not None and mesh.n_holes:
-        notes.append(closed_holes_note(drawing.with_seam(seam_length(args.seam_allowance, args.units))))
+    notes = [scale_note(PatternDrawing.of(mesh, result.positions, args.units))]
+    if drawing.seam > 0 and mesh.n_holes:
+        notes.append(closed_holes_note(drawing))
     return [note for note in notes if note]
 
 
@@ -452,10 +453,9 @@ RAN_AWAY = (f"a value stopped being finite, or the layout grew {RUNAWAY_FACTOR:g
 PATTERN_OUTPUTS = ("--out", "--distortion")
 
 
-def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> list[Path]:
-    """Write the outputs asked for: all of them, or (on an error) none; a diverged run's only those that
-    are not :data:`PATTERN_OUTPUTS`. The paths written."""
-    title = f"{mesh.name} ({result.engine} engine)"
+def pattern_drawing(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> PatternDrawing:
+    """The drawing the pattern files are written from: the layout with the run's caption, turned to ``--grain``
+    and with ``--seam-allowance`` (neither for a diverged run)."""
     final = result.final
     drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
         result.status, result.iterations, final.area_error, final.shape_error, final.folded,
@@ -464,6 +464,13 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -
         drawing = drawing.with_grain(args.grain)
     if args.seam_allowance is not None and result.status != "diverged":
         drawing = drawing.with_seam(seam_length(args.seam_allowance, args.units))
+    return drawing
+
+
+def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult, drawing: PatternDrawing) -> list[Path]:
+    """Write the outputs asked for, the pattern files from ``drawing`` (:func:`pattern_drawing`): all of them, or
+    (on an error) none; a diverged run's only those that are not :data:`PATTERN_OUTPUTS`. The paths written."""
+    title = f"{mesh.name} ({result.engine} engine)"
     jobs = [(path, "--out", lambda path: write_pattern_file(path, drawing, paper=paper_of(args),
                                                             dxf_edges=args.dxf_edges))
             for path in args.out or ()]

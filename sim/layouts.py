@@ -515,9 +515,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
                  else f"the layout '{name}'")
     closed = ""
     if name == AUTO_START:  # ARAP's folds counted with its fill's: where the fill folds, SLIM's fold-free disk
-        disk = _disk(mesh, method)
-        closed = " (with the holes closed)" if disk.n_holes < mesh.n_holes else ""
-        mesh = disk
+        closed = " (with the holes closed)" if mesh.n_holes else ""
+        mesh = _disk(mesh, method)
     if name != ARRAY_START:
         say(f"computing {described}" if method in _METHODS else f"reading {described}")
     read_notes: list[str] = []

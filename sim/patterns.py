@@ -48,7 +48,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from golden_model.mesh import Mesh, folded_faces, loop_length, loop_signed_area, overlap_counts
+from golden_model.mesh import Mesh, folded_faces, loop_length, loop_signed_area, overlap_counts, signed_areas_2d
 
 from .mesh_io import save_obj
 from .outputs import OutputError, atomic_write, output_target, write_layout
@@ -288,6 +288,11 @@ class PatternDrawing:
         pattern's area centroid, :data:`GRAIN_LINE_FRACTION` of its height long; where that line leaves the
         piece (a hole, a C-shaped piece's gap), on the vertical through the piece that runs longest in it
         (:func:`grain_on_material`)."""
+        return self._grain_ends.copy()
+
+    @cached_property
+    def _grain_ends(self) -> np.ndarray:
+        """:meth:`grain_line`'s, kept: each sheet writer and the piece label ask."""
         q = self.layout[self.faces]
         a, b = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]
         areas = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / 2
@@ -438,10 +443,8 @@ def material(drawing: PatternDrawing):
 
     if not drawing.overlapping:
         return edge_polygon(drawing.edge_loops)
-    corners = drawing.layout[drawing.faces]
-    a, b = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    kept = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) > 0  # (a triangle of no area covers nothing)
-    return shapely.union_all(shapely.polygons(corners[kept]))
+    kept = signed_areas_2d(drawing.layout, drawing.faces) != 0  # (a triangle of no area covers nothing)
+    return shapely.union_all(shapely.polygons(drawing.layout[drawing.faces[kept]]))
 
 
 #: Verticals :func:`grain_on_material` tries across the piece.
@@ -1035,7 +1038,7 @@ def without_blank_sheets(plan: SheetPlan, drawing: PatternDrawing) -> SheetPlan:
         import shapely
 
         loops = [_pattern_mm(drawing, plan, loop) for loop in drawing.cut_loops]
-        cut = shapely.Polygon(loops[0], loops[1:])
+        cut = edge_polygon(loops)
         kept = tuple(sheet for sheet in plan.sheets
                      if cut.intersects(shapely.box(*sheet.offset, *np.add(sheet.offset, size))))
     else:
@@ -1246,11 +1249,9 @@ def piece_label(drawing: PatternDrawing, plan: SheetPlan) -> Label | None:
         return None
     largest = max(parts, key=lambda part: part.area)
     centre = polylabel(largest, tolerance=max(0.01, 1e-4 * math.sqrt(largest.area)))
-    room = largest.exterior.distance(centre)  # the largest circle about the centre inside the piece
-    for ring in largest.interiors:
-        room = min(room, ring.distance(centre))
+    room = largest.boundary.distance(centre)  # the largest circle about the centre inside the piece
     name = drawing.name
-    aspect = _text_width(name, 1.0) / 1.0  # width per mm of cap height
+    aspect = _text_width(name, 1.0)  # width per mm of cap height
     # the box about the centre: the name's width, and its cap height plus a descender's depth below it
     size = min(PIECE_LABEL_MAX_MM, 0.9 * 2 * room / math.hypot(aspect, 1.0 + 2 * DESCENDER_EM / CAP_HEIGHT_EM))
     if size < PIECE_LABEL_MIN_MM:

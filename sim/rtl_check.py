@@ -62,7 +62,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     from .run_options import (UserError, default_init, holes_mode, input_files, load_format_set, params_from_args,
                               resolve_mesh, strict_json)
 
-    mesh, defaults = resolve_mesh(args.mesh, holes_mode(args))
+    mesh, defaults = resolve_mesh(args.mesh, holes_mode(args.fill_holes, args.keep_holes))
     params = params_from_args(args, defaults)
     if args.init is None:
         args.init = default_init(args.mesh)

@@ -209,11 +209,11 @@ def edge_radius(mesh: Mesh) -> int:
     return depth
 
 
-def holes_mode(args: argparse.Namespace) -> Holes:
+def holes_mode(fill_holes: bool, keep_holes: bool) -> Holes:
     """What ``--fill-holes`` / ``--keep-holes`` ask done with a mesh's holes (one or neither)."""
-    if args.fill_holes and args.keep_holes:
+    if fill_holes and keep_holes:
         raise UserError("--fill-holes and --keep-holes: a hole is closed or kept, give one of them")
-    return Holes.FILL if args.fill_holes else Holes.KEEP if args.keep_holes else Holes.REFUSE
+    return Holes.FILL if fill_holes else Holes.KEEP if keep_holes else Holes.REFUSE
 
 
 #: The refusal's hint for a mesh with holes, naming the options that take it.

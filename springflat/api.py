@@ -239,7 +239,7 @@ def read_mesh(path: str | Path, fill_holes: bool = False, keep_holes: bool = Fal
     for keyword, value in (("fill_holes", fill_holes), ("keep_holes", keep_holes)):
         if not isinstance(value, (bool, np.bool_)):
             raise TypeError(f"{keyword} must be True or False, got {value!r}")
-    holes = _holes(argparse.Namespace(fill_holes=bool(fill_holes), keep_holes=bool(keep_holes)))
+    holes = _holes(bool(fill_holes), bool(keep_holes))
     try:
         mesh, notes = load_mesh_with_notes(path, holes=holes)
     except HoledMesh as exc:
@@ -249,10 +249,10 @@ def read_mesh(path: str | Path, fill_holes: bool = False, keep_holes: bool = Fal
     return mesh.vertices, mesh.faces
 
 
-def _holes(args: argparse.Namespace) -> Holes:
+def _holes(fill_holes: bool, keep_holes: bool) -> Holes:
     """:func:`sim.run_options.holes_mode`, its refusal in the API's words."""
     try:
-        return holes_mode(args)
+        return holes_mode(fill_holes, keep_holes)
     except UserError as exc:
         raise ParameterError(_in_api_words(str(exc))) from None
 
@@ -334,7 +334,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
                              f"MESH --engine {engine.name}; the API runs the "
                              + ", ".join(e.name for e in ENGINES if e.api) + " engines")
     try:  # validated here: errors name no temporary file
-        mesh, notes = oriented_mesh(vertices, faces, name=name, holes=_holes(args))
+        mesh, notes = oriented_mesh(vertices, faces, name=name, holes=_holes(args.fill_holes, args.keep_holes))
     except HoledMesh as exc:
         raise MeshError(f"{exc}; {_in_api_words(HOLES_HINT)}") from None
     for note in notes:

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from golden_model.builtin import builtin_mesh
+from golden_model.graph import component_labels, count_components
 from golden_model.mesh import (HoledMesh, Holes, InconsistentOrientation, Mesh, MeshError, boundary_crossings,
-                               component_labels, count_components, fill_holes, folded_faces, hole_triangles,
-                               orient_consistently, oriented_mesh, turned_holes)
+                               fill_holes, folded_faces, hole_triangles, orient_consistently, oriented_mesh,
+                               turned_holes)
 from sim.generate import grid_faces, grid_uv
 from sim.mesh_io import load_mesh_with_notes, save_obj
 

@@ -11,7 +11,7 @@ import pytest
 import shapely
 
 import springflat
-from golden_model.mesh import MeshError, folded_faces, signed_areas_2d, triangle_areas_3d
+from golden_model.mesh import MeshError, folded_faces, loop_signed_area, signed_areas_2d, triangle_areas_3d
 from golden_model.params import ParameterError
 from sim.generate import holed_dome
 from sim.layouts import load_layout
@@ -27,12 +27,6 @@ def _holed_file(path):
     mesh = holed_dome(16, holes=HOLES)
     save_obj(path, mesh.vertices * 160.0, mesh.faces)
     return mesh
-
-
-def _polygon_area(points: np.ndarray) -> float:
-    """Signed area of the closed polygon ``points``: positive counter-clockwise."""
-    x, y = points[:, 0], points[:, 1]
-    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
 def _dxf_loops(path, layer: str) -> list[np.ndarray]:
@@ -61,8 +55,8 @@ def test_the_command_keeps_the_holes_open_fold_free_and_cuts_round_them(tmp_path
     for hole in holes:
         inside = fill[np.isin(fill, hole).all(axis=1)]
         area_3d = float(triangle_areas_3d(mesh.vertices * 160.0, inside).sum())
-        assert -_polygon_area(layout[hole]) == pytest.approx(area_3d, rel=0.1)  # a hole's edge runs clockwise
-    assert _polygon_area(layout[outer]) > 0
+        assert -loop_signed_area(layout[hole]) == pytest.approx(area_3d, rel=0.1)  # a hole's edge runs clockwise
+    assert loop_signed_area(layout[outer]) > 0
     # the DXF: the sew line is the pattern's edge, outer edge and holes; the cut line 3 mm outside it, into the holes
     sew, cut = _dxf_loops(outs[1], "SEW"), _dxf_loops(outs[1], "CUT")
     assert len(sew) == len(cut) == 3
@@ -267,8 +261,6 @@ def test_a_grain_line_through_a_c_shaped_pieces_gap_moves_onto_the_piece():
 
 def test_the_dxf_loops_run_one_way_with_or_without_a_seam_allowance(tmp_path):
     """Outer loops counter-clockwise, holes clockwise, on CUT and SEW alike (a cutter offsets by direction)."""
-    from golden_model.mesh import loop_signed_area
-
     mesh = holed_dome(16, holes=((2, 2, 3), (8, 8, 4)))
     pattern = springflat.flatten(mesh.vertices * 160.0, mesh.faces, keep_holes=True)
     for name, seam in (("plain.dxf", None), ("seamed.dxf", 3.0)):
