@@ -514,7 +514,7 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
              else f"{count} {'Dask ' if args.scheduler else ''}worker process{'es' if count != 1 else ''}")
     if not pending:  # every mesh skipped, or unreadable here: no worker starts
         where = "no worker process"
-    skipped = len(meshes) - len(pending) - sum(o.failed for o in outcomes.values())
+    skipped = len(skipped_names)
     if not args.json:
         print(f"springflat: {len(meshes)} mesh{'es' if len(meshes) != 1 else ''}"
               + (f" ({skipped} skipped: {'their' if skipped > 1 else 'its'} files are in "
