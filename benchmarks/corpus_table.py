@@ -383,6 +383,11 @@ def holed(entry: dict) -> bool:
     return bool(entry["recipe"].get("cut_outs"))
 
 
+def holes_options(entry: dict) -> list[str]:
+    """The command-line options a patch's runs need: ``--keep-holes`` for a ``holed`` one."""
+    return ["--keep-holes"] if holed(entry) else []
+
+
 def load_patch(entry: dict, corpus: Path) -> Mesh:
     """The patch of ``entry`` in ``corpus``, a ``holed`` one with its holes kept."""
     return load_mesh_with_notes(corpus / f"{entry['name']}.ply", holes=Holes.KEEP if holed(entry) else Holes.REFUSE)[0]
@@ -392,7 +397,7 @@ def table_row(entry: dict, corpus: Path, extra: list[str], timeout: float, cache
     patch = corpus / f"{entry['name']}.ply"
     mesh = load_patch(entry, corpus)
     arap, slim = peers_for(mesh, entry["patch"]["sha256"], cache_path, cache)
-    run = springflat(patch, [*extra, "--keep-holes"] if holed(entry) else extra, timeout)
+    run = springflat(patch, [*extra, *holes_options(entry)], timeout)
     row = Row(entry["name"], entry["kind"], mesh.n_vertices, mesh.n_faces, run, arap, slim)
     row.failures = bar_failures(run, arap, slim)
     return row
@@ -402,7 +407,7 @@ def sweep_rows(entry: dict, corpus: Path, extra: list[str], timeout: float) -> l
     patch = corpus / f"{entry['name']}.ply"
     out = []
     for label, setting in BARRIER_SETTINGS:
-        run = springflat(patch, [*extra, *setting, *(["--keep-holes"] if holed(entry) else [])], timeout)
+        run = springflat(patch, [*extra, *setting, *holes_options(entry)], timeout)
         out.append({"name": entry["name"], "kind": entry["kind"], "setting": label, **asdict(run)})
     return out
 
