@@ -62,7 +62,8 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     from .run_options import (UserError, default_init, holes_mode, input_files, load_format_set, params_from_args,
                               resolve_mesh, strict_json)
 
-    mesh, defaults = resolve_mesh(args.mesh, holes_mode(args.fill_holes, args.keep_holes))
+    holes = holes_mode(args.fill_holes, args.keep_holes)
+    mesh, defaults = resolve_mesh(args.mesh, holes)
     params = params_from_args(args, defaults)
     if args.init is None:
         args.init = default_init(args.mesh)
@@ -97,7 +98,8 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
     prepare(mesh, _initial_layout(mesh, args.init), params, formats)  # refuses what the formats cannot hold
     mesh_spec = args.mesh if not Path(args.mesh).is_file() else str(Path(args.mesh).resolve())
     init_spec = args.init if args.init in LAYOUT_METHODS + (AUTO_START,) else str(Path(args.init).resolve())
-    config = {"mesh": mesh_spec, "init": init_spec, "params": params.as_dict(), "iterations": args.iterations,
+    config = {"mesh": mesh_spec, "holes": holes.value, "init": init_spec, "params": params.as_dict(),
+              "iterations": args.iterations,
               "step_latency": SpringflatCore.step_latency_of(formats), "p_valid": 1 - stall,
               "p_ready": 1 - stall}
     first = "; the first Verilator build takes about a minute" if args.sim == "verilator" else ""

@@ -37,10 +37,12 @@ def compare(outputs: list[int], want, layout, iteration: int) -> list[str]:
 def load_problem(config, fs):
     from golden_model.builtin import builtin_mesh, is_builtin
     from sim.layouts import initial_layout
-    from sim.mesh_io import load_mesh
+    from golden_model.mesh import Holes
+    from sim.mesh_io import load_mesh_with_notes
 
-    name = config.get("mesh", "surf2")
-    mesh = builtin_mesh(name)[0] if is_builtin(name) else load_mesh(name)
+    name = config.get("mesh", "surf2")  # a file read as the command read it: its holes refused, filled or kept
+    holes = Holes(config.get("holes", Holes.REFUSE.value))
+    mesh = builtin_mesh(name)[0] if is_builtin(name) else load_mesh_with_notes(name, holes=holes)[0]
     params = FlattenParams(**config.get("params", {"density": 2.0, "damping": 0.02}))
     return prepare(mesh, initial_layout(mesh, config.get("init", "tutte")), params, fs)
 
