@@ -193,14 +193,16 @@ def in_a_batch(args: argparse.Namespace) -> str:
 def _endings(args: argparse.Namespace) -> tuple[tuple[str, str], ...]:
     """``(option, ending)`` of every output asked for; an ending is a file-name tail such as ``.pdf``."""
     endings = []
-    for option, what, _, value in output_paths(args):
-        text = str(value)
+    for option, what, suffixes, value in output_paths(args):
+        text = str(value)  # the example: an ending the option takes (--plot's .png), the one given if it is one
+        example = next((suffix for suffix in suffixes if text.lower().endswith(suffix)), suffixes[0])
         if not text or "/" in text or os.sep in text:
-            raise UserError(f"{in_a_batch(args)}, {what} takes a file-name ending such as .pdf, not '{text}': each "
-                            f"mesh writes --out-dir/<mesh name><ending>")
+            raise UserError(f"{in_a_batch(args)}, {what} takes a file-name ending such as {example}, not '{text}': "
+                            f"each mesh writes --out-dir/<mesh name><ending>")
         if text[0].isalnum():  # 'x.dxf' would write 'bunnyx.dxf': a file name given where an ending belongs
             raise UserError(f"{in_a_batch(args)}, {what} takes a file-name ending that starts with a separator, such "
-                            f"as .pdf or _flat.pdf, not '{text}' (each mesh writes --out-dir/<mesh name><ending>)")
+                            f"as {example} or _flat{example}, not '{text}' (each mesh writes --out-dir/<mesh name>"
+                            "<ending>)")
         endings.append((option, text))
     tails = [e for _, e in endings]
     for tail in tails:

@@ -120,6 +120,8 @@ def test_a_scheduler_address_runs_the_batch_on_that_cluster(tmp_path):
     (["--out-dir", "o", "--out", "sub/.pdf"], "takes a file-name ending such as .pdf"),
     (["--out-dir", "o", "--out", "x.pdf"], "takes a file-name ending that starts with a separator, such as .pdf or "
                                            "_flat.pdf, not 'x.pdf'"),
+    (["--out-dir", "o", "--plot", "png"], "--plot takes a file-name ending that starts with a separator, such as .png "
+                                          "or _flat.png, not 'png'"),  # the option's own ending, not --out's
     (["--out", ".pdf"], "a batch (several meshes, or --scheduler) writes its outputs to --out-dir DIR"),
     (["--out-dir", "o", "--formats", "narrow"], "--formats applies to the fixed-point engines"),
     (["--out-dir", "o", "--out", ".pdf", "--dxf-edges"], "--dxf-edges draws the mesh's edges into a DXF pattern"),
