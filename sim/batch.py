@@ -164,7 +164,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
                 drawing = pattern_drawing(args, mesh, result)
                 written = write_outputs(args, mesh, result, drawing)
                 _tell(job.name, [divergence_note(params, result),
-                                 *pattern_notes(params, result, formats=run_formats(args)),
+                                 *pattern_notes(params, mesh, result, formats=run_formats(args)),
                                  *notes_on_cut_files(args, mesh, result, drawing)])  # prints at 1:1000
                 summary = json_summary(args, mesh, params, result)
                 line = human_line(mesh, result)

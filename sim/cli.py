@@ -143,7 +143,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
         print(human_line(mesh, result))
         print(what_was_used(params, args.init, result, mesh), file=sys.stderr)
     formats = run_formats(args)
-    for note in (*pattern_notes(params, result, formats=formats), *notes_on_cut_files(args, mesh, result, drawing),
+    for note in (*pattern_notes(params, mesh, result, formats=formats), *notes_on_cut_files(args, mesh, result, drawing),
                  _energy_rule_note(params, result), _error_resolution_note(formats)):
         if note:
             print(f"springflat: note: {note}", file=sys.stderr)

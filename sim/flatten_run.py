@@ -17,7 +17,7 @@ from golden_model.fixed.engine import check_fixed_params, prepare, presets_holdi
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_fraction
-from golden_model.mesh import Mesh, loop_length, overlap_counts
+from golden_model.mesh import Mesh, loop_length, overlap_counts, signed_areas_2d
 from golden_model.modes import Step
 from golden_model.params import FlattenParams
 from golden_model.reference import RUNAWAY_FACTOR, energy_floor
@@ -314,6 +314,25 @@ def growth_note(params: FlattenParams, result: FlattenResult, api: bool = False)
             f"{RUNAWAY_FACTOR:g} times" + ("" if api else f"; {divergence_hint(params)}"))
 
 
+#: A pattern whose area is below this share of its surface's is said to be shrunk (:func:`shrink_note`): the
+#: counterpart of :func:`growth_note`'s twice the surface's area.
+SHRUNK_AREA_SHARE = 0.5
+
+
+def shrink_note(mesh: Mesh, result: FlattenResult) -> str | None:
+    """A pattern whose area is below :data:`SHRUNK_AREA_SHARE` of its surface's: a patch too curved to lie flat at
+    its size (a cap folded like a taco), whose springs' minimum shrinks it. E_S, the triangles' area changes over
+    the surface's area, cannot tell a pattern shrunk to a quarter (E_S at most 1) from one twice as large."""
+    if result.status == "diverged":
+        return None
+    share = float(np.abs(signed_areas_2d(result.positions, mesh.faces)).sum() / mesh.face_areas.sum())
+    if not share < SHRUNK_AREA_SHARE:
+        return None
+    return (f"the pattern's area is {share:.0%} of the surface's (E_S {error_text(result.final.area_error)}): the "
+            "patch is too curved to lie flat at its own size, and the pattern is that much smaller; pieces cut "
+            "from it (a seam, darts) each lie flatter")
+
+
 def saturation_note(params: FlattenParams, result: FlattenResult, formats: FormatSet | None,
                     api: bool = False) -> str | None:
     """A fixed-point run (of format set ``formats``) that clamped values: which, and where wider formats are;
@@ -344,12 +363,13 @@ def _holds_more(candidate: FormatSet, formats: FormatSet, clamped: dict[str, int
     return all(mine >= theirs for mine, theirs in pairs) and any(mine > theirs for mine, theirs in pairs)
 
 
-def pattern_notes(params: FlattenParams, result: FlattenResult, api: bool = False,
+def pattern_notes(params: FlattenParams, mesh: Mesh, result: FlattenResult, api: bool = False,
                   formats: FormatSet | None = None) -> list[str]:
-    """What a person must know about a pattern before cutting it: grown away, folded, overlapping, or (a
-    fixed-point run of ``formats``) clamped, at the top of its format where it ran away."""
-    return [note for note in (growth_note(params, result, api), fold_note(params, result, api), overlap_note(result),
-                              saturation_note(params, result, formats, api), still_note(params, result, formats, api))
+    """What a person must know about a pattern of ``mesh`` before cutting it: grown away, shrunk, folded,
+    overlapping, or (a fixed-point run of ``formats``) clamped, at the top of its format where it ran away."""
+    return [note for note in (growth_note(params, result, api), shrink_note(mesh, result), fold_note(params, result, api),
+                              overlap_note(result), saturation_note(params, result, formats, api),
+                              still_note(params, result, formats, api))
             if note]
 
 

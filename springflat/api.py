@@ -357,7 +357,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         forget_half_built_components(exc)
         raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
     notes = [*run_notes, divergence_note(params, result, api=True),
-             *pattern_notes(params, result, api=True, formats=run_formats(args))]
+             *pattern_notes(params, mesh, result, api=True, formats=run_formats(args))]
     for note in filter(None, notes):
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
