@@ -11,6 +11,7 @@ becomes the :class:`~golden_model.results.FlattenResult` that ``flatten`` writes
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass
 
@@ -41,6 +42,11 @@ def board_capacity(bus, fs: FormatSet) -> EngineCapacity:
     return capacity
 
 
+#: ``flatten --engine board`` gives up on a run whose ITERATIONS has not moved for this long (wall time). An
+#: iteration at the largest capacity is about 60,000 clocks, under a millisecond at the board's clock.
+BOARD_STALL_SECONDS = 20.0
+
+
 @dataclass(frozen=True, eq=False)
 class BoardRun:
     readback: EngineReadBack
@@ -49,15 +55,33 @@ class BoardRun:
     load_seconds: float
     run_seconds: float
     readback_seconds: float
+    #: the engine was found running (a run cut off before it could abort it) and was aborted first
+    aborted_earlier_run: bool = False
 
 
-def run_on_board(problem: FixedProblem, bus, *, poll=None, max_polls: int = 10_000_000) -> BoardRun:
+def _abort(driver: EngineDriver) -> None:
+    """ABORT, then STATUS polled until the engine has drained what was in flight (a few clocks)."""
+    driver.abort()
+    for _ in range(100):
+        if driver.state() != "running":
+            return
+    raise DriverError("the engine is still running after ABORT")
+
+
+def run_on_board(problem: FixedProblem, bus, *, poll=None, max_polls: int | None = 10_000_000,
+                 stall_seconds: float | None = None) -> BoardRun:
     """Load ``problem``'s image, run it, read it back and compare it with ``run_image``. ``poll`` runs between
-    STATUS reads (default: none; the link's round trip paces the polls)."""
+    STATUS reads (default: none; the link's round trip paces the polls); ``max_polls`` and ``stall_seconds``
+    limit the wait (:meth:`EngineDriver.wait`). The host owns the engine: one found running (a run cut off by
+    a lost link or a killed process) is aborted first, and a run that is interrupted or fails here is aborted
+    before the exception goes on, so that the next run finds the engine idle."""
     fs = problem.fs
     capacity = board_capacity(bus, fs)
     driver = EngineDriver(bus, RegisterMap.build(fs, capacity))
     image = build_image(problem, capacity)  # refuses a mesh over the board's capacity in one line
+    aborted_earlier_run = driver.state() == "running"
+    if aborted_earlier_run:
+        _abort(driver)
     started = time.perf_counter()
     batched = getattr(bus, "batched", None)
     if batched is not None:
@@ -67,7 +91,14 @@ def run_on_board(problem: FixedProblem, bus, *, poll=None, max_polls: int = 10_0
         driver.load(image)
     loaded = time.perf_counter()
     driver.start(irq=True)
-    driver.wait(poll=poll, max_polls=max_polls)
+    try:
+        driver.wait(poll=poll, max_polls=max_polls, stall_seconds=stall_seconds)
+    except BaseException:  # (KeyboardInterrupt too: the command's signals)
+        try:
+            _abort(driver)
+        except Exception:  # the link itself failed: the next run aborts what it finds running
+            pass
+        raise
     ran = time.perf_counter()
     readback = driver.read_back()
     done = time.perf_counter()
@@ -83,14 +114,18 @@ def run_on_board(problem: FixedProblem, bus, *, poll=None, max_polls: int = 10_0
             bad = np.argwhere(got != golden) if got.shape == golden.shape else [[0, 0]]
             node, axis = (int(v) for v in bad[0])
             mismatches.append(f"{name}: {len(bad)} values differ, the first node {node} {'xy'[axis]}")
-    return BoardRun(readback, capacity, mismatches, loaded - started, ran - loaded, done - ran)
+    return BoardRun(readback, capacity, mismatches, loaded - started, ran - loaded, done - ran, aborted_earlier_run)
 
 
-def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = "board"):
+def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = "board",
+                     stall_seconds: float | None = None):
     """``springflat flatten --engine board``: ``problem`` through the engine behind ``bus``, as a
     :class:`~golden_model.results.FlattenResult`; :class:`EngineRunError` when the read-back differs
     from the golden model's."""
-    run = run_on_board(problem, bus, poll=poll)
+    run = run_on_board(problem, bus, poll=poll, stall_seconds=stall_seconds)
+    if run.aborted_earlier_run:
+        print(f"springflat: note: the engine on {transport} was still running a run cut off earlier: aborted it "
+              "first", file=sys.stderr)
     if run.mismatches:
         raise EngineRunError(f"the engine on {transport} does not match the golden model: {run.mismatches[0]}")
     r = run.readback
@@ -117,7 +152,6 @@ def add_board_options(parser) -> None:
 def board_engine(formats: FormatSet, port: str | None, baud: int | None):
     """``--engine board``: the engine function ``cmd_flatten`` calls; every failure is one line (``UserError``).
     ``baud``: ``None`` for :data:`~golden_model.engine_spec.uart_protocol.DEFAULT_BAUD`."""
-    import sys
 
     from golden_model.engine_spec.uart_protocol import DEFAULT_BAUD
 
@@ -144,7 +178,7 @@ def board_engine(formats: FormatSet, port: str | None, baud: int | None):
         try:
             with link:
                 return flatten_on_board(problem, UartBus(link, name=f"the board on {port}"),
-                                        transport=f"the board on {port}")
+                                        transport=f"the board on {port}", stall_seconds=BOARD_STALL_SECONDS)
         except (EngineError, EngineRunError) as exc:
             raise UserError(str(exc)) from None
 

@@ -15,6 +15,7 @@ another capacity or format set, start with no mesh loaded, a wait that never end
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable, Protocol
 
@@ -163,16 +164,33 @@ class EngineDriver:
     def abort(self) -> None:
         self.bus.write(self._control.offset, _put(self._control, 0, "abort", 1))
 
-    def wait(self, poll: Callable[[], None] | None = None, max_polls: int = 100_000) -> str:
+    def state(self) -> str:
+        """STATUS.state: ``idle``, ``running`` or ``done``."""
+        return self._status_fields()[0]
+
+    def wait(self, poll: Callable[[], None] | None = None, max_polls: int | None = 100_000,
+             stall_seconds: float | None = None) -> str:
         """Poll STATUS until the run is done (``poll`` runs between reads, e.g. to advance a simulation);
-        returns the result and clears the pending interrupt."""
-        for _ in range(max_polls):
+        returns the result and clears the pending interrupt. :class:`DriverError` after ``max_polls`` reads
+        (``None``: no limit), or where ITERATIONS (counted live) has not changed for ``stall_seconds`` of wall
+        time (``None``: not watched; a simulation's clock is not the wall's)."""
+        polls, watched = 0, None
+        changed = checked = time.monotonic()
+        while max_polls is None or polls < max_polls:
+            polls += 1
             state, result = self._status_fields()
             if state == "done":
                 self.bus.write(self._status.offset, _put(self._status, 0, "irq_pending", 1))
                 return result
             if state == "idle":
                 raise DriverError("the engine is idle: start() it before wait()")
+            if stall_seconds is not None and (now := time.monotonic()) - checked >= min(1.0, stall_seconds / 4):
+                checked, iterations = now, self.read_value("iterations")
+                if iterations != watched:
+                    watched, changed = iterations, now
+                elif now - changed >= stall_seconds:
+                    raise DriverError(f"the engine made no progress for {stall_seconds:g} s: ITERATIONS stays at "
+                                      f"{iterations}")
             if poll is not None:
                 poll()
         raise DriverError(f"the engine is still running after {max_polls} status polls")

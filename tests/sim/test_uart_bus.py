@@ -84,6 +84,50 @@ def test_a_run_over_frames_is_the_golden_models():
     assert len(writes) < words / 3
 
 
+def _problem():
+    return prepare(MESH, initial_layout(MESH, "tutte"), PARAMS, DEFAULT)
+
+
+def test_a_run_cut_off_leaves_the_engine_idle_and_one_found_running_is_aborted_first():
+    """The host owns the engine: an interrupted wait (the command's Ctrl-C, SIGTERM) aborts the run before the
+    exception goes on, so the next run can load; one found running (a killed process, a lost link) is aborted
+    first and said so. The run after each is the golden model's, bit for bit."""
+    engine = ModelBus(MAP, DEFAULT, run_polls=1_000_000)
+    bus = UartBus(ModelPort(engine, addr_width(MAP)))
+    polls = []
+
+    def interrupted_after_three():
+        polls.append(1)
+        if len(polls) == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_on_board(_problem(), bus, poll=interrupted_after_three)
+    assert EngineDriver(bus, MAP).state() == "idle"
+    reference = flatten_fixed(MESH, initial_layout(MESH, "tutte"), PARAMS, DEFAULT)
+    engine.run_polls = 2
+    run = run_on_board(_problem(), bus)
+    assert not run.aborted_earlier_run and run.mismatches == []
+    driver = EngineDriver(bus, MAP)  # a run left going, as by a process killed while it waited
+    engine.run_polls = 1_000_000
+    driver.start()
+    assert driver.state() == "running"
+    engine.run_polls = 2
+    run = run_on_board(_problem(), bus)
+    assert run.aborted_earlier_run and run.mismatches == []
+    np.testing.assert_array_equal(run.readback.positions, reference.engine_state.raw_positions)
+
+
+def test_a_run_whose_iterations_stop_moving_is_given_up_and_aborted():
+    """A wall-clock watch on ITERATIONS (a hung engine, or a board that answers STATUS and nothing else): one
+    line naming the time and the count, and the engine aborted, not left running."""
+    engine = ModelBus(MAP, DEFAULT, run_polls=10**12)  # a model run never counts: ITERATIONS stays 0
+    bus = UartBus(ModelPort(engine, addr_width(MAP)))
+    with pytest.raises(DriverError, match=r"^the engine made no progress for 0\.2 s: ITERATIONS stays at 0$"):
+        run_on_board(_problem(), bus, stall_seconds=0.2)
+    assert EngineDriver(bus, MAP).state() == "idle"
+
+
 def test_the_capacity_registers_do_not_move_with_the_capacity():
     """board_capacity reads CAP_* at the addresses of DEFAULT_CAPACITY's map: they must be the same for every
     capacity."""
