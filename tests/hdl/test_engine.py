@@ -338,7 +338,8 @@ def test_a_build_without_the_guard_runs_the_momentum_step_bit_exact():
 
 def test_bus_answers_take_the_documented_clocks():
     """docs/engine.md: a register answers 5 clocks after ``stb`` rises, a memory word 12 (read or write),
-    an unmapped word's ``err`` 4; what is written reads back."""
+    an unmapped word's ``err`` 4, and an access refused where its word decodes (a read-only register written, a
+    partial ``sel``) its ``err`` when the word's ``ack`` would come; what is written reads back."""
     dut = SpringflatEngine(FS, CAPACITY, entry_bank_depth=4)
     rmap = dut.register_map
     max_iter = rmap.register("MAX_ITER").offset
@@ -356,6 +357,10 @@ def test_bus_answers_take_the_documented_clocks():
         # entry 37: bank 9, in the third of the bank select's groups of four
         answers["far_write"] = await wishbone_write(ctx, dut.bus, entries.address(37, 0), 0x3C3C3, idle=1)
         answers["far_read"] = await wishbone_read(ctx, dut.bus, entries.address(37, 0), idle=1)
+        # refused where the word decodes: err when the ack would have come
+        answers["read_only_write"] = await wishbone_write(ctx, dut.bus, rmap.register("ITERATIONS").offset, 1, idle=1)
+        answers["register_partial"] = await wishbone_write(ctx, dut.bus, max_iter, 1, sel=0b0011, idle=1)
+        answers["memory_partial"] = await wishbone_write(ctx, dut.bus, entries.address(5, 0), 1, sel=0b0011, idle=1)
 
     sim = Simulator(dut)
     sim.add_clock(1e-8)
@@ -365,7 +370,9 @@ def test_bus_answers_take_the_documented_clocks():
     # than the edges after which the target raises it
     raised_after = {name: a.clocks - 1 for name, a in answers.items()}
     assert raised_after == {"register_write": 5, "register_read": 5, "memory_write": 12, "memory_read": 12,
-                            "unmapped": 4, "far_write": 12, "far_read": 12}
+                            "unmapped": 4, "far_write": 12, "far_read": 12, "read_only_write": 5,
+                            "register_partial": 5, "memory_partial": 12}
+    assert all(answers[name].error for name in ("read_only_write", "register_partial", "memory_partial"))
     clocks = SpringflatEngine.BUS_ANSWER_CLOCKS  # what the bundle tells an integrator: the measured clocks
     assert (clocks["register"], clocks["memory word"], clocks["err"]) == (
         raised_after["register_read"], raised_after["memory_read"], raised_after["unmapped"])
