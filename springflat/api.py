@@ -40,6 +40,7 @@ from sim.engines import ENGINES, engine_named
 from sim.flatten_run import divergence_note, pattern_notes, run_flatten, run_formats
 from sim.layouts import AUTO_START, LAYOUT_METHODS, LayoutError
 from sim.mesh_io import load_mesh_with_notes
+from sim.mesh_io.seams import seams_hint, seams_note
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
                          ending_name_problem)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, add_pattern_options,
@@ -336,8 +337,10 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
     try:  # validated here: errors name no temporary file
         mesh, notes = oriented_mesh(vertices, faces, name=name, holes=_holes(args.fill_holes, args.keep_holes))
     except HoledMesh as exc:
-        raise MeshError(f"{exc}; {_in_api_words(HOLES_HINT)}") from None
-    for note in notes:
+        raise MeshError(f"{exc}{seams_hint(vertices, faces)}; {_in_api_words(HOLES_HINT)}") from None
+    except MeshError as exc:
+        raise MeshError(f"{exc}{seams_hint(vertices, faces)}") from None
+    for note in [*notes, *filter(None, [seams_note(vertices, faces)])]:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     try:
         params = params_from_args(args, file_defaults(mesh))

@@ -14,6 +14,7 @@ from .obj import obj_line_hint, read_obj
 from .off import read_off
 from .ply import read_ply
 from .polygons import first_unplain, is_float, triangulate_polygons
+from .seams import seams_hint, seams_note
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
@@ -72,13 +73,13 @@ def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple
         vertices, faces, notes = read_stl(data, path)
     try:
         mesh, turned = oriented_mesh(vertices, faces, name=path.stem, holes=holes)
-        return mesh, notes + turned
+        return mesh, notes + turned + [note for note in (seams_note(vertices, faces),) if note]
     except HoledMesh as exc:  # (the commands that can fill it say how)
-        raise HoledMesh(f"invalid mesh '{path}': {exc}") from None
+        raise HoledMesh(f"invalid mesh '{path}': {exc}{seams_hint(vertices, faces)}") from None
     except MeshError as exc:
         if suffix == ".obj":
             hint = obj_line_hint(str(exc), obj)
-        raise MeshError(f"invalid mesh '{path}': {exc}{hint}") from None
+        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{seams_hint(vertices, faces)}") from None
 
 
 def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:

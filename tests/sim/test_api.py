@@ -624,3 +624,19 @@ def test_a_pattern_below_half_its_surface_area_says_so_one_at_its_size_does_not(
         warnings.simplefilter("always")
         springflat.flatten(vertices, faces, init=uv, max_iter=1)
     assert not [w for w in caught if "area is" in str(w.message)]
+
+
+def test_arrays_with_a_seam_left_open_get_the_files_note_and_hint():
+    """The API reads arrays as the command reads files: an open seam is a MeshNote; a heap of triangles is refused
+    with the hint that welding may make it one disk."""
+    from sim.generate import grid_faces, grid_uv
+
+    grid = np.column_stack([grid_uv(4, 4, 10.0, 10.0), np.zeros(16)])
+    faces = grid_faces(4, 4)
+    with pytest.raises(MeshError, match=r"connected components; \d+ vertices lie on one another in \d+ places with "
+                                        r"no edge between them \(an exporter's seam\?\): welded, it may be one disk$"):
+        springflat.flatten(grid[faces].reshape(-1, 3), np.arange(3 * len(faces)).reshape(-1, 3))
+    right = grid[faces].mean(axis=1)[:, 0] > grid[1, 0]  # vertex 1, on the edge, copied for the faces right of it
+    faces[right] = np.where(faces[right] == 1, 16, faces[right])
+    with pytest.warns(springflat.MeshNote, match=r"mesh: 2 vertices lie on one another in 1 place with no edge "):
+        springflat.flatten(np.vstack([grid, grid[1]]), faces, max_iter=2)

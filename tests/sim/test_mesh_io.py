@@ -400,3 +400,44 @@ def test_the_command_flattens_a_holed_scan_with_fill_holes_and_the_api_too(tmp_p
     with pytest.warns(springflat.MeshNote, match=r"^mesh: 2 holes closed by 4 triangles \("):
         pattern = springflat.flatten(V0, F0, fill_holes=True, init=V0[:, :2])  # a layout of the file's vertices
     assert pattern.layout.shape == (441, 2) and pattern.folded == 0
+
+
+def _split_at(rows: range, column: int = 3, n: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """An ``n × n`` grid whose vertices ``(row, column)`` for ``rows`` are copied for the faces right of that
+    column, as an exporter's seam leaves them: the same points, no edge between the copies."""
+    from sim.generate import grid_faces, grid_uv
+
+    vertices, faces = np.column_stack([grid_uv(n, n), np.zeros(n * n)]), grid_faces(n, n)
+    right = vertices[faces].mean(axis=1)[:, 0] > vertices[column, 0]
+    for row in rows:
+        old = row * n + column
+        copied = right & (faces == old).any(axis=1)
+        faces[copied] = np.where(faces[copied] == old, len(vertices), faces[copied])
+        vertices = np.vstack([vertices, vertices[old]])
+    return vertices, faces
+
+
+def test_a_seam_left_open_is_named_where_it_cuts_the_surface_and_where_it_breaks_the_disk(tmp_path):
+    """A seam from the edge inwards is a slit: read, with a note naming the copies and how to weld them; an inner
+    seam makes a hole, and a face-by-face file a heap of triangles: their refusals say that welding may help."""
+    vertices, faces = _split_at(range(0, 2))  # from the boundary row in: a slit, still a disk
+    save_obj(tmp_path / "edge_seam.obj", vertices, faces)
+    mesh, notes = load_mesh_with_notes(tmp_path / "edge_seam.obj")
+    assert mesh.n_vertices == 38 and [note for note in notes if "on one another" in note] == [
+        "4 vertices lie on one another in 2 places with no edge between them: the surface is cut there (an exporter's "
+        "seam, where texture coordinates or normals differ, leaves it so), and so is the pattern; if it is one piece "
+        "there, weld them first (trimesh's merge_vertices, MeshLab's Merge Close Vertices)"]
+    vertices, faces = _split_at(range(2, 4))  # rows 1 and 4 stay shared: a hole
+    save_obj(tmp_path / "inner_seam.obj", vertices, faces)
+    with pytest.raises(MeshError, match=r"2 boundary loops .*; 4 vertices lie on one another in 2 places with no "
+                                        r"edge between them \(an exporter's seam\?\): welded, it may be one disk$"):
+        load_mesh_with_notes(tmp_path / "inner_seam.obj")
+    from sim.generate import grid_faces, grid_uv
+
+    grid = np.column_stack([grid_uv(3, 3), np.zeros(9)])
+    soup = grid[grid_faces(3, 3)].reshape(-1, 3)  # every triangle its own three corners: 24 at 9 points, of
+    save_obj(tmp_path / "soup.obj", soup, np.arange(len(soup)).reshape(-1, 3))  # which two corners have one
+    with pytest.raises(MeshError, match=r"8 connected components; 22 vertices lie on one another in 7 places"):
+        load_mesh_with_notes(tmp_path / "soup.obj")
+    save_obj(tmp_path / "grid.obj", grid, grid_faces(3, 3))
+    assert not [note for note in load_mesh_with_notes(tmp_path / "grid.obj")[1] if "on one another" in note]

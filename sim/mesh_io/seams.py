@@ -1,0 +1,75 @@
+"""Vertices that lie on one another with no edge between them: a seam an exporter left open.
+
+Exporters split a vertex where its texture coordinates or normals differ (a UV seam), so one surface comes
+as pieces that only touch. Read as it is, such a seam is a cut in the mesh: a seam from the edge inwards is a
+slit the pattern opens, an inner one a hole, and a face-by-face file a heap of triangles. Nothing is joined
+here (where two copies of a point belong together is the user's call); the reader says where it found them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+__all__ = ["SEAM_TOLERANCE", "open_seams", "seams_note", "seams_hint"]
+
+#: Two vertices closer than this share of the median edge length lie on one another: far below any edge of a
+#: mesh worth flattening, above a float32 file's rounding of one point written twice.
+SEAM_TOLERANCE = 1e-4
+
+
+def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
+    """``(vertices, places)``: how many of the vertices that faces use lie on another one (within
+    :data:`SEAM_TOLERANCE` of the median edge length) with no edge between them, in how many places."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        return 0, 0
+    used = np.unique(faces)
+    vertices = np.asarray(vertices)
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or used[0] < 0 or used[-1] >= len(vertices):
+        return 0, 0  # (no mesh to look at: its refusal says why)
+    points = vertices[used].astype(np.float64)
+    ends = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    length = float(np.median(np.linalg.norm(points[np.searchsorted(used, ends[:, 0])]
+                                            - points[np.searchsorted(used, ends[:, 1])], axis=1)))
+    if not np.isfinite(length) or length <= 0 or not np.isfinite(points).all():
+        return 0, 0
+    pairs = cKDTree(points).query_pairs(SEAM_TOLERANCE * length, output_type="ndarray")
+    if len(pairs) == 0:
+        return 0, 0
+    a, b = used[pairs[:, 0]], used[pairs[:, 1]]
+    n = int(used.max()) + 1
+    edge_keys = np.unique(np.minimum(ends[:, 0], ends[:, 1]) * n + np.maximum(ends[:, 0], ends[:, 1]))
+    unjoined = ~np.isin(np.minimum(a, b) * n + np.maximum(a, b), edge_keys)
+    a, b = a[unjoined], b[unjoined]
+    if len(a) == 0:
+        return 0, 0
+    involved = np.unique(np.concatenate([a, b]))
+    index = np.searchsorted(involved, np.concatenate([a, b]))
+    graph = coo_matrix((np.ones(len(a)), (index[: len(a)], index[len(a):])), shape=(len(involved),) * 2)
+    return len(involved), int(connected_components(graph, directed=False)[0])
+
+
+def _what(count: int, places: int) -> str:
+    return (f"{count} vertices lie on one another in {places} place{'s' if places != 1 else ''} with no edge "
+            "between them")
+
+
+def seams_note(vertices: np.ndarray, faces: np.ndarray) -> str | None:
+    """The reader's note on a valid mesh with open seams (:func:`open_seams`), or ``None``."""
+    count, places = open_seams(vertices, faces)
+    if not count:
+        return None
+    return (f"{_what(count, places)}: the surface is cut there (an exporter's seam, where texture coordinates or "
+            "normals differ, leaves it so), and so is the pattern; if it is one piece there, weld them first "
+            "(trimesh's merge_vertices, MeshLab's Merge Close Vertices)")
+
+
+def seams_hint(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """What a refusal adds where the mesh has open seams: ``"; <what>: ..."``, or ``""``."""
+    count, places = open_seams(vertices, faces)
+    if not count:
+        return ""
+    return f"; {_what(count, places)} (an exporter's seam?): welded, it may be one disk"
