@@ -106,9 +106,11 @@ class EngineDriver:
         major = self.read_value("version_major")
         if major != VERSION[0]:
             raise DriverError(f"the engine's register map is version {major}.x; this driver speaks {VERSION[0]}.x")
-        if self.read_value("format_hash") != self.map.format_hash:
-            raise DriverError(f"the engine was built for another format set than '{self.map.formats}' "
-                              "(FORMAT_HASH differs)")
+        if (built := self.read_value("format_hash")) != self.map.format_hash:
+            preset = next((name for name in FormatSet.presets() if format_hash(FormatSet.preset(name)) == built), None)
+            raise DriverError(f"the engine was built for another format set than '{self.map.formats}' (FORMAT_HASH "
+                              "differs): " + (f"the '{preset}' preset's: give --formats {preset}" if preset else
+                                              "no preset's: give --formats with the file it was built from"))
 
     def identify(self) -> None:
         """Check that the bus holds this map's engine: magic, major version, format set, capacity."""
@@ -202,7 +204,9 @@ class EngineDriver:
             raise DriverError("the engine is running: wait() before read_back()")
         vertices = self.read_value("vertices")
         window = self.map.window("nodes")
-        words = np.array([[self.bus.read(window.address(i, k)) for k in range(window.words)]
+        read_words = getattr(self.bus, "read_words", None)  # a bus that reads a run of words at once (UartBus)
+        words = np.array([read_words(window.address(i, 0), window.words) if read_words is not None
+                          else [self.bus.read(window.address(i, k)) for k in range(window.words)]
                           for i in range(vertices)], dtype=np.uint32).reshape(vertices, window.words)
         f = MemoryLayout(window.name, window.fields, window.depth).unpack(words)
         positions = np.column_stack([f["position_x"], f["position_y"]])

@@ -10,9 +10,11 @@ that caused it: the driver's :class:`~sim.engine_driver.BusError` for every erro
 ``err``, and the link's own: a bad checksum, length, command, address or a truncated frame), and
 :class:`LinkError` when no whole answer comes back in time or the answer itself is corrupt. Inside
 :meth:`UartBus.batched` consecutive writes are sent as one frame of up to
-:data:`~golden_model.engine_spec.uart_protocol.MAX_WORDS` words (loading an image is 97 % payload instead of
-28 %): a write's error is then raised by the call that sends its frame (a read, a write that does not
-continue the run of addresses, or the end of the block).
+:data:`~golden_model.engine_spec.uart_protocol.MAX_WORDS` words (a run of addresses ends at a
+window's stride hole, so a node is one frame, and an entry or a triangle, whose 3 words have a stride of 4,
+one each): a write's error is then raised by the call that sends its frame (a read, a write that does not
+continue the run of addresses, or the end of the block). :meth:`UartBus.read_words` reads a run of words in one
+frame; the driver reads a node's words so.
 """
 
 from __future__ import annotations
@@ -48,18 +50,22 @@ class UartBus:
         self.port.write(request)
         head = self._read_exactly(2, what)
         status, count = head
-        body = 4 * count if status == protocol.OK and request[0] == protocol.READ else 0
-        answer = head + self._read_exactly(body + 1, what)
+        asked = request[protocol.HEADER_BYTES - 1]
+        if status == protocol.OK and count != asked:  # (a body of another length would be waited for in vain)
+            raise LinkError(f"corrupt answer from {self.name} to {what}: OK with {count} words for {asked}")
+        body = protocol.WORD_BYTES * count if status == protocol.OK and request[0] == protocol.READ else 0
+        answer = head + self._read_exactly(body + 1, what, already=len(head))
         self.frames += 1
         try:
             return protocol.decode_answer(answer)
         except ValueError as exc:
             raise LinkError(f"corrupt answer from {self.name} to {what}: {exc}") from None
 
-    def _read_exactly(self, n: int, what: str) -> bytes:
+    def _read_exactly(self, n: int, what: str, already: int = 0) -> bytes:
+        """``n`` bytes of the answer to ``what``, of which ``already`` have come (for the message)."""
         data = self.port.read(n)
         if len(data) < n:
-            got = f"{len(data) } of {n} bytes" if data else "nothing"
+            got = f"{already + len(data)} of {already + n} bytes" if already or data else "nothing"
             raise LinkError(f"no answer from {self.name} to {what} ({got} before the timeout): is the board "
                             "programmed with springflat_ulx3s.bit, and the baud rate the bitstream's?")
         return bytes(data)

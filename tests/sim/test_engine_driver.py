@@ -111,7 +111,8 @@ def test_a_map_with_or_without_the_guard_must_match_the_engine(bus):
 
 def test_a_map_for_another_format_set_or_no_engine_is_refused(bus):
     narrow = RegisterMap.build(FormatSet.preset("narrow"), CAPACITY)
-    with pytest.raises(DriverError, match=r"^the engine was built for another format set than 'narrow'"):
+    with pytest.raises(DriverError, match=r"^the engine was built for another format set than 'narrow' \(FORMAT_HASH "
+                                          r"differs\): the 'default' preset's: give --formats default$"):
         EngineDriver(bus, narrow).load(_image())
 
     class Silent:

@@ -80,8 +80,11 @@ def test_a_run_over_frames_is_the_golden_models():
     words = sum(a.size for a in (image.nodes, image.entries, image.triangles))
     writes = [r for r in port.requests if r[0] == protocol.WRITE]
     assert sum(r[5] for r in writes) >= words
-    # batched: a node's 5 words are one frame (its stride of 8 leaves holes), the entries and triangles 64 a frame
+    # batched: a node's 5 words are one frame (its stride of 8 leaves holes), an entry's or a triangle's 3 (stride 4) one
     assert len(writes) < words / 3
+    node_words = MAP.window("nodes").words  # the read-back: a node's words in one frame
+    reads_of_a_node = [r for r in port.requests if r[0] == protocol.READ and r[protocol.HEADER_BYTES - 1] == node_words]
+    assert len(reads_of_a_node) == MESH.n_vertices
 
 
 def _problem():
@@ -209,6 +212,12 @@ def test_error_answers_and_timeouts_are_one_line():
         mute.read(0)
     assert str(info.value).startswith("no answer from the board on COM9 to a read at 0x0 (nothing before the timeout)")
     assert "\n" not in str(info.value)
+    headless = UartBus(ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP), mangle=lambda a: a[:2]))
+    with pytest.raises(LinkError, match=r"^no answer from the link to a read at 0x0 \(2 of 7 bytes before the "):
+        headless.read(0)  # the header came, the word and the checksum did not
+    overlong = UartBus(ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP), mangle=lambda a: bytes([a[0], 255]) + a[2:]))
+    with pytest.raises(LinkError, match=r"^corrupt answer from the link to a read at 0x0: OK with 255 words for 1$"):
+        overlong.read(0)  # refused at its header, not after waiting for 1,021 bytes
 
 
 @pytest.mark.slow  # two CLI runs
