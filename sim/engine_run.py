@@ -374,12 +374,20 @@ def rtl_capacity() -> EngineCapacity:
     (the tests use a small engine)."""
     from .run_options import UserError
 
-    if not os.environ.get("SPRINGFLAT_ENGINE_CAPACITY"):
+    from golden_model.params import ParameterError
+
+    from .register_map_export import check_fillable
+
+    given = os.environ.get("SPRINGFLAT_ENGINE_CAPACITY")
+    if not given:
         return DEFAULT_CAPACITY
     try:
-        return EngineCapacity(*(int(v) for v in os.environ["SPRINGFLAT_ENGINE_CAPACITY"].split(",")))
-    except (TypeError, ValueError) as exc:
-        raise UserError(f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
+        capacity = EngineCapacity(*(int(v) for v in given.split(",")))
+        check_fillable(capacity, f"SPRINGFLAT_ENGINE_CAPACITY={given}")
+    except (TypeError, ValueError) as exc:  # (ParameterError too: one line naming the variable)
+        raise UserError(str(exc) if isinstance(exc, ParameterError) else
+                        f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
+    return capacity
 
 
 def rtl_engine(formats: FormatSet):

@@ -176,15 +176,22 @@ def engine_capacity(values, fs, *, guard: bool = True) -> EngineCapacity:
         RegisterMap.build(fs, capacity)  # the address map must hold it
     except (TypeError, ValueError) as exc:
         raise ParameterError(f"--capacity V E T: {exc}") from None
+    check_fillable(capacity, f"--capacity {capacity.as_option()}")
+    return capacity
+
+
+def check_fillable(capacity: EngineCapacity, given: str) -> None:
+    """A one-line :class:`ParameterError` (naming ``given``, where the capacity came from) for depths that hold
+    fewer vertices than the capacity says, or no mesh: a typo's memories."""
+    from golden_model.params import ParameterError
+
     v, fillable = max(capacity.vertices, 3), capacity.fillable_vertices  # (a mesh has a triangle at least)
-    if fillable < v:  # a typo's memories, which no mesh could fill
+    if fillable < v:
         held = (f"at most {fillable} vertices (give more entries or triangles, or fewer vertices)" if fillable >= 3
                 else "no mesh")
         entries, triangles = EngineCapacity.least_for(v)
-        raise ParameterError(f"--capacity {capacity.as_option()}: a disk mesh of {v} vertices has at least "
-                             f"{entries} neighbour entries and {triangles} triangle{'s' if triangles > 1 else ''}; "
-                             f"these depths hold {held}")
-    return capacity
+        raise ParameterError(f"{given}: a disk mesh of {v} vertices has at least {entries} neighbour entries and "
+                             f"{triangles} triangle{'s' if triangles > 1 else ''}; these depths hold {held}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -602,6 +602,9 @@ def test_an_unguarded_run_where_arap_fails_names_the_start_to_give(tmp_path):
                     "wide holds it: --formats wide"),
     ("rtl", "8,64,32", "the mesh has 41 vertices; the engine holds at most 8 (capacity vertices=8, entries=64, "
                        "triangles=32)"),
+    ("rtl", "4,8,2", "SPRINGFLAT_ENGINE_CAPACITY=4,8,2: a disk mesh of 4 vertices has at least 10 neighbour entries "
+                     "and 2 triangles; these depths hold at most 3 vertices (give more entries or triangles, or fewer "
+                     "vertices)"),  # depths no mesh of that size fills, as --capacity refuses them
 ])
 def test_what_the_mesh_alone_cannot_run_is_refused_before_the_start_is_computed(tmp_path, monkeypatch, capsys, engine,
                                                                                  capacity, message):
