@@ -140,6 +140,14 @@ def open_port(port: str, baud: int = protocol.DEFAULT_BAUD, timeout_s: float = 2
     import serial
 
     url = urllib.parse.urlsplit(port)
+    if "://" in port and url.scheme in ("socket", "rfc2217"):  # (pyserial's own error is a TypeError's text)
+        try:
+            numbered = url.port is not None
+        except ValueError:
+            numbered = False
+        if not numbered:
+            raise LinkError(f"cannot open the serial port '{port}': a {url.scheme}:// URL needs a port number "
+                            f"({url.scheme}://HOST:PORT)")
     if "://" in port and "file" in urllib.parse.parse_qs(url.query):  # spy://...?file=PATH truncates PATH
         raise LinkError(f"the serial port '{port}' names a log file (file=), which springflat would write "
                         "unchecked (it could replace any file, a mesh too): leave out file= (spy:// then logs "

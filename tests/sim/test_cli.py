@@ -905,3 +905,14 @@ def test_an_obj_output_never_replaces_a_mesh_that_springflat_did_not_write(tmp_p
     with pytest.raises(springflat.OutputError, match="is an OBJ file springflat did not write"):
         springflat.write_pattern("scan.obj", pattern)
     assert Path("scan.obj").read_bytes() == scan
+
+
+def test_a_run_constant_the_engine_cannot_hold_is_refused_before_the_build_line(tmp_path, monkeypatch, capsys):
+    """--engine rtl with a --max-iter beyond the engine's 32-bit register: one line, and no 'building
+    springflat_engine' before it (nothing is built)."""
+    from sim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["flatten", "surf1", "--engine", "rtl", "--max-iter", "5000000000"]) == 2
+    assert capsys.readouterr().err == ("springflat: error: run constant max_iter = 5000000000 does not fit the "
+                                       "engine's 32-bit register (max 4294967295)\n")

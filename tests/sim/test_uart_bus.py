@@ -220,6 +220,15 @@ def test_error_answers_and_timeouts_are_one_line():
         overlong.read(0)  # refused at its header, not after waiting for 1,021 bytes
 
 
+@pytest.mark.parametrize("url", ["socket://localhost", "rfc2217://host:port", "socket://host:"])
+def test_a_network_port_without_a_port_number_is_one_line(url):
+    """pyserial answers a socket:// URL without a port with a TypeError's text ('<=' not supported ...)."""
+    scheme = url.split(":")[0]
+    with pytest.raises(LinkError, match=rf"^cannot open the serial port '{url}': a {scheme}:// URL needs a port number "
+                                        rf"\({scheme}://HOST:PORT\)$"):
+        open_port(url)
+
+
 @pytest.mark.slow  # two CLI runs
 def test_a_missing_port_is_one_line(tmp_path):
     with pytest.raises(LinkError, match=f"^cannot open the serial port '{tmp_path}/ttyUSB9': "):
