@@ -42,6 +42,16 @@ def rolled_grid(nx: int = 6, ny: int = 6, arc_degrees: float = 60.0, size: float
     return Mesh(vertices, grid_faces(nx, ny), name="rolled"), unrolled
 
 
+def ring_sector(degrees: float = 180.0, segments: int = 199, rows: int = 2, inner: float = 400.0,
+                width: float = 50.0) -> Mesh:
+    """A flat ring sector (a waistband, a curved flange) in the plane z = 0: ``segments`` cells along the arc,
+    ``rows`` vertices across its ``width``, from radius ``inner``. Its exact flattening is itself."""
+    uv = grid_uv(segments + 1, rows, np.radians(degrees), width)
+    radius = inner + uv[:, 1]
+    vertices = np.column_stack([radius * np.cos(uv[:, 0]), radius * np.sin(uv[:, 0]), np.zeros(len(uv))])
+    return Mesh(vertices, grid_faces(segments + 1, rows), name="ring_sector")
+
+
 def dome_grid(n: int = 8, height: float = 0.3) -> Mesh:
     uv = grid_uv(n, n) - 0.5
     z = height * (1 - 2 * (uv**2).sum(axis=1))

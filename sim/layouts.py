@@ -41,6 +41,7 @@ a non-finite result) is a :class:`LayoutError` naming the method.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,6 +53,7 @@ import scipy.sparse.linalg as spla
 
 from golden_model.files import read_file_bytes
 from golden_model.mesh import COORDINATE_LIMIT, Mesh, MeshError, layout_orientation, signed_areas_2d
+from golden_model.guard import ENERGY_FLOOR
 from .mesh_io import read_obj_vertices
 from .mesh_io.polygons import is_plain
 
@@ -60,7 +62,7 @@ __all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_
            "SLIM_MAX_ITERATIONS", "check_layout", "init_name", "ARRAY_START"]
 
 LAYOUT_METHODS = ("tutte", "pca", "harmonic", "lscm", "arap", "slim")
-#: The start of mesh files: ARAP, and SLIM from Tutte where ARAP folds (docs/guard.md measures the choice).
+#: The start of mesh files: ARAP, SLIM from Tutte where ARAP folds, LSCM where that alone is exact (docs/guard.md).
 AUTO_START = "auto"
 
 ARAP_MAX_ITERATIONS = 100
@@ -496,7 +498,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
 
     The guarded dynamics keeps a fold-free start fold-free but cannot clear a fold. ``auto`` is ARAP,
     or SLIM from Tutte (fold-free by construction) where ARAP folds or fails: measured on the corpus, that
-    beats untangling ARAP's layout on E_C and on time. Any other start with folds is untangled
+    beats untangling ARAP's layout on E_C and on time; where ARAP is fold-free, LSCM's layout where that is
+    exact and ARAP's is not (:func:`_lscm_where_exact`). Any other start with folds is untangled
     (:func:`sim.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
     folded is returned with its count, and the notes say why. ``progress(text)`` is called before
     each long step. ``slim()`` gives :func:`slim_layout`'s layout of ``mesh`` when ARAP folds (default: it
@@ -530,6 +533,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
         return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
     folded = _folds(mesh, positions)
     if folded == 0:
+        if name == AUTO_START:
+            return _lscm_where_exact(mesh, positions, say)
         return StartLayout(positions, method, 0, read_notes)
     plural = "s" if folded != 1 else ""
     if name == AUTO_START:
@@ -549,6 +554,35 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
         return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, partly untangled",
                            untangled.folded, notes)
     return StartLayout(positions, method, folded, notes)
+
+
+def _rms_strain(mesh: Mesh, positions: np.ndarray) -> float:
+    """``√(Σ_e (L_e − d_e)² / Σ_e d_e²)``: the springs' energy as an rms edge strain, as the stop rule's floor
+    (:data:`golden_model.guard.ENERGY_FLOOR`) measures it."""
+    i, j = mesh.edges.T
+    rest = mesh.rest_lengths
+    return float(np.sqrt(np.sum((np.linalg.norm(positions[i] - positions[j], axis=1) - rest) ** 2) / np.sum(rest**2)))
+
+
+def _lscm_where_exact(mesh: Mesh, arap: np.ndarray, say: Callable[[str], None]) -> StartLayout:
+    """``auto`` where ARAP's layout is fold-free: LSCM's instead where that is fold-free, below the stop rule's
+    energy floor (an rms edge strain of at most √ENERGY_FLOOR) and below ARAP's strain: a developable patch,
+    which LSCM, conformal, flattens exactly, and which ARAP may leave short of its minimum after its
+    :data:`ARAP_MAX_ITERATIONS` (a flat half ring came out bent to 92° with 5 % strain, which the dynamics,
+    whose steps are local, does not undo in 1,000 iterations). Only where LSCM is that exact: a lower energy
+    alone does not make a better start (from LSCM's layout, which shrinks a curved patch, corpus patches end
+    with E_C up to twice what SLIM's start gives; docs/guard.md, "The start")."""
+    say("computing the lscm layout (exact where the patch is developable)")
+    try:
+        lscm = lscm_layout(mesh)
+    except LayoutError:  # (libigl's failure on a near-degenerate mesh: ARAP's layout is a fine start)
+        return StartLayout(arap, "arap", 0, [])
+    arap_strain, lscm_strain = _rms_strain(mesh, arap), _rms_strain(mesh, lscm)
+    if _folds(mesh, lscm) or lscm_strain > math.sqrt(ENERGY_FLOOR) or not lscm_strain < arap_strain:
+        return StartLayout(arap, "arap", 0, [])
+    return StartLayout(lscm, "lscm", 0, [f"the lscm layout is as exact as the stop rule asks (an rms edge strain of "
+                                         f"{lscm_strain:.2g}: a developable patch), and more than the arap layout "
+                                         f"({arap_strain:.2g}): starting from it"])
 
 
 def _scaled_to_area(mesh: Mesh, positions: np.ndarray) -> np.ndarray:

@@ -1,6 +1,7 @@
 """Initial layouts: tutte, pca, the libigl maps (harmonic, lscm, arap) and user files."""
 
 import math
+import re
 
 import igl
 import numpy as np
@@ -226,6 +227,26 @@ def test_auto_starts_from_slim_where_arap_fails():
     assert start.notes == ["arap layout failed: igl.arap_solve returned non-finite coordinates for 35 of 36 vertices: "
                            "starting from SLIM on Tutte's layout instead (fold-free by construction)"]
     assert not folded_faces(start.positions, mesh.faces).any()
+
+
+def test_auto_starts_from_lscm_where_it_is_exact_and_a_fold_free_arap_is_not():
+    """A flat half ring: ARAP stops after its 100 iterations bent and strained (5 %), which the dynamics's local
+    steps do not undo; LSCM is exact on a developable patch, so ``auto`` starts from it, with a note. On a curved
+    dome no layout is exact: ``auto`` keeps ARAP's, with no note."""
+    from sim.generate import ring_sector
+
+    ring = ring_sector()
+    arap = initial_layout(ring, "arap")
+    assert _shape_error(ring, arap) > 1e-3  # the case: ARAP far from the exact layout (E_C 0.005, 5 % at worst)
+    start = start_layout(ring, "auto")
+    assert start.method == "lscm" and start.folded == 0 and _shape_error(ring, start.positions) < 1e-9
+    assert len(start.notes) == 1 and re.fullmatch(r"the lscm layout is as exact as the stop rule asks \(an rms edge "
+                                                  r"strain of \S+: a developable patch\), and more than the arap "
+                                                  r"layout \(0\.0\d+\): starting from it", start.notes[0]), start.notes
+    dome = dome_grid(12, height=0.3)
+    start = start_layout(dome, "auto")
+    assert (start.method, start.notes) == ("arap", [])
+    np.testing.assert_array_equal(start.positions, initial_layout(dome, "arap"))
 
 
 @pytest.mark.parametrize("content, message", [
