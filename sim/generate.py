@@ -45,11 +45,13 @@ def rolled_grid(nx: int = 6, ny: int = 6, arc_degrees: float = 60.0, size: float
 def ring_sector(degrees: float = 180.0, segments: int = 199, rows: int = 2, inner: float = 400.0,
                 width: float = 50.0) -> Mesh:
     """A flat ring sector (a waistband, a curved flange) in the plane z = 0: ``segments`` cells along the arc,
-    ``rows`` vertices across its ``width``, from radius ``inner``. Its exact flattening is itself."""
+    ``rows`` vertices across its ``width``, from radius ``inner``, wound counter-clockwise seen from +z. Its exact
+    flattening is itself."""
     uv = grid_uv(segments + 1, rows, np.radians(degrees), width)
     radius = inner + uv[:, 1]
     vertices = np.column_stack([radius * np.cos(uv[:, 0]), radius * np.sin(uv[:, 0]), np.zeros(len(uv))])
-    return Mesh(vertices, grid_faces(segments + 1, rows), name="ring_sector")
+    faces = grid_faces(segments + 1, rows)[:, ::-1]  # (the grid's (angle, radius) turns the other way round in xy)
+    return Mesh(vertices, faces, name="ring_sector")
 
 
 def dome_grid(n: int = 8, height: float = 0.3) -> Mesh:

@@ -310,7 +310,7 @@ def slim_layout(mesh: Mesh) -> np.ndarray:
 
 
 def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None = None,
-                notes: list[str] | None = None) -> np.ndarray:
+                notes: list[str] | None = None, mesh_vertices: np.ndarray | None = None) -> np.ndarray:
     """Read a user layout: a text file of ``x y`` rows, or an OBJ's vertex (x, y).
 
     A file that cannot be read is a :class:`LayoutError` "cannot read layout
@@ -318,7 +318,8 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
     permission denied, ...); an empty path is refused.  For an OBJ, given the
     mesh's ``faces``, a layout whose faces are not the mesh's (as sets of
     corners), or whose z is not 0, gets a line in ``notes``: only the
-    vertices' x, y are used.
+    vertices' x, y are used. An OBJ whose vertices are the curved mesh's own (``mesh_vertices``; springflat's
+    pattern ``.obj`` keeps the 3D mesh there and the pattern in ``vt``) is refused: its x, y are no layout.
     """
     if str(path) == "":
         raise LayoutError(f"the layout '' is empty: name a method ({', '.join((AUTO_START,) + LAYOUT_METHODS)}) or a file")
@@ -336,6 +337,11 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
         except MeshError as exc:
             raise LayoutError(str(exc)) from None
         positions = vertices[:, :2]
+        if (mesh_vertices is not None and vertices.shape == mesh_vertices.shape
+                and np.ptp(mesh_vertices[:, 2]) > 0 and np.allclose(vertices, mesh_vertices, rtol=1e-6, atol=0.0)):
+            raise LayoutError(f"layout '{path}' holds the 3D mesh itself, not a layout (a springflat pattern .obj keeps "
+                              "the pattern in its vt, which --init does not read): give the pattern written as "
+                              ".flat.obj, or a text file of 'x y' rows")
         if notes is not None and faces is not None and len(positions) == n_vertices:
             notes.extend(_obj_layout_notes(path, data, vertices, faces))
     else:
@@ -443,7 +449,8 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
     name = "arap" if str(init) == AUTO_START else str(init)
     if name in _METHODS:  # (a method needs a disk: a mesh's holes are closed for it, their vertices its own)
         return _METHODS[name](_disk(mesh, name))
-    return _facing_the_front(load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes), mesh,
+    return _facing_the_front(load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes,
+                                         mesh_vertices=mesh.vertices), mesh,
                              f"the layout '{init}'", notes)
 
 

@@ -291,3 +291,21 @@ def test_a_folded_start_is_untangled_before_the_guarded_dynamics(tmp_path):
     start = start_layout(mesh, str(path))
     assert start.folded == 0 and folded_faces(start.positions, mesh.faces).sum() == 0
     assert "untangl" in start.method and len(start.notes) == 1
+
+
+def test_an_obj_that_holds_the_curved_mesh_itself_is_no_layout_a_flat_one_is(tmp_path):
+    """springflat's pattern .obj keeps the 3D mesh in its v (the pattern in vt): given to --init, its x, y were
+    taken as a start with a 'z dropped' note. Refused in one line; a flat mesh's own file is its exact layout."""
+    from sim.generate import ring_sector
+    from sim.mesh_io import save_obj
+
+    dome = dome_grid(6)
+    save_obj(tmp_path / "dome.obj", dome.vertices, dome.faces)
+    with pytest.raises(LayoutError, match=r"^layout '.*dome.obj' holds the 3D mesh itself, not a layout \(a "
+                                          r"springflat pattern .obj keeps the pattern in its vt, which --init does not "
+                                          r"read\): give the pattern written as .flat.obj, or a text file of 'x y' "
+                                          r"rows$"):
+        initial_layout(dome, str(tmp_path / "dome.obj"))
+    ring = ring_sector(90.0, 20)
+    save_obj(tmp_path / "ring.obj", ring.vertices, ring.faces)
+    np.testing.assert_allclose(initial_layout(ring, str(tmp_path / "ring.obj")), ring.vertices[:, :2], rtol=1e-12)
