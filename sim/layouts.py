@@ -584,12 +584,13 @@ def _lscm_where_exact(mesh: Mesh, arap: np.ndarray, say: Callable[[str], None]) 
         lscm = lscm_layout(mesh)
     except LayoutError:  # (libigl's failure on a near-degenerate mesh: ARAP's layout is a fine start)
         return StartLayout(arap, "arap", 0, [])
-    arap_strain, lscm_strain = _rms_strain(mesh, arap), _rms_strain(mesh, lscm)
-    if _folds(mesh, lscm) or lscm_strain > math.sqrt(ENERGY_FLOOR) or not lscm_strain < arap_strain:
+    floor, arap_strain, lscm_strain = math.sqrt(ENERGY_FLOOR), _rms_strain(mesh, arap), _rms_strain(mesh, lscm)
+    if _folds(mesh, lscm) or lscm_strain > floor or not lscm_strain < arap_strain:
         return StartLayout(arap, "arap", 0, [])
-    return StartLayout(lscm, "lscm", 0, [f"the lscm layout is as exact as the stop rule asks (an rms edge strain of "
-                                         f"{lscm_strain:.2g}: a developable patch), and more than the arap layout "
-                                         f"({arap_strain:.2g}): starting from it"])
+    said = [] if arap_strain <= floor else [  # (both within the floor: which one is no news; the run line names it)
+        f"the arap layout is not as exact as the stop rule asks (an rms edge strain of {arap_strain:.2g}), the lscm "
+        f"layout is ({lscm_strain:.2g}: a developable patch): starting from it"]
+    return StartLayout(lscm, "lscm", 0, said)
 
 
 def _scaled_to_area(mesh: Mesh, positions: np.ndarray) -> np.ndarray:

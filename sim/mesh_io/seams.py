@@ -13,6 +13,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from golden_model.mesh import COORDINATE_LIMIT
+
 __all__ = ["SEAM_TOLERANCE", "open_seams", "seams_note", "seams_hint"]
 
 #: Two vertices closer than this share of the median edge length lie on one another: far below any edge of a
@@ -31,10 +33,12 @@ def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
     if vertices.ndim != 2 or vertices.shape[1] != 3 or used[0] < 0 or used[-1] >= len(vertices):
         return 0, 0  # (no mesh to look at: its refusal says why)
     points = vertices[used].astype(np.float64)
+    if not np.isfinite(points).all() or np.abs(points).max() > COORDINATE_LIMIT:
+        return 0, 0  # (refused for its coordinates: no distances to measure)
     ends = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     length = float(np.median(np.linalg.norm(points[np.searchsorted(used, ends[:, 0])]
                                             - points[np.searchsorted(used, ends[:, 1])], axis=1)))
-    if not np.isfinite(length) or length <= 0 or not np.isfinite(points).all():
+    if not length > 0:
         return 0, 0
     pairs = cKDTree(points).query_pairs(SEAM_TOLERANCE * length, output_type="ndarray")
     if len(pairs) == 0:
