@@ -23,30 +23,32 @@ SEAM_TOLERANCE = 1e-4
 
 
 def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
-    """``(vertices, places)``: how many of the vertices that faces use lie on another one (within
-    :data:`SEAM_TOLERANCE` of the median edge length) with no edge between them, in how many places."""
-    faces = np.asarray(faces, dtype=np.int64)
-    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-        return 0, 0
-    used = np.unique(faces)
+    """``(vertices, places)``: how many boundary vertices lie on another boundary vertex (within
+    :data:`SEAM_TOLERANCE` of the median edge length) with no edge between them, in how many places. Both copies
+    of a point an open seam splits are on the boundary, so interior vertices close together (the corners of two
+    slivers) are not looked at. Each vertex is paired with its nearest other one, so a heap of copies of one
+    point (a depth camera's invalid pixels at the origin) costs no more than a seam."""
+    faces = np.asarray(faces)
     vertices = np.asarray(vertices)
-    if vertices.ndim != 2 or vertices.shape[1] != 3 or used[0] < 0 or used[-1] >= len(vertices):
+    if (faces.dtype.kind not in "iu" or faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0
+            or vertices.ndim != 2 or vertices.shape[1] != 3 or faces.min() < 0 or faces.max() >= len(vertices)):
         return 0, 0  # (no mesh to look at: its refusal says why)
-    points = vertices[used].astype(np.float64)
-    if not np.isfinite(points).all() or np.abs(points).max() > COORDINATE_LIMIT:
+    faces = faces.astype(np.int64)
+    n = len(vertices)
+    sides = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    keys, counts = np.unique(sides[:, 0] * n + sides[:, 1], return_counts=True)
+    boundary = np.unique(np.concatenate([keys[counts == 1] // n, keys[counts == 1] % n]))
+    points = vertices[boundary].astype(np.float64)
+    if len(boundary) < 2 or not np.isfinite(points).all() or np.abs(points).max() > COORDINATE_LIMIT:
         return 0, 0  # (refused for its coordinates: no distances to measure)
-    ends = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    length = float(np.median(np.linalg.norm(points[np.searchsorted(used, ends[:, 0])]
-                                            - points[np.searchsorted(used, ends[:, 1])], axis=1)))
+    ends = vertices[keys // n].astype(np.float64) - vertices[keys % n]
+    length = float(np.median(np.linalg.norm(ends, axis=1)))
     if not length > 0:
         return 0, 0
-    pairs = cKDTree(points).query_pairs(SEAM_TOLERANCE * length, output_type="ndarray")
-    if len(pairs) == 0:
-        return 0, 0
-    a, b = used[pairs[:, 0]], used[pairs[:, 1]]
-    n = int(used.max()) + 1
-    edge_keys = np.unique(np.minimum(ends[:, 0], ends[:, 1]) * n + np.maximum(ends[:, 0], ends[:, 1]))
-    unjoined = ~np.isin(np.minimum(a, b) * n + np.maximum(a, b), edge_keys)
+    distance, nearest = cKDTree(points).query(points, k=2)
+    close = distance[:, 1] <= SEAM_TOLERANCE * length
+    a, b = boundary[close], boundary[nearest[close, 1]]
+    unjoined = ~np.isin(np.minimum(a, b) * n + np.maximum(a, b), keys)
     a, b = a[unjoined], b[unjoined]
     if len(a) == 0:
         return 0, 0
