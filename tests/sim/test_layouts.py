@@ -243,6 +243,7 @@ def test_auto_starts_from_lscm_where_it_is_exact_and_a_fold_free_arap_is_not():
     assert len(start.notes) == 1 and re.fullmatch(r"the arap layout is not as exact as the stop rule asks \(an rms "
                                                   r"edge strain of 0\.0\d+\), the lscm layout is \(\S+: a "
                                                   r"developable patch\): starting from it", start.notes[0]), start.notes
+    assert start_layout(ring, "auto", floor_strain=0.0).method == "arap"  # --tol-energy 0: no floor, none exact
     dome = dome_grid(12, height=0.3)
     start = start_layout(dome, "auto")
     assert (start.method, start.notes) == ("arap", [])
@@ -309,3 +310,29 @@ def test_an_obj_that_holds_the_curved_mesh_itself_is_no_layout_a_flat_one_is(tmp
     ring = ring_sector(90.0, 20)
     save_obj(tmp_path / "ring.obj", ring.vertices, ring.faces)
     np.testing.assert_allclose(initial_layout(ring, str(tmp_path / "ring.obj")), ring.vertices[:, :2], rtol=1e-12)
+
+
+def test_lscm_pins_the_farthest_pair_among_the_hull_and_a_far_pair_on_a_long_strip():
+    """The pins: every pair measured among the convex hull's vertices gives the brute force's pair (3D, planar and
+    nearly planar sets, a grid's tied diagonals); past FARTHEST_PAIR_EXACT hull vertices (a half ring's outer arc)
+    a double sweep's pair, at least half the greatest distance apart."""
+    from sim.generate import ring_sector
+    from sim.layouts import FARTHEST_PAIR_EXACT, _farthest_pair
+
+    def brute(points):
+        d2 = ((points[:, None] - points[None]) ** 2).sum(axis=2)
+        r, c = divmod(int(np.argmax(d2)), len(points))
+        return min(r, c), max(r, c)
+
+    rng = np.random.default_rng(5)
+    for k in range(60):
+        points = rng.normal(size=(int(rng.integers(4, 300)), 3))
+        points[:, 2] *= (1.0, 0.0, 1e-9)[k % 3]  # 3D, flat (no 3D hull), nearly flat
+        assert _farthest_pair(points) == brute(points)
+    vertices = np.column_stack([grid_uv(9, 9), np.zeros(81)])
+    grid = vertices[Mesh(vertices, grid_faces(9, 9)).boundary_loop]
+    assert _farthest_pair(grid) == brute(grid)
+    ring = ring_sector(180.0, 2 * FARTHEST_PAIR_EXACT, 2)
+    points = ring.vertices[ring.boundary_loop]
+    a, b = _farthest_pair(points)
+    assert np.linalg.norm(points[a] - points[b]) >= 0.5 * 900.0  # the outer arc's ends are 900 apart
