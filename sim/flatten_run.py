@@ -315,14 +315,15 @@ def growth_note(params: FlattenParams, result: FlattenResult, api: bool = False)
 
 
 #: A pattern whose area is below this share of its surface's is said to be shrunk (:func:`shrink_note`): the
-#: counterpart of :func:`growth_note`'s twice the surface's area.
+#: counterpart of :func:`growth_note`'s E_S above 1, which a pattern grown everywhere passes at twice the area.
 SHRUNK_AREA_SHARE = 0.5
 
 
 def shrink_note(mesh: Mesh, result: FlattenResult) -> str | None:
     """A pattern whose area is below :data:`SHRUNK_AREA_SHARE` of its surface's: a patch too curved to lie flat at
     its size (a cap folded like a taco), whose springs' minimum shrinks it. E_S, the triangles' area changes over
-    the surface's area, cannot tell a pattern shrunk to a quarter (E_S at most 1) from one twice as large."""
+    the surface's area, is at most 1 for a shrunk pattern however small, so the growth note's E_S above 1 never
+    sees one."""
     if result.status == "diverged":
         return None
     share = float(np.abs(signed_areas_2d(result.positions, mesh.faces)).sum() / mesh.face_areas.sum())

@@ -11,9 +11,9 @@ that caused it: the driver's :class:`~sim.engine_driver.BusError` for every erro
 :class:`LinkError` when no whole answer comes back in time or the answer itself is corrupt. Inside
 :meth:`UartBus.batched` consecutive writes are sent as one frame of up to
 :data:`~golden_model.engine_spec.uart_protocol.MAX_WORDS` words (a run of addresses ends at a
-window's stride hole, so a node is one frame, and an entry or a triangle, whose 3 words have a stride of 4,
-one each): a write's error is then raised by the call that sends its frame (a read, a write that does not
-continue the run of addresses, or the end of the block). :meth:`UartBus.read_words` reads a run of words in one
+window's stride hole: where a window's items leave a gap, each item is a frame of its words; the default
+preset's node, 5 words at a stride of 8, is one): a write's error is then raised by the call that sends its
+frame (a read, a write that does not continue the run of addresses, or the end of the block). :meth:`UartBus.read_words` reads a run of words in one
 frame; the driver reads a node's words so.
 """
 

@@ -80,7 +80,7 @@ def test_a_run_over_frames_is_the_golden_models():
     words = sum(a.size for a in (image.nodes, image.entries, image.triangles))
     writes = [r for r in port.requests if r[0] == protocol.WRITE]
     assert sum(r[5] for r in writes) >= words
-    # batched: a node's 5 words are one frame (its stride of 8 leaves holes), an entry's or a triangle's 3 (stride 4) one
+    # batched: a run of addresses is one frame up to a window's stride hole (this map's node: 5 words of a stride of 8)
     assert len(writes) < words / 3
     node_words = MAP.window("nodes").words  # the read-back: a node's words in one frame
     reads_of_a_node = [r for r in port.requests if r[0] == protocol.READ and r[protocol.HEADER_BYTES - 1] == node_words]
