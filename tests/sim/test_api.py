@@ -221,6 +221,7 @@ def test_a_name_with_control_characters_or_undecodable_bytes_is_one_line_of_text
     (lambda V, F: (V.astype(str), F), r"V must be an array of \(V, 3\) vertex positions, got <U\d+ values"),
     (lambda V, F: (V, F.astype(str)), r"F must be an array of \(F, 3\) vertex indices, got <U\d+ values"),
     (lambda V, F: (V, F + 0.5), r"face indices must be integers"),  # whole numbers as floats are taken (below)
+    (lambda V, F: (V, np.vstack([F, [0.0, 1.0, np.nan]])), r"face indices must be integers"),  # (no cast warning)
 ])
 def test_arrays_that_are_no_arrays_of_numbers_are_mesh_errors(ear, make, message):
     with pytest.raises(MeshError, match=message):
