@@ -27,8 +27,8 @@ from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
-                       check_mesh_fits, check_seam_fits, closed_holes_note, error_text, kind_or_none, on_sheets,
-                       run_caption, scale_note, seam_length, write_pattern_file)
+                       check_mesh_fits, check_seam_fits, closed_holes_note, covered_holes_note, error_text,
+                       kind_or_none, on_sheets, run_caption, scale_note, seam_length, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
 
@@ -368,9 +368,9 @@ def pattern_notes(params: FlattenParams, mesh: Mesh, result: FlattenResult, api:
                   formats: FormatSet | None = None) -> list[str]:
     """What a person must know about a pattern of ``mesh`` before cutting it: grown away, shrunk, folded,
     overlapping, or (a fixed-point run of ``formats``) clamped, at the top of its format where it ran away."""
-    return [note for note in (growth_note(params, result, api), shrink_note(mesh, result), fold_note(params, result, api),
-                              overlap_note(result), saturation_note(params, result, formats, api),
-                              still_note(params, result, formats, api))
+    return [note for note in (growth_note(params, result, api), shrink_note(mesh, result),
+                              fold_note(params, result, api), overlap_note(result),
+                              saturation_note(params, result, formats, api), still_note(params, result, formats, api))
             if note]
 
 
@@ -455,11 +455,11 @@ def notes_on_cut_files(args: argparse.Namespace, mesh: Mesh, result: FlattenResu
                        drawing: PatternDrawing) -> list[str]:
     """The notes on a run that writes a pattern at 1:1 (a print or a cut; ``vt`` and layouts have no scale):
     :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it; of the layout as the run left it) and,
-    with a seam allowance, :func:`~sim.patterns.closed_holes_note` of ``drawing``, the files' own
-    (:func:`pattern_drawing`)."""
+    :func:`~sim.patterns.covered_holes_note` and, with a seam allowance, :func:`~sim.patterns.closed_holes_note`
+    of ``drawing``, the files' own (:func:`pattern_drawing`)."""
     if result.status == "diverged" or not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
         return []
-    notes = [scale_note(PatternDrawing.of(mesh, result.positions, args.units))]
+    notes = [scale_note(PatternDrawing.of(mesh, result.positions, args.units)), covered_holes_note(drawing)]
     if drawing.seam > 0 and mesh.n_holes:
         notes.append(closed_holes_note(drawing))
     return [note for note in notes if note]

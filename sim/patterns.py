@@ -398,6 +398,27 @@ def closed_holes_note(drawing: PatternDrawing) -> str | None:
             "along the sew line after sewing")
 
 
+def covered_holes_note(drawing: PatternDrawing) -> str | None:
+    """Kept holes that lie under the pattern where it overlaps itself (:func:`overlaps`: a flap wrapped over a
+    hole, with sides that cross or without): a point inside the hole's loop is on the material. The cut line
+    then has no cut-out there (with a seam allowance, whose outline goes round the material) or runs over the
+    material (without one); ``None`` if no hole is covered."""
+    if not drawing.holes or not drawing.overlapping:
+        return None
+    import shapely
+
+    covered = sum(bool(drawing.covered.contains(shapely.make_valid(shapely.Polygon(loop)).representative_point()))
+                  for loop in drawing.edge_loops[1:])
+    if not covered:
+        return None
+    count = len(drawing.holes)
+    which = (f"{covered} of the {count} kept holes" if covered < count else "the kept hole" if covered == 1
+             else f"all {covered} kept holes")
+    them, are = ("them", "are") if covered > 1 else ("it", "is")
+    return (f"{which} {are} covered by the pattern where it lies on itself: the cut line "
+            + (f"has no cut-out for {them}" if drawing.seam > 0 else f"round {them} runs over the material"))
+
+
 def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]:
     """The closed loops of the cut line ``allowance`` outside the pattern's material (:func:`material`), outer
     loop first: the outline of the points within that distance of it (shapely's buffer, round joins), so every

@@ -155,6 +155,11 @@ def test_a_piece_that_wraps_over_a_hole_is_said_to_overlap_and_its_start_is_open
         warnings.simplefilter("always")
         springflat.write_pattern(tmp_path / "bump.dxf", pattern, seam_allowance=2.0)
     assert not [w for w in said if "narrower than twice the seam allowance" in str(w.message)]
+    assert [str(w.message) for w in said if "covered" in str(w.message)] == [
+        "bump: the kept hole is covered by the pattern where it lies on itself: the cut line has no cut-out for it"]
+    with pytest.warns(springflat.MeshNote, match=r"^bump: the kept hole is covered by the pattern where it lies on "
+                                                 r"itself: the cut line round it runs over the material$"):
+        springflat.write_pattern(tmp_path / "bare.dxf", pattern)  # no allowance: the hole's loop is on the cut line
     cut = _dxf_loops(tmp_path / "bump.dxf", "CUT")
     assert shapely.Polygon(cut[0], cut[1:]).buffer(1e-6).contains(shapely.union_all(triangles))
     assert "it wraps over 1 of its holes" in str(ezdxf.readfile(tmp_path / "bump.dxf").ezdxf_metadata().get(
