@@ -27,6 +27,7 @@ from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS
 from .layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, NoDiskStart, init_name, initial_layout, slim_layout,
                       start_layout)
 from .mesh_io import load_mesh_with_notes
+from .mesh_io.seams import seams_note
 from .mesh_io.polygons import is_float, is_int
 from .outputs import OutputError, directory_name_problem
 
@@ -240,7 +241,7 @@ def resolve_mesh(name: str, holes: Holes = Holes.REFUSE) -> tuple[Mesh, FlattenP
         mesh, notes = load_mesh_with_notes(name, holes=holes)
     except HoledMesh as exc:
         raise MeshError(f"{exc}; {HOLES_HINT}") from None
-    for note in notes:
+    for note in [*notes, *filter(None, [seams_note(mesh.vertices, mesh.faces)])]:  # (as the API's flatten says it)
         print(f"springflat: note: {mesh.name}: {note}", file=sys.stderr)
     return mesh, file_defaults(mesh)
 

@@ -14,7 +14,7 @@ from .obj import obj_line_hint, read_obj
 from .off import read_off
 from .ply import read_ply
 from .polygons import first_unplain, is_float, triangulate_polygons
-from .seams import seams_hint, seams_note
+from .seams import seams_hint
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
@@ -73,7 +73,7 @@ def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple
         vertices, faces, notes = read_stl(data, path)
     try:
         mesh, turned = oriented_mesh(vertices, faces, name=path.stem, holes=holes)
-        return mesh, notes + turned + [note for note in (seams_note(vertices, faces),) if note]
+        return mesh, notes + turned
     except HoledMesh as exc:  # (the commands that can fill it say how)
         raise HoledMesh(f"invalid mesh '{path}': {exc}{seams_hint(vertices, faces)}") from None
     except MeshError as exc:

@@ -641,3 +641,19 @@ def test_arrays_with_a_seam_left_open_get_the_files_note_and_hint():
     faces[right] = np.where(faces[right] == 1, 16, faces[right])
     with pytest.warns(springflat.MeshNote, match=r"mesh: 2 vertices lie on one another in 1 place with no edge "):
         springflat.flatten(np.vstack([grid, grid[1]]), faces, max_iter=2)
+
+
+def test_a_seam_left_open_in_a_file_is_said_once_by_read_mesh_then_flatten(tmp_path):
+    """read_mesh gives its reader's notes, flatten the seam's: once, not from both."""
+    from sim.generate import grid_faces, grid_uv
+    from sim.mesh_io import save_obj
+
+    grid = np.column_stack([grid_uv(4, 4, 10.0, 10.0), np.zeros(16)])
+    faces = grid_faces(4, 4)
+    right = grid[faces].mean(axis=1)[:, 0] > grid[1, 0]
+    faces[right] = np.where(faces[right] == 1, 16, faces[right])
+    save_obj(tmp_path / "seam.obj", np.vstack([grid, grid[1]]), faces)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        springflat.flatten(*springflat.read_mesh(tmp_path / "seam.obj"), max_iter=2)
+    assert len([w for w in said if "lie on one another" in str(w.message)]) == 1

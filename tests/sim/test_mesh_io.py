@@ -417,16 +417,19 @@ def _split_at(rows: range, column: int = 3, n: int = 6) -> tuple[np.ndarray, np.
     return vertices, faces
 
 
-def test_a_seam_left_open_is_named_where_it_cuts_the_surface_and_where_it_breaks_the_disk(tmp_path):
+def test_a_seam_left_open_is_named_where_it_cuts_the_surface_and_where_it_breaks_the_disk(tmp_path, capsys):
     """A seam from the edge inwards is a slit: read, with a note naming the copies and how to weld them; an inner
     seam makes a hole, and a face-by-face file a heap of triangles: their refusals say that welding may help."""
+    from sim.run_options import resolve_mesh
+
     vertices, faces = _split_at(range(0, 2))  # from the boundary row in: a slit, still a disk
     save_obj(tmp_path / "edge_seam.obj", vertices, faces)
-    mesh, notes = load_mesh_with_notes(tmp_path / "edge_seam.obj")
-    assert mesh.n_vertices == 38 and [note for note in notes if "on one another" in note] == [
-        "4 vertices lie on one another in 2 places with no edge between them: the surface is cut there (an exporter's "
-        "seam, where texture coordinates or normals differ, leaves it so), and so is the pattern; if it is one piece "
-        "there, weld them first (trimesh's merge_vertices, MeshLab's Merge Close Vertices)"]
+    mesh, _ = resolve_mesh(str(tmp_path / "edge_seam.obj"), Holes.REFUSE)  # the commands' reader, with its notes
+    said = capsys.readouterr().err.splitlines()
+    assert mesh.n_vertices == 38 and [line for line in said if "on one another" in line] == [
+        "springflat: note: edge_seam: 4 vertices lie on one another in 2 places with no edge between them: the surface "
+        "is cut there (an exporter's seam, where texture coordinates or normals differ, leaves it so), and so is the "
+        "pattern; if it is one piece there, weld them first (trimesh's merge_vertices, MeshLab's Merge Close Vertices)"]
     vertices, faces = _split_at(range(2, 4))  # rows 1 and 4 stay shared: a hole
     save_obj(tmp_path / "inner_seam.obj", vertices, faces)
     with pytest.raises(MeshError, match=r"2 boundary loops .*; 4 vertices lie on one another in 2 places with no "
