@@ -28,7 +28,7 @@ from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
                        check_mesh_fits, check_seam_fits, closed_holes_note, covered_holes_note, error_text,
-                       kind_or_none, on_sheets, run_caption, scale_note, seam_length, write_pattern_file)
+                       grain_note, kind_or_none, on_sheets, run_caption, scale_note, seam_length, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
 
@@ -455,11 +455,12 @@ def notes_on_cut_files(args: argparse.Namespace, mesh: Mesh, result: FlattenResu
                        drawing: PatternDrawing) -> list[str]:
     """The notes on a run that writes a pattern at 1:1 (a print or a cut; ``vt`` and layouts have no scale):
     :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it; of the layout as the run left it) and,
-    :func:`~sim.patterns.covered_holes_note` and, with a seam allowance, :func:`~sim.patterns.closed_holes_note`
-    of ``drawing``, the files' own (:func:`pattern_drawing`)."""
+    :func:`~sim.patterns.covered_holes_note`, :func:`~sim.patterns.grain_note` and, with a seam allowance,
+    :func:`~sim.patterns.closed_holes_note` of ``drawing``, the files' own (:func:`pattern_drawing`)."""
     if result.status == "diverged" or not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
         return []
-    notes = [scale_note(PatternDrawing.of(mesh, result.positions, args.units)), covered_holes_note(drawing)]
+    notes = [scale_note(PatternDrawing.of(mesh, result.positions, args.units)), covered_holes_note(drawing),
+             grain_note(drawing)]
     if drawing.seam > 0 and mesh.n_holes:
         notes.append(closed_holes_note(drawing))
     return [note for note in notes if note]

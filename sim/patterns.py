@@ -193,6 +193,8 @@ class PatternDrawing:
         caption: one line about the run (status, errors), printed under the name.
         grain: the 3D direction the pattern was turned to carry up the page (:meth:`with_grain`), as the
             user named it (``z``, ``1,0,0``), or ``""``: the layout's own frame, no grain line.
+        grain_agreement: how well the grain direction's pieces on the pattern agree (:func:`grain_axis`: 1 all
+            along one line, 0 every way).
         seam: the seam allowance in ``units`` (:meth:`with_seam`): the cut line runs this far outside the
             boundary, which becomes the sew line; 0: the boundary is the cut line.
         holes: each kept hole's edge, vertex indices in order (:attr:`Mesh.boundary_loops` after the first):
@@ -210,6 +212,7 @@ class PatternDrawing:
     grain: str = ""
     seam: float = 0.0
     holes: tuple[np.ndarray, ...] = ()
+    grain_agreement: float = 1.0
 
     @classmethod
     def of(cls, mesh: Mesh, layout: np.ndarray, units: str = "mm", caption: str = "") -> "PatternDrawing":
@@ -279,9 +282,9 @@ class PatternDrawing:
     def with_grain(self, grain: str | Sequence[float]) -> "PatternDrawing":
         """The drawing turned so that the 3D direction ``grain`` (:func:`grain_direction`), as the triangles
         carry it onto the pattern, points up (+y), with a grain line on every pattern file."""
-        angle = grain_angle(self.vertices, self.faces, self.layout, grain_direction(grain))
+        angle, agreement = grain_axis(self.vertices, self.faces, self.layout, grain_direction(grain))
         return replace(self, layout=_turned(self.layout, math.pi / 2 - angle, _centre(self.layout)),
-                       grain=grain_text(grain))
+                       grain=grain_text(grain), grain_agreement=agreement)
 
     def grain_line(self) -> np.ndarray:
         """``(2, 2)`` the grain line's ends (bottom, top) in ``units``: vertical, through the vertex nearest the
@@ -570,8 +573,16 @@ def _along_surface(triangles: np.ndarray, direction: np.ndarray) -> None:
                            "has no direction on the pattern; name one along the surface")
 
 
-def grain_angle(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray, direction: np.ndarray) -> float:
-    """The angle (radians, anticlockwise from +x) at which ``direction`` (a 3D unit vector) lies on the pattern.
+#: A grain whose pieces on the pattern agree less than this (:func:`grain_axis`) gets a note (:func:`grain_note`):
+#: their doubled angles' weighted mean is shorter than half their weight, so they spread by about ±45° or more.
+GRAIN_AGREEMENT = 0.5
+
+
+def grain_axis(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray,
+               direction: np.ndarray) -> tuple[float, float]:
+    """``(angle, agreement)``: the angle (radians, anticlockwise from +x) at which ``direction`` (a 3D unit
+    vector) lies on the pattern, and how well its pieces agree on it (the length of their doubled angles'
+    weighted mean over their total weight: 1 all along one line, 0 every way).
 
     Each triangle's affine map carries the direction's part in its plane onto the layout. A grain is an axis:
     those pieces are averaged as axes (their doubled angles, each weighted by its length and its triangle's 3D
@@ -592,12 +603,23 @@ def grain_angle(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray, dir
     weight = np.divide(area, length, out=np.zeros_like(area), where=length > 0)  # area × length × (unit doubled)
     doubled = np.column_stack([pieces[:, 0] ** 2 - pieces[:, 1] ** 2, 2 * pieces[:, 0] * pieces[:, 1]])
     axis = (weight[:, None] * doubled).sum(axis=0)
-    if not np.linalg.norm(axis) > 1e-3 * (area * length).sum():
+    agreement = float(np.linalg.norm(axis) / (area * length).sum())
+    if not agreement > 1e-3:
         raise PatternError("--grain: the direction's pieces on the pattern point every way (no one line carries "
                            "it): name another")
     angle = float(np.arctan2(axis[1], axis[0])) / 2
     along = (area[:, None] * pieces).sum(axis=0) @ np.array([math.cos(angle), math.sin(angle)])
-    return angle if along >= 0 else angle + math.pi
+    return (angle if along >= 0 else angle + math.pi), agreement
+
+
+def grain_note(drawing: PatternDrawing) -> str | None:
+    """A grain whose pieces on the pattern agree less than :data:`GRAIN_AGREEMENT` (a direction close to the
+    surface's normal over much of it): its line is their average, which the piece follows nowhere well."""
+    if not drawing.grain or drawing.grain_agreement >= GRAIN_AGREEMENT:
+        return None
+    return (f"the grain direction {drawing.grain} runs across the surface over much of it (close to its normal), "
+            f"and its pieces on the pattern point many ways (agreement {drawing.grain_agreement:.2f} of 1): the "
+            "grain line is their average; a direction along the surface gives a truer one")
 
 
 def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int,

@@ -793,11 +793,12 @@ def test_grain_turns_a_developable_pattern_so_that_the_direction_points_up():
     """The rolled grid's generators (3D y) unroll to parallel lines: laid at 30°, --grain y turns them
     vertical; -y turns them the other way up; a flat square laid as a diamond comes back square."""
     from sim.generate import rolled_grid
-    from sim.patterns import _turned, grain_angle, grain_direction
+    from sim.patterns import _turned, grain_axis, grain_direction
 
     mesh, unrolled = rolled_grid(8, 8, arc_degrees=90.0)
     laid = _turned(unrolled, math.radians(30.0), np.zeros(2))
-    assert math.degrees(grain_angle(mesh.vertices, mesh.faces, laid, grain_direction("y"))) == pytest.approx(120.0)
+    angle, agreement = grain_axis(mesh.vertices, mesh.faces, laid, grain_direction("y"))
+    assert math.degrees(angle) == pytest.approx(120.0) and agreement == pytest.approx(1.0)  # one line: all agree
     for grain, up in (("y", 1.0), ("-y", -1.0), ("0,2,0", 1.0)):
         turned = PatternDrawing.of(mesh, laid).with_grain(grain).layout
         generator = turned[8:] - turned[:-8]  # vertex k to k + 8: one row up, along 3D y
@@ -966,3 +967,21 @@ def test_a_piece_narrower_than_the_grain_lines_clearance_gets_no_label_and_no_er
     write_pattern_file(tmp_path / "p.svg", PatternDrawing.of(square, uv).with_grain("y"))
     svg = (tmp_path / "p.svg").read_text()
     assert 'class="piece-label"' not in svg and 'id="grain"' in svg
+
+
+def test_a_grain_close_to_the_surfaces_normal_gets_a_note_one_along_it_none():
+    """The bunny's muzzle faces -x: its x maps onto the pattern in pieces that point every way where the surface
+    faces x, and the grain line drawn is their average (a probe: 50° off the pieces' area-weighted mean); its y
+    runs along the surface, and its pieces agree."""
+    from sim.layouts import initial_layout
+    from sim.mesh_io import load_mesh
+    from sim.patterns import GRAIN_AGREEMENT, grain_note
+
+    mesh = load_mesh(SCANS / "bunny_face.obj")
+    layout = initial_layout(mesh, "arap")
+    across, along = (PatternDrawing.of(mesh, layout).with_grain(grain) for grain in ("x", "y"))
+    assert across.grain_agreement < GRAIN_AGREEMENT <= along.grain_agreement
+    assert re.fullmatch(r"the grain direction x runs across the surface over much of it \(close to its normal\), "
+                        r"and its pieces on the pattern point many ways \(agreement 0\.\d\d of 1\): the grain "
+                        r"line is their average; a direction along the surface gives a truer one", grain_note(across))
+    assert grain_note(along) is None and grain_note(PatternDrawing.of(mesh, layout)) is None
