@@ -45,7 +45,7 @@ from golden_model.results import FlattenResult
 from .exit_codes import STOP_SIGNALS
 from .mesh_io import save_obj
 
-HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded")
+HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded", "accepted")
 LAYOUT_SUFFIXES = (".obj", ".svg")
 
 
@@ -1049,13 +1049,17 @@ def _write_svg_legend(out, colours: FaceColours, left: float, top: float, size: 
 
 
 def write_history(path: Path, result: FlattenResult) -> None:
-    """CSV of :data:`HISTORY_HEADER`, row 0 = initial layout (empty ``dt``)."""
+    """CSV of :data:`HISTORY_HEADER`, row 0 = initial layout (empty ``dt`` and ``accepted``). ``dt`` is the paper
+    dynamics' time step, empty for the momentum dynamics, which has none (its step is the node weights, scaled
+    by the guard); ``accepted`` is 0 for a step the guard rolled back (its row repeats the layout kept)."""
+    timed = result.params.mode.step is not Step.MOMENTUM
     with atomic_write(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as out:
         writer = csv.writer(out)
         writer.writerow(HISTORY_HEADER)
-        for k, dt, area, shape, energy, flipped, folded in result.history.rows():
-            writer.writerow([k, "" if math.isnan(dt) else repr(dt), repr(area), repr(shape), repr(energy), flipped,
-                             folded])
+        for row, ((k, dt, area, shape, energy, flipped, folded), accepted) in enumerate(
+                zip(result.history.rows(), result.history.accepted)):
+            writer.writerow([k, repr(dt) if timed and not math.isnan(dt) else "", repr(area), repr(shape),
+                             repr(energy), flipped, folded, int(accepted) if row else ""])
 
 
 def _draw_faces(ax, positions: np.ndarray, faces: np.ndarray, colours: FaceColours):

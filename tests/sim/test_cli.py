@@ -35,7 +35,8 @@ def test_flatten_round_trip(tmp_path):
 
     with open(hist, newline="") as f:
         rows = list(csv.reader(f))
-    assert rows[0] == ["iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded"]
+    assert rows[0] == ["iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded", "accepted"]
+    assert {row[7] for row in rows[2:]} == {"1"}  # the paper dynamics has no guard: every step taken
     assert len(rows) == summary["iterations"] + 2
     assert rows[1][0] == "0" and rows[1][1] == ""
     assert float(rows[1][2]) == summary["initial_area_error"]
@@ -916,3 +917,26 @@ def test_a_run_constant_the_engine_cannot_hold_is_refused_before_the_build_line(
     assert main(["flatten", "surf1", "--engine", "rtl", "--max-iter", "5000000000"]) == 2
     assert capsys.readouterr().err == ("springflat: error: run constant max_iter = 5000000000 does not fit the "
                                        "engine's 32-bit register (max 4294967295)\n")
+
+
+def test_a_guarded_runs_history_marks_its_rolled_back_steps_and_has_no_time_step(tmp_path):
+    """The momentum dynamics has no dt (its step is the weights, scaled by the guard): the column is empty, not
+    1.0; a step the guard rolled back is 0 under accepted, as many as --json's rejected_steps, and its row
+    repeats the kept layout's energy."""
+    import csv
+    import json
+
+    from sim.generate import saddle_grid
+    from sim.mesh_io import save_obj
+
+    saddle = saddle_grid(15)  # its no-option run rolls one step back
+    save_obj(tmp_path / "saddle.obj", saddle.vertices, saddle.faces)
+    proc = run("flatten", "saddle.obj", "--history", "h.csv", "--json", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    with open(tmp_path / "h.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert {row["dt"] for row in rows} == {""} and rows[0]["accepted"] == ""
+    rolled_back = [k for k, row in enumerate(rows) if row["accepted"] == "0"]
+    assert len(rolled_back) == summary["rejected_steps"] > 0
+    assert all(rows[k]["energy"] == rows[k - 1]["energy"] for k in rolled_back)
