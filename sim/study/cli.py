@@ -248,6 +248,12 @@ def _swept(result: StudyResult) -> bool:
     return any(s.config.kind == "sweep" for s in result.summaries)
 
 
+def _swept_bits(result: StudyResult) -> bool:
+    """Whether a signal class's fraction bits were swept (not only other knobs, such as ``--sweep rounding``):
+    the deviation-against-bits plot and its table."""
+    return any(s.config.kind == "sweep" and s.config.knob in SIGNAL_CLASSES for s in result.summaries)
+
+
 def _optimised(result: StudyResult) -> bool:
     """Whether the greedy optimiser ran (``--optimise``, and a base that meets the target)."""
     return result.optimisation is not None and result.optimisation.best is not None
@@ -274,7 +280,9 @@ def write_outputs(result: StudyResult, out: Path, command: str = "springflat stu
         (out / "chosen.json").unlink()  # a stale choice from an earlier run would mislead
     plots = {PLOT_FILES["pareto"]: _plot_pareto}
     if _swept(result):  # else empty axes, which the report does not link
-        plots |= {PLOT_FILES["bits"]: _plot_bits, PLOT_FILES["knobs"]: _plot_knobs}
+        plots |= {PLOT_FILES["knobs"]: _plot_knobs}
+    if _swept_bits(result):
+        plots |= {PLOT_FILES["bits"]: _plot_bits}
     for name, plot in plots.items():
         paths[name] = out / name
         plot(result, paths[name])
@@ -536,9 +544,10 @@ def report_markdown(result: StudyResult, chosen_fs: FormatSet | None, command: s
             lines += [f"| {_text_cell(m)} | {_text_cell(why)} |" for m, why in opt.rejected]
 
     if _swept(result):
+        lines += ["", "## One-knob sweeps", ""]
+    if _swept_bits(result):
         sweep = [s for s in result.summaries if s.config.kind == "sweep"]
-        lines += ["", "## One-knob sweeps", "",
-                  f"Each signal class's fraction bits, everything else at `{base.fs.name}`: the fewest swept bits "
+        lines += [f"Each signal class's fraction bits, everything else at `{base.fs.name}`: the fewest swept bits "
                   "that still meet the target (in isolation — combined reductions add up).", "",
                   "| class | fields | base bits | fewest swept bits meeting the target | its worst \\|ΔE\\| |",
                   "|---|---|---:|---:|---:|"]
@@ -554,8 +563,9 @@ def report_markdown(result: StudyResult, chosen_fs: FormatSet | None, command: s
             best = min(ok, key=lambda s: s.config.value) if ok else None
             lines.append(f"| {cls} | {'+'.join(fields)} | {class_frac_bits(base.fs, cls)} | "
                          f"{best.config.value if best else '–'} | {_fmt(best.worst_deviation) if best else '–'} |")
-        lines += ["", f"![deviation vs fraction bits]({PLOT_FILES['bits']})", "",
-                  f"![other knobs]({PLOT_FILES['knobs']})", ""]
+        lines += ["", f"![deviation vs fraction bits]({PLOT_FILES['bits']})", ""]
+    if _swept(result):
+        lines += [f"![other knobs]({PLOT_FILES['knobs']})", ""]
     lines += [f"![cost vs accuracy]({PLOT_FILES['pareto']})", ""]
 
     meeting = sorted((s for s in result.summaries if s.meets), key=lambda s: (s.cost.key(metric), s.worst_deviation))

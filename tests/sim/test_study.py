@@ -437,3 +437,15 @@ def test_a_study_of_under_a_second_does_not_say_0_s():
     from sim.study.cli import _seconds
 
     assert [_seconds(t) for t in (0.43, 9.94, 9.96, 12.6, 135.2)] == ["0.4 s", "9.9 s", "10 s", "13 s", "135 s"]
+
+
+def test_a_study_that_sweeps_only_other_knobs_draws_no_bits_plot_and_no_empty_table(tmp_path, monkeypatch):
+    """--sweep rounding: no signal class's bits were swept, so their plot would be the target line alone and
+    their table a header; the knobs' plot is drawn and linked."""
+    monkeypatch.chdir(tmp_path)
+    assert cmd_study(_parse(["dome", "--sweep", "rounding", "--no-optimise", "--workers", "1", "--max-iter", "5",
+                             "--out", "s", "--quiet"])) == 0
+    assert sorted(os.listdir("s")) == sorted(set(REPORT_FILES) - {"study-bits.png"})
+    report = Path("s/report.md").read_text()
+    assert "](study-knobs.png)" in report and "](study-bits.png)" not in report
+    assert "fewest swept bits meeting the target" not in report
