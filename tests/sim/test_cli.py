@@ -252,13 +252,18 @@ def test_paper_report(tmp_path):
     assert "Table VI" in report and "Table VII" in report
     for name in ("surf1.png", "surf2.png", "surf1-fixed.csv", "surf2-variable.csv"):
         assert (tmp_path / "rep" / name).stat().st_size > 0
-    # each run's last iteration is a row of its table: the shorter run's final errors are shown too
-    for mesh in ("surf1", "surf2"):
+    # each run's last iteration is a row of its table: the shorter run's final errors are shown too; the
+    # folds the paper's dynamics ends with are said
+    for mesh, faces in (("surf1", 7), ("surf2", 24)):
+        folded = []
         for step in ("fixed", "variable"):
             with open(tmp_path / "rep" / f"{mesh}-{step}.csv", newline="") as f:
                 last = list(csv.DictReader(f))[-1]
+            folded.append(last["folded"])
             assert any(line.startswith(f"| {last['iteration']} | ") and f"E_C = {float(last['shape_error']):.3f}, E_S = "
                        f"{float(last['area_error']):.3f}" in line for line in report.splitlines()), (mesh, step)
+        assert any(line.startswith(f"| {mesh} |") and line.endswith(f" | {folded[0]} / {folded[1]} of {faces} |")
+                   for line in report.splitlines()), mesh
 
 
 @pytest.mark.slow
