@@ -62,7 +62,7 @@ __all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_
            "SLIM_MAX_ITERATIONS", "check_layout", "init_name", "ARRAY_START"]
 
 LAYOUT_METHODS = ("tutte", "pca", "harmonic", "lscm", "arap", "slim")
-#: The start of mesh files: ARAP, SLIM from Tutte where ARAP folds, LSCM where that alone is exact (docs/guard.md).
+#: The start of mesh files: ARAP, SLIM from Tutte where ARAP folds, LSCM where that is the exact one (docs/guard.md).
 AUTO_START = "auto"
 
 ARAP_MAX_ITERATIONS = 100
@@ -365,8 +365,8 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
         except MeshError as exc:
             raise LayoutError(str(exc)) from None
         positions = vertices[:, :2]
-        if (mesh_vertices is not None and vertices.shape == mesh_vertices.shape
-                and np.ptp(mesh_vertices[:, 2]) > 0 and np.allclose(vertices, mesh_vertices, rtol=1e-6, atol=0.0)):
+        if (mesh_vertices is not None and vertices.shape == mesh_vertices.shape and np.ptp(mesh_vertices[:, 2]) > 0
+                and np.allclose(vertices, mesh_vertices, rtol=1e-6, atol=0.0)):
             raise LayoutError(f"layout '{path}' holds the 3D mesh itself, not a layout (a springflat pattern .obj keeps "
                               "the pattern in its vt, which --init does not read): give the pattern written as "
                               ".flat.obj, or a text file of 'x y' rows")
@@ -535,7 +535,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     The guarded dynamics keeps a fold-free start fold-free but cannot clear a fold. ``auto`` is ARAP,
     or SLIM from Tutte (fold-free by construction) where ARAP folds or fails: measured on the corpus, that
     beats untangling ARAP's layout on E_C and on time; where ARAP is fold-free, LSCM's layout where that is
-    exact and ARAP's is not (:func:`_lscm_where_exact`). Any other start with folds is untangled
+    exact and more so than ARAP's (:func:`_lscm_where_exact`). Any other start with folds is untangled
     (:func:`sim.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
     folded is returned with its count, and the notes say why. ``progress(text)`` is called before
     each long step. ``slim()`` gives :func:`slim_layout`'s layout of ``mesh`` when ARAP folds (default: it

@@ -299,7 +299,7 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         F: ``(F, 3)`` 0-based vertex indices of the triangles.
         name: the mesh's name (a string), for the pattern files.
         init: the initial layout: ``auto`` (the default: ARAP, or for a guarded run SLIM from Tutte where ARAP folds or
-            fails, and LSCM where that is exact, a developable patch, and ARAP is not),
+            fails, and LSCM where that is exact, a developable patch, and more so than ARAP's),
             ``tutte``, ``pca``, ``harmonic``, ``lscm``, ``arap``, ``slim``, a layout file, or a ``(V, 2)`` array; a
             file or an array is checked (shape, finite, range), mirrored back in y where it is a mirror image of
             the mesh (clockwise, as y-down texture coordinates are), and, with the guarded dynamics, untangled
