@@ -392,32 +392,34 @@ def closed_holes_note(drawing: PatternDrawing) -> str | None:
                  for hole in drawing.edge_loops[1:])
     if not closed:
         return None
-    count = len(drawing.holes)
-    which = (f"{closed} of the {count} kept holes" if closed < count else "the kept hole" if closed == 1
-             else "both kept holes" if closed == 2 else f"all {closed} kept holes")
-    them = "them" if closed > 1 else "it"
-    return (f"{which} {'are' if closed > 1 else 'is'} narrower than twice the seam allowance "
-            f"({length_text(drawing.seam, drawing.units)}): the cut line does not go round {them}; cut {them} out "
-            "along the sew line after sewing")
+    which, are, them = _holes_words(closed, len(drawing.holes))
+    return (f"{which} {are} narrower than twice the seam allowance ({length_text(drawing.seam, drawing.units)}): "
+            f"the cut line does not go round {them}; cut {them} out along the sew line after sewing")
+
+
+def _holes_words(some: int, count: int) -> tuple[str, str, str]:
+    """``(which, are, them)`` for ``some`` of a pattern's ``count`` kept holes: ``("1 of the 3 kept holes",
+    "is", "it")``, ``("both kept holes", "are", "them")``, ..."""
+    which = (f"{some} of the {count} kept holes" if some < count else "the kept hole" if some == 1
+             else "both kept holes" if some == 2 else f"all {some} kept holes")
+    return (which, "are", "them") if some > 1 else (which, "is", "it")
 
 
 def covered_holes_note(drawing: PatternDrawing) -> str | None:
     """Kept holes that lie under the pattern where it overlaps itself (:func:`overlaps`: a flap wrapped over a
-    hole, with sides that cross or without): a point inside the hole's loop is on the material. The cut line
-    then has no cut-out there (with a seam allowance, whose outline goes round the material) or runs over the
-    material (without one); ``None`` if no hole is covered."""
+    hole, with sides that cross or without): more than half the area inside the hole's loop is material. The
+    cut line then has no cut-out there (with a seam allowance, whose outline goes round the material) or runs
+    over the material (without one); ``None`` if no hole is covered."""
     if not drawing.holes or not drawing.overlapping:
         return None
     import shapely
 
-    covered = sum(bool(drawing.covered.contains(shapely.make_valid(shapely.Polygon(loop)).representative_point()))
-                  for loop in drawing.edge_loops[1:])
+    insides = [shapely.make_valid(shapely.Polygon(loop)) for loop in drawing.edge_loops[1:]]
+    covered = sum(inside.area > 0 and inside.intersection(drawing.covered).area > inside.area / 2
+                  for inside in insides)
     if not covered:
         return None
-    count = len(drawing.holes)
-    which = (f"{covered} of the {count} kept holes" if covered < count else "the kept hole" if covered == 1
-             else f"all {covered} kept holes")
-    them, are = ("them", "are") if covered > 1 else ("it", "is")
+    which, are, them = _holes_words(covered, len(drawing.holes))
     return (f"{which} {are} covered by the pattern where it lies on itself: the cut line "
             + (f"has no cut-out for {them}" if drawing.seam > 0 else f"round {them} runs over the material"))
 
@@ -603,7 +605,8 @@ def grain_axis(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray,
     weight = np.divide(area, length, out=np.zeros_like(area), where=length > 0)  # area × length × (unit doubled)
     doubled = np.column_stack([pieces[:, 0] ** 2 - pieces[:, 1] ** 2, 2 * pieces[:, 0] * pieces[:, 1]])
     axis = (weight[:, None] * doubled).sum(axis=0)
-    agreement = float(np.linalg.norm(axis) / (area * length).sum())
+    weight_sum = float((area * length).sum())
+    agreement = float(np.linalg.norm(axis)) / weight_sum if weight_sum > 0 else 0.0  # (a layout collapsed to a point)
     if not agreement > 1e-3:
         raise PatternError("--grain: the direction's pieces on the pattern point every way (no one line carries "
                            "it): name another")
@@ -613,13 +616,14 @@ def grain_axis(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray,
 
 
 def grain_note(drawing: PatternDrawing) -> str | None:
-    """A grain whose pieces on the pattern agree less than :data:`GRAIN_AGREEMENT` (a direction close to the
-    surface's normal over much of it): its line is their average, which the piece follows nowhere well."""
+    """A grain whose pieces on the pattern agree less than :data:`GRAIN_AGREEMENT`: its line is their average,
+    which the piece follows nowhere well. (A direction close to the surface's normal over much of it does that,
+    and so does one along a cone's slope, whose lines fan out as the cone unrolls into a sector.)"""
     if not drawing.grain or drawing.grain_agreement >= GRAIN_AGREEMENT:
         return None
-    return (f"the grain direction {drawing.grain} runs across the surface over much of it (close to its normal), "
-            f"and its pieces on the pattern point many ways (agreement {drawing.grain_agreement:.2f} of 1): the "
-            "grain line is their average; a direction along the surface gives a truer one")
+    return (f"the grain direction {drawing.grain} lies on the pattern in pieces that point many ways (agreement "
+            f"{drawing.grain_agreement:.2f} of 1; a direction across the surface, or lines that fan out on it): the "
+            "grain line drawn is their average, which the piece follows nowhere closely")
 
 
 def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int,
