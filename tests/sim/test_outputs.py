@@ -335,3 +335,28 @@ def test_a_stop_signal_turns_logging_off_in_a_dask_block_and_the_callers_level_c
     finally:
         reset_interrupted()
         logging.disable(before)
+
+
+def test_a_history_of_the_start_and_the_end_leaves_dt_and_accepted_empty(tmp_path):
+    """The RTL and board engines keep no per-iteration record: their history is the start and the end (iteration
+    0 and N). That last row is no one step: no dt (even for the paper dynamics) and no accepted; a float run's rows
+    each have theirs."""
+    import csv
+    import dataclasses
+
+    from golden_model.results import History
+    from sim.outputs import write_history
+
+    mesh = dome_grid(6)
+    result = flatten(mesh, tutte_layout(mesh), FlattenParams(dynamics="paper", step="fixed", dt=0.01, max_iter=5))
+    write_history(tmp_path / "float.csv", result)
+    ends = History()
+    for k, measured in ((0, result.initial), (len(result.history) - 1, result.final)):
+        ends.append(result.history.dt[k], measured, iteration=k)
+    write_history(tmp_path / "ends.csv", dataclasses.replace(result, history=ends))
+    with open(tmp_path / "float.csv", newline="") as f:
+        every = list(csv.DictReader(f))
+    with open(tmp_path / "ends.csv", newline="") as f:
+        start, end = csv.DictReader(f)
+    assert [row["dt"] for row in every[1:]] == ["0.01"] * 5 and {row["accepted"] for row in every[1:]} == {"1"}
+    assert (end["iteration"], end["dt"], end["accepted"]) == ("5", "", "") and start["accepted"] == ""
