@@ -228,7 +228,7 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
     out = args.out
     with atomic_directory(out) as build:  # all of the report or nothing, also on Ctrl-C
-        report = reproduce_paper(build, init=args.init, progress=not args.quiet)
+        report = reproduce_paper(build, init=args.init, progress=not args.quiet and sys.stderr.isatty())
     print(f"wrote {out / report.name}")
     return 0
 

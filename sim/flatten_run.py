@@ -25,7 +25,7 @@ from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
-from .outputs import OutputWriteError, all_or_nothing, write_history, write_plot
+from .outputs import OutputWriteError, all_or_nothing, progress_bar, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
                        check_mesh_fits, check_seam_fits, closed_holes_note, covered_holes_note, error_text,
                        grain_note, kind_or_none, on_sheets, run_caption, scale_note, seam_length, write_pattern_file)
@@ -46,29 +46,6 @@ def output_paths(args: argparse.Namespace) -> list[tuple[str, str, tuple[str, ..
         for path in (value or []) if dest == "out" else ([] if value is None else [value]):
             paths.append((dest, flag, endings, path))
     return paths
-
-
-class _NoProgress:
-    """A run's progress bar when none is shown: tqdm starts its monitor thread, which stays for the process's
-    life, even for a disabled bar (an API call shows none)."""
-
-    def update(self, n: int = 1) -> None:
-        pass
-
-    def __enter__(self) -> "_NoProgress":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        pass
-
-
-def _progress(total: int, enabled: bool):
-    """A tqdm bar on stderr that appears only for runs longer than ~2 s (``enabled``), else :class:`_NoProgress`."""
-    if not enabled:
-        return _NoProgress()
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="it", delay=2.0, file=sys.stderr, leave=False)
 
 
 def check_print_size(args: argparse.Namespace, mesh: Mesh) -> None:
@@ -200,7 +177,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
                                            notes)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
-    with _progress(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+    with progress_bar(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
     if result.status != "diverged" and not result.final.folded:

@@ -62,7 +62,8 @@ __all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_
            "SLIM_MAX_ITERATIONS", "check_layout", "init_name", "ARRAY_START"]
 
 LAYOUT_METHODS = ("tutte", "pca", "harmonic", "lscm", "arap", "slim")
-#: The start of mesh files: ARAP, SLIM from Tutte where ARAP folds, LSCM where that is the exact one (docs/guard.md).
+#: The start of mesh files: ARAP; SLIM from Tutte where ARAP folds; LSCM where that is exact to the stop rule's
+#: floor and more so than ARAP's (docs/guard.md).
 AUTO_START = "auto"
 
 ARAP_MAX_ITERATIONS = 100

@@ -1048,6 +1048,30 @@ def _write_svg_legend(out, colours: FaceColours, left: float, top: float, size: 
     out.write("</g>\n")
 
 
+class _NoProgress:
+    """A progress bar when none is shown: tqdm starts its monitor thread, which stays for the process's life,
+    even for a disabled bar (an API call shows none)."""
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def __enter__(self) -> "_NoProgress":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+
+def progress_bar(total: int, enabled: bool, unit: str = "it"):
+    """A tqdm bar on stderr that appears only for work longer than ~2 s (``enabled``: the caller's terminal
+    check), else :class:`_NoProgress`."""
+    if not enabled:
+        return _NoProgress()
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit=unit, delay=2.0, file=sys.stderr, leave=False)
+
+
 def write_history(path: Path, result: FlattenResult) -> None:
     """CSV of :data:`HISTORY_HEADER`, row 0 = initial layout (empty ``dt`` and ``accepted``). ``dt`` is the paper
     dynamics' time step, empty for the momentum dynamics, which has none (its step is the node weights, scaled

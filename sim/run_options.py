@@ -256,7 +256,8 @@ def file_defaults(mesh: Mesh) -> FlattenParams:
 
 def default_init(mesh_name: str) -> str:
     """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), ``auto`` for files
-    (ARAP; SLIM from Tutte where ARAP folds or fails, LSCM where that is the exact one: sim.layouts.start_layout)."""
+    (ARAP; SLIM from Tutte where ARAP folds or fails; LSCM where that is exact to the stop rule's floor and more so
+    than ARAP's: sim.layouts.start_layout)."""
     return "pca" if is_builtin(mesh_name) else AUTO_START
 
 
