@@ -212,6 +212,14 @@ def test_error_answers_and_timeouts_are_one_line():
         mute.read(0)
     assert str(info.value).startswith("no answer from the board on COM9 to a read at 0x0 (nothing before the timeout)")
     assert "\n" not in str(info.value)
+    class Pulled(ModelPort):  # a USB-UART pulled out mid-run: pyserial raises SerialException, an OSError
+        def read(self, n):
+            raise OSError("device reports readiness to read but returned no data (device disconnected?)")
+
+    pulled = UartBus(Pulled(ModelBus(MAP, DEFAULT), addr_width(MAP)), name="the board on /dev/ttyUSB0")
+    with pytest.raises(LinkError, match=r"^the link to the board on /dev/ttyUSB0 failed during a read at 0x0: device "
+                                        r"reports readiness to read but returned no data \(device disconnected\?\)$"):
+        pulled.read(0)
     headless = UartBus(ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP), mangle=lambda a: a[:2]))
     with pytest.raises(LinkError, match=r"^no answer from the link to a read at 0x0 \(2 of 7 bytes before the "):
         headless.read(0)  # the header came, the word and the checksum did not
