@@ -1322,24 +1322,29 @@ def test_rtl_check_waves_onto_a_directory_is_one_line_before_anything(tmp_path, 
 
 
 def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
-    """Under pytest stderr is not a terminal: no bar; made to look like one, the bar is enabled."""
+    """Under pytest stderr is not a terminal: no bar; made to look like one, the bar is enabled (flatten's, and
+    paper's unless --quiet)."""
     import sim.flatten_run
+    import sim.paper
 
     seen = []
-    real = sim.flatten_run._progress
+    real = sim.flatten_run.progress_bar
 
-    def spy(total, enabled):
+    def spy(total, enabled, unit="it"):
         seen.append(enabled)
-        return real(total, enabled)
+        return real(total, enabled, unit)
 
-    monkeypatch.setattr(sim.flatten_run, "_progress", spy)
+    monkeypatch.setattr(sim.flatten_run, "progress_bar", spy)
+    monkeypatch.setattr(sim.paper, "progress_bar", spy)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "m.obj").write_text(obj())
     for argv in (["m.obj", "--max-iter", "3"], ["m.obj", "--max-iter", "3", "--json"]):
         assert main(["flatten", *argv]) == 0
+    assert main(["paper", "--out", "p1"]) == 0
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
     assert main(["flatten", "m.obj", "--max-iter", "3"]) == 0
-    assert seen == [False, False, True]
+    assert main(["paper", "--out", "p2"]) == 0 and main(["paper", "--out", "p3", "--quiet"]) == 0
+    assert seen == [False, False, False, True, True, False]
     assert "it/s" not in capsys.readouterr().err
 
 
