@@ -369,8 +369,13 @@ UNGUARDED = {"guard": False, "energy_window": 1}
 
 def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
     """Refuse, in one line, a stop rule's window the engine does not have (the guard's
-    :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it), and the guarded step on a
-    ``capacity`` built without the guard."""
+    :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it), an ``N_max`` beyond its MAX_ITER
+    register (:data:`ITERATION_BITS`; the layout-free part of :func:`build_image`'s check of the run constants, so
+    that it comes before the start is computed), and the guarded step on a ``capacity`` built without the
+    guard."""
+    if params.max_iter >= 1 << ITERATION_BITS:
+        raise FixedPointError(f"run constant max_iter = {params.max_iter} does not fit the engine's "
+                              f"{ITERATION_BITS}-bit register (max {(1 << ITERATION_BITS) - 1})")
     if capacity is not None and params.guard and not capacity.guard:
         raise FixedPointError(f"this engine was built without the step guard, so it does not run "
                               f"'{params.mode.name}': use --no-guard, or an engine built with the guard")

@@ -923,10 +923,15 @@ def test_an_obj_output_never_replaces_a_mesh_that_springflat_did_not_write(tmp_p
 
 
 def test_a_run_constant_the_engine_cannot_hold_is_refused_before_the_build_line(tmp_path, monkeypatch, capsys):
-    """--engine rtl with a --max-iter beyond the engine's 32-bit register: one line, and no 'building
-    springflat_engine' before it (nothing is built)."""
+    """--engine rtl with a --max-iter beyond the engine's 32-bit register: one line, before the start is computed
+    (no layout changes it) and with no 'building springflat_engine' before it (nothing is built)."""
+    import sim.flatten_run as flatten_run
     from sim.cli import main
 
+    def no_start(*args, **kw):
+        raise AssertionError("the start was computed before the refusal")
+
+    monkeypatch.setattr(flatten_run, "start_positions", no_start)
     monkeypatch.chdir(tmp_path)
     assert main(["flatten", "surf1", "--engine", "rtl", "--max-iter", "5000000000"]) == 2
     assert capsys.readouterr().err == ("springflat: error: run constant max_iter = 5000000000 does not fit the "
