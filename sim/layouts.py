@@ -223,7 +223,7 @@ def _farthest_pair(points: np.ndarray) -> tuple[int, int]:
     order among the convex hull's vertices) where the hull has at most :data:`FARTHEST_PAIR_EXACT` vertices; else
     the ends of a double sweep (the hull vertex farthest from the first, then the one farthest from it), at least
     half the greatest distance. A long strip's boundary is all of its vertices, and a half ring's outer arc is all
-    on the hull: every pair of 20,000 took 10 s."""
+    on the hull, so measuring every pair grows with the square of the strip's length."""
     candidates = _hull_vertices(points) if len(points) > 3 else np.arange(len(points))
     hull = points[candidates]
     if len(hull) > FARTHEST_PAIR_EXACT:
@@ -607,10 +607,10 @@ def _lscm_where_exact(mesh: Mesh, arap: np.ndarray, say: Callable[[str], None], 
     """``auto`` where ARAP's layout is fold-free: LSCM's instead where that is fold-free, below the stop rule's
     energy floor (an rms edge strain of at most ``floor``) and below ARAP's strain: a developable patch,
     which LSCM, conformal, flattens exactly, and which ARAP may leave short of its minimum after its
-    :data:`ARAP_MAX_ITERATIONS` (a flat half ring came out bent to 92° with 5 % strain, which the dynamics,
-    whose steps are local, does not undo in 1,000 iterations). Only where LSCM is that exact: a lower energy
-    alone does not make a better start (from LSCM's layout, which shrinks a curved patch, corpus patches end
-    with E_C up to twice what SLIM's start gives; docs/guard.md, "The start")."""
+    :data:`ARAP_MAX_ITERATIONS` (a long strip bent, which the dynamics, whose steps are local, does not
+    undo within its cap). Only where LSCM is that exact: a lower energy alone does not make a better start
+    (LSCM's layout shrinks a curved patch, and the runs from it end with a higher E_C). docs/guard.md, "The
+    start", has the measurements."""
     say("computing the lscm layout (exact where the patch is developable)")
     try:
         lscm = lscm_layout(mesh)
