@@ -44,12 +44,13 @@ class History:
     energy: list[float] = field(default_factory=list)
     flipped: list[int] = field(default_factory=list)
     folded: list[int] = field(default_factory=list)
-    #: whether the iteration's step was taken (the guard rolls back a step that raises the energy)
-    accepted: list[bool] = field(default_factory=list)
+    #: whether the iteration's step was taken (the guard rolls back a step that raises the energy); ``None`` for
+    #: a row that is no one step (an engine's end row, after iterations it does not record)
+    accepted: list[bool | None] = field(default_factory=list)
     #: each row's iteration number: its index, unless a row skips iterations (an engine's final row)
     iteration: list[int] = field(default_factory=list)
 
-    def append(self, dt: float, m: Measurement, accepted: bool = True, iteration: int | None = None) -> None:
+    def append(self, dt: float, m: Measurement, accepted: bool | None = True, iteration: int | None = None) -> None:
         """Add the row of ``iteration`` (default: the next, ``len(self)``)."""
         self.iteration.append(len(self) if iteration is None else iteration)
         self.accepted.append(accepted)

@@ -349,7 +349,7 @@ def engine_flatten_result(problem: FixedProblem, positions: np.ndarray, velociti
     history = History()
     history.append(math.nan, engine.measure())
     engine.raw_positions, engine.raw_velocities = positions.copy(), velocities.copy()
-    history.append(math.nan, engine.measure(), iteration=iterations)
+    history.append(math.nan, engine.measure(), accepted=None, iteration=iterations)  # (no one step)
     result = FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),
                            history, status, iterations, problem.params, problem.density, engine=engine_name)
     result.extra.update({"formats": problem.fs.name, "scale": problem.scale, **extra})
@@ -372,11 +372,10 @@ def summary_line(name: str, simulator: str, run: EngineRun) -> str:
 def rtl_capacity() -> EngineCapacity:
     """The capacity ``--engine rtl`` builds: :data:`DEFAULT_CAPACITY`, or ``SPRINGFLAT_ENGINE_CAPACITY=V,E,T``
     (the tests use a small engine)."""
-    from .run_options import UserError
-
     from golden_model.params import ParameterError
 
     from .register_map_export import check_fillable
+    from .run_options import UserError
 
     given = os.environ.get("SPRINGFLAT_ENGINE_CAPACITY")
     if not given:

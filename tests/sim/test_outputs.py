@@ -1,5 +1,6 @@
 """The plot and SVG colour each face by its area distortion |A'|/A and mark folded faces."""
 
+import math
 import os
 import xml.etree.ElementTree as ET
 
@@ -351,8 +352,8 @@ def test_a_history_of_the_start_and_the_end_leaves_dt_and_accepted_empty(tmp_pat
     result = flatten(mesh, tutte_layout(mesh), FlattenParams(dynamics="paper", step="fixed", dt=0.01, max_iter=5))
     write_history(tmp_path / "float.csv", result)
     ends = History()
-    for k, measured in ((0, result.initial), (len(result.history) - 1, result.final)):
-        ends.append(result.history.dt[k], measured, iteration=k)
+    ends.append(math.nan, result.initial)
+    ends.append(result.history.dt[-1], result.final, accepted=None, iteration=len(result.history) - 1)
     write_history(tmp_path / "ends.csv", dataclasses.replace(result, history=ends))
     with open(tmp_path / "float.csv", newline="") as f:
         every = list(csv.DictReader(f))
@@ -360,3 +361,15 @@ def test_a_history_of_the_start_and_the_end_leaves_dt_and_accepted_empty(tmp_pat
         start, end = csv.DictReader(f)
     assert [row["dt"] for row in every[1:]] == ["0.01"] * 5 and {row["accepted"] for row in every[1:]} == {"1"}
     assert (end["iteration"], end["dt"], end["accepted"]) == ("5", "", "") and start["accepted"] == ""
+    from sim.engine_run import engine_flatten_result  # the engines' own end row, after one iteration too
+    from golden_model.fixed import FormatSet
+    from golden_model.fixed.engine import prepare
+
+    problem = prepare(mesh, tutte_layout(mesh), FlattenParams(dynamics="momentum", max_iter=1),
+                      FormatSet.preset("default"))
+    one = engine_flatten_result(problem, problem.initial_positions, 0 * problem.initial_positions, "max-iterations",
+                                1, "rtl", {})
+    write_history(tmp_path / "one.csv", one)
+    with open(tmp_path / "one.csv", newline="") as f:
+        assert [(row["iteration"], row["dt"], row["accepted"]) for row in csv.DictReader(f)] == [("0", "", ""),
+                                                                                                 ("1", "", "")]
