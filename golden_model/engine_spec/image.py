@@ -369,13 +369,8 @@ UNGUARDED = {"guard": False, "energy_window": 1}
 
 def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
     """Refuse, in one line, a stop rule's window the engine does not have (the guard's
-    :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it), an ``N_max`` beyond its MAX_ITER
-    register (:data:`ITERATION_BITS`; the layout-free part of :func:`build_image`'s check of the run constants, so
-    that it comes before the start is computed), and the guarded step on a ``capacity`` built without the
-    guard."""
-    if params.max_iter >= 1 << ITERATION_BITS:
-        raise FixedPointError(f"run constant max_iter = {params.max_iter} does not fit the engine's "
-                              f"{ITERATION_BITS}-bit register (max {(1 << ITERATION_BITS) - 1})")
+    :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it), and the guarded step on a
+    ``capacity`` built without the guard."""
     if capacity is not None and params.guard and not capacity.guard:
         raise FixedPointError(f"this engine was built without the step guard, so it does not run "
                               f"'{params.mode.name}': use --no-guard, or an engine built with the guard")
@@ -385,6 +380,15 @@ def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
         raise FixedPointError(f"SpringflatEngine's stop rule measures the energy change over {window} "
                               f"{'accepted iterations' if params.guard else 'iteration'} in this mode, not "
                               f"{params.energy_window}: use {hint}")
+
+
+def check_max_iter(params) -> None:
+    """Refuse, in one line, an ``N_max`` beyond the engine's MAX_ITER register (:data:`ITERATION_BITS`): the
+    layout-free part of :func:`build_image`'s check of the run constants, so that a whole run through the engine
+    (``flatten --engine rtl|board``) can refuse it before its start is computed."""
+    if params.max_iter >= 1 << ITERATION_BITS:
+        raise FixedPointError(f"run constant max_iter = {params.max_iter} does not fit the engine's "
+                              f"{ITERATION_BITS}-bit register (max {(1 << ITERATION_BITS) - 1})")
 
 
 def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
