@@ -380,21 +380,48 @@ def length_text(length: float, units: str) -> str:
 
 
 def closed_holes_note(drawing: PatternDrawing) -> str | None:
-    """Kept holes that the seam allowance closes on the cut line (a hole narrower than twice the allowance): the
-    cut line goes round no part of them, so they are cut after sewing, along their sew line; ``None`` if none,
-    or where the pattern overlaps itself (:func:`overlaps`: its holes are no cut-outs to speak of)."""
-    if drawing.seam <= 0 or not drawing.holes or drawing.overlapping:
+    """Kept holes that the seam allowance closes on the cut line (a hole narrower than twice the allowance, or
+    what an overlapping pattern leaves of it): the cut line goes round no part of them, so they are cut after
+    sewing, along their sew line; ``None`` if none. A hole a flap covers is :func:`covered_holes_note`'s."""
+    if drawing.seam <= 0 or not drawing.holes:
         return None
-    import shapely
-
-    openings = [shapely.Polygon(loop).representative_point() for loop in drawing.cut_loops[1:]]
-    closed = sum(not any(shapely.Polygon(hole).contains(point) for point in openings)
-                 for hole in drawing.edge_loops[1:])
+    closed = sum(not cut_out and not covered for covered, cut_out in _hole_cuts(drawing))
     if not closed:
         return None
     which, are, them = _holes_words(closed, len(drawing.holes))
     return (f"{which} {are} narrower than twice the seam allowance ({length_text(drawing.seam, drawing.units)}): "
             f"the cut line does not go round {them}; cut {them} out along the sew line after sewing")
+
+
+def covered_holes_note(drawing: PatternDrawing) -> str | None:
+    """Kept holes that a flap of the pattern covers where it overlaps itself (:func:`overlaps`): more than half
+    the area inside the hole's loop is material. With a seam allowance, those the cut line has no cut-out for
+    (its outline goes round the material); without one, each of them (its loop on the cut line runs over the
+    material); ``None`` if none."""
+    if not drawing.holes or not drawing.overlapping:
+        return None
+    covered = sum(covered and not (drawing.seam > 0 and cut_out) for covered, cut_out in _hole_cuts(drawing))
+    if not covered:
+        return None
+    which, are, them = _holes_words(covered, len(drawing.holes))
+    return (f"{which} {are} covered by the pattern where it lies on itself: the cut line "
+            + (f"has no cut-out for {them}" if drawing.seam > 0 else f"round {them} runs over the material"))
+
+
+def _hole_cuts(drawing: PatternDrawing) -> list[tuple[bool, bool]]:
+    """``(covered, cut_out)`` of each kept hole: more than half the area inside its loop is material (a flap of an
+    overlapping pattern over it), and a loop of the cut line beyond the outer one lies inside it (the cut line goes
+    round some of it)."""
+    import shapely
+
+    openings = [shapely.Polygon(loop).representative_point() for loop in drawing.cut_loops[1:]]
+    cuts = []
+    for loop in drawing.edge_loops[1:]:
+        inside = shapely.make_valid(shapely.Polygon(loop))  # (a hole the pattern wraps over may cross itself)
+        covered = (drawing.overlapping and inside.area > 0
+                   and inside.intersection(drawing.covered).area > inside.area / 2)
+        cuts.append((bool(covered), any(inside.contains(point) for point in openings)))
+    return cuts
 
 
 def _holes_words(some: int, count: int) -> tuple[str, str, str]:
@@ -403,25 +430,6 @@ def _holes_words(some: int, count: int) -> tuple[str, str, str]:
     which = (f"{some} of the {count} kept holes" if some < count else "the kept hole" if some == 1
              else "both kept holes" if some == 2 else f"all {some} kept holes")
     return (which, "are", "them") if some > 1 else (which, "is", "it")
-
-
-def covered_holes_note(drawing: PatternDrawing) -> str | None:
-    """Kept holes that lie under the pattern where it overlaps itself (:func:`overlaps`: a flap wrapped over a
-    hole, with sides that cross or without): more than half the area inside the hole's loop is material. The
-    cut line then has no cut-out there (with a seam allowance, whose outline goes round the material) or runs
-    over the material (without one); ``None`` if no hole is covered."""
-    if not drawing.holes or not drawing.overlapping:
-        return None
-    import shapely
-
-    insides = [shapely.make_valid(shapely.Polygon(loop)) for loop in drawing.edge_loops[1:]]
-    covered = sum(inside.area > 0 and inside.intersection(drawing.covered).area > inside.area / 2
-                  for inside in insides)
-    if not covered:
-        return None
-    which, are, them = _holes_words(covered, len(drawing.holes))
-    return (f"{which} {are} covered by the pattern where it lies on itself: the cut line "
-            + (f"has no cut-out for {them}" if drawing.seam > 0 else f"round {them} runs over the material"))
 
 
 def seam_outlines(drawing: PatternDrawing, allowance: float) -> list[np.ndarray]:

@@ -274,3 +274,39 @@ def test_the_dxf_loops_run_one_way_with_or_without_a_seam_allowance(tmp_path):
             loops = _dxf_loops(tmp_path / name, layer)
             signs = [np.sign(loop_signed_area(loop)) for loop in loops]
             assert len(loops) == 3 and signs == [1.0, -1.0, -1.0], (name, layer, signs)
+
+
+def test_a_flap_over_a_kept_hole_is_said_where_the_cut_line_has_no_cut_out_for_it():
+    """A 110 mm flat grid with two 30 mm holes side by side in y, the strip x < c folded over onto [c, 2c]: at
+    c = 36 mm the flap covers both holes (the covered note, both, with and without an allowance); at 30 mm it
+    covers two thirds of each and the cut line still goes round the rest (no note); at 26 mm with a 10 mm
+    allowance the rest is too narrow and the cut line goes round none of it (the closed note, not the covered)."""
+    from sim.generate import grid_uv, grid_with_cut_outs
+    from sim.patterns import PatternDrawing, closed_holes_note, covered_holes_note
+
+    n = 12
+    uv = grid_uv(n, n, 110.0, 110.0)
+    cut = np.zeros((n - 1, n - 1), dtype=bool)
+    cut[1:4, 4:7] = True  # x 40-70, y 10-40
+    cut[6:9, 4:7] = True  # x 40-70, y 60-90
+    mesh = grid_with_cut_outs(np.column_stack([uv, np.zeros(n * n)]), n, cut)
+
+    def folded_at(c: float, seam: float) -> PatternDrawing:
+        layout = mesh.vertices[:, :2].copy()
+        layout[layout[:, 0] < c, 0] = 2 * c - layout[layout[:, 0] < c, 0]
+        drawing = PatternDrawing.of(mesh, layout)
+        return drawing.with_seam(seam) if seam else drawing
+
+    covers = folded_at(36.0, 1.0)
+    assert len(covers.cut_loops) == 1 and closed_holes_note(covers) is None
+    assert covered_holes_note(covers) == ("both kept holes are covered by the pattern where it lies on itself: the "
+                                          "cut line has no cut-out for them")
+    assert covered_holes_note(folded_at(36.0, 0.0)) == ("both kept holes are covered by the pattern where it lies on "
+                                                        "itself: the cut line round them runs over the material")
+    two_thirds = folded_at(30.0, 1.0)
+    assert len(two_thirds.cut_loops) == 3 and covered_holes_note(two_thirds) is None
+    assert closed_holes_note(two_thirds) is None
+    narrow = folded_at(26.0, 10.0)
+    assert len(narrow.cut_loops) == 1 and covered_holes_note(narrow) is None
+    assert closed_holes_note(narrow) == ("both kept holes are narrower than twice the seam allowance (10 mm): the cut "
+                                         "line does not go round them; cut them out along the sew line after sewing")
