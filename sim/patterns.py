@@ -630,8 +630,8 @@ def grain_note(drawing: PatternDrawing) -> str | None:
     if not drawing.grain or drawing.grain_agreement >= GRAIN_AGREEMENT:
         return None
     return (f"the grain direction {drawing.grain} lies on the pattern in pieces that point many ways (agreement "
-            f"{drawing.grain_agreement:.2f} of 1; a direction across the surface, or lines that fan out on it): the "
-            "grain line drawn is their average, which the piece follows nowhere closely")
+            f"{drawing.grain_agreement:.2f} of 1): the grain line drawn is their average, which much of the piece "
+            "does not follow; a direction that runs along the surface, not across it, gives a truer line")
 
 
 def run_caption(status: str, iterations: int, area_error: float, shape_error: float, folded: int,

@@ -48,7 +48,7 @@ class UartBus:
             return self._exchange_on_port(request, what)
         except OSError as exc:  # (pyserial's SerialException too: a USB-UART pulled out, a socket closed)
             reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise LinkError(f"the link to {self.name} failed during {what}: {reason}") from None
+            raise LinkError(f"lost {self.name} during {what}: {reason}") from None
 
     def _exchange_on_port(self, request: bytes, what: str) -> protocol.Answer:
         reset = getattr(self.port, "reset_input_buffer", None)

@@ -100,16 +100,20 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def _progress_bars(enabled: bool):
-    from tqdm import tqdm
-
+    """``(update(phase, n), close(), totals)``: a bar per phase on stderr, where ``enabled``; else no tqdm at all
+    (a disabled one still starts tqdm's monitor thread, :func:`sim.outputs.progress_bar`)."""
     bars: dict[str, Any] = {}
 
     def update(phase: str, n: int) -> None:
+        if not enabled:
+            return
+        from tqdm import tqdm
+
         if phase not in bars:
             for bar in bars.values():
                 bar.close()
             bars[phase] = tqdm(total=totals.get(phase), desc=phase, unit="run", file=sys.stderr,
-                               disable=not enabled, leave=False, dynamic_ncols=True, mininterval=0.5)
+                               leave=False, dynamic_ncols=True, mininterval=0.5)
         bars[phase].update(n)
 
     def close() -> None:

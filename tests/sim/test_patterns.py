@@ -982,6 +982,7 @@ def test_a_grain_close_to_the_surfaces_normal_gets_a_note_one_along_it_none():
     across, along = (PatternDrawing.of(mesh, layout).with_grain(grain) for grain in ("x", "y"))
     assert across.grain_agreement < GRAIN_AGREEMENT <= along.grain_agreement
     assert re.fullmatch(r"the grain direction x lies on the pattern in pieces that point many ways \(agreement "
-                        r"0\.\d\d of 1; a direction across the surface, or lines that fan out on it\): the grain line "
-                        r"drawn is their average, which the piece follows nowhere closely", grain_note(across))
+                        r"0\.\d\d of 1\): the grain line drawn is their average, which much of the piece does not "
+                        r"follow; a direction that runs along the surface, not across it, gives a truer line",
+                        grain_note(across))
     assert grain_note(along) is None and grain_note(PatternDrawing.of(mesh, layout)) is None

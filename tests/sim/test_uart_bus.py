@@ -217,8 +217,8 @@ def test_error_answers_and_timeouts_are_one_line():
             raise OSError("device reports readiness to read but returned no data (device disconnected?)")
 
     pulled = UartBus(Pulled(ModelBus(MAP, DEFAULT), addr_width(MAP)), name="the board on /dev/ttyUSB0")
-    with pytest.raises(LinkError, match=r"^the link to the board on /dev/ttyUSB0 failed during a read at 0x0: device "
-                                        r"reports readiness to read but returned no data \(device disconnected\?\)$"):
+    with pytest.raises(LinkError, match=r"^lost the board on /dev/ttyUSB0 during a read at 0x0: device reports "
+                                        r"readiness to read but returned no data \(device disconnected\?\)$"):
         pulled.read(0)
     headless = UartBus(ModelPort(ModelBus(MAP, DEFAULT), addr_width(MAP), mangle=lambda a: a[:2]))
     with pytest.raises(LinkError, match=r"^no answer from the link to a read at 0x0 \(2 of 7 bytes before the "):
