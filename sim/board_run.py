@@ -44,7 +44,7 @@ def board_capacity(bus, fs: FormatSet) -> EngineCapacity:
 
 #: ``flatten --engine board`` gives up on a run whose ITERATIONS has not moved for this long (wall time). An
 #: iteration of a 3,025-vertex patch took 58,376 clocks in simulation (docs/synthesis.md), under a millisecond
-#: at the board's 100 MHz.
+#: at the board's engine clock (``uart_protocol.ENGINE_CLOCK_HZ``).
 BOARD_STALL_SECONDS = 20.0
 
 

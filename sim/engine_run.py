@@ -405,8 +405,7 @@ def rtl_engine(formats: FormatSet):
 
     def engine(mesh, positions, params, on_iteration=None):
         problem = prepare(mesh, positions, params, formats)
-        capacity.check_mesh(mesh)  # before any build, whoever calls
-        build_image(problem, capacity)  # a run constant the registers cannot hold is refused before the build line
+        capacity.check_mesh(mesh)  # before any build, whoever calls (the run constants: check_run_limits)
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
               f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running "
               "the flattening ...", file=sys.stderr)

@@ -106,10 +106,10 @@ def choose_engine(args: argparse.Namespace, params: FlattenParams, mesh: Mesh):
     if engine.fixed_point:
         check_fixed_params(params, formats)
     if engine.hardware:
-        from golden_model.engine_spec.image import check_engine_params, check_max_iter
+        from golden_model.engine_spec.image import check_engine_params, check_run_limits
 
         check_engine_params(params)
-        check_max_iter(params)
+        check_run_limits(params)
     check_engine_holds(engine, formats, mesh, params)
     run = engine.make(args, formats)
     return _naming_presets_that_hold(run, formats) if engine.fixed_point else run

@@ -34,7 +34,7 @@ from ..guard import ENERGY_WINDOW
 from ..modes import MODE_CODE_BITS, RUN_MODES, RunMode, Step
 from ..fixed.controller import Controller, Setup
 from ..fixed.engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, FixedProblem, StopRule, check_fixed_params,
-                            energy_floor_raw)
+                            energy_floor_raw, tol_energy_raw)
 from ..fixed.measures import SAT, FixedPointError, Reciprocal, energy_shifts
 from ..fixed.format import Format, SaturationCounter, quantize, raw_range
 from ..fixed.formats_set import FormatSet
@@ -351,10 +351,7 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str,
         "tol_energy": rule.energy, "max_iter": params.max_iter, "saturation_limit": 0,
         "energy_floor": rule.floor,
     }
-    if rule.energy >> (ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS):  # (said as given: its raw value is 2^40 times it)
-        raise FixedPointError(f"--tol-energy {params.tol_energy:g} does not fit the engine's TOL_ENERGY register "
-                              f"(u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS}: below {2**ENERGY_TOL_INT_BITS}); use a "
-                              "smaller value")
+    check_run_limits(params)
     for f in run_constant_fields(fs, capacity):
         if not f.raw_min <= constants[f.name] <= f.raw_max:
             raise FixedPointError(f"run constant {f.name} = {constants[f.name]} does not fit the engine's "
@@ -382,13 +379,17 @@ def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
                               f"{params.energy_window}: use {hint}")
 
 
-def check_max_iter(params) -> None:
-    """Refuse, in one line, an ``N_max`` beyond the engine's MAX_ITER register (:data:`ITERATION_BITS`): the
-    layout-free part of :func:`build_image`'s check of the run constants, so that a whole run through the engine
-    (``flatten --engine rtl|board``) can refuse it before its start is computed."""
+def check_run_limits(params) -> None:
+    """Refuse, in one line, an ``N_max`` beyond the engine's MAX_ITER register (:data:`ITERATION_BITS`) or an ``ε``
+    beyond its TOL_ENERGY register: the run constants no layout changes, which :func:`build_image` checks with
+    the rest, and a whole run through the engine (``flatten --engine rtl|board``) before its start is computed."""
     if params.max_iter >= 1 << ITERATION_BITS:
         raise FixedPointError(f"run constant max_iter = {params.max_iter} does not fit the engine's "
                               f"{ITERATION_BITS}-bit register (max {(1 << ITERATION_BITS) - 1})")
+    if tol_energy_raw(params.tol_energy) >> (ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS):  # (said as given)
+        raise FixedPointError(f"--tol-energy {params.tol_energy:g} does not fit the engine's TOL_ENERGY register "
+                              f"(u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS}: below {2**ENERGY_TOL_INT_BITS}); use a "
+                              "smaller value")
 
 
 def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:

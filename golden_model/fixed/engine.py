@@ -115,6 +115,12 @@ def energy_to_float(problem: "FixedProblem", raw: int) -> float:
     return math.ldexp(raw / 3, -energy_frac_bits(problem.fs) - 2 * problem.scale_exp)
 
 
+def tol_energy_raw(tol_energy: float) -> int:
+    """``ε`` as the stop rule holds it: ``ENERGY_TOL_FRAC_BITS`` fraction bits, rounded half up, exactly (``1e300``
+    is a tolerance too, not a float overflow)."""
+    return math.floor(Fraction(tol_energy) * 2**ENERGY_TOL_FRAC_BITS + Fraction(1, 2))
+
+
 @dataclass(frozen=True)
 class StopRule:
     """Algorithm 1's stopping rule in integers: ``E_S ≤ φ_S``, ``E_C ≤ φ_C`` (raw [error]) and
@@ -134,8 +140,7 @@ class StopRule:
         half up (exactly: ``1e300`` is a tolerance too, not a float overflow)."""
         lsb = fs.error.frac_bits
         area, shape = (math.floor(math.ldexp(min(tol, fs.error.max), lsb)) for tol in (params.tol_area, params.tol_shape))
-        energy = math.floor(Fraction(params.tol_energy) * 2**ENERGY_TOL_FRAC_BITS + Fraction(1, 2))
-        return cls(area, shape, energy, floor)
+        return cls(area, shape, tol_energy_raw(params.tol_energy), floor)
 
     def converged(self, energy_before: int, energy_after: int, errors: tuple[int, int]) -> bool:
         if energy_before == 0:

@@ -922,9 +922,16 @@ def test_an_obj_output_never_replaces_a_mesh_that_springflat_did_not_write(tmp_p
     assert Path("scan.obj").read_bytes() == scan
 
 
-def test_a_run_constant_the_engine_cannot_hold_is_refused_before_the_build_line(tmp_path, monkeypatch, capsys):
-    """--engine rtl with a --max-iter beyond the engine's 32-bit register: one line, before the start is computed
-    (no layout changes it) and with no 'building springflat_engine' before it (nothing is built)."""
+@pytest.mark.parametrize("option, message", [
+    (["--max-iter", "5000000000"], "run constant max_iter = 5000000000 does not fit the engine's 32-bit register "
+                                   "(max 4294967295)"),
+    (["--tol-energy", "300"], "--tol-energy 300 does not fit the engine's TOL_ENERGY register (u8.40: below 256); "
+                              "use a smaller value"),
+])
+def test_a_run_constant_the_engine_cannot_hold_is_refused_before_the_build_line(tmp_path, monkeypatch, capsys,
+                                                                                  option, message):
+    """--engine rtl with a --max-iter or --tol-energy beyond the engine's register: one line, before the start is
+    computed (no layout changes them) and with no 'building springflat_engine' before it (nothing is built)."""
     import sim.flatten_run as flatten_run
     from sim.cli import main
 
@@ -933,9 +940,8 @@ def test_a_run_constant_the_engine_cannot_hold_is_refused_before_the_build_line(
 
     monkeypatch.setattr(flatten_run, "start_positions", no_start)
     monkeypatch.chdir(tmp_path)
-    assert main(["flatten", "surf1", "--engine", "rtl", "--max-iter", "5000000000"]) == 2
-    assert capsys.readouterr().err == ("springflat: error: run constant max_iter = 5000000000 does not fit the "
-                                       "engine's 32-bit register (max 4294967295)\n")
+    assert main(["flatten", "surf1", "--engine", "rtl", *option]) == 2
+    assert capsys.readouterr().err == f"springflat: error: {message}\n"
 
 
 def test_a_guarded_runs_history_marks_its_rolled_back_steps_and_has_no_time_step(tmp_path):
