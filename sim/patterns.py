@@ -255,6 +255,21 @@ class PatternDrawing:
         return material(self)
 
     @cached_property
+    def hole_cuts(self) -> list[tuple[bool, bool]]:
+        """``(covered, cut_out)`` of each kept hole, kept (the covered- and closed-hole notes ask): more than half
+        the area inside its loop is material (a flap of an overlapping pattern over it), and a loop of the cut line
+        beyond the outer one lies inside it (the cut line goes round some of it)."""
+        import shapely
+
+        openings = [shapely.Polygon(loop).representative_point() for loop in self.cut_loops[1:]]
+        cuts = []
+        for loop in self.edge_loops[1:]:
+            inside = shapely.make_valid(shapely.Polygon(loop))  # (a hole the pattern wraps over may cross itself)
+            covered = self.overlapping and inside.area > 0 and inside.intersection(self.covered).area > inside.area / 2
+            cuts.append((bool(covered), any(inside.contains(point) for point in openings)))
+        return cuts
+
+    @cached_property
     def cut_loops(self) -> list[np.ndarray]:
         """The cut line's closed loops, in ``units``: the edge's (:attr:`edge_loops`), or the seam allowance's
         outline (:func:`seam_outlines`: the outer loop first, then any hole the allowance leaves inside it)."""
@@ -385,7 +400,7 @@ def closed_holes_note(drawing: PatternDrawing) -> str | None:
     sewing, along their sew line; ``None`` if none. A hole a flap covers is :func:`covered_holes_note`'s."""
     if drawing.seam <= 0 or not drawing.holes:
         return None
-    closed = sum(not cut_out and not covered for covered, cut_out in _hole_cuts(drawing))
+    closed = sum(not cut_out and not covered for covered, cut_out in drawing.hole_cuts)
     if not closed:
         return None
     which, are, them = _holes_words(closed, len(drawing.holes))
@@ -400,28 +415,12 @@ def covered_holes_note(drawing: PatternDrawing) -> str | None:
     material); ``None`` if none."""
     if not drawing.holes or not drawing.overlapping:
         return None
-    covered = sum(covered and not (drawing.seam > 0 and cut_out) for covered, cut_out in _hole_cuts(drawing))
+    covered = sum(covered and not (drawing.seam > 0 and cut_out) for covered, cut_out in drawing.hole_cuts)
     if not covered:
         return None
     which, are, them = _holes_words(covered, len(drawing.holes))
     return (f"{which} {are} covered by the pattern where it lies on itself: the cut line "
             + (f"has no cut-out for {them}" if drawing.seam > 0 else f"round {them} runs over the material"))
-
-
-def _hole_cuts(drawing: PatternDrawing) -> list[tuple[bool, bool]]:
-    """``(covered, cut_out)`` of each kept hole: more than half the area inside its loop is material (a flap of an
-    overlapping pattern over it), and a loop of the cut line beyond the outer one lies inside it (the cut line goes
-    round some of it)."""
-    import shapely
-
-    openings = [shapely.Polygon(loop).representative_point() for loop in drawing.cut_loops[1:]]
-    cuts = []
-    for loop in drawing.edge_loops[1:]:
-        inside = shapely.make_valid(shapely.Polygon(loop))  # (a hole the pattern wraps over may cross itself)
-        covered = (drawing.overlapping and inside.area > 0
-                   and inside.intersection(drawing.covered).area > inside.area / 2)
-        cuts.append((bool(covered), any(inside.contains(point) for point in openings)))
-    return cuts
 
 
 def _holes_words(some: int, count: int) -> tuple[str, str, str]:
