@@ -178,7 +178,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
                                            notes)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
-    with progress_bar(params.max_iter, progress) as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+    with progress_bar(params.max_iter, progress, label="flattening") as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))
     # counted on a fold-free pattern, where it is the question left (and the boundary cannot be tangled)
     if result.status != "diverged" and not result.final.folded:

@@ -1062,14 +1062,14 @@ class _NoProgress:
         pass
 
 
-def progress_bar(total: int, enabled: bool, unit: str = "it"):
-    """A tqdm bar on stderr that appears only for work longer than ~2 s (``enabled``: the caller's terminal
-    check), else :class:`_NoProgress`."""
+def progress_bar(total: int, enabled: bool, unit: str = "it", label: str | None = None):
+    """A tqdm bar on stderr, ``label:`` before it, that appears only for work longer than ~2 s (``enabled``: the
+    caller's terminal check), else :class:`_NoProgress`."""
     if not enabled:
         return _NoProgress()
     from tqdm import tqdm
 
-    return tqdm(total=total, unit=unit, delay=2.0, file=sys.stderr, leave=False)
+    return tqdm(total=total, unit=unit, desc=label, delay=2.0, file=sys.stderr, leave=False)
 
 
 def write_history(path: Path, result: FlattenResult) -> None:

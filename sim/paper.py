@@ -130,7 +130,7 @@ def reproduce_paper(out: Path, init: str = "pca", progress: bool = True) -> Path
     out.mkdir(parents=True, exist_ok=True)
     names = list(BUILTIN_MESHES)
     starts = [(name, start) for start in (init, *LAYOUT_METHODS) for name in names]
-    with progress_bar(len(starts), progress, "start") as bar:
+    with progress_bar(len(starts), progress, "start", "paper runs") as bar:
         runs = {}
         for name, start in starts:
             runs[name, start] = runs.get((name, start)) or run_mesh(name, start)

@@ -1330,9 +1330,9 @@ def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
     seen = []
     real = sim.flatten_run.progress_bar
 
-    def spy(total, enabled, unit="it"):
-        seen.append(enabled)
-        return real(total, enabled, unit)
+    def spy(total, enabled, unit="it", label=None):
+        seen.append((enabled, label))
+        return real(total, enabled, unit, label)
 
     monkeypatch.setattr(sim.flatten_run, "progress_bar", spy)
     monkeypatch.setattr(sim.paper, "progress_bar", spy)
@@ -1344,7 +1344,8 @@ def test_progress_bars_go_to_a_terminal_only(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
     assert main(["flatten", "m.obj", "--max-iter", "3"]) == 0
     assert main(["paper", "--out", "p2"]) == 0 and main(["paper", "--out", "p3", "--quiet"]) == 0
-    assert seen == [False, False, False, True, True, False]
+    assert [enabled for enabled, _ in seen] == [False, False, False, True, True, False]
+    assert {label for _, label in seen} == {"flattening", "paper runs"}, "each bar says what it counts"
     assert "it/s" not in capsys.readouterr().err
 
 
