@@ -445,7 +445,11 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
     if params.spring > 0:
         _fits("C/2", 0.5 * params.spring, "spring", fs, "use another --spring, or a spring format that holds it")
     if params.damping < 1:
-        _fits("the velocity factor 1 - damping", 1.0 - params.damping, "damping", fs, finer)
+        factor = _fits("the velocity factor 1 - damping", 1.0 - params.damping, "damping", fs, finer)
+        if params.damping > 0 and factor == 1 << fs.damping.frac_bits:  # the run would not damp at all
+            raise FixedPointError(f"damping {params.damping:g} rounds to 0: 1 - damping is 1 in damping {fs.damping} "
+                                  f"of format set '{fs.name}' (lsb {fs.damping.lsb:.3g}); use a larger --damping, "
+                                  "or none, or a damping format with more fraction bits")
     for option, tolerance in (("--tol-area", params.tol_area), ("--tol-shape", params.tol_shape)):
         if 0 < tolerance < 1 and math.floor(math.ldexp(tolerance, fs.error.frac_bits)) == 0:
             raise FixedPointError(f"{option} {tolerance:g} rounds to 0 in error {fs.error} of format set '{fs.name}' "

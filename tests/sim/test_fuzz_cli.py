@@ -1003,6 +1003,9 @@ ROUND_TWO_FORMATS: dict[str, Case] = {
     "C/2 rounds to 0": Case(["--spring", "1e-9"], 2, r"C/2 5e-10 rounds to 0 \(lsb 3.05e-05\) in spring s6.15"),
     "1 - damping rounds to 0": Case(["--dynamics", "paper", "--damping", "0.99999999"], 2,
                                     r"the velocity factor 1 - damping 1e-08 rounds to 0 .* in damping u1.17"),
+    "damping rounds to 0": Case(["--dynamics", "paper", "--damping", "3e-6"], 2,  # the run would not damp: 1 - γ is 1
+                                r"damping 3e-06 rounds to 0: 1 - damping is 1 in damping u1.17 of format set "
+                                r"'default' \(lsb 7.63e-06\)"),
     "barrier gain rounds to 0": Case(["--barrier-gain", "0.01", "--formats", "f.json"], 2,
                                      r"the barrier gain mu C/\(4 X\*\) of .* rounds to 0 in barrier_gain u8.2",
                                      files={"f.json": _formats(barrier_gain="u8.2")}),
