@@ -38,12 +38,15 @@ class UserError(ValueError):
     """Anything else the user got wrong; one line."""
 
 
-def load_format_set(spec: str):
+def load_format_set(spec):
     """:func:`golden_model.fixed.engine.load_formats` (a preset name or a JSON file), with the file errors it
-    leaves to the caller made one line: an OS error reading the file, and JSON nested beyond Python's limit."""
+    leaves to the caller made one line: an OS error reading the file, and JSON nested beyond Python's limit; a
+    :class:`~golden_model.fixed.FormatSet` (the API's ``formats``) is itself."""
     from golden_model.fixed import FormatSet
     from golden_model.fixed.engine import load_formats
 
+    if isinstance(spec, FormatSet):
+        return spec
     if not spec.strip():
         raise UserError(f"the formats '{spec}' are empty: name a preset ({', '.join(FormatSet.presets())}) or a JSON "
                         "file")
@@ -221,28 +224,36 @@ def holes_mode(fill_holes: bool, keep_holes: bool) -> Holes:
 HOLES_HINT = "--fill-holes closes all but the outer edge, --keep-holes keeps them as cut-outs"
 
 
-def resolve_mesh(name: str, holes: Holes = Holes.REFUSE) -> tuple[Mesh, FlattenParams]:
-    """The mesh (a file's holes refused, closed or kept as ``holes`` says) and its default parameters.
+def resolve_mesh(name: str, holes: Holes = Holes.REFUSE,
+                 notes: list[str] | None = None) -> tuple[Mesh, FlattenParams]:
+    """The mesh (a file's holes refused, closed or kept as ``holes`` says) and its default parameters; what
+    the reader changed or found (``mesh name: note``) goes to ``notes``, or to stderr where that is ``None``.
 
     Built-ins: the paper's sets (paper dynamics, Table II/IV tolerances).  Files: the momentum
     dynamics with the fold barrier, stopped at the energy minimum (relative energy change
     ``FILE_TOL_ENERGY``, no E_S/E_C thresholds) with ``N_max`` sized to the mesh's radius in edges.
     """
+    def note(text: str) -> None:
+        if notes is None:
+            print(f"springflat: note: {text}", file=sys.stderr)
+        else:
+            notes.append(text)
+
     if is_builtin(name):  # a file of that name has no mesh format's ending: it could not be read
         if Path(name).is_file():
-            print(f"springflat: note: '{name}' is the built-in mesh; the file of that name here is not read "
-                  "(a mesh file's name ends in its format: .obj, .ply, .off, .stl)", file=sys.stderr)
+            note(f"'{name}' is the built-in mesh; the file of that name here is not read "
+                 "(a mesh file's name ends in its format: .obj, .ply, .off, .stl)")
         mesh, paper = builtin_mesh(name)
         return mesh, paper.flatten_params()
     if name.strip() and not Path(name).suffix and not os.path.lexists(name):  # a built-in's name mistyped?
         raise MeshError(f"cannot read mesh '{name}': no such file, and no built-in mesh of that name (built-in: "
                         f"{', '.join(BUILTIN_MESHES)}; a mesh file's name ends in its format: .obj, .ply, .off, .stl)")
     try:
-        mesh, notes = load_mesh_with_notes(name, holes=holes)
+        mesh, found = load_mesh_with_notes(name, holes=holes)
     except HoledMesh as exc:
         raise MeshError(f"{exc}; {HOLES_HINT}") from None
-    for note in [*notes, *filter(None, [seams_note(mesh.vertices, mesh.faces)])]:  # (as the API's flatten says it)
-        print(f"springflat: note: {mesh.name}: {note}", file=sys.stderr)
+    for text in [*found, *filter(None, [seams_note(mesh.vertices, mesh.faces)])]:  # (as the API's flatten says it)
+        note(f"{mesh.name}: {text}")
     return mesh, file_defaults(mesh)
 
 

@@ -13,7 +13,9 @@ command line is a new keyword here with no edit.
 One set of defaults.  Arrays get the defaults of a mesh *file* (:func:`sim.run_options.file_defaults`,
 which the command takes for a file: the momentum dynamics with the fold barrier, stopped at the energy
 minimum, an ARAP start): ``flatten(V, F)`` gives the layout that ``springflat flatten mesh.obj`` gives for
-the same ``V``, ``F``.
+the same ``V``, ``F``.  A mesh named instead, ``flatten("mesh.obj")`` or a built-in's ``flatten("surf1")``,
+is read as the command reads it (:func:`sim.run_options.resolve_mesh`) and gets the command's defaults for
+it: a built-in the paper's parameters and its PCA start.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from golden_model.builtin import builtin_mesh, is_builtin
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.fixed.measures import FixedPointError
 from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, oriented_mesh
@@ -46,8 +49,8 @@ from sim.outputs import (OutputError, area_ratio, check_link_target, check_outpu
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, add_pattern_options,
                           closed_holes_note, covered_holes_note, grain_note, kind_or_none, on_sheets, pattern_ending,
                           run_caption, scale_note, seam_length, write_pattern_file)
-from sim.run_options import (HOLES_HINT, UserError, add_run_options, file_defaults, file_path_argument, holes_mode,
-                             params_from_args, path_argument)
+from sim.run_options import (HOLES_HINT, UserError, add_run_options, default_init, file_defaults, file_path_argument,
+                             holes_mode, params_from_args, path_argument, resolve_mesh)
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
 
@@ -120,12 +123,19 @@ def _option_value(spec: OptionSpec, value: Any) -> Any:
     out (its default), whichever option it is."""
     if value is None:
         return spec.default
+    if spec.keyword == "formats" and isinstance(value, (FormatSet, Mapping)):  # the set itself, not a file of it
+        if isinstance(value, FormatSet):
+            return value
+        try:
+            return FormatSet.from_dict(dict(value))
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ParameterError(f"formats: {str(exc).splitlines()[0]}") from None
     if spec.action == "store_true" or spec.action is argparse.BooleanOptionalAction:
         if isinstance(value, (bool, np.bool_)):
             return bool(value)
         raise ParameterError(f"{spec.keyword} must be True or False, got {value!r}")
     if isinstance(value, (bool, np.bool_)):
-        raise ParameterError(f"{spec.keyword} takes a value ({spec.flag}), not {value!r}")
+        raise ParameterError(f"{spec.keyword} takes a value, not {value!r}")
     text = value if isinstance(value, str) else str(value)
     if spec.type is not None:
         try:
@@ -229,6 +239,9 @@ def read_mesh(path: str | Path, fill_holes: bool = False, keep_holes: bool = Fal
     (as ``--fill-holes``: triangles between each hole's own vertices after the file's faces; no vertex added);
     with ``keep_holes`` a disk with holes is read as it is (for ``flatten(V, F, keep_holes=True)``).
 
+    A built-in mesh's name (``surf1``, ``surf2``) gives its arrays; note that ``flatten(V, F)`` runs arrays
+    with a mesh file's defaults, and ``flatten("surf1")`` with the paper's, as the command does.
+
     The file must be one manifold disk (:func:`sim.mesh_io.load_mesh_with_notes`); anything else
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
     reader changed (polygons fan-triangulated, STL corners merged) is a :class:`MeshNote` warning.
@@ -241,6 +254,9 @@ def read_mesh(path: str | Path, fill_holes: bool = False, keep_holes: bool = Fal
         if not isinstance(value, (bool, np.bool_)):
             raise TypeError(f"{keyword} must be True or False, got {value!r}")
     holes = _holes(bool(fill_holes), bool(keep_holes))
+    if is_builtin(str(path)):  # (as the command reads the name; its arrays get a file's defaults in flatten)
+        mesh = builtin_mesh(str(path))[0]
+        return mesh.vertices, mesh.faces
     try:
         mesh, notes = load_mesh_with_notes(path, holes=holes)
     except HoledMesh as exc:
@@ -248,6 +264,20 @@ def read_mesh(path: str | Path, fill_holes: bool = False, keep_holes: bool = Fal
     for note in notes:
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     return mesh.vertices, mesh.faces
+
+
+def _named_mesh(path: str | os.PathLike, holes: Holes) -> tuple[Mesh, FlattenParams]:
+    """A mesh file or a built-in, and its defaults, as the command reads it; its notes as :class:`MeshNote`."""
+    if (problem := _nul_problem(path)) is not None:
+        raise MeshError(f"cannot read mesh {problem}")
+    notes: list[str] = []
+    try:
+        mesh, defaults = resolve_mesh(os.fspath(path), holes, notes)
+    except MeshError as exc:
+        raise MeshError(_in_api_words(str(exc))) from None
+    for note in notes:
+        warnings.warn(note, MeshNote, stacklevel=3)
+    return mesh, defaults
 
 
 def _holes(fill_holes: bool, keep_holes: bool) -> Holes:
@@ -266,6 +296,8 @@ def _nul_problem(path: Any) -> str | None:
 
 
 def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(V, (str, os.PathLike)):
+        raise TypeError("flatten takes a mesh file's path (or a built-in's name) alone, or two arrays V, F")
     if F is not None and hasattr(V, "vertices") and hasattr(V, "faces"):
         raise TypeError(f"flatten takes a {type(V).__name__} alone (its faces are its own), or two arrays V, F")
     if F is None:
@@ -290,14 +322,16 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
     return arrays[0], faces
 
 
-def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.ndarray | None = None,
+def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path | np.ndarray | None = None,
             **options: Any) -> Pattern:
     """Flatten a triangle-mesh disk patch into a plane.
 
     Args:
-        V: ``(V, 3)`` vertex positions (any length unit), or a ``trimesh.Trimesh`` (then no ``F``).
+        V: ``(V, 3)`` vertex positions (any length unit); or a ``trimesh.Trimesh``; or a mesh file's path or a
+            built-in mesh's name (``"surf1"``), read as ``springflat flatten`` reads it, with its defaults
+            (then no ``F``).
         F: ``(F, 3)`` 0-based vertex indices of the triangles.
-        name: the mesh's name (a string), for the pattern files.
+        name: the mesh's name (a string), for the pattern files: by default the file's stem, or ``mesh``.
         init: the initial layout: ``auto`` (the default: ARAP, or for a guarded run SLIM from Tutte where ARAP folds or
             fails, and LSCM where that is exact, a developable patch, and more so than ARAP's),
             ``tutte``, ``pca``, ``harmonic``, ``lscm``, ``arap``, ``slim``, a layout file, or a ``(V, 2)`` array; a
@@ -306,8 +340,10 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
             where it folds.
         **options: the options of ``springflat flatten`` (listed below and in :data:`OPTIONS`), the flag
             without its dashes and with ``_`` for ``-``: ``max_iter=500`` is ``--max-iter 500``.  Each value
-            is checked as the command line checks the same text.  Left out (or ``None``), an option has the
-            default of a mesh *file* on the command line (``springflat flatten mesh.obj``).
+            is checked as the command line checks the same text; ``formats`` also takes a
+            :class:`~golden_model.fixed.formats_set.FormatSet` or its ``to_dict()``.  Left out (or ``None``), an
+            option has the command line's default for the mesh: a mesh *file*'s for arrays
+            (``springflat flatten mesh.obj``), the paper's for a built-in.
 
     Returns:
         a :class:`Pattern` (``.layout`` is the ``(V, 2)`` numpy array). Faces wound against their neighbours
@@ -320,11 +356,13 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
             or an ``init`` that cannot be used (a ``ValueError``).
         TypeError: an unknown keyword, or a ``name`` that is not a string.
     """
-    if not isinstance(name, str):
+    if name is not None and not isinstance(name, str):
         raise TypeError(f"name must be a string (the mesh's name on the pattern files), not {type(name).__name__}")
     if (problem := _nul_problem(init)) is not None:
         raise ParameterError(f"init {problem}")
-    vertices, faces = _arrays(V, F)
+    named = isinstance(V, (str, os.PathLike)) and F is None
+    if not named:
+        vertices, faces = _arrays(V, F)
     args = _namespace(options)
     engine = engine_named(args.engine)
     if getattr(args, "formats", None) is not None and not engine.fixed_point:  # the command's check says --engine
@@ -334,28 +372,37 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         raise ParameterError(f"engine {engine.name!r}, {engine.help}, runs from the command line: springflat flatten "
                              f"MESH --engine {engine.name}; the API runs the "
                              + ", ".join(e.name for e in ENGINES if e.api) + " engines")
-    try:  # validated here: errors name no temporary file
-        mesh, notes = oriented_mesh(vertices, faces, name=name, holes=_holes(args.fill_holes, args.keep_holes))
-    except HoledMesh as exc:
-        raise MeshError(f"{exc}{seams_hint(vertices, faces)}; {_in_api_words(HOLES_HINT)}") from None
-    except MeshError as exc:
-        raise MeshError(f"{exc}{seams_hint(vertices, faces)}") from None
-    for note in [*notes, *filter(None, [seams_note(vertices, faces)])]:
-        warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
+    holes = _holes(args.fill_holes, args.keep_holes)
+    if named:
+        mesh, defaults = _named_mesh(V, holes)
+        if name is not None:
+            mesh = Mesh(mesh.vertices, mesh.faces, name=name, allow_holes=holes is Holes.KEEP)
+    else:
+        try:  # validated here: errors name no temporary file
+            mesh, notes = oriented_mesh(vertices, faces, name="mesh" if name is None else name, holes=holes)
+        except HoledMesh as exc:
+            raise MeshError(f"{exc}{seams_hint(vertices, faces)}; {_in_api_words(HOLES_HINT)}") from None
+        except MeshError as exc:
+            raise MeshError(f"{exc}{seams_hint(vertices, faces)}") from None
+        for note in [*notes, *filter(None, [seams_note(vertices, faces)])]:
+            warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
+        defaults = file_defaults(mesh)
     try:
-        params = params_from_args(args, file_defaults(mesh))
+        params = params_from_args(args, defaults)
     except ParameterError as exc:  # the model's words are the command line's
         raise ParameterError(_in_api_words(str(exc))) from None
     args.mesh = mesh.name
-    # a mesh file's start (AUTO_START); an array is checked, and untangled where it folds, as a layout file is
-    args.init = AUTO_START if init is None else str(init) if isinstance(init, (str, Path)) else np.asarray(init)
+    # the command's start for the mesh (a built-in's PCA, AUTO_START for arrays and files); an array is checked,
+    # and untangled where it folds, as a layout file is
+    args.init = (default_init(str(V)) if named else AUTO_START) if init is None else \
+        str(init) if isinstance(init, (str, Path)) else np.asarray(init)
     run_notes: list[str] = []  # the command's notes on stderr (the start untangled, ...) are warnings here
     try:
         result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
     except FixedPointError as exc:  # the formats cannot hold the mesh: the presets that can, by keyword
         raise FixedPointError(_in_api_words(str(exc))) from None
-    except (UserError, LayoutError) as exc:  # the command line's one line: options, or the start, refused
-        raise ParameterError(_in_api_words(str(exc))) from None
+    except (UserError, LayoutError, ParameterError) as exc:  # the command line's one line: options, or the start,
+        raise ParameterError(_in_api_words(str(exc))) from None                 # refused
     except FormatSetNotBuildable as exc:  # engine="rtl"
         forget_half_built_components(exc)
         raise ParameterError(f"the RTL cannot be built with this format set: {exc}") from None
@@ -365,8 +412,8 @@ def flatten(V: Any, F: Any = None, *, name: str = "mesh", init: str | Path | np.
         warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
     final = result.final
     ratio = area_ratio(result.positions, mesh.faces, mesh.face_areas)
-    for array in (result.positions, ratio, mesh.vertices, mesh.faces):  # the values above are of these arrays
-        array.setflags(write=False)
+    for array in (result.positions, ratio, mesh.vertices, mesh.faces, result.velocities, result.initial_positions):
+        array.setflags(write=False)  # the values above are of these arrays, and the result is the Pattern's
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
                    final.folded, ratio, mesh.name, mesh.vertices, mesh.faces, args.init, params, result)
 
@@ -512,7 +559,7 @@ def _in_api_words(message: str) -> str:
 def _options_doc() -> str:
     lines = ["", "    Options (from ``springflat flatten``):", ""]
     for spec in OPTIONS.values():
-        lines.append(f"    * ``{spec.keyword}`` (``{spec.flag}``): {spec.help}")
+        lines.append(f"    * ``{spec.keyword}`` (``{spec.flag}``): {_in_api_words(spec.help)}")
     return "\n".join(lines) + "\n"
 
 

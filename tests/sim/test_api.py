@@ -368,7 +368,9 @@ def test_the_api_raises_only_its_documented_errors_on_paths_and_options(ear):
                                              r"tutte, pca, harmonic, lscm, arap, slim\)$"):
         springflat.flatten(V, F, init="ARAP")
     with pytest.raises(TypeError, match="name must be a string"):
-        springflat.flatten(V, F, name=None)
+        springflat.flatten(V, F, name=3)
+    with pytest.raises(MeshError, match=r"^cannot read mesh 'a\\x00b.obj': a file name cannot hold a NUL character"):
+        springflat.flatten("a\0b.obj")
     with pytest.raises(springflat.OutputError, match="paper must be one of a4, a3, letter, fit, got ''"):
         springflat.write_pattern("p.pdf", springflat.flatten(V, F, max_iter=1), paper="")
     with pytest.raises(springflat.OutputError, match=r"^write_pattern: the path 'no/where/p.dxf': directory "
@@ -556,7 +558,7 @@ def test_the_commands_switches_and_drops_become_keyword_values():
 
 @pytest.mark.parametrize("options", [dict(spring=-1), dict(dynamics="paper", guard=True), dict(damping=0.5),
                                      dict(engine="fixed", tol_energy=1e-30), dict(penalty=True),
-                                     dict(barrier_gain=1e9)])
+                                     dict(barrier_gain=1e9), dict(max_iter=True), dict(spring=1e-320)])
 def test_a_refused_keyword_is_named_as_a_keyword_not_a_flag(ear, options):
     V, F = ear
     with pytest.raises(ValueError) as info:
@@ -590,7 +592,8 @@ def test_a_patterns_arrays_are_read_only(ear):
     ratios and distortion were of the old values."""
     V, F = ear
     pattern = springflat.flatten(V, F, max_iter=2)
-    for array in (pattern.layout, pattern.area_ratio, pattern.vertices, pattern.faces):
+    for array in (pattern.layout, pattern.area_ratio, pattern.vertices, pattern.faces, pattern.result.velocities,
+                  pattern.result.initial_positions):
         with pytest.raises(ValueError, match="read-only"):
             array[...] = 0
     assert np.array_equal(pattern.layout.copy() * 2, pattern.layout * 2)  # a copy is the caller's to change
@@ -657,3 +660,72 @@ def test_a_seam_left_open_in_a_file_is_said_once_by_read_mesh_then_flatten(tmp_p
         warnings.simplefilter("always")
         springflat.flatten(*springflat.read_mesh(tmp_path / "seam.obj"), max_iter=2)
     assert len([w for w in said if "lie on one another" in str(w.message)]) == 1
+
+
+def test_the_options_help_speaks_keywords():
+    """help(flatten) listed the command's help texts as they are ('drop --damping, or add --dynamics paper');
+    a flag the API has no keyword for (the board's --port) is the command line's to speak of."""
+    flag = re.compile(r"--(?:no-)?([a-z][a-z0-9-]*)")
+    for spec in springflat.OPTIONS.values():
+        line = next(line for line in springflat.flatten.__doc__.splitlines() if f"``{spec.keyword}`` (" in line)
+        spoken = {name.replace("-", "_") for name in flag.findall(line.split(":", 1)[1])}
+        assert not spoken & set(springflat.OPTIONS), line
+
+
+def test_formats_takes_a_format_set_or_its_dict(ear):
+    """A researcher sweeping word lengths had to write a JSON file for every set."""
+    from golden_model.fixed.formats_set import FormatSet
+
+    V, F = ear
+    by_name = springflat.flatten(V, F, engine="fixed", formats="wide", max_iter=5)
+    narrower = FormatSet.preset("default")
+    for formats in (FormatSet.preset("wide"), FormatSet.preset("wide").to_dict()):
+        assert np.array_equal(springflat.flatten(V, F, engine="fixed", formats=formats, max_iter=5).layout,
+                              by_name.layout)
+    assert not np.array_equal(springflat.flatten(V, F, engine="fixed", formats=narrower, max_iter=5).layout,
+                              by_name.layout)
+    with pytest.raises(ParameterError, match="^formats: FormatSet 'custom': missing 'formats' object$"):
+        springflat.flatten(V, F, engine="fixed", formats={"position": "s8.20"})
+
+
+def test_a_mesh_named_is_read_and_run_as_the_command_runs_it(tmp_path, capsys):
+    """flatten('surf1') was a TypeError and read_mesh('surf1') 'no such file', though the command takes it; a
+    built-in runs with the paper's parameters and start, a file with its defaults and its name."""
+    from golden_model.builtin import builtin_mesh
+
+    with pytest.warns(springflat.MeshNote, match="folded"):  # (the paper's dynamics, as the command's)
+        pattern = springflat.flatten("surf1")
+    assert (pattern.name, pattern.init, pattern.params) == ("surf1", "pca", builtin_mesh("surf1")[1].flatten_params())
+    assert main(["flatten", "surf1", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert (summary["status"], summary["iterations"], summary["area_error"], summary["shape_error"]) == \
+        (pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error)
+    V, F = springflat.read_mesh("SURF1")
+    assert np.array_equal(V, pattern.vertices) and np.array_equal(F, pattern.faces)
+
+    path = SCANS / "bunny_ear.obj"
+    from_file = springflat.flatten(path, max_iter=3)
+    from_arrays = springflat.flatten(*springflat.read_mesh(path), max_iter=3)
+    assert from_file.name == "bunny_ear" and from_arrays.name == "mesh"
+    assert np.array_equal(from_file.layout, from_arrays.layout) and from_file.params == from_arrays.params
+    assert springflat.flatten(str(path), name="ear", max_iter=3).name == "ear"
+    with pytest.raises(MeshError, match="no built-in mesh of that name"):
+        springflat.flatten("surf3")
+    with pytest.raises(TypeError, match="alone, or two arrays"):
+        springflat.flatten(path, F)
+
+
+def test_a_files_notes_are_warnings_and_its_holes_hint_speaks_keywords(tmp_path):
+    quad = tmp_path / "quad.obj"
+    quad.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0.1\nv 0 1 0\nf 1 2 3 4\n")
+    with pytest.warns(springflat.MeshNote, match="^quad: .*triangulated"):
+        springflat.flatten(quad, max_iter=2)
+    ring = tmp_path / "ring.obj"
+    ring.write_text("".join(f"v {np.cos(a):.6f} {np.sin(a):.6f} 0\nv {2 * np.cos(a):.6f} {2 * np.sin(a):.6f} 0\n"
+                            for a in np.arange(8) * np.pi / 4)
+                    + "".join(f"f {2 * k + 1} {2 * k + 2} {(2 * k + 2) % 16 + 2}\nf {2 * k + 1} {(2 * k + 2) % 16 + 2} "
+                              f"{(2 * k + 2) % 16 + 1}\n" for k in range(8)))
+    with pytest.raises(MeshError) as refused:
+        springflat.flatten(ring)
+    assert "keep_holes=True" in str(refused.value) and "--" not in str(refused.value)
+    assert springflat.flatten(ring, keep_holes=True, max_iter=2).faces.shape == (16, 3)
