@@ -244,3 +244,28 @@ def test_the_board_self_test_expects_the_register_maps_id_and_version():
     expected = re.search(r"# expect (0x[0-9a-f]+) (0x[0-9a-f]+)", (DOCS / "board.md").read_text())
     assert expected, "docs/board.md no longer says what the self-test reads"
     assert (int(expected[1], 16), int(expected[2], 16)) == (MAGIC, VERSION[0] << 16 | VERSION[1])
+
+
+def test_the_readmes_repository_layout_names_every_module():
+    """The README's layout of the repository had fallen behind the files (the guard's blocks, graph.py, the
+    batch's workers): every module of the three layers is named in it, a top-level one as ``name.py`` (or a
+    ``prefix_*.py``), one in a sub-package by its name in that package's parentheses."""
+    readme = (ROOT / "README.md").read_text()
+    layout = readme[readme.index("## Layout of the repository"):]
+    named = set(re.findall(r"[\w*]+\.py", layout))
+    patterns = [re.compile(name.replace("*", r"\w*") + "$") for name in named if "*" in name]
+    missing = []
+    for package in ("golden_model", "hdl", "sim", "springflat"):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            inner = path.relative_to(ROOT / package).parts[:-1]
+            if path.name == "__init__.py" or inner in (("cocotb_benches",), ("models",)):
+                continue  # a package is named by its folder; the benches and models by theirs
+            if inner:  # a sub-package's modules, in the parentheses after its folder's name in its package's part
+                part = re.search(rf"^{package}/ (.*?)(?=^\S)", layout, re.S | re.M)[1]
+                said = re.search(re.escape(inner[-1]) + r"/ \(([^()]*(?:\([^()]*\)[^()]*)*)\)", part)
+                found = said is not None and re.search(rf"\b{path.stem}\b", said[1])
+            else:
+                found = path.name in named or any(p.match(path.name) for p in patterns)
+            if not found:
+                missing.append(str(path.relative_to(ROOT)))
+    assert not missing, f"the README's layout does not name {missing}"
