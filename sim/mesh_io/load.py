@@ -13,7 +13,7 @@ from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, oriented_mesh
 from .obj import obj_line_hint, read_obj
 from .off import read_off
 from .ply import read_ply
-from .polygons import first_unplain, is_float, triangulate_polygons
+from .polygons import UTF8_BOM, first_unplain, is_float, triangulate_polygons
 from .seams import seams_hint
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
@@ -90,7 +90,9 @@ def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]
     binary = len(data) >= 84 and len(data) == 84 + 50 * count
     if binary and len(data) == 84:
         raise MeshError(f"invalid mesh '{path}': the binary STL holds 0 triangles")
-    if not binary and len(data) >= 84 and not (data.lstrip()[:5].lower() == b"solid" and b"facet" in data):
+    if not binary:
+        data = data.removeprefix(UTF8_BOM)  # (a text editor's)
+    if not binary and len(data) >= 84 and not (data.lstrip()[:5].lower() == b"solid" and b"facet" in data.lower()):
         raise MeshError(f"cannot parse mesh '{path}': not a text STL (no 'solid ... facet'), and as a binary STL "
                         f"its header's {count:,} triangles would take {84 + 50 * count:,} bytes, not {len(data):,} "
                         "(truncated or damaged?)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from golden_model.mesh import MeshError
-from .polygons import INDEX_LIMIT, Polygons, checked_polygons, first_unplain, is_float
+from .polygons import INDEX_LIMIT, UTF8_BOM, Polygons, checked_polygons, first_unplain, is_float
 
 #: PLY scalar types and their numpy codes (byte order added for binary files).
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -19,9 +19,10 @@ def read_ply(data: bytes, where: str) -> tuple[np.ndarray, Polygons]:
     Every element the header declares is read (so elements before or between
     ``vertex`` and ``face`` are skipped correctly); the faces are the
     ``face`` element's ``vertex_indices`` (or ``vertex_index``) lists, of any
-    length.  Refusals name the problem: not PLY, an unknown type, a value
+    length; other lists (per-corner texture coordinates) are read past.  Refusals name the problem: not PLY, an unknown type, a value
     that is no number, a file shorter than its header says.
     """
+    data = data.removeprefix(UTF8_BOM)  # (a text editor's; the header is text in binary files too)
     if not data.startswith(b"ply"):
         raise MeshError(f"{where}: not a PLY file (it must start with 'ply')")
     marker = data.find(b"end_header")
@@ -58,13 +59,23 @@ def read_ply(data: bytes, where: str) -> tuple[np.ndarray, Polygons]:
     if vertex is None or not {"x", "y", "z"} <= vertex.keys():
         raise MeshError(f"{where}: no 'vertex' element with x, y and z")
     vertices = np.column_stack([np.asarray(vertex[k], dtype=np.float64) for k in "xyz"]).reshape(-1, 3)
+    declared = {element for element, _, _ in elements}
+    if "face" not in declared and len(vertices):
+        other = sorted(declared - {"vertex"})
+        raise MeshError(f"{where}: no 'face' element, {len(vertices)} vertices alone"
+                        + (f" (its {', '.join(map(repr, other))} are not read: save the faces as a 'face' element)"
+                           if other else ""))
     face_properties = next((props for element, _, props in elements if element == "face"), [])
     lists = [prop for prop, _, count_type in face_properties if count_type]
     name = next((n for n in ("vertex_indices", "vertex_index") if n in lists), lists[0] if lists else None)
-    if name is None:
+    if name is None:  # the face's other lists (MeshLab's per-corner texcoord, ...) are not its corners
         index, sizes = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     else:
-        index, sizes = values["face"][name]
+        numbers, sizes = values["face"][name]
+        try:
+            index = _whole_indices(numbers, "face")
+        except ValueError as exc:
+            raise MeshError(f"{where}: {exc}") from None
     return vertices, checked_polygons(index, sizes, len(vertices), lambda f: f"face {f}", where)
 
 
@@ -82,7 +93,7 @@ def _ply_ascii(body: bytes, elements) -> dict:
         elif len(props) == 1 and count and _uniform_ascii_list(tokens, pos, count):
             length = int(tokens[pos])
             block = _ascii_numbers(tokens[pos:pos + count * (length + 1)], name, count * (length + 1))
-            columns = {props[0][0]: (_whole_indices(block.reshape(count, length + 1)[:, 1:].ravel(), name),
+            columns = {props[0][0]: (block.reshape(count, length + 1)[:, 1:].ravel(),
                                      np.full(count, length, dtype=np.int64))}
             pos += count * (length + 1)
         else:
@@ -102,7 +113,7 @@ def _ply_ascii(body: bytes, elements) -> dict:
                 raise ValueError(f"the file ends inside element '{name}' (fewer values than the header declares)")
             for prop, items in raw.items():
                 numbers = _ascii_numbers(items, name, len(items) if prop in lengths else count)
-                columns[prop] = ((_whole_indices(numbers, name), np.asarray(lengths[prop], dtype=np.int64))
+                columns[prop] = ((numbers, np.asarray(lengths[prop], dtype=np.int64))
                                  if prop in lengths else numbers)
         values[name] = columns
     if pos < len(tokens):
@@ -183,7 +194,7 @@ def _ply_binary(body: bytes, elements, order: str) -> dict:
         uniform = _uniform_binary(body, pos, count, props, order)
         if uniform is not None:
             block = take(uniform, count, name)
-            values[name] = {prop: (_whole_indices(block[prop].ravel(), name), block[prop + "#"].astype(np.int64))
+            values[name] = {prop: (block[prop].ravel(), block[prop + "#"].astype(np.int64))
                             if count_type else block[prop]
                             for prop, _, count_type in props}
             continue
@@ -199,7 +210,7 @@ def _ply_binary(body: bytes, elements, order: str) -> dict:
                     length = _list_length(take(counter[prop], 1, name)[0], name)
                     columns[prop].append(take(scalar[prop], length, name))
                     lengths[prop].append(length)
-        values[name] = {prop: ((_whole_indices(np.concatenate(items), name) if items else np.zeros(0, dtype=np.int64)),
+        values[name] = {prop: ((np.concatenate(items) if items else np.zeros(0, dtype=np.int64)),
                                np.asarray(lengths[prop], dtype=np.int64)) if prop in lengths else np.asarray(items)
                         for prop, items in columns.items()}
     return values

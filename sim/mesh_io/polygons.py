@@ -1,4 +1,5 @@
-"""Faces as the PLY, OFF and OBJ readers find them, and their fan triangulation; shared text helpers."""
+"""Faces as the PLY, OFF and OBJ readers find them, and their triangulation (fans, ear clipping where a fan
+would fold); shared text helpers."""
 
 from __future__ import annotations
 
@@ -6,7 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from golden_model.mesh import COORDINATE_LIMIT, MeshError
+from golden_model.mesh import COORDINATE_LIMIT, MeshError, hole_triangles
+
+#: The byte-order mark a text editor may put before a UTF-8 file's text (OBJ, OFF, a text STL, a PLY header).
+UTF8_BOM = b"\xef\xbb\xbf"
 
 #: Largest magnitude a face index read from a text file may have; far beyond any vertex count, and
 #: exactly representable in float64 (PLY ASCII numbers are read as floats), so a larger index is
@@ -31,15 +35,23 @@ def triangulate_polygons(
     if (sizes == 3).all():
         return polygons.index.reshape(-1, 3), np.arange(len(sizes)), []
     faces, triangle_face = fan_triangulate(polygons.index, sizes)
+    clipped = np.zeros(0, dtype=np.int64)
     if np.isfinite(vertices).all() and np.abs(vertices).max(initial=0.0) <= COORDINATE_LIMIT:
-        check_fans(vertices, faces, triangle_face, sizes, polygons.label, where)
+        clipped = folded_fans(vertices, faces, triangle_face, sizes)
+        ear_clip(vertices, polygons, clipped, faces, triangle_face, where)
     # else the validation refuses the coordinates, with the right message, before anything uses the fans
     many = sizes > 3
     low, high = int(sizes[many].min()), int(sizes[many].max())
     polygon_count = plural(int(many.sum()), "polygon")
     triangle_count = plural(int((sizes[many] - 2).sum()), "triangle")
     span = f"{low}" if low == high else f"{low} to {high}"
-    return faces, triangle_face, [f"{polygon_count} ({span} corners) fan-triangulated into {triangle_count}"]
+    if not len(clipped):
+        return faces, triangle_face, [f"{polygon_count} ({span} corners) fan-triangulated into {triangle_count}"]
+    how = ("by ear clipping" if len(clipped) == many.sum() else
+           f"as fans from the first corner, {len(clipped)} by ear clipping")
+    return faces, triangle_face, [
+        f"{polygon_count} ({span} corners) triangulated into {triangle_count} {how} ({'first ' if len(clipped) > 1 else ''}"
+        f"{polygons.label(int(clipped[0]))}): a fan from its first corner would fold or have a triangle of zero area"]
 
 
 def checked_polygons(index: np.ndarray, sizes: np.ndarray, n_vertices: int, label, where: str) -> Polygons:
@@ -69,27 +81,34 @@ def fan_triangulate(index: np.ndarray, sizes: np.ndarray) -> tuple[np.ndarray, n
     return faces, triangle_face
 
 
-def check_fans(
-    vertices: np.ndarray, faces: np.ndarray, triangle_face: np.ndarray, sizes: np.ndarray, label, where: str,
-) -> None:
-    """Refuse a polygon whose fan has a triangle facing against the polygon (not convex at corner 0)."""
+def folded_fans(vertices: np.ndarray, faces: np.ndarray, triangle_face: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """The polygons whose fan has a triangle facing against the polygon or of zero area (a reflex corner, or
+    a corner on a straight side, seen from corner 0)."""
     polygon = sizes[triangle_face] > 3
     if not polygon.any():
-        return
+        return np.zeros(0, dtype=np.int64)
     a, b, c = (vertices[faces[polygon, k]] for k in range(3))
     normal = np.cross(b - a, c - a)
     # Newell normal of each polygon = the sum of its fan triangles' normals (exact for any fan)
     owner = triangle_face[polygon]
     newell = np.column_stack([np.bincount(owner, weights=normal[:, d], minlength=len(sizes)) for d in range(3)])
     facing = np.einsum("ij,ij->i", normal, newell[owner])
-    against = ~(facing > 0)
-    if against.any():
-        t = int(np.flatnonzero(against)[0])
-        f = int(owner[t])
-        raise MeshError(
-            f"{where}: {label(f)}: polygon with {sizes[f]} corners cannot be fan-triangulated from its "
-            "first corner (a fan triangle would be folded or of zero area)"
-        )
+    return np.unique(owner[~(facing > 0)])
+
+
+def ear_clip(vertices: np.ndarray, polygons: Polygons, which: np.ndarray, faces: np.ndarray,
+             triangle_face: np.ndarray, where: str) -> None:
+    """The triangles of the polygons ``which`` in ``faces`` replaced by the polygon's ear clipping, wound as
+    the polygon runs (:func:`golden_model.mesh.hole_triangles`, which fills a hole's loop run the other way);
+    a polygon whose edge crosses itself, seen along its normal, or that encloses no area is refused."""
+    first = np.concatenate([[0], np.cumsum(polygons.sizes)[:-1]])
+    for f in which:
+        corners = polygons.index[first[f]:first[f] + polygons.sizes[f]]
+        try:
+            faces[triangle_face == f] = hole_triangles(vertices, corners[::-1])
+        except MeshError:
+            raise MeshError(f"{where}: {polygons.label(int(f))}: polygon with {polygons.sizes[f]} corners cannot be "
+                            "triangulated: its edge crosses itself or encloses no area, seen across it") from None
 
 
 def plural(n: int, word: str, words: str | None = None) -> str:

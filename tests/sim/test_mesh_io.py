@@ -116,10 +116,35 @@ def test_obj_quads_and_pentagons_are_fan_triangulated(tmp_path):
     assert quad_notes == ["1 polygon (4 corners) fan-triangulated into 2 triangles"]
 
 
-def test_obj_polygon_that_cannot_be_fanned_is_refused(tmp_path):
-    # reflex at corner 4: the fan from corner 1 would fold triangle (1, 3, 4)
-    text = "v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 0.2 0\nv 0 1 0\nf 1 2 3 4 5\n"
-    with pytest.raises(MeshError, match=r"line 6: polygon with 5 corners cannot be fan-triangulated") as info:
+@pytest.mark.parametrize("text, corners", [
+    ("v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 0.2 0\nv 0 1 0\nf 1 2 3 4 5\n", 5),  # reflex at corner 4: the fan from corner 1
+    ("v 0 0 0\nv 10 0 0\nv 3 3 0\nv 0 10 0\nf 2 3 4 1\n", 4),              # would fold (1, 3, 4); a concave quad;
+    ("v 0 0 0\nv 50 0 0\nv 100 0 0\nv 100 50 0\nv 0 50 0\nf 1 2 3 4 5\n", 5),  # a corner on a straight side
+])
+def test_an_obj_polygon_whose_fan_would_fold_is_ear_clipped(tmp_path, text, corners):
+    """They were refused ('cannot be fan-triangulated from its first corner'): a modeller writes them."""
+    mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
+    assert notes == [f"1 polygon ({corners} corners) triangulated into {corners - 2} triangles by ear clipping "
+                     f"(line {corners + 1}): a fan from its first corner would fold or have a triangle of zero area"]
+    v = mesh.vertices[:, :2]
+    areas = [np.cross(v[b] - v[a], v[c] - v[a]) / 2 for a, b, c in mesh.faces]
+    polygon = v[[int(k) - 1 for k in text.split("f ")[1].split()]]
+    shoelace = 0.5 * np.sum(polygon[:, 0] * np.roll(polygon[:, 1], -1) - np.roll(polygon[:, 0], -1) * polygon[:, 1])
+    assert all(a > 0 for a in areas) == (shoelace > 0) and np.isclose(sum(areas), shoelace)  # wound as the face
+
+
+def test_a_polygon_fanned_and_one_ear_clipped_are_told_apart(tmp_path):
+    text = ("v 0 0 0\nv 10 0 0\nv 3 3 0\nv 0 10 0\nv 20 0 0\nv 20 10 0\n"
+            "f 2 3 4 1\nf 2 5 6 3\n")
+    assert load_mesh_with_notes(_obj(tmp_path, text))[1] == [
+        "2 polygons (4 corners) triangulated into 4 triangles as fans from the first corner, 1 by ear clipping "
+        "(line 7): a fan from its first corner would fold or have a triangle of zero area"]
+
+
+def test_an_obj_polygon_whose_edge_crosses_itself_is_refused(tmp_path):
+    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3 4\n"  # a bow tie
+    with pytest.raises(MeshError, match=r"line 5: polygon with 4 corners cannot be triangulated: its edge crosses "
+                                        r"itself or encloses no area, seen across it$") as info:
         load_mesh(_obj(tmp_path, text))
     assert "\n" not in str(info.value)
 
@@ -248,6 +273,59 @@ def test_ply_ascii_with_tabs_crlf_and_mixed_faces(tmp_path):
     mesh, notes = load_mesh_with_notes(path)
     assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 3, 4], [1, 5, 6], [1, 6, 2], [2, 6, 7]]
     assert notes == ["2 polygons (4 to 5 corners) fan-triangulated into 5 triangles"]
+
+
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_a_ply_with_other_lists_reads_the_faces_corners(tmp_path, binary):
+    """MeshLab writes each face's corners' texture coordinates as a float list: every list was taken for
+    indices ('element 'face' has an index 0.1 that is not an integer'), on any element."""
+    import struct
+
+    head = ("ply\nformat {} 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+            "property list uchar float weights\nelement face 2\nproperty list uchar int vertex_indices\n"
+            "property list uchar float texcoord\nelement material 1\nproperty list uchar float colour\nend_header\n")
+    square = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+    faces = [(0, 1, 2), (0, 2, 3)]
+    if binary:
+        body = b"".join(struct.pack("<3fBf", *v, 1, 0.5) for v in square)
+        body += b"".join(struct.pack("<B3iB6f", 3, *f, 6, .1, .2, .3, .4, .5, .6) for f in faces)
+        data = head.format("binary_little_endian").encode() + body + struct.pack("<B2f", 2, 0.25, 0.75)
+    else:
+        data = (head.format("ascii") + "".join(f"{x} {y} {z} 1 0.5\n" for x, y, z in square)
+                + "".join(f"3 {a} {b} {c} 6 0.1 0.2 0.3 0.4 0.5 0.6\n" for a, b, c in faces) + "2 0.25 0.75\n").encode()
+    path = tmp_path / "m.ply"
+    path.write_bytes(data)
+    assert load_mesh(path).faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+    path.write_bytes(data.replace(b"3 0 2 3 6", b"3 0 2.5 3 6"))
+    if not binary:  # the corners themselves are still checked
+        with pytest.raises(MeshError, match=r"element 'face' has an index 2.5 that is not an integer"):
+            load_mesh(path)
+
+
+@pytest.mark.parametrize("name, text", [
+    ("m.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+              "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
+    ("m.stl", "solid s\n" + "  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n      vertex 1 0 0\n"
+              "      vertex 0 1 0\n    endloop\n  endfacet\n" * 1 + "endsolid s\n"),
+    ("M.STL", "SOLID S\n  FACET NORMAL 0 0 1\n    OUTER LOOP\n      VERTEX 0 0 0\n      VERTEX 1 0 0\n"
+              "      VERTEX 0 1 0\n    ENDLOOP\n  ENDFACET\nENDSOLID S\n"),
+])
+def test_a_byte_order_mark_and_capitals_are_read_past(tmp_path, name, text):
+    """OBJ and OFF read past a UTF-8 BOM; a text STL or PLY with one was 'not a PLY file' or, as a binary STL,
+    a billion triangles; so was a text STL in capitals, which its grammar takes."""
+    path = tmp_path / name
+    path.write_bytes(b"\xef\xbb\xbf" + text.encode() + b" " * 80 * (name != "m.ply"))  # over 84 bytes, as any is
+    assert load_mesh(path).faces.tolist() == [[0, 1, 2]]
+
+
+def test_a_ply_without_faces_names_what_it_has(tmp_path):
+    text = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            "element tristrips 1\nproperty list int int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    path = tmp_path / "m.ply"
+    path.write_text(text)
+    with pytest.raises(MeshError, match=r"no 'face' element, 3 vertices alone \(its 'tristrips' are not read: save "
+                                        r"the faces as a 'face' element\)$"):
+        load_mesh(path)
 
 
 @pytest.mark.parametrize("text, message", [
