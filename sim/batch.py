@@ -41,7 +41,7 @@ from .exit_codes import EXIT_DIVERGED, EXIT_MESHES_FAILED
 from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
 from .layouts import AUTO_START, LAYOUT_METHODS
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
-    check_output_path, file_ending, when_interrupted
+    check_output_path, file_ending, print_note, when_interrupted
 from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind
 from .run_options import (USER_ERRORS, UserError, holes_mode, input_files, integer_argument, params_from_args,
                           path_argument, resolve_mesh, strict_json)
@@ -121,7 +121,7 @@ class MeshOutcome:
 def _tell(name: str, notes: list[str | None]) -> None:
     """A batch mesh's notes on (its captured) stderr, each named by its mesh."""
     for note in filter(None, notes):
-        print(f"springflat: note: {printable_name(name)}: {note}", file=sys.stderr)
+        print_note(f"{printable_name(name)}: {note}")
 
 
 def flatten_one(job: BatchJob) -> MeshOutcome:

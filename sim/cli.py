@@ -54,7 +54,7 @@ from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size,
 from .layouts import LAYOUT_METHODS
 from .mesh_io import MESH_SUFFIXES
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
-    check_link_target, check_not_interrupted, check_output_path, file_ending, on_interrupt, received_signal, \
+    check_link_target, check_not_interrupted, check_output_path, file_ending, on_interrupt, print_note, received_signal, \
     record_written_outputs, reset_interrupted, written_outputs
 from .patterns import add_pattern_options, check_not_a_mesh, pattern_ending
 from .run_options import (
@@ -146,7 +146,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
     for note in (*pattern_notes(params, mesh, result, formats=formats), *notes_on_cut_files(args, mesh, result, drawing),
                  _energy_rule_note(params, result), _error_resolution_note(formats)):
         if note:
-            print(f"springflat: note: {note}", file=sys.stderr)
+            print_note(note)
     if result.status == "diverged":
         unwritten = [(flag, path) for _, flag, _, path in output_paths(args) if flag in PATTERN_OUTPUTS]
         kept = [f"'{path}'" for _, path in unwritten if os.path.lexists(path)]

@@ -38,7 +38,7 @@ import numpy as np
 
 from golden_model.files import file_kind, resolved_parent_key, same_file_key
 from golden_model.files import describe_os_error
-from golden_model.mesh import folded_faces, signed_areas_2d, triangle_areas_3d
+from golden_model.mesh import folded_faces, one_line, signed_areas_2d, triangle_areas_3d
 from golden_model.modes import Step
 from golden_model.results import FlattenResult
 
@@ -1060,6 +1060,12 @@ class _NoProgress:
 
     def __exit__(self, *exc) -> None:
         pass
+
+
+def print_note(text: str) -> None:
+    """``springflat: note: text`` on stderr, as one line of text: what a file put in a note (an OBJ's unknown
+    statement, a file name) cannot move the terminal's cursor or colour it (:func:`golden_model.mesh.one_line`)."""
+    print(f"springflat: note: {one_line(text)}", file=sys.stderr)
 
 
 def progress_bar(total: int, enabled: bool, unit: str = "it", label: str | None = None):

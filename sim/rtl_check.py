@@ -137,10 +137,12 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
 
 def _initial_layout(mesh, init: str):
     """:func:`initial_layout`, its notes (an OBJ layout's unused faces or z) printed as ``springflat: note:``."""
+    from .outputs import print_note
+
     notes: list[str] = []
     positions = initial_layout(mesh, init, notes)
     for note in notes:
-        print(f"springflat: note: {note}", file=sys.stderr)
+        print_note(note)
     return positions
 
 

@@ -29,7 +29,7 @@ from .layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, NoDiskStart, init
 from .mesh_io import load_mesh_with_notes
 from .mesh_io.seams import seams_note
 from .mesh_io.polygons import is_float, is_int
-from .outputs import OutputError, directory_name_problem
+from .outputs import OutputError, directory_name_problem, print_note
 
 USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
 
@@ -235,7 +235,7 @@ def resolve_mesh(name: str, holes: Holes = Holes.REFUSE,
     """
     def note(text: str) -> None:
         if notes is None:
-            print(f"springflat: note: {text}", file=sys.stderr)
+            print_note(text)
         else:
             notes.append(text)
 
@@ -317,7 +317,7 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
             notes.extend(told)
         else:
             for note in told:
-                print(f"springflat: note: {note}", file=sys.stderr)
+                print_note(note)
 
     if not params.guard:
         read: list[str] = []

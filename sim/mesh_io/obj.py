@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.files import read_file_bytes
-from golden_model.mesh import MeshError
+from golden_model.mesh import MeshError, one_line
 from .polygons import Polygons, first_unplain, is_int, plural, text_coordinates, triangulate_polygons
 
 #: Free-form geometry statements: they define curves and surfaces the
@@ -159,7 +159,7 @@ def read_obj(path: str | Path, data: bytes | None = None) -> ObjContents:
         elif key == "vn":
             n_vn += 1
         elif key in OBJ_FREE_FORM:
-            raise MeshError(f"{where}: line {line_of(i)}: free-form geometry ('{key}') is not supported")
+            raise MeshError(f"{where}: line {line_of(i)}: free-form geometry ({_quoted(key)}) is not supported")
         elif key in OBJ_HARMLESS:
             if key in groups:
                 groups[key] += 1
@@ -192,7 +192,7 @@ def read_obj(path: str | Path, data: bytes | None = None) -> ObjContents:
         notes.append(f"ignored {plural(count, *OBJ_IGNORED[key])}")
     if unknown:
         total = plural(sum(count for count, _ in unknown.values()), "unknown statement")
-        listed = [f"'{key}' ({count}, first at line {line_of(first)})" for key, (count, first) in unknown.items()]
+        listed = [f"{_quoted(key)} ({count}, first at line {line_of(first)})" for key, (count, first) in unknown.items()]
         notes.append(f"ignored {total}: {', '.join(listed[:5])}{', ...' if len(listed) > 5 else ''}")
     if extra_values:
         v_lines = plural(extra_values, "'v' line")
@@ -323,3 +323,9 @@ def obj_line_hint(message: str, obj: ObjContents) -> str:
     number = int(found.group(2))
     lines = obj.face_line if found.group(1) == "face" else obj.vertex_line
     return f" (file line {lines[number]})" if number < len(lines) else ""
+
+
+def _quoted(keyword: str, limit: int = 20) -> str:
+    """A statement's keyword from the file, quoted for a note: control characters escaped (an escape
+    sequence would colour the terminal), shortened."""
+    return "'" + one_line(keyword if len(keyword) <= limit else keyword[:limit] + "…") + "'"

@@ -2045,3 +2045,14 @@ def test_as_root_a_directory_whose_files_cannot_be_replaced_is_refused_before_a_
         assert os.listdir(tmp_path / "d") == ["x.dxf"]
     finally:
         subprocess.run(["chattr", "-" + flag[1:], str(tmp_path / "d")], check=True)
+
+
+def test_a_files_words_in_a_note_cannot_drive_the_terminal(tmp_path, monkeypatch, capsys):
+    """An OBJ's unknown statement was quoted into the note as it was: an escape sequence coloured the
+    terminal, a NUL went out raw; every note is one line of text, as every error is."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m.obj").write_bytes(obj().encode() + b"\x1b[31mRED\x1b[0m 1 2\nfoo\x00bar 3\n")
+    assert main(["flatten", "m.obj", "--max-iter", "3"]) == 0
+    err = capsys.readouterr().err
+    assert r"'\x1b[31mRED\x1b[0m' (1, first at line" in err and r"'foo\x00bar'" in err
+    assert not re.search(r"[\x00-\x09\x0b-\x1f\x7f]", err), err
