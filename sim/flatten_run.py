@@ -454,12 +454,12 @@ PATTERN_OUTPUTS = ("--out", "--distortion")
 
 
 def pattern_drawing(args: argparse.Namespace, mesh: Mesh, result: FlattenResult) -> PatternDrawing:
-    """The drawing the pattern files are written from: the layout with the run's caption, turned to ``--grain``
-    and with ``--seam-allowance`` (neither for a diverged run)."""
+    """The drawing the pattern files are written from: the layout with the run's caption, turned as the mesh is
+    seen from its front, or to ``--grain``, and with ``--seam-allowance`` (neither for a diverged run)."""
     final = result.final
     drawing = PatternDrawing.of(mesh, result.positions, args.units, run_caption(
         result.status, result.iterations, final.area_error, final.shape_error, final.folded,
-        result.extra.get("boundary_crossings"), result.extra.get("turned_holes")))
+        result.extra.get("boundary_crossings"), result.extra.get("turned_holes"))).as_seen()
     if args.grain is not None and args.out and result.status != "diverged":
         drawing = drawing.with_grain(args.grain)
     if args.seam_allowance is not None and result.status != "diverged":

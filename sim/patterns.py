@@ -164,7 +164,7 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--grain", type=grain_argument, default=None, metavar="x|y|z|X,Y,Z",
                         help="turn the pattern files so that this 3D direction of the mesh (-z: the other way), as "
                              "laid on the pattern, points up the page, and draw it as a grain line (default: the "
-                             "layout's own frame, turned to fit the sheets)")
+                             "mesh as seen from its front, turned to fit the sheets)")
     parser.add_argument("--seam-allowance", type=seam_allowance_argument, default=None, metavar="LENGTH",
                         help="add a seam allowance: the cut line runs this far outside the pattern's edge, which is "
                              "drawn as the sew line (dashed; DXF layer SEW); a length in --units, or with its "
@@ -192,7 +192,8 @@ class PatternDrawing:
         units: one of :data:`UNITS`.
         caption: one line about the run (status, errors), printed under the name.
         grain: the 3D direction the pattern was turned to carry up the page (:meth:`with_grain`), as the
-            user named it (``z``, ``1,0,0``), or ``""``: the layout's own frame, no grain line.
+            user named it (``z``, ``1,0,0``), or ``""``: no grain line (the frame is the layout's, or the mesh's
+            view after :meth:`as_seen`).
         grain_agreement: how well the grain direction's pieces on the pattern agree (:func:`grain_axis`: 1 all
             along one line, 0 every way).
         seam: the seam allowance in ``units`` (:meth:`with_seam`): the cut line runs this far outside the
@@ -293,6 +294,12 @@ class PatternDrawing:
         edge = max(self.boundary_length(), loop_length(self.vertices[self.boundary]))
         check_seam_fits(allowance, edge, self.units)
         return replace(self, seam=float(allowance))
+
+    def as_seen(self) -> "PatternDrawing":
+        """The drawing turned as the mesh is seen from its front (:func:`view_turn`): a piece modelled flat in
+        x, y comes back in x, y, and a curved one as it looks from along its mean normal."""
+        angle = view_turn(self.vertices, self.faces, self.layout)
+        return replace(self, layout=_turned(self.layout, angle, _centre(self.layout))) if angle else self
 
     def with_grain(self, grain: str | Sequence[float]) -> "PatternDrawing":
         """The drawing turned so that the 3D direction ``grain`` (:func:`grain_direction`), as the triangles
@@ -622,6 +629,33 @@ def grain_axis(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray,
     return (angle if along >= 0 else angle + math.pi), agreement
 
 
+def view_turn(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray) -> float:
+    """The rotation (radians, anticlockwise) that best lays ``layout`` onto the mesh as seen from its front: the
+    mesh projected along its vector area's normal ``n`` (the side its faces' winding faces, so the projection
+    runs the layout's way round and no mirror is needed), onto axes ``u``, ``n × u`` with ``u`` the world x axis
+    projected (the y axis where x is within 45° of ``n``: a rule by the smallest of ``n``'s components would
+    flip between x and y on rounding for a piece facing z); the angle of least squares (orthogonal Procrustes,
+    each vertex weighted by a third of its triangles' 3D areas). 0 where the mesh has no front (a closed-up
+    tube's vector area under 1e-3 of its area) or the layout has collapsed."""
+    p = vertices[faces]
+    normals = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) / 2
+    areas = np.linalg.norm(normals, axis=1)
+    front = normals.sum(axis=0)
+    if not np.linalg.norm(front) > 1e-3 * areas.sum():
+        return 0.0
+    n = front / np.linalg.norm(front)
+    axis = np.eye(3)[0 if abs(n[0]) <= math.sqrt(0.5) else 1]
+    u = axis - (axis @ n) * n
+    u /= np.linalg.norm(u)
+    seen = vertices @ np.column_stack([u, np.cross(n, u)])
+    weight = np.bincount(faces.ravel(), weights=np.repeat(areas / 3, 3), minlength=len(vertices))
+    a = layout - np.average(layout, axis=0, weights=weight)
+    b = seen - np.average(seen, axis=0, weights=weight)
+    cross = float(weight @ (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
+    dot = float(weight @ (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
+    return math.atan2(cross, dot) if cross or dot else 0.0
+
+
 def grain_note(drawing: PatternDrawing) -> str | None:
     """A grain whose pieces on the pattern agree less than :data:`GRAIN_AGREEMENT`: its line is their average,
     which the piece follows nowhere well. (A direction close to the surface's normal over much of it does that,
@@ -867,8 +901,8 @@ def turned_to_fit(drawing: PatternDrawing, paper: str) -> PatternDrawing:
     that prints fewer sheets than the layout as laid (blank ones left out; ``fit``: a page smaller by
     :data:`FIT_TURN_GAIN` of its area, or one where the laid page is too large). A box of least area has a
     side on the hull (Freeman and Shapira, 1975); the fewest sheets need not, so this is the best of those
-    sides, never worse than as laid. The layout's own frame, which the DXF and the OBJs keep, is the
-    start's: a diagonal strip lies as it was."""
+    sides, never worse than as laid. The drawing's own frame, which the DXF and the OBJs keep, is the mesh's
+    view (:meth:`PatternDrawing.as_seen`): a strip modelled at a slant lies as it was."""
     return _turned_to_fit(drawing, paper)[0]
 
 

@@ -475,7 +475,7 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,
                           pattern.folded, pattern.boundary_crossings, pattern.turned_holes)
     try:
-        drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption)
+        drawing = PatternDrawing.of(pattern.mesh, pattern.layout, units, caption).as_seen()
         if grain is not None:
             drawing = drawing.with_grain(grain)
         if seam_allowance is not None:

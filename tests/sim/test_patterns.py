@@ -986,3 +986,48 @@ def test_a_grain_close_to_the_surfaces_normal_gets_a_note_one_along_it_none():
                         r"follow; a direction that runs along the surface, not across it, gives a truer line",
                         grain_note(across))
     assert grain_note(along) is None and grain_note(PatternDrawing.of(mesh, layout)) is None
+
+
+def _flat_square_grid(n: int = 11, size: float = 200.0, clockwise: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """A ``size`` mm square in x, y as an ``n`` x ``n`` grid, its faces wound anticlockwise seen from +z."""
+    x, y = np.meshgrid(np.linspace(0, size, n), np.linspace(0, size, n))
+    V = np.column_stack([x.ravel(), y.ravel(), np.zeros(n * n)])
+    a = (np.arange(n - 1)[None, :] + n * np.arange(n - 1)[:, None]).ravel()
+    F = np.concatenate([np.column_stack([a, a + 1, a + n + 1]), np.column_stack([a, a + n + 1, a + n])])
+    return V, (F[:, ::-1] if clockwise else F)
+
+
+@pytest.mark.parametrize("clockwise", [False, True], ids=["front +z", "front -z"])
+def test_a_piece_modelled_flat_comes_back_in_its_own_x_y_not_as_the_start_laid_it(tmp_path, clockwise):
+    """A 200 mm square laid as a diamond by its start came out a 283 mm diamond in every pattern file: the files
+    show the piece as the mesh is seen from its front (the side its faces' winding faces)."""
+    import ezdxf
+    import springflat
+
+    V, F = _flat_square_grid(clockwise=clockwise)
+    diamond = (V[:, :2] - 100) @ np.array([[1, 1], [-1, 1]]) / math.sqrt(2)
+    pattern = springflat.flatten(V, F, init=diamond * (-1 if clockwise else 1) * [1, 1])
+    assert np.ptp(pattern.layout, axis=0) == pytest.approx([200 * math.sqrt(2)] * 2, rel=1e-6)  # the run's frame
+    springflat.write_pattern(tmp_path / "p.dxf", pattern)
+    cut = np.array([p[:2] for p in ezdxf.readfile(tmp_path / "p.dxf").modelspace().query("LWPOLYLINE")[0]
+                   .get_points()])
+    seen = V[:, :2] * ([1, -1] if clockwise else [1, 1])  # from below, y runs the other way
+    layout = PatternDrawing.of(pattern.mesh, pattern.layout).as_seen().layout
+    assert np.ptp(cut, axis=0) == pytest.approx([200, 200], rel=1e-6)
+    assert np.allclose(layout - layout.mean(axis=0), seen - seen.mean(axis=0), atol=1e-6)
+
+
+def test_the_view_turn_follows_the_mesh_round_its_normal():
+    """Turned about its normal by an angle, a curved piece's files turn with it by that angle."""
+    from sim.patterns import view_turn
+
+    mesh = dome_grid(9)
+    layout = np.random.default_rng(5).normal(size=(mesh.n_vertices, 2)) * 0.01 + mesh.vertices[:, :2] @ [[0, -1],
+                                                                                                          [1, 0]]
+    angle = view_turn(mesh.vertices, mesh.faces, layout)
+    assert abs(angle - math.pi / 2) < 0.05  # the layout is the mesh's view turned a quarter clockwise
+    for theta in (0.3, 2.0, -1.2):
+        c, s = math.cos(theta), math.sin(theta)
+        turned = mesh.vertices @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
+        assert math.remainder(view_turn(turned, mesh.faces, layout) - angle - theta, 2 * math.pi) == \
+            pytest.approx(0, abs=1e-9)
