@@ -590,8 +590,11 @@ def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh",
             faces, count = orient_consistently(faces)
             turned = True
             plural = "s" if count != 1 else ""
+            guess = ("; so nearly half face each way that which side is the front, the side the pattern shows, is a "
+                     "guess: if it comes out mirrored, wind the faces the other way round" if count >= 0.4 * len(faces)
+                     else "")
             notes.append(f"{count} face{plural} wound against {'their' if plural else 'its'} neighbours: turned to "
-                         f"agree with the other {len(faces) - count} (the pattern's faces keep the turned winding)")
+                         f"agree with the other {len(faces) - count} (the pattern's faces keep the turned winding){guess}")
         except HoledMesh:
             if holes is not Holes.FILL or filled:
                 raise

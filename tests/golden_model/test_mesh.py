@@ -191,8 +191,11 @@ def test_faces_wound_against_their_neighbours_are_refused_naming_them():
     assert "\n" not in str(info.value)
 
 
-@pytest.mark.parametrize("turned", [[3], list(range(1, 31)), list(range(30)), list(range(1, 50, 2))])
-def test_oriented_mesh_turns_the_fewer_faces_and_says_how_many(turned):
+@pytest.mark.parametrize("turned, guessed", [([3], False), (list(range(15)), False), (list(range(1, 31)), True),
+                                             (list(range(30)), True), (list(range(1, 50, 2)), True)])
+def test_oriented_mesh_turns_the_fewer_faces_and_says_how_many(turned, guessed):
+    """Where nearly half the faces (20 or more of 50) face each way, which side is the front is a guess, and
+    the pattern's files show the mesh from its front: the note says so."""
     vertices, faces = _grid()
     given = faces.copy()
     given[turned] = given[turned][:, [0, 2, 1]]
@@ -203,7 +206,9 @@ def test_oriented_mesh_turns_the_fewer_faces_and_says_how_many(turned):
     assert np.array_equal(np.sort(mesh.faces, axis=1), np.sort(given, axis=1))  # the same triangles
     assert notes == [f"{expected} face{'s' if expected != 1 else ''} wound against "
                      f"{'their' if expected != 1 else 'its'} neighbours: turned to agree with the other "
-                     f"{len(faces) - expected} (the pattern's faces keep the turned winding)"]
+                     f"{len(faces) - expected} (the pattern's faces keep the turned winding)"
+                     + ("; so nearly half face each way that which side is the front, the side the pattern shows, is "
+                        "a guess: if it comes out mirrored, wind the faces the other way round" if guessed else "")]
 
 
 def test_a_consistent_mesh_is_left_as_it_is():
