@@ -77,9 +77,10 @@ def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple
     except HoledMesh as exc:  # (the commands that can fill it say how)
         raise HoledMesh(f"invalid mesh '{path}': {exc}{seams_hint(vertices, faces)}") from None
     except MeshError as exc:
-        if suffix == ".obj":
+        seams = seams_hint(vertices, faces)
+        if suffix == ".obj" and not (seams and "connected components" in str(exc)):  # (pieces a weld may join)
             hint = obj_line_hint(str(exc), obj)
-        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{seams_hint(vertices, faces)}") from None
+        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{seams}") from None
 
 
 def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:

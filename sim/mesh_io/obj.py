@@ -314,15 +314,48 @@ def _obj_resolve(
 
 
 def obj_line_hint(message: str, obj: ObjContents) -> str:
-    """`` (file line n)`` for a validation message that starts with a face or vertex number."""
+    """Where in the file a validation message points, which numbers vertices and faces from 0 after fan
+    triangulation: `` (file line n)`` for one that starts with a face or vertex number, `` (vertex 4: file line
+    5)`` where one is named later, `` (its vertices: file lines 28 and 29)`` for an edge, `` (file lines 7 and
+    9)`` for two faces, and each piece's first face line for a file of several pieces."""
     import re
 
-    found = re.match(r"(face|vertex) (\d+) ", message)
-    if not found:
-        return ""
-    number = int(found.group(2))
-    lines = obj.face_line if found.group(1) == "face" else obj.vertex_line
-    return f" (file line {lines[number]})" if number < len(lines) else ""
+    def line(kind: str, number: int) -> int | None:
+        lines = obj.face_line if kind == "face" else obj.vertex_line
+        return int(lines[number]) if number < len(lines) else None
+
+    if found := re.match(r"(face|vertex) (\d+) ", message):
+        at = line(found[1], int(found[2]))
+        return f" (file line {at})" if at else ""
+    if (found := re.search(r"\bedge \((\d+), (\d+)\)", message)) and not message.startswith("faces "):
+        ends = [line("vertex", int(found[k])) for k in (1, 2)]
+        return f" (its vertices: file lines {ends[0]} and {ends[1]})" if all(ends) else ""
+    if found := re.match(r"faces (\d+) and (\d+) ", message):
+        faces = [line("face", int(found[k])) for k in (1, 2)]
+        return f" (file lines {faces[0]} and {faces[1]})" if all(faces) else ""
+    if found := re.search(r"\b(face|vertex) (\d+)\b", message):
+        at = line(found[1], int(found[2]))
+        return f" ({found[0]}: file line {at})" if at else ""
+    if "connected components" in message:
+        return _pieces_hint(obj)
+    return ""
+
+
+def _pieces_hint(obj: ObjContents) -> str:
+    """`` (its pieces' faces start at file lines 10, 145: ...)``: where each piece of a file of several begins,
+    the pieces found as the faces joined through their shared vertices."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    faces = obj.faces
+    n = len(obj.vertices)
+    rows = np.concatenate([faces[:, 0], faces[:, 1]])
+    graph = coo_matrix((np.ones(len(rows)), (rows, np.concatenate([faces[:, 1], faces[:, 2]]))), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    piece = label[faces[:, 0]]
+    starts = sorted(int(obj.face_line[np.flatnonzero(piece == p)[0]]) for p in np.unique(piece))
+    shown = ", ".join(map(str, starts[:5])) + (", ..." if len(starts) > 5 else "")
+    return f" (its pieces' faces start at file lines {shown}: flatten each from a file of its own)"
 
 
 def _quoted(keyword: str, limit: int = 20) -> str:

@@ -232,6 +232,25 @@ def test_obj_validation_message_points_at_the_file_line(tmp_path):
         load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3\nf 1 3 3\n"))
 
 
+@pytest.mark.parametrize("text, hint", [
+    # two squares meeting at one corner: the validation's vertex 2 is the OBJ's third v, on line 3
+    (UNIT_SQUARE_OBJ + "v 2 1 0\nv 2 2 0\nv 1 2 0\nf 1 2 3\nf 1 3 4\nf 3 5 6\nf 3 6 7\n",
+     r"non-manifold at vertex 2 \(.*\) \(vertex 2: file line 3\)$"),
+    # three faces on the edge from the second v to the third (lines 2, 3)
+    (UNIT_SQUARE_OBJ + "v 2 0 0\nv 1 1 1\nf 1 2 3\nf 1 3 4\nf 2 5 3\nf 2 3 6\n",
+     r"edge \(1, 2\) is shared by more than two faces \(its vertices: file lines 2 and 3\)$"),
+    # two pieces, their faces from lines 5 and 11
+    (UNIT_SQUARE_OBJ + "f 1 2 3\nf 1 3 4\no B\nv 5 0 0\nv 6 0 0\nv 5 1 0\nf 5 6 7\n",
+     r"it has 2 connected components \(its pieces' faces start at file lines 5, 11: flatten each from a file of its "
+     r"own\)$"),
+])
+def test_obj_validation_names_the_file_lines_of_what_it_refuses(tmp_path, text, hint):
+    """A pinched vertex, an edge of three faces and a file of several pieces were named in the validation's
+    numbers from 0 (an OBJ has no vertex 0) with no file line."""
+    with pytest.raises(MeshError, match=r"^invalid mesh .*" + hint):
+        load_mesh(_obj(tmp_path, text))
+
+
 # --------------------------------------------------------------------------- PLY and OFF, ranges (issue 14)
 
 PLY_V = np.array([[0, 0, 0], [2, 0, 0], [3, 1.5, 0], [1, 2.5, 0], [-1, 1.5, 0], [4, 0, 0], [4.5, 1.5, 0], [3.5, 3, 0]])
