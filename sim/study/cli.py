@@ -186,7 +186,28 @@ def cmd_study(args: argparse.Namespace) -> int:
         if (refusal := _rtl_refusal(chosen.config.fs)) is not None:
             print(f"springflat: note: the RTL cannot be built with {out / 'chosen.json'} (the golden model runs it): "
                   f"{refusal}; docs/study.md#recommendation", file=sys.stderr)
+        if (refusal := _file_default_refusal(chosen.config.fs)) is not None:
+            print(f"springflat: note: {out / 'chosen.json'} runs the paper dynamics it was studied on; a mesh file's "
+                  f"default, the momentum dynamics, refuses it ({refusal}): flatten with it and --dynamics paper",
+                  file=sys.stderr)
     return 0
+
+
+def _file_default_refusal(fs: FormatSet) -> str | None:
+    """Why a mesh file's default run (the guarded momentum dynamics, :func:`sim.run_options.file_defaults`)
+    cannot run on ``fs``, which the study chose on the paper dynamics, or ``None``."""
+    from golden_model.fixed.engine import check_fixed_params
+    from golden_model.fixed.measures import FixedPointError
+    from golden_model.params import FlattenParams
+
+    from ..run_options import FILE_TOL_ENERGY
+
+    try:
+        check_fixed_params(FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0,
+                                         tol_energy=FILE_TOL_ENERGY), fs)
+    except FixedPointError as exc:
+        return str(exc)
+    return None
 
 
 # ----------------------------------------------------------------------------- outputs

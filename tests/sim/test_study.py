@@ -449,3 +449,22 @@ def test_a_study_that_sweeps_only_other_knobs_draws_no_bits_plot_and_no_empty_ta
     report = Path("s/report.md").read_text()
     assert "](study-knobs.png)" in report and "](study-bits.png)" not in report
     assert "fewest swept bits meeting the target" not in report
+
+
+def test_a_choice_the_default_dynamics_refuses_says_so(tmp_path, monkeypatch, capsys):
+    """The study runs the paper dynamics; its pick with velocity s3.12 was refused by a plain flatten of a mesh
+    file (the momentum dynamics adds V to P), which nothing said. A preset gets no such note."""
+    monkeypatch.chdir(tmp_path)
+    FormatSet.preset("narrow").replace(name="v8", velocity="s3.8").save("v8.json")  # cheaper than every preset
+    assert cmd_study(_parse(["dome", "--sweep", "none", "--no-optimise", "--jobs", "1", "--max-iter", "5",
+                             "--target", "1", "--base", "v8.json", "--out", "s", "--quiet"])) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("chosen base:v8: ")
+    assert ("springflat: note: s/chosen.json runs the paper dynamics it was studied on; a mesh file's default, the "
+            "momentum dynamics, refuses it (the momentum dynamics adds V to P directly: format set 'v8' needs "
+            "velocity (s3.8) and position (s10.14) with the same fraction bits): flatten with it and --dynamics "
+            "paper") in err
+    assert cmd_study(_parse(["dome", "--sweep", "none", "--no-optimise", "--jobs", "1", "--max-iter", "5",
+                             "--out", "d", "--quiet"])) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("chosen preset:narrow: ") and "momentum dynamics" not in err
