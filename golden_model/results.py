@@ -80,6 +80,13 @@ class FlattenResult:
     ``positions``/``velocities`` are the last finite state; ``iterations``
     counts the iterations that produced it.  ``status == "diverged"`` means
     iteration ``iterations + 1`` produced a non-finite value.
+
+    ``extra`` holds what one engine or the command adds: the fixed-point engines' ``formats`` (the format set's
+    name), ``scale`` (the host's power of two: a mesh length ``x`` is ``x * scale`` in the model's units, so a
+    position's raw code is ``positions * scale * 2**fs.position.frac_bits``), ``saturations`` and
+    ``saturation_events`` (per source); the step guard's ``rejected_steps``, ``clipped_node_steps``,
+    ``frozen_node_steps`` and final ``step_scale`` (``docs/guard.md``); on a fold-free pattern
+    ``boundary_crossings`` and, with kept holes, ``turned_holes``.
     """
 
     positions: np.ndarray
