@@ -32,7 +32,7 @@ def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple
 
     Vertex *i* of the file is node *i* in every format but STL.  OBJ is read
     by :func:`read_obj`, PLY (ASCII and binary) and OFF by the project's own
-    readers; polygons are fan-triangulated in file order, with a note (see
+    readers; polygons are fan-triangulated in file order (ear-clipped where a fan would fold), with a note (see
     :func:`read_obj`).  Binary STL goes through trimesh, text STL through
     :func:`read_text_stl`; STL stores each triangle
     with its own three corners and no shared vertices, so for STL only,

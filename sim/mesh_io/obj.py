@@ -35,7 +35,7 @@ class ObjContents:
 
     Attributes:
         vertices: ``(V, 3)`` float64, row *i* = the file's *i*-th ``v``.
-        faces: ``(F, 3)`` int64, 0-based; polygons already fan-triangulated.
+        faces: ``(F, 3)`` int64, 0-based; polygons already triangulated (:func:`triangulate_polygons`).
         face_line: ``(F,)`` file line of the ``f`` statement of each triangle.
         vertex_line: ``(V,)`` file line of each ``v`` statement.
         notes: one line per thing that was triangulated or ignored.
@@ -352,8 +352,8 @@ def _pieces_hint(obj: ObjContents) -> str:
     rows = np.concatenate([faces[:, 0], faces[:, 1]])
     graph = coo_matrix((np.ones(len(rows)), (rows, np.concatenate([faces[:, 1], faces[:, 2]]))), shape=(n, n))
     _, label = connected_components(graph, directed=False)
-    piece = label[faces[:, 0]]
-    starts = sorted(int(obj.face_line[np.flatnonzero(piece == p)[0]]) for p in np.unique(piece))
+    _, first = np.unique(label[faces[:, 0]], return_index=True)  # each piece's first face
+    starts = sorted(int(line) for line in obj.face_line[first])
     shown = ", ".join(map(str, starts[:5])) + (", ..." if len(starts) > 5 else "")
     return f" (its pieces' faces start at file lines {shown}: flatten each from a file of its own)"
 

@@ -30,14 +30,21 @@ class Polygons:
 def triangulate_polygons(
     vertices: np.ndarray, polygons: Polygons, where: str
 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Triangles of the faces (fans for polygons), the face of each triangle, and the note on polygons."""
+    """Triangles of the faces (fans for polygons; a polygon's corner written twice in a row, as some exporters
+    write a triangle as a quad, once), the face of each triangle, and the notes on polygons."""
+    polygons, notes = _repeats_dropped(polygons, where)
     sizes = polygons.sizes
     if (sizes == 3).all():
-        return polygons.index.reshape(-1, 3), np.arange(len(sizes)), []
+        return polygons.index.reshape(-1, 3), np.arange(len(sizes)), notes
     faces, triangle_face = fan_triangulate(polygons.index, sizes)
     clipped = np.zeros(0, dtype=np.int64)
     if np.isfinite(vertices).all() and np.abs(vertices).max(initial=0.0) <= COORDINATE_LIMIT:
         clipped = folded_fans(vertices, faces, triangle_face, sizes)
+        # a quad whose fan does not fold is simple; a polygon of more corners, or one to clip, may cross itself
+        # and still have ears (a pentagram's) or a fan that does not fold
+        suspect = np.union1d(clipped, np.flatnonzero(sizes > 4))
+        if len(crossing := crossing_polygons(vertices, polygons, suspect)):
+            raise _no_surface(polygons, int(crossing[0]), where)
         ear_clip(vertices, polygons, clipped, faces, triangle_face, where)
     # else the validation refuses the coordinates, with the right message, before anything uses the fans
     many = sizes > 3
@@ -46,12 +53,37 @@ def triangulate_polygons(
     triangle_count = plural(int((sizes[many] - 2).sum()), "triangle")
     span = f"{low}" if low == high else f"{low} to {high}"
     if not len(clipped):
-        return faces, triangle_face, [f"{polygon_count} ({span} corners) fan-triangulated into {triangle_count}"]
+        return faces, triangle_face, [*notes, f"{polygon_count} ({span} corners) fan-triangulated into {triangle_count}"]
     how = ("by ear clipping" if len(clipped) == many.sum() else
            f"as fans from the first corner, {len(clipped)} by ear clipping")
-    return faces, triangle_face, [
+    return faces, triangle_face, [*notes,
         f"{polygon_count} ({span} corners) triangulated into {triangle_count} {how} ({'first ' if len(clipped) > 1 else ''}"
         f"{polygons.label(int(clipped[0]))}): a fan from its first corner would fold or have a triangle of zero area"]
+
+
+def _repeats_dropped(polygons: Polygons, where: str) -> tuple[Polygons, list[str]]:
+    """``polygons`` with each polygon's corner that repeats the one before it (the last repeating the first
+    counts) written once, and a note; a triangle that repeats a corner is left to the validation's refusal (it
+    is no polygon), a polygon left with fewer than 3 corners is refused."""
+    index, sizes = polygons.index, polygons.sizes
+    if not (sizes > 3).any():
+        return polygons, []
+    owner = np.repeat(np.arange(len(sizes)), sizes)
+    first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    following = np.arange(len(index)) + 1
+    following[first + sizes - 1] = first  # (the last corner is followed by the first)
+    drop = (index == index[following]) & (sizes[owner] > 3)
+    if not drop.any():
+        return polygons, []
+    left = sizes - np.bincount(owner[drop], minlength=len(sizes))
+    if (short := left < 3).any():
+        f = int(np.flatnonzero(short)[0])
+        raise MeshError(f"{where}: {polygons.label(f)}: face with {plural(int(left[f]), 'distinct corner')} (a face "
+                        "needs at least 3)")
+    repeated = np.unique(owner[drop])
+    note = (f"{plural(len(repeated), 'polygon')} wrote a corner twice in a row ({'first ' if len(repeated) > 1 else ''}"
+            f"{polygons.label(int(repeated[0]))}), read once")
+    return Polygons(index[~drop], left, polygons.label), [note]
 
 
 def checked_polygons(index: np.ndarray, sizes: np.ndarray, n_vertices: int, label, where: str) -> Polygons:
@@ -100,15 +132,58 @@ def ear_clip(vertices: np.ndarray, polygons: Polygons, which: np.ndarray, faces:
              triangle_face: np.ndarray, where: str) -> None:
     """The triangles of the polygons ``which`` in ``faces`` replaced by the polygon's ear clipping, wound as
     the polygon runs (:func:`golden_model.mesh.hole_triangles`, which fills a hole's loop run the other way);
-    a polygon whose edge crosses itself, seen along its normal, or that encloses no area is refused."""
+    one where no ear is left is refused (the caller refuses those that cross themselves first)."""
     first = np.concatenate([[0], np.cumsum(polygons.sizes)[:-1]])
+    triangles = np.concatenate([[0], np.cumsum(polygons.sizes - 2)[:-1]])  # (a polygon's fan is k - 2 in a row)
     for f in which:
-        corners = polygons.index[first[f]:first[f] + polygons.sizes[f]]
+        size = int(polygons.sizes[f])
+        corners = polygons.index[first[f]:first[f] + size]
         try:
-            faces[triangle_face == f] = hole_triangles(vertices, corners[::-1])
+            faces[triangles[f]:triangles[f] + size - 2] = hole_triangles(vertices, corners[::-1])
         except MeshError:
-            raise MeshError(f"{where}: {polygons.label(int(f))}: polygon with {polygons.sizes[f]} corners cannot be "
-                            "triangulated: its edge crosses itself or encloses no area, seen across it") from None
+            raise _no_surface(polygons, int(f), where) from None
+
+
+def _no_surface(polygons: Polygons, f: int, where: str) -> MeshError:
+    return MeshError(f"{where}: {polygons.label(f)}: polygon with {polygons.sizes[f]} corners cannot be triangulated: "
+                     "its edge crosses itself or encloses no area, seen across it")
+
+
+def crossing_polygons(vertices: np.ndarray, polygons: Polygons, which: np.ndarray) -> np.ndarray:
+    """Those of the polygons ``which`` that, seen along their Newell normal, enclose no area or have two sides
+    that are not neighbours meet (cross, touch, or overlap along a line): no triangulation of theirs is a
+    piece of surface. Vectorised over the polygons of each corner count."""
+    first = np.concatenate([[0], np.cumsum(polygons.sizes)[:-1]])
+    crossing = []
+    for k in np.unique(polygons.sizes[which]):
+        group = which[polygons.sizes[which] == k]
+        points = vertices[polygons.index[first[group][:, None] + np.arange(k)]]  # (m, k, 3)
+        centred = points - points.mean(axis=1, keepdims=True)
+        normal = np.cross(centred, np.roll(centred, -1, axis=1)).sum(axis=1)
+        size = np.ptp(centred, axis=1).max(axis=1)
+        length = np.linalg.norm(normal, axis=1)
+        flat_ones = ~(length > 1e-9 * size**2)
+        normal[flat_ones] = [0.0, 0.0, 1.0]
+        axis = np.eye(3)[np.argmin(np.abs(normal), axis=1)]
+        u = np.cross(normal, axis)
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        v = np.cross(normal / np.linalg.norm(normal, axis=1, keepdims=True), u)
+        flat = np.stack([np.einsum("mkd,md->mk", centred, u), np.einsum("mkd,md->mk", centred, v)], axis=2)
+        i, j = np.triu_indices(k, 2)
+        keep = ~((i == 0) & (j == k - 1))  # (the last side and the first are neighbours)
+        i, j = i[keep], j[keep]
+        a, b, c, d = flat[:, i], flat[:, (i + 1) % k], flat[:, j], flat[:, (j + 1) % k]  # (m, pairs, 2)
+
+        def side(p, q, r):
+            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+
+        tolerance = (1e-12 * size**2)[:, None]
+        straddle = (side(a, b, c) * side(a, b, d) <= tolerance**2) & (side(c, d, a) * side(c, d, b) <= tolerance**2)
+        slack = (1e-12 * size)[:, None, None]
+        boxes = np.all((np.minimum(a, b) <= np.maximum(c, d) + slack) & (np.minimum(c, d) <= np.maximum(a, b) + slack),
+                       axis=2)
+        crossing.append(group[flat_ones | (straddle & boxes).any(axis=1)])
+    return np.sort(np.concatenate(crossing)) if crossing else np.zeros(0, dtype=np.int64)
 
 
 def plural(n: int, word: str, words: str | None = None) -> str:

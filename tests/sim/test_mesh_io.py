@@ -1,5 +1,7 @@
 """Mesh files (``sim/mesh_io``): the OBJ, PLY, OFF and STL readers, the OBJ writer, and their one-line refusals."""
 
+import math
+
 import numpy as np
 import pytest
 import trimesh
@@ -119,6 +121,7 @@ def test_obj_quads_and_pentagons_are_fan_triangulated(tmp_path):
 @pytest.mark.parametrize("text, corners", [
     ("v 0 0 0\nv 1 0 0\nv 2 1 0\nv 1 0.2 0\nv 0 1 0\nf 1 2 3 4 5\n", 5),  # reflex at corner 4: the fan from corner 1
     ("v 0 0 0\nv 10 0 0\nv 3 3 0\nv 0 10 0\nf 2 3 4 1\n", 4),              # would fold (1, 3, 4); a concave quad;
+    ("v 0 0 0\nv 10 0 0\nv 3 3 0\nv 0 10 0\nf 2 1 4 3\n", 4),              # the same, clockwise;
     ("v 0 0 0\nv 50 0 0\nv 100 0 0\nv 100 50 0\nv 0 50 0\nf 1 2 3 4 5\n", 5),  # a corner on a straight side
 ])
 def test_an_obj_polygon_whose_fan_would_fold_is_ear_clipped(tmp_path, text, corners):
@@ -130,7 +133,7 @@ def test_an_obj_polygon_whose_fan_would_fold_is_ear_clipped(tmp_path, text, corn
     areas = [np.cross(v[b] - v[a], v[c] - v[a]) / 2 for a, b, c in mesh.faces]
     polygon = v[[int(k) - 1 for k in text.split("f ")[1].split()]]
     shoelace = 0.5 * np.sum(polygon[:, 0] * np.roll(polygon[:, 1], -1) - np.roll(polygon[:, 0], -1) * polygon[:, 1])
-    assert all(a > 0 for a in areas) == (shoelace > 0) and np.isclose(sum(areas), shoelace)  # wound as the face
+    assert all(np.sign(a) == np.sign(shoelace) for a in areas) and np.isclose(sum(areas), shoelace)  # as the face
 
 
 def test_a_polygon_fanned_and_one_ear_clipped_are_told_apart(tmp_path):
@@ -141,12 +144,29 @@ def test_a_polygon_fanned_and_one_ear_clipped_are_told_apart(tmp_path):
         "(line 7): a fan from its first corner would fold or have a triangle of zero area"]
 
 
-def test_an_obj_polygon_whose_edge_crosses_itself_is_refused(tmp_path):
-    text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3 4\n"  # a bow tie
-    with pytest.raises(MeshError, match=r"line 5: polygon with 4 corners cannot be triangulated: its edge crosses "
-                                        r"itself or encloses no area, seen across it$") as info:
+@pytest.mark.parametrize("points, order", [
+    ([(0, 0), (1, 0), (0, 1), (1, 1)], [1, 2, 3, 4]),  # a bow tie: no area
+    # sides 2-3 and 4-5 cross, and ear clipping finds ears in it
+    ([(0.82, 0.33), (-1.3, 0.91), (0.45, -0.54), (0.58, 0.36), (0.29, 0.03), (0.55, -0.74)], [1, 2, 3, 4, 5, 6]),
+    ([(math.cos(a), math.sin(a)) for a in np.arange(5) * 2 * np.pi / 5 + 0.3], [1, 3, 5, 2, 4, 1, 3]),  # a pentagram
+])
+def test_an_obj_polygon_whose_edge_crosses_itself_is_refused(tmp_path, points, order):
+    order = order[:len(points)]
+    text = "".join(f"v {x} {y} 0\n" for x, y in points) + "f " + " ".join(map(str, order)) + "\n"
+    if len(order) == 5:  # the pentagram's fan does not fold: make it one that must be clipped (a reflex corner)
+        text = text.replace("f 1 3 5 2 4", "v 0.1 0 0\nf 6 1 3 5 2 4")
+    with pytest.raises(MeshError, match=rf"polygon with {len(order) + (len(order) == 5)} corners cannot be "
+                                        r"triangulated: its edge crosses itself or encloses no area, seen across it$"):
         load_mesh(_obj(tmp_path, text))
-    assert "\n" not in str(info.value)
+
+
+def test_a_corner_written_twice_in_a_row_is_read_once(tmp_path):
+    """Exporters write a triangle as a quad with a corner repeated: it was refused as crossing itself."""
+    mesh, notes = load_mesh_with_notes(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3 3\nf 1 3 4 1\n"))
+    assert mesh.faces.tolist() == [[0, 1, 2], [0, 2, 3]]
+    assert notes == ["2 polygons wrote a corner twice in a row (first line 5), read once"]
+    with pytest.raises(MeshError, match=r"line 5: face with 2 distinct corners \(a face needs at least 3\)$"):
+        load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 2 1\nf 1 3 4\n"))
 
 
 def test_obj_groups_and_objects_make_one_mesh(tmp_path):
