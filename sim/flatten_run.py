@@ -432,13 +432,12 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh:
 def notes_on_cut_files(args: argparse.Namespace, mesh: Mesh, result: FlattenResult,
                        drawing: PatternDrawing) -> list[str]:
     """The notes on a run that writes a pattern at 1:1 (a print or a cut; ``vt`` and layouts have no scale):
-    :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it; of the layout as the run left it) and,
+    :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it),
     :func:`~sim.patterns.covered_holes_note`, :func:`~sim.patterns.grain_note` and, with a seam allowance,
     :func:`~sim.patterns.closed_holes_note` of ``drawing``, the files' own (:func:`pattern_drawing`)."""
     if result.status == "diverged" or not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
         return []
-    notes = [scale_note(PatternDrawing.of(mesh, result.positions, args.units)), covered_holes_note(drawing),
-             grain_note(drawing)]
+    notes = [scale_note(drawing), covered_holes_note(drawing), grain_note(drawing)]
     if drawing.seam > 0 and mesh.n_holes:
         notes.append(closed_holes_note(drawing))
     return [note for note in notes if note]
@@ -476,7 +475,7 @@ def write_outputs(args: argparse.Namespace, mesh: Mesh, result: FlattenResult, d
             for path in args.out or ()]
     jobs += [(args.history, "--history", lambda path: write_history(path, result)),
              (args.plot, "--plot", lambda path: write_plot(path, result, mesh.faces, title=title,
-                                                           vertices=mesh.vertices)),
+                                                           vertices=mesh.vertices, turn=drawing.turn)),
              (args.distortion, "--distortion",
               lambda path: write_distortion_csv(path, distortion(mesh, result.positions), args.units))]
     written = []

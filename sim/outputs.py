@@ -1133,8 +1133,9 @@ def _set_edges(ax, body, positions: np.ndarray, faces: np.ndarray) -> bool:
 
 
 def write_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str = "", *,
-               vertices: np.ndarray | None = None) -> None:
-    """PNG a person reads at a glance: the final pattern coloured by area distortion, the initial layout, errors.
+               vertices: np.ndarray | None = None, turn: float = 0.0) -> None:
+    """PNG a person reads at a glance: the final pattern coloured by area distortion, the initial layout, errors;
+    both layouts turned by ``turn`` (radians, anticlockwise: the pattern files' :attr:`PatternDrawing.turn`).
 
     The main panel fills each face by ``|A'|/A`` (:func:`face_colours`, a
     diverging log-scale map centred on 1, with a colour bar) and marks folded
@@ -1148,10 +1149,11 @@ def write_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str 
     with warnings.catch_warnings(), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         # a diverged run's 1e300 on a log axis: matplotlib's overflow notes are no news to the user
         warnings.simplefilter("ignore", RuntimeWarning)
-        _draw_plot(path, result, faces, title, vertices)
+        _draw_plot(path, result, faces, title, vertices, turn)
 
 
-def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str, vertices: np.ndarray | None) -> None:
+def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str, vertices: np.ndarray | None,
+               turn: float) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -1163,8 +1165,11 @@ def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str,
 
     faces = np.asarray(faces)
     areas = None if vertices is None else triangle_areas_3d(np.asarray(vertices, dtype=np.float64), faces)
-    final = face_colours(result.positions, faces, areas)
-    initial = face_colours(result.initial_positions, faces, areas, scale=final.scale)
+    c, s = math.cos(turn), math.sin(turn)
+    final_xy, initial_xy = (np.asarray(xy, dtype=np.float64) @ np.array([[c, s], [-s, c]])
+                            for xy in (result.positions, result.initial_positions))
+    final = face_colours(final_xy, faces, areas)
+    initial = face_colours(initial_xy, faces, areas, scale=final.scale)
 
     dpi = 110
     fig = plt.figure(figsize=(12.5, 6.6), dpi=dpi)
@@ -1175,8 +1180,8 @@ def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str,
     ax_initial = fig.add_subplot(grid[0, 3])
     ax_errors = fig.add_subplot(grid[1, 3])
 
-    body = _draw_faces(ax_main, result.positions, faces, final)
-    body_initial = _draw_faces(ax_initial, result.initial_positions, faces, initial)
+    body = _draw_faces(ax_main, final_xy, faces, final)
+    body_initial = _draw_faces(ax_initial, initial_xy, faces, initial)
     what = ("coloured by area ratio |A'|/A: red stretched, blue shrunk" if final.has_ratio
             else "not coloured: no 3D areas given")
     ax_main.set_title(f"final pattern, {what}", fontsize=10)
@@ -1232,8 +1237,8 @@ def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str,
                f"$E_C$ = {history.shape_error[-1]:.3g},  {final.n_folded} of {len(faces)} faces folded")
     fig.suptitle(f"{title} — {summary}" if title else summary, fontsize=12)
     fig.subplots_adjust(left=0.04, right=0.95, top=0.88, bottom=0.08)
-    _set_edges(ax_main, body, result.positions, faces)
-    _set_edges(ax_initial, body_initial, result.initial_positions, faces)
+    _set_edges(ax_main, body, final_xy, faces)
+    _set_edges(ax_initial, body_initial, initial_xy, faces)
     with atomic_write(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)

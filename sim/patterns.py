@@ -200,6 +200,8 @@ class PatternDrawing:
             boundary, which becomes the sew line; 0: the boundary is the cut line.
         holes: each kept hole's edge, vertex indices in order (:attr:`Mesh.boundary_loops` after the first):
             cut-outs, which the cut line and the sew line go round too.
+        turn: the angle (radians, anticlockwise) ``layout`` is turned by from the layout it was made of
+            (:meth:`as_seen`, :meth:`with_grain`), for a figure of the run to show it the same way.
     """
 
     name: str
@@ -214,6 +216,7 @@ class PatternDrawing:
     seam: float = 0.0
     holes: tuple[np.ndarray, ...] = ()
     grain_agreement: float = 1.0
+    turn: float = 0.0
 
     @classmethod
     def of(cls, mesh: Mesh, layout: np.ndarray, units: str = "mm", caption: str = "") -> "PatternDrawing":
@@ -299,14 +302,14 @@ class PatternDrawing:
         """The drawing turned as the mesh is seen from its front (:func:`view_turn`): a piece modelled flat in
         x, y comes back in x, y, and a curved one as it looks from along its mean normal."""
         angle = view_turn(self.vertices, self.faces, self.layout)
-        return replace(self, layout=_turned(self.layout, angle, _centre(self.layout))) if angle else self
+        return replace(self, layout=_turned(self.layout, angle, _centre(self.layout)), turn=self.turn + angle)
 
     def with_grain(self, grain: str | Sequence[float]) -> "PatternDrawing":
         """The drawing turned so that the 3D direction ``grain`` (:func:`grain_direction`), as the triangles
         carry it onto the pattern, points up (+y), with a grain line on every pattern file."""
         angle, agreement = grain_axis(self.vertices, self.faces, self.layout, grain_direction(grain))
         return replace(self, layout=_turned(self.layout, math.pi / 2 - angle, _centre(self.layout)),
-                       grain=grain_text(grain), grain_agreement=agreement)
+                       grain=grain_text(grain), grain_agreement=agreement, turn=self.turn + math.pi / 2 - angle)
 
     def grain_line(self) -> np.ndarray:
         """``(2, 2)`` the grain line's ends (bottom, top) in ``units``: vertical, through the vertex nearest the
@@ -632,9 +635,9 @@ def grain_axis(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray,
 def view_turn(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray) -> float:
     """The rotation (radians, anticlockwise) that best lays ``layout`` onto the mesh as seen from its front: the
     mesh projected along its vector area's normal ``n`` (the side its faces' winding faces, so the projection
-    runs the layout's way round and no mirror is needed), onto axes ``u``, ``n × u`` with ``u`` the world x axis
-    projected (the y axis where x is within 45° of ``n``: a rule by the smallest of ``n``'s components would
-    flip between x and y on rounding for a piece facing z); the angle of least squares (orthogonal Procrustes,
+    runs the layout's way round and no mirror is needed), with the world z axis projected as up (the y axis where
+    z lies within 45° of ``n``: a piece lying in x, y) and ``up × n`` across, as a drawing's views are laid out:
+    a wall comes up the right way, a piece in x, y keeps its x and y; the angle of least squares (orthogonal Procrustes,
     each vertex weighted by a third of its triangles' 3D areas). 0 where the mesh has no front (a closed-up
     tube's vector area under 1e-3 of its area) or the layout has collapsed."""
     p = vertices[faces]
@@ -644,10 +647,10 @@ def view_turn(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray) -> fl
     if not np.linalg.norm(front) > 1e-3 * areas.sum():
         return 0.0
     n = front / np.linalg.norm(front)
-    axis = np.eye(3)[0 if abs(n[0]) <= math.sqrt(0.5) else 1]
-    u = axis - (axis @ n) * n
-    u /= np.linalg.norm(u)
-    seen = vertices @ np.column_stack([u, np.cross(n, u)])
+    axis = np.eye(3)[2 if abs(n[2]) <= math.sqrt(0.5) else 1]
+    up = axis - (axis @ n) * n
+    up /= np.linalg.norm(up)
+    seen = vertices @ np.column_stack([np.cross(up, n), up])
     weight = np.bincount(faces.ravel(), weights=np.repeat(areas / 3, 3), minlength=len(vertices))
     a = layout - np.average(layout, axis=0, weights=weight)
     b = seen - np.average(seen, axis=0, weights=weight)

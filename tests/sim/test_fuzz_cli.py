@@ -2056,3 +2056,18 @@ def test_a_files_words_in_a_note_cannot_drive_the_terminal(tmp_path, monkeypatch
     err = capsys.readouterr().err
     assert r"'\x1b[31mRED\x1b[0m' (1, first at line" in err and r"'foo\x00bar'" in err
     assert not re.search(r"[\x00-\x09\x0b-\x1f\x7f]", err), err
+
+
+def test_the_scale_note_measures_the_pattern_as_its_files_lie(tmp_path, monkeypatch, capsys):
+    """A 4 m square started as a diamond: its DXF is 4 x 4 m, under the 5 m that gets a note, and the note said
+    5.66 x 5.66 m (of the run's frame)."""
+    monkeypatch.chdir(tmp_path)
+    n = 5
+    x, y = np.meshgrid(np.linspace(0, 4000, n), np.linspace(0, 4000, n))
+    a = (np.arange(n - 1)[None, :] + n * np.arange(n - 1)[:, None]).ravel()
+    faces = np.concatenate([np.column_stack([a, a + 1, a + n + 1]), np.column_stack([a, a + n + 1, a + n])])
+    (tmp_path / "sq.obj").write_text(obj(vertices=np.column_stack([x.ravel(), y.ravel(), 0 * x.ravel()]), faces=faces))
+    diamond = (np.column_stack([x.ravel(), y.ravel()]) - 2000) @ np.array([[1, 1], [-1, 1]]) / math.sqrt(2)
+    np.savetxt(tmp_path / "start.txt", diamond)
+    assert main(["flatten", "sq.obj", "--init", "start.txt", "--max-iter", "5", "--out", "p.dxf"]) == 0
+    assert "the pattern is" not in capsys.readouterr().err

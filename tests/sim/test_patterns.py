@@ -1006,15 +1006,39 @@ def test_a_piece_modelled_flat_comes_back_in_its_own_x_y_not_as_the_start_laid_i
 
     V, F = _flat_square_grid(clockwise=clockwise)
     diamond = (V[:, :2] - 100) @ np.array([[1, 1], [-1, 1]]) / math.sqrt(2)
-    pattern = springflat.flatten(V, F, init=diamond * (-1 if clockwise else 1) * [1, 1])
+    pattern = springflat.flatten(V, F, init=diamond * ([1, -1] if clockwise else [1, 1]))  # (a mirror fits them)
     assert np.ptp(pattern.layout, axis=0) == pytest.approx([200 * math.sqrt(2)] * 2, rel=1e-6)  # the run's frame
     springflat.write_pattern(tmp_path / "p.dxf", pattern)
     cut = np.array([p[:2] for p in ezdxf.readfile(tmp_path / "p.dxf").modelspace().query("LWPOLYLINE")[0]
                    .get_points()])
-    seen = V[:, :2] * ([1, -1] if clockwise else [1, 1])  # from below, y runs the other way
+    seen = V[:, :2] * ([-1, 1] if clockwise else [1, 1])  # from below, x runs the other way
     layout = PatternDrawing.of(pattern.mesh, pattern.layout).as_seen().layout
     assert np.ptp(cut, axis=0) == pytest.approx([200, 200], rel=1e-6)
     assert np.allclose(layout - layout.mean(axis=0), seen - seen.mean(axis=0), atol=1e-6)
+
+
+@pytest.mark.parametrize("facing", ["-y", "+y", "+x", "-z"])
+def test_a_wall_comes_up_the_right_way(facing):
+    """A wall (or a piece facing down) came upside down where the view kept x across: up is z, or y where z lies
+    along the normal; the view is from the front, so across is up x normal."""
+    from golden_model.mesh import signed_areas_2d
+
+    V, F = _flat_square_grid(n=5, size=2.0)  # in x, y, facing +z
+    V = V[:, {"-y": [0, 2, 1], "+y": [0, 2, 1], "+x": [2, 0, 1], "-z": [0, 1, 2]}[facing]]
+    wound = {"-y": F, "+y": F[:, ::-1], "+x": F, "-z": F[:, ::-1]}[facing]
+    normal = np.cross(V[wound[0, 1]] - V[wound[0, 0]], V[wound[0, 2]] - V[wound[0, 0]])
+    assert facing == ("+" if normal[abs(normal).argmax()] > 0 else "-") + "xyz"[abs(normal).argmax()]
+    mesh = Mesh(V, wound)
+    up_axis = 2 if facing != "-z" else 1
+    across = np.cross(np.eye(3)[up_axis], normal / np.linalg.norm(normal))
+    for angle in (0.4, 2.5):  # the piece's own shape, positively wound, at some angle
+        flat = np.column_stack([V @ across, V[:, up_axis]])
+        c, s = math.cos(angle), math.sin(angle)
+        laid = flat @ np.array([[c, s], [-s, c]])
+        assert (signed_areas_2d(laid, wound) > 0).all()
+        seen = PatternDrawing.of(mesh, laid).as_seen().layout
+        top, bottom = V[:, up_axis].argmax(), V[:, up_axis].argmin()
+        assert seen[top, 1] > seen[bottom, 1] and np.allclose(seen - seen.mean(0), flat - flat.mean(0), atol=1e-9)
 
 
 def test_the_view_turn_follows_the_mesh_round_its_normal():
@@ -1026,6 +1050,10 @@ def test_the_view_turn_follows_the_mesh_round_its_normal():
                                                                                                           [1, 0]]
     angle = view_turn(mesh.vertices, mesh.faces, layout)
     assert abs(angle - math.pi / 2) < 0.05  # the layout is the mesh's view turned a quarter clockwise
+    drawing = PatternDrawing.of(mesh, layout).as_seen().with_grain("x")  # the turn --plot shows: both, summed
+    c, s = math.cos(drawing.turn), math.sin(drawing.turn)
+    turned = layout @ np.array([[c, s], [-s, c]])
+    assert np.allclose(turned - turned.mean(axis=0), drawing.layout - drawing.layout.mean(axis=0), atol=1e-12)
     for theta in (0.3, 2.0, -1.2):
         c, s = math.cos(theta), math.sin(theta)
         turned = mesh.vertices @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
