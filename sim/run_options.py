@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -257,12 +258,16 @@ def resolve_mesh(name: str, holes: Holes = Holes.REFUSE,
     return mesh, file_defaults(mesh)
 
 
+#: A mesh file's parameters but ``N_max`` (:func:`file_defaults`): the momentum dynamics with the fold barrier and
+#: the guard, stopped at the energy minimum (``FILE_TOL_ENERGY``, no E_S/E_C thresholds).
+FILE_PARAMS = FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0,
+                            tol_energy=FILE_TOL_ENERGY)
+
+
 def file_defaults(mesh: Mesh) -> FlattenParams:
-    """A mesh file's parameters (the API's arrays take them too): the momentum dynamics with the fold barrier
-    and the guard, stopped at the energy minimum (``FILE_TOL_ENERGY``, no E_S/E_C thresholds), ``N_max``
-    sized to the mesh's radius in edges."""
-    return FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=FILE_TOL_ENERGY,
-                         max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
+    """A mesh file's parameters (the API's arrays take them too): :data:`FILE_PARAMS` with ``N_max`` sized to
+    the mesh's radius in edges."""
+    return dataclasses.replace(FILE_PARAMS, max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
 
 
 def default_init(mesh_name: str) -> str:

@@ -244,7 +244,7 @@ def read_mesh(path: str | Path, fill_holes: bool = False, keep_holes: bool = Fal
 
     The file must be one manifold disk (:func:`sim.mesh_io.load_mesh_with_notes`); anything else
     raises :class:`golden_model.mesh.MeshError` (a ``ValueError``) with a one-line message.  What the
-    reader changed (polygons fan-triangulated, STL corners merged) is a :class:`MeshNote` warning.
+    reader changed (polygons triangulated, STL corners merged) is a :class:`MeshNote` warning.
     """
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"read_mesh takes a file path (str or pathlib.Path), not {type(path).__name__}")
@@ -266,8 +266,9 @@ def read_mesh(path: str | Path, fill_holes: bool = False, keep_holes: bool = Fal
     return mesh.vertices, mesh.faces
 
 
-def _named_mesh(path: str | os.PathLike, holes: Holes) -> tuple[Mesh, FlattenParams]:
-    """A mesh file or a built-in, and its defaults, as the command reads it; its notes as :class:`MeshNote`."""
+def _named_mesh(path: str | os.PathLike, holes: Holes, name: str | None) -> tuple[Mesh, FlattenParams]:
+    """A mesh file or a built-in, and its defaults, as the command reads it, named ``name`` where that is given;
+    its notes as :class:`MeshNote`, under that name."""
     if (problem := _nul_problem(path)) is not None:
         raise MeshError(f"cannot read mesh {problem}")
     notes: list[str] = []
@@ -275,6 +276,9 @@ def _named_mesh(path: str | os.PathLike, holes: Holes) -> tuple[Mesh, FlattenPar
         mesh, defaults = resolve_mesh(os.fspath(path), holes, notes)
     except MeshError as exc:
         raise MeshError(_in_api_words(str(exc))) from None
+    if name is not None:
+        notes = [f"{name}: {note.removeprefix(mesh.name + ': ')}" for note in notes]
+        mesh = Mesh(mesh.vertices, mesh.faces, name=name, allow_holes=holes is Holes.KEEP)
     for note in notes:
         warnings.warn(note, MeshNote, stacklevel=3)
     return mesh, defaults
@@ -374,9 +378,7 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
                              + ", ".join(e.name for e in ENGINES if e.api) + " engines")
     holes = _holes(args.fill_holes, args.keep_holes)
     if named:
-        mesh, defaults = _named_mesh(V, holes)
-        if name is not None:
-            mesh = Mesh(mesh.vertices, mesh.faces, name=name, allow_holes=holes is Holes.KEEP)
+        mesh, defaults = _named_mesh(V, holes, name)
     else:
         try:  # validated here: errors name no temporary file
             mesh, notes = oriented_mesh(vertices, faces, name="mesh" if name is None else name, holes=holes)
@@ -427,8 +429,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     scale on ``paper`` = ``a4`` (the default), ``a3``, ``letter`` or ``fit``, tiled with overlap marks), ``.obj`` (the
     3D mesh with the pattern as ``vt``), ``.flat.obj`` (the layout, z = 0), ``.flat.svg`` (the layout coloured
     by distortion).  ``grain`` (``x``, ``y``, ``z``, ``-z``, or ``"X,Y,Z"``): the pattern turned so that this 3D
-    direction of the mesh, as laid on it, points up, with a grain line (as ``--grain``); by default the layout's
-    own frame.  ``seam_allowance`` (a length in ``units``, or a text with its unit: ``"10mm"``): the cut line
+    direction of the mesh, as laid on it, points up, with a grain line (as ``--grain``); by default the mesh as
+    seen from its front (``docs/patterns.md``; ``Pattern.layout`` is the run's own frame).  ``seam_allowance`` (a length in ``units``, or a text with its unit: ``"10mm"``): the cut line
     runs this far outside the pattern's edge, which is drawn as the sew line (as ``--seam-allowance``; DXF, PDF
     and SVG only).  ``units`` (``mm``, ``cm``, ``m``, ``in``) is the mesh's length unit; see
     :mod:`sim.patterns`; a true-scale pattern (DXF, PDF, SVG) under 10 mm or over 5 m across gives a

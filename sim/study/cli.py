@@ -41,7 +41,7 @@ from golden_model.study import (
     unexercised_classes,
 )
 
-from ..outputs import atomic_directory, atomic_write, check_output_directory
+from ..outputs import atomic_directory, atomic_write, check_output_directory, print_note
 from ..run_options import integer_argument, load_format_set, number_argument, path_argument
 from ..workers import local_workers
 from .cases import STUDY_MESHES, build_cases
@@ -184,12 +184,11 @@ def cmd_study(args: argparse.Namespace) -> int:
               f"{base_s.cost.dsp} DSP, {'meets' if base_s.meets else 'misses'} the target); "
               f"{result.runs} runs in {_seconds(result.seconds)}; wrote {out / 'report.md'}")
         if (refusal := _rtl_refusal(chosen.config.fs)) is not None:
-            print(f"springflat: note: the RTL cannot be built with {out / 'chosen.json'} (the golden model runs it): "
-                  f"{refusal}; docs/study.md#recommendation", file=sys.stderr)
+            print_note(f"the RTL cannot be built with {out / 'chosen.json'} (the golden model runs it): {refusal}; "
+                       "docs/study.md#recommendation")
         if (refusal := _file_default_refusal(chosen.config.fs)) is not None:
-            print(f"springflat: note: {out / 'chosen.json'} runs the paper dynamics it was studied on; a mesh file's "
-                  f"default, the momentum dynamics, refuses it ({refusal}): flatten with it and --dynamics paper",
-                  file=sys.stderr)
+            print_note(f"{out / 'chosen.json'} runs the paper dynamics it was studied on; a mesh file's default, the "
+                       f"momentum dynamics, refuses it ({refusal}): flatten with it and --dynamics paper")
     return 0
 
 
@@ -198,13 +197,11 @@ def _file_default_refusal(fs: FormatSet) -> str | None:
     cannot run on ``fs``, which the study chose on the paper dynamics, or ``None``."""
     from golden_model.fixed.engine import check_fixed_params
     from golden_model.fixed.measures import FixedPointError
-    from golden_model.params import FlattenParams
 
-    from ..run_options import FILE_TOL_ENERGY
+    from ..run_options import FILE_PARAMS
 
     try:
-        check_fixed_params(FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0,
-                                         tol_energy=FILE_TOL_ENERGY), fs)
+        check_fixed_params(FILE_PARAMS, fs)
     except FixedPointError as exc:
         return str(exc)
     return None

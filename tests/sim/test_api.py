@@ -720,6 +720,10 @@ def test_a_files_notes_are_warnings_and_its_holes_hint_speaks_keywords(tmp_path)
     quad.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0.1\nv 0 1 0\nf 1 2 3 4\n")
     with pytest.warns(springflat.MeshNote, match="^quad: .*triangulated"):
         springflat.flatten(quad, max_iter=2)
+    with warnings.catch_warnings(record=True) as said:  # one name for the file's notes and the run's
+        warnings.simplefilter("always")
+        springflat.flatten(quad, max_iter=2, name="panel")
+    assert said and all(str(w.message).startswith("panel: ") for w in said), [str(w.message) for w in said]
     ring = tmp_path / "ring.obj"
     ring.write_text("".join(f"v {np.cos(a):.6f} {np.sin(a):.6f} 0\nv {2 * np.cos(a):.6f} {2 * np.sin(a):.6f} 0\n"
                             for a in np.arange(8) * np.pi / 4)
