@@ -261,7 +261,8 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]
         names = _names(meshes)
         # a skipped mesh's files are not written (a finished one made read-only is no obstacle), but they must
         # still be its outputs: not a mesh of the batch, nor an OBJ springflat did not write
-        skipped = frozenset(name for name in names if args.skip_existing and _already_written(out_dir, name, endings))
+        skipped = frozenset(name for source, name in zip(meshes, names)
+                            if args.skip_existing and _already_written(out_dir, name, endings, source))
         written = [name for name in names if name not in skipped]
         flags = {option: (what, suffixes) for option, what, suffixes in OUTPUT_OPTIONS}
         for option, ending in endings:
@@ -296,10 +297,19 @@ def _job(source: str, name: str, options: dict, endings) -> BatchJob | MeshOutco
         return MeshOutcome(source, name, "failed", line=str(exc))
 
 
-def _already_written(out_dir: Path, name: str, endings: tuple[tuple[str, str], ...]) -> bool:
-    """Whether every output file of the mesh ``name`` is in ``out_dir`` (``--skip-existing``): a batch writes a
-    mesh's files all or none, so an interrupted batch left each mesh with all of them or none."""
-    return all((out_dir / f"{name}{ending}").is_file() for _, ending in endings)
+def _already_written(out_dir: Path, name: str, endings: tuple[tuple[str, str], ...], source: str) -> bool:
+    """Whether every output file of the mesh ``name`` is in ``out_dir`` and no older than the mesh file
+    ``source`` (``--skip-existing``): a batch writes a mesh's files all or none, so an interrupted batch left each
+    mesh with all of them or none; a mesh exported again since its files were written runs again, as make would
+    (a pattern of the old mesh would go to the cutter)."""
+    files = [out_dir / f"{name}{ending}" for _, ending in endings]
+    if not all(path.is_file() for path in files):
+        return False
+    try:
+        changed = 0.0 if is_builtin(source) else os.stat(source).st_mtime
+    except OSError:  # (an unreadable mesh fails in its own line, as a run)
+        return False
+    return all(path.stat().st_mtime >= changed for path in files)
 
 
 def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:

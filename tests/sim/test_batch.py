@@ -471,6 +471,25 @@ def test_skip_existing_goes_on_after_an_interrupted_batch(tmp_path, monkeypatch,
     assert capsys.readouterr().err.splitlines()[0] == "springflat: 3 meshes (3 skipped: their files are in o)"
 
 
+def test_skip_existing_runs_a_mesh_exported_again_since_its_files(tmp_path, monkeypatch, capsys):
+    """A mesh re-exported under its name was skipped, its old pattern kept for the cutter: as make would, a mesh
+    newer than any of its files runs again."""
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 2, 0)
+    argv = ["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "o", "--out", ".dxf", "--history", ".csv",
+            "--max-iter", "5", "--jobs", "1", "--skip-existing"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    old = os.stat("o/dome01.csv").st_mtime
+    os.utime("in/dome01.off", (old + 60, old + 60))  # exported again after the batch
+    os.utime("o/dome00.csv", (old - 60, old - 60))   # an older file of a mesh older still: skipped
+    os.utime("in/dome00.obj", (old - 120, old - 120))
+    assert main(argv) == 0
+    rows = {line.split()[0]: line.split()[1] for line in capsys.readouterr().out.splitlines() if line.startswith("dome")}
+    assert rows["dome00"] == "skipped" and rows["dome01"] in ("converged", "max-iterations")
+    assert os.stat("o/dome01.csv").st_mtime > old
+
+
 def test_skip_existing_without_an_out_dir_is_refused(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["flatten", "surf1", "--out", "a.dxf", "--skip-existing"]) == 2
