@@ -9,9 +9,11 @@ units read as metres; five copies each, every one written as a DXF and a tiled A
 
 Both write the same files; the script checks that they are byte-identical, then prints the wall
 times, their ratio and the load average before and after (a busy machine inflates both, the batch
-more: it needs the cores free).  Usage::
+more: it needs the cores free).  ``--large-grid K`` adds one generated dome of K x K vertices (a large scan's
+cost, where the workers' memory settings show: Dask's nanny starts its workers with a small malloc trim
+threshold, ``sim.workers.undo_dask_malloc_trim``).  Usage::
 
-    .venv/bin/python benchmarks/bench_batch.py [--jobs 2] [--copies 5] [--dask]
+    .venv/bin/python benchmarks/bench_batch.py [--jobs 2] [--copies 5] [--dask] [--large-grid 150]
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2, help="batch workers (default 2)")
     parser.add_argument("--copies", type=int, default=5, help="copies of each scan (default 5: 20 meshes)")
     parser.add_argument("--dask", action="store_true", help="also time the batch on a Dask LocalCluster")
+    parser.add_argument("--large-grid", type=int, default=0, metavar="K",
+                        help="add a generated dome of K x K vertices (default: none)")
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory(prefix="bench-batch-") as tmp:
@@ -55,6 +59,13 @@ def main() -> None:
                 path = tmp / "in" / f"{name}_{copy}.obj"
                 shutil.copyfile(SCANS / f"{name}.obj", path)
                 meshes.append(path)
+        if args.large_grid:
+            from sim.generate import dome_grid
+            from sim.mesh_io import save_obj
+
+            large = dome_grid(args.large_grid)
+            meshes.append(tmp / "in" / f"dome_{args.large_grid}.obj")
+            save_obj(meshes[-1], large.vertices, large.faces)
         load_before = os.getloadavg()
         separate_dir = tmp / "separate"
         separate_dir.mkdir()
@@ -72,7 +83,9 @@ def main() -> None:
             for path in sorted(separate_dir.iterdir()):
                 if path.read_bytes() != (tmp / folder / path.name).read_bytes():
                     raise SystemExit(f"{folder}/{path.name} differs from the separate run's")
-    print(f"{len(meshes)} meshes ({', '.join(MESHES)} x {args.copies}), .dxf + .pdf each, on {os.cpu_count()} cores")
+    large = f" and a {args.large_grid} x {args.large_grid} dome" if args.large_grid else ""
+    print(f"{len(meshes)} meshes ({', '.join(MESHES)} x {args.copies}{large}), .dxf + .pdf each, on "
+          f"{os.cpu_count()} cores")
     print(f"separate runs:            {separate:7.1f} s")
     print(f"batch, {args.jobs} workers:        {batch:7.1f} s   ratio {batch / separate:.2f}")
     if dask is not None:

@@ -45,7 +45,7 @@ from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write
 from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind
 from .run_options import (USER_ERRORS, UserError, holes_mode, input_files, integer_argument, params_from_args,
                           path_argument, resolve_mesh, strict_json)
-from .workers import WorkerPool, local_workers, wait_for_one
+from .workers import WorkerPool, local_workers, undo_dask_malloc_trim, wait_for_one
 
 
 def add_batch_options(parser: argparse.ArgumentParser) -> None:
@@ -129,6 +129,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
     from .flatten_run import (check_print_size, divergence_note, human_line, json_summary, pattern_notes, run_flatten,
                               notes_on_cut_files, pattern_drawing, run_formats, write_outputs)
 
+    undo_dask_malloc_trim()
     start = time.perf_counter()
     stderr = io.StringIO()
     with tempfile.TemporaryDirectory(prefix="springflat-batch-", dir=job.scratch) as tmp:

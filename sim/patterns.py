@@ -654,8 +654,10 @@ def view_turn(vertices: np.ndarray, faces: np.ndarray, layout: np.ndarray) -> fl
     weight = np.bincount(faces.ravel(), weights=np.repeat(areas / 3, 3), minlength=len(vertices))
     a = layout - np.average(layout, axis=0, weights=weight)
     b = seen - np.average(seen, axis=0, weights=weight)
-    cross = float(weight @ (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
-    dot = float(weight @ (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))
+    # numpy's own sums, not BLAS's dot: a threaded dot splits the sum by the threads it has, and the pattern
+    # files would differ in their last bits between a Dask worker (one BLAS thread) and the command
+    cross = float(np.sum(weight * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])))
+    dot = float(np.sum(weight * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])))
     return math.atan2(cross, dot) if cross or dot else 0.0
 
 

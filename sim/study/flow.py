@@ -20,7 +20,7 @@ from golden_model.study.knobs import (
 )
 from golden_model.study.records import AccuracyTarget, FixedOutcome, RunRecord, compare, run_fixed
 
-from ..workers import WorkerPool, wait_for_one
+from ..workers import WorkerPool, undo_dask_malloc_trim, wait_for_one
 from .cost import Cost, cost
 
 _WORKER_CASES: list[StudyCase] | None = None
@@ -37,6 +37,7 @@ def _worker_task(fs: FormatSet, index: int) -> FixedOutcome:
 
 def _case_task(case: StudyCase, fs: FormatSet) -> FixedOutcome:
     """A run for an executor given to :class:`Study` (it has no initializer: the case travels with the task)."""
+    undo_dask_malloc_trim()
     return run_fixed(case, fs)
 
 

@@ -5,6 +5,7 @@ import math
 import os
 import re
 import subprocess
+import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -1059,3 +1060,19 @@ def test_the_view_turn_follows_the_mesh_round_its_normal():
         turned = mesh.vertices @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
         assert math.remainder(view_turn(turned, mesh.faces, layout) - angle - theta, 2 * math.pi) == \
             pytest.approx(0, abs=1e-9)
+
+
+def test_the_view_turn_does_not_depend_on_the_blas_threads(tmp_path):
+    """A Dask worker has one BLAS thread, the command as many as cores: a dot product split by threads gave the
+    angle another last bit, and a large pattern's files other bytes than the command's."""
+    code = ("import sys; import numpy as np; from sim.generate import dome_grid; from sim.patterns import view_turn; "
+            "m = dome_grid(150); rng = np.random.default_rng(3); "
+            "layout = m.vertices[:, :2] @ np.array([[0.6, 0.8], [-0.8, 0.6]]) + rng.normal(size=(m.n_vertices, 2)) * 1e-3; "
+            "print(repr(view_turn(m.vertices, m.faces, layout)))")
+    angles = set()
+    for threads in ("1", "2"):
+        env = {**os.environ, "OPENBLAS_NUM_THREADS": threads, "OMP_NUM_THREADS": threads}
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+        assert done.returncode == 0, done.stderr
+        angles.add(done.stdout.strip())
+    assert len(angles) == 1, angles

@@ -276,3 +276,28 @@ def test_a_worker_ends_when_its_parent_is_killed(tmp_path):
         parent.kill()
         if worker is not None and not _gone(worker):  # (the check failed: no orphan left behind)
             os.kill(worker, signal.SIGKILL)
+
+
+def test_a_dask_workers_malloc_trim_threshold_is_undone_before_each_task(monkeypatch):
+    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536, which also freezes glibc's mmap threshold: a 22,000-vertex
+    flattening took 3x as long on a Dask worker. Where it is set, each batch and study task sets glibc's
+    thresholds where its own dynamic ones end (docs/patterns.md, measured with benchmarks/bench_batch.py); where it
+    is not, nothing is called."""
+    import ctypes
+
+    from sim.workers import undo_dask_malloc_trim
+
+    calls = []
+
+    class Libc:
+        def mallopt(self, parameter, value):
+            calls.append((parameter, value))
+            return 1
+
+    monkeypatch.setattr(ctypes, "CDLL", lambda name: Libc())
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    undo_dask_malloc_trim()
+    assert calls == []
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    undo_dask_malloc_trim()
+    assert calls == [(-3, 32 << 20), (-1, 64 << 20)]  # M_MMAP_THRESHOLD, M_TRIM_THRESHOLD (malloc.h)
