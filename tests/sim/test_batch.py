@@ -340,6 +340,13 @@ def test_the_table_has_one_row_per_mesh_whatever_its_file_name(tmp_path, monkeyp
     assert [row.split()[0] for row in table] == ["a\\nb", "plain", ".hidden"], table
     assert header == 3  # the lines as each mesh finishes: one each
     assert sorted(os.listdir("o")) == [".hidden.dxf", "a\nb.dxf", "plain.dxf"]
+    # --json carries the file names as they are (JSON escapes its own), and the mesh's name as the pattern files
+    # carry it in their headers and titles, one line of text
+    assert main(["flatten", "a\nb.obj", "plain.obj", "--out-dir", "j", "--out", ".dxf", "--max-iter", "3",
+                 "--json"]) == 0
+    records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    record = next(r for r in records if r.get("source") == "a\nb.obj")
+    assert (record["mesh"], record["files"]) == ("a\\nb", ["j/a\nb.dxf"])
 
 
 def test_an_out_dir_that_is_a_dangling_link_is_refused_naming_it(tmp_path, monkeypatch, capsys):
