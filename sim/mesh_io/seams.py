@@ -20,14 +20,18 @@ __all__ = ["SEAM_TOLERANCE", "open_seams", "seams_note", "seams_hint"]
 #: Two vertices closer than this share of the median edge length lie on one another: far below any edge of a
 #: mesh worth flattening, above a float32 file's rounding of one point written twice.
 SEAM_TOLERANCE = 1e-4
+#: The nearest other boundary vertices each is paired with: more copies of one point than a corner has faces
+#: (a face-by-face file writes a point once per face round it) are rare.
+SEAM_NEIGHBOURS = 8
 
 
 def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
     """``(vertices, places)``: how many boundary vertices lie on another boundary vertex (within
     :data:`SEAM_TOLERANCE` of the median edge length) with no edge between them, in how many places. Both copies
     of a point an open seam splits are on the boundary, so interior vertices close together (the corners of two
-    slivers) are not looked at. Each vertex is paired with its nearest other one, so a heap of copies of one
-    point (a depth camera's invalid pixels at the origin) costs no more than a seam."""
+    slivers) are not looked at. Each vertex is paired with its :data:`SEAM_NEIGHBOURS` nearest others, so a heap
+    of copies of one point (a depth camera's invalid pixels at the origin) costs no more than a seam, and the
+    copies of a point a face-by-face file wrote with noise are one place, not a pair of nearest ones each."""
     faces = np.asarray(faces)
     vertices = np.asarray(vertices)
     if (faces.dtype.kind not in "iu" or faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0
@@ -45,9 +49,11 @@ def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
     length = float(np.median(np.linalg.norm(ends, axis=1)))
     if not length > 0:
         return 0, 0
-    distance, nearest = cKDTree(points).query(points, k=2)
-    close = distance[:, 1] <= SEAM_TOLERANCE * length
-    a, b = boundary[close], boundary[nearest[close, 1]]
+    k = min(SEAM_NEIGHBOURS + 1, len(points))
+    distance, nearest = cKDTree(points).query(points, k=k)
+    close = (distance[:, 1:] <= SEAM_TOLERANCE * length) & (nearest[:, 1:] < len(points))  # (the first: itself)
+    a = np.repeat(boundary, k - 1).reshape(-1, k - 1)[close]
+    b = boundary[nearest[:, 1:][close]]
     unjoined = ~np.isin(np.minimum(a, b) * n + np.maximum(a, b), keys)
     a, b = a[unjoined], b[unjoined]
     if len(a) == 0:

@@ -559,5 +559,9 @@ def test_a_seam_left_open_is_named_where_it_cuts_the_surface_and_where_it_breaks
     save_obj(tmp_path / "soup.obj", soup, np.arange(len(soup)).reshape(-1, 3))  # which two corners have one
     with pytest.raises(MeshError, match=r"8 connected components; 22 vertices lie on one another in 7 places"):
         load_mesh_with_notes(tmp_path / "soup.obj")
+    noisy = soup + np.random.default_rng(1).normal(size=soup.shape) * 1e-6  # (a float32 file's rounding, say)
+    save_obj(tmp_path / "noisy.obj", noisy, np.arange(len(soup)).reshape(-1, 3))  # each point's copies one place,
+    with pytest.raises(MeshError, match=r"22 vertices lie on one another in 7 places"):  # not its nearest pairs
+        load_mesh_with_notes(tmp_path / "noisy.obj")
     save_obj(tmp_path / "grid.obj", grid, grid_faces(3, 3))
     assert not [note for note in load_mesh_with_notes(tmp_path / "grid.obj")[1] if "on one another" in note]
