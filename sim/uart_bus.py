@@ -55,12 +55,12 @@ class UartBus:
         if reset is not None:  # nothing stale from an earlier, abandoned exchange
             reset()
         self.port.write(request)
-        head = self._read_exactly(2, what)
+        head = self._read_exactly(protocol.ANSWER_HEAD_BYTES, what)
         status, count = head
-        asked = request[protocol.HEADER_BYTES - 1]
+        asked = protocol.request_words(request)
         if status == protocol.OK and count != asked:  # (a body of another length would be waited for in vain)
             raise LinkError(f"corrupt answer from {self.name} to {what}: OK with {count} words for {asked}")
-        body = protocol.WORD_BYTES * count if status == protocol.OK and request[0] == protocol.READ else 0
+        body = protocol.answer_data_bytes(request, status)
         answer = head + self._read_exactly(body + 1, what, already=len(head))
         self.frames += 1
         try:

@@ -134,6 +134,21 @@ def request_length(command: int, length: int) -> int:
     return HEADER_BYTES + (WORD_BYTES * length if command == WRITE else 0) + 1
 
 
+#: An answer's status and word count, before its data and checksum.
+ANSWER_HEAD_BYTES = 2
+
+
+def request_words(request: bytes) -> int:
+    """The word count a request asks for (its length byte)."""
+    return request[HEADER_BYTES - 1]
+
+
+def answer_data_bytes(request: bytes, status: int) -> int:
+    """The data bytes the answer to ``request`` carries after its head, whose status is ``status``: a read's
+    words where it is :data:`OK`, else none."""
+    return WORD_BYTES * request_words(request) if status == OK and request[0] == READ else 0
+
+
 def answer_bytes(status: int, count: int, words: list[int] = ()) -> bytes:
     """The answer the bridge sends (``words``: a read's data, with :data:`OK` only)."""
     return _with_crc(bytes([status, count]) + b"".join(w.to_bytes(WORD_BYTES, "big") for w in words))
