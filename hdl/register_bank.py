@@ -31,6 +31,7 @@ from golden_model.engine_spec.image import BUS_WORD_BITS
 from golden_model.engine_spec.register_map import RegisterMap
 
 from .logic import or_tree
+from .parameters import check_int
 
 __all__ = ["RegisterBank"]
 
@@ -84,8 +85,7 @@ class RegisterBank(wiring.Component):
         if not isinstance(register_map, RegisterMap):
             raise TypeError(f"RegisterBank needs a RegisterMap, not {register_map!r}")
         end = max([r.offset + 1 for r in register_map.registers] + [w.base + w.size for w in register_map.windows])
-        if isinstance(addr_width, bool) or not isinstance(addr_width, int) or (1 << addr_width) < end:
-            raise ValueError(f"addr_width must be an int whose addresses reach word {end - 1:#x}, not {addr_width!r}")
+        check_int("addr_width", addr_width, minimum=max(1, (end - 1).bit_length()))  # (to reach the map's last word)
         self.register_map, self.addr_width, self.copies = register_map, addr_width, tuple(copies)
         self.values = _field_values(register_map)
         members = {}

@@ -170,3 +170,15 @@ def test_a_field_value_with_two_access_types_is_refused():
 def test_a_copy_must_be_of_a_rw_value():
     with pytest.raises(ValueError, match="'count' is not one"):
         RegisterBank(small_map(), addr_width=ADDR_WIDTH, copies=("count",))
+
+
+def test_an_address_width_too_narrow_for_the_map_is_refused_as_the_other_parameters_are():
+    """The map's last word is 6: three address bits; the check words its refusal as every component's does."""
+    from support import refused_components
+
+    with refused_components():
+        with pytest.raises(ValueError, match=r"^addr_width must be an int >= 3, not 2$"):
+            RegisterBank(small_map(), addr_width=2)
+        with pytest.raises(ValueError, match=r"^addr_width must be an int >= 3, not True$"):
+            RegisterBank(small_map(), addr_width=True)
+        assert RegisterBank(small_map(), addr_width=3).addr_width == 3
