@@ -13,8 +13,8 @@ Workers: ``--jobs`` processes (default: the cores this process may use), each a
 ``LocalCluster`` of ``--jobs`` single-threaded worker processes.  Either way the outputs are the same bytes.
 
 A mesh that fails (unreadable, invalid, a worker that died) is reported on its line and in the table,
-and the others go on; with ``--skip-existing`` a mesh whose every output file is in ``DIR`` already is
-``skipped`` (an interrupted batch run again goes on where it stopped); the exit status is 4 when any mesh
+and the others go on; with ``--skip-existing`` a mesh whose every output file is in ``DIR`` already, newer than
+the mesh file, is ``skipped`` (an interrupted batch run again goes on where it stopped); the exit status is 4 when any mesh
 failed, else 3 when any run diverged, else 0 (2: the batch was refused before its first run).
 """
 
@@ -60,8 +60,9 @@ def add_batch_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=integer_argument, default=None, metavar="N",
                         help="batch: worker processes (default: every core)")
     parser.add_argument("--skip-existing", action="store_true",
-                        help="batch: skip a mesh whose every output file is in --out-dir already (to go on after "
-                             "an interrupted batch: each mesh's files are written all or none)")
+                        help="batch: skip a mesh whose every output file is in --out-dir already and newer than "
+                             "the mesh file (to go on after an interrupted batch: each mesh's files are written all "
+                             "or none)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
                         help="batch on a Dask cluster: a scheduler address (tcp://host:8786), or local for Dask's "
                              "LocalCluster with --jobs worker processes")
@@ -80,6 +81,7 @@ class BatchJob:
         scratch: where the worker makes its private directory: the local pool's directory, which this
             process removes however the worker ends (a Ctrl-C ends it at once, with no clean-up of its
             own); ``None`` on a Dask cluster (the worker's temporary directory).
+        read_ns: when the mesh file had last changed as it was read (:func:`_mesh_changed_ns`).
     """
 
     source: str
@@ -88,6 +90,7 @@ class BatchJob:
     options: dict
     endings: tuple[tuple[str, str], ...]
     scratch: str | None = None
+    read_ns: int = 0
 
 
 @dataclass
@@ -265,12 +268,19 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]
         skipped = frozenset(name for source, name in zip(meshes, names)
                             if args.skip_existing and _already_written(out_dir, name, endings, source))
         written = [name for name in names if name not in skipped]
+        source_of = dict(zip(names, meshes))
         flags = {option: (what, suffixes) for option, what, suffixes in OUTPUT_OPTIONS}
         for option, ending in endings:
             if option == "out":
                 pattern_kind(Path(ending))
             for name in written:  # before any run: a later mesh's obstacle must not end the batch
-                check_output_path(out_dir / f"{name}{ending}", *flags[option], typed=False)
+                try:
+                    check_output_path(out_dir / f"{name}{ending}", *flags[option], typed=False)
+                except OutputError as exc:  # a finished mesh's file made read-only, its mesh touched since?
+                    if args.skip_existing and all((out_dir / f"{name}{e}").is_file() for _, e in endings):
+                        raise OutputError(f"{exc} ({printable_name(source_of[name])} is newer than its files, so "
+                                          "--skip-existing runs it again)") from None
+                    raise
         _check_no_two_meshes_write_one_name(meshes, names, endings, out_dir)
         # no mesh's output may be a mesh of the batch (or the --init or --formats file), nor another's output
         check_distinct([(flags[option][0], out_dir / f"{name}{ending}") for name in names for option, ending in endings],
@@ -289,28 +299,56 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]
 
 
 def _job(source: str, name: str, options: dict, endings) -> BatchJob | MeshOutcome:
-    """The job of one mesh, or its failure when its file cannot be read here."""
+    """The job of one mesh, or its failure when its file cannot be read here; it keeps when the file had last
+    changed as it was read."""
     if is_builtin(source):
         return BatchJob(source, name, None, options, endings)
     try:
-        return BatchJob(source, name, read_file_bytes(source, "mesh", MeshError), options, endings)
+        changed = _mesh_changed_ns(source)
+        return BatchJob(source, name, read_file_bytes(source, "mesh", MeshError), options, endings, read_ns=changed)
+    except OSError as exc:
+        return MeshOutcome(source, name, "failed", line=f"cannot read mesh '{source}': {describe_os_error(exc)}")
     except MeshError as exc:
         return MeshOutcome(source, name, "failed", line=str(exc))
 
 
+def _changed_while_it_ran(job: BatchJob, out_dir: Path, written: list[str]) -> str | None:
+    """Where the mesh file changed after the batch read it (exported again while the batch ran): its files are of
+    the mesh as read, so they are given the mesh's time as read, and ``--skip-existing`` runs it again; the note
+    that says so, or ``None``."""
+    try:
+        if job.data is None or _mesh_changed_ns(job.source) == job.read_ns:
+            return None
+    except OSError:  # (gone since: nothing to run again)
+        return None
+    for ending in written:
+        os.utime(out_dir / f"{job.name}{ending}", ns=(job.read_ns, job.read_ns))
+    return (f"{printable_name(job.source)} changed while the batch ran: its files are of the mesh as it was read, "
+            "and --skip-existing runs it again")
+
+
 def _already_written(out_dir: Path, name: str, endings: tuple[tuple[str, str], ...], source: str) -> bool:
-    """Whether every output file of the mesh ``name`` is in ``out_dir`` and no older than the mesh file
-    ``source`` (``--skip-existing``): a batch writes a mesh's files all or none, so an interrupted batch left each
-    mesh with all of them or none; a mesh exported again since its files were written runs again, as make would
-    (a pattern of the old mesh would go to the cutter)."""
+    """Whether every output file of the mesh ``name`` is in ``out_dir`` and newer than the mesh file ``source``
+    (``--skip-existing``): a batch writes a mesh's files all or none, so an interrupted batch left each mesh with
+    all of them or none; a mesh exported again since its files were written runs again, as make would (a pattern
+    of the old mesh would go to the cutter), and so does one of the same time (a file system that keeps whole
+    seconds cannot tell them apart)."""
     files = [out_dir / f"{name}{ending}" for _, ending in endings]
     if not all(path.is_file() for path in files):
         return False
     try:
-        changed = 0.0 if is_builtin(source) else os.stat(source).st_mtime
+        changed = _mesh_changed_ns(source)
     except OSError:  # (an unreadable mesh fails in its own line, as a run)
         return False
-    return all(path.stat().st_mtime >= changed for path in files)
+    return all(path.stat().st_mtime_ns > changed for path in files)
+
+
+def _mesh_changed_ns(source: str) -> int:
+    """When the mesh file ``source`` last changed, in ns (0 for a built-in): its own time, or a symbolic link's
+    where that is later (a link pointed at another export is a change, as make -L counts it)."""
+    if is_builtin(source):
+        return 0
+    return max(os.lstat(source).st_mtime_ns, os.stat(source).st_mtime_ns)
 
 
 def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:
@@ -574,9 +612,14 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     if pending:
         stream = (_pool_outcomes(pending, workers) if args.scheduler is None
                   else _dask_outcomes(pending, args.scheduler, workers))
+        job_of = {job.name: job for job in pending}
         for outcome in stream:
             if args.out_dir is not None and not outcome.failed:
                 _write_files(args.out_dir, outcome)
+                written = [ending for ending, _ in outcome.files]
+                if not outcome.failed and written and (note := _changed_while_it_ran(job_of[outcome.name],
+                                                                                     args.out_dir, written)):
+                    outcome.notes += f"springflat: note: {note}\n"
             outcomes[outcome.name] = outcome
             report(outcome)
     ordered = [outcomes[name] for name in names]

@@ -518,3 +518,60 @@ def test_skip_existing_does_not_take_a_mesh_or_a_foreign_obj_for_an_output(tmp_p
     assert main(["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "o", "--out", ".obj",
                  "--skip-existing"]) == 2
     assert "springflat did not write" in capsys.readouterr().err
+
+
+def test_skip_existing_sees_a_mesh_changed_while_it_ran_a_link_pointed_elsewhere_and_a_tie(tmp_path, monkeypatch,
+                                                                                            capsys):
+    """A mesh exported again while the batch ran got files newer than itself, a link pointed at an older export
+    was its target's time, and a file system of whole seconds ties them: each was skipped, its old pattern kept."""
+    import sim.batch
+
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 2, 0)
+    argv = ["flatten", "in/dome00.obj", "in/link.off", "--out-dir", "o", "--out", ".dxf", "--max-iter", "3",
+            "--jobs", "1", "--skip-existing"]
+    os.symlink("dome01.off", "in/link.off")
+    real_job = sim.batch._job
+
+    def job_then_export_again(source, *rest):
+        job = real_job(source, *rest)
+        if source == "in/dome00.obj":  # exported again the moment after the batch read it
+            os.utime(source, ns=(job.read_ns + 1000, job.read_ns + 1000))
+        return job
+
+    monkeypatch.setattr(sim.batch, "_job", job_then_export_again)
+    assert main(argv) == 0
+    assert ("springflat: note: in/dome00.obj changed while the batch ran: its files are of the mesh as it was read, "
+            "and --skip-existing runs it again") in capsys.readouterr().err
+    monkeypatch.setattr(sim.batch, "_job", real_job)
+
+    def statuses() -> dict[str, str]:
+        assert main(argv) == 0
+        return {line.split()[0]: line.split()[1] for line in capsys.readouterr().out.splitlines()
+                if line.startswith(("dome", "link"))}
+
+    assert statuses() == {"dome00": "max-iterations", "link": "skipped"}  # its files were of the earlier mesh
+    assert statuses() == {"dome00": "skipped", "link": "skipped"}  # the run again wrote fresh files
+    written = os.stat("o/link.dxf").st_mtime_ns
+    (tmp_path / "in" / "older.off").write_bytes((tmp_path / "in" / "dome01.off").read_bytes())
+    os.utime("in/older.off", ns=(written - 10**9,) * 2)
+    os.remove("in/link.off")
+    os.symlink("older.off", "in/link.off")  # the link, not its target, is new
+    assert statuses()["link"] != "skipped"
+    os.utime("o/dome00.dxf", ns=(os.stat("in/dome00.obj").st_mtime_ns,) * 2)  # a tie: whole seconds
+    assert statuses()["dome00"] != "skipped"
+
+
+def test_a_touched_mesh_whose_finished_files_are_read_only_says_why_it_is_not_skipped(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "in", 1, 0)
+    argv = ["flatten", "in/dome00.obj", "surf1", "--out-dir", "o", "--out", ".dxf", "--max-iter", "3", "--jobs", "1",
+            "--skip-existing"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    os.chmod("o/dome00.dxf", 0o444)
+    future = os.stat("o/dome00.dxf").st_mtime_ns + 10**9
+    os.utime("in/dome00.obj", ns=(future, future))  # touched: a checkout, a copy without -p
+    assert main(argv) == 2
+    assert capsys.readouterr().err.strip().endswith("(in/dome00.obj is newer than its files, so --skip-existing runs "
+                                                    "it again)")

@@ -294,8 +294,16 @@ def test_a_dask_workers_malloc_trim_threshold_is_undone_before_each_task(monkeyp
             calls.append((parameter, value))
             return 1
 
+    import distributed
+
     monkeypatch.setattr(ctypes, "CDLL", lambda name: Libc())
     monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    undo_dask_malloc_trim()
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
+    undo_dask_malloc_trim()  # not in a Dask worker: the command's own process, a pool's, an API caller's
+    assert calls == []
+    monkeypatch.setattr(distributed, "get_worker", lambda: object())  # in a worker's task
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "1000000")  # the user's own value: theirs
     undo_dask_malloc_trim()
     assert calls == []
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")
