@@ -22,6 +22,7 @@ from pathlib import Path
 from filelock import FileLock
 
 from golden_model.fixed import FormatSet
+from golden_model.mesh import one_line
 
 from .lint import WAIVER_FILE, write_waivers
 from .version import SOURCE_ROOT
@@ -132,12 +133,31 @@ def build_lock(directory: Path):
         yield directory
 
 
+def _kept_log(log_file: str | Path | None, build_dir: Path, toplevel: str) -> str:
+    """``: <the log's last line>; the log: <path>`` for a failed build: the caller's log file (often in a
+    temporary directory it removes) copied into the build directory, which stays; ``; see <build_dir>`` without
+    one."""
+    if log_file is None or not Path(log_file).is_file():
+        return f"; see {build_dir}"
+    kept = Path(build_dir) / f"build-failed-{toplevel}.log"
+    shutil.copyfile(log_file, kept)
+    lines = [line.strip() for line in kept.read_text(errors="replace").splitlines() if line.strip()]
+    return (f": {one_line(lines[-1])[:200]}" if lines else "") + f"; the log: {kept}"
+
+
 def _formats_key(fs: FormatSet, dsp: str | None = None) -> str:
-    """Cache key of an export: the format set, the DSP flavour and the RTL sources (an RTL edit
-    must not reuse old Verilog)."""
+    """Cache key of an export: the format set, the DSP flavour, Amaranth's version and every source the Verilog
+    is made of: the RTL, and the golden model, whose tables and widths the RTL takes (an edit of either must not
+    reuse old Verilog: a CI cache kept across commits would check the old design)."""
+    import amaranth
+
     digest = hashlib.sha256(fs.to_json().encode())
-    digest.update(repr(dsp).encode())
-    for source in sorted((REPO / "hdl").glob("*.py")) + [REPO / "sim" / "export.py", REPO / "sim" / "lint.py"] + PRIMITIVE_MODELS.get(dsp, []):
+    digest.update(repr((dsp, amaranth.__version__)).encode())
+    sources = [*sorted((REPO / "hdl").glob("*.py")), *sorted((REPO / "golden_model").rglob("*.py")),
+               REPO / "sim" / "export.py", REPO / "sim" / "lint.py", REPO / "sim" / "engine_run.py",
+               *PRIMITIVE_MODELS.get(dsp, [])]
+    for source in sources:
+        digest.update(str(source.relative_to(REPO) if source.is_relative_to(REPO) else source).encode())
         digest.update(source.read_bytes())
     return digest.hexdigest()[:12]
 
@@ -219,7 +239,8 @@ def run_bench(sim: str, fs: FormatSet, toplevel: str, bench: str, config: dict, 
                          build_dir=build_dir, build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
                          always=False, verbose=False, log_file=log_file)
     except RuntimeError as exc:
-        raise SimulatorError(f"building {toplevel} for {sim} failed ({exc}); see {log_file or build_dir}") from None
+        raise SimulatorError(f"building {toplevel} for {sim} failed ({exc}){_kept_log(log_file, build_dir, toplevel)}") \
+            from None
     started = time.perf_counter()
     results_xml = work / "results.xml"
     try:

@@ -57,3 +57,50 @@ def test_the_builds_go_where_springflat_build_dir_says(tmp_path):
     default = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                              check=True).stdout.split()
     assert default == [str(REPO / "build" / "cocotb"), str(REPO / "build" / "ccache")]
+
+
+def test_a_cached_export_is_keyed_by_the_golden_models_sources_too(tmp_path, monkeypatch):
+    """The RTL takes its tables and widths from golden_model (the exp table, the rsqrt seeds, the energy check's
+    widths): an edit there kept the old Verilog, and a CI cache kept across commits checked the old design."""
+    import shutil
+
+    import sim.cocotb_support as support_module
+    from golden_model.fixed import FormatSet
+
+    for part in ("hdl", "golden_model"):
+        shutil.copytree(REPO / part, tmp_path / part, ignore=shutil.ignore_patterns("__pycache__"))
+    (tmp_path / "sim").mkdir()
+    for name in ("export.py", "lint.py", "engine_run.py"):
+        shutil.copy(REPO / "sim" / name, tmp_path / "sim" / name)
+    monkeypatch.setattr(support_module, "REPO", tmp_path)
+    fs = FormatSet.preset("default")
+    keys = [support_module._formats_key(fs)]
+    for edited in ("golden_model/fixed/exp_table.py", "hdl/rsqrt.py", "sim/engine_run.py"):
+        with open(tmp_path / edited, "a") as source:
+            source.write("\n# edited\n")
+        keys.append(support_module._formats_key(fs))
+    assert len(set(keys)) == len(keys), keys
+    assert support_module._formats_key(fs) == keys[-1]  # (and nothing else moves it)
+
+
+def test_a_failed_build_says_what_the_tool_said_and_keeps_its_log(tmp_path):
+    """The message pointed at a log in a temporary directory already removed, and said nothing of the tool's
+    own error: its last line is in the message, and the log is kept in the build directory."""
+    import re
+    import subprocess
+
+    from support import SPRINGFLAT
+
+    tools = tmp_path / "bin"
+    tools.mkdir()
+    (tools / "iverilog").write_text("#!/bin/sh\necho 'iverilog: springflat_core.v:7: syntax error' >&2\nexit 1\n")
+    (tools / "iverilog").chmod(0o755)
+    env = {**os.environ, "PATH": f"{tools}:{os.environ['PATH']}", "SPRINGFLAT_BUILD_DIR": str(tmp_path / "build")}
+    done = subprocess.run([SPRINGFLAT, "rtl-check", "surf1", "--sim", "icarus"], capture_output=True, text=True,
+                          env=env, timeout=300)
+    assert done.returncode == 2, done.stderr
+    error = done.stderr.splitlines()[-1]
+    found = re.fullmatch(r"springflat: error: building springflat_core for icarus failed \(.*\): iverilog: "
+                         r"springflat_core.v:7: syntax error; the log: (\S+)", error)
+    assert found, error
+    assert "syntax error" in open(found[1]).read()
