@@ -37,28 +37,80 @@ def triangulate_polygons(
     if (sizes == 3).all():
         return polygons.index.reshape(-1, 3), np.arange(len(sizes)), notes
     faces, triangle_face = fan_triangulate(polygons.index, sizes)
-    clipped = np.zeros(0, dtype=np.int64)
+    other = np.zeros(0, dtype=np.int64)
     if np.isfinite(vertices).all() and np.abs(vertices).max(initial=0.0) <= COORDINATE_LIMIT:
-        clipped = folded_fans(vertices, faces, triangle_face, sizes)
-        # a quad whose fan does not fold is simple; a polygon of more corners, or one to clip, may cross itself
-        # and still have ears (a pentagram's) or a fan that does not fold
-        suspect = np.union1d(clipped, np.flatnonzero(sizes > 4))
+        poor = np.union1d(poor_fans(vertices, faces, triangle_face, sizes), np.flatnonzero(sizes > MAX_FAN_CORNERS))
+        # a quad whose fan does not fold is simple; a polygon of more corners, or one to triangulate otherwise,
+        # may cross itself and still have ears (a pentagram's) or a fan that does not fold
+        suspect = np.union1d(poor, np.flatnonzero(sizes > 4))
         if len(crossing := crossing_polygons(vertices, polygons, suspect)):
             raise _no_surface(polygons, int(crossing[0]), where)
+        clipped = refan(vertices, polygons, poor, faces)
         ear_clip(vertices, polygons, clipped, faces, triangle_face, where)
+        other = poor
     # else the validation refuses the coordinates, with the right message, before anything uses the fans
     many = sizes > 3
     low, high = int(sizes[many].min()), int(sizes[many].max())
     polygon_count = plural(int(many.sum()), "polygon")
     triangle_count = plural(int((sizes[many] - 2).sum()), "triangle")
     span = f"{low}" if low == high else f"{low} to {high}"
-    if not len(clipped):
+    if not len(other):
         return faces, triangle_face, [*notes, f"{polygon_count} ({span} corners) fan-triangulated into {triangle_count}"]
-    how = ("by ear clipping" if len(clipped) == many.sum() else
-           f"as fans from the first corner, {len(clipped)} by ear clipping")
+    how = (", not as fans from the first corner" if len(other) == many.sum() else
+           f" as fans from the first corner, {len(other)} otherwise")
     return faces, triangle_face, [*notes,
-        f"{polygon_count} ({span} corners) triangulated into {triangle_count} {how} ({'first ' if len(clipped) > 1 else ''}"
-        f"{polygons.label(int(clipped[0]))}): a fan from its first corner would fold or have a triangle of zero area"]
+        f"{polygon_count} ({span} corners) triangulated into {triangle_count}{how} "
+        f"({'first ' if len(other) > 1 else ''}{polygons.label(int(other[0]))}): that fan would fold, have a sliver or "
+        "give its corner too many neighbours"]
+
+
+#: A fan triangle under this share of its polygon's area is a sliver (a corner on a nearly straight side, as CAD
+#: exporters leave them): the fan from a better corner is taken.
+SLIVER_SHARE = 1e-3
+#: Polygons of more corners are ear-clipped: a fan's first corner would have one neighbour for each (a 40-gon's,
+#: 39: more than the datapath accumulates).
+MAX_FAN_CORNERS = 8
+
+
+def poor_fans(vertices: np.ndarray, faces: np.ndarray, triangle_face: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """The polygons whose fan from corner 0 has a triangle facing against the polygon (a reflex corner, seen
+    from corner 0) or a sliver (:data:`SLIVER_SHARE`: a corner on a straight or nearly straight side)."""
+    polygon = sizes[triangle_face] > 3
+    if not polygon.any():
+        return np.zeros(0, dtype=np.int64)
+    a, b, c = (vertices[faces[polygon, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    # Newell normal of each polygon = the sum of its fan triangles' normals (exact for any fan)
+    owner = triangle_face[polygon]
+    newell = np.column_stack([np.bincount(owner, weights=normal[:, d], minlength=len(sizes)) for d in range(3)])
+    facing = np.einsum("ij,ij->i", normal, newell[owner])  # twice the triangle's area times twice the polygon's
+    return np.unique(owner[~(facing > SLIVER_SHARE * np.einsum("ij,ij->i", newell, newell)[owner])])
+
+
+def refan(vertices: np.ndarray, polygons: Polygons, which: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The polygons ``which`` of up to :data:`MAX_FAN_CORNERS` corners fanned from the corner whose fan's
+    smallest triangle is largest, where that one has no sliver (in ``faces``, in place); the rest, to be
+    ear-clipped. Vectorised over the polygons of each corner count."""
+    first = np.concatenate([[0], np.cumsum(polygons.sizes)[:-1]])
+    triangles = np.concatenate([[0], np.cumsum(polygons.sizes - 2)[:-1]])
+    rest = [which[polygons.sizes[which] > MAX_FAN_CORNERS]]
+    for k in np.unique(polygons.sizes[which]):
+        if k > MAX_FAN_CORNERS:
+            continue
+        group = which[polygons.sizes[which] == k]
+        corners = polygons.index[first[group][:, None] + np.arange(k)]  # (m, k)
+        points = vertices[corners]
+        newell = np.cross(points, np.roll(points, -1, axis=1)).sum(axis=1)  # (m, 3): twice the vector area
+        start = np.arange(k)[:, None]
+        apex, b, c = start, (start + np.arange(1, k - 1)) % k, (start + np.arange(2, k)) % k  # (k, k - 2)
+        double = np.cross(points[:, b] - points[:, apex], points[:, c] - points[:, apex])  # (m, k, k - 2, 3)
+        smallest = np.einsum("mskd,md->msk", double, newell).min(axis=2)  # (m, k)
+        best = smallest.argmax(axis=1)  # (the first of equals)
+        good = smallest[np.arange(len(group)), best] > SLIVER_SHARE * np.einsum("md,md->m", newell, newell)
+        for f, s, row in zip(group[good], best[good], corners[good]):
+            faces[triangles[f]:triangles[f] + k - 2] = np.column_stack([np.full(k - 2, row[s]), row[b[s]], row[c[s]]])
+        rest.append(group[~good])
+    return np.sort(np.concatenate(rest))
 
 
 def _repeats_dropped(polygons: Polygons, where: str) -> tuple[Polygons, list[str]]:
@@ -111,21 +163,6 @@ def fan_triangulate(index: np.ndarray, sizes: np.ndarray) -> tuple[np.ndarray, n
     c0 = first[triangle_face]
     faces = np.column_stack([index[c0], index[c0 + k], index[c0 + k + 1]])
     return faces, triangle_face
-
-
-def folded_fans(vertices: np.ndarray, faces: np.ndarray, triangle_face: np.ndarray, sizes: np.ndarray) -> np.ndarray:
-    """The polygons whose fan has a triangle facing against the polygon or of zero area (a reflex corner, or
-    a corner on a straight side, seen from corner 0)."""
-    polygon = sizes[triangle_face] > 3
-    if not polygon.any():
-        return np.zeros(0, dtype=np.int64)
-    a, b, c = (vertices[faces[polygon, k]] for k in range(3))
-    normal = np.cross(b - a, c - a)
-    # Newell normal of each polygon = the sum of its fan triangles' normals (exact for any fan)
-    owner = triangle_face[polygon]
-    newell = np.column_stack([np.bincount(owner, weights=normal[:, d], minlength=len(sizes)) for d in range(3)])
-    facing = np.einsum("ij,ij->i", normal, newell[owner])
-    return np.unique(owner[~(facing > 0)])
 
 
 def ear_clip(vertices: np.ndarray, polygons: Polygons, which: np.ndarray, faces: np.ndarray,

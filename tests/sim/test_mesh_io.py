@@ -127,8 +127,9 @@ def test_obj_quads_and_pentagons_are_fan_triangulated(tmp_path):
 def test_an_obj_polygon_whose_fan_would_fold_is_ear_clipped(tmp_path, text, corners):
     """They were refused ('cannot be fan-triangulated from its first corner'): a modeller writes them."""
     mesh, notes = load_mesh_with_notes(_obj(tmp_path, text))
-    assert notes == [f"1 polygon ({corners} corners) triangulated into {corners - 2} triangles by ear clipping "
-                     f"(line {corners + 1}): a fan from its first corner would fold or have a triangle of zero area"]
+    assert notes == [f"1 polygon ({corners} corners) triangulated into {corners - 2} triangles, not as fans from the "
+                     f"first corner (line {corners + 1}): that fan would fold, have a sliver or give its corner too many "
+                     "neighbours"]
     v = mesh.vertices[:, :2]
     areas = [np.cross(v[b] - v[a], v[c] - v[a]) / 2 for a, b, c in mesh.faces]
     polygon = v[[int(k) - 1 for k in text.split("f ")[1].split()]]
@@ -140,8 +141,44 @@ def test_a_polygon_fanned_and_one_ear_clipped_are_told_apart(tmp_path):
     text = ("v 0 0 0\nv 10 0 0\nv 3 3 0\nv 0 10 0\nv 20 0 0\nv 20 10 0\n"
             "f 2 3 4 1\nf 2 5 6 3\n")
     assert load_mesh_with_notes(_obj(tmp_path, text))[1] == [
-        "2 polygons (4 corners) triangulated into 4 triangles as fans from the first corner, 1 by ear clipping "
-        "(line 7): a fan from its first corner would fold or have a triangle of zero area"]
+        "2 polygons (4 corners) triangulated into 4 triangles as fans from the first corner, 1 otherwise (line 7): "
+        "that fan would fold, have a sliver or give its corner too many neighbours"]
+
+
+@pytest.mark.parametrize("bump", [-1e-12, -1e-6, 1e-6])
+def test_a_corner_on_a_nearly_straight_side_is_fanned_from_a_corner_with_no_sliver(tmp_path, bump):
+    """A CAD exporter's corner a hair off a straight side: the fan from the first corner had a triangle of zero
+    area (refused as degenerate) or a sliver (the fixed-point weights then ran out of bits)."""
+    text = f"v 0 0 0\nv 1 {bump} 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\nf 1 2 3 4 5\n"
+    mesh = load_mesh(_obj(tmp_path, text))
+    v = mesh.vertices[:, :2]
+    (ab, ac) = (v[mesh.faces[:, 1]] - v[mesh.faces[:, 0]], v[mesh.faces[:, 2]] - v[mesh.faces[:, 0]])
+    areas = (ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0]) / 2
+    assert np.isclose(areas.sum(), 4.0 - bump) and areas.min() > 0.5  # no sliver:
+    assert (mesh.faces == 1).any(axis=1).all()  # the fan from the corner a hair off
+
+
+def test_a_poor_fan_is_taken_from_the_corner_whose_smallest_triangle_is_largest():
+    from sim.mesh_io.polygons import Polygons, poor_fans, refan
+
+    vertices = np.array([[0, 0, 0], [1, 1e-6, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0],  # a hair off a straight side
+                         [0, 0, 0], [3, 0, 0], [3, 1, 0], [0, 1, 0]], dtype=float)  # a plain quad
+    polygons = Polygons(np.array([0, 1, 2, 3, 4, 5, 6, 7, 8]), np.array([5, 4]), lambda f: f"face {f}")
+    faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [5, 6, 7], [5, 7, 8]])
+    triangle_face = np.array([0, 0, 0, 1, 1])
+    assert poor_fans(vertices, faces, triangle_face, polygons.sizes).tolist() == [0]  # (0, 1, 2): a sliver
+    assert refan(vertices, polygons, np.array([0]), faces).tolist() == []  # nothing left to clip
+    assert faces.tolist() == [[1, 2, 3], [1, 3, 4], [1, 4, 0], [5, 6, 7], [5, 7, 8]]
+
+
+@pytest.mark.parametrize("corners", [12, 40])
+def test_a_polygon_of_many_corners_gives_no_corner_many_neighbours(tmp_path, corners):
+    """A 40-gon (a cylinder's cap) fanned gave its first corner 39 neighbours, more than the datapath takes."""
+    angles = np.arange(corners) * 2 * np.pi / corners
+    text = "".join(f"v {math.cos(a)} {math.sin(a)} {0.1 * math.cos(3 * a)}\n" for a in angles)
+    mesh = load_mesh(_obj(tmp_path, text + "f " + " ".join(str(k + 1) for k in range(corners)) + "\n"))
+    neighbours = np.bincount(mesh.edges.ravel()).max()
+    assert len(mesh.faces) == corners - 2 and neighbours <= min(16, corners - 3)  # (the datapath takes 32)
 
 
 @pytest.mark.parametrize("points, order", [
