@@ -30,7 +30,10 @@ __all__ = ["add_parser", "cmd_rtl_check"]
 def add_parser(sub, add_run_options) -> None:
     p = sub.add_parser("rtl-check", help="run a flattening through the RTL on a Verilog simulator",
                        description="Closed-loop flattening through the exported Verilog, checked bit for bit "
-                                   "against the golden model and compared with the float reference.")
+                                   "against the golden model and compared with the float reference. The Verilog "
+                                   "and the simulator builds are cached under build/ in the checkout (or "
+                                   "~/.cache/springflat outside one); SPRINGFLAT_BUILD_DIR=DIR puts them in DIR "
+                                   "(a CI cache, a build per job).")
     add_run_options(p)
     p.add_argument("--formats", default="default", metavar="PRESET|FILE", help="format set (default: default)")
     p.add_argument("--sim", "--simulator", dest="sim", choices=SIMULATORS, default="verilator",
