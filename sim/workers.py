@@ -157,7 +157,7 @@ def undo_dask_malloc_trim() -> None:
     """In a Dask worker started with Dask's ``MALLOC_TRIM_THRESHOLD_=65536``, glibc's thresholds set where its
     own dynamic ones end on a 64-bit machine (an mmap threshold of 32 MiB, a trim threshold of 64 MiB): Dask's
     value also stops glibc raising its mmap threshold, so each of a large mesh's arrays is mapped afresh and handed
-    back at once (a 22,000-vertex flattening 10.8 s against 3.6 s, 25 times the page faults). Nothing outside a
+    back at once, page fault by page fault (measured in docs/patterns.md, "Large meshes on Dask"). Nothing outside a
     Dask worker (the command, its process pool, an API caller's executor), where the variable has another value
     (the user's), or where glibc is not the C library; the thresholds stay for the worker's later tasks."""
     if os.environ.get("MALLOC_TRIM_THRESHOLD_") != DASK_MALLOC_TRIM_THRESHOLD or "distributed" not in sys.modules:

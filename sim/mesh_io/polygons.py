@@ -100,6 +100,7 @@ def refan(vertices: np.ndarray, polygons: Polygons, which: np.ndarray, faces: np
         group = which[polygons.sizes[which] == k]
         corners = polygons.index[first[group][:, None] + np.arange(k)]  # (m, k)
         points = vertices[corners]
+        points = points - points.mean(axis=1, keepdims=True)  # (a mesh far from the origin: no cancellation)
         newell = np.cross(points, np.roll(points, -1, axis=1)).sum(axis=1)  # (m, 3): twice the vector area
         start = np.arange(k)[:, None]
         apex, b, c = start, (start + np.arange(1, k - 1)) % k, (start + np.arange(2, k)) % k  # (k, k - 2)

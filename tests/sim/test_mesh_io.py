@@ -145,11 +145,11 @@ def test_a_polygon_fanned_and_one_ear_clipped_are_told_apart(tmp_path):
         "that fan would fold, have a sliver or give its corner too many neighbours"]
 
 
-@pytest.mark.parametrize("bump", [-1e-12, -1e-6, 1e-6])
-def test_a_corner_on_a_nearly_straight_side_is_fanned_from_a_corner_with_no_sliver(tmp_path, bump):
+@pytest.mark.parametrize("bump, x", [(-1e-12, 0), (-1e-6, 0), (1e-6, 0), (1e-6, 1e7)])  # (1e7: far from the origin)
+def test_a_corner_on_a_nearly_straight_side_is_fanned_from_a_corner_with_no_sliver(tmp_path, bump, x):
     """A CAD exporter's corner a hair off a straight side: the fan from the first corner had a triangle of zero
     area (refused as degenerate) or a sliver (the fixed-point weights then ran out of bits)."""
-    text = f"v 0 0 0\nv 1 {bump} 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\nf 1 2 3 4 5\n"
+    text = f"v {x} 0 0\nv {x + 1} {bump} 0\nv {x + 2} 0 0\nv {x + 2} 2 0\nv {x} 2 0\nf 1 2 3 4 5\n"
     mesh = load_mesh(_obj(tmp_path, text))
     v = mesh.vertices[:, :2]
     (ab, ac) = (v[mesh.faces[:, 1]] - v[mesh.faces[:, 0]], v[mesh.faces[:, 2]] - v[mesh.faces[:, 0]])
