@@ -46,9 +46,9 @@ def test_surf1_over_the_simulated_uart_is_byte_identical_to_engine_fixed(tmp_pat
         name: (status, 0) for name, status in want.items()}
     result = engine_flatten_result(problem, run.positions, run.velocities, r["status"], r["iterations"], "board",
                                    {"saturations": r["saturations"]})
-    final = result.final  # the file as --out writes it: the layout as vt, the run's line in its header
+    final = result.final  # the file as --out writes it: the layout turned as seen, as vt, the run's line in its header
     caption = run_caption(result.status, result.iterations, final.area_error, final.shape_error, final.folded)
-    write_pattern_file(tmp_path / "board.obj", PatternDrawing.of(mesh, result.positions, caption=caption))
+    write_pattern_file(tmp_path / "board.obj", PatternDrawing.of(mesh, result.positions, caption=caption).as_seen())
     proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "fixed", "--out", "fixed.obj", "--json"],
                           capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 0, proc.stderr
