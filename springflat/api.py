@@ -42,7 +42,7 @@ from sim.distortion import Distortion, distortion
 from sim.engines import ENGINES, engine_named
 from sim.flatten_run import divergence_note, pattern_notes, run_flatten, run_formats
 from sim.layouts import AUTO_START, LAYOUT_METHODS, LayoutError
-from sim.mesh_io import load_mesh_with_notes
+from sim.mesh_io import load_mesh_with_notes, repair_hint
 from sim.mesh_io.seams import seams_hint, seams_note
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
                          ending_name_problem)
@@ -385,7 +385,7 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
         except HoledMesh as exc:
             raise MeshError(f"{exc}{seams_hint(vertices, faces)}; {_in_api_words(HOLES_HINT)}") from None
         except MeshError as exc:
-            raise MeshError(f"{exc}{seams_hint(vertices, faces)}") from None
+            raise MeshError(f"{exc}{repair_hint(str(exc))}{seams_hint(vertices, faces)}") from None
         for note in [*notes, *filter(None, [seams_note(vertices, faces)])]:
             warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
         defaults = file_defaults(mesh)

@@ -6,8 +6,8 @@ readers themselves only parse (one module per format), and the topology and vali
 message; so does a file that cannot be read (the OS error in words).
 """
 
-from .load import MESH_SUFFIXES, load_mesh, load_mesh_with_notes, save_obj
+from .load import MESH_SUFFIXES, load_mesh, load_mesh_with_notes, repair_hint, save_obj
 from .obj import ObjContents, read_obj, read_obj_vertices
 
 __all__ = ["MESH_SUFFIXES", "ObjContents", "load_mesh", "load_mesh_with_notes", "read_obj", "read_obj_vertices",
-           "save_obj"]
+           "repair_hint", "save_obj"]

@@ -18,6 +18,24 @@ from .seams import seams_hint
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
+#: What a scan's harmless defects need, by the start of the validation's refusal: the tools that remove them.
+_REPAIRS = (("is not used by any face", "the unused vertices", "remove_unreferenced_vertices()",
+             "Remove Unreferenced Vertices"),
+            ("is duplicated", "the duplicate faces", "update_faces(unique_faces())", "Remove Duplicate Faces"),
+            ("is degenerate (zero area)", "the faces of zero area", "update_faces(nondegenerate_faces())",
+             "Remove Zero Area Faces"),
+            ("repeats a vertex", "the faces of zero area", "update_faces(nondegenerate_faces())",
+             "Remove Zero Area Faces"))
+
+
+def repair_hint(message: str) -> str:
+    """``"; remove <what> (trimesh's ..., MeshLab's ...)"`` for a refusal of a defect a scan often has and a
+    mesh tool removes at once (an unused vertex, a duplicate or zero-area face), else ``""``."""
+    for said, what, trimesh_call, meshlab_filter in _REPAIRS:
+        if said in message:
+            return f"; remove {what} first (trimesh's {trimesh_call}, MeshLab's {meshlab_filter})"
+    return ""
+
 
 def load_mesh(path: str | Path) -> Mesh:
     """Load and validate an OBJ, PLY, OFF or STL triangle mesh.
@@ -80,7 +98,7 @@ def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple
         seams = seams_hint(vertices, faces)
         if suffix == ".obj" and not (seams and "connected components" in str(exc)):  # (pieces a weld may join)
             hint = obj_line_hint(str(exc), obj)
-        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{seams}") from None
+        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{repair_hint(str(exc))}{seams}") from None
 
 
 def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:

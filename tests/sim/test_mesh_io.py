@@ -282,11 +282,23 @@ def test_obj_refusals_name_the_construct(tmp_path, case):
 
 def test_obj_validation_message_points_at_the_file_line(tmp_path):
     # the validation's own message, then the OBJ line it is about
-    with pytest.raises(MeshError, match=r"invalid mesh .*: vertex 4 is not used by any face \(file line 5\)$"):
+    # and what a scan's harmless defect needs: the tools that remove it
+    with pytest.raises(MeshError, match=r"invalid mesh .*: vertex 4 is not used by any face \(file line 5\); remove "
+                                        r"the unused vertices first \(trimesh's remove_unreferenced_vertices\(\), "
+                                        r"MeshLab's Remove Unreferenced Vertices\)$"):
         load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "v 9 9 9\nf 1 2 3 4\n"))
-    repeated = r"invalid mesh .*: face 1 repeats a vertex \(degenerate triangle\) \(file line 6\)$"
+    repeated = (r"invalid mesh .*: face 1 repeats a vertex \(degenerate triangle\) \(file line 6\); remove the faces "
+                r"of zero area first \(trimesh's update_faces\(nondegenerate_faces\(\)\), MeshLab's Remove Zero Area "
+                r"Faces\)$")
     with pytest.raises(MeshError, match=repeated):
         load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3\nf 1 3 3\n"))
+    with pytest.raises(MeshError, match=r"face 0 is duplicated .*; remove the duplicate faces first \(trimesh's "
+                                        r"update_faces\(unique_faces\(\)\), MeshLab's Remove Duplicate Faces\)$"):
+        load_mesh(_obj(tmp_path, UNIT_SQUARE_OBJ + "f 1 2 3\nf 1 3 4\nf 1 2 3\n"))
+    import springflat
+
+    with pytest.raises(MeshError, match=r"; remove the unused vertices first"):  # the API's arrays too
+        springflat.flatten(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5]]), [[0, 1, 2]])
 
 
 @pytest.mark.parametrize("text, hint", [
