@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from golden_model.mesh import COORDINATE_LIMIT, MeshError, hole_triangles
+from golden_model.mesh import COORDINATE_LIMIT, MeshError, boundary_crossings, hole_triangles
 
 #: The byte-order mark a text editor may put before a UTF-8 file's text (OBJ, OFF, a text STL, a PLY header).
 UTF8_BOM = b"\xef\xbb\xbf"
@@ -189,39 +189,33 @@ def _no_surface(polygons: Polygons, f: int, where: str) -> MeshError:
 
 def crossing_polygons(vertices: np.ndarray, polygons: Polygons, which: np.ndarray) -> np.ndarray:
     """Those of the polygons ``which`` that, seen along their Newell normal, enclose no area or have two sides
-    that are not neighbours meet (cross, touch, or overlap along a line): no triangulation of theirs is a
-    piece of surface. Vectorised over the polygons of each corner count."""
+    that are not neighbours meet (:func:`golden_model.mesh.boundary_crossings`, one call for all: each polygon
+    laid flat in a place of its own): no triangulation of theirs is a piece of surface."""
     first = np.concatenate([[0], np.cumsum(polygons.sizes)[:-1]])
-    crossing = []
+    flat_of, no_area = {}, []
     for k in np.unique(polygons.sizes[which]):
         group = which[polygons.sizes[which] == k]
         points = vertices[polygons.index[first[group][:, None] + np.arange(k)]]  # (m, k, 3)
         centred = points - points.mean(axis=1, keepdims=True)
         normal = np.cross(centred, np.roll(centred, -1, axis=1)).sum(axis=1)
         size = np.ptp(centred, axis=1).max(axis=1)
-        length = np.linalg.norm(normal, axis=1)
-        flat_ones = ~(length > 1e-9 * size**2)
+        flat_ones = ~(np.linalg.norm(normal, axis=1) > 1e-9 * size**2)
         normal[flat_ones] = [0.0, 0.0, 1.0]
-        axis = np.eye(3)[np.argmin(np.abs(normal), axis=1)]
-        u = np.cross(normal, axis)
+        u = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal), axis=1)])
         u /= np.linalg.norm(u, axis=1, keepdims=True)
         v = np.cross(normal / np.linalg.norm(normal, axis=1, keepdims=True), u)
         flat = np.stack([np.einsum("mkd,md->mk", centred, u), np.einsum("mkd,md->mk", centred, v)], axis=2)
-        i, j = np.triu_indices(k, 2)
-        keep = ~((i == 0) & (j == k - 1))  # (the last side and the first are neighbours)
-        i, j = i[keep], j[keep]
-        a, b, c, d = flat[:, i], flat[:, (i + 1) % k], flat[:, j], flat[:, (j + 1) % k]  # (m, pairs, 2)
-
-        def side(p, q, r):
-            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
-
-        tolerance = (1e-12 * size**2)[:, None]
-        straddle = (side(a, b, c) * side(a, b, d) <= tolerance**2) & (side(c, d, a) * side(c, d, b) <= tolerance**2)
-        slack = (1e-12 * size)[:, None, None]
-        boxes = np.all((np.minimum(a, b) <= np.maximum(c, d) + slack) & (np.minimum(c, d) <= np.maximum(a, b) + slack),
-                       axis=2)
-        crossing.append(group[flat_ones | (straddle & boxes).any(axis=1)])
-    return np.sort(np.concatenate(crossing)) if crossing else np.zeros(0, dtype=np.int64)
+        flat_of.update(zip(group.tolist(), flat / np.where(size > 0, size, 1.0)[:, None, None]))  # (within ±1)
+        no_area.append(group[flat_ones])
+    if not flat_of:
+        return np.zeros(0, dtype=np.int64)
+    order = sorted(flat_of)
+    points = np.concatenate([flat_of[f] + [4.0 * place, 0.0] for place, f in enumerate(order)])
+    ends = np.cumsum([len(flat_of[f]) for f in order])
+    loops = [np.arange(end - len(flat_of[f]), end) for f, end in zip(order, ends)]
+    crossing = [] if not boundary_crossings(points, loops) else \
+        [f for f in order if boundary_crossings(flat_of[f], np.arange(len(flat_of[f])))]
+    return np.union1d(np.concatenate(no_area), np.asarray(crossing, dtype=np.int64)).astype(np.int64)
 
 
 def plural(n: int, word: str, words: str | None = None) -> str:
