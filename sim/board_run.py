@@ -24,6 +24,7 @@ from golden_model.engine_spec.register_map import RegisterMap
 
 from .engine_driver import DriverError, EngineDriver, EngineReadBack
 from .engine_run import EngineRunError, engine_flatten_result
+from .outputs import print_note
 
 __all__ = ["board_capacity", "BoardRun", "run_on_board", "flatten_on_board", "add_board_options", "board_engine"]
 
@@ -128,8 +129,7 @@ def flatten_on_board(problem: FixedProblem, bus, *, poll=None, transport: str = 
     from the golden model's."""
     run = run_on_board(problem, bus, poll=poll, stall_seconds=stall_seconds)
     if run.aborted_earlier_run:
-        print(f"springflat: note: the engine on {transport} was still running a run cut off earlier: aborted it "
-              "first", file=sys.stderr)
+        print_note(f"the engine on {transport} was still running a run cut off earlier: aborted it first")
     if run.mismatches:
         raise EngineRunError(f"the engine on {transport} does not match the golden model: {run.mismatches[0]}")
     r = run.readback

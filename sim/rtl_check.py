@@ -61,7 +61,7 @@ def add_parser(sub, add_run_options) -> None:
 def cmd_rtl_check(args: argparse.Namespace) -> int:
     from hdl import SpringflatCore
 
-    from .outputs import check_distinct, check_link_target, check_output_path
+    from .outputs import check_distinct, check_link_target, check_output_path, print_note
     from .run_options import (UserError, default_init, holes_mode, input_files, load_format_set, params_from_args,
                               resolve_mesh, strict_json)
 
@@ -82,9 +82,8 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         if args.stall is not None:  # asked for the datapath bench, which has no guard
             raise UserError("the datapath bench (--stall) has no step guard: drop --stall for the whole engine "
                             "(--engine-top, with --wait-states), or add --no-guard --energy-window 1")
-        print("springflat: note: the guarded momentum dynamics (the default for mesh files) runs on the whole "
-              "engine only: checking SpringflatEngine (--engine-top); the datapath bench takes --no-guard "
-              "--energy-window 1", file=sys.stderr)
+        print_note("the guarded momentum dynamics (the default for mesh files) runs on the whole engine only: "
+                   "checking SpringflatEngine (--engine-top); the datapath bench takes --no-guard --energy-window 1")
         args.engine_top = True
     if args.engine_top:
         return cmd_rtl_check_engine(args, mesh, params)
