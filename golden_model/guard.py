@@ -33,13 +33,14 @@ with shifts, exactly (``golden_model.fixed``); the float model here is their ref
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
 __all__ = ["GUARD_LEVELS", "FLOOR_SHIFT", "FLOOR_MIN_SHIFT", "SCALE_GROW_AFTER", "SCALE_MAX_SHIFT",
-           "ENERGY_WINDOW", "ENERGY_FLOOR", "energy_floor_fraction", "area_floor", "triangle_levels", "node_levels",
+           "ENERGY_WINDOW", "ENERGY_FLOOR", "energy_floor_fraction", "energy_floor_strain", "area_floor", "triangle_levels", "node_levels",
            "stuck_nodes", "guarded_moves",
            "StepScale", "EnergyWindow"]
 
@@ -68,6 +69,11 @@ def energy_floor_fraction(tol_energy: float) -> float:
     :data:`ENERGY_FLOOR`. A tighter ``ε`` asks a developable patch, which the floor stops, for a more exact
     layout; a looser one would stop a patch whose minimum lies above the floor before it got there."""
     return min(ENERGY_FLOOR, tol_energy * tol_energy)
+
+
+def energy_floor_strain(tol_energy: float) -> float:
+    """:func:`energy_floor_fraction` as the rms edge strain it stands for: ``min(ε, 1e-3)``."""
+    return math.sqrt(energy_floor_fraction(tol_energy))
 
 
 def area_floor(doubled: np.ndarray, doubled_rest: np.ndarray) -> np.ndarray:

@@ -7,7 +7,6 @@ through here."""
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -16,7 +15,7 @@ import numpy as np
 from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding, scale_mesh
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
 from golden_model.fixed.measures import FixedPointError
-from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_fraction
+from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_strain
 from golden_model.mesh import Mesh, loop_length, overlap_counts, signed_areas_2d
 from golden_model.modes import Step
 from golden_model.params import FlattenParams
@@ -27,8 +26,8 @@ from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, progress_bar, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
-                       check_mesh_fits, check_seam_fits, closed_holes_note, covered_holes_note, error_text,
-                       grain_note, kind_or_none, on_sheets, run_caption, scale_note, seam_length, write_pattern_file)
+                       check_mesh_fits, check_seam_fits, cut_file_notes, error_text, kind_or_none, on_sheets,
+                       run_caption, seam_length, write_pattern_file)
 from .run_options import UserError, default_init, load_format_set, start_positions
 from .workers import local_workers
 
@@ -415,7 +414,7 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh:
     rule = f"relative energy change <= {params.tol_energy:g}" + (
         f" over {params.energy_window} iterations" if params.energy_window > 1 else "")
     floor = energy_floor(mesh, params)
-    strain = math.sqrt(energy_floor_fraction(params.tol_energy))
+    strain = energy_floor_strain(params.tol_energy)
     if floor > 0:
         rule += f", or an energy below the floor of an rms edge strain of {strain:g}"
     if params.tol_area < 1 or params.tol_shape < 1:
@@ -432,15 +431,10 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh:
 def notes_on_cut_files(args: argparse.Namespace, mesh: Mesh, result: FlattenResult,
                        drawing: PatternDrawing) -> list[str]:
     """The notes on a run that writes a pattern at 1:1 (a print or a cut; ``vt`` and layouts have no scale):
-    :func:`~sim.patterns.scale_note` (a wrong ``--units`` would spoil it),
-    :func:`~sim.patterns.covered_holes_note`, :func:`~sim.patterns.grain_note` and, with a seam allowance,
-    :func:`~sim.patterns.closed_holes_note` of ``drawing``, the files' own (:func:`pattern_drawing`)."""
+    :func:`~sim.patterns.cut_file_notes` of ``drawing``, the files' own (:func:`pattern_drawing`)."""
     if result.status == "diverged" or not any(kind_or_none(path) in TRUE_SCALE_KINDS for path in args.out or ()):
         return []
-    notes = [scale_note(drawing), covered_holes_note(drawing), grain_note(drawing)]
-    if drawing.seam > 0 and mesh.n_holes:
-        notes.append(closed_holes_note(drawing))
-    return [note for note in notes if note]
+    return cut_file_notes(drawing)
 
 
 #: What a diverged float run did (:func:`golden_model.reference.runaway_width`).

@@ -22,7 +22,7 @@ from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.files import describe_os_error
 from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, folded_faces
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
-from golden_model.guard import ENERGY_WINDOW, energy_floor_fraction
+from golden_model.guard import ENERGY_WINDOW, energy_floor_strain
 from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
 
 from .layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, NoDiskStart, init_name, initial_layout, slim_layout,
@@ -348,7 +348,7 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
 
     with slim_beside_arap(mesh, second_core and init_name(init) == AUTO_START) as slim:
         start = start_layout(mesh, init, progress=say if progress else None, slim=slim,
-                             floor_strain=math.sqrt(energy_floor_fraction(params.tol_energy)))
+                             floor_strain=energy_floor_strain(params.tol_energy))
     tell([note for note in start.notes if note not in said])  # what the progress lines have not said
     return start.positions, start.method
 
