@@ -404,6 +404,15 @@ def length_text(length: float, units: str) -> str:
     return f"{length:.6g} {units}" + (f" ({length * UNIT_MM[units]:.6g} mm)" if units != "mm" else "")
 
 
+def cut_file_notes(drawing: PatternDrawing, units_option: str = "--units {}") -> list[str]:
+    """The notes on a pattern written at 1:1 (a print or a cut): :func:`scale_note` (``units_option`` as there),
+    :func:`covered_holes_note`, :func:`grain_note` and :func:`closed_holes_note`, those that have something to
+    say."""
+    notes = (scale_note(drawing, units_option), covered_holes_note(drawing), grain_note(drawing),
+             closed_holes_note(drawing))
+    return [note for note in notes if note is not None]
+
+
 def closed_holes_note(drawing: PatternDrawing) -> str | None:
     """Kept holes that the seam allowance closes on the cut line (a hole narrower than twice the allowance, or
     what an overlapping pattern leaves of it): the cut line goes round no part of them, so they are cut after

@@ -47,8 +47,8 @@ from sim.mesh_io.seams import seams_hint, seams_note
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
                          ending_name_problem)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, add_pattern_options,
-                          closed_holes_note, covered_holes_note, grain_note, kind_or_none, on_sheets, pattern_ending,
-                          run_caption, scale_note, seam_length, write_pattern_file)
+                          cut_file_notes, kind_or_none, on_sheets, pattern_ending, run_caption, seam_length,
+                          write_pattern_file)
 from sim.run_options import (HOLES_HINT, UserError, add_run_options, default_init, file_defaults, file_path_argument,
                              holes_mode, params_from_args, path_argument, resolve_mesh)
 
@@ -487,10 +487,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     except PatternError as exc:  # the command's words for the same refusal ("check --units") in the API's
         raise PatternError(f"write_pattern: {_in_api_words(str(exc))}") from None
     if kind_or_none(path) in TRUE_SCALE_KINDS:
-        for note in (scale_note(drawing, "units='{}'"), covered_holes_note(drawing), grain_note(drawing),
-                     closed_holes_note(drawing)):
-            if note is not None:
-                warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
+        for note in cut_file_notes(drawing, "units='{}'"):
+            warnings.warn(f"{pattern.name}: {note}", MeshNote, stacklevel=2)
 
 
 #: The pattern options of ``springflat flatten`` (``--units``, ``--paper``, ...): :func:`write_pattern`'s keywords.
