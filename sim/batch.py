@@ -637,9 +637,10 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
             statuses[o.status] = statuses.get(o.status, 0) + 1
         counts = ", ".join(f"{n} {s}" for s, n in statuses.items())
         say(f"{len(ordered)} mesh{'es' if len(ordered) != 1 else ''}: {counts}; {elapsed:.1f} s on {where}")
-    if failed:
-        print(f"springflat: error: {len(failed)} of {len(ordered)} meshes failed: "
-              f"{', '.join(printable_name(o.source) for o in failed)}", file=sys.stderr)
+    if failed:  # each with its reason: the progress lines that gave them may have scrolled away
+        print(f"springflat: error: {len(failed)} of {len(ordered)} meshes failed:", file=sys.stderr)
+        for o in failed:
+            print(f"  {printable_name(o.source)}: {one_line(o.line)}", file=sys.stderr)
     if unwritable:  # the table is lost: status 2 whatever the runs gave
         written = sum(1 for o in ordered if o.files and not o.failed)
         raise OutputError(f"cannot write standard output: {describe_os_error(unwritable[0])} (the batch ran to its "
