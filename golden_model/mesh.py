@@ -26,7 +26,7 @@ import numpy as np
 
 from .graph import component_labels, count_components, parity_roots
 
-__all__ = ["Mesh", "MeshError", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes", "boundary_loops",
+__all__ = ["Mesh", "MeshError", "MeshDefect", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes", "boundary_loops",
            "outer_loop", "hole_triangles", "loop_length", "loop_signed_area", "oriented_mesh", "orient_consistently",
            "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes", "overlap_counts",
            "COORDINATE_LIMIT", "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
@@ -46,8 +46,29 @@ COORDINATE_LIMIT = 1e50
 #: over float64's smallest normal number (2.2e-308), so areas do not underflow to zero.
 MIN_MESH_SIZE = 1e-50
 
+class MeshDefect(enum.Enum):
+    """What a refusal of :class:`Mesh` is about, where a reader or a command can say more than the message:
+    a scan's harmless defects that a mesh tool removes at once, and a file of several pieces."""
+
+    UNUSED_VERTEX = enum.auto()
+    DUPLICATE_FACE = enum.auto()
+    ZERO_AREA_FACE = enum.auto()
+    SEVERAL_PIECES = enum.auto()
+
+
 class MeshError(ValueError):
-    """A mesh that cannot be flattened; the message is one line for the user."""
+    """A mesh that cannot be flattened; the message is one line for the user.
+
+    Where the validation knows what it refuses, it says so too, for a reader that can point into the file:
+    ``faces`` and ``vertices``, the ones the message names, numbered from 0 as the arrays are (a vertex, a
+    face, an edge's two vertices, two faces), and ``defect`` (:class:`MeshDefect`, or ``None``)."""
+
+    def __init__(self, message: str, *, faces: tuple[int, ...] = (), vertices: tuple[int, ...] = (),
+                 defect: MeshDefect | None = None) -> None:
+        super().__init__(message)
+        self.faces = tuple(int(f) for f in faces)
+        self.vertices = tuple(int(v) for v in vertices)
+        self.defect = defect
 
 
 class InconsistentOrientation(MeshError):
@@ -458,32 +479,36 @@ def _validate(vertices: np.ndarray, faces: np.ndarray, allow_holes: bool = False
         raise MeshError("face indices must be integers")
     bad = ~np.isfinite(vertices).all(axis=1)
     if bad.any():
-        raise MeshError(f"vertex {int(np.flatnonzero(bad)[0])} has a non-finite coordinate")
+        v = int(np.flatnonzero(bad)[0])
+        raise MeshError(f"vertex {v} has a non-finite coordinate", vertices=(v,))
     magnitude = np.abs(vertices).max(axis=1)
     far = magnitude > COORDINATE_LIMIT
     if far.any():
         v = int(np.flatnonzero(far)[0])
         raise MeshError(f"vertex {v} has a coordinate of magnitude {magnitude[v]:.3g}, outside the supported range "
-                        f"|x| <= {COORDINATE_LIMIT:g}")
+                        f"|x| <= {COORDINATE_LIMIT:g}", vertices=(v,))
     n = len(vertices)
     out = (faces < 0) | (faces >= n)
     if out.any():
         f = int(np.flatnonzero(out.any(axis=1))[0])
         raise MeshError(
-            f"face {f} references vertex {int(faces[f][out[f]][0])}, out of range 0..{n - 1}"
-        )
+            f"face {f} references vertex {int(faces[f][out[f]][0])}, out of range 0..{n - 1}", faces=(f,))
     faces = faces.astype(np.int64)
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     if repeated.any():
-        raise MeshError(f"face {int(np.flatnonzero(repeated)[0])} repeats a vertex (degenerate triangle)")
+        f = int(np.flatnonzero(repeated)[0])
+        raise MeshError(f"face {f} repeats a vertex (degenerate triangle)", faces=(f,),
+                        defect=MeshDefect.ZERO_AREA_FACE)
     _, first, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
     if (counts > 1).any():
         f = int(first[counts > 1].min())
-        raise MeshError(f"face {f} is duplicated (same three vertices appear in another face)")
+        raise MeshError(f"face {f} is duplicated (same three vertices appear in another face)", faces=(f,),
+                        defect=MeshDefect.DUPLICATE_FACE)
     used = np.zeros(n, dtype=bool)
     used[faces.ravel()] = True
     if not used.all():
-        raise MeshError(f"vertex {int(np.flatnonzero(~used)[0])} is not used by any face")
+        v = int(np.flatnonzero(~used)[0])
+        raise MeshError(f"vertex {v} is not used by any face", vertices=(v,), defect=MeshDefect.UNUSED_VERTEX)
 
     edges, side_edge, counts = _unique_edges(faces)
     differences = vertices[edges[:, 0]] - vertices[edges[:, 1]]
@@ -496,21 +521,24 @@ def _validate(vertices: np.ndarray, faces: np.ndarray, allow_holes: bool = False
     areas = triangle_areas_3d(vertices, faces)
     degenerate = areas <= DEGENERATE_RELATIVE_AREA * longest**2
     if degenerate.any():
-        raise MeshError(f"face {int(np.flatnonzero(degenerate)[0])} is degenerate (zero area)")
+        f = int(np.flatnonzero(degenerate)[0])
+        raise MeshError(f"face {f} is degenerate (zero area)", faces=(f,), defect=MeshDefect.ZERO_AREA_FACE)
     if (counts > 2).any():
         e = edges[np.flatnonzero(counts > 2)[0]]
-        raise MeshError(f"mesh is non-manifold: edge ({e[0]}, {e[1]}) is shared by more than two faces")
+        raise MeshError(f"mesh is non-manifold: edge ({e[0]}, {e[1]}) is shared by more than two faces",
+                        vertices=tuple(e))
 
     n_parts = count_components(n, edges[:, 0], edges[:, 1])
     if n_parts != 1:
-        raise MeshError(f"mesh is not a single disk: it has {n_parts} connected components")
+        raise MeshError(f"mesh is not a single disk: it has {n_parts} connected components",
+                        defect=MeshDefect.SEVERAL_PIECES)
     _check_vertex_manifold(faces, side_edge, counts, n)
     same_way = _same_way_pairs(faces, side_edge, counts)
     if len(same_way):
         f, g = sorted(same_way[0, :2])
         a, b = edges[same_way[0, 2]]
         raise InconsistentOrientation(f"faces {f} and {g} run through their shared edge ({a}, {b}) the same way: "
-                                      "the faces are not wound consistently")
+                                      "the faces are not wound consistently", faces=(f, g))
 
     boundary = edges[counts == 1]
     if len(boundary) == 0:
@@ -559,8 +587,8 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
     m = len(faces)
     root, turn = parity_roots(m, s // 3, t // 3, same)
     if (root != 0).any():
-        raise MeshError(f"mesh is not a single disk: face {int(np.flatnonzero(root != 0)[0])} shares no "
-                        "edge with face 0")
+        f = int(np.flatnonzero(root != 0)[0])
+        raise MeshError(f"mesh is not a single disk: face {f} shares no edge with face 0", faces=(f,))
     if 2 * turn.sum() > m:  # turn the fewer faces
         turn = ~turn
     result = faces.copy()
@@ -602,8 +630,9 @@ def oriented_mesh(vertices: np.ndarray, faces: np.ndarray, name: str = "mesh",
             filled = True
             notes.append(note)
         except MeshError as exc:
-            if filled:  # (a face or a count that is the fill's, not the file's)
-                raise MeshError(f"{exc}, with the holes closed") from None
+            if filled:  # (a face or a count that is the fill's, not the file's; the fill appends its faces)
+                raise MeshError(f"{exc}, with the holes closed", faces=exc.faces, vertices=exc.vertices,
+                                defect=exc.defect) from None
             raise
 
 
@@ -764,4 +793,4 @@ def _check_vertex_manifold(faces: np.ndarray, side_edge: np.ndarray, counts: np.
     if (fans_per_vertex > 1).any():
         v = int(np.flatnonzero(fans_per_vertex > 1)[0])
         raise MeshError(f"mesh is non-manifold at vertex {v} (its triangles form more than one fan: a pinch, or "
-                        "holes or the outer edge meeting at a corner)")
+                        "holes or the outer edge meeting at a corner)", vertices=(v,))

@@ -385,7 +385,7 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
         except HoledMesh as exc:
             raise MeshError(f"{exc}{seams_hint(vertices, faces)}; {_in_api_words(HOLES_HINT)}") from None
         except MeshError as exc:
-            raise MeshError(f"{exc}{repair_hint(str(exc))}{seams_hint(vertices, faces)}") from None
+            raise MeshError(f"{exc}{repair_hint(exc)}{seams_hint(vertices, faces)}") from None
         for note in [*notes, *filter(None, [seams_note(vertices, faces)])]:
             warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
         defaults = file_defaults(mesh)

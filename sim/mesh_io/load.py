@@ -9,7 +9,7 @@ from typing import Callable
 import numpy as np
 
 from golden_model.files import read_file_bytes
-from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, oriented_mesh
+from golden_model.mesh import HoledMesh, Holes, Mesh, MeshDefect, MeshError, oriented_mesh
 from .obj import obj_line_hint, read_obj
 from .off import read_off
 from .ply import read_ply
@@ -18,23 +18,21 @@ from .seams import seams_hint
 
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 
-#: What a scan's harmless defects need, by the start of the validation's refusal: the tools that remove them.
-_REPAIRS = (("is not used by any face", "the unused vertices", "remove_unreferenced_vertices()",
-             "Remove Unreferenced Vertices"),
-            ("is duplicated", "the duplicate faces", "update_faces(unique_faces())", "Remove Duplicate Faces"),
-            ("is degenerate (zero area)", "the faces of zero area", "update_faces(nondegenerate_faces())",
-             "Remove Zero Area Faces"),
-            ("repeats a vertex", "the faces of zero area", "update_faces(nondegenerate_faces())",
-             "Remove Zero Area Faces"))
+#: What a scan's harmless defects need: the tools that remove them.
+_REPAIRS = {MeshDefect.UNUSED_VERTEX: ("the unused vertices", "remove_unreferenced_vertices()",
+                                       "Remove Unreferenced Vertices"),
+            MeshDefect.DUPLICATE_FACE: ("the duplicate faces", "update_faces(unique_faces())", "Remove Duplicate Faces"),
+            MeshDefect.ZERO_AREA_FACE: ("the faces of zero area", "update_faces(nondegenerate_faces())",
+                                        "Remove Zero Area Faces")}
 
 
-def repair_hint(message: str) -> str:
+def repair_hint(exc: MeshError) -> str:
     """``"; remove <what> (trimesh's ..., MeshLab's ...)"`` for a refusal of a defect a scan often has and a
     mesh tool removes at once (an unused vertex, a duplicate or zero-area face), else ``""``."""
-    for said, what, trimesh_call, meshlab_filter in _REPAIRS:
-        if said in message:
-            return f"; remove {what} first (trimesh's {trimesh_call}, MeshLab's {meshlab_filter})"
-    return ""
+    if exc.defect not in _REPAIRS:
+        return ""
+    what, trimesh_call, meshlab_filter = _REPAIRS[exc.defect]
+    return f"; remove {what} first (trimesh's {trimesh_call}, MeshLab's {meshlab_filter})"
 
 
 def load_mesh(path: str | Path) -> Mesh:
@@ -96,9 +94,9 @@ def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple
         raise HoledMesh(f"invalid mesh '{path}': {exc}{seams_hint(vertices, faces)}") from None
     except MeshError as exc:
         seams = seams_hint(vertices, faces)
-        if suffix == ".obj" and not (seams and "connected components" in str(exc)):  # (pieces a weld may join)
-            hint = obj_line_hint(str(exc), obj)
-        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{repair_hint(str(exc))}{seams}") from None
+        if suffix == ".obj" and not (seams and exc.defect is MeshDefect.SEVERAL_PIECES):  # (pieces a weld may join)
+            hint = obj_line_hint(exc, obj)
+        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{repair_hint(exc)}{seams}") from None
 
 
 def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:

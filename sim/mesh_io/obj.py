@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.files import read_file_bytes
-from golden_model.mesh import MeshError, one_line
+from golden_model.mesh import MeshDefect, MeshError, one_line
 from .polygons import Polygons, first_unplain, is_int, plural, text_coordinates, triangulate_polygons
 
 #: Free-form geometry statements: they define curves and surfaces the
@@ -313,31 +313,24 @@ def _obj_resolve(
     return resolved
 
 
-def obj_line_hint(message: str, obj: ObjContents) -> str:
-    """Where in the file a validation message points, which numbers vertices and faces from 0 after fan
-    triangulation: `` (file line n)`` for one that starts with a face or vertex number, `` (vertex 4: file line
-    5)`` where one is named later, `` (its vertices: file lines 28 and 29)`` for an edge, `` (file lines 7 and
-    9)`` for two faces, and each piece's first face line for a file of several pieces."""
-    import re
-
-    def line(kind: str, number: int) -> int | None:
-        lines = obj.face_line if kind == "face" else obj.vertex_line
-        return int(lines[number]) if number < len(lines) else None
-
-    if found := re.match(r"(face|vertex) (\d+) ", message):
-        at = line(found[1], int(found[2]))
-        return f" (file line {at})" if at else ""
-    if (found := re.search(r"\bedge \((\d+), (\d+)\)", message)) and not message.startswith("faces "):
-        ends = [line("vertex", int(found[k])) for k in (1, 2)]
-        return f" (its vertices: file lines {ends[0]} and {ends[1]})" if all(ends) else ""
-    if found := re.match(r"faces (\d+) and (\d+) ", message):
-        faces = [line("face", int(found[k])) for k in (1, 2)]
-        return f" (file lines {faces[0]} and {faces[1]})" if all(faces) else ""
-    if found := re.search(r"\b(face|vertex) (\d+)\b", message):
-        at = line(found[1], int(found[2]))
-        return f" ({found[0]}: file line {at})" if at else ""
-    if "connected components" in message:
+def obj_line_hint(exc: MeshError, obj: ObjContents) -> str:
+    """Where in the file the faces and vertices a validation refusal names are (it numbers them from 0, after
+    fan triangulation): `` (file line n)`` for the one the message starts with, `` (vertex 4: file line 5)``
+    for one it names later, `` (its vertices: file lines 28 and 29)`` for an edge, `` (file lines 7 and 9)`` for
+    two faces, and each piece's first face line for a file of several pieces."""
+    if exc.defect is MeshDefect.SEVERAL_PIECES:
         return _pieces_hint(obj)
+    faces = [int(obj.face_line[f]) for f in exc.faces if f < len(obj.face_line)]
+    vertices = [int(obj.vertex_line[v]) for v in exc.vertices if v < len(obj.vertex_line)]
+    if len(exc.faces) == 2:
+        return f" (file lines {faces[0]} and {faces[1]})" if len(faces) == 2 else ""
+    if len(exc.vertices) == 2:
+        return f" (its vertices: file lines {vertices[0]} and {vertices[1]})" if len(vertices) == 2 else ""
+    named = [("face", exc.faces, faces), ("vertex", exc.vertices, vertices)]
+    for kind, numbers, lines in named:
+        if len(numbers) == 1 and lines:
+            first = str(exc).startswith(f"{kind} {numbers[0]} ")
+            return f" (file line {lines[0]})" if first else f" ({kind} {numbers[0]}: file line {lines[0]})"
     return ""
 
 
