@@ -290,6 +290,10 @@ def energy_check_width(fs: FormatSet, square_bits: int, barrier_bits: int) -> in
             + (2 * ((1 << barrier_bits) - 1) << barrier_shift)).bit_length()
 
 
+#: The MAX_ITER register's field: what any run through the engine can ask for (:func:`check_run_limits`).
+MAX_ITER_FIELD = WordField("max_iter", ITERATION_BITS)
+
+
 def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordField, ...]:
     """The run constants (raw ints), in register order; those of :data:`MODE_FIELDS` share the ``MODE``
     register: ``mode``, the run mode's code (:data:`~golden_model.modes.RUN_MODES`), and ``barrier``.
@@ -314,7 +318,7 @@ def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordFi
         WordField.of("tol_area", fs, "error"),
         WordField.of("tol_shape", fs, "error"),
         WordField("tol_energy", ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS),
-        WordField("max_iter", ITERATION_BITS),
+        MAX_ITER_FIELD,
         WordField("saturation_limit", SATURATION_BITS),
         WordField("energy_floor", energy_width(fs, capacity.entries)),
     )
@@ -353,10 +357,14 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str,
     }
     check_run_limits(params)
     for f in run_constant_fields(fs, capacity):
-        if not f.raw_min <= constants[f.name] <= f.raw_max:
-            raise FixedPointError(f"run constant {f.name} = {constants[f.name]} does not fit the engine's "
-                                  f"{f.width}-bit register (max {f.raw_max})")
+        _check_fits(f, constants[f.name])
     return constants
+
+
+def _check_fits(f: WordField, value: int) -> None:
+    if not f.raw_min <= value <= f.raw_max:
+        raise FixedPointError(f"run constant {f.name} = {value} does not fit the engine's {f.width}-bit register "
+                              f"(max {f.raw_max})")
 
 
 #: The momentum dynamics as the engine runs it: without the step guard, stopped by Algorithm 1's
@@ -383,9 +391,7 @@ def check_run_limits(params) -> None:
     """Refuse, in one line, an ``N_max`` beyond the engine's MAX_ITER register (:data:`ITERATION_BITS`) or an ``ε``
     beyond its TOL_ENERGY register: the run constants no layout changes, which :func:`build_image` checks with
     the rest, and a whole run through the engine (``flatten --engine rtl|board``) before its start is computed."""
-    if params.max_iter >= 1 << ITERATION_BITS:
-        raise FixedPointError(f"run constant max_iter = {params.max_iter} does not fit the engine's "
-                              f"{ITERATION_BITS}-bit register (max {(1 << ITERATION_BITS) - 1})")
+    _check_fits(MAX_ITER_FIELD, params.max_iter)
     if tol_energy_raw(params.tol_energy) >> (ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS):  # (said as given)
         raise FixedPointError(f"--tol-energy {params.tol_energy:g} does not fit the engine's TOL_ENERGY register "
                               f"(u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS}: below {2**ENERGY_TOL_INT_BITS}); use a "
