@@ -1055,6 +1055,9 @@ class _NoProgress:
     def update(self, n: int = 1) -> None:
         pass
 
+    def close(self) -> None:
+        pass
+
     def __enter__(self) -> "_NoProgress":
         return self
 
@@ -1068,7 +1071,7 @@ def print_note(text: str) -> None:
     print(f"springflat: note: {one_line(text)}", file=sys.stderr)
 
 
-def progress_bar(total: int, enabled: bool, unit: str = "it", label: str | None = None):
+def progress_bar(total: int | None, enabled: bool, unit: str = "it", label: str | None = None):
     """A tqdm bar on stderr, ``label:`` before it, that appears only for work longer than ~2 s (``enabled``: the
     caller's terminal check), else :class:`_NoProgress`."""
     if not enabled:

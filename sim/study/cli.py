@@ -41,7 +41,7 @@ from golden_model.study import (
     unexercised_classes,
 )
 
-from ..outputs import atomic_directory, atomic_write, check_output_directory, print_note
+from ..outputs import atomic_directory, atomic_write, check_output_directory, print_note, progress_bar
 from ..run_options import integer_argument, load_format_set, number_argument, path_argument
 from ..workers import local_workers
 from .cases import STUDY_MESHES, build_cases
@@ -100,20 +100,15 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def _progress_bars(enabled: bool):
-    """``(update(phase, n), close(), totals)``: a bar per phase on stderr, where ``enabled``; else no tqdm at all
-    (a disabled one still starts tqdm's monitor thread, :func:`sim.outputs.progress_bar`)."""
+    """``(update(phase, n), close(), totals)``: a :func:`sim.outputs.progress_bar` per phase, labelled with the
+    phase, where ``enabled``."""
     bars: dict[str, Any] = {}
 
     def update(phase: str, n: int) -> None:
-        if not enabled:
-            return
-        from tqdm import tqdm
-
         if phase not in bars:
             for bar in bars.values():
                 bar.close()
-            bars[phase] = tqdm(total=totals.get(phase), desc=phase, unit="run", file=sys.stderr,
-                               leave=False, dynamic_ncols=True, mininterval=0.5)
+            bars[phase] = progress_bar(totals.get(phase), enabled, unit="run", label=phase)
         bars[phase].update(n)
 
     def close() -> None:
