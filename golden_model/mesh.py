@@ -26,8 +26,8 @@ import numpy as np
 
 from .graph import component_labels, count_components, parity_roots
 
-__all__ = ["Mesh", "MeshError", "MeshDefect", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes", "boundary_loops",
-           "outer_loop", "hole_triangles", "loop_length", "loop_signed_area", "oriented_mesh", "orient_consistently",
+__all__ = ["Mesh", "MeshError", "MeshDefect", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes",
+           "boundary_loops", "unique_edges", "outer_loop", "hole_triangles", "loop_length", "loop_signed_area", "oriented_mesh", "orient_consistently",
            "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes", "overlap_counts",
            "COORDINATE_LIMIT", "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
 
@@ -169,7 +169,7 @@ class Mesh:
     @cached_property
     def edges(self) -> np.ndarray:
         """``(E, 2)`` unique undirected edges ``(i, j)`` with ``i < j``, sorted."""
-        return _unique_edges(self.faces)[0]
+        return unique_edges(self.faces)[0]
 
     @property
     def n_edges(self) -> int:
@@ -445,8 +445,9 @@ def _rings(faces: np.ndarray, n: int, edges: np.ndarray) -> Rings:
 # --------------------------------------------------------------------------- topology
 
 
-def _unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unique sorted edges, the edge index of each face side, and face counts per edge.
+def unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique sorted edges, the edge index of each face side, and face counts per edge, of any ``(F, 3)`` array of
+    non-negative vertex indices (a valid mesh's or not).
 
     Face side ``k`` of face ``f`` is the edge ``(faces[f,k], faces[f,(k+1)%3])``.
     """
@@ -462,7 +463,7 @@ def _unique_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def _directed_boundary_edges(faces: np.ndarray) -> np.ndarray:
     """Boundary edges ``(a, b)`` oriented as they appear in their face."""
     sides = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
-    _, side_edge, counts = _unique_edges(faces)
+    _, side_edge, counts = unique_edges(faces)
     return sides[counts[side_edge] == 1]
 
 
@@ -510,7 +511,7 @@ def _validate(vertices: np.ndarray, faces: np.ndarray, allow_holes: bool = False
         v = int(np.flatnonzero(~used)[0])
         raise MeshError(f"vertex {v} is not used by any face", vertices=(v,), defect=MeshDefect.UNUSED_VERTEX)
 
-    edges, side_edge, counts = _unique_edges(faces)
+    edges, side_edge, counts = unique_edges(faces)
     differences = vertices[edges[:, 0]] - vertices[edges[:, 1]]
     size = float(np.abs(differences).max())  # no squares: cannot underflow
     # the longest edge's length, from the differences scaled by the largest (their squares could underflow)
@@ -582,7 +583,7 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
     ways, and how many were turned. ``faces`` must form a connected manifold; a non-orientable one (a Möbius
     strip) raises :class:`MeshError`."""
     faces = np.asarray(faces, dtype=np.int64)
-    _, side_edge, counts = _unique_edges(faces)
+    _, side_edge, counts = unique_edges(faces)
     s, t, same = _interior_sides_run_same_way(faces, side_edge, counts)
     m = len(faces)
     root, turn = parity_roots(m, s // 3, t // 3, same)
@@ -593,7 +594,7 @@ def orient_consistently(faces: np.ndarray) -> tuple[np.ndarray, int]:
         turn = ~turn
     result = faces.copy()
     result[turn] = result[turn][:, [0, 2, 1]]
-    if len(_same_way_pairs(result, *_unique_edges(result)[1:])):  # a turned face's sides are other edges
+    if len(_same_way_pairs(result, *unique_edges(result)[1:])):  # a turned face's sides are other edges
         raise MeshError("mesh is not orientable (like a Möbius strip): its faces cannot all be wound the same way")
     return result, int(turn.sum())
 

@@ -13,7 +13,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from golden_model.mesh import COORDINATE_LIMIT
+from golden_model.mesh import COORDINATE_LIMIT, unique_edges
 
 __all__ = ["SEAM_TOLERANCE", "open_seams", "seams_note", "seams_hint"]
 
@@ -39,13 +39,13 @@ def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
         return 0, 0  # (no mesh to look at: its refusal says why)
     faces = faces.astype(np.int64)
     n = len(vertices)
-    sides = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    keys, counts = np.unique(sides[:, 0] * n + sides[:, 1], return_counts=True)
-    boundary = np.unique(np.concatenate([keys[counts == 1] // n, keys[counts == 1] % n]))
+    edges, _, counts = unique_edges(faces)
+    keys = edges[:, 0] * n + edges[:, 1]
+    boundary = np.unique(edges[counts == 1])
     points = vertices[boundary].astype(np.float64)
     if len(boundary) < 2 or not np.isfinite(points).all() or np.abs(points).max() > COORDINATE_LIMIT:
         return 0, 0  # (refused for its coordinates: no distances to measure)
-    ends = vertices[keys // n].astype(np.float64) - vertices[keys % n]
+    ends = vertices[edges[:, 0]].astype(np.float64) - vertices[edges[:, 1]]
     length = float(np.median(np.linalg.norm(ends, axis=1)))
     if not length > 0:
         return 0, 0
