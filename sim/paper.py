@@ -136,7 +136,8 @@ def reproduce_paper(out: Path, init: str = "pca", progress: bool = True) -> Path
             runs[name, start] = runs.get((name, start)) or run_mesh(name, start)
             bar.update()
     main_runs = {name: runs[name, init] for name in names}
-    start_folds = ", ".join(f"{r.fixed.initial.folded} of {name}'s {len(builtin_mesh(name)[0].faces)}"
+    n_faces = {name: builtin_mesh(name)[0].n_faces for name in names}
+    start_folds = ", ".join(f"{r.fixed.initial.folded} of {name}'s {n_faces[name]}"
                             for name, r in main_runs.items())
     other_runs = {(name, other): runs[name, other] for name in names for other in LAYOUT_METHODS}
 
@@ -164,7 +165,7 @@ def reproduce_paper(out: Path, init: str = "pca", progress: bool = True) -> Path
             f"| {name} | {initial.area_error:.3f} / {initial.shape_error:.3f} | {_count(runs.fixed)} | "
             f"{_count(runs.variable)} | {_ratio(runs.variable.iterations, runs.fixed.iterations)} | "
             f"{runs.paper_variable}/{runs.paper_fixed} | {runs.paper_variable / runs.paper_fixed:.2f} | "
-            f"{runs.fixed.final.folded} / {runs.variable.final.folded} of {len(builtin_mesh(name)[0].faces)} |"
+            f"{runs.fixed.final.folded} / {runs.variable.final.folded} of {n_faces[name]} |"
         )
     lines += [
         "",
