@@ -225,10 +225,11 @@ def holes_mode(fill_holes: bool, keep_holes: bool) -> Holes:
 HOLES_HINT = "--fill-holes closes all but the outer edge, --keep-holes keeps them as cut-outs"
 
 
-def resolve_mesh(name: str, holes: Holes = Holes.REFUSE,
-                 notes: list[str] | None = None) -> tuple[Mesh, FlattenParams]:
+def resolve_mesh(name: str, holes: Holes = Holes.REFUSE, notes: list[str] | None = None,
+                 label: str | None = None) -> tuple[Mesh, FlattenParams]:
     """The mesh (a file's holes refused, closed or kept as ``holes`` says) and its default parameters; what
-    the reader changed or found (``mesh name: note``) goes to ``notes``, or to stderr where that is ``None``.
+    the reader changed or found (``label: note``, ``label`` by default the mesh's name) goes to ``notes``, or to
+    stderr where that is ``None``.
 
     Built-ins: the paper's sets (paper dynamics, Table II/IV tolerances).  Files: the momentum
     dynamics with the fold barrier, stopped at the energy minimum (relative energy change
@@ -254,7 +255,7 @@ def resolve_mesh(name: str, holes: Holes = Holes.REFUSE,
     except HoledMesh as exc:
         raise MeshError(f"{exc}; {HOLES_HINT}") from None
     for text in [*found, *filter(None, [seams_note(mesh.vertices, mesh.faces)])]:  # (as the API's flatten says it)
-        note(f"{mesh.name}: {text}")
+        note(f"{mesh.name if label is None else label}: {text}")
     return mesh, file_defaults(mesh)
 
 

@@ -273,11 +273,10 @@ def _named_mesh(path: str | os.PathLike, holes: Holes, name: str | None) -> tupl
         raise MeshError(f"cannot read mesh {problem}")
     notes: list[str] = []
     try:
-        mesh, defaults = resolve_mesh(os.fspath(path), holes, notes)
+        mesh, defaults = resolve_mesh(os.fspath(path), holes, notes, label=name)
     except MeshError as exc:
         raise MeshError(_in_api_words(str(exc))) from None
     if name is not None:
-        notes = [f"{name}: {note.removeprefix(mesh.name + ': ')}" for note in notes]
         mesh = Mesh(mesh.vertices, mesh.faces, name=name, allow_holes=holes is Holes.KEEP)
     for note in notes:
         warnings.warn(note, MeshNote, stacklevel=3)
