@@ -665,7 +665,7 @@ def run(engine, params: FlattenParams, density: float, initial_positions: np.nda
 
     history = History()
     current = engine.measure()
-    history.append(math.nan, current)
+    history.append(math.nan, current, accepted=None)  # (the start: no step)
     window = EnergyWindow(params.energy_window)
     window.push(current.energy)
     floor = energy_floor(engine.model.mesh, params)

@@ -45,7 +45,7 @@ class History:
     flipped: list[int] = field(default_factory=list)
     folded: list[int] = field(default_factory=list)
     #: whether the iteration's step was taken (the guard rolls back a step that raises the energy); ``None`` for
-    #: a row that is no one step (an engine's end row, after iterations it does not record)
+    #: a row that is no one step (row 0, the start; an engine's end row, after iterations it does not record)
     accepted: list[bool | None] = field(default_factory=list)
     #: each row's iteration number: its index, unless a row skips iterations (an engine's final row)
     iteration: list[int] = field(default_factory=list)

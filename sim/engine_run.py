@@ -347,7 +347,7 @@ def engine_flatten_result(problem: FixedProblem, positions: np.ndarray, velociti
 
     engine = FixedEngine(problem, SaturationCounter())
     history = History()
-    history.append(math.nan, engine.measure())
+    history.append(math.nan, engine.measure(), accepted=None)  # (the start: no step)
     engine.raw_positions, engine.raw_velocities = positions.copy(), velocities.copy()
     history.append(math.nan, engine.measure(), accepted=None, iteration=iterations)  # (no one step)
     result = FlattenResult(engine.positions, engine.velocities, problem.to_float_positions(problem.initial_positions),

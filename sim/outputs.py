@@ -1085,16 +1085,15 @@ def write_history(path: Path, result: FlattenResult) -> None:
     """CSV of :data:`HISTORY_HEADER`, row 0 = initial layout (empty ``dt`` and ``accepted``). ``dt`` is the paper
     dynamics' time step, empty for the momentum dynamics, which has none (its step is the node weights, scaled
     by the guard); ``accepted`` is 0 for a step the guard rolled back (its row repeats the layout kept). A row
-    that is no one step (``History.accepted`` ``None``: the RTL and board engines keep no per-iteration record,
-    and their history is the start and the end) has both empty."""
+    that is no one step (``History.accepted`` ``None``: the start, and the end row of the RTL and board engines,
+    which keep no per-iteration record) has both empty."""
     timed = result.params.mode.step is not Step.MOMENTUM
     history = result.history
     with atomic_write(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as out:
         writer = csv.writer(out)
         writer.writerow(HISTORY_HEADER)
-        for row, ((k, dt, area, shape, energy, flipped, folded), accepted) in enumerate(
-                zip(history.rows(), history.accepted)):
-            one_step = row > 0 and accepted is not None
+        for (k, dt, area, shape, energy, flipped, folded), accepted in zip(history.rows(), history.accepted):
+            one_step = accepted is not None
             writer.writerow([k, repr(dt) if timed and one_step and not math.isnan(dt) else "", repr(area),
                              repr(shape), repr(energy), flipped, folded, int(accepted) if one_step else ""])
 

@@ -507,7 +507,7 @@ def run_fixed(engine: FixedEngine, on_iteration: Callable[[int, Measurement], No
     formats saturate, and ``result.extra`` counts it). Each iteration is recorded in the history."""
     problem = engine.problem
     history = History()
-    history.append(math.nan, engine.measure())
+    history.append(math.nan, engine.measure(), accepted=None)  # (the start: no step)
 
     def record(k: int) -> None:
         measurement = engine.measure()

@@ -73,7 +73,7 @@ def test_accepted_steps_never_raise_the_energy_and_rejected_ones_roll_back():
     energy = np.array(result.history.energy)
     assert np.all(np.diff(energy) <= 0)
     assert result.extra["rejected_steps"] > 0 and result.extra["clipped_node_steps"] > 0
-    rejected = [k for k, taken in enumerate(result.history.accepted) if not taken]
+    rejected = [k for k, taken in enumerate(result.history.accepted) if taken is False]  # (None: the start)
     assert all(energy[k] == energy[k - 1] for k in rejected)
     assert max(result.history.folded) == 0
     unguarded = flatten(mesh, p0, FlattenParams(dynamics="momentum", barrier=False, guard=False, tol_area=1.0,

@@ -351,8 +351,9 @@ def test_a_history_of_the_start_and_the_end_leaves_dt_and_accepted_empty(tmp_pat
     mesh = dome_grid(6)
     result = flatten(mesh, tutte_layout(mesh), FlattenParams(dynamics="paper", step="fixed", dt=0.01, max_iter=5))
     write_history(tmp_path / "float.csv", result)
+    assert result.history.accepted[0] is None  # the start is no step, and says so
     ends = History()
-    ends.append(math.nan, result.initial)
+    ends.append(math.nan, result.initial, accepted=None)  # (as every engine marks its start)
     ends.append(result.history.dt[-1], result.final, accepted=None, iteration=len(result.history) - 1)
     write_history(tmp_path / "ends.csv", dataclasses.replace(result, history=ends))
     with open(tmp_path / "float.csv", newline="") as f:
