@@ -19,7 +19,7 @@ from sim.layouts import initial_layout
 from golden_model.engine_spec.image import UNGUARDED
 from golden_model.params import FlattenParams
 from sim.register_map_export import EXPORT_FILES, c_header, markdown, to_json, write_exports
-from support import DOCS, PRESETS
+from support import DOCS, PRESETS, press_ctrl_c
 
 SMALL = EngineCapacity(vertices=100, entries=600, triangles=200)
 
@@ -301,11 +301,9 @@ def test_the_export_command_says_in_one_line_what_is_wrong_with_its_inputs(tmp_p
 
 
 def test_the_export_command_answers_ctrl_c_in_one_line_with_nothing_written(tmp_path, capsys, monkeypatch):
-    import signal
-
     import sim.register_map_export as export
 
-    monkeypatch.setattr(export, "write_exports", lambda m, build: signal.raise_signal(signal.SIGINT))
+    monkeypatch.setattr(export, "write_exports", press_ctrl_c)
     assert export.main(["--out", str(tmp_path / "o")]) == 130
     assert capsys.readouterr().err == "python -m sim.register_map_export: interrupted\n"
     assert list(tmp_path.iterdir()) == []

@@ -12,7 +12,7 @@ import pytest
 from golden_model.builtin import builtin_mesh
 from sim.mesh_io import load_mesh
 from sim.generate import dome_grid
-from support import SCANS, run_springflat as run
+from support import SCANS, press_ctrl_c, run_springflat as run
 
 
 def test_flatten_round_trip(tmp_path):
@@ -820,17 +820,12 @@ def test_rtl_check_engine_top_refuses_stall_whatever_its_value(tmp_path, monkeyp
 def test_a_program_that_ran_a_command_in_process_and_saw_it_interrupted_can_write_after_it(tmp_path, monkeypatch):
     """main() notes a Ctrl-C so that nothing of its command is put in place; a program that called it goes on,
     and its own writes afterwards (the API's) are not that command's."""
-    import signal
-
     import springflat
     import sim.cli
     from golden_model.builtin import builtin_mesh
     from sim.cli import main
 
-    def interrupted(*args, **kwargs):
-        signal.raise_signal(signal.SIGINT)  # as Ctrl-C during the run: the command's handler answers it
-
-    monkeypatch.setattr(sim.cli, "run_flatten", interrupted)
+    monkeypatch.setattr(sim.cli, "run_flatten", press_ctrl_c)  # as Ctrl-C during the run
     monkeypatch.chdir(tmp_path)
     assert main(["flatten", "surf1", "--out", "p.dxf"]) == 130
     assert not Path("p.dxf").exists()
@@ -870,15 +865,10 @@ def test_a_signal_after_the_outputs_are_in_place_says_they_were_written(tmp_path
                                                                         written):
     """Ctrl-C while the command still prints, after its outputs replaced the old ones: status 130 said
     'interrupted' as if nothing had been written; the line names what was, complete."""
-    import signal
-
     import sim.cli
 
-    def interrupted(*args, **kwargs):
-        signal.raise_signal(signal.SIGINT)
-
-    monkeypatch.setattr(sim.cli, "human_line", interrupted)  # flatten: the result line after its outputs
-    monkeypatch.setattr(sim.cli, "print", lambda *a, **k: interrupted() if a and str(a[0]).startswith("wrote")
+    monkeypatch.setattr(sim.cli, "human_line", press_ctrl_c)  # flatten: the result line after its outputs
+    monkeypatch.setattr(sim.cli, "print", lambda *a, **k: press_ctrl_c() if a and str(a[0]).startswith("wrote")
                         else print(*a, **k), raising=False)  # paper: its 'wrote' line
     monkeypatch.chdir(tmp_path)
     assert sim.cli.main(command) == 130

@@ -10,8 +10,10 @@ from __future__ import annotations
 import contextlib
 import gc
 import os
+import signal
 import subprocess
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -35,6 +37,15 @@ PRESETS: tuple[str, ...] = tuple(FormatSet.presets())
 #: one worker alone with them at the end); started first, the short files fill in around them.
 LONGEST_FIRST = ("sim/test_cocotb.py", "sim/test_engine_rtl.py", "hdl/test_engine.py", "hdl/test_engine_guard.py",
                  "sim/test_synth.py", "hdl/test_engine_saturation.py", "hdl/test_hdl_block_ram.py")
+
+
+def press_ctrl_c(*args, **kwargs) -> None:
+    """SIGINT to this process, as a Ctrl-C while the work goes on, for a test to put in place of a step of a
+    command run in-process. The command's handler raises ``KeyboardInterrupt`` at once; where the signal lands in a
+    finaliser (the garbage collector runs those anywhere, more often under load) the handler sends it again a
+    moment later, and the work going on here (a few seconds of it) receives it as a real run would."""
+    signal.raise_signal(signal.SIGINT)
+    time.sleep(5)
 
 
 def run_springflat(*args, cwd=None, timeout: float = 600) -> subprocess.CompletedProcess:
