@@ -27,7 +27,7 @@ from pathlib import Path
 
 from .export import relative_sources
 from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, _FMAX, SynthError, _critical_path, build_in_place,
-                    error_line, run_tool, _tool_versions)
+                    ecp5_overflow, error_line, run_tool, _tool_versions)
 
 __all__ = ["BOARDS", "NAME", "run_board_build", "collect_report", "parse_lpf_pins", "parse_clocks", "board_markdown"]
 
@@ -100,6 +100,9 @@ def run_board_build(fs, capacity, out_dir, *, board: str = "ulx3s-85f", seed: in
         uart_divisor(clock_hz, baud)
     except ValueError as exc:
         raise SynthError(str(exc)) from None
+    if over := ecp5_overflow(fs, capacity):  # (seconds, against Yosys's half hour before nextpnr said so)
+        raise SynthError(f"the engine at --capacity {capacity.as_option()} does not fit the board's LFE5U-85F: it "
+                         f"needs {over} (docs/synthesis.md: the capacities that fit)")
     top = Ulx3sTop(fs, capacity, clock_hz=clock_hz, baud=baud)
     out.mkdir(parents=True, exist_ok=True)
     platform = _ulx3s_85f()()

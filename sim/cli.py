@@ -237,23 +237,32 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     from .export import bundle_readme, export_engine_bundle, export_verilog
     from .register_map_export import engine_capacity
     from .clock import clock_sdc
-    from .synth import earlier_bundle_files, record_bundle_files
+    from .synth import earlier_bundle_files, ecp5_overflow, record_bundle_files
     from .outputs import check_build_so_far
+    from hdl.dsp import ECP5
 
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats, guard=args.build_guard)
+    platform = ECP5 if args.target == "ecp5" else None
     out = args.out
     inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
     with atomic_directory(out, inputs=inputs,  # all of the bundle or nothing, also on Ctrl-C
                           stale=earlier_bundle_files(out)) as build:
         print(f"springflat verilog: exporting every component and springflat_engine (capacity "
-              f"{capacity.as_option()}) to {out} ...", file=sys.stderr)  # half a minute of silence otherwise
-        interface = export_verilog(formats, build)
+              f"{capacity.as_option()}, {args.target}) to {out} ...", file=sys.stderr)  # half a minute of silence
+        # the build that met 125 MHz fits; any other is counted (seconds), since the bundle's clock says 125
+        if (formats, capacity) != (FormatSet.preset("default"), DEFAULT_CAPACITY) and \
+                (over := ecp5_overflow(formats, capacity)):
+            print_note(f"this engine does not fit the largest ECP5: it needs {over} (docs/synthesis.md: the "
+                       "capacities that fit)")
+        interface = export_verilog(formats, build, platform=platform)
         check_build_so_far()  # a --formats file named interface.json: refused before the engine's export
-        engine = export_engine_bundle(formats, capacity, build)
+        engine = export_engine_bundle(formats, capacity, build, platform=platform)
         (Path(build) / "clock.sdc").write_text(clock_sdc(ENGINE_TARGET_MHZ))
-        files = sorted([path.name for path in Path(build).iterdir() if path.is_file()] + ["README.md"])
-        (Path(build) / "README.md").write_text(bundle_readme(formats, capacity, files, installed_version()))
+        files = sorted([path.name + ("" if path.is_file() else "/") for path in Path(build).iterdir()]
+                       + ["README.md"])
+        (Path(build) / "README.md").write_text(bundle_readme(formats, capacity, files, installed_version(),
+                                                             platform))
         record_bundle_files(Path(build))
     for name, c in interface["components"].items():
         print(f"{out / (name + '.v')}: latency {c['latency']}, II {c['initiation_interval']}")
@@ -263,6 +272,8 @@ def cmd_verilog(args: argparse.Namespace) -> int:
           f"{capacity.triangles} triangles{'' if capacity.guard else ', no step guard'}; {engine['bus']}")
     print(", ".join(str(out / f) for f in engine["files"][1:]))
     print(f"{out / 'clock.sdc'}: clk at {ENGINE_TARGET_MHZ:g} MHz")
+    if platform is not None:
+        print(f"{out / 'sim_models'}/: the ECP5 primitives' simulation models")
     print(f"{out / 'README.md'}: which file is which")
     return 0
 
@@ -325,6 +336,10 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{DEFAULT_CAPACITY.as_option()})")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
                    help="the engine without the step guard (no guarded mode; its block RAMs free for depth)")
+    p.add_argument("--target", choices=("generic", "ecp5"), default="generic",
+                   help="generic (the default): no vendor primitives, for any tool or simulator; ecp5: the netlist "
+                        "'springflat synth --target ecp5' places (MULT18X18D, DP16KD and TRELLIS_FF instances, their "
+                        "simulation models in sim_models/), the one clock.sdc's clock was met with")
     p.add_argument("--out", type=path_argument, required=True, help="output directory")
     p.set_defaults(func=cmd_verilog)
 

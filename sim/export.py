@@ -483,18 +483,28 @@ BUNDLE_FILES = {
     "rsqrt_seed.hex": "the rsqrt unit's seed ROM, one word per line ($readmemh); the Verilog holds the same words "
                       "inline (initial blocks), so no tool needs the file",
     "exp_table.hex": "the step generator's exp-LUT ROM, one word per line ($readmemh); also inline in the Verilog",
-    "clock.sdc": f"the clock `clk` at {ENGINE_TARGET_MHZ:g} MHz, which the engine of the `default` format set at the "
-                 "default capacity meets on the ECP5-85F with nextpnr's timing-driven rip-up (`springflat synth --router "
-                 "router1-ripup`, seeds 1 and 2; one seed's placement stops 0.05 ns short without it: docs/synthesis.md). "
-                 "`springflat synth` reports Fmax for yours: another format set or a larger capacity may need a slower "
-                 "clock. As SDC (Vivado's XDC takes the same line)",
+    "clock.sdc": f"the clock `clk` at {ENGINE_TARGET_MHZ:g} MHz, which the engine's ECP5 netlist (`springflat verilog "
+                 "--target ecp5`, the one `springflat synth` places) of the `default` format set at the default capacity "
+                 "meets on the ECP5-85F with nextpnr's timing-driven rip-up (`springflat synth --router router1-ripup`, "
+                 "seeds 1 and 2; one seed's placement stops 0.05 ns short without it: docs/synthesis.md). The generic "
+                 "Verilog leaves its multipliers and block RAMs to your tool's inference, whose registers may land "
+                 "elsewhere: time it in your flow. Another format set or a larger capacity may need a slower clock: "
+                 "`springflat synth` reports Fmax for yours. As SDC (Vivado's XDC takes the same line)",
+    "sim_models/": "the ECP5 primitives' simulation models (MULT18X18D.v, DP16KD.v, TRELLIS_FF.v), for the modes the "
+                   "netlist uses: read them beside it to simulate it without the vendor's library",
     WAIVER_FILE: "Verilator lint waivers: the rules the generated Verilog breaks by construction, each with its reason",
     "README.md": "this file",
 }
 
 
-def bundle_readme(fs: FormatSet, capacity, files: list[str], version: str) -> str:
-    """``README.md`` of ``springflat verilog``'s bundle: which file is which, the top, clock and reset."""
+def bundle_readme(fs: FormatSet, capacity, files: list[str], version: str, platform=None) -> str:
+    """``README.md`` of ``springflat verilog``'s bundle: which file is which (a folder as ``name/``), the top, clock
+    and reset; ``platform`` the one the Verilog was elaborated for (``None``: generic)."""
+    flavour = ("This is the ECP5 netlist (`--target ecp5`): its multipliers are MULT18X18D and its memories DP16KD "
+               "instances, with their registers where `springflat synth` places them; it needs the ECP5 cell library "
+               "(Yosys's, Diamond's) or `sim_models/`." if dsp_target(platform) == "ecp5" else
+               "This is the generic Verilog: no vendor primitives; `springflat verilog --target ecp5` writes the ECP5 "
+               "netlist that `springflat synth` places.")
     described = {**{f"{module}.v": summary for module, summary in COMPONENT_SUMMARIES.items()}, **BUNDLE_FILES}
     lines = [f"# springflat {version}: Verilog bundle (format set `{fs.name}`)", "",
              f"The top for a system is `{ENGINE_MODULE}` in `{ENGINE_MODULE}.v`: the whole flattening behind a "
@@ -503,9 +513,9 @@ def bundle_readme(fs: FormatSet, capacity, files: list[str], version: str) -> st
              "other modules are the datapath's parts, each a top of its own for a design of your own. Every `.v` "
              "file is self-contained (one top and the modules it instantiates, no includes): give a tool one file.",
              "", "One clock, `clk` (rising edge); `rst` is synchronous and active high (hold it over a rising edge). "
-             "The generic Verilog (`springflat verilog`) has no vendor primitives; `springflat synth` maps it to "
-             "ECP5 or iCE40 and reports resources and Fmax, and `--board ulx3s-85f` builds a bitstream "
-             "(springflat's docs/synthesis.md and docs/board.md).", "", "| file | what |", "|---|---|"]
+             f"{flavour} `springflat synth` maps the RTL to ECP5 or iCE40 and reports resources and Fmax, and "
+             "`--board ulx3s-85f` builds a bitstream (springflat's docs/synthesis.md and docs/board.md).", "",
+             "| file | what |", "|---|---|"]
     lines += [f"| `{name}` | {described[name].replace('|', chr(92) + '|')} |" for name in files]  # '|' escaped
     return "\n".join(lines) + "\n"
 

@@ -155,6 +155,20 @@ def test_synth_board_refusals_are_one_line(argv, message, capsys, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow  # the engine elaborated for ECP5 to count its block RAMs: ~10 s
+def test_a_capacity_the_boards_85f_cannot_hold_is_refused_before_yosys(capsys, tmp_path):
+    """3328 vertices with the guard needs more DP16KD than the LFE5U-85F has (docs/synthesis.md's table): one line
+    at once, not a nextpnr failure after Yosys's half hour."""
+    from sim.cli import main
+
+    assert main(["synth", "--board", "ulx3s-85f", "--capacity", "3328", "19968", "6656",
+                 "--out", str(tmp_path / "out")]) == 2
+    assert re.fullmatch(r"springflat: error: the engine at --capacity 3328 19968 6656 does not fit the board's "
+                        r"LFE5U-85F: it needs \d+ block RAMs \(DP16KD\) where the ECP5 LFE5U-85F CABGA381 has 208 "
+                        r"\(docs/synthesis.md: the capacities that fit\)\n", capsys.readouterr().err)
+    assert not (tmp_path / "out").exists()
+
+
 def test_an_unreachable_baud_is_one_line(capsys, tmp_path):
     """12 Mbaud at 100 MHz is 8.33 clocks per bit: 8 is 4.2 % fast, refused before anything is built."""
     from sim.cli import main

@@ -242,3 +242,33 @@ def test_every_payload_field_is_given_the_format_it_holds(preset):
     core = {f["field"]: f["format"] for info in described if info["module"] == "springflat_core"
             for f in info["payload_layouts"]["entries__payload"] if "format" in f}
     assert core["barrier.threshold"] == f"area {fs.area}" and core["barrier.gain"] == f"barrier_gain {fs.barrier_gain}"
+
+
+@pytest.mark.slow  # every component elaborated for ECP5: ~30 s
+def test_the_ecp5_target_writes_the_netlist_synth_places(tmp_path):
+    """--target ecp5: the Verilog with the primitives synth maps (the netlist the bundle's clock was met with),
+    their simulation models beside it, and a README that says which netlist it is."""
+    out = tmp_path / "v"
+    proc = subprocess.run([SPRINGFLAT, "verilog", "--formats", "narrow", "--target", "ecp5", "--out", out],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    engine = (out / "springflat_engine.v").read_text()
+    assert "MULT18X18D" in engine and "DP16KD" in engine
+    assert sorted(p.name for p in (out / "sim_models").iterdir()) == ["DP16KD.v", "MULT18X18D.v", "TRELLIS_FF.v"]
+    readme = (out / "README.md").read_text()
+    assert "This is the ECP5 netlist" in readme and "| `sim_models/` |" in readme
+    assert f"{out / 'sim_models'}/" in proc.stdout
+
+
+@pytest.mark.slow  # the engine elaborated for ECP5 to count its block RAMs, then exported: ~1 min
+def test_a_capacity_the_85f_cannot_hold_is_said(tmp_path):
+    """3328 vertices with the guard needs more DP16KD than the LFE5U-85F has (docs/synthesis.md's table): the
+    bundle is still written (a larger device, another tool), with a note that it does not fit."""
+    out = tmp_path / "v"
+    proc = subprocess.run([SPRINGFLAT, "verilog", "--capacity", "3328", "19968", "6656", "--out", out],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    notes = [line for line in proc.stderr.splitlines() if line.startswith("springflat: note:")]
+    assert len(notes) == 1 and "does not fit the largest ECP5" in notes[0], proc.stderr
+    assert re.search(r"it needs \d+ block RAMs \(DP16KD\) where the ECP5 LFE5U-85F CABGA381 has 208", notes[0])
+    assert (out / "springflat_engine.v").exists()
