@@ -473,14 +473,36 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
     :func:`start_layout` untangles), a layout file path (what an OBJ layout has that is not used goes
     to ``notes``, see :func:`load_layout`) or a ``(V, 2)`` array (checked as a file's rows are)."""
     if isinstance(init, np.ndarray):
-        return _facing_the_front(check_layout(init, mesh.n_vertices, "the init array", mesh.faces), mesh,
-                                 "the init array", notes)
+        return _given(check_layout(init, mesh.n_vertices, "the init array", mesh.faces), mesh, "the init array",
+                      notes)
     name = "arap" if str(init) == AUTO_START else str(init)
     if name in _METHODS:  # (a method needs a disk: a mesh's holes are closed for it, their vertices its own)
         return _METHODS[name](_disk(mesh, name))
-    return _facing_the_front(load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes,
-                                         mesh_vertices=mesh.vertices), mesh,
-                             f"the layout '{init}'", notes)
+    return _given(load_layout(init, mesh.n_vertices, faces=mesh.faces, notes=notes, mesh_vertices=mesh.vertices),
+                  mesh, f"the layout '{init}'", notes)
+
+
+#: How far from the mesh's size a given layout may be and still be taken as it is: a computed start or a pattern
+#: of an earlier run given back starts the same run again; beyond, it is scaled to the mesh's size, with a note.
+SIZE_TOLERANCE = 1.1
+
+
+def _given(positions: np.ndarray, mesh: Mesh, what: str, notes: list[str] | None) -> np.ndarray:
+    """A layout the user gave, as the run starts from it: facing the front (:func:`_facing_the_front`), and scaled
+    to the mesh's size (:func:`sim.untangle.at_mesh_size`) where it is off by more than :data:`SIZE_TOLERANCE`,
+    with a note: a texture layout in [0, 1] of a mesh in millimetres, say, which the guarded dynamics, whose
+    steps are local and never grow a triangle through zero area, would otherwise have to grow a hundredfold."""
+    from .untangle import at_mesh_size
+
+    positions = _facing_the_front(positions, mesh, what, notes)
+    scaled = at_mesh_size(mesh, positions)
+    factor = float(np.linalg.norm(scaled) / np.linalg.norm(positions)) if np.any(positions) else 1.0
+    if 1 / SIZE_TOLERANCE <= factor <= SIZE_TOLERANCE:
+        return positions
+    if notes is not None:
+        notes.append(f"{what} is {1 / factor:.3g} times the mesh's size (another length unit?): scaled by "
+                     f"{factor:.3g} to it (its edge lengths fitted to the mesh's)")
+    return scaled
 
 
 def _disk(mesh: Mesh, method: str) -> Mesh:
@@ -528,7 +550,7 @@ def _folds(mesh: Mesh, positions: np.ndarray) -> int:
     return int(np.count_nonzero(folded_faces(positions, mesh.faces)))
 
 
-def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untangle_seconds: float = 20.0,
+def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None,
                  slim: Callable[[], np.ndarray] | None = None,
                  floor_strain: float = math.sqrt(ENERGY_FLOOR)) -> StartLayout:
     """The initial layout for ``init`` (:data:`AUTO_START`, a method or a file), fold-free where possible.
@@ -537,7 +559,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
     or SLIM from Tutte (fold-free by construction) where ARAP folds or fails: measured on the corpus, that
     beats untangling ARAP's layout on E_C and on time; where ARAP is fold-free, LSCM's layout where that is
     exact and more so than ARAP's (:func:`_lscm_where_exact`). Any other start with folds is untangled
-    (:func:`sim.untangle.untangle_layout`) and scaled to the mesh's area; a start that stays
+    (:func:`sim.untangle.untangle_layout`), which brings it to the mesh's size; a start that stays
     folded is returned with its count, and the notes say why. ``progress(text)`` is called before
     each long step. ``slim()`` gives :func:`slim_layout`'s layout of ``mesh`` when ARAP folds (default: it
     computes it; a caller may have started it beside ARAP, on another core). A computed start of a mesh with
@@ -583,14 +605,14 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None, untan
         return StartLayout(slim_layout(mesh) if slim is None else slim(), "slim", 0, notes)
     notes = read_notes + [f"{described} folds {folded} triangle{plural}{closed}: untangling it"]
     say(notes[-1])
-    untangled = untangle_layout(mesh, positions, time_limit=untangle_seconds)
+    untangled = untangle_layout(mesh, positions)
     if untangled.folded == 0:
-        return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, untangled", 0, notes)
+        return StartLayout(untangled.positions, f"{method}, untangled", 0, notes)
     notes.append(f"untangling left {untangled.folded} of {folded} folded triangles{closed} after "
                  f"{untangled.seconds:.0f} s; "
                  "the guarded dynamics cannot clear them (the default --init auto starts fold-free)")
     if untangled.folded < folded:
-        return StartLayout(_scaled_to_area(mesh, untangled.positions), f"{method}, partly untangled",
+        return StartLayout(untangled.positions, f"{method}, partly untangled",
                            untangled.folded, notes)
     return StartLayout(positions, method, folded, notes)
 
@@ -623,11 +645,3 @@ def _lscm_where_exact(mesh: Mesh, arap: np.ndarray, say: Callable[[str], None], 
         f"the arap layout is not as exact as the stop rule asks (an rms edge strain of {arap_strain:.2g}), the lscm "
         f"layout is ({lscm_strain:.2g}: a developable patch): starting from it"]
     return StartLayout(lscm, "lscm", 0, said)
-
-
-def _scaled_to_area(mesh: Mesh, positions: np.ndarray) -> np.ndarray:
-    """``positions`` centred and scaled uniformly so that ``Σ|A'_t|`` is the 3D area (folds unchanged): the
-    untangler's free boundary lets the layout grow."""
-    area = float(np.abs(signed_areas_2d(positions, mesh.faces)).sum())
-    centred = positions - positions.mean(axis=0)
-    return centred * np.sqrt(float(mesh.face_areas.sum()) / area) if area > 0 else centred

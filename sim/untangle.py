@@ -9,7 +9,12 @@ maps its 3D shape (laid flat in its own plane) onto the layout; the energy
 is finite for every layout (also folded ones, ``det J ≤ 0``) while ``ε > 0``, and as ``ε`` shrinks
 it approaches an energy that is infinite on folded triangles. Minimising ``F_ε`` with L-BFGS and
 shrinking ``ε`` by the paper's rule after each minimisation drives every ``det J`` positive.
-The boundary is free (the paper's 2D code holds it fixed): a pattern has no prescribed outline.
+The boundary is free (the paper's 2D code holds it fixed): a pattern has no prescribed outline. With a free
+boundary the paper's weights shrink the layout: while ``ε`` is large against ``det J`` (the paper starts at
+``ε = 1``), ``χ`` hardly grows with ``det J`` and every term is smallest at ``J = 0``, and its area term
+(``θ = 1/128``) barely holds a triangle's size. So the layout is first brought to the mesh's size (its edge
+lengths fitted to the 3D ones), ``ε`` starts at :data:`UNTANGLE_EPS0` of a triangle at its 3D size, and
+``θ`` is :data:`UNTANGLE_THETA`: measured in docs/guard.md ("The start").
 
 The result is a start for the dynamics, not a final pattern: the shape energy makes triangles
 conformal and the area term keeps them at their 3D size, so it is near an isometry wherever one
@@ -27,15 +32,22 @@ from threadpoolctl import threadpool_limits
 
 from golden_model.mesh import Mesh, layout_orientation
 
-__all__ = ["UntangleResult", "untangle_layout", "symmetric_dirichlet", "UNTANGLE_THETA"]
+__all__ = ["UntangleResult", "untangle_layout", "at_mesh_size", "symmetric_dirichlet", "UNTANGLE_THETA",
+           "UNTANGLE_EPS0", "UNTANGLE_EVALUATIONS"]
 
-#: The weight of the area term against the shape term (the paper's 1/128).
-UNTANGLE_THETA = 1.0 / 128.0
+#: The weight of the area term against the shape term (the paper's, for a fixed boundary, is 1/128).
+UNTANGLE_THETA = 0.5
+#: ``ε`` of the first minimisation, against ``det J = 1`` of a triangle at its 3D size (the paper's is 1).
+UNTANGLE_EPS0 = 0.01
+#: The energy evaluations all minimisations together may take: a bound on the work that gives the same
+#: result on a busy machine as on an idle one (a time limit would not).
+UNTANGLE_EVALUATIONS = 20_000
 
 
 @dataclass(frozen=True)
 class UntangleResult:
-    """``positions`` (V, 2); ``folded`` triangles left (0 on success); ``rounds`` of ε; ``seconds``."""
+    """``positions`` (V, 2), at the mesh's size (:func:`at_mesh_size`); ``folded`` triangles left (0 on success);
+    ``rounds`` of ε; ``seconds``."""
 
     positions: np.ndarray
     folded: int
@@ -103,28 +115,42 @@ def _energy_and_gradient(flat: np.ndarray, faces: np.ndarray, grads: np.ndarray,
     return energy, gradient.ravel(), det
 
 
-def untangle_layout(mesh: Mesh, positions: np.ndarray, *, max_rounds: int = 200, time_limit: float = 20.0,
-                    theta: float = UNTANGLE_THETA, progress=None) -> UntangleResult:
-    """Remove the folds of ``positions`` (V, 2), or as many as ``max_rounds`` and ``time_limit`` seconds allow.
+def at_mesh_size(mesh: Mesh, positions: np.ndarray) -> np.ndarray:
+    """``positions`` scaled by the factor that fits its edge lengths ``L`` to the mesh's 3D ones ``d`` in least
+    squares, ``Σ L·d / Σ L²`` (1 for a layout at a minimum of the springs' energy, whose scale it cannot lower);
+    as it is where every edge has length 0."""
+    i, j = mesh.edges.T
+    lengths = np.linalg.norm(positions[i] - positions[j], axis=1)
+    squares = float(lengths @ lengths)
+    return positions * (float(lengths @ mesh.rest_lengths) / squares) if squares > 0 else positions
 
-    The layout is mirrored into the mesh's winding first when its bulk is clockwise, and back at
-    the end, so the pattern keeps its orientation. ``progress(rounds, folded)`` is called after
-    each round.
+
+def untangle_layout(mesh: Mesh, positions: np.ndarray, *, max_rounds: int = 200,
+                    max_evaluations: int = UNTANGLE_EVALUATIONS, theta: float = UNTANGLE_THETA,
+                    eps0: float = UNTANGLE_EPS0, progress=None) -> UntangleResult:
+    """Remove the folds of ``positions`` (V, 2), or as many as ``max_rounds`` rounds of ``ε`` and
+    ``max_evaluations`` evaluations of the energy allow.
+
+    The layout is brought to the mesh's size first (:func:`at_mesh_size`), and mirrored into the mesh's winding
+    when its bulk is clockwise, and back at the end, so the pattern keeps its orientation.
+    ``progress(rounds, folded)`` is called after each round.
     """
     start = time.monotonic()
     sigma = 1.0 if _winding_agrees(mesh, positions) else -1.0
     flip = np.array([sigma, 1.0])
-    x = (np.asarray(positions, dtype=np.float64) * flip).ravel()
+    x = (at_mesh_size(mesh, np.asarray(positions, dtype=np.float64)) * flip).ravel()
     grads, areas, faces = _reference_gradients(mesh), mesh.face_areas, mesh.faces
-    eps = 1.0
-    rounds = 0
+    eps = eps0
+    rounds = evaluations = 0
     _, _, det = _energy_and_gradient(x, faces, grads, areas, eps, theta)
-    while rounds < max_rounds and time.monotonic() - start < time_limit:
+    while rounds < max_rounds and evaluations < max_evaluations:
         rounds += 1
         before, _, _ = _energy_and_gradient(x, faces, grads, areas, eps, theta)
         with threadpool_limits(1):  # L-BFGS-B's small BLAS calls only lose time to threads
             result = minimize(_energy_and_gradient_only, x, args=(faces, grads, areas, eps, theta), jac=True,
-                              method="L-BFGS-B", options={"maxiter": 2000, "gtol": 1e-6})
+                              method="L-BFGS-B", options={"maxiter": 2000, "maxfun": max_evaluations - evaluations,
+                                                          "gtol": 1e-6})
+        evaluations += result.nfev
         x = result.x
         after, _, det = _energy_and_gradient(x, faces, grads, areas, eps, theta)
         detmin = float(det.min())
@@ -135,7 +161,7 @@ def untangle_layout(mesh: Mesh, positions: np.ndarray, *, max_rounds: int = 200,
         sigma_k = max(1.0 - after / before, 0.1) if before > 0 else 0.1
         mu = (1.0 - sigma_k) * float(_chi(np.array([detmin]), eps)[0])
         eps = max(1e-9, 2.0 * np.sqrt(mu * (mu - detmin))) if detmin < mu else 1e-9
-    layout = x.reshape(-1, 2) * flip
+    layout = at_mesh_size(mesh, x.reshape(-1, 2) * flip)
     return UntangleResult(layout, int(np.count_nonzero(det <= 0)), rounds, time.monotonic() - start)
 
 

@@ -68,7 +68,40 @@ def test_layout_files(tmp_path):
     (tmp_path / "b.csv").write_text("# x,y\n" + "\n".join(f"{x},{y}" for x, y in expected))
     (tmp_path / "c.obj").write_text("".join(f"v {x} {y} 0\n" for x, y in expected) + "f 1 2 3\n")
     for name in ("a.txt", "b.csv", "c.obj"):
-        assert np.array_equal(initial_layout(mesh, tmp_path / name), expected)
+        assert np.array_equal(load_layout(tmp_path / name, 7), expected)
+
+
+def test_a_given_start_is_brought_to_the_meshs_size_with_a_note_where_that_scales_it_much(tmp_path):
+    """A texture layout in [0, 1] of a mesh in millimetres: the guarded dynamics never grows a triangle through
+    zero area and its steps are local, so from 1/100 of the size it stalled with a star-shaped pattern, said
+    'converged'. A given start that far off is scaled to the mesh's size (its edge lengths fitted to the 3D
+    ones); a pattern from an earlier run is at that size, and one within SIZE_TOLERANCE is taken as it is."""
+    import springflat
+    from sim.layouts import SIZE_TOLERANCE
+    from sim.untangle import at_mesh_size
+
+    mesh = dome_grid(8)
+    finished = springflat.flatten(mesh.vertices, mesh.faces, init="tutte")
+    np.testing.assert_allclose(at_mesh_size(mesh, finished.layout), finished.layout, rtol=1e-3)  # (a minimum's)
+    for scale, said in ((0.01, "is 0.01 times the mesh's size (another length unit?): scaled by 100 to it"),
+                        (1e16, "is 1e+16 times the mesh's size"), (0.97 * SIZE_TOLERANCE, None), (1.0, None)):
+        notes: list[str] = []
+        start = initial_layout(mesh, finished.layout * scale, notes)
+        if said is None:
+            assert np.array_equal(start, finished.layout * scale) and notes == []
+        else:
+            np.testing.assert_allclose(start, at_mesh_size(mesh, finished.layout), rtol=1e-9)
+            assert notes == [AnyStringWith(said)], notes
+    for scale in (0.01, 1e16):
+        again = springflat.flatten(mesh.vertices, mesh.faces, init=finished.layout * scale)
+        assert again.folded == 0 and again.shape_error <= finished.shape_error * 1.01
+
+
+class AnyStringWith(str):
+    def __eq__(self, other):
+        return isinstance(other, str) and str(self) in other
+
+    __hash__ = str.__hash__
 
 
 @pytest.mark.parametrize("text, message", [
@@ -291,7 +324,31 @@ def test_a_folded_start_is_untangled_before_the_guarded_dynamics(tmp_path):
     np.savetxt(path, folded)
     start = start_layout(mesh, str(path))
     assert start.folded == 0 and folded_faces(start.positions, mesh.faces).sum() == 0
-    assert "untangl" in start.method and len(start.notes) == 1
+    assert "untangl" in start.method and start.notes[-1].endswith("folds 3 triangles: untangling it")
+
+
+def test_untangling_keeps_a_nearly_right_start_and_its_size():
+    """A start with one vertex out of place (a fold): untangled at the mesh's size, the run from it ends as the run
+    from the right start does. At the paper's weights (ε = 1, θ = 1/128) the first round shrank the whole layout
+    to a hundred-thousandth of its size, and the run ended at E_C 0.21 with its boundary crossing itself,
+    against 0.004."""
+    from sim.untangle import at_mesh_size
+
+    import springflat
+
+    mesh = dome_grid(8)
+    right = initial_layout(mesh, "tutte")
+    moved = right.copy()
+    inner = int(np.setdiff1d(np.arange(mesh.n_vertices), mesh.boundary_loop)[20])
+    neighbour = int(mesh.edges[mesh.edges[:, 0] == inner][0, 1])
+    moved[inner] = 1.5 * right[neighbour] - 0.5 * right[inner]  # past a neighbour: its fan folds
+    assert folded_faces(moved, mesh.faces).sum() > 0
+    start = start_layout(mesh, moved)
+    assert start.folded == 0 and "untangled" in start.method
+    np.testing.assert_allclose(at_mesh_size(mesh, start.positions), start.positions, rtol=1e-12)
+    from_right = springflat.flatten(mesh.vertices, mesh.faces, init=right)
+    from_moved = springflat.flatten(mesh.vertices, mesh.faces, init=moved)
+    assert from_moved.folded == 0 and from_moved.shape_error <= 1.05 * from_right.shape_error
 
 
 def test_an_obj_that_holds_the_curved_mesh_itself_is_no_layout_a_flat_one_is(tmp_path):
