@@ -45,6 +45,8 @@ def _run() -> int:
         sys.stderr = io.StringIO()  # not sent to print()'s default, the standard output (a --json line)
     if sys.stdout is None:  # closed (>&-): what it prints there is dropped; its files are still written
         sys.stdout = io.StringIO()
+    if isinstance(sys.stdout, io.TextIOWrapper):  # a file name its encoding lacks (a Windows code page, a C
+        sys.stdout.reconfigure(errors="backslashreplace")  # locale) comes out escaped, as on stderr, not a traceback
     received: list[str] = []
 
     def record(signum, frame) -> None:

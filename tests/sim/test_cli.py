@@ -955,3 +955,20 @@ def test_a_guarded_runs_history_marks_its_rolled_back_steps_and_has_no_time_step
     rolled_back = [k for k, row in enumerate(rows) if row["accepted"] == "0"]
     assert len(rolled_back) == summary["rejected_steps"] > 0
     assert all(rows[k]["energy"] == rows[k - 1]["energy"] for k in rolled_back)
+
+
+def test_a_name_the_standard_outputs_encoding_lacks_is_escaped_not_a_traceback(tmp_path):
+    """A mesh named in Chinese on a standard output that is ASCII (a Windows code page, a C locale, a pipe): the
+    result line raised UnicodeEncodeError after the pattern was written; a batch stopped half way."""
+    import os
+    import shutil
+    import subprocess
+
+    from support import SPRINGFLAT
+
+    shutil.copy(SCANS / "bunny_ear.obj", tmp_path / "网格€.obj")
+    proc = subprocess.run([SPRINGFLAT, "flatten", "网格€.obj", "--max-iter", "3", "--out", "p.svg"], cwd=tmp_path,
+                          capture_output=True, env={**os.environ, "PYTHONIOENCODING": "ascii"})
+    assert proc.returncode == 0, proc.stderr.decode("ascii", "replace")
+    assert proc.stdout.decode("ascii").startswith("\\u7f51\\u683c\\u20ac: max-iterations after 3 iterations")
+    assert (tmp_path / "p.svg").exists()
