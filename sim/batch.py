@@ -345,10 +345,13 @@ def _already_written(out_dir: Path, name: str, endings: tuple[tuple[str, str], .
 
 def _mesh_changed_ns(source: str) -> int:
     """When the mesh file ``source`` last changed, in ns (0 for a built-in): its own time, or a symbolic link's
-    where that is later (a link pointed at another export is a change, as make -L counts it)."""
+    where that is later (a link pointed at another export is a change, as make -L counts it), or its inode's
+    (``st_ctime``) where that is later: a mesh moved or copied into place with its old time kept (``mv``,
+    ``cp -p``, an unpacked archive) is a change too."""
     if is_builtin(source):
         return 0
-    return max(os.lstat(source).st_mtime_ns, os.stat(source).st_mtime_ns)
+    link, target = os.lstat(source), os.stat(source)
+    return max(link.st_mtime_ns, target.st_mtime_ns, target.st_ctime_ns)
 
 
 def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:

@@ -3,6 +3,7 @@
 import json
 import os
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -482,20 +483,24 @@ def test_skip_existing_goes_on_after_an_interrupted_batch(tmp_path, monkeypatch,
 
 def test_skip_existing_runs_a_mesh_exported_again_since_its_files(tmp_path, monkeypatch, capsys):
     """A mesh re-exported under its name was skipped, its old pattern kept for the cutter: as make would, a mesh
-    newer than any of its files runs again."""
+    newer than any of its files runs again; so does one moved into place with its old time kept (mv, cp -p: its
+    inode's time is the move's)."""
     monkeypatch.chdir(tmp_path)
-    write_meshes(tmp_path / "in", 2, 0)
-    argv = ["flatten", "in/dome00.obj", "in/dome01.off", "--out-dir", "o", "--out", ".dxf", "--history", ".csv",
-            "--max-iter", "5", "--jobs", "1", "--skip-existing"]
+    write_meshes(tmp_path / "in", 3, 0)
+    argv = ["flatten", "in/dome00.obj", "in/dome01.off", "in/dome02.obj", "--out-dir", "o", "--out", ".dxf",
+            "--history", ".csv", "--max-iter", "5", "--jobs", "1", "--skip-existing"]
     assert main(argv) == 0
     capsys.readouterr()
     old = os.stat("o/dome01.csv").st_mtime
     os.utime("in/dome01.off", (old + 60, old + 60))  # exported again after the batch
-    os.utime("o/dome00.csv", (old - 60, old - 60))   # an older file of a mesh older still: skipped
-    os.utime("in/dome00.obj", (old - 120, old - 120))
+    shutil.copy("in/dome00.obj", "replacement.obj")  # another mesh, dated before the files, moved into place
+    os.utime("replacement.obj", (old - 120, old - 120))
+    os.replace("replacement.obj", "in/dome02.obj")
+    assert os.stat("in/dome02.obj").st_mtime < os.stat("o/dome02.csv").st_mtime
     assert main(argv) == 0
     rows = {line.split()[0]: line.split()[1] for line in capsys.readouterr().out.splitlines() if line.startswith("dome")}
-    assert rows["dome00"] == "skipped" and rows["dome01"] in ("converged", "max-iterations")
+    assert rows["dome00"] == "skipped"
+    assert rows["dome01"] in ("converged", "max-iterations") and rows["dome02"] in ("converged", "max-iterations")
     assert os.stat("o/dome01.csv").st_mtime > old
 
 
