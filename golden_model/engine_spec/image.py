@@ -381,7 +381,9 @@ def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
                               f"'{params.mode.name}': use --no-guard, or an engine built with the guard")
     window = image_energy_window(params.mode)
     if params.energy_window != window:
-        hint = f"--energy-window {window}" if params.guard else "--energy-window 1 (or the guard, with its window)"
+        hint = (f"--energy-window {window}" if params.guard else
+                "--energy-window 1 (or the guard, with its window)" if params.mode.step is Step.MOMENTUM else
+                "--energy-window 1")  # (the paper dynamics has no guard)
         raise FixedPointError(f"SpringflatEngine's stop rule measures the energy change over {window} "
                               f"{'accepted iterations' if params.guard else 'iteration'} in this mode, not "
                               f"{params.energy_window}: use {hint}")

@@ -300,3 +300,18 @@ def test_a_build_without_the_guard_refuses_the_guarded_step_in_one_line():
     assert image.capacity.guard is False
     with pytest.raises(ValueError, match="EngineCapacity: guard must be a bool, got 1"):
         EngineCapacity(10, 10, 10, guard=1)
+
+
+@pytest.mark.parametrize("params, hint", [
+    (FlattenParams(dynamics="paper", energy_window=3), "use --energy-window 1"),
+    (FlattenParams(dynamics="momentum", guard=False, energy_window=10),
+     "use --energy-window 1 (or the guard, with its window)"),
+    (FlattenParams(dynamics="momentum", energy_window=5), "use --energy-window 10"),
+])
+def test_a_window_the_engine_lacks_is_refused_with_a_remedy_the_mode_takes(params, hint):
+    """The paper dynamics has no guard: its refusal offered one ('or the guard'), which --guard then refused."""
+    from golden_model.engine_spec.image import check_engine_params
+
+    with pytest.raises(FixedPointError, match=r"^SpringflatEngine's stop rule measures the energy change over") as refused:
+        check_engine_params(params)
+    assert str(refused.value).endswith(hint)
