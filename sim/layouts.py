@@ -57,7 +57,7 @@ from golden_model.guard import ENERGY_FLOOR
 from .mesh_io import read_obj_vertices
 from .mesh_io.polygons import is_plain
 
-__all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
+__all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "ARRAY_WORDS", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
            "arap_layout", "slim_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS", "NoDiskStart",
            "SLIM_MAX_ITERATIONS", "check_layout", "init_name", "ARRAY_START"]
 
@@ -408,7 +408,11 @@ def check_layout(positions, n_vertices: int, what: str, faces: np.ndarray | None
     """``positions`` as a ``(n_vertices, 2)`` float64 array of finite coordinates within
     :data:`COORDINATE_LIMIT`, else a :class:`LayoutError` naming ``what`` (a layout file, the init array);
     with the mesh's ``faces``, also one in which some triangle has an area (not all on a line or a point)."""
-    positions = np.asarray(positions)
+    try:
+        positions = np.asarray(positions)
+    except ValueError:  # ragged rows (numpy's own words name its internals)
+        raise LayoutError(f"{what}'s rows are not all of one length: expected ({n_vertices}, 2), one x y row per "
+                          "vertex") from None
     if positions.dtype.kind not in "iuf":
         raise LayoutError(f"{what} holds {positions.dtype} values, not real numbers")
     if positions.ndim != 2 or positions.shape[1] != 2:
@@ -429,8 +433,10 @@ def check_layout(positions, n_vertices: int, what: str, faces: np.ndarray | None
     return positions
 
 
-#: What :func:`initial_layout` and :func:`start_layout` call a start given as an array (the Python API's ``init``).
+#: What :func:`initial_layout` and :func:`start_layout` call a start given as an array (the Python API's ``init``),
+#: and how their notes and refusals name it.
 ARRAY_START = "array"
+ARRAY_WORDS = "the init array"
 
 
 def init_name(init) -> str:
@@ -473,8 +479,7 @@ def initial_layout(mesh: Mesh, init: str | Path | np.ndarray, notes: list[str] |
     :func:`start_layout` untangles), a layout file path (what an OBJ layout has that is not used goes
     to ``notes``, see :func:`load_layout`) or a ``(V, 2)`` array (checked as a file's rows are)."""
     if isinstance(init, np.ndarray):
-        return _given(check_layout(init, mesh.n_vertices, "the init array", mesh.faces), mesh, "the init array",
-                      notes)
+        return _given(check_layout(init, mesh.n_vertices, ARRAY_WORDS, mesh.faces), mesh, ARRAY_WORDS, notes)
     name = "arap" if str(init) == AUTO_START else str(init)
     if name in _METHODS:  # (a method needs a disk: a mesh's holes are closed for it, their vertices its own)
         return _METHODS[name](_disk(mesh, name))
@@ -575,7 +580,7 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None,
     say = progress or (lambda text: None)
     name = init_name(init)
     method = "arap" if name == AUTO_START else name
-    described = (f"the {method} layout" if method in _METHODS else "the init array" if name == ARRAY_START
+    described = (f"the {method} layout" if method in _METHODS else ARRAY_WORDS if name == ARRAY_START
                  else f"the layout '{name}'")
     closed = ""
     if name == AUTO_START:  # ARAP's folds counted with its fill's: where the fill folds, SLIM's fold-free disk

@@ -41,7 +41,7 @@ from sim.cli import add_engine_options, forget_half_built_components
 from sim.distortion import Distortion, distortion
 from sim.engines import ENGINES, engine_named
 from sim.flatten_run import divergence_note, pattern_notes, run_flatten, run_formats
-from sim.layouts import AUTO_START, LAYOUT_METHODS, LayoutError
+from sim.layouts import ARRAY_WORDS, AUTO_START, LAYOUT_METHODS, LayoutError, check_layout
 from sim.mesh_io import load_mesh_with_notes, repair_hint
 from sim.mesh_io.seams import seams_hint, seams_note
 from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
@@ -395,10 +395,10 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
     args.mesh = mesh.name
     # the command's start for the mesh (a built-in's PCA, AUTO_START for arrays and files); an array is checked,
     # and untangled where it folds, as a layout file is
-    args.init = (default_init(str(V)) if named else AUTO_START) if init is None else \
-        str(init) if isinstance(init, (str, Path)) else np.asarray(init)
     run_notes: list[str] = []  # the command's notes on stderr (the start untangled, ...) are warnings here
     try:
+        args.init = (default_init(str(V)) if named else AUTO_START) if init is None else \
+            str(init) if isinstance(init, (str, Path)) else check_layout(init, mesh.n_vertices, ARRAY_WORDS)
         result = run_flatten(args, mesh, params, second_core=True, notes=run_notes)
     except FixedPointError as exc:  # the formats cannot hold the mesh: the presets that can, by keyword
         raise FixedPointError(_in_api_words(str(exc))) from None

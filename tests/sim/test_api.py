@@ -146,6 +146,8 @@ def test_trimesh_and_an_initial_array(ear):
     (lambda P: P[:-1], "the init array has {m} rows but the mesh has {n} vertices"),
     (lambda P: np.column_stack([P, P[:, :1]]), r"the init array has shape \({n}, 3\), expected \({n}, 2\)"),
     (lambda P: P.astype(complex), "the init array holds complex128 values, not real numbers"),
+    (lambda P: [list(P[0][:1])] + P[1:].tolist(), r"the init array's rows are not all of one length: expected "
+                                                  r"\({n}, 2\)"),
 ])
 def test_an_initial_array_is_checked_as_a_layout_file_is(ear, layout, message):
     V, F = ear
