@@ -87,8 +87,9 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         args.engine_top = True
     if args.engine_top:
         return cmd_rtl_check_engine(args, mesh, params)
-    if args.capacity is not None or args.wait_states:
-        raise UserError("--capacity and --wait-states apply to --engine-top")
+    if given := [flag for flag, value in (("--capacity", args.capacity is not None),
+                                          ("--wait-states", bool(args.wait_states))) if value]:
+        raise UserError(f"{' and '.join(given)} appl{'y' if len(given) > 1 else 'ies'} to --engine-top: add it")
     if args.iterations is not None and args.iterations < 1:
         raise UserError(f"--iterations must be >= 1, got {args.iterations}")
     stall = 0.0 if args.stall is None else args.stall

@@ -59,7 +59,8 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "synth", help="synthesise, place and route the RTL for ECP5 or iCE40 and write a handoff bundle",
         description="Export the Verilog, run Yosys and nextpnr (YoWASP) for ECP5-85F CABGA381 or iCE40 UP5K SG48, "
                     "and report LUT4, flip-flops, DSPs, block RAM, Fmax after routing and the critical path per "
-                    "component and for the top (springflat_core). springflat_engine (the whole engine behind "
+                    "component of --components (by default every component, springflat_core the datapath's "
+                    "top among them). springflat_engine (the whole engine behind "
                     "its Wishbone bus, --capacity) is opt-in. Writes the handoff bundle to --out.")
     p.add_argument("--target", choices=tuple(TARGETS),
                    help="ecp5 (LFE5U-85F) or ice40 (UP5K); one of --target and --board is needed")

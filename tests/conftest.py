@@ -5,6 +5,8 @@ Plain helpers and paths are in :mod:`support` (``tests/support/``), importable f
 
 from __future__ import annotations
 
+import signal
+
 import pytest
 
 from sim.cocotb_support import SIMULATORS
@@ -23,6 +25,15 @@ def unelaborated():
     """Components built only for their attributes (widths, port bits) are not reported as unused."""
     with refused_components():
         yield
+
+
+def pytest_configure(config) -> None:
+    """Ctrl-C answered as in a terminal, for the tests that send one to a command run in-process: a shell without
+    job control (a script's ``make test &``) starts its background jobs with SIGINT ignored, and a command leaves
+    an ignored signal ignored (``nohup``'s SIGHUP), so those tests would test the launcher, not the command. Each
+    xdist worker runs this too."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -38,7 +38,8 @@ VERSION = (2, 2)
 """(major, minor) of this register map; the major changes when an address or field moves."""
 
 ACCESS = {
-    "ro": "read only (a write is a bus error)",
+    "ro": "read only (a write to a register that is read only as a whole is a bus error; a read-only field of a "
+          "register that also has a writable one ignores the write)",
     "rw": "read/write",
     "w1c": "read; writing 1 clears the bit, 0 leaves it",
     "w1p": "write 1 to act (a pulse); reads 0",

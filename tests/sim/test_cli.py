@@ -972,3 +972,13 @@ def test_a_name_the_standard_outputs_encoding_lacks_is_escaped_not_a_traceback(t
     assert proc.returncode == 0, proc.stderr.decode("ascii", "replace")
     assert proc.stdout.decode("ascii").startswith("\\u7f51\\u683c\\u20ac: max-iterations after 3 iterations")
     assert (tmp_path / "p.svg").exists()
+
+
+@pytest.mark.parametrize("given, said", [(["--capacity", "64", "200", "100"], "--capacity applies"),
+                                         (["--wait-states", "2"], "--wait-states applies"),
+                                         (["--capacity", "64", "200", "100", "--wait-states", "2"],
+                                          "--capacity and --wait-states apply")])
+def test_rtl_check_names_the_engine_top_option_given_without_it(given, said):
+    """(It named both options whatever was given.)"""
+    proc = run("rtl-check", "surf1", *given)
+    assert proc.returncode == 2 and proc.stderr == f"springflat: error: {said} to --engine-top: add it\n"

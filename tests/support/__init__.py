@@ -42,8 +42,9 @@ LONGEST_FIRST = ("sim/test_cocotb.py", "sim/test_engine_rtl.py", "hdl/test_engin
 def press_ctrl_c(*args, **kwargs) -> None:
     """SIGINT to this process, as a Ctrl-C while the work goes on, for a test to put in place of a step of a
     command run in-process. The command's handler raises ``KeyboardInterrupt`` at once; where the signal lands in a
-    finaliser (the garbage collector runs those anywhere, more often under load) the handler sends it again a
-    moment later, and the work going on here (a few seconds of it) receives it as a real run would."""
+    finaliser (the garbage collector runs those anywhere) the handler sends it again a moment later
+    (:func:`sim.outputs.on_interrupt`), and the work going on here (a few seconds of it) receives it as a real
+    run would."""
     signal.raise_signal(signal.SIGINT)
     time.sleep(5)
 
