@@ -54,8 +54,8 @@ from .flatten_run import (PATTERN_OUTPUTS, check_options_used, check_print_size,
 from .layouts import LAYOUT_METHODS
 from .mesh_io import MESH_SUFFIXES
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
-    check_link_target, check_not_interrupted, check_output_path, file_ending, on_interrupt, print_note, received_signal, \
-    record_written_outputs, reset_interrupted, written_outputs
+    check_link_target, check_not_foreign, check_not_interrupted, check_output_path, file_ending, on_interrupt, \
+    print_note, received_signal, record_written_outputs, reset_interrupted, written_outputs
 from .patterns import add_pattern_options, check_not_a_mesh, pattern_ending
 from .run_options import (
     USER_ERRORS,
@@ -234,7 +234,8 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 
 def cmd_verilog(args: argparse.Namespace) -> int:
-    from .export import bundle_readme, export_engine_bundle, export_verilog
+    from .export import BUNDLE_FILES, bundle_readme, export_engine_bundle, export_verilog
+    from .top_names import COMPONENT_SUMMARIES
     from .register_map_export import engine_capacity
     from .clock import clock_sdc
     from .synth import earlier_bundle_files, ecp5_overflow, record_bundle_files
@@ -246,8 +247,11 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     platform = ECP5 if args.target == "ecp5" else None
     out = args.out
     inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
-    with atomic_directory(out, inputs=inputs,  # all of the bundle or nothing, also on Ctrl-C
-                          stale=earlier_bundle_files(out)) as build:
+    earlier = earlier_bundle_files(out)
+    check_not_foreign(out, [*(f"{module}.v" for module in COMPONENT_SUMMARIES),  # before the half minute's work
+                            *(name for name in BUNDLE_FILES if not name.endswith("/"))], earlier)
+    with atomic_directory(out, inputs=inputs, stale=earlier,  # all of the bundle or nothing, also on Ctrl-C
+                          owned=earlier) as build:  # (a file of the user's in --out is not replaced)
         print(f"springflat verilog: exporting every component and springflat_engine (capacity "
               f"{capacity.as_option()}, {args.target}) to {out} ...", file=sys.stderr)  # half a minute of silence
         # the build that met 125 MHz fits; any other is counted (seconds), since the bundle's clock says 125

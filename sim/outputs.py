@@ -643,7 +643,7 @@ def check_output_directory(out: Path, what: str = "--out", files: tuple[str, ...
 
 @contextmanager
 def atomic_directory(out: Path, what: str = "--out", stale: Sequence[str] = (),
-                     inputs: list[tuple[str, Path | None]] = ()) -> Iterator[Path]:
+                     inputs: list[tuple[str, Path | None]] = (), owned: Sequence[str] | None = None) -> Iterator[Path]:
     """Yield a new empty directory to build an output directory in; at the end of the block its contents
     become ``out``: all of them, or (on an exception, an interrupt included) none. It is made beside a new
     ``out``, and inside an existing one (hidden, removed at the end): on the file system the files end on,
@@ -655,13 +655,15 @@ def atomic_directory(out: Path, what: str = "--out", stale: Sequence[str] = (),
     regular file, nor one of ``inputs`` (``(what, path)`` as for :func:`check_distinct`).
     ``stale``: names removed from an existing ``out`` unless the build wrote them (a result an
     earlier run left that would now mislead), read when the block ends (a caller may fill it in the
-    block); a directory they leave empty goes too.
+    block); a directory they leave empty goes too. ``owned``: where given, the files of an existing ``out``
+    that an earlier run wrote; any other namesake of a built file is the user's (a project's own README.md),
+    refused in one line, not replaced (checked by :func:`check_build_so_far` before long work, and again here).
     """
     out = out if isinstance(out, Path) else Path(out)  # keeps a TypedPath as typed
     check_output_directory(out, what)
     target = output_target(out)
     build = _make_temporary(_build_parent(target), target.name, is_dir=True)
-    building = _BUILDING.set((build, out, list(inputs)))
+    building = _BUILDING.set((build, out, list(inputs), None if owned is None else frozenset(owned), what))
     try:
         try:
             yield build
@@ -679,6 +681,7 @@ def atomic_directory(out: Path, what: str = "--out", stale: Sequence[str] = (),
                 if not target.exists():
                     os.rename(build, target)
                 else:
+                    check_not_foreign(out, _built_names(build), owned, what)
                     _merge_directory(build, target, out, stale, inputs, what)
                 _written(out, directory=True)
         except OSError as exc:
@@ -689,17 +692,19 @@ def atomic_directory(out: Path, what: str = "--out", stale: Sequence[str] = (),
             shutil.rmtree(build, ignore_errors=True)
 
 
-#: The :func:`atomic_directory` being built: ``(build, out, inputs)`` (:func:`check_build_so_far`).
-_BUILDING: ContextVar[tuple[Path, Path, list] | None] = ContextVar("springflat_building", default=None)
+#: The :func:`atomic_directory` being built: ``(build, out, inputs, owned, what)`` (:func:`check_build_so_far`).
+_BUILDING: ContextVar[tuple | None] = ContextVar("springflat_building", default=None)
 
 
 def check_build_so_far() -> None:
     """Refuse now, not after the work, a file already in the :func:`atomic_directory` being built that would
     replace one of its inputs when it is put in place (a ``--formats`` file named as a bundle's file,
-    inside ``--out``). Called before a long step (a synthesis tool's run); nothing outside such a block."""
+    inside ``--out``), or a file of the user's there (``owned``). Called before a long step (a synthesis tool's
+    run); nothing outside such a block."""
     if (building := _BUILDING.get()) is not None:
-        build, out, inputs = building
+        build, out, inputs, owned, what = building
         _check_no_input_replaced(_built_files(build), build, out, inputs)
+        check_not_foreign(out, _built_names(build), owned, what)
 
 
 def _built_files(build: Path) -> list[Path]:
@@ -710,6 +715,26 @@ def _built_files(build: Path) -> list[Path]:
 def _check_no_input_replaced(files: list[Path], build: Path, out: Path, inputs: list[tuple[str, Path | None]]) -> None:
     """:func:`check_distinct` of ``files`` of ``build`` (as the ``out`` files they become) against ``inputs``."""
     check_distinct([("output", out / p.relative_to(build)) for p in files], list(inputs))
+
+
+def _built_names(build: Path) -> list[str]:
+    return [p.relative_to(build).as_posix() for p in _built_files(build)]
+
+
+def check_not_foreign(out: Path, names: Sequence[str], owned: Sequence[str] | None, what: str = "--out") -> None:
+    """Refuse, in one line, ``names`` (relative paths) that an output directory ``out`` already holds and that
+    are not ``owned`` (what an earlier run wrote there): files of the user's that writing ``names`` would replace.
+    No check where ``owned`` is ``None`` or ``out`` is no directory yet (:func:`atomic_directory`'s ``owned``; a
+    command that knows its names calls it before its work)."""
+    target = output_target(out)
+    if owned is None or not target.is_dir():
+        return
+    foreign = sorted(name for name in names if name not in owned and os.path.lexists(target / name))
+    if foreign:
+        shown = ", ".join(foreign[:4]) + (f" and {len(foreign) - 4} more" if len(foreign) > 4 else "")
+        raise OutputError(f"{what} '{out}' holds {shown}, which this run would replace and no earlier springflat "
+                          "bundle there wrote (its interface.json lists what one did): move them, or give a new "
+                          "directory")
 
 
 def _names_paths_outside(error: OSError, directory: Path) -> bool:

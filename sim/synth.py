@@ -121,7 +121,7 @@ def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str
     failure = None
     earlier = earlier_bundle_files(out)
     stale: list[str] = []  # filled once the tools have succeeded: a failed run's logs join the earlier bundle
-    with atomic_directory(out, inputs=inputs, stale=stale) as directory:
+    with atomic_directory(out, inputs=inputs, stale=stale, owned=earlier) as directory:
         def shown(text: str) -> str:
             return text.replace(str(directory), str(out))
 

@@ -272,3 +272,19 @@ def test_a_capacity_the_85f_cannot_hold_is_said(tmp_path):
     assert len(notes) == 1 and "does not fit the largest ECP5" in notes[0], proc.stderr
     assert re.search(r"it needs \d+ block RAMs \(DP16KD\) where the ECP5 LFE5U-85F CABGA381 has 208", notes[0])
     assert (out / "springflat_engine.v").exists()
+
+
+def test_a_users_files_in_out_are_refused_at_once_not_replaced(tmp_path):
+    """A project directory with its own README.md and clock.sdc: the bundle replaced both without a word. Refused
+    before the export's half minute, naming them; what no earlier bundle wrote there is the user's."""
+    out = tmp_path / "project"
+    out.mkdir()
+    for name, text in (("README.md", "precious\n"), ("clock.sdc", "my constraints\n"), ("notes.txt", "mine\n")):
+        (out / name).write_text(text)
+    proc = subprocess.run([SPRINGFLAT, "verilog", "--out", out], capture_output=True, text=True)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.splitlines()[-1] == (
+        f"springflat: error: --out '{out}' holds README.md, clock.sdc, which this run would replace and no earlier "
+        "springflat bundle there wrote (its interface.json lists what one did): move them, or give a new directory")
+    assert sorted(p.name for p in out.iterdir()) == ["README.md", "clock.sdc", "notes.txt"]
+    assert (out / "README.md").read_text() == "precious\n"

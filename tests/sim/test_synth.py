@@ -138,8 +138,8 @@ def test_an_output_that_would_replace_the_formats_file_is_refused_before_any_too
 
 def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_the_engines_export(tmp_path, capsys,
                                                                                                  monkeypatch):
-    """``verilog --formats out/interface.json --out out``: refused once the components are exported, before the
-    engine's bundle (the longer half of the export)."""
+    """``verilog --formats out/interface.json --out out``: refused before the engine's bundle (the longer half of
+    the export); in a directory that holds no earlier bundle, at once, as a file of the user's."""
     import sim.export
     from golden_model.fixed.formats_set import FormatSet
 
@@ -154,7 +154,9 @@ def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_th
     before = formats.read_bytes()
     status, out, err = run(["verilog", "--formats", str(formats), "--out", str(out_dir)], capsys)
     assert status == 2
-    assert err.splitlines()[-1] == f"springflat: error: output '{formats}' is the same file as --formats '{formats}'"
+    assert err.splitlines()[-1] == (f"springflat: error: --out '{out_dir}' holds interface.json, which this run would "
+                                    "replace and no earlier springflat bundle there wrote (its interface.json lists "
+                                    "what one did): move them, or give a new directory")
     assert os.listdir(out_dir) == ["interface.json"] and formats.read_bytes() == before
 
 
@@ -351,7 +353,9 @@ def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_i
     """An ice40 synth into an ECP5 bundle's directory kept the ECP5 primitives' models and logs beside generic
     Verilog. The files the earlier bundle's interface.json lists that this run does not write go; every other
     file stays, also one named as a bundle's file (a user's clock.lpf beside a plain Verilog bundle was deleted
-    by name); a run whose tools fail leaves the earlier bundle whole, with its logs added."""
+    by name); a run whose tools fail leaves the earlier bundle whole, with its logs added. A directory with no
+    bundle's list holds the user's files: a bundle that would replace them is refused, and they stay."""
+    from sim.outputs import OutputError
     from sim.synth import BUNDLE_FILES_KEY, build_in_place
 
     out = tmp_path / "bundle"
@@ -390,9 +394,11 @@ def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_i
     assert (out / "step_generator.v").read_text() == "new\n" and (out / "notes.txt").read_text() == "earlier\n"
     assert json.loads((out / "interface.json").read_text())[BUNDLE_FILES_KEY] == [
         "interface.json", "reproduce.sh", "step_generator.ice40.ys", "step_generator.v"]  # what this run wrote
-    build_in_place(mine, "narrow", ice40)
-    assert sorted(p.name for p in mine.iterdir()) == ["interface.json", "reproduce.sh", "step_generator.ice40.ys",
-                                                      "step_generator.v"]
+    with pytest.raises(OutputError, match=r"holds interface.json, reproduce.sh, which this run would replace and no "
+                                          r"earlier springflat bundle there wrote"):
+        build_in_place(mine, "narrow", ice40)
+    assert sorted(p.name for p in mine.iterdir()) == ["interface.json", "reproduce.sh"]
+    assert (mine / "reproduce.sh").read_text() == "mine\n"
 
 
 def test_an_interface_json_that_is_a_fifo_is_not_read_for_an_earlier_bundle(tmp_path):
