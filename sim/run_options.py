@@ -130,12 +130,13 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                        help="keep the mesh's holes as cut-outs in the pattern (its start layout is computed with "
                             "them closed)")
     parser.add_argument("--init", default=None, metavar="|".join((AUTO_START,) + LAYOUT_METHODS) + "|PATH",
-                        help="initial layout: auto (arap; for a guarded run, where it folds or fails, slim from "
-                             "tutte), tutte, pca, "
+                        help="initial layout: auto (arap; for a guarded run slim from tutte where arap folds or "
+                             "fails, and lscm where that is exact: a developable patch), tutte, pca, "
                              "harmonic, lscm, arap, slim (libigl) or a file of V rows 'x y' / an OBJ (default: "
-                             "pca for built-ins, auto for files); a file that is a mirror image of the mesh "
-                             "(clockwise) is mirrored back in y; with the guarded dynamics any other start with "
-                             "folds is untangled")
+                             "pca for built-ins, auto for files; a file is one mesh's, not a batch's); a file that "
+                             "is a mirror image of the mesh (clockwise) is mirrored back in y, one more than 1.1 "
+                             "times off the mesh's size is scaled to it; with the guarded dynamics any other start "
+                             "with folds is untangled")
     parser.add_argument("--dynamics", choices=DYNAMICS, default=None,
                         help="paper (eqs. 7-9) or momentum (docs/dynamics.md); default: paper for built-ins, "
                              "momentum for files")
