@@ -24,11 +24,11 @@ from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
-from .outputs import OutputWriteError, all_or_nothing, progress_bar, write_history, write_plot
+from .outputs import OutputWriteError, all_or_nothing, print_note, progress_bar, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
                        check_mesh_fits, check_seam_fits, cut_file_notes, error_text, kind_or_none, on_sheets,
                        run_caption, seam_length, write_pattern_file)
-from .run_options import UserError, default_init, load_format_set, start_positions
+from .run_options import UserError, default_init, load_format_set, start_positions, stl_layout_note
 from .workers import local_workers
 
 #: ``flatten``'s output options: ``(argparse dest, flag, the file endings it takes)``. ``--out`` may be given
@@ -174,6 +174,8 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     if args.init is None:
         args.init = default_init(args.mesh)
     engine = choose_engine(args, params, mesh)
+    if note := stl_layout_note(args.mesh, args.init):
+        notes.append(note) if notes is not None else print_note(note)
     positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
                                            notes)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way

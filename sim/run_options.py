@@ -272,6 +272,16 @@ def file_defaults(mesh: Mesh) -> FlattenParams:
     return dataclasses.replace(FILE_PARAMS, max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
 
 
+def stl_layout_note(mesh_name: str, init) -> str | None:
+    """The note on a layout file given for an STL mesh, whose file has no shared vertices: the layout's rows must
+    follow the vertices as the reader numbers them (:func:`sim.mesh_io.load_mesh`), which the file does not show;
+    ``None`` for any other mesh or start."""
+    if not isinstance(init, str) or init in (AUTO_START, *LAYOUT_METHODS) or Path(mesh_name).suffix.lower() != ".stl":
+        return None
+    return (f"an STL stores no shared vertices: row i of the layout '{init}' is taken for the mesh's vertex i, its i-th "
+            "distinct corner in the file's order (as a pattern .obj written from this STL numbers them)")
+
+
 def default_init(mesh_name: str) -> str:
     """The initial layout when ``--init`` is not given: pca for built-ins (the paper runs), ``auto`` for files
     (ARAP; SLIM from Tutte where ARAP folds or fails; LSCM where that is exact to the stop rule's floor and more so

@@ -982,3 +982,24 @@ def test_rtl_check_names_the_engine_top_option_given_without_it(given, said):
     """(It named both options whatever was given.)"""
     proc = run("rtl-check", "surf1", *given)
     assert proc.returncode == 2 and proc.stderr == f"springflat: error: {said} to --engine-top: add it\n"
+
+
+def test_a_layout_file_for_an_stl_says_how_its_rows_are_matched(tmp_path):
+    """An STL has no shared vertices: a layout's rows are matched to the corners as the reader merges them, which
+    the file does not show; the run says so (a layout from another tool's vertex order came out scrambled)."""
+    from sim.generate import dome_grid
+
+    mesh = dome_grid(5)
+    with open(tmp_path / "dome.stl", "w") as f:
+        f.write("solid d\n" + "".join("facet normal 0 0 1\nouter loop\n" + "".join(
+            f"vertex {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in mesh.vertices[face]) + "endloop\nendfacet\n"
+            for face in mesh.faces) + "endsolid d\n")
+    for name, v in (("dome.stl", "stl"), ("dome.obj", "obj")):
+        if v == "obj":
+            (tmp_path / name).write_text("".join(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in mesh.vertices)
+                                         + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+        np.savetxt(tmp_path / "uv.txt", mesh.vertices[:, :2])
+        proc = run("flatten", name, "--init", "uv.txt", "--max-iter", "2", cwd=tmp_path)
+        assert proc.returncode == 0, proc.stderr
+        said = "an STL stores no shared vertices: row i of the layout 'uv.txt' is taken for the mesh's vertex i"
+        assert (said in proc.stderr) == (v == "stl"), proc.stderr
