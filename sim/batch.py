@@ -135,14 +135,21 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
     undo_dask_malloc_trim()
     start = time.perf_counter()
     stderr = io.StringIO()
-    with tempfile.TemporaryDirectory(prefix="springflat-batch-", dir=job.scratch) as tmp:
+    try:
+        scratch = tempfile.TemporaryDirectory(prefix="springflat-batch-", dir=job.scratch)
+    except OSError as exc:
+        return _no_scratch(job, exc, job.scratch or tempfile.gettempdir(), start)
+    with scratch as tmp:
         mesh_path = job.source
-        if job.data is not None:
-            (Path(tmp) / "in").mkdir()
-            mesh_path = str(Path(tmp) / "in" / Path(job.source).name)
-            Path(mesh_path).write_bytes(job.data)
         out = Path(tmp) / "out"
-        out.mkdir()
+        try:
+            if job.data is not None:
+                (Path(tmp) / "in").mkdir()
+                mesh_path = str(Path(tmp) / "in" / Path(job.source).name)
+                Path(mesh_path).write_bytes(job.data)
+            out.mkdir()
+        except OSError as exc:
+            return _no_scratch(job, exc, Path(tmp).parent, start)
         # the ending alone picks a pattern's kind: in 'ear.flat' + '.obj' the mesh name's '.flat' is no ending
         stem = job.name.replace(".", "_")
         names = [(option, ending, out / f"{stem}{ending}") for option, ending in job.endings]
@@ -184,6 +191,13 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
         message = message.replace(mesh_path, job.source)
         return MeshOutcome(job.source, job.name, "failed", None, message, stderr.getvalue(), [],
                            time.perf_counter() - start)
+
+
+def _no_scratch(job: BatchJob, exc: OSError, where, start: float) -> MeshOutcome:
+    """The failure of a worker that could not write its private copy of the mesh (a full temporary directory)."""
+    return MeshOutcome(job.source, job.name, "failed", None, f"cannot write the worker's copy of the mesh in "
+                       f"'{where}': {describe_os_error(exc)} (TMPDIR chooses the directory)", "", [],
+                       time.perf_counter() - start)
 
 
 def in_a_batch(args: argparse.Namespace) -> str:
@@ -370,9 +384,9 @@ def _died(job: BatchJob, exc: BaseException) -> MeshOutcome:
 
     if isinstance(exc, BrokenProcessPool) and exc.__cause__ is None:
         line = "its worker process died (killed by a signal, or out of memory)"
-    else:  # a result that could not be sent back, ...: what caused it
-        cause = exc.__cause__ or exc
-        line = f"the worker failed: {type(cause).__name__}: {cause}"
+    else:  # a result that could not be sent back, ...: what caused it (not the worker's traceback, as text)
+        cause = exc if exc.__cause__ is None or type(exc.__cause__).__name__ == "_RemoteTraceback" else exc.__cause__
+        line = f"the worker failed: {type(cause).__name__}: {one_line(str(cause))}"
     return MeshOutcome(job.source, job.name, "failed", line=line)
 
 

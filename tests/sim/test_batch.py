@@ -12,7 +12,7 @@ import pytest
 from sim.generate import dome_grid, grid_faces, grid_uv
 from sim.mesh_io import save_obj
 from sim.cli import main
-from support import PRESETS, run_springflat as run
+from support import PRESETS, SCANS, run_springflat as run
 
 ENDINGS = ["--out", ".dxf", "--out", ".pdf", "--out", ".svg", "--out", ".obj", "--distortion", ".csv"]
 
@@ -582,3 +582,26 @@ def test_a_touched_mesh_whose_finished_files_are_read_only_says_why_it_is_not_sk
     assert main(argv) == 2
     assert capsys.readouterr().err.strip().endswith("(in/dome00.obj is newer than its files, so --skip-existing runs "
                                                     "it again)")
+
+
+def test_a_worker_that_cannot_write_its_copy_of_the_mesh_fails_it_in_one_line(tmp_path, monkeypatch):
+    """A full temporary directory: the mesh failed with the worker's whole traceback as one escaped string."""
+    import errno
+    import pathlib
+    from concurrent.futures.process import _RemoteTraceback
+
+    import sim.batch
+
+    def full(self, data):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(pathlib.Path, "write_bytes", full)
+    job = sim.batch.BatchJob(str(SCANS / "bunny_ear.obj"), "bunny_ear", b"v 0 0 0\n", {}, (("out", ".dxf"),),
+                             scratch=str(tmp_path))
+    outcome = sim.batch.flatten_one(job)
+    assert outcome.failed and outcome.line == (f"cannot write the worker's copy of the mesh in '{tmp_path}': no space "
+                                               "left on device (TMPDIR chooses the directory)")
+    assert list(tmp_path.iterdir()) == []
+    raised = OSError(errno.ENOSPC, "No space left on device")  # as a pool hands back a worker's exception
+    raised.__cause__ = _RemoteTraceback('\n"""\nTraceback (most recent call last):\n  File "x.py"\n"""')
+    assert sim.batch._died(job, raised).line == "the worker failed: OSError: [Errno 28] No space left on device"
