@@ -732,9 +732,8 @@ def check_not_foreign(out: Path, names: Sequence[str], owned: Sequence[str] | No
     foreign = sorted(name for name in names if name not in owned and os.path.lexists(target / name))
     if foreign:
         shown = ", ".join(foreign[:4]) + (f" and {len(foreign) - 4} more" if len(foreign) > 4 else "")
-        raise OutputError(f"{what} '{out}' holds {shown}, which this run would replace and no earlier springflat "
-                          "bundle there wrote (its interface.json lists what one did): move them, or give a new "
-                          "directory")
+        raise OutputError(f"{what} '{out}' holds {shown}, which this run would replace and no earlier run of this "
+                          "command wrote there: move them, or give a new directory")
 
 
 def _names_paths_outside(error: OSError, directory: Path) -> bool:

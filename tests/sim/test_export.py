@@ -284,7 +284,7 @@ def test_a_users_files_in_out_are_refused_at_once_not_replaced(tmp_path):
     proc = subprocess.run([SPRINGFLAT, "verilog", "--out", out], capture_output=True, text=True)
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.splitlines()[-1] == (
-        f"springflat: error: --out '{out}' holds README.md, clock.sdc, which this run would replace and no earlier "
-        "springflat bundle there wrote (its interface.json lists what one did): move them, or give a new directory")
+        f"springflat: error: --out '{out}' holds README.md, clock.sdc, which this run would replace and no earlier run "
+        "of this command wrote there: move them, or give a new directory")
     assert sorted(p.name for p in out.iterdir()) == ["README.md", "clock.sdc", "notes.txt"]
     assert (out / "README.md").read_text() == "precious\n"

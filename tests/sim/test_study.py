@@ -29,7 +29,8 @@ from golden_model.study import (
     sweep_configs,
 )
 from sim.study.cases import build_cases
-from sim.study.cli import REPORT_FILES, add_parser, cmd_study
+from sim.outputs import OutputError
+from sim.study.cli import REPORT_FILES, REPORT_TITLE, add_parser, cmd_study
 from sim.study.cost import cost, multipliers
 from sim.study.flow import Study
 
@@ -308,6 +309,7 @@ def test_an_earlier_choice_that_this_report_does_not_make_is_removed_and_said(tm
     result line says so."""
     monkeypatch.chdir(tmp_path)
     Path("s").mkdir()
+    Path("s/report.md").write_text(f"{REPORT_TITLE}\n\nan earlier study's report\n")
     FormatSet.preset("narrow").save("s/chosen.json")
     assert cmd_study(_parse(["dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--max-iter", "5",
                              "--target", "1e-15", "--out", "s", "--quiet"])) == 0  # a target nothing meets
@@ -316,11 +318,30 @@ def test_an_earlier_choice_that_this_report_does_not_make_is_removed_and_said(tm
                                                      "report does not make")
 
 
+def test_files_of_a_reports_names_that_no_study_wrote_are_refused_before_the_runs(tmp_path, monkeypatch):
+    """A directory of the user's with a chosen.json and a plot of those names: the study removed the first ('an
+    earlier run's choice') and the second silently. Without an earlier study's report.md there they are the
+    user's: refused in one line before any run, and left."""
+    import sim.study.cli as study_cli
+
+    monkeypatch.chdir(tmp_path)
+    Path("u").mkdir()
+    Path("u/chosen.json").write_text("my formats\n")
+    Path("u/study-knobs.png").write_bytes(b"my plot")
+    monkeypatch.setattr(study_cli, "run_study", lambda *a, **k: pytest.fail("the study ran"))
+    with pytest.raises(OutputError, match=r"^--out 'u' holds chosen.json, study-knobs.png, which this run would "
+                                          r"replace and no earlier run of this command wrote there"):
+        cmd_study(_parse(["dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--out", "u", "--quiet"]))
+    assert Path("u/chosen.json").read_text() == "my formats\n" and sorted(os.listdir("u")) == ["chosen.json",
+                                                                                              "study-knobs.png"]
+
+
 def test_a_study_that_sweeps_nothing_draws_no_sweep_plots_and_removes_an_earlier_runs(tmp_path, monkeypatch):
     """--sweep none: the sweep plots would be empty axes (the report links none); an earlier run's would pass for
     this one's."""
     monkeypatch.chdir(tmp_path)
     Path("s").mkdir()
+    Path("s/report.md").write_text(f"{REPORT_TITLE}\n\nan earlier study's report\n")
     for name in ("study-bits.png", "study-knobs.png"):
         Path("s", name).write_bytes(b"an earlier run's plot")
     assert cmd_study(_parse(["dome", "--sweep", "none", "--no-optimise", "--workers", "1", "--max-iter", "5",

@@ -155,8 +155,8 @@ def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_th
     status, out, err = run(["verilog", "--formats", str(formats), "--out", str(out_dir)], capsys)
     assert status == 2
     assert err.splitlines()[-1] == (f"springflat: error: --out '{out_dir}' holds interface.json, which this run would "
-                                    "replace and no earlier springflat bundle there wrote (its interface.json lists "
-                                    "what one did): move them, or give a new directory")
+                                    "replace and no earlier run of this command wrote there: move them, or give a new "
+                                    "directory")
     assert os.listdir(out_dir) == ["interface.json"] and formats.read_bytes() == before
 
 
@@ -395,7 +395,7 @@ def test_a_bundle_into_an_earlier_ones_directory_leaves_none_of_its_files_that_i
     assert json.loads((out / "interface.json").read_text())[BUNDLE_FILES_KEY] == [
         "interface.json", "reproduce.sh", "step_generator.ice40.ys", "step_generator.v"]  # what this run wrote
     with pytest.raises(OutputError, match=r"holds interface.json, reproduce.sh, which this run would replace and no "
-                                          r"earlier springflat bundle there wrote"):
+                                          r"earlier run of this command wrote there"):
         build_in_place(mine, "narrow", ice40)
     assert sorted(p.name for p in mine.iterdir()) == ["interface.json", "reproduce.sh"]
     assert (mine / "reproduce.sh").read_text() == "mine\n"
