@@ -421,8 +421,12 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh:
         rule += f", or an energy below the floor of an rms edge strain of {strain:g}"
     if params.tol_area < 1 or params.tol_shape < 1:
         rule = f"E_S <= {params.tol_area:g}, E_C <= {params.tol_shape:g} and {rule}"
-    held = ("the energy fell below the floor (a smaller --tol-energy lowers it)" if result.final.energy < floor
-            else "the stop rule held")
+    below = result.final.energy < floor
+    if params.tol_area < 1 or params.tol_shape < 1:  # all three held: the energy's may have held long before
+        held = ("E_S and E_C within their tolerances, and the energy " + ("below the floor" if below else
+                                                                         "rule held"))
+    else:
+        held = "the energy fell below the floor (a smaller --tol-energy lowers it)" if below else "the stop rule held"
     why = {"converged": held, "max-iterations": f"N_max = {params.max_iter} reached",
            "diverged": RAN_AWAY,
            "stalled": "no step lowered the energy any more (the guard's step scale fell below "

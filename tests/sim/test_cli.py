@@ -856,6 +856,12 @@ def test_the_run_line_says_when_the_energy_floor_stopped_a_developable_patch(tmp
                                         "the energy fell below the floor (a smaller --tol-energy lowers it)")
         iterations.append(summary["iterations"])
     assert iterations[1] > iterations[0] + 20  # the lower floor: a longer, more exact run
+    # with E_S and E_C tolerances the energy's test may have held long before: the line does not blame it
+    done = run("flatten", str(tmp_path / "rolled.obj"), "--init", "tutte", "--json", "--tol-area", "1e-9",
+               "--tol-shape", "1e-9")
+    summary = json.loads(done.stdout)
+    assert summary["iterations"] > iterations[0] and summary["used"].endswith(
+        "stopped: E_S and E_C within their tolerances, and the energy below the floor"), summary["used"]
 
 
 @pytest.mark.parametrize("command, written", [(["flatten", "surf1", "--max-iter", "3", "--out", "p.dxf",
