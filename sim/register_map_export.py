@@ -111,9 +111,9 @@ def _define(name: str, value: int) -> str:
 
 
 def c_header(m: RegisterMap) -> str:
-    """The map as a C header: register word addresses, field shifts/masks/widths, reset values, window
-    bases/depths/strides and entry field positions, and every enumeration field's codes (STATUS.state,
-    STATUS.result, MODE.mode)."""
+    """The map as a C header: register word addresses, field shifts/masks/widths (and ``_SIGNED`` for a field of
+    two's-complement values), reset values, window bases/depths/strides and entry field positions, and every
+    enumeration field's codes (STATUS.state, STATUS.result, MODE.mode)."""
     guard = f"{PREFIX}_REGS_H"
     lines = [f"/* SpringflatEngine register map v{VERSION[0]}.{VERSION[1]}: format set '{m.formats}', capacity "
              f"{m.capacity.vertices} vertices / {m.capacity.entries} entries / {m.capacity.triangles} triangles. */",
@@ -134,6 +134,8 @@ def c_header(m: RegisterMap) -> str:
         for f in r.fields:
             lines += [_define(_c_name(r.name, f.name, "SHIFT"), f.lsb), _define(_c_name(r.name, f.name, "MASK"), f.mask),
                       _define(_c_name(r.name, f.name, "WIDTH"), f.width)]
+            if f.signed:  # (two's complement in WIDTH bits: sign-extend what the mask gives)
+                lines.append(_define(_c_name(r.name, f.name, "SIGNED"), 1))
         lines.append("")
     for r in m.registers:
         for f in r.fields:
@@ -147,6 +149,8 @@ def c_header(m: RegisterMap) -> str:
         lsb = 0
         for f in w.fields:
             lines += [_define(_c_name(w.name, f.name, "LSB"), lsb), _define(_c_name(w.name, f.name, "WIDTH"), f.width)]
+            if f.signed:
+                lines.append(_define(_c_name(w.name, f.name, "SIGNED"), 1))
             lsb += f.width
         lines.append("")
     lines += [f"#endif /* {guard} */", ""]

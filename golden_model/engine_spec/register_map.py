@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field
 from .image import (BUS_WORD_BITS, ENERGY_TOL_INT_BITS, ITERATION_BITS, MODE_FIELDS, RESULTS, SATURATION_BITS,
                     EngineCapacity, WordField, energy_width, memory_layouts, run_constant_fields)
 from ..fixed.engine import ENERGY_TOL_FRAC_BITS
+from ..guard import SCALE_MAX_SHIFT
 from ..modes import RUN_MODES
 from ..fixed.formats_set import FormatSet
 
@@ -186,7 +187,7 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
     a.add("STATUS", "w1c", "state, result, interrupt", (
         BitField("state", 0, 2, "ro", "controller state", "state", codes=STATES),
         BitField("result", 4, 3, "ro", "result of the last run (diverged: saturation_limit reached; stalled: the guarded step's scale "
-                                       "fell below 2^-SCALE_MAX_SHIFT; no-mesh: "
+                                       f"fell below 2^-{SCALE_MAX_SHIFT}; no-mesh: "
                                        "VERTICES is 0; bad-constants: see docs/engine.md)", "result", codes=RESULTS),
         BitField("irq_pending", 8, 1, "w1c", "a run ended (state done); write 1 to clear", "irq_pending"),
         BitField("saturated", 9, 1, "ro", "the last run counted saturation events (SATURATIONS > 0)", "saturated"),
@@ -228,7 +229,8 @@ _CONSTANT_TEXT = {
     "vertices": "vertices of the loaded mesh (0: no mesh)",
     "entries": "neighbour entries of the loaded mesh",
     "triangles": "triangles of the loaded mesh",
-    "mode": "the run mode (docs/guard.md's table; the guarded one: docs/engine-guard.md)",
+    "mode": "the run mode (docs/guard.md's table; the guarded one: docs/engine-guard.md; on an engine built "
+            "without the guard, FEATURES.guard 0, a guarded mode's run ends at once with result bad-constants)",
     "barrier": "1: the fold barrier's entry terms are on",
     "half_spring": "½C raw [spring]",
     "damping": "1 − γ raw [damping]",

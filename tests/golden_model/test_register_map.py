@@ -195,6 +195,8 @@ def _expected_defines(regmap):
         for f in r.fields:
             key = f"SPRINGFLAT_{r.name}_{f.name.upper()}"
             want[key + "_SHIFT"], want[key + "_MASK"], want[key + "_WIDTH"] = f.lsb, f.mask, f.width
+            if f.signed:  # (a driver sign-extends those)
+                want[key + "_SIGNED"] = 1
     for i, s in enumerate(STATES):
         want[f"SPRINGFLAT_STATE_{s.upper()}"] = i
     for i, s in enumerate(RESULTS):
@@ -207,7 +209,10 @@ def _expected_defines(regmap):
         lsb = 0
         for f in w.fields:
             want[f"SPRINGFLAT_{w.name.upper()}_{f.name.upper()}_LSB"] = lsb
+            if f.signed:
+                want[f"SPRINGFLAT_{w.name.upper()}_{f.name.upper()}_SIGNED"] = 1
             lsb += f.width
+    assert any(key.endswith("_SIGNED") for key in want)  # (the map has signed values: positions, HALF_SPRING)
     return want
 
 
