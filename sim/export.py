@@ -224,7 +224,7 @@ def export_verilog(fs: FormatSet, out: Path, platform=None) -> dict:
     write_waivers(out)
     interface = {"format_set": fs.to_dict(), "stream_protocol": STREAM_PROTOCOL, "components": components,
                  "notes": [
-                     "A node's header (position, velocity, 1/m) rides on its first neighbour entry (first = 1); "
+                     "A node's header (position, velocity, 1/m, the barrier's weight w_b) rides on its first neighbour entry (first = 1); "
                      "last = 1 closes the node. A node with n >= 1 neighbours is n beats; at most max_degree.",
                      "node_update / springflat_core: one result per node, in input order; error_sum is the node's "
                      "sum of |L - d| over the positions it was given.",
