@@ -494,20 +494,19 @@ SIZE_TOLERANCE = 1.1
 
 def _given(positions: np.ndarray, mesh: Mesh, what: str, notes: list[str] | None) -> np.ndarray:
     """A layout the user gave, as the run starts from it: facing the front (:func:`_facing_the_front`), and scaled
-    to the mesh's size (:func:`sim.untangle.at_mesh_size`) where it is off by more than :data:`SIZE_TOLERANCE`,
+    to the mesh's size (:func:`sim.untangle.size_factor`) where it is off by more than :data:`SIZE_TOLERANCE`,
     with a note: a texture layout in [0, 1] of a mesh in millimetres, say, which the guarded dynamics, whose
     steps are local and never grow a triangle through zero area, would otherwise have to grow a hundredfold."""
-    from .untangle import at_mesh_size
+    from .untangle import size_factor
 
     positions = _facing_the_front(positions, mesh, what, notes)
-    scaled = at_mesh_size(mesh, positions)
-    factor = float(np.linalg.norm(scaled) / np.linalg.norm(positions)) if np.any(positions) else 1.0
+    factor = size_factor(mesh, positions)
     if 1 / SIZE_TOLERANCE <= factor <= SIZE_TOLERANCE:
         return positions
     if notes is not None:
         notes.append(f"{what} is {1 / factor:.3g} times the mesh's size (another length unit?): scaled by "
                      f"{factor:.3g} to it (its edge lengths fitted to the mesh's)")
-    return scaled
+    return positions * factor
 
 
 def _disk(mesh: Mesh, method: str) -> Mesh:

@@ -32,7 +32,7 @@ from threadpoolctl import threadpool_limits
 
 from golden_model.mesh import Mesh, layout_orientation
 
-__all__ = ["UntangleResult", "untangle_layout", "at_mesh_size", "symmetric_dirichlet", "UNTANGLE_THETA",
+__all__ = ["UntangleResult", "untangle_layout", "at_mesh_size", "size_factor", "symmetric_dirichlet", "UNTANGLE_THETA",
            "UNTANGLE_EPS0", "UNTANGLE_EVALUATIONS"]
 
 #: The weight of the area term against the shape term (the paper's, for a fixed boundary, is 1/128).
@@ -115,14 +115,19 @@ def _energy_and_gradient(flat: np.ndarray, faces: np.ndarray, grads: np.ndarray,
     return energy, gradient.ravel(), det
 
 
-def at_mesh_size(mesh: Mesh, positions: np.ndarray) -> np.ndarray:
-    """``positions`` scaled by the factor that fits its edge lengths ``L`` to the mesh's 3D ones ``d`` in least
-    squares, ``Σ L·d / Σ L²`` (1 for a layout at a minimum of the springs' energy, whose scale it cannot lower);
-    as it is where every edge has length 0."""
+def size_factor(mesh: Mesh, positions: np.ndarray) -> float:
+    """The factor that fits the layout's edge lengths ``L`` to the mesh's 3D ones ``d`` in least squares,
+    ``Σ L·d / Σ L²`` (1 for a layout at a minimum of the springs' energy, whose scale it cannot lower; 1 where
+    every edge has length 0)."""
     i, j = mesh.edges.T
     lengths = np.linalg.norm(positions[i] - positions[j], axis=1)
     squares = float(lengths @ lengths)
-    return positions * (float(lengths @ mesh.rest_lengths) / squares) if squares > 0 else positions
+    return float(lengths @ mesh.rest_lengths) / squares if squares > 0 else 1.0
+
+
+def at_mesh_size(mesh: Mesh, positions: np.ndarray) -> np.ndarray:
+    """``positions`` scaled by :func:`size_factor`."""
+    return positions * size_factor(mesh, positions)
 
 
 def untangle_layout(mesh: Mesh, positions: np.ndarray, *, max_rounds: int = 200,
