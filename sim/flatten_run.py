@@ -249,7 +249,9 @@ def divergence_hint(params: FlattenParams, api: bool = False) -> str:
     step = f"a smaller {dt}" if mode.step is Step.FIXED else f"{_option('step', 'fixed', api)} with a small {dt}"
     damping = (f"a larger {_option('damping', api=api)} than {params.damping:g}" if params.damping >= DIVERGENCE_DAMPING
                else _option("damping", DIVERGENCE_DAMPING, api))
-    return penalty + f"the paper dynamics has no guard: try {damping}, {step}, or {_guard_on(params, api)}"
+    stiffer = (f"a smaller {_option('spring', api=api)} than {params.spring:g} (it scales every force), "
+               if params.spring > FlattenParams.spring else "")  # (where the user raised it)
+    return penalty + f"the paper dynamics has no guard: try {stiffer}{damping}, {step}, or {_guard_on(params, api)}"
 
 
 #: The damping :func:`divergence_hint` suggests to an undamped paper run.

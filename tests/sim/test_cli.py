@@ -455,9 +455,10 @@ def test_the_notes_on_a_given_start_are_printed_with_progress_lines_or_without(t
                                   ["--dynamics", "momentum"], ["--dynamics", "momentum", "--no-guard"],
                                   ["--dynamics", "momentum", "--no-guard", "--penalty"],
                                   ["--dynamics", "paper", "--penalty", "--damping", "0.2"],
-                                  ["--dynamics", "paper", "--penalty", "--penalty-kappa", "1e308"]],
+                                  ["--dynamics", "paper", "--penalty", "--penalty-kappa", "1e308"],
+                                  ["--dynamics", "paper", "--spring", "1e6"]],
                          ids=["paper", "paper-fixed", "momentum", "momentum-unguarded", "momentum-unguarded-penalty",
-                              "paper-penalty-damped", "paper-penalty-raised-kappa"])
+                              "paper-penalty-damped", "paper-penalty-raised-kappa", "paper-raised-spring"])
 def test_the_divergence_hint_names_only_options_its_mode_takes(mode):
     """Each option the hint tells the user to give is accepted beside the run's own options (one it says to
     drop need not be)."""
@@ -1009,3 +1010,13 @@ def test_a_layout_file_for_an_stl_says_how_its_rows_are_matched(tmp_path):
         assert proc.returncode == 0, proc.stderr
         said = "an STL stores no shared vertices: row i of the layout 'uv.txt' is taken for the mesh's vertex i"
         assert (said in proc.stderr) == (v == "stl"), proc.stderr
+
+
+def test_a_paper_run_that_ran_away_on_a_raised_spring_constant_is_told_to_lower_it():
+    """--spring 1e6 with --damping 0.05: the hint said only 'a larger --damping', though the spring constant,
+    which scales every force, made the steps too long."""
+    proc = run("flatten", "surf1", "--damping", "0.05", "--spring", "1e6")
+    assert proc.returncode == 3 and "try a smaller --spring than 1e+06 (it scales every force), a larger " \
+        "--damping than 0.05" in proc.stderr, proc.stderr
+    proc = run("flatten", "surf1", "--damping", "0.05", "--spring", "0.4", "--step", "fixed", "--dt", "50")
+    assert proc.returncode == 3 and "--spring" not in proc.stderr.split("ran away")[1], proc.stderr
