@@ -346,6 +346,13 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
             raise LayoutError(f"{exc}; without the step guard --init auto takes no other start: give --init slim "
                               "(SLIM on Tutte's layout, where a guarded run, the default for mesh files, starts)"
                               ) from None
+        lengths = np.linalg.norm(positions[mesh.edges[:, 0]] - positions[mesh.edges[:, 1]], axis=1)
+        if not lengths.all():  # a spring's direction is undefined there: the first step is not finite
+            a, b = (int(v) for v in mesh.edges[np.flatnonzero(lengths == 0)[0]])
+            raise LayoutError(f"the start puts vertices {a} and {b}, an edge's ends, on one point (rows {a + 1} and "
+                              f"{b + 1} of a layout file): without the step guard the run cannot start from it; move "
+                              "them apart, or let the guard untangle it ("
+                              + ("drop --no-guard)" if params.mode.step is Step.MOMENTUM else "--dynamics momentum)"))
         if init_name(init) == AUTO_START and (folds := int(np.count_nonzero(folded_faces(positions, mesh.faces)))):
             read.append(f"the arap layout folds {folds} triangle{'s' if folds > 1 else ''}: without the step guard "
                         "the run starts from it as it is (the guarded dynamics, the default for mesh files, would "

@@ -1020,3 +1020,27 @@ def test_a_paper_run_that_ran_away_on_a_raised_spring_constant_is_told_to_lower_
         "--damping than 0.05" in proc.stderr, proc.stderr
     proc = run("flatten", "surf1", "--damping", "0.05", "--spring", "0.4", "--step", "fixed", "--dt", "50")
     assert proc.returncode == 3 and "--spring" not in proc.stderr.split("ran away")[1], proc.stderr
+
+
+@pytest.mark.parametrize("mode, remedy", [(["--no-guard"], "drop --no-guard"),
+                                          (["--dynamics", "paper"], "--dynamics momentum")])
+def test_an_unguarded_start_with_an_edge_of_length_zero_is_refused_in_one_line(tmp_path, mode, remedy):
+    """Two ends of an edge on one point: an unguarded run 'diverged after 0 iterations', with a hint that did not
+    name the start (a guarded run untangles it)."""
+    from sim.generate import dome_grid
+    from sim.mesh_io import save_obj
+
+    mesh = dome_grid(6)
+    save_obj(tmp_path / "dome.obj", mesh.vertices, mesh.faces)
+    a, b = (int(v) for v in mesh.edges[len(mesh.edges) // 2])
+    layout = mesh.vertices[:, :2].copy()
+    layout[a] = layout[b]
+    np.savetxt(tmp_path / "uv.txt", layout)
+    proc = run("flatten", "dome.obj", "--init", "uv.txt", *mode, "--out", "p.svg", cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stderr == (
+        f"springflat: error: the start puts vertices {min(a, b)} and {max(a, b)}, an edge's ends, on one point (rows "
+        f"{min(a, b) + 1} and {max(a, b) + 1} of a layout file): without the step guard the run cannot start from it; "
+        f"move them apart, or let the guard untangle it ({remedy})\n")
+    assert not (tmp_path / "p.svg").exists()
+    guarded = run("flatten", "dome.obj", "--init", "uv.txt", "--max-iter", "5", cwd=tmp_path)
+    assert guarded.returncode == 0 and "untangling it" in guarded.stderr
