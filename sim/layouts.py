@@ -366,6 +366,10 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
         except MeshError as exc:
             raise LayoutError(str(exc)) from None
         positions = vertices[:, :2]
+        if len(vertices) == 0 and any(line.lstrip().startswith(b"vt ") for line in data.splitlines()):
+            raise LayoutError(f"layout '{path}' holds texture coordinates (vt) but no vertices (v): --init reads an "
+                              "OBJ's v lines (a flat mesh, as springflat's .flat.obj); give the layout as v lines, "
+                              "or as a text file of 'x y' rows")
         if (mesh_vertices is not None and vertices.shape == mesh_vertices.shape and np.ptp(mesh_vertices[:, 2]) > 0
                 and np.allclose(vertices, mesh_vertices, rtol=1e-6, atol=0.0)):
             raise LayoutError(f"layout '{path}' holds the 3D mesh itself, not a layout (a springflat pattern .obj keeps "

@@ -104,6 +104,14 @@ class AnyStringWith(str):
     __hash__ = str.__hash__
 
 
+def test_an_obj_layout_of_texture_coordinates_alone_says_vt_is_not_read(tmp_path):
+    """(It said the layout had 0 rows.)"""
+    (tmp_path / "uv.obj").write_text("".join(f"vt {k / 10} {k / 20}\n" for k in range(7)))
+    with pytest.raises(LayoutError, match=r"holds texture coordinates \(vt\) but no vertices \(v\): --init reads an "
+                                          r"OBJ's v lines"):
+        load_layout(tmp_path / "uv.obj", 7)
+
+
 @pytest.mark.parametrize("text, message", [
     ("0 0\n1 1\n", "has 2 rows but the mesh has 7"),
     ("0 0 0\n" * 7, "expected 2"),
