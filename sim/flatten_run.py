@@ -28,7 +28,7 @@ from .outputs import OutputWriteError, all_or_nothing, print_note, progress_bar,
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
                        check_mesh_fits, check_seam_fits, cut_file_notes, error_text, kind_or_none, on_sheets,
                        run_caption, seam_length, write_pattern_file)
-from .run_options import UserError, default_init, load_format_set, start_positions, stl_layout_note
+from .run_options import UserError, default_init, init_notes, load_format_set, start_positions
 from .workers import local_workers
 
 #: ``flatten``'s output options: ``(argparse dest, flag, the file endings it takes)``. ``--out`` may be given
@@ -174,7 +174,7 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     if args.init is None:
         args.init = default_init(args.mesh)
     engine = choose_engine(args, params, mesh)
-    if note := stl_layout_note(args.mesh, args.init):
+    for note in init_notes(args.mesh, args.init):
         notes.append(note) if notes is not None else print_note(note)
     positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
                                            notes)

@@ -272,14 +272,20 @@ def file_defaults(mesh: Mesh) -> FlattenParams:
     return dataclasses.replace(FILE_PARAMS, max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
 
 
-def stl_layout_note(mesh_name: str, init) -> str | None:
-    """The note on a layout file given for an STL mesh, whose file has no shared vertices: the layout's rows must
-    follow the vertices as the reader numbers them (:func:`sim.mesh_io.load_mesh`), which the file does not show;
-    ``None`` for any other mesh or start."""
-    if not isinstance(init, str) or init in (AUTO_START, *LAYOUT_METHODS) or Path(mesh_name).suffix.lower() != ".stl":
-        return None
-    return (f"an STL stores no shared vertices: row i of the layout '{init}' is taken for the mesh's vertex i, its i-th "
-            "distinct corner in the file's order (as a pattern .obj written from this STL numbers them)")
+def init_notes(mesh_name: str, init) -> list[str]:
+    """What ``--init`` needs said before the run: a start method's name that a file here also has (the method is
+    taken, as a built-in's name is over a file), and a layout file given for an STL mesh, whose file has no shared
+    vertices, so that the layout's rows follow the vertices as the reader numbers them (:func:`sim.mesh_io.load_mesh`),
+    which the file does not show."""
+    if not isinstance(init, str) or init == AUTO_START:
+        return []
+    if init in LAYOUT_METHODS:
+        return ([f"--init {init} is the start method; the file '{init}' here is not read (give ./{init} for the file)"]
+                if Path(init).is_file() else [])
+    if Path(mesh_name).suffix.lower() != ".stl":
+        return []
+    return [f"an STL stores no shared vertices: row i of the layout '{init}' is taken for the mesh's vertex i, its "
+            "i-th distinct corner in the file's order (as a pattern .obj written from this STL numbers them)"]
 
 
 def default_init(mesh_name: str) -> str:

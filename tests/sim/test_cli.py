@@ -1044,3 +1044,19 @@ def test_an_unguarded_start_with_an_edge_of_length_zero_is_refused_in_one_line(t
     assert not (tmp_path / "p.svg").exists()
     guarded = run("flatten", "dome.obj", "--init", "uv.txt", "--max-iter", "5", cwd=tmp_path)
     assert guarded.returncode == 0 and "untangling it" in guarded.stderr
+
+
+def test_a_start_methods_name_that_a_file_here_also_has_says_which_is_taken(tmp_path):
+    """A file named 'tutte' beside the mesh: --init tutte took the method without a word (a built-in mesh's name
+    over a file of that name gets a note)."""
+    from sim.generate import dome_grid
+    from sim.mesh_io import save_obj
+
+    mesh = dome_grid(5)
+    save_obj(tmp_path / "dome.obj", mesh.vertices, mesh.faces)
+    np.savetxt(tmp_path / "tutte", mesh.vertices[:, :2])
+    said = "--init tutte is the start method; the file 'tutte' here is not read (give ./tutte for the file)"
+    method = run("flatten", "dome.obj", "--init", "tutte", "--max-iter", "2", "--json", cwd=tmp_path)
+    assert method.returncode == 0 and said in method.stderr and json.loads(method.stdout)["init"] == "tutte"
+    given = run("flatten", "dome.obj", "--init", "./tutte", "--max-iter", "2", "--json", cwd=tmp_path)
+    assert given.returncode == 0 and said not in given.stderr and json.loads(given.stdout)["init"] == "./tutte"
