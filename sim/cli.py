@@ -124,6 +124,14 @@ class _Parser(argparse.ArgumentParser):
             raise SystemExit(EXIT_USAGE) from None
 
 
+def _written_line(lead: str) -> str:
+    """``lead`` and the outputs the command has put in place (three named, and how many more), or ``""``."""
+    written = written_outputs()
+    if not written:
+        return ""
+    return lead + ", ".join(written[:3]) + (f" and {len(written) - 3} more" if len(written) > 3 else "")
+
+
 def cmd_flatten(args: argparse.Namespace) -> int:
     if args.more_meshes or args.out_dir is not None or args.scheduler is not None:
         from .batch import cmd_batch
@@ -427,15 +435,15 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # a file operation the commands do not name themselves
         what = ("write standard output" if exc.filename == STANDARD_OUTPUT else
                 f"access '{exc.filename}'" if exc.filename else "access")
-        _say(f"springflat: error: {one_line(f'cannot {what}: {describe_os_error(exc)}')}")
+        written = _written_line("; written before it, complete: ")  # (a --json line after the pattern files)
+        _say(f"springflat: error: {one_line(f'cannot {what}: {describe_os_error(exc)}{written}')}")
         return EXIT_USAGE
     except KeyboardInterrupt:
         if argv is None:  # the program itself, which ends now (not a caller running it in-process)
             _quiet_after_interrupt()
         line, status = STOP_SIGNALS[received_signal().name]
-        if written := written_outputs():  # put in place before the signal, while the command still printed
-            shown = ", ".join(written[:3]) + (f" and {len(written) - 3} more" if len(written) > 3 else "")
-            line += f" after writing {shown}, which are complete"
+        if written := _written_line(" after writing "):  # put in place before the signal, while it still printed
+            line += f"{written}, which are complete"
         with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone (EIO)
             print(f"springflat: {line}", file=sys.stderr)
         return status

@@ -1267,8 +1267,9 @@ def test_as_root_a_full_standard_output_is_one_line_and_a_batch_runs_to_its_end(
     elif batch:
         assert sorted(os.listdir(tmp_path / "o")) == ["m.dxf", "n.dxf"]
         assert errors[0].endswith("(the batch ran to its end: 2 meshes' files written to --out-dir)")
-    else:
+    else:  # the pattern was written before the result line: it is complete, and the line says so
         assert (tmp_path / "m.dxf").stat().st_size > 0
+        assert errors[0].endswith("; written before it, complete: m.dxf"), errors
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
