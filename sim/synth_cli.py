@@ -15,8 +15,8 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from .clock import ENGINE_TARGET_MHZ
 from .run_options import integer_argument, path_argument
 from .top_names import COMPONENT_SUMMARIES
-from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, ROUTERS, TARGETS,
-                    DoesNotFit, SynthError, build_in_place, report_markdown, run_synthesis)
+from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, REPORT_FILES, ROUTERS,
+                    TARGETS, DoesNotFit, SynthError, build_in_place, report_markdown, run_synthesis)
 
 __all__ = ["add_parser", "cmd_synth"]
 
@@ -145,7 +145,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     report = build_in_place(out, args.formats, lambda build, shown: run_synthesis(
         fs, args.target, args.freq, build, components=args.components, progress=lambda msg: progress(shown(msg)),
         router=args.router, seed=args.seed, command=_command_line(args, out), capacity=capacity,
-        placer_timing=args.placer_timing))
+        placer_timing=args.placer_timing), late=REPORT_FILES)
     if args.json:
         print(strict_json(report))
     else:

@@ -142,6 +142,7 @@ def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_th
     the export); in a directory that holds no earlier bundle, at once, as a file of the user's."""
     import sim.export
     from golden_model.fixed.formats_set import FormatSet
+    from sim.synth import BUNDLE_FILES_KEY
 
     def no_engine(*args, **kwargs):
         raise AssertionError("the engine was exported")
@@ -158,6 +159,17 @@ def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_th
                                     "replace and no earlier run of this command wrote there: move them, or give a new "
                                     "directory")
     assert os.listdir(out_dir) == ["interface.json"] and formats.read_bytes() == before
+    # in an earlier bundle's directory, whose files a new bundle replaces: once the components are exported
+    bundle = tmp_path / "bundle"
+    bundle.mkdir()
+    formats = bundle / "rsqrt_unit.v"  # a bundle's name, the earlier bundle's file
+    formats.write_text(FormatSet.preset("narrow").to_json())
+    (bundle / "interface.json").write_text(json.dumps({"format_set": {}, "components": {},
+                                                      BUNDLE_FILES_KEY: ["interface.json", "rsqrt_unit.v"]}))
+    status, out, err = run(["verilog", "--formats", str(formats), "--out", str(bundle)], capsys)
+    assert status == 2
+    assert err.splitlines()[-1] == f"springflat: error: output '{formats}' is the same file as --formats '{formats}'"
+    assert sorted(os.listdir(bundle)) == ["interface.json", "rsqrt_unit.v"]
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -439,3 +451,29 @@ def test_an_earlier_bundles_list_removes_nothing_outside_its_directory(tmp_path)
 
     build_in_place(out, "narrow", bundle)
     assert (victim / "keep.txt").read_text() == "mine\n" and not (out / "old.v").exists()
+
+
+def test_a_board_build_runs_again_into_its_own_out_and_a_users_report_is_refused_before_the_tools(tmp_path):
+    """A board build lists no bundle files (no interface.json): its report marks the directory as its own, so a
+    second build (another seed) replaces it. A user's synth_report.md, which synth writes after its tools, is
+    refused before them: the bundle was built, then thrown away."""
+    from sim.board_build import LATE_FILES, REPORT_FILE
+    from sim.outputs import OutputError
+    from sim.synth import REPORT_FILES, build_in_place
+
+    def board(directory, shown):
+        for name in ("springflat_ulx3s.bit", "pins.md"):
+            (directory / name).write_text("built\n")
+        (directory / REPORT_FILE).write_text('{"board": "ulx3s-85f"}\n')
+        return {}
+
+    out = tmp_path / "board"
+    build_in_place(out, "default", board, late=LATE_FILES, marker=(REPORT_FILE, "board"))
+    build_in_place(out, "default", board, late=LATE_FILES, marker=(REPORT_FILE, "board"))  # (refused, as the user's)
+    assert sorted(p.name for p in out.iterdir()) == ["board_report.json", "pins.md", "springflat_ulx3s.bit"]
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "synth_report.md").write_text("my notes\n")
+    with pytest.raises(OutputError, match=r"holds synth_report.md, which this run would replace"):
+        build_in_place(mine, "default", lambda directory, shown: pytest.fail("the tools ran"), late=REPORT_FILES)
+    assert (mine / "synth_report.md").read_text() == "my notes\n"
