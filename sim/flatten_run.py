@@ -28,7 +28,7 @@ from .outputs import OutputWriteError, all_or_nothing, print_note, progress_bar,
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
                        check_mesh_fits, check_seam_fits, cut_file_notes, error_text, kind_or_none, on_sheets,
                        run_caption, seam_length, write_pattern_file)
-from .run_options import UserError, default_init, init_notes, load_format_set, start_positions
+from .run_options import UserError, check_float_start, default_init, init_notes, load_format_set, start_positions
 from .workers import local_workers
 
 #: ``flatten``'s output options: ``(argparse dest, flag, the file endings it takes)``. ``--out`` may be given
@@ -175,9 +175,14 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
         args.init = default_init(args.mesh)
     engine = choose_engine(args, params, mesh)
     for note in init_notes(args.mesh, args.init):
-        notes.append(note) if notes is not None else print_note(note)
+        if notes is not None:
+            notes.append(note)
+        else:
+            print_note(note)
     positions, args.init = start_positions(mesh, args.init, params, notes is None and sys.stderr.isatty(), second_core,
                                            notes)
+    if not engine_named(args.engine).fixed_point:
+        check_float_start(mesh, positions, params, args.init)
     # the engines test every state for finiteness themselves (status "diverged"): no numpy warnings on the way
     with progress_bar(params.max_iter, progress, label="flattening") as bar, np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         result = engine(mesh, positions, params, on_iteration=lambda k, m: bar.update(1))

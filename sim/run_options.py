@@ -25,8 +25,8 @@ from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.guard import ENERGY_WINDOW, energy_floor_strain
 from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
 
-from .layouts import (AUTO_START, LAYOUT_METHODS, LayoutError, NoDiskStart, init_name, initial_layout, slim_layout,
-                      start_layout)
+from .layouts import (AUTO_START, LAYOUT_METHODS, SIZE_TOLERANCE, LayoutError, NoDiskStart, init_name, initial_layout,
+                      slim_layout, start_layout)
 from .mesh_io import load_mesh_with_notes
 from .mesh_io.seams import seams_note
 from .mesh_io.polygons import is_float, is_int
@@ -134,9 +134,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                              "fails, and lscm where that is exact: a developable patch), tutte, pca, "
                              "harmonic, lscm, arap, slim (libigl) or a file of V rows 'x y' / an OBJ (default: "
                              "pca for built-ins, auto for files; a file is one mesh's, not a batch's); a file that "
-                             "is a mirror image of the mesh (clockwise) is mirrored back in y, one more than 1.1 "
-                             "times off the mesh's size is scaled to it; with the guarded dynamics any other start "
-                             "with folds is untangled")
+                             "is a mirror image of the mesh (clockwise) is mirrored back in y, one more than "
+                             f"{SIZE_TOLERANCE:g} times off the mesh's size is scaled to it; with the guarded "
+                             "dynamics any other start with folds is untangled")
     parser.add_argument("--dynamics", choices=DYNAMICS, default=None,
                         help="paper (eqs. 7-9) or momentum (docs/dynamics.md); default: paper for built-ins, "
                              "momentum for files")
@@ -352,13 +352,6 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
             raise LayoutError(f"{exc}; without the step guard --init auto takes no other start: give --init slim "
                               "(SLIM on Tutte's layout, where a guarded run, the default for mesh files, starts)"
                               ) from None
-        lengths = np.linalg.norm(positions[mesh.edges[:, 0]] - positions[mesh.edges[:, 1]], axis=1)
-        if not lengths.all():  # a spring's direction is undefined there: the first step is not finite
-            a, b = (int(v) for v in mesh.edges[np.flatnonzero(lengths == 0)[0]])
-            raise LayoutError(f"the start puts vertices {a} and {b}, an edge's ends, on one point (rows {a + 1} and "
-                              f"{b + 1} of a layout file): without the step guard the run cannot start from it; move "
-                              "them apart, or let the guard untangle it ("
-                              + ("drop --no-guard)" if params.mode.step is Step.MOMENTUM else "--dynamics momentum)"))
         if init_name(init) == AUTO_START and (folds := int(np.count_nonzero(folded_faces(positions, mesh.faces)))):
             read.append(f"the arap layout folds {folds} triangle{'s' if folds > 1 else ''}: without the step guard "
                         "the run starts from it as it is (the guarded dynamics, the default for mesh files, would "
@@ -376,6 +369,24 @@ def start_positions(mesh: Mesh, init: str | np.ndarray, params: FlattenParams, p
                              floor_strain=energy_floor_strain(params.tol_energy))
     tell([note for note in start.notes if note not in said])  # what the progress lines have not said
     return start.positions, start.method
+
+
+def check_float_start(mesh: Mesh, positions: np.ndarray, params: FlattenParams, init) -> None:
+    """Refuse, in one line, an unguarded float run's start with an edge of length zero: a spring's direction is
+    undefined there, and the float reference's first step is not finite (a guarded start is untangled first, and
+    the fixed-point engines' lengths saturate instead)."""
+    if params.guard:
+        return
+    lengths = np.linalg.norm(positions[mesh.edges[:, 0]] - positions[mesh.edges[:, 1]], axis=1)
+    if lengths.all():
+        return
+    a, b = (int(v) for v in mesh.edges[np.flatnonzero(lengths == 0)[0]])
+    given = init_name(init) not in (AUTO_START, *LAYOUT_METHODS)
+    raise LayoutError(f"the start puts vertices {a} and {b}, an edge's ends, on one point"
+                      + (f" (rows {a + 1} and {b + 1} of the layout)" if given else f" (the {init_name(init)} layout)")
+                      + ": without the step guard the float run cannot start from it; move them apart, or let the "
+                      "guard untangle it (" + ("drop --no-guard)" if params.mode.step is Step.MOMENTUM
+                                               else "--dynamics momentum)"))
 
 
 def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> FlattenParams:

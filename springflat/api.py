@@ -340,7 +340,7 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
             ``tutte``, ``pca``, ``harmonic``, ``lscm``, ``arap``, ``slim``, a layout file, or a ``(V, 2)`` array; a
             file or an array is checked (shape, finite, range), mirrored back in y where it is a mirror image of
             the mesh (clockwise, as y-down texture coordinates are), scaled to the mesh's size where it is more
-            than 1.1 times off (texture coordinates in [0, 1], say), and, with the guarded dynamics, untangled
+            than ``sim.layouts.SIZE_TOLERANCE`` (3) times off (texture coordinates in [0, 1], say), and, with the guarded dynamics, untangled
             where it folds.
         **options: the options of ``springflat flatten`` (listed below and in :data:`OPTIONS`), the flag
             without its dashes and with ``_`` for ``-``: ``max_iter=500`` is ``--max-iter 500``.  Each value

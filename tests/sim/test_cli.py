@@ -1039,11 +1039,14 @@ def test_an_unguarded_start_with_an_edge_of_length_zero_is_refused_in_one_line(t
     proc = run("flatten", "dome.obj", "--init", "uv.txt", *mode, "--out", "p.svg", cwd=tmp_path)
     assert proc.returncode == 2 and proc.stderr == (
         f"springflat: error: the start puts vertices {min(a, b)} and {max(a, b)}, an edge's ends, on one point (rows "
-        f"{min(a, b) + 1} and {max(a, b) + 1} of a layout file): without the step guard the run cannot start from it; "
-        f"move them apart, or let the guard untangle it ({remedy})\n")
+        f"{min(a, b) + 1} and {max(a, b) + 1} of the layout): without the step guard the float run cannot start from "
+        f"it; move them apart, or let the guard untangle it ({remedy})\n")
     assert not (tmp_path / "p.svg").exists()
     guarded = run("flatten", "dome.obj", "--init", "uv.txt", "--max-iter", "5", cwd=tmp_path)
     assert guarded.returncode == 0 and "untangling it" in guarded.stderr
+    fixed = run("flatten", "dome.obj", "--init", "uv.txt", *mode, "--engine", "fixed", "--max-iter", "5",
+                "--energy-window", "1", cwd=tmp_path)  # (its lengths saturate: it runs)
+    assert fixed.returncode == 0, fixed.stderr
 
 
 def test_a_start_methods_name_that_a_file_here_also_has_says_which_is_taken(tmp_path):
