@@ -50,8 +50,9 @@ class History:
     #: each row's iteration number: its index, unless a row skips iterations (an engine's final row)
     iteration: list[int] = field(default_factory=list)
 
-    def append(self, dt: float, m: Measurement, accepted: bool | None = True, iteration: int | None = None) -> None:
-        """Add the row of ``iteration`` (default: the next, ``len(self)``)."""
+    def append(self, dt: float, m: Measurement, accepted: bool | None, iteration: int | None = None) -> None:
+        """Add the row of ``iteration`` (default: the next, ``len(self)``); ``accepted``: whether its step was taken,
+        ``None`` for a row that is no one step (no default: a start row given none was written as a step)."""
         self.iteration.append(len(self) if iteration is None else iteration)
         self.accepted.append(accepted)
         self.dt.append(dt)

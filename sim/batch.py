@@ -194,10 +194,10 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
 
 
 def _no_scratch(job: BatchJob, exc: OSError, where, start: float) -> MeshOutcome:
-    """The failure of a worker that could not write its private copy of the mesh (a full temporary directory)."""
-    return MeshOutcome(job.source, job.name, "failed", None, f"cannot write the worker's copy of the mesh in "
-                       f"'{where}': {describe_os_error(exc)} (TMPDIR chooses the directory)", "", [],
-                       time.perf_counter() - start)
+    """The failure of a worker that could not make its private directory or write its copy of the mesh there (a
+    full temporary directory)."""
+    return MeshOutcome(job.source, job.name, "failed", None, f"cannot write the worker's files in '{where}': "
+                       f"{describe_os_error(exc)} (TMPDIR chooses the directory)", "", [], time.perf_counter() - start)
 
 
 def in_a_batch(args: argparse.Namespace) -> str:
@@ -380,12 +380,12 @@ def _write_files(out_dir: Path, outcome: MeshOutcome) -> None:
 
 
 def _died(job: BatchJob, exc: BaseException) -> MeshOutcome:
-    from concurrent.futures.process import BrokenProcessPool
+    from concurrent.futures.process import BrokenProcessPool, _RemoteTraceback
 
     if isinstance(exc, BrokenProcessPool) and exc.__cause__ is None:
         line = "its worker process died (killed by a signal, or out of memory)"
     else:  # a result that could not be sent back, ...: what caused it (not the worker's traceback, as text)
-        cause = exc if exc.__cause__ is None or type(exc.__cause__).__name__ == "_RemoteTraceback" else exc.__cause__
+        cause = exc if exc.__cause__ is None or isinstance(exc.__cause__, _RemoteTraceback) else exc.__cause__
         line = f"the worker failed: {type(cause).__name__}: {one_line(str(cause))}"
     return MeshOutcome(job.source, job.name, "failed", line=line)
 

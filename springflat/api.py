@@ -275,7 +275,7 @@ def _named_mesh(path: str | os.PathLike, holes: Holes, name: str | None) -> tupl
     try:
         mesh, defaults = resolve_mesh(os.fspath(path), holes, notes, label=name)
     except MeshError as exc:
-        raise MeshError(_in_api_words(str(exc))) from None
+        raise MeshError(_in_api_words(str(exc)), faces=exc.faces, vertices=exc.vertices, defect=exc.defect) from None
     if name is not None:
         mesh = Mesh(mesh.vertices, mesh.faces, name=name, allow_holes=holes is Holes.KEEP)
     for note in notes:
@@ -385,7 +385,8 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
         except HoledMesh as exc:
             raise MeshError(f"{exc}{seams_hint(vertices, faces)}; {_in_api_words(HOLES_HINT)}") from None
         except MeshError as exc:
-            raise MeshError(f"{exc}{repair_hint(exc)}{seams_hint(vertices, faces)}") from None
+            raise MeshError(f"{exc}{repair_hint(exc)}{seams_hint(vertices, faces)}", faces=exc.faces,
+                            vertices=exc.vertices, defect=exc.defect) from None
         for note in [*notes, *filter(None, [seams_note(vertices, faces)])]:
             warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
         defaults = file_defaults(mesh)

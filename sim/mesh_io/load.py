@@ -96,7 +96,8 @@ def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple
         seams = seams_hint(vertices, faces)
         if suffix == ".obj" and not (seams and exc.defect is MeshDefect.SEVERAL_PIECES):  # (pieces a weld may join)
             hint = obj_line_hint(exc, obj)
-        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{repair_hint(exc)}{seams}") from None
+        raise MeshError(f"invalid mesh '{path}': {exc}{hint}{repair_hint(exc)}{seams}", faces=exc.faces,
+                        vertices=exc.vertices, defect=exc.defect) from None
 
 
 def read_stl(data: bytes, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:

@@ -615,8 +615,8 @@ def test_write_pattern_takes_a_grain_as_three_numbers(ear, tmp_path):
 
 def test_a_pattern_below_half_its_surface_area_says_so_one_at_its_size_does_not():
     """E_S cannot tell a pattern shrunk to a tenth (E_S at most 1) from a good one; the note gives the area's share.
-    A flat grid started from its own layout squeezed to a quarter across and stretched by 1.6 along (a start at
-    the mesh's size by its edge lengths, scaled to it, of 40 % of its area) and stopped after one iteration: every
+    A flat grid started from its own layout squeezed to a quarter across and stretched by 1.6 along (40 % of its
+    area, near the mesh's size by its edge lengths: taken as it is) and stopped after one iteration: every
     triangle still smaller than its own, so the share is 1 - E_S; started from its own layout, the pattern is the
     grid."""
     from sim.generate import grid_faces, grid_uv
@@ -737,3 +737,17 @@ def test_a_files_notes_are_warnings_and_its_holes_hint_speaks_keywords(tmp_path)
         springflat.flatten(ring)
     assert "keep_holes=True" in str(refused.value) and "--" not in str(refused.value)
     assert springflat.flatten(ring, keep_holes=True, max_iter=2).faces.shape == (16, 3)
+
+
+def test_a_refused_mesh_file_says_what_it_refuses_to_an_api_caller(tmp_path):
+    """MeshError's faces, vertices and defect (what a program can act on) came through as a plain message."""
+    from golden_model.mesh import MeshDefect
+
+    path = tmp_path / "extra.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 5\nf 1 2 3\n")
+    with pytest.raises(MeshError) as refused:
+        springflat.flatten(path)
+    assert (refused.value.vertices, refused.value.defect) == ((3,), MeshDefect.UNUSED_VERTEX)
+    with pytest.raises(MeshError) as refused:
+        springflat.flatten(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5]]), [[0, 1, 2]])
+    assert (refused.value.vertices, refused.value.defect) == ((3,), MeshDefect.UNUSED_VERTEX)

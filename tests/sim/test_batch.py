@@ -599,8 +599,8 @@ def test_a_worker_that_cannot_write_its_copy_of_the_mesh_fails_it_in_one_line(tm
     job = sim.batch.BatchJob(str(SCANS / "bunny_ear.obj"), "bunny_ear", b"v 0 0 0\n", {}, (("out", ".dxf"),),
                              scratch=str(tmp_path))
     outcome = sim.batch.flatten_one(job)
-    assert outcome.failed and outcome.line == (f"cannot write the worker's copy of the mesh in '{tmp_path}': no space "
-                                               "left on device (TMPDIR chooses the directory)")
+    assert outcome.failed and outcome.line == (f"cannot write the worker's files in '{tmp_path}': no space left on "
+                                               "device (TMPDIR chooses the directory)")
     assert list(tmp_path.iterdir()) == []
     raised = OSError(errno.ENOSPC, "No space left on device")  # as a pool hands back a worker's exception
     raised.__cause__ = _RemoteTraceback('\n"""\nTraceback (most recent call last):\n  File "x.py"\n"""')

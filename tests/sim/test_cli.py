@@ -97,8 +97,8 @@ def test_a_run_whose_errors_grow_huge_prints_them_in_a_few_digits():
     from sim.flatten_run import human_line
 
     history = History()
-    history.append(float("nan"), Measurement(0.26154, 0.09301, 1.0, 0, 0))
-    history.append(1.0, Measurement(1.2812e217, 8.5e108, 1e300, 4, 2))
+    history.append(float("nan"), Measurement(0.26154, 0.09301, 1.0, 0, 0), None)
+    history.append(1.0, Measurement(1.2812e217, 8.5e108, 1e300, 4, 2), True)
     mesh = builtin_mesh("surf1")[0]
     result = FlattenResult(mesh.vertices[:, :2], mesh.vertices[:, :2], mesh.vertices[:, :2], history, "max-iterations",
                            1, None, 1.0)
