@@ -55,7 +55,7 @@ from .layouts import LAYOUT_METHODS
 from .mesh_io import MESH_SUFFIXES
 from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_directory, check_distinct, \
     check_link_target, check_not_foreign, check_not_interrupted, check_output_path, file_ending, on_interrupt, \
-    print_note, received_signal, record_written_outputs, reset_interrupted, written_outputs
+    print_note, received_signal, record_written_outputs, report_owned, reset_interrupted, written_outputs
 from .patterns import add_pattern_options, check_not_a_mesh, pattern_ending
 from .run_options import (
     USER_ERRORS,
@@ -232,10 +232,12 @@ def _check_distinct_files(args: argparse.Namespace) -> None:
 
 
 def cmd_paper(args: argparse.Namespace) -> int:
-    from .paper import reproduce_paper
+    from .paper import REPORT_FILES, REPORT_TITLE, reproduce_paper
 
     out = args.out
-    with atomic_directory(out) as build:  # all of the report or nothing, also on Ctrl-C
+    owned = report_owned(out, REPORT_TITLE, REPORT_FILES)  # an earlier report's files; any other is the user's
+    check_not_foreign(out, REPORT_FILES, owned)  # (before the runs)
+    with atomic_directory(out, owned=owned) as build:  # all of the report or nothing, also on Ctrl-C
         report = reproduce_paper(build, init=args.init, progress=not args.quiet and sys.stderr.isatty())
     print(f"wrote {out / report.name}")
     return 0

@@ -36,7 +36,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
-from golden_model.files import file_kind, resolved_parent_key, same_file_key
+from golden_model.files import file_kind, read_regular_file, resolved_parent_key, same_file_key
 from golden_model.files import describe_os_error
 from golden_model.mesh import folded_faces, one_line, signed_areas_2d, triangle_areas_3d
 from golden_model.modes import Step
@@ -734,6 +734,16 @@ def check_not_foreign(out: Path, names: Sequence[str], owned: Sequence[str] | No
         shown = ", ".join(foreign[:4]) + (f" and {len(foreign) - 4} more" if len(foreign) > 4 else "")
         raise OutputError(f"{what} '{out}' holds {shown}, which this run would replace and no earlier run of this "
                           "command wrote there: move them, or give a new directory")
+
+
+def report_owned(out: Path, title: str, names: Sequence[str]) -> tuple[str, ...]:
+    """``names`` where the directory ``out`` holds an earlier report of this kind (its report.md's first line is
+    ``title``), else none: :func:`check_not_foreign`'s ``owned`` for a command whose report is a directory."""
+    try:  # (a FIFO of that name is not opened)
+        first = read_regular_file(output_target(out) / "report.md").split(b"\n", 1)[0]
+    except OSError:
+        return ()
+    return tuple(names) if first == title.encode() else ()
 
 
 def _names_paths_outside(error: OSError, directory: Path) -> bool:

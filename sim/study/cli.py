@@ -41,8 +41,8 @@ from golden_model.study import (
     unexercised_classes,
 )
 
-from ..outputs import atomic_directory, atomic_write, check_not_foreign, check_output_directory, output_target, \
-    print_note, progress_bar
+from ..outputs import atomic_directory, atomic_write, check_not_foreign, check_output_directory, print_note, \
+    progress_bar, report_owned
 from ..run_options import integer_argument, load_format_set, number_argument, path_argument
 from ..workers import local_workers
 from .cases import STUDY_MESHES, build_cases
@@ -104,18 +104,6 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 REPORT_TITLE = "# Fixed-point error study"
 
 
-def _holds_a_study(out: Path) -> bool:
-    """Whether the directory ``out`` holds an earlier study's report (its report.md's title): the files of
-    :data:`REPORT_FILES` there are then that study's, which this one replaces or removes; else they are the
-    user's."""
-    from golden_model.files import read_regular_file
-
-    try:  # (a FIFO of that name is not opened)
-        return read_regular_file(output_target(out) / "report.md").split(b"\n", 1)[0] == REPORT_TITLE.encode()
-    except OSError:
-        return False
-
-
 def _progress_bars(enabled: bool):
     """``(update(phase, n), close(), totals)``: a :func:`sim.outputs.progress_bar` per phase, labelled with the
     phase, where ``enabled``."""
@@ -156,7 +144,7 @@ def cmd_study(args: argparse.Namespace) -> int:
               *(("a mesh", Path(m)) for m in args.meshes or ())]
     check_output_directory(out, files=REPORT_FILES, inputs=inputs,  # before the study: the report is its end
                            labels={"chosen.json": "output (written when a format set meets the target)"})
-    earlier = REPORT_FILES if _holds_a_study(out) else ()  # what an earlier study wrote; anything else is the user's
+    earlier = report_owned(out, REPORT_TITLE, REPORT_FILES)  # an earlier study's; anything else is the user's
     check_not_foreign(out, REPORT_FILES, earlier)
     cases = build_cases(args.meshes or list(STUDY_MESHES), _BOTH[args.init], _STEPS[args.step], args.max_iter)
 

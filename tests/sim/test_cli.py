@@ -252,6 +252,9 @@ def test_paper_report(tmp_path):
     assert "Table VI" in report and "Table VII" in report
     for name in ("surf1.png", "surf2.png", "surf1-fixed.csv", "surf2-variable.csv"):
         assert (tmp_path / "rep" / name).stat().st_size > 0
+    from sim.paper import REPORT_FILES  # (the names checked against a user's files before the runs)
+
+    assert sorted(p.name for p in (tmp_path / "rep").iterdir()) == sorted(REPORT_FILES)
     # each run's last iteration is a row of its table: the shorter run's final errors are shown too; the
     # folds the paper's dynamics ends with are said
     for mesh, faces in (("surf1", 7), ("surf2", 24)):
@@ -1063,3 +1066,16 @@ def test_a_start_methods_name_that_a_file_here_also_has_says_which_is_taken(tmp_
     assert method.returncode == 0 and said in method.stderr and json.loads(method.stdout)["init"] == "tutte"
     given = run("flatten", "dome.obj", "--init", "./tutte", "--max-iter", "2", "--json", cwd=tmp_path)
     assert given.returncode == 0 and said not in given.stderr and json.loads(given.stdout)["init"] == "./tutte"
+
+
+def test_paper_does_not_replace_a_users_report_in_out(tmp_path):
+    """A directory with the user's own report.md: the paper's report replaced it. Refused before the runs; an
+    earlier paper report there (its title) is replaced."""
+    out = tmp_path / "notes"
+    out.mkdir()
+    (out / "report.md").write_text("# my report\n")
+    proc = run("paper", "--quiet", "--out", out)
+    assert proc.returncode == 2 and proc.stderr == (
+        f"springflat: error: --out '{out}' holds report.md, which this run would replace and no earlier run of this "
+        "command wrote there: move them, or give a new directory\n")
+    assert (out / "report.md").read_text() == "# my report\n" and [p.name for p in out.iterdir()] == ["report.md"]
