@@ -106,13 +106,13 @@ WIDENED_FIELDS = ("position", "velocity")
 
 
 #: The scale (in the host's units: mean edge lengths, unit time) at which each signal's rounding shows in
-#: a run's result, for :meth:`FormatSet.resolution`: lengths, ``r = 1/|Δ|``, the strain ``1 − d·r``
+#: a run's result, for :meth:`FormatSet.resolution`: positions and lengths, ``r = 1/|Δ|``, the strain ``1 − d·r``
 #: and the error measures near 1; forces about ``C/2`` (a quarter); the weights about 1/2; the
 #: accelerations a tenth; velocities, ``Δt`` and the exp table's entries near the smallest step 0.01;
 #: ``Δt²/2`` near 1e-3. Calibrated, with :data:`ACCURACY_FACTOR`, on random format sets
 #: (``tests/golden_model/test_formats_property.py``; ``docs/fixed-point.md`` has the runs).
 RESOLUTION_SCALES: dict[str, float] = {
-    "rest_length": 1.0, "delta": 1.0, "length_sq": 1.0, "rsqrt": 1.0, "spring": 1.0, "error": 1.0,
+    "position": 1.0, "rest_length": 1.0, "delta": 1.0, "length_sq": 1.0, "rsqrt": 1.0, "spring": 1.0, "error": 1.0,
     "force": 0.25, "force_acc": 0.25, "inv_mass": 0.5, "accel": 0.1,
     "velocity": 0.01, "dt": 0.01, "lut_entry": 0.01, "half_dt_sq": 1e-3,
 }
