@@ -55,8 +55,7 @@ REGISTER_BLOCKS = ("identification", "control", "results", "run constants")
 
 def format_hash(fs: FormatSet) -> int:
     """CRC-32 of the format set's formats and knobs (not its name or notes): the FORMAT_HASH register."""
-    content = {k: v for k, v in fs.to_dict().items() if k not in ("name", "notes")}
-    return zlib.crc32(json.dumps(content, sort_keys=True).encode())
+    return zlib.crc32(json.dumps(fs.content(), sort_keys=True).encode())
 
 
 @dataclass(frozen=True)

@@ -507,7 +507,16 @@ class FormatSet:
         opened), or a preset by name (``"default"``, ``"narrow"``)."""
         if cls.names_preset(path_or_preset):
             return cls.preset(str(path_or_preset))
-        return cls.from_dict(json.loads(read_regular_file(path_or_preset), object_pairs_hook=_no_repeated_keys))
+        fs = cls.from_dict(json.loads(read_regular_file(path_or_preset), object_pairs_hook=_no_repeated_keys))
+        if fs.name in cls.presets() and fs.content() != cls.preset(fs.name).content():  # (reports name the set)
+            raise ValueError(f"it is named '{fs.name}', a preset's name, but its formats are not that preset's: give "
+                             "it a name of its own (\"name\" in the file), so that its results are not taken for the "
+                             "preset's")
+        return fs
+
+    def content(self) -> dict[str, Any]:
+        """:meth:`to_dict` without the name and the notes: what the set computes with."""
+        return {k: v for k, v in self.to_dict().items() if k not in ("name", "notes")}
 
     @classmethod
     def preset(cls, name: str) -> FormatSet:

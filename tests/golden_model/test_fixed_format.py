@@ -420,3 +420,15 @@ def test_formatset_validation_messages():
         FormatSet.preset("nope")
     ok = fs.replace(delta="s3.15", name="study")
     assert ok.delta == Format(True, 3, 15) and ok != fs and ok.position == fs.position
+
+
+def test_a_file_named_as_a_preset_must_hold_that_preset(tmp_path):
+    """default.json copied and changed, its name kept: its runs, reports and study rows said 'default' (a study put
+    base:default, failing, beside preset:default, meeting the target). A verbatim copy loads."""
+    FormatSet.preset("default").save(tmp_path / "copy.json")
+    assert FormatSet.load(tmp_path / "copy.json") == FormatSet.preset("default")
+    FormatSet.preset("default").replace(velocity="s3.2").save(tmp_path / "changed.json")
+    with pytest.raises(ValueError, match=r"^it is named 'default', a preset's name, but its formats are not that "
+                                         r"preset's: give it a name of its own"):
+        FormatSet.load(tmp_path / "changed.json")
+    assert FormatSet.load(tmp_path / "copy.json").content() == FormatSet.preset("default").content()

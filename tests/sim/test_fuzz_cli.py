@@ -1771,7 +1771,8 @@ def test_real_exit_ctrl_c_while_the_worker_pool_starts_ends_the_program(command,
 
 
 def _fake_paper_report(monkeypatch, files: dict[str, str]) -> None:
-    """``paper`` writes ``files`` (name: text) into its output directory and returns its ``report.md``."""
+    """``paper`` writes ``files`` (name: text) into its output directory and returns its ``report.md``; they are
+    the report's files (``REPORT_FILES``), which an earlier report's (its title) may be replaced by."""
     import sim.paper
 
     def report(out, init="pca", progress=True):
@@ -1780,6 +1781,13 @@ def _fake_paper_report(monkeypatch, files: dict[str, str]) -> None:
         return out / "report.md"
 
     monkeypatch.setattr(sim.paper, "reproduce_paper", report)
+    monkeypatch.setattr(sim.paper, "REPORT_FILES", tuple(files))
+
+
+def _earlier_paper_report(text: str) -> str:
+    from sim.paper import REPORT_TITLE
+
+    return f"{REPORT_TITLE}\n{text}"
 
 
 def test_an_existing_output_directory_keeps_its_other_files(tmp_path, monkeypatch, capsys):
@@ -1789,7 +1797,7 @@ def test_an_existing_output_directory_keeps_its_other_files(tmp_path, monkeypatc
     monkeypatch.chdir(tmp_path)
     (tmp_path / "r").mkdir()
     (tmp_path / "r" / "mine.txt").write_text("keep")
-    (tmp_path / "r" / "report.md").write_text("old")
+    (tmp_path / "r" / "report.md").write_text(_earlier_paper_report("old"))
     assert main(["paper", "--out", "r"]) == 0
     assert sorted(os.listdir(tmp_path / "r")) == ["figure.png", "mine.txt", "report.md"]
     assert (tmp_path / "r" / "report.md").read_text() == "![figure](figure.png)\n"
@@ -1932,7 +1940,7 @@ def test_a_directory_output_put_in_place_all_or_none_when_a_rename_fails(tmp_pat
     monkeypatch.chdir(tmp_path)
     (tmp_path / "r").mkdir()
     (tmp_path / "r" / "figure.png").write_bytes(b"old png")
-    (tmp_path / "r" / "report.md").write_text("old report\n")
+    (tmp_path / "r" / "report.md").write_text(_earlier_paper_report("old report\n"))
     _refusing_replace(monkeypatch, "report.md")
     assert main(["paper", "--out", "r", "--quiet"]) == 2
     assert capsys.readouterr().err.splitlines()[-1] == ("springflat: error: cannot write --out 'r/report.md': "
