@@ -480,8 +480,10 @@ class Study:
         return result
 
     def cheapest(self, metric: str = "bits") -> ConfigSummary | None:
-        """The cheapest fully evaluated configuration that meets the target (ties: smaller deviation)."""
-        meeting = [s for s in (self.summary(c) for c in self._configs.values()) if s.meets]
+        """The cheapest fully evaluated configuration that meets the target (ties: smaller deviation); a sweep of
+        a class no case reads is none (its width changes no result here, so its saving is not one)."""
+        meeting = [s for s in (self.summary(c) for c in self._configs.values())
+                   if s.meets and not (s.config.kind == "sweep" and s.config.knob in self.unexercised)]
         if not meeting:
             return None
         return min(meeting, key=lambda s: (s.cost.key(metric), s.worst_deviation))

@@ -489,3 +489,13 @@ def test_a_choice_the_default_dynamics_refuses_says_so(tmp_path, monkeypatch, ca
                              "--out", "d", "--quiet"])) == 0
     out, err = capsys.readouterr()
     assert out.startswith("chosen preset:narrow: ") and "momentum dynamics" not in err
+
+
+def test_a_sweep_of_a_class_no_case_reads_is_never_chosen(tmp_path, monkeypatch, capsys):
+    """Without the optimiser the cheapest sweep row was chosen: power=4 on a paper run, which reads no power, so
+    its 'saving' went into chosen.json while the report said no case reads the class."""
+    monkeypatch.chdir(tmp_path)
+    assert cmd_study(_parse(["surf2", "--init", "pca", "--step", "fixed", "--workers", "1", "--no-optimise",
+                             "--sweep", "power", "--bits", "4:16:4", "--out", "s", "--quiet"])) == 0
+    said = capsys.readouterr().out
+    assert "chosen power=" not in said and "power" not in json.loads(Path("s/chosen.json").read_text())["name"], said
