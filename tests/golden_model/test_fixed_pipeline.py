@@ -450,3 +450,16 @@ def test_accumulators_that_would_not_fit_int64_are_refused():
                         delta="s3.10", face_edge="s8.10")
     assert DEFAULT.accumulators() == {"force": (True, 30), "error": (False, 23), "error_squares": (False, 41),
                                       "barrier_energy": (False, 57)}
+
+
+def test_clamps_of_the_error_measures_alone_are_said_to_move_nothing():
+    """Surf1 from Tutte in the default formats: 11 layouts with E_S of 1 or more, held at error's top. The note
+    said they moved the result from float's and sent the user to 'wide', whose error format is the same."""
+    from support import run_springflat
+
+    proc = run_springflat("flatten", "surf1", "--init", "tutte", "--engine", "fixed", "--formats", "default")
+    assert proc.returncode == 0 and "11 saturation events" in proc.stdout, proc.stdout
+    assert ("springflat: note: format set 'default' held 11 E_S/E_C measures of 1 or more at the top of its error "
+            "format (u0.20): no step or stop rule tells them from 1, so the run is not moved by them, but --history "
+            "records such a layout's E_S or E_C as 0.999999") in proc.stderr, proc.stderr
+    assert "wide" not in proc.stderr
