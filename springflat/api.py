@@ -130,6 +130,9 @@ def _option_value(spec: OptionSpec, value: Any) -> Any:
             return FormatSet.from_dict(dict(value))
         except (ValueError, KeyError, TypeError) as exc:
             raise ParameterError(f"formats: {str(exc).splitlines()[0]}") from None
+    if spec.keyword == "formats" and not isinstance(value, (str, os.PathLike)):  # (5 read as a preset's name)
+        raise ParameterError(f"formats takes a preset's name, a JSON file's path, a FormatSet or its to_dict(), not "
+                             f"a {type(value).__name__}")
     if spec.action == "store_true" or spec.action is argparse.BooleanOptionalAction:
         if isinstance(value, (bool, np.bool_)):
             return bool(value)

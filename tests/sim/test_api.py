@@ -751,3 +751,11 @@ def test_a_refused_mesh_file_says_what_it_refuses_to_an_api_caller(tmp_path):
     with pytest.raises(MeshError) as refused:
         springflat.flatten(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5]]), [[0, 1, 2]])
     assert (refused.value.vertices, refused.value.defect) == ((3,), MeshDefect.UNUSED_VERTEX)
+
+
+@pytest.mark.parametrize("value", [5, [1], b"default"])
+def test_formats_of_another_type_is_refused_as_such(value):
+    """formats=5 was looked up as a preset named '5'."""
+    with pytest.raises(ParameterError, match=r"^formats takes a preset's name, a JSON file's path, a FormatSet or its "
+                                             rf"to_dict\(\), not a {type(value).__name__}$"):
+        springflat.flatten("surf1", engine="fixed", formats=value)
