@@ -365,8 +365,19 @@ def pattern_notes(params: FlattenParams, mesh: Mesh, result: FlattenResult, api:
     overlapping, or (a fixed-point run of ``formats``) clamped, at the top of its format where it ran away."""
     return [note for note in (growth_note(params, result, api), shrink_note(mesh, result),
                               fold_note(params, result, api), overlap_note(result),
-                              saturation_note(params, result, formats, api), still_note(params, result, formats, api))
+                              saturation_note(params, result, formats, api), still_note(params, result, formats, api),
+                              coarse_note(formats))
             if note]
+
+
+def coarse_note(formats: FormatSet | None) -> str | None:
+    """A fixed-point run of a format set so coarse that its documented bound against float (``accuracy_bound``,
+    docs/fixed-point.md) is 1 or more: E_S and E_C are at most 1, so the bound promises nothing."""
+    if formats is None or formats.accuracy_bound() < 1:
+        return None
+    return (f"format set '{formats.name}' is so coarse that its accuracy bound against the float engine is "
+            f"{formats.accuracy_bound():.3g}, which promises nothing for E_S and E_C: compare with the float engine "
+            "(docs/fixed-point.md)")
 
 
 #: E_S and E_C below which a start is a flattening already (a flat patch, its errors the formats' rounding):

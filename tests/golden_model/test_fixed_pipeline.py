@@ -463,3 +463,17 @@ def test_clamps_of_the_error_measures_alone_are_said_to_move_nothing():
             "format (u0.20): no step or stop rule tells them from 1, so the run is not moved by them, but --history "
             "records such a layout's E_S or E_C as 0.999999") in proc.stderr, proc.stderr
     assert "wide" not in proc.stderr
+
+
+def test_a_format_set_whose_bound_promises_nothing_says_so(tmp_path):
+    """velocity s3.2: the bound is 100 (E_S, E_C are at most 1) and the run went far from float's with no
+    saturation and no word."""
+    from support import run_springflat
+
+    FormatSet.preset("default").replace(velocity="s3.2", name="vel2").save(tmp_path / "vel2.json")
+    assert FormatSet.load(tmp_path / "vel2.json").accuracy_bound() >= 1
+    coarse = run_springflat("flatten", "surf1", "--engine", "fixed", "--formats", tmp_path / "vel2.json")
+    assert coarse.returncode == 0 and ("springflat: note: format set 'vel2' is so coarse that its accuracy bound "
+                                       "against the float engine is 100, which promises nothing") in coarse.stderr
+    plain = run_springflat("flatten", "surf1", "--engine", "fixed", "--formats", "default")
+    assert plain.returncode == 0 and "so coarse" not in plain.stderr
