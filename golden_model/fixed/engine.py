@@ -26,6 +26,7 @@ floats only report (``Measurement``).
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from fractions import Fraction
@@ -62,6 +63,11 @@ def load_formats(spec: str) -> FormatSet:
         return FormatSet.load(spec)
     except FileNotFoundError:
         raise FixedPointError(f"formats file '{spec}' not found (presets: {', '.join(FormatSet.presets())})") from None
+    except UnicodeDecodeError:
+        raise FixedPointError(f"formats '{spec}': not a JSON file (not text)") from None
+    except json.JSONDecodeError as exc:
+        raise FixedPointError(f"formats '{spec}': not a JSON file ({exc.msg.lower()} at line {exc.lineno}, column "
+                              f"{exc.colno})") from None
     except (ValueError, KeyError, TypeError) as exc:
         raise FixedPointError(f"formats '{spec}': {str(exc).splitlines()[0]}") from None
 

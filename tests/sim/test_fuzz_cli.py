@@ -647,6 +647,10 @@ FORMAT_SETS: dict[str, Case] = {
     "json file CRLF": Case(["--formats", "f.json"], files={"f.json": _formats_json().replace("\n", "\r\n")}),
     "unknown preset": Case(["--formats", "huge"], 2, r"unknown FormatSet preset 'huge'; available: \['default', 'narrow', 'wide'\]"),
     "missing file": Case(["--formats", "nope.json"], 2, r"formats file 'nope.json' not found"),
+    "an empty file": Case(["--formats", "e.json"], 2, r"formats 'e.json': not a JSON file \(expecting value at line 1, "
+                                                      r"column 1\)", files={"e.json": ""}),
+    "not text": Case(["--formats", "b.json"], 2, r"formats 'b.json': not a JSON file \(not text\)",
+                     files={"b.json": b"\xff\xfe\x41"}),  # (UTF-16 by its BOM, then an odd byte)
     "a file named by a path without .json": Case(["--formats", "./f"], files={"f": _formats_json()}),
     "directory": Case(["--formats", "d.json"], 2, r"cannot read formats file 'd.json': is a directory",
                       files={"d.json/x": ""}),
