@@ -335,7 +335,7 @@ def saturation_note(params: FlattenParams, result: FlattenResult, formats: Forma
     if max(final.area_error, final.shape_error) >= formats.error.max:  # E_S, E_C clamped: no flattening
         return (note + "; E_S or E_C is at the top of its format: the run ran away (the float engine calls such a "
                 "run diverged), and the pattern is no flattening" + ("" if api else f"; {divergence_hint(params)}"))
-    if set(events) <= set(ERROR_MEASURES):  # layouts of E 1 or more (a start): the step and stop take E as 1
+    if set(events) <= set(ERROR_MEASURES):  # layouts of E 1 or more (far from flat): step and stop take E as 1
         return (f"format set '{result.extra['formats']}' held {result.extra['saturations']} E_S/E_C measures of 1 or "
                 f"more at the top of its error format ({formats.error}): no step or stop rule tells them from 1, so "
                 "the run is not moved by them, but --history records such a layout's E_S or E_C as "

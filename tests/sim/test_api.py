@@ -391,6 +391,7 @@ def test_a_format_set_the_rtl_cannot_build_is_a_parameter_error(ear, tmp_path):
     V, F = ear
     formats = FormatSet.preset("default").to_dict()
     formats["formats"]["delta"] = "s3.23"  # finer than position's 22 fraction bits: the force pass refuses it
+    formats["name"] = "fine_delta"  # (a set of a preset's name must be that preset)
     (tmp_path / "f.json").write_text(json.dumps(formats))
     with pytest.raises(ParameterError, match="delta s3.23 cannot have more fraction bits than position"):
         springflat.flatten(V, F, engine="rtl", formats=str(tmp_path / "f.json"), max_iter=1)
