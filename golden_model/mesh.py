@@ -47,8 +47,7 @@ COORDINATE_LIMIT = 1e50
 MIN_MESH_SIZE = 1e-50
 
 class MeshDefect(enum.Enum):
-    """What a refusal of :class:`Mesh` is about, where a reader or a command can say more than the message:
-    a scan's harmless defects that a mesh tool removes at once, and a file of several pieces."""
+    """What a refusal is about, for a reader: a scan's defects a mesh tool removes at once, or several pieces."""
 
     UNUSED_VERTEX = enum.auto()
     DUPLICATE_FACE = enum.auto()
@@ -66,9 +65,7 @@ class MeshError(ValueError):
     def __init__(self, message: str, *, faces: tuple[int, ...] = (), vertices: tuple[int, ...] = (),
                  defect: MeshDefect | None = None) -> None:
         super().__init__(message)
-        self.faces = tuple(int(f) for f in faces)
-        self.vertices = tuple(int(v) for v in vertices)
-        self.defect = defect
+        self.faces, self.vertices, self.defect = tuple(map(int, faces)), tuple(map(int, vertices)), defect
 
 
 class InconsistentOrientation(MeshError):
@@ -180,6 +177,11 @@ class Mesh:
         """``(E,)`` 3D edge lengths ``d_e`` (the springs' rest lengths)."""
         i, j = self.edges.T
         return np.linalg.norm(self.vertices[i] - self.vertices[j], axis=1)
+
+    def layout_lengths(self, positions: np.ndarray) -> np.ndarray:
+        """``(E,)`` edge lengths ``L_e`` of a ``(V, 2)`` layout, in :attr:`edges`' order (beside :attr:`rest_lengths`)."""
+        i, j = self.edges.T
+        return np.linalg.norm(positions[i] - positions[j], axis=1)
 
     @cached_property
     def face_areas(self) -> np.ndarray:

@@ -630,9 +630,8 @@ def start_layout(mesh: Mesh, init: str | Path | np.ndarray, progress=None,
 def rms_strain(mesh: Mesh, positions: np.ndarray) -> float:
     """``√(Σ_e (L_e − d_e)² / Σ_e d_e²)``: the springs' energy as an rms edge strain, as the stop rule's floor
     (:data:`golden_model.guard.ENERGY_FLOOR`) measures it."""
-    i, j = mesh.edges.T
     rest = mesh.rest_lengths
-    return float(np.sqrt(np.sum((np.linalg.norm(positions[i] - positions[j], axis=1) - rest) ** 2) / np.sum(rest**2)))
+    return float(np.sqrt(np.sum((mesh.layout_lengths(positions) - rest) ** 2) / np.sum(rest**2)))
 
 
 def _lscm_where_exact(mesh: Mesh, arap: np.ndarray, say: Callable[[str], None], floor: float) -> StartLayout:

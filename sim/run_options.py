@@ -377,7 +377,7 @@ def check_float_start(mesh: Mesh, positions: np.ndarray, params: FlattenParams, 
     the fixed-point engines' lengths saturate instead)."""
     if params.guard:
         return
-    lengths = np.linalg.norm(positions[mesh.edges[:, 0]] - positions[mesh.edges[:, 1]], axis=1)
+    lengths = mesh.layout_lengths(positions)
     if lengths.all():
         return
     a, b = (int(v) for v in mesh.edges[np.flatnonzero(lengths == 0)[0]])

@@ -119,8 +119,7 @@ def size_factor(mesh: Mesh, positions: np.ndarray) -> float:
     """The factor that fits the layout's edge lengths ``L`` to the mesh's 3D ones ``d`` in least squares,
     ``Σ L·d / Σ L²`` (1 for a layout at a minimum of the springs' energy, whose scale it cannot lower; 1 where
     every edge has length 0)."""
-    i, j = mesh.edges.T
-    lengths = np.linalg.norm(positions[i] - positions[j], axis=1)
+    lengths = mesh.layout_lengths(positions)
     squares = float(lengths @ lengths)
     return float(lengths @ mesh.rest_lengths) / squares if squares > 0 else 1.0
 
