@@ -14,7 +14,7 @@ import numpy as np
 
 from golden_model.fixed.engine import check_fixed_params, prepare, presets_holding, scale_mesh
 from golden_model.fixed.formats_set import FORMAT_FIELDS, FormatSet
-from golden_model.fixed.measures import FixedPointError
+from golden_model.fixed.measures import ERROR_MEASURE_EVENTS, FixedPointError
 from golden_model.guard import SCALE_MAX_SHIFT, energy_floor_strain
 from golden_model.mesh import Mesh, loop_length, overlap_counts, signed_areas_2d
 from golden_model.modes import Step
@@ -335,7 +335,7 @@ def saturation_note(params: FlattenParams, result: FlattenResult, formats: Forma
     if max(final.area_error, final.shape_error) >= formats.error.max:  # E_S, E_C clamped: no flattening
         return (note + "; E_S or E_C is at the top of its format: the run ran away (the float engine calls such a "
                 "run diverged), and the pattern is no flattening" + ("" if api else f"; {divergence_hint(params)}"))
-    if set(events) <= set(ERROR_MEASURES):  # layouts of E 1 or more (far from flat): step and stop take E as 1
+    if set(events) <= set(ERROR_MEASURE_EVENTS):  # layouts of E 1 or more (far from flat): step and stop take E as 1
         return (f"format set '{result.extra['formats']}' held {result.extra['saturations']} E_S/E_C measures of 1 or "
                 f"more at the top of its error format ({formats.error}): no step or stop rule tells them from 1, so "
                 "the run is not moved by them, but --history records such a layout's E_S or E_C as "
@@ -344,10 +344,6 @@ def saturation_note(params: FlattenParams, result: FlattenResult, formats: Forma
     return (note + (f"; a format set with more integer bits holds them (presets: {', '.join(wider)}; "
                     "docs/fixed-point.md)" if wider else "; no preset has more integer bits there: a "
                     + ("formats=FILE" if api else "--formats FILE") + " can (docs/fixed-point.md)"))
-
-
-#: The saturation events of the error measures E_S and E_C themselves (``error``'s range ends below 1).
-ERROR_MEASURES = ("area_error", "shape_error")
 
 
 def _holds_more(candidate: FormatSet, formats: FormatSet, clamped: dict[str, int]) -> bool:

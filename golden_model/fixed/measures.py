@@ -17,9 +17,12 @@ from .formats_set import FormatSet
 from .pipeline import exact_sum
 
 __all__ = ["FixedPointError", "Reciprocal", "SAT", "momentum_beta_raw", "MomentumState", "energy_frac_bits",
-           "energy_raw", "power_sum", "area_sum", "area_error", "length_sum", "shape_error"]
+           "energy_raw", "power_sum", "area_sum", "area_error", "length_sum", "shape_error", "ERROR_MEASURE_EVENTS"]
 
 SAT = Overflow.SATURATE
+#: The saturation sources of the error measures E_S and E_C themselves (:func:`area_error`, :func:`shape_error`):
+#: ``error``'s range ends below 1, so a layout of E 1 or more is held at its top.
+ERROR_MEASURE_EVENTS = ("area_error", "shape_error")
 
 
 class FixedPointError(ParameterError):
@@ -167,7 +170,7 @@ def area_error(fs: FormatSet, reciprocal: Reciprocal, faces: np.ndarray, face_ar
     """``E_S`` raw [error]: :func:`area_sum` times ``reciprocal`` (1/ΣA); saturating at ``error``'s
     maximum counts as ``area_error``."""
     return reciprocal.normalise(area_sum(fs, faces, face_areas, positions, counter), fs.error, fs.rounding,
-                                counter, "area_error")
+                                counter, ERROR_MEASURE_EVENTS[0])
 
 
 def length_sum(fs: FormatSet, error_sums: np.ndarray, counter: SaturationCounter | None = None) -> int:
@@ -182,4 +185,4 @@ def shape_error(fs: FormatSet, reciprocal: Reciprocal, error_sums: np.ndarray,
     """``E_C`` raw [error]: :func:`length_sum` times ``reciprocal`` (1/(2Σd)); saturating at ``error``'s
     maximum counts as ``shape_error``."""
     return reciprocal.normalise(length_sum(fs, error_sums, counter), fs.error, fs.rounding, counter,
-                                "shape_error")
+                                ERROR_MEASURE_EVENTS[1])

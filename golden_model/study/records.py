@@ -11,6 +11,7 @@ import numpy as np
 
 from ..fixed.engine import flatten_fixed
 from ..fixed.formats_set import FormatSet
+from ..fixed.measures import ERROR_MEASURE_EVENTS
 from ..params import ParameterError
 from ..results import FlattenResult
 from .cases import StudyCase
@@ -162,5 +163,6 @@ def compare(case: StudyCase, ref: FlattenResult, out: FixedOutcome) -> RunRecord
 def measure_clamps(events: dict[str, int], reference: FlattenResult) -> int:
     """The error-measure saturations among ``events`` that the float ``reference`` shares: for E_S and
     E_C, at most as many as the reference has measurements of 1 or more (:attr:`RunRecord.measure_clamps`)."""
-    history = {"area_error": reference.history.area_error, "shape_error": reference.history.shape_error}
-    return sum(min(events.get(name, 0), int((np.asarray(values) >= 1).sum())) for name, values in history.items())
+    history = (reference.history.area_error, reference.history.shape_error)
+    return sum(min(events.get(name, 0), int((np.asarray(values) >= 1).sum()))
+               for name, values in zip(ERROR_MEASURE_EVENTS, history))
