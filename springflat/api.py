@@ -44,8 +44,8 @@ from sim.flatten_run import divergence_note, pattern_notes, run_flatten, run_for
 from sim.layouts import ARRAY_WORDS, AUTO_START, LAYOUT_METHODS, LayoutError, check_layout
 from sim.mesh_io import load_mesh_with_notes, repair_hint
 from sim.mesh_io.seams import seams_hint, seams_note
-from sim.outputs import (OutputError, area_ratio, check_link_target, check_output_path, directory_name_problem,
-                         ending_name_problem)
+from sim.outputs import (OutputError, area_ratio, check_distinct, check_link_target, check_output_path,
+                         directory_name_problem, ending_name_problem)
 from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, PatternError, add_pattern_options,
                           cut_file_notes, kind_or_none, on_sheets, pattern_ending, run_caption, seam_length,
                           write_pattern_file)
@@ -188,6 +188,8 @@ class Pattern:
         init: the initial layout used (a method name, a file, or ``"array"``).
         params: the :class:`~golden_model.params.FlattenParams` of the run.
         result: the engine's full :class:`~golden_model.results.FlattenResult` (history, velocities, ...).
+        read_files: the files the run read (the mesh file, a start layout's file), absolute: :func:`write_pattern`
+            writes over none of them, as the command writes no output over its inputs.
     """
 
     layout: np.ndarray
@@ -203,6 +205,7 @@ class Pattern:
     init: str
     params: FlattenParams
     result: FlattenResult
+    read_files: tuple[Path, ...] = ()
 
     def __repr__(self) -> str:  # the arrays and the run's history are for their own attributes
         return (f"Pattern(name={self.name!r}, status={self.status!r}, iterations={self.iterations}, "
@@ -420,8 +423,10 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
     ratio = area_ratio(result.positions, mesh.faces, mesh.face_areas)
     for array in (result.positions, ratio, mesh.vertices, mesh.faces, result.velocities, result.initial_positions):
         array.setflags(write=False)  # the values above are of these arrays, and the result is the Pattern's
+    read = (V if named else None, init if isinstance(init, (str, Path)) else None)
+    read_files = tuple(Path(os.path.abspath(file)) for file in read if file is not None and os.path.isfile(file))
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
-                   final.folded, ratio, mesh.name, mesh.vertices, mesh.faces, args.init, params, result)
+                   final.folded, ratio, mesh.name, mesh.vertices, mesh.faces, args.init, params, result, read_files)
 
 
 def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", paper: str | None = None,
@@ -440,7 +445,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     :mod:`sim.patterns`; a true-scale pattern (DXF, PDF, SVG) under 10 mm or over 5 m across gives a
     :class:`MeshNote` warning that ``units`` is likely wrong.  The file appears whole or not at all, and an
     existing regular file at ``path`` that may be written is replaced (a read-only one is refused), but for
-    an ``.obj`` springflat did not write (a mesh, the pattern's own too: refused, as by the command).
+    an ``.obj`` springflat did not write (a mesh, the pattern's own too: refused, as by the command) and a file
+    the run read (``Pattern.read_files``: the mesh file, a start layout's file, even where springflat wrote them).
 
     Raises:
         OutputError: a path that cannot be written, or a ``diverged`` pattern (its last finite layout is no
@@ -476,6 +482,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     try:  # a missing directory, a link to a mesh, ... named
         check_output_path(Path(path), "the path", typed=False)
         check_link_target(Path(path), "the path", pattern_ending)
+        check_distinct([("the path", Path(path))], [("the run's input", file)
+                                                    for file in pattern.read_files])
     except OutputError as exc:
         raise OutputError(f"write_pattern: {exc}") from None
     caption = run_caption(pattern.status, pattern.iterations, pattern.area_error, pattern.shape_error,

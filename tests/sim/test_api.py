@@ -252,6 +252,29 @@ def test_write_pattern_does_not_write_a_pattern_through_a_link_to_a_mesh(ear, tm
     assert (tmp_path / "scan.obj").read_text() == "a mesh\n"
 
 
+def test_write_pattern_does_not_write_over_the_files_the_run_read(tmp_path, monkeypatch):
+    """A mesh that is a springflat pattern .obj (its own kind of file, which write_pattern replaces) and a start
+    layout that is a .flat.obj: written over by the pattern of their own run, directly or through a link, they
+    would be gone, as the command refuses (`--out` the same file as the mesh)."""
+    monkeypatch.chdir(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        springflat.write_pattern("mesh.obj", springflat.flatten("surf1", max_iter=2))
+        springflat.write_pattern("start.flat.obj", springflat.flatten("surf1", max_iter=2))
+        pattern = springflat.flatten("mesh.obj", init="start.flat.obj", max_iter=2)
+    assert pattern.read_files == (tmp_path / "mesh.obj", tmp_path / "start.flat.obj")
+    (tmp_path / "link.obj").symlink_to("mesh.obj")
+    before = {name: (tmp_path / name).read_bytes() for name in ("mesh.obj", "start.flat.obj")}
+    for path, read in [("mesh.obj", "mesh.obj"), (tmp_path / "link.obj", "mesh.obj"),
+                       ("start.flat.obj", "start.flat.obj")]:
+        with pytest.raises(springflat.OutputError, match=f"write_pattern: the path '.*' is the same file as the "
+                                                        f"run's input '{tmp_path}/{read}'"):
+            springflat.write_pattern(path, pattern)
+    assert {name: (tmp_path / name).read_bytes() for name in before} == before
+    springflat.write_pattern("other.obj", pattern)  # any other file is written
+    assert springflat.flatten(np.asarray(pattern.vertices), np.asarray(pattern.faces), max_iter=1).read_files == ()
+
+
 def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
     V, F = ear
     with pytest.raises(TypeError, match="write_pattern takes a file path \\(str or pathlib.Path\\), not NoneType"):
