@@ -43,7 +43,7 @@ from .layouts import AUTO_START, LAYOUT_METHODS
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
     check_output_path, file_ending, print_note, when_interrupted
 from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind
-from .run_options import (USER_ERRORS, UserError, holes_mode, input_files, integer_argument, params_from_args,
+from .run_options import (USER_ERRORS, OneOutput, UserError, holes_mode, input_files, integer_argument, params_from_args,
                           path_argument, resolve_mesh, strict_json)
 from .workers import WorkerPool, local_workers, undo_dask_malloc_trim, wait_for_one
 
@@ -54,7 +54,7 @@ def add_batch_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("more_meshes", nargs="*", metavar="MESH",
                         help="more meshes, right after the first (no option between them): a batch, one result "
                              "line each")
-    parser.add_argument("--out-dir", type=path_argument, default=None, metavar="DIR",
+    parser.add_argument("--out-dir", type=path_argument, action=OneOutput, default=None, metavar="DIR",
                         help="batch: write DIR/<mesh name><ending> for each ending given to --out, --history, "
                              "--plot and --distortion (e.g. --out .dxf --out .pdf --distortion .csv)")
     parser.add_argument("--jobs", type=integer_argument, default=None, metavar="N",

@@ -59,6 +59,7 @@ from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_d
 from .patterns import add_pattern_options, check_not_a_mesh, pattern_ending
 from .run_options import (
     USER_ERRORS,
+    OneOutput,
     UserError,
     add_run_options,
     default_init,
@@ -321,8 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the pattern, by its ending (repeat for several): .dxf (cut line on layer CUT), .pdf or "
                         ".svg (true scale on --paper sheets), .obj (the 3D mesh with the pattern as vt), "
                         ".flat.obj (the layout, z = 0), .flat.svg (the layout coloured by distortion)")
-    p.add_argument("--history", type=file_path_argument, metavar="FILE.csv", help="per-iteration CSV")
-    p.add_argument("--plot", type=file_path_argument, metavar="FILE.png", help="PNG of the layouts and error curves")
+    p.add_argument("--history", type=file_path_argument, action=OneOutput, metavar="FILE.csv", help="per-iteration CSV")
+    p.add_argument("--plot", type=file_path_argument, action=OneOutput, metavar="FILE.png",
+                   help="PNG of the layouts and error curves")
     p.add_argument("--json", action="store_true", help="print one JSON object with the results")
     add_pattern_options(p)
     from .batch import add_batch_options
@@ -332,7 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("paper", help="reproduce the paper's Tables VI-VII and figures",
                        description="Run Surf1 and Surf2 with fixed and variable steps; write a markdown report.")
-    p.add_argument("--out", type=path_argument, default="paper-report", help="output directory (default paper-report)")
+    p.add_argument("--out", type=path_argument, action=OneOutput, default="paper-report",
+                   help="output directory (default paper-report)")
     p.add_argument("--init", choices=LAYOUT_METHODS, default="pca", help="initial layout (default pca)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=cmd_paper)
@@ -354,7 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="generic (the default): no vendor primitives, for any tool or simulator; ecp5: the netlist "
                         "'springflat synth --target ecp5' places (MULT18X18D, DP16KD and TRELLIS_FF instances, their "
                         "simulation models in sim_models/), the one clock.sdc's clock was met with")
-    p.add_argument("--out", type=path_argument, required=True, help="output directory")
+    p.add_argument("--out", type=path_argument, action=OneOutput, required=True, help="output directory")
     p.set_defaults(func=cmd_verilog)
 
     from .rtl_check import add_parser as add_rtl_check_parser

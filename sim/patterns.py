@@ -52,7 +52,7 @@ from golden_model.mesh import Mesh, folded_faces, loop_length, loop_signed_area,
 
 from .mesh_io import save_obj
 from .outputs import OutputError, atomic_write, output_target, write_layout
-from .run_options import file_path_argument
+from .run_options import OneOutput, file_path_argument
 
 #: Length units a mesh may be in, and millimetres per unit.
 UNIT_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
@@ -171,7 +171,7 @@ def add_pattern_options(parser: argparse.ArgumentParser) -> None:
                              "unit: 10mm, 1.5cm, 0.375in (default: none, the pattern's edge is the cut line)")
     parser.add_argument("--dxf-edges", action="store_true",
                         help="also write every mesh edge to the DXF, on layer MESH (the cut line is on CUT)")
-    parser.add_argument("--distortion", type=file_path_argument, default=None, metavar="FILE.csv",
+    parser.add_argument("--distortion", type=file_path_argument, action=OneOutput, default=None, metavar="FILE.csv",
                         help="per-triangle area ratio and per-edge strain as CSV")
 
 

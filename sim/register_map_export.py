@@ -211,14 +211,14 @@ def main(argv: list[str] | None = None) -> int:
     from .exit_codes import STOP_SIGNALS, answered_signals
     from .outputs import OutputError, atomic_directory, describe_os_error, on_interrupt, received_signal, \
         reset_interrupted
-    from .run_options import integer_argument, path_argument
+    from .run_options import OneOutput, integer_argument, path_argument
 
     parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
     parser.add_argument("--formats", default="default")
     parser.add_argument("--capacity", nargs=3, type=integer_argument, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
                         default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles),
                         help="the engine's capacity (default: the one springflat verilog and synth build)")
-    parser.add_argument("--out", required=True, type=path_argument)
+    parser.add_argument("--out", required=True, type=path_argument, action=OneOutput)
     args = parser.parse_args(argv)
     reset_interrupted()
     # Ctrl-C, kill or a hang-up: one line and the command's status (no traceback, no directory half built)

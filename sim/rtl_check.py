@@ -21,7 +21,7 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY, check_engine_params
 
 from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, missing_simulator, run_bench
 from .layouts import AUTO_START, LAYOUT_METHODS, initial_layout
-from .run_options import file_path_argument, integer_argument
+from .run_options import OneOutput, file_path_argument, integer_argument
 from .top_names import CORE_MODULE, ENGINE_MODULE
 
 __all__ = ["add_parser", "cmd_rtl_check"]
@@ -48,7 +48,7 @@ def add_parser(sub, add_run_options) -> None:
     p.add_argument("--wait-states", type=integer_argument, default=0, metavar="N",
                    help="with --engine-top: up to N random idle clocks before each bus cycle (default 0)")
     p.add_argument("--iterations", type=integer_argument, default=None, metavar="N", help="stop after at most N iterations")
-    p.add_argument("--waves", type=file_path_argument, default=None, metavar="PATH",
+    p.add_argument("--waves", type=file_path_argument, action=OneOutput, default=None, metavar="PATH",
                    help="write the waveform here: FILE.fst with icarus, FILE.vcd with verilator")
     p.add_argument("--stall", type=float, default=None, metavar="P",
                    help="the datapath bench's probability of a random stall on each side per clock (default 0; "

@@ -112,6 +112,18 @@ def file_path_argument(text: str) -> Path:
     return path
 
 
+class OneOutput(argparse.Action):
+    """``store`` for an option that names one output (a file or a directory): given a second time it is refused,
+    since keeping the last, as ``store`` does, would silently leave out a file the user asked for."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        earlier = getattr(namespace, self.dest, None)
+        if earlier is not self.default:  # the parser sets the default before it reads the options
+            parser.error(f"{option_string} names one output and was given twice ('{earlier}' and '{values}'): "
+                         "give it once")
+        setattr(namespace, self.dest, values)
+
+
 #: The parameters' defaults, which the options' help states.
 _PARAMS = FlattenParams()
 

@@ -13,7 +13,7 @@ from golden_model.engine_spec import uart_protocol as protocol
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 
 from .clock import ENGINE_TARGET_MHZ
-from .run_options import integer_argument, path_argument
+from .run_options import OneOutput, integer_argument, path_argument
 from .top_names import COMPONENT_SUMMARIES
 from .synth import (DEFAULT_FREQ, DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, ENGINE, PLACER_TIMING, REPORT_FILES, ROUTERS,
                     TARGETS, DoesNotFit, SynthError, build_in_place, report_markdown, run_synthesis)
@@ -75,7 +75,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
                         + ", ".join(f"{mhz:g} for {target}" for target, mhz in DEFAULT_FREQ.items())
                         + f"; {ENGINE_TARGET_MHZ:g}, the engine's target, where the components include {ENGINE} on "
                           f"ecp5); with --board the engine's clock from the PLL (default {protocol.ENGINE_CLOCK_HZ / 1e6:g})")
-    p.add_argument("--out", type=path_argument, default=None,
+    p.add_argument("--out", type=path_argument, action=OneOutput, default=None,
                    help="bundle directory (default synth-TARGET-PRESET; with --board board-BOARD-PRESET)")
     p.add_argument("--components", type=_component_list, default=None, metavar="LIST",
                    help=f"comma-separated subset of {', '.join([*COMPONENT_SUMMARIES, ENGINE])} (default: all but "

@@ -68,7 +68,7 @@ class OptionSpec:
     Attributes:
         keyword: the keyword (``damping``); ``flag``: the command line's (``--damping``).
         action: argparse's action: ``None`` (takes a value), ``"store_true"`` or
-            ``argparse.BooleanOptionalAction``.
+            ``argparse.BooleanOptionalAction`` (a :attr:`switch`), or :class:`~sim.run_options.OneOutput` (a file).
         type: the argparse ``type`` that parses the value's text, or ``None``.
         choices: the allowed values, or ``None``.
         default: the command line's default (``None``: the mesh's default applies).
@@ -82,6 +82,11 @@ class OptionSpec:
     choices: tuple | None
     default: Any
     help: str
+
+    @property
+    def switch(self) -> bool:
+        """Whether the option is a switch (``--barrier``, ``--no-barrier``) rather than one that takes a value."""
+        return self.action == "store_true" or self.action is argparse.BooleanOptionalAction
 
 
 class _Recorder:
@@ -133,7 +138,7 @@ def _option_value(spec: OptionSpec, value: Any) -> Any:
     if spec.keyword == "formats" and not isinstance(value, (str, os.PathLike)):  # (5 read as a preset's name)
         raise ParameterError(f"formats takes a preset's name, a JSON file's path, a FormatSet or its to_dict(), not "
                              f"a {type(value).__name__}")
-    if spec.action == "store_true" or spec.action is argparse.BooleanOptionalAction:
+    if spec.switch:
         if isinstance(value, (bool, np.bool_)):
             return bool(value)
         raise ParameterError(f"{spec.keyword} must be True or False, got {value!r}")
@@ -518,7 +523,7 @@ _VALUE_WORDS: Mapping[str, Callable[[], Sequence[str]]] = {"formats": FormatSet.
 def _takes(spec: OptionSpec, word: str) -> bool:
     """Whether ``word`` is a value of the option (not the next word of the sentence): by its choices, its
     type, or (an option of any text: :data:`_VALUE_WORDS`) the words it names; a file name is never taken."""
-    if spec.action is not None or spec.type in (file_path_argument, path_argument):
+    if spec.switch or spec.type in (file_path_argument, path_argument):
         return False
     if spec.choices is not None:
         return word in map(str, spec.choices)
@@ -557,7 +562,7 @@ def _in_api_words(message: str) -> str:
             taken += 2
         rest = "".join(parts[taken - 1:]) if taken else values
         drop = match["drop"] or ""
-        if spec.action is not None:  # a switch: what it is set to (dropping it: set the other way)
+        if spec.switch:  # what it is set to (dropping it: set the other way)
             on = not match["no"] if not drop else bool(match["no"])
             return f"{keyword}={on}{values}"
         if taken:

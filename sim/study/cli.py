@@ -43,7 +43,7 @@ from golden_model.study import (
 
 from ..outputs import atomic_directory, atomic_write, check_not_foreign, check_output_directory, print_note, \
     progress_bar, report_owned
-from ..run_options import integer_argument, load_format_set, number_argument, path_argument
+from ..run_options import OneOutput, integer_argument, load_format_set, number_argument, path_argument
 from ..workers import local_workers
 from .cases import STUDY_MESHES, build_cases
 from .cost import multipliers
@@ -94,7 +94,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
                    help="run the fixed-point runs on a Dask cluster: a scheduler address (tcp://host:8786), or "
                         "local for Dask's LocalCluster with --jobs processes")
-    p.add_argument("--out", type=path_argument, default=Path("study-report"), help="output directory (default study-report)")
+    p.add_argument("--out", type=path_argument, action=OneOutput, default=Path("study-report"),
+                   help="output directory (default study-report)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_study)
     return p

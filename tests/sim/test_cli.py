@@ -416,6 +416,32 @@ def test_no_command_names_the_unknown_option_or_asks_for_one(capsys, argv, messa
     assert ended.value.code == 2 and capsys.readouterr().err == f"springflat: error: {message}\n"
 
 
+@pytest.mark.parametrize("command, flag, first, second", [
+    (["flatten", "surf1"], "--history", "a.csv", "b.csv"),
+    (["flatten", "surf1"], "--plot", "a.png", "b.png"),
+    (["flatten", "surf1"], "--distortion", "a.csv", "b.csv"),
+    (["flatten", "surf1", "surf2", "--out", ".dxf"], "--out-dir", "a", "b"),
+    (["paper"], "--out", "a", "b"),
+    (["study"], "--out", "a", "b"),
+    (["verilog"], "--out", "a", "b"),
+    (["synth"], "--out", "a", "b"),
+    (["rtl-check"], "--waves", "a.vcd", "b.vcd"),
+])
+def test_an_option_that_names_one_output_given_twice_is_refused(tmp_path, monkeypatch, capsys, command, flag, first,
+                                                                 second):
+    """Kept last, as argparse keeps a repeated option, the first file asked for would silently not be written;
+    `--out` of `flatten`, which takes several patterns, is the one output option that repeats."""
+    from sim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as ended:
+        main([*command, flag, first, flag, second])
+    assert ended.value.code == 2
+    assert capsys.readouterr().err.startswith(f"springflat: error: {flag} names one output and was given twice "
+                                              f"('{first}' and '{second}'): give it once")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_built_in_name_means_the_built_in_even_beside_a_file_of_that_name(tmp_path, monkeypatch, capsys):
     """A file named ``surf1`` (no mesh format's ending, so it could not be read) made ``flatten surf1`` fail
     with "unknown format ''" in its directory; the built-in runs, with a note, and the file is left alone."""
