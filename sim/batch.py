@@ -38,7 +38,7 @@ from golden_model.mesh import MeshError, one_line, printable_name, valid_text
 
 from .engines import engine_named
 from .exit_codes import EXIT_DIVERGED, EXIT_MESHES_FAILED
-from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths
+from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths, overlap_count
 from .layouts import AUTO_START, LAYOUT_METHODS
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
     check_output_path, file_ending, print_note, when_interrupted
@@ -653,6 +653,8 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
         for o in ordered:
             statuses[o.status] = statuses.get(o.status, 0) + 1
         counts = ", ".join(f"{n} {s}" for s, n in statuses.items())
+        overlapping = sum(bool(overlap_count(o.summary)) for o in ordered if o.summary is not None)
+        counts += f"; {overlapping} overlapping {'themselves' if overlapping > 1 else 'itself'}" if overlapping else ""
         say(f"{len(ordered)} mesh{'es' if len(ordered) != 1 else ''}: {counts}; {elapsed:.1f} s on {where}")
     if failed:  # each with its reason: the progress lines that gave them may have scrolled away
         print(f"springflat: error: {len(failed)} of {len(ordered)} meshes failed:", file=sys.stderr)
@@ -670,15 +672,18 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
 
 def summary_table(outcomes: list[MeshOutcome]) -> str:
     """A plain-text table: one row per mesh, in the order given."""
-    rows = [("mesh", "status", "iterations", "E_S", "E_C", "folded", "seconds")]
+    rows = [("mesh", "status", "iterations", "E_S", "E_C", "folded", "overlaps", "seconds")]
     for o in outcomes:
         name = printable_name(o.name)  # a file's stem may hold a newline: one row each
         if o.failed or o.summary is None:
-            rows.append((name, o.status if o.status == "skipped" else "failed", "", "", "", "", f"{o.seconds:.1f}"))
+            rows.append((name, o.status if o.status == "skipped" else "failed", "", "", "", "", "",
+                         f"{o.seconds:.1f}"))
         else:
             s = o.summary
+            overlaps = overlap_count(s)
             rows.append((name, s["status"], str(s["iterations"]), error_text(s["area_error"]),
-                         error_text(s["shape_error"]), str(s["folded"]), f"{o.seconds:.1f}"))
+                         error_text(s["shape_error"]), str(s["folded"]), "" if overlaps is None else str(overlaps),
+                         f"{o.seconds:.1f}"))
     widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
     lines = ["  ".join(cell.ljust(w) if k < 2 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths)))
              for row in rows]

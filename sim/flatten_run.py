@@ -195,6 +195,14 @@ def run_flatten(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, pro
     return result
 
 
+def overlap_count(summary: dict) -> int | None:
+    """The pattern's overlaps (``summary``: a run's ``--json`` summary or ``extra``): pairs of its boundary's sides
+    that meet and kept holes it wraps over, 0 where a cut along the boundary gives the piece; ``None`` where not
+    counted (a folded or diverged pattern)."""
+    crossings = summary.get("boundary_crossings")
+    return None if crossings is None else crossings + (summary.get("turned_holes") or 0)
+
+
 def overlap_note(result: FlattenResult) -> str | None:
     """A pattern whose boundary crosses itself, or that wraps over a kept hole: flaps lie on each other, though
     no triangle need be folded (the guard keeps triangles from folding, not distant parts of the pattern from
@@ -419,6 +427,7 @@ def human_line(mesh: Mesh, result: FlattenResult) -> str:
             f"E_S {error_text(result.initial.area_error)} -> {error_text(final.area_error)}, "
             f"E_C {error_text(result.initial.shape_error)} -> {error_text(final.shape_error)}, "
             f"folded {final.folded} (flipped against P0: {final.flipped})"
+            + (f", overlaps {overlaps}" if (overlaps := overlap_count(result.extra)) else "")
             + (f", {result.extra['saturations']} saturation events" if "saturations" in result.extra else "")
             + (f"; {result.extra['cycles']} engine cycles on {result.extra['simulator']}"
                if "simulator" in result.extra else ""))

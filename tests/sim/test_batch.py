@@ -330,6 +330,42 @@ def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
     assert capsys.readouterr().err == "springflat: error: the mesh 'a/dome00.obj' is given twice\n"
 
 
+
+def _helical_ribbon(path: Path) -> None:
+    """A ribbon wound through 430° and rising as a helix: its fold-free flattening is a ring sector of more than a
+    turn, whose end lies on its start (the boundary crosses itself) though no triangle is folded."""
+    columns, rows = 61, 3
+    u, v = (grid.ravel() for grid in np.meshgrid(np.arange(columns, dtype=float), np.arange(rows, dtype=float)))
+    angle, radius = u / (columns - 1) * np.radians(430), 7.0 - v
+    faces = [[r * columns + k, r * columns + k + 1, (r + 1) * columns + k + 1] for r in range(rows - 1)
+             for k in range(columns - 1)]
+    faces += [[r * columns + k, (r + 1) * columns + k + 1, (r + 1) * columns + k] for r in range(rows - 1)
+              for k in range(columns - 1)]
+    save_obj(path, np.c_[radius * np.cos(angle), radius * np.sin(angle), 0.3 * angle], np.array(faces))
+
+
+def test_a_pattern_that_overlaps_itself_shows_in_its_line_the_table_and_the_closing_count(tmp_path, monkeypatch,
+                                                                                          capsys):
+    """Its cut line crosses itself, so a cut along it does not give the piece: the note on stderr scrolls past in a
+    batch, so the result line, the table's `overlaps` column and the closing line say it (empty where not counted:
+    a folded pattern)."""
+    monkeypatch.chdir(tmp_path)
+    _helical_ribbon(tmp_path / "ribbon.obj")
+    save_obj("dome.obj", dome_grid(5).vertices * 100, dome_grid(5).faces)
+    assert main(["flatten", "ribbon.obj", "dome.obj", "surf1", "--out-dir", "o", "--out", ".dxf", "--jobs", "1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    ribbon = next(line for line in lines if line.startswith("[") and "ribbon:" in line)
+    overlaps = int(re.search(r"folded 0 \(flipped against P0: 0\), overlaps (\d+) ", ribbon)[1])
+    assert overlaps > 0
+    dome = next(line for line in lines if line.startswith("[") and "dome:" in line)
+    assert "folded 0" in dome and "overlaps" not in dome
+    header = next(k for k, line in enumerate(lines) if line.startswith("mesh "))
+    assert lines[header].split() == ["mesh", "status", "iterations", "E_S", "E_C", "folded", "overlaps", "seconds"]
+    rows = {line.split()[0]: line for line in lines[header + 1:header + 4]}
+    assert rows["ribbon"].split()[5:7] == ["0", str(overlaps)] and rows["dome"].split()[5:7] == ["0", "0"]
+    assert len(rows["surf1"].split()) == 7  # surf1 ends folded under the paper's dynamics: its overlaps not counted
+    assert re.fullmatch(r"3 meshes: 3 converged; 1 overlapping itself; .* s on 1 worker process", lines[header + 4])
+
 def test_the_table_has_one_row_per_mesh_whatever_its_file_name(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     mesh = dome_grid(5)
