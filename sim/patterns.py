@@ -687,7 +687,8 @@ def run_caption(status: str, iterations: int, area_error: float, shape_error: fl
     line that crosses itself, on a pattern with no fold), ``turned``: holes the pattern wraps over
     (:func:`golden_model.mesh.turned_holes`), each said when there are any."""
     return (f"{status} after {iterations} iterations: E_S {error_text(area_error)}, E_C {error_text(shape_error)}, "
-            f"{folded} folded" + (f", its boundary crosses itself {crossings} times" if crossings else "")
+            f"{folded} folded" + (f", its boundary crosses itself {'once' if crossings == 1 else f'{crossings} times'}"
+                                         if crossings else "")
             + (f", it wraps over {turned} of its holes" if turned else ""))
 
 

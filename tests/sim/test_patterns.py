@@ -781,6 +781,7 @@ def test_the_sheets_caption_says_the_boundary_crosses_itself():
     assert run_caption("converged", 12, 0.01, 0.02, 0, 10) == ("converged after 12 iterations: E_S 0.0100, E_C "
                                                                "0.0200, 0 folded, its boundary crosses itself 10 times")
     assert run_caption("converged", 12, 0.01, 0.02, 0, 0).endswith("0 folded")
+    assert run_caption("converged", 12, 0.01, 0.02, 0, 1).endswith("0 folded, its boundary crosses itself once")
 
 
 def test_the_apis_words_quote_each_value_of_a_list():
