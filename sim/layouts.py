@@ -317,6 +317,11 @@ def slim_layout(mesh: Mesh) -> np.ndarray:
     positions = tutte_layout(mesh)
     if np.sum(signed_areas_2d(positions, mesh.faces)) < 0:  # SLIM needs the mesh's own winding
         positions = positions * np.array([-1.0, 1.0])
+    # libigl's SLIM has absolute thresholds (a horn 1e-5 across came back with a hundred folded triangles): it runs
+    # on the patch scaled to a mean edge length near 1 by a power of two, which rounds nothing (its energy is
+    # scale-free, so nothing else changes)
+    size = 2.0 ** round(math.log2(float(np.mean(mesh.rest_lengths))))
+    vertices, positions = vertices / size, positions / size
     try:
         data = igl.slim_precompute(np.asfortranarray(vertices), np.asfortranarray(faces.astype(np.int32)),
                                    np.asfortranarray(positions), igl.MappingEnergyType.SYMMETRIC_DIRICHLET,
@@ -324,13 +329,13 @@ def slim_layout(mesh: Mesh) -> np.ndarray:
     except Exception as exc:
         raise _libigl_failure("slim", "slim_precompute", exc) from None
     chunk = 5
-    energy = symmetric_dirichlet(mesh, positions)
+    energy = symmetric_dirichlet(mesh, positions * size)
     for _ in range(0, SLIM_MAX_ITERATIONS, chunk):
         try:
             moved = igl.slim_solve(data, chunk)
         except Exception as exc:
             raise _libigl_failure("slim", "slim_solve", exc) from None
-        positions = _checked("slim", "slim_solve", moved, mesh.n_vertices)
+        positions = _checked("slim", "slim_solve", moved, mesh.n_vertices) * size
         before, energy = energy, symmetric_dirichlet(mesh, positions)
         if not energy < (1.0 - SLIM_TOLERANCE) * before:
             break
