@@ -276,7 +276,9 @@ def divergence_note(params: FlattenParams, result: FlattenResult, api: bool = Fa
     the API's keywords)."""
     if result.status != "diverged":
         return None
-    return f"iteration {result.iterations + 1} ran away: {RAN_AWAY} ({divergence_hint(params, api)})"
+    last = f"iteration {result.iterations}'s" if result.iterations else "the start's"
+    return (f"iteration {result.iterations + 1} ran away: {RAN_AWAY}; what is kept is the last finite layout, {last} "
+            f"({divergence_hint(params, api)})")
 
 
 def fold_note(params: FlattenParams, result: FlattenResult, api: bool = False) -> str | None:
