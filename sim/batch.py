@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from golden_model.builtin import is_builtin
-from golden_model.files import describe_os_error, read_file_bytes
+from golden_model.files import describe_os_error, read_file_bytes, same_file_key
 from golden_model.mesh import MeshError, one_line, printable_name, valid_text
 
 from .engines import engine_named
@@ -236,6 +236,9 @@ def _names(meshes: list[str]) -> list[str]:
     for mesh, name in zip(meshes, names):
         if name in seen and seen[name] == mesh:
             raise UserError(f"the mesh '{mesh}' is given twice")
+        if name in seen and not is_builtin(mesh) and same_file_key(mesh) is not None \
+                and same_file_key(mesh) == same_file_key(seen[name]):
+            raise UserError(f"the mesh '{mesh}' is given twice (as '{seen[name]}' too: the same file)")
         if name in seen:
             raise UserError(f"'{seen[name]}' and '{mesh}' are both named '{name}': their outputs would collide")
         seen[name] = mesh

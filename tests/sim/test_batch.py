@@ -328,6 +328,10 @@ def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
     assert "are both named 'dome00'" in capsys.readouterr().err
     assert main(["flatten", "a/dome00.obj", "a/dome00.obj", "--out-dir", "o", "--out", ".dxf"]) == 2
     assert capsys.readouterr().err == "springflat: error: the mesh 'a/dome00.obj' is given twice\n"
+    for other in ("b/../a/dome00.obj", f"{tmp_path}/a/dome00.obj"):
+        assert main(["flatten", "a/dome00.obj", other, "--out-dir", "o", "--out", ".dxf"]) == 2
+        assert capsys.readouterr().err == (f"springflat: error: the mesh '{other}' is given twice (as 'a/dome00.obj' "
+                                           "too: the same file)\n")
 
 
 
