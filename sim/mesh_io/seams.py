@@ -84,4 +84,5 @@ def seams_hint(vertices: np.ndarray, faces: np.ndarray) -> str:
     count, places = open_seams(vertices, faces)
     if not count:
         return ""
-    return f"; {_what(count, places)} (an exporter's seam?): welded, it may be one disk"
+    return (f"; {_what(count, places)} (an exporter's seam?): weld them first (trimesh's merge_vertices, MeshLab's "
+            "Merge Close Vertices), and it may be one disk")

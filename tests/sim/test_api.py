@@ -666,7 +666,8 @@ def test_arrays_with_a_seam_left_open_get_the_files_note_and_hint():
     grid = np.column_stack([grid_uv(4, 4, 10.0, 10.0), np.zeros(16)])
     faces = grid_faces(4, 4)
     with pytest.raises(MeshError, match=r"connected components; \d+ vertices lie on one another in \d+ places with "
-                                        r"no edge between them \(an exporter's seam\?\): welded, it may be one disk$"):
+                                        r"no edge between them \(an exporter's seam\?\): weld them first \(trimesh's "
+                                        r"merge_vertices, MeshLab's Merge Close Vertices\), and it may be one disk$"):
         springflat.flatten(grid[faces].reshape(-1, 3), np.arange(3 * len(faces)).reshape(-1, 3))
     right = grid[faces].mean(axis=1)[:, 0] > grid[1, 0]  # vertex 1, on the edge, copied for the faces right of it
     faces[right] = np.where(faces[right] == 1, 16, faces[right])

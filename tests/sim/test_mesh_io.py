@@ -599,7 +599,8 @@ def test_a_seam_left_open_is_named_where_it_cuts_the_surface_and_where_it_breaks
     vertices, faces = _split_at(range(2, 4))  # rows 1 and 4 stay shared: a hole
     save_obj(tmp_path / "inner_seam.obj", vertices, faces)
     with pytest.raises(MeshError, match=r"2 boundary loops .*; 4 vertices lie on one another in 2 places with no "
-                                        r"edge between them \(an exporter's seam\?\): welded, it may be one disk$"):
+                                        r"edge between them \(an exporter's seam\?\): weld them first \(trimesh's "
+                                        r"merge_vertices, MeshLab's Merge Close Vertices\), and it may be one disk$"):
         load_mesh_with_notes(tmp_path / "inner_seam.obj")
     from sim.generate import grid_faces, grid_uv
 
