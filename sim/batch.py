@@ -589,7 +589,8 @@ def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     if not args.json:
         print(f"springflat: {len(meshes)} mesh{'es' if len(meshes) != 1 else ''}"
               + (f" ({skipped} skipped: {'their' if skipped > 1 else 'its'} files are in "
-                 f"{printable_name(str(args.out_dir))})" if skipped else "")
+                 f"{printable_name(str(args.out_dir))}, newer than the mesh; the options they were made with are "
+                 "not compared: remove them to make them again)" if skipped else "")
               + (f" on {where}" if pending else ""), file=sys.stderr)
     done = 0
     unwritable: list[OSError] = []  # the standard output's error: the batch goes on, its files are written

@@ -518,7 +518,9 @@ def test_skip_existing_goes_on_after_an_interrupted_batch(tmp_path, monkeypatch,
     assert records[0]["files"] == ["o/dome00.dxf", "o/dome00.csv"]
     assert records[-1]["batch"]["skipped"] == 3
     assert main([*argv, "--skip-existing"]) == 0
-    assert capsys.readouterr().err.splitlines()[0] == "springflat: 3 meshes (3 skipped: their files are in o)"
+    assert capsys.readouterr().err.splitlines()[0] == ("springflat: 3 meshes (3 skipped: their files are in o, newer "
+                                                       "than the mesh; the options they were made with are not "
+                                                       "compared: remove them to make them again)")
 
 
 def test_skip_existing_runs_a_mesh_exported_again_since_its_files(tmp_path, monkeypatch, capsys):
