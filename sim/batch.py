@@ -28,6 +28,7 @@ import os
 import sys
 import tempfile
 import time
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
@@ -688,7 +689,13 @@ def summary_table(outcomes: list[MeshOutcome]) -> str:
             rows.append((name, s["status"], str(s["iterations"]), error_text(s["area_error"]),
                          error_text(s["shape_error"]), str(s["folded"]), "" if overlaps is None else str(overlaps),
                          f"{o.seconds:.1f}"))
-    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
-    lines = ["  ".join(cell.ljust(w) if k < 2 else cell.rjust(w) for k, (cell, w) in enumerate(zip(row, widths)))
+    widths = [max(_columns(row[k]) for row in rows) for k in range(len(rows[0]))]
+    lines = ["  ".join(cell + " " * (w - _columns(cell)) if k < 2 else " " * (w - _columns(cell)) + cell
+                       for k, (cell, w) in enumerate(zip(row, widths)))
              for row in rows]
     return "\n".join(line.rstrip() for line in lines)
+
+
+def _columns(text: str) -> int:
+    """The terminal columns ``text`` takes: two for a wide character (CJK), none for a combining mark."""
+    return sum(0 if unicodedata.combining(c) else 2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text)

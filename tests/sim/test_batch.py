@@ -370,6 +370,28 @@ def test_a_pattern_that_overlaps_itself_shows_in_its_line_the_table_and_the_clos
     assert len(rows["surf1"].split()) == 7  # surf1 ends folded under the paper's dynamics: its overlaps not counted
     assert re.fullmatch(r"3 meshes: 3 converged; 1 overlapping itself; .* s on 1 worker process", lines[header + 4])
 
+def test_the_tables_columns_line_up_under_wide_characters(tmp_path, monkeypatch, capsys):
+    """A CJK character takes two columns of a terminal: counted as one, it shifted its row's cells."""
+    import unicodedata
+
+    monkeypatch.chdir(tmp_path)
+    mesh = dome_grid(5)
+    for name in ("猫耳.obj", "plain.obj", "e\u0301.obj"):  # wide, narrow, and a combining accent (no column)
+        save_obj(name, mesh.vertices * 100, mesh.faces)
+    assert main(["flatten", "猫耳.obj", "plain.obj", "e\u0301.obj", "--out-dir", "o", "--out", ".dxf", "--max-iter", "3",
+                 "--jobs", "1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    header = next(k for k, line in enumerate(lines) if line.startswith("mesh "))
+
+    def column_of_status(line: str) -> int:
+        name, status = line.split()[:2]
+        before = line[:line.index(status, len(name))]
+        return sum(0 if unicodedata.combining(c) else 2 if unicodedata.east_asian_width(c) == "W" else 1
+                   for c in before)
+
+    assert {column_of_status(line) for line in lines[header:header + 4]} == {len("plain") + 2}
+
+
 def test_the_table_has_one_row_per_mesh_whatever_its_file_name(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     mesh = dome_grid(5)
