@@ -784,3 +784,18 @@ def test_formats_of_another_type_is_refused_as_such(value):
     with pytest.raises(ParameterError, match=r"^formats takes a preset's name, a JSON file's path, a FormatSet or its "
                                              rf"to_dict\(\), not a {type(value).__name__}$"):
         springflat.flatten("surf1", engine="fixed", formats=value)
+
+
+@pytest.mark.parametrize("power", [-30, 30])
+@pytest.mark.parametrize("init", [None, "slim"])  # the no-option start (ARAP's, here) and the one where ARAP folds
+def test_a_run_gives_the_same_pattern_at_any_size(ear, power, init):
+    """A mesh in metres, millimetres or microns is the same patch: made 2^±30 times as large (a factor that rounds
+    nothing), the start, every step and stop of the guarded run are the same, and the pattern is the same,
+    scaled, to the last bit. An absolute threshold anywhere (libigl's SLIM had some) shows here."""
+    V, F = ear
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (the units note: a pattern 1e-9 mm across)
+        reference, scaled = springflat.flatten(V, F, init=init), springflat.flatten(V * 2.0 ** power, F, init=init)
+    assert (scaled.status, scaled.iterations, scaled.folded) == (reference.status, reference.iterations, 0)
+    np.testing.assert_array_equal(scaled.layout, reference.layout * 2.0 ** power)
+    assert (scaled.area_error, scaled.shape_error) == (reference.area_error, reference.shape_error)
