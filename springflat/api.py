@@ -316,7 +316,8 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
         raise TypeError(f"flatten takes a {type(V).__name__} alone (its faces are its own), or two arrays V, F")
     if F is None:
         if not (hasattr(V, "vertices") and hasattr(V, "faces")):
-            raise TypeError("flatten(V, F) takes two arrays, or one trimesh.Trimesh")
+            raise TypeError(f"flatten(V, F) takes two arrays, one trimesh.Trimesh, or a mesh file's path or a built-in "
+                            f"mesh's name (str or pathlib.Path), not {type(V).__name__}")
         V, F = V.vertices, V.faces
     arrays = []
     for name, value, what in (("V", V, "(V, 3) vertex positions"), ("F", F, "(F, 3) vertex indices")):

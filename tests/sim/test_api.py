@@ -122,6 +122,9 @@ def test_unknown_keywords_and_wrong_types_are_type_errors(ear):
         springflat.flatten(V, F, barrier="yes")
     with pytest.raises(TypeError, match="trimesh"):
         springflat.flatten(V)
+    with pytest.raises(TypeError, match=r"one trimesh.Trimesh, or a mesh file's path or a built-in mesh's name \(str "
+                                        r"or pathlib.Path\), not bytes"):
+        springflat.flatten(b"ear.obj")
     with pytest.raises(TypeError, match="flatten takes a Trimesh alone \\(its faces are its own\\), or two arrays"):
         springflat.flatten(trimesh.Trimesh(V, F, process=False), F)
     with pytest.raises(TypeError, match="read_mesh takes a file path \\(str or pathlib.Path\\), not NoneType"):
