@@ -7,7 +7,7 @@ The workload is ``bench_engine_sim.py``'s: ``dome_grid(45)`` (2,025 vertices, 11
 triangles), the paper's dynamics with the variable step from a Tutte layout, tolerances 0 so the run goes to
 ``N_max``, the engine at ``DEFAULT_CAPACITY`` behind the host driver (``sim/engine_run.py``). Each build is a
 key of ``sim.engine_run.VERILATOR_BUILDS`` (one change against ``gpi-clock`` each, ``default`` the harness's own
-clock); ``pgo`` first compiles ``gpi-clock`` with ``-fprofile-generate`` and trains it on another mesh
+clock; ``yosys-opt`` is ``default`` on Yosys's optimisation of the netlist, ``YOSYS_BUILDS``); ``pgo`` first compiles ``gpi-clock`` with ``-fprofile-generate`` and trains it on another mesh
 (``dome_grid(24)``, 10 iterations),
 then compiles it again with the profile. Every build is built (and checked bit-exact) once, then the builds
 are measured round-robin ``--repeats`` times, so a change in the machine's load hits them alike; the table
@@ -36,7 +36,7 @@ from golden_model.engine_spec.image import DEFAULT_CAPACITY, build_image
 from sim.generate import dome_grid
 from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
-from sim.engine_run import VERILATOR_BUILDS, harness_ceiling, prepare_pgo, run_image_on_rtl
+from sim.engine_run import VERILATOR_BUILDS, YOSYS_BUILDS, harness_ceiling, prepare_pgo, run_image_on_rtl
 
 
 #: The pseudo-build of ``--guardless``: ``default``'s flags on the engine built without the step guard.
@@ -114,7 +114,8 @@ def main() -> int:
         flags, make = VERILATOR_BUILDS["default" if build == GUARDLESS else build]
         median = statistics.median(speeds[build])
         ratio = f"{median / base:.2f}x"
-        print(f"| {build} | `{' '.join(flags)}` | `{make.replace(chr(92), '')}` | {median:,.0f} | "
+        netlist = f" on Yosys's `{YOSYS_BUILDS[build]}`" if build in YOSYS_BUILDS else ""
+        print(f"| {build} | `{' '.join(flags)}`{netlist} | `{make.replace(chr(92), '')}` | {median:,.0f} | "
               f"{min(speeds[build]):,.0f}-{max(speeds[build]):,.0f} | {ratio} |")
     if args.harness:
         print("| harness alone (a counter), build | simulated cycles/s |")
