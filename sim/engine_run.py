@@ -36,7 +36,7 @@ __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "Eng
            "engine_flatten_result",
            "summary_line",
            "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo",
-           "harness_ceiling", "INTERNAL_CLOCK_BUILDS"]
+           "harness_ceiling", "INTERNAL_CLOCK_BUILDS", "YOSYS_BUILDS", "yosys_optimised"]
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
 #: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and
@@ -68,8 +68,9 @@ CLOCK_HALF_PERIOD_NS = 5
 #: :func:`run_image_on_rtl`): (extra Verilator arguments, make variables). ``default`` is what every run
 #: uses: the harness makes its own clock (``internal-clock``, the same build), 1.48x ``gpi-clock``'s speed
 #: measured in one run (``docs/verification.md``). ``gpi-clock`` is cocotb's GPI clock, a callback at
-#: every clock edge; the others each change one thing against it. ``pgo`` is ``gpi-clock`` compiled a
-#: second time with g++'s profile of a training run (:func:`prepare_pgo`).
+#: every clock edge; the others each change one thing against it, but ``yosys-opt`` (:data:`YOSYS_BUILDS`), which
+#: is ``default`` on another netlist. ``pgo`` is ``gpi-clock`` compiled a second time with g++'s profile of a
+#: training run (:func:`prepare_pgo`).
 VERILATOR_BUILDS = {
     "default": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
     "internal-clock": (VERILATOR_SPEED_FLAGS + ("--timing",), VERILATOR_MAKE_FLAGS + TIMING_MAKE_FLAGS),
@@ -195,6 +196,8 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
 
     if dsp is not None and dsp not in PRIMITIVE_MODELS:
         raise SimulatorError(f"no simulation model for DSP flavour {dsp!r} (choose from {', '.join(PRIMITIVE_MODELS)})")
+    if dsp is not None and build in YOSYS_BUILDS:  # (the vendor primitives have no Verilog for Yosys's hierarchy)
+        raise ValueError(f"build {build!r} runs the generic netlist only, not the {dsp} one")
     directory = engine_directory(fs, capacity, dsp)
     exported = directory / f"{ENGINE_MODULE}.v"
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only

@@ -6,7 +6,7 @@ import os
 import pytest
 
 from sim.engine_run import (INTERNAL_CLOCK_BUILDS, VERILATOR_BUILDS, VERILATOR_MAKE_FLAGS, VERILATOR_SPEED_FLAGS,
-                            build_flags, simulation_harness)
+                            YOSYS_BUILDS, build_flags, simulation_harness)
 from sim.top_names import ENGINE_MODULE
 from support import REPO
 
@@ -40,7 +40,21 @@ def test_the_internal_clock_harness():
     assert "  initial clk = 1'b0;\n  always #5 clk = ~clk;\n" in own
     for text in (plain, own):
         assert ".clk(clk)" in text and ".rst(rst_q)" in text and "always @(posedge clk) rst_q <= rst;" in text
-    assert INTERNAL_CLOCK_BUILDS == {"default", "internal-clock", "inline-all"}  # the trials of the default
+    # the trials of the default: its clock, and its flags on Yosys's netlist
+    assert INTERNAL_CLOCK_BUILDS == {"default", "internal-clock", "inline-all", "yosys-opt"}
+
+
+def test_the_yosys_build_is_defaults_flags_on_yosys_s_optimised_netlist():
+    """``yosys-opt`` changes the netlist Verilator compiles, not its flags; the vendor primitives of the ECP5
+    netlist have no Verilog for Yosys's ``hierarchy`` to read, so that pairing is refused before any work."""
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
+    from golden_model.fixed import FormatSet
+    from sim.engine_run import engine_sources
+
+    assert build_flags("verilator", "yosys-opt") == VERILATOR_BUILDS["default"]
+    assert "opt -full" in YOSYS_BUILDS["yosys-opt"] and f"-top {ENGINE_MODULE}" in YOSYS_BUILDS["yosys-opt"]
+    with pytest.raises(ValueError, match="build 'yosys-opt' runs the generic netlist only, not the ecp5 one"):
+        engine_sources(FormatSet.load("default"), DEFAULT_CAPACITY, "verilator", build="yosys-opt", dsp="ecp5")
 
 
 def test_the_builds_go_where_springflat_build_dir_says(tmp_path):
