@@ -96,15 +96,15 @@ class _Parser(argparse.ArgumentParser):
     def _dash_value_hint(self, message: str) -> str:
         """argparse reads a value that starts with '-' and is not a plain negative number (``-4:8``, ``-1e-3``,
         a file ``-print.pdf``) as an option, and says only "expected one argument": name the way to give it (where
-        the word after the option is no option of the command)."""
+        the word after the option starts with one dash and is no option of the command)."""
         match = re.fullmatch(r"argument (\S+): expected one argument", message)
         if not match:
             return ""
         argv = getattr(self, "_argv", [])
         for option in match.group(1).split("/"):
             for token, value in zip(argv, argv[1:]):
-                if token == option and value.startswith("-") \
-                        and value.split("=", 1)[0] not in self._option_string_actions:
+                if token == option and value.startswith("-") and not value.startswith("--") \
+                        and value not in self._option_string_actions:  # (a '--' word is an option mistyped)
                     return f"; a value that starts with '-' is read as an option: write {option}={value}"
         return ""
 

@@ -558,6 +558,9 @@ def test_a_mesh_file_named_with_a_leading_dash_is_named_with_the_way_to_give_it(
     (["flatten", "surf1", "--out", "-print.pdf"], "write --out=-print.pdf"),  # a file named with a dash
     (["flatten", "surf1", "--out", "--history", "h.csv"], None),  # the value left out before the next option
     (["flatten", "surf1", "--out", "--history=h.csv"], None),
+    (["flatten", "surf1", "--history", "--plto", "p.png"], None),  # an option mistyped, the value left out
+    (["flatten", "surf1", "--out", "--version"], None),
+    (["flatten", "surf1", "--out", "-h"], None),
 ])
 def test_a_value_that_starts_with_a_dash_is_named_with_the_way_to_give_it(argv, hint, capsys):
     """argparse takes ``-4:8`` (not a plain negative number) for an option and says only "expected one
