@@ -50,7 +50,7 @@ from sim.patterns import (DEFAULT_PAPER, TRUE_SCALE_KINDS, PatternDrawing, Patte
                           cut_file_notes, kind_or_none, on_sheets, pattern_ending, run_caption, seam_length,
                           write_pattern_file)
 from sim.run_options import (HOLES_HINT, UserError, add_run_options, default_init, file_defaults, file_path_argument,
-                             holes_mode, params_from_args, path_argument, resolve_mesh)
+                             holes_mode, input_files, params_from_args, path_argument, resolve_mesh)
 
 __all__ = ["OPTIONS", "OptionSpec", "MeshNote", "Pattern", "flatten", "read_mesh", "write_pattern"]
 
@@ -193,8 +193,8 @@ class Pattern:
         init: the initial layout used (a method name, a file, or ``"array"``).
         params: the :class:`~golden_model.params.FlattenParams` of the run.
         result: the engine's full :class:`~golden_model.results.FlattenResult` (history, velocities, ...).
-        read_files: the files the run read (the mesh file, a start layout's file), absolute: :func:`write_pattern`
-            writes over none of them, as the command writes no output over its inputs.
+        read_files: the files the run read (the mesh file, a start layout's, a format set's), absolute:
+            :func:`write_pattern` writes over none of them, as the command writes no output over its inputs.
     """
 
     layout: np.ndarray
@@ -429,8 +429,13 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
     ratio = area_ratio(result.positions, mesh.faces, mesh.face_areas)
     for array in (result.positions, ratio, mesh.vertices, mesh.faces, result.velocities, result.initial_positions):
         array.setflags(write=False)  # the values above are of these arrays, and the result is the Pattern's
-    read = (V if named else None, init if isinstance(init, (str, Path)) else None)
-    read_files = tuple(Path(os.path.abspath(file)) for file in read if file is not None and os.path.isfile(file))
+    read = input_files(argparse.Namespace(mesh=os.fspath(V) if named else "",
+                                          init=os.fspath(init) if isinstance(init, (str, Path)) else None,
+                                          formats=options.get("formats") if isinstance(options.get("formats"), str)
+                                          else None))
+    read_files = tuple(Path(os.path.abspath(path)) for what, path in read  # (a built-in's name is no file it read)
+                       if path is not None and os.path.isfile(path)
+                       and not (what == "the mesh" and is_builtin(str(path))))
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
                    final.folded, ratio, mesh.name, mesh.vertices, mesh.faces, args.init, params, result, read_files)
 
@@ -452,7 +457,8 @@ def write_pattern(path: str | Path, pattern: Pattern, *, units: str = "mm", pape
     :class:`MeshNote` warning that ``units`` is likely wrong.  The file appears whole or not at all, and an
     existing regular file at ``path`` that may be written is replaced (a read-only one is refused), but for
     an ``.obj`` springflat did not write (a mesh, the pattern's own too: refused, as by the command) and a file
-    the run read (``Pattern.read_files``: the mesh file, a start layout's file, even where springflat wrote them).
+    the run read (``Pattern.read_files``: the mesh file, a start layout's, a format set's, even where springflat
+    wrote them).
 
     Raises:
         OutputError: a path that cannot be written, or a ``diverged`` pattern (its last finite layout is no

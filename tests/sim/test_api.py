@@ -11,6 +11,7 @@ import pytest
 import trimesh
 
 import springflat
+from golden_model.fixed import FormatSet
 from golden_model.mesh import MeshError
 from sim.mesh_io import load_mesh
 from golden_model.params import ParameterError
@@ -276,6 +277,14 @@ def test_write_pattern_does_not_write_over_the_files_the_run_read(tmp_path, monk
     assert {name: (tmp_path / name).read_bytes() for name in before} == before
     springflat.write_pattern("other.obj", pattern)  # any other file is written
     assert springflat.flatten(np.asarray(pattern.vertices), np.asarray(pattern.faces), max_iter=1).read_files == ()
+    for name in ("surf1", "slim"):  # a built-in's name and a method's, though files of those names are here
+        (tmp_path / name).write_text("")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert springflat.flatten("surf1", init="slim", max_iter=1).read_files == ()
+        (tmp_path / "f.json").write_text(json.dumps(FormatSet.load("default").to_dict()))
+        assert springflat.flatten("surf1", engine="fixed", formats="f.json", max_iter=1).read_files == (
+            tmp_path / "f.json",)
 
 
 def test_write_pattern_takes_a_pattern_and_a_real_bool(ear, tmp_path):
