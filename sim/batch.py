@@ -697,5 +697,8 @@ def summary_table(outcomes: list[MeshOutcome]) -> str:
 
 
 def _columns(text: str) -> int:
-    """The terminal columns ``text`` takes: two for a wide character (CJK), none for a combining mark."""
-    return sum(0 if unicodedata.combining(c) else 2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text)
+    """The terminal columns ``text`` takes: two for a wide character (CJK), none for a mark that joins the one
+    before it (an accent, a Thai vowel, a variation selector; a Hangul vowel or final of a decomposed syllable)
+    or an invisible format character."""
+    return sum(0 if unicodedata.category(c) in ("Mn", "Me", "Cf") or "\u1160" <= c <= "\u11ff"
+               else 2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text)

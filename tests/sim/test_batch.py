@@ -334,7 +334,6 @@ def test_two_meshes_of_one_name_are_refused(tmp_path, monkeypatch, capsys):
                                            "too: the same file)\n")
 
 
-
 def _helical_ribbon(path: Path) -> None:
     """A ribbon wound through 430° and rising as a helix: its fold-free flattening is a ring sector of more than a
     turn, whose end lies on its start (the boundary crosses itself) though no triangle is folded."""
@@ -371,25 +370,22 @@ def test_a_pattern_that_overlaps_itself_shows_in_its_line_the_table_and_the_clos
     assert re.fullmatch(r"3 meshes: 3 converged; 1 overlapping itself; .* s on 1 worker process", lines[header + 4])
 
 def test_the_tables_columns_line_up_under_wide_characters(tmp_path, monkeypatch, capsys):
-    """A CJK character takes two columns of a terminal: counted as one, it shifted its row's cells."""
-    import unicodedata
-
+    """A CJK character takes two columns of a terminal, an accent, a Thai vowel mark or a decomposed Hangul
+    syllable's vowel none: counted as characters, they shifted their rows' cells."""
     monkeypatch.chdir(tmp_path)
     mesh = dome_grid(5)
-    for name in ("猫耳.obj", "plain.obj", "e\u0301.obj"):  # wide, narrow, and a combining accent (no column)
-        save_obj(name, mesh.vertices * 100, mesh.faces)
-    assert main(["flatten", "猫耳.obj", "plain.obj", "e\u0301.obj", "--out-dir", "o", "--out", ".dxf", "--max-iter", "3",
+    # shown as: 猫耳 (4 columns), plain (5), é (1), กิ (1), 가 (2)
+    names = ("猫耳", "plain", "e\u0301", "\u0e01\u0e34", "\u1100\u1161")
+    for name in names:
+        save_obj(f"{name}.obj", mesh.vertices * 100, mesh.faces)
+    assert main(["flatten", *(f"{name}.obj" for name in names), "--out-dir", "o", "--out", ".dxf", "--max-iter", "3",
                  "--jobs", "1"]) == 0
     lines = capsys.readouterr().out.splitlines()
     header = next(k for k, line in enumerate(lines) if line.startswith("mesh "))
-
-    def column_of_status(line: str) -> int:
-        name, status = line.split()[:2]
-        before = line[:line.index(status, len(name))]
-        return sum(0 if unicodedata.combining(c) else 2 if unicodedata.east_asian_width(c) == "W" else 1
-                   for c in before)
-
-    assert {column_of_status(line) for line in lines[header:header + 4]} == {len("plain") + 2}
+    # each row: the name, then spaces up to the widest name's 5 columns and the two between cells
+    padding = {line.split()[0]: len(line) - len(line.split()[0]) - len(line[len(line.split()[0]):].lstrip(" "))
+               for line in lines[header + 1:header + 1 + len(names)]}
+    assert padding == {"猫耳": 3, "plain": 2, "e\u0301": 6, "\u0e01\u0e34": 6, "\u1100\u1161": 5}
 
 
 def test_the_table_has_one_row_per_mesh_whatever_its_file_name(tmp_path, monkeypatch, capsys):

@@ -270,7 +270,6 @@ def test_auto_starts_from_slim_where_arap_fails():
     assert not folded_faces(start.positions, mesh.faces).any()
 
 
-
 @pytest.mark.parametrize("power", [-12, -30, 12])
 def test_slims_layout_is_the_same_at_any_size(power):
     """libigl's SLIM has absolute thresholds: the shipped ear scan (in metres) made 2^-12 times as large, edges
@@ -283,6 +282,7 @@ def test_slims_layout_is_the_same_at_any_size(power):
     positions = slim_layout(scaled)
     assert not folded_faces(positions, scaled.faces).any()
     np.testing.assert_array_equal(positions, slim_layout(ear) * 2.0 ** power)
+
 
 def test_auto_starts_from_lscm_where_it_is_exact_and_a_fold_free_arap_is_not():
     """A flat half ring: ARAP stops after its 100 iterations bent and strained (5 %), which the dynamics's local
