@@ -276,9 +276,9 @@ def divergence_note(params: FlattenParams, result: FlattenResult, api: bool = Fa
     the API's keywords)."""
     if result.status != "diverged":
         return None
-    last = f"iteration {result.iterations}'s" if result.iterations else "the start's"
-    return (f"iteration {result.iterations + 1} ran away: {RAN_AWAY}; what is kept is the last finite layout, {last} "
-            f"({divergence_hint(params, api)})")
+    last = f"iteration {result.iterations}" if result.iterations else "the start"
+    return (f"iteration {result.iterations + 1} ran away: {RAN_AWAY} ({divergence_hint(params, api)}); the results "
+            f"are of {last}, the last finite layout")
 
 
 def fold_note(params: FlattenParams, result: FlattenResult, api: bool = False) -> str | None:

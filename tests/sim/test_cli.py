@@ -232,9 +232,18 @@ def test_a_diverged_run_exits_nonzero_keeps_an_existing_pattern_and_writes_its_h
     n = json.loads(proc.stdout)["iterations"]  # the iterations whose layouts were finite
     assert len((tmp_path / "h.csv").read_text().splitlines()) == n + 2  # header, P0, n iterations
     assert (f"springflat: iteration {n + 1} ran away: a value stopped being finite, or the layout grew 10000 times "
-            "wider than the mesh's edges laid end to end; what is kept is the last finite layout, the start's ("
-            in proc.stderr and n == 0
+            "wider than the mesh's edges laid end to end (" in proc.stderr
+            and "); the results are of the start, the last finite layout" in proc.stderr and n == 0
             and f"; no pattern written (--out, --distortion), '{tmp_path / 'o.flat.obj'}' kept as it was" in proc.stderr)
+
+
+def test_a_diverged_runs_note_names_the_last_finite_iteration(tmp_path):
+    """'diverged after 5 iterations' and 'iteration 6 ran away': the note says the results are iteration 5's."""
+    proc = run("flatten", "surf1", "--step", "fixed", "--dt", "3", "--json")
+    n = json.loads(proc.stdout)["iterations"]
+    assert proc.returncode == 3 and n > 0
+    assert f"springflat: iteration {n + 1} ran away: " in proc.stderr
+    assert f"); the results are of iteration {n}, the last finite layout\n" in proc.stderr
 
 
 def test_a_diverged_runs_plot_is_written_without_warnings(tmp_path):
