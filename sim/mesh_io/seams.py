@@ -64,6 +64,10 @@ def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
     return len(involved), int(connected_components(graph, directed=False)[0])
 
 
+#: How to join the copies of a point, which springflat leaves to the user (where they belong together is theirs to say).
+WELD = "weld them first (trimesh's merge_vertices, MeshLab's Merge Close Vertices)"
+
+
 def _what(count: int, places: int) -> str:
     return (f"{count} vertices lie on one another in {places} place{'s' if places != 1 else ''} with no edge "
             "between them")
@@ -75,8 +79,7 @@ def seams_note(vertices: np.ndarray, faces: np.ndarray) -> str | None:
     if not count:
         return None
     return (f"{_what(count, places)}: the surface is cut there (an exporter's seam, where texture coordinates or "
-            "normals differ, leaves it so), and so is the pattern; if it is one piece there, weld them first "
-            "(trimesh's merge_vertices, MeshLab's Merge Close Vertices)")
+            f"normals differ, leaves it so), and so is the pattern; if it is one piece there, {WELD}")
 
 
 def seams_hint(vertices: np.ndarray, faces: np.ndarray) -> str:
@@ -84,5 +87,4 @@ def seams_hint(vertices: np.ndarray, faces: np.ndarray) -> str:
     count, places = open_seams(vertices, faces)
     if not count:
         return ""
-    return (f"; {_what(count, places)} (an exporter's seam?): weld them first (trimesh's merge_vertices, MeshLab's "
-            "Merge Close Vertices), and it may be one disk")
+    return f"; {_what(count, places)} (an exporter's seam?): {WELD}, and it may be one disk"
