@@ -44,8 +44,8 @@ from .layouts import AUTO_START, LAYOUT_METHODS
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
     check_output_path, file_ending, print_note, when_interrupted
 from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind
-from .run_options import (USER_ERRORS, OneOutput, UserError, holes_mode, input_files, integer_argument, params_from_args,
-                          path_argument, resolve_mesh, strict_json)
+from .run_options import (USER_ERRORS, OneOutput, UserError, holes_mode, input_files, integer_argument,
+                          params_from_args, path_argument, resolve_mesh, strict_json)
 from .workers import WorkerPool, local_workers, undo_dask_malloc_trim, wait_for_one
 
 
