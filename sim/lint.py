@@ -20,20 +20,29 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
+from .top_names import COMPONENT_SUMMARIES, ENGINE_MODULE, ENGINE_SIM_MODULE
+
 __all__ = ["WAIVER_FILE", "WAIVERS", "Waiver", "waiver_text", "write_waivers", "lint_warnings"]
 
 #: The configuration file's name in an export directory.
 WAIVER_FILE = "verilator_waivers.vlt"
 
 
+#: The Verilog springflat writes or ships, as Verilator wildcards (a directory in front allowed): the waivers are
+#: theirs, so that an FPGA engineer's own files, linted beside them with this configuration, keep every rule.
+#: (``*_pnr.v``: the serial I/O wrappers ``springflat synth`` places; ``sim_models/``: the vendor primitives' models.)
+SPRINGFLAT_VERILOG = (*(f"*{module}.v" for module in (*COMPONENT_SUMMARIES, ENGINE_MODULE, ENGINE_SIM_MODULE)),
+                      "*_pnr.v", "*sim_models/*")
+
+
 @dataclass(frozen=True)
 class Waiver:
-    """A Verilator lint rule switched off, for every file or for those matching ``files`` (a
-    Verilator wildcard), and why."""
+    """A Verilator lint rule switched off, for the files matching ``files`` (Verilator wildcards; by default
+    springflat's Verilog), and why."""
 
     rule: str
     reason: str
-    files: str = "*"
+    files: tuple[str, ...] = SPRINGFLAT_VERILOG
 
 
 WAIVERS = (
@@ -52,7 +61,7 @@ WAIVERS = (
     Waiver("PINMISSING", "Yosys connects only the pins of a MULT18X18D, DP16KD or TRELLIS_FF instance that "
            "the design uses; the vendor primitive ties the others off"),
     Waiver("UNUSEDPARAM", "the primitive models declare every parameter Yosys writes on an instance and "
-           "use those of the modes springflat instantiates", files="*sim_models/*"),
+           "use those of the modes springflat instantiates", files=("*sim_models/*",)),
 )
 
 
@@ -64,7 +73,8 @@ def waiver_text(waivers=WAIVERS) -> str:
              "// Lint: verilator --lint-only -Wall --top-module TOP verilator_waivers.vlt TOP.v [sim_models' .v files]",
              ""]  # (a comment that starts '// verilator' is a directive to Verilator)
     for waiver in waivers:
-        lines += [f"// {waiver.rule}: {waiver.reason}", f'lint_off -rule {waiver.rule} -file "{waiver.files}"']
+        lines += [f"// {waiver.rule}: {waiver.reason}",
+                  *(f'lint_off -rule {waiver.rule} -file "{files}"' for files in waiver.files)]
     return "\n".join(lines) + "\n"
 
 

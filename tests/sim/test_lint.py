@@ -80,8 +80,21 @@ def test_the_engine_lints_clean_and_every_waiver_is_needed(verilator, dsp):
 
 
 def test_a_rule_the_waivers_do_not_name_still_fails(verilator, tmp_path):
-    """The waivers are per rule: an output nothing drives is still reported."""
-    (tmp_path / "bad.v").write_text("module bad(input a, output y);\nendmodule\n")
+    """The waivers are per rule: an output nothing drives is still reported, in a file of springflat's name."""
+    (tmp_path / "node_update.v").write_text("module bad(input a, output y);\nendmodule\n")
     (tmp_path / WAIVER_FILE).write_text(waiver_text())
-    warnings = lint_warnings(["bad.v"], top="bad", waivers=tmp_path / WAIVER_FILE, cwd=tmp_path)
+    warnings = lint_warnings(["node_update.v"], top="bad", waivers=tmp_path / WAIVER_FILE, cwd=tmp_path)
     assert _rules(warnings) == {"UNDRIVEN"}, warnings
+
+
+def test_the_waivers_are_the_generated_files_own(verilator, tmp_path):
+    """An FPGA engineer's own file linted beside the bundle's with its waiver file keeps every rule: a narrow
+    operand widened there is reported, where in springflat's Verilog (the same text under a generated file's
+    name) it is waived."""
+    text = "module {0}(input [3:0] a, output [7:0] y);\n  assign y = a;\nendmodule\n"
+    (tmp_path / WAIVER_FILE).write_text(waiver_text())
+    (tmp_path / "mine.v").write_text(text.format("mine"))
+    (tmp_path / "node_update.v").write_text(text.format("node_update"))
+    assert "WIDTHEXPAND" in _rules(lint_warnings(["mine.v"], top="mine", waivers=tmp_path / WAIVER_FILE,
+                                                 cwd=tmp_path))
+    assert lint_warnings(["node_update.v"], top="node_update", waivers=tmp_path / WAIVER_FILE, cwd=tmp_path) == []
