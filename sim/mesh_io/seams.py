@@ -64,7 +64,8 @@ def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
     return len(involved), int(connected_components(graph, directed=False)[0])
 
 
-#: How to join the copies of a point, which springflat leaves to the user (where they belong together is theirs to say).
+#: How to join the copies of a point, which springflat leaves to the user (where they belong together is theirs
+#: to say).
 WELD = "weld them first (trimesh's merge_vertices, MeshLab's Merge Close Vertices)"
 
 
