@@ -237,8 +237,8 @@ def _names(meshes: list[str]) -> list[str]:
     for mesh, name in zip(meshes, names):
         if name in seen and seen[name] == mesh:
             raise UserError(f"the mesh '{mesh}' is given twice")
-        if name in seen and not is_builtin(mesh) and same_file_key(mesh) is not None \
-                and same_file_key(mesh) == same_file_key(seen[name]):
+        if name in seen and not is_builtin(mesh) and (key := same_file_key(mesh)) is not None \
+                and key == same_file_key(seen[name]):
             raise UserError(f"the mesh '{mesh}' is given twice (as '{seen[name]}' too: the same file)")
         if name in seen:
             raise UserError(f"'{seen[name]}' and '{mesh}' are both named '{name}': their outputs would collide")
