@@ -15,7 +15,10 @@ Per mesh the status, iterations, rolled-back steps and saturation events of each
 |ΔE_S|, |ΔE_C| <= 1e-3); a mesh the formats (``--formats``, a preset or a format-set file: default ``default``) cannot hold is
 "refused" with the reason; ``--rsqrt-frac-bits N`` resolves the lengths finer than the set does.
 ``--perturbed`` adds the float run from ``P0·(1 + 1e-9)`` beside it: how far the float model's own
-stopping point moves under a perturbation far below fixed point's rounding. docs/guard.md quotes the tables.
+stopping point moves under a perturbation far below fixed point's rounding. ``--rounded-start`` adds the
+float run from the fixed-point model's start, ``P0`` rounded to [position] and mapped back (a change of
+about 1e-8 of the layout's size in the default preset): how far the first rounding the fixed-point model
+makes moves the float model's stopping point, all later arithmetic in float. docs/guard.md quotes the tables.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from golden_model.fixed import MAX_PRODUCT_WIDTH, FormatSet  # noqa: E402
-from golden_model.fixed.engine import flatten_fixed  # noqa: E402
+from golden_model.fixed.engine import flatten_fixed, prepare  # noqa: E402
 from golden_model.fixed.measures import FixedPointError  # noqa: E402
 from sim.generate import (delaunay_patch, dome_grid, hard_patches, rolled_grid, saddle_grid,  # noqa: E402
                           spherical_cap)
@@ -103,15 +106,23 @@ def fast_subset(corpus: Path, only: list[str] | None) -> Iterator[tuple[str, Mes
 PERTURBATION = 1e-9
 
 
-def row(name: str, mesh: Mesh, p0: np.ndarray, params: FlattenParams, perturbed: bool,
+def float_again(a, mesh: Mesh, start: np.ndarray, params: FlattenParams) -> str:
+    """The float model from ``start``: its status, iterations and |ΔE_S|, |ΔE_C| against ``a``, as table cells."""
+    c = flatten(mesh, start, params)
+    return (f" {c.status}, {c.iterations} | {abs(a.final.area_error - c.final.area_error):.1e} | "
+            f"{abs(a.final.shape_error - c.final.shape_error):.1e} |")
+
+
+def row(name: str, mesh: Mesh, p0: np.ndarray, params: FlattenParams, perturbed: bool, rounded_start: bool,
         formats: FormatSet) -> tuple[str, bool]:
     a = flatten(mesh, p0, params)
     extra = ""
     if perturbed:
-        c = flatten(mesh, p0 * (1.0 + PERTURBATION), params)
-        extra = (f" {c.status}, {c.iterations} | {abs(a.final.area_error - c.final.area_error):.1e} | "
-                 f"{abs(a.final.shape_error - c.final.shape_error):.1e} |")
+        extra += float_again(a, mesh, p0 * (1.0 + PERTURBATION), params)
     try:
+        if rounded_start:
+            problem = prepare(mesh, p0, params, formats)
+            extra += float_again(a, mesh, problem.to_float_positions(problem.initial_positions), params)
         b = flatten_fixed(mesh, p0, params, formats)
     except FixedPointError as exc:
         return f"| {name} | {a.status} / refused: {exc} | {a.iterations} / – | | | | | no |{extra}", False
@@ -139,6 +150,9 @@ def main() -> None:
     parser.add_argument("--corpus", type=Path, default=REPO / "build" / "corpus", help="corpus directory (default %(default)s)")
     parser.add_argument("--perturbed", action="store_true",
                         help=f"also run float from P0·(1 + {PERTURBATION:g}): how far float moves from itself")
+    parser.add_argument("--rounded-start", action="store_true",
+                        help="also run float from the fixed-point model's start (P0 rounded to [position]): how far "
+                             "that first rounding alone moves float")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="only rows whose name starts with one of these")
     parser.add_argument("--formats", default="default", metavar="PRESET|PATH",
                         help=f"the fixed-point model's format set: a preset ({', '.join(FormatSet.presets())}) or a "
@@ -157,12 +171,14 @@ def main() -> None:
     head = "| mesh | status (float / fixed) | iterations | rolled back | saturations | |ΔE_S| | |ΔE_C| | within the bar |"
     if args.perturbed:
         head += f" float from P0·(1 + {PERTURBATION:g}): status, iterations | its |ΔE_S| | its |ΔE_C| |"
+    if args.rounded_start:
+        head += " float from P0 rounded to [position]: status, iterations | its |ΔE_S| | its |ΔE_C| |"
     print(head)
     print("|---" * head.count(" | ") + "|---|")
     met = total = 0
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         for name, mesh, p0, params in rows:
-            line, ok = row(name, mesh, p0, params, args.perturbed, formats)
+            line, ok = row(name, mesh, p0, params, args.perturbed, args.rounded_start, formats)
             met, total = met + ok, total + 1
             print(line, flush=True)
     print(f"\n{met} of {total} within the bar (same status, iterations ±{MAX_ITERATION_GAP}, "
