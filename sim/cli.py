@@ -73,6 +73,7 @@ from .run_options import (
     resolve_mesh,
     strict_json,
 )
+from .synth import VERILOG_TARGETS
 from .version import installed_version
 
 
@@ -253,11 +254,12 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     from .clock import clock_sdc
     from .synth import bundle_owned, earlier_bundle_files, ecp5_overflow, record_bundle_files
     from .outputs import check_build_so_far
-    from hdl.dsp import ECP5
+    from hdl.dsp import DspPlatform
 
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats, guard=args.build_guard)
-    platform = ECP5 if args.target == "ecp5" else None
+    dsp = VERILOG_TARGETS[args.target]
+    platform = DspPlatform(dsp) if dsp else None
     out = args.out
     inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
     earlier, owned = earlier_bundle_files(out), bundle_owned(out)
@@ -355,7 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{DEFAULT_CAPACITY.as_option()})")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
                    help="the engine without the step guard (no guarded mode; its block RAMs free for depth)")
-    p.add_argument("--target", choices=("generic", "ecp5"), default="generic",
+    p.add_argument("--target", choices=tuple(VERILOG_TARGETS), default="generic",
                    help="generic (the default): no vendor primitives, for any tool or simulator; ecp5: the netlist "
                         "'springflat synth --target ecp5' places (MULT18X18D, DP16KD and TRELLIS_FF instances, their "
                         "simulation models in sim_models/), the one clock.sdc's clock was met with")

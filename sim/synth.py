@@ -208,6 +208,9 @@ TARGETS = {
         ff_prefix="SB_DFF",
     ),
 }
+#: ``springflat verilog --target``'s choices: ``generic`` (no vendor primitives), then each target whose netlist
+#: instantiates its device's DSP primitives, by the :class:`hdl.dsp.DspPlatform` name it elaborates with.
+VERILOG_TARGETS = {"generic": None, **{name: t.dsp_primitives for name, t in TARGETS.items() if t.dsp_primitives}}
 #: nextpnr's placer options of each ``placer_timing``: ``strong`` raises the heap placer's criticality
 #: exponent and timing weight from nextpnr's defaults (2 and 10) to 4 and 20, which weighs the long
 #: routes of a device-filling design more (measured on the guarded engine: ``docs/engine-guard.md``).
