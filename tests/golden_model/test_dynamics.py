@@ -8,6 +8,7 @@ from sim.layouts import initial_layout
 from golden_model.params import FlattenParams, ParameterError
 from golden_model.reference import (
     barrier_energy,
+    barrier_force_on,
     barrier_forces,
     flatten,
     iterations_to_within,
@@ -74,6 +75,22 @@ def test_barrier_forces_are_minus_a_quarter_of_its_gradient():
             down[i, d] -= h
             numeric[i, d] = -(barrier_energy(up, *args) - barrier_energy(down, *args)) / (2 * h) / 4
     assert np.allclose(forces, numeric, atol=1e-7)
+
+
+@pytest.mark.parametrize("winding", [1.0, -1.0])
+def test_the_barrier_force_on_one_node_is_its_row_of_all_of_them_bit_for_bit(winding):
+    """The sequential update asks the barrier node by node, from the node's own triangles: the same force,
+    to the last bit, as the whole layout's row (folded and crushed triangles included)."""
+    mesh = spherical_cap(6)
+    rng = np.random.default_rng(2)
+    positions = initial_layout(mesh, "tutte") * 0.6 + rng.normal(0, 0.08, (mesh.n_vertices, 2))
+    whole = barrier_forces(positions, mesh.faces, mesh.face_areas, winding, 0.5, 4.0, 0.7)
+    corners = mesh.faces.ravel()
+    for node in range(mesh.n_vertices):
+        own = np.unique(np.flatnonzero(corners == node) // 3)
+        one = barrier_force_on(node, positions, mesh.faces[own], mesh.face_areas[own], winding, 0.5, 4.0, 0.7)
+        assert np.array_equal(one, whole[node]), node
+    assert np.count_nonzero(whole.any(axis=1)) > mesh.n_vertices // 4
 
 
 def test_barrier_is_zero_on_the_3d_shape_and_mirrors_with_the_winding():
