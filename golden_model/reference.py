@@ -381,6 +381,17 @@ def penalty_moves(model: SpringModel, positions: np.ndarray, kappa: float, gain:
     return _scatter(faces.ravel(), amount[..., None] * normal, len(positions))
 
 
+def penalty_move_of(model: SpringModel, positions: np.ndarray, node: int, own_faces: np.ndarray, kappa: float,
+                    gain: float) -> np.ndarray:
+    """``(2,)`` :func:`penalty_moves`'s row ``node``, bit for bit, from ``own_faces``, the indices of the node's
+    triangles in ascending order: computed over their corners only, renumbered, so that it costs the node's
+    neighbourhood rather than every node (the sequential update asks it node by node)."""
+    corners, local = np.unique(model.mesh.faces[own_faces], return_inverse=True)
+    moves = penalty_moves(model, positions[corners], kappa, gain, faces=local.reshape(-1, 3),
+                          orientation=model.orientation[own_faces], altitudes=model.altitudes[own_faces])
+    return moves[np.searchsorted(corners, node)]
+
+
 # --------------------------------------------------------------------------- iteration
 
 
@@ -631,12 +642,9 @@ class _Sequential:
                                 model.winding, *model.barrier, self.params.spring)
 
     def _penalty(self, i: int) -> None:
-        model = self.model
         f = self.face_of_corner[self.face_ptr[i]:self.face_ptr[i + 1]]
-        faces = model.mesh.faces[f]
-        moves = penalty_moves(model, self.positions, self.params.penalty_kappa, self.params.penalty_gain,
-                              faces=faces, orientation=model.orientation[f], altitudes=model.altitudes[f])
-        self.positions[i] += moves[i]
+        self.positions[i] += penalty_move_of(self.model, self.positions, i, f, self.params.penalty_kappa,
+                                             self.params.penalty_gain)
 
 
 def flatten(

@@ -93,6 +93,22 @@ def test_the_barrier_force_on_one_node_is_its_row_of_all_of_them_bit_for_bit(win
     assert np.count_nonzero(whole.any(axis=1)) > mesh.n_vertices // 4
 
 
+def test_the_penalty_move_of_one_node_is_its_row_of_all_of_them_bit_for_bit():
+    """The sequential update's penalty, node by node from the node's own triangles: the whole layout's row."""
+    from golden_model.reference import SpringModel, penalty_move_of, penalty_moves
+
+    mesh = spherical_cap(6)
+    start = initial_layout(mesh, "tutte")
+    model = SpringModel.build(mesh, start, 1.0, "auto", None)
+    positions = start * 0.6 + np.random.default_rng(3).normal(0, 0.08, (mesh.n_vertices, 2))
+    whole = penalty_moves(model, positions, 0.5, 0.3)
+    corners = mesh.faces.ravel()
+    for node in range(mesh.n_vertices):
+        own = np.flatnonzero(corners == node) // 3
+        assert np.array_equal(penalty_move_of(model, positions, node, own, 0.5, 0.3), whole[node]), node
+    assert np.count_nonzero(whole.any(axis=1)) > mesh.n_vertices // 4
+
+
 def test_barrier_is_zero_on_the_3d_shape_and_mirrors_with_the_winding():
     mesh = rolled_grid(5, 5, arc_degrees=60)[0]
     flat = rolled_grid(5, 5, arc_degrees=60)[1]
