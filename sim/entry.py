@@ -29,6 +29,13 @@ def _stopped(name: str) -> int:
     return status
 
 
+class ClosedStandardOutput(io.StringIO):
+    """What stands for a standard output closed at the start (``>&-``): the lines printed there are dropped
+    (:func:`sim.flatten_run.check_options_used` refuses ``--json``, which asks for nothing else)."""
+
+    closed_at_start = True
+
+
 def main() -> int:
     try:
         return _run()
@@ -43,8 +50,8 @@ def main() -> int:
 def _run() -> int:
     if sys.stderr is None:  # started with its standard error closed (2>&-): what it says there is dropped,
         sys.stderr = io.StringIO()  # not sent to print()'s default, the standard output (a --json line)
-    if sys.stdout is None:  # closed (>&-): what it prints there is dropped; its files are still written
-        sys.stdout = io.StringIO()
+    if sys.stdout is None:  # closed (>&-): what it prints there is dropped; its files are still written, and
+        sys.stdout = ClosedStandardOutput()  # an option that asks for the standard output is refused
     if isinstance(sys.stdout, io.TextIOWrapper):  # a file name its encoding lacks (a Windows code page, a C
         sys.stdout.reconfigure(errors="backslashreplace")  # locale) comes out escaped, as on stderr, not a traceback
     received: list[str] = []

@@ -75,6 +75,9 @@ def check_options_used(args: argparse.Namespace) -> None:
     """Refuse, before any run, an option of ``flatten`` that this run (or batch: ``--out`` then holds
     endings) would ignore, in one line naming what it needs."""
     check_formats_option(args)
+    if args.json and getattr(sys.stdout, "closed_at_start", False):  # (sim.entry.ClosedStandardOutput)
+        raise UserError("--json writes the results to the standard output, which is closed: drop --json, or give "
+                        "the standard output a file")
     if args.dxf_edges and not any(kind_or_none(path) == "dxf" for path in args.out or ()):
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
     if args.grain is not None and not args.out:

@@ -1247,6 +1247,20 @@ def test_a_closed_standard_output_drops_the_lines_and_the_run_goes_on(tmp_path, 
     assert sorted(os.listdir(tmp_path / "o")) == ["m.dxf", "n.dxf"] if batch else (tmp_path / "m.dxf").is_file()
 
 
+@pytest.mark.parametrize("batch", [False, True], ids=["single", "batch"])
+def test_json_with_a_closed_standard_output_is_refused_before_the_run(tmp_path, batch):
+    """--json asks for the standard output and nothing else: closed, the results would be lost with status 0."""
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "n.obj").write_text(obj())
+    args = ["m.obj", "n.obj", "--out-dir", "o", "--out", ".dxf"] if batch else ["m.obj", "--out", "m.dxf"]
+    proc = subprocess.run([SPRINGFLAT, "flatten", *args, "--max-iter", "5", "--json"], stderr=subprocess.PIPE,
+                          text=True, cwd=tmp_path, timeout=300, preexec_fn=lambda: os.close(1))
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr == ("springflat: error: --json writes the results to the standard output, which is closed: "
+                           "drop --json, or give the standard output a file\n")
+    assert sorted(os.listdir(tmp_path)) == ["m.obj", "n.obj"]
+
+
 @pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
 @pytest.mark.parametrize("batch", [False, True, "no files"], ids=["single", "batch", "batch without files"])
 def test_as_root_a_full_standard_output_is_one_line_and_a_batch_runs_to_its_end(tmp_path, batch):
