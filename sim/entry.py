@@ -14,6 +14,7 @@ has its status (the command's, a usage error's, an interrupt's), all three are i
 from __future__ import annotations
 
 import io
+import os
 import signal
 import sys
 
@@ -48,6 +49,9 @@ def main() -> int:
 
 
 def _run() -> int:
+    # The command draws into files only: matplotlib's file backend, whatever MPLBACKEND names (a name it does
+    # not know failed its import, and the run with it, as a traceback); its worker processes inherit it.
+    os.environ["MPLBACKEND"] = "Agg"
     if sys.stderr is None:  # started with its standard error closed (2>&-): what it says there is dropped,
         sys.stderr = io.StringIO()  # not sent to print()'s default, the standard output (a --json line)
     if sys.stdout is None:  # closed (>&-): what it prints there is dropped; its files are still written, and

@@ -1248,6 +1248,20 @@ def test_a_closed_standard_output_drops_the_lines_and_the_run_goes_on(tmp_path, 
 
 
 @pytest.mark.parametrize("batch", [False, True], ids=["single", "batch"])
+def test_a_backend_name_matplotlib_does_not_know_in_the_environment_does_not_stop_the_plot(tmp_path, batch):
+    """MPLBACKEND=bogus failed matplotlib's import, and the run, as a traceback: the command draws into files."""
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "n.obj").write_text(obj())
+    args = (["m.obj", "n.obj", "--jobs", "1", "--out-dir", "o", "--plot", ".png"] if batch else
+            ["m.obj", "--out", "m.svg", "--plot", "m.png"])
+    proc = subprocess.run([SPRINGFLAT, "flatten", *args, "--max-iter", "5"], capture_output=True, text=True,
+                          cwd=tmp_path, timeout=300, env={**os.environ, "MPLBACKEND": "bogus"})
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    plots = [tmp_path / "o" / "m.png", tmp_path / "o" / "n.png"] if batch else [tmp_path / "m.png"]
+    assert all(plot.read_bytes().startswith(b"\x89PNG") for plot in plots)
+
+
+@pytest.mark.parametrize("batch", [False, True], ids=["single", "batch"])
 def test_json_with_a_closed_standard_output_is_refused_before_the_run(tmp_path, batch):
     """--json asks for the standard output and nothing else: closed, the results would be lost with status 0."""
     (tmp_path / "m.obj").write_text(obj())
