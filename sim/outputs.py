@@ -169,7 +169,15 @@ def temporary_name(name: str, token: str) -> str:
 
 
 def _make_temporary(directory: Path, name: str, *, is_dir: bool = False) -> Path:
-    """Create a new file (mode 0600) or directory (0700) named by :func:`temporary_name` in ``directory``."""
+    """Create a new file (mode 0600) or directory (0700) named by :func:`temporary_name` in ``directory``.
+
+    A directory with no write permission for anyone is refused as the OS refuses it to its users
+    (``PermissionError``), also to root: a user who took every write bit away, in a container where everyone
+    is root, meant it to stay as it is (as :func:`_refuse_special` says of a file)."""
+    if not os.stat(directory).st_mode & 0o222:
+        raise PermissionError(errno.EACCES, f"directory '{directory}' is read-only (no write permission for "
+                              "anyone): springflat does not write into it (make it writable, or name another)",
+                              str(directory))
     for _ in range(100):
         candidate = Path(directory) / temporary_name(name, secrets.token_hex(4))
         try:

@@ -763,11 +763,38 @@ def test_real_permission_denied(tmp_path, what):
     if what == "read-only out":  # a rename would replace it: refused as a shell's '>' would be
         _one_error_line(proc, r"^springflat: error: --out 'kept.obj' is read-only: springflat does not replace a "
                               r"file you may not write \(make it writable, or name another\)$")
+    elif what == "out":  # (no write bit for anyone: refused by springflat before the OS)
+        _one_error_line(proc, r"^springflat: error: cannot write --out 'ro/o.obj': directory 'ro' is read-only \(no "
+                              r"write permission for anyone\): springflat does not write into it \(make it writable, "
+                              r"or name another\)$")
     else:
-        kind = {"mesh": "read mesh", "layout": "read layout", "formats": "read formats file", "out": "write --out"}[what]
-        _one_error_line(proc, rf"^springflat: error: cannot {kind} '{'ro/o.obj' if what == 'out' else target}': "
-                              "permission denied$")
+        kind = {"mesh": "read mesh", "layout": "read layout", "formats": "read formats file"}[what]
+        _one_error_line(proc, rf"^springflat: error: cannot {kind} '{target}': permission denied$")
     assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("batch", [False, True], ids=["single", "batch"])
+def test_a_directory_nobody_may_write_is_refused_even_for_root(tmp_path, batch):
+    """chmod a-w on a directory is the user's "keep this" as on a file: root could write into it, but nothing is
+    put there, neither a file replaced nor a new one made."""
+    (tmp_path / "m.obj").write_text(obj())
+    (tmp_path / "n.obj").write_text(obj())
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    (kept / "m.svg").write_text("keep\n")
+    kept.chmod(0o555)
+    args = ["m.obj", "n.obj", "--out-dir", "kept", "--out", ".svg"] if batch else ["m.obj", "--out", "kept/m.svg",
+                                                                                  "--out", "kept/new.svg"]
+    try:
+        proc = subprocess.run([SPRINGFLAT, "flatten", *args, "--max-iter", "5"], capture_output=True, text=True,
+                              cwd=tmp_path, timeout=300)
+        assert sorted(os.listdir(kept)) == ["m.svg"] and (kept / "m.svg").read_text() == "keep\n"
+    finally:
+        kept.chmod(0o755)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr == ("springflat: error: cannot write --out 'kept/m.svg': directory 'kept' is read-only (no "
+                           "write permission for anyone): springflat does not write into it (make it writable, or "
+                           "name another)\n")
 
 
 def test_a_file_nobody_may_write_is_refused_as_output_even_for_root(tmp_path, monkeypatch, capsys):
