@@ -402,9 +402,12 @@ def still_note(params: FlattenParams, result: FlattenResult, formats: FormatSet 
     (the layout no longer changes) but the pattern is its start. (The momentum dynamics does not start from
     rest; a start whose E_S and E_C are below :data:`STILL_START_ERROR` is a flattening already.)"""
     energy = np.asarray(result.history.energy)
-    if (formats is None or not params.mode.has_masses or result.status != "converged" or len(energy) < 2
-            or max(result.initial.area_error, result.initial.shape_error) < STILL_START_ERROR
-            or not np.all(energy == energy[0])):
+    if (not params.mode.has_masses or result.status != "converged" or len(energy) < 2
+            or max(result.initial.area_error, result.initial.shape_error) < STILL_START_ERROR):
+        return None
+    if formats is None:
+        return _still_float_note(params, result, energy, api)
+    if not np.all(energy == energy[0]):
         return None
     float_engine = "engine='float'" if api else "--engine float"
     return (f"the run stopped without changing the layout's energy: its steps round to no move in the "
@@ -412,6 +415,26 @@ def still_note(params: FlattenParams, result: FlattenResult, formats: FormatSet 
             f"stop rule held at once, and the pattern is its start; the float engine, whose steps are not rounded, "
             f"may move it ({float_engine}), if slowly where E_S and E_C are small; the momentum dynamics does not "
             f"start from rest: {_guard_on(params, api)}")
+
+
+def _still_float_note(params: FlattenParams, result: FlattenResult, energy: np.ndarray, api: bool) -> str | None:
+    """:func:`still_note` of the float engine: a run of the paper dynamics that stopped after its first step,
+    whose relative energy change was within ε. From rest that step (½Δt²·F/m) is the run's smallest, so the
+    stop rule held before the layout moved more than a trace (a tiny ``Δt``, a huge density)."""
+    if result.iterations != 1 or not energy[0] > 0:
+        return None
+    change = abs(energy[1] - energy[0]) / energy[0]
+    larger = "a larger dt with step='fixed'" if api else "a larger --dt with --step fixed"
+    if params.density != "auto":  # heavy nodes: their moves are F/m
+        larger += " and a smaller density" if api else " and a smaller --density"
+    if change > 0:  # (a change of 0 meets any tolerance)
+        larger += ", or a smaller tol_energy" if api else ", or a smaller --tol-energy"
+    step = ("which left the layout's energy as it was" if change == 0 else
+            f"which changed the layout's energy by a relative {change:.2g}, within the stop rule's "
+            f"{params.tol_energy:g}")
+    return (f"the run stopped after its first step, {step}: from rest the paper dynamics' first step is its "
+            f"smallest, and the pattern is its start, barely moved; larger steps move it: {larger}; the momentum "
+            f"dynamics does not start from rest: {_guard_on(params, api)}")
 
 
 def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, result: FlattenResult) -> dict:
@@ -428,7 +451,7 @@ def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, re
 def human_line(mesh: Mesh, result: FlattenResult) -> str:
     """The one-line result a person reads."""
     final = result.final
-    return (f"{mesh.name}: {result.status} after {result.iterations} iterations: "
+    return (f"{mesh.name}: {result.status} after {result.iterations} iteration{'s' if result.iterations != 1 else ''}: "
             f"E_S {error_text(result.initial.area_error)} -> {error_text(final.area_error)}, "
             f"E_C {error_text(result.initial.shape_error)} -> {error_text(final.shape_error)}, "
             f"folded {final.folded} (flipped against P0: {final.flipped})"

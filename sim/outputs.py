@@ -1277,7 +1277,8 @@ def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str,
     ax_errors.set_title(f"errors ({how})", fontsize=9)
     ax_errors.grid(alpha=0.3)
 
-    summary = (f"{result.status} after {result.iterations} iterations:  $E_S$ = {history.area_error[-1]:.3g},  "
+    summary = (f"{result.status} after {result.iterations} iteration{'s' if result.iterations != 1 else ''}:  "
+               f"$E_S$ = {history.area_error[-1]:.3g},  "
                f"$E_C$ = {history.shape_error[-1]:.3g},  {final.n_folded} of {len(faces)} faces folded")
     fig.suptitle(f"{title} — {summary}" if title else summary, fontsize=12)
     fig.subplots_adjust(left=0.04, right=0.95, top=0.88, bottom=0.08)

@@ -686,7 +686,8 @@ def run_caption(status: str, iterations: int, area_error: float, shape_error: fl
     """The line under the name on each sheet; ``crossings``: pairs of the boundary's sides that meet (a cut
     line that crosses itself, on a pattern with no fold), ``turned``: holes the pattern wraps over
     (:func:`golden_model.mesh.turned_holes`), each said when there are any."""
-    return (f"{status} after {iterations} iterations: E_S {error_text(area_error)}, E_C {error_text(shape_error)}, "
+    return (f"{status} after {iterations} iteration{'s' if iterations != 1 else ''}: E_S {error_text(area_error)}, "
+            f"E_C {error_text(shape_error)}, "
             f"{folded} folded" + (f", its boundary crosses itself {'once' if crossings == 1 else f'{crossings} times'}"
                                          if crossings else "")
             + (f", it wraps over {turned} of its holes" if turned else ""))

@@ -102,7 +102,7 @@ def test_a_run_whose_errors_grow_huge_prints_them_in_a_few_digits():
     mesh = builtin_mesh("surf1")[0]
     result = FlattenResult(mesh.vertices[:, :2], mesh.vertices[:, :2], mesh.vertices[:, :2], history, "max-iterations",
                            1, None, 1.0)
-    assert human_line(mesh, result) == ("surf1: max-iterations after 1 iterations: E_S 0.2615 -> 1.28e+217, "
+    assert human_line(mesh, result) == ("surf1: max-iterations after 1 iteration: E_S 0.2615 -> 1.28e+217, "
                                         "E_C 0.0930 -> 8.5e+108, folded 2 (flipped against P0: 4)")
 
 
@@ -811,7 +811,7 @@ def test_a_fixed_point_run_whose_steps_round_to_no_move_says_its_pattern_is_its_
     argv = ["flatten", "grid.obj", "--dynamics", "paper", "--init", "pca", "--max-iter", "50"]
     assert main([*argv, "--engine", "fixed"]) == 0
     out, err = capsys.readouterr()
-    assert out.startswith("grid: converged after 1 iterations: E_S 0.0201 -> 0.0201")
+    assert out.startswith("grid: converged after 1 iteration: E_S 0.0201 -> 0.0201")
     notes = [line for line in err.splitlines() if "without changing" in line]
     assert notes == ["springflat: note: the run stopped without changing the layout's energy: its steps round to no "
                      "move in the 22 fraction bits of the positions (format set 'default'), so the stop rule held at "
@@ -821,7 +821,7 @@ def test_a_fixed_point_run_whose_steps_round_to_no_move_says_its_pattern_is_its_
     for remedy in (["--engine", "float"], ["--engine", "fixed", "--dynamics", "momentum"]):  # followed literally
         assert main(["flatten", "grid.obj", "--init", "pca", "--max-iter", "50", *remedy]) == 0
         out, err = capsys.readouterr()
-        assert "converged after 1 iterations" not in out and "without changing" not in err, remedy
+        assert "converged after 1 iteration:" not in out and "without changing" not in err, remedy
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         springflat.flatten(vertices, faces, engine="fixed", dynamics="paper", init="pca", max_iter=50)
@@ -833,6 +833,49 @@ def test_a_fixed_point_run_whose_steps_round_to_no_move_says_its_pattern_is_its_
         assert main(["flatten", "flat.obj", "--dynamics", dynamics, "--init", "pca", "--engine", "fixed"]) == 0
         out, err = capsys.readouterr()
         assert "E_S 0.0000 -> 0.0000" in out and "without changing" not in err, dynamics
+
+
+@pytest.mark.parametrize("options", [["--step", "fixed", "--dt", "1e-4"], ["--density", "1e300"]])
+def test_a_float_run_whose_first_step_is_too_small_to_count_says_its_pattern_is_its_start(tmp_path, monkeypatch,
+                                                                                           capsys, options):
+    """From rest the paper dynamics' first step is its smallest: a tiny --dt or a huge --density changes the energy
+    by less than --tol-energy, and the run 'converges' after 1 iteration with the start's errors. The note says
+    so, and each of its remedies, followed literally, moves the layout."""
+    import warnings
+
+    import springflat
+    from sim.mesh_io import save_obj
+    from sim.cli import main
+
+    vertices, faces = _gently_curved_grid()
+    vertices = vertices * [1.0, 1.0, 4.0]  # curved enough that a step of the default size moves it
+    monkeypatch.chdir(tmp_path)
+    save_obj(tmp_path / "grid.obj", vertices, faces)
+    argv = ["flatten", "grid.obj", "--dynamics", "paper", "--init", "pca", "--max-iter", "50"]
+    assert main([*argv, *options]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("grid: converged after 1 iteration: ")
+    notes = [line for line in err.splitlines() if "first step" in line]
+    assert len(notes) == 1 and notes[0].startswith("springflat: note: the run stopped after its first step, which ")
+    heavy = "--density" in options  # its moves are 0 to the bit: no tolerance helps
+    remedy = ("a larger --dt with --step fixed and a smaller --density" if heavy else
+              "a larger --dt with --step fixed, or a smaller --tol-energy")
+    assert notes[0].endswith(f"the pattern is its start, barely moved; larger steps move it: {remedy}; the momentum "
+                             "dynamics does not start from rest: --dynamics momentum (it takes none of --step, --dt, "
+                             "--damping, --density)")
+    remedies = [[*argv, "--step", "fixed", "--dt", "0.05", *(["--density", "1"] if heavy else [])],
+                ["flatten", "grid.obj", "--init", "pca", "--max-iter", "50", "--dynamics", "momentum"]]
+    if not heavy:
+        remedies.append([*argv, *options, "--tol-energy", "1e-15"])
+    for remedy in remedies:
+        assert main(remedy) == 0
+        out, err = capsys.readouterr()
+        assert "after 1 iteration:" not in out and "first step" not in err, remedy
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        springflat.flatten(vertices, faces, dynamics="paper", init="pca", max_iter=50, step="fixed", dt=1e-4)
+    assert any("first step" in str(w.message) and "a larger dt with step='fixed'" in str(w.message)
+               and "dynamics='momentum'" in str(w.message) for w in caught)
 
 
 def test_rtl_check_with_its_simulator_missing_says_so_before_anything(tmp_path, monkeypatch, capsys):
