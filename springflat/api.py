@@ -315,6 +315,8 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
     if F is not None and hasattr(V, "vertices") and hasattr(V, "faces"):
         raise TypeError(f"flatten takes a {type(V).__name__} alone (its faces are its own), or two arrays V, F")
     if F is None:
+        if isinstance(V, (np.ndarray, list, tuple)):  # an array of vertices alone
+            raise TypeError("flatten(V, F) takes the faces F too: F, the (F, 3) vertex indices, is missing")
         if not (hasattr(V, "vertices") and hasattr(V, "faces")):
             raise TypeError(f"flatten(V, F) takes two arrays, one trimesh.Trimesh, or a mesh file's path or a built-in "
                             f"mesh's name (str or pathlib.Path), not {type(V).__name__}")

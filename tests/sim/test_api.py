@@ -121,8 +121,10 @@ def test_unknown_keywords_and_wrong_types_are_type_errors(ear):
         springflat.flatten(V, F, max_iters=3)
     with pytest.raises(ParameterError, match="barrier must be True or False"):
         springflat.flatten(V, F, barrier="yes")
-    with pytest.raises(TypeError, match="trimesh"):
-        springflat.flatten(V)
+    for vertices_alone in (V, V.tolist()):  # the faces forgotten: said, not "not ndarray"
+        with pytest.raises(TypeError, match=r"^flatten\(V, F\) takes the faces F too: F, the \(F, 3\) vertex indices, "
+                                            r"is missing$"):
+            springflat.flatten(vertices_alone)
     with pytest.raises(TypeError, match=r"one trimesh.Trimesh, or a mesh file's path or a built-in mesh's name \(str "
                                         r"or pathlib.Path\), not bytes"):
         springflat.flatten(b"ear.obj")
