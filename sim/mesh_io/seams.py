@@ -51,9 +51,11 @@ def open_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[int, int]:
         return 0, 0
     k = min(SEAM_NEIGHBOURS + 1, len(points))
     distance, nearest = cKDTree(points).query(points, k=k)
-    close = (distance[:, 1:] <= SEAM_TOLERANCE * length) & (nearest[:, 1:] < len(points))  # (the first: itself)
-    a = np.repeat(boundary, k - 1).reshape(-1, k - 1)[close]
-    b = boundary[nearest[:, 1:][close]]
+    # each point's own entry is not always the first: a copy at distance 0 may come before it
+    close = ((distance <= SEAM_TOLERANCE * length) & (nearest < len(points))
+             & (nearest != np.arange(len(points))[:, None]))
+    a = np.repeat(boundary, k).reshape(-1, k)[close]
+    b = boundary[nearest[close]]
     unjoined = ~np.isin(np.minimum(a, b) * n + np.maximum(a, b), keys)
     a, b = a[unjoined], b[unjoined]
     if len(a) == 0:
