@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import errno
 import io
 import os
 import sys
@@ -540,6 +541,11 @@ def _output_directory(path: Path | None) -> Iterator[None]:
     if path.exists() and not path.is_dir():
         raise UserError(f"--out-dir '{path}' exists and is not a directory")
     if path.is_symlink() and not path.exists():
+        try:
+            os.stat(path)
+        except OSError as exc:  # a link to nothing, or a loop of links
+            if exc.errno == errno.ELOOP:
+                raise UserError(f"--out-dir '{path}' is a loop of symbolic links: it names no directory") from None
         raise UserError(f"--out-dir '{path}' is a symbolic link to '{os.readlink(path)}', which does not exist")
     # ('a/../b' makes 'a' and 'b': 'a/..' names no directory of its own)
     missing = [p for p in (path, *path.parents) if not p.exists() and p.name not in ("", ".", "..")]

@@ -20,8 +20,11 @@ frame; the driver reads a node's words so.
 from __future__ import annotations
 
 import contextlib
+import os
+import stat
 
 from golden_model.engine_spec import uart_protocol as protocol
+from golden_model.files import file_kind
 
 from .engine_driver import BusError, EngineError
 
@@ -159,6 +162,14 @@ def open_port(port: str, baud: int = protocol.DEFAULT_BAUD, timeout_s: float = 2
         raise LinkError(f"the serial port '{port}' names a log file (file=), which springflat would write "
                         "unchecked (it could replace any file, a mesh too): leave out file= (spy:// then logs "
                         "to standard error)")
+    if "://" not in port:  # a device's path: a file of another kind is no port (pyserial's words name an ioctl)
+        try:
+            mode = os.stat(port).st_mode
+        except OSError:
+            mode = None  # (COM3, or a path that does not exist: pyserial says why)
+        if mode is not None and not stat.S_ISCHR(mode):
+            raise LinkError(f"cannot open the serial port '{port}': it is a {file_kind(mode)}, not a serial device "
+                            "(such as /dev/ttyUSB0)")
     try:
         return serial.serial_for_url(port, baudrate=baud, timeout=timeout_s, write_timeout=timeout_s)
     except (serial.SerialException, ValueError, OSError) as exc:

@@ -418,6 +418,11 @@ def test_an_out_dir_that_is_a_dangling_link_is_refused_naming_it(tmp_path, monke
     assert capsys.readouterr().err == ("springflat: error: --out-dir 'o' is a symbolic link to 'nowhere', which does "
                                        "not exist\n")
     assert sorted(os.listdir()) == ["a", "o"] and os.path.islink("o")
+    os.symlink("loop", "loop")  # a link to itself exists, and names nothing
+    assert main(["flatten", "a/dome00.obj", "a/dome01.off", "--out-dir", "loop", "--out", ".dxf"]) == 2
+    assert capsys.readouterr().err == ("springflat: error: --out-dir 'loop' is a loop of symbolic links: it names no "
+                                       "directory\n")
+    assert sorted(os.listdir()) == ["a", "loop", "o"]
 
 
 @pytest.mark.slow

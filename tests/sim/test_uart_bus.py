@@ -237,6 +237,18 @@ def test_a_network_port_without_a_port_number_is_one_line(url):
         open_port(url)
 
 
+def test_a_file_that_is_no_device_is_no_port(tmp_path):
+    """A regular file (the mesh, say) or a directory named as the port: pyserial opened it read-write and said
+    'Inappropriate ioctl for device'."""
+    mesh = tmp_path / "m.obj"
+    mesh.write_text("v 0 0 0\n")
+    for path, kind in ((mesh, "regular file"), (tmp_path, "directory")):
+        with pytest.raises(LinkError, match=rf"^cannot open the serial port '{path}': it is a {kind}, not a serial "
+                                            r"device \(such as /dev/ttyUSB0\)$"):
+            open_port(str(path))
+    assert mesh.read_text() == "v 0 0 0\n"
+
+
 @pytest.mark.slow  # two CLI runs
 def test_a_missing_port_is_one_line(tmp_path):
     with pytest.raises(LinkError, match=f"^cannot open the serial port '{tmp_path}/ttyUSB9': "):
