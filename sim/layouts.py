@@ -390,7 +390,8 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
             if any(len(r) != 2 for r in rows):
                 bad = next(k for k, r in enumerate(rows) if len(r) != 2)
                 raise LayoutError(
-                    f"layout '{path}': row {bad + 1} has {len(rows[bad])} values, expected 2 (x y)"
+                    f"layout '{path}': row {bad + 1} has {len(rows[bad])} value{'s' if len(rows[bad]) != 1 else ''}, "
+                    "expected 2 (x y)"
                 )
             positions = np.array([[_layout_number(v, path, k) for v in r] for k, r in enumerate(rows)],
                                  dtype=np.float64).reshape(-1, 2)

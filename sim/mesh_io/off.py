@@ -44,7 +44,7 @@ def read_off(data: bytes, where: str) -> tuple[np.ndarray, Polygons]:
     n_vertices, n_faces = int(header[0]), int(header[1])
     if len(rows) < n_vertices + n_faces:
         raise MeshError(f"{where}: the file ends early: the header declares {plural(n_vertices, 'vertex', 'vertices')} "
-                        f"and {plural(n_faces, 'face')}, the file has {len(rows)} lines of them")
+                        f"and {plural(n_faces, 'face')}, the file has {plural(len(rows), 'line')} of them")
     vertex_rows, face_rows = rows[:n_vertices], rows[n_vertices:n_vertices + n_faces]
     short = next(((number, tokens) for number, tokens in vertex_rows if len(tokens) < 3), None)
     if short is not None:

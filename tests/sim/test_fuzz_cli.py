@@ -447,6 +447,8 @@ LAYOUTS: dict[str, Case] = {
                                   files={"l.txt": layout_text(LAYOUT_ROWS * 1e-300)}),
     "three columns": Case(["--init", "l.txt"], 2, r"row 1 has 3 values",
                           files={"l.txt": layout_text(np.column_stack([LAYOUT_ROWS, UV[:, 0]]))}),
+    "one column": Case(["--init", "l.txt"], 2, r"row 1 has 1 value, expected 2 \(x y\)$",
+                       files={"l.txt": "0.5\n" + layout_text(LAYOUT_ROWS[1:])}),
     "digit separator": Case(["--init", "l.txt"], 2, r"cannot parse layout 'l.txt': row 1 has '0_05', not a number",
                             files={"l.txt": layout_text().replace("0.05 0.05", "0_05 0.05", 1)}),
     "not a number": Case(["--init", "l.txt"], 2, r"cannot parse layout",

@@ -428,6 +428,7 @@ def test_a_ply_without_faces_names_what_it_has(tmp_path):
     ("ply\nformat binary_middle_endian 1.0\nend_header\n", r"no 'format ascii\|binary"),
     ("ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n", r"header line 4 'property quad x'"),
     ("OFF\n3 1\n0 0 0\n1 0 0\n", r"the file ends early"),
+    ("OFF\n3 1 0\n0 0 0\n", r"declares 3 vertices and 1 face, the file has 1 line of them$"),
     ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", r"line 6: face with 2 corners"),
     ("OFF BINARY\n", r"binary OFF is not supported"),
     ("", r"the file is empty: no 'OFF' header, no vertices, no faces"),
