@@ -296,8 +296,9 @@ def fold_note(params: FlattenParams, result: FlattenResult, api: bool = False) -
     elif not params.mode.has_masses:
         why = f"the step guard keeps every triangle from folding: {_guard_on(params, api)}; docs/guard.md"
     else:
-        why = ("the paper dynamics does not keep triangles from folding; the momentum dynamics with its step guard "
-               f"does: {_guard_on(params, api)}; docs/guard.md")
+        barrier = ", nor does its fold barrier, a force that only pushes back" if params.barrier else ""
+        why = (f"the paper dynamics does not keep triangles from folding{barrier}; the momentum dynamics with its step "
+               f"guard does: {_guard_on(params, api)}; docs/guard.md")
     return (f"the pattern has {folded} folded triangle{'s' if folded > 1 else ''}, flipped over their neighbours: "
             f"cut along its boundary it is not the mesh's piece; {why}")
 

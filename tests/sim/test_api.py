@@ -520,6 +520,13 @@ def test_a_folded_pattern_warns_in_the_apis_words():
         "surf1: the pattern has 3 folded triangles, flipped over their neighbours: cut along its boundary it is not "
         "the mesh's piece; the paper dynamics does not keep triangles from folding; the momentum dynamics with its "
         "step guard does: dynamics='momentum' (it takes none of step, dt, damping, density); docs/guard.md"]
+    with pytest.warns(springflat.MeshNote) as caught:  # with the paper dynamics' barrier on: it did not hold either
+        pattern = springflat.flatten(mesh.vertices, mesh.faces, dynamics="paper", init="pca", name="surf1",
+                                     barrier=True)
+    notes = [str(w.message) for w in caught if "folded" in str(w.message)]
+    assert pattern.folded > 0 and len(notes) == 1 and ("the paper dynamics does not keep triangles from folding, nor "
+                                                       "does its fold barrier, a force that only pushes back; the "
+                                                       "momentum dynamics") in notes[0]
 
 
 def test_write_patterns_refusals_speak_the_apis_keywords(tmp_path):
