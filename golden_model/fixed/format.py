@@ -76,7 +76,7 @@ class Overflow(str, Enum):
     WRAP = "wrap"
 
 
-_FORMAT_RE = re.compile(r"^\s*([su])(\d+)\.(\d+)\s*$")
+_FORMAT_RE = re.compile(r"^\s*([su])(\d+)\.(\d+)\s*$", re.ASCII)  # ASCII: another script's digits are no bits
 
 
 def raw_range(width: int, signed: bool) -> tuple[int, int]:
@@ -119,10 +119,11 @@ class Format:
         if isinstance(text, Format):
             return text
         m = _FORMAT_RE.match(str(text))
+        shown = repr(str(text)) if len(str(text)) <= 40 else repr(str(text)[:40]) + "..."  # (not a page of digits)
         if m is None:
-            raise ValueError(
-                f"cannot parse fixed-point format {text!r}: expected e.g. 's3.16' or 'u0.18'"
-            )
+            raise ValueError(f"cannot parse fixed-point format {shown}: expected e.g. 's3.16' or 'u0.18'")
+        if max(len(m.group(2)), len(m.group(3))) > len(str(MAX_WIDTH)):
+            raise ValueError(f"fixed-point format {shown}: its width is outside 1..{MAX_WIDTH} bits")
         return cls(m.group(1) == "s", int(m.group(2)), int(m.group(3)))
 
     def __str__(self) -> str:

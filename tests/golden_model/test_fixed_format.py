@@ -78,10 +78,18 @@ def test_format_validation(args, msg):
         Format(*args)
 
 
-@pytest.mark.parametrize("text", ["3.16", "s3", "x3.16", "s-1.4", "s3.16.1", ""])
+@pytest.mark.parametrize("text", ["3.16", "s3", "x3.16", "s-1.4", "s3.16.1", "", "s\uff11" "0.22", "u0.\u0663"])
 def test_format_parse_errors(text):
+    """Digits of other scripts (a fullwidth 1, an Arabic-Indic 3) are no bit counts, though int() takes them."""
     with pytest.raises(ValueError, match="cannot parse"):
         Format.parse(text)
+
+
+def test_a_format_of_hundreds_of_digits_is_refused_without_echoing_them():
+    with pytest.raises(ValueError, match=r"^fixed-point format 's9{39}'\.\.\.: its width is outside 1\.\.62 bits$"):
+        Format.parse("s" + "9" * 400 + ".1")
+    with pytest.raises(ValueError, match=r"^cannot parse fixed-point format 'x{40}'\.\.\.: expected"):
+        Format.parse("x" * 1000)
 
 
 def test_format_check():
