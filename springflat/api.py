@@ -323,13 +323,15 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
         V, F = V.vertices, V.faces
     arrays = []
     for name, value, what in (("V", V, "(V, 3) vertex positions"), ("F", F, "(F, 3) vertex indices")):
+        if np.ma.is_masked(value):  # np.array would take the values under the mask
+            raise MeshError(f"{name} has masked entries: a mesh has no missing {what.split(') ')[1]}; fill or drop them")
         try:
             array = np.array(value)  # a copy: the Pattern must not change when the caller's arrays do
         except ValueError:  # ragged rows (numpy's own words name its internals)
             raise MeshError(f"{name} must be an array of {what}: its rows are not all of one length") from None
         except TypeError as exc:  # objects that are no arrays
             raise MeshError(f"{name} must be an array of {what}: {str(exc).splitlines()[0]}") from None
-        if array.dtype.kind not in "iufb":  # strings, complex numbers, objects: nothing to take silently
+        if array.dtype.kind not in "iuf":  # strings, complex numbers, objects, True/False: nothing to take silently
             raise MeshError(f"{name} must be an array of {what}, got {array.dtype} values")
         arrays.append(array)
     faces = arrays[1]

@@ -228,6 +228,10 @@ def test_a_name_with_control_characters_or_undecodable_bytes_is_one_line_of_text
     (lambda V, F: (V.astype(complex), F), r"V must be an array of \(V, 3\) vertex positions, got complex128 values"),
     (lambda V, F: (V.astype(str), F), r"V must be an array of \(V, 3\) vertex positions, got <U\d+ values"),
     (lambda V, F: (V, F.astype(str)), r"F must be an array of \(F, 3\) vertex indices, got <U\d+ values"),
+    (lambda V, F: (V > 0, F), r"^V must be an array of \(V, 3\) vertex positions, got bool values$"),
+    (lambda V, F: (V, F > 0), r"^F must be an array of \(F, 3\) vertex indices, got bool values$"),
+    (lambda V, F: (np.ma.masked_greater(V, V.max() - 1e-9), F),
+     r"^V has masked entries: a mesh has no missing vertex positions; fill or drop them$"),
     (lambda V, F: (V, F + 0.5), r"face indices must be integers"),  # whole numbers as floats are taken (below)
     (lambda V, F: (V, np.vstack([F, [0.0, 1.0, np.nan]])), r"face indices must be integers"),  # (no cast warning)
 ])
