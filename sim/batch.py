@@ -43,7 +43,7 @@ from .exit_codes import EXIT_DIVERGED, EXIT_MESHES_FAILED
 from .flatten_run import OUTPUT_OPTIONS, check_options_used, output_paths, overlap_count
 from .layouts import AUTO_START, LAYOUT_METHODS
 from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write, check_distinct, check_link_target, \
-    check_output_path, file_ending, print_note, when_interrupted
+    check_output_path, file_ending, folded_name, print_note, when_interrupted
 from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind
 from .run_options import (USER_ERRORS, OneOutput, UserError, holes_mode, input_files, integer_argument,
                           params_from_args, path_argument, resolve_mesh, strict_json)
@@ -252,12 +252,14 @@ def _check_no_two_meshes_write_one_name(meshes: list[str], names: list[str], end
     """Refuse two meshes whose names and endings make one file name (``a`` with ``.flat.obj``, ``a.flat`` with
     ``.obj``), naming both (the same-file check after this could only name the file twice)."""
     flags = {option: flag for option, flag, _ in OUTPUT_OPTIONS}
-    writer: dict[str, str] = {}
+    writer: dict[str, tuple[str, str]] = {}  # by the name as out_dir's file system tells names apart
     for mesh, name in zip(meshes, names):
         for option, ending in endings:
             which, file = f"'{mesh}' with {flags[option]} {ending}", f"{name}{ending}"
-            if writer.setdefault(file, which) != which:
-                raise UserError(f"{writer[file]} and {which} would both write '{out_dir / file}'")
+            first, first_file = writer.setdefault(folded_name(file, out_dir), (which, file))
+            if first != which:
+                one = "" if first_file == file else f" (its file system takes '{first_file}' and '{file}' for one name)"
+                raise UserError(f"{first} and {which} would both write '{out_dir / file}'{one}")
 
 
 def _check_batch(args: argparse.Namespace, meshes: list[str]

@@ -28,6 +28,7 @@ import stat
 import struct
 import sys
 import threading
+import unicodedata
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -269,14 +270,48 @@ def _refuse_locked_directory(directory: Path, what: str) -> None:
             raise OutputError(f"{what}: directory '{directory}' is {why}")
 
 
+#: :func:`folds_case`'s answers, by directory ``(st_dev, st_ino)``.
+_FOLDS_CASE: dict[tuple, bool] = {}
+
+
+def folds_case(directory: Path) -> bool:
+    """Whether the file system holding ``directory`` (or, where it does not exist yet, its nearest existing
+    parent, which it will be made in) takes names that differ only in case for one file, as macOS's and
+    Windows's do by default: a probe file is made there and looked up under its name in the other case. ``False``
+    where no probe can be made (the write's own check says why)."""
+    directory = Path(os.path.abspath(directory))
+    while not directory.is_dir() and directory != directory.parent:
+        directory = directory.parent
+    key = same_file_key(directory)
+    if key not in _FOLDS_CASE:
+        try:
+            probe = _make_temporary(directory, "case")
+        except OSError:
+            return False
+        try:
+            _FOLDS_CASE[key] = os.path.exists(probe.with_name(probe.name.swapcase()))
+        finally:
+            os.unlink(probe)
+    return _FOLDS_CASE[key]
+
+
+def folded_name(name: str, directory: Path) -> str:
+    """``name`` as ``directory``'s file system tells names apart: case and Unicode composition folded where
+    :func:`folds_case` (``Ab.svg`` and ``ab.svg`` are one file there), else as it is."""
+    return unicodedata.normalize("NFD", name).casefold() if folds_case(directory) else name
+
+
 def _identity(path: Path) -> tuple:
     """What decides whether two paths are one file: ``(st_dev, st_ino)`` of an existing file (links
-    followed), else the directory's ``(st_dev, st_ino)`` and the name the file will get."""
+    followed), else the directory's ``(st_dev, st_ino)`` and the name the file will get (:func:`folded_name`)."""
     key = same_file_key(path)
     if key is not None:
         return key
     target = output_target(path)
-    return resolved_parent_key(target) or (os.path.abspath(target),)
+    parent = resolved_parent_key(target)
+    if parent is None:
+        return (os.path.abspath(target),)
+    return (*parent[:-1], folded_name(parent[-1], target.parent if str(target.parent) else Path(".")))
 
 
 def check_distinct(outputs: list[tuple[str, Path | None]], inputs: list[tuple[str, Path | None]]) -> None:

@@ -410,6 +410,28 @@ def test_the_table_has_one_row_per_mesh_whatever_its_file_name(tmp_path, monkeyp
     assert (record["mesh"], record["files"]) == ("a\\nb", ["j/a\nb.dxf"])
 
 
+def test_on_a_file_system_that_folds_case_outputs_named_alike_but_for_case_are_one_file(tmp_path, monkeypatch,
+                                                                                       capsys):
+    """macOS's and Windows's file systems take 'a.svg' and 'A.svg' for one file: there two outputs so named, or
+    two meshes 'Ear' and 'ear' of a batch, would replace each other's files. This one tells names apart (the
+    probe says so and leaves nothing); where it did not, they are refused before the run."""
+    import sim.outputs
+
+    monkeypatch.chdir(tmp_path)
+    write_meshes(tmp_path / "a", 2, 0)
+    assert not sim.outputs.folds_case(tmp_path) and not sim.outputs.folds_case(tmp_path / "new" / "dir")
+    assert sorted(os.listdir(tmp_path)) == ["a"]
+    os.rename("a/dome01.off", "a/DOME00.off")
+    monkeypatch.setattr(sim.outputs, "folds_case", lambda directory: True)
+    assert main(["flatten", "a/dome00.obj", "--out", "p.svg", "--out", "P.SVG", "--max-iter", "3"]) == 2
+    assert capsys.readouterr().err == "springflat: error: --out 'P.SVG' is the same file as --out 'p.svg'\n"
+    assert main(["flatten", "a/dome00.obj", "a/DOME00.off", "--out-dir", "o", "--out", ".svg", "--max-iter", "3"]) == 2
+    assert capsys.readouterr().err == ("springflat: error: 'a/dome00.obj' with --out .svg and 'a/DOME00.off' with "
+                                       "--out .svg would both write 'o/DOME00.svg' (its file system takes 'dome00.svg' "
+                                       "and 'DOME00.svg' for one name)\n")
+    assert sorted(os.listdir(tmp_path)) == ["a"]
+
+
 def test_an_out_dir_that_is_a_dangling_link_is_refused_naming_it(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "a", 2, 0)
