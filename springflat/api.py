@@ -324,7 +324,8 @@ def _arrays(V: Any, F: Any) -> tuple[np.ndarray, np.ndarray]:
     arrays = []
     for name, value, what in (("V", V, "(V, 3) vertex positions"), ("F", F, "(F, 3) vertex indices")):
         if np.ma.is_masked(value):  # np.array would take the values under the mask
-            raise MeshError(f"{name} has masked entries: a mesh has no missing {what.split(') ')[1]}; fill or drop them")
+            raise MeshError(f"{name} has masked entries: a mesh has no missing {what.split(') ')[1]}; fill or drop "
+                            "them")
         try:
             array = np.array(value)  # a copy: the Pattern must not change when the caller's arrays do
         except ValueError:  # ragged rows (numpy's own words name its internals)

@@ -619,7 +619,7 @@ def test_a_seam_left_open_is_named_where_it_cuts_the_surface_and_where_it_breaks
     # two copies of a point joined by an edge (of a face of zero area) are no seam: the KD-tree may list a point's
     # copy at distance 0 before the point itself, which was counted as the point on itself ("1 vertices")
     (tmp_path / "joined.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0.2\nv 1 0 0\nf 1 2 3\nf 2 4 3\nf 1 5 2\n")
-    with pytest.raises(MeshError, match=r"joined.obj': face 2 is degenerate \(zero area\) \(file line 8\); remove the faces of "
-                                        r"zero area first \(trimesh's update_faces\(nondegenerate_faces\(\)\), MeshLab's "
-                                        r"Remove Zero Area Faces\)$"):
+    with pytest.raises(MeshError, match=r"joined.obj': face 2 is degenerate \(zero area\) \(file line 8\); remove "
+                                        r"the faces of zero area first \(trimesh's update_faces\(nondegenerate_faces"
+                                        r"\(\)\), MeshLab's Remove Zero Area Faces\)$"):
         load_mesh_with_notes(tmp_path / "joined.obj")
