@@ -415,7 +415,7 @@ def rtl_capacity() -> EngineCapacity:
         check_fillable(capacity, f"SPRINGFLAT_ENGINE_CAPACITY={given}")
     except (TypeError, ValueError) as exc:  # (ParameterError too: one line naming the variable)
         raise UserError(str(exc) if isinstance(exc, ParameterError) else
-                        f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2): {exc}") from None
+                        f"SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2), got {given!r}") from None
     return capacity
 
 

@@ -178,8 +178,8 @@ def engine_capacity(values, fs, *, guard: bool = True) -> EngineCapacity:
     try:
         capacity = EngineCapacity(*(int(v) for v in values), guard=guard)
         RegisterMap.build(fs, capacity)  # the address map must hold it
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"--capacity V E T: {exc}") from None
+    except (TypeError, ValueError) as exc:  # (EngineCapacity's words without its name)
+        raise ParameterError(f"--capacity V E T: {str(exc).removeprefix('EngineCapacity: ')}") from None
     check_fillable(capacity, f"--capacity {capacity.as_option()}")
     return capacity
 

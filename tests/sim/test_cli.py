@@ -666,6 +666,7 @@ def test_an_unguarded_run_where_arap_fails_names_the_start_to_give(tmp_path):
     ("rtl", "4,8,2", "SPRINGFLAT_ENGINE_CAPACITY=4,8,2: a disk mesh of 4 vertices has at least 10 neighbour entries "
                      "and 2 triangles; these depths hold at most 3 vertices (give more entries or triangles, or fewer "
                      "vertices)"),  # depths no mesh of that size fills, as --capacity refuses them
+    ("rtl", "abc", "SPRINGFLAT_ENGINE_CAPACITY must be V,E,T (three integers >= 2), got 'abc'"),
 ])
 def test_what_the_mesh_alone_cannot_run_is_refused_before_the_start_is_computed(tmp_path, monkeypatch, capsys, engine,
                                                                                  capacity, message):

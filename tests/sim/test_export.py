@@ -192,7 +192,7 @@ def test_capacity_option_sizes_the_engine_and_its_map(tmp_path):
 
 
 @pytest.mark.parametrize("capacity, message", [
-    (["1", "300", "128"], "vertices must be an int >= 2, got 1"),
+    (["1", "300", "128"], "error: --capacity V E T: vertices must be an int >= 2, got 1"),  # (no class name)
     (["64", "300"], "expected 3 arguments"),
     (["64", "x", "128"], "argument --capacity: expected an integer, got 'x'"),
     (["268435456", "1073741824", "1073741824"], "do not fit a 32-bit byte address"),
