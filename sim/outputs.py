@@ -776,7 +776,7 @@ def check_not_foreign(out: Path, names: Sequence[str], owned: Sequence[str] | No
     if foreign:
         shown = ", ".join(foreign[:4]) + (f" and {len(foreign) - 4} more" if len(foreign) > 4 else "")
         raise OutputError(f"{what} '{out}' holds {shown}, which this run would replace and no earlier run of this "
-                          "command wrote there: move them, or give a new directory")
+                          f"command wrote there: move {'it' if len(foreign) == 1 else 'them'}, or give a new directory")
 
 
 def report_owned(out: Path, title: str, names: Sequence[str]) -> tuple[str, ...]:

@@ -1163,5 +1163,5 @@ def test_paper_does_not_replace_a_users_report_in_out(tmp_path):
     proc = run("paper", "--quiet", "--out", out)
     assert proc.returncode == 2 and proc.stderr == (
         f"springflat: error: --out '{out}' holds report.md, which this run would replace and no earlier run of this "
-        "command wrote there: move them, or give a new directory\n")
+        "command wrote there: move it, or give a new directory\n")
     assert (out / "report.md").read_text() == "# my report\n" and [p.name for p in out.iterdir()] == ["report.md"]
