@@ -55,11 +55,9 @@ def _window_section(w: MemoryWindow, level: int) -> list[str]:
              f"Base `0x{w.base:05X}`, depth {w.depth}, {w.words} words per entry at a stride of {w.stride} "
              f"(entry `i`, word `k` at `0x{w.base:05X} + i·{w.stride} + k`; word 0 = bits 31:0).", "",
              "| Bits | Field | Width | Signed | Format |", "|---|---|---|---|---|"]
-    lsb = 0
-    for f in w.fields:
+    for f, lsb in zip(w.fields, w.field_lsbs):
         lines.append(f"| {_bits((lsb, f.width))} | `{f.name}` | {f.width} | {'yes' if f.signed else 'no'} | "
                      f"{f.fmt or '—'} |")
-        lsb += f.width
     return lines + [""]
 
 
@@ -146,12 +144,10 @@ def c_header(m: RegisterMap) -> str:
         lines += [f"/* memory window {w.name}: {w.description} */", _define(_c_name(w.name, "BASE"), w.base),
                   _define(_c_name(w.name, "DEPTH"), w.depth), _define(_c_name(w.name, "WORDS"), w.words),
                   _define(_c_name(w.name, "STRIDE"), w.stride), _define(_c_name(w.name, "SIZE"), w.size)]
-        lsb = 0
-        for f in w.fields:
+        for f, lsb in zip(w.fields, w.field_lsbs):
             lines += [_define(_c_name(w.name, f.name, "LSB"), lsb), _define(_c_name(w.name, f.name, "WIDTH"), f.width)]
             if f.signed:
                 lines.append(_define(_c_name(w.name, f.name, "SIGNED"), 1))
-            lsb += f.width
         lines.append("")
     lines += [f"#endif /* {guard} */", ""]
     return "\n".join(lines)

@@ -117,6 +117,12 @@ class MemoryWindow:
     def address(self, index: int, word: int = 0) -> int:
         return self.base + index * self.stride + word
 
+    @property
+    def field_lsbs(self) -> tuple[int, ...]:
+        """Each field's first bit in the entry's word (word 0's bit 0 first): LSB first, in field order, as the
+        images pack them."""
+        return tuple(sum(f.width for f in self.fields[:k]) for k in range(len(self.fields)))
+
 
 _WINDOW_TEXT = {
     "nodes": "per vertex: state and weights (read back the layout here)",
@@ -392,7 +398,9 @@ class RegisterMap:
             "version": list(VERSION), "magic": MAGIC, "formats": self.formats, "format_hash": self.format_hash,
             "capacity": asdict(self.capacity), "access": ACCESS, "states": list(STATES), "results": list(RESULTS),
             "registers": [asdict(r) for r in self.registers],
-            "windows": [{**asdict(w), "size": w.size} for w in self.windows],
+            "windows": [{**asdict(w), "size": w.size,
+                         "fields": [{**asdict(f), "lsb": lsb} for f, lsb in zip(w.fields, w.field_lsbs)]}
+                        for w in self.windows],
         }
 
     @classmethod
@@ -400,5 +408,6 @@ class RegisterMap:
         registers = tuple(Register(**{**r, "fields": tuple(BitField(**{**f, "codes": tuple(f["codes"])})
                                                                    for f in r["fields"])}) for r in d["registers"])
         windows = tuple(MemoryWindow(**{k: v for k, v in w.items() if k != "size"} | {
-            "fields": tuple(WordField(**f) for f in w["fields"])}) for w in d["windows"])
+            "fields": tuple(WordField(**{k: v for k, v in f.items() if k != "lsb"}) for f in w["fields"])})
+            for w in d["windows"])
         return cls(d["formats"], d["format_hash"], EngineCapacity(**d["capacity"]), registers, windows)

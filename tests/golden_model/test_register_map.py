@@ -244,6 +244,28 @@ def test_the_c_header_compiles_and_holds_the_map(regmap, tmp_path):
     assert got == want
 
 
+def test_the_jsons_field_positions_unpack_the_images_words(regmap, fs):
+    """register_map.json gives each memory field its ``lsb`` (the C header's ``_LSB``): with it and the width, a
+    host's script reads every field of a real image's words as the golden model packed it."""
+    mesh = dome_grid(6)
+    params = FlattenParams(dynamics="momentum", barrier=True, max_iter=5)
+    image = build_image(prepare(mesh, initial_layout(mesh, "tutte"), params, fs), SMALL)
+    windows = json.loads(to_json(regmap))["windows"]
+    layouts = memory_layouts(fs, SMALL)
+    header = c_header(regmap)
+    for window in windows:
+        words = image.memories()[window["name"]]
+        whole = [sum(int(w) << (32 * k) for k, w in enumerate(row)) for row in words]
+        unpacked = layouts[window["name"]].unpack(words)
+        for field in window["fields"]:
+            raw = [(value >> field["lsb"]) & ((1 << field["width"]) - 1) for value in whole]
+            if field["signed"]:
+                raw = [r - (1 << field["width"]) if r >> (field["width"] - 1) else r for r in raw]
+            assert raw == [int(v) for v in unpacked[field["name"]]], (window["name"], field["name"])
+            name = f"SPRINGFLAT_{window['name']}_{field['name']}_LSB".upper()
+            assert re.search(rf"#define {name} +0x{field['lsb']:X}u", header), name
+
+
 def test_write_exports_writes_all_three(regmap, tmp_path):
     paths = write_exports(regmap, tmp_path / "out")
     assert [p.name for p in paths] == list(EXPORT_FILES)
