@@ -177,7 +177,8 @@ def board_engine(formats: FormatSet, port: str | None, baud: int | None):
             link = open_port(port, baud)
         except EngineError as exc:
             raise UserError(str(exc)) from None
-        print(f"springflat: board: loading the mesh over {port} at {baud} baud and running the flattening ...",
+        speed = "" if port.startswith(("socket://", "loop://")) else f" at {baud} baud"  # (no baud on those links)
+        print(f"springflat: board: loading the mesh over {port}{speed} and running the flattening ...",
               file=sys.stderr)
         try:
             with link:

@@ -69,6 +69,9 @@ class UartBus:
         try:
             return protocol.decode_answer(answer)
         except ValueError as exc:
+            if request.startswith(answer):  # the request's own bytes came back: a loopback (loop://, a jumper)
+                raise LinkError(f"{self.name} echoes what is sent ({what}): a loopback, not the board's bridge") \
+                    from None
             raise LinkError(f"corrupt answer from {self.name} to {what}: {exc}") from None
 
     def _read_exactly(self, n: int, what: str, already: int = 0) -> bytes:
@@ -174,4 +177,5 @@ def open_port(port: str, baud: int = protocol.DEFAULT_BAUD, timeout_s: float = 2
         return serial.serial_for_url(port, baudrate=baud, timeout=timeout_s, write_timeout=timeout_s)
     except (serial.SerialException, ValueError, OSError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        reason = reason.removeprefix(f"Could not open port {port}: ")  # (pyserial's words name the port again)
         raise LinkError(f"cannot open the serial port '{port}': {reason}") from None

@@ -237,6 +237,19 @@ def test_a_network_port_without_a_port_number_is_one_line(url):
         open_port(url)
 
 
+def test_a_refused_connection_names_the_port_once():
+    """pyserial's message repeats the port ('Could not open port socket://...: ...')."""
+    import socket
+
+    with socket.socket() as s:  # a port nothing listens on: bound, never listening
+        s.bind(("127.0.0.1", 0))
+        url = f"socket://127.0.0.1:{s.getsockname()[1]}"
+        with pytest.raises(LinkError) as refused:
+            open_port(url)
+    assert str(refused.value).startswith(f"cannot open the serial port '{url}': [Errno ")
+    assert str(refused.value).count(url) == 1
+
+
 def test_a_file_that_is_no_device_is_no_port(tmp_path):
     """A regular file (the mesh, say) or a directory named as the port: pyserial opened it read-write and said
     'Inappropriate ioctl for device'."""
@@ -329,3 +342,15 @@ def test_a_port_url_that_names_a_log_file_is_refused_and_the_file_left_alone(tmp
     assert mesh.read_text() == "v 0 0 0\n"
     port = open_port("loop://")
     port.close()
+
+
+@pytest.mark.slow  # a CLI run
+def test_a_loopback_port_is_said_to_echo_not_to_answer_corruptly(tmp_path):
+    """loop:// (or a jumper on the wires) sends the request back: its checksum came out as 'corrupt answer'."""
+    proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "board", "--port", "loop://", "--out", "o.obj"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 2 and not (tmp_path / "o.obj").exists()
+    assert proc.stderr.splitlines()[-2:] == [
+        "springflat: board: loading the mesh over loop:// and running the flattening ...",
+        "springflat: error: the board on loop:// echoes what is sent (a read at 0x0): a loopback, not the board's "
+        "bridge"]
