@@ -23,7 +23,7 @@ from golden_model.reference import RUNAWAY_FACTOR, energy_floor
 from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
-from .engines import ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
+from .engines import DEFAULT_ENGINE, ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
 from .outputs import OutputWriteError, all_or_nothing, print_note, progress_bar, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
                        check_mesh_fits, check_seam_fits, cut_file_notes, error_text, kind_or_none, on_sheets,
@@ -93,7 +93,10 @@ def check_options_used(args: argparse.Namespace) -> None:
                         "the layout drawn to fit, not a pattern on sheets)")
     for option, what in (("port", "the serial port"), ("baud", "the serial port's rate")):
         if getattr(args, option) is not None and not engine_named(args.engine).serial:
-            raise UserError(f"--{option} sets {what}: add --engine {' or '.join(SERIAL_ENGINE_NAMES)}")
+            serial = " or ".join(SERIAL_ENGINE_NAMES)
+            raise UserError(f"--{option} sets {what}: add --engine {serial}" if args.engine == DEFAULT_ENGINE else
+                            f"--{option} sets {what} of --engine {serial}, not of --engine {args.engine}: drop "
+                            f"--{option}, or run --engine {serial}")
     if args.jobs is not None:
         local_workers(args.jobs, "--jobs")
 

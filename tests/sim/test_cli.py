@@ -163,6 +163,8 @@ BAD_ARGS = [
     (["--penalty-kappa", "2"], "--penalty-kappa sets the penalty: add --penalty"),
     (["--port", "/nowhere"], "--port sets the serial port: add --engine board"),
     (["--baud", "9600"], "--baud sets the serial port's rate: add --engine board"),
+    (["--engine", "rtl", "--port", "loop://"], "--port sets the serial port of --engine board, not of --engine rtl: "
+                                               "drop --port, or run --engine board"),
     (["--dynamics", "momentum", "--step", "fixed"], "--step fixed is a step of the paper dynamics, not of the "
                                                     "momentum dynamics: drop --step, or add --dynamics paper"),
     (["--dynamics", "momentum", "--step", "variable"], "--step variable is a step of the paper dynamics"),
