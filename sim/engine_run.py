@@ -429,9 +429,13 @@ def rtl_engine(formats: FormatSet):
     from golden_model.fixed.engine import prepare
 
     from .cocotb_support import SimulatorError
+    from .outputs import print_note
+    from .register_map_export import beyond_the_85f
     from .run_options import UserError
 
     capacity = rtl_capacity()
+    if beyond := beyond_the_85f(capacity):
+        print_note(beyond)
 
     def engine(mesh, positions, params, on_iteration=None):
         problem = prepare(mesh, positions, params, formats)

@@ -180,7 +180,8 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     from golden_model.engine_spec.image import build_image
 
     from .engine_run import run_image_on_rtl, summary_line
-    from .register_map_export import engine_capacity
+    from .outputs import print_note
+    from .register_map_export import beyond_the_85f, engine_capacity
     from .run_options import UserError, load_format_set, start_positions, strict_json
 
     if args.stall is not None:
@@ -199,6 +200,8 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     # the start flatten takes: a guarded run's folded start untangled (the datapath bench has no guard)
     problem = prepare(mesh, start_positions(mesh, args.init, params, progress=False)[0], params, formats)
     image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity
+    if beyond := beyond_the_85f(capacity):
+        print_note(beyond)
     print(f"springflat: {args.sim}: exporting and building springflat_engine for capacity {capacity.vertices}/"
           f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running the "
           "whole flattening ...", file=sys.stderr)

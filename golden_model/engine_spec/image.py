@@ -41,7 +41,7 @@ from ..fixed.formats_set import FormatSet
 from ..fixed.pipeline import BarrierEntries, NeighbourStream
 from ..mesh import Mesh
 
-__all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
+__all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "LARGEST_85F_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
            "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "energy_check_width",
            "EngineImage",
            "build_image", "decode_nodes", "decode_entries", "decode_triangles", "constant_fault", "ImageRunResult",
@@ -137,6 +137,10 @@ class EngineCapacity:
 #: The engine's capacity unless a flow says otherwise: a 2,000-vertex patch (about 6 entries and 2
 #: triangles per vertex) with room to spare, and what the ECP5-85F holds (docs/synthesis.md).
 DEFAULT_CAPACITY = EngineCapacity(vertices=2048, entries=12288, triangles=4096)
+
+#: The largest capacity the ECP5-85F's block RAMs hold in the ``default`` formats, with the step guard as
+#: without it, at the entries/vertices ≈ 6, triangles/vertices ≈ 2 ratios (counted, docs/synthesis.md).
+LARGEST_85F_CAPACITY = EngineCapacity(vertices=3072, entries=18432, triangles=6144)
 
 
 @dataclass(frozen=True)

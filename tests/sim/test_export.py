@@ -288,3 +288,17 @@ def test_a_users_files_in_out_are_refused_at_once_not_replaced(tmp_path):
         "of this command wrote there: move them, or give a new directory")
     assert sorted(p.name for p in out.iterdir()) == ["README.md", "clock.sdc", "notes.txt"]
     assert (out / "README.md").read_text() == "precious\n"
+
+
+def test_a_capacity_deeper_than_the_85f_holds_gets_a_note_on_its_build_time():
+    """rtl-check --engine-top --capacity 100000 1000000 100000 exported for 8.5 minutes with one line said:
+    a capacity no 85F holds is named as such before its long export and build."""
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY, LARGEST_85F_CAPACITY, EngineCapacity
+    from sim.register_map_export import beyond_the_85f
+
+    assert beyond_the_85f(DEFAULT_CAPACITY) is None and beyond_the_85f(LARGEST_85F_CAPACITY) is None
+    for deeper in (EngineCapacity(3073, 18432, 6144), EngineCapacity(1024, 18433, 2048),
+                   EngineCapacity(100000, 1000000, 100000)):
+        note = beyond_the_85f(deeper)
+        assert note.startswith(f"capacity {deeper.as_option()} is deeper than 3072 18432 6144, the largest the "
+                               "LFE5U-85F holds (docs/synthesis.md): its export and simulation build take long")
