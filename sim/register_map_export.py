@@ -100,6 +100,18 @@ def to_json(m: RegisterMap) -> str:
     return json.dumps(m.to_dict(), indent=2, ensure_ascii=False) + "\n"
 
 
+#: The map's texts in ASCII for the C header: a compiler that reads a source in its code page warns on any other
+#: character, in a comment too (MSVC's C4819).
+_ASCII = str.maketrans({"·": "*", "½": "1/2 ", "−": "-", "γ": "gamma", "Δ": "D", "φ": "phi", "ε": "eps"})
+
+
+def _ascii_comment(text: str) -> str:
+    """``/* text */`` in ASCII (:data:`_ASCII`, ``Σ`` as ``sum``; any other character as a ``\\u`` escape), with no
+    ``*/`` inside."""
+    text = re.sub("Σ(?=\\w)", "sum ", text).replace("Σ", "sum").translate(_ASCII)
+    return "/* " + text.encode("ascii", "backslashreplace").decode("ascii").replace("*/", "* /") + " */"
+
+
 def _c_name(*parts: str) -> str:
     return "_".join([PREFIX] + [re.sub(r"[^A-Za-z0-9]", "_", p).upper() for p in parts])
 
@@ -127,7 +139,7 @@ def c_header(m: RegisterMap) -> str:
         # a field of another access than its register's (CONTROL's w1p start, STATUS's ro state) says its own
         others = ", ".join(f"{f.name} {f.access}" for f in r.fields if f.access != r.access)
         access = f"{r.access}; {others}" if others else r.access
-        lines += [f"/* {r.name} ({access}): {r.description} */", _define(_c_name(r.name, "ADDR"), r.offset),
+        lines += [_ascii_comment(f"{r.name} ({access}): {r.description}"), _define(_c_name(r.name, "ADDR"), r.offset),
                   _define(_c_name(r.name, "RESET"), r.reset)]
         for f in r.fields:
             lines += [_define(_c_name(r.name, f.name, "SHIFT"), f.lsb), _define(_c_name(r.name, f.name, "MASK"), f.mask),
@@ -141,7 +153,7 @@ def c_header(m: RegisterMap) -> str:
                 lines += [f"/* {r.name}.{f.name} codes */", *(_define(_c_name(f.name, c), i) for i, c in enumerate(f.codes)),
                           ""]
     for w in m.windows:
-        lines += [f"/* memory window {w.name}: {w.description} */", _define(_c_name(w.name, "BASE"), w.base),
+        lines += [_ascii_comment(f"memory window {w.name}: {w.description}"), _define(_c_name(w.name, "BASE"), w.base),
                   _define(_c_name(w.name, "DEPTH"), w.depth), _define(_c_name(w.name, "WORDS"), w.words),
                   _define(_c_name(w.name, "STRIDE"), w.stride), _define(_c_name(w.name, "SIZE"), w.size)]
         for f, lsb in zip(w.fields, w.field_lsbs):
