@@ -423,6 +423,10 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout = NamedStandardOutput(stdout)
     try:
         try:
+            if getattr(args, "json", False) and getattr(sys.stdout, "closed_at_start", False):
+                # (sim.entry.ClosedStandardOutput) --json asks for the standard output alone: refused before the work
+                raise UserError("--json writes the results to the standard output, which is closed: drop --json, or "
+                                "give the standard output a file")
             status = args.func(args)
             if sys.stdout is not None:
                 sys.stdout.flush()  # a full disk or a closed pipe is one line here, not a message at exit

@@ -32,7 +32,7 @@ def _stopped(name: str) -> int:
 
 class ClosedStandardOutput(io.StringIO):
     """What stands for a standard output closed at the start (``>&-``): the lines printed there are dropped
-    (:func:`sim.flatten_run.check_options_used` refuses ``--json``, which asks for nothing else)."""
+    (:func:`sim.cli.main` refuses any command's ``--json``, which asks for nothing else)."""
 
     closed_at_start = True
 
@@ -49,13 +49,13 @@ def main() -> int:
 
 
 def _run() -> int:
-    # The command draws into files only: matplotlib's file backend, whatever MPLBACKEND names (a name it does
-    # not know failed its import, and the run with it, as a traceback); its worker processes inherit it.
+    # The command draws into files only: matplotlib's file backend, whatever MPLBACKEND names (a name matplotlib
+    # does not know fails its import, the run with it); its worker processes inherit it.
     os.environ["MPLBACKEND"] = "Agg"
     if sys.stderr is None:  # started with its standard error closed (2>&-): what it says there is dropped,
         sys.stderr = io.StringIO()  # not sent to print()'s default, the standard output (a --json line)
     if sys.stdout is None:  # closed (>&-): what it prints there is dropped; its files are still written, and
-        sys.stdout = ClosedStandardOutput()  # an option that asks for the standard output is refused
+        sys.stdout = ClosedStandardOutput()  # --json, which asks for the standard output alone, is refused
     if isinstance(sys.stdout, io.TextIOWrapper):  # a file name its encoding lacks (a Windows code page, a C
         sys.stdout.reconfigure(errors="backslashreplace")  # locale) comes out escaped, as on stderr, not a traceback
     received: list[str] = []

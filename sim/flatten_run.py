@@ -75,9 +75,6 @@ def check_options_used(args: argparse.Namespace) -> None:
     """Refuse, before any run, an option of ``flatten`` that this run (or batch: ``--out`` then holds
     endings) would ignore, in one line naming what it needs."""
     check_formats_option(args)
-    if args.json and getattr(sys.stdout, "closed_at_start", False):  # (sim.entry.ClosedStandardOutput)
-        raise UserError("--json writes the results to the standard output, which is closed: drop --json, or give "
-                        "the standard output a file")
     if args.dxf_edges and not any(kind_or_none(path) == "dxf" for path in args.out or ()):
         raise UserError("--dxf-edges draws the mesh's edges into a DXF pattern: add --out NAME.dxf")
     if args.grain is not None and not args.out:
@@ -94,6 +91,9 @@ def check_options_used(args: argparse.Namespace) -> None:
     for option, what in (("port", "the serial port"), ("baud", "the serial port's rate")):
         if getattr(args, option) is not None and not engine_named(args.engine).serial:
             serial = " or ".join(SERIAL_ENGINE_NAMES)
+            if args.more_meshes or args.out_dir is not None or args.scheduler is not None:  # a batch
+                raise UserError(f"--{option} sets {what} of --engine {serial}, which runs one mesh at a time: drop "
+                                f"--{option} for a batch")
             raise UserError(f"--{option} sets {what}: add --engine {serial}" if args.engine == DEFAULT_ENGINE else
                             f"--{option} sets {what} of --engine {serial}, not of --engine {args.engine}: drop "
                             f"--{option}, or run --engine {serial}")

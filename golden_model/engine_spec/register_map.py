@@ -23,7 +23,7 @@ import zlib
 from dataclasses import asdict, dataclass, field
 
 from .image import (BUS_WORD_BITS, ENERGY_TOL_INT_BITS, ITERATION_BITS, MODE_FIELDS, RESULTS, SATURATION_BITS,
-                    EngineCapacity, WordField, energy_width, memory_layouts, run_constant_fields)
+                    EngineCapacity, MemoryLayout, WordField, energy_width, memory_layouts, run_constant_fields)
 from ..fixed.engine import ENERGY_TOL_FRAC_BITS
 from ..guard import SCALE_MAX_SHIFT
 from ..modes import RUN_MODES
@@ -119,9 +119,9 @@ class MemoryWindow:
 
     @property
     def field_lsbs(self) -> tuple[int, ...]:
-        """Each field's first bit in the entry's word (word 0's bit 0 first): LSB first, in field order, as the
-        images pack them."""
-        return tuple(sum(f.width for f in self.fields[:k]) for k in range(len(self.fields)))
+        """Each field's first bit in the entry's word (word 0's bit 0 first), in field order: the offsets the
+        images are packed with (:meth:`~golden_model.engine_spec.image.MemoryLayout.offsets`)."""
+        return tuple(MemoryLayout(self.name, self.fields, self.depth).offsets().values())
 
 
 _WINDOW_TEXT = {

@@ -122,9 +122,10 @@ class Format:
         shown = repr(str(text)) if len(str(text)) <= 40 else repr(str(text)[:40]) + "..."  # (not a page of digits)
         if m is None:
             raise ValueError(f"cannot parse fixed-point format {shown}: expected e.g. 's3.16' or 'u0.18'")
-        if max(len(m.group(2)), len(m.group(3))) > len(str(MAX_WIDTH)):
+        int_bits, frac_bits = int(m.group(2)), int(m.group(3))
+        if max(int_bits, frac_bits) > MAX_WIDTH:  # (said here: Format's own message would print every digit)
             raise ValueError(f"fixed-point format {shown}: its width is outside 1..{MAX_WIDTH} bits")
-        return cls(m.group(1) == "s", int(m.group(2)), int(m.group(3)))
+        return cls(m.group(1) == "s", int_bits, frac_bits)
 
     def __str__(self) -> str:
         return f"{'s' if self.signed else 'u'}{self.int_bits}.{self.frac_bits}"

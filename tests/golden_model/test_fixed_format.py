@@ -86,6 +86,7 @@ def test_format_parse_errors(text):
 
 
 def test_a_format_of_hundreds_of_digits_is_refused_without_echoing_them():
+    assert Format.parse("s007.16") == Format.parse("s7.16") and Format.parse("u0.022") == Format.parse("u0.22")
     with pytest.raises(ValueError, match=r"^fixed-point format 's9{39}'\.\.\.: its width is outside 1\.\.62 bits$"):
         Format.parse("s" + "9" * 400 + ".1")
     with pytest.raises(ValueError, match=r"^cannot parse fixed-point format 'x{40}'\.\.\.: expected"):

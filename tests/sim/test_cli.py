@@ -165,6 +165,8 @@ BAD_ARGS = [
     (["--baud", "9600"], "--baud sets the serial port's rate: add --engine board"),
     (["--engine", "rtl", "--port", "loop://"], "--port sets the serial port of --engine board, not of --engine rtl: "
                                                "drop --port, or run --engine board"),
+    (["surf1", "surf2", "--out-dir", "o", "--out", ".svg", "--baud", "9600"],  # (a batch: the board runs one mesh)
+     "--baud sets the serial port's rate of --engine board, which runs one mesh at a time: drop --baud for a batch"),
     (["--dynamics", "momentum", "--step", "fixed"], "--step fixed is a step of the paper dynamics, not of the "
                                                     "momentum dynamics: drop --step, or add --dynamics paper"),
     (["--dynamics", "momentum", "--step", "variable"], "--step variable is a step of the paper dynamics"),

@@ -1304,6 +1304,17 @@ def test_json_with_a_closed_standard_output_is_refused_before_the_run(tmp_path, 
     assert sorted(os.listdir(tmp_path)) == ["m.obj", "n.obj"]
 
 
+@pytest.mark.parametrize("command", [["rtl-check", "surf1", "--sim", "icarus"], ["synth", "--target", "ecp5"]],
+                         ids=["rtl-check", "synth"])
+def test_every_commands_json_with_a_closed_standard_output_is_refused_before_its_work(tmp_path, command):
+    proc = subprocess.run([SPRINGFLAT, *command, "--json"], stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                          timeout=300, preexec_fn=lambda: os.close(1))
+    assert proc.returncode == 2 and proc.stderr == (
+        "springflat: error: --json writes the results to the standard output, which is closed: drop --json, or give "
+        "the standard output a file\n")
+    assert os.listdir(tmp_path) == []
+
+
 @pytest.mark.skipif(os.geteuid() != 0, reason="mknod needs root")
 @pytest.mark.parametrize("batch", [False, True, "no files"], ids=["single", "batch", "batch without files"])
 def test_as_root_a_full_standard_output_is_one_line_and_a_batch_runs_to_its_end(tmp_path, batch):
