@@ -24,6 +24,7 @@ from golden_model.results import FlattenResult
 
 from .distortion import distortion, worst_summary, write_distortion_csv
 from .engines import DEFAULT_ENGINE, ENGINES, SERIAL_ENGINE_NAMES, Engine, engine_named
+from .mesh_io.polygons import plural
 from .outputs import OutputWriteError, all_or_nothing, print_note, progress_bar, write_history, write_plot
 from .patterns import (DEFAULT_PAPER, PATTERN_SUFFIXES, TRUE_SCALE_KINDS, PatternDrawing, check_grain,
                        check_mesh_fits, check_seam_fits, cut_file_notes, error_text, kind_or_none, on_sheets,
@@ -400,11 +401,13 @@ STILL_START_ERROR = 1e-4
 
 def still_note(params: FlattenParams, result: FlattenResult, formats: FormatSet | None,
                api: bool = False) -> str | None:
-    """A fixed-point run (of ``formats``) of the paper dynamics that stopped with the energy it started with,
-    to the bit, a nonzero one: from rest its first moves, ½Δt²·F/m, rounded to no move, so the relative
-    energy change was 0 and the stop rule held while the float run may go on. The run's words are true
-    (the layout no longer changes) but the pattern is its start. (The momentum dynamics does not start from
-    rest; a start whose E_S and E_C are below :data:`STILL_START_ERROR` is a flattening already.)"""
+    """A run of the paper dynamics whose pattern is its start though it 'converged': a fixed-point run (of
+    ``formats``) that stopped with the energy it started with, to the bit, a nonzero one (from rest its first
+    moves, ½Δt²·F/m, rounded to no move, so the relative energy change was 0 and the stop rule held while the
+    float run may go on), or a float run that stopped after its first step (:func:`_still_float_note`). The
+    run's words are true (the layout no longer changes) but the pattern is its start. (The momentum dynamics
+    does not start from rest; a start whose E_S and E_C are below :data:`STILL_START_ERROR` is a flattening
+    already.)"""
     energy = np.asarray(result.history.energy)
     if (not params.mode.has_masses or result.status != "converged" or len(energy) < 2
             or max(result.initial.area_error, result.initial.shape_error) < STILL_START_ERROR):
@@ -455,7 +458,7 @@ def json_summary(args: argparse.Namespace, mesh: Mesh, params: FlattenParams, re
 def human_line(mesh: Mesh, result: FlattenResult) -> str:
     """The one-line result a person reads."""
     final = result.final
-    return (f"{mesh.name}: {result.status} after {result.iterations} iteration{'s' if result.iterations != 1 else ''}: "
+    return (f"{mesh.name}: {result.status} after {plural(result.iterations, 'iteration')}: "
             f"E_S {error_text(result.initial.area_error)} -> {error_text(final.area_error)}, "
             f"E_C {error_text(result.initial.shape_error)} -> {error_text(final.shape_error)}, "
             f"folded {final.folded} (flipped against P0: {final.flipped})"

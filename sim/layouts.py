@@ -55,7 +55,7 @@ from golden_model.files import read_file_bytes
 from golden_model.mesh import COORDINATE_LIMIT, Mesh, MeshError, layout_orientation, signed_areas_2d
 from golden_model.guard import ENERGY_FLOOR
 from .mesh_io import read_obj_vertices
-from .mesh_io.polygons import is_plain
+from .mesh_io.polygons import is_plain, plural
 
 __all__ = ["LayoutError", "StartLayout", "start_layout", "AUTO_START", "ARRAY_WORDS", "initial_layout", "tutte_layout", "pca_layout", "harmonic_layout", "lscm_layout",
            "arap_layout", "slim_layout", "load_layout", "LAYOUT_METHODS", "ARAP_MAX_ITERATIONS", "NoDiskStart",
@@ -390,7 +390,7 @@ def load_layout(path: str | Path, n_vertices: int, *, faces: np.ndarray | None =
             if any(len(r) != 2 for r in rows):
                 bad = next(k for k, r in enumerate(rows) if len(r) != 2)
                 raise LayoutError(
-                    f"layout '{path}': row {bad + 1} has {len(rows[bad])} value{'s' if len(rows[bad]) != 1 else ''}, "
+                    f"layout '{path}': row {bad + 1} has {plural(len(rows[bad]), 'value')}, "
                     "expected 2 (x y)"
                 )
             positions = np.array([[_layout_number(v, path, k) for v in r] for k, r in enumerate(rows)],

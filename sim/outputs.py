@@ -45,6 +45,7 @@ from golden_model.results import FlattenResult
 
 from .exit_codes import STOP_SIGNALS
 from .mesh_io import save_obj
+from .mesh_io.polygons import plural
 
 HISTORY_HEADER = ("iteration", "dt", "area_error", "shape_error", "energy", "flipped", "folded", "accepted")
 LAYOUT_SUFFIXES = (".obj", ".svg")
@@ -175,7 +176,7 @@ def _make_temporary(directory: Path, name: str, *, is_dir: bool = False) -> Path
     A directory with no write permission for anyone is refused as the OS refuses it to its users
     (``PermissionError``), also to root: a user who took every write bit away, in a container where everyone
     is root, meant it to stay as it is (as :func:`_refuse_special` says of a file)."""
-    if not os.stat(directory).st_mode & 0o222:
+    if os.name == "posix" and not os.stat(directory).st_mode & 0o222:  # (Windows's read-only folder flag is no lock)
         raise PermissionError(errno.EACCES, f"directory '{directory}' is read-only (no write permission for "
                               "anyone): springflat does not write into it (make it writable, or name another)",
                               str(directory))
@@ -285,8 +286,9 @@ def folds_case(directory: Path) -> bool:
     key = same_file_key(directory)
     if key not in _FOLDS_CASE:
         try:
+            _refuse_locked_directory(directory, "")  # (a probe made in an append-only one would stay)
             probe = _make_temporary(directory, "case")
-        except OSError:
+        except (OSError, OutputError):
             return False
         try:
             _FOLDS_CASE[key] = os.path.exists(probe.with_name(probe.name.swapcase()))
@@ -296,9 +298,10 @@ def folds_case(directory: Path) -> bool:
 
 
 def folded_name(name: str, directory: Path) -> str:
-    """``name`` as ``directory``'s file system tells names apart: case and Unicode composition folded where
-    :func:`folds_case` (``Ab.svg`` and ``ab.svg`` are one file there), else as it is."""
-    return unicodedata.normalize("NFD", name).casefold() if folds_case(directory) else name
+    """``name`` as ``directory``'s file system tells names apart: composed (NFC) and in lower case where
+    :func:`folds_case` (``Ab.svg`` and ``ab.svg`` are one file there; ``ß`` stays, as those systems keep it), else
+    as it is."""
+    return unicodedata.normalize("NFC", name).lower() if folds_case(directory) else name
 
 
 def _identity(path: Path) -> tuple:
@@ -1312,7 +1315,7 @@ def _draw_plot(path: Path, result: FlattenResult, faces: np.ndarray, title: str,
     ax_errors.set_title(f"errors ({how})", fontsize=9)
     ax_errors.grid(alpha=0.3)
 
-    summary = (f"{result.status} after {result.iterations} iteration{'s' if result.iterations != 1 else ''}:  "
+    summary = (f"{result.status} after {plural(result.iterations, 'iteration')}:  "
                f"$E_S$ = {history.area_error[-1]:.3g},  "
                f"$E_C$ = {history.shape_error[-1]:.3g},  {final.n_folded} of {len(faces)} faces folded")
     fig.suptitle(f"{title} — {summary}" if title else summary, fontsize=12)

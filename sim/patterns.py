@@ -51,6 +51,7 @@ import numpy as np
 from golden_model.mesh import Mesh, folded_faces, loop_length, loop_signed_area, overlap_counts, signed_areas_2d
 
 from .mesh_io import save_obj
+from .mesh_io.polygons import plural
 from .outputs import OutputError, atomic_write, output_target, write_layout
 from .run_options import OneOutput, file_path_argument
 
@@ -686,7 +687,7 @@ def run_caption(status: str, iterations: int, area_error: float, shape_error: fl
     """The line under the name on each sheet; ``crossings``: pairs of the boundary's sides that meet (a cut
     line that crosses itself, on a pattern with no fold), ``turned``: holes the pattern wraps over
     (:func:`golden_model.mesh.turned_holes`), each said when there are any."""
-    return (f"{status} after {iterations} iteration{'s' if iterations != 1 else ''}: E_S {error_text(area_error)}, "
+    return (f"{status} after {plural(iterations, 'iteration')}: E_S {error_text(area_error)}, "
             f"E_C {error_text(shape_error)}, "
             f"{folded} folded" + (f", its boundary crosses itself {'once' if crossings == 1 else f'{crossings} times'}"
                                          if crossings else "")

@@ -193,16 +193,16 @@ def engine_capacity(values, fs, *, guard: bool = True) -> EngineCapacity:
 
 
 def beyond_the_85f(capacity: EngineCapacity) -> str | None:
-    """A note for a capacity deeper than :data:`~golden_model.engine_spec.image.LARGEST_85F_CAPACITY` in any
-    of its three depths: no ECP5 holds it, and its Verilog export and simulation build take long (at 100,000
-    vertices, over 10 minutes before the run starts), or ``None``."""
+    """A note for a capacity with a memory deeper than :data:`~golden_model.engine_spec.image.LARGEST_85F_CAPACITY`'s:
+    its Verilog export and simulation build take long (at 100,000 vertices, over 10 minutes before the run starts),
+    or ``None``. (Whether it fits a device is ``springflat verilog``'s count, :func:`sim.synth.ecp5_overflow`.)"""
     from golden_model.engine_spec.image import LARGEST_85F_CAPACITY as largest
 
     if all(getattr(capacity, d) <= getattr(largest, d) for d in ("vertices", "entries", "triangles")):
         return None
-    return (f"capacity {capacity.as_option()} is deeper than {largest.as_option()}, the largest the LFE5U-85F holds "
-            "(docs/synthesis.md): its export and simulation build take long, minutes and more with depth "
-            "(over 10 minutes at 100,000 vertices)")
+    return (f"capacity {capacity.as_option()} has a memory deeper than {largest.as_option()}'s, the largest engine "
+            "the LFE5U-85F holds in the default formats (docs/synthesis.md): its export and simulation build take "
+            "long, minutes and more with depth (over 10 minutes at 100,000 vertices)")
 
 
 def check_fillable(capacity: EngineCapacity, given: str) -> None:

@@ -194,14 +194,14 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
         params = dataclasses.replace(params, max_iter=min(params.max_iter, args.iterations))
     formats = load_format_set(args.formats)
     capacity = engine_capacity(args.capacity, formats)  # one line for what the register map cannot hold
+    if beyond := beyond_the_85f(capacity):  # (before the start's seconds, and the export's minutes)
+        print_note(beyond)
     check_fixed_params(params, formats)
     scale_mesh(mesh, params, formats)  # what no layout changes is refused before the start is computed
     capacity.check_mesh(mesh)
     # the start flatten takes: a guarded run's folded start untangled (the datapath bench has no guard)
     problem = prepare(mesh, start_positions(mesh, args.init, params, progress=False)[0], params, formats)
     image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity
-    if beyond := beyond_the_85f(capacity):
-        print_note(beyond)
     print(f"springflat: {args.sim}: exporting and building springflat_engine for capacity {capacity.vertices}/"
           f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running the "
           "whole flattening ...", file=sys.stderr)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import stat
 
 from golden_model.engine_spec import uart_protocol as protocol
@@ -177,5 +178,7 @@ def open_port(port: str, baud: int = protocol.DEFAULT_BAUD, timeout_s: float = 2
         return serial.serial_for_url(port, baudrate=baud, timeout=timeout_s, write_timeout=timeout_s)
     except (serial.SerialException, ValueError, OSError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        reason = reason.removeprefix(f"Could not open port {port}: ")  # (pyserial's words name the port again)
+        # pyserial's words name the port again ('[Errno 2] could not open port P: [Errno 2] No such file ...: 'P'')
+        reason = re.sub(rf"^(\[Errno \d+\] )?[Cc]ould not open port {re.escape(port)}: ", "", reason)
+        reason = reason.removesuffix(f": '{port}'")
         raise LinkError(f"cannot open the serial port '{port}': {reason}") from None

@@ -121,7 +121,7 @@ def test_unknown_keywords_and_wrong_types_are_type_errors(ear):
         springflat.flatten(V, F, max_iters=3)
     with pytest.raises(ParameterError, match="barrier must be True or False"):
         springflat.flatten(V, F, barrier="yes")
-    for vertices_alone in (V, V.tolist()):  # the faces forgotten: said, not "not ndarray"
+    for vertices_alone in (V, V.tolist()):  # the faces forgotten: said to be missing
         with pytest.raises(TypeError, match=r"^flatten\(V, F\) takes the faces F too: F, the \(F, 3\) vertex indices, "
                                             r"is missing$"):
             springflat.flatten(vertices_alone)

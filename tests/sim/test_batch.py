@@ -4,6 +4,7 @@ import json
 import os
 import re
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -419,8 +420,10 @@ def test_on_a_file_system_that_folds_case_outputs_named_alike_but_for_case_are_o
 
     monkeypatch.chdir(tmp_path)
     write_meshes(tmp_path / "a", 2, 0)
-    assert not sim.outputs.folds_case(tmp_path) and not sim.outputs.folds_case(tmp_path / "new" / "dir")
-    assert sorted(os.listdir(tmp_path)) == ["a"]
+    real = sim.outputs.folds_case(tmp_path)
+    assert sim.outputs.folds_case(tmp_path / "new" / "dir") == real  # (a directory yet to be made: its parent's)
+    assert not real or not sys.platform.startswith("linux")  # (Linux's file systems tell case apart)
+    assert sorted(os.listdir(tmp_path)) == ["a"]  # (the probe left nothing)
     os.rename("a/dome01.off", "a/DOME00.off")
     monkeypatch.setattr(sim.outputs, "folds_case", lambda directory: True)
     assert main(["flatten", "a/dome00.obj", "--out", "p.svg", "--out", "P.SVG", "--max-iter", "3"]) == 2

@@ -291,8 +291,8 @@ def test_a_users_files_in_out_are_refused_at_once_not_replaced(tmp_path):
 
 
 def test_a_capacity_deeper_than_the_85f_holds_gets_a_note_on_its_build_time():
-    """rtl-check --engine-top --capacity 100000 1000000 100000 exported for 8.5 minutes with one line said:
-    a capacity no 85F holds is named as such before its long export and build."""
+    """A capacity with a memory deeper than the largest engine the 85F holds gets a note on its long export and
+    build (rtl-check --engine-top, --engine rtl), said before them; the default and that largest one get none."""
     from golden_model.engine_spec.image import DEFAULT_CAPACITY, LARGEST_85F_CAPACITY, EngineCapacity
     from sim.register_map_export import beyond_the_85f
 
@@ -300,5 +300,6 @@ def test_a_capacity_deeper_than_the_85f_holds_gets_a_note_on_its_build_time():
     for deeper in (EngineCapacity(3073, 18432, 6144), EngineCapacity(1024, 18433, 2048),
                    EngineCapacity(100000, 1000000, 100000)):
         note = beyond_the_85f(deeper)
-        assert note.startswith(f"capacity {deeper.as_option()} is deeper than 3072 18432 6144, the largest the "
-                               "LFE5U-85F holds (docs/synthesis.md): its export and simulation build take long")
+        assert note.startswith(f"capacity {deeper.as_option()} has a memory deeper than 3072 18432 6144's, the "
+                               "largest engine the LFE5U-85F holds in the default formats (docs/synthesis.md): its "
+                               "export and simulation build take long")

@@ -616,8 +616,8 @@ def test_a_seam_left_open_is_named_where_it_cuts_the_surface_and_where_it_breaks
         load_mesh_with_notes(tmp_path / "noisy.obj")
     save_obj(tmp_path / "grid.obj", grid, grid_faces(3, 3))
     assert not [note for note in load_mesh_with_notes(tmp_path / "grid.obj")[1] if "on one another" in note]
-    # two copies of a point joined by an edge (of a face of zero area) are no seam: the KD-tree may list a point's
-    # copy at distance 0 before the point itself, which was counted as the point on itself ("1 vertices")
+    # two copies of a point joined by an edge (of a face of zero area) are no seam, and a point is no copy of
+    # itself, wherever the KD-tree lists it among its neighbours at distance 0
     (tmp_path / "joined.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0.2\nv 1 0 0\nf 1 2 3\nf 2 4 3\nf 1 5 2\n")
     with pytest.raises(MeshError, match=r"joined.obj': face 2 is degenerate \(zero area\) \(file line 8\); remove "
                                         r"the faces of zero area first \(trimesh's update_faces\(nondegenerate_faces"

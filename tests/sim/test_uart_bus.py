@@ -238,7 +238,7 @@ def test_a_network_port_without_a_port_number_is_one_line(url):
 
 
 def test_a_refused_connection_names_the_port_once():
-    """pyserial's message repeats the port ('Could not open port socket://...: ...')."""
+    """The port named once, pyserial's own words about it ('Could not open port socket://...: ...') left out."""
     import socket
 
     with socket.socket() as s:  # a port nothing listens on: bound, never listening
@@ -251,8 +251,8 @@ def test_a_refused_connection_names_the_port_once():
 
 
 def test_a_file_that_is_no_device_is_no_port(tmp_path):
-    """A regular file (the mesh, say) or a directory named as the port: pyserial opened it read-write and said
-    'Inappropriate ioctl for device'."""
+    """A regular file (the mesh, say) or a directory named as the port is no serial device: refused before
+    pyserial opens it (read-write)."""
     mesh = tmp_path / "m.obj"
     mesh.write_text("v 0 0 0\n")
     for path, kind in ((mesh, "regular file"), (tmp_path, "directory")):
@@ -264,8 +264,9 @@ def test_a_file_that_is_no_device_is_no_port(tmp_path):
 
 @pytest.mark.slow  # two CLI runs
 def test_a_missing_port_is_one_line(tmp_path):
-    with pytest.raises(LinkError, match=f"^cannot open the serial port '{tmp_path}/ttyUSB9': "):
+    with pytest.raises(LinkError, match=f"^cannot open the serial port '{tmp_path}/ttyUSB9': ") as missing:
         open_port(str(tmp_path / "ttyUSB9"))
+    assert str(missing.value).count("ttyUSB9") == 1  # (once: pyserial's own words about the port left out)
     proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "board", "--port", str(tmp_path / "ttyUSB9"),
                            "--out", "out.obj"], capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert proc.returncode == 2 and proc.stdout == ""
@@ -346,7 +347,7 @@ def test_a_port_url_that_names_a_log_file_is_refused_and_the_file_left_alone(tmp
 
 @pytest.mark.slow  # a CLI run
 def test_a_loopback_port_is_said_to_echo_not_to_answer_corruptly(tmp_path):
-    """loop:// (or a jumper on the wires) sends the request back: its checksum came out as 'corrupt answer'."""
+    """loop:// (or a jumper on the wires) sends the request back: said as an echo, not as a corrupt answer."""
     proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", "board", "--port", "loop://", "--out", "o.obj"],
                           capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert proc.returncode == 2 and not (tmp_path / "o.obj").exists()
