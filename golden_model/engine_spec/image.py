@@ -41,12 +41,11 @@ from ..fixed.formats_set import FormatSet
 from ..fixed.pipeline import BarrierEntries, NeighbourStream
 from ..mesh import Mesh
 
-__all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "LARGEST_85F_CAPACITY", "WordField", "MemoryLayout", "memory_layouts", "node_word_layout",
-           "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width", "energy_check_width",
-           "EngineImage",
-           "build_image", "decode_nodes", "decode_entries", "decode_triangles", "constant_fault", "ImageRunResult",
-           "run_image", "image_energy_window", "BUS_WORD_BITS", "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS",
-           "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode"]
+__all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "LARGEST_85F_CAPACITY", "WordField", "MemoryLayout", "memory_layouts",
+           "node_word_layout", "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width",
+           "energy_check_width", "EngineImage", "build_image", "decode_nodes", "decode_entries", "decode_triangles",
+           "constant_fault", "ImageRunResult", "run_image", "image_energy_window", "BUS_WORD_BITS", "ITERATION_BITS",
+           "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS", "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode"]
 
 BUS_WORD_BITS = 32
 """Width of one bus word (Wishbone ``dat``)."""
