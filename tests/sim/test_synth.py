@@ -156,7 +156,7 @@ def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_th
     status, out, err = run(["verilog", "--formats", str(formats), "--out", str(out_dir)], capsys)
     assert status == 2
     assert err.splitlines()[-1] == (f"springflat: error: --out '{out_dir}' holds interface.json, which this run would "
-                                    "replace and no earlier run of this command wrote there: move them, or give a new "
+                                    "replace and no earlier run of this command wrote there: move it, or give a new "
                                     "directory")
     assert os.listdir(out_dir) == ["interface.json"] and formats.read_bytes() == before
     # in an earlier bundle's directory, whose files a new bundle replaces: once the components are exported
