@@ -28,8 +28,9 @@ from .graph import component_labels, count_components, parity_roots
 
 __all__ = ["Mesh", "MeshError", "MeshDefect", "InconsistentOrientation", "HoledMesh", "Holes", "fill_holes",
            "boundary_loops", "unique_edges", "outer_loop", "hole_triangles", "loop_length", "loop_signed_area",
-           "oriented_mesh", "orient_consistently", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings", "turned_holes", "overlap_counts",
-           "COORDINATE_LIMIT", "MIN_MESH_SIZE", "printable_name", "one_line", "valid_text"]
+           "oriented_mesh", "orient_consistently", "triangle_areas_3d", "signed_areas_2d", "boundary_crossings",
+           "turned_holes", "overlap_counts", "COORDINATE_LIMIT", "MIN_MESH_SIZE", "printable_name", "one_line",
+           "valid_text"]
 
 #: Relative area below which a triangle counts as degenerate: area ≤ this
 #: times the squared longest edge of the mesh.

@@ -434,13 +434,12 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
     ratio = area_ratio(result.positions, mesh.faces, mesh.face_areas)
     for array in (result.positions, ratio, mesh.vertices, mesh.faces, result.velocities, result.initial_positions):
         array.setflags(write=False)  # the values above are of these arrays, and the result is the Pattern's
-    read = input_files(argparse.Namespace(mesh=os.fspath(V) if named else "",
+    mesh_file = os.fspath(V) if named and not is_builtin(str(os.fspath(V))) else ""  # (a built-in's name: no file)
+    read = input_files(argparse.Namespace(mesh=mesh_file,
                                           init=os.fspath(init) if isinstance(init, (str, Path)) else None,
                                           formats=options.get("formats") if isinstance(options.get("formats"), str)
                                           else None))
-    read_files = tuple(Path(os.path.abspath(path)) for what, path in read  # (a built-in's name is no file it read)
-                       if path is not None and os.path.isfile(path)
-                       and not (what == "the mesh" and is_builtin(str(path))))
+    read_files = tuple(Path(os.path.abspath(path)) for _, path in read if path is not None and os.path.isfile(path))
     return Pattern(result.positions, result.status, result.iterations, final.area_error, final.shape_error,
                    final.folded, ratio, mesh.name, mesh.vertices, mesh.faces, args.init, params, result, read_files)
 
