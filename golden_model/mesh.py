@@ -245,9 +245,7 @@ class Mesh:
 
     def masses(self, density: float) -> np.ndarray:
         """Node masses (eq. 6): ``m_i = (rho/3)·Σ A_t`` over incident triangles."""
-        incident = np.bincount(
-            self.faces.ravel(), weights=np.repeat(self.face_areas, 3), minlength=self.n_vertices
-        )
+        incident = np.bincount(self.faces.ravel(), weights=np.repeat(self.face_areas, 3), minlength=self.n_vertices)
         return density / 3.0 * incident
 
     def auto_density(self) -> float:
