@@ -75,6 +75,10 @@ class ForcePass(wiring.Component):
         :data:`~hdl.layouts.FORCE_NODE_EVENTS`), and take the ``barrier`` input. Every saturation
         stage's overflow bits are added into a small running count that rides with the entry and
         is summed per node like the forces; no stage, no multiply more.
+    delay_lines : :class:`bool`
+        Carry the values that ride along unchanged for several stages in delay lines of
+        distributed RAM, not a register per stage (:class:`~hdl.pipeline.Pipeline`): the same
+        results clock for clock, fewer flip-flops.
 
     Members
     -------
@@ -119,11 +123,13 @@ class ForcePass(wiring.Component):
     has a stage of its own.
     """
 
-    def __init__(self, fs: FormatSet | str, *, energy: bool = False, saturations: bool = False):
+    def __init__(self, fs: FormatSet | str, *, energy: bool = False, saturations: bool = False,
+                 delay_lines: bool = False):
         fs = format_set(fs, "ForcePass")
         if fs.delta.frac_bits > fs.position.frac_bits:
             raise FormatSetNotBuildable(f"delta {fs.delta} cannot have more fraction bits than position {fs.position}")
         self.fs, self.energy, self.saturations = fs, bool(energy), bool(saturations)
+        self.delay_lines = bool(delay_lines)
         super().__init__(self.signature_of(fs, self.energy, self.saturations))
         self.stages = _stage_counts(fs, self.energy, self.saturations)
         if self.stages.barrier > self.stages.rsqrt:
@@ -148,7 +154,7 @@ class ForcePass(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         m.submodules.rsqrt = rsqrt = RsqrtUnit(self.fs)
-        _build(m, self.fs, self.energy, self.saturations, self, rsqrt, platform)
+        _build(m, self.fs, self.energy, self.saturations, self, rsqrt, platform, self.delay_lines)
         return m
 
 
@@ -164,10 +170,11 @@ def _stage_counts(fs: FormatSet, energy: bool, saturations: bool) -> ForcePassSt
     return count_stages(lambda m: _build(m, fs, energy, saturations, ports, rsqrt, None))
 
 
-def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsqrt, platform) -> ForcePassStages:
+def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsqrt, platform,
+           delay_lines: bool = False) -> ForcePassStages:
     """The force pass's datapath into ``m``: ``ports`` (``i``, ``o``, ``half_spring``, ``idle``, with
     ``saturations`` ``barrier``) and the rsqrt unit's ``i``, ``o`` and ``latency``; returns the
-    stages it built."""
+    stages it built (the same with or without ``delay_lines``: :class:`~hdl.pipeline.Pipeline`)."""
     rnd = fs.rounding
     half_spring = Signal.like(ports.half_spring, name="half_spring_r", reset_less=True)
     m.d.sync += half_spring.eq(ports.half_spring)
@@ -191,7 +198,7 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
 
     # ------------------------------------------------------------ front
     current = Signal(vector_layout(fs.position), name="current_position", reset_less=True)
-    front = Pipeline(m, ports.i.valid, land_operands=True, platform=platform)
+    front = Pipeline(m, ports.i.valid, land_operands=True, platform=platform, delay_lines=delay_lines)
     position = vector_layout(fs.position)
     # F0: the beat as it arrived, so that i.valid drives no wide enable (the held P_i's was
     # the critical path once the barrier widened the entry)
@@ -231,7 +238,7 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
 
     # The entry's side data waits for r in a delay line as long as the rsqrt unit; the fold
     # barrier's force is computed there.
-    side = Pipeline(m, front.valid, land_operands=True, platform=platform)
+    side = Pipeline(m, front.valid, land_operands=True, platform=platform, delay_lines=delay_lines)
     # S1: the shortfall T − X and the opposite edge D = Δa − Δb, exact
     live.step(side, "s1", drop=("cross", "threshold", "bx", "by"), short=live["threshold"] - live["cross"],
               ex=live["dx"] - live["bx"], ey=live["dy"] - live["by"])
@@ -261,7 +268,7 @@ def _build(m: Module, fs: FormatSet, energy: bool, saturations: bool, ports, rsq
         live.step(side, f"side{n}")
 
     # ------------------------------------------------------------ back
-    back = Pipeline(m, rsqrt.o.valid, land_operands=True, platform=platform)
+    back = Pipeline(m, rsqrt.o.valid, land_operands=True, platform=platform, delay_lines=delay_lines)
     r = rsqrt.o.payload.rsqrt  # leaves the rsqrt unit's output register
     live.update(events(rsqrt.o.payload.saturated))  # registered by b1's first stage, beside r's use
     # d·r and S·r

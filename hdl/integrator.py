@@ -42,6 +42,10 @@ class Integrator(wiring.Component):
         :data:`~hdl.layouts.INTEGRATOR_EVENTS`: 13). Every saturation stage's overflow bits
         (those of the dynamics in use) are added into a running count that rides with the node;
         one stage more (the last flags' addition), no multiply more.
+    delay_lines : :class:`bool`
+        Carry the values that ride along unchanged for several stages in delay lines of
+        distributed RAM, not a register per stage (:class:`~hdl.pipeline.Pipeline`): the same
+        results clock for clock, fewer flip-flops.
 
     Members
     -------
@@ -89,7 +93,8 @@ class Integrator(wiring.Component):
     multiply's operands land in fabric registers first; one adder, rounding or saturation per stage.
     """
 
-    def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None, saturations: bool = False):
+    def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None, saturations: bool = False,
+                 delay_lines: bool = False):
         fs = format_set(fs, "Integrator")
         if fs.velocity.frac_bits != fs.position.frac_bits:
             raise FormatSetNotBuildable(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
@@ -97,6 +102,7 @@ class Integrator(wiring.Component):
         if side is not None:
             Shape.cast(side)  # a clear error now rather than at elaboration
         self.fs, self.side, self.saturations = fs, side, bool(saturations)
+        self.delay_lines = bool(delay_lines)
         super().__init__(self.signature_of(fs, side, self.saturations))
         self.latency = _stage_count(fs, side, self.saturations)
 
@@ -118,7 +124,7 @@ class Integrator(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        _build(m, self.fs, self.side, self.saturations, self, platform)
+        _build(m, self.fs, self.side, self.saturations, self, platform, self.delay_lines)
         return m
 
 
@@ -129,8 +135,9 @@ def _stage_count(fs: FormatSet, side, saturations: bool) -> int:
     return count_stages(lambda m: _build(m, fs, side, saturations, ports, None))
 
 
-def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -> int:
-    """The integrator's datapath into ``m`` (``ports``: the component's members); returns its stages."""
+def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform, delay_lines: bool = False) -> int:
+    """The integrator's datapath into ``m`` (``ports``: the component's members); returns its stages
+    (the same with or without ``delay_lines``: :class:`~hdl.pipeline.Pipeline`)."""
     rnd = fs.rounding
     # Constants, registered so that they reach the multipliers from registers.
     dt, half_dt_sq, damping = (Signal.like(p, name=f"{n}_r", reset_less=True) for n, p in (
@@ -159,7 +166,7 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform) -
     def events(*flags, **gated):
         """The stage's event values (:class:`~hdl.pipeline.EventCount`; ``{}`` without ``saturations``)."""
         return count(*flags, **gated) if saturations else {}
-    tail = Pipeline(m, ports.i.valid, land_operands=True, platform=platform)
+    tail = Pipeline(m, ports.i.valid, land_operands=True, platform=platform, delay_lines=delay_lines)
     node = ports.i.payload
     # T1: the node as it arrives
     live.step(tail, "t1", f_x=node.force.x, f_y=node.force.y, p_x=node.node.position.x, p_y=node.node.position.y,

@@ -35,8 +35,9 @@ from collections.abc import Callable
 from typing import TypeVar
 
 from amaranth.hdl import Cat, Const, Module, Signal, Value
+from amaranth.lib.memory import Memory
 
-from .dsp import registered_product
+from .dsp import dsp_target, registered_product
 from .fixedpoint import dsp_operands
 
 __all__ = ["LiveValues", "Pipeline", "aligned_add", "count_stages", "join_parts", "reduce_levels"]
@@ -101,22 +102,34 @@ class Pipeline:
     platform
         The elaboration platform; :data:`hdl.dsp.ECP5` makes the multipliers ``MULT18X18D``
         instances with their own registers (:func:`hdl.dsp.registered_product`).
+    delay_lines : bool
+        Let :class:`LiveValues` carry a value that rides along unchanged for :attr:`LUT_DELAY_MIN`
+        stages or more in a delay line of distributed RAM (:meth:`delayed`) instead of a register per
+        stage. The values each stage presents are the same, clock for clock, valid or not; only the
+        flip-flops go (a value carried through a 30-stage datapath is 30 registers, a delay line is a
+        few LUT RAM cells and one register).
     """
 
     #: Stages of a multiply before its adder levels: operands, products (both in the DSP
     #: block), the products landed in fabric registers (one more with ``land_operands``).
     MUL_STAGES = 3
+    #: The shortest delay :meth:`delayed` puts in distributed RAM: a ``TRELLIS_DPR16X4`` holds four
+    #: bits 16 deep and takes three slices' LUTs, against half a slice per bit and clock of registers.
+    LUT_DELAY_MIN = 4
 
     @classmethod
     def mul_stages(cls, land_operands: bool = False) -> int:
         """Stages of a multiply before its adder levels."""
         return cls.MUL_STAGES + int(land_operands)
 
-    def __init__(self, m: Module, valid, *, advance=None, land_operands: bool = False, platform=None):
+    def __init__(self, m: Module, valid, *, advance=None, land_operands: bool = False, platform=None,
+                 delay_lines: bool = False):
         self._m = m
         self._advance = advance
         self.land_operands = land_operands
         self._platform = platform
+        self.delay_lines = bool(delay_lines)
+        self._lines = 0  # delay lines built
         self.valid = valid
         self.stages = 0
 
@@ -149,6 +162,37 @@ class Pipeline:
     def keep(self, value, name: str):
         """``value`` registered with its own shape (a carried value)."""
         return self.reg(value, value.shape(), name)
+
+    def delayed(self, value, clocks: int, name: str) -> Value:
+        """``value`` as it was ``clocks`` loads of this pipeline ago: ``clocks`` registers in a row,
+        or from :attr:`LUT_DELAY_MIN` clocks on a delay line (``name`` names its parts).
+
+        The delay line is a memory of at least ``clocks − 1`` words read asynchronously, a pointer that
+        steps with every load, and one output register: each load writes ``value`` at the pointer and
+        registers the word written ``clocks − 1`` loads before, so the output is exactly the last of
+        ``clocks`` registers in a row (no reset: data registers have none either). On ECP5 the memory
+        is distributed RAM (``ram_style``), whose read is a LUT's delay.
+        """
+        value = Value.cast(value)
+        if clocks < self.LUT_DELAY_MIN or not len(value):
+            for i in range(clocks):
+                value = self.keep(value, f"{name}_d{i + 1}")
+            return value
+        depth = 1 << (clocks - 2).bit_length()  # a power of two of at least clocks − 1 words
+        attrs = {"ram_style": "distributed"} if dsp_target(self._platform) == "ecp5" else {}
+        storage = Memory(shape=value.shape(), depth=depth, init=[], attrs=attrs)
+        self._m.submodules[f"{name}_delay_line"] = storage
+        write, read = storage.write_port(), storage.read_port(domain="comb")
+        # each line's pointer starts elsewhere, so that synthesis cannot merge them into one register
+        # driving every line's RAM cells across the datapath (the words read before the first writes
+        # are the memory's zeros wherever the pointer starts, as a row of registers' would be)
+        pointer = Signal(range(depth), init=self._lines % depth, name=f"{name}_delay_pointer", reset_less=True)
+        self._lines += 1
+        self._m.d.comb += [write.addr.eq(pointer), write.data.eq(value),
+                           write.en.eq(1 if self._advance is None else self._advance),
+                           read.addr.eq(pointer - (clocks - 1))]  # modulo depth
+        self._load(pointer, pointer + 1)
+        return self.reg(read.data, value.shape(), f"{name}_delayed")
 
     def mul(self, a, b, name: str):
         """``a * b`` as 18×18 partial products ``[(product, shift)]``, one DSP block each.
@@ -224,6 +268,16 @@ def _exact_width(value, exact) -> Value:
     return cut.as_signed() if shape.signed else cut
 
 
+class _Held:
+    """A carried value as ``pipe`` registered it in stage ``stage``, not registered since
+    (:class:`LiveValues` on a pipeline with ``delay_lines``)."""
+
+    __slots__ = ("value", "pipe", "stage")
+
+    def __init__(self, value: Value, pipe: Pipeline, stage: int):
+        self.value, self.pipe, self.stage = value, pipe, stage
+
+
 class LiveValues(dict):
     """The values a datapath carries from stage to stage, by name (``{name: value}``).
 
@@ -231,14 +285,57 @@ class LiveValues(dict):
     every carried value not dropped, so a value written once rides along until it is dropped;
     :meth:`multiply` does the same through every stage of :meth:`Pipeline.multiply`. A value
     assigned directly (``live[key] = expression``) is registered by the next stage.
+
+    On a pipeline with ``delay_lines`` a carried value is not registered again in each stage: it is
+    held as registered where it was last new or last read, and reading it (``live[key]``) delays it
+    to the stage that carried last (:meth:`Pipeline.delayed`), as does a stage of another pipeline
+    carrying it. A value dropped unread costs nothing past its last read.
     """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._carried: dict[int, tuple[int, str]] = {}  # id(pipe): (stage, name) of its last carry
+
+    def _now(self, key: str, held: _Held) -> Value:
+        """``held`` as the last stage that carried in its pipeline holds it."""
+        stage, name = self._carried[id(held.pipe)]
+        return held.pipe.delayed(held.value, stage - held.stage, f"{name}_{key}")
 
     def carry(self, pipe: Pipeline, name: str, drop=(), **new):
         """Register, in ``pipe``'s current stage, ``new`` and every carried value not in ``drop``."""
-        carried = [(k, v) for k, v in self.items() if k not in drop and k not in new]
-        registered = {key: pipe.keep(Value.cast(value), f"{name}_{key}") for key, value in carried + list(new.items())}
+        kept = {}
+        for key, value in dict.items(self):
+            if key in drop or key in new:
+                continue
+            if isinstance(value, _Held) and value.pipe is pipe:
+                kept[key] = value  # rides along in its delay
+                continue
+            if isinstance(value, _Held):  # leaving its pipeline: as that pipeline's last stage holds it
+                value = self._now(key, value)
+            kept[key] = pipe.keep(Value.cast(value), f"{name}_{key}")
+        for key, value in new.items():
+            kept[key] = pipe.keep(Value.cast(value), f"{name}_{key}")
+        if pipe.delay_lines:
+            kept = {key: value if isinstance(value, _Held) else _Held(value, pipe, pipe.stages)
+                    for key, value in kept.items()}
+            self._carried[id(pipe)] = (pipe.stages, name)
         self.clear()
-        self.update(registered)
+        self.update(kept)
+
+    def __getitem__(self, key: str):
+        value = super().__getitem__(key)
+        if not isinstance(value, _Held):
+            return value
+        now = self._now(key, value)
+        super().__setitem__(key, _Held(now, value.pipe, self._carried[id(value.pipe)][0]))  # later reads delay from here
+        return now
+
+    def get(self, key: str, default=None):
+        return self[key] if key in self else default
+
+    def pop(self, key: str, *default):
+        value = super().pop(key, *default)
+        return self._now(key, value) if isinstance(value, _Held) else value
 
     def step(self, pipe: Pipeline, name: str, drop=(), **new):
         """One stage of ``pipe`` named ``name`` (see :meth:`carry`)."""
@@ -315,7 +412,8 @@ class EventCount:
         (where a stage of its own would lengthen the block, the last flags are added in theirs)."""
         self._note(flags, gated)
         total = self._count(flags, gated)
-        self.live.pop("ev_pending", None)
+        if "ev_pending" in self.live:  # dropped, not read
+            del self.live["ev_pending"]
         self._pending_gates = []
         return {"ev": total}
 

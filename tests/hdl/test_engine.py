@@ -43,6 +43,7 @@ def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, 
                             pin_registers=pin_registers)
     assert dut.registered_select is registered_select
     assert dut.pin_registers is (latency > 2)
+    assert dut.delay_lines is registered_select  # the force pass's and the integrator's, with the registered select
     result, read_back = run_on_engine(dut, image)
     assert result == expected.status
     assert_same_run(read_back, expected)
@@ -79,14 +80,19 @@ def test_a_preload_leaves_every_block_ram_as_the_bus_load_does():
     assert preloaded == over_the_bus
 
 def test_the_memories_registers_are_checked_and_follow_the_build():
-    """No pin registers by default, with or without the guard; the registered select needs them."""
+    """No pin registers by default, with or without the guard; the registered select needs them. The
+    datapaths' delay lines come with the registered select unless asked for."""
     with warnings.catch_warnings():  # engines built here are never elaborated
         warnings.simplefilter("ignore", UnusedElaboratable)
         assert SpringflatEngine(FS, CAPACITY).pin_registers is False
         assert SpringflatEngine(FS, dataclasses.replace(CAPACITY, guard=False)).pin_registers is False
         assert SpringflatEngine(FS, CAPACITY, pin_registers=True).pin_registers is True
         assert SpringflatEngine(FS, CAPACITY, registered_select=True).pin_registers is True
-        for flag in ("registered_select", "pin_registers"):
+        assert SpringflatEngine(FS, CAPACITY).delay_lines is False
+        assert SpringflatEngine(FS, CAPACITY, registered_select=True).delay_lines is True
+        assert SpringflatEngine(FS, CAPACITY, registered_select=True, delay_lines=False).delay_lines is False
+        assert SpringflatEngine(FS, CAPACITY, delay_lines=True).delay_lines is True
+        for flag in ("registered_select", "pin_registers", "delay_lines"):
             with pytest.raises(TypeError, match=f"{flag} must be a bool or None, not 1"):
                 SpringflatEngine(FS, CAPACITY, **{flag: 1})
         with pytest.raises(ValueError, match="registered_select needs the pin registers"):

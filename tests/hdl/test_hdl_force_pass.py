@@ -92,10 +92,11 @@ def test_golden_energy_partials_are_the_per_entry_definition():
 @pytest.mark.parametrize("preset", PRESETS)
 @pytest.mark.parametrize("barrier", [False, True])
 @pytest.mark.parametrize("energy", [False, True])
-def test_random_nodes_with_input_gaps(preset, barrier, energy):
+@pytest.mark.parametrize("delay_lines", [False, True])
+def test_random_nodes_with_input_gaps(preset, barrier, energy, delay_lines):
     fs = FormatSet.preset(preset)
     stream, positions, _ = random_stream(fs, 50, seed=31 + barrier, barrier=barrier)
-    check_force_pass(ForcePass(fs, energy=energy), fs, stream, positions, seed=5, p_valid=0.7)
+    check_force_pass(ForcePass(fs, energy=energy, delay_lines=delay_lines), fs, stream, positions, seed=5, p_valid=0.7)
 
 
 #: Independent pins of the stages the pass builds: front, barrier side line, rsqrt unit, back
@@ -213,9 +214,9 @@ def node_events(fs, stream, positions, half_spring):
     return np.array(counts)
 
 
-def run_saturations(fs, stream, positions, half_spring, *, barrier_on, beats_stream=None):
+def run_saturations(fs, stream, positions, half_spring, *, barrier_on, beats_stream=None, delay_lines=False):
     """The RTL's per-node ``saturations`` (``beats_stream``: the stream whose triangles the beats carry)."""
-    dut = ForcePass(fs, saturations=True)
+    dut = ForcePass(fs, saturations=True, delay_lines=delay_lines)
     beats = force_beats(dut.i.payload.shape(), beats_stream or stream, positions)
 
     def setup(ctx):
@@ -229,7 +230,8 @@ def run_saturations(fs, stream, positions, half_spring, *, barrier_on, beats_str
 @pytest.mark.parametrize("preset", [pytest.param("default", marks=pytest.mark.slow), "narrow"])  # default: 30-50 s
 @pytest.mark.parametrize("barrier", [False, True])
 @pytest.mark.parametrize("mesh", [False, True], ids=["synthetic", "mesh"])
-def test_saturations_count_every_golden_event(preset, barrier, mesh):
+@pytest.mark.parametrize("delay_lines", [False, True])
+def test_saturations_count_every_golden_event(preset, barrier, mesh, delay_lines):
     """Each node's ``saturations`` is the number of events ``node_terms`` counts for it, and over
     the pass they sum to ``SaturationCounter().total`` (on a mesh: the per-edge path, each edge's
     events counted for both entries). Without the barrier its (random) triangles count nothing."""
@@ -247,7 +249,7 @@ def test_saturations_count_every_golden_event(preset, barrier, mesh):
     filler = NeighbourStream(stream.indptr, stream.neighbour, stream.rest, stream.inv_mass,
                              BarrierEntries(triangles.second, zero, zero))
     out = run_saturations(fs, stream, positions, half_spring, barrier_on=barrier,
-                          beats_stream=None if barrier else filler)
+                          beats_stream=None if barrier else filler, delay_lines=delay_lines)
     assert np.array_equal(out["force"]["x"], want.force[:, 0]) and np.array_equal(out["error_sum"], want.error_sums)
     per_node = node_events(fs, stream, positions, half_spring)
     assert per_node.sum() == counter.total

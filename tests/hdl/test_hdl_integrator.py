@@ -86,13 +86,15 @@ def check_integrator(dut, fs, nodes, constants, momentum=False, scale_shift=0, p
 
 @pytest.mark.parametrize("preset", PRESETS)
 @pytest.mark.parametrize("momentum", [False, True])
-def test_random_nodes_with_input_gaps(preset, momentum):
+@pytest.mark.parametrize("delay_lines", [False, True])
+def test_random_nodes_with_input_gaps(preset, momentum, delay_lines):
     fs = FormatSet.preset(preset)
     constants = random_constants(fs, 7)
     if momentum:
         constants = NodeConstants(int(0.7 * (1 << fs.dt.frac_bits)), 0, constants.half_spring, 1 << fs.damping.frac_bits)
-    check_integrator(Integrator(fs, side=SIDE), fs, random_nodes(fs, 300, seed=8 + momentum), constants,
-                     momentum=momentum, seed=9, p_valid=0.6)
+    dut = Integrator(fs, side=SIDE, delay_lines=delay_lines)
+    check_integrator(dut, fs, random_nodes(fs, 300, seed=8 + momentum), constants, momentum=momentum, seed=9,
+                     p_valid=0.6)
 
 
 #: Independent pins of the stages the integrator builds (NodeUpdate's tail_stages).
@@ -165,9 +167,9 @@ def golden_events(fs, nodes, constants, momentum):
     return count(slice(None)), np.array([count(slice(i, i + 1)).total for i in range(n)])
 
 
-def integrator_saturations(fs, nodes, constants, momentum, **kw):
+def integrator_saturations(fs, nodes, constants, momentum, delay_lines=False, **kw):
     """The RTL's per-node ``saturations`` (a unit with ``saturations=True``, checked bit-exact first)."""
-    dut = Integrator(fs, side=SIDE, saturations=True)
+    dut = Integrator(fs, side=SIDE, saturations=True, delay_lines=delay_lines)
     n = len(nodes["inside"])
     run = check_integrator(dut, fs, dict(nodes, side=np.arange(n)), constants, momentum=momentum,
                            seed=12, p_valid=0.8, **kw)
@@ -188,7 +190,8 @@ REACHABLE = {
 
 @pytest.mark.parametrize("case", REACHABLE)
 @pytest.mark.parametrize("momentum", [False, True])
-def test_saturations_count_every_golden_event(case, momentum):
+@pytest.mark.parametrize("delay_lines", [False, True])
+def test_saturations_count_every_golden_event(case, momentum, delay_lines):
     """Each node's ``saturations`` is the number of events the golden model counts for it
     (``integrate`` or ``integrate_momentum``, and with momentum ``node_power``); over the pass they sum to
     ``SaturationCounter().total``."""
@@ -200,7 +203,7 @@ def test_saturations_count_every_golden_event(case, momentum):
         constants = NodeConstants(fs.dt.raw_max, fs.half_dt_sq.raw_max, 0, fs.damping.raw_max)
     counter, per_node = golden_events(fs, nodes, constants, momentum)
     assert per_node.sum() == counter.total
-    got = integrator_saturations(fs, nodes, constants, momentum)
+    got = integrator_saturations(fs, nodes, constants, momentum, delay_lines)
     bad = np.flatnonzero(got != per_node)
     assert bad.size == 0, f"{bad.size} nodes miscounted; first {int(bad[0])}: rtl {int(got[bad[0]])} golden " \
                           f"{int(per_node[bad[0]])}"
