@@ -7,7 +7,8 @@ The workload is ``bench_engine_sim.py``'s: ``dome_grid(45)`` (2,025 vertices, 11
 triangles), the paper's dynamics with the variable step from a Tutte layout, tolerances 0 so the run goes to
 ``N_max``, the engine at ``DEFAULT_CAPACITY`` behind the host driver (``sim/engine_run.py``). Each build is a
 key of ``sim.engine_run.VERILATOR_BUILDS`` (one change against ``gpi-clock`` each, ``default`` the harness's own
-clock; ``yosys-opt`` is ``default`` on Yosys's optimisation of the netlist, ``YOSYS_BUILDS``); ``pgo`` first
+clock; ``yosys-opt`` is ``default`` on Yosys's optimisation of the netlist, ``YOSYS_BUILDS``; ``delay-lines``
+``default`` on the engine built with the datapaths' delay lines, ``ENGINE_OPTION_BUILDS``); ``pgo`` first
 compiles ``gpi-clock`` with ``-fprofile-generate`` and trains it on another mesh (``dome_grid(24)``, 10
 iterations), then compiles it again with the profile. Every build is built (and checked bit-exact) once, then the builds
 are measured round-robin ``--repeats`` times, so a change in the machine's load hits them alike; the table

@@ -2,7 +2,7 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/ff_budget.py [--capacity V E T] [--formats default]
+    .venv/bin/python benchmarks/ff_budget.py [--capacity V E T] [--formats default] [--delay-lines on|off]
 
 Elaborates the engine for ECP5 (``DP16KD``, ``MULT18X18D`` and the ``keep`` pin registers as ``synth`` makes
 them), converts it to RTLIL and has Yosys count every flip-flop bit per module after ``proc`` and
@@ -10,6 +10,8 @@ them), converts it to RTLIL and has Yosys count every flip-flop bit per module a
 18432 / 6144: 63,012 and 42,339 flip-flops after it, against 68,532 and 46,937 here). Units are the
 engine's submodules with their own submodules folded in. About twenty seconds per build. The last row
 adds a second lane's units (:data:`LANE_UNITS`) to the total: a sum of the measured units, not a build.
+``--delay-lines`` builds the force pass and the integrator with or without their delay lines
+(``SpringflatEngine(delay_lines=...)``; by default as the engine chooses for the capacity).
 docs/synthesis.md quotes the table: the guarded engine above ``DEFAULT_CAPACITY`` is placed short of
 its clock with three-quarters of the 85F's flip-flops in use.
 """
@@ -53,14 +55,15 @@ def ff_bits_per_module(stat: str) -> dict[str, int]:
     return bits
 
 
-def ff_bits_per_unit(fs: FormatSet, capacity: EngineCapacity) -> dict[str, int]:
+def ff_bits_per_unit(fs: FormatSet, capacity: EngineCapacity, delay_lines: bool | None = None) -> dict[str, int]:
     """Flip-flop bits per unit (the engine's first level of submodules, ``(engine)`` for its own)."""
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     from amaranth.back import rtlil
 
     with tempfile.TemporaryDirectory() as tmp:
         il, stat = Path(tmp) / "engine.il", Path(tmp) / "stat.txt"
-        il.write_text(rtlil.convert(SpringflatEngine(fs, capacity), name=TOP, platform=ECP5))
+        engine = SpringflatEngine(fs, capacity, delay_lines=delay_lines)
+        il.write_text(rtlil.convert(engine, name=TOP, platform=ECP5))
         # YoWASP's Yosys sees the working directory, not absolute paths
         status, log = run_tool(TOOL["yosys"], ["-q", "-p", f"read_rtlil {il.name}; hierarchy -top {TOP}; proc; "
                                                f"opt_clean; tee -q -o {stat.name} stat -width"], Path(tmp), "yosys.log")
@@ -79,9 +82,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--capacity", nargs=3, type=int, metavar=("V", "E", "T"),
                         default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles))
     parser.add_argument("--formats", default="default", help="format set preset")
+    parser.add_argument("--delay-lines", choices=("on", "off"),
+                        help="the datapaths' delay lines (default: as the engine builds them at this capacity)")
     args = parser.parse_args(argv)
     fs = FormatSet.preset(args.formats)
-    builds = {guard: ff_bits_per_unit(fs, EngineCapacity(*args.capacity, guard)) for guard in (True, False)}
+    lines = None if args.delay_lines is None else args.delay_lines == "on"
+    builds = {guard: ff_bits_per_unit(fs, EngineCapacity(*args.capacity, guard), lines) for guard in (True, False)}
     units = sorted(builds[True], key=lambda u: -builds[True][u])
     print(f"| unit | with the guard | without the guard |  (capacity {' / '.join(map(str, args.capacity))})")
     print("|---|---|---|")

@@ -36,7 +36,8 @@ __all__ = ["VERILATOR_SPEED_FLAGS", "VERILATOR_MAKE_FLAGS", "ICARUS_FLAGS", "Eng
            "engine_flatten_result",
            "summary_line",
            "simulation_harness", "top_ports", "build_flags", "VERILATOR_BUILDS", "prepare_pgo",
-           "harness_ceiling", "INTERNAL_CLOCK_BUILDS", "YOSYS_BUILDS", "yosys_optimised"]
+           "harness_ceiling", "INTERNAL_CLOCK_BUILDS", "YOSYS_BUILDS", "yosys_optimised",
+           "ENGINE_OPTION_BUILDS"]
 
 #: Verilator flags for a whole run. cocotb's runner makes every internal signal public
 #: (``--public-flat-rw``): a VPI handle per signal (a symbol table that takes g++ many minutes) and
@@ -92,8 +93,14 @@ VERILATOR_BUILDS = {
 YOSYS_BUILDS = {"yosys-opt": f"hierarchy -top {ENGINE_MODULE}; proc; flatten; opt -full; wreduce; opt_clean -purge"}
 VERILATOR_BUILDS.update({name: VERILATOR_BUILDS["default"] for name in YOSYS_BUILDS})
 
+#: Builds that simulate another elaboration of the engine (keyword arguments of
+#: :class:`~hdl.engine.SpringflatEngine`) with ``default``'s flags and clock: ``delay-lines``, the datapaths' delay
+#: lines at a capacity whose build has none (``docs/verification.md``).
+ENGINE_OPTION_BUILDS = {"delay-lines": {"delay_lines": True}}
+VERILATOR_BUILDS.update({name: VERILATOR_BUILDS["default"] for name in ENGINE_OPTION_BUILDS})
+
 #: Builds whose harness makes its own clock (:func:`simulation_harness`); the bench then starts none.
-INTERNAL_CLOCK_BUILDS = frozenset({"default", "internal-clock", "inline-all", *YOSYS_BUILDS})
+INTERNAL_CLOCK_BUILDS = frozenset({"default", "internal-clock", "inline-all", *YOSYS_BUILDS, *ENGINE_OPTION_BUILDS})
 
 
 def yosys_optimised(exported: Path, script: str) -> Path:
@@ -168,10 +175,13 @@ def simulation_harness(verilog: str, internal_clock: bool = False) -> str:
             f"endmodule\n")
 
 
-def engine_directory(fs: FormatSet, capacity: EngineCapacity, dsp: str | None = None) -> Path:
-    """Where :func:`engine_sources` exports the engine for ``fs``, ``capacity`` and the Verilog flavour ``dsp``:
-    one directory per distinct Verilog (a build without the step guard is another design at the same depths)."""
-    return cocotb_support.BUILD_ROOT / _formats_key(fs, dsp) / "engine" / capacity_key(capacity)
+def engine_directory(fs: FormatSet, capacity: EngineCapacity, dsp: str | None = None,
+                     options: dict | None = None) -> Path:
+    """Where :func:`engine_sources` exports the engine for ``fs``, ``capacity``, the Verilog flavour ``dsp`` and
+    the engine's build ``options``: one directory per distinct Verilog (a build without the step guard is another
+    design at the same depths)."""
+    key = capacity_key(capacity) + "".join(f"-{name}-{value}" for name, value in sorted((options or {}).items()))
+    return cocotb_support.BUILD_ROOT / _formats_key(fs, dsp) / "engine" / key
 
 
 def capacity_key(capacity: EngineCapacity) -> str:
@@ -198,7 +208,8 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
         raise SimulatorError(f"no simulation model for DSP flavour {dsp!r} (choose from {', '.join(PRIMITIVE_MODELS)})")
     if dsp is not None and build in YOSYS_BUILDS:  # (the vendor primitives have no Verilog for Yosys's hierarchy)
         raise ValueError(f"build {build!r} runs the generic netlist only, not the {dsp} one")
-    directory = engine_directory(fs, capacity, dsp)
+    options = ENGINE_OPTION_BUILDS.get(build) if simulator == "verilator" else None
+    directory = engine_directory(fs, capacity, dsp, options)
     exported = directory / f"{ENGINE_MODULE}.v"
     # one source directory per simulator (and build flags): the runner rebuilds on a source change only
     flags = build_flags(simulator, build)
@@ -210,7 +221,7 @@ def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "ve
     copy = directory / f"{simulator}-source-{key}"
     with build_lock(directory):
         if not exported.exists():
-            export_engine(fs, capacity, directory, platform=DspPlatform(dsp) if dsp else None)
+            export_engine(fs, capacity, directory, platform=DspPlatform(dsp) if dsp else None, engine_options=options)
         copy.mkdir(exist_ok=True)
         text = exported.read_text()
         harness = simulation_harness(text, internal_clock=simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS)
