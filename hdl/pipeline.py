@@ -129,7 +129,6 @@ class Pipeline:
         self.land_operands = land_operands
         self._platform = platform
         self.delay_lines = bool(delay_lines)
-        self._lines = 0  # delay lines built
         self.valid = valid
         self.stages = 0
 
@@ -167,11 +166,14 @@ class Pipeline:
         """``value`` as it was ``clocks`` loads of this pipeline ago: ``clocks`` registers in a row,
         or from :attr:`LUT_DELAY_MIN` clocks on a delay line (``name`` names its parts).
 
-        The delay line is a memory of at least ``clocks − 1`` words read asynchronously, a pointer that
-        steps with every load, and one output register: each load writes ``value`` at the pointer and
-        registers the word written ``clocks − 1`` loads before, so the output is exactly the last of
-        ``clocks`` registers in a row (no reset: data registers have none either). On ECP5 the memory
-        is distributed RAM (``ram_style``), whose read is a LUT's delay.
+        The delay line is a memory of at least ``clocks − 1`` words read asynchronously, two pointers
+        that step with every load, ``clocks − 1`` words apart, and one output register: each load writes
+        ``value`` at the write pointer and registers the word at the read pointer, written ``clocks − 1``
+        loads before, so the output is exactly the last of ``clocks`` registers in a row (no reset: data
+        registers have none either; the words read before the first writes are the memory's zeros, as
+        the row's registers start at zero). The read address is a register, so the read path is a
+        flip-flop, the RAM's read and the output register. On ECP5 the memory is distributed RAM
+        (``ram_style``), whose read is a LUT's delay.
         """
         value = Value.cast(value)
         if clocks < self.LUT_DELAY_MIN or not len(value):
@@ -183,15 +185,12 @@ class Pipeline:
         storage = Memory(shape=value.shape(), depth=depth, init=[], attrs=attrs)
         self._m.submodules[f"{name}_delay_line"] = storage
         write, read = storage.write_port(), storage.read_port(domain="comb")
-        # each line's pointer starts elsewhere, so that synthesis cannot merge them into one register
-        # driving every line's RAM cells across the datapath (the words read before the first writes
-        # are the memory's zeros wherever the pointer starts, as a row of registers' would be)
-        pointer = Signal(range(depth), init=self._lines % depth, name=f"{name}_delay_pointer", reset_less=True)
-        self._lines += 1
-        self._m.d.comb += [write.addr.eq(pointer), write.data.eq(value),
-                           write.en.eq(1 if self._advance is None else self._advance),
-                           read.addr.eq(pointer - (clocks - 1))]  # modulo depth
-        self._load(pointer, pointer + 1)
+        write_at = Signal(range(depth), name=f"{name}_delay_write", reset_less=True)
+        read_at = Signal(range(depth), init=(1 - clocks) % depth, name=f"{name}_delay_read", reset_less=True)
+        self._m.d.comb += [write.addr.eq(write_at), write.data.eq(value), read.addr.eq(read_at),
+                           write.en.eq(1 if self._advance is None else self._advance)]
+        self._load(write_at, write_at + 1)
+        self._load(read_at, read_at + 1)
         return self.reg(read.data, value.shape(), f"{name}_delayed")
 
     def mul(self, a, b, name: str):
@@ -269,13 +268,13 @@ def _exact_width(value, exact) -> Value:
 
 
 class _Held:
-    """A carried value as ``pipe`` registered it in stage ``stage``, not registered since
+    """A carried value as ``pipe``'s ``carry``-th carry registered it, not registered since
     (:class:`LiveValues` on a pipeline with ``delay_lines``)."""
 
-    __slots__ = ("value", "pipe", "stage")
+    __slots__ = ("value", "pipe", "carry")
 
-    def __init__(self, value: Value, pipe: Pipeline, stage: int):
-        self.value, self.pipe, self.stage = value, pipe, stage
+    def __init__(self, value: Value, pipe: Pipeline, carry: int):
+        self.value, self.pipe, self.carry = value, pipe, carry
 
 
 class LiveValues(dict):
@@ -288,21 +287,24 @@ class LiveValues(dict):
 
     On a pipeline with ``delay_lines`` a carried value is not registered again in each stage: it is
     held as registered where it was last new or last read, and reading it (``live[key]``) delays it
-    to the stage that carried last (:meth:`Pipeline.delayed`), as does a stage of another pipeline
-    carrying it. A value dropped unread costs nothing past its last read.
+    by the carries since (:meth:`Pipeline.delayed`), as does a stage of another pipeline carrying
+    it: what the register built by the last carry would hold. A value dropped unread costs nothing
+    past its last read. (Only ``[]``, :meth:`get` and :meth:`pop` read; the other dict views show
+    the held values as they are.)
     """
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self._carried: dict[int, tuple[int, str]] = {}  # id(pipe): (stage, name) of its last carry
+        self._last_carry: dict[Pipeline, tuple[int, str]] = {}  # per pipeline: its carries, the last one's name
 
-    def _now(self, key: str, held: _Held) -> Value:
-        """``held`` as the last stage that carried in its pipeline holds it."""
-        stage, name = self._carried[id(held.pipe)]
-        return held.pipe.delayed(held.value, stage - held.stage, f"{name}_{key}")
+    def _at_last_carry(self, key: str, held: _Held) -> Value:
+        """``held`` as the register of its pipeline's last carry would hold it."""
+        carries, name = self._last_carry[held.pipe]
+        return held.pipe.delayed(held.value, carries - held.carry, f"{name}_{key}")
 
     def carry(self, pipe: Pipeline, name: str, drop=(), **new):
-        """Register, in ``pipe``'s current stage, ``new`` and every carried value not in ``drop``."""
+        """Register, in ``pipe``'s current stage, ``new`` and every carried value not in ``drop``
+        (with ``delay_lines``: hold them, see above)."""
         kept = {}
         for key, value in dict.items(self):
             if key in drop or key in new:
@@ -310,15 +312,16 @@ class LiveValues(dict):
             if isinstance(value, _Held) and value.pipe is pipe:
                 kept[key] = value  # rides along in its delay
                 continue
-            if isinstance(value, _Held):  # leaving its pipeline: as that pipeline's last stage holds it
-                value = self._now(key, value)
+            if isinstance(value, _Held):  # leaving its pipeline: as that pipeline's last carry holds it
+                value = self._at_last_carry(key, value)
             kept[key] = pipe.keep(Value.cast(value), f"{name}_{key}")
         for key, value in new.items():
             kept[key] = pipe.keep(Value.cast(value), f"{name}_{key}")
         if pipe.delay_lines:
-            kept = {key: value if isinstance(value, _Held) else _Held(value, pipe, pipe.stages)
+            carries = self._last_carry.get(pipe, (0, ""))[0] + 1
+            kept = {key: value if isinstance(value, _Held) else _Held(value, pipe, carries)
                     for key, value in kept.items()}
-            self._carried[id(pipe)] = (pipe.stages, name)
+            self._last_carry[pipe] = (carries, name)
         self.clear()
         self.update(kept)
 
@@ -326,8 +329,8 @@ class LiveValues(dict):
         value = super().__getitem__(key)
         if not isinstance(value, _Held):
             return value
-        now = self._now(key, value)
-        super().__setitem__(key, _Held(now, value.pipe, self._carried[id(value.pipe)][0]))  # later reads delay from here
+        now = self._at_last_carry(key, value)
+        super().__setitem__(key, _Held(now, value.pipe, self._last_carry[value.pipe][0]))  # later reads delay from here
         return now
 
     def get(self, key: str, default=None):
@@ -335,7 +338,7 @@ class LiveValues(dict):
 
     def pop(self, key: str, *default):
         value = super().pop(key, *default)
-        return self._now(key, value) if isinstance(value, _Held) else value
+        return self._at_last_carry(key, value) if isinstance(value, _Held) else value
 
     def step(self, pipe: Pipeline, name: str, drop=(), **new):
         """One stage of ``pipe`` named ``name`` (see :meth:`carry`)."""

@@ -30,7 +30,7 @@ def _run(m: Module, inputs: dict, outputs: dict, feed: dict[str, list[int]], clo
 
 @pytest.mark.parametrize("stalls", [False, True], ids=["free-running", "stalling"])
 def test_a_delay_line_is_a_row_of_registers(stalls):
-    """Every length from 1 to 40 clocks (registers below ``LUT_DELAY_MIN``, one and two 16-word RAMs above),
+    """Every length from 1 to 40 clocks (registers below ``LUT_DELAY_MIN``, memories of 4 to 64 words above),
     signed and unsigned, with ``advance`` low at random: each delay line shows what the same number of
     registers in a row shows, from the first clock on."""
     rng = np.random.default_rng(7)
@@ -39,7 +39,7 @@ def test_a_delay_line_is_a_row_of_registers(stalls):
     data, advance = Signal(signed(13)), Signal(init=1)
     outputs = {}
     for n in range(1, 41):
-        lines = Pipeline(m, Signal(), advance=advance if stalls else None, delay_lines=True)
+        lines = Pipeline(m, Signal(), advance=advance if stalls else None)
         registers = Pipeline(m, Signal(), advance=advance if stalls else None)
         outputs[f"line{n}"] = lines.delayed(data, n, f"line{n}")
         row = data
@@ -55,9 +55,10 @@ def test_a_delay_line_is_a_row_of_registers(stalls):
 
 
 def test_live_values_carry_through_delay_lines_as_through_registers():
-    """A value carried through 20 stages, read in the middle and at the end, a second one new in stage 5
-    and a third dropped unread: with delay lines each read gives what the register-per-stage build gives,
-    and the build has memories only with delay lines (the ECP5 form asks for distributed RAM)."""
+    """A value carried through 20 stages, read in the middle and at the end, a second one new in stage 6
+    and a third dropped unread, and a stage that carries nothing: with delay lines each read gives what the
+    register-per-carry build gives (the delays count carries, not stages), and the build has memories
+    only with delay lines."""
     rng = np.random.default_rng(3)
     clocks = 120
     builds = {}
@@ -69,6 +70,7 @@ def test_live_values_carry_through_delay_lines_as_through_registers():
         for k in range(2, 6):
             live.step(pipe, f"s{k}")
         live.step(pipe, "s6", drop=("dropped",), b=b + live["a"])  # a read after five stages
+        pipe.stage("bare")  # (a stage whose registers are not the live values')
         for k in range(7, 21):
             live.step(pipe, f"s{k}")
         builds[lines] = (m, {"a": a, "b": b}, {"a_end": live["a"], "b_end": live["b"]})
