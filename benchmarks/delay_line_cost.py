@@ -8,7 +8,7 @@ Maps each unit as the engine builds it (``ForcePass(energy=True, saturations=Tru
 ``Integrator(saturations=True)``) with Yosys's ``synth_ecp5``, once with a register per stage and once with
 ``delay_lines=True`` (``hdl.pipeline.Pipeline.delayed``), and prints the cells that differ: flip-flops
 (``TRELLIS_FF``), LUT4 (carry cells apart), the distributed RAM's ``TRELLIS_DPR16X4`` and the multipliers (which
-must not change). About half a minute. docs/engine.md quotes the table.
+must not change). About a minute. docs/engine.md quotes the table.
 """
 
 from __future__ import annotations
