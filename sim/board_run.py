@@ -153,6 +153,10 @@ def add_board_options(parser) -> None:
                              f"{DEFAULT_BAUD})")
 
 
+#: pyserial URLs whose link has no line rate: ``--baud`` does nothing there (``rfc2217://`` sets the far port's).
+UNTIMED_LINKS = ("socket://", "loop://")
+
+
 def board_engine(formats: FormatSet, port: str | None, baud: int | None):
     """``--engine board``: the engine function ``cmd_flatten`` calls; every failure is one line (``UserError``).
     ``baud``: ``None`` for :data:`~golden_model.engine_spec.uart_protocol.DEFAULT_BAUD`."""
@@ -167,6 +171,9 @@ def board_engine(formats: FormatSet, port: str | None, baud: int | None):
 
     if not port:
         raise UserError("--engine board needs --port DEVICE (the board's serial port, e.g. /dev/ttyUSB0)")
+    if baud is not None and port.startswith(UNTIMED_LINKS):
+        print_note(f"--baud {baud} has no effect on a {port.split('://')[0]}:// link, which carries bytes at no line "
+                   "rate; the board's UART runs at the rate its bitstream was built for")
     baud = DEFAULT_BAUD if baud is None else baud
     if baud <= 0:
         raise UserError(f"--baud must be a positive number of bits per second, not {baud}")
@@ -177,7 +184,7 @@ def board_engine(formats: FormatSet, port: str | None, baud: int | None):
             link = open_port(port, baud)
         except EngineError as exc:
             raise UserError(str(exc)) from None
-        speed = "" if port.startswith(("socket://", "loop://")) else f" at {baud} baud"  # (no baud on those links)
+        speed = "" if port.startswith(UNTIMED_LINKS) else f" at {baud} baud"
         print(f"springflat: board: loading the mesh over {port}{speed} and running the flattening ...",
               file=sys.stderr)
         try:

@@ -18,7 +18,7 @@ from golden_model.engine_spec.register_map import MAGIC, RegisterMap
 from sim.generate import dome_grid
 from sim.layouts import initial_layout
 from golden_model.params import FlattenParams
-from sim.board_run import board_capacity, run_on_board
+from sim.board_run import board_capacity, board_engine, run_on_board
 from sim.engine_driver import BusError, DriverError, EngineDriver, ModelBus
 from sim.uart_bus import LinkError, UartBus, open_port
 from support import SPRINGFLAT
@@ -235,6 +235,19 @@ def test_a_network_port_without_a_port_number_is_one_line(url):
     with pytest.raises(LinkError, match=rf"^cannot open the serial port '{url}': a {scheme}:// URL needs a port number "
                                         rf"\({scheme}://HOST:PORT\)$"):
         open_port(url)
+
+
+@pytest.mark.parametrize("port, baud, noted", [("socket://127.0.0.1:9", 9600, True), ("loop://", 9600, True),
+                                               ("socket://127.0.0.1:9", None, False), ("/dev/ttyUSB7", 9600, False),
+                                               ("rfc2217://127.0.0.1:9", 9600, False)])
+def test_a_baud_on_a_link_without_a_line_rate_gets_a_note(capsys, port, baud, noted):
+    """--baud on a socket:// or loop:// link (a network socket, pyserial's loopback) sets nothing: a note says
+    so (rfc2217:// does set the far port's rate). Nothing is opened until the engine runs."""
+    board_engine(FormatSet.preset("default"), port, baud)
+    err = capsys.readouterr().err
+    assert (err == f"springflat: note: --baud 9600 has no effect on a {port.split('://')[0]}:// link, which carries "
+                   "bytes at no line rate; the board's UART runs at the rate its bitstream was built for\n") if noted \
+        else err == ""
 
 
 def test_a_refused_connection_names_the_port_once():
