@@ -40,8 +40,22 @@ def test_the_internal_clock_harness():
     assert "  initial clk = 1'b0;\n  always #5 clk = ~clk;\n" in own
     for text in (plain, own):
         assert ".clk(clk)" in text and ".rst(rst_q)" in text and "always @(posedge clk) rst_q <= rst;" in text
-    # the trials of the default: its clock, and its flags on Yosys's netlist
-    assert INTERNAL_CLOCK_BUILDS == {"default", "internal-clock", "inline-all", "yosys-opt"}
+    # the trials of the default: its clock, and its flags on Yosys's netlist or on another build of the engine
+    assert INTERNAL_CLOCK_BUILDS == {"default", "internal-clock", "inline-all", "yosys-opt", "delay-lines"}
+
+
+def test_an_engine_option_build_is_defaults_flags_on_another_export():
+    """``delay-lines`` compiles the engine built with ``delay_lines=True`` with ``default``'s flags, exported to a
+    directory of its own beside the default build's (the same format set and capacity)."""
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
+    from golden_model.fixed import FormatSet
+    from sim.engine_run import ENGINE_OPTION_BUILDS, engine_directory
+
+    assert build_flags("verilator", "delay-lines") == VERILATOR_BUILDS["default"]
+    assert ENGINE_OPTION_BUILDS["delay-lines"] == {"delay_lines": True}
+    fs = FormatSet.load("default")
+    plain, other = (engine_directory(fs, DEFAULT_CAPACITY, options=o) for o in (None, ENGINE_OPTION_BUILDS["delay-lines"]))
+    assert other.parent == plain.parent and other.name == f"{plain.name}-delay_lines-True"
 
 
 def test_the_yosys_build_is_defaults_flags_on_yosys_s_optimised_netlist():
