@@ -2,20 +2,19 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/ff_budget.py [--capacity V E T] [--formats default] [--delay-lines on|off]
+    .venv/bin/python benchmarks/ff_budget.py [--capacity V E T] [--formats default] [--delay-lines]
 
 Elaborates the engine for ECP5 (``DP16KD``, ``MULT18X18D`` and the ``keep`` pin registers as ``synth`` makes
 them), converts it to RTLIL and has Yosys count every flip-flop bit per module after ``proc`` and
 ``opt_clean``, before ``synth_ecp5``'s optimisation, which merges and removes about a tenth (at 3072 /
-18432 / 6144 with ``--delay-lines off``: 63,012 and 42,339 flip-flops after it, against 68,532 and 46,937
-here; with the guard and the delay lines, the build there: 50,281 against 55,265). Units are the
+18432 / 6144: 63,012 and 42,339 flip-flops after it, against 68,532 and 46,937 here; with the guard and
+``--delay-lines``: 50,281 against 55,265). Units are the
 engine's submodules with their own submodules folded in. About twenty seconds per build. The last row
 adds a second lane's units (:data:`LANE_UNITS`) to the total: a sum of the measured units, not a build.
-``--delay-lines`` builds the force pass and the integrator with or without their delay lines
-(``SpringflatEngine(delay_lines=...)``; by default as the engine chooses for the capacity).
+``--delay-lines`` builds the force pass and the integrator with their delay lines (``SpringflatEngine(delay_lines=True)``,
+a build option).
 docs/synthesis.md quotes the table: the guarded engine above ``DEFAULT_CAPACITY`` is placed short of
-its clock with three-quarters of the 85F's flip-flops in use, and with three-fifths once the delay lines
-take the datapaths' carried values.
+its clock with three-quarters of the 85F's flip-flops in use, and with three-fifths with the delay lines.
 """
 
 from __future__ import annotations
@@ -57,7 +56,7 @@ def ff_bits_per_module(stat: str) -> dict[str, int]:
     return bits
 
 
-def ff_bits_per_unit(fs: FormatSet, capacity: EngineCapacity, delay_lines: bool | None = None) -> dict[str, int]:
+def ff_bits_per_unit(fs: FormatSet, capacity: EngineCapacity, delay_lines: bool = False) -> dict[str, int]:
     """Flip-flop bits per unit (the engine's first level of submodules, ``(engine)`` for its own)."""
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     from amaranth.back import rtlil
@@ -84,12 +83,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--capacity", nargs=3, type=int, metavar=("V", "E", "T"),
                         default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles))
     parser.add_argument("--formats", default="default", help="format set preset")
-    parser.add_argument("--delay-lines", choices=("on", "off"),
-                        help="the datapaths' delay lines (default: as the engine builds them at this capacity)")
+    parser.add_argument("--delay-lines", action="store_true", help="the datapaths' delay lines (a build option)")
     args = parser.parse_args(argv)
     fs = FormatSet.preset(args.formats)
-    lines = None if args.delay_lines is None else args.delay_lines == "on"
-    builds = {guard: ff_bits_per_unit(fs, EngineCapacity(*args.capacity, guard), lines) for guard in (True, False)}
+    builds = {guard: ff_bits_per_unit(fs, EngineCapacity(*args.capacity, guard), args.delay_lines)
+              for guard in (True, False)}
     units = sorted(builds[True], key=lambda u: -builds[True][u])
     print(f"| unit | with the guard | without the guard |  (capacity {' / '.join(map(str, args.capacity))})")
     print("|---|---|---|")

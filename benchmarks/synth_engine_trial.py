@@ -1,12 +1,12 @@
-"""A trial place and route of the guarded engine at ``DEFAULT_CAPACITY`` built with one of its build options:
+"""A trial place and route of the guarded engine (at ``DEFAULT_CAPACITY`` unless ``--capacity``) built with one of
+its build options:
 every block RAM input in a register of its own and the banks' select registered (``--registered-select``:
 ``SpringflatEngine(registered_select=True)``, the build the engine takes by itself above 2,048 vertices), the
 block RAM inputs' registers alone (``--pin-registers``), or the force pass's and the integrator's carried values
-in delay lines of distributed RAM (``--delay-lines``: ``SpringflatEngine(delay_lines=True)``, also the engine's
-own choice above 2,048 vertices).
+in delay lines of distributed RAM (``--delay-lines``: ``SpringflatEngine(delay_lines=True)``).
 
 Usage: .venv/bin/python benchmarks/synth_engine_trial.py (--registered-select | --pin-registers | --delay-lines)
-       [--seed 1] [--router auto] [--out DIR]
+       [--capacity V E T] [--seed 1] [--router auto] [--out DIR]
 
 Runs ``springflat synth --target ecp5 --formats default --components springflat_engine --freq 125`` on
 that build and prints the engine's Fmax and critical path. It takes 30-60 minutes on this machine, so it
@@ -21,6 +21,7 @@ import json
 import sys
 from pathlib import Path
 
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from golden_model.fixed import FormatSet
 from sim.clock import ENGINE_TARGET_MHZ
 from sim.synth import DEFAULT_ROUTER, ROUTERS, run_synthesis
@@ -34,6 +35,8 @@ def main() -> int:
     chosen = parser.add_mutually_exclusive_group(required=True)
     for option in OPTIONS:
         chosen.add_argument(f"--{option.replace('_', '-')}", dest="option", action="store_const", const=option)
+    parser.add_argument("--capacity", nargs=3, type=int, metavar=("V", "E", "T"),
+                        default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles))
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--router", choices=sorted(ROUTERS), default=DEFAULT_ROUTER)
     parser.add_argument("--out", type=Path)
@@ -41,6 +44,7 @@ def main() -> int:
     out = args.out or Path(f"build/synth-{args.option.replace('_', '-')}")
     report = run_synthesis(FormatSet.preset("default"), "ecp5", ENGINE_TARGET_MHZ, out, components=["springflat_engine"],
                            seed=args.seed, router=args.router, engine_options={args.option: True},
+                           capacity=EngineCapacity(*args.capacity),
                            progress=lambda msg: print(msg, file=sys.stderr, flush=True),
                            command=" ".join(["benchmarks/synth_engine_trial.py", *sys.argv[1:]]))
     engine = report["components"]["springflat_engine"]

@@ -65,12 +65,12 @@ class SpringflatEngine(wiring.Component):
         reads take a clock more (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: only with
         ``registered_select``. A build option for timing trials (``docs/engine-guard.md``: at
         ``DEFAULT_CAPACITY`` with the guard it did not raise Fmax).
-    delay_lines : bool or None
+    delay_lines : bool
         The force pass's and the integrator's values that ride along unchanged for several stages
         carried in delay lines of distributed RAM instead of a register per stage
-        (:class:`~hdl.pipeline.Pipeline`): the same results in the same clocks, with about 13,000
-        fewer flip-flops in ``default``; ``None``: with ``registered_select``, where the device is
-        full enough that flip-flops crowd the placement (``docs/synthesis.md``).
+        (:class:`~hdl.pipeline.Pipeline`): the same results in the same clocks, with 13,267 fewer
+        flip-flops in ``default``. A build option, off by default: placed and routed, it did not raise
+        Fmax at ``DEFAULT_CAPACITY`` nor make 3072 vertices route (``docs/synthesis.md``).
 
     Members
     -------
@@ -124,7 +124,7 @@ class SpringflatEngine(wiring.Component):
 
     def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH,
                  registered_select: bool | None = None, pin_registers: bool | None = None,
-                 delay_lines: bool | None = None):
+                 delay_lines: bool = False):
         if isinstance(fs, str):
             fs = FormatSet.preset(fs)
         if not isinstance(fs, FormatSet):
@@ -132,10 +132,11 @@ class SpringflatEngine(wiring.Component):
         if not isinstance(capacity, EngineCapacity):
             raise TypeError(f"SpringflatEngine needs an EngineCapacity, not {capacity!r}")
         check_power_of_two("entry_bank_depth", entry_bank_depth)
-        for flag, value in (("registered_select", registered_select), ("pin_registers", pin_registers),
-                            ("delay_lines", delay_lines)):
+        for flag, value in (("registered_select", registered_select), ("pin_registers", pin_registers)):
             if value is not None and not isinstance(value, bool):
                 raise TypeError(f"{flag} must be a bool or None, not {value!r}")
+        if not isinstance(delay_lines, bool):
+            raise TypeError(f"delay_lines must be a bool, not {delay_lines!r}")
         self.fs, self.capacity = fs, capacity
         self.entry_bank_depth = entry_bank_depth
         self.registered_select = needs_registered_select(fs, capacity) if registered_select is None \
@@ -143,7 +144,7 @@ class SpringflatEngine(wiring.Component):
         if pin_registers is False and self.registered_select:
             raise ValueError("registered_select needs the pin registers: pin_registers=False contradicts it")
         self.pin_registers = self.registered_select or bool(pin_registers)
-        self.delay_lines = self.registered_select if delay_lines is None else delay_lines
+        self.delay_lines = delay_lines
         self.register_map = RegisterMap.build(fs, capacity)
         self.layouts = memory_layouts(fs, capacity)
         self.addr_width = self.register_map.address_bits

@@ -94,8 +94,8 @@ YOSYS_BUILDS = {"yosys-opt": f"hierarchy -top {ENGINE_MODULE}; proc; flatten; op
 VERILATOR_BUILDS.update({name: VERILATOR_BUILDS["default"] for name in YOSYS_BUILDS})
 
 #: Builds that simulate another elaboration of the engine (keyword arguments of
-#: :class:`~hdl.engine.SpringflatEngine`) with ``default``'s flags and clock: ``delay-lines``, the datapaths' delay
-#: lines at a capacity whose build has none (``docs/verification.md``).
+#: :class:`~hdl.engine.SpringflatEngine`) with ``default``'s flags and clock: ``delay-lines``, the engine built with
+#: the datapaths' delay lines, a build option (``docs/verification.md``).
 ENGINE_OPTION_BUILDS = {"delay-lines": {"delay_lines": True}}
 VERILATOR_BUILDS.update({name: VERILATOR_BUILDS["default"] for name in ENGINE_OPTION_BUILDS})
 

@@ -31,7 +31,7 @@ pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: secon
 # The node and triangle memories' reads: in the first run straight from the block RAMs (two clocks, the
 # default), in the second through the pin registers alone (three, a build option), in the third also
 # through the registered bank select (five), which the engine takes at capacities whose node memories
-# need several block RAM banks.
+# need several block RAM banks; the third also with the datapaths' delay lines (a build option).
 @pytest.mark.parametrize("run, bank_depth, registered_select, pin_registers, latency", [
     ("paper-variable", 256, False, None, 2),
     ("paper-fixed-barrier-damped", 8, False, True, 3),
@@ -40,10 +40,9 @@ def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, 
     image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
     expected = run_image(image, FS)
     dut = PreloadableEngine(FS, CAPACITY, entry_bank_depth=bank_depth, registered_select=registered_select,
-                            pin_registers=pin_registers)
+                            pin_registers=pin_registers, delay_lines=registered_select)
     assert dut.registered_select is registered_select
     assert dut.pin_registers is (latency > 2)
-    assert dut.delay_lines is registered_select  # the force pass's and the integrator's, with the registered select
     result, read_back = run_on_engine(dut, image)
     assert result == expected.status
     assert_same_run(read_back, expected)
@@ -81,7 +80,7 @@ def test_a_preload_leaves_every_block_ram_as_the_bus_load_does():
 
 def test_the_memories_registers_are_checked_and_follow_the_build():
     """No pin registers by default, with or without the guard; the registered select needs them. The
-    datapaths' delay lines come with the registered select unless asked for."""
+    datapaths' delay lines only when asked for."""
     with warnings.catch_warnings():  # engines built here are never elaborated
         warnings.simplefilter("ignore", UnusedElaboratable)
         assert SpringflatEngine(FS, CAPACITY).pin_registers is False
@@ -89,10 +88,11 @@ def test_the_memories_registers_are_checked_and_follow_the_build():
         assert SpringflatEngine(FS, CAPACITY, pin_registers=True).pin_registers is True
         assert SpringflatEngine(FS, CAPACITY, registered_select=True).pin_registers is True
         assert SpringflatEngine(FS, CAPACITY).delay_lines is False
-        assert SpringflatEngine(FS, CAPACITY, registered_select=True).delay_lines is True
-        assert SpringflatEngine(FS, CAPACITY, registered_select=True, delay_lines=False).delay_lines is False
+        assert SpringflatEngine(FS, CAPACITY, registered_select=True).delay_lines is False
         assert SpringflatEngine(FS, CAPACITY, delay_lines=True).delay_lines is True
-        for flag in ("registered_select", "pin_registers", "delay_lines"):
+        with pytest.raises(TypeError, match="delay_lines must be a bool, not None"):
+            SpringflatEngine(FS, CAPACITY, delay_lines=None)
+        for flag in ("registered_select", "pin_registers"):
             with pytest.raises(TypeError, match=f"{flag} must be a bool or None, not 1"):
                 SpringflatEngine(FS, CAPACITY, **{flag: 1})
         with pytest.raises(ValueError, match="registered_select needs the pin registers"):
