@@ -7,8 +7,7 @@ Usage::
 Elaborates the engine for ECP5 (``DP16KD``, ``MULT18X18D`` and the ``keep`` pin registers as ``synth`` makes
 them), converts it to RTLIL and has Yosys count every flip-flop bit per module after ``proc`` and
 ``opt_clean``, before ``synth_ecp5``'s optimisation, which merges and removes about a tenth (at 3072 /
-18432 / 6144: 63,012 and 42,339 flip-flops after it, against 68,532 and 46,937 here; with the guard and
-``--delay-lines``: 50,281 against 55,265). Units are the
+18432 / 6144: 63,012 and 42,339 flip-flops after it, against 68,532 and 46,937 here). Units are the
 engine's submodules with their own submodules folded in. About twenty seconds per build. The last row
 adds a second lane's units (:data:`LANE_UNITS`) to the total: a sum of the measured units, not a build.
 ``--delay-lines`` builds the force pass and the integrator with their delay lines (``SpringflatEngine(delay_lines=True)``,

@@ -68,7 +68,7 @@ class SpringflatEngine(wiring.Component):
     delay_lines : bool
         The force pass's and the integrator's values that ride along unchanged for several stages
         carried in delay lines of distributed RAM instead of a register per stage
-        (:class:`~hdl.pipeline.Pipeline`): the same results in the same clocks, with 13,267 fewer
+        (:class:`~hdl.pipeline.Pipeline`): the same results in the same clocks, with 13,040 fewer
         flip-flops in ``default``. A build option, off by default: placed and routed, it did not raise
         Fmax at ``DEFAULT_CAPACITY`` nor make 3072 vertices route (``docs/synthesis.md``).
 
