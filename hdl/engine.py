@@ -137,6 +137,9 @@ class SpringflatEngine(wiring.Component):
                 raise TypeError(f"{flag} must be a bool or None, not {value!r}")
         if not isinstance(delay_lines, bool):
             raise TypeError(f"delay_lines must be a bool, not {delay_lines!r}")
+        if capacity.lanes != 1:
+            raise ValueError(f"SpringflatEngine is built with one lane, not lanes={capacity.lanes}: the lanes' register map, "
+                             "images and driver are defined (docs/engine.md, 'Lanes'), their datapaths not yet")
         self.fs, self.capacity = fs, capacity
         self.entry_bank_depth = entry_bank_depth
         self.registered_select = needs_registered_select(fs, capacity) if registered_select is None \

@@ -30,13 +30,14 @@ __all__ = ["board_capacity", "BoardRun", "run_on_board", "flatten_on_board", "ad
 
 
 def board_capacity(bus, fs: FormatSet) -> EngineCapacity:
-    """The capacity the engine behind ``bus`` was built with (its CAP_* registers and FEATURES.guard), once its
+    """The capacity the engine behind ``bus`` was built with (its CAP_* registers and FEATURES), once its
     ID, version and format set say it is an engine this driver speaks to (:class:`DriverError` if not)."""
     probe = EngineDriver(bus, RegisterMap.build(fs, DEFAULT_CAPACITY))
     probe.identify_engine()
     values = [probe.read_value(f"cap_{what}") for what in ("vertices", "entries", "triangles")]
     try:
-        capacity = EngineCapacity(*values, guard=bool(probe.read_value("feature_guard")))
+        capacity = EngineCapacity(*values, guard=bool(probe.read_value("feature_guard")),
+                                  lanes=probe.read_value("feature_lanes"))
         RegisterMap.build(fs, capacity)  # (its address map must fit the bus)
     except ValueError as exc:
         raise DriverError(f"the engine reports a capacity it cannot have ({exc})") from None

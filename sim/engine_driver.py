@@ -23,7 +23,7 @@ import numpy as np
 
 from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import (EngineImage, ImageRunResult, MemoryLayout, constant_fault,
-                                             run_constant_fields, run_image)
+                                            lane_entry_counts, lane_rows, run_constant_fields, run_image)
 from golden_model.engine_spec.register_map import MAGIC, STATES, VERSION, BitField, Register, RegisterMap, format_hash
 
 __all__ = ["EngineError", "BusError", "DriverError", "Bus", "EngineReadBack", "EngineDriver", "ModelBus"]
@@ -124,6 +124,8 @@ class EngineDriver:
         if guard != self.map.capacity.guard:
             raise DriverError(f"the engine was built {'with' if guard else 'without'} the step guard; the register "
                               f"map says {'with' if self.map.capacity.guard else 'without'}")
+        if (lanes := self.read_value("feature_lanes")) != self.map.capacity.lanes:
+            raise DriverError(f"the engine was built with {lanes} lane(s); the register map says {self.map.capacity.lanes}")
 
     # ------------------------------------------------------------------ the run
     def load(self, image: EngineImage, memories: tuple[str, ...] | None = None) -> None:
@@ -139,6 +141,7 @@ class EngineDriver:
                               f"(the engine has {', '.join(known)})")
         if image.capacity != self.map.capacity:
             c, e = (f"{c.vertices}/{c.entries}/{c.triangles}{'' if c.guard else ' without the guard'}"
+                    f"{'' if c.lanes == 1 else f' in {c.lanes} lanes'}"
                     for c in (image.capacity, self.map.capacity))
             raise DriverError(f"the image was built for capacity {c} (vertices/entries/triangles); the engine has {e}")
         if self._status_fields()[0] == "running":
@@ -147,9 +150,9 @@ class EngineDriver:
             if memories is not None and name not in memories:
                 continue
             window = self.map.window(name)
-            for index, row in enumerate(words):
+            for index, row in zip(image.rows(name), words):
                 for k, word in enumerate(row):
-                    self.bus.write(window.address(index, k), int(word))
+                    self.bus.write(window.address(int(index), k), int(word))
         for offset, word in sorted(self.map.encode(image.constants).items()):
             self.bus.write(offset, word)
 
@@ -306,8 +309,8 @@ class ModelBus:
         if fault is not None:
             self._set_status("done", fault, 1)
             return
-        image = EngineImage(self.map.capacity, self.memories["nodes"][:constants["vertices"]],
-                            self.memories["entries"][:constants["entries"]],
+        entries = self.memories["entries"][lane_rows(lane_entry_counts(constants, self.map.capacity), self.map.capacity)]
+        image = EngineImage(self.map.capacity, self.memories["nodes"][:constants["vertices"]], entries,
                             self.memories["triangles"][:constants["triangles"]], constants)
         self._pending = run_image(image, self.fs)
         self._polls_left = self.run_polls

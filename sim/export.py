@@ -436,7 +436,9 @@ def host_scaling_markdown() -> str:
         "`sigma = +1` entry `k` carries the triangle `(i, j_k, j_k+1)` and `second = j_k+1`; for `sigma = -1` "
         "entry `k+1` carries it and `second = j_k`. `threshold = kappa * X* * s^2` [area], `gain = mu*C / (4 * "
         "X* * s^2)` [barrier_gain]. An entry without a triangle (or without the barrier): `second = neighbour`, "
-        "`threshold = gain = 0`.",
+        "`threshold = gain = 0`. With K lanes (FEATURES.lanes > 1), lane `k` runs the vertices `k, k+K, k+2K, ...`: "
+        "their entries, in that order, go to the window's indices from `k * CAP_ENTRIES/K` on, and LANEk_ENTRIES "
+        "counts them (at most CAP_ENTRIES/K; the lanes' sum is ENTRIES).",
         "4. **triangles**: the corners as in the mesh, `area = A * s^2` [face_area] (`A` the 3D area).",
         "5. **Run constants**: `half_spring = C/2` [spring], `damping = 1 - gamma` [damping]. A reciprocal of a "
         "raw total `T` with `b` = the reciprocal format's width: `shift = b + bit_length(T) - 1`, `mantissa = "
@@ -448,6 +450,7 @@ def host_scaling_markdown() -> str:
         "|---|---|---|",
         "| `vertices`, `entries`, `triangles` | capacity's bits | the loaded mesh's counts (`vertices = 0`: no mesh, "
         "the reset value) |",
+        "| `lane0_entries`, … (K > 1 lanes only) | bits of CAP_ENTRIES/K | each lane's neighbour entries (step 3) |",
         "| `mode`, `barrier` | the run mode's code, 1 (register `MODE`) | the run mode (`MODE.mode`'s codes in "
         "`register_map.md`; the engine runs all of them), the fold barrier |",
         "| `half_spring` | [spring] | ½C |",

@@ -45,7 +45,8 @@ __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "LARGEST_85F_CAPACITY", "WordFi
            "node_word_layout", "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width",
            "energy_check_width", "EngineImage", "build_image", "decode_nodes", "decode_entries", "decode_triangles",
            "constant_fault", "ImageRunResult", "run_image", "image_energy_window", "BUS_WORD_BITS", "ITERATION_BITS",
-           "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS", "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode"]
+           "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS", "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode",
+           "LANES", "entry_lanes", "lane_rows", "lane_entry_counts"]
 
 BUS_WORD_BITS = 32
 """Width of one bus word (Wishbone ``dat``)."""
@@ -70,6 +71,10 @@ MODE_FIELDS = ("mode", "barrier")
 """The run constants that share the ``MODE`` register, from bit 0 up."""
 
 
+LANES = (1, 2, 4)
+"""The engine's lane counts K (``EngineCapacity.lanes``)."""
+
+
 def _next_power_of_two(n: int) -> int:
     return 1 << max(0, (n - 1).bit_length())
 
@@ -77,14 +82,16 @@ def _next_power_of_two(n: int) -> int:
 @dataclass(frozen=True)
 class EngineCapacity:
     """The engine's memory depths, an elaboration parameter: vertices, neighbour entries, triangles;
-    and ``guard``: whether the build has the step guard's passes and memories (the proposal memory and
+    ``guard``: whether the build has the step guard's passes and memories (the proposal memory and
     the level scatters), so runs the guarded modes. Both builds fit the ECP5-85F's block RAMs up to
-    3072 / 18432 / 6144 (``docs/synthesis.md``)."""
+    3072 / 18432 / 6144 (``docs/synthesis.md``). ``lanes``: K datapaths, each on a share of the
+    nodes (:data:`LANES`; the images' partition: :func:`entry_lanes`); every depth a multiple of K."""
 
     vertices: int
     entries: int
     triangles: int
     guard: bool = True
+    lanes: int = 1
 
     def __post_init__(self) -> None:
         for name in ("vertices", "entries", "triangles"):
@@ -93,6 +100,17 @@ class EngineCapacity:
                 raise ValueError(f"EngineCapacity: {name} must be an int >= 2, got {value!r}")
         if not isinstance(self.guard, bool):
             raise ValueError(f"EngineCapacity: guard must be a bool, got {self.guard!r}")
+        if isinstance(self.lanes, bool) or self.lanes not in LANES:
+            raise ValueError(f"EngineCapacity: lanes must be one of {', '.join(map(str, LANES))}, got {self.lanes!r}")
+        for name in ("vertices", "entries", "triangles"):
+            if getattr(self, name) % self.lanes:
+                raise ValueError(f"EngineCapacity: {name} = {getattr(self, name)} is not a multiple of lanes = "
+                                 f"{self.lanes} (each lane holds an equal share of every memory)")
+
+    @property
+    def lane_entries(self) -> int:
+        """Neighbour entries one lane's share of the entry memory holds: ``entries / lanes``."""
+        return self.entries // self.lanes
 
     def as_option(self) -> str:
         """``V E T``, as ``--capacity`` takes them."""
@@ -127,10 +145,48 @@ class EngineCapacity:
                     f"at most {getattr(self, name)} (capacity vertices={self.vertices}, entries={self.entries}, "
                     f"triangles={self.triangles})")
 
+    def check_lanes(self, lane_entries: np.ndarray) -> None:
+        """Refuse a lane whose nodes' entries (:func:`entry_lanes`) overflow its share of the entry memory."""
+        for k, count in enumerate(lane_entries):
+            if count > self.lane_entries:
+                raise FixedPointError(
+                    f"lane {k} of {self.lanes} (vertices {k}, {k + self.lanes}, {k + 2 * self.lanes}, ...) has {count} "
+                    f"neighbour entries; a lane holds at most {self.lane_entries} (capacity entries={self.entries}, "
+                    f"lanes={self.lanes})")
+
     def check_mesh(self, mesh: Mesh) -> None:
         """:meth:`check` of ``mesh``'s own counts (its neighbour entries are its rings': two per edge), which
         no layout changes: callers refuse it before computing one."""
         self.check(mesh.n_vertices, len(mesh.rings.neighbour), mesh.n_faces)
+        self.check_lanes(entry_lanes(mesh.rings.indptr, self.lanes)[1])
+
+
+def entry_lanes(indptr: np.ndarray, lanes: int) -> tuple[np.ndarray, np.ndarray]:
+    """How ``lanes`` datapaths share the neighbour entries: lane ``k`` runs the nodes ``k, k + K, k + 2K, …``
+    (node ``i`` in lane ``i mod K``, so each node memory is K banks by the index's low bits), each node's
+    entries in ring order, from its own share of the entry memory. ``indptr`` (V + 1,) the rings' offsets.
+
+    Returns ``(order, counts)``: ``order[r]`` the node-order entry at lane-major row ``r`` (lane 0's
+    entries, then lane 1's, …), ``counts[k]`` lane ``k``'s entries."""
+    degrees = np.diff(indptr)
+    lane = np.repeat(np.arange(len(degrees)), degrees) % lanes
+    return np.argsort(lane, kind="stable"), np.bincount(lane, minlength=lanes)
+
+
+def lane_rows(counts: np.ndarray, capacity: EngineCapacity) -> np.ndarray:
+    """The entry window's index of each lane-major row: lane ``k``'s ``counts[k]`` entries from
+    ``k · capacity.lane_entries`` on (consecutive from 0 with one lane)."""
+    return np.concatenate([k * capacity.lane_entries + np.arange(n) for k, n in enumerate(counts)]).astype(np.int64)
+
+
+def node_order_entries(words: np.ndarray, counts: np.ndarray, lanes: int, last: np.ndarray) -> np.ndarray:
+    """Lane-major entry rows (:func:`entry_lanes`) back in node order: ``words`` (Σcounts, …) and their
+    ``last`` flags; lane ``k``'s ``n``-th node is ``k + n·K``."""
+    lane = np.repeat(np.arange(lanes), counts)
+    starts = np.repeat(np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
+    ends_before = np.concatenate([[0], np.cumsum(last)[:-1]])  # nodes ended before each row, over all lanes
+    local = ends_before - ends_before[starts]  # … and within its lane
+    return words[np.argsort(lane + lanes * local, kind="stable")]
 
 
 #: The engine's capacity unless a flow says otherwise: a 2,000-vertex patch (about 6 entries and 2
@@ -297,6 +353,21 @@ def energy_check_width(fs: FormatSet, square_bits: int, barrier_bits: int) -> in
 MAX_ITER_FIELD = WordField("max_iter", ITERATION_BITS)
 
 
+def lane_count_fields(capacity: EngineCapacity) -> tuple[WordField, ...]:
+    """With more than one lane, each lane's neighbour entries (``lane0_entries``, …; :func:`entry_lanes`),
+    which the run constants carry after ``entries`` (their total); none with one lane."""
+    if capacity.lanes == 1:
+        return ()
+    return tuple(WordField(f"lane{k}_entries", capacity.lane_entries.bit_length()) for k in range(capacity.lanes))
+
+
+def lane_entry_counts(constants: dict[str, int], capacity: EngineCapacity) -> np.ndarray:
+    """Each lane's neighbour entries as the run constants give them (one lane: ``entries``)."""
+    if capacity.lanes == 1:
+        return np.array([constants["entries"]])
+    return np.array([constants[f.name] for f in lane_count_fields(capacity)])
+
+
 def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordField, ...]:
     """The run constants (raw ints), in register order; those of :data:`MODE_FIELDS` share the ``MODE``
     register: ``mode``, the run mode's code (:data:`~golden_model.modes.RUN_MODES`), and ``barrier``.
@@ -308,6 +379,7 @@ def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordFi
     return (
         WordField("vertices", capacity.count_bits("vertices")),
         WordField("entries", capacity.count_bits("entries")),
+        *lane_count_fields(capacity),
         WordField("triangles", capacity.count_bits("triangles")),
         WordField("mode", MODE_CODE_BITS),
         WordField("barrier", 1),
@@ -341,14 +413,23 @@ class EngineImage:
     def memories(self) -> dict[str, np.ndarray]:
         return {"nodes": self.nodes, "entries": self.entries, "triangles": self.triangles}
 
+    def rows(self, name: str) -> np.ndarray:
+        """The index in its memory window of each row of memory ``name``: from 0 up, except the entries of
+        more than one lane (:func:`lane_rows`)."""
+        n = len(self.memories()[name])
+        if name != "entries" or self.capacity.lanes == 1:
+            return np.arange(n)
+        return lane_rows(lane_entry_counts(self.constants, self.capacity), self.capacity)
 
-def _run_constants(problem: FixedProblem, capacity: EngineCapacity) -> dict[str, int]:
+
+def _run_constants(problem: FixedProblem, capacity: EngineCapacity, lane_counts: np.ndarray) -> dict[str, int]:
     fs, params, stream = problem.fs, problem.params, problem.stream
     mode = params.mode
     fixed_step = mode.step is Step.FIXED
     rule = StopRule.of(params, fs, energy_floor_raw(problem))
     constants = {
         "vertices": len(stream.indptr) - 1, "entries": len(stream.neighbour), "triangles": len(problem.face_areas),
+        **{f.name: int(n) for f, n in zip(lane_count_fields(capacity), lane_counts)},
         "mode": mode.code, "barrier": int(stream.barrier is not None),
         "half_spring": problem.half_spring, "damping": problem.damping,
         "dt": int(quantize(params.dt, fs.dt, HOST_ROUNDING, SAT)) if fixed_step else 0,
@@ -404,17 +485,20 @@ def check_run_limits(params) -> None:
 
 
 def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
-    """The memory images and run constants of ``problem`` for an engine of ``capacity``.
+    """The memory images and run constants of ``problem`` for an engine of ``capacity``: the entries
+    lane-major (:func:`entry_lanes`; node order with one lane), written at :meth:`EngineImage.rows`.
 
-    Raises :class:`FixedPointError` (one line) for a mesh over capacity, or a parameter
-    the engine's registers cannot hold.
+    Raises :class:`FixedPointError` (one line) for a mesh over capacity (a lane's share of the
+    entries included), or a parameter the engine's registers cannot hold.
     """
     fs, stream = problem.fs, problem.stream
     n_vertices, n_entries = len(stream.indptr) - 1, len(stream.neighbour)
     capacity.check(n_vertices, n_entries, len(problem.face_areas))
+    lane_order, lane_counts = entry_lanes(stream.indptr, capacity.lanes)
+    capacity.check_lanes(lane_counts)
     check_fixed_params(problem.params, fs)
     check_engine_params(problem.params, capacity)
-    constants = _run_constants(problem, capacity)
+    constants = _run_constants(problem, capacity, lane_counts)
     layouts = memory_layouts(fs, capacity)
     positions = problem.initial_positions
     nodes = layouts["nodes"].pack({
@@ -429,7 +513,7 @@ def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
         "neighbour": stream.neighbour, "last": last, "rest": stream.rest,
         "second": stream.neighbour if barrier is None else barrier.second,
         "threshold": zeros if barrier is None else barrier.threshold,
-        "gain": zeros if barrier is None else barrier.gain})
+        "gain": zeros if barrier is None else barrier.gain})[lane_order]
     faces = problem.mesh.faces
     triangles = layouts["triangles"].pack({"a": faces[:, 0], "b": faces[:, 1], "c": faces[:, 2],
                                            "area": problem.face_areas})
@@ -445,10 +529,15 @@ def decode_nodes(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity) -> 
             f["inv_mass"], f["inv_mass_barrier"])
 
 
-def decode_entries(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity,
-                   barrier: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, BarrierEntries | None]:
-    """Entry memory words → ``(indptr (V+1,) from the last flags, neighbour, rest, barrier entries or None)``."""
-    f = entry_word_layout(fs, capacity).unpack(words)
+def decode_entries(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity, barrier: bool,
+                   lane_counts: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                   BarrierEntries | None]:
+    """Entry memory words → ``(indptr (V+1,) from the last flags, neighbour, rest, barrier entries or None)``,
+    in node order: ``words`` in node order, or lane-major with each lane's ``lane_counts`` (:func:`entry_lanes`)."""
+    layout = entry_word_layout(fs, capacity)
+    if lane_counts is not None and len(lane_counts) > 1:
+        words = node_order_entries(words, lane_counts, len(lane_counts), layout.unpack(words)["last"])
+    f = layout.unpack(words)
     indptr = np.concatenate([[0], np.flatnonzero(f["last"]) + 1])
     entries = BarrierEntries(f["second"], f["threshold"], f["gain"]) if barrier else None
     return indptr, f["neighbour"], f["rest"], entries
@@ -468,7 +557,9 @@ def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCap
     ``None`` (the run starts)."""
     if constants["vertices"] == 0:
         return "no-mesh"
-    counts_ok = all(0 < constants[n] <= getattr(capacity, n) for n in ("vertices", "entries", "triangles"))
+    lane_counts = lane_entry_counts(constants, capacity)
+    counts_ok = all(0 < constants[n] <= getattr(capacity, n) for n in ("vertices", "entries", "triangles")) \
+        and lane_counts.sum() == constants["entries"] and lane_counts.max() <= capacity.lane_entries
     top = 1 << (fs.reciprocal.width - 1)
     reciprocals_ok = all(top <= constants[f"{k}_reciprocal"] < 2 * top
                          and constants[f"{k}_shift"] >= fs.error.frac_bits + 2 for k in ("area", "length"))
@@ -518,7 +609,8 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     if fault is not None:
         return ImageRunResult(image.nodes.copy(), fault, 0, 0, 0, 0, 0, positions, velocities)
     n = c["vertices"]
-    indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity, bool(c["barrier"]))
+    indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity, bool(c["barrier"]),
+                                                      lane_entry_counts(c, capacity))
     stream = NeighbourStream(indptr, neighbour, rest, inv_mass[:n], barrier, inv_mass_barrier[:n])
     faces, areas = decode_triangles(image.triangles[:c["triangles"]], fs, capacity)
     setup = Setup(fs, image_mode(c), stream, faces, areas, c["half_spring"], c["damping"], c["dt"],

@@ -35,7 +35,7 @@ __all__ = ["MAGIC", "VERSION", "ACCESS", "STATES", "RESULTS", "REGISTER_BLOCKS",
 MAGIC = 0x5350_464C
 """ID register: ASCII ``SPFL``."""
 
-VERSION = (2, 2)
+VERSION = (2, 3)
 """(major, minor) of this register map; the major changes when an address or field moves."""
 
 ACCESS = {
@@ -179,7 +179,10 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
         a.value(f"cap_{what}", 32, "ro", f"capacity: {what} the memories hold", ident, reset=getattr(capacity, what))
     a.add("FEATURES", "ro", "what the build has beside its capacity", (
         BitField("guard", 0, 1, "ro", "the step guard's passes and memories: the guarded modes run", "feature_guard"),
-    ), ident, int(capacity.guard))
+        BitField("lanes", 1, 3, "ro", "K, the datapaths (lanes) each running a share of the nodes: vertex i in lane "
+                                      "i mod K, its entries in that lane's share of the entries window "
+                                      "(docs/engine.md)", "feature_lanes"),
+    ), ident, int(capacity.guard) | capacity.lanes << 1)
 
     a.block()
     a.add("CONTROL", "rw", "start, abort, interrupt enable", (
@@ -212,7 +215,7 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
     a.add("MODE", "rw", "the run's mode and the fold barrier", _mode_fields(constants), "run constants")
     for c in constants:
         if c.name not in MODE_FIELDS:
-            a.value(c.name, c.width, "rw", _CONSTANT_TEXT[c.name], "run constants", c.signed, c.fmt)
+            a.value(c.name, c.width, "rw", _constant_text(c.name), "run constants", c.signed, c.fmt)
     return a.registers
 
 
@@ -252,6 +255,14 @@ _CONSTANT_TEXT = {
     "energy_floor": "the stop rule's energy floor, raw as ENERGY: with E_S and E_C within φ, an energy below "
                     "it stops the run as converged (0: no floor)",
 }
+
+
+def _constant_text(name: str) -> str:
+    if name.startswith("lane") and name.endswith("_entries"):
+        k = name.removeprefix("lane").removesuffix("_entries")
+        return (f"neighbour entries of lane {k}'s nodes (vertices {k}, {k} + K, …), at the entries window's "
+                f"index {k}·CAP_ENTRIES/K on; the lanes' sum is ENTRIES")
+    return _CONSTANT_TEXT[name]
 
 
 def _windows(fs: FormatSet, capacity: EngineCapacity, first_free: int) -> list[MemoryWindow]:

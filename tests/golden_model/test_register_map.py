@@ -41,9 +41,10 @@ def test_identification_and_capacity_read_back_as_reset_values(regmap, fs):
         r = regmap.register(f"CAP_{what.upper()}")
         assert (r.access, r.reset) == ("ro", getattr(SMALL, what))
     features = regmap.register("FEATURES")
-    assert (features.access, features.reset, features.block) == ("ro", 1, regmap.register("ID").block)
+    # bit 0 the guard, bits 3:1 the lanes (K = 1)
+    assert (features.access, features.reset, features.block) == ("ro", 0b0011, regmap.register("ID").block)
     guardless = RegisterMap.build(fs, dataclasses.replace(SMALL, guard=False))
-    assert guardless.register("FEATURES").reset == 0
+    assert guardless.register("FEATURES").reset == 0b0010
     # FEATURES took the identification block's free word: no other register moved
     assert [(r.name, r.offset) for r in guardless.registers] == [(r.name, r.offset) for r in regmap.registers]
     assert features.offset < regmap.register("CONTROL").offset
