@@ -153,13 +153,16 @@ def c_header(m: RegisterMap) -> str:
                 lines += [f"/* {r.name}.{f.name} codes */", *(_define(_c_name(f.name, c), i) for i, c in enumerate(f.codes)),
                           ""]
     for w in m.windows:
-        lines += [_ascii_comment(f"memory window {w.name}: {w.description}"), _define(_c_name(w.name, "BASE"), w.base),
-                  _define(_c_name(w.name, "DEPTH"), w.depth), _define(_c_name(w.name, "WORDS"), w.words),
-                  _define(_c_name(w.name, "STRIDE"), w.stride), _define(_c_name(w.name, "SIZE"), w.size)]
+        # WINDOW_ in front: the entries window's base beside the ENTRIES register's address (SPRINGFLAT_ENTRIES_ADDR)
+        # would read as one thing
+        name = f"window_{w.name}"
+        lines += [_ascii_comment(f"memory window {w.name}: {w.description}"), _define(_c_name(name, "BASE"), w.base),
+                  _define(_c_name(name, "DEPTH"), w.depth), _define(_c_name(name, "WORDS"), w.words),
+                  _define(_c_name(name, "STRIDE"), w.stride), _define(_c_name(name, "SIZE"), w.size)]
         for f, lsb in zip(w.fields, w.field_lsbs):
-            lines += [_define(_c_name(w.name, f.name, "LSB"), lsb), _define(_c_name(w.name, f.name, "WIDTH"), f.width)]
+            lines += [_define(_c_name(name, f.name, "LSB"), lsb), _define(_c_name(name, f.name, "WIDTH"), f.width)]
             if f.signed:
-                lines.append(_define(_c_name(w.name, f.name, "SIGNED"), 1))
+                lines.append(_define(_c_name(name, f.name, "SIGNED"), 1))
         lines.append("")
     lines += [f"#endif /* {guard} */", ""]
     return "\n".join(lines)

@@ -206,15 +206,17 @@ def _expected_defines(regmap):
         want[f"SPRINGFLAT_MODE_{mode.name.upper().replace('-', '_')}"] = mode.code
     for w in regmap.windows:
         for what in ("base", "depth", "words", "stride", "size"):
-            want[f"SPRINGFLAT_{w.name.upper()}_{what.upper()}"] = getattr(w, what)
+            want[f"SPRINGFLAT_WINDOW_{w.name.upper()}_{what.upper()}"] = getattr(w, what)
         lsb = 0
         for f in w.fields:
-            want[f"SPRINGFLAT_{w.name.upper()}_{f.name.upper()}_LSB"] = lsb
+            want[f"SPRINGFLAT_WINDOW_{w.name.upper()}_{f.name.upper()}_LSB"] = lsb
             if f.signed:
-                want[f"SPRINGFLAT_{w.name.upper()}_{f.name.upper()}_SIGNED"] = 1
+                want[f"SPRINGFLAT_WINDOW_{w.name.upper()}_{f.name.upper()}_SIGNED"] = 1
             lsb += f.width
-    assert {"SPRINGFLAT_NODES_POSITION_X_SIGNED", "SPRINGFLAT_HALF_SPRING_VALUE_SIGNED"} <= set(want)  # (known)
-    assert "SPRINGFLAT_NODES_INV_MASS_SIGNED" not in want
+    assert {"SPRINGFLAT_WINDOW_NODES_POSITION_X_SIGNED", "SPRINGFLAT_HALF_SPRING_VALUE_SIGNED"} <= set(want)  # (known)
+    assert "SPRINGFLAT_WINDOW_NODES_INV_MASS_SIGNED" not in want
+    # a window's names apart from its register's: the entries window's base is not the ENTRIES register's address
+    assert {"SPRINGFLAT_ENTRIES_ADDR", "SPRINGFLAT_WINDOW_ENTRIES_BASE"} <= set(want)
     return want
 
 
@@ -263,7 +265,7 @@ def test_the_jsons_field_positions_unpack_the_images_words(regmap, fs):
             if field["signed"]:
                 raw = [r - (1 << field["width"]) if r >> (field["width"] - 1) else r for r in raw]
             assert raw == [int(v) for v in unpacked[field["name"]]], (window["name"], field["name"])
-            name = f"SPRINGFLAT_{window['name']}_{field['name']}_LSB".upper()
+            name = f"SPRINGFLAT_WINDOW_{window['name']}_{field['name']}_LSB".upper()
             assert re.search(rf"#define {name} +0x{field['lsb']:X}u", header), name
 
 
