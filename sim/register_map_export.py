@@ -15,7 +15,7 @@ import threading
 from dataclasses import replace
 from pathlib import Path
 
-from golden_model.engine_spec.image import BUS_WORD_BITS, DEFAULT_CAPACITY, EngineCapacity
+from golden_model.engine_spec.image import BUS_WORD_BITS, DEFAULT_CAPACITY, LANES, EngineCapacity
 from golden_model.engine_spec.register_map import ACCESS, MAGIC, REGISTER_BLOCKS, VERSION, BitField, \
     MemoryWindow, Register, RegisterMap
 
@@ -70,7 +70,7 @@ def markdown(m: RegisterMap, level: int = 1) -> str:
         f"{h} SpringflatEngine register map (v{VERSION[0]}.{VERSION[1]})", "",
         f"Generated from `golden_model.engine_spec.register_map.RegisterMap` for format set `{m.formats}` "
         f"(FORMAT_HASH `0x{m.format_hash:08X}`) and capacity {m.capacity.vertices} vertices, "
-        f"{m.capacity.entries} entries, {m.capacity.triangles} triangles. Do not edit.", "",
+        f"{m.capacity.entries} entries, {m.capacity.triangles} triangles{_in_lanes(m.capacity)}. Do not edit.", "",
         f"Bus: {bus['protocol']}, {bus['data_bits']}-bit data, `adr` a {bus['address_bits']}-bit address of "
         f"{bus['address']}s (byte address >> 2), "
         f"`sel` {bus['sel']}. `err` answers: {bus['err']}.", "",
@@ -112,6 +112,10 @@ def _ascii_comment(text: str) -> str:
     return "/* " + text.encode("ascii", "backslashreplace").decode("ascii").replace("*/", "* /") + " */"
 
 
+def _in_lanes(capacity: EngineCapacity) -> str:
+    return "" if capacity.lanes == 1 else f", in {capacity.lanes} lanes"
+
+
 def _c_name(*parts: str) -> str:
     return "_".join([PREFIX] + [re.sub(r"[^A-Za-z0-9]", "_", p).upper() for p in parts])
 
@@ -126,7 +130,8 @@ def c_header(m: RegisterMap) -> str:
     enumeration field's codes (STATUS.state, STATUS.result, MODE.mode)."""
     guard = f"{PREFIX}_REGS_H"
     lines = [f"/* SpringflatEngine register map v{VERSION[0]}.{VERSION[1]}: format set '{m.formats}', capacity "
-             f"{m.capacity.vertices} vertices / {m.capacity.entries} entries / {m.capacity.triangles} triangles. */",
+             f"{m.capacity.vertices} vertices / {m.capacity.entries} entries / {m.capacity.triangles} triangles"
+             f"{_in_lanes(m.capacity)}. */",
              "/* Generated from golden_model.engine_spec.register_map.RegisterMap; do not edit. */",
              f"/* Addresses are {BUS_WORD_BITS}-bit-word addresses (Wishbone adr): byte address = ADDR * "
              "ADDR_UNIT_BYTES. */",
@@ -178,16 +183,16 @@ def write_exports(m: RegisterMap, out_dir: str | Path) -> list[Path]:
     return paths
 
 
-def engine_capacity(values, fs, *, guard: bool = True) -> EngineCapacity:
-    """``--capacity V E T`` (and ``--no-guard``: ``guard`` False) as an
+def engine_capacity(values, fs, *, guard: bool = True, lanes: int = 1) -> EngineCapacity:
+    """``--capacity V E T`` (and ``--no-guard``: ``guard`` False; ``--lanes``) as an
     :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the default depths); a capacity the
     engine's register map cannot hold is a one-line :class:`ParameterError`."""
     from golden_model.params import ParameterError
 
     if values is None:
-        return DEFAULT_CAPACITY if guard else replace(DEFAULT_CAPACITY, guard=False)
+        return replace(DEFAULT_CAPACITY, guard=guard, lanes=lanes)
     try:
-        capacity = EngineCapacity(*(int(v) for v in values), guard=guard)
+        capacity = EngineCapacity(*(int(v) for v in values), guard=guard, lanes=lanes)
         RegisterMap.build(fs, capacity)  # the address map must hold it
     except (TypeError, ValueError) as exc:  # (EngineCapacity's words without its name)
         raise ParameterError(f"--capacity V E T: {str(exc).removeprefix('EngineCapacity: ')}") from None
@@ -223,7 +228,7 @@ def check_fillable(capacity: EngineCapacity, given: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m sim.register_map_export --formats PRESET|FILE --capacity V E T --out DIR``."""
+    """``python -m sim.register_map_export --formats PRESET|FILE --capacity V E T [--lanes K] --out DIR``."""
     import argparse
 
     from golden_model.fixed.engine import load_formats
@@ -242,6 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--capacity", nargs=3, type=integer_argument, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
                         default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles),
                         help="the engine's capacity (default: the one springflat verilog and synth build)")
+    parser.add_argument("--lanes", type=int, choices=LANES, default=1,
+                        help="the map of an engine of K lanes (docs/engine.md, 'Lanes': defined, not yet built in the RTL)")
     parser.add_argument("--out", required=True, type=path_argument, action=OneOutput)
     args = parser.parse_args(argv)
     reset_interrupted()
@@ -251,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         try:
             formats = load_formats(args.formats)
-            m = RegisterMap.build(formats, engine_capacity(args.capacity, formats))  # (--capacity's checks)
+            m = RegisterMap.build(formats, engine_capacity(args.capacity, formats, lanes=args.lanes))  # (--capacity's checks)
         except (FixedPointError, ParameterError, ValueError) as exc:
             parser.exit(2, f"{parser.prog}: error: {exc}\n")
         except OSError as exc:  # a --formats file that cannot be read (a FIFO, a directory)

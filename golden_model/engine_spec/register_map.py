@@ -260,8 +260,8 @@ _CONSTANT_TEXT = {
 def _constant_text(name: str) -> str:
     if name.startswith("lane") and name.endswith("_entries"):
         k = name.removeprefix("lane").removesuffix("_entries")
-        return (f"neighbour entries of lane {k}'s nodes (vertices {k}, {k} + K, …), at the entries window's "
-                f"index {k}·CAP_ENTRIES/K on; the lanes' sum is ENTRIES")
+        return (f"neighbour entries of lane {k}'s vertices ({k}, {k}+K, {k}+2K, ...), from the entries window's "
+                f"index {k}*CAP_ENTRIES/K on; the lanes' sum is ENTRIES")
     return _CONSTANT_TEXT[name]
 
 

@@ -323,6 +323,23 @@ def test_the_engine_doc_holds_the_generated_map():
     regmap = RegisterMap.build(FormatSet.preset(formats), capacity)
     assert blocks["register-map"].rstrip() == markdown(regmap, level=3).rstrip()
 
+def test_the_export_command_writes_the_map_of_k_lanes(tmp_path, capsys):
+    from sim.register_map_export import main
+
+    assert main(["--lanes", "2", "--out", str(tmp_path / "two")]) == 0
+    header = (tmp_path / "two" / "springflat_regs.h").read_text()
+    assert header.splitlines()[0].endswith("4096 triangles, in 2 lanes. */")
+    assert "#define SPRINGFLAT_LANE1_ENTRIES_ADDR" in header and "SPRINGFLAT_LANE2_ENTRIES" not in header
+    assert json.loads((tmp_path / "two" / "register_map.json").read_text())["capacity"]["lanes"] == 2
+    with pytest.raises(SystemExit) as stopped:
+        main(["--lanes", "4", "--capacity", "64", "402", "128", "--out", str(tmp_path / "four")])
+    assert stopped.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1] == ("python -m sim.register_map_export: error: --capacity V E T: "
+                                                        "entries = 402 is not a multiple of lanes = 4 (each lane holds "
+                                                        "an equal share of every memory)")
+    assert not (tmp_path / "four").exists()
+
+
 def test_the_export_command_says_in_one_line_what_is_wrong_with_its_inputs(tmp_path, capsys):
     """A --formats FIFO was a NotRegularFileError traceback; --out '' wrote into the current directory."""
     import os
