@@ -8,12 +8,12 @@ set and capacity: this module decodes that map, it defines no address of its own
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from golden_model.fixed import FormatSet
-from golden_model.engine_spec.image import EngineCapacity, memory_layouts
+from golden_model.engine_spec.image import EngineCapacity, lane_count_fields, memory_layouts
 from golden_model.engine_spec.register_map import RegisterMap
 from golden_model.modes import Step
 
@@ -22,6 +22,7 @@ from .area_error import AreaError
 from .force_pass import ForcePass
 from .guard_passes import GUARD_PASSES, GuardPasses
 from .integrator import Integrator
+from .lanes import LANE_PASSES, LANE_SUMS, LaneSums
 from .logic import mode_steps
 from .memory_windows import WINDOW_STEPS, MemoryWindows, needs_registered_select
 from .parameters import check_power_of_two
@@ -39,6 +40,11 @@ __all__ = ["SpringflatEngine"]
 #: then reaches its enable over the same distance.
 UNIT_CONSTANTS = ("barrier", "mode", "half_spring", "damping", "area_reciprocal", "area_shift",
                   "length_reciprocal", "length_shift", "tol_energy", "vertices", "entries", "triangles")
+
+
+#: The controller's flags each pass sequencer reads.
+SEQUENCER_FLAGS = ("fetch_force", "fetch_area", "fetch_nodes", "in_start", "in_force", "in_area", "in_step",
+                   "in_integrate", "running", "area_clear", "guarded", "half_rate", "node_restart", "triangle_restart")
 
 
 class SpringflatEngine(wiring.Component):
@@ -137,13 +143,13 @@ class SpringflatEngine(wiring.Component):
                 raise TypeError(f"{flag} must be a bool or None, not {value!r}")
         if not isinstance(delay_lines, bool):
             raise TypeError(f"delay_lines must be a bool, not {delay_lines!r}")
-        if capacity.lanes != 1:
-            raise ValueError(f"SpringflatEngine is built with one lane, not lanes={capacity.lanes}: the lanes' register map, "
-                             "images and driver are defined (docs/engine.md, 'Lanes'), their datapaths not yet")
+        if capacity.lanes > 1 and (capacity.guard or registered_select or pin_registers or delay_lines):
+            raise ValueError(f"SpringflatEngine: lanes={capacity.lanes} are built without the step guard "
+                             "(EngineCapacity(guard=False)), the registered select, the pin registers and the delay lines")
         self.fs, self.capacity = fs, capacity
         self.entry_bank_depth = entry_bank_depth
-        self.registered_select = needs_registered_select(fs, capacity) if registered_select is None \
-            else registered_select
+        self.registered_select = (needs_registered_select(fs, capacity) and capacity.lanes == 1) \
+            if registered_select is None else registered_select
         if pin_registers is False and self.registered_select:
             raise ValueError("registered_select needs the pin registers: pin_registers=False contradicts it")
         self.pin_registers = self.registered_select or bool(pin_registers)
@@ -159,12 +165,10 @@ class SpringflatEngine(wiring.Component):
     def elaborate(self, platform):
         fs, cap, rmap = self.fs, self.capacity, self.register_map
         m = Module()
-        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width)
-        m.submodules.registers = registers = RegisterBank(rmap, addr_width=self.addr_width, copies=UNIT_CONSTANTS)
-        m.submodules.memories = memories = MemoryWindows(fs, cap, rmap, addr_width=self.addr_width,
-                                                         entry_bank_depth=self.entry_bank_depth,
-                                                         registered_select=self.registered_select,
-                                                         pin_registers=self.pin_registers)
+        hs, registers, memories = self._blocks(m)
+        if cap.lanes > 1:
+            self._elaborate_lanes(m, hs, registers, memories, platform)
+            return m
         m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency)
         m.submodules.controller = controller = PhaseController(fs, rmap)
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True, delay_lines=self.delay_lines)
@@ -176,48 +180,14 @@ class SpringflatEngine(wiring.Component):
         # SATURATIONS' sources, in the order they are summed in pairs
         producers = {"force": sequencer, "integrate": sequencer, "step": controller, "area": sequencer,
                      "length": sequencer, "power": sequencer, "shape_error": controller, "area_error": controller}
-        m.submodules.tally = tally = SaturationTally(
-            {name: unit.event_widths[name] for name, unit in producers.items()},
-            count_bits=rmap.value_width("saturations"))
-
-        # the bus: the handshake's request into the register bank (which answers) and the windows
-        wiring.connect(m, wiring.flipped(self.bus), hs.bus)
-        _wire(m, hs, registers, "request", "address", "write", "write_data", "whole_word")
-        _wire(m, hs, memories, "address", "write", "write_data", "whole_word")
-        _wire(m, registers, hs, "done", "error", "data")
-        _wire(m, registers, memories, "bus_request")
-        m.d.comb += [registers.window_hit.eq(memories.hit), registers.window_answer.eq(memories.answer),
-                     registers.window_data.eq(memories.answer_data),
-                     self.irq.eq(registers.irq_pending & registers.irq_enable)]
-
-        # the run: constants and CONTROL into the controller, its state and results back to STATUS
-        _wire(m, registers, controller, "start", "abort", *CONSTANTS, *(f"{name}_held" for name in HELD))
-        _wire(m, controller, registers, "state", "result", *RESULT_VALUES)
-        _wire(m, tally, registers, "saturations", "saturated")
-        _wire(m, tally, controller, "saturations")
-        m.d.comb += [registers.irq_pending_set.eq(controller.irq_set),
-                     registers.irq_pending_clear.eq(controller.starting), tally.clear.eq(controller.starting)]
-        # the accepted layout measured again after a rollback counts no event (the golden model restores
-        # its results)
-        measured = ("force", "area", "length", "shape_error", "area_error")
-        for name, producer in producers.items():
-            events = getattr(producer, f"{name}_events")
-            m.d.comb += getattr(tally, f"{name}_events").eq(
-                Mux(controller.measuring_again, 0, events) if name in measured else events)
+        tally = self._tally(m, {name: unit.event_widths[name] for name, unit in producers.items()})
+        self._bus_and_run(m, hs, registers, memories, controller, tally,
+                          {name: getattr(unit, f"{name}_events") for name, unit in producers.items()},
+                          ("force", "area", "length", "shape_error", "area_error"))
 
         # the passes: the controller's flags, the memories' ports, the units' streams
-        _wire(m, controller, sequencer, "fetch_force", "fetch_area", "fetch_nodes", "in_start", "in_force",
-              "in_area", "in_step", "in_integrate", "running", "area_clear", "guarded", "half_rate", "node_restart",
-              "triangle_restart")
-        _wire(m, controller, memories, "running", "fetch_nodes")
-        # the position ports read the triangles' corners in every triangle pass, the node in every node pass:
-        # the phase flags ORed into registers (a clock late: a triangle's corners are addressed from its
-        # second clock on, and a node pass's first node from its fetch flag)
-        corner_pass, node_pass = Signal(name="corner_pass"), Signal(name="node_pass")
-        m.d.sync += [corner_pass.eq(controller.in_area | controller.in_stuck | controller.in_certify),
-                     node_pass.eq(controller.in_integrate | controller.in_hold | controller.in_commit
-                                  | controller.in_rollback)]
-        m.d.comb += [memories.in_area.eq(corner_pass), memories.in_integrate.eq(node_pass)]
+        _wire(m, controller, sequencer, *SEQUENCER_FLAGS)
+        self._pass_flags(m, controller, memories)
         m.d.comb += [integrator.scale_shift.eq(controller.scale_shift), integrator.propose.eq(controller.guarded)]
         if guard is not None:
             _wire(m, controller, guard, "in_step", "in_integrate", *(f"in_{name}" for name in GUARD_PASSES))
@@ -235,11 +205,7 @@ class SpringflatEngine(wiring.Component):
         _wire(m, sequencer, memories, "entry_index", "tri_index", "node_index", "node_of_entry")
         _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done",
               "length_sum", "square_sum", "barrier_sum", "power_sum")
-        wiring.connect(m, sequencer.force_entry, force.i)
-        wiring.connect(m, sequencer.triangle_out, area.i)
-        wiring.connect(m, sequencer.node_out, integrator.i)
-        wiring.connect(m, force.o, sequencer.forces)
-        wiring.connect(m, integrator.o, sequencer.integrated)
+        _connect_units(m, sequencer, force, area, integrator)
         wiring.connect(m, sequencer.force_write, memories.force_write)
         # the node memories' and the proposal memory's writers: one pass at a time, so the writer whose
         # enable is high
@@ -251,22 +217,179 @@ class SpringflatEngine(wiring.Component):
             ours = getattr(guard, port)
             m.d.comb += [sink.en.eq(ours.en | theirs.en), sink.addr.eq(Mux(ours.en, ours.addr, theirs.addr)),
                          sink.data.eq(Mux(ours.en, ours.data, theirs.data))]
-        m.d.comb += [sequencer.area_saturations.eq(area.saturations), sequencer.force_idle.eq(force.idle),
-                     sequencer.area_idle.eq(area.idle), sequencer.integrator_idle.eq(integrator.idle),
-                     controller.area_total.eq(area.total), area.clear.eq(controller.area_clear),
-                     force.half_spring.eq(registers.half_spring_held), force.barrier.eq(registers.barrier_held),
-                     integrator.damping.eq(registers.damping_held), integrator.momentum.eq(mode_steps(registers.mode_held, Step.MOMENTUM)),
-                     sequencer.momentum.eq(mode_steps(registers.mode, Step.MOMENTUM)),
-                     integrator.dt.eq(controller.step_dt), integrator.half_dt_sq.eq(controller.step_half)]
+        _constants_into_units(m, registers, controller, sequencer, force, area, integrator, area_total=controller.area_total)
 
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
         self.debug_memories = {name: memories.rams[name].contents for name in ("positions", "velocities")}
+        self._debug_signals(controller, sequencer, memories.node_write.en)
+        return m
+
+    def _blocks(self, m: Module):
+        """The bus handshake, the register bank and the memories: ``(hs, registers, memories)``."""
+        fs, cap, rmap = self.fs, self.capacity, self.register_map
+        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width)
+        copies = UNIT_CONSTANTS + tuple(f.name for f in lane_count_fields(cap))
+        m.submodules.registers = registers = RegisterBank(rmap, addr_width=self.addr_width, copies=copies)
+        m.submodules.memories = memories = MemoryWindows(fs, cap, rmap, addr_width=self.addr_width,
+                                                         entry_bank_depth=self.entry_bank_depth,
+                                                         registered_select=self.registered_select,
+                                                         pin_registers=self.pin_registers)
+        return hs, registers, memories
+
+    def _tally(self, m: Module, widths: dict):
+        """SATURATIONS' tally of the event sources ``widths`` (in the order they are summed in pairs)."""
+        m.submodules.tally = tally = SaturationTally(widths, count_bits=self.register_map.value_width("saturations"))
+        return tally
+
+    def _bus_and_run(self, m: Module, hs, registers, memories, controller, tally, events: dict, measured) -> None:
+        """The bus into the register bank and the windows; the run constants and CONTROL into the controller,
+        its state and results back to STATUS; ``events`` (each source's signal) into the tally, those of a
+        ``measured`` source gated off while the controller measures an accepted layout again."""
+        # the bus: the handshake's request into the register bank (which answers) and the windows
+        wiring.connect(m, wiring.flipped(self.bus), hs.bus)
+        _wire(m, hs, registers, "request", "address", "write", "write_data", "whole_word")
+        _wire(m, hs, memories, "address", "write", "write_data", "whole_word")
+        _wire(m, registers, hs, "done", "error", "data")
+        _wire(m, registers, memories, "bus_request")
+        m.d.comb += [registers.window_hit.eq(memories.hit), registers.window_answer.eq(memories.answer),
+                     registers.window_data.eq(memories.answer_data),
+                     self.irq.eq(registers.irq_pending & registers.irq_enable)]
+        # the run: constants and CONTROL into the controller, its state and results back to STATUS
+        _wire(m, registers, controller, "start", "abort", *CONSTANTS, *(f"{name}_held" for name in HELD))
+        _wire(m, controller, registers, "state", "result", *RESULT_VALUES)
+        _wire(m, tally, registers, "saturations", "saturated")
+        _wire(m, tally, controller, "saturations")
+        m.d.comb += [registers.irq_pending_set.eq(controller.irq_set),
+                     registers.irq_pending_clear.eq(controller.starting), tally.clear.eq(controller.starting)]
+        # the accepted layout measured again after a rollback counts no event (the golden model restores
+        # its results)
+        for name, signal in events.items():
+            m.d.comb += getattr(tally, f"{name}_events").eq(
+                Mux(controller.measuring_again, 0, signal) if name in measured else signal)
+
+    @staticmethod
+    def _pass_flags(m: Module, controller, memories) -> None:
+        """The controller's flags that choose the memories' port sources."""
+        _wire(m, controller, memories, "running", "fetch_nodes")
+        # the position ports read the triangles' corners in every triangle pass, the node in every node pass:
+        # the phase flags ORed into registers (a clock late: a triangle's corners are addressed from its
+        # second clock on, and a node pass's first node from its fetch flag)
+        corner_pass, node_pass = Signal(name="corner_pass"), Signal(name="node_pass")
+        m.d.sync += [corner_pass.eq(controller.in_area | controller.in_stuck | controller.in_certify),
+                     node_pass.eq(controller.in_integrate | controller.in_hold | controller.in_commit
+                                  | controller.in_rollback)]
+        m.d.comb += [memories.in_area.eq(corner_pass), memories.in_integrate.eq(node_pass)]
+
+    def _elaborate_lanes(self, m: Module, hs, registers, memories, platform) -> None:
+        """K > 1 lanes (``capacity.lanes``, without the guard): a pass sequencer, force pass, area unit and
+        integrator per lane, on lane ``l``'s vertices ``l, l + K, …`` (its bank of every node memory), its
+        triangles ``l, l + K, …`` and its share of the entries; their pass ends and sums joined
+        (:class:`~hdl.lanes.LaneSums`) for the one controller."""
+        fs, cap, rmap = self.fs, self.capacity, self.register_map
+        lanes, bank_bits = cap.lanes, (cap.lanes - 1).bit_length()
+        sequencers, units = [], []
+        for lane in range(lanes):
+            sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency)
+            m.submodules[f"sequencer{lane}"] = sequencer
+            sequencers.append(sequencer)
+        m.submodules.controller = controller = PhaseController(fs, rmap)
+        for lane in range(lanes):
+            lane_units = (ForcePass(fs, energy=True, saturations=True), AreaError(fs), Integrator(fs, saturations=True))
+            for name, unit in zip(("force", "area", "integrator"), lane_units):
+                m.submodules[f"{name}{lane}"] = unit
+            units.append(lane_units)
+        m.submodules.sums = sums = LaneSums(fs, cap)
+        # SATURATIONS' sources: each lane's per-node and per-triangle events, the whole sums' from the join
+        events, widths = {}, {}
+        for lane, sequencer in enumerate(sequencers):
+            for name in ("force", "integrate", "area"):
+                events[f"{name}{lane}"] = getattr(sequencer, f"{name}_events")
+                widths[f"{name}{lane}"] = sequencer.event_widths[name]
+        for name in ("length", "power", "area"):
+            events[f"{name}_sum" if name == "area" else name] = getattr(sums, f"{name}_events")
+            widths[f"{name}_sum" if name == "area" else name] = 1
+        for name in ("step", "shape_error", "area_error"):
+            events[name], widths[name] = getattr(controller, f"{name}_events"), controller.event_widths[name]
+        measured = {*(f"{name}{lane}" for name in ("force", "area") for lane in range(lanes)),
+                    "length", "area_sum", "shape_error", "area_error"}
+        self._bus_and_run(m, hs, registers, memories, controller, self._tally(m, widths), events, measured)
+        self._pass_flags(m, controller, memories)
+        # START's check of the lanes' entries: they add up to ENTRIES and each fits its share
+        counts = [getattr(registers, f.name) for f in lane_count_fields(cap)]
+        lane_fault = Signal(name="lane_fault")
+        m.d.sync += lane_fault.eq((sum(counts) != registers.entries)
+                                  | Cat(count > cap.lane_entries for count in counts).any())
+        m.d.comb += [controller.lane_fault.eq(lane_fault), controller.passes_idle.eq(
+            Cat(sequencer.passes_idle for sequencer in sequencers).all())]
+        m.d.comb += [sums.restart.eq(controller.in_start), sums.momentum.eq(mode_steps(registers.mode, Step.MOMENTUM))]
+        for name in LANE_PASSES:
+            m.d.comb += getattr(controller, f"{name}_done").eq(getattr(sums, f"{name}_done"))
+            for sum_name in LANE_SUMS[name]:
+                m.d.comb += getattr(controller, sum_name).eq(getattr(sums, sum_name))
+        for lane, (sequencer, (force, area, integrator)) in enumerate(zip(sequencers, units)):
+            _wire(m, controller, sequencer, *SEQUENCER_FLAGS)
+            m.d.comb += [integrator.scale_shift.eq(controller.scale_shift), integrator.propose.eq(controller.guarded)]
+            # the lane's counts, registered (run constants, written before START): its vertices and triangles
+            # those whose index is the lane's mod K, its entries LANEk_ENTRIES
+            for what in ("vertices", "triangles"):
+                count = Signal.like(getattr(sequencer, what), name=f"lane{lane}_{what}")
+                m.d.sync += count.eq((getattr(registers, f"{what}_held") + (lanes - 1 - lane)) >> bank_bits)
+                m.d.comb += getattr(sequencer, what).eq(count)
+            m.d.comb += sequencer.entries.eq(getattr(registers, f"lane{lane}_entries_held"))
+            for name in ("entry", "triangle", "position", "velocity", "weight_word", "force_word"):
+                source = getattr(memories, name)[lane]
+                if name == "position":
+                    m.d.comb += [sequencer.position[k].eq(source[k]) for k in range(3)]
+                else:
+                    m.d.comb += getattr(sequencer, name).eq(source)
+            m.d.comb += [memories.entry_index[lane].eq(sequencer.entry_index),
+                         memories.node_of_entry[lane].eq(sequencer.node_of_entry)]
+            wiring.connect(m, sequencer.force_write, memories.force_write[lane])
+            write, sink = sequencer.node_write, memories.node_write[lane]
+            m.d.comb += [sink.en.eq(write.en), sink.addr.eq(write.addr), sink.data.eq(write.data)]
+            _wire(m, registers, sequencer, "barrier_held")
+            _connect_units(m, sequencer, force, area, integrator)
+            _constants_into_units(m, registers, controller, sequencer, force, area, integrator)
+            for name in LANE_PASSES:
+                m.d.comb += getattr(sums, f"{name}_done_in")[lane].eq(getattr(sequencer, f"{name}_done"))
+            for sum_name in ("length_sum", "square_sum", "barrier_sum", "power_sum"):
+                m.d.comb += getattr(sums, f"{sum_name}_in")[lane].eq(getattr(sequencer, sum_name))
+            m.d.comb += [sums.area_total_in[lane].eq(area.total),
+                         sums.area_saturated_in[lane].eq(area.saturations.area_sum)]
+        # the triangle and integrate passes run the lanes in step: lane 0's counters address every bank
+        m.d.comb += [memories.tri_index.eq(sequencers[0].tri_index), memories.node_index.eq(sequencers[0].node_index)]
+        self.debug_memories = {f"{name}{b}": memories.rams[f"{name}{b}"].contents
+                               for name in ("positions", "velocities") for b in range(lanes)}
+        self._debug_signals(controller, sequencers[0], memories.node_write[0].en)
+
+    def _debug_signals(self, controller, sequencer, node_write_en) -> None:
+        """Internal state a testbench may watch (``debug_signals``): the first lane's counters."""
         self.debug_signals = {"state": controller.state, "phase": controller.phase,
                               "entry_index": sequencer.entry_index, "force_out_index": sequencer.force_out_index,
                               "tri_index": sequencer.tri_index, "node_out_index": sequencer.node_out_index,
                               "math_pending": controller.math_pending, "iterations": controller.iterations,
-                              "passes_idle": controller.passes_idle, "node_write": memories.node_write.en}
-        return m
+                              "passes_idle": controller.passes_idle, "node_write": node_write_en}
+
+
+def _connect_units(m: Module, sequencer, force, area, integrator) -> None:
+    """A sequencer's streams into and out of its units."""
+    wiring.connect(m, sequencer.force_entry, force.i)
+    wiring.connect(m, sequencer.triangle_out, area.i)
+    wiring.connect(m, sequencer.node_out, integrator.i)
+    wiring.connect(m, force.o, sequencer.forces)
+    wiring.connect(m, integrator.o, sequencer.integrated)
+
+
+def _constants_into_units(m: Module, registers, controller, sequencer, force, area, integrator, area_total=None) -> None:
+    """A sequencer's units: their state into it, the run constants and the step into them; the area unit's
+    sum into ``area_total`` (the controller's, with one lane)."""
+    m.d.comb += [sequencer.area_saturations.eq(area.saturations), sequencer.force_idle.eq(force.idle),
+                 sequencer.area_idle.eq(area.idle), sequencer.integrator_idle.eq(integrator.idle),
+                 *([area_total.eq(area.total)] if area_total is not None else []), area.clear.eq(controller.area_clear),
+                 force.half_spring.eq(registers.half_spring_held), force.barrier.eq(registers.barrier_held),
+                 integrator.damping.eq(registers.damping_held), integrator.momentum.eq(mode_steps(registers.mode_held, Step.MOMENTUM)),
+                 sequencer.momentum.eq(mode_steps(registers.mode, Step.MOMENTUM)),
+                 integrator.dt.eq(controller.step_dt), integrator.half_dt_sq.eq(controller.step_half)]
 
 
 def _wire(m: Module, source, sink, *names: str) -> None:

@@ -3,7 +3,7 @@ read-modify-write of a window word, and each port's multiplexer between the bus 
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
+from amaranth.hdl import Array, Cat, Const, Module, Mux, Shape, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -168,8 +168,15 @@ class MemoryWindows(wiring.Component):
         self.entry_bank_depth = entry_bank_depth
         self.registered_select = bool(registered_select)
         self.pin_registers = bool(pin_registers) or self.registered_select
-        #: Clocks from a node or triangle memory's address register to its data.
-        self.read_latency = READ_LATENCY + self.pin_registers + BlockRam.SELECT_STAGES * self.registered_select
+        #: The lanes (``capacity.lanes``): K > 1 splits every node and triangle memory into K banks by the
+        #: index's low bits and the entry memory into K shares (:meth:`_lane_rams`).
+        self.lanes = lanes = capacity.lanes
+        if lanes > 1 and (capacity.guard or self.pin_registers):
+            raise ValueError(f"MemoryWindows: lanes={lanes} are built without the guard and without pin registers")
+        #: Clocks from a node or triangle memory's address register to its data (with lanes, the bank's word
+        #: selected in a register of its own).
+        self.read_latency = READ_LATENCY + self.pin_registers + BlockRam.SELECT_STAGES * self.registered_select \
+            + (lanes > 1)
         assert self.read_latency <= ENTRY_LATENCY, "the bus aligns every window's word to the entry's"
         select = {"registered_select": self.registered_select, "pin_registers": self.pin_registers}
         # a triangle's three corners at once: where the pins are registered, the third port reads the first
@@ -184,7 +191,7 @@ class MemoryWindows(wiring.Component):
         #: The block RAMs by name (``contents`` for a testbench); the entries in banks of
         #: ``entry_bank_depth`` words: Yosys maps a bank of wide words to DP16KDs with no cascade,
         #: where a deeper memory gets a multiplexer after the block RAMs' outputs.
-        self.rams = {
+        self.rams = self._lane_rams(pos_shape, vel_shape, weight_shape, force_shape) if lanes > 1 else {
             "positions": BlockRam(pos_shape, cap.vertices, name="positions", **corners),
             "velocities": BlockRam(vel_shape, cap.vertices, name="velocities", **select),
             "weights": BlockRam(weight_shape, cap.vertices, name="weights", **select),
@@ -199,10 +206,12 @@ class MemoryWindows(wiring.Component):
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
                                        name=f"entries{b}", pin_registers=True) for b in range(banks)},
         }
+        if lanes > 1:
+            super().__init__({**self._bus_members(addr_width),
+                              **self._lane_members(pos_shape, vel_shape, weight_shape, force_shape)})
+            return
         super().__init__({
-            "address": In(addr_width), "bus_request": In(1), "write": In(1), "write_data": In(BUS_WORD_BITS),
-            "whole_word": In(1), "hit": Out(1), "answer": Out(1), "answer_data": Out(BUS_WORD_BITS),
-            "running": In(1), "in_area": In(1), "in_integrate": In(1), "fetch_nodes": In(1),
+            **self._bus_members(addr_width),
             "entry_index": In(range(cap.entries + 1)), "tri_index": In(range(cap.triangles + 1)),
             "node_index": In(range(cap.vertices + 1)), "node_of_entry": In(range(cap.vertices + 1)),
             "entry": Out(self.entry_shape), "triangle": Out(self.triangle_shape), "position": Out(pos_shape).array(3),
@@ -213,10 +222,20 @@ class MemoryWindows(wiring.Component):
             "proposal_write": In(write_signature(range(cap.vertices + 1), vel_shape)),
         })
 
+    @staticmethod
+    def _bus_members(addr_width: int) -> dict:
+        """The bus's request and answer, and the controller's flags: the members every build has."""
+        return {"address": In(addr_width), "bus_request": In(1), "write": In(1), "write_data": In(BUS_WORD_BITS),
+                "whole_word": In(1), "hit": Out(1), "answer": Out(1), "answer_data": Out(BUS_WORD_BITS),
+                "running": In(1), "in_area": In(1), "in_integrate": In(1), "fetch_nodes": In(1)}
+
     def elaborate(self, platform):
         m = Module()
         for name, ram in self.rams.items():
             m.submodules[name] = ram
+        if self.lanes > 1:
+            self._elaborate_lanes(m, platform)
+            return m
         entry_banks = [ram for name, ram in self.rams.items() if name.startswith("entries")]
         bank_bits = (self.entry_bank_depth - 1).bit_length() if len(entry_banks) > 1 \
             else len(entry_banks[0].read[0].addr)
@@ -248,7 +267,12 @@ class MemoryWindows(wiring.Component):
                              ram.write.en.eq(proposal_regs[2])]
 
         window_q, index_q, word_q = self._decode(m)
-        bus_writing, new_words = self._bus_words(m, window_q, word_q, ent_data)
+        pos_a, vel_r, wgt_r = self.rams["positions"].read[0], self.rams["velocities"].read[0], self.rams["weights"].read[0]
+        reads = {"nodes": (Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
+                               wgt_r.data.inv_mass_barrier), self.read_latency),
+                 "triangles": (self.rams["triangles"].read[0].data.as_value(), self.read_latency),
+                 "entries": (ent_data.as_value(), ENTRY_LATENCY)}
+        bus_writing, new_words = self._bus_words(m, window_q, word_q, reads)
         self._read_addresses(m, index_q, ent_addr, ent_hot, bank_bits, ent_data)
         self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks, platform)
         return m
@@ -261,27 +285,27 @@ class MemoryWindows(wiring.Component):
         """The proposal memories' read ports, one per position port."""
         return [port for ram in self._proposal_rams() for port in ram.read]
 
-    def _entry_read(self, m: Module, entry_banks, ent_addr, ent_hot):
+    def _entry_read(self, m: Module, entry_banks, ent_addr, ent_hot, prefix: str = "ent"):
         """The entry memory's read, E0 (``ent_addr``, ``ent_hot``) to E6 (the returned register): see the
-        class's docstring."""
+        class's docstring. ``prefix`` names its registers."""
         shape = self.entry_shape
         kept = []
         for b, bank in enumerate(entry_banks):
             assert bank.latency == ENTRY_BANK_LATENCY
             port = bank.read[0]
-            select = [Signal(name=f"ent_select{b}_{k}") for k in range(1, ENTRY_BANK_LATENCY + 1)]  # E1 … E3
+            select = [Signal(name=f"{prefix}_select{b}_{k}") for k in range(1, ENTRY_BANK_LATENCY + 1)]  # E1 … E3
             m.d.sync += [select[0].eq(ent_hot[b]), *(select[k].eq(select[k - 1]) for k in range(1, len(select)))]
             m.d.comb += port.addr.eq(ent_addr[:len(port.addr)])
-            kept.append(Signal(shape, reset_less=True, name=f"ent_kept{b}"))
+            kept.append(Signal(shape, reset_less=True, name=f"{prefix}_kept{b}"))
             with m.If(select[-1]):
                 m.d.sync += kept[b].eq(port.data)
             with m.Else():
                 m.d.sync += kept[b].eq(0)
         n_groups = -(-len(kept) // ENTRY_GROUP)
         size = -(-len(kept) // n_groups)
-        groups = [Signal(shape, reset_less=True, name=f"ent_group{g}") for g in range(n_groups)]
+        groups = [Signal(shape, reset_less=True, name=f"{prefix}_group{g}") for g in range(n_groups)]
         m.d.sync += [group.eq(or_tree(kept[g * size:(g + 1) * size])) for g, group in enumerate(groups)]
-        ent_data = Signal(shape, reset_less=True, name="ent_data")  # the addressed entry
+        ent_data = Signal(shape, reset_less=True, name=f"{prefix}_data")  # the addressed entry
         m.d.sync += ent_data.eq(or_tree(groups))
         return ent_data
 
@@ -310,11 +334,12 @@ class MemoryWindows(wiring.Component):
         m.d.comb += self.hit.eq(~self.running & (window_q != n_windows))
         return window_q, index_q, word_q
 
-    def _bus_words(self, m: Module, window_q, word_q, ent_data):
+    def _bus_words(self, m: Module, window_q, word_q, reads):
         """A window word's read and write-back: DEC forms the port addresses (in the memories' address
         registers the clock after), then the block RAM read, the whole word landed in a register (the
         memories' outputs come from all over the device), then the answer and, for a write, the
-        modified word written back. Returns ``(bus_writing, {window: (k, new word)})``."""
+        modified word written back. ``reads``: per window, its word as the memories read it and the clocks
+        from the address registers to it. Returns ``(bus_writing, {window: (k, new word)})``."""
         windows = self.register_map.windows
         mem_steps = [Signal(name=f"mem_step{k}") for k in range(WINDOW_STEPS)]
         m.d.sync += [mem_steps[0].eq(self.bus_request & self.hit),
@@ -328,23 +353,15 @@ class MemoryWindows(wiring.Component):
         # (long before the entry lands): the answer and the write-back are AND-OR selects from flip-flops
         word_hot = {(k, j): Signal(name=f"word_hot_{w.name}_{j}") for k, w in enumerate(windows) for j in range(w.words)}
         m.d.sync += [hot.eq((window_q == k) & (word_q == j)) for (k, j), hot in word_hot.items()]
-        pos_a, vel_r, wgt_r = self.rams["positions"].read[0], self.rams["velocities"].read[0], self.rams["weights"].read[0]
         answer_terms, new_words = [], {}
         for k, w in enumerate(windows):
-            if w.name == "entries":
-                word_value = ent_data.as_value()  # ENTRY_LATENCY clocks after the address register
-            else:
-                if w.name == "nodes":
-                    read_data = Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
-                                    wgt_r.data.inv_mass_barrier)
-                else:
-                    read_data = self.rams["triangles"].read[0].data.as_value()
-                # the memories' data has landed (BlockRam); delayed to the entry's clock
-                word_value = read_data
-                for d in range(ENTRY_LATENCY - self.read_latency):
-                    aligned = Signal(len(read_data), name=f"bus_{w.name}_aligned{d}", reset_less=True)
-                    m.d.sync += aligned.eq(word_value)
-                    word_value = aligned
+            # the memories' data has landed (BlockRam); delayed to the entry's clock (ENTRY_LATENCY clocks after
+            # the address register)
+            word_value, latency = reads[w.name]
+            for d in range(ENTRY_LATENCY - latency):
+                aligned = Signal(len(word_value), name=f"bus_{w.name}_aligned{d}", reset_less=True)
+                m.d.sync += aligned.eq(word_value)
+                word_value = aligned
             padded = Signal(w.words * BUS_WORD_BITS, name=f"bus_{w.name}_word", reset_less=True)
             m.d.sync += padded.eq(word_value)
             words = [padded.word_select(j, BUS_WORD_BITS) for j in range(w.words)]
@@ -440,3 +457,172 @@ class MemoryWindows(wiring.Component):
                     with m.If(window_q == load_window):
                         m.d.sync += addr.eq(index_q)
                 m.d.sync += [word.eq(bus_data), en.eq(bus_en)]
+
+    # ------------------------------------------------------------------ lanes
+    def _lane_rams(self, pos_shape, vel_shape, weight_shape, force_shape) -> dict[str, BlockRam]:
+        """K > 1 lanes: every node and triangle memory in K banks, bank ``b`` holding the nodes (or triangles)
+        whose index is ``b`` mod K at the index divided by K; the position banks with three read ports per
+        lane (a lane's force and area passes read any node); a force memory per lane; the entry memory in K
+        shares of ``entries / K`` words (lane ``l``'s at ``l · entries / K`` in the window), each in banks of
+        ``entry_bank_depth`` words."""
+        cap, lanes, depth = self.capacity, self.lanes, self.entry_bank_depth
+        nodes, share = cap.vertices // lanes, cap.lane_entries
+        rams = {}
+        for b in range(lanes):
+            rams[f"positions{b}"] = BlockRam(pos_shape, nodes, read_ports=3 * lanes, name=f"positions{b}")
+            rams[f"velocities{b}"] = BlockRam(vel_shape, nodes, name=f"velocities{b}")
+            rams[f"weights{b}"] = BlockRam(weight_shape, nodes, name=f"weights{b}")
+            rams[f"triangles{b}"] = BlockRam(self.triangle_shape, cap.triangles // lanes, name=f"triangles{b}")
+        for lane in range(lanes):
+            rams[f"forces{lane}"] = BlockRam(force_shape, nodes, name=f"forces{lane}")
+            for b in range(-(-share // depth)):
+                rams[f"lane{lane}_entries{b}"] = BlockRam(self.entry_shape, min(depth, share - b * depth),
+                                                          name=f"lane{lane}_entries{b}", pin_registers=True)
+        return rams
+
+    def _lane_members(self, pos_shape, vel_shape, weight_shape, force_shape) -> dict:
+        """K > 1 lanes: each pass port once per lane (``[lane]``; ``position[lane][k]``), the node and entry
+        indices lane-local: lane ``l``'s ``n``-th node is node ``l + n·K``, its word ``n`` of bank ``l``. The
+        triangle and integrate passes run the lanes in step, from lane 0's counters (``tri_index``,
+        ``node_index``: a bank word)."""
+        cap, lanes = self.capacity, self.lanes
+        nodes = range(cap.vertices // lanes + 1)
+        return {
+            "entry_index": In(range(cap.lane_entries + 1)).array(lanes), "tri_index": In(range(cap.triangles // lanes + 1)),
+            "node_index": In(nodes), "node_of_entry": In(nodes).array(lanes),
+            "entry": Out(self.entry_shape).array(lanes), "triangle": Out(self.triangle_shape).array(lanes),
+            "position": Out(pos_shape).array(lanes, 3), "velocity": Out(vel_shape).array(lanes),
+            "weight_word": Out(weight_shape).array(lanes), "force_word": Out(force_shape).array(lanes),
+            "force_write": In(write_signature(nodes, force_shape)).array(lanes),
+            "node_write": In(write_signature(nodes, node_write_layout(self.fs))).array(lanes),
+        }
+
+    def _elaborate_lanes(self, m: Module, platform) -> None:
+        """K > 1 lanes: each lane's entry share read as the entry memory is; every pass read landed, then (a
+        clock more, :attr:`read_latency`) its bank's word selected in a register; the bus's word of a node or
+        triangle from its bank, of an entry from its lane's share."""
+        cap, lanes = self.capacity, self.lanes
+        bank_bits = (lanes - 1).bit_length()
+        window_q, index_q, word_q = self._decode(m)
+        bus_word, bus_bank = index_q[bank_bits:], index_q[:bank_bits]
+        running, in_area = self.running, self.in_area
+        in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight
+        # the entry shares: each lane's read while running, the bus's index within its share while idle
+        shares = []
+        for lane in range(lanes):
+            banks = [ram for name, ram in self.rams.items() if name.startswith(f"lane{lane}_entries")]
+            share_bits = (self.entry_bank_depth - 1).bit_length() if len(banks) > 1 else len(banks[0].read[0].addr)
+            ent_addr = Signal(range(cap.lane_entries), name=f"lane{lane}_ent_addr")
+            ent_hot = Signal(len(banks), name=f"lane{lane}_ent_hot")
+            ent_data = self._entry_read(m, banks, ent_addr, ent_hot, prefix=f"lane{lane}_ent")
+            m.d.comb += self.entry[lane].eq(ent_data)
+            start = lane * cap.lane_entries
+            local = Signal(range(cap.lane_entries), name=f"lane{lane}_bus_index")
+            in_share = Signal(name=f"lane{lane}_bus_in_share")
+            m.d.comb += [local.eq(index_q - start), in_share.eq((index_q >= start) & (index_q < start + cap.lane_entries))]
+            ent_next = Signal.like(ent_addr, name=f"lane{lane}_ent_next")
+            m.d.comb += ent_next.eq(Mux(running, self.entry_index[lane], local))
+            m.d.sync += [ent_addr.eq(ent_next),
+                         ent_hot.eq(Cat(((ent_next[share_bits:] == b) if len(banks) > 1 else 1) & (running | in_share)
+                                        for b in range(len(banks))))]
+            shares.append((banks, share_bits, local, in_share, ent_data))
+
+        # the node and triangle banks: lane 0's counters address every bank while running (the lanes run in
+        # step), the bus's word while idle; each lane's word landed a clock after the bank's
+        rams = self.rams
+        word_addr, tri_addr = Signal(range(cap.vertices // lanes), name="node_word_addr"), \
+            Signal(range(cap.triangles // lanes), name="tri_word_addr")
+        m.d.sync += [word_addr.eq(Mux(running, self.node_index, bus_word)),
+                     tri_addr.eq(Mux(running, self.tri_index, bus_word))]
+        for b in range(lanes):
+            m.d.comb += [rams[f"{name}{b}"].read[0].addr.eq(word_addr) for name in ("velocities", "weights", "forces")]
+            m.d.comb += rams[f"triangles{b}"].read[0].addr.eq(tri_addr)
+        for lane in range(lanes):
+            for name, out in (("velocities", self.velocity), ("weights", self.weight_word), ("forces", self.force_word),
+                              ("triangles", self.triangle)):
+                landed = Signal.like(out[lane], name=f"{name}_landed{lane}", reset_less=True)
+                m.d.sync += landed.eq(rams[f"{name}{lane}"].read[0].data)
+                m.d.comb += out[lane].eq(landed)
+        # the position ports: each lane's three, every bank read at the port's word, the bank's word selected
+        # by the node's low bits, carried beside the read
+        for lane in range(lanes):
+            tri, entry = self.triangle[lane], self.entry[lane]
+            own_or_a = Mux(in_area, tri.a[bank_bits:], self.node_of_entry[lane])
+            sources = {  # (word, bank) while running
+                "a": (Mux(in_nodes, self.node_index, own_or_a), Mux(in_area & ~in_nodes, tri.a[:bank_bits], lane)),
+                "b": (Mux(in_area, tri.b[bank_bits:], entry.neighbour[bank_bits:]),
+                      Mux(in_area, tri.b[:bank_bits], entry.neighbour[:bank_bits])),
+                "c": (Mux(in_area, tri.c[bank_bits:], entry.second[bank_bits:]),
+                      Mux(in_area, tri.c[:bank_bits], entry.second[:bank_bits])),
+            }
+            for k, (port, (word, bank)) in enumerate(sources.items()):
+                addr = Signal(range(cap.vertices // lanes), name=f"pos_{port}_addr{lane}")
+                banks = [Signal(bank_bits, name=f"pos_{port}_bank{lane}_{d}") for d in range(READ_LATENCY + 1)]
+                m.d.sync += [addr.eq(Mux(running, word, bus_word)), banks[0].eq(Mux(running, bank, bus_bank)),
+                             *(banks[d].eq(banks[d - 1]) for d in range(1, len(banks)))]
+                reads = [rams[f"positions{b}"].read[3 * lane + k] for b in range(lanes)]
+                m.d.comb += [read.addr.eq(addr) for read in reads]
+                landed = Signal.like(self.position[lane][k], name=f"pos_{port}_landed{lane}", reset_less=True)
+                m.d.sync += landed.eq(Array(read.data for read in reads)[banks[READ_LATENCY]])
+                m.d.comb += self.position[lane][k].eq(landed)
+        # the bus's word: a node's and a triangle's from its bank (lane 0's first port reads the positions), an
+        # entry's from every share (the shares that do not hold it read 0)
+        node_words = [Cat(rams[f"positions{b}"].read[0].data.x, rams[f"positions{b}"].read[0].data.y,
+                          rams[f"velocities{b}"].read[0].data.x, rams[f"velocities{b}"].read[0].data.y,
+                          rams[f"weights{b}"].read[0].data.inv_mass, rams[f"weights{b}"].read[0].data.inv_mass_barrier)
+                      for b in range(lanes)]
+        reads = {"nodes": (Array(node_words)[bus_bank], READ_LATENCY),
+                 "triangles": (Array(rams[f"triangles{b}"].read[0].data.as_value() for b in range(lanes))[bus_bank],
+                               READ_LATENCY),
+                 "entries": (or_tree([share[-1].as_value() for share in shares]), ENTRY_LATENCY)}
+        bus_writing, new_words = self._bus_words(m, window_q, word_q, reads)
+        self._lane_writes(m, window_q, bus_word, bus_bank, bus_writing, new_words, shares, platform)
+
+    def _lane_writes(self, m: Module, window_q, bus_word, bus_bank, bus_writing, new_words, shares, platform) -> None:
+        """K > 1 lanes: each bank's write registers (lane ``b``'s integrate pass writes bank ``b`` while running,
+        the bus's write-back the bank of its index while idle); each share's (the bus only); each lane's force
+        memory (its force pass)."""
+        rams, lanes = self.rams, self.lanes
+        node_k, node_new = new_words["nodes"]
+        ent_k, ent_new = new_words["entries"]
+        tri_k, tri_new = new_words["triangles"]
+        pos_bits, vel_bits = (Shape.cast(rams[f"{name}0"].shape).width for name in ("positions", "velocities"))
+        node_writing = bus_writing & (window_q == node_k)
+        for b in range(lanes):
+            hit = bus_bank == b
+            lane_write = self.node_write[b]
+            ports = {  # (port, data and enable from the bus, (address, data, enable) from lane b or None)
+                "pos": (rams[f"positions{b}"].write, node_new[:pos_bits], node_writing & hit,
+                        (lane_write.addr, lane_write.data.position, lane_write.en)),
+                "vel": (rams[f"velocities{b}"].write, node_new[pos_bits:pos_bits + vel_bits], node_writing & hit,
+                        (lane_write.addr, lane_write.data.velocity, lane_write.en)),
+                "wgt": (rams[f"weights{b}"].write, node_new[pos_bits + vel_bits:], node_writing & hit, None),
+                "tri": (rams[f"triangles{b}"].write, tri_new, bus_writing & (window_q == tri_k) & hit, None),
+            }
+            for name, (port, bus_data, bus_en, from_lane) in ports.items():
+                regs = (Signal.like(port.addr, name=f"{name}{b}_waddr"), Signal.like(port.data, name=f"{name}{b}_wdata"),
+                        Signal(name=f"{name}{b}_wen"))
+                m.d.comb += [port.addr.eq(regs[0]), port.data.eq(regs[1]), port.en.eq(regs[2])]
+                # (the choice from a copy of ``running`` of the port's own, a clock late: see _writes)
+                with m.If(kept_register(m, self.running, name=f"{name}{b}_writes_running", platform=platform)):
+                    m.d.sync += ([reg.eq(value) for reg, value in zip(regs, from_lane)] if from_lane is not None
+                                 else regs[2].eq(0))
+                with m.Else():
+                    m.d.sync += [regs[0].eq(bus_word), regs[1].eq(bus_data), regs[2].eq(bus_en)]
+        for lane, (banks, share_bits, local, in_share, _) in enumerate(shares):
+            regs = (Signal(range(self.capacity.lane_entries), name=f"lane{lane}_ent_waddr"),
+                    Signal(self.entry_shape, name=f"lane{lane}_ent_wdata"), Signal(len(banks), name=f"lane{lane}_ent_whot"))
+            for b, bank in enumerate(banks):
+                m.d.comb += [bank.write.addr.eq(regs[0][:len(bank.write.addr)]), bank.write.data.eq(regs[1]),
+                             bank.write.en.eq(regs[2][b])]
+            with m.If(kept_register(m, self.running, name=f"lane{lane}_ent_writes_running", platform=platform)):
+                m.d.sync += regs[2].eq(0)
+            with m.Else():
+                writing = bus_writing & (window_q == ent_k) & in_share
+                with m.If(window_q == ent_k):
+                    m.d.sync += regs[0].eq(local)
+                m.d.sync += [regs[1].eq(ent_new), regs[2].eq(Cat(writing & ((local[share_bits:] == b) if len(banks) > 1
+                                                                            else 1) for b in range(len(banks))))]
+        for lane in range(lanes):
+            forces, write = rams[f"forces{lane}"], self.force_write[lane]
+            m.d.comb += [forces.write.addr.eq(write.addr), forces.write.data.eq(write.data), forces.write.en.eq(write.en)]

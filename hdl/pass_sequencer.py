@@ -135,6 +135,10 @@ class PassSequencer(wiring.Component):
             raise TypeError(f"PassSequencer needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
         cap: EngineCapacity = register_map.capacity
         self.fs, self.capacity = fs, cap
+        #: With K > 1 lanes this is one lane's: its counts are the lane's (``vertices``, ``entries``,
+        #: ``triangles``), its indices lane-local (a bank's word), and the events of a whole pass's sum
+        #: (E_C's, S's, E_S's ``area_sum``) are the lanes' sum's, not its own (:class:`~hdl.lanes.LaneSums`).
+        self.lanes = lanes = cap.lanes
         #: Each pass's clocks from its first address to its unit's input (:func:`fetch_latencies`).
         self.force_fetch_latency, self.area_fetch_latency, self.node_fetch_latency = fetch_latencies(read_latency)
         self.read_latency = read_latency
@@ -142,7 +146,7 @@ class PassSequencer(wiring.Component):
         sums = energy_sums_layout(fs, cap.entries)
         force_sig, integrator_sig = ForcePass.signature_of(fs, True, True), Integrator.signature_of(fs, None, True)
         width = register_map.value_width
-        nodes = range(cap.vertices + 1)
+        nodes = range(cap.vertices // lanes + 1)
         area_saturations = Signal(area_saturations_layout(fs))
         #: Width of each saturation-event output (a unit's count, 0 when it reports none).
         self.event_widths = {
@@ -160,7 +164,7 @@ class PassSequencer(wiring.Component):
             "entry": In(word_layout(layouts["entries"])), "triangle": In(word_layout(layouts["triangles"])),
             "position": In(vector_layout(fs.position)).array(3), "velocity": In(vector_layout(fs.velocity)),
             "weight_word": In(weight_word_layout(fs)), "force_word": In(force_word_layout(fs)),
-            "entry_index": Out(range(cap.entries + 1)), "tri_index": Out(range(cap.triangles + 1)),
+            "entry_index": Out(range(cap.lane_entries + 1)), "tri_index": Out(range(cap.triangles // lanes + 1)),
             "node_index": Out(nodes), "node_of_entry": Out(nodes),
             "force_entry": Out(stream.Signature(force_entry_layout(fs), always_ready=True)),
             "triangle_out": Out(stream.Signature(triangle_layout(fs), always_ready=True)),
@@ -328,11 +332,20 @@ class PassSequencer(wiring.Component):
         m.d.comb += [
             self.force_events.eq(Mux(self.forces.valid, self.forces.payload.saturations, 0)),
             self.integrate_events.eq(Mux(self.integrated.valid & self.running, self.integrated.payload.saturations, 0)),
+        ]
+        if self.lanes > 1:  # a sum's event is the lanes' sum's (hdl.lanes.LaneSums)
+            m.d.comb += self.area_events.eq(Mux(self.area_done, sat.face_edge + sat.face_area, 0))
+            return self._idle(m, e_valid, t_valid, n_valid)
+        m.d.comb += [
             self.area_events.eq(Mux(self.area_done, sat.face_edge + sat.face_area + sat.area_sum, 0)),
             self.length_events.eq(self.force_done & (self.length_sum > fs.error_acc.raw_max)),
             self.power_events.eq(self.integrate_done & self.momentum
                                  & ((power > fs.power_acc.raw_max) | (power < fs.power_acc.raw_min))),
         ]
+        self._idle(m, e_valid, t_valid, n_valid)
+
+    def _idle(self, m: Module, e_valid, t_valid, n_valid) -> None:
+        """``passes_idle``: the fetch counters at their ends and no item in a fetch or a unit."""
         # The fetch counters' compares in registers beside the counters, then `done_fetching` from
         # those, two clocks behind the counters, so that no compare's logic sits on the route across
         # the device into the drain's end. A guard pass restarts its counter in its first clock,

@@ -92,7 +92,11 @@ class PhaseController(wiring.Component):
         Registered: in the clock before, every pass had fetched its last item and none was in a
         fetch, a unit or a guard pass (the sequencer's and the guard's ``passes_idle`` and ``idle``).
     length_sum, square_sum, barrier_sum, power_sum, area_total : ``In``
-        The passes' sums (``area_total`` from :class:`~hdl.area_error.AreaError`).
+        The passes' sums (``area_total`` from :class:`~hdl.area_error.AreaError`; with lanes, the pass ends
+        and sums from :class:`~hdl.lanes.LaneSums`).
+    lane_fault : ``In(1)``
+        With K > 1 lanes only: LANEk_ENTRIES do not add up to ENTRIES or one overflows its share (START
+        answers ``bad-constants``).
     state, result, running : ``Out``
         STATUS.state and STATUS.result codes; ``running`` is ``state == running`` as a flip-flop of
         its own (it gates every pass, port multiplexer and bus answer: their logic starts from a
@@ -157,6 +161,8 @@ class PhaseController(wiring.Component):
             "square_sum": In(sums["square_sum"].shape), "barrier_sum": In(sums["barrier_sum"].shape),
             "power_sum": In(signed(fs.power.width + self.capacity.vertices.bit_length())),
             "area_total": In(shape_of(fs.error_acc)),
+            # with lanes, LANEk_ENTRIES that do not add up to ENTRIES or overflow a share (the engine's compare)
+            **({"lane_fault": In(1)} if self.capacity.lanes > 1 else {}),
             "state": Out(range(len(STATES)), init=_code(STATES, "idle")),
             "result": Out(range(len(RESULTS)), init=_code(RESULTS, "none")),
             "running": Out(1), "starting": Out(1), "irq_set": Out(1),
@@ -344,7 +350,8 @@ class PhaseController(wiring.Component):
                           | (getattr(self, f"{k}_shift") < fs.error.frac_bits + 2) for k in ("area", "length")]
         faults = [self.vertices > cap.vertices, self.entries > cap.entries, self.triangles > cap.triangles,
                   self.entries == 0, self.triangles == 0, *reciprocal_bad, ~mode_runs(self.mode, guard=cap.guard),
-                  mode_steps(self.mode, Step.FIXED) & (self.dt == 0), self.max_iter == 0]
+                  mode_steps(self.mode, Step.FIXED) & (self.dt == 0), self.max_iter == 0,
+                  *([self.lane_fault] if cap.lanes > 1 else [])]
         # in two registered stages, each fault and then their OR (MODE's decode and the compares into one
         # flag is five LUTs across the register file): START's pulse comes at least six clocks after a
         # constant's storage changes (its register answers two clocks after the write, the acknowledge

@@ -80,7 +80,7 @@ def test_a_preload_leaves_every_block_ram_as_the_bus_load_does():
 
 def test_the_memories_registers_are_checked_and_follow_the_build():
     """No pin registers by default, with or without the guard; the registered select needs them. The
-    datapaths' delay lines only when asked for; one lane."""
+    datapaths' delay lines only when asked for; lanes only without the guard and those options."""
     with warnings.catch_warnings():  # engines built here are never elaborated
         warnings.simplefilter("ignore", UnusedElaboratable)
         assert SpringflatEngine(FS, CAPACITY).pin_registers is False
@@ -97,9 +97,13 @@ def test_the_memories_registers_are_checked_and_follow_the_build():
                 SpringflatEngine(FS, CAPACITY, **{flag: 1})
         with pytest.raises(ValueError, match="registered_select needs the pin registers"):
             SpringflatEngine(FS, CAPACITY, registered_select=True, pin_registers=False)
-        # the lanes' contract is defined (golden_model), their datapaths are not built: refused, not one lane
-        with pytest.raises(ValueError, match="^SpringflatEngine is built with one lane, not lanes=2: "):
-            SpringflatEngine(FS, dataclasses.replace(CAPACITY, lanes=2))
+        # lanes: without the guard and the memories' and datapaths' build options
+        lanes = dataclasses.replace(CAPACITY, guard=False, lanes=2)
+        assert SpringflatEngine(FS, lanes).registered_select is False
+        for capacity, option in ((dataclasses.replace(CAPACITY, lanes=2), {}), (lanes, {"delay_lines": True}),
+                                 (lanes, {"pin_registers": True})):
+            with pytest.raises(ValueError, match=r"^SpringflatEngine: lanes=2 are built without the step guard "):
+                SpringflatEngine(FS, capacity, **option)
         gc.collect()
 
 
