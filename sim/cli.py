@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.builtin import is_builtin
-from golden_model.engine_spec.image import DEFAULT_CAPACITY
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, LANES
 from golden_model.files import describe_os_error
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
 from golden_model.mesh import one_line
@@ -257,7 +257,9 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     from hdl.dsp import DspPlatform
 
     formats = load_format_set(args.formats)
-    capacity = engine_capacity(args.capacity, formats, guard=args.build_guard)
+    if args.lanes > 1 and args.build_guard:
+        raise UserError(f"--lanes {args.lanes} builds the engine without the step guard: add --no-guard")
+    capacity = engine_capacity(args.capacity, formats, guard=args.build_guard, lanes=args.lanes)
     dsp = VERILOG_TARGETS[args.target]
     platform = DspPlatform(dsp) if dsp else None
     out = args.out
@@ -357,6 +359,9 @@ def build_parser() -> argparse.ArgumentParser:
                         f"{DEFAULT_CAPACITY.as_option()})")
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
                    help="the engine without the step guard (no guarded mode; its block RAMs free for depth)")
+    p.add_argument("--lanes", type=integer_argument, choices=LANES, default=1, metavar="K",
+                   help="the engine with K datapaths (1, 2 or 4), each on a share of the nodes; built without the "
+                        "step guard, so with --no-guard (docs/engine.md, 'Lanes'; default 1)")
     p.add_argument("--target", choices=tuple(VERILOG_TARGETS), default="generic",
                    help="generic (the default): no vendor primitives, for any tool or simulator; ecp5: the netlist "
                         "'springflat synth --target ecp5' places (MULT18X18D, DP16KD and TRELLIS_FF instances, their "

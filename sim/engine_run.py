@@ -13,6 +13,7 @@ bit with :func:`~golden_model.engine_spec.image.run_image` inside the bench.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import os
 import re
@@ -185,9 +186,10 @@ def engine_directory(fs: FormatSet, capacity: EngineCapacity, dsp: str | None = 
 
 
 def capacity_key(capacity: EngineCapacity) -> str:
-    """A directory name per elaborated capacity: the depths, and whether the build has the step guard."""
+    """A directory name per elaborated capacity: the depths, whether the build has the step guard, its lanes."""
     depths = f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}"
-    return depths if capacity.guard else f"{depths}-no-guard"
+    key = depths if capacity.guard else f"{depths}-no-guard"
+    return key if capacity.lanes == 1 else f"{key}-lanes-{capacity.lanes}"
 
 
 def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator",
@@ -289,8 +291,7 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
     work = Path(work)
     work.mkdir(parents=True, exist_ok=True)
     np.savez(work / "image.npz", nodes=image.nodes, entries=image.entries, triangles=image.triangles)
-    config = {"capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
-                           "triangles": capacity.triangles, "guard": capacity.guard},
+    config = {"capacity": dataclasses.asdict(capacity),
               "constants": {k: int(v) for k, v in image.constants.items()},
               "wait_states": wait_states, "seed": seed,
               "internal_clock": simulator == "verilator" and build in INTERNAL_CLOCK_BUILDS,

@@ -23,7 +23,7 @@ import os
 import re
 import shutil
 import warnings
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable, TypeVar
 
@@ -357,8 +357,7 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
                             "| port | direction | bits |", "|---|---|---|",
                             *(f"| `{p['name']}` | {p['direction']} | {p['width']} |" for p in verilog_ports(engine)),
                             ""]))
-    return {"module": ENGINE_MODULE, "capacity": {"vertices": capacity.vertices, "entries": capacity.entries,
-                                                          "triangles": capacity.triangles, "guard": capacity.guard},
+    return {"module": ENGINE_MODULE, "capacity": asdict(capacity),
             "bus": f"Wishbone B4 classic, {BUS_WORD_BITS}-bit data, word addresses", "addr_width": engine.addr_width,
             "files": [f"{ENGINE_MODULE}.v", *files]}
 

@@ -75,11 +75,13 @@ def _seed(nextpnr_command: str | None) -> str:
 
 
 def capacity_text(capacity: dict | None) -> str:
-    """The ``capacity`` column: ``V/E/T``, and `` no guard`` for an engine built without the step guard."""
+    """The ``capacity`` column: ``V/E/T``, `` no guard`` for an engine built without the step guard, and
+    `` K lanes`` for one of K > 1 lanes."""
     if not capacity:
         return ""
     text = "/".join(str(capacity[k]) for k in ("vertices", "entries", "triangles"))
-    return text if capacity.get("guard", True) else f"{text} no guard"
+    text = text if capacity.get("guard", True) else f"{text} no guard"
+    return text if capacity.get("lanes", 1) == 1 else f"{text}, {capacity['lanes']} lanes"
 
 
 def rows_from_report(report: dict, date: str) -> list[dict[str, str]]:

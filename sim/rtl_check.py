@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 from golden_model.fixed.engine import check_fixed_params, prepare, scale_mesh
-from golden_model.engine_spec.image import DEFAULT_CAPACITY, check_engine_params
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, LANES, check_engine_params
 
 from .cocotb_support import SIMULATORS, WAVE_SUFFIX, SimulatorError, missing_simulator, run_bench
 from .layouts import AUTO_START, LAYOUT_METHODS, initial_layout
@@ -45,6 +45,9 @@ def add_parser(sub, add_run_options) -> None:
     p.add_argument("--capacity", type=integer_argument, nargs=3, default=None, metavar=("V", "E", "T"),
                    help="with --engine-top: the engine's vertices, neighbour entries and triangles "
                         f"(default: {DEFAULT_CAPACITY.as_option()})")
+    p.add_argument("--lanes", type=integer_argument, default=1, choices=LANES, metavar="K",
+                   help="with --engine-top: an engine of K datapaths (1, 2 or 4), built without the step guard, so "
+                        "with --no-guard --energy-window 1 (default 1)")
     p.add_argument("--wait-states", type=integer_argument, default=0, metavar="N",
                    help="with --engine-top: up to N random idle clocks before each bus cycle (default 0)")
     p.add_argument("--iterations", type=integer_argument, default=None, metavar="N", help="stop after at most N iterations")
@@ -78,6 +81,8 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         check_link_target(args.waves, "--waves")
     load_format_set(args.formats)  # a formats file that cannot work is refused before the run mode
     check_engine_params(params)
+    if args.lanes > 1 and params.guard:
+        raise UserError(f"--lanes {args.lanes} builds the engine without the step guard: add --no-guard --energy-window 1")
     if params.guard and not args.engine_top:
         if args.stall is not None:  # asked for the datapath bench, which has no guard
             raise UserError("the datapath bench (--stall) has no step guard: drop --stall for the whole engine "
@@ -87,7 +92,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
         args.engine_top = True
     if args.engine_top:
         return cmd_rtl_check_engine(args, mesh, params)
-    if given := [flag for flag, value in (("--capacity", args.capacity is not None),
+    if given := [flag for flag, value in (("--capacity", args.capacity is not None), ("--lanes", args.lanes != 1),
                                           ("--wait-states", bool(args.wait_states))) if value]:
         raise UserError(f"{' and '.join(given)} appl{'y' if len(given) > 1 else 'ies'} to --engine-top: add it")
     if args.iterations is not None and args.iterations < 1:
@@ -193,7 +198,8 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
             raise UserError(f"--iterations must be >= 1, got {args.iterations}")
         params = dataclasses.replace(params, max_iter=min(params.max_iter, args.iterations))
     formats = load_format_set(args.formats)
-    capacity = engine_capacity(args.capacity, formats)  # one line for what the register map cannot hold
+    # one line for what the register map cannot hold; lanes are built without the guard
+    capacity = engine_capacity(args.capacity, formats, guard=args.lanes == 1, lanes=args.lanes)
     if beyond := beyond_the_85f(capacity):  # (before the start's seconds, and the export's minutes)
         print_note(beyond)
     check_fixed_params(params, formats)
@@ -202,9 +208,10 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
     # the start flatten takes: a guarded run's folded start untangled (the datapath bench has no guard)
     problem = prepare(mesh, start_positions(mesh, args.init, params, progress=False)[0], params, formats)
     image = build_image(problem, capacity)  # FixedPointError (one line) for a mesh over capacity
+    lanes = "" if capacity.lanes == 1 else f" in {capacity.lanes} lanes"
     print(f"springflat: {args.sim}: exporting and building springflat_engine for capacity {capacity.vertices}/"
-          f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running the "
-          "whole flattening ...", file=sys.stderr)
+          f"{capacity.entries}/{capacity.triangles}{lanes} (once per format set and capacity, then reused) and running "
+          "the whole flattening ...", file=sys.stderr)
     with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
         log = Path(tmp) / "simulation.log"
         try:
@@ -220,6 +227,7 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
             _save_waves(run.waves, args.waves)
     summary = {"mesh": mesh.name, "simulator": args.sim, "formats": formats.name, "top": ENGINE_MODULE,
                "capacity": list(args.capacity or (capacity.vertices, capacity.entries, capacity.triangles)),
+               "lanes": capacity.lanes,
                "vertices": mesh.n_vertices, **run.result, **_engine_measures(run.result, problem),
                "wall_seconds": run.wall_seconds}
     if args.json:

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from golden_model.engine_spec import uart_protocol as protocol
-from golden_model.engine_spec.image import DEFAULT_CAPACITY
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, LANES
 
 from .clock import ENGINE_TARGET_MHZ
 from .run_options import OneOutput, integer_argument, path_argument
@@ -86,6 +86,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--no-guard", dest="build_guard", action="store_false",
                    help="springflat_engine without the step guard: no guarded mode and fewer block RAMs "
                         "(docs/engine-guard.md)")
+    p.add_argument("--lanes", type=integer_argument, choices=LANES, default=1, metavar="K",
+                   help="springflat_engine with K datapaths (1, 2 or 4), each on a share of the nodes; built without "
+                        "the step guard, so with --no-guard (docs/engine.md, 'Lanes'; default 1)")
     p.add_argument("--router", choices=tuple(ROUTERS), default=DEFAULT_ROUTER,
                    help="nextpnr router (default auto: the timing-driven router1; router1-ripup: router1 with its "
                         "timing-driven rip-up, --tmg-ripup; router2 is not timing-driven)")
@@ -109,6 +112,8 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
         parts += ["--capacity", *(str(n) for n in args.capacity)]
     if not args.build_guard:
         parts.append("--no-guard")
+    if args.lanes != 1:
+        parts += ["--lanes", str(args.lanes)]
     if args.router != DEFAULT_ROUTER:
         parts += ["--router", args.router]
     if args.placer_timing != DEFAULT_PLACER_TIMING:
@@ -125,14 +130,19 @@ def cmd_synth(args: argparse.Namespace) -> int:
     from .register_map_export import engine_capacity
 
     fs = load_format_set(args.formats)
-    capacity = engine_capacity(args.capacity, fs, guard=args.build_guard)
+    if args.lanes > 1 and args.build_guard:
+        raise SynthError(f"--lanes {args.lanes} builds {ENGINE} without the step guard: add --no-guard")
+    capacity = engine_capacity(args.capacity, fs, guard=args.build_guard, lanes=args.lanes)
     if args.board is not None or args.target is None:
+        if args.lanes > 1:
+            raise SynthError("--lanes applies to --target ecp5 builds of springflat_engine, not yet to --board")
         from .board_build import cmd_board
 
         return cmd_board(args, fs, capacity)
     if args.baud is not None:
         raise SynthError("--baud sets the board's UART: add --board ulx3s-85f (and drop --target)")
-    for given, option in ((args.capacity, "--capacity sizes"), (not args.build_guard, "--no-guard builds")):
+    for given, option in ((args.capacity, "--capacity sizes"), (not args.build_guard, "--no-guard builds"),
+                          (args.lanes > 1, "--lanes builds")):
         if given and ENGINE not in (args.components or ()):
             raise SynthError(f"{option} {ENGINE}: add it to --components")
     out = args.out if args.out else Path(f"synth-{args.target}-{fs.name}")

@@ -1077,11 +1077,19 @@ def test_a_name_the_standard_outputs_encoding_lacks_is_escaped_not_a_traceback(t
 @pytest.mark.parametrize("given, said", [(["--capacity", "64", "200", "100"], "--capacity applies"),
                                          (["--wait-states", "2"], "--wait-states applies"),
                                          (["--capacity", "64", "200", "100", "--wait-states", "2"],
-                                          "--capacity and --wait-states apply")])
+                                          "--capacity and --wait-states apply"),
+                                         (["--lanes", "2", "--no-guard", "--energy-window", "1"], "--lanes applies")])
 def test_rtl_check_names_the_engine_top_option_given_without_it(given, said):
     """(It named both options whatever was given.)"""
     proc = run("rtl-check", "surf1", *given)
     assert proc.returncode == 2 and proc.stderr == f"springflat: error: {said} to --engine-top: add it\n"
+
+
+def test_rtl_check_lanes_need_an_unguarded_mode():
+    """Lanes are built without the step guard: the guarded momentum run is refused in one line, before a build."""
+    proc = run("rtl-check", "surf1", "--dynamics", "momentum", "--lanes", "2")
+    assert proc.returncode == 2 and proc.stderr == ("springflat: error: --lanes 2 builds the engine without the step "
+                                                    "guard: add --no-guard --energy-window 1\n")
 
 
 def test_a_layout_file_for_an_stl_says_how_its_rows_are_matched(tmp_path):
