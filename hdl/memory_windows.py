@@ -152,6 +152,16 @@ class MemoryWindows(wiring.Component):
     * write (the bus's write-back only): the address, data and one-hot bank-enable registers, then
       the block RAMs' pin registers: a clock more, which the bus cycle absorbs (its next read comes
       after its answer).
+
+    Lanes
+    -----
+    With ``capacity.lanes`` K > 1 (built without the guard and the pin registers): every node and
+    triangle memory is K banks by the index's low bits, the position banks with three read ports per
+    lane; a force memory per lane; the entry memory in K shares, each read as above by its lane
+    (:meth:`_lane_rams`). The pass ports are per lane (:meth:`_lane_members`), every pass read one
+    clock longer: the bank's word selected in a register. The bus's word of a node or triangle comes
+    from its bank, of an entry from the share that holds it (the others read 0), and its write-back
+    goes to that bank or share alone.
     """
 
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, register_map: RegisterMap, *, addr_width: int,
