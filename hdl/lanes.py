@@ -37,8 +37,8 @@ class LaneSums(wiring.Component):
     Members
     -------
     ``<pass>_done_in`` : ``In(1).array(K)``; ``<pass>_done`` : ``Out(1)``
-        A lane's pass end (a one-clock pulse, :class:`~hdl.pass_sequencer.PassSequencer`'s), for ``force``,
-        ``area`` and ``integrate``; the pass's end, a one-clock pulse the clock after the last lane's.
+        A lane's pass end (a one-clock pulse, once per pass: :class:`~hdl.pass_sequencer.PassSequencer`'s), for
+        ``force``, ``area`` and ``integrate``; the pass's end, a one-clock pulse the clock after the last lane's.
     ``<sum>_in`` : ``In(...).array(K)``; ``<sum>`` : ``Out(...)``
         Each lane's sum, whole from its pass end until the next pass restarts it; the lanes' sum, a register
         loaded with the pass end (``length_sum``, ``square_sum``, ``barrier_sum``, ``power_sum``, and

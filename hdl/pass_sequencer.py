@@ -322,12 +322,22 @@ class PassSequencer(wiring.Component):
         # a pulse the clock after the pass's last result, registered (its counter's compare and the
         # units' idle flags stay off the phase machine's logic)
         area_fetching = Cat(*t_valid).any()
-        m.d.sync += [
-            self.force_done.eq(self.in_force & (self.force_out_index == self.vertices) & ~self.force_done),
-            self.area_done.eq(self.in_area & (self.tri_index == self.triangles) & ~area_fetching & self.area_idle
-                              & ~self.area_clear & ~self.area_done),
-            self.integrate_done.eq(self.in_integrate & (self.node_out_index == self.vertices) & ~self.integrate_done),
-        ]
+        if self.lanes == 1:  # the controller leaves the phase the clock after the pulse
+            m.d.sync += [
+                self.force_done.eq(self.in_force & (self.force_out_index == self.vertices) & ~self.force_done),
+                self.area_done.eq(self.in_area & (self.tri_index == self.triangles) & ~area_fetching & self.area_idle
+                                  & ~self.area_clear & ~self.area_done),
+                self.integrate_done.eq(self.in_integrate & (self.node_out_index == self.vertices) & ~self.integrate_done),
+            ]
+        else:  # the joined end (hdl.lanes.LaneSums) comes a clock after the last lane's, so the phase outlasts the
+            # pulse, which would come again every other clock: a lane's end pulses once in its phase
+            ends = {"force": (self.in_force, self.force_done, self.force_out_index == self.vertices),
+                    "area": (self.in_area, self.area_done, (self.tri_index == self.triangles) & ~area_fetching
+                             & self.area_idle & ~self.area_clear),
+                    "integrate": (self.in_integrate, self.integrate_done, self.node_out_index == self.vertices)}
+            for name, (phase, done, at_end) in ends.items():
+                ended = Signal(name=f"{name}_ended")
+                m.d.sync += [done.eq(phase & at_end & ~done & ~ended), ended.eq(phase & (ended | done))]
         sat, power = self.area_saturations, self.power_sum
         m.d.comb += [
             self.force_events.eq(Mux(self.forces.valid, self.forces.payload.saturations, 0)),

@@ -247,8 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--capacity", nargs=3, type=integer_argument, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
                         default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles),
                         help="the engine's capacity (default: the one springflat verilog and synth build)")
-    parser.add_argument("--lanes", type=int, choices=LANES, default=1,
-                        help="the map of an engine of K lanes (docs/engine.md, 'Lanes': defined, not yet built in the RTL)")
+    parser.add_argument("--lanes", type=integer_argument, choices=LANES, default=1, metavar="K",
+                        help="the map of an engine of K lanes (docs/engine.md, 'Lanes'; default 1)")
     parser.add_argument("--out", required=True, type=path_argument, action=OneOutput)
     args = parser.parse_args(argv)
     reset_interrupted()

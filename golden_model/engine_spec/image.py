@@ -100,7 +100,7 @@ class EngineCapacity:
                 raise ValueError(f"EngineCapacity: {name} must be an int >= 2, got {value!r}")
         if not isinstance(self.guard, bool):
             raise ValueError(f"EngineCapacity: guard must be a bool, got {self.guard!r}")
-        if isinstance(self.lanes, bool) or self.lanes not in LANES:
+        if not isinstance(self.lanes, int) or isinstance(self.lanes, bool) or self.lanes not in LANES:
             raise ValueError(f"EngineCapacity: lanes must be one of {', '.join(map(str, LANES))}, got {self.lanes!r}")
         for name in ("vertices", "entries", "triangles"):
             if getattr(self, name) % self.lanes:

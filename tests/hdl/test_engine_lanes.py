@@ -1,14 +1,17 @@
 """SpringflatEngine in K lanes (``EngineCapacity(lanes=K)``, without the guard) on Amaranth's simulator: whole
 flattenings loaded and read back over the bus, bit for bit against the golden model's ``run_image`` of the
-same image (itself the one-lane run: ``tests/golden_model/test_engine_lanes.py``)."""
+same image (itself the one-lane run: ``tests/golden_model/test_image_lanes.py``)."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from golden_model.engine_spec.image import constant_fault, run_image
+from golden_model.engine_spec.image import EngineCapacity, build_image, constant_fault, run_image
+from golden_model.fixed.engine import prepare
 from hdl.engine import SpringflatEngine
+from sim.generate import dome_grid
+from sim.layouts import initial_layout
 from support.engine_sim import CAPACITY, FS, INIT, RUNS, assert_same_run, image_of, simulate
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator
@@ -21,26 +24,39 @@ def _lanes(k: int):
 
 
 def _run(capacity, image, entry_bank_depth=8):
-    """Load ``image`` over the bus, start, wait, read back: ``(result, read_back, entries read back, cycles)``."""
+    """Load ``image`` over the bus, start, wait, read back: ``(result, read_back, {entries, triangles} read back,
+    cycles)``."""
     dut = SpringflatEngine(FS, capacity, entry_bank_depth=entry_bank_depth)
-    window = dut.register_map.window("entries")
     out = {}
 
     def host(driver, bus):
         driver.load(image)
-        out["entries"] = [[bus.read(window.address(int(row), word)) for word in range(window.words)]
-                          for row in image.rows("entries")]
+        for name in ("entries", "triangles"):
+            window = dut.register_map.window(name)
+            out[name] = np.array([[bus.read(window.address(int(row), word)) for word in range(window.words)]
+                                  for row in image.rows(name)], dtype=np.uint32)
         driver.start()
         out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
         out["read_back"] = driver.read_back()
         out["cycles"] = driver.read_value("cycles")
 
     simulate(dut, host)
-    return out["result"], out["read_back"], np.array(out["entries"], dtype=np.uint32), out["cycles"]
+    return out["result"], out["read_back"], {name: out[name] for name in ("entries", "triangles")}, out["cycles"]
 
 
-# Two lanes with their entry shares in banks of 8 words (the second lane's share starts inside the first's
-# last bank's words: 128 words a share), and four lanes; the paper dynamics and the unguarded momentum step.
+def _check(capacity, image, **options):
+    """A whole run of ``image`` on ``capacity`` as ``run_image`` has it, every window word read back as loaded."""
+    expected = run_image(image, FS)
+    result, read_back, windows, _ = _run(capacity, image, **options)
+    for name, words in windows.items():  # each share's and bank's words read back where they were written
+        np.testing.assert_array_equal(words, image.memories()[name])
+    assert result == expected.status
+    assert_same_run(read_back, expected)
+    return expected
+
+
+# Two lanes with their entry shares in banks of 8 words (128 words a share: 16 banks each), and four lanes
+# (64 words a share); the paper dynamics and the unguarded momentum step.
 @pytest.mark.parametrize("lanes, run", [(2, "momentum-barrier"), (4, "paper-fixed-barrier-damped"),
                                         (2, "paper-variable")])
 def test_lanes_run_the_one_lane_run_bit_exact(lanes, run):
@@ -49,10 +65,25 @@ def test_lanes_run_the_one_lane_run_bit_exact(lanes, run):
     expected = run_image(image, FS)
     one_lane = run_image(image_of(RUNS[run], GUARDLESS, init=INIT.get(run, "tutte")), FS)
     assert (expected.status, expected.iterations) == (one_lane.status, one_lane.iterations)
-    result, read_back, entries, _ = _run(capacity, image)
-    np.testing.assert_array_equal(entries, image.entries)  # each share's words read back where they were written
-    assert result == expected.status and expected.iterations >= 4
-    assert_same_run(read_back, expected)
+    assert _check(capacity, image).iterations >= 4
+
+
+@pytest.mark.parametrize("lanes", [2, 4])
+def test_an_uneven_tail_and_shares_across_the_banks(lanes):
+    """25 vertices (lane 0 holds a node more than the others) and 32 triangles; shares of 60 or 30 entries in
+    banks of 8 words, so a share starts inside a bank's range and the last bank is short."""
+    mesh = dome_grid(5)
+    capacity = EngineCapacity(32, 120, 64, guard=False, lanes=lanes)
+    image = build_image(prepare(mesh, initial_layout(mesh, "tutte"), RUNS["momentum-barrier"], FS), capacity)
+    assert mesh.n_vertices % lanes and image.rows("entries")[-1] > (lanes - 1) * capacity.lane_entries
+    assert _check(capacity, image).iterations >= 4
+
+
+def test_every_saturation_event_is_counted_once():
+    """A layout 380 times too wide saturates the area pass's edges and areas: each lane's events once a pass
+    (a lane's pass end pulsed again while the joined end was a clock behind, and counted them twice)."""
+    image = image_of(dataclasses.replace(RUNS["paper-variable"], max_iter=2), _lanes(2), squeeze=380.0)
+    assert _check(_lanes(2), image).saturations > 100
 
 
 def test_lane_counts_that_do_not_add_up_answer_bad_constants():

@@ -100,6 +100,7 @@ def test_a_lane_over_its_share_of_the_entries_is_refused_in_one_line():
 
 @pytest.mark.parametrize("lanes, what", [(3, "lanes must be one of 1, 2, 4, got 3"),
                                          (True, "lanes must be one of 1, 2, 4, got True"),
+                                         (2.0, "lanes must be one of 1, 2, 4, got 2.0"),
                                          (4, "entries = 402 is not a multiple of lanes = 4")])
 def test_a_lane_count_the_engine_cannot_have_is_refused(lanes, what):
     with pytest.raises(ValueError, match=f"^EngineCapacity: {what}"):
