@@ -38,7 +38,8 @@ class LaneSums(wiring.Component):
     -------
     ``<pass>_done_in`` : ``In(1).array(K)``; ``<pass>_done`` : ``Out(1)``
         A lane's pass end (a one-clock pulse, once per pass: :class:`~hdl.pass_sequencer.PassSequencer`'s), for
-        ``force``, ``area`` and ``integrate``; the pass's end, a one-clock pulse the clock after the last lane's.
+        ``force``, ``area`` and ``integrate``; the pass's end, a one-clock pulse two clocks after the last lane's
+        (each lane's end is registered first).
     ``<sum>_in`` : ``In(...).array(K)``; ``<sum>`` : ``Out(...)``
         Each lane's sum, whole from its pass end until the next pass restarts it; the lanes' sum, a register
         loaded with the pass end (``length_sum``, ``square_sum``, ``barrier_sum``, ``power_sum``, and
@@ -80,7 +81,10 @@ class LaneSums(wiring.Component):
         m = Module()
         area_over = Signal(name="area_over")
         for name in LANE_PASSES:
-            ends = getattr(self, f"{name}_done_in")
+            # each lane's end landed beside the join first: the lanes' sequencers sit across the device, and their
+            # pulses into the seen flags' logic were its critical path
+            ends = Signal(lanes, name=f"{name}_ends")
+            m.d.sync += ends.eq(Cat(*getattr(self, f"{name}_done_in")))
             seen = Signal(lanes, name=f"{name}_seen")
             now = Cat(seen[k] | ends[k] for k in range(lanes))
             every = now.all()

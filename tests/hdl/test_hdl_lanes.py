@@ -1,4 +1,4 @@
-"""The lanes' join (hdl.lanes.LaneSums) against a Python model of its contract: a pass ends the clock after its
+"""The lanes' join (hdl.lanes.LaneSums) against a Python model of its contract: a pass ends two clocks after its
 last lane's end, with the lanes' sums; a whole sum's saturation is the sum's; a restart forgets the lanes seen."""
 
 import random
@@ -77,8 +77,8 @@ def test_a_pass_ends_after_its_last_lane_with_the_lanes_sums(lanes):
         power = sum(sums["power_sum"])
         totals = {"length_sum": sum(sums["length_sum"]), "square_sum": sum(sums["square_sum"]),
                   "barrier_sum": sum(sums["barrier_sum"]), "power_sum": power, "area_total": min(area, error_max)}
-        # (read after the edge that takes the last lane's end: a clock after it)
-        expected.append((max(ends), name, {s: totals[s] for s in _sums_of(name)},
+        # (read after the edge a clock after the one that takes the last lane's end)
+        expected.append((max(ends) + 1, name, {s: totals[s] for s in _sums_of(name)},
                          int(name == "force" and totals["length_sum"] > FS.error_acc.raw_max),
                          int(name == "integrate" and not FS.power_acc.raw_min <= power <= FS.power_acc.raw_max),
                          int(name == "area" and (area > error_max or any(saturated)))))
