@@ -56,7 +56,9 @@ class SpringflatEngine(wiring.Component):
     capacity : :class:`~golden_model.engine_spec.image.EngineCapacity`
         Depths of the node, entry and triangle memories, and whether the step guard is built (its
         passes, :class:`~hdl.guard_passes.GuardPasses`, and the proposal memories; without it START
-        answers a guarded mode with ``bad-constants`` and FEATURES.guard reads 0).
+        answers a guarded mode with ``bad-constants`` and FEATURES.guard reads 0); its ``lanes`` K > 1 build K
+        datapaths, each on the vertices ``l, l + K, …`` (:meth:`_elaborate_lanes`; without the guard and
+        without the build options below).
     entry_bank_depth : int
         Words per bank of the entry memory (a power of two; :data:`ENTRY_BANK_DEPTH`, the deepest
         DP16KD mode of a wide word; a test passes less to have several banks at a small capacity).
@@ -114,7 +116,9 @@ class SpringflatEngine(wiring.Component):
       stop decisions, the normalisers, the energy check and the step's units;
     * :class:`~hdl.saturation_tally.SaturationTally` (``tally``): SATURATIONS;
     * the passes' units: :class:`~hdl.force_pass.ForcePass` (``force``),
-      :class:`~hdl.area_error.AreaError` (``area``), :class:`~hdl.integrator.Integrator` (``integrator``).
+      :class:`~hdl.area_error.AreaError` (``area``), :class:`~hdl.integrator.Integrator` (``integrator``);
+    * with K lanes, a sequencer and those units per lane (``sequencer0``, ``force0``, …) and
+      :class:`~hdl.lanes.LaneSums` (``sums``), their pass ends and sums joined for the controller.
     """
 
     #: Clocks the check phase waits after the math phase's last result (the saturation tally's
