@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal, signed
+from amaranth.hdl import Cat, Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -10,7 +10,7 @@ from golden_model.engine_spec.image import EngineCapacity
 from golden_model.fixed import FormatSet
 
 from .fixedpoint import clamp, shape_of
-from .layouts import energy_sums_layout
+from .layouts import pass_sum_shapes
 
 __all__ = ["LaneSums", "LANE_PASSES", "LANE_SUMS"]
 
@@ -60,13 +60,8 @@ class LaneSums(wiring.Component):
         if capacity.lanes < 2:
             raise ValueError(f"LaneSums joins two lanes or more, not {capacity.lanes}")
         self.fs, self.lanes = fs, capacity.lanes
-        sums = energy_sums_layout(fs, capacity.entries)
-        self.sum_shapes = {
-            "length_sum": fs.error_acc.width + capacity.vertices.bit_length(),
-            "square_sum": sums["square_sum"].shape, "barrier_sum": sums["barrier_sum"].shape,
-            "power_sum": signed(fs.power.width + capacity.vertices.bit_length()),
-            "area_total": shape_of(fs.error_acc),
-        }
+        self.sum_shapes = {**pass_sum_shapes(fs, capacity.vertices, capacity.entries),
+                           "area_total": shape_of(fs.error_acc)}
         super().__init__({
             **{f"{name}_done_in": In(1).array(self.lanes) for name in LANE_PASSES},
             **{f"{name}_done": Out(1) for name in LANE_PASSES},

@@ -303,6 +303,18 @@ def energy_sums_layout(fs: FormatSet, entries_capacity: int) -> data.StructLayou
     })
 
 
+def pass_sum_shapes(fs: FormatSet, vertices_capacity: int, entries_capacity: int) -> dict[str, ShapeCastable]:
+    """The shapes of the exact sums the passes hand the controller, each wide enough for a pass over
+    ``vertices_capacity`` nodes and ``entries_capacity`` entries: ``length_sum`` Σ|L − d| (a node's
+    [error_acc] term per node), ``square_sum`` and ``barrier_sum`` (:func:`energy_sums_layout`),
+    ``power_sum`` S = ΣF·V (signed, a node's [power] term per node)."""
+    node_bits = vertices_capacity.bit_length()
+    sums = energy_sums_layout(fs, entries_capacity)
+    return {"length_sum": unsigned(fs.error_acc.width + node_bits),
+            "square_sum": sums["square_sum"].shape, "barrier_sum": sums["barrier_sum"].shape,
+            "power_sum": signed(fs.power.width + node_bits)}
+
+
 def energy_result_layout(energy_bits: int) -> data.StructLayout:
     """``energy`` (``energy_raw``: three times the energy, exact, ``energy_bits`` wide) and
     ``settled``: the stopping rule's relative energy change is within ε."""

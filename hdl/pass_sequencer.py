@@ -3,7 +3,7 @@ and the collection of the unit's per-node results (counts, exact sums, saturatio
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -15,9 +15,9 @@ from .dsp import kept_register
 from .fixedpoint import shape_of
 from .force_pass import ForcePass
 from .integrator import Integrator
-from .layouts import (area_saturations_layout, energy_sums_layout, force_entry_layout, force_word_layout,
+from .layouts import (area_saturations_layout, force_entry_layout, force_word_layout,
                       integrator_input_layout, integrator_output_layout, node_force_layout, triangle_layout,
-                      vector_layout, weight_word_layout, word_layout)
+                      pass_sum_shapes, vector_layout, weight_word_layout, word_layout)
 from .memory_windows import ENTRY_LATENCY, READ_LATENCY, node_write_layout, write_signature
 
 __all__ = ["PassSequencer", "fetch_counter", "fetch_latencies"]
@@ -143,7 +143,6 @@ class PassSequencer(wiring.Component):
         self.force_fetch_latency, self.area_fetch_latency, self.node_fetch_latency = fetch_latencies(read_latency)
         self.read_latency = read_latency
         layouts = memory_layouts(fs, cap)
-        sums = energy_sums_layout(fs, cap.entries)
         force_sig, integrator_sig = ForcePass.signature_of(fs, True, True), Integrator.signature_of(fs, None, True)
         width = register_map.value_width
         nodes = range(cap.vertices // lanes + 1)
@@ -180,9 +179,7 @@ class PassSequencer(wiring.Component):
             "landed_area": Out(shape_of(fs.face_area)),
             "force_done": Out(1), "area_done": Out(1), "integrate_done": Out(1),
             "passes_idle": Out(1),
-            "length_sum": Out(fs.error_acc.width + cap.vertices.bit_length()),
-            "square_sum": Out(sums["square_sum"].shape), "barrier_sum": Out(sums["barrier_sum"].shape),
-            "power_sum": Out(signed(fs.power.width + cap.vertices.bit_length())),
+            **{name: Out(shape) for name, shape in pass_sum_shapes(fs, cap.vertices, cap.entries).items()},
             **{f"{name}_events": Out(w) for name, w in self.event_widths.items()},
         })
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from amaranth.hdl import C, Cat, Module, Mux, Signal, Value, signed
+from amaranth.hdl import C, Cat, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -20,7 +20,7 @@ from .guard_decision import GuardDecision
 from .guard_passes import GUARD_PASSES
 from .dsp import kept_register, registered_product
 from .fixedpoint import clamp, shape_of, shift_round
-from .layouts import energy_sums_layout
+from .layouts import pass_sum_shapes
 from .logic import mode_guarded, mode_runs, mode_steps, or_tree, reset_echo
 from .stepgen import StepGenerator, pending_is_zero
 
@@ -146,7 +146,6 @@ class PhaseController(wiring.Component):
             raise TypeError(f"PhaseController needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
         self.fs, self.capacity = fs, register_map.capacity
         width = register_map.value_width
-        sums = energy_sums_layout(fs, self.capacity.entries)
         #: Width of each saturation-event output.
         self.event_widths = {"step": StepGenerator.output_layout(fs, True)["saturations"].shape.width,
                              "shape_error": 1, "area_error": 1}
@@ -157,9 +156,8 @@ class PhaseController(wiring.Component):
             "saturations": In(width("saturations")),
             "force_done": In(1), "area_done": In(1), "integrate_done": In(1), "guard_done": In(1),
             "passes_idle": In(1),
-            "length_sum": In(fs.error_acc.width + self.capacity.vertices.bit_length()),
-            "square_sum": In(sums["square_sum"].shape), "barrier_sum": In(sums["barrier_sum"].shape),
-            "power_sum": In(signed(fs.power.width + self.capacity.vertices.bit_length())),
+            **{name: In(shape) for name, shape in
+               pass_sum_shapes(fs, self.capacity.vertices, self.capacity.entries).items()},
             "area_total": In(shape_of(fs.error_acc)),
             # with lanes, LANEk_ENTRIES that do not add up to ENTRIES or overflow a share (the engine's compare)
             **({"lane_fault": In(1)} if self.capacity.lanes > 1 else {}),
