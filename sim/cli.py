@@ -257,8 +257,6 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     from hdl.dsp import DspPlatform
 
     formats = load_format_set(args.formats)
-    if args.lanes > 1 and args.build_guard:
-        raise UserError(f"--lanes {args.lanes} builds the engine without the step guard: add --no-guard")
     capacity = engine_capacity(args.capacity, formats, guard=args.build_guard, lanes=args.lanes)
     dsp = VERILOG_TARGETS[args.target]
     platform = DspPlatform(dsp) if dsp else None

@@ -186,9 +186,12 @@ def write_exports(m: RegisterMap, out_dir: str | Path) -> list[Path]:
 def engine_capacity(values, fs, *, guard: bool = True, lanes: int = 1) -> EngineCapacity:
     """``--capacity V E T`` (and ``--no-guard``: ``guard`` False; ``--lanes``) as an
     :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the default depths); a capacity the
-    engine's register map cannot hold is a one-line :class:`ParameterError`."""
+    engine's register map cannot hold, or lanes with the step guard (lanes are built without it,
+    ``docs/engine.md``), is a one-line :class:`ParameterError`."""
     from golden_model.params import ParameterError
 
+    if lanes > 1 and guard:
+        raise ParameterError(f"--lanes {lanes} builds the engine without the step guard: add --no-guard")
     if values is None:
         return replace(DEFAULT_CAPACITY, guard=guard, lanes=lanes)
     try:
@@ -258,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         try:
             formats = load_formats(args.formats)
-            m = RegisterMap.build(formats, engine_capacity(args.capacity, formats, lanes=args.lanes))  # (--capacity's checks)
+            m = RegisterMap.build(formats, engine_capacity(args.capacity, formats, guard=args.lanes == 1, lanes=args.lanes))  # (--capacity's checks)
         except (FixedPointError, ParameterError, ValueError) as exc:
             parser.exit(2, f"{parser.prog}: error: {exc}\n")
         except OSError as exc:  # a --formats file that cannot be read (a FIFO, a directory)

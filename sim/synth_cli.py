@@ -130,8 +130,6 @@ def cmd_synth(args: argparse.Namespace) -> int:
     from .register_map_export import engine_capacity
 
     fs = load_format_set(args.formats)
-    if args.lanes > 1 and args.build_guard:
-        raise SynthError(f"--lanes {args.lanes} builds {ENGINE} without the step guard: add --no-guard")
     capacity = engine_capacity(args.capacity, fs, guard=args.build_guard, lanes=args.lanes)
     if args.board is not None or args.target is None:
         if args.lanes > 1:

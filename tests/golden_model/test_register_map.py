@@ -330,7 +330,9 @@ def test_the_export_command_writes_the_map_of_k_lanes(tmp_path, capsys):
     header = (tmp_path / "two" / "springflat_regs.h").read_text()
     assert header.splitlines()[0].endswith("4096 triangles, in 2 lanes. */")
     assert "#define SPRINGFLAT_LANE1_ENTRIES_ADDR" in header and "SPRINGFLAT_LANE2_ENTRIES" not in header
-    assert json.loads((tmp_path / "two" / "register_map.json").read_text())["capacity"]["lanes"] == 2
+    exported = json.loads((tmp_path / "two" / "register_map.json").read_text())
+    # the map of the engine that lanes build: without the guard (FEATURES.guard 0)
+    assert exported["capacity"]["lanes"] == 2 and exported["capacity"]["guard"] is False
     with pytest.raises(SystemExit) as stopped:
         main(["--lanes", "4", "--capacity", "64", "402", "128", "--out", str(tmp_path / "four")])
     assert stopped.value.code == 2

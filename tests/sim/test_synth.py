@@ -187,7 +187,7 @@ def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_th
     (["synth", "--target", "ecp5", "--seed", "one"], "argument --seed: expected an integer, got 'one'"),
     (["synth", "--target", "ecp5", "--baud", "9600"], "--baud sets the board's UART: add --board ulx3s-85f"),
     (["synth", "--target", "ecp5", "--components", "springflat_engine", "--lanes", "2"],
-     "--lanes 2 builds springflat_engine without the step guard: add --no-guard"),
+     "--lanes 2 builds the engine without the step guard: add --no-guard"),
     (["synth", "--target", "ecp5", "--lanes", "2", "--no-guard"], "builds springflat_engine: add it to --components"),
     (["synth", "--board", "ulx3s-85f", "--lanes", "2", "--no-guard"], "--lanes applies to --target ecp5 builds"),
     (["synth", "--target", "ecp5", "--lanes", "3"], "argument --lanes: invalid choice: 3"),
