@@ -448,25 +448,35 @@ class MemoryWindows(wiring.Component):
         }
         # while running, the integrator's results into the node memories; the others hold, not enabled
         from_passes = {"pos": (node.addr, node.data.position, node.en), "vel": (node.addr, node.data.velocity, node.en)}
-        for name, (addr, word, en) in write_regs.items():
-            # the choice from a copy of ``running`` of each port's own, beside its registers, a clock late:
-            # the controller's flip-flop drives logic all over the device, so a route from it into these
-            # multiplexers crosses the die. A clock late is safe: no pass writes in the start phase's
-            # first clock, the bus's last write has been answered before START, and nothing writes once a
-            # run has drained.
-            with m.If(kept_register(m, self.running, name=f"{name}_writes_running", platform=platform)):
-                if name in from_passes:
-                    m.d.sync += [reg.eq(value) for reg, value in zip((addr, word, en), from_passes[name])]
-                else:
-                    m.d.sync += en.eq(0)
-            with m.Else():
-                load_window, bus_data, bus_en = from_bus[name]
-                if load_window is None:
-                    m.d.sync += addr.eq(index_q)
-                else:
-                    with m.If(window_q == load_window):
-                        m.d.sync += addr.eq(index_q)
-                m.d.sync += [word.eq(bus_data), en.eq(bus_en)]
+        for name, regs in write_regs.items():
+            load_window, bus_data, bus_en = from_bus[name]
+            self._choose_writes(m, name, regs, from_passes.get(name),
+                                (index_q, None if load_window is None else window_q == load_window, bus_data, bus_en),
+                                platform)
+
+    def _choose_writes(self, m: Module, name: str, regs, from_passes, from_bus, platform) -> None:
+        """A write port's registers ``regs`` (address, data, enable): ``from_passes`` (address, data, enable)
+        while running, or not enabled where it is ``None``; ``from_bus`` (address, the condition that loads it
+        or ``None`` for always, data, enable) while idle."""
+        addr, word, en = regs
+        # the choice from a copy of ``running`` of each port's own, beside its registers, a clock late:
+        # the controller's flip-flop drives logic all over the device, so a route from it into these
+        # multiplexers crosses the die. A clock late is safe: no pass writes in the start phase's
+        # first clock, the bus's last write has been answered before START, and nothing writes once a
+        # run has drained.
+        with m.If(kept_register(m, self.running, name=f"{name}_writes_running", platform=platform)):
+            if from_passes is not None:
+                m.d.sync += [reg.eq(value) for reg, value in zip(regs, from_passes)]
+            else:
+                m.d.sync += en.eq(0)
+        with m.Else():
+            bus_addr, load, bus_data, bus_en = from_bus
+            if load is None:
+                m.d.sync += addr.eq(bus_addr)
+            else:
+                with m.If(load):
+                    m.d.sync += addr.eq(bus_addr)
+            m.d.sync += [word.eq(bus_data), en.eq(bus_en)]
 
     # ------------------------------------------------------------------ lanes
     def _lane_rams(self, pos_shape, vel_shape, weight_shape, force_shape) -> dict[str, BlockRam]:
@@ -613,26 +623,16 @@ class MemoryWindows(wiring.Component):
                 regs = (Signal.like(port.addr, name=f"{name}{b}_waddr"), Signal.like(port.data, name=f"{name}{b}_wdata"),
                         Signal(name=f"{name}{b}_wen"))
                 m.d.comb += [port.addr.eq(regs[0]), port.data.eq(regs[1]), port.en.eq(regs[2])]
-                # (the choice from a copy of ``running`` of the port's own, a clock late: see _writes)
-                with m.If(kept_register(m, self.running, name=f"{name}{b}_writes_running", platform=platform)):
-                    m.d.sync += ([reg.eq(value) for reg, value in zip(regs, from_lane)] if from_lane is not None
-                                 else regs[2].eq(0))
-                with m.Else():
-                    m.d.sync += [regs[0].eq(bus_word), regs[1].eq(bus_data), regs[2].eq(bus_en)]
+                self._choose_writes(m, f"{name}{b}", regs, from_lane, (bus_word, None, bus_data, bus_en), platform)
         for lane, (banks, share_bits, local, in_share, _) in enumerate(shares):
             regs = (Signal(range(self.capacity.lane_entries), name=f"lane{lane}_ent_waddr"),
                     Signal(self.entry_shape, name=f"lane{lane}_ent_wdata"), Signal(len(banks), name=f"lane{lane}_ent_whot"))
             for b, bank in enumerate(banks):
                 m.d.comb += [bank.write.addr.eq(regs[0][:len(bank.write.addr)]), bank.write.data.eq(regs[1]),
                              bank.write.en.eq(regs[2][b])]
-            with m.If(kept_register(m, self.running, name=f"lane{lane}_ent_writes_running", platform=platform)):
-                m.d.sync += regs[2].eq(0)
-            with m.Else():
-                writing = bus_writing & (window_q == ent_k) & in_share
-                with m.If(window_q == ent_k):
-                    m.d.sync += regs[0].eq(local)
-                m.d.sync += [regs[1].eq(ent_new), regs[2].eq(Cat(writing & ((local[share_bits:] == b) if len(banks) > 1
-                                                                            else 1) for b in range(len(banks))))]
+            writing = bus_writing & (window_q == ent_k) & in_share
+            hot = Cat(writing & ((local[share_bits:] == b) if len(banks) > 1 else 1) for b in range(len(banks)))
+            self._choose_writes(m, f"lane{lane}_ent", regs, None, (local, window_q == ent_k, ent_new, hot), platform)
         for lane in range(lanes):
             forces, write = rams[f"forces{lane}"], self.force_write[lane]
             m.d.comb += [forces.write.addr.eq(write.addr), forces.write.data.eq(write.data), forces.write.en.eq(write.en)]
