@@ -543,6 +543,21 @@ def decode_entries(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity, b
     return indptr, f["neighbour"], f["rest"], entries
 
 
+def unended_nodes(last: np.ndarray, counts: np.ndarray, vertices: int) -> str | None:
+    """Where the entries' ``last`` flags (lane-major: lane ``k``'s ``counts[k]`` rows, :func:`entry_lanes`) do not
+    end exactly each lane's nodes (lane ``k`` runs nodes ``k, k + K, …`` of ``vertices``), what is wrong, in a
+    few words; ``None`` where they do (every image :func:`build_image` makes)."""
+    lanes, first = len(counts), 0
+    for k, n in enumerate(counts):
+        rows, first = last[first:first + n].astype(bool), first + n
+        nodes, ends = len(range(k, vertices, lanes)), int(np.count_nonzero(rows))
+        if ends != nodes or (n > 0 and not rows[-1]):
+            whose = f"lane {k}'s {n} entries" if lanes > 1 else f"the {n} entries"
+            unfinished = " and leave a node unfinished" if n > 0 and not rows[-1] else ""
+            return f"{whose} end {ends} nodes{unfinished}, not {nodes}"
+    return None
+
+
 def decode_triangles(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity) -> tuple[np.ndarray, np.ndarray]:
     """Triangle memory words → ``(faces (F, 3), areas (F,) [face_area])``."""
     f = triangle_word_layout(fs, capacity).unpack(words)
@@ -551,7 +566,8 @@ def decode_triangles(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity)
 
 def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCapacity) -> str | None:
     """What the engine answers to START with these run constants: ``"no-mesh"`` (no vertices: nothing
-    loaded since reset), ``"bad-constants"`` (a count over capacity or zero, a reciprocal that is not a
+    loaded since reset), ``"bad-constants"`` (a count over capacity or zero, with K > 1 lanes ``lane{k}_entries``
+    that do not add up to ``entries`` or one over its share, a reciprocal that is not a
     u1.F mantissa or whose shift is too small for :meth:`Reciprocal.normalise`, a mode code the engine
     does not run, a guarded mode on a build without the guard, a zero fixed step, no iterations), or
     ``None`` (the run starts)."""
@@ -608,9 +624,14 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     fault = constant_fault(c, fs, capacity)
     if fault is not None:
         return ImageRunResult(image.nodes.copy(), fault, 0, 0, 0, 0, 0, positions, velocities)
-    n = c["vertices"]
+    n, counts = c["vertices"], lane_entry_counts(c, capacity)
+    last = entry_word_layout(fs, capacity).unpack(image.entries[:c["entries"]])["last"]
+    if (unended := unended_nodes(last, counts, n)) is not None:
+        raise ValueError(f"run_image: {unended}: the entry counts do not match the entries, and the engine's "
+                         "run is undefined (on the RTL such a run never ends, nor does ABORT's drain: only a reset "
+                         "recovers)")
     indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity, bool(c["barrier"]),
-                                                      lane_entry_counts(c, capacity))
+                                                      counts)
     stream = NeighbourStream(indptr, neighbour, rest, inv_mass[:n], barrier, inv_mass_barrier[:n])
     faces, areas = decode_triangles(image.triangles[:c["triangles"]], fs, capacity)
     setup = Setup(fs, image_mode(c), stream, faces, areas, c["half_spring"], c["damping"], c["dt"],

@@ -154,3 +154,27 @@ def test_a_map_with_other_lanes_than_the_engine_is_refused():
     bus = ModelBus(RegisterMap.build(DEFAULT, _lanes(2)), DEFAULT)
     with pytest.raises(DriverError, match="^the engine was built with 2 lane\\(s\\); the register map says 1$"):
         EngineDriver(bus, RegisterMap.build(DEFAULT, ONE_LANE)).identify()
+
+
+@pytest.mark.parametrize("lanes, change, said", [
+    (1, lambda c: {"entries": c["entries"] - 1}, r"the \d+ entries end 35 nodes and leave a node unfinished, not 36"),
+    (2, lambda c: {"lane0_entries": c["lane0_entries"] + 1, "lane1_entries": c["lane1_entries"] - 1},
+     r"lane 0's \d+ entries end 18 nodes and leave a node unfinished, not 18"),
+    (2, lambda c: {"lane0_entries": c["entries"], "lane1_entries": 0}, r"lane 0's \d+ entries end 36 nodes, not 18"),
+])
+def test_counts_that_add_up_but_do_not_end_the_nodes_are_refused_in_one_line(lanes, change, said):
+    """START checks the counts against each other and the capacity, not against the entries' last flags: counts
+    that cut a node's entries leave the RTL's force pass waiting for that node's end, a run that never ends and
+    that ABORT cannot end. The model says so in one line rather than run something the engine does not."""
+    capacity = _lanes(lanes) if lanes > 1 else ONE_LANE
+    image = build_image(_problem(), capacity)
+    wrong = dataclasses.replace(image, constants={**image.constants, **change(image.constants)})
+    assert constant_fault(wrong.constants, DEFAULT, capacity) is None  # (what START checks: it starts)
+    with pytest.raises(ValueError, match=rf"^run_image: {said}: the entry counts do not match the entries") as refused:
+        run_image(wrong, DEFAULT)
+    assert "\n" not in str(refused.value)
+    regmap = RegisterMap.build(DEFAULT, capacity)  # the same on the bus model, the engine's stand-in
+    driver = EngineDriver(ModelBus(regmap, DEFAULT), regmap)
+    driver.load(wrong)
+    with pytest.raises(ValueError, match=rf"^run_image: {said}"):
+        driver.start()
