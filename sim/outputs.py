@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import errno
+import json
 import math
 import os
 import secrets
@@ -780,6 +781,17 @@ def check_not_foreign(out: Path, names: Sequence[str], owned: Sequence[str] | No
         shown = ", ".join(foreign[:4]) + (f" and {len(foreign) - 4} more" if len(foreign) > 4 else "")
         raise OutputError(f"{what} '{out}' holds {shown}, which this run would replace and no earlier run of this "
                           f"command wrote there: move {'it' if len(foreign) == 1 else 'them'}, or give a new directory")
+
+
+def holds_marker(out: Path, marker: tuple[str, str]) -> bool:
+    """Whether the directory ``out`` holds ``marker`` = ``(name, key)``: a JSON file of that name, an object
+    with that key (what a springflat output of one kind always writes). A FIFO of that name is not opened."""
+    name, key = marker
+    try:
+        found = json.loads(read_regular_file(output_target(out) / name))
+    except (OSError, ValueError):
+        return False
+    return isinstance(found, dict) and key in found
 
 
 def report_owned(out: Path, title: str, names: Sequence[str]) -> tuple[str, ...]:

@@ -241,8 +241,8 @@ def main(argv: list[str] | None = None) -> int:
     from golden_model.params import ParameterError
 
     from .exit_codes import STOP_SIGNALS, answered_signals
-    from .outputs import OutputError, atomic_directory, describe_os_error, on_interrupt, received_signal, \
-        reset_interrupted
+    from .outputs import (OutputError, atomic_directory, check_build_so_far, describe_os_error, holds_marker,
+                          on_interrupt, received_signal, reset_interrupted)
     from .run_options import OneOutput, integer_argument, path_argument
 
     parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
@@ -269,8 +269,11 @@ def main(argv: list[str] | None = None) -> int:
         out = args.out
         try:
             inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
-            with atomic_directory(out, inputs=inputs) as build:  # all three files in place, or none
+            # a namesake of the user's is refused, not replaced: an earlier export's (or bundle's) files are ours
+            owned = EXPORT_FILES if holds_marker(out, ("register_map.json", "format_hash")) else ()
+            with atomic_directory(out, inputs=inputs, owned=owned) as build:  # all three files in place, or none
                 names = [path.name for path in write_exports(m, build)]
+                check_build_so_far()  # (a --formats file it would replace is named as such first)
         except OutputError as exc:
             parser.exit(2, f"{parser.prog}: error: {one_line(str(exc))}\n")
     except KeyboardInterrupt:

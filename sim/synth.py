@@ -117,18 +117,11 @@ def bundle_owned(out: Path, marker: tuple[str, str] = BUNDLE_MARKER) -> tuple[st
     JSON file a bundle of this kind always writes and a key it has, shows a bundle of springflat's without a list
     (a board build's, one written before the lists); none (``()``) where there is no bundle: every file there is
     the user's."""
-    from golden_model.files import read_regular_file
-
-    from .outputs import output_target
+    from .outputs import holds_marker
 
     if earlier := earlier_bundle_files(out):
         return earlier
-    name, key = marker
-    try:  # (a FIFO of that name is not opened)
-        found = json.loads(read_regular_file(output_target(out) / name))
-    except (OSError, ValueError):
-        return ()
-    return None if isinstance(found, dict) and key in found else ()
+    return None if holds_marker(out, marker) else ()
 
 
 def build_in_place(out: Path, formats: str, build: Callable[[Path, Callable[[str], str]], dict],

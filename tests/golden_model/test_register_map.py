@@ -366,3 +366,26 @@ def test_the_export_command_answers_ctrl_c_in_one_line_with_nothing_written(tmp_
     assert export.main(["--out", str(tmp_path / "o")]) == 130
     assert capsys.readouterr().err == "python -m sim.register_map_export: interrupted\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_export_refuses_to_replace_a_file_of_the_users_and_replaces_its_own(tmp_path, capsys):
+    """A directory holding the user's own register_map.md (or a link of that name) was overwritten: the export
+    replaces only what an earlier export of its own (or a bundle's) wrote there, as verilog does."""
+    from sim.register_map_export import main
+
+    notes = tmp_path / "notes"
+    notes.mkdir()
+    (notes / "register_map.md").write_text("my own register notes\n")
+    (tmp_path / "mine.md").write_text("linked\n")
+    (notes / "springflat_regs.h").symlink_to(tmp_path / "mine.md")
+    with pytest.raises(SystemExit) as stopped:
+        main(["--out", str(notes)])
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "which this run would replace and no earlier run of this command wrote" in err
+    assert (notes / "register_map.md").read_text() == "my own register notes\n"
+    assert (notes / "springflat_regs.h").is_symlink() and (tmp_path / "mine.md").read_text() == "linked\n"
+    assert sorted(p.name for p in notes.iterdir()) == ["register_map.md", "springflat_regs.h"]
+    assert main(["--out", str(tmp_path / "maps")]) == 0  # its own export, again: replaced
+    assert main(["--lanes", "2", "--out", str(tmp_path / "maps")]) == 0
+    assert "in 2 lanes" in (tmp_path / "maps" / "springflat_regs.h").read_text()
