@@ -167,7 +167,7 @@ def flatten_one(job: BatchJob) -> MeshOutcome:
         try:
             with contextlib.redirect_stderr(stderr):
                 mesh, defaults = resolve_mesh(mesh_path, holes_mode(args.fill_holes, args.keep_holes))
-                params = params_from_args(args, defaults)
+                params = params_from_args(args, defaults, fixed_point=engine_named(args.engine).fixed_point)
                 check_print_size(args, mesh)
                 notes: list[str] = []  # each named by its mesh: the workers' notes come in any order
                 try:

@@ -142,7 +142,7 @@ def cmd_flatten(args: argparse.Namespace) -> int:
 
         return cmd_batch(args)
     mesh, defaults = resolve_mesh(args.mesh, holes_mode(args.fill_holes, args.keep_holes))
-    params = params_from_args(args, defaults)
+    params = params_from_args(args, defaults, fixed_point=engine_named(args.engine).fixed_point)
     check_outputs(args)
     check_print_size(args, mesh)
     result = run_flatten(args, mesh, params, progress=sys.stderr.isatty(),  # progress to a terminal only

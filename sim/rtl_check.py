@@ -70,7 +70,7 @@ def cmd_rtl_check(args: argparse.Namespace) -> int:
 
     holes = holes_mode(args.fill_holes, args.keep_holes)
     mesh, defaults = resolve_mesh(args.mesh, holes)
-    params = params_from_args(args, defaults)
+    params = params_from_args(args, defaults, fixed_point=True)
     if args.init is None:
         args.init = default_init(args.mesh)
     if (missing := missing_simulator(args.sim)) is not None:  # before the start and the "building" line

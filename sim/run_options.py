@@ -401,8 +401,13 @@ def check_float_start(mesh: Mesh, positions: np.ndarray, params: FlattenParams, 
                                                else "--dynamics momentum)"))
 
 
-def params_from_args(args: argparse.Namespace, defaults: FlattenParams) -> FlattenParams:
-    """Apply the command-line overrides to ``defaults`` (validated)."""
+def params_from_args(args: argparse.Namespace, defaults: FlattenParams, fixed_point: bool = False) -> FlattenParams:
+    """Apply the command-line overrides to ``defaults`` (validated). ``fixed_point``: the run goes to the
+    fixed-point pipeline (``--engine fixed|rtl|board``, ``rtl-check``), which has no penalty: a penalty option
+    is refused as such first, before a hint that would ask for another."""
+    if fixed_point and (given := [f"--{name.replace('_', '-')}" for name in ("penalty", "penalty_kappa", "penalty_gain")
+                                  if getattr(args, name) not in (None, False)]):
+        raise ParameterError(f"the penalty is not part of the fixed-point pipeline; drop {' and '.join(given)}")
     changes = {"update": args.update, "penalty": args.penalty or defaults.penalty}
     if args.dynamics is not None and args.dynamics != defaults.dynamics:
         changes["dynamics"] = args.dynamics

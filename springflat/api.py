@@ -408,7 +408,7 @@ def flatten(V: Any, F: Any = None, *, name: str | None = None, init: str | Path 
             warnings.warn(f"{mesh.name}: {note}", MeshNote, stacklevel=2)
         defaults = file_defaults(mesh)
     try:
-        params = params_from_args(args, defaults)
+        params = params_from_args(args, defaults, fixed_point=engine.fixed_point)
     except ParameterError as exc:  # the model's words are the command line's
         raise ParameterError(_in_api_words(str(exc))) from None
     args.mesh = mesh.name

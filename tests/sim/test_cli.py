@@ -161,6 +161,11 @@ BAD_ARGS = [
                                                                               "barrier, which this run has off"),
     (["--penalty-gain", "5"], "--penalty-gain sets the penalty: add --penalty"),
     (["--penalty-kappa", "2"], "--penalty-kappa sets the penalty: add --penalty"),
+    # the fixed-point engines have no penalty: said first, not "add --penalty" and then "drop --penalty"
+    (["--engine", "fixed", "--penalty-kappa", "2"], "the penalty is not part of the fixed-point pipeline; drop "
+                                                    "--penalty-kappa"),
+    (["--engine", "rtl", "--penalty", "--penalty-gain", "2"], "the penalty is not part of the fixed-point pipeline; "
+                                                              "drop --penalty and --penalty-gain"),
     (["--port", "/nowhere"], "--port sets the serial port: add --engine board"),
     (["--baud", "9600"], "--baud sets the serial port's rate: add --engine board"),
     (["--engine", "rtl", "--port", "loop://"], "--port sets the serial port of --engine board, not of --engine rtl: "
@@ -1090,6 +1095,16 @@ def test_rtl_check_lanes_need_an_unguarded_mode():
     proc = run("rtl-check", "surf1", "--dynamics", "momentum", "--lanes", "2")
     assert proc.returncode == 2 and proc.stderr == ("springflat: error: --lanes 2 builds the engine without the step "
                                                     "guard: add --no-guard --energy-window 1\n")
+
+
+def test_rtl_check_refuses_the_penalty_as_such_first(tmp_path):
+    """rtl-check said "add --penalty" to --penalty-kappa, then "drop --penalty", and on a mesh file "use --no-guard"
+    first: the fixed-point pipeline has no penalty, and that is the one line."""
+    for args, dropped in ((["--penalty-kappa", "2"], "--penalty-kappa"), (["--penalty"], "--penalty")):
+        proc = run("rtl-check", "surf1", *args, cwd=tmp_path)
+        assert proc.returncode == 2 and proc.stderr == ("springflat: error: the penalty is not part of the fixed-point "
+                                                        f"pipeline; drop {dropped}\n")
+    assert not list(tmp_path.iterdir())
 
 
 def test_a_layout_file_for_an_stl_says_how_its_rows_are_matched(tmp_path):
