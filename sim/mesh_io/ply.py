@@ -233,8 +233,10 @@ def _uniform_binary(body: bytes, pos: int, count: int, props, order: str) -> np.
             length = _list_length(np.frombuffer(body, dtype=counter, count=1, offset=offset)[0], "")
         except ValueError:
             return None  # the row-by-row read names the bad length
-        fields += [(prop + "#", counter), (prop, order + _PLY_TYPES[t], (length,))]
         offset += counter.itemsize + length * np.dtype(_PLY_TYPES[t]).itemsize
+        if offset > len(body):  # (a row longer than the file: the row-by-row read says where it ends; numpy
+            return None         # refuses a record of 2 GiB or more in its own words)
+        fields += [(prop + "#", counter), (prop, order + _PLY_TYPES[t], (length,))]
     dtype = np.dtype(fields)
     if pos + dtype.itemsize * count > len(body):
         return None

@@ -901,6 +901,9 @@ ROUND_TWO_MESHES: dict[str, Case] = {
                                        files={"m.ply": ply_binary_floats([[3, 0, 1, 5], [3, 1, 5, math.nan]])}),
     "ply binary list length inf": Case(["m.ply"], 2, r"element 'face' has a list length inf that is not a whole",
                                        files={"m.ply": ply_binary_floats([[3, 0, 1, 5], [math.inf, 1, 5, 2]])}),
+    "ply binary list length of 2^31": Case(  # (numpy's "dtype size in bytes must fit into a C int" came through)
+        ["m.ply"], 2, r"cannot parse mesh 'm.ply': the file ends inside element 'face'",
+        files={"m.ply": ply_binary_floats([[2147483647, 0, 1, 5], [3, 1, 5, 2]])}),
     "ply binary fractional list length": Case(
         ["m.ply"], 2, r"element 'face' has a list length 3.9 that is not a whole",
         files={"m.ply": ply_binary_floats([[3.9, 0, 1, 5], [3, 1, 5, 2]])}),
