@@ -172,12 +172,12 @@ def board_engine(formats: FormatSet, port: str | None, baud: int | None):
 
     if not port:
         raise UserError("--engine board needs --port DEVICE (the board's serial port, e.g. /dev/ttyUSB0)")
+    if baud is not None and baud <= 0:  # (before the note on a link that ignores it)
+        raise UserError(f"--baud must be a positive number of bits per second, not {baud}")
     if baud is not None and port.startswith(UNTIMED_LINKS):
         print_note(f"--baud {baud} has no effect on a {port.split('://')[0]}:// link, which carries bytes at no line "
                    "rate; the board's UART runs at the rate its bitstream was built for")
     baud = DEFAULT_BAUD if baud is None else baud
-    if baud <= 0:
-        raise UserError(f"--baud must be a positive number of bits per second, not {baud}")
 
     def engine(mesh, positions, params, on_iteration=None):  # the parameters checked by choose_engine
         problem = prepare(mesh, positions, params, formats)

@@ -329,7 +329,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--history", type=file_path_argument, action=OneOutput, metavar="FILE.csv", help="per-iteration CSV")
     p.add_argument("--plot", type=file_path_argument, action=OneOutput, metavar="FILE.png",
                    help="PNG of the layouts and error curves")
-    p.add_argument("--json", action="store_true", help="print one JSON object with the results")
+    p.add_argument("--json", action="store_true", help="print one JSON object with the results (a batch: one "
+                   "line per mesh, then one with the batch's counts)")
     add_pattern_options(p)
     from .batch import add_batch_options
 

@@ -250,6 +250,15 @@ def test_a_baud_on_a_link_without_a_line_rate_gets_a_note(capsys, port, baud, no
         else err == ""
 
 
+def test_an_impossible_baud_is_refused_without_the_note_on_a_link_that_ignores_it(capsys):
+    """--baud 0 on loop:// printed the note that the rate has no effect, then refused it: the refusal alone."""
+    from sim.run_options import UserError
+
+    with pytest.raises(UserError, match=r"^--baud must be a positive number of bits per second, not 0$"):
+        board_engine(FormatSet.preset("default"), "loop://", 0)
+    assert capsys.readouterr().err == ""
+
+
 def test_a_refused_connection_names_the_port_once():
     """The port named once, pyserial's own words about it ('Could not open port socket://...: ...') left out."""
     import socket
