@@ -22,6 +22,7 @@ from .area_error import AreaError
 from .force_pass import ForcePass
 from .guard_passes import GUARD_PASSES, GuardPasses
 from .integrator import Integrator
+from .layouts import PASS_SUMS
 from .lanes import LANE_PASSES, LANE_SUMS, LaneSums
 from .logic import mode_steps
 from .memory_windows import WINDOW_STEPS, MemoryWindows, needs_registered_select
@@ -207,8 +208,7 @@ class SpringflatEngine(wiring.Component):
                      sequencer.triangles.eq(registers.triangles_held)]
         _wire(m, memories, sequencer, "entry", "triangle", "position", "velocity", "weight_word", "force_word")
         _wire(m, sequencer, memories, "entry_index", "tri_index", "node_index", "node_of_entry")
-        _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done",
-              "length_sum", "square_sum", "barrier_sum", "power_sum")
+        _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done", *PASS_SUMS)
         _connect_units(m, sequencer, force, area, integrator)
         wiring.connect(m, sequencer.force_write, memories.force_write)
         # the node memories' and the proposal memory's writers: one pass at a time, so the writer whose
@@ -356,7 +356,7 @@ class SpringflatEngine(wiring.Component):
             _constants_into_units(m, registers, controller, sequencer, force, area, integrator)
             for name in LANE_PASSES:
                 m.d.comb += getattr(sums, f"{name}_done_in")[lane].eq(getattr(sequencer, f"{name}_done"))
-            for sum_name in ("length_sum", "square_sum", "barrier_sum", "power_sum"):
+            for sum_name in PASS_SUMS:
                 m.d.comb += getattr(sums, f"{sum_name}_in")[lane].eq(getattr(sequencer, sum_name))
             m.d.comb += [sums.area_total_in[lane].eq(area.total),
                          sums.area_saturated_in[lane].eq(area.saturations.area_sum)]

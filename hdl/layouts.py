@@ -189,8 +189,8 @@ def errors_layout(fs: FormatSet) -> data.StructLayout:
 __all__ += ["triangle_layout", "certificate_layout", "certificate_level_shape", "certificate_result_layout",
             "commit_input_layout", "commit_output_layout",
             "decision_input_layout", "decision_output_layout", "area_saturations_layout",
-            "normalise_layout", "energy_sums_layout", "energy_result_layout", "word_layout", "weight_word_layout",
-            "force_word_layout"]
+            "normalise_layout", "energy_sums_layout", "PASS_SUMS", "pass_sum_shapes", "energy_result_layout",
+            "word_layout", "weight_word_layout", "force_word_layout"]
 
 
 def triangle_layout(fs: FormatSet) -> data.StructLayout:
@@ -303,6 +303,10 @@ def energy_sums_layout(fs: FormatSet, entries_capacity: int) -> data.StructLayou
     })
 
 
+#: The exact sums the passes hand the controller (:func:`pass_sum_shapes`), in the order the engine wires them.
+PASS_SUMS = ("length_sum", "square_sum", "barrier_sum", "power_sum")
+
+
 def pass_sum_shapes(fs: FormatSet, vertices_capacity: int, entries_capacity: int) -> dict[str, ShapeCastable]:
     """The shapes of the exact sums the passes hand the controller, each wide enough for a pass over
     ``vertices_capacity`` nodes and ``entries_capacity`` entries: ``length_sum`` Σ|L − d| (a node's
@@ -310,9 +314,10 @@ def pass_sum_shapes(fs: FormatSet, vertices_capacity: int, entries_capacity: int
     ``power_sum`` S = ΣF·V (signed, a node's [power] term per node)."""
     node_bits = vertices_capacity.bit_length()
     sums = energy_sums_layout(fs, entries_capacity)
-    return {"length_sum": unsigned(fs.error_acc.width + node_bits),
-            "square_sum": sums["square_sum"].shape, "barrier_sum": sums["barrier_sum"].shape,
-            "power_sum": signed(fs.power.width + node_bits)}
+    shapes = {"length_sum": unsigned(fs.error_acc.width + node_bits),
+              "square_sum": sums["square_sum"].shape, "barrier_sum": sums["barrier_sum"].shape,
+              "power_sum": signed(fs.power.width + node_bits)}
+    return {name: shapes[name] for name in PASS_SUMS}
 
 
 def energy_result_layout(energy_bits: int) -> data.StructLayout:

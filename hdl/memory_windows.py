@@ -433,26 +433,23 @@ class MemoryWindows(wiring.Component):
         node = self.node_write
         pos_bits, vel_bits = (len(Value.cast(write_regs[n][1])) for n in ("pos", "vel"))
         node_writing = bus_writing & (window_q == node_k)
-        # while idle, the bus's write-back: (the window for which the bus's index loads the address, None for
+        # while idle, the bus's write-back: (the index; the condition that loads it into the address, None for
         # any window; data; enable). A port loads the index only for its own window where another port's address
         # register would otherwise have the same logic: Yosys merges such registers into one, which then
         # drives block RAMs placed far apart.
         from_bus = {
-            "pos": (None, node_new[:pos_bits], node_writing),
-            "vel": (None, node_new[pos_bits:pos_bits + vel_bits], node_writing),
-            "wgt": (node_k, node_new[pos_bits + vel_bits:], node_writing),
-            "ent": (ent_k, ent_new, Cat(bus_writing & (window_q == ent_k)
-                                        & (index_q[bank_bits:] == b if len(entry_banks) > 1 else 1)
-                                        for b in range(len(entry_banks)))),
-            "tri": (tri_k, tri_new, bus_writing & (window_q == tri_k)),
+            "pos": (index_q, None, node_new[:pos_bits], node_writing),
+            "vel": (index_q, None, node_new[pos_bits:pos_bits + vel_bits], node_writing),
+            "wgt": (index_q, window_q == node_k, node_new[pos_bits + vel_bits:], node_writing),
+            "ent": (index_q, window_q == ent_k, ent_new, Cat(bus_writing & (window_q == ent_k)
+                                                             & (index_q[bank_bits:] == b if len(entry_banks) > 1 else 1)
+                                                             for b in range(len(entry_banks)))),
+            "tri": (index_q, window_q == tri_k, tri_new, bus_writing & (window_q == tri_k)),
         }
         # while running, the integrator's results into the node memories; the others hold, not enabled
         from_passes = {"pos": (node.addr, node.data.position, node.en), "vel": (node.addr, node.data.velocity, node.en)}
         for name, regs in write_regs.items():
-            load_window, bus_data, bus_en = from_bus[name]
-            self._choose_writes(m, name, regs, from_passes.get(name),
-                                (index_q, None if load_window is None else window_q == load_window, bus_data, bus_en),
-                                platform)
+            self._choose_writes(m, name, regs, from_passes.get(name), from_bus[name], platform)
 
     def _choose_writes(self, m: Module, name: str, regs, from_passes, from_bus, platform) -> None:
         """A write port's registers ``regs`` (address, data, enable): ``from_passes`` (address, data, enable)

@@ -405,9 +405,13 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams, fixed_po
     """Apply the command-line overrides to ``defaults`` (validated). ``fixed_point``: the run goes to the
     fixed-point pipeline (``--engine fixed|rtl|board``, ``rtl-check``), which has no penalty: a penalty option
     is refused as such first, before a hint that would ask for another."""
-    if fixed_point and (given := [f"--{name.replace('_', '-')}" for name in ("penalty", "penalty_kappa", "penalty_gain")
-                                  if getattr(args, name) not in (None, False)]):
-        raise ParameterError(f"the penalty is not part of the fixed-point pipeline; drop {' and '.join(given)}")
+    from golden_model.fixed.engine import NO_PENALTY
+
+    given = {"penalty": args.penalty, "penalty_kappa": args.penalty_kappa is not None,  # (a value of 0 is given)
+             "penalty_gain": args.penalty_gain is not None}
+    if fixed_point and any(given.values()):
+        raise ParameterError(f"{NO_PENALTY}; " + " and ".join(f"drop --{name.replace('_', '-')}"
+                                                                for name, set_ in given.items() if set_))
     changes = {"update": args.update, "penalty": args.penalty or defaults.penalty}
     if args.dynamics is not None and args.dynamics != defaults.dynamics:
         changes["dynamics"] = args.dynamics

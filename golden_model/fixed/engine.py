@@ -48,7 +48,10 @@ from .pipeline import BarrierEntries, NeighbourStream, NodeConstants
 from .steplut import DT_MAX, DT_MIN, dt_constant, half_dt_sq, lut_value_float
 
 __all__ = ["FixedProblem", "ScaledMesh", "scale_mesh", "prepare", "presets_holding", "flatten_fixed", "load_formats",
-           "energy_to_float", "StopRule", "ENERGY_TOL_FRAC_BITS", "run_fixed"]
+           "energy_to_float", "StopRule", "ENERGY_TOL_FRAC_BITS", "run_fixed", "NO_PENALTY"]
+
+#: Why a fixed-point run refuses the penalty (the first words of every such refusal).
+NO_PENALTY = "the penalty is not part of the fixed-point pipeline"
 
 HOST_ROUNDING = Rounding.HALF_UP  # host-side conversions of constants and inputs
 
@@ -421,7 +424,7 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
         raise FixedPointError("the fixed-point engine computes the jacobi order (as the hardware does); "
                               "use --update jacobi")
     if params.penalty:
-        raise FixedPointError("the penalty is not part of the fixed-point pipeline; drop --penalty")
+        raise FixedPointError(f"{NO_PENALTY}; drop --penalty")
     if params.mode.step is Step.MOMENTUM and fs.velocity.frac_bits != fs.position.frac_bits:
         raise FixedPointError(f"the momentum dynamics adds V to P directly: format set '{fs.name}' needs velocity "
                               f"({fs.velocity}) and position ({fs.position}) with the same fraction bits")

@@ -824,3 +824,12 @@ def test_a_run_gives_the_same_pattern_at_any_size(ear, power, init):
     assert (scaled.status, scaled.iterations, scaled.folded) == (reference.status, reference.iterations, 0)
     np.testing.assert_array_equal(scaled.layout, reference.layout * 2.0 ** power)
     assert (scaled.area_error, scaled.shape_error) == (reference.area_error, reference.shape_error)
+
+
+@pytest.mark.parametrize("options, said", [
+    ({"penalty": True, "penalty_gain": 2.0}, "penalty=False and drop penalty_gain"),
+    ({"penalty_kappa": 0.0}, "drop penalty_kappa"),  # (0 is a value given)
+])
+def test_the_fixed_point_engine_refuses_the_penalty_in_the_apis_words(options, said):
+    with pytest.raises(ParameterError, match=rf"^the penalty is not part of the fixed-point pipeline; {said}$"):
+        springflat.flatten("surf1", engine="fixed", **options)

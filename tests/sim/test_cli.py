@@ -165,7 +165,9 @@ BAD_ARGS = [
     (["--engine", "fixed", "--penalty-kappa", "2"], "the penalty is not part of the fixed-point pipeline; drop "
                                                     "--penalty-kappa"),
     (["--engine", "rtl", "--penalty", "--penalty-gain", "2"], "the penalty is not part of the fixed-point pipeline; "
-                                                              "drop --penalty and --penalty-gain"),
+                                                              "drop --penalty and drop --penalty-gain"),
+    (["--engine", "fixed", "--penalty-gain", "0"], "the penalty is not part of the fixed-point pipeline; drop "
+                                                   "--penalty-gain"),  # (0 is a value given, not none)
     (["--port", "/nowhere"], "--port sets the serial port: add --engine board"),
     (["--baud", "9600"], "--baud sets the serial port's rate: add --engine board"),
     (["--engine", "rtl", "--port", "loop://"], "--port sets the serial port of --engine board, not of --engine rtl: "
