@@ -783,15 +783,19 @@ def check_not_foreign(out: Path, names: Sequence[str], owned: Sequence[str] | No
                           f"command wrote there: move {'it' if len(foreign) == 1 else 'them'}, or give a new directory")
 
 
-def holds_marker(out: Path, marker: tuple[str, str]) -> bool:
-    """Whether the directory ``out`` holds ``marker`` = ``(name, key)``: a JSON file of that name, an object
-    with that key (what a springflat output of one kind always writes). A FIFO of that name is not opened."""
-    name, key = marker
-    try:
-        found = json.loads(read_regular_file(output_target(out) / name))
-    except (OSError, ValueError):
+def holds_marker(out: Path, marker: tuple) -> bool:
+    """Whether the directory ``out`` holds ``marker`` = ``(name, key)`` or ``(name, key, value)``: a JSON file of
+    that name (a regular file, not a link: springflat writes none), an object with that key (and value): what a
+    springflat output of one kind always writes. A FIFO of that name is not opened."""
+    name, key, *value = marker
+    path = output_target(out) / name
+    if path.is_symlink():
         return False
-    return isinstance(found, dict) and key in found
+    try:
+        found = json.loads(read_regular_file(path))
+    except (OSError, ValueError, RecursionError):  # (RecursionError: JSON nested too deep)
+        return False
+    return isinstance(found, dict) and key in found and (not value or found[key] == value[0])
 
 
 def report_owned(out: Path, title: str, names: Sequence[str]) -> tuple[str, ...]:

@@ -22,6 +22,9 @@ from golden_model.engine_spec.register_map import ACCESS, MAGIC, REGISTER_BLOCKS
 __all__ = ["markdown", "to_json", "c_header", "write_exports", "engine_capacity", "EXPORT_FILES"]
 
 EXPORT_FILES = ("register_map.md", "register_map.json", "springflat_regs.h")
+#: What every export's JSON holds (``magic``, the ID register's value): a directory with it holds an earlier
+#: map, whose files a new one may replace (:func:`sim.outputs.holds_marker`).
+EXPORT_MARKER = (EXPORT_FILES[1], "magic", MAGIC)
 PREFIX = "SPRINGFLAT"
 
 
@@ -261,7 +264,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         try:
             formats = load_formats(args.formats)
-            m = RegisterMap.build(formats, engine_capacity(args.capacity, formats, guard=args.lanes == 1, lanes=args.lanes))  # (--capacity's checks)
+            # (--capacity's checks); the map of K > 1 lanes is the unguarded engine's, the one lanes build
+            capacity = engine_capacity(args.capacity, formats, guard=args.lanes == 1, lanes=args.lanes)
+            m = RegisterMap.build(formats, capacity)
         except (FixedPointError, ParameterError, ValueError) as exc:
             parser.exit(2, f"{parser.prog}: error: {exc}\n")
         except OSError as exc:  # a --formats file that cannot be read (a FIFO, a directory)
@@ -270,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             inputs = [("--formats", None if FormatSet.names_preset(args.formats) else Path(args.formats))]
             # a namesake of the user's is refused, not replaced: an earlier export's (or bundle's) files are ours
-            owned = EXPORT_FILES if holds_marker(out, ("register_map.json", "format_hash")) else ()
+            owned = EXPORT_FILES if holds_marker(out, EXPORT_MARKER) else ()
             with atomic_directory(out, inputs=inputs, owned=owned) as build:  # all three files in place, or none
                 names = [path.name for path in write_exports(m, build)]
                 check_build_so_far()  # (a --formats file it would replace is named as such first)

@@ -130,10 +130,11 @@ def cmd_synth(args: argparse.Namespace) -> int:
     from .register_map_export import engine_capacity
 
     fs = load_format_set(args.formats)
+    board = args.board is not None or args.target is None
+    if board and args.lanes > 1:  # (before engine_capacity's hint to add --no-guard, which would not help)
+        raise SynthError("--lanes applies to --target ecp5 builds of springflat_engine, not yet to --board")
     capacity = engine_capacity(args.capacity, fs, guard=args.build_guard, lanes=args.lanes)
-    if args.board is not None or args.target is None:
-        if args.lanes > 1:
-            raise SynthError("--lanes applies to --target ecp5 builds of springflat_engine, not yet to --board")
+    if board:
         from .board_build import cmd_board
 
         return cmd_board(args, fs, capacity)

@@ -530,14 +530,19 @@ def decode_nodes(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity) -> 
 
 
 def decode_entries(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity, barrier: bool,
-                   lane_counts: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                   BarrierEntries | None]:
+                   lane_counts: np.ndarray | None = None, vertices: int | None = None) -> tuple[
+                       np.ndarray, np.ndarray, np.ndarray, BarrierEntries | None]:
     """Entry memory words → ``(indptr (V+1,) from the last flags, neighbour, rest, barrier entries or None)``,
-    in node order: ``words`` in node order, or lane-major with each lane's ``lane_counts`` (:func:`entry_lanes`)."""
+    in node order: ``words`` in node order, or lane-major with each lane's ``lane_counts`` (:func:`entry_lanes`).
+    With ``vertices``, entries whose ``last`` flags do not end exactly each lane's nodes (:func:`unended_nodes`)
+    are a one-line ``ValueError``: counts that do not match the entries."""
     layout = entry_word_layout(fs, capacity)
-    if lane_counts is not None and len(lane_counts) > 1:
-        words = node_order_entries(words, lane_counts, len(lane_counts), layout.unpack(words)["last"])
     f = layout.unpack(words)
+    counts = np.array([len(words)]) if lane_counts is None else lane_counts
+    if vertices is not None and (unended := unended_nodes(f["last"], counts, vertices)) is not None:
+        raise ValueError(f"{unended}: the entry counts do not match the entries")
+    if len(counts) > 1:
+        f = layout.unpack(node_order_entries(words, counts, len(counts), f["last"]))
     indptr = np.concatenate([[0], np.flatnonzero(f["last"]) + 1])
     entries = BarrierEntries(f["second"], f["threshold"], f["gain"]) if barrier else None
     return indptr, f["neighbour"], f["rest"], entries
@@ -551,10 +556,11 @@ def unended_nodes(last: np.ndarray, counts: np.ndarray, vertices: int) -> str | 
     for k, n in enumerate(counts):
         rows, first = last[first:first + n].astype(bool), first + n
         nodes, ends = len(range(k, vertices, lanes)), int(np.count_nonzero(rows))
-        if ends != nodes or (n > 0 and not rows[-1]):
-            whose = f"lane {k}'s {n} entries" if lanes > 1 else f"the {n} entries"
-            unfinished = " and leave a node unfinished" if n > 0 and not rows[-1] else ""
-            return f"{whose} end {ends} nodes{unfinished}, not {nodes}"
+        whose = (f"lane {k}'s" if lanes > 1 else "the") + f" {n} {'entry' if n == 1 else 'entries'}"
+        if n > 0 and not rows[-1]:
+            return f"{whose} stop inside a node, after {ends} of {'its' if lanes > 1 else 'the'} {nodes} nodes' ends"
+        if ends != nodes:
+            return f"{whose} end {ends} nodes, not {'its' if lanes > 1 else 'the'} {nodes}"
     return None
 
 
@@ -618,20 +624,21 @@ def image_energy_window(mode: RunMode) -> int:
 def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     """Algorithm 1 from START to done on the decoded images, as the engine runs it: the one controller
     model (:class:`~golden_model.fixed.controller.Controller`) on what the memories and run constants
-    hold, ``diverged`` when ``saturation_limit`` events were counted."""
+    hold, ``diverged`` when ``saturation_limit`` events were counted. Entry counts that START accepts but
+    that do not end the entries' nodes (a host's own image, not :func:`build_image`'s) are a one-line
+    ``ValueError``: the engine's run of them is undefined."""
     c, capacity = image.constants, image.capacity
     positions, velocities, inv_mass, inv_mass_barrier = decode_nodes(image.nodes, fs, capacity)
     fault = constant_fault(c, fs, capacity)
     if fault is not None:
         return ImageRunResult(image.nodes.copy(), fault, 0, 0, 0, 0, 0, positions, velocities)
-    n, counts = c["vertices"], lane_entry_counts(c, capacity)
-    last = entry_word_layout(fs, capacity).unpack(image.entries[:c["entries"]])["last"]
-    if (unended := unended_nodes(last, counts, n)) is not None:
-        raise ValueError(f"run_image: {unended}: the entry counts do not match the entries, and the engine's "
-                         "run is undefined (on the RTL such a run never ends, nor does ABORT's drain: only a reset "
-                         "recovers)")
-    indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity, bool(c["barrier"]),
-                                                      counts)
+    n = c["vertices"]
+    try:
+        indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity,
+                                                          bool(c["barrier"]), lane_entry_counts(c, capacity), n)
+    except ValueError as exc:
+        raise ValueError(f"run_image: {exc}, and the engine's run is undefined (on the RTL such a run never ends, "
+                         "nor does ABORT's drain: only a reset recovers)") from None
     stream = NeighbourStream(indptr, neighbour, rest, inv_mass[:n], barrier, inv_mass_barrier[:n])
     faces, areas = decode_triangles(image.triangles[:c["triangles"]], fs, capacity)
     setup = Setup(fs, image_mode(c), stream, faces, areas, c["half_spring"], c["damping"], c["dt"],

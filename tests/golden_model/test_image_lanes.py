@@ -157,10 +157,10 @@ def test_a_map_with_other_lanes_than_the_engine_is_refused():
 
 
 @pytest.mark.parametrize("lanes, change, said", [
-    (1, lambda c: {"entries": c["entries"] - 1}, r"the \d+ entries end 35 nodes and leave a node unfinished, not 36"),
+    (1, lambda c: {"entries": c["entries"] - 1}, r"the \d+ entries stop inside a node, after 35 of the 36 nodes' ends"),
     (2, lambda c: {"lane0_entries": c["lane0_entries"] + 1, "lane1_entries": c["lane1_entries"] - 1},
-     r"lane 0's \d+ entries end 18 nodes and leave a node unfinished, not 18"),
-    (2, lambda c: {"lane0_entries": c["entries"], "lane1_entries": 0}, r"lane 0's \d+ entries end 36 nodes, not 18"),
+     r"lane 0's \d+ entries stop inside a node, after 18 of its 18 nodes' ends"),
+    (2, lambda c: {"lane0_entries": c["entries"], "lane1_entries": 0}, r"lane 0's \d+ entries end 36 nodes, not its 18"),
 ])
 def test_counts_that_add_up_but_do_not_end_the_nodes_are_refused_in_one_line(lanes, change, said):
     """START checks the counts against each other and the capacity, not against the entries' last flags: counts

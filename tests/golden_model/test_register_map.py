@@ -386,6 +386,20 @@ def test_the_export_refuses_to_replace_a_file_of_the_users_and_replaces_its_own(
     assert (notes / "register_map.md").read_text() == "my own register notes\n"
     assert (notes / "springflat_regs.h").is_symlink() and (tmp_path / "mine.md").read_text() == "linked\n"
     assert sorted(p.name for p in notes.iterdir()) == ["register_map.md", "springflat_regs.h"]
+    # a map of the user's own with a format_hash, or a link named as the map (springflat writes no links), is
+    # no earlier export: the directory's files stay the user's
+    for name, make in (("own", lambda p: p.write_text('{"format_hash": "mine"}')),
+                       ("linked", lambda p: p.symlink_to(tmp_path / "maps" / "register_map.json"))):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "register_map.md").write_text("mine\n")
+        make(tmp_path / name / "register_map.json")
+    assert main(["--out", str(tmp_path / "maps")]) == 0
+    for name in ("own", "linked"):
+        with pytest.raises(SystemExit):
+            main(["--out", str(tmp_path / name)])
+        assert "which this run would replace" in capsys.readouterr().err
+        assert (tmp_path / name / "register_map.md").read_text() == "mine\n"
+    assert (tmp_path / "linked" / "register_map.json").is_symlink()
     assert main(["--out", str(tmp_path / "maps")]) == 0  # its own export, again: replaced
     assert main(["--lanes", "2", "--out", str(tmp_path / "maps")]) == 0
     assert "in 2 lanes" in (tmp_path / "maps" / "springflat_regs.h").read_text()

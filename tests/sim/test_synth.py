@@ -186,6 +186,7 @@ def test_verilog_refuses_an_output_that_would_replace_the_formats_file_before_th
                                                                       "2147483647, not 99999999999999999999"),
     (["synth", "--target", "ecp5", "--seed", "one"], "argument --seed: expected an integer, got 'one'"),
     (["synth", "--target", "ecp5", "--baud", "9600"], "--baud sets the board's UART: add --board ulx3s-85f"),
+    (["synth", "--board", "ulx3s-85f", "--lanes", "2"], "--lanes applies to --target ecp5 builds"),  # (not --no-guard)
     (["synth", "--target", "ecp5", "--components", "springflat_engine", "--lanes", "2"],
      "--lanes 2 builds the engine without the step guard: add --no-guard"),
     (["synth", "--target", "ecp5", "--lanes", "2", "--no-guard"], "builds springflat_engine: add it to --components"),
