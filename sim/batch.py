@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from golden_model.builtin import is_builtin
-from golden_model.files import describe_os_error, read_file_bytes, same_file_key
+from golden_model.files import describe_os_error, read_file_bytes
 from golden_model.mesh import MeshError, one_line, printable_name, valid_text
 
 from .engines import engine_named
@@ -46,7 +46,7 @@ from .outputs import OutputError, OutputWriteError, all_or_nothing, atomic_write
     check_output_path, file_ending, folded_name, print_note, when_interrupted
 from .patterns import check_not_a_mesh, error_text, pattern_ending, pattern_kind
 from .run_options import (USER_ERRORS, OneOutput, UserError, holes_mode, input_files, integer_argument,
-                          params_from_args, path_argument, resolve_mesh, strict_json)
+                          mesh_names, params_from_args, path_argument, resolve_mesh, strict_json)
 from .workers import WorkerPool, local_workers, undo_dask_malloc_trim, wait_for_one
 
 
@@ -231,22 +231,6 @@ def _endings(args: argparse.Namespace) -> tuple[tuple[str, str], ...]:
     return tuple(endings)
 
 
-def _names(meshes: list[str]) -> list[str]:
-    """Each mesh's name (file stem or built-in name); two meshes of one name would share files."""
-    names = [m if is_builtin(m) else Path(m).stem for m in meshes]
-    seen: dict[str, str] = {}
-    for mesh, name in zip(meshes, names):
-        if name in seen and seen[name] == mesh:
-            raise UserError(f"the mesh '{mesh}' is given twice")
-        if name in seen and not is_builtin(mesh) and (key := same_file_key(mesh)) is not None \
-                and key == same_file_key(seen[name]):
-            raise UserError(f"the mesh '{mesh}' is given twice (as '{seen[name]}' too: the same file)")
-        if name in seen:
-            raise UserError(f"'{seen[name]}' and '{mesh}' are both named '{name}': their outputs would collide")
-        seen[name] = mesh
-    return names
-
-
 def _check_no_two_meshes_write_one_name(meshes: list[str], names: list[str], endings: tuple[tuple[str, str], ...],
                                         out_dir: Path) -> None:
     """Refuse two meshes whose names and endings make one file name (``a`` with ``.flat.obj``, ``a.flat`` with
@@ -283,7 +267,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]
                         "name the files)")
     if args.out_dir is not None:
         out_dir = args.out_dir
-        names = _names(meshes)
+        names = mesh_names(meshes)
         # a skipped mesh's files are not written (a finished one made read-only is no obstacle), but they must
         # still be its outputs: not a mesh of the batch, nor an OBJ springflat did not write
         skipped = frozenset(name for source, name in zip(meshes, names)
@@ -314,7 +298,7 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]
                 if option == "out":
                     check_not_a_mesh(out_dir / f"{name}{ending}", flags[option][0])
     else:
-        _names(meshes)
+        mesh_names(meshes)
         skipped = frozenset()
     return endings, jobs, skipped
 
@@ -573,7 +557,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
     endings, workers, skipped_names = _check_batch(args, meshes)
-    names = _names(meshes)
+    names = mesh_names(meshes)
     options = {k: v for k, v in vars(args).items() if k not in ("func", "mesh", "more_meshes")}
     start = time.perf_counter()
     outcomes: dict[str, MeshOutcome] = {}

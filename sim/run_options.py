@@ -19,7 +19,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
-from golden_model.files import describe_os_error
+from golden_model.files import describe_os_error, same_file_key
 from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, folded_faces
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.guard import ENERGY_WINDOW, energy_floor_strain
@@ -399,6 +399,23 @@ def check_float_start(mesh: Mesh, positions: np.ndarray, params: FlattenParams, 
                       + ": without the step guard the float run cannot start from it; move them apart, or let the "
                       "guard untangle it (" + ("drop --no-guard)" if params.mode.step is Step.MOMENTUM
                                                else "--dynamics momentum)"))
+
+
+def mesh_names(meshes: list[str]) -> list[str]:
+    """Each mesh's name (file stem or built-in name), for the commands that take several (a batch, a study): a
+    mesh given twice, or two meshes of one name, whose outputs would share files, are refused in one line."""
+    names = [m if is_builtin(m) else Path(m).stem for m in meshes]
+    seen: dict[str, str] = {}
+    for mesh, name in zip(meshes, names):
+        if name in seen and seen[name] == mesh:
+            raise UserError(f"the mesh '{mesh}' is given twice")
+        if name in seen and not is_builtin(mesh) and (key := same_file_key(mesh)) is not None \
+                and key == same_file_key(seen[name]):
+            raise UserError(f"the mesh '{mesh}' is given twice (as '{seen[name]}' too: the same file)")
+        if name in seen:
+            raise UserError(f"'{seen[name]}' and '{mesh}' are both named '{name}': their outputs would collide")
+        seen[name] = mesh
+    return names
 
 
 def params_from_args(args: argparse.Namespace, defaults: FlattenParams, fixed_point: bool = False) -> FlattenParams:

@@ -43,7 +43,7 @@ from golden_model.study import (
 
 from ..outputs import atomic_directory, atomic_write, check_not_foreign, check_output_directory, print_note, \
     progress_bar, report_owned
-from ..run_options import OneOutput, integer_argument, load_format_set, number_argument, path_argument
+from ..run_options import OneOutput, integer_argument, load_format_set, mesh_names, number_argument, path_argument
 from ..workers import local_workers
 from .cases import STUDY_MESHES, build_cases
 from .cost import multipliers
@@ -141,6 +141,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     workers = local_workers(args.jobs, "--jobs", args.scheduler)
     base = load_format_set(args.base)
     out = args.out
+    mesh_names(args.meshes or [])  # (a mesh given twice ran its cases twice)
     inputs = [("--base", None if FormatSet.names_preset(args.base) else Path(args.base)),
               *(("a mesh", Path(m)) for m in args.meshes or ())]
     check_output_directory(out, files=REPORT_FILES, inputs=inputs,  # before the study: the report is its end

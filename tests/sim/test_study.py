@@ -287,6 +287,15 @@ def test_bad_input_is_a_parameter_error(tmp_path, argv, message):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_mesh_given_twice_is_refused_as_flatten_refuses_it(tmp_path):
+    """``study surf1 surf1`` ran every case of Surf1 twice."""
+    from sim.run_options import UserError
+
+    with pytest.raises(UserError, match="^the mesh 'surf1' is given twice$"):
+        cmd_study(_parse(["surf1", "surf1", "--out", str(tmp_path / "out"), "--quiet"]))
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_report_that_would_replace_its_own_base_is_refused_before_the_study(tmp_path, monkeypatch):
     """study's docs check a choice with --base study-report/chosen.json: into the default --out the new
     chosen.json would replace it. Refused at once (it was refused after the whole study), nothing written."""
