@@ -230,10 +230,12 @@ def cmd_board(args, fs, capacity) -> int:
 
     if args.board is None:
         raise SynthError("give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)")
-    if (args.target is not None or args.components or args.router != DEFAULT_ROUTER
-            or args.placer_timing != DEFAULT_PLACER_TIMING):
+    others = [flag for flag, given in (("--target", args.target is not None), ("--components", args.components),
+                                       ("--router", args.router != DEFAULT_ROUTER),
+                                       ("--placer-timing", args.placer_timing != DEFAULT_PLACER_TIMING)) if given]
+    if others:
         raise SynthError("--board takes --formats, --capacity, --no-guard, --seed, --freq, --baud, --out, --json "
-                         "and --quiet only")
+                         f"and --quiet only: drop {' and '.join(others)}")
     if args.baud is not None and args.baud <= 0:
         raise SynthError(f"--baud must be a positive number of bits per second, not {args.baud}")
     out = args.out if args.out else Path(f"board-{args.board}-{fs.name}")

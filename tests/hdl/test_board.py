@@ -139,10 +139,11 @@ def test_the_top_for_the_ulx3s_85f(tmp_path):
 @pytest.mark.parametrize("argv, message", [
     (["synth"], "give --target ecp5|ice40 (the components' reports) or --board ulx3s-85f (a bitstream)"),
     (["synth", "--board", "ulx3s-85f", "--target", "ecp5"], "--board takes --formats, --capacity, --no-guard, --seed, "
-                                                            "--freq, --baud, --out, --json and --quiet only"),
-    (["synth", "--board", "ulx3s-85f", "--placer-timing", "strong"], "--board takes --formats, --capacity, "
-                                                                      "--no-guard, --seed, --freq, --baud, --out, "
-                                                                      "--json and --quiet only"),
+                                                            "--freq, --baud, --out, --json and --quiet only: drop "
+                                                            "--target"),
+    (["synth", "--board", "ulx3s-85f", "--placer-timing", "strong", "--components", "rsqrt_unit"],
+     "--board takes --formats, --capacity, --no-guard, --seed, --freq, --baud, --out, --json and --quiet only: drop "
+     "--components and --placer-timing"),
     (["synth", "--target", "ecp5", "--no-guard"], "--no-guard builds springflat_engine: add it to --components"),
     (["synth", "--board", "ulx3s-85f", "--baud", "0"], "--baud must be a positive number of bits per second, not 0"),
     (["synth", "--board", "ulx3s-85f", "--freq", "3"], "the PLL output must be 3.125-400 MHz, not 3 MHz"),
