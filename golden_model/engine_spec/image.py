@@ -44,7 +44,7 @@ from ..mesh import Mesh
 __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "LARGEST_85F_CAPACITY", "WordField", "MemoryLayout", "memory_layouts",
            "node_word_layout", "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width",
            "energy_check_width", "EngineImage", "build_image", "decode_nodes", "decode_entries", "decode_triangles",
-           "constant_fault", "ImageRunResult", "run_image", "image_energy_window", "BUS_WORD_BITS", "ITERATION_BITS",
+           "constant_fault", "EntryCountError", "ImageRunResult", "run_image", "image_energy_window", "BUS_WORD_BITS", "ITERATION_BITS",
            "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS", "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode",
            "LANES", "entry_lanes", "lane_rows", "lane_entry_counts"]
 
@@ -535,17 +535,21 @@ def decode_entries(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity, b
     """Entry memory words → ``(indptr (V+1,) from the last flags, neighbour, rest, barrier entries or None)``,
     in node order: ``words`` in node order, or lane-major with each lane's ``lane_counts`` (:func:`entry_lanes`).
     With ``vertices``, entries whose ``last`` flags do not end exactly each lane's nodes (:func:`unended_nodes`)
-    are a one-line ``ValueError``: counts that do not match the entries."""
+    are a one-line :class:`EntryCountError`: counts that do not match the entries."""
     layout = entry_word_layout(fs, capacity)
     f = layout.unpack(words)
     counts = np.array([len(words)]) if lane_counts is None else lane_counts
     if vertices is not None and (unended := unended_nodes(f["last"], counts, vertices)) is not None:
-        raise ValueError(f"{unended}: the entry counts do not match the entries")
+        raise EntryCountError(f"{unended}: the entry counts do not match the entries")
     if len(counts) > 1:
         f = layout.unpack(node_order_entries(words, counts, len(counts), f["last"]))
     indptr = np.concatenate([[0], np.flatnonzero(f["last"]) + 1])
     entries = BarrierEntries(f["second"], f["threshold"], f["gain"]) if barrier else None
     return indptr, f["neighbour"], f["rest"], entries
+
+
+class EntryCountError(ValueError):
+    """Entry counts that do not end the entries' nodes (:func:`unended_nodes`), in one line."""
 
 
 def unended_nodes(last: np.ndarray, counts: np.ndarray, vertices: int) -> str | None:
@@ -626,7 +630,7 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     model (:class:`~golden_model.fixed.controller.Controller`) on what the memories and run constants
     hold, ``diverged`` when ``saturation_limit`` events were counted. Entry counts that START accepts but
     that do not end the entries' nodes (a host's own image, not :func:`build_image`'s) are a one-line
-    ``ValueError``: the engine's run of them is undefined."""
+    :class:`EntryCountError`: the engine's run of them is undefined."""
     c, capacity = image.constants, image.capacity
     positions, velocities, inv_mass, inv_mass_barrier = decode_nodes(image.nodes, fs, capacity)
     fault = constant_fault(c, fs, capacity)
@@ -636,8 +640,8 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     try:
         indptr, neighbour, rest, barrier = decode_entries(image.entries[:c["entries"]], fs, capacity,
                                                           bool(c["barrier"]), lane_entry_counts(c, capacity), n)
-    except ValueError as exc:
-        raise ValueError(f"run_image: {exc}, and the engine's run is undefined (on the RTL such a run never ends, "
+    except EntryCountError as exc:
+        raise EntryCountError(f"run_image: {exc}, and the engine's run is undefined (on the RTL such a run never ends, "
                          "nor does ABORT's drain: only a reset recovers)") from None
     stream = NeighbourStream(indptr, neighbour, rest, inv_mass[:n], barrier, inv_mass_barrier[:n])
     faces, areas = decode_triangles(image.triangles[:c["triangles"]], fs, capacity)
