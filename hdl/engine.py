@@ -65,7 +65,9 @@ class SpringflatEngine(wiring.Component):
         DP16KD mode of a wide word; a test passes less to have several banks at a small capacity).
     registered_select : bool or None
         The node and triangle memories built as the entry memory (pin registers, the bank select in
-        registered stages), their reads three clocks longer (:class:`~hdl.memory_windows.MemoryWindows`); ``None``: where the node memories take
+        registered stages), their reads three clocks longer (:class:`~hdl.memory_windows.MemoryWindows`); the
+        entry memory's bank flag a copy per block RAM; the check phase a clock longer, its verdict from
+        registers (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ``None``: where the node memories take
         several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
         ``default``). A test passes ``True`` to run those latencies at a small capacity.
     pin_registers : bool or None
@@ -175,7 +177,8 @@ class SpringflatEngine(wiring.Component):
             self._elaborate_lanes(m, hs, registers, memories, platform)
             return m
         m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency)
-        m.submodules.controller = controller = PhaseController(fs, rmap)
+        # the registered select's builds (above DEFAULT_CAPACITY) also take the check's verdict from registers
+        m.submodules.controller = controller = PhaseController(fs, rmap, registered_verdict=self.registered_select)
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True, delay_lines=self.delay_lines)
         m.submodules.area = area = AreaError(fs)
         m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines)

@@ -147,7 +147,8 @@ class MemoryWindows(wiring.Component):
       RAM's pin registers, and each bank's own select flag; E3 the banks' data
       (:data:`ENTRY_BANK_LATENCY`); E4 ``ent_kept<b>``: a bank's data, or 0 when the bank is not the
       one addressed (a register beside the bank, reset by the bank's flag: no logic between the
-      output register and it); E5 ``ent_group<g>``: the OR of a group of banks; E6 ``entry``: the OR
+      output register and it; with the registered select, each block RAM's slice of it reset by a
+      copy of the flag of its own, so that it can sit beside that block RAM); E5 ``ent_group<g>``: the OR of a group of banks; E6 ``entry``: the OR
       of the groups (:data:`ENTRY_LATENCY`);
     * write (the bus's write-back only): the address, data and one-hot bank-enable registers, then
       the block RAMs' pin registers: a clock more, which the bus cycle absorbs (its next read comes
@@ -251,7 +252,7 @@ class MemoryWindows(wiring.Component):
             else len(entry_banks[0].read[0].addr)
         ent_addr = Signal(range(self.capacity.entries), name="ent_addr")  # the entry memory's address register
         ent_hot = Signal(len(entry_banks), name="ent_hot")  # ent_addr's bank, one flag per bank
-        ent_data = self._entry_read(m, entry_banks, ent_addr, ent_hot)
+        ent_data = self._entry_read(m, entry_banks, ent_addr, ent_hot, platform)
 
         positions, triangles, forces = self.rams["positions"], self.rams["triangles"], self.rams["forces"]
         m.d.comb += [self.entry.eq(ent_data), self.triangle.eq(triangles.read[0].data),
@@ -295,9 +296,13 @@ class MemoryWindows(wiring.Component):
         """The proposal memories' read ports, one per position port."""
         return [port for ram in self._proposal_rams() for port in ram.read]
 
-    def _entry_read(self, m: Module, entry_banks, ent_addr, ent_hot, prefix: str = "ent"):
+    def _entry_read(self, m: Module, entry_banks, ent_addr, ent_hot, platform, prefix: str = "ent"):
         """The entry memory's read, E0 (``ent_addr``, ``ent_hot``) to E6 (the returned register): see the
-        class's docstring. ``prefix`` names its registers."""
+        class's docstring. ``prefix`` names its registers.
+
+        With the registered select, a bank's E3 flag is a copy per block RAM (a ``DP16KD`` slice of the
+        word, :func:`~hdl.block_ram.dp16kd_banks`), kept distinct: a bank's block RAMs spread over the
+        device, and each slice of ``ent_kept<b>`` can then sit beside its own block RAM."""
         shape = self.entry_shape
         kept = []
         for b, bank in enumerate(entry_banks):
@@ -307,10 +312,14 @@ class MemoryWindows(wiring.Component):
             m.d.sync += [select[0].eq(ent_hot[b]), *(select[k].eq(select[k - 1]) for k in range(1, len(select)))]
             m.d.comb += port.addr.eq(ent_addr[:len(port.addr)])
             kept.append(Signal(shape, reset_less=True, name=f"{prefix}_kept{b}"))
-            with m.If(select[-1]):
-                m.d.sync += kept[b].eq(port.data)
-            with m.Else():
-                m.d.sync += kept[b].eq(0)
+            if self.registered_select:
+                self._kept_per_block_ram(m, bank, select[-2], Value.cast(port.data), Value.cast(kept[b]), platform,
+                                         name=f"{prefix}_select{b}_3")
+            else:
+                with m.If(select[-1]):
+                    m.d.sync += kept[b].eq(port.data)
+                with m.Else():
+                    m.d.sync += kept[b].eq(0)
         n_groups = -(-len(kept) // ENTRY_GROUP)
         size = -(-len(kept) // n_groups)
         groups = [Signal(shape, reset_less=True, name=f"{prefix}_group{g}") for g in range(n_groups)]
@@ -318,6 +327,20 @@ class MemoryWindows(wiring.Component):
         ent_data = Signal(shape, reset_less=True, name=f"{prefix}_data")  # the addressed entry
         m.d.sync += ent_data.eq(or_tree(groups))
         return ent_data
+
+    @staticmethod
+    def _kept_per_block_ram(m: Module, bank: BlockRam, before_last, data: Value, kept: Value, platform, *,
+                            name: str) -> None:
+        """``kept``, each block RAM's slice of it under a select flag of its own: ``before_last`` registered
+        once per ``DP16KD`` slice (:func:`~hdl.block_ram.dp16kd_banks`), kept distinct from its copies."""
+        slice_width, _, inner_banks = dp16kd_banks(bank.depth, len(data))
+        assert inner_banks == 1, "an entry bank is one DP16KD bank deep"
+        for s, lo in enumerate(range(0, len(data), slice_width)):
+            bits = slice(lo, lo + slice_width)
+            with m.If(kept_register(m, before_last, name=f"{name}_s{s}", platform=platform)):
+                m.d.sync += kept[bits].eq(data[bits])
+            with m.Else():
+                m.d.sync += kept[bits].eq(0)
 
     def _decode(self, m: Module):
         """The request's window, index and word, registered at DEC (``n_windows``: none)."""
@@ -531,7 +554,7 @@ class MemoryWindows(wiring.Component):
             share_bits = (self.entry_bank_depth - 1).bit_length() if len(banks) > 1 else len(banks[0].read[0].addr)
             ent_addr = Signal(range(cap.lane_entries), name=f"lane{lane}_ent_addr")
             ent_hot = Signal(len(banks), name=f"lane{lane}_ent_hot")
-            ent_data = self._entry_read(m, banks, ent_addr, ent_hot, prefix=f"lane{lane}_ent")
+            ent_data = self._entry_read(m, banks, ent_addr, ent_hot, platform, prefix=f"lane{lane}_ent")
             m.d.comb += self.entry[lane].eq(ent_data)
             start = lane * cap.lane_entries
             local = Signal(range(cap.lane_entries), name=f"lane{lane}_bus_index")

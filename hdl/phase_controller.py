@@ -43,6 +43,13 @@ def _code(codes: tuple[str, ...], name: str) -> int:
     return codes.index(name)
 
 
+def _registered(m: Module, value, name: str) -> Signal:
+    """``value`` a clock later, in a flip-flop of its own."""
+    q = Signal(name=name)
+    m.d.sync += q.eq(value)
+    return q
+
+
 @dataclass
 class _Run:
     """The controller's internal registers, shared by its parts."""
@@ -76,6 +83,11 @@ class PhaseController(wiring.Component):
     fs : :class:`~golden_model.fixed.FormatSet`
     register_map : :class:`~golden_model.engine_spec.register_map.RegisterMap`
         Sizes the constants' and results' ports (its values) and the energy check (its capacity).
+    registered_verdict : bool
+        The check phase's verdict (a result, or the step) in flip-flops of their own, taken from the
+        phase's first clock and acted on in its second: a clock more per check, so that the phase flags,
+        placed by the units they drive across the device, are set from registers through no more than
+        a LUT or two (the engine's builds above ``DEFAULT_CAPACITY``; ``docs/synthesis.md``).
 
     Members
     -------
@@ -141,10 +153,13 @@ class PhaseController(wiring.Component):
     #: normaliser's saturation is counted before the limit is tested, as in ``run_image``.
     CHECK_SETTLE_CLOCKS = 3
 
-    def __init__(self, fs: FormatSet, register_map: RegisterMap):
+    def __init__(self, fs: FormatSet, register_map: RegisterMap, *, registered_verdict: bool = False):
         if not isinstance(fs, FormatSet) or not isinstance(register_map, RegisterMap):
             raise TypeError(f"PhaseController needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
+        if not isinstance(registered_verdict, bool):
+            raise TypeError(f"PhaseController registered_verdict must be a bool, not {registered_verdict!r}")
         self.fs, self.capacity = fs, register_map.capacity
+        self.registered_verdict = registered_verdict
         width = register_map.value_width
         #: Width of each saturation-event output.
         self.event_widths = {"step": StepGenerator.output_layout(fs, True)["saturations"].shape.width,
@@ -444,17 +459,26 @@ class PhaseController(wiring.Component):
                              *move("decide", "rollback")]
         with m.If(go & flags["rollback"] & self.guard_done):
             m.d.sync += [self.fetch_nodes.eq(0), *move("rollback", "start")]
-        with m.If(go & flags["check"]):
-            # as run_image: the saturation limit first, then the stop rule (neither after the first
-            # measurement), then the iteration limit
+        # as run_image: the saturation limit first, then the stop rule (neither after the first
+        # measurement), then the iteration limit
+        verdicts = {"diverged": q["diverged_q"] & ~run.first_measure,
+                    "stalled": run.guarded & run.stalled & ~run.first_measure,
+                    "converged": q["converged_q"] & ~run.first_measure,
+                    "max-iterations": q["at_max_iter_q"]}
+        checking = go & flags["check"]
+        if self.registered_verdict:  # taken from the check phase's first clock, acted on in its second
+            verdicts = {code: _registered(m, verdict, f"verdict_{code.replace('-', '_')}")
+                        for code, verdict in verdicts.items()}
+            checking &= _registered(m, flags["check"], "check_second_clock")
+        with m.If(checking):
             m.d.sync += move("check")  # to the step phase, or the run is over
-            with m.If(q["diverged_q"] & ~run.first_measure):
+            with m.If(verdicts["diverged"]):
                 finish("diverged")
-            with m.Elif(run.guarded & run.stalled & ~run.first_measure):
+            with m.Elif(verdicts["stalled"]):
                 finish("stalled")
-            with m.Elif(q["converged_q"] & ~run.first_measure):
+            with m.Elif(verdicts["converged"]):
                 finish("converged")
-            with m.Elif(q["at_max_iter_q"]):
+            with m.Elif(verdicts["max-iterations"]):
                 finish("max-iterations")
             with m.Else():
                 m.d.sync += [run.first_measure.eq(0), *move("check", "step")]

@@ -47,12 +47,14 @@ def test_area_and_shape_sum_saturations_are_counted(dynamics):
     assert_same_run(read_back, expected)
 
 
-def test_error_measure_saturations_are_counted_before_the_limit_is_tested():
+@pytest.mark.parametrize("registered_select", [False, True])
+def test_error_measure_saturations_are_counted_before_the_limit_is_tested(registered_select):
     """A layout twice the mesh's size: E_S and E_C are 1 or more at every measurement, the only events
     (the normalisers saturate; two per measurement). Counted as the golden model counts them, and with
     a limit of 4 the run stops as diverged after its one iteration, not at N_max: the check phase waits until the
     normalisers' events are in the count (without that wait it saw 3 and went on). 72 triangles: the area
-    normaliser answers after the energy check, so its event is the math phase's last."""
+    normaliser answers after the energy check, so its event is the math phase's last. Also with the
+    registered select's verdict, which must be taken in the check phase, not before it."""
     params = FlattenParams(density="auto", max_iter=1)
     mesh, capacity = dome_grid(7), EngineCapacity(64, 512, 128)
     image = build_image(prepare(mesh, 2.0 * initial_layout(mesh, "tutte"), params, FS), capacity)
@@ -63,5 +65,5 @@ def test_error_measure_saturations_are_counted_before_the_limit_is_tested():
     assert (expected_limited.status, expected_limited.iterations, expected_limited.saturations) == ("diverged", 1, 4)
     # the limited run alone on the engine: a check that went on at 3 counted events would end at N_max
     # (max-iterations), and its count is compared
-    _, read_back = run_on_engine(PreloadableEngine(FS, capacity), limited)
+    _, read_back = run_on_engine(PreloadableEngine(FS, capacity, registered_select=registered_select), limited)
     assert_same_run(read_back, expected_limited)
