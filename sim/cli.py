@@ -27,7 +27,6 @@ import contextlib
 import gc
 import math
 import os
-import re
 import signal
 import sys
 import threading
@@ -59,6 +58,7 @@ from .outputs import STANDARD_OUTPUT, NamedStandardOutput, OutputError, atomic_d
 from .patterns import add_pattern_options, check_not_a_mesh, pattern_ending
 from .run_options import (
     USER_ERRORS,
+    CommandParser,
     OneOutput,
     UserError,
     add_run_options,
@@ -75,57 +75,6 @@ from .run_options import (
 )
 from .synth import VERILOG_TARGETS
 from .version import installed_version
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse with the project's one-line error format, and no abbreviated options: with them ``rtl-check
-    --engine fixed`` (``flatten``'s option) is taken as ``--engine-top`` and ``fixed`` refused, and a
-    script's abbreviation changes meaning with the next option added."""
-
-    def __init__(self, *args, **kwargs):
-        kwargs.setdefault("allow_abbrev", False)
-        super().__init__(*args, **kwargs)
-
-    def parse_known_args(self, args=None, namespace=None):
-        self._argv = list(sys.argv[1:] if args is None else args)  # for error()'s hint
-        return super().parse_known_args(args, namespace)
-
-    def error(self, message: str):
-        self.exit(EXIT_USAGE, f"springflat: error: {one_line(message)}{self._dash_value_hint(message)} "
-                              f"(see '{self.prog} --help')\n")
-
-    def _dash_value_hint(self, message: str) -> str:
-        """argparse reads a value that starts with '-' and is not a plain negative number (``-4:8``, ``-1e-3``,
-        a file ``-print.pdf``) as an option, and says only "expected one argument": name the way to give it (where
-        the word after the option starts with one dash and is no option of the command)."""
-        match = re.fullmatch(r"argument (\S+): expected one argument", message)
-        if not match:
-            return ""
-        argv = getattr(self, "_argv", [])
-        for option in match.group(1).split("/"):
-            for token, value in zip(argv, argv[1:]):
-                if token == option and value.startswith("-") and not value.startswith("--") \
-                        and value not in self._option_string_actions:  # (a '--' word is an option mistyped)
-                    return f"; a value that starts with '-' is read as an option: write {option}={value}"
-        return ""
-
-    def _print_message(self, message: str, file=None) -> None:
-        """argparse's, without its silence on a failed write: ``--help`` or ``--version`` into a full disk
-        or a closed pipe is the one line on the standard error and status 2, not a lost text and status 0."""
-        if not message:
-            return
-        file = sys.stderr if file is None else file
-        try:
-            file.write(message)
-            file.flush()
-        except OSError as exc:
-            if file is not sys.stderr:
-                try:
-                    print(f"springflat: error: cannot write standard output: {describe_os_error(exc)}",
-                          file=sys.stderr)
-                except OSError:  # (nowhere left to say it)
-                    pass
-            raise SystemExit(EXIT_USAGE) from None
 
 
 def _written_line(lead: str) -> str:
@@ -307,14 +256,14 @@ def add_engine_options(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+    parser = CommandParser(
         prog="springflat",
         description="Flatten triangle-mesh patches with the variable step-size mass-spring method, "
                     "and verify its fixed-point hardware.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     # not required here: main() names an unknown option before it asks for the command
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=CommandParser)
 
     p = sub.add_parser("flatten", help="flatten a mesh", description="Flatten a mesh patch (Algorithm 1).")
     add_run_options(p)

@@ -235,8 +235,6 @@ def check_fillable(capacity: EngineCapacity, given: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m sim.register_map_export --formats PRESET|FILE --capacity V E T [--lanes K] --out DIR``."""
-    import argparse
-
     from golden_model.fixed.engine import load_formats
     from golden_model.fixed.measures import FixedPointError
     from golden_model.fixed.formats_set import FormatSet
@@ -246,9 +244,10 @@ def main(argv: list[str] | None = None) -> int:
     from .exit_codes import STOP_SIGNALS, answered_signals
     from .outputs import (OutputError, atomic_directory, check_build_so_far, describe_os_error, holds_marker,
                           on_interrupt, received_signal, reset_interrupted)
-    from .run_options import OneOutput, integer_argument, path_argument
+    from .run_options import CommandParser, OneOutput, integer_argument, path_argument
 
-    parser = argparse.ArgumentParser(prog="python -m sim.register_map_export", description=main.__doc__)
+    prog = "python -m sim.register_map_export"
+    parser = CommandParser(prog=prog, error_name=prog, description=main.__doc__)
     parser.add_argument("--formats", default="default")
     parser.add_argument("--capacity", nargs=3, type=integer_argument, metavar=("VERTICES", "ENTRIES", "TRIANGLES"),
                         default=(DEFAULT_CAPACITY.vertices, DEFAULT_CAPACITY.entries, DEFAULT_CAPACITY.triangles),

@@ -12,6 +12,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import sys
 from pathlib import Path
 from typing import Callable, Iterator
@@ -20,11 +21,12 @@ import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
 from golden_model.files import describe_os_error, same_file_key
-from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, folded_faces
+from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, folded_faces, one_line
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
 from golden_model.guard import ENERGY_WINDOW, energy_floor_strain
 from golden_model.params import BARRIER_GAIN_MAX, MASS_PARAMETERS, UPDATE_ORDERS, FlattenParams, ParameterError
 
+from .exit_codes import EXIT_USAGE
 from .layouts import (AUTO_START, LAYOUT_METHODS, SIZE_TOLERANCE, LayoutError, NoDiskStart, init_name, initial_layout,
                       slim_layout, start_layout)
 from .mesh_io import load_mesh_with_notes
@@ -33,6 +35,58 @@ from .mesh_io.polygons import is_float, is_int
 from .outputs import OutputError, directory_name_problem, print_note
 
 USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
+
+
+class CommandParser(argparse.ArgumentParser):
+    """argparse with the project's one-line error format (``error_name: error: …``), and no abbreviated options: with them ``rtl-check
+    --engine fixed`` (``flatten``'s option) is taken as ``--engine-top`` and ``fixed`` refused, and a
+    script's abbreviation changes meaning with the next option added."""
+
+    def __init__(self, *args, error_name: str = "springflat", **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+        self.error_name = error_name
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._argv = list(sys.argv[1:] if args is None else args)  # for error()'s hint
+        return super().parse_known_args(args, namespace)
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.error_name}: error: {one_line(message)}{self._dash_value_hint(message)} "
+                              f"(see '{self.prog} --help')\n")
+
+    def _dash_value_hint(self, message: str) -> str:
+        """argparse reads a value that starts with '-' and is not a plain negative number (``-4:8``, ``-1e-3``,
+        a file ``-print.pdf``) as an option, and says only "expected one argument": name the way to give it (where
+        the word after the option starts with one dash and is no option of the command)."""
+        match = re.fullmatch(r"argument (\S+): expected one argument", message)
+        if not match:
+            return ""
+        argv = getattr(self, "_argv", [])
+        for option in match.group(1).split("/"):
+            for token, value in zip(argv, argv[1:]):
+                if token == option and value.startswith("-") and not value.startswith("--") \
+                        and value not in self._option_string_actions:  # (a '--' word is an option mistyped)
+                    return f"; a value that starts with '-' is read as an option: write {option}={value}"
+        return ""
+
+    def _print_message(self, message: str, file=None) -> None:
+        """argparse's, without its silence on a failed write: ``--help`` or ``--version`` into a full disk
+        or a closed pipe is the one line on the standard error and status 2, not a lost text and status 0."""
+        if not message:
+            return
+        file = sys.stderr if file is None else file
+        try:
+            file.write(message)
+            file.flush()
+        except OSError as exc:
+            if file is not sys.stderr:
+                try:
+                    print(f"{self.error_name}: error: cannot write standard output: {describe_os_error(exc)}",
+                          file=sys.stderr)
+                except OSError:  # (nowhere left to say it)
+                    pass
+            raise SystemExit(EXIT_USAGE) from None
 
 
 class UserError(ValueError):

@@ -70,8 +70,11 @@ def load_mesh_with_notes(path: str | Path, holes: Holes = Holes.REFUSE) -> tuple
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
+        # a name that is only a suffix ('.obj') is all stem, a hidden file's name
+        bare = f": the name '{path.name}' has no stem (name it, for example, 'mesh{path.name.lower()}')" \
+            if not suffix and path.name.lower() in MESH_SUFFIXES else ""
         raise MeshError(
-            f"cannot read mesh '{path}': unknown format '{suffix}' (use {', '.join(MESH_SUFFIXES)})"
+            f"cannot read mesh '{path}': unknown format '{suffix}' (use {', '.join(MESH_SUFFIXES)}){bare}"
         )
     hint = ""
     if suffix == ".obj":

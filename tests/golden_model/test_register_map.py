@@ -343,7 +343,8 @@ def test_the_export_command_writes_the_map_of_k_lanes(tmp_path, capsys):
 
 
 def test_the_export_command_says_in_one_line_what_is_wrong_with_its_inputs(tmp_path, capsys):
-    """A --formats FIFO was a NotRegularFileError traceback; --out '' wrote into the current directory."""
+    """A --formats FIFO was a NotRegularFileError traceback; --out '' wrote into the current directory; an
+    argument error came after argparse's usage block. Each is one line, the command's name first."""
     import os
 
     from sim.register_map_export import main
@@ -351,11 +352,13 @@ def test_the_export_command_says_in_one_line_what_is_wrong_with_its_inputs(tmp_p
     os.mkfifo(tmp_path / "f.json")
     for args, said in [(["--formats", str(tmp_path / "f.json"), "--out", str(tmp_path / "o")],
                         f"cannot read --formats '{tmp_path / 'f.json'}': is a named pipe (FIFO), not a regular file"),
-                       (["--out", ""], "argument --out: expected a path, got ''")]:
+                       (["--out", ""], "argument --out: expected a path, got ''"),
+                       (["--out", str(tmp_path / "o"), "--bogus"], "unrecognized arguments: --bogus")]:
         with pytest.raises(SystemExit) as stopped:
             main(args)
         assert stopped.value.code == 2
-        assert capsys.readouterr().err.splitlines()[-1] == f"python -m sim.register_map_export: error: {said}"
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith(f"python -m sim.register_map_export: error: {said}"), err
     assert os.listdir(tmp_path) == ["f.json"]
 
 

@@ -49,6 +49,11 @@ def test_unparseable_and_unknown_files(tmp_path):
         load_mesh(tmp_path / "x.dae") if (tmp_path / "x.dae").write_text("x") else None
     with pytest.raises(MeshError, match="no such file"):
         load_mesh(tmp_path / "missing.obj")
+    # a file named only '.OBJ' is a hidden file whose name has no suffix: say so, and how to name it
+    (tmp_path / ".OBJ").write_text("v 0 0 0\n")
+    with pytest.raises(MeshError, match=r"unknown format '' \(use .*\): the name '\.OBJ' has no stem \(name it, "
+                                        r"for example, 'mesh\.obj'\)$"):
+        load_mesh(tmp_path / ".OBJ")
 
 
 # --------------------------------------------------------------------------- OBJ reader
