@@ -79,7 +79,8 @@ class MemoryWindows(wiring.Component):
     registered_select : bool
         The node and triangle memories as the entry memory: every block RAM input in a register of its
         own (:class:`BlockRam`'s ``pin_registers``: a write lands a clock later) and the read data through
-        its ``registered_select``; :attr:`read_latency` is three clocks more.
+        its ``registered_select``; :attr:`read_latency` is three clocks more. The entry memory's bank flag
+        is then a copy per block RAM (:meth:`_entry_read`; ``entry_bank_depth`` one ``DP16KD`` deep).
     pin_registers : bool
         The node and triangle memories' pin registers alone (implied by ``registered_select``): a write
         lands a clock later, :attr:`read_latency` is one clock more.
@@ -196,6 +197,10 @@ class MemoryWindows(wiring.Component):
         corners = {"read_ports": 3, "shared_write_port": self.pin_registers, **select}
         layouts = memory_layouts(fs, capacity)
         self.entry_shape, self.triangle_shape = word_layout(layouts["entries"]), word_layout(layouts["triangles"])
+        entry_width = Shape.cast(self.entry_shape).width
+        if self.registered_select and dp16kd_banks(entry_bank_depth, entry_width)[2] > 1:
+            raise ValueError(f"MemoryWindows: with the registered select an entry bank is one DP16KD deep: "
+                             f"entry_bank_depth={entry_bank_depth} of {entry_width}-bit entries is more")
         pos_shape, vel_shape = vector_layout(fs.position), vector_layout(fs.velocity)
         weight_shape, force_shape = weight_word_layout(fs), force_word_layout(fs)
         cap, banks = capacity, -(-capacity.entries // entry_bank_depth)
@@ -313,6 +318,7 @@ class MemoryWindows(wiring.Component):
             m.d.comb += port.addr.eq(ent_addr[:len(port.addr)])
             kept.append(Signal(shape, reset_less=True, name=f"{prefix}_kept{b}"))
             if self.registered_select:
+                # (E3's one flag is then unread, and Yosys removes it)
                 self._kept_per_block_ram(m, bank, select[-2], Value.cast(port.data), Value.cast(kept[b]), platform,
                                          name=f"{prefix}_select{b}_3")
             else:
@@ -334,7 +340,7 @@ class MemoryWindows(wiring.Component):
         """``kept``, each block RAM's slice of it under a select flag of its own: ``before_last`` registered
         once per ``DP16KD`` slice (:func:`~hdl.block_ram.dp16kd_banks`), kept distinct from its copies."""
         slice_width, _, inner_banks = dp16kd_banks(bank.depth, len(data))
-        assert inner_banks == 1, "an entry bank is one DP16KD bank deep"
+        assert inner_banks == 1, "an entry bank is one DP16KD deep (checked in __init__)"
         for s, lo in enumerate(range(0, len(data), slice_width)):
             bits = slice(lo, lo + slice_width)
             with m.If(kept_register(m, before_last, name=f"{name}_s{s}", platform=platform)):

@@ -97,6 +97,17 @@ def test_the_memories_registers_are_checked_and_follow_the_build():
                 SpringflatEngine(FS, CAPACITY, **{flag: 1})
         with pytest.raises(ValueError, match="registered_select needs the pin registers"):
             SpringflatEngine(FS, CAPACITY, registered_select=True, pin_registers=False)
+        # the registered select's entry flags are one per block RAM of a bank one DP16KD deep (2,048 9-bit words)
+        from golden_model.engine_spec.register_map import RegisterMap
+        from hdl.memory_windows import MemoryWindows
+
+        def windows(depth):
+            rmap = RegisterMap.build(FS, CAPACITY)
+            return MemoryWindows(FS, CAPACITY, rmap, addr_width=rmap.address_bits, entry_bank_depth=depth,
+                                 registered_select=True)
+        assert windows(2048).registered_select
+        with pytest.raises(ValueError, match=r"one DP16KD deep: entry_bank_depth=4096 of \d+-bit entries is more"):
+            windows(4096)
         # lanes: without the guard and the memories' and datapaths' build options
         lanes = dataclasses.replace(CAPACITY, guard=False, lanes=2)
         assert SpringflatEngine(FS, lanes).registered_select is False
