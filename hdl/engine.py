@@ -66,8 +66,11 @@ class SpringflatEngine(wiring.Component):
     registered_select : bool or None
         The node and triangle memories built as the entry memory (pin registers, the bank select in
         registered stages), their reads three clocks longer (:class:`~hdl.memory_windows.MemoryWindows`); the
-        entry memory's bank flag a copy per block RAM; the check phase a clock longer, its verdict from
-        registers (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ``None``: where the node memories take
+        entry memory's bank flag a copy per block RAM; the fetch counters' compares from copies of them
+        (:class:`~hdl.pass_sequencer.PassSequencer`'s ``compare_copies``); a register write a clock later,
+        from a write enable per register (:class:`~hdl.register_bank.RegisterBank`'s ``registered_write``);
+        the check phase a clock longer, its verdict from registers
+        (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ``None``: where the node memories take
         several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
         ``default``). A test passes ``True`` to run those latencies at a small capacity.
     pin_registers : bool or None
@@ -176,8 +179,10 @@ class SpringflatEngine(wiring.Component):
         if cap.lanes > 1:
             self._elaborate_lanes(m, hs, registers, memories, platform)
             return m
-        m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency)
-        # the registered select's builds (above DEFAULT_CAPACITY) also take the check's verdict from registers
+        # the registered select's builds (above DEFAULT_CAPACITY) also compare copies of the fetch counters
+        # and take the check's verdict from registers
+        m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency,
+                                                           compare_copies=self.registered_select)
         m.submodules.controller = controller = PhaseController(fs, rmap, registered_verdict=self.registered_select)
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True, delay_lines=self.delay_lines)
         m.submodules.area = area = AreaError(fs)
@@ -236,7 +241,8 @@ class SpringflatEngine(wiring.Component):
         fs, cap, rmap = self.fs, self.capacity, self.register_map
         m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width)
         copies = UNIT_CONSTANTS + tuple(f.name for f in lane_count_fields(cap))
-        m.submodules.registers = registers = RegisterBank(rmap, addr_width=self.addr_width, copies=copies)
+        m.submodules.registers = registers = RegisterBank(rmap, addr_width=self.addr_width, copies=copies,
+                                                          registered_write=self.registered_select)
         m.submodules.memories = memories = MemoryWindows(fs, cap, rmap, addr_width=self.addr_width,
                                                          entry_bank_depth=self.entry_bank_depth,
                                                          registered_select=self.registered_select,

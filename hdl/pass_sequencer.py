@@ -43,20 +43,28 @@ RESTARTS = {
     "node_index": ("in_step", False), "node_out_index": ("in_step", False), "power_sum": ("in_step", True),
 }
 RESTARTED = tuple(RESTARTS)
+#: The passes' fetch counters (:func:`fetch_counter`).
+FETCH_COUNTERS = ("entry_index", "tri_index", "node_index")
 
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
 
 
-def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, stages: int) -> list[Signal]:
+def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, stages: int,
+                  compare: Signal | None = None) -> list[Signal]:
     """A pass's fetch: while ``fetch`` is high, ``index`` counts 0, 1, … up to ``count``, one issued
     per clock. Returns ``valid``: ``valid[k]`` marks the clock whose data belongs to an index issued
-    ``k`` clocks ago (``valid[0]``: the index in the memories' address registers)."""
+    ``k`` clocks ago (``valid[0]``: the index in the memories' address registers).
+
+    ``compare``: a copy of ``index`` (restarted with it by the caller) that the compare with ``count``
+    reads, so that the counter's loop does not follow ``index`` to the block RAMs it addresses."""
     valid = [Signal(name=f"{valid_prefix}{k}_valid") for k in range(stages)]
-    issue = fetch & (index < count)
+    issue = fetch & ((index if compare is None else compare) < count)
     m.d.sync += [valid[0].eq(issue), *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
     with m.If(issue):
         m.d.sync += index.eq(index + 1)
+        if compare is not None:
+            m.d.sync += compare.eq(compare + 1)
     return valid
 
 
@@ -130,9 +138,14 @@ class PassSequencer(wiring.Component):
     drains on its own.
     """
 
-    def __init__(self, fs: FormatSet, register_map: RegisterMap, *, read_latency: int = READ_LATENCY):
+    def __init__(self, fs: FormatSet, register_map: RegisterMap, *, read_latency: int = READ_LATENCY,
+                 compare_copies: bool = False):
         if not isinstance(fs, FormatSet) or not isinstance(register_map, RegisterMap):
             raise TypeError(f"PassSequencer needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
+        if not isinstance(compare_copies, bool):
+            raise TypeError(f"PassSequencer compare_copies must be a bool, not {compare_copies!r}")
+        #: Each fetch counter's compares read a copy of it (:func:`fetch_counter`'s ``compare``).
+        self.compare_copies = compare_copies
         cap: EngineCapacity = register_map.capacity
         self.fs, self.capacity = fs, cap
         #: With K > 1 lanes this is one lane's: its counts are the lane's (``vertices``, ``entries``,
@@ -191,6 +204,9 @@ class PassSequencer(wiring.Component):
         # flip-flops' reset pins: a long path on the board).
         r = {name: Signal.like(getattr(self, name), reset_less=True, name=f"{name}_q") for name in RESTARTED}
         m.d.comb += [getattr(self, name).eq(q) for name, q in r.items()]
+        # with compare_copies, the fetch counters' copies (restarted with them)
+        self._compares = {name: Signal.like(r[name], name=f"{name}_compare")
+                          for name in FETCH_COUNTERS if self.compare_copies}
         e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
@@ -203,22 +219,25 @@ class PassSequencer(wiring.Component):
         copies = {phase: kept_register(m, getattr(self, phase), platform=platform,
                                        name=f"sums_restart_at_{phase.removeprefix('in_')}")
                   for phase in ("in_start", "in_step")}
+        restarted = r | {f"{name}_compare": q for name, q in self._compares.items()}
         for phase, copy in copies.items():
             with m.If(getattr(self, phase)):
-                m.d.sync += [r[name].eq(0) for name, (at, is_sum) in RESTARTS.items() if at == phase and not is_sum]
+                m.d.sync += [q.eq(0) for name, q in restarted.items() if RESTARTS[name.removesuffix("_compare")]
+                             == (phase, False)]
             with m.If(copy):
                 m.d.sync += [r[name].eq(0) for name, (at, is_sum) in RESTARTS.items() if at == phase and is_sum]
         with m.If(self.in_start):
             m.d.sync += next_first.eq(1)
         with m.If(self.node_restart):
-            m.d.sync += r["node_index"].eq(0)
+            m.d.sync += [q.eq(0) for name, q in restarted.items() if name.removesuffix("_compare") == "node_index"]
         with m.If(self.triangle_restart):
-            m.d.sync += r["tri_index"].eq(0)
+            m.d.sync += [q.eq(0) for name, q in restarted.items() if name.removesuffix("_compare") == "tri_index"]
         return m
 
     def _force_pass(self, m: Module, r: dict[str, Signal], platform):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
-        e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self.entries, "e", self.force_fetch_latency + 1)
+        e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self.entries, "e", self.force_fetch_latency + 1,
+                                self._compares.get("entry_index"))
         entry_shape = self.entry.shape()
         ent_data = self.entry  # the addressed entry, at E6 (ENTRY_LATENCY)
         next_first = Signal(name="next_first")
@@ -272,7 +291,7 @@ class PassSequencer(wiring.Component):
         alternate = Signal(name="tri_alternate")
         m.d.sync += alternate.eq(~alternate & self.half_rate)
         t_valid = fetch_counter(m, r["tri_index"], self.fetch_area & ~alternate, self.triangles, "t",
-                                self.area_fetch_latency + 1)
+                                self.area_fetch_latency + 1, self._compares.get("tri_index"))
         # the triangle's area and corners, landed with it, carried beside its corners' read
         area, corners = self.triangle.area, [self.triangle.a, self.triangle.b, self.triangle.c]
         for k in range(self.read_latency + 1, self.area_fetch_latency + 1):
@@ -291,7 +310,8 @@ class PassSequencer(wiring.Component):
 
     def _integrate_pass(self, m: Module, r: dict[str, Signal]):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
-        n_valid = fetch_counter(m, r["node_index"], self.fetch_nodes, self.vertices, "n", self.node_fetch_latency + 1)
+        n_valid = fetch_counter(m, r["node_index"], self.fetch_nodes, self.vertices, "n", self.node_fetch_latency + 1,
+                                self._compares.get("node_index"))
         node = self.node_out.payload
         landed = n_valid[self.node_fetch_latency]
         m.d.comb += [  # landed at N2
@@ -360,9 +380,10 @@ class PassSequencer(wiring.Component):
         # `done_fetching` a clock later reads it as done. A pass without a restart pulse starts from a
         # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.
         at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
-        m.d.sync += at_end.eq(Cat(self.entry_index == self.entries,
-                                  (self.tri_index == self.triangles) & ~self.triangle_restart,
-                                  (self.node_index == self.vertices) & ~self.node_restart))
+        index = {name: self._compares.get(name, getattr(self, name)) for name in FETCH_COUNTERS}
+        m.d.sync += at_end.eq(Cat(index["entry_index"] == self.entries,
+                                  (index["tri_index"] == self.triangles) & ~self.triangle_restart,
+                                  (index["node_index"] == self.vertices) & ~self.node_restart))
         done_fetching = Signal(name="done_fetching")
         m.d.sync += done_fetching.eq(
             (at_end[0] | ~self.fetch_force)

@@ -75,15 +75,21 @@ class RegisterBank(wiring.Component):
     Contract
     --------
     A register write acts at DEC's clock edge: ``rw`` storage holds the word the clock after DEC,
-    a ``w1p`` port is high that clock. A register answers two clocks after DEC (the one-hot select's
+    a ``w1p`` port is high that clock (with ``registered_write`` a clock later: each writable register's
+    write enable and the bus's data in flip-flops first, so that the enable reaches a register placed
+    beside its loads from a flip-flop). A register answers two clocks after DEC (the one-hot select's
     AND-OR into groups of eight, landed, then their OR, landed): ``error`` for a write to a ``ro``
     register or a partial word. A request that is neither a register nor an idle window is refused
     (``error``) the clock after DEC. A window's answer is passed on as it comes.
     """
 
-    def __init__(self, register_map: RegisterMap, *, addr_width: int, copies: tuple[str, ...] = ()):
+    def __init__(self, register_map: RegisterMap, *, addr_width: int, copies: tuple[str, ...] = (),
+                 registered_write: bool = False):
         if not isinstance(register_map, RegisterMap):
             raise TypeError(f"RegisterBank needs a RegisterMap, not {register_map!r}")
+        if not isinstance(registered_write, bool):
+            raise TypeError(f"RegisterBank registered_write must be a bool, not {registered_write!r}")
+        self.registered_write = registered_write
         end = max([r.offset + 1 for r in register_map.registers] + [w.base + w.size for w in register_map.windows])
         check_int("addr_width", addr_width, minimum=max(1, (end - 1).bit_length()))  # (to reach the map's last word)
         self.register_map, self.addr_width, self.copies = register_map, addr_width, tuple(copies)
@@ -135,6 +141,10 @@ class RegisterBank(wiring.Component):
                      reg_select.eq(Cat(low == r.offset for r in registers)),
                      bus_reg_hit.eq(offset_map.bit_select(low, 1) & (self.address[offset_bits:] == 0))]
         bus_write = self.bus_request & self.write & self.whole_word & bus_reg_hit
+        write_data = self.write_data
+        if self.registered_write:  # a register's write enable and the data in flip-flops, a clock later
+            write_data = Signal.like(self.write_data, name="write_data_q", reset_less=True)
+            m.d.sync += write_data.eq(self.write_data)
 
         # reads and writes: a write acts in DEC's clock; the answer comes from the read word landed
         m.d.sync += [p.eq(0) for p in pulses.values()]
@@ -146,9 +156,13 @@ class RegisterBank(wiring.Component):
             read_terms.append(Mux(selected, word, 0))
             if r.access == "ro":
                 read_only_terms.append(selected)
-            with m.If(bus_write & selected):
+            writes = bus_write & selected
+            if self.registered_write and r.access != "ro":
+                writes = Signal(name=f"write_{r.name.lower()}")
+                m.d.sync += writes.eq(bus_write & selected)
+            with m.If(writes):
                 for f in r.fields:
-                    bits = self.write_data[f.lsb:f.lsb + f.width]
+                    bits = write_data[f.lsb:f.lsb + f.width]
                     at = slice(f.value_lsb, f.value_lsb + f.width)
                     if f.access == "rw":
                         m.d.sync += storage[f.value][at].eq(bits)

@@ -47,8 +47,9 @@ class Bench(wiring.Component):
 
     bus: In(wishbone.Signature(addr_width=ADDR_WIDTH))
 
-    def __init__(self):
-        self.bank = RegisterBank(small_map(), addr_width=ADDR_WIDTH, copies=("wide",))
+    def __init__(self, registered_write: bool = False):
+        self.bank = RegisterBank(small_map(), addr_width=ADDR_WIDTH, copies=("wide",),
+                                 registered_write=registered_write)
         super().__init__()
 
     def elaborate(self, platform):
@@ -93,8 +94,10 @@ def test_the_ports_follow_the_access_types():
     assert len(bank.wide) == 40 and len(bank.count) == 20 and len(bank.flags) == 2
 
 
-def test_each_field_acts_as_its_access_type_says():
-    dut = Bench()
+@pytest.mark.parametrize("registered_write", [False, True])
+def test_each_field_acts_as_its_access_type_says(registered_write):
+    """Also with the writes a clock later (``registered_write``): every effect is in place by the write's answer."""
+    dut = Bench(registered_write)
     bank = dut.bank
     pulses = []
 
