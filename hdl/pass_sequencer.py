@@ -76,6 +76,11 @@ class PassSequencer(wiring.Component):
     fs : :class:`~golden_model.fixed.FormatSet`
     register_map : :class:`~golden_model.engine_spec.register_map.RegisterMap`
         Its capacity sizes the counters, its values the mesh-size inputs.
+    read_latency : int
+        Clocks from a node or triangle memory's address register to its data (:func:`fetch_latencies`).
+    compare_copies : bool
+        Each fetch counter's issue and end compares read a copy of the counter, restarted and counted with
+        it (:func:`fetch_counter`'s ``compare``; the area pass's end still reads ``tri_index``).
 
     Members
     -------
@@ -373,7 +378,7 @@ class PassSequencer(wiring.Component):
 
     def _idle(self, m: Module, e_valid, t_valid, n_valid) -> None:
         """``passes_idle``: the fetch counters at their ends and no item in a fetch or a unit."""
-        # The fetch counters' compares in registers beside the counters, then `done_fetching` from
+        # The fetch counters' compares (or their copies') in registers beside them, then `done_fetching` from
         # those, two clocks behind the counters, so that no compare's logic sits on the route across
         # the device into the drain's end. A guard pass restarts its counter in its first clock,
         # while the counter still stands at the previous pass's end: neither that clock's compare nor

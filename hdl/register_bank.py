@@ -57,6 +57,9 @@ class RegisterBank(wiring.Component):
         because the register file sits by the bus decode and the unit's first stage far from it).
         The host writes a run constant a bus cycle or more before START, so the copy is current
         when a run reads it.
+    registered_write : bool
+        Each writable register's write enable and the bus's data in flip-flops: a write acts a clock
+        after DEC (see the contract), its answer as before.
 
     Members
     -------
@@ -146,7 +149,8 @@ class RegisterBank(wiring.Component):
             write_data = Signal.like(self.write_data, name="write_data_q", reset_less=True)
             m.d.sync += write_data.eq(self.write_data)
 
-        # reads and writes: a write acts in DEC's clock; the answer comes from the read word landed
+        # reads and writes: a write acts in DEC's clock (registered_write: the next); the answer comes from
+        # the read word landed
         m.d.sync += [p.eq(0) for p in pulses.values()]
         read_terms, read_only_terms = [], []
         for k, r in enumerate(registers):

@@ -185,3 +185,32 @@ def test_an_address_width_too_narrow_for_the_map_is_refused_as_the_other_paramet
         with pytest.raises(ValueError, match=r"^addr_width must be an int >= 3, not True$"):
             RegisterBank(small_map(), addr_width=True)
         assert RegisterBank(small_map(), addr_width=3).addr_width == 3
+
+
+@pytest.mark.parametrize("registered_write", [False, True])
+def test_a_registered_write_acts_a_clock_later(registered_write):
+    """The bank driven directly (one clock of a registered request): a rw word is stored two clocks after
+    the request (DEC, then the write's edge), three with ``registered_write``; the answer comes at the same
+    clock either way."""
+    bank = RegisterBank(small_map(), addr_width=ADDR_WIDTH, registered_write=registered_write)
+    seen = {}
+
+    async def bench(ctx):
+        ctx.set(bank.request, 1)
+        ctx.set(bank.address, 4)
+        ctx.set(bank.write, 1)
+        ctx.set(bank.write_data, 0x1234_5678)
+        ctx.set(bank.whole_word, 1)
+        for clock in range(1, 6):
+            await ctx.tick()
+            ctx.set(bank.request, 0)
+            if ctx.get(bank.done):
+                seen.setdefault("answer", clock)
+            if ctx.get(bank.wide) == 0x1234_5678:
+                seen.setdefault("stored", clock)
+
+    sim = Simulator(bank)
+    sim.add_clock(1e-8)
+    sim.add_testbench(bench)
+    sim.run()
+    assert seen == {"stored": 2 + registered_write, "answer": 3}
