@@ -224,19 +224,21 @@ class PassSequencer(wiring.Component):
         copies = {phase: kept_register(m, getattr(self, phase), platform=platform,
                                        name=f"sums_restart_at_{phase.removeprefix('in_')}")
                   for phase in ("in_start", "in_step")}
-        restarted = r | {f"{name}_compare": q for name, q in self._compares.items()}
+        def restart(names):  # the registers named, then their compare copies, to 0
+            return [q.eq(0) for q in [*(r[name] for name in names),
+                                      *(self._compares[name] for name in names if name in self._compares)]]
+
         for phase, copy in copies.items():
             with m.If(getattr(self, phase)):
-                m.d.sync += [q.eq(0) for name, q in restarted.items() if RESTARTS[name.removesuffix("_compare")]
-                             == (phase, False)]
+                m.d.sync += restart([name for name, (at, is_sum) in RESTARTS.items() if at == phase and not is_sum])
             with m.If(copy):
-                m.d.sync += [r[name].eq(0) for name, (at, is_sum) in RESTARTS.items() if at == phase and is_sum]
+                m.d.sync += restart([name for name, (at, is_sum) in RESTARTS.items() if at == phase and is_sum])
         with m.If(self.in_start):
             m.d.sync += next_first.eq(1)
         with m.If(self.node_restart):
-            m.d.sync += [q.eq(0) for name, q in restarted.items() if name.removesuffix("_compare") == "node_index"]
+            m.d.sync += restart(["node_index"])
         with m.If(self.triangle_restart):
-            m.d.sync += [q.eq(0) for name, q in restarted.items() if name.removesuffix("_compare") == "tri_index"]
+            m.d.sync += restart(["tri_index"])
         return m
 
     def _force_pass(self, m: Module, r: dict[str, Signal], platform):
