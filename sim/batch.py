@@ -247,9 +247,10 @@ def _check_no_two_meshes_write_one_name(meshes: list[str], names: list[str], end
 
 
 def _check_batch(args: argparse.Namespace, meshes: list[str]
-                 ) -> tuple[tuple[tuple[str, str], ...], int, frozenset[str]]:
-    """Refuse what a batch cannot do, before any run; returns the endings, the worker count and the names of
-    the meshes ``--skip-existing`` skips (their files all in ``--out-dir``)."""
+                 ) -> tuple[tuple[tuple[str, str], ...], int, list[str], frozenset[str]]:
+    """Refuse what a batch cannot do, before any run; returns the endings, the worker count, the meshes' names
+    (:func:`~sim.run_options.mesh_names`) and the names of the meshes ``--skip-existing`` skips (their files all in
+    ``--out-dir``)."""
     single = engine_named(args.engine).single
     if single:
         raise UserError(f"--engine {args.engine} runs one mesh at a time ({single}): drop it for a batch")
@@ -265,9 +266,9 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]
     if endings and args.out_dir is None:
         raise UserError("a batch (several meshes, or --scheduler) writes its outputs to --out-dir DIR (the endings "
                         "name the files)")
+    names = mesh_names(meshes)
     if args.out_dir is not None:
         out_dir = args.out_dir
-        names = mesh_names(meshes)
         # a skipped mesh's files are not written (a finished one made read-only is no obstacle), but they must
         # still be its outputs: not a mesh of the batch, nor an OBJ springflat did not write
         skipped = frozenset(name for source, name in zip(meshes, names)
@@ -298,9 +299,8 @@ def _check_batch(args: argparse.Namespace, meshes: list[str]
                 if option == "out":
                     check_not_a_mesh(out_dir / f"{name}{ending}", flags[option][0])
     else:
-        mesh_names(meshes)
         skipped = frozenset()
-    return endings, jobs, skipped
+    return endings, jobs, names, skipped
 
 
 def _job(source: str, name: str, options: dict, endings) -> BatchJob | MeshOutcome:
@@ -556,8 +556,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 
 def _run_batch(args: argparse.Namespace, meshes: list[str]) -> int:
-    endings, workers, skipped_names = _check_batch(args, meshes)
-    names = mesh_names(meshes)
+    endings, workers, names, skipped_names = _check_batch(args, meshes)
     options = {k: v for k, v in vars(args).items() if k not in ("func", "mesh", "more_meshes")}
     start = time.perf_counter()
     outcomes: dict[str, MeshOutcome] = {}

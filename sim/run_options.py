@@ -38,9 +38,9 @@ USER_ERRORS = (MeshError, LayoutError, ParameterError, OutputError)
 
 
 class CommandParser(argparse.ArgumentParser):
-    """argparse with the project's one-line error format (``error_name: error: …``), and no abbreviated options: with them ``rtl-check
-    --engine fixed`` (``flatten``'s option) is taken as ``--engine-top`` and ``fixed`` refused, and a
-    script's abbreviation changes meaning with the next option added."""
+    """argparse with the project's one-line error format (``error_name: error: …``), and no abbreviated
+    options: with them ``rtl-check --engine fixed`` (``flatten``'s option) is taken as ``--engine-top`` and
+    ``fixed`` refused, and a script's abbreviation changes meaning with the next option added."""
 
     def __init__(self, *args, error_name: str = "springflat", **kwargs):
         kwargs.setdefault("allow_abbrev", False)
