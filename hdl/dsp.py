@@ -19,7 +19,7 @@ The platform object also tells :class:`hdl.fifo.LutFIFO` that the device has dis
 
 from __future__ import annotations
 
-from amaranth.hdl import ClockSignal, Const, Fragment, Instance, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import ClockSignal, Const, Fragment, Instance, Module, Mux, ResetSignal, Signal, Value, signed, unsigned
 
 from golden_model.fixed.dsp import DSP_WIDTH, is_dsp_block
 
@@ -48,22 +48,27 @@ def dsp_target(platform) -> str | None:
     return getattr(platform, "dsp", None)
 
 
-def kept_register(m: Module, value, *, name: str, platform=None) -> Signal:
+def kept_register(m: Module, value, *, name: str, platform=None, reset: bool = False) -> Signal:
     """``value`` registered (a free-running flip-flop per bit), kept apart from identical registers.
 
     A copy of a register placed beside one group of its loads: Yosys merges flip-flops with the same
     input, so with ECP5 primitives each bit is a ``TRELLIS_FF`` instance marked ``keep``; in generic
-    RTL (simulation) a plain register.
+    RTL (simulation) a plain register. ``reset``: the ECP5 flip-flop is cleared by the ``sync`` domain's
+    reset too (its synchronous LSR), as the generic register is, so that a copy of a register loaded
+    from the same next value equals it in every clock, a reset's included; without it the ECP5 copy
+    ignores the reset (a copy whose loads are all cleared by the reset anyway).
     """
     value = Value.cast(value)
     q = Signal(len(value), name=name)
     if dsp_target(platform) != "ecp5":
         m.d.sync += q.eq(value)
         return q
+    # (LSR_OVER_CE, the default SRMODE: a synchronous clear, as the domain's)
+    clear = {"p_SRMODE": "LSR_OVER_CE", "i_LSR": ResetSignal()} if reset else {"i_LSR": 0}
     for i in range(len(value)):
         m.submodules[f"{name}_ff{i}"] = Instance(
             "TRELLIS_FF", p_GSR="AUTO", p_CEMUX="1", p_CLKMUX="CLK", p_LSRMUX="LSR", p_REGSET="RESET",
-            i_CLK=ClockSignal(), i_LSR=0, i_DI=value[i], o_Q=q[i], a_keep=1)
+            i_CLK=ClockSignal(), **clear, i_DI=value[i], o_Q=q[i], a_keep=1)
     return q
 
 

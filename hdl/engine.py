@@ -70,7 +70,9 @@ class SpringflatEngine(wiring.Component):
         (:class:`~hdl.pass_sequencer.PassSequencer`'s ``compare_copies``); a register write a clock later,
         from a write enable per register (:class:`~hdl.register_bank.RegisterBank`'s ``registered_write``);
         the check phase a clock longer, its verdict from registers
-        (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ``None``: where the node memories take
+        (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ABORT's register and
+        ``running`` copied for groups of their loads (its ``control_copies``; the read addresses' copies of
+        ``running`` in the memories); ``None``: where the node memories take
         several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
         ``default``). A test passes ``True`` to run those latencies at a small capacity.
     pin_registers : bool or None
@@ -179,11 +181,14 @@ class SpringflatEngine(wiring.Component):
         if cap.lanes > 1:
             self._elaborate_lanes(m, hs, registers, memories, platform)
             return m
-        # the registered select's builds (above DEFAULT_CAPACITY) also compare copies of the fetch counters
-        # and take the check's verdict from registers
+        # the registered select's builds (above DEFAULT_CAPACITY) also compare copies of the fetch counters,
+        # take the check's verdict from registers and read ABORT and running from copies by their loads
         m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency,
                                                            compare_copies=self.registered_select)
-        m.submodules.controller = controller = PhaseController(fs, rmap, registered_verdict=self.registered_select)
+        m.submodules.controller = controller = PhaseController(fs, rmap, registered_verdict=self.registered_select,
+                                                               control_copies=self.registered_select)
+        if self.registered_select:
+            _wire(m, controller, memories, "running_next")
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True, delay_lines=self.delay_lines)
         m.submodules.area = area = AreaError(fs)
         m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines)

@@ -96,6 +96,10 @@ class MemoryWindows(wiring.Component):
         (nine) clocks after DEC, for a write as for a read.
     running, in_area, in_integrate, fetch_nodes : ``In(1)``
         The controller's flip-flops that choose each port's source.
+    running_next : ``In(1)``
+        With ``registered_select`` only: ``running``'s next value (the controller's), from which the read
+        addresses' copies of ``running`` are loaded (cleared by the domain's reset, as ``running`` is):
+        one each for the entry, the triangle and the node memories, placed by their address registers.
     entry_index, tri_index, node_index, node_of_entry : ``In``
         The passes' addresses (:class:`~hdl.pass_sequencer.PassSequencer`).
     entry, triangle, position[3], velocity, weight_word, force_word : ``Out``
@@ -228,6 +232,7 @@ class MemoryWindows(wiring.Component):
             return
         super().__init__({
             **self._bus_members(addr_width),
+            **({"running_next": In(1)} if self.registered_select else {}),
             "entry_index": In(range(cap.entries + 1)), "tri_index": In(range(cap.triangles + 1)),
             "node_index": In(range(cap.vertices + 1)), "node_of_entry": In(range(cap.vertices + 1)),
             "entry": Out(self.entry_shape), "triangle": Out(self.triangle_shape), "position": Out(pos_shape).array(3),
@@ -289,7 +294,7 @@ class MemoryWindows(wiring.Component):
                  "triangles": (self.rams["triangles"].read[0].data.as_value(), self.read_latency),
                  "entries": (ent_data.as_value(), ENTRY_LATENCY)}
         bus_writing, new_words = self._bus_words(m, window_q, word_q, reads)
-        self._read_addresses(m, index_q, ent_addr, ent_hot, bank_bits, ent_data)
+        self._read_addresses(m, index_q, ent_addr, ent_hot, bank_bits, ent_data, platform)
         self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks, platform)
         return m
 
@@ -410,8 +415,9 @@ class MemoryWindows(wiring.Component):
         m.d.comb += mem_data.eq(or_tree(answer_terms))
         return mem_landed & self.write & self.whole_word, new_words
 
-    def _read_addresses(self, m: Module, index_q, ent_addr, ent_hot, bank_bits, ent_data) -> None:
-        """Each read address register: the bus's index while idle, the pass's address while running."""
+    def _read_addresses(self, m: Module, index_q, ent_addr, ent_hot, bank_bits, ent_data, platform) -> None:
+        """Each read address register: the bus's index while idle, the pass's address while running
+        (with ``registered_select``, ``running`` from a copy per memory group)."""
         positions = self.rams["positions"].read
         read_ports = {"pos_a": positions[0], "pos_b": positions[1], "pos_c": positions[2],
                       "vel": self.rams["velocities"].read[0], "wgt": self.rams["weights"].read[0],
@@ -423,17 +429,22 @@ class MemoryWindows(wiring.Component):
         m.d.comb += [port.addr.eq(read_addr[f"pos_{c}"]) for port, c in zip(self._proposal_ports(), "abc")]
         t2_tri = self.rams["triangles"].read[0].data
         running, in_area = self.running, self.in_area
+        if self.registered_select:
+            running = {group: kept_register(m, self.running_next, name=f"{group}_reads_running", platform=platform,
+                                            reset=True) for group in ("ent", "tri", "node")}
+        else:
+            running = dict.fromkeys(("ent", "tri", "node"), running)
         in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight
         ent_next = Signal.like(ent_addr, name="ent_next")
-        m.d.comb += ent_next.eq(Mux(running, self.entry_index, index_q))
+        m.d.comb += ent_next.eq(Mux(running["ent"], self.entry_index, index_q))
         m.d.sync += [
             ent_addr.eq(ent_next),
             ent_hot.eq(Cat(ent_next[bank_bits:] == b for b in range(len(ent_hot))) if len(ent_hot) > 1 else 1),
-            read_addr["tri"].eq(Mux(running, self.tri_index, index_q)),
-            *(read_addr[n].eq(Mux(running, self.node_index, index_q)) for n in ("vel", "wgt", "frc")),
+            read_addr["tri"].eq(Mux(running["tri"], self.tri_index, index_q)),
+            *(read_addr[n].eq(Mux(running["node"], self.node_index, index_q)) for n in ("vel", "wgt", "frc")),
             read_addr["pos_b"].eq(Mux(in_area, t2_tri.b, ent_data.neighbour)),
             read_addr["pos_c"].eq(Mux(in_area, t2_tri.c, ent_data.second)),
-            read_addr["pos_a"].eq(Mux(~running | in_nodes, Mux(running, self.node_index, index_q),
+            read_addr["pos_a"].eq(Mux(~running["node"] | in_nodes, Mux(running["node"], self.node_index, index_q),
                                       Mux(in_area, t2_tri.a, self.node_of_entry))),
         ]
 

@@ -66,6 +66,8 @@ class _Run:
     measuring_again: Signal  # the accepted layout measured again after a rollback (its events not counted)
     stalled: Signal  # the decision's: the step scale passed SCALE_MAX_SHIFT
     abort: Signal  # CONTROL.abort registered once more, beside the phase machine
+    abort_guard: Signal  # with control copies, a copy of ``abort`` for the transitions that wait on the guard
+    abort_passes: Signal  # with control copies, a copy of ``abort`` for those that wait on a pass's end
     requests: dict  # {unit name: a pulse, the phase machine's request, which sets the unit's input valid}
 
 
@@ -88,6 +90,12 @@ class PhaseController(wiring.Component):
         phase's first clock and acted on in its second: a clock more per check, so that the phase flags,
         placed by the units they drive across the device, are set from registers through no more than
         a LUT or two (the engine's builds above ``DEFAULT_CAPACITY``; ``docs/synthesis.md``).
+    control_copies : bool
+        ABORT's register copied, each copy loaded from the same pulse (so equal to it in every clock):
+        one for the transitions that wait on the guard's passes, one for those that wait on a pass's
+        end, each placed by its own group of loads rather than at the centre of all of them; and
+        ``running_next`` exported, from which a port's copy of ``running`` is loaded (the engine's
+        builds above ``DEFAULT_CAPACITY``).
 
     Members
     -------
@@ -113,6 +121,9 @@ class PhaseController(wiring.Component):
         STATUS.state and STATUS.result codes; ``running`` is ``state == running`` as a flip-flop of
         its own (it gates every pass, port multiplexer and bus answer: their logic starts from a
         register rather than a compare).
+    running_next : ``Out(1)``
+        With ``control_copies`` only: combinational, ``running``'s next value (the domain's reset
+        aside): a register loaded from it and cleared by the reset is a copy of ``running``.
     starting, irq_set : ``Out(1)``
         Combinational: START accepted this clock (the results and STATUS.irq_pending restart); a
         run ends this clock (STATUS.irq_pending set).
@@ -153,13 +164,15 @@ class PhaseController(wiring.Component):
     #: normaliser's saturation is counted before the limit is tested, as in ``run_image``.
     CHECK_SETTLE_CLOCKS = 3
 
-    def __init__(self, fs: FormatSet, register_map: RegisterMap, *, registered_verdict: bool = False):
+    def __init__(self, fs: FormatSet, register_map: RegisterMap, *, registered_verdict: bool = False,
+                 control_copies: bool = False):
         if not isinstance(fs, FormatSet) or not isinstance(register_map, RegisterMap):
             raise TypeError(f"PhaseController needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
-        if not isinstance(registered_verdict, bool):
-            raise TypeError(f"PhaseController registered_verdict must be a bool, not {registered_verdict!r}")
+        for flag, value in (("registered_verdict", registered_verdict), ("control_copies", control_copies)):
+            if not isinstance(value, bool):
+                raise TypeError(f"PhaseController {flag} must be a bool, not {value!r}")
         self.fs, self.capacity = fs, register_map.capacity
-        self.registered_verdict = registered_verdict
+        self.registered_verdict, self.control_copies = registered_verdict, control_copies
         width = register_map.value_width
         #: Width of each saturation-event output.
         self.event_widths = {"step": StepGenerator.output_layout(fs, True)["saturations"].shape.width,
@@ -178,7 +191,8 @@ class PhaseController(wiring.Component):
             **({"lane_fault": In(1)} if self.capacity.lanes > 1 else {}),
             "state": Out(range(len(STATES)), init=_code(STATES, "idle")),
             "result": Out(range(len(RESULTS)), init=_code(RESULTS, "none")),
-            "running": Out(1), "starting": Out(1), "irq_set": Out(1),
+            "running": Out(1), **({"running_next": Out(1)} if control_copies else {}),
+            "starting": Out(1), "irq_set": Out(1),
             **{f"in_{name}": Out(1) for name in PHASES},
             "fetch_force": Out(1), "fetch_area": Out(1), "fetch_nodes": Out(1), "area_clear": Out(1),
             "half_rate": Out(1), "node_restart": Out(1), "triangle_restart": Out(1), "guarded": Out(1),
@@ -215,12 +229,16 @@ class PhaseController(wiring.Component):
                    momentum=Signal(name="mode_momentum"), fixed_step=Signal(name="mode_fixed_step"),
                    guarded=Signal(name="mode_guarded") if self.capacity.guard else C(0, 1),
                    measuring_again=self.measuring_again,
-                   stalled=Signal(name="stalled"), abort=Signal(name="abort_q"),
+                   stalled=Signal(name="stalled"), abort=Signal(name="abort_q"), abort_guard=None, abort_passes=None,
                    requests={name: Signal(name=f"{name}_request") for name in units})
         # ABORT registered here: the register bank's pulse is routed across the device, and every phase
         # flag and unit request depends on it (a run under way drains a clock later; START's refusal of a
         # write that also sets ABORT, and the idle engine's answer, read the pulse itself)
         m.d.sync += run.abort.eq(self.abort)
+        if self.control_copies:
+            run.abort_guard, run.abort_passes = (
+                kept_register(m, self.abort, name=f"abort_{group}", platform=platform, reset=True)
+                for group in ("guard", "passes"))
         # MODE's decodes as flip-flops (MODE stands still during a run, and the phase machine first reads
         # them after the first pass; START's check reads the code): a flag's or a request's next-state
         # logic then reads one bit, not the code
@@ -391,8 +409,13 @@ class PhaseController(wiring.Component):
         def move(leaving, entering=None):
             return [flags[leaving].eq(0), *([flags[entering].eq(1)] if entering else [])]
 
+        if self.control_copies:  # running's next value, from the same statements as running
+            m.d.comb += self.running_next.eq(self.running)
+
         def set_state(name):
             m.d.sync += [self.state.eq(_code(STATES, name)), self.running.eq(name == "running")]
+            if self.control_copies:
+                m.d.comb += self.running_next.eq(name == "running")
 
         def finish(code):  # (no pass is fetching then)
             set_state("done")
@@ -423,18 +446,18 @@ class PhaseController(wiring.Component):
             with m.Else():
                 set_state("running")
                 m.d.sync += [launch.eq(1), run.first_measure.eq(1), run.measuring_again.eq(0)]
-        go = ~abort
+        go, go_guard, go_passes = self._go(run)
         # the start phase entered a clock after the run's state, from a register of START's decision: the
         # START write's decode sits by the register bank, the phase flags' logic by the units they drive
         with m.If(go & launch):
             m.d.sync += flags["start"].eq(1)
         with m.If(go & flags["start"]):  # a measurement: the force pass
             m.d.sync += [self.fetch_force.eq(1), *move("start", "force")]
-        with m.If(go & flags["force"] & self.force_done):
+        with m.If(go_passes & flags["force"] & self.force_done):
             m.d.sync += [self.fetch_force.eq(0), self.fetch_area.eq(1), *move("force", "area"),
                          run.math_pending.eq(0b111), requests["norm_length"].eq(1), requests["energy_check"].eq(1),
                          self.area_clear.eq(1)]
-        with m.If(go & flags["area"] & self.area_done):
+        with m.If(go_passes & flags["area"] & self.area_done):
             m.d.sync += [self.fetch_area.eq(0), *move("area", "math"), requests["norm_area"].eq(1)]
         # the last result's clock t clears its math_pending bit (seen at t+1); its event reaches diverged_q
         # at t+5: the check phase starts then, CHECK_SETTLE_CLOCKS after math_pending reads 0
@@ -457,7 +480,7 @@ class PhaseController(wiring.Component):
             with m.Else():  # P − V and V = 0, then the accepted layout measured again
                 m.d.sync += [self.fetch_nodes.eq(1), self.node_restart.eq(1), run.measuring_again.eq(1),
                              *move("decide", "rollback")]
-        with m.If(go & flags["rollback"] & self.guard_done):
+        with m.If(go_guard & flags["rollback"] & self.guard_done):
             m.d.sync += [self.fetch_nodes.eq(0), *move("rollback", "start")]
         # as run_image: the saturation limit first, then the stop rule (neither after the first
         # measurement), then the iteration limit
@@ -503,23 +526,31 @@ class PhaseController(wiring.Component):
             m.d.sync += move("drain")
             m.d.sync += [self.result.eq(_code(RESULTS, "none")), self.half_rate.eq(0),
                          self.fetch_force.eq(0), self.fetch_area.eq(0), self.fetch_nodes.eq(0)]
-        with m.If(go & flags["integrate"] & self.integrate_done):
+        with m.If(go_passes & flags["integrate"] & self.integrate_done):
             with m.If(run.guarded):  # the proposals' certificate, then the commit
                 m.d.sync += [self.fetch_nodes.eq(0), self.fetch_area.eq(1), self.half_rate.eq(1),
                              self.triangle_restart.eq(1), *move("integrate", "stuck")]
             with m.Else():
                 m.d.sync += [self.fetch_nodes.eq(0), *move("integrate", "start")]
-        with m.If(go & flags["stuck"] & self.guard_done):
+        with m.If(go_guard & flags["stuck"] & self.guard_done):
             m.d.sync += [self.fetch_area.eq(0), self.half_rate.eq(0), self.fetch_nodes.eq(1), self.node_restart.eq(1),
                          *move("stuck", "hold")]
-        with m.If(go & flags["hold"] & self.guard_done):
+        with m.If(go_guard & flags["hold"] & self.guard_done):
             m.d.sync += [self.fetch_nodes.eq(0), self.fetch_area.eq(1), self.half_rate.eq(1),
                          self.triangle_restart.eq(1), *move("hold", "certify")]
-        with m.If(go & flags["certify"] & self.guard_done):
+        with m.If(go_guard & flags["certify"] & self.guard_done):
             m.d.sync += [self.fetch_area.eq(0), self.half_rate.eq(0), self.fetch_nodes.eq(1), self.node_restart.eq(1),
                          *move("certify", "commit")]
-        with m.If(go & flags["commit"] & self.guard_done):
+        with m.If(go_guard & flags["commit"] & self.guard_done):
             m.d.sync += [self.fetch_nodes.eq(0), *move("commit", "start")]
+
+    def _go(self, run: _Run) -> tuple[Value, Value, Value]:
+        """No ABORT, for the phase machine's transitions: those that wait on the guard and those that wait
+        on a pass's end, with control copies, read ABORT from copies of their own (placed by those
+        loads, across the device from the phase machine); the others, and all without the copies,
+        from ``run.abort``. Returns ``(others, guard's, passes')``."""
+        go = ~run.abort
+        return (go, ~run.abort_guard, ~run.abort_passes) if self.control_copies else (go, go, go)
 
     def _momentum(self, m: Module, units, run: _Run, iterations: Signal, cleared) -> None:
         """``k`` and the restart for β_k, and ITERATIONS, each moved by a registered pulse of its own.
@@ -530,7 +561,7 @@ class PhaseController(wiring.Component):
         own (the launch's or the step's), not by the pulses that move ``momentum_k``: registered so
         that no LUT is shared between the 32-bit update and the flag's enable."""
         beta = units["beta"]
-        go = ~run.abort
+        go, go_guard, go_passes = self._go(run)
         momentum_k = run.momentum_k
         restart_pending, step_was_restart = Signal(name="restart_pending"), Signal(name="step_was_restart")
         m.d.sync += beta.i.payload.eq(Mux(restart_pending, 0, momentum_k))
@@ -540,8 +571,8 @@ class PhaseController(wiring.Component):
         # a rollback restarts the momentum (the rolled-back step's S is void), as a run's start does
         launching = (self.in_start & run.first_measure) | (self.in_rollback & self.guard_done)
         stepping = go & self.in_step & run.momentum
-        ending = go & self.in_integrate & self.integrate_done
-        committed = go & self.in_commit & self.guard_done  # the guarded step's iteration ends with its commit
+        ending = go_passes & self.in_integrate & self.integrate_done
+        committed = go_guard & self.in_commit & self.guard_done  # the guarded step's iteration ends with its commit
         m.d.sync += [launch_pulse.eq(launching), step_pulse.eq(stepping), restart_clear.eq(launching | stepping),
                      iterate_pulse.eq(Mux(run.guarded, committed, ending)),
                      restart_pulse.eq(ending & run.momentum & ~step_was_restart),
