@@ -49,7 +49,7 @@ def dsp_target(platform) -> str | None:
 
 
 def kept_register(m: Module, value, *, name: str, platform=None, reset: bool = False) -> Signal:
-    """``value`` registered (a free-running flip-flop per bit), kept apart from identical registers.
+    """``value`` registered (a flip-flop per bit, with no enable), kept apart from identical registers.
 
     A copy of a register placed beside one group of its loads: Yosys merges flip-flops with the same
     input, so with ECP5 primitives each bit is a ``TRELLIS_FF`` instance marked ``keep``; in generic

@@ -66,8 +66,8 @@ class _Run:
     measuring_again: Signal  # the accepted layout measured again after a rollback (its events not counted)
     stalled: Signal  # the decision's: the step scale passed SCALE_MAX_SHIFT
     abort: Signal  # CONTROL.abort registered once more, beside the phase machine
-    abort_guard: Signal  # with control copies, a copy of ``abort`` for the transitions that wait on the guard
-    abort_passes: Signal  # with control copies, a copy of ``abort`` for those that wait on a pass's end
+    abort_guard: Signal | None  # with control copies, a copy of ``abort`` for the transitions that wait on the guard
+    abort_passes: Signal | None  # with control copies, a copy of ``abort`` for those that wait on a pass's end
     requests: dict  # {unit name: a pulse, the phase machine's request, which sets the unit's input valid}
 
 

@@ -1,7 +1,7 @@
 """PhaseController's copies for the large builds (``control_copies``): a register loaded from ``running_next``
 equals ``running`` in every clock, whatever the run's inputs do (START, ABORT, the passes' ends, the domain's
-reset), so the memories' read addresses behave as with ``running`` itself. The whole runs with the copies:
-``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
+reset): the memories' read-address copies are such registers (their ECP5 form: ``test_kept_register.py``).
+The whole runs with the copies: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
 
 import numpy as np
 from amaranth.hdl import ClockDomain, Module, Signal
