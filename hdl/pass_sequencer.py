@@ -80,7 +80,10 @@ class PassSequencer(wiring.Component):
         Clocks from a node or triangle memory's address register to its data (:func:`fetch_latencies`).
     compare_copies : bool
         Each fetch counter's issue and end compares read a copy of the counter, restarted and counted with
-        it (:func:`fetch_counter`'s ``compare``; the area pass's end still reads ``tri_index``).
+        it (:func:`fetch_counter`'s ``compare``; the area pass's end still reads ``tri_index``), and every
+        compare reads the mesh sizes from copies of its own (a clock late: run constants, written before
+        START), so that the register bank's size registers, which the guard also reads, are not placed
+        between the two.
 
     Members
     -------
@@ -212,6 +215,9 @@ class PassSequencer(wiring.Component):
         # with compare_copies, the fetch counters' copies (restarted with them)
         self._compares = {name: Signal.like(r[name], name=f"{name}_compare")
                           for name in FETCH_COUNTERS if self.compare_copies}
+        # the mesh sizes the compares read: with compare_copies, copies beside them
+        self._sizes = {name: kept_register(m, getattr(self, name), name=f"{name}_size", platform=platform)
+                       if self.compare_copies else getattr(self, name) for name in ("vertices", "entries", "triangles")}
         e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
@@ -243,7 +249,7 @@ class PassSequencer(wiring.Component):
 
     def _force_pass(self, m: Module, r: dict[str, Signal], platform):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
-        e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self.entries, "e", self.force_fetch_latency + 1,
+        e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self._sizes["entries"], "e", self.force_fetch_latency + 1,
                                 self._compares.get("entry_index"))
         entry_shape = self.entry.shape()
         ent_data = self.entry  # the addressed entry, at E6 (ENTRY_LATENCY)
@@ -297,7 +303,7 @@ class PassSequencer(wiring.Component):
         # the guard's triangle passes issue every other clock (the certificate's interval of 2)
         alternate = Signal(name="tri_alternate")
         m.d.sync += alternate.eq(~alternate & self.half_rate)
-        t_valid = fetch_counter(m, r["tri_index"], self.fetch_area & ~alternate, self.triangles, "t",
+        t_valid = fetch_counter(m, r["tri_index"], self.fetch_area & ~alternate, self._sizes["triangles"], "t",
                                 self.area_fetch_latency + 1, self._compares.get("tri_index"))
         # the triangle's area and corners, landed with it, carried beside its corners' read
         area, corners = self.triangle.area, [self.triangle.a, self.triangle.b, self.triangle.c]
@@ -317,7 +323,7 @@ class PassSequencer(wiring.Component):
 
     def _integrate_pass(self, m: Module, r: dict[str, Signal]):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
-        n_valid = fetch_counter(m, r["node_index"], self.fetch_nodes, self.vertices, "n", self.node_fetch_latency + 1,
+        n_valid = fetch_counter(m, r["node_index"], self.fetch_nodes, self._sizes["vertices"], "n", self.node_fetch_latency + 1,
                                 self._compares.get("node_index"))
         node = self.node_out.payload
         landed = n_valid[self.node_fetch_latency]
@@ -348,17 +354,17 @@ class PassSequencer(wiring.Component):
         area_fetching = Cat(*t_valid).any()
         if self.lanes == 1:  # the controller leaves the phase the clock after the pulse
             m.d.sync += [
-                self.force_done.eq(self.in_force & (self.force_out_index == self.vertices) & ~self.force_done),
-                self.area_done.eq(self.in_area & (self.tri_index == self.triangles) & ~area_fetching & self.area_idle
+                self.force_done.eq(self.in_force & (self.force_out_index == self._sizes["vertices"]) & ~self.force_done),
+                self.area_done.eq(self.in_area & (self.tri_index == self._sizes["triangles"]) & ~area_fetching & self.area_idle
                                   & ~self.area_clear & ~self.area_done),
-                self.integrate_done.eq(self.in_integrate & (self.node_out_index == self.vertices) & ~self.integrate_done),
+                self.integrate_done.eq(self.in_integrate & (self.node_out_index == self._sizes["vertices"]) & ~self.integrate_done),
             ]
         else:  # the joined end (hdl.lanes.LaneSums) comes a clock after the last lane's, so the phase outlasts the
             # pulse, which would come again every other clock: a lane's end pulses once in its phase
-            ends = {"force": (self.in_force, self.force_done, self.force_out_index == self.vertices),
-                    "area": (self.in_area, self.area_done, (self.tri_index == self.triangles) & ~area_fetching
+            ends = {"force": (self.in_force, self.force_done, self.force_out_index == self._sizes["vertices"]),
+                    "area": (self.in_area, self.area_done, (self.tri_index == self._sizes["triangles"]) & ~area_fetching
                              & self.area_idle & ~self.area_clear),
-                    "integrate": (self.in_integrate, self.integrate_done, self.node_out_index == self.vertices)}
+                    "integrate": (self.in_integrate, self.integrate_done, self.node_out_index == self._sizes["vertices"])}
             for name, (phase, done, at_end) in ends.items():
                 ended = Signal(name=f"{name}_ended")
                 m.d.sync += [done.eq(phase & at_end & ~done & ~ended), ended.eq(phase & (ended | done))]
@@ -388,9 +394,9 @@ class PassSequencer(wiring.Component):
         # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.
         at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
         index = {name: self._compares.get(name, getattr(self, name)) for name in FETCH_COUNTERS}
-        m.d.sync += at_end.eq(Cat(index["entry_index"] == self.entries,
-                                  (index["tri_index"] == self.triangles) & ~self.triangle_restart,
-                                  (index["node_index"] == self.vertices) & ~self.node_restart))
+        m.d.sync += at_end.eq(Cat(index["entry_index"] == self._sizes["entries"],
+                                  (index["tri_index"] == self._sizes["triangles"]) & ~self.triangle_restart,
+                                  (index["node_index"] == self._sizes["vertices"]) & ~self.node_restart))
         done_fetching = Signal(name="done_fetching")
         m.d.sync += done_fetching.eq(
             (at_end[0] | ~self.fetch_force)
