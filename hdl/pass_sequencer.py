@@ -43,28 +43,32 @@ RESTARTS = {
     "node_index": ("in_step", False), "node_out_index": ("in_step", False), "power_sum": ("in_step", True),
 }
 RESTARTED = tuple(RESTARTS)
-#: The passes' fetch counters (:func:`fetch_counter`).
-FETCH_COUNTERS = ("entry_index", "tri_index", "node_index")
+#: The passes' fetch counters (:func:`fetch_counter`), each with the mesh size it counts to.
+FETCH_COUNTERS = {"entry_index": "entries", "tri_index": "triangles", "node_index": "vertices"}
 
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
 
 
 def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, stages: int,
-                  compare: Signal | None = None) -> list[Signal]:
+                  compare: tuple[Signal, Signal] | None = None) -> list[Signal]:
     """A pass's fetch: while ``fetch`` is high, ``index`` counts 0, 1, … up to ``count``, one issued
     per clock. Returns ``valid``: ``valid[k]`` marks the clock whose data belongs to an index issued
     ``k`` clocks ago (``valid[0]``: the index in the memories' address registers).
 
-    ``compare``: a copy of ``index`` (restarted with it by the caller) that the compare with ``count``
-    reads, so that the counter's loop does not follow ``index`` to the block RAMs it addresses."""
+    ``compare``: ``(copy, below)``, a copy of ``index`` and a flag that is ``copy < count`` in every
+    clock, both restarted by the caller with ``index`` (to 0 and ``count != 0``; ``count`` stands still
+    from a restart to the pass's end). The flag is loaded with the compare of the copy's next value, so
+    the issue reads a flip-flop: the compare's carry chain sits by the copy, not on the route to the
+    counter, which the placer puts by the block RAMs it addresses."""
     valid = [Signal(name=f"{valid_prefix}{k}_valid") for k in range(stages)]
-    issue = fetch & ((index if compare is None else compare) < count)
+    issue = fetch & ((index < count) if compare is None else compare[1])
     m.d.sync += [valid[0].eq(issue), *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
     with m.If(issue):
         m.d.sync += index.eq(index + 1)
         if compare is not None:
-            m.d.sync += compare.eq(compare + 1)
+            copy, below = compare
+            m.d.sync += [copy.eq(copy + 1), below.eq(copy + 1 < count)]
     return valid
 
 
@@ -80,7 +84,8 @@ class PassSequencer(wiring.Component):
         Clocks from a node or triangle memory's address register to its data (:func:`fetch_latencies`).
     compare_copies : bool
         Each fetch counter's issue and end compares read a copy of the counter, restarted and counted with
-        it (:func:`fetch_counter`'s ``compare``; the area pass's end still reads ``tri_index``), and every
+        it, the issue through a flag loaded with the compare of the copy's next value (:func:`fetch_counter`'s
+        ``compare``; the area pass's end still reads ``tri_index``), and every
         compare reads the mesh sizes from copies of its own (a clock late: run constants, written before
         START), so that the register bank's size registers, which the guard also reads, are not placed
         between the two.
@@ -212,12 +217,13 @@ class PassSequencer(wiring.Component):
         # flip-flops' reset pins: a long path on the board).
         r = {name: Signal.like(getattr(self, name), reset_less=True, name=f"{name}_q") for name in RESTARTED}
         m.d.comb += [getattr(self, name).eq(q) for name, q in r.items()]
-        # with compare_copies, the fetch counters' copies (restarted with them)
-        self._compares = {name: Signal.like(r[name], name=f"{name}_compare")
+        # with compare_copies, the fetch counters' copies and their flags (restarted with them)
+        self._compares = {name: (Signal.like(r[name], name=f"{name}_compare"),
+                                 Signal(name=f"{name}_below", reset_less=True))
                           for name in FETCH_COUNTERS if self.compare_copies}
         # the mesh sizes the compares read: with compare_copies, copies beside them
         self._sizes = {name: kept_register(m, getattr(self, name), name=f"{name}_size", platform=platform)
-                       if self.compare_copies else getattr(self, name) for name in ("vertices", "entries", "triangles")}
+                       if self.compare_copies else getattr(self, name) for name in FETCH_COUNTERS.values()}
         e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
@@ -230,9 +236,11 @@ class PassSequencer(wiring.Component):
         copies = {phase: kept_register(m, getattr(self, phase), platform=platform,
                                        name=f"sums_restart_at_{phase.removeprefix('in_')}")
                   for phase in ("in_start", "in_step")}
-        def restart(names):  # the registers named, then their compare copies, to 0
-            return [q.eq(0) for q in [*(r[name] for name in names),
-                                      *(self._compares[name] for name in names if name in self._compares)]]
+        def restart(names):  # the registers named, then their compare copies, to 0 (their flags: 0 < size)
+            return [*(q.eq(0) for q in [*(r[name] for name in names),
+                                        *(self._compares[name][0] for name in names if name in self._compares)]),
+                    *(self._compares[name][1].eq(self._sizes[FETCH_COUNTERS[name]] != 0)
+                      for name in names if name in self._compares)]
 
         for phase, copy in copies.items():
             with m.If(getattr(self, phase)):
@@ -393,7 +401,8 @@ class PassSequencer(wiring.Component):
         # `done_fetching` a clock later reads it as done. A pass without a restart pulse starts from a
         # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.
         at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
-        index = {name: self._compares.get(name, getattr(self, name)) for name in FETCH_COUNTERS}
+        index = {name: self._compares[name][0] if name in self._compares else getattr(self, name)
+                 for name in FETCH_COUNTERS}
         m.d.sync += at_end.eq(Cat(index["entry_index"] == self._sizes["entries"],
                                   (index["tri_index"] == self._sizes["triangles"]) & ~self.triangle_restart,
                                   (index["node_index"] == self._sizes["vertices"]) & ~self.node_restart))
