@@ -3,7 +3,7 @@ and the collection of the unit's per-node results (counts, exact sums, saturatio
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -56,19 +56,20 @@ def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, sta
     per clock. Returns ``valid``: ``valid[k]`` marks the clock whose data belongs to an index issued
     ``k`` clocks ago (``valid[0]``: the index in the memories' address registers).
 
-    ``compare``: ``(copy, below)``, a copy of ``index`` and a flag that is ``copy < count`` in every
-    clock, both restarted by the caller with ``index`` (to 0 and ``count != 0``; ``count`` stands still
-    from a restart to the pass's end). The flag is loaded with the compare of the copy's next value, so
-    the issue reads a flip-flop: the compare's carry chain sits by the copy, not on the route to the
-    counter, which the placer puts by the block RAMs it addresses."""
+    ``compare``: ``(copy, left)``, a copy of ``index`` and a signed down-counter that is
+    ``count − 1 − copy`` in every clock, both restarted by the caller with ``index`` (to 0 and
+    ``count − 1``; ``count`` stands still from a restart to the pass's end). The issue reads ``left``'s
+    sign bit, a flip-flop (``left ≥ 0`` is ``index < count``; it stops at −1), so no compare lies on the
+    route to the counter, which the placer puts by the block RAMs it addresses: ``left``'s decrement is
+    a carry chain from its own flip-flops back into them."""
     valid = [Signal(name=f"{valid_prefix}{k}_valid") for k in range(stages)]
-    issue = fetch & ((index < count) if compare is None else compare[1])
+    issue = fetch & ((index < count) if compare is None else ~compare[1][-1])
     m.d.sync += [valid[0].eq(issue), *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
     with m.If(issue):
         m.d.sync += index.eq(index + 1)
         if compare is not None:
-            copy, below = compare
-            m.d.sync += [copy.eq(copy + 1), below.eq(copy + 1 < count)]
+            copy, left = compare
+            m.d.sync += [copy.eq(copy + 1), left.eq(left - 1)]
     return valid
 
 
@@ -84,8 +85,8 @@ class PassSequencer(wiring.Component):
         Clocks from a node or triangle memory's address register to its data (:func:`fetch_latencies`).
     compare_copies : bool
         Each fetch counter's issue and end compares read a copy of the counter, restarted and counted with
-        it, the issue through a flag loaded with the compare of the copy's next value (:func:`fetch_counter`'s
-        ``compare``; the area pass's end still reads ``tri_index``), and every
+        it, the issue through the sign of a down-counter beside the copy (:func:`fetch_counter`'s
+        ``compare``), and every
         compare reads the mesh sizes from copies of its own (a clock late: run constants, written before
         START), so that the register bank's size registers, which the guard also reads, are not placed
         between the two.
@@ -217,9 +218,10 @@ class PassSequencer(wiring.Component):
         # flip-flops' reset pins: a long path on the board).
         r = {name: Signal.like(getattr(self, name), reset_less=True, name=f"{name}_q") for name in RESTARTED}
         m.d.comb += [getattr(self, name).eq(q) for name, q in r.items()]
-        # with compare_copies, the fetch counters' copies and their flags (restarted with them)
+        # with compare_copies, the fetch counters' copies and their down-counters (restarted with them; at −1,
+        # no issue, until the first restart)
         self._compares = {name: (Signal.like(r[name], name=f"{name}_compare"),
-                                 Signal(name=f"{name}_below", reset_less=True))
+                                 Signal(signed(len(r[name]) + 1), init=-1, name=f"{name}_left", reset_less=True))
                           for name in FETCH_COUNTERS if self.compare_copies}
         # the mesh sizes the compares read: with compare_copies, copies beside them
         self._sizes = {name: kept_register(m, getattr(self, name), name=f"{name}_size", platform=platform)
@@ -236,10 +238,10 @@ class PassSequencer(wiring.Component):
         copies = {phase: kept_register(m, getattr(self, phase), platform=platform,
                                        name=f"sums_restart_at_{phase.removeprefix('in_')}")
                   for phase in ("in_start", "in_step")}
-        def restart(names):  # the registers named, then their compare copies, to 0 (their flags: 0 < size)
+        def restart(names):  # the registers named, then their compare copies, to 0 (their down-counters: size − 1)
             return [*(q.eq(0) for q in [*(r[name] for name in names),
                                         *(self._compares[name][0] for name in names if name in self._compares)]),
-                    *(self._compares[name][1].eq(self._sizes[FETCH_COUNTERS[name]] != 0)
+                    *(self._compares[name][1].eq(self._sizes[FETCH_COUNTERS[name]] - 1)
                       for name in names if name in self._compares)]
 
         for phase, copy in copies.items():
@@ -360,17 +362,18 @@ class PassSequencer(wiring.Component):
         # a pulse the clock after the pass's last result, registered (its counter's compare and the
         # units' idle flags stay off the phase machine's logic)
         area_fetching = Cat(*t_valid).any()
+        tri_index = self._counted("tri_index")
         if self.lanes == 1:  # the controller leaves the phase the clock after the pulse
             m.d.sync += [
                 self.force_done.eq(self.in_force & (self.force_out_index == self._sizes["vertices"]) & ~self.force_done),
-                self.area_done.eq(self.in_area & (self.tri_index == self._sizes["triangles"]) & ~area_fetching & self.area_idle
+                self.area_done.eq(self.in_area & (tri_index == self._sizes["triangles"]) & ~area_fetching & self.area_idle
                                   & ~self.area_clear & ~self.area_done),
                 self.integrate_done.eq(self.in_integrate & (self.node_out_index == self._sizes["vertices"]) & ~self.integrate_done),
             ]
         else:  # the joined end (hdl.lanes.LaneSums) comes a clock after the last lane's, so the phase outlasts the
             # pulse, which would come again every other clock: a lane's end pulses once in its phase
             ends = {"force": (self.in_force, self.force_done, self.force_out_index == self._sizes["vertices"]),
-                    "area": (self.in_area, self.area_done, (self.tri_index == self._sizes["triangles"]) & ~area_fetching
+                    "area": (self.in_area, self.area_done, (tri_index == self._sizes["triangles"]) & ~area_fetching
                              & self.area_idle & ~self.area_clear),
                     "integrate": (self.in_integrate, self.integrate_done, self.node_out_index == self._sizes["vertices"])}
             for name, (phase, done, at_end) in ends.items():
@@ -392,6 +395,10 @@ class PassSequencer(wiring.Component):
         ]
         self._idle(m, e_valid, t_valid, n_valid)
 
+    def _counted(self, name: str) -> Signal:
+        """Fetch counter ``name`` as its compares read it: its copy with ``compare_copies``."""
+        return self._compares[name][0] if name in self._compares else getattr(self, name)
+
     def _idle(self, m: Module, e_valid, t_valid, n_valid) -> None:
         """``passes_idle``: the fetch counters at their ends and no item in a fetch or a unit."""
         # The fetch counters' compares (or their copies') in registers beside them, then `done_fetching` from
@@ -401,8 +408,7 @@ class PassSequencer(wiring.Component):
         # `done_fetching` a clock later reads it as done. A pass without a restart pulse starts from a
         # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.
         at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
-        index = {name: self._compares[name][0] if name in self._compares else getattr(self, name)
-                 for name in FETCH_COUNTERS}
+        index = {name: self._counted(name) for name in FETCH_COUNTERS}
         m.d.sync += at_end.eq(Cat(index["entry_index"] == self._sizes["entries"],
                                   (index["tri_index"] == self._sizes["triangles"]) & ~self.triangle_restart,
                                   (index["node_index"] == self._sizes["vertices"]) & ~self.node_restart))
