@@ -1,0 +1,76 @@
+"""PassSequencer's compare copies for the large builds (``compare_copies``): the fetch counters' copies, the
+issue from a down-counter's sign bit and the sizes' copies change no clock. Two sequencers, with and without
+the copies, fed the same random inputs (fetch enables, phases, the guard's restarts, unit results) answer
+the same in every clock: addresses, the units' valid bits, the passes' ends and ``passes_idle``. The whole
+runs through the large builds: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
+
+import numpy as np
+import pytest
+from amaranth.hdl import ClockDomain, Module
+from amaranth.sim import Simulator
+
+from golden_model.engine_spec.register_map import RegisterMap
+from hdl.pass_sequencer import PassSequencer
+from support.engine_sim import CAPACITY, FS
+
+#: The one-bit inputs driven at random in every clock, each with its probability of being high.
+RANDOM_FLAGS = {
+    "fetch_force": 0.8, "fetch_area": 0.8, "fetch_nodes": 0.8, "in_start": 0.02, "in_step": 0.02,
+    "in_force": 0.5, "in_area": 0.5, "in_integrate": 0.5, "running": 0.9, "area_clear": 0.05,
+    "guarded": 0.5, "half_rate": 0.3, "node_restart": 0.02, "triangle_restart": 0.02,
+    "force_idle": 0.7, "area_idle": 0.7, "integrator_idle": 0.7,
+}
+#: The answers compared in every clock.
+ANSWERS = ("entry_index", "tri_index", "node_index", "node_of_entry", "force_out_index", "node_out_index",
+           "force_done", "area_done", "integrate_done", "passes_idle", "node_landed", "triangle_landed")
+#: The streams into the units, whose valid bits are compared in every clock.
+UNITS = ("force_entry", "triangle_out", "node_out")
+SIZES = {"vertices": CAPACITY.vertices, "entries": CAPACITY.entries, "triangles": CAPACITY.triangles}
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_compare_copies_change_no_clock(seed):
+    register_map = RegisterMap.build(FS, CAPACITY)
+    plain, copied = PassSequencer(FS, register_map), PassSequencer(FS, register_map, compare_copies=True)
+    m = Module()
+    m.domains.sync = ClockDomain("sync")
+    m.submodules.plain, m.submodules.copied = plain, copied
+    seen = {"issued": 0, "ends": 0}
+
+    async def bench(ctx):
+        rng = np.random.default_rng(seed)
+
+        def put(name, value):
+            for seq in (plain, copied):
+                ctx.set(getattr(seq, name), value)
+
+        for clock in range(4000):
+            if clock % 1000 == 0:  # new sizes (0 included), then both passes' restarts a few clocks later:
+                # the sizes are run constants, still from a restart to its pass's end
+                for name, top in SIZES.items():
+                    put(name, int(rng.integers(0, top + 1)))
+                for flag in RANDOM_FLAGS:
+                    put(flag, 0)
+                await ctx.tick().repeat(3)
+                put("in_start", 1)
+                put("in_step", 1)
+                await ctx.tick()
+            for flag, p in RANDOM_FLAGS.items():
+                put(flag, int(rng.random() < p))
+            for stream in ("forces", "integrated"):  # the units' results
+                valid = int(rng.random() < 0.3)
+                for seq in (plain, copied):
+                    ctx.set(getattr(seq, stream).valid, valid)
+            await ctx.tick()
+            for name in ANSWERS:
+                assert ctx.get(getattr(copied, name)) == ctx.get(getattr(plain, name)), f"{name} in clock {clock}"
+            for unit in UNITS:
+                assert ctx.get(getattr(copied, unit).valid) == ctx.get(getattr(plain, unit).valid), f"{unit} in clock {clock}"
+            seen["issued"] += sum(ctx.get(getattr(plain, unit).valid) for unit in UNITS)
+            seen["ends"] += ctx.get(plain.area_done) + ctx.get(plain.force_done) + ctx.get(plain.integrate_done)
+
+    sim = Simulator(m)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    sim.run()
+    assert seen["issued"] > 1000 and seen["ends"] > 50, seen  # the passes ran, and ended
