@@ -3,7 +3,7 @@ and the collection of the unit's per-node results (counts, exact sums, saturatio
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Module, Mux, Signal, Value, signed
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -51,25 +51,23 @@ PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
 
 
 def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, stages: int,
-                  compare: tuple[Signal, Signal] | None = None) -> list[Signal]:
+                  left: Signal | None = None) -> list[Signal]:
     """A pass's fetch: while ``fetch`` is high, ``index`` counts 0, 1, … up to ``count``, one issued
     per clock. Returns ``valid``: ``valid[k]`` marks the clock whose data belongs to an index issued
     ``k`` clocks ago (``valid[0]``: the index in the memories' address registers).
 
-    ``compare``: ``(copy, left)``, a copy of ``index`` and a signed down-counter that is
-    ``count − 1 − copy`` in every clock, both restarted by the caller with ``index`` (to 0 and
-    ``count − 1``; ``count`` stands still from a restart to the pass's end). The issue reads ``left``'s
-    sign bit, a flip-flop (``left ≥ 0`` is ``index < count``; it stops at −1), so no compare lies on the
-    route to the counter, which the placer puts by the block RAMs it addresses: ``left``'s decrement is
-    a carry chain from its own flip-flops back into them."""
+    ``left``: a signed down-counter that is ``count − 1 − index`` in every clock, restarted by the caller
+    with ``index`` (to ``count − 1``; ``count`` stands still from a restart to the pass's end). The issue
+    reads ``left``'s sign bit, a flip-flop (``left ≥ 0`` is ``index < count``; it stops at −1), so no
+    compare lies on the route to the counter, which the placer puts by the block RAMs it addresses:
+    ``left``'s decrement is a carry chain from its own flip-flops back into them."""
     valid = [Signal(name=f"{valid_prefix}{k}_valid") for k in range(stages)]
-    issue = fetch & ((index < count) if compare is None else ~compare[1][-1])
+    issue = fetch & ((index < count) if left is None else ~left[-1])
     m.d.sync += [valid[0].eq(issue), *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
     with m.If(issue):
         m.d.sync += index.eq(index + 1)
-        if compare is not None:
-            copy, left = compare
-            m.d.sync += [copy.eq(copy + 1), left.eq(left - 1)]
+        if left is not None:
+            m.d.sync += left.eq(left - 1)
     return valid
 
 
@@ -84,12 +82,10 @@ class PassSequencer(wiring.Component):
     read_latency : int
         Clocks from a node or triangle memory's address register to its data (:func:`fetch_latencies`).
     compare_copies : bool
-        Each fetch counter's issue and end compares read a copy of the counter, restarted and counted with
-        it, the issue through the sign of a down-counter beside the copy (:func:`fetch_counter`'s
-        ``compare``), and every
-        compare reads the mesh sizes from copies of its own (a clock late: run constants, written before
-        START), so that the register bank's size registers, which the guard also reads, are not placed
-        between the two.
+        Each fetch counter's issue and end read the sign of a down-counter restarted and counted with it
+        (:func:`fetch_counter`'s ``left``: no compare of the counter), which is loaded from a copy of the
+        mesh size of its own (a clock late: run constants, written before START), so that the register
+        bank's size registers, which the guard also reads, are not placed between the two.
 
     Members
     -------
@@ -158,7 +154,7 @@ class PassSequencer(wiring.Component):
             raise TypeError(f"PassSequencer needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
         if not isinstance(compare_copies, bool):
             raise TypeError(f"PassSequencer compare_copies must be a bool, not {compare_copies!r}")
-        #: Each fetch counter's compares read a copy of it (:func:`fetch_counter`'s ``compare``).
+        #: Each fetch counter's issue and end read a down-counter's sign (:func:`fetch_counter`'s ``left``).
         self.compare_copies = compare_copies
         cap: EngineCapacity = register_map.capacity
         self.fs, self.capacity = fs, cap
@@ -218,11 +214,10 @@ class PassSequencer(wiring.Component):
         # flip-flops' reset pins: a long path on the board).
         r = {name: Signal.like(getattr(self, name), reset_less=True, name=f"{name}_q") for name in RESTARTED}
         m.d.comb += [getattr(self, name).eq(q) for name, q in r.items()]
-        # with compare_copies, the fetch counters' copies and their down-counters (restarted with them; at −1,
-        # no issue, until the first restart)
-        self._compares = {name: (Signal.like(r[name], name=f"{name}_compare"),
-                                 Signal(signed(len(r[name]) + 1), init=-1, name=f"{name}_left", reset_less=True))
-                          for name in FETCH_COUNTERS if self.compare_copies}
+        # with compare_copies, the fetch counters' down-counters (restarted with them; at −1, no issue and
+        # the pass at its end, until the first restart)
+        self._left = {name: Signal(signed(len(r[name]) + 1), init=-1, name=f"{name}_left", reset_less=True)
+                      for name in FETCH_COUNTERS if self.compare_copies}
         # the mesh sizes the compares read: with compare_copies, copies beside them
         self._sizes = {name: kept_register(m, getattr(self, name), name=f"{name}_size", platform=platform)
                        if self.compare_copies else getattr(self, name) for name in FETCH_COUNTERS.values()}
@@ -238,11 +233,9 @@ class PassSequencer(wiring.Component):
         copies = {phase: kept_register(m, getattr(self, phase), platform=platform,
                                        name=f"sums_restart_at_{phase.removeprefix('in_')}")
                   for phase in ("in_start", "in_step")}
-        def restart(names):  # the registers named, then their compare copies, to 0 (their down-counters: size − 1)
-            return [*(q.eq(0) for q in [*(r[name] for name in names),
-                                        *(self._compares[name][0] for name in names if name in self._compares)]),
-                    *(self._compares[name][1].eq(self._sizes[FETCH_COUNTERS[name]] - 1)
-                      for name in names if name in self._compares)]
+        def restart(names):  # the registers named to 0, their down-counters to size − 1
+            return [*(r[name].eq(0) for name in names),
+                    *(self._left[name].eq(self._sizes[FETCH_COUNTERS[name]] - 1) for name in names if name in self._left)]
 
         for phase, copy in copies.items():
             with m.If(getattr(self, phase)):
@@ -260,7 +253,7 @@ class PassSequencer(wiring.Component):
     def _force_pass(self, m: Module, r: dict[str, Signal], platform):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
         e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self._sizes["entries"], "e", self.force_fetch_latency + 1,
-                                self._compares.get("entry_index"))
+                                self._left.get("entry_index"))
         entry_shape = self.entry.shape()
         ent_data = self.entry  # the addressed entry, at E6 (ENTRY_LATENCY)
         next_first = Signal(name="next_first")
@@ -314,7 +307,7 @@ class PassSequencer(wiring.Component):
         alternate = Signal(name="tri_alternate")
         m.d.sync += alternate.eq(~alternate & self.half_rate)
         t_valid = fetch_counter(m, r["tri_index"], self.fetch_area & ~alternate, self._sizes["triangles"], "t",
-                                self.area_fetch_latency + 1, self._compares.get("tri_index"))
+                                self.area_fetch_latency + 1, self._left.get("tri_index"))
         # the triangle's area and corners, landed with it, carried beside its corners' read
         area, corners = self.triangle.area, [self.triangle.a, self.triangle.b, self.triangle.c]
         for k in range(self.read_latency + 1, self.area_fetch_latency + 1):
@@ -334,7 +327,7 @@ class PassSequencer(wiring.Component):
     def _integrate_pass(self, m: Module, r: dict[str, Signal]):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
         n_valid = fetch_counter(m, r["node_index"], self.fetch_nodes, self._sizes["vertices"], "n", self.node_fetch_latency + 1,
-                                self._compares.get("node_index"))
+                                self._left.get("node_index"))
         node = self.node_out.payload
         landed = n_valid[self.node_fetch_latency]
         m.d.comb += [  # landed at N2
@@ -362,18 +355,18 @@ class PassSequencer(wiring.Component):
         # a pulse the clock after the pass's last result, registered (its counter's compare and the
         # units' idle flags stay off the phase machine's logic)
         area_fetching = Cat(*t_valid).any()
-        tri_index = self._counted("tri_index")
+        tri_at_end = self._at_end("tri_index")
         if self.lanes == 1:  # the controller leaves the phase the clock after the pulse
             m.d.sync += [
                 self.force_done.eq(self.in_force & (self.force_out_index == self._sizes["vertices"]) & ~self.force_done),
-                self.area_done.eq(self.in_area & (tri_index == self._sizes["triangles"]) & ~area_fetching & self.area_idle
+                self.area_done.eq(self.in_area & tri_at_end & ~area_fetching & self.area_idle
                                   & ~self.area_clear & ~self.area_done),
                 self.integrate_done.eq(self.in_integrate & (self.node_out_index == self._sizes["vertices"]) & ~self.integrate_done),
             ]
         else:  # the joined end (hdl.lanes.LaneSums) comes a clock after the last lane's, so the phase outlasts the
             # pulse, which would come again every other clock: a lane's end pulses once in its phase
             ends = {"force": (self.in_force, self.force_done, self.force_out_index == self._sizes["vertices"]),
-                    "area": (self.in_area, self.area_done, (tri_index == self._sizes["triangles"]) & ~area_fetching
+                    "area": (self.in_area, self.area_done, tri_at_end & ~area_fetching
                              & self.area_idle & ~self.area_clear),
                     "integrate": (self.in_integrate, self.integrate_done, self.node_out_index == self._sizes["vertices"])}
             for name, (phase, done, at_end) in ends.items():
@@ -395,23 +388,24 @@ class PassSequencer(wiring.Component):
         ]
         self._idle(m, e_valid, t_valid, n_valid)
 
-    def _counted(self, name: str) -> Signal:
-        """Fetch counter ``name`` as its compares read it: its copy with ``compare_copies``."""
-        return self._compares[name][0] if name in self._compares else getattr(self, name)
+    def _at_end(self, name: str) -> Value:
+        """Fetch counter ``name`` stands at its mesh size: with ``compare_copies`` its down-counter's sign
+        (−1 from the last issue to the next restart), no compare."""
+        if name in self._left:
+            return self._left[name][-1]
+        return getattr(self, name) == self._sizes[FETCH_COUNTERS[name]]
 
     def _idle(self, m: Module, e_valid, t_valid, n_valid) -> None:
         """``passes_idle``: the fetch counters at their ends and no item in a fetch or a unit."""
-        # The fetch counters' compares (or their copies') in registers beside them, then `done_fetching` from
+        # The fetch counters' ends (compares, or down-counters' signs) in registers beside them, then `done_fetching` from
         # those, two clocks behind the counters, so that no compare's logic sits on the route across
         # the device into the drain's end. A guard pass restarts its counter in its first clock,
         # while the counter still stands at the previous pass's end: neither that clock's compare nor
         # `done_fetching` a clock later reads it as done. A pass without a restart pulse starts from a
         # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.
         at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
-        index = {name: self._counted(name) for name in FETCH_COUNTERS}
-        m.d.sync += at_end.eq(Cat(index["entry_index"] == self._sizes["entries"],
-                                  (index["tri_index"] == self._sizes["triangles"]) & ~self.triangle_restart,
-                                  (index["node_index"] == self._sizes["vertices"]) & ~self.node_restart))
+        m.d.sync += at_end.eq(Cat(self._at_end("entry_index"), self._at_end("tri_index") & ~self.triangle_restart,
+                                  self._at_end("node_index") & ~self.node_restart))
         done_fetching = Signal(name="done_fetching")
         m.d.sync += done_fetching.eq(
             (at_end[0] | ~self.fetch_force)
