@@ -66,8 +66,8 @@ class SpringflatEngine(wiring.Component):
     registered_select : bool or None
         The node and triangle memories built as the entry memory (pin registers, the bank select in
         registered stages), their reads three clocks longer (:class:`~hdl.memory_windows.MemoryWindows`); the
-        entry memory's bank flag a copy per block RAM; the fetch counters' compares from copies of them
-        (:class:`~hdl.pass_sequencer.PassSequencer`'s ``compare_copies``); a register write a clock later,
+        entry memory's bank flag a copy per block RAM; the fetch counters' issues and ends from down-counters
+        (:class:`~hdl.pass_sequencer.PassSequencer`'s ``down_counters``); a register write a clock later,
         from a write enable per register (:class:`~hdl.register_bank.RegisterBank`'s ``registered_write``);
         the check phase a clock longer, its verdict from registers
         (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ABORT's register and
@@ -181,10 +181,10 @@ class SpringflatEngine(wiring.Component):
         if cap.lanes > 1:
             self._elaborate_lanes(m, hs, registers, memories, platform)
             return m
-        # the registered select's builds (above DEFAULT_CAPACITY) also compare copies of the fetch counters,
+        # the registered select's builds (above DEFAULT_CAPACITY) also end the fetches from down-counters,
         # take the check's verdict from registers and read ABORT and running from copies by their loads
         m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency,
-                                                           compare_copies=self.registered_select)
+                                                           down_counters=self.registered_select)
         m.submodules.controller = controller = PhaseController(fs, rmap, registered_verdict=self.registered_select,
                                                                control_copies=self.registered_select)
         if self.registered_select:

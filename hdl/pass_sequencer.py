@@ -81,7 +81,7 @@ class PassSequencer(wiring.Component):
         Its capacity sizes the counters, its values the mesh-size inputs.
     read_latency : int
         Clocks from a node or triangle memory's address register to its data (:func:`fetch_latencies`).
-    compare_copies : bool
+    down_counters : bool
         Each fetch counter's issue and end read the sign of a down-counter restarted and counted with it
         (:func:`fetch_counter`'s ``left``: no compare of the counter), which is loaded from a copy of the
         mesh size of its own (a clock late: run constants, written before START), so that the register
@@ -149,13 +149,13 @@ class PassSequencer(wiring.Component):
     """
 
     def __init__(self, fs: FormatSet, register_map: RegisterMap, *, read_latency: int = READ_LATENCY,
-                 compare_copies: bool = False):
+                 down_counters: bool = False):
         if not isinstance(fs, FormatSet) or not isinstance(register_map, RegisterMap):
             raise TypeError(f"PassSequencer needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
-        if not isinstance(compare_copies, bool):
-            raise TypeError(f"PassSequencer compare_copies must be a bool, not {compare_copies!r}")
+        if not isinstance(down_counters, bool):
+            raise TypeError(f"PassSequencer down_counters must be a bool, not {down_counters!r}")
         #: Each fetch counter's issue and end read a down-counter's sign (:func:`fetch_counter`'s ``left``).
-        self.compare_copies = compare_copies
+        self.down_counters = down_counters
         cap: EngineCapacity = register_map.capacity
         self.fs, self.capacity = fs, cap
         #: With K > 1 lanes this is one lane's: its counts are the lane's (``vertices``, ``entries``,
@@ -214,13 +214,13 @@ class PassSequencer(wiring.Component):
         # flip-flops' reset pins: a long path on the board).
         r = {name: Signal.like(getattr(self, name), reset_less=True, name=f"{name}_q") for name in RESTARTED}
         m.d.comb += [getattr(self, name).eq(q) for name, q in r.items()]
-        # with compare_copies, the fetch counters' down-counters (restarted with them; at −1, no issue and
+        # with down_counters, the fetch counters' down-counters (restarted with them; at −1, no issue and
         # the pass at its end, until the first restart)
         self._left = {name: Signal(signed(len(r[name]) + 1), init=-1, name=f"{name}_left", reset_less=True)
-                      for name in FETCH_COUNTERS if self.compare_copies}
-        # the mesh sizes the compares read: with compare_copies, copies beside them
+                      for name in FETCH_COUNTERS if self.down_counters}
+        # the mesh sizes the counters read: with down_counters, copies beside the down-counters
         self._sizes = {name: kept_register(m, getattr(self, name), name=f"{name}_size", platform=platform)
-                       if self.compare_copies else getattr(self, name) for name in FETCH_COUNTERS.values()}
+                       if self.down_counters else getattr(self, name) for name in FETCH_COUNTERS.values()}
         e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
@@ -389,7 +389,7 @@ class PassSequencer(wiring.Component):
         self._idle(m, e_valid, t_valid, n_valid)
 
     def _at_end(self, name: str) -> Value:
-        """Fetch counter ``name`` stands at its mesh size: with ``compare_copies`` its down-counter's sign
+        """Fetch counter ``name`` stands at its mesh size: with ``down_counters`` its down-counter's sign
         (−1 from the last issue to the next restart), no compare."""
         if name in self._left:
             return self._left[name][-1]

@@ -1,6 +1,6 @@
-"""PassSequencer's compare copies for the large builds (``compare_copies``): the fetch counters' copies, the
-issue from a down-counter's sign bit and the sizes' copies change no clock. Two sequencers, with and without
-the copies, fed the same random inputs (fetch enables, phases, the guard's restarts, unit results) answer
+"""PassSequencer's down-counters for the large builds (``down_counters``): the fetch counters' issues and
+ends from down-counters' sign bits, and the sizes' copies, change no clock. Two sequencers, with and without
+them, fed the same random inputs (fetch enables, phases, the guard's restarts, unit results) answer
 the same in every clock: addresses, the units' valid bits, the passes' ends and ``passes_idle``. The whole
 runs through the large builds: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
 
@@ -29,19 +29,19 @@ SIZES = {"vertices": CAPACITY.vertices, "entries": CAPACITY.entries, "triangles"
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_the_compare_copies_change_no_clock(seed):
+def test_the_down_counters_change_no_clock(seed):
     register_map = RegisterMap.build(FS, CAPACITY)
-    plain, copied = PassSequencer(FS, register_map), PassSequencer(FS, register_map, compare_copies=True)
+    plain, counted = PassSequencer(FS, register_map), PassSequencer(FS, register_map, down_counters=True)
     m = Module()
     m.domains.sync = ClockDomain("sync")
-    m.submodules.plain, m.submodules.copied = plain, copied
+    m.submodules.plain, m.submodules.counted = plain, counted
     seen = {"issued": 0, "ends": 0}
 
     async def bench(ctx):
         rng = np.random.default_rng(seed)
 
         def put(name, value):
-            for seq in (plain, copied):
+            for seq in (plain, counted):
                 ctx.set(getattr(seq, name), value)
 
         for clock in range(4000):
@@ -59,13 +59,13 @@ def test_the_compare_copies_change_no_clock(seed):
                 put(flag, int(rng.random() < p))
             for stream in ("forces", "integrated"):  # the units' results
                 valid = int(rng.random() < 0.3)
-                for seq in (plain, copied):
+                for seq in (plain, counted):
                     ctx.set(getattr(seq, stream).valid, valid)
             await ctx.tick()
             for name in ANSWERS:
-                assert ctx.get(getattr(copied, name)) == ctx.get(getattr(plain, name)), f"{name} in clock {clock}"
+                assert ctx.get(getattr(counted, name)) == ctx.get(getattr(plain, name)), f"{name} in clock {clock}"
             for unit in UNITS:
-                assert ctx.get(getattr(copied, unit).valid) == ctx.get(getattr(plain, unit).valid), f"{unit} in clock {clock}"
+                assert ctx.get(getattr(counted, unit).valid) == ctx.get(getattr(plain, unit).valid), f"{unit} in clock {clock}"
             seen["issued"] += sum(ctx.get(getattr(plain, unit).valid) for unit in UNITS)
             seen["ends"] += ctx.get(plain.area_done) + ctx.get(plain.force_done) + ctx.get(plain.integrate_done)
 
