@@ -25,7 +25,7 @@ from .integrator import Integrator
 from .layouts import PASS_SUMS
 from .lanes import LANE_PASSES, LANE_SUMS, LaneSums
 from .logic import mode_steps
-from .memory_windows import WINDOW_STEPS, MemoryWindows, needs_registered_select
+from .memory_windows import MemoryWindows, needs_registered_select, window_steps
 from .parameters import check_power_of_two
 from .pass_sequencer import PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
@@ -133,12 +133,6 @@ class SpringflatEngine(wiring.Component):
     #: pipeline and the registered limit compare): :attr:`PhaseController.CHECK_SETTLE_CLOCKS`.
     CHECK_SETTLE_CLOCKS = PhaseController.CHECK_SETTLE_CLOCKS
 
-    #: Clocks from ``stb`` to the target raising ``ack`` or ``err`` (the initiator samples it at the next
-    #: edge), every capacity and build option alike: a register (the handshake's request register, the
-    #: registered decode, the read word's two AND-OR stages, ``ack``); a memory word, read or write (the
-    #: decode, then :data:`~hdl.memory_windows.WINDOW_STEPS`); an ``err`` for a word that decodes to nothing
-    #: or a memory word while running. ``tests/hdl/test_engine.py`` measures them.
-    BUS_ANSWER_CLOCKS = {"register": 5, "memory word": 3 + WINDOW_STEPS, "err": 4}
 
     def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH,
                  registered_select: bool | None = None, pin_registers: bool | None = None,
@@ -165,6 +159,13 @@ class SpringflatEngine(wiring.Component):
         if pin_registers is False and self.registered_select:
             raise ValueError("registered_select needs the pin registers: pin_registers=False contradicts it")
         self.pin_registers = self.registered_select or bool(pin_registers)
+        #: Clocks from ``stb`` to the target raising ``ack`` or ``err`` (the initiator samples it at the next
+        #: edge): a register (the handshake's request register, the registered decode, the read word's two
+        #: AND-OR stages, ``ack``); a memory word, read or write (the decode, then
+        #: :func:`~hdl.memory_windows.window_steps`: a clock more with the registered select); an ``err`` for
+        #: a word that decodes to nothing or a memory word while running. ``tests/hdl/test_engine.py``
+        #: measures them, with and without the registered select.
+        self.bus_answer_clocks = {"register": 5, "memory word": 3 + window_steps(self.registered_select), "err": 4}
         self.delay_lines = delay_lines
         self.register_map = RegisterMap.build(fs, capacity)
         self.layouts = memory_layouts(fs, capacity)
@@ -184,6 +185,7 @@ class SpringflatEngine(wiring.Component):
         # the registered select's builds (above DEFAULT_CAPACITY) also end the fetches from down-counters,
         # take the check's verdict from registers and read ABORT and running from copies by their loads
         m.submodules.sequencer = sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency,
+                                                           entry_latency=memories.entry_latency,
                                                            down_counters=self.registered_select)
         m.submodules.controller = controller = PhaseController(fs, rmap, registered_verdict=self.registered_select,
                                                                control_copies=self.registered_select)

@@ -18,8 +18,8 @@ from .logic import or_tree
 from .parameters import check_power_of_two
 from .rom import ENTRY_BANK_DEPTH
 
-__all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "node_write_layout",
-           "needs_registered_select", "write_signature"]
+__all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "entry_latency",
+           "node_write_layout", "needs_registered_select", "window_steps", "write_signature"]
 
 #: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`), for the
 #: node and triangle memories of a capacity whose node memories are one bank each and have no pin registers
@@ -43,13 +43,27 @@ ENTRY_SELECT_STAGES = 3
 ENTRY_GROUP = 4
 #: Clocks from an entry bank's read address to its data: a :class:`BlockRam` with ``pin_registers``.
 ENTRY_BANK_LATENCY = BlockRam.LATENCY + 1
-#: Clocks from the entry memory's address register (``ent_addr``) to the addressed entry in ``entry``:
-#: the banks' read, the bank select.
-ENTRY_LATENCY = ENTRY_BANK_LATENCY + ENTRY_SELECT_STAGES
-#: Clocks from DEC to a window's answer: the address registered, the entry read (the other windows'
-#: data delayed alike), the whole word in the window's register (the write-back formed), the bus word
-#: landed.
-WINDOW_STEPS = 1 + ENTRY_LATENCY + 2
+#: With the registered select, a relay register after each entry block RAM, before its kept register: the
+#: block RAMs of a large build spread over the whole device, and one route from a block RAM to the kept
+#: register, which the placer puts near its group's OR, was most of a period with no logic on it.
+ENTRY_RELAY_STAGES = 1
+
+
+def entry_latency(registered_select: bool) -> int:
+    """Clocks from the entry memory's address register (``ent_addr``) to the addressed entry in ``entry``:
+    the banks' read, with ``registered_select`` the relay, the bank select."""
+    return ENTRY_BANK_LATENCY + ENTRY_RELAY_STAGES * registered_select + ENTRY_SELECT_STAGES
+
+
+def window_steps(registered_select: bool) -> int:
+    """Clocks from DEC to a window's answer: the address registered, the entry read (the other windows'
+    data delayed alike), the whole word in the window's register (the write-back formed), the bus word
+    landed."""
+    return 1 + entry_latency(registered_select) + 2
+
+
+#: :func:`entry_latency` and :func:`window_steps` of the builds up to ``DEFAULT_CAPACITY`` (no registered select).
+ENTRY_LATENCY, WINDOW_STEPS = entry_latency(False), window_steps(False)
 
 
 def write_signature(addr_shape, data_shape) -> wiring.Signature:
@@ -92,8 +106,8 @@ class MemoryWindows(wiring.Component):
         (:attr:`RegisterBank.bus_request <hdl.register_bank.RegisterBank>`).
     hit, answer, answer_data : ``Out``
         At DEC: the request is a window word's and the engine is idle (``hit``, combinational from
-        flip-flops); ``answer`` with ``answer_data`` (the word read, a register) :data:`WINDOW_STEPS`
-        (nine) clocks after DEC, for a write as for a read.
+        flip-flops); ``answer`` with ``answer_data`` (the word read, a register) :attr:`window_steps`
+        (nine, ten with ``registered_select``) clocks after DEC, for a write as for a read.
     running, in_area, in_integrate, fetch_nodes : ``In(1)``
         The controller's flip-flops that choose each port's source.
     running_next : ``In(1)``
@@ -104,7 +118,8 @@ class MemoryWindows(wiring.Component):
         The passes' addresses (:class:`~hdl.pass_sequencer.PassSequencer`).
     entry, triangle, position[3], velocity, weight_word, force_word : ``Out``
         The passes' read data: ``entry`` (the addressed bank's word, a register)
-        :data:`ENTRY_LATENCY` (six) clocks after the entry address is in ``ent_addr``, every other
+        :attr:`entry_latency` (six, seven with ``registered_select``) clocks after the entry address is in
+        ``ent_addr``, every other
         port :attr:`read_latency` (two, three with ``pin_registers``, five with ``registered_select``) clocks
         after its address register.
     force_write : ``In(write_signature(...))``
@@ -152,9 +167,11 @@ class MemoryWindows(wiring.Component):
       RAM's pin registers, and each bank's own select flag; E3 the banks' data
       (:data:`ENTRY_BANK_LATENCY`); E4 ``ent_kept<b>``: a bank's data, or 0 when the bank is not the
       one addressed (a register beside the bank, reset by the bank's flag: no logic between the
-      output register and it; with the registered select, each block RAM's slice of it reset by a
-      copy of the flag of its own, so that it can sit beside that block RAM); E5 ``ent_group<g>``: the OR of a group of banks; E6 ``entry``: the OR
-      of the groups (:data:`ENTRY_LATENCY`);
+      output register and it); E5 ``ent_group<g>``: the OR of a group of banks; E6 ``entry``: the OR
+      of the groups (:func:`entry_latency`). With the registered select a relay register
+      ``ent_relay<b>`` comes first (E4), and each block RAM's slice of ``ent_kept<b>`` (E5) is reset by a
+      copy of the flag of its own: every stage a route with no logic, so that each can be short, and the
+      kept slice can sit by its block RAM; E6 the groups, E7 ``entry``;
     * write (the bus's write-back only): the address, data and one-hot bank-enable registers, then
       the block RAMs' pin registers: a clock more, which the bus cycle absorbs (its next read comes
       after its answer).
@@ -193,7 +210,10 @@ class MemoryWindows(wiring.Component):
         #: selected in a register of its own).
         self.read_latency = READ_LATENCY + self.pin_registers + BlockRam.SELECT_STAGES * self.registered_select \
             + (lanes > 1)
-        assert self.read_latency <= ENTRY_LATENCY, "the bus aligns every window's word to the entry's"
+        #: Clocks from ``ent_addr`` to ``entry`` (:func:`entry_latency`), and from DEC to a window's answer.
+        self.entry_latency = entry_latency(self.registered_select)
+        self.window_steps = window_steps(self.registered_select)
+        assert self.read_latency <= self.entry_latency, "the bus aligns every window's word to the entry's"
         select = {"registered_select": self.registered_select, "pin_registers": self.pin_registers}
         # a triangle's three corners at once: where the pins are registered, the third port reads the first
         # copy's write port, and its address multiplexer sits before a pin register beside the block RAM
@@ -292,7 +312,7 @@ class MemoryWindows(wiring.Component):
         reads = {"nodes": (Cat(pos_a.data.x, pos_a.data.y, vel_r.data.x, vel_r.data.y, wgt_r.data.inv_mass,
                                wgt_r.data.inv_mass_barrier), self.read_latency),
                  "triangles": (self.rams["triangles"].read[0].data.as_value(), self.read_latency),
-                 "entries": (ent_data.as_value(), ENTRY_LATENCY)}
+                 "entries": (ent_data.as_value(), self.entry_latency)}
         bus_writing, new_words = self._bus_words(m, window_q, word_q, reads)
         self._read_addresses(m, index_q, ent_addr, ent_hot, bank_bits, ent_data, platform)
         self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks, platform)
@@ -307,12 +327,13 @@ class MemoryWindows(wiring.Component):
         return [port for ram in self._proposal_rams() for port in ram.read]
 
     def _entry_read(self, m: Module, entry_banks, ent_addr, ent_hot, platform, prefix: str = "ent"):
-        """The entry memory's read, E0 (``ent_addr``, ``ent_hot``) to E6 (the returned register): see the
-        class's docstring. ``prefix`` names its registers.
+        """The entry memory's read, E0 (``ent_addr``, ``ent_hot``) to :attr:`entry_latency` (the returned
+        register): see the class's docstring. ``prefix`` names its registers.
 
-        With the registered select, a bank's E3 flag is a copy per block RAM (a ``DP16KD`` slice of the
-        word, :func:`~hdl.block_ram.dp16kd_banks`), kept distinct: a bank's block RAMs spread over the
-        device, and each slice of ``ent_kept<b>`` can then sit beside its own block RAM."""
+        With the registered select, the bank's word is relayed through a register first, and the bank's E4
+        flag is a copy per block RAM (a ``DP16KD`` slice of the word, :func:`~hdl.block_ram.dp16kd_banks`),
+        kept distinct: a bank's block RAMs spread over the device, and each slice of ``ent_kept<b>`` can
+        then sit by its own block RAM's relay."""
         shape = self.entry_shape
         kept = []
         for b, bank in enumerate(entry_banks):
@@ -322,10 +343,11 @@ class MemoryWindows(wiring.Component):
             m.d.sync += [select[0].eq(ent_hot[b]), *(select[k].eq(select[k - 1]) for k in range(1, len(select)))]
             m.d.comb += port.addr.eq(ent_addr[:len(port.addr)])
             kept.append(Signal(shape, reset_less=True, name=f"{prefix}_kept{b}"))
-            if self.registered_select:
-                # (E3's one flag is then unread, and Yosys removes it)
-                self._kept_per_block_ram(m, bank, select[-2], Value.cast(port.data), Value.cast(kept[b]), platform,
-                                         name=f"{prefix}_select{b}_3")
+            if self.registered_select:  # E4 the relay, E5 the kept slices under E4's flag's copies
+                relay = Signal(shape, reset_less=True, name=f"{prefix}_relay{b}")
+                m.d.sync += relay.eq(port.data)
+                self._kept_per_block_ram(m, bank, select[-1], Value.cast(relay), Value.cast(kept[b]), platform,
+                                         name=f"{prefix}_select{b}_4")
             else:
                 with m.If(select[-1]):
                     m.d.sync += kept[b].eq(port.data)
@@ -385,10 +407,11 @@ class MemoryWindows(wiring.Component):
         modified word written back. ``reads``: per window, its word as the memories read it and the clocks
         from the address registers to it. Returns ``(bus_writing, {window: (k, new word)})``."""
         windows = self.register_map.windows
-        mem_steps = [Signal(name=f"mem_step{k}") for k in range(WINDOW_STEPS)]
+        steps = self.window_steps
+        mem_steps = [Signal(name=f"mem_step{k}") for k in range(steps)]
         m.d.sync += [mem_steps[0].eq(self.bus_request & self.hit),
-                     *(mem_steps[k].eq(mem_steps[k - 1]) for k in range(1, WINDOW_STEPS))]
-        mem_landed, mem_answer = mem_steps[WINDOW_STEPS - 2], mem_steps[WINDOW_STEPS - 1]
+                     *(mem_steps[k].eq(mem_steps[k - 1]) for k in range(1, steps))]
+        mem_landed, mem_answer = mem_steps[steps - 2], mem_steps[steps - 1]
         mem_data = Signal(BUS_WORD_BITS)
         mem_word = Signal(BUS_WORD_BITS, reset_less=True, name="mem_word")
         m.d.sync += mem_word.eq(mem_data)
@@ -399,10 +422,10 @@ class MemoryWindows(wiring.Component):
         m.d.sync += [hot.eq((window_q == k) & (word_q == j)) for (k, j), hot in word_hot.items()]
         answer_terms, new_words = [], {}
         for k, w in enumerate(windows):
-            # the memories' data has landed (BlockRam); delayed to the entry's clock (ENTRY_LATENCY clocks after
+            # the memories' data has landed (BlockRam); delayed to the entry's clock (entry_latency clocks after
             # the address register)
             word_value, latency = reads[w.name]
-            for d in range(ENTRY_LATENCY - latency):
+            for d in range(self.entry_latency - latency):
                 aligned = Signal(len(word_value), name=f"bus_{w.name}_aligned{d}", reset_less=True)
                 m.d.sync += aligned.eq(word_value)
                 word_value = aligned
@@ -631,7 +654,7 @@ class MemoryWindows(wiring.Component):
         reads = {"nodes": (Array(node_words)[bus_bank], READ_LATENCY),
                  "triangles": (Array(rams[f"triangles{b}"].read[0].data.as_value() for b in range(lanes))[bus_bank],
                                READ_LATENCY),
-                 "entries": (or_tree([share[-1].as_value() for share in shares]), ENTRY_LATENCY)}
+                 "entries": (or_tree([share[-1].as_value() for share in shares]), self.entry_latency)}
         bus_writing, new_words = self._bus_words(m, window_q, word_q, reads)
         self._lane_writes(m, window_q, bus_word, bus_bank, bus_writing, new_words, shares, platform)
 

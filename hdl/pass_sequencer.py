@@ -22,12 +22,13 @@ from .memory_windows import ENTRY_LATENCY, READ_LATENCY, node_write_layout, writ
 
 __all__ = ["PassSequencer", "fetch_counter", "fetch_latencies"]
 
-def fetch_latencies(read_latency: int) -> tuple[int, int, int]:
+def fetch_latencies(read_latency: int, entry_latency: int = ENTRY_LATENCY) -> tuple[int, int, int]:
     """``(force, area, node)``: each pass's clocks from its first address to its unit's input, for node and
-    triangle memories answering ``read_latency`` clocks after their address registers. The force pass: the
-    entry read, its position addresses registered, their read; the area pass: the triangle's read, its
-    corners' addresses registered, their read; the integrate pass: the node's read."""
-    return ENTRY_LATENCY + 1 + read_latency, read_latency + 1 + read_latency, read_latency
+    triangle memories answering ``read_latency`` clocks after their address registers and the entry memory
+    ``entry_latency`` clocks after its own. The force pass: the entry read, its position addresses
+    registered, their read; the area pass: the triangle's read, its corners' addresses registered, their
+    read; the integrate pass: the node's read."""
+    return entry_latency + 1 + read_latency, read_latency + 1 + read_latency, read_latency
 
 
 #: :func:`fetch_latencies` with the node memories' :data:`READ_LATENCY` (one bank each).
@@ -79,8 +80,10 @@ class PassSequencer(wiring.Component):
     fs : :class:`~golden_model.fixed.FormatSet`
     register_map : :class:`~golden_model.engine_spec.register_map.RegisterMap`
         Its capacity sizes the counters, its values the mesh-size inputs.
-    read_latency : int
-        Clocks from a node or triangle memory's address register to its data (:func:`fetch_latencies`).
+    read_latency, entry_latency : int
+        Clocks from a node or triangle memory's address register to its data, and from the entry memory's
+        to the entry (:func:`fetch_latencies`; :attr:`MemoryWindows.entry_latency
+        <hdl.memory_windows.MemoryWindows>`).
     down_counters : bool
         Each fetch counter's issue and end read the sign of a down-counter restarted and counted with it
         (:func:`fetch_counter`'s ``left``: no compare of the counter), which is loaded from a copy of the
@@ -135,11 +138,11 @@ class PassSequencer(wiring.Component):
     Latency
     -------
     Valid bits are named for the clock whose data they mark. The force pass
-    (:data:`FORCE_FETCH_LATENCY`, nine clocks): E0 the entry's address in the entry memory's address
-    register; E6 the addressed entry (:data:`~hdl.memory_windows.ENTRY_LATENCY`: the block RAMs' pin
-    registers, their read, the bank select in registered stages), its three position addresses
-    formed; E7 those in the position memory's address registers; E8 its read data; E9 everything
-    landed, into ``ForcePass.i``. The area pass (:data:`AREA_FETCH_LATENCY`): T0 the triangle's
+    (:data:`FORCE_FETCH_LATENCY`, nine clocks, with ``read_latency`` 2 and ``entry_latency`` 6): E0 the
+    entry's address in the entry memory's address register; E6 the addressed entry
+    (:data:`~hdl.memory_windows.ENTRY_LATENCY`: the block RAMs' pin registers, their read, the bank select in
+    registered stages), its three position addresses formed; E7 those in the position memory's address
+    registers; E8 its read data; E9 everything landed, into ``ForcePass.i``. The area pass (:data:`AREA_FETCH_LATENCY`): T0 the triangle's
     address, T1 the data, T2 landed (corner addresses formed), T3 registered, T4 the corners' data,
     T5 landed, into ``AreaError.i``. The integrate pass (:data:`NODE_FETCH_LATENCY`): N0 the node's
     address, N1 the data, N2 landed, into ``Integrator.i``. Every block RAM address comes from
@@ -149,7 +152,7 @@ class PassSequencer(wiring.Component):
     """
 
     def __init__(self, fs: FormatSet, register_map: RegisterMap, *, read_latency: int = READ_LATENCY,
-                 down_counters: bool = False):
+                 entry_latency: int = ENTRY_LATENCY, down_counters: bool = False):
         if not isinstance(fs, FormatSet) or not isinstance(register_map, RegisterMap):
             raise TypeError(f"PassSequencer needs a FormatSet and a RegisterMap, not {fs!r}, {register_map!r}")
         if not isinstance(down_counters, bool):
@@ -163,8 +166,9 @@ class PassSequencer(wiring.Component):
         #: (E_C's, S's, E_S's ``area_sum``) are the lanes' sum's, not its own (:class:`~hdl.lanes.LaneSums`).
         self.lanes = lanes = cap.lanes
         #: Each pass's clocks from its first address to its unit's input (:func:`fetch_latencies`).
-        self.force_fetch_latency, self.area_fetch_latency, self.node_fetch_latency = fetch_latencies(read_latency)
-        self.read_latency = read_latency
+        self.force_fetch_latency, self.area_fetch_latency, self.node_fetch_latency = \
+            fetch_latencies(read_latency, entry_latency)
+        self.read_latency, self.entry_latency = read_latency, entry_latency
         layouts = memory_layouts(fs, cap)
         force_sig, integrator_sig = ForcePass.signature_of(fs, True, True), Integrator.signature_of(fs, None, True)
         width = register_map.value_width
@@ -255,16 +259,16 @@ class PassSequencer(wiring.Component):
         e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self._sizes["entries"], "e", self.force_fetch_latency + 1,
                                 self._left.get("entry_index"))
         entry_shape = self.entry.shape()
-        ent_data = self.entry  # the addressed entry, at E6 (ENTRY_LATENCY)
+        ent_data = self.entry  # the addressed entry, at entry_latency
         next_first = Signal(name="next_first")
-        # the entry and its first flag carried from ENTRY_LATENCY to FORCE_FETCH_LATENCY, beside its
+        # the entry and its first flag carried from entry_latency to force_fetch_latency, beside its
         # positions' read
         e_entry, e_first = ent_data, next_first
-        for k in range(ENTRY_LATENCY + 1, self.force_fetch_latency + 1):
+        for k in range(self.entry_latency + 1, self.force_fetch_latency + 1):
             entry_k, first_k = Signal(entry_shape, reset_less=True, name=f"e{k}_entry"), Signal(name=f"e{k}_first")
             m.d.sync += [entry_k.eq(e_entry), first_k.eq(e_first)]
             e_entry, e_first = entry_k, first_k
-        with m.If(e_valid[ENTRY_LATENCY]):  # the owner of the entry after this one
+        with m.If(e_valid[self.entry_latency]):  # the owner of the entry after this one
             m.d.sync += [next_first.eq(ent_data.last), r["node_of_entry"].eq(r["node_of_entry"] + ent_data.last)]
         # MODE.barrier gates the entry's barrier terms through a copy of its own beside the gating: the
         # register bank's copy sits by the bus decode, and a route from it into this multiplexer crosses

@@ -337,7 +337,7 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
     engine = SpringflatEngine(fs, capacity, **(engine_options or {}))
     (out / f"{ENGINE_MODULE}.v").write_text(verilog_of(engine, ENGINE_MODULE, platform))
     files = [p.name for p in write_exports(RegisterMap.build(fs, capacity), out)] + [write_waivers(out).name]
-    answer = SpringflatEngine.BUS_ANSWER_CLOCKS
+    answer = engine.bus_answer_clocks
     with open(out / "register_map.md", "a", encoding="utf-8") as f:  # the module the map is the bus of
         f.write("\n".join(["", f"## Ports of `{ENGINE_MODULE}`", "",
                             "`rst` is synchronous and active high (hold it over a clock edge); `irq` is "

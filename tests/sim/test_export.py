@@ -128,9 +128,10 @@ def test_the_register_map_gives_the_engines_ports_as_its_verilog_has_them(export
     assert table == ports and "irq" in table
     assert f"`adr` a {ports['bus__adr'][1]}-bit address of 32-bit words" in text
     # and when the answers come (tests/hdl/test_engine.py measures them): the bundle is all it may have
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
     from hdl.engine import SpringflatEngine
 
-    clocks = SpringflatEngine.BUS_ANSWER_CLOCKS
+    clocks = SpringflatEngine("narrow", DEFAULT_CAPACITY).bus_answer_clocks  # the build exported
     assert (f"raises them {clocks['register']} clocks after `stb` rises for a register, {clocks['memory word']} "
             f"for a memory word (read or write) and {clocks['err']} for an `err`") in text
     assert "**A host must not abandon a cycle**" in text  # its late answer goes to the next cycle (docs/engine.md)
