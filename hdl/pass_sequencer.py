@@ -140,11 +140,11 @@ class PassSequencer(wiring.Component):
     Valid bits are named for the clock whose data they mark. The force pass
     (:data:`FORCE_FETCH_LATENCY`, nine clocks, with ``read_latency`` 2 and ``entry_latency`` 6): E0 the
     entry's address in the entry memory's address register; E6 the addressed entry
-    (:data:`~hdl.memory_windows.ENTRY_LATENCY`: the block RAMs' pin registers, their read, the bank select in
-    registered stages), its three position addresses formed; E7 those in the position memory's address
-    registers; E8 its read data; E9 everything landed, into ``ForcePass.i``. The area pass (:data:`AREA_FETCH_LATENCY`): T0 the triangle's
-    address, T1 the data, T2 landed (corner addresses formed), T3 registered, T4 the corners' data,
-    T5 landed, into ``AreaError.i``. The integrate pass (:data:`NODE_FETCH_LATENCY`): N0 the node's
+    (:data:`~hdl.memory_windows.ENTRY_LATENCY`: the block RAMs' pin registers, their read, the bank select
+    in registered stages), its three position addresses formed; E7 those in the position memory's address
+    registers; E8 its read data; E9 everything landed, into ``ForcePass.i``. The area pass
+    (:data:`AREA_FETCH_LATENCY`): T0 the triangle's address, T1 the data, T2 landed (corner addresses
+    formed), T3 registered, T4 the corners' data, T5 landed, into ``AreaError.i``. The integrate pass (:data:`NODE_FETCH_LATENCY`): N0 the node's
     address, N1 the data, N2 landed, into ``Integrator.i``. Every block RAM address comes from
     a flip-flop after the port multiplexer, every block RAM output lands in a register before any
     logic (clock-to-out is most of a period on ECP5). One item per clock; a pass fetched to its end
