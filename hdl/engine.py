@@ -133,7 +133,6 @@ class SpringflatEngine(wiring.Component):
     #: pipeline and the registered limit compare): :attr:`PhaseController.CHECK_SETTLE_CLOCKS`.
     CHECK_SETTLE_CLOCKS = PhaseController.CHECK_SETTLE_CLOCKS
 
-
     def __init__(self, fs: FormatSet | str, capacity: EngineCapacity, *, entry_bank_depth: int = ENTRY_BANK_DEPTH,
                  registered_select: bool | None = None, pin_registers: bool | None = None,
                  delay_lines: bool = False):

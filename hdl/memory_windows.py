@@ -45,7 +45,7 @@ ENTRY_GROUP = 4
 ENTRY_BANK_LATENCY = BlockRam.LATENCY + 1
 #: With the registered select, a relay register after each entry block RAM, before its kept register: the
 #: block RAMs of a large build spread over the whole device, and one route from a block RAM to the kept
-#: register, which the placer puts near its group's OR, was most of a period with no logic on it.
+#: register, which the placer puts near its group's OR, can take most of a period with no logic on it.
 ENTRY_RELAY_STAGES = 1
 
 
@@ -171,7 +171,7 @@ class MemoryWindows(wiring.Component):
       of the groups (:func:`entry_latency`). With the registered select a relay register
       ``ent_relay<b>`` comes first (E4), and each block RAM's slice of ``ent_kept<b>`` (E5) is reset by a
       copy of the flag of its own: every stage a route with no logic, so that each can be short, and the
-      kept slice can sit by its block RAM; E6 the groups, E7 ``entry``;
+      kept slice can sit by its block RAM's relay; E6 the groups, E7 ``entry``;
     * write (the bus's write-back only): the address, data and one-hot bank-enable registers, then
       the block RAMs' pin registers: a clock more, which the bus cycle absorbs (its next read comes
       after its answer).
