@@ -140,20 +140,21 @@ class RegisterBank(wiring.Component):
         low = self.address[:offset_bits]
         reg_select = Signal(len(registers))
         bus_reg_hit = Signal(name="bus_reg_hit")
-        reg_hit = offset_map.bit_select(low, 1) & (self.address[offset_bits:] == 0)
         m.d.sync += [self.bus_request.eq(self.request),
                      reg_select.eq(Cat(low == r.offset for r in registers)),
-                     bus_reg_hit.eq(reg_hit)]
+                     bus_reg_hit.eq(offset_map.bit_select(low, 1) & (self.address[offset_bits:] == 0))]
         bus_write = self.bus_request & self.write & self.whole_word & bus_reg_hit
         write_data = self.write_data
         if self.registered_write:  # a register's write enable and the data in flip-flops, a clock later
             write_data = Signal.like(self.write_data, name="write_data_q", reset_less=True)
             m.d.sync += write_data.eq(self.write_data)
-            # DEC's write a flip-flop of its own, loaded with the request (``write`` and ``whole_word`` hold
-            # from the request to the answer), so each register's write enable is one LUT from flip-flops:
-            # the AND of the four, placed by the bus decode, was most of the route to a register across the die
-            bus_write = Signal(name="bus_write")
-            m.d.sync += bus_write.eq(self.request & self.write & self.whole_word & reg_hit)
+            # DEC's write a flip-flop of its own, loaded with the request from the handshake's flags (``write``
+            # and ``whole_word`` hold from the request to the answer), the decode's hit joining it at each
+            # register's write enable: that enable is one LUT from three flip-flops, and no decode lies in front
+            # of the flag, which the placer puts by its loads, across the die from the handshake
+            write_request = Signal(name="bus_write_request")
+            m.d.sync += write_request.eq(self.request & self.write & self.whole_word)
+            bus_write = write_request & bus_reg_hit
 
         # reads and writes: a write acts in DEC's clock (registered_write: the next); the answer comes from
         # the read word landed
