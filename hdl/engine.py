@@ -308,7 +308,8 @@ class SpringflatEngine(wiring.Component):
         lanes, bank_bits = cap.lanes, (cap.lanes - 1).bit_length()
         sequencers, units = [], []
         for lane in range(lanes):
-            sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency)
+            sequencer = PassSequencer(fs, rmap, read_latency=memories.read_latency,
+                                      entry_latency=memories.entry_latency)
             m.submodules[f"sequencer{lane}"] = sequencer
             sequencers.append(sequencer)
         m.submodules.controller = controller = PhaseController(fs, rmap)
