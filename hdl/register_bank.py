@@ -138,11 +138,19 @@ class RegisterBank(wiring.Component):
         offset_bits = max(1, max(r.offset for r in registers).bit_length())
         offset_map = Const(sum(1 << r.offset for r in registers), 1 << offset_bits)
         low = self.address[:offset_bits]
+        low_hit, high_zero = offset_map.bit_select(low, 1), self.address[offset_bits:] == 0
         reg_select = Signal(len(registers))
-        bus_reg_hit = Signal(name="bus_reg_hit")
-        m.d.sync += [self.bus_request.eq(self.request),
-                     reg_select.eq(Cat(low == r.offset for r in registers)),
-                     bus_reg_hit.eq(offset_map.bit_select(low, 1) & (self.address[offset_bits:] == 0))]
+        m.d.sync += [self.bus_request.eq(self.request), reg_select.eq(Cat(low == r.offset for r in registers))]
+        if self.registered_write:
+            # the hit's two halves in registers of their own, ANDed where they are used: the bank sits far
+            # from the handshake's address register, and that route leaves time for two LUTs, not for the
+            # five of the whole decode
+            bus_low_hit, bus_high_zero = Signal(name="bus_low_hit"), Signal(name="bus_high_zero")
+            m.d.sync += [bus_low_hit.eq(low_hit), bus_high_zero.eq(high_zero)]
+            bus_reg_hit = bus_low_hit & bus_high_zero
+        else:
+            bus_reg_hit = Signal(name="bus_reg_hit")
+            m.d.sync += bus_reg_hit.eq(low_hit & high_zero)
         bus_write = self.bus_request & self.write & self.whole_word & bus_reg_hit
         write_data = self.write_data
         if self.registered_write:  # a register's write enable and the data in flip-flops, a clock later
@@ -150,8 +158,8 @@ class RegisterBank(wiring.Component):
             m.d.sync += write_data.eq(self.write_data)
             # DEC's write a flip-flop of its own, loaded with the request from the handshake's flags (``write``
             # and ``whole_word`` hold from the request to the answer), the decode's hit joining it at each
-            # register's write enable: that enable is one LUT from three flip-flops, and no decode lies in front
-            # of the flag, which the placer puts by its loads, across the die from the handshake
+            # register's write enable: that enable is one LUT from flip-flops, and no decode lies in front of
+            # the flag, which the placer puts by its loads, across the die from the handshake
             write_request = Signal(name="bus_write_request")
             m.d.sync += write_request.eq(self.request & self.write & self.whole_word)
             bus_write = write_request & bus_reg_hit
