@@ -48,26 +48,33 @@ def dsp_target(platform) -> str | None:
     return getattr(platform, "dsp", None)
 
 
-def kept_register(m: Module, value, *, name: str, platform=None, reset: bool = False) -> Signal:
-    """``value`` registered (a flip-flop per bit, with no enable), kept apart from identical registers.
+def kept_register(m: Module, value, *, name: str, platform=None, reset: bool = False, enable=None) -> Signal:
+    """``value`` registered (a flip-flop per bit), kept apart from identical registers.
 
     A copy of a register placed beside one group of its loads: Yosys merges flip-flops with the same
     input, so with ECP5 primitives each bit is a ``TRELLIS_FF`` instance marked ``keep``; in generic
     RTL (simulation) a plain register. ``reset``: the ECP5 flip-flop is cleared by the ``sync`` domain's
     reset too (its synchronous LSR), as the generic register is, so that a copy of a register loaded
     from the same next value equals it in every clock, a reset's included; without it the ECP5 copy
-    ignores the reset (a copy whose loads are all cleared by the reset anyway).
+    ignores the reset (a copy whose loads are all cleared by the reset anyway). ``enable`` (1 bit, or
+    ``None``: every clock): the register loads only when it is high, the flip-flop's own clock enable
+    (the reset wins over it, as in an Amaranth register).
     """
     value = Value.cast(value)
     q = Signal(len(value), name=name)
     if dsp_target(platform) != "ecp5":
-        m.d.sync += q.eq(value)
+        if enable is None:
+            m.d.sync += q.eq(value)
+        else:
+            with m.If(enable):
+                m.d.sync += q.eq(value)
         return q
-    # (LSR_OVER_CE, the default SRMODE: a synchronous clear, as the domain's)
+    # (LSR_OVER_CE, the default SRMODE: a synchronous clear, as the domain's, that wins over the enable)
     clear = {"p_SRMODE": "LSR_OVER_CE", "i_LSR": ResetSignal()} if reset else {"i_LSR": 0}
+    load = {"p_CEMUX": "1"} if enable is None else {"p_CEMUX": "CE", "i_CE": enable}
     for i in range(len(value)):
         m.submodules[f"{name}_ff{i}"] = Instance(
-            "TRELLIS_FF", p_GSR="AUTO", p_CEMUX="1", p_CLKMUX="CLK", p_LSRMUX="LSR", p_REGSET="RESET",
+            "TRELLIS_FF", p_GSR="AUTO", **load, p_CLKMUX="CLK", p_LSRMUX="LSR", p_REGSET="RESET",
             i_CLK=ClockSignal(), **clear, i_DI=value[i], o_Q=q[i], a_keep=1)
     return q
 

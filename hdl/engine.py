@@ -245,7 +245,10 @@ class SpringflatEngine(wiring.Component):
     def _blocks(self, m: Module):
         """The bus handshake, the register bank and the memories: ``(hs, registers, memories)``."""
         fs, cap, rmap = self.fs, self.capacity, self.register_map
-        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width)
+        # (with the registered select the register bank decodes its own copy of the address: the bank and
+        # the windows' decode sit apart on the die)
+        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width,
+                                                        address_copy=self.registered_select)
         copies = UNIT_CONSTANTS + tuple(f.name for f in lane_count_fields(cap))
         m.submodules.registers = registers = RegisterBank(rmap, addr_width=self.addr_width, copies=copies,
                                                           registered_write=self.registered_select)
@@ -266,7 +269,9 @@ class SpringflatEngine(wiring.Component):
         ``measured`` source gated off while the controller measures an accepted layout again."""
         # the bus: the handshake's request into the register bank (which answers) and the windows
         wiring.connect(m, wiring.flipped(self.bus), hs.bus)
-        _wire(m, hs, registers, "request", "address", "write", "write_data", "whole_word")
+        _wire(m, hs, registers, "request")
+        m.d.comb += registers.address.eq(hs.address_copy if self.registered_select else hs.address)
+        _wire(m, hs, registers, "write", "write_data", "whole_word")
         _wire(m, hs, memories, "address", "write", "write_data", "whole_word")
         _wire(m, registers, hs, "done", "error", "data")
         _wire(m, registers, memories, "bus_request")

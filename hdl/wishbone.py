@@ -19,6 +19,7 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.engine_spec.image import BUS_WORD_BITS
 
+from .dsp import kept_register
 from .parameters import check_int
 
 __all__ = ["Signature", "TargetHandshake", "DATA_WIDTH", "GRANULARITY"]
@@ -71,9 +72,17 @@ class TargetHandshake(wiring.Component):
         The registered request.
     done, error : ``In(1)``; data : ``In(DATA_WIDTH)``
         The target's answer.
+    address_copy : ``Out(addr_width)``, with ``address_copy=True``
+        ``address`` in every clock, from a register of its own (kept apart from ``address``'s by
+        :func:`~hdl.dsp.kept_register`), so that the placer can put it by the loads of one part of the
+        target while ``address`` stays by the others.
     """
 
-    def __init__(self, *, addr_width: int):
+    def __init__(self, *, addr_width: int, address_copy: bool = False):
+        if not isinstance(address_copy, bool):
+            raise TypeError(f"TargetHandshake address_copy must be a bool, not {address_copy!r}")
+        self.address_copy_built = address_copy
+        copy = {"address_copy": Out(addr_width)} if address_copy else {}
         super().__init__({
             "bus": In(Signature(addr_width=addr_width)),
             "request": Out(1),
@@ -84,6 +93,7 @@ class TargetHandshake(wiring.Component):
             "done": In(1),
             "error": In(1),
             "data": In(DATA_WIDTH),
+            **copy,
         })
 
     def elaborate(self, platform):
@@ -97,6 +107,9 @@ class TargetHandshake(wiring.Component):
         with m.If(start):
             m.d.sync += [busy.eq(1), self.address.eq(bus.adr), self.write.eq(bus.we),
                          self.write_data.eq(bus.dat_w), self.whole_word.eq(bus.sel.all())]
+        if self.address_copy_built:  # loaded and cleared as `address` is
+            m.d.comb += self.address_copy.eq(kept_register(m, bus.adr, name="address_kept", platform=platform,
+                                                           reset=True, enable=start))
         m.d.sync += [bus.ack.eq(0), bus.err.eq(0)]
         with m.If(busy & self.done):
             m.d.sync += [busy.eq(0), bus.ack.eq(bus.cyc & ~self.error),

@@ -20,13 +20,14 @@ class RegisterFile(wiring.Component):
 
     bus: In(wishbone.Signature(addr_width=4))
 
-    def __init__(self, latency: int):
-        self.latency = latency
+    def __init__(self, latency: int, address_copy: bool = False):
+        self.latency, self.address_copy = latency, address_copy
         super().__init__()
 
     def _target(self, m: Module):
         """The handshake on the bus, and the words."""
-        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=4)
+        m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=4, address_copy=self.address_copy)
+        self.hs = hs
         wiring.connect(m, wiring.flipped(self.bus), hs.bus)
         return hs, [Signal(32, name=f"word{i}") for i in range(REGISTERS)]
 
@@ -194,6 +195,36 @@ def test_the_cycle_after_an_abandoned_one_gets_its_own_answer(latency, write):
             assert (answer.error, answer.data) == (False, 100 + i), (i, answer)
 
     run(dut, bench)
+
+
+def test_the_address_copy_is_the_address_in_every_clock():
+    """Random cycles, back to back or apart, with the bus's address changing while no cycle is taken (between
+    cycles, and while an answer is awaited): the handshake's address copy equals its address in every clock."""
+    dut = RegisterFile(2, address_copy=True)
+    rng = random.Random(7)
+    compared = []
+
+    async def watch(ctx):
+        async for _, _, address, copy, adr in ctx.tick().sample(dut.hs.address, dut.hs.address_copy, dut.bus.adr):
+            assert copy == address, (copy, address)
+            compared.append(address != adr)
+
+    async def bench(ctx):
+        for _ in range(80):
+            for _ in range(rng.choice([0, 1, 3])):  # idle clocks with a changing address on the bus
+                ctx.set(dut.bus.cyc, 0)
+                ctx.set(dut.bus.stb, 0)
+                ctx.set(dut.bus.adr, rng.randrange(16))
+                await ctx.tick()
+            await wishbone_cycle(ctx, dut.bus, rng.randrange(16), write=rng.random() < 0.5, data=rng.getrandbits(32),
+                                 keep_stb=rng.random() < 0.3)
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_process(watch)
+    sim.add_testbench(bench)
+    sim.run()
+    assert len(compared) > 300 and sum(compared) > 50  # clocks where the bus's address was another
 
 
 def test_signature_checks_its_parameter():
