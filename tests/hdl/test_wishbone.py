@@ -232,3 +232,6 @@ def test_signature_checks_its_parameter():
         wishbone.Signature(addr_width=0)
     assert wishbone.Signature(addr_width=8) == wishbone.Signature(addr_width=8)
     assert wishbone.Signature(addr_width=8) != wishbone.Signature(addr_width=9)
+    with pytest.raises(TypeError, match="address_copy must be a bool"):
+        wishbone.TargetHandshake(addr_width=8, address_copy=1)
+    assert "address_copy" not in wishbone.TargetHandshake(addr_width=8).signature.members
