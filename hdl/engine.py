@@ -192,7 +192,8 @@ class SpringflatEngine(wiring.Component):
             _wire(m, controller, memories, "running_next")
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True, delay_lines=self.delay_lines)
         m.submodules.area = area = AreaError(fs)
-        m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines)
+        m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines,
+                                                          shift_copy=self.registered_select)
         guard = GuardPasses(fs, cap, read_latency=memories.read_latency) if cap.guard else None
         if guard is not None:
             m.submodules.guard = guard

@@ -16,6 +16,7 @@ from amaranth.lib.wiring import In, Out
 from golden_model.fixed import Format, FormatSet
 from golden_model.guard import SCALE_MAX_SHIFT
 
+from .dsp import kept_register
 from .fixedpoint import FormatSetNotBuildable, clamp, round_half_bit, shape_of, shift_round, variable_shift
 from .force_pass import format_set
 from .layouts import INTEGRATOR_EVENTS, integrator_input_layout, integrator_output_layout
@@ -94,7 +95,7 @@ class Integrator(wiring.Component):
     """
 
     def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None, saturations: bool = False,
-                 delay_lines: bool = False):
+                 delay_lines: bool = False, shift_copy: bool = False):
         fs = format_set(fs, "Integrator")
         if fs.velocity.frac_bits != fs.position.frac_bits:
             raise FormatSetNotBuildable(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
@@ -102,7 +103,7 @@ class Integrator(wiring.Component):
         if side is not None:
             Shape.cast(side)  # a clear error now rather than at elaboration
         self.fs, self.side, self.saturations = fs, side, bool(saturations)
-        self.delay_lines = bool(delay_lines)
+        self.delay_lines, self.shift_copy = bool(delay_lines), bool(shift_copy)
         super().__init__(self.signature_of(fs, side, self.saturations))
         self.latency = _stage_count(fs, side, self.saturations)
 
@@ -124,7 +125,7 @@ class Integrator(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        _build(m, self.fs, self.side, self.saturations, self, platform, self.delay_lines)
+        _build(m, self.fs, self.side, self.saturations, self, platform, self.delay_lines, self.shift_copy)
         return m
 
 
@@ -135,9 +136,10 @@ def _stage_count(fs: FormatSet, side, saturations: bool) -> int:
     return count_stages(lambda m: _build(m, fs, side, saturations, ports, None))
 
 
-def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform, delay_lines: bool = False) -> int:
+def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform, delay_lines: bool = False,
+           shift_copy: bool = False) -> int:
     """The integrator's datapath into ``m`` (``ports``: the component's members); returns its stages
-    (the same with or without ``delay_lines``: :class:`~hdl.pipeline.Pipeline`)."""
+    (the same with or without ``delay_lines`` (:class:`~hdl.pipeline.Pipeline`) and ``shift_copy``)."""
     rnd = fs.rounding
     # Constants, registered so that they reach the multipliers from registers.
     dt, half_dt_sq, damping = (Signal.like(p, name=f"{n}_r", reset_less=True) for n, p in (
@@ -194,8 +196,12 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform, d
     # the momentum step's a' = a·2^-scale_shift rounded (the guarded proposal's step scale; a' = a at
     # shift 0), alongside the multiply: the variable shift in its first stage, the rounding's carry
     # chain in its second
+    clamped = {"x": a_x[0], "y": a_y[0]}
     for k in "xy":
-        live[f"as_{k}"], live[f"as_sticky_{k}"] = variable_shift(live[f"a_{k}"], scale_shift, rnd)
+        # shift_copy: loaded from t4's input in the clock t4 loads a (the pipeline is free-running)
+        accel = kept_register(m, clamped[k], name=f"t4_a_shift_{k}", platform=platform).as_signed() \
+            if shift_copy else live[f"a_{k}"]
+        live[f"as_{k}"], live[f"as_sticky_{k}"] = variable_shift(accel, scale_shift, rnd)
 
     def scaled_accel(values):
         rounded_a = {}

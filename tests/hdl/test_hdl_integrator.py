@@ -6,10 +6,12 @@ order, with random gaps in the input (the stream helpers of :mod:`support.stream
 """
 
 import gc
+import re
 import warnings
 
 import numpy as np
 import pytest
+from amaranth.back import rtlil
 from amaranth.hdl import UnusedElaboratable, unsigned
 
 from golden_model.fixed import FormatSet, SaturationCounter
@@ -17,9 +19,11 @@ from golden_model.fixed.guard import proposal
 from golden_model.fixed.pipeline import NodeConstants, integrate, integrate_momentum, node_power
 from golden_model.guard import SCALE_MAX_SHIFT
 from hdl import Integrator, NodeUpdate
+from hdl.dsp import ECP5
 from hdl.fixedpoint import FormatSetNotBuildable
 from sim.payloads import pack_beats, unpack_beats
 from support.streams import run_streams
+from test_hdl_force_pass import _Wrapped
 from test_hdl_node_update import PRESETS, random_constants
 
 SIDE = unsigned(20)
@@ -252,13 +256,13 @@ def test_the_paper_step_ignores_the_proposal_inputs():
 
 # ---------------------------------------------------------------- the guarded mode's proposal
 
-def check_proposals(fs, nodes, beta, shift, seed):
+def check_proposals(fs, nodes, beta, shift, seed, shift_copy=False):
     """One pass of proposals (``momentum``, ``propose``, ``scale_shift = shift``, β in ``dt``) against
     :func:`golden_model.fixed.guard.proposal`: ``V'`` bit for bit, the power as ever, and each node's
     ``saturations`` the events ``proposal`` and the guarded step's ``node_power`` (S, formed as it
     proposes) count for it. Returns the pass's golden counter."""
     n = len(nodes["inside"])
-    dut = Integrator(fs, side=SIDE, saturations=True)
+    dut = Integrator(fs, side=SIDE, saturations=True, shift_copy=shift_copy)
     vec = lambda a: {"x": a[:, 0], "y": a[:, 1]}  # noqa: E731
     beats = pack_beats(dut.i.payload.shape(), {
         "node": {"position": vec(nodes["position"]), "velocity": vec(nodes["velocity"]),
@@ -295,10 +299,11 @@ def check_proposals(fs, nodes, beta, shift, seed):
 
 
 @pytest.mark.parametrize("case", [*PRESETS, "tight"])
-def test_proposals_at_every_step_scale(case):
+@pytest.mark.parametrize("shift_copy", [False, True])
+def test_proposals_at_every_step_scale(case, shift_copy):
     """Every shift 0 … SCALE_MAX_SHIFT + 1 with a random β: random nodes, and nodes that saturate (in the
     presets accel and velocity; in the tight formats velocity, and the position and the power too: a
-    proposal counts the power's, not the position's)."""
+    proposal counts the power's, not the position's). ``shift_copy``: the shift from its own copy of a."""
     fs = FormatSet.preset("default").replace(**TIGHT) if case == "tight" else FormatSet.preset(case)
     rng = np.random.default_rng(30)
     seen = set()
@@ -308,7 +313,7 @@ def test_proposals_at_every_step_scale(case):
             nodes = random_nodes(fs, 40, seed=31 + shift)
         else:
             nodes = saturating_nodes(fs, 40, seed=31 + shift)
-        seen |= set(check_proposals(fs, nodes, beta, shift, seed=shift).saturations)
+        seen |= set(check_proposals(fs, nodes, beta, shift, seed=shift, shift_copy=shift_copy).saturations)
     assert ({"velocity"} if case == "tight" else {"accel", "velocity"}) <= seen, seen
     if case == "tight":  # the unguarded step would count more on the same nodes: propose drops it
         nodes = saturating_nodes(fs, 100, seed=60)
@@ -316,3 +321,15 @@ def test_proposals_at_every_step_scale(case):
         assert {"position", "power"} <= set(counter.saturations), counter
         proposed = check_proposals(fs, nodes, fs.dt.raw_max, 0, seed=61)
         assert proposed.total < counter.total
+
+
+def test_shift_copy_is_kept_apart_in_the_ecp5_form():
+    """``shift_copy``: in the ECP5 form the step scale's shift reads kept flip-flops of its own (one per bit of
+    a, for x and y), which Yosys cannot merge with the register feeding the multipliers; none without it."""
+    fs = FormatSet.preset("narrow")
+    for shift_copy in (False, True):
+        top = _Wrapped(Integrator(fs, saturations=True, shift_copy=shift_copy))
+        text = rtlil.convert(top, platform=ECP5, ports=[top.dut.i.valid, top.dut.o.valid])
+        kept = set(re.findall(r"^\s*cell \\TRELLIS_FF \\(t4_a_shift_[xy])_ff(\d+)", text, re.M))
+        want = {(f"t4_a_shift_{k}", str(i)) for k in "xy" for i in range(fs.accel.width)} if shift_copy else set()
+        assert kept == want, (shift_copy, sorted(kept ^ want)[:4])
