@@ -81,7 +81,6 @@ class TargetHandshake(wiring.Component):
     def __init__(self, *, addr_width: int, address_copy: bool = False):
         if not isinstance(address_copy, bool):
             raise TypeError(f"TargetHandshake address_copy must be a bool, not {address_copy!r}")
-        self.address_copy_built = address_copy
         copy = {"address_copy": Out(addr_width)} if address_copy else {}
         super().__init__({
             "bus": In(Signature(addr_width=addr_width)),
@@ -107,7 +106,7 @@ class TargetHandshake(wiring.Component):
         with m.If(start):
             m.d.sync += [busy.eq(1), self.address.eq(bus.adr), self.write.eq(bus.we),
                          self.write_data.eq(bus.dat_w), self.whole_word.eq(bus.sel.all())]
-        if self.address_copy_built:  # loaded and cleared as `address` is
+        if "address_copy" in self.signature.members:  # loaded and cleared as `address` is
             m.d.comb += self.address_copy.eq(kept_register(m, bus.adr, name="address_kept", platform=platform,
                                                            reset=True, enable=start))
         m.d.sync += [bus.ack.eq(0), bus.err.eq(0)]
