@@ -27,7 +27,7 @@ from .lanes import LANE_PASSES, LANE_SUMS, LaneSums
 from .logic import mode_steps
 from .memory_windows import MemoryWindows, needs_registered_select, window_steps
 from .parameters import check_power_of_two
-from .pass_sequencer import PassSequencer
+from .pass_sequencer import FETCH_FLAGS, PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
 from .register_bank import RegisterBank
 from .rom import ENTRY_BANK_DEPTH
@@ -190,6 +190,7 @@ class SpringflatEngine(wiring.Component):
                                                                control_copies=self.registered_select)
         if self.registered_select:
             _wire(m, controller, memories, "running_next")
+            _wire(m, controller, sequencer, *(f"{flag}_next" for flag in FETCH_FLAGS))
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True, delay_lines=self.delay_lines)
         m.submodules.area = area = AreaError(fs)
         m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines,

@@ -47,6 +47,9 @@ RESTARTED = tuple(RESTARTS)
 #: The passes' fetch counters (:func:`fetch_counter`), each with the mesh size it counts to.
 FETCH_COUNTERS = {"entry_index": "entries", "tri_index": "triangles", "node_index": "vertices"}
 
+#: The controller's pass enables, one per fetch counter (in :data:`FETCH_COUNTERS`' order).
+FETCH_FLAGS = ("fetch_force", "fetch_area", "fetch_nodes")
+
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
 
@@ -88,13 +91,19 @@ class PassSequencer(wiring.Component):
         Each fetch counter's issue and end read the sign of a down-counter restarted and counted with it
         (:func:`fetch_counter`'s ``left``: no compare of the counter), which is loaded from a copy of the
         mesh size of its own (a clock late: run constants, written before START), so that the register
-        bank's size registers, which the guard also reads, are not placed between the two.
+        bank's size registers, which the guard also reads, are not placed between the two; and its pass
+        enable from a copy of its own, loaded from the controller's next value of the flag
+        (``fetch_<pass>_next``) and cleared by the reset, so equal to the flag in every clock: the issue
+        is then a LUT beside the counter, not beside the controller's flag across the device.
 
     Members
     -------
     fetch_force, fetch_area, fetch_nodes : ``In(1)``
         The controller's pass enables: while high, the pass issues one item per clock until its
         counter reaches the mesh size (``entries``, ``triangles``, ``vertices``).
+    fetch_force_next, fetch_area_next, fetch_nodes_next : ``In(1)``
+        With ``down_counters`` only: the pass enables' next values
+        (:class:`~hdl.phase_controller.PhaseController`'s, with its ``control_copies``).
     in_start, in_force, in_area, in_step, in_integrate, running, area_clear : ``In(1)``
         The controller's flags: the start phase restarts the force and area passes' counters and
         sums, the step phase the integrate pass's; the pass phases time the passes' ends.
@@ -182,7 +191,7 @@ class PassSequencer(wiring.Component):
             "length": 1, "power": 1,
         }
         super().__init__({
-            "fetch_force": In(1), "fetch_area": In(1), "fetch_nodes": In(1),
+            **{name: In(1) for name in FETCH_FLAGS},
             **{name: In(1) for name in PHASE_INPUTS}, "running": In(1), "area_clear": In(1),
             "vertices": In(width("vertices")), "entries": In(width("entries")), "triangles": In(width("triangles")),
             "momentum": In(1), "barrier_held": In(1),
@@ -208,6 +217,7 @@ class PassSequencer(wiring.Component):
             "passes_idle": Out(1),
             **{name: Out(shape) for name, shape in pass_sum_shapes(fs, cap.vertices, cap.entries).items()},
             **{f"{name}_events": Out(w) for name, w in self.event_widths.items()},
+            **({f"{name}_next": In(1) for name in FETCH_FLAGS} if down_counters else {}),
         })
 
     def elaborate(self, platform):
@@ -225,6 +235,10 @@ class PassSequencer(wiring.Component):
         # the mesh sizes the counters read: with down_counters, copies beside the down-counters
         self._sizes = {name: kept_register(m, getattr(self, name), name=f"{name}_size", platform=platform)
                        if self.down_counters else getattr(self, name) for name in FETCH_COUNTERS.values()}
+        # the pass enables the fetch counters read: with down_counters, copies beside the counters
+        self._fetch = {name: kept_register(m, getattr(self, f"{name}_next"), name=f"{name}_copy", platform=platform,
+                                           reset=True)
+                       if self.down_counters else getattr(self, name) for name in FETCH_FLAGS}
         e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
@@ -256,8 +270,8 @@ class PassSequencer(wiring.Component):
 
     def _force_pass(self, m: Module, r: dict[str, Signal], platform):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
-        e_valid = fetch_counter(m, r["entry_index"], self.fetch_force, self._sizes["entries"], "e", self.force_fetch_latency + 1,
-                                self._left.get("entry_index"))
+        e_valid = fetch_counter(m, r["entry_index"], self._fetch["fetch_force"], self._sizes["entries"], "e",
+                                self.force_fetch_latency + 1, self._left.get("entry_index"))
         entry_shape = self.entry.shape()
         ent_data = self.entry  # the addressed entry, at entry_latency
         next_first = Signal(name="next_first")
@@ -310,8 +324,8 @@ class PassSequencer(wiring.Component):
         # the guard's triangle passes issue every other clock (the certificate's interval of 2)
         alternate = Signal(name="tri_alternate")
         m.d.sync += alternate.eq(~alternate & self.half_rate)
-        t_valid = fetch_counter(m, r["tri_index"], self.fetch_area & ~alternate, self._sizes["triangles"], "t",
-                                self.area_fetch_latency + 1, self._left.get("tri_index"))
+        t_valid = fetch_counter(m, r["tri_index"], self._fetch["fetch_area"] & ~alternate, self._sizes["triangles"],
+                                "t", self.area_fetch_latency + 1, self._left.get("tri_index"))
         # the triangle's area and corners, landed with it, carried beside its corners' read
         area, corners = self.triangle.area, [self.triangle.a, self.triangle.b, self.triangle.c]
         for k in range(self.read_latency + 1, self.area_fetch_latency + 1):
@@ -330,8 +344,8 @@ class PassSequencer(wiring.Component):
 
     def _integrate_pass(self, m: Module, r: dict[str, Signal]):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
-        n_valid = fetch_counter(m, r["node_index"], self.fetch_nodes, self._sizes["vertices"], "n", self.node_fetch_latency + 1,
-                                self._left.get("node_index"))
+        n_valid = fetch_counter(m, r["node_index"], self._fetch["fetch_nodes"], self._sizes["vertices"], "n",
+                                self.node_fetch_latency + 1, self._left.get("node_index"))
         node = self.node_out.payload
         landed = n_valid[self.node_fetch_latency]
         m.d.comb += [  # landed at N2

@@ -21,6 +21,7 @@ from .guard_passes import GUARD_PASSES
 from .dsp import kept_register, registered_product
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import pass_sum_shapes
+from .pass_sequencer import FETCH_FLAGS
 from .logic import mode_guarded, mode_runs, mode_steps, or_tree, reset_echo
 from .stepgen import StepGenerator, pending_is_zero
 
@@ -94,8 +95,9 @@ class PhaseController(wiring.Component):
         ABORT's register copied, each copy loaded from the same pulse (so equal to it in every clock):
         one for the transitions that wait on the guard's passes, one for those that wait on a pass's
         end, each placed by its own group of loads rather than at the centre of all of them; and
-        ``running_next`` exported, from which a port's copy of ``running`` is loaded (the engine's
-        builds above ``DEFAULT_CAPACITY``).
+        ``running_next`` exported, from which a port's copy of ``running`` is loaded, and the pass enables'
+        ``fetch_<pass>_next``, from which the sequencer's copies beside its fetch counters are loaded (the
+        engine's builds above ``DEFAULT_CAPACITY``).
 
     Members
     -------
@@ -121,9 +123,9 @@ class PhaseController(wiring.Component):
         STATUS.state and STATUS.result codes; ``running`` is ``state == running`` as a flip-flop of
         its own (it gates every pass, port multiplexer and bus answer: their logic starts from a
         register rather than a compare).
-    running_next : ``Out(1)``
-        With ``control_copies`` only: combinational, ``running``'s next value (the domain's reset
-        aside): a register loaded from it and cleared by the reset is a copy of ``running``.
+    running_next, fetch_force_next, fetch_area_next, fetch_nodes_next : ``Out(1)``
+        With ``control_copies`` only: combinational, ``running``'s and the pass enables' next values (the
+        domain's reset aside): a register loaded from one and cleared by the reset is a copy of its flag.
     starting, irq_set : ``Out(1)``
         Combinational: START accepted this clock (the results and STATUS.irq_pending restart); a
         run ends this clock (STATUS.irq_pending set).
@@ -191,7 +193,9 @@ class PhaseController(wiring.Component):
             **({"lane_fault": In(1)} if self.capacity.lanes > 1 else {}),
             "state": Out(range(len(STATES)), init=_code(STATES, "idle")),
             "result": Out(range(len(RESULTS)), init=_code(RESULTS, "none")),
-            "running": Out(1), **({"running_next": Out(1)} if control_copies else {}),
+            "running": Out(1),
+            **({name: Out(1) for name in ("running_next", *(f"{flag}_next" for flag in FETCH_FLAGS))}
+               if control_copies else {}),
             "starting": Out(1), "irq_set": Out(1),
             **{f"in_{name}": Out(1) for name in PHASES},
             "fetch_force": Out(1), "fetch_area": Out(1), "fetch_nodes": Out(1), "area_clear": Out(1),
@@ -409,8 +413,16 @@ class PhaseController(wiring.Component):
         def move(leaving, entering=None):
             return [flags[leaving].eq(0), *([flags[entering].eq(1)] if entering else [])]
 
-        if self.control_copies:  # running's next value, from the same statements as running
-            m.d.comb += self.running_next.eq(self.running)
+        if self.control_copies:  # running's and the pass enables' next values, from the same statements
+            m.d.comb += [self.running_next.eq(self.running),
+                         *(getattr(self, f"{flag}_next").eq(getattr(self, flag)) for flag in FETCH_FLAGS)]
+
+        def fetch(**values):
+            """The statements that set pass enables (``force=1``: ``fetch_force``), for ``m.d.sync``; with
+            control copies, their next values set here too."""
+            if self.control_copies:
+                m.d.comb += [getattr(self, f"fetch_{name}_next").eq(value) for name, value in values.items()]
+            return [getattr(self, f"fetch_{name}").eq(value) for name, value in values.items()]
 
         def set_state(name):
             m.d.sync += [self.state.eq(_code(STATES, name)), self.running.eq(name == "running")]
@@ -452,13 +464,13 @@ class PhaseController(wiring.Component):
         with m.If(go & launch):
             m.d.sync += flags["start"].eq(1)
         with m.If(go & flags["start"]):  # a measurement: the force pass
-            m.d.sync += [self.fetch_force.eq(1), *move("start", "force")]
+            m.d.sync += [*fetch(force=1), *move("start", "force")]
         with m.If(go_passes & flags["force"] & self.force_done):
-            m.d.sync += [self.fetch_force.eq(0), self.fetch_area.eq(1), *move("force", "area"),
+            m.d.sync += [*fetch(force=0, area=1), *move("force", "area"),
                          run.math_pending.eq(0b111), requests["norm_length"].eq(1), requests["energy_check"].eq(1),
                          self.area_clear.eq(1)]
         with m.If(go_passes & flags["area"] & self.area_done):
-            m.d.sync += [self.fetch_area.eq(0), *move("area", "math"), requests["norm_area"].eq(1)]
+            m.d.sync += [*fetch(area=0), *move("area", "math"), requests["norm_area"].eq(1)]
         # the last result's clock t clears its math_pending bit (seen at t+1); its event reaches diverged_q
         # at t+5: the check phase starts then, CHECK_SETTLE_CLOCKS after math_pending reads 0
         math_settle = [Signal(name=f"math_settle{k}") for k in range(self.CHECK_SETTLE_CLOCKS)]
@@ -478,10 +490,10 @@ class PhaseController(wiring.Component):
             with m.If(accepted):
                 m.d.sync += move("decide", "check")
             with m.Else():  # P − V and V = 0, then the accepted layout measured again
-                m.d.sync += [self.fetch_nodes.eq(1), self.node_restart.eq(1), run.measuring_again.eq(1),
+                m.d.sync += [*fetch(nodes=1), self.node_restart.eq(1), run.measuring_again.eq(1),
                              *move("decide", "rollback")]
         with m.If(go_guard & flags["rollback"] & self.guard_done):
-            m.d.sync += [self.fetch_nodes.eq(0), *move("rollback", "start")]
+            m.d.sync += [*fetch(nodes=0), *move("rollback", "start")]
         # as run_image: the saturation limit first, then the stop rule (neither after the first
         # measurement), then the iteration limit
         verdicts = {"diverged": q["diverged_q"] & ~run.first_measure,
@@ -520,29 +532,29 @@ class PhaseController(wiring.Component):
         step_result, step_loaded = Signal(name="step_result"), Signal(name="step_loaded")
         m.d.sync += [step_result.eq(beta.o.valid | stepgen.o.valid | run.fixed_load), step_loaded.eq(step_result)]
         with m.If(go & flags["step_wait"] & step_loaded):
-            m.d.sync += [self.fetch_nodes.eq(1), *move("step_wait", "integrate")]
+            m.d.sync += [*fetch(nodes=1), *move("step_wait", "integrate")]
         with m.If(go & flags["drain"] & drained):
             set_state("idle")
             m.d.sync += move("drain")
             m.d.sync += [self.result.eq(_code(RESULTS, "none")), self.half_rate.eq(0),
-                         self.fetch_force.eq(0), self.fetch_area.eq(0), self.fetch_nodes.eq(0)]
+                         *fetch(force=0, area=0, nodes=0)]
         with m.If(go_passes & flags["integrate"] & self.integrate_done):
             with m.If(run.guarded):  # the proposals' certificate, then the commit
-                m.d.sync += [self.fetch_nodes.eq(0), self.fetch_area.eq(1), self.half_rate.eq(1),
+                m.d.sync += [*fetch(nodes=0, area=1), self.half_rate.eq(1),
                              self.triangle_restart.eq(1), *move("integrate", "stuck")]
             with m.Else():
-                m.d.sync += [self.fetch_nodes.eq(0), *move("integrate", "start")]
+                m.d.sync += [*fetch(nodes=0), *move("integrate", "start")]
         with m.If(go_guard & flags["stuck"] & self.guard_done):
-            m.d.sync += [self.fetch_area.eq(0), self.half_rate.eq(0), self.fetch_nodes.eq(1), self.node_restart.eq(1),
+            m.d.sync += [*fetch(area=0), self.half_rate.eq(0), *fetch(nodes=1), self.node_restart.eq(1),
                          *move("stuck", "hold")]
         with m.If(go_guard & flags["hold"] & self.guard_done):
-            m.d.sync += [self.fetch_nodes.eq(0), self.fetch_area.eq(1), self.half_rate.eq(1),
+            m.d.sync += [*fetch(nodes=0, area=1), self.half_rate.eq(1),
                          self.triangle_restart.eq(1), *move("hold", "certify")]
         with m.If(go_guard & flags["certify"] & self.guard_done):
-            m.d.sync += [self.fetch_area.eq(0), self.half_rate.eq(0), self.fetch_nodes.eq(1), self.node_restart.eq(1),
+            m.d.sync += [*fetch(area=0), self.half_rate.eq(0), *fetch(nodes=1), self.node_restart.eq(1),
                          *move("certify", "commit")]
         with m.If(go_guard & flags["commit"] & self.guard_done):
-            m.d.sync += [self.fetch_nodes.eq(0), *move("commit", "start")]
+            m.d.sync += [*fetch(nodes=0), *move("commit", "start")]
 
     def _go(self, run: _Run) -> tuple[Value, Value, Value]:
         """No ABORT, for the phase machine's transitions: those that wait on the guard and those that wait

@@ -1,7 +1,7 @@
 """PassSequencer's down-counters for the large builds (``down_counters``): the fetch counters' issues and
-ends from down-counters' sign bits, and the sizes' copies, change no clock. Two sequencers, with and without
-them, fed the same random inputs (fetch enables, phases, the guard's restarts, unit results) answer
-the same in every clock: addresses, the units' valid bits, the passes' ends and ``passes_idle``. The whole
+ends from down-counters' sign bits, and the sizes' and pass enables' copies, change no clock. Two sequencers,
+with and without them, fed the same random inputs (fetch enables, phases, the guard's restarts, unit results;
+the one with them also each enable's next value, as the controller gives it) answer the same in every clock: addresses, the units' valid bits, the passes' ends and ``passes_idle``. The whole
 runs through the large builds: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
 
 import numpy as np
@@ -10,7 +10,7 @@ from amaranth.hdl import ClockDomain, Module
 from amaranth.sim import Simulator
 
 from golden_model.engine_spec.register_map import RegisterMap
-from hdl.pass_sequencer import PassSequencer
+from hdl.pass_sequencer import FETCH_FLAGS, PassSequencer
 from support.engine_sim import CAPACITY, FS
 
 #: The one-bit inputs driven at random in every clock, each with its probability of being high.
@@ -44,19 +44,34 @@ def test_the_down_counters_change_no_clock(seed):
             for seq in (plain, counted):
                 ctx.set(getattr(seq, name), value)
 
+        enables = dict.fromkeys(FETCH_FLAGS, 0)  # the pass enables in the coming clock
+
+        def put_enables(following):
+            """This clock's pass enables (the next values given a clock ago) and ``following``, their next."""
+            for flag in FETCH_FLAGS:
+                put(flag, enables[flag])
+                ctx.set(getattr(counted, f"{flag}_next"), following[flag])
+            enables.update(following)
+
         for clock in range(4000):
             if clock % 1000 == 0:  # new sizes (0 included), then both passes' restarts a few clocks later:
-                # the sizes are run constants, still from a restart to its pass's end
+                # the sizes are run constants, still from a restart to its pass's end (no fetch meanwhile)
+                for flag in RANDOM_FLAGS.keys() - set(FETCH_FLAGS):
+                    put(flag, 0)
+                for _ in range(2):
+                    put_enables(dict.fromkeys(FETCH_FLAGS, 0))
+                    await ctx.tick()
                 for name, top in SIZES.items():
                     put(name, int(rng.integers(0, top + 1)))
-                for flag in RANDOM_FLAGS:
-                    put(flag, 0)
                 await ctx.tick().repeat(3)
                 put("in_start", 1)
                 put("in_step", 1)
                 await ctx.tick()
-            for flag, p in RANDOM_FLAGS.items():
-                put(flag, int(rng.random() < p))
+            draws = {flag: int(rng.random() < p) for flag, p in RANDOM_FLAGS.items()}
+            for flag, value in draws.items():
+                if flag not in FETCH_FLAGS:
+                    put(flag, value)
+            put_enables({flag: draws[flag] for flag in FETCH_FLAGS})
             for stream in ("forces", "integrated"):  # the units' results
                 valid = int(rng.random() < 0.3)
                 for seq in (plain, counted):
