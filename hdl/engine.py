@@ -44,8 +44,8 @@ UNIT_CONSTANTS = ("barrier", "mode", "half_spring", "damping", "area_reciprocal"
 
 
 #: The controller's flags each pass sequencer reads.
-SEQUENCER_FLAGS = ("fetch_force", "fetch_area", "fetch_nodes", "in_start", "in_force", "in_area", "in_step",
-                   "in_integrate", "running", "area_clear", "guarded", "half_rate", "node_restart", "triangle_restart")
+SEQUENCER_FLAGS = (*FETCH_FLAGS, "in_start", "in_force", "in_area", "in_step", "in_integrate", "running",
+                   "area_clear", "guarded", "half_rate", "node_restart", "triangle_restart")
 
 
 class SpringflatEngine(wiring.Component):

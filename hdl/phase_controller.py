@@ -21,8 +21,8 @@ from .guard_passes import GUARD_PASSES
 from .dsp import kept_register, registered_product
 from .fixedpoint import clamp, shape_of, shift_round
 from .layouts import pass_sum_shapes
-from .pass_sequencer import FETCH_FLAGS
 from .logic import mode_guarded, mode_runs, mode_steps, or_tree, reset_echo
+from .pass_sequencer import FETCH_FLAGS
 from .stepgen import StepGenerator, pending_is_zero
 
 __all__ = ["PhaseController", "PHASES"]
@@ -198,7 +198,7 @@ class PhaseController(wiring.Component):
                if control_copies else {}),
             "starting": Out(1), "irq_set": Out(1),
             **{f"in_{name}": Out(1) for name in PHASES},
-            "fetch_force": Out(1), "fetch_area": Out(1), "fetch_nodes": Out(1), "area_clear": Out(1),
+            **{name: Out(1) for name in FETCH_FLAGS}, "area_clear": Out(1),
             "half_rate": Out(1), "node_restart": Out(1), "triangle_restart": Out(1), "guarded": Out(1),
             "measuring_again": Out(1), "scale_shift": Out(range(SCALE_MAX_SHIFT + 2)),
             "step_dt": Out(shape_of(fs.dt)), "step_half": Out(shape_of(fs.half_dt_sq)),
