@@ -24,7 +24,11 @@ from .dsp import kept_register
 from .layouts import decision_input_layout, decision_output_layout
 from .parameters import check_int
 
-__all__ = ["GuardDecision"]
+__all__ = ["SPLIT_RISE_PARTS", "GuardDecision"]
+
+#: The rise's parts in the engine's builds with a registered verdict (above ``DEFAULT_CAPACITY``): a
+#: quarter of the energy's width is a carry chain of about nine ECP5 cells (``docs/synthesis.md``).
+SPLIT_RISE_PARTS = 4
 
 
 class GuardDecision(wiring.Component):
@@ -51,6 +55,10 @@ class GuardDecision(wiring.Component):
     window : int
         The window's length in iterations (:data:`golden_model.guard.ENERGY_WINDOW`, the guarded mode's
         default; a run constant in the golden model, which the engine's host is to check against it).
+    rise_parts : int
+        1: the rise ``E > E_kept`` compared in one clock. More: the energies cut into ``rise_parts``
+        parts of (nearly) equal width, each part's greater and equal registered, and the rise joined
+        from them a clock later (a clock more per decision; the carry chains are a part's width).
 
     Members
     -------
@@ -66,19 +74,22 @@ class GuardDecision(wiring.Component):
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle. The decision, the window and the scale are
-    updated two clocks after the transfer (the rise compared first); ``ε·E_old`` then takes
-    ``energy_bits`` clocks (an LSB-first shift-add, with ``|E_kept − E_old|`` alongside), the
-    compare's halves one more, and
+    updated two clocks after the transfer (the rise compared first; three with ``rise_parts`` > 1);
+    ``ε·E_old`` then takes ``energy_bits`` clocks (an LSB-first shift-add, with ``|E_kept − E_old|``
+    alongside), the compare's halves one more, and
     ``o`` is a register: with ``o.ready`` high the output transfers :attr:`latency`
-    (``energy_bits + 5``) clock edges after the input.
+    (``energy_bits + 5``, one more with ``rise_parts`` > 1) clock edges after the input.
     """
 
-    def __init__(self, energy_bits: int, *, window: int = ENERGY_WINDOW):
+    def __init__(self, energy_bits: int, *, window: int = ENERGY_WINDOW, rise_parts: int = 1):
         check_int("energy_bits", energy_bits, 2)
         check_int("window", window)
-        self.energy_bits, self.window = energy_bits, window
+        check_int("rise_parts", rise_parts)
+        if rise_parts > energy_bits:
+            raise ValueError(f"rise_parts ({rise_parts}) must not exceed energy_bits ({energy_bits})")
+        self.energy_bits, self.window, self.rise_parts = energy_bits, window, rise_parts
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
-        self.latency = energy_bits + 5
+        self.latency = energy_bits + 5 + (rise_parts > 1)
         super().__init__({
             "i": In(stream.Signature(decision_input_layout(energy_bits))),
             "o": Out(stream.Signature(decision_output_layout(energy_bits))),
@@ -116,7 +127,8 @@ class GuardDecision(wiring.Component):
                          with_momentum.eq(beat.with_momentum), tolerance.eq(self.tolerance), floor.eq(self.floor)]
 
         # the energy's compare in a clock of its own (a carry chain as wide as the energy, feeding the
-        # window's and the scale's enables in the same clock, is too long a path for the engine's clock),
+        # window's and the scale's enables in the same clock, is too long a path for the engine's clock;
+        # with `rise_parts`, in parts over two clocks: the whole chain is too long for it at 3072 vertices),
         # then the decision, the scale and the window in one clock; the scale's next states (grown, shrunk) are
         # formed beside the compare, from registers, so that only the choice between them follows its flag
         rises = Signal(name="rises")
@@ -125,17 +137,18 @@ class GuardDecision(wiring.Component):
                                      for n in ("shift_grown", "shift_shrunk"))
         count_grown = Signal.like(accepted_count, name="count_grown", reset_less=True)
         grows_now = accepted_count + 1 >= SCALE_GROW_AFTER
-        with m.If(rising):
-            m.d.sync += [rising.eq(0), deciding.eq(1), rises.eq(energy > kept), grows.eq(grows_now),
+        compared, rise = self._rise(m, rising, energy, kept)
+        with m.If(compared):
+            m.d.sync += [compared.eq(0), deciding.eq(1), rises.eq(rise), grows.eq(grows_now),
                          shift_grown.eq(Mux(shift > 0, shift - 1, 0)),
                          count_grown.eq(Mux(grows_now, Mux(shift > 0, 0, SCALE_GROW_AFTER), accepted_count + 1)),
                          shift_shrunk.eq(Mux(with_momentum | (shift > SCALE_MAX_SHIFT), shift, shift + 1))]
         newest = Mux(first | ~rises, energy, kept)
-        # `deciding` is `rising` a clock later; the window's energies and the kept energy with the scale each
-        # move on a copy of their own, placed by them (one flip-flop enabling them all and starting the
+        # `deciding` is `compared` a clock later; the window's energies and the kept energy with the scale
+        # each move on a copy of their own, placed by them (one flip-flop enabling them all and starting the
         # multiply is a net across the device)
-        deciding_window = kept_register(m, rising, name="deciding_window", platform=platform)
-        deciding_scale = kept_register(m, rising, name="deciding_scale", platform=platform)
+        deciding_window = kept_register(m, compared, name="deciding_window", platform=platform)
+        deciding_scale = kept_register(m, compared, name="deciding_scale", platform=platform)
         with m.If(deciding):  # the multiplier, the window's oldest once the new energy is in, in the low bits
             m.d.sync += [deciding.eq(0), multiplying.eq(1), steps.eq(bits), allowed.eq(energies[size - 1])]
         with m.If(deciding_window):
@@ -189,3 +202,22 @@ class GuardDecision(wiring.Component):
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += [self.o.valid.eq(0), idle.eq(1)]
         return m
+
+    def _rise(self, m: Module, rising: Signal, energy: Signal, kept: Signal):
+        """The clock flag in which the rise ``energy > kept`` is ready, and the rise: with one part
+        ``rising`` and the compare itself; with more, each part's greater and equal registered in
+        ``rising`` and the rise joined from them, most significant part first, in ``joining``."""
+        if self.rise_parts == 1:
+            return rising, energy > kept
+        bounds = [self.energy_bits * k // self.rise_parts for k in range(self.rise_parts + 1)]
+        parts = [slice(low, high) for low, high in zip(bounds, bounds[1:])]
+        greater, equal = (Signal(self.rise_parts, name=n, reset_less=True) for n in ("rise_greater", "rise_equal"))
+        joining = Signal(name="joining")
+        with m.If(rising):
+            m.d.sync += [rising.eq(0), joining.eq(1),
+                         greater.eq(Cat(energy[part] > kept[part] for part in parts)),
+                         equal.eq(Cat(energy[part] == kept[part] for part in parts))]
+        rise = greater[0]
+        for k in range(1, self.rise_parts):
+            rise = greater[k] | (equal[k] & rise)
+        return joining, rise

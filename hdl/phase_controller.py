@@ -16,7 +16,7 @@ from golden_model.guard import SCALE_MAX_SHIFT
 from golden_model.engine_spec.register_map import RESULTS, STATES, RegisterMap
 
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
-from .guard_decision import GuardDecision
+from .guard_decision import SPLIT_RISE_PARTS, GuardDecision
 from .guard_passes import GUARD_PASSES
 from .dsp import kept_register, registered_product
 from .fixedpoint import clamp, shape_of, shift_round
@@ -90,7 +90,9 @@ class PhaseController(wiring.Component):
         The check phase's verdict (a result, or the step) in flip-flops of their own, taken from the
         phase's first clock and acted on in its second: a clock more per check, so that the phase flags,
         placed by the units they drive across the device, are set from registers through no more than
-        a LUT or two (the engine's builds above ``DEFAULT_CAPACITY``; ``docs/synthesis.md``).
+        a LUT or two (the engine's builds above ``DEFAULT_CAPACITY``; ``docs/synthesis.md``). The guard
+        decision's rise is then compared in :data:`~hdl.guard_decision.SPLIT_RISE_PARTS` parts and joined
+        a clock later (a clock more per guarded iteration).
     control_copies : bool
         ABORT's register copied, each copy loaded from the same pulse (so equal to it in every clock):
         one for the transitions that wait on the guard's passes, one for those that wait on a pass's
@@ -218,7 +220,8 @@ class PhaseController(wiring.Component):
             "beta": BetaDivider(fs, k_bits=ITERATION_BITS),
             "stepgen": StepGenerator(fs, saturations=True),
         }
-        units["decision"] = GuardDecision(units["energy_check"].energy_bits)
+        units["decision"] = GuardDecision(units["energy_check"].energy_bits,
+                                          rise_parts=SPLIT_RISE_PARTS if self.registered_verdict else 1)
         for name, unit in units.items():
             m.submodules[name] = unit
         # the register is as wide as the energy check's tolerance (both from the golden model's

@@ -15,7 +15,7 @@ from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, StopRule
 from golden_model.guard import ENERGY_WINDOW, SCALE_GROW_AFTER, SCALE_MAX_SHIFT, EnergyWindow, StepScale
 from golden_model.params import FlattenParams
 from hdl.controller_units import EnergyCheck
-from hdl.guard_decision import GuardDecision
+from hdl.guard_decision import SPLIT_RISE_PARTS, GuardDecision
 from sim.payloads import pack, unpack
 from support import refused_components
 from support.streams import run_streams
@@ -87,8 +87,8 @@ def until_stalled(items):
     return kept
 
 
-def run_decision(items, tolerance, floor, *, seed=0, p_valid=1.0, p_ready=1.0):
-    dut = GuardDecision(ENERGY_BITS)
+def run_decision(items, tolerance, floor, *, seed=0, p_valid=1.0, p_ready=1.0, rise_parts=1):
+    dut = GuardDecision(ENERGY_BITS, rise_parts=rise_parts)
     layout = dut.i.payload.shape()
     beats = [pack(layout, {"energy": e, "first": f, "with_momentum": w}) for e, f, w in items]
 
@@ -102,15 +102,15 @@ def run_decision(items, tolerance, floor, *, seed=0, p_valid=1.0, p_ready=1.0):
     return dut, run, [(d["accepted"], d["energy"], d["settled"], d["stalled"], d["shift"]) for d in got]
 
 
-@pytest.mark.parametrize("seed", [1, 2])
-def test_decisions_are_the_golden_models_with_gaps_and_back_pressure(seed):
+@pytest.mark.parametrize("seed, rise_parts", [(1, 1), (2, 1), (3, SPLIT_RISE_PARTS)])
+def test_decisions_are_the_golden_models_with_gaps_and_back_pressure(seed, rise_parts):
     items = runs(seed)
     floor = 1 << 30
     want = golden(items, TOLERANCE, floor)
     # the runs reach what the decision must get right
     assert {w[0] for w in want} == {0, 1} and {w[2] for w in want} == {0, 1} and {w[3] for w in want} == {0, 1}
     assert max(w[4] for w in want) > SCALE_MAX_SHIFT and any(0 < w[4] < 3 for w in want)
-    _, _, got = run_decision(items, TOLERANCE, floor, seed=seed, p_valid=0.6, p_ready=0.5)
+    _, _, got = run_decision(items, TOLERANCE, floor, seed=seed, p_valid=0.6, p_ready=0.5, rise_parts=rise_parts)
     mismatch = [k for k, (g, w) in enumerate(zip(got, want)) if g != w]
     assert not mismatch, f"{len(mismatch)} of {len(want)} differ, first at {mismatch[0]}: RTL {got[mismatch[0]]}, " \
                          f"golden {want[mismatch[0]]}"
@@ -125,9 +125,30 @@ def test_the_scale_grows_back_after_accepted_steps():
     assert got == golden(items, TOLERANCE, 0)
 
 
-def test_latency():
-    dut, run, _ = run_decision([(5, 1, 0), (4, 0, 0), (9, 0, 1)], TOLERANCE, 0)
-    assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * 3
+@pytest.mark.parametrize("rise_parts, latency", [(1, ENERGY_BITS + 5), (SPLIT_RISE_PARTS, ENERGY_BITS + 6)])
+def test_latency(rise_parts, latency):
+    dut, run, _ = run_decision([(5, 1, 0), (4, 0, 0), (9, 0, 1)], TOLERANCE, 0, rise_parts=rise_parts)
+    assert dut.latency == latency
+    assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [latency] * 3
+
+
+@pytest.mark.parametrize("rise_parts", [1, 3, SPLIT_RISE_PARTS])
+def test_the_rise_at_every_bit(rise_parts):
+    """The rise ``E > E_kept`` where the energies differ first at each bit (the parts' edges among them):
+    E's bit set (a rise, with every lower bit of E clear and of E_kept set, so the lower parts say the
+    opposite) or clear (no rise), and E equal to E_kept. Each pair is a run of its own."""
+    rng = random.Random(rise_parts)
+    items = []
+    for bit in range(ENERGY_BITS):
+        top = rng.getrandbits(ENERGY_BITS) >> (bit + 1) << (bit + 1)
+        below = (1 << bit) - 1
+        low, high = top | below, top | (1 << bit)  # high > low: differ first at `bit`
+        items += [(low, 1, 0), (high, 0, 0), (high, 1, 0), (low, 0, 0)]
+    items += [(top, 1, 0), (top, 0, 0)]
+    want = golden(items, TOLERANCE, 0)
+    assert [w[0] for w in want[1::2]] == [0, 1] * ENERGY_BITS + [1]
+    _, _, got = run_decision(items, TOLERANCE, 0, rise_parts=rise_parts)
+    assert got == want
 
 
 def test_parameter_validation():
@@ -137,6 +158,10 @@ def test_parameter_validation():
             GuardDecision(1)
         with pytest.raises(ValueError, match="window must be an int >= 1, not 0"):
             GuardDecision(ENERGY_BITS, window=0)
+        with pytest.raises(ValueError, match="rise_parts must be an int >= 1, not 0"):
+            GuardDecision(ENERGY_BITS, rise_parts=0)
+        with pytest.raises(ValueError, match=rf"rise_parts \({ENERGY_BITS + 1}\) must not exceed energy_bits"):
+            GuardDecision(ENERGY_BITS, rise_parts=ENERGY_BITS + 1)
         gc.collect()
 
 

@@ -33,11 +33,12 @@ RUNS = {
 INIT = {"momentum-barrier": "pca"}
 
 # The guarded step (the momentum dynamics' default) from a Tutte layout squeezed across: steps are clipped
-# by the certificate and one is rolled back; without the barrier and squeezed further, nodes are also
-# held still (frozen) and the forces saturate, through the registered bank select's latencies.
+# by the certificate and one is rolled back, through the registered bank select's latencies and the guard
+# decision's rise in parts; without the barrier and squeezed further, nodes are also held still (frozen)
+# and the forces saturate.
 GUARDED = {
-    "clipped-and-rolled-back": (0.05, FlattenParams(dynamics="momentum", max_iter=12), False),
-    "frozen-and-saturating": (0.02, FlattenParams(dynamics="momentum", barrier=False, max_iter=12), True),
+    "clipped-and-rolled-back": (0.05, FlattenParams(dynamics="momentum", max_iter=12), True),
+    "frozen-and-saturating": (0.02, FlattenParams(dynamics="momentum", barrier=False, max_iter=12), False),
 }
 
 
