@@ -35,7 +35,8 @@ PRESETS: tuple[str, ...] = tuple(FormatSet.presets())
 #: longest first. ``make test`` hands whole files to its workers in collection order (``--dist loadfile
 #: --no-loadscope-reorder``; pytest-xdist's default order, most tests first, started these last and left
 #: one worker alone with them at the end); started first, the short files fill in around them.
-LONGEST_FIRST = ("sim/test_cocotb.py", "sim/test_engine_rtl.py", "hdl/test_engine.py", "hdl/test_engine_guard.py",
+LONGEST_FIRST = ("sim/test_cocotb.py", "sim/test_engine_rtl.py", "hdl/test_engine.py", "hdl/test_engine_lanes.py",
+                 "hdl/test_engine_guard.py",
                  "sim/test_synth.py", "hdl/test_engine_saturation.py", "hdl/test_hdl_block_ram.py")
 
 
