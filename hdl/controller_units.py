@@ -27,6 +27,7 @@ from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
 from golden_model.fixed.measures import energy_shifts
 from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS, energy_check_width
 
+from .dsp import kept_register
 from .fixedpoint import FormatSetNotBuildable, clamp, shape_of, shift_round
 from .layouts import energy_result_layout, energy_sums_layout, normalise_layout, saturations_shape
 from .parameters import check_int
@@ -209,6 +210,11 @@ class EnergyCheck(wiring.Component):
         The most neighbour entries of a pass: the sums' widths (:func:`~hdl.layouts.energy_sums_layout`)
         hold ``capacity·max(e)²`` and ``capacity·max(c)·max(h)``, and ``energy_bits`` holds
         the largest ``E`` of sums of those widths with the largest ``½C``.
+    load_copy : bool
+        ``ε·E_prev``'s register loaded with ``E_prev`` by a copy of the energy phase's flag of its own
+        (a ``kept_register`` loaded as the flag is, so equal to it in every clock), placed by that
+        register's shift-add loop rather than by the flag's other loads (the engine's builds above
+        ``DEFAULT_CAPACITY``; ``docs/synthesis.md``). No clock changes.
 
     Members
     -------
@@ -234,10 +240,12 @@ class EnergyCheck(wiring.Component):
     registers. The adders are as wide as ``3·½C``, ``ε``, and (one clock each) ``E``.
     """
 
-    def __init__(self, fs: FormatSet | str, entries_capacity: int):
+    def __init__(self, fs: FormatSet | str, entries_capacity: int, *, load_copy: bool = False):
         fs = _check_fs("EnergyCheck", fs)
         check_int("entries_capacity", entries_capacity)
-        self.fs = fs
+        if not isinstance(load_copy, bool):
+            raise TypeError(f"load_copy must be a bool, not {load_copy!r}")
+        self.fs, self.load_copy = fs, load_copy
         self.entries_capacity = entries_capacity
         sums = energy_sums_layout(fs, entries_capacity)
         self.square_bits = sums["square_sum"].shape.width
@@ -321,9 +329,18 @@ class EnergyCheck(wiring.Component):
             m.d.sync += [in_springs.eq(0), in_product.eq(1), counting.eq(0)]
         with m.If(in_product):  # ``product`` takes the last step's result at this clock's edge
             m.d.sync += [in_product.eq(0), in_energy.eq(1)]
-        with m.If(in_energy):
-            m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits),
-                         last.eq(self.energy_bits == 1), in_energy.eq(0), in_tolerance.eq(1), counting.eq(1)]
+        if self.load_copy:
+            # in_energy is in_product a clock later (each a one-clock pulse, both cleared by the reset)
+            load_allowed = kept_register(m, in_product, name="load_allowed", platform=platform, reset=True)
+            with m.If(in_energy):
+                m.d.sync += [energy.eq(total), steps.eq(self.energy_bits), last.eq(self.energy_bits == 1),
+                             in_energy.eq(0), in_tolerance.eq(1), counting.eq(1)]
+            with m.If(load_allowed):
+                m.d.sync += allowed.eq(previous)
+        else:
+            with m.If(in_energy):
+                m.d.sync += [energy.eq(total), allowed.eq(previous), steps.eq(self.energy_bits),
+                             last.eq(self.energy_bits == 1), in_energy.eq(0), in_tolerance.eq(1), counting.eq(1)]
         with m.If(in_tolerance):
             # the step count (energy_bits ≥ 2 clocks) leaves time for the difference, then its
             # magnitude: each a carry chain as wide as E, one per clock

@@ -92,7 +92,8 @@ class PhaseController(wiring.Component):
         placed by the units they drive across the device, are set from registers through no more than
         a LUT or two (the engine's builds above ``DEFAULT_CAPACITY``; ``docs/synthesis.md``). The guard
         decision's rise is then compared in :data:`~hdl.guard_decision.SPLIT_RISE_PARTS` parts and joined
-        a clock later (a clock more per guarded iteration).
+        a clock later (a clock more per guarded iteration), and the energy check loads ``ε·E_prev`` from a
+        copy of its energy phase's flag (``EnergyCheck(load_copy=True)``).
     control_copies : bool
         ABORT's register copied, each copy loaded from the same pulse (so equal to it in every clock):
         one for the transitions that wait on the guard's passes, one for those that wait on a pass's
@@ -215,7 +216,7 @@ class PhaseController(wiring.Component):
         units = {
             "norm_length": Normaliser(fs, saturations=True),
             "norm_area": Normaliser(fs, saturations=True),
-            "energy_check": EnergyCheck(fs, cap.entries),
+            "energy_check": EnergyCheck(fs, cap.entries, load_copy=self.registered_verdict),
             # k counts iterations since the last restart, so it never exceeds ITERATIONS: as wide, it never wraps
             "beta": BetaDivider(fs, k_bits=ITERATION_BITS),
             "stepgen": StepGenerator(fs, saturations=True),
