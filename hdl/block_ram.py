@@ -67,10 +67,12 @@ class BlockRam(wiring.Component):
     spread over the device crosses it, where a copy per block RAM can sit between the source and
     its block RAM. In generic RTL one register per port.
 
-    ``registered_select``: the word read passes two more registers, :attr:`latency` two clocks more. In the
-    ECP5 form with several banks these hold the bank select: each bank's word kept, or zeroed where it
-    is not the bank addressed, in a register beside the bank, then the banks' words ORed into a
-    register, so that no logic sits between a bank's output register and a route across the device
+    ``registered_select``: the word read passes three more registers, :attr:`latency` three clocks more. In
+    the ECP5 form with several banks these hold the bank select: each block RAM's slice of the word relayed
+    through a register (which the placer can put beside that block RAM), then kept, or zeroed where it is
+    not the bank addressed, under a copy of the bank's flag per block RAM, then the banks' words ORed into
+    a register, so that no logic sits between a bank's output register and a route across the device,
+    and no route from a block RAM to a register placed by the others takes a whole period
     (``docs/synthesis.md``); with one bank, and in generic RTL, they only delay the word.
 
     ``name`` prefixes the ``DP16KD`` instances of the ECP5 form (``{name}_r{k}_{slice}``).
@@ -81,8 +83,8 @@ class BlockRam(wiring.Component):
     #: Clocks from a read port's ``addr`` to its ``data``: the address registered in the block RAM,
     #: then its data in the output register.
     LATENCY = 2
-    #: Clocks ``registered_select`` adds: the banks' words kept or zeroed, then ORed.
-    SELECT_STAGES = 2
+    #: Clocks ``registered_select`` adds: the block RAMs' words relayed, kept or zeroed, then ORed.
+    SELECT_STAGES = 3
 
     def __init__(self, shape, depth: int, *, read_ports: int = 1, name: str = "ram", pin_registers: bool = False,
                  registered_select: bool = False, shared_write_port: bool = False):
@@ -223,16 +225,21 @@ class BlockRam(wiring.Component):
         # the bank of the word in the output registers: the address's high bits, carried to the clock
         # of the banks' data (the address registered, in the pin registers, then read)
         to_data = self.LATENCY + self.pin_registers
-        if self.registered_select:  # one flag per bank, the kept words ORed
+        if self.registered_select:  # the relays; one flag per bank, copied per block RAM; the kept words ORed
+            slice_width = dp16kd_banks(self.depth, width)[0]
             flags = [[Signal(name=f"r{k}_bank{b}_q{n}") for n in range(1, to_data + 1)] for b in range(banks)]
             kept = [Signal(width, reset_less=True, name=f"r{k}_bank{b}_kept") for b in range(banks)]
             for b in range(banks):
                 m.d.sync += [flags[b][0].eq(port.addr[address_bits:] == b),
                              *(flags[b][n].eq(flags[b][n - 1]) for n in range(1, to_data))]
-                with m.If(flags[b][-1]):
-                    m.d.sync += kept[b].eq(bank_data[b])
-                with m.Else():
-                    m.d.sync += kept[b].eq(0)
+                relay = Signal(width, reset_less=True, name=f"r{k}_bank{b}_relay")
+                m.d.sync += relay.eq(bank_data[b])
+                for s, lo in enumerate(range(0, width, slice_width)):
+                    bits = slice(lo, lo + slice_width)
+                    with m.If(kept_register(m, flags[b][-1], name=f"r{k}_bank{b}_s{s}_kept_flag", platform=ECP5)):
+                        m.d.sync += kept[b][bits].eq(relay[bits])
+                    with m.Else():
+                        m.d.sync += kept[b][bits].eq(0)
             selected = Signal(width, reset_less=True, name=f"r{k}_selected")
             m.d.sync += selected.eq(or_tree(kept))
             m.d.comb += read_data.eq(selected)

@@ -93,7 +93,7 @@ class MemoryWindows(wiring.Component):
     registered_select : bool
         The node and triangle memories as the entry memory: every block RAM input in a register of its
         own (:class:`BlockRam`'s ``pin_registers``: a write lands a clock later) and the read data through
-        its ``registered_select``; :attr:`read_latency` is three clocks more. The entry memory's bank flag
+        its ``registered_select``; :attr:`read_latency` is four clocks more. The entry memory's bank flag
         is then a copy per block RAM (:meth:`_entry_read`; ``entry_bank_depth`` one ``DP16KD`` deep).
     pin_registers : bool
         The node and triangle memories' pin registers alone (implied by ``registered_select``): a write
@@ -120,7 +120,7 @@ class MemoryWindows(wiring.Component):
         The passes' read data: ``entry`` (the addressed bank's word, a register)
         :attr:`entry_latency` (six, seven with ``registered_select``) clocks after the entry address is in
         ``ent_addr``, every other
-        port :attr:`read_latency` (two, three with ``pin_registers``, five with ``registered_select``) clocks
+        port :attr:`read_latency` (two, three with ``pin_registers``, six with ``registered_select``) clocks
         after its address register.
     force_write : ``In(write_signature(...))``
         The force pass's per-node results: written to the force memory (not on the bus).

@@ -30,12 +30,12 @@ pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: secon
 # select's groups of four), the first in one.
 # The node and triangle memories' reads: in the first run straight from the block RAMs (two clocks, the
 # default), in the second through the pin registers alone (three, a build option), in the third also
-# through the registered bank select (five), which the engine takes at capacities whose node memories
+# through the registered bank select (six), which the engine takes at capacities whose node memories
 # need several block RAM banks; the third also with the datapaths' delay lines (a build option).
 @pytest.mark.parametrize("run, bank_depth, registered_select, pin_registers, latency", [
     ("paper-variable", 256, False, None, 2),
     ("paper-fixed-barrier-damped", 8, False, True, 3),
-    ("momentum-barrier", 8, True, None, 5)])
+    ("momentum-barrier", 8, True, None, 6)])
 def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, pin_registers, latency):
     image = image_of(RUNS[run], init=INIT.get(run, "tutte"))
     expected = run_image(image, FS)

@@ -15,7 +15,7 @@ from amaranth.back import verilog
 from amaranth.hdl import Shape, unsigned
 from amaranth.lib import data
 
-from hdl.block_ram import BlockRam
+from hdl.block_ram import BlockRam, dp16kd_banks
 from hdl.dsp import ECP5
 
 from support import refused_components
@@ -42,8 +42,9 @@ def test_block_ram_with_pin_registers_reads_three_clocks_after_the_address(tmp_p
 @pytest.mark.parametrize("platform", [None, ECP5], ids=["generic", "ecp5"])
 @pytest.mark.parametrize("shape, depth, pin_registers", [(unsigned(40), 600, False), (unsigned(52), 3072, False),
                                                          (unsigned(40), 3000, True)])  # the last two in banks
-def test_block_ram_with_registered_select_reads_two_clocks_later(tmp_path, platform, shape, depth, pin_registers):
-    """The bank select (or, with one bank, the word) in two registers more: the read answers two clocks later."""
+def test_block_ram_with_registered_select_reads_three_clocks_later(tmp_path, platform, shape, depth, pin_registers):
+    """The relays and the bank select (or, with one bank, the word) in three registers more: the read answers
+    three clocks later."""
     check_block_ram(tmp_path, platform, shape, depth, pin_registers=pin_registers, registered_select=True)
 
 
@@ -51,13 +52,14 @@ def check_block_ram(tmp_path, platform, shape, depth, *, pin_registers, register
     os.environ["AMARANTH_USE_YOSYS"] = "builtin"
     ram = BlockRam(shape, depth, read_ports=2, name="mem", pin_registers=pin_registers,
                    registered_select=registered_select)
-    assert ram.latency == BlockRam.LATENCY + pin_registers + 2 * registered_select
+    assert ram.latency == BlockRam.LATENCY + pin_registers + 3 * registered_select
     width = Shape.cast(shape).width
     abits = len(ram.write.addr)
     (tmp_path / "ram.v").write_text(verilog.convert(ram, name="ram", platform=platform))
     source = (tmp_path / "ram.v").read_text()
     assert ("DP16KD" in source and '"OUTREG"' in source) == (platform is ECP5)
-    assert ("TRELLIS_FF" in source) == (platform is ECP5 and pin_registers)
+    banks = dp16kd_banks(depth, width)[2]  # the registered select's kept flag copies are TRELLIS_FFs too
+    assert ("TRELLIS_FF" in source) == (platform is ECP5 and (pin_registers or (registered_select and banks > 1)))
     rng = np.random.default_rng(depth + width)
     we, waddr, wdata, raddr = random_ram_traffic(rng, depth, width, 2500)
     want = ram_reads(we, waddr, wdata, raddr, depth, ram.latency - 1)
@@ -134,8 +136,6 @@ def test_block_ram_refuses_bad_parameters():
 
 
 def test_dp16kd_banks_takes_the_fewest_block_rams():
-    from hdl.block_ram import dp16kd_banks
-
     assert dp16kd_banks(1024, 66) == (18, 1024, 1)  # 4 block RAMs
     assert dp16kd_banks(3072, 66) == (18, 1024, 3)  # 12, where one 4K x 4 bank takes 17
     assert dp16kd_banks(6144, 65) == (9, 2048, 3)  # 24, tied with 6 banks of 1K x 18: fewer banks
