@@ -70,33 +70,56 @@ NODE_FIELDS = {"position_x": ("positions", "x"), "position_y": ("positions", "y"
                "inv_mass": ("weights", "inv_mass"), "inv_mass_barrier": ("weights", "inv_mass_barrier")}
 
 
-def preload(ctx, windows, image, memories=None) -> None:
-    """Write ``image``'s rows of ``memories`` (default: all of :meth:`EngineImage.memories`) into the block RAMs
-    of ``windows`` (a testbench's ``ctx``), as the bus windows' write-back writes them: a node row's fields
-    (unpacked with ``node_word_layout`` of the windows' format set) into the position, velocity and weight
-    memories' words (:data:`NODE_FIELDS`), an entry or triangle row whole, its bus words side by side, the
-    first the lowest; the entries in banks of ``windows.entry_bank_depth`` rows."""
-    rams = windows.rams
+def preload_words(windows, image, memories=None) -> dict[str, dict[int, int]]:
+    """The words that writing ``image``'s rows of ``memories`` (default: all of :meth:`EngineImage.memories`) into
+    the block RAMs of ``windows`` puts there, ``{block RAM: {address: word}}``, as the bus windows' write-back
+    writes them: a node row's fields (unpacked with ``node_word_layout`` of the windows' format set) into the
+    position, velocity and weight memories' words (:data:`NODE_FIELDS`), an entry or triangle row whole, its
+    bus words side by side, the first the lowest. Each row at its window index (:meth:`EngineImage.rows`): the
+    entries in banks of ``windows.entry_bank_depth`` rows (with K > 1 lanes, lane ``l``'s share in banks of its
+    own, ``lane<l>_entries<b>``), and with lanes a node or triangle's row in bank ``index mod K`` at
+    ``index // K``."""
+    rams, lanes = windows.rams, windows.lanes
     rows = image.memories()
     members_of: dict[str, dict[str, str]] = {}  # memory -> {its word's member: the node field}
     for field, (ram_name, member) in NODE_FIELDS.items():
         members_of.setdefault(ram_name, {})[member] = field
+
+    def banked(ram_name: str, index: int) -> tuple[str, int]:
+        return (f"{ram_name}{index % lanes}", index // lanes) if lanes > 1 else (ram_name, index)
+
+    def entry_bank(index: int) -> tuple[str, int]:
+        if lanes == 1:
+            bank, address = divmod(index, windows.entry_bank_depth)
+            return f"entries{bank}", address
+        lane, local = divmod(index, image.capacity.lane_entries)
+        bank, address = divmod(local, windows.entry_bank_depth)
+        return f"lane{lane}_entries{bank}", address
+
+    words: dict[str, dict[int, int]] = {}
     for name in memories if memories is not None else rows:
+        indices = image.rows(name)
         if name == "nodes":
             fields = node_word_layout(windows.fs, image.capacity).unpack(rows[name])
             for ram_name, members in members_of.items():
-                ram = rams[ram_name]
-                for index in range(len(rows[name])):
-                    word = {member: int(fields[field][index]) for member, field in members.items()}
-                    ctx.set(Value.cast(ram.contents[index]), ram.shape.const(word).as_bits())
+                for k, index in enumerate(indices):
+                    ram, address = banked(ram_name, int(index))
+                    word = {member: int(fields[field][k]) for member, field in members.items()}
+                    words.setdefault(ram, {})[address] = rams[ram].shape.const(word).as_bits()
         else:
-            for index, row_words in enumerate(rows[name]):
+            for index, row_words in zip(indices, rows[name]):
                 row = sum(int(word) << (BUS_WORD_BITS * k) for k, word in enumerate(row_words))
-                if name == "entries":
-                    bank, address = divmod(index, windows.entry_bank_depth)
-                    ctx.set(Value.cast(rams[f"entries{bank}"].contents[address]), row)
-                else:
-                    ctx.set(Value.cast(rams[name].contents[index]), row)
+                ram, address = entry_bank(int(index)) if name == "entries" else banked(name, int(index))
+                words.setdefault(ram, {})[address] = row
+    return words
+
+
+def preload(ctx, windows, image, memories=None) -> None:
+    """Write ``image``'s rows of ``memories`` (default all) into the block RAMs of ``windows`` (a testbench's
+    ``ctx``): the words of :func:`preload_words`."""
+    for ram, words in preload_words(windows, image, memories).items():
+        for address, word in words.items():
+            ctx.set(Value.cast(windows.rams[ram].contents[address]), word)
 
 
 def load_directly(driver, bus, dut: PreloadableEngine, image, memories=None) -> None:
