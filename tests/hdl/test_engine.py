@@ -44,6 +44,7 @@ def test_whole_run_matches_the_golden_model(run, bank_depth, registered_select, 
     assert dut.registered_select is registered_select
     assert dut.pin_registers is (latency > 2)
     result, read_back = run_on_engine(dut, image)
+    assert dut.memory_windows.read_latency == latency
     assert result == expected.status
     assert_same_run(read_back, expected)
     assert read_back.cycles > 0
