@@ -55,7 +55,7 @@ PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
 
 
 def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, stages: int,
-                  left: Signal | None = None) -> list[Signal]:
+                  left: Signal | None = None, valid_fetch=None) -> list[Signal]:
     """A pass's fetch: while ``fetch`` is high, ``index`` counts 0, 1, … up to ``count``, one issued
     per clock. Returns ``valid``: ``valid[k]`` marks the clock whose data belongs to an index issued
     ``k`` clocks ago (``valid[0]``: the index in the memories' address registers).
@@ -64,10 +64,16 @@ def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, sta
     with ``index`` (to ``count − 1``; ``count`` stands still from a restart to the pass's end). The issue
     reads ``left``'s sign bit, a flip-flop (``left ≥ 0`` is ``index < count``; it stops at −1), so no
     compare lies on the route to the counter, which the placer puts by the block RAMs it addresses:
-    ``left``'s decrement is a carry chain from its own flip-flops back into them."""
+    ``left``'s decrement is a carry chain from its own flip-flops back into them.
+
+    ``valid_fetch`` (``None``: ``fetch``): a flag equal to ``fetch`` in every clock, from which ``valid[0]``'s
+    issue is formed, so that the counter's own issue, whose loads are the counter's clock enables, is a
+    LUT of its own beside the counter, not one shared with the valid chain and placed between the two."""
     valid = [Signal(name=f"{valid_prefix}{k}_valid") for k in range(stages)]
-    issue = fetch & ((index < count) if left is None else ~left[-1])
-    m.d.sync += [valid[0].eq(issue), *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
+    more = (index < count) if left is None else ~left[-1]
+    issue = fetch & more
+    m.d.sync += [valid[0].eq(issue if valid_fetch is None else valid_fetch & more),
+                 *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
     with m.If(issue):
         m.d.sync += index.eq(index + 1)
         if left is not None:
@@ -94,7 +100,9 @@ class PassSequencer(wiring.Component):
         bank's size registers, which the guard also reads, are not placed between the two; and its pass
         enable from a copy of its own, loaded from the controller's next value of the flag
         (``fetch_<pass>_next``) and cleared by the reset, so equal to the flag in every clock: the issue
-        is then a LUT beside the counter, not beside the controller's flag across the device.
+        is then a LUT beside the counter, not beside the controller's flag across the device. The valid
+        chain's issue reads a second such copy (:func:`fetch_counter`'s ``valid_fetch``), so that the
+        counter's issue has no load but the counter.
 
     Members
     -------
@@ -239,6 +247,10 @@ class PassSequencer(wiring.Component):
         self._fetch = {name: kept_register(m, getattr(self, f"{name}_next"), name=f"{name}_copy", platform=platform,
                                            reset=True)
                        if self.down_counters else getattr(self, name) for name in FETCH_FLAGS}
+        # and a second copy for each fetch's valid chain (``fetch_counter``'s ``valid_fetch``)
+        self._valid_fetch = {name: kept_register(m, getattr(self, f"{name}_next"), name=f"{name}_valid_copy",
+                                                 platform=platform, reset=True)
+                             if self.down_counters else None for name in FETCH_FLAGS}
         e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
@@ -271,7 +283,8 @@ class PassSequencer(wiring.Component):
     def _force_pass(self, m: Module, r: dict[str, Signal], platform):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
         e_valid = fetch_counter(m, r["entry_index"], self._fetch["fetch_force"], self._sizes["entries"], "e",
-                                self.force_fetch_latency + 1, self._left.get("entry_index"))
+                                self.force_fetch_latency + 1, self._left.get("entry_index"),
+                                self._valid_fetch["fetch_force"])
         entry_shape = self.entry.shape()
         ent_data = self.entry  # the addressed entry, at entry_latency
         next_first = Signal(name="next_first")
@@ -324,8 +337,10 @@ class PassSequencer(wiring.Component):
         # the guard's triangle passes issue every other clock (the certificate's interval of 2)
         alternate = Signal(name="tri_alternate")
         m.d.sync += alternate.eq(~alternate & self.half_rate)
+        valid_fetch = self._valid_fetch["fetch_area"]
         t_valid = fetch_counter(m, r["tri_index"], self._fetch["fetch_area"] & ~alternate, self._sizes["triangles"],
-                                "t", self.area_fetch_latency + 1, self._left.get("tri_index"))
+                                "t", self.area_fetch_latency + 1, self._left.get("tri_index"),
+                                None if valid_fetch is None else valid_fetch & ~alternate)
         # the triangle's area and corners, landed with it, carried beside its corners' read
         area, corners = self.triangle.area, [self.triangle.a, self.triangle.b, self.triangle.c]
         for k in range(self.read_latency + 1, self.area_fetch_latency + 1):
@@ -345,7 +360,8 @@ class PassSequencer(wiring.Component):
     def _integrate_pass(self, m: Module, r: dict[str, Signal]):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
         n_valid = fetch_counter(m, r["node_index"], self._fetch["fetch_nodes"], self._sizes["vertices"], "n",
-                                self.node_fetch_latency + 1, self._left.get("node_index"))
+                                self.node_fetch_latency + 1, self._left.get("node_index"),
+                                self._valid_fetch["fetch_nodes"])
         node = self.node_out.payload
         landed = n_valid[self.node_fetch_latency]
         m.d.comb += [  # landed at N2

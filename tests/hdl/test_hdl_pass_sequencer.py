@@ -4,12 +4,16 @@ with and without them, fed the same random inputs (fetch enables, phases, the gu
 the one with them also each enable's next value, as the controller gives it) answer the same in every clock: addresses, the units' valid bits, the passes' ends and ``passes_idle``. The whole
 runs through the large builds: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
 
+import re
+
 import numpy as np
 import pytest
+from amaranth.back import rtlil
 from amaranth.hdl import ClockDomain, Module
 from amaranth.sim import Simulator
 
 from golden_model.engine_spec.register_map import RegisterMap
+from hdl.dsp import ECP5
 from hdl.pass_sequencer import FETCH_FLAGS, PassSequencer
 from support.engine_sim import CAPACITY, FS
 
@@ -89,3 +93,22 @@ def test_the_down_counters_change_no_clock(seed):
     sim.add_testbench(bench)
     sim.run()
     assert seen["issued"] > 1000 and seen["ends"] > 50, seen  # the passes ran, and ended
+
+
+def test_each_fetch_has_two_kept_copies_of_its_enable_in_the_ecp5_form():
+    """``down_counters``: in the ECP5 form each pass enable has two kept flip-flops cleared by the reset, one the
+    counter's issue reads (``<flag>_copy``) and one the valid chain's (``<flag>_valid_copy``), which Yosys cannot
+    merge into one issue LUT placed between the counter and the chain; neither without ``down_counters``."""
+    register_map = RegisterMap.build(FS, CAPACITY)
+    for down_counters in (False, True):
+        seq = PassSequencer(FS, register_map, down_counters=down_counters)
+        ports = [*(getattr(seq, name) for name in ("entry_index", "tri_index", "node_index", *FETCH_FLAGS)),
+                 *(getattr(seq, unit).valid for unit in UNITS),
+                 *(getattr(seq, f"{flag}_next") for flag in FETCH_FLAGS if down_counters)]
+        text = rtlil.convert(seq, platform=ECP5, ports=ports)
+        kept = dict(re.findall(r"^\s*cell \\TRELLIS_FF \\(fetch_\w+?)_ff0\n((?:\s+(?:parameter|connect|attribute) .*\n)+)",
+                               text, re.M))
+        expected = {f"{flag}{kind}" for flag in FETCH_FLAGS for kind in ("_copy", "_valid_copy")}
+        assert set(kept) == (expected if down_counters else set())
+        for name, body in kept.items():
+            assert re.search(r"connect \\LSR \\rst", body) and "LSR_OVER_CE" in body, name
