@@ -48,7 +48,7 @@ from .logic import or_tree
 from .parameters import check_int
 from .rom import DP16KD_ADDRESS_PINS, DP16KD_CONFIGS, DP16KD_DATA_PINS, dp16kd, dp16kd_port
 
-__all__ = ["BlockRam", "dp16kd_banks"]
+__all__ = ["BlockRam", "dp16kd_banks", "kept_per_slice"]
 
 
 class BlockRam(wiring.Component):
@@ -234,12 +234,8 @@ class BlockRam(wiring.Component):
                              *(flags[b][n].eq(flags[b][n - 1]) for n in range(1, to_data))]
                 relay = Signal(width, reset_less=True, name=f"r{k}_bank{b}_relay")
                 m.d.sync += relay.eq(bank_data[b])
-                for s, lo in enumerate(range(0, width, slice_width)):
-                    bits = slice(lo, lo + slice_width)
-                    with m.If(kept_register(m, flags[b][-1], name=f"r{k}_bank{b}_s{s}_kept_flag", platform=ECP5)):
-                        m.d.sync += kept[b][bits].eq(relay[bits])
-                    with m.Else():
-                        m.d.sync += kept[b][bits].eq(0)
+                kept_per_slice(m, flags[b][-1], relay, kept[b], slice_width, name=f"r{k}_bank{b}_kept_flag",
+                               platform=ECP5)
             selected = Signal(width, reset_less=True, name=f"r{k}_selected")
             m.d.sync += selected.eq(or_tree(kept))
             m.d.comb += read_data.eq(selected)
@@ -250,6 +246,20 @@ class BlockRam(wiring.Component):
             for b in range(banks):
                 with m.Case(b):
                     m.d.comb += read_data.eq(bank_data[b])
+
+
+def kept_per_slice(m: Module, before_last, data: Value, kept: Value, slice_width: int, *, name: str,
+                   platform) -> None:
+    """``kept`` loaded with ``data``, or zeroed, each ``slice_width``-bit slice (a ``DP16KD``'s share of the
+    word) under a select flag of its own: ``before_last`` registered once per slice (``{name}_s<slice>``,
+    :func:`~hdl.dsp.kept_register`, kept distinct from its copies), so that each slice's flag can sit by the
+    block RAM whose word it selects."""
+    for s, lo in enumerate(range(0, len(data), slice_width)):
+        bits = slice(lo, lo + slice_width)
+        with m.If(kept_register(m, before_last, name=f"{name}_s{s}", platform=platform)):
+            m.d.sync += kept[bits].eq(data[bits])
+        with m.Else():
+            m.d.sync += kept[bits].eq(0)
 
 
 def dp16kd_banks(depth: int, width: int) -> tuple[int, int, int]:

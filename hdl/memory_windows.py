@@ -11,7 +11,7 @@ from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import BUS_WORD_BITS, EngineCapacity, memory_layouts
 from golden_model.engine_spec.register_map import RegisterMap
 
-from .block_ram import BlockRam, dp16kd_banks
+from .block_ram import BlockRam, dp16kd_banks, kept_per_slice
 from .dsp import kept_register
 from .layouts import force_word_layout, vector_layout, weight_word_layout, word_layout
 from .logic import or_tree
@@ -364,16 +364,11 @@ class MemoryWindows(wiring.Component):
     @staticmethod
     def _kept_per_block_ram(m: Module, bank: BlockRam, before_last, data: Value, kept: Value, platform, *,
                             name: str) -> None:
-        """``kept``, each block RAM's slice of it under a select flag of its own: ``before_last`` registered
-        once per ``DP16KD`` slice (:func:`~hdl.block_ram.dp16kd_banks`), kept distinct from its copies."""
+        """``kept``, each block RAM's slice of it under a select flag of its own (:func:`~hdl.block_ram.kept_per_slice`,
+        the slices of :func:`~hdl.block_ram.dp16kd_banks`)."""
         slice_width, _, inner_banks = dp16kd_banks(bank.depth, len(data))
         assert inner_banks == 1, "an entry bank is one DP16KD deep (checked in __init__)"
-        for s, lo in enumerate(range(0, len(data), slice_width)):
-            bits = slice(lo, lo + slice_width)
-            with m.If(kept_register(m, before_last, name=f"{name}_s{s}", platform=platform)):
-                m.d.sync += kept[bits].eq(data[bits])
-            with m.Else():
-                m.d.sync += kept[bits].eq(0)
+        kept_per_slice(m, before_last, data, kept, slice_width, name=name, platform=platform)
 
     def _decode(self, m: Module):
         """The request's window, index and word, registered at DEC (``n_windows``: none)."""
