@@ -72,7 +72,8 @@ class SpringflatEngine(wiring.Component):
         the check phase a clock longer, its verdict from registers
         (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ABORT's register and
         ``running`` copied for groups of their loads (its ``control_copies``; the read addresses' copies of
-        ``running`` in the memories); ``None``: where the node memories take
+        ``running`` in the memories); the guard certificate's output valid from a flip-flop
+        (:class:`~hdl.guard_passes.GuardPasses`' ``registered_valid``); ``None``: where the node memories take
         several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
         ``default``). A test passes ``True`` to run those latencies at a small capacity.
     pin_registers : bool or None
@@ -195,7 +196,8 @@ class SpringflatEngine(wiring.Component):
         m.submodules.area = area = AreaError(fs)
         m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines,
                                                           shift_copy=self.registered_select)
-        guard = GuardPasses(fs, cap, read_latency=memories.read_latency) if cap.guard else None
+        guard = GuardPasses(fs, cap, read_latency=memories.read_latency,
+                            registered_valid=self.registered_select) if cap.guard else None
         if guard is not None:
             m.submodules.guard = guard
         # SATURATIONS' sources, in the order they are summed in pairs

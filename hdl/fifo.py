@@ -14,7 +14,7 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from .dsp import dsp_target
+from .dsp import dsp_target, kept_register
 from .parameters import check_int, check_power_of_two
 
 __all__ = ["LutFIFO", "SlicedFIFO"]
@@ -34,12 +34,22 @@ class LutFIFO(Elaboratable):
     reset value: FIFOs that split one wide queue into column slices get different starts, so
     that synthesis cannot merge their pointer registers and each pointer drives only its own
     slice's RAM cells.
+
+    ``registered_ready``: ``r_rdy`` is a flip-flop (:func:`~hdl.dsp.kept_register`, cleared by the reset)
+    loaded with the pointers' next values' inequality, equal in every clock to the plain form's
+    ``produce != consume``. Its loads then start at a register, not at the compare's LUTs, for a FIFO
+    whose ``r_rdy`` is routed across the device (the guard certificate's results, whose valid steps a
+    pass's counter by the controller).
     """
 
-    def __init__(self, *, width: int, depth: int, checked: bool = True, start: int = 0):
+    def __init__(self, *, width: int, depth: int, checked: bool = True, start: int = 0,
+                 registered_ready: bool = False):
         check_int("LutFIFO width", width)
         check_power_of_two("LutFIFO depth", depth)
+        if not isinstance(registered_ready, bool):
+            raise TypeError(f"registered_ready must be a bool, not {registered_ready!r}")
         self.width, self.depth, self.checked, self.start = width, depth, checked, start % depth
+        self.registered_ready = registered_ready
         self.w_data = Signal(width)
         self.w_en = Signal()
         self.w_rdy = Signal()
@@ -58,13 +68,18 @@ class LutFIFO(Elaboratable):
         bits = (self.depth - 1).bit_length()
         produce = Signal(bits + 1, init=self.start)  # the top bit counts wraps
         consume = Signal(bits + 1, init=self.start)
+        if not self.registered_ready:
+            m.d.comb += self.r_rdy.eq(produce != consume)
         m.d.comb += [
-            self.r_rdy.eq(produce != consume),
             self.w_rdy.eq(produce != (consume ^ (1 << bits))),
             self.level.eq((produce - consume)[:bits + 1]),
         ]
         do_write = self.w_en & self.w_rdy if self.checked else self.w_en
         do_read = self.r_en & self.r_rdy if self.checked else self.r_en
+        if self.registered_ready:  # the pointers' next values compared into the flag (both start equal: 0)
+            after_write, after_read = (produce + do_write)[:bits + 1], (consume + do_read)[:bits + 1]
+            m.d.comb += self.r_rdy.eq(kept_register(m, after_write != after_read, name="r_rdy_q",
+                                                    platform=platform, reset=True))
         m.d.comb += [
             write.addr.eq(produce[:bits]), write.data.eq(self.w_data), write.en.eq(do_write),
             read.addr.eq(consume[:bits]), self.r_data.eq(read.data),

@@ -54,6 +54,10 @@ class GuardCertificate(wiring.Component):
         The initiation interval, 1 or 2: clocks per triangle at most. At 2 each multiplier forms one
         product of a cross product in the triangle's clock and the other in the clock after, so the
         unit takes half the DSP blocks (28 instead of 56 in ``default``), for two more stages.
+    registered_valid : bool
+        ``o.valid`` from a flip-flop of its own (the result FIFO's ``registered_ready``), the same in every
+        clock: for a build whose ``o.valid`` is routed across the device (the engine above
+        ``DEFAULT_CAPACITY``: :class:`~hdl.guard_passes.GuardPasses`).
 
     Members
     -------
@@ -90,9 +94,11 @@ class GuardCertificate(wiring.Component):
     safe one. Each stage does one add (a carry chain) of every value it forms.
     """
 
-    def __init__(self, fs: FormatSet | str, *, interval: int = 1):
+    def __init__(self, fs: FormatSet | str, *, interval: int = 1, registered_valid: bool = False):
         if interval not in (1, 2) or isinstance(interval, bool):
             raise ValueError(f"interval must be 1 or 2, not {interval!r}")
+        if not isinstance(registered_valid, bool):
+            raise TypeError(f"registered_valid must be a bool, not {registered_valid!r}")
         if isinstance(fs, str):
             fs = FormatSet.preset(fs)
         if not isinstance(fs, FormatSet):
@@ -101,7 +107,7 @@ class GuardCertificate(wiring.Component):
             raise FormatSetNotBuildable(
                 f"the certificate needs position {fs.position}, velocity {fs.velocity} and face_edge "
                 f"{fs.face_edge} to share their fraction bits")
-        self.fs, self.interval = fs, interval
+        self.fs, self.interval, self.registered_valid = fs, interval, registered_valid
         self.latency = self.latency_of(fs, interval)
         #: Triangles that may be owed at once: the result FIFO's depth (a power of two above the latency).
         self.credits = 1 << (self.latency + 1).bit_length()
@@ -256,7 +262,8 @@ class GuardCertificate(wiring.Component):
         s = stage("level", level=level, stuck=s["stuck"])
         result = Signal(certificate_result_layout())
         m.d.comb += [result.level.eq(s["level"]), result.stuck.eq(s["stuck"])]
-        m.submodules.results = results = LutFIFO(width=len(result.as_value()), depth=self.credits)
+        m.submodules.results = results = LutFIFO(width=len(result.as_value()), depth=self.credits,
+                                                     registered_ready=self.registered_valid)
         m.d.comb += [results.w_data.eq(result), results.w_en.eq(pipe.valid),
                      self.o.payload.eq(results.r_data), self.o.valid.eq(results.r_rdy),
                      results.r_en.eq(self.o.ready)]

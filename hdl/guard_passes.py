@@ -58,6 +58,11 @@ class GuardPasses(wiring.Component):
         a clock before those registers, from ``node_index``, and answer
         :attr:`LevelScatter.LOOKUP_LATENCY <hdl.level_scatter.LevelScatter.LOOKUP_LATENCY>` after it:
         their levels are delayed by the difference.
+    registered_valid : bool
+        The certificate's ``o.valid`` from a flip-flop of its own
+        (:class:`~hdl.guard_certificate.GuardCertificate`'s ``registered_valid``), the same in every clock:
+        it steps the triangle count, whose end flag sits by the controller across the device from the
+        certificate. The engine builds it with the registered select (above ``DEFAULT_CAPACITY``).
 
     Members
     -------
@@ -81,12 +86,16 @@ class GuardPasses(wiring.Component):
         scatter and no node in the commit (an aborted run drains until then).
     """
 
-    def __init__(self, fs: FormatSet, capacity: EngineCapacity, *, read_latency: int = BlockRam.LATENCY):
+    def __init__(self, fs: FormatSet, capacity: EngineCapacity, *, read_latency: int = BlockRam.LATENCY,
+                 registered_valid: bool = False):
         if not isinstance(fs, FormatSet) or not isinstance(capacity, EngineCapacity):
             raise TypeError(f"GuardPasses needs a FormatSet and an EngineCapacity, not {fs!r}, {capacity!r}")
         shortest = LevelScatter.LOOKUP_LATENCY - 1
         check_int("read_latency", read_latency, shortest)
+        if not isinstance(registered_valid, bool):
+            raise TypeError(f"registered_valid must be a bool, not {registered_valid!r}")
         self.fs, self.capacity, self.read_latency = fs, capacity, read_latency
+        self.registered_valid = registered_valid
         nodes = range(capacity.vertices + 1)
         pos, vel = vector_layout(fs.position), vector_layout(fs.velocity)
         super().__init__({
@@ -103,7 +112,7 @@ class GuardPasses(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         fs, cap = self.fs, self.capacity
-        m.submodules.certificate = certificate = GuardCertificate(fs, interval=2)
+        m.submodules.certificate = certificate = GuardCertificate(fs, interval=2, registered_valid=self.registered_valid)
         m.submodules.commit = commit = GuardCommit(fs)
         scatters = [LevelScatter(cap.vertices, name=f"guard_levels_{slot}") for slot in "abc"]
         for slot, scatter in zip("abc", scatters):

@@ -77,8 +77,8 @@ def triangles(fs, n, rng):
 
 
 def run_certificate(fs, corners, moves, areas, winding, *, interval=1, seed=0, p_valid=1.0, p_ready=1.0,
-                    ready_after=0):
-    dut = GuardCertificate(fs, interval=interval)
+                    ready_after=0, registered_valid=False):
+    dut = GuardCertificate(fs, interval=interval, registered_valid=registered_valid)
 
     def setup(ctx):
         ctx.set(dut.winding_negative, int(winding < 0))
@@ -112,25 +112,31 @@ def test_levels_are_the_golden_models_with_gaps_and_back_pressure(preset, windin
                                f"RTL {got_stuck[mismatch[:5]]}, golden {want_stuck[mismatch[:5]]}"
 
 
+@pytest.mark.parametrize("registered_valid", [False, True])
 @pytest.mark.parametrize("interval", [1, 2])
 @pytest.mark.parametrize("preset", PRESETS)
-def test_latency_and_order(preset, interval):
+def test_latency_and_order(preset, interval, registered_valid):
+    """``registered_valid`` (``o.valid`` from a flip-flop) changes no clock."""
     fs = FormatSet.preset(preset)
     corners, moves, areas = triangles(fs, 24, np.random.default_rng(11))
-    dut, run = run_certificate(fs, corners, moves, areas, 1.0, interval=interval)
+    dut, run = run_certificate(fs, corners, moves, areas, 1.0, interval=interval, registered_valid=registered_valid)
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.latency] * len(corners)
     # a triangle offered every clock goes in every ``interval`` clocks
     assert set(np.diff(run.in_cycles)) == {interval}
     assert [list(r) for r in results(run)] == [list(g) for g in golden(fs, corners, moves, areas, 1.0)]
 
 
+@pytest.mark.parametrize("registered_valid", [False, True])
 @pytest.mark.parametrize("interval", [1, 2])
-def test_a_stopped_consumer_takes_every_level_once_the_credits_ran_out(interval):
-    """Nothing is taken for 120 clocks: exactly ``credits`` triangles go in meanwhile, none is lost."""
+def test_a_stopped_consumer_takes_every_level_once_the_credits_ran_out(interval, registered_valid):
+    """Nothing is taken for 120 clocks: exactly ``credits`` triangles go in meanwhile, none is lost; then the
+    levels come one per clock."""
     fs = FormatSet.preset("default")
     corners, moves, areas = triangles(fs, 80, np.random.default_rng(5))
-    dut, run = run_certificate(fs, corners, moves, areas, 1.0, interval=interval, ready_after=120)
+    dut, run = run_certificate(fs, corners, moves, areas, 1.0, interval=interval, ready_after=120,
+                               registered_valid=registered_valid)
     assert sum(cycle < 120 for cycle in run.in_cycles) == dut.credits
+    assert list(np.diff(run.out_cycles[:dut.credits])) == [1] * (dut.credits - 1)
     assert [list(r) for r in results(run)] == [list(g) for g in golden(fs, corners, moves, areas, 1.0)]
 
 
@@ -146,6 +152,8 @@ def test_parameter_validation():
             GuardCertificate(other)
         with pytest.raises(ValueError, match="interval must be 1 or 2, not 3"):
             GuardCertificate(fs, interval=3)
+        with pytest.raises(TypeError, match="registered_valid must be a bool, not 1"):
+            GuardCertificate(fs, registered_valid=1)
         gc.collect()
 
 
