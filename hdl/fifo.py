@@ -36,8 +36,8 @@ class LutFIFO(Elaboratable):
     slice's RAM cells.
 
     ``registered_ready``: ``r_rdy`` is a flip-flop (:func:`~hdl.dsp.kept_register`, cleared by the reset)
-    loaded with the pointers' next values' inequality, equal in every clock to the plain form's
-    ``produce != consume``. Its loads then start at a register, not at the compare's LUTs, for a FIFO
+    loaded with its next value (set by a write, cleared by a read of the last entry), equal in every clock
+    to the plain form's ``produce != consume``; no carry chain lies in front of it. Its loads then start at a register, not at the compare's LUTs, for a FIFO
     whose ``r_rdy`` is routed across the device (the guard certificate's results, whose valid steps a
     pass's counter by the controller).
     """
@@ -76,10 +76,14 @@ class LutFIFO(Elaboratable):
         ]
         do_write = self.w_en & self.w_rdy if self.checked else self.w_en
         do_read = self.r_en & self.r_rdy if self.checked else self.r_en
-        if self.registered_ready:  # the pointers' next values compared into the flag (both start equal: 0)
-            after_write, after_read = (produce + do_write)[:bits + 1], (consume + do_read)[:bits + 1]
-            m.d.comb += self.r_rdy.eq(kept_register(m, after_write != after_read, name="r_rdy_q",
-                                                    platform=platform, reset=True))
+        if self.registered_ready:
+            # ready after this clock: a write, or ready now and not the last entry read (no carry chain: the
+            # last entry is `produce == consume + 1`, from a register that counts one read ahead; reset: empty)
+            ahead = Signal(bits + 1, init=(self.start + 1) % (2 * self.depth))
+            with m.If(do_read):
+                m.d.sync += ahead.eq(ahead + 1)
+            ready_next = do_write | (self.r_rdy & ~(do_read & (produce == ahead)))
+            m.d.comb += self.r_rdy.eq(kept_register(m, ready_next, name="r_rdy_q", platform=platform, reset=True))
         m.d.comb += [
             write.addr.eq(produce[:bits]), write.data.eq(self.w_data), write.en.eq(do_write),
             read.addr.eq(consume[:bits]), self.r_data.eq(read.data),
