@@ -73,7 +73,8 @@ class SpringflatEngine(wiring.Component):
         (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ABORT's register and
         ``running`` copied for groups of their loads (its ``control_copies``; the read addresses' copies of
         ``running`` in the memories); the guard certificate's output valid from a flip-flop
-        (:class:`~hdl.guard_passes.GuardPasses`' ``registered_valid``); ``None``: where the node memories take
+        (:class:`~hdl.guard_passes.GuardPasses`' ``registered_valid``); the bus handshake's state in two
+        flip-flops (:class:`~hdl.wishbone.TargetHandshake`'s ``busy_copy``); ``None``: where the node memories take
         several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
         ``default``). A test passes ``True`` to run those latencies at a small capacity.
     pin_registers : bool or None
@@ -252,7 +253,8 @@ class SpringflatEngine(wiring.Component):
         # (with the registered select the register bank decodes its own copy of the address: the bank and
         # the windows' decode sit apart on the die)
         m.submodules.hs = hs = wishbone.TargetHandshake(addr_width=self.addr_width,
-                                                        address_copy=self.registered_select)
+                                                        address_copy=self.registered_select,
+                                                        busy_copy=self.registered_select)
         copies = UNIT_CONSTANTS + tuple(f.name for f in lane_count_fields(cap))
         m.submodules.registers = registers = RegisterBank(rmap, addr_width=self.addr_width, copies=copies,
                                                           registered_write=self.registered_select)

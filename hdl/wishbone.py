@@ -13,7 +13,7 @@ Classic cycles (Wishbone B4 §3.2): the initiator holds ``cyc``, ``stb``, ``we``
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Signal
+from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -76,11 +76,19 @@ class TargetHandshake(wiring.Component):
         ``address`` in every clock, from a register of its own (kept apart from ``address``'s by
         :func:`~hdl.dsp.kept_register`), so that the placer can put it by the loads of one part of the
         target while ``address`` stays by the others.
+
+    ``busy_copy``: the state (a cycle taken, not yet answered) in two flip-flops loaded with the same next
+    value, the second kept apart by :func:`~hdl.dsp.kept_register`: ``busy`` for its own next value and the
+    answer, the copy for the start of a cycle, whose loads are the request and the address and data
+    registers. The logic of ``busy``'s next value then has no load but the two flip-flops and is placed by
+    ``busy``, not between it and the registers the start loads. No clock changes.
     """
 
-    def __init__(self, *, addr_width: int, address_copy: bool = False):
-        if not isinstance(address_copy, bool):
-            raise TypeError(f"TargetHandshake address_copy must be a bool, not {address_copy!r}")
+    def __init__(self, *, addr_width: int, address_copy: bool = False, busy_copy: bool = False):
+        for flag, value in (("address_copy", address_copy), ("busy_copy", busy_copy)):
+            if not isinstance(value, bool):
+                raise TypeError(f"TargetHandshake {flag} must be a bool, not {value!r}")
+        self.busy_copy = busy_copy
         copy = {"address_copy": Out(addr_width)} if address_copy else {}
         super().__init__({
             "bus": In(Signature(addr_width=addr_width)),
@@ -101,18 +109,26 @@ class TargetHandshake(wiring.Component):
         busy = Signal()  # a cycle has been taken and not yet answered
         # While ack/err is out, the initiator still shows the answered cycle's request: it takes
         # the answer at this clock edge and only then presents its next cycle (or drops stb).
-        start = bus.cyc & bus.stb & ~busy & ~bus.ack & ~bus.err
+        if self.busy_copy:  # busy's next value (as the statements below give it) into busy and its copy
+            busy_next = bus.cyc & Mux(busy, ~self.done, bus.stb & ~bus.ack & ~bus.err)
+            m.d.sync += busy.eq(busy_next)
+            busy_for_start = kept_register(m, busy_next, name="busy_kept", platform=platform, reset=True)
+        else:
+            busy_for_start = busy
+        start = bus.cyc & bus.stb & ~busy_for_start & ~bus.ack & ~bus.err
         m.d.sync += self.request.eq(start)
+        loads = [self.address.eq(bus.adr), self.write.eq(bus.we), self.write_data.eq(bus.dat_w),
+                 self.whole_word.eq(bus.sel.all())]
         with m.If(start):
-            m.d.sync += [busy.eq(1), self.address.eq(bus.adr), self.write.eq(bus.we),
-                         self.write_data.eq(bus.dat_w), self.whole_word.eq(bus.sel.all())]
+            m.d.sync += loads if self.busy_copy else [busy.eq(1), *loads]
         if "address_copy" in self.signature.members:  # loaded and cleared as `address` is
             m.d.comb += self.address_copy.eq(kept_register(m, bus.adr, name="address_kept", platform=platform,
                                                            reset=True, enable=start))
         m.d.sync += [bus.ack.eq(0), bus.err.eq(0)]
+        answer = [bus.ack.eq(bus.cyc & ~self.error), bus.err.eq(bus.cyc & self.error), bus.dat_r.eq(self.data)]
         with m.If(busy & self.done):
-            m.d.sync += [busy.eq(0), bus.ack.eq(bus.cyc & ~self.error),
-                         bus.err.eq(bus.cyc & self.error), bus.dat_r.eq(self.data)]
-        with m.If(~bus.cyc):
-            m.d.sync += busy.eq(0)
+            m.d.sync += answer if self.busy_copy else [busy.eq(0), *answer]
+        if not self.busy_copy:
+            with m.If(~bus.cyc):
+                m.d.sync += busy.eq(0)
         return m

@@ -2,10 +2,11 @@
 
 import gc
 import random
+import re
 import warnings
 
 import pytest
-from amaranth.hdl import Module, Signal, UnusedElaboratable
+from amaranth.hdl import ClockDomain, Module, Signal, UnusedElaboratable
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In
 from amaranth.sim import Simulator
@@ -241,6 +242,60 @@ def test_the_handshake_checks_its_parameter():
         warnings.simplefilter("ignore", UnusedElaboratable)
         with pytest.raises(TypeError, match="address_copy must be a bool"):
             wishbone.TargetHandshake(addr_width=8, address_copy=1)
+        with pytest.raises(TypeError, match="busy_copy must be a bool"):
+            wishbone.TargetHandshake(addr_width=8, busy_copy=1)
         assert "address_copy" not in wishbone.TargetHandshake(addr_width=8).signature.members
         assert "address_copy" in wishbone.TargetHandshake(addr_width=8, address_copy=True).signature.members
         gc.collect()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_busy_copy_changes_no_clock(seed):
+    """Two handshakes, with and without ``busy_copy``, driven with the same random bus lines and target answers
+    in every clock (held requests, dropped cycles, answers at any time, resets): the same request, address,
+    write flags and data, and the same ``ack``, ``err`` and ``dat_r``, in every clock."""
+    m = Module()
+    m.domains.sync = domain = ClockDomain("sync")
+    plain = wishbone.TargetHandshake(addr_width=4)
+    copied = wishbone.TargetHandshake(addr_width=4, busy_copy=True)
+    m.submodules.plain, m.submodules.copied = plain, copied
+    rng = random.Random(seed)
+    outputs = ("request", "address", "write", "write_data", "whole_word")
+    seen = {"requests": 0, "acks": 0, "errs": 0}
+
+    async def bench(ctx):
+        for clock in range(4000):
+            lines = {"cyc": rng.random() < 0.9, "stb": rng.random() < 0.7, "we": rng.random() < 0.5,
+                     "adr": rng.randrange(16), "dat_w": rng.getrandbits(32), "sel": rng.choice([15, 15, 15, 3])}
+            answer = {"done": rng.random() < 0.3, "error": rng.random() < 0.3, "data": rng.getrandbits(32)}
+            for hs in (plain, copied):
+                for name, value in lines.items():
+                    ctx.set(getattr(hs.bus, name), value)
+                for name, value in answer.items():
+                    ctx.set(getattr(hs, name), value)
+            ctx.set(domain.rst, rng.random() < 0.01)
+            got = [[ctx.get(getattr(hs, name)) for name in outputs]
+                   + [ctx.get(getattr(hs.bus, name)) for name in ("ack", "err", "dat_r")] for hs in (plain, copied)]
+            assert got[0] == got[1], (clock, got)
+            seen["requests"] += got[0][0]
+            seen["acks"] += got[0][5]
+            seen["errs"] += got[0][6]
+            await ctx.tick()
+        assert min(seen.values()) > 50, seen
+
+    run(m, bench)
+
+
+def test_the_busy_copy_is_a_kept_flip_flop_cleared_by_the_reset_in_the_ecp5_form():
+    from amaranth.back import rtlil
+
+    from hdl.dsp import ECP5
+
+    for busy_copy in (False, True):
+        hs = wishbone.TargetHandshake(addr_width=4, busy_copy=busy_copy)
+        text = rtlil.convert(hs, platform=ECP5)
+        kept = re.findall(r"^\s*cell \\TRELLIS_FF \\busy_kept_ff0\n((?:\s+(?:parameter|connect|attribute) .*\n)+)",
+                          text, re.M)
+        assert len(kept) == busy_copy
+        for body in kept:
+            assert re.search(r"connect \\LSR \\rst", body) and "LSR_OVER_CE" in body
