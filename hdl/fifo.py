@@ -37,9 +37,9 @@ class LutFIFO(Elaboratable):
 
     ``registered_ready``: ``r_rdy`` is a flip-flop (:func:`~hdl.dsp.kept_register`, cleared by the reset)
     loaded with its next value (set by a write, cleared by a read of the last entry), equal in every clock
-    to the plain form's ``produce != consume``; no carry chain lies in front of it. Its loads then start at a register, not at the compare's LUTs, for a FIFO
-    whose ``r_rdy`` is routed across the device (the guard certificate's results, whose valid steps a
-    pass's counter by the controller).
+    to the plain form's ``produce != consume``, with no carry chain in front of it. Its loads then start at
+    a register, not at the compare's LUTs: for a FIFO whose ``r_rdy`` is routed across the device (the
+    guard certificate's results, whose valid steps a pass's counter by the controller).
     """
 
     def __init__(self, *, width: int, depth: int, checked: bool = True, start: int = 0,

@@ -112,7 +112,8 @@ class GuardPasses(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         fs, cap = self.fs, self.capacity
-        m.submodules.certificate = certificate = GuardCertificate(fs, interval=2, registered_valid=self.registered_valid)
+        m.submodules.certificate = certificate = GuardCertificate(fs, interval=2,
+                                                                  registered_valid=self.registered_valid)
         m.submodules.commit = commit = GuardCommit(fs)
         scatters = [LevelScatter(cap.vertices, name=f"guard_levels_{slot}") for slot in "abc"]
         for slot, scatter in zip("abc", scatters):
