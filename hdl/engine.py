@@ -66,8 +66,9 @@ class SpringflatEngine(wiring.Component):
     registered_select : bool or None
         The node and triangle memories built as the entry memory (pin registers, the bank select in
         registered stages), their reads three clocks longer (:class:`~hdl.memory_windows.MemoryWindows`); the
-        entry memory's bank flag a copy per block RAM; the fetch counters' issues and ends from down-counters
-        (:class:`~hdl.pass_sequencer.PassSequencer`'s ``down_counters``); a register write a clock later,
+        entry memory's bank flag a copy per block RAM; the fetch counters' issues and ends from down-counters,
+        and their pass enables from copies beside them, a clock late (a force, area or integrate pass
+        issues a clock later; :class:`~hdl.pass_sequencer.PassSequencer`'s ``down_counters``); a register write a clock later,
         from a write enable per register (:class:`~hdl.register_bank.RegisterBank`'s ``registered_write``);
         the check phase a clock longer, its verdict from registers
         (:class:`~hdl.phase_controller.PhaseController`'s ``registered_verdict``); ABORT's register and
@@ -192,7 +193,6 @@ class SpringflatEngine(wiring.Component):
                                                                control_copies=self.registered_select)
         if self.registered_select:
             _wire(m, controller, memories, "running_next")
-            _wire(m, controller, sequencer, *(f"{flag}_next" for flag in FETCH_FLAGS))
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True, delay_lines=self.delay_lines)
         m.submodules.area = area = AreaError(fs)
         m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines,

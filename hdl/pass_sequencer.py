@@ -98,20 +98,21 @@ class PassSequencer(wiring.Component):
         (:func:`fetch_counter`'s ``left``: no compare of the counter), which is loaded from a copy of the
         mesh size of its own (a clock late: run constants, written before START), so that the register
         bank's size registers, which the guard also reads, are not placed between the two; and its pass
-        enable from a copy of its own, loaded from the controller's next value of the flag
-        (``fetch_<pass>_next``) and cleared by the reset, so equal to the flag in every clock: the issue
-        is then a LUT beside the counter, not beside the controller's flag across the device. The valid
-        chain's issue reads a second such copy (:func:`fetch_counter`'s ``valid_fetch``), so that the
-        counter's issue has no load but the counter.
+        enable from a copy of its own, loaded from the controller's flag (a clock late) and cleared by the
+        reset. The copy's input is then a route from a flip-flop, with no logic of the controller's in
+        front of it, so the placer puts the copy, and the issue LUT that reads it, by the counter. The
+        valid chain's issue reads a second such copy (:func:`fetch_counter`'s ``valid_fetch``), so that
+        the counter's issue has no load but the counter. A pass then issues a clock after its enable
+        rises, not in that clock, and the sequencer is the one without ``down_counters`` fed its enables a
+        clock late, but for ``passes_idle``, which counts a pass as fetching from its enable's rise: a
+        pass fetching but not issuing yet is never taken for idle. The guard's passes, whose counters
+        restart in their enable's first clock, issue in the clock after it either way.
 
     Members
     -------
     fetch_force, fetch_area, fetch_nodes : ``In(1)``
         The controller's pass enables: while high, the pass issues one item per clock until its
         counter reaches the mesh size (``entries``, ``triangles``, ``vertices``).
-    fetch_force_next, fetch_area_next, fetch_nodes_next : ``In(1)``
-        With ``down_counters`` only: the pass enables' next values
-        (:class:`~hdl.phase_controller.PhaseController`'s, with its ``control_copies``).
     in_start, in_force, in_area, in_step, in_integrate, running, area_clear : ``In(1)``
         The controller's flags: the start phase restarts the force and area passes' counters and
         sums, the step phase the integrate pass's; the pass phases time the passes' ends.
@@ -225,7 +226,6 @@ class PassSequencer(wiring.Component):
             "passes_idle": Out(1),
             **{name: Out(shape) for name, shape in pass_sum_shapes(fs, cap.vertices, cap.entries).items()},
             **{f"{name}_events": Out(w) for name, w in self.event_widths.items()},
-            **({f"{name}_next": In(1) for name in FETCH_FLAGS} if down_counters else {}),
         })
 
     def elaborate(self, platform):
@@ -243,12 +243,11 @@ class PassSequencer(wiring.Component):
         # the mesh sizes the counters read: with down_counters, copies beside the down-counters
         self._sizes = {name: kept_register(m, getattr(self, name), name=f"{name}_size", platform=platform)
                        if self.down_counters else getattr(self, name) for name in FETCH_COUNTERS.values()}
-        # the pass enables the fetch counters read: with down_counters, copies beside the counters
-        self._fetch = {name: kept_register(m, getattr(self, f"{name}_next"), name=f"{name}_copy", platform=platform,
-                                           reset=True)
+        # the pass enables the fetch counters read: with down_counters, copies beside the counters (a clock late)
+        self._fetch = {name: kept_register(m, getattr(self, name), name=f"{name}_copy", platform=platform, reset=True)
                        if self.down_counters else getattr(self, name) for name in FETCH_FLAGS}
         # and a second copy for each fetch's valid chain (``fetch_counter``'s ``valid_fetch``)
-        self._valid_fetch = {name: kept_register(m, getattr(self, f"{name}_next"), name=f"{name}_valid_copy",
+        self._valid_fetch = {name: kept_register(m, getattr(self, name), name=f"{name}_valid_copy",
                                                  platform=platform, reset=True)
                              if self.down_counters else None for name in FETCH_FLAGS}
         e_valid, next_first = self._force_pass(m, r, platform)
@@ -440,11 +439,15 @@ class PassSequencer(wiring.Component):
         at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
         m.d.sync += at_end.eq(Cat(self._at_end("entry_index"), self._at_end("tri_index") & ~self.triangle_restart,
                                   self._at_end("node_index") & ~self.node_restart))
+        # a pass is fetching while its enable is high; with down_counters also while the copies its counter
+        # reads are: from the enable's rise, a clock before the first issue, to the copies' fall
+        force, area, nodes = (getattr(self, flag) if self._valid_fetch[flag] is None
+                              else getattr(self, flag) | self._valid_fetch[flag] for flag in FETCH_FLAGS)
         done_fetching = Signal(name="done_fetching")
         m.d.sync += done_fetching.eq(
-            (at_end[0] | ~self.fetch_force)
-            & ((at_end[1] & ~self.triangle_restart) | ~self.fetch_area)
-            & ((at_end[2] & ~self.node_restart) | ~self.fetch_nodes))
+            (at_end[0] | ~force)
+            & ((at_end[1] & ~self.triangle_restart) | ~area)
+            & ((at_end[2] & ~self.node_restart) | ~nodes))
         # the passes' idle state registered here too, for the drain's end (hdl.phase_controller)
         fetching = Cat(*e_valid, *t_valid, *n_valid).any()
         m.d.sync += self.passes_idle.eq(self.force_idle & self.area_idle & self.integrator_idle & ~fetching

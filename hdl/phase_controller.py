@@ -98,9 +98,8 @@ class PhaseController(wiring.Component):
         ABORT's register copied, each copy loaded from the same pulse (so equal to it in every clock):
         one for the transitions that wait on the guard's passes, one for those that wait on a pass's
         end, each placed by its own group of loads rather than at the centre of all of them; and
-        ``running_next`` exported, from which a port's copy of ``running`` is loaded, and the pass enables'
-        ``fetch_<pass>_next``, from which the sequencer's copies beside its fetch counters are loaded (the
-        engine's builds above ``DEFAULT_CAPACITY``).
+        ``running_next`` exported, from which a port's copy of ``running`` is loaded (the engine's builds
+        above ``DEFAULT_CAPACITY``).
 
     Members
     -------
@@ -126,9 +125,9 @@ class PhaseController(wiring.Component):
         STATUS.state and STATUS.result codes; ``running`` is ``state == running`` as a flip-flop of
         its own (it gates every pass, port multiplexer and bus answer: their logic starts from a
         register rather than a compare).
-    running_next, fetch_force_next, fetch_area_next, fetch_nodes_next : ``Out(1)``
-        With ``control_copies`` only: combinational, ``running``'s and the pass enables' next values (the
-        domain's reset aside): a register loaded from one and cleared by the reset is a copy of its flag.
+    running_next : ``Out(1)``
+        With ``control_copies`` only: combinational, ``running``'s next value (the domain's reset aside): a
+        register loaded from it and cleared by the reset is a copy of ``running``.
     starting, irq_set : ``Out(1)``
         Combinational: START accepted this clock (the results and STATUS.irq_pending restart); a
         run ends this clock (STATUS.irq_pending set).
@@ -197,8 +196,7 @@ class PhaseController(wiring.Component):
             "state": Out(range(len(STATES)), init=_code(STATES, "idle")),
             "result": Out(range(len(RESULTS)), init=_code(RESULTS, "none")),
             "running": Out(1),
-            **({name: Out(1) for name in ("running_next", *(f"{flag}_next" for flag in FETCH_FLAGS))}
-               if control_copies else {}),
+            **({"running_next": Out(1)} if control_copies else {}),
             "starting": Out(1), "irq_set": Out(1),
             **{f"in_{name}": Out(1) for name in PHASES},
             **{name: Out(1) for name in FETCH_FLAGS}, "area_clear": Out(1),
@@ -417,15 +415,11 @@ class PhaseController(wiring.Component):
         def move(leaving, entering=None):
             return [flags[leaving].eq(0), *([flags[entering].eq(1)] if entering else [])]
 
-        if self.control_copies:  # running's and the pass enables' next values, from the same statements
-            m.d.comb += [self.running_next.eq(self.running),
-                         *(getattr(self, f"{flag}_next").eq(getattr(self, flag)) for flag in FETCH_FLAGS)]
+        if self.control_copies:  # running's next value, from the same statements
+            m.d.comb += self.running_next.eq(self.running)
 
         def fetch(**values):
-            """The statements that set pass enables (``force=1``: ``fetch_force``), for ``m.d.sync``; with
-            control copies, their next values set here too."""
-            if self.control_copies:
-                m.d.comb += [getattr(self, f"fetch_{name}_next").eq(value) for name, value in values.items()]
+            """The statements that set pass enables (``force=1``: ``fetch_force``), for ``m.d.sync``."""
             return [getattr(self, f"fetch_{name}").eq(value) for name, value in values.items()]
 
         def set_state(name):

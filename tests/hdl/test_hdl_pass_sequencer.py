@@ -1,8 +1,9 @@
 """PassSequencer's down-counters for the large builds (``down_counters``): the fetch counters' issues and
-ends from down-counters' sign bits, and the sizes' and pass enables' copies, change no clock. Two sequencers,
-with and without them, fed the same random inputs (fetch enables, phases, the guard's restarts, unit results;
-the one with them also each enable's next value, as the controller gives it) answer the same in every clock: addresses, the units' valid bits, the passes' ends and ``passes_idle``. The whole
-runs through the large builds: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
+ends from down-counters' sign bits, and the sizes' and pass enables' copies. Two sequencers fed the same
+random inputs (fetch enables, phases, the guard's restarts, unit results), the one without them its pass
+enables a clock late, answer the same in every clock: addresses, the units' valid bits and the passes' ends;
+``passes_idle`` too, but that the one with them counts a pass as fetching from its enable's rise. The
+whole runs through the large builds: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
 
 import re
 
@@ -33,7 +34,7 @@ SIZES = {"vertices": CAPACITY.vertices, "entries": CAPACITY.entries, "triangles"
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_the_down_counters_change_no_clock(seed):
+def test_the_down_counters_are_the_plain_sequencer_with_its_enables_a_clock_late(seed):
     register_map = RegisterMap.build(FS, CAPACITY)
     plain, counted = PassSequencer(FS, register_map), PassSequencer(FS, register_map, down_counters=True)
     m = Module()
@@ -48,14 +49,17 @@ def test_the_down_counters_change_no_clock(seed):
             for seq in (plain, counted):
                 ctx.set(getattr(seq, name), value)
 
-        enables = dict.fromkeys(FETCH_FLAGS, 0)  # the pass enables in the coming clock
+        late = dict.fromkeys(FETCH_FLAGS, 0)  # the pass enables of the clock before, the plain one's
+        rises = [False, False]  # an enable rose two clocks ago, a clock ago
 
-        def put_enables(following):
-            """This clock's pass enables (the next values given a clock ago) and ``following``, their next."""
+        def put_enables(enables):
+            """This clock's pass enables: the counted sequencer's; the plain one's are the clock before's."""
             for flag in FETCH_FLAGS:
-                put(flag, enables[flag])
-                ctx.set(getattr(counted, f"{flag}_next"), following[flag])
-            enables.update(following)
+                ctx.set(getattr(counted, flag), enables[flag])
+                ctx.set(getattr(plain, flag), late[flag])
+            rises.append(any(enables[flag] and not late[flag] for flag in FETCH_FLAGS))
+            del rises[0]
+            late.update(enables)
 
         for clock in range(4000):
             if clock % 1000 == 0:  # new sizes (0 included), then both passes' restarts a few clocks later:
@@ -82,7 +86,15 @@ def test_the_down_counters_change_no_clock(seed):
                     ctx.set(getattr(seq, stream).valid, valid)
             await ctx.tick()
             for name in ANSWERS:
-                assert ctx.get(getattr(counted, name)) == ctx.get(getattr(plain, name)), f"{name} in clock {clock}"
+                if name != "passes_idle":
+                    assert ctx.get(getattr(counted, name)) == ctx.get(getattr(plain, name)), f"{name} in clock {clock}"
+            # passes_idle answers for the enables two clocks before: after a rise, never idle where the plain
+            # one is not (it may be busy where the plain one, its enable still low, is idle)
+            idle = {seq: ctx.get(seq.passes_idle) for seq in (plain, counted)}
+            if rises[0]:
+                assert idle[counted] <= idle[plain], f"passes_idle in clock {clock}"
+            else:
+                assert idle[counted] == idle[plain], f"passes_idle in clock {clock}"
             for unit in UNITS:
                 assert ctx.get(getattr(counted, unit).valid) == ctx.get(getattr(plain, unit).valid), f"{unit} in clock {clock}"
             seen["issued"] += sum(ctx.get(getattr(plain, unit).valid) for unit in UNITS)
@@ -95,6 +107,52 @@ def test_the_down_counters_change_no_clock(seed):
     assert seen["issued"] > 1000 and seen["ends"] > 50, seen  # the passes ran, and ended
 
 
+@pytest.mark.parametrize("down_counters", [False, True])
+@pytest.mark.parametrize("flag", FETCH_FLAGS)
+def test_a_pass_is_never_idle_from_its_enables_rise_to_its_last_item(flag, down_counters):
+    """The drain's end (``passes_idle``) in a pass started as the controller starts it: its counter restarted,
+    then its enable raised. From the first clock ``passes_idle`` reads the enable in (two clocks after the
+    rise) until the pass's last item has left the fetch, it is low, whether the pass issues in the enable's
+    first clock or, with ``down_counters``, in the next."""
+    register_map = RegisterMap.build(FS, CAPACITY)
+    seq = PassSequencer(FS, register_map, down_counters=down_counters)
+    unit, phase = dict(zip(FETCH_FLAGS, zip(UNITS, ("in_force", "in_area", "in_integrate"))))[flag]
+    items = 5
+
+    async def bench(ctx):
+        for name in SIZES:
+            ctx.set(getattr(seq, name), items)
+        for name in ("force_idle", "area_idle", "integrator_idle", "running"):
+            ctx.set(getattr(seq, name), 1)
+        ctx.set(getattr(seq, phase), 1)  # the items reach the unit in the pass's phase
+        await ctx.tick().repeat(3)
+        ctx.set(seq.in_start, 1)
+        ctx.set(seq.in_step, 1)
+        await ctx.tick()
+        ctx.set(seq.in_start, 0)
+        ctx.set(seq.in_step, 0)
+        await ctx.tick().repeat(4)
+        assert ctx.get(seq.passes_idle)  # restarted, no enable high: idle
+        ctx.set(getattr(seq, flag), 1)
+        await ctx.tick().repeat(2)
+        issued = 0
+        for _ in range(40):
+            if issued == items and ctx.get(seq.passes_idle):
+                break
+            assert not ctx.get(seq.passes_idle), f"idle with {issued} of {items} items out"
+            issued += ctx.get(getattr(seq, unit).valid)
+            await ctx.tick()
+        assert issued == items and ctx.get(seq.passes_idle)
+
+    m = Module()
+    m.domains.sync = ClockDomain("sync")
+    m.submodules.seq = seq
+    sim = Simulator(m)
+    sim.add_clock(1e-6)
+    sim.add_testbench(bench)
+    sim.run()
+
+
 def test_each_fetch_has_two_kept_copies_of_its_enable_in_the_ecp5_form():
     """``down_counters``: in the ECP5 form each pass enable has two kept flip-flops cleared by the reset, one the
     counter's issue reads (``<flag>_copy``) and one the valid chain's (``<flag>_valid_copy``), which Yosys cannot
@@ -103,8 +161,7 @@ def test_each_fetch_has_two_kept_copies_of_its_enable_in_the_ecp5_form():
     for down_counters in (False, True):
         seq = PassSequencer(FS, register_map, down_counters=down_counters)
         ports = [*(getattr(seq, name) for name in ("entry_index", "tri_index", "node_index", *FETCH_FLAGS)),
-                 *(getattr(seq, unit).valid for unit in UNITS),
-                 *(getattr(seq, f"{flag}_next") for flag in FETCH_FLAGS if down_counters)]
+                 *(getattr(seq, unit).valid for unit in UNITS)]
         text = rtlil.convert(seq, platform=ECP5, ports=ports)
         kept = dict(re.findall(r"^\s*cell \\TRELLIS_FF \\(fetch_\w+?)_ff0\n((?:\s+(?:parameter|connect|attribute) .*\n)+)",
                                text, re.M))
