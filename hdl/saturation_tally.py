@@ -21,6 +21,13 @@ class SaturationTally(wiring.Component):
         The event inputs, in order, and their widths; an even number (they are summed in pairs).
     count_bits : int
         Width of the count.
+    overflow_bits : bool
+        The count kept in a register wider than ``count_bits`` (by one bit, or more where one clock's
+        events are wider): a sum past the maximum sets its high bits, which then hold the count still
+        (their OR is its clock enable), and ``saturations`` is the low bits ORed with them. The adder's
+        carry chain then ends in the count's own flip-flops, with no multiplexer after it whose select,
+        the chain's carry-out, fans out to every bit (the engine's builds above ``DEFAULT_CAPACITY``).
+        The same count in every clock.
 
     Members
     -------
@@ -41,7 +48,7 @@ class SaturationTally(wiring.Component):
     saturating add in one clock is a long carry chain behind a wide adder tree.
     """
 
-    def __init__(self, sources: dict[str, int], *, count_bits: int):
+    def __init__(self, sources: dict[str, int], *, count_bits: int, overflow_bits: bool = False):
         sources = dict(sources)
         if not sources or len(sources) % 2:
             raise ValueError(f"SaturationTally sums its sources in pairs: it needs an even number, not {len(sources)}")
@@ -50,6 +57,9 @@ class SaturationTally(wiring.Component):
                 raise ValueError(f"event source {name!r}: its name must be an identifier")
             check_int(f"event source {name!r}'s width", width)
         check_int("count_bits", count_bits)
+        if not isinstance(overflow_bits, bool):
+            raise TypeError(f"SaturationTally overflow_bits must be a bool, not {overflow_bits!r}")
+        self.overflow_bits = overflow_bits
         #: Width of the sum of one clock's events (the pairs' sums, then their sum).
         self.events_bits = max(sources.values()) + (len(sources) - 1).bit_length()
         self.sources, self.count_bits = sources, count_bits
@@ -69,6 +79,9 @@ class SaturationTally(wiring.Component):
         m.d.sync += new_events.eq(sum(pair_sums))
         # the count has no domain reset: `clear` and the reset's echo clear it (a LUT of the domain's
         # reset and `clear` driving its reset pins is a long path on the board)
+        if self.overflow_bits:
+            self._count_with_overflow_bits(m, new_events)
+            return m
         count = Signal.like(self.saturations, reset_less=True, name="count")
         m.d.comb += self.saturations.eq(count)
         # past the maximum exactly when the sum has a bit set above the count's width: an OR of those
@@ -80,3 +93,17 @@ class SaturationTally(wiring.Component):
             m.d.sync += count.eq(0)
         m.d.sync += self.saturated.eq(count != 0)
         return m
+
+    def _count_with_overflow_bits(self, m: Module, new_events: Signal) -> None:
+        """The count below the maximum in the low bits, past it a high bit set and the count held. Adding a
+        clock's events (below ``2**events_bits``) to a count below ``2**count_bits`` cannot carry out of a
+        register one bit wider than the wider of the two."""
+        width = max(self.count_bits, self.events_bits) + 1
+        count = Signal(width, reset_less=True, name="count_wide")
+        over = count[self.count_bits:].any()
+        with m.If(~over):
+            m.d.sync += count.eq(count + new_events)
+        with m.If(self.clear | reset_echo(m, "count_echo")):
+            m.d.sync += count.eq(0)
+        m.d.comb += self.saturations.eq(count[:self.count_bits] | over.replicate(self.count_bits))
+        m.d.sync += self.saturated.eq(self.saturations != 0)

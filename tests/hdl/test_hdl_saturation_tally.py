@@ -1,5 +1,6 @@
 """RTL saturation tally (hdl.SaturationTally) against a clock-by-clock Python model of its contract: the
-count of every event, four edges after it is reported, stopping at the count's maximum, and ``clear``."""
+count of every event, four edges after it is reported, stopping at the count's maximum, and ``clear``; in
+both forms (the count's maximum by a multiplexer after the adder, or by overflow bits held)."""
 
 import random
 
@@ -26,7 +27,8 @@ def reference(stimulus, sources, count_bits):
 
 @pytest.mark.parametrize("sources, count_bits", [({"a": 3, "b": 3}, 4), ({"a": 2, "b": 1, "c": 3, "d": 1}, 6),
                                                  ({f"s{k}": 2 for k in range(8)}, 5), ({"a": 6, "b": 5}, 4)])
-def test_counts_every_event_stops_at_the_maximum_and_clears(sources, count_bits):
+@pytest.mark.parametrize("overflow_bits", [False, True])
+def test_counts_every_event_stops_at_the_maximum_and_clears(sources, count_bits, overflow_bits):
     rng = random.Random(count_bits)
     stimulus = []
     for t in range(600):
@@ -38,7 +40,7 @@ def test_counts_every_event_stops_at_the_maximum_and_clears(sources, count_bits)
     top = expected.index((1 << count_bits) - 1)  # the run reaches the maximum
     assert min(expected[top:]) == 0  # and is cleared after it
 
-    dut = SaturationTally(sources, count_bits=count_bits)
+    dut = SaturationTally(sources, count_bits=count_bits, overflow_bits=overflow_bits)
     seen = []
 
     async def bench(ctx):
