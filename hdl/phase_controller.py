@@ -98,8 +98,10 @@ class PhaseController(wiring.Component):
         ABORT's register copied, each copy loaded from the same pulse (so equal to it in every clock):
         one for the transitions that wait on the guard's passes, one for those that wait on a pass's
         end, each placed by its own group of loads rather than at the centre of all of them; and
-        ``running_next`` exported, from which a port's copy of ``running`` is loaded (the engine's builds
-        above ``DEFAULT_CAPACITY``).
+        ``running_next`` exported, from which a port's copy of ``running`` is loaded; and the momentum step's
+        pulse, which moves ``k``, is the β request's flip-flop (loaded from the same condition in the same
+        clock), so that the step phase's logic has no load across the device from the phase machine (the
+        engine's builds above ``DEFAULT_CAPACITY``).
 
     Members
     -------
@@ -569,7 +571,8 @@ class PhaseController(wiring.Component):
         from the step phase until the divider takes the request, the clock after. ``restart_pending``
         is set from S's sign (a flip-flop) at the integrate pass's end and cleared by a pulse of its
         own (the launch's or the step's), not by the pulses that move ``momentum_k``: registered so
-        that no LUT is shared between the 32-bit update and the flag's enable."""
+        that no LUT is shared between the 32-bit update and the flag's enable. With ``control_copies`` the
+        step's pulse is the β request and the clear the OR of the two pulses (both flip-flops)."""
         beta = units["beta"]
         go, go_guard, go_passes = self._go(run)
         momentum_k = run.momentum_k
@@ -583,8 +586,15 @@ class PhaseController(wiring.Component):
         stepping = go & self.in_step & run.momentum
         ending = go_passes & self.in_integrate & self.integrate_done
         committed = go_guard & self.in_commit & self.guard_done  # the guarded step's iteration ends with its commit
-        m.d.sync += [launch_pulse.eq(launching), step_pulse.eq(stepping), restart_clear.eq(launching | stepping),
-                     iterate_pulse.eq(Mux(run.guarded, committed, ending)),
+        if self.control_copies:
+            # the step's pulse is the β request itself, loaded from the same condition in the same clock, and
+            # the restart's clear the OR of the two pulses: the step phase's logic then has no load but the
+            # request, by the phase machine, not one across the device by k
+            step_pulse, restart_clear = run.requests["beta"], launch_pulse | run.requests["beta"]
+            m.d.sync += launch_pulse.eq(launching)
+        else:
+            m.d.sync += [launch_pulse.eq(launching), step_pulse.eq(stepping), restart_clear.eq(launching | stepping)]
+        m.d.sync += [iterate_pulse.eq(Mux(run.guarded, committed, ending)),
                      restart_pulse.eq(ending & run.momentum & ~step_was_restart),
                      power_negative.eq(self.power_sum < 0)]
         with m.If(launch_pulse):  # a run's start: no momentum yet
