@@ -75,7 +75,10 @@ class SpringflatEngine(wiring.Component):
         ``running`` copied for groups of their loads (its ``control_copies``; the read addresses' copies of
         ``running`` in the memories); the guard certificate's output valid from a flip-flop
         (:class:`~hdl.guard_passes.GuardPasses`' ``registered_valid``); the bus handshake's state in two
-        flip-flops (:class:`~hdl.wishbone.TargetHandshake`'s ``busy_copy``); ``None``: where the node memories take
+        flip-flops (:class:`~hdl.wishbone.TargetHandshake`'s ``busy_copy``); SATURATIONS' count held by overflow
+        bits, not a multiplexer after its adder (:class:`~hdl.saturation_tally.SaturationTally`'s
+        ``overflow_bits``); the momentum step's pulse from the β request (the controller's ``control_copies``);
+        ``None``: where the node memories take
         several banks (:func:`~hdl.memory_windows.needs_registered_select`: above 2,048 vertices in
         ``default``). A test passes ``True`` to run those latencies at a small capacity.
     pin_registers : bool or None
@@ -266,7 +269,8 @@ class SpringflatEngine(wiring.Component):
 
     def _tally(self, m: Module, widths: dict):
         """SATURATIONS' tally of the event sources ``widths`` (in the order they are summed in pairs)."""
-        m.submodules.tally = tally = SaturationTally(widths, count_bits=self.register_map.value_width("saturations"))
+        m.submodules.tally = tally = SaturationTally(widths, count_bits=self.register_map.value_width("saturations"),
+                                                       overflow_bits=self.registered_select)
         return tally
 
     def _bus_and_run(self, m: Module, hs, registers, memories, controller, tally, events: dict, measured) -> None:
