@@ -583,7 +583,6 @@ class PhaseController(wiring.Component):
                                      "restart_clear", "power_negative"))
         # a rollback restarts the momentum (the rolled-back step's S is void), as a run's start does
         launching = (self.in_start & run.first_measure) | (self.in_rollback & self.guard_done)
-        stepping = go & self.in_step & run.momentum
         ending = go_passes & self.in_integrate & self.integrate_done
         committed = go_guard & self.in_commit & self.guard_done  # the guarded step's iteration ends with its commit
         if self.control_copies:
@@ -593,6 +592,7 @@ class PhaseController(wiring.Component):
             step_pulse, restart_clear = run.requests["beta"], launch_pulse | run.requests["beta"]
             m.d.sync += launch_pulse.eq(launching)
         else:
+            stepping = go & self.in_step & run.momentum
             m.d.sync += [launch_pulse.eq(launching), step_pulse.eq(stepping), restart_clear.eq(launching | stepping)]
         m.d.sync += [iterate_pulse.eq(Mux(run.guarded, committed, ending)),
                      restart_pulse.eq(ending & run.momentum & ~step_was_restart),
