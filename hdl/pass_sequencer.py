@@ -55,7 +55,7 @@ PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
 
 
 def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, stages: int,
-                  left: Signal | None = None, valid_fetch=None) -> list[Signal]:
+                  left: Signal | None = None, valid_fetch=None, left_fetch=None) -> list[Signal]:
     """A pass's fetch: while ``fetch`` is high, ``index`` counts 0, 1, … up to ``count``, one issued
     per clock. Returns ``valid``: ``valid[k]`` marks the clock whose data belongs to an index issued
     ``k`` clocks ago (``valid[0]``: the index in the memories' address registers).
@@ -68,7 +68,11 @@ def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, sta
 
     ``valid_fetch`` (``None``: ``fetch``): a flag equal to ``fetch`` in every clock, from which ``valid[0]``'s
     issue is formed, so that the counter's own issue, whose loads are the counter's clock enables, is a
-    LUT of its own beside the counter, not one shared with the valid chain and placed between the two."""
+    LUT of its own beside the counter, not one shared with the valid chain and placed between the two.
+
+    ``left_fetch`` (``None``: ``fetch``): likewise, a flag equal to ``fetch`` from which ``left``'s issue is
+    formed, so that the up-counter and the down-counter each have an issue LUT of their own, placed by
+    it (the placer puts the two counters apart: the up-counter by the block RAMs it addresses)."""
     valid = [Signal(name=f"{valid_prefix}{k}_valid") for k in range(stages)]
     more = (index < count) if left is None else ~left[-1]
     issue = fetch & more
@@ -76,7 +80,10 @@ def fetch_counter(m: Module, index: Signal, fetch, count, valid_prefix: str, sta
                  *(valid[k].eq(valid[k - 1]) for k in range(1, stages))]
     with m.If(issue):
         m.d.sync += index.eq(index + 1)
-        if left is not None:
+        if left is not None and left_fetch is None:
+            m.d.sync += left.eq(left - 1)
+    if left is not None and left_fetch is not None:
+        with m.If(left_fetch & more):
             m.d.sync += left.eq(left - 1)
     return valid
 
@@ -101,8 +108,9 @@ class PassSequencer(wiring.Component):
         enable from a copy of its own, loaded from the controller's flag (a clock late) and cleared by the
         reset. The copy's input is then a route from a flip-flop, with no logic of the controller's in
         front of it, so the placer puts the copy, and the issue LUT that reads it, by the counter. The
-        valid chain's issue reads a second such copy (:func:`fetch_counter`'s ``valid_fetch``), so that
-        the counter's issue has no load but the counter. A pass then issues a clock after its enable
+        valid chain's issue reads a second such copy (:func:`fetch_counter`'s ``valid_fetch``) and the
+        down-counter's a third (its ``left_fetch``), so that each counter's issue has no load but that
+        counter. A pass then issues a clock after its enable
         rises, not in that clock, and the sequencer is the one without ``down_counters`` fed its enables a
         clock late, but for ``passes_idle``, which counts a pass as fetching from its enable's rise: a
         pass fetching but not issuing yet is never taken for idle. The guard's passes, whose counters
@@ -246,10 +254,11 @@ class PassSequencer(wiring.Component):
         # the pass enables the fetch counters read: with down_counters, copies beside the counters (a clock late)
         self._fetch = {name: kept_register(m, getattr(self, name), name=f"{name}_copy", platform=platform, reset=True)
                        if self.down_counters else getattr(self, name) for name in FETCH_FLAGS}
-        # and a second copy for each fetch's valid chain (``fetch_counter``'s ``valid_fetch``)
-        self._valid_fetch = {name: kept_register(m, getattr(self, name), name=f"{name}_valid_copy",
-                                                 platform=platform, reset=True)
-                             if self.down_counters else None for name in FETCH_FLAGS}
+        # a second copy for each fetch's valid chain, a third for its down-counter (``fetch_counter``'s
+        # ``valid_fetch`` and ``left_fetch``)
+        self._valid_fetch, self._left_fetch = (
+            {name: kept_register(m, getattr(self, name), name=f"{name}_{kind}_copy", platform=platform, reset=True)
+             if self.down_counters else None for name in FETCH_FLAGS} for kind in ("valid", "left"))
         e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
@@ -283,7 +292,7 @@ class PassSequencer(wiring.Component):
         """E0 … E9 into ``ForcePass.i``, one entry per clock; its per-node results counted and summed."""
         e_valid = fetch_counter(m, r["entry_index"], self._fetch["fetch_force"], self._sizes["entries"], "e",
                                 self.force_fetch_latency + 1, self._left.get("entry_index"),
-                                self._valid_fetch["fetch_force"])
+                                self._valid_fetch["fetch_force"], self._left_fetch["fetch_force"])
         entry_shape = self.entry.shape()
         ent_data = self.entry  # the addressed entry, at entry_latency
         next_first = Signal(name="next_first")
@@ -336,10 +345,11 @@ class PassSequencer(wiring.Component):
         # the guard's triangle passes issue every other clock (the certificate's interval of 2)
         alternate = Signal(name="tri_alternate")
         m.d.sync += alternate.eq(~alternate & self.half_rate)
-        valid_fetch = self._valid_fetch["fetch_area"]
+        valid_fetch, left_fetch = self._valid_fetch["fetch_area"], self._left_fetch["fetch_area"]
         t_valid = fetch_counter(m, r["tri_index"], self._fetch["fetch_area"] & ~alternate, self._sizes["triangles"],
                                 "t", self.area_fetch_latency + 1, self._left.get("tri_index"),
-                                None if valid_fetch is None else valid_fetch & ~alternate)
+                                None if valid_fetch is None else valid_fetch & ~alternate,
+                                None if left_fetch is None else left_fetch & ~alternate)
         # the triangle's area and corners, landed with it, carried beside its corners' read
         area, corners = self.triangle.area, [self.triangle.a, self.triangle.b, self.triangle.c]
         for k in range(self.read_latency + 1, self.area_fetch_latency + 1):
@@ -360,7 +370,7 @@ class PassSequencer(wiring.Component):
         """N0 … N2 into ``Integrator.i``, one node per clock; its results counted and S summed."""
         n_valid = fetch_counter(m, r["node_index"], self._fetch["fetch_nodes"], self._sizes["vertices"], "n",
                                 self.node_fetch_latency + 1, self._left.get("node_index"),
-                                self._valid_fetch["fetch_nodes"])
+                                self._valid_fetch["fetch_nodes"], self._left_fetch["fetch_nodes"])
         node = self.node_out.payload
         landed = n_valid[self.node_fetch_latency]
         m.d.comb += [  # landed at N2

@@ -153,10 +153,11 @@ def test_a_pass_is_never_idle_from_its_enables_rise_to_its_last_item(flag, down_
     sim.run()
 
 
-def test_each_fetch_has_two_kept_copies_of_its_enable_in_the_ecp5_form():
-    """``down_counters``: in the ECP5 form each pass enable has two kept flip-flops cleared by the reset, one the
-    counter's issue reads (``<flag>_copy``) and one the valid chain's (``<flag>_valid_copy``), which Yosys cannot
-    merge into one issue LUT placed between the counter and the chain; neither without ``down_counters``."""
+def test_each_fetch_has_three_kept_copies_of_its_enable_in_the_ecp5_form():
+    """``down_counters``: in the ECP5 form each pass enable has three kept flip-flops cleared by the reset, one the
+    counter's issue reads (``<flag>_copy``), one the valid chain's (``<flag>_valid_copy``) and one the
+    down-counter's (``<flag>_left_copy``), which Yosys cannot merge into one issue LUT placed between the
+    counters and the chain; none without ``down_counters``."""
     register_map = RegisterMap.build(FS, CAPACITY)
     for down_counters in (False, True):
         seq = PassSequencer(FS, register_map, down_counters=down_counters)
@@ -165,7 +166,7 @@ def test_each_fetch_has_two_kept_copies_of_its_enable_in_the_ecp5_form():
         text = rtlil.convert(seq, platform=ECP5, ports=ports)
         kept = dict(re.findall(r"^\s*cell \\TRELLIS_FF \\(fetch_\w+?)_ff0\n((?:\s+(?:parameter|connect|attribute) .*\n)+)",
                                text, re.M))
-        expected = {f"{flag}{kind}" for flag in FETCH_FLAGS for kind in ("_copy", "_valid_copy")}
+        expected = {f"{flag}{kind}" for flag in FETCH_FLAGS for kind in ("_copy", "_valid_copy", "_left_copy")}
         assert set(kept) == (expected if down_counters else set())
         for name, body in kept.items():
             assert re.search(r"connect \\LSR \\rst", body) and "LSR_OVER_CE" in body, name
