@@ -109,7 +109,9 @@ class MemoryWindows(wiring.Component):
         flip-flops); ``answer`` with ``answer_data`` (the word read, a register) :attr:`window_steps`
         (nine, ten with ``registered_select``) clocks after DEC, for a write as for a read.
     running, in_area, in_integrate, fetch_nodes : ``In(1)``
-        The controller's flip-flops that choose each port's source.
+        The controller's flip-flops that choose each port's source (with ``registered_select``, ``fetch_nodes``
+        through a copy of its own beside the address multiplexers, a clock late, as the sequencer's
+        down-counters issue).
     running_next : ``In(1)``
         With ``registered_select`` only: ``running``'s next value (the controller's), from which the read
         addresses' copies of ``running`` are loaded (cleared by the domain's reset, as ``running`` is):
@@ -452,7 +454,13 @@ class MemoryWindows(wiring.Component):
                                             reset=True) for group in ("ent", "tri", "node")}
         else:
             running = dict.fromkeys(("ent", "tri", "node"), running)
-        in_nodes = self.fetch_nodes | self.in_integrate  # the integrate pass: fetching, or its last nodes in flight
+        # a node pass: fetching, or its last nodes in flight. With the registered select, the fetch flag from a
+        # copy beside the address multiplexers (a clock late: the sequencer's down-counters, which the
+        # registered select comes with, issue a node the clock after the flag, from a copy like it)
+        fetch_nodes = self.fetch_nodes
+        if self.registered_select:
+            fetch_nodes = kept_register(m, self.fetch_nodes, name="node_reads_fetch", platform=platform, reset=True)
+        in_nodes = fetch_nodes | self.in_integrate
         ent_next = Signal.like(ent_addr, name="ent_next")
         m.d.comb += ent_next.eq(Mux(running["ent"], self.entry_index, index_q))
         m.d.sync += [

@@ -50,6 +50,9 @@ FETCH_COUNTERS = {"entry_index": "entries", "tri_index": "triangles", "node_inde
 #: The controller's pass enables, one per fetch counter (in :data:`FETCH_COUNTERS`' order).
 FETCH_FLAGS = ("fetch_force", "fetch_area", "fetch_nodes")
 
+#: The guard passes' restart pulses from the controller, each restarting one fetch counter.
+RESTART_PULSES = {"tri_index": "triangle_restart", "node_index": "node_restart"}
+
 #: The phase flags the sequencer reads (:class:`~hdl.phase_controller.PhaseController`).
 PHASE_INPUTS = ("in_start", "in_force", "in_area", "in_step", "in_integrate")
 
@@ -113,8 +116,12 @@ class PassSequencer(wiring.Component):
         counter. A pass then issues a clock after its enable
         rises, not in that clock, and the sequencer is the one without ``down_counters`` fed its enables a
         clock late, but for ``passes_idle``, which counts a pass as fetching from its enable's rise: a
-        pass fetching but not issuing yet is never taken for idle. The guard's passes, whose counters
-        restart in their enable's first clock, issue in the clock after it either way.
+        pass fetching but not issuing yet is never taken for idle. The guard's restart pulses are read
+        from copies too (a clock late), so that the controller's pulses, set by the phase machine's
+        decisions, have no load but their copies: a guard pass's counter restarts in its enable's second
+        clock, and the pass issues in its third (a node pass a clock later than without
+        ``down_counters``; a triangle pass, which issues every other clock, in the same clock), and the
+        enable's rise counts as the restart for ``passes_idle``.
 
     Members
     -------
@@ -128,7 +135,8 @@ class PassSequencer(wiring.Component):
         The guarded mode (the integrate pass proposes: its velocities go to ``proposal_write``, not to the
         node memories), a triangle issued every other clock (the guard's triangle passes, for the
         certificate's interval of 2), and the guard's passes' restarts of the node and triangle counters
-        (a pulse in the clock their fetch flag rises, when the counter still stands at its end).
+        (a pulse in the clock their fetch flag rises, when the counter still stands at its end; the
+        sequencer reads them a clock late with ``down_counters``).
     vertices, entries, triangles, momentum, barrier_held : ``In``
         Run constants (a momentum mode in MODE.mode gates S's saturation event; MODE.barrier's copy the barrier terms).
     entry, triangle, position[3], velocity, weight_word, force_word : ``In``
@@ -259,6 +267,10 @@ class PassSequencer(wiring.Component):
         self._valid_fetch, self._left_fetch = (
             {name: kept_register(m, getattr(self, name), name=f"{name}_{kind}_copy", platform=platform, reset=True)
              if self.down_counters else None for name in FETCH_FLAGS} for kind in ("valid", "left"))
+        # the guard passes' restart pulses: with down_counters, copies beside the counters (a clock late)
+        self._restart = {name: kept_register(m, getattr(self, pulse), name=f"{pulse}_copy", platform=platform,
+                                             reset=True) if self.down_counters else getattr(self, pulse)
+                         for name, pulse in RESTART_PULSES.items()}
         e_valid, next_first = self._force_pass(m, r, platform)
         t_valid = self._area_pass(m, r)
         n_valid = self._integrate_pass(m, r)
@@ -282,10 +294,9 @@ class PassSequencer(wiring.Component):
                 m.d.sync += restart([name for name, (at, is_sum) in RESTARTS.items() if at == phase and is_sum])
         with m.If(self.in_start):
             m.d.sync += next_first.eq(1)
-        with m.If(self.node_restart):
-            m.d.sync += restart(["node_index"])
-        with m.If(self.triangle_restart):
-            m.d.sync += restart(["tri_index"])
+        for name, pulse in self._restart.items():
+            with m.If(pulse):
+                m.d.sync += restart([name])
         return m
 
     def _force_pass(self, m: Module, r: dict[str, Signal], platform):
@@ -446,18 +457,26 @@ class PassSequencer(wiring.Component):
         # while the counter still stands at the previous pass's end: neither that clock's compare nor
         # `done_fetching` a clock later reads it as done. A pass without a restart pulse starts from a
         # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.
+        restart = self._restart
         at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
-        m.d.sync += at_end.eq(Cat(self._at_end("entry_index"), self._at_end("tri_index") & ~self.triangle_restart,
-                                  self._at_end("node_index") & ~self.node_restart))
+        m.d.sync += at_end.eq(Cat(self._at_end("entry_index"), self._at_end("tri_index") & ~restart["tri_index"],
+                                  self._at_end("node_index") & ~restart["node_index"]))
         # a pass is fetching while its enable is high; with down_counters also while the copies its counter
-        # reads are: from the enable's rise, a clock before the first issue, to the copies' fall
+        # reads are: from the enable's rise, a clock before the first issue, to the copies' fall. There a
+        # guard pass's counter restarts a clock after the rise, from the pulse's copy: the rise itself
+        # (the enable high, its copy still low) is not done, in place of the pulse
         force, area, nodes = (getattr(self, flag) if self._valid_fetch[flag] is None
                               else getattr(self, flag) | self._valid_fetch[flag] for flag in FETCH_FLAGS)
+        if self.down_counters:
+            rising = {name: getattr(self, flag) & ~self._fetch[flag] for name, flag in zip(FETCH_COUNTERS, FETCH_FLAGS)}
+            restarting = {name: restart[name] | rising[name] for name in RESTART_PULSES}
+        else:
+            restarting = restart
         done_fetching = Signal(name="done_fetching")
         m.d.sync += done_fetching.eq(
             (at_end[0] | ~force)
-            & ((at_end[1] & ~self.triangle_restart) | ~area)
-            & ((at_end[2] & ~self.node_restart) | ~nodes))
+            & ((at_end[1] & ~restarting["tri_index"]) | ~area)
+            & ((at_end[2] & ~restarting["node_index"]) | ~nodes))
         # the passes' idle state registered here too, for the drain's end (hdl.phase_controller)
         fetching = Cat(*e_valid, *t_valid, *n_valid).any()
         m.d.sync += self.passes_idle.eq(self.force_idle & self.area_idle & self.integrator_idle & ~fetching

@@ -1,7 +1,7 @@
 """PassSequencer's down-counters for the large builds (``down_counters``): the fetch counters' issues and
 ends from down-counters' sign bits, and the sizes' and pass enables' copies. Two sequencers fed the same
 random inputs (fetch enables, phases, the guard's restarts, unit results), the one without them its pass
-enables a clock late, answer the same in every clock: addresses, the units' valid bits and the passes' ends;
+enables and the guard's restart pulses a clock late, answer the same in every clock: addresses, the units' valid bits and the passes' ends;
 ``passes_idle`` too, but that the one with them counts a pass as fetching from its enable's rise. The
 whole runs through the large builds: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
 
@@ -15,7 +15,7 @@ from amaranth.sim import Simulator
 
 from golden_model.engine_spec.register_map import RegisterMap
 from hdl.dsp import ECP5
-from hdl.pass_sequencer import FETCH_FLAGS, PassSequencer
+from hdl.pass_sequencer import FETCH_FLAGS, RESTART_PULSES, PassSequencer
 from support.engine_sim import CAPACITY, FS
 
 #: The one-bit inputs driven at random in every clock, each with its probability of being high.
@@ -30,6 +30,8 @@ ANSWERS = ("entry_index", "tri_index", "node_index", "node_of_entry", "force_out
            "force_done", "area_done", "integrate_done", "passes_idle", "node_landed", "triangle_landed")
 #: The streams into the units, whose valid bits are compared in every clock.
 UNITS = ("force_entry", "triangle_out", "node_out")
+#: The inputs the sequencer with down-counters reads through copies, a clock late.
+LATE = (*FETCH_FLAGS, *RESTART_PULSES.values())
 SIZES = {"vertices": CAPACITY.vertices, "entries": CAPACITY.entries, "triangles": CAPACITY.triangles}
 
 
@@ -49,12 +51,13 @@ def test_the_down_counters_are_the_plain_sequencer_with_its_enables_a_clock_late
             for seq in (plain, counted):
                 ctx.set(getattr(seq, name), value)
 
-        late = dict.fromkeys(FETCH_FLAGS, 0)  # the pass enables of the clock before, the plain one's
+        late = dict.fromkeys(LATE, 0)  # the pass enables and restart pulses of the clock before, the plain one's
         rises = [False, False]  # an enable rose two clocks ago, a clock ago
 
         def put_enables(enables):
-            """This clock's pass enables: the counted sequencer's; the plain one's are the clock before's."""
-            for flag in FETCH_FLAGS:
+            """This clock's pass enables and restart pulses: the counted sequencer's; the plain one's are the
+            clock before's."""
+            for flag in LATE:
                 ctx.set(getattr(counted, flag), enables[flag])
                 ctx.set(getattr(plain, flag), late[flag])
             rises.append(any(enables[flag] and not late[flag] for flag in FETCH_FLAGS))
@@ -64,10 +67,10 @@ def test_the_down_counters_are_the_plain_sequencer_with_its_enables_a_clock_late
         for clock in range(4000):
             if clock % 1000 == 0:  # new sizes (0 included), then both passes' restarts a few clocks later:
                 # the sizes are run constants, still from a restart to its pass's end (no fetch meanwhile)
-                for flag in RANDOM_FLAGS.keys() - set(FETCH_FLAGS):
+                for flag in RANDOM_FLAGS.keys() - set(LATE):
                     put(flag, 0)
                 for _ in range(2):
-                    put_enables(dict.fromkeys(FETCH_FLAGS, 0))
+                    put_enables(dict.fromkeys(LATE, 0))
                     await ctx.tick()
                 for name, top in SIZES.items():
                     put(name, int(rng.integers(0, top + 1)))
@@ -77,9 +80,9 @@ def test_the_down_counters_are_the_plain_sequencer_with_its_enables_a_clock_late
                 await ctx.tick()
             draws = {flag: int(rng.random() < p) for flag, p in RANDOM_FLAGS.items()}
             for flag, value in draws.items():
-                if flag not in FETCH_FLAGS:
+                if flag not in LATE:
                     put(flag, value)
-            put_enables({flag: draws[flag] for flag in FETCH_FLAGS})
+            put_enables({flag: draws[flag] for flag in LATE})
             for stream in ("forces", "integrated"):  # the units' results
                 valid = int(rng.random() < 0.3)
                 for seq in (plain, counted):
@@ -107,17 +110,46 @@ def test_the_down_counters_are_the_plain_sequencer_with_its_enables_a_clock_late
     assert seen["issued"] > 1000 and seen["ends"] > 50, seen  # the passes ran, and ended
 
 
+#: How a pass starts: its counter restarted in a phase before its enable rises (every pass), or, as the
+#: guard's passes start, by a restart pulse in the enable's first clock while the counter still stands at the
+#: end of a pass before (the triangle and node passes).
+STARTS = [(flag, "phase") for flag in FETCH_FLAGS] + [(flag, "pulse") for flag in FETCH_FLAGS
+                                                      if flag != "fetch_force"]
+
+
 @pytest.mark.parametrize("down_counters", [False, True])
-@pytest.mark.parametrize("flag", FETCH_FLAGS)
-def test_a_pass_is_never_idle_from_its_enables_rise_to_its_last_item(flag, down_counters):
+@pytest.mark.parametrize(("flag", "start"), STARTS)
+def test_a_pass_is_never_idle_from_its_enables_rise_to_its_last_item(flag, start, down_counters):
     """The drain's end (``passes_idle``) in a pass started as the controller starts it: its counter restarted,
-    then its enable raised. From the first clock ``passes_idle`` reads the enable in (two clocks after the
-    rise) until the pass's last item has left the fetch, it is low, whether the pass issues in the enable's
-    first clock or, with ``down_counters``, in the next."""
+    then its enable raised, or (``pulse``) a pass run to its end, then its enable raised with the restart
+    pulse. From the first clock ``passes_idle`` reads the enable in (two clocks after the rise) until the
+    pass's last item has left the fetch, it is low, whether the pass issues in the enable's first clock or,
+    with ``down_counters``, in the next (its counter restarted there, from the pulse's copy, a clock late)."""
     register_map = RegisterMap.build(FS, CAPACITY)
     seq = PassSequencer(FS, register_map, down_counters=down_counters)
     unit, phase = dict(zip(FETCH_FLAGS, zip(UNITS, ("in_force", "in_area", "in_integrate"))))[flag]
+    pulse = dict(zip(FETCH_FLAGS, (None, "triangle_restart", "node_restart")))[flag]
     items = 5
+
+    async def run_pass(ctx, restart):
+        """Raise the enable (with the restart pulse, if ``restart``) and count the items out until idle."""
+        ctx.set(getattr(seq, flag), 1)
+        if restart:
+            ctx.set(getattr(seq, pulse), 1)
+        await ctx.tick()
+        if restart:
+            ctx.set(getattr(seq, pulse), 0)
+        await ctx.tick()
+        issued = 0
+        for _ in range(40):
+            if issued == items and ctx.get(seq.passes_idle):
+                break
+            assert not ctx.get(seq.passes_idle), f"idle with {issued} of {items} items out"
+            issued += ctx.get(getattr(seq, unit).valid)
+            await ctx.tick()
+        assert issued == items and ctx.get(seq.passes_idle)
+        ctx.set(getattr(seq, flag), 0)
+        await ctx.tick().repeat(4)
 
     async def bench(ctx):
         for name in SIZES:
@@ -133,16 +165,10 @@ def test_a_pass_is_never_idle_from_its_enables_rise_to_its_last_item(flag, down_
         ctx.set(seq.in_step, 0)
         await ctx.tick().repeat(4)
         assert ctx.get(seq.passes_idle)  # restarted, no enable high: idle
-        ctx.set(getattr(seq, flag), 1)
-        await ctx.tick().repeat(2)
-        issued = 0
-        for _ in range(40):
-            if issued == items and ctx.get(seq.passes_idle):
-                break
-            assert not ctx.get(seq.passes_idle), f"idle with {issued} of {items} items out"
-            issued += ctx.get(getattr(seq, unit).valid)
-            await ctx.tick()
-        assert issued == items and ctx.get(seq.passes_idle)
+        await run_pass(ctx, restart=False)
+        if start == "pulse":  # the counter at the first pass's end, restarted by the pulse
+            assert ctx.get(seq.passes_idle)
+            await run_pass(ctx, restart=True)
 
     m = Module()
     m.domains.sync = ClockDomain("sync")
