@@ -465,8 +465,8 @@ class PassSequencer(wiring.Component):
         # reads are: from the enable's rise, a clock before the first issue, to the copies' fall. There a
         # guard pass's counter restarts a clock after the rise, from the pulse's copy: the rise itself
         # (the enable high, its copy still low) is not done, in place of the pulse
-        force, area, nodes = (getattr(self, flag) if self._valid_fetch[flag] is None
-                              else getattr(self, flag) | self._valid_fetch[flag] for flag in FETCH_FLAGS)
+        force, area, nodes = (getattr(self, flag) | self._valid_fetch[flag] if self.down_counters
+                              else getattr(self, flag) for flag in FETCH_FLAGS)
         if self.down_counters:
             rising = {name: getattr(self, flag) & ~self._fetch[flag] for name, flag in zip(FETCH_COUNTERS, FETCH_FLAGS)}
             restarting = {name: restart[name] | rising[name] for name in RESTART_PULSES}
