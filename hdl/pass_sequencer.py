@@ -453,10 +453,11 @@ class PassSequencer(wiring.Component):
         """``passes_idle``: the fetch counters at their ends and no item in a fetch or a unit."""
         # The fetch counters' ends (compares, or down-counters' signs) in registers beside them, then `done_fetching` from
         # those, two clocks behind the counters, so that no compare's logic sits on the route across
-        # the device into the drain's end. A guard pass restarts its counter in its first clock,
-        # while the counter still stands at the previous pass's end: neither that clock's compare nor
-        # `done_fetching` a clock later reads it as done. A pass without a restart pulse starts from a
-        # counter at 0 and issues in its first clock, so `passes_idle` covers the lag's clock there.
+        # the device into the drain's end. A guard pass restarts its counter in its first clock (with
+        # down_counters its second), while the counter still stands at the previous pass's end: neither
+        # that clock's compare nor `done_fetching` a clock later reads it as done. A pass without a restart
+        # pulse starts from a counter at 0 and issues in its first clock (its second), so `passes_idle`
+        # covers the lag's clock there.
         restart = self._restart
         at_end = Signal(3, name="fetch_at_end")  # entries, triangles, nodes
         m.d.sync += at_end.eq(Cat(self._at_end("entry_index"), self._at_end("tri_index") & ~restart["tri_index"],

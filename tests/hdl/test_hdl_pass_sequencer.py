@@ -1,8 +1,9 @@
 """PassSequencer's down-counters for the large builds (``down_counters``): the fetch counters' issues and
 ends from down-counters' sign bits, and the sizes' and pass enables' copies. Two sequencers fed the same
 random inputs (fetch enables, phases, the guard's restarts, unit results), the one without them its pass
-enables and the guard's restart pulses a clock late, answer the same in every clock: addresses, the units' valid bits and the passes' ends;
-``passes_idle`` too, but that the one with them counts a pass as fetching from its enable's rise. The
+enables and the guard's restart pulses a clock late, answer the same in every clock: addresses, the units'
+valid bits and the passes' ends; ``passes_idle`` too, but that the one with them counts a pass as fetching
+from its enable's rise. The
 whole runs through the large builds: ``test_engine.py``'s registered-select case and ``test_engine_guard.py``."""
 
 import re
@@ -15,7 +16,7 @@ from amaranth.sim import Simulator
 
 from golden_model.engine_spec.register_map import RegisterMap
 from hdl.dsp import ECP5
-from hdl.pass_sequencer import FETCH_FLAGS, RESTART_PULSES, PassSequencer
+from hdl.pass_sequencer import FETCH_COUNTERS, FETCH_FLAGS, RESTART_PULSES, PassSequencer
 from support.engine_sim import CAPACITY, FS
 
 #: The one-bit inputs driven at random in every clock, each with its probability of being high.
@@ -36,7 +37,7 @@ SIZES = {"vertices": CAPACITY.vertices, "entries": CAPACITY.entries, "triangles"
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-def test_the_down_counters_are_the_plain_sequencer_with_its_enables_a_clock_late(seed):
+def test_the_down_counters_are_the_plain_sequencer_with_its_enables_and_restarts_a_clock_late(seed):
     register_map = RegisterMap.build(FS, CAPACITY)
     plain, counted = PassSequencer(FS, register_map), PassSequencer(FS, register_map, down_counters=True)
     m = Module()
@@ -113,8 +114,8 @@ def test_the_down_counters_are_the_plain_sequencer_with_its_enables_a_clock_late
 #: How a pass starts: its counter restarted in a phase before its enable rises (every pass), or, as the
 #: guard's passes start, by a restart pulse in the enable's first clock while the counter still stands at the
 #: end of a pass before (the triangle and node passes).
-STARTS = [(flag, "phase") for flag in FETCH_FLAGS] + [(flag, "pulse") for flag in FETCH_FLAGS
-                                                      if flag != "fetch_force"]
+PULSES = {flag: RESTART_PULSES.get(counter) for flag, counter in zip(FETCH_FLAGS, FETCH_COUNTERS)}
+STARTS = [(flag, "phase") for flag in FETCH_FLAGS] + [(flag, "pulse") for flag in FETCH_FLAGS if PULSES[flag]]
 
 
 @pytest.mark.parametrize("down_counters", [False, True])
@@ -128,7 +129,7 @@ def test_a_pass_is_never_idle_from_its_enables_rise_to_its_last_item(flag, start
     register_map = RegisterMap.build(FS, CAPACITY)
     seq = PassSequencer(FS, register_map, down_counters=down_counters)
     unit, phase = dict(zip(FETCH_FLAGS, zip(UNITS, ("in_force", "in_area", "in_integrate"))))[flag]
-    pulse = dict(zip(FETCH_FLAGS, (None, "triangle_restart", "node_restart")))[flag]
+    pulse = PULSES[flag]
     items = 5
 
     async def run_pass(ctx, restart):
