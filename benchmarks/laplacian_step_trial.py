@@ -1,11 +1,12 @@
 """A trial, not a default: the guarded momentum step with a graph-Laplacian preconditioner, larger Jacobi
-weights, a speed restart, or nonlinear conjugate gradients (float only).
+weights, a speed restart, nonlinear conjugate gradients, or a polynomial coarse space (float only).
 
 Usage::
 
     .venv/bin/python benchmarks/laplacian_step_trial.py                      # issue 25's four patches
     .venv/bin/python benchmarks/laplacian_step_trial.py --corpus [--only NAME ...] [--kinds KIND ...]
     .venv/bin/python benchmarks/laplacian_step_trial.py [--corpus] --variants jacobi jacobi2
+    .venv/bin/python benchmarks/laplacian_step_trial.py [--corpus] --variants jacobi coarse_hybrid --coarse-degree 3
 
 The default step proposes ``V' = β_k·V + s·w_i·f_i`` with the Jacobi weights ``w_i = 2/(C·deg_i)``
 (``docs/guard.md``). The trial replaces ``w_i·f_i`` by ``K⁻¹f`` with ``K = C·((1 + δ)·D − A)``, the
@@ -34,6 +35,13 @@ Variants beside the default (``jacobi``):
   ``α`` halves. Up to two energy evaluations an iteration against the default's one: a line search the engine's
   passes do not have, tried for what it would give. A Krylov method adapts to the spectrum where the
   heavy ball's fixed schedule cannot (isolated slow modes cost it a few iterations each);
+* ``coarse``: ``w·f + Φ (ΦᵀKΦ)⁻¹ Φᵀ f``, a two-level step: the Jacobi step plus the best move, for the
+  springs' Laplacian ``K``, in a coarse space of smooth global functions, ``Φ`` the monomials up to degree
+  ``--coarse-degree`` (default ``COARSE_DEGREE``) of the start layout's coordinates (10 for degree 3,
+  centred and scaled to the layout's extent). ``ΦᵀKΦ`` is a small run constant; each iteration needs the
+  sums ``Φᵀf`` over the nodes and each node's ``Φc``, which the engine's passes could carry;
+* ``coarse_hybrid``: ``coarse``, with ``hybrid``'s rule: a rolled-back plain gradient step switches to the
+  Jacobi step alone for ``HYBRID_JACOBI_STEPS`` accepted steps;
 * ``sweeps`` (the four patches only): ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from ``w·f``, each one
   more pass over the neighbours, the kind of preconditioner the engine's passes could run.
 
@@ -76,9 +84,13 @@ from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, 
 DELTA = 0.01
 #: ``hybrid``: accepted Jacobi steps after a rolled-back gradient step, before the Laplacian step again.
 HYBRID_JACOBI_STEPS = 20
+#: The variants that take the Jacobi step alone for a while after a rolled-back gradient step.
+HYBRIDS = ("hybrid", "coarse_hybrid")
 #: ``speed``: iterations since the last restart before a shorter move restarts the momentum.
 SPEED_RESTART_AFTER = 10
-VARIANTS = ("jacobi", "laplacian", "hybrid", "jacobi2", "speed", "cg")
+#: ``coarse``: the polynomial degree of the coarse space (its basis: the monomials up to it in the start layout).
+COARSE_DEGREE = 3
+VARIANTS = ("jacobi", "laplacian", "hybrid", "jacobi2", "speed", "cg", "coarse", "coarse_hybrid")
 #: Four patches only: ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from the default's ``w·f`` (one more
 #: pass over the neighbours each, as the engine could run them).
 SWEEPS = 8
@@ -96,24 +108,39 @@ class _Trial(reference._Jacobi):
     (``_force_step``) replaced, and for ``hybrid`` what a rolled-back step does (``_after_rejection``)."""
 
     variant = "jacobi"
+    coarse_degree = COARSE_DEGREE
 
-    def _laplacian_solve(self, forces: np.ndarray) -> np.ndarray:
-        if not hasattr(self, "_lu"):
-            mesh = self.model.mesh
-            i, j = mesh.edges.T
-            n = mesh.n_vertices
-            adjacency = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
-            degree = np.asarray(adjacency.sum(axis=1)).ravel()
-            stiffness = self.params.spring * (sp.diags((1.0 + DELTA) * degree) - adjacency)
-            self._lu = spla.splu(stiffness.tocsc())
-        return self._lu.solve(np.ascontiguousarray(forces))
-
-    def _sweeps(self, forces: np.ndarray) -> np.ndarray:
+    def _graph(self) -> tuple[sp.csr_matrix, np.ndarray]:
+        """The springs' adjacency matrix and the nodes' degrees."""
         mesh = self.model.mesh
         i, j = mesh.edges.T
         n = mesh.n_vertices
         adjacency = sp.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsr()
-        degree = np.asarray(adjacency.sum(axis=1)).ravel()[:, None]
+        return adjacency, np.asarray(adjacency.sum(axis=1)).ravel()
+
+    def _stiffness(self) -> sp.csr_matrix:
+        """``K = C·((1 + δ)·D − A)``."""
+        adjacency, degree = self._graph()
+        return self.params.spring * (sp.diags((1.0 + DELTA) * degree) - adjacency)
+
+    def _laplacian_solve(self, forces: np.ndarray) -> np.ndarray:
+        if not hasattr(self, "_lu"):
+            self._lu = spla.splu(self._stiffness().tocsc())
+        return self._lu.solve(np.ascontiguousarray(forces))
+
+    def _coarse(self, forces: np.ndarray) -> np.ndarray:
+        """The coarse space's correction ``Φ (ΦᵀKΦ)⁻¹ Φᵀ f``: ``Φ`` the monomials up to ``coarse_degree`` of the
+        start layout's coordinates (centred, scaled to the layout's extent), ``K`` as ``laplacian``'s."""
+        if not hasattr(self, "_basis"):
+            u = (self.positions - self.positions.mean(axis=0)) / np.abs(self.positions).max()
+            self._basis = np.stack([u[:, 0] ** a * u[:, 1] ** b for a in range(self.coarse_degree + 1)
+                                    for b in range(self.coarse_degree + 1 - a)], axis=1)
+            self._coarse_inverse = np.linalg.inv(self._basis.T @ (self._stiffness() @ self._basis))
+        return self._basis @ (self._coarse_inverse @ (self._basis.T @ forces))
+
+    def _sweeps(self, forces: np.ndarray) -> np.ndarray:
+        adjacency, degree = self._graph()
+        degree = degree[:, None]
         inverse = 1.0 / (self.params.spring * degree)
         x = 2.0 * inverse * forces
         for _ in range(SWEEPS):
@@ -181,16 +208,18 @@ class _Trial(reference._Jacobi):
         # hybrid: the Jacobi steps left, counted down by a taken step (a rolled-back one restores it)
         self._jacobi_left_before = jacobi_left = getattr(self, "_jacobi_left", 0)
         self._jacobi_left = jacobi_left - 1
-        if self.variant in ("jacobi", "jacobi2", "speed") or (self.variant == "hybrid" and jacobi_left > 0):
+        if self.variant in ("jacobi", "jacobi2", "speed") or (self.variant in HYBRIDS and jacobi_left > 0):
             factor = 2.0 if self.variant == "jacobi2" else 1.0
             return factor * super()._force_step(forces)
         if self.variant == "sweeps":
             return self._sweeps(forces)
+        if self.variant in ("coarse", "coarse_hybrid"):
+            return super()._force_step(forces) + self._coarse(forces)
         return self._laplacian_solve(forces)
 
     def _after_rejection(self, with_momentum: bool) -> None:
         self._jacobi_left = jacobi_left = self._jacobi_left_before
-        if self.variant == "hybrid" and not with_momentum and jacobi_left <= 0:
+        if self.variant in HYBRIDS and not with_momentum and jacobi_left <= 0:
             self._jacobi_left = HYBRID_JACOBI_STEPS  # the Jacobi step next, the scale kept
             return
         super()._after_rejection(with_momentum)
@@ -274,9 +303,12 @@ def main() -> None:
                         metavar="DIR", help="the corpus's no-option runs (default DIR: build/corpus)")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="with --corpus: only these patches")
     parser.add_argument("--kinds", nargs="+", metavar="KIND", help="with --corpus: only these kinds")
+    parser.add_argument("--coarse-degree", type=int, default=COARSE_DEGREE, metavar="D",
+                        help=f"coarse, coarse_hybrid: the coarse space's polynomial degree (default {COARSE_DEGREE})")
     parser.add_argument("--variants", nargs="+", choices=VARIANTS + ("sweeps",), metavar="VARIANT",
                         help=f"the steps to compare (default: all; {', '.join(VARIANTS)}, and sweeps without --corpus)")
     args = parser.parse_args()
+    _Trial.coarse_degree = args.coarse_degree
     if args.corpus is None:
         generated(tuple(args.variants or VARIANTS + ("sweeps",)))
     elif "sweeps" in (args.variants or ()):
