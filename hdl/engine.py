@@ -27,7 +27,7 @@ from .lanes import LANE_PASSES, LANE_SUMS, LaneSums
 from .logic import mode_steps
 from .memory_windows import MemoryWindows, needs_registered_select, window_steps
 from .parameters import check_power_of_two
-from .pass_sequencer import FETCH_FLAGS, PassSequencer
+from .pass_sequencer import FETCH_FLAGS, PHASE_INPUTS, PassSequencer
 from .phase_controller import CONSTANTS, HELD, RESULT_VALUES, PhaseController
 from .register_bank import RegisterBank
 from .rom import ENTRY_BANK_DEPTH
@@ -44,8 +44,8 @@ UNIT_CONSTANTS = ("barrier", "mode", "half_spring", "damping", "area_reciprocal"
 
 
 #: The controller's flags each pass sequencer reads.
-SEQUENCER_FLAGS = (*FETCH_FLAGS, "in_start", "in_force", "in_area", "in_step", "in_integrate", "running",
-                   "area_clear", "guarded", "half_rate", "node_restart", "triangle_restart")
+SEQUENCER_FLAGS = (*FETCH_FLAGS, *PHASE_INPUTS, "running", "area_clear", "guarded", "half_rate", "node_restart",
+                   "triangle_restart")
 
 
 class SpringflatEngine(wiring.Component):

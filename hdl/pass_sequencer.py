@@ -469,8 +469,9 @@ class PassSequencer(wiring.Component):
         force, area, nodes = (getattr(self, flag) | self._valid_fetch[flag] if self.down_counters
                               else getattr(self, flag) for flag in FETCH_FLAGS)
         if self.down_counters:
-            rising = {name: getattr(self, flag) & ~self._fetch[flag] for name, flag in zip(FETCH_COUNTERS, FETCH_FLAGS)}
-            restarting = {name: restart[name] | rising[name] for name in RESTART_PULSES}
+            flags = dict(zip(FETCH_COUNTERS, FETCH_FLAGS))
+            restarting = {name: pulse | (getattr(self, flags[name]) & ~self._fetch[flags[name]])  # or the rise
+                          for name, pulse in restart.items()}
         else:
             restarting = restart
         done_fetching = Signal(name="done_fetching")
