@@ -11,6 +11,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from .coarse import COARSE_DEGREE_MAX
 from .guard import ENERGY_WINDOW
 from .modes import DYNAMICS, STEP_MODES, RunMode, run_mode
 
@@ -72,6 +73,9 @@ class FlattenParams:
             energy change, ``|E_k − E_k−W| ≤ ε·E_k−W`` (counting accepted steps only);
             ``None`` means 1 with ``paper`` (Algorithm 1's rule) and
             :data:`~golden_model.guard.ENERGY_WINDOW` with ``momentum``.
+        coarse_degree: the guarded momentum step's coarse space (:mod:`golden_model.coarse`): the
+            monomials up to this degree of the start layout's coordinates; 0 (the default) takes the
+            Jacobi step alone.
     """
 
     spring: float = 0.5
@@ -93,6 +97,7 @@ class FlattenParams:
     barrier_gain: float = 4.0
     guard: bool | None = None
     energy_window: int | None = None
+    coarse_degree: int = 0
 
     def __post_init__(self) -> None:
         for f in fields(self):  # a numpy scalar as its Python value (np.float32(0.5) is 0.5, np.int64(500) 500)
@@ -144,6 +149,14 @@ class FlattenParams:
         if self.guard and self.dynamics != "momentum":
             raise ParameterError("the step guard belongs to the momentum dynamics (--dynamics momentum); "
                                  "the paper dynamics has none (drop --guard)")
+        if (isinstance(self.coarse_degree, bool) or not isinstance(self.coarse_degree, int)
+                or not 0 <= self.coarse_degree <= COARSE_DEGREE_MAX):
+            raise ParameterError(f"--coarse-degree must be an integer in [0, {COARSE_DEGREE_MAX}], "
+                                 f"got {self.coarse_degree!r}")
+        if self.coarse_degree and not self.guard:
+            raise ParameterError("the coarse space is a step of the guarded momentum dynamics: drop --coarse-degree"
+                                 + (", or drop --no-guard" if self.dynamics == "momentum" else
+                                    ", or add --dynamics momentum"))
         if self.guard and self.penalty:
             raise ParameterError("the penalty moves nodes after the guarded step and would void its "
                                  "guarantees: drop --penalty, or use --no-guard")

@@ -34,6 +34,7 @@ from typing import Callable
 
 import numpy as np
 
+from .coarse import CoarseSchedule, basis, coarse_inverse, coarse_move
 from .guard import ENERGY_FLOOR, GUARD_LEVELS, EnergyWindow, StepScale, energy_floor_fraction, guarded_moves
 from .mesh import Mesh, folded_by_area, layout_orientation, signed_areas_2d
 from .modes import Step
@@ -487,6 +488,11 @@ class _Jacobi:
         self.restart = False  # S < 0 seen in the last force pass
         self._refresh()
         self.guard = GuardRecord() if params.guard else None
+        self.coarse = None  # the coarse space's Φ and M (golden_model.coarse), with its schedule
+        if params.coarse_degree:
+            phi = basis(positions, params.coarse_degree)
+            self.coarse = (phi, coarse_inverse(phi, self.edges, params.spring))
+            self.coarse_schedule = CoarseSchedule()
         self.accepted = True  # the last advance's step was taken
         self.stalled = False
         if self.guard is not None:
@@ -570,6 +576,8 @@ class _Jacobi:
             self.momentum_k += 1
             self.restart = power < 0
             guard.scale = guard.scale.accepted_step()
+            if self.coarse is not None:
+                self.coarse_schedule = self.coarse_schedule.accepted()
         else:
             self.positions, self.delta, self.length, self.signed, self._layout_energy = before
             self.velocities = np.zeros_like(self.velocities)
@@ -580,12 +588,22 @@ class _Jacobi:
 
     def _force_step(self, forces: np.ndarray) -> np.ndarray:
         """The momentum step's force term ``w·f`` (length units, before the guard's scale), ``w`` the step
-        weights of the current layout (``SpringModel.step_weights``)."""
-        return self.model.step_weights(self.positions, self.signed)[:, None] * forces
+        weights of the current layout (``SpringModel.step_weights``), plus the coarse move ``Φ·M·(Φᵀf)``
+        where the coarse space is on and its schedule takes it."""
+        step = self.model.step_weights(self.positions, self.signed)[:, None] * forces
+        if self.coarse is not None and self.coarse_schedule.coarse:
+            step = step + coarse_move(*self.coarse, forces)
+        return step
 
     def _after_rejection(self, with_momentum: bool) -> None:
-        """A rolled-back step's effect on the guard's scale: it halves after a plain gradient step."""
+        """A rolled-back step's effect on the guard's scale: it halves after a plain gradient step, but for
+        one taken with the coarse move, after which the Jacobi step goes alone for a while
+        (:class:`~golden_model.coarse.CoarseSchedule`)."""
         guard = self.guard
+        if self.coarse is not None:
+            self.coarse_schedule, scale_rule = self.coarse_schedule.rejected(with_momentum)
+            if not scale_rule:
+                return
         guard.scale = guard.scale.rejected(with_momentum)
         self.stalled = guard.scale.stalled
 

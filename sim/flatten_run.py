@@ -476,6 +476,7 @@ def what_was_used(params: FlattenParams, init: str, result: FlattenResult, mesh:
     penalty = ", overlap penalty" if params.penalty else ""
     if params.mode.step is Step.MOMENTUM:
         dynamics = ("momentum dynamics, " + ("step guard" if params.guard else "no step guard")
+                    + (f", coarse space of degree {params.coarse_degree}" if params.coarse_degree else "")
                     + (barrier or ", no barrier") + penalty)
     else:
         dynamics = (f"paper dynamics, {params.step} step" + (f", damping {params.damping:g}" if params.damping else "")

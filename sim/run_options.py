@@ -20,6 +20,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
+from golden_model.coarse import COARSE_DEGREE, COARSE_DEGREE_MAX
 from golden_model.files import describe_os_error, same_file_key
 from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, folded_faces, one_line
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
@@ -220,6 +221,11 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--energy-window", type=integer_argument, default=None, metavar="W",
                         help="iterations over which the stop rule measures the relative energy change "
                              f"(default: 1 with paper, as Algorithm 1; {ENERGY_WINDOW} with momentum)")
+    parser.add_argument("--coarse-degree", type=integer_argument, default=None, metavar="D",
+                        help="the guarded momentum step's coarse space: add the best move in the span of the start "
+                             f"layout's monomials up to degree D (0 to {COARSE_DEGREE_MAX}; {COARSE_DEGREE} meets "
+                             "120 iterations on smooth patches; float and fixed engines; default "
+                             f"{_PARAMS.coarse_degree}, none; docs/guard.md)")
     parser.add_argument("--step", choices=STEP_MODES, default=None,
                         help=f"the paper dynamics' step-size mode (default {_PARAMS.step}, eqs. 18-20)")
     parser.add_argument("--dt", type=number_argument, default=None, help=f"fixed step size (default {_PARAMS.dt:g})")
@@ -492,7 +498,7 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams, fixed_po
             changes["tol_energy"] = FILE_TOL_ENERGY_PAPER
     for option in ("step", "dt", "damping", "penalty_kappa", "penalty_gain", "spring", "density",
                    "tol_area", "tol_shape", "tol_energy", "max_iter", "barrier", "barrier_threshold",
-                   "barrier_gain", "guard", "energy_window"):
+                   "barrier_gain", "guard", "energy_window", "coarse_degree"):
         value = getattr(args, option)
         if value is not None:
             changes[option] = value

@@ -459,7 +459,10 @@ UNGUARDED = {"guard": False, "energy_window": 1}
 def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
     """Refuse, in one line, a stop rule's window the engine does not have (the guard's
     :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it), and the guarded step on a
-    ``capacity`` built without the guard."""
+    ``capacity`` built without the guard, and the coarse space, which the engine does not run."""
+    if params.coarse_degree:
+        raise FixedPointError("SpringflatEngine has no coarse space (its passes take the Jacobi step alone): "
+                              "drop --coarse-degree, or use --engine float or fixed")
     if capacity is not None and params.guard and not capacity.guard:
         raise FixedPointError(f"this engine was built without the step guard, so it does not run "
                               f"'{params.mode.name}': use --no-guard, or an engine built with the guard")

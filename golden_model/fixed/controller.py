@@ -22,8 +22,10 @@ from typing import Callable
 
 import numpy as np
 
+from ..coarse import CoarseSchedule
 from ..guard import EnergyWindow
 from ..modes import RunMode, Step
+from .coarse import CoarseConstants, coarse_accel
 from .format import SaturationCounter
 from .formats_set import FormatSet
 from .guard import commit, floor_min_raw, guarded_moves_raw, proposal
@@ -41,7 +43,8 @@ class Setup:
     ``faces`` are the triangles (for E_S and the guard) with ``winding`` σ, the pattern's orientation
     (the engine's image writes each triangle in the pattern's winding, so there σ = +1); ``dt`` the
     fixed Δt of ``paper-fixed``; ``saturation_limit`` stops a run as ``diverged`` once that many
-    saturation events were counted (0: never).
+    saturation events were counted (0: never); ``coarse`` the guarded step's coarse space
+    (:mod:`golden_model.fixed.coarse`; ``None``: the Jacobi step alone, as the engine's).
     """
 
     fs: FormatSet
@@ -59,6 +62,7 @@ class Setup:
     energy_window: int
     saturation_limit: int = 0
     winding: int = 1
+    coarse: CoarseConstants | None = None
 
 
 class Controller:
@@ -85,6 +89,7 @@ class Controller:
         self.momentum = MomentumState()
         self.guard = GuardRecord() if setup.mode.guarded else None
         self.floor_min = floor_min_raw(setup.fs, setup.face_areas) if self.guard is not None else None
+        self.coarse_schedule = CoarseSchedule()
         self.accepted = True
         self.stalled = False
         self._measured: np.ndarray | None = None  # the positions array the pass results belong to
@@ -142,8 +147,11 @@ class Controller:
         """Propose, guard, commit and measure; keep the step only if the energy did not rise."""
         s, guard = self.setup, self.guard
         accepted = (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power)
+        coarse = None
+        if s.coarse is not None and self.coarse_schedule.coarse:
+            coarse = coarse_accel(s.fs, s.coarse, self.terms.force, self.counter)
         wanted = proposal(s.fs, self.raw_velocities, self.terms.force, weights, self.dt, guard.scale.shift,
-                          self.counter)
+                          self.counter, coarse)
         moves, levels = guarded_moves_raw(s.fs, self.raw_positions, wanted, s.faces, s.winding, self.floor_min)
         guard.count_levels(levels)
         # V is the move taken before the moved layout is measured, so that its S = Σ F·V pairs the new
@@ -154,6 +162,8 @@ class Controller:
         self.accepted = self.energy_raw <= before
         if self.accepted:
             guard.scale = guard.scale.accepted_step()
+            if s.coarse is not None:
+                self.coarse_schedule = self.coarse_schedule.accepted()
             return
         self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power = accepted
         self._measured = self.raw_positions
@@ -161,7 +171,12 @@ class Controller:
         self.power = 0  # S of a stopped momentum
         self.momentum = MomentumState()
         guard.rejected += 1
-        guard.scale = guard.scale.rejected(with_momentum=self.dt > 0)  # β = 0: a plain gradient step
+        with_momentum = self.dt > 0  # β = 0: a plain gradient step
+        if s.coarse is not None:
+            self.coarse_schedule, scale_rule = self.coarse_schedule.rejected(with_momentum)
+            if not scale_rule:
+                return
+        guard.scale = guard.scale.rejected(with_momentum)
         self.stalled = guard.scale.stalled
 
     def run(self, on_iteration: Callable[[int], None] | None = None) -> tuple[str, int]:

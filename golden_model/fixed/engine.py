@@ -40,6 +40,7 @@ from ..modes import Step
 from ..params import FlattenParams
 from ..reference import node_weights
 from ..results import FlattenResult, History, Measurement
+from .coarse import CoarseConstants, coarse_constants, coarse_formats_problem
 from .controller import Controller, Setup
 from .format import MAX_PRODUCT_WIDTH, Format, Rounding, SaturationCounter, quantize, to_float
 from .formats_set import FormatSet
@@ -93,6 +94,7 @@ class FixedProblem:
     initial_positions: np.ndarray  # (V, 2) raw [position]
     density: float
     winding: float = 1.0  # σ of the fixed-point P0 (the barrier's orientation)
+    coarse: CoarseConstants | None = None  # the coarse space's run constants (params.coarse_degree > 0)
 
     @property
     def momentum(self) -> bool:
@@ -297,9 +299,12 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
     length_total = int(stream.rest.sum()) << (fs.error_acc.frac_bits - fs.rest_length.frac_bits)  # [error_acc]
     orientation = np.where(_doubled_areas(fs, positions, mesh.faces) >= 0, 1, -1)
     mantissa_bits = fs.reciprocal.width
+    coarse = (coarse_constants(fs, positions, mesh.edges, params.spring, params.coarse_degree)
+              if params.coarse_degree else None)
     return FixedProblem(fs, mesh, params, scaled.scale_exp, stream, scaled.half_spring, scaled.damping,
                         scaled.face_areas, Reciprocal.of(area_total, mantissa_bits),
-                        Reciprocal.of(length_total, mantissa_bits), orientation, positions, scaled.density, winding)
+                        Reciprocal.of(length_total, mantissa_bits), orientation, positions, scaled.density, winding,
+                        coarse)
 
 
 def _barrier_entries(mesh: Mesh, params: FlattenParams, fs: FormatSet, scale: float,
@@ -400,7 +405,7 @@ def controller_setup(problem: FixedProblem) -> Setup:
     return Setup(fs, mode, problem.stream, problem.mesh.faces, problem.face_areas, problem.half_spring,
                  problem.damping, dt, problem.area_reciprocal, problem.length_reciprocal,
                  StopRule.of(params, fs, energy_floor_raw(problem)), params.max_iter, params.energy_window,
-                 winding=int(problem.winding))
+                 winding=int(problem.winding), coarse=problem.coarse)
 
 
 def _fits(what: str, value: float, field: str, fs: FormatSet, hint: str = "") -> int:
@@ -431,6 +436,8 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
     if params.guard and fs.face_edge.frac_bits != fs.position.frac_bits:
         raise FixedPointError(f"the step guard's certificate is exact only with face_edge ({fs.face_edge}) at "
                               f"position's ({fs.position}) fraction bits: format set '{fs.name}'")
+    if params.coarse_degree and (problem := coarse_formats_problem(fs, params.coarse_degree)) is not None:
+        raise FixedPointError(problem)
     if 0 < params.tol_energy < math.ldexp(1, -ENERGY_TOL_FRAC_BITS - 1):
         raise FixedPointError(f"--tol-energy {params.tol_energy:g} is below the controller's resolution "
                               f"2^-{ENERGY_TOL_FRAC_BITS} ({math.ldexp(1, -ENERGY_TOL_FRAC_BITS):.3g}); use 0 or a larger value")

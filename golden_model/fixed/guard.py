@@ -43,16 +43,19 @@ EDGE_WEIGHT, ROUNDING_MARGIN = 2, 8
 
 
 def proposal(fs: FormatSet, velocities: np.ndarray, force: np.ndarray, weights: np.ndarray, beta: int, shift: int,
-             counter: SaturationCounter | None = None) -> np.ndarray:
+             counter: SaturationCounter | None = None, coarse: np.ndarray | None = None) -> np.ndarray:
     """``(V, 2)`` the guarded momentum step's proposal [velocity]::
 
         a  = rq(F·w → accel)                              w [inv_mass]
+        a  = sat(a + coarse → accel)                      with the coarse move [accel] (golden_model.fixed.coarse)
         a' = rq(a · 2^-shift → accel)                     the step scale
         V' = rq(β·V + a' → velocity)                      β [dt]; one rounding for both terms
     """
     rnd = fs.rounding
     accel = requantize(force * weights[:, None], fs.force_acc.frac_bits + fs.inv_mass.frac_bits,
                        fs.accel, rnd, SAT, counter, "accel")
+    if coarse is not None:
+        accel = requantize(accel + coarse, fs.accel.frac_bits, fs.accel, rnd, SAT, counter, "accel")
     if shift:
         accel = shift_round(accel, shift, rnd)
     fv = fs.dt.frac_bits + fs.velocity.frac_bits

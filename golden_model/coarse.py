@@ -1,0 +1,100 @@
+"""The guarded momentum step's coarse space: a two-level step that couples distant nodes.
+
+The Jacobi-weighted step ``w·f`` moves each node by its own forces, so a smooth strain over the whole
+patch takes about a dozen iterations per edge of radius to leave (``docs/guard.md``, "Speed to the
+minimum"). The coarse space adds the best move, for the springs' graph Laplacian ``K``, in a small
+space of smooth global functions::
+
+    step = w·f + Φ·M·(Φᵀf),        M = (ΦᵀKΦ)⁻¹,        K = C·((1 + δ)·D − A),
+
+``Φ`` the ``(V, m)`` monomials ``u^a·v^b``, ``a + b ≤ degree``, of the start layout's coordinates
+(centred and scaled into ``[-1, 1]``), ``D`` the nodes' degrees, ``A`` the springs' adjacency and
+``δ`` = :data:`STIFFNESS_SHIFT` (it keeps ``K`` regular on a free boundary). ``M`` is a run constant;
+each iteration needs the ``2m`` sums ``Φᵀf`` and each node's ``Φ_i·c``. The guard is unchanged, so its
+guarantees hold for any proposal.
+
+Near the area floor the guard clips the global move node by node, and the clipped move can stop being
+a descent direction, as a Laplacian-preconditioned one does. So a rolled-back plain gradient step taken
+with the coarse move does not halve the step scale but takes the Jacobi step alone for
+:data:`JACOBI_STEPS_AFTER_REJECTION` accepted steps (:class:`CoarseSchedule`).
+
+Numpy only: ``ΦᵀKΦ = C·(δ·ΦᵀDΦ + Σ_edges (Φ_i − Φ_j)(Φ_i − Φ_j)ᵀ)`` needs no sparse matrix.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION",
+           "basis_exponents", "basis", "coarse_stiffness", "coarse_inverse", "coarse_move", "CoarseSchedule"]
+
+#: The degree that meets issue 25's 120-iteration bound on the generated patches (``docs/guard.md``).
+COARSE_DEGREE = 3
+#: The largest degree accepted: 15 functions; degree 4 measured no faster than 3.
+COARSE_DEGREE_MAX = 4
+#: ``δ`` in ``K = C·((1 + δ)·D − A)``.
+STIFFNESS_SHIFT = 0.01
+#: Accepted Jacobi steps after a rolled-back plain gradient step taken with the coarse move.
+JACOBI_STEPS_AFTER_REJECTION = 20
+
+
+def basis_exponents(degree: int) -> list[tuple[int, int]]:
+    """The monomials' exponents ``(a, b)`` of ``u^a·v^b``, ``a + b ≤ degree``, by total degree then ``b``."""
+    return [(total - b, b) for total in range(degree + 1) for b in range(total + 1)]
+
+
+def basis_coordinates(positions: np.ndarray) -> np.ndarray:
+    """``(V, 2)`` the layout's coordinates centred on its bounding box and scaled by its larger half-side,
+    so that they lie in ``[-1, 1]`` (the coarse space does not depend on the scaling; the values' range does)."""
+    low, high = positions.min(axis=0), positions.max(axis=0)
+    half = float((high - low).max()) / 2.0
+    return (positions - (low + high) / 2.0) / (half if half > 0 else 1.0)
+
+
+def basis(positions: np.ndarray, degree: int) -> np.ndarray:
+    """``(V, m)`` the coarse space's functions at the nodes: the monomials up to ``degree`` of
+    :func:`basis_coordinates` (``m = (degree + 1)(degree + 2)/2``)."""
+    u = basis_coordinates(positions)
+    return np.stack([u[:, 0] ** a * u[:, 1] ** b for a, b in basis_exponents(degree)], axis=1)
+
+
+def coarse_stiffness(phi: np.ndarray, edges: np.ndarray, spring: float) -> np.ndarray:
+    """``(m, m)`` ``ΦᵀKΦ`` for the springs' Laplacian ``K = C·((1 + δ)·D − A)``."""
+    degree = np.bincount(edges.ravel(), minlength=len(phi)).astype(np.float64)
+    difference = phi[edges[:, 0]] - phi[edges[:, 1]]
+    return spring * (STIFFNESS_SHIFT * (phi.T * degree) @ phi + difference.T @ difference)
+
+
+def coarse_inverse(phi: np.ndarray, edges: np.ndarray, spring: float) -> np.ndarray:
+    """``(m, m)`` ``M = (ΦᵀKΦ)⁻¹``, the run constant of the coarse move [1/C]."""
+    return np.linalg.inv(coarse_stiffness(phi, edges, spring))
+
+
+def coarse_move(phi: np.ndarray, inverse: np.ndarray, forces: np.ndarray) -> np.ndarray:
+    """``(V, 2)`` ``Φ·M·(Φᵀf)``: the best move in the coarse space for the forces ``f`` [length]."""
+    return phi @ (inverse @ (phi.T @ forces))
+
+
+@dataclass(frozen=True)
+class CoarseSchedule:
+    """Whether the next step takes the coarse move: not while ``jacobi_left`` accepted Jacobi steps remain
+    after a rolled-back plain gradient step that took it."""
+
+    jacobi_left: int = 0
+
+    @property
+    def coarse(self) -> bool:
+        return self.jacobi_left == 0
+
+    def accepted(self) -> "CoarseSchedule":
+        return CoarseSchedule(max(0, self.jacobi_left - 1))
+
+    def rejected(self, with_momentum: bool) -> tuple["CoarseSchedule", bool]:
+        """After a rolled-back step: the schedule, and whether the guard's own scale rule applies
+        (:meth:`~golden_model.guard.StepScale.rejected`); it does not after a plain gradient step taken with
+        the coarse move, whose scale stays."""
+        if self.coarse and not with_momentum:
+            return CoarseSchedule(JACOBI_STEPS_AFTER_REJECTION), False
+        return self, True
