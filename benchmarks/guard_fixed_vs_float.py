@@ -13,7 +13,8 @@ the mesh file's defaults): ``sim.generate.hard_patches()`` and the corpus's ``ta
 Per mesh the status, iterations, rolled-back steps and saturation events of each engine and
 |ΔE_S|, |ΔE_C|, and whether the row meets issue 25's bar (same status, iterations within ±1,
 |ΔE_S|, |ΔE_C| <= 1e-3); a mesh the formats (``--formats``, a preset or a format-set file: default ``default``) cannot hold is
-"refused" with the reason; ``--rsqrt-frac-bits N`` resolves the lengths finer than the set does.
+"refused" with the reason; ``--rsqrt-frac-bits N`` resolves the lengths finer than the set does;
+``--coarse-degree D`` runs both with the guarded step's coarse space of degree D (``golden_model.coarse``).
 ``--perturbed`` adds the float run from ``P0·(1 + 1e-9)`` beside it: how far the float model's own
 stopping point moves under a perturbation far below fixed point's rounding. ``--rounded-start`` adds the
 float run from the fixed-point model's start, ``P0`` rounded to [position] and mapped back (a change of
@@ -161,6 +162,8 @@ def main() -> None:
     parser.add_argument("--rsqrt-frac-bits", type=int, metavar="N",
                         help="resolve lengths finer: N fraction bits of rsqrt, length_sq's cut to keep their product "
                              f"in {MAX_PRODUCT_WIDTH} bits (the golden model's int64)")
+    parser.add_argument("--coarse-degree", type=int, default=0, metavar="D",
+                        help="both models with the coarse space of degree D (default 0: none)")
     args = parser.parse_args()
     try:
         formats = FormatSet.load(args.formats)
@@ -179,6 +182,7 @@ def main() -> None:
     met = total = 0
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         for name, mesh, p0, params in rows:
+            params = params.with_(coarse_degree=args.coarse_degree)
             line, ok = row(name, mesh, p0, params, args.perturbed, args.rounded_start, formats)
             met, total = met + ok, total + 1
             print(line, flush=True)

@@ -2,8 +2,10 @@
 
 The host computes the run constants once, from the fixed-point start layout:
 
-* ``Φ`` [basis]: each node's ``m`` monomials of the start layout's coordinates
-  (:func:`golden_model.coarse.basis`, values in ``[-1, 1]``), rounded half up to ``s1.BASIS_FRAC_BITS``;
+* ``Φ`` [basis]: each node's ``m`` monomials of its start coordinates ``u, v`` in ``[-1, 1]``
+  (:func:`golden_model.coarse.basis_coordinates`), ``u`` and ``v`` rounded half up to ``s1.BASIS_FRAC_BITS``
+  and each monomial formed from a lower one by one integer product, rounded half up (:func:`integer_basis`),
+  so that a node's basis follows from its two coordinates;
 * ``M = (ΦᵀKΦ)⁻¹`` of that rounded ``Φ``, as integers ``M_raw = round(M·2^e)`` with one exponent ``e`` for
   the matrix (a block exponent: ``max |M_raw|`` just below ``2^MATRIX_BITS``).
 
@@ -25,13 +27,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..coarse import basis, basis_exponents, coarse_inverse
-from .format import Format, Overflow, SaturationCounter, quantize, requantize
+from ..coarse import basis_coordinates, basis_exponents, coarse_inverse
+from .format import Format, Overflow, SaturationCounter, quantize, requantize, shift_round
 from .formats_set import FormatSet
 from .pipeline import exact_sum
 
 __all__ = ["BASIS_FRAC_BITS", "MATRIX_BITS", "BASIS", "coefficient_format", "CoarseConstants", "coarse_constants",
-           "coarse_accel", "coarse_formats_problem"]
+           "integer_basis", "coarse_accel", "coarse_formats_problem"]
 
 SAT = Overflow.SATURATE
 #: Fraction bits of the basis values ``Φ`` (s1.16: 18 bits, one DSP operand).
@@ -61,7 +63,7 @@ def coarse_constants(fs: FormatSet, raw_positions: np.ndarray, edges: np.ndarray
                      degree: int) -> CoarseConstants:
     """Round the start layout's basis to [basis] and ``M`` of the rounded basis to :data:`MATRIX_BITS` bits."""
     layout = raw_positions.astype(np.float64)  # (the basis does not depend on the layout's scale)
-    phi = quantize(basis(layout, degree), BASIS, "half_up", SAT)
+    phi = integer_basis(quantize(basis_coordinates(layout), BASIS, "half_up", SAT), degree)
     inverse = coarse_inverse(np.ldexp(phi.astype(np.float64), -BASIS_FRAC_BITS), edges, spring)
     exponent = MATRIX_BITS - math.frexp(float(np.abs(inverse).max()))[1]  # max |M|·2^e in [2^23, 2^24)
     matrix = tuple(tuple(int(v) for v in row) for row in np.rint(np.ldexp(inverse, exponent)).astype(np.int64))
@@ -77,6 +79,18 @@ def coarse_formats_problem(fs: FormatSet, degree: int) -> str | None:
         return None
     return (f"the coarse move's sum of {m} products of basis {BASIS} and position {coefficient_format(fs)} takes "
             f"{width} bits > 63 in format set '{fs.name}': use a smaller --coarse-degree or position format")
+
+
+def integer_basis(uv: np.ndarray, degree: int) -> np.ndarray:
+    """``(V, m)`` the monomials ``u^a·v^b`` [basis] of the raw coordinates ``uv`` ``(V, 2)`` [basis], in
+    :func:`~golden_model.coarse.basis_exponents`' order: ``1``, then each from the one of a degree lower, times
+    ``u`` where ``a > 0`` (else ``v``), rounded half up (|values| ≤ 1: no saturation)."""
+    one = np.full(len(uv), 1 << BASIS_FRAC_BITS, dtype=np.int64)
+    columns: dict[tuple[int, int], np.ndarray] = {(0, 0): one}
+    for a, b in basis_exponents(degree)[1:]:
+        lower, factor = ((a - 1, b), uv[:, 0]) if a else ((a, b - 1), uv[:, 1])
+        columns[a, b] = shift_round(columns[lower] * factor, BASIS_FRAC_BITS, "half_up")
+    return np.column_stack([columns[e] for e in basis_exponents(degree)])
 
 
 def _round_half_up(value: int, shift: int) -> int:
