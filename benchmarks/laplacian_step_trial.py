@@ -1,5 +1,6 @@
-"""A trial, not a default: the guarded momentum step with a graph-Laplacian preconditioner, larger Jacobi
-weights, a speed restart, nonlinear conjugate gradients, or a polynomial coarse space (float only).
+"""Trials, not defaults: the guarded momentum step with a graph-Laplacian preconditioner, larger Jacobi
+weights, a speed restart, nonlinear conjugate gradients, or a polynomial coarse space (the last built in:
+``--coarse-degree``).
 
 Usage::
 
@@ -7,6 +8,7 @@ Usage::
     .venv/bin/python benchmarks/laplacian_step_trial.py --corpus [--only NAME ...] [--kinds KIND ...]
     .venv/bin/python benchmarks/laplacian_step_trial.py [--corpus] --variants jacobi jacobi2
     .venv/bin/python benchmarks/laplacian_step_trial.py [--corpus] --variants jacobi coarse_hybrid --coarse-degree 3
+    .venv/bin/python benchmarks/laplacian_step_trial.py --variants jacobi coarse_hybrid --engine fixed
 
 The default step proposes ``V' = β_k·V + s·w_i·f_i`` with the Jacobi weights ``w_i = 2/(C·deg_i)``
 (``docs/guard.md``). The trial replaces ``w_i·f_i`` by ``K⁻¹f`` with ``K = C·((1 + δ)·D − A)``, the
@@ -41,7 +43,9 @@ Variants beside the default (``jacobi``):
   centred and scaled to the layout's extent). ``ΦᵀKΦ`` is a small run constant; each iteration needs the
   sums ``Φᵀf`` over the nodes and each node's ``Φc``, which the engine's passes could carry;
 * ``coarse_hybrid``: ``coarse``, with ``hybrid``'s rule: a rolled-back plain gradient step switches to the
-  Jacobi step alone for ``HYBRID_JACOBI_STEPS`` accepted steps;
+  Jacobi step alone for ``HYBRID_JACOBI_STEPS`` accepted steps. Built in: the models' ``--coarse-degree``
+  (``golden_model.coarse``, ``golden_model.fixed.coarse``), which this variant runs, in float or, with
+  ``--engine fixed``, in fixed point, as ``jacobi`` (the built-in default);
 * ``sweeps`` (the four patches only): ``SWEEPS`` damped Jacobi sweeps on ``K x = f`` from ``w·f``, each one
   more pass over the neighbours, the kind of preconditioner the engine's passes could run.
 
@@ -72,20 +76,18 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
+import golden_model.coarse as coarse  # noqa: E402
 import golden_model.reference as reference  # noqa: E402
 from sim.generate import bumpy_grid, rolled_grid, saddle_grid, spherical_cap  # noqa: E402
 from golden_model.guard import guarded_moves  # noqa: E402
 from sim.layouts import initial_layout, start_layout  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
+from golden_model.fixed.engine import flatten_fixed  # noqa: E402
 from golden_model.reference import flatten, iterations_to_within  # noqa: E402
 from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius  # noqa: E402
 
-#: ``K = C·((1 + δ)·D − A)``.
-DELTA = 0.01
 #: ``hybrid``: accepted Jacobi steps after a rolled-back gradient step, before the Laplacian step again.
 HYBRID_JACOBI_STEPS = 20
-#: The variants that take the Jacobi step alone for a while after a rolled-back gradient step.
-HYBRIDS = ("hybrid", "coarse_hybrid")
 #: ``speed``: iterations since the last restart before a shorter move restarts the momentum.
 SPEED_RESTART_AFTER = 10
 #: ``coarse``: the polynomial degree of the coarse space (its basis: the monomials up to it in the start layout).
@@ -121,7 +123,7 @@ class _Trial(reference._Jacobi):
     def _stiffness(self) -> sp.csr_matrix:
         """``K = C·((1 + δ)·D − A)``."""
         adjacency, degree = self._graph()
-        return self.params.spring * (sp.diags((1.0 + DELTA) * degree) - adjacency)
+        return self.params.spring * (sp.diags((1.0 + coarse.STIFFNESS_SHIFT) * degree) - adjacency)
 
     def _laplacian_solve(self, forces: np.ndarray) -> np.ndarray:
         if not hasattr(self, "_lu"):
@@ -129,14 +131,11 @@ class _Trial(reference._Jacobi):
         return self._lu.solve(np.ascontiguousarray(forces))
 
     def _coarse(self, forces: np.ndarray) -> np.ndarray:
-        """The coarse space's correction ``Φ (ΦᵀKΦ)⁻¹ Φᵀ f``: ``Φ`` the monomials up to ``coarse_degree`` of the
-        start layout's coordinates (centred, scaled to the layout's extent), ``K`` as ``laplacian``'s."""
+        """The coarse space's correction ``Φ (ΦᵀKΦ)⁻¹ Φᵀ f`` (:mod:`golden_model.coarse`, the built-in step's)."""
         if not hasattr(self, "_basis"):
-            u = (self.positions - self.positions.mean(axis=0)) / np.abs(self.positions).max()
-            self._basis = np.stack([u[:, 0] ** a * u[:, 1] ** b for a in range(self.coarse_degree + 1)
-                                    for b in range(self.coarse_degree + 1 - a)], axis=1)
-            self._coarse_inverse = np.linalg.inv(self._basis.T @ (self._stiffness() @ self._basis))
-        return self._basis @ (self._coarse_inverse @ (self._basis.T @ forces))
+            self._basis = coarse.basis(self.positions, self.coarse_degree)
+            self._coarse_inverse = coarse.coarse_inverse(self._basis, self.model.mesh.edges, self.params.spring)
+        return coarse.coarse_move(self._basis, self._coarse_inverse, forces)
 
     def _sweeps(self, forces: np.ndarray) -> np.ndarray:
         adjacency, degree = self._graph()
@@ -208,25 +207,35 @@ class _Trial(reference._Jacobi):
         # hybrid: the Jacobi steps left, counted down by a taken step (a rolled-back one restores it)
         self._jacobi_left_before = jacobi_left = getattr(self, "_jacobi_left", 0)
         self._jacobi_left = jacobi_left - 1
-        if self.variant in ("jacobi", "jacobi2", "speed") or (self.variant in HYBRIDS and jacobi_left > 0):
+        if self.variant in ("jacobi", "jacobi2", "speed") or (self.variant == "hybrid" and jacobi_left > 0):
             factor = 2.0 if self.variant == "jacobi2" else 1.0
             return factor * super()._force_step(forces)
         if self.variant == "sweeps":
             return self._sweeps(forces)
-        if self.variant in ("coarse", "coarse_hybrid"):
+        if self.variant == "coarse":
             return super()._force_step(forces) + self._coarse(forces)
         return self._laplacian_solve(forces)
 
     def _after_rejection(self, with_momentum: bool) -> None:
         self._jacobi_left = jacobi_left = self._jacobi_left_before
-        if self.variant in HYBRIDS and not with_momentum and jacobi_left <= 0:
+        if self.variant == "hybrid" and not with_momentum and jacobi_left <= 0:
             self._jacobi_left = HYBRID_JACOBI_STEPS  # the Jacobi step next, the scale kept
             return
         super()._after_rejection(with_momentum)
 
 
-def run(variant: str, mesh, p0: np.ndarray, params: FlattenParams):
-    """:func:`golden_model.reference.flatten` with the trial's step ``variant``."""
+#: The variants the models have built in (``--coarse-degree``), which ``--engine fixed`` runs too.
+BUILT_IN = ("jacobi", "coarse_hybrid")
+
+
+def run(variant: str, mesh, p0: np.ndarray, params: FlattenParams, engine: str = "float"):
+    """:func:`golden_model.reference.flatten` (or, for the built-in steps, ``engine`` ``fixed``'s
+    :func:`~golden_model.fixed.engine.flatten_fixed`) with the trial's step ``variant``."""
+    if variant in BUILT_IN:
+        params = params.with_(coarse_degree=_Trial.coarse_degree if variant == "coarse_hybrid" else 0)
+        return (flatten if engine == "float" else flatten_fixed)(mesh, p0, params)
+    if engine != "float":
+        raise ValueError(f"{variant} is a float trial: --engine fixed runs {' and '.join(BUILT_IN)}")
     trial = type(f"_Trial_{variant}", (_Trial,), {"variant": variant})
     default = reference._Jacobi
     reference._Jacobi = trial
@@ -242,7 +251,7 @@ def file_defaults(mesh) -> FlattenParams:
                          max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
 
 
-def generated(variants: tuple[str, ...]) -> None:
+def generated(variants: tuple[str, ...], engine: str = "float") -> None:
     print("| patch | minimum's E_C | " + " | ".join(f"{v}: to within 1 %" for v in variants) + " | "
           + " | ".join(f"{v}: default stop (status, it, E_C)" for v in variants) + " |")
     print("|---" * (2 + 2 * len(variants)) + "|")
@@ -252,11 +261,11 @@ def generated(variants: tuple[str, ...]) -> None:
         target = flatten(mesh, p0, FlattenParams(dynamics="momentum", max_iter=3000, **RUN)).final.shape_error
         within, stopped = [], []
         for variant in variants:
-            history = run(variant, mesh, p0, FlattenParams(dynamics="momentum", max_iter=400, **RUN)).history
+            history = run(variant, mesh, p0, FlattenParams(dynamics="momentum", max_iter=400, **RUN), engine).history
             reached = iterations_to_within(history.shape_error, target)
             within.append(str(reached) if reached is not None else f"> {len(history.shape_error) - 1}")
             r = run(variant, mesh, p0, FlattenParams(dynamics="momentum", density="auto", tol_area=1.0, tol_shape=1.0,
-                                                     tol_energy=FILE_TOL_ENERGY, max_iter=3000))
+                                                     tol_energy=FILE_TOL_ENERGY, max_iter=3000), engine)
             stopped.append(f"{r.status}, {r.iterations}, {r.final.shape_error:.4f}")
         print(f"| {name} | {target:.4f} | " + " | ".join(within) + " | " + " | ".join(stopped) + " |", flush=True)
 
@@ -307,10 +316,15 @@ def main() -> None:
                         help=f"coarse, coarse_hybrid: the coarse space's polynomial degree (default {COARSE_DEGREE})")
     parser.add_argument("--variants", nargs="+", choices=VARIANTS + ("sweeps",), metavar="VARIANT",
                         help=f"the steps to compare (default: all; {', '.join(VARIANTS)}, and sweeps without --corpus)")
+    parser.add_argument("--engine", choices=("float", "fixed"), default="float",
+                        help="without --corpus: the model that runs the built-in steps (jacobi, coarse_hybrid); the "
+                             "minimum is float's (default float)")
     args = parser.parse_args()
     _Trial.coarse_degree = args.coarse_degree
+    if args.engine == "fixed" and (args.corpus is not None or not set(args.variants or VARIANTS) <= set(BUILT_IN)):
+        parser.error(f"--engine fixed runs the built-in steps ({', '.join(BUILT_IN)}) on the four patches")
     if args.corpus is None:
-        generated(tuple(args.variants or VARIANTS + ("sweeps",)))
+        generated(tuple(args.variants or VARIANTS + ("sweeps",)), args.engine)
     elif "sweeps" in (args.variants or ()):
         parser.error("sweeps runs on the four patches only, not with --corpus")
     else:
