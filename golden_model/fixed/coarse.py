@@ -1,23 +1,28 @@
 """The coarse space of the guarded momentum step in integers (:mod:`golden_model.coarse` in float).
 
+Sized for a datapath of 18 × 18 multipliers: every per-node product is of two 18-bit operands, and the
+controller's ``M·g`` of two 25-bit ones. Values whose range changes over a run (the sums ``g``, the
+coefficients ``c``) are held as mantissas with one exponent for the whole vector (block floating point),
+chosen by their largest magnitude's leading one; every shift rounds half up.
+
 The host computes the run constants once, from the fixed-point start layout:
 
 * ``Φ`` [basis]: each node's ``m`` monomials of its start coordinates ``u, v`` in ``[-1, 1]``
-  (:func:`golden_model.coarse.basis_coordinates`), ``u`` and ``v`` rounded half up to ``s1.BASIS_FRAC_BITS``
-  and each monomial formed from a lower one by one integer product, rounded half up (:func:`integer_basis`),
-  so that a node's basis follows from its two coordinates;
-* ``M = (ΦᵀKΦ)⁻¹`` of that rounded ``Φ``, as integers ``M_raw = round(M·2^e)`` with one exponent ``e`` for
-  the matrix (a block exponent: ``max |M_raw|`` just below ``2^MATRIX_BITS``).
+  (:func:`golden_model.coarse.basis_coordinates`), ``u`` and ``v`` rounded to :data:`BASIS` and each monomial
+  formed from a lower one by one product (:func:`integer_basis`), so that a node's basis follows from its two
+  coordinates;
+* ``M = (ΦᵀKΦ)⁻¹`` of that basis as integers ``M_raw = round(M·2^matrix_exponent)``, one exponent for the
+  matrix, ``max |M_raw|`` in ``[2^(MATRIX_BITS − 1), 2^MATRIX_BITS)``.
 
-Each iteration, from the forces ``F`` [force_acc] of the last accepted layout:
+Each iteration, from the forces ``F`` [force_acc] of the last accepted layout (:func:`coarse_accel`):
 
-1. ``g = ΦᵀF``: ``2m`` exact integer sums (``Φ_raw·F_raw``: ``BASIS_FRAC_BITS`` + force_acc's fraction
-   bits), as the energy's and ``S``'s sums are exact;
-2. ``c = M·g``, exact, rounded half up once to :func:`coefficient_format` [position], saturating;
-3. each node's coarse move ``Φ_i·c``, exact, rounded (the format set's rounding) and saturated to [accel],
-   and added to the Jacobi term ``F·w`` before the step scale (:func:`golden_model.fixed.guard.proposal`).
-
-Every saturation is counted (``coarse_coefficient``, ``coarse_move``).
+1. ``F`` rounded to :data:`OPERAND_BITS` bits (:func:`narrow_force_format`; saturation counted as
+   ``coarse_force``), and the ``2m`` sums ``g = ΦᵀF`` formed exactly;
+2. ``g`` to mantissas of :data:`SUM_BITS` bits with one exponent (:func:`block_mantissas`), ``c = M·g`` formed
+   exactly, and ``c`` to mantissas of :data:`OPERAND_BITS` bits with one exponent;
+3. each node's coarse move ``Φ_i·c`` formed exactly, rounded (the format set's rounding) and saturated to
+   [accel] (counted as ``coarse_move``), and added to ``F·w`` before the step scale
+   (:func:`golden_model.fixed.guard.proposal`).
 """
 
 from __future__ import annotations
@@ -30,55 +35,30 @@ import numpy as np
 from ..coarse import basis_coordinates, basis_exponents, coarse_inverse
 from .format import Format, Overflow, SaturationCounter, quantize, requantize, shift_round
 from .formats_set import FormatSet
-from .pipeline import exact_sum
 
-__all__ = ["BASIS_FRAC_BITS", "MATRIX_BITS", "BASIS", "coefficient_format", "CoarseConstants", "coarse_constants",
-           "integer_basis", "coarse_accel", "coarse_formats_problem"]
+__all__ = ["OPERAND_BITS", "SUM_BITS", "MATRIX_BITS", "BASIS_FRAC_BITS", "BASIS", "CoarseConstants",
+           "coarse_constants", "integer_basis", "narrow_force_format", "block_mantissas", "coarse_accel"]
 
 SAT = Overflow.SATURATE
-#: Fraction bits of the basis values ``Φ`` (s1.16: 18 bits, one DSP operand).
-BASIS_FRAC_BITS = 16
+#: Width of the per-node operands: the basis values, the narrowed forces and the coefficients' mantissas.
+OPERAND_BITS = 18
+#: Width of the sums' mantissas, ``g``, and of ``M``'s entries (the controller's operands).
+SUM_BITS = 25
+#: Magnitude bits of ``M``'s largest entry.
+MATRIX_BITS = SUM_BITS - 1
+#: Fraction bits of the basis values ``Φ`` (s1.16: values in [-1, 1], 1 exact).
+BASIS_FRAC_BITS = OPERAND_BITS - 2
 BASIS = Format(True, 1, BASIS_FRAC_BITS)
-#: Magnitude bits of ``M``'s largest entry (a signed 25-bit mantissa with the matrix's exponent).
-MATRIX_BITS = 24
-
-
-def coefficient_format(fs: FormatSet) -> Format:
-    """The coarse coefficients ``c`` [length]: position's range and fraction bits (a move in the coarse space
-    spans at most the layout)."""
-    return fs.position
 
 
 @dataclass(frozen=True, eq=False)
 class CoarseConstants:
     """The host's run constants of the coarse space: ``phi`` ``(V, m)`` raw [basis], ``matrix`` ``(m, m)``
-    Python ints ``M·2^exponent``."""
+    int64 ``M·2^matrix_exponent``."""
 
     phi: np.ndarray
-    matrix: tuple[tuple[int, ...], ...]
-    exponent: int
-
-
-def coarse_constants(fs: FormatSet, raw_positions: np.ndarray, edges: np.ndarray, spring: float,
-                     degree: int) -> CoarseConstants:
-    """Round the start layout's basis to [basis] and ``M`` of the rounded basis to :data:`MATRIX_BITS` bits."""
-    layout = raw_positions.astype(np.float64)  # (the basis does not depend on the layout's scale)
-    phi = integer_basis(quantize(basis_coordinates(layout), BASIS, "half_up", SAT), degree)
-    inverse = coarse_inverse(np.ldexp(phi.astype(np.float64), -BASIS_FRAC_BITS), edges, spring)
-    exponent = MATRIX_BITS - math.frexp(float(np.abs(inverse).max()))[1]  # max |M|·2^e in [2^23, 2^24)
-    matrix = tuple(tuple(int(v) for v in row) for row in np.rint(np.ldexp(inverse, exponent)).astype(np.int64))
-    return CoarseConstants(phi, matrix, exponent)
-
-
-def coarse_formats_problem(fs: FormatSet, degree: int) -> str | None:
-    """Why the coarse move ``Φ_i·c`` of ``degree`` would not be exact in int64 with ``fs``, in one line (``None``:
-    it is)."""
-    m = len(basis_exponents(degree))
-    width = BASIS.width + coefficient_format(fs).width - 1 + math.ceil(math.log2(m))
-    if width <= 63:
-        return None
-    return (f"the coarse move's sum of {m} products of basis {BASIS} and position {coefficient_format(fs)} takes "
-            f"{width} bits > 63 in format set '{fs.name}': use a smaller --coarse-degree or position format")
+    matrix: np.ndarray
+    matrix_exponent: int
 
 
 def integer_basis(uv: np.ndarray, degree: int) -> np.ndarray:
@@ -93,25 +73,41 @@ def integer_basis(uv: np.ndarray, degree: int) -> np.ndarray:
     return np.column_stack([columns[e] for e in basis_exponents(degree)])
 
 
-def _round_half_up(value: int, shift: int) -> int:
-    """``value·2^-shift`` rounded half up (an exact left shift where ``shift ≤ 0``)."""
-    return (value + (1 << (shift - 1))) >> shift if shift > 0 else value << -shift
+def coarse_constants(raw_positions: np.ndarray, edges: np.ndarray, spring: float, degree: int) -> CoarseConstants:
+    """The basis of the start layout ``raw_positions`` (any fixed-point scale: the basis is scaled to the layout's
+    box) and ``M`` of that basis, rounded to :data:`MATRIX_BITS` bits with one exponent."""
+    uv = quantize(basis_coordinates(raw_positions.astype(np.float64)), BASIS, "half_up", SAT)
+    phi = integer_basis(uv, degree)
+    inverse = coarse_inverse(np.ldexp(phi.astype(np.float64), -BASIS_FRAC_BITS), edges, spring)
+    exponent = MATRIX_BITS - math.frexp(float(np.abs(inverse).max()))[1]
+    matrix = np.rint(np.ldexp(inverse, exponent)).astype(np.int64)
+    return CoarseConstants(phi, matrix, exponent)
+
+
+def narrow_force_format(fs: FormatSet) -> Format:
+    """The forces' format in the sums ``ΦᵀF``: :data:`OPERAND_BITS` bits with force_acc's integer bits (as many as
+    fit), the rest fraction bits."""
+    int_bits = min(fs.force_acc.int_bits, OPERAND_BITS - 1)
+    return Format(True, int_bits, OPERAND_BITS - 1 - int_bits)
+
+
+def block_mantissas(values: np.ndarray, bits: int) -> tuple[np.ndarray, int]:
+    """``values`` (int64) as ``bits``-bit signed mantissas with one exponent ``e ≥ 0``: ``values ≈ m·2^e``, ``e`` the
+    least that leaves the largest magnitude a bit below the mantissas' limit (so that rounding half up never
+    overflows it)."""
+    largest = int(np.abs(values).max()) if values.size else 0
+    exponent = max(0, largest.bit_length() - (bits - 2))
+    return shift_round(values, exponent, "half_up"), exponent
 
 
 def coarse_accel(fs: FormatSet, constants: CoarseConstants, force: np.ndarray,
                  counter: SaturationCounter | None = None) -> np.ndarray:
     """``(V, 2)`` each node's coarse move ``Φ_i·M·(ΦᵀF)`` [accel] for the forces ``F`` [force_acc]."""
-    phi, coefficient = constants.phi, coefficient_format(fs)
-    sums = [[exact_sum(phi[:, k] * force[:, d]) for d in range(2)] for k in range(phi.shape[1])]
-    # c = M·g: g at BASIS_FRAC_BITS + force_acc's fraction bits, M at `exponent`
-    shift = constants.exponent + BASIS_FRAC_BITS + fs.force_acc.frac_bits - coefficient.frac_bits
-    exact = [_round_half_up(sum(m * g[d] for m, g in zip(row, sums)), shift)
-             for row in constants.matrix for d in range(2)]
-    if counter is not None:
-        counter.add_saturations("coarse_coefficient",
-                                sum(not coefficient.raw_min <= v <= coefficient.raw_max for v in exact))
-    c = np.array([min(max(v, coefficient.raw_min), coefficient.raw_max) for v in exact],
-                 dtype=np.int64).reshape(-1, 2)
-    move = phi @ c  # exact in int64: coarse_formats_problem
-    return requantize(move, BASIS_FRAC_BITS + coefficient.frac_bits, fs.accel, fs.rounding, SAT, counter,
-                      "coarse_move")
+    phi, operand = constants.phi, narrow_force_format(fs)
+    narrow = requantize(force, fs.force_acc.frac_bits, operand, "half_up", SAT, counter, "coarse_force")
+    sums, sum_exponent = block_mantissas(phi.T @ narrow, SUM_BITS)  # (m, 2): |Φ·F| ≤ 2^33, V < 2^20
+    c, c_exponent = block_mantissas(constants.matrix @ sums, OPERAND_BITS)  # |M·g| < 2^24·2^24·m
+    move = phi @ c  # |Φ·c| < 2^16·2^16·m
+    frac = BASIS_FRAC_BITS + operand.frac_bits + BASIS_FRAC_BITS + constants.matrix_exponent \
+        - sum_exponent - c_exponent
+    return requantize(move, frac, fs.accel, fs.rounding, SAT, counter, "coarse_move")

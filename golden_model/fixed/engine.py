@@ -40,7 +40,7 @@ from ..modes import Step
 from ..params import FlattenParams
 from ..reference import node_weights
 from ..results import FlattenResult, History, Measurement
-from .coarse import CoarseConstants, coarse_constants, coarse_formats_problem
+from .coarse import CoarseConstants, coarse_constants
 from .controller import Controller, Setup
 from .format import MAX_PRODUCT_WIDTH, Format, Rounding, SaturationCounter, quantize, to_float
 from .formats_set import FormatSet
@@ -299,7 +299,7 @@ def prepare(mesh: Mesh, initial_positions: np.ndarray, params: FlattenParams, fs
     length_total = int(stream.rest.sum()) << (fs.error_acc.frac_bits - fs.rest_length.frac_bits)  # [error_acc]
     orientation = np.where(_doubled_areas(fs, positions, mesh.faces) >= 0, 1, -1)
     mantissa_bits = fs.reciprocal.width
-    coarse = (coarse_constants(fs, positions, mesh.edges, params.spring, params.coarse_degree)
+    coarse = (coarse_constants(positions, mesh.edges, params.spring, params.coarse_degree)
               if params.coarse_degree else None)
     return FixedProblem(fs, mesh, params, scaled.scale_exp, stream, scaled.half_spring, scaled.damping,
                         scaled.face_areas, Reciprocal.of(area_total, mantissa_bits),
@@ -436,8 +436,6 @@ def check_fixed_params(params: FlattenParams, fs: FormatSet) -> None:
     if params.guard and fs.face_edge.frac_bits != fs.position.frac_bits:
         raise FixedPointError(f"the step guard's certificate is exact only with face_edge ({fs.face_edge}) at "
                               f"position's ({fs.position}) fraction bits: format set '{fs.name}'")
-    if params.coarse_degree and (problem := coarse_formats_problem(fs, params.coarse_degree)) is not None:
-        raise FixedPointError(problem)
     if 0 < params.tol_energy < math.ldexp(1, -ENERGY_TOL_FRAC_BITS - 1):
         raise FixedPointError(f"--tol-energy {params.tol_energy:g} is below the controller's resolution "
                               f"2^-{ENERGY_TOL_FRAC_BITS} ({math.ldexp(1, -ENERGY_TOL_FRAC_BITS):.3g}); use 0 or a larger value")
