@@ -37,7 +37,8 @@ from .format import Format, Overflow, SaturationCounter, quantize, requantize, s
 from .formats_set import FormatSet
 
 __all__ = ["OPERAND_BITS", "SUM_BITS", "MATRIX_BITS", "BASIS_FRAC_BITS", "BASIS", "CoarseConstants",
-           "coarse_constants", "integer_basis", "narrow_force_format", "block_mantissas", "coarse_accel"]
+           "coarse_constants", "integer_basis", "narrow_force_format", "block_mantissas", "narrow_forces", "coarse_sums", "coefficients",
+           "move_frac_bits", "node_moves", "coarse_accel"]
 
 SAT = Overflow.SATURATE
 #: Width of the per-node operands: the basis values, the narrowed forces and the coefficients' mantissas.
@@ -100,14 +101,43 @@ def block_mantissas(values: np.ndarray, bits: int) -> tuple[np.ndarray, int]:
     return shift_round(values, exponent, "half_up"), exponent
 
 
+def narrow_forces(fs: FormatSet, force: np.ndarray, counter: SaturationCounter | None = None) -> np.ndarray:
+    """``(V, 2)`` the forces [force_acc] rounded half up to :func:`narrow_force_format`, saturating
+    (``coarse_force``)."""
+    return requantize(force, fs.force_acc.frac_bits, narrow_force_format(fs), "half_up", SAT, counter, "coarse_force")
+
+
+def coarse_sums(phi: np.ndarray, narrow: np.ndarray) -> np.ndarray:
+    """``(m, 2)`` the exact sums ``Φᵀ·F`` of the basis [basis] and the narrowed forces (``|Φ·F| ≤ 2^33``, fewer than
+    ``2^20`` nodes: int64)."""
+    return phi.T @ narrow
+
+
+def coefficients(constants: CoarseConstants, sums: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The coefficients ``c = M·g`` as :data:`OPERAND_BITS`-bit mantissas ``(m, 2)``, and the exponents of the sums'
+    and the coefficients' mantissas: ``g`` to :data:`SUM_BITS` bits, ``M·g`` exact, then to :data:`OPERAND_BITS`."""
+    g, sum_exponent = block_mantissas(sums, SUM_BITS)
+    c, c_exponent = block_mantissas(constants.matrix @ g, OPERAND_BITS)  # |M·g| < 2^24·2^23·m
+    return c, sum_exponent, c_exponent
+
+
+def move_frac_bits(fs: FormatSet, constants: CoarseConstants, sum_exponent: int, c_exponent: int) -> int:
+    """The fraction bits of the node products ``Φ_i·c``: the basis's twice, the narrowed forces', ``M``'s
+    exponent, less the two block exponents."""
+    return (2 * BASIS_FRAC_BITS + narrow_force_format(fs).frac_bits + constants.matrix_exponent
+            - sum_exponent - c_exponent)
+
+
+def node_moves(fs: FormatSet, phi: np.ndarray, c: np.ndarray, frac_bits: int,
+               counter: SaturationCounter | None = None) -> np.ndarray:
+    """``(V, 2)`` each node's ``Φ_i·c``, exact (``|Φ·c| ≤ 2^32·m``), rounded (the format set's rounding) and
+    saturated to [accel] (``coarse_move``)."""
+    return requantize(phi @ c, frac_bits, fs.accel, fs.rounding, SAT, counter, "coarse_move")
+
+
 def coarse_accel(fs: FormatSet, constants: CoarseConstants, force: np.ndarray,
                  counter: SaturationCounter | None = None) -> np.ndarray:
     """``(V, 2)`` each node's coarse move ``Φ_i·M·(ΦᵀF)`` [accel] for the forces ``F`` [force_acc]."""
-    phi, operand = constants.phi, narrow_force_format(fs)
-    narrow = requantize(force, fs.force_acc.frac_bits, operand, "half_up", SAT, counter, "coarse_force")
-    sums, sum_exponent = block_mantissas(phi.T @ narrow, SUM_BITS)  # (m, 2): |Φ·F| ≤ 2^33, V < 2^20
-    c, c_exponent = block_mantissas(constants.matrix @ sums, OPERAND_BITS)  # |M·g| < 2^24·2^24·m
-    move = phi @ c  # |Φ·c| < 2^16·2^16·m
-    frac = BASIS_FRAC_BITS + operand.frac_bits + BASIS_FRAC_BITS + constants.matrix_exponent \
-        - sum_exponent - c_exponent
-    return requantize(move, frac, fs.accel, fs.rounding, SAT, counter, "coarse_move")
+    sums = coarse_sums(constants.phi, narrow_forces(fs, force, counter))
+    c, sum_exponent, c_exponent = coefficients(constants, sums)
+    return node_moves(fs, constants.phi, c, move_frac_bits(fs, constants, sum_exponent, c_exponent), counter)
