@@ -222,7 +222,9 @@ def node_update_flip_flops() -> str:
 
 def unit_figures() -> str:
     """Latency and ``MULT18X18D`` blocks of every unit in ``hdl/``, every preset."""
-    from hdl import AreaError, BetaDivider, EnergyCheck, ForcePass, Integrator, Normaliser, RsqrtUnit, StepGenerator
+    from golden_model.coarse import COARSE_DEGREE
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY
+    from hdl import AreaError, BetaDivider, CoarseNode, EnergyCheck, ForcePass, Integrator, Normaliser, RsqrtUnit, StepGenerator
 
     entries = 8192
 
@@ -230,6 +232,7 @@ def unit_figures() -> str:
         plain = fs.replace(lut_interpolate=False)
         fp, fpe, integ, area = ForcePass(fs), ForcePass(fs, energy=True), Integrator(fs), AreaError(fs)
         norm, energy, beta = Normaliser(fs), EnergyCheck(fs, entries), BetaDivider(fs)
+        coarse = CoarseNode(fs, COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
         s = fp.stages
         return [
             [str(RsqrtUnit.latency_of(fs.rsqrt_config())), str(_mult18x18d(RsqrtUnit(fs)))],
@@ -239,6 +242,7 @@ def unit_figures() -> str:
             [f"{fpe.latency}", str(_mult18x18d(fpe))],
             [str(integ.latency), str(_mult18x18d(integ))],
             [str(AreaError.latency_of(fs)), str(_mult18x18d(area))],
+            [str(coarse.latency), str(_mult18x18d(coarse))],
             [f"{norm.cycles(fs.error.frac_bits + 2)} to {norm.cycles(10 ** 6)}", "none"],
             [f"{energy.square_bits} + {energy.energy_bits} + {energy.latency - energy.square_bits - energy.energy_bits}"
              f" = {energy.latency}", "none"],
@@ -247,7 +251,8 @@ def unit_figures() -> str:
 
     rows = {p: quietly(lambda: column(_preset(p))) for p in PRESETS}
     names = ["`RsqrtUnit`", "`StepGenerator`", "`StepGenerator`, `lut_interpolate` off", "`ForcePass`",
-             "`ForcePass(energy=True)`", "`Integrator`", "`AreaError`", "`Normaliser`: `cycles(shift)`, shift from "
+             "`ForcePass(energy=True)`", "`Integrator`", "`AreaError`",
+             f"`CoarseNode`, degree {COARSE_DEGREE}", "`Normaliser`: `cycles(shift)`, shift from "
              "F + 2 up", f"`EnergyCheck` at {entries:,} entries", "`BetaDivider`"]
     return _table(["unit", *(f"latency, {p}" for p in PRESETS), *(f"`MULT18X18D`, {p}" for p in PRESETS)],
                   [[name, *(rows[p][i][0] for p in PRESETS), *(rows[p][i][1] for p in PRESETS)]

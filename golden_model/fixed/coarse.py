@@ -32,13 +32,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..coarse import basis_coordinates, basis_exponents, coarse_inverse
+from ..coarse import COARSE_DEGREE_MAX, basis_coordinates, basis_exponents, coarse_inverse
 from .format import Format, Overflow, SaturationCounter, quantize, requantize, shift_round
 from .formats_set import FormatSet
 
 __all__ = ["OPERAND_BITS", "SUM_BITS", "MATRIX_BITS", "BASIS_FRAC_BITS", "BASIS", "CoarseConstants",
            "coarse_constants", "integer_basis", "narrow_force_format", "block_mantissas", "narrow_forces", "coarse_sums", "coefficients",
-           "move_frac_bits", "node_moves", "coarse_accel"]
+           "move_frac_bits", "MOVE_BITS", "move_shift", "node_moves", "coarse_accel"]
 
 SAT = Overflow.SATURATE
 #: Width of the per-node operands: the basis values, the narrowed forces and the coefficients' mantissas.
@@ -128,11 +128,23 @@ def move_frac_bits(fs: FormatSet, constants: CoarseConstants, sum_exponent: int,
             - sum_exponent - c_exponent)
 
 
+#: Bits of a node's exact ``Φ_i·c`` (signed): ``|Φ|, |c| ≤ 2^16``, at most 15 products.
+MOVE_BITS = 2 * (OPERAND_BITS - 2) + math.ceil(math.log2(len(basis_exponents(COARSE_DEGREE_MAX)))) + 1
+
+
+def move_shift(fs: FormatSet, frac_bits: int) -> int:
+    """The right shift (negative: left) from ``Φ_i·c`` at ``frac_bits`` to [accel], clamped to
+    ``[−accel.width, MOVE_BITS + 1]``, where the result no longer changes: beyond the right end every value
+    rounds to 0, beyond the left end every value but 0 saturates (the hardware's shifter spans the range)."""
+    return min(max(frac_bits - fs.accel.frac_bits, -fs.accel.width), MOVE_BITS + 1)
+
+
 def node_moves(fs: FormatSet, phi: np.ndarray, c: np.ndarray, frac_bits: int,
                counter: SaturationCounter | None = None) -> np.ndarray:
-    """``(V, 2)`` each node's ``Φ_i·c``, exact (``|Φ·c| ≤ 2^32·m``), rounded (the format set's rounding) and
-    saturated to [accel] (``coarse_move``)."""
-    return requantize(phi @ c, frac_bits, fs.accel, fs.rounding, SAT, counter, "coarse_move")
+    """``(V, 2)`` each node's ``Φ_i·c``, exact (:data:`MOVE_BITS`), rounded (the format set's rounding) by
+    :func:`move_shift` and saturated to [accel] (``coarse_move``)."""
+    shift = move_shift(fs, frac_bits)
+    return requantize(phi @ c, fs.accel.frac_bits + shift, fs.accel, fs.rounding, SAT, counter, "coarse_move")
 
 
 def coarse_accel(fs: FormatSet, constants: CoarseConstants, force: np.ndarray,

@@ -1,0 +1,205 @@
+"""The coarse space's work at one node: its basis, and either its share of the sums ``ΦᵀF`` or its coarse move.
+
+The RTL twin of the per-node stages of :mod:`golden_model.fixed.coarse`: :func:`~golden_model.fixed.coarse.integer_basis`,
+:func:`~golden_model.fixed.coarse.narrow_forces` with :func:`~golden_model.fixed.coarse.coarse_sums`, and
+:func:`~golden_model.fixed.coarse.node_moves`. Built and verified as a unit; ``SpringflatEngine`` does not take
+the coarse space yet (``docs/guard.md``, "A polynomial coarse space").
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, Mux, Signal, signed
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.coarse import COARSE_DEGREE_MAX, basis_exponents
+from golden_model.fixed import FormatSet
+from golden_model.fixed.coarse import BASIS, BASIS_FRAC_BITS, MOVE_BITS, OPERAND_BITS, narrow_force_format
+
+from .fixedpoint import FormatSetNotBuildable, clamp, requantize, round_half_bit, shift_round, variable_shift
+from .force_pass import format_set
+from .layouts import vector_layout
+from .pipeline import LiveValues, Pipeline, count_stages
+
+__all__ = ["CoarseNode", "move_shift_shape", "sum_bits"]
+
+
+def move_shift_shape(fs: FormatSet):
+    """The shape of :attr:`CoarseNode.move_shift`: ``−accel.width … MOVE_BITS + 1``
+    (:func:`golden_model.fixed.coarse.move_shift`'s range)."""
+    return signed(max(fs.accel.width, MOVE_BITS + 1).bit_length() + 1)
+
+
+def sum_bits(max_nodes: int) -> int:
+    """Bits of an exact sum ``Σ Φ·F`` over ``max_nodes`` nodes (signed): each product ``|Φ·F| ≤ 2^16·2^17``."""
+    return 2 * OPERAND_BITS - 2 + max(1, (max_nodes - 1).bit_length())
+
+
+class CoarseNode(wiring.Component):
+    """One node per clock: the basis ``Φ_i`` of its coordinates, then ``Φ_i`` times the node's narrowed force
+    (into the sums) or times the coefficients (its move), bit-exact with the golden model::
+
+        Φ_i  = integer_basis(u, v)                        m = (degree + 1)(degree + 2)/2 values [basis]
+        sums:   F' = rq_half_up(F → 18 bits), saturating;  sums[k][d] += Φ_ik·F'_d   (exact)
+        moves:  move_d = sat(rq(Σ_k Φ_ik·c_kd >> move_shift → accel))
+
+    The same ``2m`` multipliers serve both (``moves`` chooses their second operand), so a sums pass and a
+    propose pass can share them.
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+        The force_acc and accel formats and the rounding.
+    degree : int
+        The coarse space's degree, 1 … :data:`~golden_model.coarse.COARSE_DEGREE_MAX`.
+    max_nodes : int
+        The most nodes a sums pass adds (the sums' width, :func:`sum_bits`).
+
+    Members
+    -------
+    i : ``In(stream.Signature(StructLayout({"uv": vector [basis], "force": vector [force_acc]}), always_ready=True))``
+        One node per beat: its basis coordinates ``u, v`` and (for a sums pass) its force. Always ready.
+    o : ``Out(stream.Signature(StructLayout({"move": vector [accel], "saturations": 0..2}), always_ready=True))``
+        One beat per node, in input order: its coarse move (a moves pass; 0 in a sums pass) and the node's
+        saturation events (the forces' narrowing in a sums pass, ``coarse_force``; the move's clamp in a moves
+        pass, ``coarse_move``). ``o.valid`` is a register; the consumer takes every beat.
+    moves : ``In(1)``
+        A moves pass (1) or a sums pass (0). Change it only between passes.
+    coefficients : ``In(ArrayLayout(vector of signed 18 bits, m))``
+        ``c`` as mantissas (:func:`golden_model.fixed.coarse.coefficients`). Hold them during a moves pass.
+    move_shift : ``In(move_shift_shape(fs))``
+        :func:`golden_model.fixed.coarse.move_shift` of the pass. Hold it during a moves pass.
+    clear : ``In(1)``
+        Zeroes the sums at the clock edge (before a sums pass; no node may be in flight).
+    sums : ``Out(ArrayLayout(vector of signed sum_bits(max_nodes), m))``
+        The exact sums of the nodes of the sums passes since the last ``clear`` (registers).
+    idle : ``Out(1)``
+        No node in flight.
+
+    Contract
+    --------
+    Throughput: one node per clock (II = 1). Latency: :attr:`latency` clocks from a node's transfer on ``i`` to
+    its result on ``o`` (the stages built, counted); its share of the sums is in ``sums`` a clock later. No
+    back-pressure.
+    """
+
+    def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int):
+        fs = format_set(fs, "CoarseNode")
+        if isinstance(degree, bool) or not isinstance(degree, int) or not 1 <= degree <= COARSE_DEGREE_MAX:
+            raise ValueError(f"CoarseNode: degree must be an integer in 1..{COARSE_DEGREE_MAX}, got {degree!r}")
+        if isinstance(max_nodes, bool) or not isinstance(max_nodes, int) or max_nodes < 1:
+            raise ValueError(f"CoarseNode: max_nodes must be a positive integer, got {max_nodes!r}")
+        if not fs.accel.signed or not fs.force_acc.signed:
+            raise FormatSetNotBuildable(f"force_acc {fs.force_acc} and accel {fs.accel} must be signed")
+        self.fs, self.degree, self.max_nodes = fs, degree, max_nodes
+        self.exponents = basis_exponents(degree)
+        super().__init__(self.signature_of(fs, degree, max_nodes))
+        self.latency = count_stages(lambda m: _build(m, self, self.signature_of(fs, degree, max_nodes).create(), None))
+
+    @staticmethod
+    def signature_of(fs: FormatSet, degree: int, max_nodes: int) -> wiring.Signature:
+        """The component's signature (also the throwaway build's stand-in ports)."""
+        m = len(basis_exponents(degree))
+        coefficient = data.StructLayout({"x": signed(OPERAND_BITS), "y": signed(OPERAND_BITS)})
+        total = data.StructLayout({"x": signed(sum_bits(max_nodes)), "y": signed(sum_bits(max_nodes))})
+        return wiring.Signature({
+            "i": In(stream.Signature(data.StructLayout({"uv": vector_layout(BASIS),
+                                                        "force": vector_layout(fs.force_acc)}), always_ready=True)),
+            "o": Out(stream.Signature(data.StructLayout({"move": vector_layout(fs.accel), "saturations": range(3)}),
+                                      always_ready=True)),
+            "moves": In(1),
+            "coefficients": In(data.ArrayLayout(coefficient, m)),
+            "move_shift": In(move_shift_shape(fs)),
+            "clear": In(1),
+            "sums": Out(data.ArrayLayout(total, m)),
+            "idle": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        stages = _build(m, self, self, platform)
+        assert stages == self.latency, (stages, self.latency)
+        return m
+
+
+def _build(m: Module, unit: CoarseNode, ports, platform) -> int:
+    """The node's datapath into ``m`` (``ports``: the component's members; ``platform``: :data:`hdl.dsp.ECP5` for
+    ``MULT18X18D`` instances); returns its stages."""
+    fs, exponents = unit.fs, unit.exponents
+    live = LiveValues()
+    pipe = Pipeline(m, ports.i.valid, platform=platform)
+    node = ports.i.payload
+    moves = Signal(name="moves_held")  # the pass's kind, registered (it changes only between passes)
+    shift = Signal(move_shift_shape(fs), name="move_shift_held")
+    m.d.sync += [moves.eq(ports.moves), shift.eq(ports.move_shift)]
+    # C1: the inputs, and the forces rounded to the sums' 18 bits (their saturation flags with them)
+    narrow = narrow_force_format(fs)
+    narrowed = {d: requantize(node.force[d], fs.force_acc.frac_bits, narrow, "half_up") for d in "xy"}
+    live.step(pipe, "c1", u=node.uv.x, v=node.uv.y, **{f"f_{d}": narrowed[d][0] for d in "xy"},
+              force_events=narrowed["x"][1] + narrowed["y"][1])
+    # the basis, a degree at a time: each monomial from one of a degree lower times u (or v), rounded half up
+    phi = {(1, 0): "u", (0, 1): "v"}
+    for level in range(2, unit.degree + 1):
+        wanted = [(a, b) for a, b in exponents if a + b == level]
+        products = {f"p{a}{b}": (live[phi[(a - 1, b) if a else (a, b - 1)]], live["u" if a else "v"])
+                    for a, b in wanted}
+        live.multiply(pipe, f"basis{level}", **products)
+        live.step(pipe, f"basis{level}_round", drop=tuple(products),
+                  **{f"phi{a}{b}": shift_round(live[f"p{a}{b}"], BASIS_FRAC_BITS, "half_up")[:OPERAND_BITS].as_signed()
+                     for a, b in wanted})
+        phi.update({(a, b): f"phi{a}{b}" for a, b in wanted})
+    # the second operands, landed: the narrowed force (sums) or the coefficient (moves)
+    live.step(pipe, "operands", drop=("f_x", "f_y"),
+              **{f"o{k}{d}": Mux(moves, ports.coefficients[k][d], live[f"f_{d}"])
+                 for k in range(len(exponents)) for d in "xy"})
+    # the products Φ_k·o_k, 18 × 18 each; Φ_0 = 1 is a shift, carried along
+    products = {f"q{k}{d}": (live[phi[e]], live[f"o{k}{d}"]) for k, e in enumerate(exponents) if k for d in "xy"}
+    for d in "xy":
+        live[f"q0{d}"] = live.pop(f"o0{d}").shift_left(BASIS_FRAC_BITS)
+    live.multiply(pipe, "products", drop=tuple(phi.values()) + tuple(f"o{k}{d}" for k in range(1, len(exponents))
+                                                                       for d in "xy"), **products)
+    # the sums: every product of a sums pass added, exact
+    width = sum_bits(unit.max_nodes)
+    sums_valid = pipe.valid & ~moves
+    for k in range(len(exponents)):
+        for d in "xy":
+            total = ports.sums[k][d]
+            with m.If(ports.clear):
+                m.d.sync += total.eq(0)
+            with m.Elif(sums_valid):
+                m.d.sync += total.eq((total + live[f"q{k}{d}"])[:width].as_signed())
+    # the move: Σ_k Φ_k·c_k by pairwise adder levels, then the variable shift, its rounding, the clamp
+    terms = {d: [f"q{k}{d}" for k in range(len(exponents))] for d in "xy"}
+    level = 0
+    while len(terms["x"]) > 1:
+        level += 1
+        new, names = {}, {}
+        for d in "xy":
+            names[d] = []
+            for j in range(0, len(terms[d]), 2):
+                pair = terms[d][j:j + 2]
+                name = f"s{level}_{j // 2}{d}"
+                new[name] = live[pair[0]] if len(pair) == 1 else live[pair[0]] + live[pair[1]]
+                names[d].append(name)
+        live.step(pipe, f"move_sum{level}", drop=tuple(terms["x"] + terms["y"]), **new)
+        terms = names
+    amount_bits = fs.accel.width.bit_length()
+    right = {d: variable_shift(live[terms[d][0]], Mux(shift[-1], 0, shift.as_unsigned()), fs.rounding) for d in "xy"}
+    left = {d: live[terms[d][0]] << Mux(shift[-1], (-shift)[:amount_bits], 0) for d in "xy"}
+    live.step(pipe, "move_shift", drop=tuple(terms["x"] + terms["y"]), left_shift=shift[-1],
+              **{f"t_{d}": right[d][0] for d in "xy"}, **{f"sticky_{d}": right[d][1] for d in "xy"},
+              **{f"l_{d}": left[d] for d in "xy"})
+    live.step(pipe, "move_round", drop=tuple(f"{n}_{d}" for n in ("t", "sticky", "l") for d in "xy") + ("left_shift",),
+              **{f"r_{d}": Mux(live["left_shift"], live[f"l_{d}"],
+                               round_half_bit(live[f"t_{d}"], fs.rounding, live[f"sticky_{d}"])) for d in "xy"})
+    clamped = {d: clamp(live[f"r_{d}"], fs.accel) for d in "xy"}
+    live.step(pipe, "move_clamp", drop=("r_x", "r_y", "force_events"),
+              **{f"out_{d}": Mux(moves, clamped[d][0], 0) for d in "xy"},
+              events=Mux(moves, clamped["x"][1] + clamped["y"][1], live["force_events"]))
+    out = ports.o.payload
+    m.d.comb += [ports.o.valid.eq(pipe.valid), out.move.x.eq(live["out_x"]), out.move.y.eq(live["out_y"]),
+                 out.saturations.eq(live["events"])]
+    in_flight = Signal(range(pipe.stages + 2), name="nodes_in_flight")
+    m.d.sync += in_flight.eq(in_flight + ports.i.valid - ports.o.valid)
+    m.d.comb += ports.idle.eq(in_flight == 0)
+    return pipe.stages

@@ -1,0 +1,152 @@
+"""RTL coarse-space node unit (hdl.CoarseNode) against the golden model's integer_basis, narrow_forces, coarse_sums
+and node_moves, in Amaranth's simulator: every node's move and event count and the pass's sums, bit for bit."""
+
+import gc
+import warnings
+
+import numpy as np
+import pytest
+from amaranth.hdl import UnusedElaboratable, Value
+
+from golden_model.coarse import basis_exponents
+from golden_model.fixed import FormatSet
+from golden_model.fixed.coarse import (BASIS_FRAC_BITS, MOVE_BITS, OPERAND_BITS, coarse_sums, integer_basis,
+                                       move_shift, narrow_forces, node_moves)
+from golden_model.fixed.format import SaturationCounter
+from hdl.coarse_node import CoarseNode
+from sim.payloads import pack_beats, unpack_beats
+from support import PRESETS
+from support.streams import run_streams, top_level_verilog
+
+
+def random_nodes(fs, n, rng):
+    """``(uv, force)``: coordinates over [-1, 1] with both ends, forces over force_acc's range with its ends."""
+    one = 1 << BASIS_FRAC_BITS
+    uv = rng.integers(-one, one + 1, size=(n, 2))
+    uv[:4] = [[one, one], [-one, -one], [one, -one], [0, 0]]
+    f = fs.force_acc
+    force = rng.integers(f.raw_min, f.raw_max + 1, size=(n, 2))
+    force[:3] = [[f.raw_max, f.raw_min], [f.raw_max - 1, 1], [-1, f.raw_min + 1]]
+    return uv, force
+
+
+def run_node(fs, degree, uv, force, *, moves, coefficients=None, shift=0, seed=0, p_valid=1.0):
+    """The nodes through the RTL: ``(outputs, sums, run, dut)``."""
+    m = len(basis_exponents(degree))
+    dut = CoarseNode(fs, degree, max_nodes=len(uv))
+    beats = pack_beats(dut.i.payload.shape(), {"uv": {"x": uv[:, 0], "y": uv[:, 1]},
+                                               "force": {"x": force[:, 0], "y": force[:, 1]}})
+    c = np.zeros((m, 2), dtype=np.int64) if coefficients is None else coefficients
+
+    def setup(ctx):
+        ctx.set(dut.moves, int(moves))
+        ctx.set(dut.move_shift, int(shift))
+        for k in range(m):
+            ctx.set(dut.coefficients[k].x, int(c[k, 0]))
+            ctx.set(dut.coefficients[k].y, int(c[k, 1]))
+
+    run = run_streams(dut, beats, setup=setup, start=1, seed=seed, p_valid=p_valid,
+                      watch={"sums": Value.cast(dut.sums), "idle": dut.idle})
+    assert run.watched["idle"][-1]
+    out = unpack_beats(dut.o.payload.shape(), run.outputs)
+    raw = unpack_beats(dut.sums.shape(), [run.watched["sums"][-1]])
+    totals = np.array([[raw[k]["x"][0], raw[k]["y"][0]] for k in range(m)])
+    return out, totals, run, dut
+
+
+def check(name, got, expected):
+    bad = np.flatnonzero(np.asarray(got) != np.asarray(expected))
+    assert bad.size == 0, f"{name}: {bad.size} mismatches; first at {int(bad[0])}: rtl {np.ravel(got)[bad[0]]} " \
+                          f"golden {np.ravel(expected)[bad[0]]}"
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("degree", [1, 3, 4])
+def test_a_sums_pass_forms_the_exact_sums_of_the_narrowed_forces(preset, degree):
+    fs = FormatSet.preset(preset)
+    rng = np.random.default_rng(degree)
+    uv, force = random_nodes(fs, 120, rng)
+    out, totals, _, _ = run_node(fs, degree, uv, force, moves=False, p_valid=0.7, seed=degree)
+    counter = SaturationCounter()
+    phi = integer_basis(uv, degree)
+    narrow = narrow_forces(fs, force, counter)
+    check("sums", totals, coarse_sums(phi, narrow))
+    check("moves", np.column_stack([out["move"]["x"], out["move"]["y"]]), np.zeros_like(force))
+    check("saturations", out["saturations"], events_per_node(lambda k, counter: narrow_forces(fs, force[k:k + 1], counter),
+                                                           len(force)))
+    # the narrowing's clamp is exercised where it narrows (a force at force_acc's top rounds past it)
+    assert (counter.total > 0) == (fs.force_acc.width > OPERAND_BITS)
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("degree", [1, 3, 4])
+@pytest.mark.parametrize("shift", [-30, -3, 0, 1, 17, 30, MOVE_BITS + 1])
+@pytest.mark.parametrize("limit", [1 << (OPERAND_BITS - 2), 4])  # the mantissas' range; small: moves near the clamp
+def test_a_moves_pass_forms_each_nodes_move(preset, degree, shift, limit):
+    fs = FormatSet.preset(preset)
+    rng = np.random.default_rng(100 + degree + shift + limit)
+    uv, force = random_nodes(fs, 60, rng)
+    m = len(basis_exponents(degree))
+    c = rng.integers(-limit, limit + 1, size=(m, 2))
+    c[0] = [limit, -limit]
+    shift = max(shift, -fs.accel.width)
+    out, totals, _, _ = run_node(fs, degree, uv, force, moves=True, coefficients=c, shift=shift, seed=shift % 7)
+    assert not totals.any()  # a moves pass leaves the sums alone
+    phi = integer_basis(uv, degree)
+    frac = fs.accel.frac_bits + shift
+    assert move_shift(fs, frac) == shift
+    counter = SaturationCounter()
+    expected = node_moves(fs, phi, c, frac, counter)
+    check("move.x", out["move"]["x"], expected[:, 0])
+    check("move.y", out["move"]["y"], expected[:, 1])
+    events = events_per_node(lambda k, counter: node_moves(fs, phi[k:k + 1], c, frac, counter), len(uv))
+    check("saturations", out["saturations"], events)
+    if shift <= -3 and limit > 4:
+        assert counter.total > 0  # the clamp is exercised
+
+
+def events_per_node(golden, n):
+    """Each node's saturation events as the golden model's counter counts them: ``golden(k, counter)`` for node k."""
+    counter, events = SaturationCounter(), []
+    for k in range(n):
+        before = counter.total
+        golden(k, counter)
+        events.append(counter.total - before)
+    return events
+
+
+def test_parameters_are_checked():
+    with warnings.catch_warnings():  # the refused objects are never elaborated
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        with pytest.raises(ValueError, match="degree must be an integer in 1..4"):
+            CoarseNode("default", 5, 100)
+        with pytest.raises(ValueError, match="max_nodes must be a positive integer"):
+            CoarseNode("default", 3, 0)
+        with pytest.raises(TypeError, match="CoarseNode needs a FormatSet or a preset name"):
+            CoarseNode(3, 3, 10)
+        gc.collect()
+
+
+#: Independent pins of the stages CoarseNode builds: the inputs and the narrowed forces (1), each basis level's
+#: multiply and rounding (3 + 1), the landed operands (1), the products (3), the adder levels (⌈log2 m⌉), the
+#: shift, the rounding and the clamp (3).
+LATENCY = {1: 1 + 0 + 1 + 3 + 2 + 3, 3: 1 + 8 + 1 + 3 + 4 + 3, 4: 1 + 12 + 1 + 3 + 4 + 3}
+
+
+@pytest.mark.parametrize("degree", sorted(LATENCY))
+def test_one_node_per_clock_and_the_latency(degree):
+    fs = FormatSet.preset("default")
+    uv, force = random_nodes(fs, 40, np.random.default_rng(7))
+    _, _, run, dut = run_node(fs, degree, uv, force, moves=True)
+    assert dut.latency == LATENCY[degree]
+    assert run.in_cycles == list(range(40))
+    assert run.out_cycles == [c + LATENCY[degree] for c in range(40)]
+
+
+def test_converts_to_verilog(monkeypatch):
+    """Top level: the streams' constant ``ready`` is left out of the ports (amaranth-lang/amaranth#1574)."""
+    monkeypatch.setenv("AMARANTH_USE_YOSYS", "builtin")
+    fs = FormatSet.preset("default")
+    text = top_level_verilog(CoarseNode(fs, 3, 2048), "coarse_node")
+    assert "module coarse_node" in text
+    assert f"output [{2 * fs.accel.width + 2 - 1}:0] o__payload;" in text
