@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION",
+__all__ = ["COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION", "SINGULAR_CUTOFF",
            "basis_exponents", "basis", "coarse_stiffness", "coarse_inverse", "coarse_move", "CoarseSchedule"]
 
 #: The degree that meets issue 25's 120-iteration bound on the generated patches (``docs/guard.md``).
@@ -67,9 +67,16 @@ def coarse_stiffness(phi: np.ndarray, edges: np.ndarray, spring: float) -> np.nd
     return spring * (STIFFNESS_SHIFT * (phi.T * degree) @ phi + difference.T @ difference)
 
 
+#: Singular values of ``ΦᵀKΦ`` below this fraction of its largest are dropped (:func:`coarse_inverse`).
+SINGULAR_CUTOFF = 1e-12
+
+
 def coarse_inverse(phi: np.ndarray, edges: np.ndarray, spring: float) -> np.ndarray:
-    """``(m, m)`` ``M = (ΦᵀKΦ)⁻¹``, the run constant of the coarse move [1/C]."""
-    return np.linalg.inv(coarse_stiffness(phi, edges, spring))
+    """``(m, m)`` ``M = (ΦᵀKΦ)⁺``, the run constant of the coarse move [1/C]: the pseudo-inverse, so that a basis
+    whose functions are dependent on the nodes (fewer nodes than functions, or a rounded basis whose highest
+    monomials vanish) moves in the span they have. ``Φ·M·Φᵀ`` is the same for every solution of the normal
+    equations, as ``Φᵀf`` lies in the range of ``ΦᵀKΦ`` for a regular ``K``."""
+    return np.linalg.pinv(coarse_stiffness(phi, edges, spring), rcond=SINGULAR_CUTOFF, hermitian=True)
 
 
 def coarse_move(phi: np.ndarray, inverse: np.ndarray, forces: np.ndarray) -> np.ndarray:

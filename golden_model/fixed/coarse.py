@@ -108,8 +108,8 @@ def narrow_forces(fs: FormatSet, force: np.ndarray, counter: SaturationCounter |
 
 
 def coarse_sums(phi: np.ndarray, narrow: np.ndarray) -> np.ndarray:
-    """``(m, 2)`` the exact sums ``Φᵀ·F`` of the basis [basis] and the narrowed forces (``|Φ·F| ≤ 2^33``, fewer than
-    ``2^20`` nodes: int64)."""
+    """``(m, 2)`` the exact sums ``Φᵀ·F`` of the basis [basis] and the narrowed forces (``|Φ·F| ≤ 2^33``: int64 for
+    fewer than ``2^29`` nodes)."""
     return phi.T @ narrow
 
 

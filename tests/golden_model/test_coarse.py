@@ -219,3 +219,18 @@ def test_the_host_rounds_m_to_a_24_bit_mantissa_with_one_exponent():
     largest = int(np.abs(constants.matrix).max())
     assert 1 << 23 <= largest < 1 << 24
     assert constants.phi.shape == (mesh.n_vertices, 10) and np.abs(constants.phi).max() <= 1 << BASIS_FRAC_BITS
+
+
+@pytest.mark.parametrize("run", [flatten, flatten_fixed])
+def test_a_basis_with_more_functions_than_nodes_moves_in_the_span_it_has(run):
+    """Ten functions of degree 3 on a single triangle are dependent: ``ΦᵀKΦ`` is singular, and its pseudo-inverse
+    gives the move in the span of the three the nodes can tell apart."""
+    from golden_model.mesh import Mesh
+
+    triangle = Mesh(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.2]]), np.array([[0, 1, 2]]))
+    phi = basis(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), 3)
+    assert np.linalg.matrix_rank(coarse_stiffness(phi, triangle.edges, 0.5)) == 3
+    result = run(triangle, np.array([[0.0, 0.0], [0.9, 0.0], [0.0, 1.1]]),
+                 FlattenParams(dynamics="momentum", tol_area=1.0, tol_shape=1.0, max_iter=50, coarse_degree=3))
+    assert result.status in ("converged", "max-iterations") and result.final.folded == 0
+    assert result.final.shape_error < 0.05
