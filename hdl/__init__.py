@@ -6,6 +6,7 @@ bit-exact with its golden-model function. See ``docs/hardware-units.md``.
 """
 
 from .area_error import AreaError
+from .coarse_coefficients import CoarseCoefficients
 from .coarse_node import CoarseNode
 from .controller_units import BetaDivider, EnergyCheck, Normaliser
 from .core import SpringflatCore
@@ -19,5 +20,5 @@ from .node_update import NodeUpdate
 from .rsqrt import RsqrtUnit
 from .stepgen import StepGenerator
 
-__all__ = ["AreaError", "BetaDivider", "CoarseNode", "EnergyCheck", "ForcePass", "GuardCertificate", "GuardCommit", "GuardDecision", "Integrator", "LevelScatter",
+__all__ = ["AreaError", "BetaDivider", "CoarseCoefficients", "CoarseNode", "EnergyCheck", "ForcePass", "GuardCertificate", "GuardCommit", "GuardDecision", "Integrator", "LevelScatter",
            "Normaliser", "NodeUpdate", "RsqrtUnit", "SpringflatCore", "StepGenerator"]

@@ -11,8 +11,8 @@ The host computes the run constants once, from the fixed-point start layout:
   (:func:`golden_model.coarse.basis_coordinates`), ``u`` and ``v`` rounded to :data:`BASIS` and each monomial
   formed from a lower one by one product (:func:`integer_basis`), so that a node's basis follows from its two
   coordinates;
-* ``M = (ΦᵀKΦ)⁻¹`` of that basis as integers ``M_raw = round(M·2^matrix_exponent)``, one exponent for the
-  matrix, ``max |M_raw|`` in ``[2^(MATRIX_BITS − 1), 2^MATRIX_BITS)``.
+* ``M = (ΦᵀKΦ)⁺`` of that basis as integers ``M_raw = round(M·2^matrix_exponent)``, one exponent for the
+  matrix, ``max |M_raw|`` in ``[2^(MATRIX_BITS − 1), 2^MATRIX_BITS)`` (a :data:`SUM_BITS`-bit signed value).
 
 Each iteration, from the forces ``F`` [force_acc] of the last accepted layout (:func:`coarse_accel`):
 
@@ -81,7 +81,8 @@ def coarse_constants(raw_positions: np.ndarray, edges: np.ndarray, spring: float
     phi = integer_basis(uv, degree)
     inverse = coarse_inverse(np.ldexp(phi.astype(np.float64), -BASIS_FRAC_BITS), edges, spring)
     exponent = MATRIX_BITS - math.frexp(float(np.abs(inverse).max()))[1]
-    matrix = np.rint(np.ldexp(inverse, exponent)).astype(np.int64)
+    limit = (1 << MATRIX_BITS) - 1  # (rint may round the largest up to 2^MATRIX_BITS: held one below)
+    matrix = np.clip(np.rint(np.ldexp(inverse, exponent)), -limit, limit).astype(np.int64)
     return CoarseConstants(phi, matrix, exponent)
 
 

@@ -1,0 +1,204 @@
+"""The coarse space's once-per-iteration arithmetic: the coefficients ``c = M·g`` from a pass's sums ``g = ΦᵀF``.
+
+The RTL twin of :func:`golden_model.fixed.coarse.coefficients` and of
+:func:`~golden_model.fixed.coarse.move_shift` of :func:`~golden_model.fixed.coarse.move_frac_bits`: the sums to
+25-bit mantissas with one exponent, ``M·g`` exact, the result to 18-bit mantissas with one exponent, and the
+shift that takes a node's ``Φ_i·c`` to [accel] (:class:`~hdl.coarse_node.CoarseNode`'s ``move_shift``). Built and
+verified as a unit; ``SpringflatEngine`` does not take the coarse space yet (``docs/guard.md``).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Const, Module, Mux, Signal, signed
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from golden_model.coarse import COARSE_DEGREE_MAX, basis_exponents
+from golden_model.fixed import FormatSet
+from golden_model.fixed.coarse import BASIS_FRAC_BITS, MATRIX_BITS, MOVE_BITS, OPERAND_BITS, SUM_BITS, narrow_force_format
+
+from .coarse_node import move_shift_shape, sum_bits
+from .fixedpoint import round_half_bit, variable_shift
+from .force_pass import format_set
+
+__all__ = ["CoarseCoefficients", "MATRIX_EXPONENT_BITS"]
+
+#: Bits of the matrix's exponent (signed): ``M·2^e`` with ``|M| ≥ 2^-100`` and ``≤ 2^100``.
+MATRIX_EXPONENT_BITS = 8
+
+
+def _bit_length(value, width: int):
+    """The bit length of the unsigned ``value`` (``width`` bits): a priority encoder, as the OR of one term a bit
+    (its position where it is the highest set bit), not a chain of multiplexers ``width`` deep."""
+    length = Const(0, range(width + 1))
+    for bit in range(width):
+        highest = value[bit] & ~value[bit + 1:width].any() if bit + 1 < width else value[bit]
+        length = length | Mux(highest, bit + 1, 0)
+    return length
+
+
+class CoarseCoefficients(wiring.Component):
+    """``c`` and the move's shift from the sums of a pass, bit-exact with the golden model::
+
+        e_g = max(0, bitlen(max |g|) − (SUM_BITS − 2));     g' = rq_half_up(g >> e_g)      (2m values)
+        a_kd = Σ_j M_kj·g'_jd                                (exact)
+        e_c = max(0, bitlen(max |a|) − (OPERAND_BITS − 2));  c = rq_half_up(a >> e_c)
+        move_shift = clamp(2·BASIS_FRAC_BITS + F_n + matrix_exponent − e_g − e_c − accel.frac,
+                           −accel.width, MOVE_BITS + 1)
+
+    Parameters
+    ----------
+    fs : :class:`~golden_model.fixed.FormatSet` or preset name
+        The force_acc (its narrowed form's fraction bits ``F_n``) and accel formats.
+    degree : int
+        The coarse space's degree, 1 … :data:`~golden_model.coarse.COARSE_DEGREE_MAX` (``m`` functions).
+    max_nodes : int
+        The sums' width (:func:`~hdl.coarse_node.sum_bits`), as :class:`~hdl.coarse_node.CoarseNode`'s.
+
+    Members
+    -------
+    i : ``In(stream.Signature(StructLayout({"sums": ArrayLayout(vector, m)})))``
+        A pass's exact sums ``g`` (:attr:`CoarseNode.sums <hdl.coarse_node.CoarseNode>`).
+    o : ``Out(stream.Signature(StructLayout({"coefficients": ArrayLayout(vector of signed 18, m), "move_shift"})))``
+        The coefficients' mantissas and the move's shift, held until taken.
+    matrix_exponent : ``In(signed(MATRIX_EXPONENT_BITS))``
+        ``M``'s exponent (:class:`~golden_model.fixed.coarse.CoarseConstants`); hold it while a result is formed.
+    matrix_addr : ``Out(range(m·m))``, matrix_data : ``In(signed(SUM_BITS))``
+        A read port on ``M`` (row-major, ``|M_kj| < 2^MATRIX_BITS``): the entry at ``matrix_addr`` is expected on
+        ``matrix_data`` a clock later, as a block RAM's registered read gives it.
+
+    Contract
+    --------
+    One item at a time: ``i.ready`` is high while idle, ``o.valid`` and ``o.payload`` are registers. :attr:`cycles`
+    clock edges from the input transfer to the output transfer when ``o.ready`` is high: one for ``e_g``,
+    ``2m`` for ``g'``, ``m²`` products of ``MATRIX_BITS + 2`` clocks each (a read, the operands' load and a
+    shift-add step per bit of ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums
+    to land, one for ``e_c``, ``2m`` for ``c``, one for the shift and one for the output transfer (2,645 at
+    degree 3). No multiplier blocks: two adders as wide as the products.
+    """
+
+    def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int):
+        fs = format_set(fs, "CoarseCoefficients")
+        if isinstance(degree, bool) or not isinstance(degree, int) or not 1 <= degree <= COARSE_DEGREE_MAX:
+            raise ValueError(f"CoarseCoefficients: degree must be an integer in 1..{COARSE_DEGREE_MAX}, got {degree!r}")
+        if isinstance(max_nodes, bool) or not isinstance(max_nodes, int) or max_nodes < 1:
+            raise ValueError(f"CoarseCoefficients: max_nodes must be a positive integer, got {max_nodes!r}")
+        self.fs, self.degree, self.max_nodes = fs, degree, max_nodes
+        self.m = m = len(basis_exponents(degree))
+        #: Bits of an exact ``a_kd`` (signed): ``|M| < 2^MATRIX_BITS``, ``|g'| ≤ 2^(SUM_BITS − 2)``, m terms.
+        self.product_bits = MATRIX_BITS + SUM_BITS - 2 + (m - 1).bit_length() + 1
+        self.cycles = 1 + 2 * m + m * m * (MATRIX_BITS + 2) + 1 + 1 + 2 * m + 1 + 1
+        vector = lambda bits: data.StructLayout({"x": signed(bits), "y": signed(bits)})  # noqa: E731
+        super().__init__({
+            "i": In(stream.Signature(data.StructLayout({"sums": data.ArrayLayout(vector(sum_bits(max_nodes)), m)}))),
+            "o": Out(stream.Signature(data.StructLayout({"coefficients": data.ArrayLayout(vector(OPERAND_BITS), m),
+                                                         "move_shift": move_shift_shape(fs)}))),
+            "matrix_exponent": In(signed(MATRIX_EXPONENT_BITS)),
+            "matrix_addr": Out(range(m * m)),
+            "matrix_data": In(signed(SUM_BITS)),
+        })
+
+    def elaborate(self, platform):
+        fs, m = self.fs, self.m
+        mod = Module()
+        count = 2 * m  # a vector's values, (k, x) then (k, y), k = 0 … m − 1
+        width = sum_bits(self.max_nodes)
+        # register files that rotate instead of being indexed: each sequential step works on element 0
+        sums = [Signal(signed(width), name=f"g{j}", reset_less=True) for j in range(count)]
+        g = [Signal(signed(SUM_BITS), name=f"g_mantissa{j}", reset_less=True) for j in range(count)]
+        a = [Signal(signed(self.product_bits), name=f"a{j}", reset_less=True) for j in range(count)]
+        e_g = Signal(range(width + 1), name="sum_exponent", reset_less=True)
+        e_c = Signal(range(self.product_bits + 1), name="c_exponent", reset_less=True)
+        index = Signal(range(count + 1), name="index", reset_less=True)
+        row, column = Signal(range(m), name="row", reset_less=True), Signal(range(m), name="column", reset_less=True)
+        steps = Signal(range(MATRIX_BITS + 1), name="steps", reset_less=True)
+        multiplier = Signal(MATRIX_BITS, name="multiplier", reset_less=True)  # |M_kj|
+        negative = Signal(name="negative", reset_less=True)
+        multiplicand = {d: Signal(signed(self.product_bits), name=f"multiplicand_{d}", reset_less=True) for d in "xy"}
+        accumulator = {d: Signal(signed(self.product_bits), name=f"accumulator_{d}", reset_less=True) for d in "xy"}
+        coefficients = [self.o.payload.coefficients[k][d] for k in range(m) for d in "xy"]
+
+        names = ("idle", "sum_exponent", "sum_mantissas", "read", "load", "step", "last_row", "c_exponent",
+                 "c_mantissas", "shift", "done")
+        state = {name: Signal(name=f"in_{name}", init=(name == "idle")) for name in names}
+
+        def goto(name):
+            return [flag.eq(n == name) for n, flag in state.items()]
+
+        def exponent(values, bits, keep):
+            """``max(0, bitlen(OR of |v|) − keep)`` of ``values`` (signed, less than ``bits`` wide)."""
+            magnitude = 0
+            for v in values:
+                magnitude = magnitude | Mux(v < 0, -v, v).as_unsigned()
+            length = _bit_length(magnitude, bits)
+            return Mux(length > keep, length - keep, 0)
+
+        def mantissa(value, shift):
+            """``value >> shift`` rounded half up (``shift`` ≥ 0)."""
+            t, sticky = variable_shift(value, shift, "half_up")
+            return round_half_bit(t, "half_up", sticky)
+
+        def rotate(values, new):
+            """Each value takes the next one's, the last takes ``new``."""
+            return [v.eq(n) for v, n in zip(values, [*values[1:], new])]
+
+        mod.d.comb += [self.i.ready.eq(state["idle"]), self.matrix_addr.eq(row * m + column)]
+        with mod.If(state["idle"] & self.i.valid):
+            mod.d.sync += [v.eq(self.i.payload.sums[k][d]) for v, (k, d) in zip(sums, ((k, d) for k in range(m)
+                                                                                       for d in "xy"))]
+            mod.d.sync += goto("sum_exponent")
+        with mod.If(state["sum_exponent"]):
+            mod.d.sync += [e_g.eq(exponent(sums, width + 1, SUM_BITS - 2)), index.eq(0), *goto("sum_mantissas")]
+        with mod.If(state["sum_mantissas"]):  # g' of sums[0], shifted into g; sums rotate
+            mod.d.sync += [*rotate(sums, sums[0]), *rotate(g, mantissa(sums[0], e_g)), index.eq(index + 1)]
+            with mod.If(index == count - 1):
+                mod.d.sync += [row.eq(0), column.eq(0), *(accumulator[d].eq(0) for d in "xy"), *goto("read")]
+        with mod.If(state["read"]):  # matrix_addr is presented; its entry arrives at the next clock
+            mod.d.sync += goto("load")
+        with mod.If(state["load"]):  # g[0], g[1]: column j's x and y (g rotates by two a product)
+            entry = self.matrix_data
+            mod.d.sync += [multiplier.eq(Mux(entry < 0, -entry, entry)), negative.eq(entry < 0),
+                           multiplicand["x"].eq(g[0]), multiplicand["y"].eq(g[1]),
+                           *(v.eq(n) for v, n in zip(g, [*g[2:], g[0], g[1]])),
+                           steps.eq(MATRIX_BITS), *goto("step")]
+        with mod.If(state["step"]):
+            for d in "xy":
+                term = Mux(negative, -multiplicand[d], multiplicand[d])
+                with mod.If(multiplier[0]):
+                    mod.d.sync += accumulator[d].eq(accumulator[d] + term)
+                mod.d.sync += multiplicand[d].eq(multiplicand[d] << 1)
+            mod.d.sync += [multiplier.eq(multiplier >> 1), steps.eq(steps - 1)]
+            with mod.If(steps == 1):
+                with mod.If(column == m - 1):
+                    # the row's last product: its sums are complete a clock later, when the next read starts
+                    mod.d.sync += column.eq(0)
+                    with mod.If(row == m - 1):
+                        mod.d.sync += goto("last_row")
+                    with mod.Else():
+                        mod.d.sync += [row.eq(row + 1), *goto("read")]
+                with mod.Else():
+                    mod.d.sync += [column.eq(column + 1), *goto("read")]
+        row_done = Signal(name="row_done")
+        mod.d.sync += row_done.eq(state["step"] & (steps == 1) & (column == m - 1))
+        with mod.If(row_done):  # the row's two sums, complete now, shifted into a; the accumulators start again
+            mod.d.sync += [*(v.eq(n) for v, n in zip(a, [*a[2:], accumulator["x"], accumulator["y"]])),
+                           accumulator["x"].eq(0), accumulator["y"].eq(0)]
+        with mod.If(state["last_row"]):  # the last row's sums land in a at this clock's end
+            mod.d.sync += goto("c_exponent")
+        with mod.If(state["c_exponent"]):
+            mod.d.sync += [e_c.eq(exponent(a, self.product_bits + 1, OPERAND_BITS - 2)), index.eq(0),
+                           *goto("c_mantissas")]
+        with mod.If(state["c_mantissas"]):  # c of a[0], shifted into the output; a rotates
+            mod.d.sync += [*rotate(a, a[0]),
+                           *rotate(coefficients, mantissa(a[0], e_c)[:OPERAND_BITS].as_signed()), index.eq(index + 1)]
+            with mod.If(index == count - 1):
+                mod.d.sync += goto("shift")
+        with mod.If(state["shift"]):
+            base = 2 * BASIS_FRAC_BITS + narrow_force_format(fs).frac_bits - fs.accel.frac_bits
+            shift = base + self.matrix_exponent - e_g - e_c
+            low, high = -fs.accel.width, MOVE_BITS + 1
+            mod.d.sync += [self.o.payload.move_shift.eq(Mux(shift < low, low, Mux(shift > high, high, shift))),
+                           self.o.valid.eq(1), *goto("done")]
+        with mod.If(state["done"] & self.o.ready):
+            mod.d.sync += [self.o.valid.eq(0), *goto("idle")]
+        return mod

@@ -1,0 +1,104 @@
+"""RTL coarse coefficients (hdl.CoarseCoefficients) against the golden model's coefficients and move_shift of
+move_frac_bits, in Amaranth's simulator: every coefficient's mantissa and the move's shift, bit for bit, with the
+matrix read from a stand-in block RAM (a registered read) and random valid/ready stalls."""
+
+import gc
+import warnings
+
+import numpy as np
+import pytest
+from amaranth.hdl import UnusedElaboratable, Value
+
+from golden_model.coarse import basis_exponents
+from golden_model.fixed import FormatSet
+from golden_model.fixed.coarse import (MATRIX_BITS, CoarseConstants, coefficients, move_frac_bits, move_shift)
+from hdl.coarse_coefficients import CoarseCoefficients
+from hdl.coarse_node import sum_bits
+from sim.payloads import pack, unpack_beats
+from support import PRESETS
+from support.streams import StreamRun, run_testbenches, stream_consumer, stream_producer
+
+MAX_NODES = 2048
+
+
+def random_case(rng, m, scale_bits):
+    """A matrix of 25-bit entries (one at an end of their range) and sums of about ``scale_bits`` bits."""
+    limit = (1 << MATRIX_BITS) - 1
+    matrix = rng.integers(-limit, limit + 1, size=(m, m))
+    matrix[rng.integers(m), rng.integers(m)] = limit * rng.choice([-1, 1])
+    top = (1 << (sum_bits(MAX_NODES) - 1)) - 1
+    limit = min(top, 1 << scale_bits)
+    sums = rng.integers(-limit, limit + 1, size=(m, 2))
+    return matrix, sums
+
+
+def run_cases(fs, degree, cases, exponent, *, seed=0, p_valid=1.0, p_ready=1.0):
+    """Each ``(matrix, sums)`` through the RTL (one matrix memory per case, swapped when a case is taken):
+    the outputs as ``(coefficients (m, 2), move_shift)``."""
+    m = len(basis_exponents(degree))
+    dut = CoarseCoefficients(fs, degree, MAX_NODES)
+    beats = [pack(dut.i.payload.shape(), {"sums": {k: {"x": int(s[k, 0]), "y": int(s[k, 1])} for k in range(m)}})
+             for _, s in cases]
+    run = StreamRun()
+
+    async def memory(ctx):  # a registered read: the entry at the address of one clock, the next clock
+        ctx.set(dut.matrix_exponent, exponent)
+        async for _, _, addr in ctx.tick().sample(dut.matrix_addr):
+            if len(run.outputs) == len(cases):  # (the simulation ends when every testbench has returned)
+                return
+            ctx.set(dut.matrix_data, int(cases[max(len(run.in_cycles) - 1, 0)][0].ravel()[addr]))
+
+    run_testbenches(dut, memory,
+                    stream_producer(dut.i, beats, run, seed=seed, p_valid=p_valid),
+                    stream_consumer(dut.o, len(cases), run, seed=seed + 1, p_ready=p_ready, drain=10,
+                                    max_cycles=len(cases) * (dut.cycles + 50) * 4 + 200, probe_ready=True))
+    out = unpack_beats(dut.o.payload.shape(), run.outputs)
+    return [(np.array([[out["coefficients"][k]["x"][i], out["coefficients"][k]["y"][i]] for k in range(m)]),
+             int(out["move_shift"][i])) for i in range(len(cases))], run, dut
+
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("degree", [1, 3])
+def test_coefficients_and_the_move_shift_bit_for_bit(preset, degree):
+    fs = FormatSet.preset(preset)
+    rng = np.random.default_rng(degree)
+    m = len(basis_exponents(degree))
+    cases = [random_case(rng, m, bits) for bits in (0, 5, 20, 23, 30, sum_bits(MAX_NODES) - 1)]
+    cases.append((cases[0][0], np.zeros((m, 2), dtype=np.int64)))  # no forces: every exponent 0
+    exponent = 30
+    results, _, _ = run_cases(fs, degree, cases, exponent, p_valid=0.6, p_ready=0.5, seed=degree)
+    for (matrix, sums), (c, shift) in zip(cases, results):
+        constants = CoarseConstants(np.zeros((1, m), dtype=np.int64), matrix, exponent)
+        want, sum_exponent, c_exponent = coefficients(constants, sums)
+        assert np.array_equal(c, want), (sums.tolist(), c.tolist(), want.tolist())
+        assert shift == move_shift(fs, move_frac_bits(fs, constants, sum_exponent, c_exponent))
+
+
+@pytest.mark.parametrize("exponent", [-100, 0, 60, 127])
+def test_the_move_shift_is_clamped_at_both_ends_of_its_range(exponent):
+    fs = FormatSet.preset("default")
+    rng = np.random.default_rng(9)
+    case = random_case(rng, 3, 20)
+    (c, shift), = run_cases(fs, 1, [case], exponent)[0]
+    constants = CoarseConstants(np.zeros((1, 3), dtype=np.int64), case[0], exponent)
+    _, sum_exponent, c_exponent = coefficients(constants, case[1])
+    assert shift == move_shift(fs, move_frac_bits(fs, constants, sum_exponent, c_exponent))
+
+
+def test_the_cycles_of_the_contract():
+    fs = FormatSet.preset("default")
+    rng = np.random.default_rng(3)
+    cases = [random_case(rng, 10, 20) for _ in range(2)]
+    _, run, dut = run_cases(fs, 3, cases, 20)
+    assert dut.cycles == 1 + 20 + 100 * (MATRIX_BITS + 2) + 1 + 1 + 20 + 1 + 1
+    assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.cycles] * 2
+
+
+def test_parameters_are_checked():
+    with warnings.catch_warnings():  # the refused objects are never elaborated
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        with pytest.raises(ValueError, match="degree must be an integer in 1..4"):
+            CoarseCoefficients("default", 0, 100)
+        with pytest.raises(ValueError, match="max_nodes must be a positive integer"):
+            CoarseCoefficients("default", 3, -1)
+        gc.collect()
