@@ -132,6 +132,7 @@ class FlattenResult:
             "dynamics": self.params.dynamics,
             "step": self.params.mode.step.value,  # "momentum": that dynamics has no step of its own to choose
             "guard": self.params.guard,
+            **({"coarse_degree": self.params.coarse_degree} if self.params.guard else {}),
             "energy_window": self.params.energy_window,
             "update": self.params.update,
             "penalty": self.params.penalty,

@@ -375,6 +375,28 @@ def test_rtl_check_refuses_the_guard_on_the_datapath_bench(tmp_path):
     assert "building" not in proc.stderr
 
 
+def test_the_coarse_space_is_an_option_of_the_guarded_float_and_fixed_runs(tmp_path):
+    """``--coarse-degree`` shows in the run line and the JSON summary; the engine, which has no coarse space, and
+    an unguarded run refuse it in one line."""
+    path = SCANS / "bunny_face.obj"
+    summaries = {}
+    for engine in ("float", "fixed"):
+        done = run("flatten", str(path), "--engine", engine, "--coarse-degree", "3", "--max-iter", "20", "--json",
+                   cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        summaries[engine] = json.loads(done.stdout)
+        assert summaries[engine]["coarse_degree"] == 3 and "coarse space of degree 3" in summaries[engine]["used"]
+    assert abs(summaries["float"]["shape_error"] - summaries["fixed"]["shape_error"]) <= 1e-3
+    plain = json.loads(run("flatten", str(path), "--max-iter", "20", "--json", cwd=tmp_path).stdout)
+    assert plain["coarse_degree"] == 0 and "coarse" not in plain["used"]
+    for options, message in ((("--engine", "rtl"), "SpringflatEngine has no coarse space"),
+                             (("--no-guard",), "the coarse space is a step of the guarded momentum dynamics"),
+                             (("--coarse-degree", "5"), "--coarse-degree must be an integer in [0, 4], got 5")):
+        proc = run("flatten", str(path), "--coarse-degree", "3", *options, cwd=tmp_path)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1 and message in lines[0], proc.stderr
+
+
 @pytest.mark.slow
 def test_momentum_on_the_fixed_engine_matches_the_float_engine():
     common = ("flatten", "surf2", "--dynamics", "momentum", "--init", "tutte", "--max-iter", "60",
