@@ -27,11 +27,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION", "SINGULAR_CUTOFF",
-           "basis_exponents", "basis", "coarse_stiffness", "coarse_inverse", "coarse_move", "CoarseSchedule"]
+__all__ = ["RECOMMENDED_COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION",
+           "SINGULAR_CUTOFF", "basis_exponents", "basis_coordinates", "basis", "coarse_stiffness", "coarse_inverse",
+           "coarse_move", "CoarseSchedule"]
 
-#: The degree that meets issue 25's 120-iteration bound on the generated patches (``docs/guard.md``).
-COARSE_DEGREE = 3
+#: The degree that meets issue 25's 120-iteration bound on the generated patches (``docs/guard.md``); the
+#: default is none (0) while ``SpringflatEngine`` does not take the coarse space.
+RECOMMENDED_COARSE_DEGREE = 3
 #: The largest degree accepted: 15 functions; degree 4 measured no faster than 3.
 COARSE_DEGREE_MAX = 4
 #: ``δ`` in ``K = C·((1 + δ)·D − A)``.

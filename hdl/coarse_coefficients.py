@@ -15,16 +15,14 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.coarse import COARSE_DEGREE_MAX, basis_exponents
 from golden_model.fixed import FormatSet
-from golden_model.fixed.coarse import BASIS_FRAC_BITS, MATRIX_BITS, MOVE_BITS, OPERAND_BITS, SUM_BITS, narrow_force_format
+from golden_model.fixed.coarse import (BASIS_FRAC_BITS, MATRIX_BITS, MATRIX_EXPONENT_BITS, MOVE_BITS, OPERAND_BITS, SUM_BITS,
+                                       narrow_force_format)
 
 from .coarse_node import move_shift_shape, sum_bits
 from .fixedpoint import round_half_bit, variable_shift
 from .force_pass import format_set
 
-__all__ = ["CoarseCoefficients", "MATRIX_EXPONENT_BITS"]
-
-#: Bits of the matrix's exponent (signed): ``M·2^e`` with ``|M| ≥ 2^-100`` and ``≤ 2^100``.
-MATRIX_EXPONENT_BITS = 8
+__all__ = ["CoarseCoefficients"]
 
 
 def _bit_length(value, width: int):

@@ -31,8 +31,9 @@ def move_shift_shape(fs: FormatSet):
 
 
 def sum_bits(max_nodes: int) -> int:
-    """Bits of an exact sum ``Σ Φ·F`` over ``max_nodes`` nodes (signed): each product ``|Φ·F| ≤ 2^16·2^17``."""
-    return 2 * OPERAND_BITS - 2 + max(1, (max_nodes - 1).bit_length())
+    """Bits of an exact sum ``Σ Φ·F`` over ``max_nodes`` nodes (signed): each product ``|Φ·F| ≤ 2^16·2^17``, so
+    the sum's magnitude is below ``2^(33 + bit_length(max_nodes))``."""
+    return 2 * OPERAND_BITS - 2 + max_nodes.bit_length()
 
 
 class CoarseNode(wiring.Component):
@@ -43,8 +44,8 @@ class CoarseNode(wiring.Component):
         sums:   F' = rq_half_up(F → 18 bits), saturating;  sums[k][d] += Φ_ik·F'_d   (exact)
         moves:  move_d = sat(rq(Σ_k Φ_ik·c_kd >> move_shift → accel))
 
-    The same ``2m`` multipliers serve both (``moves`` chooses their second operand), so a sums pass and a
-    propose pass can share them.
+    The same ``2(m − 1)`` multipliers serve both (``moves`` chooses their second operand; ``Φ_0 = 1`` is a
+    shift), so a sums pass and a propose pass can share them.
 
     Parameters
     ----------
@@ -64,11 +65,12 @@ class CoarseNode(wiring.Component):
         saturation events (the forces' narrowing in a sums pass, ``coarse_force``; the move's clamp in a moves
         pass, ``coarse_move``). ``o.valid`` is a register; the consumer takes every beat.
     moves : ``In(1)``
-        A moves pass (1) or a sums pass (0). Change it only between passes.
+        A moves pass (1) or a sums pass (0). Change it only while ``idle``: the stages read it as the node
+        passes them, so a change with nodes in flight would move them to the other kind.
     coefficients : ``In(ArrayLayout(vector of signed 18 bits, m))``
-        ``c`` as mantissas (:func:`golden_model.fixed.coarse.coefficients`). Hold them during a moves pass.
+        ``c`` as mantissas (:func:`golden_model.fixed.coarse.coefficients`). Change them only while ``idle``.
     move_shift : ``In(move_shift_shape(fs))``
-        :func:`golden_model.fixed.coarse.move_shift` of the pass. Hold it during a moves pass.
+        :func:`golden_model.fixed.coarse.move_shift` of the pass. Change it only while ``idle``.
     clear : ``In(1)``
         Zeroes the sums at the clock edge (before a sums pass; no node may be in flight).
     sums : ``Out(ArrayLayout(vector of signed sum_bits(max_nodes), m))``

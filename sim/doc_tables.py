@@ -222,7 +222,7 @@ def node_update_flip_flops() -> str:
 
 def unit_figures() -> str:
     """Latency and ``MULT18X18D`` blocks of every unit in ``hdl/``, every preset."""
-    from golden_model.coarse import COARSE_DEGREE
+    from golden_model.coarse import RECOMMENDED_COARSE_DEGREE as COARSE_DEGREE
     from golden_model.engine_spec.image import DEFAULT_CAPACITY
     from hdl import (AreaError, BetaDivider, CoarseCoefficients, CoarseNode, EnergyCheck, ForcePass, Integrator, Normaliser,
                      RsqrtUnit, StepGenerator)

@@ -20,7 +20,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
-from golden_model.coarse import COARSE_DEGREE, COARSE_DEGREE_MAX
+from golden_model.coarse import COARSE_DEGREE_MAX, RECOMMENDED_COARSE_DEGREE
 from golden_model.files import describe_os_error, same_file_key
 from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, folded_faces, one_line
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
@@ -223,9 +223,9 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                              f"(default: 1 with paper, as Algorithm 1; {ENERGY_WINDOW} with momentum)")
     parser.add_argument("--coarse-degree", type=integer_argument, default=None, metavar="D",
                         help="the guarded momentum step's coarse space: add the best move in the span of the start "
-                             f"layout's monomials up to degree D (0 to {COARSE_DEGREE_MAX}; {COARSE_DEGREE} meets "
-                             "120 iterations on smooth patches; float and fixed engines; default "
-                             f"{_PARAMS.coarse_degree}, none; docs/guard.md)")
+                             f"layout's monomials up to degree D (0 to {COARSE_DEGREE_MAX}; with {RECOMMENDED_COARSE_DEGREE} "
+                             "smooth patches come within 1 percent of the minimum in at most 120 iterations; float and fixed "
+                             f"engines; default {_PARAMS.coarse_degree}, none; docs/guard.md)")
     parser.add_argument("--step", choices=STEP_MODES, default=None,
                         help=f"the paper dynamics' step-size mode (default {_PARAMS.step}, eqs. 18-20)")
     parser.add_argument("--dt", type=number_argument, default=None, help=f"fixed step size (default {_PARAMS.dt:g})")

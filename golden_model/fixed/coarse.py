@@ -3,7 +3,8 @@
 Sized for a datapath of 18 × 18 multipliers: every per-node product is of two 18-bit operands, and the
 controller's ``M·g`` of two 25-bit ones. Values whose range changes over a run (the sums ``g``, the
 coefficients ``c``) are held as mantissas with one exponent for the whole vector (block floating point),
-chosen by their largest magnitude's leading one; every shift rounds half up.
+chosen by their largest magnitude's leading one; every shift by such an exponent rounds half up, and the move's
+last rounding is the format set's.
 
 The host computes the run constants once, from the fixed-point start layout:
 
@@ -35,8 +36,9 @@ import numpy as np
 from ..coarse import COARSE_DEGREE_MAX, basis_coordinates, basis_exponents, coarse_inverse
 from .format import Format, Overflow, SaturationCounter, quantize, requantize, shift_round
 from .formats_set import FormatSet
+from .measures import FixedPointError
 
-__all__ = ["OPERAND_BITS", "SUM_BITS", "MATRIX_BITS", "BASIS_FRAC_BITS", "BASIS", "CoarseConstants",
+__all__ = ["OPERAND_BITS", "SUM_BITS", "MATRIX_BITS", "MATRIX_EXPONENT_BITS", "BASIS_FRAC_BITS", "BASIS", "CoarseConstants",
            "coarse_constants", "integer_basis", "narrow_force_format", "block_mantissas", "narrow_forces", "coarse_sums", "coefficients",
            "move_frac_bits", "MOVE_BITS", "move_shift", "node_moves", "coarse_accel"]
 
@@ -47,6 +49,8 @@ OPERAND_BITS = 18
 SUM_BITS = 25
 #: Magnitude bits of ``M``'s largest entry.
 MATRIX_BITS = SUM_BITS - 1
+#: Bits of ``M``'s exponent (signed): the engine's register for it.
+MATRIX_EXPONENT_BITS = 8
 #: Fraction bits of the basis values ``Φ`` (s1.16: values in [-1, 1], 1 exact).
 BASIS_FRAC_BITS = OPERAND_BITS - 2
 BASIS = Format(True, 1, BASIS_FRAC_BITS)
@@ -81,6 +85,10 @@ def coarse_constants(raw_positions: np.ndarray, edges: np.ndarray, spring: float
     phi = integer_basis(uv, degree)
     inverse = coarse_inverse(np.ldexp(phi.astype(np.float64), -BASIS_FRAC_BITS), edges, spring)
     exponent = MATRIX_BITS - math.frexp(float(np.abs(inverse).max()))[1]
+    if not -(1 << (MATRIX_EXPONENT_BITS - 1)) <= exponent < 1 << (MATRIX_EXPONENT_BITS - 1):
+        raise FixedPointError(f"the coarse space's matrix (ΦᵀKΦ)⁻¹ has entries up to {float(np.abs(inverse).max()):.3g}: "
+                              f"its exponent {exponent} does not fit {MATRIX_EXPONENT_BITS} bits; use another "
+                              "--spring, or drop --coarse-degree")
     limit = (1 << MATRIX_BITS) - 1  # (rint may round the largest up to 2^MATRIX_BITS: held one below)
     matrix = np.clip(np.rint(np.ldexp(inverse, exponent)), -limit, limit).astype(np.int64)
     return CoarseConstants(phi, matrix, exponent)

@@ -16,7 +16,7 @@ from golden_model.fixed.format import SaturationCounter
 from hdl.coarse_node import CoarseNode
 from sim.payloads import pack_beats, unpack_beats
 from support import PRESETS
-from support.streams import run_streams, top_level_verilog
+from support.streams import run_streams, run_testbenches, top_level_verilog
 
 
 def random_nodes(fs, n, rng):
@@ -150,3 +150,66 @@ def test_converts_to_verilog(monkeypatch):
     text = top_level_verilog(CoarseNode(fs, 3, 2048), "coarse_node")
     assert "module coarse_node" in text
     assert f"output [{2 * fs.accel.width + 2 - 1}:0] o__payload;" in text
+
+
+def test_clear_and_passes_of_both_kinds_on_one_unit():
+    """A sums pass, a moves pass (which leaves the sums alone, its moves those of the coefficients), then
+    ``clear`` and a second sums pass: the sums are the second pass's alone."""
+    fs = FormatSet.preset("default")
+    rng = np.random.default_rng(11)
+    degree, m = 3, len(basis_exponents(3))
+    passes = [random_nodes(fs, 30, rng) for _ in range(3)]
+    c = rng.integers(-(1 << 16), (1 << 16) + 1, size=(m, 2))
+    shift = 20
+    dut = CoarseNode(fs, degree, 64)
+    shape = dut.i.payload.shape()
+    seen = {"sums": [], "moves": []}
+
+    async def bench(ctx):
+        async def stream(uv, force):
+            moves = []
+            for k in range(len(uv)):
+                ctx.set(Value.cast(dut.i.payload), pack_beats(shape, {"uv": {"x": uv[k:k + 1, 0], "y": uv[k:k + 1, 1]},
+                                                                      "force": {"x": force[k:k + 1, 0],
+                                                                                "y": force[k:k + 1, 1]}})[0])
+                ctx.set(dut.i.valid, 1)
+                _, _, valid, out = await ctx.tick().sample(dut.o.valid, Value.cast(dut.o.payload))
+                if valid:
+                    moves.append(out)
+            ctx.set(dut.i.valid, 0)
+            while not ctx.get(dut.idle):
+                _, _, valid, out = await ctx.tick().sample(dut.o.valid, Value.cast(dut.o.payload))
+                if valid:
+                    moves.append(out)
+            await ctx.tick()  # a node's share lands in the sums a clock after its output
+            return moves
+
+        await stream(*passes[0])
+        seen["sums"].append(ctx.get(Value.cast(dut.sums)))
+        ctx.set(dut.moves, 1)
+        ctx.set(dut.move_shift, shift)
+        for k in range(m):
+            ctx.set(dut.coefficients[k].x, int(c[k, 0]))
+            ctx.set(dut.coefficients[k].y, int(c[k, 1]))
+        await ctx.tick()
+        seen["moves"] = await stream(*passes[1])
+        seen["sums"].append(ctx.get(Value.cast(dut.sums)))
+        ctx.set(dut.moves, 0)
+        ctx.set(dut.clear, 1)
+        await ctx.tick()
+        ctx.set(dut.clear, 0)
+        await ctx.tick()
+        await stream(*passes[2])
+        seen["sums"].append(ctx.get(Value.cast(dut.sums)))
+
+    run_testbenches(dut, bench)
+    sums = [unpack_beats(dut.sums.shape(), [raw]) for raw in seen["sums"]]
+    totals = [np.array([[s[k]["x"][0], s[k]["y"][0]] for k in range(m)]) for s in sums]
+    golden = [coarse_sums(integer_basis(uv, degree), narrow_forces(fs, force)) for uv, force in passes]
+    check("sums after the first pass", totals[0], golden[0])
+    check("sums after the moves pass", totals[1], golden[0])
+    check("sums after clear and the third pass", totals[2], golden[2])
+    out = unpack_beats(dut.o.payload.shape(), seen["moves"])
+    uv = passes[1][0]
+    expected = node_moves(fs, integer_basis(uv, degree), c, fs.accel.frac_bits + shift)
+    check("moves", np.column_stack([out["move"]["x"], out["move"]["y"]]), expected)
