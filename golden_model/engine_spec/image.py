@@ -462,7 +462,7 @@ def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
     ``capacity`` built without the guard, and the coarse space, which the engine does not run."""
     if params.coarse_degree:
         raise FixedPointError("SpringflatEngine has no coarse space (its passes take the Jacobi step alone): "
-                              "drop --coarse-degree, or use --engine float or fixed")
+                              "drop --coarse-degree (the float and fixed engines have it)")
     if capacity is not None and params.guard and not capacity.guard:
         raise FixedPointError(f"this engine was built without the step guard, so it does not run "
                               f"'{params.mode.name}': use --no-guard, or an engine built with the guard")

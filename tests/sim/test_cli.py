@@ -389,10 +389,12 @@ def test_the_coarse_space_is_an_option_of_the_guarded_float_and_fixed_runs(tmp_p
     assert abs(summaries["float"]["shape_error"] - summaries["fixed"]["shape_error"]) <= 1e-3
     plain = json.loads(run("flatten", str(path), "--max-iter", "20", "--json", cwd=tmp_path).stdout)
     assert plain["coarse_degree"] == 0 and "coarse" not in plain["used"]
-    for options, message in ((("--engine", "rtl"), "SpringflatEngine has no coarse space"),
-                             (("--no-guard",), "the coarse space is a step of the guarded momentum dynamics"),
-                             (("--coarse-degree", "5"), "--coarse-degree must be an integer in [0, 4], got 5")):
-        proc = run("flatten", str(path), "--coarse-degree", "3", *options, cwd=tmp_path)
+    for command, options, message in (
+            ("flatten", ("--engine", "rtl"), "SpringflatEngine has no coarse space"),
+            ("rtl-check", ("--engine-top",), "SpringflatEngine has no coarse space"),
+            ("flatten", ("--no-guard",), "the coarse space is a step of the guarded momentum dynamics"),
+            ("flatten", ("--coarse-degree", "5"), "--coarse-degree must be an integer in [0, 4], got 5")):
+        proc = run(command, str(path), "--coarse-degree", "3", *options, cwd=tmp_path)
         lines = proc.stderr.strip().splitlines()
         assert proc.returncode == 2 and len(lines) == 1 and message in lines[0], proc.stderr
 
