@@ -19,7 +19,7 @@ from golden_model.guard import SCALE_MAX_SHIFT
 from .dsp import kept_register
 from .fixedpoint import FormatSetNotBuildable, clamp, round_half_bit, shape_of, shift_round, variable_shift
 from .force_pass import format_set
-from .layouts import INTEGRATOR_EVENTS, integrator_input_layout, integrator_output_layout
+from .layouts import COARSE_INTEGRATOR_EVENTS, INTEGRATOR_EVENTS, integrator_input_layout, integrator_output_layout
 from .pipeline import EventCount, LiveValues, Pipeline, aligned_add, count_stages
 
 __all__ = ["Integrator"]
@@ -47,6 +47,12 @@ class Integrator(wiring.Component):
         Carry the values that ride along unchanged for several stages in delay lines of
         distributed RAM, not a register per stage (:class:`~hdl.pipeline.Pipeline`): the same
         results clock for clock, fewer flip-flops.
+    coarse : :class:`bool`
+        Take each node's coarse move (``coarse`` [accel] in ``i``, :class:`~hdl.coarse_node.CoarseNode`'s)
+        into the momentum step's ``a`` before the step scale, ``a = sat(a + coarse → accel)``, as
+        :func:`golden_model.fixed.guard.proposal` does with its ``coarse``: one stage more, two events more
+        (:data:`~hdl.layouts.COARSE_INTEGRATOR_EVENTS`). Drive 0 for a step without it. Not with
+        ``shift_copy``. Not yet built into ``SpringflatEngine``.
 
     Members
     -------
@@ -95,25 +101,28 @@ class Integrator(wiring.Component):
     """
 
     def __init__(self, fs: FormatSet | str, *, side: ShapeCastable | None = None, saturations: bool = False,
-                 delay_lines: bool = False, shift_copy: bool = False):
+                 delay_lines: bool = False, shift_copy: bool = False, coarse: bool = False):
         fs = format_set(fs, "Integrator")
+        if coarse and shift_copy:
+            raise ValueError("Integrator: shift_copy copies a before the coarse move is added to it; build it "
+                             "without shift_copy")
         if fs.velocity.frac_bits != fs.position.frac_bits:
             raise FormatSetNotBuildable(f"the momentum step adds V to P: velocity {fs.velocity} needs position's "
                                         f"{fs.position.frac_bits} fraction bits")
         if side is not None:
             Shape.cast(side)  # a clear error now rather than at elaboration
         self.fs, self.side, self.saturations = fs, side, bool(saturations)
-        self.delay_lines, self.shift_copy = bool(delay_lines), bool(shift_copy)
-        super().__init__(self.signature_of(fs, side, self.saturations))
-        self.latency = _stage_count(fs, side, self.saturations)
+        self.delay_lines, self.shift_copy, self.coarse = bool(delay_lines), bool(shift_copy), bool(coarse)
+        super().__init__(self.signature_of(fs, side, self.saturations, self.coarse))
+        self.latency = _stage_count(fs, side, self.saturations, self.coarse)
 
     @staticmethod
-    def signature_of(fs: FormatSet, side: ShapeCastable | None = None, saturations: bool = False
-                     ) -> wiring.Signature:
+    def signature_of(fs: FormatSet, side: ShapeCastable | None = None, saturations: bool = False,
+                     coarse: bool = False) -> wiring.Signature:
         """The component's signature (also the throwaway build's stand-in ports)."""
         return wiring.Signature({
-            "i": In(stream.Signature(integrator_input_layout(fs, side), always_ready=True)),
-            "o": Out(stream.Signature(integrator_output_layout(fs, side, saturations), always_ready=True)),
+            "i": In(stream.Signature(integrator_input_layout(fs, side, coarse), always_ready=True)),
+            "o": Out(stream.Signature(integrator_output_layout(fs, side, saturations, coarse), always_ready=True)),
             "dt": In(shape_of(fs.dt)),
             "half_dt_sq": In(shape_of(fs.half_dt_sq)),
             "damping": In(shape_of(fs.damping)),
@@ -125,21 +134,23 @@ class Integrator(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        _build(m, self.fs, self.side, self.saturations, self, platform, self.delay_lines, self.shift_copy)
+        _build(m, self.fs, self.side, self.saturations, self, platform, self.delay_lines, self.shift_copy,
+               self.coarse)
         return m
 
 
 @functools.cache
-def _stage_count(fs: FormatSet, side, saturations: bool) -> int:
+def _stage_count(fs: FormatSet, side, saturations: bool, coarse: bool = False) -> int:
     """The stages :func:`_build` builds (a throwaway build with stand-in ports)."""
-    ports = Integrator.signature_of(fs, side, saturations).create()
-    return count_stages(lambda m: _build(m, fs, side, saturations, ports, None))
+    ports = Integrator.signature_of(fs, side, saturations, coarse).create()
+    return count_stages(lambda m: _build(m, fs, side, saturations, ports, None, coarse=coarse))
 
 
 def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform, delay_lines: bool = False,
-           shift_copy: bool = False) -> int:
+           shift_copy: bool = False, coarse: bool = False) -> int:
     """The integrator's datapath into ``m`` (``ports``: the component's members); returns its stages
-    (the same with or without ``delay_lines`` (:class:`~hdl.pipeline.Pipeline`) and ``shift_copy``)."""
+    (the same with or without ``delay_lines`` (:class:`~hdl.pipeline.Pipeline`) and ``shift_copy``; one more
+    with ``coarse``)."""
     rnd = fs.rounding
     # Constants, registered so that they reach the multipliers from registers.
     dt, half_dt_sq, damping = (Signal.like(p, name=f"{n}_r", reset_less=True) for n, p in (
@@ -162,7 +173,7 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform, d
     live = LiveValues()
     # Saturation events: counted by a few small adders along the node (EventCount); a dynamics'
     # flags count only while it is the one in use.
-    node_events = sum(INTEGRATOR_EVENTS.values())
+    node_events = sum(INTEGRATOR_EVENTS.values()) + (sum(COARSE_INTEGRATOR_EVENTS.values()) if coarse else 0)
     count = EventCount(live, node_events.bit_length(), paper=~momentum, mom=momentum, place=place, power=power_gate)
 
     def events(*flags, **gated):
@@ -174,7 +185,8 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform, d
     live.step(tail, "t1", f_x=node.force.x, f_y=node.force.y, p_x=node.node.position.x, p_y=node.node.position.y,
               v_x=node.node.velocity.x, v_y=node.node.velocity.y, inv_mass=node.node.inv_mass,
               inv_mass_barrier=node.node.inv_mass_barrier, inside=node.inside,
-              **({"side": Value.cast(node.side)} if side is not None else {}))
+              **({"side": Value.cast(node.side)} if side is not None else {}),
+              **({"c_x": node.coarse.x, "c_y": node.coarse.y} if coarse else {}))
     # F·w, w the barrier's weight where a triangle of the node is inside it (chosen as it lands),
     # then a = rq(F·w → accel); and the power F·V of the input state (the momentum restart's S)
     weight = Mux(live["inside"], live["inv_mass_barrier"], live["inv_mass"])
@@ -188,6 +200,11 @@ def _build(m: Module, fs: FormatSet, side, saturations: bool, ports, platform, d
     live.step(tail, "t4", a_x=a_x[0], a_y=a_y[0],
               pw=rounded(live["pw"], fs.force_acc.frac_bits + fs.velocity.frac_bits, fs.power),
               **events(a_x[1], a_y[1]))
+    if coarse:
+        # T4c: a = sat(a + coarse → accel), the proposal's coarse move added before the step scale; in the
+        # paper's step and an unguarded momentum step the coarse input is 0 and changes nothing
+        a_x, a_y = (clamp(live[f"a_{k}"] + live[f"c_{k}"], fs.accel) for k in "xy")
+        live.step(tail, "t4c", drop=("c_x", "c_y"), a_x=a_x[0], a_y=a_y[0], **events(a_x[1], a_y[1]))
     power = clamp(live["pw"], fs.power)
     live["pw"] = power[0]
     # the power counts only in the momentum dynamics: the controller forms S (and the golden model

@@ -19,7 +19,7 @@ from .fixedpoint import shape_of
 __all__ = ["vector_layout", "node_layout", "barrier_layout", "neighbour_layout", "entry_layout", "result_layout",
            "force_entry_layout", "node_force_layout", "integrator_input_layout", "integrator_output_layout",
            "step_layout", "errors_layout", "FORCE_ENTRY_EVENTS", "FORCE_NODE_EVENTS", "INTEGRATOR_EVENTS",
-           "STEP_EVENTS", "force_saturations_max", "saturations_shape"]
+           "STEP_EVENTS", "COARSE_INTEGRATOR_EVENTS", "force_saturations_max", "saturations_shape"]
 
 #: Saturation events one neighbour entry of the force pass can raise, by the golden model's
 #: ``SaturationCounter`` name (``node_terms``: ``neighbour_terms`` and ``barrier_terms``): elements
@@ -35,6 +35,9 @@ FORCE_NODE_EVENTS = {"force_acc": 2, "error_acc": 1}
 #: momentum step only ``accel``, ``velocity``, ``position`` and ``power``.
 INTEGRATOR_EVENTS = {"accel": 2, "position_step": 2, "position": 2, "velocity_step": 2, "velocity": 2,
                      "damping": 2, "power": 1}
+#: … and, in an integrator built with the coarse move's input, the sum ``a + coarse`` saturated to [accel]
+#: (:func:`golden_model.fixed.guard.proposal`).
+COARSE_INTEGRATOR_EVENTS = {"accel": 2}
 #: Saturation events of one step (``step_size``): ``lut_input`` per lane (a u1.F error above 1),
 #: ``dt`` twice (the requantised sum, then with the constant added), ``half_dt_sq``.
 STEP_EVENTS = {"lut_input": 2, "dt": 2, "half_dt_sq": 1}
@@ -148,28 +151,33 @@ def node_force_layout(fs: FormatSet, energy: bool = False, saturations: bool = F
     return data.StructLayout(fields)
 
 
-def integrator_input_layout(fs: FormatSet, side: ShapeCastable | None = None) -> data.StructLayout:
+def integrator_input_layout(fs: FormatSet, side: ShapeCastable | None = None,
+                            coarse: bool = False) -> data.StructLayout:
     """One node into the integrate stage (:class:`~hdl.integrator.Integrator`): its state ``node``
     (:func:`node_layout`), ``force`` ΣF [force_acc] and ``inside`` (the barrier's weight applies);
-    with ``side``, an opaque field of that shape carried to the output unchanged."""
+    with ``side``, an opaque field of that shape carried to the output unchanged; with ``coarse``, the
+    node's coarse move ``coarse`` [accel] (:class:`~hdl.coarse_node.CoarseNode`'s)."""
     fields = {"node": node_layout(fs), "force": vector_layout(fs.force_acc), "inside": unsigned(1)}
     if side is not None:
         fields["side"] = side
+    if coarse:
+        fields["coarse"] = vector_layout(fs.accel)
     return data.StructLayout(fields)
 
 
 def integrator_output_layout(fs: FormatSet, side: ShapeCastable | None = None,
-                             saturations: bool = False) -> data.StructLayout:
+                             saturations: bool = False, coarse: bool = False) -> data.StructLayout:
     """One node out of the integrate stage: new ``position`` [position], new ``velocity``
     [velocity] (damped), ``power`` F·V [power] of the input state; with ``side``, the input's
     ``side`` field; with ``saturations``, ``saturations``: the node's saturation events (up to
-    :data:`INTEGRATOR_EVENTS`)."""
+    :data:`INTEGRATOR_EVENTS`, and :data:`COARSE_INTEGRATOR_EVENTS` with ``coarse``)."""
     fields = {"position": vector_layout(fs.position), "velocity": vector_layout(fs.velocity),
               "power": shape_of(fs.power)}
     if side is not None:
         fields["side"] = side
     if saturations:
-        fields["saturations"] = saturations_shape(sum(INTEGRATOR_EVENTS.values()))
+        fields["saturations"] = saturations_shape(sum(INTEGRATOR_EVENTS.values())
+                                                  + (sum(COARSE_INTEGRATOR_EVENTS.values()) if coarse else 0))
     return data.StructLayout(fields)
 
 

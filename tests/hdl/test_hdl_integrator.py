@@ -333,3 +333,53 @@ def test_shift_copy_is_kept_apart_in_the_ecp5_form():
         kept = set(re.findall(r"^\s*cell \\TRELLIS_FF \\(t4_a_shift_[xy])_ff(\d+)", text, re.M))
         want = {(f"t4_a_shift_{k}", str(i)) for k in "xy" for i in range(fs.accel.width)} if shift_copy else set()
         assert kept == want, (shift_copy, sorted(kept ^ want)[:4])
+
+
+# ---------------------------------------------------------------- the coarse move in the proposal
+
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("shift", [0, 3])
+def test_proposals_with_the_coarse_move(preset, shift):
+    """``coarse``: the node's coarse move added to ``a`` before the step scale, saturating in [accel], against
+    :func:`golden_model.fixed.guard.proposal` with its ``coarse``: ``V'`` bit for bit and each node's events
+    (the sum's clamp counted as ``accel``)."""
+    fs = FormatSet.preset(preset)
+    rng = np.random.default_rng(70 + shift)
+    n = 80
+    nodes = random_nodes(fs, n, seed=71 + shift)
+    coarse = rng.integers(fs.accel.raw_min, fs.accel.raw_max + 1, size=(n, 2))
+    coarse[:4] = [[fs.accel.raw_max, fs.accel.raw_min], [0, 0], [fs.accel.raw_min, 1], [-1, fs.accel.raw_max]]
+    beta = int(rng.integers(0, fs.dt.raw_max + 1))
+    dut = Integrator(fs, side=SIDE, saturations=True, coarse=True)
+    vec = lambda a: {"x": a[:, 0], "y": a[:, 1]}  # noqa: E731
+    beats = pack_beats(dut.i.payload.shape(), {
+        "node": {"position": vec(nodes["position"]), "velocity": vec(nodes["velocity"]),
+                 "inv_mass": nodes["inv_mass"], "inv_mass_barrier": nodes["inv_mass_barrier"]},
+        "force": vec(nodes["force"]), "inside": nodes["inside"].astype(np.int64), "side": np.arange(n),
+        "coarse": vec(coarse)})
+
+    def setup(ctx):
+        for port, value in ((dut.dt, beta), (dut.half_dt_sq, 0), (dut.damping, 0), (dut.momentum, 1),
+                            (dut.scale_shift, shift), (dut.propose, 1)):
+            ctx.set(port, value)
+
+    run = run_streams(dut, beats, setup=setup, start=1, seed=shift, p_valid=0.7)
+    out = unpack_beats(dut.o.payload.shape(), run.outputs)
+    weights = np.where(nodes["inside"], nodes["inv_mass_barrier"], nodes["inv_mass"])
+    v, f = nodes["velocity"], nodes["force"]
+    counter = SaturationCounter()
+    want = proposal(fs, v, f, weights, beta, shift, counter, coarse)
+    per_node = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        node_counter = SaturationCounter()
+        proposal(fs, v[i:i + 1], f[i:i + 1], weights[i:i + 1], beta, shift, node_counter, coarse[i:i + 1])
+        node_power(fs, f[i:i + 1], v[i:i + 1], node_counter)
+        per_node[i] = node_counter.total
+    assert counter["accel"] > 0  # the sum's clamp is exercised
+    for name, got, expected in (("velocity.x", out["velocity"]["x"], want[:, 0]),
+                                ("velocity.y", out["velocity"]["y"], want[:, 1]),
+                                ("saturations", out["saturations"], per_node)):
+        bad = np.flatnonzero(got != expected)
+        assert bad.size == 0, f"{name}: {bad.size} mismatches; first at node {int(bad[0])}: " \
+                              f"rtl {int(got[bad[0]])} golden {int(expected[bad[0]])}"
+    assert dut.latency == LATENCY[preset] + 2  # the events' last stage (saturations), and T4c
