@@ -21,6 +21,7 @@ from golden_model.fixed.coarse import (BASIS_FRAC_BITS, MATRIX_BITS, MATRIX_EXPO
 from .coarse_node import move_shift_shape, sum_bits
 from .fixedpoint import round_half_bit, variable_shift
 from .force_pass import format_set
+from .parameters import check_in_range, check_int
 
 __all__ = ["CoarseCoefficients"]
 
@@ -77,10 +78,8 @@ class CoarseCoefficients(wiring.Component):
 
     def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int):
         fs = format_set(fs, "CoarseCoefficients")
-        if isinstance(degree, bool) or not isinstance(degree, int) or not 1 <= degree <= COARSE_DEGREE_MAX:
-            raise ValueError(f"CoarseCoefficients: degree must be an integer in 1..{COARSE_DEGREE_MAX}, got {degree!r}")
-        if isinstance(max_nodes, bool) or not isinstance(max_nodes, int) or max_nodes < 1:
-            raise ValueError(f"CoarseCoefficients: max_nodes must be a positive integer, got {max_nodes!r}")
+        check_in_range("degree", degree, 1, COARSE_DEGREE_MAX)
+        check_int("max_nodes", max_nodes)
         self.fs, self.degree, self.max_nodes = fs, degree, max_nodes
         self.m = m = len(basis_exponents(degree))
         #: Bits of an exact ``a_kd`` (signed): ``|M| < 2^MATRIX_BITS``, ``|g'| ≤ 2^(SUM_BITS − 2)``, m terms.

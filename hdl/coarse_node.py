@@ -19,6 +19,7 @@ from golden_model.fixed.coarse import BASIS, BASIS_FRAC_BITS, MOVE_BITS, OPERAND
 from .fixedpoint import FormatSetNotBuildable, clamp, requantize, round_half_bit, shift_round, variable_shift
 from .force_pass import format_set
 from .layouts import vector_layout
+from .parameters import check_in_range, check_int
 from .pipeline import LiveValues, Pipeline, count_stages
 
 __all__ = ["CoarseNode", "move_shift_shape", "sum_bits"]
@@ -87,10 +88,8 @@ class CoarseNode(wiring.Component):
 
     def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int):
         fs = format_set(fs, "CoarseNode")
-        if isinstance(degree, bool) or not isinstance(degree, int) or not 1 <= degree <= COARSE_DEGREE_MAX:
-            raise ValueError(f"CoarseNode: degree must be an integer in 1..{COARSE_DEGREE_MAX}, got {degree!r}")
-        if isinstance(max_nodes, bool) or not isinstance(max_nodes, int) or max_nodes < 1:
-            raise ValueError(f"CoarseNode: max_nodes must be a positive integer, got {max_nodes!r}")
+        check_in_range("degree", degree, 1, COARSE_DEGREE_MAX)
+        check_int("max_nodes", max_nodes)
         if not fs.accel.signed or not fs.force_acc.signed:
             raise FormatSetNotBuildable(f"force_acc {fs.force_acc} and accel {fs.accel} must be signed")
         self.fs, self.degree, self.max_nodes = fs, degree, max_nodes

@@ -10,6 +10,12 @@ def check_int(name: str, value, minimum: int = 1) -> None:
         raise ValueError(f"{name} must be an int >= {minimum}, not {value!r}")
 
 
+def check_in_range(name: str, value, low: int, high: int) -> None:
+    """Refuse ``value`` unless it is an ``int`` (not a ``bool``) from ``low`` to ``high``."""
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ValueError(f"{name} must be an int in {low}..{high}, not {value!r}")
+
+
 def check_power_of_two(name: str, value, minimum: int = 2) -> None:
     """Refuse ``value`` unless it is an ``int`` power of two of at least ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum or value & (value - 1):

@@ -1,12 +1,9 @@
 """RTL coarse-space node unit (hdl.CoarseNode) against the golden model's integer_basis, narrow_forces, coarse_sums
 and node_moves, in Amaranth's simulator: every node's move and event count and the pass's sums, bit for bit."""
 
-import gc
-import warnings
-
 import numpy as np
 import pytest
-from amaranth.hdl import UnusedElaboratable, Value
+from amaranth.hdl import Value
 
 from golden_model.coarse import basis_exponents
 from golden_model.fixed import FormatSet
@@ -113,18 +110,6 @@ def events_per_node(golden, n):
         golden(k, counter)
         events.append(counter.total - before)
     return events
-
-
-def test_parameters_are_checked():
-    with warnings.catch_warnings():  # the refused objects are never elaborated
-        warnings.simplefilter("ignore", UnusedElaboratable)
-        with pytest.raises(ValueError, match="degree must be an integer in 1..4"):
-            CoarseNode("default", 5, 100)
-        with pytest.raises(ValueError, match="max_nodes must be a positive integer"):
-            CoarseNode("default", 3, 0)
-        with pytest.raises(TypeError, match="CoarseNode needs a FormatSet or a preset name"):
-            CoarseNode(3, 3, 10)
-        gc.collect()
 
 
 #: Independent pins of the stages CoarseNode builds: the inputs and the narrowed forces (1), each basis level's

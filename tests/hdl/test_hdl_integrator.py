@@ -256,18 +256,20 @@ def test_the_paper_step_ignores_the_proposal_inputs():
 
 # ---------------------------------------------------------------- the guarded mode's proposal
 
-def check_proposals(fs, nodes, beta, shift, seed, shift_copy=False):
+def check_proposals(fs, nodes, beta, shift, seed, shift_copy=False, coarse=None):
     """One pass of proposals (``momentum``, ``propose``, ``scale_shift = shift``, β in ``dt``) against
     :func:`golden_model.fixed.guard.proposal`: ``V'`` bit for bit, the power as ever, and each node's
     ``saturations`` the events ``proposal`` and the guarded step's ``node_power`` (S, formed as it
-    proposes) count for it. Returns the pass's golden counter."""
+    proposes) count for it; with ``coarse`` ``(n, 2)`` [accel], an integrator built to take the coarse move
+    and ``proposal``'s ``coarse``. Returns the pass's golden counter."""
     n = len(nodes["inside"])
-    dut = Integrator(fs, side=SIDE, saturations=True, shift_copy=shift_copy)
+    dut = Integrator(fs, side=SIDE, saturations=True, shift_copy=shift_copy, coarse=coarse is not None)
     vec = lambda a: {"x": a[:, 0], "y": a[:, 1]}  # noqa: E731
     beats = pack_beats(dut.i.payload.shape(), {
         "node": {"position": vec(nodes["position"]), "velocity": vec(nodes["velocity"]),
                  "inv_mass": nodes["inv_mass"], "inv_mass_barrier": nodes["inv_mass_barrier"]},
-        "force": vec(nodes["force"]), "inside": nodes["inside"].astype(np.int64), "side": np.arange(n)})
+        "force": vec(nodes["force"]), "inside": nodes["inside"].astype(np.int64), "side": np.arange(n),
+        **({"coarse": vec(coarse)} if coarse is not None else {})})
 
     def setup(ctx):
         for port, value in ((dut.dt, beta), (dut.half_dt_sq, 0), (dut.damping, 0), (dut.momentum, 1),
@@ -279,12 +281,13 @@ def check_proposals(fs, nodes, beta, shift, seed, shift_copy=False):
     weights = np.where(nodes["inside"], nodes["inv_mass_barrier"], nodes["inv_mass"])
     v, f = nodes["velocity"], nodes["force"]
     counter = SaturationCounter()
-    want = proposal(fs, v, f, weights, beta, shift, counter)
+    want = proposal(fs, v, f, weights, beta, shift, counter, coarse)
     node_power(fs, f, v, counter)
     per_node = np.zeros(n, dtype=np.int64)
     for i in range(n):  # each node's own events
         node_counter = SaturationCounter()
-        proposal(fs, v[i:i + 1], f[i:i + 1], weights[i:i + 1], beta, shift, node_counter)
+        proposal(fs, v[i:i + 1], f[i:i + 1], weights[i:i + 1], beta, shift, node_counter,
+                 None if coarse is None else coarse[i:i + 1])
         node_power(fs, f[i:i + 1], v[i:i + 1], node_counter)
         per_node[i] = node_counter.total
     assert per_node.sum() == counter.total
@@ -335,51 +338,28 @@ def test_shift_copy_is_kept_apart_in_the_ecp5_form():
         assert kept == want, (shift_copy, sorted(kept ^ want)[:4])
 
 
-# ---------------------------------------------------------------- the coarse move in the proposal
 
 @pytest.mark.parametrize("preset", PRESETS)
 @pytest.mark.parametrize("shift", [0, 3])
 def test_proposals_with_the_coarse_move(preset, shift):
     """``coarse``: the node's coarse move added to ``a`` before the step scale, saturating in [accel], against
     :func:`golden_model.fixed.guard.proposal` with its ``coarse``: ``V'`` bit for bit and each node's events
-    (the sum's clamp counted as ``accel``)."""
+    (the sum's clamp counted as ``accel``), with moves over [accel]'s range and its ends."""
     fs = FormatSet.preset(preset)
     rng = np.random.default_rng(70 + shift)
     n = 80
-    nodes = random_nodes(fs, n, seed=71 + shift)
     coarse = rng.integers(fs.accel.raw_min, fs.accel.raw_max + 1, size=(n, 2))
     coarse[:4] = [[fs.accel.raw_max, fs.accel.raw_min], [0, 0], [fs.accel.raw_min, 1], [-1, fs.accel.raw_max]]
     beta = int(rng.integers(0, fs.dt.raw_max + 1))
-    dut = Integrator(fs, side=SIDE, saturations=True, coarse=True)
-    vec = lambda a: {"x": a[:, 0], "y": a[:, 1]}  # noqa: E731
-    beats = pack_beats(dut.i.payload.shape(), {
-        "node": {"position": vec(nodes["position"]), "velocity": vec(nodes["velocity"]),
-                 "inv_mass": nodes["inv_mass"], "inv_mass_barrier": nodes["inv_mass_barrier"]},
-        "force": vec(nodes["force"]), "inside": nodes["inside"].astype(np.int64), "side": np.arange(n),
-        "coarse": vec(coarse)})
-
-    def setup(ctx):
-        for port, value in ((dut.dt, beta), (dut.half_dt_sq, 0), (dut.damping, 0), (dut.momentum, 1),
-                            (dut.scale_shift, shift), (dut.propose, 1)):
-            ctx.set(port, value)
-
-    run = run_streams(dut, beats, setup=setup, start=1, seed=shift, p_valid=0.7)
-    out = unpack_beats(dut.o.payload.shape(), run.outputs)
-    weights = np.where(nodes["inside"], nodes["inv_mass_barrier"], nodes["inv_mass"])
-    v, f = nodes["velocity"], nodes["force"]
-    counter = SaturationCounter()
-    want = proposal(fs, v, f, weights, beta, shift, counter, coarse)
-    per_node = np.zeros(n, dtype=np.int64)
-    for i in range(n):
-        node_counter = SaturationCounter()
-        proposal(fs, v[i:i + 1], f[i:i + 1], weights[i:i + 1], beta, shift, node_counter, coarse[i:i + 1])
-        node_power(fs, f[i:i + 1], v[i:i + 1], node_counter)
-        per_node[i] = node_counter.total
+    counter = check_proposals(fs, random_nodes(fs, n, seed=71 + shift), beta, shift, seed=shift, coarse=coarse)
     assert counter["accel"] > 0  # the sum's clamp is exercised
-    for name, got, expected in (("velocity.x", out["velocity"]["x"], want[:, 0]),
-                                ("velocity.y", out["velocity"]["y"], want[:, 1]),
-                                ("saturations", out["saturations"], per_node)):
-        bad = np.flatnonzero(got != expected)
-        assert bad.size == 0, f"{name}: {bad.size} mismatches; first at node {int(bad[0])}: " \
-                              f"rtl {int(got[bad[0]])} golden {int(expected[bad[0]])}"
-    assert dut.latency == LATENCY[preset] + 2  # the events' last stage (saturations), and T4c
+
+
+def test_the_coarse_move_takes_one_stage_more():
+    with warnings.catch_warnings():  # built for their attributes only, never elaborated
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        latencies = {coarse: Integrator("default", saturations=True, coarse=coarse).latency for coarse in (False, True)}
+        with pytest.raises(ValueError, match="shift_copy copies a before the coarse move"):
+            Integrator("default", shift_copy=True, coarse=True)
+        gc.collect()
+    assert latencies == {False: LATENCY["default"] + 1, True: LATENCY["default"] + 2}

@@ -6,9 +6,11 @@ from amaranth.hdl import unsigned
 from golden_model.engine_spec.image import EngineCapacity
 from golden_model.fixed import FormatSet
 from hdl.block_ram import BlockRam
+from hdl.coarse_coefficients import CoarseCoefficients
+from hdl.coarse_node import CoarseNode
 from hdl.engine import SpringflatEngine
 from hdl.fifo import LutFIFO, SlicedFIFO
-from hdl.parameters import check_int, check_power_of_two
+from hdl.parameters import check_in_range, check_int, check_power_of_two
 from hdl.saturation_tally import SaturationTally
 from hdl.wishbone import Signature
 from support import refused_components
@@ -35,6 +37,15 @@ def test_a_power_of_two_is_one_of_at_least_two(value, taken):
             check_power_of_two("depth", value)
 
 
+@pytest.mark.parametrize("value, taken", [(1, True), (4, True), (0, False), (5, False), (True, False), (3.0, False)])
+def test_an_int_in_its_range_is_taken(value, taken):
+    if taken:
+        check_in_range("degree", value, 1, 4)
+    else:
+        with pytest.raises(ValueError, match=rf"^degree must be an int in 1..4, not {value!r}$"):
+            check_in_range("degree", value, 1, 4)
+
+
 def test_the_components_refuse_through_the_checks():
     with refused_components():
         with pytest.raises(ValueError, match=r"^BlockRam read_ports must be an int >= 1, not 0$"):
@@ -49,5 +60,12 @@ def test_the_components_refuse_through_the_checks():
             LutFIFO(width=True, depth=4)
         with pytest.raises(ValueError, match=r"^event source 'a'.s width must be an int >= 1, not 2.0$"):
             SaturationTally({"a": 2.0, "b": 1}, count_bits=4)
+        for unit in (CoarseNode, CoarseCoefficients):
+            with pytest.raises(ValueError, match=r"^degree must be an int in 1..4, not 5$"):
+                unit("default", 5, 100)
+            with pytest.raises(ValueError, match=r"^max_nodes must be an int >= 1, not 0$"):
+                unit("default", 3, 0)
+            with pytest.raises(TypeError, match=rf"^{unit.__name__} needs a FormatSet or a preset name, not 3$"):
+                unit(3, 3, 10)
     with pytest.raises(ValueError, match=r"^addr_width must be an int >= 1, not 0$"):
         Signature(addr_width=0)
