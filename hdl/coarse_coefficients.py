@@ -15,10 +15,10 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.coarse import COARSE_DEGREE_MAX, basis_exponents
 from golden_model.fixed import FormatSet
-from golden_model.fixed.coarse import (BASIS_FRAC_BITS, MATRIX_BITS, MATRIX_EXPONENT_BITS, MOVE_BITS, OPERAND_BITS, SUM_BITS,
-                                       narrow_force_format)
+from golden_model.fixed.coarse import (MATRIX_BITS, MATRIX_EXPONENT_BITS, OPERAND_BITS, SUM_BITS,
+                                       mantissa_magnitude_bits, move_frac_base, move_shift_range, sum_bits)
 
-from .coarse_node import move_shift_shape, sum_bits
+from .coarse_node import move_shift_shape
 from .fixedpoint import round_half_bit, variable_shift
 from .force_pass import format_set
 from .parameters import check_in_range, check_int
@@ -52,7 +52,7 @@ class CoarseCoefficients(wiring.Component):
     degree : int
         The coarse space's degree, 1 … :data:`~golden_model.coarse.COARSE_DEGREE_MAX` (``m`` functions).
     max_nodes : int
-        The sums' width (:func:`~hdl.coarse_node.sum_bits`), as :class:`~hdl.coarse_node.CoarseNode`'s.
+        The sums' width (:func:`golden_model.fixed.coarse.sum_bits`), as :class:`~hdl.coarse_node.CoarseNode`'s.
 
     Members
     -------
@@ -83,7 +83,7 @@ class CoarseCoefficients(wiring.Component):
         self.fs, self.degree, self.max_nodes = fs, degree, max_nodes
         self.m = m = len(basis_exponents(degree))
         #: Bits of an exact ``a_kd`` (signed): ``|M| < 2^MATRIX_BITS``, ``|g'| ≤ 2^(SUM_BITS − 2)``, m terms.
-        self.product_bits = MATRIX_BITS + SUM_BITS - 2 + (m - 1).bit_length() + 1
+        self.product_bits = MATRIX_BITS + mantissa_magnitude_bits(SUM_BITS) + (m - 1).bit_length() + 1
         self.cycles = 1 + 2 * m + m * m * (MATRIX_BITS + 2) + 1 + 1 + 2 * m + 1 + 1
         vector = lambda bits: data.StructLayout({"x": signed(bits), "y": signed(bits)})  # noqa: E731
         super().__init__({
@@ -145,7 +145,7 @@ class CoarseCoefficients(wiring.Component):
                                                                                        for d in "xy"))]
             mod.d.sync += goto("sum_exponent")
         with mod.If(state["sum_exponent"]):
-            mod.d.sync += [e_g.eq(exponent(sums, width + 1, SUM_BITS - 2)), index.eq(0), *goto("sum_mantissas")]
+            mod.d.sync += [e_g.eq(exponent(sums, width + 1, mantissa_magnitude_bits(SUM_BITS))), index.eq(0), *goto("sum_mantissas")]
         with mod.If(state["sum_mantissas"]):  # g' of sums[0], shifted into g; sums rotate
             mod.d.sync += [*rotate(sums, sums[0]), *rotate(g, mantissa(sums[0], e_g)), index.eq(index + 1)]
             with mod.If(index == count - 1):
@@ -183,17 +183,16 @@ class CoarseCoefficients(wiring.Component):
         with mod.If(state["last_row"]):  # the last row's sums land in a at this clock's end
             mod.d.sync += goto("c_exponent")
         with mod.If(state["c_exponent"]):
-            mod.d.sync += [e_c.eq(exponent(a, self.product_bits + 1, OPERAND_BITS - 2)), index.eq(0),
-                           *goto("c_mantissas")]
+            mod.d.sync += [e_c.eq(exponent(a, self.product_bits + 1, mantissa_magnitude_bits(OPERAND_BITS))),
+                           index.eq(0), *goto("c_mantissas")]
         with mod.If(state["c_mantissas"]):  # c of a[0], shifted into the output; a rotates
             mod.d.sync += [*rotate(a, a[0]),
                            *rotate(coefficients, mantissa(a[0], e_c)[:OPERAND_BITS].as_signed()), index.eq(index + 1)]
             with mod.If(index == count - 1):
                 mod.d.sync += goto("shift")
         with mod.If(state["shift"]):
-            base = 2 * BASIS_FRAC_BITS + narrow_force_format(fs).frac_bits - fs.accel.frac_bits
-            shift = base + self.matrix_exponent - e_g - e_c
-            low, high = -fs.accel.width, MOVE_BITS + 1
+            shift = move_frac_base(fs) - fs.accel.frac_bits + self.matrix_exponent - e_g - e_c
+            low, high = move_shift_range(fs)
             mod.d.sync += [self.o.payload.move_shift.eq(Mux(shift < low, low, Mux(shift > high, high, shift))),
                            self.o.valid.eq(1), *goto("done")]
         with mod.If(state["done"] & self.o.ready):

@@ -14,7 +14,8 @@ from amaranth.lib.wiring import In, Out
 
 from golden_model.coarse import COARSE_DEGREE_MAX, basis_exponents
 from golden_model.fixed import FormatSet
-from golden_model.fixed.coarse import BASIS, BASIS_FRAC_BITS, MOVE_BITS, OPERAND_BITS, narrow_force_format
+from golden_model.fixed.coarse import (BASIS, BASIS_FRAC_BITS, MOVE_BITS, OPERAND_BITS, move_shift_range,
+                                       narrow_force_format, sum_bits)
 
 from .fixedpoint import FormatSetNotBuildable, clamp, requantize, round_half_bit, shift_round, variable_shift
 from .force_pass import format_set
@@ -22,19 +23,12 @@ from .layouts import vector_layout
 from .parameters import check_in_range, check_int
 from .pipeline import LiveValues, Pipeline, count_stages
 
-__all__ = ["CoarseNode", "move_shift_shape", "sum_bits"]
+__all__ = ["CoarseNode", "move_shift_shape"]
 
 
 def move_shift_shape(fs: FormatSet):
-    """The shape of :attr:`CoarseNode.move_shift`: ``−accel.width … MOVE_BITS + 1``
-    (:func:`golden_model.fixed.coarse.move_shift`'s range)."""
-    return signed(max(fs.accel.width, MOVE_BITS + 1).bit_length() + 1)
-
-
-def sum_bits(max_nodes: int) -> int:
-    """Bits of an exact sum ``Σ Φ·F`` over ``max_nodes`` nodes (signed): each product ``|Φ·F| ≤ 2^16·2^17``, so
-    the sum's magnitude is below ``2^(33 + bit_length(max_nodes))``."""
-    return 2 * OPERAND_BITS - 2 + max_nodes.bit_length()
+    """The shape of :attr:`CoarseNode.move_shift`: :func:`golden_model.fixed.coarse.move_shift_range`."""
+    return signed(max(abs(end) for end in move_shift_range(fs)).bit_length() + 1)
 
 
 class CoarseNode(wiring.Component):
@@ -55,7 +49,7 @@ class CoarseNode(wiring.Component):
     degree : int
         The coarse space's degree, 1 … :data:`~golden_model.coarse.COARSE_DEGREE_MAX`.
     max_nodes : int
-        The most nodes a sums pass adds (the sums' width, :func:`sum_bits`).
+        The most nodes a sums pass adds (the sums' width, :func:`golden_model.fixed.coarse.sum_bits`).
 
     Members
     -------

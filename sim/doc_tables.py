@@ -222,7 +222,7 @@ def node_update_flip_flops() -> str:
 
 def unit_figures() -> str:
     """Latency and ``MULT18X18D`` blocks of every unit in ``hdl/``, every preset."""
-    from golden_model.coarse import RECOMMENDED_COARSE_DEGREE as COARSE_DEGREE
+    from golden_model.coarse import RECOMMENDED_COARSE_DEGREE
     from golden_model.engine_spec.image import DEFAULT_CAPACITY
     from hdl import (AreaError, BetaDivider, CoarseCoefficients, CoarseNode, EnergyCheck, ForcePass, Integrator, Normaliser,
                      RsqrtUnit, StepGenerator)
@@ -233,8 +233,8 @@ def unit_figures() -> str:
         plain = fs.replace(lut_interpolate=False)
         fp, fpe, integ, area = ForcePass(fs), ForcePass(fs, energy=True), Integrator(fs), AreaError(fs)
         norm, energy, beta = Normaliser(fs), EnergyCheck(fs, entries), BetaDivider(fs)
-        coarse = CoarseNode(fs, COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
-        coefficients = CoarseCoefficients(fs, COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
+        coarse = CoarseNode(fs, RECOMMENDED_COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
+        coefficients = CoarseCoefficients(fs, RECOMMENDED_COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
         s = fp.stages
         return [
             [str(RsqrtUnit.latency_of(fs.rsqrt_config())), str(_mult18x18d(RsqrtUnit(fs)))],
@@ -255,9 +255,9 @@ def unit_figures() -> str:
     rows = {p: quietly(lambda: column(_preset(p))) for p in PRESETS}
     names = ["`RsqrtUnit`", "`StepGenerator`", "`StepGenerator`, `lut_interpolate` off", "`ForcePass`",
              "`ForcePass(energy=True)`", "`Integrator`", "`AreaError`",
-             f"`CoarseNode`, degree {COARSE_DEGREE}", "`Normaliser`: `cycles(shift)`, shift from "
+             f"`CoarseNode`, degree {RECOMMENDED_COARSE_DEGREE}", "`Normaliser`: `cycles(shift)`, shift from "
              "F + 2 up", f"`EnergyCheck` at {entries:,} entries", "`BetaDivider`",
-             f"`CoarseCoefficients`, degree {COARSE_DEGREE}"]
+             f"`CoarseCoefficients`, degree {RECOMMENDED_COARSE_DEGREE}"]
     return _table(["unit", *(f"latency, {p}" for p in PRESETS), *(f"`MULT18X18D`, {p}" for p in PRESETS)],
                   [[name, *(rows[p][i][0] for p in PRESETS), *(rows[p][i][1] for p in PRESETS)]
                    for i, name in enumerate(names)])

@@ -40,7 +40,8 @@ from .measures import FixedPointError
 
 __all__ = ["OPERAND_BITS", "SUM_BITS", "MATRIX_BITS", "MATRIX_EXPONENT_BITS", "BASIS_FRAC_BITS", "BASIS", "CoarseConstants",
            "coarse_constants", "integer_basis", "narrow_force_format", "block_mantissas", "narrow_forces", "coarse_sums", "coefficients",
-           "move_frac_bits", "MOVE_BITS", "move_shift", "node_moves", "coarse_accel"]
+           "move_frac_base", "move_frac_bits", "MOVE_BITS", "move_shift_range", "move_shift", "node_moves",
+           "coarse_accel", "MANTISSA_HEADROOM", "mantissa_magnitude_bits", "sum_bits"]
 
 SAT = Overflow.SATURATE
 #: Width of the per-node operands: the basis values, the narrowed forces and the coefficients' mantissas.
@@ -54,6 +55,9 @@ MATRIX_EXPONENT_BITS = 8
 #: Fraction bits of the basis values ``Φ`` (s1.16: values in [-1, 1], 1 exact).
 BASIS_FRAC_BITS = OPERAND_BITS - 2
 BASIS = Format(True, 1, BASIS_FRAC_BITS)
+#: The bits a block mantissa leaves above its largest magnitude's leading one: its sign, and one for the
+#: rounding up (:func:`block_mantissas`).
+MANTISSA_HEADROOM = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,12 +105,23 @@ def narrow_force_format(fs: FormatSet) -> Format:
     return Format(True, int_bits, OPERAND_BITS - 1 - int_bits)
 
 
+def mantissa_magnitude_bits(bits: int) -> int:
+    """The magnitude bits a ``bits``-bit block mantissa keeps of the largest value (:data:`MANTISSA_HEADROOM`)."""
+    return bits - MANTISSA_HEADROOM
+
+
+def sum_bits(max_nodes: int) -> int:
+    """Bits of an exact sum ``Σ Φ·F'`` over ``max_nodes`` nodes (signed): each product ``|Φ·F'| ≤ 2^16·2^17``, so
+    the sum's magnitude is below ``2^(33 + bit_length(max_nodes))``."""
+    return 2 * OPERAND_BITS - 2 + max_nodes.bit_length()
+
+
 def block_mantissas(values: np.ndarray, bits: int) -> tuple[np.ndarray, int]:
     """``values`` (int64) as ``bits``-bit signed mantissas with one exponent ``e ≥ 0``: ``values ≈ m·2^e``, ``e`` the
     least that leaves the largest magnitude a bit below the mantissas' limit (so that rounding half up never
     overflows it)."""
     largest = int(np.abs(values).max()) if values.size else 0
-    exponent = max(0, largest.bit_length() - (bits - 2))
+    exponent = max(0, largest.bit_length() - mantissa_magnitude_bits(bits))
     return shift_round(values, exponent, "half_up"), exponent
 
 
@@ -117,7 +132,7 @@ def narrow_forces(fs: FormatSet, force: np.ndarray, counter: SaturationCounter |
 
 
 def coarse_sums(phi: np.ndarray, narrow: np.ndarray) -> np.ndarray:
-    """``(m, 2)`` the exact sums ``Φᵀ·F`` of the basis [basis] and the narrowed forces (``|Φ·F| ≤ 2^33``: int64 for
+    """``(m, 2)`` the exact sums ``Φᵀ·F`` of the basis [basis] and the narrowed forces (:func:`sum_bits`: int64 for
     fewer than ``2^29`` nodes)."""
     return phi.T @ narrow
 
@@ -130,22 +145,33 @@ def coefficients(constants: CoarseConstants, sums: np.ndarray) -> tuple[np.ndarr
     return c, sum_exponent, c_exponent
 
 
+def move_frac_base(fs: FormatSet) -> int:
+    """The part of :func:`move_frac_bits` that the formats fix: the basis's fraction bits twice and the narrowed
+    forces'."""
+    return 2 * BASIS_FRAC_BITS + narrow_force_format(fs).frac_bits
+
+
 def move_frac_bits(fs: FormatSet, constants: CoarseConstants, sum_exponent: int, c_exponent: int) -> int:
-    """The fraction bits of the node products ``Φ_i·c``: the basis's twice, the narrowed forces', ``M``'s
-    exponent, less the two block exponents."""
-    return (2 * BASIS_FRAC_BITS + narrow_force_format(fs).frac_bits + constants.matrix_exponent
-            - sum_exponent - c_exponent)
+    """The fraction bits of the node products ``Φ_i·c``: :func:`move_frac_base` and ``M``'s exponent, less the two
+    block exponents."""
+    return move_frac_base(fs) + constants.matrix_exponent - sum_exponent - c_exponent
 
 
 #: Bits of a node's exact ``Φ_i·c`` (signed): ``|Φ|, |c| ≤ 2^16``, at most 15 products.
 MOVE_BITS = 2 * (OPERAND_BITS - 2) + math.ceil(math.log2(len(basis_exponents(COARSE_DEGREE_MAX)))) + 1
 
 
+def move_shift_range(fs: FormatSet) -> tuple[int, int]:
+    """The range :func:`move_shift` clamps to, ``(−accel.width, MOVE_BITS + 1)``: beyond the right end every value
+    rounds to 0, beyond the left end every value but 0 saturates (the hardware's shifter spans the range)."""
+    return -fs.accel.width, MOVE_BITS + 1
+
+
 def move_shift(fs: FormatSet, frac_bits: int) -> int:
     """The right shift (negative: left) from ``Φ_i·c`` at ``frac_bits`` to [accel], clamped to
-    ``[−accel.width, MOVE_BITS + 1]``, where the result no longer changes: beyond the right end every value
-    rounds to 0, beyond the left end every value but 0 saturates (the hardware's shifter spans the range)."""
-    return min(max(frac_bits - fs.accel.frac_bits, -fs.accel.width), MOVE_BITS + 1)
+    :func:`move_shift_range`, where the result no longer changes."""
+    low, high = move_shift_range(fs)
+    return min(max(frac_bits - fs.accel.frac_bits, low), high)
 
 
 def node_moves(fs: FormatSet, phi: np.ndarray, c: np.ndarray, frac_bits: int,

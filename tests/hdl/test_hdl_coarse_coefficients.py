@@ -7,9 +7,9 @@ import pytest
 
 from golden_model.coarse import basis_exponents
 from golden_model.fixed import FormatSet
-from golden_model.fixed.coarse import (MATRIX_BITS, CoarseConstants, coefficients, move_frac_bits, move_shift)
+from golden_model.fixed.coarse import (MATRIX_BITS, CoarseConstants, coefficients, move_frac_bits, move_shift,
+                                       sum_bits)
 from hdl.coarse_coefficients import CoarseCoefficients
-from hdl.coarse_node import sum_bits
 from sim.payloads import pack, unpack_beats
 from support import PRESETS
 from support.streams import StreamRun, run_testbenches, stream_consumer, stream_producer
