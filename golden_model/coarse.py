@@ -23,9 +23,11 @@ Numpy only: ``ΦᵀKΦ = C·(δ·ΦᵀDΦ + Σ_edges (Φ_i − Φ_j)(Φ_i − Φ
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+from .guard import StepScale
 
 __all__ = ["RECOMMENDED_COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION",
            "SINGULAR_CUTOFF", "basis_exponents", "basis_coordinates", "basis", "coarse_stiffness", "coarse_inverse",
@@ -88,22 +90,25 @@ def coarse_move(phi: np.ndarray, inverse: np.ndarray, forces: np.ndarray) -> np.
 
 @dataclass(frozen=True)
 class CoarseSchedule:
-    """Whether the next step takes the coarse move: not while ``jacobi_left`` accepted Jacobi steps remain
-    after a rolled-back plain gradient step that took it."""
+    """Whether the next step takes the coarse move, and the guard's step scale after a rolled-back step, in the
+    float and the fixed-point model alike: the coarse move is taken where the run has a coarse space
+    (``active``), but not while ``jacobi_left`` accepted Jacobi steps remain after a rolled-back plain gradient
+    step that took it."""
 
+    active: bool = False
     jacobi_left: int = 0
 
     @property
     def coarse(self) -> bool:
-        return self.jacobi_left == 0
+        return self.active and self.jacobi_left == 0
 
     def accepted(self) -> "CoarseSchedule":
-        return CoarseSchedule(max(0, self.jacobi_left - 1))
+        return replace(self, jacobi_left=max(0, self.jacobi_left - 1))
 
-    def rejected(self, with_momentum: bool) -> tuple["CoarseSchedule", bool]:
-        """After a rolled-back step: the schedule, and whether the guard's own scale rule applies
-        (:meth:`~golden_model.guard.StepScale.rejected`); it does not after a plain gradient step taken with
-        the coarse move, whose scale stays."""
+    def rejected(self, scale: StepScale, with_momentum: bool) -> tuple["CoarseSchedule", StepScale]:
+        """After a rolled-back step: the schedule and the guard's scale. A plain gradient step taken with the
+        coarse move keeps its scale and hands over to the Jacobi step; any other follows the guard's own rule
+        (:meth:`~golden_model.guard.StepScale.rejected`)."""
         if self.coarse and not with_momentum:
-            return CoarseSchedule(JACOBI_STEPS_AFTER_REJECTION), False
-        return self, True
+            return replace(self, jacobi_left=JACOBI_STEPS_AFTER_REJECTION), scale
+        return self, scale.rejected(with_momentum)

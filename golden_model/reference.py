@@ -488,11 +488,11 @@ class _Jacobi:
         self.restart = False  # S < 0 seen in the last force pass
         self._refresh()
         self.guard = GuardRecord() if params.guard else None
-        self.coarse = None  # the coarse space's Φ and M (golden_model.coarse), with its schedule
+        self.coarse = None  # the coarse space's Φ and M (golden_model.coarse)
         if params.coarse_degree:
             phi = basis(positions, params.coarse_degree)
             self.coarse = (phi, coarse_inverse(phi, self.edges, params.spring))
-            self.coarse_schedule = CoarseSchedule()
+        self.coarse_schedule = CoarseSchedule(active=self.coarse is not None)
         self.accepted = True  # the last advance's step was taken
         self.stalled = False
         if self.guard is not None:
@@ -576,8 +576,7 @@ class _Jacobi:
             self.momentum_k += 1
             self.restart = power < 0
             guard.scale = guard.scale.accepted_step()
-            if self.coarse is not None:
-                self.coarse_schedule = self.coarse_schedule.accepted()
+            self.coarse_schedule = self.coarse_schedule.accepted()
         else:
             self.positions, self.delta, self.length, self.signed, self._layout_energy = before
             self.velocities = np.zeros_like(self.velocities)
@@ -591,7 +590,7 @@ class _Jacobi:
         weights of the current layout (``SpringModel.step_weights``), plus the coarse move ``Φ·M·(Φᵀf)``
         where the coarse space is on and its schedule takes it."""
         step = self.model.step_weights(self.positions, self.signed)[:, None] * forces
-        if self.coarse is not None and self.coarse_schedule.coarse:
+        if self.coarse_schedule.coarse:
             step = step + coarse_move(*self.coarse, forces)
         return step
 
@@ -600,11 +599,7 @@ class _Jacobi:
         one taken with the coarse move, after which the Jacobi step goes alone for a while
         (:class:`~golden_model.coarse.CoarseSchedule`)."""
         guard = self.guard
-        if self.coarse is not None:
-            self.coarse_schedule, scale_rule = self.coarse_schedule.rejected(with_momentum)
-            if not scale_rule:
-                return
-        guard.scale = guard.scale.rejected(with_momentum)
+        self.coarse_schedule, guard.scale = self.coarse_schedule.rejected(guard.scale, with_momentum)
         self.stalled = guard.scale.stalled
 
     def energy_of_layout(self) -> float:

@@ -89,7 +89,7 @@ class Controller:
         self.momentum = MomentumState()
         self.guard = GuardRecord() if setup.mode.guarded else None
         self.floor_min = floor_min_raw(setup.fs, setup.face_areas) if self.guard is not None else None
-        self.coarse_schedule = CoarseSchedule()
+        self.coarse_schedule = CoarseSchedule(active=setup.coarse is not None)
         self.accepted = True
         self.stalled = False
         self._measured: np.ndarray | None = None  # the positions array the pass results belong to
@@ -148,7 +148,7 @@ class Controller:
         s, guard = self.setup, self.guard
         accepted = (self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power)
         coarse = None
-        if s.coarse is not None and self.coarse_schedule.coarse:
+        if self.coarse_schedule.coarse:
             coarse = coarse_accel(s.fs, s.coarse, self.terms.force, self.counter)
         wanted = proposal(s.fs, self.raw_velocities, self.terms.force, weights, self.dt, guard.scale.shift,
                           self.counter, coarse)
@@ -162,8 +162,7 @@ class Controller:
         self.accepted = self.energy_raw <= before
         if self.accepted:
             guard.scale = guard.scale.accepted_step()
-            if s.coarse is not None:
-                self.coarse_schedule = self.coarse_schedule.accepted()
+            self.coarse_schedule = self.coarse_schedule.accepted()
             return
         self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power = accepted
         self._measured = self.raw_positions
@@ -171,12 +170,8 @@ class Controller:
         self.power = 0  # S of a stopped momentum
         self.momentum = MomentumState()
         guard.rejected += 1
-        with_momentum = self.dt > 0  # β = 0: a plain gradient step
-        if s.coarse is not None:
-            self.coarse_schedule, scale_rule = self.coarse_schedule.rejected(with_momentum)
-            if not scale_rule:
-                return
-        guard.scale = guard.scale.rejected(with_momentum)
+        # β = 0: a plain gradient step
+        self.coarse_schedule, guard.scale = self.coarse_schedule.rejected(guard.scale, with_momentum=self.dt > 0)
         self.stalled = guard.scale.stalled
 
     def run(self, on_iteration: Callable[[int], None] | None = None) -> tuple[str, int]:

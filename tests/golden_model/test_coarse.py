@@ -15,6 +15,7 @@ from golden_model.coarse import (
     coarse_stiffness,
 )
 from golden_model.engine_spec.image import check_engine_params
+from golden_model.guard import StepScale
 from golden_model.fixed.coarse import (BASIS_FRAC_BITS, CoarseConstants, block_mantissas, coarse_accel, coarse_constants,
                                       integer_basis, narrow_force_format)
 from golden_model.fixed.engine import FixedEngine, flatten_fixed, prepare
@@ -83,14 +84,20 @@ def test_the_coarse_move_does_not_depend_on_where_the_layout_lies_or_its_size():
 
 
 def test_a_rejected_coarse_gradient_step_keeps_the_scale_and_takes_the_jacobi_step_for_a_while():
-    schedule, scale_rule = CoarseSchedule().rejected(with_momentum=False)
-    assert not scale_rule and not schedule.coarse
+    scale = StepScale(shift=2, accepted=5)
+    schedule, kept = CoarseSchedule(active=True).rejected(scale, with_momentum=False)
+    assert kept == scale and not schedule.coarse
     for _ in range(JACOBI_STEPS_AFTER_REJECTION - 1):
         schedule = schedule.accepted()
         assert not schedule.coarse
-        assert schedule.rejected(with_momentum=False) == (schedule, True)  # a Jacobi step: the guard's own rule
+        # a Jacobi step: the guard's own rule, the scale halves
+        assert schedule.rejected(scale, with_momentum=False) == (schedule, StepScale(shift=3, accepted=0))
     assert schedule.accepted().coarse
-    assert CoarseSchedule().rejected(with_momentum=True) == (CoarseSchedule(), True)
+    active = CoarseSchedule(active=True)
+    assert active.rejected(scale, with_momentum=True) == (active, StepScale(shift=2, accepted=0))
+    # without a coarse space: never the coarse move, always the guard's own rule
+    assert not CoarseSchedule().coarse
+    assert CoarseSchedule().rejected(scale, with_momentum=False) == (CoarseSchedule(), StepScale(shift=3, accepted=0))
 
 
 def test_coarse_degree_is_checked():
