@@ -37,7 +37,8 @@ def board_capacity(bus, fs: FormatSet) -> EngineCapacity:
     values = [probe.read_value(f"cap_{what}") for what in ("vertices", "entries", "triangles")]
     try:
         capacity = EngineCapacity(*values, guard=bool(probe.read_value("feature_guard")),
-                                  lanes=probe.read_value("feature_lanes"))
+                                  lanes=probe.read_value("feature_lanes"),
+                                  coarse_degree=probe.read_value("feature_coarse"))
         RegisterMap.build(fs, capacity)  # (its address map must fit the bus)
     except ValueError as exc:
         raise DriverError(f"the engine reports a capacity it cannot have ({exc})") from None

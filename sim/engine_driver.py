@@ -126,6 +126,9 @@ class EngineDriver:
                               f"map says {'with' if self.map.capacity.guard else 'without'}")
         if (lanes := self.read_value("feature_lanes")) != self.map.capacity.lanes:
             raise DriverError(f"the engine was built with {lanes} lane(s); the register map says {self.map.capacity.lanes}")
+        if (degree := self.read_value("feature_coarse")) != self.map.capacity.coarse_degree:
+            raise DriverError(f"the engine was built with a coarse space of degree {degree} (0: none); the register map "
+                              f"says {self.map.capacity.coarse_degree}")
 
     # ------------------------------------------------------------------ the run
     def load(self, image: EngineImage, memories: tuple[str, ...] | None = None) -> None:
@@ -142,6 +145,7 @@ class EngineDriver:
         if image.capacity != self.map.capacity:
             c, e = (f"{c.vertices}/{c.entries}/{c.triangles}{'' if c.guard else ' without the guard'}"
                     f"{'' if c.lanes == 1 else f' in {c.lanes} lanes'}"
+                    f"{f' with a coarse space of degree {c.coarse_degree}' if c.coarse_degree else ''}"
                     for c in (image.capacity, self.map.capacity))
             raise DriverError(f"the image was built for capacity {c} (vertices/entries/triangles); the engine has {e}")
         if self._status_fields()[0] == "running":
@@ -310,8 +314,9 @@ class ModelBus:
             self._set_status("done", fault, 1)
             return
         entries = self.memories["entries"][lane_rows(lane_entry_counts(constants, self.map.capacity), self.map.capacity)]
+        coarse = ([self.memories["basis"], self.memories["matrix"]] if self.map.capacity.coarse_degree else [])
         image = EngineImage(self.map.capacity, self.memories["nodes"][:constants["vertices"]], entries,
-                            self.memories["triangles"][:constants["triangles"]], constants)
+                            self.memories["triangles"][:constants["triangles"]], constants, *coarse)
         self._pending = run_image(image, self.fs)
         self._polls_left = self.run_polls
         self._set_status("running", "none", 0)

@@ -30,8 +30,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..coarse import COARSE_DEGREE_MAX, basis_exponents
 from ..guard import ENERGY_WINDOW
 from ..modes import MODE_CODE_BITS, RUN_MODES, RunMode, Step
+from ..fixed.coarse import MATRIX_EXPONENT_BITS, OPERAND_BITS, SUM_BITS, BASIS_FRAC_BITS, CoarseConstants
 from ..fixed.controller import Controller, Setup
 from ..fixed.engine import (ENERGY_TOL_FRAC_BITS, HOST_ROUNDING, FixedProblem, StopRule, check_fixed_params,
                             energy_floor_raw, tol_energy_raw)
@@ -42,11 +44,12 @@ from ..fixed.pipeline import BarrierEntries, NeighbourStream
 from ..mesh import Mesh
 
 __all__ = ["EngineCapacity", "DEFAULT_CAPACITY", "LARGEST_85F_CAPACITY", "WordField", "MemoryLayout", "memory_layouts",
-           "node_word_layout", "entry_word_layout", "triangle_word_layout", "run_constant_fields", "energy_width",
-           "energy_check_width", "EngineImage", "build_image", "decode_nodes", "decode_entries", "decode_triangles",
-           "constant_fault", "EntryCountError", "ImageRunResult", "run_image", "image_energy_window", "BUS_WORD_BITS", "ITERATION_BITS",
-           "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS", "ENGINE_RUN_MODES", "MODE_FIELDS", "image_mode",
-           "LANES", "entry_lanes", "lane_rows", "lane_entry_counts"]
+           "node_word_layout", "entry_word_layout", "triangle_word_layout", "basis_field_names", "basis_word_layout",
+           "matrix_word_layout", "coarse_constant_fields", "run_constant_fields", "energy_width", "energy_check_width",
+           "EngineImage", "build_image", "decode_coarse", "decode_nodes", "decode_entries", "decode_triangles",
+           "constant_fault", "EntryCountError", "ImageRunResult", "run_image", "image_energy_window", "BUS_WORD_BITS",
+           "ITERATION_BITS", "SATURATION_BITS", "ENERGY_TOL_INT_BITS", "RESULTS", "ENGINE_RUN_MODES", "MODE_FIELDS",
+           "image_mode", "LANES", "entry_lanes", "lane_rows", "lane_entry_counts"]
 
 BUS_WORD_BITS = 32
 """Width of one bus word (Wishbone ``dat``)."""
@@ -85,13 +88,17 @@ class EngineCapacity:
     ``guard``: whether the build has the step guard's passes and memories (the proposal memory and
     the level scatters), so runs the guarded modes. Both builds fit the ECP5-85F's block RAMs up to
     3072 / 18432 / 6144 (``docs/synthesis.md``). ``lanes``: K datapaths, each on a share of the
-    nodes (:data:`LANES`; the images' partition: :func:`entry_lanes`); every depth a multiple of K."""
+    nodes (:data:`LANES`; the images' partition: :func:`entry_lanes`); every depth a multiple of K.
+    ``coarse_degree``: the degree of the guarded step's coarse space the build has (its basis and matrix
+    memories, :func:`basis_word_layout` and :func:`matrix_word_layout`, and the passes that use them); 0:
+    none. A build with one takes the guard and one lane."""
 
     vertices: int
     entries: int
     triangles: int
     guard: bool = True
     lanes: int = 1
+    coarse_degree: int = 0
 
     def __post_init__(self) -> None:
         for name in ("vertices", "entries", "triangles"):
@@ -102,6 +109,13 @@ class EngineCapacity:
             raise ValueError(f"EngineCapacity: guard must be a bool, got {self.guard!r}")
         if not isinstance(self.lanes, int) or isinstance(self.lanes, bool) or self.lanes not in LANES:
             raise ValueError(f"EngineCapacity: lanes must be one of {', '.join(map(str, LANES))}, got {self.lanes!r}")
+        degree = self.coarse_degree
+        if isinstance(degree, bool) or not isinstance(degree, int) or not 0 <= degree <= COARSE_DEGREE_MAX:
+            raise ValueError(f"EngineCapacity: coarse_degree must be an int from 0 (none) to {COARSE_DEGREE_MAX}, "
+                             f"got {degree!r}")
+        if degree and (not self.guard or self.lanes != 1):
+            raise ValueError("EngineCapacity: a coarse space (coarse_degree > 0) is built with the step guard and "
+                             "one lane")
         for name in ("vertices", "entries", "triangles"):
             if getattr(self, name) % self.lanes:
                 raise ValueError(f"EngineCapacity: {name} = {getattr(self, name)} is not a multiple of lanes = "
@@ -313,10 +327,33 @@ def triangle_word_layout(fs: FormatSet, capacity: EngineCapacity) -> MemoryLayou
     ), capacity.triangles)
 
 
+def basis_field_names(degree: int) -> tuple[str, ...]:
+    """The basis memory's fields: ``phi_<a><b>`` for the monomial ``u^a·v^b`` of each of
+    :func:`~golden_model.coarse.basis_exponents`' but the first (the constant 1, which is not stored)."""
+    return tuple(f"phi_{a}{b}" for a, b in basis_exponents(degree)[1:])
+
+
+def basis_word_layout(capacity: EngineCapacity) -> MemoryLayout:
+    """Per vertex, with a coarse space: its basis values ``Φ_i`` but the constant 1, raw s1.16
+    (:data:`~golden_model.fixed.coarse.BASIS`, ``CoarseConstants.phi``'s columns 1 on), computed by the host
+    from the start layout."""
+    return MemoryLayout("basis", tuple(WordField(name, OPERAND_BITS, True) for name in
+                                       basis_field_names(capacity.coarse_degree)), capacity.vertices)
+
+
+def matrix_word_layout(capacity: EngineCapacity) -> MemoryLayout:
+    """With a coarse space of ``m`` functions: ``M = (ΦᵀKΦ)⁺`` as ``m²`` signed integers, row-major
+    (``CoarseConstants.matrix``, scaled by ``2^matrix_exponent``)."""
+    functions = len(basis_exponents(capacity.coarse_degree))
+    return MemoryLayout("matrix", (WordField("entry", SUM_BITS, True),), functions * functions)
+
+
 def memory_layouts(fs: FormatSet, capacity: EngineCapacity) -> dict[str, MemoryLayout]:
-    """The three memories, by name, in bus-window order."""
+    """The memories, by name, in bus-window order: nodes, entries, triangles; with a coarse space the basis and
+    the matrix after them."""
+    coarse = (basis_word_layout(capacity), matrix_word_layout(capacity)) if capacity.coarse_degree else ()
     return {m.name: m for m in (node_word_layout(fs, capacity), entry_word_layout(fs, capacity),
-                                triangle_word_layout(fs, capacity))}
+                                triangle_word_layout(fs, capacity), *coarse)}
 
 
 def _reciprocal_shift_bits(fs: FormatSet, capacity: EngineCapacity) -> int:
@@ -368,6 +405,14 @@ def lane_entry_counts(constants: dict[str, int], capacity: EngineCapacity) -> np
     return np.array([constants[f.name] for f in lane_count_fields(capacity)])
 
 
+def coarse_constant_fields(capacity: EngineCapacity) -> tuple[WordField, ...]:
+    """With a coarse space, the run constants that follow the others: ``coarse`` (1: the guarded step takes the
+    coarse move) and ``matrix_exponent``, the matrix memory's scale; none without one."""
+    if not capacity.coarse_degree:
+        return ()
+    return WordField("coarse", 1), WordField("matrix_exponent", MATRIX_EXPONENT_BITS, True)
+
+
 def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordField, ...]:
     """The run constants (raw ints), in register order; those of :data:`MODE_FIELDS` share the ``MODE``
     register: ``mode``, the run mode's code (:data:`~golden_model.modes.RUN_MODES`), and ``barrier``.
@@ -396,22 +441,27 @@ def run_constant_fields(fs: FormatSet, capacity: EngineCapacity) -> tuple[WordFi
         MAX_ITER_FIELD,
         WordField("saturation_limit", SATURATION_BITS),
         WordField("energy_floor", energy_width(fs, capacity.entries)),
+        *coarse_constant_fields(capacity),
     )
 
 
 @dataclass(frozen=True, eq=False)
 class EngineImage:
     """What the host loads: three memories as ``(n, words)`` uint32 (``n`` the mesh's counts), and the
-    run constants as raw ints (keys: :func:`run_constant_fields`)."""
+    run constants as raw ints (keys: :func:`run_constant_fields`); with a coarse space
+    (``capacity.coarse_degree``) the basis (a row per vertex) and the matrix memories too."""
 
     capacity: EngineCapacity
     nodes: np.ndarray
     entries: np.ndarray
     triangles: np.ndarray
     constants: dict[str, int] = field(default_factory=dict)
+    basis: np.ndarray | None = None
+    matrix: np.ndarray | None = None
 
     def memories(self) -> dict[str, np.ndarray]:
-        return {"nodes": self.nodes, "entries": self.entries, "triangles": self.triangles}
+        coarse = {"basis": self.basis, "matrix": self.matrix} if self.capacity.coarse_degree else {}
+        return {"nodes": self.nodes, "entries": self.entries, "triangles": self.triangles, **coarse}
 
     def rows(self, name: str) -> np.ndarray:
         """The index in its memory window of each row of memory ``name``: from 0 up, except the entries of
@@ -439,6 +489,9 @@ def _run_constants(problem: FixedProblem, capacity: EngineCapacity, lane_counts:
         "tol_energy": rule.energy, "max_iter": params.max_iter, "saturation_limit": 0,
         "energy_floor": rule.floor,
     }
+    if capacity.coarse_degree:
+        constants |= {"coarse": int(problem.coarse is not None),
+                      "matrix_exponent": 0 if problem.coarse is None else problem.coarse.matrix_exponent}
     check_run_limits(params)
     for f in run_constant_fields(fs, capacity):
         _check_fits(f, constants[f.name])
@@ -459,10 +512,14 @@ UNGUARDED = {"guard": False, "energy_window": 1}
 def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
     """Refuse, in one line, a stop rule's window the engine does not have (the guard's
     :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it), and the guarded step on a
-    ``capacity`` built without the guard, and the coarse space, which the engine does not run."""
-    if params.coarse_degree:
+    ``capacity`` built without the guard, and a coarse space of another degree than the ``capacity``'s (none
+    where it is not given: the engine the command line builds has none)."""
+    built = 0 if capacity is None else capacity.coarse_degree
+    if params.coarse_degree and params.coarse_degree != built:
         raise FixedPointError("SpringflatEngine has no coarse space (its passes take the Jacobi step alone): "
-                              "drop --coarse-degree (the float and fixed engines have it)")
+                              "drop --coarse-degree (the float and fixed engines have it)" if not built else
+                              f"this engine's coarse space is of degree {built}, not {params.coarse_degree}: use "
+                              f"--coarse-degree {built} or 0")
     if capacity is not None and params.guard and not capacity.guard:
         raise FixedPointError(f"this engine was built without the step guard, so it does not run "
                               f"'{params.mode.name}': use --no-guard, or an engine built with the guard")
@@ -520,7 +577,29 @@ def build_image(problem: FixedProblem, capacity: EngineCapacity) -> EngineImage:
     faces = problem.mesh.faces
     triangles = layouts["triangles"].pack({"a": faces[:, 0], "b": faces[:, 1], "c": faces[:, 2],
                                            "area": problem.face_areas})
-    return EngineImage(capacity, nodes, entries, triangles, constants)
+    if not capacity.coarse_degree:
+        return EngineImage(capacity, nodes, entries, triangles, constants)
+    coarse = problem.coarse
+    functions = len(basis_exponents(capacity.coarse_degree))
+    phi = np.zeros((n_vertices, functions), np.int64) if coarse is None else coarse.phi
+    matrix = np.zeros((functions, functions), np.int64) if coarse is None else coarse.matrix
+    basis = basis_word_layout(capacity).pack(dict(zip(basis_field_names(capacity.coarse_degree), phi[:, 1:].T)))
+    return EngineImage(capacity, nodes, entries, triangles, constants, basis,
+                       matrix_word_layout(capacity).pack({"entry": matrix.reshape(-1)}))
+
+
+def decode_coarse(image: "EngineImage") -> CoarseConstants | None:
+    """The coarse space's constants the basis and matrix memories and the run constants hold (the constant
+    basis function prepended), or ``None`` where the run takes none (no coarse space built, or ``coarse`` 0)."""
+    capacity, c = image.capacity, image.constants
+    if not capacity.coarse_degree or not c["coarse"]:
+        return None
+    columns = basis_word_layout(capacity).unpack(image.basis[:c["vertices"]])
+    phi = np.column_stack([np.full(c["vertices"], 1 << BASIS_FRAC_BITS, np.int64),
+                           *(columns[name] for name in basis_field_names(capacity.coarse_degree))])
+    functions = phi.shape[1]
+    matrix = matrix_word_layout(capacity).unpack(image.matrix)["entry"][:functions * functions]
+    return CoarseConstants(phi, matrix.reshape(functions, functions), c["matrix_exponent"])
 
 
 def decode_nodes(words: np.ndarray, fs: FormatSet, capacity: EngineCapacity) -> tuple[np.ndarray, np.ndarray,
@@ -582,7 +661,8 @@ def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCap
     loaded since reset), ``"bad-constants"`` (a count over capacity or zero, with K > 1 lanes ``lane{k}_entries``
     that do not add up to ``entries`` or one over its share, a reciprocal that is not a
     u1.F mantissa or whose shift is too small for :meth:`Reciprocal.normalise`, a mode code the engine
-    does not run, a guarded mode on a build without the guard, a zero fixed step, no iterations), or
+    does not run, a guarded mode on a build without the guard, the coarse move asked of an unguarded mode, a zero
+    fixed step, no iterations), or
     ``None`` (the run starts)."""
     if constants["vertices"] == 0:
         return "no-mesh"
@@ -594,7 +674,7 @@ def constant_fault(constants: dict[str, int], fs: FormatSet, capacity: EngineCap
                          and constants[f"{k}_shift"] >= fs.error.frac_bits + 2 for k in ("area", "length"))
     mode = image_mode(constants)
     step_ok = mode is not None and (mode.step is not Step.FIXED or constants["dt"] > 0) \
-        and (capacity.guard or not mode.guarded)
+        and (capacity.guard or not mode.guarded) and (mode.guarded or not constants.get("coarse", 0))
     if not (counts_ok and reciprocals_ok and step_ok and constants["max_iter"] > 0):
         return "bad-constants"
     return None
@@ -651,7 +731,7 @@ def run_image(image: EngineImage, fs: FormatSet) -> ImageRunResult:
     setup = Setup(fs, image_mode(c), stream, faces, areas, c["half_spring"], c["damping"], c["dt"],
                   Reciprocal(c["area_reciprocal"], c["area_shift"]), Reciprocal(c["length_reciprocal"], c["length_shift"]),
                   StopRule(c["tol_area"], c["tol_shape"], c["tol_energy"], c["energy_floor"]), c["max_iter"],
-                  image_energy_window(image_mode(c)), c["saturation_limit"])
+                  image_energy_window(image_mode(c)), c["saturation_limit"], coarse=decode_coarse(image))
     counter = SaturationCounter()
     controller = Controller(setup, positions[:n], velocities[:n], counter)
     status, k = controller.run()

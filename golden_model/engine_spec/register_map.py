@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field
 from .image import (BUS_WORD_BITS, ENERGY_TOL_INT_BITS, ITERATION_BITS, MODE_FIELDS, RESULTS, SATURATION_BITS,
                     EngineCapacity, MemoryLayout, WordField, energy_width, memory_layouts, run_constant_fields)
 from ..fixed.engine import ENERGY_TOL_FRAC_BITS
+from ..coarse import COARSE_DEGREE_MAX
 from ..guard import SCALE_MAX_SHIFT
 from ..modes import RUN_MODES
 from ..fixed.formats_set import FormatSet
@@ -35,7 +36,7 @@ __all__ = ["MAGIC", "VERSION", "ACCESS", "STATES", "RESULTS", "REGISTER_BLOCKS",
 MAGIC = 0x5350_464C
 """ID register: ASCII ``SPFL``."""
 
-VERSION = (2, 3)
+VERSION = (2, 4)
 """(major, minor) of this register map; the major changes when an address or field moves."""
 
 ACCESS = {
@@ -128,6 +129,8 @@ _WINDOW_TEXT = {
     "nodes": "per vertex: state and weights (read back the layout here)",
     "entries": "per neighbour entry: nodes in order, each node's entries in ring order",
     "triangles": "per triangle: corners and 3D area (E_S)",
+    "basis": "per vertex, with a coarse space: its basis values but the constant 1, from the start layout",
+    "matrix": "with a coarse space: M = (Φ^T K Φ)^+ row-major, scaled by 2^MATRIX_EXPONENT",
 }
 
 
@@ -182,7 +185,9 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
         BitField("lanes", 1, 3, "ro", "K, the datapaths (lanes) each running a share of the nodes: vertex i in lane "
                                       "i mod K, its entries in that lane's share of the entries window "
                                       "(docs/engine.md)", "feature_lanes"),
-    ), ident, int(capacity.guard) | capacity.lanes << 1)
+        BitField("coarse", 4, COARSE_DEGREE_MAX.bit_length(), "ro", "the degree of the guarded step's coarse space (its basis and matrix windows "
+                                       "and run constants; docs/guard.md); 0: none", "feature_coarse"),
+    ), ident, int(capacity.guard) | capacity.lanes << 1 | capacity.coarse_degree << 4)
 
     a.block()
     a.add("CONTROL", "rw", "start, abort, interrupt enable", (
@@ -252,6 +257,8 @@ _CONSTANT_TEXT = {
     "tol_energy": f"ε raw, u{ENERGY_TOL_INT_BITS}.{ENERGY_TOL_FRAC_BITS}",
     "max_iter": "N_max",
     "saturation_limit": "stop as diverged after this many saturation events (0: never)",
+    "coarse": "1: the guarded step takes the coarse move (the basis and matrix windows loaded)",
+    "matrix_exponent": "the exponent e of the matrix window's scale: its entries are M·2^e",
     "energy_floor": "the stop rule's energy floor, raw as ENERGY: with E_S and E_C within φ, an energy below "
                     "it stops the run as converged (0: no floor)",
 }

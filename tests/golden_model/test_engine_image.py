@@ -184,20 +184,22 @@ def test_an_energy_tolerance_the_register_cannot_hold_is_refused():
         "tol_energy"] == round(255.9 * 2**40)
 
 
-def _check_bit_identical(mesh: Mesh, params: FlattenParams, fs: FormatSet = DEFAULT) -> None:
+def _check_bit_identical(mesh: Mesh, params: FlattenParams, fs: FormatSet = DEFAULT,
+                         capacity: EngineCapacity = CAPACITY):
     p0 = initial_layout(mesh, "tutte")
     reference = flatten_fixed(mesh, p0, params, fs)
     state = reference.engine_state
-    result = run_image(build_image(prepare(mesh, p0, params, fs), CAPACITY), fs)
+    result = run_image(build_image(prepare(mesh, p0, params, fs), capacity), fs)
     assert (result.status, result.iterations) == (reference.status, reference.iterations)
     np.testing.assert_array_equal(result.positions, state.raw_positions)
     np.testing.assert_array_equal(result.velocities, state.raw_velocities)
     assert (result.area_error, result.shape_error) == state.errors
     assert result.energy == state.energy_raw
     assert result.saturations == reference.extra["saturations"]
-    positions, velocities, _, _ = decode_nodes(result.nodes, fs, CAPACITY)  # written back in place
+    positions, velocities, _, _ = decode_nodes(result.nodes, fs, capacity)  # written back in place
     np.testing.assert_array_equal(positions, state.raw_positions)
     np.testing.assert_array_equal(velocities, state.raw_velocities)
+    return result
 
 
 @pytest.mark.parametrize("run", RUNS)
@@ -315,3 +317,82 @@ def test_a_window_the_engine_lacks_is_refused_with_a_remedy_the_mode_takes(param
     with pytest.raises(FixedPointError, match=r"^SpringflatEngine's stop rule measures the energy change over") as refused:
         check_engine_params(params)
     assert str(refused.value).endswith(hint)
+
+
+COARSE_CAPACITY = dataclasses.replace(CAPACITY, coarse_degree=3)
+COARSE_RUN = FlattenParams(dynamics="momentum", coarse_degree=3, max_iter=60)
+
+
+@pytest.mark.parametrize("mesh, barrier", [("dome", True), ("saddle", True), ("delaunay", False)])
+def test_run_image_with_the_coarse_space_is_bit_identical_to_run_fixed(mesh, barrier, monkeypatch):
+    """The basis and matrix memories and the coarse run constants carry what ``run_fixed`` reads; the runs take
+    the coarse move (they end elsewhere than the same build's runs without it), and the Delaunay patch's rolls
+    back a plain gradient step that took it (the schedule's hand-over to the Jacobi step)."""
+    from golden_model.coarse import CoarseSchedule
+
+    rejected, handed_over = CoarseSchedule.rejected, []
+
+    def watched(schedule, scale, with_momentum):
+        handed_over.append(schedule.coarse and not with_momentum)
+        return rejected(schedule, scale, with_momentum)
+
+    monkeypatch.setattr(CoarseSchedule, "rejected", watched)
+    params = COARSE_RUN.with_(barrier=barrier)
+    with_coarse = _check_bit_identical(MESHES[mesh], params, capacity=COARSE_CAPACITY)
+    without = _check_bit_identical(MESHES[mesh], params.with_(coarse_degree=0), capacity=COARSE_CAPACITY)
+    assert with_coarse.iterations != without.iterations or not np.array_equal(with_coarse.positions, without.positions)
+    if mesh == "delaunay":
+        assert any(handed_over) and with_coarse.guard.rejected > 2
+
+
+def test_the_coarse_memories_hold_the_hosts_basis_and_matrix():
+    from golden_model.engine_spec.image import decode_coarse
+
+    mesh = MESHES["dome"]
+    problem = prepare(mesh, initial_layout(mesh, "tutte"), COARSE_RUN, DEFAULT)
+    image = build_image(problem, COARSE_CAPACITY)
+    assert set(image.memories()) == {"nodes", "entries", "triangles", "basis", "matrix"}
+    assert image.basis.shape == (mesh.n_vertices, 6) and image.matrix.shape == (100, 1)  # 9 × 18 bits; 25 bits
+    decoded = decode_coarse(image)
+    np.testing.assert_array_equal(decoded.phi, problem.coarse.phi)
+    np.testing.assert_array_equal(decoded.matrix, problem.coarse.matrix)
+    assert (image.constants["coarse"], image.constants["matrix_exponent"]) == (1, problem.coarse.matrix_exponent)
+    off = build_image(prepare(mesh, initial_layout(mesh, "tutte"), COARSE_RUN.with_(coarse_degree=0), DEFAULT),
+                      COARSE_CAPACITY)
+    assert off.constants["coarse"] == 0 and decode_coarse(off) is None
+    assert not build_image(prepare(mesh, initial_layout(mesh, "tutte"), COARSE_RUN.with_(coarse_degree=0), DEFAULT),
+                           CAPACITY).memories().keys() - {"nodes", "entries", "triangles"}
+
+
+def test_the_coarse_move_asked_of_an_unguarded_mode_is_a_bad_constant():
+    mesh = MESHES["dome"]
+    image = build_image(prepare(mesh, initial_layout(mesh, "tutte"), COARSE_RUN, DEFAULT), COARSE_CAPACITY)
+    assert constant_fault(image.constants, DEFAULT, COARSE_CAPACITY) is None
+    unguarded = {**image.constants, "mode": mode_named("momentum").code}
+    assert constant_fault(unguarded, DEFAULT, COARSE_CAPACITY) == "bad-constants"
+    assert constant_fault({**unguarded, "coarse": 0}, DEFAULT, COARSE_CAPACITY) is None
+
+
+@pytest.mark.parametrize("capacity, params, message", [
+    (None, COARSE_RUN, r"^SpringflatEngine has no coarse space .*drop --coarse-degree"),
+    (CAPACITY, COARSE_RUN, r"^SpringflatEngine has no coarse space"),
+    (dataclasses.replace(CAPACITY, coarse_degree=2), COARSE_RUN,
+     r"^this engine's coarse space is of degree 2, not 3: use --coarse-degree 2 or 0$"),
+])
+def test_a_coarse_space_the_engine_lacks_is_refused_in_one_line(capacity, params, message):
+    from golden_model.engine_spec.image import check_engine_params
+
+    with pytest.raises(FixedPointError, match=message):
+        check_engine_params(params, capacity)
+    check_engine_params(params.with_(coarse_degree=0), capacity)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"coarse_degree": 5}, "coarse_degree must be an int from 0"),
+    ({"coarse_degree": True}, "coarse_degree must be an int from 0"),
+    ({"coarse_degree": 3, "guard": False}, "built with the step guard and one lane"),
+    ({"coarse_degree": 3, "lanes": 2}, "built with the step guard and one lane"),
+])
+def test_a_coarse_build_takes_the_guard_one_lane_and_a_degree_in_range(changes, message):
+    with pytest.raises(ValueError, match=message):
+        dataclasses.replace(CAPACITY, **changes)

@@ -406,3 +406,31 @@ def test_the_export_refuses_to_replace_a_file_of_the_users_and_replaces_its_own(
     assert main(["--out", str(tmp_path / "maps")]) == 0  # its own export, again: replaced
     assert main(["--lanes", "2", "--out", str(tmp_path / "maps")]) == 0
     assert "in 2 lanes" in (tmp_path / "maps" / "springflat_regs.h").read_text()
+
+
+def test_a_coarse_build_adds_its_windows_and_constants_after_the_others_moving_none(fs):
+    """A build with a coarse space keeps every address of the build without one, and adds the basis and matrix
+    windows after the triangles' and COARSE and MATRIX_EXPONENT after the other run constants; FEATURES.coarse
+    reads its degree; a host's image for it round-trips through the windows' field positions."""
+    coarse = dataclasses.replace(SMALL, coarse_degree=3)
+    plain, built = RegisterMap.build(fs, SMALL), RegisterMap.build(fs, coarse)
+    for register in plain.registers:
+        assert built.register(register.name).offset == register.offset, register.name
+    for window in plain.windows:
+        assert built.window(window.name).base == window.base, window.name
+    assert [w.name for w in built.windows] == ["nodes", "entries", "triangles", "basis", "matrix"]
+    assert built.window("basis").depth == SMALL.vertices and built.window("matrix").depth == 100
+    assert min(built.window(n).base for n in ("basis", "matrix")) > built.window("triangles").base
+    last_plain = max(r.offset for r in plain.registers)
+    assert all(built.register(n).offset > last_plain for n in ("COARSE", "MATRIX_EXPONENT"))
+    assert built.value_fields("matrix_exponent")[0][1].signed
+    features = built.register("FEATURES")
+    field = next(f for f in features.fields if f.name == "coarse")
+    assert (features.reset & field.mask) >> field.lsb == 3
+    assert (plain.register("FEATURES").reset & field.mask) == 0
+    mesh = dome_grid(6)
+    image = build_image(prepare(mesh, initial_layout(mesh, "tutte"), FlattenParams(dynamics="momentum", coarse_degree=3,
+                                                                                   max_iter=5), fs), coarse)
+    words = built.encode(image.constants)
+    assert built.decode_value("matrix_exponent", words) == image.constants["matrix_exponent"] != 0
+    assert built.decode_value("coarse", words) == 1

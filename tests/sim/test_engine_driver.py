@@ -190,3 +190,31 @@ def test_abort_and_a_wait_that_never_ends(bus):
     back = driver.read_back()
     assert (back.state, back.result) == ("idle", "none")
     np.testing.assert_array_equal(back.positions, prepare(MESH, P0, PARAMS, DEFAULT).initial_positions)
+
+
+COARSE_MAP = RegisterMap.build(DEFAULT, dataclasses.replace(CAPACITY, coarse_degree=3))
+
+
+def test_a_coarse_run_over_the_bus_is_the_golden_models():
+    """The driver loads the basis and matrix windows and the coarse run constants of a coarse build; the run
+    is ``run_fixed``'s with the coarse move, not the one without it."""
+    params = FlattenParams(dynamics="momentum", coarse_degree=3, max_iter=40)
+    reference, plain = (flatten_fixed(MESH, P0, p, DEFAULT) for p in (params, params.with_(coarse_degree=0)))
+    assert not np.array_equal(reference.engine_state.raw_positions, plain.engine_state.raw_positions)
+    driver = EngineDriver(ModelBus(COARSE_MAP, DEFAULT, run_polls=1), COARSE_MAP)
+    driver.load(_image(params, COARSE_MAP.capacity))
+    driver.start()
+    assert driver.wait() == reference.status
+    back = driver.read_back()
+    assert back.iterations == reference.iterations
+    np.testing.assert_array_equal(back.positions, reference.engine_state.raw_positions)
+
+
+def test_a_map_with_another_coarse_degree_than_the_engine_is_refused(bus):
+    with pytest.raises(DriverError) as info:
+        EngineDriver(bus, COARSE_MAP).identify()
+    assert one_line(info) == ("the engine was built with a coarse space of degree 0 (0: none); the register map "
+                              "says 3")
+    with pytest.raises(DriverError, match="with a coarse space of degree 3 .*the engine has 64/400/128$"):
+        EngineDriver(bus, MAP).load(_image(FlattenParams(dynamics="momentum", coarse_degree=3, max_iter=5),
+                                           COARSE_MAP.capacity))
