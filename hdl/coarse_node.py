@@ -50,11 +50,17 @@ class CoarseNode(wiring.Component):
         The coarse space's degree, 1 … :data:`~golden_model.coarse.COARSE_DEGREE_MAX`.
     max_nodes : int
         The most nodes a sums pass adds (the sums' width, :func:`golden_model.fixed.coarse.sum_bits`).
+    basis_input : bool
+        Take each node's basis values ``Φ_i`` but the constant 1 (``phi``, as the engine's basis memory holds
+        them: :func:`golden_model.engine_spec.image.basis_word_layout`) instead of ``u, v``: no basis stages,
+        and none of their ``m − degree − 1`` multipliers.
 
     Members
     -------
     i : ``In(stream.Signature(StructLayout({"uv": vector [basis], "force": vector [force_acc]}), always_ready=True))``
-        One node per beat: its basis coordinates ``u, v`` and (for a sums pass) its force. Always ready.
+        One node per beat: its basis coordinates ``u, v`` (with ``basis_input``, ``phi``: an array of its ``m − 1``
+        basis values [basis] in :func:`~golden_model.coarse.basis_exponents`' order from the second) and (for a
+        sums pass) its force. Always ready.
     o : ``Out(stream.Signature(StructLayout({"move": vector [accel], "saturations": 0..2}), always_ready=True))``
         One beat per node, in input order: its coarse move (a moves pass; 0 in a sums pass) and the node's
         saturation events (the forces' narrowing in a sums pass, ``coarse_force``; the move's clamp in a moves
@@ -80,26 +86,30 @@ class CoarseNode(wiring.Component):
     back-pressure.
     """
 
-    def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int):
+    def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int, *, basis_input: bool = False):
         fs = format_set(fs, "CoarseNode")
         check_in_range("degree", degree, 1, COARSE_DEGREE_MAX)
         check_int("max_nodes", max_nodes)
+        if not isinstance(basis_input, bool):
+            raise TypeError(f"CoarseNode basis_input must be a bool, not {basis_input!r}")
         if not fs.accel.signed or not fs.force_acc.signed:
             raise FormatSetNotBuildable(f"force_acc {fs.force_acc} and accel {fs.accel} must be signed")
-        self.fs, self.degree, self.max_nodes = fs, degree, max_nodes
+        self.fs, self.degree, self.max_nodes, self.basis_input = fs, degree, max_nodes, basis_input
         self.exponents = basis_exponents(degree)
-        super().__init__(self.signature_of(fs, degree, max_nodes))
-        self.latency = count_stages(lambda m: _build(m, self, self.signature_of(fs, degree, max_nodes).create(), None))
+        super().__init__(self.signature_of(fs, degree, max_nodes, basis_input))
+        self.latency = count_stages(lambda m: _build(
+            m, self, self.signature_of(fs, degree, max_nodes, basis_input).create(), None))
 
     @staticmethod
-    def signature_of(fs: FormatSet, degree: int, max_nodes: int) -> wiring.Signature:
+    def signature_of(fs: FormatSet, degree: int, max_nodes: int, basis_input: bool = False) -> wiring.Signature:
         """The component's signature (also the throwaway build's stand-in ports)."""
         m = len(basis_exponents(degree))
         coefficient = data.StructLayout({"x": signed(OPERAND_BITS), "y": signed(OPERAND_BITS)})
         total = data.StructLayout({"x": signed(sum_bits(max_nodes)), "y": signed(sum_bits(max_nodes))})
+        basis = {"phi": data.ArrayLayout(signed(OPERAND_BITS), m - 1)} if basis_input else {"uv": vector_layout(BASIS)}
         return wiring.Signature({
-            "i": In(stream.Signature(data.StructLayout({"uv": vector_layout(BASIS),
-                                                        "force": vector_layout(fs.force_acc)}), always_ready=True)),
+            "i": In(stream.Signature(data.StructLayout({**basis, "force": vector_layout(fs.force_acc)}),
+                                     always_ready=True)),
             "o": Out(stream.Signature(data.StructLayout({"move": vector_layout(fs.accel), "saturations": range(3)}),
                                       always_ready=True)),
             "moves": In(1),
@@ -130,11 +140,16 @@ def _build(m: Module, unit: CoarseNode, ports, platform) -> int:
     # C1: the inputs, and the forces rounded to the sums' 18 bits (their saturation flags with them)
     narrow = narrow_force_format(fs)
     narrowed = {d: requantize(node.force[d], fs.force_acc.frac_bits, narrow, "half_up") for d in "xy"}
-    live.step(pipe, "c1", u=node.uv.x, v=node.uv.y, **{f"f_{d}": narrowed[d][0] for d in "xy"},
+    if unit.basis_input:  # the basis as the node's word holds it
+        phi = {e: f"phi{e[0]}{e[1]}" for e in exponents[1:]}
+        basis = {phi[e]: node.phi[k] for k, e in enumerate(exponents[1:])}
+    else:
+        phi = {(1, 0): "u", (0, 1): "v"}
+        basis = {"u": node.uv.x, "v": node.uv.y}
+    live.step(pipe, "c1", **basis, **{f"f_{d}": narrowed[d][0] for d in "xy"},
               force_events=narrowed["x"][1] + narrowed["y"][1])
     # the basis, a degree at a time: each monomial from one of a degree lower times u (or v), rounded half up
-    phi = {(1, 0): "u", (0, 1): "v"}
-    for level in range(2, unit.degree + 1):
+    for level in range(2, unit.degree + 1 if not unit.basis_input else 2):
         wanted = [(a, b) for a, b in exponents if a + b == level]
         products = {f"p{a}{b}": (live[phi[(a - 1, b) if a else (a, b - 1)]], live["u" if a else "v"])
                     for a, b in wanted}

@@ -15,6 +15,7 @@ from amaranth.hdl import Cat, Module, Mux, Signal, unsigned
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from golden_model.coarse import JACOBI_STEPS_AFTER_REJECTION
 from golden_model.engine_spec.image import ENERGY_TOL_INT_BITS
 from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS
 from golden_model.guard import ENERGY_WINDOW, SCALE_GROW_AFTER, SCALE_MAX_SHIFT
@@ -44,6 +45,13 @@ class GuardDecision(wiring.Component):
         settled  = full and a step taken in it, and
                    (E_old == 0 ? E_kept == 0 : |E_kept − E_old| << 40 ≤ ε·E_old, or E_kept < floor)
 
+    With ``coarse``, the coarse space's schedule too (:class:`golden_model.coarse.CoarseSchedule`)::
+
+        coarse_step = coarse_active and left == 0      the next step takes the coarse move
+        left        = first: 0;  accepted: left − 1 (not below 0)
+                      rolled back, a plain gradient step that took the coarse move: JACOBI_STEPS_AFTER_REJECTION,
+                      and the scale (shift and count) stays
+
     The run's first measurement (``first``) restarts everything: the window holds only its energy. A
     decision with ``stalled`` ends the run as ``stalled`` whatever ``settled`` says (the golden model
     stops before the window's test); the shift then stays at ``SCALE_MAX_SHIFT + 1``.
@@ -59,6 +67,8 @@ class GuardDecision(wiring.Component):
         1: the rise ``E > E_kept`` compared in one clock. More: the energies cut into ``rise_parts``
         parts of (nearly) equal width, each part's greater and equal registered, and the rise joined
         from them a clock later (a clock more per decision; the carry chains are a part's width).
+    coarse : bool
+        Build the coarse space's schedule (``coarse_active``, ``coarse_step``).
 
     Members
     -------
@@ -70,6 +80,11 @@ class GuardDecision(wiring.Component):
         ``StopRule.floor`` (``energy_floor_raw``). Both sampled when an item is accepted.
     shift : ``Out(range(SCALE_MAX_SHIFT + 2))``
         The step scale's shift now (a register; the proposal pass reads it).
+    coarse_active : ``In(1)``
+        With ``coarse`` only: the run has a coarse space (a run constant, steady while a run is under way).
+    coarse_step : ``Out(1)``
+        With ``coarse`` only: the coming step takes the coarse move (``coarse_active`` and a register); it
+        changes with the scale, and the step it is for is the one decided next.
 
     Contract
     --------
@@ -81,13 +96,15 @@ class GuardDecision(wiring.Component):
     (``energy_bits + 5``, one more with ``rise_parts`` > 1) clock edges after the input.
     """
 
-    def __init__(self, energy_bits: int, *, window: int = ENERGY_WINDOW, rise_parts: int = 1):
+    def __init__(self, energy_bits: int, *, window: int = ENERGY_WINDOW, rise_parts: int = 1, coarse: bool = False):
         check_int("energy_bits", energy_bits, 2)
         check_int("window", window)
         check_int("rise_parts", rise_parts)
         if rise_parts > energy_bits:
             raise ValueError(f"rise_parts ({rise_parts}) must not exceed energy_bits ({energy_bits})")
-        self.energy_bits, self.window, self.rise_parts = energy_bits, window, rise_parts
+        if not isinstance(coarse, bool):
+            raise TypeError(f"GuardDecision coarse must be a bool, not {coarse!r}")
+        self.energy_bits, self.window, self.rise_parts, self.coarse = energy_bits, window, rise_parts, coarse
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
         self.latency = energy_bits + 5 + (rise_parts > 1)
         super().__init__({
@@ -96,6 +113,7 @@ class GuardDecision(wiring.Component):
             "tolerance": In(unsigned(self.tolerance_bits)),
             "floor": In(unsigned(energy_bits)),
             "shift": Out(range(SCALE_MAX_SHIFT + 2)),
+            **({"coarse_active": In(1), "coarse_step": Out(1)} if coarse else {}),
         })
 
     def elaborate(self, platform):
@@ -157,6 +175,7 @@ class GuardDecision(wiring.Component):
                 m.d.sync += [held.eq(1), taken.eq(0)]
             with m.Else():
                 m.d.sync += [held.eq(Mux(held == size + 1, held, held + 1)), taken.eq(Cat(~rises, taken[:-1]))]
+        handover = self._schedule(m, deciding_scale, first, rises, with_momentum) if self.coarse else None
         with m.If(deciding_scale):
             m.d.sync += [kept.eq(newest), accepted.eq(first | ~rises)]
             with m.If(first):
@@ -166,7 +185,8 @@ class GuardDecision(wiring.Component):
                     m.d.sync += accepted_count.eq(count_grown)
                     with m.If(grows):
                         m.d.sync += shift.eq(shift_grown)
-                with m.Else():  # (the shift stops one past SCALE_MAX_SHIFT: the run ends stalled there)
+                with m.Else() if handover is None else m.Elif(~handover):
+                    # (the shift stops one past SCALE_MAX_SHIFT: the run ends stalled there)
                     m.d.sync += [accepted_count.eq(0), shift.eq(shift_shrunk)]
 
         # ε·E_old and |E_kept − E_old|, then the compare's halves, then their combination
@@ -202,6 +222,23 @@ class GuardDecision(wiring.Component):
         with m.If(self.o.valid & self.o.ready):
             m.d.sync += [self.o.valid.eq(0), idle.eq(1)]
         return m
+
+    def _schedule(self, m: Module, deciding: Signal, first: Signal, rises: Signal, with_momentum: Signal):
+        """The coarse space's schedule, moved with the scale: the Jacobi steps left and ``coarse_step``. Returns
+        the hand-over of this decision (a rolled-back plain gradient step that took the coarse move), which keeps
+        the scale."""
+        left = Signal(range(JACOBI_STEPS_AFTER_REJECTION + 1), name="jacobi_left")
+        left_zero = Signal(name="jacobi_left_zero", init=1)  # left == 0, a flip-flop of its own
+        m.d.comb += self.coarse_step.eq(self.coarse_active & left_zero)
+        handover = self.coarse_step & ~with_momentum & rises & ~first
+        with m.If(deciding):
+            with m.If(first):
+                m.d.sync += [left.eq(0), left_zero.eq(1)]
+            with m.Elif(~rises):
+                m.d.sync += [left.eq(Mux(left_zero, 0, left - 1)), left_zero.eq(left <= 1)]
+            with m.Elif(handover):
+                m.d.sync += [left.eq(JACOBI_STEPS_AFTER_REJECTION), left_zero.eq(0)]
+        return handover
 
     def _rise(self, m: Module, rising: Signal, energy: Signal, kept: Signal):
         """The clock flag in which the rise ``energy > kept`` is ready, and the rise: with one part

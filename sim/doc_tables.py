@@ -234,6 +234,7 @@ def unit_figures() -> str:
         fp, fpe, integ, area = ForcePass(fs), ForcePass(fs, energy=True), Integrator(fs), AreaError(fs)
         norm, energy, beta = Normaliser(fs), EnergyCheck(fs, entries), BetaDivider(fs)
         coarse = CoarseNode(fs, RECOMMENDED_COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
+        coarse_basis = CoarseNode(fs, RECOMMENDED_COARSE_DEGREE, DEFAULT_CAPACITY.vertices, basis_input=True)
         coefficients = CoarseCoefficients(fs, RECOMMENDED_COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
         s = fp.stages
         return [
@@ -245,6 +246,7 @@ def unit_figures() -> str:
             [str(integ.latency), str(_mult18x18d(integ))],
             [str(AreaError.latency_of(fs)), str(_mult18x18d(area))],
             [str(coarse.latency), str(_mult18x18d(coarse))],
+            [str(coarse_basis.latency), str(_mult18x18d(coarse_basis))],
             [f"{norm.cycles(fs.error.frac_bits + 2)} to {norm.cycles(10 ** 6)}", "none"],
             [f"{energy.square_bits} + {energy.energy_bits} + {energy.latency - energy.square_bits - energy.energy_bits}"
              f" = {energy.latency}", "none"],
@@ -255,7 +257,8 @@ def unit_figures() -> str:
     rows = {p: quietly(lambda: column(_preset(p))) for p in PRESETS}
     names = ["`RsqrtUnit`", "`StepGenerator`", "`StepGenerator`, `lut_interpolate` off", "`ForcePass`",
              "`ForcePass(energy=True)`", "`Integrator`", "`AreaError`",
-             f"`CoarseNode`, degree {RECOMMENDED_COARSE_DEGREE}", "`Normaliser`: `cycles(shift)`, shift from "
+             f"`CoarseNode`, degree {RECOMMENDED_COARSE_DEGREE}",
+             f"`CoarseNode`, degree {RECOMMENDED_COARSE_DEGREE}, `basis_input`", "`Normaliser`: `cycles(shift)`, shift from "
              "F + 2 up", f"`EnergyCheck` at {entries:,} entries", "`BetaDivider`",
              f"`CoarseCoefficients`, degree {RECOMMENDED_COARSE_DEGREE}"]
     return _table(["unit", *(f"latency, {p}" for p in PRESETS), *(f"`MULT18X18D`, {p}" for p in PRESETS)],

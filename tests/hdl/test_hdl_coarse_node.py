@@ -27,12 +27,14 @@ def random_nodes(fs, n, rng):
     return uv, force
 
 
-def run_node(fs, degree, uv, force, *, moves, coefficients=None, shift=0, seed=0, p_valid=1.0):
-    """The nodes through the RTL: ``(outputs, sums, run, dut)``."""
+def run_node(fs, degree, uv, force, *, moves, coefficients=None, shift=0, seed=0, p_valid=1.0, basis_input=False):
+    """The nodes through the RTL (with ``basis_input``, their basis from the golden model's ``integer_basis``):
+    ``(outputs, sums, run, dut)``."""
     m = len(basis_exponents(degree))
-    dut = CoarseNode(fs, degree, max_nodes=len(uv))
-    beats = pack_beats(dut.i.payload.shape(), {"uv": {"x": uv[:, 0], "y": uv[:, 1]},
-                                               "force": {"x": force[:, 0], "y": force[:, 1]}})
+    dut = CoarseNode(fs, degree, max_nodes=len(uv), basis_input=basis_input)
+    basis = ({"phi": {k: column for k, column in enumerate(integer_basis(uv, degree)[:, 1:].T)}} if basis_input
+             else {"uv": {"x": uv[:, 0], "y": uv[:, 1]}})
+    beats = pack_beats(dut.i.payload.shape(), {**basis, "force": {"x": force[:, 0], "y": force[:, 1]}})
     c = np.zeros((m, 2), dtype=np.int64) if coefficients is None else coefficients
 
     def setup(ctx):
@@ -198,3 +200,24 @@ def test_clear_and_passes_of_both_kinds_on_one_unit():
     uv = passes[1][0]
     expected = node_moves(fs, integer_basis(uv, degree), c, fs.accel.frac_bits + shift)
     check("moves", np.column_stack([out["move"]["x"], out["move"]["y"]]), expected)
+
+
+@pytest.mark.parametrize("degree", [1, 3, 4])
+@pytest.mark.parametrize("shift", [-3, 17])
+def test_the_basis_as_input_gives_the_same_sums_and_moves_with_fewer_stages(degree, shift):
+    """``basis_input``: the node's basis values from its word (the engine's basis memory) instead of formed from
+    ``u, v``, the same sums and moves bit for bit, the basis's stages left out (degree 1 has none)."""
+    fs = FormatSet.preset("default")
+    rng = np.random.default_rng(200 + degree)
+    uv, force = random_nodes(fs, 60, rng)
+    phi = integer_basis(uv, degree)
+    _, totals, _, dut = run_node(fs, degree, uv, force, moves=False, p_valid=0.7, seed=degree, basis_input=True)
+    check("sums", totals, coarse_sums(phi, narrow_forces(fs, force)))
+    m = len(basis_exponents(degree))
+    c = rng.integers(-(1 << 16), (1 << 16) + 1, size=(m, 2))
+    out, _, run, _ = run_node(fs, degree, uv, force, moves=True, coefficients=c, shift=shift, basis_input=True)
+    frac = fs.accel.frac_bits + shift
+    check("moves", np.column_stack([out["move"]["x"], out["move"]["y"]]), node_moves(fs, phi, c, frac))
+    basis_stages = {1: 0, 3: 8, 4: 12}[degree]
+    assert dut.latency == LATENCY[degree] - basis_stages
+    assert run.out_cycles == [k + dut.latency for k in range(60)]

@@ -9,6 +9,7 @@ import warnings
 import pytest
 from amaranth.hdl import UnusedElaboratable
 
+from golden_model.coarse import JACOBI_STEPS_AFTER_REJECTION, CoarseSchedule
 from golden_model.engine_spec.image import DEFAULT_CAPACITY
 from golden_model.fixed import FormatSet
 from golden_model.fixed.engine import ENERGY_TOL_FRAC_BITS, StopRule
@@ -25,24 +26,28 @@ with refused_components():  # built for its width only (else reported unused in 
 TOLERANCE = StopRule.of(FlattenParams(tol_energy=1e-3), FormatSet.preset("default")).energy  # ε = 1e-3 raw
 
 
-def golden(items, tolerance, floor, size=ENERGY_WINDOW):
-    """``[(accepted, energy, settled, stalled, shift)]`` as ``Controller._advance_guarded`` and ``run`` decide."""
+def golden(items, tolerance, floor, size=ENERGY_WINDOW, coarse=None):
+    """``[(accepted, energy, settled, stalled, shift)]`` as ``Controller._advance_guarded`` and ``run`` decide;
+    with ``coarse`` (the run has a coarse space, or not), each with ``CoarseSchedule.coarse`` after it."""
     rule = StopRule(area=0, shape=0, energy=tolerance, floor=floor)
     out, scale, window, kept = [], StepScale(), EnergyWindow(size), None
+    schedule = CoarseSchedule(active=bool(coarse))
     for energy, first, with_momentum in items:
         if first:
             scale, window, kept = StepScale(), EnergyWindow(size), energy
+            schedule = CoarseSchedule(active=bool(coarse))
             window.push(energy)
-            out.append((1, kept, 0, 0, 0))
+            out.append((1, kept, 0, 0, 0) + ((int(schedule.coarse),) if coarse is not None else ()))
             continue
         accepted = energy <= kept
         if accepted:
-            kept, scale = energy, scale.accepted_step()
+            kept, scale, schedule = energy, scale.accepted_step(), schedule.accepted()
         else:
-            scale = scale.rejected(with_momentum=bool(with_momentum))
+            schedule, scale = schedule.rejected(scale, with_momentum=bool(with_momentum))
         window.push(kept, accepted)
         settled = window.ready and rule.converged(window.oldest, kept, (0, 0))
-        out.append((int(accepted), kept, int(settled), int(scale.stalled), scale.shift))
+        out.append((int(accepted), kept, int(settled), int(scale.stalled), scale.shift)
+                   + ((int(schedule.coarse),) if coarse is not None else ()))
     return out
 
 
@@ -76,10 +81,10 @@ def runs(seed: int, n_runs: int = 12, length: int = 90):
     return until_stalled(items)
 
 
-def until_stalled(items):
+def until_stalled(items, coarse=None):
     """``items`` with each run cut after its first ``stalled`` decision: there a run ends."""
     kept, stopped = [], False
-    for item, decision in zip(items, golden(items, TOLERANCE, 0)):
+    for item, decision in zip(items, golden(items, TOLERANCE, 0, coarse=coarse)):
         stopped = False if item[1] else stopped
         if not stopped:
             kept.append(item)
@@ -87,19 +92,27 @@ def until_stalled(items):
     return kept
 
 
-def run_decision(items, tolerance, floor, *, seed=0, p_valid=1.0, p_ready=1.0, rise_parts=1):
-    dut = GuardDecision(ENERGY_BITS, rise_parts=rise_parts)
+def run_decision(items, tolerance, floor, *, seed=0, p_valid=1.0, p_ready=1.0, rise_parts=1, coarse=None):
+    """The items through the RTL: ``(dut, run, decisions)``; with ``coarse`` (``coarse_active``'s value) a build
+    with the schedule, each decision with ``coarse_step`` as it reads at the decision's output."""
+    dut = GuardDecision(ENERGY_BITS, rise_parts=rise_parts, coarse=coarse is not None)
     layout = dut.i.payload.shape()
     beats = [pack(layout, {"energy": e, "first": f, "with_momentum": w}) for e, f, w in items]
 
     def setup(ctx):
         ctx.set(dut.tolerance, tolerance)
         ctx.set(dut.floor, floor)
+        if coarse is not None:
+            ctx.set(dut.coarse_active, int(coarse))
 
-    run = run_streams(dut, beats, seed=seed, p_valid=p_valid, p_ready=p_ready, setup=setup, one_at_a_time=True)
+    watch = {"coarse_step": dut.coarse_step} if coarse is not None else None
+    run = run_streams(dut, beats, seed=seed, p_valid=p_valid, p_ready=p_ready, setup=setup, one_at_a_time=True,
+                      watch=watch)
     shape = dut.o.payload.shape()
     got = [unpack(shape, raw) for raw in run.outputs]
-    return dut, run, [(d["accepted"], d["energy"], d["settled"], d["stalled"], d["shift"]) for d in got]
+    steps = [(run.watched["coarse_step"][cycle],) if coarse is not None else () for cycle in run.out_cycles]
+    return dut, run, [(d["accepted"], d["energy"], d["settled"], d["stalled"], d["shift"]) + step
+                      for d, step in zip(got, steps)]
 
 
 @pytest.mark.parametrize("seed, rise_parts", [(1, 1), (2, 1), (3, SPLIT_RISE_PARTS)])
@@ -217,3 +230,24 @@ def test_a_stalled_scale_stays_one_past_the_last_halving():
     items = [(10, 1, 0)] + [(11, 0, 0)] * (SCALE_MAX_SHIFT + 4)
     _, _, got = run_decision(items, TOLERANCE, 0)
     assert [g[4] for g in got][-3:] == [SCALE_MAX_SHIFT + 1] * 3 and all(g[3] for g in got[-3:])
+
+
+@pytest.mark.parametrize("seed, coarse", [(4, True), (5, True), (6, False)])
+def test_the_coarse_schedule_is_the_golden_models(seed, coarse):
+    """With the schedule built: each decision and ``coarse_step`` after it as ``CoarseSchedule`` has them, with
+    gaps and back-pressure; the runs roll back plain gradient steps that took the coarse move (the hand-over,
+    which keeps the scale) and count the Jacobi steps down to the coarse move again."""
+    items = until_stalled(runs(seed), coarse=coarse)
+    floor = 1 << 30
+    want = golden(items, TOLERANCE, floor, coarse=coarse)
+    _, _, got = run_decision(items, TOLERANCE, floor, seed=seed, p_valid=0.6, p_ready=0.5, coarse=coarse)
+    mismatch = [k for k, (g, w) in enumerate(zip(got, want)) if g != w]
+    assert not mismatch, f"{len(mismatch)} of {len(want)} differ, first at {mismatch[0]}: RTL {got[mismatch[0]]}, " \
+                         f"golden {want[mismatch[0]]}"
+    flags = [w[5] for w in want]
+    assert set(flags) == ({0, 1} if coarse else {0})
+    if coarse:  # a hand-over, then JACOBI_STEPS_AFTER_REJECTION accepted steps without the coarse move
+        handovers = [k for k in range(1, len(items)) if flags[k - 1] and not flags[k] and not items[k][1]]
+        assert handovers and any(want[k][4] == want[k - 1][4] and not items[k][2] for k in handovers)
+        assert any(flags[k:k + JACOBI_STEPS_AFTER_REJECTION + 1] == [0] * JACOBI_STEPS_AFTER_REJECTION + [1]
+                   for k in range(len(flags)))
