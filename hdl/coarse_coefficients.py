@@ -53,6 +53,9 @@ class CoarseCoefficients(wiring.Component):
         The coarse space's degree, 1 … :data:`~golden_model.coarse.COARSE_DEGREE_MAX` (``m`` functions).
     max_nodes : int
         The sums' width (:func:`golden_model.fixed.coarse.sum_bits`), as :class:`~hdl.coarse_node.CoarseNode`'s.
+    read_latency : int
+        Clocks from ``matrix_addr`` to its entry on ``matrix_data`` (1: a block RAM's registered read; the
+        engine's memories register the address first, :attr:`~hdl.memory_windows.MemoryWindows.read_latency`).
 
     Members
     -------
@@ -64,27 +67,28 @@ class CoarseCoefficients(wiring.Component):
         ``M``'s exponent (:class:`~golden_model.fixed.coarse.CoarseConstants`); hold it while a result is formed.
     matrix_addr : ``Out(range(m·m))``, matrix_data : ``In(signed(SUM_BITS))``
         A read port on ``M`` (row-major, ``|M_kj| < 2^MATRIX_BITS``): the entry at ``matrix_addr`` is expected on
-        ``matrix_data`` a clock later, as a block RAM's registered read gives it.
+        ``matrix_data`` ``read_latency`` clocks later; the address holds from then until the entry is taken.
 
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle, ``o.valid`` and ``o.payload`` are registers. :attr:`cycles`
     clock edges from the input transfer to the output transfer when ``o.ready`` is high: one for ``e_g``,
-    ``2m`` for ``g'``, ``m²`` products of ``MATRIX_BITS + 2`` clocks each (a read, the operands' load and a
+    ``2m`` for ``g'``, ``m²`` products of ``MATRIX_BITS + 1 + read_latency`` clocks each (the read, the operands' load and a
     shift-add step per bit of ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums
     to land, one for ``e_c``, ``2m`` for ``c``, one for the shift and one for the output transfer (2,645 at
     degree 3). No multiplier blocks: two adders as wide as the products.
     """
 
-    def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int):
+    def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int, *, read_latency: int = 1):
         fs = format_set(fs, "CoarseCoefficients")
         check_in_range("degree", degree, 1, COARSE_DEGREE_MAX)
         check_int("max_nodes", max_nodes)
-        self.fs, self.degree, self.max_nodes = fs, degree, max_nodes
+        check_int("read_latency", read_latency)
+        self.fs, self.degree, self.max_nodes, self.read_latency = fs, degree, max_nodes, read_latency
         self.m = m = len(basis_exponents(degree))
         #: Bits of an exact ``a_kd`` (signed): ``|M| < 2^MATRIX_BITS``, ``|g'| ≤ 2^(SUM_BITS − 2)``, m terms.
         self.product_bits = MATRIX_BITS + mantissa_magnitude_bits(SUM_BITS) + (m - 1).bit_length() + 1
-        self.cycles = 1 + 2 * m + m * m * (MATRIX_BITS + 2) + 1 + 1 + 2 * m + 1 + 1
+        self.cycles = 1 + 2 * m + m * m * (MATRIX_BITS + 1 + read_latency) + 1 + 1 + 2 * m + 1 + 1
         vector = lambda bits: data.StructLayout({"x": signed(bits), "y": signed(bits)})  # noqa: E731
         super().__init__({
             "i": In(stream.Signature(data.StructLayout({"sums": data.ArrayLayout(vector(sum_bits(max_nodes)), m)}))),
@@ -150,8 +154,17 @@ class CoarseCoefficients(wiring.Component):
             mod.d.sync += [*rotate(sums, sums[0]), *rotate(g, mantissa(sums[0], e_g)), index.eq(index + 1)]
             with mod.If(index == count - 1):
                 mod.d.sync += [row.eq(0), column.eq(0), *(accumulator[d].eq(0) for d in "xy"), *goto("read")]
-        with mod.If(state["read"]):  # matrix_addr is presented; its entry arrives at the next clock
-            mod.d.sync += goto("load")
+        if self.read_latency == 1:
+            with mod.If(state["read"]):  # matrix_addr is presented; its entry arrives at the next clock
+                mod.d.sync += goto("load")
+        else:  # matrix_addr is presented; its entry arrives read_latency clocks later
+            waited = Signal(range(self.read_latency), name="read_waited", reset_less=True)
+            with mod.If(state["read"]):
+                mod.d.sync += waited.eq(waited + 1)
+                with mod.If(waited == self.read_latency - 1):
+                    mod.d.sync += [waited.eq(0), *goto("load")]
+            with mod.If(state["idle"]):
+                mod.d.sync += waited.eq(0)
         with mod.If(state["load"]):  # g[0], g[1]: column j's x and y (g rotates by two a product)
             entry = self.matrix_data
             mod.d.sync += [multiplier.eq(Mux(entry < 0, -entry, entry)), negative.eq(entry < 0),

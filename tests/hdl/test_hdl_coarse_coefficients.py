@@ -28,21 +28,24 @@ def random_case(rng, m, scale_bits):
     return matrix, sums
 
 
-def run_cases(fs, degree, cases, exponent, *, seed=0, p_valid=1.0, p_ready=1.0):
+def run_cases(fs, degree, cases, exponent, *, seed=0, p_valid=1.0, p_ready=1.0, read_latency=1):
     """Each ``(matrix, sums)`` through the RTL (one matrix memory per case, swapped when a case is taken):
-    the outputs as ``(coefficients (m, 2), move_shift)``."""
+    the outputs as ``(coefficients (m, 2), move_shift)``. The stand-in memory answers ``read_latency`` clocks
+    after the address."""
     m = len(basis_exponents(degree))
-    dut = CoarseCoefficients(fs, degree, MAX_NODES)
+    dut = CoarseCoefficients(fs, degree, MAX_NODES, read_latency=read_latency)
     beats = [pack(dut.i.payload.shape(), {"sums": {k: {"x": int(s[k, 0]), "y": int(s[k, 1])} for k in range(m)}})
              for _, s in cases]
     run = StreamRun()
 
-    async def memory(ctx):  # a registered read: the entry at the address of one clock, the next clock
+    async def memory(ctx):  # registered reads: the entry at the address of one clock, read_latency clocks later
         ctx.set(dut.matrix_exponent, exponent)
+        addresses = [0] * read_latency
         async for _, _, addr in ctx.tick().sample(dut.matrix_addr):
             if len(run.outputs) == len(cases):  # (the simulation ends when every testbench has returned)
                 return
-            ctx.set(dut.matrix_data, int(cases[max(len(run.in_cycles) - 1, 0)][0].ravel()[addr]))
+            addresses = [*addresses[1:], addr]
+            ctx.set(dut.matrix_data, int(cases[max(len(run.in_cycles) - 1, 0)][0].ravel()[addresses[0]]))
 
     run_testbenches(dut, memory,
                     stream_producer(dut.i, beats, run, seed=seed, p_valid=p_valid),
@@ -87,4 +90,22 @@ def test_the_cycles_of_the_contract():
     cases = [random_case(rng, 10, 20) for _ in range(2)]
     _, run, dut = run_cases(fs, 3, cases, 20)
     assert dut.cycles == 2645  # the contract's count at degree 3, pinned (docs/hardware-units.md)
+    assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.cycles] * 2
+
+
+@pytest.mark.parametrize("read_latency", [2, 3])
+def test_a_slower_matrix_read_gives_the_same_results_a_clock_more_per_product(read_latency):
+    """``read_latency``: the matrix memory answers later (the engine's memories register the address), each of
+    the ``m²`` reads waits for it; the results are the same bit for bit."""
+    fs = FormatSet.preset("default")
+    rng = np.random.default_rng(30 + read_latency)
+    cases = [random_case(rng, 10, bits) for bits in (5, 30)]
+    results, run, dut = run_cases(fs, 3, cases, 25, p_valid=0.7, p_ready=0.6, read_latency=read_latency)
+    for (matrix, sums), (c, shift) in zip(cases, results):
+        constants = CoarseConstants(np.zeros((1, 10), dtype=np.int64), matrix, 25)
+        want, sum_exponent, c_exponent = coefficients(constants, sums)
+        assert np.array_equal(c, want)
+        assert shift == move_shift(fs, move_frac_bits(fs, constants, sum_exponent, c_exponent))
+    assert dut.cycles == 2645 + 100 * (read_latency - 1)
+    _, run, _ = run_cases(fs, 3, cases, 25, read_latency=read_latency)
     assert [o - i for i, o in zip(run.in_cycles, run.out_cycles)] == [dut.cycles] * 2
