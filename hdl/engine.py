@@ -19,6 +19,7 @@ from golden_model.modes import Step
 
 from . import wishbone
 from .area_error import AreaError
+from .coarse_passes import CoarsePasses
 from .force_pass import ForcePass
 from .guard_passes import GUARD_PASSES, GuardPasses
 from .integrator import Integrator
@@ -154,6 +155,9 @@ class SpringflatEngine(wiring.Component):
                 raise TypeError(f"{flag} must be a bool or None, not {value!r}")
         if not isinstance(delay_lines, bool):
             raise TypeError(f"delay_lines must be a bool, not {delay_lines!r}")
+        if capacity.coarse_degree and (registered_select or pin_registers or delay_lines):
+            raise ValueError("SpringflatEngine: a coarse space (coarse_degree > 0) is built without the registered "
+                             "select, the pin registers and the delay lines")
         if capacity.lanes > 1 and (capacity.guard or registered_select or pin_registers or delay_lines):
             raise ValueError(f"SpringflatEngine: lanes={capacity.lanes} are built without the step guard "
                              "(EngineCapacity(guard=False)), the registered select, the pin registers and the delay lines")
@@ -199,14 +203,20 @@ class SpringflatEngine(wiring.Component):
         m.submodules.force = force = ForcePass(fs, energy=True, saturations=True, delay_lines=self.delay_lines)
         m.submodules.area = area = AreaError(fs)
         m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines,
-                                                          shift_copy=self.registered_select)
+                                                          shift_copy=self.registered_select,
+                                                          coarse=bool(cap.coarse_degree))
+        # (the matrix's read address passes the memories' address register first: a clock before read_latency)
+        coarse = CoarsePasses(fs, cap, read_latency=memories.read_latency + 1) if cap.coarse_degree else None
+        if coarse is not None:
+            m.submodules.coarse = coarse
         guard = GuardPasses(fs, cap, read_latency=memories.read_latency,
                             registered_valid=self.registered_select) if cap.guard else None
         if guard is not None:
             m.submodules.guard = guard
         # SATURATIONS' sources, in the order they are summed in pairs
         producers = {"force": sequencer, "integrate": sequencer, "step": controller, "area": sequencer,
-                     "length": sequencer, "power": sequencer, "shape_error": controller, "area_error": controller}
+                     "length": sequencer, "power": sequencer, "shape_error": controller, "area_error": controller,
+                     **({"coarse_force": coarse, "coarse_move": coarse} if coarse is not None else {})}
         tally = self._tally(m, {name: unit.event_widths[name] for name, unit in producers.items()})
         self._bus_and_run(m, hs, registers, memories, controller, tally,
                           {name: getattr(unit, f"{name}_events") for name, unit in producers.items()},
@@ -231,7 +241,15 @@ class SpringflatEngine(wiring.Component):
         _wire(m, memories, sequencer, "entry", "triangle", "position", "velocity", "weight_word", "force_word")
         _wire(m, sequencer, memories, "entry_index", "tri_index", "node_index", "node_of_entry")
         _wire(m, sequencer, controller, "force_done", "area_done", "integrate_done", *PASS_SUMS)
-        _connect_units(m, sequencer, force, area, integrator)
+        _connect_units(m, sequencer, force, area, integrator, coarse)
+        if coarse is not None:  # the coarse space: its passes read the basis, force and matrix memories
+            _wire(m, controller, coarse, "in_coarse", "coarse_step")
+            _wire(m, sequencer, coarse, "node_landed")
+            _wire(m, memories, coarse, "force_word")
+            _wire(m, coarse, memories, "matrix_addr")
+            m.d.comb += [coarse.basis.eq(memories.basis_word), coarse.matrix_data.eq(memories.matrix_word.entry),
+                         coarse.vertices.eq(registers.vertices_held), coarse.matrix_exponent.eq(registers.matrix_exponent),
+                         controller.coarse.eq(registers.coarse), controller.coarse_done.eq(coarse.done)]
         wiring.connect(m, sequencer.force_write, memories.force_write)
         # the node memories' and the proposal memory's writers: one pass at a time, so the writer whose
         # enable is high
@@ -243,7 +261,8 @@ class SpringflatEngine(wiring.Component):
             ours = getattr(guard, port)
             m.d.comb += [sink.en.eq(ours.en | theirs.en), sink.addr.eq(Mux(ours.en, ours.addr, theirs.addr)),
                          sink.data.eq(Mux(ours.en, ours.data, theirs.data))]
-        _constants_into_units(m, registers, controller, sequencer, force, area, integrator, area_total=controller.area_total)
+        _constants_into_units(m, registers, controller, sequencer, force, area, integrator, area_total=controller.area_total,
+                              coarse=coarse)
 
         # Internal state a testbench may watch (``debug_signals``) or read (``debug_memories``).
         self.debug_memories = {name: memories.rams[name].contents for name in ("positions", "velocities")}
@@ -406,20 +425,28 @@ class SpringflatEngine(wiring.Component):
                               "passes_idle": controller.passes_idle, "node_write": node_write_en}
 
 
-def _connect_units(m: Module, sequencer, force, area, integrator) -> None:
-    """A sequencer's streams into and out of its units."""
+def _connect_units(m: Module, sequencer, force, area, integrator, coarse=None) -> None:
+    """A sequencer's streams into and out of its units (the integrate pass's nodes through the coarse passes,
+    where the build has them)."""
     wiring.connect(m, sequencer.force_entry, force.i)
     wiring.connect(m, sequencer.triangle_out, area.i)
-    wiring.connect(m, sequencer.node_out, integrator.i)
+    if coarse is None:
+        wiring.connect(m, sequencer.node_out, integrator.i)
+    else:
+        wiring.connect(m, sequencer.node_out, coarse.node_in)
+        wiring.connect(m, coarse.node_out, integrator.i)
     wiring.connect(m, force.o, sequencer.forces)
     wiring.connect(m, integrator.o, sequencer.integrated)
 
 
-def _constants_into_units(m: Module, registers, controller, sequencer, force, area, integrator, area_total=None) -> None:
+def _constants_into_units(m: Module, registers, controller, sequencer, force, area, integrator, area_total=None,
+                          coarse=None) -> None:
     """A sequencer's units: their state into it, the run constants and the step into them; the area unit's
-    sum into ``area_total`` (the controller's, with one lane)."""
+    sum into ``area_total`` (the controller's, with one lane). The coarse passes, where the build has them, count
+    with the integrator for the passes' idle state."""
+    integrating_idle = integrator.idle if coarse is None else integrator.idle & coarse.idle
     m.d.comb += [sequencer.area_saturations.eq(area.saturations), sequencer.force_idle.eq(force.idle),
-                 sequencer.area_idle.eq(area.idle), sequencer.integrator_idle.eq(integrator.idle),
+                 sequencer.area_idle.eq(area.idle), sequencer.integrator_idle.eq(integrating_idle),
                  *([area_total.eq(area.total)] if area_total is not None else []), area.clear.eq(controller.area_clear),
                  force.half_spring.eq(registers.half_spring_held), force.barrier.eq(registers.barrier_held),
                  integrator.damping.eq(registers.damping_held), integrator.momentum.eq(mode_steps(registers.mode_held, Step.MOMENTUM)),

@@ -247,6 +247,10 @@ class MemoryWindows(wiring.Component):
                {f"proposals{k}": BlockRam(vel_shape, cap.vertices, name=f"proposals{k}", **select) for k in range(3)}),
             **{f"entries{b}": BlockRam(self.entry_shape, min(entry_bank_depth, cap.entries - b * entry_bank_depth),
                                        name=f"entries{b}", pin_registers=True) for b in range(banks)},
+            # the coarse space's basis (a word per node) and matrix, on the bus and read by the coarse passes
+            **({} if not cap.coarse_degree else
+               {name: BlockRam(word_layout(layouts[name]), layouts[name].depth, name=name, **select)
+                for name in ("basis", "matrix")}),
         }
         if lanes > 1:
             super().__init__({**self._bus_members(addr_width),
@@ -263,6 +267,9 @@ class MemoryWindows(wiring.Component):
             "node_write": In(write_signature(range(cap.vertices + 1), node_write_layout(fs))),
             "proposal": Out(vel_shape).array(3),
             "proposal_write": In(write_signature(range(cap.vertices + 1), vel_shape)),
+            **({} if not cap.coarse_degree else
+               {"basis_word": Out(word_layout(layouts["basis"])), "matrix_word": Out(word_layout(layouts["matrix"])),
+                "matrix_addr": In(range(layouts["matrix"].depth))}),
         })
 
     @staticmethod
@@ -315,6 +322,11 @@ class MemoryWindows(wiring.Component):
                                wgt_r.data.inv_mass_barrier), self.read_latency),
                  "triangles": (self.rams["triangles"].read[0].data.as_value(), self.read_latency),
                  "entries": (ent_data.as_value(), self.entry_latency)}
+        if self.capacity.coarse_degree:
+            for name in ("basis", "matrix"):
+                data_out = self.rams[name].read[0].data
+                m.d.comb += getattr(self, f"{name}_word").eq(data_out)
+                reads[name] = (data_out.as_value(), self.read_latency)
         bus_writing, new_words = self._bus_words(m, window_q, word_q, reads)
         self._read_addresses(m, index_q, ent_addr, ent_hot, bank_bits, ent_data, platform)
         self._writes(m, index_q, window_q, bus_writing, new_words, ent_addr, bank_bits, entry_banks, platform)
@@ -442,6 +454,9 @@ class MemoryWindows(wiring.Component):
         read_ports = {"pos_a": positions[0], "pos_b": positions[1], "pos_c": positions[2],
                       "vel": self.rams["velocities"].read[0], "wgt": self.rams["weights"].read[0],
                       "frc": self.rams["forces"].read[0], "tri": self.rams["triangles"].read[0]}
+        coarse = self.capacity.coarse_degree
+        if coarse:
+            read_ports |= {"bas": self.rams["basis"].read[0], "mtx": self.rams["matrix"].read[0]}
         read_addr = {name: Signal.like(port.addr, name=f"{name}_addr") for name, port in read_ports.items()}
         m.d.comb += [port.addr.eq(read_addr[name]) for name, port in read_ports.items()]
         # the proposals' ports read at their position port's address register (a second register with
@@ -467,7 +482,9 @@ class MemoryWindows(wiring.Component):
             ent_addr.eq(ent_next),
             ent_hot.eq(Cat(ent_next[bank_bits:] == b for b in range(len(ent_hot))) if len(ent_hot) > 1 else 1),
             read_addr["tri"].eq(Mux(running["tri"], self.tri_index, index_q)),
-            *(read_addr[n].eq(Mux(running["node"], self.node_index, index_q)) for n in ("vel", "wgt", "frc")),
+            *(read_addr[n].eq(Mux(running["node"], self.node_index, index_q))
+              for n in ("vel", "wgt", "frc", *(("bas",) if coarse else ()))),
+            *([read_addr["mtx"].eq(Mux(running["node"], self.matrix_addr, index_q))] if coarse else []),
             read_addr["pos_b"].eq(Mux(in_area, t2_tri.b, ent_data.neighbour)),
             read_addr["pos_c"].eq(Mux(in_area, t2_tri.c, ent_data.second)),
             read_addr["pos_a"].eq(Mux(~running["node"] | in_nodes, Mux(running["node"], self.node_index, index_q),
@@ -479,7 +496,9 @@ class MemoryWindows(wiring.Component):
         """Each write port's address, data and enable registers: the bus's write-back while idle, the
         integrator's results while running (the entry banks: one enable flag per bank)."""
         write_ports = {"pos": self.rams["positions"].write, "vel": self.rams["velocities"].write,
-                       "wgt": self.rams["weights"].write, "ent": None, "tri": self.rams["triangles"].write}
+                       "wgt": self.rams["weights"].write, "ent": None, "tri": self.rams["triangles"].write,
+                       **({"bas": self.rams["basis"].write, "mtx": self.rams["matrix"].write}
+                          if self.capacity.coarse_degree else {})}
         write_regs = {}
         for name, port in write_ports.items():
             if port is None:  # the entry banks, each enabled by its flag (then their pin registers)
@@ -512,6 +531,10 @@ class MemoryWindows(wiring.Component):
                                                              for b in range(len(entry_banks)))),
             "tri": (index_q, window_q == tri_k, tri_new, bus_writing & (window_q == tri_k)),
         }
+        for name, window in (("bas", "basis"), ("mtx", "matrix")):  # the coarse space's: the bus's alone
+            if name in write_ports:
+                k, new = new_words[window]
+                from_bus[name] = (index_q, window_q == k, new, bus_writing & (window_q == k))
         # while running, the integrator's results into the node memories; the others hold, not enabled
         from_passes = {"pos": (node.addr, node.data.position, node.en), "vel": (node.addr, node.data.velocity, node.en)}
         for name, regs in write_regs.items():

@@ -204,14 +204,17 @@ class PassSequencer(wiring.Component):
             fetch_latencies(read_latency, entry_latency)
         self.read_latency, self.entry_latency = read_latency, entry_latency
         layouts = memory_layouts(fs, cap)
-        force_sig, integrator_sig = ForcePass.signature_of(fs, True, True), Integrator.signature_of(fs, None, True)
+        # with a coarse space, the integrator takes the coarse move (and counts its add's events)
+        coarse = bool(cap.coarse_degree)
+        force_sig = ForcePass.signature_of(fs, True, True)
+        integrator_sig = Integrator.signature_of(fs, None, True, coarse)
         width = register_map.value_width
         nodes = range(cap.vertices // lanes + 1)
         area_saturations = Signal(area_saturations_layout(fs))
         #: Width of each saturation-event output (a unit's count, 0 when it reports none).
         self.event_widths = {
             "force": node_force_layout(fs, True, True)["saturations"].shape.width,
-            "integrate": integrator_output_layout(fs, None, True)["saturations"].shape.width,
+            "integrate": integrator_output_layout(fs, None, True, coarse)["saturations"].shape.width,
             "area": len(area_saturations.face_edge + area_saturations.face_area + area_saturations.area_sum),
             "length": 1, "power": 1,
         }

@@ -25,10 +25,18 @@ from .logic import mode_guarded, mode_runs, mode_steps, or_tree, reset_echo
 from .pass_sequencer import FETCH_FLAGS
 from .stepgen import StepGenerator, pending_is_zero
 
-__all__ = ["PhaseController", "PHASES"]
+__all__ = ["PhaseController", "PHASES", "COARSE_PHASES", "phases_of"]
 
 #: The phases of a run, in code order (the ``phase`` debug code).
 PHASES = ("start", "force", "area", "math", "decide", "check", "step", "step_wait", "integrate", *GUARD_PASSES, "drain")
+#: The phases a build with a coarse space has besides :data:`PHASES` (their codes follow those): the coarse
+#: space's sums pass and coefficients (:class:`~hdl.coarse_passes.CoarsePasses`).
+COARSE_PHASES = ("coarse",)
+
+
+def phases_of(capacity) -> tuple[str, ...]:
+    """The phases of a build of ``capacity``, in code order."""
+    return PHASES + (COARSE_PHASES if capacity.coarse_degree else ())
 
 #: Run constants the controller reads from the register bank, and those it reads from their copies.
 CONSTANTS = ("vertices", "entries", "triangles", "mode", "dt", "max_iter", "saturation_limit",
@@ -133,7 +141,12 @@ class PhaseController(wiring.Component):
     starting, irq_set : ``Out(1)``
         Combinational: START accepted this clock (the results and STATUS.irq_pending restart); a
         run ends this clock (STATUS.irq_pending set).
-    ``in_<phase>`` for each of :data:`PHASES` : ``Out(1)``
+    coarse : ``In(1)``, coarse_done : ``In(1)``, coarse_step : ``Out(1)``
+        With a coarse space only (``capacity.coarse_degree``): COARSE (the run takes the coarse move), the
+        coarse passes' end (:class:`~hdl.coarse_passes.CoarsePasses`), and the guard decision's schedule: the
+        coming step takes the move. A guarded iteration whose step takes it runs the ``coarse`` phase, a node
+        pass with the coefficients after it, between the check and the step.
+    ``in_<phase>`` for each of :data:`PHASES` (and :data:`COARSE_PHASES` with a coarse space) : ``Out(1)``
         One flip-flop per phase, all low while no run is under way (each implies ``running``).
     fetch_force, fetch_area, fetch_nodes, area_clear : ``Out(1)``
         The passes' enables (:class:`~hdl.pass_sequencer.PassSequencer`) and the area unit's clear.
@@ -179,6 +192,9 @@ class PhaseController(wiring.Component):
                 raise TypeError(f"PhaseController {flag} must be a bool, not {value!r}")
         self.fs, self.capacity = fs, register_map.capacity
         self.registered_verdict, self.control_copies = registered_verdict, control_copies
+        self.coarse_built = coarse = bool(self.capacity.coarse_degree)
+        #: The phases, in code order (:func:`phases_of`).
+        self.phases = phases = phases_of(self.capacity)
         width = register_map.value_width
         #: Width of each saturation-event output.
         self.event_widths = {"step": StepGenerator.output_layout(fs, True)["saturations"].shape.width,
@@ -200,14 +216,15 @@ class PhaseController(wiring.Component):
             "running": Out(1),
             **({"running_next": Out(1)} if control_copies else {}),
             "starting": Out(1), "irq_set": Out(1),
-            **{f"in_{name}": Out(1) for name in PHASES},
+            **{f"in_{name}": Out(1) for name in phases},
+            **({"coarse": In(1), "coarse_done": In(1), "coarse_step": Out(1)} if coarse else {}),
             **{name: Out(1) for name in FETCH_FLAGS}, "area_clear": Out(1),
             "half_rate": Out(1), "node_restart": Out(1), "triangle_restart": Out(1), "guarded": Out(1),
             "measuring_again": Out(1), "scale_shift": Out(range(SCALE_MAX_SHIFT + 2)),
             "step_dt": Out(shape_of(fs.dt)), "step_half": Out(shape_of(fs.half_dt_sq)),
             **{name: Out(width(name)) for name in RESULT_VALUES},
             **{f"{name}_events": Out(w) for name, w in self.event_widths.items()},
-            "phase": Out(range(len(PHASES))), "math_pending": Out(3),
+            "phase": Out(range(len(phases))), "math_pending": Out(3),
         })
 
     def elaborate(self, platform):
@@ -222,13 +239,14 @@ class PhaseController(wiring.Component):
             "stepgen": StepGenerator(fs, saturations=True),
         }
         units["decision"] = GuardDecision(units["energy_check"].energy_bits,
-                                          rise_parts=SPLIT_RISE_PARTS if self.registered_verdict else 1)
+                                          rise_parts=SPLIT_RISE_PARTS if self.registered_verdict else 1,
+                                          coarse=self.coarse_built)
         for name, unit in units.items():
             m.submodules[name] = unit
         # the register is as wide as the energy check's tolerance (both from the golden model's
         # ENERGY_TOL_* bits), so every value START sees is valid
         assert len(self.tol_energy_held) == len(units["energy_check"].tolerance)
-        phase_codes = [Mux(getattr(self, f"in_{name}"), k, 0) for k, name in enumerate(PHASES)]
+        phase_codes = [Mux(getattr(self, f"in_{name}"), k, 0) for k, name in enumerate(self.phases)]
         m.d.comb += self.phase.eq(or_tree(phase_codes))
 
         run = _Run(first_measure=Signal(name="first_measure"), math_pending=self.math_pending,
@@ -336,6 +354,8 @@ class PhaseController(wiring.Component):
             decision.i.payload.energy.eq(self.energy), decision.i.payload.first.eq(run.first_measure),
             decision.i.payload.with_momentum.eq(self.step_dt != 0),
             decision.tolerance.eq(self.tol_energy_held), decision.floor.eq(self.energy_floor),
+            *([decision.coarse_active.eq(self.coarse), self.coarse_step.eq(decision.coarse_step)]
+              if self.coarse_built else []),
             self.scale_shift.eq(decision.shift),
             self.shape_error_events.eq(norm_length.o.valid & norm_length.o.payload.saturations),
             self.area_error_events.eq(norm_area.o.valid & norm_area.o.payload.saturations),
@@ -390,7 +410,8 @@ class PhaseController(wiring.Component):
         faults = [self.vertices > cap.vertices, self.entries > cap.entries, self.triangles > cap.triangles,
                   self.entries == 0, self.triangles == 0, *reciprocal_bad, ~mode_runs(self.mode, guard=cap.guard),
                   mode_steps(self.mode, Step.FIXED) & (self.dt == 0), self.max_iter == 0,
-                  *([self.lane_fault] if cap.lanes > 1 else [])]
+                  *([self.lane_fault] if cap.lanes > 1 else []),
+                  *([self.coarse & ~mode_guarded(self.mode)] if self.coarse_built else [])]
         # in two registered stages, each fault and then their OR (MODE's decode and the compares into one
         # flag is five LUTs across the register file): START's pulse comes at least six clocks after a
         # constant's storage changes (its register answers two clocks after the write, the acknowledge
@@ -412,7 +433,7 @@ class PhaseController(wiring.Component):
     def _phases(self, m: Module, units, run: _Run, q, drained) -> None:
         """START, ABORT and the phase machine: one block per phase, each enabled by its one-hot flag
         (and the pass-end pulse it waits for), not by a decode of a phase code under ``running``."""
-        flags = {name: getattr(self, f"in_{name}") for name in PHASES}
+        flags = {name: getattr(self, f"in_{name}") for name in self.phases}
 
         def move(leaving, entering=None):
             return [flags[leaving].eq(0), *([flags[entering].eq(1)] if entering else [])]
@@ -516,7 +537,21 @@ class PhaseController(wiring.Component):
             with m.Elif(verdicts["max-iterations"]):
                 finish("max-iterations")
             with m.Else():
-                m.d.sync += [run.first_measure.eq(0), *move("check", "step")]
+                m.d.sync += run.first_measure.eq(0)
+                if self.coarse_built:  # a step that takes the coarse move: its sums pass and coefficients first
+                    with m.If(run.guarded & self.coarse_step):  # (the node counter restarted first: see below)
+                        m.d.sync += [self.node_restart.eq(1), *move("check", "coarse")]
+                    with m.Else():
+                        m.d.sync += move("check", "step")
+                else:
+                    m.d.sync += move("check", "step")
+        if self.coarse_built:
+            # the sums pass fetches from the phase's second clock: its first restarts the node counter, which
+            # before the run's first integrate pass stands at 0, not at its end as a guard pass finds it
+            with m.If(go & flags["coarse"] & ~self.fetch_nodes & ~self.coarse_done):
+                m.d.sync += fetch(nodes=1)
+            with m.If(go & flags["coarse"] & self.coarse_done):
+                m.d.sync += [*fetch(nodes=0), *move("coarse", "step")]
         with m.If(go & flags["step"]):
             with m.If(run.momentum):
                 m.d.sync += requests["beta"].eq(1)

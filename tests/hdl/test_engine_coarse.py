@@ -1,0 +1,112 @@
+"""SpringflatEngine with a coarse space (``EngineCapacity.coarse_degree``) on Amaranth's simulator: guarded
+whole runs that take the coarse move bit for bit against the golden model's ``run_image``, the basis and
+matrix windows loaded over the bus, and START's check of the COARSE run constant."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from amaranth.hdl import Value
+
+from golden_model.coarse import CoarseSchedule
+from golden_model.engine_spec.image import constant_fault, run_image
+from golden_model.fixed.format import SaturationCounter
+from golden_model.modes import mode_named
+from golden_model.params import FlattenParams
+from support.engine_sim import (CAPACITY, FS, PreloadableEngine, assert_same_run, image_of, load_directly,
+                                run_on_engine, simulate)
+
+pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
+
+COARSE = dataclasses.replace(CAPACITY, coarse_degree=3)
+RUN = FlattenParams(dynamics="momentum", coarse_degree=3, max_iter=12)
+
+
+def golden_run(image, monkeypatch):
+    """``run_image`` of ``image``, with whether a rolled-back plain gradient step took the coarse move (the
+    schedule's hand-over to the Jacobi step) and the saturation events by name."""
+    handovers, events = [], {}
+    rejected, add = CoarseSchedule.rejected, SaturationCounter.add_saturations
+
+    def watched_rejected(schedule, scale, with_momentum):
+        handovers.append(schedule.coarse and not with_momentum)
+        return rejected(schedule, scale, with_momentum)
+
+    def watched_add(counter, name, n):
+        events[name] = events.get(name, 0) + int(n)
+        return add(counter, name, n)
+
+    monkeypatch.setattr(CoarseSchedule, "rejected", watched_rejected)
+    monkeypatch.setattr(SaturationCounter, "add_saturations", watched_add)
+    return run_image(image, FS), any(handovers), events
+
+
+def test_a_coarse_run_with_rollbacks_and_the_hand_over_matches_the_golden_model(monkeypatch):
+    """Squeezed across, the run clips steps and rolls some back, one of them a plain gradient step that took the
+    coarse move (the Jacobi steps follow): the engine's whole run is the golden model's, bit for bit."""
+    image = image_of(RUN, COARSE, squeeze=0.05)
+    expected, handed_over, _ = golden_run(image, monkeypatch)
+    assert handed_over and expected.guard.rejected >= 2 and expected.guard.clipped > 0
+    assert not np.array_equal(expected.positions,
+                              run_image(image_of(RUN.with_(coarse_degree=0), COARSE, squeeze=0.05), FS).positions)
+    result, read_back = run_on_engine(PreloadableEngine(FS, COARSE), image)
+    assert result == expected.status
+    assert_same_run(read_back, expected)
+
+
+def test_coarse_moves_clamped_to_accel_are_counted_as_the_golden_model_counts_them(monkeypatch):
+    """A host's matrix exponent 14 below the image's makes the moves 2^14 times larger: they clamp to [accel],
+    and SATURATIONS counts each clamp as the golden model does (``coarse_move``)."""
+    image = image_of(RUN.with_(max_iter=4), COARSE)
+    image = dataclasses.replace(image, constants={**image.constants,
+                                                  "matrix_exponent": image.constants["matrix_exponent"] - 14})
+    expected, _, events = golden_run(image, monkeypatch)
+    assert events.get("coarse_move", 0) > 0 and expected.saturations >= events["coarse_move"]
+    result, read_back = run_on_engine(PreloadableEngine(FS, COARSE), image)
+    assert result == expected.status
+    assert_same_run(read_back, expected)
+
+
+def test_the_coarse_windows_load_over_the_bus_and_start_checks_the_coarse_constant():
+    """The basis and matrix windows written over Wishbone leave their block RAMs as the preload does (every word);
+    FEATURES.coarse reads the degree; START answers COARSE with an unguarded mode as ``constant_fault`` does
+    (bad-constants), and runs it without."""
+    image = image_of(RUN, COARSE)
+    contents, answers = [], {}
+    for over_the_bus in (True, False):
+        dut = PreloadableEngine(FS, COARSE)
+
+        def snapshot(ctx):
+            contents.append({name: [ctx.get(Value.cast(ram.contents[i])) for i in range(ram.depth)]
+                             for name, ram in dut.memory_windows.rams.items() if name in ("basis", "matrix")})
+
+        def host(driver, bus):
+            if over_the_bus:
+                driver.load(image)
+            else:
+                load_directly(driver, bus, dut, image)
+            bus.in_simulator(snapshot)
+            if over_the_bus:
+                return
+            answers["FEATURES.coarse"] = driver.read_value("feature_coarse")
+            unguarded = mode_named("momentum").code
+            for name, change in (("coarse unguarded", {"mode": unguarded}),
+                                 ("unguarded", {"mode": unguarded, "coarse": 0})):
+                for offset, word in sorted(driver.map.encode({**image.constants, **change}).items()):
+                    bus.write(offset, word)
+                driver.start()
+                bus.idle(20)
+                answers[name] = driver._status_fields()
+                if answers[name][0] == "running":
+                    driver.abort()
+                    bus.idle(400)
+
+        simulate(dut, host)
+    over_the_bus, preloaded = contents
+    assert any(over_the_bus["basis"]) and any(over_the_bus["matrix"])
+    assert preloaded == over_the_bus
+    assert answers["FEATURES.coarse"] == 3
+    unguarded = {**image.constants, "mode": mode_named("momentum").code}
+    assert constant_fault(unguarded, FS, COARSE) == "bad-constants"
+    assert answers["coarse unguarded"] == ("done", "bad-constants")
+    assert answers["unguarded"] == ("running", "none")
