@@ -3,8 +3,8 @@
 The RTL twin of :func:`golden_model.fixed.coarse.coefficients` and of
 :func:`~golden_model.fixed.coarse.move_shift` of :func:`~golden_model.fixed.coarse.move_frac_bits`: the sums to
 25-bit mantissas with one exponent, ``M·g`` exact, the result to 18-bit mantissas with one exponent, and the
-shift that takes a node's ``Φ_i·c`` to [accel] (:class:`~hdl.coarse_node.CoarseNode`'s ``move_shift``). Built and
-verified as a unit; ``SpringflatEngine`` does not take the coarse space yet (``docs/guard.md``).
+shift that takes a node's ``Φ_i·c`` to [accel] (:class:`~hdl.coarse_node.CoarseNode`'s ``move_shift``). In the
+engine it runs once per iteration that takes the coarse move (:class:`~hdl.coarse_passes.CoarsePasses`).
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 
 The RTL twin of the per-node stages of :mod:`golden_model.fixed.coarse`: :func:`~golden_model.fixed.coarse.integer_basis`,
 :func:`~golden_model.fixed.coarse.narrow_forces` with :func:`~golden_model.fixed.coarse.coarse_sums`, and
-:func:`~golden_model.fixed.coarse.node_moves`. Built and verified as a unit; ``SpringflatEngine`` does not take
-the coarse space yet (``docs/guard.md``, "A polynomial coarse space").
+:func:`~golden_model.fixed.coarse.node_moves`. In the engine it serves
+both the coarse phase's sums pass and the integrate pass (:class:`~hdl.coarse_passes.CoarsePasses`).
 """
 
 from __future__ import annotations

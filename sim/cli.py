@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from golden_model.builtin import is_builtin
+from golden_model.coarse import COARSE_DEGREE_MAX
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, LANES
 from golden_model.files import describe_os_error
 from golden_model.fixed.formats_set import FormatSet, FormatSetNotBuildable
@@ -206,7 +207,8 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     from hdl.dsp import DspPlatform
 
     formats = load_format_set(args.formats)
-    capacity = engine_capacity(args.capacity, formats, guard=args.build_guard, lanes=args.lanes)
+    capacity = engine_capacity(args.capacity, formats, guard=args.build_guard, lanes=args.lanes,
+                               coarse_degree=args.coarse_degree)
     dsp = VERILOG_TARGETS[args.target]
     platform = DspPlatform(dsp) if dsp else None
     out = args.out
@@ -237,7 +239,8 @@ def cmd_verilog(args: argparse.Namespace) -> int:
     print(f"{out / 'interface.md'}, {out / 'interface.json'}; ROM contents {out / 'rsqrt_seed.hex'}, "
           f"{out / 'exp_table.hex'}")
     print(f"{out / engine['files'][0]}: capacity {capacity.vertices} vertices, {capacity.entries} entries, "
-          f"{capacity.triangles} triangles{'' if capacity.guard else ', no step guard'}; {engine['bus']}")
+          f"{capacity.triangles} triangles{'' if capacity.guard else ', no step guard'}"
+          f"{f', coarse space of degree {capacity.coarse_degree}' if capacity.coarse_degree else ''}; {engine['bus']}")
     print(", ".join(str(out / f) for f in engine["files"][1:]))
     print(f"{out / 'clock.sdc'}: clk at {ENGINE_TARGET_MHZ:g} MHz")
     if platform is not None:
@@ -310,6 +313,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lanes", type=integer_argument, choices=LANES, default=1, metavar="K",
                    help="the engine with K datapaths (1, 2 or 4), each on a share of the nodes; built without the "
                         "step guard, so with --no-guard (docs/engine.md, 'Lanes'; default 1)")
+    p.add_argument("--coarse-degree", type=integer_argument, choices=range(COARSE_DEGREE_MAX + 1), default=0,
+                   metavar="D", help="the engine with the guarded step's coarse space of degree D (its basis and "
+                                     "matrix memories and passes, docs/engine.md; default 0: none)")
     p.add_argument("--target", choices=tuple(VERILOG_TARGETS), default="generic",
                    help="generic (the default): no vendor primitives, for any tool or simulator; ecp5: the netlist "
                         "'springflat synth --target ecp5' places (MULT18X18D, DP16KD and TRELLIS_FF instances, their "

@@ -186,10 +186,12 @@ def engine_directory(fs: FormatSet, capacity: EngineCapacity, dsp: str | None = 
 
 
 def capacity_key(capacity: EngineCapacity) -> str:
-    """A directory name per elaborated capacity: the depths, whether the build has the step guard, its lanes."""
+    """A directory name per elaborated capacity: the depths, whether the build has the step guard, its lanes, its
+    coarse space's degree."""
     depths = f"{capacity.vertices}-{capacity.entries}-{capacity.triangles}"
     key = depths if capacity.guard else f"{depths}-no-guard"
-    return key if capacity.lanes == 1 else f"{key}-lanes-{capacity.lanes}"
+    key = key if capacity.lanes == 1 else f"{key}-lanes-{capacity.lanes}"
+    return key if not capacity.coarse_degree else f"{key}-coarse-{capacity.coarse_degree}"
 
 
 def engine_sources(fs: FormatSet, capacity: EngineCapacity, simulator: str = "verilator",
@@ -290,7 +292,7 @@ def run_image_on_rtl(image: EngineImage, fs: FormatSet, simulator: str, *, wait_
         work = sources / "runs" / f"{simulator}-{os.getpid()}-{time.time_ns()}"
     work = Path(work)
     work.mkdir(parents=True, exist_ok=True)
-    np.savez(work / "image.npz", nodes=image.nodes, entries=image.entries, triangles=image.triangles)
+    np.savez(work / "image.npz", **image.memories())
     config = {"capacity": dataclasses.asdict(capacity),
               "constants": {k: int(v) for k, v in image.constants.items()},
               "wait_states": wait_states, "seed": seed,
@@ -451,14 +453,15 @@ def rtl_engine(formats: FormatSet):
 
     def engine(mesh, positions, params, on_iteration=None):
         problem = prepare(mesh, positions, params, formats)
-        capacity.check_mesh(mesh)  # before any build, whoever calls (the run constants: check_run_limits)
+        built = dataclasses.replace(capacity, coarse_degree=params.coarse_degree)  # (its coarse space, if any)
+        built.check_mesh(mesh)  # before any build, whoever calls (the run constants: check_run_limits)
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
               f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running "
               "the flattening ...", file=sys.stderr)
         with tempfile.TemporaryDirectory(prefix="springflat-engine-") as tmp:
             try:  # the simulator's own output goes to a log: stdout is for the result
                 with contextlib.redirect_stdout(sys.stderr):
-                    return flatten_on_rtl(problem, capacity, "verilator", work=Path(tmp) / "run",
+                    return flatten_on_rtl(problem, built, "verilator", work=Path(tmp) / "run",
                                           log_file=Path(tmp) / "simulation.log")
             except (SimulatorError, EngineRunError) as exc:
                 raise UserError(str(exc)) from None

@@ -364,13 +364,14 @@ def export_engine(fs: FormatSet, capacity, out: Path, platform=None, engine_opti
 
 def memory_image_markdown(fs: FormatSet, capacity) -> str:
     """A short description of the engine's memory images for the handoff bundle (``memory_image.md``):
-    the three memories' word layouts and bus packing for this format set and capacity."""
+    the memories' word layouts and bus packing for this format set and capacity."""
     from golden_model.engine_spec.register_map import RegisterMap
 
     rmap = RegisterMap.build(fs, capacity)
     lines = [f"# springflat engine memory images (format set `{fs.name}`, capacity {capacity.vertices} vertices, "
              f"{capacity.entries} entries, {capacity.triangles} triangles)", "",
-             "The host loads three memories over the Wishbone bus while the engine is idle, writes the run "
+             f"The host loads {'five' if capacity.coarse_degree else 'three'} memories over the Wishbone bus while "
+             "the engine is idle, writes the run "
              "constants (registers, `register_map.md`) and writes CONTROL.start; the engine writes positions and "
              "velocities back in place in the `nodes` memory. Each memory word is the fields below, first field "
              f"at bit 0, no padding between fields; over the bus a word is `ceil(bits/{BUS_WORD_BITS})` "
@@ -385,7 +386,12 @@ def memory_image_markdown(fs: FormatSet, capacity) -> str:
              "* `entries`: nodes in order, each node's neighbour entries in ring order; `last` marks a node's "
              "last entry (every node has at least one); without the fold barrier `second = neighbour`, "
              "`threshold = gain = 0`.",
-             "* `triangles`: corner indices and the host-scaled 3D area (for E_S).", "",
+             "* `triangles`: corner indices and the host-scaled 3D area (for E_S).",
+             *(["* `basis` and `matrix` (a build with the guarded step's coarse space, of degree "
+                f"{capacity.coarse_degree}): each vertex's basis values but the constant 1 (s1.16) and "
+                "`M = (Phi^T K Phi)^+` row-major, scaled by 2^MATRIX_EXPONENT "
+                "(`golden_model.fixed.coarse.coarse_constants`; docs/engine.md, 'The coarse space')."]
+               if capacity.coarse_degree else []), "",
              "| memory | base | depth | bits | words | stride | fields (LSB first: name width[format]) |",
              "|---|---|---|---|---|---|---|"]
     for w in rmap.windows:

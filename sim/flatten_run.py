@@ -114,6 +114,7 @@ def choose_engine(args: argparse.Namespace, params: FlattenParams, mesh: Mesh):
     if engine.hardware:
         from golden_model.engine_spec.image import check_engine_params, check_run_limits
 
+        # (the rtl engine is built with the coarse space the run asks for; the board's is checked once it is read)
         check_engine_params(params)
         check_run_limits(params)
     check_engine_holds(engine, formats, mesh, params)

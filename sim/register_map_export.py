@@ -186,19 +186,22 @@ def write_exports(m: RegisterMap, out_dir: str | Path) -> list[Path]:
     return paths
 
 
-def engine_capacity(values, fs, *, guard: bool = True, lanes: int = 1) -> EngineCapacity:
-    """``--capacity V E T`` (and ``--no-guard``: ``guard`` False; ``--lanes``) as an
+def engine_capacity(values, fs, *, guard: bool = True, lanes: int = 1, coarse_degree: int = 0) -> EngineCapacity:
+    """``--capacity V E T`` (and ``--no-guard``: ``guard`` False; ``--lanes``; ``--coarse-degree``) as an
     :class:`~golden_model.engine_spec.image.EngineCapacity` (``None``: the default depths); a capacity the
-    engine's register map cannot hold, or lanes with the step guard (lanes are built without it,
-    ``docs/engine.md``), is a one-line :class:`ParameterError`."""
+    engine's register map cannot hold, lanes with the step guard (lanes are built without it,
+    ``docs/engine.md``), or a coarse space without the guard or with lanes, is a one-line :class:`ParameterError`."""
     from golden_model.params import ParameterError
 
     if lanes > 1 and guard:
         raise ParameterError(f"--lanes {lanes} builds the engine without the step guard: add --no-guard")
+    if coarse_degree and (not guard or lanes > 1):
+        raise ParameterError(f"--coarse-degree {coarse_degree} builds the engine's coarse space on the step guard's "
+                             "passes, with one lane: drop --no-guard and --lanes")
     if values is None:
-        return replace(DEFAULT_CAPACITY, guard=guard, lanes=lanes)
+        return replace(DEFAULT_CAPACITY, guard=guard, lanes=lanes, coarse_degree=coarse_degree)
     try:
-        capacity = EngineCapacity(*(int(v) for v in values), guard=guard, lanes=lanes)
+        capacity = EngineCapacity(*(int(v) for v in values), guard=guard, lanes=lanes, coarse_degree=coarse_degree)
         RegisterMap.build(fs, capacity)  # the address map must hold it
     except (TypeError, ValueError) as exc:  # (EngineCapacity's words without its name)
         raise ParameterError(f"--capacity V E T: {str(exc).removeprefix('EngineCapacity: ')}") from None

@@ -199,7 +199,8 @@ def cmd_rtl_check_engine(args: argparse.Namespace, mesh, params) -> int:
         params = dataclasses.replace(params, max_iter=min(params.max_iter, args.iterations))
     formats = load_format_set(args.formats)
     # one line for what the register map cannot hold; lanes are built without the guard
-    capacity = engine_capacity(args.capacity, formats, guard=args.lanes == 1, lanes=args.lanes)
+    capacity = engine_capacity(args.capacity, formats, guard=args.lanes == 1, lanes=args.lanes,
+                               coarse_degree=params.coarse_degree)
     if beyond := beyond_the_85f(capacity):  # (before the start's seconds, and the export's minutes)
         print_note(beyond)
     check_fixed_params(params, formats)

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from golden_model.engine_spec import uart_protocol as protocol
+from golden_model.coarse import COARSE_DEGREE_MAX
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, LANES
 
 from .clock import ENGINE_TARGET_MHZ
@@ -89,6 +90,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--lanes", type=integer_argument, choices=LANES, default=1, metavar="K",
                    help="springflat_engine with K datapaths (1, 2 or 4), each on a share of the nodes; built without "
                         "the step guard, so with --no-guard (docs/engine.md, 'Lanes'; default 1)")
+    p.add_argument("--coarse-degree", type=integer_argument, choices=range(COARSE_DEGREE_MAX + 1), default=0,
+                   metavar="D", help="springflat_engine with the guarded step's coarse space of degree D (its basis "
+                                     "and matrix memories and passes, docs/guard.md; default 0: none)")
     p.add_argument("--router", choices=tuple(ROUTERS), default=DEFAULT_ROUTER,
                    help="nextpnr router (default auto: the timing-driven router1; router1-ripup: router1 with its "
                         "timing-driven rip-up, --tmg-ripup; router2 is not timing-driven)")
@@ -110,6 +114,8 @@ def _command_line(args: argparse.Namespace, out: Path) -> str:
         parts += ["--components", ",".join(args.components)]
     if args.capacity:
         parts += ["--capacity", *(str(n) for n in args.capacity)]
+    if args.coarse_degree:
+        parts += ["--coarse-degree", str(args.coarse_degree)]
     if not args.build_guard:
         parts.append("--no-guard")
     if args.lanes != 1:
@@ -133,7 +139,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
     board = args.board is not None or args.target is None
     if board and args.lanes > 1:  # (before engine_capacity's hint to add --no-guard, which would not help)
         raise SynthError("--lanes applies to --target ecp5 builds of springflat_engine, not yet to --board")
-    capacity = engine_capacity(args.capacity, fs, guard=args.build_guard, lanes=args.lanes)
+    capacity = engine_capacity(args.capacity, fs, guard=args.build_guard, lanes=args.lanes,
+                               coarse_degree=args.coarse_degree)
     if board:
         from .board_build import cmd_board
 
@@ -141,7 +148,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     if args.baud is not None:
         raise SynthError("--baud sets the board's UART: add --board ulx3s-85f (and drop --target)")
     for given, option in ((args.capacity, "--capacity sizes"), (not args.build_guard, "--no-guard builds"),
-                          (args.lanes > 1, "--lanes builds")):
+                          (args.lanes > 1, "--lanes builds"), (args.coarse_degree, "--coarse-degree builds")):
         if given and ENGINE not in (args.components or ()):
             raise SynthError(f"{option} {ENGINE}: add it to --components")
     out = args.out if args.out else Path(f"synth-{args.target}-{fs.name}")

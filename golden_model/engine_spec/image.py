@@ -512,14 +512,14 @@ UNGUARDED = {"guard": False, "energy_window": 1}
 def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
     """Refuse, in one line, a stop rule's window the engine does not have (the guard's
     :data:`~golden_model.guard.ENERGY_WINDOW`, one iteration without it), and the guarded step on a
-    ``capacity`` built without the guard, and a coarse space of another degree than the ``capacity``'s (none
-    where it is not given: the engine the command line builds has none)."""
-    built = 0 if capacity is None else capacity.coarse_degree
-    if params.coarse_degree and params.coarse_degree != built:
-        raise FixedPointError("SpringflatEngine has no coarse space (its passes take the Jacobi step alone): "
-                              "drop --coarse-degree (the float and fixed engines have it)" if not built else
-                              f"this engine's coarse space is of degree {built}, not {params.coarse_degree}: use "
-                              f"--coarse-degree {built} or 0")
+    ``capacity`` built without the guard, and a coarse space the ``capacity`` does not have (of another degree;
+    ``None``: the engine's capacity is not known yet, and :func:`build_image` checks it)."""
+    if capacity is not None and params.coarse_degree and params.coarse_degree != capacity.coarse_degree:
+        built = capacity.coarse_degree
+        raise FixedPointError(f"this engine's coarse space is of degree {built}, not {params.coarse_degree}: use "
+                              f"--coarse-degree {built} or 0" if built else
+                              "this engine was built without a coarse space: drop --coarse-degree, or build the "
+                              f"engine with one (springflat synth --coarse-degree {params.coarse_degree})")
     if capacity is not None and params.guard and not capacity.guard:
         raise FixedPointError(f"this engine was built without the step guard, so it does not run "
                               f"'{params.mode.name}': use --no-guard, or an engine built with the guard")

@@ -15,6 +15,8 @@ positions, velocities, status, iterations, E_S, E_C, energy. The read-back is wr
 
 from __future__ import annotations
 
+import dataclasses
+
 import os
 import random
 import time
@@ -132,8 +134,9 @@ class CocotbWishbone:
 def load_image(config: dict, work: Path) -> EngineImage:
     capacity = EngineCapacity(**config["capacity"])
     arrays = np.load(work / "image.npz")
+    coarse = [arrays["basis"], arrays["matrix"]] if capacity.coarse_degree else []
     return EngineImage(capacity, arrays["nodes"], arrays["entries"], arrays["triangles"],
-                       {k: int(v) for k, v in config["constants"].items()})
+                       {k: int(v) for k, v in config["constants"].items()}, *coarse)
 
 
 def compare(got, want, what: str) -> list[str]:
@@ -155,7 +158,7 @@ def compare(got, want, what: str) -> list[str]:
 
 
 def with_constants(image: EngineImage, **changes: int) -> EngineImage:
-    return EngineImage(image.capacity, image.nodes, image.entries, image.triangles, {**image.constants, **changes})
+    return dataclasses.replace(image, constants={**image.constants, **changes})
 
 
 @cocotb.test()

@@ -14,7 +14,7 @@ from golden_model.coarse import (
     coarse_move,
     coarse_stiffness,
 )
-from golden_model.engine_spec.image import check_engine_params
+from golden_model.engine_spec.image import DEFAULT_CAPACITY, check_engine_params
 from golden_model.guard import StepScale
 from golden_model.fixed.coarse import (BASIS_FRAC_BITS, CoarseConstants, block_mantissas, coarse_accel, coarse_constants,
                                       integer_basis, narrow_force_format)
@@ -109,8 +109,8 @@ def test_coarse_degree_is_checked():
         FlattenParams(dynamics="momentum", guard=False, coarse_degree=3)
     with pytest.raises(ParameterError, match="drop --coarse-degree, or add --dynamics momentum"):
         FlattenParams(coarse_degree=3)
-    with pytest.raises(FixedPointError, match="SpringflatEngine has no coarse space"):
-        check_engine_params(FlattenParams(dynamics="momentum", coarse_degree=3))
+    with pytest.raises(FixedPointError, match="this engine was built without a coarse space: drop --coarse-degree"):
+        check_engine_params(FlattenParams(dynamics="momentum", coarse_degree=3), DEFAULT_CAPACITY)
 
 
 def _minimum_and_start(name):

@@ -374,17 +374,22 @@ def test_the_coarse_move_asked_of_an_unguarded_mode_is_a_bad_constant():
 
 
 @pytest.mark.parametrize("capacity, params, message", [
-    (None, COARSE_RUN, r"^SpringflatEngine has no coarse space .*drop --coarse-degree"),
-    (CAPACITY, COARSE_RUN, r"^SpringflatEngine has no coarse space"),
+    (CAPACITY, COARSE_RUN, r"^this engine was built without a coarse space: drop --coarse-degree, or build the engine "
+                           r"with one \(springflat synth --coarse-degree 3\)$"),
     (dataclasses.replace(CAPACITY, coarse_degree=2), COARSE_RUN,
      r"^this engine's coarse space is of degree 2, not 3: use --coarse-degree 2 or 0$"),
 ])
 def test_a_coarse_space_the_engine_lacks_is_refused_in_one_line(capacity, params, message):
+    """Against the engine's capacity (``build_image`` checks it; not known yet, nothing is refused)."""
     from golden_model.engine_spec.image import check_engine_params
 
     with pytest.raises(FixedPointError, match=message):
         check_engine_params(params, capacity)
+    with pytest.raises(FixedPointError, match=message):
+        build_image(prepare(MESHES["dome"], initial_layout(MESHES["dome"], "tutte"), params, DEFAULT), capacity)
     check_engine_params(params.with_(coarse_degree=0), capacity)
+    check_engine_params(params, None)
+    check_engine_params(params, COARSE_CAPACITY)
 
 
 @pytest.mark.parametrize("changes, message", [

@@ -376,8 +376,8 @@ def test_rtl_check_refuses_the_guard_on_the_datapath_bench(tmp_path):
 
 
 def test_the_coarse_space_is_an_option_of_the_guarded_float_and_fixed_runs(tmp_path):
-    """``--coarse-degree`` shows in the run line and the JSON summary; the engine, which has no coarse space, and
-    an unguarded run refuse it in one line."""
+    """``--coarse-degree`` shows in the run line and the JSON summary; an unguarded run and a degree out of range
+    are refused in one line (the engine's runs with it: ``tests/sim/test_engine_rtl.py``)."""
     path = SCANS / "bunny_face.obj"
     summaries = {}
     for engine in ("float", "fixed"):
@@ -390,8 +390,6 @@ def test_the_coarse_space_is_an_option_of_the_guarded_float_and_fixed_runs(tmp_p
     plain = json.loads(run("flatten", str(path), "--max-iter", "20", "--json", cwd=tmp_path).stdout)
     assert plain["coarse_degree"] == 0 and "coarse" not in plain["used"]
     for command, options, message in (
-            ("flatten", ("--engine", "rtl"), "SpringflatEngine has no coarse space"),
-            ("rtl-check", ("--engine-top",), "SpringflatEngine has no coarse space"),
             ("flatten", ("--no-guard",), "the coarse space is a step of the guarded momentum dynamics"),
             ("flatten", ("--coarse-degree", "5"), "--coarse-degree must be an integer in [0, 4], got 5")):
         proc = run(command, str(path), "--coarse-degree", "3", *options, cwd=tmp_path)

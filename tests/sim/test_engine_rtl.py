@@ -301,3 +301,45 @@ def test_the_bench_is_told_the_capacity_it_runs_on(monkeypatch, tmp_path):
             run_image_on_rtl(dataclasses.replace(image, capacity=capacity), DEFAULT, "verilator",
                              work=tmp_path / str(capacity.guard))
     assert [EngineCapacity(**config["capacity"]) for config in seen] == [CAPACITY, guardless]
+
+
+COARSE = dataclasses.replace(CAPACITY, coarse_degree=3)
+
+
+@pytest.mark.parametrize("simulator", ["verilator", "icarus"])
+def test_a_coarse_run_is_bit_exact(simulator):
+    """The engine with a coarse space (``EngineCapacity.coarse_degree``), exported to Verilog: a guarded run that
+    takes the coarse move, squeezed across so that steps are clipped and rolled back, equals ``run_image`` every
+    iteration (N_max = 1, 2 read back) and whole, with bus wait states, on both simulators."""
+    need_simulator(simulator)
+    mesh = dome_grid(4)
+    params = FlattenParams(density="auto", dynamics="momentum", coarse_degree=3, tol_area=0.0, tol_shape=0.0,
+                           max_iter=8)
+    layout = initial_layout(mesh, "tutte") * np.array([0.05, 1.0])
+    image = build_image(prepare(mesh, layout, params, DEFAULT), COARSE)
+    want = run_image(image, DEFAULT)
+    assert want.guard.rejected > 0 and want.guard.clipped > 0 and image.constants["coarse"] == 1
+    run = run_image_on_rtl(image, DEFAULT, simulator, wait_states=3, seed=7, checks={"iteration_checks": 2})
+    r = run.result
+    assert run.passed, r.get("first_mismatches", r)
+    assert np.array_equal(run.positions, want.positions) and np.array_equal(run.velocities, want.velocities)
+    assert (r["status"], r["iterations"], r["shape_error"], r["energy"]) == (
+        want.status, want.iterations, want.shape_error, want.energy)
+
+
+def test_flatten_engine_rtl_with_the_coarse_space_writes_the_fixed_engines_layout(tmp_path):
+    """flatten --engine rtl --coarse-degree 3 builds the engine with the coarse space and writes the layout
+    flatten --engine fixed --coarse-degree 3 writes, bit for bit."""
+    need_simulator("verilator")
+    env = {**os.environ, "SPRINGFLAT_ENGINE_CAPACITY": "64,512,128"}
+    outs = {}
+    for engine in ("rtl", "fixed"):
+        proc = subprocess.run([SPRINGFLAT, "flatten", "surf1", "--engine", engine, "--dynamics", "momentum",
+                               "--coarse-degree", "3",
+                               "--max-iter", "12", "--out", f"{engine}.flat.obj", "--json"], capture_output=True,
+                              text=True, cwd=tmp_path, env=env, timeout=1800)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        outs[engine] = json.loads(proc.stdout)
+    assert (tmp_path / "rtl.flat.obj").read_text() == (tmp_path / "fixed.flat.obj").read_text()
+    assert outs["rtl"]["iterations"] == outs["fixed"]["iterations"]
+    assert outs["rtl"]["coarse_degree"] == outs["fixed"]["coarse_degree"] == 3
