@@ -110,3 +110,14 @@ def test_the_coarse_windows_load_over_the_bus_and_start_checks_the_coarse_consta
     assert constant_fault(unguarded, FS, COARSE) == "bad-constants"
     assert answers["coarse unguarded"] == ("done", "bad-constants")
     assert answers["unguarded"] == ("running", "none")
+
+
+def test_the_paper_dynamics_runs_bit_exact_on_a_coarse_build():
+    """The integrate pass's nodes pass the coarse unit in every mode (its latency), with a move of 0 where the step
+    takes none: the paper dynamics' run on the coarse build is the golden model's."""
+    image = image_of(FlattenParams(density="auto", barrier=True, max_iter=4), COARSE)
+    assert image.constants["coarse"] == 0
+    expected = run_image(image, FS)
+    result, read_back = run_on_engine(PreloadableEngine(FS, COARSE), image)
+    assert result == expected.status
+    assert_same_run(read_back, expected)
