@@ -119,7 +119,7 @@ class CoarsePasses(wiring.Component):
         m.d.sync += was_coarse.eq(self.in_coarse)
         entering = self.in_coarse & ~was_coarse
         landed = Signal(range(self.capacity.vertices + 1), name="sums_landed")
-        summing, settling, solving = (Signal(name=n) for n in ("summing", "sums_settling", "solving"))
+        summing, settling = Signal(name="summing"), Signal(name="sums_settling")
         with m.If(entering):
             m.d.sync += [landed.eq(0), summing.eq(1)]
         with m.Elif(self.in_coarse & self.node_landed):
@@ -138,7 +138,7 @@ class CoarsePasses(wiring.Component):
         with m.If(all_landed & node.idle & ~settling):
             m.d.sync += [summing.eq(0), settling.eq(1)]
         with m.If(settling):
-            m.d.sync += [settling.eq(0), solving.eq(1), coefficients.i.valid.eq(1)]
+            m.d.sync += [settling.eq(0), coefficients.i.valid.eq(1)]
         with m.If(coefficients.i.valid & coefficients.i.ready):
             m.d.sync += coefficients.i.valid.eq(0)
         m.d.comb += [coefficients.i.payload.sums.eq(node.sums), coefficients.o.ready.eq(1),
@@ -149,9 +149,9 @@ class CoarsePasses(wiring.Component):
         m.d.comb += [node.coefficients.eq(held), node.move_shift.eq(shift)]
         with m.If(coefficients.o.valid):
             m.d.sync += [held.eq(coefficients.o.payload.coefficients), shift.eq(coefficients.o.payload.move_shift),
-                         solving.eq(0), self.done.eq(self.in_coarse)]
+                         self.done.eq(self.in_coarse)]
         with m.If(~self.in_coarse):  # the phase over (or aborted): ready for the next
-            m.d.sync += [summing.eq(0), settling.eq(0), solving.eq(0), self.done.eq(0)]
+            m.d.sync += [summing.eq(0), settling.eq(0), self.done.eq(0)]
 
         # the integrate pass: each node beside its move, the unit's latency later
         beat = self.node_in.payload
@@ -171,10 +171,7 @@ class CoarsePasses(wiring.Component):
                                                     node.o.payload.saturations, 0))]
         in_delay = Signal(range(self.latency + 2), name="delay_count")
         m.d.sync += in_delay.eq(in_delay + self.node_in.valid - delayed_valid)
-        m.d.comb += self.idle.eq(node.idle & (in_delay == 0) & coarse_idle(coefficients) & ~settling)
+        # (the coefficient unit idle: no request and no result under way)
+        solving = ~coefficients.i.ready | coefficients.i.valid | coefficients.o.valid
+        m.d.comb += self.idle.eq(node.idle & (in_delay == 0) & ~solving & ~settling)
         return m
-
-
-def coarse_idle(coefficients: CoarseCoefficients):
-    """The coefficient unit has no request and no result under way."""
-    return coefficients.i.ready & ~coefficients.i.valid & ~coefficients.o.valid

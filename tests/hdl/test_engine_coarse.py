@@ -121,3 +121,59 @@ def test_the_paper_dynamics_runs_bit_exact_on_a_coarse_build():
     result, read_back = run_on_engine(PreloadableEngine(FS, COARSE), image)
     assert result == expected.status
     assert_same_run(read_back, expected)
+
+
+def test_abort_in_the_coarse_phase_drains_and_a_clean_rerun_matches():
+    """ABORT in the coarse phase's sums pass and in its coefficients, each followed by a reload of the node memory:
+    the drain waits for the coarse unit, and the last, whole run is bit-exact (the next coarse phase starts
+    clean). The clocks are taken from a first run's phases, the abort's lag calibrated by a first abort."""
+    from golden_model.engine_spec.register_map import STATES
+    from hdl.phase_controller import phases_of
+
+    phases = phases_of(COARSE)
+    image = image_of(RUN.with_(max_iter=3), COARSE)
+    dut = PreloadableEngine(FS, COARSE)
+    spans, aborted_in, drained_at, out = [], [], [], {}
+
+    async def watch(ctx):
+        phase, state, last, clock = dut.debug_signals["phase"], dut.debug_signals["state"], 0, 0
+        while True:
+            await ctx.tick()
+            clock = clock + 1 if ctx.get(state) == STATES.index("running") else 0
+            now = ctx.get(phase)
+            if clock:
+                if clock == 1 or spans[-1][0] != phases[now]:
+                    spans.append([phases[now], clock - 1, clock - 1])
+                spans[-1][2] = clock - 1
+            if phases[now] == "drain" and phases[last] != "drain":
+                aborted_in.append((phases[last], clock))
+                drained_at.append(clock)
+            last = now
+
+    def abort_after(driver, bus, clocks):
+        load_directly(driver, bus, dut, image, memories=("nodes",))
+        driver.start()
+        bus.idle(clocks)
+        driver.abort()
+        while driver.state() != "idle":  # (the drain waits for the coefficients under way; the next START follows)
+            bus.idle(50)
+
+    def host(driver, bus):
+        load_directly(driver, bus, dut, image)
+        driver.start()
+        driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+        name, begin, end = next(span for span in spans if span[0] == "coarse")
+        abort_after(driver, bus, begin)
+        offset = drained_at[-1] - begin
+        aborted_in.clear()
+        out["targets"] = (begin + 6, (begin + end) // 2)  # the sums pass; the coefficients
+        for clock in out["targets"]:
+            abort_after(driver, bus, clock - offset)
+        load_directly(driver, bus, dut, image, memories=("nodes",))
+        driver.start()
+        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+        out["read_back"] = driver.read_back()
+
+    simulate(dut, host, {"watcher": watch})
+    assert [phase for phase, _ in aborted_in] == ["coarse", "coarse"], (aborted_in, out["targets"])
+    assert_same_run(out["read_back"], run_image(image, FS))
