@@ -16,7 +16,7 @@ from golden_model.modes import mode_named
 from golden_model.engine_spec.image import run_image
 from hdl.engine import SpringflatEngine
 from support.engine_sim import (CAPACITY, FS, INIT, MESH, RUNS, PreloadableEngine, assert_same_run, image_of,
-                                load_directly, run_on_engine, simulate)
+                                load_directly, run_on_engine, simulate, start_answers)
 from support.wishbone import ThreadedBus, wishbone_read, wishbone_write
 from sim.engine_driver import BusError, EngineDriver
 
@@ -279,17 +279,7 @@ def test_bad_run_constants_answer_as_constant_fault_says(guard):
         load_directly(driver, bus, dut, image)
         answers["FEATURES.guard"] = driver.read_value("feature_guard")
         for name, change in cases.items():
-            constants = {**image.constants, **change}
-            # the changed constants' words written last, right before START: the check is current by then
-            changed = set(driver.map.encode({k: constants[k] for k in change}))
-            for offset, word in sorted(driver.map.encode(constants).items(), key=lambda item: (item[0] in changed, item[0])):
-                bus.write(offset, word)
-            driver.start()
-            bus.idle(20)
-            answers[name] = driver._status_fields()
-            if answers[name][0] == "running":
-                driver.abort()
-                bus.idle(400)
+            answers[name] = start_answers(driver, bus, image.constants, change)
 
     simulate(dut, host)
     assert answers["FEATURES.guard"] == guard

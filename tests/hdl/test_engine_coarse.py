@@ -14,7 +14,7 @@ from golden_model.fixed.format import SaturationCounter
 from golden_model.modes import mode_named
 from golden_model.params import FlattenParams
 from support.engine_sim import (CAPACITY, FS, PreloadableEngine, assert_same_run, image_of, load_directly,
-                                run_on_engine, simulate)
+                                phase_spans, run_on_engine, simulate, start_answers)
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
 
@@ -92,14 +92,7 @@ def test_the_coarse_windows_load_over_the_bus_and_start_checks_the_coarse_consta
             unguarded = mode_named("momentum").code
             for name, change in (("coarse unguarded", {"mode": unguarded}),
                                  ("unguarded", {"mode": unguarded, "coarse": 0})):
-                for offset, word in sorted(driver.map.encode({**image.constants, **change}).items()):
-                    bus.write(offset, word)
-                driver.start()
-                bus.idle(20)
-                answers[name] = driver._status_fields()
-                if answers[name][0] == "running":
-                    driver.abort()
-                    bus.idle(400)
+                answers[name] = start_answers(driver, bus, image.constants, change)
 
         simulate(dut, host)
     over_the_bus, preloaded = contents
@@ -127,28 +120,12 @@ def test_abort_in_the_coarse_phase_drains_and_a_clean_rerun_matches():
     """ABORT in the coarse phase's sums pass and in its coefficients, each followed by a reload of the node memory:
     the drain waits for the coarse unit, and the last, whole run is bit-exact (the next coarse phase starts
     clean). The clocks are taken from a first run's phases, the abort's lag calibrated by a first abort."""
-    from golden_model.engine_spec.register_map import STATES
     from hdl.phase_controller import phases_of
 
-    phases = phases_of(COARSE)
     image = image_of(RUN.with_(max_iter=3), COARSE)
     dut = PreloadableEngine(FS, COARSE)
-    spans, aborted_in, drained_at, out = [], [], [], {}
-
-    async def watch(ctx):
-        phase, state, last, clock = dut.debug_signals["phase"], dut.debug_signals["state"], 0, 0
-        while True:
-            await ctx.tick()
-            clock = clock + 1 if ctx.get(state) == STATES.index("running") else 0
-            now = ctx.get(phase)
-            if clock:
-                if clock == 1 or spans[-1][0] != phases[now]:
-                    spans.append([phases[now], clock - 1, clock - 1])
-                spans[-1][2] = clock - 1
-            if phases[now] == "drain" and phases[last] != "drain":
-                aborted_in.append((phases[last], clock))
-                drained_at.append(clock)
-            last = now
+    watch, spans, aborted_in, drained_at = phase_spans(dut, phases_of(COARSE))
+    out = {}
 
     def abort_after(driver, bus, clocks):
         load_directly(driver, bus, dut, image, memories=("nodes",))
@@ -175,5 +152,5 @@ def test_abort_in_the_coarse_phase_drains_and_a_clean_rerun_matches():
         out["read_back"] = driver.read_back()
 
     simulate(dut, host, {"watcher": watch})
-    assert [phase for phase, _ in aborted_in] == ["coarse", "coarse"], (aborted_in, out["targets"])
+    assert aborted_in == ["coarse", "coarse"], (aborted_in, out["targets"])
     assert_same_run(out["read_back"], run_image(image, FS))

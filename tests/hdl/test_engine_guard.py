@@ -9,7 +9,7 @@ from golden_model.engine_spec.image import run_image
 from golden_model.params import FlattenParams
 from sim.engine_driver import BusError, EngineDriver
 from support.engine_sim import (CAPACITY, FS, GUARDED, PreloadableEngine, assert_same_run, guarded_image, image_of,
-                                load_directly, run_on_engine, simulate)
+                                load_directly, phase_spans, run_on_engine, simulate)
 from support.wishbone import ThreadedBus, wishbone_write
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
@@ -35,7 +35,6 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
     followed by a reload of the node memory (a run writes no other): the last, whole run is bit-exact with
     the golden model (the propose pass clears what an aborted run left in the scatters). The clocks are
     taken from a first run's phases."""
-    from golden_model.engine_spec.register_map import STATES
     from hdl.phase_controller import PHASES
 
     # stretched across, the guarded run rolls back its fourth step (the golden model's record says so): the
@@ -44,22 +43,8 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
     assert run_image(image, FS).guard.rejected == 1
     guard_phases = ("decide", "rollback", "integrate", "stuck", "hold", "certify", "commit")
     dut = PreloadableEngine(FS, CAPACITY)
-    spans, aborted_in, drained_at, out = [], [], [], {}  # spans: [phase, first clock, last clock] of a run
-
-    async def watch(ctx):
-        phase, state, last, clock = dut.debug_signals["phase"], dut.debug_signals["state"], 0, 0
-        while True:
-            await ctx.tick()
-            clock = clock + 1 if ctx.get(state) == STATES.index("running") else 0
-            now = ctx.get(phase)
-            if clock:
-                if clock == 1 or spans[-1][0] != PHASES[now]:
-                    spans.append([PHASES[now], clock - 1, clock - 1])
-                spans[-1][2] = clock - 1
-            if PHASES[now] == "drain" and PHASES[last] != "drain":
-                aborted_in.append(PHASES[last])
-                drained_at.append(clock)
-            last = now
+    watch, spans, aborted_in, drained_at = phase_spans(dut, PHASES)  # spans: [phase, first clock, last clock]
+    out = {}
 
     def abort_after(driver, bus, clocks):
         load_directly(driver, bus, dut, image, memories=("nodes",))

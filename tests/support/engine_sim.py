@@ -178,3 +178,46 @@ def guarded_image(case: str):
     """The image of ``GUARDED[case]``: the Tutte layout squeezed across by the case's factor."""
     squeeze, params, _ = GUARDED[case]
     return image_of(params, squeeze=squeeze)
+
+
+def start_answers(driver, bus, constants: dict, change: dict) -> tuple[str, str]:
+    """Write ``constants`` with ``change`` applied (the changed constants' words last, right before START: the
+    check is current by then), START, and read STATUS (state, result) 20 clocks later; a run that started is
+    aborted and drained."""
+    constants = {**constants, **change}
+    changed = set(driver.map.encode({k: constants[k] for k in change}))
+    for offset, word in sorted(driver.map.encode(constants).items(), key=lambda item: (item[0] in changed, item[0])):
+        bus.write(offset, word)
+    driver.start()
+    bus.idle(20)
+    answer = driver._status_fields()
+    if answer[0] == "running":
+        driver.abort()
+        bus.idle(400)
+    return answer
+
+
+def phase_spans(dut, phases):
+    """A watcher (``simulate``'s ``watch={"watcher": ...}``) that records a run's phases: returns ``(watcher, spans,
+    aborted_in, drained_at)``: each run's ``[phase, first clock, last clock]`` from START, and the phase a drain
+    began in and its clock."""
+    from golden_model.engine_spec.register_map import STATES
+
+    spans, aborted_in, drained_at = [], [], []
+
+    async def watch(ctx):
+        phase, state, last, clock = dut.debug_signals["phase"], dut.debug_signals["state"], 0, 0
+        while True:
+            await ctx.tick()
+            clock = clock + 1 if ctx.get(state) == STATES.index("running") else 0
+            now = ctx.get(phase)
+            if clock:
+                if clock == 1 or spans[-1][0] != phases[now]:
+                    spans.append([phases[now], clock - 1, clock - 1])
+                spans[-1][2] = clock - 1
+            if phases[now] == "drain" and phases[last] != "drain":
+                aborted_in.append(phases[last])
+                drained_at.append(clock)
+            last = now
+
+    return watch, spans, aborted_in, drained_at
