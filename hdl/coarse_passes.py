@@ -70,7 +70,7 @@ class CoarsePasses(wiring.Component):
         In the ``coarse`` phase: the coefficients are in (a register).
     idle : ``Out(1)``
         No node in the unit or the delay line, the coefficient unit idle.
-    coarse_force_events, coarse_move_events : ``Out(range(3))``
+    coarse_force_events, coarse_move_events : ``Out``
         A node's saturation events: its force's narrowing in the sums pass (``coarse_force``), its move's clamp
         in an integrate pass that takes the move (``coarse_move``; none in one that does not).
 
@@ -93,8 +93,9 @@ class CoarsePasses(wiring.Component):
                                                read_latency=read_latency)
         #: Clocks a node of the integrate pass takes more: the node unit's latency.
         self.latency = self.node.latency
-        #: Width of the saturation-event output.
-        self.event_widths = {"coarse_force": 2, "coarse_move": 2}
+        events = self.node.o.payload.saturations.shape()  # (a node's events, the unit's)
+        #: Width of each saturation-event output.
+        self.event_widths = {"coarse_force": events.width, "coarse_move": events.width}
         functions = len(basis_exponents(capacity.coarse_degree))
         super().__init__({
             "node_in": In(stream.Signature(integrator_input_layout(fs), always_ready=True)),
@@ -105,7 +106,7 @@ class CoarsePasses(wiring.Component):
             "vertices": In(range(capacity.vertices + 1)),
             "matrix_exponent": In(signed(MATRIX_EXPONENT_BITS)),
             "matrix_addr": Out(range(functions * functions)), "matrix_data": In(signed(SUM_BITS)),
-            "done": Out(1), "idle": Out(1), "coarse_force_events": Out(range(3)), "coarse_move_events": Out(range(3)),
+            "done": Out(1), "idle": Out(1), "coarse_force_events": Out(events), "coarse_move_events": Out(events),
         })
 
     def elaborate(self, platform):

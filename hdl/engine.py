@@ -155,9 +155,6 @@ class SpringflatEngine(wiring.Component):
                 raise TypeError(f"{flag} must be a bool or None, not {value!r}")
         if not isinstance(delay_lines, bool):
             raise TypeError(f"delay_lines must be a bool, not {delay_lines!r}")
-        if capacity.coarse_degree and (registered_select or pin_registers or delay_lines):
-            raise ValueError("SpringflatEngine: a coarse space (coarse_degree > 0) is built without the registered "
-                             "select, the pin registers and the delay lines")
         if capacity.lanes > 1 and (capacity.guard or registered_select or pin_registers or delay_lines):
             raise ValueError(f"SpringflatEngine: lanes={capacity.lanes} are built without the step guard "
                              "(EngineCapacity(guard=False)), the registered select, the pin registers and the delay lines")
@@ -168,6 +165,10 @@ class SpringflatEngine(wiring.Component):
         if pin_registers is False and self.registered_select:
             raise ValueError("registered_select needs the pin registers: pin_registers=False contradicts it")
         self.pin_registers = self.registered_select or bool(pin_registers)
+        if capacity.coarse_degree and (self.registered_select or self.pin_registers or delay_lines):
+            raise ValueError("SpringflatEngine: a coarse space (coarse_degree > 0) is built without the registered "
+                             "select (the capacities above DEFAULT_CAPACITY's node memories), the pin registers and "
+                             "the delay lines")
         #: Clocks from ``stb`` to the target raising ``ack`` or ``err`` (the initiator samples it at the next
         #: edge): a register (the handshake's request register, the registered decode, the read word's two
         #: AND-OR stages, ``ack``); a memory word, read or write (the decode, then
@@ -205,8 +206,7 @@ class SpringflatEngine(wiring.Component):
         m.submodules.integrator = integrator = Integrator(fs, saturations=True, delay_lines=self.delay_lines,
                                                           shift_copy=self.registered_select,
                                                           coarse=bool(cap.coarse_degree))
-        # (the matrix's read address passes the memories' address register first: a clock before read_latency)
-        coarse = CoarsePasses(fs, cap, read_latency=memories.read_latency + 1) if cap.coarse_degree else None
+        coarse = CoarsePasses(fs, cap, read_latency=memories.matrix_read_latency) if cap.coarse_degree else None
         if coarse is not None:
             m.submodules.coarse = coarse
         guard = GuardPasses(fs, cap, read_latency=memories.read_latency,

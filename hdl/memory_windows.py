@@ -212,6 +212,9 @@ class MemoryWindows(wiring.Component):
         #: selected in a register of its own).
         self.read_latency = READ_LATENCY + self.pin_registers + BlockRam.SELECT_STAGES * self.registered_select \
             + (lanes > 1)
+        #: With a coarse space, clocks from ``matrix_addr`` to its entry in ``matrix_word``: the address
+        #: register after the port's multiplexer, then :attr:`read_latency`.
+        self.matrix_read_latency = 1 + self.read_latency
         #: Clocks from ``ent_addr`` to ``entry`` (:func:`entry_latency`), and from DEC to a window's answer.
         self.entry_latency = entry_latency(self.registered_select)
         self.window_steps = window_steps(self.registered_select)

@@ -444,7 +444,7 @@ def rtl_engine(formats: FormatSet):
 
     from .cocotb_support import SimulatorError
     from .outputs import print_note
-    from .register_map_export import beyond_the_85f
+    from .register_map_export import beyond_the_85f, check_coarse_capacity
     from .run_options import UserError
 
     capacity = rtl_capacity()
@@ -454,6 +454,10 @@ def rtl_engine(formats: FormatSet):
     def engine(mesh, positions, params, on_iteration=None):
         problem = prepare(mesh, positions, params, formats)
         built = dataclasses.replace(capacity, coarse_degree=params.coarse_degree)  # (its coarse space, if any)
+        try:
+            check_coarse_capacity(formats, built, "the engine's capacity")
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
         built.check_mesh(mesh)  # before any build, whoever calls (the run constants: check_run_limits)
         print(f"springflat: verilator: building springflat_engine for capacity {capacity.vertices}/"
               f"{capacity.entries}/{capacity.triangles} (once per format set and capacity, then reused) and running "

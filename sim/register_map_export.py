@@ -196,8 +196,9 @@ def engine_capacity(values, fs, *, guard: bool = True, lanes: int = 1, coarse_de
     if lanes > 1 and guard:
         raise ParameterError(f"--lanes {lanes} builds the engine without the step guard: add --no-guard")
     if coarse_degree and (not guard or lanes > 1):
+        given = " and ".join(flag for flag, on in (("--no-guard", not guard), (f"--lanes {lanes}", lanes > 1)) if on)
         raise ParameterError(f"--coarse-degree {coarse_degree} builds the engine's coarse space on the step guard's "
-                             "passes, with one lane: drop --no-guard and --lanes")
+                             f"passes, with one lane: drop {given}")
     if values is None:
         return replace(DEFAULT_CAPACITY, guard=guard, lanes=lanes, coarse_degree=coarse_degree)
     try:
@@ -206,7 +207,20 @@ def engine_capacity(values, fs, *, guard: bool = True, lanes: int = 1, coarse_de
     except (TypeError, ValueError) as exc:  # (EngineCapacity's words without its name)
         raise ParameterError(f"--capacity V E T: {str(exc).removeprefix('EngineCapacity: ')}") from None
     check_fillable(capacity, f"--capacity {capacity.as_option()}")
+    check_coarse_capacity(fs, capacity, f"--capacity {capacity.as_option()}")
     return capacity
+
+
+def check_coarse_capacity(fs, capacity: EngineCapacity, what: str) -> None:
+    """Refuse, in one line (:class:`ParameterError`), a coarse space at a capacity whose node memories take the
+    registered select (:func:`hdl.memory_windows.needs_registered_select`), which the coarse build does not have."""
+    from golden_model.params import ParameterError
+    from hdl.memory_windows import needs_registered_select
+
+    if capacity.coarse_degree and needs_registered_select(fs, capacity):
+        raise ParameterError(f"{what}: the engine's coarse space is built only where the node memories are one "
+                             f"block RAM bank each (up to {DEFAULT_CAPACITY.vertices} vertices in 'default'): "
+                             "use a smaller capacity, or drop --coarse-degree")
 
 
 def beyond_the_85f(capacity: EngineCapacity) -> str | None:

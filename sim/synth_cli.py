@@ -142,6 +142,9 @@ def cmd_synth(args: argparse.Namespace) -> int:
     capacity = engine_capacity(args.capacity, fs, guard=args.build_guard, lanes=args.lanes,
                                coarse_degree=args.coarse_degree)
     if board:
+        if args.coarse_degree:
+            raise SynthError("--coarse-degree builds springflat_engine with --target ecp5; the board top does not "
+                             "take it yet: drop --coarse-degree")
         from .board_build import cmd_board
 
         return cmd_board(args, fs, capacity)

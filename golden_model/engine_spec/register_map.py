@@ -180,14 +180,17 @@ def _registers(fs: FormatSet, capacity: EngineCapacity) -> list[Register]:
             reset=format_hash(fs))
     for what in ("vertices", "entries", "triangles"):
         a.value(f"cap_{what}", 32, "ro", f"capacity: {what} the memories hold", ident, reset=getattr(capacity, what))
-    a.add("FEATURES", "ro", "what the build has beside its capacity", (
+    features = (
         BitField("guard", 0, 1, "ro", "the step guard's passes and memories: the guarded modes run", "feature_guard"),
         BitField("lanes", 1, 3, "ro", "K, the datapaths (lanes) each running a share of the nodes: vertex i in lane "
                                       "i mod K, its entries in that lane's share of the entries window "
                                       "(docs/engine.md)", "feature_lanes"),
-        BitField("coarse", 4, COARSE_DEGREE_MAX.bit_length(), "ro", "the degree of the guarded step's coarse space (its basis and matrix windows "
-                                       "and run constants; docs/guard.md); 0: none", "feature_coarse"),
-    ), ident, int(capacity.guard) | capacity.lanes << 1 | capacity.coarse_degree << 4)
+        BitField("coarse", 4, COARSE_DEGREE_MAX.bit_length(), "ro", "the degree of the guarded step's coarse space "
+                 "(its basis and matrix windows and run constants; docs/engine.md); 0: none", "feature_coarse"),
+    )
+    built = {"guard": int(capacity.guard), "lanes": capacity.lanes, "coarse": capacity.coarse_degree}
+    a.add("FEATURES", "ro", "what the build has beside its capacity", features, ident,
+          sum(built[f.name] << f.lsb for f in features))
 
     a.block()
     a.add("CONTROL", "rw", "start, abort, interrupt enable", (

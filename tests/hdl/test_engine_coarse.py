@@ -16,7 +16,7 @@ from golden_model.params import FlattenParams
 from support.engine_sim import (CAPACITY, FS, PreloadableEngine, assert_same_run, image_of, load_directly,
                                 phase_spans, run_on_engine, simulate, start_answers)
 
-pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
+# the whole engine on the Python simulator (seconds per iteration): every test but the last is marked slow
 
 COARSE = dataclasses.replace(CAPACITY, coarse_degree=3)
 RUN = FlattenParams(dynamics="momentum", coarse_degree=3, max_iter=12)
@@ -41,6 +41,7 @@ def golden_run(image, monkeypatch):
     return run_image(image, FS), any(handovers), events
 
 
+@pytest.mark.slow
 def test_a_coarse_run_with_rollbacks_and_the_hand_over_matches_the_golden_model(monkeypatch):
     """Squeezed across, the run clips steps and rolls some back, one of them a plain gradient step that took the
     coarse move (the Jacobi steps follow): the engine's whole run is the golden model's, bit for bit."""
@@ -54,6 +55,7 @@ def test_a_coarse_run_with_rollbacks_and_the_hand_over_matches_the_golden_model(
     assert_same_run(read_back, expected)
 
 
+@pytest.mark.slow
 def test_coarse_moves_clamped_to_accel_are_counted_as_the_golden_model_counts_them(monkeypatch):
     """A host's matrix exponent 14 below the image's makes the moves 2^14 times larger: they clamp to [accel],
     and SATURATIONS counts each clamp as the golden model does (``coarse_move``)."""
@@ -67,6 +69,7 @@ def test_coarse_moves_clamped_to_accel_are_counted_as_the_golden_model_counts_th
     assert_same_run(read_back, expected)
 
 
+@pytest.mark.slow
 def test_the_coarse_windows_load_over_the_bus_and_start_checks_the_coarse_constant():
     """The basis and matrix windows written over Wishbone leave their block RAMs as the preload does (every word);
     FEATURES.coarse reads the degree; START answers COARSE with an unguarded mode as ``constant_fault`` does
@@ -105,6 +108,7 @@ def test_the_coarse_windows_load_over_the_bus_and_start_checks_the_coarse_consta
     assert answers["unguarded"] == ("running", "none")
 
 
+@pytest.mark.slow
 def test_the_paper_dynamics_runs_bit_exact_on_a_coarse_build():
     """The integrate pass's nodes pass the coarse unit in every mode (its latency), with a move of 0 where the step
     takes none: the paper dynamics' run on the coarse build is the golden model's."""
@@ -116,6 +120,7 @@ def test_the_paper_dynamics_runs_bit_exact_on_a_coarse_build():
     assert_same_run(read_back, expected)
 
 
+@pytest.mark.slow
 def test_abort_in_the_coarse_phase_drains_and_a_clean_rerun_matches():
     """ABORT in the coarse phase's sums pass and in its coefficients, each followed by a reload of the node memory:
     the drain waits for the coarse unit, and the last, whole run is bit-exact (the next coarse phase starts
@@ -154,3 +159,33 @@ def test_abort_in_the_coarse_phase_drains_and_a_clean_rerun_matches():
     simulate(dut, host, {"watcher": watch})
     assert aborted_in == ["coarse", "coarse"], (aborted_in, out["targets"])
     assert_same_run(out["read_back"], run_image(image, FS))
+
+
+def test_a_coarse_space_is_built_up_to_one_bank_per_node_memory_and_refused_beyond_in_one_line():
+    """(fast: no elaboration) The coarse build at DEFAULT_CAPACITY; at LARGEST_85F_CAPACITY, whose node memories
+    take the registered select, SpringflatEngine and the command line's capacity refuse it."""
+    import gc
+    import warnings
+
+    from amaranth.hdl import UnusedElaboratable
+
+    from golden_model.engine_spec.image import DEFAULT_CAPACITY, LARGEST_85F_CAPACITY
+    from golden_model.params import ParameterError
+    from hdl.engine import SpringflatEngine
+    from sim.register_map_export import engine_capacity
+
+    large = dataclasses.replace(LARGEST_85F_CAPACITY, coarse_degree=3)
+    with warnings.catch_warnings():  # engines built here are never elaborated
+        warnings.simplefilter("ignore", UnusedElaboratable)
+        assert SpringflatEngine(FS, dataclasses.replace(DEFAULT_CAPACITY, coarse_degree=3)).registered_select is False
+        with pytest.raises(ValueError, match=r"^SpringflatEngine: a coarse space .* is built without the registered "):
+            SpringflatEngine(FS, large)
+        for option in ({"delay_lines": True}, {"pin_registers": True}):
+            with pytest.raises(ValueError, match="is built without the registered select"):
+                SpringflatEngine(FS, COARSE, **option)
+        gc.collect()
+    with pytest.raises(ParameterError, match=r"^--capacity 3072 18432 6144: the engine's coarse space is built only "):
+        engine_capacity((3072, 18432, 6144), FS, coarse_degree=3)
+    with pytest.raises(ParameterError, match=r"builds the engine's coarse space .*: drop --no-guard$"):
+        engine_capacity(None, FS, guard=False, coarse_degree=3)
+    assert engine_capacity(None, FS, coarse_degree=3).coarse_degree == 3
