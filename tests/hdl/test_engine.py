@@ -9,14 +9,14 @@ import warnings
 
 import numpy as np
 import pytest
-from amaranth.hdl import UnusedElaboratable, Value
+from amaranth.hdl import UnusedElaboratable
 from amaranth.sim import Simulator
 
 from golden_model.modes import mode_named
 from golden_model.engine_spec.image import run_image
 from hdl.engine import SpringflatEngine
 from support.engine_sim import (CAPACITY, FS, INIT, MESH, RUNS, PreloadableEngine, assert_same_run, image_of,
-                                load_directly, run_on_engine, simulate, start_answers)
+                                load_and_snapshot, load_directly, run_on_engine, simulate, start_answers)
 from support.wishbone import ThreadedBus, wishbone_read, wishbone_write
 from sim.engine_driver import BusError, EngineDriver
 
@@ -56,23 +56,8 @@ def test_a_preload_leaves_every_block_ram_as_the_bus_load_does():
     the block RAMs) against the bus: the same image loaded over Wishbone and preloaded leaves every word
     of every block RAM equal, the mesh's entries in nine banks and the barrier's triangle fields set."""
     image = image_of(RUNS["momentum-barrier"], init=INIT["momentum-barrier"])
-    contents = []
-    for over_the_bus in (True, False):
-        dut = PreloadableEngine(FS, CAPACITY, entry_bank_depth=8)
-
-        def snapshot(ctx):
-            contents.append({name: [ctx.get(Value.cast(ram.contents[i])) for i in range(ram.depth)]
-                             for name, ram in dut.memory_windows.rams.items()})
-
-        def host(driver, bus):
-            if over_the_bus:
-                driver.load(image)
-            else:
-                load_directly(driver, bus, dut, image)
-            bus.in_simulator(snapshot)
-
-        simulate(dut, host)
-    over_the_bus, preloaded = contents
+    over_the_bus, preloaded = (load_and_snapshot(PreloadableEngine(FS, CAPACITY, entry_bank_depth=8), image, bus_load)
+                               for bus_load in (True, False))
     assert len([name for name in over_the_bus if name.startswith("entries")]) == CAPACITY.entries // 8
     for name in ("positions", "weights", "triangles", "entries8"):  # 66 entries: 9 banks of 8 (a run starts at rest)
         assert any(over_the_bus[name]), name  # each kind of row written

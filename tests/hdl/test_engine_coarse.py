@@ -6,15 +6,15 @@ import dataclasses
 
 import numpy as np
 import pytest
-from amaranth.hdl import Value
 
 from golden_model.coarse import CoarseSchedule
 from golden_model.engine_spec.image import constant_fault, run_image
 from golden_model.fixed.format import SaturationCounter
 from golden_model.modes import mode_named
 from golden_model.params import FlattenParams
-from support.engine_sim import (CAPACITY, FS, PreloadableEngine, assert_same_run, image_of, load_directly,
-                                phase_spans, run_on_engine, simulate, start_answers)
+from support.engine_sim import (CAPACITY, FS, PreloadableEngine, abort_after, assert_same_run, image_of,
+                                load_and_snapshot, load_directly, phase_spans, run_on_engine, simulate,
+                                start_answers)
 
 # the whole engine on the Python simulator (seconds per iteration): every test but the last is marked slow
 
@@ -75,30 +75,16 @@ def test_the_coarse_windows_load_over_the_bus_and_start_checks_the_coarse_consta
     FEATURES.coarse reads the degree; START answers COARSE with an unguarded mode as ``constant_fault`` does
     (bad-constants), and runs it without."""
     image = image_of(RUN, COARSE)
-    contents, answers = [], {}
-    for over_the_bus in (True, False):
-        dut = PreloadableEngine(FS, COARSE)
+    answers = {}
 
-        def snapshot(ctx):
-            contents.append({name: [ctx.get(Value.cast(ram.contents[i])) for i in range(ram.depth)]
-                             for name, ram in dut.memory_windows.rams.items() if name in ("basis", "matrix")})
+    def start_checks(driver, bus):
+        answers["FEATURES.coarse"] = driver.read_value("feature_coarse")
+        unguarded = mode_named("momentum").code
+        for name, change in (("coarse unguarded", {"mode": unguarded}), ("unguarded", {"mode": unguarded, "coarse": 0})):
+            answers[name] = start_answers(driver, bus, image.constants, change)
 
-        def host(driver, bus):
-            if over_the_bus:
-                driver.load(image)
-            else:
-                load_directly(driver, bus, dut, image)
-            bus.in_simulator(snapshot)
-            if over_the_bus:
-                return
-            answers["FEATURES.coarse"] = driver.read_value("feature_coarse")
-            unguarded = mode_named("momentum").code
-            for name, change in (("coarse unguarded", {"mode": unguarded}),
-                                 ("unguarded", {"mode": unguarded, "coarse": 0})):
-                answers[name] = start_answers(driver, bus, image.constants, change)
-
-        simulate(dut, host)
-    over_the_bus, preloaded = contents
+    over_the_bus = load_and_snapshot(PreloadableEngine(FS, COARSE), image, True, ("basis", "matrix"))
+    preloaded = load_and_snapshot(PreloadableEngine(FS, COARSE), image, False, ("basis", "matrix"), start_checks)
     assert any(over_the_bus["basis"]) and any(over_the_bus["matrix"])
     assert preloaded == over_the_bus
     assert answers["FEATURES.coarse"] == 3
@@ -132,25 +118,17 @@ def test_abort_in_the_coarse_phase_drains_and_a_clean_rerun_matches():
     watch, spans, aborted_in, drained_at = phase_spans(dut, phases_of(COARSE))
     out = {}
 
-    def abort_after(driver, bus, clocks):
-        load_directly(driver, bus, dut, image, memories=("nodes",))
-        driver.start()
-        bus.idle(clocks)
-        driver.abort()
-        while driver.state() != "idle":  # (the drain waits for the coefficients under way; the next START follows)
-            bus.idle(50)
-
     def host(driver, bus):
         load_directly(driver, bus, dut, image)
         driver.start()
         driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
         name, begin, end = next(span for span in spans if span[0] == "coarse")
-        abort_after(driver, bus, begin)
+        abort_after(driver, bus, dut, image, begin)
         offset = drained_at[-1] - begin
         aborted_in.clear()
         out["targets"] = (begin + 6, (begin + end) // 2)  # the sums pass; the coefficients
         for clock in out["targets"]:
-            abort_after(driver, bus, clock - offset)
+            abort_after(driver, bus, dut, image, clock - offset)
         load_directly(driver, bus, dut, image, memories=("nodes",))
         driver.start()
         out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)

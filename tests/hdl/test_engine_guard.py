@@ -8,8 +8,8 @@ from amaranth.sim import Simulator
 from golden_model.engine_spec.image import run_image
 from golden_model.params import FlattenParams
 from sim.engine_driver import BusError, EngineDriver
-from support.engine_sim import (CAPACITY, FS, GUARDED, PreloadableEngine, assert_same_run, guarded_image, image_of,
-                                load_directly, phase_spans, run_on_engine, simulate)
+from support.engine_sim import (CAPACITY, FS, GUARDED, PreloadableEngine, abort_after, assert_same_run, guarded_image,
+                                image_of, load_directly, phase_spans, run_on_engine, simulate)
 from support.wishbone import ThreadedBus, wishbone_write
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
@@ -46,13 +46,6 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
     watch, spans, aborted_in, drained_at = phase_spans(dut, PHASES)  # spans: [phase, first clock, last clock]
     out = {}
 
-    def abort_after(driver, bus, clocks):
-        load_directly(driver, bus, dut, image, memories=("nodes",))
-        driver.start()
-        bus.idle(clocks)
-        driver.abort()
-        bus.idle(300)
-
     def host(driver, bus):
         load_directly(driver, bus, dut, image)
         driver.start()
@@ -64,11 +57,11 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
         assert set(first_span) == set(guard_phases), spans
         out["first_span"] = first_span
         # the clocks from START's write to the run's first clock, calibrated by a first abort
-        abort_after(driver, bus, first_span["decide"])
+        abort_after(driver, bus, dut, image, first_span["decide"])
         offset = drained_at[-1] - first_span["decide"]
         aborted_in.clear()
         for clock in first_span.values():
-            abort_after(driver, bus, clock - offset)
+            abort_after(driver, bus, dut, image, clock - offset)
         load_directly(driver, bus, dut, image, memories=("nodes",))
         driver.start()
         out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)

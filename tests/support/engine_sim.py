@@ -221,3 +221,37 @@ def phase_spans(dut, phases):
             last = now
 
     return watch, spans, aborted_in, drained_at
+
+
+def abort_after(driver, bus, dut, image, clocks: int) -> None:
+    """Reload ``image``'s node memory (a run writes no other), START, ABORT ``clocks`` bus clocks later, and wait
+    for the drain (STATUS idle): the next START may follow at once."""
+    load_directly(driver, bus, dut, image, memories=("nodes",))
+    driver.start()
+    bus.idle(clocks)
+    driver.abort()
+    while driver.state() != "idle":
+        bus.idle(50)
+
+
+def load_and_snapshot(dut, image, over_the_bus: bool, rams=None, then=None) -> dict:
+    """``image`` loaded into ``dut`` (a :class:`PreloadableEngine`) over the bus or preloaded, then every word of its
+    block RAMs (those named in ``rams``, default all) read from the simulator: ``{block RAM: [words]}``. ``then``
+    (``(driver, bus)``), if given, runs after the snapshot, in the same simulation."""
+    contents = {}
+
+    def snapshot(ctx):
+        contents.update({name: [ctx.get(Value.cast(ram.contents[i])) for i in range(ram.depth)]
+                         for name, ram in dut.memory_windows.rams.items() if rams is None or name in rams})
+
+    def host(driver, bus):
+        if over_the_bus:
+            driver.load(image)
+        else:
+            load_directly(driver, bus, dut, image)
+        bus.in_simulator(snapshot)
+        if then is not None:
+            then(driver, bus)
+
+    simulate(dut, host)
+    return contents
