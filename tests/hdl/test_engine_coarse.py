@@ -12,7 +12,7 @@ from golden_model.engine_spec.image import constant_fault, run_image
 from golden_model.fixed.format import SaturationCounter
 from golden_model.modes import mode_named
 from golden_model.params import FlattenParams
-from support.engine_sim import (CAPACITY, FS, PreloadableEngine, abort_after, assert_same_run, image_of,
+from support.engine_sim import (CAPACITY, FS, PreloadableEngine, aborts_then_a_whole_run, assert_same_run, image_of,
                                 load_and_snapshot, load_directly, phase_spans, run_on_engine, simulate,
                                 start_answers)
 
@@ -123,16 +123,9 @@ def test_abort_in_the_coarse_phase_drains_and_a_clean_rerun_matches():
         driver.start()
         driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
         name, begin, end = next(span for span in spans if span[0] == "coarse")
-        abort_after(driver, bus, dut, image, begin)
-        offset = drained_at[-1] - begin
-        aborted_in.clear()
         out["targets"] = (begin + 6, (begin + end) // 2)  # the sums pass; the coefficients
-        for clock in out["targets"]:
-            abort_after(driver, bus, dut, image, clock - offset)
-        load_directly(driver, bus, dut, image, memories=("nodes",))
-        driver.start()
-        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
-        out["read_back"] = driver.read_back()
+        out["read_back"] = aborts_then_a_whole_run(driver, bus, dut, image, drained_at, aborted_in, begin,
+                                                   out["targets"])
 
     simulate(dut, host, {"watcher": watch})
     assert aborted_in == ["coarse", "coarse"], (aborted_in, out["targets"])

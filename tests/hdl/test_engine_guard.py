@@ -8,8 +8,8 @@ from amaranth.sim import Simulator
 from golden_model.engine_spec.image import run_image
 from golden_model.params import FlattenParams
 from sim.engine_driver import BusError, EngineDriver
-from support.engine_sim import (CAPACITY, FS, GUARDED, PreloadableEngine, abort_after, assert_same_run, guarded_image,
-                                image_of, load_directly, phase_spans, run_on_engine, simulate)
+from support.engine_sim import (CAPACITY, FS, GUARDED, PreloadableEngine, aborts_then_a_whole_run, assert_same_run,
+                                guarded_image, image_of, load_directly, phase_spans, run_on_engine, simulate)
 from support.wishbone import ThreadedBus, wishbone_write
 
 pytestmark = pytest.mark.slow  # the whole engine on the Python simulator: seconds per iteration
@@ -56,16 +56,8 @@ def test_guarded_runs_aborted_in_every_pass_then_a_clean_rerun():
                 first_span[name] = (begin + end) // 2
         assert set(first_span) == set(guard_phases), spans
         out["first_span"] = first_span
-        # the clocks from START's write to the run's first clock, calibrated by a first abort
-        abort_after(driver, bus, dut, image, first_span["decide"])
-        offset = drained_at[-1] - first_span["decide"]
-        aborted_in.clear()
-        for clock in first_span.values():
-            abort_after(driver, bus, dut, image, clock - offset)
-        load_directly(driver, bus, dut, image, memories=("nodes",))
-        driver.start()
-        out["result"] = driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
-        out["read_back"] = driver.read_back()
+        out["read_back"] = aborts_then_a_whole_run(driver, bus, dut, image, drained_at, aborted_in,
+                                                   first_span["decide"], first_span.values())
 
     simulate(dut, host, {"watcher": watch})
     assert set(aborted_in) == set(guard_phases), (aborted_in, out["first_span"])

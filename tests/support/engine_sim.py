@@ -255,3 +255,19 @@ def load_and_snapshot(dut, image, over_the_bus: bool, rams=None, then=None) -> d
 
     simulate(dut, host)
     return contents
+
+
+def aborts_then_a_whole_run(driver, bus, dut, image, drained_at: list, aborted_in: list, calibrate_at: int,
+                            targets) -> object:
+    """ABORT at the run's clock ``calibrate_at`` (as :func:`phase_spans` counts it; the lag from the bus's START to
+    the run's first clock measured by that first abort, whose drain is then forgotten), then at each clock of
+    ``targets``, each run from the reloaded node memory; then a whole run: its read-back."""
+    abort_after(driver, bus, dut, image, calibrate_at)
+    offset = drained_at[-1] - calibrate_at
+    aborted_in.clear()
+    for clock in targets:
+        abort_after(driver, bus, dut, image, clock - offset)
+    load_directly(driver, bus, dut, image, memories=("nodes",))
+    driver.start()
+    driver.wait(poll=lambda: bus.idle(100), max_polls=5000)
+    return driver.read_back()
