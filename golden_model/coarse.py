@@ -34,7 +34,8 @@ __all__ = ["RECOMMENDED_COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", 
            "coarse_move", "CoarseSchedule"]
 
 #: The degree that meets issue 25's 120-iteration bound on the generated patches (``docs/guard.md``); the
-#: default is none (0) while ``SpringflatEngine`` does not take the coarse space.
+#: default is none (0): the engine built with it does not meet its clock yet, and it stalls on a developable
+#: strip without the barrier (``docs/guard.md``).
 RECOMMENDED_COARSE_DEGREE = 3
 #: The largest degree accepted: 15 functions; degree 4 measured no faster than 3.
 COARSE_DEGREE_MAX = 4
