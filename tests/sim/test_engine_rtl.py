@@ -27,7 +27,8 @@ from sim.top_names import ENGINE_MODULE
 from golden_model.engine_spec.image import UNGUARDED
 from support import SPRINGFLAT, BenchCalled, need_simulator, record_bench_configs
 
-pytestmark = pytest.mark.slow  # simulator builds (Verilator: minutes, cached)
+pytestmark = [pytest.mark.slow,  # simulator builds (Verilator: minutes, cached)
+              pytest.mark.usefixtures("refused_garbage_collected")]
 
 DEFAULT = FormatSet.preset("default")
 CAPACITY = EngineCapacity(64, 512, 128)
