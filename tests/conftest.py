@@ -27,17 +27,6 @@ def unelaborated():
         yield
 
 
-@pytest.fixture
-def refused_garbage_collected():
-    """After the test, the components it left in reference cycles collected, their "created but never used"
-    ignored: a refusal's exception traceback keeps the half-built component (``__init__``'s frame) alive until the
-    garbage collector runs, wherever that is, and Amaranth then reports it in whichever test is running. A
-    component the test itself drops unused is still reported there."""
-    yield
-    with refused_components():
-        pass
-
-
 def pytest_configure(config) -> None:
     """Ctrl-C answered as in a terminal, for the tests that send one to a command run in-process: a shell without
     job control (a script's ``make test &``) starts its background jobs with SIGINT ignored, and a command leaves

@@ -18,8 +18,6 @@ from support.engine_sim import (CAPACITY, FS, PreloadableEngine, aborts_then_a_w
 
 # the whole engine on the Python simulator (seconds per iteration): every test but the last is marked slow
 
-pytestmark = pytest.mark.usefixtures("refused_garbage_collected")
-
 COARSE = dataclasses.replace(CAPACITY, coarse_degree=3)
 RUN = FlattenParams(dynamics="momentum", coarse_degree=3, max_iter=12)
 

@@ -27,8 +27,7 @@ from sim.top_names import ENGINE_MODULE
 from golden_model.engine_spec.image import UNGUARDED
 from support import SPRINGFLAT, BenchCalled, need_simulator, record_bench_configs
 
-pytestmark = [pytest.mark.slow,  # simulator builds (Verilator: minutes, cached)
-              pytest.mark.usefixtures("refused_garbage_collected")]
+pytestmark = pytest.mark.slow  # simulator builds (Verilator: minutes, cached)
 
 DEFAULT = FormatSet.preset("default")
 CAPACITY = EngineCapacity(64, 512, 128)
