@@ -72,11 +72,15 @@ class CoarseCoefficients(wiring.Component):
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle, ``o.valid`` and ``o.payload`` are registers. :attr:`cycles`
-    clock edges from the input transfer to the output transfer when ``o.ready`` is high: one for ``e_g``,
-    ``2m`` for ``g'``, ``m²`` products of ``MATRIX_BITS + 1 + read_latency`` clocks each (the read, the operands' load and a
-    shift-add step per bit of ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums
-    to land, one for ``e_c``, ``2m`` for ``c``, one for the shift and one for the output transfer (2,645 at
-    degree 3). No multiplier blocks: two adders as wide as the products.
+    clock edges from the input transfer to the output transfer when ``o.ready`` is high: ``2m + 2`` for ``e_g``
+    (the magnitudes' OR a value a clock, its bit length, the exponent), ``2m + 1`` for ``g'`` (a shift a clock,
+    each rounded a clock later), ``m²`` products of ``MATRIX_BITS + 2 + read_latency`` clocks each (the read,
+    the entry taken into a register, the operands' load with the entry's sign, and a shift-add step per bit of
+    ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums to land, ``2m + 2`` for
+    ``e_c``, ``2m + 1`` for ``c``, one for the shift and one for the output transfer (2,789 at degree 3). No
+    multiplier blocks: two adders as wide as the products. Each clock's logic is one of: a magnitude and an OR,
+    a priority encoder, a subtraction, a variable shift, a rounding add, a negation, an add: the unit places
+    at the engine's clock (``benchmarks/synth_coarse_units.py``).
     """
 
     def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int, *, read_latency: int = 1):
@@ -88,7 +92,8 @@ class CoarseCoefficients(wiring.Component):
         self.m = m = len(basis_exponents(degree))
         #: Bits of an exact ``a_kd`` (signed): ``|M| < 2^MATRIX_BITS``, ``|g'| ≤ 2^(SUM_BITS − 2)``, m terms.
         self.product_bits = MATRIX_BITS + mantissa_magnitude_bits(SUM_BITS) + (m - 1).bit_length() + 1
-        self.cycles = 1 + 2 * m + m * m * (MATRIX_BITS + 1 + read_latency) + 1 + 1 + 2 * m + 1 + 1
+        self.cycles = (2 * m + 2) + (2 * m + 1) + m * m * (MATRIX_BITS + 2 + read_latency) + 1 \
+            + (2 * m + 2) + (2 * m + 1) + 1 + 1
         vector = lambda bits: data.StructLayout({"x": signed(bits), "y": signed(bits)})  # noqa: E731
         super().__init__({
             "i": In(stream.Signature(data.StructLayout({"sums": data.ArrayLayout(vector(sum_bits(max_nodes)), m)}))),
@@ -108,74 +113,95 @@ class CoarseCoefficients(wiring.Component):
         sums = [Signal(signed(width), name=f"g{j}", reset_less=True) for j in range(count)]
         g = [Signal(signed(SUM_BITS), name=f"g_mantissa{j}", reset_less=True) for j in range(count)]
         a = [Signal(signed(self.product_bits), name=f"a{j}", reset_less=True) for j in range(count)]
+        # an exponent in three steps: the OR of the magnitudes a value a clock, its bit length, the exponent
+        magnitude = Signal(max(width, self.product_bits), name="magnitude", reset_less=True)
+        length = Signal(range(len(magnitude) + 1), name="length", reset_less=True)
         e_g = Signal(range(width + 1), name="sum_exponent", reset_less=True)
         e_c = Signal(range(self.product_bits + 1), name="c_exponent", reset_less=True)
-        index = Signal(range(count + 1), name="index", reset_less=True)
+        # a mantissa in two steps: the shift (``t``, the half-lsb in bit 0), then the rounding add
+        shifted = Signal(signed(max(width, self.product_bits) + 1), name="shifted", reset_less=True)
+        index = Signal(range(count + 2), name="index", reset_less=True)
         row, column = Signal(range(m), name="row", reset_less=True), Signal(range(m), name="column", reset_less=True)
         steps = Signal(range(MATRIX_BITS + 1), name="steps", reset_less=True)
         multiplier = Signal(MATRIX_BITS, name="multiplier", reset_less=True)  # |M_kj|
-        negative = Signal(name="negative", reset_less=True)
+        entry = Signal(signed(SUM_BITS), name="entry", reset_less=True)  # M_kj, as read
+        # ±g_j: the entry's sign taken at the operand, so that a step is one add
         multiplicand = {d: Signal(signed(self.product_bits), name=f"multiplicand_{d}", reset_less=True) for d in "xy"}
         accumulator = {d: Signal(signed(self.product_bits), name=f"accumulator_{d}", reset_less=True) for d in "xy"}
         coefficients = [self.o.payload.coefficients[k][d] for k in range(m) for d in "xy"]
 
-        names = ("idle", "sum_exponent", "sum_mantissas", "read", "load", "step", "last_row", "c_exponent",
-                 "c_mantissas", "shift", "done")
+        names = ("idle", "sum_magnitude", "sum_length", "sum_exponent", "sum_mantissas", "read", "take", "load",
+                 "step", "last_row", "c_magnitude", "c_length", "c_exponent", "c_mantissas", "shift", "done")
         state = {name: Signal(name=f"in_{name}", init=(name == "idle")) for name in names}
 
-        def goto(name):
-            return [flag.eq(n == name) for n, flag in state.items()]
-
-        def exponent(values, bits, keep):
-            """``max(0, bitlen(OR of |v|) − keep)`` of ``values`` (signed, less than ``bits`` wide)."""
-            magnitude = 0
-            for v in values:
-                magnitude = magnitude | Mux(v < 0, -v, v).as_unsigned()
-            length = _bit_length(magnitude, bits)
-            return Mux(length > keep, length - keep, 0)
-
-        def mantissa(value, shift):
-            """``value >> shift`` rounded half up (``shift`` ≥ 0)."""
-            t, sticky = variable_shift(value, shift, "half_up")
-            return round_half_bit(t, "half_up", sticky)
+        def goto(current, name):
+            """One-hot: ``current``'s flag falls, ``name``'s rises (each flag's next value a few terms, not a
+            chain through every state's condition)."""
+            return [state[current].eq(0), state[name].eq(1)]
 
         def rotate(values, new):
             """Each value takes the next one's, the last takes ``new``."""
             return [v.eq(n) for v, n in zip(values, [*values[1:], new])]
 
+        def exponent_steps(values, prefix, exponent, keep, then):
+            """``exponent = max(0, bitlen(OR of |v|) − keep)`` of ``values`` (which rotate back to their order):
+            ``count`` clocks of magnitudes, one of the bit length, one of the exponent."""
+            with mod.If(state[f"{prefix}_magnitude"]):
+                v = values[0]
+                mod.d.sync += [*rotate(values, v), magnitude.eq(magnitude | Mux(v < 0, -v, v).as_unsigned()),
+                               index.eq(index + 1)]
+                with mod.If(index == count - 1):
+                    mod.d.sync += goto(f"{prefix}_magnitude", f"{prefix}_length")
+            with mod.If(state[f"{prefix}_length"]):
+                mod.d.sync += [length.eq(_bit_length(magnitude, len(magnitude))), *goto(f"{prefix}_length", f"{prefix}_exponent")]
+            with mod.If(state[f"{prefix}_exponent"]):
+                mod.d.sync += [exponent.eq(Mux(length > keep, length - keep, 0)), index.eq(0), *goto(f"{prefix}_exponent", then)]
+
+        def mantissa_steps(current, values, exponent, results, bits, then):
+            """``results``: each of ``values`` shifted right by ``exponent``, rounded half up (``bits`` of it),
+            ``count + 1`` clocks: the shift of ``values[0]`` (rotating) into ``shifted``, its rounding a clock
+            later."""
+            with mod.If(index < count):
+                mod.d.sync += [*rotate(values, values[0]), shifted.eq(variable_shift(values[0], exponent, "half_up")[0])]
+            with mod.If(index != 0):
+                mod.d.sync += rotate(results, round_half_bit(shifted, "half_up")[:bits].as_signed())
+            mod.d.sync += index.eq(index + 1)
+            with mod.If(index == count):
+                mod.d.sync += goto(current, then)
+
         mod.d.comb += [self.i.ready.eq(state["idle"]), self.matrix_addr.eq(row * m + column)]
         with mod.If(state["idle"] & self.i.valid):
             mod.d.sync += [v.eq(self.i.payload.sums[k][d]) for v, (k, d) in zip(sums, ((k, d) for k in range(m)
                                                                                        for d in "xy"))]
-            mod.d.sync += goto("sum_exponent")
-        with mod.If(state["sum_exponent"]):
-            mod.d.sync += [e_g.eq(exponent(sums, width + 1, mantissa_magnitude_bits(SUM_BITS))), index.eq(0), *goto("sum_mantissas")]
-        with mod.If(state["sum_mantissas"]):  # g' of sums[0], shifted into g; sums rotate
-            mod.d.sync += [*rotate(sums, sums[0]), *rotate(g, mantissa(sums[0], e_g)), index.eq(index + 1)]
-            with mod.If(index == count - 1):
-                mod.d.sync += [row.eq(0), column.eq(0), *(accumulator[d].eq(0) for d in "xy"), *goto("read")]
-        if self.read_latency == 1:
-            with mod.If(state["read"]):  # matrix_addr is presented; its entry arrives at the next clock
-                mod.d.sync += goto("load")
-        else:  # matrix_addr is presented; its entry arrives read_latency clocks later
-            waited = Signal(range(self.read_latency), name="read_waited", reset_less=True)
-            with mod.If(state["read"]):
+            mod.d.sync += [magnitude.eq(0), index.eq(0), *goto("idle", "sum_magnitude")]
+        exponent_steps(sums, "sum", e_g, mantissa_magnitude_bits(SUM_BITS), "sum_mantissas")
+        with mod.If(state["sum_mantissas"]):  # g' of the sums, shifted into g
+            mantissa_steps("sum_mantissas", sums, e_g, g, SUM_BITS, "read")
+            with mod.If(index == count):
+                mod.d.sync += [row.eq(0), column.eq(0), *(accumulator[d].eq(0) for d in "xy")]
+        waited = Signal(range(self.read_latency), name="read_waited", reset_less=True)
+        with mod.If(state["read"]):  # matrix_addr is presented; its entry arrives read_latency clocks later
+            if self.read_latency == 1:
+                mod.d.sync += goto("read", "take")
+            else:
                 mod.d.sync += waited.eq(waited + 1)
                 with mod.If(waited == self.read_latency - 1):
-                    mod.d.sync += [waited.eq(0), *goto("load")]
-            with mod.If(state["idle"]):
-                mod.d.sync += waited.eq(0)
+                    mod.d.sync += [waited.eq(0), *goto("read", "take")]
+        with mod.If(state["idle"]):
+            mod.d.sync += waited.eq(0)
+        with mod.If(state["take"]):  # the entry into a register of its own, off the memory's output
+            mod.d.sync += [entry.eq(self.matrix_data), *goto("take", "load")]
         with mod.If(state["load"]):  # g[0], g[1]: column j's x and y (g rotates by two a product)
-            entry = self.matrix_data
-            mod.d.sync += [multiplier.eq(Mux(entry < 0, -entry, entry)), negative.eq(entry < 0),
-                           multiplicand["x"].eq(g[0]), multiplicand["y"].eq(g[1]),
+            negative = entry < 0
+            mod.d.sync += [multiplier.eq(Mux(negative, -entry, entry)),
+                           multiplicand["x"].eq(Mux(negative, -g[0], g[0])),
+                           multiplicand["y"].eq(Mux(negative, -g[1], g[1])),
                            *(v.eq(n) for v, n in zip(g, [*g[2:], g[0], g[1]])),
-                           steps.eq(MATRIX_BITS), *goto("step")]
+                           steps.eq(MATRIX_BITS), *goto("load", "step")]
         with mod.If(state["step"]):
             for d in "xy":
-                term = Mux(negative, -multiplicand[d], multiplicand[d])
                 with mod.If(multiplier[0]):
-                    mod.d.sync += accumulator[d].eq(accumulator[d] + term)
+                    mod.d.sync += accumulator[d].eq(accumulator[d] + multiplicand[d])
                 mod.d.sync += multiplicand[d].eq(multiplicand[d] << 1)
             mod.d.sync += [multiplier.eq(multiplier >> 1), steps.eq(steps - 1)]
             with mod.If(steps == 1):
@@ -183,31 +209,26 @@ class CoarseCoefficients(wiring.Component):
                     # the row's last product: its sums are complete a clock later, when the next read starts
                     mod.d.sync += column.eq(0)
                     with mod.If(row == m - 1):
-                        mod.d.sync += goto("last_row")
+                        mod.d.sync += goto("step", "last_row")
                     with mod.Else():
-                        mod.d.sync += [row.eq(row + 1), *goto("read")]
+                        mod.d.sync += [row.eq(row + 1), *goto("step", "read")]
                 with mod.Else():
-                    mod.d.sync += [column.eq(column + 1), *goto("read")]
+                    mod.d.sync += [column.eq(column + 1), *goto("step", "read")]
         row_done = Signal(name="row_done")
         mod.d.sync += row_done.eq(state["step"] & (steps == 1) & (column == m - 1))
         with mod.If(row_done):  # the row's two sums, complete now, shifted into a; the accumulators start again
             mod.d.sync += [*(v.eq(n) for v, n in zip(a, [*a[2:], accumulator["x"], accumulator["y"]])),
                            accumulator["x"].eq(0), accumulator["y"].eq(0)]
         with mod.If(state["last_row"]):  # the last row's sums land in a at this clock's end
-            mod.d.sync += goto("c_exponent")
-        with mod.If(state["c_exponent"]):
-            mod.d.sync += [e_c.eq(exponent(a, self.product_bits + 1, mantissa_magnitude_bits(OPERAND_BITS))),
-                           index.eq(0), *goto("c_mantissas")]
-        with mod.If(state["c_mantissas"]):  # c of a[0], shifted into the output; a rotates
-            mod.d.sync += [*rotate(a, a[0]),
-                           *rotate(coefficients, mantissa(a[0], e_c)[:OPERAND_BITS].as_signed()), index.eq(index + 1)]
-            with mod.If(index == count - 1):
-                mod.d.sync += goto("shift")
+            mod.d.sync += [magnitude.eq(0), index.eq(0), *goto("last_row", "c_magnitude")]
+        exponent_steps(a, "c", e_c, mantissa_magnitude_bits(OPERAND_BITS), "c_mantissas")
+        with mod.If(state["c_mantissas"]):  # c of a, shifted into the output
+            mantissa_steps("c_mantissas", a, e_c, coefficients, OPERAND_BITS, "shift")
         with mod.If(state["shift"]):
             shift = move_frac_base(fs) - fs.accel.frac_bits + self.matrix_exponent - e_g - e_c
             low, high = move_shift_range(fs)
             mod.d.sync += [self.o.payload.move_shift.eq(Mux(shift < low, low, Mux(shift > high, high, shift))),
-                           self.o.valid.eq(1), *goto("done")]
+                           self.o.valid.eq(1), *goto("shift", "done")]
         with mod.If(state["done"] & self.o.ready):
-            mod.d.sync += [self.o.valid.eq(0), *goto("idle")]
+            mod.d.sync += [self.o.valid.eq(0), *goto("done", "idle")]
         return mod

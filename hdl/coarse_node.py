@@ -135,8 +135,16 @@ def _build(m: Module, unit: CoarseNode, ports, platform) -> int:
     pipe = Pipeline(m, ports.i.valid, platform=platform)
     node = ports.i.payload
     moves = Signal(name="moves_held")  # the pass's kind, registered (it changes only between passes)
-    shift = Signal(move_shift_shape(fs), name="move_shift_held")
-    m.d.sync += [moves.eq(ports.moves), shift.eq(ports.move_shift)]
+    # the move's shift as the shifters take it, registered from the port (it changes only between passes): the
+    # right amount, or the left one negated, so that no negation sits before a shifter
+    amount_bits = fs.accel.width.bit_length()
+    left_shift = Signal(name="move_left_shift")
+    right_amount = Signal(len(ports.move_shift), name="move_right_amount")
+    left_amount = Signal(amount_bits, name="move_left_amount")
+    negative = ports.move_shift.as_signed() < 0
+    m.d.sync += [moves.eq(ports.moves), left_shift.eq(negative),
+                 right_amount.eq(Mux(negative, 0, ports.move_shift.as_unsigned())),
+                 left_amount.eq(Mux(negative, (-ports.move_shift.as_signed())[:amount_bits], 0))]
     # C1: the inputs, and the forces rounded to the sums' 18 bits (their saturation flags with them)
     narrow = narrow_force_format(fs)
     narrowed = {d: requantize(node.force[d], fs.force_acc.frac_bits, narrow, "half_up") for d in "xy"}
@@ -148,8 +156,10 @@ def _build(m: Module, unit: CoarseNode, ports, platform) -> int:
         basis = {"u": node.uv.x, "v": node.uv.y}
     live.step(pipe, "c1", **basis, **{f"f_{d}": narrowed[d][0] for d in "xy"},
               force_events=narrowed["x"][1] + narrowed["y"][1])
-    # the basis, a degree at a time: each monomial from one of a degree lower times u (or v), rounded half up
-    for level in range(2, unit.degree + 1 if not unit.basis_input else 2):
+    # the basis, a degree at a time (unless it comes in): each monomial from one of a degree lower times u (or v),
+    # rounded half up
+    levels = () if unit.basis_input else range(2, unit.degree + 1)
+    for level in levels:
         wanted = [(a, b) for a, b in exponents if a + b == level]
         products = {f"p{a}{b}": (live[phi[(a - 1, b) if a else (a, b - 1)]], live["u" if a else "v"])
                     for a, b in wanted}
@@ -193,10 +203,9 @@ def _build(m: Module, unit: CoarseNode, ports, platform) -> int:
                 names[d].append(name)
         live.step(pipe, f"move_sum{level}", drop=tuple(terms["x"] + terms["y"]), **new)
         terms = names
-    amount_bits = fs.accel.width.bit_length()
-    right = {d: variable_shift(live[terms[d][0]], Mux(shift[-1], 0, shift.as_unsigned()), fs.rounding) for d in "xy"}
-    left = {d: live[terms[d][0]] << Mux(shift[-1], (-shift)[:amount_bits], 0) for d in "xy"}
-    live.step(pipe, "move_shift", drop=tuple(terms["x"] + terms["y"]), left_shift=shift[-1],
+    right = {d: variable_shift(live[terms[d][0]], right_amount, fs.rounding) for d in "xy"}
+    left = {d: live[terms[d][0]] << left_amount for d in "xy"}
+    live.step(pipe, "move_shift", drop=tuple(terms["x"] + terms["y"]), left_shift=left_shift,
               **{f"t_{d}": right[d][0] for d in "xy"}, **{f"sticky_{d}": right[d][1] for d in "xy"},
               **{f"l_{d}": left[d] for d in "xy"})
     live.step(pipe, "move_round", drop=tuple(f"{n}_{d}" for n in ("t", "sticky", "l") for d in "xy") + ("left_shift",),

@@ -25,7 +25,7 @@ the synthesis report of the bare core does not include.
 """
 
 
-from amaranth.hdl import Cat, Module, Signal, Value
+from amaranth.hdl import Cat, Const, Module, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -52,8 +52,8 @@ class SerialWrapper(wiring.Component):
         self.core = core
         self._inputs, self._outputs = [], []
         for path, member, value in core.signature.flatten(core):
-            if not member.is_port:
-                continue
+            if not member.is_port or (member.flow == In and isinstance(value, Const)):
+                continue  # a constant input (an always-ready stream's ready) is the core's own
             (self._inputs if member.flow == In else self._outputs).append(value)
         self.in_width = sum(len(Value.cast(v)) for v in self._inputs)
         self.out_width = sum(len(Value.cast(v)) for v in self._outputs)
