@@ -4,11 +4,14 @@ test's run settings (no stop rule: exactly ``--max-iter`` iterations), for each 
 barrier.
 
 Usage: .venv/bin/python benchmarks/coarse_strip_stall.py [--max-iter 1000] [--degrees 0 1 2 3] [--n 12]
+       [--without-clip-handover]
 
 Prints a row per run: the final E_C and energy, the iteration at which E_C first falls below 1e-4, the guard's
 rolled-back steps and its clipped and frozen node steps, the final step scale, and the smallest triangle's area
 as a fraction of its 3D area. Then the stop rule's ending (the default's ``tol_energy``, ``energy_window``) of
-each degree without the barrier. ``docs/guard.md`` holds its output (under ten seconds).
+each run. ``--without-clip-handover`` runs the coarse schedule without its hand-over after a step clipped deep
+(``golden_model.coarse.CLIP_HANDOVER_LEVEL``), as it was when the strip stalled. ``docs/guard.md`` holds its
+output (under ten seconds).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import sys
 
 import numpy as np
 
+from golden_model.coarse import CoarseSchedule
 from golden_model.params import FlattenParams
 from golden_model.reference import flatten, signed_areas_2d
 from sim.generate import rolled_grid
@@ -41,7 +45,12 @@ def main() -> int:
     parser.add_argument("--max-iter", type=int, default=1000)
     parser.add_argument("--degrees", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--n", type=int, default=12, help="the strip's grid (n × n)")
+    parser.add_argument("--without-clip-handover", action="store_true",
+                        help="the schedule's hand-over only after a rolled-back step")
     args = parser.parse_args()
+    if args.without_clip_handover:
+        accepted = CoarseSchedule.accepted
+        CoarseSchedule.accepted = lambda schedule, clipped=False: accepted(schedule, False)
     mesh = rolled_grid(args.n, args.n, arc_degrees=180)[0]
     p0 = initial_layout(mesh, "tutte")
     print("| degree | barrier | E_C | energy | E_C < 1e-4 at | rolled back | clipped | frozen | scale | smallest area / 3D |")
@@ -56,12 +65,13 @@ def main() -> int:
                   f"{result.final.energy:.2g} | {first_below(result.history.shape_error, REACHED) or '–'} | "
                   f"{guard['rejected_steps']} | {guard['clipped_node_steps']} | {guard['frozen_node_steps']} | "
                   f"{guard['step_scale']:.2g} | {ratio.min():.2g} |", flush=True)
-    print("\nUnder the default stop rule, without the barrier:")
-    for degree in args.degrees:
-        result = flatten(mesh, p0, FlattenParams(dynamics="momentum", barrier=False, coarse_degree=degree,
-                                                 max_iter=args.max_iter))
-        print(f"  degree {degree}: {result.status} at iteration {result.iterations}, "
-              f"E_C {result.final.shape_error:.2g}", flush=True)
+    print("\nUnder the default stop rule:")
+    for barrier in (False, True):
+        for degree in args.degrees:
+            result = flatten(mesh, p0, FlattenParams(dynamics="momentum", barrier=barrier, coarse_degree=degree,
+                                                     max_iter=args.max_iter))
+            print(f"  barrier {'on' if barrier else 'off'}, degree {degree}: {result.status} at iteration "
+                  f"{result.iterations}, E_C {result.final.shape_error:.2g}", flush=True)
     return 0
 
 

@@ -3,7 +3,7 @@
 engine's hour.
 
 Usage: .venv/bin/python benchmarks/synth_coarse_units.py [--units coarse_coefficients,coarse_node,coarse_passes]
-       [--degree 3] [--freq 125] [--seed 1] [--out build/synth-coarse-units]
+       [--degree 3] [--freq 125] [--seed 1] [--router auto] [--out build/synth-coarse-units]
 
 Each unit goes through the serial I/O wrapper (``hdl.io_wrapper.SerialWrapper``: every path to and from its
 ports register to register), Yosys ``synth_ecp5`` and nextpnr for the ECP5-85F, as ``springflat synth`` does
@@ -31,7 +31,7 @@ from pathlib import Path
 from golden_model.engine_spec.image import DEFAULT_CAPACITY, EngineCapacity
 from golden_model.fixed import FormatSet
 from sim.clock import ENGINE_TARGET_MHZ, write_clock_constraints
-from sim.synth import TARGETS, TOOL, error_line, nextpnr_argv, parse_nextpnr_log, run_tool, tool_file
+from sim.synth import DEFAULT_ROUTER, ROUTERS, TARGETS, TOOL, error_line, nextpnr_argv, parse_nextpnr_log, run_tool, tool_file
 
 
 def build(unit: str, fs: FormatSet, capacity: EngineCapacity):
@@ -51,7 +51,8 @@ def build(unit: str, fs: FormatSet, capacity: EngineCapacity):
 UNITS = ("coarse_coefficients", "coarse_node", "coarse_passes")
 
 
-def place_and_route(unit: str, fs: FormatSet, capacity: EngineCapacity, freq: float, seed: int, out: Path) -> dict:
+def place_and_route(unit: str, fs: FormatSet, capacity: EngineCapacity, freq: float, seed: int, router: str,
+                    out: Path) -> dict:
     """Yosys and nextpnr on ``unit`` inside the serial wrapper; its resources, Fmax and critical path."""
     from hdl.dsp import DspPlatform
     from hdl.io_wrapper import SerialWrapper
@@ -70,7 +71,7 @@ def place_and_route(unit: str, fs: FormatSet, capacity: EngineCapacity, freq: fl
     status, log = run_tool(TOOL["yosys"], ["-s", files["ys"]], out, files["yosys.log"])
     if status != 0:
         raise SystemExit(f"yosys failed on {unit}: {error_line(log)}")
-    status, text = run_tool(target.nextpnr, nextpnr_argv(target, top, freq, "auto", seed), out,
+    status, text = run_tool(target.nextpnr, nextpnr_argv(target, top, freq, router, seed), out,
                             files["nextpnr.stdout"])
     log_file = out / files["nextpnr.log"]
     log = log_file.read_text() if log_file.exists() else text
@@ -90,6 +91,8 @@ def main() -> int:
     parser.add_argument("--degree", type=int, default=3)
     parser.add_argument("--freq", type=float, default=ENGINE_TARGET_MHZ)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--router", choices=sorted(ROUTERS), default=DEFAULT_ROUTER,
+                        help="nextpnr's router (router2 finishes where the timing-driven router1 keeps ripping up)")
     parser.add_argument("--out", type=Path, default=Path("build/synth-coarse-units"))
     args = parser.parse_args()
     units = args.units.split(",")
@@ -103,7 +106,7 @@ def main() -> int:
     for unit in units:
         print(f"{unit}: yosys and nextpnr at {args.freq:g} MHz ...", file=sys.stderr, flush=True)
         print(json.dumps(place_and_route(unit, FormatSet.preset("default"), capacity, args.freq, args.seed,
-                                         args.out)), flush=True)
+                                         args.router, args.out)), flush=True)
     return 0
 
 

@@ -16,7 +16,10 @@ guarantees hold for any proposal.
 Near the area floor the guard clips the global move node by node, and the clipped move can stop being
 a descent direction, as a Laplacian-preconditioned one does. So a rolled-back plain gradient step taken
 with the coarse move does not halve the step scale but takes the Jacobi step alone for
-:data:`JACOBI_STEPS_AFTER_REJECTION` accepted steps (:class:`CoarseSchedule`).
+:data:`JACOBI_STEPS_AFTER_REJECTION` accepted steps (:class:`CoarseSchedule`). So does an accepted step taken
+with it in which the guard shortened a node's move to ``2^-CLIP_HANDOVER_LEVEL`` or less: the move is pushing
+a triangle towards the floor, where, without the barrier, the guard would otherwise hold its corners still
+step after step (a developable strip stalled so, ``docs/guard.md``).
 
 Numpy only: ``ΦᵀKΦ = C·(δ·ΦᵀDΦ + Σ_edges (Φ_i − Φ_j)(Φ_i − Φ_j)ᵀ)`` needs no sparse matrix.
 """
@@ -30,8 +33,8 @@ import numpy as np
 from .guard import StepScale
 
 __all__ = ["RECOMMENDED_COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION",
-           "SINGULAR_CUTOFF", "basis_exponents", "basis_coordinates", "basis", "coarse_stiffness", "coarse_inverse",
-           "coarse_move", "CoarseSchedule"]
+           "CLIP_HANDOVER_LEVEL", "SINGULAR_CUTOFF", "basis_exponents", "basis_coordinates", "basis", "coarse_stiffness", "coarse_inverse",
+           "coarse_move", "CoarseSchedule", "clipped_deep"]
 
 #: The degree that meets issue 25's 120-iteration bound on the generated patches (``docs/guard.md``); the
 #: default is none (0): the engine built with it does not meet its clock yet, and it stalls on a developable
@@ -43,6 +46,9 @@ COARSE_DEGREE_MAX = 4
 STIFFNESS_SHIFT = 0.01
 #: Accepted Jacobi steps after a rolled-back plain gradient step taken with the coarse move.
 JACOBI_STEPS_AFTER_REJECTION = 20
+#: An accepted step taken with the coarse move hands over to the Jacobi step too where a node's guard level
+#: (:func:`golden_model.guard.guarded_moves`: its move shortened to ``2^-level``) reached this.
+CLIP_HANDOVER_LEVEL = 2
 
 
 def basis_exponents(degree: int) -> list[tuple[int, int]]:
@@ -94,7 +100,7 @@ class CoarseSchedule:
     """Whether the next step takes the coarse move, and the guard's step scale after a rolled-back step, in the
     float and the fixed-point model alike: the coarse move is taken where the run has a coarse space
     (``active``), but not while ``jacobi_left`` accepted Jacobi steps remain after a rolled-back plain gradient
-    step that took it."""
+    step that took it, or after an accepted one that the guard clipped to :data:`CLIP_HANDOVER_LEVEL`."""
 
     active: bool = False
     jacobi_left: int = 0
@@ -103,7 +109,11 @@ class CoarseSchedule:
     def coarse(self) -> bool:
         return self.active and self.jacobi_left == 0
 
-    def accepted(self) -> "CoarseSchedule":
+    def accepted(self, clipped: bool = False) -> "CoarseSchedule":
+        """After an accepted step; ``clipped``: the guard shortened a node's move in it to
+        ``2^-CLIP_HANDOVER_LEVEL`` or less (:func:`clipped_deep`)."""
+        if self.coarse and clipped:
+            return replace(self, jacobi_left=JACOBI_STEPS_AFTER_REJECTION)
         return replace(self, jacobi_left=max(0, self.jacobi_left - 1))
 
     def rejected(self, scale: StepScale, with_momentum: bool) -> tuple["CoarseSchedule", StepScale]:
@@ -113,3 +123,9 @@ class CoarseSchedule:
         if self.coarse and not with_momentum:
             return replace(self, jacobi_left=JACOBI_STEPS_AFTER_REJECTION), scale
         return self, scale.rejected(with_momentum)
+
+
+def clipped_deep(levels: np.ndarray) -> bool:
+    """Whether a step's guard ``levels`` (a node's move shortened to ``2^-level``, ``GUARD_LEVELS + 1`` held) hand a
+    coarse step over to the Jacobi step (:data:`CLIP_HANDOVER_LEVEL`)."""
+    return bool(np.any(np.asarray(levels) >= CLIP_HANDOVER_LEVEL))

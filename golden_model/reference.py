@@ -34,7 +34,7 @@ from typing import Callable
 
 import numpy as np
 
-from .coarse import CoarseSchedule, basis, coarse_inverse, coarse_move
+from .coarse import CoarseSchedule, basis, clipped_deep, coarse_inverse, coarse_move
 from .guard import ENERGY_FLOOR, GUARD_LEVELS, EnergyWindow, StepScale, energy_floor_fraction, guarded_moves
 from .mesh import Mesh, folded_by_area, layout_orientation, signed_areas_2d
 from .modes import Step
@@ -576,7 +576,7 @@ class _Jacobi:
             self.momentum_k += 1
             self.restart = power < 0
             guard.scale = guard.scale.accepted_step()
-            self.coarse_schedule = self.coarse_schedule.accepted()
+            self.coarse_schedule = self.coarse_schedule.accepted(clipped_deep(levels))
         else:
             self.positions, self.delta, self.length, self.signed, self._layout_energy = before
             self.velocities = np.zeros_like(self.velocities)

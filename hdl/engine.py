@@ -249,7 +249,8 @@ class SpringflatEngine(wiring.Component):
             _wire(m, coarse, memories, "matrix_addr")
             m.d.comb += [coarse.basis.eq(memories.basis_word), coarse.matrix_data.eq(memories.matrix_word.entry),
                          coarse.vertices.eq(registers.vertices_held), coarse.matrix_exponent.eq(registers.matrix_exponent),
-                         controller.coarse.eq(registers.coarse), controller.coarse_done.eq(coarse.done)]
+                         controller.coarse.eq(registers.coarse), controller.coarse_done.eq(coarse.done),
+                         controller.coarse_clipped.eq(guard.clipped)]
         wiring.connect(m, sequencer.force_write, memories.force_write)
         # the node memories' and the proposal memory's writers: one pass at a time, so the writer whose
         # enable is high

@@ -49,6 +49,8 @@ class GuardDecision(wiring.Component):
 
         coarse_step = coarse_active and left == 0      the next step takes the coarse move
         left        = first: 0;  accepted: left − 1 (not below 0)
+                      accepted, a step that took the coarse move and was clipped (the input's clipped):
+                      JACOBI_STEPS_AFTER_REJECTION
                       rolled back, a plain gradient step that took the coarse move: JACOBI_STEPS_AFTER_REJECTION,
                       and the scale (shift and count) stays
 
@@ -72,7 +74,7 @@ class GuardDecision(wiring.Component):
 
     Members
     -------
-    i : ``In(stream.Signature(decision_input_layout(energy_bits)))``
+    i : ``In(stream.Signature(decision_input_layout(energy_bits, coarse)))``
     o : ``Out(stream.Signature(decision_output_layout(energy_bits)))``
     tolerance : ``In(unsigned(ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS))``
         ``ε`` raw (``StopRule.energy``), as :class:`~hdl.controller_units.EnergyCheck` takes it.
@@ -108,7 +110,7 @@ class GuardDecision(wiring.Component):
         self.tolerance_bits = ENERGY_TOL_INT_BITS + ENERGY_TOL_FRAC_BITS
         self.latency = energy_bits + 5 + (rise_parts > 1)
         super().__init__({
-            "i": In(stream.Signature(decision_input_layout(energy_bits))),
+            "i": In(stream.Signature(decision_input_layout(energy_bits, coarse))),
             "o": Out(stream.Signature(decision_output_layout(energy_bits))),
             "tolerance": In(unsigned(self.tolerance_bits)),
             "floor": In(unsigned(energy_bits)),
@@ -175,7 +177,12 @@ class GuardDecision(wiring.Component):
                 m.d.sync += [held.eq(1), taken.eq(0)]
             with m.Else():
                 m.d.sync += [held.eq(Mux(held == size + 1, held, held + 1)), taken.eq(Cat(~rises, taken[:-1]))]
-        handover = self._schedule(m, deciding_scale, first, rises, with_momentum) if self.coarse else None
+        handover = None
+        if self.coarse:
+            clipped = Signal(name="coarse_clipped_held", reset_less=True)
+            with m.If(self.i.valid & idle):
+                m.d.sync += clipped.eq(beat.clipped)
+            handover = self._schedule(m, deciding_scale, first, rises, with_momentum, clipped)
         with m.If(deciding_scale):
             m.d.sync += [kept.eq(newest), accepted.eq(first | ~rises)]
             with m.If(first):
@@ -223,10 +230,12 @@ class GuardDecision(wiring.Component):
             m.d.sync += [self.o.valid.eq(0), idle.eq(1)]
         return m
 
-    def _schedule(self, m: Module, deciding: Signal, first: Signal, rises: Signal, with_momentum: Signal):
+    def _schedule(self, m: Module, deciding: Signal, first: Signal, rises: Signal, with_momentum: Signal,
+                  clipped: Signal):
         """The coarse space's schedule, moved with the scale: the Jacobi steps left and ``coarse_step``. Returns
         the hand-over of this decision (a rolled-back plain gradient step that took the coarse move), which keeps
-        the scale."""
+        the scale; an accepted step that took it, ``clipped``, hands over too, and the scale moves as for any
+        accepted step."""
         left = Signal(range(JACOBI_STEPS_AFTER_REJECTION + 1), name="jacobi_left")
         left_zero = Signal(name="jacobi_left_zero", init=1)  # left == 0, a flip-flop of its own
         m.d.comb += self.coarse_step.eq(self.coarse_active & left_zero)
@@ -234,6 +243,8 @@ class GuardDecision(wiring.Component):
         with m.If(deciding):
             with m.If(first):
                 m.d.sync += [left.eq(0), left_zero.eq(1)]
+            with m.Elif(~rises & self.coarse_step & clipped):
+                m.d.sync += [left.eq(JACOBI_STEPS_AFTER_REJECTION), left_zero.eq(0)]
             with m.Elif(~rises):
                 m.d.sync += [left.eq(Mux(left_zero, 0, left - 1)), left_zero.eq(left <= 1)]
             with m.Elif(handover):

@@ -12,6 +12,7 @@ from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from golden_model.coarse import CLIP_HANDOVER_LEVEL
 from golden_model.fixed import FormatSet
 from golden_model.engine_spec.image import EngineCapacity
 
@@ -84,6 +85,10 @@ class GuardPasses(wiring.Component):
     idle : ``Out(1)``
         Registered: in the clock before, no triangle was owed by the certificate, no update was in a
         scatter and no node in the commit (an aborted run drains until then).
+    clipped : ``Out(1)``
+        With a coarse space only (``capacity.coarse_degree``): a node of the last commit pass took a level of
+        :data:`~golden_model.coarse.CLIP_HANDOVER_LEVEL` or more (a register, cleared in the step phase, which
+        follows the decision on that commit: :func:`golden_model.coarse.clipped_deep`).
     """
 
     def __init__(self, fs: FormatSet, capacity: EngineCapacity, *, read_latency: int = BlockRam.LATENCY,
@@ -106,7 +111,7 @@ class GuardPasses(wiring.Component):
             "position": In(pos).array(3), "proposal": In(vel).array(3), "velocity": In(vel),
             "proposal_write": Out(write_signature(nodes, vel)),
             "node_write": Out(write_signature(nodes, node_write_layout(fs))),
-            "done": Out(1), "idle": Out(1),
+            "done": Out(1), "idle": Out(1), **({"clipped": Out(1)} if capacity.coarse_degree else {}),
         })
 
     def elaborate(self, platform):
@@ -213,6 +218,11 @@ class GuardPasses(wiring.Component):
                      self.node_write.data.velocity.eq(commit.o.payload.velocity)]
         with m.If(commit.o.valid):
             m.d.sync += committed.eq(committed + 1)
+        if cap.coarse_degree:
+            with m.If(self.in_step):
+                m.d.sync += self.clipped.eq(0)
+            with m.Elif(commit.o.valid & (commit.o.payload.level >= CLIP_HANDOVER_LEVEL)):
+                m.d.sync += self.clipped.eq(1)
 
         # Each counter's end (``count == size``) a flag beside it, set in the clock it steps from size − 1, so
         # that a pass's end reads flags: the sizes come from the register bank across the die, and a compare

@@ -254,11 +254,13 @@ def commit_output_layout(fs: FormatSet) -> data.StructLayout:
                               "level": certificate_level_shape()})
 
 
-def decision_input_layout(energy_bits: int) -> data.StructLayout:
+def decision_input_layout(energy_bits: int, coarse: bool = False) -> data.StructLayout:
     """One measurement: its exact ``energy`` (``energy_raw``), ``first`` (the run's start layout: no step
     to judge) and ``with_momentum`` (the step carried momentum, β > 0: a rejection restarts it rather
-    than halving the scale)."""
-    return data.StructLayout({"energy": unsigned(energy_bits), "first": 1, "with_momentum": 1})
+    than halving the scale); with ``coarse``, ``clipped`` too (the guard shortened a node's move in the step to
+    ``2^-CLIP_HANDOVER_LEVEL`` or less: :func:`golden_model.coarse.clipped_deep`)."""
+    return data.StructLayout({"energy": unsigned(energy_bits), "first": 1, "with_momentum": 1,
+                              **({"clipped": 1} if coarse else {})})
 
 
 def decision_output_layout(energy_bits: int) -> data.StructLayout:

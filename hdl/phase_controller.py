@@ -141,11 +141,13 @@ class PhaseController(wiring.Component):
     starting, irq_set : ``Out(1)``
         Combinational: START accepted this clock (the results and STATUS.irq_pending restart); a
         run ends this clock (STATUS.irq_pending set).
-    coarse : ``In(1)``, coarse_done : ``In(1)``, coarse_step : ``Out(1)``
+    coarse : ``In(1)``, coarse_done : ``In(1)``, coarse_step : ``Out(1)``, coarse_clipped : ``In(1)``
         With a coarse space only (``capacity.coarse_degree``): COARSE (the run takes the coarse move), the
         coarse passes' end (:class:`~hdl.coarse_passes.CoarsePasses`), and the guard decision's schedule: the
-        coming step takes the move. A guarded iteration whose step takes it runs the ``coarse`` phase, a node
-        pass with the coefficients after it, between the check and the step.
+        coming step takes the move; ``coarse_clipped``: the last commit pass clipped a node deep
+        (:class:`~hdl.guard_passes.GuardPasses`' ``clipped``), read with the decision on that step. A guarded
+        iteration whose step takes the move runs the ``coarse`` phase, a node pass with the coefficients after
+        it, between the check and the step.
     ``in_<phase>`` for each of :data:`PHASES` (and :data:`COARSE_PHASES` with a coarse space) : ``Out(1)``
         One flip-flop per phase, all low while no run is under way (each implies ``running``).
     fetch_force, fetch_area, fetch_nodes, area_clear : ``Out(1)``
@@ -217,7 +219,8 @@ class PhaseController(wiring.Component):
             **({"running_next": Out(1)} if control_copies else {}),
             "starting": Out(1), "irq_set": Out(1),
             **{f"in_{name}": Out(1) for name in phases},
-            **({"coarse": In(1), "coarse_done": In(1), "coarse_step": Out(1)} if coarse else {}),
+            **({"coarse": In(1), "coarse_done": In(1), "coarse_step": Out(1), "coarse_clipped": In(1)}
+               if coarse else {}),
             **{name: Out(1) for name in FETCH_FLAGS}, "area_clear": Out(1),
             "half_rate": Out(1), "node_restart": Out(1), "triangle_restart": Out(1), "guarded": Out(1),
             "measuring_again": Out(1), "scale_shift": Out(range(SCALE_MAX_SHIFT + 2)),
@@ -354,8 +357,8 @@ class PhaseController(wiring.Component):
             decision.i.payload.energy.eq(self.energy), decision.i.payload.first.eq(run.first_measure),
             decision.i.payload.with_momentum.eq(self.step_dt != 0),
             decision.tolerance.eq(self.tol_energy_held), decision.floor.eq(self.energy_floor),
-            *([decision.coarse_active.eq(self.coarse), self.coarse_step.eq(decision.coarse_step)]
-              if self.coarse_built else []),
+            *([decision.coarse_active.eq(self.coarse), self.coarse_step.eq(decision.coarse_step),
+               decision.i.payload.clipped.eq(self.coarse_clipped)] if self.coarse_built else []),
             self.scale_shift.eq(decision.shift),
             self.shape_error_events.eq(norm_length.o.valid & norm_length.o.payload.saturations),
             self.area_error_events.eq(norm_area.o.valid & norm_area.o.payload.saturations),

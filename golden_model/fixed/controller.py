@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..coarse import CoarseSchedule
+from ..coarse import CoarseSchedule, clipped_deep
 from ..guard import EnergyWindow
 from ..modes import RunMode, Step
 from .coarse import CoarseConstants, coarse_accel
@@ -162,7 +162,7 @@ class Controller:
         self.accepted = self.energy_raw <= before
         if self.accepted:
             guard.scale = guard.scale.accepted_step()
-            self.coarse_schedule = self.coarse_schedule.accepted()
+            self.coarse_schedule = self.coarse_schedule.accepted(clipped_deep(levels))
             return
         self.raw_positions, self.terms, self.errors, self.energy_raw, self.power, self.node_power = accepted
         self._measured = self.raw_positions

@@ -23,33 +23,44 @@ RUN = FlattenParams(dynamics="momentum", coarse_degree=3, max_iter=12)
 
 
 def golden_run(image, monkeypatch):
-    """``run_image`` of ``image``, with whether a rolled-back plain gradient step took the coarse move (the
-    schedule's hand-over to the Jacobi step) and the saturation events by name."""
-    handovers, events = [], {}
-    rejected, add = CoarseSchedule.rejected, SaturationCounter.add_saturations
+    """``run_image`` of ``image``, with the schedule's hand-overs to the Jacobi step by kind (``"rejected"``: a
+    rolled-back plain gradient step that took the coarse move; ``"clipped"``: an accepted one clipped deep) and the
+    saturation events by name."""
+    handovers, events = set(), {}
+    rejected, accepted, add = CoarseSchedule.rejected, CoarseSchedule.accepted, SaturationCounter.add_saturations
 
     def watched_rejected(schedule, scale, with_momentum):
-        handovers.append(schedule.coarse and not with_momentum)
+        if schedule.coarse and not with_momentum:
+            handovers.add("rejected")
         return rejected(schedule, scale, with_momentum)
+
+    def watched_accepted(schedule, clipped=False):
+        if schedule.coarse and clipped:
+            handovers.add("clipped")
+        return accepted(schedule, clipped)
 
     def watched_add(counter, name, n):
         events[name] = events.get(name, 0) + int(n)
         return add(counter, name, n)
 
     monkeypatch.setattr(CoarseSchedule, "rejected", watched_rejected)
+    monkeypatch.setattr(CoarseSchedule, "accepted", watched_accepted)
     monkeypatch.setattr(SaturationCounter, "add_saturations", watched_add)
-    return run_image(image, FS), any(handovers), events
+    return run_image(image, FS), handovers, events
 
 
 @pytest.mark.slow
-def test_a_coarse_run_with_rollbacks_and_the_hand_over_matches_the_golden_model(monkeypatch):
-    """Squeezed across, the run clips steps and rolls some back, one of them a plain gradient step that took the
-    coarse move (the Jacobi steps follow): the engine's whole run is the golden model's, bit for bit."""
-    image = image_of(RUN, COARSE, squeeze=0.05)
-    expected, handed_over, _ = golden_run(image, monkeypatch)
-    assert handed_over and expected.guard.rejected >= 2 and expected.guard.clipped > 0
-    assert not np.array_equal(expected.positions,
-                              run_image(image_of(RUN.with_(coarse_degree=0), COARSE, squeeze=0.05), FS).positions)
+@pytest.mark.parametrize("squeeze, iterations, handover", [(0.05, 12, "clipped"), (0.2, 20, "rejected")])
+def test_a_coarse_run_with_rollbacks_and_the_hand_over_matches_the_golden_model(monkeypatch, squeeze, iterations,
+                                                                                 handover):
+    """Squeezed across, the run clips steps and rolls some back; the schedule hands over to the Jacobi step after
+    an accepted step clipped deep (``clipped``), or after a rolled-back plain gradient step that took the coarse
+    move (``rejected``): the engine's whole run is the golden model's, bit for bit."""
+    image = image_of(RUN.with_(max_iter=iterations), COARSE, squeeze=squeeze)
+    expected, handovers, _ = golden_run(image, monkeypatch)
+    assert handovers == {handover} and expected.guard.rejected >= 1 and expected.guard.clipped > 0
+    assert not np.array_equal(expected.positions, run_image(image_of(RUN.with_(coarse_degree=0, max_iter=iterations),
+                                                                     COARSE, squeeze=squeeze), FS).positions)
     result, read_back = run_on_engine(PreloadableEngine(FS, COARSE), image)
     assert result == expected.status
     assert_same_run(read_back, expected)

@@ -28,11 +28,12 @@ TOLERANCE = StopRule.of(FlattenParams(tol_energy=1e-3), FormatSet.preset("defaul
 
 def golden(items, tolerance, floor, size=ENERGY_WINDOW, coarse=None):
     """``[(accepted, energy, settled, stalled, shift)]`` as ``Controller._advance_guarded`` and ``run`` decide;
-    with ``coarse`` (the run has a coarse space, or not), each with ``CoarseSchedule.coarse`` after it."""
+    with ``coarse`` (the run has a coarse space, or not), each with ``CoarseSchedule.coarse`` after it (an item's
+    optional fourth value: the step was clipped deep, ``clipped_deep``)."""
     rule = StopRule(area=0, shape=0, energy=tolerance, floor=floor)
     out, scale, window, kept = [], StepScale(), EnergyWindow(size), None
     schedule = CoarseSchedule(active=bool(coarse))
-    for energy, first, with_momentum in items:
+    for energy, first, with_momentum, *clipped in items:
         if first:
             scale, window, kept = StepScale(), EnergyWindow(size), energy
             schedule = CoarseSchedule(active=bool(coarse))
@@ -41,7 +42,7 @@ def golden(items, tolerance, floor, size=ENERGY_WINDOW, coarse=None):
             continue
         accepted = energy <= kept
         if accepted:
-            kept, scale, schedule = energy, scale.accepted_step(), schedule.accepted()
+            kept, scale, schedule = energy, scale.accepted_step(), schedule.accepted(bool(clipped and clipped[0]))
         else:
             schedule, scale = schedule.rejected(scale, with_momentum=bool(with_momentum))
         window.push(kept, accepted)
@@ -97,7 +98,8 @@ def run_decision(items, tolerance, floor, *, seed=0, p_valid=1.0, p_ready=1.0, r
     with the schedule, each decision with ``coarse_step`` as it reads at the decision's output."""
     dut = GuardDecision(ENERGY_BITS, rise_parts=rise_parts, coarse=coarse is not None)
     layout = dut.i.payload.shape()
-    beats = [pack(layout, {"energy": e, "first": f, "with_momentum": w}) for e, f, w in items]
+    beats = [pack(layout, {"energy": e, "first": f, "with_momentum": w,
+                           **({"clipped": c[0] if c else 0} if coarse is not None else {})}) for e, f, w, *c in items]
 
     def setup(ctx):
         ctx.set(dut.tolerance, tolerance)
@@ -237,7 +239,9 @@ def test_the_coarse_schedule_is_the_golden_models(seed, coarse):
     """With the schedule built: each decision and ``coarse_step`` after it as ``CoarseSchedule`` has them, with
     gaps and back-pressure; the runs roll back plain gradient steps that took the coarse move (the hand-over,
     which keeps the scale) and count the Jacobi steps down to the coarse move again."""
-    items = until_stalled(runs(seed), coarse=coarse)
+    rng = random.Random(seed + 100)
+    # a step clipped deep now and then: an accepted coarse one hands over as a rolled-back gradient step does
+    items = until_stalled([(*item, int(rng.random() < 0.03)) for item in runs(seed)], coarse=coarse)
     floor = 1 << 30
     want = golden(items, TOLERANCE, floor, coarse=coarse)
     _, _, got = run_decision(items, TOLERANCE, floor, seed=seed, p_valid=0.6, p_ready=0.5, coarse=coarse)
@@ -249,5 +253,6 @@ def test_the_coarse_schedule_is_the_golden_models(seed, coarse):
     if coarse:  # a hand-over, then JACOBI_STEPS_AFTER_REJECTION accepted steps without the coarse move
         handovers = [k for k in range(1, len(items)) if flags[k - 1] and not flags[k] and not items[k][1]]
         assert handovers and any(want[k][4] == want[k - 1][4] and not items[k][2] for k in handovers)
+        assert any(want[k][0] and items[k][3] for k in handovers)  # an accepted step clipped deep
         assert any(flags[k:k + JACOBI_STEPS_AFTER_REJECTION + 1] == [0] * JACOBI_STEPS_AFTER_REJECTION + [1]
                    for k in range(len(flags)))
