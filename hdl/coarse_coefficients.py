@@ -9,7 +9,7 @@ engine it runs once per iteration that takes the coarse move (:class:`~hdl.coars
 
 from __future__ import annotations
 
-from amaranth.hdl import Const, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -26,6 +26,10 @@ from .parameters import check_in_range, check_int
 __all__ = ["CoarseCoefficients"]
 
 
+#: Bits a group of the bit length's first step takes (:func:`_group_lengths`).
+LENGTH_GROUP = 8
+
+
 def _bit_length(value, width: int):
     """The bit length of the unsigned ``value`` (``width`` bits): a priority encoder, as the OR of one term a bit
     (its position where it is the highest set bit), not a chain of multiplexers ``width`` deep."""
@@ -34,6 +38,22 @@ def _bit_length(value, width: int):
         highest = value[bit] & ~value[bit + 1:width].any() if bit + 1 < width else value[bit]
         length = length | Mux(highest, bit + 1, 0)
     return length
+
+
+def _group_lengths(value, width: int) -> list:
+    """The bit length's first step: each :data:`LENGTH_GROUP` bits of ``value``'s, from the lowest (0: none set)."""
+    return [_bit_length(value[low:min(low + LENGTH_GROUP, width)], min(LENGTH_GROUP, width - low))
+            for low in range(0, width, LENGTH_GROUP)]
+
+
+def _length_of_groups(lengths: list, width: int):
+    """The bit length's second step: the highest group with a bit set, its offset plus its own length."""
+    total = Const(0, range(width + 1))
+    for k, length in enumerate(lengths):
+        higher = Cat(*(other != 0 for other in lengths[k + 1:]))
+        highest = (length != 0) & ~higher.any() if k + 1 < len(lengths) else length != 0
+        total = total | Mux(highest, k * LENGTH_GROUP + length, 0)
+    return total
 
 
 class CoarseCoefficients(wiring.Component):
@@ -72,12 +92,12 @@ class CoarseCoefficients(wiring.Component):
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle, ``o.valid`` and ``o.payload`` are registers. :attr:`cycles`
-    clock edges from the input transfer to the output transfer when ``o.ready`` is high: ``2m + 2`` for ``e_g``
-    (the magnitudes' OR a value a clock, its bit length, the exponent), ``2m + 1`` for ``g'`` (a shift a clock,
-    each rounded a clock later), ``m²`` products of ``MATRIX_BITS + 2 + read_latency`` clocks each (the read,
+    clock edges from the input transfer to the output transfer when ``o.ready`` is high: ``2m + 3`` for ``e_g``
+    (the magnitudes' OR a value a clock, its bit length in two steps, the exponent), ``2m + 2`` for ``g'`` (a value a clock
+    shifted by the exponent's multiple of 8, by the rest a clock later, rounded a clock after that), ``m²`` products of ``MATRIX_BITS + 2 + read_latency`` clocks each (the read,
     the entry taken into a register, the operands' load with the entry's sign, and a shift-add step per bit of
-    ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums to land, ``2m + 2`` for
-    ``e_c``, ``2m + 1`` for ``c``, one for the shift and one for the output transfer (2,789 at degree 3). No
+    ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums to land, ``2m + 3`` for
+    ``e_c``, ``2m + 2`` for ``c``, one for the shift and one for the output transfer (2,793 at degree 3). No
     multiplier blocks: two adders as wide as the products. Each clock's logic is one of: a magnitude and an OR,
     a priority encoder, a subtraction, a variable shift, a rounding add, a negation, an add: the unit places
     at the engine's clock (``benchmarks/synth_coarse_units.py``).
@@ -92,8 +112,8 @@ class CoarseCoefficients(wiring.Component):
         self.m = m = len(basis_exponents(degree))
         #: Bits of an exact ``a_kd`` (signed): ``|M| < 2^MATRIX_BITS``, ``|g'| ≤ 2^(SUM_BITS − 2)``, m terms.
         self.product_bits = MATRIX_BITS + mantissa_magnitude_bits(SUM_BITS) + (m - 1).bit_length() + 1
-        self.cycles = (2 * m + 2) + (2 * m + 1) + m * m * (MATRIX_BITS + 2 + read_latency) + 1 \
-            + (2 * m + 2) + (2 * m + 1) + 1 + 1
+        self.cycles = (2 * m + 3) + (2 * m + 2) + m * m * (MATRIX_BITS + 2 + read_latency) + 1 \
+            + (2 * m + 3) + (2 * m + 2) + 1 + 1
         vector = lambda bits: data.StructLayout({"x": signed(bits), "y": signed(bits)})  # noqa: E731
         super().__init__({
             "i": In(stream.Signature(data.StructLayout({"sums": data.ArrayLayout(vector(sum_bits(max_nodes)), m)}))),
@@ -116,22 +136,29 @@ class CoarseCoefficients(wiring.Component):
         # an exponent in three steps: the OR of the magnitudes a value a clock, its bit length, the exponent
         magnitude = Signal(max(width, self.product_bits), name="magnitude", reset_less=True)
         length = Signal(range(len(magnitude) + 1), name="length", reset_less=True)
+        group_lengths = [Signal(range(LENGTH_GROUP + 1), name=f"group_length{k}", reset_less=True)
+                         for k in range(-(-len(magnitude) // LENGTH_GROUP))]
         e_g = Signal(range(width + 1), name="sum_exponent", reset_less=True)
         e_c = Signal(range(self.product_bits + 1), name="c_exponent", reset_less=True)
-        # a mantissa in two steps: the shift (``t``, the half-lsb in bit 0), then the rounding add
-        shifted = Signal(signed(max(width, self.product_bits) + 1), name="shifted", reset_less=True)
-        index = Signal(range(count + 2), name="index", reset_less=True)
+        # a mantissa in three steps: the shift by the exponent's multiple of 8, by the rest (``t``, the half-lsb in
+        # bit 0), then the rounding add
+        partial = Signal(signed(max(width, self.product_bits) + 1), name="partial", reset_less=True)
+        shifted = Signal.like(partial, name="shifted", reset_less=True)
+        index = Signal(range(count + 3), name="index", reset_less=True)
         row, column = Signal(range(m), name="row", reset_less=True), Signal(range(m), name="column", reset_less=True)
+        address = Signal(range(m * m), name="address", reset_less=True)  # row·m + column, counted (no multiplier)
         steps = Signal(range(MATRIX_BITS + 1), name="steps", reset_less=True)
         multiplier = Signal(MATRIX_BITS, name="multiplier", reset_less=True)  # |M_kj|
         entry = Signal(signed(SUM_BITS), name="entry", reset_less=True)  # M_kj, as read
-        # ±g_j: the entry's sign taken at the operand, so that a step is one add
+        # ±g_j: the entry's sign taken at the operand, so that a step is one add; −g_j formed while the entry is read
+        negated = {d: Signal(signed(SUM_BITS + 1), name=f"negated_{d}", reset_less=True) for d in "xy"}
         multiplicand = {d: Signal(signed(self.product_bits), name=f"multiplicand_{d}", reset_less=True) for d in "xy"}
         accumulator = {d: Signal(signed(self.product_bits), name=f"accumulator_{d}", reset_less=True) for d in "xy"}
         coefficients = [self.o.payload.coefficients[k][d] for k in range(m) for d in "xy"]
 
-        names = ("idle", "sum_magnitude", "sum_length", "sum_exponent", "sum_mantissas", "read", "take", "load",
-                 "step", "last_row", "c_magnitude", "c_length", "c_exponent", "c_mantissas", "shift", "done")
+        names = ("idle", "sum_magnitude", "sum_groups", "sum_length", "sum_exponent", "sum_mantissas", "read", "take",
+                 "load", "step", "last_row", "c_magnitude", "c_groups", "c_length", "c_exponent", "c_mantissas", "shift",
+                 "done")
         state = {name: Signal(name=f"in_{name}", init=(name == "idle")) for name in names}
 
         def goto(current, name):
@@ -143,44 +170,73 @@ class CoarseCoefficients(wiring.Component):
             """Each value takes the next one's, the last takes ``new``."""
             return [v.eq(n) for v, n in zip(values, [*values[1:], new])]
 
+        # The register files rotate, and rounded values land, where a flip-flop of their own says so, set and
+        # cleared a clock ahead: each enables a thousand bits or so, too many for a net through the index's
+        # compares and the state's decode in one clock.
+        turning = {"sum": Signal(name="sums_turning"), "c": Signal(name="a_turning")}
+        refining = Signal(name="refining")
+        exponent_low = Signal(3, name="exponent_low", reset_less=True)  # the exponent being applied, mod 8
+        landing = {"sum": Signal(name="g_landing"), "c": Signal(name="c_landing")}
+
         def exponent_steps(values, prefix, exponent, keep, then):
             """``exponent = max(0, bitlen(OR of |v|) − keep)`` of ``values`` (which rotate back to their order):
-            ``count`` clocks of magnitudes, one of the bit length, one of the exponent."""
+            ``count`` clocks of magnitudes (``turning`` set on entry), two of the bit length, one of the exponent."""
             with mod.If(state[f"{prefix}_magnitude"]):
                 v = values[0]
-                mod.d.sync += [*rotate(values, v), magnitude.eq(magnitude | Mux(v < 0, -v, v).as_unsigned()),
-                               index.eq(index + 1)]
+                mod.d.sync += [magnitude.eq(magnitude | Mux(v < 0, -v, v).as_unsigned()), index.eq(index + 1)]
                 with mod.If(index == count - 1):
-                    mod.d.sync += goto(f"{prefix}_magnitude", f"{prefix}_length")
+                    mod.d.sync += [turning[prefix].eq(0), *goto(f"{prefix}_magnitude", f"{prefix}_groups")]
+            with mod.If(state[f"{prefix}_groups"]):  # the bit length in two steps: each group's, then the highest
+                mod.d.sync += [*(q.eq(v) for q, v in zip(group_lengths, _group_lengths(magnitude, len(magnitude)))),
+                               *goto(f"{prefix}_groups", f"{prefix}_length")]
             with mod.If(state[f"{prefix}_length"]):
-                mod.d.sync += [length.eq(_bit_length(magnitude, len(magnitude))), *goto(f"{prefix}_length", f"{prefix}_exponent")]
+                mod.d.sync += [length.eq(_length_of_groups(group_lengths, len(magnitude))),
+                               *goto(f"{prefix}_length", f"{prefix}_exponent")]
             with mod.If(state[f"{prefix}_exponent"]):
-                mod.d.sync += [exponent.eq(Mux(length > keep, length - keep, 0)), index.eq(0), *goto(f"{prefix}_exponent", then)]
+                value = Mux(length > keep, length - keep, 0)
+                mod.d.sync += [exponent.eq(value), exponent_low.eq(value[:3]), index.eq(0), turning[prefix].eq(1),
+                               *goto(f"{prefix}_exponent", then)]
+            with mod.If(turning[prefix]):
+                mod.d.sync += rotate(values, values[0])
 
-        def mantissa_steps(current, values, exponent, results, bits, then):
+        def mantissa_steps(current, prefix, values, exponent, results, bits, then):
             """``results``: each of ``values`` shifted right by ``exponent``, rounded half up (``bits`` of it),
-            ``count + 1`` clocks: the shift of ``values[0]`` (rotating) into ``shifted``, its rounding a clock
-            later."""
-            with mod.If(index < count):
-                mod.d.sync += [*rotate(values, values[0]), shifted.eq(variable_shift(values[0], exponent, "half_up")[0])]
-            with mod.If(index != 0):
-                mod.d.sync += rotate(results, round_half_bit(shifted, "half_up")[:bits].as_signed())
-            mod.d.sync += index.eq(index + 1)
+            ``count + 2`` clocks: ``values[0]`` (rotating) shifted by the exponent's multiple of 8 into
+            ``partial``, by the rest into ``shifted`` a clock later, and rounded a clock after that (``landing``)."""
+            with mod.If(turning[prefix]):
+                mod.d.sync += partial.eq(variable_shift(values[0], Cat(Const(0, 3), exponent[3:]), "half_up")[0])
+            with mod.If(index == count - 1):
+                mod.d.sync += turning[prefix].eq(0)
+            with mod.If(index == 0):
+                mod.d.sync += refining.eq(1)
             with mod.If(index == count):
-                mod.d.sync += goto(current, then)
+                mod.d.sync += refining.eq(0)
+            with mod.If(index == 1):
+                mod.d.sync += landing[prefix].eq(1)
+            mod.d.sync += index.eq(index + 1)
+            with mod.If(index == count + 1):
+                mod.d.sync += [landing[prefix].eq(0), *goto(current, then)]
 
-        mod.d.comb += [self.i.ready.eq(state["idle"]), self.matrix_addr.eq(row * m + column)]
+        with mod.If(refining):  # (the half-lsb is bit 0 of partial already: the rest shifts t itself)
+            mod.d.sync += shifted.eq(partial >> exponent_low)
+
+        def landing_steps(prefix, results, bits):
+            with mod.If(landing[prefix]):
+                mod.d.sync += rotate(results, round_half_bit(shifted, "half_up")[:bits].as_signed())
+
+        mod.d.comb += [self.i.ready.eq(state["idle"]), self.matrix_addr.eq(address)]
         with mod.If(state["idle"] & self.i.valid):
             mod.d.sync += [v.eq(self.i.payload.sums[k][d]) for v, (k, d) in zip(sums, ((k, d) for k in range(m)
                                                                                        for d in "xy"))]
-            mod.d.sync += [magnitude.eq(0), index.eq(0), *goto("idle", "sum_magnitude")]
+            mod.d.sync += [magnitude.eq(0), index.eq(0), turning["sum"].eq(1), *goto("idle", "sum_magnitude")]
         exponent_steps(sums, "sum", e_g, mantissa_magnitude_bits(SUM_BITS), "sum_mantissas")
         with mod.If(state["sum_mantissas"]):  # g' of the sums, shifted into g
-            mantissa_steps("sum_mantissas", sums, e_g, g, SUM_BITS, "read")
-            with mod.If(index == count):
-                mod.d.sync += [row.eq(0), column.eq(0), *(accumulator[d].eq(0) for d in "xy")]
+            mantissa_steps("sum_mantissas", "sum", sums, e_g, g, SUM_BITS, "read")
+            with mod.If(index == count + 1):
+                mod.d.sync += [row.eq(0), column.eq(0), address.eq(0), *(accumulator[d].eq(0) for d in "xy")]
         waited = Signal(range(self.read_latency), name="read_waited", reset_less=True)
         with mod.If(state["read"]):  # matrix_addr is presented; its entry arrives read_latency clocks later
+            mod.d.sync += [negated["x"].eq(-g[0]), negated["y"].eq(-g[1])]
             if self.read_latency == 1:
                 mod.d.sync += goto("read", "take")
             else:
@@ -194,8 +250,8 @@ class CoarseCoefficients(wiring.Component):
         with mod.If(state["load"]):  # g[0], g[1]: column j's x and y (g rotates by two a product)
             negative = entry < 0
             mod.d.sync += [multiplier.eq(Mux(negative, -entry, entry)),
-                           multiplicand["x"].eq(Mux(negative, -g[0], g[0])),
-                           multiplicand["y"].eq(Mux(negative, -g[1], g[1])),
+                           multiplicand["x"].eq(Mux(negative, negated["x"], g[0])),
+                           multiplicand["y"].eq(Mux(negative, negated["y"], g[1])),
                            *(v.eq(n) for v, n in zip(g, [*g[2:], g[0], g[1]])),
                            steps.eq(MATRIX_BITS), *goto("load", "step")]
         with mod.If(state["step"]):
@@ -211,19 +267,21 @@ class CoarseCoefficients(wiring.Component):
                     with mod.If(row == m - 1):
                         mod.d.sync += goto("step", "last_row")
                     with mod.Else():
-                        mod.d.sync += [row.eq(row + 1), *goto("step", "read")]
+                        mod.d.sync += [row.eq(row + 1), address.eq(address + 1), *goto("step", "read")]
                 with mod.Else():
-                    mod.d.sync += [column.eq(column + 1), *goto("step", "read")]
+                    mod.d.sync += [column.eq(column + 1), address.eq(address + 1), *goto("step", "read")]
         row_done = Signal(name="row_done")
         mod.d.sync += row_done.eq(state["step"] & (steps == 1) & (column == m - 1))
         with mod.If(row_done):  # the row's two sums, complete now, shifted into a; the accumulators start again
             mod.d.sync += [*(v.eq(n) for v, n in zip(a, [*a[2:], accumulator["x"], accumulator["y"]])),
                            accumulator["x"].eq(0), accumulator["y"].eq(0)]
         with mod.If(state["last_row"]):  # the last row's sums land in a at this clock's end
-            mod.d.sync += [magnitude.eq(0), index.eq(0), *goto("last_row", "c_magnitude")]
+            mod.d.sync += [magnitude.eq(0), index.eq(0), turning["c"].eq(1), *goto("last_row", "c_magnitude")]
         exponent_steps(a, "c", e_c, mantissa_magnitude_bits(OPERAND_BITS), "c_mantissas")
         with mod.If(state["c_mantissas"]):  # c of a, shifted into the output
-            mantissa_steps("c_mantissas", a, e_c, coefficients, OPERAND_BITS, "shift")
+            mantissa_steps("c_mantissas", "c", a, e_c, coefficients, OPERAND_BITS, "shift")
+        landing_steps("sum", g, SUM_BITS)
+        landing_steps("c", coefficients, OPERAND_BITS)
         with mod.If(state["shift"]):
             shift = move_frac_base(fs) - fs.accel.frac_bits + self.matrix_exponent - e_g - e_c
             low, high = move_shift_range(fs)
