@@ -352,8 +352,18 @@ def run_tool(tool: str, argv: list[str], cwd: Path, log_name: str) -> tuple[int,
     check_build_so_far()  # a clash with an input is refused before the tool's minutes, not after them
     module, function = tool.split(":")
     code = f"import sys, {module}; sys.exit({module}.{function}(sys.argv[1:]))"
-    proc = subprocess.run([sys.executable, "-c", code, *argv], cwd=cwd, capture_output=True, text=True)
-    text = proc.stdout + proc.stderr
+    proc = subprocess.Popen([sys.executable, "-c", code, *argv], cwd=cwd, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = proc.communicate()
+    except BaseException:
+        # a stop signal (KeyboardInterrupt from the commands' handler): the tool dies before springflat does,
+        # which subprocess.run does not promise (it waits a quarter second after a KeyboardInterrupt, and a
+        # WebAssembly tool's gigabytes take longer to tear down on a loaded machine)
+        proc.kill()
+        proc.wait()
+        raise
+    text = stdout + stderr
     (cwd / log_name).write_text(text)
     return proc.returncode, text
 
