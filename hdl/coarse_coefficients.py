@@ -133,7 +133,7 @@ class CoarseCoefficients(wiring.Component):
         sums = [Signal(signed(width), name=f"g{j}", reset_less=True) for j in range(count)]
         g = [Signal(signed(SUM_BITS), name=f"g_mantissa{j}", reset_less=True) for j in range(count)]
         a = [Signal(signed(self.product_bits), name=f"a{j}", reset_less=True) for j in range(count)]
-        # an exponent in three steps: the OR of the magnitudes a value a clock, its bit length, the exponent
+        # an exponent in steps: the OR of the magnitudes a value a clock, its bit length in two, the exponent
         magnitude = Signal(max(width, self.product_bits), name="magnitude", reset_less=True)
         length = Signal(range(len(magnitude) + 1), name="length", reset_less=True)
         group_lengths = [Signal(range(LENGTH_GROUP + 1), name=f"group_length{k}", reset_less=True)
