@@ -37,7 +37,7 @@ __all__ = ["RECOMMENDED_COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", 
            "coarse_move", "CoarseSchedule", "clipped_deep"]
 
 #: The degree that meets issue 25's 120-iteration bound on the generated patches (``docs/guard.md``); the
-#: default is none (0): the engine built with it is not yet shown to meet its clock (``docs/guard.md``).
+#: default is none (0): the engine built with it routes to 88 MHz, short of its clock (``docs/guard.md``).
 RECOMMENDED_COARSE_DEGREE = 3
 #: The largest degree accepted: 15 functions; degree 4 measured no faster than 3.
 COARSE_DEGREE_MAX = 4
