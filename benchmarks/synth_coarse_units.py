@@ -39,9 +39,9 @@ def build(unit: str, fs: FormatSet, capacity: EngineCapacity):
     from hdl.coarse_coefficients import CoarseCoefficients
     from hdl.coarse_node import CoarseNode
     from hdl.coarse_passes import CoarsePasses
-    from hdl.memory_windows import READ_LATENCY
+    from hdl.memory_windows import matrix_read_latency
 
-    latency = 1 + READ_LATENCY  # MemoryWindows.matrix_read_latency of the default build (no pin registers)
+    latency = matrix_read_latency()  # the engine builds a coarse space without pin registers or registered select
     return {"coarse_coefficients": lambda: CoarseCoefficients(fs, capacity.coarse_degree, capacity.vertices,
                                                               read_latency=latency),
             "coarse_node": lambda: CoarseNode(fs, capacity.coarse_degree, capacity.vertices, basis_input=True),

@@ -28,6 +28,8 @@ __all__ = ["CoarseCoefficients"]
 
 #: Bits a group of the bit length's first step takes (:func:`_group_lengths`).
 LENGTH_GROUP = 8
+#: A mantissa's shift in two clocks: by the exponent's multiple of ``2^SHIFT_SPLIT_BITS``, then by the rest.
+SHIFT_SPLIT_BITS = 3
 
 
 def _bit_length(value, width: int):
@@ -92,15 +94,17 @@ class CoarseCoefficients(wiring.Component):
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle, ``o.valid`` and ``o.payload`` are registers. :attr:`cycles`
-    clock edges from the input transfer to the output transfer when ``o.ready`` is high: ``2m + 3`` for ``e_g``
-    (the magnitudes' OR a value a clock, its bit length in two steps, the exponent), ``2m + 2`` for ``g'`` (a value a clock
-    shifted by the exponent's multiple of 8, by the rest a clock later, rounded a clock after that), ``m²`` products of ``MATRIX_BITS + 2 + read_latency`` clocks each (the read,
-    the entry taken into a register, the operands' load with the entry's sign, and a shift-add step per bit of
-    ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums to land, ``2m + 3`` for
-    ``e_c``, ``2m + 2`` for ``c``, one for the shift and one for the output transfer (2,793 at degree 3). No
-    multiplier blocks: two adders as wide as the products. Each clock's logic is one of: a magnitude and an OR,
-    a priority encoder, a subtraction, a variable shift, a rounding add, a negation, an add: the unit places
-    at the engine's clock (``benchmarks/synth_coarse_units.py``).
+    clock edges from the input transfer to the output transfer when ``o.ready`` is high: ``2m + 4`` for ``e_g``
+    (a value's magnitude a clock, ORed a clock later, the bit length in two steps, the exponent), ``2m + 2`` for
+    ``g'`` (a value a clock shifted by the exponent's multiple of ``2^SHIFT_SPLIT_BITS``, by the rest a clock later,
+    rounded a clock after that), ``m²`` products of ``MATRIX_BITS + 2 + read_latency`` clocks each (the read, the
+    entry taken into a register, the operands' load with the entry's sign, and a shift-add step per bit of
+    ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums to land, ``2m + 4`` for
+    ``e_c``, ``2m + 2`` for ``c``, one for the shift and one for the output transfer (2,795 at degree 3). No
+    multiplier blocks: two adders as wide as the products. Each clock's logic is one of: a magnitude, an OR, a
+    priority encoder, a subtraction, a variable shift, a rounding add, a negation, an add
+    (``benchmarks/synth_coarse_units.py`` places the unit alone; ``docs/guard.md`` gives its clock alone and in
+    the engine).
     """
 
     def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int, *, read_latency: int = 1):
@@ -112,8 +116,8 @@ class CoarseCoefficients(wiring.Component):
         self.m = m = len(basis_exponents(degree))
         #: Bits of an exact ``a_kd`` (signed): ``|M| < 2^MATRIX_BITS``, ``|g'| ≤ 2^(SUM_BITS − 2)``, m terms.
         self.product_bits = MATRIX_BITS + mantissa_magnitude_bits(SUM_BITS) + (m - 1).bit_length() + 1
-        self.cycles = (2 * m + 3) + (2 * m + 2) + m * m * (MATRIX_BITS + 2 + read_latency) + 1 \
-            + (2 * m + 3) + (2 * m + 2) + 1 + 1
+        self.cycles = (2 * m + 4) + (2 * m + 2) + m * m * (MATRIX_BITS + 2 + read_latency) + 1 \
+            + (2 * m + 4) + (2 * m + 2) + 1 + 1
         vector = lambda bits: data.StructLayout({"x": signed(bits), "y": signed(bits)})  # noqa: E731
         super().__init__({
             "i": In(stream.Signature(data.StructLayout({"sums": data.ArrayLayout(vector(sum_bits(max_nodes)), m)}))),
@@ -135,13 +139,14 @@ class CoarseCoefficients(wiring.Component):
         a = [Signal(signed(self.product_bits), name=f"a{j}", reset_less=True) for j in range(count)]
         # an exponent in steps: the OR of the magnitudes a value a clock, its bit length in two, the exponent
         magnitude = Signal(max(width, self.product_bits), name="magnitude", reset_less=True)
+        value_magnitude = Signal.like(magnitude, name="value_magnitude", reset_less=True)
         length = Signal(range(len(magnitude) + 1), name="length", reset_less=True)
         group_lengths = [Signal(range(LENGTH_GROUP + 1), name=f"group_length{k}", reset_less=True)
                          for k in range(-(-len(magnitude) // LENGTH_GROUP))]
         e_g = Signal(range(width + 1), name="sum_exponent", reset_less=True)
         e_c = Signal(range(self.product_bits + 1), name="c_exponent", reset_less=True)
-        # a mantissa in three steps: the shift by the exponent's multiple of 8, by the rest (``t``, the half-lsb in
-        # bit 0), then the rounding add
+        # a mantissa in three steps: the shift by the exponent's multiple of 2^SHIFT_SPLIT_BITS, by the rest
+        # (``t``, the half-lsb in bit 0), then the rounding add
         partial = Signal(signed(max(width, self.product_bits) + 1), name="partial", reset_less=True)
         shifted = Signal.like(partial, name="shifted", reset_less=True)
         index = Signal(range(count + 3), name="index", reset_less=True)
@@ -175,17 +180,23 @@ class CoarseCoefficients(wiring.Component):
         # compares and the state's decode in one clock.
         turning = {"sum": Signal(name="sums_turning"), "c": Signal(name="a_turning")}
         refining = Signal(name="refining")
-        exponent_low = Signal(3, name="exponent_low", reset_less=True)  # the exponent being applied, mod 8
+        exponent_low = Signal(SHIFT_SPLIT_BITS, name="exponent_low", reset_less=True)  # the exponent's rest
         landing = {"sum": Signal(name="g_landing"), "c": Signal(name="c_landing")}
 
         def exponent_steps(values, prefix, exponent, keep, then):
             """``exponent = max(0, bitlen(OR of |v|) − keep)`` of ``values`` (which rotate back to their order):
-            ``count`` clocks of magnitudes (``turning`` set on entry), two of the bit length, one of the exponent."""
+            ``count + 1`` clocks of magnitudes and their OR (``turning`` set on entry), two of the bit length, one of
+            the exponent."""
             with mod.If(state[f"{prefix}_magnitude"]):
+                # a value's magnitude a clock, ORed a clock later: a wide negation and the OR's fan-in in one
+                # clock spread across the engine (value_magnitude is 0 on entry, the clock after the last is spare)
                 v = values[0]
-                mod.d.sync += [magnitude.eq(magnitude | Mux(v < 0, -v, v).as_unsigned()), index.eq(index + 1)]
+                mod.d.sync += [value_magnitude.eq(Mux(v < 0, -v, v).as_unsigned()),
+                               magnitude.eq(magnitude | value_magnitude), index.eq(index + 1)]
                 with mod.If(index == count - 1):
-                    mod.d.sync += [turning[prefix].eq(0), *goto(f"{prefix}_magnitude", f"{prefix}_groups")]
+                    mod.d.sync += turning[prefix].eq(0)
+                with mod.If(index == count):
+                    mod.d.sync += goto(f"{prefix}_magnitude", f"{prefix}_groups")
             with mod.If(state[f"{prefix}_groups"]):  # the bit length in two steps: each group's, then the highest
                 mod.d.sync += [*(q.eq(v) for q, v in zip(group_lengths, _group_lengths(magnitude, len(magnitude)))),
                                *goto(f"{prefix}_groups", f"{prefix}_length")]
@@ -194,17 +205,19 @@ class CoarseCoefficients(wiring.Component):
                                *goto(f"{prefix}_length", f"{prefix}_exponent")]
             with mod.If(state[f"{prefix}_exponent"]):
                 value = Mux(length > keep, length - keep, 0)
-                mod.d.sync += [exponent.eq(value), exponent_low.eq(value[:3]), index.eq(0), turning[prefix].eq(1),
-                               *goto(f"{prefix}_exponent", then)]
+                mod.d.sync += [exponent.eq(value), exponent_low.eq(value[:SHIFT_SPLIT_BITS]), index.eq(0),
+                               turning[prefix].eq(1), *goto(f"{prefix}_exponent", then)]
             with mod.If(turning[prefix]):
                 mod.d.sync += rotate(values, values[0])
 
         def mantissa_steps(current, prefix, values, exponent, results, bits, then):
             """``results``: each of ``values`` shifted right by ``exponent``, rounded half up (``bits`` of it),
-            ``count + 2`` clocks: ``values[0]`` (rotating) shifted by the exponent's multiple of 8 into
-            ``partial``, by the rest into ``shifted`` a clock later, and rounded a clock after that (``landing``)."""
+            ``count + 2`` clocks: ``values[0]`` (rotating) shifted by the exponent's multiple of
+            ``2^SHIFT_SPLIT_BITS`` into ``partial``, by the rest into ``shifted`` a clock later, and rounded a clock
+            after that (``landing``)."""
             with mod.If(turning[prefix]):
-                mod.d.sync += partial.eq(variable_shift(values[0], Cat(Const(0, 3), exponent[3:]), "half_up")[0])
+                whole = Cat(Const(0, SHIFT_SPLIT_BITS), exponent[SHIFT_SPLIT_BITS:])
+                mod.d.sync += partial.eq(variable_shift(values[0], whole, "half_up")[0])
             with mod.If(index == count - 1):
                 mod.d.sync += turning[prefix].eq(0)
             with mod.If(index == 0):
@@ -228,7 +241,8 @@ class CoarseCoefficients(wiring.Component):
         with mod.If(state["idle"] & self.i.valid):
             mod.d.sync += [v.eq(self.i.payload.sums[k][d]) for v, (k, d) in zip(sums, ((k, d) for k in range(m)
                                                                                        for d in "xy"))]
-            mod.d.sync += [magnitude.eq(0), index.eq(0), turning["sum"].eq(1), *goto("idle", "sum_magnitude")]
+            mod.d.sync += [magnitude.eq(0), value_magnitude.eq(0), index.eq(0), turning["sum"].eq(1),
+                           *goto("idle", "sum_magnitude")]
         exponent_steps(sums, "sum", e_g, mantissa_magnitude_bits(SUM_BITS), "sum_mantissas")
         with mod.If(state["sum_mantissas"]):  # g' of the sums, shifted into g
             mantissa_steps("sum_mantissas", "sum", sums, e_g, g, SUM_BITS, "read")
@@ -276,7 +290,8 @@ class CoarseCoefficients(wiring.Component):
             mod.d.sync += [*(v.eq(n) for v, n in zip(a, [*a[2:], accumulator["x"], accumulator["y"]])),
                            accumulator["x"].eq(0), accumulator["y"].eq(0)]
         with mod.If(state["last_row"]):  # the last row's sums land in a at this clock's end
-            mod.d.sync += [magnitude.eq(0), index.eq(0), turning["c"].eq(1), *goto("last_row", "c_magnitude")]
+            mod.d.sync += [magnitude.eq(0), value_magnitude.eq(0), index.eq(0), turning["c"].eq(1),
+                           *goto("last_row", "c_magnitude")]
         exponent_steps(a, "c", e_c, mantissa_magnitude_bits(OPERAND_BITS), "c_mantissas")
         with mod.If(state["c_mantissas"]):  # c of a, shifted into the output
             mantissa_steps("c_mantissas", "c", a, e_c, coefficients, OPERAND_BITS, "shift")

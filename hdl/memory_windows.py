@@ -19,7 +19,8 @@ from .parameters import check_power_of_two
 from .rom import ENTRY_BANK_DEPTH
 
 __all__ = ["ENTRY_BANK_LATENCY", "ENTRY_LATENCY", "MemoryWindows", "READ_LATENCY", "WINDOW_STEPS", "entry_latency",
-           "node_write_layout", "needs_registered_select", "window_steps", "write_signature"]
+           "matrix_read_latency", "needs_registered_select", "node_read_latency", "node_write_layout", "window_steps",
+           "write_signature"]
 
 #: Clocks from a block RAM's read address register to its data landed (:attr:`BlockRam.LATENCY`), for the
 #: node and triangle memories of a capacity whose node memories are one bank each and have no pin registers
@@ -53,6 +54,21 @@ def entry_latency(registered_select: bool) -> int:
     """Clocks from the entry memory's address register (``ent_addr``) to the addressed entry in ``entry``:
     the banks' read, with ``registered_select`` the relay, the bank select."""
     return ENTRY_BANK_LATENCY + ENTRY_RELAY_STAGES * registered_select + ENTRY_SELECT_STAGES
+
+
+def node_read_latency(registered_select: bool = False, pin_registers: bool = False, lanes: int = 1) -> int:
+    """Clocks from a node or triangle memory's address register to its data (:attr:`MemoryWindows.read_latency`):
+    the block RAM's, its pin registers' (implied by ``registered_select``), the bank select's stages, and with
+    lanes the bank's word selected in a register of its own."""
+    pin_registers = bool(pin_registers) or registered_select
+    return READ_LATENCY + pin_registers + BlockRam.SELECT_STAGES * registered_select + (lanes > 1)
+
+
+def matrix_read_latency(registered_select: bool = False, pin_registers: bool = False, lanes: int = 1) -> int:
+    """With a coarse space, clocks from ``matrix_addr`` to its entry in ``matrix_word``
+    (:attr:`MemoryWindows.matrix_read_latency`): the address register after the port's multiplexer, then
+    :func:`node_read_latency`."""
+    return 1 + node_read_latency(registered_select, pin_registers, lanes)
 
 
 def window_steps(registered_select: bool) -> int:
@@ -210,11 +226,10 @@ class MemoryWindows(wiring.Component):
             raise ValueError(f"MemoryWindows: lanes={lanes} are built without the guard and without pin registers")
         #: Clocks from a node or triangle memory's address register to its data (with lanes, the bank's word
         #: selected in a register of its own).
-        self.read_latency = READ_LATENCY + self.pin_registers + BlockRam.SELECT_STAGES * self.registered_select \
-            + (lanes > 1)
+        self.read_latency = node_read_latency(self.registered_select, self.pin_registers, lanes)
         #: With a coarse space, clocks from ``matrix_addr`` to its entry in ``matrix_word``: the address
         #: register after the port's multiplexer, then :attr:`read_latency`.
-        self.matrix_read_latency = 1 + self.read_latency
+        self.matrix_read_latency = matrix_read_latency(self.registered_select, self.pin_registers, lanes)
         #: Clocks from ``ent_addr`` to ``entry`` (:func:`entry_latency`), and from DEC to a window's answer.
         self.entry_latency = entry_latency(self.registered_select)
         self.window_steps = window_steps(self.registered_select)
