@@ -5,8 +5,9 @@ Usage::
     .venv/bin/python benchmarks/guard_fixed_vs_float.py             # generated patches from Tutte
     .venv/bin/python benchmarks/guard_fixed_vs_float.py --fast-subset [--corpus build/corpus]
 
-Default: from Tutte's layout on generated patches (the momentum dynamics, the barrier, the guard, the
-energy change over 10 iterations <= FILE_TOL_ENERGY). ``--fast-subset``: the kinds that broke the
+Default: from Tutte's layout on generated patches (a mesh file's defaults: the momentum dynamics, the barrier,
+the guard with the coarse space, the energy change over 10 iterations <= FILE_TOL_ENERGY, up to 3,000
+iterations). ``--fast-subset``: the kinds that broke the
 unguarded dynamics (issue 25), as a no-option ``springflat flatten`` runs them (the ``auto`` start,
 the mesh file's defaults): ``sim.generate.hard_patches()`` and the corpus's ``taco``,
 ``cone_tip`` and ``cad_sliver`` patches (docs/corpus.md; a missing corpus is skipped with a note).
@@ -14,7 +15,8 @@ Per mesh the status, iterations, rolled-back steps and saturation events of each
 |ΔE_S|, |ΔE_C|, and whether the row meets issue 25's bar (same status, iterations within ±1,
 |ΔE_S|, |ΔE_C| <= 1e-3); a mesh the formats (``--formats``, a preset or a format-set file: default ``default``) cannot hold is
 "refused" with the reason; ``--rsqrt-frac-bits N`` resolves the lengths finer than the set does;
-``--coarse-degree D`` runs both with the guarded step's coarse space of degree D (``golden_model.coarse``).
+``--coarse-degree D`` runs both with the guarded step's coarse space of degree D (``golden_model.coarse``; 0: the
+Jacobi step alone; default: the mesh files', ``DEFAULT_COARSE_DEGREE``).
 ``--perturbed`` adds the float run from ``P0·(1 + 1e-9)`` beside it: how far the float model's own
 stopping point moves under a perturbation far below fixed point's rounding. ``--rounded-start`` adds the
 float run from the fixed-point model's start, ``P0`` rounded to [position] and mapped back (a change of
@@ -45,7 +47,7 @@ from golden_model.mesh import Mesh  # noqa: E402
 from sim.mesh_io import load_mesh  # noqa: E402
 from golden_model.params import FlattenParams  # noqa: E402
 from golden_model.reference import flatten  # noqa: E402
-from sim.run_options import FILE_ITER_PER_EDGE, FILE_MIN_ITER, FILE_TOL_ENERGY, edge_radius  # noqa: E402
+from sim.run_options import FILE_PARAMS, file_defaults  # noqa: E402
 
 MESHES = {
     "cap, 10 rings": lambda: spherical_cap(10),
@@ -65,19 +67,12 @@ MAX_ITERATION_GAP = 1
 MAX_ERROR_GAP = 1e-3
 
 
-def file_defaults(mesh: Mesh) -> FlattenParams:
-    """What a mesh file gets with no options (sim.run_options.resolve_mesh)."""
-    return FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0, tol_energy=FILE_TOL_ENERGY,
-                         max_iter=max(FILE_MIN_ITER, FILE_ITER_PER_EDGE * edge_radius(mesh)))
-
-
 def wanted(name: str, only: list[str] | None) -> bool:
     return not only or any(name.startswith(prefix) for prefix in only)
 
 
 def generated_from_tutte(only: list[str] | None) -> Iterator[tuple[str, Mesh, np.ndarray, FlattenParams]]:
-    params = FlattenParams(dynamics="momentum", density="auto", tol_area=1.0, tol_shape=1.0,
-                           tol_energy=FILE_TOL_ENERGY, max_iter=3000)
+    params = FILE_PARAMS.with_(max_iter=3000)
     for name, make in MESHES.items():
         if not wanted(name, only):
             continue
@@ -162,8 +157,9 @@ def main() -> None:
     parser.add_argument("--rsqrt-frac-bits", type=int, metavar="N",
                         help="resolve lengths finer: N fraction bits of rsqrt, length_sq's cut to keep their product "
                              f"in {MAX_PRODUCT_WIDTH} bits (the golden model's int64)")
-    parser.add_argument("--coarse-degree", type=int, default=0, metavar="D",
-                        help="both models with the coarse space of degree D (default 0: none)")
+    parser.add_argument("--coarse-degree", type=int, default=FILE_PARAMS.coarse_degree, metavar="D",
+                        help="both models with the coarse space of degree D (0: the Jacobi step alone; default "
+                             "%(default)s, the mesh files')")
     args = parser.parse_args()
     try:
         formats = FormatSet.load(args.formats)

@@ -39,7 +39,7 @@ Variants beside the default (``jacobi``):
   heavy ball's fixed schedule cannot (isolated slow modes cost it a few iterations each);
 * ``coarse``: ``w·f + Φ (ΦᵀKΦ)⁻¹ Φᵀ f``, a two-level step: the Jacobi step plus the best move, for the
   springs' Laplacian ``K``, in a coarse space of smooth global functions, ``Φ`` the monomials up to degree
-  ``--coarse-degree`` (default ``RECOMMENDED_COARSE_DEGREE``) of the start layout's coordinates (10 for degree 3,
+  ``--coarse-degree`` (default ``DEFAULT_COARSE_DEGREE``) of the start layout's coordinates (10 for degree 3,
   centred and scaled to the layout's extent). ``ΦᵀKΦ`` is a small run constant; each iteration needs the
   sums ``Φᵀf`` over the nodes and each node's ``Φc``, which the engine's passes could carry;
 * ``coarse_hybrid``: ``coarse``, with ``hybrid``'s rule: a rolled-back plain gradient step switches to the
@@ -108,7 +108,7 @@ class _Trial(reference._Jacobi):
     (``_force_step``) replaced, and for ``hybrid`` what a rolled-back step does (``_after_rejection``)."""
 
     variant = "jacobi"
-    coarse_degree = coarse.RECOMMENDED_COARSE_DEGREE
+    coarse_degree = coarse.DEFAULT_COARSE_DEGREE
 
     def _graph(self) -> tuple[sp.csr_matrix, np.ndarray]:
         """The springs' adjacency matrix and the nodes' degrees."""
@@ -310,9 +310,9 @@ def main() -> None:
                         metavar="DIR", help="the corpus's no-option runs (default DIR: build/corpus)")
     parser.add_argument("--only", nargs="+", metavar="NAME", help="with --corpus: only these patches")
     parser.add_argument("--kinds", nargs="+", metavar="KIND", help="with --corpus: only these kinds")
-    parser.add_argument("--coarse-degree", type=int, default=coarse.RECOMMENDED_COARSE_DEGREE, metavar="D",
+    parser.add_argument("--coarse-degree", type=int, default=coarse.DEFAULT_COARSE_DEGREE, metavar="D",
                         help="coarse, coarse_hybrid: the coarse space's polynomial degree (default "
-                             f"{coarse.RECOMMENDED_COARSE_DEGREE})")
+                             f"{coarse.DEFAULT_COARSE_DEGREE})")
     parser.add_argument("--variants", nargs="+", choices=VARIANTS + ("sweeps",), metavar="VARIANT",
                         help=f"the steps to compare (default: all; {', '.join(VARIANTS)}, and sweeps without --corpus)")
     parser.add_argument("--engine", choices=("float", "fixed"), default="float",

@@ -32,13 +32,14 @@ import numpy as np
 
 from .guard import StepScale
 
-__all__ = ["RECOMMENDED_COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION",
+__all__ = ["DEFAULT_COARSE_DEGREE", "COARSE_DEGREE_MAX", "STIFFNESS_SHIFT", "JACOBI_STEPS_AFTER_REJECTION",
            "CLIP_HANDOVER_LEVEL", "SINGULAR_CUTOFF", "basis_exponents", "basis_coordinates", "basis", "coarse_stiffness", "coarse_inverse",
            "coarse_move", "CoarseSchedule", "clipped_deep"]
 
-#: The degree that meets issue 25's 120-iteration bound on the generated patches (``docs/guard.md``); the
-#: default is none (0): the engine built with it routes to 88 MHz, short of its clock (``docs/guard.md``).
-RECOMMENDED_COARSE_DEGREE = 3
+#: The degree a mesh file's guarded run takes by default (``sim.run_options.FILE_PARAMS``): it meets issue 25's
+#: 120-iteration bound on the generated patches (``docs/guard.md``); :class:`~golden_model.params.FlattenParams`
+#: itself defaults to none (0), the Jacobi step alone.
+DEFAULT_COARSE_DEGREE = 3
 #: The largest degree accepted: 15 functions; degree 4 measured no faster than 3.
 COARSE_DEGREE_MAX = 4
 #: ``δ`` in ``K = C·((1 + δ)·D − A)``.

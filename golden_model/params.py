@@ -74,8 +74,10 @@ class FlattenParams:
             ``None`` means 1 with ``paper`` (Algorithm 1's rule) and
             :data:`~golden_model.guard.ENERGY_WINDOW` with ``momentum``.
         coarse_degree: the guarded momentum step's coarse space (:mod:`golden_model.coarse`): the
-            monomials up to this degree of the start layout's coordinates; 0 (the default) takes the
-            Jacobi step alone.
+            monomials up to this degree of the start layout's coordinates; 0 (the default here) takes the
+            Jacobi step alone. A mesh file's defaults take
+            :data:`~golden_model.coarse.DEFAULT_COARSE_DEGREE` with the guard
+            (``sim.run_options.FILE_PARAMS``).
     """
 
     spring: float = 0.5

@@ -222,7 +222,7 @@ def node_update_flip_flops() -> str:
 
 def unit_figures() -> str:
     """Latency and ``MULT18X18D`` blocks of every unit in ``hdl/``, every preset."""
-    from golden_model.coarse import RECOMMENDED_COARSE_DEGREE
+    from golden_model.coarse import DEFAULT_COARSE_DEGREE
     from golden_model.engine_spec.image import DEFAULT_CAPACITY
     from hdl import (AreaError, BetaDivider, CoarseCoefficients, CoarseNode, EnergyCheck, ForcePass, Integrator, Normaliser,
                      RsqrtUnit, StepGenerator)
@@ -233,9 +233,9 @@ def unit_figures() -> str:
         plain = fs.replace(lut_interpolate=False)
         fp, fpe, integ, area = ForcePass(fs), ForcePass(fs, energy=True), Integrator(fs), AreaError(fs)
         norm, energy, beta = Normaliser(fs), EnergyCheck(fs, entries), BetaDivider(fs)
-        coarse = CoarseNode(fs, RECOMMENDED_COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
-        coarse_basis = CoarseNode(fs, RECOMMENDED_COARSE_DEGREE, DEFAULT_CAPACITY.vertices, basis_input=True)
-        coefficients = CoarseCoefficients(fs, RECOMMENDED_COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
+        coarse = CoarseNode(fs, DEFAULT_COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
+        coarse_basis = CoarseNode(fs, DEFAULT_COARSE_DEGREE, DEFAULT_CAPACITY.vertices, basis_input=True)
+        coefficients = CoarseCoefficients(fs, DEFAULT_COARSE_DEGREE, DEFAULT_CAPACITY.vertices)
         s = fp.stages
         return [
             [str(RsqrtUnit.latency_of(fs.rsqrt_config())), str(_mult18x18d(RsqrtUnit(fs)))],
@@ -257,10 +257,10 @@ def unit_figures() -> str:
     rows = {p: quietly(lambda: column(_preset(p))) for p in PRESETS}
     names = ["`RsqrtUnit`", "`StepGenerator`", "`StepGenerator`, `lut_interpolate` off", "`ForcePass`",
              "`ForcePass(energy=True)`", "`Integrator`", "`AreaError`",
-             f"`CoarseNode`, degree {RECOMMENDED_COARSE_DEGREE}",
-             f"`CoarseNode`, degree {RECOMMENDED_COARSE_DEGREE}, `basis_input`", "`Normaliser`: `cycles(shift)`, shift from "
+             f"`CoarseNode`, degree {DEFAULT_COARSE_DEGREE}",
+             f"`CoarseNode`, degree {DEFAULT_COARSE_DEGREE}, `basis_input`", "`Normaliser`: `cycles(shift)`, shift from "
              "F + 2 up", f"`EnergyCheck` at {entries:,} entries", "`BetaDivider`",
-             f"`CoarseCoefficients`, degree {RECOMMENDED_COARSE_DEGREE}"]
+             f"`CoarseCoefficients`, degree {DEFAULT_COARSE_DEGREE}"]
     return _table(["unit", *(f"latency, {p}" for p in PRESETS), *(f"`MULT18X18D`, {p}" for p in PRESETS)],
                   [[name, *(rows[p][i][0] for p in PRESETS), *(rows[p][i][1] for p in PRESETS)]
                    for i, name in enumerate(names)])

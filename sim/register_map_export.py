@@ -220,7 +220,7 @@ def check_coarse_capacity(fs, capacity: EngineCapacity, what: str) -> None:
     if capacity.coarse_degree and needs_registered_select(fs, capacity):
         raise ParameterError(f"{what}: the engine's coarse space is built only where the node memories are one "
                              f"block RAM bank each (up to {DEFAULT_CAPACITY.vertices} vertices in 'default'): "
-                             "use a smaller capacity, or drop --coarse-degree")
+                             "use a smaller capacity, or --coarse-degree 0")
 
 
 def beyond_the_85f(capacity: EngineCapacity) -> str | None:

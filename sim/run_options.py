@@ -20,7 +20,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from golden_model.builtin import BUILTIN_MESHES, builtin_mesh, is_builtin
-from golden_model.coarse import COARSE_DEGREE_MAX, RECOMMENDED_COARSE_DEGREE
+from golden_model.coarse import COARSE_DEGREE_MAX, DEFAULT_COARSE_DEGREE
 from golden_model.files import describe_os_error, same_file_key
 from golden_model.mesh import HoledMesh, Holes, Mesh, MeshError, folded_faces, one_line
 from golden_model.modes import DYNAMICS, RUN_MODES, STEP_MODES, Step
@@ -223,9 +223,10 @@ def add_run_options(parser: argparse.ArgumentParser) -> None:
                              f"(default: 1 with paper, as Algorithm 1; {ENERGY_WINDOW} with momentum)")
     parser.add_argument("--coarse-degree", type=integer_argument, default=None, metavar="D",
                         help="the guarded momentum step's coarse space: add the best move in the span of the start "
-                             f"layout's monomials up to degree D (0 to {COARSE_DEGREE_MAX}; with {RECOMMENDED_COARSE_DEGREE} "
-                             "smooth patches come within 1 percent of the minimum in at most 120 iterations; float and fixed "
-                             f"engines; default {_PARAMS.coarse_degree}, none; docs/guard.md)")
+                             f"layout's monomials up to degree D (0 to {COARSE_DEGREE_MAX}, 0: the Jacobi step alone; "
+                             f"with {DEFAULT_COARSE_DEGREE} smooth patches come within 1 percent of the minimum in at "
+                             "most 120 iterations; default: "
+                             f"{DEFAULT_COARSE_DEGREE} for a mesh file's guarded run, else 0; docs/guard.md)")
     parser.add_argument("--step", choices=STEP_MODES, default=None,
                         help=f"the paper dynamics' step-size mode (default {_PARAMS.step}, eqs. 18-20)")
     parser.add_argument("--dt", type=number_argument, default=None, help=f"fixed step size (default {_PARAMS.dt:g})")
@@ -333,9 +334,10 @@ def resolve_mesh(name: str, holes: Holes = Holes.REFUSE, notes: list[str] | None
 
 
 #: A mesh file's parameters but ``N_max`` (:func:`file_defaults`): the momentum dynamics with the fold barrier and
-#: the guard, stopped at the energy minimum (``FILE_TOL_ENERGY``, no E_S/E_C thresholds).
+#: the guard with the coarse space (:data:`~golden_model.coarse.DEFAULT_COARSE_DEGREE`; dropped with the guard
+#: unless given), stopped at the energy minimum (``FILE_TOL_ENERGY``, no E_S/E_C thresholds).
 FILE_PARAMS = FlattenParams(density="auto", dynamics="momentum", tol_area=1.0, tol_shape=1.0,
-                            tol_energy=FILE_TOL_ENERGY)
+                            tol_energy=FILE_TOL_ENERGY, coarse_degree=DEFAULT_COARSE_DEGREE)
 
 
 def file_defaults(mesh: Mesh) -> FlattenParams:
@@ -502,6 +504,9 @@ def params_from_args(args: argparse.Namespace, defaults: FlattenParams, fixed_po
         value = getattr(args, option)
         if value is not None:
             changes[option] = value
+    if args.coarse_degree is None and defaults.coarse_degree \
+            and not defaults.with_(**{**changes, "coarse_degree": 0}).guard:
+        changes["coarse_degree"] = 0  # the defaults' coarse space follows the guard unless given
     params = defaults.with_(**changes)
     _check_options_apply(args, params)
     return params

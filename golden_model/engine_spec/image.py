@@ -518,7 +518,7 @@ def check_engine_params(params, capacity: EngineCapacity | None = None) -> None:
         built = capacity.coarse_degree
         raise FixedPointError(f"this engine's coarse space is of degree {built}, not {params.coarse_degree}: use "
                               f"--coarse-degree {built} or 0" if built else
-                              "this engine was built without a coarse space: drop --coarse-degree, or build the "
+                              "this engine was built without a coarse space: use --coarse-degree 0, or build the "
                               f"engine with one (springflat verilog --coarse-degree {params.coarse_degree} --out DIR)")
     if capacity is not None and params.guard and not capacity.guard:
         raise FixedPointError(f"this engine was built without the step guard, so it does not run "

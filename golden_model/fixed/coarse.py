@@ -92,7 +92,7 @@ def coarse_constants(raw_positions: np.ndarray, edges: np.ndarray, spring: float
     if not -(1 << (MATRIX_EXPONENT_BITS - 1)) <= exponent < 1 << (MATRIX_EXPONENT_BITS - 1):
         raise FixedPointError(f"the coarse space's matrix (ΦᵀKΦ)⁻¹ has entries up to {float(np.abs(inverse).max()):.3g}: "
                               f"its exponent {exponent} does not fit {MATRIX_EXPONENT_BITS} bits; use another "
-                              "--spring, or drop --coarse-degree")
+                              "--spring, or --coarse-degree 0")
     limit = (1 << MATRIX_BITS) - 1  # (rint may round the largest up to 2^MATRIX_BITS: held one below)
     matrix = np.clip(np.rint(np.ldexp(inverse, exponent)), -limit, limit).astype(np.int64)
     return CoarseConstants(phi, matrix, exponent)

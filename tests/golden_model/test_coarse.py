@@ -138,7 +138,7 @@ def test_coarse_degree_is_checked():
         FlattenParams(dynamics="momentum", guard=False, coarse_degree=3)
     with pytest.raises(ParameterError, match="drop --coarse-degree, or add --dynamics momentum"):
         FlattenParams(coarse_degree=3)
-    with pytest.raises(FixedPointError, match="this engine was built without a coarse space: drop --coarse-degree"):
+    with pytest.raises(FixedPointError, match="this engine was built without a coarse space: use --coarse-degree 0"):
         check_engine_params(FlattenParams(dynamics="momentum", coarse_degree=3), DEFAULT_CAPACITY)
 
 

@@ -374,7 +374,7 @@ def test_the_coarse_move_asked_of_an_unguarded_mode_is_a_bad_constant():
 
 
 @pytest.mark.parametrize("capacity, params, message", [
-    (CAPACITY, COARSE_RUN, r"^this engine was built without a coarse space: drop --coarse-degree, or build the engine "
+    (CAPACITY, COARSE_RUN, r"^this engine was built without a coarse space: use --coarse-degree 0, or build the engine "
                            r"with one \(springflat verilog --coarse-degree 3 --out DIR\)$"),
     (dataclasses.replace(CAPACITY, coarse_degree=2), COARSE_RUN,
      r"^this engine's coarse space is of degree 2, not 3: use --coarse-degree 2 or 0$"),

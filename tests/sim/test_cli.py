@@ -304,7 +304,8 @@ def test_variable_step_beats_fixed_on_surf1():
 
 @pytest.mark.slow
 def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap():
-    """Defaults for files: momentum, fold barrier, ARAP start, stop at the energy minimum."""
+    """Defaults for files: momentum, the guard with the coarse space of degree 3, fold barrier, ARAP start, stop
+    at the energy minimum."""
     from sim.layouts import initial_layout
     from golden_model.reference import SpringModel, measure
 
@@ -322,10 +323,12 @@ def test_a_scanned_patch_with_no_options_flattens_without_folds_and_beats_arap()
     assert summary["init"] == "arap" and "stopped: the stop rule held" in summary["used"]
     assert (summary["mode"], summary["step"], summary["guard"], summary["energy_window"]) == \
         ("momentum-guarded", "momentum", True, 10) and "density" not in summary and "damping" not in summary
+    assert summary["coarse_degree"] == 3
     assert ("relative energy change <= 0.001 over 10 iterations, or an energy below the floor of an rms edge "
             "strain of 0.001;") in summary["used"]
     human = run("flatten", str(path), "--max-iter", "5")
-    assert "used momentum dynamics, step guard, fold barrier" in human.stderr and "N_max = 5 reached" in human.stderr
+    assert "used momentum dynamics, step guard, coarse space of degree 3, fold barrier" in human.stderr
+    assert "N_max = 5 reached" in human.stderr
     unguarded = run("flatten", str(path), "--max-iter", "5", "--no-guard", "--penalty")
     assert "used momentum dynamics, no step guard, fold barrier (kappa 0.5, mu 4), overlap penalty" in unguarded.stderr
 
@@ -376,8 +379,9 @@ def test_rtl_check_refuses_the_guard_on_the_datapath_bench(tmp_path):
 
 
 def test_the_coarse_space_is_an_option_of_the_guarded_float_and_fixed_runs(tmp_path):
-    """``--coarse-degree`` shows in the run line and the JSON summary; an unguarded run and a degree out of range
-    are refused in one line (the engine's runs with it: ``tests/sim/test_engine_rtl.py``)."""
+    """``--coarse-degree`` shows in the run line and the JSON summary, a mesh file's default of degree 3 too, and 0
+    takes the Jacobi step alone; given with an unguarded run, and a degree out of range, it is refused in one line,
+    and an unguarded run without it drops the default (the engine's runs with it: ``tests/sim/test_engine_rtl.py``)."""
     path = SCANS / "bunny_face.obj"
     summaries = {}
     for engine in ("float", "fixed"):
@@ -387,8 +391,16 @@ def test_the_coarse_space_is_an_option_of_the_guarded_float_and_fixed_runs(tmp_p
         summaries[engine] = json.loads(done.stdout)
         assert summaries[engine]["coarse_degree"] == 3 and "coarse space of degree 3" in summaries[engine]["used"]
     assert abs(summaries["float"]["shape_error"] - summaries["fixed"]["shape_error"]) <= 1e-3
-    plain = json.loads(run("flatten", str(path), "--max-iter", "20", "--json", cwd=tmp_path).stdout)
+    default = json.loads(run("flatten", str(path), "--max-iter", "20", "--json", cwd=tmp_path).stdout)
+    assert default["coarse_degree"] == 3 and "coarse space of degree 3" in default["used"]
+    assert default["shape_error"] == summaries["float"]["shape_error"]
+    plain = json.loads(run("flatten", str(path), "--coarse-degree", "0", "--max-iter", "20", "--json",
+                           cwd=tmp_path).stdout)
     assert plain["coarse_degree"] == 0 and "coarse" not in plain["used"]
+    for options in (("--no-guard",), ("--dynamics", "paper")):
+        unguarded = run("flatten", str(path), *options, "--max-iter", "5", "--json", cwd=tmp_path)
+        assert unguarded.returncode in (0, 1), unguarded.stderr
+        assert "coarse_degree" not in json.loads(unguarded.stdout) and "coarse" not in unguarded.stderr
     for command, options, message in (
             ("flatten", ("--no-guard",), "the coarse space is a step of the guarded momentum dynamics"),
             ("flatten", ("--coarse-degree", "5"), "--coarse-degree must be an integer in [0, 4], got 5")):
@@ -1079,9 +1091,9 @@ def test_a_guarded_runs_history_marks_its_rolled_back_steps_and_has_no_time_step
     from sim.generate import saddle_grid
     from sim.mesh_io import save_obj
 
-    saddle = saddle_grid(15)  # its no-option run rolls one step back
+    saddle = saddle_grid(15)  # with the Jacobi step alone its run rolls steps back
     save_obj(tmp_path / "saddle.obj", saddle.vertices, saddle.faces)
-    proc = run("flatten", "saddle.obj", "--history", "h.csv", "--json", cwd=tmp_path)
+    proc = run("flatten", "saddle.obj", "--coarse-degree", "0", "--history", "h.csv", "--json", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     with open(tmp_path / "h.csv", newline="") as f:
