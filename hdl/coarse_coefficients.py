@@ -61,9 +61,9 @@ def _length_of_groups(lengths: list, width: int):
 class CoarseCoefficients(wiring.Component):
     """``c`` and the move's shift from the sums of a pass, bit-exact with the golden model::
 
-        e_g = max(0, bitlen(max |g|) − (SUM_BITS − 2));     g' = rq_half_up(g >> e_g)      (2m values)
+        e_g = max(0, bitlen(max ‖g‖) − (SUM_BITS − 2));     g' = rq_half_up(g >> e_g)      (2m values)
         a_kd = Σ_j M_kj·g'_jd                                (exact)
-        e_c = max(0, bitlen(max |a|) − (OPERAND_BITS − 2));  c = rq_half_up(a >> e_c)
+        e_c = max(0, bitlen(max ‖a‖) − (OPERAND_BITS − 2));  c = rq_half_up(a >> e_c)
         move_shift = clamp(2·BASIS_FRAC_BITS + F_n + matrix_exponent − e_g − e_c − accel.frac,
                            −accel.width, MOVE_BITS + 1)
 
@@ -94,17 +94,18 @@ class CoarseCoefficients(wiring.Component):
     Contract
     --------
     One item at a time: ``i.ready`` is high while idle, ``o.valid`` and ``o.payload`` are registers. :attr:`cycles`
-    clock edges from the input transfer to the output transfer when ``o.ready`` is high: ``2m + 4`` for ``e_g``
-    (a value's magnitude a clock, ORed a clock later, the bit length in two steps, the exponent), ``2m + 2`` for
+    clock edges from the input transfer to the output transfer when ``o.ready`` is high: ``2m + 3`` for ``e_g``
+    (a value's magnitude ORed in a clock, the bit length in two steps, the exponent), ``2m + 2`` for
     ``g'`` (a value a clock shifted by the exponent's multiple of ``2^SHIFT_SPLIT_BITS``, by the rest a clock later,
     rounded a clock after that), ``m²`` products of ``MATRIX_BITS + 2 + read_latency`` clocks each (the read, the
     entry taken into a register, the operands' load with the entry's sign, and a shift-add step per bit of
-    ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums to land, ``2m + 4`` for
-    ``e_c``, ``2m + 2`` for ``c``, one for the shift and one for the output transfer (2,795 at degree 3). No
-    multiplier blocks: two adders as wide as the products. Each clock's logic is one of: a magnitude, an OR, a
-    priority encoder, a subtraction, a variable shift, a rounding add, a negation, an add
-    (``benchmarks/synth_coarse_units.py`` places the unit alone; ``docs/guard.md`` gives its clock alone and in
-    the engine).
+    ``|M_kj| < 2^MATRIX_BITS``, both coordinates at once), one for the last row's sums to land, ``2m + 3`` for
+    ``e_c``, ``2m + 2`` for ``c``, one for the shift and one for the output transfer (2,793 at degree 3). No
+    multiplier blocks: two adders as wide as the products. ``‖v‖`` is the magnitude as the leading sign bits count
+    it, as :func:`~golden_model.fixed.coarse.block_mantissas` does: ``v``, or ``~v`` below 0 (an XOR a bit, where
+    ``|v|`` would take a carry chain). Each clock's logic is one of: an XOR and an OR, a priority encoder, a
+    subtraction, a variable shift, a rounding add, a negation, an add (``benchmarks/synth_coarse_units.py`` places
+    the unit alone; ``docs/guard.md`` gives its clock alone and in the engine).
     """
 
     def __init__(self, fs: FormatSet | str, degree: int, max_nodes: int, *, read_latency: int = 1):
@@ -116,8 +117,8 @@ class CoarseCoefficients(wiring.Component):
         self.m = m = len(basis_exponents(degree))
         #: Bits of an exact ``a_kd`` (signed): ``|M| < 2^MATRIX_BITS``, ``|g'| ≤ 2^(SUM_BITS − 2)``, m terms.
         self.product_bits = MATRIX_BITS + mantissa_magnitude_bits(SUM_BITS) + (m - 1).bit_length() + 1
-        self.cycles = (2 * m + 4) + (2 * m + 2) + m * m * (MATRIX_BITS + 2 + read_latency) + 1 \
-            + (2 * m + 4) + (2 * m + 2) + 1 + 1
+        self.cycles = (2 * m + 3) + (2 * m + 2) + m * m * (MATRIX_BITS + 2 + read_latency) + 1 \
+            + (2 * m + 3) + (2 * m + 2) + 1 + 1
         vector = lambda bits: data.StructLayout({"x": signed(bits), "y": signed(bits)})  # noqa: E731
         super().__init__({
             "i": In(stream.Signature(data.StructLayout({"sums": data.ArrayLayout(vector(sum_bits(max_nodes)), m)}))),
@@ -139,7 +140,6 @@ class CoarseCoefficients(wiring.Component):
         a = [Signal(signed(self.product_bits), name=f"a{j}", reset_less=True) for j in range(count)]
         # an exponent in steps: the OR of the magnitudes a value a clock, its bit length in two, the exponent
         magnitude = Signal(max(width, self.product_bits), name="magnitude", reset_less=True)
-        value_magnitude = Signal.like(magnitude, name="value_magnitude", reset_less=True)
         length = Signal(range(len(magnitude) + 1), name="length", reset_less=True)
         group_lengths = [Signal(range(LENGTH_GROUP + 1), name=f"group_length{k}", reset_less=True)
                          for k in range(-(-len(magnitude) // LENGTH_GROUP))]
@@ -185,18 +185,16 @@ class CoarseCoefficients(wiring.Component):
 
         def exponent_steps(values, prefix, exponent, keep, then):
             """``exponent = max(0, bitlen(OR of |v|) − keep)`` of ``values`` (which rotate back to their order):
-            ``count + 1`` clocks of magnitudes and their OR (``turning`` set on entry), two of the bit length, one of
-            the exponent."""
+            ``count`` clocks of magnitudes ORed in (``turning`` set on entry), two of the bit length, one of the
+            exponent."""
             with mod.If(state[f"{prefix}_magnitude"]):
-                # a value's magnitude a clock, ORed a clock later: a wide negation and the OR's fan-in in one
-                # clock spread across the engine (value_magnitude is 0 on entry, the clock after the last is spare)
+                # the magnitude as the leading sign bits count it (v, or ~v below 0: an XOR a bit, no carry
+                # chain), ORed in
                 v = values[0]
-                mod.d.sync += [value_magnitude.eq(Mux(v < 0, -v, v).as_unsigned()),
-                               magnitude.eq(magnitude | value_magnitude), index.eq(index + 1)]
+                ones = v.as_unsigned() ^ v[-1].replicate(len(v))
+                mod.d.sync += [magnitude.eq(magnitude | ones), index.eq(index + 1)]
                 with mod.If(index == count - 1):
-                    mod.d.sync += turning[prefix].eq(0)
-                with mod.If(index == count):
-                    mod.d.sync += goto(f"{prefix}_magnitude", f"{prefix}_groups")
+                    mod.d.sync += [turning[prefix].eq(0), *goto(f"{prefix}_magnitude", f"{prefix}_groups")]
             with mod.If(state[f"{prefix}_groups"]):  # the bit length in two steps: each group's, then the highest
                 mod.d.sync += [*(q.eq(v) for q, v in zip(group_lengths, _group_lengths(magnitude, len(magnitude)))),
                                *goto(f"{prefix}_groups", f"{prefix}_length")]
@@ -241,8 +239,7 @@ class CoarseCoefficients(wiring.Component):
         with mod.If(state["idle"] & self.i.valid):
             mod.d.sync += [v.eq(self.i.payload.sums[k][d]) for v, (k, d) in zip(sums, ((k, d) for k in range(m)
                                                                                        for d in "xy"))]
-            mod.d.sync += [magnitude.eq(0), value_magnitude.eq(0), index.eq(0), turning["sum"].eq(1),
-                           *goto("idle", "sum_magnitude")]
+            mod.d.sync += [magnitude.eq(0), index.eq(0), turning["sum"].eq(1), *goto("idle", "sum_magnitude")]
         exponent_steps(sums, "sum", e_g, mantissa_magnitude_bits(SUM_BITS), "sum_mantissas")
         with mod.If(state["sum_mantissas"]):  # g' of the sums, shifted into g
             mantissa_steps("sum_mantissas", "sum", sums, e_g, g, SUM_BITS, "read")
@@ -290,8 +287,7 @@ class CoarseCoefficients(wiring.Component):
             mod.d.sync += [*(v.eq(n) for v, n in zip(a, [*a[2:], accumulator["x"], accumulator["y"]])),
                            accumulator["x"].eq(0), accumulator["y"].eq(0)]
         with mod.If(state["last_row"]):  # the last row's sums land in a at this clock's end
-            mod.d.sync += [magnitude.eq(0), value_magnitude.eq(0), index.eq(0), turning["c"].eq(1),
-                           *goto("last_row", "c_magnitude")]
+            mod.d.sync += [magnitude.eq(0), index.eq(0), turning["c"].eq(1), *goto("last_row", "c_magnitude")]
         exponent_steps(a, "c", e_c, mantissa_magnitude_bits(OPERAND_BITS), "c_mantissas")
         with mod.If(state["c_mantissas"]):  # c of a, shifted into the output
             mantissa_steps("c_mantissas", "c", a, e_c, coefficients, OPERAND_BITS, "shift")

@@ -119,8 +119,12 @@ def sum_bits(max_nodes: int) -> int:
 def block_mantissas(values: np.ndarray, bits: int) -> tuple[np.ndarray, int]:
     """``values`` (int64) as ``bits``-bit signed mantissas with one exponent ``e ≥ 0``: ``values ≈ m·2^e``, ``e`` the
     least that leaves the largest magnitude a bit below the mantissas' limit (so that rounding half up never
-    overflows it)."""
-    largest = int(np.abs(values).max()) if values.size else 0
+    overflows it). The magnitude is counted as two's complement's leading sign bits count it, ``v`` for ``v ≥ 0``
+    and ``−v − 1`` (``~v``) below 0: hardware forms that with an XOR a bit, where ``|v|`` takes a carry chain.
+    ``−2^k`` then counts as ``k`` bits, and its mantissa ``−2^(bits − MANTISSA_HEADROOM)`` at the most still
+    fits."""
+    ones = np.where(values < 0, ~values, values) if values.size else values
+    largest = int(ones.max()) if values.size else 0
     exponent = max(0, largest.bit_length() - mantissa_magnitude_bits(bits))
     return shift_round(values, exponent, "half_up"), exponent
 

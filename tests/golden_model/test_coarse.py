@@ -248,6 +248,10 @@ def test_block_mantissas_keep_the_largest_a_bit_below_the_limit():
     assert block_mantissas(np.array([100, -7]), 18) == (pytest.approx([100, -7]), 0)  # small: exact, no shift
     # 2^17 − 1 has 17 bits: one shift, and its rounding up to 2^16 stays below the 18-bit limit of 2^17
     assert block_mantissas(np.array([(1 << 17) - 1]), 18) == (pytest.approx([1 << 16]), 1)
+    # a negative power of two counts as its leading sign bits do: -2^16 has 16 bits (2^16 has 17), no shift, and
+    # -2^16 is within the 18-bit mantissa; -2^16 - 1 takes a shift
+    assert block_mantissas(np.array([-(1 << 16), 5]), 18) == (pytest.approx([-(1 << 16), 5]), 0)
+    assert block_mantissas(np.array([-(1 << 16) - 1, 5]), 18) == (pytest.approx([-(1 << 15), 3]), 1)
 
 
 def test_the_host_rounds_m_to_a_24_bit_mantissa_with_one_exponent():
