@@ -3,7 +3,8 @@
 Sized for a datapath of 18 × 18 multipliers: every per-node product is of two 18-bit operands, and the
 controller's ``M·g`` of two 25-bit ones. Values whose range changes over a run (the sums ``g``, the
 coefficients ``c``) are held as mantissas with one exponent for the whole vector (block floating point),
-chosen by their largest magnitude's leading one; every shift by such an exponent rounds half up, and the move's
+chosen by their largest magnitude's leading one (``v``, or ``~v`` below 0, as the leading sign bits count it:
+:func:`block_mantissas`); every shift by such an exponent rounds half up, and the move's
 last rounding is the format set's.
 
 The host computes the run constants once, from the fixed-point start layout:
