@@ -124,8 +124,7 @@ def block_mantissas(values: np.ndarray, bits: int) -> tuple[np.ndarray, int]:
     and ``−v − 1`` (``~v``) below 0: hardware forms that with an XOR a bit, where ``|v|`` takes a carry chain.
     ``−2^k`` then counts as ``k`` bits, and its mantissa ``−2^(bits − MANTISSA_HEADROOM)`` at the most still
     fits."""
-    ones = np.where(values < 0, ~values, values) if values.size else values
-    largest = int(ones.max()) if values.size else 0
+    largest = int(np.where(values < 0, ~values, values).max()) if values.size else 0
     exponent = max(0, largest.bit_length() - mantissa_magnitude_bits(bits))
     return shift_round(values, exponent, "half_up"), exponent
 
